@@ -1,0 +1,192 @@
+//! Tile codecs: turning a tile's texels into the bytes of one image file.
+//!
+//! The codec also decides the stored texel format: JPEG holds 8-bit grey or RGB only, so 16-bit
+//! tiles are rounded to 8 bits and alpha is either composited away (`--flatten`) or refused.
+
+use crate::error::TilerError;
+use crate::pixel::{Channels, Depth, PixelLayout, Sample, u16_to_u8};
+
+/// JPEG chroma subsampling.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Subsampling {
+    /// 4:2:0: chroma at half resolution both ways (smaller files, what libjpeg does below q90).
+    #[value(name = "420")]
+    S420,
+    /// 4:4:4: full-resolution chroma.
+    #[value(name = "444")]
+    S444,
+}
+
+/// PNG effort.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PngLevel {
+    /// fdeflate: very fast, files a little larger.
+    Fast,
+    /// zlib-like default.
+    Default,
+    /// Slowest, smallest.
+    Best,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Codec {
+    Jpeg { quality: u8, subsampling: Subsampling },
+    Png { level: PngLevel },
+}
+
+impl Codec {
+    /// The `codec` member of `info.json` and the usual file extension.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Codec::Jpeg { .. } => "jpeg",
+            Codec::Png { .. } => "png",
+        }
+    }
+
+    pub fn extension(&self) -> &'static str {
+        match self {
+            Codec::Jpeg { .. } => "jpg",
+            Codec::Png { .. } => "png",
+        }
+    }
+
+    /// The texel layout tiles are stored in for a source of `source` layout.
+    pub fn stored_layout(&self, source: PixelLayout, flatten: bool) -> Result<PixelLayout, TilerError> {
+        match self {
+            Codec::Png { .. } => Ok(if flatten { PixelLayout::new(source.channels.without_alpha(), source.depth) } else { source }),
+            Codec::Jpeg { .. } => {
+                if source.channels.has_alpha() && !flatten {
+                    return Err(TilerError::Options(format!(
+                        "the source is {source} but JPEG has no alpha channel: use --codec png to keep alpha, or --flatten to composite it over --background"
+                    )));
+                }
+                Ok(PixelLayout::new(source.channels.without_alpha(), Depth::U8))
+            }
+        }
+    }
+}
+
+/// Encodes tiles of one layout with one codec; shared by all worker threads.
+pub struct TileEncoder<T> {
+    codec: Codec,
+    source: PixelLayout,
+    stored: PixelLayout,
+    side: u32,
+    /// Colour alpha is composited over, in source samples (`--flatten`).
+    matte: Vec<T>,
+}
+
+impl<T: Sample> TileEncoder<T> {
+    pub fn new(codec: Codec, source: PixelLayout, flatten: bool, side: u32, matte: Vec<T>) -> Result<Self, TilerError> {
+        let stored = codec.stored_layout(source, flatten)?;
+        Ok(TileEncoder { codec, source, stored, side, matte })
+    }
+
+    pub fn stored_layout(&self) -> PixelLayout {
+        self.stored
+    }
+
+    /// Encodes a `side x side` tile given in the source layout.
+    pub fn encode(&self, texels: &[T], out: &mut Vec<u8>) -> Result<(), String> {
+        out.clear();
+        let flat;
+        let texels = if self.stored.channels != self.source.channels {
+            flat = flatten(texels, self.source.channels.count(), &self.matte);
+            &flat[..]
+        } else {
+            texels
+        };
+        match self.codec {
+            Codec::Jpeg { quality, subsampling } => self.encode_jpeg(texels, quality, subsampling, out),
+            Codec::Png { level } => self.encode_png(texels, level, out),
+        }
+    }
+
+    fn encode_jpeg(&self, texels: &[T], quality: u8, subsampling: Subsampling, out: &mut Vec<u8>) -> Result<(), String> {
+        let bytes: Vec<u8>;
+        let samples: &[u8] = match T::DEPTH {
+            Depth::U8 => bytemuck::cast_slice(texels),
+            Depth::U16 => {
+                bytes = texels.iter().map(|s| u16_to_u8(s.to_u16())).collect();
+                &bytes
+            }
+        };
+        let colour = match self.stored.channels {
+            Channels::Grey => jpeg_encoder::ColorType::Luma,
+            _ => jpeg_encoder::ColorType::Rgb,
+        };
+        let mut enc = jpeg_encoder::Encoder::new(out, quality);
+        enc.set_sampling_factor(match subsampling {
+            Subsampling::S420 => jpeg_encoder::SamplingFactor::F_2_2,
+            Subsampling::S444 => jpeg_encoder::SamplingFactor::F_1_1,
+        });
+        enc.set_chroma_subsampling_method(jpeg_encoder::ChromaSubsamplingMethod::Average);
+        let side = self.side as u16;
+        enc.encode(samples, side, side, colour).map_err(|e| e.to_string())
+    }
+
+    fn encode_png(&self, texels: &[T], level: PngLevel, out: &mut Vec<u8>) -> Result<(), String> {
+        let mut enc = png::Encoder::new(&mut *out, self.side, self.side);
+        enc.set_color(match self.stored.channels {
+            Channels::Grey => png::ColorType::Grayscale,
+            Channels::GreyAlpha => png::ColorType::GrayscaleAlpha,
+            Channels::Rgb => png::ColorType::Rgb,
+            Channels::Rgba => png::ColorType::Rgba,
+        });
+        enc.set_compression(match level {
+            PngLevel::Fast => png::Compression::Fast,
+            PngLevel::Default => png::Compression::Balanced,
+            PngLevel::Best => png::Compression::High,
+        });
+        let big_endian: Vec<u8>;
+        let data: &[u8] = match T::DEPTH {
+            Depth::U8 => {
+                enc.set_depth(png::BitDepth::Eight);
+                bytemuck::cast_slice(texels)
+            }
+            Depth::U16 => {
+                enc.set_depth(png::BitDepth::Sixteen);
+                big_endian = texels.iter().flat_map(|s| s.to_u16().to_be_bytes()).collect();
+                &big_endian
+            }
+        };
+        let mut writer = enc.write_header().map_err(|e| e.to_string())?;
+        writer.write_image_data(data).map_err(|e| e.to_string())?;
+        writer.finish().map_err(|e| e.to_string())
+    }
+}
+
+/// Composites straight alpha over `matte` (the colour channels of one texel), rounding once.
+fn flatten<T: Sample>(texels: &[T], channels: usize, matte: &[T]) -> Vec<T> {
+    let colour = channels - 1;
+    let max = T::MAX as u64;
+    let mut out = Vec::with_capacity(texels.len() / channels * colour);
+    for px in texels.chunks_exact(channels) {
+        let a = px[colour].to_u64();
+        for c in 0..colour {
+            let v = px[c].to_u64() * a + matte[c].to_u64() * (max - a);
+            out.push(T::from_u64((2 * v + max) / (2 * max)));
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flatten_composites_over_matte() {
+        let px = [255u8, 0, 0, 255, 255, 0, 0, 0, 255, 0, 0, 128];
+        let out = flatten(&px, 4, &[0, 0, 255]);
+        assert_eq!(out, vec![255, 0, 0, 0, 0, 255, 128, 0, 127]);
+    }
+
+    #[test]
+    fn jpeg_refuses_alpha_unless_flattened() {
+        let codec = Codec::Jpeg { quality: 85, subsampling: Subsampling::S420 };
+        let rgba = PixelLayout::new(Channels::Rgba, Depth::U16);
+        assert!(codec.stored_layout(rgba, false).is_err());
+        assert_eq!(codec.stored_layout(rgba, true).unwrap(), PixelLayout::new(Channels::Rgb, Depth::U8));
+    }
+}

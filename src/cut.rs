@@ -1,0 +1,170 @@
+//! Cutting stored tiles (payload plus borders) out of a band.
+//!
+//! A stored tile at `(x, y)` of LOD k covers virtual texels `[x*P - B, x*P + P + B)` in both
+//! directions. Coordinates outside the virtual texture repeat its edge texels; coordinates in
+//! the padding between the image and the virtual edge repeat the image's last texel ("edge")
+//! or take the background colour. Each direction is precomputed once per tile column or row as
+//! a few runs, so cutting is mostly `memcpy`.
+
+use crate::band::Band;
+use crate::layout::Layout;
+
+/// Where the texels of one direction of a tile come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Run {
+    /// `len` real texels starting at `start`.
+    Copy { start: u32, len: u32 },
+    /// The real texel `at`, `len` times.
+    Repeat { at: u32, len: u32 },
+    /// The background colour, `len` times.
+    Fill { len: u32 },
+}
+
+/// What fills the padding between the image and the virtual texture's edge.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Padding<T> {
+    /// Repeat the nearest image texel.
+    Edge,
+    /// One texel of this colour (`channels` samples).
+    Colour(Vec<T>),
+}
+
+/// The runs for tile index `t` along a direction where the level's image has `extent` texels.
+pub fn runs(layout: &Layout, lod: u32, t: u32, extent: u32, edge_padding: bool) -> Vec<Run> {
+    let p = layout.payload() as i64;
+    let last_virtual = layout.virtual_side(lod) as i64 - 1;
+    let start = t as i64 * p - layout.border as i64;
+    let mut out: Vec<Run> = Vec::new();
+    for i in 0..layout.tile_size as i64 {
+        let v = (start + i).clamp(0, last_virtual);
+        let src = if v < extent as i64 {
+            Some(v as u32)
+        } else if edge_padding {
+            Some(extent - 1)
+        } else {
+            None
+        };
+        match (out.last_mut(), src) {
+            (Some(Run::Fill { len }), None) => *len += 1,
+            (Some(Run::Repeat { at, len }), Some(s)) if *at == s => *len += 1,
+            (Some(Run::Copy { start, len }), Some(s)) if *start + *len == s => *len += 1,
+            (Some(Run::Copy { start, len }), Some(s)) if *start + *len - 1 == s => {
+                // The texel just copied repeats: end the copy one early, start a repeat.
+                *len -= 1;
+                let drop_empty = *len == 0;
+                if drop_empty {
+                    out.pop();
+                }
+                out.push(Run::Repeat { at: s, len: 2 });
+            }
+            (_, Some(s)) => out.push(Run::Copy { start: s, len: 1 }),
+            (_, None) => out.push(Run::Fill { len: 1 }),
+        }
+    }
+    out
+}
+
+/// Assembles one tile from `band`: `x_runs` pick columns, `y_runs` pick rows.
+pub fn cut_tile<T: Copy>(band: &Band<T>, channels: usize, x_runs: &[Run], y_runs: &[Run], padding: &Padding<T>, out: &mut Vec<T>) {
+    out.clear();
+    let fill = match padding {
+        Padding::Colour(c) => c.as_slice(),
+        Padding::Edge => &[],
+    };
+    let push_row = |row: Option<&[T]>, out: &mut Vec<T>| {
+        for run in x_runs {
+            match (*run, row) {
+                (Run::Copy { start, len }, Some(r)) => {
+                    out.extend_from_slice(&r[start as usize * channels..(start + len) as usize * channels])
+                }
+                (Run::Repeat { at, len }, Some(r)) => {
+                    let px = &r[at as usize * channels..(at as usize + 1) * channels];
+                    for _ in 0..len {
+                        out.extend_from_slice(px);
+                    }
+                }
+                (Run::Copy { len, .. } | Run::Repeat { len, .. } | Run::Fill { len }, _) => {
+                    for _ in 0..len {
+                        out.extend_from_slice(fill);
+                    }
+                }
+            }
+        }
+    };
+    for run in y_runs {
+        match *run {
+            Run::Copy { start, len } => {
+                for y in start..start + len {
+                    push_row(Some(band.row(y as u64)), out);
+                }
+            }
+            Run::Repeat { at, len } => {
+                let first = out.len();
+                push_row(Some(band.row(at as u64)), out);
+                let row = out.len() - first;
+                for _ in 1..len {
+                    out.extend_from_within(first..first + row);
+                }
+            }
+            Run::Fill { len } => {
+                for _ in 0..len {
+                    push_row(None, out);
+                }
+            }
+        }
+    }
+}
+
+/// Last image row (inclusive) that tile row `t` of a level with `extent` rows reads.
+pub fn last_row_needed(layout: &Layout, lod: u32, t: u32, extent: u32) -> u64 {
+    let end = (t as u64 + 1) * layout.payload() as u64 + layout.border as u64;
+    (end - 1).min(layout.virtual_side(lod) - 1).min(extent as u64 - 1)
+}
+
+/// First image row the tile rows after `t` still read.
+pub fn first_row_kept(layout: &Layout, t: u32, extent: u32) -> u64 {
+    ((t as u64 + 1) * layout.payload() as u64)
+        .saturating_sub(layout.border as u64)
+        .min(extent as u64 - 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn expand(runs: &[Run]) -> Vec<Option<u32>> {
+        runs.iter()
+            .flat_map(|r| match *r {
+                Run::Copy { start, len } => (start..start + len).map(Some).collect::<Vec<_>>(),
+                Run::Repeat { at, len } => vec![Some(at); len as usize],
+                Run::Fill { len } => vec![None; len as usize],
+            })
+            .collect()
+    }
+
+    #[test]
+    fn border_repeats_the_virtual_edge() {
+        // 16-texel tiles, border 2: payload 12. A 20-texel image needs 2 pages.
+        let l = Layout::new(20, 20, 16, 2).unwrap();
+        let r0 = runs(&l, 0, 0, 20, true);
+        let want: Vec<Option<u32>> = [0, 0, 0].into_iter().chain(1..14).map(Some).collect();
+        assert_eq!(expand(&r0), want);
+        assert_eq!(r0[0], Run::Repeat { at: 0, len: 3 });
+        // Second tile: texels 10..26, the image ends at 19, the virtual texture at 23.
+        let edge = expand(&runs(&l, 0, 1, 20, true));
+        let want: Vec<Option<u32>> = (10..20).chain([19; 6]).map(Some).collect();
+        assert_eq!(edge, want);
+        let bg = expand(&runs(&l, 0, 1, 20, false));
+        let want: Vec<Option<u32>> = (10..20).map(Some).chain([None; 6]).collect();
+        assert_eq!(bg, want);
+    }
+
+    #[test]
+    fn full_image_repeats_last_texel_not_background() {
+        // 24 texels fill the virtual texture exactly: the right border repeats texel 23.
+        let l = Layout::new(24, 24, 16, 2).unwrap();
+        let r = expand(&runs(&l, 0, 1, 24, false));
+        let want: Vec<Option<u32>> = (10..24).chain([23, 23]).map(Some).collect();
+        assert_eq!(r, want);
+    }
+}

@@ -1,0 +1,72 @@
+//! Typed errors of the tiler library. Each variant carries where it happened (file, row, tile,
+//! field) so the command line can print one line a user can act on.
+
+use std::io;
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum TilerError {
+    /// The file could not be opened or read at all.
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: io::Error,
+    },
+
+    /// The file is readable but not a valid image of its kind.
+    #[error("{}: {message}", path.display())]
+    Decode { path: PathBuf, message: String },
+
+    /// Decoding failed part-way through the image.
+    #[error("{}: row {row}: {message}", path.display())]
+    DecodeRow { path: PathBuf, row: u64, message: String },
+
+    /// A valid image this tool cannot handle as asked (format feature, size over a limit).
+    #[error("{}: {message}", path.display())]
+    Unsupported { path: PathBuf, message: String },
+
+    /// The image size or tile options make no usable virtual texture.
+    #[error("{0}")]
+    Geometry(String),
+
+    /// Options that contradict each other or the input.
+    #[error("{0}")]
+    Options(String),
+
+    /// A member of an `info.json` is missing, malformed or contradicts the command line.
+    #[error("{}: {field}: {message}", path.display())]
+    Info { path: PathBuf, field: String, message: String },
+
+    /// Encoding a tile failed.
+    #[error("tile (lod {lod}, x {x}, y {y}): {message}")]
+    Encode { lod: u32, x: u32, y: u32, message: String },
+
+    /// Writing output failed (unwritable directory, full disk, ...).
+    #[error("{}: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: io::Error,
+    },
+}
+
+impl TilerError {
+    pub fn io(path: impl Into<PathBuf>, source: io::Error) -> Self {
+        TilerError::Io { path: path.into(), source }
+    }
+
+    pub fn decode(path: impl Into<PathBuf>, message: impl ToString) -> Self {
+        TilerError::Decode { path: path.into(), message: message.to_string() }
+    }
+
+    pub fn unsupported(path: impl Into<PathBuf>, message: impl ToString) -> Self {
+        TilerError::Unsupported { path: path.into(), message: message.to_string() }
+    }
+
+    pub fn write(path: impl Into<PathBuf>, source: io::Error) -> Self {
+        TilerError::Write { path: path.into(), source }
+    }
+}
+
+pub type Result<T, E = TilerError> = std::result::Result<T, E>;

@@ -1,0 +1,9 @@
+pub mod band;
+pub mod codec;
+pub mod cut;
+pub mod error;
+pub mod filename;
+pub mod layout;
+pub mod pixel;
+pub mod pyramid;
+pub mod source;

@@ -1,0 +1,192 @@
+//! Exact 2x2 reduction from one LOD to the next.
+//!
+//! A texel of LOD k+1 is the mean of the *real* source pixels under it. Instead of rounding a
+//! mean per level (which drifts), each level passes down the exact sum of its footprint in a
+//! `u64`, and only the copy that becomes a tile is rounded, once. The divisor is the number
+//! of real source pixels under the texel, so texels along a right/bottom edge that is not a
+//! multiple of 2^k average only real pixels and padding never tints the image.
+//!
+//! Rows are consumed one at a time: a level keeps one half-built output row (the horizontal
+//! pair sums of an even row, waiting for the odd one), so the extra memory is one row per level.
+
+use crate::pixel::Sample;
+
+/// Reduces the rows of LOD `lod` into rows of LOD `lod + 1`.
+pub struct Reducer {
+    channels: usize,
+    /// Width of the output level in texels.
+    out_width: usize,
+    /// Source pixels per output texel column, `min(2^(lod+1), width - x * 2^(lod+1))`.
+    col_weight: Vec<u64>,
+    /// Source image height and the output level's footprint side, to weigh rows.
+    src_height: u64,
+    footprint: u64,
+    /// Horizontal pair sums of the rows received so far for the current output row.
+    acc: Vec<u64>,
+    rows_in_acc: u32,
+    /// Index of the output row being built.
+    out_row: u64,
+}
+
+/// An exact output row: sums plus what they must be divided by.
+pub struct ExactRow<'a> {
+    pub sums: &'a [u64],
+    pub y: u64,
+    row_weight: u64,
+    col_weight: &'a [u64],
+    /// Leading texels whose footprint is complete: their divisor is `footprint^2`, a shift.
+    full_cols: usize,
+    footprint: u64,
+    channels: usize,
+}
+
+impl Reducer {
+    /// `src_width`/`src_height` are the source image's size at LOD 0; `in_width` is the width of
+    /// the input level (LOD `lod`).
+    pub fn new(src_width: u64, src_height: u64, lod: u32, in_width: usize, channels: usize) -> Reducer {
+        let footprint = 1u64 << (lod + 1);
+        let out_width = in_width.div_ceil(2);
+        let col_weight = (0..out_width as u64)
+            .map(|x| footprint.min(src_width - x * footprint))
+            .collect();
+        Reducer {
+            channels,
+            out_width,
+            col_weight,
+            src_height,
+            footprint,
+            acc: vec![0; out_width * channels],
+            rows_in_acc: 0,
+            out_row: 0,
+        }
+    }
+
+    pub fn out_width(&self) -> usize {
+        self.out_width
+    }
+
+    /// Adds one input row (samples or exact sums); returns the output row once two rows are in.
+    pub fn push<S: Copy + Into<u64>>(&mut self, row: &[S]) -> Option<ExactRow<'_>> {
+        add_column_pairs(row, self.channels, &mut self.acc, self.rows_in_acc == 0);
+        self.rows_in_acc += 1;
+        if self.rows_in_acc == 2 { Some(self.emit()) } else { None }
+    }
+
+    /// Emits the last output row if the input had an odd number of rows.
+    pub fn finish(&mut self) -> Option<ExactRow<'_>> {
+        if self.rows_in_acc == 1 { Some(self.emit()) } else { None }
+    }
+
+    fn emit(&mut self) -> ExactRow<'_> {
+        self.rows_in_acc = 0;
+        let y = self.out_row;
+        self.out_row += 1;
+        let row_weight = self.footprint.min(self.src_height - y * self.footprint);
+        let full_cols = if row_weight == self.footprint {
+            self.col_weight.iter().take_while(|w| **w == self.footprint).count()
+        } else {
+            0
+        };
+        ExactRow {
+            sums: &self.acc,
+            y,
+            row_weight,
+            col_weight: &self.col_weight,
+            full_cols,
+            footprint: self.footprint,
+            channels: self.channels,
+        }
+    }
+}
+
+impl ExactRow<'_> {
+    /// The row's texels rounded to the nearest sample value (halves round up).
+    pub fn round_into<T: Sample>(&self, out: &mut [T]) {
+        let c = self.channels;
+        debug_assert_eq!(out.len(), self.sums.len());
+        let full_cols = self.full_cols;
+        let (head, tail) = out.split_at_mut(full_cols * c);
+        let shift = (self.footprint * self.footprint).trailing_zeros();
+        let half = 1u64 << (shift - 1);
+        for (o, s) in head.iter_mut().zip(self.sums) {
+            *o = T::from_u64((s + half) >> shift);
+        }
+        for (i, o) in tail.iter_mut().enumerate() {
+            let x = full_cols + i / c;
+            let weight = self.col_weight[x] * self.row_weight;
+            *o = T::from_u64((2 * self.sums[full_cols * c + i] + weight) / (2 * weight));
+        }
+    }
+}
+
+/// `dst[x] (+)= src[2x] + src[2x+1]` per channel; an odd last column is taken alone.
+fn add_column_pairs<S: Copy + Into<u64>>(src: &[S], c: usize, dst: &mut [u64], assign: bool) {
+    let pairs = src.len() / (2 * c);
+    let (body, rest) = src.split_at(pairs * 2 * c);
+    let (dst_body, dst_rest) = dst.split_at_mut(pairs * c);
+    for (d, s) in dst_body.chunks_exact_mut(c).zip(body.chunks_exact(2 * c)) {
+        for ch in 0..c {
+            let v = s[ch].into() + s[c + ch].into();
+            d[ch] = if assign { v } else { d[ch] + v };
+        }
+    }
+    for (d, s) in dst_rest.iter_mut().zip(rest) {
+        *d = if assign { (*s).into() } else { *d + (*s).into() };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reduce_all(src: &[u8], w: usize, h: usize, levels: u32) -> Vec<Vec<u8>> {
+        // Cascades `levels` reductions of a grey image; returns each level's rounded texels.
+        let mut out = Vec::new();
+        let mut rows: Vec<Vec<u64>> = src.chunks(w).map(|r| r.iter().map(|v| *v as u64).collect()).collect();
+        let mut width = w;
+        for lod in 0..levels {
+            let mut red = Reducer::new(w as u64, h as u64, lod, width, 1);
+            let mut next = Vec::new();
+            let mut rounded = Vec::new();
+            for r in &rows {
+                if let Some(e) = red.push(r) {
+                    let mut o = vec![0u8; e.sums.len()];
+                    e.round_into(&mut o);
+                    rounded.extend_from_slice(&o);
+                    next.push(e.sums.to_vec());
+                }
+            }
+            if let Some(e) = red.finish() {
+                let mut o = vec![0u8; e.sums.len()];
+                e.round_into(&mut o);
+                rounded.extend_from_slice(&o);
+                next.push(e.sums.to_vec());
+            }
+            width = red.out_width();
+            out.push(rounded);
+            rows = next;
+        }
+        out
+    }
+
+    #[test]
+    fn checkerboard_becomes_mid_grey() {
+        let (w, h) = (6, 4);
+        let src: Vec<u8> = (0..w * h).map(|i| if (i % w + i / w) % 2 == 0 { 0 } else { 255 }).collect();
+        let lods = reduce_all(&src, w, h, 1);
+        assert!(lods[0].iter().all(|v| *v == 128), "{:?}", lods[0]);
+    }
+
+    #[test]
+    fn edge_texels_average_only_real_pixels() {
+        // 3x3 image of 200 with a 5 in the corner: the right column's LOD-1 texels cover one
+        // real column and must not be darkened by padding.
+        let mut src = vec![200u8; 9];
+        src[8] = 5;
+        let l1 = &reduce_all(&src, 3, 3, 1)[0];
+        assert_eq!(l1, &vec![200, 200, 200, 5]);
+        let l2 = &reduce_all(&src, 3, 3, 2)[1];
+        // (8 * 200 + 5) / 9 = 178.3
+        assert_eq!(l2, &vec![178]);
+    }
+}

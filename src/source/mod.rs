@@ -1,0 +1,83 @@
+//! Image sources that deliver an image top to bottom, one row at a time.
+//!
+//! Streaming sources (PNG, TIFF, PPM/PGM) hold only what their decoder needs for the current
+//! row, strip or tile row, so memory does not grow with the image height. Formats that cannot
+//! be streamed are decoded whole through the `image` crate, but only under `--max-memory`.
+
+mod png;
+mod pnm;
+mod whole;
+
+use std::fs::File;
+use std::io::Read;
+use std::path::Path;
+
+use crate::error::{Result, TilerError};
+use crate::pixel::PixelLayout;
+
+/// A decoder positioned at the next row of an image.
+pub trait RowSource: Send {
+    fn width(&self) -> u32;
+    fn height(&self) -> u32;
+    fn layout(&self) -> PixelLayout;
+    /// Fills `row` (width x bytes per pixel, 16-bit samples in native byte order) with the next row.
+    fn read_row(&mut self, row: &mut [u8]) -> Result<()>;
+    /// Short name of the decoder path taken, for the summary line.
+    fn describe(&self) -> String;
+}
+
+/// Opens `path`, choosing the decoder from the file's first bytes (not its extension).
+pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
+    let mut magic = [0u8; 8];
+    let mut file = File::open(path).map_err(|e| TilerError::io(path, e))?;
+    let meta = file.metadata().map_err(|e| TilerError::io(path, e))?;
+    if meta.is_dir() {
+        return Err(TilerError::decode(path, "is a directory, not an image"));
+    }
+    let n = read_up_to(&mut file, &mut magic).map_err(|e| TilerError::io(path, e))?;
+    let magic = &magic[..n];
+    if n == 0 {
+        return Err(TilerError::decode(path, "the file is empty"));
+    }
+    if magic.starts_with(b"\x89PNG\r\n\x1a\n") {
+        png::open(path, max_memory)
+    } else if magic.starts_with(b"II*\0") || magic.starts_with(b"MM\0*") || magic.starts_with(b"II+\0") || magic.starts_with(b"MM\0+") {
+        whole::open(path, max_memory)
+    } else if magic.len() >= 2 && magic[0] == b'P' && matches!(magic[1], b'5' | b'6') {
+        pnm::open(path)
+    } else {
+        whole::open(path, max_memory)
+    }
+}
+
+fn read_up_to(file: &mut File, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut n = 0;
+    while n < buf.len() {
+        match file.read(&mut buf[n..])? {
+            0 => break,
+            k => n += k,
+        }
+    }
+    Ok(n)
+}
+
+/// Bytes of a fully decoded image, checked for overflow.
+pub(crate) fn image_bytes(width: u64, height: u64, layout: PixelLayout) -> Option<u64> {
+    width.checked_mul(height)?.checked_mul(layout.bytes_per_pixel() as u64)
+}
+
+/// Refuses to hold a whole decoded image above `max_memory`, saying why and what to do.
+pub(crate) fn check_whole_fits(path: &Path, width: u64, height: u64, layout: PixelLayout, max_memory: u64, why: &str) -> Result<()> {
+    let need = image_bytes(width, height, layout).unwrap_or(u64::MAX);
+    if need > max_memory {
+        return Err(TilerError::unsupported(
+            path,
+            format!(
+                "{why}, so the whole {width}x{height} {layout} image ({} MiB) would have to be held in memory, more than --max-memory ({} MiB); raise --max-memory or re-save it in a streamable form (non-interlaced PNG, baseline JPEG, striped or tiled TIFF)",
+                need.div_ceil(1 << 20),
+                max_memory >> 20
+            ),
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,139 @@
+//! Binary PGM (P5) and PPM (P6) read through a memory map: rows are slices of the file, so the
+//! operating system pages the image in and out and the process holds none of it.
+
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+use memmap2::Mmap;
+
+use super::{RowSource, image_bytes};
+use crate::error::{Result, TilerError};
+use crate::pixel::{Channels, Depth, PixelLayout};
+
+pub struct PnmSource {
+    path: PathBuf,
+    map: Mmap,
+    data_start: usize,
+    width: u32,
+    height: u32,
+    maxval: u32,
+    layout: PixelLayout,
+    next: u64,
+}
+
+pub fn open(path: &Path) -> Result<Box<dyn RowSource>> {
+    let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
+    // SAFETY: the map is read-only; a file truncated underneath would fault, as for any mapped reader.
+    let map = unsafe { Mmap::map(&file) }.map_err(|e| TilerError::io(path, e))?;
+    let (channels, width, height, maxval, data_start) = parse_header(&map).map_err(|m| TilerError::decode(path, m))?;
+    if width == 0 || height == 0 {
+        return Err(TilerError::decode(path, format!("the header says {width}x{height}: the image has no pixels")));
+    }
+    let depth = if maxval < 256 { Depth::U8 } else { Depth::U16 };
+    let layout = PixelLayout::new(channels, depth);
+    let need = image_bytes(width, height, layout).ok_or_else(|| TilerError::decode(path, "the header's size overflows"))?;
+    let have = (map.len() - data_start) as u64;
+    if have < need {
+        return Err(TilerError::decode(
+            path,
+            format!("truncated: the header says {width}x{height} ({need} bytes of pixels) but the file holds {have}"),
+        ));
+    }
+    let (width, height) = (u32::try_from(width).unwrap_or(u32::MAX), u32::try_from(height).unwrap_or(u32::MAX));
+    Ok(Box::new(PnmSource { path: path.to_path_buf(), map, data_start, width, height, maxval, layout, next: 0 }))
+}
+
+/// Returns (channels, width, height, maxval, offset of the pixel data).
+fn parse_header(bytes: &[u8]) -> std::result::Result<(Channels, u64, u64, u32, usize), String> {
+    let channels = match bytes.get(..2) {
+        Some(b"P5") => Channels::Grey,
+        Some(b"P6") => Channels::Rgb,
+        _ => return Err("not a binary PGM/PPM (P5/P6)".into()),
+    };
+    let mut pos = 2;
+    let mut fields = [0u64; 3];
+    for (i, field) in fields.iter_mut().enumerate() {
+        loop {
+            match bytes.get(pos) {
+                Some(b'#') => {
+                    while !matches!(bytes.get(pos), Some(b'\n') | None) {
+                        pos += 1;
+                    }
+                }
+                Some(c) if c.is_ascii_whitespace() => pos += 1,
+                _ => break,
+            }
+        }
+        let start = pos;
+        while bytes.get(pos).is_some_and(u8::is_ascii_digit) {
+            pos += 1;
+        }
+        let name = ["width", "height", "maxval"][i];
+        let text = std::str::from_utf8(&bytes[start..pos]).unwrap_or("");
+        *field = text.parse().map_err(|_| format!("header field {name} is missing or not a number"))?;
+    }
+    if !bytes.get(pos).is_some_and(u8::is_ascii_whitespace) {
+        return Err("header is not followed by a single whitespace byte".into());
+    }
+    let maxval = fields[2];
+    if maxval == 0 || maxval > 65535 {
+        return Err(format!("header field maxval is {maxval}; it must be 1..=65535"));
+    }
+    Ok((channels, fields[0], fields[1], maxval as u32, pos + 1))
+}
+
+impl RowSource for PnmSource {
+    fn width(&self) -> u32 {
+        self.width
+    }
+    fn height(&self) -> u32 {
+        self.height
+    }
+    fn layout(&self) -> PixelLayout {
+        self.layout
+    }
+
+    fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
+        let start = self.data_start + self.next as usize * out.len();
+        let data = self.map.get(start..start + out.len()).ok_or_else(|| TilerError::DecodeRow {
+            path: self.path.clone(),
+            row: self.next,
+            message: "the file ends early".into(),
+        })?;
+        self.next += 1;
+        match (self.layout.depth, self.maxval) {
+            (Depth::U8, 255) => out.copy_from_slice(data),
+            (Depth::U8, m) => {
+                for (o, v) in out.iter_mut().zip(data) {
+                    *o = ((*v as u32).min(m) * 255 * 2 + m).div_euclid(2 * m) as u8;
+                }
+            }
+            (Depth::U16, m) => {
+                for (o, i) in out.chunks_exact_mut(2).zip(data.chunks_exact(2)) {
+                    let v = (u16::from_be_bytes([i[0], i[1]]) as u32).min(m);
+                    let v = if m == 65535 { v } else { ((v as u64 * 65535 * 2 + m as u64) / (2 * m as u64)) as u32 };
+                    o.copy_from_slice(&(v as u16).to_ne_bytes());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn describe(&self) -> String {
+        "pnm, memory-mapped".into()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn header_with_comments() {
+        let h = b"P6\n# made by hand\n3 2\n255\nrest";
+        assert_eq!(parse_header(h).unwrap(), (Channels::Rgb, 3, 2, 255, 23));
+        assert!(parse_header(b"P6 3 2 70000 ").is_err());
+        assert!(parse_header(b"P6 3 x 255 ").is_err());
+        assert!(parse_header(b"P3 3 2 255 ").is_err());
+    }
+}

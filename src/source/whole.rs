@@ -1,0 +1,102 @@
+//! Any other format the `image` crate reads, decoded whole: accepted only when the decoded
+//! image fits under `--max-memory`, which is checked from the header before decoding.
+
+use std::path::Path;
+
+use image::{DynamicImage, ImageDecoder, ImageReader};
+
+use super::{RowSource, check_whole_fits};
+use crate::error::{Result, TilerError};
+use crate::pixel::{Channels, Depth, PixelLayout};
+
+pub struct WholeSource {
+    format: String,
+    width: u32,
+    height: u32,
+    layout: PixelLayout,
+    /// Native-endian samples of the whole image.
+    bytes: Vec<u8>,
+    next: usize,
+}
+
+pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
+    let reader = ImageReader::open(path)
+        .map_err(|e| TilerError::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| TilerError::io(path, e))?;
+    let format = reader
+        .format()
+        .ok_or_else(|| TilerError::decode(path, "not an image format this tool reads (PNG, TIFF, JPEG, PPM/PGM, WebP, GIF, BMP, TGA, QOI)"))?;
+    let mut decoder = reader.into_decoder().map_err(|e| image_error(path, e))?;
+    let (width, height) = decoder.dimensions();
+    let layout = layout_of(decoder.color_type()).ok_or_else(|| {
+        TilerError::unsupported(path, format!("pixel type {:?} is not supported (8/16-bit grey, grey+alpha, RGB, RGBA are)", decoder.color_type()))
+    })?;
+    let why = format!("{format:?} images are not streamed by this tool");
+    check_whole_fits(path, width as u64, height as u64, layout, max_memory, &why)?;
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(max_memory);
+    decoder.set_limits(limits).map_err(|e| image_error(path, e))?;
+    let image = DynamicImage::from_decoder(decoder).map_err(|e| image_error(path, e))?;
+    let bytes = match image {
+        DynamicImage::ImageLuma8(i) => i.into_raw(),
+        DynamicImage::ImageLumaA8(i) => i.into_raw(),
+        DynamicImage::ImageRgb8(i) => i.into_raw(),
+        DynamicImage::ImageRgba8(i) => i.into_raw(),
+        DynamicImage::ImageLuma16(i) => bytemuck::cast_slice(&i.into_raw()).to_vec(),
+        DynamicImage::ImageLumaA16(i) => bytemuck::cast_slice(&i.into_raw()).to_vec(),
+        DynamicImage::ImageRgb16(i) => bytemuck::cast_slice(&i.into_raw()).to_vec(),
+        DynamicImage::ImageRgba16(i) => bytemuck::cast_slice(&i.into_raw()).to_vec(),
+        other => return Err(TilerError::unsupported(path, format!("pixel type {:?} is not supported", other.color()))),
+    };
+    Ok(Box::new(WholeSource { format: format!("{format:?}").to_lowercase(), width, height, layout, bytes, next: 0 }))
+}
+
+fn layout_of(colour: image::ColorType) -> Option<PixelLayout> {
+    use image::ColorType as C;
+    let (channels, depth) = match colour {
+        C::L8 => (Channels::Grey, Depth::U8),
+        C::La8 => (Channels::GreyAlpha, Depth::U8),
+        C::Rgb8 => (Channels::Rgb, Depth::U8),
+        C::Rgba8 => (Channels::Rgba, Depth::U8),
+        C::L16 => (Channels::Grey, Depth::U16),
+        C::La16 => (Channels::GreyAlpha, Depth::U16),
+        C::Rgb16 => (Channels::Rgb, Depth::U16),
+        C::Rgba16 => (Channels::Rgba, Depth::U16),
+        _ => return None,
+    };
+    Some(PixelLayout::new(channels, depth))
+}
+
+fn image_error(path: &Path, e: image::ImageError) -> TilerError {
+    match e {
+        image::ImageError::IoError(io) => TilerError::io(path, io),
+        image::ImageError::Limits(l) => TilerError::unsupported(path, format!("{l}; raise --max-memory")),
+        image::ImageError::Unsupported(u) => TilerError::unsupported(path, u),
+        other => TilerError::decode(path, format!("corrupt or truncated image: {other}")),
+    }
+}
+
+impl RowSource for WholeSource {
+    fn width(&self) -> u32 {
+        self.width
+    }
+    fn height(&self) -> u32 {
+        self.height
+    }
+    fn layout(&self) -> PixelLayout {
+        self.layout
+    }
+
+    fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
+        let start = self.next * out.len();
+        out.copy_from_slice(&self.bytes[start..start + out.len()]);
+        self.next += 1;
+        Ok(())
+    }
+
+    fn describe(&self) -> String {
+        format!("{}, decoded whole", self.format)
+    }
+}
+
