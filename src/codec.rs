@@ -3,6 +3,8 @@
 //! The codec also decides the stored texel format: JPEG holds 8-bit grey or RGB only, so 16-bit
 //! tiles are rounded to 8 bits and alpha is either composited away (`--flatten`) or refused.
 
+use std::borrow::Cow;
+
 use crate::error::TilerError;
 use crate::pixel::{Channels, Depth, PixelLayout, Sample, u16_to_u8};
 
@@ -50,17 +52,22 @@ impl Codec {
         }
     }
 
-    /// The texel layout tiles are stored in for a source of `source` layout.
-    pub fn stored_layout(&self, source: PixelLayout, flatten: bool) -> Result<PixelLayout, TilerError> {
+    /// The texel layout tiles are stored in for a source of `source` layout; `depth` asks for
+    /// a sample depth other than the source's.
+    pub fn stored_layout(&self, source: PixelLayout, flatten: bool, depth: Option<Depth>) -> Result<PixelLayout, TilerError> {
+        let channels = if flatten { source.channels.without_alpha() } else { source.channels };
         match self {
-            Codec::Png { .. } => Ok(if flatten { PixelLayout::new(source.channels.without_alpha(), source.depth) } else { source }),
+            Codec::Png { .. } => Ok(PixelLayout::new(channels, depth.unwrap_or(source.depth))),
             Codec::Jpeg { .. } => {
-                if source.channels.has_alpha() && !flatten {
+                if channels.has_alpha() {
                     return Err(TilerError::Options(format!(
                         "the source is {source} but JPEG has no alpha channel: use --codec png to keep alpha, or --flatten to composite it over --background"
                     )));
                 }
-                Ok(PixelLayout::new(source.channels.without_alpha(), Depth::U8))
+                if depth == Some(Depth::U16) {
+                    return Err(TilerError::Options("JPEG stores 8-bit samples only: use --codec png for 16-bit tiles".into()));
+                }
+                Ok(PixelLayout::new(channels, Depth::U8))
             }
         }
     }
@@ -77,8 +84,8 @@ pub struct TileEncoder<T> {
 }
 
 impl<T: Sample> TileEncoder<T> {
-    pub fn new(codec: Codec, source: PixelLayout, flatten: bool, side: u32, matte: Vec<T>) -> Result<Self, TilerError> {
-        let stored = codec.stored_layout(source, flatten)?;
+    pub fn new(codec: Codec, source: PixelLayout, flatten: bool, depth: Option<Depth>, side: u32, matte: Vec<T>) -> Result<Self, TilerError> {
+        let stored = codec.stored_layout(source, flatten, depth)?;
         Ok(TileEncoder { codec, source, stored, side, matte })
     }
 
@@ -103,14 +110,7 @@ impl<T: Sample> TileEncoder<T> {
     }
 
     fn encode_jpeg(&self, texels: &[T], quality: u8, subsampling: Subsampling, out: &mut Vec<u8>) -> Result<(), String> {
-        let bytes: Vec<u8>;
-        let samples: &[u8] = match T::DEPTH {
-            Depth::U8 => bytemuck::cast_slice(texels),
-            Depth::U16 => {
-                bytes = texels.iter().map(|s| u16_to_u8(s.to_u16())).collect();
-                &bytes
-            }
-        };
+        let samples = to_u8(texels);
         let colour = match self.stored.channels {
             Channels::Grey => jpeg_encoder::ColorType::Luma,
             _ => jpeg_encoder::ColorType::Rgb,
@@ -122,7 +122,7 @@ impl<T: Sample> TileEncoder<T> {
         });
         enc.set_chroma_subsampling_method(jpeg_encoder::ChromaSubsamplingMethod::Average);
         let side = self.side as u16;
-        enc.encode(samples, side, side, colour).map_err(|e| e.to_string())
+        enc.encode(&samples, side, side, colour).map_err(|e| e.to_string())
     }
 
     fn encode_png(&self, texels: &[T], level: PngLevel, out: &mut Vec<u8>) -> Result<(), String> {
@@ -138,21 +138,28 @@ impl<T: Sample> TileEncoder<T> {
             PngLevel::Default => png::Compression::Balanced,
             PngLevel::Best => png::Compression::High,
         });
-        let big_endian: Vec<u8>;
-        let data: &[u8] = match T::DEPTH {
+        let data: Cow<[u8]> = match self.stored.depth {
             Depth::U8 => {
                 enc.set_depth(png::BitDepth::Eight);
-                bytemuck::cast_slice(texels)
+                to_u8(texels)
             }
             Depth::U16 => {
                 enc.set_depth(png::BitDepth::Sixteen);
-                big_endian = texels.iter().flat_map(|s| s.to_u16().to_be_bytes()).collect();
-                &big_endian
+                let widen = if T::DEPTH == Depth::U8 { 257 } else { 1 };
+                Cow::Owned(texels.iter().flat_map(|s| (s.to_u16() * widen).to_be_bytes()).collect())
             }
         };
         let mut writer = enc.write_header().map_err(|e| e.to_string())?;
-        writer.write_image_data(data).map_err(|e| e.to_string())?;
+        writer.write_image_data(&data).map_err(|e| e.to_string())?;
         writer.finish().map_err(|e| e.to_string())
+    }
+}
+
+/// Samples as 8-bit, rounding 16-bit ones to the nearest 8-bit value.
+fn to_u8<T: Sample>(texels: &[T]) -> Cow<'_, [u8]> {
+    match T::DEPTH {
+        Depth::U8 => Cow::Borrowed(bytemuck::cast_slice(texels)),
+        Depth::U16 => Cow::Owned(texels.iter().map(|s| u16_to_u8(s.to_u16())).collect()),
     }
 }
 
@@ -186,7 +193,8 @@ mod tests {
     fn jpeg_refuses_alpha_unless_flattened() {
         let codec = Codec::Jpeg { quality: 85, subsampling: Subsampling::S420 };
         let rgba = PixelLayout::new(Channels::Rgba, Depth::U16);
-        assert!(codec.stored_layout(rgba, false).is_err());
-        assert_eq!(codec.stored_layout(rgba, true).unwrap(), PixelLayout::new(Channels::Rgb, Depth::U8));
+        assert!(codec.stored_layout(rgba, false, None).is_err());
+        assert!(codec.stored_layout(rgba, true, Some(Depth::U16)).is_err());
+        assert_eq!(codec.stored_layout(rgba, true, None).unwrap(), PixelLayout::new(Channels::Rgb, Depth::U8));
     }
 }

@@ -1,9 +1,14 @@
+pub mod background;
 pub mod band;
 pub mod codec;
 pub mod cut;
 pub mod error;
 pub mod filename;
+pub mod info;
 pub mod layout;
 pub mod pixel;
 pub mod pyramid;
+pub mod settings;
+pub mod sink;
 pub mod source;
+pub mod split;

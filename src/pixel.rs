@@ -108,7 +108,7 @@ impl fmt::Display for PixelLayout {
 
 /// A sample type the pipeline can carry. Sums are taken in `u64`, which holds the sum of
 /// 4^24 samples of 16 bits, far beyond any pyramid a 2^24-texel side can have.
-pub trait Sample: Copy + Default + PartialEq + Send + Sync + bytemuck::Pod + 'static {
+pub trait Sample: Copy + Default + PartialEq + Send + Sync + Into<u64> + bytemuck::Pod + 'static {
     const DEPTH: Depth;
     const MAX: u16;
     fn to_u64(self) -> u64;

@@ -1,0 +1,103 @@
+//! `info.json`: the description of a tiled pyramid, as the thesis's tiler wrote it, extended
+//! with what a runtime needs. Its specification is `docs/info-json.md`.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Result, TilerError};
+
+/// The `formatVersion` this tool writes. Files without the member are the thesis's version 0.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Every member; on reading, all are optional (the thesis's files have only the first six).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "camelCase", deny_unknown_fields)]
+pub struct InfoFile {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub format_version: Option<u32>,
+    pub tile_size: Option<u32>,
+    pub tile_count: Option<u32>,
+    pub lod_count: Option<u32>,
+    pub tile_format: Option<String>,
+    pub tile_type: Option<String>,
+    pub filename_format: Option<String>,
+    pub border: Option<u32>,
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+    pub background: Option<String>,
+    pub codec: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub quality: Option<u8>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub subsampling: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub png_compression: Option<String>,
+}
+
+/// A complete description, as written after a successful run.
+pub type Info = InfoFile;
+
+impl InfoFile {
+    /// Reads and checks an existing `info.json`.
+    pub fn read(path: &Path) -> Result<InfoFile> {
+        let text = std::fs::read_to_string(path).map_err(|e| TilerError::io(path, e))?;
+        let info: InfoFile = serde_json::from_str(&text).map_err(|e| TilerError::Info {
+            path: path.to_path_buf(),
+            field: format!("line {} column {}", e.line(), e.column()),
+            message: e.to_string(),
+        })?;
+        info.check(path)?;
+        Ok(info)
+    }
+
+    /// Members that contradict each other.
+    fn check(&self, path: &Path) -> Result<()> {
+        let err = |field: &str, message: String| TilerError::Info { path: path.to_path_buf(), field: field.into(), message };
+        if let Some(v) = self.format_version.filter(|v| *v > FORMAT_VERSION) {
+            return Err(err("formatVersion", format!("{v} is newer than this tool understands ({FORMAT_VERSION})")));
+        }
+        if let Some(c) = self.tile_count {
+            if !c.is_power_of_two() {
+                return Err(err("tileCount", format!("{c} is not a power of two")));
+            }
+            if let Some(l) = self.lod_count.filter(|l| *l != c.trailing_zeros() + 1) {
+                return Err(err("lodCount", format!("{l} contradicts tileCount {c} (lodCount = log2(tileCount) + 1 = {})", c.trailing_zeros() + 1)));
+            }
+        }
+        Ok(())
+    }
+
+    pub fn to_json_pretty(&self) -> String {
+        let mut s = serde_json::to_string_pretty(self).expect("plain data serialises");
+        s.push('\n');
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_the_thesis_example() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("info.json");
+        std::fs::write(&p, r#"{"tileSize":128,"tileCount":512,"lodCount":10,"tileFormat":"rgb","tileType":"unsignedByte","filenameFormat":"lod%1$02s-x%2$04s-y%3$04s.jpg"}"#).unwrap();
+        let i = InfoFile::read(&p).unwrap();
+        assert_eq!((i.tile_size, i.tile_count, i.lod_count), (Some(128), Some(512), Some(10)));
+        assert_eq!(i.format_version, None);
+    }
+
+    #[test]
+    fn names_the_bad_member() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("info.json");
+        std::fs::write(&p, r#"{"tileCount":512,"lodCount":9}"#).unwrap();
+        let e = InfoFile::read(&p).unwrap_err().to_string();
+        assert!(e.contains("lodCount") && e.contains("info.json"), "{e}");
+        std::fs::write(&p, r#"{"tilesize":128}"#).unwrap();
+        let e = InfoFile::read(&p).unwrap_err().to_string();
+        assert!(e.contains("tilesize"), "{e}");
+    }
+}

@@ -1,0 +1,65 @@
+//! What the user sees while and after a run: the progress bar and the summary line.
+
+use std::path::Path;
+use std::time::Duration;
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use vortex_tiler::split::Summary;
+
+pub fn progress_bar(total: u64, quiet: bool) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr_with_hz(10));
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40.cyan/blue}] {human_pos}/{human_len} tiles ({per_sec}, eta {eta})")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    bar
+}
+
+/// One line: what was written, how fast, how much memory.
+pub fn summary_line(s: &Summary, out: &Path, width: u32, height: u32, decoder: &str, took: Duration) -> String {
+    let secs = took.as_secs_f64().max(1e-9);
+    let mpx = width as f64 * height as f64 / 1e6;
+    let peak = peak_rss().map(|b| format!(", peak memory {}", mib(b))).unwrap_or_default();
+    format!(
+        "wrote {} tiles ({} encoded, {} LODs, {}x{} {}) totalling {} to {} in {:.2} s: {:.1} source Mpx/s [{decoder}]{peak}",
+        s.tiles,
+        s.encoded,
+        s.layout.lod_count,
+        s.layout.tile_size,
+        s.layout.tile_size,
+        s.stored,
+        mib(s.bytes),
+        out.display(),
+        secs,
+        mpx / secs,
+    )
+}
+
+fn mib(bytes: u64) -> String {
+    format!("{:.1} MiB", bytes as f64 / (1u64 << 20) as f64)
+}
+
+/// Peak resident set size, from /proc on Linux.
+fn peak_rss() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// The error and its causes on one line, without repeating a cause the message already holds.
+pub fn chain(e: &anyhow::Error) -> String {
+    let mut out = e.to_string();
+    for cause in e.chain().skip(1) {
+        let c = cause.to_string();
+        if !out.contains(&c) {
+            out.push_str(": ");
+            out.push_str(&c);
+        }
+    }
+    out
+}

@@ -1,0 +1,183 @@
+//! Resolving the output settings: command-line flags override an existing `info.json` in the
+//! output directory (the thesis tool's way of configuring a run), which overrides defaults.
+//! Members that contradict each other, the flags or the input are errors naming the member.
+
+use std::path::Path;
+
+use crate::background::Background;
+use crate::codec::{Codec, PngLevel, Subsampling};
+use crate::error::{Result, TilerError};
+use crate::filename::FilenameFormat;
+use crate::info::{FORMAT_VERSION, InfoFile};
+use crate::layout::Layout;
+use crate::pixel::{Channels, Depth, PixelLayout};
+use crate::split::{SplitOptions, Summary};
+
+pub const DEFAULT_TILE_SIZE: u32 = 128;
+pub const DEFAULT_QUALITY: u8 = 85;
+/// The thesis's default names, with the codec's extension.
+pub const DEFAULT_FILENAME_STEM: &str = "lod%1$02s-x%2$04s-y%3$04s";
+
+/// Which codec: `auto` picks JPEG for 8-bit grey or RGB and PNG for anything with alpha or 16 bits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum CodecChoice {
+    Auto,
+    Jpeg,
+    Png,
+}
+
+/// What the command line asked for; `None` means "not given".
+#[derive(Clone, Debug, Default)]
+pub struct Requested {
+    pub tile_size: Option<u32>,
+    pub border: Option<u32>,
+    pub codec: Option<CodecChoice>,
+    pub quality: Option<u8>,
+    pub subsampling: Option<Subsampling>,
+    pub png_level: Option<PngLevel>,
+    pub background: Option<Background>,
+    pub flatten: bool,
+    pub tile_depth: Option<Depth>,
+    pub filename_format: Option<String>,
+}
+
+/// Combines flags, an existing `info.json` (at `info_path`) and the source into settings.
+pub fn resolve(req: &Requested, existing: Option<(&Path, &InfoFile)>, source: PixelLayout) -> Result<(SplitOptions, FilenameFormat)> {
+    let empty = InfoFile::default();
+    let (info_path, info) = existing.unwrap_or((Path::new("info.json"), &empty));
+    let field_err = |field: &str, message: String| TilerError::Info { path: info_path.to_path_buf(), field: field.into(), message };
+
+    let tile_size = req.tile_size.or(info.tile_size).unwrap_or(DEFAULT_TILE_SIZE);
+    let border = req.border.or(info.border).unwrap_or(0);
+    let names_given = req.filename_format.clone().or(info.filename_format.clone());
+    let ext = names_given.as_deref().and_then(|f| FilenameFormat::parse(f, 3).ok()).and_then(|f| f.extension());
+
+    // Codec: flag, then info.json's codec, then the file extension, then auto.
+    let info_codec = match info.codec.as_deref() {
+        None => None,
+        Some("jpeg") => Some(CodecChoice::Jpeg),
+        Some("png") => Some(CodecChoice::Png),
+        Some(other) => return Err(field_err("codec", format!("'{other}' is not a codec (jpeg, png)"))),
+    };
+    let ext_codec = match ext.as_deref() {
+        Some("jpg" | "jpeg") => Some(CodecChoice::Jpeg),
+        Some("png") => Some(CodecChoice::Png),
+        _ => None,
+    };
+    let mut choice = req.codec.or(info_codec).or(ext_codec).unwrap_or(CodecChoice::Auto);
+    // info.json's tileFormat/tileType say what the tiles must hold.
+    let want_channels = match info.tile_format.as_deref() {
+        None => None,
+        Some(f) => Some(Channels::from_tile_format(f).ok_or_else(|| {
+            field_err("tileFormat", format!("'{f}' is not supported (luminance, luminanceAlpha, rgb, rgba)"))
+        })?),
+    };
+    let info_depth = match info.tile_type.as_deref() {
+        None => None,
+        Some(t) => Some(Depth::from_tile_type(t).ok_or_else(|| field_err("tileType", format!("'{t}' is not supported (unsignedByte, unsignedShort)")))?),
+    };
+    let tile_depth = req.tile_depth.or(info_depth);
+    let flatten = req.flatten || want_channels.is_some_and(|c| source.channels.has_alpha() && c == source.channels.without_alpha());
+    if choice == CodecChoice::Auto {
+        let lossless = (source.channels.has_alpha() && !flatten) || tile_depth.unwrap_or(source.depth) == Depth::U16;
+        choice = if lossless { CodecChoice::Png } else { CodecChoice::Jpeg };
+    }
+    let codec = match choice {
+        CodecChoice::Jpeg => Codec::Jpeg {
+            quality: req.quality.or(info.quality).unwrap_or(DEFAULT_QUALITY),
+            subsampling: req.subsampling.or(parse_member(info.subsampling.as_deref(), "subsampling", &field_err)?).unwrap_or(Subsampling::S420),
+        },
+        _ => Codec::Png { level: req.png_level.or(parse_member(info.png_compression.as_deref(), "pngCompression", &field_err)?).unwrap_or(PngLevel::Fast) },
+    };
+    if let Codec::Jpeg { quality, .. } = codec
+        && !(1..=100).contains(&quality)
+    {
+        return Err(TilerError::Options(format!("JPEG quality {quality} is outside 1..=100")));
+    }
+    if let (Some(e), false) = (&ext, ext_codec.is_none_or(|c| c == choice)) {
+        return Err(TilerError::Options(format!("the filename format ends in .{e} but the codec is {}", codec.name())));
+    }
+    let names = match names_given {
+        Some(f) => f,
+        None => format!("{DEFAULT_FILENAME_STEM}.{}", codec.extension()),
+    };
+    let names = FilenameFormat::parse(&names, 3).map_err(|m| TilerError::Options(format!("filename format: {m}")))?;
+
+    let opts = SplitOptions {
+        tile_size,
+        border,
+        codec,
+        background: match (req.background, info.background.as_deref()) {
+            (Some(b), _) => b,
+            (None, Some(b)) => b.parse().map_err(|m| field_err("background", m))?,
+            (None, None) => Background::Edge,
+        },
+        flatten,
+        tile_depth,
+    };
+    let stored = codec.stored_layout(source, flatten, tile_depth)?;
+    if let Some(want) = want_channels.filter(|c| *c != stored.channels) {
+        return Err(field_err(
+            "tileFormat",
+            format!("is {} but {source} tiles stored as {} would be {}", want.tile_format(), codec.name(), stored.channels.tile_format()),
+        ));
+    }
+    Ok((opts, names))
+}
+
+/// Checks an existing `info.json`'s derived members against what this run will produce.
+pub fn check_grid(info_path: &Path, info: &InfoFile, req: &Requested, layout: &Layout) -> Result<()> {
+    // Flags that change the grid make the old counts moot.
+    if req.tile_size.is_some() || req.border.is_some() {
+        return Ok(());
+    }
+    for (field, old, new) in [("tileCount", info.tile_count, layout.tile_count), ("lodCount", info.lod_count, layout.lod_count)] {
+        if let Some(old) = old.filter(|o| *o != new) {
+            return Err(TilerError::Info {
+                path: info_path.to_path_buf(),
+                field: field.into(),
+                message: format!(
+                    "is {old} but this {}x{} image in {}-texel tiles (border {}) needs {new}; remove the old info.json or choose another output",
+                    layout.width, layout.height, layout.tile_size, layout.border
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+fn parse_member<V: clap::ValueEnum>(value: Option<&str>, field: &str, err: &dyn Fn(&str, String) -> TilerError) -> Result<Option<V>> {
+    value
+        .map(|v| V::from_str(v, false).map_err(|_| err(field, format!("'{v}' is not a valid value"))))
+        .transpose()
+}
+
+/// The `info.json` describing a finished run.
+pub fn describe(summary: &Summary, opts: &SplitOptions, names: &FilenameFormat) -> InfoFile {
+    let l = &summary.layout;
+    let (quality, subsampling, png_compression) = match opts.codec {
+        Codec::Jpeg { quality, subsampling } => (Some(quality), Some(value_name(subsampling)), None),
+        Codec::Png { level } => (None, None, Some(value_name(level))),
+    };
+    InfoFile {
+        format_version: Some(FORMAT_VERSION),
+        tile_size: Some(l.tile_size),
+        tile_count: Some(l.tile_count),
+        lod_count: Some(l.lod_count),
+        tile_format: Some(summary.stored.channels.tile_format().into()),
+        tile_type: Some(summary.stored.depth.tile_type().into()),
+        filename_format: Some(names.as_str().into()),
+        border: Some(l.border),
+        width: Some(l.width),
+        height: Some(l.height),
+        background: Some(opts.background.to_string()),
+        codec: Some(opts.codec.name().into()),
+        quality,
+        subsampling,
+        png_compression,
+    }
+}
+
+fn value_name<V: clap::ValueEnum>(v: V) -> String {
+    v.to_possible_value().expect("no hidden values").get_name().to_string()
+}

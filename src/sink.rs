@@ -1,0 +1,119 @@
+//! Where finished tiles go. A sink receives encoded tiles from many threads in any order and
+//! is finished once, after the last tile, with the pyramid's description.
+//!
+//! [`DirSink`] writes one file per tile plus `info.json` into a staging directory beside the
+//! destination and renames it into place only when everything is written, so an interrupted
+//! run never leaves a directory that looks like a finished pyramid.
+
+use std::collections::HashSet;
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use crate::error::{Result, TilerError};
+use crate::filename::FilenameFormat;
+use crate::info::Info;
+
+pub trait TileSink: Sync {
+    fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()>;
+    /// Bytes of tile data written so far.
+    fn bytes_written(&self) -> u64;
+}
+
+/// One image file per tile plus `info.json`.
+pub struct DirSink {
+    dest: PathBuf,
+    staging: PathBuf,
+    names: FilenameFormat,
+    made_dirs: Mutex<HashSet<PathBuf>>,
+    bytes: AtomicU64,
+}
+
+impl DirSink {
+    /// Prepares to write into `dest`, which must be absent, empty, or a previous output (it
+    /// holds an `info.json`); anything else is refused rather than replaced.
+    pub fn create(dest: &Path, names: FilenameFormat) -> Result<DirSink> {
+        if dest.exists() {
+            if !dest.is_dir() {
+                return Err(TilerError::write(dest, std::io::Error::other("exists and is not a directory")));
+            }
+            let mut entries = fs::read_dir(dest).map_err(|e| TilerError::write(dest, e))?;
+            if entries.next().is_some() && !dest.join("info.json").is_file() {
+                return Err(TilerError::write(
+                    dest,
+                    std::io::Error::other("is not empty and holds no info.json, so it is not a previous output; choose a new or empty directory"),
+                ));
+            }
+        }
+        let name = dest.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
+        let parent = match dest.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let staging = parent.join(format!(".{name}.partial-{}", std::process::id()));
+        if staging.exists() {
+            fs::remove_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
+        }
+        fs::create_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
+        Ok(DirSink { dest: dest.to_path_buf(), staging, names, made_dirs: Mutex::new(HashSet::new()), bytes: AtomicU64::new(0) })
+    }
+
+    /// Writes `info.json` last, then moves the staging directory into place. A previous output
+    /// at the destination is moved aside first and deleted only after the new one is in place.
+    pub fn finish(self, info: &Info) -> Result<()> {
+        let json = self.staging.join("info.json");
+        fs::write(&json, info.to_json_pretty()).map_err(|e| TilerError::write(&json, e))?;
+        let old = self.staging.with_file_name(format!(
+            "{}.old",
+            self.staging.file_name().unwrap_or_default().to_string_lossy()
+        ));
+        let had_old = self.dest.exists();
+        if had_old {
+            fs::rename(&self.dest, &old).map_err(|e| TilerError::write(&self.dest, e))?;
+        }
+        fs::rename(&self.staging, &self.dest).map_err(|e| TilerError::write(&self.dest, e))?;
+        if had_old {
+            fs::remove_dir_all(&old).map_err(|e| TilerError::write(&old, e))?;
+        }
+        Ok(())
+    }
+
+    /// Removes the staging directory after a failure.
+    pub fn abandon(self) {
+        let _ = fs::remove_dir_all(&self.staging);
+    }
+
+    pub fn staging_dir(&self) -> &Path {
+        &self.staging
+    }
+}
+
+impl TileSink for DirSink {
+    fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+        let path = self.staging.join(self.names.format(&[lod, x, y]));
+        if let Some(dir) = path.parent().filter(|d| *d != self.staging) {
+            let mut made = self.made_dirs.lock().unwrap_or_else(|p| p.into_inner());
+            if !made.contains(dir) {
+                fs::create_dir_all(dir).map_err(|e| TilerError::write(dir, e))?;
+                made.insert(dir.to_path_buf());
+            }
+        }
+        let mut file = fs::File::create_new(&path).map_err(|e| match e.kind() {
+            std::io::ErrorKind::AlreadyExists => TilerError::Options(format!(
+                "tile (lod {lod}, x {x}, y {y}) would overwrite {}: the filename format '{}' gives two tiles one name; pad the numbers or separate them",
+                path.display(),
+                self.names.as_str()
+            )),
+            _ => TilerError::write(&path, e),
+        })?;
+        file.write_all(bytes).map_err(|e| TilerError::write(&path, e))?;
+        self.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
+        Ok(())
+    }
+
+    fn bytes_written(&self) -> u64 {
+        self.bytes.load(Ordering::Relaxed)
+    }
+}

@@ -1,0 +1,258 @@
+//! The `split` pipeline: source -> bands -> tiles and pyramid -> sink.
+//!
+//! A producer thread reads the source row by row into the LOD-0 band and cascades every row
+//! down the pyramid (each level keeps its own band and one half-built row for the next). As
+//! soon as a band holds everything a row of tiles needs, the tiles are cut and sent, in a
+//! bounded channel, to the calling thread, which encodes them in parallel on the rayon pool
+//! and hands them to the sink. Peak memory is therefore a few bands of the image's width,
+//! whatever its height; output bytes do not depend on the thread count.
+
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use rayon::prelude::*;
+
+use crate::background::Background;
+use crate::band::Band;
+use crate::codec::{Codec, TileEncoder};
+use crate::cut::{self, Padding, Run};
+use crate::error::{Result, TilerError};
+use crate::layout::Layout;
+use crate::pixel::{Depth, PixelLayout, Sample};
+use crate::pyramid::{ExactRow, Reducer};
+use crate::sink::TileSink;
+use crate::source::RowSource;
+
+/// How to cut and store the pyramid.
+#[derive(Clone, Debug)]
+pub struct SplitOptions {
+    pub tile_size: u32,
+    pub border: u32,
+    pub codec: Codec,
+    pub background: Background,
+    /// Composite alpha over the background (or black) instead of storing it.
+    pub flatten: bool,
+    /// Store tiles at this depth instead of the source's (JPEG is always 8-bit).
+    pub tile_depth: Option<Depth>,
+}
+
+/// What a finished run produced.
+#[derive(Clone, Debug)]
+pub struct Summary {
+    pub layout: Layout,
+    pub source: PixelLayout,
+    pub stored: PixelLayout,
+    pub tiles: u64,
+    /// Tiles encoded (the rest were copies of an identical neighbour).
+    pub encoded: u64,
+    pub bytes: u64,
+}
+
+/// Batches of tiles waiting for the encoder; two keep both sides busy without piling up.
+const QUEUE_BATCHES: usize = 2;
+
+/// Tiles of one tile row whose texels are identical share one encoding.
+struct Batch<T> {
+    lod: u32,
+    tiles: Vec<(Vec<T>, Vec<(u32, u32)>)>,
+}
+
+/// Cuts `source` into the pyramid and writes every tile to `sink`. Runs the encoders on the
+/// current rayon pool; `progress` is called with the number of tiles finished each time.
+pub fn split(source: Box<dyn RowSource>, sink: &dyn TileSink, opts: &SplitOptions, progress: &(dyn Fn(u64) + Sync)) -> Result<Summary> {
+    let layout = Layout::new(source.width() as u64, source.height() as u64, opts.tile_size, opts.border)?;
+    match source.layout().depth {
+        Depth::U8 => run::<u8>(source, sink, opts, layout, progress),
+        Depth::U16 => run::<u16>(source, sink, opts, layout, progress),
+    }
+}
+
+fn run<T: Sample>(
+    source: Box<dyn RowSource>,
+    sink: &dyn TileSink,
+    opts: &SplitOptions,
+    layout: Layout,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<Summary> {
+    let src_layout = source.layout();
+    let channels = src_layout.channels;
+    let matte = opts.background.matte::<T>(channels);
+    let encoder = TileEncoder::<T>::new(opts.codec, src_layout, opts.flatten, opts.tile_depth, layout.tile_size, matte)?;
+    let padding = match opts.background.texel::<T>(channels) {
+        Some(texel) => Padding::Colour(texel),
+        None => Padding::Edge,
+    };
+
+    let (tx, rx) = sync_channel::<Result<Batch<T>>>(QUEUE_BATCHES);
+    let encoded = AtomicU64::new(0);
+    let tiles = AtomicU64::new(0);
+    std::thread::scope(|scope| {
+        let producer = scope.spawn(move || {
+            let mut pyramid = Pyramid::new(layout, channels.count(), padding, tx.clone());
+            if let Err(e) = pyramid.run(source) {
+                let _ = tx.send(Err(e));
+            }
+        });
+        let consumed = consume(rx, &encoder, sink, &encoded, &tiles, progress);
+        // Dropping the receiver (on error) makes the producer's next send fail, so it stops.
+        producer.join().map_err(|_| TilerError::Options("the tiling thread panicked".into()))?;
+        consumed
+    })?;
+    Ok(Summary {
+        layout,
+        source: src_layout,
+        stored: encoder.stored_layout(),
+        tiles: tiles.into_inner(),
+        encoded: encoded.into_inner(),
+        bytes: sink.bytes_written(),
+    })
+}
+
+/// Encodes and writes batches as they arrive; merges waiting batches so that small coarse
+/// levels still keep every thread busy.
+fn consume<T: Sample>(
+    rx: Receiver<Result<Batch<T>>>,
+    encoder: &TileEncoder<T>,
+    sink: &dyn TileSink,
+    encoded: &AtomicU64,
+    tiles: &AtomicU64,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<()> {
+    while let Ok(first) = rx.recv() {
+        let mut work = vec![first?];
+        while let Ok(more) = rx.try_recv() {
+            work.push(more?);
+        }
+        let jobs: Vec<(u32, &(Vec<T>, Vec<(u32, u32)>))> =
+            work.iter().flat_map(|b| b.tiles.iter().map(move |t| (b.lod, t))).collect();
+        jobs.par_iter().try_for_each_init(Vec::new, |buf, (lod, (texels, places))| {
+            let (lod, (x0, y0)) = (*lod, places[0]);
+            encoder.encode(texels, buf).map_err(|message| TilerError::Encode { lod, x: x0, y: y0, message })?;
+            for (x, y) in places {
+                sink.write_tile(lod, *x, *y, buf)?;
+            }
+            encoded.fetch_add(1, Ordering::Relaxed);
+            tiles.fetch_add(places.len() as u64, Ordering::Relaxed);
+            progress(places.len() as u64);
+            Ok(())
+        })?;
+    }
+    Ok(())
+}
+
+/// One LOD in flight: its band, the tile rows cut so far and the reducer to the next LOD.
+struct Level<T> {
+    lod: u32,
+    extent: (u32, u32),
+    band: Band<T>,
+    next_tile_row: u32,
+    x_runs: Vec<Vec<Run>>,
+    reducer: Option<Reducer>,
+    /// The current row, rounded from exact sums.
+    row: Vec<T>,
+}
+
+struct Pyramid<T> {
+    layout: Layout,
+    channels: usize,
+    padding: Padding<T>,
+    levels: Vec<Level<T>>,
+    out: SyncSender<Result<Batch<T>>>,
+}
+
+impl<T: Sample> Pyramid<T> {
+    fn new(layout: Layout, channels: usize, padding: Padding<T>, out: SyncSender<Result<Batch<T>>>) -> Self {
+        let edge = padding == Padding::Edge;
+        let levels = (0..layout.lod_count)
+            .map(|lod| {
+                let extent = layout.level_extent(lod);
+                let row_len = extent.0 as usize * channels;
+                let x_runs = (0..layout.tiles_per_side(lod)).map(|t| cut::runs(&layout, lod, t, extent.0, edge)).collect();
+                let reducer = (lod + 1 < layout.lod_count)
+                    .then(|| Reducer::new(layout.width as u64, layout.height as u64, lod, extent.0 as usize, channels));
+                Level {
+                    lod,
+                    extent,
+                    band: Band::new(row_len, layout.tile_size as usize + 1),
+                    next_tile_row: 0,
+                    x_runs,
+                    reducer,
+                    row: vec![T::default(); row_len],
+                }
+            })
+            .collect();
+        Pyramid { layout, channels, padding, levels, out }
+    }
+
+    fn run(&mut self, mut source: Box<dyn RowSource>) -> Result<()> {
+        let mut row = vec![T::default(); self.levels[0].row.len()];
+        for _ in 0..self.layout.height {
+            source.read_row(bytemuck::cast_slice_mut(&mut row))?;
+            self.push_source_row(&row)?;
+        }
+        // Odd heights leave a half-built row in each reducer: flush them top-down.
+        for k in 0..self.levels.len() {
+            let (this, rest) = self.levels[k..].split_first_mut().expect("level k exists");
+            if let Some(exact) = this.reducer.as_mut().and_then(Reducer::finish) {
+                Self::feed(rest, &exact, &self.layout, self.channels, &self.padding, &self.out)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn push_source_row(&mut self, row: &[T]) -> Result<()> {
+        let (first, rest) = self.levels.split_first_mut().expect("at least one level");
+        first.band.push(row);
+        first.cut_ready(&self.layout, self.channels, &self.padding, &self.out)?;
+        if let Some(exact) = first.reducer.as_mut().and_then(|r| r.push(row)) {
+            Self::feed(rest, &exact, &self.layout, self.channels, &self.padding, &self.out)?;
+        }
+        Ok(())
+    }
+
+    /// Gives `levels[0]` its next exact row and cascades into the levels below it.
+    fn feed(
+        levels: &mut [Level<T>],
+        exact: &ExactRow,
+        layout: &Layout,
+        channels: usize,
+        padding: &Padding<T>,
+        out: &SyncSender<Result<Batch<T>>>,
+    ) -> Result<()> {
+        let (this, rest) = levels.split_first_mut().expect("a level below the reducer");
+        exact.round_into(&mut this.row);
+        this.band.push(&this.row);
+        this.cut_ready(layout, channels, padding, out)?;
+        if let Some(next) = this.reducer.as_mut().and_then(|r| r.push(exact.sums)) {
+            Self::feed(rest, &next, layout, channels, padding, out)?;
+        }
+        Ok(())
+    }
+}
+
+impl<T: Sample> Level<T> {
+    /// Cuts every tile row whose rows are all in the band, then drops rows no longer needed.
+    fn cut_ready(&mut self, layout: &Layout, channels: usize, padding: &Padding<T>, out: &SyncSender<Result<Batch<T>>>) -> Result<()> {
+        let (_, height) = self.extent;
+        while self.next_tile_row < layout.tiles_per_side(self.lod)
+            && self.band.end() > cut::last_row_needed(layout, self.lod, self.next_tile_row, height)
+        {
+            let ty = self.next_tile_row;
+            let y_runs = cut::runs(layout, self.lod, ty, height, *padding == Padding::Edge);
+            let mut tiles: Vec<(Vec<T>, Vec<(u32, u32)>)> = Vec::new();
+            let mut texels = Vec::with_capacity(layout.tile_bytes(channels));
+            for (tx, x_runs) in self.x_runs.iter().enumerate() {
+                cut::cut_tile(&self.band, channels, x_runs, &y_runs, padding, &mut texels);
+                match tiles.last_mut() {
+                    Some((prev, places)) if *prev == texels => places.push((tx as u32, ty)),
+                    _ => tiles.push((texels.clone(), vec![(tx as u32, ty)])),
+                }
+            }
+            out.send(Ok(Batch { lod: self.lod, tiles }))
+                .map_err(|_| TilerError::Options("the encoder stopped".into()))?;
+            self.next_tile_row += 1;
+            self.band.drop_before(cut::first_row_kept(layout, ty, height));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,200 @@
+//! Shared test helpers: in-memory sources, a sink that keeps tiles, and a naive whole-image
+//! pyramid (the oracle the streaming pipeline must match byte for byte).
+#![allow(dead_code)]
+
+use std::collections::BTreeMap;
+use std::sync::Mutex;
+
+use vortex_tiler::background::Background;
+use vortex_tiler::codec::{Codec, PngLevel};
+use vortex_tiler::error::Result;
+use vortex_tiler::layout::Layout;
+use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
+use vortex_tiler::sink::TileSink;
+use vortex_tiler::source::RowSource;
+use vortex_tiler::split::{SplitOptions, Summary, split};
+
+/// An image in memory: samples widened to u16 whatever the depth.
+#[derive(Clone, Debug)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub layout: PixelLayout,
+    pub samples: Vec<u16>,
+}
+
+impl Image {
+    pub fn channels(&self) -> usize {
+        self.layout.channels.count()
+    }
+
+    /// Deterministic pseudo-random content from `seed`.
+    pub fn random(width: u32, height: u32, layout: PixelLayout, seed: u64) -> Image {
+        let max = if layout.depth == Depth::U8 { 255u64 } else { 65535 };
+        let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let n = width as usize * height as usize * layout.channels.count();
+        let samples = (0..n)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state % (max + 1)) as u16
+            })
+            .collect();
+        Image { width, height, layout, samples }
+    }
+
+    pub fn constant(width: u32, height: u32, layout: PixelLayout, value: u16) -> Image {
+        let n = width as usize * height as usize * layout.channels.count();
+        Image { width, height, layout, samples: vec![value; n] }
+    }
+
+    pub fn source(&self) -> Box<dyn RowSource> {
+        Box::new(MemSource { image: self.clone(), next: 0 })
+    }
+}
+
+struct MemSource {
+    image: Image,
+    next: usize,
+}
+
+impl RowSource for MemSource {
+    fn width(&self) -> u32 {
+        self.image.width
+    }
+    fn height(&self) -> u32 {
+        self.image.height
+    }
+    fn layout(&self) -> PixelLayout {
+        self.image.layout
+    }
+    fn read_row(&mut self, row: &mut [u8]) -> Result<()> {
+        let n = self.image.width as usize * self.image.channels();
+        let src = &self.image.samples[self.next * n..(self.next + 1) * n];
+        match self.image.layout.depth {
+            Depth::U8 => row.iter_mut().zip(src).for_each(|(o, s)| *o = *s as u8),
+            Depth::U16 => row.chunks_exact_mut(2).zip(src).for_each(|(o, s)| o.copy_from_slice(&s.to_ne_bytes())),
+        }
+        self.next += 1;
+        Ok(())
+    }
+    fn describe(&self) -> String {
+        "memory".into()
+    }
+}
+
+/// Keeps every tile's encoded bytes.
+#[derive(Default)]
+pub struct MemSink {
+    pub tiles: Mutex<BTreeMap<(u32, u32, u32), Vec<u8>>>,
+}
+
+impl TileSink for MemSink {
+    fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+        let old = self.tiles.lock().unwrap().insert((lod, x, y), bytes.to_vec());
+        assert!(old.is_none(), "tile ({lod}, {x}, {y}) written twice");
+        Ok(())
+    }
+    fn bytes_written(&self) -> u64 {
+        self.tiles.lock().unwrap().values().map(|v| v.len() as u64).sum()
+    }
+}
+
+pub fn png_options(tile_size: u32, border: u32, background: Background) -> SplitOptions {
+    SplitOptions { tile_size, border, codec: Codec::Png { level: PngLevel::Fast }, background, flatten: false, tile_depth: None }
+}
+
+/// Runs the real pipeline on `threads` threads and returns every tile decoded to u16 samples.
+pub fn run_pipeline(image: &Image, opts: &SplitOptions, threads: usize) -> (Summary, BTreeMap<(u32, u32, u32), Vec<u16>>) {
+    let sink = MemSink::default();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+    let summary = pool.install(|| split(image.source(), &sink, opts, &|_| {})).expect("pipeline runs");
+    let tiles = sink.tiles.into_inner().unwrap().into_iter().map(|(k, png)| (k, decode_png(&png))).collect();
+    (summary, tiles)
+}
+
+pub fn decode_png(bytes: &[u8]) -> Vec<u16> {
+    let mut reader = png::Decoder::new(std::io::Cursor::new(bytes)).read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    match info.bit_depth {
+        png::BitDepth::Sixteen => buf.chunks_exact(2).map(|b| u16::from_be_bytes([b[0], b[1]])).collect(),
+        _ => buf.into_iter().map(u16::from).collect(),
+    }
+}
+
+/// LOD `lod` of `image` computed directly from the source: each texel is the rounded mean of
+/// the real source pixels under it (halves round up). Returns (width, height, samples).
+pub fn naive_level(image: &Image, lod: u32) -> (u32, u32, Vec<u16>) {
+    let f = 1u64 << lod;
+    let (w, h) = (image.width as u64, image.height as u64);
+    let (lw, lh) = (w.div_ceil(f), h.div_ceil(f));
+    let c = image.channels();
+    let mut out = Vec::with_capacity((lw * lh) as usize * c);
+    for y in 0..lh {
+        for x in 0..lw {
+            for ch in 0..c {
+                let (mut sum, mut n) = (0u64, 0u64);
+                for sy in y * f..((y + 1) * f).min(h) {
+                    for sx in x * f..((x + 1) * f).min(w) {
+                        sum += image.samples[((sy * w + sx) as usize) * c + ch] as u64;
+                        n += 1;
+                    }
+                }
+                out.push(((2 * sum + n) / (2 * n)) as u16);
+            }
+        }
+    }
+    (lw as u32, lh as u32, out)
+}
+
+/// Every stored tile of the naive pyramid, with borders and padding, in u16 samples.
+pub fn naive_tiles(image: &Image, opts: &SplitOptions) -> BTreeMap<(u32, u32, u32), Vec<u16>> {
+    let layout = Layout::new(image.width as u64, image.height as u64, opts.tile_size, opts.border).unwrap();
+    let c = image.channels();
+    let wide = image.layout.depth == Depth::U16;
+    let bg: Option<Vec<u16>> = if wide {
+        opts.background.texel::<u16>(image.layout.channels)
+    } else {
+        opts.background.texel::<u8>(image.layout.channels).map(|t| t.into_iter().map(u16::from).collect())
+    };
+    let mut tiles = BTreeMap::new();
+    for lod in 0..layout.lod_count {
+        let (lw, lh, level) = naive_level(image, lod);
+        let last = layout.virtual_side(lod) as i64 - 1;
+        let (p, b, t) = (layout.payload() as i64, layout.border as i64, layout.tile_size as i64);
+        for ty in 0..layout.tiles_per_side(lod) {
+            for tx in 0..layout.tiles_per_side(lod) {
+                let mut tile = Vec::with_capacity((t * t) as usize * c);
+                for j in 0..t {
+                    let vy = (ty as i64 * p - b + j).clamp(0, last);
+                    for i in 0..t {
+                        let vx = (tx as i64 * p - b + i).clamp(0, last);
+                        let inside = vx < lw as i64 && vy < lh as i64;
+                        match (&bg, inside) {
+                            (Some(bg), false) => tile.extend_from_slice(bg),
+                            _ => {
+                                let (x, y) = (vx.min(lw as i64 - 1) as usize, vy.min(lh as i64 - 1) as usize);
+                                let at = (y * lw as usize + x) * c;
+                                tile.extend_from_slice(&level[at..at + c]);
+                            }
+                        }
+                    }
+                }
+                tiles.insert((lod, tx, ty), tile);
+            }
+        }
+    }
+    tiles
+}
+
+pub fn layouts() -> Vec<PixelLayout> {
+    let mut v = Vec::new();
+    for c in [Channels::Grey, Channels::GreyAlpha, Channels::Rgb, Channels::Rgba] {
+        for d in [Depth::U8, Depth::U16] {
+            v.push(PixelLayout::new(c, d));
+        }
+    }
+    v
+}

@@ -1,0 +1,57 @@
+//! The banded, parallel pipeline against the naive whole-image oracle.
+
+mod common;
+
+use common::*;
+use proptest::prelude::*;
+use vortex_tiler::background::Background;
+
+fn check(image: &Image, tile: u32, border: u32, background: Background, threads: usize) {
+    let opts = png_options(tile, border, background);
+    let (summary, got) = run_pipeline(image, &opts, threads);
+    let want = naive_tiles(image, &opts);
+    assert_eq!(summary.tiles as usize, want.len());
+    assert_eq!(got.len(), want.len(), "tile count");
+    for (key, w) in &want {
+        let g = &got[key];
+        assert!(g == w, "tile (lod, x, y) = {key:?} differs for {}x{} {} tile {tile} border {border} {background}", image.width, image.height, image.layout);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, .. ProptestConfig::default() })]
+
+    #[test]
+    fn pipeline_matches_oracle(
+        w in 1u32..70,
+        h in 1u32..70,
+        layout_idx in 0usize..8,
+        tile in 8u32..24,
+        border in 0u32..3,
+        colour in proptest::option::of(any::<[u8; 4]>()),
+        threads in 1usize..4,
+        seed in any::<u64>(),
+    ) {
+        let layout = layouts()[layout_idx];
+        let image = Image::random(w, h, layout, seed);
+        let background = colour.map_or(Background::Edge, Background::Colour);
+        check(&image, tile, border, background, threads);
+    }
+}
+
+#[test]
+fn thin_and_tiny_images() {
+    let rgb = layouts()[4];
+    for (w, h) in [(1, 1), (1, 37), (37, 1), (2, 2), (17, 16), (16, 17), (33, 65)] {
+        check(&Image::random(w, h, rgb, w as u64 * 31 + h as u64), 16, 2, Background::Edge, 2);
+    }
+}
+
+#[test]
+fn output_does_not_depend_on_thread_count() {
+    let image = Image::random(150, 97, layouts()[7], 7);
+    let opts = png_options(32, 2, Background::Colour([10, 20, 30, 40]));
+    let (_, one) = run_pipeline(&image, &opts, 1);
+    let (_, four) = run_pipeline(&image, &opts, 4);
+    assert_eq!(one, four);
+}
