@@ -2,7 +2,7 @@
 //! a zone plate (every spatial frequency), hard-edged discs and per-pixel noise, so that codecs
 //! and filters meet photo-like, high-frequency and line content at once.
 //!
-//!     cargo run --release --example gen_image -- WIDTH HEIGHT OUT.{tif,png,ppm} [--alpha] [--16] [--noise F]
+//!     cargo run --release --example gen_image -- WIDTH HEIGHT OUT.{tif,png,ppm} [--grey] [--alpha] [--16] [--noise F]
 //!
 //! `--noise` sets the noise amplitude (default 0.12 of full scale; small fixtures use less so
 //! that they compress).
@@ -12,7 +12,7 @@ use std::io::{BufWriter, Write};
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: gen_image WIDTH HEIGHT OUT.{tif,png,ppm} [--alpha] [--16] [--noise F]";
+    let usage = "usage: gen_image WIDTH HEIGHT OUT.{tif,png,ppm} [--grey] [--alpha] [--16] [--noise F]";
     let (w, h, out) = match &args[..] {
         [w, h, out, ..] => (w.parse::<u32>().expect(usage), h.parse::<u32>().expect(usage), out.clone()),
         _ => panic!("{usage}"),
@@ -20,20 +20,36 @@ fn main() {
     let alpha = args.iter().any(|a| a == "--alpha");
     let wide = args.iter().any(|a| a == "--16");
     let noise: f64 = args.iter().position(|a| a == "--noise").map_or(0.12, |i| args[i + 1].parse().expect(usage));
+    let grey = args.iter().any(|a| a == "--grey");
     let channels = if alpha { 4 } else { 3 };
     let row = |y: u32| -> Vec<u16> {
         let mut r = Vec::with_capacity(w as usize * channels);
         for x in 0..w {
-            r.extend_from_slice(&texel(x, y, w, h, noise)[..channels]);
+            let t = texel(x, y, w, h, noise);
+            if grey {
+                let luma = ((t[0] as u32 * 299 + t[1] as u32 * 587 + t[2] as u32 * 114) / 1000) as u16;
+                r.push(luma);
+                if alpha {
+                    r.push(t[3]);
+                }
+            } else {
+                r.extend_from_slice(&t[..channels]);
+            }
         }
         r
     };
     let file = BufWriter::with_capacity(1 << 20, File::create(&out).expect("create output"));
     if out.ends_with(".tif") || out.ends_with(".tiff") {
+        assert!(!grey, "TIFF output is RGB(A) only");
         write_tiff(file, w, h, alpha, wide, row);
     } else if out.ends_with(".png") {
         let mut enc = png::Encoder::new(file, w, h);
-        enc.set_color(if alpha { png::ColorType::Rgba } else { png::ColorType::Rgb });
+        enc.set_color(match (grey, alpha) {
+            (true, false) => png::ColorType::Grayscale,
+            (true, true) => png::ColorType::GrayscaleAlpha,
+            (false, false) => png::ColorType::Rgb,
+            (false, true) => png::ColorType::Rgba,
+        });
         enc.set_depth(if wide { png::BitDepth::Sixteen } else { png::BitDepth::Eight });
         enc.set_compression(png::Compression::High);
         let mut writer = enc.write_header().unwrap();
@@ -43,7 +59,7 @@ fn main() {
         }
         stream.finish().unwrap();
     } else if out.ends_with(".ppm") {
-        assert!(!alpha, "PPM has no alpha");
+        assert!(!alpha && !grey, "PPM output is RGB only");
         let mut f = file;
         write!(f, "P6\n{w} {h}\n{}\n", if wide { 65535 } else { 255 }).unwrap();
         for y in 0..h {

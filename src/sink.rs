@@ -56,7 +56,9 @@ impl DirSink {
         if staging.exists() {
             fs::remove_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
         }
-        fs::create_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
+        fs::create_dir_all(&staging).map_err(|e| {
+            TilerError::write(dest, std::io::Error::new(e.kind(), format!("cannot create {}: {e}", staging.display())))
+        })?;
         Ok(DirSink { dest: dest.to_path_buf(), staging, names, made_dirs: Mutex::new(HashSet::new()), bytes: AtomicU64::new(0) })
     }
 
@@ -103,7 +105,7 @@ impl TileSink for DirSink {
         let mut file = fs::File::create_new(&path).map_err(|e| match e.kind() {
             std::io::ErrorKind::AlreadyExists => TilerError::Options(format!(
                 "tile (lod {lod}, x {x}, y {y}) would overwrite {}: the filename format '{}' gives two tiles one name; pad the numbers or separate them",
-                path.display(),
+                self.names.format(&[lod, x, y]),
                 self.names.as_str()
             )),
             _ => TilerError::write(&path, e),

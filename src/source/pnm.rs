@@ -1,5 +1,6 @@
-//! Binary PGM (P5) and PPM (P6) read through a memory map: rows are slices of the file, so the
-//! operating system pages the image in and out and the process holds none of it.
+//! Binary PGM (P5) and PPM (P6) read through a memory map: rows are slices of the file. Pages
+//! already read are handed back to the kernel as the reader moves on, so the mapped file does
+//! not accumulate in the process's resident memory.
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -19,19 +20,27 @@ pub struct PnmSource {
     maxval: u32,
     layout: PixelLayout,
     next: u64,
+    /// Bytes before this offset have been released from the mapping.
+    released: usize,
 }
+
+/// Release consumed pages in steps of this many bytes.
+const RELEASE_STEP: usize = 16 << 20;
 
 pub fn open(path: &Path) -> Result<Box<dyn RowSource>> {
     let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
     // SAFETY: the map is read-only; a file truncated underneath would fault, as for any mapped reader.
     let map = unsafe { Mmap::map(&file) }.map_err(|e| TilerError::io(path, e))?;
+    #[cfg(unix)]
+    let _ = map.advise(memmap2::Advice::Sequential);
     let (channels, width, height, maxval, data_start) = parse_header(&map).map_err(|m| TilerError::decode(path, m))?;
     if width == 0 || height == 0 {
         return Err(TilerError::decode(path, format!("the header says {width}x{height}: the image has no pixels")));
     }
     let depth = if maxval < 256 { Depth::U8 } else { Depth::U16 };
     let layout = PixelLayout::new(channels, depth);
-    let need = image_bytes(width, height, layout).ok_or_else(|| TilerError::decode(path, "the header's size overflows"))?;
+    let need =
+        image_bytes(width, height, layout).ok_or_else(|| TilerError::decode(path, "the header's size overflows"))?;
     let have = (map.len() - data_start) as u64;
     if have < need {
         return Err(TilerError::decode(
@@ -40,7 +49,17 @@ pub fn open(path: &Path) -> Result<Box<dyn RowSource>> {
         ));
     }
     let (width, height) = (u32::try_from(width).unwrap_or(u32::MAX), u32::try_from(height).unwrap_or(u32::MAX));
-    Ok(Box::new(PnmSource { path: path.to_path_buf(), map, data_start, width, height, maxval, layout, next: 0 }))
+    Ok(Box::new(PnmSource {
+        path: path.to_path_buf(),
+        map,
+        data_start,
+        width,
+        height,
+        maxval,
+        layout,
+        next: 0,
+        released: 0,
+    }))
 }
 
 /// Returns (channels, width, height, maxval, offset of the pixel data).
@@ -101,6 +120,18 @@ impl RowSource for PnmSource {
             message: "the file ends early".into(),
         })?;
         self.next += 1;
+        #[cfg(unix)]
+        if start - self.released >= RELEASE_STEP {
+            // SAFETY: a read-only file mapping; dropped pages are read from the file again if touched.
+            let _ = unsafe {
+                self.map.unchecked_advise_range(
+                    memmap2::UncheckedAdvice::DontNeed,
+                    self.released,
+                    start - self.released,
+                )
+            };
+            self.released = start;
+        }
         match (self.layout.depth, self.maxval) {
             (Depth::U8, 255) => out.copy_from_slice(data),
             (Depth::U8, m) => {

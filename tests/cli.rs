@@ -1,0 +1,186 @@
+//! The command line as a user meets it: good runs, and one clear line plus exit code 1 for
+//! every kind of bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_vortex-tiler");
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN).args(args).env("NO_COLOR", "1").output().expect("binary runs")
+}
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures").join(name)
+}
+
+/// Asserts a failure with exit code 1 whose stderr mentions every `needle`.
+fn fails_with(out: &Output, needles: &[&str]) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "expected exit 1, got {:?}; stderr: {err}", out.status);
+    assert!(err.starts_with("error: "), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    for n in needles {
+        assert!(err.contains(n), "stderr lacks {n:?}: {err}");
+    }
+}
+
+/// A small PPM with the given header and `body` bytes of pixels.
+fn ppm(dir: &Path, name: &str, header: &str, body: usize) -> PathBuf {
+    let p = dir.join(name);
+    let mut bytes = header.as_bytes().to_vec();
+    bytes.resize(bytes.len() + body, 77);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn splits_the_fixture_with_both_spellings() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let r = run(&["split", s(&fixture("sample.png")), "-o", s(&out), "--tile-size", "64", "--border", "2"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let line = String::from_utf8_lossy(&r.stdout);
+    assert!(line.contains("wrote 341 tiles") && line.contains("Mpx/s"), "{line}");
+    let info: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("info.json")).unwrap()).unwrap();
+    assert_eq!(info["tileSize"], 64);
+    assert_eq!(info["tileCount"], 16);
+    assert_eq!(info["lodCount"], 5);
+    assert!(out.join("lod04-x0000-y0000.jpg").is_file());
+    assert!(out.join("lod00-x0015-y0015.jpg").is_file());
+
+    let out2 = dir.path().join("out2");
+    let r = run(&["split", &format!("--input={}", s(&fixture("sample.png"))), &format!("--output={}", s(&out2)), "-q"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(r.stdout.is_empty());
+    assert!(out2.join("info.json").is_file());
+}
+
+#[test]
+fn existing_info_json_sets_the_output_and_flags_override_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    std::fs::write(out.join("info.json"), r#"{"tileSize":256,"filenameFormat":"t/%1$d/%2$d_%3$d.png"}"#).unwrap();
+    let r = run(&["split", s(&fixture("sample.png")), "-o", s(&out), "-q"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(out.join("t/0/2_1.png").is_file(), "the PNG names and 256 tiles from info.json were used");
+    let info: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("info.json")).unwrap()).unwrap();
+    assert_eq!((info["tileSize"].as_u64(), info["codec"].as_str()), (Some(256), Some("png")));
+
+    // A flag overrides; the rewritten info.json is now the configuration.
+    std::fs::write(out.join("t/stale.txt"), "from an older run").unwrap();
+    let r = run(&["split", s(&fixture("sample.png")), "-o", s(&out), "-q", "--tile-size", "128"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let info: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("info.json")).unwrap()).unwrap();
+    assert_eq!(info["tileSize"], 128);
+    assert!(out.join("t/3/0_0.png").is_file(), "128-texel tiles make 4 LODs");
+    assert!(!out.join("t/stale.txt").exists(), "the previous pyramid was replaced, not mixed in");
+}
+
+#[test]
+fn help_lists_options_with_defaults() {
+    let r = run(&["split", "--help"]);
+    let help = String::from_utf8_lossy(&r.stdout);
+    for needle in ["--tile-size", "[default: 128]", "--border", "--codec", "--quality", "[default: 85]", "--background", "--max-memory", "[default: 1G]", "--filename-format", "--ff"] {
+        assert!(help.contains(needle), "--help lacks {needle}");
+    }
+}
+
+#[test]
+fn missing_and_unreadable_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    fails_with(&run(&["split", "/no/such/image.png", "-o", s(&out)]), &["/no/such/image.png", "No such file"]);
+    fails_with(&run(&["split", s(dir.path()), "-o", s(&out)]), &[s(dir.path()), "directory"]);
+    let empty = ppm(dir.path(), "empty.ppm", "", 0);
+    fails_with(&run(&["split", s(&empty), "-o", s(&out)]), &["empty.ppm", "empty"]);
+    let text = dir.path().join("notes.txt");
+    std::fs::write(&text, "hello, not an image").unwrap();
+    fails_with(&run(&["split", s(&text), "-o", s(&out)]), &["notes.txt", "not an image format"]);
+    assert!(!out.exists());
+}
+
+#[test]
+fn truncated_and_corrupt_images() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let png = std::fs::read(fixture("sample.png")).unwrap();
+    let cut = dir.path().join("cut.png");
+    std::fs::write(&cut, &png[..png.len() / 2]).unwrap();
+    fails_with(&run(&["split", s(&cut), "-o", s(&out)]), &["cut.png", "row "]);
+    assert!(!out.exists(), "a failed run leaves no output");
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(leftovers.len(), 1, "the staging directory was removed: {leftovers:?}");
+
+    let mut bad = png.clone();
+    for b in &mut bad[200..400] {
+        *b ^= 0x5a;
+    }
+    let bad_path = dir.path().join("bad.png");
+    std::fs::write(&bad_path, &bad).unwrap();
+    fails_with(&run(&["split", s(&bad_path), "-o", s(&out)]), &["bad.png"]);
+
+    let header_only = dir.path().join("header.png");
+    std::fs::write(&header_only, &png[..8]).unwrap();
+    fails_with(&run(&["split", s(&header_only), "-o", s(&out)]), &["header.png", "PNG"]);
+}
+
+#[test]
+fn headers_that_lie_or_are_absurd() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let lying = ppm(dir.path(), "lying.ppm", "P6\n1000 1000\n255\n", 3 * 1000 * 10);
+    fails_with(&run(&["split", s(&lying), "-o", s(&out)]), &["lying.ppm", "truncated", "1000x1000"]);
+    let zero = ppm(dir.path(), "zero.ppm", "P6\n0 10\n255\n", 0);
+    fails_with(&run(&["split", s(&zero), "-o", s(&out)]), &["zero.ppm", "no pixels"]);
+    let huge = ppm(dir.path(), "huge.ppm", "P5\n40000000 1\n255\n", 40_000_000);
+    fails_with(&run(&["split", s(&huge), "-o", s(&out)]), &["40000000x1", "not supported"]);
+    let bad_field = ppm(dir.path(), "field.ppm", "P6\n10 ten\n255\n", 300);
+    fails_with(&run(&["split", s(&bad_field), "-o", s(&out)]), &["field.ppm", "height"]);
+}
+
+#[test]
+fn unwritable_or_foreign_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, "x").unwrap();
+    let under_file = file.join("out");
+    fails_with(&run(&["split", s(&fixture("sample.png")), "-o", s(&under_file)]), &["a-file"]);
+    fails_with(&run(&["split", s(&fixture("sample.png")), "-o", s(&file)]), &["a-file", "not a directory"]);
+    let foreign = dir.path().join("photos");
+    std::fs::create_dir(&foreign).unwrap();
+    std::fs::write(foreign.join("holiday.jpg"), "precious").unwrap();
+    fails_with(&run(&["split", s(&fixture("sample.png")), "-o", s(&foreign)]), &["photos", "no info.json"]);
+    assert_eq!(std::fs::read(foreign.join("holiday.jpg")).unwrap(), b"precious");
+}
+
+#[test]
+fn contradictory_settings() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let rgba = dir.path().join("rgba.png");
+    image::RgbaImage::from_pixel(40, 30, image::Rgba([1, 2, 3, 4])).save(&rgba).unwrap();
+    fails_with(&run(&["split", s(&rgba), "-o", s(&out), "--codec", "jpeg"]), &["alpha", "--flatten"]);
+    let r = run(&["split", s(&rgba), "-o", s(&out), "--codec", "jpeg", "--flatten", "-q"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+
+    fails_with(&run(&["split", s(&rgba), "-o", s(&dir.path().join("o2")), "--codec", "jpeg", "--ff", "%s-%s-%s.png", "--flatten"]), &[".png", "jpeg"]);
+    fails_with(&run(&["split", s(&rgba), "-o", s(&dir.path().join("o3")), "--ff", "x%s-y%s.png"]), &["never uses argument 3"]);
+    let sample = fixture("sample.png");
+    fails_with(&run(&["split", s(&sample), "-o", s(&dir.path().join("o4")), "--ff", "%1$s%2$s%3$s.png", "--tile-size", "16"]), &["two tiles one name"]);
+    fails_with(&run(&["split", s(&rgba), "-o", s(&dir.path().join("o5")), "--border", "70"]), &["border 70"]);
+
+    let conf = dir.path().join("conf");
+    std::fs::create_dir(&conf).unwrap();
+    std::fs::write(conf.join("info.json"), r#"{"tileSize":128,"tileCount":512,"lodCount":10}"#).unwrap();
+    fails_with(&run(&["split", s(&rgba), "-o", s(&conf)]), &["info.json", "tileCount", "512"]);
+    std::fs::write(conf.join("info.json"), r#"{"tileFormat":"luminance"}"#).unwrap();
+    fails_with(&run(&["split", s(&rgba), "-o", s(&conf)]), &["info.json", "tileFormat"]);
+    std::fs::write(conf.join("info.json"), r#"{"tileSize": "big"}"#).unwrap();
+    fails_with(&run(&["split", s(&rgba), "-o", s(&conf)]), &["info.json", "line 1"]);
+}
