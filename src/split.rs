@@ -48,8 +48,9 @@ pub struct Summary {
     pub bytes: u64,
 }
 
-/// Batches of tiles waiting for the encoder; two keep both sides busy without piling up.
-const QUEUE_BATCHES: usize = 2;
+/// Batches of tiles waiting for the encoder: cutting is much cheaper than encoding, so one
+/// waiting batch keeps the encoders busy, and each extra one would cost a row of tiles of memory.
+const QUEUE_BATCHES: usize = 1;
 
 /// Tiles of one tile row whose texels are identical share one encoding.
 struct Batch<T> {
@@ -108,8 +109,8 @@ fn run<T: Sample>(
     })
 }
 
-/// Encodes and writes batches as they arrive; merges waiting batches so that small coarse
-/// levels still keep every thread busy.
+/// Encodes and writes batches as they arrive. Small batches (coarse levels, narrow images) are
+/// merged with the ones waiting behind them so that every thread has work.
 fn consume<T: Sample>(
     rx: Receiver<Result<Batch<T>>>,
     encoder: &TileEncoder<T>,
@@ -120,8 +121,12 @@ fn consume<T: Sample>(
 ) -> Result<()> {
     while let Ok(first) = rx.recv() {
         let mut work = vec![first?];
-        while let Ok(more) = rx.try_recv() {
-            work.push(more?);
+        let enough = 2 * rayon::current_num_threads();
+        while work.iter().map(|b| b.tiles.len()).sum::<usize>() < enough {
+            match rx.try_recv() {
+                Ok(more) => work.push(more?),
+                Err(_) => break,
+            }
         }
         let jobs: Vec<(u32, &(Vec<T>, Vec<(u32, u32)>))> =
             work.iter().flat_map(|b| b.tiles.iter().map(move |t| (b.lod, t))).collect();
