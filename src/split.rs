@@ -52,10 +52,17 @@ pub struct Summary {
 /// waiting batch keeps the encoders busy, and each extra one would cost a row of tiles of memory.
 const QUEUE_BATCHES: usize = 1;
 
-/// Tiles of one tile row whose texels are identical share one encoding.
+/// One row of tiles of one LOD.
 struct Batch<T> {
     lod: u32,
-    tiles: Vec<(Vec<T>, Vec<(u32, u32)>)>,
+    tiles: Vec<CutTile<T>>,
+}
+
+/// Texels of a tile and every (x, y) that holds them: neighbours with identical texels (most
+/// often padding) share one encoding.
+struct CutTile<T> {
+    texels: Vec<T>,
+    places: Vec<(u32, u32)>,
 }
 
 /// Cuts `source` into the pyramid and writes every tile to `sink`. Runs the encoders on the
@@ -128,10 +135,9 @@ fn consume<T: Sample>(
                 Err(_) => break,
             }
         }
-        let jobs: Vec<(u32, &(Vec<T>, Vec<(u32, u32)>))> =
-            work.iter().flat_map(|b| b.tiles.iter().map(move |t| (b.lod, t))).collect();
-        jobs.par_iter().try_for_each_init(Vec::new, |buf, (lod, (texels, places))| {
-            let (lod, (x0, y0)) = (*lod, places[0]);
+        let jobs: Vec<(u32, &CutTile<T>)> = work.iter().flat_map(|b| b.tiles.iter().map(move |t| (b.lod, t))).collect();
+        jobs.par_iter().try_for_each_init(Vec::new, |buf, &(lod, CutTile { texels, places })| {
+            let (x0, y0) = places[0];
             encoder.encode(texels, buf).map_err(|message| TilerError::Encode { lod, x: x0, y: y0, message })?;
             for (x, y) in places {
                 sink.write_tile(lod, *x, *y, buf)?;
@@ -244,13 +250,13 @@ impl<T: Sample> Level<T> {
         {
             let ty = self.next_tile_row;
             let y_runs = cut::runs(layout, self.lod, ty, height, *padding == Padding::Edge);
-            let mut tiles: Vec<(Vec<T>, Vec<(u32, u32)>)> = Vec::new();
+            let mut tiles: Vec<CutTile<T>> = Vec::new();
             let mut texels = Vec::with_capacity(layout.tile_bytes(channels));
             for (tx, x_runs) in self.x_runs.iter().enumerate() {
                 cut::cut_tile(&self.band, channels, x_runs, &y_runs, padding, &mut texels);
                 match tiles.last_mut() {
-                    Some((prev, places)) if *prev == texels => places.push((tx as u32, ty)),
-                    _ => tiles.push((texels.clone(), vec![(tx as u32, ty)])),
+                    Some(prev) if prev.texels == texels => prev.places.push((tx as u32, ty)),
+                    _ => tiles.push(CutTile { texels: texels.clone(), places: vec![(tx as u32, ty)] }),
                 }
             }
             out.send(Ok(Batch { lod: self.lod, tiles }))

@@ -105,8 +105,11 @@ pub fn png_options(tile_size: u32, border: u32, background: Background) -> Split
     SplitOptions { tile_size, border, codec: Codec::Png { level: PngLevel::Fast }, background, flatten: false, tile_depth: None }
 }
 
+/// Tiles by (lod, x, y), decoded to u16 samples.
+pub type Tiles = BTreeMap<(u32, u32, u32), Vec<u16>>;
+
 /// Runs the real pipeline on `threads` threads and returns every tile decoded to u16 samples.
-pub fn run_pipeline(image: &Image, opts: &SplitOptions, threads: usize) -> (Summary, BTreeMap<(u32, u32, u32), Vec<u16>>) {
+pub fn run_pipeline(image: &Image, opts: &SplitOptions, threads: usize) -> (Summary, Tiles) {
     let sink = MemSink::default();
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
     let summary = pool.install(|| split(image.source(), &sink, opts, &|_| {})).expect("pipeline runs");
@@ -150,7 +153,7 @@ pub fn naive_level(image: &Image, lod: u32) -> (u32, u32, Vec<u16>) {
 }
 
 /// Every stored tile of the naive pyramid, with borders and padding, in u16 samples.
-pub fn naive_tiles(image: &Image, opts: &SplitOptions) -> BTreeMap<(u32, u32, u32), Vec<u16>> {
+pub fn naive_tiles(image: &Image, opts: &SplitOptions) -> Tiles {
     let layout = Layout::new(image.width as u64, image.height as u64, opts.tile_size, opts.border).unwrap();
     let c = image.channels();
     let wide = image.layout.depth == Depth::U16;
