@@ -45,7 +45,8 @@ impl FromStr for Background {
 
     /// `edge`, `#rrggbb`, `#rrggbbaa`, `r,g,b`, `r,g,b,a` or a grey level `v` (0-255).
     fn from_str(s: &str) -> Result<Self, String> {
-        let bad = || format!("'{s}' is not a background: use edge, #rrggbb, #rrggbbaa, r,g,b[,a] or a grey level 0-255");
+        let bad =
+            || format!("'{s}' is not a background: use edge, #rrggbb, #rrggbbaa, r,g,b[,a] or a grey level 0-255");
         if s == "edge" {
             return Ok(Background::Edge);
         }
@@ -53,7 +54,11 @@ impl FromStr for Background {
             if !matches!(hex.len(), 6 | 8) || !hex.is_ascii() {
                 return Err(bad());
             }
-            (0..hex.len()).step_by(2).map(|i| u8::from_str_radix(&hex[i..i + 2], 16)).collect::<Result<_, _>>().map_err(|_| bad())?
+            (0..hex.len())
+                .step_by(2)
+                .map(|i| u8::from_str_radix(&hex[i..i + 2], 16))
+                .collect::<Result<_, _>>()
+                .map_err(|_| bad())?
         } else {
             s.split(',').map(|v| v.trim().parse::<u8>()).collect::<Result<_, _>>().map_err(|_| bad())?
         };
@@ -82,7 +87,13 @@ mod tests {
 
     #[test]
     fn parses_and_prints() {
-        for (text, shown) in [("edge", "edge"), ("#FF8000", "#ff8000"), ("1,2,3,4", "#01020304"), ("128", "#808080"), ("#00000000", "#00000000")] {
+        for (text, shown) in [
+            ("edge", "edge"),
+            ("#FF8000", "#ff8000"),
+            ("1,2,3,4", "#01020304"),
+            ("128", "#808080"),
+            ("#00000000", "#00000000"),
+        ] {
             let b: Background = text.parse().unwrap();
             assert_eq!(b.to_string(), shown);
             assert_eq!(b.to_string().parse::<Background>().unwrap(), b);

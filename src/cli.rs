@@ -18,7 +18,11 @@ use vortex_tiler::{source, split};
 use crate::report;
 
 #[derive(Parser, Debug)]
-#[command(name = "vortex-tiler", version, about = "Cut huge images into virtual-texture tiles with every power-of-two LOD, in bounded memory")]
+#[command(
+    name = "vortex-tiler",
+    version,
+    about = "Cut huge images into virtual-texture tiles with every power-of-two LOD, in bounded memory"
+)]
 pub struct Args {
     #[command(subcommand)]
     command: Command,
@@ -137,7 +141,8 @@ fn run_split(a: SplitArgs) -> Result<()> {
         tile_depth: a.tile_type,
         filename_format: a.filename_format,
     };
-    let (opts, names) = settings::resolve(&requested, existing.as_ref().map(|i| (info_path.as_path(), i)), source.layout())?;
+    let (opts, names) =
+        settings::resolve(&requested, existing.as_ref().map(|i| (info_path.as_path(), i)), source.layout())?;
     let layout = Layout::new(source.width() as u64, source.height() as u64, opts.tile_size, opts.border)?;
     if let Some(info) = &existing {
         settings::check_grid(&info_path, info, &requested, &layout)?;
@@ -145,7 +150,10 @@ fn run_split(a: SplitArgs) -> Result<()> {
     let decoder = source.describe();
     let (width, height) = (source.width(), source.height());
 
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.threads.unwrap_or(0)).build().context("starting worker threads")?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()
+        .context("starting worker threads")?;
     let sink = DirSink::create(&a.output, names.clone())?;
     let bar = report::progress_bar(layout.total_tiles(), a.quiet);
     let result = pool.install(|| split::split(source, &sink, &opts, &|n| bar.inc(n)));

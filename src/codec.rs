@@ -54,7 +54,12 @@ impl Codec {
 
     /// The texel layout tiles are stored in for a source of `source` layout; `depth` asks for
     /// a sample depth other than the source's.
-    pub fn stored_layout(&self, source: PixelLayout, flatten: bool, depth: Option<Depth>) -> Result<PixelLayout, TilerError> {
+    pub fn stored_layout(
+        &self,
+        source: PixelLayout,
+        flatten: bool,
+        depth: Option<Depth>,
+    ) -> Result<PixelLayout, TilerError> {
         let channels = if flatten { source.channels.without_alpha() } else { source.channels };
         match self {
             Codec::Png { .. } => Ok(PixelLayout::new(channels, depth.unwrap_or(source.depth))),
@@ -65,7 +70,9 @@ impl Codec {
                     )));
                 }
                 if depth == Some(Depth::U16) {
-                    return Err(TilerError::Options("JPEG stores 8-bit samples only: use --codec png for 16-bit tiles".into()));
+                    return Err(TilerError::Options(
+                        "JPEG stores 8-bit samples only: use --codec png for 16-bit tiles".into(),
+                    ));
                 }
                 Ok(PixelLayout::new(channels, Depth::U8))
             }
@@ -84,7 +91,14 @@ pub struct TileEncoder<T> {
 }
 
 impl<T: Sample> TileEncoder<T> {
-    pub fn new(codec: Codec, source: PixelLayout, flatten: bool, depth: Option<Depth>, side: u32, matte: Vec<T>) -> Result<Self, TilerError> {
+    pub fn new(
+        codec: Codec,
+        source: PixelLayout,
+        flatten: bool,
+        depth: Option<Depth>,
+        side: u32,
+        matte: Vec<T>,
+    ) -> Result<Self, TilerError> {
         let stored = codec.stored_layout(source, flatten, depth)?;
         Ok(TileEncoder { codec, source, stored, side, matte })
     }
@@ -109,7 +123,13 @@ impl<T: Sample> TileEncoder<T> {
         }
     }
 
-    fn encode_jpeg(&self, texels: &[T], quality: u8, subsampling: Subsampling, out: &mut Vec<u8>) -> Result<(), String> {
+    fn encode_jpeg(
+        &self,
+        texels: &[T],
+        quality: u8,
+        subsampling: Subsampling,
+        out: &mut Vec<u8>,
+    ) -> Result<(), String> {
         let samples = to_u8(texels);
         let colour = match self.stored.channels {
             Channels::Grey => jpeg_encoder::ColorType::Luma,

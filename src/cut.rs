@@ -65,7 +65,14 @@ pub fn runs(layout: &Layout, lod: u32, t: u32, extent: u32, edge_padding: bool) 
 }
 
 /// Assembles one tile from `band`: `x_runs` pick columns, `y_runs` pick rows.
-pub fn cut_tile<T: Copy>(band: &Band<T>, channels: usize, x_runs: &[Run], y_runs: &[Run], padding: &Padding<T>, out: &mut Vec<T>) {
+pub fn cut_tile<T: Copy>(
+    band: &Band<T>,
+    channels: usize,
+    x_runs: &[Run],
+    y_runs: &[Run],
+    padding: &Padding<T>,
+    out: &mut Vec<T>,
+) {
     out.clear();
     let fill = match padding {
         Padding::Colour(c) => c.as_slice(),
@@ -123,9 +130,7 @@ pub fn last_row_needed(layout: &Layout, lod: u32, t: u32, extent: u32) -> u64 {
 
 /// First image row the tile rows after `t` still read.
 pub fn first_row_kept(layout: &Layout, t: u32, extent: u32) -> u64 {
-    ((t as u64 + 1) * layout.payload() as u64)
-        .saturating_sub(layout.border as u64)
-        .min(extent as u64 - 1)
+    ((t as u64 + 1) * layout.payload() as u64).saturating_sub(layout.border as u64).min(extent as u64 - 1)
 }
 
 #[cfg(test)]

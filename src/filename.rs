@@ -38,7 +38,9 @@ impl FilenameFormat {
                     Some((_, '%')) if spec.is_empty() => break '%',
                     Some((_, c @ ('s' | 'd' | 'i' | 'u'))) => break c,
                     Some((_, c)) if c.is_ascii_digit() || c == '$' => spec.push(c),
-                    _ => return Err(format!("bad conversion at byte {at} of '{pattern}' (expected e.g. %1$04s or %d)")),
+                    _ => {
+                        return Err(format!("bad conversion at byte {at} of '{pattern}' (expected e.g. %1$04s or %d)"));
+                    }
                 }
             };
             if conversion == '%' {
@@ -47,9 +49,13 @@ impl FilenameFormat {
             }
             let (index, flags) = match spec.split_once('$') {
                 Some((n, rest)) => {
-                    let n: usize = n.parse().map_err(|_| format!("bad argument number in '%{spec}{conversion}' of '{pattern}'"))?;
+                    let n: usize = n
+                        .parse()
+                        .map_err(|_| format!("bad argument number in '%{spec}{conversion}' of '{pattern}'"))?;
                     if n == 0 || n > arg_count {
-                        return Err(format!("'%{spec}{conversion}' in '{pattern}' refers to argument {n}, but there are {arg_count}"));
+                        return Err(format!(
+                            "'%{spec}{conversion}' in '{pattern}' refers to argument {n}, but there are {arg_count}"
+                        ));
                     }
                     (n - 1, rest)
                 }
@@ -65,7 +71,11 @@ impl FilenameFormat {
                 return Err(format!("bad conversion '%{spec}{conversion}' in '{pattern}'"));
             }
             let zero = flags.starts_with('0');
-            let width = if flags.is_empty() { 0 } else { flags.parse().map_err(|_| format!("bad width in '%{spec}{conversion}'"))? };
+            let width = if flags.is_empty() {
+                0
+            } else {
+                flags.parse().map_err(|_| format!("bad width in '%{spec}{conversion}'"))?
+            };
             if !literal.is_empty() {
                 pieces.push(Piece::Literal(std::mem::take(&mut literal)));
             }
@@ -134,7 +144,9 @@ mod tests {
 
     #[test]
     fn refuses_bad_patterns() {
-        for bad in ["x%02s.png", "%4$s%2$s%3$s", "%q", "%1$s-%2$s-%3$s-%s%s%s%s", "../%s%s%s", "/abs/%s%s%s", "%1$2$s%s%s"] {
+        for bad in
+            ["x%02s.png", "%4$s%2$s%3$s", "%q", "%1$s-%2$s-%3$s-%s%s%s%s", "../%s%s%s", "/abs/%s%s%s", "%1$2$s%s%s"]
+        {
             assert!(FilenameFormat::parse(bad, 3).is_err(), "{bad} was accepted");
         }
     }

@@ -53,7 +53,8 @@ impl InfoFile {
 
     /// Members that contradict each other.
     fn check(&self, path: &Path) -> Result<()> {
-        let err = |field: &str, message: String| TilerError::Info { path: path.to_path_buf(), field: field.into(), message };
+        let err =
+            |field: &str, message: String| TilerError::Info { path: path.to_path_buf(), field: field.into(), message };
         if let Some(v) = self.format_version.filter(|v| *v > FORMAT_VERSION) {
             return Err(err("formatVersion", format!("{v} is newer than this tool understands ({FORMAT_VERSION})")));
         }
@@ -62,7 +63,13 @@ impl InfoFile {
                 return Err(err("tileCount", format!("{c} is not a power of two")));
             }
             if let Some(l) = self.lod_count.filter(|l| *l != c.trailing_zeros() + 1) {
-                return Err(err("lodCount", format!("{l} contradicts tileCount {c} (lodCount = log2(tileCount) + 1 = {})", c.trailing_zeros() + 1)));
+                return Err(err(
+                    "lodCount",
+                    format!(
+                        "{l} contradicts tileCount {c} (lodCount = log2(tileCount) + 1 = {})",
+                        c.trailing_zeros() + 1
+                    ),
+                ));
             }
         }
         Ok(())

@@ -113,7 +113,8 @@ mod tests {
         assert!(Layout::new(0, 5, 128, 0).is_err());
         assert!(Layout::new(5, 0, 128, 0).is_err());
         assert!(Layout::new(MAX_SIDE + 1, 1, 128, 0).is_err());
-        assert!(Layout::new(10, 10, 128, 62).is_err());
+        assert!(Layout::new(10, 10, 128, 63).is_err());
+        assert!(Layout::new(10, 10, 128, 65).is_err());
         assert!(Layout::new(10, 10, 4, 0).is_err());
     }
 

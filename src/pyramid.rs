@@ -46,9 +46,7 @@ impl Reducer {
     pub fn new(src_width: u64, src_height: u64, lod: u32, in_width: usize, channels: usize) -> Reducer {
         let footprint = 1u64 << (lod + 1);
         let out_width = in_width.div_ceil(2);
-        let col_weight = (0..out_width as u64)
-            .map(|x| footprint.min(src_width - x * footprint))
-            .collect();
+        let col_weight = (0..out_width as u64).map(|x| footprint.min(src_width - x * footprint)).collect();
         Reducer {
             channels,
             out_width,

@@ -42,10 +42,15 @@ pub struct Requested {
 }
 
 /// Combines flags, an existing `info.json` (at `info_path`) and the source into settings.
-pub fn resolve(req: &Requested, existing: Option<(&Path, &InfoFile)>, source: PixelLayout) -> Result<(SplitOptions, FilenameFormat)> {
+pub fn resolve(
+    req: &Requested,
+    existing: Option<(&Path, &InfoFile)>,
+    source: PixelLayout,
+) -> Result<(SplitOptions, FilenameFormat)> {
     let empty = InfoFile::default();
     let (info_path, info) = existing.unwrap_or((Path::new("info.json"), &empty));
-    let field_err = |field: &str, message: String| TilerError::Info { path: info_path.to_path_buf(), field: field.into(), message };
+    let field_err =
+        |field: &str, message: String| TilerError::Info { path: info_path.to_path_buf(), field: field.into(), message };
 
     let tile_size = req.tile_size.or(info.tile_size).unwrap_or(DEFAULT_TILE_SIZE);
     let border = req.border.or(info.border).unwrap_or(0);
@@ -72,12 +77,16 @@ pub fn resolve(req: &Requested, existing: Option<(&Path, &InfoFile)>, source: Pi
             field_err("tileFormat", format!("'{f}' is not supported (luminance, luminanceAlpha, rgb, rgba)"))
         })?),
     };
-    let info_depth = match info.tile_type.as_deref() {
-        None => None,
-        Some(t) => Some(Depth::from_tile_type(t).ok_or_else(|| field_err("tileType", format!("'{t}' is not supported (unsignedByte, unsignedShort)")))?),
-    };
+    let info_depth =
+        match info.tile_type.as_deref() {
+            None => None,
+            Some(t) => Some(Depth::from_tile_type(t).ok_or_else(|| {
+                field_err("tileType", format!("'{t}' is not supported (unsignedByte, unsignedShort)"))
+            })?),
+        };
     let tile_depth = req.tile_depth.or(info_depth);
-    let flatten = req.flatten || want_channels.is_some_and(|c| source.channels.has_alpha() && c == source.channels.without_alpha());
+    let flatten = req.flatten
+        || want_channels.is_some_and(|c| source.channels.has_alpha() && c == source.channels.without_alpha());
     if choice == CodecChoice::Auto {
         let lossless = (source.channels.has_alpha() && !flatten) || tile_depth.unwrap_or(source.depth) == Depth::U16;
         choice = if lossless { CodecChoice::Png } else { CodecChoice::Jpeg };
@@ -85,9 +94,17 @@ pub fn resolve(req: &Requested, existing: Option<(&Path, &InfoFile)>, source: Pi
     let codec = match choice {
         CodecChoice::Jpeg => Codec::Jpeg {
             quality: req.quality.or(info.quality).unwrap_or(DEFAULT_QUALITY),
-            subsampling: req.subsampling.or(parse_member(info.subsampling.as_deref(), "subsampling", &field_err)?).unwrap_or(Subsampling::S420),
+            subsampling: req
+                .subsampling
+                .or(parse_member(info.subsampling.as_deref(), "subsampling", &field_err)?)
+                .unwrap_or(Subsampling::S420),
         },
-        _ => Codec::Png { level: req.png_level.or(parse_member(info.png_compression.as_deref(), "pngCompression", &field_err)?).unwrap_or(PngLevel::Fast) },
+        _ => Codec::Png {
+            level: req
+                .png_level
+                .or(parse_member(info.png_compression.as_deref(), "pngCompression", &field_err)?)
+                .unwrap_or(PngLevel::Fast),
+        },
     };
     if let Codec::Jpeg { quality, .. } = codec
         && !(1..=100).contains(&quality)
@@ -119,7 +136,12 @@ pub fn resolve(req: &Requested, existing: Option<(&Path, &InfoFile)>, source: Pi
     if let Some(want) = want_channels.filter(|c| *c != stored.channels) {
         return Err(field_err(
             "tileFormat",
-            format!("is {} but {source} tiles stored as {} would be {}", want.tile_format(), codec.name(), stored.channels.tile_format()),
+            format!(
+                "is {} but {source} tiles stored as {} would be {}",
+                want.tile_format(),
+                codec.name(),
+                stored.channels.tile_format()
+            ),
         ));
     }
     Ok((opts, names))
@@ -131,7 +153,9 @@ pub fn check_grid(info_path: &Path, info: &InfoFile, req: &Requested, layout: &L
     if req.tile_size.is_some() || req.border.is_some() {
         return Ok(());
     }
-    for (field, old, new) in [("tileCount", info.tile_count, layout.tile_count), ("lodCount", info.lod_count, layout.lod_count)] {
+    for (field, old, new) in
+        [("tileCount", info.tile_count, layout.tile_count), ("lodCount", info.lod_count, layout.lod_count)]
+    {
         if let Some(old) = old.filter(|o| *o != new) {
             return Err(TilerError::Info {
                 path: info_path.to_path_buf(),
@@ -146,10 +170,12 @@ pub fn check_grid(info_path: &Path, info: &InfoFile, req: &Requested, layout: &L
     Ok(())
 }
 
-fn parse_member<V: clap::ValueEnum>(value: Option<&str>, field: &str, err: &dyn Fn(&str, String) -> TilerError) -> Result<Option<V>> {
-    value
-        .map(|v| V::from_str(v, false).map_err(|_| err(field, format!("'{v}' is not a valid value"))))
-        .transpose()
+fn parse_member<V: clap::ValueEnum>(
+    value: Option<&str>,
+    field: &str,
+    err: &dyn Fn(&str, String) -> TilerError,
+) -> Result<Option<V>> {
+    value.map(|v| V::from_str(v, false).map_err(|_| err(field, format!("'{v}' is not a valid value")))).transpose()
 }
 
 /// The `info.json` describing a finished run.

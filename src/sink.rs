@@ -43,7 +43,9 @@ impl DirSink {
             if entries.next().is_some() && !dest.join("info.json").is_file() {
                 return Err(TilerError::write(
                     dest,
-                    std::io::Error::other("is not empty and holds no info.json, so it is not a previous output; choose a new or empty directory"),
+                    std::io::Error::other(
+                        "is not empty and holds no info.json, so it is not a previous output; choose a new or empty directory",
+                    ),
                 ));
             }
         }
@@ -59,7 +61,13 @@ impl DirSink {
         fs::create_dir_all(&staging).map_err(|e| {
             TilerError::write(dest, std::io::Error::new(e.kind(), format!("cannot create {}: {e}", staging.display())))
         })?;
-        Ok(DirSink { dest: dest.to_path_buf(), staging, names, made_dirs: Mutex::new(HashSet::new()), bytes: AtomicU64::new(0) })
+        Ok(DirSink {
+            dest: dest.to_path_buf(),
+            staging,
+            names,
+            made_dirs: Mutex::new(HashSet::new()),
+            bytes: AtomicU64::new(0),
+        })
     }
 
     /// Writes `info.json` last, then moves the staging directory into place. A previous output
@@ -67,10 +75,9 @@ impl DirSink {
     pub fn finish(self, info: &Info) -> Result<()> {
         let json = self.staging.join("info.json");
         fs::write(&json, info.to_json_pretty()).map_err(|e| TilerError::write(&json, e))?;
-        let old = self.staging.with_file_name(format!(
-            "{}.old",
-            self.staging.file_name().unwrap_or_default().to_string_lossy()
-        ));
+        let old = self
+            .staging
+            .with_file_name(format!("{}.old", self.staging.file_name().unwrap_or_default().to_string_lossy()));
         let had_old = self.dest.exists();
         if had_old {
             fs::rename(&self.dest, &old).map_err(|e| TilerError::write(&self.dest, e))?;

@@ -7,8 +7,8 @@
 //! and hands them to the sink. Peak memory is therefore a few bands of the image's width,
 //! whatever its height; output bytes do not depend on the thread count.
 
-use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 
 use rayon::prelude::*;
 
@@ -67,7 +67,12 @@ struct CutTile<T> {
 
 /// Cuts `source` into the pyramid and writes every tile to `sink`. Runs the encoders on the
 /// current rayon pool; `progress` is called with the number of tiles finished each time.
-pub fn split(source: Box<dyn RowSource>, sink: &dyn TileSink, opts: &SplitOptions, progress: &(dyn Fn(u64) + Sync)) -> Result<Summary> {
+pub fn split(
+    source: Box<dyn RowSource>,
+    sink: &dyn TileSink,
+    opts: &SplitOptions,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<Summary> {
     let layout = Layout::new(source.width() as u64, source.height() as u64, opts.tile_size, opts.border)?;
     match source.layout().depth {
         Depth::U8 => run::<u8>(source, sink, opts, layout, progress),
@@ -85,7 +90,8 @@ fn run<T: Sample>(
     let src_layout = source.layout();
     let channels = src_layout.channels;
     let matte = opts.background.matte::<T>(channels);
-    let encoder = TileEncoder::<T>::new(opts.codec, src_layout, opts.flatten, opts.tile_depth, layout.tile_size, matte)?;
+    let encoder =
+        TileEncoder::<T>::new(opts.codec, src_layout, opts.flatten, opts.tile_depth, layout.tile_size, matte)?;
     let padding = match opts.background.texel::<T>(channels) {
         Some(texel) => Padding::Colour(texel),
         None => Padding::Edge,
@@ -178,7 +184,8 @@ impl<T: Sample> Pyramid<T> {
             .map(|lod| {
                 let extent = layout.level_extent(lod);
                 let row_len = extent.0 as usize * channels;
-                let x_runs = (0..layout.tiles_per_side(lod)).map(|t| cut::runs(&layout, lod, t, extent.0, edge)).collect();
+                let x_runs =
+                    (0..layout.tiles_per_side(lod)).map(|t| cut::runs(&layout, lod, t, extent.0, edge)).collect();
                 let reducer = (lod + 1 < layout.lod_count)
                     .then(|| Reducer::new(layout.width as u64, layout.height as u64, lod, extent.0 as usize, channels));
                 Level {
@@ -243,7 +250,13 @@ impl<T: Sample> Pyramid<T> {
 
 impl<T: Sample> Level<T> {
     /// Cuts every tile row whose rows are all in the band, then drops rows no longer needed.
-    fn cut_ready(&mut self, layout: &Layout, channels: usize, padding: &Padding<T>, out: &SyncSender<Result<Batch<T>>>) -> Result<()> {
+    fn cut_ready(
+        &mut self,
+        layout: &Layout,
+        channels: usize,
+        padding: &Padding<T>,
+        out: &SyncSender<Result<Batch<T>>>,
+    ) -> Result<()> {
         let (_, height) = self.extent;
         while self.next_tile_row < layout.tiles_per_side(self.lod)
             && self.band.end() > cut::last_row_needed(layout, self.lod, self.next_tile_row, height)

@@ -1,11 +1,14 @@
 //! Image sources that deliver an image top to bottom, one row at a time.
 //!
-//! Streaming sources (PNG, TIFF, PPM/PGM) hold only what their decoder needs for the current
-//! row, strip or tile row, so memory does not grow with the image height. Formats that cannot
-//! be streamed are decoded whole through the `image` crate, but only under `--max-memory`.
+//! Streaming sources (PNG, TIFF, baseline JPEG, PPM/PGM) hold only what their decoder needs for
+//! the current row, strip or tile row, so memory does not grow with the image height. Formats
+//! that cannot be streamed are decoded whole through the `image` crate, but only under
+//! `--max-memory`.
 
+mod jpeg;
 mod png;
 mod pnm;
+mod tiff;
 mod whole;
 
 use std::fs::File;
@@ -41,8 +44,14 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     }
     if magic.starts_with(b"\x89PNG\r\n\x1a\n") {
         png::open(path, max_memory)
-    } else if magic.starts_with(b"II*\0") || magic.starts_with(b"MM\0*") || magic.starts_with(b"II+\0") || magic.starts_with(b"MM\0+") {
-        whole::open(path, max_memory)
+    } else if magic.starts_with(b"II*\0")
+        || magic.starts_with(b"MM\0*")
+        || magic.starts_with(b"II+\0")
+        || magic.starts_with(b"MM\0+")
+    {
+        tiff::open(path, max_memory)
+    } else if magic.starts_with(b"\xff\xd8\xff") {
+        jpeg::open(path, max_memory)
     } else if magic.len() >= 2 && magic[0] == b'P' && matches!(magic[1], b'5' | b'6') {
         pnm::open(path)
     } else {
@@ -67,17 +76,36 @@ pub(crate) fn image_bytes(width: u64, height: u64, layout: PixelLayout) -> Optio
 }
 
 /// Refuses to hold a whole decoded image above `max_memory`, saying why and what to do.
-pub(crate) fn check_whole_fits(path: &Path, width: u64, height: u64, layout: PixelLayout, max_memory: u64, why: &str) -> Result<()> {
+pub(crate) fn check_whole_fits(
+    path: &Path,
+    width: u64,
+    height: u64,
+    layout: PixelLayout,
+    max_memory: u64,
+    why: &str,
+) -> Result<()> {
     let need = image_bytes(width, height, layout).unwrap_or(u64::MAX);
     if need > max_memory {
         return Err(TilerError::unsupported(
             path,
             format!(
-                "{why}, so the whole {width}x{height} {layout} image ({} MiB) would have to be held in memory, more than --max-memory ({} MiB); raise --max-memory or re-save it in a streamable form (non-interlaced PNG, baseline JPEG, striped or tiled TIFF)",
-                need.div_ceil(1 << 20),
-                max_memory >> 20
+                "{why}, so the whole {width}x{height} {layout} image ({}) would have to be held in memory, more than --max-memory ({}); raise --max-memory or re-save it in a streamable form (non-interlaced PNG, baseline JPEG, striped or tiled TIFF)",
+                human_bytes(need),
+                human_bytes(max_memory)
             ),
         ));
     }
     Ok(())
+}
+
+/// `1536` -> "1.5 KiB".
+pub(crate) fn human_bytes(bytes: u64) -> String {
+    let units = ["B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"];
+    let mut value = bytes as f64;
+    let mut unit = 0;
+    while value >= 1024.0 && unit + 1 < units.len() {
+        value /= 1024.0;
+        unit += 1;
+    }
+    if unit == 0 { format!("{bytes} B") } else { format!("{value:.1} {}", units[unit]) }
 }

@@ -47,10 +47,18 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     let layout = PixelLayout::new(channels, depth);
     let (width, height) = (reader.info().width, reader.info().height);
     let rows = if reader.info().interlaced {
-        check_whole_fits(path, width as u64, height as u64, layout, max_memory, "the PNG is Adam7-interlaced (its rows arrive out of order)")?;
+        check_whole_fits(
+            path,
+            width as u64,
+            height as u64,
+            layout,
+            max_memory,
+            "the PNG is Adam7-interlaced (its rows arrive out of order)",
+        )?;
         let size = reader.output_buffer_size().ok_or_else(|| TilerError::decode(path, "image too large"))?;
         let mut buf = vec![0; size];
-        let info = reader.next_frame(&mut buf).map_err(|e| TilerError::decode(path, format!("corrupt PNG data: {e}")))?;
+        let info =
+            reader.next_frame(&mut buf).map_err(|e| TilerError::decode(path, format!("corrupt PNG data: {e}")))?;
         Rows::Whole(buf, info.line_size)
     } else {
         Rows::Streamed(Box::new(reader))

@@ -162,7 +162,7 @@ mod tests {
     #[test]
     fn header_with_comments() {
         let h = b"P6\n# made by hand\n3 2\n255\nrest";
-        assert_eq!(parse_header(h).unwrap(), (Channels::Rgb, 3, 2, 255, 23));
+        assert_eq!(parse_header(h).unwrap(), (Channels::Rgb, 3, 2, 255, 26));
         assert!(parse_header(b"P6 3 2 70000 ").is_err());
         assert!(parse_header(b"P6 3 x 255 ").is_err());
         assert!(parse_header(b"P3 3 2 255 ").is_err());

@@ -24,13 +24,22 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         .map_err(|e| TilerError::io(path, e))?
         .with_guessed_format()
         .map_err(|e| TilerError::io(path, e))?;
-    let format = reader
-        .format()
-        .ok_or_else(|| TilerError::decode(path, "not an image format this tool reads (PNG, TIFF, JPEG, PPM/PGM, WebP, GIF, BMP, TGA, QOI)"))?;
+    let format = reader.format().ok_or_else(|| {
+        TilerError::decode(
+            path,
+            "not an image format this tool reads (PNG, TIFF, JPEG, PPM/PGM, WebP, GIF, BMP, TGA, QOI)",
+        )
+    })?;
     let mut decoder = reader.into_decoder().map_err(|e| image_error(path, e))?;
     let (width, height) = decoder.dimensions();
     let layout = layout_of(decoder.color_type()).ok_or_else(|| {
-        TilerError::unsupported(path, format!("pixel type {:?} is not supported (8/16-bit grey, grey+alpha, RGB, RGBA are)", decoder.color_type()))
+        TilerError::unsupported(
+            path,
+            format!(
+                "pixel type {:?} is not supported (8/16-bit grey, grey+alpha, RGB, RGBA are)",
+                decoder.color_type()
+            ),
+        )
     })?;
     let why = format!("{format:?} images are not streamed by this tool");
     check_whole_fits(path, width as u64, height as u64, layout, max_memory, &why)?;
@@ -99,4 +108,3 @@ impl RowSource for WholeSource {
         format!("{}, decoded whole", self.format)
     }
 }
-

@@ -1,0 +1,932 @@
+//! TIFF and BigTIFF through the `tiff` crate, read one strip (or one row of tiles) at a time:
+//! only the current strip or tile row is held, never the whole image.
+//!
+//! Accepted: grey, grey+alpha, RGB and RGBA with 8- or 16-bit unsigned samples stored
+//! contiguously (PlanarConfiguration 1), uncompressed or compressed with LZW, Deflate or
+//! PackBits, with or without the horizontal predictor. Everything else (palette, CMYK, YCbCr,
+//! Lab, floating point or signed samples, 1/2/4-bit, separate planes, JPEG-in-TIFF, ...) is
+//! refused with a message naming what the file is.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::path::{Path, PathBuf};
+
+use tiff::decoder::{ChunkType, Decoder, Limits};
+use tiff::tags::{CompressionMethod, PhotometricInterpretation, PlanarConfiguration, Predictor, SampleFormat, Tag};
+use tiff::{ColorType, TiffError};
+
+use super::RowSource;
+use crate::error::{Result, TilerError};
+use crate::pixel::{Channels, Depth, PixelLayout};
+
+pub struct TiffSource {
+    path: PathBuf,
+    decoder: Decoder<BufReader<File>>,
+    width: u32,
+    height: u32,
+    layout: PixelLayout,
+    chunking: Chunking,
+    compression: CompressionMethod,
+    bigtiff: bool,
+    /// Samples per pixel as the decoder delivers them (the crate already drops extra samples of
+    /// RGB/RGBA images; grey images keep theirs and are compacted here).
+    file_samples: usize,
+    /// The current strip or tile row, as whole image rows of `file_samples` native-endian samples.
+    band: Vec<u8>,
+    /// First image row held in `band`, and how many rows it holds.
+    band_first: u64,
+    band_rows: u64,
+    /// One decoded tile (tiled images only).
+    tile: Vec<u8>,
+    next: u64,
+    /// Set once a strip failed: the decoder's state is not trusted after that.
+    failed: bool,
+}
+
+#[derive(Clone, Copy)]
+enum Chunking {
+    /// Strips of `rows` rows (the last may be shorter).
+    Strips { rows: u32 },
+    /// Tiles of `width` x `height` (edge tiles are padded in the file).
+    Tiles { width: u32, height: u32, across: u32 },
+}
+
+impl Chunking {
+    /// Rows covered by one strip or one row of tiles.
+    fn rows(self) -> u32 {
+        match self {
+            Chunking::Strips { rows } => rows,
+            Chunking::Tiles { height, .. } => height,
+        }
+    }
+}
+
+pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
+    let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
+    let bigtiff = is_bigtiff(path)?;
+    // The first directory is read with the crate's default limits (256 MiB of tag values, ample
+    // for the strip tables of any image this tool can take); the limits below apply to the rest.
+    let decoder = Decoder::new(BufReader::with_capacity(1 << 16, file)).map_err(|e| open_error(path, e))?;
+    let max = usize::try_from(max_memory).unwrap_or(usize::MAX);
+    let mut limits = Limits::default();
+    // Bounds every buffer the crate allocates itself (tag value arrays, whole-chunk results).
+    limits.decoding_buffer_size = max;
+    limits.ifd_value_size = max;
+    // Checked against a chunk's *compressed* byte count. None of the accepted compressions buffer
+    // the compressed chunk (they stream it from the file), and an uncompressed strip of a wide
+    // image easily exceeds the crate's 128 MiB default, so this limit is lifted; the decoded size
+    // of a strip or tile row is checked against --max-memory below instead.
+    limits.intermediate_buffer_size = usize::MAX;
+    let mut decoder = decoder.with_limits(limits);
+
+    let (width, height) = decoder.dimensions().map_err(|e| open_error(path, e))?;
+    let compression = check_compression(path, &mut decoder)?;
+    let (layout, file_samples) = pixel_layout(path, &mut decoder)?;
+
+    let chunking = match decoder.get_chunk_type() {
+        ChunkType::Strip => {
+            let (_, rows) = decoder.chunk_dimensions();
+            // RowsPerStrip is often 2^32-1 ("one strip"): clamp it to the image.
+            Chunking::Strips { rows: rows.clamp(1, height) }
+        }
+        ChunkType::Tile => {
+            let (tw, th) = decoder.chunk_dimensions();
+            if tw == 0 || th == 0 {
+                return Err(TilerError::decode(path, format!("the TIFF declares {tw}x{th} tiles")));
+            }
+            Chunking::Tiles { width: tw, height: th, across: width.div_ceil(tw) }
+        }
+    };
+
+    // Memory held: one strip or tile row of whole image rows, plus one tile.
+    let pixel_bytes = (file_samples * layout.depth.bytes()) as u64;
+    let row_bytes = width as u64 * pixel_bytes;
+    let band_rows = chunking.rows().min(height) as u64;
+    let tile_bytes = match chunking {
+        Chunking::Strips { .. } => 0,
+        Chunking::Tiles { width: tw, height: th, .. } => tw as u64 * th as u64 * pixel_bytes,
+    };
+    let need = row_bytes.saturating_mul(band_rows).saturating_add(tile_bytes);
+    if need > max_memory {
+        let what = match chunking {
+            Chunking::Strips { .. } if band_rows == height as u64 => "the TIFF is stored as a single strip".to_string(),
+            Chunking::Strips { rows } => format!("the TIFF is stored in strips of {rows} rows"),
+            Chunking::Tiles { width: tw, height: th, .. } => format!("the TIFF is stored in {tw}x{th} tiles"),
+        };
+        return Err(TilerError::unsupported(
+            path,
+            format!(
+                "{what}, so one {} of the {width}x{height} {layout} image ({} MiB decoded) would have to be held in memory, more than --max-memory ({} MiB); raise --max-memory or re-save it with smaller strips or tiles (e.g. `tiffcp -r 64 in.tif out.tif` or `gdal_translate -co TILED=YES in.tif out.tif`)",
+                if matches!(chunking, Chunking::Tiles { .. }) { "row of tiles" } else { "strip" },
+                need.div_ceil(1 << 20),
+                max_memory >> 20
+            ),
+        ));
+    }
+    let band = vec![
+        0u8;
+        usize::try_from(row_bytes * band_rows)
+            .map_err(|_| TilerError::unsupported(path, "a strip is too large for this machine"))?
+    ];
+    let tile = vec![0u8; tile_bytes as usize];
+
+    Ok(Box::new(TiffSource {
+        path: path.to_path_buf(),
+        decoder,
+        width,
+        height,
+        layout,
+        chunking,
+        compression,
+        bigtiff,
+        file_samples,
+        band,
+        band_first: 0,
+        band_rows: 0,
+        tile,
+        next: 0,
+        failed: false,
+    }))
+}
+
+/// Whether the file is a BigTIFF (only for the summary line; the crate reads both).
+fn is_bigtiff(path: &Path) -> Result<bool> {
+    use std::io::Read;
+    let mut head = [0u8; 4];
+    let mut file = File::open(path).map_err(|e| TilerError::io(path, e))?;
+    let n = file.read(&mut head).map_err(|e| TilerError::io(path, e))?;
+    Ok(n == 4 && (head == *b"II+\0" || head == *b"MM\0+"))
+}
+
+fn open_error(path: &Path, e: TiffError) -> TilerError {
+    match e {
+        TiffError::UnsupportedError(u) => TilerError::unsupported(path, format!("unsupported TIFF: {u}")),
+        TiffError::LimitsExceeded => {
+            TilerError::unsupported(path, "the TIFF's tag data exceeds the decoder's memory limits; raise --max-memory")
+        }
+        TiffError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
+            TilerError::decode(path, "truncated TIFF: the file ends inside its header or a directory")
+        }
+        other => TilerError::decode(path, format!("not a readable TIFF: {other}")),
+    }
+}
+
+fn check_compression(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<CompressionMethod> {
+    let code: u16 = decoder.find_tag_unsigned(Tag::Compression).map_err(|e| open_error(path, e))?.unwrap_or(1);
+    let method = CompressionMethod::from_u16_exhaustive(code);
+    match method {
+        CompressionMethod::None
+        | CompressionMethod::LZW
+        | CompressionMethod::Deflate
+        | CompressionMethod::OldDeflate
+        | CompressionMethod::PackBits => Ok(method),
+        other => {
+            let name = match other {
+                CompressionMethod::Huffman => "CCITT modified Huffman (fax)".to_string(),
+                CompressionMethod::Fax3 => "CCITT Group 3 fax".to_string(),
+                CompressionMethod::Fax4 => "CCITT Group 4 fax".to_string(),
+                CompressionMethod::JPEG => "old-style JPEG".to_string(),
+                CompressionMethod::ModernJPEG => "JPEG".to_string(),
+                CompressionMethod::ZSTD => "Zstandard".to_string(),
+                CompressionMethod::WebP => "WebP".to_string(),
+                _ => format!("code {code}"),
+            };
+            Err(TilerError::unsupported(
+                path,
+                format!(
+                    "TIFF compression {name} is not supported (uncompressed, LZW, Deflate and PackBits are); re-save it with one of those, e.g. `tiffcp -c lzw in.tif out.tif`"
+                ),
+            ))
+        }
+    }
+}
+
+/// The output layout, and the samples per pixel the decoder delivers.
+fn pixel_layout(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<(PixelLayout, usize)> {
+    let tag_err = |e| open_error(path, e);
+    let photometric_code: Option<u16> = decoder.find_tag_unsigned(Tag::PhotometricInterpretation).map_err(tag_err)?;
+    let photometric = photometric_code.and_then(PhotometricInterpretation::from_u16);
+    let unsupported = |what: String| {
+        Err(TilerError::unsupported(
+            path,
+            format!(
+                "{what} TIFF is not supported (8/16-bit grey, grey+alpha, RGB and RGBA are); convert it first, e.g. to 8-bit RGB"
+            ),
+        ))
+    };
+    match photometric {
+        Some(
+            PhotometricInterpretation::WhiteIsZero
+            | PhotometricInterpretation::BlackIsZero
+            | PhotometricInterpretation::RGB,
+        ) => {}
+        Some(PhotometricInterpretation::RGBPalette) => return unsupported("a palette (indexed colour)".into()),
+        Some(PhotometricInterpretation::CMYK) => return unsupported("a CMYK (separated)".into()),
+        Some(PhotometricInterpretation::YCbCr) => return unsupported("a YCbCr".into()),
+        Some(PhotometricInterpretation::TransparencyMask) => return unsupported("a transparency-mask".into()),
+        Some(
+            PhotometricInterpretation::CIELab | PhotometricInterpretation::IccLab | PhotometricInterpretation::ItuLab,
+        ) => {
+            return unsupported("a CIE L*a*b*".into());
+        }
+        Some(other) => return unsupported(format!("a {other:?}")),
+        None => match photometric_code {
+            Some(code) => return unsupported(format!("a photometric interpretation {code}")),
+            None => return Err(TilerError::decode(path, "the TIFF has no PhotometricInterpretation tag")),
+        },
+    }
+
+    let formats: Vec<u16> = decoder.find_tag_unsigned_vec(Tag::SampleFormat).map_err(tag_err)?.unwrap_or_default();
+    if let Some(&f) = formats.iter().find(|&&f| f != 1) {
+        let what = match SampleFormat::from_u16_exhaustive(f) {
+            SampleFormat::Int => "a signed-integer".to_string(),
+            SampleFormat::IEEEFP => "a floating-point".to_string(),
+            SampleFormat::Void => "an untyped (void) sample".to_string(),
+            _ => format!("a sample-format-{f}"),
+        };
+        return unsupported(what);
+    }
+    let bits: Vec<u16> = decoder.find_tag_unsigned_vec(Tag::BitsPerSample).map_err(tag_err)?.unwrap_or_else(|| vec![1]);
+    let depth = match bits.first().copied().unwrap_or(1) {
+        8 => Depth::U8,
+        16 => Depth::U16,
+        b => return unsupported(format!("a {b}-bit")),
+    };
+    if bits.iter().any(|&b| b != bits[0]) {
+        return unsupported(format!("a mixed-depth ({bits:?} bits per sample)"));
+    }
+    let samples: u16 = decoder.find_tag_unsigned(Tag::SamplesPerPixel).map_err(tag_err)?.unwrap_or(1);
+    let planar: u16 = decoder.find_tag_unsigned(Tag::PlanarConfiguration).map_err(tag_err)?.unwrap_or(1);
+    if PlanarConfiguration::from_u16(planar) != Some(PlanarConfiguration::Chunky) && samples > 1 {
+        return unsupported("a planar-separate (one plane per channel, PlanarConfiguration 2)".into());
+    }
+    let predictor: u16 = decoder.find_tag_unsigned(Tag::Predictor).map_err(tag_err)?.unwrap_or(1);
+    match Predictor::from_u16(predictor) {
+        Some(Predictor::None | Predictor::Horizontal) => {}
+        _ => return unsupported(format!("a predictor-{predictor}")),
+    }
+    let extra: Vec<u16> = decoder.find_tag_unsigned_vec(Tag::ExtraSamples).map_err(tag_err)?.unwrap_or_default();
+    let first_extra_is_alpha = matches!(extra.first(), Some(1 | 2));
+
+    let colour = decoder.colortype().map_err(|e| open_error(path, e))?;
+    let (channels, file_samples) = match colour {
+        ColorType::Gray(_) => (Channels::Grey, 1),
+        ColorType::Multiband { num_samples, .. } if photometric != Some(PhotometricInterpretation::RGB) => {
+            if photometric == Some(PhotometricInterpretation::WhiteIsZero) {
+                return unsupported("a WhiteIsZero grey with extra samples".into());
+            }
+            let channels = if first_extra_is_alpha { Channels::GreyAlpha } else { Channels::Grey };
+            (channels, num_samples as usize)
+        }
+        ColorType::RGB(_) => (Channels::Rgb, 3),
+        ColorType::RGBA(_) => (Channels::Rgba, 4),
+        other => return unsupported(format!("a {other:?}")),
+    };
+    Ok((PixelLayout::new(channels, depth), file_samples))
+}
+
+impl TiffSource {
+    /// Decodes the strip or tile row holding image row `y` into `band`.
+    fn load_band(&mut self, y: u64) -> Result<()> {
+        let rows_per = self.chunking.rows() as u64;
+        let index = (y / rows_per) as u32;
+        let first = index as u64 * rows_per;
+        let rows = rows_per.min(self.height as u64 - first);
+        let row_bytes = self.width as usize * self.file_samples * self.layout.depth.bytes();
+        let band = &mut self.band[..row_bytes * rows as usize];
+        let decoder = &mut self.decoder;
+        let result = match self.chunking {
+            Chunking::Strips { .. } => {
+                guarded(|| decoder.read_chunk_bytes(index, band)).map_err(|m| (format!("strip {index}"), m))
+            }
+            Chunking::Tiles { width: tw, across, .. } => {
+                let pixel_bytes = self.file_samples * self.layout.depth.bytes();
+                let mut result = Ok(());
+                for col in 0..across {
+                    let chunk = index * across + col;
+                    let x0 = col as usize * tw as usize;
+                    let data_w = (tw as usize).min(self.width as usize - x0);
+                    let tile_row = data_w * pixel_bytes;
+                    let tile = &mut self.tile[..tile_row * rows as usize];
+                    if let Err(m) = guarded(|| decoder.read_chunk_bytes(chunk, tile)) {
+                        result = Err((format!("tile {chunk} (tile row {index}, column {col})"), m));
+                        break;
+                    }
+                    for (dst, src) in band.chunks_exact_mut(row_bytes).zip(tile.chunks_exact(tile_row)) {
+                        dst[x0 * pixel_bytes..][..tile_row].copy_from_slice(src);
+                    }
+                }
+                result
+            }
+        };
+        if let Err((chunk, message)) = result {
+            self.failed = true;
+            return Err(TilerError::DecodeRow {
+                path: self.path.clone(),
+                row: y,
+                message: format!("{chunk} (rows {first}..{}): {message}", first + rows),
+            });
+        }
+        self.band_first = first;
+        self.band_rows = rows;
+        Ok(())
+    }
+}
+
+/// Runs a chunk read, turning both its errors and any panic inside the crate (which a corrupt
+/// file should not cause, but a decoder bug must not take the whole run down) into a message.
+fn guarded(read: impl FnOnce() -> tiff::TiffResult<()>) -> std::result::Result<(), String> {
+    match catch_unwind(AssertUnwindSafe(read)) {
+        Ok(Ok(())) => Ok(()),
+        Ok(Err(TiffError::IoError(e))) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
+            Err(format!("the file ends early (truncated TIFF): {e}"))
+        }
+        Ok(Err(e)) => Err(format!("corrupt or undecodable TIFF data: {e}")),
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| panic.downcast_ref::<&str>().copied())
+                .unwrap_or("unknown panic");
+            Err(format!("the TIFF decoder failed: {what}"))
+        }
+    }
+}
+
+impl RowSource for TiffSource {
+    fn width(&self) -> u32 {
+        self.width
+    }
+    fn height(&self) -> u32 {
+        self.height
+    }
+    fn layout(&self) -> PixelLayout {
+        self.layout
+    }
+
+    fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
+        let y = self.next;
+        if self.failed {
+            return Err(TilerError::DecodeRow {
+                path: self.path.clone(),
+                row: y,
+                message: "an earlier strip failed to decode".into(),
+            });
+        }
+        if y >= self.height as u64 {
+            return Err(TilerError::DecodeRow {
+                path: self.path.clone(),
+                row: y,
+                message: "read past the last row".into(),
+            });
+        }
+        if y >= self.band_first + self.band_rows {
+            self.load_band(y)?;
+        }
+        let sample = self.layout.depth.bytes();
+        let file_pixel = self.file_samples * sample;
+        let row_bytes = self.width as usize * file_pixel;
+        let row = &self.band[(y - self.band_first) as usize * row_bytes..][..row_bytes];
+        let out_pixel = self.layout.bytes_per_pixel();
+        if out.len() != self.width as usize * out_pixel {
+            return Err(TilerError::DecodeRow {
+                path: self.path.clone(),
+                row: y,
+                message: format!("row buffer has {} bytes, expected {}", out.len(), self.width as usize * out_pixel),
+            });
+        }
+        // The crate has already converted samples to native byte order (and applied the
+        // predictor and WhiteIsZero inversion); only surplus extra samples are dropped here.
+        if file_pixel == out_pixel {
+            out.copy_from_slice(row);
+        } else {
+            for (o, i) in out.chunks_exact_mut(out_pixel).zip(row.chunks_exact(file_pixel)) {
+                o.copy_from_slice(&i[..out_pixel]);
+            }
+        }
+        self.next += 1;
+        Ok(())
+    }
+
+    fn describe(&self) -> String {
+        let kind = if self.bigtiff { "bigtiff" } else { "tiff" };
+        let compression = match self.compression {
+            CompressionMethod::None => "uncompressed",
+            CompressionMethod::LZW => "lzw",
+            CompressionMethod::Deflate | CompressionMethod::OldDeflate => "deflate",
+            CompressionMethod::PackBits => "packbits",
+            _ => "compressed",
+        };
+        match self.chunking {
+            Chunking::Strips { rows } => format!("{kind}, {compression}, streamed by strip ({rows} rows)"),
+            Chunking::Tiles { width, height, .. } => {
+                format!("{kind}, {compression}, streamed by tile row ({width}x{height} tiles)")
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::source::RowSource;
+    use tiff::encoder::{Compression, DeflateLevel, TiffEncoder, TiffKind, colortype};
+
+    /// Reads every row of `source` into one buffer.
+    fn read_all(source: &mut dyn RowSource) -> Result<Vec<u8>> {
+        let row = source.width() as usize * source.layout().bytes_per_pixel();
+        let mut all = vec![0u8; row * source.height() as usize];
+        for chunk in all.chunks_exact_mut(row) {
+            source.read_row(chunk)?;
+        }
+        Ok(all)
+    }
+
+    /// The `image` crate's whole-image decode, as native-endian bytes.
+    fn image_crate_decode(path: &Path) -> (PixelLayout, Vec<u8>) {
+        use image::DynamicImage as D;
+        let layout = |c, d| PixelLayout::new(c, d);
+        match image::open(path).unwrap() {
+            D::ImageLuma8(i) => (layout(Channels::Grey, Depth::U8), i.into_raw()),
+            D::ImageRgb8(i) => (layout(Channels::Rgb, Depth::U8), i.into_raw()),
+            D::ImageRgba8(i) => (layout(Channels::Rgba, Depth::U8), i.into_raw()),
+            D::ImageLuma16(i) => (layout(Channels::Grey, Depth::U16), bytemuck::cast_slice(&i.into_raw()).to_vec()),
+            D::ImageRgb16(i) => (layout(Channels::Rgb, Depth::U16), bytemuck::cast_slice(&i.into_raw()).to_vec()),
+            D::ImageRgba16(i) => (layout(Channels::Rgba, Depth::U16), bytemuck::cast_slice(&i.into_raw()).to_vec()),
+            other => panic!("unexpected {:?}", other.color()),
+        }
+    }
+
+    /// A deterministic pattern with gradients, edges and noise, `samples` values per pixel.
+    fn pattern(width: u32, height: u32, samples: usize, max: u32) -> Vec<u32> {
+        let mut state = 0x1234_5678u32;
+        let mut v = Vec::with_capacity((width * height) as usize * samples);
+        for y in 0..height {
+            for x in 0..width {
+                for c in 0..samples as u32 {
+                    state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    let smooth = (x * 7 + y * 3 + c * 50) % (max + 1);
+                    v.push(if (x / 5 + y / 3) % 4 == 0 { state % (max + 1) } else { smooth });
+                }
+            }
+        }
+        v
+    }
+
+    fn encode<K: TiffKind, C: colortype::ColorType>(
+        mut encoder: TiffEncoder<File, K>,
+        width: u32,
+        height: u32,
+        rows_per_strip: Option<u32>,
+        data: &[C::Inner],
+    ) where
+        [C::Inner]: tiff::encoder::TiffValue,
+    {
+        let mut image = encoder.new_image::<C>(width, height).unwrap();
+        if let Some(rows) = rows_per_strip {
+            image.rows_per_strip(rows).unwrap();
+        }
+        image.write_data(data).unwrap();
+    }
+
+    fn write_with<C: colortype::ColorType>(
+        path: &Path,
+        compression: Compression,
+        big: bool,
+        rows: Option<u32>,
+        w: u32,
+        h: u32,
+        data: &[C::Inner],
+    ) where
+        [C::Inner]: tiff::encoder::TiffValue,
+    {
+        let file = File::create(path).unwrap();
+        if big {
+            encode::<_, C>(TiffEncoder::new_big(file).unwrap().with_compression(compression), w, h, rows, data);
+        } else {
+            encode::<_, C>(TiffEncoder::new(file).unwrap().with_compression(compression), w, h, rows, data);
+        }
+    }
+
+    fn assert_matches_image_crate(path: &Path, expect: PixelLayout) {
+        let mut source = open(path, 1 << 30).unwrap();
+        assert_eq!(source.layout(), expect, "{}", path.display());
+        let ours = read_all(source.as_mut()).unwrap();
+        let (layout, theirs) = image_crate_decode(path);
+        assert_eq!(layout, expect);
+        assert!(ours == theirs, "{} differs from the image crate's decode", path.display());
+    }
+
+    #[test]
+    fn strips_match_image_crate_for_every_compression_and_layout() {
+        let dir = tempfile::tempdir().unwrap();
+        let compressions = [
+            ("none", Compression::Uncompressed),
+            ("lzw", Compression::Lzw),
+            ("deflate", Compression::Deflate(DeflateLevel::Fast)),
+            ("packbits", Compression::Packbits),
+        ];
+        let (w, h) = (101, 67);
+        for (name, compression) in compressions {
+            for (i, rows) in [None, Some(1), Some(7), Some(1000)].into_iter().enumerate() {
+                let p = |kind: &str| dir.path().join(format!("{name}-{i}-{kind}.tif"));
+                let g8: Vec<u8> = pattern(w, h, 1, 255).into_iter().map(|v| v as u8).collect();
+                let rgb8: Vec<u8> = pattern(w, h, 3, 255).into_iter().map(|v| v as u8).collect();
+                let rgba8: Vec<u8> = pattern(w, h, 4, 255).into_iter().map(|v| v as u8).collect();
+                let g16: Vec<u16> = pattern(w, h, 1, 65535).into_iter().map(|v| v as u16).collect();
+                let rgb16: Vec<u16> = pattern(w, h, 3, 65535).into_iter().map(|v| v as u16).collect();
+                let rgba16: Vec<u16> = pattern(w, h, 4, 65535).into_iter().map(|v| v as u16).collect();
+                write_with::<colortype::Gray8>(&p("g8"), compression, false, rows, w, h, &g8);
+                write_with::<colortype::RGB8>(&p("rgb8"), compression, false, rows, w, h, &rgb8);
+                write_with::<colortype::RGBA8>(&p("rgba8"), compression, false, rows, w, h, &rgba8);
+                write_with::<colortype::Gray16>(&p("g16"), compression, false, rows, w, h, &g16);
+                write_with::<colortype::RGB16>(&p("rgb16"), compression, false, rows, w, h, &rgb16);
+                write_with::<colortype::RGBA16>(&p("rgba16"), compression, false, rows, w, h, &rgba16);
+                assert_matches_image_crate(&p("g8"), PixelLayout::new(Channels::Grey, Depth::U8));
+                assert_matches_image_crate(&p("rgb8"), PixelLayout::new(Channels::Rgb, Depth::U8));
+                assert_matches_image_crate(&p("rgba8"), PixelLayout::new(Channels::Rgba, Depth::U8));
+                assert_matches_image_crate(&p("g16"), PixelLayout::new(Channels::Grey, Depth::U16));
+                assert_matches_image_crate(&p("rgb16"), PixelLayout::new(Channels::Rgb, Depth::U16));
+                assert_matches_image_crate(&p("rgba16"), PixelLayout::new(Channels::Rgba, Depth::U16));
+            }
+        }
+    }
+
+    #[test]
+    fn sixteen_bit_round_trip_is_native_endian() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (64, 40);
+        let values: Vec<u16> = pattern(w, h, 3, 65535).into_iter().map(|v| v as u16).collect();
+        let path = dir.path().join("rgb16.tif");
+        write_with::<colortype::RGB16>(&path, Compression::Lzw, false, Some(5), w, h, &values);
+        let mut source = open(&path, 1 << 30).unwrap();
+        let got = read_all(source.as_mut()).unwrap();
+        let got: Vec<u16> = got.chunks_exact(2).map(|b| u16::from_ne_bytes([b[0], b[1]])).collect();
+        assert_eq!(got, values);
+
+        // Big-endian ("MM") file, written by hand: samples must come out native too.
+        let grey: Vec<u16> = pattern(w, h, 1, 65535).into_iter().map(|v| v as u16).collect();
+        let be: Vec<u8> = grey.iter().flat_map(|v| v.to_be_bytes()).collect();
+        let path = dir.path().join("be16.tif");
+        let strips = strips_of(&be, w as usize * 2, 16);
+        write_tiff(&path, true, basic_tags(w, h, &[16], 1, Some(16)), &strips, false);
+        let mut source = open(&path, 1 << 30).unwrap();
+        assert_eq!(source.layout(), PixelLayout::new(Channels::Grey, Depth::U16));
+        let got = read_all(source.as_mut()).unwrap();
+        let got: Vec<u16> = got.chunks_exact(2).map(|b| u16::from_ne_bytes([b[0], b[1]])).collect();
+        assert_eq!(got, grey);
+    }
+
+    #[test]
+    fn bigtiff_and_predictor() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (90, 33);
+        let rgb16: Vec<u16> = pattern(w, h, 3, 65535).into_iter().map(|v| v as u16).collect();
+        let path = dir.path().join("big.tif");
+        write_with::<colortype::RGB16>(
+            &path,
+            Compression::Deflate(DeflateLevel::Balanced),
+            true,
+            Some(4),
+            w,
+            h,
+            &rgb16,
+        );
+        // Through the format dispatch, as the pipeline opens it.
+        let source = crate::source::open(&path, 1 << 30).unwrap();
+        assert!(source.describe().starts_with("bigtiff, deflate"), "{}", source.describe());
+        drop(source);
+        assert_matches_image_crate(&path, PixelLayout::new(Channels::Rgb, Depth::U16));
+
+        let path = dir.path().join("predicted.tif");
+        let rgb8: Vec<u8> = pattern(w, h, 3, 255).into_iter().map(|v| v as u8).collect();
+        let encoder = TiffEncoder::new(File::create(&path).unwrap())
+            .unwrap()
+            .with_compression(Compression::Lzw)
+            .with_predictor(Predictor::Horizontal);
+        encode::<_, colortype::RGB8>(encoder, w, h, Some(8), &rgb8);
+        let mut source = open(&path, 1 << 30).unwrap();
+        assert_eq!(read_all(source.as_mut()).unwrap(), rgb8);
+    }
+
+    // ---- A minimal TIFF writer for layouts the `tiff` encoder cannot make (tiles, grey+alpha,
+    // big-endian, directory before the data, unsupported kinds).
+
+    type Entry = (u16, u16, Vec<u32>);
+    const SHORT: u16 = 3;
+    const LONG: u16 = 4;
+
+    fn basic_tags(w: u32, h: u32, bits: &[u32], photometric: u32, rows_per_strip: Option<u32>) -> Vec<Entry> {
+        let mut tags = vec![
+            (256, LONG, vec![w]),
+            (257, LONG, vec![h]),
+            (258, SHORT, bits.to_vec()),
+            (259, SHORT, vec![1]),
+            (262, SHORT, vec![photometric]),
+            (277, SHORT, vec![bits.len() as u32]),
+        ];
+        if let Some(rows) = rows_per_strip {
+            tags.push((278, LONG, vec![rows]));
+        }
+        tags
+    }
+
+    fn set_tag(tags: &mut Vec<Entry>, entry: Entry) {
+        tags.retain(|t| t.0 != entry.0);
+        tags.push(entry);
+    }
+
+    fn strips_of(data: &[u8], row_bytes: usize, rows: usize) -> Vec<Vec<u8>> {
+        data.chunks(row_bytes * rows).map(<[u8]>::to_vec).collect()
+    }
+
+    /// Cuts `data` (rows of `w` pixels of `pixel` bytes) into `tw` x `th` tiles, zero-padded.
+    fn tiles_of(data: &[u8], w: usize, h: usize, pixel: usize, tw: usize, th: usize) -> Vec<Vec<u8>> {
+        let mut tiles = Vec::new();
+        for ty in (0..h).step_by(th) {
+            for tx in (0..w).step_by(tw) {
+                let mut tile = vec![0u8; tw * th * pixel];
+                for y in ty..(ty + th).min(h) {
+                    let n = (tw.min(w - tx)) * pixel;
+                    tile[(y - ty) * tw * pixel..][..n].copy_from_slice(&data[(y * w + tx) * pixel..][..n]);
+                }
+                tiles.push(tile);
+            }
+        }
+        tiles
+    }
+
+    /// Writes a classic TIFF with its directory first (right after the header), then the
+    /// out-of-line tag values, then the strips or tiles in order.
+    fn write_tiff(path: &Path, big_endian: bool, mut tags: Vec<Entry>, chunks: &[Vec<u8>], tiled: bool) {
+        let (offsets_tag, counts_tag) = if tiled { (324, 325) } else { (273, 279) };
+        tags.push((offsets_tag, LONG, vec![0; chunks.len()]));
+        tags.push((counts_tag, LONG, chunks.iter().map(|c| c.len() as u32).collect()));
+        tags.sort_by_key(|t| t.0);
+        let size = |t: &Entry| t.2.len() * if t.1 == SHORT { 2 } else { 4 };
+        let ifd_len = 2 + 12 * tags.len() + 4;
+        let extra: usize = tags.iter().map(size).filter(|&s| s > 4).sum();
+        let mut at = 8 + ifd_len + extra;
+        let offsets: Vec<u32> = chunks
+            .iter()
+            .map(|c| {
+                let o = at;
+                at += c.len();
+                o as u32
+            })
+            .collect();
+        tags.iter_mut().find(|t| t.0 == offsets_tag).unwrap().2 = offsets;
+
+        let u16b = |v: u16| if big_endian { v.to_be_bytes() } else { v.to_le_bytes() };
+        let u32b = |v: u32| if big_endian { v.to_be_bytes() } else { v.to_le_bytes() };
+        let mut out: Vec<u8> = if big_endian { b"MM\0*".to_vec() } else { b"II*\0".to_vec() };
+        out.extend(u32b(8));
+        out.extend(u16b(tags.len() as u16));
+        let mut extra_at = 8 + ifd_len;
+        let mut extra_bytes = Vec::new();
+        for (tag, ty, values) in &tags {
+            out.extend(u16b(*tag));
+            out.extend(u16b(*ty));
+            out.extend(u32b(values.len() as u32));
+            let mut bytes = Vec::new();
+            for &v in values {
+                if *ty == SHORT {
+                    bytes.extend(u16b(v as u16));
+                } else {
+                    bytes.extend(u32b(v));
+                }
+            }
+            if bytes.len() <= 4 {
+                bytes.resize(4, 0);
+                out.extend(bytes);
+            } else {
+                out.extend(u32b(extra_at as u32));
+                extra_at += bytes.len();
+                extra_bytes.extend(bytes);
+            }
+        }
+        out.extend(u32b(0));
+        out.extend(extra_bytes);
+        for c in chunks {
+            out.extend(c);
+        }
+        std::fs::write(path, out).unwrap();
+    }
+
+    fn tiled_tags(w: u32, h: u32, bits: &[u32], photometric: u32, tw: u32, th: u32) -> Vec<Entry> {
+        let mut tags = basic_tags(w, h, bits, photometric, None);
+        tags.push((322, LONG, vec![tw]));
+        tags.push((323, LONG, vec![th]));
+        tags
+    }
+
+    #[test]
+    fn tiled_tiff_matches_source_and_image_crate() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h, tw, th) = (100u32, 70u32, 32u32, 16u32);
+        let rgb: Vec<u8> = pattern(w, h, 3, 255).into_iter().map(|v| v as u8).collect();
+        let path = dir.path().join("tiled.tif");
+        let tiles = tiles_of(&rgb, w as usize, h as usize, 3, tw as usize, th as usize);
+        write_tiff(&path, false, tiled_tags(w, h, &[8, 8, 8], 2, tw, th), &tiles, true);
+        let mut source = open(&path, 1 << 30).unwrap();
+        assert!(source.describe().contains("tile row (32x16 tiles)"), "{}", source.describe());
+        assert_eq!(read_all(source.as_mut()).unwrap(), rgb);
+        assert_matches_image_crate(&path, PixelLayout::new(Channels::Rgb, Depth::U8));
+
+        // 16-bit grey, big-endian, tiles larger than the image.
+        let grey: Vec<u16> = pattern(w, h, 1, 65535).into_iter().map(|v| v as u16).collect();
+        let be: Vec<u8> = grey.iter().flat_map(|v| v.to_be_bytes()).collect();
+        let path = dir.path().join("tiled16.tif");
+        let tiles = tiles_of(&be, w as usize, h as usize, 2, 128, 128);
+        write_tiff(&path, true, tiled_tags(w, h, &[16], 1, 128, 128), &tiles, true);
+        let mut source = open(&path, 1 << 30).unwrap();
+        let got = read_all(source.as_mut()).unwrap();
+        let got: Vec<u16> = got.chunks_exact(2).map(|b| u16::from_ne_bytes([b[0], b[1]])).collect();
+        assert_eq!(got, grey);
+    }
+
+    #[test]
+    fn grey_alpha_and_extra_samples() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (37u32, 21u32);
+        let ga: Vec<u8> = pattern(w, h, 2, 255).into_iter().map(|v| v as u8).collect();
+        let path = dir.path().join("ga.tif");
+        let mut tags = basic_tags(w, h, &[8, 8], 1, Some(4));
+        tags.push((338, SHORT, vec![2]));
+        write_tiff(&path, false, tags, &strips_of(&ga, w as usize * 2, 4), false);
+        let mut source = open(&path, 1 << 30).unwrap();
+        assert_eq!(source.layout(), PixelLayout::new(Channels::GreyAlpha, Depth::U8));
+        assert_eq!(read_all(source.as_mut()).unwrap(), ga);
+
+        // An unspecified extra sample is dropped: plain grey.
+        let path = dir.path().join("g-extra.tif");
+        let mut tags = basic_tags(w, h, &[8, 8], 1, Some(4));
+        tags.push((338, SHORT, vec![0]));
+        write_tiff(&path, false, tags, &strips_of(&ga, w as usize * 2, 4), false);
+        let mut source = open(&path, 1 << 30).unwrap();
+        assert_eq!(source.layout(), PixelLayout::new(Channels::Grey, Depth::U8));
+        let grey: Vec<u8> = ga.iter().step_by(2).copied().collect();
+        assert_eq!(read_all(source.as_mut()).unwrap(), grey);
+
+        // WhiteIsZero grey is inverted.
+        let path = dir.path().join("wiz.tif");
+        write_tiff(&path, false, basic_tags(w, h, &[8], 0, None), std::slice::from_ref(&grey), false);
+        let mut source = open(&path, 1 << 30).unwrap();
+        let inverted: Vec<u8> = grey.iter().map(|v| 255 - v).collect();
+        assert_eq!(read_all(source.as_mut()).unwrap(), inverted);
+    }
+
+    #[test]
+    fn truncated_file_is_an_error_naming_the_row() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (50u32, 40u32);
+        let rgb: Vec<u8> = pattern(w, h, 3, 255).into_iter().map(|v| v as u8).collect();
+        let path = dir.path().join("cut.tif");
+        write_tiff(&path, false, basic_tags(w, h, &[8, 8, 8], 2, Some(8)), &strips_of(&rgb, w as usize * 3, 8), false);
+        let bytes = std::fs::read(&path).unwrap();
+        // Strips are 50 x 8 x 3 = 1200 bytes: drop the last and 100 bytes of the one before.
+        std::fs::write(&path, &bytes[..bytes.len() - 1200 - 100]).unwrap();
+        let mut source = open(&path, 1 << 30).unwrap();
+        let err = read_all(source.as_mut()).unwrap_err();
+        match &err {
+            TilerError::DecodeRow { row, message, .. } => {
+                assert_eq!(*row, 24, "{err}");
+                assert!(message.contains("strip 3"), "{err}");
+            }
+            other => panic!("unexpected {other}"),
+        }
+        assert!(err.to_string().contains("cut.tif"), "{err}");
+
+        // Compressed strips cut short, written by the `tiff` encoder (directory last): the
+        // directory is gone, so opening fails.
+        let path = dir.path().join("cut-lzw.tif");
+        write_with::<colortype::RGB8>(&path, Compression::Lzw, false, Some(8), w, h, &rgb);
+        let bytes = std::fs::read(&path).unwrap();
+        for keep in [bytes.len() / 2, 10, 4] {
+            std::fs::write(&path, &bytes[..keep]).unwrap();
+            let err = open(&path, 1 << 30).err().expect("truncated file must not open");
+            assert!(err.to_string().contains("cut-lzw.tif"), "{err}");
+        }
+
+        // LZW data cut inside a strip, directory first.
+        let path = dir.path().join("cut-lzw2.tif");
+        write_with::<colortype::RGB8>(&path, Compression::Lzw, false, Some(8), w, h, &rgb);
+        let mut decoder = Decoder::new(File::open(&path).unwrap()).unwrap();
+        let strips: Vec<Vec<u8>> = (0..5)
+            .map(|i| {
+                let offset = decoder.get_tag_u64_vec(Tag::StripOffsets).unwrap()[i] as usize;
+                let count = decoder.get_tag_u64_vec(Tag::StripByteCounts).unwrap()[i] as usize;
+                std::fs::read(&path).unwrap()[offset..offset + count].to_vec()
+            })
+            .collect();
+        let mut tags = basic_tags(w, h, &[8, 8, 8], 2, Some(8));
+        set_tag(&mut tags, (259, SHORT, vec![5]));
+        write_tiff(&path, false, tags, &strips, false);
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() - strips[4].len() / 2]).unwrap();
+        let mut source = open(&path, 1 << 30).unwrap();
+        let err = read_all(source.as_mut()).unwrap_err();
+        assert!(matches!(err, TilerError::DecodeRow { row: 32, .. }), "{err}");
+    }
+
+    #[test]
+    fn unsupported_kinds_are_refused_with_a_reason() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (16u32, 8u32);
+        let expect_unsupported = |path: &Path, needle: &str| {
+            let err = open(path, 1 << 30).err().unwrap_or_else(|| panic!("{} opened", path.display()));
+            assert!(matches!(err, TilerError::Unsupported { .. }), "{err}");
+            assert!(err.to_string().contains(needle), "{err} lacks {needle:?}");
+        };
+
+        let path = dir.path().join("cmyk.tif");
+        write_with::<colortype::CMYK8>(
+            &path,
+            Compression::Uncompressed,
+            false,
+            None,
+            w,
+            h,
+            &vec![7u8; (w * h * 4) as usize],
+        );
+        expect_unsupported(&path, "CMYK");
+
+        let path = dir.path().join("float.tif");
+        write_with::<colortype::Gray32Float>(
+            &path,
+            Compression::Uncompressed,
+            false,
+            None,
+            w,
+            h,
+            &vec![0.5f32; (w * h) as usize],
+        );
+        expect_unsupported(&path, "floating-point");
+
+        let path = dir.path().join("palette.tif");
+        let mut tags = basic_tags(w, h, &[8], 3, None);
+        tags.push((320, SHORT, vec![0; 3 * 256]));
+        write_tiff(&path, false, tags, &[vec![0; (w * h) as usize]], false);
+        expect_unsupported(&path, "palette");
+
+        let path = dir.path().join("planar.tif");
+        let mut tags = basic_tags(w, h, &[8, 8, 8], 2, None);
+        tags.push((284, SHORT, vec![2]));
+        let plane = vec![9u8; (w * h) as usize];
+        write_tiff(&path, false, tags, &[plane.clone(), plane.clone(), plane], false);
+        expect_unsupported(&path, "planar-separate");
+
+        let path = dir.path().join("bilevel.tif");
+        write_tiff(&path, false, basic_tags(w, h, &[1], 1, None), &[vec![0xAA; (w / 8 * h) as usize]], false);
+        expect_unsupported(&path, "1-bit");
+
+        let path = dir.path().join("ycbcr.tif");
+        let mut tags = basic_tags(w, h, &[8, 8, 8], 6, None);
+        tags.push((530, SHORT, vec![1, 1]));
+        write_tiff(&path, false, tags, &[vec![0; (w * h * 3) as usize]], false);
+        expect_unsupported(&path, "YCbCr");
+
+        let path = dir.path().join("jpeg-in-tiff.tif");
+        let mut tags = basic_tags(w, h, &[8, 8, 8], 2, None);
+        set_tag(&mut tags, (259, SHORT, vec![7]));
+        write_tiff(&path, false, tags, &[vec![0; 10]], false);
+        expect_unsupported(&path, "compression JPEG");
+    }
+
+    #[test]
+    fn strip_over_max_memory_is_refused_and_says_why() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (256u32, 256u32);
+        let rgb = vec![100u8; (w * h * 3) as usize];
+        let path = dir.path().join("one-strip.tif");
+        write_with::<colortype::RGB8>(&path, Compression::Uncompressed, false, Some(h), w, h, &rgb);
+        let err = open(&path, 100_000).err().unwrap();
+        assert!(matches!(err, TilerError::Unsupported { .. }), "{err}");
+        let text = err.to_string();
+        assert!(text.contains("single strip") && text.contains("--max-memory") && text.contains("tiffcp"), "{text}");
+        // The same file streams fine once a strip fits.
+        assert!(open(&path, 256 * 256 * 3).is_ok());
+
+        // Tiles: one row of 256x256 tiles of a 256-wide image.
+        let path = dir.path().join("tiles.tif");
+        let tiles = tiles_of(&rgb, w as usize, h as usize, 3, 256, 256);
+        write_tiff(&path, false, tiled_tags(w, h, &[8, 8, 8], 2, 256, 256), &tiles, true);
+        let err = open(&path, 100_000).err().unwrap();
+        assert!(err.to_string().contains("row of tiles"), "{err}");
+    }
+
+    /// A single uncompressed strip far above the `tiff` crate's 128 MiB default limits
+    /// (16384 x 4096 RGB, 192 MiB). Slow and large on disk: run with `--ignored`.
+    #[test]
+    #[ignore]
+    fn huge_single_uncompressed_strip() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (16384u32, 4096u32);
+        let rgb: Vec<u8> = (0..w as usize * h as usize * 3).map(|i| (i % 251) as u8).collect();
+        let path = dir.path().join("huge.tif");
+        write_with::<colortype::RGB8>(&path, Compression::Uncompressed, false, Some(h), w, h, &rgb);
+        let mut source = open(&path, 1 << 30).unwrap();
+        assert_eq!(read_all(source.as_mut()).unwrap(), rgb);
+    }
+}
