@@ -86,7 +86,19 @@ fn existing_info_json_sets_the_output_and_flags_override_it() {
 fn help_lists_options_with_defaults() {
     let r = run(&["split", "--help"]);
     let help = String::from_utf8_lossy(&r.stdout);
-    for needle in ["--tile-size", "[default: 128]", "--border", "--codec", "--quality", "[default: 85]", "--background", "--max-memory", "[default: 1G]", "--filename-format", "--ff"] {
+    for needle in [
+        "--tile-size",
+        "[default: 128]",
+        "--border",
+        "--codec",
+        "--quality",
+        "[default: 85]",
+        "--background",
+        "--max-memory",
+        "[default: 1G]",
+        "--filename-format",
+        "--ff",
+    ] {
         assert!(help.contains(needle), "--help lacks {needle}");
     }
 }
@@ -169,10 +181,29 @@ fn contradictory_settings() {
     let r = run(&["split", s(&rgba), "-o", s(&out), "--codec", "jpeg", "--flatten", "-q"]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
 
-    fails_with(&run(&["split", s(&rgba), "-o", s(&dir.path().join("o2")), "--codec", "jpeg", "--ff", "%s-%s-%s.png", "--flatten"]), &[".png", "jpeg"]);
-    fails_with(&run(&["split", s(&rgba), "-o", s(&dir.path().join("o3")), "--ff", "x%s-y%s.png"]), &["never uses argument 3"]);
+    fails_with(
+        &run(&[
+            "split",
+            s(&rgba),
+            "-o",
+            s(&dir.path().join("o2")),
+            "--codec",
+            "jpeg",
+            "--ff",
+            "%s-%s-%s.png",
+            "--flatten",
+        ]),
+        &[".png", "jpeg"],
+    );
+    fails_with(
+        &run(&["split", s(&rgba), "-o", s(&dir.path().join("o3")), "--ff", "x%s-y%s.png"]),
+        &["never uses argument 3"],
+    );
     let sample = fixture("sample.png");
-    fails_with(&run(&["split", s(&sample), "-o", s(&dir.path().join("o4")), "--ff", "%1$s%2$s%3$s.png", "--tile-size", "16"]), &["two tiles one name"]);
+    fails_with(
+        &run(&["split", s(&sample), "-o", s(&dir.path().join("o4")), "--ff", "%1$s%2$s%3$s.png", "--tile-size", "16"]),
+        &["two tiles one name"],
+    );
     fails_with(&run(&["split", s(&rgba), "-o", s(&dir.path().join("o5")), "--border", "70"]), &["border 70"]);
 
     let conf = dir.path().join("conf");

@@ -50,7 +50,11 @@ impl RowSource for BrokenSource {
     }
     fn read_row(&mut self, row: &mut [u8]) -> Result<()> {
         if self.row == self.good {
-            return Err(TilerError::DecodeRow { path: PathBuf::from("broken.png"), row: self.row, message: "boom".into() });
+            return Err(TilerError::DecodeRow {
+                path: PathBuf::from("broken.png"),
+                row: self.row,
+                message: "boom".into(),
+            });
         }
         self.row += 1;
         self.inner.read_row(row)
@@ -67,7 +71,9 @@ fn a_failing_sink_stops_the_run_with_its_error() {
         for ok in [0, 5, 200] {
             let sink = FullDisk { ok, written: AtomicUsize::new(0) };
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-            let err = pool.install(|| split(image.source(), &sink, &png_options(16, 1, Background::Edge), &|_| {})).unwrap_err();
+            let err = pool
+                .install(|| split(image.source(), &sink, &png_options(16, 1, Background::Edge), &|_| {}))
+                .unwrap_err();
             let text = err.to_string();
             assert!(text.contains("out/tile.png") && text.contains("No space left"), "{text}");
         }

@@ -16,12 +16,20 @@ fn golden(fixture: &str, tile: u32, border: u32, background: Background) {
     let src = source::open(&root.join(fixture), 1 << 30).unwrap();
     let sink = MemSink::default();
     let summary = split(src, &sink, &png_options(tile, border, background), &|_| {}).unwrap();
-    let mut text = format!("# {fixture}: tile {tile}, border {border}, background {background}, {} tiles\n", summary.tiles);
+    let mut text =
+        format!("# {fixture}: tile {tile}, border {border}, background {background}, {} tiles\n", summary.tiles);
     text.push_str("# lod x y width height crc32\n");
     for ((lod, x, y), png) in sink.tiles.into_inner().unwrap() {
-        let samples: Vec<u8> = decode_png(&png).iter().flat_map(|s| {
-            if summary.stored.depth == vortex_tiler::pixel::Depth::U8 { vec![*s as u8] } else { s.to_be_bytes().to_vec() }
-        }).collect();
+        let samples: Vec<u8> = decode_png(&png)
+            .iter()
+            .flat_map(|s| {
+                if summary.stored.depth == vortex_tiler::pixel::Depth::U8 {
+                    vec![*s as u8]
+                } else {
+                    s.to_be_bytes().to_vec()
+                }
+            })
+            .collect();
         text.push_str(&format!("{lod} {x} {y} {tile} {tile} {:08x}\n", crc32fast::hash(&samples)));
     }
     let path = root.join("golden").join(format!("{fixture}.txt"));
@@ -32,7 +40,11 @@ fn golden(fixture: &str, tile: u32, border: u32, background: Background) {
     if want != text {
         let actual = path.with_extension("actual.txt");
         std::fs::write(&actual, &text).unwrap();
-        panic!("{} differs from this run (written to {}); diff them, and bless with BLESS=1 if the change is intended", path.display(), actual.display());
+        panic!(
+            "{} differs from this run (written to {}); diff them, and bless with BLESS=1 if the change is intended",
+            path.display(),
+            actual.display()
+        );
     }
 }
 

@@ -14,7 +14,13 @@ fn check(image: &Image, tile: u32, border: u32, background: Background, threads:
     assert_eq!(got.len(), want.len(), "tile count");
     for (key, w) in &want {
         let g = &got[key];
-        assert!(g == w, "tile (lod, x, y) = {key:?} differs for {}x{} {} tile {tile} border {border} {background}", image.width, image.height, image.layout);
+        assert!(
+            g == w,
+            "tile (lod, x, y) = {key:?} differs for {}x{} {} tile {tile} border {border} {background}",
+            image.width,
+            image.height,
+            image.layout
+        );
     }
 }
 

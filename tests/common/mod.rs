@@ -102,7 +102,14 @@ impl TileSink for MemSink {
 }
 
 pub fn png_options(tile_size: u32, border: u32, background: Background) -> SplitOptions {
-    SplitOptions { tile_size, border, codec: Codec::Png { level: PngLevel::Fast }, background, flatten: false, tile_depth: None }
+    SplitOptions {
+        tile_size,
+        border,
+        codec: Codec::Png { level: PngLevel::Fast },
+        background,
+        flatten: false,
+        tile_depth: None,
+    }
 }
 
 /// Tiles by (lod, x, y), decoded to u16 samples.
