@@ -123,6 +123,8 @@ impl<T: Sample> TileEncoder<T> {
         }
     }
 
+    /// libjpeg-turbo's encoder (MozJPEG in its libjpeg-turbo-compatible "fastest" profile: no
+    /// trellis, no scan optimisation), the encoder `vips` uses, with SIMD when built with nasm.
     fn encode_jpeg(
         &self,
         texels: &[T],
@@ -131,18 +133,36 @@ impl<T: Sample> TileEncoder<T> {
         out: &mut Vec<u8>,
     ) -> Result<(), String> {
         let samples = to_u8(texels);
+        let side = self.side as usize;
         let colour = match self.stored.channels {
-            Channels::Grey => jpeg_encoder::ColorType::Luma,
-            _ => jpeg_encoder::ColorType::Rgb,
+            Channels::Grey => mozjpeg::ColorSpace::JCS_GRAYSCALE,
+            _ => mozjpeg::ColorSpace::JCS_RGB,
         };
-        let mut enc = jpeg_encoder::Encoder::new(out, quality);
-        enc.set_sampling_factor(match subsampling {
-            Subsampling::S420 => jpeg_encoder::SamplingFactor::F_2_2,
-            Subsampling::S444 => jpeg_encoder::SamplingFactor::F_1_1,
-        });
-        enc.set_chroma_subsampling_method(jpeg_encoder::ChromaSubsamplingMethod::Average);
-        let side = self.side as u16;
-        enc.encode(&samples, side, side, colour).map_err(|e| e.to_string())
+        let buf = std::mem::take(out);
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> std::io::Result<Vec<u8>> {
+            let mut c = mozjpeg::Compress::new(colour);
+            c.set_fastest_defaults();
+            c.set_size(side, side);
+            c.set_quality(quality as f32);
+            if colour == mozjpeg::ColorSpace::JCS_RGB {
+                let px = match subsampling {
+                    Subsampling::S420 => (2, 2),
+                    Subsampling::S444 => (1, 1),
+                };
+                c.set_chroma_sampling_pixel_sizes(px, px);
+            }
+            let mut started = c.start_compress(buf)?;
+            started.write_scanlines(&samples)?;
+            started.finish()
+        }));
+        match result {
+            Ok(Ok(bytes)) => {
+                *out = bytes;
+                Ok(())
+            }
+            Ok(Err(e)) => Err(e.to_string()),
+            Err(_) => Err("libjpeg failed".into()),
+        }
     }
 
     fn encode_png(&self, texels: &[T], level: PngLevel, out: &mut Vec<u8>) -> Result<(), String> {
