@@ -122,6 +122,11 @@ pub fn cut_tile<T: Copy>(
     }
 }
 
+/// First virtual row that tile row `t` reads (negative rows are the top border's clamp).
+pub fn first_row_needed(layout: &Layout, t: u32) -> i64 {
+    t as i64 * layout.payload() as i64 - layout.border as i64
+}
+
 /// Last image row (inclusive) that tile row `t` of a level with `extent` rows reads.
 pub fn last_row_needed(layout: &Layout, lod: u32, t: u32, extent: u32) -> u64 {
     let end = (t as u64 + 1) * layout.payload() as u64 + layout.border as u64;

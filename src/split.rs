@@ -258,23 +258,29 @@ impl<T: Sample> Level<T> {
         out: &SyncSender<Result<Batch<T>>>,
     ) -> Result<()> {
         let (_, height) = self.extent;
-        while self.next_tile_row < layout.tiles_per_side(self.lod)
+        let rows = layout.tiles_per_side(self.lod);
+        while self.next_tile_row < rows
             && self.band.end() > cut::last_row_needed(layout, self.lod, self.next_tile_row, height)
         {
             let ty = self.next_tile_row;
+            // Rows of tiles entirely below the image are all alike (they repeat the last image
+            // row, or are background): cut the first, and give it the places of all the others.
+            let below_image = cut::first_row_needed(layout, ty) >= height as i64;
+            let row_span = if below_image { ty..rows } else { ty..ty + 1 };
             let y_runs = cut::runs(layout, self.lod, ty, height, *padding == Padding::Edge);
             let mut tiles: Vec<CutTile<T>> = Vec::new();
             let mut texels = Vec::with_capacity(layout.tile_bytes(channels));
             for (tx, x_runs) in self.x_runs.iter().enumerate() {
                 cut::cut_tile(&self.band, channels, x_runs, &y_runs, padding, &mut texels);
+                let places = row_span.clone().map(|y| (tx as u32, y));
                 match tiles.last_mut() {
-                    Some(prev) if prev.texels == texels => prev.places.push((tx as u32, ty)),
-                    _ => tiles.push(CutTile { texels: texels.clone(), places: vec![(tx as u32, ty)] }),
+                    Some(prev) if prev.texels == texels => prev.places.extend(places),
+                    _ => tiles.push(CutTile { texels: texels.clone(), places: places.collect() }),
                 }
             }
             out.send(Ok(Batch { lod: self.lod, tiles }))
                 .map_err(|_| TilerError::Options("the encoder stopped".into()))?;
-            self.next_tile_row += 1;
+            self.next_tile_row = row_span.end;
             self.band.drop_before(cut::first_row_kept(layout, ty, height));
         }
         Ok(())
