@@ -271,8 +271,13 @@ impl<T: Sample> Level<T> {
             let mut tiles: Vec<CutTile<T>> = Vec::new();
             let mut texels = Vec::with_capacity(layout.tile_bytes(channels));
             for (tx, x_runs) in self.x_runs.iter().enumerate() {
-                cut::cut_tile(&self.band, channels, x_runs, &y_runs, padding, &mut texels);
                 let places = row_span.clone().map(|y| (tx as u32, y));
+                // Columns of tiles right of the image read the same texels as their left neighbour.
+                if tx > 0 && self.x_runs[tx - 1] == *x_runs {
+                    tiles.last_mut().expect("a tile left of this one").places.extend(places);
+                    continue;
+                }
+                cut::cut_tile(&self.band, channels, x_runs, &y_runs, padding, &mut texels);
                 match tiles.last_mut() {
                     Some(prev) if prev.texels == texels => prev.places.extend(places),
                     _ => tiles.push(CutTile { texels: texels.clone(), places: places.collect() }),
