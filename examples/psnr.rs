@@ -24,7 +24,8 @@ use vortex_tiler::filename::FilenameFormat;
 use vortex_tiler::info::InfoFile;
 use vortex_tiler::pixel::{Channels, Depth};
 
-const USAGE: &str = "usage: psnr SOURCE (--vortex DIR | --dzi DIR_files [--tile-size N] [--overlap N]) [--max-memory BYTES] [-v]";
+const USAGE: &str =
+    "usage: psnr SOURCE (--vortex DIR | --dzi DIR_files [--tile-size N] [--overlap N]) [--max-memory BYTES] [-v]";
 
 /// Where the finest-level tiles are and how they map onto the source.
 enum Grid {
@@ -57,7 +58,14 @@ impl Grid {
 
 fn main() {
     if let Err(e) = run() {
-        eprintln!("psnr: {e:#}");
+        // The library's errors already hold their io::Error, which `{:#}` would print twice.
+        let mut line = e.to_string();
+        for cause in e.chain().skip(1).map(|c| c.to_string()) {
+            if !line.contains(&cause) {
+                line = format!("{line}: {cause}");
+            }
+        }
+        eprintln!("psnr: {line}");
         std::process::exit(1);
     }
 }
@@ -169,7 +177,8 @@ fn vortex_grid(dir: PathBuf) -> Result<(Grid, u32)> {
             format!("lod%1$02s-x%2$04s-y%3$04s.{ext}")
         }
     };
-    let names = FilenameFormat::parse(&pattern, 3).map_err(|e| anyhow::anyhow!("{}: filenameFormat: {e}", info_path.display()))?;
+    let names = FilenameFormat::parse(&pattern, 3)
+        .map_err(|e| anyhow::anyhow!("{}: filenameFormat: {e}", info_path.display()))?;
     let page = tile_size.checked_sub(2 * border).filter(|p| *p > 0).context("border leaves no payload")?;
     Ok((Grid::Vortex { dir, names, border }, page))
 }
@@ -194,7 +203,8 @@ fn dzi_grid(files: PathBuf, tile_size: Option<u32>, overlap: Option<u32>) -> Res
         let at = text.find(&format!("{name}=\""))? + name.len() + 2;
         text[at..].split('"').next()?.parse().ok()
     };
-    let tile_size = tile_size.or_else(|| attr("TileSize")).context("no .dzi next to the directory: give --tile-size")?;
+    let tile_size =
+        tile_size.or_else(|| attr("TileSize")).context("no .dzi next to the directory: give --tile-size")?;
     let overlap = overlap.or_else(|| attr("Overlap")).unwrap_or(0);
     Ok((Grid::Dzi { level_dir, ext, overlap }, tile_size))
 }
