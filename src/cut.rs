@@ -85,15 +85,10 @@ pub fn cut_tile<T: Copy>(
                     out.extend_from_slice(&r[start as usize * channels..(start + len) as usize * channels])
                 }
                 (Run::Repeat { at, len }, Some(r)) => {
-                    let px = &r[at as usize * channels..(at as usize + 1) * channels];
-                    for _ in 0..len {
-                        out.extend_from_slice(px);
-                    }
+                    repeat_texel(out, &r[at as usize * channels..(at as usize + 1) * channels], len)
                 }
                 (Run::Copy { len, .. } | Run::Repeat { len, .. } | Run::Fill { len }, _) => {
-                    for _ in 0..len {
-                        out.extend_from_slice(fill);
-                    }
+                    repeat_texel(out, fill, len)
                 }
             }
         }
@@ -125,6 +120,21 @@ pub fn cut_tile<T: Copy>(
 /// First virtual row that tile row `t` reads (negative rows are the top border's clamp).
 pub fn first_row_needed(layout: &Layout, t: u32) -> i64 {
     t as i64 * layout.payload() as i64 - layout.border as i64
+}
+
+/// Appends `len` copies of `texel`, doubling what is already written instead of copying
+/// one texel at a time.
+fn repeat_texel<T: Copy>(out: &mut Vec<T>, texel: &[T], len: u32) {
+    let start = out.len();
+    let total = texel.len() * len as usize;
+    if total == 0 {
+        return;
+    }
+    out.extend_from_slice(texel);
+    while out.len() - start < total {
+        let have = out.len() - start;
+        out.extend_from_within(start..start + have.min(total - have));
+    }
 }
 
 /// Last image row (inclusive) that tile row `t` of a level with `extent` rows reads.
