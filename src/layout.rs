@@ -80,9 +80,9 @@ impl Layout {
         (0..self.lod_count).map(|l| (self.tiles_per_side(l) as u64).pow(2)).sum()
     }
 
-    /// Bytes of one stored tile for `bytes_per_pixel`.
-    pub fn tile_bytes(&self, bytes_per_pixel: usize) -> usize {
-        (self.tile_size as usize).pow(2) * bytes_per_pixel
+    /// Texels of one stored tile.
+    pub fn tile_texels(&self) -> usize {
+        (self.tile_size as usize).pow(2)
     }
 }
 

@@ -119,17 +119,32 @@ impl ExactRow<'_> {
 
 /// `dst[x] (+)= src[2x] + src[2x+1]` per channel; an odd last column is taken alone.
 fn add_column_pairs<S: Copy + Into<u64>>(src: &[S], c: usize, dst: &mut [u64], assign: bool) {
-    let pairs = src.len() / (2 * c);
-    let (body, rest) = src.split_at(pairs * 2 * c);
-    let (dst_body, dst_rest) = dst.split_at_mut(pairs * c);
-    for (d, s) in dst_body.chunks_exact_mut(c).zip(body.chunks_exact(2 * c)) {
-        for ch in 0..c {
-            let v = s[ch].into() + s[c + ch].into();
-            d[ch] = if assign { v } else { d[ch] + v };
+    // A constant channel count lets the compiler unroll and vectorise the inner loop.
+    match (c, assign) {
+        (1, true) => pairs::<S, 1, true>(src, dst),
+        (1, false) => pairs::<S, 1, false>(src, dst),
+        (2, true) => pairs::<S, 2, true>(src, dst),
+        (2, false) => pairs::<S, 2, false>(src, dst),
+        (3, true) => pairs::<S, 3, true>(src, dst),
+        (3, false) => pairs::<S, 3, false>(src, dst),
+        (4, true) => pairs::<S, 4, true>(src, dst),
+        (4, false) => pairs::<S, 4, false>(src, dst),
+        _ => unreachable!("1 to 4 channels"),
+    }
+}
+
+fn pairs<S: Copy + Into<u64>, const C: usize, const ASSIGN: bool>(src: &[S], dst: &mut [u64]) {
+    let pairs = src.len() / (2 * C);
+    let (body, rest) = src.split_at(pairs * 2 * C);
+    let (dst_body, dst_rest) = dst.split_at_mut(pairs * C);
+    for (d, s) in dst_body.chunks_exact_mut(C).zip(body.chunks_exact(2 * C)) {
+        for ch in 0..C {
+            let v = s[ch].into() + s[C + ch].into();
+            d[ch] = if ASSIGN { v } else { d[ch] + v };
         }
     }
     for (d, s) in dst_rest.iter_mut().zip(rest) {
-        *d = if assign { (*s).into() } else { *d + (*s).into() };
+        *d = if ASSIGN { (*s).into() } else { *d + (*s).into() };
     }
 }
 

@@ -269,7 +269,7 @@ impl<T: Sample> Level<T> {
             let row_span = if below_image { ty..rows } else { ty..ty + 1 };
             let y_runs = cut::runs(layout, self.lod, ty, height, *padding == Padding::Edge);
             let mut tiles: Vec<CutTile<T>> = Vec::new();
-            let mut texels = Vec::with_capacity(layout.tile_bytes(channels));
+            let mut texels = Vec::with_capacity(layout.tile_texels() * channels);
             for (tx, x_runs) in self.x_runs.iter().enumerate() {
                 let places = row_span.clone().map(|y| (tx as u32, y));
                 // Columns of tiles right of the image read the same texels as their left neighbour.
@@ -280,7 +280,10 @@ impl<T: Sample> Level<T> {
                 cut::cut_tile(&self.band, channels, x_runs, &y_runs, padding, &mut texels);
                 match tiles.last_mut() {
                     Some(prev) if prev.texels == texels => prev.places.extend(places),
-                    _ => tiles.push(CutTile { texels: texels.clone(), places: places.collect() }),
+                    _ => {
+                        let full = std::mem::replace(&mut texels, Vec::with_capacity(layout.tile_texels() * channels));
+                        tiles.push(CutTile { texels: full, places: places.collect() })
+                    }
                 }
             }
             out.send(Ok(Batch { lod: self.lod, tiles }))
