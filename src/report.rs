@@ -3,7 +3,7 @@
 use std::path::Path;
 use std::time::Duration;
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 use vortex_tiler::split::Summary;
 
 pub fn progress_bar(total: u64, quiet: bool) -> ProgressBar {
@@ -13,9 +13,12 @@ pub fn progress_bar(total: u64, quiet: bool) -> ProgressBar {
     let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr_with_hz(10));
     bar.set_style(
         ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40.cyan/blue}] {human_pos}/{human_len} tiles ({per_sec}, eta {eta})",
+            "{elapsed_precise} [{bar:40.cyan/blue}] {human_pos}/{human_len} tiles ({rate}, eta {eta})",
         )
         .expect("valid template")
+        .with_key("rate", |s: &ProgressState, w: &mut dyn std::fmt::Write| {
+            let _ = write!(w, "{:.0} tiles/s", s.per_sec());
+        })
         .progress_chars("=> "),
     );
     bar
