@@ -8,9 +8,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use common::{Image, layouts, png_options};
 use vortex_tiler::background::Background;
 use vortex_tiler::error::{Result, TilerError};
-use vortex_tiler::pixel::PixelLayout;
 use vortex_tiler::sink::TileSink;
-use vortex_tiler::source::RowSource;
+use vortex_tiler::source::{ImageHeader, RowSource};
 use vortex_tiler::split::split;
 
 /// Fails with a full disk after `ok` tiles.
@@ -39,14 +38,8 @@ struct BrokenSource {
 }
 
 impl RowSource for BrokenSource {
-    fn width(&self) -> u32 {
-        self.inner.width()
-    }
-    fn height(&self) -> u32 {
-        self.inner.height()
-    }
-    fn layout(&self) -> PixelLayout {
-        self.inner.layout()
+    fn header(&self) -> ImageHeader {
+        self.inner.header()
     }
     fn read_row(&mut self, row: &mut [u8]) -> Result<()> {
         if self.row == self.good {

@@ -24,7 +24,7 @@ use mozjpeg::decompress::DecompressStarted;
 use mozjpeg::{ColorSpace, Decompress};
 use mozjpeg_sys::{jpeg_common_struct, jpeg_error_mgr};
 
-use super::RowSource;
+use super::{ImageHeader, RowSource};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 
@@ -368,14 +368,8 @@ fn panic_message(payload: Box<dyn std::any::Any + Send>) -> String {
 }
 
 impl RowSource for JpegSource {
-    fn width(&self) -> u32 {
-        self.width
-    }
-    fn height(&self) -> u32 {
-        self.height
-    }
-    fn layout(&self) -> PixelLayout {
-        self.layout
+    fn header(&self) -> ImageHeader {
+        ImageHeader { width: self.width, height: self.height, layout: self.layout }
     }
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {

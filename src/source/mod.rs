@@ -18,11 +18,26 @@ use std::path::Path;
 use crate::error::{Result, TilerError};
 use crate::pixel::PixelLayout;
 
+/// What a decoder knows before the first row: size and pixel layout.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImageHeader {
+    pub width: u32,
+    pub height: u32,
+    pub layout: PixelLayout,
+}
+
 /// A decoder positioned at the next row of an image.
 pub trait RowSource: Send {
-    fn width(&self) -> u32;
-    fn height(&self) -> u32;
-    fn layout(&self) -> PixelLayout;
+    fn header(&self) -> ImageHeader;
+    fn width(&self) -> u32 {
+        self.header().width
+    }
+    fn height(&self) -> u32 {
+        self.header().height
+    }
+    fn layout(&self) -> PixelLayout {
+        self.header().layout
+    }
     /// Fills `row` (width x bytes per pixel, 16-bit samples in native byte order) with the next row.
     fn read_row(&mut self, row: &mut [u8]) -> Result<()>;
     /// Short name of the decoder path taken, for the summary line.

@@ -5,7 +5,7 @@ use std::fs::File;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
-use super::{RowSource, check_whole_fits};
+use super::{ImageHeader, RowSource, check_whole_fits};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 
@@ -67,14 +67,8 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
 }
 
 impl RowSource for PngSource {
-    fn width(&self) -> u32 {
-        self.width
-    }
-    fn height(&self) -> u32 {
-        self.height
-    }
-    fn layout(&self) -> PixelLayout {
-        self.layout
+    fn header(&self) -> ImageHeader {
+        ImageHeader { width: self.width, height: self.height, layout: self.layout }
     }
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use memmap2::Mmap;
 
-use super::{RowSource, image_bytes};
+use super::{ImageHeader, RowSource, image_bytes};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 
@@ -102,14 +102,8 @@ fn parse_header(bytes: &[u8]) -> std::result::Result<(Channels, u64, u64, u32, u
 }
 
 impl RowSource for PnmSource {
-    fn width(&self) -> u32 {
-        self.width
-    }
-    fn height(&self) -> u32 {
-        self.height
-    }
-    fn layout(&self) -> PixelLayout {
-        self.layout
+    fn header(&self) -> ImageHeader {
+        ImageHeader { width: self.width, height: self.height, layout: self.layout }
     }
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {

@@ -16,7 +16,7 @@ use tiff::decoder::{ChunkType, Decoder, Limits};
 use tiff::tags::{CompressionMethod, PhotometricInterpretation, PlanarConfiguration, Predictor, SampleFormat, Tag};
 use tiff::{ColorType, TiffError};
 
-use super::RowSource;
+use super::{ImageHeader, RowSource};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 
@@ -355,14 +355,8 @@ fn guarded(read: impl FnOnce() -> tiff::TiffResult<()>) -> std::result::Result<(
 }
 
 impl RowSource for TiffSource {
-    fn width(&self) -> u32 {
-        self.width
-    }
-    fn height(&self) -> u32 {
-        self.height
-    }
-    fn layout(&self) -> PixelLayout {
-        self.layout
+    fn header(&self) -> ImageHeader {
+        ImageHeader { width: self.width, height: self.height, layout: self.layout }
     }
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {

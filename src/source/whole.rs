@@ -5,7 +5,7 @@ use std::path::Path;
 
 use image::{DynamicImage, ImageDecoder, ImageReader};
 
-use super::{RowSource, check_whole_fits};
+use super::{ImageHeader, RowSource, check_whole_fits};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 
@@ -87,14 +87,8 @@ fn image_error(path: &Path, e: image::ImageError) -> TilerError {
 }
 
 impl RowSource for WholeSource {
-    fn width(&self) -> u32 {
-        self.width
-    }
-    fn height(&self) -> u32 {
-        self.height
-    }
-    fn layout(&self) -> PixelLayout {
-        self.layout
+    fn header(&self) -> ImageHeader {
+        ImageHeader { width: self.width, height: self.height, layout: self.layout }
     }
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {

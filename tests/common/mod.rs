@@ -11,7 +11,7 @@ use vortex_tiler::error::Result;
 use vortex_tiler::layout::Layout;
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
 use vortex_tiler::sink::TileSink;
-use vortex_tiler::source::RowSource;
+use vortex_tiler::source::{ImageHeader, RowSource};
 use vortex_tiler::split::{SplitOptions, Summary, split};
 
 /// An image in memory: samples widened to u16 whatever the depth.
@@ -60,14 +60,8 @@ struct MemSource {
 }
 
 impl RowSource for MemSource {
-    fn width(&self) -> u32 {
-        self.image.width
-    }
-    fn height(&self) -> u32 {
-        self.image.height
-    }
-    fn layout(&self) -> PixelLayout {
-        self.image.layout
+    fn header(&self) -> ImageHeader {
+        ImageHeader { width: self.image.width, height: self.image.height, layout: self.image.layout }
     }
     fn read_row(&mut self, row: &mut [u8]) -> Result<()> {
         let n = self.image.width as usize * self.image.channels();
