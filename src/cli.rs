@@ -155,9 +155,9 @@ fn run_split(a: SplitArgs) -> Result<()> {
         .build()
         .context("starting worker threads")?;
     let sink = DirSink::create(&a.output, names.clone())?;
-    let bar = report::progress_bar(layout.total_tiles(), a.quiet);
-    let result = pool.install(|| split::split(source, &sink, &opts, &|n| bar.inc(n)));
-    bar.finish_and_clear();
+    let watch = report::Watch::new(layout.total_tiles(), a.quiet);
+    let result = pool.install(|| split::split(source, &sink, &opts, &watch));
+    watch.bar.finish_and_clear();
     let summary = match result {
         Ok(s) => s,
         Err(e) => {

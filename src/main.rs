@@ -15,7 +15,10 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", report::chain(&e));
-            ExitCode::FAILURE
+            match e.downcast_ref::<vortex_tiler::error::TilerError>() {
+                Some(vortex_tiler::error::TilerError::Interrupted) => ExitCode::from(130),
+                _ => ExitCode::FAILURE,
+            }
         }
     }
 }

@@ -3,10 +3,42 @@
 use std::path::Path;
 use std::time::Duration;
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
-use vortex_tiler::split::Summary;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
-pub fn progress_bar(total: u64, quiet: bool) -> ProgressBar {
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
+use vortex_tiler::split::{Progress, Summary};
+
+/// The progress bar, and the flag Ctrl-C raises so that a run stops and cleans up.
+pub struct Watch {
+    pub bar: ProgressBar,
+    stop: Arc<AtomicBool>,
+}
+
+impl Watch {
+    pub fn new(total_tiles: u64, quiet: bool) -> Watch {
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        // A second Ctrl-C while cleaning up ends the process at once.
+        let _ = ctrlc::set_handler(move || {
+            if flag.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+        });
+        Watch { bar: progress_bar(total_tiles, quiet), stop }
+    }
+}
+
+impl Progress for Watch {
+    fn advance(&self, tiles: u64) {
+        self.bar.inc(tiles);
+    }
+    fn cancelled(&self) -> bool {
+        self.stop.load(Ordering::Relaxed)
+    }
+}
+
+fn progress_bar(total: u64, quiet: bool) -> ProgressBar {
     if quiet {
         return ProgressBar::hidden();
     }

@@ -36,6 +36,19 @@ pub struct SplitOptions {
     pub tile_depth: Option<Depth>,
 }
 
+/// Watches a run: told of finished tiles, asked whether to stop.
+pub trait Progress: Sync {
+    fn advance(&self, _tiles: u64) {}
+    /// Checked once per source row and per batch of tiles; a run that sees `true` stops with
+    /// [`TilerError::Interrupted`].
+    fn cancelled(&self) -> bool {
+        false
+    }
+}
+
+/// No progress reporting, never cancelled.
+impl Progress for () {}
+
 /// What a finished run produced.
 #[derive(Clone, Debug)]
 pub struct Summary {
@@ -66,12 +79,12 @@ struct CutTile<T> {
 }
 
 /// Cuts `source` into the pyramid and writes every tile to `sink`. Runs the encoders on the
-/// current rayon pool; `progress` is called with the number of tiles finished each time.
+/// current rayon pool; `progress` hears of every finished tile and can stop the run.
 pub fn split(
     source: Box<dyn RowSource>,
     sink: &dyn TileSink,
     opts: &SplitOptions,
-    progress: &(dyn Fn(u64) + Sync),
+    progress: &dyn Progress,
 ) -> Result<Summary> {
     let layout = Layout::new(source.width() as u64, source.height() as u64, opts.tile_size, opts.border)?;
     match source.layout().depth {
@@ -85,7 +98,7 @@ fn run<T: Sample>(
     sink: &dyn TileSink,
     opts: &SplitOptions,
     layout: Layout,
-    progress: &(dyn Fn(u64) + Sync),
+    progress: &dyn Progress,
 ) -> Result<Summary> {
     let src_layout = source.layout();
     let channels = src_layout.channels;
@@ -103,7 +116,7 @@ fn run<T: Sample>(
     std::thread::scope(|scope| {
         let producer = scope.spawn(move || {
             let mut pyramid = Pyramid::new(layout, channels.count(), padding, tx.clone());
-            if let Err(e) = pyramid.run(source) {
+            if let Err(e) = pyramid.run(source, progress) {
                 let _ = tx.send(Err(e));
             }
         });
@@ -130,9 +143,12 @@ fn consume<T: Sample>(
     sink: &dyn TileSink,
     encoded: &AtomicU64,
     tiles: &AtomicU64,
-    progress: &(dyn Fn(u64) + Sync),
+    progress: &dyn Progress,
 ) -> Result<()> {
     while let Ok(first) = rx.recv() {
+        if progress.cancelled() {
+            return Err(TilerError::Interrupted);
+        }
         let mut work = vec![first?];
         let enough = 2 * rayon::current_num_threads();
         while work.iter().map(|b| b.tiles.len()).sum::<usize>() < enough {
@@ -150,7 +166,7 @@ fn consume<T: Sample>(
             }
             encoded.fetch_add(1, Ordering::Relaxed);
             tiles.fetch_add(places.len() as u64, Ordering::Relaxed);
-            progress(places.len() as u64);
+            progress.advance(places.len() as u64);
             Ok(())
         })?;
     }
@@ -202,9 +218,12 @@ impl<T: Sample> Pyramid<T> {
         Pyramid { layout, channels, padding, levels, out }
     }
 
-    fn run(&mut self, mut source: Box<dyn RowSource>) -> Result<()> {
+    fn run(&mut self, mut source: Box<dyn RowSource>, progress: &dyn Progress) -> Result<()> {
         let mut row = vec![T::default(); self.levels[0].row.len()];
         for _ in 0..self.layout.height {
+            if progress.cancelled() {
+                return Err(TilerError::Interrupted);
+            }
             source.read_row(bytemuck::cast_slice_mut(&mut row))?;
             self.push_source_row(&row)?;
         }

@@ -215,3 +215,29 @@ fn contradictory_settings() {
     std::fs::write(conf.join("info.json"), r#"{"tileSize": "big"}"#).unwrap();
     fails_with(&run(&["split", s(&rgba), "-o", s(&conf)]), &["info.json", "line 1"]);
 }
+
+#[test]
+fn ctrl_c_stops_the_run_and_leaves_nothing_behind() {
+    let dir = tempfile::tempdir().unwrap();
+    // Big enough that the run is still going when the signal arrives (PNG "best" is slow).
+    let input = ppm(dir.path(), "big.ppm", "P6\n3000 3000\n255\n", 3 * 3000 * 3000);
+    let out = dir.path().join("out");
+    let mut child = Command::new(BIN)
+        .args(["split", s(&input), "-o", s(&out), "--codec", "png", "--png-compression", "best", "--tile-size", "16"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let staging = dir.path().join(format!(".out.partial-{}", child.id()));
+    let started = std::time::Instant::now();
+    while !staging.exists() && started.elapsed().as_secs() < 20 {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    assert!(staging.exists(), "the run never started writing");
+    let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(killed.success());
+    let result = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&result.stderr);
+    assert_eq!(result.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted"), "{err}");
+    assert!(!out.exists() && !staging.exists(), "nothing is left behind");
+}

@@ -64,9 +64,8 @@ fn a_failing_sink_stops_the_run_with_its_error() {
         for ok in [0, 5, 200] {
             let sink = FullDisk { ok, written: AtomicUsize::new(0) };
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-            let err = pool
-                .install(|| split(image.source(), &sink, &png_options(16, 1, Background::Edge), &|_| {}))
-                .unwrap_err();
+            let err =
+                pool.install(|| split(image.source(), &sink, &png_options(16, 1, Background::Edge), &())).unwrap_err();
             let text = err.to_string();
             assert!(text.contains("out/tile.png") && text.contains("No space left"), "{text}");
         }
@@ -78,7 +77,7 @@ fn a_failing_source_stops_the_run_naming_the_row() {
     let image = Image::random(200, 200, layouts()[2], 4);
     for good in [0, 1, 57, 199] {
         let src = Box::new(BrokenSource { inner: image.source(), good, row: 0 });
-        let err = split(src, &common::MemSink::default(), &png_options(32, 2, Background::Edge), &|_| {}).unwrap_err();
+        let err = split(src, &common::MemSink::default(), &png_options(32, 2, Background::Edge), &()).unwrap_err();
         assert_eq!(err.to_string(), format!("broken.png: row {good}: boom"));
     }
 }

@@ -15,7 +15,7 @@ fn golden(fixture: &str, tile: u32, border: u32, background: Background) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
     let src = source::open(&root.join(fixture), 1 << 30).unwrap();
     let sink = MemSink::default();
-    let summary = split(src, &sink, &png_options(tile, border, background), &|_| {}).unwrap();
+    let summary = split(src, &sink, &png_options(tile, border, background), &()).unwrap();
     let mut text =
         format!("# {fixture}: tile {tile}, border {border}, background {background}, {} tiles\n", summary.tiles);
     text.push_str("# lod x y width height crc32\n");

@@ -16,7 +16,7 @@ fn fixture(name: &str) -> PathBuf {
 fn tiles(path: &Path, max_memory: u64) -> Vec<((u32, u32, u32), Vec<u8>)> {
     let src = source::open(path, max_memory).unwrap();
     let sink = MemSink::default();
-    split(src, &sink, &png_options(16, 1, Background::Edge), &|_| {}).unwrap();
+    split(src, &sink, &png_options(16, 1, Background::Edge), &()).unwrap();
     sink.tiles.into_inner().unwrap().into_iter().collect()
 }
 

@@ -113,7 +113,7 @@ pub type Tiles = BTreeMap<(u32, u32, u32), Vec<u16>>;
 pub fn run_pipeline(image: &Image, opts: &SplitOptions, threads: usize) -> (Summary, Tiles) {
     let sink = MemSink::default();
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-    let summary = pool.install(|| split(image.source(), &sink, opts, &|_| {})).expect("pipeline runs");
+    let summary = pool.install(|| split(image.source(), &sink, opts, &())).expect("pipeline runs");
     let tiles = sink.tiles.into_inner().unwrap().into_iter().map(|(k, png)| (k, decode_png(&png))).collect();
     (summary, tiles)
 }
