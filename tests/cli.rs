@@ -222,7 +222,7 @@ fn ctrl_c_stops_the_run_and_leaves_nothing_behind() {
     // Big enough that the run is still going when the signal arrives (PNG "best" is slow).
     let input = ppm(dir.path(), "big.ppm", "P6\n3000 3000\n255\n", 3 * 3000 * 3000);
     let out = dir.path().join("out");
-    let mut child = Command::new(BIN)
+    let child = Command::new(BIN)
         .args(["split", s(&input), "-o", s(&out), "--codec", "png", "--png-compression", "best", "--tile-size", "16"])
         .stderr(std::process::Stdio::piped())
         .spawn()
