@@ -35,3 +35,48 @@ fn interlaced_png_over_max_memory_is_refused_with_advice() {
         assert!(err.contains(needle), "{needle:?} missing from: {err}");
     }
 }
+
+/// The same pixels saved as PNG, TIFF and PPM (8 and 16 bits) give identical pyramids.
+#[test]
+fn png_tiff_and_ppm_agree() {
+    let dir = tempfile::tempdir().unwrap();
+    let rgb8 = image::RgbImage::from_fn(83, 57, |x, y| image::Rgb([(x * 3) as u8, (y * 4) as u8, ((x ^ y) * 5) as u8]));
+    let rgb16 = image::ImageBuffer::<image::Rgb<u16>, _>::from_fn(83, 57, |x, y| {
+        image::Rgb([(x * 700) as u16, (y * 1100) as u16, ((x * y) * 13) as u16])
+    });
+    for (name, wide) in [("rgb8", false), ("rgb16", true)] {
+        let mut outputs = Vec::new();
+        for ext in ["png", "tif", "ppm"] {
+            let path = dir.path().join(format!("{name}.{ext}"));
+            if wide {
+                rgb16.save(&path).unwrap()
+            } else {
+                rgb8.save(&path).unwrap()
+            }
+            outputs.push((ext, tiles(&path, 1 << 20)));
+        }
+        for (ext, t) in &outputs[1..] {
+            assert!(*t == outputs[0].1, "{name}.{ext} differs from {name}.png");
+        }
+    }
+}
+
+/// A baseline JPEG streams through the banded decoder and its pyramid is close to the one of
+/// the `image` crate's decode of the same file (IDCTs differ by a code value or two).
+#[test]
+fn jpeg_input_streams() {
+    let dir = tempfile::tempdir().unwrap();
+    let img = image::RgbImage::from_fn(200, 120, |x, y| image::Rgb([(x + y) as u8, (x * 2) as u8, (y * 2) as u8]));
+    let jpg = dir.path().join("in.jpg");
+    img.save(&jpg).unwrap();
+    let src = source::open(&jpg, 1 << 20).unwrap();
+    assert!(src.describe().contains("jpeg"), "{}", src.describe());
+    let reference = dir.path().join("ref.png");
+    image::open(&jpg).unwrap().to_rgb8().save(&reference).unwrap();
+    let (got, want) = (tiles(&jpg, 1 << 20), tiles(&reference, 1 << 20));
+    for ((k, a), (_, b)) in got.iter().zip(&want) {
+        let (a, b) = (common::decode_png(a), common::decode_png(b));
+        let worst = a.iter().zip(&b).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
+        assert!(worst <= 4, "tile {k:?} differs by {worst}");
+    }
+}
