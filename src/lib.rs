@@ -1,3 +1,12 @@
+//! The library behind `vortex-tiler`: cut an image of any size into the pages of a virtual
+//! texture, with every power-of-two LOD, in memory bounded by the image's width.
+//!
+//! The modules follow the data: [`source`] delivers rows, [`band`] holds the rows a row of
+//! pages needs, [`pyramid`] cascades exact sums to the coarser LODs, [`cut`] assembles pages
+//! with their borders, [`codec`] encodes them and [`sink`] stores them; [`split`] runs that
+//! pipeline. [`layout`] is the page grid's geometry, [`settings`] and [`info`] turn flags and
+//! `info.json` into options and back. See `docs/architecture.md`.
+
 pub mod background;
 pub mod band;
 pub mod codec;
