@@ -1,0 +1,35 @@
+//! Errors that say where: the file, the byte offset or section, and the tile when known.
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum PackError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+
+    /// The file is not a pack, or a structure in it is invalid.
+    #[error("{}: {section} at byte {offset}: {message}", path.display())]
+    Corrupt { path: PathBuf, section: &'static str, offset: u64, message: String },
+
+    /// A valid pack this reader cannot read (newer version, unknown required feature).
+    #[error("{}: {message}", path.display())]
+    Unsupported { path: PathBuf, message: String },
+
+    /// A tile's entry or bytes are invalid.
+    #[error("{}: tile (lod {lod}, x {x}, y {y}) at byte {offset}: {message}", path.display())]
+    Tile { path: PathBuf, lod: u32, x: u32, y: u32, offset: u64, message: String },
+
+    /// The caller asked for a tile that does not exist.
+    #[error("{}: no tile (lod {lod}, x {x}, y {y}): {message}", path.display())]
+    OutOfRange { path: PathBuf, lod: u32, x: u32, y: u32, message: String },
+
+    /// The writer was used wrongly (tile outside the grid, written twice, wrong raw size).
+    #[error("{0}")]
+    Usage(String),
+}
+
+pub type Result<T, E = PackError> = std::result::Result<T, E>;

@@ -1,0 +1,314 @@
+//! The on-disk structures of a pack, exactly as `docs/pack-format.md` draws them: a 192-byte
+//! header, a level table of 32-byte rows, an index of 24-byte entries, then metadata and data.
+//! All integers are little-endian. Encoding and decoding live side by side so that reader and
+//! writer cannot disagree.
+
+/// `\x89VTP\r\n\x1a\n`: the high bit catches 7-bit transfers, CR LF and LF catch newline
+/// conversion, 0x1A stops `type` on DOS, as in PNG's signature.
+pub const MAGIC: [u8; 8] = *b"\x89VTP\r\n\x1a\n";
+pub const MAJOR: u16 = 1;
+pub const MINOR: u16 = 0;
+pub const HEADER_LEN: usize = 192;
+pub const LEVEL_LEN: usize = 32;
+pub const ENTRY_LEN: usize = 24;
+/// Required-feature bits this reader understands (none yet: v1.0 has no optional encodings
+/// that a reader may not know).
+pub const KNOWN_REQUIRED_FEATURES: u64 = 0;
+
+/// How a tile's bytes are stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum TileKind {
+    /// No data: a runtime falls back to the parent tile.
+    Absent = 0,
+    /// Every texel has one value, held in the entry itself; no payload.
+    Constant = 1,
+    /// Texels as they are uploaded: `tile_size^2 x channels x sample_bytes` bytes, rows top down.
+    Raw = 2,
+    /// `Raw` compressed with zstd.
+    Zstd = 3,
+    Png = 4,
+    Jpeg = 5,
+    /// Reserved: BC1 blocks, uploadable as-is.
+    Bc1 = 6,
+    /// Reserved: BC7 blocks, uploadable as-is.
+    Bc7 = 7,
+}
+
+impl TileKind {
+    pub fn from_u8(v: u8) -> Option<TileKind> {
+        use TileKind::*;
+        [Absent, Constant, Raw, Zstd, Png, Jpeg, Bc1, Bc7].into_iter().find(|k| *k as u8 == v)
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            TileKind::Absent => "absent",
+            TileKind::Constant => "constant",
+            TileKind::Raw => "raw",
+            TileKind::Zstd => "zstd",
+            TileKind::Png => "png",
+            TileKind::Jpeg => "jpeg",
+            TileKind::Bc1 => "bc1",
+            TileKind::Bc7 => "bc7",
+        }
+    }
+
+    /// Kinds whose entry points at payload bytes.
+    pub fn has_payload(self) -> bool {
+        !matches!(self, TileKind::Absent | TileKind::Constant)
+    }
+}
+
+/// What the texture is: everything a runtime needs to address and clamp it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Description {
+    /// Real image size at LOD 0, in texels.
+    pub width: u32,
+    pub height: u32,
+    /// Stored tile side, borders included.
+    pub tile_size: u32,
+    pub border: u32,
+    pub level_count: u32,
+    /// 1 grey, 2 grey+alpha, 3 RGB, 4 RGBA.
+    pub channels: u8,
+    /// 1 or 2.
+    pub sample_bytes: u8,
+}
+
+impl Description {
+    /// Bytes of one raw tile.
+    pub fn raw_tile_len(&self) -> Option<u64> {
+        (self.tile_size as u64).checked_mul(self.tile_size as u64)?.checked_mul(self.channels as u64 * self.sample_bytes as u64)
+    }
+}
+
+/// The fixed header at offset 0.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Header {
+    pub major: u16,
+    pub minor: u16,
+    pub required_features: u64,
+    pub optional_features: u64,
+    pub file_len: u64,
+    /// Identifies the content: FNV-1a 64 over the metadata and every index entry.
+    pub content_hash: u64,
+    pub description: Description,
+    /// Power of two >= 8: the data section starts at a multiple of it.
+    pub alignment: u32,
+    /// Power of two >= 8: every payload starts at a multiple of it (65536 gives each tile its
+    /// own Vulkan sparse block).
+    pub payload_alignment: u32,
+    pub levels_offset: u64,
+    pub index_offset: u64,
+    pub index_count: u64,
+    pub index_crc: u32,
+    pub meta_offset: u64,
+    pub meta_len: u32,
+    pub meta_crc: u32,
+    pub data_offset: u64,
+    pub data_len: u64,
+}
+
+/// One row of the level table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Level {
+    pub tiles_w: u32,
+    pub tiles_h: u32,
+    /// Index position of tile (0, 0) of this level.
+    pub first_entry: u64,
+    /// Real image size at this level in texels (`ceil(width / 2^lod)`).
+    pub width: u32,
+    pub height: u32,
+}
+
+/// One index entry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Entry {
+    /// Payload offset in the file; for `Constant`, the texel's samples (little-endian, packed
+    /// from byte 0); 0 for `Absent`.
+    pub offset_or_value: u64,
+    pub len: u32,
+    /// CRC-32C of the payload (0 without payload).
+    pub crc: u32,
+    pub kind: u8,
+}
+
+impl Entry {
+    pub const ABSENT: Entry = Entry { offset_or_value: 0, len: 0, crc: 0, kind: TileKind::Absent as u8 };
+}
+
+fn put_u16(b: &mut [u8], at: usize, v: u16) {
+    b[at..at + 2].copy_from_slice(&v.to_le_bytes());
+}
+fn put_u32(b: &mut [u8], at: usize, v: u32) {
+    b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+}
+fn put_u64(b: &mut [u8], at: usize, v: u64) {
+    b[at..at + 8].copy_from_slice(&v.to_le_bytes());
+}
+pub(crate) fn u16_at(b: &[u8], at: usize) -> u16 {
+    u16::from_le_bytes(b[at..at + 2].try_into().expect("2 bytes"))
+}
+pub(crate) fn u32_at(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes(b[at..at + 4].try_into().expect("4 bytes"))
+}
+pub(crate) fn u64_at(b: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(b[at..at + 8].try_into().expect("8 bytes"))
+}
+
+/// Byte offsets of the header's fields (see the spec's diagram).
+pub mod at {
+    pub const MAJOR: usize = 8;
+    pub const MINOR: usize = 10;
+    pub const HEADER_LEN: usize = 12;
+    pub const REQUIRED: usize = 16;
+    pub const OPTIONAL: usize = 24;
+    pub const FILE_LEN: usize = 32;
+    pub const CONTENT_HASH: usize = 40;
+    pub const WIDTH: usize = 48;
+    pub const HEIGHT: usize = 52;
+    pub const TILE_SIZE: usize = 56;
+    pub const BORDER: usize = 60;
+    pub const LEVEL_COUNT: usize = 64;
+    pub const CHANNELS: usize = 68;
+    pub const SAMPLE_BYTES: usize = 69;
+    pub const ALIGNMENT: usize = 72;
+    pub const PAYLOAD_ALIGNMENT: usize = 76;
+    pub const LEVELS_OFFSET: usize = 80;
+    pub const INDEX_OFFSET: usize = 88;
+    pub const INDEX_COUNT: usize = 96;
+    pub const ENTRY_LEN: usize = 104;
+    pub const INDEX_CRC: usize = 108;
+    pub const META_OFFSET: usize = 112;
+    pub const META_LEN: usize = 120;
+    pub const META_CRC: usize = 124;
+    pub const DATA_OFFSET: usize = 128;
+    pub const DATA_LEN: usize = 136;
+    /// Bytes 144..188 are reserved and must be zero.
+    pub const RESERVED: usize = 144;
+    pub const HEADER_CRC: usize = 188;
+}
+
+impl Header {
+    /// The 192 header bytes, CRC included.
+    pub fn encode(&self) -> [u8; HEADER_LEN] {
+        let mut b = [0u8; HEADER_LEN];
+        let d = &self.description;
+        b[..8].copy_from_slice(&MAGIC);
+        put_u16(&mut b, at::MAJOR, self.major);
+        put_u16(&mut b, at::MINOR, self.minor);
+        put_u32(&mut b, at::HEADER_LEN, HEADER_LEN as u32);
+        put_u64(&mut b, at::REQUIRED, self.required_features);
+        put_u64(&mut b, at::OPTIONAL, self.optional_features);
+        put_u64(&mut b, at::FILE_LEN, self.file_len);
+        put_u64(&mut b, at::CONTENT_HASH, self.content_hash);
+        put_u32(&mut b, at::WIDTH, d.width);
+        put_u32(&mut b, at::HEIGHT, d.height);
+        put_u32(&mut b, at::TILE_SIZE, d.tile_size);
+        put_u32(&mut b, at::BORDER, d.border);
+        put_u32(&mut b, at::LEVEL_COUNT, d.level_count);
+        b[at::CHANNELS] = d.channels;
+        b[at::SAMPLE_BYTES] = d.sample_bytes;
+        put_u32(&mut b, at::ALIGNMENT, self.alignment);
+        put_u32(&mut b, at::PAYLOAD_ALIGNMENT, self.payload_alignment);
+        put_u64(&mut b, at::LEVELS_OFFSET, self.levels_offset);
+        put_u64(&mut b, at::INDEX_OFFSET, self.index_offset);
+        put_u64(&mut b, at::INDEX_COUNT, self.index_count);
+        put_u32(&mut b, at::ENTRY_LEN, ENTRY_LEN as u32);
+        put_u32(&mut b, at::INDEX_CRC, self.index_crc);
+        put_u64(&mut b, at::META_OFFSET, self.meta_offset);
+        put_u32(&mut b, at::META_LEN, self.meta_len);
+        put_u32(&mut b, at::META_CRC, self.meta_crc);
+        put_u64(&mut b, at::DATA_OFFSET, self.data_offset);
+        put_u64(&mut b, at::DATA_LEN, self.data_len);
+        let crc = crc32c::crc32c(&b[..at::HEADER_CRC]);
+        put_u32(&mut b, at::HEADER_CRC, crc);
+        b
+    }
+
+    /// Reads the fields; the caller has checked magic, length and CRC.
+    pub(crate) fn decode(b: &[u8]) -> Header {
+        Header {
+            major: u16_at(b, at::MAJOR),
+            minor: u16_at(b, at::MINOR),
+            required_features: u64_at(b, at::REQUIRED),
+            optional_features: u64_at(b, at::OPTIONAL),
+            file_len: u64_at(b, at::FILE_LEN),
+            content_hash: u64_at(b, at::CONTENT_HASH),
+            description: Description {
+                width: u32_at(b, at::WIDTH),
+                height: u32_at(b, at::HEIGHT),
+                tile_size: u32_at(b, at::TILE_SIZE),
+                border: u32_at(b, at::BORDER),
+                level_count: u32_at(b, at::LEVEL_COUNT),
+                channels: b[at::CHANNELS],
+                sample_bytes: b[at::SAMPLE_BYTES],
+            },
+            alignment: u32_at(b, at::ALIGNMENT),
+            payload_alignment: u32_at(b, at::PAYLOAD_ALIGNMENT),
+            levels_offset: u64_at(b, at::LEVELS_OFFSET),
+            index_offset: u64_at(b, at::INDEX_OFFSET),
+            index_count: u64_at(b, at::INDEX_COUNT),
+            index_crc: u32_at(b, at::INDEX_CRC),
+            meta_offset: u64_at(b, at::META_OFFSET),
+            meta_len: u32_at(b, at::META_LEN),
+            meta_crc: u32_at(b, at::META_CRC),
+            data_offset: u64_at(b, at::DATA_OFFSET),
+            data_len: u64_at(b, at::DATA_LEN),
+        }
+    }
+}
+
+impl Level {
+    pub fn encode(&self) -> [u8; LEVEL_LEN] {
+        let mut b = [0u8; LEVEL_LEN];
+        put_u32(&mut b, 0, self.tiles_w);
+        put_u32(&mut b, 4, self.tiles_h);
+        put_u64(&mut b, 8, self.first_entry);
+        put_u32(&mut b, 16, self.width);
+        put_u32(&mut b, 20, self.height);
+        b
+    }
+
+    pub(crate) fn decode(b: &[u8]) -> Level {
+        Level { tiles_w: u32_at(b, 0), tiles_h: u32_at(b, 4), first_entry: u64_at(b, 8), width: u32_at(b, 16), height: u32_at(b, 20) }
+    }
+}
+
+impl Entry {
+    pub fn encode(&self) -> [u8; ENTRY_LEN] {
+        let mut b = [0u8; ENTRY_LEN];
+        put_u64(&mut b, 0, self.offset_or_value);
+        put_u32(&mut b, 8, self.len);
+        put_u32(&mut b, 12, self.crc);
+        b[16] = self.kind;
+        b
+    }
+
+    pub(crate) fn decode(b: &[u8]) -> Entry {
+        Entry { offset_or_value: u64_at(b, 0), len: u32_at(b, 8), crc: u32_at(b, 12), kind: b[16] }
+    }
+}
+
+/// FNV-1a, 64 bits: the content hash is for identification (cache keys, "same pack?"), not
+/// for security; per-tile CRC-32C values are what it covers.
+pub fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
+    bytes.iter().fold(hash, |h, b| (h ^ *b as u64).wrapping_mul(0x0000_0100_0000_01B3))
+}
+
+pub const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+
+/// The levels of a square power-of-two pyramid of `description` (the tiler's layout).
+pub fn pyramid_levels(d: &Description, tiles_at_lod0: u32) -> Vec<Level> {
+    let mut first = 0u64;
+    (0..d.level_count)
+        .map(|lod| {
+            let n = tiles_at_lod0 >> lod;
+            let shrink = |v: u32| ((v as u64 + (1u64 << lod) - 1) >> lod) as u32;
+            let level = Level { tiles_w: n, tiles_h: n, first_entry: first, width: shrink(d.width), height: shrink(d.height) };
+            first += n as u64 * n as u64;
+            level
+        })
+        .collect()
+}

@@ -1,0 +1,27 @@
+//! Vortex tile packs: every page of a virtual texture in one file that a runtime maps into
+//! memory and reads tiles from with no parsing and no copy. The format is specified in
+//! `docs/pack-format.md`.
+//!
+//! ```no_run
+//! let pack = vortex_pack::Pack::open("world.vtpk")?;
+//! match pack.tile(0, 3, 5)? {
+//!     vortex_pack::Tile::Data(kind, bytes) => println!("{} bytes of {}", bytes.len(), kind.name()),
+//!     other => println!("{other:?}"),
+//! }
+//! # Ok::<(), vortex_pack::PackError>(())
+//! ```
+//!
+//! This crate is a leaf: std, a CRC-32C crate, memmap2, thiserror and zstd. The writer is
+//! behind the `write` feature so that readers need none of it.
+
+mod error;
+pub mod format;
+mod reader;
+#[cfg(feature = "write")]
+mod writer;
+
+pub use error::{PackError, Result};
+pub use format::{Description, Entry, Header, Level, TileKind};
+pub use reader::{Pack, Tile, TileId};
+#[cfg(feature = "write")]
+pub use writer::{NewTile, PackWriter, WriteOptions, WriteSummary};

@@ -1,0 +1,336 @@
+//! Opening a pack and finding tiles in it: O(1) per tile, no allocation per tile, no copy.
+//!
+//! `Pack::open` checks the structure before it returns (magic, version, header checksum, that
+//! every section lies inside the file and the index checksum); tile payloads are checked on
+//! request ([`Pack::tile_checked`]) or all at once by `verify`.
+//!
+//! The memory-map contract: the file must not be truncated or rewritten while a `Pack` maps it
+//! (a truncated mapping faults on access). Writers of this crate never rewrite a pack in place:
+//! they write a new file and rename it over the old one, which leaves existing maps intact.
+
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+
+use memmap2::Mmap;
+
+use crate::error::{PackError, Result};
+use crate::format::{self, Description, ENTRY_LEN, Entry, HEADER_LEN, Header, LEVEL_LEN, Level, MAGIC, TileKind};
+
+/// Where the bytes come from: a read-only map, or the whole file read into memory (for
+/// platforms or file systems where mapping is unwanted); both give identical bytes.
+enum Bytes {
+    Map(Mmap),
+    Owned(Vec<u8>),
+}
+
+impl Bytes {
+    fn as_slice(&self) -> &[u8] {
+        match self {
+            Bytes::Map(m) => m,
+            Bytes::Owned(v) => v,
+        }
+    }
+}
+
+/// An open pack. `Send + Sync`: lookups take `&self` and touch no shared state.
+pub struct Pack {
+    path: PathBuf,
+    bytes: Bytes,
+    header: Header,
+    levels: Vec<Level>,
+}
+
+/// A tile as stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Tile<'a> {
+    Absent,
+    /// Every texel is these samples (channels x sample bytes, little-endian).
+    Constant(&'a [u8]),
+    /// Payload bytes of the given kind, a slice of the map.
+    Data(TileKind, &'a [u8]),
+}
+
+/// A tile's address.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct TileId {
+    pub lod: u32,
+    pub x: u32,
+    pub y: u32,
+}
+
+impl Pack {
+    /// Maps `path` read-only and checks its structure.
+    pub fn open(path: impl AsRef<Path>) -> Result<Pack> {
+        let path = path.as_ref();
+        let file = File::open(path).map_err(|e| io(path, e))?;
+        // SAFETY: read-only map; see the module's contract on concurrent truncation.
+        let map = unsafe { Mmap::map(&file) }.map_err(|e| io(path, e))?;
+        Pack::from_bytes(path, Bytes::Map(map))
+    }
+
+    /// Reads the whole file into memory instead of mapping it.
+    pub fn open_read(path: impl AsRef<Path>) -> Result<Pack> {
+        let path = path.as_ref();
+        let mut file = File::open(path).map_err(|e| io(path, e))?;
+        let len = file.seek(SeekFrom::End(0)).map_err(|e| io(path, e))?;
+        file.seek(SeekFrom::Start(0)).map_err(|e| io(path, e))?;
+        let mut bytes = Vec::new();
+        bytes.try_reserve_exact(usize::try_from(len).unwrap_or(usize::MAX)).map_err(|e| {
+            io(path, std::io::Error::new(std::io::ErrorKind::OutOfMemory, e.to_string()))
+        })?;
+        file.read_to_end(&mut bytes).map_err(|e| io(path, e))?;
+        Pack::from_bytes(path, Bytes::Owned(bytes))
+    }
+
+    fn from_bytes(path: &Path, bytes: Bytes) -> Result<Pack> {
+        let b = bytes.as_slice();
+        let corrupt = |section: &'static str, offset: u64, message: String| PackError::Corrupt {
+            path: path.to_path_buf(),
+            section,
+            offset,
+            message,
+        };
+        if b.len() < HEADER_LEN {
+            return Err(corrupt("header", 0, format!("the file is {} bytes, shorter than a pack header ({HEADER_LEN})", b.len())));
+        }
+        if b[..8] != MAGIC {
+            let hint = if b[..8].iter().all(|v| *v == 0) {
+                "all zero: an unfinished write (the header is written last)"
+            } else if b[1..4] == MAGIC[1..4] {
+                "damaged in transfer (text-mode or 7-bit conversion?)"
+            } else {
+                "not a Vortex pack"
+            };
+            return Err(corrupt("header", 0, format!("bad signature: {hint}")));
+        }
+        let stored_crc = format::u32_at(b, format::at::HEADER_CRC);
+        if crc32c::crc32c(&b[..format::at::HEADER_CRC]) != stored_crc {
+            return Err(corrupt("header", format::at::HEADER_CRC as u64, "header checksum mismatch".into()));
+        }
+        let reserved = [70usize, 71].into_iter().chain(format::at::RESERVED..format::at::HEADER_CRC);
+        if let Some(at) = reserved.into_iter().find(|at| b[*at] != 0) {
+            return Err(corrupt("header", at as u64, "reserved byte is not zero".into()));
+        }
+        let h = Header::decode(b);
+        let unsupported = |message: String| PackError::Unsupported { path: path.to_path_buf(), message };
+        if h.major != format::MAJOR {
+            return Err(unsupported(format!("format version {}.{} (this reader reads {}.x)", h.major, h.minor, format::MAJOR)));
+        }
+        if h.required_features & !format::KNOWN_REQUIRED_FEATURES != 0 {
+            return Err(unsupported(format!("required features {:#x} unknown to this reader", h.required_features)));
+        }
+        check_header(&h, b.len() as u64).map_err(|(offset, m)| corrupt("header", offset, m))?;
+
+        let levels_len = h.description.level_count as usize * LEVEL_LEN;
+        let levels: Vec<Level> = b[h.levels_offset as usize..][..levels_len].chunks_exact(LEVEL_LEN).map(Level::decode).collect();
+        let index_len = h.index_count as usize * ENTRY_LEN;
+        let mut crc = crc32c::crc32c(&b[h.levels_offset as usize..][..levels_len]);
+        crc = crc32c::crc32c_append(crc, &b[h.index_offset as usize..][..index_len]);
+        if crc != h.index_crc {
+            return Err(corrupt("index", h.index_offset, "level table or index checksum mismatch".into()));
+        }
+        check_levels(&h, &levels, &b[h.levels_offset as usize..][..levels_len]).map_err(|(o, m)| corrupt("levels", h.levels_offset + o, m))?;
+        if crc32c::crc32c(&b[h.meta_offset as usize..][..h.meta_len as usize]) != h.meta_crc {
+            return Err(corrupt("metadata", h.meta_offset, "metadata checksum mismatch".into()));
+        }
+        Ok(Pack { path: path.to_path_buf(), bytes, header: h, levels })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    pub fn description(&self) -> &Description {
+        &self.header.description
+    }
+
+    pub fn levels(&self) -> &[Level] {
+        &self.levels
+    }
+
+    /// The metadata: JSON text with the `info.json` members (not needed for addressing).
+    pub fn metadata(&self) -> &[u8] {
+        &self.file()[self.header.meta_offset as usize..][..self.header.meta_len as usize]
+    }
+
+    /// The whole file.
+    pub fn file(&self) -> &[u8] {
+        self.bytes.as_slice()
+    }
+
+    /// Index position of a tile: `first_entry[lod] + y * tiles_w[lod] + x`.
+    pub fn position(&self, id: TileId) -> Result<u64> {
+        let out = |message: String| PackError::OutOfRange { path: self.path.clone(), lod: id.lod, x: id.x, y: id.y, message };
+        let level = self.levels.get(id.lod as usize).ok_or_else(|| out(format!("the pack has {} levels", self.levels.len())))?;
+        if id.x >= level.tiles_w || id.y >= level.tiles_h {
+            return Err(out(format!("level {} is {}x{} tiles", id.lod, level.tiles_w, level.tiles_h)));
+        }
+        Ok(level.first_entry + id.y as u64 * level.tiles_w as u64 + id.x as u64)
+    }
+
+    /// The raw index entry at `position`.
+    pub fn entry(&self, position: u64) -> Entry {
+        let at = self.header.index_offset as usize + position as usize * ENTRY_LEN;
+        Entry::decode(&self.file()[at..at + ENTRY_LEN])
+    }
+
+    /// The tile at `(lod, x, y)`: O(1), zero copy. Checks that the entry is well formed and its
+    /// bytes lie in the data section; does not check the payload's CRC (see `tile_checked`).
+    pub fn tile(&self, lod: u32, x: u32, y: u32) -> Result<Tile<'_>> {
+        let id = TileId { lod, x, y };
+        let position = self.position(id)?;
+        self.tile_at(id, position)
+    }
+
+    /// As [`Pack::tile`], and the payload's CRC-32C must match.
+    pub fn tile_checked(&self, lod: u32, x: u32, y: u32) -> Result<Tile<'_>> {
+        let id = TileId { lod, x, y };
+        let position = self.position(id)?;
+        let tile = self.tile_at(id, position)?;
+        if let Tile::Data(_, bytes) = tile {
+            let e = self.entry(position);
+            if crc32c::crc32c(bytes) != e.crc {
+                return Err(self.tile_error(id, e.offset_or_value, "payload checksum mismatch".into()));
+            }
+        }
+        Ok(tile)
+    }
+
+    pub(crate) fn tile_at(&self, id: TileId, position: u64) -> Result<Tile<'_>> {
+        let e = self.entry(position);
+        let entry_at = self.header.index_offset + position * ENTRY_LEN as u64;
+        let kind = TileKind::from_u8(e.kind).ok_or_else(|| self.tile_error(id, entry_at, format!("unknown tile kind {}", e.kind)))?;
+        let raw = &self.file()[entry_at as usize..][..ENTRY_LEN];
+        if raw[17..].iter().any(|b| *b != 0) {
+            return Err(self.tile_error(id, entry_at + 17, "reserved entry bytes are not zero".into()));
+        }
+        match kind {
+            TileKind::Absent => Ok(Tile::Absent),
+            TileKind::Constant => {
+                let n = self.header.description.channels as usize * self.header.description.sample_bytes as usize;
+                let at = entry_at as usize;
+                Ok(Tile::Constant(&self.file()[at..at + n]))
+            }
+            _ => {
+                let (start, end) = (e.offset_or_value, e.offset_or_value.checked_add(e.len as u64));
+                let data = self.header.data_offset..self.header.data_offset + self.header.data_len;
+                match end {
+                    Some(end) if start >= data.start && end <= data.end => {
+                        Ok(Tile::Data(kind, &self.file()[start as usize..end as usize]))
+                    }
+                    _ => Err(self.tile_error(id, entry_at, format!("payload {start}+{} lies outside the data section", e.len))),
+                }
+            }
+        }
+    }
+
+    pub(crate) fn tile_error(&self, id: TileId, offset: u64, message: String) -> PackError {
+        PackError::Tile { path: self.path.clone(), lod: id.lod, x: id.x, y: id.y, offset, message }
+    }
+
+    /// Every tile address, level by level (coarsest last), rows top down.
+    pub fn ids(&self) -> impl Iterator<Item = TileId> + '_ {
+        self.levels.iter().enumerate().flat_map(|(lod, l)| {
+            (0..l.tiles_h).flat_map(move |y| (0..l.tiles_w).map(move |x| TileId { lod: lod as u32, x, y }))
+        })
+    }
+
+    /// Tiles with payload in the order their bytes lie in the file (for sequential readers).
+    pub fn ids_in_file_order(&self) -> Vec<(TileId, Entry)> {
+        let mut v: Vec<(TileId, Entry)> = self
+            .ids()
+            .enumerate()
+            .map(|(i, id)| (id, self.entry(i as u64)))
+            .filter(|(_, e)| TileKind::from_u8(e.kind).is_some_and(TileKind::has_payload))
+            .collect();
+        v.sort_by_key(|(_, e)| e.offset_or_value);
+        v
+    }
+}
+
+/// Every section must lie inside the file, in order, without overlap.
+fn check_header(h: &Header, file_len: u64) -> std::result::Result<(), (u64, String)> {
+    use format::at;
+    let d = &h.description;
+    if h.file_len != file_len {
+        let what = if file_len < h.file_len { "truncated" } else { "has trailing bytes" };
+        return Err((at::FILE_LEN as u64, format!("the header says {} bytes but the file has {file_len}: {what}", h.file_len)));
+    }
+    if !(1..=4).contains(&d.channels) || !(1..=2).contains(&d.sample_bytes) {
+        return Err((at::CHANNELS as u64, format!("{} channels of {} bytes is not a texel format", d.channels, d.sample_bytes)));
+    }
+    if d.tile_size == 0 || d.border.checked_mul(2).is_none_or(|b| b >= d.tile_size) || d.width == 0 || d.height == 0 {
+        return Err((at::WIDTH as u64, format!("image {}x{}, tile {} border {} is not a valid texture", d.width, d.height, d.tile_size, d.border)));
+    }
+    if d.level_count == 0 || d.level_count > 32 {
+        return Err((at::LEVEL_COUNT as u64, format!("{} levels", d.level_count)));
+    }
+    for (value, field) in [(h.alignment, at::ALIGNMENT), (h.payload_alignment, at::PAYLOAD_ALIGNMENT)] {
+        if !value.is_power_of_two() || value < 8 {
+            return Err((field as u64, format!("alignment {value} is not a power of two >= 8")));
+        }
+    }
+    let sections = [
+        ("level table", h.levels_offset, d.level_count as u64 * LEVEL_LEN as u64, at::LEVELS_OFFSET),
+        ("index", h.index_offset, h.index_count.checked_mul(ENTRY_LEN as u64).unwrap_or(u64::MAX), at::INDEX_OFFSET),
+        ("metadata", h.meta_offset, h.meta_len as u64, at::META_OFFSET),
+        ("data", h.data_offset, h.data_len, at::DATA_OFFSET),
+    ];
+    let mut end_of_previous = HEADER_LEN as u64;
+    for (name, offset, len, field) in sections {
+        let end = offset.checked_add(len).unwrap_or(u64::MAX);
+        if offset < end_of_previous || end > file_len {
+            return Err((field as u64, format!("the {name} ({offset}+{len}) overlaps what precedes it or lies outside the {file_len}-byte file")));
+        }
+        if name != "metadata" && offset % 8 != 0 {
+            return Err((field as u64, format!("the {name} at {offset} is not 8-byte aligned")));
+        }
+        end_of_previous = end;
+    }
+    if h.data_offset % h.alignment as u64 != 0 {
+        return Err((at::DATA_OFFSET as u64, format!("the data section at {} is not aligned to {}", h.data_offset, h.alignment)));
+    }
+    if h.data_offset + h.data_len != file_len {
+        return Err((at::DATA_LEN as u64, "the data section does not end the file".into()));
+    }
+    Ok(())
+}
+
+/// The level table must tile the index exactly, level after level.
+fn check_levels(h: &Header, levels: &[Level], raw: &[u8]) -> std::result::Result<(), (u64, String)> {
+    let mut next = 0u64;
+    for (lod, l) in levels.iter().enumerate() {
+        let at = (lod * LEVEL_LEN) as u64;
+        if raw[lod * LEVEL_LEN + 24..(lod + 1) * LEVEL_LEN].iter().any(|b| *b != 0) {
+            return Err((at + 24, format!("level {lod}: reserved bytes are not zero")));
+        }
+        if l.first_entry != next || l.tiles_w == 0 || l.tiles_h == 0 {
+            return Err((at, format!("level {lod} starts at entry {} with {}x{} tiles; expected to start at {next}", l.first_entry, l.tiles_w, l.tiles_h)));
+        }
+        next = next.checked_add(l.tiles_w as u64 * l.tiles_h as u64).ok_or((at, "tile count overflows".to_string()))?;
+    }
+    if next != h.index_count {
+        return Err((0, format!("the levels hold {next} tiles but the index has {} entries", h.index_count)));
+    }
+    Ok(())
+}
+
+fn io(path: &Path, source: std::io::Error) -> PackError {
+    PackError::Io { path: path.to_path_buf(), source }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pack_is_send_and_sync() {
+        fn check<T: Send + Sync>() {}
+        check::<Pack>();
+    }
+}

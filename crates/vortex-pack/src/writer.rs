@@ -1,0 +1,278 @@
+//! Writing a pack in one pass, tiles in any order, in memory proportional to the tile count
+//! (24 bytes per tile for the index, 16 per distinct payload for deduplication), never to the
+//! data.
+//!
+//! The file is written under a temporary name beside the destination: zeroed header, level
+//! table, index and metadata placeholders, then payloads as they come. `finish` writes the
+//! tables, syncs, writes the header last (its signature is the "complete" mark: an unfinished
+//! file starts with zeros), syncs again and renames the file into place. Dropping an
+//! unfinished writer deletes the temporary file.
+
+use std::collections::HashMap;
+use std::fs::{self, File, OpenOptions};
+use std::io::{Seek, SeekFrom, Write};
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+
+use crate::error::{PackError, Result};
+use crate::format::{self, Description, ENTRY_LEN, Entry, FNV_OFFSET, HEADER_LEN, Header, LEVEL_LEN, Level, TileKind};
+use crate::reader::TileId;
+
+/// A tile handed to the writer.
+#[derive(Clone, Copy, Debug)]
+pub enum NewTile<'a> {
+    Absent,
+    /// One texel's samples (channels x sample bytes, little-endian).
+    Constant(&'a [u8]),
+    Data(TileKind, &'a [u8]),
+}
+
+/// Layout choices.
+#[derive(Clone, Copy, Debug)]
+pub struct WriteOptions {
+    /// Start of the data section; default 4096 (a page).
+    pub alignment: u32,
+    /// Start of every payload; default 8.
+    pub payload_alignment: u32,
+}
+
+impl Default for WriteOptions {
+    fn default() -> Self {
+        WriteOptions { alignment: 4096, payload_alignment: 8 }
+    }
+}
+
+/// What a finished pack holds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WriteSummary {
+    pub tiles: u64,
+    pub stored_payloads: u64,
+    pub deduplicated: u64,
+    pub constant: u64,
+    pub absent: u64,
+    pub payload_bytes: u64,
+    pub file_bytes: u64,
+    pub content_hash: u64,
+}
+
+pub struct PackWriter {
+    dest: PathBuf,
+    tmp: PathBuf,
+    file: Option<File>,
+    description: Description,
+    levels: Vec<Level>,
+    metadata: Vec<u8>,
+    options: WriteOptions,
+    entries: Vec<Entry>,
+    written: Vec<bool>,
+    /// (crc, len) of every stored payload -> offsets holding those bytes.
+    stored: HashMap<(u32, u32), Vec<u64>>,
+    data_offset: u64,
+    end: u64,
+    summary: WriteSummary,
+}
+
+impl PackWriter {
+    /// Starts `dest` (written as `.<name>.tmp-<pid>` beside it until `finish`).
+    pub fn create(dest: impl AsRef<Path>, description: Description, levels: Vec<Level>, metadata: &[u8], options: WriteOptions) -> Result<PackWriter> {
+        let dest = dest.as_ref().to_path_buf();
+        let usage = PackError::Usage;
+        if levels.len() != description.level_count as usize {
+            return Err(usage(format!("{} levels given, description says {}", levels.len(), description.level_count)));
+        }
+        for a in [options.alignment, options.payload_alignment] {
+            if !a.is_power_of_two() || a < 8 {
+                return Err(usage(format!("alignment {a} is not a power of two >= 8")));
+            }
+        }
+        let meta_len = u32::try_from(metadata.len()).map_err(|_| usage("metadata over 4 GiB".into()))?;
+        let mut count = 0u64;
+        for l in &levels {
+            if l.first_entry != count {
+                return Err(usage("levels must follow each other in the index".into()));
+            }
+            count += l.tiles_w as u64 * l.tiles_h as u64;
+        }
+        let name = dest.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "pack".into());
+        let tmp = dest.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
+        let file = OpenOptions::new().write(true).read(true).create(true).truncate(true).open(&tmp).map_err(|e| io(&tmp, e))?;
+
+        let levels_offset = HEADER_LEN as u64;
+        let index_offset = levels_offset + levels.len() as u64 * LEVEL_LEN as u64;
+        let meta_offset = index_offset + count * ENTRY_LEN as u64;
+        let data_offset = (meta_offset + meta_len as u64).next_multiple_of(options.alignment as u64);
+        let count_usize = usize::try_from(count).map_err(|_| usage("too many tiles".into()))?;
+        let mut w = PackWriter {
+            dest,
+            tmp,
+            file: Some(file),
+            description,
+            levels,
+            metadata: metadata.to_vec(),
+            options,
+            entries: vec![Entry::ABSENT; count_usize],
+            written: vec![false; count_usize],
+            stored: HashMap::new(),
+            data_offset,
+            end: data_offset,
+            summary: WriteSummary::default(),
+        };
+        // Placeholders up to the data section: zeros, so that an unfinished file has no signature.
+        w.file_mut().set_len(data_offset).map_err(|e| io(&w.tmp, e))?;
+        w.file_mut().seek(SeekFrom::Start(data_offset)).map_err(|e| io(&w.tmp, e))?;
+        Ok(w)
+    }
+
+    fn file_mut(&mut self) -> &mut File {
+        self.file.as_mut().expect("open until finish")
+    }
+
+    /// Adds the tile at `id`; each tile at most once. Identical payloads are stored once.
+    pub fn add(&mut self, id: TileId, tile: NewTile) -> Result<()> {
+        let position = self.position(id)?;
+        if std::mem::replace(&mut self.written[position], true) {
+            return Err(PackError::Usage(format!("tile (lod {}, x {}, y {}) written twice", id.lod, id.x, id.y)));
+        }
+        let texel = self.description.channels as usize * self.description.sample_bytes as usize;
+        let entry = match tile {
+            NewTile::Absent => {
+                self.summary.absent += 1;
+                Entry::ABSENT
+            }
+            NewTile::Constant(value) => {
+                if value.len() != texel {
+                    return Err(PackError::Usage(format!("a constant texel has {texel} bytes, not {}", value.len())));
+                }
+                let mut v = [0u8; 8];
+                v[..texel].copy_from_slice(value);
+                self.summary.constant += 1;
+                Entry { offset_or_value: u64::from_le_bytes(v), len: 0, crc: 0, kind: TileKind::Constant as u8 }
+            }
+            NewTile::Data(kind, bytes) => {
+                if !kind.has_payload() {
+                    return Err(PackError::Usage(format!("{} tiles have no payload", kind.name())));
+                }
+                if kind == TileKind::Raw && Some(bytes.len() as u64) != self.description.raw_tile_len() {
+                    return Err(PackError::Usage(format!("a raw tile has {:?} bytes, not {}", self.description.raw_tile_len(), bytes.len())));
+                }
+                let len = u32::try_from(bytes.len()).map_err(|_| PackError::Usage("a tile over 4 GiB".into()))?;
+                let crc = crc32c::crc32c(bytes);
+                let offset = match self.find_stored(crc, bytes)? {
+                    Some(offset) => {
+                        self.summary.deduplicated += 1;
+                        offset
+                    }
+                    None => self.append(crc, bytes)?,
+                };
+                Entry { offset_or_value: offset, len, crc, kind: kind as u8 }
+            }
+        };
+        self.entries[position] = entry;
+        self.summary.tiles += 1;
+        Ok(())
+    }
+
+    fn position(&self, id: TileId) -> Result<usize> {
+        let l = self.levels.get(id.lod as usize).filter(|l| id.x < l.tiles_w && id.y < l.tiles_h).ok_or_else(|| {
+            PackError::Usage(format!("tile (lod {}, x {}, y {}) is outside the pack's grid", id.lod, id.x, id.y))
+        })?;
+        Ok((l.first_entry + id.y as u64 * l.tiles_w as u64 + id.x as u64) as usize)
+    }
+
+    /// An offset already holding exactly `bytes` (compared byte for byte, never by hash alone).
+    fn find_stored(&self, crc: u32, bytes: &[u8]) -> Result<Option<u64>> {
+        let Some(offsets) = self.stored.get(&(crc, bytes.len() as u32)) else { return Ok(None) };
+        let file = self.file.as_ref().expect("open until finish");
+        let mut buf = vec![0u8; bytes.len()];
+        for &offset in offsets {
+            file.read_exact_at(&mut buf, offset).map_err(|e| io(&self.tmp, e))?;
+            if buf == bytes {
+                return Ok(Some(offset));
+            }
+        }
+        Ok(None)
+    }
+
+    fn append(&mut self, crc: u32, bytes: &[u8]) -> Result<u64> {
+        let offset = self.end.next_multiple_of(self.options.payload_alignment as u64);
+        let pad = (offset - self.end) as usize;
+        let tmp = self.tmp.clone();
+        let file = self.file_mut();
+        file.write_all(&[0u8; 65536][..pad.min(65536)]).map_err(|e| io(&tmp, e))?;
+        if pad > 65536 {
+            file.seek(SeekFrom::Start(offset)).map_err(|e| io(&tmp, e))?;
+        }
+        file.write_all(bytes).map_err(|e| io(&tmp, e))?;
+        self.end = offset + bytes.len() as u64;
+        self.stored.entry((crc, bytes.len() as u32)).or_default().push(offset);
+        self.summary.stored_payloads += 1;
+        self.summary.payload_bytes += bytes.len() as u64;
+        Ok(offset)
+    }
+
+    /// Writes the tables and the header, syncs and renames the file into place. Tiles never
+    /// added are absent.
+    pub fn finish(mut self) -> Result<WriteSummary> {
+        let tmp = self.tmp.clone();
+        let file = self.file.take().expect("open until finish");
+        let io_err = |e| io(&tmp, e);
+        // Pad the file end so that the data section ends the file exactly (the padding of a
+        // zero-payload pack is the data section itself).
+        file.set_len(self.end).map_err(io_err)?;
+        let levels: Vec<u8> = self.levels.iter().flat_map(|l| l.encode()).collect();
+        let index: Vec<u8> = self.entries.iter().flat_map(|e| e.encode()).collect();
+        let levels_offset = HEADER_LEN as u64;
+        let index_offset = levels_offset + levels.len() as u64;
+        let meta_offset = index_offset + index.len() as u64;
+        file.write_all_at(&levels, levels_offset).map_err(io_err)?;
+        file.write_all_at(&index, index_offset).map_err(io_err)?;
+        file.write_all_at(&self.metadata, meta_offset).map_err(io_err)?;
+        let content_hash = format::fnv1a(format::fnv1a(FNV_OFFSET, &self.metadata), &index);
+        let header = Header {
+            major: format::MAJOR,
+            minor: format::MINOR,
+            required_features: 0,
+            optional_features: 0,
+            file_len: self.end,
+            content_hash,
+            description: self.description,
+            alignment: self.options.alignment,
+            payload_alignment: self.options.payload_alignment,
+            levels_offset,
+            index_offset,
+            index_count: self.entries.len() as u64,
+            index_crc: crc32c::crc32c_append(crc32c::crc32c(&levels), &index),
+            meta_offset,
+            meta_len: self.metadata.len() as u32,
+            meta_crc: crc32c::crc32c(&self.metadata),
+            data_offset: self.data_offset,
+            data_len: self.end - self.data_offset,
+        };
+        file.sync_data().map_err(io_err)?;
+        file.write_all_at(&header.encode(), 0).map_err(io_err)?;
+        file.sync_all().map_err(io_err)?;
+        drop(file);
+        fs::rename(&self.tmp, &self.dest).map_err(|e| io(&self.dest, e))?;
+        if let Some(dir) = self.dest.parent().filter(|d| !d.as_os_str().is_empty()) {
+            // Make the rename itself durable; not all file systems allow syncing a directory.
+            let _ = File::open(dir).and_then(|d| d.sync_all());
+        }
+        self.summary.file_bytes = self.end;
+        self.summary.content_hash = content_hash;
+        self.summary.absent += self.written.iter().filter(|w| !**w).count() as u64;
+        self.summary.tiles = self.entries.len() as u64;
+        Ok(self.summary)
+    }
+}
+
+impl Drop for PackWriter {
+    fn drop(&mut self) {
+        if self.file.take().is_some() {
+            let _ = fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+fn io(path: &Path, source: std::io::Error) -> PackError {
+    PackError::Io { path: path.to_path_buf(), source }
+}
