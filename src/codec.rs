@@ -107,16 +107,36 @@ impl<T: Sample> TileEncoder<T> {
         self.stored
     }
 
+    pub fn source_layout(&self) -> PixelLayout {
+        self.source
+    }
+
+    /// Texels with alpha composited away if the stored layout has none.
+    fn flattened<'a>(&self, texels: &'a [T]) -> Cow<'a, [T]> {
+        if self.stored.channels != self.source.channels {
+            Cow::Owned(flatten(texels, self.source.channels.count(), &self.matte))
+        } else {
+            Cow::Borrowed(texels)
+        }
+    }
+
+    /// One source texel as stored (flattened, depth converted), little-endian samples.
+    pub fn stored_texel(&self, texel: &[T]) -> Vec<u8> {
+        let texel = self.flattened(texel);
+        match self.stored.depth {
+            Depth::U8 => to_u8(&texel).into_owned(),
+            Depth::U16 => {
+                let widen = if T::DEPTH == Depth::U8 { 257 } else { 1 };
+                texel.iter().flat_map(|s| (s.to_u16() * widen).to_le_bytes()).collect()
+            }
+        }
+    }
+
     /// Encodes a `side x side` tile given in the source layout.
     pub fn encode(&self, texels: &[T], out: &mut Vec<u8>) -> Result<(), String> {
         out.clear();
-        let flat;
-        let texels = if self.stored.channels != self.source.channels {
-            flat = flatten(texels, self.source.channels.count(), &self.matte);
-            &flat[..]
-        } else {
-            texels
-        };
+        let texels = self.flattened(texels);
+        let texels = &texels[..];
         match self.codec {
             Codec::Jpeg { quality, subsampling } => self.encode_jpeg(texels, quality, subsampling, out),
             Codec::Png { level } => self.encode_png(texels, level, out),

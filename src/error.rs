@@ -42,6 +42,10 @@ pub enum TilerError {
     #[error("tile (lod {lod}, x {x}, y {y}): {message}")]
     Encode { lod: u32, x: u32, y: u32, message: String },
 
+    /// Reading or writing a pack failed.
+    #[error(transparent)]
+    Pack(#[from] vortex_pack::PackError),
+
     /// The caller asked the run to stop (Ctrl-C).
     #[error("interrupted; nothing was left at the destination")]
     Interrupted,

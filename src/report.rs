@@ -76,7 +76,22 @@ pub fn summary_line(s: &Summary, out: &Path, width: u32, height: u32, decoder: &
     )
 }
 
-fn mib(bytes: u64) -> String {
+/// What a pack writer stored: deduplication and one-colour tiles.
+pub fn pack_line(w: &vortex_pack::WriteSummary) -> String {
+    format!(
+        "pack: {} tiles, {} payloads stored ({} duplicates shared, {} one-colour, {} absent), {} in {} file bytes, content hash {:016x}",
+        w.tiles,
+        w.stored_payloads,
+        w.deduplicated,
+        w.constant,
+        w.absent,
+        mib(w.payload_bytes),
+        w.file_bytes,
+        w.content_hash
+    )
+}
+
+pub fn mib(bytes: u64) -> String {
     format!("{:.1} MiB", bytes as f64 / (1u64 << 20) as f64)
 }
 

@@ -11,7 +11,7 @@ use crate::filename::FilenameFormat;
 use crate::info::{FORMAT_VERSION, InfoFile};
 use crate::layout::Layout;
 use crate::pixel::{Channels, Depth, PixelLayout};
-use crate::split::{SplitOptions, Summary};
+use crate::split::SplitOptions;
 
 pub const DEFAULT_TILE_SIZE: u32 = 128;
 pub const DEFAULT_QUALITY: u8 = 85;
@@ -179,8 +179,7 @@ fn parse_member<V: clap::ValueEnum>(
 }
 
 /// The `info.json` describing a finished run.
-pub fn describe(summary: &Summary, opts: &SplitOptions, names: &FilenameFormat) -> InfoFile {
-    let l = &summary.layout;
+pub fn describe(l: &Layout, stored: PixelLayout, opts: &SplitOptions, names: &FilenameFormat) -> InfoFile {
     let (quality, subsampling, png_compression) = match opts.codec {
         Codec::Jpeg { quality, subsampling } => (Some(quality), Some(value_name(subsampling)), None),
         Codec::Png { level } => (None, None, Some(value_name(level))),
@@ -190,8 +189,8 @@ pub fn describe(summary: &Summary, opts: &SplitOptions, names: &FilenameFormat) 
         tile_size: Some(l.tile_size),
         tile_count: Some(l.tile_count),
         lod_count: Some(l.lod_count),
-        tile_format: Some(summary.stored.channels.tile_format().into()),
-        tile_type: Some(summary.stored.depth.tile_type().into()),
+        tile_format: Some(stored.channels.tile_format().into()),
+        tile_type: Some(stored.depth.tile_type().into()),
         filename_format: Some(names.as_str().into()),
         border: Some(l.border),
         width: Some(l.width),

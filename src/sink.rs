@@ -18,6 +18,11 @@ use crate::info::Info;
 
 pub trait TileSink: Sync {
     fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()>;
+    /// Offers a tile whose texels all equal `texel` (samples of the stored layout,
+    /// little-endian). Returns `false` if the sink wants it encoded like any other tile.
+    fn write_constant(&self, _lod: u32, _x: u32, _y: u32, _texel: &[u8]) -> Result<bool> {
+        Ok(false)
+    }
     /// Bytes of tile data written so far.
     fn bytes_written(&self) -> u64;
 }

@@ -160,14 +160,27 @@ fn consume<T: Sample>(
         let jobs: Vec<(u32, &CutTile<T>)> = work.iter().flat_map(|b| b.tiles.iter().map(move |t| (b.lod, t))).collect();
         jobs.par_iter().try_for_each_init(Vec::new, |buf, &(lod, CutTile { texels, places })| {
             let (x0, y0) = places[0];
-            encoder.encode(texels, buf).map_err(|message| TilerError::Encode { lod, x: x0, y: y0, message })?;
-            for (x, y) in places {
-                sink.write_tile(lod, *x, *y, buf)?;
+            // A one-colour tile is offered to the sink as its colour; sinks that store it so
+            // (packs) need no encoding.
+            let channels = encoder.source_layout().channels.count();
+            let constant = texels.chunks_exact(channels).all(|t| t == &texels[..channels]);
+            let texel = constant.then(|| encoder.stored_texel(&texels[..channels]));
+            if let Some(texel) = &texel
+                && sink.write_constant(lod, x0, y0, texel)?
+            {
+                for (x, y) in &places[1..] {
+                    sink.write_constant(lod, *x, *y, texel)?;
+                }
+            } else {
+                encoder.encode(texels, buf).map_err(|message| TilerError::Encode { lod, x: x0, y: y0, message })?;
+                for (x, y) in places {
+                    sink.write_tile(lod, *x, *y, buf)?;
+                }
+                encoded.fetch_add(1, Ordering::Relaxed);
             }
-            encoded.fetch_add(1, Ordering::Relaxed);
             tiles.fetch_add(places.len() as u64, Ordering::Relaxed);
             progress.advance(places.len() as u64);
-            Ok(())
+            Ok::<(), TilerError>(())
         })?;
     }
     Ok(())

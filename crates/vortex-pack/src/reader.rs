@@ -76,9 +76,9 @@ impl Pack {
         let len = file.seek(SeekFrom::End(0)).map_err(|e| io(path, e))?;
         file.seek(SeekFrom::Start(0)).map_err(|e| io(path, e))?;
         let mut bytes = Vec::new();
-        bytes.try_reserve_exact(usize::try_from(len).unwrap_or(usize::MAX)).map_err(|e| {
-            io(path, std::io::Error::new(std::io::ErrorKind::OutOfMemory, e.to_string()))
-        })?;
+        bytes
+            .try_reserve_exact(usize::try_from(len).unwrap_or(usize::MAX))
+            .map_err(|e| io(path, std::io::Error::new(std::io::ErrorKind::OutOfMemory, e.to_string())))?;
         file.read_to_end(&mut bytes).map_err(|e| io(path, e))?;
         Pack::from_bytes(path, Bytes::Owned(bytes))
     }
@@ -92,7 +92,11 @@ impl Pack {
             message,
         };
         if b.len() < HEADER_LEN {
-            return Err(corrupt("header", 0, format!("the file is {} bytes, shorter than a pack header ({HEADER_LEN})", b.len())));
+            return Err(corrupt(
+                "header",
+                0,
+                format!("the file is {} bytes, shorter than a pack header ({HEADER_LEN})", b.len()),
+            ));
         }
         if b[..8] != MAGIC {
             let hint = if b[..8].iter().all(|v| *v == 0) {
@@ -115,22 +119,37 @@ impl Pack {
         let h = Header::decode(b);
         let unsupported = |message: String| PackError::Unsupported { path: path.to_path_buf(), message };
         if h.major != format::MAJOR {
-            return Err(unsupported(format!("format version {}.{} (this reader reads {}.x)", h.major, h.minor, format::MAJOR)));
+            return Err(unsupported(format!(
+                "format version {}.{} (this reader reads {}.x)",
+                h.major,
+                h.minor,
+                format::MAJOR
+            )));
         }
         if h.required_features & !format::KNOWN_REQUIRED_FEATURES != 0 {
             return Err(unsupported(format!("required features {:#x} unknown to this reader", h.required_features)));
         }
+        // The sizes of the header and of an index entry are fixed in 1.x; a reader that ignored
+        // these fields would misread a file that says otherwise.
+        for (field, expected) in [(format::at::HEADER_LEN, HEADER_LEN), (format::at::ENTRY_LEN, ENTRY_LEN)] {
+            let value = format::u32_at(b, field);
+            if value as usize != expected {
+                return Err(corrupt("header", field as u64, format!("length field says {value}, expected {expected}")));
+            }
+        }
         check_header(&h, b.len() as u64).map_err(|(offset, m)| corrupt("header", offset, m))?;
 
         let levels_len = h.description.level_count as usize * LEVEL_LEN;
-        let levels: Vec<Level> = b[h.levels_offset as usize..][..levels_len].chunks_exact(LEVEL_LEN).map(Level::decode).collect();
+        let levels: Vec<Level> =
+            b[h.levels_offset as usize..][..levels_len].chunks_exact(LEVEL_LEN).map(Level::decode).collect();
         let index_len = h.index_count as usize * ENTRY_LEN;
         let mut crc = crc32c::crc32c(&b[h.levels_offset as usize..][..levels_len]);
         crc = crc32c::crc32c_append(crc, &b[h.index_offset as usize..][..index_len]);
         if crc != h.index_crc {
             return Err(corrupt("index", h.index_offset, "level table or index checksum mismatch".into()));
         }
-        check_levels(&h, &levels, &b[h.levels_offset as usize..][..levels_len]).map_err(|(o, m)| corrupt("levels", h.levels_offset + o, m))?;
+        check_levels(&h, &levels, &b[h.levels_offset as usize..][..levels_len])
+            .map_err(|(o, m)| corrupt("levels", h.levels_offset + o, m))?;
         if crc32c::crc32c(&b[h.meta_offset as usize..][..h.meta_len as usize]) != h.meta_crc {
             return Err(corrupt("metadata", h.meta_offset, "metadata checksum mismatch".into()));
         }
@@ -165,8 +184,12 @@ impl Pack {
 
     /// Index position of a tile: `first_entry[lod] + y * tiles_w[lod] + x`.
     pub fn position(&self, id: TileId) -> Result<u64> {
-        let out = |message: String| PackError::OutOfRange { path: self.path.clone(), lod: id.lod, x: id.x, y: id.y, message };
-        let level = self.levels.get(id.lod as usize).ok_or_else(|| out(format!("the pack has {} levels", self.levels.len())))?;
+        let out =
+            |message: String| PackError::OutOfRange { path: self.path.clone(), lod: id.lod, x: id.x, y: id.y, message };
+        let level = self
+            .levels
+            .get(id.lod as usize)
+            .ok_or_else(|| out(format!("the pack has {} levels", self.levels.len())))?;
         if id.x >= level.tiles_w || id.y >= level.tiles_h {
             return Err(out(format!("level {} is {}x{} tiles", id.lod, level.tiles_w, level.tiles_h)));
         }
@@ -204,7 +227,8 @@ impl Pack {
     pub(crate) fn tile_at(&self, id: TileId, position: u64) -> Result<Tile<'_>> {
         let e = self.entry(position);
         let entry_at = self.header.index_offset + position * ENTRY_LEN as u64;
-        let kind = TileKind::from_u8(e.kind).ok_or_else(|| self.tile_error(id, entry_at, format!("unknown tile kind {}", e.kind)))?;
+        let kind = TileKind::from_u8(e.kind)
+            .ok_or_else(|| self.tile_error(id, entry_at, format!("unknown tile kind {}", e.kind)))?;
         let raw = &self.file()[entry_at as usize..][..ENTRY_LEN];
         if raw[17..].iter().any(|b| *b != 0) {
             return Err(self.tile_error(id, entry_at + 17, "reserved entry bytes are not zero".into()));
@@ -223,7 +247,11 @@ impl Pack {
                     Some(end) if start >= data.start && end <= data.end => {
                         Ok(Tile::Data(kind, &self.file()[start as usize..end as usize]))
                     }
-                    _ => Err(self.tile_error(id, entry_at, format!("payload {start}+{} lies outside the data section", e.len))),
+                    _ => Err(self.tile_error(
+                        id,
+                        entry_at,
+                        format!("payload {start}+{} lies outside the data section", e.len),
+                    )),
                 }
             }
         }
@@ -259,13 +287,22 @@ fn check_header(h: &Header, file_len: u64) -> std::result::Result<(), (u64, Stri
     let d = &h.description;
     if h.file_len != file_len {
         let what = if file_len < h.file_len { "truncated" } else { "has trailing bytes" };
-        return Err((at::FILE_LEN as u64, format!("the header says {} bytes but the file has {file_len}: {what}", h.file_len)));
+        return Err((
+            at::FILE_LEN as u64,
+            format!("the header says {} bytes but the file has {file_len}: {what}", h.file_len),
+        ));
     }
     if !(1..=4).contains(&d.channels) || !(1..=2).contains(&d.sample_bytes) {
-        return Err((at::CHANNELS as u64, format!("{} channels of {} bytes is not a texel format", d.channels, d.sample_bytes)));
+        return Err((
+            at::CHANNELS as u64,
+            format!("{} channels of {} bytes is not a texel format", d.channels, d.sample_bytes),
+        ));
     }
     if d.tile_size == 0 || d.border.checked_mul(2).is_none_or(|b| b >= d.tile_size) || d.width == 0 || d.height == 0 {
-        return Err((at::WIDTH as u64, format!("image {}x{}, tile {} border {} is not a valid texture", d.width, d.height, d.tile_size, d.border)));
+        return Err((
+            at::WIDTH as u64,
+            format!("image {}x{}, tile {} border {} is not a valid texture", d.width, d.height, d.tile_size, d.border),
+        ));
     }
     if d.level_count == 0 || d.level_count > 32 {
         return Err((at::LEVEL_COUNT as u64, format!("{} levels", d.level_count)));
@@ -277,23 +314,31 @@ fn check_header(h: &Header, file_len: u64) -> std::result::Result<(), (u64, Stri
     }
     let sections = [
         ("level table", h.levels_offset, d.level_count as u64 * LEVEL_LEN as u64, at::LEVELS_OFFSET),
-        ("index", h.index_offset, h.index_count.checked_mul(ENTRY_LEN as u64).unwrap_or(u64::MAX), at::INDEX_OFFSET),
+        ("index", h.index_offset, h.index_count.saturating_mul(ENTRY_LEN as u64), at::INDEX_OFFSET),
         ("metadata", h.meta_offset, h.meta_len as u64, at::META_OFFSET),
         ("data", h.data_offset, h.data_len, at::DATA_OFFSET),
     ];
     let mut end_of_previous = HEADER_LEN as u64;
     for (name, offset, len, field) in sections {
-        let end = offset.checked_add(len).unwrap_or(u64::MAX);
+        let end = offset.saturating_add(len);
         if offset < end_of_previous || end > file_len {
-            return Err((field as u64, format!("the {name} ({offset}+{len}) overlaps what precedes it or lies outside the {file_len}-byte file")));
+            return Err((
+                field as u64,
+                format!(
+                    "the {name} ({offset}+{len}) overlaps what precedes it or lies outside the {file_len}-byte file"
+                ),
+            ));
         }
         if name != "metadata" && offset % 8 != 0 {
             return Err((field as u64, format!("the {name} at {offset} is not 8-byte aligned")));
         }
         end_of_previous = end;
     }
-    if h.data_offset % h.alignment as u64 != 0 {
-        return Err((at::DATA_OFFSET as u64, format!("the data section at {} is not aligned to {}", h.data_offset, h.alignment)));
+    if !h.data_offset.is_multiple_of(h.alignment as u64) {
+        return Err((
+            at::DATA_OFFSET as u64,
+            format!("the data section at {} is not aligned to {}", h.data_offset, h.alignment),
+        ));
     }
     if h.data_offset + h.data_len != file_len {
         return Err((at::DATA_LEN as u64, "the data section does not end the file".into()));
@@ -310,7 +355,13 @@ fn check_levels(h: &Header, levels: &[Level], raw: &[u8]) -> std::result::Result
             return Err((at + 24, format!("level {lod}: reserved bytes are not zero")));
         }
         if l.first_entry != next || l.tiles_w == 0 || l.tiles_h == 0 {
-            return Err((at, format!("level {lod} starts at entry {} with {}x{} tiles; expected to start at {next}", l.first_entry, l.tiles_w, l.tiles_h)));
+            return Err((
+                at,
+                format!(
+                    "level {lod} starts at entry {} with {}x{} tiles; expected to start at {next}",
+                    l.first_entry, l.tiles_w, l.tiles_h
+                ),
+            ));
         }
         next = next.checked_add(l.tiles_w as u64 * l.tiles_h as u64).ok_or((at, "tile count overflows".to_string()))?;
     }

@@ -1,15 +1,15 @@
-//! Flags and subcommands.
+//! `split`: flags to options, the pipeline with a progress bar, one summary line.
 
 use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use clap::{Parser, Subcommand};
 
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{PngLevel, Subsampling};
 use vortex_tiler::info::InfoFile;
 use vortex_tiler::layout::Layout;
+use vortex_tiler::pack_sink::PackSink;
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::settings::{self, CodecChoice, Requested};
 use vortex_tiler::sink::DirSink;
@@ -17,34 +17,8 @@ use vortex_tiler::{source, split};
 
 use crate::report;
 
-#[derive(Parser, Debug)]
-#[command(
-    name = "vortex-tiler",
-    version,
-    about = "Cut huge images into virtual-texture tiles with every power-of-two LOD, in bounded memory"
-)]
-pub struct Args {
-    #[command(subcommand)]
-    command: Command,
-}
-
-#[derive(Subcommand, Debug)]
-enum Command {
-    /// Cut one image into tiles plus every power-of-two LOD, streaming it in bands.
-    ///
-    /// The output directory gets one file per tile of every LOD and an info.json describing the
-    /// pyramid (docs/info-json.md). If it already holds an info.json, that file's members set
-    /// the defaults for this run (the original tool's behaviour) and flags override them.
-    ///
-    /// Examples:
-    ///   vortex-tiler split huge.tif -o out/ --tile-size 128 --border 4 --codec jpeg --quality 85
-    ///   vortex-tiler split --input=in.png --output=out
-    #[command(verbatim_doc_comment)]
-    Split(SplitArgs),
-}
-
 #[derive(clap::Args, Debug)]
-struct SplitArgs {
+pub struct SplitArgs {
     /// Image to cut: PNG, TIFF/BigTIFF, JPEG, PPM/PGM stream in bands; WebP, GIF, BMP, TGA and
     /// QOI are decoded whole within --max-memory.
     #[arg(value_name = "INPUT", required_unless_present = "input_flag")]
@@ -55,8 +29,15 @@ struct SplitArgs {
     input_flag: Option<PathBuf>,
 
     /// Output directory (created; replaced only if it holds a previous output's info.json).
-    #[arg(short, long, value_name = "DIR")]
-    output: PathBuf,
+    #[arg(short, long, value_name = "DIR", required_unless_present = "pack", conflicts_with = "pack")]
+    output: Option<PathBuf>,
+
+    /// Write one pack file instead of a directory of tiles (docs/pack-format.md).
+    #[arg(long, value_name = "FILE")]
+    pack: Option<PathBuf>,
+
+    #[command(flatten)]
+    pack_layout: super::PackLayout,
 
     /// Side of a stored tile in texels, borders included [default: 128].
     #[arg(long, value_name = "N")]
@@ -94,7 +75,7 @@ struct SplitArgs {
     flatten: bool,
 
     /// Sample type of stored tiles: unsignedByte or unsignedShort (PNG only) [default: the source's].
-    #[arg(long, value_name = "TYPE", value_parser = parse_tile_type)]
+    #[arg(long, value_name = "TYPE", value_parser = super::parse_tile_type)]
     tile_type: Option<Depth>,
 
     /// Tile file names, printf-like with positional arguments 1 = LOD, 2 = x, 3 = y; '/' makes
@@ -104,7 +85,7 @@ struct SplitArgs {
 
     /// Largest image this tool will hold whole in memory when a format cannot be streamed
     /// (interlaced PNG, progressive JPEG, one-strip TIFF, WebP, ...), e.g. 512M, 4G.
-    #[arg(long, value_name = "SIZE", default_value = "1G", value_parser = parse_size)]
+    #[arg(long, value_name = "SIZE", default_value = "1G", value_parser = super::parse_size)]
     max_memory: u64,
 
     /// Worker threads for encoding [default: all cores]. Output is identical for any count.
@@ -116,17 +97,15 @@ struct SplitArgs {
     quiet: bool,
 }
 
-pub fn run(args: Args) -> Result<()> {
-    match args.command {
-        Command::Split(a) => run_split(a),
-    }
-}
-
-fn run_split(a: SplitArgs) -> Result<()> {
+pub fn run(a: SplitArgs) -> Result<()> {
     let started = Instant::now();
     let input = a.input.or(a.input_flag).expect("clap requires one");
-    let info_path = a.output.join("info.json");
-    let existing = if info_path.is_file() { Some(InfoFile::read(&info_path)?) } else { None };
+    // Only an output directory can hold an info.json that configures the run.
+    let info_path = a.output.as_ref().map(|o| o.join("info.json"));
+    let existing = match &info_path {
+        Some(p) if p.is_file() => Some(InfoFile::read(p)?),
+        _ => None,
+    };
 
     let source = source::open(&input, a.max_memory)?;
     let requested = Requested {
@@ -141,12 +120,14 @@ fn run_split(a: SplitArgs) -> Result<()> {
         tile_depth: a.tile_type,
         filename_format: a.filename_format,
     };
-    let (opts, names) =
-        settings::resolve(&requested, existing.as_ref().map(|i| (info_path.as_path(), i)), source.layout())?;
+    let existing_ref = info_path.as_deref().zip(existing.as_ref());
+    let (opts, names) = settings::resolve(&requested, existing_ref, source.layout())?;
     let layout = Layout::new(source.width() as u64, source.height() as u64, opts.tile_size, opts.border)?;
-    if let Some(info) = &existing {
-        settings::check_grid(&info_path, info, &requested, &layout)?;
+    if let Some((path, info)) = existing_ref {
+        settings::check_grid(path, info, &requested, &layout)?;
     }
+    let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
+    let info = settings::describe(&layout, stored, &opts, &names);
     let decoder = source.describe();
     let (width, height) = (source.width(), source.height());
 
@@ -154,60 +135,50 @@ fn run_split(a: SplitArgs) -> Result<()> {
         .num_threads(a.threads.unwrap_or(0))
         .build()
         .context("starting worker threads")?;
-    let sink = DirSink::create(&a.output, names.clone())?;
     let watch = report::Watch::new(layout.total_tiles(), a.quiet);
-    let result = pool.install(|| split::split(source, &sink, &opts, &watch));
-    watch.bar.finish_and_clear();
-    let summary = match result {
-        Ok(s) => s,
-        Err(e) => {
-            sink.abandon();
-            return Err(e.into());
+    let (summary, destination) = match (&a.output, &a.pack) {
+        (Some(dir), _) => {
+            let sink = DirSink::create(dir, names)?;
+            let result = pool.install(|| split::split(source, &sink, &opts, &watch));
+            watch.bar.finish_and_clear();
+            match result {
+                Ok(s) if s.tiles == layout.total_tiles() => {
+                    sink.finish(&info)?;
+                    (s, dir)
+                }
+                Ok(s) => {
+                    sink.abandon();
+                    bail!("internal error: wrote {} tiles of {}", s.tiles, layout.total_tiles());
+                }
+                Err(e) => {
+                    sink.abandon();
+                    return Err(e.into());
+                }
+            }
         }
+        (None, Some(file)) => {
+            let sink = PackSink::create(
+                file,
+                &layout,
+                stored,
+                opts.codec,
+                info.to_json_pretty().as_bytes(),
+                a.pack_layout.options()?,
+            )?;
+            // On error the sink is dropped, which deletes the unfinished pack.
+            let s = pool.install(|| split::split(source, &sink, &opts, &watch));
+            watch.bar.finish_and_clear();
+            let s = s?;
+            let written = sink.finish()?;
+            if !a.quiet {
+                println!("{}", report::pack_line(&written));
+            }
+            (s, file)
+        }
+        (None, None) => unreachable!("clap requires --output or --pack"),
     };
-    if summary.tiles != layout.total_tiles() {
-        sink.abandon();
-        bail!("internal error: wrote {} tiles of {}", summary.tiles, layout.total_tiles());
-    }
-    sink.finish(&settings::describe(&summary, &opts, &names))?;
     if !a.quiet {
-        println!("{}", report::summary_line(&summary, &a.output, width, height, &decoder, started.elapsed()));
+        println!("{}", report::summary_line(&summary, destination, width, height, &decoder, started.elapsed()));
     }
     Ok(())
-}
-
-fn parse_tile_type(s: &str) -> Result<Depth, String> {
-    Depth::from_tile_type(s).ok_or_else(|| format!("'{s}' is not a tile type (unsignedByte, unsignedShort)"))
-}
-
-/// `1048576`, `512K`, `64M`, `2G`, `1GiB`...
-fn parse_size(s: &str) -> Result<u64, String> {
-    let t = s.trim().to_ascii_uppercase();
-    let t = t.trim_end_matches("IB").trim_end_matches('B');
-    let (num, shift) = match t.chars().last() {
-        Some('K') => (&t[..t.len() - 1], 10),
-        Some('M') => (&t[..t.len() - 1], 20),
-        Some('G') => (&t[..t.len() - 1], 30),
-        Some('T') => (&t[..t.len() - 1], 40),
-        _ => (t, 0),
-    };
-    let n: f64 = num.trim().parse().map_err(|_| format!("'{s}' is not a size (e.g. 512M, 4G)"))?;
-    if !(n.is_finite() && n >= 0.0) {
-        return Err(format!("'{s}' is not a size"));
-    }
-    Ok((n * (1u64 << shift) as f64) as u64)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn sizes() {
-        assert_eq!(parse_size("1G"), Ok(1 << 30));
-        assert_eq!(parse_size("512MiB"), Ok(512 << 20));
-        assert_eq!(parse_size("1.5k"), Ok(1536));
-        assert_eq!(parse_size("100"), Ok(100));
-        assert!(parse_size("lots").is_err());
-    }
 }

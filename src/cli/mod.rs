@@ -1,0 +1,114 @@
+//! The command line: flags, subcommands, and the glue from them to the library.
+
+mod pack;
+mod split;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use vortex_pack::WriteOptions;
+use vortex_tiler::pixel::Depth;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "vortex-tiler",
+    version,
+    about = "Cut huge images into virtual-texture tiles with every power-of-two LOD, in bounded memory"
+)]
+pub struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Cut one image into tiles plus every power-of-two LOD, streaming it in bands.
+    ///
+    /// The output directory gets one file per tile of every LOD and an info.json describing the
+    /// pyramid (docs/info-json.md). If it already holds an info.json, that file's members set
+    /// the defaults for this run (the original tool's behaviour) and flags override them. With
+    /// --pack, the tiles go into one pack file instead (docs/pack-format.md).
+    ///
+    /// Examples:
+    ///   vortex-tiler split huge.tif -o out/ --tile-size 128 --border 4 --codec jpeg --quality 85
+    ///   vortex-tiler split --input=in.png --output=out
+    ///   vortex-tiler split huge.tif --pack world.vtpk --tile-size 128 --border 4
+    #[command(verbatim_doc_comment)]
+    Split(split::SplitArgs),
+    /// Put a tiled directory (info.json + tile files, e.g. from split -o) into one pack file.
+    Pack(pack::PackArgs),
+    /// Write a pack's tiles back out as files plus info.json.
+    Unpack(pack::UnpackArgs),
+    /// Describe a pack: texture, levels, tile kinds, sizes, deduplication.
+    Info(pack::InfoArgs),
+}
+
+/// Where a pack's bytes go.
+#[derive(clap::Args, Debug)]
+pub struct PackLayout {
+    /// Alignment of a pack's data section, e.g. 4K or 64K.
+    #[arg(long, value_name = "SIZE", default_value = "4K", value_parser = parse_size)]
+    align: u64,
+    /// Alignment of every tile's bytes in a pack; 64K gives each tile its own Vulkan sparse block.
+    #[arg(long, value_name = "SIZE", default_value = "8", value_parser = parse_size)]
+    tile_align: u64,
+}
+
+impl PackLayout {
+    fn options(&self) -> Result<WriteOptions> {
+        let check = |v: u64, flag: &str| -> Result<u32> {
+            match u32::try_from(v) {
+                Ok(v) if v.is_power_of_two() && v >= 8 => Ok(v),
+                _ => anyhow::bail!("{flag} {v} must be a power of two from 8 to 2G"),
+            }
+        };
+        Ok(WriteOptions {
+            alignment: check(self.align, "--align")?,
+            payload_alignment: check(self.tile_align, "--tile-align")?,
+        })
+    }
+}
+
+pub fn run(args: Args) -> Result<()> {
+    match args.command {
+        Command::Split(a) => split::run(a),
+        Command::Pack(a) => pack::run_pack(a),
+        Command::Unpack(a) => pack::run_unpack(a),
+        Command::Info(a) => pack::run_info(a),
+    }
+}
+
+fn parse_tile_type(s: &str) -> Result<Depth, String> {
+    Depth::from_tile_type(s).ok_or_else(|| format!("'{s}' is not a tile type (unsignedByte, unsignedShort)"))
+}
+
+/// `1048576`, `512K`, `64M`, `2G`, `1GiB`...
+fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim().to_ascii_uppercase();
+    let t = t.trim_end_matches("IB").trim_end_matches('B');
+    let (num, shift) = match t.chars().last() {
+        Some('K') => (&t[..t.len() - 1], 10),
+        Some('M') => (&t[..t.len() - 1], 20),
+        Some('G') => (&t[..t.len() - 1], 30),
+        Some('T') => (&t[..t.len() - 1], 40),
+        _ => (t, 0),
+    };
+    let n: f64 = num.trim().parse().map_err(|_| format!("'{s}' is not a size (e.g. 512M, 4G)"))?;
+    if !(n.is_finite() && n >= 0.0) {
+        return Err(format!("'{s}' is not a size"));
+    }
+    Ok((n * (1u64 << shift) as f64) as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes() {
+        assert_eq!(parse_size("1G"), Ok(1 << 30));
+        assert_eq!(parse_size("512MiB"), Ok(512 << 20));
+        assert_eq!(parse_size("1.5k"), Ok(1536));
+        assert_eq!(parse_size("100"), Ok(100));
+        assert!(parse_size("lots").is_err());
+    }
+}

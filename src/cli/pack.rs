@@ -1,0 +1,165 @@
+//! `pack`, `unpack` and `info`: between tiled directories and pack files.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Result;
+use vortex_pack::{Pack, TileKind};
+use vortex_tiler::repack;
+
+use super::PackLayout;
+use crate::report;
+
+#[derive(clap::Args, Debug)]
+pub struct PackArgs {
+    /// A tiled directory: info.json plus one file per tile (what `split -o` writes).
+    #[arg(value_name = "DIR")]
+    input: PathBuf,
+    /// The pack file to write (replaced only when complete).
+    #[arg(short, long, value_name = "FILE")]
+    output: PathBuf,
+    #[command(flatten)]
+    layout: PackLayout,
+    /// No progress bar and no summary line.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct UnpackArgs {
+    #[arg(value_name = "PACK")]
+    input: PathBuf,
+    /// Output directory for the tile files and info.json.
+    #[arg(short, long, value_name = "DIR")]
+    output: PathBuf,
+    /// No progress bar and no summary line.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct InfoArgs {
+    #[arg(value_name = "PACK")]
+    input: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run_pack(a: PackArgs) -> Result<()> {
+    let started = Instant::now();
+    let t = repack::TiledDir::read(&a.input)?;
+    let total = (0..t.description.level_count).map(|l| ((t.tile_count >> l) as u64).pow(2)).sum();
+    let watch = report::Watch::new(total, a.quiet);
+    let written = repack::pack_dir(&a.input, &a.output, a.layout.options()?, &watch);
+    watch.bar.finish_and_clear();
+    let written = written?;
+    if !a.quiet {
+        println!(
+            "{} -> {} in {:.2} s",
+            report::pack_line(&written),
+            a.output.display(),
+            started.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
+}
+
+pub fn run_unpack(a: UnpackArgs) -> Result<()> {
+    let started = Instant::now();
+    let pack = Pack::open(&a.input)?;
+    let watch = report::Watch::new(pack.header().index_count, a.quiet);
+    let count = repack::unpack(&pack, &a.output, &watch);
+    watch.bar.finish_and_clear();
+    let count = count?;
+    if !a.quiet {
+        println!(
+            "wrote {count} tile files and info.json to {} in {:.2} s",
+            a.output.display(),
+            started.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
+}
+
+pub fn run_info(a: InfoArgs) -> Result<()> {
+    let pack = Pack::open(&a.input)?;
+    let h = pack.header();
+    let d = pack.description();
+    let mut kinds = std::collections::BTreeMap::<&str, (u64, u64)>::new();
+    let mut offsets = std::collections::HashSet::new();
+    let (mut referenced, mut stored) = (0u64, 0u64);
+    for i in 0..h.index_count {
+        let e = pack.entry(i);
+        let name = TileKind::from_u8(e.kind).map_or("unknown", TileKind::name);
+        let k = kinds.entry(name).or_default();
+        k.0 += 1;
+        k.1 += e.len as u64;
+        if TileKind::from_u8(e.kind).is_some_and(TileKind::has_payload) {
+            referenced += e.len as u64;
+            if offsets.insert(e.offset_or_value) {
+                stored += e.len as u64;
+            }
+        }
+    }
+    let metadata = String::from_utf8_lossy(pack.metadata());
+    if a.json {
+        let levels: Vec<serde_json::Value> = pack
+            .levels()
+            .iter()
+            .enumerate()
+            .map(|(lod, l)| serde_json::json!({"lod": lod, "tilesW": l.tiles_w, "tilesH": l.tiles_h, "width": l.width, "height": l.height, "firstEntry": l.first_entry}))
+            .collect();
+        let kinds: serde_json::Map<String, serde_json::Value> =
+            kinds.iter().map(|(k, (n, b))| (k.to_string(), serde_json::json!({"tiles": n, "bytes": b}))).collect();
+        let out = serde_json::json!({
+            "path": a.input,
+            "version": format!("{}.{}", h.major, h.minor),
+            "contentHash": format!("{:016x}", h.content_hash),
+            "fileBytes": h.file_len,
+            "width": d.width, "height": d.height, "tileSize": d.tile_size, "border": d.border,
+            "channels": d.channels, "sampleBytes": d.sample_bytes,
+            "alignment": h.alignment, "tileAlignment": h.payload_alignment,
+            "levels": levels,
+            "kinds": kinds,
+            "payloadBytesReferenced": referenced,
+            "payloadBytesStored": stored,
+            "metadata": serde_json::from_str::<serde_json::Value>(&metadata).unwrap_or(serde_json::Value::Null),
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!(
+        "{}: Vortex pack {}.{}, {} bytes, content hash {:016x}",
+        a.input.display(),
+        h.major,
+        h.minor,
+        h.file_len,
+        h.content_hash
+    );
+    println!(
+        "texture {}x{} texels, {}-texel tiles with a {}-texel border, {} channel(s) of {} byte(s), {} levels",
+        d.width, d.height, d.tile_size, d.border, d.channels, d.sample_bytes, d.level_count
+    );
+    println!("data aligned to {} bytes, tiles to {}", h.alignment, h.payload_alignment);
+    println!("{:>4} {:>11} {:>15} {:>12}", "lod", "tiles", "image texels", "first entry");
+    for (lod, l) in pack.levels().iter().enumerate() {
+        println!(
+            "{lod:>4} {:>11} {:>15} {:>12}",
+            format!("{}x{}", l.tiles_w, l.tiles_h),
+            format!("{}x{}", l.width, l.height),
+            l.first_entry
+        );
+    }
+    for (kind, (n, bytes)) in &kinds {
+        println!("{kind:>9}: {n} tiles, {}", report::mib(*bytes));
+    }
+    let saved = referenced - stored;
+    println!(
+        "payload {} stored for {} referenced ({} saved by sharing identical tiles)",
+        report::mib(stored),
+        report::mib(referenced),
+        report::mib(saved)
+    );
+    Ok(())
+}

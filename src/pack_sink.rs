@@ -1,0 +1,88 @@
+//! A sink that writes one pack file instead of a directory of tiles: `split --pack`.
+//!
+//! Tiles arrive from the encoder threads in any order; the pack writer appends each payload
+//! as it comes (one pass, no intermediate files) and keeps only the index in memory.
+//! One-colour tiles are stored as their colour, with no payload.
+
+use std::path::Path;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use vortex_pack::format::pyramid_levels;
+use vortex_pack::{Description, NewTile, PackWriter, TileId, TileKind, WriteOptions, WriteSummary};
+
+use crate::codec::Codec;
+use crate::error::{Result, TilerError};
+use crate::layout::Layout;
+use crate::pixel::PixelLayout;
+use crate::sink::TileSink;
+
+pub struct PackSink {
+    writer: Mutex<PackWriter>,
+    kind: TileKind,
+    bytes: AtomicU64,
+}
+
+/// The pack's description of a tiler layout and stored texel format.
+pub fn description(layout: &Layout, stored: PixelLayout) -> Description {
+    Description {
+        width: layout.width,
+        height: layout.height,
+        tile_size: layout.tile_size,
+        border: layout.border,
+        level_count: layout.lod_count,
+        channels: stored.channels.count() as u8,
+        sample_bytes: stored.depth.bytes() as u8,
+    }
+}
+
+pub fn tile_kind(codec: Codec) -> TileKind {
+    match codec {
+        Codec::Jpeg { .. } => TileKind::Jpeg,
+        Codec::Png { .. } => TileKind::Png,
+    }
+}
+
+impl PackSink {
+    /// Starts `dest`; `metadata` is the run's `info.json`.
+    pub fn create(
+        dest: &Path,
+        layout: &Layout,
+        stored: PixelLayout,
+        codec: Codec,
+        metadata: &[u8],
+        options: WriteOptions,
+    ) -> Result<PackSink> {
+        let d = description(layout, stored);
+        let writer = PackWriter::create(dest, d, pyramid_levels(&d, layout.tile_count), metadata, options)?;
+        Ok(PackSink { writer: Mutex::new(writer), kind: tile_kind(codec), bytes: AtomicU64::new(0) })
+    }
+
+    /// Writes the index and header and renames the pack into place.
+    pub fn finish(self) -> Result<WriteSummary> {
+        let writer = self.writer.into_inner().map_err(|_| TilerError::Options("a tile writer panicked".into()))?;
+        Ok(writer.finish()?)
+    }
+
+    fn add(&self, lod: u32, x: u32, y: u32, tile: NewTile) -> Result<()> {
+        let mut w = self.writer.lock().map_err(|_| TilerError::Options("a tile writer panicked".into()))?;
+        Ok(w.add(TileId { lod, x, y }, tile)?)
+    }
+}
+
+impl TileSink for PackSink {
+    fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+        self.add(lod, x, y, NewTile::Data(self.kind, bytes))?;
+        self.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
+        Ok(())
+    }
+
+    fn write_constant(&self, lod: u32, x: u32, y: u32, texel: &[u8]) -> Result<bool> {
+        self.add(lod, x, y, NewTile::Constant(texel))?;
+        Ok(true)
+    }
+
+    fn bytes_written(&self) -> u64 {
+        self.bytes.load(Ordering::Relaxed)
+    }
+}
