@@ -1,7 +1,7 @@
 //! Between a directory of tiles (`info.json` + files) and a pack: `pack` and `unpack`.
 //!
-//! `pack` stores every tile file's bytes unchanged, coarsest level first and each level in
-//! Morton order (see docs/pack-format.md on ordering); `unpack` writes them back, so a round
+//! `pack` stores every tile file's bytes unchanged, coarsest level first (see
+//! docs/pack-format.md on ordering); `unpack` writes them back, so a round
 //! trip gives byte-identical files. Tiles a pack stores as one colour are encoded again with
 //! the pack's codec, which gives the bytes `split` would have written.
 
@@ -100,31 +100,13 @@ fn codec_of(info: &InfoFile, extension: Option<String>) -> Option<Codec> {
     }
 }
 
-/// Every tile of `levels`, coarsest level first, each level in Morton (Z) order.
+/// Every tile, coarsest level first, each level in raster order (rows top down). Raster
+/// beats Morton order for rectangular views (`bench/order-locality.py`, docs/pack-format.md).
 pub fn pack_order(tile_count: u32, lod_count: u32) -> impl Iterator<Item = TileId> {
     (0..lod_count).rev().flat_map(move |lod| {
         let n = tile_count >> lod;
-        let bits = n.trailing_zeros();
-        (0..(n as u64 * n as u64)).map(move |m| {
-            let (x, y) = morton_decode(m);
-            debug_assert!(x < 1 << bits && y < 1 << bits);
-            TileId { lod, x, y }
-        })
+        (0..n).flat_map(move |y| (0..n).map(move |x| TileId { lod, x, y }))
     })
-}
-
-/// De-interleaves the even (x) and odd (y) bits of `m`.
-fn morton_decode(m: u64) -> (u32, u32) {
-    let compact = |mut v: u64| {
-        v &= 0x5555_5555_5555_5555;
-        v = (v | (v >> 1)) & 0x3333_3333_3333_3333;
-        v = (v | (v >> 2)) & 0x0f0f_0f0f_0f0f_0f0f;
-        v = (v | (v >> 4)) & 0x00ff_00ff_00ff_00ff;
-        v = (v | (v >> 8)) & 0x0000_ffff_0000_ffff;
-        v = (v | (v >> 16)) & 0x0000_0000_ffff_ffff;
-        v as u32
-    };
-    (compact(m), compact(m >> 1))
 }
 
 /// Packs the tiled directory `dir` into `dest`.
@@ -227,15 +209,14 @@ mod tests {
     use super::*;
 
     #[test]
-    fn morton_order_visits_each_tile_once() {
+    fn coarse_levels_come_first() {
         let ids: Vec<TileId> = pack_order(4, 3).collect();
         assert_eq!(ids.len(), 1 + 4 + 16);
         assert_eq!(ids[0], TileId { lod: 2, x: 0, y: 0 });
-        let lod0: Vec<(u32, u32)> = ids[5..].iter().map(|i| (i.x, i.y)).take(6).collect();
-        assert_eq!(lod0, vec![(0, 0), (1, 0), (0, 1), (1, 1), (2, 0), (3, 0)]);
-        let mut all: Vec<_> = ids.iter().map(|i| (i.lod, i.x, i.y)).collect();
-        all.sort();
-        all.dedup();
-        assert_eq!(all.len(), 21);
+        assert_eq!(
+            ids[1..5].iter().map(|i| (i.lod, i.x, i.y)).collect::<Vec<_>>(),
+            vec![(1, 0, 0), (1, 1, 0), (1, 0, 1), (1, 1, 1)]
+        );
+        assert_eq!(ids[20], TileId { lod: 0, x: 3, y: 3 });
     }
 }
