@@ -1,0 +1,120 @@
+//! Packs from the command line: split --pack, pack, unpack, info.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_vortex-tiler");
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN).args(args).output().expect("binary runs")
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = run(args);
+    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn fixture(name: &str) -> String {
+    format!("{}/fixtures/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Every file under `dir`, relative path -> bytes.
+fn files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push((p.strip_prefix(dir).unwrap().to_path_buf(), std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn split_pack_unpack_equals_split_to_files() {
+    let dir = tempfile::tempdir().unwrap();
+    for (img, extra) in [
+        ("sample.png", &["--border", "4"][..]),
+        ("rgba8-130x67.png", &["--tile-size", "32", "--background", "#102030"][..]),
+        ("grey-alpha16-97x61.png", &["--tile-size", "16"][..]),
+    ] {
+        let files_dir = dir.path().join(format!("{img}.files"));
+        let pack = dir.path().join(format!("{img}.vtpk"));
+        let back = dir.path().join(format!("{img}.back"));
+        let input = fixture(img);
+        let a = ["split", input.as_str(), "-q"];
+        ok(&[&a[..], &["-o", s(&files_dir)], extra].concat());
+        ok(&[&a[..], &["--pack", s(&pack)], extra].concat());
+        ok(&["unpack", s(&pack), "-o", s(&back), "-q"]);
+        assert!(files(&back) == files(&files_dir), "{img}: unpack(split --pack) differs from split -o");
+
+        // pack then unpack gives the same files back.
+        let pack2 = dir.path().join(format!("{img}.2.vtpk"));
+        let back2 = dir.path().join(format!("{img}.back2"));
+        ok(&["pack", s(&files_dir), "-o", s(&pack2), "-q"]);
+        ok(&["unpack", s(&pack2), "-o", s(&back2), "-q"]);
+        assert!(files(&back2) == files(&files_dir), "{img}: unpack(pack) differs");
+    }
+}
+
+#[test]
+fn info_describes_the_pack() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = dir.path().join("s.vtpk");
+    let line = ok(&["split", &fixture("sample.png"), "--pack", s(&pack), "--border", "4", "--align", "64K"]);
+    assert!(line.contains("pack: 85 tiles") && line.contains("one-colour"), "{line}");
+    let text = ok(&["info", s(&pack)]);
+    assert!(text.contains("700x500") && text.contains("4 levels") && text.contains("jpeg"), "{text}");
+    let json: serde_json::Value = serde_json::from_str(&ok(&["info", s(&pack), "--json"])).unwrap();
+    assert_eq!(json["tileSize"], 128);
+    assert_eq!(json["alignment"], 65536);
+    assert_eq!(json["levels"].as_array().unwrap().len(), 4);
+    assert_eq!(json["metadata"]["codec"], "jpeg");
+    let tiles: u64 = json["kinds"].as_object().unwrap().values().map(|k| k["tiles"].as_u64().unwrap()).sum();
+    assert_eq!(tiles, 85);
+}
+
+#[test]
+fn failed_runs_leave_no_pack() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = std::fs::read(fixture("sample.png")).unwrap();
+    let cut = dir.path().join("cut.png");
+    std::fs::write(&cut, &png[..png.len() / 2]).unwrap();
+    let pack = dir.path().join("out.vtpk");
+    let out = run(&["split", s(&cut), "--pack", s(&pack)]);
+    assert_eq!(out.status.code(), Some(1));
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left.len(), 1, "only the input is left: {left:?}");
+
+    // A directory with a missing tile cannot be packed; the error names the file.
+    let tiles = dir.path().join("tiles");
+    ok(&["split", &fixture("sample.png"), "-o", s(&tiles), "-q"]);
+    std::fs::remove_file(tiles.join("lod00-x0003-y0002.jpg")).unwrap();
+    let out = run(&["pack", s(&tiles), "-o", s(&pack)]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("lod00-x0003-y0002.jpg"), "{err}");
+    assert!(!pack.exists());
+}
+
+#[test]
+fn opening_something_else_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let not_pack = dir.path().join("x.vtpk");
+    std::fs::write(&not_pack, vec![7u8; 500]).unwrap();
+    let out = run(&["info", s(&not_pack)]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(err.contains("x.vtpk") && err.contains("not a Vortex pack"), "{err}");
+}
