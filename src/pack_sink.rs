@@ -6,7 +6,6 @@
 
 use std::path::Path;
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use vortex_pack::format::pyramid_levels;
 use vortex_pack::{Description, NewTile, PackWriter, TileId, TileKind, WriteOptions, WriteSummary};
@@ -20,7 +19,6 @@ use crate::sink::TileSink;
 pub struct PackSink {
     writer: Mutex<PackWriter>,
     kind: TileKind,
-    bytes: AtomicU64,
 }
 
 /// The pack's description of a tiler layout and stored texel format.
@@ -55,7 +53,7 @@ impl PackSink {
     ) -> Result<PackSink> {
         let d = description(layout, stored);
         let writer = PackWriter::create(dest, d, pyramid_levels(&d, layout.tile_count), metadata, options)?;
-        Ok(PackSink { writer: Mutex::new(writer), kind: tile_kind(codec), bytes: AtomicU64::new(0) })
+        Ok(PackSink { writer: Mutex::new(writer), kind: tile_kind(codec) })
     }
 
     /// Writes the index and header and renames the pack into place.
@@ -72,17 +70,23 @@ impl PackSink {
 
 impl TileSink for PackSink {
     fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
-        self.add(lod, x, y, NewTile::Data(self.kind, bytes))?;
-        self.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
-        Ok(())
+        self.add(lod, x, y, NewTile::Data(self.kind, bytes))
     }
 
-    fn write_constant(&self, lod: u32, x: u32, y: u32, texel: &[u8]) -> Result<bool> {
-        self.add(lod, x, y, NewTile::Constant(texel))?;
-        Ok(true)
+    fn takes_constants(&self) -> bool {
+        true
     }
 
+    fn write_constant(&self, lod: u32, x: u32, y: u32, texel: &[u8]) -> Result<()> {
+        self.add(lod, x, y, NewTile::Constant(texel))
+    }
+
+    fn ordered(&self) -> bool {
+        true
+    }
+
+    /// Payload bytes stored: identical tiles count once.
     fn bytes_written(&self) -> u64 {
-        self.bytes.load(Ordering::Relaxed)
+        self.writer.lock().map_or(0, |w| w.payload_bytes())
     }
 }

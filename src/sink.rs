@@ -18,10 +18,20 @@ use crate::info::Info;
 
 pub trait TileSink: Sync {
     fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()>;
-    /// Offers a tile whose texels all equal `texel` (samples of the stored layout,
-    /// little-endian). Returns `false` if the sink wants it encoded like any other tile.
-    fn write_constant(&self, _lod: u32, _x: u32, _y: u32, _texel: &[u8]) -> Result<bool> {
-        Ok(false)
+    /// Whether one-colour tiles should come as their colour (`write_constant`) rather than
+    /// encoded.
+    fn takes_constants(&self) -> bool {
+        false
+    }
+    /// A tile whose texels all equal `texel` (samples of the stored layout, little-endian);
+    /// only called when `takes_constants`.
+    fn write_constant(&self, lod: u32, x: u32, y: u32, _texel: &[u8]) -> Result<()> {
+        Err(TilerError::Options(format!("tile (lod {lod}, x {x}, y {y}): this sink stores no one-colour tiles")))
+    }
+    /// Whether tiles must arrive in the same order on every run (a pack's bytes depend on it;
+    /// a directory's do not, and takes them from many threads at once).
+    fn ordered(&self) -> bool {
+        false
     }
     /// Bytes of tile data written so far.
     fn bytes_written(&self) -> u64;

@@ -158,32 +158,53 @@ fn consume<T: Sample>(
             }
         }
         let jobs: Vec<(u32, &CutTile<T>)> = work.iter().flat_map(|b| b.tiles.iter().map(move |t| (b.lod, t))).collect();
-        jobs.par_iter().try_for_each_init(Vec::new, |buf, &(lod, CutTile { texels, places })| {
-            let (x0, y0) = places[0];
-            // A one-colour tile is offered to the sink as its colour; sinks that store it so
-            // (packs) need no encoding.
-            let channels = encoder.source_layout().channels.count();
-            let constant = texels.chunks_exact(channels).all(|t| t == &texels[..channels]);
-            let texel = constant.then(|| encoder.stored_texel(&texels[..channels]));
-            if let Some(texel) = &texel
-                && sink.write_constant(lod, x0, y0, texel)?
-            {
-                for (x, y) in &places[1..] {
-                    sink.write_constant(lod, *x, *y, texel)?;
+        let store = |(lod, tile, stored): (u32, &CutTile<T>, Stored)| -> Result<()> {
+            for &(x, y) in &tile.places {
+                match &stored {
+                    Stored::Encoded(bytes) => sink.write_tile(lod, x, y, bytes)?,
+                    Stored::Constant(texel) => sink.write_constant(lod, x, y, texel)?,
                 }
-            } else {
-                encoder.encode(texels, buf).map_err(|message| TilerError::Encode { lod, x: x0, y: y0, message })?;
-                for (x, y) in places {
-                    sink.write_tile(lod, *x, *y, buf)?;
-                }
+            }
+            tiles.fetch_add(tile.places.len() as u64, Ordering::Relaxed);
+            progress.advance(tile.places.len() as u64);
+            Ok(())
+        };
+        let prepared = jobs.par_iter().map(|&(lod, tile)| {
+            let stored = prepare(encoder, sink, lod, tile)?;
+            if matches!(stored, Stored::Encoded(_)) {
                 encoded.fetch_add(1, Ordering::Relaxed);
             }
-            tiles.fetch_add(places.len() as u64, Ordering::Relaxed);
-            progress.advance(places.len() as u64);
-            Ok::<(), TilerError>(())
-        })?;
+            Ok((lod, tile, stored))
+        });
+        if sink.ordered() {
+            // Encode in parallel, store in the producer's (deterministic) order.
+            let prepared: Vec<Result<_>> = prepared.collect();
+            prepared.into_iter().try_for_each(|p| store(p?))?;
+        } else {
+            prepared.try_for_each(|p| store(p?))?;
+        }
     }
     Ok(())
+}
+
+/// A tile ready for the sink.
+enum Stored {
+    Encoded(Vec<u8>),
+    /// Every texel is this one (stored layout, little-endian samples).
+    Constant(Vec<u8>),
+}
+
+/// Encodes a tile, unless it has one colour and the sink stores such tiles as their colour.
+fn prepare<T: Sample>(encoder: &TileEncoder<T>, sink: &dyn TileSink, lod: u32, tile: &CutTile<T>) -> Result<Stored> {
+    let channels = encoder.source_layout().channels.count();
+    let texels = &tile.texels;
+    if sink.takes_constants() && texels.chunks_exact(channels).all(|t| t == &texels[..channels]) {
+        return Ok(Stored::Constant(encoder.stored_texel(&texels[..channels])));
+    }
+    let mut bytes = Vec::new();
+    let (x, y) = tile.places[0];
+    encoder.encode(texels, &mut bytes).map_err(|message| TilerError::Encode { lod, x, y, message })?;
+    Ok(Stored::Encoded(bytes))
 }
 
 /// One LOD in flight: its band, the tile rows cut so far and the reducer to the next LOD.

@@ -118,3 +118,15 @@ fn opening_something_else_is_a_clear_error() {
     assert_eq!(out.status.code(), Some(1));
     assert!(err.contains("x.vtpk") && err.contains("not a Vortex pack"), "{err}");
 }
+
+#[test]
+fn packs_are_byte_identical_whatever_the_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut packs = Vec::new();
+    for threads in ["1", "2", "3"] {
+        let pack = dir.path().join(format!("t{threads}.vtpk"));
+        ok(&["split", &fixture("sample.png"), "--pack", s(&pack), "--tile-size", "32", "--threads", threads, "-q"]);
+        packs.push(std::fs::read(&pack).unwrap());
+    }
+    assert!(packs[0] == packs[1] && packs[1] == packs[2]);
+}
