@@ -79,7 +79,9 @@ pub struct Description {
 impl Description {
     /// Bytes of one raw tile.
     pub fn raw_tile_len(&self) -> Option<u64> {
-        (self.tile_size as u64).checked_mul(self.tile_size as u64)?.checked_mul(self.channels as u64 * self.sample_bytes as u64)
+        (self.tile_size as u64)
+            .checked_mul(self.tile_size as u64)?
+            .checked_mul(self.channels as u64 * self.sample_bytes as u64)
     }
 }
 
@@ -272,7 +274,13 @@ impl Level {
     }
 
     pub(crate) fn decode(b: &[u8]) -> Level {
-        Level { tiles_w: u32_at(b, 0), tiles_h: u32_at(b, 4), first_entry: u64_at(b, 8), width: u32_at(b, 16), height: u32_at(b, 20) }
+        Level {
+            tiles_w: u32_at(b, 0),
+            tiles_h: u32_at(b, 4),
+            first_entry: u64_at(b, 8),
+            width: u32_at(b, 16),
+            height: u32_at(b, 20),
+        }
     }
 }
 
@@ -306,7 +314,8 @@ pub fn pyramid_levels(d: &Description, tiles_at_lod0: u32) -> Vec<Level> {
         .map(|lod| {
             let n = tiles_at_lod0 >> lod;
             let shrink = |v: u32| ((v as u64 + (1u64 << lod) - 1) >> lod) as u32;
-            let level = Level { tiles_w: n, tiles_h: n, first_entry: first, width: shrink(d.width), height: shrink(d.height) };
+            let level =
+                Level { tiles_w: n, tiles_h: n, first_entry: first, width: shrink(d.width), height: shrink(d.height) };
             first += n as u64 * n as u64;
             level
         })

@@ -12,16 +12,24 @@
 //! ```
 //!
 //! This crate is a leaf: std, a CRC-32C crate, memmap2, thiserror and zstd. The writer is
-//! behind the `write` feature so that readers need none of it.
+//! behind the `write` feature so that readers need none of it; `decode_rgba8` (PNG and JPEG
+//! decoding, and `verify` with [`VerifyOptions::decode`]) is behind `decode`. [`verify()`]
+//! checks every byte of a pack and reports every problem it finds.
 
+#[cfg(feature = "decode")]
+mod decode;
 mod error;
 pub mod format;
 mod reader;
+pub mod verify;
 #[cfg(feature = "write")]
 mod writer;
 
+#[cfg(feature = "decode")]
+pub use decode::{decode_rgba8, decode_rgba8_limited};
 pub use error::{PackError, Result};
 pub use format::{Description, Entry, Header, Level, TileKind};
 pub use reader::{Pack, Tile, TileId};
+pub use verify::{DEFAULT_MAX_DECODED_BYTES, Problem, Report, VerifyOptions, verify};
 #[cfg(feature = "write")]
 pub use writer::{NewTile, PackWriter, WriteOptions, WriteSummary};

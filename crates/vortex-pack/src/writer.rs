@@ -74,7 +74,13 @@ pub struct PackWriter {
 
 impl PackWriter {
     /// Starts `dest` (written as `.<name>.tmp-<pid>` beside it until `finish`).
-    pub fn create(dest: impl AsRef<Path>, description: Description, levels: Vec<Level>, metadata: &[u8], options: WriteOptions) -> Result<PackWriter> {
+    pub fn create(
+        dest: impl AsRef<Path>,
+        description: Description,
+        levels: Vec<Level>,
+        metadata: &[u8],
+        options: WriteOptions,
+    ) -> Result<PackWriter> {
         let dest = dest.as_ref().to_path_buf();
         let usage = PackError::Usage;
         if levels.len() != description.level_count as usize {
@@ -85,23 +91,48 @@ impl PackWriter {
                 return Err(usage(format!("alignment {a} is not a power of two >= 8")));
             }
         }
+        // What the reader refuses, refused here (a texel over 8 bytes would not fit an entry).
+        let d = &description;
+        if !(1..=4).contains(&d.channels) || !(1..=2).contains(&d.sample_bytes) {
+            return Err(usage(format!("{} channels of {} bytes is not a texel format", d.channels, d.sample_bytes)));
+        }
+        if d.tile_size == 0 || d.border.checked_mul(2).is_none_or(|b| b >= d.tile_size) || d.width == 0 || d.height == 0
+        {
+            return Err(usage(format!(
+                "image {}x{}, tile {} border {} is not a valid texture",
+                d.width, d.height, d.tile_size, d.border
+            )));
+        }
+        if d.level_count == 0 || d.level_count > 32 {
+            return Err(usage(format!("{} levels (1 to 32)", d.level_count)));
+        }
         let meta_len = u32::try_from(metadata.len()).map_err(|_| usage("metadata over 4 GiB".into()))?;
         let mut count = 0u64;
         for l in &levels {
-            if l.first_entry != count {
-                return Err(usage("levels must follow each other in the index".into()));
+            if l.first_entry != count || l.tiles_w == 0 || l.tiles_h == 0 {
+                return Err(usage("levels must follow each other in the index and hold tiles".into()));
             }
-            count += l.tiles_w as u64 * l.tiles_h as u64;
+            count =
+                count.checked_add(l.tiles_w as u64 * l.tiles_h as u64).ok_or_else(|| usage("too many tiles".into()))?;
         }
         let name = dest.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "pack".into());
         let tmp = dest.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
-        let file = OpenOptions::new().write(true).read(true).create(true).truncate(true).open(&tmp).map_err(|e| io(&tmp, e))?;
+        let file = OpenOptions::new()
+            .write(true)
+            .read(true)
+            .create(true)
+            .truncate(true)
+            .open(&tmp)
+            .map_err(|e| io(&tmp, e))?;
 
         let levels_offset = HEADER_LEN as u64;
         let index_offset = levels_offset + levels.len() as u64 * LEVEL_LEN as u64;
+        let count_usize = usize::try_from(count)
+            .ok()
+            .filter(|n| n.checked_mul(ENTRY_LEN).is_some())
+            .ok_or_else(|| usage("too many tiles".into()))?;
         let meta_offset = index_offset + count * ENTRY_LEN as u64;
         let data_offset = (meta_offset + meta_len as u64).next_multiple_of(options.alignment as u64);
-        let count_usize = usize::try_from(count).map_err(|_| usage("too many tiles".into()))?;
         let mut w = PackWriter {
             dest,
             tmp,
@@ -130,7 +161,7 @@ impl PackWriter {
     /// Adds the tile at `id`; each tile at most once. Identical payloads are stored once.
     pub fn add(&mut self, id: TileId, tile: NewTile) -> Result<()> {
         let position = self.position(id)?;
-        if std::mem::replace(&mut self.written[position], true) {
+        if self.written[position] {
             return Err(PackError::Usage(format!("tile (lod {}, x {}, y {}) written twice", id.lod, id.x, id.y)));
         }
         let texel = self.description.channels as usize * self.description.sample_bytes as usize;
@@ -152,8 +183,12 @@ impl PackWriter {
                 if !kind.has_payload() {
                     return Err(PackError::Usage(format!("{} tiles have no payload", kind.name())));
                 }
-                if kind == TileKind::Raw && Some(bytes.len() as u64) != self.description.raw_tile_len() {
-                    return Err(PackError::Usage(format!("a raw tile has {:?} bytes, not {}", self.description.raw_tile_len(), bytes.len())));
+                if bytes.is_empty() {
+                    return Err(PackError::Usage(format!("an empty {} payload", kind.name())));
+                }
+                let raw_len = self.description.raw_tile_len().unwrap_or(u64::MAX);
+                if kind == TileKind::Raw && bytes.len() as u64 != raw_len {
+                    return Err(PackError::Usage(format!("a raw tile has {raw_len} bytes, not {}", bytes.len())));
                 }
                 let len = u32::try_from(bytes.len()).map_err(|_| PackError::Usage("a tile over 4 GiB".into()))?;
                 let crc = crc32c::crc32c(bytes);
@@ -167,6 +202,8 @@ impl PackWriter {
                 Entry { offset_or_value: offset, len, crc, kind: kind as u8 }
             }
         };
+        // Only now: a tile refused above may be added again.
+        self.written[position] = true;
         self.entries[position] = entry;
         self.summary.tiles += 1;
         Ok(())
@@ -210,11 +247,18 @@ impl PackWriter {
         Ok(offset)
     }
 
+    /// Payload bytes stored so far (shared tiles counted once).
+    pub fn payload_bytes(&self) -> u64 {
+        self.summary.payload_bytes
+    }
+
     /// Writes the tables and the header, syncs and renames the file into place. Tiles never
     /// added are absent.
     pub fn finish(mut self) -> Result<WriteSummary> {
         let tmp = self.tmp.clone();
-        let file = self.file.take().expect("open until finish");
+        // The file stays in `self.file` until renamed, so that an error on the way leaves `Drop`
+        // to delete it.
+        let file = self.file.as_ref().expect("open until finish");
         let io_err = |e| io(&tmp, e);
         // Pad the file end so that the data section ends the file exactly (the padding of a
         // zero-payload pack is the data section itself).
@@ -251,8 +295,11 @@ impl PackWriter {
         file.sync_data().map_err(io_err)?;
         file.write_all_at(&header.encode(), 0).map_err(io_err)?;
         file.sync_all().map_err(io_err)?;
-        drop(file);
-        fs::rename(&self.tmp, &self.dest).map_err(|e| io(&self.dest, e))?;
+        drop(self.file.take());
+        if let Err(e) = fs::rename(&self.tmp, &self.dest) {
+            let _ = fs::remove_file(&self.tmp);
+            return Err(io(&self.dest, e));
+        }
         if let Some(dir) = self.dest.parent().filter(|d| !d.as_os_str().is_empty()) {
             // Make the rename itself durable; not all file systems allow syncing a directory.
             let _ = File::open(dir).and_then(|d| d.sync_all());
