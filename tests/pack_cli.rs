@@ -130,3 +130,34 @@ fn packs_are_byte_identical_whatever_the_thread_count() {
     }
     assert!(packs[0] == packs[1] && packs[1] == packs[2]);
 }
+
+#[test]
+fn verify_passes_sound_packs_and_names_every_damaged_tile() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = dir.path().join("s.vtpk");
+    ok(&["split", &fixture("sample.png"), "--pack", s(&pack), "--border", "4", "-q"]);
+    let report = ok(&["verify", s(&pack), "--decode"]);
+    assert!(report.contains("OK: no problem found"), "{report}");
+
+    // Damage two payloads and one padding byte: all three are reported, exit code 1.
+    let mut bytes = std::fs::read(&pack).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&ok(&["verify", s(&pack), "--json"])).unwrap();
+    assert_eq!(json["ok"], true);
+    let len = bytes.len();
+    bytes[len - 100] ^= 1;
+    bytes[len / 2] ^= 1;
+    std::fs::write(&pack, &bytes).unwrap();
+    let out = run(&["verify", s(&pack), "--json"]);
+    assert_eq!(out.status.code(), Some(1));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let problems = json["problems"].as_array().unwrap();
+    assert!(problems.len() >= 2, "{problems:?}");
+    assert!(problems.iter().all(|p| p["offset"].is_u64()), "{problems:?}");
+
+    // A truncated pack does not open; verify says so and fails.
+    std::fs::write(&pack, &bytes[..len - 1]).unwrap();
+    let out = run(&["verify", s(&pack)]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(err.contains("truncated"), "{err}");
+}

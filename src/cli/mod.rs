@@ -40,6 +40,11 @@ enum Command {
     Unpack(pack::UnpackArgs),
     /// Describe a pack: texture, levels, tile kinds, sizes, deduplication.
     Info(pack::InfoArgs),
+    /// Check a pack end to end: structure, every checksum, every byte; report every problem.
+    ///
+    /// Exits 0 if the pack is sound, 1 otherwise, after listing every problem with its byte
+    /// offset and tile. --decode also decodes every tile (sizes checked before allocating).
+    Verify(pack::VerifyArgs),
 }
 
 /// Where a pack's bytes go.
@@ -74,6 +79,7 @@ pub fn run(args: Args) -> Result<()> {
         Command::Pack(a) => pack::run_pack(a),
         Command::Unpack(a) => pack::run_unpack(a),
         Command::Info(a) => pack::run_info(a),
+        Command::Verify(a) => pack::run_verify(a),
     }
 }
 
