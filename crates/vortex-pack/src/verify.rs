@@ -258,6 +258,9 @@ pub fn verify(pack: &Pack, opts: VerifyOptions) -> Report {
         );
     }
     v.sections();
+    if let Err(e) = pack.check_index() {
+        v.problem("index", Some(h.index_offset), None, e.to_string());
+    }
     v.content_hash();
     v.levels();
     v.metadata();
