@@ -161,3 +161,43 @@ fn verify_passes_sound_packs_and_names_every_damaged_tile() {
     assert_eq!(out.status.code(), Some(1));
     assert!(err.contains("truncated"), "{err}");
 }
+
+#[test]
+fn a_killed_write_leaves_nothing_that_opens_as_a_pack() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("big.ppm");
+    let mut bytes = b"P6\n3000 3000\n255\n".to_vec();
+    bytes.resize(bytes.len() + 3 * 3000 * 3000, 90);
+    std::fs::write(&input, bytes).unwrap();
+    let pack = dir.path().join("out.vtpk");
+    let child = Command::new(BIN)
+        .args([
+            "split",
+            s(&input),
+            "--pack",
+            s(&pack),
+            "--codec",
+            "png",
+            "--png-compression",
+            "best",
+            "--tile-size",
+            "16",
+            "-q",
+        ])
+        .spawn()
+        .unwrap();
+    let tmp = dir.path().join(format!(".out.vtpk.tmp-{}", child.id()));
+    let started = std::time::Instant::now();
+    while std::fs::metadata(&tmp).map_or(true, |m| m.len() < 100_000) && started.elapsed().as_secs() < 20 {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    assert!(Command::new("kill").args(["-KILL", &child.id().to_string()]).status().unwrap().success());
+    let status = child.wait_with_output().unwrap().status;
+    assert!(!status.success());
+    assert!(!pack.exists(), "nothing at the destination");
+    // The leftover temporary file starts with zeros and is refused as unfinished.
+    let out = run(&["info", s(&tmp)]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(err.contains("unfinished write"), "{err}");
+}
