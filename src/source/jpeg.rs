@@ -414,16 +414,8 @@ impl RowSource for JpegSource {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::source::read_all;
     use jpeg_encoder::{ColorType as Jc, Encoder, SamplingFactor};
-
-    fn read_all(source: &mut dyn RowSource) -> Result<Vec<u8>> {
-        let row = source.width() as usize * source.layout().bytes_per_pixel();
-        let mut all = vec![0u8; row * source.height() as usize];
-        for chunk in all.chunks_exact_mut(row) {
-            source.read_row(chunk)?;
-        }
-        Ok(all)
-    }
 
     /// Smooth gradients with a few hard edges: realistic enough for JPEG, deterministic.
     fn pattern(width: u32, height: u32, samples: usize) -> Vec<u8> {

@@ -124,3 +124,14 @@ pub(crate) fn human_bytes(bytes: u64) -> String {
     }
     if unit == 0 { format!("{bytes} B") } else { format!("{value:.1} {}", units[unit]) }
 }
+
+/// Reads every row of `source` into one buffer (for tests of the decoders).
+#[cfg(test)]
+pub(crate) fn read_all(source: &mut dyn RowSource) -> Result<Vec<u8>> {
+    let row = source.width() as usize * source.layout().bytes_per_pixel();
+    let mut all = vec![0u8; row * source.height() as usize];
+    for chunk in all.chunks_exact_mut(row) {
+        source.read_row(chunk)?;
+    }
+    Ok(all)
+}

@@ -424,18 +424,8 @@ impl RowSource for TiffSource {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::source::RowSource;
+    use crate::source::read_all;
     use tiff::encoder::{Compression, DeflateLevel, TiffEncoder, TiffKind, colortype};
-
-    /// Reads every row of `source` into one buffer.
-    fn read_all(source: &mut dyn RowSource) -> Result<Vec<u8>> {
-        let row = source.width() as usize * source.layout().bytes_per_pixel();
-        let mut all = vec![0u8; row * source.height() as usize];
-        for chunk in all.chunks_exact_mut(row) {
-            source.read_row(chunk)?;
-        }
-        Ok(all)
-    }
 
     /// The `image` crate's whole-image decode, as native-endian bytes.
     fn image_crate_decode(path: &Path) -> (PixelLayout, Vec<u8>) {
