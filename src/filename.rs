@@ -112,6 +112,43 @@ impl FilenameFormat {
         out
     }
 
+    /// The arguments that would give `name`, or `None` if it does not match the pattern (or
+    /// gives one argument two values).
+    pub fn match_name(&self, name: &str) -> Option<Vec<u32>> {
+        let mut args: Vec<Option<u32>> = vec![None; self.arg_count()];
+        let mut rest = name;
+        for p in &self.pieces {
+            match p {
+                Piece::Literal(l) => rest = rest.strip_prefix(l.as_str())?,
+                Piece::Arg { index, .. } => {
+                    let trimmed = rest.trim_start_matches(' ');
+                    let digits = trimmed.bytes().take_while(u8::is_ascii_digit).count();
+                    if digits == 0 {
+                        return None;
+                    }
+                    let value: u32 = trimmed[..digits].parse().ok()?;
+                    if args[*index].is_some_and(|v| v != value) {
+                        return None;
+                    }
+                    args[*index] = Some(value);
+                    rest = &trimmed[digits..];
+                }
+            }
+        }
+        if !rest.is_empty() {
+            return None;
+        }
+        args.into_iter().collect()
+    }
+
+    fn arg_count(&self) -> usize {
+        self.pieces
+            .iter()
+            .filter_map(|p| if let Piece::Arg { index, .. } = p { Some(index + 1) } else { None })
+            .max()
+            .unwrap_or(0)
+    }
+
     /// The file extension (after the last '.'), lower-cased.
     pub fn extension(&self) -> Option<String> {
         match self.pieces.last() {
@@ -140,6 +177,17 @@ mod tests {
         assert_eq!(f.format(&[4, 10, 20]), "4/20/10.jpg");
         let f = FilenameFormat::parse("100%%-%s-%s-%s", 3).unwrap();
         assert_eq!(f.format(&[1, 2, 3]), "100%-1-2-3");
+    }
+
+    #[test]
+    fn names_match_back() {
+        let f = FilenameFormat::parse("x%02s-y%02s.png", 2).unwrap();
+        assert_eq!(f.match_name("x05-y123.png"), Some(vec![5, 123]));
+        assert_eq!(f.match_name("x5-y1.png"), Some(vec![5, 1]));
+        assert_eq!(f.match_name("x05-y12.jpg"), None);
+        assert_eq!(f.match_name("y05-x12.png"), None);
+        let f = FilenameFormat::parse("%1$d/%3$d/%2$d.jpg", 3).unwrap();
+        assert_eq!(f.match_name(&f.format(&[4, 10, 20])), Some(vec![4, 10, 20]));
     }
 
     #[test]

@@ -23,3 +23,4 @@ pub mod settings;
 pub mod sink;
 pub mod source;
 pub mod split;
+pub mod tiled;

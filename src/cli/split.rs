@@ -13,6 +13,7 @@ use vortex_tiler::pack_sink::PackSink;
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::settings::{self, CodecChoice, Requested};
 use vortex_tiler::sink::DirSink;
+use vortex_tiler::source::RowSource;
 use vortex_tiler::{source, split};
 
 use crate::report;
@@ -28,6 +29,18 @@ pub struct SplitArgs {
     #[arg(long = "input", value_name = "INPUT", conflicts_with = "input")]
     input_flag: Option<PathBuf>,
 
+    /// Tile file names, printf-like with positional arguments 1 = LOD, 2 = x, 3 = y; '/' makes
+    /// subdirectories [default: lod%1$02s-x%2$04s-y%3$04s.<ext>].
+    #[arg(long, visible_alias = "ff", value_name = "PATTERN")]
+    filename_format: Option<String>,
+
+    #[command(flatten)]
+    out: OutputArgs,
+}
+
+/// What `split` and `convert` write, and how.
+#[derive(clap::Args, Debug)]
+pub struct OutputArgs {
     /// Output directory (created; replaced only if it holds a previous output's info.json).
     #[arg(short, long, value_name = "DIR", required_unless_present = "pack", conflicts_with = "pack")]
     output: Option<PathBuf>,
@@ -78,11 +91,6 @@ pub struct SplitArgs {
     #[arg(long, value_name = "TYPE", value_parser = super::parse_tile_type)]
     tile_type: Option<Depth>,
 
-    /// Tile file names, printf-like with positional arguments 1 = LOD, 2 = x, 3 = y; '/' makes
-    /// subdirectories [default: lod%1$02s-x%2$04s-y%3$04s.<ext>].
-    #[arg(long, visible_alias = "ff", value_name = "PATTERN")]
-    filename_format: Option<String>,
-
     /// Largest image this tool will hold whole in memory when a format cannot be streamed
     /// (interlaced PNG, progressive JPEG, one-strip TIFF, WebP, ...), e.g. 512M, 4G.
     #[arg(long, value_name = "SIZE", default_value = "1G", value_parser = super::parse_size)]
@@ -100,14 +108,19 @@ pub struct SplitArgs {
 pub fn run(a: SplitArgs) -> Result<()> {
     let started = Instant::now();
     let input = a.input.or(a.input_flag).expect("clap requires one");
+    let source = source::open(&input, a.out.max_memory)?;
+    tile(source, a.filename_format, &a.out, started)
+}
+
+/// Runs the pipeline from `source` into the output `out` names, with the progress bar and
+/// the summary line. `names` is the output filename format flag.
+pub fn tile(source: Box<dyn RowSource>, names: Option<String>, a: &OutputArgs, started: Instant) -> Result<()> {
     // Only an output directory can hold an info.json that configures the run.
     let info_path = a.output.as_ref().map(|o| o.join("info.json"));
     let existing = match &info_path {
         Some(p) if p.is_file() => Some(InfoFile::read(p)?),
         _ => None,
     };
-
-    let source = source::open(&input, a.max_memory)?;
     let requested = Requested {
         tile_size: a.tile_size,
         border: a.border,
@@ -118,7 +131,7 @@ pub fn run(a: SplitArgs) -> Result<()> {
         background: a.background,
         flatten: a.flatten,
         tile_depth: a.tile_type,
-        filename_format: a.filename_format,
+        filename_format: names,
     };
     let existing_ref = info_path.as_deref().zip(existing.as_ref());
     let (opts, names) = settings::resolve(&requested, existing_ref, source.layout())?;

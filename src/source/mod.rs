@@ -11,6 +11,8 @@ mod pnm;
 mod tiff;
 mod whole;
 
+pub use whole::{Decoded, decode_tile};
+
 use std::fs::File;
 use std::io::Read;
 use std::path::Path;

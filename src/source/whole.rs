@@ -47,7 +47,13 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     limits.max_alloc = Some(max_memory);
     decoder.set_limits(limits).map_err(|e| image_error(path, e))?;
     let image = DynamicImage::from_decoder(decoder).map_err(|e| image_error(path, e))?;
-    let bytes = match image {
+    let bytes = native_bytes(path, image)?;
+    Ok(Box::new(WholeSource { format: format!("{format:?}").to_lowercase(), width, height, layout, bytes, next: 0 }))
+}
+
+/// An image's samples in native byte order, in one of the pipeline's layouts.
+fn native_bytes(path: &Path, image: DynamicImage) -> Result<Vec<u8>> {
+    Ok(match image {
         DynamicImage::ImageLuma8(i) => i.into_raw(),
         DynamicImage::ImageLumaA8(i) => i.into_raw(),
         DynamicImage::ImageRgb8(i) => i.into_raw(),
@@ -57,8 +63,26 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         DynamicImage::ImageRgb16(i) => bytemuck::cast_slice(&i.into_raw()).to_vec(),
         DynamicImage::ImageRgba16(i) => bytemuck::cast_slice(&i.into_raw()).to_vec(),
         other => return Err(TilerError::unsupported(path, format!("pixel type {:?} is not supported", other.color()))),
-    };
-    Ok(Box::new(WholeSource { format: format!("{format:?}").to_lowercase(), width, height, layout, bytes, next: 0 }))
+    })
+}
+
+/// A small image (a tile) decoded whole from memory.
+pub struct Decoded {
+    pub width: u32,
+    pub height: u32,
+    pub layout: PixelLayout,
+    /// Native-endian samples, rows top down.
+    pub bytes: Vec<u8>,
+}
+
+/// Decodes a tile file's bytes; `path` names it in errors. Tiles are small, so the `image`
+/// crate's default allocation limit applies.
+pub fn decode_tile(path: &Path, bytes: &[u8]) -> Result<Decoded> {
+    let image = image::load_from_memory(bytes).map_err(|e| image_error(path, e))?;
+    let (width, height) = (image.width(), image.height());
+    let layout = layout_of(image.color())
+        .ok_or_else(|| TilerError::unsupported(path, format!("pixel type {:?} is not supported", image.color())))?;
+    Ok(Decoded { width, height, layout, bytes: native_bytes(path, image)? })
 }
 
 fn layout_of(colour: image::ColorType) -> Option<PixelLayout> {

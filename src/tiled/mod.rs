@@ -1,0 +1,201 @@
+//! Already-tiled inputs for `convert`: a grid of tiles whose payloads, laid side by side, form
+//! one image. [`TiledSource`] turns any [`TileGrid`] into a [`RowSource`], so re-tiling runs
+//! through the same pipeline, pyramid and sinks as `split`.
+//!
+//! Only one row of input tiles is decoded and held at a time (decoded in parallel), so memory
+//! does not grow with the grid's height.
+
+mod dir;
+mod split_output;
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use rayon::prelude::*;
+
+pub use dir::NamedDir;
+pub use split_output::SplitOutput;
+
+use crate::error::{Result, TilerError};
+use crate::pixel::PixelLayout;
+use crate::source::{ImageHeader, RowSource, decode_tile};
+
+/// Where a cell's texels come from.
+pub enum CellData {
+    /// An encoded image file's bytes (PNG, JPEG, ...), and a name for errors.
+    File(PathBuf, Vec<u8>),
+    /// Samples in the grid's layout, `width x height` of the whole stored tile.
+    Samples { name: PathBuf, width: u32, height: u32, bytes: Vec<u8> },
+}
+
+/// A tiled image. Cell (c, r) covers image texels `[c * cell_w, min((c + 1) * cell_w, width))`
+/// across and likewise down; its stored tile may carry extra texels (borders, overlap) that
+/// `crop` says how to skip.
+pub trait TileGrid: Send + Sync {
+    /// One line about the input, for the summary.
+    fn describe(&self) -> String;
+    fn header(&self) -> ImageHeader;
+    /// Nominal cell size in image texels.
+    fn cell(&self) -> (u32, u32);
+    /// The stored tile of cell (c, r), or `None` if it is missing.
+    fn read(&self, col: u32, row: u32) -> Result<Option<CellData>>;
+    /// Texels to skip at the left and top of the stored tile of cell (c, r).
+    fn crop(&self, col: u32, row: u32) -> (u32, u32);
+}
+
+/// Rows of a [`TileGrid`], one row of cells decoded at a time.
+pub struct TiledSource {
+    grid: Box<dyn TileGrid>,
+    header: ImageHeader,
+    /// Samples used for missing cells (one texel).
+    fill: Vec<u8>,
+    strict: bool,
+    missing: Mutex<Vec<String>>,
+    /// The decoded cell row: `cell_h` image rows (fewer at the bottom).
+    band: Vec<u8>,
+    band_row: Option<u32>,
+    next: u32,
+}
+
+impl TiledSource {
+    /// `fill` is one texel of the grid's layout (native-endian samples) for missing cells;
+    /// with `strict`, a missing cell is an error instead.
+    pub fn new(grid: Box<dyn TileGrid>, fill: Vec<u8>, strict: bool) -> TiledSource {
+        let header = grid.header();
+        TiledSource {
+            grid,
+            header,
+            fill,
+            strict,
+            missing: Mutex::new(Vec::new()),
+            band: Vec::new(),
+            band_row: None,
+            next: 0,
+        }
+    }
+
+    /// Names of the cells that were missing and filled.
+    pub fn missing(&self) -> Vec<String> {
+        self.missing.lock().map(|m| m.clone()).unwrap_or_default()
+    }
+
+    fn load_row(&mut self, row: u32) -> Result<()> {
+        let h = self.header;
+        let (cw, ch) = self.grid.cell();
+        let bpp = h.layout.bytes_per_pixel();
+        let rows = ch.min(h.height - row * ch) as usize;
+        let cols = h.width.div_ceil(cw);
+        let row_bytes = h.width as usize * bpp;
+        let cells: Vec<Result<Option<(Vec<u8>, usize)>>> = (0..cols)
+            .into_par_iter()
+            .map(|col| {
+                let width = cw.min(h.width - col * cw) as usize;
+                self.cell_texels(col, row, width, rows).map(|t| t.map(|t| (t, width)))
+            })
+            .collect();
+        self.band.resize(rows * row_bytes, 0);
+        for (col, cell) in cells.into_iter().enumerate() {
+            let x0 = col * cw as usize * bpp;
+            match cell? {
+                Some((texels, width)) => {
+                    for (y, src) in texels.chunks_exact(width * bpp).enumerate() {
+                        self.band[y * row_bytes + x0..][..width * bpp].copy_from_slice(src);
+                    }
+                }
+                None => {
+                    let width = cw.min(h.width - col as u32 * cw) as usize;
+                    for y in 0..rows {
+                        for px in self.band[y * row_bytes + x0..][..width * bpp].chunks_exact_mut(bpp) {
+                            px.copy_from_slice(&self.fill);
+                        }
+                    }
+                }
+            }
+        }
+        self.band_row = Some(row);
+        Ok(())
+    }
+
+    /// The `width x rows` texels of cell (col, row), cropped out of its stored tile.
+    fn cell_texels(&self, col: u32, row: u32, width: usize, rows: usize) -> Result<Option<Vec<u8>>> {
+        let h = self.header;
+        let (name, tile_w, tile_h, layout, bytes) = match self.grid.read(col, row)? {
+            None => {
+                let name = format!("cell (x {col}, y {row})");
+                if self.strict {
+                    return Err(TilerError::Options(format!(
+                        "{name} of {} is missing (--strict)",
+                        self.grid.describe()
+                    )));
+                }
+                self.missing.lock().map_err(|_| TilerError::Options("poisoned".into()))?.push(name);
+                return Ok(None);
+            }
+            Some(CellData::File(path, bytes)) => {
+                let d = decode_tile(&path, &bytes)?;
+                (path, d.width, d.height, d.layout, d.bytes)
+            }
+            Some(CellData::Samples { name, width, height, bytes }) => (name, width, height, h.layout, bytes),
+        };
+        if layout != h.layout {
+            return Err(TilerError::decode(&name, format!("is {layout} but the other tiles are {}", h.layout)));
+        }
+        let (skip_x, skip_y) = self.grid.crop(col, row);
+        if (tile_w as usize) < skip_x as usize + width || (tile_h as usize) < skip_y as usize + rows {
+            return Err(TilerError::decode(
+                &name,
+                format!(
+                    "is {tile_w}x{tile_h}, but cell (x {col}, y {row}) needs {}x{} texels",
+                    skip_x as usize + width,
+                    skip_y as usize + rows
+                ),
+            ));
+        }
+        let bpp = layout.bytes_per_pixel();
+        let stride = tile_w as usize * bpp;
+        let mut out = Vec::with_capacity(width * rows * bpp);
+        for y in 0..rows {
+            let start = (skip_y as usize + y) * stride + skip_x as usize * bpp;
+            out.extend_from_slice(&bytes[start..start + width * bpp]);
+        }
+        Ok(Some(out))
+    }
+}
+
+impl RowSource for TiledSource {
+    fn header(&self) -> ImageHeader {
+        self.header
+    }
+
+    fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
+        let (_, ch) = self.grid.cell();
+        let cell_row = self.next / ch;
+        if self.band_row != Some(cell_row) {
+            self.load_row(cell_row)?;
+        }
+        let y = (self.next - cell_row * ch) as usize;
+        out.copy_from_slice(&self.band[y * out.len()..(y + 1) * out.len()]);
+        self.next += 1;
+        Ok(())
+    }
+
+    fn describe(&self) -> String {
+        self.grid.describe()
+    }
+}
+
+/// Reads a tile file, or `None` if it does not exist.
+pub(crate) fn read_file(path: &Path) -> Result<Option<CellData>> {
+    match std::fs::read(path) {
+        Ok(bytes) => Ok(Some(CellData::File(path.to_path_buf(), bytes))),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(TilerError::io(path, e)),
+    }
+}
+
+/// The header of the tile at `path` (size and layout), from its first bytes.
+pub(crate) fn probe(path: &Path) -> Result<(u32, u32, PixelLayout)> {
+    let bytes = std::fs::read(path).map_err(|e| TilerError::io(path, e))?;
+    let d = decode_tile(path, &bytes)?;
+    Ok((d.width, d.height, d.layout))
+}

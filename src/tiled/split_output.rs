@@ -1,0 +1,60 @@
+//! A pyramid this tool wrote (`info.json` + tile files): its LOD 0 is the image, each tile's
+//! payload the cell, its border skipped.
+
+use std::path::{Path, PathBuf};
+
+use super::{CellData, TileGrid, read_file};
+use crate::error::Result;
+use crate::filename::FilenameFormat;
+use crate::pixel::{Channels, Depth, PixelLayout};
+use crate::repack::TiledDir;
+use crate::source::ImageHeader;
+
+pub struct SplitOutput {
+    dir: PathBuf,
+    names: FilenameFormat,
+    header: ImageHeader,
+    payload: u32,
+    border: u32,
+}
+
+impl SplitOutput {
+    pub fn open(dir: &Path) -> Result<SplitOutput> {
+        let t = TiledDir::read(dir)?;
+        let d = t.description;
+        let channels = [Channels::Grey, Channels::GreyAlpha, Channels::Rgb, Channels::Rgba][d.channels as usize - 1];
+        let depth = if d.sample_bytes == 2 { Depth::U16 } else { Depth::U8 };
+        // A JPEG pyramid stores 8-bit samples whatever tileType says.
+        let header = ImageHeader { width: d.width, height: d.height, layout: PixelLayout::new(channels, depth) };
+        Ok(SplitOutput {
+            dir: dir.to_path_buf(),
+            names: t.names,
+            header,
+            payload: d.tile_size - 2 * d.border,
+            border: d.border,
+        })
+    }
+}
+
+impl TileGrid for SplitOutput {
+    fn describe(&self) -> String {
+        format!(
+            "LOD 0 of the pyramid in {} ({}-texel payload, border {})",
+            self.dir.display(),
+            self.payload,
+            self.border
+        )
+    }
+    fn header(&self) -> ImageHeader {
+        self.header
+    }
+    fn cell(&self) -> (u32, u32) {
+        (self.payload, self.payload)
+    }
+    fn read(&self, col: u32, row: u32) -> Result<Option<CellData>> {
+        read_file(&self.dir.join(self.names.format(&[0, col, row])))
+    }
+    fn crop(&self, _: u32, _: u32) -> (u32, u32) {
+        (self.border, self.border)
+    }
+}
