@@ -43,6 +43,9 @@ pub trait TileGrid: Send + Sync {
     fn crop(&self, col: u32, row: u32) -> (u32, u32);
 }
 
+/// A cell's texels, cropped to the cell; `None` for a missing cell.
+type CellTexels = Option<Vec<u8>>;
+
 /// Rows of a [`TileGrid`], one row of cells decoded at a time.
 pub struct TiledSource {
     grid: Box<dyn TileGrid>,
@@ -86,24 +89,20 @@ impl TiledSource {
         let rows = ch.min(h.height - row * ch) as usize;
         let cols = h.width.div_ceil(cw);
         let row_bytes = h.width as usize * bpp;
-        let cells: Vec<Result<Option<(Vec<u8>, usize)>>> = (0..cols)
-            .into_par_iter()
-            .map(|col| {
-                let width = cw.min(h.width - col * cw) as usize;
-                self.cell_texels(col, row, width, rows).map(|t| t.map(|t| (t, width)))
-            })
-            .collect();
+        let width_of = |col: u32| cw.min(h.width - col * cw) as usize;
+        let cells: Vec<Result<CellTexels>> =
+            (0..cols).into_par_iter().map(|col| self.cell_texels(col, row, width_of(col), rows)).collect();
         self.band.resize(rows * row_bytes, 0);
         for (col, cell) in cells.into_iter().enumerate() {
             let x0 = col * cw as usize * bpp;
+            let width = width_of(col as u32);
             match cell? {
-                Some((texels, width)) => {
+                Some(texels) => {
                     for (y, src) in texels.chunks_exact(width * bpp).enumerate() {
                         self.band[y * row_bytes + x0..][..width * bpp].copy_from_slice(src);
                     }
                 }
                 None => {
-                    let width = cw.min(h.width - col as u32 * cw) as usize;
                     for y in 0..rows {
                         for px in self.band[y * row_bytes + x0..][..width * bpp].chunks_exact_mut(bpp) {
                             px.copy_from_slice(&self.fill);
@@ -117,7 +116,7 @@ impl TiledSource {
     }
 
     /// The `width x rows` texels of cell (col, row), cropped out of its stored tile.
-    fn cell_texels(&self, col: u32, row: u32, width: usize, rows: usize) -> Result<Option<Vec<u8>>> {
+    fn cell_texels(&self, col: u32, row: u32, width: usize, rows: usize) -> Result<CellTexels> {
         let h = self.header;
         let (name, tile_w, tile_h, layout, bytes) = match self.grid.read(col, row)? {
             None => {
