@@ -1,5 +1,6 @@
 //! The command line: flags, subcommands, and the glue from them to the library.
 
+mod convert;
 mod pack;
 mod split;
 
@@ -34,6 +35,19 @@ enum Command {
     ///   vortex-tiler split huge.tif --pack world.vtpk --tile-size 128 --border 4
     #[command(verbatim_doc_comment)]
     Split(split::SplitArgs),
+    /// Re-tile an already-tiled input to a new tile size and border, regenerating every LOD.
+    ///
+    /// Only the input tiles of the current band are decoded and held, so memory does not grow
+    /// with the grid's height. Output and options are split's.
+    ///
+    /// Examples:
+    ///   vortex-tiler convert in_tiles/ -o out/ --tiled --ff 'x%02s-y%02s.png' --tile-size 128 --border 4
+    ///   vortex-tiler convert old/ --pack new.vtpk --tile-size 256        # old/ = split output
+    ///   vortex-tiler convert old.vtpk -o out/ --tile-size 64 --border 1
+    ///   vortex-tiler convert slide.dzi --pack slide.vtpk                  # Deep Zoom (vips dzsave)
+    ///   vortex-tiler convert google_tiles/ --layout google --pack map.vtpk
+    #[command(verbatim_doc_comment)]
+    Convert(convert::ConvertArgs),
     /// Put a tiled directory (info.json + tile files, e.g. from split -o) into one pack file.
     Pack(pack::PackArgs),
     /// Write a pack's tiles back out as files plus info.json.
@@ -76,6 +90,7 @@ impl PackLayout {
 pub fn run(args: Args) -> Result<()> {
     match args.command {
         Command::Split(a) => split::run(a),
+        Command::Convert(a) => convert::run(a),
         Command::Pack(a) => pack::run_pack(a),
         Command::Unpack(a) => pack::run_unpack(a),
         Command::Info(a) => pack::run_info(a),

@@ -114,6 +114,12 @@ pub fn run(a: SplitArgs) -> Result<()> {
 
 /// Runs the pipeline from `source` into the output `out` names, with the progress bar and
 /// the summary line. `names` is the output filename format flag.
+impl OutputArgs {
+    pub fn background(&self) -> Option<Background> {
+        self.background
+    }
+}
+
 pub fn tile(source: Box<dyn RowSource>, names: Option<String>, a: &OutputArgs, started: Instant) -> Result<()> {
     // Only an output directory can hold an info.json that configures the run.
     let info_path = a.output.as_ref().map(|o| o.join("info.json"));

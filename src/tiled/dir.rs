@@ -108,4 +108,9 @@ impl TileGrid for NamedDir {
     fn crop(&self, _: u32, _: u32) -> (u32, u32) {
         (0, 0)
     }
+    /// Full tiles, smaller only in the last column and row.
+    fn stored_size(&self, col: u32, row: u32) -> Option<(u32, u32)> {
+        let (w, h) = (self.header.width, self.header.height);
+        Some((self.cell.0.min(w - col * self.cell.0), self.cell.1.min(h - row * self.cell.1)))
+    }
 }

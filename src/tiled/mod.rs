@@ -5,15 +5,21 @@
 //! Only one row of input tiles is decoded and held at a time (decoded in parallel), so memory
 //! does not grow with the grid's height.
 
+mod deepzoom;
 mod dir;
+mod google;
+mod pack_input;
 mod split_output;
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
 
+pub use deepzoom::DeepZoom;
 pub use dir::NamedDir;
+pub use google::Xyz;
+pub use pack_input::PackInput;
 pub use split_output::SplitOutput;
 
 use crate::error::{Result, TilerError};
@@ -41,6 +47,11 @@ pub trait TileGrid: Send + Sync {
     fn read(&self, col: u32, row: u32) -> Result<Option<CellData>>;
     /// Texels to skip at the left and top of the stored tile of cell (c, r).
     fn crop(&self, col: u32, row: u32) -> (u32, u32);
+    /// The exact size the stored tile of cell (c, r) must have, where the layout fixes it;
+    /// `None` only requires it to hold the cell.
+    fn stored_size(&self, _col: u32, _row: u32) -> Option<(u32, u32)> {
+        None
+    }
 }
 
 /// A cell's texels, cropped to the cell; `None` for a missing cell.
@@ -53,7 +64,7 @@ pub struct TiledSource {
     /// Samples used for missing cells (one texel).
     fill: Vec<u8>,
     strict: bool,
-    missing: Mutex<Vec<String>>,
+    missing: Arc<Mutex<Vec<String>>>,
     /// The decoded cell row: `cell_h` image rows (fewer at the bottom).
     band: Vec<u8>,
     band_row: Option<u32>,
@@ -65,21 +76,12 @@ impl TiledSource {
     /// with `strict`, a missing cell is an error instead.
     pub fn new(grid: Box<dyn TileGrid>, fill: Vec<u8>, strict: bool) -> TiledSource {
         let header = grid.header();
-        TiledSource {
-            grid,
-            header,
-            fill,
-            strict,
-            missing: Mutex::new(Vec::new()),
-            band: Vec::new(),
-            band_row: None,
-            next: 0,
-        }
+        TiledSource { grid, header, fill, strict, missing: Arc::default(), band: Vec::new(), band_row: None, next: 0 }
     }
 
-    /// Names of the cells that were missing and filled.
-    pub fn missing(&self) -> Vec<String> {
-        self.missing.lock().map(|m| m.clone()).unwrap_or_default()
+    /// The list of cells found missing (and filled), which fills as rows are read.
+    pub fn missing_log(&self) -> Arc<Mutex<Vec<String>>> {
+        self.missing.clone()
     }
 
     fn load_row(&mut self, row: u32) -> Result<()> {
@@ -138,6 +140,12 @@ impl TiledSource {
         };
         if layout != h.layout {
             return Err(TilerError::decode(&name, format!("is {layout} but the other tiles are {}", h.layout)));
+        }
+        if let Some((w, h)) = self.grid.stored_size(col, row).filter(|s| *s != (tile_w, tile_h)) {
+            return Err(TilerError::decode(
+                &name,
+                format!("is {tile_w}x{tile_h}, but the tiles of this input are {w}x{h} there"),
+            ));
         }
         let (skip_x, skip_y) = self.grid.crop(col, row);
         if (tile_w as usize) < skip_x as usize + width || (tile_h as usize) < skip_y as usize + rows {

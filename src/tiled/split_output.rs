@@ -57,4 +57,8 @@ impl TileGrid for SplitOutput {
     fn crop(&self, _: u32, _: u32) -> (u32, u32) {
         (self.border, self.border)
     }
+    fn stored_size(&self, _: u32, _: u32) -> Option<(u32, u32)> {
+        let side = self.payload + 2 * self.border;
+        Some((side, side))
+    }
 }

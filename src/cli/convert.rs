@@ -1,0 +1,118 @@
+//! `convert`: an already-tiled input re-tiled through the same pipeline as `split`.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Result, bail};
+use vortex_tiler::background::Background;
+use vortex_tiler::pixel::{Depth, PixelLayout};
+use vortex_tiler::source::RowSource;
+use vortex_tiler::tiled::{DeepZoom, NamedDir, PackInput, SplitOutput, TileGrid, TiledSource, Xyz};
+
+use super::split::{OutputArgs, tile};
+
+/// How the input's tiles are laid out on disk.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum InputLayout {
+    /// Decide from the input: a .dzi descriptor, a pack file, a directory with our info.json,
+    /// or (with --filename-format) a directory of named tiles.
+    Auto,
+    /// Google/XYZ tiles as z/y/x.<ext>; the highest z is read.
+    Google,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct ConvertArgs {
+    /// The tiled input: a directory of tiles, this tool's split output (info.json + tiles), a
+    /// pack (.vtpk), a Deep Zoom descriptor (.dzi, e.g. from vips dzsave) or, with --layout
+    /// google, a z/y/x directory. For pyramids, the finest level is the source and coarser input
+    /// levels are ignored.
+    #[arg(value_name = "INPUT")]
+    input: PathBuf,
+
+    /// The input is a directory of tiles named by --filename-format (the original tool's flag).
+    #[arg(long)]
+    tiled: bool,
+
+    /// Names of the input tiles, printf-like: argument 1 = column, 2 = row, e.g. 'x%02s-y%02s.png'.
+    #[arg(long, visible_alias = "ff", value_name = "PATTERN")]
+    filename_format: Option<String>,
+
+    #[arg(long, value_enum, default_value = "auto")]
+    layout: InputLayout,
+
+    /// A missing input tile is an error (otherwise it is filled with --background, or zeros,
+    /// and reported as a warning).
+    #[arg(long)]
+    strict: bool,
+
+    /// Output tile names, as split's --filename-format [default: lod%1$02s-x%2$04s-y%3$04s.<ext>].
+    #[arg(long, value_name = "PATTERN")]
+    output_filename_format: Option<String>,
+
+    #[command(flatten)]
+    out: OutputArgs,
+}
+
+pub fn run(a: ConvertArgs) -> Result<()> {
+    let started = Instant::now();
+    let grid = open_grid(&a)?;
+    let header = grid.header();
+    let source = TiledSource::new(grid, fill_texel(a.out.background(), header.layout), a.strict);
+    let missing = source.missing_log();
+    let result = tile(Box::new(source) as Box<dyn RowSource>, a.output_filename_format.clone(), &a.out, started);
+    let missing = missing.lock().map(|m| m.clone()).unwrap_or_default();
+    if !missing.is_empty() {
+        eprintln!(
+            "warning: {} input tile(s) missing, filled with {}: {}{}",
+            missing.len(),
+            a.out.background().map_or("zeros".to_string(), |b| b.to_string()),
+            missing.iter().take(5).cloned().collect::<Vec<_>>().join(", "),
+            if missing.len() > 5 { ", ..." } else { "" }
+        );
+    }
+    result
+}
+
+fn open_grid(a: &ConvertArgs) -> Result<Box<dyn TileGrid>> {
+    let input = &a.input;
+    if a.tiled || a.filename_format.is_some() {
+        let Some(pattern) = &a.filename_format else {
+            bail!("--tiled needs --filename-format (e.g. 'x%02s-y%02s.png')")
+        };
+        return Ok(Box::new(NamedDir::open(input, pattern)?));
+    }
+    if a.layout == InputLayout::Google {
+        return Ok(Box::new(Xyz::open(input)?));
+    }
+    if !input.exists() {
+        bail!("{}: no such file or directory", input.display());
+    }
+    if input.extension().is_some_and(|e| e.eq_ignore_ascii_case("dzi")) {
+        return Ok(Box::new(DeepZoom::open(input)?));
+    }
+    if input.is_file() {
+        return Ok(Box::new(PackInput::open(input)?));
+    }
+    if input.join("info.json").is_file() {
+        return Ok(Box::new(SplitOutput::open(input)?));
+    }
+    bail!(
+        "{}: a directory without info.json; for named tiles pass --tiled --filename-format PATTERN, for z/y/x tiles --layout google",
+        input.display()
+    )
+}
+
+/// One texel of `background` in the grid's layout, native-endian; zeros without a colour.
+fn fill_texel(background: Option<Background>, layout: PixelLayout) -> Vec<u8> {
+    let colour = background.unwrap_or_default();
+    match layout.depth {
+        Depth::U8 => colour.texel::<u8>(layout.channels).unwrap_or_else(|| vec![0; layout.channels.count()]),
+        Depth::U16 => colour
+            .texel::<u16>(layout.channels)
+            .unwrap_or_else(|| vec![0; layout.channels.count()])
+            .iter()
+            .flat_map(|s| s.to_ne_bytes())
+            .collect(),
+    }
+}

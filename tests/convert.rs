@@ -1,0 +1,238 @@
+//! convert: re-tiling an already-tiled input gives what splitting the original image gives.
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+use common::{Image, MemSink, layouts, png_options};
+use proptest::prelude::*;
+use vortex_tiler::background::Background;
+use vortex_tiler::filename::FilenameFormat;
+use vortex_tiler::info::InfoFile;
+use vortex_tiler::settings::describe;
+use vortex_tiler::sink::DirSink;
+use vortex_tiler::split::split;
+use vortex_tiler::tiled::{NamedDir, SplitOutput, TileGrid, TiledSource};
+
+const BIN: &str = env!("CARGO_BIN_EXE_vortex-tiler");
+
+/// Every tile's PNG bytes by (lod, x, y).
+type Tiles = std::collections::BTreeMap<(u32, u32, u32), Vec<u8>>;
+
+fn split_to_memory(source: Box<dyn vortex_tiler::source::RowSource>, tile: u32, border: u32) -> Tiles {
+    let sink = MemSink::default();
+    split(source, &sink, &png_options(tile, border, Background::Edge), &()).unwrap();
+    sink.tiles.into_inner().unwrap()
+}
+
+fn split_to_dir(image: &Image, dir: &Path, tile: u32, border: u32) {
+    let opts = png_options(tile, border, Background::Edge);
+    let names = FilenameFormat::parse("lod%1$02s-x%2$04s-y%3$04s.png", 3).unwrap();
+    let sink = DirSink::create(dir, names.clone()).unwrap();
+    let summary = split(image.source(), &sink, &opts, &()).unwrap();
+    let info: InfoFile = describe(&summary.layout, summary.stored, &opts, &names);
+    sink.finish(&info).unwrap();
+}
+
+fn converted(grid: Box<dyn TileGrid>, tile: u32, border: u32) -> Tiles {
+    split_to_memory(Box::new(TiledSource::new(grid, vec![0; 8], true)), tile, border)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, .. ProptestConfig::default() })]
+
+    #[test]
+    fn convert_of_split_equals_split(
+        w in 1u32..90, h in 1u32..90, layout_idx in 0usize..8,
+        a in 8u32..40, ab in 0u32..3, b in 8u32..40, bb in 0u32..3, seed in any::<u64>(),
+    ) {
+        prop_assume!(a >= 2 * ab + 4 && b >= 2 * bb + 4);
+        let image = Image::random(w, h, layouts()[layout_idx], seed);
+        let dir = tempfile::tempdir().unwrap();
+        let first = dir.path().join("first");
+        split_to_dir(&image, &first, a, ab);
+        let got = converted(Box::new(SplitOutput::open(&first).unwrap()), b, bb);
+        let want = split_to_memory(image.source(), b, bb);
+        prop_assert!(got == want, "{w}x{h} {}: {a}/{ab} -> {b}/{bb}", image.layout);
+    }
+}
+
+/// Writes `image` as tiles of `tw x th` named by `pattern` (x, y), edge tiles smaller.
+fn write_named(image: &image::RgbImage, dir: &Path, pattern: &str, tw: u32, th: u32) {
+    let f = FilenameFormat::parse(pattern, 2).unwrap();
+    for ty in 0..image.height().div_ceil(th) {
+        for tx in 0..image.width().div_ceil(tw) {
+            let (x0, y0) = (tx * tw, ty * th);
+            let sub = image::imageops::crop_imm(image, x0, y0, tw.min(image.width() - x0), th.min(image.height() - y0))
+                .to_image();
+            let path = dir.join(f.format(&[tx, ty]));
+            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+            sub.save(&path).unwrap();
+        }
+    }
+}
+
+fn test_image(w: u32, h: u32) -> image::RgbImage {
+    image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 7 + y) as u8, (y * 5) as u8, (x ^ y) as u8]))
+}
+
+#[test]
+fn named_tiles_that_do_not_divide_the_new_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let img = test_image(250, 170);
+    let tiles = dir.path().join("tiles");
+    write_named(&img, &tiles, "x%02s-y%02s.png", 100, 100);
+    let original = dir.path().join("orig.png");
+    img.save(&original).unwrap();
+    let got = converted(Box::new(NamedDir::open(&tiles, "x%02s-y%02s.png").unwrap()), 128, 4);
+    let want = split_to_memory(vortex_tiler::source::open(&original, 1 << 30).unwrap(), 128, 4);
+    assert!(got == want);
+}
+
+fn convert_err(args: &[&str]) -> String {
+    let out = Command::new(BIN).arg("convert").args(args).output().unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn bad_tiled_inputs_name_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let tiles = dir.path().join("tiles");
+    write_named(&test_image(60, 40), &tiles, "x%02s-y%02s.png", 32, 32);
+    let t = tiles.to_str().unwrap();
+    let out = dir.path().join("out");
+    let o = out.to_str().unwrap();
+    let ff = ["--tiled", "--ff", "x%02s-y%02s.png"];
+
+    std::fs::write(tiles.join("notes.txt"), "x").unwrap();
+    let e = convert_err(&[&[t, "-o", o][..], &ff].concat());
+    assert!(e.contains("notes.txt") && e.contains("does not match"), "{e}");
+    std::fs::remove_file(tiles.join("notes.txt")).unwrap();
+
+    std::fs::copy(tiles.join("x01-y00.png"), tiles.join("x1-y0.png")).unwrap();
+    let e = convert_err(&[&[t, "-o", o][..], &ff].concat());
+    assert!(e.contains("x1-y0.png") && e.contains("same coordinates"), "{e}");
+    std::fs::remove_file(tiles.join("x1-y0.png")).unwrap();
+
+    image::RgbImage::new(20, 20).save(tiles.join("x00-y00.png")).unwrap();
+    let e = convert_err(&[&[t, "-o", o][..], &ff].concat());
+    assert!(e.contains("x00-y00.png") || e.contains("x01-y00.png"), "{e}");
+    write_named(&test_image(60, 40), &tiles, "x%02s-y%02s.png", 32, 32);
+
+    image::GrayImage::new(32, 32).save(tiles.join("x01-y00.png")).unwrap();
+    let e = convert_err(&[&[t, "-o", o][..], &ff].concat());
+    assert!(e.contains("x01-y00.png") && e.contains("luminance"), "{e}");
+
+    std::fs::write(tiles.join("x01-y00.png"), b"\x89PNG\r\n\x1a\nbroken").unwrap();
+    let e = convert_err(&[&[t, "-o", o][..], &ff].concat());
+    assert!(e.contains("x01-y00.png"), "{e}");
+
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let e = convert_err(&[&[empty.to_str().unwrap(), "-o", o][..], &ff].concat());
+    assert!(e.contains("empty") && e.contains("no tiles"), "{e}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn missing_tiles_are_filled_with_a_warning_or_refused_with_strict() {
+    let dir = tempfile::tempdir().unwrap();
+    let tiles = dir.path().join("tiles");
+    write_named(&test_image(90, 70), &tiles, "%s_%s.png", 32, 32);
+    std::fs::remove_file(tiles.join("1_1.png")).unwrap();
+    let out = dir.path().join("out");
+    let args =
+        [tiles.to_str().unwrap(), "-o", out.to_str().unwrap(), "--ff", "%s_%s.png", "--background", "#ff0000", "-q"];
+    let r = Command::new(BIN).arg("convert").args(args).output().unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let warning = String::from_utf8_lossy(&r.stderr);
+    assert!(warning.contains("1 input tile(s) missing") && warning.contains("#ff0000"), "{warning}");
+    let e = convert_err(&[&args[..], &["--strict"]].concat());
+    assert!(e.contains("missing") && e.contains("--strict"), "{e}");
+}
+
+/// Every file under `dir` (relative path, bytes), sorted.
+fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut out: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read(&p).unwrap()))
+        .collect();
+    out.sort();
+    out
+}
+
+fn run_ok(args: &[&str]) {
+    let out = Command::new(BIN).args(args).output().unwrap();
+    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// Each kind of input, from the command line, gives the files `split` of the original gives.
+#[test]
+fn every_input_kind_converts_like_splitting_the_original() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let img = test_image(150, 97);
+    img.save(d("orig.png")).unwrap();
+    let target = ["--tile-size", "64", "--border", "2", "--codec", "png", "-q"];
+    run_ok(&[&["split", &d("orig.png"), "-o", &d("want")][..], &target].concat());
+    let want = files(Path::new(&d("want")));
+
+    // A pack (lossless tiles).
+    run_ok(&[
+        "split",
+        &d("orig.png"),
+        "--pack",
+        &d("in.vtpk"),
+        "--tile-size",
+        "32",
+        "--border",
+        "1",
+        "--codec",
+        "png",
+        "-q",
+    ]);
+    run_ok(&[&["convert", &d("in.vtpk"), "-o", &d("from-pack")][..], &target].concat());
+    assert!(files(Path::new(&d("from-pack"))) == want, "from a pack");
+
+    // Deep Zoom with overlap 1 and odd edge tiles: level 8 holds the 150x97 image.
+    let (ts, overlap) = (40u32, 1u32);
+    let level = dir.path().join("slide_files/8");
+    std::fs::create_dir_all(&level).unwrap();
+    for r in 0..img.height().div_ceil(ts) {
+        for c in 0..img.width().div_ceil(ts) {
+            let x0 = (c * ts).saturating_sub(if c > 0 { overlap } else { 0 });
+            let y0 = (r * ts).saturating_sub(if r > 0 { overlap } else { 0 });
+            let x1 = ((c + 1) * ts + overlap).min(img.width());
+            let y1 = ((r + 1) * ts + overlap).min(img.height());
+            image::imageops::crop_imm(&img, x0, y0, x1 - x0, y1 - y0)
+                .to_image()
+                .save(level.join(format!("{c}_{r}.png")))
+                .unwrap();
+        }
+    }
+    std::fs::write(
+        d("slide.dzi"),
+        format!(r#"<?xml version="1.0"?><Image xmlns="http://schemas.microsoft.com/deepzoom/2008" Format="png" Overlap="{overlap}" TileSize="{ts}"><Size Height="97" Width="150"/></Image>"#),
+    )
+    .unwrap();
+    run_ok(&[&["convert", &d("slide.dzi"), "-o", &d("from-dzi")][..], &target].concat());
+    assert!(files(Path::new(&d("from-dzi"))) == want, "from Deep Zoom");
+
+    // Google z/y/x with 50-texel tiles covering 150x100: crop the original to that box first.
+    let xyz = dir.path().join("xyz");
+    let padded = image::RgbImage::from_fn(150, 100, |x, y| *img.get_pixel(x, y.min(96)));
+    for y in 0..2u32 {
+        for x in 0..3u32 {
+            let p = xyz.join(format!("5/{}/{}.png", 7 + y, 11 + x));
+            std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+            image::imageops::crop_imm(&padded, x * 50, y * 50, 50, 50).to_image().save(p).unwrap();
+        }
+    }
+    padded.save(d("padded.png")).unwrap();
+    run_ok(&[&["split", &d("padded.png"), "-o", &d("want-xyz")][..], &target].concat());
+    run_ok(&[&["convert", &d("xyz"), "--layout", "google", "-o", &d("from-xyz")][..], &target].concat());
+    assert!(files(Path::new(&d("from-xyz"))) == files(Path::new(&d("want-xyz"))), "from z/y/x");
+}
