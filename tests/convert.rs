@@ -236,3 +236,17 @@ fn every_input_kind_converts_like_splitting_the_original() {
     run_ok(&[&["convert", &d("xyz"), "--layout", "google", "-o", &d("from-xyz")][..], &target].concat());
     assert!(files(Path::new(&d("from-xyz"))) == files(Path::new(&d("want-xyz"))), "from z/y/x");
 }
+
+#[test]
+fn an_info_json_beside_named_tiles_gives_the_image_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let img = test_image(128, 128);
+    let tiles = dir.path().join("tiles");
+    write_named(&img, &tiles, "x%s-y%s.png", 64, 64);
+    std::fs::write(tiles.join("info.json"), r#"{"width": 100, "height": 90}"#).unwrap();
+    let cropped = image::imageops::crop_imm(&img, 0, 0, 100, 90).to_image();
+    cropped.save(dir.path().join("c.png")).unwrap();
+    let got = converted(Box::new(NamedDir::open(&tiles, "x%s-y%s.png").unwrap()), 32, 1);
+    let want = split_to_memory(vortex_tiler::source::open(&dir.path().join("c.png"), 1 << 30).unwrap(), 32, 1);
+    assert!(got == want);
+}

@@ -1,6 +1,7 @@
 //! A directory of tiles named by a positional printf-like pattern whose first argument is the
 //! column and second the row (`x%02s-y%02s.png`), as the thesis's `--tiled --filename-format`.
-//! The grid comes from the names; tile size and pixel layout from the tiles themselves.
+//! The grid comes from the names (or the image size from an `info.json` beside them, if it has
+//! `width` and `height`); tile size and pixel layout from the tiles themselves.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -8,6 +9,7 @@ use std::path::{Path, PathBuf};
 use super::{CellData, TileGrid, probe, read_file};
 use crate::error::{Result, TilerError};
 use crate::filename::FilenameFormat;
+use crate::info::InfoFile;
 use crate::source::ImageHeader;
 
 pub struct NamedDir {
@@ -16,6 +18,8 @@ pub struct NamedDir {
     cells: HashMap<(u32, u32), PathBuf>,
     header: ImageHeader,
     cell: (u32, u32),
+    /// The size came from the tiles, so edge tiles must be exactly the remainder.
+    exact: bool,
 }
 
 impl NamedDir {
@@ -58,15 +62,24 @@ impl NamedDir {
         };
         let (last_w, _) = edge((cols - 1, 0), (tw, th))?;
         let (_, last_h) = edge((0, rows - 1), (tw, th))?;
-        let width = (cols - 1) as u64 * tw as u64 + last_w.min(tw) as u64;
-        let height = (rows - 1) as u64 * th as u64 + last_h.min(th) as u64;
+        let mut width = (cols - 1) as u64 * tw as u64 + last_w.min(tw) as u64;
+        let mut height = (rows - 1) as u64 * th as u64 + last_h.min(th) as u64;
+        // An info.json beside the tiles gives the image size (tiles beyond it are ignored).
+        let info_path = dir.join("info.json");
+        let mut exact = true;
+        if info_path.is_file() {
+            let info = InfoFile::read(&info_path)?;
+            if let (Some(w), Some(h)) = (info.width, info.height) {
+                (width, height, exact) = (w as u64, h as u64, false);
+            }
+        }
         let too_big = || TilerError::Geometry(format!("{cols}x{rows} tiles of {tw}x{th} make an image too large"));
         let header = ImageHeader {
             width: u32::try_from(width).map_err(|_| too_big())?,
             height: u32::try_from(height).map_err(|_| too_big())?,
             layout,
         };
-        Ok(NamedDir { dir: dir.to_path_buf(), names, cells, header, cell: (tw, th) })
+        Ok(NamedDir { dir: dir.to_path_buf(), names, cells, header, cell: (tw, th), exact })
     }
 }
 
@@ -108,9 +121,9 @@ impl TileGrid for NamedDir {
     fn crop(&self, _: u32, _: u32) -> (u32, u32) {
         (0, 0)
     }
-    /// Full tiles, smaller only in the last column and row.
+    /// Full tiles, smaller only in the last column and row (unless info.json set the size).
     fn stored_size(&self, col: u32, row: u32) -> Option<(u32, u32)> {
         let (w, h) = (self.header.width, self.header.height);
-        Some((self.cell.0.min(w - col * self.cell.0), self.cell.1.min(h - row * self.cell.1)))
+        self.exact.then(|| (self.cell.0.min(w - col * self.cell.0), self.cell.1.min(h - row * self.cell.1)))
     }
 }
