@@ -56,7 +56,7 @@ pub struct Summary {
     pub source: PixelLayout,
     pub stored: PixelLayout,
     pub tiles: u64,
-    /// Tiles encoded (the rest were copies of an identical neighbour).
+    /// Tiles encoded; the others share an identical neighbour's bytes or were stored as their one colour.
     pub encoded: u64,
     pub bytes: u64,
 }

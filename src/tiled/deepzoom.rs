@@ -321,15 +321,7 @@ mod tests {
 
     /// A reproducible RGB image.
     fn rgb_image(width: u32, height: u32, seed: u32) -> Vec<u8> {
-        let mut state = seed.wrapping_mul(2_654_435_761).max(1);
-        (0..width * height * 3)
-            .map(|_| {
-                state ^= state << 13;
-                state ^= state >> 17;
-                state ^= state << 5;
-                (state >> 24) as u8
-            })
-            .collect()
+        crate::tiled::noise((width * height * 3) as usize, seed)
     }
 
     /// Writes the finest level of a Deep Zoom pyramid of `image` (RGB, PNG tiles) as dzsave

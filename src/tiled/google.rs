@@ -179,15 +179,7 @@ mod tests {
 
     /// A reproducible RGBA image.
     fn rgba_image(width: u32, height: u32, seed: u32) -> Vec<u8> {
-        let mut state = seed.wrapping_mul(2_654_435_761).max(1);
-        (0..width * height * 4)
-            .map(|_| {
-                state ^= state << 13;
-                state ^= state >> 17;
-                state ^= state << 5;
-                (state >> 24) as u8
-            })
-            .collect()
+        crate::tiled::noise((width * height * 4) as usize, seed)
     }
 
     /// Writes `image` (RGBA, `cols x rows` tiles of TS) as PNG tiles `z/y/x.png` from tile

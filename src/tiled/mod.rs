@@ -206,3 +206,17 @@ pub(crate) fn probe(path: &Path) -> Result<(u32, u32, PixelLayout)> {
     let d = decode_tile(path, &bytes)?;
     Ok((d.width, d.height, d.layout))
 }
+
+/// Reproducible noise bytes for the tests of the tiled inputs.
+#[cfg(test)]
+pub(crate) fn noise(len: usize, seed: u32) -> Vec<u8> {
+    let mut state = seed.wrapping_mul(2_654_435_761).max(1);
+    (0..len)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            (state >> 24) as u8
+        })
+        .collect()
+}

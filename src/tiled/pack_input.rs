@@ -176,15 +176,7 @@ mod tests {
 
     /// Reproducible bytes.
     fn noise(len: usize, seed: u32) -> Vec<u8> {
-        let mut state = seed.wrapping_mul(2_654_435_761).max(1);
-        (0..len)
-            .map(|_| {
-                state ^= state << 13;
-                state ^= state >> 17;
-                state ^= state << 5;
-                (state >> 24) as u8
-            })
-            .collect()
+        crate::tiled::noise(len, seed)
     }
 
     /// An image of `bpp`-byte texels, `width` wide.
