@@ -2,4 +2,10 @@
 //! which pages a frame needs and where they live, so that it can be tested exactly on any
 //! machine. The GPU runtime drives it once per frame.
 
+pub mod analysis;
+pub mod feedback;
+pub mod invariants;
 pub mod page;
+pub mod page_table;
+pub mod residency;
+pub mod sampler;
