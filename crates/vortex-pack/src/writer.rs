@@ -117,13 +117,10 @@ impl PackWriter {
         }
         let name = dest.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "pack".into());
         let tmp = dest.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
-        let file = OpenOptions::new()
-            .write(true)
-            .read(true)
-            .create(true)
-            .truncate(true)
-            .open(&tmp)
-            .map_err(|e| io(&tmp, e))?;
+        let file =
+            OpenOptions::new().write(true).read(true).create(true).truncate(true).open(&tmp).map_err(|e| {
+                io(&dest, std::io::Error::new(e.kind(), format!("cannot create {}: {e}", tmp.display())))
+            })?;
 
         let levels_offset = HEADER_LEN as u64;
         let index_offset = levels_offset + levels.len() as u64 * LEVEL_LEN as u64;
