@@ -1,0 +1,136 @@
+//! The physical page cache: one `Rgba8Unorm` texture of `slots_per_side x slots_per_side`
+//! slots, each holding one stored tile (`tile_size` texels per side, its border included).
+//! Slot `s` sits at column `s % slots_per_side`, row `s / slots_per_side` (the layout
+//! `vortex_vt::page_table::Entry::pack` encodes). Uploads run on the render thread, between the
+//! residency update and the page-table update that maps the new pages.
+//!
+//! The texture's storage format is `Rgba8Unorm` (writable as storage on every driver, lavapipe
+//! included) and it is sampled through an `Rgba8UnormSrgb` view, so that bilinear filtering
+//! happens in linear light, as the reference sampler does. Tiles are RGBA8 with sRGB-encoded
+//! colour.
+
+use vortex_vt::residency::Slot;
+
+/// Why a cache cannot be made.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum CacheError {
+    #[error("{slots_per_side} slots per side: the page-table entry has room for 1..=256")]
+    SlotsPerSide { slots_per_side: u16 },
+    #[error("border {border} leaves no payload in a {tile_size}-texel tile")]
+    Border { tile_size: u32, border: u32 },
+    #[error("a {side}-texel cache is over the device's {max}-texel 2D texture limit")]
+    TooLarge { side: u32, max: u32 },
+}
+
+/// The physical page cache texture and its geometry.
+#[derive(Debug)]
+pub struct PageCache {
+    texture: wgpu::Texture,
+    srgb_view: wgpu::TextureView,
+    slots_per_side: u16,
+    tile_size: u32,
+    border: u32,
+}
+
+impl PageCache {
+    /// A cache of `slots_per_side²` slots of `tile_size`-texel tiles with `border` texels of border
+    /// on each side. Its texels start as zero (transparent black).
+    pub fn new(
+        device: &wgpu::Device,
+        slots_per_side: u16,
+        tile_size: u32,
+        border: u32,
+    ) -> Result<PageCache, CacheError> {
+        if !(1..=256).contains(&slots_per_side) {
+            return Err(CacheError::SlotsPerSide { slots_per_side });
+        }
+        if tile_size == 0 || 2 * border >= tile_size {
+            return Err(CacheError::Border { tile_size, border });
+        }
+        let side = slots_per_side as u32 * tile_size;
+        let max = device.limits().max_texture_dimension_2d;
+        if side > max {
+            return Err(CacheError::TooLarge { side, max });
+        }
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("vortex page cache"),
+            size: wgpu::Extent3d { width: side, height: side, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba8Unorm,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[wgpu::TextureFormat::Rgba8UnormSrgb],
+        });
+        let srgb_view = texture.create_view(&wgpu::TextureViewDescriptor {
+            label: Some("vortex page cache (sRGB)"),
+            format: Some(wgpu::TextureFormat::Rgba8UnormSrgb),
+            ..Default::default()
+        });
+        Ok(PageCache { texture, srgb_view, slots_per_side, tile_size, border })
+    }
+
+    /// Writes one stored tile (`tile_size²` RGBA8 texels, row-major, border included) into `slot`.
+    /// The write lands before the next submitted command buffer runs. Panics if `slot` is outside
+    /// the cache or `texels` is not exactly one tile.
+    pub fn upload(&self, queue: &wgpu::Queue, slot: Slot, texels: &[u8]) {
+        let ts = self.tile_size;
+        assert!((slot as u32) < self.slot_count(), "slot {slot} of a cache of {} slots", self.slot_count());
+        assert_eq!(texels.len(), (ts * ts * 4) as usize, "a tile of {ts}x{ts} RGBA8 texels");
+        let (x, y) = self.slot_origin(slot);
+        queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d { x, y, z: 0 },
+                aspect: wgpu::TextureAspect::All,
+            },
+            texels,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(ts * 4), rows_per_image: Some(ts) },
+            wgpu::Extent3d { width: ts, height: ts, depth_or_array_layers: 1 },
+        );
+    }
+
+    /// Texel position of the top-left corner of `slot`.
+    pub fn slot_origin(&self, slot: Slot) -> (u32, u32) {
+        let side = self.slots_per_side as u32;
+        (slot as u32 % side * self.tile_size, slot as u32 / side * self.tile_size)
+    }
+
+    pub fn slot_count(&self) -> u32 {
+        (self.slots_per_side as u32).pow(2)
+    }
+
+    pub fn slots_per_side(&self) -> u16 {
+        self.slots_per_side
+    }
+
+    /// Side of a stored tile in texels, border included.
+    pub fn tile_size(&self) -> u32 {
+        self.tile_size
+    }
+
+    pub fn border(&self) -> u32 {
+        self.border
+    }
+
+    /// Side of a tile's payload (the part that is its own page): `tile_size - 2 * border`.
+    pub fn payload(&self) -> u32 {
+        self.tile_size - 2 * self.border
+    }
+
+    /// Side of the whole cache texture in texels.
+    pub fn side_texels(&self) -> u32 {
+        self.slots_per_side as u32 * self.tile_size
+    }
+
+    /// The cache texture (storage format `Rgba8Unorm`).
+    pub fn texture(&self) -> &wgpu::Texture {
+        &self.texture
+    }
+
+    /// The `Rgba8UnormSrgb` view that sampling goes through.
+    pub fn srgb_view(&self) -> &wgpu::TextureView {
+        &self.srgb_view
+    }
+}
