@@ -1,0 +1,404 @@
+//! The feedback pass and its readback. The view is drawn a second time, into a small `R32Uint`
+//! target ([`FeedbackTarget`], the frame's size divided by e.g. 8), cleared to
+//! [`NO_REQUEST`]; its fragment shader (`shaders/feedback.wgsl`) writes per pixel the feedback
+//! word (`vortex_vt::feedback::encode`) of the page its virtual UV wants. The LOD is the one
+//! `vortex_vt::feedback::lod_for` gives for the UV's screen-space derivatives, plus the view's
+//! bias and [`FeedbackTarget::bias`] (`feedback_bias`, which makes up for the reduced size), and
+//! the page is `vortex_vt::feedback::page_at` of it.
+//!
+//! [`FeedbackReadback`] copies the target into one of a small ring of mappable buffers, so that
+//! the CPU picks up the words of an earlier frame when the GPU is done with them and never
+//! waits: [`FeedbackReadback::try_read`] never blocks; a frame whose copy finds every buffer
+//! still in flight is skipped.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, Ordering};
+
+use vortex_vt::feedback::{NO_REQUEST, feedback_bias};
+use vortex_vt::page::TextureGrid;
+
+/// The format of feedback targets: one feedback word per pixel.
+pub const FEEDBACK_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
+
+/// What one feedback draw covers: a window of one virtual texture, like
+/// [`ViewParams`](crate::ViewParams), but with the LOD chosen per pixel from derivatives.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FeedbackView {
+    /// Virtual UV of the target's top-left corner.
+    pub origin: [f32; 2],
+    /// Virtual UV covered by the whole target, per axis (1.0 is the whole texture).
+    pub extent: [f32; 2],
+    /// Texture id written into the words (below 16).
+    pub texture: u8,
+    /// The texture's page grid.
+    pub grid: TextureGrid,
+    /// Payload texels per page side (without borders): the texture is `grid.pages * payload`
+    /// texels per side at LOD 0.
+    pub payload: u32,
+    /// The frame's own LOD bias; the target's [`FeedbackTarget::bias`] is added to it.
+    pub bias: f32,
+}
+
+impl FeedbackView {
+    /// The virtual UV that pixel (`x`, `y`) of a `width x height` feedback target wants (at its
+    /// centre), computed as the shader does (unclamped).
+    pub fn uv(&self, x: u32, y: u32, width: u32, height: u32) -> [f32; 2] {
+        let step = [self.extent[0] / width as f32, self.extent[1] / height as f32];
+        [self.origin[0] + (x as f32 + 0.5) * step[0], self.origin[1] + (y as f32 + 0.5) * step[1]]
+    }
+
+    /// Texels per side of the texture at LOD 0.
+    pub fn side_texels(&self) -> f32 {
+        self.grid.pages as f32 * self.payload as f32
+    }
+}
+
+/// The uniform block of `feedback.wgsl` (`Params`), 48 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    window: [f32; 4],
+    pages: u32,
+    lod_count: u32,
+    texture: u32,
+    pad0: u32,
+    side_texels: f32,
+    bias: f32,
+    pad1: [f32; 2],
+}
+
+/// The `R32Uint` target of the feedback pass, at a fraction of the frame's size.
+#[derive(Debug)]
+pub struct FeedbackTarget {
+    pub width: u32,
+    pub height: u32,
+    /// The size of the frame the feedback stands for (sets [`FeedbackTarget::bias`]).
+    pub frame_width: u32,
+    pub frame_height: u32,
+    texture: wgpu::Texture,
+    view: wgpu::TextureView,
+}
+
+impl FeedbackTarget {
+    /// A target of the frame's size divided by `divisor` (rounded up, at least one pixel).
+    pub fn new(device: &wgpu::Device, frame_width: u32, frame_height: u32, divisor: u32) -> FeedbackTarget {
+        let divisor = divisor.max(1);
+        let (w, h) = (frame_width.div_ceil(divisor).max(1), frame_height.div_ceil(divisor).max(1));
+        FeedbackTarget::with_size(device, w, h, frame_width, frame_height)
+    }
+
+    /// A `width x height` target for a `frame_width x frame_height` frame.
+    pub fn with_size(
+        device: &wgpu::Device,
+        width: u32,
+        height: u32,
+        frame_width: u32,
+        frame_height: u32,
+    ) -> FeedbackTarget {
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("vortex feedback"),
+            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: FEEDBACK_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        FeedbackTarget { width, height, frame_width, frame_height, texture, view }
+    }
+
+    /// The LOD bias that makes up for the reduced size: `feedback_bias` (e.g. -3 at 1/8).
+    pub fn bias(&self) -> f32 {
+        feedback_bias(self.width, self.height, self.frame_width, self.frame_height)
+    }
+
+    pub fn view(&self) -> &wgpu::TextureView {
+        &self.view
+    }
+}
+
+/// The pipeline of the feedback pass, made once per device.
+#[derive(Debug)]
+pub struct FeedbackPass {
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+}
+
+impl FeedbackPass {
+    pub fn new(device: &wgpu::Device) -> FeedbackPass {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("vortex feedback.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("shaders/feedback.wgsl").into()),
+        });
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vortex feedback"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: wgpu::BufferSize::new(size_of::<Params>() as u64),
+                },
+                count: None,
+            }],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("vortex feedback"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("vortex feedback"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: FEEDBACK_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        FeedbackPass { pipeline, layout }
+    }
+
+    /// Records the feedback pass into `target`: the clear to [`NO_REQUEST`], then the draw of
+    /// `view` if there is one (`None` records the clear alone: nothing virtual on screen).
+    pub fn encode(
+        &self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        target: &FeedbackTarget,
+        view: Option<&FeedbackView>,
+    ) {
+        let bind_group = view.map(|view| {
+            let (w, h) = (target.width as f32, target.height as f32);
+            let params = Params {
+                window: [view.origin[0], view.origin[1], view.extent[0] / w, view.extent[1] / h],
+                pages: view.grid.pages as u32,
+                lod_count: view.grid.lod_count as u32,
+                texture: view.texture as u32 & 0xF,
+                pad0: 0,
+                side_texels: view.side_texels(),
+                bias: view.bias + target.bias(),
+                pad1: [0.0; 2],
+            };
+            let uniform = wgpu::util::DeviceExt::create_buffer_init(
+                device,
+                &wgpu::util::BufferInitDescriptor {
+                    label: Some("vortex feedback params"),
+                    contents: bytemuck::bytes_of(&params),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                },
+            );
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("vortex feedback"),
+                layout: &self.layout,
+                entries: &[wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() }],
+            })
+        });
+        // Integer targets take the clear colour converted to the channel type: all ones.
+        let clear = NO_REQUEST as f64;
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("vortex feedback"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &target.view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color { r: clear, g: clear, b: clear, a: clear }),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        if let Some(bind_group) = &bind_group {
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, bind_group, &[]);
+            pass.draw(0..3, 0..1);
+        }
+    }
+}
+
+/// The words of one read-back feedback target, row-major.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FeedbackFrame {
+    /// The number [`FeedbackReadback::encode_copy`] gave the copy.
+    pub frame: u64,
+    pub width: u32,
+    pub height: u32,
+    pub words: Vec<u32>,
+}
+
+/// Mapping state of a ring buffer, set by the map callback.
+const MAP_PENDING: u8 = 0;
+const MAP_DONE: u8 = 1;
+const MAP_FAILED: u8 = 2;
+
+#[derive(Debug)]
+enum SlotState {
+    Free,
+    /// The copy is recorded; the mapping is requested by [`FeedbackReadback::submitted`].
+    Copied {
+        frame: u64,
+    },
+    /// Mapping requested; the callback sets the flag.
+    Mapping {
+        frame: u64,
+        state: Arc<AtomicU8>,
+    },
+}
+
+#[derive(Debug)]
+struct Slot {
+    buffer: wgpu::Buffer,
+    state: SlotState,
+}
+
+/// A ring of mappable buffers that feedback targets are copied into, read back without making
+/// the CPU wait for the GPU. Per frame: [`FeedbackReadback::encode_copy`] after the feedback
+/// pass, `queue.submit`, [`FeedbackReadback::submitted`], then [`FeedbackReadback::try_read`]
+/// for the oldest frame the GPU has finished, if any.
+#[derive(Debug)]
+pub struct FeedbackReadback {
+    pub width: u32,
+    pub height: u32,
+    /// Bytes per row in the buffers: a multiple of 256, as buffer copies require.
+    padded_row: u32,
+    slots: Vec<Slot>,
+    next_frame: u64,
+}
+
+impl FeedbackReadback {
+    /// A ring of `buffers` (at least 1; 2 or 3 keep the CPU from waiting) for `width x height`
+    /// targets.
+    pub fn new(device: &wgpu::Device, width: u32, height: u32, buffers: usize) -> FeedbackReadback {
+        let padded_row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let slots = (0..buffers.max(1))
+            .map(|_| Slot {
+                buffer: device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("vortex feedback readback"),
+                    size: padded_row as u64 * height as u64,
+                    usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                    mapped_at_creation: false,
+                }),
+                state: SlotState::Free,
+            })
+            .collect();
+        FeedbackReadback { width, height, padded_row, slots, next_frame: 0 }
+    }
+
+    /// Copies that are recorded or in flight and not yet read.
+    pub fn in_flight(&self) -> usize {
+        self.slots.iter().filter(|s| !matches!(s.state, SlotState::Free)).count()
+    }
+
+    /// Records the copy of `target` into a free buffer of the ring and returns the frame number
+    /// it will be read back under, or `None` when every buffer is still in flight (this frame's
+    /// feedback is then skipped). Call [`FeedbackReadback::submitted`] after submitting.
+    pub fn encode_copy(&mut self, encoder: &mut wgpu::CommandEncoder, target: &FeedbackTarget) -> Option<u64> {
+        assert_eq!((target.width, target.height), (self.width, self.height), "feedback target size");
+        let slot = self.slots.iter_mut().find(|s| matches!(s.state, SlotState::Free))?;
+        encoder.copy_texture_to_buffer(
+            target.texture.as_image_copy(),
+            wgpu::TexelCopyBufferInfo {
+                buffer: &slot.buffer,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(self.padded_row),
+                    rows_per_image: Some(self.height),
+                },
+            },
+            wgpu::Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
+        );
+        let frame = self.next_frame;
+        self.next_frame += 1;
+        slot.state = SlotState::Copied { frame };
+        Some(frame)
+    }
+
+    /// Requests the mapping of every copy recorded since the last call; call it once the
+    /// encoders holding them are submitted (a buffer may not be mapped while a submission that
+    /// uses it is still to come).
+    pub fn submitted(&mut self) {
+        for slot in &mut self.slots {
+            if let SlotState::Copied { frame } = slot.state {
+                let state = Arc::new(AtomicU8::new(MAP_PENDING));
+                let flag = state.clone();
+                slot.buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+                    flag.store(if r.is_ok() { MAP_DONE } else { MAP_FAILED }, Ordering::Release);
+                });
+                slot.state = SlotState::Mapping { frame, state };
+            }
+        }
+    }
+
+    /// The words of the oldest frame whose copy the GPU has finished, without blocking (the
+    /// device is polled once); `None` when none is ready. A failed mapping is logged and its
+    /// frame dropped.
+    pub fn try_read(&mut self, device: &wgpu::Device) -> Option<FeedbackFrame> {
+        if let Err(e) = device.poll(wgpu::PollType::Poll) {
+            log::error!("vortex-gpu: polling for feedback: {e}");
+        }
+        loop {
+            let (i, frame, state) = self
+                .slots
+                .iter()
+                .enumerate()
+                .filter_map(|(i, s)| match &s.state {
+                    SlotState::Mapping { frame, state } => {
+                        let st = state.load(Ordering::Acquire);
+                        (st != MAP_PENDING).then_some((i, *frame, st))
+                    }
+                    _ => None,
+                })
+                .min_by_key(|&(_, frame, _)| frame)?;
+            let slot = &mut self.slots[i];
+            slot.state = SlotState::Free;
+            if state == MAP_FAILED {
+                log::error!("vortex-gpu: mapping the feedback of frame {frame} failed; dropped");
+                continue;
+            }
+            let words = {
+                let bytes = slot.buffer.get_mapped_range(..).expect("the feedback buffer is mapped");
+                let row = self.width as usize * 4;
+                bytes
+                    .chunks_exact(self.padded_row as usize)
+                    .flat_map(|r| r[..row].chunks_exact(4).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]])))
+                    .collect()
+            };
+            slot.buffer.unmap();
+            return Some(FeedbackFrame { frame, width: self.width, height: self.height, words });
+        }
+    }
+
+    /// Waits for the GPU to finish everything submitted, then reads the oldest frame in flight
+    /// (`None` if none was). For tests and tools; a frame loop uses
+    /// [`FeedbackReadback::try_read`].
+    pub fn read_now(&mut self, device: &wgpu::Device) -> Option<FeedbackFrame> {
+        if !self.slots.iter().any(|s| matches!(s.state, SlotState::Mapping { .. })) {
+            return None;
+        }
+        device.poll(wgpu::PollType::wait_indefinitely()).expect("device lost while waiting for feedback");
+        self.try_read(device)
+    }
+}
