@@ -17,6 +17,8 @@ use std::sync::atomic::{AtomicU8, Ordering};
 use vortex_vt::feedback::{NO_REQUEST, feedback_bias};
 use vortex_vt::page::TextureGrid;
 
+use crate::fullscreen;
+
 /// The format of feedback targets: one feedback word per pixel.
 pub const FEEDBACK_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 
@@ -128,10 +130,7 @@ pub struct FeedbackPass {
 
 impl FeedbackPass {
     pub fn new(device: &wgpu::Device) -> FeedbackPass {
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("vortex feedback.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("shaders/feedback.wgsl").into()),
-        });
+        let module = fullscreen::shader(device, "vortex feedback.wgsl", include_str!("shaders/feedback.wgsl"));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("vortex feedback"),
             entries: &[wgpu::BindGroupLayoutEntry {
@@ -145,36 +144,7 @@ impl FeedbackPass {
                 count: None,
             }],
         });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("vortex feedback"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("vortex feedback"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: None,
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: FEEDBACK_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let pipeline = fullscreen::pipeline(device, "vortex feedback", &module, &layout, FEEDBACK_FORMAT);
         FeedbackPass { pipeline, layout }
     }
 
@@ -199,14 +169,7 @@ impl FeedbackPass {
                 bias: view.bias + target.bias(),
                 pad1: [0.0; 2],
             };
-            let uniform = wgpu::util::DeviceExt::create_buffer_init(
-                device,
-                &wgpu::util::BufferInitDescriptor {
-                    label: Some("vortex feedback params"),
-                    contents: bytemuck::bytes_of(&params),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                },
-            );
+            let uniform = fullscreen::uniform(device, "vortex feedback params", bytemuck::bytes_of(&params));
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("vortex feedback"),
                 layout: &self.layout,
@@ -215,27 +178,14 @@ impl FeedbackPass {
         });
         // Integer targets take the clear colour converted to the channel type: all ones.
         let clear = NO_REQUEST as f64;
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("vortex feedback"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &target.view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color { r: clear, g: clear, b: clear, a: clear }),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        if let Some(bind_group) = &bind_group {
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, bind_group, &[]);
-            pass.draw(0..3, 0..1);
-        }
+        let colour = wgpu::Color { r: clear, g: clear, b: clear, a: clear };
+        fullscreen::record(
+            encoder,
+            "vortex feedback",
+            &target.view,
+            colour,
+            bind_group.as_ref().map(|g| (&self.pipeline, g)),
+        );
     }
 }
 

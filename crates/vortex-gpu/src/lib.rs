@@ -9,6 +9,7 @@
 
 pub mod device;
 pub mod feedback;
+mod fullscreen;
 pub mod page_cache;
 pub mod page_table;
 pub mod render;

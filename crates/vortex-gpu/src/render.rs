@@ -9,6 +9,7 @@
 use vortex_vt::sampler::Rgba8Image;
 
 use crate::device::Gpu;
+use crate::fullscreen;
 use crate::page_cache::PageCache;
 use crate::page_table::GpuPageTable;
 
@@ -61,10 +62,7 @@ pub struct SamplePass {
 
 impl SamplePass {
     pub fn new(device: &wgpu::Device) -> SamplePass {
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("vortex sample.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("shaders/sample.wgsl").into()),
-        });
+        let module = fullscreen::shader(device, "vortex sample.wgsl", include_str!("shaders/sample.wgsl"));
         let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::FRAGMENT,
@@ -101,36 +99,7 @@ impl SamplePass {
                 entry(3, wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering)),
             ],
         });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("vortex sample"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("vortex sample"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: None,
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: TARGET_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let pipeline = fullscreen::pipeline(device, "vortex sample", &module, &layout, TARGET_FORMAT);
         // Bilinear within a slot; the border makes the neighbouring slots' texels unreachable, so
         // the address mode only matters at the cache's outer edge.
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
@@ -161,14 +130,7 @@ impl SamplePass {
             pad: [0; 2],
             tile: [cache.tile_size() as f32, cache.border() as f32, cache.payload() as f32, cache.side_texels() as f32],
         };
-        let uniform = wgpu::util::DeviceExt::create_buffer_init(
-            device,
-            &wgpu::util::BufferInitDescriptor {
-                label: Some("vortex sample params"),
-                contents: bytemuck::bytes_of(&params),
-                usage: wgpu::BufferUsages::UNIFORM,
-            },
-        );
+        let uniform = fullscreen::uniform(device, "vortex sample params", bytemuck::bytes_of(&params));
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("vortex sample"),
             layout: &self.layout,
@@ -179,25 +141,13 @@ impl SamplePass {
                 wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
             ],
         });
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("vortex sample"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &target.view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.draw(0..3, 0..1);
+        fullscreen::record(
+            encoder,
+            "vortex sample",
+            &target.view,
+            wgpu::Color::TRANSPARENT,
+            Some((&self.pipeline, &bind_group)),
+        );
     }
 
     /// Draws `view` into `target`, submits, and reads the result back (blocking).

@@ -22,13 +22,6 @@ struct Params {
 
 @group(0) @binding(0) var<uniform> params: Params;
 
-@vertex
-fn vs_main(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
-    // One triangle covering the target: (-1, -1), (3, -1), (-1, 3).
-    let xy = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u)) * 2.0 - 1.0;
-    return vec4<f32>(xy, 0.0, 1.0);
-}
-
 @fragment
 fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) u32 {
     // Unclamped, so that the derivatives stay those of the view beyond the texture's edges.

@@ -25,13 +25,6 @@ const UNMAPPED: u32 = 0xffffffffu;
 // The largest f32 below 1: keeps v = 1 inside the last page.
 const BELOW_ONE: f32 = 0.99999994;
 
-@vertex
-fn vs_main(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
-    // One triangle covering the target: (-1, -1), (3, -1), (-1, 3).
-    let xy = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u)) * 2.0 - 1.0;
-    return vec4<f32>(xy, 0.0, 1.0);
-}
-
 @fragment
 fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
     let v = clamp(params.window.xy + frag.xy * params.window.zw, vec2<f32>(0.0), vec2<f32>(BELOW_ONE));
