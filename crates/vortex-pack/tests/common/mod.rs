@@ -135,37 +135,7 @@ fn get_u64(b: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(b[at..at + 8].try_into().unwrap())
 }
 
-fn section(b: &[u8], offset: u64, len: Option<u64>) -> Option<&[u8]> {
-    let start = usize::try_from(offset).ok()?;
-    let end = start.checked_add(usize::try_from(len?).ok()?)?;
-    b.get(start..end)
-}
-
-/// Recomputes every checksum (index, metadata, content hash, header) after tampering, so that
-/// the change reaches the checks behind them. Sections the header places outside the file
-/// keep their old checksums.
-pub fn reseal(b: &mut [u8]) {
-    if b.len() < format::HEADER_LEN {
-        return;
-    }
-    let levels = section(b, get_u64(b, at::LEVELS_OFFSET), get_u32(b, at::LEVEL_COUNT).checked_mul(32));
-    let index = section(b, get_u64(b, at::INDEX_OFFSET), get_u64(b, at::INDEX_COUNT).checked_mul(24));
-    let meta = section(b, get_u64(b, at::META_OFFSET), Some(get_u32(b, at::META_LEN)));
-    let index_crc = levels.zip(index).map(|(l, i)| crc32c::crc32c_append(crc32c::crc32c(l), i));
-    let meta_crc = meta.map(crc32c::crc32c);
-    let hash = meta.zip(index).map(|(m, i)| format::fnv1a(format::fnv1a(format::FNV_OFFSET, m), i));
-    if let Some(c) = index_crc {
-        b[at::INDEX_CRC..at::INDEX_CRC + 4].copy_from_slice(&c.to_le_bytes());
-    }
-    if let Some(c) = meta_crc {
-        b[at::META_CRC..at::META_CRC + 4].copy_from_slice(&c.to_le_bytes());
-    }
-    if let Some(h) = hash {
-        b[at::CONTENT_HASH..at::CONTENT_HASH + 8].copy_from_slice(&h.to_le_bytes());
-    }
-    let crc = crc32c::crc32c(&b[..at::HEADER_CRC]);
-    b[at::HEADER_CRC..at::HEADER_CRC + 4].copy_from_slice(&crc.to_le_bytes());
-}
+pub use vortex_pack::format::reseal;
 
 /// Index entries of a (well-formed) pack's bytes: (entry offset, payload offset, length).
 pub fn payload_entries(b: &[u8]) -> Vec<(usize, u64, u64)> {
