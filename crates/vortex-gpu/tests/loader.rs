@@ -1,0 +1,526 @@
+//! The tile loader on small packs written here (4x4 pages of 16 texels with a 2-texel border):
+//! texels as `decode_rgba8` gives them, the same answers whatever the thread count, stand-ins and
+//! errors for bad tiles, absent tiles from their ancestors, the asynchronous API. No GPU needed.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use vortex_gpu::VirtualTexture;
+use vortex_gpu::loader::{LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS, stand_in_tile};
+use vortex_pack::format::{self, Level};
+use vortex_pack::{Description, NewTile, Pack, PackWriter, Tile, TileId, TileKind, WriteOptions};
+use vortex_vt::page::{PageId, TextureGrid};
+use vortex_vt::residency::Slot;
+
+const TILE: u32 = 16;
+const BORDER: u32 = 2;
+const PAGES: u32 = 4;
+
+/// What to store for one tile.
+#[derive(Clone, Copy, Debug)]
+enum Spec {
+    Absent,
+    Constant([u8; 3]),
+    Raw(u32),
+    Zstd(u32),
+    Png(u32),
+    Jpeg(u32),
+    /// A payload of this kind that does not decode (its CRC is right).
+    Garbage(TileKind),
+}
+
+fn description(tile_size: u32, border: u32, pages: u32, width: u32, height: u32) -> Description {
+    let level_count = pages.trailing_zeros() + 1;
+    Description { width, height, tile_size, border, level_count, channels: 3, sample_bytes: 1 }
+}
+
+/// RGB texels of one tile that depend on `seed` and vary across the tile.
+fn rgb(tile_size: u32, seed: u32) -> Vec<u8> {
+    let n = (tile_size * tile_size) as usize;
+    (0..n)
+        .flat_map(|i| {
+            let (x, y) = (i as u32 % tile_size, i as u32 / tile_size);
+            [(x * 13 + seed * 29) as u8, (y * 11 + seed * 7) as u8, ((x ^ y) * 5 + seed * 3) as u8]
+        })
+        .collect()
+}
+
+fn png(tile_size: u32, seed: u32) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut encoder = png::Encoder::new(&mut out, tile_size, tile_size);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    let mut writer = encoder.write_header().unwrap();
+    writer.write_image_data(&rgb(tile_size, seed)).unwrap();
+    writer.finish().unwrap();
+    out
+}
+
+fn jpeg(tile_size: u32, seed: u32) -> Vec<u8> {
+    let mut out = Vec::new();
+    let side = tile_size as u16;
+    jpeg_encoder::Encoder::new(&mut out, 90)
+        .encode(&rgb(tile_size, seed), side, side, jpeg_encoder::ColorType::Rgb)
+        .unwrap();
+    out
+}
+
+/// Writes a pack of `description` with the pyramid's levels, each tile as `spec` says.
+fn write_pack(path: &Path, d: Description, spec: impl Fn(TileId) -> Spec) -> Arc<Pack> {
+    let levels = format::pyramid_levels(&d, 1 << (d.level_count - 1));
+    write_pack_with_levels(path, d, levels, spec)
+}
+
+fn write_pack_with_levels(path: &Path, d: Description, levels: Vec<Level>, spec: impl Fn(TileId) -> Spec) -> Arc<Pack> {
+    let mut w = PackWriter::create(path, d, levels.clone(), b"{}", WriteOptions::default()).unwrap();
+    for (lod, level) in levels.iter().enumerate() {
+        for y in 0..level.tiles_h {
+            for x in 0..level.tiles_w {
+                let id = TileId { lod: lod as u32, x, y };
+                let (kind, bytes) = match spec(id) {
+                    Spec::Absent => {
+                        w.add(id, NewTile::Absent).unwrap();
+                        continue;
+                    }
+                    Spec::Constant(value) => {
+                        w.add(id, NewTile::Constant(&value)).unwrap();
+                        continue;
+                    }
+                    Spec::Raw(seed) => (TileKind::Raw, rgb(d.tile_size, seed)),
+                    Spec::Zstd(seed) => (TileKind::Zstd, zstd::bulk::compress(&rgb(d.tile_size, seed), 3).unwrap()),
+                    Spec::Png(seed) => (TileKind::Png, png(d.tile_size, seed)),
+                    Spec::Jpeg(seed) => (TileKind::Jpeg, jpeg(d.tile_size, seed)),
+                    Spec::Garbage(kind) => (kind, b"this is not an image of any kind".to_vec()),
+                };
+                w.add(id, NewTile::Data(kind, &bytes)).unwrap();
+            }
+        }
+    }
+    w.finish().unwrap();
+    Arc::new(Pack::open(path).unwrap())
+}
+
+/// A distinct number per tile, to seed its content.
+fn seed(id: TileId) -> u32 {
+    id.lod * 100 + id.y * 10 + id.x + 1
+}
+
+/// Every kind of tile, at every LOD: JPEG, PNG, raw, constant, zstd in turn.
+fn mixed(id: TileId) -> Spec {
+    let s = seed(id);
+    match (id.lod + id.x + 2 * id.y) % 5 {
+        0 => Spec::Jpeg(s),
+        1 => Spec::Png(s),
+        2 => Spec::Raw(s),
+        3 => Spec::Constant([s as u8, (s * 3) as u8, 200]),
+        _ => Spec::Zstd(s),
+    }
+}
+
+fn mixed_pack(dir: &Path, name: &str) -> Arc<Pack> {
+    write_pack(&dir.join(name), description(TILE, BORDER, PAGES, 44, 40), mixed)
+}
+
+/// Every page of the texture, finest LOD first, with distinct slots.
+fn all_pages(texture: u8, grid: TextureGrid, first_slot: Slot) -> Vec<(PageId, Slot)> {
+    let mut pages = Vec::new();
+    for lod in 0..grid.lod_count {
+        let side = grid.pages_per_side(lod);
+        for y in 0..side {
+            for x in 0..side {
+                pages.push(PageId::new(texture, lod, x, y));
+            }
+        }
+    }
+    pages.into_iter().zip(first_slot..).collect()
+}
+
+fn expected_texels(pack: &Pack, page: PageId) -> Vec<u8> {
+    vortex_pack::decode_rgba8(pack, page.lod.into(), page.x.into(), page.y.into()).unwrap().unwrap()
+}
+
+fn payload_len(pack: &Pack, page: PageId) -> u64 {
+    match pack.tile(page.lod.into(), page.x.into(), page.y.into()).unwrap() {
+        Tile::Data(_, bytes) => bytes.len() as u64,
+        Tile::Constant(_) | Tile::Absent => 0,
+    }
+}
+
+fn tempdir() -> tempfile::TempDir {
+    tempfile::tempdir().unwrap()
+}
+
+#[test]
+fn virtual_texture_describes_the_pack() {
+    let dir = tempdir();
+    let pack = mixed_pack(dir.path(), "a.vtpk");
+    let t = VirtualTexture::from_pack(&pack).unwrap();
+    assert_eq!(t.grid, TextureGrid::new(4).unwrap());
+    assert_eq!(t.grid.lod_count, 3);
+    assert_eq!((t.width, t.height, t.tile_size, t.border, t.payload()), (44, 40, 16, 2, 12));
+    assert_eq!(t.uv_scale(), [44.0 / 48.0, 40.0 / 48.0]);
+}
+
+#[test]
+fn packs_that_are_not_a_power_of_two_pyramid_are_rejected_naming_the_field() {
+    let dir = tempdir();
+    let cases: [(&str, Description, Vec<Level>, &str); 4] = {
+        let level = |tiles_w, tiles_h, first_entry| Level { tiles_w, tiles_h, first_entry, width: 30, height: 30 };
+        let d = |level_count| Description { level_count, ..description(TILE, BORDER, 4, 30, 30) };
+        [
+            ("three.vtpk", d(2), vec![level(3, 3, 0), level(2, 2, 9)], "tiles_w"),
+            ("oblong.vtpk", d(2), vec![level(2, 1, 0), level(1, 1, 2)], "tiles_h"),
+            ("short.vtpk", d(2), vec![level(4, 4, 0), level(2, 2, 16)], "level_count"),
+            ("odd.vtpk", d(3), vec![level(4, 4, 0), level(2, 3, 16), level(1, 1, 22)], "tiles_h"),
+        ]
+    };
+    for (name, d, levels, field) in cases {
+        let path = dir.path().join(name);
+        let pack = write_pack_with_levels(&path, d, levels, |_| Spec::Constant([1, 2, 3]));
+        let e = VirtualTexture::from_pack(&pack).unwrap_err();
+        assert!(
+            matches!(&e, LoaderError::Layout { path: p, field: f, .. } if *p == path && *f == field),
+            "{name}: {e}"
+        );
+        assert!(e.to_string().contains(name), "{e}");
+        assert!(Loader::new(vec![pack], 1).is_err());
+    }
+    // An image larger than the page grid covers.
+    let too_wide =
+        write_pack(&dir.path().join("wide.vtpk"), description(TILE, BORDER, 2, 25, 10), |_| Spec::Constant([0, 0, 0]));
+    let e = VirtualTexture::from_pack(&too_wide).unwrap_err();
+    assert!(matches!(&e, LoaderError::Layout { field: "width", .. }), "{e}");
+}
+
+#[test]
+fn texels_equal_decode_rgba8_for_every_tile_kind() {
+    let dir = tempdir();
+    let pack = mixed_pack(dir.path(), "a.vtpk");
+    let loader = Loader::new(vec![Arc::clone(&pack)], 2).unwrap();
+    assert_eq!((loader.tile_size(), loader.border(), loader.threads()), (16, 2, 2));
+    let pages = all_pages(0, loader.textures()[0].grid, 0);
+    assert_eq!(pages.len(), 21);
+    let loaded = loader.load(&pages);
+    let mut kinds = HashMap::new();
+    for (answer, (page, slot)) in loaded.iter().zip(&pages) {
+        assert_eq!((answer.page, answer.slot), (*page, *slot));
+        assert_eq!(answer.error, None, "{page:?}");
+        assert_eq!(answer.texels, expected_texels(&pack, *page), "{page:?}");
+        assert_eq!(answer.bytes_read, payload_len(&pack, *page), "{page:?}");
+        let kind = match pack.tile(page.lod.into(), page.x.into(), page.y.into()).unwrap() {
+            Tile::Data(kind, _) => kind,
+            Tile::Constant(_) => TileKind::Constant,
+            Tile::Absent => TileKind::Absent,
+        };
+        *kinds.entry(kind).or_insert(0) += 1;
+    }
+    for kind in [TileKind::Jpeg, TileKind::Png, TileKind::Raw, TileKind::Zstd, TileKind::Constant] {
+        assert!(kinds.get(&kind).copied().unwrap_or(0) >= 3, "{kind:?}: {kinds:?}");
+    }
+    let c = loader.counters();
+    assert_eq!((c.pages, c.tiles_decoded, c.absent_filled, c.errors), (21, 21, 0, 0));
+}
+
+#[test]
+fn bytes_read_is_the_sum_of_payload_lengths() {
+    let dir = tempdir();
+    let pack = mixed_pack(dir.path(), "a.vtpk");
+    let loader = Loader::new(vec![Arc::clone(&pack)], 3).unwrap();
+    let pages = all_pages(0, loader.textures()[0].grid, 0);
+    // Pages asked twice are read twice.
+    let twice: Vec<(PageId, Slot)> = pages.iter().chain(&pages).copied().collect();
+    let loaded = loader.load(&twice);
+    let expected: u64 = twice.iter().map(|(page, _)| payload_len(&pack, *page)).sum();
+    assert!(expected > 0);
+    assert_eq!(loaded.iter().map(|p| p.bytes_read).sum::<u64>(), expected);
+    assert_eq!(loader.counters().bytes_read, expected);
+    assert_eq!(loader.counters().pages, twice.len() as u64);
+}
+
+#[test]
+fn results_and_counters_do_not_depend_on_the_thread_count() {
+    let dir = tempdir();
+    let a = mixed_pack(dir.path(), "a.vtpk");
+    let b = write_pack(&dir.path().join("b.vtpk"), description(TILE, BORDER, 2, 20, 24), |id| match seed(id) % 3 {
+        0 => Spec::Absent,
+        1 => Spec::Garbage(TileKind::Png),
+        _ => Spec::Jpeg(seed(id) + 50),
+    });
+    let grids = [VirtualTexture::from_pack(&a).unwrap().grid, VirtualTexture::from_pack(&b).unwrap().grid];
+    let mut pages = all_pages(0, grids[0], 0);
+    pages.extend(all_pages(1, grids[1], 100));
+    pages.extend(pages.clone());
+    // Out of the grids, and an unknown texture.
+    pages.extend([(PageId::new(0, 3, 0, 0), 7), (PageId::new(1, 0, 2, 0), 8), (PageId::new(2, 0, 0, 0), 9)]);
+    // A fixed shuffle.
+    let n = pages.len();
+    for i in 0..n {
+        pages.swap(i, (i * 7919 + 13) % n);
+    }
+    let run = |threads: usize| -> (Vec<LoadedPage>, LoadCounters) {
+        let loader = Loader::new(vec![Arc::clone(&a), Arc::clone(&b)], threads).unwrap();
+        let loaded = loader.load(&pages);
+        (loaded, loader.counters())
+    };
+    let (one, one_counters) = run(1);
+    let (four, four_counters) = run(4);
+    assert_eq!(one.iter().map(|p| (p.page, p.slot)).collect::<Vec<_>>(), pages);
+    assert!(one == four, "the answers differ between 1 and 4 threads");
+    assert_eq!(one_counters, four_counters);
+    assert!(one_counters.errors > 3 && one_counters.absent_filled > 0, "{one_counters:?}");
+    assert_eq!(one_counters.errors, one.iter().filter(|p| !p.is_ok()).count() as u64);
+}
+
+#[test]
+fn mismatched_tile_sizes_or_borders_are_rejected_naming_both_packs() {
+    let dir = tempdir();
+    let a = mixed_pack(dir.path(), "first.vtpk");
+    let big = write_pack(&dir.path().join("big.vtpk"), description(32, BORDER, 2, 40, 40), |_| Spec::Constant([9; 3]));
+    let thin = write_pack(&dir.path().join("thin.vtpk"), description(TILE, 1, 4, 40, 40), |_| Spec::Constant([9; 3]));
+    for (other, field, value) in [(big, "tile_size", 32), (thin, "border", 1)] {
+        let e = Loader::new(vec![Arc::clone(&a), Arc::clone(&a), Arc::clone(&other)], 1).err().unwrap();
+        let text = e.to_string();
+        assert!(text.contains("first.vtpk") && text.contains(&other.path().display().to_string()), "{text}");
+        match e {
+            LoaderError::Mismatch { field: f, first, other_value, .. } => {
+                assert_eq!((f, first.as_path(), other_value), (field, a.path(), value));
+            }
+            other => panic!("{other}"),
+        }
+    }
+    assert!(matches!(Loader::new(Vec::new(), 1), Err(LoaderError::NoTextures)));
+    assert!(matches!(Loader::new(vec![a; 17], 1), Err(LoaderError::TooManyTextures { count: 17 })));
+}
+
+/// Flips one byte of the payload of `id` in a copy of the pack at `from`.
+fn corrupt_copy(from: &Pack, to: &Path, id: TileId) -> (Arc<Pack>, u64) {
+    let entry = from.entry(from.position(id).unwrap());
+    let mut bytes = from.file().to_vec();
+    bytes[(entry.offset_or_value + u64::from(entry.len) / 2) as usize] ^= 0x40;
+    std::fs::write(to, &bytes).unwrap();
+    (Arc::new(Pack::open(to).unwrap()), u64::from(entry.len))
+}
+
+#[test]
+fn a_corrupted_payload_gives_the_stand_in_and_an_error_naming_the_tile() {
+    let dir = tempdir();
+    let pack = mixed_pack(dir.path(), "a.vtpk");
+    let corrupt_path = dir.path().join("corrupt.vtpk");
+    // (lod 1, x 1, y 0) is a raw tile, (lod 1, x 1, y 1) a zstd one: corrupt both.
+    let (once, _) = corrupt_copy(&pack, &corrupt_path, TileId { lod: 1, x: 1, y: 0 });
+    let (corrupt, len) = corrupt_copy(&once, &corrupt_path, TileId { lod: 1, x: 1, y: 1 });
+    drop(once);
+    let loader = Loader::new(vec![Arc::clone(&corrupt)], 2).unwrap();
+    let pages = all_pages(0, loader.textures()[0].grid, 0);
+    let loaded = loader.load(&pages);
+    let bad: Vec<&LoadedPage> = loaded.iter().filter(|p| !p.is_ok()).collect();
+    assert_eq!(bad.len(), 2);
+    for (page, x, y) in [(bad[0], 1, 0), (bad[1], 1, 1)] {
+        assert_eq!((page.page.lod, page.page.x, page.page.y), (1, x, y));
+        match page.error.as_ref().unwrap() {
+            LoadError::Tile { path, lod: 1, x: ex, y: ey, message } if (*ex, *ey) == (u32::from(x), u32::from(y)) => {
+                assert_eq!(path, &corrupt_path);
+                assert!(message.contains("checksum"), "{message}");
+            }
+            other => panic!("{other}"),
+        }
+        assert_eq!(page.texels, stand_in_tile(TILE));
+        assert_eq!(&page.texels[..4], &STAND_IN_COLORS[0]);
+    }
+    assert_eq!(bad[1].bytes_read, len);
+    let message = bad[0].error.as_ref().unwrap().to_string();
+    assert!(message.contains("corrupt.vtpk") && message.contains("(lod 1, x 1, y 0)"), "{message}");
+    for page in loaded.iter().filter(|p| p.is_ok()) {
+        assert_eq!(page.texels, expected_texels(&pack, page.page));
+    }
+    assert_eq!(loader.counters().errors, 2);
+}
+
+#[test]
+fn undecodable_payloads_with_right_checksums_give_the_stand_in() {
+    let dir = tempdir();
+    let kinds = [TileKind::Png, TileKind::Jpeg, TileKind::Zstd, TileKind::Png];
+    let pack = write_pack(&dir.path().join("garbage.vtpk"), description(TILE, BORDER, 2, 20, 20), |id| {
+        if id.lod == 0 { Spec::Garbage(kinds[(id.y * 2 + id.x) as usize]) } else { Spec::Raw(1) }
+    });
+    let loader = Loader::new(vec![Arc::clone(&pack)], 2).unwrap();
+    let loaded = loader.load(&all_pages(0, loader.textures()[0].grid, 0));
+    for page in &loaded[..4] {
+        let e = page.error.as_ref().unwrap();
+        assert!(
+            matches!(e, LoadError::Tile { lod: 0, x, y, .. } if (*x, *y) == (page.page.x.into(), page.page.y.into())),
+            "{e}"
+        );
+        assert_eq!(page.texels, stand_in_tile(TILE));
+    }
+    assert!(loaded[4].is_ok());
+    assert_eq!(loader.counters().errors, 4);
+}
+
+#[test]
+fn pages_outside_the_grid_get_the_stand_in_and_an_error() {
+    let dir = tempdir();
+    let pack = mixed_pack(dir.path(), "a.vtpk");
+    let loader = Loader::new(vec![Arc::clone(&pack)], 1).unwrap();
+    let pages = [(PageId::new(0, 3, 0, 0), 0), (PageId::new(0, 0, 4, 0), 1), (PageId::new(0, 1, 0, 2), 2)];
+    for page in loader.load(&pages) {
+        assert_eq!(page.texels, stand_in_tile(TILE));
+        let e = page.error.unwrap();
+        assert!(matches!(&e, LoadError::OutOfGrid { path, .. } if path == pack.path()), "{e}");
+    }
+    let unknown = loader.load(&[(PageId::new(1, 0, 0, 0), 3)]);
+    assert!(matches!(unknown[0].error, Some(LoadError::UnknownTexture { textures: 1, .. })));
+    assert_eq!(unknown[0].texels, stand_in_tile(TILE));
+    assert_eq!(loader.counters().errors, 4);
+}
+
+/// The reference magnification, in floating point: texel i of `page` is centred on
+/// `x * payload - border + i + 1/2` at its LOD, sampled bilinearly (clamped to the tile) from the
+/// ancestor `levels_up` LODs coarser, rounded half up.
+fn magnified(ancestor: &[u8], page: PageId, levels_up: u8) -> Vec<u8> {
+    let (t, b, p) = (TILE as f64, BORDER as f64, (TILE - 2 * BORDER) as f64);
+    let scale = f64::from(1u32 << levels_up);
+    let axis = |xy: u16, i: usize| {
+        let origin = f64::from(xy >> levels_up) * p - b;
+        let u = (f64::from(xy) * p - b + i as f64 + 0.5) / scale - origin - 0.5;
+        let j = u.floor();
+        let clamp = |v: f64| v.clamp(0.0, t - 1.0) as usize;
+        (clamp(j), clamp(j + 1.0), u - j)
+    };
+    let side = TILE as usize;
+    let mut out = Vec::new();
+    for i in 0..side {
+        let (y0, y1, fy) = axis(page.y, i);
+        for k in 0..side {
+            let (x0, x1, fx) = axis(page.x, k);
+            for c in 0..4 {
+                let at = |x: usize, y: usize| f64::from(ancestor[(y * side + x) * 4 + c]);
+                let v = (1.0 - fy) * ((1.0 - fx) * at(x0, y0) + fx * at(x1, y0))
+                    + fy * ((1.0 - fx) * at(x0, y1) + fx * at(x1, y1));
+                out.push((v + 0.5).floor() as u8);
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn an_absent_tile_is_its_nearest_ancestor_magnified() {
+    let dir = tempdir();
+    // LOD 0 (1, 1) and LOD 1 (0, 0) are absent: (1, 1) comes from the root, two LODs up.
+    // LOD 0 (2, 1) and (3, 3) come from their parents, LOD 1 (1, 0) and (1, 1).
+    let absent = [(0, 1, 1), (1, 0, 0), (0, 2, 1), (0, 3, 3), (0, 0, 0)];
+    let pack = write_pack(&dir.path().join("holes.vtpk"), description(TILE, BORDER, PAGES, 44, 40), |id| {
+        if absent.contains(&(id.lod, id.x, id.y)) { Spec::Absent } else { Spec::Raw(seed(id)) }
+    });
+    let loader = Loader::new(vec![Arc::clone(&pack)], 2).unwrap();
+    let cases = [(PageId::new(0, 0, 1, 1), 2u8), (PageId::new(0, 0, 2, 1), 1), (PageId::new(0, 0, 3, 3), 1)];
+    let cases = cases.into_iter().chain([(PageId::new(0, 0, 0, 0), 2), (PageId::new(0, 1, 0, 0), 1)]);
+    for (page, levels_up) in cases {
+        let answer = &loader.load(&[(page, 5)])[0];
+        assert_eq!(answer.error, None);
+        let ancestor = PageId::new(0, page.lod + levels_up, page.x >> levels_up, page.y >> levels_up);
+        let want = magnified(&expected_texels(&pack, ancestor), page, levels_up);
+        assert_eq!(answer.texels, want, "{page:?} from {ancestor:?}");
+        assert_eq!(answer.bytes_read, payload_len(&pack, ancestor));
+        assert_ne!(answer.texels, stand_in_tile(TILE));
+    }
+    let c = loader.counters();
+    assert_eq!((c.pages, c.absent_filled, c.tiles_decoded, c.errors), (5, 5, 5, 0));
+}
+
+#[test]
+fn an_absent_tile_of_a_constant_ancestor_is_that_constant() {
+    let dir = tempdir();
+    let pack = write_pack(&dir.path().join("flat.vtpk"), description(TILE, BORDER, PAGES, 44, 40), |id| {
+        if id.lod == 2 { Spec::Constant([12, 34, 56]) } else { Spec::Absent }
+    });
+    let loader = Loader::new(vec![pack], 1).unwrap();
+    for page in loader.load(&all_pages(0, loader.textures()[0].grid, 0)) {
+        assert_eq!(page.error, None);
+        assert_eq!(page.bytes_read, 0);
+        assert_eq!(page.texels, [12, 34, 56, 255].repeat((TILE * TILE) as usize));
+    }
+}
+
+#[test]
+fn a_tile_with_no_stored_ancestor_gets_the_stand_in() {
+    let dir = tempdir();
+    let pack = write_pack(&dir.path().join("empty.vtpk"), description(TILE, BORDER, 2, 20, 20), |_| Spec::Absent);
+    let loader = Loader::new(vec![pack], 1).unwrap();
+    let loaded = loader.load(&[(PageId::new(0, 0, 1, 1), 0)]);
+    assert!(matches!(loaded[0].error, Some(LoadError::NoAncestor { lod: 0, x: 1, y: 1, .. })));
+    assert_eq!(loaded[0].texels, stand_in_tile(TILE));
+}
+
+#[test]
+fn a_broken_ancestor_of_an_absent_tile_is_named() {
+    let dir = tempdir();
+    let pack = write_pack(&dir.path().join("a.vtpk"), description(TILE, BORDER, 2, 20, 20), |id| {
+        if id.lod == 0 { Spec::Absent } else { Spec::Garbage(TileKind::Jpeg) }
+    });
+    let loader = Loader::new(vec![pack], 1).unwrap();
+    let loaded = loader.load(&[(PageId::new(0, 0, 1, 0), 0)]);
+    match loaded[0].error.as_ref().unwrap() {
+        LoadError::Tile { lod: 1, x: 0, y: 0, message, .. } => assert!(message.contains("ancestor"), "{message}"),
+        other => panic!("{other}"),
+    }
+    assert_eq!(loaded[0].texels, stand_in_tile(TILE));
+}
+
+#[test]
+fn request_and_poll_answer_every_page_exactly_once() {
+    let dir = tempdir();
+    let pack = mixed_pack(dir.path(), "a.vtpk");
+    let loader = Loader::new(vec![Arc::clone(&pack)], 3).unwrap();
+    let grid = loader.textures()[0].grid;
+    let pages: Vec<(PageId, Slot)> = (0..3).flat_map(|round| all_pages(0, grid, round * 100)).collect();
+    let reference: HashMap<PageId, LoadedPage> =
+        loader.load(&all_pages(0, grid, 0)).into_iter().map(|p| (p.page, p)).collect();
+    let mut seen: HashMap<Slot, LoadedPage> = HashMap::new();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    for chunk in pages.chunks(10) {
+        loader.request(chunk);
+        // A blocking load meanwhile shares the workers and is not mixed into the polled pages.
+        assert_eq!(loader.load(&chunk[..1])[0].page, chunk[0].0);
+        for page in loader.poll() {
+            assert!(seen.insert(page.slot, page).is_none(), "answered twice");
+        }
+    }
+    while loader.pending() > 0 {
+        assert!(Instant::now() < deadline, "{} pages never came", loader.pending());
+        for page in loader.poll() {
+            assert!(seen.insert(page.slot, page).is_none(), "answered twice");
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert!(loader.poll().is_empty());
+    assert_eq!(seen.len(), pages.len());
+    for (page, slot) in &pages {
+        let answer = &seen[slot];
+        assert_eq!(answer.page, *page);
+        let want = &reference[page];
+        assert_eq!((&answer.texels, answer.bytes_read, &answer.error), (&want.texels, want.bytes_read, &want.error));
+    }
+}
+
+#[test]
+fn dropping_the_loader_with_work_in_flight_stops_its_threads() {
+    let dir = tempdir();
+    let pack = mixed_pack(dir.path(), "a.vtpk");
+    let grid = VirtualTexture::from_pack(&pack).unwrap().grid;
+    let pages: Vec<(PageId, Slot)> = (0..20).flat_map(|_| all_pages(0, grid, 0)).collect();
+    for threads in [1, 4] {
+        let loader = Loader::new(vec![Arc::clone(&pack)], threads).unwrap();
+        loader.request(&pages);
+        let _ = loader.poll();
+        drop(loader);
+    }
+    // No worker holds the pack any more.
+    assert_eq!(Arc::strong_count(&pack), 1);
+    let zero = Loader::new(vec![pack], 0).unwrap();
+    assert!(zero.threads() >= 1);
+    assert!(zero.load(&[]).is_empty());
+}
