@@ -3,8 +3,10 @@
 //!
 //! Every texel format becomes 8-bit RGBA: grey `g` is `(g, g, g, 255)`, grey-alpha `(g, a)` is
 //! `(g, g, g, a)`, RGB gets an opaque alpha, and 16-bit samples become 8-bit with rounding,
-//! `(v + 128) / 257`. Raw and zstd payloads (and constant values) hold little-endian samples;
-//! PNG's 16-bit samples are big-endian as PNG defines them.
+//! `(v + 128) / 257`. Raw, zstd and zstd-delta payloads (and constant values) hold
+//! little-endian samples; PNG's 16-bit samples are big-endian as PNG defines them. BC1 and BC7
+//! blocks are decoded as Direct3D defines them (`bcdec_rs`); in a pack of RGB texels the alpha
+//! they decode to is ignored (255).
 //!
 //! Payload bytes are untrusted: before anything is allocated the decoded size must equal the
 //! tile's (`tile_size^2` texels) and stay under a byte limit, so that a payload claiming a huge
@@ -12,15 +14,15 @@
 
 use std::io::Cursor;
 
-use crate::error::Result;
-use crate::format::{Description, ENTRY_LEN, TileKind};
+use crate::error::{PackError, Result};
+use crate::format::{Description, ENTRY_LEN, TileKind, delta_decode_rows};
 use crate::reader::{Pack, Tile, TileId};
 use crate::verify::DEFAULT_MAX_DECODED_BYTES;
 
 /// The tile at `(lod, x, y)` as `tile_size^2` RGBA8 texels, rows top down; `None` if it is
 /// absent. Payload checksums are checked ([`Pack::tile_checked`]); a payload that does not
 /// decode to exactly one tile, or would need more than [`DEFAULT_MAX_DECODED_BYTES`], is a
-/// [`PackError::Tile`](crate::PackError::Tile). BC1 and BC7 payloads are not decoded (an error).
+/// [`PackError::Tile`](crate::PackError::Tile).
 pub fn decode_rgba8(pack: &Pack, lod: u32, x: u32, y: u32) -> Result<Option<Vec<u8>>> {
     decode_rgba8_limited(pack, lod, x, y, DEFAULT_MAX_DECODED_BYTES)
 }
@@ -42,6 +44,38 @@ pub fn decode_rgba8_limited(pack: &Pack, lod: u32, x: u32, y: u32, max_bytes: u6
             let mut decoder = PayloadDecoder::default();
             decoder.decode(kind, bytes, d, max_bytes).map(Some).map_err(|m| pack.tile_error(id, offset, m))
         }
+    }
+}
+
+/// A payload of `kind` that decodes to texels in the pack's own texel format (raw, zstd,
+/// zstd-delta, BC1, BC7) as one raw tile: `tile_size^2` texels of `channels` samples, rows top
+/// down, samples little-endian. For converting packs; PNG and JPEG payloads are image files
+/// (see [`decode_rgba8`]) and are refused here. Nothing larger than `max_bytes` is allocated.
+pub fn payload_texels(kind: TileKind, bytes: &[u8], d: &Description, max_bytes: u64) -> Result<Vec<u8>> {
+    let fail = |message: String| PackError::Payload { kind: kind.name(), message };
+    let mut decoder = PayloadDecoder::default();
+    match kind {
+        TileKind::Raw => {
+            let raw = raw_len(d, max_bytes).map_err(fail)?;
+            if bytes.len() as u64 != raw {
+                return Err(fail(format!("a raw tile is {raw} bytes, this payload {}", bytes.len())));
+            }
+            Ok(bytes.to_vec())
+        }
+        TileKind::Zstd | TileKind::ZstdDelta => decoder.unzstd(kind, bytes, d, max_bytes).map_err(fail),
+        TileKind::Bc1 | TileKind::Bc7 => {
+            let rgba = decode_blocks(kind, bytes, d, max_bytes).map_err(fail)?;
+            let channels = d.channels as usize;
+            if channels == 4 {
+                return Ok(rgba);
+            }
+            let mut out = alloc(raw_len(d, max_bytes).map_err(fail)?).map_err(fail)?;
+            for (o, px) in out.chunks_exact_mut(channels).zip(rgba.chunks_exact(4)) {
+                o.copy_from_slice(&px[..channels]);
+            }
+            Ok(out)
+        }
+        _ => Err(fail("not a texel payload: decode it as an image file".into())),
     }
 }
 
@@ -80,23 +114,13 @@ impl PayloadDecoder {
                 }
                 texels_to_rgba8(bytes, d.channels, d.sample_bytes, Endian::Little)?
             }
-            TileKind::Zstd => {
-                let raw = raw_len(d, max_bytes)?;
-                let mut buf = alloc(raw)?;
-                if self.zstd.is_none() {
-                    self.zstd = Some(zstd::bulk::Decompressor::new().map_err(|e| format!("zstd: {e}"))?);
-                }
-                let decompressor = self.zstd.as_mut().expect("just made");
-                match decompressor.decompress_to_buffer(bytes, &mut buf[..]) {
-                    Ok(n) if n as u64 == raw => {}
-                    Ok(n) => return Err(format!("zstd payload decompresses to {n} bytes; a raw tile is {raw}")),
-                    Err(e) => return Err(format!("zstd payload does not decompress to one {raw}-byte raw tile: {e}")),
-                }
+            TileKind::Zstd | TileKind::ZstdDelta => {
+                let buf = self.unzstd(kind, bytes, d, max_bytes)?;
                 texels_to_rgba8(&buf, d.channels, d.sample_bytes, Endian::Little)?
             }
             TileKind::Png => decode_png(bytes, d.tile_size, max_bytes)?,
             TileKind::Jpeg => decode_jpeg(bytes, d.tile_size, max_bytes)?,
-            TileKind::Bc1 | TileKind::Bc7 => return Err(format!("decoding {} tiles is not supported", kind.name())),
+            TileKind::Bc1 | TileKind::Bc7 => decode_blocks(kind, bytes, d, max_bytes)?,
             TileKind::Absent | TileKind::Constant => return Err(format!("{} tiles have no payload", kind.name())),
         };
         if out.len() as u64 != rgba {
@@ -104,6 +128,58 @@ impl PayloadDecoder {
         }
         Ok(out)
     }
+}
+
+impl PayloadDecoder {
+    /// A zstd or zstd-delta payload as one raw tile (the row filter undone).
+    fn unzstd(&mut self, kind: TileKind, bytes: &[u8], d: &Description, max_bytes: u64) -> Result<Vec<u8>, String> {
+        let raw = raw_len(d, max_bytes)?;
+        let mut buf = alloc(raw)?;
+        if self.zstd.is_none() {
+            self.zstd = Some(zstd::bulk::Decompressor::new().map_err(|e| format!("zstd: {e}"))?);
+        }
+        let decompressor = self.zstd.as_mut().expect("just made");
+        match decompressor.decompress_to_buffer(bytes, &mut buf[..]) {
+            Ok(n) if n as u64 == raw => {}
+            Ok(n) => return Err(format!("zstd payload decompresses to {n} bytes; a raw tile is {raw}")),
+            Err(e) => return Err(format!("zstd payload does not decompress to one {raw}-byte raw tile: {e}")),
+        }
+        if kind == TileKind::ZstdDelta {
+            let (c, sb) = (d.channels as usize, d.sample_bytes as usize);
+            delta_decode_rows(&mut buf, d.tile_size as usize, c, sb);
+        }
+        Ok(buf)
+    }
+}
+
+/// BC1 or BC7 blocks (rows of 4x4 blocks, top down) as one RGBA8 tile; alpha is 255 in a pack
+/// of RGB texels.
+fn decode_blocks(kind: TileKind, bytes: &[u8], d: &Description, max_bytes: u64) -> Result<Vec<u8>, String> {
+    if let Some(why) = d.refuses(kind) {
+        return Err(why);
+    }
+    let expected = d.block_tile_len(kind).expect("a block kind");
+    if bytes.len() as u64 != expected {
+        return Err(format!("a {} tile has {expected} bytes, not {}", kind.name(), bytes.len()));
+    }
+    let mut out = alloc(rgba_len(d, max_bytes)?)?;
+    let side = d.tile_size as usize;
+    let pitch = side * 4;
+    let block_len = if kind == TileKind::Bc1 { 8 } else { 16 };
+    for (i, block) in bytes.chunks_exact(block_len).enumerate() {
+        let (bx, by) = (i % (side / 4), i / (side / 4));
+        let at = by * 4 * pitch + bx * 16;
+        match kind {
+            TileKind::Bc1 => bcdec_rs::bc1(block, &mut out[at..], pitch),
+            _ => bcdec_rs::bc7(block, &mut out[at..], pitch),
+        }
+    }
+    if d.channels == 3 {
+        for px in out.chunks_exact_mut(4) {
+            px[3] = 255;
+        }
+    }
+    Ok(out)
 }
 
 /// Bytes of one RGBA8 tile, if within the limit.

@@ -7,13 +7,17 @@
 /// conversion, 0x1A stops `type` on DOS, as in PNG's signature.
 pub const MAGIC: [u8; 8] = *b"\x89VTP\r\n\x1a\n";
 pub const MAJOR: u16 = 1;
-pub const MINOR: u16 = 0;
+/// 1.1 adds the `zstd-delta` tile kind (and required-feature bit 0 for it) and specifies the
+/// BC1 and BC7 payloads that 1.0 reserved.
+pub const MINOR: u16 = 1;
 pub const HEADER_LEN: usize = 192;
 pub const LEVEL_LEN: usize = 32;
 pub const ENTRY_LEN: usize = 24;
-/// Required-feature bits this reader understands (none yet: v1.0 has no optional encodings
-/// that a reader may not know).
-pub const KNOWN_REQUIRED_FEATURES: u64 = 0;
+/// Required-feature bit 0: the pack holds `zstd-delta` tiles (kind 8), which a 1.0 reader does
+/// not know. A writer sets it exactly when it stores such a tile.
+pub const REQUIRED_ZSTD_DELTA: u64 = 1 << 0;
+/// Required-feature bits this reader understands.
+pub const KNOWN_REQUIRED_FEATURES: u64 = REQUIRED_ZSTD_DELTA;
 
 /// How a tile's bytes are stored.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -29,16 +33,24 @@ pub enum TileKind {
     Zstd = 3,
     Png = 4,
     Jpeg = 5,
-    /// Reserved: BC1 blocks, uploadable as-is.
+    /// BC1 blocks (opaque RGB, 8 bytes per 4x4 texels), uploadable as-is.
     Bc1 = 6,
-    /// Reserved: BC7 blocks, uploadable as-is.
+    /// BC7 blocks (RGB or RGBA, 16 bytes per 4x4 texels), uploadable as-is.
     Bc7 = 7,
+    /// `Raw` with every row left-delta filtered ([`delta_encode_rows`]), then compressed with
+    /// zstd. Since 1.1; a pack holding one sets [`REQUIRED_ZSTD_DELTA`].
+    ZstdDelta = 8,
 }
 
 impl TileKind {
-    pub fn from_u8(v: u8) -> Option<TileKind> {
+    /// Every kind, in the order of their bytes (`ALL[k as usize] == k`).
+    pub const ALL: [TileKind; 9] = {
         use TileKind::*;
-        [Absent, Constant, Raw, Zstd, Png, Jpeg, Bc1, Bc7].into_iter().find(|k| *k as u8 == v)
+        [Absent, Constant, Raw, Zstd, Png, Jpeg, Bc1, Bc7, ZstdDelta]
+    };
+
+    pub fn from_u8(v: u8) -> Option<TileKind> {
+        TileKind::ALL.get(v as usize).copied()
     }
 
     pub fn name(self) -> &'static str {
@@ -51,6 +63,20 @@ impl TileKind {
             TileKind::Jpeg => "jpeg",
             TileKind::Bc1 => "bc1",
             TileKind::Bc7 => "bc7",
+            TileKind::ZstdDelta => "zstd-delta",
+        }
+    }
+
+    /// BC1 or BC7: 4x4 blocks a GPU samples directly.
+    pub fn is_block_compressed(self) -> bool {
+        matches!(self, TileKind::Bc1 | TileKind::Bc7)
+    }
+
+    /// The required-feature bit a pack holding this kind must set (0 for kinds of 1.0).
+    pub fn required_feature(self) -> u64 {
+        match self {
+            TileKind::ZstdDelta => REQUIRED_ZSTD_DELTA,
+            _ => 0,
         }
     }
 
@@ -82,6 +108,88 @@ impl Description {
         (self.tile_size as u64)
             .checked_mul(self.tile_size as u64)?
             .checked_mul(self.channels as u64 * self.sample_bytes as u64)
+    }
+
+    /// Bytes of one tile of BC1 (8 per block) or BC7 (16 per block) blocks, `None` for other
+    /// kinds.
+    pub fn block_tile_len(&self, kind: TileKind) -> Option<u64> {
+        let blocks = (self.tile_size as u64).div_ceil(4).pow(2);
+        match kind {
+            TileKind::Bc1 => Some(blocks * 8),
+            TileKind::Bc7 => Some(blocks * 16),
+            _ => None,
+        }
+    }
+
+    /// Why tiles of `kind` cannot be stored in a pack of this description, if they cannot: BC
+    /// blocks need a tile size that is a multiple of 4 and 8-bit samples, BC1 RGB texels, BC7
+    /// RGB or RGBA texels.
+    pub fn refuses(&self, kind: TileKind) -> Option<String> {
+        let name = kind.name();
+        if !kind.is_block_compressed() {
+            return None;
+        }
+        if !self.tile_size.is_multiple_of(4) {
+            return Some(format!("{name} tiles need a tile size that is a multiple of 4, not {}", self.tile_size));
+        }
+        let channels_ok = match kind {
+            TileKind::Bc1 => self.channels == 3,
+            _ => matches!(self.channels, 3 | 4),
+        };
+        if self.sample_bytes != 1 || !channels_ok {
+            let allowed = if kind == TileKind::Bc1 { "3 channels" } else { "3 or 4 channels" };
+            return Some(format!(
+                "{name} tiles need {allowed} of 1 byte, not {} channel(s) of {} byte(s)",
+                self.channels, self.sample_bytes
+            ));
+        }
+        None
+    }
+}
+
+/// The row filter of `zstd-delta` tiles, in place: in each row of `width` texels of `channels`
+/// samples of `sample_bytes` (1, or 2 little-endian), every sample after the row's first texel
+/// becomes its difference from the same channel's sample of the texel to its left, modulo
+/// 2^(8 x sample_bytes). Rows are independent; a partial row at the end is filtered as a row.
+pub fn delta_encode_rows(bytes: &mut [u8], width: usize, channels: usize, sample_bytes: usize) {
+    let texel = channels * sample_bytes;
+    for row in bytes.chunks_mut((width * texel).max(1)) {
+        // Right to left, so that each left neighbour is still unfiltered when it is subtracted.
+        match sample_bytes {
+            2 => {
+                for i in (texel..row.len() - row.len() % 2).step_by(2).rev() {
+                    let v = u16::from_le_bytes([row[i], row[i + 1]]);
+                    let left = u16::from_le_bytes([row[i - texel], row[i + 1 - texel]]);
+                    row[i..i + 2].copy_from_slice(&v.wrapping_sub(left).to_le_bytes());
+                }
+            }
+            _ => {
+                for i in (texel..row.len()).rev() {
+                    row[i] = row[i].wrapping_sub(row[i - texel]);
+                }
+            }
+        }
+    }
+}
+
+/// Undoes [`delta_encode_rows`] in place.
+pub fn delta_decode_rows(bytes: &mut [u8], width: usize, channels: usize, sample_bytes: usize) {
+    let texel = channels * sample_bytes;
+    for row in bytes.chunks_mut((width * texel).max(1)) {
+        match sample_bytes {
+            2 => {
+                for i in (texel..row.len() - row.len() % 2).step_by(2) {
+                    let d = u16::from_le_bytes([row[i], row[i + 1]]);
+                    let left = u16::from_le_bytes([row[i - texel], row[i + 1 - texel]]);
+                    row[i..i + 2].copy_from_slice(&d.wrapping_add(left).to_le_bytes());
+                }
+            }
+            _ => {
+                for i in texel..row.len() {
+                    row[i] = row[i].wrapping_add(row[i - texel]);
+                }
+            }
+        }
     }
 }
 

@@ -12,8 +12,8 @@
 //! ```
 //!
 //! This crate is a leaf: std, a CRC-32C crate, memmap2, thiserror and zstd. The writer is
-//! behind the `write` feature so that readers need none of it; `decode_rgba8` (PNG and JPEG
-//! decoding, and `verify` with [`VerifyOptions::decode`]) is behind `decode`. [`verify()`]
+//! behind the `write` feature so that readers need none of it; `decode_rgba8` (PNG, JPEG, BC1
+//! and BC7 decoding, and `verify` with [`VerifyOptions::decode`]) is behind `decode`. [`verify()`]
 //! checks every byte of a pack and reports every problem it finds.
 
 #[cfg(feature = "decode")]
@@ -26,7 +26,7 @@ pub mod verify;
 mod writer;
 
 #[cfg(feature = "decode")]
-pub use decode::{decode_rgba8, decode_rgba8_limited};
+pub use decode::{decode_rgba8, decode_rgba8_limited, payload_texels};
 pub use error::{PackError, Result};
 pub use format::{Description, Entry, Header, Level, TileKind};
 pub use reader::{Pack, Tile, TileId};

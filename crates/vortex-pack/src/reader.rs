@@ -243,6 +243,11 @@ impl Pack {
         let entry_at = self.header.index_offset + position * ENTRY_LEN as u64;
         let kind = TileKind::from_u8(e.kind)
             .ok_or_else(|| self.tile_error(id, entry_at, format!("unknown tile kind {}", e.kind)))?;
+        if self.header.required_features & kind.required_feature() != kind.required_feature() {
+            let message =
+                format!("a {} tile in a pack without required-feature bit {:#x}", kind.name(), kind.required_feature());
+            return Err(self.tile_error(id, entry_at + 16, message));
+        }
         let raw = &self.file()[entry_at as usize..][..ENTRY_LEN];
         if raw[17..].iter().any(|b| *b != 0) {
             return Err(self.tile_error(id, entry_at + 17, "reserved entry bytes are not zero".into()));

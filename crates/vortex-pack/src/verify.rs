@@ -24,7 +24,7 @@ pub const DEFAULT_MAX_DECODED_BYTES: u64 = 1 << 30;
 /// What to check beyond structure and checksums.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct VerifyOptions {
-    /// Decode every distinct payload (raw, zstd, PNG, JPEG) and check that it is exactly one
+    /// Decode every distinct payload (raw, zstd, zstd-delta, PNG, JPEG, BC1, BC7) and check that it is exactly one
     /// tile. Needs the `decode` feature; without it, asking is itself reported as a problem.
     pub decode: bool,
     /// With `decode`, the most bytes one decoded tile (or a buffer decoding it) may take; a
@@ -60,7 +60,7 @@ pub struct Report {
     /// Index entries (every tile address of every level).
     pub tiles: u64,
     /// Tiles of each kind, indexed by the kind's byte (`TileKind as usize`).
-    pub kinds: [u64; 8],
+    pub kinds: [u64; 9],
     /// Entries of no known kind.
     pub unknown_kinds: u64,
     /// Distinct payloads in the data section (inside it and not empty), and their bytes.
@@ -75,16 +75,7 @@ pub struct Report {
     pub problems: Vec<Problem>,
 }
 
-const KINDS: [TileKind; 8] = [
-    TileKind::Absent,
-    TileKind::Constant,
-    TileKind::Raw,
-    TileKind::Zstd,
-    TileKind::Png,
-    TileKind::Jpeg,
-    TileKind::Bc1,
-    TileKind::Bc7,
-];
+const KINDS: [TileKind; 9] = TileKind::ALL;
 
 impl Report {
     /// No problem found.
@@ -265,6 +256,7 @@ pub fn verify(pack: &Pack, opts: VerifyOptions) -> Report {
     v.levels();
     v.metadata();
     let payloads = v.entries();
+    v.kinds_allowed();
     v.payloads(payloads, opts);
     // File order; problems without an offset first. The sort is stable: an entry's problems
     // stay in the order they were found.
@@ -434,7 +426,7 @@ impl Verifier<'_> {
                         let message = format!("a {name} tile is {expected} bytes, this payload {len}");
                         self.problem("index", Some(entry_at + 8), tile, message);
                     }
-                    if kind == TileKind::Zstd {
+                    if matches!(kind, TileKind::Zstd | TileKind::ZstdDelta) {
                         let bytes = &self.b[start as usize..][..len as usize];
                         let raw_len = d.raw_tile_len();
                         match zstd::zstd_safe::get_frame_content_size(bytes) {
@@ -459,6 +451,26 @@ impl Verifier<'_> {
             }
         }
         payloads
+    }
+
+    /// Kinds the header does not allow, reported once per kind rather than per tile: BC blocks
+    /// in a texture of another texel format or tile size, kinds newer than 1.0 without their
+    /// required-feature bit.
+    fn kinds_allowed(&mut self) {
+        let h = *self.pack.header();
+        let counts = self.report.kinds;
+        for kind in TileKind::ALL.into_iter().filter(|k| counts[*k as usize] > 0) {
+            let n = counts[kind as usize];
+            if let Some(why) = h.description.refuses(kind) {
+                let message = format!("{n} {} tile(s), but {why}", kind.name());
+                self.problem("header", Some(format::at::TILE_SIZE as u64), None, message);
+            }
+            let bit = kind.required_feature();
+            if h.required_features & bit != bit {
+                let message = format!("{n} {} tile(s), but required-feature bit {bit:#x} is not set", kind.name());
+                self.problem("header", Some(format::at::REQUIRED as u64), None, message);
+            }
+        }
     }
 
     /// The tile whose entry is at index `position`.
@@ -523,13 +535,14 @@ impl Verifier<'_> {
                 continue;
             }
             // Each kind a payload is read as, once; not when its checksum already failed.
-            let mut done = [false; 8];
+            let mut done = [false; 9];
             for q in group.iter().filter(|q| q.crc == crc) {
                 let kind = self.kind_of(q.position);
-                // BC blocks are not decoded; a raw payload of the wrong size is already reported.
+                // A raw or block payload of the wrong size, or block kinds the texture's format
+                // does not allow, are already reported.
                 if std::mem::replace(&mut done[kind as usize], true)
-                    || matches!(kind, TileKind::Bc1 | TileKind::Bc7)
                     || stored_len(kind, &d).is_some_and(|n| n != q.len as u64)
+                    || d.refuses(kind).is_some()
                 {
                     continue;
                 }
@@ -558,15 +571,9 @@ impl PayloadDecoder {
 
 /// Bytes of a payload whose size the format fixes: raw texels, BC1 and BC7 blocks.
 fn stored_len(kind: TileKind, d: &Description) -> Option<u64> {
-    let blocks = || {
-        let side = (d.tile_size as u64).div_ceil(4);
-        side * side
-    };
     match kind {
         TileKind::Raw => Some(d.raw_tile_len().unwrap_or(u64::MAX)),
-        TileKind::Bc1 => Some(blocks() * 8),
-        TileKind::Bc7 => Some(blocks() * 16),
-        _ => None,
+        _ => d.block_tile_len(kind),
     }
 }
 

@@ -69,6 +69,8 @@ pub struct PackWriter {
     stored: HashMap<(u32, u32), Vec<u64>>,
     data_offset: u64,
     end: u64,
+    /// Required-feature bits of the kinds stored so far.
+    required_features: u64,
     summary: WriteSummary,
 }
 
@@ -143,6 +145,7 @@ impl PackWriter {
             stored: HashMap::new(),
             data_offset,
             end: data_offset,
+            required_features: 0,
             summary: WriteSummary::default(),
         };
         // Placeholders up to the data section: zeros, so that an unfinished file has no signature.
@@ -187,6 +190,13 @@ impl PackWriter {
                 if kind == TileKind::Raw && bytes.len() as u64 != raw_len {
                     return Err(PackError::Usage(format!("a raw tile has {raw_len} bytes, not {}", bytes.len())));
                 }
+                if let Some(why) = self.description.refuses(kind) {
+                    return Err(PackError::Usage(why));
+                }
+                if let Some(n) = self.description.block_tile_len(kind).filter(|n| *n != bytes.len() as u64) {
+                    return Err(PackError::Usage(format!("a {} tile has {n} bytes, not {}", kind.name(), bytes.len())));
+                }
+                self.required_features |= kind.required_feature();
                 let len = u32::try_from(bytes.len()).map_err(|_| PackError::Usage("a tile over 4 GiB".into()))?;
                 let crc = crc32c::crc32c(bytes);
                 let offset = match self.find_stored(crc, bytes)? {
@@ -272,7 +282,7 @@ impl PackWriter {
         let header = Header {
             major: format::MAJOR,
             minor: format::MINOR,
-            required_features: 0,
+            required_features: self.required_features,
             optional_features: 0,
             file_len: self.end,
             content_hash,
