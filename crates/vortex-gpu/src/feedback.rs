@@ -1,10 +1,10 @@
 //! The feedback pass and its readback. The view is drawn a second time, into a small `R32Uint`
 //! target ([`FeedbackTarget`], the frame's size divided by e.g. 8), cleared to
 //! [`NO_REQUEST`]; its fragment shader (`shaders/feedback.wgsl`) writes per pixel the feedback
-//! word (`vortex_vt::feedback::encode`) of the page its virtual UV wants. The LOD is the one
-//! `vortex_vt::feedback::lod_for` gives for the UV's screen-space derivatives, plus the view's
-//! bias and [`FeedbackTarget::bias`] (`feedback_bias`, which makes up for the reduced size), and
-//! the page is `vortex_vt::feedback::page_at` of it.
+//! word (`vortex_vt::feedback::encode`) of the page it wants. The LOD is the one
+//! `vortex_vt::feedback::lod_for` gives for the fragment's footprint, plus the frame's bias and
+//! [`FeedbackTarget::bias`] (`feedback_bias`, which makes up for the reduced size), and the page
+//! is the one holding its address at that LOD (`vortex_vt::address`).
 //!
 //! [`FeedbackReadback`] copies the target into one of a small ring of mappable buffers, so that
 //! the CPU picks up the words of an earlier frame when the GPU is done with them and never
@@ -15,59 +15,14 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
 
 use vortex_vt::feedback::{NO_REQUEST, feedback_bias};
-use vortex_vt::page::TextureGrid;
 
-use crate::fullscreen;
+use crate::draw::{self, Pipelines};
+use crate::params::Frame;
+use crate::texture::VirtualTexture;
+use crate::view::View;
 
 /// The format of feedback targets: one feedback word per pixel.
 pub const FEEDBACK_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
-
-/// What one feedback draw covers: a window of one virtual texture, like
-/// [`ViewParams`](crate::ViewParams), but with the LOD chosen per pixel from derivatives.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FeedbackView {
-    /// Virtual UV of the target's top-left corner.
-    pub origin: [f32; 2],
-    /// Virtual UV covered by the whole target, per axis (1.0 is the whole texture).
-    pub extent: [f32; 2],
-    /// Texture id written into the words (below 16).
-    pub texture: u8,
-    /// The texture's page grid.
-    pub grid: TextureGrid,
-    /// Payload texels per page side (without borders): the texture is `grid.pages * payload`
-    /// texels per side at LOD 0.
-    pub payload: u32,
-    /// The frame's own LOD bias; the target's [`FeedbackTarget::bias`] is added to it.
-    pub bias: f32,
-}
-
-impl FeedbackView {
-    /// The virtual UV that pixel (`x`, `y`) of a `width x height` feedback target wants (at its
-    /// centre), computed as the shader does (unclamped).
-    pub fn uv(&self, x: u32, y: u32, width: u32, height: u32) -> [f32; 2] {
-        let step = [self.extent[0] / width as f32, self.extent[1] / height as f32];
-        [self.origin[0] + (x as f32 + 0.5) * step[0], self.origin[1] + (y as f32 + 0.5) * step[1]]
-    }
-
-    /// Texels per side of the texture at LOD 0.
-    pub fn side_texels(&self) -> f32 {
-        self.grid.pages as f32 * self.payload as f32
-    }
-}
-
-/// The uniform block of `feedback.wgsl` (`Params`), 48 bytes.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct Params {
-    window: [f32; 4],
-    pages: u32,
-    lod_count: u32,
-    texture: u32,
-    pad0: u32,
-    side_texels: f32,
-    bias: f32,
-    pad1: [f32; 2],
-}
 
 /// The `R32Uint` target of the feedback pass, at a fraction of the frame's size.
 #[derive(Debug)]
@@ -79,6 +34,7 @@ pub struct FeedbackTarget {
     pub frame_height: u32,
     texture: wgpu::Texture,
     view: wgpu::TextureView,
+    depth: wgpu::TextureView,
 }
 
 impl FeedbackTarget {
@@ -108,7 +64,8 @@ impl FeedbackTarget {
             view_formats: &[],
         });
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        FeedbackTarget { width, height, frame_width, frame_height, texture, view }
+        let depth = draw::depth_texture(device, width, height);
+        FeedbackTarget { width, height, frame_width, frame_height, texture, view, depth }
     }
 
     /// The LOD bias that makes up for the reduced size: `feedback_bias` (e.g. -3 at 1/8).
@@ -121,55 +78,49 @@ impl FeedbackTarget {
     }
 }
 
-/// The pipeline of the feedback pass, made once per device.
+/// The pipelines of the feedback pass, made once per device.
 #[derive(Debug)]
 pub struct FeedbackPass {
-    pipeline: wgpu::RenderPipeline,
+    pipelines: Pipelines,
     layout: wgpu::BindGroupLayout,
 }
 
 impl FeedbackPass {
     pub fn new(device: &wgpu::Device) -> FeedbackPass {
-        let module = fullscreen::shader(device, "vortex feedback.wgsl", include_str!("shaders/feedback.wgsl"));
+        let module = draw::shader(device, "vortex feedback.wgsl", include_str!("shaders/feedback.wgsl"));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("vortex feedback"),
             entries: &[wgpu::BindGroupLayoutEntry {
                 binding: 0,
-                visibility: wgpu::ShaderStages::FRAGMENT,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
                 ty: wgpu::BindingType::Buffer {
                     ty: wgpu::BufferBindingType::Uniform,
                     has_dynamic_offset: false,
-                    min_binding_size: wgpu::BufferSize::new(size_of::<Params>() as u64),
+                    min_binding_size: wgpu::BufferSize::new(size_of::<Frame>() as u64),
                 },
                 count: None,
             }],
         });
-        let pipeline = fullscreen::pipeline(device, "vortex feedback", &module, &layout, FEEDBACK_FORMAT);
-        FeedbackPass { pipeline, layout }
+        let pipelines = Pipelines::new(device, "vortex feedback", &module, &layout, FEEDBACK_FORMAT, &[]);
+        FeedbackPass { pipelines, layout }
     }
 
     /// Records the feedback pass into `target`: the clear to [`NO_REQUEST`], then the draw of
-    /// `view` if there is one (`None` records the clear alone: nothing virtual on screen).
+    /// `view` if there is one (`None` records the clear alone: nothing virtual on screen). `bias`
+    /// is the frame's own LOD bias (the residency's); the target's is added to it.
     pub fn encode(
         &self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         target: &FeedbackTarget,
-        view: Option<&FeedbackView>,
+        textures: &[VirtualTexture],
+        view: Option<&View>,
+        bias: f32,
     ) {
         let bind_group = view.map(|view| {
-            let (w, h) = (target.width as f32, target.height as f32);
-            let params = Params {
-                window: [view.origin[0], view.origin[1], view.extent[0] / w, view.extent[1] / h],
-                pages: view.grid.pages as u32,
-                lod_count: view.grid.lod_count as u32,
-                texture: view.texture as u32 & 0xF,
-                pad0: 0,
-                side_texels: view.side_texels(),
-                bias: view.bias + target.bias(),
-                pad1: [0.0; 2],
-            };
-            let uniform = fullscreen::uniform(device, "vortex feedback params", bytemuck::bytes_of(&params));
+            let size = (target.width, target.height);
+            let frame = Frame::new(textures, None, view, size, bias + target.bias(), None);
+            let uniform = draw::uniform(device, "vortex feedback frame", bytemuck::bytes_of(&frame));
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("vortex feedback"),
                 layout: &self.layout,
@@ -179,13 +130,8 @@ impl FeedbackPass {
         // Integer targets take the clear colour converted to the channel type: all ones.
         let clear = NO_REQUEST as f64;
         let colour = wgpu::Color { r: clear, g: clear, b: clear, a: clear };
-        fullscreen::record(
-            encoder,
-            "vortex feedback",
-            &target.view,
-            colour,
-            bind_group.as_ref().map(|g| (&self.pipeline, g)),
-        );
+        let draw = bind_group.as_ref().zip(view).map(|(g, v)| (&self.pipelines, g, v));
+        draw::record(encoder, "vortex feedback", &target.view, &target.depth, colour, draw);
     }
 }
 

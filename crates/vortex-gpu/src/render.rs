@@ -1,71 +1,66 @@
-//! The sampling pass: a full-screen triangle whose fragment shader (`shaders/sample.wgsl`) maps
-//! each pixel's virtual UV through the page table to the physical page cache and samples it
-//! bilinearly in linear light. Recorded and submitted on the render thread.
-//!
-//! For now the LOD is chosen per draw ([`ViewParams::lod`]) rather than from screen-space
-//! derivatives, and the view is an axis-aligned window of the virtual texture; scenes come later.
-//! [`RenderTarget`] is an `Rgba8UnormSrgb` texture that can be read back to the CPU.
+//! The sampling pass: draws a [`View`] whose fragment shader (`shaders/sample.wgsl`) maps each
+//! fragment's address through the page table to the physical page cache and samples it in
+//! linear light (nearest, bilinear, or trilinear across two LODs: [`Filter`]). The LOD comes
+//! from the screen-space footprint, or is fixed per draw for tests. Recorded and submitted on
+//! the render thread. [`RenderTarget`] is an `Rgba8UnormSrgb` texture with a depth buffer that
+//! can be read back to the CPU.
 
 use vortex_vt::sampler::Rgba8Image;
 
 use crate::device::Gpu;
-use crate::fullscreen;
+use crate::draw::{self, Pipelines};
 use crate::page_cache::PageCache;
 use crate::page_table::GpuPageTable;
+use crate::params::Frame;
+use crate::texture::VirtualTexture;
+use crate::view::View;
 
 /// The format of render targets: sRGB, so the linear-light samples are encoded on write.
 pub const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 
-/// What one draw shows: a window of the virtual texture, sampled at one LOD.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ViewParams {
-    /// Virtual UV of the target's top-left corner.
-    pub origin: [f32; 2],
-    /// Virtual UV covered by the whole target, per axis (1.0 shows the whole texture).
-    pub extent: [f32; 2],
-    /// The LOD whose page-table level is read (the entry then names the resident LOD sampled).
-    pub lod: u8,
+/// How the cache is filtered. Only trilinear reads two LODs per sample.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Filter {
+    Nearest,
+    #[default]
+    Bilinear,
+    /// Bilinear in the LOD below and above the footprint, blended.
+    Trilinear,
 }
 
-impl ViewParams {
-    /// The whole texture at `lod`.
-    pub fn whole(lod: u8) -> ViewParams {
-        ViewParams { origin: [0.0; 2], extent: [1.0; 2], lod }
-    }
-
-    /// The virtual UV that pixel (`x`, `y`) of a `width x height` target samples (at its centre),
-    /// computed as the shader does.
-    pub fn uv(&self, x: u32, y: u32, width: u32, height: u32) -> [f32; 2] {
-        let step = [self.extent[0] / width as f32, self.extent[1] / height as f32];
-        [self.origin[0] + (x as f32 + 0.5) * step[0], self.origin[1] + (y as f32 + 0.5) * step[1]]
+impl Filter {
+    pub fn name(self) -> &'static str {
+        match self {
+            Filter::Nearest => "nearest",
+            Filter::Bilinear => "bilinear",
+            Filter::Trilinear => "trilinear",
+        }
     }
 }
 
-/// The uniform block of `sample.wgsl` (`Params`), 48 bytes.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct Params {
-    window: [f32; 4],
-    pages: u32,
-    lod: u32,
-    pad: [u32; 2],
-    tile: [f32; 4],
+/// What a draw samples from: the textures' shapes, the page table and the cache.
+#[derive(Clone, Copy, Debug)]
+pub struct Sources<'a> {
+    pub textures: &'a [VirtualTexture],
+    pub table: &'a GpuPageTable,
+    pub cache: &'a PageCache,
 }
 
-/// The pipeline and sampler of the sampling pass, made once per device.
+/// The pipelines and sampler of the sampling pass with one [`Filter`], made once per device.
 #[derive(Debug)]
 pub struct SamplePass {
-    pipeline: wgpu::RenderPipeline,
+    pipelines: Pipelines,
     layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
+    filter: Filter,
 }
 
 impl SamplePass {
-    pub fn new(device: &wgpu::Device) -> SamplePass {
-        let module = fullscreen::shader(device, "vortex sample.wgsl", include_str!("shaders/sample.wgsl"));
+    pub fn new(device: &wgpu::Device, filter: Filter) -> SamplePass {
+        let module = draw::shader(device, "vortex sample.wgsl", include_str!("shaders/sample.wgsl"));
         let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
             binding,
-            visibility: wgpu::ShaderStages::FRAGMENT,
+            visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
             ty,
             count: None,
         };
@@ -77,14 +72,14 @@ impl SamplePass {
                     wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Uniform,
                         has_dynamic_offset: false,
-                        min_binding_size: wgpu::BufferSize::new(size_of::<Params>() as u64),
+                        min_binding_size: wgpu::BufferSize::new(size_of::<Frame>() as u64),
                     },
                 ),
                 entry(
                     1,
                     wgpu::BindingType::Texture {
                         sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2,
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
                         multisampled: false,
                     },
                 ),
@@ -99,54 +94,58 @@ impl SamplePass {
                 entry(3, wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering)),
             ],
         });
-        let pipeline = fullscreen::pipeline(device, "vortex sample", &module, &layout, TARGET_FORMAT);
-        // Bilinear within a slot; the border makes the neighbouring slots' texels unreachable, so
-        // the address mode only matters at the cache's outer edge.
+        let constants = [("FILTER", filter as u32 as f64)];
+        let pipelines = Pipelines::new(device, "vortex sample", &module, &layout, TARGET_FORMAT, &constants);
+        // Within a slot only: the border (or the shader's clamp) keeps neighbouring slots'
+        // texels out, so the address mode only matters at the cache's outer edge.
+        let mode = if filter == Filter::Nearest { wgpu::FilterMode::Nearest } else { wgpu::FilterMode::Linear };
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("vortex page cache"),
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
+            mag_filter: mode,
+            min_filter: mode,
             mipmap_filter: wgpu::MipmapFilterMode::Nearest,
             ..Default::default()
         });
-        SamplePass { pipeline, layout, sampler }
+        SamplePass { pipelines, layout, sampler, filter }
     }
 
-    /// Records one draw of `view` into `target`, reading `table` and `cache`.
+    pub fn filter(&self) -> Filter {
+        self.filter
+    }
+
+    /// Records one draw of `view` into `target`. `lod` fixes the LOD sampled everywhere (tests);
+    /// `None` takes it from each fragment's footprint.
     pub fn encode(
         &self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         target: &RenderTarget,
-        cache: &PageCache,
-        table: &GpuPageTable,
-        view: &ViewParams,
+        sources: &Sources,
+        view: &View,
+        lod: Option<f32>,
     ) {
-        let (w, h) = (target.width as f32, target.height as f32);
-        let params = Params {
-            window: [view.origin[0], view.origin[1], view.extent[0] / w, view.extent[1] / h],
-            pages: table.grid().pages as u32,
-            lod: view.lod.min(table.grid().lod_count - 1) as u32,
-            pad: [0; 2],
-            tile: [cache.tile_size() as f32, cache.border() as f32, cache.payload() as f32, cache.side_texels() as f32],
-        };
-        let uniform = fullscreen::uniform(device, "vortex sample params", bytemuck::bytes_of(&params));
+        let frame = Frame::new(sources.textures, Some(sources.cache), view, (target.width, target.height), 0.0, lod);
+        let uniform = draw::uniform(device, "vortex sample frame", bytemuck::bytes_of(&frame));
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("vortex sample"),
             layout: &self.layout,
             entries: &[
                 wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(table.view()) },
-                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(cache.srgb_view()) },
+                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(sources.table.view()) },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(sources.cache.srgb_view()),
+                },
                 wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
             ],
         });
-        fullscreen::record(
+        draw::record(
             encoder,
             "vortex sample",
             &target.view,
+            &target.depth,
             wgpu::Color::TRANSPARENT,
-            Some((&self.pipeline, &bind_group)),
+            Some((&self.pipelines, &bind_group, view)),
         );
     }
 
@@ -155,13 +154,13 @@ impl SamplePass {
         &self,
         gpu: &Gpu,
         target: &RenderTarget,
-        cache: &PageCache,
-        table: &GpuPageTable,
-        view: &ViewParams,
+        sources: &Sources,
+        view: &View,
+        lod: Option<f32>,
     ) -> Rgba8Image {
         let mut encoder =
             gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex frame") });
-        self.encode(&gpu.device, &mut encoder, target, cache, table, view);
+        self.encode(&gpu.device, &mut encoder, target, sources, view, lod);
         target.encode_copy_out(&mut encoder);
         gpu.queue.submit([encoder.finish()]);
         target.read(gpu)
@@ -175,6 +174,7 @@ pub struct RenderTarget {
     pub height: u32,
     texture: wgpu::Texture,
     view: wgpu::TextureView,
+    depth: wgpu::TextureView,
     readback: wgpu::Buffer,
     /// Bytes per row in `readback`: a multiple of 256, as buffer copies require.
     padded_row: u32,
@@ -200,7 +200,8 @@ impl RenderTarget {
             usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
             mapped_at_creation: false,
         });
-        RenderTarget { width, height, texture, view, readback, padded_row }
+        let depth = draw::depth_texture(device, width, height);
+        RenderTarget { width, height, texture, view, depth, readback, padded_row }
     }
 
     pub fn view(&self) -> &wgpu::TextureView {

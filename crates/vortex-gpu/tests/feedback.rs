@@ -1,17 +1,18 @@
 //! The feedback pass against `vortex_vt`'s CPU mirror of its shader: windows of a 16x16-page
 //! virtual texture (120-texel pages) are drawn into a 40x30 feedback target standing for a
 //! 320x240 frame (so with a LOD bias of -3), read back through the ring, and compared word for
-//! word with `lod_for` + `page_at` + `encode` at the same pixel-centre UVs; the words are then
-//! run through `vortex_vt::analysis`. Device conventions as in `sample.rs` (see `common`).
+//! word with `WindowOrigin::lod` + `WindowOrigin::at` + `encode` at the same pixel centres; the
+//! words are then run through `vortex_vt::analysis`. Device conventions as in `sample.rs` (see
+//! `common`).
 
 mod common;
 
 use std::collections::{BTreeMap, BTreeSet};
 
 use common::gpu;
-use vortex_gpu::{FeedbackPass, FeedbackReadback, FeedbackTarget, FeedbackView, Gpu};
+use vortex_gpu::{FeedbackPass, FeedbackReadback, FeedbackTarget, Gpu, View, VirtualTexture, Window};
 use vortex_vt::analysis::analyze;
-use vortex_vt::feedback::{NO_REQUEST, encode, lod_for, page_at};
+use vortex_vt::feedback::{NO_REQUEST, encode};
 use vortex_vt::page::{PageId, TextureGrid};
 
 const PAGES: u16 = 16;
@@ -19,29 +20,50 @@ const PAYLOAD: u32 = 120;
 const FRAME: (u32, u32) = (320, 240);
 const DIVISOR: u32 = 8;
 
-fn view(texture: u8, origin: [f32; 2], extent: [f32; 2], bias: f32) -> FeedbackView {
-    FeedbackView { origin, extent, texture, grid: TextureGrid::new(PAGES).unwrap(), payload: PAYLOAD, bias }
+/// A window and the frame's own LOD bias.
+#[derive(Clone, Copy, Debug)]
+struct Case {
+    window: Window,
+    bias: f32,
 }
 
-/// What the shader must write: per pixel, `encode` of `page_at` at the LOD `lod_for` gives for
-/// the view's (constant) derivatives. Also asserts that the view keeps every pixel clear of
-/// rounding: no UV within a fused multiply-add's difference of a page edge, no footprint near a
-/// LOD boundary, so that bit-exactness is a fair demand.
-fn expected(v: &FeedbackView, target: &FeedbackTarget) -> Vec<u32> {
+fn view(texture: u8, origin: [f64; 2], extent: [f64; 2], bias: f32) -> Case {
+    Case { window: Window { texture, origin, extent }, bias }
+}
+
+/// Sixteen textures of the same shape, so that any texture id of a word can be tried.
+fn textures() -> Vec<VirtualTexture> {
+    vec![VirtualTexture::square(TextureGrid::new(PAGES).unwrap(), PAYLOAD + 8, 4); 16]
+}
+
+/// What the shader must write: per pixel, `encode` of the page holding the pixel's address at
+/// the LOD of the window's footprint. Also asserts that the view keeps every pixel clear of
+/// rounding: no position within a hundredth of a texel of a page edge, no footprint near a LOD
+/// boundary, so that bit-exactness is a fair demand.
+fn expected(c: &Case, target: &FeedbackTarget) -> Vec<u32> {
     let (w, h) = (target.width, target.height);
-    let (dudx, dvdy) = (v.extent[0] / w as f32, v.extent[1] / h as f32);
-    let bias = v.bias + target.bias();
-    let lod = lod_for(dudx, 0.0, 0.0, dvdy, v.side_texels(), bias, v.grid.lod_count);
-    let f = (dudx.max(dvdy) * v.side_texels()).log2() + bias;
+    let texture = textures()[0];
+    let origin = c.window.origin_texels(&texture, (w, h));
+    let bias = c.bias + target.bias();
+    let grid = texture.grid;
+    let lod = origin.lod(bias, grid.lod_count);
+    let f = origin.step[0].max(origin.step[1]).log2() + bias;
     assert!((f - f.round()).abs() > 1e-3, "footprint {f} is too close to a LOD boundary");
+    let side = texture.side_texels() as f64;
+    let page_texels = (PAYLOAD << lod) as f64;
     let mut words = Vec::with_capacity((w * h) as usize);
     for y in 0..h {
         for x in 0..w {
-            let [u, vv] = v.uv(x, y, w, h);
-            let fused = [(x as f32 + 0.5).mul_add(dudx, v.origin[0]), (y as f32 + 0.5).mul_add(dvdy, v.origin[1])];
-            let (px, py) = page_at(u, vv, lod, &v.grid);
-            assert_eq!(page_at(fused[0], fused[1], lod, &v.grid), (px, py), "pixel ({x}, {y}) is on a page edge");
-            words.push(encode(PageId::new(v.texture, lod, px, py)));
+            let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, PAGES as u32, PAYLOAD);
+            for (i, uv) in c.window.uv(x, y, (w, h)).into_iter().enumerate() {
+                let texel = uv * side;
+                let edge = (texel / page_texels).round() * page_texels;
+                assert!(
+                    (texel - edge).abs() > 0.01 || texel <= 0.0 || texel >= side,
+                    "pixel ({x}, {y}) axis {i} is on a page edge"
+                );
+            }
+            words.push(encode(PageId::new(c.window.texture, lod, at.page[0] as u16, at.page[1] as u16)));
         }
     }
     words
@@ -65,17 +87,19 @@ impl Fixture {
     }
 
     /// Records and submits the pass and the copy; the frame number, or `None` if the ring is full.
-    fn submit(&mut self, view: Option<&FeedbackView>) -> Option<u64> {
+    fn submit(&mut self, case: Option<&Case>) -> Option<u64> {
         let mut encoder =
             self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("feedback test") });
-        self.pass.encode(&self.gpu.device, &mut encoder, &self.target, view);
+        let view = case.map(|c| View::Window(c.window));
+        let bias = case.map_or(0.0, |c| c.bias);
+        self.pass.encode(&self.gpu.device, &mut encoder, &self.target, &textures(), view.as_ref(), bias);
         let frame = self.readback.encode_copy(&mut encoder, &self.target);
         self.gpu.queue.submit([encoder.finish()]);
         self.readback.submitted();
         frame
     }
 
-    fn render(&mut self, view: Option<&FeedbackView>) -> Vec<u32> {
+    fn render(&mut self, view: Option<&Case>) -> Vec<u32> {
         let frame = self.submit(view).expect("a free buffer");
         let got = self.readback.read_now(&self.gpu.device).expect("a frame in flight");
         assert_eq!((got.frame, got.width, got.height), (frame, 40, 30));
@@ -131,7 +155,7 @@ fn words_match_the_cpu_mirror_and_analysis_finds_the_pages() {
             assert_eq!(r.direct, direct.get(&r.page).copied().unwrap_or(0), "{:?}", r.page);
             assert_eq!(r.distance, grid.lod_count - r.page.lod, "{:?}", r.page);
         }
-        let root = a.requests.iter().find(|r| r.page == grid.root(v.texture)).unwrap();
+        let root = a.requests.iter().find(|r| r.page == grid.root(v.window.texture)).unwrap();
         assert_eq!(root.samples, 1200);
         eprintln!("{v:?}: LOD {lod}, {} pages requested, {} with ancestors", direct.len(), all.len());
     }

@@ -10,7 +10,9 @@
 mod common;
 
 use common::gpu;
-use vortex_gpu::{Gpu, GpuPageTable, PageCache, RenderTarget, SamplePass, ViewParams};
+use vortex_gpu::{
+    Filter, Gpu, GpuPageTable, PageCache, RenderTarget, SamplePass, Sources, View, VirtualTexture, Window,
+};
 use vortex_vt::page::{PageId, TextureGrid};
 use vortex_vt::page_table::PageTable;
 use vortex_vt::residency::{Residency, ResidencyConfig};
@@ -76,6 +78,7 @@ struct Fixture {
     chain: LodChain,
     cache: PageCache,
     gpu_table: GpuPageTable,
+    textures: [VirtualTexture; 1],
     table: PageTable,
     pass: SamplePass,
     target: RenderTarget,
@@ -89,7 +92,7 @@ impl Fixture {
         let mut residency = Residency::new(&[grid], ResidencyConfig::new(slots, slots)).unwrap();
         let mut table = PageTable::new(&[grid]);
         let cache = PageCache::new(&gpu.device, CACHE_SIDE, TILE, BORDER).unwrap();
-        let gpu_table = GpuPageTable::new(&gpu.device, &gpu.queue, 0, grid, CACHE_SIDE);
+        let gpu_table = GpuPageTable::new(&gpu.device, &gpu.queue, &[grid], CACHE_SIDE);
         let update = residency.update(0, requests);
         assert_eq!(update.stats.deferred, 0, "every requested page fits in one update");
         for &(page, slot) in &update.loads {
@@ -97,32 +100,34 @@ impl Fixture {
         }
         let changes = table.apply(&update);
         gpu_table.write_changes(&gpu.queue, &changes);
-        let pass = SamplePass::new(&gpu.device);
+        let pass = SamplePass::new(&gpu.device, Filter::Bilinear);
         let target = RenderTarget::new(&gpu.device, TARGET, TARGET);
-        Fixture { gpu, chain, cache, gpu_table, table, pass, target }
+        let textures = [VirtualTexture::square(grid, TILE, BORDER)];
+        Fixture { gpu, chain, cache, gpu_table, textures, table, pass, target }
     }
 
-    fn render(&self, view: &ViewParams) -> Rgba8Image {
-        self.pass.render_and_read(&self.gpu, &self.target, &self.cache, &self.gpu_table, view)
+    fn render(&self, window: &Window, lod: u8) -> Rgba8Image {
+        let sources = Sources { textures: &self.textures, table: &self.gpu_table, cache: &self.cache };
+        self.pass.render_and_read(&self.gpu, &self.target, &sources, &View::Window(*window), Some(lod as f32))
     }
 
     /// What the render must be: at each pixel's UV, the reference bilinear sample at the LOD of
     /// the page-table entry the shader reads (the finest resident ancestor of the wanted page).
-    fn expected(&self, view: &ViewParams) -> Rgba8Image {
-        let pages_at = |lod: u8| (PAGES >> lod) as f32;
+    fn expected(&self, window: &Window, lod: u8) -> Rgba8Image {
+        let size = (TARGET, TARGET);
+        let origin = window.origin_texels(&self.textures[0], size);
         Rgba8Image::from_fn(TARGET, TARGET, |x, y| {
-            let [u, v] = view.uv(x, y, TARGET, TARGET);
-            let below_one = 1.0 - f32::EPSILON / 2.0;
-            let page = |t: f32| ((t.clamp(0.0, below_one) * pages_at(view.lod)) as u16).min((PAGES >> view.lod) - 1);
-            let entry = self.table.entry(0, view.lod, page(u), page(v));
-            bilinear(&self.chain, entry.lod, u, v)
+            let [u, v] = window.uv(x, y, size);
+            let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, PAGES as u32, PAYLOAD);
+            let entry = self.table.entry(0, lod, at.page[0] as u16, at.page[1] as u16);
+            bilinear(&self.chain, entry.lod, u as f32, v as f32)
         })
     }
 
-    /// Renders `view` and checks it against [`Fixture::expected`].
-    fn check(&self, what: &str, view: &ViewParams) -> Diff {
-        let got = self.render(view);
-        let want = self.expected(view);
+    /// Renders `window` at `lod` and checks it against [`Fixture::expected`].
+    fn check(&self, what: &str, window: &Window, lod: u8) -> Diff {
+        let got = self.render(window, lod);
+        let want = self.expected(window, lod);
         let d = Diff::of(&got, &want);
         eprintln!("{what}: {d}");
         assert!(
@@ -183,11 +188,11 @@ fn all_resident_matches_the_reference_at_lod_0() {
     eprintln!("adapter: {:?}", gpu.adapter_info().name);
     let fx = Fixture::new(gpu, &all_pages(0));
     assert_eq!(fx.table.entry(0, 0, 3, 2).lod, 0, "LOD 0 is resident");
-    fx.check("all resident, whole texture at LOD 0", &ViewParams::whole(0));
-    fx.check("all resident, whole texture at LOD 1", &ViewParams::whole(1));
+    fx.check("all resident, whole texture at LOD 0", &Window::whole(0), 0);
+    fx.check("all resident, whole texture at LOD 1", &Window::whole(0), 1);
     // Magnified across the corner of four pages: page seams are where borders matter.
-    let zoom = ViewParams { origin: [0.37, 0.41], extent: [0.21, 0.17], lod: 0 };
-    fx.check("all resident, magnified window over a page corner at LOD 0", &zoom);
+    let zoom = Window { texture: 0, origin: [0.37, 0.41], extent: [0.21, 0.17] };
+    fx.check("all resident, magnified window over a page corner at LOD 0", &zoom, 0);
 }
 
 #[test]
@@ -197,13 +202,13 @@ fn only_the_root_falls_back_to_the_coarsest_lod() {
     let root = TextureGrid::new(PAGES).unwrap().lod_count - 1;
     assert!(fx.table.level(0, 0).iter().all(|e| e.lod == root), "every entry points at the root");
     // The expectation is the reference sampler at the root's LOD everywhere.
-    let view = ViewParams::whole(0);
+    let view = Window::whole(0);
     let root_only = Rgba8Image::from_fn(TARGET, TARGET, |x, y| {
-        let [u, v] = view.uv(x, y, TARGET, TARGET);
-        bilinear(&fx.chain, root, u, v)
+        let [u, v] = view.uv(x, y, (TARGET, TARGET));
+        bilinear(&fx.chain, root, u as f32, v as f32)
     });
-    assert_eq!(fx.expected(&view), root_only);
-    fx.check("root only, whole texture requested at LOD 0", &view);
+    assert_eq!(fx.expected(&view, 0), root_only);
+    fx.check("root only, whole texture requested at LOD 0", &view, 0);
 }
 
 #[test]
@@ -213,5 +218,5 @@ fn partly_resident_samples_the_finest_resident_ancestor() {
     let fx = Fixture::new(gpu, &[PageId::new(0, 0, 1, 1), PageId::new(0, 0, 2, 1), PageId::new(0, 1, 0, 1)]);
     let lods: std::collections::BTreeSet<u8> = fx.table.level(0, 0).iter().map(|e| e.lod).collect();
     assert_eq!(lods.into_iter().collect::<Vec<_>>(), [0, 1, 2], "the view mixes three LODs");
-    fx.check("mixed residency, whole texture at LOD 0", &ViewParams::whole(0));
+    fx.check("mixed residency, whole texture at LOD 0", &Window::whole(0), 0);
 }

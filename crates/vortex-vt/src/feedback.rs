@@ -75,13 +75,18 @@ pub fn decode(word: u32) -> Option<PageId> {
 /// In WGSL: `let f = max(length(dpdx(uv)), length(dpdy(uv))) * side;`
 /// `let lod = clamp(floor(log2(f) + bias), 0.0, f32(lod_count - 1u));`.
 pub fn lod_for(dudx: f32, dvdx: f32, dudy: f32, dvdy: f32, texture_side_texels: f32, bias: f32, lod_count: u8) -> u8 {
-    let max_lod = lod_count.saturating_sub(1);
     let length = |a: f32, b: f32| {
         let (a, b) = (a * texture_side_texels, b * texture_side_texels);
         (a * a + b * b).sqrt()
     };
-    let (fx, fy) = (length(dudx, dvdx), length(dudy, dvdy));
-    let lod = (fx.max(fy).log2() + bias).floor();
+    lod_from_footprint(length(dudx, dvdx).max(length(dudy, dvdy)), bias, lod_count)
+}
+
+/// `floor(log2(footprint) + bias)` clamped to `[0, lod_count - 1]`, for a footprint in LOD-0
+/// texels per pixel (what [`lod_for`] computes from derivatives, and a 2D window from its step).
+pub fn lod_from_footprint(footprint: f32, bias: f32, lod_count: u8) -> u8 {
+    let max_lod = lod_count.saturating_sub(1);
+    let lod = (footprint.log2() + bias).floor();
     // NaN (e.g. a zero footprint with an infinite bias) counts as magnified.
     if lod.is_nan() || lod < 0.0 {
         0

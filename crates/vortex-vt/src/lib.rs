@@ -2,6 +2,7 @@
 //! which pages a frame needs and where they live, so that it can be tested exactly on any
 //! machine. The GPU runtime drives it once per frame.
 
+pub mod address;
 pub mod analysis;
 pub mod feedback;
 pub mod invariants;

@@ -1,47 +1,58 @@
-// Samples a virtual texture through the page table and the physical page cache: one full-screen
-// triangle, each fragment maps its virtual UV to the page table at the wanted LOD, follows the
-// entry to a slot of the cache (the finest resident ancestor of the wanted page) and samples it
-// bilinearly through the cache's sRGB view. The layout of `Params` is `render::Params`.
+// The sampling pass: each fragment finds its LOD (from its footprint, or `frame.lod_override`),
+// its address at that LOD, the page-table entry there (the finest resident ancestor-or-self of
+// the wanted page), and samples that page's slot of the physical cache through its sRGB view:
+// nearest, bilinear, or trilinear (two LODs blended), as the pipeline's `FILTER` constant says.
+// Appended to `virtual.wgsl`.
 
-struct Params {
-    // Virtual UV of the target's pixel (0, 0) corner (xy) and UV per pixel (zw): a fragment at
-    // framebuffer position p (pixel centres at .5) samples window.xy + p * window.zw.
-    window: vec4<f32>,
-    // Pages per side at LOD 0, the LOD to sample, padding.
-    pages: u32,
-    lod: u32,
-    pad0: u32,
-    pad1: u32,
-    // Tile side with border, border, payload side, cache side: all in texels.
-    tile: vec4<f32>,
-}
-
-@group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var page_table: texture_2d<u32>;
+@group(0) @binding(1) var page_table: texture_2d_array<u32>;
 @group(0) @binding(2) var cache: texture_2d<f32>;
 @group(0) @binding(3) var cache_sampler: sampler;
 
-const UNMAPPED: u32 = 0xffffffffu;
-// The largest f32 below 1: keeps v = 1 inside the last page.
-const BELOW_ONE: f32 = 0.99999994;
+// 0 nearest, 1 bilinear, 2 trilinear (`render::Filter`).
+override FILTER: u32 = 1u;
 
-@fragment
-fn fs_main(@builtin(position) frag: vec4<f32>) -> @location(0) vec4<f32> {
-    let v = clamp(params.window.xy + frag.xy * params.window.zw, vec2<f32>(0.0), vec2<f32>(BELOW_ONE));
-    let lod = params.lod;
-    let page = vec2<u32>(v * f32(params.pages)) >> vec2<u32>(lod);
-    let word = textureLoad(page_table, page, lod).r;
+const UNMAPPED: u32 = 0xffffffffu;
+
+// The sample at address `at` of LOD `lod` of texture `texture`, from whatever the page table
+// maps there.
+fn sample_at(texture: u32, lod: u32, at: At) -> vec4<f32> {
+    let word = textureLoad(page_table, at.page, texture, lod).r;
     if word == UNMAPPED {
         // Only before the first update pinned the root: magenta, never a real texel.
         return vec4<f32>(1.0, 0.0, 1.0, 1.0);
     }
     let slot = vec2<f32>(f32(word & 0xffu), f32((word >> 8u) & 0xffu));
     let page_lod = (word >> 16u) & 0xffu;
-    // Position inside the page the entry points at (the wanted page or a coarser ancestor), then
-    // inside its payload, past the border, in the slot, in the cache.
-    let within = fract(v * f32(params.pages >> page_lod));
-    let texel = slot * params.tile.x + within * params.tile.z + params.tile.y;
-    // Explicit level: the cache has one mip, and the UV jumps between slots at page edges, so
-    // derivatives would be meaningless.
-    return textureSampleLevel(cache, cache_sampler, texel / params.tile.w, 0.0);
+    let a = ancestor(at, page_lod - lod, frame.textures[texture].payload);
+    // Past the border into the slot; clamped half a texel inside the slot so that a tile
+    // without a border never filters in its neighbour's texels.
+    let origin = slot * frame.tile.x;
+    let texel = clamp(origin + frame.tile.y + a.within, origin + 0.5, origin + frame.tile.x - 0.5);
+    return textureSampleLevel(cache, cache_sampler, texel / frame.tile.w, 0.0);
+}
+
+fn shade(is_window: bool, position: vec2<f32>, uv: vec2<f32>, texture: u32) -> vec4<f32> {
+    let t = frame.textures[texture];
+    let wanted = select(log2(footprint(is_window, uv, t)) + frame.bias, frame.lod_override, frame.lod_override >= 0.0);
+    let top = f32(t.lod_count - 1u);
+    let level = clamp(floor(wanted), 0.0, top);
+    let lod = u32(level);
+    let at = address(is_window, position, uv, lod, t);
+    let fine = sample_at(texture, lod, at);
+    if FILTER != 2u || level >= top {
+        return fine;
+    }
+    let blend = clamp(wanted - level, 0.0, 1.0);
+    let coarse = sample_at(texture, lod + 1u, ancestor(at, 1u, t.payload));
+    return mix(fine, coarse, blend);
+}
+
+@fragment
+fn fs_window(v: Varyings) -> @location(0) vec4<f32> {
+    return shade(true, v.position.xy, v.uv, v.texture);
+}
+
+@fragment
+fn fs_mesh(v: Varyings) -> @location(0) vec4<f32> {
+    return shade(false, v.position.xy, v.uv, v.texture);
 }

@@ -1,0 +1,150 @@
+//! What the sampling and the feedback pass share: their shader (`virtual.wgsl` followed by the
+//! pass's fragment stages), a pipeline per kind of [`View`] (a full-screen window, or meshes
+//! with a depth test), and the recording of one pass: clear, then draw. Render thread.
+
+use wgpu::util::DeviceExt;
+
+use crate::mesh::Vertex;
+use crate::view::View;
+
+pub(crate) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// A pass's shader: the shared part followed by the pass's `fs_window` and `fs_mesh`.
+pub(crate) fn shader(device: &wgpu::Device, label: &str, fragment: &str) -> wgpu::ShaderModule {
+    let source = format!("{}\n{fragment}", include_str!("shaders/virtual.wgsl"));
+    device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    })
+}
+
+/// The two pipelines of a pass.
+#[derive(Debug)]
+pub(crate) struct Pipelines {
+    window: wgpu::RenderPipeline,
+    mesh: wgpu::RenderPipeline,
+}
+
+impl Pipelines {
+    /// Pipelines writing `format` without blending; `constants` set the shader's overrides.
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        label: &str,
+        module: &wgpu::ShaderModule,
+        layout: &wgpu::BindGroupLayout,
+        format: wgpu::TextureFormat,
+        constants: &[(&str, f64)],
+    ) -> Pipelines {
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &[Some(layout)],
+            immediate_size: 0,
+        });
+        let make = |is_window: bool| {
+            let options = wgpu::PipelineCompilationOptions { constants, ..Default::default() };
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module,
+                    entry_point: Some(if is_window { "vs_window" } else { "vs_mesh" }),
+                    compilation_options: options.clone(),
+                    buffers: if is_window { &[] } else { &[Some(Vertex::LAYOUT)] },
+                },
+                primitive: wgpu::PrimitiveState::default(),
+                // The window lies at the far plane, behind every mesh.
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(!is_window),
+                    depth_compare: Some(wgpu::CompareFunction::LessEqual),
+                    stencil: wgpu::StencilState::default(),
+                    bias: wgpu::DepthBiasState::default(),
+                }),
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module,
+                    entry_point: Some(if is_window { "fs_window" } else { "fs_mesh" }),
+                    compilation_options: options,
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format,
+                        blend: None,
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        Pipelines { window: make(true), mesh: make(false) }
+    }
+}
+
+/// A uniform buffer holding `bytes`.
+pub(crate) fn uniform(device: &wgpu::Device, label: &str, bytes: &[u8]) -> wgpu::Buffer {
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: bytes,
+        usage: wgpu::BufferUsages::UNIFORM,
+    })
+}
+
+/// A depth buffer for a `width x height` target.
+pub(crate) fn depth_texture(device: &wgpu::Device, width: u32, height: u32) -> wgpu::TextureView {
+    device
+        .create_texture(&wgpu::TextureDescriptor {
+            label: Some("vortex depth"),
+            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: DEPTH_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            view_formats: &[],
+        })
+        .create_view(&wgpu::TextureViewDescriptor::default())
+}
+
+/// Clears `colour` to `clear` and the depth to the far plane, then draws `view` with
+/// `pipelines` and `bind_group` if given.
+pub(crate) fn record(
+    encoder: &mut wgpu::CommandEncoder,
+    label: &str,
+    colour: &wgpu::TextureView,
+    depth: &wgpu::TextureView,
+    clear: wgpu::Color,
+    draw: Option<(&Pipelines, &wgpu::BindGroup, &View)>,
+) {
+    let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view: colour,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations { load: wgpu::LoadOp::Clear(clear), store: wgpu::StoreOp::Store },
+        })],
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view: depth,
+            depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
+            stencil_ops: None,
+        }),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    });
+    let Some((pipelines, bind_group, view)) = draw else { return };
+    pass.set_bind_group(0, bind_group, &[]);
+    match view {
+        View::Window(_) => {
+            pass.set_pipeline(&pipelines.window);
+            pass.draw(0..3, 0..1);
+        }
+        View::Meshes { meshes, .. } => {
+            pass.set_pipeline(&pipelines.mesh);
+            for mesh in *meshes {
+                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..mesh.index_count, 0, 0..1);
+            }
+        }
+    }
+}

@@ -1,0 +1,466 @@
+//! Scenes: what a headless run renders, read from JSON (`docs/scenes.md`) or built in code. A
+//! scene names its virtual textures, its geometry (a 2D window, or planes, terrain grids and
+//! boxes), a camera path, the output size, and the effects it needs (filter, feedback size,
+//! cache size, upload budget). The runtime turns on only what the scene asks for: one sampling
+//! pipeline for its filter, the mesh pipelines only for meshes, and only the pages its
+//! feedback requests are ever read.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::camera::{Camera, Keyframe, at_frame, lerp3};
+use crate::mesh::{Mesh, Vertex};
+use crate::render::Filter;
+use crate::view::Window;
+
+/// Why a scene cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error("cannot read scene {path}: {source}")]
+    Read { path: PathBuf, source: std::io::Error },
+    #[error("scene {path}: {source}")]
+    Parse { path: PathBuf, source: serde_json::Error },
+    #[error("scene {path}: {message}")]
+    Invalid { path: PathBuf, message: String },
+}
+
+/// A scene as written in JSON. Every member but `view` has a default.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// Packs, texture id = position; relative paths are relative to the scene file. May be
+    /// empty when the command line names the packs.
+    #[serde(default)]
+    pub textures: Vec<PathBuf>,
+    /// Output width and height in pixels.
+    #[serde(default = "default_size")]
+    pub size: [u32; 2],
+    /// Frames to render.
+    #[serde(default = "default_frames")]
+    pub frames: u32,
+    pub view: SceneView,
+    #[serde(default)]
+    pub effects: Effects,
+}
+
+/// What the camera looks at.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum SceneView {
+    /// A 2D window onto one texture, moving along `path` (a viewer's pan and zoom).
+    Window {
+        #[serde(default)]
+        texture: u8,
+        path: Vec<Keyframe<WindowKey>>,
+    },
+    /// Meshes through a perspective camera moving along `path`.
+    Camera {
+        #[serde(default = "default_fov")]
+        fov_y_deg: f32,
+        path: Vec<Keyframe<Camera>>,
+        geometry: Vec<Shape>,
+    },
+}
+
+/// Where a window is: the virtual UV at its centre and how much of the texture's width it
+/// shows (1 = all of it; 0.01 = a hundredth).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WindowKey {
+    pub center: [f64; 2],
+    pub width: f64,
+}
+
+/// One piece of geometry; UV 0..1 spans the texture's real image.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum Shape {
+    /// A flat square in the y = 0 plane, centred on the origin, `size` units per side.
+    Plane {
+        #[serde(default)]
+        texture: u8,
+        #[serde(default = "one")]
+        size: f32,
+    },
+    /// A height field over a square (`size` units, `cells` per side) with rolling hills of
+    /// amplitude `height`.
+    Terrain {
+        #[serde(default)]
+        texture: u8,
+        #[serde(default = "one")]
+        size: f32,
+        #[serde(default = "default_cells")]
+        cells: u32,
+        #[serde(default = "default_height")]
+        height: f32,
+    },
+    /// An axis-aligned box; each face shows the whole image.
+    Box {
+        #[serde(default)]
+        texture: u8,
+        center: [f32; 3],
+        size: [f32; 3],
+    },
+}
+
+/// The effects a scene needs; nothing else runs.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Effects {
+    #[serde(with = "filter_name")]
+    pub filter: Filter,
+    /// The feedback target is the frame's size divided by this.
+    pub feedback_divisor: u32,
+    /// The physical cache is this many slots per side (1..=256).
+    pub cache_slots_per_side: u16,
+    /// Most pages uploaded per frame.
+    pub upload_budget: usize,
+    /// Loader threads.
+    pub threads: usize,
+}
+
+impl Default for Effects {
+    fn default() -> Effects {
+        Effects {
+            filter: Filter::Bilinear,
+            feedback_divisor: 8,
+            cache_slots_per_side: 16,
+            upload_budget: 32,
+            threads: 2,
+        }
+    }
+}
+
+mod filter_name {
+    use serde::{Deserialize, Deserializer, Serializer, de::Error};
+
+    use crate::render::Filter;
+
+    pub fn serialize<S: Serializer>(f: &Filter, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(f.name())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Filter, D::Error> {
+        let name = String::deserialize(d)?;
+        [Filter::Nearest, Filter::Bilinear, Filter::Trilinear]
+            .into_iter()
+            .find(|f| f.name() == name)
+            .ok_or_else(|| D::Error::custom(format!("unknown filter {name:?}: nearest, bilinear or trilinear")))
+    }
+}
+
+fn default_size() -> [u32; 2] {
+    [512, 384]
+}
+fn default_frames() -> u32 {
+    60
+}
+fn default_fov() -> f32 {
+    60.0
+}
+fn one() -> f32 {
+    1.0
+}
+fn default_cells() -> u32 {
+    64
+}
+fn default_height() -> f32 {
+    0.1
+}
+
+impl Scene {
+    /// The built-in scene: a plane seen from above, zooming in towards one spot while panning,
+    /// then holding still for the last third of the frames so that streaming can converge.
+    pub fn default_plane() -> Scene {
+        let key = |frame, eye, target| Keyframe { frame, at: Camera { eye, target } };
+        Scene {
+            textures: vec![],
+            size: default_size(),
+            frames: 60,
+            view: SceneView::Camera {
+                fov_y_deg: 60.0,
+                path: vec![
+                    key(0, [0.0, 0.9, 0.35], [0.0, 0.0, 0.0]),
+                    key(20, [0.12, 0.25, 0.18], [0.1, 0.0, -0.02]),
+                    key(40, [0.22, 0.08, 0.05], [0.28, 0.0, -0.12]),
+                ],
+                geometry: vec![Shape::Plane { texture: 0, size: 1.0 }],
+            },
+            effects: Effects::default(),
+        }
+    }
+
+    /// Reads a scene file; relative texture paths become relative to the file's folder.
+    pub fn read(path: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read { path: path.into(), source })?;
+        let mut scene: Scene =
+            serde_json::from_str(&text).map_err(|source| SceneError::Parse { path: path.into(), source })?;
+        let dir = path.parent().unwrap_or(Path::new(""));
+        for t in &mut scene.textures {
+            if t.is_relative() {
+                *t = dir.join(&*t);
+            }
+        }
+        scene.check().map_err(|message| SceneError::Invalid { path: path.into(), message })?;
+        Ok(scene)
+    }
+
+    /// Checks what serde cannot: sizes, counts, keyframe order, texture ids below `textures`
+    /// (when known; pass `None` before the packs are chosen).
+    pub fn check(&self) -> Result<(), String> {
+        let [w, h] = self.size;
+        if !(1..=8192).contains(&w) || !(1..=8192).contains(&h) {
+            return Err(format!("size {w}x{h}: each side must be 1..=8192"));
+        }
+        if self.frames == 0 {
+            return Err("frames must be at least 1".into());
+        }
+        let e = &self.effects;
+        if e.feedback_divisor == 0 {
+            return Err("effects.feedback_divisor must be at least 1".into());
+        }
+        if !(1..=256).contains(&e.cache_slots_per_side) {
+            return Err(format!("effects.cache_slots_per_side {} must be 1..=256", e.cache_slots_per_side));
+        }
+        if e.threads == 0 {
+            return Err("effects.threads must be at least 1".into());
+        }
+        let frames: Vec<u32> = match &self.view {
+            SceneView::Window { path, .. } => {
+                if let Some(k) = path.iter().find(|k| !(k.at.width > 0.0 && k.at.width.is_finite())) {
+                    return Err(format!("view.window.path: frame {} has width {}, must be > 0", k.frame, k.at.width));
+                }
+                path.iter().map(|k| k.frame).collect()
+            }
+            SceneView::Camera { path, fov_y_deg, geometry } => {
+                if !(1.0..=170.0).contains(fov_y_deg) {
+                    return Err(format!("view.camera.fov_y_deg {fov_y_deg} must be 1..=170"));
+                }
+                if geometry.is_empty() {
+                    return Err("view.camera.geometry is empty: nothing to draw".into());
+                }
+                if let Some(k) = path.iter().find(|k| k.at.eye == k.at.target) {
+                    return Err(format!("view.camera.path: frame {} has eye == target", k.frame));
+                }
+                path.iter().map(|k| k.frame).collect()
+            }
+        };
+        if frames.is_empty() {
+            return Err("the view's path has no keyframe".into());
+        }
+        if frames.windows(2).any(|w| w[0] >= w[1]) {
+            return Err(format!("the view's path frames {frames:?} must increase"));
+        }
+        Ok(())
+    }
+
+    /// Checks that every texture id used is below `count`.
+    pub fn check_textures(&self, count: usize) -> Result<(), String> {
+        let used: Vec<u8> = match &self.view {
+            SceneView::Window { texture, .. } => vec![*texture],
+            SceneView::Camera { geometry, .. } => geometry.iter().map(Shape::texture).collect(),
+        };
+        match used.into_iter().find(|&t| t as usize >= count) {
+            Some(t) => Err(format!("texture {t} is used but the scene has {count} texture(s)")),
+            None => Ok(()),
+        }
+    }
+
+    /// The first frame from which the camera no longer moves (the last keyframe's).
+    pub fn still_from(&self) -> u32 {
+        let last = match &self.view {
+            SceneView::Window { path, .. } => path.last().map(|k| k.frame),
+            SceneView::Camera { path, .. } => path.last().map(|k| k.frame),
+        };
+        last.unwrap_or(0).min(self.frames.saturating_sub(1))
+    }
+
+    /// The meshes of a camera scene, all in one (empty for a window).
+    pub fn mesh(&self) -> Mesh {
+        let mut mesh = Mesh::default();
+        if let SceneView::Camera { geometry, .. } = &self.view {
+            for shape in geometry {
+                mesh.append(&shape.mesh());
+            }
+        }
+        mesh
+    }
+
+    /// Where the camera is at `frame`.
+    pub fn pose(&self, frame: u32) -> Pose {
+        let aspect = self.size[0] as f32 / self.size[1] as f32;
+        match &self.view {
+            SceneView::Window { texture, path } => {
+                let k = at_frame(path, frame, |a, b, t| {
+                    let t = t as f64;
+                    // Zoom geometrically, so that a deep zoom moves at an even pace.
+                    WindowKey {
+                        center: [
+                            a.center[0] + (b.center[0] - a.center[0]) * t,
+                            a.center[1] + (b.center[1] - a.center[1]) * t,
+                        ],
+                        width: a.width * (b.width / a.width).powf(t),
+                    }
+                })
+                .expect("checked: a path has keyframes");
+                let extent = [k.width, k.width / aspect as f64];
+                let origin = [k.center[0] - extent[0] / 2.0, k.center[1] - extent[1] / 2.0];
+                Pose::Window(Window { texture: *texture, origin, extent })
+            }
+            SceneView::Camera { fov_y_deg, path, .. } => {
+                let cam = at_frame(path, frame, |a, b, t| Camera {
+                    eye: lerp3(a.eye, b.eye, t),
+                    target: lerp3(a.target, b.target, t),
+                })
+                .expect("checked: a path has keyframes");
+                Pose::Camera(cam.view_proj(*fov_y_deg, aspect))
+            }
+        }
+    }
+}
+
+/// Where the camera is in one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Pose {
+    Window(Window),
+    /// A view-projection matrix for the scene's meshes.
+    Camera([[f32; 4]; 4]),
+}
+
+impl Shape {
+    pub fn texture(&self) -> u8 {
+        match self {
+            Shape::Plane { texture, .. } | Shape::Terrain { texture, .. } | Shape::Box { texture, .. } => *texture,
+        }
+    }
+
+    /// The shape's triangles.
+    pub fn mesh(&self) -> Mesh {
+        match *self {
+            Shape::Plane { texture, size } => grid(texture as u32, size, 1, |_, _| 0.0),
+            Shape::Terrain { texture, size, cells, height } => {
+                grid(texture as u32, size, cells.clamp(1, 1024), |x, z| {
+                    let (x, z) = (x / size * std::f32::consts::TAU, z / size * std::f32::consts::TAU);
+                    height * 0.5 * ((2.0 * x).sin() * (3.0 * z).cos() + 0.5 * (5.0 * x + z).sin())
+                })
+            }
+            Shape::Box { texture, center, size } => cuboid(texture as u32, center, size),
+        }
+    }
+}
+
+/// A square of `cells x cells` quads in x and z, centred on the origin, heights from `y(x, z)`;
+/// UV (0, 0) at (-size/2, -size/2).
+fn grid(texture: u32, size: f32, cells: u32, y: impl Fn(f32, f32) -> f32) -> Mesh {
+    let n = cells + 1;
+    let mut mesh = Mesh::default();
+    for j in 0..n {
+        for i in 0..n {
+            let (u, v) = (i as f32 / cells as f32, j as f32 / cells as f32);
+            let (x, z) = ((u - 0.5) * size, (v - 0.5) * size);
+            mesh.vertices.push(Vertex { position: [x, y(x, z), z], uv: [u, v], texture });
+        }
+    }
+    for j in 0..cells {
+        for i in 0..cells {
+            let a = j * n + i;
+            mesh.indices.extend_from_slice(&[a, a + n, a + 1, a + 1, a + n, a + n + 1]);
+        }
+    }
+    mesh
+}
+
+/// Six faces, each a quad showing the whole image.
+fn cuboid(texture: u32, center: [f32; 3], size: [f32; 3]) -> Mesh {
+    let mut mesh = Mesh::default();
+    let h = size.map(|s| s / 2.0);
+    // Each face: its normal axis and sign; the other two axes span it.
+    for axis in 0..3 {
+        for sign in [-1.0f32, 1.0] {
+            let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+            let base = mesh.vertices.len() as u32;
+            for (u, v) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)] {
+                let mut p = center;
+                p[axis] += sign * h[axis];
+                p[a] += (u * 2.0 - 1.0) * h[a];
+                p[b] += (v * 2.0 - 1.0) * h[b];
+                mesh.vertices.push(Vertex { position: p, uv: [u, v], texture });
+            }
+            mesh.indices.extend_from_slice(&[base, base + 1, base + 2, base + 2, base + 1, base + 3]);
+        }
+    }
+    mesh
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_scene_is_valid_and_ends_still() {
+        let s = Scene::default_plane();
+        s.check().unwrap();
+        s.check_textures(1).unwrap();
+        assert!(s.still_from() < s.frames - 10);
+        assert_eq!(s.pose(s.still_from()), s.pose(s.frames - 1));
+        assert_ne!(s.pose(0), s.pose(s.still_from()));
+        assert_eq!(s.mesh().indices.len(), 6);
+    }
+
+    #[test]
+    fn json_round_trips_and_bad_members_are_named() {
+        let s = Scene::default_plane();
+        let json = serde_json::to_string_pretty(&s).unwrap();
+        assert_eq!(serde_json::from_str::<Scene>(&json).unwrap(), s);
+        let bad = json.replace("\"bilinear\"", "\"bicubic\"");
+        assert!(serde_json::from_str::<Scene>(&bad).unwrap_err().to_string().contains("unknown filter \"bicubic\""));
+        let extra = json.replacen("\"frames\"", "\"frame_count\": 3, \"frames\"", 1);
+        assert!(serde_json::from_str::<Scene>(&extra).unwrap_err().to_string().contains("frame_count"));
+    }
+
+    #[test]
+    fn checks_catch_what_serde_cannot() {
+        let mut s = Scene::default_plane();
+        s.effects.cache_slots_per_side = 0;
+        assert!(s.check().unwrap_err().contains("cache_slots_per_side"));
+        let mut s = Scene::default_plane();
+        if let SceneView::Camera { path, .. } = &mut s.view {
+            path[1].frame = 0;
+        }
+        assert!(s.check().unwrap_err().contains("must increase"));
+        let mut s = Scene::default_plane();
+        if let SceneView::Camera { geometry, .. } = &mut s.view {
+            geometry.push(Shape::Box { texture: 3, center: [0.0; 3], size: [0.1; 3] });
+        }
+        assert!(s.check_textures(2).unwrap_err().contains("texture 3"));
+    }
+
+    #[test]
+    fn window_paths_zoom_geometrically() {
+        let key = |frame, width| Keyframe { frame, at: WindowKey { center: [0.5, 0.5], width } };
+        let s = Scene {
+            size: [100, 50],
+            view: SceneView::Window { texture: 0, path: vec![key(0, 1.0), key(10, 0.01)] },
+            ..Scene::default_plane()
+        };
+        s.check().unwrap();
+        let Pose::Window(w) = s.pose(5) else { panic!() };
+        assert!((w.extent[0] - 0.1).abs() < 1e-9, "{w:?}");
+        assert!((w.extent[1] - 0.05).abs() < 1e-9);
+        assert!((w.origin[0] - 0.45).abs() < 1e-9);
+    }
+
+    #[test]
+    fn boxes_and_terrain_have_sound_indices() {
+        for shape in [
+            Shape::Box { texture: 1, center: [0.0, 0.5, 0.0], size: [1.0, 1.0, 2.0] },
+            Shape::Terrain { texture: 0, size: 2.0, cells: 8, height: 0.2 },
+        ] {
+            let m = shape.mesh();
+            assert!(m.indices.iter().all(|&i| (i as usize) < m.vertices.len()));
+            assert_eq!(m.indices.len() % 3, 0);
+            assert!(m.vertices.iter().all(|v| v.uv.iter().all(|t| (0.0..=1.0).contains(t))));
+        }
+    }
+}
