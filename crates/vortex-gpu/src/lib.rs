@@ -17,6 +17,7 @@ pub mod mesh;
 pub mod page_cache;
 pub mod page_table;
 mod params;
+pub mod probe;
 pub mod render;
 pub mod runtime;
 pub mod scene;

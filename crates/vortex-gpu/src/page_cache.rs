@@ -91,6 +91,39 @@ impl PageCache {
         );
     }
 
+    /// Reads the texels of `slot` back (RGBA8, row-major, border included): blocking, for tests
+    /// and debugging.
+    pub fn read_slot(&self, gpu: &crate::Gpu, slot: Slot) -> Vec<u8> {
+        let ts = self.tile_size;
+        let row = (ts * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("vortex slot readback"),
+            size: row as u64 * ts as u64,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let (x, y) = self.slot_origin(slot);
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        encoder.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d { x, y, z: 0 },
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buffer,
+                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(ts) },
+            },
+            wgpu::Extent3d { width: ts, height: ts, depth_or_array_layers: 1 },
+        );
+        gpu.queue.submit([encoder.finish()]);
+        buffer.slice(..).map_async(wgpu::MapMode::Read, |r| r.expect("mapping the slot readback"));
+        gpu.wait_idle();
+        let bytes = buffer.slice(..).get_mapped_range().expect("the slot readback is mapped");
+        bytes.chunks_exact(row as usize).flat_map(|r| r[..(ts * 4) as usize].iter().copied()).collect()
+    }
+
     /// Texel position of the top-left corner of `slot`.
     pub fn slot_origin(&self, slot: Slot) -> (u32, u32) {
         let side = self.slots_per_side as u32;

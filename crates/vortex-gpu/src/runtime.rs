@@ -22,7 +22,7 @@ use vortex_vt::analysis::Analyzer;
 use vortex_vt::invariants::{self, Violation};
 use vortex_vt::page::{PageId, TextureGrid};
 use vortex_vt::page_table::PageTable;
-use vortex_vt::residency::{ConfigError, Residency, ResidencyConfig};
+use vortex_vt::residency::{ConfigError, FrameUpdate, Residency, ResidencyConfig};
 use vortex_vt::sampler::Rgba8Image;
 
 use crate::device::Gpu;
@@ -115,6 +115,7 @@ pub struct Runtime {
     frame: u64,
     touched: HashSet<PageId>,
     errors: Vec<LoadError>,
+    last_update: FrameUpdate,
     /// Check the page-table invariants after every frame (tests; costs a table rebuild).
     pub check_invariants: bool,
 }
@@ -145,6 +146,7 @@ impl Runtime {
             frame: 0,
             touched: HashSet::new(),
             errors: Vec::new(),
+            last_update: FrameUpdate::default(),
             check_invariants: false,
             gpu,
             loader,
@@ -223,6 +225,7 @@ impl Runtime {
             bytes_read,
             load_errors,
         };
+        self.last_update = update;
         self.frame += 1;
         Ok((report, picture))
     }
@@ -266,6 +269,11 @@ impl Runtime {
             errors: self.errors.iter().take(20).map(|e| e.to_string()).collect(),
             frames,
         }
+    }
+
+    /// The residency update of the last frame (its loads, in upload order, and evictions).
+    pub fn last_update(&self) -> &FrameUpdate {
+        &self.last_update
     }
 
     pub fn gpu(&self) -> &Gpu {

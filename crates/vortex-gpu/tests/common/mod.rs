@@ -56,3 +56,5 @@ pub fn gpu() -> Option<Gpu> {
         }
     }
 }
+
+pub mod pyramid;

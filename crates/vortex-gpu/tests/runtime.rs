@@ -1,0 +1,295 @@
+//! The whole frame loop on lavapipe, over packs written here (2048² texels: 16x16 pages of 128
+//! texels with a 4-texel border, stored raw): camera paths converge to no fallback, the
+//! page-table invariants hold after every frame, counters repeat exactly, the cache holds the
+//! pack's bordered tiles byte for byte, renders match the CPU reference sampler, an
+//! oversubscribed cache raises the LOD bias and lowers it again without ever showing a wrong
+//! texel, uploads stay within the budget, coarse before fine. Device conventions as in
+//! `sample.rs` (see `common`).
+
+mod common;
+
+use std::collections::HashSet;
+
+use common::gpu;
+use common::pyramid::Synthetic;
+use vortex_gpu::camera::{Camera, Keyframe};
+use vortex_gpu::scene::WindowKey;
+use vortex_gpu::{Effects, Filter, FrameReport, Gpu, Loader, Pose, Runtime, Scene, SceneView, Shape, Window};
+use vortex_vt::address::WindowOrigin;
+use vortex_vt::sampler::{Rgba8Image, bilinear, trilinear};
+
+const TILE: u32 = 136;
+const BORDER: u32 = 4;
+const PAGES: u16 = 16;
+const SIZE: [u32; 2] = [128, 128];
+
+fn key(frame: u32, center: [f64; 2], width: f64) -> Keyframe<WindowKey> {
+    Keyframe { frame, at: WindowKey { center, width } }
+}
+
+/// A 2D viewer zooming from the whole texture into a corner where four pages meet, panning a
+/// little, then holding still from frame 16.
+fn zoom_scene(effects: Effects) -> Scene {
+    Scene {
+        textures: vec![],
+        size: SIZE,
+        frames: 30,
+        view: SceneView::Window {
+            texture: 0,
+            path: vec![key(0, [0.5, 0.5], 1.0), key(10, [0.49, 0.51], 0.07), key(16, [0.503, 0.497], 0.045)],
+        },
+        effects,
+    }
+}
+
+fn effects(slots_per_side: u16, budget: usize) -> Effects {
+    Effects { cache_slots_per_side: slots_per_side, upload_budget: budget, ..Effects::default() }
+}
+
+fn runtime(gpu: Gpu, textures: &[&Synthetic], scene: &Scene) -> Runtime {
+    let loader = Loader::new(textures.iter().map(|t| t.pack.clone()).collect(), 2).unwrap();
+    let mut rt = Runtime::new(gpu, loader, scene).unwrap();
+    rt.check_invariants = true;
+    rt
+}
+
+/// Runs `scene`, returning every frame's counters and the last picture.
+fn run(rt: &mut Runtime, scene: &Scene) -> (Vec<FrameReport>, Rgba8Image) {
+    let mut frames = Vec::new();
+    let mut last = None;
+    for f in 0..scene.frames {
+        let (report, picture) = rt.frame(&scene.pose(f), f + 1 == scene.frames).unwrap();
+        frames.push(report);
+        last = picture;
+    }
+    (frames, last.unwrap())
+}
+
+/// What a window render must be: at each pixel, the reference bilinear (or trilinear) sample
+/// at the LOD the page table maps for the pixel's wanted page.
+fn expected(rt: &Runtime, tex: &Synthetic, window: &Window, filter: Filter) -> Rgba8Image {
+    let size = (SIZE[0], SIZE[1]);
+    let origin: WindowOrigin = window.origin_texels(&tex.texture, size);
+    let lods = tex.texture.grid.lod_count;
+    let table = rt.page_table();
+    Rgba8Image::from_fn(size.0, size.1, |x, y| {
+        let [u, v] = window.uv(x, y, size).map(|t| t as f32);
+        let lod = origin.lod(0.0, lods);
+        let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, PAGES as u32, tex.texture.payload());
+        let entry = table.entry(0, lod, at.page[0] as u16, at.page[1] as u16);
+        match filter {
+            Filter::Trilinear if entry.lod == lod => {
+                let f = origin.step[0].max(origin.step[1]).log2().max(0.0);
+                trilinear(&tex.chain, f, u, v)
+            }
+            _ => bilinear(&tex.chain, entry.lod, u, v),
+        }
+    })
+}
+
+/// Largest channel difference and PSNR over all channels.
+fn diff(got: &Rgba8Image, want: &Rgba8Image) -> (u8, f64) {
+    let mut max = 0;
+    let mut sq = 0.0;
+    for (g, w) in got.texels.iter().zip(&want.texels) {
+        for c in 0..4 {
+            max = max.max(g[c].abs_diff(w[c]));
+            sq += (g[c] as f64 - w[c] as f64).powi(2);
+        }
+    }
+    let mse = sq / (got.texels.len() * 4) as f64;
+    (max, if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64.powi(2) / mse).log10() })
+}
+
+#[test]
+fn a_zoom_converges_matches_the_reference_and_repeats_exactly() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let tex = Synthetic::new(dir.path(), "a.vtpk", PAGES, TILE, BORDER, 1);
+    let scene = zoom_scene(effects(16, 16));
+    let mut rt = runtime(gpu, &[&tex], &scene);
+    let (frames, picture) = run(&mut rt, &scene);
+    let report = rt.report(&scene, frames.clone());
+    for f in &frames {
+        eprintln!(
+            "frame {:2}: requested {:3} loaded {:2} evicted {:2} fallback {:.3} bias {}",
+            f.frame, f.requested, f.loaded, f.evicted, f.fallback_fraction, f.lod_bias
+        );
+    }
+    let last = frames.last().unwrap();
+    assert_eq!(last.fallback_fraction, 0.0, "the still view converges");
+    assert!(report.frames_to_converge.is_some_and(|n| n <= 10), "{:?}", report.frames_to_converge);
+    assert!(frames.iter().skip(1).all(|f| f.loaded <= 16), "the budget holds");
+    assert!(
+        report.pages_touched * 4 < report.pages_total as usize,
+        "{} of {}",
+        report.pages_touched,
+        report.pages_total
+    );
+    assert_eq!(report.bytes_read, report.pages_touched as u64 * (TILE * TILE * 4) as u64, "raw tiles, each read once");
+
+    // The converged picture is the reference, sampled at the LOD the view wants.
+    let Pose::Window(window) = scene.pose(scene.frames - 1) else { unreachable!() };
+    let (max, psnr) = diff(&picture, &expected(&rt, &tex, &window, Filter::Bilinear));
+    eprintln!("converged zoom: max difference {max}/255, PSNR {psnr:.1} dB");
+    assert!(max <= 2 && psnr >= 50.0, "max {max}, PSNR {psnr:.1} dB");
+
+    // Every resident page's slot holds the pack's bordered tile, exactly.
+    for (page, slot) in rt.residency().resident() {
+        assert!(rt.cache().read_slot(rt.gpu(), slot) == tex.tile(page), "slot {slot} of {page:?}");
+    }
+
+    // The same run again gives the same counters, frame for frame.
+    let gpu = rt.gpu().adapter_info();
+    drop(rt);
+    let mut again = runtime(common::gpu().unwrap(), &[&tex], &scene);
+    assert_eq!(run(&mut again, &scene).0, frames, "counters repeat on {}", gpu.name);
+}
+
+#[test]
+fn a_camera_over_a_plane_converges_with_every_filter() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let tex = Synthetic::new(dir.path(), "a.vtpk", PAGES, TILE, BORDER, 2);
+    let mut scene = Scene::default_plane();
+    scene.size = [128, 96];
+    scene.frames = 50;
+    scene.effects = effects(16, 24);
+    let mut rt = runtime(gpu, &[&tex], &scene);
+    let (frames, picture) = run(&mut rt, &scene);
+    let report = rt.report(&scene, frames.clone());
+    eprintln!(
+        "plane: {} of {} pages, converged after {:?}",
+        report.pages_touched, report.pages_total, report.frames_to_converge
+    );
+    assert_eq!(frames.last().unwrap().fallback_fraction, 0.0);
+    assert!(report.pages_touched * 2 < report.pages_total as usize);
+    // Something was drawn: the plane covers most of the frame.
+    let drawn = picture.texels.iter().filter(|t| t[3] == 255).count();
+    assert!(drawn * 2 > picture.texels.len(), "{drawn} pixels drawn");
+
+    // The other filters converge along the same path to the same pages.
+    for filter in [Filter::Nearest, Filter::Trilinear] {
+        scene.effects.filter = filter;
+        let mut rt = runtime(common::gpu().unwrap(), &[&tex], &scene);
+        let (f, p) = run(&mut rt, &scene);
+        assert_eq!(f.last().unwrap().fallback_fraction, 0.0, "{filter:?}");
+        assert_eq!(f, frames, "the feedback does not depend on the filter");
+        let (max, _) = diff(&p, &picture);
+        assert!(max > 0, "{filter:?} renders differently from bilinear");
+    }
+}
+
+#[test]
+fn trilinear_matches_the_reference_between_lods() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let tex = Synthetic::new(dir.path(), "a.vtpk", PAGES, TILE, BORDER, 3);
+    // Still at 2.7 texels per pixel: between LOD 1 and 2.
+    let mut scene = zoom_scene(Effects { filter: Filter::Trilinear, ..effects(16, 64) });
+    scene.view = SceneView::Window { texture: 0, path: vec![key(0, [0.41, 0.37], 2.7 * 128.0 / 2048.0)] };
+    scene.frames = 8;
+    let mut rt = runtime(gpu, &[&tex], &scene);
+    let (frames, picture) = run(&mut rt, &scene);
+    assert_eq!(frames.last().unwrap().fallback_fraction, 0.0);
+    let Pose::Window(window) = scene.pose(0) else { unreachable!() };
+    let (max, psnr) = diff(&picture, &expected(&rt, &tex, &window, Filter::Trilinear));
+    eprintln!("trilinear: max difference {max}/255, PSNR {psnr:.1} dB");
+    assert!(max <= 2 && psnr >= 50.0, "max {max}, PSNR {psnr:.1} dB");
+}
+
+#[test]
+fn an_oversubscribed_cache_blurs_but_never_shows_a_wrong_texel() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let tex = Synthetic::new(dir.path(), "a.vtpk", PAGES, TILE, BORDER, 4);
+    // A view needing about 3x3 LOD-0 pages (plus ancestors) in a cache of 3x3 slots; then a
+    // view of the whole texture, which needs only the root and its children.
+    let mut scene = zoom_scene(effects(3, 4));
+    scene.view = SceneView::Window {
+        texture: 0,
+        path: vec![key(0, [0.5, 0.5], 0.14), key(24, [0.5, 0.5], 0.14), key(26, [0.5, 0.5], 1.0)],
+    };
+    scene.frames = 44;
+    let mut rt = runtime(gpu, &[&tex], &scene);
+    let mut biases = Vec::new();
+    let mut worst = (0, f64::INFINITY);
+    for f in 0..scene.frames {
+        let pose = scene.pose(f);
+        let Pose::Window(window) = pose else { unreachable!() };
+        // A frame draws with the table as the previous frame left it: the reference at the LOD
+        // of each pixel's entry, however coarse (frame 0 draws before anything is mapped).
+        let want = (f > 0).then(|| expected(&rt, &tex, &window, Filter::Bilinear));
+        let (report, picture) = rt.frame(&pose, true).unwrap();
+        biases.push(report.lod_bias);
+        if let Some(want) = want {
+            let (max, psnr) = diff(&picture.unwrap(), &want);
+            assert!(max <= 2 && psnr >= 50.0, "frame {f}: max {max}, PSNR {psnr:.1} dB");
+            worst = (worst.0.max(max), worst.1.min(psnr));
+        }
+    }
+    eprintln!("oversubscribed: worst max difference {}/255, worst PSNR {:.1} dB", worst.0, worst.1);
+    let peak = biases.iter().cloned().fold(0.0f32, f32::max);
+    eprintln!("LOD bias per frame: {biases:?}");
+    assert!(peak >= 1.0, "the bias rose to {peak}");
+    assert_eq!(*biases.last().unwrap(), 0.0, "and fell back once the view fits");
+    assert!(biases.iter().all(|&b| b >= 0.0));
+}
+
+#[test]
+fn uploads_stay_within_the_budget_coarse_before_fine() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let tex = Synthetic::new(dir.path(), "a.vtpk", PAGES, TILE, BORDER, 5);
+    let scene = zoom_scene(effects(16, 3));
+    let mut rt = runtime(gpu, &[&tex], &scene);
+    let mut resident: HashSet<_> = HashSet::new();
+    for f in 0..scene.frames {
+        let (report, _) = rt.frame(&scene.pose(f), false).unwrap();
+        let update = rt.last_update();
+        if f > 0 {
+            assert!(report.loaded <= 3, "frame {f} loaded {}", report.loaded);
+        }
+        for (page, _) in &update.evictions {
+            resident.remove(page);
+        }
+        for (page, _) in &update.loads {
+            let grid = tex.texture.grid;
+            if let Some(parent) = page.parent(&grid) {
+                assert!(resident.contains(&parent), "frame {f}: {page:?} loaded before its parent");
+            }
+            resident.insert(*page);
+        }
+    }
+}
+
+#[test]
+fn several_textures_stream_side_by_side() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let a = Synthetic::new(dir.path(), "a.vtpk", PAGES, TILE, BORDER, 6);
+    let b = Synthetic::new(dir.path(), "b.vtpk", 4, TILE, BORDER, 7);
+    let key = |frame, eye, target| Keyframe { frame, at: Camera { eye, target } };
+    let scene = Scene {
+        textures: vec![],
+        size: [128, 96],
+        frames: 40,
+        view: SceneView::Camera {
+            fov_y_deg: 60.0,
+            path: vec![key(0, [0.0, 1.2, 1.4], [0.0, 0.0, 0.0]), key(20, [0.05, 0.25, 0.35], [0.0, 0.2, 0.0])],
+            geometry: vec![
+                Shape::Plane { texture: 0, size: 2.0 },
+                Shape::Box { texture: 1, center: [0.0, 0.2, 0.0], size: [0.4, 0.4, 0.4] },
+            ],
+        },
+        effects: effects(16, 32),
+    };
+    let mut rt = runtime(gpu, &[&a, &b], &scene);
+    let (frames, picture) = run(&mut rt, &scene);
+    assert_eq!(frames.last().unwrap().fallback_fraction, 0.0);
+    let textures: HashSet<u8> = rt.residency().resident().map(|(p, _)| p.texture).collect();
+    assert_eq!(textures, HashSet::from([0, 1]));
+    let fine_b = rt.residency().resident().filter(|(p, _)| p.texture == 1 && p.lod < 2).count();
+    assert!(fine_b > 0, "the box, close up, asks for its own fine pages");
+    assert!(picture.texels.iter().all(|t| t[3] == 255), "the box covers the frame");
+}
