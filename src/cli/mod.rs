@@ -2,6 +2,7 @@
 
 mod convert;
 mod pack;
+mod render;
 mod split;
 
 use anyhow::Result;
@@ -59,6 +60,19 @@ enum Command {
     /// Exits 0 if the pack is sound, 1 otherwise, after listing every problem with its byte
     /// offset and tile. --decode also decodes every tile (sizes checked before allocating).
     Verify(pack::VerifyArgs),
+    /// Stream packs through the GPU virtual-texturing runtime along a scene's camera path.
+    ///
+    /// Headless (a Vulkan, Metal or DX12 adapter; without a GPU, lavapipe from
+    /// mesa-vulkan-drivers). Writes PNG frames and a JSON report of what was streamed per frame:
+    /// pages requested, loaded and evicted, the share of pixels drawn from a coarser fallback,
+    /// the LOD bias, bytes read, pages touched out of all pages, frames to converge. The scene
+    /// format is in docs/scenes.md.
+    ///
+    /// Examples:
+    ///   vortex-tiler render --pack world.vtpk --frames out/frames/ --report out/report.json
+    ///   vortex-tiler render --pack a.vtpk --pack b.vtpk --scene boxes.json --filter trilinear
+    #[command(verbatim_doc_comment)]
+    Render(render::RenderArgs),
 }
 
 /// Where a pack's bytes go.
@@ -95,6 +109,7 @@ pub fn run(args: Args) -> Result<()> {
         Command::Unpack(a) => pack::run_unpack(a),
         Command::Info(a) => pack::run_info(a),
         Command::Verify(a) => pack::run_verify(a),
+        Command::Render(a) => render::run(a),
     }
 }
 

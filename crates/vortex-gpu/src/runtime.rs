@@ -83,6 +83,7 @@ pub struct Report {
     /// Distinct pages ever loaded, against all pages of all textures.
     pub pages_touched: usize,
     pub pages_total: u64,
+    /// Payload bytes read from the packs, the roots pinned before the first frame included.
     pub bytes_read: u64,
     /// Resident hits over pages requested, over all frames.
     pub hit_rate: f64,
@@ -137,7 +138,7 @@ impl Runtime {
         let readback = FeedbackReadback::new(&gpu.device, feedback_target.width, feedback_target.height, 2);
         let mesh = scene.mesh();
         let meshes = if mesh.indices.is_empty() { vec![] } else { vec![GpuMesh::upload(&gpu.device, &mesh)] };
-        Ok(Runtime {
+        let mut runtime = Runtime {
             sample: SamplePass::new(&gpu.device, e.filter),
             feedback: FeedbackPass::new(&gpu.device),
             target: RenderTarget::new(&gpu.device, w, h),
@@ -158,7 +159,11 @@ impl Runtime {
             feedback_target,
             readback,
             meshes,
-        })
+        };
+        // Pin every texture's root before the first draw, so that no frame shows an unmapped
+        // entry.
+        runtime.stream(0, &[])?;
+        Ok(runtime)
     }
 
     /// Draws one frame at `pose`, streams what its feedback asks for, and returns its counters
@@ -194,7 +199,30 @@ impl Runtime {
         let fallback_fraction = if analysis.samples == 0 { 0.0 } else { fallback as f64 / analysis.samples as f64 };
         let wanted: Vec<PageId> = analysis.requests.iter().map(|r| r.page).collect();
 
-        let update = self.residency.update(self.frame, &wanted);
+        let (update, bytes_read, load_errors) = self.stream(self.frame + 1, &wanted)?;
+        let s = update.stats;
+        let report = FrameReport {
+            frame: self.frame,
+            requested: s.requested,
+            hits: s.hits,
+            loaded: s.loaded,
+            evicted: s.evicted,
+            deferred: s.deferred,
+            fallback_fraction,
+            lod_bias,
+            bytes_read,
+            load_errors,
+        };
+        self.last_update = update;
+        self.frame += 1;
+        Ok((report, picture))
+    }
+
+    /// Updates the residency with `wanted`, loads and uploads the new pages, and maps them.
+    /// Returns the update, the bytes read and the pages that failed to load.
+    /// `stamp` is the residency's frame number: `new` pins the roots at 0, frame `n` is `n + 1`.
+    fn stream(&mut self, stamp: u64, wanted: &[PageId]) -> Result<(FrameUpdate, u64, usize), RuntimeError> {
+        let update = self.residency.update(stamp, wanted);
         let mut bytes_read = 0;
         let mut load_errors = 0;
         for page in self.loader.load(&update.loads) {
@@ -212,22 +240,7 @@ impl Runtime {
             invariants::check(&self.residency, &self.table)
                 .map_err(|violation| RuntimeError::Invariant { frame: self.frame, violation })?;
         }
-        let s = update.stats;
-        let report = FrameReport {
-            frame: self.frame,
-            requested: s.requested,
-            hits: s.hits,
-            loaded: s.loaded,
-            evicted: s.evicted,
-            deferred: s.deferred,
-            fallback_fraction,
-            lod_bias,
-            bytes_read,
-            load_errors,
-        };
-        self.last_update = update;
-        self.frame += 1;
-        Ok((report, picture))
+        Ok((update, bytes_read, load_errors))
     }
 
     /// Renders every frame of `scene`, handing each frame's counters (and picture, if `images`)
@@ -262,7 +275,7 @@ impl Runtime {
             upload_budget: self.residency.config().upload_budget,
             pages_touched: self.touched.len(),
             pages_total: self.grids.iter().map(|g| g.page_count()).sum(),
-            bytes_read: frames.iter().map(|f| f.bytes_read).sum(),
+            bytes_read: self.loader.counters().bytes_read,
             hit_rate: if requested == 0 { 0.0 } else { hits as f64 / requested as f64 },
             still_from,
             frames_to_converge,

@@ -1,0 +1,180 @@
+//! `vortex-tiler render`: streams packs through the GPU runtime along a scene's camera path,
+//! headless, writing PNG frames and a JSON residency report.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use vortex_gpu::{Filter, Gpu, Loader, Runtime, Scene};
+use vortex_vt::sampler::Rgba8Image;
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// A pack to stream (texture 0; repeat the flag for textures 1, 2, ...). Replaces the
+    /// scene's own list of textures.
+    #[arg(long, value_name = "PACK")]
+    pack: Vec<PathBuf>,
+    /// The scene (docs/scenes.md); without it, a plane under a zoom-and-pan camera path that
+    /// ends still.
+    #[arg(long, value_name = "JSON")]
+    scene: Option<PathBuf>,
+    /// Folder for the PNG frames (frame-0000.png, ...); none are written without it.
+    #[arg(long, value_name = "DIR")]
+    frames: Option<PathBuf>,
+    /// Where to write the JSON report (per-frame counters, pages touched, convergence).
+    #[arg(long, value_name = "FILE")]
+    report: Option<PathBuf>,
+    /// Override the scene's number of frames.
+    #[arg(long, value_name = "N")]
+    frame_count: Option<u32>,
+    /// Override the scene's output size, e.g. 640x480.
+    #[arg(long, value_name = "WxH", value_parser = parse_dims)]
+    size: Option<[u32; 2]>,
+    /// Override the scene's filter.
+    #[arg(long, value_enum)]
+    filter: Option<FilterArg>,
+    /// Override the cache size: slots per side (the cache holds this squared).
+    #[arg(long, value_name = "N")]
+    cache_side: Option<u16>,
+    /// Override the most pages uploaded per frame.
+    #[arg(long, value_name = "N")]
+    budget: Option<usize>,
+    /// No progress bar.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+enum FilterArg {
+    Nearest,
+    Bilinear,
+    Trilinear,
+}
+
+fn parse_dims(s: &str) -> Result<[u32; 2], String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("'{s}' is not WIDTHxHEIGHT"))?;
+    let n = |t: &str| t.trim().parse::<u32>().map_err(|_| format!("'{s}' is not WIDTHxHEIGHT"));
+    Ok([n(w)?, n(h)?])
+}
+
+pub fn run(a: RenderArgs) -> Result<()> {
+    // Mesa's device-select layer complains on stderr about display variables a headless run
+    // has no use for; it only picks the default adapter, which wgpu does itself.
+    if std::env::var_os("NODEVICE_SELECT").is_none() {
+        // SAFETY: no other thread has been started yet (the loader's and wgpu's come later).
+        unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
+    }
+    let mut scene = match &a.scene {
+        Some(path) => Scene::read(path)?,
+        None => Scene::default_plane(),
+    };
+    if !a.pack.is_empty() {
+        scene.textures = a.pack.clone();
+    }
+    if scene.textures.is_empty() {
+        bail!("no texture: give --pack PACK (or a scene whose \"textures\" names packs)");
+    }
+    scene.frames = a.frame_count.unwrap_or(scene.frames);
+    scene.size = a.size.unwrap_or(scene.size);
+    let e = &mut scene.effects;
+    if let Some(f) = a.filter {
+        e.filter = match f {
+            FilterArg::Nearest => Filter::Nearest,
+            FilterArg::Bilinear => Filter::Bilinear,
+            FilterArg::Trilinear => Filter::Trilinear,
+        };
+    }
+    e.cache_slots_per_side = a.cache_side.unwrap_or(e.cache_slots_per_side);
+    e.upload_budget = a.budget.unwrap_or(e.upload_budget);
+    scene.check().map_err(|m| anyhow::anyhow!("scene: {m}"))?;
+
+    let packs = scene
+        .textures
+        .iter()
+        .map(|p| vortex_pack::Pack::open(p).map(Arc::new).with_context(|| format!("opening {}", p.display())))
+        .collect::<Result<Vec<_>>>()?;
+    let loader = Loader::new(packs, scene.effects.threads)?;
+    let side = scene.effects.cache_slots_per_side as u32 * loader.tile_size();
+    let gpu = Gpu::headless(side.max(scene.size[0]).max(scene.size[1]))?;
+    let adapter = gpu.adapter_info();
+    let mut runtime = Runtime::new(gpu, loader, &scene)?;
+    if let Some(dir) = &a.frames {
+        fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+
+    let bar = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        let bar = ProgressBar::with_draw_target(Some(scene.frames as u64), ProgressDrawTarget::stderr_with_hz(10));
+        bar.set_style(
+            ProgressStyle::with_template("{elapsed_precise} [{bar:40.cyan/blue}] {pos}/{len} frames {msg}")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        bar
+    };
+    let start = Instant::now();
+    let frames_dir = a.frames.as_deref();
+    let report = runtime.run(&scene, frames_dir.is_some(), |f, picture| -> Result<()> {
+        if let (Some(dir), Some(picture)) = (frames_dir, picture) {
+            write_png(&dir.join(format!("frame-{:04}.png", f.frame)), &picture)?;
+        }
+        bar.set_message(format!("{} loaded, {:.1}% fallback", f.loaded, f.fallback_fraction * 100.0));
+        bar.inc(1);
+        Ok(())
+    })?;
+    bar.finish_and_clear();
+    let took = start.elapsed();
+    if let Some(path) = &a.report {
+        let json = serde_json::to_string_pretty(&report)?;
+        write_atomically(path, json.as_bytes())?;
+    }
+    let converge = report
+        .frames_to_converge
+        .map_or("did not converge".to_string(), |n| format!("converged {n} frame(s) after the camera stopped"));
+    println!(
+        "rendered {} frames of {}x{} on {} in {:.2} s ({:.1} ms/frame); {} of {} pages touched ({:.2}%), {} read; {converge}",
+        report.frames.len(),
+        scene.size[0],
+        scene.size[1],
+        adapter.name,
+        took.as_secs_f64(),
+        took.as_secs_f64() * 1e3 / report.frames.len().max(1) as f64,
+        report.pages_touched,
+        report.pages_total,
+        100.0 * report.pages_touched as f64 / report.pages_total.max(1) as f64,
+        crate::report::mib(report.bytes_read),
+    );
+    if !report.errors.is_empty() {
+        bail!(
+            "{} page(s) failed to load and were drawn as a stand-in; first: {}",
+            report.errors.len(),
+            report.errors[0]
+        );
+    }
+    Ok(())
+}
+
+fn write_png(path: &Path, image: &Rgba8Image) -> Result<()> {
+    let mut bytes = Vec::new();
+    let mut encoder = png::Encoder::new(&mut bytes, image.width, image.height);
+    encoder.set_color(png::ColorType::Rgba);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_compression(png::Compression::Fast);
+    let mut writer = encoder.write_header()?;
+    writer.write_image_data(image.texels.as_flattened())?;
+    writer.finish()?;
+    write_atomically(path, &bytes)
+}
+
+/// Writes `bytes` to a temporary name beside `path`, then renames it into place.
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    let name = path.file_name().with_context(|| format!("{} is not a file path", path.display()))?;
+    let tmp = path.with_file_name(format!(".{}.partial-{}", name.to_string_lossy(), std::process::id()));
+    fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
+}
