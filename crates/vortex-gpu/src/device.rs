@@ -3,8 +3,8 @@
 //! handles are `Send + Sync`, but the rest of the crate expects one thread to drive them.
 //!
 //! The device asks for the adapter's own largest 2D texture side rather than wgpu's default
-//! (8192), since the physical page cache is one big texture; everything else stays at wgpu's
-//! defaults. The instance reads wgpu's environment variables (`WGPU_BACKEND`, `WGPU_DEBUG`,
+//! (8192), since the physical page cache is one big texture, and for BC texture sampling where
+//! the adapter has it (a BC7 cache); everything else stays at wgpu's defaults. The instance reads wgpu's environment variables (`WGPU_BACKEND`, `WGPU_DEBUG`,
 //! `WGPU_VALIDATION`, ...); the Vulkan loader's `VK_DRIVER_FILES` pins a driver, e.g. lavapipe in
 //! tests.
 
@@ -49,9 +49,12 @@ impl Gpu {
             return Err(DeviceError::TextureTooSmall { have, need: min_texture_side });
         }
         let required_limits = wgpu::Limits::default().using_resolution(adapter.limits());
+        // BC sampling where the adapter has it: the page cache can then hold BC7 blocks.
+        let required_features = adapter.features() & wgpu::Features::TEXTURE_COMPRESSION_BC;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("vortex"),
             required_limits,
+            required_features,
             ..Default::default()
         }))?;
         let info = adapter.get_info();

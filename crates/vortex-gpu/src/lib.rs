@@ -8,6 +8,7 @@
 //! Everything here is headless (no window or surface) and runs on lavapipe, Mesa's CPU Vulkan
 //! driver, so it is tested on machines without a GPU.
 
+pub mod bc7;
 pub mod camera;
 pub mod device;
 mod draw;
@@ -28,7 +29,7 @@ pub use device::{DeviceError, Gpu};
 pub use feedback::{FeedbackFrame, FeedbackPass, FeedbackReadback, FeedbackTarget};
 pub use loader::{LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS, stand_in_tile};
 pub use mesh::{GpuMesh, Mesh, Vertex};
-pub use page_cache::{CacheError, PageCache};
+pub use page_cache::{CacheError, CacheFormat, PageCache};
 pub use page_table::GpuPageTable;
 pub use render::{Filter, RenderTarget, SamplePass, Sources};
 pub use runtime::{FrameReport, Report, Runtime, RuntimeError};

@@ -21,14 +21,17 @@
 use std::collections::VecDeque;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
 
-use vortex_pack::{Pack, PackError, Tile};
+use vortex_pack::{Pack, PackError, Tile, TileKind};
 use vortex_vt::page::{MAX_TEXTURES, PageId, TextureGrid};
 use vortex_vt::residency::Slot;
+
+use crate::bc7;
+use crate::page_cache::CacheFormat;
 
 use crate::texture::VirtualTexture;
 
@@ -231,6 +234,8 @@ struct Shared {
     absent_filled: AtomicU64,
     bytes_read: AtomicU64,
     errors: AtomicU64,
+    /// Answer BC7 blocks instead of RGBA8 texels ([`Loader::set_format`]).
+    bc7: AtomicBool,
 }
 
 /// Reads pages of up to 16 virtual textures (texture id = index in the packs given to
@@ -287,6 +292,7 @@ impl Loader {
             absent_filled: AtomicU64::new(0),
             bytes_read: AtomicU64::new(0),
             errors: AtomicU64::new(0),
+            bc7: AtomicBool::new(false),
         });
         let (async_tx, async_rx) = mpsc::channel();
         // Built before the workers so that, if one fails to start, Drop stops those already started.
@@ -320,6 +326,29 @@ impl Loader {
     /// Side of every tile of every texture, borders included (the page cache's slot side).
     pub fn tile_size(&self) -> u32 {
         self.shared.tile_size
+    }
+
+    /// Whether every stored tile of every pack is a BC7 payload or one colour, so that pages can be
+    /// streamed into a BC7 cache as they are (absent tiles would need decoding and re-encoding).
+    pub fn holds_only_bc7(&self) -> bool {
+        self.shared.tile_size.is_multiple_of(4)
+            && self.shared.packs.iter().all(|pack| {
+                (0..pack.header().index_count).all(|i| {
+                    let kind = TileKind::from_u8(pack.entry(i).kind);
+                    matches!(kind, Some(TileKind::Bc7 | TileKind::Constant))
+                })
+            })
+    }
+
+    /// Makes every later page come in `format`: RGBA8 texels, or BC7 blocks (which only packs
+    /// that [hold only BC7](Loader::holds_only_bc7) can give; other tiles then get the stand-in
+    /// and an error).
+    pub fn set_format(&self, format: CacheFormat) {
+        self.shared.bc7.store(format == CacheFormat::Bc7, Ordering::Relaxed);
+    }
+
+    pub fn format(&self) -> CacheFormat {
+        if self.shared.bc7.load(Ordering::Relaxed) { CacheFormat::Bc7 } else { CacheFormat::Rgba8 }
     }
 
     /// Texels of border on each side of every tile.
@@ -485,7 +514,15 @@ impl Shared {
             }
             Err(e) => {
                 self.errors.fetch_add(1, Ordering::Relaxed);
-                (stand_in_tile(self.tile_size), Some(e))
+                let stand_in = stand_in_tile(self.tile_size);
+                (
+                    if self.bc7.load(Ordering::Relaxed) {
+                        to_solid_blocks(&stand_in, self.tile_size)
+                    } else {
+                        stand_in
+                    },
+                    Some(e),
+                )
             }
         };
         LoadedPage { page, slot, texels, bytes_read, error }
@@ -507,6 +544,9 @@ impl Shared {
                 pages: grid.pages,
                 lod_count: grid.lod_count,
             });
+        }
+        if self.bc7.load(Ordering::Relaxed) {
+            return self.blocks(pack, texture, page, bytes_read).map(|b| (b, Made::Stored));
         }
         for tile in page.ancestors_and_self(&grid) {
             let levels_up = tile.lod - page.lod;
@@ -534,6 +574,59 @@ impl Shared {
         }
         Err(LoadError::NoAncestor { path: pack.path().to_path_buf(), lod: page.lod, x: page.x, y: page.y })
     }
+
+    /// The page's BC7 blocks: its BC7 payload as stored (checksum checked), or blocks of its one
+    /// colour.
+    fn blocks(
+        &self,
+        pack: &Pack,
+        texture: &VirtualTexture,
+        page: PageId,
+        bytes_read: &mut u64,
+    ) -> Result<Vec<u8>, LoadError> {
+        let (lod, x, y) = (u32::from(page.lod), u32::from(page.x), u32::from(page.y));
+        let failed = |e: PackError| tile_error(pack.path(), page, page, e);
+        let wanted = CacheFormat::Bc7.tile_bytes(texture.tile_size);
+        let blocks = match pack.tile_checked(lod, x, y).map_err(failed)? {
+            Tile::Data(TileKind::Bc7, payload) => {
+                *bytes_read += payload.len() as u64;
+                payload.to_vec()
+            }
+            Tile::Constant(_) => {
+                let texels = vortex_pack::decode_rgba8(pack, lod, x, y).map_err(failed)?.unwrap_or_default();
+                let colour = texels.first_chunk::<4>().copied().unwrap_or_default();
+                bc7::solid_block(colour).repeat(wanted / bc7::BLOCK_BYTES)
+            }
+            Tile::Data(kind, _) => {
+                let message = format!("a BC7 cache takes BC7 and one-colour tiles, not {}", kind.name());
+                return Err(tile_error_message(pack.path(), page, page, message));
+            }
+            Tile::Absent => {
+                let message = "an absent tile cannot be made into BC7 blocks".to_string();
+                return Err(tile_error_message(pack.path(), page, page, message));
+            }
+        };
+        if blocks.len() != wanted {
+            let message = format!("holds {} bytes of BC7 blocks, not {wanted}", blocks.len());
+            return Err(tile_error_message(pack.path(), page, page, message));
+        }
+        self.tiles_decoded.fetch_add(1, Ordering::Relaxed);
+        Ok(blocks)
+    }
+}
+
+/// BC7 blocks of an RGBA8 tile whose every 4x4 block is one colour (the colour of its first
+/// texel is taken).
+fn to_solid_blocks(texels: &[u8], tile_size: u32) -> Vec<u8> {
+    let side = tile_size as usize;
+    let mut out = Vec::with_capacity(CacheFormat::Bc7.tile_bytes(tile_size));
+    for by in (0..side).step_by(4) {
+        for bx in (0..side).step_by(4) {
+            let i = (by * side + bx) * 4;
+            out.extend_from_slice(&bc7::solid_block([texels[i], texels[i + 1], texels[i + 2], texels[i + 3]]));
+        }
+    }
+    out
 }
 
 /// `e`, read for `page` from its tile or ancestor `tile`, as a [`LoadError::Tile`] naming `tile`.

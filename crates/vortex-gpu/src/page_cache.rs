@@ -4,12 +4,57 @@
 //! `vortex_vt::page_table::Entry::pack` encodes). Uploads run on the render thread, between the
 //! residency update and the page-table update that maps the new pages.
 //!
-//! The texture's storage format is `Rgba8Unorm` (writable as storage on every driver, lavapipe
-//! included) and it is sampled through an `Rgba8UnormSrgb` view, so that bilinear filtering
-//! happens in linear light, as the reference sampler does. Tiles are RGBA8 with sRGB-encoded
-//! colour.
+//! The texture's format is `Rgba8Unorm` (writable as storage on every driver, lavapipe included)
+//! sampled through an `Rgba8UnormSrgb` view, so that bilinear filtering happens in linear light,
+//! as the reference sampler does; tiles are RGBA8 with sRGB-encoded colour. Or, when the adapter
+//! samples BC formats and the packs hold BC7 tiles, `Bc7RgbaUnorm` sampled through
+//! `Bc7RgbaUnormSrgb`: the packs' blocks are uploaded as they are, a quarter of RGBA8's memory.
 
 use vortex_vt::residency::Slot;
+
+/// How the cache stores texels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum CacheFormat {
+    /// 4 bytes per texel; tiles are uploaded as RGBA8.
+    #[default]
+    Rgba8,
+    /// BC7 blocks (16 bytes per 4x4 texels); tiles are uploaded as blocks, rows of blocks top
+    /// down. Needs `Features::TEXTURE_COMPRESSION_BC` and a tile side that is a multiple of 4.
+    Bc7,
+}
+
+impl CacheFormat {
+    pub fn name(self) -> &'static str {
+        match self {
+            CacheFormat::Rgba8 => "rgba8",
+            CacheFormat::Bc7 => "bc7",
+        }
+    }
+
+    /// Bytes of one `tile_size²` tile in this format.
+    pub fn tile_bytes(self, tile_size: u32) -> usize {
+        let side = tile_size as usize;
+        match self {
+            CacheFormat::Rgba8 => side * side * 4,
+            CacheFormat::Bc7 => (side / 4) * (side / 4) * 16,
+        }
+    }
+
+    /// Bytes per row of texels (or of blocks) of one tile, and rows per tile.
+    fn rows(self, tile_size: u32) -> (u32, u32) {
+        match self {
+            CacheFormat::Rgba8 => (tile_size * 4, tile_size),
+            CacheFormat::Bc7 => (tile_size / 4 * 16, tile_size / 4),
+        }
+    }
+
+    fn formats(self) -> (wgpu::TextureFormat, wgpu::TextureFormat) {
+        match self {
+            CacheFormat::Rgba8 => (wgpu::TextureFormat::Rgba8Unorm, wgpu::TextureFormat::Rgba8UnormSrgb),
+            CacheFormat::Bc7 => (wgpu::TextureFormat::Bc7RgbaUnorm, wgpu::TextureFormat::Bc7RgbaUnormSrgb),
+        }
+    }
+}
 
 /// Why a cache cannot be made.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
@@ -20,6 +65,10 @@ pub enum CacheError {
     Border { tile_size: u32, border: u32 },
     #[error("a {side}-texel cache is over the device's {max}-texel 2D texture limit")]
     TooLarge { side: u32, max: u32 },
+    #[error(
+        "a BC7 cache needs the device feature TEXTURE_COMPRESSION_BC and a tile side that is a multiple of 4 (it is {tile_size})"
+    )]
+    Bc7 { tile_size: u32 },
 }
 
 /// The physical page cache texture and its geometry.
@@ -30,6 +79,7 @@ pub struct PageCache {
     slots_per_side: u16,
     tile_size: u32,
     border: u32,
+    format: CacheFormat,
 }
 
 impl PageCache {
@@ -40,12 +90,18 @@ impl PageCache {
         slots_per_side: u16,
         tile_size: u32,
         border: u32,
+        format: CacheFormat,
     ) -> Result<PageCache, CacheError> {
         if !(1..=256).contains(&slots_per_side) {
             return Err(CacheError::SlotsPerSide { slots_per_side });
         }
         if tile_size == 0 || 2 * border >= tile_size {
             return Err(CacheError::Border { tile_size, border });
+        }
+        if format == CacheFormat::Bc7
+            && (!tile_size.is_multiple_of(4) || !device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC))
+        {
+            return Err(CacheError::Bc7 { tile_size });
         }
         let side = slots_per_side as u32 * tile_size;
         let max = device.limits().max_texture_dimension_2d;
@@ -58,25 +114,27 @@ impl PageCache {
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba8Unorm,
+            format: format.formats().0,
             usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[wgpu::TextureFormat::Rgba8UnormSrgb],
+            view_formats: &[format.formats().1],
         });
         let srgb_view = texture.create_view(&wgpu::TextureViewDescriptor {
             label: Some("vortex page cache (sRGB)"),
-            format: Some(wgpu::TextureFormat::Rgba8UnormSrgb),
+            format: Some(format.formats().1),
             ..Default::default()
         });
-        Ok(PageCache { texture, srgb_view, slots_per_side, tile_size, border })
+        Ok(PageCache { texture, srgb_view, slots_per_side, tile_size, border, format })
     }
 
-    /// Writes one stored tile (`tile_size²` RGBA8 texels, row-major, border included) into `slot`.
-    /// The write lands before the next submitted command buffer runs. Panics if `slot` is outside
-    /// the cache or `texels` is not exactly one tile.
+    /// Writes one stored tile (border included, in the cache's format: `tile_size²` RGBA8 texels
+    /// row-major, or BC7 blocks) into `slot`. The write lands before the next submitted command
+    /// buffer runs. Panics if `slot` is outside the cache or `texels` is not exactly one tile.
     pub fn upload(&self, queue: &wgpu::Queue, slot: Slot, texels: &[u8]) {
         let ts = self.tile_size;
         assert!((slot as u32) < self.slot_count(), "slot {slot} of a cache of {} slots", self.slot_count());
-        assert_eq!(texels.len(), (ts * ts * 4) as usize, "a tile of {ts}x{ts} RGBA8 texels");
+        let format = self.format;
+        assert_eq!(texels.len(), format.tile_bytes(ts), "a tile of {ts}x{ts} texels in {format:?}");
+        let (row, rows) = format.rows(ts);
         let (x, y) = self.slot_origin(slot);
         queue.write_texture(
             wgpu::TexelCopyTextureInfo {
@@ -86,19 +144,20 @@ impl PageCache {
                 aspect: wgpu::TextureAspect::All,
             },
             texels,
-            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(ts * 4), rows_per_image: Some(ts) },
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(rows) },
             wgpu::Extent3d { width: ts, height: ts, depth_or_array_layers: 1 },
         );
     }
 
-    /// Reads the texels of `slot` back (RGBA8, row-major, border included): blocking, for tests
-    /// and debugging.
+    /// Reads the tile in `slot` back, as [`PageCache::upload`] takes it: blocking, for tests and
+    /// debugging.
     pub fn read_slot(&self, gpu: &crate::Gpu, slot: Slot) -> Vec<u8> {
         let ts = self.tile_size;
-        let row = (ts * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let (tile_row, rows) = self.format.rows(ts);
+        let row = tile_row.next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("vortex slot readback"),
-            size: row as u64 * ts as u64,
+            size: row as u64 * rows as u64,
             usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
             mapped_at_creation: false,
         });
@@ -113,7 +172,7 @@ impl PageCache {
             },
             wgpu::TexelCopyBufferInfo {
                 buffer: &buffer,
-                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(ts) },
+                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(rows) },
             },
             wgpu::Extent3d { width: ts, height: ts, depth_or_array_layers: 1 },
         );
@@ -121,7 +180,7 @@ impl PageCache {
         buffer.slice(..).map_async(wgpu::MapMode::Read, |r| r.expect("mapping the slot readback"));
         gpu.wait_idle();
         let bytes = buffer.slice(..).get_mapped_range().expect("the slot readback is mapped");
-        bytes.chunks_exact(row as usize).flat_map(|r| r[..(ts * 4) as usize].iter().copied()).collect()
+        bytes.chunks_exact(row as usize).flat_map(|r| r[..tile_row as usize].iter().copied()).collect()
     }
 
     /// Texel position of the top-left corner of `slot`.
@@ -145,6 +204,10 @@ impl PageCache {
 
     pub fn border(&self) -> u32 {
         self.border
+    }
+
+    pub fn format(&self) -> CacheFormat {
+        self.format
     }
 
     /// Side of a tile's payload (the part that is its own page): `tile_size - 2 * border`.

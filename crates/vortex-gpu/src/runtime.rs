@@ -29,7 +29,7 @@ use crate::device::Gpu;
 use crate::feedback::{FeedbackPass, FeedbackReadback, FeedbackTarget};
 use crate::loader::{LoadError, Loader};
 use crate::mesh::GpuMesh;
-use crate::page_cache::{CacheError, PageCache};
+use crate::page_cache::{CacheError, CacheFormat, PageCache};
 use crate::page_table::GpuPageTable;
 use crate::render::{RenderTarget, SamplePass, Sources};
 use crate::scene::{Pose, Scene};
@@ -77,6 +77,8 @@ pub struct Report {
     pub adapter: String,
     pub size: [u32; 2],
     pub filter: String,
+    /// `rgba8`, or `bc7` when the packs' BC7 blocks went to the GPU as they are.
+    pub cache_format: String,
     pub cache_slots: usize,
     pub upload_budget: usize,
     pub frames: Vec<FrameReport>,
@@ -130,7 +132,12 @@ impl Runtime {
         let grids: Vec<TextureGrid> = textures.iter().map(|t| t.grid).collect();
         let e = &scene.effects;
         let side = e.cache_slots_per_side;
-        let cache = PageCache::new(&gpu.device, side, loader.tile_size(), loader.border())?;
+        // BC7 blocks go to the GPU as they are, where the adapter samples them and the scene
+        // allows it; otherwise tiles are decoded to RGBA8.
+        let bc = gpu.device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC);
+        let format = if e.bc7 && bc && loader.holds_only_bc7() { CacheFormat::Bc7 } else { CacheFormat::Rgba8 };
+        loader.set_format(format);
+        let cache = PageCache::new(&gpu.device, side, loader.tile_size(), loader.border(), format)?;
         let residency = Residency::new(&grids, ResidencyConfig::new(cache.slot_count() as usize, e.upload_budget))?;
         let gpu_table = GpuPageTable::new(&gpu.device, &gpu.queue, &grids, side);
         let [w, h] = scene.size;
@@ -271,6 +278,7 @@ impl Runtime {
             adapter: self.gpu.adapter_info().name,
             size: scene.size,
             filter: self.sample.filter().name().into(),
+            cache_format: self.cache.format().name().into(),
             cache_slots: self.residency.slots(),
             upload_budget: self.residency.config().upload_budget,
             pages_touched: self.touched.len(),

@@ -118,6 +118,8 @@ pub struct Effects {
     pub upload_budget: usize,
     /// Loader threads.
     pub threads: usize,
+    /// Use a BC7 cache when the adapter samples BC and every tile is BC7 (or one colour).
+    pub bc7: bool,
 }
 
 impl Default for Effects {
@@ -128,6 +130,7 @@ impl Default for Effects {
             cache_slots_per_side: 16,
             upload_budget: 32,
             threads: 2,
+            bc7: true,
         }
     }
 }

@@ -524,3 +524,25 @@ fn dropping_the_loader_with_work_in_flight_stops_its_threads() {
     assert!(zero.threads() >= 1);
     assert!(zero.load(&[]).is_empty());
 }
+
+#[test]
+fn solid_bc7_blocks_decode_to_their_colour_exactly() {
+    // Every 8-bit value in every channel: a 64x64 tile of 256 blocks, block i of colour
+    // (i, 255 - i, 7i mod 256, i).
+    let dir = tempfile::tempdir().unwrap();
+    let d =
+        Description { width: 64, height: 64, tile_size: 64, border: 0, level_count: 1, channels: 4, sample_bytes: 1 };
+    let colour = |i: usize| [i as u8, 255 - i as u8, (i * 7 % 256) as u8, i as u8];
+    let blocks: Vec<u8> = (0..256).flat_map(|i| vortex_gpu::bc7::solid_block(colour(i))).collect();
+    let levels = format::pyramid_levels(&d, 1);
+    let path = dir.path().join("solid.vtpk");
+    let mut w = PackWriter::create(&path, d, levels, b"{}", WriteOptions::default()).unwrap();
+    w.add(TileId { lod: 0, x: 0, y: 0 }, NewTile::Data(TileKind::Bc7, &blocks)).unwrap();
+    w.finish().unwrap();
+    let pack = Pack::open(&path).unwrap();
+    let texels = vortex_pack::decode_rgba8(&pack, 0, 0, 0).unwrap().unwrap();
+    for (i, t) in texels.chunks_exact(4).enumerate() {
+        let (x, y) = (i % 64, i / 64);
+        assert_eq!(t, colour((y / 4) * 16 + x / 4), "texel ({x}, {y})");
+    }
+}

@@ -11,7 +11,7 @@ mod common;
 
 use common::gpu;
 use vortex_gpu::{
-    Filter, Gpu, GpuPageTable, PageCache, RenderTarget, SamplePass, Sources, View, VirtualTexture, Window,
+    CacheFormat, Filter, Gpu, GpuPageTable, PageCache, RenderTarget, SamplePass, Sources, View, VirtualTexture, Window,
 };
 use vortex_vt::page::{PageId, TextureGrid};
 use vortex_vt::page_table::PageTable;
@@ -91,7 +91,7 @@ impl Fixture {
         let slots = (CACHE_SIDE as usize).pow(2);
         let mut residency = Residency::new(&[grid], ResidencyConfig::new(slots, slots)).unwrap();
         let mut table = PageTable::new(&[grid]);
-        let cache = PageCache::new(&gpu.device, CACHE_SIDE, TILE, BORDER).unwrap();
+        let cache = PageCache::new(&gpu.device, CACHE_SIDE, TILE, BORDER, CacheFormat::Rgba8).unwrap();
         let gpu_table = GpuPageTable::new(&gpu.device, &gpu.queue, &[grid], CACHE_SIDE);
         let update = residency.update(0, requests);
         assert_eq!(update.stats.deferred, 0, "every requested page fits in one update");

@@ -23,10 +23,24 @@ pub struct Synthetic {
 impl Synthetic {
     /// `seed` varies the content, so that two textures differ.
     pub fn new(dir: &Path, name: &str, pages: u16, tile_size: u32, border: u32, seed: u32) -> Synthetic {
+        Synthetic::with_kind(dir, name, pages, tile_size, border, seed, TileKind::Raw)
+    }
+
+    /// As [`Synthetic::new`], the tiles stored as `kind`: `Raw`, or `Bc7` (each 4x4 block one
+    /// colour, its top-left texel's: what `vortex_gpu::bc7` encodes exactly).
+    pub fn with_kind(
+        dir: &Path,
+        name: &str,
+        pages: u16,
+        tile_size: u32,
+        border: u32,
+        seed: u32,
+        kind: TileKind,
+    ) -> Synthetic {
         let grid = TextureGrid::new(pages).unwrap();
         let texture = VirtualTexture::square(grid, tile_size, border);
         let chain = chain(texture.side_texels() as u32, grid.lod_count, seed);
-        let pack = write_pack(&dir.join(name), &chain, &texture);
+        let pack = write_pack(&dir.join(name), &chain, &texture, kind);
         Synthetic { chain, texture, pack }
     }
 
@@ -77,7 +91,20 @@ fn tile(chain: &LodChain, t: &VirtualTexture, page: PageId) -> Vec<u8> {
     out
 }
 
-fn write_pack(path: &Path, chain: &LodChain, t: &VirtualTexture) -> Arc<Pack> {
+/// BC7 blocks of `rgba`, each 4x4 block the colour of its top-left texel.
+pub fn solid_blocks(rgba: &[u8], tile_size: u32) -> Vec<u8> {
+    let side = tile_size as usize;
+    let mut out = Vec::new();
+    for by in (0..side).step_by(4) {
+        for bx in (0..side).step_by(4) {
+            let i = (by * side + bx) * 4;
+            out.extend_from_slice(&vortex_gpu::bc7::solid_block([rgba[i], rgba[i + 1], rgba[i + 2], rgba[i + 3]]));
+        }
+    }
+    out
+}
+
+fn write_pack(path: &Path, chain: &LodChain, t: &VirtualTexture, kind: TileKind) -> Arc<Pack> {
     let side = t.side_texels() as u32;
     let d = Description {
         width: side,
@@ -93,8 +120,11 @@ fn write_pack(path: &Path, chain: &LodChain, t: &VirtualTexture) -> Arc<Pack> {
     for (lod, level) in levels.iter().enumerate() {
         for y in 0..level.tiles_h {
             for x in 0..level.tiles_w {
-                let bytes = tile(chain, t, PageId::new(0, lod as u8, x as u16, y as u16));
-                w.add(TileId { lod: lod as u32, x, y }, NewTile::Data(TileKind::Raw, &bytes)).unwrap();
+                let mut bytes = tile(chain, t, PageId::new(0, lod as u8, x as u16, y as u16));
+                if kind == TileKind::Bc7 {
+                    bytes = solid_blocks(&bytes, t.tile_size);
+                }
+                w.add(TileId { lod: lod as u32, x, y }, NewTile::Data(kind, &bytes)).unwrap();
             }
         }
     }
