@@ -30,7 +30,7 @@ for scene in default docs/scene-example.json bench/scenes/zoom.json; do
   args=()
   [ "$scene" != default ] && args=(--scene "$ROOT/$scene")
   json=$WORK/render-$(basename "$scene" .json).json
-  read -r wall rss < <(measure render.log "$WORK/bin/vortex-tiler" render --pack "$PACK" "${args[@]}" --report "$json" -q)
+  read -r wall rss < <(measure "$WORK/render.log" "$WORK/bin/vortex-tiler" render --pack "$PACK" "${args[@]}" --report "$json" -q)
   log "$scene: $wall s, $((rss / 1024)) MiB"
   python3 - "$json" "$scene" "$wall" "$rss" >>"$REPORT" <<'PY'
 import json, sys
