@@ -1,9 +1,14 @@
-//! Tile codecs: turning a tile's texels into the bytes of one image file.
+//! Tile codecs: turning a tile's texels into the bytes of one image file or pack payload.
 //!
 //! The codec also decides the stored texel format: JPEG holds 8-bit grey or RGB only, so 16-bit
 //! tiles are rounded to 8 bits and alpha is either composited away (`--flatten`) or refused.
+//! Raw and zstd store any layout, as PNG does. BC1 stores opaque 8-bit RGB and BC7 8-bit RGB or
+//! RGBA, so grey becomes RGB (grey + alpha RGBA). Raw, zstd and BC payloads have no file format:
+//! they go into packs only (docs/pack-format.md).
 
 use std::borrow::Cow;
+use std::cell::RefCell;
+use std::ops::RangeInclusive;
 
 use crate::error::TilerError;
 use crate::pixel::{Channels, Depth, PixelLayout, Sample, u16_to_u8};
@@ -30,26 +35,84 @@ pub enum PngLevel {
     Best,
 }
 
+/// BC7 encoder effort: the presets of Intel's ISPC texture compressor, fastest first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Bc7Effort {
+    UltraFast,
+    VeryFast,
+    Fast,
+    Basic,
+    Slow,
+}
+
+/// zstd levels `--zstd-level` accepts (zstd's negative "fast" levels are left out).
+pub const ZSTD_LEVELS: RangeInclusive<i32> = 1..=22;
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Codec {
-    Jpeg { quality: u8, subsampling: Subsampling },
-    Png { level: PngLevel },
+    Jpeg {
+        quality: u8,
+        subsampling: Subsampling,
+    },
+    Png {
+        level: PngLevel,
+    },
+    /// Texels as a GPU uploads them (packs only).
+    Raw,
+    /// Raw texels compressed with zstd, rows left-delta filtered first with `delta` (packs only).
+    Zstd {
+        level: i32,
+        delta: bool,
+    },
+    /// BC1 blocks, opaque RGB (packs only).
+    Bc1,
+    /// BC7 blocks, RGB or RGBA (packs only).
+    Bc7 {
+        effort: Bc7Effort,
+    },
 }
 
 impl Codec {
-    /// The `codec` member of `info.json` and the usual file extension.
+    /// The `codec` member of `info.json` (and `--codec`).
     pub fn name(&self) -> &'static str {
         match self {
             Codec::Jpeg { .. } => "jpeg",
             Codec::Png { .. } => "png",
+            Codec::Raw => "raw",
+            Codec::Zstd { delta: false, .. } => "zstd",
+            Codec::Zstd { delta: true, .. } => "zstd-delta",
+            Codec::Bc1 => "bc1",
+            Codec::Bc7 { .. } => "bc7",
         }
     }
 
+    /// The usual file extension (for raw, zstd and BC only the names `info.json` records).
     pub fn extension(&self) -> &'static str {
         match self {
             Codec::Jpeg { .. } => "jpg",
             Codec::Png { .. } => "png",
+            Codec::Raw => "raw",
+            Codec::Zstd { .. } => "zst",
+            Codec::Bc1 => "bc1",
+            Codec::Bc7 { .. } => "bc7",
         }
+    }
+
+    /// Whether a tile of this codec is an image file (JPEG, PNG) that a directory of tiles can
+    /// hold; the others are pack payloads only.
+    pub fn writes_files(&self) -> bool {
+        matches!(self, Codec::Jpeg { .. } | Codec::Png { .. })
+    }
+
+    /// Refuses a tile side this codec cannot store: BC blocks are 4x4 texels.
+    pub fn check_tile_size(&self, side: u32) -> Result<(), TilerError> {
+        if matches!(self, Codec::Bc1 | Codec::Bc7 { .. }) && !side.is_multiple_of(4) {
+            return Err(TilerError::Options(format!(
+                "--codec {} stores 4x4-texel blocks, so --tile-size must be a multiple of 4, not {side}",
+                self.name()
+            )));
+        }
+        Ok(())
     }
 
     /// The texel layout tiles are stored in for a source of `source` layout; `depth` asks for
@@ -62,7 +125,24 @@ impl Codec {
     ) -> Result<PixelLayout, TilerError> {
         let channels = if flatten { source.channels.without_alpha() } else { source.channels };
         match self {
-            Codec::Png { .. } => Ok(PixelLayout::new(channels, depth.unwrap_or(source.depth))),
+            Codec::Png { .. } | Codec::Raw | Codec::Zstd { .. } => {
+                Ok(PixelLayout::new(channels, depth.unwrap_or(source.depth)))
+            }
+            Codec::Bc1 | Codec::Bc7 { .. } => {
+                let name = self.name();
+                if depth == Some(Depth::U16) {
+                    return Err(TilerError::Options(format!(
+                        "--codec {name} stores 8-bit samples only: use --codec png, raw or zstd for 16-bit tiles"
+                    )));
+                }
+                if *self == Codec::Bc1 && channels.has_alpha() {
+                    return Err(TilerError::Options(format!(
+                        "the source is {source} but --codec bc1 stores opaque RGB: use --codec bc7 to keep alpha, or --flatten to composite it over --background"
+                    )));
+                }
+                let channels = if channels.has_alpha() { Channels::Rgba } else { Channels::Rgb };
+                Ok(PixelLayout::new(channels, Depth::U8))
+            }
             Codec::Jpeg { .. } => {
                 if channels.has_alpha() {
                     return Err(TilerError::Options(format!(
@@ -100,6 +180,7 @@ impl<T: Sample> TileEncoder<T> {
         matte: Vec<T>,
     ) -> Result<Self, TilerError> {
         let stored = codec.stored_layout(source, flatten, depth)?;
+        codec.check_tile_size(side)?;
         Ok(TileEncoder { codec, source, stored, side, matte })
     }
 
@@ -111,25 +192,42 @@ impl<T: Sample> TileEncoder<T> {
         self.source
     }
 
-    /// Texels with alpha composited away if the stored layout has none.
+    /// Texels in the stored channels: alpha composited away if the stored layout has none, grey
+    /// repeated into RGB if it is RGB (BC1, BC7).
     fn flattened<'a>(&self, texels: &'a [T]) -> Cow<'a, [T]> {
-        if self.stored.channels != self.source.channels {
-            Cow::Owned(flatten(texels, self.source.channels.count(), &self.matte))
-        } else {
-            Cow::Borrowed(texels)
+        let mut channels = self.source.channels;
+        let mut texels = Cow::Borrowed(texels);
+        if channels.has_alpha() && !self.stored.channels.has_alpha() {
+            texels = Cow::Owned(flatten(&texels, channels.count(), &self.matte));
+            channels = channels.without_alpha();
+        }
+        if channels.count() < self.stored.channels.count() {
+            // Grey (+ alpha) to RGB(A).
+            let n = channels.count();
+            texels = Cow::Owned(
+                texels
+                    .chunks_exact(n)
+                    .flat_map(|t| [t[0], t[0], t[0]].into_iter().chain(t[1..].iter().copied()))
+                    .collect(),
+            );
+        }
+        texels
+    }
+
+    /// Samples of the stored layout (depth converted), little-endian: a raw tile's bytes.
+    fn stored_bytes<'a>(&self, texels: &'a [T]) -> Cow<'a, [u8]> {
+        match self.stored.depth {
+            Depth::U8 => to_u8(texels),
+            Depth::U16 => {
+                let widen = if T::DEPTH == Depth::U8 { 257 } else { 1 };
+                Cow::Owned(texels.iter().flat_map(|s| (s.to_u16() * widen).to_le_bytes()).collect())
+            }
         }
     }
 
     /// One source texel as stored (flattened, depth converted), little-endian samples.
     pub fn stored_texel(&self, texel: &[T]) -> Vec<u8> {
-        let texel = self.flattened(texel);
-        match self.stored.depth {
-            Depth::U8 => to_u8(&texel).into_owned(),
-            Depth::U16 => {
-                let widen = if T::DEPTH == Depth::U8 { 257 } else { 1 };
-                texel.iter().flat_map(|s| (s.to_u16() * widen).to_le_bytes()).collect()
-            }
-        }
+        self.stored_bytes(&self.flattened(texel)).into_owned()
     }
 
     /// Encodes a `side x side` tile given in the source layout.
@@ -140,7 +238,73 @@ impl<T: Sample> TileEncoder<T> {
         match self.codec {
             Codec::Jpeg { quality, subsampling } => self.encode_jpeg(texels, quality, subsampling, out),
             Codec::Png { level } => self.encode_png(texels, level, out),
+            Codec::Raw => {
+                out.extend_from_slice(&self.stored_bytes(texels));
+                Ok(())
+            }
+            Codec::Zstd { level, delta } => self.encode_zstd(texels, level, delta, out),
+            Codec::Bc1 => self.encode_bc(texels, None, out),
+            Codec::Bc7 { effort } => self.encode_bc(texels, Some(effort), out),
         }
+    }
+
+    /// zstd of the raw tile, rows left-delta filtered first with `delta` (the filter of
+    /// `zstd-delta` tiles in docs/pack-format.md). One compression context per thread.
+    fn encode_zstd(&self, texels: &[T], level: i32, delta: bool, out: &mut Vec<u8>) -> Result<(), String> {
+        let mut raw = self.stored_bytes(texels);
+        if delta {
+            let (c, sb) = (self.stored.channels.count(), self.stored.depth.bytes());
+            vortex_pack::format::delta_encode_rows(raw.to_mut(), self.side as usize, c, sb);
+        }
+        thread_local! {
+            static ZSTD: RefCell<Option<(i32, zstd::bulk::Compressor<'static>)>> = const { RefCell::new(None) };
+        }
+        ZSTD.with(|cell| {
+            let mut cell = cell.borrow_mut();
+            if cell.as_ref().is_none_or(|(l, _)| *l != level) {
+                *cell = Some((level, zstd::bulk::Compressor::new(level).map_err(|e| format!("zstd: {e}"))?));
+            }
+            let (_, compressor) = cell.as_mut().expect("just made");
+            *out = compressor.compress(&raw).map_err(|e| format!("zstd: {e}"))?;
+            Ok(())
+        })
+    }
+
+    /// BC1 (`bc7` None) or BC7 blocks of an 8-bit RGB or RGBA tile, by Intel's ISPC texture
+    /// compressor; the blocks come in rows, top down, as a GPU upload takes them.
+    fn encode_bc(&self, texels: &[T], bc7: Option<Bc7Effort>, out: &mut Vec<u8>) -> Result<(), String> {
+        let samples = to_u8(texels);
+        let rgba: Cow<[u8]> = match self.stored.channels {
+            Channels::Rgba => samples,
+            _ => Cow::Owned(samples.chunks_exact(3).flat_map(|t| [t[0], t[1], t[2], 255]).collect()),
+        };
+        let side = self.side;
+        let surface = intel_tex_2::RgbaSurface { data: &rgba, width: side, height: side, stride: side * 4 };
+        match bc7 {
+            None => {
+                out.resize(intel_tex_2::bc1::calc_output_size(side, side), 0);
+                intel_tex_2::bc1::compress_blocks_into(&surface, out);
+            }
+            Some(effort) => {
+                use intel_tex_2::bc7;
+                let alpha = self.stored.channels.has_alpha();
+                let settings = match (effort, alpha) {
+                    (Bc7Effort::UltraFast, false) => bc7::opaque_ultra_fast_settings(),
+                    (Bc7Effort::VeryFast, false) => bc7::opaque_very_fast_settings(),
+                    (Bc7Effort::Fast, false) => bc7::opaque_fast_settings(),
+                    (Bc7Effort::Basic, false) => bc7::opaque_basic_settings(),
+                    (Bc7Effort::Slow, false) => bc7::opaque_slow_settings(),
+                    (Bc7Effort::UltraFast, true) => bc7::alpha_ultra_fast_settings(),
+                    (Bc7Effort::VeryFast, true) => bc7::alpha_very_fast_settings(),
+                    (Bc7Effort::Fast, true) => bc7::alpha_fast_settings(),
+                    (Bc7Effort::Basic, true) => bc7::alpha_basic_settings(),
+                    (Bc7Effort::Slow, true) => bc7::alpha_slow_settings(),
+                };
+                out.resize(bc7::calc_output_size(side, side), 0);
+                bc7::compress_blocks_into(&settings, &surface, out);
+            }
+        }
+        Ok(())
     }
 
     /// libjpeg-turbo's encoder (MozJPEG in its libjpeg-turbo-compatible "fastest" profile: no

@@ -33,6 +33,10 @@ pub struct InfoFile {
     pub subsampling: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub png_compression: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zstd_level: Option<i32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bc7_effort: Option<String>,
 }
 
 /// A complete description, as written after a successful run.

@@ -38,6 +38,11 @@ pub fn tile_kind(codec: Codec) -> TileKind {
     match codec {
         Codec::Jpeg { .. } => TileKind::Jpeg,
         Codec::Png { .. } => TileKind::Png,
+        Codec::Raw => TileKind::Raw,
+        Codec::Zstd { delta: false, .. } => TileKind::Zstd,
+        Codec::Zstd { delta: true, .. } => TileKind::ZstdDelta,
+        Codec::Bc1 => TileKind::Bc1,
+        Codec::Bc7 { .. } => TileKind::Bc7,
     }
 }
 

@@ -3,21 +3,24 @@
 //! `pack` stores every tile file's bytes unchanged, coarsest level first (see
 //! docs/pack-format.md on ordering); `unpack` writes them back, so a round
 //! trip gives byte-identical files. Tiles a pack stores as one colour are encoded again with
-//! the pack's codec, which gives the bytes `split` would have written.
+//! the pack's codec, which gives the bytes `split` would have written. Given another codec,
+//! `pack` decodes every tile file and encodes it again (one-colour tiles become constants).
 
 use std::path::Path;
 
+use rayon::prelude::*;
 use vortex_pack::format::pyramid_levels;
 use vortex_pack::{Description, NewTile, Pack, PackWriter, Tile, TileId, TileKind, WriteOptions, WriteSummary};
 
-use crate::codec::{Codec, PngLevel, Subsampling, TileEncoder};
+use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling, TileEncoder};
 use crate::error::{Result, TilerError};
 use crate::filename::FilenameFormat;
 use crate::info::{FORMAT_VERSION, InfoFile};
 use crate::pack_sink::tile_kind;
 use crate::pixel::{Channels, Depth, PixelLayout, Sample};
-use crate::settings::DEFAULT_FILENAME_STEM;
+use crate::settings::{DEFAULT_BC7_EFFORT, DEFAULT_FILENAME_STEM, DEFAULT_ZSTD_LEVEL};
 use crate::sink::{DirSink, TileSink};
+use crate::source::decode_tile;
 use crate::split::Progress;
 
 /// A tiled directory's `info.json`, completed with defaults for the thesis's version-0 files.
@@ -50,7 +53,7 @@ impl TiledDir {
             field: "filenameFormat".into(),
             message: m,
         })?;
-        let codec = codec_of(&info, names.extension()).ok_or_else(|| TilerError::Info {
+        let codec = codec_of(&info, names.extension()).filter(Codec::writes_files).ok_or_else(|| TilerError::Info {
             path: path.clone(),
             field: "codec".into(),
             message: "neither codec nor the file extension says jpeg or png".into(),
@@ -82,6 +85,18 @@ impl TiledDir {
         info.codec = Some(codec.name().into());
         Ok(TiledDir { info, description, tile_count, names, codec })
     }
+
+    /// The texel layout of the tiles.
+    pub fn layout(&self) -> PixelLayout {
+        layout_of(&self.description)
+    }
+}
+
+fn layout_of(d: &Description) -> PixelLayout {
+    PixelLayout::new(
+        [Channels::Grey, Channels::GreyAlpha, Channels::Rgb, Channels::Rgba][d.channels as usize - 1],
+        if d.sample_bytes == 2 { Depth::U16 } else { Depth::U8 },
+    )
 }
 
 /// The codec `info.json` names, or else the one the tile files' extension implies.
@@ -93,9 +108,18 @@ fn codec_of(info: &InfoFile, extension: Option<String>) -> Option<Codec> {
         Some("best") => PngLevel::Best,
         _ => PngLevel::Fast,
     };
+    let zstd_level = info.zstd_level.unwrap_or(DEFAULT_ZSTD_LEVEL);
+    let effort = info.bc7_effort.as_deref().and_then(|e| <Bc7Effort as clap::ValueEnum>::from_str(e, false).ok());
     match name.as_str() {
         "jpeg" | "jpg" => Some(Codec::Jpeg { quality: info.quality.unwrap_or(85), subsampling }),
         "png" => Some(Codec::Png { level }),
+        // Never a file extension: these tiles are not files.
+        _ if info.codec.is_none() => None,
+        "raw" => Some(Codec::Raw),
+        "zstd" => Some(Codec::Zstd { level: zstd_level, delta: false }),
+        "zstd-delta" => Some(Codec::Zstd { level: zstd_level, delta: true }),
+        "bc1" => Some(Codec::Bc1),
+        "bc7" => Some(Codec::Bc7 { effort: effort.unwrap_or(DEFAULT_BC7_EFFORT) }),
         _ => None,
     }
 }
@@ -109,9 +133,22 @@ pub fn pack_order(tile_count: u32, lod_count: u32) -> impl Iterator<Item = TileI
     })
 }
 
-/// Packs the tiled directory `dir` into `dest`.
-pub fn pack_dir(dir: &Path, dest: &Path, options: WriteOptions, progress: &dyn Progress) -> Result<WriteSummary> {
+/// Packs the tiled directory `dir` into `dest`: the tile files' bytes as they are, or, with a
+/// `codec` other than the directory's, every tile decoded and encoded again with it.
+pub fn pack_dir(
+    dir: &Path,
+    dest: &Path,
+    options: WriteOptions,
+    codec: Option<Codec>,
+    progress: &dyn Progress,
+) -> Result<WriteSummary> {
     let t = TiledDir::read(dir)?;
+    if let Some(codec) = codec.filter(|c| *c != t.codec) {
+        return match t.description.sample_bytes {
+            2 => reencode_dir::<u16>(dir, &t, dest, options, codec, progress),
+            _ => reencode_dir::<u8>(dir, &t, dest, options, codec, progress),
+        };
+    }
     let levels = pyramid_levels(&t.description, t.tile_count);
     let metadata = t.info.to_json_pretty();
     let mut writer = PackWriter::create(dest, t.description, levels, metadata.as_bytes(), options)?;
@@ -120,19 +157,124 @@ pub fn pack_dir(dir: &Path, dest: &Path, options: WriteOptions, progress: &dyn P
         if progress.cancelled() {
             return Err(TilerError::Interrupted);
         }
-        let path = dir.join(t.names.format(&[id.lod, id.x, id.y]));
-        let bytes = std::fs::read(&path).map_err(|e| TilerError::io(&path, e))?;
-        let looks_right = match kind {
-            TileKind::Jpeg => bytes.starts_with(&[0xff, 0xd8, 0xff]),
-            _ => bytes.starts_with(b"\x89PNG\r\n\x1a\n"),
-        };
-        if !looks_right {
-            return Err(TilerError::decode(&path, format!("is not a {} file, as info.json's codec says", kind.name())));
-        }
-        writer.add(id, NewTile::Data(kind, &bytes))?;
+        let (path, bytes) = read_tile(dir, &t, id, kind)?;
+        writer.add(id, NewTile::Data(kind, &bytes)).map_err(|e| in_file(&path, e))?;
         progress.advance(1);
     }
     Ok(writer.finish()?)
+}
+
+/// The file of tile `id` and its bytes, which must be a `kind` (PNG or JPEG) file.
+fn read_tile(dir: &Path, t: &TiledDir, id: TileId, kind: TileKind) -> Result<(std::path::PathBuf, Vec<u8>)> {
+    let path = dir.join(t.names.format(&[id.lod, id.x, id.y]));
+    let bytes = std::fs::read(&path).map_err(|e| TilerError::io(&path, e))?;
+    let looks_right = match kind {
+        TileKind::Jpeg => bytes.starts_with(&[0xff, 0xd8, 0xff]),
+        _ => bytes.starts_with(b"\x89PNG\r\n\x1a\n"),
+    };
+    if !looks_right {
+        return Err(TilerError::decode(&path, format!("is not a {} file, as info.json's codec says", kind.name())));
+    }
+    Ok((path, bytes))
+}
+
+fn in_file(path: &Path, e: vortex_pack::PackError) -> TilerError {
+    TilerError::decode(path, e)
+}
+
+/// Tiles decoded and encoded in parallel this many at a time, then stored in order.
+const REENCODE_CHUNK: usize = 64;
+
+/// `pack_dir` with another codec: each tile file decoded (it must have the directory's size
+/// and layout) and encoded with `codec`; one-colour tiles are stored as their colour.
+fn reencode_dir<T: Sample>(
+    dir: &Path,
+    t: &TiledDir,
+    dest: &Path,
+    options: WriteOptions,
+    codec: Codec,
+    progress: &dyn Progress,
+) -> Result<WriteSummary> {
+    let side = t.description.tile_size;
+    let layout = t.layout();
+    let encoder = TileEncoder::<T>::new(codec, layout, false, None, side, Vec::new())?;
+    let stored = encoder.stored_layout();
+    let description = Description {
+        channels: stored.channels.count() as u8,
+        sample_bytes: stored.depth.bytes() as u8,
+        ..t.description
+    };
+    let mut info = t.info.clone();
+    let names = t.names.as_str();
+    let stem = match t.names.extension() {
+        Some(ext) => &names[..names.len() - ext.len() - 1],
+        None => names,
+    };
+    info.filename_format = Some(format!("{stem}.{}", codec.extension()));
+    info.tile_format = Some(stored.channels.tile_format().into());
+    info.tile_type = Some(stored.depth.tile_type().into());
+    let described = crate::settings::describe_codec(codec);
+    info.codec = described.codec;
+    info.quality = described.quality;
+    info.subsampling = described.subsampling;
+    info.png_compression = described.png_compression;
+    info.zstd_level = described.zstd_level;
+    info.bc7_effort = described.bc7_effort;
+    let levels = pyramid_levels(&description, t.tile_count);
+    let mut writer = PackWriter::create(dest, description, levels, info.to_json_pretty().as_bytes(), options)?;
+    let (from, to) = (tile_kind(t.codec), tile_kind(codec));
+    let channels = layout.channels.count();
+    let ids: Vec<TileId> = pack_order(t.tile_count, t.description.level_count).collect();
+    for chunk in ids.chunks(REENCODE_CHUNK) {
+        if progress.cancelled() {
+            return Err(TilerError::Interrupted);
+        }
+        let done: Vec<Result<(TileId, std::path::PathBuf, Stored)>> = chunk
+            .par_iter()
+            .map(|&id| {
+                let (path, bytes) = read_tile(dir, t, id, from)?;
+                let decoded = decode_tile(&path, &bytes)?;
+                if (decoded.width, decoded.height, decoded.layout) != (side, side, layout) {
+                    return Err(TilerError::decode(
+                        &path,
+                        format!(
+                            "is a {}x{} {} image; info.json says tiles are {side}x{side} {layout}",
+                            decoded.width, decoded.height, decoded.layout
+                        ),
+                    ));
+                }
+                let texels: Vec<T> = bytemuck::pod_collect_to_vec(&decoded.bytes);
+                let first = &texels[..channels];
+                if texels.chunks_exact(channels).all(|px| px == first) {
+                    return Ok((id, path, Stored::Constant(encoder.stored_texel(first))));
+                }
+                let mut out = Vec::new();
+                encoder.encode(&texels, &mut out).map_err(|message| TilerError::Encode {
+                    lod: id.lod,
+                    x: id.x,
+                    y: id.y,
+                    message,
+                })?;
+                Ok((id, path, Stored::Data(out)))
+            })
+            .collect();
+        for tile in done {
+            let (id, path, stored) = tile?;
+            let tile = match &stored {
+                Stored::Constant(texel) => NewTile::Constant(texel),
+                Stored::Data(bytes) => NewTile::Data(to, bytes),
+            };
+            writer.add(id, tile).map_err(|e| in_file(&path, e))?;
+        }
+        progress.advance(chunk.len() as u64);
+    }
+    Ok(writer.finish()?)
+}
+
+/// A re-encoded tile.
+enum Stored {
+    Constant(Vec<u8>),
+    Data(Vec<u8>),
 }
 
 /// Writes every tile of `pack` as files plus `info.json` into `dir`; returns the tile count.
@@ -150,10 +292,19 @@ pub fn unpack(pack: &Pack, dir: &Path, progress: &dyn Progress) -> Result<u64> {
     };
     let names = FilenameFormat::parse(&names, 3).map_err(TilerError::Options)?;
     let codec = codec_of(&info, names.extension());
-    let layout = PixelLayout::new(
-        [Channels::Grey, Channels::GreyAlpha, Channels::Rgb, Channels::Rgba][d.channels as usize - 1],
-        if d.sample_bytes == 2 { Depth::U16 } else { Depth::U8 },
-    );
+    let layout = layout_of(&d);
+    let no_files = |kind: &str| {
+        TilerError::unsupported(
+            pack.path(),
+            format!(
+                "its tiles are {kind} payloads, which are not image files; `vortex-tiler convert {} -o DIR --codec png` writes them as files",
+                pack.path().display()
+            ),
+        )
+    };
+    if let Some(c) = codec.filter(|c| !c.writes_files()) {
+        return Err(no_files(c.name()));
+    }
     let sink = DirSink::create(dir, names)?;
     let result = (|| {
         let mut count = 0;
@@ -163,7 +314,8 @@ pub fn unpack(pack: &Pack, dir: &Path, progress: &dyn Progress) -> Result<u64> {
             }
             match pack.tile_checked(id.lod, id.x, id.y)? {
                 Tile::Absent => continue,
-                Tile::Data(_, bytes) => sink.write_tile(id.lod, id.x, id.y, bytes)?,
+                Tile::Data(TileKind::Png | TileKind::Jpeg, bytes) => sink.write_tile(id.lod, id.x, id.y, bytes)?,
+                Tile::Data(kind, _) => return Err(no_files(kind.name())),
                 Tile::Constant(texel) => {
                     let codec = codec.ok_or_else(|| {
                         TilerError::Options("the pack's metadata names no codec to encode one-colour tiles with".into())

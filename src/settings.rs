@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use crate::background::Background;
-use crate::codec::{Codec, PngLevel, Subsampling};
+use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling, ZSTD_LEVELS};
 use crate::error::{Result, TilerError};
 use crate::filename::FilenameFormat;
 use crate::info::{FORMAT_VERSION, InfoFile};
@@ -15,15 +15,30 @@ use crate::split::SplitOptions;
 
 pub const DEFAULT_TILE_SIZE: u32 = 128;
 pub const DEFAULT_QUALITY: u8 = 85;
+pub const DEFAULT_ZSTD_LEVEL: i32 = 3;
+pub const DEFAULT_BC7_EFFORT: Bc7Effort = Bc7Effort::UltraFast;
 /// The thesis's default names, with the codec's extension.
 pub const DEFAULT_FILENAME_STEM: &str = "lod%1$02s-x%2$04s-y%3$04s";
 
 /// Which codec: `auto` picks JPEG for 8-bit grey or RGB and PNG for anything with alpha or 16 bits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum CodecChoice {
+    /// JPEG for 8-bit grey or RGB, PNG with alpha or 16 bits.
     Auto,
+    /// Lossy, 8-bit grey or RGB (--quality, --subsampling).
     Jpeg,
+    /// Lossless, any layout (--png-compression).
     Png,
+    /// Packs only: texels as a GPU uploads them, any layout.
+    Raw,
+    /// Packs only: raw texels compressed with zstd (--zstd-level).
+    Zstd,
+    /// Packs only: zstd of raw texels whose rows are left-delta filtered first.
+    ZstdDelta,
+    /// Packs only: BC1 blocks, opaque 8-bit RGB (tile size a multiple of 4).
+    Bc1,
+    /// Packs only: BC7 blocks, 8-bit RGB or RGBA (tile size a multiple of 4; --bc7-effort).
+    Bc7,
 }
 
 /// What the command line asked for; `None` means "not given".
@@ -35,6 +50,8 @@ pub struct Requested {
     pub quality: Option<u8>,
     pub subsampling: Option<Subsampling>,
     pub png_level: Option<PngLevel>,
+    pub zstd_level: Option<i32>,
+    pub bc7_effort: Option<Bc7Effort>,
     pub background: Option<Background>,
     pub flatten: bool,
     pub tile_depth: Option<Depth>,
@@ -58,12 +75,7 @@ pub fn resolve(
     let ext = names_given.as_deref().and_then(|f| FilenameFormat::parse(f, 3).ok()).and_then(|f| f.extension());
 
     // Codec: flag, then info.json's codec, then the file extension, then auto.
-    let info_codec = match info.codec.as_deref() {
-        None => None,
-        Some("jpeg") => Some(CodecChoice::Jpeg),
-        Some("png") => Some(CodecChoice::Png),
-        Some(other) => return Err(field_err("codec", format!("'{other}' is not a codec (jpeg, png)"))),
-    };
+    let info_codec = info_codec(info, &field_err)?;
     let ext_codec = match ext.as_deref() {
         Some("jpg" | "jpeg") => Some(CodecChoice::Jpeg),
         Some("png") => Some(CodecChoice::Png),
@@ -91,26 +103,8 @@ pub fn resolve(
         let lossless = (source.channels.has_alpha() && !flatten) || tile_depth.unwrap_or(source.depth) == Depth::U16;
         choice = if lossless { CodecChoice::Png } else { CodecChoice::Jpeg };
     }
-    let codec = match choice {
-        CodecChoice::Jpeg => Codec::Jpeg {
-            quality: req.quality.or(info.quality).unwrap_or(DEFAULT_QUALITY),
-            subsampling: req
-                .subsampling
-                .or(parse_member(info.subsampling.as_deref(), "subsampling", &field_err)?)
-                .unwrap_or(Subsampling::S420),
-        },
-        _ => Codec::Png {
-            level: req
-                .png_level
-                .or(parse_member(info.png_compression.as_deref(), "pngCompression", &field_err)?)
-                .unwrap_or(PngLevel::Fast),
-        },
-    };
-    if let Codec::Jpeg { quality, .. } = codec
-        && !(1..=100).contains(&quality)
-    {
-        return Err(TilerError::Options(format!("JPEG quality {quality} is outside 1..=100")));
-    }
+    let codec = build_codec(choice, req, info, &field_err)?;
+    codec.check_tile_size(tile_size)?;
     if let (Some(e), false) = (&ext, ext_codec.is_none_or(|c| c == choice)) {
         return Err(TilerError::Options(format!("the filename format ends in .{e} but the codec is {}", codec.name())));
     }
@@ -170,6 +164,83 @@ pub fn check_grid(info_path: &Path, info: &InfoFile, req: &Requested, layout: &L
     Ok(())
 }
 
+/// `info.json`'s `codec`, if any.
+fn info_codec(info: &InfoFile, field_err: &dyn Fn(&str, String) -> TilerError) -> Result<Option<CodecChoice>> {
+    match info.codec.as_deref() {
+        None | Some("auto") => Ok(None),
+        Some(name) => <CodecChoice as clap::ValueEnum>::from_str(name, false).map(Some).map_err(|_| {
+            field_err("codec", format!("'{name}' is not a codec (jpeg, png, raw, zstd, zstd-delta, bc1, bc7)"))
+        }),
+    }
+}
+
+/// The codec `choice` (not `auto`) with its settings: flags, then `info.json`, then defaults.
+fn build_codec(
+    choice: CodecChoice,
+    req: &Requested,
+    info: &InfoFile,
+    field_err: &dyn Fn(&str, String) -> TilerError,
+) -> Result<Codec> {
+    let zstd_level = req.zstd_level.or(info.zstd_level).unwrap_or(DEFAULT_ZSTD_LEVEL);
+    let codec = match choice {
+        CodecChoice::Jpeg => Codec::Jpeg {
+            quality: req.quality.or(info.quality).unwrap_or(DEFAULT_QUALITY),
+            subsampling: req
+                .subsampling
+                .or(parse_member(info.subsampling.as_deref(), "subsampling", field_err)?)
+                .unwrap_or(Subsampling::S420),
+        },
+        CodecChoice::Auto | CodecChoice::Png => Codec::Png {
+            level: req
+                .png_level
+                .or(parse_member(info.png_compression.as_deref(), "pngCompression", field_err)?)
+                .unwrap_or(PngLevel::Fast),
+        },
+        CodecChoice::Raw => Codec::Raw,
+        CodecChoice::Zstd => Codec::Zstd { level: zstd_level, delta: false },
+        CodecChoice::ZstdDelta => Codec::Zstd { level: zstd_level, delta: true },
+        CodecChoice::Bc1 => Codec::Bc1,
+        CodecChoice::Bc7 => Codec::Bc7 {
+            effort: req
+                .bc7_effort
+                .or(parse_member(info.bc7_effort.as_deref(), "bc7Effort", field_err)?)
+                .unwrap_or(DEFAULT_BC7_EFFORT),
+        },
+    };
+    match codec {
+        Codec::Jpeg { quality, .. } if !(1..=100).contains(&quality) => {
+            Err(TilerError::Options(format!("JPEG quality {quality} (--quality) is outside 1..=100")))
+        }
+        Codec::Zstd { level, .. } if !ZSTD_LEVELS.contains(&level) => Err(TilerError::Options(format!(
+            "zstd level {level} (--zstd-level) is outside {}..={}",
+            ZSTD_LEVELS.start(),
+            ZSTD_LEVELS.end()
+        ))),
+        codec => Ok(codec),
+    }
+}
+
+/// The codec to re-encode tiles of `source` layout with, for `pack`: the flags in `req` over
+/// the tiled directory's `info.json` (at `info_path`), whose codec is the default.
+pub fn resolve_codec(req: &Requested, info_path: &Path, info: &InfoFile, source: PixelLayout) -> Result<Codec> {
+    let field_err =
+        |field: &str, message: String| TilerError::Info { path: info_path.to_path_buf(), field: field.into(), message };
+    let mut choice = req.codec.or(info_codec(info, &field_err)?).unwrap_or(CodecChoice::Auto);
+    if choice == CodecChoice::Auto {
+        let lossless = source.channels.has_alpha() || source.depth == Depth::U16;
+        choice = if lossless { CodecChoice::Png } else { CodecChoice::Jpeg };
+    }
+    // Settings of the directory's own codec apply only to that codec.
+    let same = info_codec(info, &field_err)? == Some(choice);
+    let info_settings = if same { info.clone() } else { InfoFile::default() };
+    let codec = build_codec(choice, req, &info_settings, &field_err)?;
+    codec.stored_layout(source, false, None)?;
+    if let Some(side) = info.tile_size {
+        codec.check_tile_size(side)?;
+    }
+    Ok(codec)
+}
+
 fn parse_member<V: clap::ValueEnum>(
     value: Option<&str>,
     field: &str,
@@ -180,10 +251,7 @@ fn parse_member<V: clap::ValueEnum>(
 
 /// The `info.json` describing a finished run.
 pub fn describe(l: &Layout, stored: PixelLayout, opts: &SplitOptions, names: &FilenameFormat) -> InfoFile {
-    let (quality, subsampling, png_compression) = match opts.codec {
-        Codec::Jpeg { quality, subsampling } => (Some(quality), Some(value_name(subsampling)), None),
-        Codec::Png { level } => (None, None, Some(value_name(level))),
-    };
+    let codec = describe_codec(opts.codec);
     InfoFile {
         format_version: Some(FORMAT_VERSION),
         tile_size: Some(l.tile_size),
@@ -196,11 +264,28 @@ pub fn describe(l: &Layout, stored: PixelLayout, opts: &SplitOptions, names: &Fi
         width: Some(l.width),
         height: Some(l.height),
         background: Some(opts.background.to_string()),
-        codec: Some(opts.codec.name().into()),
-        quality,
-        subsampling,
-        png_compression,
+        codec: codec.codec,
+        quality: codec.quality,
+        subsampling: codec.subsampling,
+        png_compression: codec.png_compression,
+        zstd_level: codec.zstd_level,
+        bc7_effort: codec.bc7_effort,
     }
+}
+
+/// The `info.json` members that describe `codec` (`codec` and its settings); no others.
+pub fn describe_codec(codec: Codec) -> InfoFile {
+    let mut info = InfoFile { codec: Some(codec.name().into()), ..InfoFile::default() };
+    match codec {
+        Codec::Jpeg { quality, subsampling } => {
+            (info.quality, info.subsampling) = (Some(quality), Some(value_name(subsampling)))
+        }
+        Codec::Png { level } => info.png_compression = Some(value_name(level)),
+        Codec::Zstd { level, .. } => info.zstd_level = Some(level),
+        Codec::Bc7 { effort } => info.bc7_effort = Some(value_name(effort)),
+        Codec::Raw | Codec::Bc1 => {}
+    }
+    info
 }
 
 fn value_name<V: clap::ValueEnum>(v: V) -> String {

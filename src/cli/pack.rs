@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use vortex_pack::{Pack, TileKind, VerifyOptions, verify};
-use vortex_tiler::repack;
+use vortex_tiler::{repack, settings};
 
 use super::PackLayout;
 use crate::report;
@@ -20,6 +20,10 @@ pub struct PackArgs {
     output: PathBuf,
     #[command(flatten)]
     layout: PackLayout,
+    /// Codec flags re-encode every tile (decoded from its file) unless they describe the
+    /// directory's own codec; without them the tile files are stored as they are.
+    #[command(flatten)]
+    enc: super::split::CodecArgs,
     /// No progress bar and no summary line.
     #[arg(short, long)]
     quiet: bool,
@@ -85,9 +89,13 @@ pub fn run_verify(a: VerifyArgs) -> Result<()> {
 pub fn run_pack(a: PackArgs) -> Result<()> {
     let started = Instant::now();
     let t = repack::TiledDir::read(&a.input)?;
+    let codec = match a.enc.any() {
+        true => Some(settings::resolve_codec(&a.enc.requested(), &a.input.join("info.json"), &t.info, t.layout())?),
+        false => None,
+    };
     let total = (0..t.description.level_count).map(|l| ((t.tile_count >> l) as u64).pow(2)).sum();
     let watch = report::Watch::new(total, a.quiet);
-    let written = repack::pack_dir(&a.input, &a.output, a.layout.options()?, &watch);
+    let written = repack::pack_dir(&a.input, &a.output, a.layout.options()?, codec, &watch);
     watch.bar.finish_and_clear();
     let written = written?;
     if !a.quiet {

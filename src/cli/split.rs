@@ -6,7 +6,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 
 use vortex_tiler::background::Background;
-use vortex_tiler::codec::{PngLevel, Subsampling};
+use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
 use vortex_tiler::info::InfoFile;
 use vortex_tiler::layout::Layout;
 use vortex_tiler::pack_sink::PackSink;
@@ -61,22 +61,8 @@ pub struct OutputArgs {
     #[arg(long, value_name = "N")]
     border: Option<u32>,
 
-    /// Tile codec; auto = JPEG for 8-bit grey/RGB, PNG with alpha or 16 bits [default: auto,
-    /// or what the filename format's extension says].
-    #[arg(long, value_enum)]
-    codec: Option<CodecChoice>,
-
-    /// JPEG quality, 1-100 [default: 85].
-    #[arg(long, value_name = "Q")]
-    quality: Option<u8>,
-
-    /// JPEG chroma subsampling [default: 420].
-    #[arg(long, value_enum)]
-    subsampling: Option<Subsampling>,
-
-    /// PNG compression effort [default: fast].
-    #[arg(long, value_enum)]
-    png_compression: Option<PngLevel>,
+    #[command(flatten)]
+    enc: CodecArgs,
 
     /// Fill for the padding between the image and the square power-of-two virtual texture:
     /// edge (repeat the image's edge), #rrggbb, #rrggbbaa, r,g,b[,a] or a grey level [default: edge].
@@ -87,7 +73,8 @@ pub struct OutputArgs {
     #[arg(long)]
     flatten: bool,
 
-    /// Sample type of stored tiles: unsignedByte or unsignedShort (PNG only) [default: the source's].
+    /// Sample type of stored tiles: unsignedByte or unsignedShort (png, raw, zstd, zstd-delta)
+    /// [default: the source's].
     #[arg(long, value_name = "TYPE", value_parser = super::parse_tile_type)]
     tile_type: Option<Depth>,
 
@@ -103,6 +90,61 @@ pub struct OutputArgs {
     /// No progress bar and no summary line.
     #[arg(short, long)]
     quiet: bool,
+}
+
+/// How tiles are encoded: `split`, `convert` and `pack` share these flags.
+#[derive(clap::Args, Debug)]
+pub struct CodecArgs {
+    /// Tile codec [default: auto, or what the filename format's extension says]. raw, zstd,
+    /// zstd-delta, bc1 and bc7 have no file format and write packs only.
+    #[arg(long, value_enum)]
+    pub codec: Option<CodecChoice>,
+
+    /// JPEG quality, 1-100 [default: 85].
+    #[arg(long, value_name = "Q")]
+    pub quality: Option<u8>,
+
+    /// JPEG chroma subsampling [default: 420].
+    #[arg(long, value_enum)]
+    pub subsampling: Option<Subsampling>,
+
+    /// PNG compression effort [default: fast].
+    #[arg(long, value_enum)]
+    pub png_compression: Option<PngLevel>,
+
+    /// zstd level for --codec zstd and zstd-delta, 1-22 [default: 3].
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    pub zstd_level: Option<i32>,
+
+    /// BC7 encoder effort, fastest first (Intel ISPC presets) [default: ultra-fast].
+    #[arg(long, value_enum)]
+    pub bc7_effort: Option<Bc7Effort>,
+}
+
+impl CodecArgs {
+    /// These flags as the codec part of a request.
+    pub fn requested(&self) -> Requested {
+        Requested {
+            codec: self.codec,
+            quality: self.quality,
+            subsampling: self.subsampling,
+            png_level: self.png_compression,
+            zstd_level: self.zstd_level,
+            bc7_effort: self.bc7_effort,
+            ..Requested::default()
+        }
+    }
+
+    /// Whether any of them was given.
+    pub fn any(&self) -> bool {
+        let r = self.requested();
+        r.codec.is_some()
+            || r.quality.is_some()
+            || r.subsampling.is_some()
+            || r.png_level.is_some()
+            || r.zstd_level.is_some()
+            || r.bc7_effort.is_some()
+    }
 }
 
 pub fn run(a: SplitArgs) -> Result<()> {
@@ -130,17 +172,20 @@ pub fn tile(source: Box<dyn RowSource>, names: Option<String>, a: &OutputArgs, s
     let requested = Requested {
         tile_size: a.tile_size,
         border: a.border,
-        codec: a.codec,
-        quality: a.quality,
-        subsampling: a.subsampling,
-        png_level: a.png_compression,
         background: a.background,
         flatten: a.flatten,
         tile_depth: a.tile_type,
         filename_format: names,
+        ..a.enc.requested()
     };
     let existing_ref = info_path.as_deref().zip(existing.as_ref());
     let (opts, names) = settings::resolve(&requested, existing_ref, source.layout())?;
+    if a.output.is_some() && !opts.codec.writes_files() {
+        bail!(
+            "--codec {} writes packs only (its tiles are not image files): write --pack FILE instead of --output, or use --codec png for lossless tile files",
+            opts.codec.name()
+        );
+    }
     let layout = Layout::new(source.width() as u64, source.height() as u64, opts.tile_size, opts.border)?;
     if let Some((path, info)) = existing_ref {
         settings::check_grid(path, info, &requested, &layout)?;

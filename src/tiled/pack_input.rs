@@ -1,8 +1,8 @@
 //! A Vortex pack as input: its LOD 0 is the image, each tile's payload the cell, its border
-//! skipped. PNG and JPEG payloads are decoded like tile files; raw and zstd payloads and
-//! constant tiles hold little-endian samples in the pack's texel format.
+//! skipped. PNG and JPEG payloads are decoded like tile files; raw, zstd and zstd-delta
+//! payloads and constant tiles hold little-endian samples in the pack's texel format, and BC1
+//! and BC7 blocks decode to it (RGB or RGBA).
 
-use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 
 use vortex_pack::{Pack, Tile, TileKind};
@@ -82,29 +82,6 @@ impl PackInput {
     }
 }
 
-thread_local! {
-    /// One zstd context per decoding thread, reused from tile to tile.
-    static ZSTD: RefCell<Option<zstd::bulk::Decompressor<'static>>> = const { RefCell::new(None) };
-}
-
-/// A zstd payload as exactly `raw_len` bytes; the error says why not.
-fn decompress(bytes: &[u8], raw_len: usize) -> std::result::Result<Vec<u8>, String> {
-    ZSTD.with(|cell| {
-        let mut cell = cell.borrow_mut();
-        if cell.is_none() {
-            *cell = Some(zstd::bulk::Decompressor::new().map_err(|e| format!("zstd: {e}"))?);
-        }
-        let decompressor = cell.as_mut().expect("just made");
-        let mut out = Vec::new();
-        out.try_reserve_exact(raw_len).map_err(|e| format!("cannot allocate {raw_len} bytes: {e}"))?;
-        match decompressor.decompress_to_buffer(bytes, &mut out) {
-            Ok(n) if n == raw_len => Ok(out),
-            Ok(n) => Err(format!("the zstd payload decompresses to {n} bytes; a raw tile is {raw_len}")),
-            Err(e) => Err(format!("the zstd payload does not decompress to one {raw_len}-byte raw tile: {e}")),
-        }
-    })
-}
-
 impl TileGrid for PackInput {
     fn describe(&self) -> String {
         format!(
@@ -132,21 +109,11 @@ impl TileGrid for PackInput {
                 self.samples(name(), bytes)
             }
             Tile::Data(TileKind::Png | TileKind::Jpeg, bytes) => CellData::File(name(), bytes.to_vec()),
-            Tile::Data(TileKind::Raw, bytes) => {
-                if bytes.len() != self.raw_len {
-                    return Err(TilerError::decode(
-                        name(),
-                        format!("the raw payload is {} bytes; a raw tile is {}", bytes.len(), self.raw_len),
-                    ));
-                }
-                self.samples(name(), bytes.to_vec())
-            }
-            Tile::Data(TileKind::Zstd, bytes) => {
-                let raw = decompress(bytes, self.raw_len).map_err(|m| TilerError::decode(name(), m))?;
+            Tile::Data(kind, bytes) => {
+                let limit = vortex_pack::DEFAULT_MAX_DECODED_BYTES;
+                let raw = vortex_pack::payload_texels(kind, bytes, self.pack.description(), limit)
+                    .map_err(|e| TilerError::decode(name(), e))?;
                 self.samples(name(), raw)
-            }
-            Tile::Data(kind, _) => {
-                return Err(TilerError::unsupported(name(), format!("{} tiles cannot be decoded", kind.name())));
             }
         }))
     }
@@ -361,7 +328,7 @@ mod tests {
             (NewTile::Data(TileKind::Zstd, &too_long), "does not decompress to one 256-byte raw tile"),
             (NewTile::Data(TileKind::Zstd, &too_short), "decompresses to 255 bytes; a raw tile is 256"),
             (NewTile::Data(TileKind::Png, b"not a png"), "format could not be determined"),
-            (NewTile::Data(TileKind::Bc1, &[0; 8]), "bc1 tiles cannot be decoded"),
+            (NewTile::Data(TileKind::ZstdDelta, b"not zstd"), "does not decompress to one 256-byte raw tile"),
         ];
         for (i, (tile, expected)) in cases.into_iter().enumerate() {
             let path = tmp.path().join(format!("bad{i}.vtpk"));

@@ -75,7 +75,7 @@ pub fn payload_texels(kind: TileKind, bytes: &[u8], d: &Description, max_bytes: 
             }
             Ok(out)
         }
-        _ => Err(fail("not a texel payload: decode it as an image file".into())),
+        _ => Err(fail(format!("{} payloads are image files, not texels (see decode_rgba8)", kind.name()))),
     }
 }
 

@@ -27,8 +27,8 @@ pub enum PackError {
     #[error("{}: no tile (lod {lod}, x {x}, y {y}): {message}", path.display())]
     OutOfRange { path: PathBuf, lod: u32, x: u32, y: u32, message: String },
 
-    /// A payload given on its own (no pack, no tile) does not decode.
-    #[error("{kind} payload: {message}")]
+    /// A payload given on its own (no pack, no tile) does not decode; the message names the kind.
+    #[error("{message}")]
     Payload { kind: &'static str, message: String },
 
     /// The writer was used wrongly (tile outside the grid, written twice, wrong raw size).

@@ -237,7 +237,7 @@ fn block_tiles_need_a_texture_they_can_describe() {
         let e = w.add(TileId { lod: 0, x: 0, y: 0 }, NewTile::Data(kind, bytes)).unwrap_err().to_string();
         assert!(e.contains(expected), "{expected}: {e}");
         let e = payload_texels(kind, bytes, &d, LIMIT).unwrap_err().to_string();
-        assert!(e.starts_with(kind.name()) && e.contains(expected.trim_start_matches("a ")), "{expected}: {e}");
+        assert!(e.contains(expected), "{expected}: {e}");
     }
 
     // A BC1 pack whose header is changed to say RGBA: verify reports it once, at the header,
@@ -269,7 +269,7 @@ fn hostile_payloads_are_errors_not_panics() {
     // Right-sized random blocks decode to something (every bit pattern is a block).
     assert_eq!(payload_texels(TileKind::Bc7, &noise(64, 1), &d, LIMIT).unwrap().len(), 256);
     let e = payload_texels(TileKind::Png, b"\x89PNG", &d, LIMIT).unwrap_err().to_string();
-    assert!(e.contains("png payload: not a texel payload"), "{e}");
+    assert!(e.contains("png payloads are image files, not texels"), "{e}");
     let e = payload_texels(TileKind::Raw, &[0; 256], &common::description(4, 1), 100).unwrap_err().to_string();
     assert!(e.contains("exceeds the decoding limit of 100 bytes"), "{e}");
 }
