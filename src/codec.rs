@@ -38,10 +38,15 @@ pub enum PngLevel {
 /// BC7 encoder effort: the presets of Intel's ISPC texture compressor, fastest first.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Bc7Effort {
+    /// About 1 ms per 256-texel RGB tile on one core.
     UltraFast,
+    /// About 10x slower than ultra-fast, about 3 dB better.
     VeryFast,
+    /// About 18x slower, a little better.
     Fast,
+    /// About 45x slower.
     Basic,
+    /// About 160x slower, best.
     Slow,
 }
 

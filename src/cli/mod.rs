@@ -50,6 +50,11 @@ enum Command {
     #[command(verbatim_doc_comment)]
     Convert(convert::ConvertArgs),
     /// Put a tiled directory (info.json + tile files, e.g. from split -o) into one pack file.
+    ///
+    /// The tile files are stored as they are, unless codec flags name another codec (or other
+    /// settings of the same one): then every tile is decoded and encoded again, e.g.
+    ///   vortex-tiler pack out/ -o world.vtpk --codec bc7
+    #[command(verbatim_doc_comment)]
     Pack(pack::PackArgs),
     /// Write a pack's tiles back out as files plus info.json.
     Unpack(pack::UnpackArgs),
