@@ -107,7 +107,10 @@ impl FeedbackPass {
 
     /// Records the feedback pass into `target`: the clear to [`NO_REQUEST`], then the draw of
     /// `view` if there is one (`None` records the clear alone: nothing virtual on screen). `bias`
-    /// is the frame's own LOD bias (the residency's); the target's is added to it.
+    /// is the frame's own LOD bias (the residency's); the target's is added to it. Each feedback
+    /// pixel samples at `jitter` (feedback pixels, within ±0.5) from its centre: pass
+    /// [`jitter`]`(frame)` so that over frames the samples cover every frame pixel, or `[0, 0]`.
+    #[allow(clippy::too_many_arguments)]
     pub fn encode(
         &self,
         device: &wgpu::Device,
@@ -116,10 +119,11 @@ impl FeedbackPass {
         textures: &[VirtualTexture],
         view: Option<&View>,
         bias: f32,
+        jitter: [f32; 2],
     ) {
         let bind_group = view.map(|view| {
             let size = (target.width, target.height);
-            let frame = Frame::new(textures, None, view, size, bias + target.bias(), None);
+            let frame = Frame::new(textures, None, view, size, bias + target.bias(), None).jittered(jitter, size);
             let uniform = draw::uniform(device, "vortex feedback frame", bytemuck::bytes_of(&frame));
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("vortex feedback"),
@@ -133,6 +137,25 @@ impl FeedbackPass {
         let draw = bind_group.as_ref().zip(view).map(|(g, v)| (&self.pipelines, g, v));
         draw::record(encoder, "vortex feedback", &target.view, &target.depth, colour, draw);
     }
+}
+
+/// Where frame `n`'s feedback samples within its pixels, relative to their centres: the Halton
+/// (2, 3) sequence, so that the samples of a few consecutive frames spread evenly over each
+/// feedback pixel's block of frame pixels. A page seen only by frame pixels between two
+/// feedback samples (at the frame's edge, or a thin sliver) is then still asked for, within a
+/// few frames, instead of never.
+pub fn jitter(n: u64) -> [f32; 2] {
+    let halton = |mut i: u64, base: u64| {
+        let (mut f, mut r) = (1.0f64, 0.0f64);
+        while i > 0 {
+            f /= base as f64;
+            r += f * (i % base) as f64;
+            i /= base;
+        }
+        r
+    };
+    // Index 1 on, so that frame 0 samples near the centre: (0.5, 1/3) - 0.5.
+    [(halton(n + 1, 2) - 0.5) as f32, (halton(n + 1, 3) - 0.5) as f32]
 }
 
 /// The words of one read-back feedback target, row-major.

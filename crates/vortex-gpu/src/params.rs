@@ -20,7 +20,7 @@ struct TextureParams {
     pad1: f32,
 }
 
-/// `Frame` in `virtual.wgsl`, 640 bytes.
+/// `Frame` in `virtual.wgsl`, 656 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub(crate) struct Frame {
@@ -32,11 +32,23 @@ pub(crate) struct Frame {
     lod_override: f32,
     tile: [f32; 4],
     bias: f32,
-    pad: [f32; 3],
+    pad0: f32,
+    jitter: [f32; 2],
+    jitter_ndc: [f32; 2],
+    pad1: [f32; 2],
     textures: [TextureParams; MAX_TEXTURES as usize],
 }
 
 impl Frame {
+    /// Samples at `jitter` (in pixels, within ±0.5) from each pixel's centre instead of at it.
+    pub(crate) fn jittered(mut self, jitter: [f32; 2], size: (u32, u32)) -> Frame {
+        self.jitter = jitter;
+        // Sampling a point `j` to the right (and down) is drawing the image `j` to the left
+        // (and up); clip-space y points up, framebuffer y down.
+        self.jitter_ndc = [-2.0 * jitter[0] / size.0 as f32, 2.0 * jitter[1] / size.1 as f32];
+        self
+    }
+
     /// The parameters of drawing `view` into a `size` target: `bias` is added to every LOD,
     /// `lod_override` (sampling only) replaces the LOD from derivatives.
     pub(crate) fn new(
@@ -70,7 +82,10 @@ impl Frame {
                 [c.tile_size() as f32, c.border() as f32, c.payload() as f32, c.side_texels() as f32]
             }),
             bias,
-            pad: [0.0; 3],
+            pad0: 0.0,
+            jitter: [0.0; 2],
+            jitter_ndc: [0.0; 2],
+            pad1: [0.0; 2],
             textures: params,
         };
         match view {

@@ -184,7 +184,16 @@ impl Runtime {
         let device = &self.gpu.device;
         let mut encoder =
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex frame") });
-        self.feedback.encode(device, &mut encoder, &self.feedback_target, &self.textures, Some(&view), lod_bias);
+        let jitter = crate::feedback::jitter(self.frame);
+        self.feedback.encode(
+            device,
+            &mut encoder,
+            &self.feedback_target,
+            &self.textures,
+            Some(&view),
+            lod_bias,
+            jitter,
+        );
         self.readback.encode_copy(&mut encoder, &self.feedback_target);
         let sources = Sources { textures: &self.textures, table: &self.gpu_table, cache: &self.cache };
         self.sample.encode(device, &mut encoder, &self.target, &sources, &view, None);

@@ -67,7 +67,7 @@ fn lod_selection_at_exact_powers_of_two_is_stable() {
         let mut first = None;
         for _ in 0..4 {
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
-            pass.encode(&gpu.device, &mut encoder, &target, &[texture], Some(&view), 0.0);
+            pass.encode(&gpu.device, &mut encoder, &target, &[texture], Some(&view), 0.0, [0.0; 2]);
             readback.encode_copy(&mut encoder, &target).unwrap();
             gpu.queue.submit([encoder.finish()]);
             readback.submitted();

@@ -92,7 +92,7 @@ impl Fixture {
             self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("feedback test") });
         let view = case.map(|c| View::Window(c.window));
         let bias = case.map_or(0.0, |c| c.bias);
-        self.pass.encode(&self.gpu.device, &mut encoder, &self.target, &textures(), view.as_ref(), bias);
+        self.pass.encode(&self.gpu.device, &mut encoder, &self.target, &textures(), view.as_ref(), bias, [0.0; 2]);
         let frame = self.readback.encode_copy(&mut encoder, &self.target);
         self.gpu.queue.submit([encoder.finish()]);
         self.readback.submitted();

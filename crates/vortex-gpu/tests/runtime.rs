@@ -366,3 +366,33 @@ fn bc7_blocks_stream_as_they_are_and_draw_what_rgba8_draws() {
     eprintln!("BC7 cache against RGBA8 cache: max difference {max}/255, PSNR {psnr:.1} dB");
     assert!(max <= 1, "max {max}");
 }
+
+#[test]
+fn pages_seen_only_between_feedback_samples_are_still_loaded() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let tex = Synthetic::new(dir.path(), "a.vtpk", PAGES, TILE, BORDER, 9);
+    // Frame column 511 shows LOD-0 texel 768.15 (page 6), but the centre of the last 8x8 block
+    // of the feedback (column 508) shows texel 766.4 (page 5): without jitter, page 6 is never
+    // asked for and that column stays coarse.
+    let size = [512, 384];
+    let mut scene = zoom_scene(effects(16, 32));
+    scene.size = size;
+    scene.frames = 24;
+    scene.view = SceneView::Window { texture: 0, path: vec![key(0, [0.3127, 0.4419], 0.125)] };
+    let mut rt = runtime(gpu, &[&tex], &scene);
+    for f in 0..scene.frames {
+        rt.frame(&scene.pose(f), false).unwrap();
+    }
+    let Pose::Window(window) = scene.pose(0) else { unreachable!() };
+    let origin = window.origin_texels(&tex.texture, (size[0], size[1]));
+    let lod = origin.lod(0.0, tex.texture.grid.lod_count);
+    let coarse: Vec<(u32, u32)> = (0..size[1])
+        .flat_map(|y| (0..size[0]).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, PAGES as u32, tex.texture.payload());
+            rt.page_table().entry(0, lod, at.page[0] as u16, at.page[1] as u16).lod != lod
+        })
+        .collect();
+    assert!(coarse.is_empty(), "{} pixels still drawn coarser than LOD {lod}, e.g. {:?}", coarse.len(), coarse.first());
+}

@@ -39,10 +39,11 @@ fn shade(is_window: bool, position: vec2<f32>, uv: vec2<f32>, texture: u32) -> v
     let lod = u32(level);
     let at = address(is_window, position, uv, lod, t);
     let fine = sample_at(texture, lod, at);
-    if FILTER != 2u || level >= top {
+    let blend = clamp(wanted - level, 0.0, 1.0);
+    // Magnified (or at the coarsest LOD) trilinear is bilinear: no second sample.
+    if FILTER != 2u || level >= top || blend == 0.0 {
         return fine;
     }
-    let blend = clamp(wanted - level, 0.0, 1.0);
     let coarse = sample_at(texture, lod + 1u, ancestor(at, 1u, t.payload));
     return mix(fine, coarse, blend);
 }

@@ -32,8 +32,12 @@ struct Frame {
     // Added to every LOD (feedback: the residency's bias plus the reduced size's compensation).
     bias: f32,
     pad0: f32,
-    pad1: f32,
-    pad2: f32,
+    // Where in its pixel a fragment samples, relative to the centre (feedback: a different
+    // point each frame, so that over a few frames every frame pixel's page is asked for): in
+    // pixels for windows, and as the clip-space shift that moves meshes by as much.
+    jitter: vec2<f32>,
+    jitter_ndc: vec2<f32>,
+    pad1: vec2<f32>,
     textures: array<Texture, 16>,
 }
 
@@ -58,7 +62,8 @@ fn vs_window(@builtin(vertex_index) i: u32) -> Varyings {
 
 @vertex
 fn vs_mesh(@location(0) position: vec3<f32>, @location(1) uv: vec2<f32>, @location(2) texture: u32) -> Varyings {
-    return Varyings(frame.view_proj * vec4<f32>(position, 1.0), uv, texture);
+    let clip = frame.view_proj * vec4<f32>(position, 1.0);
+    return Varyings(vec4<f32>(clip.xy + frame.jitter_ndc * clip.w, clip.zw), uv, texture);
 }
 
 // A sample's address at one LOD: its page and its position in the page's payload, in texels.
@@ -78,7 +83,7 @@ fn uv_at(uv: vec2<f32>, lod: u32, t: Texture) -> At {
 fn window_at(position: vec2<f32>, lod: u32, t: Texture) -> At {
     let side = i32(max(t.pages >> lod, 1u) * t.payload);
     let mask = (1u << lod) - 1u;
-    let rel = frame.origin_frac + position * frame.step;
+    let rel = frame.origin_frac + (position + frame.jitter) * frame.step;
     let r = (vec2<f32>(frame.origin_int & vec2<u32>(mask)) + rel) * (1.0 / f32(1u << lod));
     let fl = floor(r);
     var texel = vec2<i32>(frame.origin_int >> vec2<u32>(lod)) + vec2<i32>(fl);
