@@ -45,7 +45,12 @@ fn zoom_scene(effects: Effects) -> Scene {
 }
 
 fn effects(slots_per_side: u16, budget: usize) -> Effects {
-    Effects { cache_slots_per_side: slots_per_side, upload_budget: budget, ..Effects::default() }
+    Effects {
+        filter: Filter::Bilinear,
+        cache_slots_per_side: slots_per_side,
+        upload_budget: budget,
+        ..Effects::default()
+    }
 }
 
 fn runtime(gpu: Gpu, textures: &[&Synthetic], scene: &Scene) -> Runtime {
