@@ -79,6 +79,39 @@ impl Pipelines {
     }
 }
 
+/// The entry of binding 0 of every pass: the `Frame` uniform.
+pub(crate) fn frame_entry() -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding: 0,
+        visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: wgpu::BufferSize::new(size_of::<crate::params::Frame>() as u64),
+        },
+        count: None,
+    }
+}
+
+/// The layout and bind group of a pass that reads the `Frame` uniform alone.
+pub(crate) fn frame_only_layout(device: &wgpu::Device, label: &str) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &[frame_entry()] })
+}
+
+pub(crate) fn frame_only_bind_group(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+    frame: &crate::params::Frame,
+) -> wgpu::BindGroup {
+    let buffer = uniform(device, label, bytemuck::bytes_of(frame));
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &[wgpu::BindGroupEntry { binding: 0, resource: buffer.as_entire_binding() }],
+    })
+}
+
 /// A uniform buffer holding `bytes`.
 pub(crate) fn uniform(device: &wgpu::Device, label: &str, bytes: &[u8]) -> wgpu::Buffer {
     device.create_buffer_init(&wgpu::util::BufferInitDescriptor {

@@ -88,19 +88,7 @@ pub struct FeedbackPass {
 impl FeedbackPass {
     pub fn new(device: &wgpu::Device) -> FeedbackPass {
         let module = draw::shader(device, "vortex feedback.wgsl", include_str!("shaders/feedback.wgsl"));
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("vortex feedback"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: wgpu::BufferSize::new(size_of::<Frame>() as u64),
-                },
-                count: None,
-            }],
-        });
+        let layout = draw::frame_only_layout(device, "vortex feedback");
         let pipelines = Pipelines::new(device, "vortex feedback", &module, &layout, FEEDBACK_FORMAT, &[]);
         FeedbackPass { pipelines, layout }
     }
@@ -124,12 +112,7 @@ impl FeedbackPass {
         let bind_group = view.map(|view| {
             let size = (target.width, target.height);
             let frame = Frame::new(textures, None, view, size, bias + target.bias(), None).jittered(jitter, size);
-            let uniform = draw::uniform(device, "vortex feedback frame", bytemuck::bytes_of(&frame));
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("vortex feedback"),
-                layout: &self.layout,
-                entries: &[wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() }],
-            })
+            draw::frame_only_bind_group(device, "vortex feedback", &self.layout, &frame)
         });
         // Integer targets take the clear colour converted to the channel type: all ones.
         let clear = NO_REQUEST as f64;

@@ -22,19 +22,7 @@ pub struct AddressProbe {
 impl AddressProbe {
     pub fn new(device: &wgpu::Device) -> AddressProbe {
         let module = draw::shader(device, "vortex probe.wgsl", include_str!("shaders/probe.wgsl"));
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("vortex probe"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: wgpu::BufferSize::new(size_of::<Frame>() as u64),
-                },
-                count: None,
-            }],
-        });
+        let layout = draw::frame_only_layout(device, "vortex probe");
         AddressProbe { pipelines: Pipelines::new(device, "vortex probe", &module, &layout, FORMAT, &[]), layout }
     }
 
@@ -62,12 +50,7 @@ impl AddressProbe {
         let colour = texture.create_view(&wgpu::TextureViewDescriptor::default());
         let depth = draw::depth_texture(device, width, height);
         let frame = Frame::new(textures, None, view, (width, height), 0.0, Some(lod as f32));
-        let uniform = draw::uniform(device, "vortex probe frame", bytemuck::bytes_of(&frame));
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("vortex probe"),
-            layout: &self.layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() }],
-        });
+        let bind_group = draw::frame_only_bind_group(device, "vortex probe", &self.layout, &frame);
         let row = (width * 16).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("vortex probe readback"),

@@ -67,14 +67,7 @@ impl SamplePass {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("vortex sample"),
             entries: &[
-                entry(
-                    0,
-                    wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: wgpu::BufferSize::new(size_of::<Frame>() as u64),
-                    },
-                ),
+                draw::frame_entry(),
                 entry(
                     1,
                     wgpu::BindingType::Texture {

@@ -9,14 +9,14 @@
 
 mod common;
 
-use common::gpu;
+use common::{gpu, pyramid};
 use vortex_gpu::{
     CacheFormat, Filter, Gpu, GpuPageTable, PageCache, RenderTarget, SamplePass, Sources, View, VirtualTexture, Window,
 };
 use vortex_vt::page::{PageId, TextureGrid};
 use vortex_vt::page_table::PageTable;
 use vortex_vt::residency::{Residency, ResidencyConfig};
-use vortex_vt::sampler::{LodChain, LodImages, Rgba8Image, bilinear};
+use vortex_vt::sampler::{LodChain, Rgba8Image, bilinear};
 
 const PAGES: u16 = 4;
 const TILE: u32 = 32;
@@ -27,49 +27,6 @@ const TARGET: u32 = 128;
 /// Largest difference allowed in any channel, in code values, and the lowest PSNR.
 const MAX_DIFF: u8 = 2;
 const MIN_PSNR_DB: f64 = 50.0;
-
-/// LOD 0 is smooth colour (sines and a ramp, 120x120 texels); each next LOD is the 2x2 mean.
-fn lod_chain() -> LodChain {
-    let size = PAGES as u32 * PAYLOAD;
-    let code = |x: f64| x.round().clamp(0.0, 255.0) as u8;
-    let lod0 = Rgba8Image::from_fn(size, size, |x, y| {
-        let (x, y) = (x as f64, y as f64);
-        [
-            code(127.5 + 120.0 * (x * 0.11 + y * 0.03).sin()),
-            code(127.5 + 120.0 * (y * 0.09 - x * 0.05).cos()),
-            code((x + y) * 255.0 / (2.0 * (size - 1) as f64)),
-            code(200.0 + 50.0 * (x * 0.07).sin()),
-        ]
-    });
-    let mut chain = vec![lod0];
-    while chain.len() < TextureGrid::new(PAGES).unwrap().lod_count as usize {
-        let prev = chain.last().unwrap();
-        let next = Rgba8Image::from_fn(prev.width / 2, prev.height / 2, |x, y| {
-            let t = |dx, dy| prev.texels[((2 * y + dy) * prev.width + 2 * x + dx) as usize];
-            std::array::from_fn(|c| {
-                let sum: u32 = [t(0, 0), t(1, 0), t(0, 1), t(1, 1)].iter().map(|t| t[c] as u32).sum();
-                ((sum + 2) / 4) as u8
-            })
-        });
-        chain.push(next);
-    }
-    LodChain(chain)
-}
-
-/// The stored tile of `page`: its payload plus `BORDER` texels of its neighbours on each side,
-/// the texture's edge texels repeated beyond the edge (the tiler's layout), RGBA8 row-major.
-fn tile(chain: &LodChain, page: PageId) -> Vec<u8> {
-    let (w, h) = chain.size(page.lod);
-    let mut out = Vec::with_capacity((TILE * TILE * 4) as usize);
-    for j in 0..TILE {
-        for i in 0..TILE {
-            let x = (page.x as i64 * PAYLOAD as i64 + i as i64 - BORDER as i64).clamp(0, w as i64 - 1) as u32;
-            let y = (page.y as i64 * PAYLOAD as i64 + j as i64 - BORDER as i64).clamp(0, h as i64 - 1) as u32;
-            out.extend_from_slice(&chain.texel(page.lod, x, y));
-        }
-    }
-    out
-}
 
 /// The GPU side of one virtual texture with the pages that one residency update makes resident
 /// for `requests`, plus the CPU page table that the update produced.
@@ -87,7 +44,8 @@ struct Fixture {
 impl Fixture {
     fn new(gpu: Gpu, requests: &[PageId]) -> Fixture {
         let grid = TextureGrid::new(PAGES).unwrap();
-        let chain = lod_chain();
+        let textures = [VirtualTexture::square(grid, TILE, BORDER)];
+        let chain = pyramid::chain(PAGES as u32 * PAYLOAD, grid.lod_count, 0);
         let slots = (CACHE_SIDE as usize).pow(2);
         let mut residency = Residency::new(&[grid], ResidencyConfig::new(slots, slots)).unwrap();
         let mut table = PageTable::new(&[grid]);
@@ -96,13 +54,12 @@ impl Fixture {
         let update = residency.update(0, requests);
         assert_eq!(update.stats.deferred, 0, "every requested page fits in one update");
         for &(page, slot) in &update.loads {
-            cache.upload(&gpu.queue, slot, &tile(&chain, page));
+            cache.upload(&gpu.queue, slot, &pyramid::tile(&chain, &textures[0], page));
         }
         let changes = table.apply(&update);
         gpu_table.write_changes(&gpu.queue, &changes);
         let pass = SamplePass::new(&gpu.device, Filter::Bilinear);
         let target = RenderTarget::new(&gpu.device, TARGET, TARGET);
-        let textures = [VirtualTexture::square(grid, TILE, BORDER)];
         Fixture { gpu, chain, cache, gpu_table, textures, table, pass, target }
     }
 

@@ -50,7 +50,9 @@ impl Synthetic {
     }
 }
 
-fn chain(side: u32, lods: u8, seed: u32) -> LodChain {
+/// LOD 0 of `side²` texels (smooth colour with finer detail, opaque), then each LOD the 2x2
+/// mean of the one above, `lods` in all.
+pub fn chain(side: u32, lods: u8, seed: u32) -> LodChain {
     let code = |x: f64| x.round().clamp(0.0, 255.0) as u8;
     let s = seed as f64;
     let lod0 = Rgba8Image::from_fn(side, side, |x, y| {
@@ -77,7 +79,9 @@ fn chain(side: u32, lods: u8, seed: u32) -> LodChain {
     LodChain(levels)
 }
 
-fn tile(chain: &LodChain, t: &VirtualTexture, page: PageId) -> Vec<u8> {
+/// The stored tile of `page`: its payload plus the border from its neighbours, the texture's
+/// edge texels repeated beyond the edge (the tiler's layout), RGBA8 row-major.
+pub fn tile(chain: &LodChain, t: &VirtualTexture, page: PageId) -> Vec<u8> {
     let (w, h) = chain.size(page.lod);
     let (ts, b, p) = (t.tile_size as i64, t.border as i64, t.payload() as i64);
     let mut out = Vec::with_capacity((ts * ts * 4) as usize);
