@@ -37,6 +37,9 @@ pub struct InfoFile {
     pub zstd_level: Option<i32>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bc7_effort: Option<String>,
+    /// How LODs were made (`--filter`); absent in files written before it existed (`box`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub filter: Option<String>,
 }
 
 /// A complete description, as written after a successful run.

@@ -4,8 +4,9 @@
 //! The modules follow the data: [`source`] delivers rows, [`band`] holds the rows a row of
 //! pages needs, [`pyramid`] cascades exact sums to the coarser LODs, [`cut`] assembles pages
 //! with their borders, [`codec`] encodes them and [`sink`] stores them; [`split`] runs that
-//! pipeline. [`layout`] is the page grid's geometry, [`settings`] and [`info`] turn flags and
-//! `info.json` into options and back. See `docs/architecture.md`.
+//! pipeline; [`filter`] and [`resample`] are the LOD filters. [`layout`] is the page grid's
+//! geometry, [`settings`] and [`info`] turn flags and `info.json` into options and back. See
+//! `docs/architecture.md`.
 
 pub mod background;
 pub mod band;
@@ -13,12 +14,14 @@ pub mod codec;
 pub mod cut;
 pub mod error;
 pub mod filename;
+pub mod filter;
 pub mod info;
 pub mod layout;
 pub mod pack_sink;
 pub mod pixel;
 pub mod pyramid;
 pub mod repack;
+pub mod resample;
 pub mod settings;
 pub mod sink;
 pub mod source;

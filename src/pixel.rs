@@ -107,8 +107,9 @@ impl fmt::Display for PixelLayout {
 }
 
 /// A sample type the pipeline can carry. Sums are taken in `u64`, which holds the sum of
-/// 4^24 samples of 16 bits, far beyond any pyramid a 2^24-texel side can have.
-pub trait Sample: Copy + Default + PartialEq + Send + Sync + Into<u64> + bytemuck::Pod + 'static {
+/// 4^24 samples of 16 bits, far beyond any pyramid a 2^24-texel side can have (some LOD
+/// filters sum wider values, in `u128` where needed).
+pub trait Sample: Copy + Default + PartialEq + Send + Sync + Into<u64> + Into<u128> + bytemuck::Pod + 'static {
     const DEPTH: Depth;
     const MAX: u16;
     fn to_u64(self) -> u64;

@@ -8,11 +8,59 @@
 //!
 //! Rows are consumed one at a time: a level keeps one half-built output row (the horizontal
 //! pair sums of an even row, waiting for the odd one), so the extra memory is one row per level.
+//!
+//! What is summed depends on the filter ([`crate::filter`]): the stored samples for `box`,
+//! fixed-point linear light or alpha-weighted colour for the others. Sums are `u64` unless the
+//! filter's values could overflow one over the pyramid's depth; then they are `u128` ([`Acc`]).
+
+use std::ops::Add;
 
 use crate::pixel::Sample;
 
+/// An exact sum: `u64`, or `u128` for the filters whose sums could exceed it.
+pub trait Acc:
+    Copy + Default + PartialEq + Send + Sync + 'static + Add<Output = Self> + From<u8> + From<u16> + From<u64>
+{
+    /// `round_half_up(self / 2^shift)`; the result fits in a `u64`.
+    fn round_shift(self, shift: u32) -> u64;
+    /// `round_half_up(self / d)`; the result fits in a `u64`.
+    fn round_div(self, d: u64) -> u64;
+    /// `round_half_up(self / d)` for a divisor that is itself a sum (`d > 0`).
+    fn round_ratio(self, d: Self) -> u64;
+}
+
+impl Acc for u64 {
+    #[inline]
+    fn round_shift(self, shift: u32) -> u64 {
+        (self + (1 << shift >> 1)) >> shift
+    }
+    #[inline]
+    fn round_div(self, d: u64) -> u64 {
+        (2 * self + d) / (2 * d)
+    }
+    #[inline]
+    fn round_ratio(self, d: u64) -> u64 {
+        (2 * self + d) / (2 * d)
+    }
+}
+
+impl Acc for u128 {
+    #[inline]
+    fn round_shift(self, shift: u32) -> u64 {
+        ((self + (1 << shift >> 1)) >> shift) as u64
+    }
+    #[inline]
+    fn round_div(self, d: u64) -> u64 {
+        ((2 * self + d as u128) / (2 * d as u128)) as u64
+    }
+    #[inline]
+    fn round_ratio(self, d: u128) -> u64 {
+        ((2 * self + d) / (2 * d)) as u64
+    }
+}
+
 /// Reduces the rows of LOD `lod` into rows of LOD `lod + 1`.
-pub struct Reducer {
+pub struct Reducer<A = u64> {
     channels: usize,
     /// Width of the output level in texels.
     out_width: usize,
@@ -22,15 +70,15 @@ pub struct Reducer {
     src_height: u64,
     footprint: u64,
     /// Horizontal pair sums of the rows received so far for the current output row.
-    acc: Vec<u64>,
+    acc: Vec<A>,
     rows_in_acc: u32,
     /// Index of the output row being built.
     out_row: u64,
 }
 
 /// An exact output row: sums plus what they must be divided by.
-pub struct ExactRow<'a> {
-    pub sums: &'a [u64],
+pub struct ExactRow<'a, A = u64> {
+    pub sums: &'a [A],
     pub y: u64,
     row_weight: u64,
     col_weight: &'a [u64],
@@ -40,10 +88,10 @@ pub struct ExactRow<'a> {
     channels: usize,
 }
 
-impl Reducer {
+impl<A: Acc> Reducer<A> {
     /// `src_width`/`src_height` are the source image's size at LOD 0; `in_width` is the width of
     /// the input level (LOD `lod`).
-    pub fn new(src_width: u64, src_height: u64, lod: u32, in_width: usize, channels: usize) -> Reducer {
+    pub fn new(src_width: u64, src_height: u64, lod: u32, in_width: usize, channels: usize) -> Reducer<A> {
         let footprint = 1u64 << (lod + 1);
         let out_width = in_width.div_ceil(2);
         let col_weight = (0..out_width as u64).map(|x| footprint.min(src_width - x * footprint)).collect();
@@ -53,7 +101,7 @@ impl Reducer {
             col_weight,
             src_height,
             footprint,
-            acc: vec![0; out_width * channels],
+            acc: vec![A::default(); out_width * channels],
             rows_in_acc: 0,
             out_row: 0,
         }
@@ -64,18 +112,18 @@ impl Reducer {
     }
 
     /// Adds one input row (samples or exact sums); returns the output row once two rows are in.
-    pub fn push<S: Copy + Into<u64>>(&mut self, row: &[S]) -> Option<ExactRow<'_>> {
+    pub fn push<S: Copy + Into<A>>(&mut self, row: &[S]) -> Option<ExactRow<'_, A>> {
         add_column_pairs(row, self.channels, &mut self.acc, self.rows_in_acc == 0);
         self.rows_in_acc += 1;
         if self.rows_in_acc == 2 { Some(self.emit()) } else { None }
     }
 
     /// Emits the last output row if the input had an odd number of rows.
-    pub fn finish(&mut self) -> Option<ExactRow<'_>> {
+    pub fn finish(&mut self) -> Option<ExactRow<'_, A>> {
         if self.rows_in_acc == 1 { Some(self.emit()) } else { None }
     }
 
-    fn emit(&mut self) -> ExactRow<'_> {
+    fn emit(&mut self) -> ExactRow<'_, A> {
         self.rows_in_acc = 0;
         let y = self.out_row;
         self.out_row += 1;
@@ -97,43 +145,57 @@ impl Reducer {
     }
 }
 
-impl ExactRow<'_> {
-    /// The row's texels rounded to the nearest sample value (halves round up).
+impl<A: Acc> ExactRow<'_, A> {
+    /// The row's texels rounded to the nearest sample value (halves round up): the `box` filter.
     pub fn round_into<T: Sample>(&self, out: &mut [T]) {
         let c = self.channels;
         debug_assert_eq!(out.len(), self.sums.len());
         let full_cols = self.full_cols;
         let (head, tail) = out.split_at_mut(full_cols * c);
         let shift = (self.footprint * self.footprint).trailing_zeros();
-        let half = 1u64 << (shift - 1);
         for (o, s) in head.iter_mut().zip(self.sums) {
-            *o = T::from_u64((s + half) >> shift);
+            *o = T::from_u64(s.round_shift(shift));
         }
         for (i, o) in tail.iter_mut().enumerate() {
             let x = full_cols + i / c;
-            let weight = self.col_weight[x] * self.row_weight;
-            *o = T::from_u64((2 * self.sums[full_cols * c + i] + weight) / (2 * weight));
+            *o = T::from_u64(self.sums[full_cols * c + i].round_div(self.weight(x)));
+        }
+    }
+
+    /// Real source pixels under texel `x`.
+    #[inline]
+    pub fn weight(&self, x: usize) -> u64 {
+        self.col_weight[x] * self.row_weight
+    }
+
+    /// `sum` (one of texel `x`'s sums) divided by the texel's pixel count, rounded half up.
+    #[inline]
+    pub fn mean(&self, x: usize, sum: A) -> u64 {
+        if x < self.full_cols {
+            sum.round_shift((self.footprint * self.footprint).trailing_zeros())
+        } else {
+            sum.round_div(self.weight(x))
         }
     }
 }
 
 /// `dst[x] (+)= src[2x] + src[2x+1]` per channel; an odd last column is taken alone.
-fn add_column_pairs<S: Copy + Into<u64>>(src: &[S], c: usize, dst: &mut [u64], assign: bool) {
+fn add_column_pairs<S: Copy + Into<A>, A: Acc>(src: &[S], c: usize, dst: &mut [A], assign: bool) {
     // A constant channel count lets the compiler unroll and vectorise the inner loop.
     match (c, assign) {
-        (1, true) => pairs::<S, 1, true>(src, dst),
-        (1, false) => pairs::<S, 1, false>(src, dst),
-        (2, true) => pairs::<S, 2, true>(src, dst),
-        (2, false) => pairs::<S, 2, false>(src, dst),
-        (3, true) => pairs::<S, 3, true>(src, dst),
-        (3, false) => pairs::<S, 3, false>(src, dst),
-        (4, true) => pairs::<S, 4, true>(src, dst),
-        (4, false) => pairs::<S, 4, false>(src, dst),
+        (1, true) => pairs::<S, A, 1, true>(src, dst),
+        (1, false) => pairs::<S, A, 1, false>(src, dst),
+        (2, true) => pairs::<S, A, 2, true>(src, dst),
+        (2, false) => pairs::<S, A, 2, false>(src, dst),
+        (3, true) => pairs::<S, A, 3, true>(src, dst),
+        (3, false) => pairs::<S, A, 3, false>(src, dst),
+        (4, true) => pairs::<S, A, 4, true>(src, dst),
+        (4, false) => pairs::<S, A, 4, false>(src, dst),
         _ => unreachable!("1 to 4 channels"),
     }
 }
 
-fn pairs<S: Copy + Into<u64>, const C: usize, const ASSIGN: bool>(src: &[S], dst: &mut [u64]) {
+fn pairs<S: Copy + Into<A>, A: Acc, const C: usize, const ASSIGN: bool>(src: &[S], dst: &mut [A]) {
     let pairs = src.len() / (2 * C);
     let (body, rest) = src.split_at(pairs * 2 * C);
     let (dst_body, dst_rest) = dst.split_at_mut(pairs * C);

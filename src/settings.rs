@@ -8,6 +8,7 @@ use crate::background::Background;
 use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling, ZSTD_LEVELS};
 use crate::error::{Result, TilerError};
 use crate::filename::FilenameFormat;
+use crate::filter::Filter;
 use crate::info::{FORMAT_VERSION, InfoFile};
 use crate::layout::Layout;
 use crate::pixel::{Channels, Depth, PixelLayout};
@@ -56,6 +57,7 @@ pub struct Requested {
     pub flatten: bool,
     pub tile_depth: Option<Depth>,
     pub filename_format: Option<String>,
+    pub filter: Option<Filter>,
 }
 
 /// Combines flags, an existing `info.json` (at `info_path`) and the source into settings.
@@ -125,6 +127,10 @@ pub fn resolve(
         },
         flatten,
         tile_depth,
+        filter: match req.filter {
+            Some(f) => f,
+            None => parse_member(info.filter.as_deref(), "filter", &field_err)?.unwrap_or_default(),
+        },
     };
     let stored = codec.stored_layout(source, flatten, tile_depth)?;
     if let Some(want) = want_channels.filter(|c| *c != stored.channels) {
@@ -270,6 +276,7 @@ pub fn describe(l: &Layout, stored: PixelLayout, opts: &SplitOptions, names: &Fi
         png_compression: codec.png_compression,
         zstd_level: codec.zstd_level,
         bc7_effort: codec.bc7_effort,
+        filter: Some(opts.filter.name().into()),
     }
 }
 

@@ -17,9 +17,11 @@ use crate::band::Band;
 use crate::codec::{Codec, TileEncoder};
 use crate::cut::{self, Padding, Run};
 use crate::error::{Result, TilerError};
+use crate::filter::{ExactFilter, Filter};
 use crate::layout::Layout;
 use crate::pixel::{Depth, PixelLayout, Sample};
-use crate::pyramid::{ExactRow, Reducer};
+use crate::pyramid::{Acc, ExactRow, Reducer};
+use crate::resample::Resampler;
 use crate::sink::TileSink;
 use crate::source::RowSource;
 
@@ -34,6 +36,8 @@ pub struct SplitOptions {
     pub flatten: bool,
     /// Store tiles at this depth instead of the source's (JPEG is always 8-bit).
     pub tile_depth: Option<Depth>,
+    /// How each LOD is made from the finer ones.
+    pub filter: Filter,
 }
 
 /// Watches a run: told of finished tiles, asked whether to stop.
@@ -115,8 +119,13 @@ fn run<T: Sample>(
     let tiles = AtomicU64::new(0);
     std::thread::scope(|scope| {
         let producer = scope.spawn(move || {
-            let mut pyramid = Pyramid::new(layout, channels.count(), padding, tx.clone());
-            if let Err(e) = pyramid.run(source, progress) {
+            let exact = ExactFilter::new(opts.filter, src_layout);
+            let result = if exact.is_some_and(|f| f.needs_u128(layout.lod_count)) {
+                Pyramid::<T, u128>::new(layout, src_layout, opts.filter, padding, tx.clone()).run(source, progress)
+            } else {
+                Pyramid::<T, u64>::new(layout, src_layout, opts.filter, padding, tx.clone()).run(source, progress)
+            };
+            if let Err(e) = result {
                 let _ = tx.send(Err(e));
             }
         });
@@ -207,49 +216,84 @@ fn prepare<T: Sample>(encoder: &TileEncoder<T>, sink: &dyn TileSink, lod: u32, t
     Ok(Stored::Encoded(bytes))
 }
 
-/// One LOD in flight: its band, the tile rows cut so far and the reducer to the next LOD.
-struct Level<T> {
+/// How a level makes the next one.
+enum Down<T, A> {
+    /// The exact filters: a cascade of sums.
+    Exact(Reducer<A>),
+    /// The resampling filters: the next level from this one's rounded rows.
+    Resample(Box<Resampler<T>>),
+}
+
+/// One LOD in flight: its band, the tile rows cut so far and the reduction to the next LOD.
+struct Level<T, A> {
     lod: u32,
     extent: (u32, u32),
     band: Band<T>,
     next_tile_row: u32,
     x_runs: Vec<Vec<Run>>,
-    reducer: Option<Reducer>,
+    down: Option<Down<T, A>>,
     /// The current row, rounded from exact sums.
     row: Vec<T>,
 }
 
-struct Pyramid<T> {
+/// What every level's cutting needs.
+struct Cutter<'a, T> {
+    layout: &'a Layout,
+    channels: usize,
+    padding: &'a Padding<T>,
+    out: &'a SyncSender<Result<Batch<T>>>,
+}
+
+struct Pyramid<T, A> {
     layout: Layout,
     channels: usize,
     padding: Padding<T>,
-    levels: Vec<Level<T>>,
+    levels: Vec<Level<T, A>>,
     out: SyncSender<Result<Batch<T>>>,
+    /// What the exact cascade sums when it is not the samples themselves.
+    exact: Option<ExactFilter>,
+    /// A source row as `exact` sums it.
+    prepared: Vec<u64>,
 }
 
-impl<T: Sample> Pyramid<T> {
-    fn new(layout: Layout, channels: usize, padding: Padding<T>, out: SyncSender<Result<Batch<T>>>) -> Self {
+impl<T: Sample + Into<A>, A: Acc> Pyramid<T, A> {
+    fn new(
+        layout: Layout,
+        pixels: PixelLayout,
+        filter: Filter,
+        padding: Padding<T>,
+        out: SyncSender<Result<Batch<T>>>,
+    ) -> Self {
         let edge = padding == Padding::Edge;
+        let channels = pixels.channels.count();
         let levels = (0..layout.lod_count)
             .map(|lod| {
                 let extent = layout.level_extent(lod);
                 let row_len = extent.0 as usize * channels;
                 let x_runs =
                     (0..layout.tiles_per_side(lod)).map(|t| cut::runs(&layout, lod, t, extent.0, edge)).collect();
-                let reducer = (lod + 1 < layout.lod_count)
-                    .then(|| Reducer::new(layout.width as u64, layout.height as u64, lod, extent.0 as usize, channels));
+                let down = (lod + 1 < layout.lod_count).then(|| {
+                    if filter.is_exact() {
+                        let (w, h) = (layout.width as u64, layout.height as u64);
+                        Down::Exact(Reducer::new(w, h, lod, extent.0 as usize, channels))
+                    } else {
+                        Down::Resample(Box::new(Resampler::new(filter, pixels, extent.0 as usize, extent.1 as u64)))
+                    }
+                });
                 Level {
                     lod,
                     extent,
                     band: Band::new(row_len, layout.tile_size as usize + 1),
                     next_tile_row: 0,
                     x_runs,
-                    reducer,
+                    down,
                     row: vec![T::default(); row_len],
                 }
             })
             .collect();
-        Pyramid { layout, channels, padding, levels, out }
+        let exact = ExactFilter::new(filter, pixels);
+        let prepared = if exact.is_some() { vec![0; layout.width as usize * channels] } else { Vec::new() };
+        Pyramid { layout, channels, padding, levels, out, exact, prepared }
     }
 
     fn run(&mut self, mut source: Box<dyn RowSource>, progress: &dyn Progress) -> Result<()> {
@@ -261,55 +305,90 @@ impl<T: Sample> Pyramid<T> {
             source.read_row(bytemuck::cast_slice_mut(&mut row))?;
             self.push_source_row(&row)?;
         }
-        // Odd heights leave a half-built row in each reducer: flush them top-down.
+        // Odd heights leave a half-built row in each reducer: flush them top-down. (Resamplers
+        // finish with their last input row.)
+        let cutter = Cutter { layout: &self.layout, channels: self.channels, padding: &self.padding, out: &self.out };
         for k in 0..self.levels.len() {
             let (this, rest) = self.levels[k..].split_first_mut().expect("level k exists");
-            if let Some(exact) = this.reducer.as_mut().and_then(Reducer::finish) {
-                Self::feed(rest, &exact, &self.layout, self.channels, &self.padding, &self.out)?;
+            if let Some(Down::Exact(reducer)) = &mut this.down
+                && let Some(exact) = reducer.finish()
+            {
+                Self::feed_exact(rest, &exact, &cutter, self.exact.as_ref())?;
             }
         }
         Ok(())
     }
 
     fn push_source_row(&mut self, row: &[T]) -> Result<()> {
+        let cutter = Cutter { layout: &self.layout, channels: self.channels, padding: &self.padding, out: &self.out };
         let (first, rest) = self.levels.split_first_mut().expect("at least one level");
         first.band.push(row);
-        first.cut_ready(&self.layout, self.channels, &self.padding, &self.out)?;
-        if let Some(exact) = first.reducer.as_mut().and_then(|r| r.push(row)) {
-            Self::feed(rest, &exact, &self.layout, self.channels, &self.padding, &self.out)?;
+        first.cut_ready(&cutter)?;
+        match &mut first.down {
+            Some(Down::Exact(reducer)) => {
+                let exact = match &self.exact {
+                    None => reducer.push(row),
+                    Some(filter) => {
+                        filter.prepare(row, &mut self.prepared);
+                        reducer.push(&self.prepared)
+                    }
+                };
+                if let Some(exact) = exact {
+                    Self::feed_exact(rest, &exact, &cutter, self.exact.as_ref())?;
+                }
+            }
+            Some(Down::Resample(resampler)) => {
+                if let Some(rows) = resampler.push(row)? {
+                    Self::feed_rows(rest, rows, &cutter)?;
+                }
+            }
+            None => {}
         }
         Ok(())
     }
 
     /// Gives `levels[0]` its next exact row and cascades into the levels below it.
-    fn feed(
-        levels: &mut [Level<T>],
-        exact: &ExactRow,
-        layout: &Layout,
-        channels: usize,
-        padding: &Padding<T>,
-        out: &SyncSender<Result<Batch<T>>>,
+    fn feed_exact(
+        levels: &mut [Level<T, A>],
+        exact: &ExactRow<A>,
+        cutter: &Cutter<T>,
+        filter: Option<&ExactFilter>,
     ) -> Result<()> {
         let (this, rest) = levels.split_first_mut().expect("a level below the reducer");
-        exact.round_into(&mut this.row);
+        match filter {
+            None => exact.round_into(&mut this.row),
+            Some(f) => f.finish(exact, &mut this.row),
+        }
         this.band.push(&this.row);
-        this.cut_ready(layout, channels, padding, out)?;
-        if let Some(next) = this.reducer.as_mut().and_then(|r| r.push(exact.sums)) {
-            Self::feed(rest, &next, layout, channels, padding, out)?;
+        this.cut_ready(cutter)?;
+        if let Some(Down::Exact(reducer)) = &mut this.down
+            && let Some(next) = reducer.push(exact.sums)
+        {
+            Self::feed_exact(rest, &next, cutter, filter)?;
+        }
+        Ok(())
+    }
+
+    /// Gives `levels[0]` its next rows (row-major) and resamples them into the levels below it.
+    fn feed_rows(levels: &mut [Level<T, A>], rows: &[T], cutter: &Cutter<T>) -> Result<()> {
+        let (this, rest) = levels.split_first_mut().expect("a level below the resampler");
+        for row in rows.chunks_exact(this.row.len()) {
+            this.band.push(row);
+            this.cut_ready(cutter)?;
+            if let Some(Down::Resample(resampler)) = &mut this.down
+                && let Some(next) = resampler.push(row)?
+            {
+                Self::feed_rows(rest, next, cutter)?;
+            }
         }
         Ok(())
     }
 }
 
-impl<T: Sample> Level<T> {
+impl<T: Sample, A> Level<T, A> {
     /// Cuts every tile row whose rows are all in the band, then drops rows no longer needed.
-    fn cut_ready(
-        &mut self,
-        layout: &Layout,
-        channels: usize,
-        padding: &Padding<T>,
-        out: &SyncSender<Result<Batch<T>>>,
-    ) -> Result<()> {
+    fn cut_ready(&mut self, cutter: &Cutter<T>) -> Result<()> {
+        let Cutter { layout, channels, padding, out } = *cutter;
         let (_, height) = self.extent;
         let rows = layout.tiles_per_side(self.lod);
         while self.next_tile_row < rows

@@ -241,3 +241,58 @@ fn ctrl_c_stops_the_run_and_leaves_nothing_behind() {
     assert!(err.contains("interrupted"), "{err}");
     assert!(!out.exists() && !staging.exists(), "nothing is left behind");
 }
+
+#[test]
+fn filter_flag_is_checked_recorded_and_read_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let rgba = dir.path().join("rgba.png");
+    image::RgbaImage::from_fn(70, 50, |x, y| image::Rgba([x as u8, y as u8, 7, if x < 30 { 255 } else { 0 }]))
+        .save(&rgba)
+        .unwrap();
+    let info = |dir: &Path| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(dir.join("info.json")).unwrap()).unwrap()
+    };
+
+    // A bad value is refused by the parser, which lists the good ones.
+    let r = run(&["split", s(&rgba), "-o", s(&dir.path().join("bad")), "--filter", "gaussian"]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    for needle in ["gaussian", "--filter", "box", "linear-premultiplied", "lanczos3", "mitchell"] {
+        assert!(err.contains(needle), "stderr lacks {needle}: {err}");
+    }
+    assert!(!dir.path().join("bad").exists());
+
+    // Recorded in info.json; box when not given.
+    let out = dir.path().join("out");
+    let r = run(&["split", s(&rgba), "-o", s(&out), "--tile-size", "16", "--filter", "premultiplied", "-q"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(info(&out)["filter"], "premultiplied");
+    let plain = dir.path().join("plain");
+    assert!(run(&["split", s(&rgba), "-o", s(&plain), "--tile-size", "16", "-q"]).status.success());
+    assert_eq!(info(&plain)["filter"], "box");
+
+    // An existing info.json's filter is this run's default, and the flag overrides it.
+    assert!(run(&["split", s(&rgba), "-o", s(&out), "-q"]).status.success());
+    assert_eq!(info(&out)["filter"], "premultiplied");
+    assert!(run(&["split", s(&rgba), "-o", s(&out), "--filter", "lanczos3", "-q"]).status.success());
+    assert_eq!(info(&out)["filter"], "lanczos3");
+    let conf = dir.path().join("conf");
+    std::fs::create_dir(&conf).unwrap();
+    std::fs::write(conf.join("info.json"), r#"{"filter":"gaussian"}"#).unwrap();
+    fails_with(&run(&["split", s(&rgba), "-o", s(&conf)]), &["info.json", "filter", "gaussian"]);
+
+    // convert takes it too; a pack's metadata records it, and pack keeps what the files were made with.
+    let conv = dir.path().join("conv");
+    let r = run(&["convert", s(&out), "-o", s(&conv), "--tile-size", "32", "--filter", "linear", "-q"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(info(&conv)["filter"], "linear");
+    let pack = dir.path().join("conv.vtpk");
+    assert!(run(&["pack", s(&conv), "-o", s(&pack), "-q"]).status.success());
+    let r = run(&["info", s(&pack), "--json"]);
+    let json: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    assert_eq!(json["metadata"]["filter"], "linear");
+    let direct = dir.path().join("direct.vtpk");
+    assert!(run(&["split", s(&rgba), "--pack", s(&direct), "--filter", "mitchell", "-q"]).status.success());
+    let json: serde_json::Value = serde_json::from_slice(&run(&["info", s(&direct), "--json"]).stdout).unwrap();
+    assert_eq!(json["metadata"]["filter"], "mitchell");
+}

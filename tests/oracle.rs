@@ -5,9 +5,24 @@ mod common;
 use common::*;
 use proptest::prelude::*;
 use vortex_tiler::background::Background;
+use vortex_tiler::filter::Filter;
+use vortex_tiler::split::SplitOptions;
+
+const FILTERS: [Filter; 6] = [
+    Filter::Box,
+    Filter::Linear,
+    Filter::Premultiplied,
+    Filter::LinearPremultiplied,
+    Filter::Lanczos3,
+    Filter::Mitchell,
+];
 
 fn check(image: &Image, tile: u32, border: u32, background: Background, threads: usize) {
-    let opts = png_options(tile, border, background);
+    check_filtered(image, tile, border, background, threads, Filter::Box)
+}
+
+fn check_filtered(image: &Image, tile: u32, border: u32, background: Background, threads: usize, filter: Filter) {
+    let opts = SplitOptions { filter, ..png_options(tile, border, background) };
     let (summary, got) = run_pipeline(image, &opts, threads);
     let want = naive_tiles(image, &opts);
     assert_eq!(summary.tiles as usize, want.len());
@@ -16,7 +31,7 @@ fn check(image: &Image, tile: u32, border: u32, background: Background, threads:
         let g = &got[key];
         assert!(
             g == w,
-            "tile (lod, x, y) = {key:?} differs for {}x{} {} tile {tile} border {border} {background}",
+            "tile (lod, x, y) = {key:?} differs for {}x{} {} tile {tile} border {border} {background} filter {filter}",
             image.width,
             image.height,
             image.layout
@@ -43,6 +58,22 @@ proptest! {
         let background = colour.map_or(Background::Edge, Background::Colour);
         check(&image, tile, border, background, threads);
     }
+
+    /// Every filter, streamed in bands, against its whole-image definition.
+    #[test]
+    fn every_filter_matches_its_oracle(
+        w in 1u32..70,
+        h in 1u32..70,
+        layout_idx in 0usize..8,
+        filter_idx in 0usize..FILTERS.len(),
+        tile in 8u32..24,
+        border in 0u32..3,
+        threads in 1usize..3,
+        seed in any::<u64>(),
+    ) {
+        let image = Image::random(w, h, layouts()[layout_idx], seed);
+        check_filtered(&image, tile, border, Background::Edge, threads, FILTERS[filter_idx]);
+    }
 }
 
 #[test]
@@ -50,6 +81,18 @@ fn thin_and_tiny_images() {
     let rgb = layouts()[4];
     for (w, h) in [(1, 1), (1, 37), (37, 1), (2, 2), (17, 16), (16, 17), (33, 65)] {
         check(&Image::random(w, h, rgb, w as u64 * 31 + h as u64), 16, 2, Background::Edge, 2);
+    }
+}
+
+#[test]
+fn odd_tiny_and_just_over_a_tile_sizes_for_every_filter() {
+    // 1x1, 1xN, Nx1, 2^k - 1, 2^k + 1, and one texel past a multiple of the 12-texel payload.
+    let sizes = [(1, 1), (1, 33), (33, 1), (63, 65), (65, 63), (2, 129), (25, 37), (37, 25)];
+    for filter in FILTERS {
+        for (i, (w, h)) in sizes.into_iter().enumerate() {
+            let layout = layouts()[[7, 3, 5, 0][i % 4]];
+            check_filtered(&Image::random(w, h, layout, i as u64), 16, 2, Background::Edge, 2, filter);
+        }
     }
 }
 

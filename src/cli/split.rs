@@ -7,6 +7,7 @@ use anyhow::{Context, Result, bail};
 
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
+use vortex_tiler::filter::Filter;
 use vortex_tiler::info::InfoFile;
 use vortex_tiler::layout::Layout;
 use vortex_tiler::pack_sink::PackSink;
@@ -72,6 +73,13 @@ pub struct OutputArgs {
     /// Composite alpha over --background (black if edge) so that RGBA sources can be stored as JPEG.
     #[arg(long)]
     flatten: bool,
+
+    /// How each LOD is made from the finer ones [default: box]. box, linear, premultiplied and
+    /// linear-premultiplied are exact means over the source footprint, rounded once (linear:
+    /// in linear light; premultiplied: colour weighted by alpha, no fringes from transparent
+    /// texels); lanczos3 and mitchell resample each LOD from the previous one.
+    #[arg(long, value_enum)]
+    filter: Option<Filter>,
 
     /// Sample type of stored tiles: unsignedByte or unsignedShort (png, raw, zstd, zstd-delta)
     /// [default: the source's].
@@ -176,6 +184,7 @@ pub fn tile(source: Box<dyn RowSource>, names: Option<String>, a: &OutputArgs, s
         flatten: a.flatten,
         tile_depth: a.tile_type,
         filename_format: names,
+        filter: a.filter,
         ..a.enc.requested()
     };
     let existing_ref = info_path.as_deref().zip(existing.as_ref());

@@ -8,8 +8,10 @@ use std::sync::Mutex;
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Codec, PngLevel};
 use vortex_tiler::error::Result;
+use vortex_tiler::filter::{Filter, SrgbTable};
 use vortex_tiler::layout::Layout;
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
+use vortex_tiler::resample::resample_level;
 use vortex_tiler::sink::TileSink;
 use vortex_tiler::source::{ImageHeader, RowSource};
 use vortex_tiler::split::{SplitOptions, Summary, split};
@@ -103,6 +105,7 @@ pub fn png_options(tile_size: u32, border: u32, background: Background) -> Split
         background,
         flatten: false,
         tile_depth: None,
+        filter: Filter::Box,
     }
 }
 
@@ -131,26 +134,80 @@ pub fn decode_png(bytes: &[u8]) -> Vec<u16> {
 /// LOD `lod` of `image` computed directly from the source: each texel is the rounded mean of
 /// the real source pixels under it (halves round up). Returns (width, height, samples).
 pub fn naive_level(image: &Image, lod: u32) -> (u32, u32, Vec<u16>) {
+    naive_level_filtered(image, lod, Filter::Box)
+}
+
+/// LOD `lod` of `image` by an exact filter, texel by texel from the source footprint (the
+/// definitions in docs/info-json.md): the mean of the stored values (`box`), of their
+/// fixed-point linear-light decodes, encoded back (`linear`), or of colour weighted by alpha
+/// divided by the alpha sum, 0 where that is 0 (`premultiplied`). u128 sums, rounded once,
+/// halves up.
+pub fn naive_level_filtered(image: &Image, lod: u32, filter: Filter) -> (u32, u32, Vec<u16>) {
     let f = 1u64 << lod;
     let (w, h) = (image.width as u64, image.height as u64);
     let (lw, lh) = (w.div_ceil(f), h.div_ceil(f));
     let c = image.channels();
+    let alpha = image.layout.channels.has_alpha().then(|| c - 1);
+    let linear = matches!(filter, Filter::Linear | Filter::LinearPremultiplied);
+    let premultiplied = matches!(filter, Filter::Premultiplied | Filter::LinearPremultiplied) && alpha.is_some();
+    let table = SrgbTable::get(image.layout.depth);
+    let round = |sum: u128, n: u128| ((2 * sum + n) / (2 * n)) as u64;
     let mut out = Vec::with_capacity((lw * lh) as usize * c);
     for y in 0..lh {
         for x in 0..lw {
+            let px = |sx: u64, sy: u64, ch: usize| image.samples[((sy * w + sx) as usize) * c + ch];
+            let footprint =
+                || (y * f..((y + 1) * f).min(h)).flat_map(|sy| (x * f..((x + 1) * f).min(w)).map(move |sx| (sx, sy)));
+            let n = footprint().count() as u128;
+            let alpha_sum: u128 = alpha.map_or(0, |a| footprint().map(|(sx, sy)| px(sx, sy, a) as u128).sum());
             for ch in 0..c {
-                let (mut sum, mut n) = (0u64, 0u64);
-                for sy in y * f..((y + 1) * f).min(h) {
-                    for sx in x * f..((x + 1) * f).min(w) {
-                        sum += image.samples[((sy * w + sx) as usize) * c + ch] as u64;
-                        n += 1;
-                    }
+                if Some(ch) == alpha {
+                    out.push(round(alpha_sum, n) as u16);
+                    continue;
                 }
-                out.push(((2 * sum + n) / (2 * n)) as u16);
+                let value = |sx, sy| {
+                    let v = px(sx, sy, ch);
+                    let v = if linear { table.decode(v) as u128 } else { v as u128 };
+                    if premultiplied { v * px(sx, sy, alpha.unwrap()) as u128 } else { v }
+                };
+                let sum: u128 = footprint().map(|(sx, sy)| value(sx, sy)).sum();
+                let mean = match (premultiplied, alpha_sum) {
+                    (true, 0) => 0,
+                    (true, a) => round(sum, a),
+                    (false, _) => round(sum, n),
+                };
+                out.push(if linear { table.encode(mean) } else { mean as u16 });
             }
         }
     }
     (lw as u32, lh as u32, out)
+}
+
+/// Every level of `image` by `filter`, from LOD 0 to `count - 1`. Resampling filters take each
+/// level from the previous one, resized whole in one call, which the banded pipeline must match.
+pub fn naive_levels(image: &Image, filter: Filter, count: u32) -> Vec<(u32, u32, Vec<u16>)> {
+    if filter.is_exact() {
+        // LOD 0 is the source as it is, whatever the filter.
+        return (0..count)
+            .map(|lod| naive_level_filtered(image, lod, if lod == 0 { Filter::Box } else { filter }))
+            .collect();
+    }
+    let c = image.channels();
+    let mut levels = vec![(image.width, image.height, image.samples.clone())];
+    while levels.len() < count as usize {
+        let (w, h, prev) = levels.last().unwrap();
+        let (w, h) = (*w as usize, *h as usize);
+        let next: Vec<u16> = match image.layout.depth {
+            Depth::U8 => {
+                let p: Vec<u8> = prev.iter().map(|v| *v as u8).collect();
+                resample_level(filter, image.layout, &p, w, h).unwrap().into_iter().map(u16::from).collect()
+            }
+            Depth::U16 => resample_level(filter, image.layout, prev, w, h).unwrap(),
+        };
+        assert_eq!(next.len(), w.div_ceil(2) * h.div_ceil(2) * c);
+        levels.push((w.div_ceil(2) as u32, h.div_ceil(2) as u32, next));
+    }
+    levels
 }
 
 /// Every stored tile of the naive pyramid, with borders and padding, in u16 samples.
@@ -164,8 +221,8 @@ pub fn naive_tiles(image: &Image, opts: &SplitOptions) -> Tiles {
         opts.background.texel::<u8>(image.layout.channels).map(|t| t.into_iter().map(u16::from).collect())
     };
     let mut tiles = BTreeMap::new();
-    for lod in 0..layout.lod_count {
-        let (lw, lh, level) = naive_level(image, lod);
+    for (lod, (lw, lh, level)) in naive_levels(image, opts.filter, layout.lod_count).into_iter().enumerate() {
+        let lod = lod as u32;
         let last = layout.virtual_side(lod) as i64 - 1;
         let (p, b, t) = (layout.payload() as i64, layout.border as i64, layout.tile_size as i64);
         for ty in 0..layout.tiles_per_side(lod) {
