@@ -54,9 +54,8 @@ fn the_default_scene_streams_a_small_share_of_the_pack_and_converges() {
     let dir = tempfile::tempdir().unwrap();
     let pack = sample_pack(dir.path());
     let (frames, json) = (dir.path().join("frames"), dir.path().join("report.json"));
-    let out = run(&[
-        "render", "--pack", s(&pack), "--frames", s(&frames), "--report", s(&json), "--size", "128x96", "-q",
-    ]);
+    let out =
+        run(&["render", "--pack", s(&pack), "--frames", s(&frames), "--report", s(&json), "--size", "128x96", "-q"]);
     if no_gpu(&out) {
         return;
     }
@@ -78,7 +77,8 @@ fn the_default_scene_streams_a_small_share_of_the_pack_and_converges() {
     let names: Vec<String> =
         std::fs::read_dir(&frames).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into()).collect();
     assert_eq!(names.len(), 60, "{names:?}");
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(frames.join("frame-0059.png")).unwrap()));
+    let decoder =
+        png::Decoder::new(std::io::BufReader::new(std::fs::File::open(frames.join("frame-0059.png")).unwrap()));
     let info = decoder.read_info().unwrap().info().clone();
     assert_eq!((info.width, info.height), (128, 96));
     assert!(!dir.path().read_dir().unwrap().any(|e| e.unwrap().file_name().to_string_lossy().contains(".partial")));
@@ -97,7 +97,8 @@ fn the_documented_example_scene_renders() {
 
     let json = dir.path().join("report.json");
     let scene = root("docs/scene-example.json");
-    let out = run(&["render", "--pack", s(&pack), "--scene", s(&scene), "--report", s(&json), "--size", "160x120", "-q"]);
+    let out =
+        run(&["render", "--pack", s(&pack), "--scene", s(&scene), "--report", s(&json), "--size", "160x120", "-q"]);
     if no_gpu(&out) {
         return;
     }
@@ -133,7 +134,11 @@ fn bad_packs_and_scenes_are_named() {
     let scene = dir.path().join("scene.json");
     std::fs::write(&scene, r#"{"view": {"window": {"path": [{"frame": 0, "center": [0.5, 0.5], "width": 1}]}}, "effects": {"filter": "bicubic"}}"#).unwrap();
     fails_with(&run(&["render", "--pack", s(&pack), "--scene", s(&scene)]), &["scene.json", "bicubic"]);
-    std::fs::write(&scene, r#"{"view": {"window": {"texture": 3, "path": [{"frame": 0, "center": [0.5, 0.5], "width": 1}]}}}"#).unwrap();
+    std::fs::write(
+        &scene,
+        r#"{"view": {"window": {"texture": 3, "path": [{"frame": 0, "center": [0.5, 0.5], "width": 1}]}}}"#,
+    )
+    .unwrap();
     fails_with(&run(&["render", "--pack", s(&pack), "--scene", s(&scene)]), &["texture 3"]);
     std::fs::write(&scene, r#"{"view": {"window": {"path": []}}}"#).unwrap();
     fails_with(&run(&["render", "--pack", s(&pack), "--scene", s(&scene)]), &["no keyframe"]);

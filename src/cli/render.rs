@@ -90,7 +90,10 @@ pub fn run(a: RenderArgs) -> Result<()> {
     }
     e.cache_slots_per_side = a.cache_side.unwrap_or(e.cache_slots_per_side);
     e.upload_budget = a.budget.unwrap_or(e.upload_budget);
-    scene.check().and_then(|()| scene.check_textures(scene.textures.len())).map_err(|m| anyhow::anyhow!("scene: {m}"))?;
+    scene
+        .check()
+        .and_then(|()| scene.check_textures(scene.textures.len()))
+        .map_err(|m| anyhow::anyhow!("scene: {m}"))?;
 
     let packs = scene
         .textures
