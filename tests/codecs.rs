@@ -224,6 +224,42 @@ fn pack_and_convert_reencode_with_the_codec_flags() {
 }
 
 #[test]
+fn bc7_ignores_colour_under_alpha_zero() {
+    // Opaque smooth discs over a fully transparent background of random colour.
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("cutout.png");
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let img = image::RgbaImage::from_fn(96, 96, |x, y| {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        let inside = ((x as i32 - 48).pow(2) + (y as i32 - 48).pow(2)) < 30 * 30;
+        let [a, b, c, ..] = seed.to_le_bytes();
+        if inside { image::Rgba([(x * 2) as u8, (y * 2) as u8, 128, 255]) } else { image::Rgba([a, b, c, 0]) }
+    });
+    img.save(&src).unwrap();
+    let pack = dir.path().join("cutout.vtpk");
+    ok(&["split", s(&src), "--pack", s(&pack), "--tile-size", "32", "--border", "0", "--codec", "bc7", "-q"]);
+    let p = Pack::open(&pack).unwrap();
+    let id = vortex_pack::TileId { lod: 0, x: 1, y: 0 };
+    let got = decode_rgba8(&p, id.lod, id.x, id.y).unwrap().unwrap();
+    // The tile's source texels: x 32..64, y 0..32 of the image.
+    let want: Vec<u8> =
+        (0..32).flat_map(|y| (32..64).map(move |x| (x, y))).flat_map(|(x, y)| img.get_pixel(x, y).0).collect();
+    let worst_alpha = got.chunks_exact(4).zip(want.chunks_exact(4)).map(|(g, w)| g[3].abs_diff(w[3])).max().unwrap();
+    assert!(worst_alpha <= 8, "alpha off by {worst_alpha}");
+    let visible = |t: &[u8]| t[3] == 255;
+    let colour_err = got
+        .chunks_exact(4)
+        .zip(want.chunks_exact(4))
+        .filter(|(_, w)| visible(w))
+        .map(|(g, w)| (0..3).map(|c| g[c].abs_diff(w[c])).max().unwrap())
+        .max()
+        .unwrap();
+    assert!(colour_err <= 12, "visible colour off by {colour_err}");
+}
+
+#[test]
 fn bad_codec_combinations_are_errors_naming_the_flag() {
     let dir = tempfile::tempdir().unwrap();
     let sample = fixture("sample.png");
