@@ -52,6 +52,20 @@ pub fn solid_block(rgba: [u8; 4]) -> [u8; BLOCK_BYTES] {
     bits.value.to_le_bytes()
 }
 
+/// BC7 blocks of a `tile_size²` RGBA8 tile (rows of blocks, top down), each 4x4 block of one
+/// colour: that of its top-left texel. Exact for tiles whose blocks are one colour each.
+pub fn solid_blocks(texels: &[u8], tile_size: u32) -> Vec<u8> {
+    let side = tile_size as usize;
+    let mut out = Vec::with_capacity((side / 4).pow(2) * BLOCK_BYTES);
+    for by in (0..side).step_by(4) {
+        for bx in (0..side).step_by(4) {
+            let i = (by * side + bx) * 4;
+            out.extend_from_slice(&solid_block([texels[i], texels[i + 1], texels[i + 2], texels[i + 3]]));
+        }
+    }
+    out
+}
+
 /// A little-endian bit writer for one block.
 #[derive(Default)]
 struct Bits {

@@ -517,7 +517,7 @@ impl Shared {
                 let stand_in = stand_in_tile(self.tile_size);
                 (
                     if self.bc7.load(Ordering::Relaxed) {
-                        to_solid_blocks(&stand_in, self.tile_size)
+                        bc7::solid_blocks(&stand_in, self.tile_size)
                     } else {
                         stand_in
                     },
@@ -613,20 +613,6 @@ impl Shared {
         self.tiles_decoded.fetch_add(1, Ordering::Relaxed);
         Ok(blocks)
     }
-}
-
-/// BC7 blocks of an RGBA8 tile whose every 4x4 block is one colour (the colour of its first
-/// texel is taken).
-fn to_solid_blocks(texels: &[u8], tile_size: u32) -> Vec<u8> {
-    let side = tile_size as usize;
-    let mut out = Vec::with_capacity(CacheFormat::Bc7.tile_bytes(tile_size));
-    for by in (0..side).step_by(4) {
-        for bx in (0..side).step_by(4) {
-            let i = (by * side + bx) * 4;
-            out.extend_from_slice(&bc7::solid_block([texels[i], texels[i + 1], texels[i + 2], texels[i + 3]]));
-        }
-    }
-    out
 }
 
 /// `e`, read for `page` from its tile or ancestor `tile`, as a [`LoadError::Tile`] naming `tile`.

@@ -95,19 +95,6 @@ pub fn tile(chain: &LodChain, t: &VirtualTexture, page: PageId) -> Vec<u8> {
     out
 }
 
-/// BC7 blocks of `rgba`, each 4x4 block the colour of its top-left texel.
-pub fn solid_blocks(rgba: &[u8], tile_size: u32) -> Vec<u8> {
-    let side = tile_size as usize;
-    let mut out = Vec::new();
-    for by in (0..side).step_by(4) {
-        for bx in (0..side).step_by(4) {
-            let i = (by * side + bx) * 4;
-            out.extend_from_slice(&vortex_gpu::bc7::solid_block([rgba[i], rgba[i + 1], rgba[i + 2], rgba[i + 3]]));
-        }
-    }
-    out
-}
-
 fn write_pack(path: &Path, chain: &LodChain, t: &VirtualTexture, kind: TileKind) -> Arc<Pack> {
     let side = t.side_texels() as u32;
     let d = Description {
@@ -126,7 +113,7 @@ fn write_pack(path: &Path, chain: &LodChain, t: &VirtualTexture, kind: TileKind)
             for x in 0..level.tiles_w {
                 let mut bytes = tile(chain, t, PageId::new(0, lod as u8, x as u16, y as u16));
                 if kind == TileKind::Bc7 {
-                    bytes = solid_blocks(&bytes, t.tile_size);
+                    bytes = vortex_gpu::bc7::solid_blocks(&bytes, t.tile_size);
                 }
                 w.add(TileId { lod: lod as u32, x, y }, NewTile::Data(kind, &bytes)).unwrap();
             }
