@@ -13,56 +13,19 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use vortex_vt::analysis::{Analysis, Analyzer, analyze};
-use vortex_vt::feedback::{NO_REQUEST, encode, feedback_bias, lod_for, page_at};
+use vortex_vt::feedback::{encode, feedback_bias};
 use vortex_vt::page::{PageId, TextureGrid};
 
-const FRAME: (u32, u32) = (1280, 720);
-const FEEDBACK: (u32, u32) = (160, 90);
-const SIDE_TEXELS: f32 = 65536.0;
-const VERTICAL_FOV: f32 = 75.0;
-const YAW: f32 = 30.0;
-const PITCH: f32 = 40.0;
-const HEIGHT_M: f32 = 2.0;
-const TEXTURE_SIDE_M: f32 = 128.0;
+#[path = "common/ground.rs"]
+mod ground;
 
-/// UV on the ground plane seen through feedback pixel position (px, py), or None above the
-/// horizon.
-fn uv(px: f32, py: f32) -> Option<(f32, f32)> {
-    let (w, h) = (FEEDBACK.0 as f32, FEEDBACK.1 as f32);
-    let tan = (VERTICAL_FOV / 2.0).to_radians().tan();
-    let x = (2.0 * px / w - 1.0) * tan * w / h;
-    let y = (1.0 - 2.0 * py / h) * tan;
-    // Ray (x, y, 1) in camera space, pitched down: its forward and downward components.
-    let (s, c) = PITCH.to_radians().sin_cos();
-    let forward = c + y * s;
-    let down = s - y * c;
-    if down <= 1e-4 {
-        return None;
-    }
-    let t = HEIGHT_M / down;
-    let (ys, yc) = YAW.to_radians().sin_cos();
-    let (wx, wz) = ((x * yc - forward * ys) * t, (x * ys + forward * yc) * t);
-    Some((0.5 + wx / TEXTURE_SIDE_M, 0.25 + wz / TEXTURE_SIDE_M))
-}
+use ground::{Camera, FEEDBACK, FRAME};
 
-/// The feedback pass on the CPU: derivatives from the neighbouring pixels, as `dpdx`/`dpdy`.
+/// The still view: the camera at (64 m, 32 m), turned 30° from the texture's axes.
 fn perspective_buffer(grid: &TextureGrid) -> Vec<u32> {
-    let bias = feedback_bias(FEEDBACK.0, FEEDBACK.1, FRAME.0, FRAME.1);
-    let mut words = Vec::with_capacity((FEEDBACK.0 * FEEDBACK.1) as usize);
-    for py in 0..FEEDBACK.1 {
-        for px in 0..FEEDBACK.0 {
-            let (px, py) = (px as f32 + 0.5, py as f32 + 0.5);
-            let word = match (uv(px, py), uv(px + 1.0, py), uv(px, py + 1.0)) {
-                (Some((u, v)), Some((ux, vx)), Some((uy, vy))) => {
-                    let lod = lod_for(ux - u, vx - v, uy - u, vy - v, SIDE_TEXELS, bias, grid.lod_count);
-                    let (x, y) = page_at(u.rem_euclid(1.0), v.rem_euclid(1.0), lod, grid);
-                    encode(PageId::new(0, lod, x, y))
-                }
-                _ => NO_REQUEST,
-            };
-            words.push(word);
-        }
-    }
+    let camera = Camera { x: 64.0, z: 32.0, yaw: 30.0 };
+    let mut words = Vec::new();
+    camera.feedback(grid, feedback_bias(FEEDBACK.0, FEEDBACK.1, FRAME.0, FRAME.1), &mut words);
     words
 }
 

@@ -21,94 +21,21 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use vortex_vt::analysis::Analyzer;
-use vortex_vt::feedback::{NO_REQUEST, encode, feedback_bias, lod_for, page_at};
+use vortex_vt::feedback::feedback_bias;
 use vortex_vt::page::{PageId, TextureGrid};
 use vortex_vt::page_table::{Change, PageTable};
 use vortex_vt::residency::{FrameUpdate, Residency, ResidencyConfig};
 
-const FRAME: (u32, u32) = (1280, 720);
-const FEEDBACK: (u32, u32) = (160, 90);
+#[path = "common/ground.rs"]
+mod ground;
+
+use ground::{Camera, FEEDBACK, FRAME};
+
 const PAGES: u16 = 512;
-const SIDE_TEXELS: f32 = 65536.0;
-const TEXTURE_SIDE_M: f32 = 128.0;
 const SLOTS: usize = 1024;
 const BUDGET: usize = 32;
 const WARMUP: u64 = 300;
 const FRAMES: u64 = 2000;
-
-const VERTICAL_FOV: f32 = 75.0;
-const PITCH: f32 = 40.0;
-const HEIGHT_M: f32 = 2.0;
-/// Walking speed, metres per frame (1.4 m/s at 60 frames per second).
-const STEP_M: f32 = 1.4 / 60.0;
-
-/// Where the camera stands (metres on the ground plane, from the texture's origin) and where it looks.
-#[derive(Clone, Copy)]
-struct Camera {
-    x: f32,
-    z: f32,
-    yaw: f32,
-}
-
-impl Camera {
-    /// The heading of frame `f`, in degrees: 30° + 0.1° per frame + a ±20° sway (period ~25 s).
-    fn yaw_at(f: u64) -> f32 {
-        let f = f as f32;
-        30.0 + 0.1 * f + 20.0 * (f / 240.0).sin()
-    }
-
-    /// The camera of frame 0, at the texture's centre.
-    fn start() -> Camera {
-        Camera { x: TEXTURE_SIDE_M / 2.0, z: TEXTURE_SIDE_M / 2.0, yaw: Camera::yaw_at(0) }
-    }
-
-    /// From frame `f - 1` to frame `f`: one step forward, then the new heading.
-    fn step(&mut self, f: u64) {
-        let (s, c) = self.yaw.to_radians().sin_cos();
-        (self.x, self.z) = (self.x - s * STEP_M, self.z + c * STEP_M);
-        self.yaw = Camera::yaw_at(f);
-    }
-
-    /// UV (not yet wrapped) on the ground plane seen through feedback pixel position (px, py), or
-    /// None above the horizon.
-    fn uv(&self, px: f32, py: f32) -> Option<(f32, f32)> {
-        let (w, h) = (FEEDBACK.0 as f32, FEEDBACK.1 as f32);
-        let tan = (VERTICAL_FOV / 2.0).to_radians().tan();
-        let x = (2.0 * px / w - 1.0) * tan * w / h;
-        let y = (1.0 - 2.0 * py / h) * tan;
-        // Ray (x, y, 1) in camera space, pitched down: its forward and downward components.
-        let (s, c) = PITCH.to_radians().sin_cos();
-        let forward = c + y * s;
-        let down = s - y * c;
-        if down <= 1e-4 {
-            return None;
-        }
-        let t = HEIGHT_M / down;
-        let (ys, yc) = self.yaw.to_radians().sin_cos();
-        let (wx, wz) = ((x * yc - forward * ys) * t, (x * ys + forward * yc) * t);
-        Some(((self.x + wx) / TEXTURE_SIDE_M, (self.z + wz) / TEXTURE_SIDE_M))
-    }
-
-    /// The feedback pass on the CPU, into `words`: derivatives from the neighbouring pixels (as
-    /// `dpdx`/`dpdy`), the LOD biased by `bias` (the reduced size's plus the residency's).
-    fn feedback(&self, grid: &TextureGrid, bias: f32, words: &mut Vec<u32>) {
-        words.clear();
-        for py in 0..FEEDBACK.1 {
-            for px in 0..FEEDBACK.0 {
-                let (px, py) = (px as f32 + 0.5, py as f32 + 0.5);
-                let word = match (self.uv(px, py), self.uv(px + 1.0, py), self.uv(px, py + 1.0)) {
-                    (Some((u, v)), Some((ux, vx)), Some((uy, vy))) => {
-                        let lod = lod_for(ux - u, vx - v, uy - u, vy - v, SIDE_TEXELS, bias, grid.lod_count);
-                        let (x, y) = page_at(u.rem_euclid(1.0), v.rem_euclid(1.0), lod, grid);
-                        encode(PageId::new(0, lod, x, y))
-                    }
-                    _ => NO_REQUEST,
-                };
-                words.push(word);
-            }
-        }
-    }
-}
 
 #[derive(Default)]
 struct Totals {
