@@ -5,7 +5,7 @@
 #   Case 1, 16384 x 16384 RGB 8-bit uncompressed BigTIFF (268.4 Mpx, ~805 MB, from
 #   examples/gen_image: gradients, zone plate, discs, per-pixel noise), cut into 256-texel
 #   JPEG tiles at quality 85 with no border/overlap, alternately RUNS times by
-#     - vortex-tiler split SRC -o OUT --tile-size 256 --border 0 --codec jpeg --quality 85 --quiet
+#     - vortex-tiler split SRC -o OUT --tile-size 256 --border 0 --codec jpeg --quality 85 --filter box --quiet
 #     - vips dzsave SRC OUT --tile-size 256 --overlap 0 --suffix .jpg[Q=85]   (Debian libvips 8.14)
 #     - pyvips dzsave(tile_size=256, overlap=0, Q=85), sequential access   (newest libvips from
 #       PyPI, pyvips-binary, in a venv; skipped with a note if pip cannot install it)
@@ -159,7 +159,7 @@ TOOLS=(vortex vips)
 for run in $(seq 1 "$RUNS"); do
   for tool in "${TOOLS[@]}"; do
     case $tool in
-      vortex) timed vortex "$run" "$OUT/vortex-$run" -- "$TILER" split "$SRC" -o "$OUT/vortex-$run" --tile-size 256 --border 0 --codec jpeg --quality 85 --quiet ;;
+      vortex) timed vortex "$run" "$OUT/vortex-$run" -- "$TILER" split "$SRC" -o "$OUT/vortex-$run" --tile-size 256 --border 0 --codec jpeg --quality 85 --filter box --quiet ;;
       vips) timed vips "$run" "$OUT/vips-${run}_files" "$OUT/vips-$run.dzi" -- vips dzsave "$SRC" "$OUT/vips-$run" --tile-size 256 --overlap 0 --suffix '.jpg[Q=85]' ;;
       pyvips) timed pyvips "$run" "$OUT/pyvips-${run}_files" "$OUT/pyvips-$run.dzi" -- "$PY" -c "$PYSCRIPT" "$SRC" "$OUT/pyvips-$run" ;;
     esac
@@ -191,7 +191,7 @@ if [ "$BIG" = 1 ]; then
     fi
     cat srcbig.tif >/dev/null # warm the page cache where it fits
     # Not --quiet: the summary line names the decoder path and its own peak memory.
-    timed vortex-tall 1 "$OUT/tall" -- "$TILER" split srcbig.tif -o "$OUT/tall" --tile-size 256 --border 0 --codec jpeg --quality 85
+    timed vortex-tall 1 "$OUT/tall" -- "$TILER" split srcbig.tif -o "$OUT/tall" --tile-size 256 --border 0 --codec jpeg --quality 85 --filter box
     BIG_SUMMARY=$(grep '^wrote' "$WORK/vortex-tall.log" || true)
     if [ "$KEEP" != 1 ]; then rm -f srcbig.tif; fi
   fi
@@ -275,7 +275,9 @@ if [ ! -f "$DOC" ] || ! grep -qF "$BEGIN" "$DOC"; then
 
 \`vortex-tiler split\` and libvips' \`dzsave\` (the usual tool for Deep Zoom pyramids) cut the same
 uncompressed 16384 x 16384 RGB BigTIFF into 256-texel JPEG tiles at quality 85 with every
-power-of-two level. Measured per tool: wall-clock time and peak resident memory
+power-of-two level. Both average the levels in stored (sRGB) values: vortex-tiler runs with
+\`--filter box\`, since its default, \`linear-premultiplied\`, averages in linear light and costs
+1.1-1.5x the time (\`docs/accuracy.md\`). Measured per tool: wall-clock time and peak resident memory
 (\`/usr/bin/time -v\`, median of alternating runs, source in the page cache), size of the tiles
 written, and PSNR of the finest level against the source. A second case runs vortex-tiler on a
 16384 x 131072 image to show that its memory does not grow with the image height.

@@ -262,14 +262,14 @@ fn filter_flag_is_checked_recorded_and_read_back() {
     }
     assert!(!dir.path().join("bad").exists());
 
-    // Recorded in info.json; box when not given.
+    // Recorded in info.json; linear-premultiplied when not given.
     let out = dir.path().join("out");
     let r = run(&["split", s(&rgba), "-o", s(&out), "--tile-size", "16", "--filter", "premultiplied", "-q"]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     assert_eq!(info(&out)["filter"], "premultiplied");
     let plain = dir.path().join("plain");
     assert!(run(&["split", s(&rgba), "-o", s(&plain), "--tile-size", "16", "-q"]).status.success());
-    assert_eq!(info(&plain)["filter"], "box");
+    assert_eq!(info(&plain)["filter"], "linear-premultiplied");
 
     // An existing info.json's filter is this run's default, and the flag overrides it.
     assert!(run(&["split", s(&rgba), "-o", s(&out), "-q"]).status.success());
