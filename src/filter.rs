@@ -11,7 +11,7 @@
 use std::sync::OnceLock;
 
 use crate::pixel::{Depth, PixelLayout, Sample};
-use crate::pyramid::{Acc, ExactRow};
+use crate::pyramid::{Acc, ExactRow, Reducer};
 
 /// How LOD k+1 is made from LOD k.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
@@ -186,6 +186,22 @@ impl ExactFilter {
         sums_need_u128(self.max_value, lod_count)
     }
 
+    /// Adds a source row to `reducer`: linear light without alpha (the default filter on grey
+    /// and RGB) is decoded as it is summed; otherwise the row is first made into the values
+    /// the cascade sums, in `scratch` (one per sample).
+    pub fn push_row<'r, T: Sample, A: Acc>(
+        &self,
+        reducer: &'r mut Reducer<A>,
+        row: &[T],
+        scratch: &mut [u64],
+    ) -> Option<ExactRow<'r, A>> {
+        if let (Some(t), None) = (self.table, self.alpha) {
+            return reducer.push_mapped(row, |s: T| A::from(t.decode(s.to_u16()) as u64));
+        }
+        self.prepare(row, scratch);
+        reducer.push(scratch)
+    }
+
     /// Turns a row of samples into the values the cascade sums (`out.len() == row.len()`).
     pub fn prepare<T: Sample>(&self, row: &[T], out: &mut [u64]) {
         let c = self.channels;
@@ -210,6 +226,12 @@ impl ExactFilter {
 
     /// Rounds an exact row into samples.
     pub fn finish<T: Sample, A: Acc>(&self, exact: &ExactRow<'_, A>, out: &mut [T]) {
+        if let (Some(t), None) = (self.table, self.alpha) {
+            for (o, v) in out.iter_mut().zip(exact.means()) {
+                *o = T::from_u16(t.encode(v));
+            }
+            return;
+        }
         let c = self.channels;
         for (x, (sums, o)) in exact.sums.chunks_exact(c).zip(out.chunks_exact_mut(c)).enumerate() {
             let alpha_sum = self.alpha.map(|a| sums[a]);

@@ -113,7 +113,13 @@ impl<A: Acc> Reducer<A> {
 
     /// Adds one input row (samples or exact sums); returns the output row once two rows are in.
     pub fn push<S: Copy + Into<A>>(&mut self, row: &[S]) -> Option<ExactRow<'_, A>> {
-        add_column_pairs(row, self.channels, &mut self.acc, self.rows_in_acc == 0);
+        self.push_mapped(row, S::into)
+    }
+
+    /// Adds one input row whose samples `value` turns into what is summed (e.g. linear light),
+    /// without an intermediate row.
+    pub fn push_mapped<S: Copy>(&mut self, row: &[S], value: impl Fn(S) -> A + Copy) -> Option<ExactRow<'_, A>> {
+        add_column_pairs(row, self.channels, &mut self.acc, self.rows_in_acc == 0, value);
         self.rows_in_acc += 1;
         if self.rows_in_acc == 2 { Some(self.emit()) } else { None }
     }
@@ -148,18 +154,21 @@ impl<A: Acc> Reducer<A> {
 impl<A: Acc> ExactRow<'_, A> {
     /// The row's texels rounded to the nearest sample value (halves round up): the `box` filter.
     pub fn round_into<T: Sample>(&self, out: &mut [T]) {
-        let c = self.channels;
         debug_assert_eq!(out.len(), self.sums.len());
-        let full_cols = self.full_cols;
-        let (head, tail) = out.split_at_mut(full_cols * c);
+        for (o, v) in out.iter_mut().zip(self.means()) {
+            *o = T::from_u64(v);
+        }
+    }
+
+    /// Every sum divided by its texel's pixel count, rounded half up, in row order: a shift
+    /// for the leading texels with complete footprints, a division for the rest.
+    pub fn means(&self) -> impl Iterator<Item = u64> + '_ {
+        let c = self.channels;
+        let (head, tail) = self.sums.split_at(self.full_cols * c);
         let shift = (self.footprint * self.footprint).trailing_zeros();
-        for (o, s) in head.iter_mut().zip(self.sums) {
-            *o = T::from_u64(s.round_shift(shift));
-        }
-        for (i, o) in tail.iter_mut().enumerate() {
-            let x = full_cols + i / c;
-            *o = T::from_u64(self.sums[full_cols * c + i].round_div(self.weight(x)));
-        }
+        let head = head.iter().map(move |s| s.round_shift(shift));
+        let tail = tail.iter().enumerate().map(move |(i, s)| s.round_div(self.weight(self.full_cols + i / c)));
+        head.chain(tail)
     }
 
     /// Real source pixels under texel `x`.
@@ -179,34 +188,34 @@ impl<A: Acc> ExactRow<'_, A> {
     }
 }
 
-/// `dst[x] (+)= src[2x] + src[2x+1]` per channel; an odd last column is taken alone.
-fn add_column_pairs<S: Copy + Into<A>, A: Acc>(src: &[S], c: usize, dst: &mut [A], assign: bool) {
+/// `dst[x] (+)= f(src[2x]) + f(src[2x+1])` per channel; an odd last column is taken alone.
+fn add_column_pairs<S: Copy, A: Acc, F: Fn(S) -> A + Copy>(src: &[S], c: usize, dst: &mut [A], assign: bool, f: F) {
     // A constant channel count lets the compiler unroll and vectorise the inner loop.
     match (c, assign) {
-        (1, true) => pairs::<S, A, 1, true>(src, dst),
-        (1, false) => pairs::<S, A, 1, false>(src, dst),
-        (2, true) => pairs::<S, A, 2, true>(src, dst),
-        (2, false) => pairs::<S, A, 2, false>(src, dst),
-        (3, true) => pairs::<S, A, 3, true>(src, dst),
-        (3, false) => pairs::<S, A, 3, false>(src, dst),
-        (4, true) => pairs::<S, A, 4, true>(src, dst),
-        (4, false) => pairs::<S, A, 4, false>(src, dst),
+        (1, true) => pairs::<S, A, F, 1, true>(src, dst, f),
+        (1, false) => pairs::<S, A, F, 1, false>(src, dst, f),
+        (2, true) => pairs::<S, A, F, 2, true>(src, dst, f),
+        (2, false) => pairs::<S, A, F, 2, false>(src, dst, f),
+        (3, true) => pairs::<S, A, F, 3, true>(src, dst, f),
+        (3, false) => pairs::<S, A, F, 3, false>(src, dst, f),
+        (4, true) => pairs::<S, A, F, 4, true>(src, dst, f),
+        (4, false) => pairs::<S, A, F, 4, false>(src, dst, f),
         _ => unreachable!("1 to 4 channels"),
     }
 }
 
-fn pairs<S: Copy + Into<A>, A: Acc, const C: usize, const ASSIGN: bool>(src: &[S], dst: &mut [A]) {
+fn pairs<S: Copy, A: Acc, F: Fn(S) -> A, const C: usize, const ASSIGN: bool>(src: &[S], dst: &mut [A], f: F) {
     let pairs = src.len() / (2 * C);
     let (body, rest) = src.split_at(pairs * 2 * C);
     let (dst_body, dst_rest) = dst.split_at_mut(pairs * C);
     for (d, s) in dst_body.chunks_exact_mut(C).zip(body.chunks_exact(2 * C)) {
         for ch in 0..C {
-            let v = s[ch].into() + s[C + ch].into();
+            let v = f(s[ch]) + f(s[C + ch]);
             d[ch] = if ASSIGN { v } else { d[ch] + v };
         }
     }
     for (d, s) in dst_rest.iter_mut().zip(rest) {
-        *d = if ASSIGN { (*s).into() } else { *d + (*s).into() };
+        *d = if ASSIGN { f(*s) } else { *d + f(*s) };
     }
 }
 

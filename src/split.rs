@@ -328,10 +328,7 @@ impl<T: Sample + Into<A>, A: Acc> Pyramid<T, A> {
             Some(Down::Exact(reducer)) => {
                 let exact = match &self.exact {
                     None => reducer.push(row),
-                    Some(filter) => {
-                        filter.prepare(row, &mut self.prepared);
-                        reducer.push(&self.prepared)
-                    }
+                    Some(filter) => filter.push_row(reducer, row, &mut self.prepared),
                 };
                 if let Some(exact) = exact {
                     Self::feed_exact(rest, &exact, &cutter, self.exact.as_ref())?;
