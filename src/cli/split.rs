@@ -74,10 +74,11 @@ pub struct OutputArgs {
     #[arg(long)]
     flatten: bool,
 
-    /// How each LOD is made from the finer ones [default: linear-premultiplied]. box, linear, premultiplied and
-    /// linear-premultiplied are exact means over the source footprint, rounded once (linear:
-    /// in linear light; premultiplied: colour weighted by alpha, no fringes from transparent
-    /// texels); lanczos3 and mitchell resample each LOD from the previous one.
+    /// How each LOD is made from the finer ones [default: linear-premultiplied]. box, linear,
+    /// premultiplied and linear-premultiplied are exact means over the source footprint,
+    /// rounded once (linear: in linear light; premultiplied: colour weighted by alpha, no
+    /// fringes from transparent texels; box: of the stored values, as vips dzsave averages);
+    /// lanczos3 and mitchell resample each LOD from the previous one.
     #[arg(long, value_enum)]
     filter: Option<Filter>,
 
