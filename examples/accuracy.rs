@@ -50,14 +50,7 @@ const TIME_BUDGET_S: f64 = 270.0;
 /// PSNR shown for an exact match (no error at all) in plots.
 const PSNR_CAP: f64 = 99.0;
 
-const FILTERS: [Filter; 6] = [
-    Filter::Box,
-    Filter::Linear,
-    Filter::Premultiplied,
-    Filter::LinearPremultiplied,
-    Filter::Lanczos3,
-    Filter::Mitchell,
-];
+const FILTERS: [Filter; 6] = Filter::ALL;
 
 // ---------------------------------------------------------------------------------------------
 // Images

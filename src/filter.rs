@@ -38,6 +38,16 @@ pub enum Filter {
 }
 
 impl Filter {
+    /// Every filter, in the order `--help` lists them.
+    pub const ALL: [Filter; 6] = [
+        Filter::Box,
+        Filter::Linear,
+        Filter::Premultiplied,
+        Filter::LinearPremultiplied,
+        Filter::Lanczos3,
+        Filter::Mitchell,
+    ];
+
     /// The name used on the command line and in `info.json`.
     pub fn name(self) -> &'static str {
         match self {
@@ -264,4 +274,14 @@ impl ExactFilter {
 pub fn sums_need_u128(max_value: u64, lod_count: u32) -> bool {
     let pixels = 1u128 << (2 * lod_count.saturating_sub(1));
     (max_value as u128 * pixels) * 2 + max_value as u128 > u64::MAX as u128
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn all_lists_every_filter_once() {
+        assert_eq!(Filter::ALL.as_slice(), <Filter as clap::ValueEnum>::value_variants());
+    }
 }

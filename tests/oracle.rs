@@ -8,14 +8,7 @@ use vortex_tiler::background::Background;
 use vortex_tiler::filter::Filter;
 use vortex_tiler::split::SplitOptions;
 
-const FILTERS: [Filter; 6] = [
-    Filter::Box,
-    Filter::Linear,
-    Filter::Premultiplied,
-    Filter::LinearPremultiplied,
-    Filter::Lanczos3,
-    Filter::Mitchell,
-];
+const FILTERS: [Filter; 6] = Filter::ALL;
 
 fn check(image: &Image, tile: u32, border: u32, background: Background, threads: usize) {
     check_filtered(image, tile, border, background, threads, Filter::Box)

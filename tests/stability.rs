@@ -18,14 +18,7 @@ use vortex_tiler::pyramid::{Acc, ExactRow, Reducer};
 use vortex_tiler::resample::Resampler;
 
 const EXACT: [Filter; 4] = [Filter::Box, Filter::Linear, Filter::Premultiplied, Filter::LinearPremultiplied];
-const ALL: [Filter; 6] = [
-    Filter::Box,
-    Filter::Linear,
-    Filter::Premultiplied,
-    Filter::LinearPremultiplied,
-    Filter::Lanczos3,
-    Filter::Mitchell,
-];
+const ALL: [Filter; 6] = Filter::ALL;
 
 /// One level: width, height, samples (row-major, interleaved channels).
 type Level<T> = (usize, usize, Vec<T>);
