@@ -19,7 +19,7 @@ use std::f64::consts::{FRAC_PI_6, TAU};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use plotters::prelude::*;
@@ -34,6 +34,10 @@ use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
 use vortex_tiler::settings::{self, CodecChoice, Requested};
 use vortex_tiler::source::{ImageHeader, RowSource};
 use vortex_tiler::split::{self, SplitOptions};
+
+#[path = "common/run_info.rs"]
+mod run_info;
+use run_info::{load_average, machine, today, write_atomically};
 
 /// Stored tile side and border: the README's first command (id Tech 5's 120-texel payload).
 const TILE_SIZE: u32 = 128;
@@ -1028,7 +1032,7 @@ fn applies(img: &Img, extra: bool, choice: Choice) -> bool {
 fn main() -> Result<()> {
     let args = parse_args()?;
     let started = Instant::now();
-    let load_start = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    let load_start = load_average();
     let defaults = defaults()?;
     let (w, h) = args.size;
     eprintln!("generating 5 images of {w}x{h}");
@@ -1110,34 +1114,26 @@ fn main() -> Result<()> {
         rounds_done = round + 1;
         eprintln!("round {}/{} done in {:.1} s", round + 1, args.runs, round_started.elapsed().as_secs_f64());
     }
-    let load_end = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    let load_end = load_average();
 
     std::fs::create_dir_all(&args.out)?;
     let run = RunInfo {
         args: &args,
         layout,
         rounds: rounds_done,
-        load_start: load_start.split_whitespace().next().unwrap_or("?").to_string(),
-        load_end: load_end.split_whitespace().next().unwrap_or("?").to_string(),
+        load_start,
+        load_end,
         seconds: started.elapsed().as_secs_f64(),
     };
     let plotted: Vec<&ImageResult> = results.iter().filter(|r| !r.extra).collect();
     for (name, axis) in [("accuracy-time.svg", Axis::Time), ("accuracy-size.svg", Axis::Size)] {
         let svg = plot(&plotted, axis, &defaults)?;
-        write_atomically(&args.out.join(name), svg.as_bytes())?;
+        write_atomically(&args.out.join(name), svg.as_bytes()).with_context(|| name.to_string())?;
     }
     let doc = document(&results, &defaults, &run);
     let path = args.out.join("accuracy.md");
-    write_atomically(&path, doc.as_bytes())?;
+    write_atomically(&path, doc.as_bytes()).with_context(|| path.display().to_string())?;
     eprintln!("wrote {} and its plots in {:.0} s", path.display(), started.elapsed().as_secs_f64());
-    Ok(())
-}
-
-fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path.file_name().context("a file name")?.to_string_lossy();
-    let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
-    std::fs::write(&tmp, bytes).with_context(|| tmp.display().to_string())?;
-    std::fs::rename(&tmp, path).with_context(|| path.display().to_string())?;
     Ok(())
 }
 
@@ -1399,8 +1395,8 @@ struct RunInfo<'a> {
     args: &'a Args,
     layout: Layout,
     rounds: usize,
-    load_start: String,
-    load_end: String,
+    load_start: Option<f64>,
+    load_end: Option<f64>,
     seconds: f64,
 }
 
@@ -1434,40 +1430,6 @@ fn f2(v: f64) -> String {
 
 fn kib(bytes: f64) -> String {
     format!("{:.1}", bytes / 1024.0)
-}
-
-/// Today's date (UTC) as YYYY-MM-DD.
-fn today() -> String {
-    let days = SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_secs() / 86_400).unwrap_or(0) as i64;
-    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + if m <= 2 { 1 } else { 0 };
-    format!("{y:04}-{m:02}-{d:02}")
-}
-
-fn machine() -> String {
-    let cpu = std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|s| {
-            s.lines().find(|l| l.starts_with("model name")).and_then(|l| Some(l.split(':').nth(1)?.trim().to_string()))
-        })
-        .unwrap_or_else(|| "unknown CPU".into());
-    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
-    let mem = std::fs::read_to_string("/proc/meminfo")
-        .ok()
-        .and_then(|s| {
-            s.lines().find(|l| l.starts_with("MemTotal")).and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-        })
-        .map(|kb| format!(", {:.0} GiB", kb / 1024.0 / 1024.0))
-        .unwrap_or_default();
-    format!("{cpu} ({cores} cores available{mem})")
 }
 
 fn get(r: &ImageResult, filter: Filter, codec: Codec) -> Option<&Measured> {
@@ -1556,9 +1518,9 @@ fn document(all: &[ImageResult], d: &Defaults, run: &RunInfo) -> String {
         today(),
         run.seconds,
         machine(),
-        run.load_start,
-        run.load_end,
-        if run.load_start.parse::<f64>().is_ok_and(|l| l >= 1.0) { " (other work shared the machine)" } else { "" }
+        run.load_start.map_or("?".into(), |l| format!("{l:.2}")),
+        run.load_end.map_or("?".into(), |l| format!("{l:.2}")),
+        if run.load_start.is_some_and(|l| l >= 1.0) { " (other work shared the machine)" } else { "" }
     );
     out!(s);
     out!(s, "```sh");

@@ -30,7 +30,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::time::Instant;
 
 use vortex_gpu::camera::Keyframe;
 use vortex_gpu::scene::WindowKey;
@@ -42,6 +42,10 @@ use vortex_pack::format::pyramid_levels;
 use vortex_pack::{Description, NewTile, Pack, PackWriter, TileId, TileKind, WriteOptions};
 use vortex_vt::page::{PageId, TextureGrid};
 use vortex_vt::sampler::{LodChain, LodImages, Rgba8Image, bilinear, nearest, trilinear};
+
+#[path = "../../../examples/common/run_info.rs"]
+mod run_info;
+use run_info::{cores, load_average, today, write_atomically};
 
 const LAVAPIPE_ICD: &str = "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json";
 
@@ -154,7 +158,7 @@ fn main() {
         (Some(a), Some(b)) => format!("{a:.1} at the start and {b:.1} at the end"),
         _ => "unknown".into(),
     };
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let cores = cores();
     let machine = format!(
         "{cores} cores; the 1-minute load average was {load}{}",
         if load_before.is_some_and(|l| l > cores as f64 * 0.5) {
@@ -167,13 +171,8 @@ fn main() {
         }
     );
     let doc = document(&adapter.name, &machine, &table, &diagnostics, &rows, started.elapsed().as_secs_f64());
-    write_atomically(&output, &doc);
+    write_atomically(&output, doc.as_bytes()).unwrap_or_else(|e| panic!("cannot write {}: {e}", output.display()));
     eprintln!("wrote {} in {:.1} s", output.display(), started.elapsed().as_secs_f64());
-}
-
-/// The 1-minute load average (Linux), to tell whether other work shared the machine.
-fn load_average() -> Option<f64> {
-    std::fs::read_to_string("/proc/loadavg").ok()?.split_whitespace().next()?.parse().ok()
 }
 
 /// Points the Vulkan loader at lavapipe, as the tests do, unless a driver is already chosen.
@@ -731,23 +730,6 @@ fn diagnostics(rows: &[Row]) -> String {
     s
 }
 
-/// Today's date (UTC), from the days since 1970-01-01 by the proleptic Gregorian calendar.
-fn today() -> String {
-    let secs = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
-    let days = (secs / 86_400) as i64;
-    // Shift the epoch to 0000-03-01 so that leap days end each 4-, 100- and 400-year cycle.
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let day_of_era = z - era * 146_097;
-    let year_of_era = (day_of_era - day_of_era / 1460 + day_of_era / 36_524 - day_of_era / 146_096) / 365;
-    let day_of_year = day_of_era - (365 * year_of_era + year_of_era / 4 - year_of_era / 100);
-    let month_from_march = (5 * day_of_year + 2) / 153;
-    let day = day_of_year - (153 * month_from_march + 2) / 5 + 1;
-    let month = if month_from_march < 10 { month_from_march + 3 } else { month_from_march - 9 };
-    let year = year_of_era + era * 400 + i64::from(month <= 2);
-    format!("{year:04}-{month:02}-{day:02}")
-}
-
 fn document(adapter: &str, machine: &str, table: &str, diagnostics: &str, rows: &[Row], seconds: f64) -> String {
     let mut s = String::new();
     let _ = write!(
@@ -959,13 +941,4 @@ fn surprises(rows: &[Row]) -> String {
         magnified_tri.frame_ms / magnified_bi.frame_ms,
     );
     s
-}
-
-/// Writes `text` to `path` through a temporary name beside it, renamed into place.
-fn write_atomically(path: &Path, text: &str) {
-    let name = path.file_name().expect("a file name").to_string_lossy();
-    let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
-    std::fs::write(&tmp, text).unwrap_or_else(|e| panic!("cannot write {}: {e}", tmp.display()));
-    std::fs::rename(&tmp, path)
-        .unwrap_or_else(|e| panic!("cannot rename {} to {}: {e}", tmp.display(), path.display()));
 }
