@@ -52,22 +52,12 @@ fn exact<T: Sample + Into<A>, A: Acc>(
     levels: u32,
 ) -> Vec<Level<T>> {
     let c = layout.channels.count();
-    let mut rows: Vec<Vec<A>> = src
-        .chunks(w * c)
-        .map(|r| match &filter {
-            Some(f) => {
-                let mut p = vec![0u64; r.len()];
-                f.prepare(r, &mut p);
-                p.into_iter().map(A::from).collect()
-            }
-            None => r.iter().map(|v| (*v).into()).collect(),
-        })
-        .collect();
     let (mut width, mut out) = (w, Vec::new());
+    let mut rows: Vec<Vec<A>> = Vec::new();
     for lod in 0..levels {
         let mut red = Reducer::<A>::new(w as u64, h as u64, lod, width, c);
         let (mut next, mut rounded) = (Vec::new(), Vec::new());
-        let mut take = |e: ExactRow<A>, next: &mut Vec<Vec<A>>| {
+        let mut take = |e: ExactRow<A>| {
             let mut o = vec![T::default(); e.sums.len()];
             match &filter {
                 Some(f) => f.finish(&e, &mut o),
@@ -76,13 +66,27 @@ fn exact<T: Sample + Into<A>, A: Acc>(
             rounded.extend_from_slice(&o);
             next.push(e.sums.to_vec());
         };
-        for r in &rows {
-            if let Some(e) = red.push(r) {
-                take(e, &mut next);
+        if lod == 0 {
+            // The source rows go in as the pipeline gives them (`Pyramid::push_source_row`).
+            let mut scratch = vec![0u64; w * c];
+            for r in src.chunks(w * c) {
+                let e = match &filter {
+                    Some(f) => f.push_row(&mut red, r, &mut scratch),
+                    None => red.push(r),
+                };
+                if let Some(e) = e {
+                    take(e);
+                }
+            }
+        } else {
+            for r in &rows {
+                if let Some(e) = red.push(r) {
+                    take(e);
+                }
             }
         }
         if let Some(e) = red.finish() {
-            take(e, &mut next);
+            take(e);
         }
         width = red.out_width();
         out.push((width, next.len(), rounded));
