@@ -2,28 +2,11 @@
 //! every kind of bad input.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
-const BIN: &str = env!("CARGO_BIN_EXE_vortex-tiler");
+mod common;
 
-fn run(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).env("NO_COLOR", "1").output().expect("binary runs")
-}
-
-fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures").join(name)
-}
-
-/// Asserts a failure with exit code 1 whose stderr mentions every `needle`.
-fn fails_with(out: &Output, needles: &[&str]) {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "expected exit 1, got {:?}; stderr: {err}", out.status);
-    assert!(err.starts_with("error: "), "{err}");
-    assert!(!err.contains("panicked"), "{err}");
-    for n in needles {
-        assert!(err.contains(n), "stderr lacks {n:?}: {err}");
-    }
-}
+use common::cli::{BIN, fails_with, fixture, run, s};
 
 /// A small PPM with the given header and `body` bytes of pixels.
 fn ppm(dir: &Path, name: &str, header: &str, body: usize) -> PathBuf {
@@ -32,10 +15,6 @@ fn ppm(dir: &Path, name: &str, header: &str, body: usize) -> PathBuf {
     bytes.resize(bytes.len() + body, 77);
     std::fs::write(&p, bytes).unwrap();
     p
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 #[test]

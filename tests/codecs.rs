@@ -2,35 +2,17 @@
 //! `convert`, lossless ones exactly, lossy ones within stated bounds, and the bad combinations.
 
 use std::path::Path;
-use std::process::{Command, Output};
 
+mod common;
+
+use common::cli::{fixture, ok, run, s};
 use vortex_pack::{Pack, TileKind, decode_rgba8, payload_texels};
-
-const BIN: &str = env!("CARGO_BIN_EXE_vortex-tiler");
-
-fn run(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().expect("binary runs")
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = run(args);
-    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
 
 /// The error of a run that must fail.
 fn fails(args: &[&str]) -> String {
     let out = run(args);
     assert_eq!(out.status.code(), Some(1), "{args:?} should fail");
     String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-fn fixture(name: &str) -> String {
-    format!("{}/fixtures/{name}", env!("CARGO_MANIFEST_DIR"))
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 /// A smooth RGB image (gradients and slow waves, the texture BC formats are made for).
@@ -111,10 +93,10 @@ fn lossless_pack_codecs_keep_16_bits_and_alpha_exactly() {
     for fixture_name in ["grey-alpha16-97x61.png", "rgba8-130x67.png"] {
         let input = fixture(fixture_name);
         let direct = dir.path().join(format!("{fixture_name}.direct"));
-        ok(&["split", &input, "-o", s(&direct), "--tile-size", "16", "--codec", "png", "-q"]);
+        ok(&["split", s(&input), "-o", s(&direct), "--tile-size", "16", "--codec", "png", "-q"]);
         for codec in ["raw", "zstd", "zstd-delta"] {
             let pack = dir.path().join(format!("{fixture_name}.{codec}.vtpk"));
-            ok(&["split", &input, "--pack", s(&pack), "--tile-size", "16", "--codec", codec, "-q"]);
+            ok(&["split", s(&input), "--pack", s(&pack), "--tile-size", "16", "--codec", codec, "-q"]);
             let back = dir.path().join(format!("{fixture_name}.{codec}.back"));
             ok(&["convert", s(&pack), "-o", s(&back), "--tile-size", "16", "--codec", "png", "-q"]);
             let mut compared = 0;
@@ -172,7 +154,7 @@ fn jpeg_444_keeps_colour_edges_better_than_420() {
 fn pack_and_convert_reencode_with_the_codec_flags() {
     let dir = tempfile::tempdir().unwrap();
     let tiles = dir.path().join("tiles");
-    ok(&["split", &fixture("sample.png"), "-o", s(&tiles), "--tile-size", "64", "--codec", "png", "-q"]);
+    ok(&["split", s(&fixture("sample.png")), "-o", s(&tiles), "--tile-size", "64", "--codec", "png", "-q"]);
     let plain = dir.path().join("plain.vtpk");
     ok(&["pack", s(&tiles), "-o", s(&plain), "-q"]);
     // The directory's own codec: the files are stored as they are.
@@ -276,23 +258,23 @@ fn bad_codec_combinations_are_errors_naming_the_flag() {
         (vec!["-o", s(&dir.path().join("o")), "--codec", "zstd-delta"], "write --pack FILE instead of --output"),
         (vec!["-o", s(&dir.path().join("o")), "--codec", "bc1"], "--codec bc1 writes packs only"),
     ] {
-        let err = fails(&[&["split", sample.as_str()][..], &args].concat());
+        let err = fails(&[&["split", s(&sample)][..], &args].concat());
         assert!(err.contains(expected), "{args:?}: {err}");
     }
-    let err = fails(&["split", &fixture("rgba8-130x67.png"), "--pack", p, "--codec", "bc1"]);
+    let err = fails(&["split", s(&fixture("rgba8-130x67.png")), "--pack", p, "--codec", "bc1"]);
     assert!(err.contains("--codec bc1 stores opaque RGB: use --codec bc7"), "{err}");
     assert!(!pack.exists() && !dir.path().join("o").exists());
 
     // pack checks its codec flags against the directory's tiles.
     let tiles = dir.path().join("tiles");
-    ok(&["split", &sample, "-o", s(&tiles), "--tile-size", "30", "-q"]);
+    ok(&["split", s(&sample), "-o", s(&tiles), "--tile-size", "30", "-q"]);
     let err = fails(&["pack", s(&tiles), "-o", p, "--codec", "bc1"]);
     assert!(err.contains("--tile-size must be a multiple of 4, not 30"), "{err}");
     let err = fails(&["pack", s(&tiles), "-o", p, "--codec", "zstd", "--zstd-level", "40"]);
     assert!(err.contains("--zstd-level"), "{err}");
 
     // A pack of raw texels or blocks cannot be unpacked to files; the error says what can.
-    ok(&["split", &sample, "--pack", p, "--codec", "zstd", "-q"]);
+    ok(&["split", s(&sample), "--pack", p, "--codec", "zstd", "-q"]);
     let err = fails(&["unpack", p, "-o", s(&dir.path().join("u"))]);
     assert!(err.contains("zstd payloads, which are not image files") && err.contains("convert"), "{err}");
     assert!(!dir.path().join("u").exists());

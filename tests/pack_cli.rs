@@ -1,27 +1,11 @@
 //! Packs from the command line: split --pack, pack, unpack, info.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
-const BIN: &str = env!("CARGO_BIN_EXE_vortex-tiler");
+mod common;
 
-fn run(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().expect("binary runs")
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = run(args);
-    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn fixture(name: &str) -> String {
-    format!("{}/fixtures/{name}", env!("CARGO_MANIFEST_DIR"))
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use common::cli::{BIN, fixture, ok, run, s};
 
 /// Every file under `dir`, relative path -> bytes.
 fn files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
@@ -53,7 +37,7 @@ fn split_pack_unpack_equals_split_to_files() {
         let pack = dir.path().join(format!("{img}.vtpk"));
         let back = dir.path().join(format!("{img}.back"));
         let input = fixture(img);
-        let a = ["split", input.as_str(), "-q"];
+        let a = ["split", s(&input), "-q"];
         ok(&[&a[..], &["-o", s(&files_dir)], extra].concat());
         ok(&[&a[..], &["--pack", s(&pack)], extra].concat());
         ok(&["unpack", s(&pack), "-o", s(&back), "-q"]);
@@ -72,7 +56,7 @@ fn split_pack_unpack_equals_split_to_files() {
 fn info_describes_the_pack() {
     let dir = tempfile::tempdir().unwrap();
     let pack = dir.path().join("s.vtpk");
-    let line = ok(&["split", &fixture("sample.png"), "--pack", s(&pack), "--border", "4", "--align", "64K"]);
+    let line = ok(&["split", s(&fixture("sample.png")), "--pack", s(&pack), "--border", "4", "--align", "64K"]);
     assert!(line.contains("pack: 85 tiles") && line.contains("one-colour"), "{line}");
     let text = ok(&["info", s(&pack)]);
     assert!(text.contains("700x500") && text.contains("4 levels") && text.contains("jpeg"), "{text}");
@@ -99,7 +83,7 @@ fn failed_runs_leave_no_pack() {
 
     // A directory with a missing tile cannot be packed; the error names the file.
     let tiles = dir.path().join("tiles");
-    ok(&["split", &fixture("sample.png"), "-o", s(&tiles), "-q"]);
+    ok(&["split", s(&fixture("sample.png")), "-o", s(&tiles), "-q"]);
     std::fs::remove_file(tiles.join("lod00-x0003-y0002.jpg")).unwrap();
     let out = run(&["pack", s(&tiles), "-o", s(&pack)]);
     let err = String::from_utf8_lossy(&out.stderr);
@@ -125,7 +109,7 @@ fn packs_are_byte_identical_whatever_the_thread_count() {
     let mut packs = Vec::new();
     for threads in ["1", "2", "3"] {
         let pack = dir.path().join(format!("t{threads}.vtpk"));
-        ok(&["split", &fixture("sample.png"), "--pack", s(&pack), "--tile-size", "32", "--threads", threads, "-q"]);
+        ok(&["split", s(&fixture("sample.png")), "--pack", s(&pack), "--tile-size", "32", "--threads", threads, "-q"]);
         packs.push(std::fs::read(&pack).unwrap());
     }
     assert!(packs[0] == packs[1] && packs[1] == packs[2]);
@@ -135,7 +119,7 @@ fn packs_are_byte_identical_whatever_the_thread_count() {
 fn verify_passes_sound_packs_and_names_every_damaged_tile() {
     let dir = tempfile::tempdir().unwrap();
     let pack = dir.path().join("s.vtpk");
-    ok(&["split", &fixture("sample.png"), "--pack", s(&pack), "--border", "4", "-q"]);
+    ok(&["split", s(&fixture("sample.png")), "--pack", s(&pack), "--border", "4", "-q"]);
     let report = ok(&["verify", s(&pack), "--decode"]);
     assert!(report.contains("OK: no problem found"), "{report}");
 

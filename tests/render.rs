@@ -4,32 +4,20 @@
 //! do); without an adapter the tests print a note and pass, except under `CI=true`.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-const BIN: &str = env!("CARGO_BIN_EXE_vortex-tiler");
-const LAVAPIPE_ICD: &str = "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json";
+mod common;
 
-fn run(args: &[&str]) -> Output {
-    let mut cmd = Command::new(BIN);
-    cmd.args(args).env("NO_COLOR", "1");
-    if std::env::var_os("VK_DRIVER_FILES").is_none() && Path::new(LAVAPIPE_ICD).exists() {
-        cmd.env("VK_DRIVER_FILES", LAVAPIPE_ICD);
-    }
-    cmd.output().expect("binary runs")
-}
+use common::cli::{fails_with, fixture, run, s};
 
 fn root(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
 }
 
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
 /// The fixture as a pack of 136-texel tiles with a 4-texel border.
 fn sample_pack(dir: &Path) -> PathBuf {
     let pack = dir.join("sample.vtpk");
-    let r = run(&["split", s(&root("fixtures/sample.png")), "--pack", s(&pack), "--tile-size", "136", "--border", "4"]);
+    let r = run(&["split", s(&fixture("sample.png")), "--pack", s(&pack), "--tile-size", "136", "--border", "4"]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     pack
 }
@@ -108,16 +96,6 @@ fn the_documented_example_scene_renders() {
     assert_eq!(r["cache_slots"], 144);
     assert_eq!(r["frames"].as_array().unwrap().len(), 48);
     assert!(r["frames"].as_array().unwrap().iter().all(|f| f["loaded"].as_u64().unwrap() <= 16));
-}
-
-/// Asserts exit code 1 and an error line mentioning every `needle`.
-fn fails_with(out: &Output, needles: &[&str]) {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "expected exit 1, got {:?}; stderr: {err}", out.status);
-    assert!(!err.contains("panicked"), "{err}");
-    for n in needles {
-        assert!(err.contains(n), "stderr lacks {n:?}: {err}");
-    }
 }
 
 #[test]

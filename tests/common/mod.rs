@@ -2,6 +2,8 @@
 //! pyramid (the oracle the streaming pipeline must match byte for byte).
 #![allow(dead_code)]
 
+pub mod cli;
+
 use std::collections::BTreeMap;
 use std::sync::Mutex;
 
