@@ -15,8 +15,8 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use vortex_pack::{Description, TileKind, payload_texels};
 use vortex_tiler::codec::{Bc7Effort, Codec, PngLevel, Subsampling, TileEncoder};
-use vortex_tiler::pack_sink::tile_kind;
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
+use vortex_tiler::sink::tile_kind;
 
 fn flag(args: &[String], name: &str, default: u32) -> Result<u32> {
     match args.iter().position(|a| a == name) {

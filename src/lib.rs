@@ -1,29 +1,41 @@
 //! The library behind `vortex-tiler`: cut an image of any size into the pages of a virtual
 //! texture, with every power-of-two LOD, in memory bounded by the image's width.
 //!
-//! The modules follow the data: [`source`] delivers rows, [`band`] holds the rows a row of
-//! pages needs, [`pyramid`] cascades exact sums to the coarser LODs, [`cut`] assembles pages
-//! with their borders, [`codec`] encodes them and [`sink`] stores them; [`split`] runs that
-//! pipeline; [`filter`] and [`resample`] are the LOD filters. [`layout`] is the page grid's
-//! geometry, [`settings`] and [`info`] turn flags and `info.json` into options and back. See
-//! `docs/architecture.md`.
+//! The modules follow the data, one folder or file per stage (see `docs/architecture.md`):
+//! - [`source`]: images delivered one row at a time (PNG, JPEG, TIFF, PNM, or decoded whole),
+//!   and under [`source::tiled`] the already-tiled inputs of `convert`;
+//! - [`pyramid`]: the bands, the exact sums and the resampling filters that make every LOD,
+//!   the LOD cascade, and the cutting of tiles with their borders;
+//! - [`codec`]: tile encoders (JPEG, PNG, raw, zstd, BC1/BC7);
+//! - [`sink`]: where encoded tiles go (a tile directory or a pack);
+//! - [`split`]: the orchestration that runs source -> pyramid -> codec -> sink.
+//!
+//! Beside the stages: [`tile_dir`] is the tile-directory format (`info.json`, file names) that
+//! the directory sink writes and the tiled sources read; [`repack`] moves tiles between a tile
+//! directory and a pack (`pack`, `unpack`). Shared types: [`layout`] (the page grid's
+//! geometry), [`pixel`] (channels and depth), [`background`] (what fills the padding),
+//! [`settings`] (flags and `info.json` into options) and [`error`].
 
 pub mod background;
-pub mod band;
 pub mod codec;
-pub mod cut;
 pub mod error;
-pub mod filename;
-pub mod filter;
-pub mod info;
 pub mod layout;
-pub mod pack_sink;
 pub mod pixel;
 pub mod pyramid;
 pub mod repack;
-pub mod resample;
 pub mod settings;
 pub mod sink;
 pub mod source;
 pub mod split;
-pub mod tiled;
+pub mod tile_dir;
+
+/// Internals the integration tests check directly (the exact sums, the sRGB tables, the
+/// resamplers, the cutting arithmetic). Not an API: only built with the `testing` feature,
+/// which the crate's own dev-dependency on itself turns on for `cargo test`.
+#[cfg(feature = "testing")]
+pub mod testing {
+    pub use crate::pyramid::cut::{first_row_kept, first_row_needed, last_row_needed};
+    pub use crate::pyramid::filter::{ExactFilter, SrgbTable, linear_to_srgb, srgb_to_linear, sums_need_u128};
+    pub use crate::pyramid::reduce::{Acc, ExactRow, Reducer};
+    pub use crate::pyramid::resample::{Resampler, resample_level};
+}

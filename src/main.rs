@@ -3,7 +3,6 @@
 //! library; this file is glue.
 
 mod cli;
-mod report;
 
 use std::process::ExitCode;
 
@@ -14,7 +13,7 @@ fn main() -> ExitCode {
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", report::chain(&e));
+            eprintln!("error: {}", cli::report::chain(&e));
             match e.downcast_ref::<vortex_tiler::error::TilerError>() {
                 Some(vortex_tiler::error::TilerError::Interrupted) => ExitCode::from(130),
                 _ => ExitCode::FAILURE,

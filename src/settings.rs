@@ -7,12 +7,12 @@ use std::path::Path;
 use crate::background::Background;
 use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling, ZSTD_LEVELS};
 use crate::error::{Result, TilerError};
-use crate::filename::FilenameFormat;
-use crate::filter::Filter;
-use crate::info::{FORMAT_VERSION, InfoFile};
 use crate::layout::Layout;
 use crate::pixel::{Channels, Depth, PixelLayout};
+use crate::pyramid::filter::Filter;
 use crate::split::SplitOptions;
+use crate::tile_dir::filename::FilenameFormat;
+use crate::tile_dir::info::{FORMAT_VERSION, InfoFile};
 
 pub const DEFAULT_TILE_SIZE: u32 = 128;
 pub const DEFAULT_QUALITY: u8 = 85;

@@ -1,27 +1,27 @@
-//! The `split` pipeline: source -> bands -> tiles and pyramid -> sink.
+//! The `split` pipeline's wiring: source -> pyramid cascade -> encoders -> sink.
 //!
-//! A producer thread reads the source row by row into the LOD-0 band and cascades every row
-//! down the pyramid (each level keeps its own band and one half-built row for the next). As
-//! soon as a band holds everything a row of tiles needs, the tiles are cut and sent, in a
-//! bounded channel, to the calling thread, which encodes them in parallel on the rayon pool
-//! and hands them to the sink. Peak memory is therefore a few bands of the image's width,
+//! A producer thread reads the source row by row into the [LOD cascade](crate::pyramid),
+//! which cuts each row of tiles as soon as its bands hold every row it reads and sends it, in
+//! a bounded channel, to the calling thread; that thread encodes the tiles in parallel on the
+//! rayon pool ([`crate::codec`]) and hands them to the [sink](crate::sink). This file is only
+//! that orchestration. Peak memory is therefore a few bands of the image's width,
 //! whatever its height; output bytes do not depend on the thread count.
 
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::sync::mpsc::{Receiver, sync_channel};
 
 use rayon::prelude::*;
 
 use crate::background::Background;
-use crate::band::Band;
 use crate::codec::{Codec, TileEncoder};
-use crate::cut::{self, Padding, Run};
 use crate::error::{Result, TilerError};
-use crate::filter::{ExactFilter, Filter};
 use crate::layout::Layout;
 use crate::pixel::{Depth, PixelLayout, Sample};
-use crate::pyramid::{Acc, ExactRow, Reducer};
-use crate::resample::Resampler;
+use crate::pyramid::Filter;
+use crate::pyramid::cascade::{Batch, Cascade, CutTile};
+use crate::pyramid::cut::Padding;
+use crate::pyramid::filter::ExactFilter;
+use crate::pyramid::reduce::Acc;
 use crate::sink::TileSink;
 use crate::source::RowSource;
 
@@ -69,19 +69,6 @@ pub struct Summary {
 /// waiting batch keeps the encoders busy, and each extra one would cost a row of tiles of memory.
 const QUEUE_BATCHES: usize = 1;
 
-/// One row of tiles of one LOD.
-struct Batch<T> {
-    lod: u32,
-    tiles: Vec<CutTile<T>>,
-}
-
-/// Texels of a tile and every (x, y) that holds them: neighbours with identical texels (most
-/// often padding) share one encoding.
-struct CutTile<T> {
-    texels: Vec<T>,
-    places: Vec<(u32, u32)>,
-}
-
 /// Cuts `source` into the pyramid and writes every tile to `sink`. Runs the encoders on the
 /// current rayon pool; `progress` hears of every finished tile and can stop the run.
 pub fn split(
@@ -121,9 +108,9 @@ fn run<T: Sample>(
         let producer = scope.spawn(move || {
             let exact = ExactFilter::new(opts.filter, src_layout);
             let result = if exact.is_some_and(|f| f.needs_u128(layout.lod_count)) {
-                Pyramid::<T, u128>::new(layout, src_layout, opts.filter, padding, tx.clone()).run(source, progress)
+                produce(Cascade::<T, u128>::new(layout, src_layout, opts.filter, padding, tx.clone()), source, progress)
             } else {
-                Pyramid::<T, u64>::new(layout, src_layout, opts.filter, padding, tx.clone()).run(source, progress)
+                produce(Cascade::<T, u64>::new(layout, src_layout, opts.filter, padding, tx.clone()), source, progress)
             };
             if let Err(e) = result {
                 let _ = tx.send(Err(e));
@@ -142,6 +129,23 @@ fn run<T: Sample>(
         encoded: encoded.into_inner(),
         bytes: sink.bytes_written(),
     })
+}
+
+/// The producer: reads the source row by row into the cascade, which sends the cut tiles on.
+fn produce<T: Sample + Into<A>, A: Acc>(
+    mut cascade: Cascade<T, A>,
+    mut source: Box<dyn RowSource>,
+    progress: &dyn Progress,
+) -> Result<()> {
+    let mut row = vec![T::default(); cascade.row_len()];
+    for _ in 0..source.height() {
+        if progress.cancelled() {
+            return Err(TilerError::Interrupted);
+        }
+        source.read_row(bytemuck::cast_slice_mut(&mut row))?;
+        cascade.push_source_row(&row)?;
+    }
+    cascade.finish()
 }
 
 /// Encodes and writes batches as they arrive. Small batches (coarse levels, narrow images) are
@@ -214,212 +218,4 @@ fn prepare<T: Sample>(encoder: &TileEncoder<T>, sink: &dyn TileSink, lod: u32, t
     let (x, y) = tile.places[0];
     encoder.encode(texels, &mut bytes).map_err(|message| TilerError::Encode { lod, x, y, message })?;
     Ok(Stored::Encoded(bytes))
-}
-
-/// How a level makes the next one.
-enum Down<T, A> {
-    /// The exact filters: a cascade of sums.
-    Exact(Reducer<A>),
-    /// The resampling filters: the next level from this one's rounded rows.
-    Resample(Box<Resampler<T>>),
-}
-
-/// One LOD in flight: its band, the tile rows cut so far and the reduction to the next LOD.
-struct Level<T, A> {
-    lod: u32,
-    extent: (u32, u32),
-    band: Band<T>,
-    next_tile_row: u32,
-    x_runs: Vec<Vec<Run>>,
-    down: Option<Down<T, A>>,
-    /// The current row, rounded from exact sums.
-    row: Vec<T>,
-}
-
-/// What every level's cutting needs.
-struct Cutter<'a, T> {
-    layout: &'a Layout,
-    channels: usize,
-    padding: &'a Padding<T>,
-    out: &'a SyncSender<Result<Batch<T>>>,
-}
-
-struct Pyramid<T, A> {
-    layout: Layout,
-    channels: usize,
-    padding: Padding<T>,
-    levels: Vec<Level<T, A>>,
-    out: SyncSender<Result<Batch<T>>>,
-    /// What the exact cascade sums when it is not the samples themselves.
-    exact: Option<ExactFilter>,
-    /// A source row as `exact` sums it.
-    prepared: Vec<u64>,
-}
-
-impl<T: Sample + Into<A>, A: Acc> Pyramid<T, A> {
-    fn new(
-        layout: Layout,
-        pixels: PixelLayout,
-        filter: Filter,
-        padding: Padding<T>,
-        out: SyncSender<Result<Batch<T>>>,
-    ) -> Self {
-        let edge = padding == Padding::Edge;
-        let channels = pixels.channels.count();
-        let levels = (0..layout.lod_count)
-            .map(|lod| {
-                let extent = layout.level_extent(lod);
-                let row_len = extent.0 as usize * channels;
-                let x_runs =
-                    (0..layout.tiles_per_side(lod)).map(|t| cut::runs(&layout, lod, t, extent.0, edge)).collect();
-                let down = (lod + 1 < layout.lod_count).then(|| {
-                    if filter.is_exact() {
-                        let (w, h) = (layout.width as u64, layout.height as u64);
-                        Down::Exact(Reducer::new(w, h, lod, extent.0 as usize, channels))
-                    } else {
-                        Down::Resample(Box::new(Resampler::new(filter, pixels, extent.0 as usize, extent.1 as u64)))
-                    }
-                });
-                Level {
-                    lod,
-                    extent,
-                    band: Band::new(row_len, layout.tile_size as usize + 1),
-                    next_tile_row: 0,
-                    x_runs,
-                    down,
-                    row: vec![T::default(); row_len],
-                }
-            })
-            .collect();
-        let exact = ExactFilter::new(filter, pixels);
-        let prepared = if exact.is_some() { vec![0; layout.width as usize * channels] } else { Vec::new() };
-        Pyramid { layout, channels, padding, levels, out, exact, prepared }
-    }
-
-    fn run(&mut self, mut source: Box<dyn RowSource>, progress: &dyn Progress) -> Result<()> {
-        let mut row = vec![T::default(); self.levels[0].row.len()];
-        for _ in 0..self.layout.height {
-            if progress.cancelled() {
-                return Err(TilerError::Interrupted);
-            }
-            source.read_row(bytemuck::cast_slice_mut(&mut row))?;
-            self.push_source_row(&row)?;
-        }
-        // Odd heights leave a half-built row in each reducer: flush them top-down. (Resamplers
-        // finish with their last input row.)
-        let cutter = Cutter { layout: &self.layout, channels: self.channels, padding: &self.padding, out: &self.out };
-        for k in 0..self.levels.len() {
-            let (this, rest) = self.levels[k..].split_first_mut().expect("level k exists");
-            if let Some(Down::Exact(reducer)) = &mut this.down
-                && let Some(exact) = reducer.finish()
-            {
-                Self::feed_exact(rest, &exact, &cutter, self.exact.as_ref())?;
-            }
-        }
-        Ok(())
-    }
-
-    fn push_source_row(&mut self, row: &[T]) -> Result<()> {
-        let cutter = Cutter { layout: &self.layout, channels: self.channels, padding: &self.padding, out: &self.out };
-        let (first, rest) = self.levels.split_first_mut().expect("at least one level");
-        first.band.push(row);
-        first.cut_ready(&cutter)?;
-        match &mut first.down {
-            Some(Down::Exact(reducer)) => {
-                let exact = match &self.exact {
-                    None => reducer.push(row),
-                    Some(filter) => filter.push_row(reducer, row, &mut self.prepared),
-                };
-                if let Some(exact) = exact {
-                    Self::feed_exact(rest, &exact, &cutter, self.exact.as_ref())?;
-                }
-            }
-            Some(Down::Resample(resampler)) => {
-                if let Some(rows) = resampler.push(row)? {
-                    Self::feed_rows(rest, rows, &cutter)?;
-                }
-            }
-            None => {}
-        }
-        Ok(())
-    }
-
-    /// Gives `levels[0]` its next exact row and cascades into the levels below it.
-    fn feed_exact(
-        levels: &mut [Level<T, A>],
-        exact: &ExactRow<A>,
-        cutter: &Cutter<T>,
-        filter: Option<&ExactFilter>,
-    ) -> Result<()> {
-        let (this, rest) = levels.split_first_mut().expect("a level below the reducer");
-        match filter {
-            None => exact.round_into(&mut this.row),
-            Some(f) => f.finish(exact, &mut this.row),
-        }
-        this.band.push(&this.row);
-        this.cut_ready(cutter)?;
-        if let Some(Down::Exact(reducer)) = &mut this.down
-            && let Some(next) = reducer.push(exact.sums)
-        {
-            Self::feed_exact(rest, &next, cutter, filter)?;
-        }
-        Ok(())
-    }
-
-    /// Gives `levels[0]` its next rows (row-major) and resamples them into the levels below it.
-    fn feed_rows(levels: &mut [Level<T, A>], rows: &[T], cutter: &Cutter<T>) -> Result<()> {
-        let (this, rest) = levels.split_first_mut().expect("a level below the resampler");
-        for row in rows.chunks_exact(this.row.len()) {
-            this.band.push(row);
-            this.cut_ready(cutter)?;
-            if let Some(Down::Resample(resampler)) = &mut this.down
-                && let Some(next) = resampler.push(row)?
-            {
-                Self::feed_rows(rest, next, cutter)?;
-            }
-        }
-        Ok(())
-    }
-}
-
-impl<T: Sample, A> Level<T, A> {
-    /// Cuts every tile row whose rows are all in the band, then drops rows no longer needed.
-    fn cut_ready(&mut self, cutter: &Cutter<T>) -> Result<()> {
-        let Cutter { layout, channels, padding, out } = *cutter;
-        let (_, height) = self.extent;
-        let rows = layout.tiles_per_side(self.lod);
-        while self.next_tile_row < rows
-            && self.band.end() > cut::last_row_needed(layout, self.lod, self.next_tile_row, height)
-        {
-            let ty = self.next_tile_row;
-            // Rows of tiles entirely below the image are all alike (they repeat the last image
-            // row, or are background): cut the first, and give it the places of all the others.
-            let below_image = cut::first_row_needed(layout, ty) >= height as i64;
-            let row_span = if below_image { ty..rows } else { ty..ty + 1 };
-            let y_runs = cut::runs(layout, self.lod, ty, height, *padding == Padding::Edge);
-            let mut tiles: Vec<CutTile<T>> = Vec::new();
-            let mut texels = Vec::with_capacity(layout.tile_texels() * channels);
-            for (tx, x_runs) in self.x_runs.iter().enumerate() {
-                let places = row_span.clone().map(|y| (tx as u32, y));
-                // Columns of tiles right of the image read the same texels as their left neighbour.
-                if tx > 0 && self.x_runs[tx - 1] == *x_runs {
-                    tiles.last_mut().expect("a tile left of this one").places.extend(places);
-                    continue;
-                }
-                cut::cut_tile(&self.band, channels, x_runs, &y_runs, padding, &mut texels);
-                match tiles.last_mut() {
-                    Some(prev) if prev.texels == texels => prev.places.extend(places),
-                    _ => {
-                        let full = std::mem::replace(&mut texels, Vec::with_capacity(layout.tile_texels() * channels));
-                        tiles.push(CutTile { texels: full, places: places.collect() })
-                    }
-                }
-            }
-            out.send(Ok(Batch { lod: self.lod, tiles }))
-                .map_err(|_| TilerError::Options("the encoder stopped".into()))?;
-            self.next_tile_row = row_span.end;
-            self.band.drop_before(cut::first_row_kept(layout, ty, height));
-        }
-        Ok(())
-    }
 }

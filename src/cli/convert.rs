@@ -7,7 +7,7 @@ use anyhow::{Result, bail};
 use vortex_tiler::background::Background;
 use vortex_tiler::pixel::{Depth, PixelLayout};
 use vortex_tiler::source::RowSource;
-use vortex_tiler::tiled::{DeepZoom, NamedDir, PackInput, SplitOutput, TileGrid, TiledSource, Xyz};
+use vortex_tiler::source::tiled::{DeepZoom, NamedDir, PackInput, SplitOutput, TileGrid, TiledSource, Xyz};
 
 use super::split::{OutputArgs, tile};
 

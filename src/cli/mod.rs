@@ -3,6 +3,7 @@
 mod convert;
 mod pack;
 mod render;
+pub(crate) mod report;
 mod split;
 
 use anyhow::Result;

@@ -5,10 +5,11 @@ use std::time::Instant;
 
 use anyhow::Result;
 use vortex_pack::{Pack, TileKind, VerifyOptions, verify};
+use vortex_tiler::tile_dir::TiledDir;
 use vortex_tiler::{repack, settings};
 
 use super::PackLayout;
-use crate::report;
+use super::report;
 
 #[derive(clap::Args, Debug)]
 pub struct PackArgs {
@@ -88,7 +89,7 @@ pub fn run_verify(a: VerifyArgs) -> Result<()> {
 
 pub fn run_pack(a: PackArgs) -> Result<()> {
     let started = Instant::now();
-    let t = repack::TiledDir::read(&a.input)?;
+    let t = TiledDir::read(&a.input)?;
     let codec = match a.enc.any() {
         true => Some(settings::resolve_codec(&a.enc.requested(), &a.input.join("info.json"), &t.info, t.layout())?),
         false => None,

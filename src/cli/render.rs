@@ -150,7 +150,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         report.pages_touched,
         report.pages_total,
         100.0 * report.pages_touched as f64 / report.pages_total.max(1) as f64,
-        crate::report::mib(report.bytes_read),
+        super::report::mib(report.bytes_read),
     );
     if !report.errors.is_empty() {
         bail!(

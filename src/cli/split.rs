@@ -7,17 +7,17 @@ use anyhow::{Context, Result, bail};
 
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
-use vortex_tiler::filter::Filter;
-use vortex_tiler::info::InfoFile;
 use vortex_tiler::layout::Layout;
-use vortex_tiler::pack_sink::PackSink;
 use vortex_tiler::pixel::Depth;
+use vortex_tiler::pyramid::Filter;
 use vortex_tiler::settings::{self, CodecChoice, Requested};
 use vortex_tiler::sink::DirSink;
+use vortex_tiler::sink::PackSink;
 use vortex_tiler::source::RowSource;
+use vortex_tiler::tile_dir::info::InfoFile;
 use vortex_tiler::{source, split};
 
-use crate::report;
+use super::report;
 
 #[derive(clap::Args, Debug)]
 pub struct SplitArgs {

@@ -4,11 +4,15 @@
 //! the current row, strip or tile row, so memory does not grow with the image height. Formats
 //! that cannot be streamed are decoded whole through the `image` crate, but only under
 //! `--max-memory`.
+//!
+//! [`tiled`] holds the other kind of input, for `convert`: grids of tiles (named files, a
+//! tile directory this tool wrote, a pack, Deep Zoom, z/y/x) read a row of tiles at a time.
 
 mod jpeg;
 mod png;
 mod pnm;
 mod tiff;
+pub mod tiled;
 mod whole;
 
 pub use whole::{Decoded, decode_tile};

@@ -3,9 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-mod common;
-
-use common::cli::{BIN, fixture, ok, run, s};
+use crate::common::cli::{BIN, fixture, ok, run, s};
 
 /// Every file under `dir`, relative path -> bytes.
 fn files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {

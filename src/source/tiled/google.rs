@@ -173,13 +173,13 @@ impl TileGrid for Xyz {
 mod tests {
     use super::*;
     use crate::source::read_all;
-    use crate::tiled::TiledSource;
+    use crate::source::tiled::TiledSource;
 
     const TS: u32 = 8;
 
     /// A reproducible RGBA image.
     fn rgba_image(width: u32, height: u32, seed: u32) -> Vec<u8> {
-        crate::tiled::noise((width * height * 4) as usize, seed)
+        crate::source::tiled::noise((width * height * 4) as usize, seed)
     }
 
     /// Writes `image` (RGBA, `cols x rows` tiles of TS) as PNG tiles `z/y/x.png` from tile

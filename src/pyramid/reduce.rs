@@ -9,7 +9,7 @@
 //! Rows are consumed one at a time: a level keeps one half-built output row (the horizontal
 //! pair sums of an even row, waiting for the odd one), so the extra memory is one row per level.
 //!
-//! What is summed depends on the filter ([`crate::filter`]): the stored samples for `box`,
+//! What is summed depends on the filter ([`crate::pyramid::filter`]): the stored samples for `box`,
 //! fixed-point linear light or alpha-weighted colour for the others. Sums are `u64` unless the
 //! filter's values could overflow one over the pyramid's depth; then they are `u128` ([`Acc`]).
 
@@ -63,6 +63,7 @@ impl Acc for u128 {
 pub struct Reducer<A = u64> {
     channels: usize,
     /// Width of the output level in texels.
+    #[cfg_attr(not(feature = "testing"), allow(dead_code))] // read by the tests, through `testing`
     out_width: usize,
     /// Source pixels per output texel column, `min(2^(lod+1), width - x * 2^(lod+1))`.
     col_weight: Vec<u64>,
@@ -79,6 +80,7 @@ pub struct Reducer<A = u64> {
 /// An exact output row: sums plus what they must be divided by.
 pub struct ExactRow<'a, A = u64> {
     pub sums: &'a [A],
+    #[cfg_attr(not(feature = "testing"), allow(dead_code))] // read by the tests, through `testing`
     pub y: u64,
     row_weight: u64,
     col_weight: &'a [u64],
@@ -107,6 +109,7 @@ impl<A: Acc> Reducer<A> {
         }
     }
 
+    #[cfg_attr(not(feature = "testing"), allow(dead_code))] // read by the tests, through `testing`
     pub fn out_width(&self) -> usize {
         self.out_width
     }

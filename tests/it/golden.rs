@@ -1,12 +1,10 @@
 //! Golden files: every tile of each small fixture as `lod x y width height crc32` (CRC-32 of the
 //! decoded samples, big-endian), so any change to the pyramid shows up as a reviewable diff.
-//! Bless new results with `BLESS=1 cargo test --test golden` after checking them.
-
-mod common;
+//! Bless new results with `BLESS=1 cargo test --test it golden::` after checking them.
 
 use std::path::Path;
 
-use common::{MemSink, decode_png, png_options};
+use crate::common::{MemSink, decode_png, png_options};
 use vortex_tiler::background::Background;
 use vortex_tiler::source;
 use vortex_tiler::split::split;

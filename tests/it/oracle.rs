@@ -1,11 +1,9 @@
 //! The banded, parallel pipeline against the naive whole-image oracle.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use proptest::prelude::*;
 use vortex_tiler::background::Background;
-use vortex_tiler::filter::Filter;
+use vortex_tiler::pyramid::Filter;
 use vortex_tiler::split::SplitOptions;
 
 const FILTERS: [Filter; 6] = Filter::ALL;

@@ -10,11 +10,11 @@ use std::sync::Mutex;
 use vortex_pack::format::pyramid_levels;
 use vortex_pack::{Description, NewTile, PackWriter, TileId, TileKind, WriteOptions, WriteSummary};
 
+use super::TileSink;
 use crate::codec::Codec;
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::PixelLayout;
-use crate::sink::TileSink;
 
 pub struct PackSink {
     writer: Mutex<PackWriter>,
@@ -22,7 +22,7 @@ pub struct PackSink {
 }
 
 /// The pack's description of a tiler layout and stored texel format.
-pub fn description(layout: &Layout, stored: PixelLayout) -> Description {
+fn description(layout: &Layout, stored: PixelLayout) -> Description {
     Description {
         width: layout.width,
         height: layout.height,

@@ -317,11 +317,11 @@ fn unescape(value: &str) -> String {
 mod tests {
     use super::*;
     use crate::source::read_all;
-    use crate::tiled::TiledSource;
+    use crate::source::tiled::TiledSource;
 
     /// A reproducible RGB image.
     fn rgb_image(width: u32, height: u32, seed: u32) -> Vec<u8> {
-        crate::tiled::noise((width * height * 3) as usize, seed)
+        crate::source::tiled::noise((width * height * 3) as usize, seed)
     }
 
     /// Writes the finest level of a Deep Zoom pyramid of `image` (RGB, PNG tiles) as dzsave

@@ -6,9 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-mod common;
-
-use common::cli::{fails_with, fixture, run, s};
+use crate::common::cli::{fails_with, fixture, run, s};
 
 fn root(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)

@@ -135,7 +135,7 @@ mod tests {
 
     use super::*;
     use crate::source::read_all;
-    use crate::tiled::TiledSource;
+    use crate::source::tiled::TiledSource;
 
     const TILE: u32 = 16;
     const BORDER: u32 = 2;
@@ -143,7 +143,7 @@ mod tests {
 
     /// Reproducible bytes.
     fn noise(len: usize, seed: u32) -> Vec<u8> {
-        crate::tiled::noise(len, seed)
+        crate::source::tiled::noise(len, seed)
     }
 
     /// An image of `bpp`-byte texels, `width` wide.

@@ -1,11 +1,10 @@
 //! Failures in the middle of a run stop it cleanly with the first error, on every thread count.
 
-mod common;
-
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use common::{Image, layouts, png_options};
+use crate::common;
+use crate::common::{Image, layouts, png_options};
 use vortex_tiler::background::Background;
 use vortex_tiler::error::{Result, TilerError};
 use vortex_tiler::sink::TileSink;

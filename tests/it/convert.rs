@@ -1,19 +1,17 @@
 //! convert: re-tiling an already-tiled input gives what splitting the original image gives.
 
-mod common;
-
 use std::path::Path;
 use std::process::Command;
 
-use common::{Image, MemSink, layouts, png_options};
+use crate::common::{Image, MemSink, layouts, png_options};
 use proptest::prelude::*;
 use vortex_tiler::background::Background;
-use vortex_tiler::filename::FilenameFormat;
-use vortex_tiler::info::InfoFile;
 use vortex_tiler::settings::describe;
 use vortex_tiler::sink::DirSink;
+use vortex_tiler::source::tiled::{NamedDir, SplitOutput, TileGrid, TiledSource};
 use vortex_tiler::split::split;
-use vortex_tiler::tiled::{NamedDir, SplitOutput, TileGrid, TiledSource};
+use vortex_tiler::tile_dir::filename::FilenameFormat;
+use vortex_tiler::tile_dir::info::InfoFile;
 
 const BIN: &str = env!("CARGO_BIN_EXE_vortex-tiler");
 

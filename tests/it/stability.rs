@@ -9,13 +9,13 @@
 //! resample each level from the rounded previous one and are not exact means: their bounds
 //! below are what the kernels give, measured and then fixed as limits.
 
-mod common;
-
-use vortex_tiler::filter::{ExactFilter, Filter, SrgbTable, linear_to_srgb, srgb_to_linear, sums_need_u128};
+use crate::common;
 use vortex_tiler::layout::{Layout, MAX_SIDE};
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout, Sample};
-use vortex_tiler::pyramid::{Acc, ExactRow, Reducer};
-use vortex_tiler::resample::Resampler;
+use vortex_tiler::pyramid::Filter;
+use vortex_tiler::testing::{
+    Acc, ExactFilter, ExactRow, Reducer, Resampler, SrgbTable, linear_to_srgb, srgb_to_linear, sums_need_u128,
+};
 
 const EXACT: [Filter; 4] = [Filter::Box, Filter::Linear, Filter::Premultiplied, Filter::LinearPremultiplied];
 const ALL: [Filter; 6] = Filter::ALL;
@@ -690,9 +690,9 @@ fn sizes_and_offsets_above_2_32_are_exact() {
     }
     // Rows of the last tile row at LOD 0, beyond 2^24 in virtual rows, clamp to the image.
     let last = l.tiles_per_side(0) - 1;
-    assert_eq!(vortex_tiler::cut::first_row_needed(&l, last), (last as i64) * 4 - 2);
-    assert_eq!(vortex_tiler::cut::last_row_needed(&l, 0, last, side as u32), side - 1);
-    assert_eq!(vortex_tiler::cut::first_row_kept(&l, last, side as u32), side - 1);
+    assert_eq!(vortex_tiler::testing::first_row_needed(&l, last), (last as i64) * 4 - 2);
+    assert_eq!(vortex_tiler::testing::last_row_needed(&l, 0, last, side as u32), side - 1);
+    assert_eq!(vortex_tiler::testing::first_row_kept(&l, last, side as u32), side - 1);
     // Texel weights above 2^32: the coarsest texels of a 2^24 - 1 image cover up to 4^22
     // pixels; the bottom-right one (2^22 - 1)^2, an odd count.
     let mut red = Reducer::<u64>::new(side, side, 21, 8, 1);

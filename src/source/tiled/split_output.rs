@@ -5,10 +5,10 @@ use std::path::{Path, PathBuf};
 
 use super::{CellData, TileGrid, read_file};
 use crate::error::Result;
-use crate::filename::FilenameFormat;
 use crate::pixel::{Channels, Depth, PixelLayout};
-use crate::repack::TiledDir;
 use crate::source::ImageHeader;
+use crate::tile_dir::TiledDir;
+use crate::tile_dir::filename::FilenameFormat;
 
 pub struct SplitOutput {
     dir: PathBuf,

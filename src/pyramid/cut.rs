@@ -6,8 +6,8 @@
 //! or take the background colour. Each direction is precomputed once per tile column or row as
 //! a few runs, so cutting is mostly `memcpy`.
 
-use crate::band::Band;
 use crate::layout::Layout;
+use crate::pyramid::band::Band;
 
 /// Where the texels of one direction of a tile come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -6,8 +6,8 @@
 //! does not grow with the grid's height.
 
 mod deepzoom;
-mod dir;
 mod google;
+mod named_dir;
 mod pack_input;
 mod split_output;
 
@@ -17,8 +17,8 @@ use std::sync::{Arc, Mutex};
 use rayon::prelude::*;
 
 pub use deepzoom::DeepZoom;
-pub use dir::NamedDir;
 pub use google::Xyz;
+pub use named_dir::NamedDir;
 pub use pack_input::PackInput;
 pub use split_output::SplitOutput;
 

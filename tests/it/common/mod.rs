@@ -1,6 +1,5 @@
 //! Shared test helpers: in-memory sources, a sink that keeps tiles, and a naive whole-image
 //! pyramid (the oracle the streaming pipeline must match byte for byte).
-#![allow(dead_code)]
 
 pub mod cli;
 
@@ -10,13 +9,13 @@ use std::sync::Mutex;
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Codec, PngLevel};
 use vortex_tiler::error::Result;
-use vortex_tiler::filter::{Filter, SrgbTable};
 use vortex_tiler::layout::Layout;
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
-use vortex_tiler::resample::resample_level;
+use vortex_tiler::pyramid::Filter;
 use vortex_tiler::sink::TileSink;
 use vortex_tiler::source::{ImageHeader, RowSource};
 use vortex_tiler::split::{SplitOptions, Summary, split};
+use vortex_tiler::testing::{SrgbTable, resample_level};
 
 /// An image in memory: samples widened to u16 whatever the depth.
 #[derive(Clone, Debug)]
@@ -46,11 +45,6 @@ impl Image {
             })
             .collect();
         Image { width, height, layout, samples }
-    }
-
-    pub fn constant(width: u32, height: u32, layout: PixelLayout, value: u16) -> Image {
-        let n = width as usize * height as usize * layout.channels.count();
-        Image { width, height, layout, samples: vec![value; n] }
     }
 
     pub fn source(&self) -> Box<dyn RowSource> {

@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 
 use super::{CellData, TileGrid, probe, read_file};
 use crate::error::{Result, TilerError};
-use crate::filename::FilenameFormat;
-use crate::info::InfoFile;
 use crate::source::ImageHeader;
+use crate::tile_dir::filename::FilenameFormat;
+use crate::tile_dir::info::InfoFile;
 
 pub struct NamedDir {
     dir: PathBuf,

@@ -3,9 +3,7 @@
 
 use std::path::Path;
 
-mod common;
-
-use common::cli::{fixture, ok, run, s};
+use crate::common::cli::{fixture, ok, run, s};
 use vortex_pack::{Pack, TileKind, decode_rgba8, payload_texels};
 
 /// The error of a run that must fail.

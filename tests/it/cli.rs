@@ -4,9 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-mod common;
-
-use common::cli::{BIN, fails_with, fixture, run, s};
+use crate::common::cli::{BIN, fails_with, fixture, run, s};
 
 /// A small PPM with the given header and `body` bytes of pixels.
 fn ppm(dir: &Path, name: &str, header: &str, body: usize) -> PathBuf {

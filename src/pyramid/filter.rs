@@ -6,12 +6,12 @@
 //! summed: the stored values (`box`), fixed-point linear light decoded from sRGB through a
 //! table (`linear`), colour times alpha (`premultiplied`) or both. The resampling filters
 //! (`lanczos3`, `mitchell`) compute each LOD from the rounded previous one with
-//! `fast_image_resize`, band by band ([`crate::resample`]).
+//! `fast_image_resize`, band by band ([`crate::pyramid::resample`]).
 
 use std::sync::OnceLock;
 
 use crate::pixel::{Depth, PixelLayout, Sample};
-use crate::pyramid::{Acc, ExactRow, Reducer};
+use crate::pyramid::reduce::{Acc, ExactRow, Reducer};
 
 /// How LOD k+1 is made from LOD k.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
@@ -87,6 +87,7 @@ pub fn srgb_to_linear(v: f64) -> f64 {
 }
 
 /// The sRGB encode of linear `l` in [0, 1], in f64.
+#[cfg_attr(not(feature = "testing"), allow(dead_code))] // read by the tests, through `testing`
 pub fn linear_to_srgb(l: f64) -> f64 {
     if l <= 0.003_130_8 { l * 12.92 } else { 1.055 * l.powf(1.0 / 2.4) - 0.055 }
 }
@@ -101,6 +102,7 @@ pub fn linear_to_srgb(l: f64) -> f64 {
 /// the identity.
 pub struct SrgbTable {
     /// Largest code value: 255 or 65535.
+    #[cfg_attr(not(feature = "testing"), allow(dead_code))] // read by the tests, through `testing`
     pub max_code: u32,
     /// Fixed-point value of linear 1.0: 65535 for 8-bit codes, 2^20 - 1 for 16-bit ones (so
     /// that every sum of a pyramid that `Layout` accepts fits in a u64, see `ExactFilter`).

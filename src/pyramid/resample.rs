@@ -21,8 +21,8 @@
 use fast_image_resize as fir;
 
 use crate::error::{Result, TilerError};
-use crate::filter::Filter;
 use crate::pixel::{Depth, PixelLayout, Sample};
+use crate::pyramid::filter::Filter;
 
 /// Output rows computed per call to the resizer (fewer at the end of the level).
 pub const CHUNK: u64 = 16;
@@ -244,6 +244,7 @@ impl<T: Sample> Resampler<T> {
 
 /// A whole level resampled in one call: what the banded [`Resampler`] must give (tests and
 /// oracles use it).
+#[cfg_attr(not(feature = "testing"), allow(dead_code))] // read by the tests, through `testing`
 pub fn resample_level<T: Sample>(filter: Filter, layout: PixelLayout, src: &[T], w: usize, h: usize) -> Result<Vec<T>> {
     let (kernel, _) = Kernel::new::<T>(filter, layout);
     let c = layout.channels.count();

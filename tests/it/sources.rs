@@ -1,10 +1,9 @@
 //! Every decoder path gives the same pyramid as every other for the same pixels.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 
-use common::{MemSink, png_options};
+use crate::common;
+use crate::common::{MemSink, png_options};
 use vortex_tiler::background::Background;
 use vortex_tiler::source;
 use vortex_tiler::split::split;

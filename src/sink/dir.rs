@@ -1,9 +1,6 @@
-//! Where finished tiles go. A sink receives encoded tiles from many threads in any order and
-//! is finished once, after the last tile, with the pyramid's description.
-//!
-//! [`DirSink`] writes one file per tile plus `info.json` into a staging directory beside the
-//! destination and renames it into place only when everything is written, so an interrupted
-//! run never leaves a directory that looks like a finished pyramid.
+//! [`DirSink`]: one file per tile plus `info.json`, written into a staging directory beside the
+//! destination and renamed into place only when everything is written, so an interrupted run
+//! never leaves a directory that looks like a finished pyramid.
 
 use std::collections::HashSet;
 use std::fs;
@@ -12,30 +9,10 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use super::TileSink;
 use crate::error::{Result, TilerError};
-use crate::filename::FilenameFormat;
-use crate::info::Info;
-
-pub trait TileSink: Sync {
-    fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()>;
-    /// Whether one-colour tiles should come as their colour (`write_constant`) rather than
-    /// encoded.
-    fn takes_constants(&self) -> bool {
-        false
-    }
-    /// A tile whose texels all equal `texel` (samples of the stored layout, little-endian);
-    /// only called when `takes_constants`.
-    fn write_constant(&self, lod: u32, x: u32, y: u32, _texel: &[u8]) -> Result<()> {
-        Err(TilerError::Options(format!("tile (lod {lod}, x {x}, y {y}): this sink stores no one-colour tiles")))
-    }
-    /// Whether tiles must arrive in the same order on every run (a pack's bytes depend on it;
-    /// a directory's do not, and takes them from many threads at once).
-    fn ordered(&self) -> bool {
-        false
-    }
-    /// Bytes of tile data written so far.
-    fn bytes_written(&self) -> u64;
-}
+use crate::tile_dir::filename::FilenameFormat;
+use crate::tile_dir::info::Info;
 
 /// One image file per tile plus `info.json`.
 pub struct DirSink {

@@ -1,0 +1,37 @@
+//! Where finished tiles go: the stage after the encoders. A sink receives encoded tiles from
+//! many threads in any order and is finished once, after the last tile, with the pyramid's
+//! description.
+//!
+//! [`DirSink`] (`dir.rs`) writes the tile directory of [`crate::tile_dir`]; [`PackSink`]
+//! (`pack.rs`) writes one pack file (`crates/vortex-pack`). Both write under a temporary name
+//! and rename into place when complete.
+
+mod dir;
+mod pack;
+
+pub use dir::DirSink;
+pub use pack::{PackSink, tile_kind};
+
+use crate::error::{Result, TilerError};
+
+/// Takes the encoded tiles of one run.
+pub trait TileSink: Sync {
+    fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()>;
+    /// Whether one-colour tiles should come as their colour (`write_constant`) rather than
+    /// encoded.
+    fn takes_constants(&self) -> bool {
+        false
+    }
+    /// A tile whose texels all equal `texel` (samples of the stored layout, little-endian);
+    /// only called when `takes_constants`.
+    fn write_constant(&self, lod: u32, x: u32, y: u32, _texel: &[u8]) -> Result<()> {
+        Err(TilerError::Options(format!("tile (lod {lod}, x {x}, y {y}): this sink stores no one-colour tiles")))
+    }
+    /// Whether tiles must arrive in the same order on every run (a pack's bytes depend on it;
+    /// a directory's do not, and takes them from many threads at once).
+    fn ordered(&self) -> bool {
+        false
+    }
+    /// Bytes of tile data written so far.
+    fn bytes_written(&self) -> u64;
+}

@@ -1,0 +1,121 @@
+//! The tile directory `split -o` writes and `pack`, `unpack` and `convert` read: `info.json`
+//! ([`info`], specified in docs/info-json.md) beside one file per tile, named by a positional
+//! pattern ([`filename`]). [`TiledDir`] reads one back, completing the thesis's version-0
+//! files with defaults. It is a format, not a stage: the directory sink writes it, the tiled
+//! sources and `repack` read it.
+
+pub mod filename;
+pub mod info;
+
+use std::path::Path;
+
+use vortex_pack::Description;
+
+use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling};
+use crate::error::{Result, TilerError};
+use crate::pixel::{Channels, Depth, PixelLayout};
+use crate::settings::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
+use filename::FilenameFormat;
+use info::{FORMAT_VERSION, InfoFile};
+
+/// A tiled directory's `info.json`, completed with defaults for the thesis's version-0 files.
+pub struct TiledDir {
+    pub info: InfoFile,
+    pub description: Description,
+    pub tile_count: u32,
+    pub names: FilenameFormat,
+    pub codec: Codec,
+}
+
+impl TiledDir {
+    pub fn read(dir: &Path) -> Result<TiledDir> {
+        let path = dir.join("info.json");
+        let mut info = InfoFile::read(&path)?;
+        let missing =
+            |field: &str| TilerError::Info { path: path.clone(), field: field.into(), message: "is required".into() };
+        let tile_size = info.tile_size.ok_or_else(|| missing("tileSize"))?;
+        let tile_count = info.tile_count.ok_or_else(|| missing("tileCount"))?;
+        let border = info.border.unwrap_or(0);
+        let payload = tile_size.checked_sub(2 * border).filter(|p| *p > 0).ok_or_else(|| TilerError::Info {
+            path: path.clone(),
+            field: "border".into(),
+            message: format!("{border} leaves no payload in {tile_size}-texel tiles"),
+        })?;
+        let side = u32::try_from(tile_count as u64 * payload as u64).map_err(|_| missing("width"))?;
+        let names = info.filename_format.clone().ok_or_else(|| missing("filenameFormat"))?;
+        let names = FilenameFormat::parse(&names, 3).map_err(|m| TilerError::Info {
+            path: path.clone(),
+            field: "filenameFormat".into(),
+            message: m,
+        })?;
+        let codec = codec_of(&info, names.extension()).filter(Codec::writes_files).ok_or_else(|| TilerError::Info {
+            path: path.clone(),
+            field: "codec".into(),
+            message: "neither codec nor the file extension says jpeg or png".into(),
+        })?;
+        let channels = Channels::from_tile_format(info.tile_format.as_deref().unwrap_or("rgb")).ok_or_else(|| {
+            TilerError::Info { path: path.clone(), field: "tileFormat".into(), message: "not supported".into() }
+        })?;
+        let depth = Depth::from_tile_type(info.tile_type.as_deref().unwrap_or("unsignedByte")).ok_or_else(|| {
+            TilerError::Info { path: path.clone(), field: "tileType".into(), message: "not supported".into() }
+        })?;
+        let lod_count = tile_count.trailing_zeros() + 1;
+        let description = Description {
+            width: info.width.unwrap_or(side),
+            height: info.height.unwrap_or(side),
+            tile_size,
+            border,
+            level_count: lod_count,
+            channels: channels.count() as u8,
+            sample_bytes: depth.bytes() as u8,
+        };
+        // The pack's metadata is the completed description.
+        info.format_version = Some(FORMAT_VERSION);
+        info.lod_count = Some(lod_count);
+        info.border = Some(border);
+        info.width = Some(description.width);
+        info.height = Some(description.height);
+        info.tile_format = Some(channels.tile_format().into());
+        info.tile_type = Some(depth.tile_type().into());
+        info.codec = Some(codec.name().into());
+        Ok(TiledDir { info, description, tile_count, names, codec })
+    }
+
+    /// The texel layout of the tiles.
+    pub fn layout(&self) -> PixelLayout {
+        layout_of(&self.description)
+    }
+}
+
+/// The texel layout a pack's description states.
+pub(crate) fn layout_of(d: &Description) -> PixelLayout {
+    PixelLayout::new(
+        [Channels::Grey, Channels::GreyAlpha, Channels::Rgb, Channels::Rgba][d.channels as usize - 1],
+        if d.sample_bytes == 2 { Depth::U16 } else { Depth::U8 },
+    )
+}
+
+/// The codec `info.json` names, or else the one the tile files' extension implies.
+pub(crate) fn codec_of(info: &InfoFile, extension: Option<String>) -> Option<Codec> {
+    let name = info.codec.clone().or(extension).unwrap_or_default();
+    let subsampling = if info.subsampling.as_deref() == Some("444") { Subsampling::S444 } else { Subsampling::S420 };
+    let level = match info.png_compression.as_deref() {
+        Some("default") => PngLevel::Default,
+        Some("best") => PngLevel::Best,
+        _ => PngLevel::Fast,
+    };
+    let zstd_level = info.zstd_level.unwrap_or(DEFAULT_ZSTD_LEVEL);
+    let effort = info.bc7_effort.as_deref().and_then(|e| <Bc7Effort as clap::ValueEnum>::from_str(e, false).ok());
+    match name.as_str() {
+        "jpeg" | "jpg" => Some(Codec::Jpeg { quality: info.quality.unwrap_or(85), subsampling }),
+        "png" => Some(Codec::Png { level }),
+        // Never a file extension: these tiles are not files.
+        _ if info.codec.is_none() => None,
+        "raw" => Some(Codec::Raw),
+        "zstd" => Some(Codec::Zstd { level: zstd_level, delta: false }),
+        "zstd-delta" => Some(Codec::Zstd { level: zstd_level, delta: true }),
+        "bc1" => Some(Codec::Bc1),
+        "bc7" => Some(Codec::Bc7 { effort: effort.unwrap_or(DEFAULT_BC7_EFFORT) }),
+        _ => None,
+    }
+}

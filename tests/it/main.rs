@@ -1,0 +1,19 @@
+//! The root crate's integration tests, one binary (one link instead of one per file). Each
+//! module is one concern; `common` holds the shared helpers (in-memory sources and sinks, the
+//! naive whole-image oracle, running the built binary).
+//!
+//! Run one module with a filter, e.g. `cargo test --test it oracle::`; bless the golden files
+//! with `BLESS=1 cargo test --test it golden::` after checking the diff.
+
+mod cli;
+mod codecs;
+mod common;
+mod convert;
+mod docs;
+mod failures;
+mod golden;
+mod oracle;
+mod pack_cli;
+mod render;
+mod sources;
+mod stability;
