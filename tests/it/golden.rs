@@ -1,10 +1,11 @@
-//! Golden files: every tile of each small fixture as `lod x y width height crc32` (CRC-32 of the
-//! decoded samples, big-endian), so any change to the pyramid shows up as a reviewable diff.
+//! Golden files: every tile of each small fixture as `lod x y width height crc32` (the tile
+//! file's decoded width and height, and the CRC-32 of its decoded samples, big-endian), so any
+//! change to the pyramid shows up as a reviewable diff.
 //! Bless new results with `BLESS=1 cargo test --test it golden::` after checking them.
 
 use std::path::Path;
 
-use crate::common::{MemSink, decode_png, png_options};
+use crate::common::{MemSink, decode_png_sized, png_options};
 use vortex_tiler::background::Background;
 use vortex_tiler::source;
 use vortex_tiler::split::split;
@@ -18,7 +19,8 @@ fn golden(fixture: &str, tile: u32, border: u32, background: Background) {
         format!("# {fixture}: tile {tile}, border {border}, background {background}, {} tiles\n", summary.tiles);
     text.push_str("# lod x y width height crc32\n");
     for ((lod, x, y), png) in sink.tiles.into_inner().unwrap() {
-        let samples: Vec<u8> = decode_png(&png)
+        let (width, height, samples) = decode_png_sized(&png);
+        let samples: Vec<u8> = samples
             .iter()
             .flat_map(|s| {
                 if summary.stored.depth == vortex_tiler::pixel::Depth::U8 {
@@ -28,7 +30,7 @@ fn golden(fixture: &str, tile: u32, border: u32, background: Background) {
                 }
             })
             .collect();
-        text.push_str(&format!("{lod} {x} {y} {tile} {tile} {:08x}\n", crc32fast::hash(&samples)));
+        text.push_str(&format!("{lod} {x} {y} {width} {height} {:08x}\n", crc32fast::hash(&samples)));
     }
     let path = root.join("golden").join(format!("{fixture}.txt"));
     if std::env::var_os("BLESS").is_some() {

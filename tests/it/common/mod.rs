@@ -118,13 +118,19 @@ pub fn run_pipeline(image: &Image, opts: &SplitOptions, threads: usize) -> (Summ
 }
 
 pub fn decode_png(bytes: &[u8]) -> Vec<u16> {
+    decode_png_sized(bytes).2
+}
+
+/// A PNG's decoded width, height and samples (widened to u16).
+pub fn decode_png_sized(bytes: &[u8]) -> (u32, u32, Vec<u16>) {
     let mut reader = png::Decoder::new(std::io::Cursor::new(bytes)).read_info().unwrap();
     let mut buf = vec![0; reader.output_buffer_size().unwrap()];
     let info = reader.next_frame(&mut buf).unwrap();
-    match info.bit_depth {
+    let samples = match info.bit_depth {
         png::BitDepth::Sixteen => buf.chunks_exact(2).map(|b| u16::from_be_bytes([b[0], b[1]])).collect(),
         _ => buf.into_iter().map(u16::from).collect(),
-    }
+    };
+    (info.width, info.height, samples)
 }
 
 /// LOD `lod` of `image` computed directly from the source: each texel is the rounded mean of
