@@ -2,12 +2,12 @@
 //! stored tiles cut out of each level, in memory bounded by the image's width.
 //!
 //! In data order:
-//! - [`band`]: the few rows of one level that its next row of tiles needs;
-//! - [`reduce`]: exact 2x2 sums passed from each level to the next, rounded once per texel;
-//! - [`filter`]: what those sums add up (`--filter`: box, linear light, premultiplied);
-//! - [`resample`]: the filters that cannot cascade sums (lanczos3, mitchell), band by band;
-//! - [`cut`]: the tiles (payload, borders, padding) cut out of a band;
-//! - [`cascade`]: all levels in flight at once, wiring the above together for one run.
+//! - `band`: the few rows of one level that its next row of tiles needs;
+//! - `reduce`: exact 2x2 sums passed from each level to the next, rounded once per texel;
+//! - `filter`: what those sums add up (`--filter`: box, linear light, premultiplied);
+//! - `resample`: the filters that cannot cascade sums (lanczos3, mitchell), band by band;
+//! - `cut`: the tiles (payload, borders, padding) cut out of a band;
+//! - `cascade`: all levels in flight at once, wiring the above together for one run.
 //!
 //! Only [`Filter`], an option of [`crate::split::SplitOptions`], is public; the rest is the
 //! pipeline's inside (tests reach it through the `testing` feature).
