@@ -3,9 +3,9 @@
 //! A producer thread reads the source row by row into the [LOD cascade](crate::pyramid),
 //! which cuts each row of tiles as soon as its bands hold every row it reads and sends it, in
 //! a bounded channel, to the calling thread; that thread encodes the tiles in parallel on the
-//! rayon pool ([`crate::codec`]) and hands them to the [sink](crate::sink). This file is only
-//! that orchestration. Peak memory is therefore a few bands of the image's width,
-//! whatever its height; output bytes do not depend on the thread count.
+//! rayon pool ([`crate::codec`]) and hands them to the [sink](crate::sink). Peak memory is a
+//! few bands of the image's width, whatever its height; output bytes do not depend on the
+//! thread count. This file is only that orchestration; the stages live in their modules.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, sync_channel};
