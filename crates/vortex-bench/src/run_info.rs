@@ -1,8 +1,5 @@
-//! What the benchmark examples that write a document say about their run: the date, the
-//! machine, its load; and how they write the document (never half-written).
-//!
-//! Shared by `examples/accuracy.rs` and `crates/vortex-gpu/examples/sampling_cost.rs` through
-//! `#[path]`, since examples of different crates cannot share a module otherwise.
+//! What the measurement programs say about their run: the date, the machine, its load; and how
+//! they write a document or a plot (never half-written).
 
 use std::path::Path;
 use std::time::{SystemTime, UNIX_EPOCH};
@@ -25,7 +22,6 @@ pub fn today() -> String {
 }
 
 /// "CPU model (N cores available, M GiB)", from /proc (Linux).
-#[allow(dead_code)] // not every example names the CPU
 pub fn machine() -> String {
     let proc_line = |file: &str, key: &str| -> Option<String> {
         let text = std::fs::read_to_string(file).ok()?;
