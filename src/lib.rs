@@ -17,6 +17,8 @@ pub mod filename;
 pub mod filter;
 pub mod info;
 pub mod layout;
+pub mod limits;
+pub mod output;
 pub mod pack_sink;
 pub mod pixel;
 pub mod pyramid;

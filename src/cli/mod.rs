@@ -3,6 +3,7 @@
 mod convert;
 mod pack;
 mod render;
+mod signals;
 mod split;
 
 use anyhow::Result;
