@@ -46,6 +46,14 @@ pub enum TilerError {
     #[error(transparent)]
     Pack(#[from] vortex_pack::PackError),
 
+    /// What the input or the options ask for is over a cap of [`crate::limits::Limits`].
+    #[error("{0}")]
+    Limit(String),
+
+    /// The destination may not be written (see [`crate::output`]).
+    #[error(transparent)]
+    Output(#[from] crate::output::OutputError),
+
     /// The caller asked the run to stop (Ctrl-C).
     #[error("interrupted; nothing was left at the destination")]
     Interrupted,

@@ -14,12 +14,16 @@
 //! the directory sink writes and the tiled sources read; [`repack`] moves tiles between a tile
 //! directory and a pack (`pack`, `unpack`). Shared types: [`layout`] (the page grid's
 //! geometry), [`pixel`] (channels and depth), [`background`] (what fills the padding),
-//! [`settings`] (flags and `info.json` into options) and [`error`].
+//! [`settings`] (flags and `info.json` into options) and [`error`]. Every command checks
+//! [`limits`] before it allocates and claims its destination through [`output`], the one rule
+//! that keeps it from destroying anything the user owns.
 
 pub mod background;
 pub mod codec;
 pub mod error;
 pub mod layout;
+pub mod limits;
+pub mod output;
 pub mod pixel;
 pub mod pyramid;
 pub mod repack;

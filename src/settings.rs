@@ -99,8 +99,8 @@ pub fn resolve(
             })?),
         };
     let tile_depth = req.tile_depth.or(info_depth);
-    let flatten = req.flatten
-        || want_channels.is_some_and(|c| source.channels.has_alpha() && c == source.channels.without_alpha());
+    refuse_lossy_defaults(req, info, source, want_channels, info_depth, info_codec, &field_err)?;
+    let flatten = req.flatten;
     if choice == CodecChoice::Auto {
         let lossless = (source.channels.has_alpha() && !flatten) || tile_depth.unwrap_or(source.depth) == Depth::U16;
         choice = if lossless { CodecChoice::Png } else { CodecChoice::Jpeg };
@@ -145,6 +145,78 @@ pub fn resolve(
         ));
     }
     Ok((opts, names))
+}
+
+/// An existing `info.json` sets this run's defaults, but never ones that would lose data the
+/// source holds: its alpha (`tileFormat` without it), its 16 bits (`tileType` unsignedByte) or
+/// its exactness (a lossy `codec` where the source's default is lossless). Those are errors
+/// naming the member and the flag that asks for the loss explicitly.
+fn refuse_lossy_defaults(
+    req: &Requested,
+    info: &InfoFile,
+    source: PixelLayout,
+    want_channels: Option<Channels>,
+    info_depth: Option<Depth>,
+    info_codec: Option<CodecChoice>,
+    field_err: &dyn Fn(&str, String) -> TilerError,
+) -> Result<()> {
+    let has_alpha = source.channels.has_alpha();
+    if has_alpha && !req.flatten && want_channels.is_some_and(|c| !c.has_alpha()) {
+        return Err(field_err(
+            "tileFormat",
+            format!(
+                "is {} but the source is {source}: its alpha would be dropped; pass --flatten to composite it away, or choose another output",
+                want_channels.map_or("", |c| c.tile_format())
+            ),
+        ));
+    }
+    if source.depth == Depth::U16 && req.tile_depth.is_none() && info_depth == Some(Depth::U8) {
+        return Err(field_err(
+            "tileType",
+            format!(
+                "is unsignedByte but the source is {source}: its 16 bits would be cut to 8; pass --tile-type unsignedByte to do so, or choose another output"
+            ),
+        ));
+    }
+    let lossless_source = (has_alpha && !req.flatten) || source.depth == Depth::U16;
+    let lossy = matches!(info_codec, Some(CodecChoice::Jpeg | CodecChoice::Bc1 | CodecChoice::Bc7));
+    if lossless_source && lossy && req.codec.is_none() {
+        return Err(field_err(
+            "codec",
+            format!(
+                "is {} but the source is {source}, stored losslessly by default; pass --codec {} to use it anyway, or choose another output",
+                info.codec.as_deref().unwrap_or_default(),
+                info.codec.as_deref().unwrap_or_default()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The members of an existing `info.json` that set this run's settings (no flag overrode
+/// them), as `name value` for the line that says so.
+pub fn taken_from_file(req: &Requested, info: &InfoFile) -> Vec<String> {
+    let mut taken = Vec::new();
+    let mut take = |name: &str, flag_given: bool, value: Option<String>| {
+        if let (false, Some(v)) = (flag_given, value) {
+            taken.push(format!("{name} {v}"));
+        }
+    };
+    let codec_given = req.codec.is_some();
+    take("tileSize", req.tile_size.is_some(), info.tile_size.map(|v| v.to_string()));
+    take("border", req.border.is_some(), info.border.map(|v| v.to_string()));
+    take("codec", codec_given, info.codec.clone());
+    take("quality", codec_given || req.quality.is_some(), info.quality.map(|v| v.to_string()));
+    take("subsampling", codec_given || req.subsampling.is_some(), info.subsampling.clone());
+    take("pngCompression", codec_given || req.png_level.is_some(), info.png_compression.clone());
+    take("zstdLevel", codec_given || req.zstd_level.is_some(), info.zstd_level.map(|v| v.to_string()));
+    take("bc7Effort", codec_given || req.bc7_effort.is_some(), info.bc7_effort.clone());
+    take("background", req.background.is_some(), info.background.clone());
+    take("tileFormat", req.flatten, info.tile_format.clone());
+    take("tileType", req.tile_depth.is_some(), info.tile_type.clone());
+    take("filenameFormat", req.filename_format.is_some(), info.filename_format.clone());
+    take("filter", req.filter.is_some(), info.filter.clone());
+    taken
 }
 
 /// Checks an existing `info.json`'s derived members against what this run will produce.

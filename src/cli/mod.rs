@@ -4,6 +4,7 @@ mod convert;
 mod pack;
 mod render;
 pub(crate) mod report;
+mod signals;
 mod split;
 
 use anyhow::Result;

@@ -52,12 +52,19 @@ pub trait RowSource: Send {
 
 /// Opens `path`, choosing the decoder from the file's first bytes (not its extension).
 pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
-    let mut magic = [0u8; 8];
-    let mut file = File::open(path).map_err(|e| TilerError::io(path, e))?;
-    let meta = file.metadata().map_err(|e| TilerError::io(path, e))?;
+    // Checked before opening: opening a FIFO blocks until a writer comes.
+    let meta = std::fs::metadata(path).map_err(|e| TilerError::io(path, e))?;
     if meta.is_dir() {
         return Err(TilerError::decode(path, "is a directory, not an image"));
     }
+    if !meta.is_file() {
+        return Err(TilerError::unsupported(
+            path,
+            "is not a regular file (a FIFO, socket or device): an image is opened more than once (its first bytes, then its rows), so save it to a file first",
+        ));
+    }
+    let mut magic = [0u8; 8];
+    let mut file = File::open(path).map_err(|e| TilerError::io(path, e))?;
     let n = read_up_to(&mut file, &mut magic).map_err(|e| TilerError::io(path, e))?;
     let magic = &magic[..n];
     if n == 0 {

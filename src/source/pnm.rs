@@ -1,11 +1,10 @@
-//! Binary PGM (P5) and PPM (P6) read through a memory map: rows are slices of the file. Pages
-//! already read are handed back to the kernel as the reader moves on, so the mapped file does
-//! not accumulate in the process's resident memory.
+//! Binary PGM (P5) and PPM (P6), read row by row through a buffer. Not memory-mapped: a
+//! mapped file that another process truncates during the run kills the reader with SIGBUS,
+//! where a read simply comes up short and is reported as an error naming the row.
 
 use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
-
-use memmap2::Mmap;
 
 use super::{ImageHeader, RowSource, image_bytes};
 use crate::error::{Result, TilerError};
@@ -13,27 +12,27 @@ use crate::pixel::{Channels, Depth, PixelLayout};
 
 pub struct PnmSource {
     path: PathBuf,
-    map: Mmap,
-    data_start: usize,
+    reader: BufReader<File>,
+    /// The file's samples of one row, before scaling to the full range.
+    raw: Vec<u8>,
     width: u32,
     height: u32,
     maxval: u32,
     layout: PixelLayout,
     next: u64,
-    /// Bytes before this offset have been released from the mapping.
-    released: usize,
 }
 
-/// Release consumed pages in steps of this many bytes.
-const RELEASE_STEP: usize = 16 << 20;
+/// The most header bytes read (comments included) before the pixel data must start.
+const MAX_HEADER: u64 = 64 << 10;
+/// Read in blocks of this size, so that rows of any width cost few system calls.
+const READ_BUFFER: usize = 1 << 20;
 
 pub fn open(path: &Path) -> Result<Box<dyn RowSource>> {
-    let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
-    // SAFETY: the map is read-only; a file truncated underneath would fault, as for any mapped reader.
-    let map = unsafe { Mmap::map(&file) }.map_err(|e| TilerError::io(path, e))?;
-    #[cfg(unix)]
-    let _ = map.advise(memmap2::Advice::Sequential);
-    let (channels, width, height, maxval, data_start) = parse_header(&map).map_err(|m| TilerError::decode(path, m))?;
+    let mut file = File::open(path).map_err(|e| TilerError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
+    let mut head = Vec::new();
+    (&mut file).take(MAX_HEADER).read_to_end(&mut head).map_err(|e| TilerError::io(path, e))?;
+    let (channels, width, height, maxval, data_start) = parse_header(&head).map_err(|m| TilerError::decode(path, m))?;
     if width == 0 || height == 0 {
         return Err(TilerError::decode(path, format!("the header says {width}x{height}: the image has no pixels")));
     }
@@ -41,7 +40,7 @@ pub fn open(path: &Path) -> Result<Box<dyn RowSource>> {
     let layout = PixelLayout::new(channels, depth);
     let need =
         image_bytes(width, height, layout).ok_or_else(|| TilerError::decode(path, "the header's size overflows"))?;
-    let have = (map.len() - data_start) as u64;
+    let have = file_len.saturating_sub(data_start as u64);
     if have < need {
         return Err(TilerError::decode(
             path,
@@ -49,16 +48,16 @@ pub fn open(path: &Path) -> Result<Box<dyn RowSource>> {
         ));
     }
     let (width, height) = (u32::try_from(width).unwrap_or(u32::MAX), u32::try_from(height).unwrap_or(u32::MAX));
+    file.seek(SeekFrom::Start(data_start as u64)).map_err(|e| TilerError::io(path, e))?;
     Ok(Box::new(PnmSource {
         path: path.to_path_buf(),
-        map,
-        data_start,
+        reader: BufReader::with_capacity(READ_BUFFER, file),
+        raw: Vec::new(),
         width,
         height,
         maxval,
         layout,
         next: 0,
-        released: 0,
     }))
 }
 
@@ -107,27 +106,26 @@ impl RowSource for PnmSource {
     }
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
-        let start = self.data_start + self.next as usize * out.len();
-        let data = self.map.get(start..start + out.len()).ok_or_else(|| TilerError::DecodeRow {
+        let row = self.next;
+        let ends_early = |e: std::io::Error| TilerError::DecodeRow {
             path: self.path.clone(),
-            row: self.next,
-            message: "the file ends early".into(),
-        })?;
-        self.next += 1;
-        #[cfg(unix)]
-        if start - self.released >= RELEASE_STEP {
-            // SAFETY: a read-only file mapping; dropped pages are read from the file again if touched.
-            let _ = unsafe {
-                self.map.unchecked_advise_range(
-                    memmap2::UncheckedAdvice::DontNeed,
-                    self.released,
-                    start - self.released,
-                )
-            };
-            self.released = start;
+            row,
+            message: if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                "the file ends early (was it truncated while being read?)".into()
+            } else {
+                e.to_string()
+            },
+        };
+        if self.layout.depth == Depth::U8 && self.maxval == 255 {
+            self.reader.read_exact(out).map_err(ends_early)?;
+            self.next += 1;
+            return Ok(());
         }
+        self.raw.resize(out.len(), 0);
+        self.reader.read_exact(&mut self.raw).map_err(ends_early)?;
+        self.next += 1;
+        let data = &self.raw;
         match (self.layout.depth, self.maxval) {
-            (Depth::U8, 255) => out.copy_from_slice(data),
             (Depth::U8, m) => {
                 for (o, v) in out.iter_mut().zip(data) {
                     *o = ((*v as u32).min(m) * 255 * 2 + m).div_euclid(2 * m) as u8;
@@ -145,7 +143,7 @@ impl RowSource for PnmSource {
     }
 
     fn describe(&self) -> String {
-        "pnm, memory-mapped".into()
+        "pnm, read by row".into()
     }
 }
 

@@ -1,0 +1,181 @@
+//! The caps every command checks before it allocates, whatever its input claims.
+//!
+//! A header, an `info.json`, a pack's metadata or a flag can claim any size. Each command
+//! computes what it will need from those claims first (the pyramid's tile count, the pack
+//! index, the bands and the pages in flight, a whole decoded image, frames, threads, file-name
+//! length) and checks it here; over a cap the error names the figure, the cap and the flag
+//! that raises it, instead of an abort, an OOM kill or a run that never ends.
+
+use crate::error::TilerError;
+use crate::layout::Layout;
+
+/// The caps of one run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    /// Bytes a run may hold at once (`--max-memory`): bands and pages in flight, a pack's
+    /// index, a whole decoded image, a row of input tiles.
+    pub memory: u64,
+    /// Tiles in the whole pyramid. A pack indexes each one; a directory gets one file each.
+    pub tiles: u64,
+    /// Frames `render` draws.
+    pub frames: u64,
+    /// Worker threads (`--threads`).
+    pub threads: usize,
+    /// Bytes of one tile's file name (a file-name pattern can pad numbers to any width).
+    pub filename_bytes: usize,
+}
+
+/// `--max-memory`'s default.
+pub const DEFAULT_MEMORY: u64 = 1 << 30;
+
+impl Default for Limits {
+    fn default() -> Limits {
+        Limits {
+            memory: DEFAULT_MEMORY,
+            tiles: 1 << 32,
+            frames: 1_000_000,
+            threads: max_threads(),
+            filename_bytes: 4096,
+        }
+    }
+}
+
+/// The most worker threads accepted: 4 per core, enough to hide I/O waits, not enough to
+/// spend minutes starting threads.
+pub fn max_threads() -> usize {
+    4 * std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Index bytes per tile of a pack (one entry per tile of the pyramid).
+const INDEX_ENTRY_BYTES: u64 = vortex_pack::format::ENTRY_LEN as u64;
+
+impl Limits {
+    fn over(figure: &str, need: u64, cap: u64, flag: &str) -> TilerError {
+        TilerError::Limit(format!("{figure} needs {}, more than {flag} ({}); raise {flag}", human(need), human(cap)))
+    }
+
+    /// Checks a pyramid's tile count and, for a pack, its index.
+    pub fn check_pyramid(&self, layout: &Layout, pack: bool) -> Result<(), TilerError> {
+        let tiles = layout.total_tiles();
+        if tiles > self.tiles {
+            return Err(TilerError::Limit(format!(
+                "the pyramid has {tiles} tiles ({} LODs of up to {} x {} tiles), more than the {} a pyramid may have; a larger tile size gives fewer",
+                layout.lod_count, layout.tile_count, layout.tile_count, self.tiles
+            )));
+        }
+        if pack {
+            let index = tiles.saturating_mul(INDEX_ENTRY_BYTES);
+            if index > self.memory {
+                return Err(Limits::over(
+                    &format!("the pack's index of {tiles} tiles"),
+                    index,
+                    self.memory,
+                    "--max-memory",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks the pipeline's working set for `layout` with `sample_bytes` bytes per texel
+    /// (the bound of `docs/architecture.md`: bands, reducers and three rows of pages in
+    /// flight).
+    pub fn check_pipeline(&self, layout: &Layout, texel_bytes: u64) -> Result<(), TilerError> {
+        let need = pipeline_bytes(layout, texel_bytes);
+        if need > self.memory {
+            return Err(Limits::over(
+                &format!(
+                    "cutting a {}-texel-wide image into {}-texel tiles (border {})",
+                    layout.width, layout.tile_size, layout.border
+                ),
+                need,
+                self.memory,
+                "--max-memory",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Checks a `--threads` request.
+    pub fn check_threads(&self, threads: usize) -> Result<(), TilerError> {
+        if threads > self.threads {
+            return Err(TilerError::Limit(format!(
+                "--threads {threads} is more than {} (4 per core); 0 means one per core",
+                self.threads
+            )));
+        }
+        Ok(())
+    }
+
+    /// Checks a frame count.
+    pub fn check_frames(&self, frames: u64) -> Result<(), TilerError> {
+        if frames > self.frames {
+            return Err(TilerError::Limit(format!("{frames} frames is more than the {} a run may draw", self.frames)));
+        }
+        Ok(())
+    }
+}
+
+/// Bytes the banded pipeline holds at once for `layout`, rounded up generously.
+pub fn pipeline_bytes(layout: &Layout, texel_bytes: u64) -> u64 {
+    let width = layout.virtual_side(0).min(layout.width as u64 + layout.tile_size as u64);
+    let tile = layout.tile_size as u64;
+    let pages_per_row = layout.tile_count as u64;
+    // Bands: (T + 1) rows per LOD, summing to under twice LOD 0's.
+    let bands = 2 * (tile + 1) * width * texel_bytes;
+    // Exact sums: one row of u64 (or u128) per sample per LOD.
+    let reducers = 2 * 16 * width * texel_bytes;
+    // Pages: three batches of one row of LOD-0 pages each.
+    let pages = 3 * pages_per_row * tile * tile * texel_bytes;
+    bands.saturating_add(reducers).saturating_add(pages)
+}
+
+/// `1.5 GiB`, `12 MiB`, `512 KiB`, `100 B`.
+pub fn human(bytes: u64) -> String {
+    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut value = bytes as f64;
+    let mut unit = 0;
+    while value >= 1024.0 && unit + 1 < UNITS.len() {
+        value /= 1024.0;
+        unit += 1;
+    }
+    if unit == 0 { format!("{bytes} B") } else { format!("{value:.1} {}", UNITS[unit]) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_wide_strip_is_refused_before_allocation() {
+        // 16000000 x 1 in 128-texel pages: a square grid of 131072 pages per side.
+        let layout = Layout::new(16_000_000, 1, 128, 0).unwrap();
+        let e = Limits::default().check_pyramid(&layout, true).unwrap_err().to_string();
+        assert!(e.contains("tiles") && e.contains("tile size"), "{e}");
+    }
+
+    #[test]
+    fn huge_tiles_with_tiny_payload_are_refused() {
+        let layout = Layout::new(1000, 1000, 16384, 8190).unwrap();
+        let e = Limits::default().check_pipeline(&layout, 3).unwrap_err().to_string();
+        assert!(e.contains("--max-memory"), "{e}");
+    }
+
+    #[test]
+    fn ordinary_runs_pass() {
+        let layout = Layout::new(16384, 16384, 256, 0).unwrap();
+        let limits = Limits::default();
+        limits.check_pyramid(&layout, true).unwrap();
+        limits.check_pipeline(&layout, 3).unwrap();
+        // The bound stays near docs/architecture.md's 63 MiB for this image.
+        assert!(pipeline_bytes(&layout, 3) < 128 << 20, "{}", pipeline_bytes(&layout, 3));
+    }
+
+    #[test]
+    fn threads_and_frames() {
+        let limits = Limits::default();
+        assert!(limits.check_threads(1_000_000_000).unwrap_err().to_string().contains("4 per core"));
+        limits.check_threads(1).unwrap();
+        assert!(limits.check_frames(4_000_000_000).is_err());
+    }
+}

@@ -1,0 +1,182 @@
+//! How each kind of output recognises a previous output of its own, the only thing it may
+//! replace without `--force`. Recognition is by content, never by name: a pack by its
+//! signature, a tile directory by an `info.json` we can read and tiles its file-name pattern
+//! names (nothing else), a render report by its members, a frames folder by its frame names.
+
+use std::fs;
+use std::io::Read;
+use std::path::Path;
+
+use crate::settings::DEFAULT_FILENAME_STEM;
+use crate::tile_dir::filename::FilenameFormat;
+use crate::tile_dir::info::InfoFile;
+
+/// What a command writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Product {
+    /// A pack file (`split --pack`, `convert --pack`, `pack -o`).
+    Pack,
+    /// A directory of tiles plus `info.json` (`split -o`, `convert -o`, `unpack -o`).
+    TileDir,
+    /// The JSON report of `render --report`.
+    Report,
+    /// The folder of PNG frames of `render --frames`.
+    Frames,
+}
+
+/// The largest report or `info.json` read to recognise it; ours are far smaller.
+const MAX_JSON_BYTES: u64 = 64 << 20;
+
+impl Product {
+    pub fn is_dir(self) -> bool {
+        matches!(self, Product::TileDir | Product::Frames)
+    }
+
+    /// The product as the messages name it.
+    pub fn noun(self) -> &'static str {
+        match self {
+            Product::Pack => "a pack",
+            Product::TileDir => "a tile directory",
+            Product::Report => "a render report",
+            Product::Frames => "a folder of rendered frames",
+        }
+    }
+
+    /// `Ok` if `path` (of the right file type) holds a previous output of this kind, else
+    /// what is there instead, for the message.
+    pub(super) fn recognise(self, path: &Path) -> Result<(), String> {
+        match self {
+            Product::Pack => recognise_pack(path),
+            Product::TileDir => recognise_tile_dir(path),
+            Product::Report => recognise_report(path),
+            Product::Frames => recognise_frames(path),
+        }
+    }
+}
+
+fn recognise_pack(path: &Path) -> Result<(), String> {
+    let mut head = [0u8; 8];
+    let n = fs::File::open(path)
+        .and_then(|mut f| read_up_to(&mut f, &mut head))
+        .map_err(|e| format!("unreadable ({e})"))?;
+    if n == 0 {
+        return Err("an empty file".into());
+    }
+    if head[..n] != vortex_pack::format::MAGIC[..] {
+        return Err("a file that is not a pack".into());
+    }
+    Ok(())
+}
+
+fn read_up_to(f: &mut fs::File, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut n = 0;
+    while n < buf.len() {
+        match f.read(&mut buf[n..])? {
+            0 => break,
+            k => n += k,
+        }
+    }
+    Ok(n)
+}
+
+fn recognise_report(path: &Path) -> Result<(), String> {
+    let len = fs::metadata(path).map_err(|e| format!("unreadable ({e})"))?.len();
+    if len > MAX_JSON_BYTES {
+        return Err(format!("a file of {len} bytes, too large to be a render report"));
+    }
+    let text = fs::read(path).map_err(|e| format!("unreadable ({e})"))?;
+    let value: serde_json::Value =
+        serde_json::from_slice(&text).map_err(|_| "a file that is not a render report".to_string())?;
+    let ours = ["adapter", "frames", "pages_touched", "pages_total"].iter().all(|k| value.get(k).is_some());
+    if ours { Ok(()) } else { Err("a JSON file that is not a render report".into()) }
+}
+
+/// The entries of a directory, or what went wrong as the message says it.
+fn entries(dir: &Path) -> Result<Vec<fs::DirEntry>, String> {
+    let read = fs::read_dir(dir).map_err(|e| format!("unreadable ({e})"))?;
+    read.collect::<Result<Vec<_>, _>>().map_err(|e| format!("unreadable ({e})"))
+}
+
+fn recognise_frames(dir: &Path) -> Result<(), String> {
+    for entry in entries(dir)? {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        let is_frame = entry.file_type().is_ok_and(|t| t.is_file())
+            && name
+                .strip_prefix("frame-")
+                .and_then(|n| n.strip_suffix(".png"))
+                .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()));
+        if !is_frame {
+            return Err(format!("holds {name}"));
+        }
+    }
+    Ok(())
+}
+
+/// An empty directory, or our `info.json` plus only the tiles its pattern names (in any
+/// sub-folders the pattern makes).
+fn recognise_tile_dir(dir: &Path) -> Result<(), String> {
+    let top = entries(dir)?;
+    if top.is_empty() {
+        return Ok(());
+    }
+    let info_path = dir.join("info.json");
+    if !info_path.is_file() {
+        let first = top[0].file_name();
+        return Err(format!("holds {} and no info.json", first.to_string_lossy()));
+    }
+    if fs::metadata(&info_path).map_or(0, |m| m.len()) > MAX_JSON_BYTES {
+        return Err("holds an info.json too large to be ours".into());
+    }
+    let info = InfoFile::read(&info_path).map_err(|e| format!("holds an info.json this tool did not write ({e})"))?;
+    let names = tile_names(&info)?;
+    let lods = info.lod_count.unwrap_or(u32::MAX);
+    let mut stack = vec![(dir.to_path_buf(), String::new(), top)];
+    while let Some((path, prefix, list)) = stack.pop() {
+        for entry in list {
+            let name = entry.file_name();
+            let relative = format!("{prefix}{}", name.to_string_lossy());
+            let kind = entry.file_type().map_err(|e| format!("unreadable ({e})"))?;
+            if kind.is_dir() {
+                let child = path.join(&name);
+                let list = entries(&child)?;
+                stack.push((child, format!("{relative}/"), list));
+            } else if kind.is_file() && (relative == "info.json" || is_tile(&names, &relative, lods)) {
+                continue;
+            } else {
+                return Err(format!("holds {relative}, which is not one of its tiles"));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// How `info`'s tiles are named: its `filenameFormat`, or (files of the original tool may
+/// lack one) the default stem with an image extension.
+struct TileNames {
+    format: FilenameFormat,
+    /// Whether the extension is left out of `format` and checked apart.
+    any_image_extension: bool,
+}
+
+fn tile_names(info: &InfoFile) -> Result<TileNames, String> {
+    let (pattern, any_image_extension) = match &info.filename_format {
+        Some(f) => (f.as_str(), false),
+        None => (DEFAULT_FILENAME_STEM, true),
+    };
+    let format = FilenameFormat::parse(pattern, 3)
+        .map_err(|e| format!("holds an info.json whose filenameFormat does not parse ({e})"))?;
+    Ok(TileNames { format, any_image_extension })
+}
+
+fn is_tile(names: &TileNames, relative: &str, lods: u32) -> bool {
+    let stem = if names.any_image_extension {
+        match relative.rsplit_once('.') {
+            Some((stem, ext)) if ["jpg", "jpeg", "png"].contains(&ext.to_ascii_lowercase().as_str()) => stem,
+            _ => return false,
+        }
+    } else {
+        relative
+    };
+    names.format.match_name(stem).is_some_and(|args| args.first().is_some_and(|lod| *lod < lods))
+}

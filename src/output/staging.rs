@@ -1,0 +1,154 @@
+//! Temporary names for outputs being written, and the removal of those a dead run left.
+//!
+//! An output `DIR/NAME` is written as `DIR/.NAME.partial-PID` (a pack as `DIR/.NAME.tmp-PID`,
+//! the pack writer's own name), in the destination's directory so that the final rename never
+//! crosses a file system. A run that is killed outright (SIGKILL, power loss) cannot clean up;
+//! the next run for the same destination finds temporaries whose PID is no longer alive and
+//! removes them. A temporary of a live process, possibly another run writing the same
+//! destination, is left alone.
+
+use std::fs;
+use std::io;
+use std::path::{Path, PathBuf};
+
+/// `dest`'s directory, `.` for a bare name.
+pub fn parent_of(dest: &Path) -> PathBuf {
+    match dest.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+fn name_of(dest: &Path) -> String {
+    dest.file_name().map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned())
+}
+
+/// This process's temporary name for `dest`.
+pub fn partial_path(dest: &Path) -> PathBuf {
+    parent_of(dest).join(format!(".{}.partial-{}", name_of(dest), std::process::id()))
+}
+
+/// Writes `bytes` to a temporary name beside `path`, then renames it into place; on any
+/// failure the temporary is removed. The caller has claimed `path` (see [`super::claim`]).
+pub fn write_file(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    let tmp = partial_path(path);
+    let result = fs::write(&tmp, bytes).and_then(|()| fs::rename(&tmp, path));
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Removes the temporaries of `dest` left by processes that are no longer running; returns
+/// what was removed so that the caller can say so.
+pub fn remove_stale(dest: &Path) -> io::Result<Vec<PathBuf>> {
+    let parent = parent_of(dest);
+    let prefix = format!(".{}.", name_of(dest));
+    let mut removed = Vec::new();
+    let entries = match fs::read_dir(&parent) {
+        Ok(e) => e,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(removed),
+        Err(e) => return Err(e),
+    };
+    for entry in entries {
+        let entry = entry?;
+        let name = entry.file_name();
+        let Some(pid) = name.to_str().and_then(|n| n.strip_prefix(&prefix)).and_then(temporary_pid) else {
+            continue;
+        };
+        if pid == std::process::id() || process_alive(pid) != Some(false) {
+            continue;
+        }
+        let path = entry.path();
+        let kind = entry.file_type()?;
+        if kind.is_dir() {
+            fs::remove_dir_all(&path)?;
+        } else {
+            fs::remove_file(&path)?;
+        }
+        removed.push(path);
+    }
+    removed.sort();
+    Ok(removed)
+}
+
+/// The PID in `partial-PID`, `partial-PID.old` or `tmp-PID`.
+fn temporary_pid(suffix: &str) -> Option<u32> {
+    let digits = suffix.strip_prefix("partial-").or_else(|| suffix.strip_prefix("tmp-"))?;
+    let digits = digits.strip_suffix(".old").unwrap_or(digits);
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    digits.parse().ok()
+}
+
+/// Whether process `pid` exists: `None` where this system cannot tell (no `/proc`), so that
+/// nothing is removed there.
+fn process_alive(pid: u32) -> Option<bool> {
+    let proc = Path::new("/proc");
+    if !proc.join("self").exists() {
+        return None;
+    }
+    Some(proc.join(pid.to_string()).exists())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A PID that no process has: beyond the kernel's maximum.
+    fn dead_pid() -> u32 {
+        let max: u32 =
+            fs::read_to_string("/proc/sys/kernel/pid_max").ok().and_then(|s| s.trim().parse().ok()).unwrap_or(4194304);
+        max + 1
+    }
+
+    #[test]
+    fn names_carry_the_pid() {
+        assert_eq!(temporary_pid("partial-123"), Some(123));
+        assert_eq!(temporary_pid("partial-123.old"), Some(123));
+        assert_eq!(temporary_pid("tmp-9"), Some(9));
+        assert_eq!(temporary_pid("partial-"), None);
+        assert_eq!(temporary_pid("partial-12x"), None);
+        assert_eq!(temporary_pid("backup"), None);
+    }
+
+    #[test]
+    fn stale_temporaries_of_dead_runs_go_and_others_stay() {
+        if process_alive(1).is_none() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let dest = dir.path().join("out");
+        let dead = dead_pid();
+        let stale_dir = dir.path().join(format!(".out.partial-{dead}"));
+        fs::create_dir_all(stale_dir.join("sub")).unwrap();
+        fs::write(stale_dir.join("sub/tile.png"), b"x").unwrap();
+        let stale_pack = dir.path().join(format!(".out.tmp-{dead}"));
+        fs::write(&stale_pack, b"x").unwrap();
+        let live = dir.path().join(".out.partial-1");
+        fs::write(&live, b"x").unwrap();
+        let other = dir.path().join(format!(".other.partial-{dead}"));
+        fs::write(&other, b"x").unwrap();
+        let mine = partial_path(&dest);
+        fs::write(&mine, b"x").unwrap();
+
+        let removed = remove_stale(&dest).unwrap();
+        let mut expected = vec![stale_dir.clone(), stale_pack.clone()];
+        expected.sort();
+        assert_eq!(removed, expected);
+        assert!(!stale_dir.exists() && !stale_pack.exists());
+        assert!(live.exists() && other.exists() && mine.exists());
+    }
+
+    #[test]
+    fn write_file_leaves_only_the_result() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("report.json");
+        write_file(&path, b"{}").unwrap();
+        assert_eq!(fs::read(&path).unwrap(), b"{}");
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1);
+        assert!(write_file(&dir.path().join("missing/report.json"), b"{}").is_err());
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+}

@@ -1,0 +1,266 @@
+//! The hostile-input suite: every way a user's mistake or an attacker's file could destroy
+//! data, take the machine down or mislead, run as a user runs the tool. Each case asserts the
+//! exit code, the message, and that nothing is left behind or changed.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::common::cli::{BIN, fails_with, fixture, ok, run, s};
+
+/// A scratch directory holding a copy of a fixture as `in.png`.
+fn scratch_with_input() -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.png");
+    fs::copy(fixture("sample.png"), &input).unwrap();
+    (dir, input)
+}
+
+/// The names in `dir`, sorted, to show that nothing was added or removed.
+fn listing(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn a_pack_onto_its_own_input_is_refused() {
+    let (dir, input) = scratch_with_input();
+    let before = fs::read(&input).unwrap();
+    fails_with(&run(&["split", s(&input), "--pack", s(&input)]), &["is the input"]);
+    fails_with(&run(&["split", s(&input), "--pack", s(&input), "--force"]), &["is the input"]);
+    assert_eq!(fs::read(&input).unwrap(), before);
+    assert_eq!(listing(dir.path()), ["in.png"]);
+}
+
+#[test]
+fn an_output_directory_holding_the_input_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    fs::create_dir(&out).unwrap();
+    let input = out.join("source.png");
+    fs::copy(fixture("sample.png"), &input).unwrap();
+    fs::write(out.join("info.json"), "{}").unwrap();
+    fs::write(out.join("notes.txt"), "mine").unwrap();
+    fails_with(&run(&["split", s(&input), "-o", s(&out)]), &["holds the input"]);
+    assert_eq!(listing(&out), ["info.json", "notes.txt", "source.png"]);
+    assert_eq!(listing(dir.path()), ["out"]);
+}
+
+#[test]
+fn a_directory_with_foreign_files_is_never_replaced() {
+    let (dir, input) = scratch_with_input();
+    let out = dir.path().join("out");
+    ok(&["split", s(&input), "-o", s(&out), "--quiet"]);
+    fs::write(out.join("notes.txt"), "mine").unwrap();
+    fails_with(&run(&["split", s(&input), "-o", s(&out), "--force"]), &["notes.txt", "not one of its tiles"]);
+    assert_eq!(fs::read_to_string(out.join("notes.txt")).unwrap(), "mine");
+    // Without the foreign file the previous output is ours, and is replaced.
+    fs::remove_file(out.join("notes.txt")).unwrap();
+    ok(&["split", s(&input), "-o", s(&out), "--quiet"]);
+    assert_eq!(listing(dir.path()), ["in.png", "out"]);
+}
+
+#[cfg(unix)]
+#[test]
+fn device_nodes_and_links_are_never_replaced() {
+    let (dir, input) = scratch_with_input();
+    fails_with(&run(&["split", s(&input), "--pack", "/dev/null", "--force"]), &["/dev/null", "device node"]);
+    use std::os::unix::fs::FileTypeExt;
+    assert!(fs::metadata("/dev/null").unwrap().file_type().is_char_device());
+    let target = dir.path().join("target.vtpk");
+    ok(&["split", s(&input), "--pack", s(&target), "--quiet"]);
+    let before = fs::read(&target).unwrap();
+    let link = dir.path().join("link.vtpk");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    fails_with(&run(&["split", s(&input), "--pack", s(&link)]), &["symbolic link"]);
+    fails_with(&run(&["pack", s(&link), "-o", s(&link)]), &["symbolic link"]);
+    assert_eq!(fs::read(&target).unwrap(), before);
+    assert!(fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+}
+
+#[test]
+fn a_foreign_file_is_replaced_only_with_force() {
+    let (dir, input) = scratch_with_input();
+    let notes = dir.path().join("notes.vtpk");
+    fs::write(&notes, "my notes").unwrap();
+    fails_with(&run(&["split", s(&input), "--pack", s(&notes)]), &["not a pack", "--force"]);
+    assert_eq!(fs::read_to_string(&notes).unwrap(), "my notes");
+    ok(&["split", s(&input), "--pack", s(&notes), "--force", "--quiet"]);
+    assert!(fs::read(&notes).unwrap().starts_with(b"\x89VTP"));
+    // A previous pack is ours: replaced without --force.
+    ok(&["split", s(&input), "--pack", s(&notes), "--quiet"]);
+    let out = dir.path().join("out");
+    ok(&["split", s(&input), "-o", s(&out), "--quiet"]);
+    fails_with(&run(&["pack", s(&out), "-o", s(&input)]), &["is the input"]);
+    let report = dir.path().join("report.json");
+    fs::write(&report, "{\"mine\": 1}").unwrap();
+    fails_with(&run(&["render", "--pack", s(&notes), "--report", s(&report)]), &["not a render report", "--force"]);
+    assert_eq!(fs::read_to_string(&report).unwrap(), "{\"mine\": 1}");
+    fails_with(&run(&["unpack", s(&notes), "-o", s(&dir.path().join("in.png"))]), &["a file where"]);
+    assert_eq!(listing(dir.path()), ["in.png", "notes.vtpk", "out", "report.json"]);
+}
+
+/// A grey PNG of `width` x 1, compressed to a few kilobytes.
+fn wide_png(path: &Path, width: u32) {
+    let file = fs::File::create(path).unwrap();
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width, 1);
+    enc.set_color(png::ColorType::Grayscale);
+    enc.set_compression(png::Compression::Fast);
+    let mut writer = enc.write_header().unwrap();
+    writer.write_image_data(&vec![128u8; width as usize]).unwrap();
+}
+
+#[test]
+fn sizes_are_checked_before_allocating() {
+    let dir = tempfile::tempdir().unwrap();
+    let wide = dir.path().join("wide.png");
+    wide_png(&wide, 16_000_000);
+    let pack = dir.path().join("wide.vtpk");
+    fails_with(&run(&["split", s(&wide), "--pack", s(&pack)]), &["tiles"]);
+    let (_, input) = scratch_with_input();
+    fails_with(
+        &run(&["split", s(&input), "--pack", s(&pack), "--tile-size", "16384", "--border", "8190"]),
+        &["--max-memory"],
+    );
+    fails_with(&run(&["split", s(&input), "--pack", s(&pack), "--threads", "1000000000"]), &["--threads", "per core"]);
+    fails_with(&run(&["split", s(&input), "--pack", s(&pack), "--max-memory", "16777217T"]), &["--max-memory"]);
+    fails_with(&run(&["render", "--pack", s(&input), "--frame-count", "4000000000"]), &["frames"]);
+    fails_with(
+        &run(&["split", s(&input), "-o", s(&dir.path().join("o")), "--ff", "%1$65536d-%2$d-%3$d.png"]),
+        &["width"],
+    );
+    assert_eq!(listing(dir.path()), ["wide.png"]);
+}
+
+/// A PID that no process has: beyond the kernel's maximum.
+fn dead_pid() -> u64 {
+    fs::read_to_string("/proc/sys/kernel/pid_max").ok().and_then(|s| s.trim().parse().ok()).unwrap_or(4194304) + 1
+}
+
+#[test]
+fn temporaries_of_dead_runs_are_removed() {
+    if !Path::new("/proc/self").exists() {
+        eprintln!("note: no /proc, so dead runs cannot be told from live ones; skipped");
+        return;
+    }
+    let (dir, input) = scratch_with_input();
+    let pid = dead_pid();
+    let stale_dir = dir.path().join(format!(".out.partial-{pid}"));
+    fs::create_dir(&stale_dir).unwrap();
+    fs::write(stale_dir.join("lod00-x0000-y0000.jpg"), "x").unwrap();
+    let stale_pack = dir.path().join(format!(".p.vtpk.tmp-{pid}"));
+    fs::write(&stale_pack, "x").unwrap();
+    let out = run(&["split", s(&input), "-o", s(&dir.path().join("out")), "--quiet"]);
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("removed"), "{}", String::from_utf8_lossy(&out.stderr));
+    ok(&["split", s(&input), "--pack", s(&dir.path().join("p.vtpk")), "--quiet"]);
+    assert_eq!(listing(dir.path()), ["in.png", "out", "p.vtpk"]);
+}
+
+/// A PPM of noise, slow enough to encode as best-compressed PNG that a signal lands mid-run.
+fn noise_ppm(path: &Path, side: usize) {
+    let mut bytes = format!("P6\n{side} {side}\n255\n").into_bytes();
+    let mut state = 0x2545_F491_4F6C_DD1Du64;
+    bytes.extend((0..side * side * 3).map(|_| {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state as u8
+    }));
+    fs::write(path, bytes).unwrap();
+}
+
+#[cfg(unix)]
+#[test]
+fn signals_stop_cleanly_and_leave_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("noise.ppm");
+    noise_ppm(&input, 3000);
+    for (signal, code) in [("TERM", 143), ("INT", 130), ("HUP", 129)] {
+        for (flag, dest) in [("-o", "out"), ("--pack", "out.vtpk")] {
+            let mut child = Command::new(BIN)
+                .args(["split", s(&input), flag, s(&dir.path().join(dest))])
+                .args(["--codec", "png", "--png-compression", "best", "--tile-size", "256", "--quiet"])
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap();
+            // Wait until the run has started writing, then signal it.
+            let started = Instant::now();
+            while listing(dir.path()).len() < 2 && started.elapsed() < Duration::from_secs(20) {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            let sent = Command::new("kill").args([&format!("-{signal}"), &child.id().to_string()]).status().unwrap();
+            assert!(sent.success());
+            let out = child.wait_with_output().unwrap();
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(code), "SIG{signal} {flag}: {err}");
+            assert!(err.contains("interrupted") && !err.contains("panicked"), "{err}");
+            assert_eq!(listing(dir.path()), ["noise.ppm"], "SIG{signal} {flag} left temporaries");
+        }
+    }
+}
+
+#[test]
+fn output_to_a_closed_pipe_ends_quietly() {
+    let (dir, input) = scratch_with_input();
+    let pack = dir.path().join("p.vtpk");
+    ok(&["split", s(&input), "--pack", s(&pack), "--quiet"]);
+    for command in ["verify", "info"] {
+        let mut child = Command::new(BIN)
+            .args([command, s(&pack)])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(matches!(out.status.code(), Some(0 | 141)), "{command}: {:?} {err}", out.status);
+        assert!(err.is_empty(), "{command}: {err}");
+    }
+}
+
+#[test]
+fn messages_point_the_right_way() {
+    let (dir, input) = scratch_with_input();
+    for command in ["info", "verify", "unpack"] {
+        let mut args = vec![command, s(dir.path())];
+        if command == "unpack" {
+            args.extend(["-o", "/nonexistent/never"]);
+        }
+        fails_with(&run(&args), &["is a directory"]);
+    }
+    fails_with(&run(&["convert", s(&input), "--pack", s(&dir.path().join("p.vtpk"))]), &["vortex-tiler split"]);
+    assert_eq!(listing(dir.path()), ["in.png"]);
+}
+
+#[cfg(unix)]
+#[test]
+fn a_fifo_input_is_refused_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("in.png");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let started = Instant::now();
+    fails_with(&run(&["split", s(&fifo), "--pack", s(&dir.path().join("p.vtpk"))]), &["not a regular file"]);
+    assert!(started.elapsed() < Duration::from_secs(10));
+}
+
+#[test]
+fn settings_from_an_existing_info_json_are_shown_and_never_lose_data() {
+    let (dir, _) = scratch_with_input();
+    let out = dir.path().join("out");
+    ok(&["split", s(&fixture("sample.png")), "-o", s(&out), "--tile-size", "64", "--quiet"]);
+    // An RGBA image into a directory that held an RGB JPEG pyramid would lose its alpha.
+    let rgba = fixture("rgba8-130x67.png");
+    fails_with(&run(&["split", s(&rgba), "-o", s(&out)]), &["info.json", "tileFormat", "--flatten"]);
+    let out_json = fs::read_to_string(out.join("info.json")).unwrap();
+    assert!(out_json.contains("\"rgb\""), "{out_json}");
+    // Settings that lose nothing are taken, and said.
+    let again = run(&["split", s(&fixture("sample.png")), "-o", s(&out)]);
+    assert!(again.status.success());
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(err.contains("from") && err.contains("info.json") && err.contains("tileSize 64"), "{err}");
+}
