@@ -15,7 +15,7 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("error: {}", cli::report::chain(&e));
             match e.downcast_ref::<vortex_tiler::error::TilerError>() {
-                Some(vortex_tiler::error::TilerError::Interrupted) => ExitCode::from(130),
+                Some(vortex_tiler::error::TilerError::Interrupted) => cli::interrupted_exit_code(),
                 _ => ExitCode::FAILURE,
             }
         }

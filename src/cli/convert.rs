@@ -60,7 +60,8 @@ pub fn run(a: ConvertArgs) -> Result<()> {
     let header = grid.header();
     let source = TiledSource::new(grid, fill_texel(a.out.background(), header.layout), a.strict);
     let missing = source.missing_log();
-    let result = tile(Box::new(source) as Box<dyn RowSource>, a.output_filename_format.clone(), &a.out, started);
+    let result =
+        tile(Box::new(source) as Box<dyn RowSource>, &a.input, a.output_filename_format.clone(), &a.out, started);
     let missing = missing.lock().map(|m| m.clone()).unwrap_or_default();
     if !missing.is_empty() {
         eprintln!(

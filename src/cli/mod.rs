@@ -1,5 +1,11 @@
 //! The command line: flags, subcommands, and the glue from them to the library.
 
+/// `println!` for results: a reader that went away (`| head`, `| true`) ends the process
+/// quietly with status 141, as coreutils do when SIGPIPE kills them, instead of a panic.
+macro_rules! say {
+    ($($arg:tt)*) => { $crate::cli::say_line(format_args!($($arg)*)) };
+}
+
 mod convert;
 mod pack;
 mod render;
@@ -108,6 +114,23 @@ impl PackLayout {
     }
 }
 
+pub fn say_line(line: std::fmt::Arguments) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_fmt(line).and_then(|()| out.write_all(b"\n")).and_then(|()| out.flush()) {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(141);
+        }
+        eprintln!("error: writing to standard output: {e}");
+        std::process::exit(1);
+    }
+}
+
+/// The exit status of a run that a signal stopped: 128 + its number (130 for Ctrl-C).
+pub fn interrupted_exit_code() -> std::process::ExitCode {
+    std::process::ExitCode::from(signals::requested().map_or(130, signals::exit_code))
+}
+
 pub fn run(args: Args) -> Result<()> {
     match args.command {
         Command::Split(a) => split::run(a),
@@ -139,7 +162,12 @@ fn parse_size(s: &str) -> Result<u64, String> {
     if !(n.is_finite() && n >= 0.0) {
         return Err(format!("'{s}' is not a size"));
     }
-    Ok((n * (1u64 << shift) as f64) as u64)
+    let bytes = n * (1u64 << shift) as f64;
+    // f64 to u64 saturates: check before converting, so an absurd size is an error.
+    if bytes >= (1u64 << 62) as f64 {
+        return Err(format!("'{s}' is more than 4E, more than any machine holds"));
+    }
+    Ok(bytes as u64)
 }
 
 #[cfg(test)]
@@ -153,5 +181,6 @@ mod tests {
         assert_eq!(parse_size("1.5k"), Ok(1536));
         assert_eq!(parse_size("100"), Ok(100));
         assert!(parse_size("lots").is_err());
+        assert!(parse_size("16777217T").is_err());
     }
 }

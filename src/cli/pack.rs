@@ -1,10 +1,11 @@
 //! `pack`, `unpack` and `info`: between tiled directories and pack files.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 use vortex_pack::{Pack, TileKind, VerifyOptions, verify};
+use vortex_tiler::output::{self, Product};
 use vortex_tiler::tile_dir::TiledDir;
 use vortex_tiler::{repack, settings};
 
@@ -16,9 +17,14 @@ pub struct PackArgs {
     /// A tiled directory: info.json plus one file per tile (what `split -o` writes).
     #[arg(value_name = "DIR")]
     input: PathBuf,
-    /// The pack file to write (replaced only when complete).
+    /// The pack file to write (replaced only when complete). An existing pack is replaced;
+    /// any other file only with --force.
     #[arg(short, long, value_name = "FILE")]
     output: PathBuf,
+    /// Replace a regular file at --output that is not a pack. Never replaces a directory, a
+    /// device, a FIFO, a link or the input.
+    #[arg(long)]
+    force: bool,
     #[command(flatten)]
     layout: PackLayout,
     /// Codec flags re-encode every tile (decoded from its file) unless they describe the
@@ -34,7 +40,8 @@ pub struct PackArgs {
 pub struct UnpackArgs {
     #[arg(value_name = "PACK")]
     input: PathBuf,
-    /// Output directory for the tile files and info.json.
+    /// Output directory for the tile files and info.json (created; replaced only if it holds
+    /// nothing but a previous output).
     #[arg(short, long, value_name = "DIR")]
     output: PathBuf,
     /// No progress bar and no summary line.
@@ -65,21 +72,21 @@ pub struct VerifyArgs {
 
 pub fn run_verify(a: VerifyArgs) -> Result<()> {
     let started = Instant::now();
-    let report = match Pack::open(&a.input) {
+    let report = match open_pack(&a.input) {
         Ok(pack) => verify(&pack, VerifyOptions { decode: a.decode, ..VerifyOptions::default() }),
         Err(e) if a.json => {
             // The structure is unusable: one problem, in the same shape as a full report's.
             let json = serde_json::json!({"path": a.input, "ok": false, "problems": [{"section": "open", "message": e.to_string()}]});
-            println!("{}", serde_json::to_string_pretty(&json)?);
+            say!("{}", serde_json::to_string_pretty(&json)?);
             anyhow::bail!("{}: cannot be opened as a pack", a.input.display());
         }
         Err(e) => return Err(e.into()),
     };
     if a.json {
-        println!("{}", report.to_json());
+        say!("{}", report.to_json());
     } else {
-        print!("{report}");
-        println!("checked in {:.2} s", started.elapsed().as_secs_f64());
+        say!("{}", report.to_string().trim_end_matches('\n'));
+        say!("checked in {:.2} s", started.elapsed().as_secs_f64());
     }
     if !report.is_ok() {
         anyhow::bail!("{}: {} problem(s) found", a.input.display(), report.problems.len());
@@ -89,36 +96,35 @@ pub fn run_verify(a: VerifyArgs) -> Result<()> {
 
 pub fn run_pack(a: PackArgs) -> Result<()> {
     let started = Instant::now();
+    output::claim(&a.output, Product::Pack, &[&a.input], a.force)?;
+    report::remove_stale_temporaries(&a.output)?;
     let t = TiledDir::read(&a.input)?;
     let codec = match a.enc.any() {
         true => Some(settings::resolve_codec(&a.enc.requested(), &a.input.join("info.json"), &t.info, t.layout())?),
         false => None,
     };
     let total = (0..t.description.level_count).map(|l| ((t.tile_count >> l) as u64).pow(2)).sum();
-    let watch = report::Watch::new(total, a.quiet);
+    let watch = report::Watch::new(total, a.quiet)?;
     let written = repack::pack_dir(&a.input, &a.output, a.layout.options()?, codec, &watch);
     watch.bar.finish_and_clear();
     let written = written?;
     if !a.quiet {
-        println!(
-            "{} -> {} in {:.2} s",
-            report::pack_line(&written),
-            a.output.display(),
-            started.elapsed().as_secs_f64()
-        );
+        say!("{} -> {} in {:.2} s", report::pack_line(&written), a.output.display(), started.elapsed().as_secs_f64());
     }
     Ok(())
 }
 
 pub fn run_unpack(a: UnpackArgs) -> Result<()> {
     let started = Instant::now();
-    let pack = Pack::open(&a.input)?;
-    let watch = report::Watch::new(pack.header().index_count, a.quiet);
+    let pack = open_pack(&a.input)?;
+    output::claim(&a.output, Product::TileDir, &[&a.input], false)?;
+    report::remove_stale_temporaries(&a.output)?;
+    let watch = report::Watch::new(pack.header().index_count, a.quiet)?;
     let count = repack::unpack(&pack, &a.output, &watch);
     watch.bar.finish_and_clear();
     let count = count?;
     if !a.quiet {
-        println!(
+        say!(
             "wrote {count} tile files and info.json to {} in {:.2} s",
             a.output.display(),
             started.elapsed().as_secs_f64()
@@ -127,8 +133,20 @@ pub fn run_unpack(a: UnpackArgs) -> Result<()> {
     Ok(())
 }
 
+/// Opens a pack, telling a directory (a tile directory, most likely) from a broken pack.
+fn open_pack(path: &Path) -> Result<Pack> {
+    if path.is_dir() {
+        bail!(
+            "{}: is a directory, not a pack; `vortex-tiler pack {} -o FILE` packs a tile directory",
+            path.display(),
+            path.display()
+        );
+    }
+    Ok(Pack::open(path)?)
+}
+
 pub fn run_info(a: InfoArgs) -> Result<()> {
-    let pack = Pack::open(&a.input)?;
+    let pack = open_pack(&a.input)?;
     let h = pack.header();
     let d = pack.description();
     let mut kinds = std::collections::BTreeMap::<&str, (u64, u64)>::new();
@@ -171,10 +189,10 @@ pub fn run_info(a: InfoArgs) -> Result<()> {
             "payloadBytesStored": stored,
             "metadata": serde_json::from_str::<serde_json::Value>(&metadata).unwrap_or(serde_json::Value::Null),
         });
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        say!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
-    println!(
+    say!(
         "{}: Vortex pack {}.{}, {} bytes, content hash {:016x}",
         a.input.display(),
         h.major,
@@ -182,14 +200,20 @@ pub fn run_info(a: InfoArgs) -> Result<()> {
         h.file_len,
         h.content_hash
     );
-    println!(
+    say!(
         "texture {}x{} texels, {}-texel tiles with a {}-texel border, {} channel(s) of {} byte(s), {} levels",
-        d.width, d.height, d.tile_size, d.border, d.channels, d.sample_bytes, d.level_count
+        d.width,
+        d.height,
+        d.tile_size,
+        d.border,
+        d.channels,
+        d.sample_bytes,
+        d.level_count
     );
-    println!("data aligned to {} bytes, tiles to {}", h.alignment, h.payload_alignment);
-    println!("{:>4} {:>11} {:>15} {:>12}", "lod", "tiles", "image texels", "first entry");
+    say!("data aligned to {} bytes, tiles to {}", h.alignment, h.payload_alignment);
+    say!("{:>4} {:>11} {:>15} {:>12}", "lod", "tiles", "image texels", "first entry");
     for (lod, l) in pack.levels().iter().enumerate() {
-        println!(
+        say!(
             "{lod:>4} {:>11} {:>15} {:>12}",
             format!("{}x{}", l.tiles_w, l.tiles_h),
             format!("{}x{}", l.width, l.height),
@@ -197,10 +221,10 @@ pub fn run_info(a: InfoArgs) -> Result<()> {
         );
     }
     for (kind, (n, bytes)) in &kinds {
-        println!("{kind:>9}: {n} tiles, {}", report::mib(*bytes));
+        say!("{kind:>9}: {n} tiles, {}", report::mib(*bytes));
     }
     let saved = referenced - stored;
-    println!(
+    say!(
         "payload {} stored for {} referenced ({} saved by sharing identical tiles)",
         report::mib(stored),
         report::mib(referenced),

@@ -3,29 +3,22 @@
 use std::path::Path;
 use std::time::Duration;
 
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-
+use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
+use vortex_tiler::output::staging;
 use vortex_tiler::split::{Progress, Summary};
 
-/// The progress bar, and the flag Ctrl-C raises so that a run stops and cleans up.
+use super::signals;
+
+/// The progress bar of a run that SIGINT, SIGTERM or SIGHUP stop cleanly.
 pub struct Watch {
     pub bar: ProgressBar,
-    stop: Arc<AtomicBool>,
 }
 
 impl Watch {
-    pub fn new(total_tiles: u64, quiet: bool) -> Watch {
-        let stop = Arc::new(AtomicBool::new(false));
-        let flag = stop.clone();
-        // A second Ctrl-C while cleaning up ends the process at once.
-        let _ = ctrlc::set_handler(move || {
-            if flag.swap(true, Ordering::SeqCst) {
-                std::process::exit(130);
-            }
-        });
-        Watch { bar: progress_bar(total_tiles, quiet), stop }
+    pub fn new(total_tiles: u64, quiet: bool) -> Result<Watch> {
+        signals::install().context("installing signal handlers")?;
+        Ok(Watch { bar: progress_bar(total_tiles, quiet) })
     }
 }
 
@@ -34,8 +27,19 @@ impl Progress for Watch {
         self.bar.inc(tiles);
     }
     fn cancelled(&self) -> bool {
-        self.stop.load(Ordering::Relaxed)
+        signals::requested().is_some()
     }
+}
+
+/// Removes what dead runs left while writing `dest` and says so: a run killed outright (power
+/// loss, SIGKILL) cannot clean up after itself.
+pub fn remove_stale_temporaries(dest: &Path) -> Result<()> {
+    let removed = staging::remove_stale(dest)
+        .with_context(|| format!("removing temporaries that earlier runs left beside {}", dest.display()))?;
+    for path in removed {
+        eprintln!("note: removed {}, left by a run that did not finish", path.display());
+    }
+    Ok(())
 }
 
 fn progress_bar(total: u64, quiet: bool) -> ProgressBar {

@@ -1,6 +1,6 @@
 //! `split`: flags to options, the pipeline with a progress bar, one summary line.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
@@ -8,6 +8,8 @@ use anyhow::{Context, Result, bail};
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
 use vortex_tiler::layout::Layout;
+use vortex_tiler::limits::Limits;
+use vortex_tiler::output::{self, Existing, Product};
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::pyramid::Filter;
 use vortex_tiler::settings::{self, CodecChoice, Requested};
@@ -42,13 +44,20 @@ pub struct SplitArgs {
 /// What `split` and `convert` write, and how.
 #[derive(clap::Args, Debug)]
 pub struct OutputArgs {
-    /// Output directory (created; replaced only if it holds a previous output's info.json).
+    /// Output directory (created; replaced only if it holds nothing but a previous output:
+    /// its info.json and the tiles that names).
     #[arg(short, long, value_name = "DIR", required_unless_present = "pack", conflicts_with = "pack")]
     output: Option<PathBuf>,
 
-    /// Write one pack file instead of a directory of tiles (docs/pack-format.md).
+    /// Write one pack file instead of a directory of tiles (docs/pack-format.md). An existing
+    /// pack is replaced; any other file only with --force.
     #[arg(long, value_name = "FILE")]
     pack: Option<PathBuf>,
+
+    /// Replace a regular file at --pack that is not a pack. Never replaces a directory, a
+    /// device, a FIFO, a link or the input.
+    #[arg(long)]
+    force: bool,
 
     #[command(flatten)]
     pack_layout: super::PackLayout,
@@ -87,12 +96,14 @@ pub struct OutputArgs {
     #[arg(long, value_name = "TYPE", value_parser = super::parse_tile_type)]
     tile_type: Option<Depth>,
 
-    /// Largest image this tool will hold whole in memory when a format cannot be streamed
-    /// (interlaced PNG, progressive JPEG, one-strip TIFF, WebP, ...), e.g. 512M, 4G.
+    /// Most memory a run may hold at once, checked before allocating: an image decoded whole
+    /// when its format cannot be streamed (interlaced PNG, progressive JPEG, one-strip TIFF,
+    /// WebP, ...), the bands and tiles in flight, a pack's index; e.g. 512M, 4G.
     #[arg(long, value_name = "SIZE", default_value = "1G", value_parser = super::parse_size)]
     max_memory: u64,
 
-    /// Worker threads for encoding [default: all cores]. Output is identical for any count.
+    /// Worker threads for encoding, at most 4 per core [default: one per core]. Output is
+    /// identical for any count.
     #[arg(long, value_name = "N")]
     threads: Option<usize>,
 
@@ -160,7 +171,7 @@ pub fn run(a: SplitArgs) -> Result<()> {
     let started = Instant::now();
     let input = a.input.or(a.input_flag).expect("clap requires one");
     let source = source::open(&input, a.out.max_memory)?;
-    tile(source, a.filename_format, &a.out, started)
+    tile(source, &input, a.filename_format, &a.out, started)
 }
 
 /// Runs the pipeline from `source` into the output `out` names, with the progress bar and
@@ -171,13 +182,28 @@ impl OutputArgs {
     }
 }
 
-pub fn tile(source: Box<dyn RowSource>, names: Option<String>, a: &OutputArgs, started: Instant) -> Result<()> {
-    // Only an output directory can hold an info.json that configures the run.
-    let info_path = a.output.as_ref().map(|o| o.join("info.json"));
-    let existing = match &info_path {
-        Some(p) if p.is_file() => Some(InfoFile::read(p)?),
-        _ => None,
+pub fn tile(
+    source: Box<dyn RowSource>,
+    input: &Path,
+    names: Option<String>,
+    a: &OutputArgs,
+    started: Instant,
+) -> Result<()> {
+    let limits = Limits { memory: a.max_memory, ..Limits::default() };
+    limits.check_threads(a.threads.unwrap_or(0))?;
+    let (dest, product) = match (&a.output, &a.pack) {
+        (Some(dir), _) => (dir, Product::TileDir),
+        (None, Some(file)) => (file, Product::Pack),
+        (None, None) => unreachable!("clap requires --output or --pack"),
     };
+    let claim = output::claim(dest, product, &[input], a.force)?;
+    report::remove_stale_temporaries(dest)?;
+    // A previous output directory's info.json sets this run's defaults (the original tool's
+    // way of configuring a run); the claim above made sure the directory is ours.
+    let info_path = (product == Product::TileDir && claim.replaces == Some(Existing::Ours))
+        .then(|| dest.join("info.json"))
+        .filter(|p| p.is_file());
+    let existing = info_path.as_deref().map(InfoFile::read).transpose()?;
     let requested = Requested {
         tile_size: a.tile_size,
         border: a.border,
@@ -190,6 +216,12 @@ pub fn tile(source: Box<dyn RowSource>, names: Option<String>, a: &OutputArgs, s
     };
     let existing_ref = info_path.as_deref().zip(existing.as_ref());
     let (opts, names) = settings::resolve(&requested, existing_ref, source.layout())?;
+    if let Some((path, info)) = existing_ref {
+        let taken = settings::taken_from_file(&requested, info);
+        if !taken.is_empty() && !a.quiet {
+            eprintln!("settings from {}: {}", path.display(), taken.join(", "));
+        }
+    }
     if a.output.is_some() && !opts.codec.writes_files() {
         bail!(
             "--codec {} writes packs only (its tiles are not image files): write --pack FILE instead of --output, or use --codec png for lossless tile files",
@@ -201,6 +233,8 @@ pub fn tile(source: Box<dyn RowSource>, names: Option<String>, a: &OutputArgs, s
         settings::check_grid(path, info, &requested, &layout)?;
     }
     let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
+    limits.check_pyramid(&layout, product == Product::Pack)?;
+    limits.check_pipeline(&layout, stored.bytes_per_pixel() as u64)?;
     let info = settings::describe(&layout, stored, &opts, &names);
     let decoder = source.describe();
     let (width, height) = (source.width(), source.height());
@@ -209,7 +243,7 @@ pub fn tile(source: Box<dyn RowSource>, names: Option<String>, a: &OutputArgs, s
         .num_threads(a.threads.unwrap_or(0))
         .build()
         .context("starting worker threads")?;
-    let watch = report::Watch::new(layout.total_tiles(), a.quiet);
+    let watch = report::Watch::new(layout.total_tiles(), a.quiet)?;
     let (summary, destination) = match (&a.output, &a.pack) {
         (Some(dir), _) => {
             let sink = DirSink::create(dir, names)?;
@@ -245,14 +279,14 @@ pub fn tile(source: Box<dyn RowSource>, names: Option<String>, a: &OutputArgs, s
             let s = s?;
             let written = sink.finish()?;
             if !a.quiet {
-                println!("{}", report::pack_line(&written));
+                say!("{}", report::pack_line(&written));
             }
             (s, file)
         }
         (None, None) => unreachable!("clap requires --output or --pack"),
     };
     if !a.quiet {
-        println!("{}", report::summary_line(&summary, destination, width, height, &decoder, started.elapsed()));
+        say!("{}", report::summary_line(&summary, destination, width, height, &decoder, started.elapsed()));
     }
     Ok(())
 }
