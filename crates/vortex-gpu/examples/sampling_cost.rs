@@ -32,11 +32,12 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
+use vortex_gpu::SampleFilter as Filter;
 use vortex_gpu::camera::Keyframe;
 use vortex_gpu::scene::WindowKey;
 use vortex_gpu::{
-    Effects, Filter, Gpu, GpuPageTable, Loader, Pose, RenderTarget, Runtime, SamplePass, Scene, SceneView, Sources,
-    View, VirtualTexture, Window,
+    Effects, Gpu, GpuPageTable, Loader, Pose, RenderTarget, Runtime, SamplePass, Scene, SceneView, Sources, View,
+    VirtualTexture, Window,
 };
 use vortex_pack::format::pyramid_levels;
 use vortex_pack::{Description, NewTile, Pack, PackWriter, TileId, TileKind, WriteOptions};
@@ -46,8 +47,6 @@ use vortex_vt::sampler::{LodChain, LodImages, Rgba8Image, bilinear, nearest, tri
 #[path = "../../../examples/common/run_info.rs"]
 mod run_info;
 use run_info::{cores, load_average, today, write_atomically};
-
-const LAVAPIPE_ICD: &str = "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json";
 
 /// Payload texels per page side, for every border.
 const PAYLOAD: u32 = 128;
@@ -179,17 +178,7 @@ fn main() {
 fn pin_lavapipe() {
     // SAFETY: called in `main` before any other thread exists (the loaders' workers
     // and the drivers' threads are started later), so nothing reads the environment meanwhile.
-    unsafe {
-        if std::env::var_os("VK_DRIVER_FILES").is_none()
-            && std::env::var_os("VK_ICD_FILENAMES").is_none()
-            && Path::new(LAVAPIPE_ICD).exists()
-        {
-            std::env::set_var("VK_DRIVER_FILES", LAVAPIPE_ICD);
-        }
-        if std::env::var_os("NODEVICE_SELECT").is_none() {
-            std::env::set_var("NODEVICE_SELECT", "1");
-        }
-    }
+    unsafe { vortex_gpu::device::prefer_lavapipe() };
 }
 
 /// The window of `spec` on a `side`-texel texture, as a scene's pose gives it.
@@ -398,7 +387,7 @@ impl Run {
                     self.pass.encode(&gpu.device, &mut encoder, &self.target, &sources, &view, None);
                 }
                 gpu.queue.submit([encoder.finish()]);
-                gpu.wait_idle();
+                gpu.wait_idle().expect("the GPU finishes");
                 start.elapsed().as_secs_f64() * 1e3 / DRAWS_PER_SUBMIT as f64
             })
             .collect()
@@ -412,7 +401,10 @@ impl Run {
         let picture = picture.expect("a picture was asked for");
         // The sampling-only path draws the same thing.
         let sources = Sources { textures: self.rt.textures(), table: &self.table, cache: self.rt.cache() };
-        let alone = self.pass.render_and_read(self.rt.gpu(), &self.target, &sources, &View::Window(*window), None);
+        let alone = self
+            .pass
+            .render_and_read(self.rt.gpu(), &self.target, &sources, &View::Window(*window), None)
+            .expect("a picture");
         let sampling_only_differs = alone != picture;
 
         let own = compare(&picture, &want);
