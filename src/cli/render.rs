@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use vortex_gpu::{Filter, Gpu, Loader, Runtime, Scene};
+use vortex_gpu::{Gpu, Loader, Runtime, SampleFilter, Scene};
 use vortex_vt::sampler::Rgba8Image;
 
 #[derive(Args, Debug)]
@@ -83,9 +83,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let e = &mut scene.effects;
     if let Some(f) = a.filter {
         e.filter = match f {
-            FilterArg::Nearest => Filter::Nearest,
-            FilterArg::Bilinear => Filter::Bilinear,
-            FilterArg::Trilinear => Filter::Trilinear,
+            FilterArg::Nearest => SampleFilter::Nearest,
+            FilterArg::Bilinear => SampleFilter::Bilinear,
+            FilterArg::Trilinear => SampleFilter::Trilinear,
         };
     }
     e.cache_slots_per_side = a.cache_side.unwrap_or(e.cache_slots_per_side);

@@ -4,11 +4,56 @@
 //!
 //! The device asks for the adapter's own largest 2D texture side rather than wgpu's default
 //! (8192), since the physical page cache is one big texture, and for BC texture sampling where
-//! the adapter has it (a BC7 cache); everything else stays at wgpu's defaults. The instance reads wgpu's environment variables (`WGPU_BACKEND`, `WGPU_DEBUG`,
-//! `WGPU_VALIDATION`, ...); the Vulkan loader's `VK_DRIVER_FILES` pins a driver, e.g. lavapipe in
-//! tests.
+//! the adapter has it (a BC7 cache); everything else stays at wgpu's defaults. The instance reads
+//! wgpu's environment variables (`WGPU_BACKEND`, `WGPU_DEBUG`, `WGPU_VALIDATION`, ...); the
+//! Vulkan loader's `VK_DRIVER_FILES` pins a driver.
+//!
+//! Pinning lavapipe (Mesa's CPU Vulkan driver) lives here too, once, for everything that wants
+//! the same pictures and counters on every machine: the tests, the measurement programs and the
+//! command-line tests of `vortex-tiler render` ([`lavapipe_env`], [`prefer_lavapipe`]).
 
-/// Why no device could be made.
+use std::path::Path;
+
+/// Where Mesa's packages install lavapipe's Vulkan driver manifest (x86-64 Debian and Ubuntu,
+/// `mesa-vulkan-drivers`).
+pub const LAVAPIPE_ICD: &str = "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json";
+
+/// The environment variables that pin the Vulkan loader to lavapipe, given the environment as it
+/// is: `VK_DRIVER_FILES` = [`LAVAPIPE_ICD`] when lavapipe is installed and no driver is chosen
+/// already (neither `VK_DRIVER_FILES` nor the older `VK_ICD_FILENAMES` is set), and
+/// `NODEVICE_SELECT=1` unless set (Mesa's device-select layer only picks the default adapter,
+/// which wgpu does itself, and complains on stderr about display variables a headless run has
+/// no use for). Empty when there is nothing to change. For a child process:
+/// `command.envs(lavapipe_env())`.
+pub fn lavapipe_env() -> Vec<(&'static str, &'static str)> {
+    let unset = |name: &str| std::env::var_os(name).is_none();
+    let mut vars = Vec::new();
+    if unset("VK_DRIVER_FILES") && unset("VK_ICD_FILENAMES") && Path::new(LAVAPIPE_ICD).exists() {
+        vars.push(("VK_DRIVER_FILES", LAVAPIPE_ICD));
+    }
+    if std::env::var_os("NODEVICE_SELECT").is_none() {
+        vars.push(("NODEVICE_SELECT", "1"));
+    }
+    vars
+}
+
+/// Sets [`lavapipe_env`] in this process's environment, so that the next [`Gpu::headless`]
+/// runs on lavapipe where it is installed and no driver was chosen.
+///
+/// # Safety
+///
+/// Setting environment variables is only sound while no other thread reads or writes the
+/// environment: call it at the start of `main`, before any thread is spawned, or from a test
+/// helper under a `std::sync::Once` that every test passes before it touches the environment or
+/// Vulkan.
+pub unsafe fn prefer_lavapipe() {
+    for (name, value) in lavapipe_env() {
+        // SAFETY: the caller guarantees that no other thread uses the environment meanwhile.
+        unsafe { std::env::set_var(name, value) };
+    }
+}
+
+/// Why no device could be made, or why it stopped answering.
 #[derive(Debug, thiserror::Error)]
 pub enum DeviceError {
     /// No adapter on any enabled backend (no driver, or none matching the environment).
@@ -18,6 +63,9 @@ pub enum DeviceError {
     TextureTooSmall { have: u32, need: u32 },
     #[error("the adapter refused the device: {0}")]
     Device(#[from] wgpu::RequestDeviceError),
+    /// Waiting for the GPU to finish its work failed (the device is lost, or the wait timed out).
+    #[error("waiting for the GPU failed (is the device lost?): {0}")]
+    Wait(#[from] wgpu::PollError),
 }
 
 /// A headless device and its queue.
@@ -68,7 +116,8 @@ impl Gpu {
     }
 
     /// Waits until the GPU has finished all submitted work (and map callbacks have run).
-    pub fn wait_idle(&self) {
-        self.device.poll(wgpu::PollType::wait_indefinitely()).expect("device lost while waiting for the GPU");
+    pub fn wait_idle(&self) -> Result<(), DeviceError> {
+        self.device.poll(wgpu::PollType::wait_indefinitely())?;
+        Ok(())
     }
 }

@@ -1,8 +1,7 @@
-//! What the sampling and the feedback pass share: their shader (`virtual.wgsl` followed by the
-//! pass's fragment stages), a pipeline per kind of [`View`] (a full-screen window, or meshes
-//! with a depth test), and the recording of one pass: clear, then draw. Render thread.
-
-use wgpu::util::DeviceExt;
+//! What the sampling and the feedback pass (and the address probe) share: their shader
+//! (`virtual.wgsl` followed by the pass's fragment stages), a pipeline per kind of [`View`] (a
+//! full-screen window, or meshes with a depth test), the colour target with its depth buffer,
+//! and the recording of one pass: clear, then draw. Render thread.
 
 use crate::mesh::Vertex;
 use crate::view::View;
@@ -112,17 +111,80 @@ pub(crate) fn frame_only_bind_group(
     })
 }
 
-/// A uniform buffer holding `bytes`.
+/// A uniform buffer holding `bytes`. Written through a mapping at creation, as
+/// `DeviceExt::create_buffer_init` does, except that a buffer that cannot be mapped (the device
+/// is lost, so the buffer is invalid) is left unwritten instead of panicking: the pass that uses
+/// it is invalid too, and the frame's readback reports the loss as an error.
 pub(crate) fn uniform(device: &wgpu::Device, label: &str, bytes: &[u8]) -> wgpu::Buffer {
-    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
-        contents: bytes,
+        size: (bytes.len() as u64).next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT),
         usage: wgpu::BufferUsages::UNIFORM,
-    })
+        mapped_at_creation: true,
+    });
+    if let Ok(mut view) = buffer.get_mapped_range_mut(..) {
+        view.slice(..bytes.len()).copy_from_slice(bytes);
+    }
+    buffer.unmap();
+    buffer
+}
+
+/// What a pass draws into: a `width x height` colour texture that can be copied out (to a
+/// [`Readback`](crate::readback::Readback)), its view, and a depth buffer of the same size.
+#[derive(Debug)]
+pub(crate) struct Target {
+    pub(crate) width: u32,
+    pub(crate) height: u32,
+    pub(crate) texture: wgpu::Texture,
+    pub(crate) view: wgpu::TextureView,
+    pub(crate) depth: wgpu::TextureView,
+}
+
+impl Target {
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        label: &str,
+        format: wgpu::TextureFormat,
+        width: u32,
+        height: u32,
+    ) -> Target {
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let depth = depth_texture(device, width, height);
+        Target { width, height, texture, view, depth }
+    }
+
+    /// The whole colour texture, as the source of a copy.
+    pub(crate) fn copy_source(&self) -> (wgpu::TexelCopyTextureInfo<'_>, wgpu::Extent3d) {
+        (
+            self.texture.as_image_copy(),
+            wgpu::Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
+        )
+    }
+
+    /// Records a pass into this target: see [`record`].
+    pub(crate) fn record(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        label: &str,
+        clear: wgpu::Color,
+        draw: Option<(&Pipelines, &wgpu::BindGroup, &View)>,
+    ) {
+        record(encoder, label, &self.view, &self.depth, clear, draw);
+    }
 }
 
 /// A depth buffer for a `width x height` target.
-pub(crate) fn depth_texture(device: &wgpu::Device, width: u32, height: u32) -> wgpu::TextureView {
+fn depth_texture(device: &wgpu::Device, width: u32, height: u32) -> wgpu::TextureView {
     device
         .create_texture(&wgpu::TextureDescriptor {
             label: Some("vortex depth"),
@@ -139,7 +201,7 @@ pub(crate) fn depth_texture(device: &wgpu::Device, width: u32, height: u32) -> w
 
 /// Clears `colour` to `clear` and the depth to the far plane, then draws `view` with
 /// `pipelines` and `bind_group` if given.
-pub(crate) fn record(
+fn record(
     encoder: &mut wgpu::CommandEncoder,
     label: &str,
     colour: &wgpu::TextureView,

@@ -11,13 +11,13 @@
 //! waits: [`FeedbackReadback::try_read`] never blocks; a frame whose copy finds every buffer
 //! still in flight is skipped.
 
-use std::sync::Arc;
-use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
 use vortex_vt::feedback::{NO_REQUEST, feedback_bias};
 
-use crate::draw::{self, Pipelines};
+use crate::draw::{self, Pipelines, Target};
 use crate::params::Frame;
+use crate::readback::{Readback, ReadbackError};
 use crate::texture::VirtualTexture;
 use crate::view::View;
 
@@ -32,9 +32,7 @@ pub struct FeedbackTarget {
     /// The size of the frame the feedback stands for (sets [`FeedbackTarget::bias`]).
     pub frame_width: u32,
     pub frame_height: u32,
-    texture: wgpu::Texture,
-    view: wgpu::TextureView,
-    depth: wgpu::TextureView,
+    target: Target,
 }
 
 impl FeedbackTarget {
@@ -53,19 +51,8 @@ impl FeedbackTarget {
         frame_width: u32,
         frame_height: u32,
     ) -> FeedbackTarget {
-        let texture = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("vortex feedback"),
-            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: FEEDBACK_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
-        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        let depth = draw::depth_texture(device, width, height);
-        FeedbackTarget { width, height, frame_width, frame_height, texture, view, depth }
+        let target = Target::new(device, "vortex feedback", FEEDBACK_FORMAT, width, height);
+        FeedbackTarget { width, height, frame_width, frame_height, target }
     }
 
     /// The LOD bias that makes up for the reduced size: `feedback_bias` (e.g. -3 at 1/8).
@@ -74,7 +61,7 @@ impl FeedbackTarget {
     }
 
     pub fn view(&self) -> &wgpu::TextureView {
-        &self.view
+        &self.target.view
     }
 }
 
@@ -118,7 +105,7 @@ impl FeedbackPass {
         let clear = NO_REQUEST as f64;
         let colour = wgpu::Color { r: clear, g: clear, b: clear, a: clear };
         let draw = bind_group.as_ref().zip(view).map(|(g, v)| (&self.pipelines, g, v));
-        draw::record(encoder, "vortex feedback", &target.view, &target.depth, colour, draw);
+        target.target.record(encoder, "vortex feedback", colour, draw);
     }
 }
 
@@ -151,10 +138,8 @@ pub struct FeedbackFrame {
     pub words: Vec<u32>,
 }
 
-/// Mapping state of a ring buffer, set by the map callback.
-const MAP_PENDING: u8 = 0;
-const MAP_DONE: u8 = 1;
-const MAP_FAILED: u8 = 2;
+/// What the map callback of a ring buffer reports: nothing yet, or the mapping's result.
+type MapResult = Arc<Mutex<Option<Result<(), wgpu::BufferAsyncError>>>>;
 
 #[derive(Debug)]
 enum SlotState {
@@ -163,16 +148,16 @@ enum SlotState {
     Copied {
         frame: u64,
     },
-    /// Mapping requested; the callback sets the flag.
+    /// Mapping requested; the callback fills in the result.
     Mapping {
         frame: u64,
-        state: Arc<AtomicU8>,
+        result: MapResult,
     },
 }
 
 #[derive(Debug)]
 struct Slot {
-    buffer: wgpu::Buffer,
+    readback: Readback,
     state: SlotState,
 }
 
@@ -184,8 +169,6 @@ struct Slot {
 pub struct FeedbackReadback {
     pub width: u32,
     pub height: u32,
-    /// Bytes per row in the buffers: a multiple of 256, as buffer copies require.
-    padded_row: u32,
     slots: Vec<Slot>,
     next_frame: u64,
 }
@@ -194,19 +177,10 @@ impl FeedbackReadback {
     /// A ring of `buffers` (at least 1; 2 or 3 keep the CPU from waiting) for `width x height`
     /// targets.
     pub fn new(device: &wgpu::Device, width: u32, height: u32, buffers: usize) -> FeedbackReadback {
-        let padded_row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let slots = (0..buffers.max(1))
-            .map(|_| Slot {
-                buffer: device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("vortex feedback readback"),
-                    size: padded_row as u64 * height as u64,
-                    usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-                    mapped_at_creation: false,
-                }),
-                state: SlotState::Free,
-            })
+            .map(|_| Slot { readback: Readback::new(device, "feedback", width * 4, height), state: SlotState::Free })
             .collect();
-        FeedbackReadback { width, height, padded_row, slots, next_frame: 0 }
+        FeedbackReadback { width, height, slots, next_frame: 0 }
     }
 
     /// Copies that are recorded or in flight and not yet read.
@@ -220,18 +194,8 @@ impl FeedbackReadback {
     pub fn encode_copy(&mut self, encoder: &mut wgpu::CommandEncoder, target: &FeedbackTarget) -> Option<u64> {
         assert_eq!((target.width, target.height), (self.width, self.height), "feedback target size");
         let slot = self.slots.iter_mut().find(|s| matches!(s.state, SlotState::Free))?;
-        encoder.copy_texture_to_buffer(
-            target.texture.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &slot.buffer,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(self.padded_row),
-                    rows_per_image: Some(self.height),
-                },
-            },
-            wgpu::Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
-        );
+        let (source, extent) = target.target.copy_source();
+        slot.readback.encode_copy(encoder, source, extent);
         let frame = self.next_frame;
         self.next_frame += 1;
         slot.state = SlotState::Copied { frame };
@@ -244,63 +208,53 @@ impl FeedbackReadback {
     pub fn submitted(&mut self) {
         for slot in &mut self.slots {
             if let SlotState::Copied { frame } = slot.state {
-                let state = Arc::new(AtomicU8::new(MAP_PENDING));
-                let flag = state.clone();
-                slot.buffer.map_async(wgpu::MapMode::Read, .., move |r| {
-                    flag.store(if r.is_ok() { MAP_DONE } else { MAP_FAILED }, Ordering::Release);
-                });
-                slot.state = SlotState::Mapping { frame, state };
+                let result: MapResult = Arc::default();
+                let answer = result.clone();
+                slot.readback.map(move |r| *lock(&answer) = Some(r));
+                slot.state = SlotState::Mapping { frame, result };
             }
         }
     }
 
     /// The words of the oldest frame whose copy the GPU has finished, without blocking (the
-    /// device is polled once); `None` when none is ready. A failed mapping is logged and its
-    /// frame dropped.
-    pub fn try_read(&mut self, device: &wgpu::Device) -> Option<FeedbackFrame> {
-        if let Err(e) = device.poll(wgpu::PollType::Poll) {
-            log::error!("vortex-gpu: polling for feedback: {e}");
-        }
-        loop {
-            let (i, frame, state) = self
-                .slots
-                .iter()
-                .enumerate()
-                .filter_map(|(i, s)| match &s.state {
-                    SlotState::Mapping { frame, state } => {
-                        let st = state.load(Ordering::Acquire);
-                        (st != MAP_PENDING).then_some((i, *frame, st))
-                    }
-                    _ => None,
-                })
-                .min_by_key(|&(_, frame, _)| frame)?;
-            let slot = &mut self.slots[i];
-            slot.state = SlotState::Free;
-            if state == MAP_FAILED {
-                log::error!("vortex-gpu: mapping the feedback of frame {frame} failed; dropped");
-                continue;
-            }
-            let words = {
-                let bytes = slot.buffer.get_mapped_range(..).expect("the feedback buffer is mapped");
-                let row = self.width as usize * 4;
-                bytes
-                    .chunks_exact(self.padded_row as usize)
-                    .flat_map(|r| r[..row].chunks_exact(4).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]])))
-                    .collect()
-            };
-            slot.buffer.unmap();
-            return Some(FeedbackFrame { frame, width: self.width, height: self.height, words });
-        }
+    /// device is polled once); `Ok(None)` when none is ready. A failed mapping (a lost device)
+    /// is an error naming its frame; the frame's buffer is free again, so a later call goes on
+    /// with the next frames.
+    pub fn try_read(&mut self, device: &wgpu::Device) -> Result<Option<FeedbackFrame>, ReadbackError> {
+        device.poll(wgpu::PollType::Poll).map_err(|source| ReadbackError::Wait { what: "feedback", source })?;
+        let oldest = self
+            .slots
+            .iter()
+            .enumerate()
+            .filter_map(|(i, s)| match &s.state {
+                SlotState::Mapping { frame, result } => lock(result).clone().map(|r| (i, *frame, r)),
+                _ => None,
+            })
+            .min_by_key(|&(_, frame, _)| frame);
+        let Some((i, frame, result)) = oldest else { return Ok(None) };
+        let slot = &mut self.slots[i];
+        slot.state = SlotState::Free;
+        result.map_err(|source| ReadbackError::Feedback { frame, source })?;
+        let words =
+            slot.readback.take()?.chunks_exact(4).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]])).collect();
+        Ok(Some(FeedbackFrame { frame, width: self.width, height: self.height, words }))
     }
 
     /// Waits for the GPU to finish everything submitted, then reads the oldest frame in flight
-    /// (`None` if none was). For tests and tools; a frame loop uses
+    /// (`Ok(None)` if none was). For tests and tools; a frame loop uses
     /// [`FeedbackReadback::try_read`].
-    pub fn read_now(&mut self, device: &wgpu::Device) -> Option<FeedbackFrame> {
+    pub fn read_now(&mut self, device: &wgpu::Device) -> Result<Option<FeedbackFrame>, ReadbackError> {
         if !self.slots.iter().any(|s| matches!(s.state, SlotState::Mapping { .. })) {
-            return None;
+            return Ok(None);
         }
-        device.poll(wgpu::PollType::wait_indefinitely()).expect("device lost while waiting for feedback");
+        device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|source| ReadbackError::Wait { what: "feedback", source })?;
         self.try_read(device)
     }
+}
+
+/// The callback holds the lock only to store a value, so a poisoned lock still holds a whole one.
+fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }

@@ -12,6 +12,8 @@
 
 use vortex_vt::residency::Slot;
 
+use crate::readback::{Readback, ReadbackError};
+
 /// How the cache stores texels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum CacheFormat {
@@ -150,37 +152,25 @@ impl PageCache {
     }
 
     /// Reads the tile in `slot` back, as [`PageCache::upload`] takes it: blocking, for tests and
-    /// debugging.
-    pub fn read_slot(&self, gpu: &crate::Gpu, slot: Slot) -> Vec<u8> {
+    /// debugging. Fails if the device is lost.
+    pub fn read_slot(&self, gpu: &crate::Gpu, slot: Slot) -> Result<Vec<u8>, ReadbackError> {
         let ts = self.tile_size;
         let (tile_row, rows) = self.format.rows(ts);
-        let row = tile_row.next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("vortex slot readback"),
-            size: row as u64 * rows as u64,
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
+        let readback = Readback::new(&gpu.device, "slot", tile_row, rows);
         let (x, y) = self.slot_origin(slot);
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        encoder.copy_texture_to_buffer(
+        readback.encode_copy(
+            &mut encoder,
             wgpu::TexelCopyTextureInfo {
                 texture: &self.texture,
                 mip_level: 0,
                 origin: wgpu::Origin3d { x, y, z: 0 },
                 aspect: wgpu::TextureAspect::All,
             },
-            wgpu::TexelCopyBufferInfo {
-                buffer: &buffer,
-                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(rows) },
-            },
             wgpu::Extent3d { width: ts, height: ts, depth_or_array_layers: 1 },
         );
         gpu.queue.submit([encoder.finish()]);
-        buffer.slice(..).map_async(wgpu::MapMode::Read, |r| r.expect("mapping the slot readback"));
-        gpu.wait_idle();
-        let bytes = buffer.slice(..).get_mapped_range().expect("the slot readback is mapped");
-        bytes.chunks_exact(row as usize).flat_map(|r| r[..tile_row as usize].iter().copied()).collect()
+        readback.read(&gpu.device)
     }
 
     /// Texel position of the top-left corner of `slot`.

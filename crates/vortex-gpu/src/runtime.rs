@@ -31,7 +31,8 @@ use crate::loader::{LoadError, Loader};
 use crate::mesh::GpuMesh;
 use crate::page_cache::{CacheError, CacheFormat, PageCache};
 use crate::page_table::GpuPageTable;
-use crate::render::{RenderTarget, SamplePass, Sources};
+use crate::readback::ReadbackError;
+use crate::sample::{RenderTarget, SamplePass, Sources};
 use crate::scene::{Pose, Scene};
 use crate::texture::VirtualTexture;
 use crate::view::View;
@@ -47,6 +48,13 @@ pub enum RuntimeError {
     Scene(String),
     #[error("frame {frame}: the page-table invariants are broken: {violation}")]
     Invariant { frame: u64, violation: Violation },
+    /// The picture or the feedback could not be read back (a lost device).
+    #[error("frame {frame}: {source}")]
+    Readback {
+        frame: u64,
+        #[source]
+        source: ReadbackError,
+    },
 }
 
 /// The counters of one frame.
@@ -202,8 +210,9 @@ impl Runtime {
         }
         self.gpu.queue.submit([encoder.finish()]);
         self.readback.submitted();
-        let picture = image.then(|| self.target.read(&self.gpu));
-        let words = self.readback.read_now(device).map(|f| f.words).unwrap_or_default();
+        let failed = |source| RuntimeError::Readback { frame: self.frame, source };
+        let picture = if image { Some(self.target.read(&self.gpu).map_err(failed)?) } else { None };
+        let words = self.readback.read_now(device).map_err(failed)?.map(|f| f.words).unwrap_or_default();
 
         let residency = &self.residency;
         let grids = &self.grids;

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::camera::{Camera, Keyframe, at_frame, lerp3};
 use crate::mesh::{Mesh, Vertex};
-use crate::render::Filter;
+use crate::sample::SampleFilter;
 use crate::view::Window;
 
 /// Why a scene cannot be used.
@@ -109,7 +109,7 @@ pub enum Shape {
 #[serde(default, deny_unknown_fields)]
 pub struct Effects {
     #[serde(with = "filter_name")]
-    pub filter: Filter,
+    pub filter: SampleFilter,
     /// The feedback target is the frame's size divided by this.
     pub feedback_divisor: u32,
     /// The physical cache is this many slots per side (1..=256).
@@ -126,7 +126,7 @@ impl Default for Effects {
     fn default() -> Effects {
         Effects {
             // docs/gpu-sampling.md: 18 dB closer to the ideal between LODs for ~1.3x the frame.
-            filter: Filter::Trilinear,
+            filter: SampleFilter::Trilinear,
             feedback_divisor: 8,
             cache_slots_per_side: 16,
             upload_budget: 32,
@@ -139,15 +139,15 @@ impl Default for Effects {
 mod filter_name {
     use serde::{Deserialize, Deserializer, Serializer, de::Error};
 
-    use crate::render::Filter;
+    use crate::sample::SampleFilter;
 
-    pub fn serialize<S: Serializer>(f: &Filter, s: S) -> Result<S::Ok, S::Error> {
+    pub fn serialize<S: Serializer>(f: &SampleFilter, s: S) -> Result<S::Ok, S::Error> {
         s.serialize_str(f.name())
     }
 
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Filter, D::Error> {
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<SampleFilter, D::Error> {
         let name = String::deserialize(d)?;
-        [Filter::Nearest, Filter::Bilinear, Filter::Trilinear]
+        SampleFilter::ALL
             .into_iter()
             .find(|f| f.name() == name)
             .ok_or_else(|| D::Error::custom(format!("unknown filter {name:?}: nearest, bilinear or trilinear")))

@@ -4,16 +4,13 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 pub const BIN: &str = env!("CARGO_BIN_EXE_vortex-tiler");
-const LAVAPIPE_ICD: &str = "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json";
 
 /// Runs the tool with plain output (`NO_COLOR`). `render` gets lavapipe where it is installed
 /// and no Vulkan driver is chosen, as the GPU tests do.
 pub fn run(args: &[&str]) -> Output {
     let mut cmd = Command::new(BIN);
     cmd.args(args).env("NO_COLOR", "1");
-    if std::env::var_os("VK_DRIVER_FILES").is_none() && Path::new(LAVAPIPE_ICD).exists() {
-        cmd.env("VK_DRIVER_FILES", LAVAPIPE_ICD);
-    }
+    cmd.envs(vortex_gpu::device::lavapipe_env());
     cmd.output().expect("binary runs")
 }
 

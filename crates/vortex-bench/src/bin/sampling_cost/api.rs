@@ -5,8 +5,8 @@
 pub use vortex_gpu::camera::Keyframe;
 pub use vortex_gpu::scene::WindowKey;
 pub use vortex_gpu::{
-    Effects, Filter as SampleFilter, Gpu, GpuPageTable, Loader, Pose, RenderTarget, Runtime, SamplePass, Scene,
-    SceneView, Sources, View, VirtualTexture, Window,
+    Effects, Gpu, GpuPageTable, Loader, Pose, RenderTarget, Runtime, SampleFilter, SamplePass, Scene, SceneView,
+    Sources, View, VirtualTexture, Window,
 };
 pub use vortex_pack::format::pyramid_levels;
 pub use vortex_pack::{Description, NewTile, Pack, PackWriter, TileId, TileKind, WriteOptions};

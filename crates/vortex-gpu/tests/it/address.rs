@@ -4,9 +4,7 @@
 //! non-dyadic windows; and LOD selection exactly at powers of two, which must not flicker from
 //! frame to frame. Device conventions as in `sample.rs` (see `common`).
 
-mod common;
-
-use common::gpu;
+use crate::common::gpu;
 use vortex_gpu::probe::AddressProbe;
 use vortex_gpu::{FeedbackPass, FeedbackReadback, FeedbackTarget, View, VirtualTexture, Window};
 use vortex_vt::feedback::decode;
@@ -32,7 +30,7 @@ fn window_addresses_stay_within_a_sixteenth_of_a_texel_at_the_largest_size() {
     ] {
         let extent = step * SIZE as f64 / side;
         let window = Window { texture: 0, origin: o, extent: [extent, extent] };
-        let addresses = probe.addresses(&gpu, &[texture], &View::Window(window), lod, SIZE, SIZE);
+        let addresses = probe.addresses(&gpu, &[texture], &View::Window(window), lod, SIZE, SIZE).unwrap();
         let mirror = window.origin_texels(&texture, (SIZE, SIZE));
         for (i, got) in addresses.iter().enumerate() {
             let (x, y) = (i as u32 % SIZE, i as u32 / SIZE);
@@ -71,7 +69,7 @@ fn lod_selection_at_exact_powers_of_two_is_stable() {
             readback.encode_copy(&mut encoder, &target).unwrap();
             gpu.queue.submit([encoder.finish()]);
             readback.submitted();
-            let words = readback.read_now(&gpu.device).unwrap().words;
+            let words = readback.read_now(&gpu.device).unwrap().unwrap().words;
             assert!(words.iter().all(|&w| decode(w).unwrap().lod == k), "2^{k} texels per pixel is LOD {k}");
             match &first {
                 None => first = Some(words),

@@ -5,11 +5,9 @@
 //! words are then run through `vortex_vt::analysis`. Device conventions as in `sample.rs` (see
 //! `common`).
 
-mod common;
-
 use std::collections::{BTreeMap, BTreeSet};
 
-use common::gpu;
+use crate::common::gpu;
 use vortex_gpu::{FeedbackPass, FeedbackReadback, FeedbackTarget, Gpu, View, VirtualTexture, Window};
 use vortex_vt::analysis::analyze;
 use vortex_vt::feedback::{NO_REQUEST, encode};
@@ -101,7 +99,7 @@ impl Fixture {
 
     fn render(&mut self, view: Option<&Case>) -> Vec<u32> {
         let frame = self.submit(view).expect("a free buffer");
-        let got = self.readback.read_now(&self.gpu.device).expect("a frame in flight");
+        let got = self.readback.read_now(&self.gpu.device).unwrap().expect("a frame in flight");
         assert_eq!((got.frame, got.width, got.height), (frame, 40, 30));
         got.words
     }
@@ -186,7 +184,7 @@ fn the_ring_reads_frames_in_order_without_blocking() {
     // try_read never blocks; poll it until the GPU is done with the oldest frame.
     let start = std::time::Instant::now();
     let first = loop {
-        if let Some(f) = fx.readback.try_read(&fx.gpu.device) {
+        if let Some(f) = fx.readback.try_read(&fx.gpu.device).unwrap() {
             break f;
         }
         assert!(start.elapsed().as_secs() < 30, "frame 0 never completed");
@@ -194,13 +192,13 @@ fn the_ring_reads_frames_in_order_without_blocking() {
     };
     assert_eq!(first.frame, 0, "the oldest frame first");
     assert_eq!(first.words, expected(&views[0], &fx.target));
-    let second = fx.readback.read_now(&fx.gpu.device).unwrap();
+    let second = fx.readback.read_now(&fx.gpu.device).unwrap().unwrap();
     assert_eq!(second.frame, 1);
     assert_eq!(second.words, expected(&views[1], &fx.target));
     assert_eq!(fx.readback.in_flight(), 0);
-    assert_eq!(fx.readback.try_read(&fx.gpu.device), None);
-    assert_eq!(fx.readback.read_now(&fx.gpu.device), None);
+    assert_eq!(fx.readback.try_read(&fx.gpu.device).unwrap(), None);
+    assert_eq!(fx.readback.read_now(&fx.gpu.device).unwrap(), None);
     // The freed buffers take new frames, numbered on.
     assert_eq!(fx.submit(Some(&views[1])), Some(2));
-    assert_eq!(fx.readback.read_now(&fx.gpu.device).map(|f| f.frame), Some(2));
+    assert_eq!(fx.readback.read_now(&fx.gpu.device).unwrap().map(|f| f.frame), Some(2));
 }

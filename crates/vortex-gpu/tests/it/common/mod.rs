@@ -1,12 +1,11 @@
 //! What the GPU tests share: the device, pinned to lavapipe (Mesa's CPU Vulkan driver) when it
-//! is installed and `VK_DRIVER_FILES` is not set, and wgpu's warnings on stderr. Without an
-//! adapter a test prints a note and passes, except under `CI=true`, where it fails.
+//! is installed and no Vulkan driver is chosen (`vortex_gpu::device::prefer_lavapipe`), and
+//! wgpu's warnings on stderr. Without an adapter a test prints a note and passes, except under
+//! `CI=true`, where it fails.
 
 use std::sync::Once;
 
 use vortex_gpu::Gpu;
-
-const LAVAPIPE_ICD: &str = "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json";
 
 /// Prints wgpu's warnings and errors (validation messages come through `log`).
 struct StderrLogger;
@@ -33,17 +32,8 @@ pub fn gpu() -> Option<Gpu> {
         // SAFETY: every test calls `gpu()` before anything else that reads the environment or
         // touches Vulkan, and `Once` holds the other test threads here until these writes are done,
         // so no other thread reads the environment (through libc or std) while it is modified.
-        unsafe {
-            if std::env::var_os("VK_DRIVER_FILES").is_none()
-                && std::env::var_os("VK_ICD_FILENAMES").is_none()
-                && std::path::Path::new(LAVAPIPE_ICD).exists()
-            {
-                std::env::set_var("VK_DRIVER_FILES", LAVAPIPE_ICD);
-            }
-            if std::env::var_os("NODEVICE_SELECT").is_none() {
-                std::env::set_var("NODEVICE_SELECT", "1");
-            }
-        }
+        // (The loader's tests read no environment.)
+        unsafe { vortex_gpu::device::prefer_lavapipe() };
     });
     match Gpu::headless(1024) {
         Ok(gpu) => Some(gpu),

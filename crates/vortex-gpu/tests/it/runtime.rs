@@ -6,16 +6,15 @@
 //! texel, uploads stay within the budget, coarse before fine. Device conventions as in
 //! `sample.rs` (see `common`).
 
-mod common;
-
 use std::collections::HashSet;
 
-use common::gpu;
-use common::pyramid::Synthetic;
+use crate::common::gpu;
+use crate::common::pyramid::Synthetic;
 use vortex_gpu::camera::{Camera, Keyframe};
 use vortex_gpu::scene::WindowKey;
 use vortex_gpu::{
-    CacheFormat, Effects, Filter, FrameReport, Gpu, Loader, Pose, Runtime, Scene, SceneView, Shape, Window,
+    CacheFormat, Effects, FrameReport, Gpu, Loader, Pose, Runtime, RuntimeError, SampleFilter, Scene, SceneView, Shape,
+    Window,
 };
 use vortex_vt::address::WindowOrigin;
 use vortex_vt::sampler::{Rgba8Image, bilinear, trilinear};
@@ -46,7 +45,7 @@ fn zoom_scene(effects: Effects) -> Scene {
 
 fn effects(slots_per_side: u16, budget: usize) -> Effects {
     Effects {
-        filter: Filter::Bilinear,
+        filter: SampleFilter::Bilinear,
         cache_slots_per_side: slots_per_side,
         upload_budget: budget,
         ..Effects::default()
@@ -74,7 +73,7 @@ fn run(rt: &mut Runtime, scene: &Scene) -> (Vec<FrameReport>, Rgba8Image) {
 
 /// What a window render must be: at each pixel, the reference bilinear (or trilinear) sample
 /// at the LOD the page table maps for the pixel's wanted page.
-fn expected(rt: &Runtime, tex: &Synthetic, window: &Window, filter: Filter) -> Rgba8Image {
+fn expected(rt: &Runtime, tex: &Synthetic, window: &Window, filter: SampleFilter) -> Rgba8Image {
     let size = (SIZE[0], SIZE[1]);
     let origin: WindowOrigin = window.origin_texels(&tex.texture, size);
     let lods = tex.texture.grid.lod_count;
@@ -85,7 +84,7 @@ fn expected(rt: &Runtime, tex: &Synthetic, window: &Window, filter: Filter) -> R
         let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, PAGES as u32, tex.texture.payload());
         let entry = table.entry(0, lod, at.page[0] as u16, at.page[1] as u16);
         match filter {
-            Filter::Trilinear if entry.lod == lod => {
+            SampleFilter::Trilinear if entry.lod == lod => {
                 let f = origin.step[0].max(origin.step[1]).log2().max(0.0);
                 trilinear(&tex.chain, f, u, v)
             }
@@ -137,20 +136,20 @@ fn a_zoom_converges_matches_the_reference_and_repeats_exactly() {
 
     // The converged picture is the reference, sampled at the LOD the view wants.
     let Pose::Window(window) = scene.pose(scene.frames - 1) else { unreachable!() };
-    let (max, psnr) = diff(&picture, &expected(&rt, &tex, &window, Filter::Bilinear));
+    let (max, psnr) = diff(&picture, &expected(&rt, &tex, &window, SampleFilter::Bilinear));
     eprintln!("converged zoom: max difference {max}/255, PSNR {psnr:.1} dB");
     assert!(max <= 2 && psnr >= 50.0, "max {max}, PSNR {psnr:.1} dB");
 
     // Every resident page's slot holds the pack's bordered tile, exactly.
     for (page, slot) in rt.residency().resident() {
-        assert!(rt.cache().read_slot(rt.gpu(), slot) == tex.tile(page), "slot {slot} of {page:?}");
+        assert!(rt.cache().read_slot(rt.gpu(), slot).unwrap() == tex.tile(page), "slot {slot} of {page:?}");
     }
 
     // The same run again gives the same counters, frame for frame, and on lavapipe the ones
     // recorded in the golden file, whatever the build profile (`cargo test --release` too).
     let adapter = rt.gpu().adapter_info().name;
     drop(rt);
-    let mut again = runtime(common::gpu().unwrap(), &[&tex], &scene);
+    let mut again = runtime(crate::common::gpu().unwrap(), &[&tex], &scene);
     assert_eq!(run(&mut again, &scene).0, frames, "counters repeat on {adapter}");
     check_golden("zoom-counters.txt", &adapter, &frames);
 }
@@ -214,9 +213,9 @@ fn a_camera_over_a_plane_converges_with_every_filter() {
     assert!(drawn * 2 > picture.texels.len(), "{drawn} pixels drawn");
 
     // The other filters converge along the same path to the same pages.
-    for filter in [Filter::Nearest, Filter::Trilinear] {
+    for filter in [SampleFilter::Nearest, SampleFilter::Trilinear] {
         scene.effects.filter = filter;
-        let mut rt = runtime(common::gpu().unwrap(), &[&tex], &scene);
+        let mut rt = runtime(crate::common::gpu().unwrap(), &[&tex], &scene);
         let (f, p) = run(&mut rt, &scene);
         assert_eq!(f.last().unwrap().fallback_fraction, 0.0, "{filter:?}");
         assert_eq!(f, frames, "the feedback does not depend on the filter");
@@ -231,14 +230,14 @@ fn trilinear_matches_the_reference_between_lods() {
     let dir = tempfile::tempdir().unwrap();
     let tex = Synthetic::new(dir.path(), "a.vtpk", PAGES, TILE, BORDER, 3);
     // Still at 2.7 texels per pixel: between LOD 1 and 2.
-    let mut scene = zoom_scene(Effects { filter: Filter::Trilinear, ..effects(16, 64) });
+    let mut scene = zoom_scene(Effects { filter: SampleFilter::Trilinear, ..effects(16, 64) });
     scene.view = SceneView::Window { texture: 0, path: vec![key(0, [0.41, 0.37], 2.7 * 128.0 / 2048.0)] };
     scene.frames = 8;
     let mut rt = runtime(gpu, &[&tex], &scene);
     let (frames, picture) = run(&mut rt, &scene);
     assert_eq!(frames.last().unwrap().fallback_fraction, 0.0);
     let Pose::Window(window) = scene.pose(0) else { unreachable!() };
-    let (max, psnr) = diff(&picture, &expected(&rt, &tex, &window, Filter::Trilinear));
+    let (max, psnr) = diff(&picture, &expected(&rt, &tex, &window, SampleFilter::Trilinear));
     eprintln!("trilinear: max difference {max}/255, PSNR {psnr:.1} dB");
     assert!(max <= 2 && psnr >= 50.0, "max {max}, PSNR {psnr:.1} dB");
 }
@@ -264,7 +263,7 @@ fn an_oversubscribed_cache_blurs_but_never_shows_a_wrong_texel() {
         let Pose::Window(window) = pose else { unreachable!() };
         // A frame draws with the table as the previous frame left it: the reference at the LOD
         // of each pixel's entry, however coarse.
-        let want = expected(&rt, &tex, &window, Filter::Bilinear);
+        let want = expected(&rt, &tex, &window, SampleFilter::Bilinear);
         let (report, picture) = rt.frame(&pose, true).unwrap();
         biases.push(report.lod_bias);
         let (max, psnr) = diff(&picture.unwrap(), &want);
@@ -356,14 +355,14 @@ fn bc7_blocks_stream_as_they_are_and_draw_what_rgba8_draws() {
         else {
             panic!("{page:?} is stored as BC7")
         };
-        assert!(bc7.cache().read_slot(bc7.gpu(), slot) == blocks, "slot {slot} of {page:?}");
+        assert!(bc7.cache().read_slot(bc7.gpu(), slot).unwrap() == blocks, "slot {slot} of {page:?}");
     }
     drop(bc7);
     // The same scene through an RGBA8 cache (the blocks decoded on the CPU) streams the same
     // pages and draws the same picture.
     let mut scene = scene;
     scene.effects.bc7 = false;
-    let mut rgba = runtime(common::gpu().unwrap(), &[&tex], &scene);
+    let mut rgba = runtime(crate::common::gpu().unwrap(), &[&tex], &scene);
     assert_eq!(rgba.cache().format(), CacheFormat::Rgba8);
     let (frames_rgba, picture_rgba) = run(&mut rgba, &scene);
     assert_eq!(frames, frames_rgba);
@@ -400,4 +399,22 @@ fn pages_seen_only_between_feedback_samples_are_still_loaded() {
         })
         .collect();
     assert!(coarse.is_empty(), "{} pixels still drawn coarser than LOD {lod}, e.g. {:?}", coarse.len(), coarse.first());
+}
+
+#[test]
+fn a_lost_device_ends_the_frame_loop_with_an_error_not_a_panic() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let tex = Synthetic::new(dir.path(), "a.vtpk", PAGES, TILE, BORDER, 1);
+    let scene = zoom_scene(effects(16, 16));
+    let mut rt = runtime(gpu, &[&tex], &scene);
+    rt.frame(&scene.pose(0), false).unwrap();
+    // What is recorded on a destroyed device is invalid: wgpu reports it to this handler (the
+    // default one panics); the frame itself fails where it reads back.
+    let device = &rt.gpu().device;
+    device.on_uncaptured_error(std::sync::Arc::new(|e| eprintln!("after the loss, as expected: {e}")));
+    device.destroy();
+    let err = rt.frame(&scene.pose(1), true).unwrap_err();
+    assert!(matches!(err, RuntimeError::Readback { frame: 1, .. }), "{err}");
+    assert!(err.to_string().starts_with("frame 1: reading back the "), "{err}");
 }

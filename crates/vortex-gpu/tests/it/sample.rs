@@ -7,11 +7,11 @@
 //! when it is installed and `VK_DRIVER_FILES` is not set. Without an adapter they print a note
 //! and pass, except under `CI=true`, where they fail.
 
-mod common;
-
-use common::{gpu, pyramid};
+use crate::common::{gpu, pyramid};
+use vortex_gpu::testing::bordered_tile;
 use vortex_gpu::{
-    CacheFormat, Filter, Gpu, GpuPageTable, PageCache, RenderTarget, SamplePass, Sources, View, VirtualTexture, Window,
+    CacheFormat, Gpu, GpuPageTable, PageCache, RenderTarget, SampleFilter, SamplePass, Sources, View, VirtualTexture,
+    Window,
 };
 use vortex_vt::page::{PageId, TextureGrid};
 use vortex_vt::page_table::PageTable;
@@ -54,18 +54,18 @@ impl Fixture {
         let update = residency.update(0, requests);
         assert_eq!(update.stats.deferred, 0, "every requested page fits in one update");
         for &(page, slot) in &update.loads {
-            cache.upload(&gpu.queue, slot, &pyramid::tile(&chain, &textures[0], page));
+            cache.upload(&gpu.queue, slot, &bordered_tile(&chain, &textures[0], page));
         }
         let changes = table.apply(&update);
         gpu_table.write_changes(&gpu.queue, &changes);
-        let pass = SamplePass::new(&gpu.device, Filter::Bilinear);
+        let pass = SamplePass::new(&gpu.device, SampleFilter::Bilinear);
         let target = RenderTarget::new(&gpu.device, TARGET, TARGET);
         Fixture { gpu, chain, cache, gpu_table, textures, table, pass, target }
     }
 
     fn render(&self, window: &Window, lod: u8) -> Rgba8Image {
         let sources = Sources { textures: &self.textures, table: &self.gpu_table, cache: &self.cache };
-        self.pass.render_and_read(&self.gpu, &self.target, &sources, &View::Window(*window), Some(lod as f32))
+        self.pass.render_and_read(&self.gpu, &self.target, &sources, &View::Window(*window), Some(lod as f32)).unwrap()
     }
 
     /// What the render must be: at each pixel's UV, the reference bilinear sample at the LOD of

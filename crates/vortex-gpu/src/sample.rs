@@ -1,26 +1,31 @@
 //! The sampling pass: draws a [`View`] whose fragment shader (`shaders/sample.wgsl`) maps each
 //! fragment's address through the page table to the physical page cache and samples it in
-//! linear light (nearest, bilinear, or trilinear across two LODs: [`Filter`]). The LOD comes
-//! from the screen-space footprint, or is fixed per draw for tests. Recorded and submitted on
-//! the render thread. [`RenderTarget`] is an `Rgba8UnormSrgb` texture with a depth buffer that
+//! linear light (nearest, bilinear, or trilinear across two LODs: [`SampleFilter`]). The LOD
+//! comes from the screen-space footprint, or is fixed per draw for tests. Recorded and submitted
+//! on the render thread. [`RenderTarget`] is an `Rgba8UnormSrgb` texture with a depth buffer that
 //! can be read back to the CPU.
+//!
+//! The module is named after the shader it drives, as `feedback` is: the two passes of a frame.
+//! The filter is a `SampleFilter`, not a `Filter`, so that it is never mistaken for the tiler's
+//! LOD filter (how a pyramid level is reduced from the one above), which is another thing.
 
 use vortex_vt::sampler::Rgba8Image;
 
 use crate::device::Gpu;
-use crate::draw::{self, Pipelines};
+use crate::draw::{self, Pipelines, Target};
 use crate::page_cache::PageCache;
 use crate::page_table::GpuPageTable;
 use crate::params::Frame;
+use crate::readback::{Readback, ReadbackError};
 use crate::texture::VirtualTexture;
 use crate::view::View;
 
 /// The format of render targets: sRGB, so the linear-light samples are encoded on write.
 pub const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 
-/// How the cache is filtered. Only trilinear reads two LODs per sample.
+/// How the sampling pass filters the cache. Only trilinear reads two LODs per sample.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum Filter {
+pub enum SampleFilter {
     Nearest,
     #[default]
     Bilinear,
@@ -28,12 +33,16 @@ pub enum Filter {
     Trilinear,
 }
 
-impl Filter {
+impl SampleFilter {
+    /// Every filter, cheapest first.
+    pub const ALL: [SampleFilter; 3] = [SampleFilter::Nearest, SampleFilter::Bilinear, SampleFilter::Trilinear];
+
+    /// The name scenes and reports use.
     pub fn name(self) -> &'static str {
         match self {
-            Filter::Nearest => "nearest",
-            Filter::Bilinear => "bilinear",
-            Filter::Trilinear => "trilinear",
+            SampleFilter::Nearest => "nearest",
+            SampleFilter::Bilinear => "bilinear",
+            SampleFilter::Trilinear => "trilinear",
         }
     }
 }
@@ -46,17 +55,17 @@ pub struct Sources<'a> {
     pub cache: &'a PageCache,
 }
 
-/// The pipelines and sampler of the sampling pass with one [`Filter`], made once per device.
+/// The pipelines and sampler of the sampling pass with one [`SampleFilter`], made once per device.
 #[derive(Debug)]
 pub struct SamplePass {
     pipelines: Pipelines,
     layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
-    filter: Filter,
+    filter: SampleFilter,
 }
 
 impl SamplePass {
-    pub fn new(device: &wgpu::Device, filter: Filter) -> SamplePass {
+    pub fn new(device: &wgpu::Device, filter: SampleFilter) -> SamplePass {
         let module = draw::shader(device, "vortex sample.wgsl", include_str!("shaders/sample.wgsl"));
         let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
             binding,
@@ -91,7 +100,7 @@ impl SamplePass {
         let pipelines = Pipelines::new(device, "vortex sample", &module, &layout, TARGET_FORMAT, &constants);
         // Within a slot only: the border (or the shader's clamp) keeps neighbouring slots'
         // texels out, so the address mode only matters at the cache's outer edge.
-        let mode = if filter == Filter::Nearest { wgpu::FilterMode::Nearest } else { wgpu::FilterMode::Linear };
+        let mode = if filter == SampleFilter::Nearest { wgpu::FilterMode::Nearest } else { wgpu::FilterMode::Linear };
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("vortex page cache"),
             mag_filter: mode,
@@ -102,7 +111,7 @@ impl SamplePass {
         SamplePass { pipelines, layout, sampler, filter }
     }
 
-    pub fn filter(&self) -> Filter {
+    pub fn filter(&self) -> SampleFilter {
         self.filter
     }
 
@@ -132,14 +141,8 @@ impl SamplePass {
                 wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
             ],
         });
-        draw::record(
-            encoder,
-            "vortex sample",
-            &target.view,
-            &target.depth,
-            wgpu::Color::TRANSPARENT,
-            Some((&self.pipelines, &bind_group, view)),
-        );
+        let draw = Some((&self.pipelines, &bind_group, view));
+        target.target.record(encoder, "vortex sample", wgpu::Color::TRANSPARENT, draw);
     }
 
     /// Draws `view` into `target`, submits, and reads the result back (blocking).
@@ -150,7 +153,7 @@ impl SamplePass {
         sources: &Sources,
         view: &View,
         lod: Option<f32>,
-    ) -> Rgba8Image {
+    ) -> Result<Rgba8Image, ReadbackError> {
         let mut encoder =
             gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex frame") });
         self.encode(&gpu.device, &mut encoder, target, sources, view, lod);
@@ -165,72 +168,32 @@ impl SamplePass {
 pub struct RenderTarget {
     pub width: u32,
     pub height: u32,
-    texture: wgpu::Texture,
-    view: wgpu::TextureView,
-    depth: wgpu::TextureView,
-    readback: wgpu::Buffer,
-    /// Bytes per row in `readback`: a multiple of 256, as buffer copies require.
-    padded_row: u32,
+    target: Target,
+    readback: Readback,
 }
 
 impl RenderTarget {
     pub fn new(device: &wgpu::Device, width: u32, height: u32) -> RenderTarget {
-        let texture = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("vortex target"),
-            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: TARGET_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
-        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        let padded_row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let readback = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("vortex target readback"),
-            size: padded_row as u64 * height as u64,
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
-        let depth = draw::depth_texture(device, width, height);
-        RenderTarget { width, height, texture, view, depth, readback, padded_row }
+        let target = Target::new(device, "vortex target", TARGET_FORMAT, width, height);
+        let readback = Readback::new(device, "target", width * 4, height);
+        RenderTarget { width, height, target, readback }
     }
 
     pub fn view(&self) -> &wgpu::TextureView {
-        &self.view
+        &self.target.view
     }
 
     /// Records the copy of the target into its readback buffer.
     pub fn encode_copy_out(&self, encoder: &mut wgpu::CommandEncoder) {
-        encoder.copy_texture_to_buffer(
-            self.texture.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &self.readback,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(self.padded_row),
-                    rows_per_image: Some(self.height),
-                },
-            },
-            wgpu::Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
-        );
+        let (source, extent) = self.target.copy_source();
+        self.readback.encode_copy(encoder, source, extent);
     }
 
     /// Maps the readback buffer (after a submitted [`RenderTarget::encode_copy_out`]) and returns
-    /// its texels; blocks until the GPU is done.
-    pub fn read(&self, gpu: &Gpu) -> Rgba8Image {
-        let slice = self.readback.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |r| r.expect("mapping the readback buffer"));
-        gpu.wait_idle();
-        let texels = {
-            let bytes = slice.get_mapped_range().expect("the readback buffer is mapped");
-            bytes
-                .chunks_exact(self.padded_row as usize)
-                .flat_map(|row| row[..self.width as usize * 4].chunks_exact(4).map(|t| [t[0], t[1], t[2], t[3]]))
-                .collect()
-        };
-        self.readback.unmap();
-        Rgba8Image { width: self.width, height: self.height, texels }
+    /// its texels; blocks until the GPU is done. Fails if the device is lost.
+    pub fn read(&self, gpu: &Gpu) -> Result<Rgba8Image, ReadbackError> {
+        let bytes = self.readback.read(&gpu.device)?;
+        let texels = bytes.chunks_exact(4).map(|t| [t[0], t[1], t[2], t[3]]).collect();
+        Ok(Rgba8Image { width: self.width, height: self.height, texels })
     }
 }

@@ -1,0 +1,231 @@
+//! The tile loader: reads the pages the residency asks for from Vortex tile packs and turns them
+//! into RGBA8 texels (or BC7 blocks) ready for `queue.write_texture` into a slot of the page
+//! cache. Decoding runs on the loader's own pool of worker threads (plain std threads named
+//! `vortex-loader-N`); the caller's thread only queues pages and collects texels, blocking
+//! ([`Loader::load`]) or not ([`Loader::request`] and [`Loader::poll`]). Pure CPU: nothing here
+//! touches wgpu.
+//!
+//! Three parts, one file each, because each changes for its own reasons: `pool` (the worker
+//! threads, the queue, request and poll, the blocking load, the counters), `decode` (one page
+//! from its pack: a stored tile to RGBA8 or BC7, or an absent one from its ancestor) and
+//! `magnify` (the exact integer magnification of that ancestor). This file holds what callers
+//! see of all three: the errors, a loaded page, the counters and the stand-in tile.
+//!
+//! Every page gets texels, so a slot is never left holding stale or garbage data:
+//!
+//! - a stored tile (PNG, JPEG, zstd, raw or constant) is decoded by `vortex_pack::decode_rgba8`,
+//!   which checks its CRC-32C;
+//! - an `absent` tile ("the runtime falls back to the parent tile", pack format) is built from its
+//!   nearest stored ancestor by bilinear magnification (`magnify`); that is not an error;
+//! - a tile that cannot be read or decoded, or a page outside its texture, gets the
+//!   [stand-in tile](stand_in_tile) (a magenta and black checkerboard) and a [`LoadError`] that
+//!   names the pack and the tile.
+//!
+//! A page's result depends only on the pack and the page, never on the thread that decoded it or
+//! on other pages (nothing is cached between pages), so results and counters are the same
+//! whatever the thread count.
+
+mod decode;
+mod magnify;
+mod pool;
+
+use std::path::PathBuf;
+
+use vortex_pack::Pack;
+use vortex_vt::page::{MAX_TEXTURES, PageId, TextureGrid};
+use vortex_vt::residency::Slot;
+
+use crate::texture::VirtualTexture;
+
+pub use pool::Loader;
+
+/// Why a [`VirtualTexture`] or a [`Loader`] cannot be made.
+#[derive(Debug, thiserror::Error)]
+pub enum LoaderError {
+    /// The pack's layout is not a virtual texture's (square power-of-two page grid, halving per LOD).
+    #[error("{}: {field}: {message}", path.display())]
+    Layout { path: PathBuf, field: &'static str, message: String },
+
+    #[error("a loader needs at least one pack")]
+    NoTextures,
+
+    #[error("{count} packs: a scene has at most {MAX_TEXTURES} virtual textures")]
+    TooManyTextures { count: usize },
+
+    /// Two packs whose tiles cannot share one physical page cache.
+    #[error(
+        "{}: {field} {first_value}, but {}: {field} {other_value}; the textures of one page cache need the same tile size and border",
+        first.display(),
+        other.display()
+    )]
+    Mismatch { field: &'static str, first: PathBuf, first_value: u32, other: PathBuf, other_value: u32 },
+
+    #[error("cannot start loader thread {index}: {source}")]
+    Spawn {
+        index: usize,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// Why a page came back with stand-in texels.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum LoadError {
+    /// The page's texture id is not an index of the loader's packs.
+    #[error("page {page:?}: no texture {}; the loader has {textures}", page.texture)]
+    UnknownTexture { page: PageId, textures: usize },
+
+    /// The page lies outside its texture's page grid.
+    #[error(
+        "{}: no page (lod {lod}, x {x}, y {y}): the texture has {pages} pages per side at LOD 0 and {lod_count} LODs",
+        path.display()
+    )]
+    OutOfGrid { path: PathBuf, lod: u8, x: u16, y: u16, pages: u16, lod_count: u8 },
+
+    /// A stored tile could not be read, failed its checksum or did not decode. For an absent page
+    /// this names the ancestor that failed (the message says which page it was read for).
+    #[error("{}: tile (lod {lod}, x {x}, y {y}): {message}", path.display())]
+    Tile { path: PathBuf, lod: u32, x: u32, y: u32, message: String },
+
+    /// The tile and every coarser tile covering it are absent: nothing to build it from.
+    #[error("{}: tile (lod {lod}, x {x}, y {y}) is absent and so is every coarser tile covering it", path.display())]
+    NoAncestor { path: PathBuf, lod: u8, x: u16, y: u16 },
+
+    /// A worker stopped without answering (it cannot happen unless a worker thread died).
+    #[error("page {page:?}: the loader's worker stopped before loading it")]
+    Lost { page: PageId },
+}
+
+/// Reading a texture's shape from its pack (the type lives in [`crate::texture`], shared with the
+/// renderer).
+impl VirtualTexture {
+    /// The texture stored in `pack`. The pack must hold a square power-of-two grid of at most
+    /// 4096 pages per side at LOD 0, halving per LOD down to one page (the tiler's layout, which
+    /// the page table and the feedback word assume); levels past that one page are ignored.
+    pub fn from_pack(pack: &Pack) -> Result<VirtualTexture, LoaderError> {
+        let layout = |field: &'static str, message: String| LoaderError::Layout {
+            path: pack.path().to_path_buf(),
+            field,
+            message,
+        };
+        let d = pack.description();
+        let levels = pack.levels();
+        let first = levels.first().ok_or_else(|| layout("level_count", "the pack has no levels".into()))?;
+        if first.tiles_w != first.tiles_h {
+            return Err(layout(
+                "tiles_h",
+                format!("LOD 0 is {}x{} tiles; a virtual texture's page grid is square", first.tiles_w, first.tiles_h),
+            ));
+        }
+        let grid = u16::try_from(first.tiles_w).ok().and_then(TextureGrid::new).ok_or_else(|| {
+            layout("tiles_w", format!("{} tiles per side at LOD 0; expected a power of two up to 4096", first.tiles_w))
+        })?;
+        if levels.len() < grid.lod_count as usize {
+            return Err(layout(
+                "level_count",
+                format!(
+                    "{} levels; {} pages per side need {} (down to one page)",
+                    levels.len(),
+                    grid.pages,
+                    grid.lod_count
+                ),
+            ));
+        }
+        for (lod, level) in levels.iter().enumerate().take(grid.lod_count as usize) {
+            let side = u32::from(grid.pages_per_side(lod as u8));
+            for (field, value) in [("tiles_w", level.tiles_w), ("tiles_h", level.tiles_h)] {
+                if value != side {
+                    return Err(layout(
+                        field,
+                        format!("level {lod} has {field} {value}; a power-of-two pyramid has {side} there"),
+                    ));
+                }
+            }
+        }
+        let payload = d.tile_size - 2 * d.border;
+        let covered = u64::from(grid.pages) * u64::from(payload);
+        for (field, value) in [("width", d.width), ("height", d.height)] {
+            if u64::from(value) > covered {
+                return Err(layout(
+                    field,
+                    format!("{field} {value} exceeds the {covered} texels of {} pages of {payload}", grid.pages),
+                ));
+            }
+        }
+        Ok(VirtualTexture { grid, width: d.width, height: d.height, tile_size: d.tile_size, border: d.border })
+    }
+}
+
+/// The texels of one requested page.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LoadedPage {
+    pub page: PageId,
+    /// The slot it was requested for, passed through.
+    pub slot: Slot,
+    /// `tile_size²` RGBA8 texels (sRGB-encoded colour, straight alpha), rows top down, borders
+    /// included: one slot of the page cache. The [stand-in](stand_in_tile) when `error` is set.
+    pub texels: Vec<u8>,
+    /// Payload bytes read from the pack for this page: its tile's, or for an absent tile its
+    /// ancestor's; counted even when they failed to decode. Constant tiles have none.
+    pub bytes_read: u64,
+    pub error: Option<LoadError>,
+}
+
+impl LoadedPage {
+    pub fn is_ok(&self) -> bool {
+        self.error.is_none()
+    }
+}
+
+/// What a loader has done since it started (every page it finished, whether or not it was
+/// collected yet).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LoadCounters {
+    /// Pages finished, with or without an error.
+    pub pages: u64,
+    /// Stored tiles decoded to texels (a page's own tile, or the ancestor of an absent one).
+    pub tiles_decoded: u64,
+    /// Pages built from an ancestor because their tile is absent.
+    pub absent_filled: u64,
+    /// Payload bytes read from the packs (the sum of [`LoadedPage::bytes_read`]).
+    pub bytes_read: u64,
+    /// Pages answered with the stand-in tile and an error.
+    pub errors: u64,
+}
+
+/// The two colours of the [stand-in tile](stand_in_tile): opaque magenta and opaque black, which
+/// no real texture is likely to show in a checkerboard.
+pub const STAND_IN_COLORS: [[u8; 4]; 2] = [[255, 0, 255, 255], [0, 0, 0, 255]];
+
+/// The texels given to a page that could not be loaded: a checkerboard of 8 x 8 squares
+/// alternating [`STAND_IN_COLORS`], magenta at the top-left (squares of `tile_size / 8` texels,
+/// at least one), over the whole stored tile, borders included. Visible at a glance, unlike a
+/// black or transparent tile that could pass for content.
+pub fn stand_in_tile(tile_size: u32) -> Vec<u8> {
+    let side = tile_size as usize;
+    let square = (side / 8).max(1);
+    let mut texels = Vec::with_capacity(side * side * 4);
+    for y in 0..side {
+        for x in 0..side {
+            texels.extend_from_slice(&STAND_IN_COLORS[(x / square + y / square) % 2]);
+        }
+    }
+    texels
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stand_in_is_a_magenta_and_black_checkerboard() {
+        let t = stand_in_tile(16);
+        assert_eq!(t.len(), 16 * 16 * 4);
+        let at = |x: usize, y: usize| &t[(y * 16 + x) * 4..][..4];
+        assert_eq!(at(0, 0), STAND_IN_COLORS[0]);
+        assert_eq!(at(1, 1), STAND_IN_COLORS[0]);
+        assert_eq!(at(2, 0), STAND_IN_COLORS[1]);
+        assert_eq!(at(2, 2), STAND_IN_COLORS[0]);
+        assert_eq!(stand_in_tile(3).len(), 36);
+    }
+}

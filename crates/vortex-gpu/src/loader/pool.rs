@@ -1,0 +1,334 @@
+//! The loader's pool: plain std threads (`vortex-loader-N`) that take pages from one queue,
+//! decode them (`decode`) and answer on a channel, the blocking [`Loader::load`] and the
+//! asynchronous [`Loader::request`] / [`Loader::poll`] over it, and the counters. Everything
+//! about threads and their failures is here: a worker that dies answers nothing, which `load`
+//! turns into [`LoadError::Lost`]; a decoder that panics is caught and answered with the
+//! stand-in tile and an error.
+
+use std::collections::VecDeque;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::mpsc::{self, Receiver, Sender};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::thread::JoinHandle;
+
+use vortex_pack::{Pack, TileKind};
+use vortex_vt::page::{MAX_TEXTURES, PageId};
+use vortex_vt::residency::Slot;
+
+use super::decode::{self, Made, Tally};
+use super::{LoadCounters, LoadError, LoadedPage, LoaderError, stand_in_tile};
+use crate::bc7;
+use crate::page_cache::CacheFormat;
+use crate::texture::VirtualTexture;
+
+/// One page to load, and where its answer goes.
+struct Job {
+    index: usize,
+    page: PageId,
+    slot: Slot,
+    reply: Sender<(usize, LoadedPage)>,
+}
+
+struct Queue {
+    jobs: VecDeque<Job>,
+    shutdown: bool,
+}
+
+/// What the workers share with the loader.
+struct Shared {
+    packs: Vec<Arc<Pack>>,
+    textures: Vec<VirtualTexture>,
+    tile_size: u32,
+    queue: Mutex<Queue>,
+    ready: Condvar,
+    pages: AtomicU64,
+    tiles_decoded: AtomicU64,
+    absent_filled: AtomicU64,
+    bytes_read: AtomicU64,
+    errors: AtomicU64,
+    /// Answer BC7 blocks instead of RGBA8 texels ([`Loader::set_format`]).
+    bc7: AtomicBool,
+}
+
+/// Reads pages of up to 16 virtual textures (texture id = index in the packs given to
+/// [`Loader::new`]) on a pool of worker threads. Dropping it stops the workers: queued pages are
+/// discarded and the pages being decoded are finished first (one tile per worker).
+pub struct Loader {
+    shared: Arc<Shared>,
+    workers: Vec<JoinHandle<()>>,
+    /// Where workers answer [`Loader::request`]s, and where [`Loader::poll`] collects them.
+    async_tx: Sender<(usize, LoadedPage)>,
+    async_rx: Mutex<Receiver<(usize, LoadedPage)>>,
+    /// Requested pages not yet returned by `poll`.
+    pending: AtomicUsize,
+}
+
+impl Loader {
+    /// A loader of `packs` on `threads` worker threads (0: one per available core). The packs
+    /// must all be virtual textures ([`VirtualTexture::from_pack`]) with the same tile size and
+    /// border, since their pages share one physical page cache.
+    pub fn new(packs: Vec<Arc<Pack>>, threads: usize) -> Result<Loader, LoaderError> {
+        let first = packs.first().ok_or(LoaderError::NoTextures)?;
+        if packs.len() > MAX_TEXTURES as usize {
+            return Err(LoaderError::TooManyTextures { count: packs.len() });
+        }
+        let textures = packs.iter().map(|p| VirtualTexture::from_pack(p)).collect::<Result<Vec<_>, _>>()?;
+        let reference = textures[0];
+        for (pack, texture) in packs.iter().zip(&textures).skip(1) {
+            for (field, a, b) in
+                [("tile_size", reference.tile_size, texture.tile_size), ("border", reference.border, texture.border)]
+            {
+                if a != b {
+                    return Err(LoaderError::Mismatch {
+                        field,
+                        first: first.path().to_path_buf(),
+                        first_value: a,
+                        other: pack.path().to_path_buf(),
+                        other_value: b,
+                    });
+                }
+            }
+        }
+        let threads = match threads {
+            0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+            n => n,
+        };
+        let shared = Arc::new(Shared {
+            packs,
+            textures,
+            tile_size: reference.tile_size,
+            queue: Mutex::new(Queue { jobs: VecDeque::new(), shutdown: false }),
+            ready: Condvar::new(),
+            pages: AtomicU64::new(0),
+            tiles_decoded: AtomicU64::new(0),
+            absent_filled: AtomicU64::new(0),
+            bytes_read: AtomicU64::new(0),
+            errors: AtomicU64::new(0),
+            bc7: AtomicBool::new(false),
+        });
+        let (async_tx, async_rx) = mpsc::channel();
+        // Built before the workers so that, if one fails to start, Drop stops those already started.
+        let mut loader = Loader {
+            shared,
+            workers: Vec::with_capacity(threads),
+            async_tx,
+            async_rx: Mutex::new(async_rx),
+            pending: AtomicUsize::new(0),
+        };
+        for index in 0..threads {
+            let shared = Arc::clone(&loader.shared);
+            let worker = std::thread::Builder::new()
+                .name(format!("vortex-loader-{index}"))
+                .spawn(move || work(&shared))
+                .map_err(|source| LoaderError::Spawn { index, source })?;
+            loader.workers.push(worker);
+        }
+        Ok(loader)
+    }
+
+    /// The textures, indexed by texture id.
+    pub fn textures(&self) -> &[VirtualTexture] {
+        &self.shared.textures
+    }
+
+    pub fn packs(&self) -> &[Arc<Pack>] {
+        &self.shared.packs
+    }
+
+    /// Side of every tile of every texture, borders included (the page cache's slot side).
+    pub fn tile_size(&self) -> u32 {
+        self.shared.tile_size
+    }
+
+    /// Whether every stored tile of every pack is a BC7 payload or one colour, so that pages can be
+    /// streamed into a BC7 cache as they are (absent tiles would need decoding and re-encoding).
+    pub fn holds_only_bc7(&self) -> bool {
+        self.shared.tile_size.is_multiple_of(4)
+            && self.shared.packs.iter().all(|pack| {
+                (0..pack.header().index_count).all(|i| {
+                    let kind = TileKind::from_u8(pack.entry(i).kind);
+                    matches!(kind, Some(TileKind::Bc7 | TileKind::Constant))
+                })
+            })
+    }
+
+    /// Makes every later page come in `format`: RGBA8 texels, or BC7 blocks (which only packs
+    /// that [hold only BC7](Loader::holds_only_bc7) can give; other tiles then get the stand-in
+    /// and an error).
+    pub fn set_format(&self, format: CacheFormat) {
+        self.shared.bc7.store(format == CacheFormat::Bc7, Ordering::Relaxed);
+    }
+
+    pub fn format(&self) -> CacheFormat {
+        if self.shared.bc7.load(Ordering::Relaxed) { CacheFormat::Bc7 } else { CacheFormat::Rgba8 }
+    }
+
+    /// Texels of border on each side of every tile.
+    pub fn border(&self) -> u32 {
+        self.shared.textures[0].border
+    }
+
+    pub fn threads(&self) -> usize {
+        self.workers.len()
+    }
+
+    /// Loads `pages` on the workers and waits for all of them; the answers are in the order of
+    /// `pages` (one per entry, duplicates included). Pages queued by [`Loader::request`] before
+    /// this call are decoded first.
+    pub fn load(&self, pages: &[(PageId, Slot)]) -> Vec<LoadedPage> {
+        if pages.is_empty() {
+            return Vec::new();
+        }
+        let (tx, rx) = mpsc::channel();
+        self.enqueue(pages.iter().enumerate().map(|(index, &(page, slot))| Job {
+            index,
+            page,
+            slot,
+            reply: tx.clone(),
+        }));
+        // Only the jobs hold senders now: if every one of them is gone, `recv` stops waiting.
+        drop(tx);
+        let mut answers: Vec<Option<LoadedPage>> = vec![None; pages.len()];
+        for _ in 0..pages.len() {
+            let Ok((index, answer)) = rx.recv() else { break };
+            if let Some(place) = answers.get_mut(index) {
+                *place = Some(answer);
+            }
+        }
+        answers
+            .into_iter()
+            .zip(pages)
+            .map(|(answer, &(page, slot))| {
+                answer.unwrap_or_else(|| LoadedPage {
+                    page,
+                    slot,
+                    texels: stand_in_tile(self.shared.tile_size),
+                    bytes_read: 0,
+                    error: Some(LoadError::Lost { page }),
+                })
+            })
+            .collect()
+    }
+
+    /// Queues `pages` and returns at once; [`Loader::poll`] collects them as they finish. Each
+    /// entry is answered once (a page requested twice is loaded twice).
+    pub fn request(&self, pages: &[(PageId, Slot)]) {
+        self.pending.fetch_add(pages.len(), Ordering::Relaxed);
+        self.enqueue(pages.iter().map(|&(page, slot)| Job { index: 0, page, slot, reply: self.async_tx.clone() }));
+    }
+
+    /// The requested pages finished since the last call, in the order they finished; never waits.
+    pub fn poll(&self) -> Vec<LoadedPage> {
+        let rx = self.async_rx.lock().unwrap_or_else(PoisonError::into_inner);
+        let finished: Vec<LoadedPage> = rx.try_iter().map(|(_, page)| page).collect();
+        self.pending.fetch_sub(finished.len(), Ordering::Relaxed);
+        finished
+    }
+
+    /// Pages requested and not yet returned by [`Loader::poll`].
+    pub fn pending(&self) -> usize {
+        self.pending.load(Ordering::Relaxed)
+    }
+
+    pub fn counters(&self) -> LoadCounters {
+        let s = &self.shared;
+        LoadCounters {
+            pages: s.pages.load(Ordering::Relaxed),
+            tiles_decoded: s.tiles_decoded.load(Ordering::Relaxed),
+            absent_filled: s.absent_filled.load(Ordering::Relaxed),
+            bytes_read: s.bytes_read.load(Ordering::Relaxed),
+            errors: s.errors.load(Ordering::Relaxed),
+        }
+    }
+
+    fn enqueue(&self, jobs: impl Iterator<Item = Job>) {
+        let mut queue = lock(&self.shared.queue);
+        queue.jobs.extend(jobs);
+        drop(queue);
+        self.shared.ready.notify_all();
+    }
+}
+
+impl Drop for Loader {
+    fn drop(&mut self) {
+        let mut queue = lock(&self.shared.queue);
+        queue.shutdown = true;
+        queue.jobs.clear();
+        drop(queue);
+        self.shared.ready.notify_all();
+        for worker in self.workers.drain(..) {
+            // A worker that panicked has nothing left to clean up; its panic was already reported.
+            let _ = worker.join();
+        }
+    }
+}
+
+/// No lock is held across anything that can panic, so a poisoned lock still holds consistent data.
+fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// A worker: takes jobs until the loader shuts down.
+fn work(shared: &Shared) {
+    loop {
+        let job = {
+            let mut queue = lock(&shared.queue);
+            loop {
+                if queue.shutdown {
+                    return;
+                }
+                if let Some(job) = queue.jobs.pop_front() {
+                    break job;
+                }
+                queue = shared.ready.wait(queue).unwrap_or_else(PoisonError::into_inner);
+            }
+        };
+        let answer = shared.load_page(job.page, job.slot);
+        // The receiver is gone only if nobody wants the answer any more (a dropped loader).
+        let _ = job.reply.send((job.index, answer));
+    }
+}
+
+impl Shared {
+    /// One page, its counters updated. Never panics on bad data: a panicking decoder is caught and
+    /// reported like any other decoding error.
+    fn load_page(&self, page: PageId, slot: Slot) -> LoadedPage {
+        let as_bc7 = self.bc7.load(Ordering::Relaxed);
+        let mut tally = Tally::default();
+        let texels = || decode::texels(&self.packs, &self.textures, page, as_bc7, &mut tally);
+        let result = catch_unwind(AssertUnwindSafe(texels)).unwrap_or_else(|panic| {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_default();
+            let path = self.packs.get(page.texture as usize).map(|p| p.path().to_path_buf()).unwrap_or_default();
+            Err(LoadError::Tile {
+                path,
+                lod: page.lod.into(),
+                x: page.x.into(),
+                y: page.y.into(),
+                message: format!("the decoder panicked: {what}"),
+            })
+        });
+        let Tally { bytes_read, tiles_decoded } = tally;
+        self.tiles_decoded.fetch_add(tiles_decoded, Ordering::Relaxed);
+        self.pages.fetch_add(1, Ordering::Relaxed);
+        self.bytes_read.fetch_add(bytes_read, Ordering::Relaxed);
+        let (texels, error) = match result {
+            Ok((texels, made)) => {
+                if let Made::FromAncestor = made {
+                    self.absent_filled.fetch_add(1, Ordering::Relaxed);
+                }
+                (texels, None)
+            }
+            Err(e) => {
+                self.errors.fetch_add(1, Ordering::Relaxed);
+                let stand_in = stand_in_tile(self.tile_size);
+                (if as_bc7 { bc7::solid_blocks(&stand_in, self.tile_size) } else { stand_in }, Some(e))
+            }
+        };
+        LoadedPage { page, slot, texels, bytes_read, error }
+    }
+}

@@ -1,0 +1,13 @@
+//! The integration tests of `vortex-gpu`, one binary: one link instead of one per file, and the
+//! helpers in `common` shared without `#![allow(dead_code)]`. The GPU tests run on whatever
+//! adapter wgpu finds, pinned to lavapipe (Mesa's CPU Vulkan driver) when it is installed and no
+//! Vulkan driver is chosen; without an adapter they print a note and pass, except under
+//! `CI=true`, where they fail. `loader` needs no GPU.
+
+mod address;
+mod common;
+mod feedback;
+mod loader;
+mod readback;
+mod runtime;
+mod sample;
