@@ -1,6 +1,6 @@
 //! `convert`: an already-tiled input re-tiled through the same pipeline as `split`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Result, bail};
@@ -93,6 +93,13 @@ fn open_grid(a: &ConvertArgs) -> Result<Box<dyn TileGrid>> {
         return Ok(Box::new(DeepZoom::open(input)?));
     }
     if input.is_file() {
+        if let Some(kind) = image_kind(input) {
+            bail!(
+                "{}: is a {kind} image, not a tiled input; `vortex-tiler split {} -o DIR` (or --pack FILE) cuts an image",
+                input.display(),
+                input.display()
+            );
+        }
         return Ok(Box::new(PackInput::open(input)?));
     }
     if input.join("info.json").is_file() {
@@ -102,6 +109,19 @@ fn open_grid(a: &ConvertArgs) -> Result<Box<dyn TileGrid>> {
         "{}: a directory without info.json; for named tiles pass --tiled --filename-format PATTERN, for z/y/x tiles --layout google",
         input.display()
     )
+}
+
+/// The image format `path` starts like, if any: `convert` takes tiles, `split` images.
+fn image_kind(path: &Path) -> Option<&'static str> {
+    let mut head = [0u8; 4];
+    std::fs::File::open(path).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head)).ok()?;
+    match head {
+        [0x89, b'P', b'N', b'G'] => Some("PNG"),
+        [0xff, 0xd8, 0xff, _] => Some("JPEG"),
+        [b'I', b'I', 42 | 43, 0] | [b'M', b'M', 0, 42 | 43] => Some("TIFF"),
+        [b'P', b'5' | b'6', ..] => Some("PNM"),
+        _ => None,
+    }
 }
 
 /// One texel of `background` in the grid's layout, native-endian; zeros without a colour.

@@ -10,7 +10,12 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use vortex_gpu::{Gpu, Loader, Runtime, SampleFilter, Scene};
+use vortex_tiler::error::TilerError;
+use vortex_tiler::limits::Limits;
+use vortex_tiler::output::{self, Product, staging};
 use vortex_vt::sampler::Rgba8Image;
+
+use super::{report, signals};
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
@@ -22,12 +27,17 @@ pub struct RenderArgs {
     /// ends still.
     #[arg(long, value_name = "JSON")]
     scene: Option<PathBuf>,
-    /// Folder for the PNG frames (frame-0000.png, ...); none are written without it.
+    /// Folder for the PNG frames (frame-0000.png, ...); none are written without it. Written
+    /// whole or not at all; replaces only a folder of frames.
     #[arg(long, value_name = "DIR")]
     frames: Option<PathBuf>,
-    /// Where to write the JSON report (per-frame counters, pages touched, convergence).
+    /// Where to write the JSON report (per-frame counters, pages touched, convergence). An
+    /// earlier report is replaced; any other file only with --force.
     #[arg(long, value_name = "FILE")]
     report: Option<PathBuf>,
+    /// Replace a regular file at --report that is not a render report.
+    #[arg(long)]
+    force: bool,
     /// Override the scene's number of frames.
     #[arg(long, value_name = "N")]
     frame_count: Option<u32>,
@@ -94,6 +104,17 @@ pub fn run(a: RenderArgs) -> Result<()> {
         .check()
         .and_then(|()| scene.check_textures(scene.textures.len()))
         .map_err(|m| anyhow::anyhow!("scene: {m}"))?;
+    Limits::default().check_frames(scene.frames as u64)?;
+    let inputs: Vec<&Path> = scene.textures.iter().map(PathBuf::as_path).chain(a.scene.as_deref()).collect();
+    if let Some(path) = &a.report {
+        output::claim(path, Product::Report, &inputs, a.force)?;
+        report::remove_stale_temporaries(path)?;
+    }
+    if let Some(dir) = &a.frames {
+        output::claim(dir, Product::Frames, &inputs, false)?;
+        report::remove_stale_temporaries(dir)?;
+    }
+    signals::install().context("installing signal handlers")?;
 
     let packs = scene
         .textures
@@ -105,9 +126,8 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let gpu = Gpu::headless(side.max(scene.size[0]).max(scene.size[1]))?;
     let adapter = gpu.adapter_info();
     let mut runtime = Runtime::new(gpu, loader, &scene)?;
-    if let Some(dir) = &a.frames {
-        fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
+    // Frames go into a staging folder, moved into place only when every frame is written.
+    let frames = a.frames.as_deref().map(StagedFrames::create).transpose()?;
 
     let bar = if a.quiet {
         ProgressBar::hidden()
@@ -121,10 +141,12 @@ pub fn run(a: RenderArgs) -> Result<()> {
         bar
     };
     let start = Instant::now();
-    let frames_dir = a.frames.as_deref();
-    let report = runtime.run(&scene, frames_dir.is_some(), |f, picture| -> Result<()> {
-        if let (Some(dir), Some(picture)) = (frames_dir, picture) {
-            write_png(&dir.join(format!("frame-{:04}.png", f.frame)), &picture)?;
+    let report = runtime.run(&scene, frames.is_some(), |f, picture| -> Result<()> {
+        if signals::requested().is_some() {
+            return Err(TilerError::Interrupted.into());
+        }
+        if let (Some(frames), Some(picture)) = (&frames, picture) {
+            write_png(&frames.staging.join(format!("frame-{:04}.png", f.frame)), &picture)?;
         }
         bar.set_message(format!("{} loaded, {:.1}% fallback", f.loaded, f.fallback_fraction * 100.0));
         bar.inc(1);
@@ -134,12 +156,15 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let took = start.elapsed();
     if let Some(path) = &a.report {
         let json = serde_json::to_string_pretty(&report)?;
-        write_atomically(path, json.as_bytes())?;
+        staging::write_file(path, json.as_bytes()).with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(frames) = frames {
+        frames.finish()?;
     }
     let converge = report
         .frames_to_converge
         .map_or("did not converge".to_string(), |n| format!("converged {n} frame(s) after the camera stopped"));
-    println!(
+    say!(
         "rendered {} frames of {}x{} on {} in {:.2} s ({:.1} ms/frame); {} of {} pages touched ({:.2}%), {} read; {converge}",
         report.frames.len(),
         scene.size[0],
@@ -171,13 +196,31 @@ fn write_png(path: &Path, image: &Rgba8Image) -> Result<()> {
     let mut writer = encoder.write_header()?;
     writer.write_image_data(image.texels.as_flattened())?;
     writer.finish()?;
-    write_atomically(path, &bytes)
+    fs::write(path, &bytes).with_context(|| format!("writing {}", path.display()))
 }
 
-/// Writes `bytes` to a temporary name beside `path`, then renames it into place.
-fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path.file_name().with_context(|| format!("{} is not a file path", path.display()))?;
-    let tmp = path.with_file_name(format!(".{}.partial-{}", name.to_string_lossy(), std::process::id()));
-    fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
+/// The frames folder while it is written: a staging folder beside the destination, removed
+/// if the run ends early.
+struct StagedFrames {
+    staging: PathBuf,
+    dest: PathBuf,
+}
+
+impl StagedFrames {
+    fn create(dest: &Path) -> Result<StagedFrames> {
+        let staging = staging::partial_path(dest);
+        fs::create_dir_all(&staging).with_context(|| format!("creating {}", staging.display()))?;
+        Ok(StagedFrames { staging, dest: dest.to_path_buf() })
+    }
+
+    fn finish(self) -> Result<()> {
+        staging::replace_dir(&self.staging, &self.dest).with_context(|| format!("writing {}", self.dest.display()))
+    }
+}
+
+impl Drop for StagedFrames {
+    fn drop(&mut self) {
+        // After `finish` the staging folder has become the destination and is gone.
+        let _ = fs::remove_dir_all(&self.staging);
+    }
 }

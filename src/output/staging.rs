@@ -39,6 +39,32 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> io::Result<()> {
     result
 }
 
+/// Moves the finished directory `staging` to `dest`. A previous output at `dest` (claimed as
+/// ours) is moved aside first and deleted only once the new one is in place; on failure
+/// `staging` is removed and the previous output put back.
+pub fn replace_dir(staging: &Path, dest: &Path) -> io::Result<()> {
+    let old = PathBuf::from(format!("{}.old", staging.display()));
+    let had_old = fs::symlink_metadata(dest).is_ok();
+    let moved = (|| {
+        if had_old {
+            fs::rename(dest, &old)?;
+        }
+        fs::rename(staging, dest).inspect_err(|_| {
+            if had_old {
+                let _ = fs::rename(&old, dest);
+            }
+        })
+    })();
+    if let Err(e) = moved {
+        let _ = fs::remove_dir_all(staging);
+        return Err(e);
+    }
+    if had_old {
+        fs::remove_dir_all(&old)?;
+    }
+    Ok(())
+}
+
 /// Removes the temporaries of `dest` left by processes that are no longer running; returns
 /// what was removed so that the caller can say so.
 pub fn remove_stale(dest: &Path) -> io::Result<Vec<PathBuf>> {
@@ -139,6 +165,25 @@ mod tests {
         assert_eq!(removed, expected);
         assert!(!stale_dir.exists() && !stale_pack.exists());
         assert!(live.exists() && other.exists() && mine.exists());
+    }
+
+    #[test]
+    fn replace_dir_swaps_in_the_new_output() {
+        let dir = tempfile::tempdir().unwrap();
+        let dest = dir.path().join("out");
+        fs::create_dir(&dest).unwrap();
+        fs::write(dest.join("old.png"), b"old").unwrap();
+        let staging = partial_path(&dest);
+        fs::create_dir(&staging).unwrap();
+        fs::write(staging.join("new.png"), b"new").unwrap();
+        replace_dir(&staging, &dest).unwrap();
+        assert_eq!(fs::read_dir(&dest).unwrap().count(), 1);
+        assert_eq!(fs::read(dest.join("new.png")).unwrap(), b"new");
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1);
+        // A failed move leaves no staging behind.
+        let missing = dir.path().join("missing");
+        assert!(replace_dir(&missing, &dir.path().join("nowhere/out")).is_err());
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1);
     }
 
     #[test]

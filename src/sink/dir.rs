@@ -11,6 +11,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::TileSink;
 use crate::error::{Result, TilerError};
+use crate::output::{self, Product, staging};
 use crate::tile_dir::filename::FilenameFormat;
 use crate::tile_dir::info::Info;
 
@@ -24,29 +25,11 @@ pub struct DirSink {
 }
 
 impl DirSink {
-    /// Prepares to write into `dest`, which must be absent, empty, or a previous output (it
-    /// holds an `info.json`); anything else is refused rather than replaced.
+    /// Prepares to write into `dest`, which must be absent, empty, or a previous output of
+    /// ours (see [`output::claim`]); anything else is refused rather than replaced.
     pub fn create(dest: &Path, names: FilenameFormat) -> Result<DirSink> {
-        if dest.exists() {
-            if !dest.is_dir() {
-                return Err(TilerError::write(dest, std::io::Error::other("exists and is not a directory")));
-            }
-            let mut entries = fs::read_dir(dest).map_err(|e| TilerError::write(dest, e))?;
-            if entries.next().is_some() && !dest.join("info.json").is_file() {
-                return Err(TilerError::write(
-                    dest,
-                    std::io::Error::other(
-                        "is not empty and holds no info.json, so it is not a previous output; choose a new or empty directory",
-                    ),
-                ));
-            }
-        }
-        let name = dest.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
-        let parent = match dest.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        let staging = parent.join(format!(".{name}.partial-{}", std::process::id()));
+        output::claim(dest, Product::TileDir, &[], false)?;
+        let staging = staging::partial_path(dest);
         if staging.exists() {
             fs::remove_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
         }
@@ -66,19 +49,11 @@ impl DirSink {
     /// at the destination is moved aside first and deleted only after the new one is in place.
     pub fn finish(self, info: &Info) -> Result<()> {
         let json = self.staging.join("info.json");
-        fs::write(&json, info.to_json_pretty()).map_err(|e| TilerError::write(&json, e))?;
-        let old = self
-            .staging
-            .with_file_name(format!("{}.old", self.staging.file_name().unwrap_or_default().to_string_lossy()));
-        let had_old = self.dest.exists();
-        if had_old {
-            fs::rename(&self.dest, &old).map_err(|e| TilerError::write(&self.dest, e))?;
+        if let Err(e) = fs::write(&json, info.to_json_pretty()) {
+            let _ = fs::remove_dir_all(&self.staging);
+            return Err(TilerError::write(&json, e));
         }
-        fs::rename(&self.staging, &self.dest).map_err(|e| TilerError::write(&self.dest, e))?;
-        if had_old {
-            fs::remove_dir_all(&old).map_err(|e| TilerError::write(&old, e))?;
-        }
-        Ok(())
+        staging::replace_dir(&self.staging, &self.dest).map_err(|e| TilerError::write(&self.dest, e))
     }
 
     /// Removes the staging directory after a failure.

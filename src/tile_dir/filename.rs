@@ -12,6 +12,10 @@ enum Piece {
     Arg { index: usize, width: usize, zero: bool },
 }
 
+/// The widest a number may be padded: far more digits than a `u32` has, far fewer than the
+/// 255 bytes of a file name part.
+const MAX_WIDTH: usize = 32;
+
 /// A parsed pattern.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FilenameFormat {
@@ -71,11 +75,16 @@ impl FilenameFormat {
                 return Err(format!("bad conversion '%{spec}{conversion}' in '{pattern}'"));
             }
             let zero = flags.starts_with('0');
-            let width = if flags.is_empty() {
+            let width: usize = if flags.is_empty() {
                 0
             } else {
                 flags.parse().map_err(|_| format!("bad width in '%{spec}{conversion}'"))?
             };
+            if width > MAX_WIDTH {
+                return Err(format!(
+                    "width {width} in '%{spec}{conversion}' is more than {MAX_WIDTH}: a file name part holds at most 255 bytes"
+                ));
+            }
             if !literal.is_empty() {
                 pieces.push(Piece::Literal(std::mem::take(&mut literal)));
             }
@@ -196,6 +205,9 @@ mod tests {
             ["x%02s.png", "%4$s%2$s%3$s", "%q", "%1$s-%2$s-%3$s-%s%s%s%s", "../%s%s%s", "/abs/%s%s%s", "%1$2$s%s%s"]
         {
             assert!(FilenameFormat::parse(bad, 3).is_err(), "{bad} was accepted");
+        }
+        for wide in ["%1$65536d-%2$d-%3$d.png", "%1$33d-%2$d-%3$d"] {
+            assert!(FilenameFormat::parse(wide, 3).unwrap_err().contains("width"), "{wide}");
         }
     }
 }

@@ -12,6 +12,7 @@ mod convert;
 mod docs;
 mod failures;
 mod golden;
+mod hostile;
 mod oracle;
 mod pack_cli;
 mod render;
