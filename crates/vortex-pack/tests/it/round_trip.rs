@@ -1,19 +1,18 @@
 //! Packs written with `PackWriter` read back identically through both backends, verify clean,
 //! decode to RGBA8; and `verify` finds each kind of problem planted in a pack.
 
-mod common;
-
 use std::collections::HashMap;
 use std::path::Path;
 
-use common::{Written, reseal, write_sample};
 use vortex_pack::format::at;
 use vortex_pack::{
-    NewTile, Pack, PackError, PackWriter, Tile, TileId, TileKind, VerifyOptions, WriteOptions, decode_rgba8,
+    Limits, NewTile, Pack, PackError, PackWriter, Tile, TileId, TileKind, VerifyOptions, WriteOptions, decode_rgba8,
     decode_rgba8_limited, verify,
 };
 
-const DECODE: VerifyOptions = VerifyOptions { decode: true, max_decoded_bytes: 1 << 20 };
+use crate::common::{self, Written, reseal, write_sample};
+
+const DECODE: VerifyOptions = VerifyOptions { decode: true };
 
 fn as_written(tile: Tile<'_>) -> Written {
     match tile {
@@ -332,7 +331,9 @@ fn verify_decodes_every_payload_when_asked() {
     assert!(decode_rgba8(&pack, zstd_id.lod, zstd_id.x, zstd_id.y).is_err());
 
     // A limit below one tile: every decodable payload is refused, none is decoded.
-    let report = verify(&pack, VerifyOptions { decode: true, max_decoded_bytes: d.raw_tile_len().unwrap() - 1 });
+    let limits = Limits { max_decoded_bytes: d.raw_tile_len().unwrap() - 1, ..Limits::default() };
+    let pack = Pack::from_bytes_with_limits(pack.path(), pack.file().to_vec(), limits).unwrap();
+    let report = verify(&pack, VerifyOptions { decode: true });
     assert!(report.problems.iter().filter(|p| p.message.contains("decoding limit")).count() >= 3, "{report}");
 }
 
