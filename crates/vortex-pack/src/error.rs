@@ -20,10 +20,11 @@ pub enum PackError {
     Unsupported { path: PathBuf, message: String },
 
     /// The header claims more than the reader's [`Limits`](crate::Limits) allow (a tile side,
-    /// a tile count): refused before anything is sized from it. `field` is the header field or
+    /// a tile count): refused before anything is sized from it. The writer refuses, with this
+    /// error, a pack that readers with the default limits would refuse. `field` is the header field or
     /// level-table row, `offset` its byte in the file, `cap` the `Limits` member that raises it.
     #[error(
-        "{}: {field} (byte {offset}) is {value}, over this reader's limit of {limit} (Limits::{cap})",
+        "{}: {field} (byte {offset}) is {value}, over the limit of {limit} (Limits::{cap})",
         path.display()
     )]
     LimitExceeded { path: PathBuf, field: String, offset: u64, value: u64, limit: u64, cap: &'static str },

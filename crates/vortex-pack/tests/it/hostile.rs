@@ -387,7 +387,7 @@ fn limits_below_the_pack_refuse_it() {
     let bytes = samples().packs[0].clone();
     let tight = |limits: Limits| Pack::from_bytes_with_limits("tight.vtpk", bytes.clone(), limits).err();
     let e = tight(Limits { max_tiles: 20, ..Limits::default() }).expect("21 tiles opened under a cap of 20");
-    assert!(e.to_string().contains("index_count (byte 96) is 21, over this reader's limit of 20"), "{e}");
+    assert!(e.to_string().contains("index_count (byte 96) is 21, over the limit of 20"), "{e}");
     let e = tight(Limits { max_tile_size: 7, ..Limits::default() }).expect("8-texel tiles opened under a cap of 7");
     assert!(e.to_string().contains("tile_size (byte 56) is 8"), "{e}");
     assert!(tight(Limits { max_tiles: 21, max_tile_size: 8, ..Limits::default() }).is_none());
