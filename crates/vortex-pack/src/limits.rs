@@ -16,15 +16,16 @@ pub const DEFAULT_MAX_DECODED_BYTES: u64 = 1 << 30;
 /// [`Limits::default`] and change the caps you need,
 /// `Limits { max_tiles: 1 << 30, ..Limits::default() }`.
 ///
-/// The defaults admit every pack the tiler writes (its tile sizes are 8..=16384) up to a
-/// pyramid of 2^26 tiles, whose index alone is 1.5 GiB.
+/// The defaults admit every tile size the tiler writes (8..=16384) and its square pyramids up
+/// to 16384 x 16384 tiles at LOD 0 (about 3.6 x 10^8 tiles; an index of 8 GiB, which a writer
+/// holds in memory).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Limits {
     /// The largest `tile_size` (stored tile side, borders included) a header may declare.
     /// Default 16384, the largest texture side GPUs commonly support.
     pub max_tile_size: u32,
     /// The most tiles (index entries, every level together) a header's `index_count` and the
-    /// level table may declare; the index is 24 bytes per tile. Default 2^26.
+    /// level table may declare; the index is 24 bytes per tile. Default 2^29.
     pub max_tiles: u64,
     /// The most bytes one decoded tile, or any buffer decoding it needs, may take (decoding
     /// and `verify` with decoding). Default [`DEFAULT_MAX_DECODED_BYTES`].
@@ -33,6 +34,6 @@ pub struct Limits {
 
 impl Default for Limits {
     fn default() -> Self {
-        Limits { max_tile_size: 16384, max_tiles: 1 << 26, max_decoded_bytes: DEFAULT_MAX_DECODED_BYTES }
+        Limits { max_tile_size: 16384, max_tiles: 1 << 29, max_decoded_bytes: DEFAULT_MAX_DECODED_BYTES }
     }
 }

@@ -205,7 +205,7 @@ fn writer_refuses_what_readers_would_refuse_before_allocating() {
     let levels = vortex_pack::format::pyramid_levels(&d, 1 << 16);
     let e = PackWriter::create(&path, d, levels, b"", WriteOptions::default()).err().unwrap();
     assert!(matches!(&e, PackError::LimitExceeded { cap: "max_tiles", .. }), "{e}");
-    assert!(e.to_string().contains("index_count (byte 96) is 5726623061, over the limit of 67108864"), "{e}");
+    assert!(e.to_string().contains("index_count (byte 96) is 5726623061, over the limit of 536870912"), "{e}");
 
     let d = vortex_pack::Description { tile_size: 1 << 15, level_count: 1, ..common::description(3, 1) };
     let levels = vortex_pack::format::pyramid_levels(&d, 1);
