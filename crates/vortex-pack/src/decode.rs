@@ -17,18 +17,18 @@ use std::io::Cursor;
 use crate::error::{PackError, Result};
 use crate::format::{Description, ENTRY_LEN, TileKind, delta_decode_rows};
 use crate::reader::{Pack, Tile, TileId};
-use crate::verify::DEFAULT_MAX_DECODED_BYTES;
 
 /// The tile at `(lod, x, y)` as `tile_size^2` RGBA8 texels, rows top down; `None` if it is
 /// absent. Payload checksums are checked ([`Pack::tile_checked`]); a payload that does not
-/// decode to exactly one tile, or would need more than [`DEFAULT_MAX_DECODED_BYTES`], is a
+/// decode to exactly one tile, or would need more than the pack's
+/// [`Limits::max_decoded_bytes`](crate::Limits::max_decoded_bytes), is a
 /// [`PackError::Tile`](crate::PackError::Tile).
 pub fn decode_rgba8(pack: &Pack, lod: u32, x: u32, y: u32) -> Result<Option<Vec<u8>>> {
-    decode_rgba8_limited(pack, lod, x, y, DEFAULT_MAX_DECODED_BYTES)
+    decode_rgba8_limited(pack, lod, x, y, pack.limits().max_decoded_bytes)
 }
 
-/// As [`decode_rgba8`] with a limit of `max_bytes` on the decoded tile and on any buffer that
-/// decoding it needs.
+/// As [`decode_rgba8`] with a limit of `max_bytes` (instead of the pack's) on the decoded tile
+/// and on any buffer that decoding it needs.
 pub fn decode_rgba8_limited(pack: &Pack, lod: u32, x: u32, y: u32, max_bytes: u64) -> Result<Option<Vec<u8>>> {
     let id = TileId { lod, x, y };
     let position = pack.position(id)?;

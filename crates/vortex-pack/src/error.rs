@@ -19,6 +19,16 @@ pub enum PackError {
     #[error("{}: {message}", path.display())]
     Unsupported { path: PathBuf, message: String },
 
+    /// The header claims more than the reader's [`Limits`](crate::Limits) allow (a tile side,
+    /// a tile count): refused before anything is sized from it. The writer refuses, with this
+    /// error, a pack that readers with the default limits would refuse. `field` is the header field or
+    /// level-table row, `offset` its byte in the file, `cap` the `Limits` member that raises it.
+    #[error(
+        "{}: {field} (byte {offset}) is {value}, over the limit of {limit} (Limits::{cap})",
+        path.display()
+    )]
+    LimitExceeded { path: PathBuf, field: String, offset: u64, value: u64, limit: u64, cap: &'static str },
+
     /// A tile's entry or bytes are invalid.
     #[error("{}: tile (lod {lod}, x {x}, y {y}) at byte {offset}: {message}", path.display())]
     Tile { path: PathBuf, lod: u32, x: u32, y: u32, offset: u64, message: String },

@@ -13,13 +13,15 @@
 //!
 //! This crate is a leaf: std, a CRC-32C crate, memmap2, thiserror and zstd. The writer is
 //! behind the `write` feature so that readers need none of it; `decode_rgba8` (PNG, JPEG, BC1
-//! and BC7 decoding, and `verify` with [`VerifyOptions::decode`]) is behind `decode`. [`verify()`]
-//! checks every byte of a pack and reports every problem it finds.
+//! and BC7 decoding, and `verify` with `VerifyOptions::decode`) is behind `decode`. [`verify()`]
+//! checks every byte of a pack and reports every problem it finds. Whatever a header claims is
+//! held to [`Limits`] before anything is sized from it.
 
 #[cfg(feature = "decode")]
 mod decode;
 mod error;
 pub mod format;
+mod limits;
 mod reader;
 pub mod verify;
 #[cfg(feature = "write")]
@@ -29,7 +31,8 @@ mod writer;
 pub use decode::{decode_rgba8, decode_rgba8_limited, payload_texels};
 pub use error::{PackError, Result};
 pub use format::{Description, Entry, Header, Level, TileKind};
+pub use limits::{DEFAULT_MAX_DECODED_BYTES, Limits};
 pub use reader::{Pack, Tile, TileId};
-pub use verify::{DEFAULT_MAX_DECODED_BYTES, Problem, Report, VerifyOptions, verify};
+pub use verify::{Problem, Report, VerifyOptions, verify};
 #[cfg(feature = "write")]
 pub use writer::{NewTile, PackWriter, WriteOptions, WriteSummary};

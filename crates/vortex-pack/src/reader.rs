@@ -1,8 +1,10 @@
 //! Opening a pack and finding tiles in it: O(1) per tile, no allocation per tile, no copy.
 //!
-//! `Pack::open` checks the structure before it returns (magic, version, header checksum, file
-//! length, that every section lies inside the file, the level table, the metadata checksum)
-//! and reads nothing per tile. The index checksum ([`Pack::check_index`]) and tile payloads
+//! A pack is a memory-mapped file ([`Pack::open`]), a file read into memory
+//! ([`Pack::open_read`]) or bytes the caller holds ([`Pack::from_bytes`]); one function checks
+//! all three the same way before it returns (magic, version, header checksum, the header's
+//! claims against [`Limits`], file length, that every section lies inside the file, the level
+//! table, the metadata checksum) and reads nothing per tile. The index checksum ([`Pack::check_index`]) and tile payloads
 //! ([`Pack::tile_checked`]) are checked on request, or all at once by `verify`.
 //!
 //! The memory-map contract: the file must not be truncated or rewritten while a `Pack` maps it
@@ -10,26 +12,27 @@
 //! they write a new file and rename it over the old one, which leaves existing maps intact.
 
 use std::fs::File;
-use std::io::{Read, Seek, SeekFrom};
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use memmap2::Mmap;
 
 use crate::error::{PackError, Result};
 use crate::format::{self, Description, ENTRY_LEN, Entry, HEADER_LEN, Header, LEVEL_LEN, Level, MAGIC, TileKind};
+use crate::limits::Limits;
 
-/// Where the bytes come from: a read-only map, or the whole file read into memory (for
-/// platforms or file systems where mapping is unwanted); both give identical bytes.
+/// Where the bytes come from: a read-only map of a file, or bytes in memory (read from a file
+/// where mapping is unwanted, or handed over by the caller); all give identical answers.
 enum Bytes {
     Map(Mmap),
-    Owned(Vec<u8>),
+    Memory(Box<dyn AsRef<[u8]> + Send + Sync>),
 }
 
 impl Bytes {
     fn as_slice(&self) -> &[u8] {
         match self {
             Bytes::Map(m) => m,
-            Bytes::Owned(v) => v,
+            Bytes::Memory(b) => (**b).as_ref(),
         }
     }
 }
@@ -40,6 +43,7 @@ pub struct Pack {
     bytes: Bytes,
     header: Header,
     levels: Vec<Level>,
+    limits: Limits,
 }
 
 /// A tile as stored.
@@ -61,30 +65,55 @@ pub struct TileId {
 }
 
 impl Pack {
-    /// Maps `path` read-only and checks its structure.
+    /// Maps `path` read-only and checks its structure against the default [`Limits`].
     pub fn open(path: impl AsRef<Path>) -> Result<Pack> {
+        Pack::open_with_limits(path, Limits::default())
+    }
+
+    /// As [`Pack::open`], holding the pack to `limits`.
+    pub fn open_with_limits(path: impl AsRef<Path>, limits: Limits) -> Result<Pack> {
         let path = path.as_ref();
         let file = File::open(path).map_err(|e| io(path, e))?;
         // SAFETY: read-only map; see the module's contract on concurrent truncation.
         let map = unsafe { Mmap::map(&file) }.map_err(|e| io(path, e))?;
-        Pack::from_bytes(path, Bytes::Map(map))
+        Pack::new(path, Bytes::Map(map), limits)
     }
 
     /// Reads the whole file into memory instead of mapping it.
     pub fn open_read(path: impl AsRef<Path>) -> Result<Pack> {
+        Pack::open_read_with_limits(path, Limits::default())
+    }
+
+    /// As [`Pack::open_read`], holding the pack to `limits`.
+    pub fn open_read_with_limits(path: impl AsRef<Path>, limits: Limits) -> Result<Pack> {
         let path = path.as_ref();
         let mut file = File::open(path).map_err(|e| io(path, e))?;
-        let len = file.seek(SeekFrom::End(0)).map_err(|e| io(path, e))?;
-        file.seek(SeekFrom::Start(0)).map_err(|e| io(path, e))?;
+        let len = file.metadata().map_err(|e| io(path, e))?.len();
         let mut bytes = Vec::new();
         bytes
             .try_reserve_exact(usize::try_from(len).unwrap_or(usize::MAX))
             .map_err(|e| io(path, std::io::Error::new(std::io::ErrorKind::OutOfMemory, e.to_string())))?;
         file.read_to_end(&mut bytes).map_err(|e| io(path, e))?;
-        Pack::from_bytes(path, Bytes::Owned(bytes))
+        Pack::new(path, Bytes::Memory(Box::new(bytes)), limits)
     }
 
-    fn from_bytes(path: &Path, bytes: Bytes) -> Result<Pack> {
+    /// A pack held in memory (a `Vec<u8>`, `Box<[u8]>`, `Arc<[u8]>`, a static slice...),
+    /// checked exactly as [`Pack::open`] checks a file, against the default [`Limits`]. `name`
+    /// stands for the path in errors and [`Pack::path`] (a file name, a URL, `<memory>`).
+    pub fn from_bytes(name: impl Into<PathBuf>, bytes: impl AsRef<[u8]> + Send + Sync + 'static) -> Result<Pack> {
+        Pack::from_bytes_with_limits(name, bytes, Limits::default())
+    }
+
+    /// As [`Pack::from_bytes`], holding the pack to `limits`.
+    pub fn from_bytes_with_limits(
+        name: impl Into<PathBuf>,
+        bytes: impl AsRef<[u8]> + Send + Sync + 'static,
+        limits: Limits,
+    ) -> Result<Pack> {
+        Pack::new(&name.into(), Bytes::Memory(Box::new(bytes)), limits)
+    }
+
+    fn new(path: &Path, bytes: Bytes, limits: Limits) -> Result<Pack> {
         let b = bytes.as_slice();
         let corrupt = |section: &'static str, offset: u64, message: String| PackError::Corrupt {
             path: path.to_path_buf(),
@@ -138,17 +167,49 @@ impl Pack {
                 return Err(corrupt("header", field as u64, format!("length field says {value}, expected {expected}")));
             }
         }
+        let over = |field: String, offset: u64, value: u64, limit: u64, cap: &'static str| PackError::LimitExceeded {
+            path: path.to_path_buf(),
+            field,
+            offset,
+            value,
+            limit,
+            cap,
+        };
+        // The claims a caller sizes buffers from, before anything else is believed.
+        let d = &h.description;
+        if d.tile_size > limits.max_tile_size {
+            let (value, limit) = (d.tile_size.into(), limits.max_tile_size.into());
+            return Err(over("tile_size".into(), format::at::TILE_SIZE as u64, value, limit, "max_tile_size"));
+        }
+        if h.index_count > limits.max_tiles {
+            let offset = format::at::INDEX_COUNT as u64;
+            return Err(over("index_count".into(), offset, h.index_count, limits.max_tiles, "max_tiles"));
+        }
         check_header(&h, b.len() as u64).map_err(|(offset, m)| corrupt("header", offset, m))?;
 
         let levels_len = h.description.level_count as usize * LEVEL_LEN;
         let levels: Vec<Level> =
             b[h.levels_offset as usize..][..levels_len].chunks_exact(LEVEL_LEN).map(Level::decode).collect();
+        let mut tiles = 0u64;
+        for (lod, l) in levels.iter().enumerate() {
+            tiles = tiles.saturating_add(l.tiles_w as u64 * l.tiles_h as u64);
+            if tiles > limits.max_tiles {
+                let field = format!("the tile count of levels 0..={lod} (level {lod}: {}x{})", l.tiles_w, l.tiles_h);
+                let offset = h.levels_offset + (lod * LEVEL_LEN) as u64;
+                return Err(over(field, offset, tiles, limits.max_tiles, "max_tiles"));
+            }
+        }
         check_levels(&h, &levels, &b[h.levels_offset as usize..][..levels_len])
             .map_err(|(o, m)| corrupt("levels", h.levels_offset + o, m))?;
         if crc32c::crc32c(&b[h.meta_offset as usize..][..h.meta_len as usize]) != h.meta_crc {
             return Err(corrupt("metadata", h.meta_offset, "metadata checksum mismatch".into()));
         }
-        Ok(Pack { path: path.to_path_buf(), bytes, header: h, levels })
+        Ok(Pack { path: path.to_path_buf(), bytes, header: h, levels, limits })
+    }
+
+    /// The caps this pack was opened with (and that decoding it is held to).
+    pub fn limits(&self) -> &Limits {
+        &self.limits
     }
 
     pub fn path(&self) -> &Path {

@@ -17,25 +17,16 @@ use crate::reader::{Pack, TileId};
 #[cfg(feature = "decode")]
 use crate::decode::PayloadDecoder;
 
-/// The default limit on the bytes one decoded tile (and any buffer decoding it needs) may
-/// take: 1 GiB, a 16384-texel RGBA8 tile.
-pub const DEFAULT_MAX_DECODED_BYTES: u64 = 1 << 30;
-
-/// What to check beyond structure and checksums.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// What to check beyond structure and checksums. Without the `decode` feature there is
+/// nothing to choose (decoding is not built, so it cannot be asked for).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct VerifyOptions {
-    /// Decode every distinct payload (raw, zstd, zstd-delta, PNG, JPEG, BC1, BC7) and check that it is exactly one
-    /// tile. Needs the `decode` feature; without it, asking is itself reported as a problem.
+    /// Decode every distinct payload (raw, zstd, zstd-delta, PNG, JPEG, BC1, BC7) and check
+    /// that it is exactly one tile, each held to the pack's
+    /// [`Limits::max_decoded_bytes`](crate::Limits::max_decoded_bytes): a tile that would need
+    /// more is a problem, not an allocation. Feature `decode`.
+    #[cfg(feature = "decode")]
     pub decode: bool,
-    /// With `decode`, the most bytes one decoded tile (or a buffer decoding it) may take; a
-    /// tile that would need more is a problem, not an allocation.
-    pub max_decoded_bytes: u64,
-}
-
-impl Default for VerifyOptions {
-    fn default() -> Self {
-        VerifyOptions { decode: false, max_decoded_bytes: DEFAULT_MAX_DECODED_BYTES }
-    }
 }
 
 /// One thing wrong with a pack.
@@ -46,7 +37,7 @@ pub struct Problem {
     pub offset: Option<u64>,
     /// The tile concerned, when there is one.
     pub tile: Option<TileId>,
-    /// `header`, `levels`, `index`, `metadata`, `data`, `padding` or `decode`.
+    /// `header`, `levels`, `index`, `metadata`, `data` or `padding`.
     pub section: &'static str,
     pub message: String,
 }
@@ -70,7 +61,7 @@ pub struct Report {
     pub shared_payloads: u64,
     /// Bytes that are neither header, table, index, metadata nor payload, all checked to be zero.
     pub padding_bytes: u64,
-    /// Payloads decoded (with [`VerifyOptions::decode`]).
+    /// Payloads decoded (with `VerifyOptions::decode`, feature `decode`).
     pub decoded_payloads: u64,
     pub problems: Vec<Problem>,
 }
@@ -240,14 +231,6 @@ pub fn verify(pack: &Pack, opts: VerifyOptions) -> Report {
         ..Report::default()
     };
     let mut v = Verifier { pack, b: pack.file(), report };
-    if opts.decode && !cfg!(feature = "decode") {
-        v.problem(
-            "decode",
-            None,
-            None,
-            "decoding was asked for, but this build has no decoding support (feature `decode`)".into(),
-        );
-    }
     v.sections();
     if let Err(e) = pack.check_index() {
         v.problem("index", Some(h.index_offset), None, e.to_string());
@@ -483,6 +466,7 @@ impl Verifier<'_> {
     }
 
     /// The kind of the entry at `position`, known to be valid.
+    #[cfg(feature = "decode")]
     fn kind_of(&self, position: u64) -> TileKind {
         let at = self.pack.header().index_offset as usize + position as usize * ENTRY_LEN + 16;
         TileKind::from_u8(self.b[at]).expect("checked by entries()")
@@ -491,11 +475,12 @@ impl Verifier<'_> {
     /// Checksums, exact-or-disjoint payload ranges, zero padding between them, and decoding.
     fn payloads(&mut self, mut payloads: Vec<Payload>, opts: VerifyOptions) {
         let h = *self.pack.header();
-        let d = h.description;
         let data_end = h.data_offset + h.data_len;
         payloads.sort_unstable_by_key(|p| (p.start, p.len, p.position));
-        let decode = opts.decode && cfg!(feature = "decode");
-        let mut decoder = PayloadDecoder::default();
+        #[cfg(feature = "decode")]
+        let mut decoder = opts.decode.then(PayloadDecoder::default);
+        #[cfg(not(feature = "decode"))]
+        let _ = opts;
         // End of the bytes covered so far and the payload reaching furthest.
         let mut covered = h.data_offset;
         let mut reach: Option<Payload> = None;
@@ -531,41 +516,37 @@ impl Verifier<'_> {
                     format!("payload checksum mismatch: the entry says {:08x}, the bytes give {crc:08x}", q.crc);
                 self.problem("data", Some(q.start), Some(self.id_of(q.position)), message);
             }
-            if !decode {
-                continue;
-            }
-            // Each kind a payload is read as, once; not when its checksum already failed.
-            let mut done = [false; 9];
-            for q in group.iter().filter(|q| q.crc == crc) {
-                let kind = self.kind_of(q.position);
-                // A raw or block payload of the wrong size, or block kinds the texture's format
-                // does not allow, are already reported.
-                if std::mem::replace(&mut done[kind as usize], true)
-                    || stored_len(kind, &d).is_some_and(|n| n != q.len as u64)
-                    || d.refuses(kind).is_some()
-                {
-                    continue;
-                }
-                self.report.decoded_payloads += 1;
-                if let Err(m) = decoder.decode(kind, bytes, &d, opts.max_decoded_bytes) {
-                    let message = format!("{} payload does not decode to one tile: {m}", kind.name());
-                    self.problem("data", Some(q.start), Some(self.id_of(q.position)), message);
-                }
+            #[cfg(feature = "decode")]
+            if let Some(decoder) = decoder.as_mut() {
+                self.decode(decoder, group, bytes, crc);
             }
         }
         self.zero(covered, data_end, "after the last payload");
     }
-}
 
-/// Without the `decode` feature there is nothing to decode with (and `verify` never asks).
-#[cfg(not(feature = "decode"))]
-#[derive(Default)]
-struct PayloadDecoder(());
-
-#[cfg(not(feature = "decode"))]
-impl PayloadDecoder {
-    fn decode(&mut self, _: TileKind, _: &[u8], _: &Description, _: u64) -> Result<Vec<u8>, String> {
-        Err("decoding support is not compiled in".into())
+    /// Decodes the payload `bytes` shared by `group` once for each kind its entries read it as;
+    /// not for entries whose checksum (`crc` is the bytes') already failed.
+    #[cfg(feature = "decode")]
+    fn decode(&mut self, decoder: &mut PayloadDecoder, group: &[Payload], bytes: &[u8], crc: u32) {
+        let d = self.pack.header().description;
+        let max_bytes = self.pack.limits().max_decoded_bytes;
+        let mut done = [false; 9];
+        for q in group.iter().filter(|q| q.crc == crc) {
+            let kind = self.kind_of(q.position);
+            // A raw or block payload of the wrong size, or block kinds the texture's format
+            // does not allow, are already reported.
+            if std::mem::replace(&mut done[kind as usize], true)
+                || stored_len(kind, &d).is_some_and(|n| n != q.len as u64)
+                || d.refuses(kind).is_some()
+            {
+                continue;
+            }
+            self.report.decoded_payloads += 1;
+            if let Err(m) = decoder.decode(kind, bytes, &d, max_bytes) {
+                let message = format!("{} payload does not decode to one tile: {m}", kind.name());
+                self.problem("data", Some(q.start), Some(self.id_of(q.position)), message);
+            }
+        }
     }
 }
 

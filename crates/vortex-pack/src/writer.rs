@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{PackError, Result};
 use crate::format::{self, Description, ENTRY_LEN, Entry, FNV_OFFSET, HEADER_LEN, Header, LEVEL_LEN, Level, TileKind};
+use crate::limits::Limits;
 use crate::reader::TileId;
 
 /// A tile handed to the writer.
@@ -75,7 +76,9 @@ pub struct PackWriter {
 }
 
 impl PackWriter {
-    /// Starts `dest` (written as `.<name>.tmp-<pid>` beside it until `finish`).
+    /// Starts `dest` (written as `.<name>.tmp-<pid>` beside it until `finish`). A pack that
+    /// readers with the default [`Limits`] would refuse (a tile side or tile count over them) is
+    /// refused here with [`PackError::LimitExceeded`], before its index is allocated.
     pub fn create(
         dest: impl AsRef<Path>,
         description: Description,
@@ -117,6 +120,36 @@ impl PackWriter {
             count =
                 count.checked_add(l.tiles_w as u64 * l.tiles_h as u64).ok_or_else(|| usage("too many tiles".into()))?;
         }
+        let caps = Limits::default();
+        let over = |field: &str, offset: usize, value: u64, limit: u64, cap| PackError::LimitExceeded {
+            path: dest.clone(),
+            field: field.into(),
+            offset: offset as u64,
+            value,
+            limit,
+            cap,
+        };
+        if d.tile_size > caps.max_tile_size {
+            let (value, limit) = (d.tile_size.into(), caps.max_tile_size.into());
+            return Err(over("tile_size", format::at::TILE_SIZE, value, limit, "max_tile_size"));
+        }
+        if count > caps.max_tiles {
+            return Err(over("index_count", format::at::INDEX_COUNT, count, caps.max_tiles, "max_tiles"));
+        }
+        let count_usize = usize::try_from(count)
+            .ok()
+            .filter(|n| n.checked_mul(ENTRY_LEN).is_some())
+            .ok_or_else(|| usage("too many tiles".into()))?;
+        let out_of_memory = |e: std::collections::TryReserveError| {
+            let message = format!("cannot allocate the index of {count} tiles: {e}");
+            io(&dest, std::io::Error::new(std::io::ErrorKind::OutOfMemory, message))
+        };
+        let mut entries = Vec::new();
+        entries.try_reserve_exact(count_usize).map_err(out_of_memory)?;
+        entries.resize(count_usize, Entry::ABSENT);
+        let mut written = Vec::new();
+        written.try_reserve_exact(count_usize).map_err(out_of_memory)?;
+        written.resize(count_usize, false);
         let name = dest.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "pack".into());
         let tmp = dest.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
         let file =
@@ -126,10 +159,6 @@ impl PackWriter {
 
         let levels_offset = HEADER_LEN as u64;
         let index_offset = levels_offset + levels.len() as u64 * LEVEL_LEN as u64;
-        let count_usize = usize::try_from(count)
-            .ok()
-            .filter(|n| n.checked_mul(ENTRY_LEN).is_some())
-            .ok_or_else(|| usage("too many tiles".into()))?;
         let meta_offset = index_offset + count * ENTRY_LEN as u64;
         let data_offset = (meta_offset + meta_len as u64).next_multiple_of(options.alignment as u64);
         let mut w = PackWriter {
@@ -140,8 +169,8 @@ impl PackWriter {
             levels,
             metadata: metadata.to_vec(),
             options,
-            entries: vec![Entry::ABSENT; count_usize],
-            written: vec![false; count_usize],
+            entries,
+            written,
             stored: HashMap::new(),
             data_offset,
             end: data_offset,

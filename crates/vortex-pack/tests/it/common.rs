@@ -1,5 +1,4 @@
 //! Small packs with every kind of tile, and the means to tamper with them.
-#![allow(dead_code)]
 
 use std::path::Path;
 

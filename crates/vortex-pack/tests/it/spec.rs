@@ -1,6 +1,6 @@
 //! `docs/pack-format.md` holds a hex dump of a tiny pack. This test writes that pack with the
 //! real writer and compares every byte, so the spec and the code cannot drift apart. After an
-//! intended format change, `BLESS=1 cargo test -p vortex-pack --test spec` rewrites the dump.
+//! intended format change, `BLESS=1 cargo test -p vortex-pack --test it spec` rewrites the dump.
 
 use vortex_pack::format::pyramid_levels;
 use vortex_pack::{Description, NewTile, Pack, PackWriter, Tile, TileId, TileKind, WriteOptions};

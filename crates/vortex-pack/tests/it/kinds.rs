@@ -2,16 +2,15 @@
 //! BC7 blocks. Blocks here are written by hand, bit by bit, from the Direct3D definitions, so
 //! that the decoder is checked against the format rather than against an encoder.
 
-mod common;
-
-use common::reseal;
 use vortex_pack::format::{self, at, delta_decode_rows, delta_encode_rows, pyramid_levels};
 use vortex_pack::{
     Description, NewTile, Pack, PackWriter, TileId, TileKind, VerifyOptions, WriteOptions, decode_rgba8,
     payload_texels, verify,
 };
 
-const DECODE: VerifyOptions = VerifyOptions { decode: true, max_decoded_bytes: 1 << 20 };
+use crate::common::{self, reseal};
+
+const DECODE: VerifyOptions = VerifyOptions { decode: true };
 const LIMIT: u64 = 1 << 20;
 
 /// Reproducible bytes.

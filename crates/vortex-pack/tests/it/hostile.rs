@@ -1,36 +1,47 @@
 //! Any byte of a pack may be hostile. Every single-byte change is caught (by `Pack::open` or by
 //! `verify`), every truncation and extension is refused by `open`, and packs tampered with
 //! behind re-computed checksums give clean errors: never a panic, never a large allocation.
-
-mod common;
+//! Headers that claim huge tiles or tile counts are refused by `open` with an error naming the
+//! field and the [`Limits`] member, before anything is sized from them.
 
 use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use proptest::prelude::*;
-use vortex_pack::{Pack, Tile, VerifyOptions, decode_rgba8_limited, verify};
+use vortex_pack::format::{self, at};
+use vortex_pack::{Limits, Pack, PackError, Tile, VerifyOptions, decode_rgba8_limited, verify};
 
-/// Records the largest single allocation of the process, to catch allocations sized by counts
-/// or lengths read from a file.
+use crate::common;
+
+/// Records the largest single allocation of each thread, to catch allocations sized by counts
+/// or lengths read from a file. Per thread because the other modules' tests run beside these
+/// in the same process (each test has a thread of its own).
 struct Peak;
 
-static PEAK: AtomicUsize = AtomicUsize::new(0);
+thread_local! {
+    // A const initialiser and no destructor: reading it never allocates.
+    static PEAK: Cell<usize> = const { Cell::new(0) };
+}
+
+fn record(size: usize) {
+    let _ = PEAK.try_with(|p| p.set(p.get().max(size)));
+}
 
 unsafe impl GlobalAlloc for Peak {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        PEAK.fetch_max(layout.size(), Ordering::Relaxed);
+        record(layout.size());
         // SAFETY: forwarded as given.
         unsafe { System.alloc(layout) }
     }
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        PEAK.fetch_max(layout.size(), Ordering::Relaxed);
+        record(layout.size());
         // SAFETY: forwarded as given.
         unsafe { System.alloc_zeroed(layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        PEAK.fetch_max(new_size, Ordering::Relaxed);
+        record(new_size);
         // SAFETY: forwarded as given.
         unsafe { System.realloc(ptr, layout, new_size) }
     }
@@ -47,7 +58,7 @@ static ALLOCATOR: Peak = Peak;
 /// limited to `LIMIT`).
 const MAX_ALLOCATION: usize = 8 << 20;
 const LIMIT: u64 = 1 << 20;
-const DECODE: VerifyOptions = VerifyOptions { decode: true, max_decoded_bytes: LIMIT };
+const DECODE: VerifyOptions = VerifyOptions { decode: true };
 
 struct Samples {
     _dir: tempfile::TempDir,
@@ -79,15 +90,20 @@ fn scratch(bytes: &[u8]) -> (tempfile::TempDir, PathBuf) {
     (dir, path)
 }
 
-/// Opens `path` both ways: both must agree on success, and give the same bytes.
+/// Opens `path` mapped, read into memory and from bytes given in memory: all must agree on
+/// success (the first two are returned), and give the same bytes.
 fn open_both(path: &Path) -> Option<(Pack, Pack)> {
-    match (Pack::open(path), Pack::open_read(path)) {
+    let limits = Limits { max_decoded_bytes: LIMIT, ..Limits::default() };
+    let given = Pack::from_bytes_with_limits(path, std::fs::read(path).unwrap(), limits);
+    match (Pack::open_with_limits(path, limits), Pack::open_read_with_limits(path, limits)) {
         (Ok(a), Ok(b)) => {
             assert_eq!(a.file(), b.file());
+            assert_eq!(a.file(), given.expect("the file opens, the same bytes in memory do not").file());
             Some((a, b))
         }
         (Err(a), Err(b)) => {
             assert_eq!(a.to_string(), b.to_string());
+            assert_eq!(a.to_string(), given.err().expect("the file fails, the same bytes in memory open").to_string());
             None
         }
         (a, b) => panic!("the backends disagree: {:?} / {:?}", a.err(), b.err()),
@@ -122,7 +138,7 @@ fn exercise(mapped: &Pack, read: &Pack) -> bool {
 }
 
 fn check_allocations() {
-    let peak = PEAK.load(Ordering::Relaxed);
+    let peak = PEAK.with(Cell::get);
     assert!(peak < MAX_ALLOCATION, "an allocation of {peak} bytes");
 }
 
@@ -288,4 +304,96 @@ fn set_lengths(b: &mut [u8]) {
     b[32..40].copy_from_slice(&len.to_le_bytes());
     b[136..144].copy_from_slice(&len.saturating_sub(data_offset).to_le_bytes());
     common::reseal(b);
+}
+
+/// A sample pack with `change` applied to its bytes and every checksum recomputed.
+fn tampered(change: impl FnOnce(&mut Vec<u8>)) -> Vec<u8> {
+    let mut bytes = samples().packs[0].clone();
+    change(&mut bytes);
+    common::reseal(&mut bytes);
+    bytes
+}
+
+/// `bytes` must be refused by every backend with `LimitExceeded` naming `field` and `cap`.
+fn assert_over_limit(bytes: Vec<u8>, field: &str, cap: &str) {
+    let (_dir, path) = scratch(&bytes);
+    assert!(open_both(&path).is_none());
+    for e in [Pack::open(&path).err(), Pack::from_bytes("hostile.vtpk", bytes).err()] {
+        let e = e.expect("a pack claiming too much opens");
+        let text = e.to_string();
+        match &e {
+            PackError::LimitExceeded { field: f, cap: c, .. } => {
+                assert!(f.contains(field), "{text}");
+                assert_eq!(*c, cap, "{text}");
+            }
+            other => panic!("not a limit error: {other}"),
+        }
+        assert!(text.contains(field) && text.contains(&format!("Limits::{cap}")), "{text}");
+    }
+    check_allocations();
+}
+
+fn put_u32(b: &mut [u8], at: usize, v: u32) {
+    b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+}
+
+fn put_u64(b: &mut [u8], at: usize, v: u64) {
+    b[at..at + 8].copy_from_slice(&v.to_le_bytes());
+}
+
+/// `unpack` of a pack whose header said `tile_size` 2^31 died of `capacity overflow`.
+#[test]
+fn a_huge_tile_size_is_refused_naming_the_field() {
+    for side in [1u32 << 31, u32::MAX, 16385] {
+        let bytes = tampered(|b| put_u32(b, at::TILE_SIZE, side));
+        assert_over_limit(bytes, "tile_size", "max_tile_size");
+    }
+    // The cap can be raised; then the claim is checked against the rest of the file as before.
+    let bytes = tampered(|b| put_u32(b, at::TILE_SIZE, 1 << 31));
+    let raised = Limits { max_tile_size: u32::MAX, ..Limits::default() };
+    if let Ok(pack) = Pack::from_bytes_with_limits("raised.vtpk", bytes, raised) {
+        assert!(!verify(&pack, VerifyOptions::default()).is_ok());
+        assert!(vortex_pack::decode_rgba8(&pack, 0, 1, 0).is_err());
+    }
+    check_allocations();
+}
+
+/// An index of 2^40 entries (24 TiB) claimed in the header.
+#[test]
+fn a_huge_index_count_is_refused_naming_the_field() {
+    for count in [1u64 << 40, u64::MAX, Limits::default().max_tiles + 1] {
+        let bytes = tampered(|b| put_u64(b, at::INDEX_COUNT, count));
+        assert_over_limit(bytes, "index_count", "max_tiles");
+    }
+}
+
+/// A level table whose levels hold 2^32 x 2^32 tiles, the index count left alone.
+#[test]
+fn a_huge_level_table_is_refused_naming_the_level() {
+    for (lod, w, h) in [(0usize, u32::MAX, u32::MAX), (1, 1 << 20, 1 << 20), (2, 1 << 15, 1 << 15)] {
+        let bytes = tampered(|b| {
+            let row = u64::from_le_bytes(b[at::LEVELS_OFFSET..at::LEVELS_OFFSET + 8].try_into().unwrap()) as usize
+                + lod * format::LEVEL_LEN;
+            put_u32(b, row, w);
+            put_u32(b, row + 4, h);
+        });
+        assert_over_limit(bytes, &format!("level {lod}: {w}x{h}"), "max_tiles");
+    }
+}
+
+/// Tighter caps refuse a pack that the defaults accept; the sample has 21 tiles of 8 texels.
+#[test]
+fn limits_below_the_pack_refuse_it() {
+    let bytes = samples().packs[0].clone();
+    let tight = |limits: Limits| Pack::from_bytes_with_limits("tight.vtpk", bytes.clone(), limits).err();
+    let e = tight(Limits { max_tiles: 20, ..Limits::default() }).expect("21 tiles opened under a cap of 20");
+    assert!(e.to_string().contains("index_count (byte 96) is 21, over the limit of 20"), "{e}");
+    let e = tight(Limits { max_tile_size: 7, ..Limits::default() }).expect("8-texel tiles opened under a cap of 7");
+    assert!(e.to_string().contains("tile_size (byte 56) is 8"), "{e}");
+    assert!(tight(Limits { max_tiles: 21, max_tile_size: 8, ..Limits::default() }).is_none());
+    // A decoding cap below one tile refuses each tile, not the pack.
+    let small = Limits { max_decoded_bytes: 255, ..Limits::default() };
+    let pack = Pack::from_bytes_with_limits("small.vtpk", bytes.clone(), small).unwrap();
+    let report = verify(&pack, DECODE);
+    assert!(report.problems.iter().any(|p| p.message.contains("decoding limit of 255 bytes")), "{report}");
 }

@@ -1,19 +1,18 @@
 //! Packs written with `PackWriter` read back identically through both backends, verify clean,
 //! decode to RGBA8; and `verify` finds each kind of problem planted in a pack.
 
-mod common;
-
 use std::collections::HashMap;
 use std::path::Path;
 
-use common::{Written, reseal, write_sample};
 use vortex_pack::format::at;
 use vortex_pack::{
-    NewTile, Pack, PackError, PackWriter, Tile, TileId, TileKind, VerifyOptions, WriteOptions, decode_rgba8,
+    Limits, NewTile, Pack, PackError, PackWriter, Tile, TileId, TileKind, VerifyOptions, WriteOptions, decode_rgba8,
     decode_rgba8_limited, verify,
 };
 
-const DECODE: VerifyOptions = VerifyOptions { decode: true, max_decoded_bytes: 1 << 20 };
+use crate::common::{self, Written, reseal, write_sample};
+
+const DECODE: VerifyOptions = VerifyOptions { decode: true };
 
 fn as_written(tile: Tile<'_>) -> Written {
     match tile {
@@ -188,6 +187,36 @@ fn writer_refuses_misuse_and_leaves_no_file() {
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }
 
+/// A 16000000 x 1 image as a square pyramid used to abort allocating 549 GB of index entries;
+/// what a default reader would refuse is refused before anything is allocated or created.
+#[test]
+fn writer_refuses_what_readers_would_refuse_before_allocating() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("huge.vtpk");
+    let d = vortex_pack::Description {
+        width: 16_000_000,
+        height: 1,
+        tile_size: 256,
+        border: 0,
+        level_count: 17,
+        channels: 3,
+        sample_bytes: 1,
+    };
+    let levels = vortex_pack::format::pyramid_levels(&d, 1 << 16);
+    let e = PackWriter::create(&path, d, levels, b"", WriteOptions::default()).err().unwrap();
+    assert!(matches!(&e, PackError::LimitExceeded { cap: "max_tiles", .. }), "{e}");
+    assert!(e.to_string().contains("index_count (byte 96) is 5726623061, over the limit of 536870912"), "{e}");
+
+    let d = vortex_pack::Description { tile_size: 1 << 15, level_count: 1, ..common::description(3, 1) };
+    let levels = vortex_pack::format::pyramid_levels(&d, 1);
+    let e = PackWriter::create(&path, d, levels, b"", WriteOptions::default()).err().unwrap();
+    assert!(
+        e.to_string().contains("tile_size (byte 56) is 32768, over the limit of 16384 (Limits::max_tile_size)"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "nothing is created");
+}
+
 /// Writes `bytes` to a file and opens it.
 fn open_bytes(dir: &Path, bytes: &[u8]) -> Pack {
     let path = dir.join("planted.vtpk");
@@ -332,7 +361,9 @@ fn verify_decodes_every_payload_when_asked() {
     assert!(decode_rgba8(&pack, zstd_id.lod, zstd_id.x, zstd_id.y).is_err());
 
     // A limit below one tile: every decodable payload is refused, none is decoded.
-    let report = verify(&pack, VerifyOptions { decode: true, max_decoded_bytes: d.raw_tile_len().unwrap() - 1 });
+    let limits = Limits { max_decoded_bytes: d.raw_tile_len().unwrap() - 1, ..Limits::default() };
+    let pack = Pack::from_bytes_with_limits(pack.path(), pack.file().to_vec(), limits).unwrap();
+    let report = verify(&pack, VerifyOptions { decode: true });
     assert!(report.problems.iter().filter(|p| p.message.contains("decoding limit")).count() >= 3, "{report}");
 }
 

@@ -1,0 +1,9 @@
+//! The crate's one integration-test binary (one link instead of one per file); each module is
+//! one concern of the reader and writer.
+
+mod common;
+mod fuzz_regressions;
+mod hostile;
+mod kinds;
+mod round_trip;
+mod spec;
