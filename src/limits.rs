@@ -32,7 +32,8 @@ impl Default for Limits {
     fn default() -> Limits {
         Limits {
             memory: DEFAULT_MEMORY,
-            tiles: 1 << 32,
+            // What a pack reader accepts, so that every pyramid written can be read back.
+            tiles: vortex_pack::Limits::default().max_tiles,
             frames: 1_000_000,
             threads: max_threads(),
             filename_bytes: 4096,

@@ -216,12 +216,6 @@ pub fn tile(
     };
     let existing_ref = info_path.as_deref().zip(existing.as_ref());
     let (opts, names) = settings::resolve(&requested, existing_ref, source.layout())?;
-    if let Some((path, info)) = existing_ref {
-        let taken = settings::taken_from_file(&requested, info);
-        if !taken.is_empty() && !a.quiet {
-            eprintln!("settings from {}: {}", path.display(), taken.join(", "));
-        }
-    }
     if a.output.is_some() && !opts.codec.writes_files() {
         bail!(
             "--codec {} writes packs only (its tiles are not image files): write --pack FILE instead of --output, or use --codec png for lossless tile files",
@@ -235,6 +229,13 @@ pub fn tile(
     let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
     limits.check_pyramid(&layout, product == Product::Pack)?;
     limits.check_pipeline(&layout, stored.bytes_per_pixel() as u64)?;
+    // Said once everything is checked, just before the work starts.
+    if let Some((path, info)) = existing_ref {
+        let taken = settings::taken_from_file(&requested, info);
+        if !taken.is_empty() && !a.quiet {
+            eprintln!("settings from {}: {}", path.display(), taken.join(", "));
+        }
+    }
     let info = settings::describe(&layout, stored, &opts, &names);
     let decoder = source.describe();
     let (width, height) = (source.width(), source.height());

@@ -127,7 +127,10 @@ fn sizes_are_checked_before_allocating() {
         &["--max-memory"],
     );
     fails_with(&run(&["split", s(&input), "--pack", s(&pack), "--threads", "1000000000"]), &["--threads", "per core"]);
-    fails_with(&run(&["split", s(&input), "--pack", s(&pack), "--max-memory", "16777217T"]), &["--max-memory"]);
+    // A flag value clap refuses is a usage error: exit 2, as for any bad flag.
+    let absurd = run(&["split", s(&input), "--pack", s(&pack), "--max-memory", "16777217T"]);
+    assert_eq!(absurd.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&absurd.stderr).contains("'16777217T' is more than"));
     fails_with(&run(&["render", "--pack", s(&input), "--frame-count", "4000000000"]), &["frames"]);
     fails_with(
         &run(&["split", s(&input), "-o", s(&dir.path().join("o")), "--ff", "%1$65536d-%2$d-%3$d.png"]),
@@ -182,7 +185,7 @@ fn signals_stop_cleanly_and_leave_nothing() {
     noise_ppm(&input, 3000);
     for (signal, code) in [("TERM", 143), ("INT", 130), ("HUP", 129)] {
         for (flag, dest) in [("-o", "out"), ("--pack", "out.vtpk")] {
-            let mut child = Command::new(BIN)
+            let child = Command::new(BIN)
                 .args(["split", s(&input), flag, s(&dir.path().join(dest))])
                 .args(["--codec", "png", "--png-compression", "best", "--tile-size", "256", "--quiet"])
                 .stdout(Stdio::null())
