@@ -73,14 +73,14 @@ pub struct VerifyArgs {
 pub fn run_verify(a: VerifyArgs) -> Result<()> {
     let started = Instant::now();
     let report = match open_pack(&a.input) {
-        Ok(pack) => verify(&pack, VerifyOptions { decode: a.decode, ..VerifyOptions::default() }),
+        Ok(pack) => verify(&pack, VerifyOptions { decode: a.decode }),
         Err(e) if a.json => {
             // The structure is unusable: one problem, in the same shape as a full report's.
             let json = serde_json::json!({"path": a.input, "ok": false, "problems": [{"section": "open", "message": e.to_string()}]});
             say!("{}", serde_json::to_string_pretty(&json)?);
             anyhow::bail!("{}: cannot be opened as a pack", a.input.display());
         }
-        Err(e) => return Err(e.into()),
+        Err(e) => return Err(e),
     };
     if a.json {
         say!("{}", report.to_json());
