@@ -6,6 +6,7 @@
 //!
 //! `--noise` sets the noise amplitude (default 0.12 of full scale; small fixtures use less so
 //! that they compress).
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests and measurement programs may panic on a broken set-up
 
 use std::fs::File;
 use std::io::{BufWriter, Write};

@@ -15,6 +15,7 @@
 //! Prints only the PSNR in dB over all colour samples (8-bit, peak 255), or `inf` for an
 //! identical image; `-v` adds the sample count and mean squared error on stderr. Sources must be
 //! 8-bit grey or RGB; alpha channels are ignored.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests and measurement programs may panic on a broken set-up
 
 use std::path::{Path, PathBuf};
 

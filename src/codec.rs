@@ -269,7 +269,7 @@ impl<T: Sample> TileEncoder<T> {
             if cell.as_ref().is_none_or(|(l, _)| *l != level) {
                 *cell = Some((level, zstd::bulk::Compressor::new(level).map_err(|e| format!("zstd: {e}"))?));
             }
-            let (_, compressor) = cell.as_mut().expect("just made");
+            let Some((_, compressor)) = cell.as_mut() else { unreachable!("filled above") };
             *out = compressor.compress(&raw).map_err(|e| format!("zstd: {e}"))?;
             Ok(())
         })

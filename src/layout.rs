@@ -49,7 +49,8 @@ impl Layout {
             height: height as u32,
             tile_size,
             border,
-            tile_count: u32::try_from(tile_count).expect("bounded by MAX_SIDE / 4"),
+            tile_count: u32::try_from(tile_count)
+                .map_err(|_| TilerError::Geometry(format!("{tile_count} pages per side do not fit the page grid")))?,
             lod_count,
         })
     }

@@ -367,6 +367,7 @@ pub fn describe_codec(codec: Codec) -> InfoFile {
     info
 }
 
+#[expect(clippy::expect_used, reason = "our value enums hide no value")]
 fn value_name<V: clap::ValueEnum>(v: V) -> String {
     v.to_possible_value().expect("no hidden values").get_name().to_string()
 }

@@ -8,7 +8,6 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use vortex_gpu::{Gpu, Loader, Runtime, SampleFilter, Scene};
 use vortex_tiler::error::TilerError;
 use vortex_tiler::limits::Limits;
@@ -71,6 +70,7 @@ fn parse_dims(s: &str) -> Result<[u32; 2], String> {
     Ok([n(w)?, n(h)?])
 }
 
+#[expect(unsafe_code, reason = "std::env::set_var before any thread starts")]
 pub fn run(a: RenderArgs) -> Result<()> {
     // Mesa's device-select layer complains on stderr about display variables a headless run
     // has no use for; it only picks the default adapter, which wgpu does itself.
@@ -129,17 +129,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     // Frames go into a staging folder, moved into place only when every frame is written.
     let frames = a.frames.as_deref().map(StagedFrames::create).transpose()?;
 
-    let bar = if a.quiet {
-        ProgressBar::hidden()
-    } else {
-        let bar = ProgressBar::with_draw_target(Some(scene.frames as u64), ProgressDrawTarget::stderr_with_hz(10));
-        bar.set_style(
-            ProgressStyle::with_template("{elapsed_precise} [{bar:40.cyan/blue}] {pos}/{len} frames {msg}")
-                .expect("valid template")
-                .progress_chars("=> "),
-        );
-        bar
-    };
+    let bar = report::progress_bar(scene.frames as u64, "frames", a.quiet);
     let start = Instant::now();
     let report = runtime.run(&scene, frames.is_some(), |f, picture| -> Result<()> {
         if signals::requested().is_some() {

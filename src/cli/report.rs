@@ -18,7 +18,7 @@ pub struct Watch {
 impl Watch {
     pub fn new(total_tiles: u64, quiet: bool) -> Result<Watch> {
         signals::install().context("installing signal handlers")?;
-        Ok(Watch { bar: progress_bar(total_tiles, quiet) })
+        Ok(Watch { bar: progress_bar(total_tiles, "tiles", quiet) })
     }
 }
 
@@ -42,20 +42,24 @@ pub fn remove_stale_temporaries(dest: &Path) -> Result<()> {
     Ok(())
 }
 
-fn progress_bar(total: u64, quiet: bool) -> ProgressBar {
+/// A progress bar on stderr counting `unit` (`tiles`, `frames`), with a rate and an ETA; hidden
+/// when `quiet`.
+pub fn progress_bar(total: u64, unit: &'static str, quiet: bool) -> ProgressBar {
     if quiet {
         return ProgressBar::hidden();
     }
     let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr_with_hz(10));
+    let template = format!(
+        "{{elapsed_precise}} [{{bar:40.cyan/blue}}] {{human_pos}}/{{human_len}} {unit} ({{rate}}, eta {{eta}}) {{msg}}"
+    );
+    // The template is ours and fixed; should indicatif ever refuse it, a plain bar still works.
+    let style = ProgressStyle::with_template(&template).unwrap_or_else(|_| ProgressStyle::default_bar());
     bar.set_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40.cyan/blue}] {human_pos}/{human_len} tiles ({rate}, eta {eta})",
-        )
-        .expect("valid template")
-        .with_key("rate", |s: &ProgressState, w: &mut dyn std::fmt::Write| {
-            let _ = write!(w, "{:.0} tiles/s", s.per_sec());
-        })
-        .progress_chars("=> "),
+        style
+            .with_key("rate", move |s: &ProgressState, w: &mut dyn std::fmt::Write| {
+                let _ = write!(w, "{:.0} {unit}/s", s.per_sec());
+            })
+            .progress_chars("=> "),
     );
     bar
 }

@@ -169,7 +169,7 @@ impl CodecArgs {
 
 pub fn run(a: SplitArgs) -> Result<()> {
     let started = Instant::now();
-    let input = a.input.or(a.input_flag).expect("clap requires one");
+    let input = a.input.or(a.input_flag).context("an input image is required")?;
     let source = source::open(&input, a.out.max_memory)?;
     tile(source, &input, a.filename_format, &a.out, started)
 }

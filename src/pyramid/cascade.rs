@@ -116,6 +116,7 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
     }
 
     /// Completes the pyramid once the last source row is in.
+    #[expect(clippy::expect_used, reason = "a cascade has one level per LOD and the callers index within them")]
     pub fn finish(&mut self) -> Result<()> {
         // Odd heights leave a half-built row in each reducer: flush them top-down. (Resamplers
         // finish with their last input row.)
@@ -132,6 +133,7 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
     }
 
     /// Takes the next source row: into LOD 0's band, and on down the levels below.
+    #[expect(clippy::expect_used, reason = "a cascade has one level per LOD and the callers index within them")]
     pub fn push_source_row(&mut self, row: &[T]) -> Result<()> {
         let cutter = Cutter { layout: &self.layout, channels: self.channels, padding: &self.padding, out: &self.out };
         let (first, rest) = self.levels.split_first_mut().expect("at least one level");
@@ -158,6 +160,7 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
     }
 
     /// Gives `levels[0]` its next exact row and cascades into the levels below it.
+    #[expect(clippy::expect_used, reason = "a cascade has one level per LOD and the callers index within them")]
     fn feed_exact(
         levels: &mut [Level<T, A>],
         exact: &ExactRow<A>,
@@ -180,6 +183,7 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
     }
 
     /// Gives `levels[0]` its next rows (row-major) and resamples them into the levels below it.
+    #[expect(clippy::expect_used, reason = "a cascade has one level per LOD and the callers index within them")]
     fn feed_rows(levels: &mut [Level<T, A>], rows: &[T], cutter: &Cutter<T>) -> Result<()> {
         let (this, rest) = levels.split_first_mut().expect("a level below the resampler");
         for row in rows.chunks_exact(this.row.len()) {
@@ -197,6 +201,7 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
 
 impl<T: Sample, A> Level<T, A> {
     /// Cuts every tile row whose rows are all in the band, then drops rows no longer needed.
+    #[expect(clippy::expect_used, reason = "a cascade has one level per LOD and the callers index within them")]
     fn cut_ready(&mut self, cutter: &Cutter<T>) -> Result<()> {
         let Cutter { layout, channels, padding, out } = *cutter;
         let (_, height) = self.extent;

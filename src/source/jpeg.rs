@@ -48,6 +48,7 @@ struct Libjpeg(DecompressStarted<BufReader<File>>);
 // SAFETY: the decompressor (libjpeg's state plus the boxed error and source managers it points
 // to) is owned solely by this value and is only used through `&mut`, so from one thread at a
 // time; libjpeg keeps no thread-local or global state, and our callbacks touch only `cinfo`.
+#[expect(unsafe_code)]
 unsafe impl Send for Libjpeg {}
 
 /// What the marker segments before the first scan say.
@@ -266,11 +267,13 @@ fn skip(reader: &mut BufReader<File>, mut n: usize) -> std::io::Result<()> {
 /// libjpeg's standard error manager with two methods replaced: fatal errors and corrupt-data
 /// warnings both unwind with the formatted message.
 /// `multi_scan`: whether the image may have several scans (progressive, or not known).
+#[expect(unsafe_code, reason = "libjpeg's C interface")]
 fn error_manager(multi_scan: bool) -> jpeg_error_mgr {
     // SAFETY: `jpeg_std_error` fills in every field of the zeroed struct (method pointers and
     // pointers to libjpeg's static message tables); the struct holds no pointer to itself, so it
     // may be moved afterwards.
     let mut err: jpeg_error_mgr = unsafe { std::mem::zeroed() };
+    // SAFETY: `err` is a valid, writable error manager for libjpeg to fill in.
     unsafe { mozjpeg_sys::jpeg_std_error(&mut err) };
     err.error_exit = Some(unwind_on_error);
     err.emit_message = Some(if multi_scan { warn_multi_scan } else { warn_single_scan });
@@ -311,6 +314,7 @@ const HARMLESS: [c_int; 6] = [
 /// file with every pixel's data read. libjpeg then supplies an EOI marker, and if any block
 /// still needs data it warns "premature end of data segment", which *is* fatal: a file cut
 /// anywhere in its image data fails at the row where data runs out.
+#[expect(unsafe_code, reason = "libjpeg's C interface")]
 extern "C-unwind" fn warn_single_scan(cinfo: &mut jpeg_common_struct, msg_level: c_int) {
     if msg_level >= 0 {
         return;
@@ -329,6 +333,7 @@ extern "C-unwind" fn warn_single_scan(cinfo: &mut jpeg_common_struct, msg_level:
 /// `emit_message` for multi-scan images: all scans are read before the first row, and a file
 /// cut between two scans ends without any other warning (libjpeg outputs the coarser image of
 /// the scans it got), so the end of the file is fatal too.
+#[expect(unsafe_code, reason = "libjpeg's C interface")]
 extern "C-unwind" fn warn_multi_scan(cinfo: &mut jpeg_common_struct, msg_level: c_int) {
     if msg_level >= 0 {
         return;
@@ -340,6 +345,7 @@ extern "C-unwind" fn warn_multi_scan(cinfo: &mut jpeg_common_struct, msg_level: 
     }
 }
 
+#[expect(unsafe_code, reason = "libjpeg's C interface")]
 fn format_message(cinfo: &mut jpeg_common_struct) -> String {
     // libjpeg writes at most JMSG_LENGTH_MAX (200) bytes including the NUL.
     let mut buffer = [0u8; 256];

@@ -114,8 +114,9 @@ impl FilenameFormat {
         for p in &self.pieces {
             match p {
                 Piece::Literal(s) => out.push_str(s),
-                Piece::Arg { index, width, zero: true } => write!(out, "{:0width$}", args[*index]).unwrap(),
-                Piece::Arg { index, width, zero: false } => write!(out, "{:width$}", args[*index]).unwrap(),
+                // Writing to a String cannot fail.
+                Piece::Arg { index, width, zero: true } => drop(write!(out, "{:0width$}", args[*index])),
+                Piece::Arg { index, width, zero: false } => drop(write!(out, "{:width$}", args[*index])),
             }
         }
         out

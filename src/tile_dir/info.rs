@@ -82,6 +82,7 @@ impl InfoFile {
         Ok(())
     }
 
+    #[expect(clippy::expect_used, reason = "plain data always serialises")]
     pub fn to_json_pretty(&self) -> String {
         let mut s = serde_json::to_string_pretty(self).expect("plain data serialises");
         s.push('\n');

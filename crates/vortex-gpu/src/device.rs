@@ -46,6 +46,7 @@ pub fn lavapipe_env() -> Vec<(&'static str, &'static str)> {
 /// environment: call it at the start of `main`, before any thread is spawned, or from a test
 /// helper under a `std::sync::Once` that every test passes before it touches the environment or
 /// Vulkan.
+#[expect(unsafe_code, reason = "std::env::set_var is unsafe in edition 2024; the caller upholds its contract")]
 pub unsafe fn prefer_lavapipe() {
     for (name, value) in lavapipe_env() {
         // SAFETY: the caller guarantees that no other thread uses the environment meanwhile.

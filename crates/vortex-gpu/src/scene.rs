@@ -291,7 +291,9 @@ impl Scene {
         mesh
     }
 
-    /// Where the camera is at `frame`.
+    /// Where the camera is at `frame`. The scene must have passed [`Scene::check`], which
+    /// refuses a path without keyframes.
+    #[expect(clippy::expect_used, reason = "Scene::check refuses a path without keyframes")]
     pub fn pose(&self, frame: u32) -> Pose {
         let aspect = self.size[0] as f32 / self.size[1] as f32;
         match &self.view {

@@ -6,6 +6,7 @@
 //! 128-texel pages) with 1-4 KiB payloads into DIR (default: the system temp dir), then times
 //! `Pack::open`, `tile()` at random addresses, and `verify`, next to plain CRC-32C over the same
 //! bytes. Prints a markdown table.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests and measurement programs may panic on a broken set-up
 
 use std::hint::black_box;
 use std::time::Instant;

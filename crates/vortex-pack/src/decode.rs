@@ -135,10 +135,10 @@ impl PayloadDecoder {
     fn unzstd(&mut self, kind: TileKind, bytes: &[u8], d: &Description, max_bytes: u64) -> Result<Vec<u8>, String> {
         let raw = raw_len(d, max_bytes)?;
         let mut buf = alloc(raw)?;
-        if self.zstd.is_none() {
-            self.zstd = Some(zstd::bulk::Decompressor::new().map_err(|e| format!("zstd: {e}"))?);
-        }
-        let decompressor = self.zstd.as_mut().expect("just made");
+        let decompressor = match &mut self.zstd {
+            Some(d) => d,
+            slot @ None => slot.insert(zstd::bulk::Decompressor::new().map_err(|e| format!("zstd: {e}"))?),
+        };
         match decompressor.decompress_to_buffer(bytes, &mut buf[..]) {
             Ok(n) if n as u64 == raw => {}
             Ok(n) => return Err(format!("zstd payload decompresses to {n} bytes; a raw tile is {raw}")),
@@ -158,7 +158,9 @@ fn decode_blocks(kind: TileKind, bytes: &[u8], d: &Description, max_bytes: u64) 
     if let Some(why) = d.refuses(kind) {
         return Err(why);
     }
-    let expected = d.block_tile_len(kind).expect("a block kind");
+    let Some(expected) = d.block_tile_len(kind) else {
+        return Err(format!("{} tiles are not blocks", kind.name()));
+    };
     if bytes.len() as u64 != expected {
         return Err(format!("a {} tile has {expected} bytes, not {}", kind.name(), bytes.len()));
     }

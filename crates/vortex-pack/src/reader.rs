@@ -74,7 +74,9 @@ impl Pack {
     pub fn open_with_limits(path: impl AsRef<Path>, limits: Limits) -> Result<Pack> {
         let path = path.as_ref();
         let file = File::open(path).map_err(|e| io(path, e))?;
-        // SAFETY: read-only map; see the module's contract on concurrent truncation.
+        // SAFETY: a read-only map of a file opened read-only; see the module's contract on
+        // concurrent truncation (a pack rewritten in place by another process).
+        #[expect(unsafe_code)]
         let map = unsafe { Mmap::map(&file) }.map_err(|e| io(path, e))?;
         Pack::new(path, Bytes::Map(map), limits)
     }

@@ -183,8 +183,15 @@ impl PackWriter {
         Ok(w)
     }
 
+    /// The file being written: `Some` from `create` until `finish` or `drop` takes it.
+    #[expect(clippy::expect_used, reason = "only finish and drop take the file, and both consume the writer")]
     fn file_mut(&mut self) -> &mut File {
         self.file.as_mut().expect("open until finish")
+    }
+
+    #[expect(clippy::expect_used, reason = "only finish and drop take the file, and both consume the writer")]
+    fn file_ref(&self) -> &File {
+        self.file.as_ref().expect("open until finish")
     }
 
     /// Adds the tile at `id`; each tile at most once. Identical payloads are stored once.
@@ -255,7 +262,7 @@ impl PackWriter {
     /// An offset already holding exactly `bytes` (compared byte for byte, never by hash alone).
     fn find_stored(&self, crc: u32, bytes: &[u8]) -> Result<Option<u64>> {
         let Some(offsets) = self.stored.get(&(crc, bytes.len() as u32)) else { return Ok(None) };
-        let file = self.file.as_ref().expect("open until finish");
+        let file = self.file_ref();
         let mut buf = vec![0u8; bytes.len()];
         for &offset in offsets {
             file.read_exact_at(&mut buf, offset).map_err(|e| io(&self.tmp, e))?;
@@ -294,7 +301,7 @@ impl PackWriter {
         let tmp = self.tmp.clone();
         // The file stays in `self.file` until renamed, so that an error on the way leaves `Drop`
         // to delete it.
-        let file = self.file.as_ref().expect("open until finish");
+        let file = self.file_ref();
         let io_err = |e| io(&tmp, e);
         // Pad the file end so that the data section ends the file exactly (the padding of a
         // zero-payload pack is the data section itself).

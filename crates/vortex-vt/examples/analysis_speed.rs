@@ -7,6 +7,7 @@
 //! buffers: 400 pages over LODs 0-3 in random order (no run coherence), and 14400 distinct pages.
 //!
 //! `cargo run --release -p vortex-vt --example analysis_speed`
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests and measurement programs may panic on a broken set-up
 
 use std::collections::{BTreeMap, HashSet};
 use std::hint::black_box;

@@ -16,6 +16,7 @@
 //!
 //! `cargo run --release -p vortex-vt --example frame_cost` (add `-- --best-of 3` to time each frame
 //! three times, on clones of the state, and keep each part's fastest: preemption filtered out).
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests and measurement programs may panic on a broken set-up
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};

@@ -5,6 +5,7 @@
 //! and evicting after the first frames. The full `rebuild()` is timed for comparison.
 //!
 //! `cargo run --release -p vortex-vt --example residency_speed`
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests and measurement programs may panic on a broken set-up
 
 use std::time::{Duration, Instant};
 

@@ -154,7 +154,8 @@ impl Analyzer {
                 self.parents.sort_unstable();
                 merge_in_place(&mut self.parents);
                 for &(word, direct, samples) in &self.level {
-                    let page = decode(word).expect("validated above");
+                    // Every word in `level` decoded when it was collected.
+                    let Some(page) = decode(word) else { continue };
                     let resident = resident_lod(page).unwrap_or(grid.lod_count);
                     let distance = resident.saturating_sub(page.lod);
                     r.requests.push(PageRequest { page, direct, samples, distance });

@@ -290,7 +290,8 @@ impl Residency {
         for (t, grid) in self.grids.iter().enumerate() {
             let root = grid.root(t as u8);
             if !self.pages.contains_key(&root) {
-                let slot = self.free.pop().expect("at least one slot per texture");
+                // `new` refuses a cache with fewer slots than textures, so one is always free here.
+                let Some(slot) = self.free.pop() else { break };
                 self.pages.insert(root, Resident { slot, stamp: frame });
                 self.owners[slot as usize] = Some(root);
                 out.loads.push((root, slot));
@@ -398,7 +399,7 @@ impl Residency {
                 } else if stamp < frame {
                     heap.pop();
                     *live -= 1;
-                    let r = self.pages.remove(&p).expect("checked above");
+                    let Some(r) = self.pages.remove(&p) else { continue };
                     self.owners[r.slot as usize] = None;
                     return Some((p, r.slot));
                 } else {

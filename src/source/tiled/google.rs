@@ -23,6 +23,7 @@ pub struct Xyz {
 
 impl Xyz {
     /// Lists the highest zoom level under `dir` and reads its first tile (size and layout).
+    #[expect(clippy::expect_used, reason = "the tile map was checked to be non-empty above")]
     pub fn open(dir: &Path) -> Result<Xyz> {
         let (zoom, zoom_dir) = highest_zoom(dir)?;
         let mut tiles: HashMap<(u32, u32), PathBuf> = HashMap::new();

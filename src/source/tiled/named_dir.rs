@@ -23,6 +23,7 @@ pub struct NamedDir {
 }
 
 impl NamedDir {
+    #[expect(clippy::expect_used, reason = "the files were listed under dir and checked to be non-empty above")]
     pub fn open(dir: &Path, pattern: &str) -> Result<NamedDir> {
         let names =
             FilenameFormat::parse(pattern, 2).map_err(|m| TilerError::Options(format!("--filename-format: {m}")))?;

@@ -25,6 +25,7 @@ impl log::Log for StderrLogger {
 static SETUP: Once = Once::new();
 
 /// The device for one test, or `None` (with a note) when there is no adapter outside CI.
+#[expect(unsafe_code, reason = "pinning the Vulkan driver sets environment variables")]
 pub fn gpu() -> Option<Gpu> {
     SETUP.call_once(|| {
         let _ = log::set_logger(&StderrLogger);
