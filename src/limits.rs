@@ -97,6 +97,14 @@ impl Limits {
         Ok(())
     }
 
+    /// Checks that `figure` (what needs the memory, for the message) fits in `--max-memory`.
+    pub fn check_memory(&self, figure: &str, need: u64) -> Result<(), TilerError> {
+        if need > self.memory {
+            return Err(Limits::over(figure, need, self.memory, "--max-memory"));
+        }
+        Ok(())
+    }
+
     /// Checks a `--threads` request.
     pub fn check_threads(&self, threads: usize) -> Result<(), TilerError> {
         if threads > self.threads {

@@ -14,10 +14,11 @@ use vortex_pack::{Description, NewTile, Pack, PackWriter, Tile, TileId, TileKind
 
 use crate::codec::{Codec, TileEncoder};
 use crate::error::{Result, TilerError};
+use crate::layout::Layout;
 use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::settings::DEFAULT_FILENAME_STEM;
 use crate::sink::{DirSink, TileSink, tile_kind};
-use crate::source::decode_tile;
+use crate::source::{decode_tile, probe_tile};
 use crate::split::Progress;
 use crate::tile_dir::filename::FilenameFormat;
 use crate::tile_dir::info::InfoFile;
@@ -63,19 +64,55 @@ pub fn pack_dir(
     Ok(writer.finish()?)
 }
 
-/// The file of tile `id` and its bytes, which must be a `kind` (PNG or JPEG) file.
+/// The file of tile `id` and its bytes, checked against `info.json` before they are stored:
+/// a regular file no larger than a tile can be, a complete `kind` (PNG or JPEG) file whose
+/// header says the directory's tile size and pixel layout.
 fn read_tile(dir: &Path, t: &TiledDir, id: TileId, kind: TileKind) -> Result<(std::path::PathBuf, Vec<u8>)> {
+    use std::io::Read;
     let path = dir.join(t.names.format(&[id.lod, id.x, id.y]));
-    let bytes = std::fs::read(&path).map_err(|e| TilerError::io(&path, e))?;
-    let looks_right = match kind {
-        TileKind::Jpeg => bytes.starts_with(&[0xff, 0xd8, 0xff]),
-        _ => bytes.starts_with(b"\x89PNG\r\n\x1a\n"),
+    let meta = std::fs::metadata(&path).map_err(|e| TilerError::io(&path, e))?;
+    if !meta.is_file() {
+        return Err(TilerError::decode(&path, "is not a regular file (a device, FIFO or directory)"));
+    }
+    let side = t.description.tile_size;
+    let layout = t.layout();
+    // A tile file is at most its raw texels twice over (JPEG of noise at quality 100 stays
+    // well below) plus its headers.
+    let most = 2 * (side as u64).pow(2) * layout.bytes_per_pixel() as u64 + (64 << 10);
+    if meta.len() > most {
+        return Err(TilerError::decode(
+            &path,
+            format!("is {} bytes, more than a {side}x{side} {layout} tile can need ({most})", meta.len()),
+        ));
+    }
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    let file = std::fs::File::open(&path).map_err(|e| TilerError::io(&path, e))?;
+    file.take(most + 1).read_to_end(&mut bytes).map_err(|e| TilerError::io(&path, e))?;
+    let (looks_right, complete) = match kind {
+        TileKind::Jpeg => (bytes.starts_with(&[0xff, 0xd8, 0xff]), bytes.ends_with(&[0xff, 0xd9])),
+        _ => (bytes.starts_with(b"\x89PNG\r\n\x1a\n"), bytes.ends_with(&PNG_END)),
     };
     if !looks_right {
         return Err(TilerError::decode(&path, format!("is not a {} file, as info.json's codec says", kind.name())));
     }
+    if !complete || bytes.len() as u64 > most {
+        return Err(TilerError::decode(
+            &path,
+            format!("is a truncated or damaged {} file (no end marker)", kind.name()),
+        ));
+    }
+    let (w, h, found) = probe_tile(&path, &bytes)?;
+    if (w, h, found) != (side, side, layout) {
+        return Err(TilerError::decode(
+            &path,
+            format!("is a {w}x{h} {found} image; info.json says tiles are {side}x{side} {layout}"),
+        ));
+    }
     Ok((path, bytes))
 }
+
+/// The last 12 bytes of every PNG file: the empty IEND chunk with its CRC.
+const PNG_END: [u8; 12] = [0, 0, 0, 0, b'I', b'E', b'N', b'D', 0xae, 0x42, 0x60, 0x82];
 
 fn in_file(path: &Path, e: vortex_pack::PackError) -> TilerError {
     TilerError::decode(path, e)
@@ -204,6 +241,7 @@ pub fn unpack(pack: &Pack, dir: &Path, progress: &dyn Progress) -> Result<u64> {
     if let Some(c) = codec.filter(|c| !c.writes_files()) {
         return Err(no_files(c.name()));
     }
+    check_metadata(pack, &info, codec, names.extension())?;
     let sink = DirSink::create(dir, names)?;
     let result = (|| {
         let mut count = 0;
@@ -213,7 +251,23 @@ pub fn unpack(pack: &Pack, dir: &Path, progress: &dyn Progress) -> Result<u64> {
             }
             match pack.tile_checked(id.lod, id.x, id.y)? {
                 Tile::Absent => continue,
-                Tile::Data(TileKind::Png | TileKind::Jpeg, bytes) => sink.write_tile(id.lod, id.x, id.y, bytes)?,
+                Tile::Data(kind @ (TileKind::Png | TileKind::Jpeg), bytes) => {
+                    if let Some(c) = codec.filter(|c| tile_kind(*c) != kind) {
+                        return Err(TilerError::Info {
+                            path: pack.path().to_path_buf(),
+                            field: "metadata: codec".into(),
+                            message: format!(
+                                "says {} but tile (lod {}, x {}, y {}) is {}",
+                                c.name(),
+                                id.lod,
+                                id.x,
+                                id.y,
+                                kind.name()
+                            ),
+                        });
+                    }
+                    sink.write_tile(id.lod, id.x, id.y, bytes)?
+                }
                 Tile::Data(kind, _) => return Err(no_files(kind.name())),
                 Tile::Constant(texel) => {
                     let codec = codec.ok_or_else(|| {
@@ -241,6 +295,46 @@ pub fn unpack(pack: &Pack, dir: &Path, progress: &dyn Progress) -> Result<u64> {
             Err(e)
         }
     }
+}
+
+/// Refuses a pack whose metadata (the `info.json` that `unpack` writes) contradicts its
+/// header: the files must be described by what they are, not by what the metadata claims.
+fn check_metadata(pack: &Pack, info: &InfoFile, codec: Option<Codec>, extension: Option<String>) -> Result<()> {
+    let d = pack.description();
+    let lie = |field: &str, claimed: String, actual: String| TilerError::Info {
+        path: pack.path().to_path_buf(),
+        field: format!("metadata: {field}"),
+        message: format!(
+            "says {claimed} but the pack's header says {actual}; the pack was altered or written by another tool"
+        ),
+    };
+    let grid = Layout::new(d.width as u64, d.height as u64, d.tile_size, d.border)?;
+    let stored = layout_of(d);
+    let members: [(&str, Option<String>, String); 8] = [
+        ("tileSize", info.tile_size.map(|v| v.to_string()), d.tile_size.to_string()),
+        ("border", info.border.map(|v| v.to_string()), d.border.to_string()),
+        ("width", info.width.map(|v| v.to_string()), d.width.to_string()),
+        ("height", info.height.map(|v| v.to_string()), d.height.to_string()),
+        ("tileCount", info.tile_count.map(|v| v.to_string()), grid.tile_count.to_string()),
+        ("lodCount", info.lod_count.map(|v| v.to_string()), d.level_count.to_string()),
+        ("tileFormat", info.tile_format.clone(), stored.channels.tile_format().to_string()),
+        ("tileType", info.tile_type.clone(), stored.depth.tile_type().to_string()),
+    ];
+    for (field, claimed, actual) in members {
+        if let Some(claimed) = claimed.filter(|c| *c != actual) {
+            return Err(lie(field, claimed, actual));
+        }
+    }
+    if let (Some(c), Some(ext)) = (codec, extension) {
+        let matches = match c {
+            Codec::Jpeg { .. } => ext == "jpg" || ext == "jpeg",
+            _ => ext == c.extension(),
+        };
+        if !matches {
+            return Err(lie("filenameFormat", format!("files ending .{ext}"), format!("{} tiles", c.name())));
+        }
+    }
+    Ok(())
 }
 
 fn encode_constant<T: Sample>(codec: Codec, layout: PixelLayout, side: u32, texel: &[u8]) -> Result<Vec<u8>> {

@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 use vortex_tiler::background::Background;
+use vortex_tiler::limits::Limits;
 use vortex_tiler::pixel::{Depth, PixelLayout};
 use vortex_tiler::source::RowSource;
 use vortex_tiler::source::tiled::{DeepZoom, NamedDir, PackInput, SplitOutput, TileGrid, TiledSource, Xyz};
@@ -58,7 +59,15 @@ pub fn run(a: ConvertArgs) -> Result<()> {
     let started = Instant::now();
     let grid = open_grid(&a)?;
     let header = grid.header();
+    let grid_cell = grid.cell();
     let source = TiledSource::new(grid, fill_texel(a.out.background(), header.layout), a.strict);
+    Limits { memory: a.out.max_memory(), ..Limits::default() }.check_memory(
+        &format!(
+            "reading a row of {}x{} input tiles of the {}x{} image",
+            grid_cell.0, grid_cell.1, header.width, header.height
+        ),
+        source.band_bytes(),
+    )?;
     let missing = source.missing_log();
     let result =
         tile(Box::new(source) as Box<dyn RowSource>, &a.input, a.output_filename_format.clone(), &a.out, started);

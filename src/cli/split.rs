@@ -180,6 +180,10 @@ impl OutputArgs {
     pub fn background(&self) -> Option<Background> {
         self.background
     }
+
+    pub fn max_memory(&self) -> u64 {
+        self.max_memory
+    }
 }
 
 pub fn tile(

@@ -15,7 +15,7 @@ mod tiff;
 pub mod tiled;
 mod whole;
 
-pub use whole::{Decoded, decode_tile};
+pub use whole::{Decoded, decode_tile, probe_tile};
 
 use std::fs::File;
 use std::io::Read;

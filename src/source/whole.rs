@@ -85,6 +85,20 @@ pub fn decode_tile(path: &Path, bytes: &[u8]) -> Result<Decoded> {
     Ok(Decoded { width, height, layout, bytes: native_bytes(path, image)? })
 }
 
+/// A tile file's size and pixel layout from its header alone, without decoding it.
+pub fn probe_tile(path: &Path, bytes: &[u8]) -> Result<(u32, u32, PixelLayout)> {
+    use image::ImageDecoder;
+    let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| TilerError::io(path, e))?;
+    let decoder = reader.into_decoder().map_err(|e| image_error(path, e))?;
+    let (width, height) = decoder.dimensions();
+    let colour = decoder.color_type();
+    let layout = layout_of(colour)
+        .ok_or_else(|| TilerError::unsupported(path, format!("pixel type {colour:?} is not supported")))?;
+    Ok((width, height, layout))
+}
+
 fn layout_of(colour: image::ColorType) -> Option<PixelLayout> {
     use image::ColorType as C;
     let (channels, depth) = match colour {

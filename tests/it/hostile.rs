@@ -265,3 +265,66 @@ fn settings_from_an_existing_info_json_are_shown_and_never_lose_data() {
     let err = String::from_utf8_lossy(&again.stderr);
     assert!(err.contains("from") && err.contains("info.json") && err.contains("tileSize 64"), "{err}");
 }
+
+#[cfg(unix)]
+#[test]
+fn pack_checks_every_tile_file_against_info_json() {
+    let (dir, input) = scratch_with_input();
+    let out = dir.path().join("out");
+    let small = dir.path().join("small");
+    ok(&["split", s(&input), "-o", s(&out), "--tile-size", "64", "--quiet"]);
+    ok(&["split", s(&input), "-o", s(&small), "--tile-size", "32", "--quiet"]);
+    let tile = out.join("lod00-x0000-y0000.jpg");
+    let pack = dir.path().join("p.vtpk");
+    let original = fs::read(&tile).unwrap();
+    fs::write(&tile, &original[..original.len() / 2]).unwrap();
+    fails_with(&run(&["pack", s(&out), "-o", s(&pack)]), &["lod00-x0000-y0000.jpg", "truncated"]);
+    fs::copy(small.join("lod00-x0000-y0000.jpg"), &tile).unwrap();
+    fails_with(&run(&["pack", s(&out), "-o", s(&pack)]), &["lod00-x0000-y0000.jpg", "32x32", "64x64"]);
+    fs::remove_file(&tile).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", &tile).unwrap();
+    fails_with(&run(&["pack", s(&out), "-o", s(&pack)]), &["lod00-x0000-y0000.jpg", "not a regular file"]);
+    fs::remove_file(&tile).unwrap();
+    fs::write(&tile, &original).unwrap();
+    ok(&["pack", s(&out), "-o", s(&pack), "--quiet"]);
+    assert_eq!(listing(dir.path()), ["in.png", "out", "p.vtpk", "small"]);
+}
+
+/// `pack` rewritten with `metadata` in place of its own, tiles unchanged.
+fn with_metadata(pack: &Path, metadata: &str, dest: &Path) {
+    use vortex_pack::{NewTile, Pack, PackWriter, Tile, WriteOptions};
+    let p = Pack::open(pack).unwrap();
+    let mut w =
+        PackWriter::create(dest, *p.description(), p.levels().to_vec(), metadata.as_bytes(), WriteOptions::default())
+            .unwrap();
+    for id in p.ids() {
+        let tile = match p.tile_checked(id.lod, id.x, id.y).unwrap() {
+            Tile::Absent => NewTile::Absent,
+            Tile::Constant(t) => NewTile::Constant(t),
+            Tile::Data(k, b) => NewTile::Data(k, b),
+        };
+        w.add(id, tile).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn unpack_refuses_metadata_that_lies() {
+    let (dir, input) = scratch_with_input();
+    let pack = dir.path().join("p.vtpk");
+    ok(&["split", s(&input), "--pack", s(&pack), "--quiet"]);
+    let info: serde_json::Value = serde_json::from_slice(vortex_pack::Pack::open(&pack).unwrap().metadata()).unwrap();
+    let liar = dir.path().join("liar.vtpk");
+    for (field, value) in [
+        ("tileCount", serde_json::json!(65536)),
+        ("codec", serde_json::json!("png")),
+        ("filenameFormat", serde_json::json!("%1$d-%2$d-%3$d.png")),
+        ("tileFormat", serde_json::json!("rgba")),
+    ] {
+        let mut lie = info.clone();
+        lie[field] = value;
+        with_metadata(&pack, &lie.to_string(), &liar);
+        fails_with(&run(&["unpack", s(&liar), "-o", s(&dir.path().join("out"))]), &["liar.vtpk", "metadata"]);
+    }
+    assert_eq!(listing(dir.path()), ["in.png", "liar.vtpk", "p.vtpk"]);
+}

@@ -66,7 +66,8 @@ impl Xyz {
         let ymax = tiles.keys().map(|k| k.1).max().expect("not empty");
         let first = tiles.iter().min_by_key(|((x, y), _)| (*y, *x)).map(|(_, p)| p.clone()).expect("not empty");
         let (tw, th, layout) = probe(&first)?;
-        let (cols, rows) = (xmax - xmin + 1, ymax - ymin + 1);
+        // In u64: tiles at x 0 and 2^32 - 1 span 2^32 columns, which wraps a u32 to zero.
+        let (cols, rows) = (xmax as u64 - xmin as u64 + 1, ymax as u64 - ymin as u64 + 1);
         let too_big = || {
             TilerError::Geometry(format!(
                 "{cols}x{rows} tiles of {tw}x{th} at zoom {zoom} of {} make an image too large",
@@ -74,8 +75,8 @@ impl Xyz {
             ))
         };
         let header = ImageHeader {
-            width: cols.checked_mul(tw).ok_or_else(too_big)?,
-            height: rows.checked_mul(th).ok_or_else(too_big)?,
+            width: u32::try_from(cols * tw as u64).map_err(|_| too_big())?,
+            height: u32::try_from(rows * th as u64).map_err(|_| too_big())?,
             layout,
         };
         Ok(Xyz { dir: dir.to_path_buf(), zoom, origin: (xmin, ymin), tiles, header, cell: (tw, th) })

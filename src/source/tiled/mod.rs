@@ -79,6 +79,13 @@ impl TiledSource {
         TiledSource { grid, header, fill, strict, missing: Arc::default(), band: Vec::new(), band_row: None, next: 0 }
     }
 
+    /// Bytes held while a row of cells is read: the decoded cells of the row and the band
+    /// they are copied into, each a cell high and the image wide.
+    pub fn band_bytes(&self) -> u64 {
+        let (_, ch) = self.grid.cell();
+        2 * ch as u64 * self.header.width as u64 * self.header.layout.bytes_per_pixel() as u64
+    }
+
     /// The list of cells found missing (and filled), which fills as rows are read.
     pub fn missing_log(&self) -> Arc<Mutex<Vec<String>>> {
         self.missing.clone()
