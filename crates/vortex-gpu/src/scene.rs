@@ -227,8 +227,9 @@ impl Scene {
         if !(1..=256).contains(&e.cache_slots_per_side) {
             return Err(format!("effects.cache_slots_per_side {} must be 1..=256", e.cache_slots_per_side));
         }
-        if e.threads == 0 {
-            return Err("effects.threads must be at least 1".into());
+        let most_threads = 4 * std::thread::available_parallelism().map_or(1, |n| n.get());
+        if !(1..=most_threads).contains(&e.threads) {
+            return Err(format!("effects.threads {} must be 1..={most_threads} (4 per core)", e.threads));
         }
         let frames: Vec<u32> = match &self.view {
             SceneView::Window { path, .. } => {
