@@ -3,12 +3,13 @@
 //! pass), only these paths change.
 
 pub use vortex_gpu::camera::Keyframe;
+pub use vortex_gpu::device::prefer_lavapipe;
 pub use vortex_gpu::scene::WindowKey;
+pub use vortex_gpu::testing::{box_chain, write_pack};
 pub use vortex_gpu::{
     Effects, Gpu, GpuPageTable, Loader, Pose, RenderTarget, Runtime, SampleFilter, SamplePass, Scene, SceneView,
     Sources, View, VirtualTexture, Window,
 };
-pub use vortex_pack::format::pyramid_levels;
-pub use vortex_pack::{Description, NewTile, Pack, PackWriter, TileId, TileKind, WriteOptions};
+pub use vortex_pack::{Pack, TileKind};
 pub use vortex_vt::page::{PageId, TextureGrid};
-pub use vortex_vt::sampler::{LodChain, LodImages, Rgba8Image, bilinear, nearest, trilinear};
+pub use vortex_vt::sampler::{LodChain, Rgba8Image, bilinear, nearest, trilinear};

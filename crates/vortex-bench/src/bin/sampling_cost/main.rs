@@ -32,7 +32,6 @@
 mod api;
 mod compare;
 mod conclusions;
-mod lavapipe;
 mod reference;
 mod report;
 mod run;
@@ -42,12 +41,14 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
+use anyhow::{Context, Result};
 use vortex_bench::out;
 use vortex_bench::run_info::{cores, load_average, today};
 use vortex_bench::splice::{Block, splice_file};
 
 use crate::api::{
-    Effects, Keyframe, Pack, Pose, SampleFilter as Filter, Scene, SceneView, TextureGrid, Window, WindowKey,
+    Effects, Keyframe, Pack, Pose, SampleFilter as Filter, Scene, SceneView, TextureGrid, TileKind, VirtualTexture,
+    Window, WindowKey, prefer_lavapipe, write_pack,
 };
 use crate::report::Row;
 use crate::run::Run;
@@ -84,28 +85,37 @@ const VIEWS: [ViewSpec; 3] = [
     ViewSpec { name: "minified 2.7", texels_per_pixel: 2.7, center: [0.487_1, 0.523_3] },
 ];
 
-fn main() {
+fn main() -> Result<()> {
+    // SAFETY: first thing in `main`, before any thread is spawned (the loaders' workers and the
+    // drivers' threads start later, in `Run::new`), so no other thread reads the environment.
+    unsafe { prefer_lavapipe() };
     let output = std::env::args_os().nth(1).map(PathBuf::from).unwrap_or_else(|| {
         let docs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs");
         docs.canonicalize().unwrap_or(docs).join("gpu-sampling.md")
     });
-    lavapipe::pin();
     let started = Instant::now();
     let load_before = load_average();
 
     let side = PAGES as u32 * PAYLOAD;
-    let chain = texture::lod_chain(side, TextureGrid::new(PAGES).unwrap().lod_count);
-    let dir = tempfile::tempdir().expect("a temporary directory");
+    let grid = TextureGrid::new(PAGES).context("a page grid of PAGES pages per side")?;
+    let chain = texture::lod_chain(side, grid.lod_count);
+    let dir = tempfile::tempdir().context("a temporary directory")?;
     let packs: Vec<(u32, Arc<Pack>)> = BORDERS
         .iter()
-        .map(|&b| (b, texture::write_pack(&dir.path().join(format!("border{b}.vtpk")), &chain, PAYLOAD + 2 * b, b)))
-        .collect();
+        .map(|&b| {
+            let path = dir.path().join(format!("border{b}.vtpk"));
+            let texture = VirtualTexture::square(grid, PAYLOAD + 2 * b, b);
+            let pack = write_pack(&path, &chain, &texture, TileKind::Raw)
+                .with_context(|| format!("writing the pack {}", path.display()))?;
+            Ok((b, pack))
+        })
+        .collect::<Result<_>>()?;
     eprintln!("packs written in {:.1} s", started.elapsed().as_secs_f64());
 
     let mut runs: Vec<Run> = Vec::new();
     for (border, pack) in &packs {
         for filter in FILTERS {
-            runs.push(Run::new(*border, filter, pack.clone()));
+            runs.push(Run::new(*border, filter, pack.clone())?);
         }
     }
     let adapter = runs[0].rt.gpu().adapter_info();
@@ -116,7 +126,7 @@ fn main() {
         let window = window(spec, side);
         let pose = Pose::Window(window);
         for run in &mut runs {
-            run.converge(&pose, spec.name);
+            run.converge(&pose, spec.name)?;
         }
         let mut frame_ms: Vec<Vec<f64>> = vec![Vec::new(); runs.len()];
         let mut sample_ms: Vec<Vec<f64>> = vec![Vec::new(); runs.len()];
@@ -132,13 +142,13 @@ fn main() {
                 order.swap(k, (random % (k as u64 + 1)) as usize);
             }
             for &i in &order {
-                frame_ms[i].extend(runs[i].time_frames(&pose, spec.name));
-                sample_ms[i].extend(runs[i].time_sampling(&window));
+                frame_ms[i].extend(runs[i].time_frames(&pose, spec.name)?);
+                sample_ms[i].extend(runs[i].time_sampling(&window)?);
             }
         }
         let ideal = reference::ideal(&chain, &window, side);
         for (i, run) in runs.iter_mut().enumerate() {
-            let check = run.check(&chain, &window, &ideal);
+            let check = run.check(&chain, &window, &ideal)?;
             rows.push(Row {
                 view: v,
                 border: run.border,
@@ -165,11 +175,9 @@ fn main() {
         Block::new("gpu-sampling:surprises", conclusions::surprises(&rows)),
         Block::new("gpu-sampling:details", report::diagnostics(&rows)),
     ];
-    if let Err(e) = splice_file(&output, "gpu-sampling:", &blocks) {
-        eprintln!("error: {e:#}");
-        std::process::exit(1);
-    }
+    splice_file(&output, "gpu-sampling:", &blocks)?;
     eprintln!("wrote {} in {:.1} s", output.display(), started.elapsed().as_secs_f64());
+    Ok(())
 }
 
 /// The window of `spec` on a `side`-texel texture, as a scene's pose gives it.

@@ -4,6 +4,8 @@
 use std::sync::Arc;
 use std::time::Instant;
 
+use anyhow::{Context, Result, bail};
+
 use crate::api::{
     Effects, Gpu, GpuPageTable, Loader, LodChain, Pack, Pose, RenderTarget, Rgba8Image, Runtime,
     SampleFilter as Filter, SamplePass, Sources, View, VirtualTexture, Window,
@@ -28,21 +30,18 @@ pub struct Run {
 }
 
 impl Run {
-    pub fn new(border: u32, filter: Filter, pack: Arc<Pack>) -> Run {
+    pub fn new(border: u32, filter: Filter, pack: Arc<Pack>) -> Result<Run> {
         let tile = PAYLOAD + 2 * border;
         let effects = Effects { filter, cache_slots_per_side: 16, upload_budget: 64, ..Effects::default() };
-        let gpu = Gpu::headless(16 * tile).unwrap_or_else(|e| {
-            eprintln!("error: no GPU device ({e}); install mesa-vulkan-drivers for lavapipe");
-            std::process::exit(2)
-        });
-        let loader = Loader::new(vec![pack], 2).expect("a loader");
-        let rt = Runtime::new(gpu, loader, &scene(effects, [0.5, 0.5], 1.0)).expect("a runtime");
+        let gpu = Gpu::headless(16 * tile).context("no GPU device; install mesa-vulkan-drivers for lavapipe")?;
+        let loader = Loader::new(vec![pack], 2).context("a loader")?;
+        let rt = Runtime::new(gpu, loader, &scene(effects, [0.5, 0.5], 1.0)).context("a runtime")?;
         let texture = rt.textures()[0];
         let device = &rt.gpu().device;
         let pass = SamplePass::new(device, filter);
         let target = RenderTarget::new(device, SIZE[0], SIZE[1]);
         let table = GpuPageTable::new(device, &rt.gpu().queue, &[texture.grid], rt.cache().slots_per_side());
-        Run { border, filter, rt, texture, pass, target, table, converged_after: 0, loaded_while_timed: 0 }
+        Ok(Run { border, filter, rt, texture, pass, target, table, converged_after: 0, loaded_while_timed: 0 })
     }
 
     pub fn label(&self) -> String {
@@ -51,11 +50,11 @@ impl Run {
 
     /// Draws `pose` until a frame shows no fallback and the next 16 load nothing, then copies
     /// the page table for the sampling-only pass.
-    pub fn converge(&mut self, pose: &Pose, view: &str) {
+    pub fn converge(&mut self, pose: &Pose, view: &str) -> Result<()> {
         let mut first_clean = None;
         let mut quiet = 0;
         for f in 0..MAX_CONVERGE_FRAMES {
-            let (report, _) = self.rt.frame(pose, false).expect("a frame");
+            let (report, _) = self.rt.frame(pose, false).with_context(|| format!("{} on {view:?}", self.label()))?;
             if report.fallback_fraction == 0.0 {
                 first_clean.get_or_insert(f);
             } else {
@@ -63,34 +62,37 @@ impl Run {
             }
             quiet = if first_clean.is_some() && report.loaded == 0 && report.deferred == 0 { quiet + 1 } else { 0 };
             // The feedback jitter visits every sample position of a pixel block within 16 frames.
-            if quiet >= 16 {
-                self.converged_after = first_clean.unwrap();
+            if quiet >= 16
+                && let Some(first_clean) = first_clean
+            {
+                self.converged_after = first_clean;
                 self.table.write_all(&self.rt.gpu().queue, self.rt.page_table());
-                return;
+                return Ok(());
             }
         }
-        panic!("{} did not converge on view {view:?} in {MAX_CONVERGE_FRAMES} frames", self.label());
+        bail!("{} did not converge on view {view:?} in {MAX_CONVERGE_FRAMES} frames", self.label());
     }
 
     /// Times `FRAMES_PER_ROUND` runtime frames, in ms each.
-    pub fn time_frames(&mut self, pose: &Pose, view: &str) -> Vec<f64> {
+    pub fn time_frames(&mut self, pose: &Pose, view: &str) -> Result<Vec<f64>> {
         (0..FRAMES_PER_ROUND)
             .map(|_| {
                 let start = Instant::now();
-                let (report, _) = self.rt.frame(pose, false).expect("a frame");
+                let (report, _) =
+                    self.rt.frame(pose, false).with_context(|| format!("{} on {view:?}", self.label()))?;
                 let ms = start.elapsed().as_secs_f64() * 1e3;
                 if report.loaded > 0 || report.fallback_fraction > 0.0 {
                     eprintln!("note: {} on {view:?} streamed while timed: {report:?}", self.label());
                     self.loaded_while_timed += report.loaded;
                 }
-                ms
+                Ok(ms)
             })
             .collect()
     }
 
     /// Times `SUBMITS_PER_ROUND` submissions of `DRAWS_PER_SUBMIT` sampling-only draws, in ms per
     /// draw.
-    pub fn time_sampling(&self, window: &Window) -> Vec<f64> {
+    pub fn time_sampling(&self, window: &Window) -> Result<Vec<f64>> {
         let gpu = self.rt.gpu();
         let sources = Sources { textures: self.rt.textures(), table: &self.table, cache: self.rt.cache() };
         let view = View::Window(*window);
@@ -102,21 +104,27 @@ impl Run {
                     self.pass.encode(&gpu.device, &mut encoder, &self.target, &sources, &view, None);
                 }
                 gpu.queue.submit([encoder.finish()]);
-                gpu.wait_idle();
-                start.elapsed().as_secs_f64() * 1e3 / DRAWS_PER_SUBMIT as f64
+                gpu.wait_idle().with_context(|| format!("{}: sampling-only draws", self.label()))?;
+                Ok(start.elapsed().as_secs_f64() * 1e3 / DRAWS_PER_SUBMIT as f64)
             })
             .collect()
     }
 
     /// Renders one picture of `window` and compares it with the reference sampler's model of
     /// this runtime and with `ideal`.
-    pub fn check(&mut self, chain: &LodChain, window: &Window, ideal: &Rgba8Image) -> Check {
+    pub fn check(&mut self, chain: &LodChain, window: &Window, ideal: &Rgba8Image) -> Result<Check> {
         let (want, mut fallback) = model(&self.rt, chain, &self.texture, window, self.filter);
-        let (_, picture) = self.rt.frame(&Pose::Window(*window), true).expect("a frame");
-        let picture = picture.expect("a picture was asked for");
+        let (_, picture) = self
+            .rt
+            .frame(&Pose::Window(*window), true)
+            .with_context(|| format!("{}: the checked frame", self.label()))?;
+        let picture = picture.context("the runtime returned no picture though one was asked for")?;
         // The sampling-only path draws the same thing.
         let sources = Sources { textures: self.rt.textures(), table: &self.table, cache: self.rt.cache() };
-        let alone = self.pass.render_and_read(self.rt.gpu(), &self.target, &sources, &View::Window(*window), None);
+        let alone = self
+            .pass
+            .render_and_read(self.rt.gpu(), &self.target, &sources, &View::Window(*window), None)
+            .with_context(|| format!("{}: the sampling-only picture", self.label()))?;
         let sampling_only_differs = alone != picture;
 
         let own = compare(&picture, &want);
@@ -155,7 +163,7 @@ impl Run {
                 worst = Worst { err, x, y, got: *g, want: *w };
             }
         }
-        Check {
+        Ok(Check {
             own,
             ideal,
             fallback,
@@ -166,6 +174,6 @@ impl Run {
             worst,
             sampling_only_differs,
             loaded_while_timed: self.loaded_while_timed,
-        }
+        })
     }
 }

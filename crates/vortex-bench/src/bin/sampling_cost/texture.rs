@@ -1,14 +1,8 @@
-//! The synthetic texture and its packs: one deterministic 2048² RGBA8 image with smooth colour,
-//! a fine grating, thin lines and noise; its box LOD chain; and one raw-tile pack per border.
+//! The synthetic texture: one deterministic 2048² RGBA8 image with smooth colour, a fine
+//! grating, thin lines and noise, and its box LOD chain. Its packs (one of raw tiles per border)
+//! are written by `vortex_gpu::testing::write_pack`, in the tiler's layout.
 
-use std::path::Path;
-use std::sync::Arc;
-
-use crate::PAGES;
-use crate::api::{
-    Description, LodChain, LodImages, NewTile, Pack, PackWriter, PageId, Rgba8Image, TileId, TileKind, WriteOptions,
-    pyramid_levels,
-};
+use crate::api::{LodChain, Rgba8Image, box_chain};
 
 /// An integer hash of a texel position, for noise that is the same on every run.
 pub fn hash(x: u32, y: u32) -> u32 {
@@ -41,61 +35,8 @@ pub fn source_texel(x: u32, y: u32, side: u32) -> [u8; 4] {
 }
 
 /// The texture's LODs: LOD 0 from [`source_texel`], each further LOD the 2x2 mean of the one
-/// before in code values, rounded half up (the tiler's `box` filter on an image that fills its
-/// page grid).
+/// before in code values, rounded half up ([`box_chain`]: the tiler's `box` filter on an image
+/// that fills its page grid).
 pub fn lod_chain(side: u32, lods: u8) -> LodChain {
-    let mut levels = vec![Rgba8Image::from_fn(side, side, |x, y| source_texel(x, y, side))];
-    for _ in 1..lods {
-        let fine = levels.last().unwrap();
-        let texel = |x: u32, y: u32| fine.texels[(y * fine.width + x) as usize];
-        let coarse = Rgba8Image::from_fn(fine.width / 2, fine.height / 2, |x, y| {
-            let quad =
-                [texel(2 * x, 2 * y), texel(2 * x + 1, 2 * y), texel(2 * x, 2 * y + 1), texel(2 * x + 1, 2 * y + 1)];
-            std::array::from_fn(|c| ((quad.iter().map(|t| t[c] as u32).sum::<u32>() + 2) / 4) as u8)
-        });
-        levels.push(coarse);
-    }
-    LodChain(levels)
-}
-
-/// The stored tile of `page`: its payload and `border` texels of its neighbours on each side,
-/// texels beyond the level's edge repeating the edge (the tiler's layout), RGBA8.
-pub fn stored_tile(chain: &LodChain, page: PageId, tile_size: u32, border: u32) -> Vec<u8> {
-    let (w, h) = chain.size(page.lod);
-    let payload = (tile_size - 2 * border) as i64;
-    let mut bytes = Vec::with_capacity((tile_size * tile_size * 4) as usize);
-    for j in 0..tile_size as i64 {
-        let y = (page.y as i64 * payload + j - border as i64).clamp(0, h as i64 - 1) as u32;
-        for i in 0..tile_size as i64 {
-            let x = (page.x as i64 * payload + i - border as i64).clamp(0, w as i64 - 1) as u32;
-            bytes.extend_from_slice(&chain.texel(page.lod, x, y));
-        }
-    }
-    bytes
-}
-
-/// A pack of every page of `chain` in `tile_size`-texel raw tiles with `border`.
-pub fn write_pack(path: &Path, chain: &LodChain, tile_size: u32, border: u32) -> Arc<Pack> {
-    let (side, _) = chain.size(0);
-    let d = Description {
-        width: side,
-        height: side,
-        tile_size,
-        border,
-        level_count: chain.lod_count() as u32,
-        channels: 4,
-        sample_bytes: 1,
-    };
-    let levels = pyramid_levels(&d, PAGES as u32);
-    let mut writer = PackWriter::create(path, d, levels.clone(), b"{}", WriteOptions::default()).expect("a pack");
-    for (lod, level) in levels.iter().enumerate() {
-        for y in 0..level.tiles_h {
-            for x in 0..level.tiles_w {
-                let tile = stored_tile(chain, PageId::new(0, lod as u8, x as u16, y as u16), tile_size, border);
-                writer.add(TileId { lod: lod as u32, x, y }, NewTile::Data(TileKind::Raw, &tile)).expect("a tile");
-            }
-        }
-    }
-    writer.finish().expect("the pack is written");
-    Arc::new(Pack::open(path).expect("the pack opens"))
+    box_chain(Rgba8Image::from_fn(side, side, |x, y| source_texel(x, y, side)), lods)
 }
