@@ -7,6 +7,7 @@
 //! cargo run --release -p vortex-bench --bin accuracy        # docs/accuracy.md + its two SVGs
 //! cargo run --release -p vortex-bench --bin sampling_cost   # docs/gpu-sampling.md (lavapipe)
 //! ```
+#![allow(clippy::unwrap_used, clippy::expect_used)] // measurement programs may panic on a broken set-up
 
 pub mod run_info;
 pub mod splice;

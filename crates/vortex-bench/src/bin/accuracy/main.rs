@@ -17,6 +17,7 @@
 //! `DIR/accuracy-time.svg`, `DIR/accuracy-size.svg` ([`plot`]) are rewritten. `DIR` is `docs/`
 //! unless `--out` says otherwise; a directory without `accuracy.md` gets a copy of
 //! `docs/accuracy.md` first.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // measurement programs may panic on a broken set-up
 
 mod choice;
 mod images;

@@ -28,6 +28,7 @@
 //!
 //! The GPU is pinned to lavapipe (Mesa's CPU Vulkan driver) when it is installed and neither
 //! `VK_DRIVER_FILES` nor `VK_ICD_FILENAMES` is set, as in the tests.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // measurement programs may panic on a broken set-up
 
 mod api;
 mod compare;
@@ -85,6 +86,7 @@ const VIEWS: [ViewSpec; 3] = [
     ViewSpec { name: "minified 2.7", texels_per_pixel: 2.7, center: [0.487_1, 0.523_3] },
 ];
 
+#[expect(unsafe_code, reason = "pinning the Vulkan driver sets environment variables")]
 fn main() -> Result<()> {
     // SAFETY: first thing in `main`, before any thread is spawned (the loaders' workers and the
     // drivers' threads start later, in `Run::new`), so no other thread reads the environment.
