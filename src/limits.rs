@@ -52,7 +52,11 @@ const INDEX_ENTRY_BYTES: u64 = vortex_pack::format::ENTRY_LEN as u64;
 
 impl Limits {
     fn over(figure: &str, need: u64, cap: u64, flag: &str) -> TilerError {
-        TilerError::Limit(format!("{figure} needs {}, more than {flag} ({}); raise {flag}", human(need), human(cap)))
+        TilerError::Limit(format!(
+            "{figure} needs {}, more than {flag} ({}); raise {flag}",
+            human_bytes(need),
+            human_bytes(cap)
+        ))
     }
 
     /// Checks a pyramid's tile count and, for a pack, its index.
@@ -139,16 +143,16 @@ pub fn pipeline_bytes(layout: &Layout, texel_bytes: u64) -> u64 {
     bands.saturating_add(reducers).saturating_add(pages)
 }
 
-/// `1.5 GiB`, `12 MiB`, `512 KiB`, `100 B`.
-pub fn human(bytes: u64) -> String {
-    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
+/// `1536` -> "1.5 KiB".
+pub fn human_bytes(bytes: u64) -> String {
+    let units = ["B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"];
     let mut value = bytes as f64;
     let mut unit = 0;
-    while value >= 1024.0 && unit + 1 < UNITS.len() {
+    while value >= 1024.0 && unit + 1 < units.len() {
         value /= 1024.0;
         unit += 1;
     }
-    if unit == 0 { format!("{bytes} B") } else { format!("{value:.1} {}", UNITS[unit]) }
+    if unit == 0 { format!("{bytes} B") } else { format!("{value:.1} {}", units[unit]) }
 }
 
 #[cfg(test)]

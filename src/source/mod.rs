@@ -22,6 +22,7 @@ use std::io::Read;
 use std::path::Path;
 
 use crate::error::{Result, TilerError};
+use crate::limits::human_bytes;
 use crate::pixel::PixelLayout;
 
 /// What a decoder knows before the first row: size and pixel layout.
@@ -124,18 +125,6 @@ pub(crate) fn check_whole_fits(
         ));
     }
     Ok(())
-}
-
-/// `1536` -> "1.5 KiB".
-pub(crate) fn human_bytes(bytes: u64) -> String {
-    let units = ["B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"];
-    let mut value = bytes as f64;
-    let mut unit = 0;
-    while value >= 1024.0 && unit + 1 < units.len() {
-        value /= 1024.0;
-        unit += 1;
-    }
-    if unit == 0 { format!("{bytes} B") } else { format!("{value:.1} {}", units[unit]) }
 }
 
 /// Reads every row of `source` into one buffer (for tests of the decoders).
