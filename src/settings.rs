@@ -193,30 +193,36 @@ fn refuse_lossy_defaults(
     Ok(())
 }
 
-/// The members of an existing `info.json` that set this run's settings (no flag overrode
-/// them), as `name value` for the line that says so.
-pub fn taken_from_file(req: &Requested, info: &InfoFile) -> Vec<String> {
-    let mut taken = Vec::new();
-    let mut take = |name: &str, flag_given: bool, value: Option<String>| {
-        if let (false, Some(v)) = (flag_given, value) {
-            taken.push(format!("{name} {v}"));
-        }
+/// The members of `this_run`'s description that an existing `info.json` changed: what the
+/// flags alone would have given differs. `name value` each, for the line that says so; every
+/// settable member when the flags alone give no valid run.
+pub fn changed_by_file(
+    req: &Requested,
+    source: PixelLayout,
+    width: u32,
+    height: u32,
+    this_run: &InfoFile,
+) -> Vec<String> {
+    // Derived from the grid, which tileSize and border already show.
+    const DERIVED: [&str; 5] = ["formatVersion", "width", "height", "tileCount", "lodCount"];
+    let without_file = resolve(req, None, source).and_then(|(opts, names)| {
+        let layout = Layout::new(width as u64, height as u64, opts.tile_size, opts.border)?;
+        let stored = opts.codec.stored_layout(source, opts.flatten, opts.tile_depth)?;
+        Ok(describe(&layout, stored, &opts, &names))
+    });
+    let as_map = |info: &InfoFile| match serde_json::to_value(info) {
+        Ok(serde_json::Value::Object(map)) => map,
+        _ => serde_json::Map::new(),
     };
-    let codec_given = req.codec.is_some();
-    take("tileSize", req.tile_size.is_some(), info.tile_size.map(|v| v.to_string()));
-    take("border", req.border.is_some(), info.border.map(|v| v.to_string()));
-    take("codec", codec_given, info.codec.clone());
-    take("quality", codec_given || req.quality.is_some(), info.quality.map(|v| v.to_string()));
-    take("subsampling", codec_given || req.subsampling.is_some(), info.subsampling.clone());
-    take("pngCompression", codec_given || req.png_level.is_some(), info.png_compression.clone());
-    take("zstdLevel", codec_given || req.zstd_level.is_some(), info.zstd_level.map(|v| v.to_string()));
-    take("bc7Effort", codec_given || req.bc7_effort.is_some(), info.bc7_effort.clone());
-    take("background", req.background.is_some(), info.background.clone());
-    take("tileFormat", req.flatten, info.tile_format.clone());
-    take("tileType", req.tile_depth.is_some(), info.tile_type.clone());
-    take("filenameFormat", req.filename_format.is_some(), info.filename_format.clone());
-    take("filter", req.filter.is_some(), info.filter.clone());
-    taken
+    let without = without_file.as_ref().map(as_map).unwrap_or_default();
+    as_map(this_run)
+        .into_iter()
+        .filter(|(name, value)| !DERIVED.contains(&name.as_str()) && without.get(name) != Some(value))
+        .map(|(name, value)| match value {
+            serde_json::Value::String(v) => format!("{name} {v}"),
+            v => format!("{name} {v}"),
+        })
+        .collect()
 }
 
 /// Checks an existing `info.json`'s derived members against what this run will produce.

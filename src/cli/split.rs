@@ -233,14 +233,14 @@ pub fn tile(
     let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
     limits.check_pyramid(&layout, product == Product::Pack)?;
     limits.check_pipeline(&layout, stored.bytes_per_pixel() as u64)?;
+    let info = settings::describe(&layout, stored, &opts, &names);
     // Said once everything is checked, just before the work starts.
-    if let Some((path, info)) = existing_ref {
-        let taken = settings::taken_from_file(&requested, info);
-        if !taken.is_empty() && !a.quiet {
-            eprintln!("settings from {}: {}", path.display(), taken.join(", "));
+    if let (Some(path), false) = (&info_path, a.quiet) {
+        let changed = settings::changed_by_file(&requested, source.layout(), source.width(), source.height(), &info);
+        if !changed.is_empty() {
+            eprintln!("settings from {}: {}", path.display(), changed.join(", "));
         }
     }
-    let info = settings::describe(&layout, stored, &opts, &names);
     let decoder = source.describe();
     let (width, height) = (source.width(), source.height());
 
