@@ -118,10 +118,7 @@ fn existing(dest: &Path, product: Product, force: bool) -> Result<Option<Existin
     }
     match product.recognise(dest) {
         Ok(()) => Ok(Some(Existing::Ours)),
-        Err(what) if force && !product.is_dir() => {
-            let _ = what;
-            Ok(Some(Existing::ForcedFile))
-        }
+        Err(_) if force && !product.is_dir() => Ok(Some(Existing::ForcedFile)),
         Err(what) => Err(OutputError::Foreign {
             path: dest.to_path_buf(),
             what,

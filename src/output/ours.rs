@@ -63,7 +63,7 @@ fn recognise_pack(path: &Path) -> Result<(), String> {
         return Err("an empty file".into());
     }
     if head[..n] != vortex_pack::format::MAGIC[..] {
-        return Err("a file that is not a pack".into());
+        return Err("a file without a pack's signature".into());
     }
     Ok(())
 }
@@ -85,10 +85,9 @@ fn recognise_report(path: &Path) -> Result<(), String> {
         return Err(format!("a file of {len} bytes, too large to be a render report"));
     }
     let text = fs::read(path).map_err(|e| format!("unreadable ({e})"))?;
-    let value: serde_json::Value =
-        serde_json::from_slice(&text).map_err(|_| "a file that is not a render report".to_string())?;
+    let value: serde_json::Value = serde_json::from_slice(&text).map_err(|_| "a file that is not JSON".to_string())?;
     let ours = ["adapter", "frames", "pages_touched", "pages_total"].iter().all(|k| value.get(k).is_some());
-    if ours { Ok(()) } else { Err("a JSON file that is not a render report".into()) }
+    if ours { Ok(()) } else { Err("a JSON file with other members".into()) }
 }
 
 /// The entries of a directory, or what went wrong as the message says it.
