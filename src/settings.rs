@@ -108,7 +108,18 @@ pub fn resolve(
     let codec = build_codec(choice, req, info, &field_err)?;
     codec.check_tile_size(tile_size)?;
     if let (Some(e), false) = (&ext, ext_codec.is_none_or(|c| c == choice)) {
-        return Err(TilerError::Options(format!("the filename format ends in .{e} but the codec is {}", codec.name())));
+        let message = format!("ends in .{e} but the codec is {}", codec.name());
+        return Err(match req.filename_format {
+            Some(_) => TilerError::Options(format!("the filename format {message}")),
+            // The names came from the previous run's info.json; a flag replaces them.
+            None => field_err(
+                "filenameFormat",
+                format!(
+                    "{message}; pass --filename-format with a .{} pattern, or choose another output",
+                    codec.extension()
+                ),
+            ),
+        });
     }
     let names = match names_given {
         Some(f) => f,

@@ -328,3 +328,16 @@ fn unpack_refuses_metadata_that_lies() {
     }
     assert_eq!(listing(dir.path()), ["in.png", "liar.vtpk", "p.vtpk"]);
 }
+
+#[test]
+fn names_from_an_existing_info_json_that_clash_with_a_flag_name_the_file() {
+    let (dir, input) = scratch_with_input();
+    let out = dir.path().join("out");
+    ok(&["split", s(&input), "-o", s(&out), "--quiet"]);
+    fails_with(
+        &run(&["split", s(&input), "-o", s(&out), "--codec", "png"]),
+        &["info.json", "filenameFormat", "--filename-format"],
+    );
+    ok(&["split", s(&input), "-o", s(&out), "--codec", "png", "--ff", "%1$d/%2$d_%3$d.png", "--quiet"]);
+    assert!(out.join("0/0_0.png").is_file());
+}
