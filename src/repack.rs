@@ -15,6 +15,7 @@ use vortex_pack::{Description, NewTile, Pack, PackWriter, Tile, TileId, TileKind
 use crate::codec::{Codec, TileEncoder};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
+use crate::output::Claim;
 use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::settings::DEFAULT_FILENAME_STEM;
 use crate::sink::{DirSink, TileSink, tile_kind};
@@ -213,8 +214,9 @@ enum Stored {
     Data(Vec<u8>),
 }
 
-/// Writes every tile of `pack` as files plus `info.json` into `dir`; returns the tile count.
-pub fn unpack(pack: &Pack, dir: &Path, progress: &dyn Progress) -> Result<u64> {
+/// Writes every tile of `pack` as files plus `info.json` into the directory `dir` claims;
+/// returns the tile count.
+pub fn unpack(pack: &Pack, dir: &Claim, progress: &dyn Progress) -> Result<u64> {
     let meta = pack.metadata();
     let info: InfoFile = serde_json::from_slice(meta).map_err(|e| TilerError::Info {
         path: pack.path().to_path_buf(),

@@ -7,8 +7,8 @@ use anyhow::{Result, bail};
 use vortex_tiler::background::Background;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::pixel::{Depth, PixelLayout};
-use vortex_tiler::source::RowSource;
 use vortex_tiler::source::tiled::{DeepZoom, NamedDir, PackInput, SplitOutput, TileGrid, TiledSource, Xyz};
+use vortex_tiler::source::{RowSource, Streamed};
 
 use super::split::{OutputArgs, tile};
 
@@ -122,15 +122,9 @@ fn open_grid(a: &ConvertArgs) -> Result<Box<dyn TileGrid>> {
 
 /// The image format `path` starts like, if any: `convert` takes tiles, `split` images.
 fn image_kind(path: &Path) -> Option<&'static str> {
-    let mut head = [0u8; 4];
-    std::fs::File::open(path).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head)).ok()?;
-    match head {
-        [0x89, b'P', b'N', b'G'] => Some("PNG"),
-        [0xff, 0xd8, 0xff, _] => Some("JPEG"),
-        [b'I', b'I', 42 | 43, 0] | [b'M', b'M', 0, 42 | 43] => Some("TIFF"),
-        [b'P', b'5' | b'6', ..] => Some("PNM"),
-        _ => None,
-    }
+    let mut magic = Vec::with_capacity(8);
+    std::io::Read::read_to_end(&mut std::io::Read::take(std::fs::File::open(path).ok()?, 8), &mut magic).ok()?;
+    Streamed::sniff(&magic).map(Streamed::name)
 }
 
 /// One texel of `background` in the grid's layout, native-endian; zeros without a colour.

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 use vortex_pack::{Pack, TileKind, VerifyOptions, verify};
-use vortex_tiler::output::{self, Product};
+use vortex_tiler::output::Product;
 use vortex_tiler::tile_dir::TiledDir;
 use vortex_tiler::{repack, settings};
 
@@ -96,8 +96,7 @@ pub fn run_verify(a: VerifyArgs) -> Result<()> {
 
 pub fn run_pack(a: PackArgs) -> Result<()> {
     let started = Instant::now();
-    output::claim(&a.output, Product::Pack, &[&a.input], a.force)?;
-    report::remove_stale_temporaries(&a.output)?;
+    report::claim(&a.output, Product::Pack, &[&a.input], a.force)?;
     let t = TiledDir::read(&a.input)?;
     let codec = match a.enc.any() {
         true => Some(settings::resolve_codec(&a.enc.requested(), &a.input.join("info.json"), &t.info, t.layout())?),
@@ -117,10 +116,9 @@ pub fn run_pack(a: PackArgs) -> Result<()> {
 pub fn run_unpack(a: UnpackArgs) -> Result<()> {
     let started = Instant::now();
     let pack = open_pack(&a.input)?;
-    output::claim(&a.output, Product::TileDir, &[&a.input], false)?;
-    report::remove_stale_temporaries(&a.output)?;
+    let claim = report::claim(&a.output, Product::TileDir, &[&a.input], false)?;
     let watch = report::Watch::new(pack.header().index_count, a.quiet)?;
-    let count = repack::unpack(&pack, &a.output, &watch);
+    let count = repack::unpack(&pack, &claim, &watch);
     watch.bar.finish_and_clear();
     let count = count?;
     if !a.quiet {

@@ -11,7 +11,7 @@ use clap::Args;
 use vortex_gpu::{Gpu, Loader, Runtime, SampleFilter, Scene};
 use vortex_tiler::error::TilerError;
 use vortex_tiler::limits::Limits;
-use vortex_tiler::output::{self, Product, staging};
+use vortex_tiler::output::{Product, staging};
 use vortex_vt::sampler::Rgba8Image;
 
 use super::{report, signals};
@@ -107,12 +107,10 @@ pub fn run(a: RenderArgs) -> Result<()> {
     Limits::default().check_frames(scene.frames as u64)?;
     let inputs: Vec<&Path> = scene.textures.iter().map(PathBuf::as_path).chain(a.scene.as_deref()).collect();
     if let Some(path) = &a.report {
-        output::claim(path, Product::Report, &inputs, a.force)?;
-        report::remove_stale_temporaries(path)?;
+        report::claim(path, Product::Report, &inputs, a.force)?;
     }
     if let Some(dir) = &a.frames {
-        output::claim(dir, Product::Frames, &inputs, false)?;
-        report::remove_stale_temporaries(dir)?;
+        report::claim(dir, Product::Frames, &inputs, false)?;
     }
     signals::install().context("installing signal handlers")?;
 

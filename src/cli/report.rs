@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
-use vortex_tiler::output::staging;
+use vortex_tiler::output::{self, Claim, Product, staging};
 use vortex_tiler::split::{Progress, Summary};
 
 use super::signals;
@@ -31,15 +31,16 @@ impl Progress for Watch {
     }
 }
 
-/// Removes what dead runs left while writing `dest` and says so: a run killed outright (power
-/// loss, SIGKILL) cannot clean up after itself.
-pub fn remove_stale_temporaries(dest: &Path) -> Result<()> {
+/// Claims `dest` for `product` (see `output::claim`), then removes what dead runs left while
+/// writing it and says so: a run killed outright (power loss, SIGKILL) cannot clean up.
+pub fn claim(dest: &Path, product: Product, inputs: &[&Path], force: bool) -> Result<Claim> {
+    let claim = output::claim(dest, product, inputs, force)?;
     let removed = staging::remove_stale(dest)
         .with_context(|| format!("removing temporaries that earlier runs left beside {}", dest.display()))?;
     for path in removed {
         eprintln!("note: removed {}, left by a run that did not finish", path.display());
     }
-    Ok(())
+    Ok(claim)
 }
 
 /// A progress bar on stderr counting `unit` (`tiles`, `frames`), with a rate and an ETA; hidden

@@ -9,7 +9,7 @@ use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
 use vortex_tiler::layout::Layout;
 use vortex_tiler::limits::Limits;
-use vortex_tiler::output::{self, Existing, Product};
+use vortex_tiler::output::{Existing, Product};
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::pyramid::Filter;
 use vortex_tiler::settings::{self, CodecChoice, Requested};
@@ -200,8 +200,7 @@ pub fn tile(
         (None, Some(file)) => (file, Product::Pack),
         (None, None) => unreachable!("clap requires --output or --pack"),
     };
-    let claim = output::claim(dest, product, &[input], a.force)?;
-    report::remove_stale_temporaries(dest)?;
+    let claim = report::claim(dest, product, &[input], a.force)?;
     // A previous output directory's info.json sets this run's defaults (the original tool's
     // way of configuring a run); the claim above made sure the directory is ours.
     let info_path = (product == Product::TileDir && claim.replaces == Some(Existing::Ours))
@@ -251,7 +250,7 @@ pub fn tile(
     let watch = report::Watch::new(layout.total_tiles(), a.quiet)?;
     let (summary, destination) = match (&a.output, &a.pack) {
         (Some(dir), _) => {
-            let sink = DirSink::create(dir, names)?;
+            let sink = DirSink::create(&claim, names)?;
             let result = pool.install(|| split::split(source, &sink, &opts, &watch));
             watch.bar.finish_and_clear();
             match result {

@@ -55,28 +55,15 @@ impl Product {
 }
 
 fn recognise_pack(path: &Path) -> Result<(), String> {
-    let mut head = [0u8; 8];
-    let n = fs::File::open(path)
-        .and_then(|mut f| read_up_to(&mut f, &mut head))
-        .map_err(|e| format!("unreadable ({e})"))?;
-    if n == 0 {
+    let mut head = Vec::with_capacity(8);
+    fs::File::open(path).and_then(|f| f.take(8).read_to_end(&mut head)).map_err(|e| format!("unreadable ({e})"))?;
+    if head.is_empty() {
         return Err("an empty file".into());
     }
-    if head[..n] != vortex_pack::format::MAGIC[..] {
+    if head[..] != vortex_pack::format::MAGIC[..] {
         return Err("a file without a pack's signature".into());
     }
     Ok(())
-}
-
-fn read_up_to(f: &mut fs::File, buf: &mut [u8]) -> std::io::Result<usize> {
-    let mut n = 0;
-    while n < buf.len() {
-        match f.read(&mut buf[n..])? {
-            0 => break,
-            k => n += k,
-        }
-    }
-    Ok(n)
 }
 
 fn recognise_report(path: &Path) -> Result<(), String> {

@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::TileSink;
 use crate::error::{Result, TilerError};
-use crate::output::{self, Product, staging};
+use crate::output::{Claim, Product, staging};
 use crate::tile_dir::filename::FilenameFormat;
 use crate::tile_dir::info::Info;
 
@@ -25,10 +25,17 @@ pub struct DirSink {
 }
 
 impl DirSink {
-    /// Prepares to write into `dest`, which must be absent, empty, or a previous output of
-    /// ours (see [`output::claim`]); anything else is refused rather than replaced.
-    pub fn create(dest: &Path, names: FilenameFormat) -> Result<DirSink> {
-        output::claim(dest, Product::TileDir, &[], false)?;
+    /// Prepares to write into the destination `claim` checked (see [`crate::output::claim`]): absent,
+    /// empty, or a previous output of ours, which `finish` replaces.
+    pub fn create(claim: &Claim, names: FilenameFormat) -> Result<DirSink> {
+        if claim.product != Product::TileDir {
+            return Err(TilerError::Options(format!(
+                "{} was claimed for {}",
+                claim.path.display(),
+                claim.product.noun()
+            )));
+        }
+        let dest = claim.path.as_path();
         let staging = staging::partial_path(dest);
         if staging.exists() {
             fs::remove_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;

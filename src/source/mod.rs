@@ -71,20 +71,47 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     if n == 0 {
         return Err(TilerError::decode(path, "the file is empty"));
     }
-    if magic.starts_with(b"\x89PNG\r\n\x1a\n") {
-        png::open(path, max_memory)
-    } else if magic.starts_with(b"II*\0")
-        || magic.starts_with(b"MM\0*")
-        || magic.starts_with(b"II+\0")
-        || magic.starts_with(b"MM\0+")
-    {
-        tiff::open(path, max_memory)
-    } else if magic.starts_with(b"\xff\xd8\xff") {
-        jpeg::open(path, max_memory)
-    } else if magic.len() >= 2 && magic[0] == b'P' && matches!(magic[1], b'5' | b'6') {
-        pnm::open(path)
-    } else {
-        whole::open(path, max_memory)
+    match Streamed::sniff(magic) {
+        Some(Streamed::Png) => png::open(path, max_memory),
+        Some(Streamed::Tiff) => tiff::open(path, max_memory),
+        Some(Streamed::Jpeg) => jpeg::open(path, max_memory),
+        Some(Streamed::Pnm) => pnm::open(path),
+        None => whole::open(path, max_memory),
+    }
+}
+
+/// The image formats read row by row, told apart by their first bytes (not the extension).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Streamed {
+    Png,
+    Tiff,
+    Jpeg,
+    Pnm,
+}
+
+impl Streamed {
+    /// The format whose signature `magic` (a file's first 8 bytes, or fewer) starts with.
+    pub fn sniff(magic: &[u8]) -> Option<Streamed> {
+        if magic.starts_with(b"\x89PNG\r\n\x1a\n") {
+            Some(Streamed::Png)
+        } else if [b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"].iter().any(|m| magic.starts_with(*m)) {
+            Some(Streamed::Tiff)
+        } else if magic.starts_with(b"\xff\xd8\xff") {
+            Some(Streamed::Jpeg)
+        } else if magic.len() >= 2 && magic[0] == b'P' && matches!(magic[1], b'5' | b'6') {
+            Some(Streamed::Pnm)
+        } else {
+            None
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Streamed::Png => "PNG",
+            Streamed::Tiff => "TIFF",
+            Streamed::Jpeg => "JPEG",
+            Streamed::Pnm => "PNM",
+        }
     }
 }
 

@@ -6,6 +6,7 @@ use std::process::Command;
 use crate::common::{Image, MemSink, layouts, png_options};
 use proptest::prelude::*;
 use vortex_tiler::background::Background;
+use vortex_tiler::output::{self, Product};
 use vortex_tiler::settings::describe;
 use vortex_tiler::sink::DirSink;
 use vortex_tiler::source::tiled::{NamedDir, SplitOutput, TileGrid, TiledSource};
@@ -27,7 +28,8 @@ fn split_to_memory(source: Box<dyn vortex_tiler::source::RowSource>, tile: u32, 
 fn split_to_dir(image: &Image, dir: &Path, tile: u32, border: u32) {
     let opts = png_options(tile, border, Background::Edge);
     let names = FilenameFormat::parse("lod%1$02s-x%2$04s-y%3$04s.png", 3).unwrap();
-    let sink = DirSink::create(dir, names.clone()).unwrap();
+    let claim = output::claim(dir, Product::TileDir, &[], false).unwrap();
+    let sink = DirSink::create(&claim, names.clone()).unwrap();
     let summary = split(image.source(), &sink, &opts, &()).unwrap();
     let info: InfoFile = describe(&summary.layout, summary.stored, &opts, &names);
     sink.finish(&info).unwrap();
