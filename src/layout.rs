@@ -1,5 +1,12 @@
-//! Geometry of the virtual texture: how an image of `width x height` texels maps onto a
-//! square, power-of-two grid of pages at every LOD.
+//! Geometry of the virtual texture: how an image of `width x height` texels maps onto a grid
+//! of pages at every LOD.
+//!
+//! Each axis has its own page count: LOD 0 has `ceil(w / P)` x `ceil(h / P)` pages (P the
+//! payload), LOD k's image is `ceil(w / 2^k)` x `ceil(h / 2^k)` texels in
+//! `ceil(w_k / P)` x `ceil(h_k / P)` pages, and the last LOD is the first with a single page.
+//! Because nested ceilings compose (`ceil(ceil(n / P) / 2) = ceil(n / 2P)`), LOD k has
+//! `ceil(pages_0 / 2^k)` pages per axis and page (x, y)'s parent is (x / 2, y / 2), as in a
+//! square quadtree; only the pages that would lie wholly outside the image are gone.
 //!
 //! Every size is checked before it is multiplied, and everything that can exceed 2^32 is a
 //! `u64`, so absurd headers are refused here instead of overflowing later.
@@ -10,16 +17,19 @@ use crate::error::TilerError;
 /// (65535 * 4^24 < 2^64) and is far beyond what any image format here can describe.
 pub const MAX_SIDE: u64 = 1 << 24;
 
-/// The page grid of a virtual texture (the thesis's layout): `tile_count` pages per side at
-/// LOD 0, halving per LOD down to one page; each stored page is `tile_size` texels per side,
-/// of which `payload = tile_size - 2 * border` are its own and the rest copied from neighbours.
+/// The page grid of a virtual texture: `columns` x `rows` pages at LOD 0, halving (rounding
+/// up) per LOD down to one page; each stored page is `tile_size` texels per side, of which
+/// `payload = tile_size - 2 * border` are its own and the rest copied from neighbours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Layout {
     pub width: u32,
     pub height: u32,
     pub tile_size: u32,
     pub border: u32,
-    pub tile_count: u32,
+    /// Pages per row at LOD 0.
+    pub columns: u32,
+    /// Page rows at LOD 0.
+    pub rows: u32,
     pub lod_count: u32,
 }
 
@@ -41,18 +51,10 @@ impl Layout {
                 "border {border} leaves no room in a {tile_size}-texel tile (payload = tile size - 2 x border must be at least 4)"
             ))
         })?;
-        let pages = width.max(height).div_ceil(payload as u64);
-        let tile_count = pages.next_power_of_two();
-        let lod_count = tile_count.trailing_zeros() + 1;
-        Ok(Layout {
-            width: width as u32,
-            height: height as u32,
-            tile_size,
-            border,
-            tile_count: u32::try_from(tile_count)
-                .map_err(|_| TilerError::Geometry(format!("{tile_count} pages per side do not fit the page grid")))?,
-            lod_count,
-        })
+        // MAX_SIDE / 4 pages per axis at most: every count below fits a u32.
+        let (columns, rows) = (width.div_ceil(payload as u64) as u32, height.div_ceil(payload as u64) as u32);
+        let lod_count = columns.max(rows).next_power_of_two().trailing_zeros() + 1;
+        Ok(Layout { width: width as u32, height: height as u32, tile_size, border, columns, rows, lod_count })
     }
 
     /// Texels of a page that are its own (the stored tile minus the borders).
@@ -60,14 +62,23 @@ impl Layout {
         self.tile_size - 2 * self.border
     }
 
-    /// Pages per side at `lod`.
-    pub fn tiles_per_side(&self, lod: u32) -> u32 {
-        self.tile_count >> lod
+    /// Pages per row and page rows at `lod`: `ceil(pages_0 / 2^lod)` per axis.
+    pub fn grid(&self, lod: u32) -> (u32, u32) {
+        let shrink = |pages: u32| (((pages as u64) + (1u64 << lod) - 1) >> lod) as u32;
+        (shrink(self.columns), shrink(self.rows))
     }
 
-    /// Side of the (square, padded) virtual texture at `lod`, in texels.
-    pub fn virtual_side(&self, lod: u32) -> u64 {
-        self.tiles_per_side(lod) as u64 * self.payload() as u64
+    /// Width and height of the virtual texture at `lod` (its pages' payloads side by side), in
+    /// texels: the real image plus the padding of the last page of each row and column.
+    pub fn virtual_extent(&self, lod: u32) -> (u64, u64) {
+        let (c, r) = self.grid(lod);
+        (c as u64 * self.payload() as u64, r as u64 * self.payload() as u64)
+    }
+
+    /// The thesis's `tileCount` (pages per side of a square power-of-two grid), for the grids
+    /// that are one; other grids have no such number.
+    pub fn square_tile_count(&self) -> Option<u32> {
+        (self.columns == self.rows && self.columns.is_power_of_two()).then_some(self.columns)
     }
 
     /// Width and height of the real image at `lod`: `ceil(size / 2^lod)`.
@@ -76,9 +87,22 @@ impl Layout {
         (shrink(self.width), shrink(self.height))
     }
 
+    /// The pack's level table for this grid (docs/pack-format.md), LOD 0 first.
+    pub fn pack_levels(&self) -> Vec<vortex_pack::Level> {
+        let mut first_entry = 0;
+        (0..self.lod_count)
+            .map(|lod| {
+                let ((tiles_w, tiles_h), (width, height)) = (self.grid(lod), self.level_extent(lod));
+                let level = vortex_pack::Level { tiles_w, tiles_h, first_entry, width, height };
+                first_entry += tiles_w as u64 * tiles_h as u64;
+                level
+            })
+            .collect()
+    }
+
     /// Number of stored tiles over all LODs.
     pub fn total_tiles(&self) -> u64 {
-        (0..self.lod_count).map(|l| (self.tiles_per_side(l) as u64).pow(2)).sum()
+        (0..self.lod_count).map(|l| self.grid(l)).map(|(c, r)| c as u64 * r as u64).sum()
     }
 
     /// Texels of one stored tile.
@@ -96,16 +120,34 @@ mod tests {
     fn thesis_example() {
         // 65536^2 texels in 128-texel pages: 512 pages per side, 10 LODs.
         let l = Layout::new(65536, 65536, 128, 0).unwrap();
-        assert_eq!((l.tile_count, l.lod_count), (512, 10));
-        // id Tech 5 pages: 120 payload + 4 border; 65536 / 120 = 546.1 -> 547 -> 1024.
+        assert_eq!((l.columns, l.rows, l.lod_count, l.square_tile_count()), (512, 512, 10, Some(512)));
+        // id Tech 5 pages: 120 payload + 4 border; 65536 / 120 = 546.1 -> 547 pages, 11 LODs.
         let l = Layout::new(65536, 65536, 128, 4).unwrap();
-        assert_eq!((l.payload(), l.tile_count, l.lod_count), (120, 1024, 11));
+        assert_eq!((l.payload(), l.columns, l.lod_count, l.square_tile_count()), (120, 547, 11, None));
+        assert_eq!(l.grid(10), (1, 1));
+    }
+
+    #[test]
+    fn grids_follow_the_image() {
+        // The examples: 700 x 500 in 128-texel pages is 6 x 4 pages, not 8 x 8.
+        let l = Layout::new(700, 500, 128, 0).unwrap();
+        assert_eq!((l.grid(0), l.grid(1), l.grid(2), l.grid(3), l.lod_count), ((6, 4), (3, 2), (2, 1), (1, 1), 4));
+        assert_eq!(l.total_tiles(), 24 + 6 + 2 + 1);
+        // 16384 x 131072 in 256-texel pages: 64 x 512 pages at LOD 0 and 43,695 in all,
+        // where the square grid had 349,525.
+        let l = Layout::new(16384, 131072, 256, 0).unwrap();
+        assert_eq!((l.columns, l.rows, l.lod_count), (64, 512, 10));
+        assert_eq!(l.total_tiles(), 43_695);
+        // 16,000,000 x 1: one page row at every LOD.
+        let l = Layout::new(16_000_000, 1, 256, 0).unwrap();
+        assert_eq!((l.columns, l.rows, l.lod_count), (62_500, 1, 17));
+        assert_eq!(l.total_tiles(), 125_007);
     }
 
     #[test]
     fn one_pixel_is_one_page() {
         let l = Layout::new(1, 1, 128, 4).unwrap();
-        assert_eq!((l.tile_count, l.lod_count, l.total_tiles()), (1, 1, 1));
+        assert_eq!((l.columns, l.rows, l.lod_count, l.total_tiles()), (1, 1, 1, 1));
         assert_eq!(l.level_extent(0), (1, 1));
     }
 
@@ -123,24 +165,32 @@ mod tests {
     fn largest_side_has_no_overflow() {
         let l = Layout::new(MAX_SIDE, MAX_SIDE, 8, 2).unwrap();
         assert_eq!(l.payload(), 4);
-        assert_eq!(l.tile_count, 1 << 22);
-        assert_eq!(l.virtual_side(0), 1 << 24);
+        assert_eq!((l.columns, l.square_tile_count()), (1 << 22, Some(1 << 22)));
+        assert_eq!(l.virtual_extent(0), (1 << 24, 1 << 24));
         assert!(l.total_tiles() > u32::MAX as u64);
     }
 
     proptest! {
         #[test]
-        fn grid_covers_image(w in 1u64..100_000, h in 1u64..100_000, tile in 8u32..600, b in 0u32..8) {
+        fn grid_covers_image_and_nothing_more(w in 1u64..100_000, h in 1u64..100_000, tile in 8u32..600, b in 0u32..8) {
             prop_assume!(tile >= 2 * b + 4);
             let l = Layout::new(w, h, tile, b).unwrap();
-            prop_assert!(l.tile_count.is_power_of_two());
-            prop_assert!(l.virtual_side(0) >= w.max(h));
-            // Half the grid would not cover the image (the count is the smallest power of two).
-            prop_assert!(l.tile_count == 1 || (l.tile_count as u64 / 2) * (l.payload() as u64) < w.max(h));
+            let p = l.payload() as u64;
+            for lod in 0..l.lod_count {
+                let (c, r) = l.grid(lod);
+                let (lw, lh) = l.level_extent(lod);
+                // Every page holds some of the image, and the pages hold all of it.
+                prop_assert_eq!((c as u64, r as u64), ((lw as u64).div_ceil(p), (lh as u64).div_ceil(p)));
+                // The quadtree: a level's pages are its parents' children.
+                if lod > 0 {
+                    let (pc, pr) = l.grid(lod - 1);
+                    prop_assert_eq!((c, r), (pc.div_ceil(2), pr.div_ceil(2)));
+                }
+            }
             let last = l.lod_count - 1;
-            prop_assert_eq!(l.tiles_per_side(last), 1);
-            let (lw, lh) = l.level_extent(last);
-            prop_assert!(lw as u64 <= l.payload() as u64 && lh as u64 <= l.payload() as u64);
+            prop_assert_eq!(l.grid(last), (1, 1));
+            // The last LOD is the first with a single page.
+            prop_assert!(last == 0 || l.grid(last - 1) != (1, 1));
         }
     }
 }

@@ -65,7 +65,7 @@ impl Limits {
         if tiles > self.tiles {
             return Err(TilerError::Limit(format!(
                 "the pyramid has {tiles} tiles ({} LODs of up to {} x {} tiles), more than the {} a pyramid may have; a larger tile size gives fewer",
-                layout.lod_count, layout.tile_count, layout.tile_count, self.tiles
+                layout.lod_count, layout.columns, layout.rows, self.tiles
             )));
         }
         if pack {
@@ -131,9 +131,9 @@ impl Limits {
 
 /// Bytes the banded pipeline holds at once for `layout`, rounded up generously.
 pub fn pipeline_bytes(layout: &Layout, texel_bytes: u64) -> u64 {
-    let width = layout.virtual_side(0).min(layout.width as u64 + layout.tile_size as u64);
+    let width = layout.virtual_extent(0).0;
     let tile = layout.tile_size as u64;
-    let pages_per_row = layout.tile_count as u64;
+    let pages_per_row = layout.columns as u64;
     // Bands: (T + 1) rows per LOD, summing to under twice LOD 0's.
     let bands = 2 * (tile + 1) * width * texel_bytes;
     // Exact sums: one row of u64 (or u128) per sample per LOD.
@@ -160,11 +160,16 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_wide_strip_is_refused_before_allocation() {
-        // 16000000 x 1 in 128-texel pages: a square grid of 131072 pages per side.
-        let layout = Layout::new(16_000_000, 1, 128, 0).unwrap();
+    fn too_many_tiles_are_refused_before_allocation() {
+        // 2^24 texels per side in 4-texel payloads: 2^44 / 3 tiles.
+        let layout = Layout::new(1 << 24, 1 << 24, 8, 2).unwrap();
         let e = Limits::default().check_pyramid(&layout, true).unwrap_err().to_string();
         assert!(e.contains("tiles") && e.contains("tile size"), "{e}");
+        // A wide strip has a strip of pages: 16000000 x 1 in 128-texel pages is 250,007 tiles,
+        // where the square grid had 131072^2 at LOD 0 alone.
+        let strip = Layout::new(16_000_000, 1, 128, 0).unwrap();
+        assert_eq!(strip.total_tiles(), 250_007);
+        Limits::default().check_pyramid(&strip, true).unwrap();
     }
 
     #[test]

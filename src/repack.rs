@@ -9,12 +9,10 @@
 use std::path::Path;
 
 use rayon::prelude::*;
-use vortex_pack::format::pyramid_levels;
-use vortex_pack::{Description, NewTile, Pack, PackWriter, Tile, TileId, TileKind, WriteOptions, WriteSummary};
+use vortex_pack::{Description, Level, NewTile, Pack, PackWriter, Tile, TileId, TileKind, WriteOptions, WriteSummary};
 
 use crate::codec::{Codec, TileEncoder};
 use crate::error::{Result, TilerError};
-use crate::layout::Layout;
 use crate::output::Claim;
 use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::settings::DEFAULT_FILENAME_STEM;
@@ -25,12 +23,12 @@ use crate::tile_dir::filename::FilenameFormat;
 use crate::tile_dir::info::InfoFile;
 use crate::tile_dir::{TiledDir, codec_of, layout_of};
 
-/// Every tile, coarsest level first, each level in raster order (rows top down). Raster
-/// beats Morton order for rectangular views (`bench/order-locality.py`, docs/pack-format.md).
-pub fn pack_order(tile_count: u32, lod_count: u32) -> impl Iterator<Item = TileId> {
-    (0..lod_count).rev().flat_map(move |lod| {
-        let n = tile_count >> lod;
-        (0..n).flat_map(move |y| (0..n).map(move |x| TileId { lod, x, y }))
+/// Every tile of `levels`, coarsest level first, each level in raster order (rows top down).
+/// Raster beats Morton order for rectangular views (`bench/order-locality.py`,
+/// docs/pack-format.md).
+pub fn pack_order(levels: &[Level]) -> impl Iterator<Item = TileId> + '_ {
+    levels.iter().enumerate().rev().flat_map(|(lod, l)| {
+        (0..l.tiles_h).flat_map(move |y| (0..l.tiles_w).map(move |x| TileId { lod: lod as u32, x, y }))
     })
 }
 
@@ -50,11 +48,10 @@ pub fn pack_dir(
             _ => reencode_dir::<u8>(dir, &t, dest, options, codec, progress),
         };
     }
-    let levels = pyramid_levels(&t.description, t.tile_count);
     let metadata = t.info.to_json_pretty();
-    let mut writer = PackWriter::create(dest, t.description, levels, metadata.as_bytes(), options)?;
+    let mut writer = PackWriter::create(dest, t.description, t.levels.clone(), metadata.as_bytes(), options)?;
     let kind = tile_kind(t.codec);
-    for id in pack_order(t.tile_count, t.description.level_count) {
+    for id in pack_order(&t.levels) {
         if progress.cancelled() {
             return Err(TilerError::Interrupted);
         }
@@ -157,11 +154,11 @@ fn reencode_dir<T: Sample>(
     info.png_compression = described.png_compression;
     info.zstd_level = described.zstd_level;
     info.bc7_effort = described.bc7_effort;
-    let levels = pyramid_levels(&description, t.tile_count);
-    let mut writer = PackWriter::create(dest, description, levels, info.to_json_pretty().as_bytes(), options)?;
+    let mut writer =
+        PackWriter::create(dest, description, t.levels.clone(), info.to_json_pretty().as_bytes(), options)?;
     let (from, to) = (tile_kind(t.codec), tile_kind(codec));
     let channels = layout.channels.count();
-    let ids: Vec<TileId> = pack_order(t.tile_count, t.description.level_count).collect();
+    let ids: Vec<TileId> = pack_order(&t.levels).collect();
     for chunk in ids.chunks(REENCODE_CHUNK) {
         if progress.cancelled() {
             return Err(TilerError::Interrupted);
@@ -299,6 +296,14 @@ pub fn unpack(pack: &Pack, dir: &Claim, progress: &dyn Progress) -> Result<u64> 
     }
 }
 
+/// A square grid's side as `tileCount` gives it, or what the grid is when it is not square.
+fn square_side(lod0: Level) -> String {
+    match lod0.tiles_w == lod0.tiles_h {
+        true => lod0.tiles_w.to_string(),
+        false => format!("a grid of {} x {} tiles", lod0.tiles_w, lod0.tiles_h),
+    }
+}
+
 /// Refuses a pack whose metadata (the `info.json` that `unpack` writes) contradicts its
 /// header: the files must be described by what they are, not by what the metadata claims.
 fn check_metadata(pack: &Pack, info: &InfoFile, codec: Option<Codec>, extension: Option<String>) -> Result<()> {
@@ -310,14 +315,16 @@ fn check_metadata(pack: &Pack, info: &InfoFile, codec: Option<Codec>, extension:
             "says {claimed} but the pack's header says {actual}; the pack was altered or written by another tool"
         ),
     };
-    let grid = Layout::new(d.width as u64, d.height as u64, d.tile_size, d.border)?;
+    let lod0 = pack.levels()[0];
     let stored = layout_of(d);
-    let members: [(&str, Option<String>, String); 8] = [
+    let members: [(&str, Option<String>, String); 10] = [
         ("tileSize", info.tile_size.map(|v| v.to_string()), d.tile_size.to_string()),
         ("border", info.border.map(|v| v.to_string()), d.border.to_string()),
         ("width", info.width.map(|v| v.to_string()), d.width.to_string()),
         ("height", info.height.map(|v| v.to_string()), d.height.to_string()),
-        ("tileCount", info.tile_count.map(|v| v.to_string()), grid.tile_count.to_string()),
+        ("tileColumns", info.tile_columns.map(|v| v.to_string()), lod0.tiles_w.to_string()),
+        ("tileRows", info.tile_rows.map(|v| v.to_string()), lod0.tiles_h.to_string()),
+        ("tileCount", info.tile_count.map(|v| v.to_string()), square_side(lod0)),
         ("lodCount", info.lod_count.map(|v| v.to_string()), d.level_count.to_string()),
         ("tileFormat", info.tile_format.clone(), stored.channels.tile_format().to_string()),
         ("tileType", info.tile_type.clone(), stored.depth.tile_type().to_string()),
@@ -354,16 +361,20 @@ fn encode_constant<T: Sample>(codec: Codec, layout: PixelLayout, side: u32, texe
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::layout::Layout;
 
     #[test]
     fn coarse_levels_come_first() {
-        let ids: Vec<TileId> = pack_order(4, 3).collect();
-        assert_eq!(ids.len(), 1 + 4 + 16);
-        assert_eq!(ids[0], TileId { lod: 2, x: 0, y: 0 });
+        // A 5 x 3 page grid: 5 x 3, 3 x 2, 2 x 1, 1 x 1.
+        let levels = Layout::new(50, 30, 14, 2).unwrap().pack_levels();
+        let ids: Vec<TileId> = pack_order(&levels).collect();
+        assert_eq!(ids.len(), 1 + 2 + 6 + 15);
+        assert_eq!(ids[0], TileId { lod: 3, x: 0, y: 0 });
+        assert_eq!(ids[1..3].iter().map(|i| (i.lod, i.x, i.y)).collect::<Vec<_>>(), vec![(2, 0, 0), (2, 1, 0)]);
         assert_eq!(
-            ids[1..5].iter().map(|i| (i.lod, i.x, i.y)).collect::<Vec<_>>(),
-            vec![(1, 0, 0), (1, 1, 0), (1, 0, 1), (1, 1, 1)]
+            ids[3..6].iter().map(|i| (i.lod, i.x, i.y)).collect::<Vec<_>>(),
+            vec![(1, 0, 0), (1, 1, 0), (1, 2, 0)]
         );
-        assert_eq!(ids[20], TileId { lod: 0, x: 3, y: 3 });
+        assert_eq!(ids[23], TileId { lod: 0, x: 4, y: 2 });
     }
 }

@@ -215,7 +215,7 @@ pub fn changed_by_file(
     this_run: &InfoFile,
 ) -> Vec<String> {
     // Derived from the grid, which tileSize and border already show.
-    const DERIVED: [&str; 5] = ["formatVersion", "width", "height", "tileCount", "lodCount"];
+    const DERIVED: [&str; 7] = ["formatVersion", "width", "height", "tileCount", "tileColumns", "tileRows", "lodCount"];
     let without_file = resolve(req, None, source).and_then(|(opts, names)| {
         let layout = Layout::new(width as u64, height as u64, opts.tile_size, opts.border)?;
         let stored = opts.codec.stored_layout(source, opts.flatten, opts.tile_depth)?;
@@ -242,9 +242,15 @@ pub fn check_grid(info_path: &Path, info: &InfoFile, req: &Requested, layout: &L
     if req.tile_size.is_some() || req.border.is_some() {
         return Ok(());
     }
-    for (field, old, new) in
-        [("tileCount", info.tile_count, layout.tile_count), ("lodCount", info.lod_count, layout.lod_count)]
-    {
+    // An older file's square `tileCount` is the side of the smallest power-of-two square
+    // grid holding this one; it has one LOD per halving, as this grid does.
+    let square_side = 1 << (layout.lod_count - 1);
+    for (field, old, new) in [
+        ("tileColumns", info.tile_columns, layout.columns),
+        ("tileRows", info.tile_rows, layout.rows),
+        ("tileCount", info.tile_count, square_side),
+        ("lodCount", info.lod_count, layout.lod_count),
+    ] {
         if let Some(old) = old.filter(|o| *o != new) {
             return Err(TilerError::Info {
                 path: info_path.to_path_buf(),
@@ -350,7 +356,9 @@ pub fn describe(l: &Layout, stored: PixelLayout, opts: &SplitOptions, names: &Fi
     InfoFile {
         format_version: Some(FORMAT_VERSION),
         tile_size: Some(l.tile_size),
-        tile_count: Some(l.tile_count),
+        tile_count: l.square_tile_count(),
+        tile_columns: Some(l.columns),
+        tile_rows: Some(l.rows),
         lod_count: Some(l.lod_count),
         tile_format: Some(stored.channels.tile_format().into()),
         tile_type: Some(stored.depth.tile_type().into()),

@@ -102,8 +102,7 @@ pub fn run_pack(a: PackArgs) -> Result<()> {
         true => Some(settings::resolve_codec(&a.enc.requested(), &a.input.join("info.json"), &t.info, t.layout())?),
         false => None,
     };
-    let total = (0..t.description.level_count).map(|l| ((t.tile_count >> l) as u64).pow(2)).sum();
-    let watch = report::Watch::new(total, a.quiet)?;
+    let watch = report::Watch::new(t.tile_total(), a.quiet)?;
     let written = repack::pack_dir(&a.input, &a.output, a.layout.options()?, codec, &watch);
     watch.bar.finish_and_clear();
     let written = written?;

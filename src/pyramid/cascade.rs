@@ -84,8 +84,9 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
             .map(|lod| {
                 let extent = layout.level_extent(lod);
                 let row_len = extent.0 as usize * channels;
-                let x_runs =
-                    (0..layout.tiles_per_side(lod)).map(|t| cut::runs(&layout, lod, t, extent.0, edge)).collect();
+                let (columns, _) = layout.grid(lod);
+                let virtual_width = layout.virtual_extent(lod).0;
+                let x_runs = (0..columns).map(|t| cut::runs(&layout, t, extent.0, virtual_width, edge)).collect();
                 let down = (lod + 1 < layout.lod_count).then(|| {
                     if filter.is_exact() {
                         let (w, h) = (layout.width as u64, layout.height as u64);
@@ -97,7 +98,7 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
                 Level {
                     lod,
                     extent,
-                    band: Band::new(row_len, layout.tile_size as usize + 1),
+                    band: Band::new(row_len, (layout.tile_size + 1).min(extent.1) as usize),
                     next_tile_row: 0,
                     x_runs,
                     down,
@@ -201,41 +202,30 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
 
 impl<T: Sample, A> Level<T, A> {
     /// Cuts every tile row whose rows are all in the band, then drops rows no longer needed.
-    #[expect(clippy::expect_used, reason = "a cascade has one level per LOD and the callers index within them")]
     fn cut_ready(&mut self, cutter: &Cutter<T>) -> Result<()> {
         let Cutter { layout, channels, padding, out } = *cutter;
         let (_, height) = self.extent;
-        let rows = layout.tiles_per_side(self.lod);
-        while self.next_tile_row < rows
-            && self.band.end() > cut::last_row_needed(layout, self.lod, self.next_tile_row, height)
-        {
+        let (_, rows) = layout.grid(self.lod);
+        let virtual_height = layout.virtual_extent(self.lod).1;
+        while self.next_tile_row < rows && self.band.end() > cut::last_row_needed(layout, self.next_tile_row, height) {
             let ty = self.next_tile_row;
-            // Rows of tiles entirely below the image are all alike (they repeat the last image
-            // row, or are background): cut the first, and give it the places of all the others.
-            let below_image = cut::first_row_needed(layout, ty) >= height as i64;
-            let row_span = if below_image { ty..rows } else { ty..ty + 1 };
-            let y_runs = cut::runs(layout, self.lod, ty, height, *padding == Padding::Edge);
+            let y_runs = cut::runs(layout, ty, height, virtual_height, *padding == Padding::Edge);
             let mut tiles: Vec<CutTile<T>> = Vec::new();
             let mut texels = Vec::with_capacity(layout.tile_texels() * channels);
             for (tx, x_runs) in self.x_runs.iter().enumerate() {
-                let places = row_span.clone().map(|y| (tx as u32, y));
-                // Columns of tiles right of the image read the same texels as their left neighbour.
-                if tx > 0 && self.x_runs[tx - 1] == *x_runs {
-                    tiles.last_mut().expect("a tile left of this one").places.extend(places);
-                    continue;
-                }
                 cut::cut_tile(&self.band, channels, x_runs, &y_runs, padding, &mut texels);
+                // Neighbours with the same texels (most often one colour) share one encoding.
                 match tiles.last_mut() {
-                    Some(prev) if prev.texels == texels => prev.places.extend(places),
+                    Some(prev) if prev.texels == texels => prev.places.push((tx as u32, ty)),
                     _ => {
                         let full = std::mem::replace(&mut texels, Vec::with_capacity(layout.tile_texels() * channels));
-                        tiles.push(CutTile { texels: full, places: places.collect() })
+                        tiles.push(CutTile { texels: full, places: vec![(tx as u32, ty)] })
                     }
                 }
             }
             out.send(Ok(Batch { lod: self.lod, tiles }))
                 .map_err(|_| TilerError::Options("the encoder stopped".into()))?;
-            self.next_tile_row = row_span.end;
+            self.next_tile_row = ty + 1;
             self.band.drop_before(cut::first_row_kept(layout, ty, height));
         }
         Ok(())

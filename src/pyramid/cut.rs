@@ -1,9 +1,9 @@
 //! Cutting stored tiles (payload plus borders) out of a band.
 //!
 //! A stored tile at `(x, y)` of LOD k covers virtual texels `[x*P - B, x*P + P + B)` in both
-//! directions. Coordinates outside the virtual texture repeat its edge texels; coordinates in
-//! the padding between the image and the virtual edge repeat the image's last texel ("edge")
-//! or take the background colour. Each direction is precomputed once per tile column or row as
+//! directions. Coordinates outside the virtual texture (its page grid) repeat its edge texels;
+//! coordinates in the padding between the image and the virtual edge (inside the last page of
+//! a row or column) repeat the image's last texel ("edge") or take the background colour. Each direction is precomputed once per tile column or row as
 //! a few runs, so cutting is mostly `memcpy`.
 
 use crate::layout::Layout;
@@ -29,10 +29,11 @@ pub enum Padding<T> {
     Colour(Vec<T>),
 }
 
-/// The runs for tile index `t` along a direction where the level's image has `extent` texels.
-pub fn runs(layout: &Layout, lod: u32, t: u32, extent: u32, edge_padding: bool) -> Vec<Run> {
+/// The runs for tile index `t` along a direction where the level's image has `extent` texels
+/// and its virtual texture `virtual_len` (the pages' payloads side by side).
+pub fn runs(layout: &Layout, t: u32, extent: u32, virtual_len: u64, edge_padding: bool) -> Vec<Run> {
     let p = layout.payload() as i64;
-    let last_virtual = layout.virtual_side(lod) as i64 - 1;
+    let last_virtual = virtual_len as i64 - 1;
     let start = t as i64 * p - layout.border as i64;
     let mut out: Vec<Run> = Vec::new();
     for i in 0..layout.tile_size as i64 {
@@ -117,11 +118,6 @@ pub fn cut_tile<T: Copy>(
     }
 }
 
-/// First virtual row that tile row `t` reads (negative rows are the top border's clamp).
-pub fn first_row_needed(layout: &Layout, t: u32) -> i64 {
-    t as i64 * layout.payload() as i64 - layout.border as i64
-}
-
 /// Appends `len` copies of `texel`, doubling what is already written instead of copying
 /// one texel at a time.
 fn repeat_texel<T: Copy>(out: &mut Vec<T>, texel: &[T], len: u32) {
@@ -138,9 +134,9 @@ fn repeat_texel<T: Copy>(out: &mut Vec<T>, texel: &[T], len: u32) {
 }
 
 /// Last image row (inclusive) that tile row `t` of a level with `extent` rows reads.
-pub fn last_row_needed(layout: &Layout, lod: u32, t: u32, extent: u32) -> u64 {
+pub fn last_row_needed(layout: &Layout, t: u32, extent: u32) -> u64 {
     let end = (t as u64 + 1) * layout.payload() as u64 + layout.border as u64;
-    (end - 1).min(layout.virtual_side(lod) - 1).min(extent as u64 - 1)
+    (end - 1).min(extent as u64 - 1)
 }
 
 /// First image row the tile rows after `t` still read.
@@ -166,15 +162,16 @@ mod tests {
     fn border_repeats_the_virtual_edge() {
         // 16-texel tiles, border 2: payload 12. A 20-texel image needs 2 pages.
         let l = Layout::new(20, 20, 16, 2).unwrap();
-        let r0 = runs(&l, 0, 0, 20, true);
+        let v = l.virtual_extent(0).0;
+        let r0 = runs(&l, 0, 20, v, true);
         let want: Vec<Option<u32>> = [0, 0, 0].into_iter().chain(1..14).map(Some).collect();
         assert_eq!(expand(&r0), want);
         assert_eq!(r0[0], Run::Repeat { at: 0, len: 3 });
         // Second tile: texels 10..26, the image ends at 19, the virtual texture at 23.
-        let edge = expand(&runs(&l, 0, 1, 20, true));
+        let edge = expand(&runs(&l, 1, 20, v, true));
         let want: Vec<Option<u32>> = (10..20).chain([19; 6]).map(Some).collect();
         assert_eq!(edge, want);
-        let bg = expand(&runs(&l, 0, 1, 20, false));
+        let bg = expand(&runs(&l, 1, 20, v, false));
         let want: Vec<Option<u32>> = (10..20).map(Some).chain([None; 6]).collect();
         assert_eq!(bg, want);
     }
@@ -183,7 +180,7 @@ mod tests {
     fn full_image_repeats_last_texel_not_background() {
         // 24 texels fill the virtual texture exactly: the right border repeats texel 23.
         let l = Layout::new(24, 24, 16, 2).unwrap();
-        let r = expand(&runs(&l, 0, 1, 24, false));
+        let r = expand(&runs(&l, 1, 24, l.virtual_extent(0).0, false));
         let want: Vec<Option<u32>> = (10..24).chain([23, 23]).map(Some).collect();
         assert_eq!(r, want);
     }

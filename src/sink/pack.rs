@@ -7,7 +7,6 @@
 use std::path::Path;
 use std::sync::Mutex;
 
-use vortex_pack::format::pyramid_levels;
 use vortex_pack::{Description, NewTile, PackWriter, TileId, TileKind, WriteOptions, WriteSummary};
 
 use super::TileSink;
@@ -57,7 +56,7 @@ impl PackSink {
         options: WriteOptions,
     ) -> Result<PackSink> {
         let d = description(layout, stored);
-        let writer = PackWriter::create(dest, d, pyramid_levels(&d, layout.tile_count), metadata, options)?;
+        let writer = PackWriter::create(dest, d, layout.pack_levels(), metadata, options)?;
         Ok(PackSink { writer: Mutex::new(writer), kind: tile_kind(codec) })
     }
 

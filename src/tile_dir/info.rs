@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Result, TilerError};
 
 /// The `formatVersion` this tool writes. Files without the member are the thesis's version 0.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Every member; on reading, all are optional (the thesis's files have only the first six).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -17,7 +17,16 @@ pub struct InfoFile {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub format_version: Option<u32>,
     pub tile_size: Option<u32>,
+    /// Pages per side of a square power-of-two grid: written only for such grids (the
+    /// thesis's layout), read from the files that have no `tileColumns`.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub tile_count: Option<u32>,
+    /// Pages per row at LOD 0 (since format version 2).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tile_columns: Option<u32>,
+    /// Page rows at LOD 0 (since format version 2).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tile_rows: Option<u32>,
     pub lod_count: Option<u32>,
     pub tile_format: Option<String>,
     pub tile_type: Option<String>,
@@ -65,6 +74,30 @@ impl InfoFile {
         if let Some(v) = self.format_version.filter(|v| *v > FORMAT_VERSION) {
             return Err(err("formatVersion", format!("{v} is newer than this tool understands ({FORMAT_VERSION})")));
         }
+        match (self.tile_columns, self.tile_rows) {
+            (Some(c), Some(r)) => {
+                if c == 0 || r == 0 {
+                    return Err(err(if c == 0 { "tileColumns" } else { "tileRows" }, "must be at least 1".into()));
+                }
+                let lods = lods_for(c.max(r));
+                if let Some(l) = self.lod_count.filter(|l| *l != lods) {
+                    return Err(err(
+                        "lodCount",
+                        format!(
+                            "{l} contradicts a grid of {c} x {r} pages (the first LOD of one page is {})",
+                            lods - 1
+                        ),
+                    ));
+                }
+                if let Some(t) = self.tile_count.filter(|t| (*t, *t) != (c, r)) {
+                    return Err(err("tileCount", format!("{t} contradicts tileColumns {c} and tileRows {r}")));
+                }
+                return Ok(());
+            }
+            (Some(_), None) => return Err(err("tileRows", "is required with tileColumns".into())),
+            (None, Some(_)) => return Err(err("tileColumns", "is required with tileRows".into())),
+            (None, None) => {}
+        }
         if let Some(c) = self.tile_count {
             if !c.is_power_of_two() {
                 return Err(err("tileCount", format!("{c} is not a power of two")));
@@ -82,12 +115,27 @@ impl InfoFile {
         Ok(())
     }
 
+    /// Pages per row and page rows at LOD 0: `tileColumns` and `tileRows`, or the square
+    /// `tileCount` of older files.
+    pub fn grid(&self) -> Option<(u32, u32)> {
+        match (self.tile_columns, self.tile_rows, self.tile_count) {
+            (Some(c), Some(r), _) => Some((c, r)),
+            (_, _, Some(t)) => Some((t, t)),
+            _ => None,
+        }
+    }
+
     #[expect(clippy::expect_used, reason = "plain data always serialises")]
     pub fn to_json_pretty(&self) -> String {
         let mut s = serde_json::to_string_pretty(self).expect("plain data serialises");
         s.push('\n');
         s
     }
+}
+
+/// LODs of a grid whose longer axis has `pages` pages at LOD 0: down to the first of one page.
+pub fn lods_for(pages: u32) -> u32 {
+    pages.next_power_of_two().trailing_zeros() + 1
 }
 
 #[cfg(test)]
@@ -101,7 +149,15 @@ mod tests {
         std::fs::write(&p, r#"{"tileSize":128,"tileCount":512,"lodCount":10,"tileFormat":"rgb","tileType":"unsignedByte","filenameFormat":"lod%1$02s-x%2$04s-y%3$04s.jpg"}"#).unwrap();
         let i = InfoFile::read(&p).unwrap();
         assert_eq!((i.tile_size, i.tile_count, i.lod_count), (Some(128), Some(512), Some(10)));
-        assert_eq!(i.format_version, None);
+        assert_eq!((i.format_version, i.grid()), (None, Some((512, 512))));
+    }
+
+    #[test]
+    fn reads_per_axis_grids() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("info.json");
+        std::fs::write(&p, r#"{"formatVersion":2,"tileColumns":6,"tileRows":4,"lodCount":4}"#).unwrap();
+        assert_eq!(InfoFile::read(&p).unwrap().grid(), Some((6, 4)));
     }
 
     #[test]
@@ -111,6 +167,12 @@ mod tests {
         std::fs::write(&p, r#"{"tileCount":512,"lodCount":9}"#).unwrap();
         let e = InfoFile::read(&p).unwrap_err().to_string();
         assert!(e.contains("lodCount") && e.contains("info.json"), "{e}");
+        std::fs::write(&p, r#"{"tileColumns":6,"tileRows":4,"lodCount":3}"#).unwrap();
+        let e = InfoFile::read(&p).unwrap_err().to_string();
+        assert!(e.contains("lodCount") && e.contains("6 x 4"), "{e}");
+        std::fs::write(&p, r#"{"tileColumns":6,"lodCount":4}"#).unwrap();
+        let e = InfoFile::read(&p).unwrap_err().to_string();
+        assert!(e.contains("tileRows"), "{e}");
         std::fs::write(&p, r#"{"tilesize":128}"#).unwrap();
         let e = InfoFile::read(&p).unwrap_err().to_string();
         assert!(e.contains("tilesize"), "{e}");

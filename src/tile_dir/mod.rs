@@ -9,20 +9,23 @@ pub mod info;
 
 use std::path::Path;
 
-use vortex_pack::Description;
+use vortex_pack::format::pyramid_levels;
+use vortex_pack::{Description, Level};
 
 use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling};
 use crate::error::{Result, TilerError};
+use crate::layout::Layout;
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::settings::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
 use filename::FilenameFormat;
-use info::{FORMAT_VERSION, InfoFile};
+use info::{FORMAT_VERSION, InfoFile, lods_for};
 
 /// A tiled directory's `info.json`, completed with defaults for the thesis's version-0 files.
 pub struct TiledDir {
     pub info: InfoFile,
     pub description: Description,
-    pub tile_count: u32,
+    /// The page grid of every LOD, as a pack's level table states it.
+    pub levels: Vec<Level>,
     pub names: FilenameFormat,
     pub codec: Codec,
 }
@@ -34,14 +37,21 @@ impl TiledDir {
         let missing =
             |field: &str| TilerError::Info { path: path.clone(), field: field.into(), message: "is required".into() };
         let tile_size = info.tile_size.ok_or_else(|| missing("tileSize"))?;
-        let tile_count = info.tile_count.ok_or_else(|| missing("tileCount"))?;
+        let (columns, rows) = info.grid().ok_or_else(|| missing("tileColumns"))?;
         let border = info.border.unwrap_or(0);
         let payload = tile_size.checked_sub(2 * border).filter(|p| *p > 0).ok_or_else(|| TilerError::Info {
             path: path.clone(),
             field: "border".into(),
             message: format!("{border} leaves no payload in {tile_size}-texel tiles"),
         })?;
-        let side = u32::try_from(tile_count as u64 * payload as u64).map_err(|_| missing("width"))?;
+        // The thesis's files have no size: the image fills the grid.
+        let (width, height) = match (info.width, info.height) {
+            (Some(w), Some(h)) => (w, h),
+            _ => {
+                let side = |pages: u32| u32::try_from(pages as u64 * payload as u64).map_err(|_| missing("width"));
+                (side(columns)?, side(rows)?)
+            }
+        };
         let names = info.filename_format.clone().ok_or_else(|| missing("filenameFormat"))?;
         let names = FilenameFormat::parse(&names, 3).map_err(|m| TilerError::Info {
             path: path.clone(),
@@ -59,15 +69,33 @@ impl TiledDir {
         let depth = Depth::from_tile_type(info.tile_type.as_deref().unwrap_or("unsignedByte")).ok_or_else(|| {
             TilerError::Info { path: path.clone(), field: "tileType".into(), message: "not supported".into() }
         })?;
-        let lod_count = tile_count.trailing_zeros() + 1;
+        let lod_count = lods_for(columns.max(rows));
         let description = Description {
-            width: info.width.unwrap_or(side),
-            height: info.height.unwrap_or(side),
+            width,
+            height,
             tile_size,
             border,
             level_count: lod_count,
             channels: channels.count() as u8,
             sample_bytes: depth.bytes() as u8,
+        };
+        let levels = if info.tile_columns.is_some() {
+            // A per-axis grid is the one the image and tile size give.
+            let layout = Layout::new(width as u64, height as u64, tile_size, border)?;
+            if (layout.columns, layout.rows) != (columns, rows) {
+                return Err(TilerError::Info {
+                    path: path.clone(),
+                    field: "tileColumns".into(),
+                    message: format!(
+                        "{columns} x {rows} pages, but a {width}x{height} image in {tile_size}-texel tiles (border {border}) has {} x {}",
+                        layout.columns, layout.rows
+                    ),
+                });
+            }
+            layout.pack_levels()
+        } else {
+            // Older files: a square power-of-two grid, the image at its top-left.
+            pyramid_levels(&description, columns)
         };
         // The pack's metadata is the completed description.
         info.format_version = Some(FORMAT_VERSION);
@@ -78,7 +106,12 @@ impl TiledDir {
         info.tile_format = Some(channels.tile_format().into());
         info.tile_type = Some(depth.tile_type().into());
         info.codec = Some(codec.name().into());
-        Ok(TiledDir { info, description, tile_count, names, codec })
+        Ok(TiledDir { info, description, levels, names, codec })
+    }
+
+    /// Tiles over all LODs.
+    pub fn tile_total(&self) -> u64 {
+        self.levels.iter().map(|l| l.tiles_w as u64 * l.tiles_h as u64).sum()
     }
 
     /// The texel layout of the tiles.

@@ -250,3 +250,55 @@ fn an_info_json_beside_named_tiles_gives_the_image_size() {
     let want = split_to_memory(vortex_tiler::source::open(&dir.path().join("c.png"), 1 << 30).unwrap(), 32, 1);
     assert!(got == want);
 }
+
+/// Directories and packs written before per-axis grids (format version 1: a square
+/// power-of-two grid of `tileCount` pages per side, padding pages included) still read.
+#[test]
+fn square_grids_of_older_versions_still_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    test_image(150, 97).save(d("orig.png")).unwrap();
+    let target = ["--tile-size", "64", "--border", "2", "--codec", "png", "-q"];
+    run_ok(&[&["split", &d("orig.png"), "-o", &d("want")][..], &target].concat());
+    run_ok(&["split", &d("orig.png"), "-o", &d("tight"), "--tile-size", "32", "--border", "1", "--codec", "png", "-q"]);
+
+    // 150 x 97 in 30-texel payloads: 5 x 4 pages, which version 1 kept in an 8 x 8 square.
+    let old = dir.path().join("old");
+    std::fs::create_dir(&old).unwrap();
+    let mut info: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("tight/info.json")).unwrap()).unwrap();
+    assert_eq!((&info["tileColumns"], &info["tileRows"], &info["lodCount"]), (&5.into(), &4.into(), &4.into()));
+    let map = info.as_object_mut().unwrap();
+    map.remove("tileColumns");
+    map.remove("tileRows");
+    map.insert("formatVersion".into(), 1.into());
+    map.insert("tileCount".into(), 8.into());
+    std::fs::write(old.join("info.json"), serde_json::to_vec_pretty(&info).unwrap()).unwrap();
+    let padding = std::fs::read(dir.path().join("tight/lod03-x0000-y0000.png")).unwrap();
+    for lod in 0..4u32 {
+        for y in 0..8 >> lod {
+            for x in 0..8 >> lod {
+                let name = format!("lod{lod:02}-x{x:04}-y{y:04}.png");
+                let tile = std::fs::read(dir.path().join("tight").join(&name)).unwrap_or_else(|_| padding.clone());
+                std::fs::write(old.join(name), tile).unwrap();
+            }
+        }
+    }
+
+    run_ok(&[&["convert", &d("old"), "-o", &d("from-old")][..], &target].concat());
+    assert!(files(Path::new(&d("from-old"))) == files(Path::new(&d("want"))), "from a version 1 directory");
+    // `pack` keeps the square grid it was given, and `unpack` gives the files back.
+    run_ok(&["pack", &d("old"), "-o", &d("old.vtpk"), "-q"]);
+    let pack = vortex_pack::Pack::open(Path::new(&d("old.vtpk"))).unwrap();
+    let grids: Vec<(u32, u32)> = pack.levels().iter().map(|l| (l.tiles_w, l.tiles_h)).collect();
+    assert_eq!(grids, [(8, 8), (4, 4), (2, 2), (1, 1)]);
+    run_ok(&["unpack", &d("old.vtpk"), "-o", &d("unpacked"), "-q"]);
+    // The tiles come back as they were; info.json is completed (formatVersion 2, same grid).
+    let tiles = |dir: &Path| files(dir).into_iter().filter(|(name, _)| name != "info.json").collect::<Vec<_>>();
+    assert!(tiles(Path::new(&d("unpacked"))) == tiles(&old), "unpack(pack(version 1))");
+    let back: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("unpacked/info.json")).unwrap()).unwrap();
+    assert_eq!((&back["tileCount"], back.get("tileColumns")), (&8.into(), None));
+    run_ok(&[&["convert", &d("old.vtpk"), "-o", &d("from-old-pack")][..], &target].concat());
+    assert!(files(Path::new(&d("from-old-pack"))) == files(Path::new(&d("want"))), "from a square pack");
+}

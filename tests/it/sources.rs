@@ -23,7 +23,8 @@ fn tiles(path: &Path, max_memory: u64) -> Vec<((u32, u32, u32), Vec<u8>)> {
 fn interlaced_png_matches_the_same_pixels_streamed() {
     let interlaced = tiles(&fixture("interlaced-61x47.png"), 1 << 20);
     let ppm = tiles(&fixture("interlaced-61x47.ppm"), 1 << 20);
-    assert_eq!(interlaced.len(), 85);
+    // 61 x 47 in 14-texel payloads: 5 x 4, 3 x 2, 2 x 1 and 1 x 1 pages.
+    assert_eq!(interlaced.len(), 29);
     assert!(interlaced == ppm);
 }
 

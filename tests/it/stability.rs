@@ -679,19 +679,18 @@ fn sizes_and_offsets_above_2_32_are_exact() {
     // The largest grid: 2^22 pages per side, 23 levels, 2^24 - 1 texels per side.
     let side = MAX_SIDE - 1;
     let l = Layout::new(side, side, 8, 2).unwrap();
-    assert_eq!((l.tile_count, l.lod_count, l.payload()), (1 << 22, 23, 4));
+    assert_eq!((l.columns, l.rows, l.lod_count, l.payload()), (1 << 22, 1 << 22, 23, 4));
     let tiles: u128 = (0..23u32).map(|k| (1u128 << (22 - k)).pow(2)).sum();
     assert_eq!(l.total_tiles() as u128, tiles);
     assert!(l.total_tiles() > u32::MAX as u64);
     for lod in 0..23 {
         let want = (side as u128).div_ceil(1 << lod) as u32;
         assert_eq!(l.level_extent(lod), (want, want), "LOD {lod}");
-        assert_eq!(l.virtual_side(lod) as u128, (1u128 << (22 - lod)) * 4);
+        assert_eq!(l.virtual_extent(lod).0 as u128, (1u128 << (22 - lod)) * 4);
     }
     // Rows of the last tile row at LOD 0, beyond 2^24 in virtual rows, clamp to the image.
-    let last = l.tiles_per_side(0) - 1;
-    assert_eq!(vortex_tiler::testing::first_row_needed(&l, last), (last as i64) * 4 - 2);
-    assert_eq!(vortex_tiler::testing::last_row_needed(&l, 0, last, side as u32), side - 1);
+    let last = l.rows - 1;
+    assert_eq!(vortex_tiler::testing::last_row_needed(&l, last, side as u32), side - 1);
     assert_eq!(vortex_tiler::testing::first_row_kept(&l, last, side as u32), side - 1);
     // Texel weights above 2^32: the coarsest texels of a 2^24 - 1 image cover up to 4^22
     // pixels; the bottom-right one (2^22 - 1)^2, an odd count.

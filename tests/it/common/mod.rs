@@ -9,7 +9,6 @@ use std::sync::Mutex;
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Codec, PngLevel};
 use vortex_tiler::error::Result;
-use vortex_tiler::layout::Layout;
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
 use vortex_tiler::pyramid::Filter;
 use vortex_tiler::sink::TileSink;
@@ -212,9 +211,10 @@ pub fn naive_levels(image: &Image, filter: Filter, count: u32) -> Vec<(u32, u32,
     levels
 }
 
-/// Every stored tile of the naive pyramid, with borders and padding, in u16 samples.
+/// Every stored tile of the naive pyramid, with borders and padding, in u16 samples. The grid
+/// is worked out here from its definition, not taken from `Layout`: each LOD has as many pages
+/// per axis as its image needs, and the last LOD is the first with a single page.
 pub fn naive_tiles(image: &Image, opts: &SplitOptions) -> Tiles {
-    let layout = Layout::new(image.width as u64, image.height as u64, opts.tile_size, opts.border).unwrap();
     let c = image.channels();
     let wide = image.layout.depth == Depth::U16;
     let bg: Option<Vec<u16>> = if wide {
@@ -222,18 +222,26 @@ pub fn naive_tiles(image: &Image, opts: &SplitOptions) -> Tiles {
     } else {
         opts.background.texel::<u8>(image.layout.channels).map(|t| t.into_iter().map(u16::from).collect())
     };
+    let (p, b, t) = ((opts.tile_size - 2 * opts.border) as i64, opts.border as i64, opts.tile_size as i64);
+    let pages = |texels: u32| (texels as i64 + p - 1) / p;
+    let mut lod_count = 1;
+    while pages(image.width.div_ceil(1 << (lod_count - 1))) > 1
+        || pages(image.height.div_ceil(1 << (lod_count - 1))) > 1
+    {
+        lod_count += 1;
+    }
     let mut tiles = BTreeMap::new();
-    for (lod, (lw, lh, level)) in naive_levels(image, opts.filter, layout.lod_count).into_iter().enumerate() {
+    for (lod, (lw, lh, level)) in naive_levels(image, opts.filter, lod_count).into_iter().enumerate() {
         let lod = lod as u32;
-        let last = layout.virtual_side(lod) as i64 - 1;
-        let (p, b, t) = (layout.payload() as i64, layout.border as i64, layout.tile_size as i64);
-        for ty in 0..layout.tiles_per_side(lod) {
-            for tx in 0..layout.tiles_per_side(lod) {
+        let (columns, rows) = (pages(lw), pages(lh));
+        let (last_x, last_y) = (columns * p - 1, rows * p - 1);
+        for ty in 0..rows as u32 {
+            for tx in 0..columns as u32 {
                 let mut tile = Vec::with_capacity((t * t) as usize * c);
                 for j in 0..t {
-                    let vy = (ty as i64 * p - b + j).clamp(0, last);
+                    let vy = (ty as i64 * p - b + j).clamp(0, last_y);
                     for i in 0..t {
-                        let vx = (tx as i64 * p - b + i).clamp(0, last);
+                        let vx = (tx as i64 * p - b + i).clamp(0, last_x);
                         let inside = vx < lw as i64 && vy < lh as i64;
                         match (&bg, inside) {
                             (Some(bg), false) => tile.extend_from_slice(bg),
