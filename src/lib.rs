@@ -42,4 +42,5 @@ pub mod testing {
     pub use crate::pyramid::filter::{ExactFilter, SrgbTable, linear_to_srgb, srgb_to_linear, sums_need_u128};
     pub use crate::pyramid::reduce::{Acc, ExactRow, Reducer};
     pub use crate::pyramid::resample::{Resampler, resample_level};
+    pub use crate::pyramid::stripes::one_band_bytes;
 }

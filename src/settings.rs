@@ -58,6 +58,8 @@ pub struct Requested {
     pub tile_depth: Option<Depth>,
     pub filename_format: Option<String>,
     pub filter: Option<Filter>,
+    /// `--max-memory` (not an `info.json` member).
+    pub max_memory: Option<u64>,
 }
 
 /// Combines flags, an existing `info.json` (at `info_path`) and the source into settings.
@@ -142,6 +144,7 @@ pub fn resolve(
             Some(f) => f,
             None => parse_member(info.filter.as_deref(), "filter", &field_err)?.unwrap_or_default(),
         },
+        max_memory: req.max_memory.unwrap_or(crate::limits::DEFAULT_MEMORY),
     };
     let stored = codec.stored_layout(source, flatten, tile_depth)?;
     if let Some(want) = want_channels.filter(|c| *c != stored.channels) {

@@ -4,8 +4,10 @@
 //! which cuts each row of tiles as soon as its bands hold every row it reads and sends it, in
 //! a bounded channel, to the calling thread; that thread encodes the tiles in parallel on the
 //! rayon pool ([`crate::codec`]) and hands them to the [sink](crate::sink). Peak memory is a
-//! few bands of the image's width, whatever its height; output bytes do not depend on the
-//! thread count. This file is only that orchestration; the stages live in their modules.
+//! few bands of the image's width, whatever its height; an image too wide for that under
+//! `max_memory` is read once per vertical stripe ([`crate::pyramid::stripes`]) for the same
+//! tiles. Output bytes do not depend on the thread count. This file is only that
+//! orchestration; the stages live in their modules.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, sync_channel};
@@ -18,10 +20,11 @@ use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::pyramid::Filter;
-use crate::pyramid::cascade::{Batch, Cascade, CutTile};
+use crate::pyramid::cascade::{Batch, Cascade, CutTile, Span};
 use crate::pyramid::cut::Padding;
 use crate::pyramid::filter::ExactFilter;
-use crate::pyramid::reduce::Acc;
+use crate::pyramid::reduce::{Acc, Reducer};
+use crate::pyramid::stripes::Plan;
 use crate::sink::TileSink;
 use crate::source::RowSource;
 
@@ -38,6 +41,8 @@ pub struct SplitOptions {
     pub tile_depth: Option<Depth>,
     /// How each LOD is made from the finer ones.
     pub filter: Filter,
+    /// Bytes the pipeline may hold (`--max-memory`); a wider image is cut in stripes.
+    pub max_memory: u64,
 }
 
 /// Watches a run: told of finished tiles, asked whether to stop.
@@ -63,6 +68,11 @@ pub struct Summary {
     /// Tiles encoded; the others share an identical neighbour's bytes or were stored as their one colour.
     pub encoded: u64,
     pub bytes: u64,
+    /// Vertical stripes the fine LODs were cut in (1: one band over the whole width, or one
+    /// stripe of the fine LODs and a coarse pass).
+    pub stripes: usize,
+    /// Times the source was read: 1 for one band, the stripes plus one for the coarse pass.
+    pub passes: usize,
 }
 
 /// Batches of tiles waiting for the encoder: cutting is much cheaper than encoding, so one
@@ -101,16 +111,21 @@ fn run<T: Sample>(
         None => Padding::Edge,
     };
 
+    let texel_bytes = src_layout.bytes_per_pixel() as u64;
+    let plan = Plan::choose(&layout, texel_bytes, opts.filter, opts.max_memory)?;
+    let (stripes, passes) = (plan.stripes.len(), plan.stripes.len() + plan.coarse.is_some() as usize);
+
     let (tx, rx) = sync_channel::<Result<Batch<T>>>(QUEUE_BATCHES);
     let encoded = AtomicU64::new(0);
     let tiles = AtomicU64::new(0);
     std::thread::scope(|scope| {
         let producer = scope.spawn(move || {
             let exact = ExactFilter::new(opts.filter, src_layout);
+            let producer = Producer { layout, pixels: src_layout, opts, padding, out: tx.clone(), progress };
             let result = if exact.is_some_and(|f| f.needs_u128(layout.lod_count)) {
-                produce(Cascade::<T, u128>::new(layout, src_layout, opts.filter, padding, tx.clone()), source, progress)
+                producer.run::<u128>(&plan, source)
             } else {
-                produce(Cascade::<T, u64>::new(layout, src_layout, opts.filter, padding, tx.clone()), source, progress)
+                producer.run::<u64>(&plan, source)
             };
             if let Err(e) = result {
                 let _ = tx.send(Err(e));
@@ -128,24 +143,100 @@ fn run<T: Sample>(
         tiles: tiles.into_inner(),
         encoded: encoded.into_inner(),
         bytes: sink.bytes_written(),
+        stripes,
+        passes,
     })
 }
 
-/// The producer: reads the source row by row into the cascade, which sends the cut tiles on.
-fn produce<T: Sample + Into<A>, A: Acc>(
-    mut cascade: Cascade<T, A>,
-    mut source: Box<dyn RowSource>,
-    progress: &dyn Progress,
-) -> Result<()> {
-    let mut row = vec![T::default(); cascade.row_len()];
-    for _ in 0..source.height() {
-        if progress.cancelled() {
-            return Err(TilerError::Interrupted);
+/// The producer: reads the source row by row into each pass's cascade, which sends the cut
+/// tiles on.
+struct Producer<'a, T> {
+    layout: Layout,
+    pixels: crate::pixel::PixelLayout,
+    opts: &'a SplitOptions,
+    padding: Padding<T>,
+    out: std::sync::mpsc::SyncSender<Result<Batch<T>>>,
+    progress: &'a dyn Progress,
+}
+
+impl<T: Sample> Producer<'_, T> {
+    fn run<A: Acc>(&self, plan: &Plan, mut source: Box<dyn RowSource>) -> Result<()>
+    where
+        T: Into<A>,
+    {
+        for (i, stripe) in plan.stripes.iter().enumerate() {
+            if i > 0 {
+                source.rewind()?;
+            }
+            self.stripe::<A>(stripe, source.as_mut())?;
         }
-        source.read_row(bytemuck::cast_slice_mut(&mut row))?;
-        cascade.push_source_row(&row)?;
+        if let Some(coarse) = &plan.coarse {
+            source.rewind()?;
+            self.coarse::<A>(coarse, source.as_mut())?;
+        }
+        Ok(())
     }
-    cascade.finish()
+
+    fn cascade<A: Acc>(&self, span: &Span) -> Cascade<T, A>
+    where
+        T: Into<A>,
+    {
+        Cascade::new(self.layout, span, self.pixels, self.opts.filter, self.padding.clone(), self.out.clone())
+    }
+
+    /// LOD 0 onwards for the columns of `span`: whole source rows, the window's part of each.
+    fn stripe<A: Acc>(&self, span: &Span, source: &mut dyn RowSource) -> Result<()>
+    where
+        T: Into<A>,
+    {
+        let mut cascade = self.cascade::<A>(span);
+        let channels = self.pixels.channels.count();
+        let window = span.window(&self.layout, 0);
+        let columns = window.start as usize * channels..window.end as usize * channels;
+        let mut row = vec![T::default(); self.layout.width as usize * channels];
+        for _ in 0..self.layout.height {
+            self.check_cancelled()?;
+            source.read_row(bytemuck::cast_slice_mut(&mut row))?;
+            cascade.push_source_row(&row[columns.clone()])?;
+        }
+        cascade.finish()
+    }
+
+    /// The LODs of `span` (all columns, from its first LOD down) from block sums of the source.
+    fn coarse<A: Acc>(&self, span: &Span, source: &mut dyn RowSource) -> Result<()>
+    where
+        T: Into<A>,
+    {
+        let mut cascade = self.cascade::<A>(span);
+        let channels = self.pixels.channels.count();
+        let (w, h) = (self.layout.width, self.layout.height);
+        let mut blocks = Reducer::<A>::window(w as u64, h as u64, 0, span.lods.start, 0, w as usize, channels);
+        let exact = ExactFilter::new(self.opts.filter, self.pixels);
+        let mut prepared = vec![0u64; if exact.is_some() { w as usize * channels } else { 0 }];
+        let mut row = vec![T::default(); w as usize * channels];
+        for _ in 0..h {
+            self.check_cancelled()?;
+            source.read_row(bytemuck::cast_slice_mut(&mut row))?;
+            let sums = match &exact {
+                None => blocks.push(&row),
+                Some(filter) => filter.push_row(&mut blocks, &row, &mut prepared),
+            };
+            if let Some(sums) = sums {
+                cascade.push_exact(&sums)?;
+            }
+        }
+        if let Some(sums) = blocks.finish() {
+            cascade.push_exact(&sums)?;
+        }
+        cascade.finish()
+    }
+
+    fn check_cancelled(&self) -> Result<()> {
+        match self.progress.cancelled() {
+            true => Err(TilerError::Interrupted),
+            false => Ok(()),
+        }
+    }
 }
 
 /// Encodes and writes batches as they arrive. Small batches (coarse levels, narrow images) are

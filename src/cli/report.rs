@@ -70,11 +70,17 @@ pub fn summary_line(s: &Summary, out: &Path, width: u32, height: u32, decoder: &
     let secs = took.as_secs_f64().max(1e-9);
     let mpx = width as f64 * height as f64 / 1e6;
     let peak = peak_rss().map(|b| format!(", peak memory {}", mib(b))).unwrap_or_default();
+    let stripes = match s.passes {
+        1 => String::new(),
+        n => format!(", in {} vertical stripes and a coarse pass (the source read {n} times)", s.stripes),
+    };
     format!(
-        "wrote {} tiles ({} encoded, {} LODs, {}x{} {}) totalling {} to {} in {:.2} s: {:.1} source Mpx/s [{decoder}]{peak}",
+        "wrote {} tiles ({} encoded, {} LODs from {} x {} pages, {}x{} {}) totalling {} to {} in {:.2} s: {:.1} source Mpx/s [{decoder}]{stripes}{peak}",
         s.tiles,
         s.encoded,
         s.layout.lod_count,
+        s.layout.columns,
+        s.layout.rows,
         s.layout.tile_size,
         s.layout.tile_size,
         s.stored,

@@ -215,6 +215,7 @@ pub fn tile(
         tile_depth: a.tile_type,
         filename_format: names,
         filter: a.filter,
+        max_memory: Some(a.max_memory),
         ..a.enc.requested()
     };
     let existing_ref = info_path.as_deref().zip(existing.as_ref());
@@ -231,7 +232,6 @@ pub fn tile(
     }
     let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
     limits.check_pyramid(&layout, product == Product::Pack)?;
-    limits.check_pipeline(&layout, stored.bytes_per_pixel() as u64)?;
     let info = settings::describe(&layout, stored, &opts, &names);
     // Said once everything is checked, just before the work starts.
     if let (Some(path), false) = (&info_path, a.quiet) {

@@ -7,6 +7,7 @@
 //! are cut ([`cut`]) and sent as one [`Batch`] to the encoders. The cascade knows nothing of
 //! where rows come from or where tiles go: `split.rs` feeds it and drains the channel.
 
+use std::ops::Range;
 use std::sync::mpsc::SyncSender;
 
 use super::band::Band;
@@ -34,6 +35,15 @@ pub(crate) struct CutTile<T> {
     pub places: Vec<(u32, u32)>,
 }
 
+/// Bytes of texels one batch holds at most: a row of tiles of a wide image is sent in pieces,
+/// so that the tiles in flight do not grow with the width.
+pub(crate) const BATCH_BYTES: usize = 16 << 20;
+
+/// Tiles in one batch of tiles of `texel_bytes`-byte texels (at least one).
+pub(crate) fn batch_tiles(layout: &Layout, texel_bytes: usize) -> usize {
+    (BATCH_BYTES / (layout.tile_texels() * texel_bytes)).max(1)
+}
+
 /// How a level makes the next one.
 enum Down<T, A> {
     /// The exact filters: a cascade of sums.
@@ -42,13 +52,53 @@ enum Down<T, A> {
     Resample(Box<Resampler<T>>),
 }
 
+/// The part of the pyramid one cascade makes: LODs `lods`, and of the first of them the page
+/// columns `pages` (of each LOD below it, the pages above those). The whole pyramid is one
+/// span; a stripe of a wide image ([`crate::pyramid::stripes`]) is the fine LODs of a few page
+/// columns, and its coarse pass the remaining LODs at full width.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct Span {
+    pub lods: Range<u32>,
+    pub pages: Range<u32>,
+}
+
+impl Span {
+    pub fn whole(layout: &Layout) -> Span {
+        Span { lods: 0..layout.lod_count, pages: 0..layout.columns }
+    }
+
+    /// Page columns of `lod` that this span cuts.
+    pub fn pages_at(&self, layout: &Layout, lod: u32) -> Range<u32> {
+        let k = lod - self.lods.start;
+        let end =
+            if self.pages.end == layout.grid(self.lods.start).0 { layout.grid(lod).0 } else { self.pages.end >> k };
+        self.pages.start >> k..end
+    }
+
+    /// Texel columns of `lod` the span's cascade holds: its pages, their borders, and as much
+    /// more as keeps every finer LOD's window an exact multiple of its footprints (the margin
+    /// of the last LOD, doubled per finer LOD), clipped to the image.
+    pub fn window(&self, layout: &Layout, lod: u32) -> Range<u64> {
+        let first = self.lods.start;
+        let margin = (layout.border as u64) << (self.lods.end - 1 - first);
+        let p = layout.payload() as u64;
+        let width = layout.level_extent(first).0 as u64;
+        let start = (self.pages.start as u64 * p).saturating_sub(margin);
+        let end = (self.pages.end as u64 * p + margin).min(width);
+        let k = lod - first;
+        (start >> k)..end.div_ceil(1 << k)
+    }
+}
+
 /// One LOD in flight: its band, the tile rows cut so far and the reduction to the next LOD.
 struct Level<T, A> {
     lod: u32,
     extent: (u32, u32),
+    /// The rows of the level's window (all its columns but in a stripe).
     band: Band<T>,
     next_tile_row: u32,
-    x_runs: Vec<Vec<Run>>,
+    /// Per page column cut, its first column and where its texels come from (band columns).
+    x_runs: Vec<(u32, Vec<Run>)>,
     down: Option<Down<T, A>>,
     /// The current row, rounded from exact sums.
     row: Vec<T>,
@@ -77,22 +127,39 @@ pub(crate) struct Cascade<T, A> {
 }
 
 impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
-    pub fn new(layout: Layout, pixels: PixelLayout, filter: Filter, padding: Padding<T>, out: BatchSender<T>) -> Self {
+    /// The cascade of `span`: fed the rows of its first LOD's window, by
+    /// [`push_source_row`](Self::push_source_row) when that is LOD 0, else by
+    /// [`push_exact`](Self::push_exact). A span narrower than the image needs an exact filter.
+    pub fn new(
+        layout: Layout,
+        span: &Span,
+        pixels: PixelLayout,
+        filter: Filter,
+        padding: Padding<T>,
+        out: BatchSender<T>,
+    ) -> Self {
         let edge = padding == Padding::Edge;
         let channels = pixels.channels.count();
-        let levels = (0..layout.lod_count)
+        let levels = span
+            .lods
+            .clone()
             .map(|lod| {
                 let extent = layout.level_extent(lod);
-                let row_len = extent.0 as usize * channels;
-                let (columns, _) = layout.grid(lod);
+                let window = span.window(&layout, lod);
+                let width = (window.end - window.start) as usize;
+                let row_len = width * channels;
                 let virtual_width = layout.virtual_extent(lod).0;
-                let x_runs = (0..columns).map(|t| cut::runs(&layout, t, extent.0, virtual_width, edge)).collect();
-                let down = (lod + 1 < layout.lod_count).then(|| {
+                let x_runs = span
+                    .pages_at(&layout, lod)
+                    .map(|t| (t, cut::shifted(cut::runs(&layout, t, extent.0, virtual_width, edge), window.start)))
+                    .collect();
+                let down = (lod + 1 < span.lods.end).then(|| {
                     if filter.is_exact() {
                         let (w, h) = (layout.width as u64, layout.height as u64);
-                        Down::Exact(Reducer::new(w, h, lod, extent.0 as usize, channels))
+                        let next = span.window(&layout, lod + 1).start;
+                        Down::Exact(Reducer::window(w, h, lod, 1, next, width, channels))
                     } else {
-                        Down::Resample(Box::new(Resampler::new(filter, pixels, extent.0 as usize, extent.1 as u64)))
+                        Down::Resample(Box::new(Resampler::new(filter, pixels, width, extent.1 as u64)))
                     }
                 });
                 Level {
@@ -107,13 +174,19 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
             })
             .collect();
         let exact = ExactFilter::new(filter, pixels);
-        let prepared = if exact.is_some() { vec![0; layout.width as usize * channels] } else { Vec::new() };
+        let first_width = span.window(&layout, span.lods.start);
+        let prepared = if exact.is_some() {
+            vec![0; (first_width.end - first_width.start) as usize * channels]
+        } else {
+            Vec::new()
+        };
         Cascade { layout, channels, padding, levels, out, exact, prepared }
     }
 
-    /// Samples in one source row (the LOD-0 width times the channels).
-    pub fn row_len(&self) -> usize {
-        self.levels[0].row.len()
+    /// Takes the next row of exact sums of the first LOD (a span that starts below LOD 0).
+    pub fn push_exact(&mut self, exact: &ExactRow<A>) -> Result<()> {
+        let cutter = Cutter { layout: &self.layout, channels: self.channels, padding: &self.padding, out: &self.out };
+        Self::feed_exact(&mut self.levels, exact, &cutter, self.exact.as_ref())
     }
 
     /// Completes the pyramid once the last source row is in.
@@ -212,14 +285,20 @@ impl<T: Sample, A> Level<T, A> {
             let y_runs = cut::runs(layout, ty, height, virtual_height, *padding == Padding::Edge);
             let mut tiles: Vec<CutTile<T>> = Vec::new();
             let mut texels = Vec::with_capacity(layout.tile_texels() * channels);
-            for (tx, x_runs) in self.x_runs.iter().enumerate() {
+            let per_batch = batch_tiles(layout, channels * size_of::<T>());
+            for (tx, x_runs) in &self.x_runs {
+                if tiles.len() == per_batch {
+                    let full = std::mem::take(&mut tiles);
+                    out.send(Ok(Batch { lod: self.lod, tiles: full }))
+                        .map_err(|_| TilerError::Options("the encoder stopped".into()))?;
+                }
                 cut::cut_tile(&self.band, channels, x_runs, &y_runs, padding, &mut texels);
                 // Neighbours with the same texels (most often one colour) share one encoding.
                 match tiles.last_mut() {
-                    Some(prev) if prev.texels == texels => prev.places.push((tx as u32, ty)),
+                    Some(prev) if prev.texels == texels => prev.places.push((*tx, ty)),
                     _ => {
                         let full = std::mem::replace(&mut texels, Vec::with_capacity(layout.tile_texels() * channels));
-                        tiles.push(CutTile { texels: full, places: vec![(tx as u32, ty)] })
+                        tiles.push(CutTile { texels: full, places: vec![(*tx, ty)] })
                     }
                 }
             }

@@ -65,6 +65,18 @@ pub fn runs(layout: &Layout, t: u32, extent: u32, virtual_len: u64, edge_padding
     out
 }
 
+/// `runs` for a band whose first column is image column `origin`.
+pub fn shifted(runs: Vec<Run>, origin: u64) -> Vec<Run> {
+    let by = origin as u32;
+    runs.into_iter()
+        .map(|run| match run {
+            Run::Copy { start, len } => Run::Copy { start: start - by, len },
+            Run::Repeat { at, len } => Run::Repeat { at: at - by, len },
+            fill => fill,
+        })
+        .collect()
+}
+
 /// Assembles one tile from `band`: `x_runs` pick columns, `y_runs` pick rows.
 pub fn cut_tile<T: Copy>(
     band: &Band<T>,

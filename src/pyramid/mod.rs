@@ -1,5 +1,5 @@
 //! The pyramid: every power-of-two LOD made from the source rows as they arrive, and the
-//! stored tiles cut out of each level, in memory bounded by the image's width.
+//! stored tiles cut out of each level, in memory bounded by `--max-memory` whatever the size.
 //!
 //! In data order:
 //! - `band`: the few rows of one level that its next row of tiles needs;
@@ -7,7 +7,9 @@
 //! - `filter`: what those sums add up (`--filter`: box, linear light, premultiplied);
 //! - `resample`: the filters that cannot cascade sums (lanczos3, mitchell), band by band;
 //! - `cut`: the tiles (payload, borders, padding) cut out of a band;
-//! - `cascade`: all levels in flight at once, wiring the above together for one run.
+//! - `cascade`: all levels in flight at once, wiring the above together for one pass;
+//! - `stripes`: the passes of an image too wide for one band: vertical stripes of the fine
+//!   levels, then the coarse levels from block sums.
 //!
 //! Only [`Filter`], an option of [`crate::split::SplitOptions`], is public; the rest is the
 //! pipeline's inside (tests reach it through the `testing` feature).
@@ -18,5 +20,6 @@ pub(crate) mod cut;
 pub(crate) mod filter;
 pub(crate) mod reduce;
 pub(crate) mod resample;
+pub(crate) mod stripes;
 
 pub use filter::Filter;

@@ -59,13 +59,17 @@ impl Acc for u128 {
     }
 }
 
-/// Reduces the rows of LOD `lod` into rows of LOD `lod + 1`.
+/// Reduces the rows of LOD `lod` into rows of LOD `lod + levels` (one level, 2x2, but for
+/// the stripes' coarse pass, which sums LOD 0 straight into a coarse level).
 pub struct Reducer<A = u64> {
     channels: usize,
+    /// Input texels per output texel along each axis, as a power of two.
+    levels: u32,
     /// Width of the output level in texels.
     #[cfg_attr(not(feature = "testing"), allow(dead_code))] // read by the tests, through `testing`
     out_width: usize,
-    /// Source pixels per output texel column, `min(2^(lod+1), width - x * 2^(lod+1))`.
+    /// Source pixels per output texel column, `min(footprint, width - x * footprint)` for the
+    /// column's place `x` in the whole image.
     col_weight: Vec<u64>,
     /// Source image height and the output level's footprint side, to weigh rows.
     src_height: u64,
@@ -93,12 +97,31 @@ pub struct ExactRow<'a, A = u64> {
 impl<A: Acc> Reducer<A> {
     /// `src_width`/`src_height` are the source image's size at LOD 0; `in_width` is the width of
     /// the input level (LOD `lod`).
+    #[cfg_attr(not(feature = "testing"), allow(dead_code))] // the tests' one-level reducer
     pub fn new(src_width: u64, src_height: u64, lod: u32, in_width: usize, channels: usize) -> Reducer<A> {
-        let footprint = 1u64 << (lod + 1);
-        let out_width = in_width.div_ceil(2);
-        let col_weight = (0..out_width as u64).map(|x| footprint.min(src_width - x * footprint)).collect();
+        Reducer::window(src_width, src_height, lod, 1, 0, in_width, channels)
+    }
+
+    /// Reduces `levels` LODs at once, for a window of the image: `in_width` texels of LOD `lod`
+    /// whose first output texel is column `out_x0` of LOD `lod + levels`. The window starts at
+    /// a multiple of `2^levels` input texels and ends at one or at the image's edge, so every
+    /// output texel's footprint lies in it whole.
+    pub fn window(
+        src_width: u64,
+        src_height: u64,
+        lod: u32,
+        levels: u32,
+        out_x0: u64,
+        in_width: usize,
+        channels: usize,
+    ) -> Reducer<A> {
+        let footprint = 1u64 << (lod + levels);
+        let out_width = in_width.div_ceil(1 << levels);
+        let col_weight =
+            (out_x0..out_x0 + out_width as u64).map(|x| footprint.min(src_width - x * footprint)).collect();
         Reducer {
             channels,
+            levels,
             out_width,
             col_weight,
             src_height,
@@ -122,14 +145,18 @@ impl<A: Acc> Reducer<A> {
     /// Adds one input row whose samples `value` turns into what is summed (e.g. linear light),
     /// without an intermediate row.
     pub fn push_mapped<S: Copy>(&mut self, row: &[S], value: impl Fn(S) -> A + Copy) -> Option<ExactRow<'_, A>> {
-        add_column_pairs(row, self.channels, &mut self.acc, self.rows_in_acc == 0, value);
+        let first = self.rows_in_acc == 0;
+        match self.levels {
+            1 => add_column_pairs(row, self.channels, &mut self.acc, first, value),
+            _ => add_column_groups(row, self.channels, self.levels, &mut self.acc, first, value),
+        }
         self.rows_in_acc += 1;
-        if self.rows_in_acc == 2 { Some(self.emit()) } else { None }
+        if self.rows_in_acc == 1 << self.levels { Some(self.emit()) } else { None }
     }
 
-    /// Emits the last output row if the input had an odd number of rows.
+    /// Emits the last output row if the input ended inside one (an odd number of rows).
     pub fn finish(&mut self) -> Option<ExactRow<'_, A>> {
-        if self.rows_in_acc == 1 { Some(self.emit()) } else { None }
+        if self.rows_in_acc > 0 { Some(self.emit()) } else { None }
     }
 
     fn emit(&mut self) -> ExactRow<'_, A> {
@@ -222,6 +249,28 @@ fn pairs<S: Copy, A: Acc, F: Fn(S) -> A, const C: usize, const ASSIGN: bool>(src
     }
 }
 
+/// `dst[x] (+)= sum of f(src[x * 2^levels ..][.. 2^levels])` per channel; a short last group
+/// is summed as far as it goes. The coarse pass's reduction, once per source row.
+fn add_column_groups<S: Copy, A: Acc, F: Fn(S) -> A>(
+    src: &[S],
+    c: usize,
+    levels: u32,
+    dst: &mut [A],
+    assign: bool,
+    f: F,
+) {
+    if assign {
+        dst.fill(A::default());
+    }
+    for (d, group) in dst.chunks_exact_mut(c).zip(src.chunks(c << levels)) {
+        for px in group.chunks_exact(c) {
+            for ch in 0..c {
+                d[ch] = d[ch] + f(px[ch]);
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -275,5 +324,42 @@ mod tests {
         let l2 = &reduce_all(&src, 3, 3, 2)[1];
         // (8 * 200 + 5) / 9 = 178.3
         assert_eq!(l2, &vec![178]);
+    }
+
+    #[test]
+    fn one_reduction_of_many_levels_equals_the_cascade() {
+        // 13 x 11 texels: odd sizes, partial footprints at the right and bottom.
+        let (w, h) = (13usize, 11usize);
+        let src: Vec<u8> = (0..w * h).map(|i| (i * 37 % 251) as u8).collect();
+        let cascade = reduce_all(&src, w, h, 3);
+        let mut block = Reducer::<u64>::window(w as u64, h as u64, 0, 3, 0, w, 1);
+        let mut rows = Vec::new();
+        for row in src.chunks(w) {
+            if let Some(e) = block.push(row) {
+                let mut o = vec![0u8; e.sums.len()];
+                e.round_into(&mut o);
+                rows.extend(o);
+            }
+        }
+        let e = block.finish().unwrap();
+        let mut o = vec![0u8; e.sums.len()];
+        e.round_into(&mut o);
+        rows.extend(o);
+        assert_eq!(rows, cascade[2]);
+    }
+
+    #[test]
+    fn a_window_weighs_its_columns_by_their_place_in_the_image() {
+        // The right half (from column 8) of a 13-texel row: LOD 1 columns 4..7, the last one
+        // covering one real texel.
+        let (w, h) = (13usize, 2usize);
+        let src: Vec<u8> = (0..w * h).map(|i| (i * 53 % 256) as u8).collect();
+        let whole = &reduce_all(&src, w, h, 1)[0];
+        let mut half = Reducer::<u64>::window(w as u64, h as u64, 0, 1, 4, w - 8, 1);
+        half.push(&src[8..w]);
+        let e = half.push(&src[w + 8..]).unwrap();
+        let mut o = vec![0u8; e.sums.len()];
+        e.round_into(&mut o);
+        assert_eq!(o, whole[4..]);
     }
 }

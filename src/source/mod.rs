@@ -49,10 +49,48 @@ pub trait RowSource: Send {
     fn read_row(&mut self, row: &mut [u8]) -> Result<()>;
     /// Short name of the decoder path taken, for the summary line.
     fn describe(&self) -> String;
+    /// Starts again from the first row: an image too wide for one band is read once per
+    /// vertical stripe. Sources that cannot say so.
+    fn rewind(&mut self) -> Result<()> {
+        Err(TilerError::Options(format!("{} cannot be read twice, as a striped run needs", self.describe())))
+    }
+}
+
+/// A file source that rewinds by opening its file again (a decoder from the top: PNG and
+/// JPEG decode once more per stripe, as documented in docs/architecture.md).
+struct Reopening {
+    path: std::path::PathBuf,
+    max_memory: u64,
+    inner: Box<dyn RowSource>,
+}
+
+impl RowSource for Reopening {
+    fn header(&self) -> ImageHeader {
+        self.inner.header()
+    }
+    fn read_row(&mut self, row: &mut [u8]) -> Result<()> {
+        self.inner.read_row(row)
+    }
+    fn describe(&self) -> String {
+        self.inner.describe()
+    }
+    fn rewind(&mut self) -> Result<()> {
+        let again = open_once(&self.path, self.max_memory)?;
+        if again.header() != self.inner.header() {
+            return Err(TilerError::decode(&self.path, "changed while it was being read"));
+        }
+        self.inner = again;
+        Ok(())
+    }
 }
 
 /// Opens `path`, choosing the decoder from the file's first bytes (not its extension).
 pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
+    let inner = open_once(path, max_memory)?;
+    Ok(Box::new(Reopening { path: path.to_path_buf(), max_memory, inner }))
+}
+
+fn open_once(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     // Checked before opening: opening a FIFO blocks until a writer comes.
     let meta = std::fs::metadata(path).map_err(|e| TilerError::io(path, e))?;
     if meta.is_dir() {

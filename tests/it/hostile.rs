@@ -110,16 +110,35 @@ fn wide_png(path: &Path, width: u32) {
     enc.set_color(png::ColorType::Grayscale);
     enc.set_compression(png::Compression::Fast);
     let mut writer = enc.write_header().unwrap();
-    writer.write_image_data(&vec![128u8; width as usize]).unwrap();
+    writer.write_image_data(&(0..width).map(|x| (x / 97) as u8).collect::<Vec<u8>>()).unwrap();
+}
+
+#[test]
+fn a_wide_strip_is_cut_in_stripes_within_max_memory() {
+    // 1000000 x 1: one band would hold a 16 MiB row of sums per LOD and 48 MiB of tiles.
+    let dir = tempfile::tempdir().unwrap();
+    let wide = dir.path().join("wide.png");
+    wide_png(&wide, 1_000_000);
+    let pack = dir.path().join("wide.vtpk");
+    let args = ["split", s(&wide), "--pack", s(&pack), "--tile-size", "256", "--max-memory", "48M"];
+    let line = ok(&args);
+    assert!(line.contains("from 3907 x 1 pages") && line.contains("vertical stripes"), "{line}");
+    let peak: f64 = line.split("peak memory ").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap();
+    assert!(peak < 48.0 + 16.0, "peak {peak} MiB: {line}");
+    assert!(ok(&["verify", s(&pack)]).contains("OK"));
 }
 
 #[test]
 fn sizes_are_checked_before_allocating() {
     let dir = tempfile::tempdir().unwrap();
-    let wide = dir.path().join("wide.png");
-    wide_png(&wide, 16_000_000);
-    let pack = dir.path().join("wide.vtpk");
-    fails_with(&run(&["split", s(&wide), "--pack", s(&pack)]), &["tiles"]);
+    // A 131072^2 grey PPM (a sparse 16 GiB file) in 4-texel payloads: 1.4 billion tiles.
+    let huge = dir.path().join("huge.pgm");
+    let header = b"P5\n131072 131072\n255\n";
+    fs::write(&huge, header).unwrap();
+    fs::OpenOptions::new().write(true).open(&huge).unwrap().set_len(header.len() as u64 + (1 << 34)).unwrap();
+    let pack = dir.path().join("huge.vtpk");
+    fails_with(&run(&["split", s(&huge), "--pack", s(&pack), "--tile-size", "8", "--border", "2"]), &["tiles"]);
+    fs::remove_file(&huge).unwrap();
     let input = dir.path().join("in.png");
     fs::copy(fixture("sample.png"), &input).unwrap();
     fails_with(
@@ -136,7 +155,7 @@ fn sizes_are_checked_before_allocating() {
         &run(&["split", s(&input), "-o", s(&dir.path().join("o")), "--ff", "%1$65536d-%2$d-%3$d.png"]),
         &["width"],
     );
-    assert_eq!(listing(dir.path()), ["in.png", "wide.png"]);
+    assert_eq!(listing(dir.path()), ["in.png"]);
 }
 
 /// A PID that no process has: beyond the kernel's maximum.

@@ -19,3 +19,4 @@ mod pack_cli;
 mod render;
 mod sources;
 mod stability;
+mod stripes;

@@ -69,6 +69,8 @@ pub struct TiledSource {
     band: Vec<u8>,
     band_row: Option<u32>,
     next: u32,
+    /// Read again from the top (a striped run): missing cells are already logged.
+    rewound: bool,
 }
 
 impl TiledSource {
@@ -76,7 +78,17 @@ impl TiledSource {
     /// with `strict`, a missing cell is an error instead.
     pub fn new(grid: Box<dyn TileGrid>, fill: Vec<u8>, strict: bool) -> TiledSource {
         let header = grid.header();
-        TiledSource { grid, header, fill, strict, missing: Arc::default(), band: Vec::new(), band_row: None, next: 0 }
+        TiledSource {
+            grid,
+            header,
+            fill,
+            strict,
+            missing: Arc::default(),
+            band: Vec::new(),
+            band_row: None,
+            next: 0,
+            rewound: false,
+        }
     }
 
     /// Bytes held while a row of cells is read: the decoded cells of the row and the band
@@ -136,7 +148,9 @@ impl TiledSource {
                         self.grid.describe()
                     )));
                 }
-                self.missing.lock().map_err(|_| TilerError::Options("poisoned".into()))?.push(name);
+                if !self.rewound {
+                    self.missing.lock().map_err(|_| TilerError::Options("poisoned".into()))?.push(name);
+                }
                 return Ok(None);
             }
             Some(CellData::File(path, bytes)) => {
@@ -195,6 +209,11 @@ impl RowSource for TiledSource {
 
     fn describe(&self) -> String {
         self.grid.describe()
+    }
+
+    fn rewind(&mut self) -> Result<()> {
+        (self.next, self.band_row, self.rewound) = (0, None, true);
+        Ok(())
     }
 }
 

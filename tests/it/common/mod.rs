@@ -73,6 +73,10 @@ impl RowSource for MemSource {
     fn describe(&self) -> String {
         "memory".into()
     }
+    fn rewind(&mut self) -> Result<()> {
+        self.next = 0;
+        Ok(())
+    }
 }
 
 /// Keeps every tile's encoded bytes.
@@ -101,6 +105,7 @@ pub fn png_options(tile_size: u32, border: u32, background: Background) -> Split
         flatten: false,
         tile_depth: None,
         filter: Filter::Box,
+        max_memory: 1 << 30,
     }
 }
 

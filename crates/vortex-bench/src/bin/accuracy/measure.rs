@@ -116,6 +116,7 @@ pub fn split_once(img: &Img, layout: &Layout, choice: Choice, dest: &Path) -> Re
         flatten: false,
         tile_depth: None,
         filter: choice.filter(),
+        max_memory: vortex_tiler::limits::DEFAULT_MEMORY,
     };
     let stored = codec.stored_layout(img.layout(), false, None)?;
     let started = Instant::now();
