@@ -46,7 +46,7 @@ pub use feedback::{FeedbackFrame, FeedbackPass, FeedbackReadback, FeedbackTarget
 pub use loader::{LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS, stand_in_tile};
 pub use mesh::{GpuMesh, Mesh, Vertex};
 pub use page_cache::{CacheError, CacheFormat, PageCache};
-pub use page_table::GpuPageTable;
+pub use page_table::{GpuPageTable, PageTableError};
 pub use readback::ReadbackError;
 pub use runtime::{FrameReport, Report, Runtime, RuntimeError};
 pub use sample::{RenderTarget, SampleFilter, SamplePass, Sources};

@@ -11,13 +11,11 @@ use crate::view::View;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
 struct TextureParams {
-    pages: u32,
+    size: [u32; 2],
     lod_count: u32,
     payload: u32,
-    pad0: u32,
-    uv_scale: [f32; 2],
-    side_texels: f32,
-    pad1: f32,
+    pages: [u32; 2],
+    pad: [u32; 2],
 }
 
 /// `Frame` in `virtual.wgsl`, 656 bytes.
@@ -63,11 +61,10 @@ impl Frame {
         let mut params = [TextureParams::default(); MAX_TEXTURES as usize];
         for (p, t) in params.iter_mut().zip(textures) {
             *p = TextureParams {
-                pages: t.grid.pages as u32,
-                lod_count: t.grid.lod_count as u32,
+                size: t.size(),
+                lod_count: u32::from(t.grid.lod_count()),
                 payload: t.payload(),
-                uv_scale: t.uv_scale(),
-                side_texels: t.side_texels() as f32,
+                pages: t.grid.pages().map(u32::from),
                 ..TextureParams::default()
             };
         }

@@ -30,7 +30,7 @@ use crate::feedback::{FeedbackPass, FeedbackReadback, FeedbackTarget};
 use crate::loader::{LoadError, Loader};
 use crate::mesh::GpuMesh;
 use crate::page_cache::{CacheError, CacheFormat, PageCache};
-use crate::page_table::GpuPageTable;
+use crate::page_table::{GpuPageTable, PageTableError};
 use crate::readback::ReadbackError;
 use crate::sample::{RenderTarget, SamplePass, Sources};
 use crate::scene::{Pose, Scene};
@@ -44,6 +44,8 @@ pub enum RuntimeError {
     Cache(#[from] CacheError),
     #[error("residency: {0}")]
     Residency(#[from] ConfigError),
+    #[error("page table: {0}")]
+    PageTable(#[from] PageTableError),
     #[error("scene: {0}")]
     Scene(String),
     #[error("frame {frame}: the page-table invariants are broken: {violation}")]
@@ -147,7 +149,7 @@ impl Runtime {
         loader.set_format(format);
         let cache = PageCache::new(&gpu.device, side, loader.tile_size(), loader.border(), format)?;
         let residency = Residency::new(&grids, ResidencyConfig::new(cache.slot_count() as usize, e.upload_budget))?;
-        let gpu_table = GpuPageTable::new(&gpu.device, &gpu.queue, &grids, side);
+        let gpu_table = GpuPageTable::new(&gpu.device, &gpu.queue, &grids, side)?;
         let [w, h] = scene.size;
         let feedback_target = FeedbackTarget::new(&gpu.device, w, h, e.feedback_divisor);
         let readback = FeedbackReadback::new(&gpu.device, feedback_target.width, feedback_target.height, 2);
@@ -278,7 +280,7 @@ impl Runtime {
     ) -> Result<Report, E> {
         let mut frames = Vec::with_capacity(scene.frames as usize);
         for f in 0..scene.frames {
-            let (report, picture) = self.frame(&scene.pose(f), images)?;
+            let (report, picture) = self.frame(&scene.pose(f, &self.textures), images)?;
             each(&report, picture)?;
             frames.push(report);
         }

@@ -79,10 +79,10 @@ impl SamplePass {
                 draw::frame_entry(),
                 entry(
                     1,
-                    wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
+                    wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
                     },
                 ),
                 entry(
@@ -133,7 +133,7 @@ impl SamplePass {
             layout: &self.layout,
             entries: &[
                 wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(sources.table.view()) },
+                wgpu::BindGroupEntry { binding: 1, resource: sources.table.buffer().as_entire_binding() },
                 wgpu::BindGroupEntry {
                     binding: 2,
                     resource: wgpu::BindingResource::TextureView(sources.cache.srgb_view()),

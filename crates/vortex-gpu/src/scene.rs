@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 use crate::camera::{Camera, Keyframe, at_frame, lerp3};
 use crate::mesh::{Mesh, Vertex};
 use crate::sample::SampleFilter;
+use crate::texture::VirtualTexture;
 use crate::view::Window;
 
 /// Why a scene cannot be used.
@@ -63,8 +64,9 @@ pub enum SceneView {
     },
 }
 
-/// Where a window is: the virtual UV at its centre and how much of the texture's width it
-/// shows (1 = all of it; 0.01 = a hundredth).
+/// Where a window is: the image UV at its centre (0..1 over the real image on each axis) and how
+/// much of the image's width it shows (1 = all of it; 0.01 = a hundredth); its height follows
+/// from square pixels (`Window::square_pixels`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WindowKey {
@@ -292,10 +294,11 @@ impl Scene {
         mesh
     }
 
-    /// Where the camera is at `frame`. The scene must have passed [`Scene::check`], which
-    /// refuses a path without keyframes.
+    /// Where the camera is at `frame`, over `textures` (the loader's: a window's height depends
+    /// on its image's aspect ratio; a texture id without one is taken as square). The scene must
+    /// have passed [`Scene::check`], which refuses a path without keyframes.
     #[expect(clippy::expect_used, reason = "Scene::check refuses a path without keyframes")]
-    pub fn pose(&self, frame: u32) -> Pose {
+    pub fn pose(&self, frame: u32, textures: &[VirtualTexture]) -> Pose {
         let aspect = self.size[0] as f32 / self.size[1] as f32;
         match &self.view {
             SceneView::Window { texture, path } => {
@@ -311,9 +314,9 @@ impl Scene {
                     }
                 })
                 .expect("checked: a path has keyframes");
-                let extent = [k.width, k.width / aspect as f64];
-                let origin = [k.center[0] - extent[0] / 2.0, k.center[1] - extent[1] / 2.0];
-                Pose::Window(Window { texture: *texture, origin, extent })
+                let size = (self.size[0], self.size[1]);
+                let image = textures.get(*texture as usize).map_or([1, 1], VirtualTexture::size);
+                Pose::Window(Window::square_pixels(*texture, image, k.center, k.width, size))
             }
             SceneView::Camera { fov_y_deg, path, .. } => {
                 let cam = at_frame(path, frame, |a, b, t| Camera {
@@ -410,8 +413,8 @@ mod tests {
         s.check().unwrap();
         s.check_textures(1).unwrap();
         assert!(s.still_from() < s.frames - 10);
-        assert_eq!(s.pose(s.still_from()), s.pose(s.frames - 1));
-        assert_ne!(s.pose(0), s.pose(s.still_from()));
+        assert_eq!(s.pose(s.still_from(), &[]), s.pose(s.frames - 1, &[]));
+        assert_ne!(s.pose(0, &[]), s.pose(s.still_from(), &[]));
         assert_eq!(s.mesh().indices.len(), 6);
     }
 
@@ -452,10 +455,16 @@ mod tests {
             ..Scene::default_plane()
         };
         s.check().unwrap();
-        let Pose::Window(w) = s.pose(5) else { panic!() };
+        let Pose::Window(w) = s.pose(5, &[]) else { panic!() };
         assert!((w.extent[0] - 0.1).abs() < 1e-9, "{w:?}");
         assert!((w.extent[1] - 0.05).abs() < 1e-9);
         assert!((w.origin[0] - 0.45).abs() < 1e-9);
+        // A 4:1 image: the same tenth of its width is a fifth of its height on a 2:1 target.
+        let wide = VirtualTexture::new(4000, 1000, 128, 4).unwrap();
+        let Pose::Window(w) = s.pose(5, &[wide]) else { panic!() };
+        assert!((w.extent[1] - 0.2).abs() < 1e-9, "{w:?}");
+        let o = w.origin_texels(&wide, (100, 50));
+        assert_eq!(o.step[0], o.step[1], "square pixels");
     }
 
     #[test]

@@ -12,25 +12,31 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use vortex_pack::format::pyramid_levels;
-use vortex_pack::{Description, NewTile, Pack, PackError, PackWriter, TileId, TileKind, WriteOptions};
+use vortex_pack::{Description, Level, NewTile, Pack, PackError, PackWriter, TileId, TileKind, WriteOptions};
 use vortex_vt::page::PageId;
 use vortex_vt::sampler::{LodChain, LodImages, Rgba8Image};
 
 use crate::texture::VirtualTexture;
 
-/// `lods` levels: `lod0`, then each level the 2x2 mean of the one above in code values, rounded
-/// half up (the tiler's `box` filter on an image that fills its page grid). `lod0`'s sides must
-/// be divisible by `2^(lods-1)`.
+/// `lods` levels: `lod0`, then each level the mean of the (up to) 2x2 texels of the one above
+/// that it covers, in code values, rounded half up (the tiler's `box` filter, cascaded): level
+/// k + 1 is `ceil(w_k / 2) x ceil(h_k / 2)`, anchored at the top-left, and a texel on an odd
+/// edge averages the one or two texels it covers.
 pub fn box_chain(lod0: Rgba8Image, lods: u8) -> LodChain {
     let mut levels = vec![lod0];
     while levels.len() < lods as usize {
         let Some(fine) = levels.last() else { break };
-        let texel = |x: u32, y: u32| fine.texels[(y * fine.width + x) as usize];
-        let coarse = Rgba8Image::from_fn(fine.width / 2, fine.height / 2, |x, y| {
-            let quad =
-                [texel(2 * x, 2 * y), texel(2 * x + 1, 2 * y), texel(2 * x, 2 * y + 1), texel(2 * x + 1, 2 * y + 1)];
-            std::array::from_fn(|c| ((quad.iter().map(|t| u32::from(t[c])).sum::<u32>() + 2) / 4) as u8)
+        let coarse = Rgba8Image::from_fn(fine.width.div_ceil(2), fine.height.div_ceil(2), |x, y| {
+            let mut sum = [0u32; 4];
+            let mut n = 0;
+            for (fx, fy) in [(2 * x, 2 * y), (2 * x + 1, 2 * y), (2 * x, 2 * y + 1), (2 * x + 1, 2 * y + 1)] {
+                if fx < fine.width && fy < fine.height {
+                    let t = fine.texels[(fy * fine.width + fx) as usize];
+                    (0..4).for_each(|c| sum[c] += u32::from(t[c]));
+                    n += 1;
+                }
+            }
+            sum.map(|c| ((c + n / 2) / n) as u8)
         });
         levels.push(coarse);
     }
@@ -38,9 +44,9 @@ pub fn box_chain(lod0: Rgba8Image, lods: u8) -> LodChain {
 }
 
 /// The stored tile of `page` of `texture`: its payload and `border` texels of its neighbours on
-/// each side, texels beyond the level's edge repeating the edge (the tiler's layout); RGBA8
-/// row-major, `tile_size²` texels.
-pub fn bordered_tile(chain: &LodChain, texture: &VirtualTexture, page: PageId) -> Vec<u8> {
+/// each side, texels beyond the level's edge repeating the edge (the tiler's layout with
+/// `--background edge`); RGBA8 row-major, `tile_size²` texels.
+pub fn bordered_tile(chain: &impl LodImages, texture: &VirtualTexture, page: PageId) -> Vec<u8> {
     let (w, h) = chain.size(page.lod);
     let (side, border, payload) =
         (i64::from(texture.tile_size), i64::from(texture.border), i64::from(texture.payload()));
@@ -55,35 +61,84 @@ pub fn bordered_tile(chain: &LodChain, texture: &VirtualTexture, page: PageId) -
     out
 }
 
+/// The level table of `texture`'s pack: its grid's pages per LOD, and the image at each LOD
+/// (`ceil(size / 2^lod)`).
+pub fn levels(texture: &VirtualTexture) -> Vec<Level> {
+    let mut first_entry = 0u64;
+    (0..texture.grid.lod_count())
+        .map(|lod| {
+            let [w, h] = texture.grid.pages_at(lod).map(u32::from);
+            let shrink = |v: u32| v.div_ceil(1 << lod);
+            let level = Level {
+                tiles_w: w,
+                tiles_h: h,
+                first_entry,
+                width: shrink(texture.width),
+                height: shrink(texture.height),
+            };
+            first_entry += u64::from(w) * u64::from(h);
+            level
+        })
+        .collect()
+}
+
+/// One tile of a pack that [`write_pack_with`] writes.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum TestTile {
+    /// `tile_size²` RGBA8 texels, stored as the pack's kind.
+    Texels(Vec<u8>),
+    /// One colour over the whole tile, borders included.
+    Constant([u8; 4]),
+    /// No tile: the runtime magnifies the nearest stored ancestor.
+    Absent,
+}
+
 /// Writes a pack at `path` of every page of `texture` (texture id 0), each the
 /// [bordered tile](bordered_tile) of `chain` stored as `kind`: `Raw`, or `Bc7` (the tile encoded
 /// by [`crate::bc7::solid_blocks`], exact when each 4x4 block is one colour). Opens it.
 pub fn write_pack(
     path: &Path,
-    chain: &LodChain,
+    chain: &impl LodImages,
     texture: &VirtualTexture,
     kind: TileKind,
 ) -> Result<Arc<Pack>, PackError> {
-    let side = texture.side_texels() as u32;
+    write_pack_with(path, texture, kind, |page| TestTile::Texels(bordered_tile(chain, texture, page)))
+}
+
+/// Writes a pack at `path` of every page of `texture` (texture id 0), each as `tile` says, the
+/// texels stored as `kind` (`Raw` or `Bc7`, as [`write_pack`]). For textures too large to hold
+/// as a [`LodChain`]: most of their tiles can be one colour or absent. Opens it.
+pub fn write_pack_with(
+    path: &Path,
+    texture: &VirtualTexture,
+    kind: TileKind,
+    mut tile: impl FnMut(PageId) -> TestTile,
+) -> Result<Arc<Pack>, PackError> {
     let d = Description {
-        width: side,
-        height: side,
+        width: texture.width,
+        height: texture.height,
         tile_size: texture.tile_size,
         border: texture.border,
-        level_count: u32::from(texture.grid.lod_count),
+        level_count: u32::from(texture.grid.lod_count()),
         channels: 4,
         sample_bytes: 1,
     };
-    let levels = pyramid_levels(&d, u32::from(texture.grid.pages));
+    let levels = levels(texture);
     let mut writer = PackWriter::create(path, d, levels.clone(), b"{}", WriteOptions::default())?;
     for (lod, level) in levels.iter().enumerate() {
         for y in 0..level.tiles_h {
             for x in 0..level.tiles_w {
-                let mut bytes = bordered_tile(chain, texture, PageId::new(0, lod as u8, x as u16, y as u16));
-                if kind == TileKind::Bc7 {
-                    bytes = crate::bc7::solid_blocks(&bytes, texture.tile_size);
+                let id = TileId { lod: lod as u32, x, y };
+                match tile(PageId::new(0, lod as u8, x as u16, y as u16)) {
+                    TestTile::Texels(mut bytes) => {
+                        if kind == TileKind::Bc7 {
+                            bytes = crate::bc7::solid_blocks(&bytes, texture.tile_size);
+                        }
+                        writer.add(id, NewTile::Data(kind, &bytes))?;
+                    }
+                    TestTile::Constant(colour) => writer.add(id, NewTile::Constant(&colour))?,
+                    TestTile::Absent => writer.add(id, NewTile::Absent)?,
                 }
-                writer.add(TileId { lod: lod as u32, x, y }, NewTile::Data(kind, &bytes))?;
             }
         }
     }

@@ -1,8 +1,9 @@
-//! What the runtime needs to know of one virtual texture to address it: its page grid and how
-//! the real image sits in it. A texture is square, a power of two of pages per side; the image
-//! fills its top-left corner (`uv_scale` of it per axis) and image UV 0..1 spans just the image.
+//! What the runtime needs to know of one virtual texture to address it: its page grid and the
+//! real image it holds. UV 0..1 spans the image on both axes (LOD-0 texel = `uv * size`); the
+//! grid covers it from the top-left, rectangular, its last row and column of pages possibly
+//! part padding, which no sample reaches.
 
-use vortex_vt::page::TextureGrid;
+use vortex_vt::page::{GridError, TextureGrid};
 
 /// The shape of one virtual texture.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -17,10 +18,20 @@ pub struct VirtualTexture {
 }
 
 impl VirtualTexture {
-    /// A texture whose image fills its whole page grid (`grid.pages * payload` texels per side).
-    pub fn square(grid: TextureGrid, tile_size: u32, border: u32) -> VirtualTexture {
-        let side = grid.pages as u32 * (tile_size - 2 * border);
-        VirtualTexture { grid, width: side, height: side, tile_size, border }
+    /// The texture of a `width x height` image in tiles of `tile_size` texels with `border`
+    /// texels of border per side: `ceil(width / payload) x ceil(height / payload)` pages at
+    /// LOD 0. Panics if the border leaves no payload.
+    pub fn new(width: u32, height: u32, tile_size: u32, border: u32) -> Result<VirtualTexture, GridError> {
+        assert!(2 * border < tile_size, "a {tile_size}-texel tile with a {border}-texel border has no payload");
+        let grid = TextureGrid::for_image(width, height, tile_size - 2 * border)?;
+        Ok(VirtualTexture { grid, width, height, tile_size, border })
+    }
+
+    /// A texture whose image fills its whole page grid (`pages * payload` texels per axis).
+    pub fn filling(grid: TextureGrid, tile_size: u32, border: u32) -> VirtualTexture {
+        let payload = tile_size - 2 * border;
+        let [w, h] = grid.pages().map(|p| u32::from(p) * payload);
+        VirtualTexture { grid, width: w, height: h, tile_size, border }
     }
 
     /// Side of a page's own texels (the tile without its borders).
@@ -28,15 +39,8 @@ impl VirtualTexture {
         self.tile_size - 2 * self.border
     }
 
-    /// Texels per side of the page grid at LOD 0.
-    pub fn side_texels(&self) -> u64 {
-        self.grid.pages as u64 * self.payload() as u64
-    }
-
-    /// The fraction of the page grid the image covers, per axis: image UV times this is the
-    /// virtual UV.
-    pub fn uv_scale(&self) -> [f32; 2] {
-        let side = self.side_texels() as f64;
-        [(self.width as f64 / side) as f32, (self.height as f64 / side) as f32]
+    /// The image's width and height at LOD 0, in texels: what UV 0..1 spans.
+    pub fn size(&self) -> [u32; 2] {
+        [self.width, self.height]
     }
 }

@@ -39,10 +39,10 @@ fn xorshift(s: &mut u64) -> u64 {
 
 /// 400 distinct pages (100 per LOD 0-3, in a window near the texture's centre), each pixel one
 /// of them at random.
-fn scattered_buffer() -> Vec<u32> {
+fn scattered_buffer(grid: &TextureGrid) -> Vec<u32> {
     let pages: Vec<u32> = (0..4u8)
         .flat_map(|lod| {
-            (0..100u16).map(move |i| encode(PageId::new(0, lod, (200 >> lod) + i % 10, (200 >> lod) + i / 10)))
+            (0..100u16).map(move |i| encode(PageId::new(0, lod, (200 >> lod) + i % 10, (200 >> lod) + i / 10), grid))
         })
         .collect();
     let mut s = 0x9E37_79B9_7F4A_7C15;
@@ -50,9 +50,10 @@ fn scattered_buffer() -> Vec<u32> {
 }
 
 /// Every pixel a different LOD 0 page, shuffled.
-fn distinct_buffer() -> Vec<u32> {
-    let mut words: Vec<u32> =
-        (0..FEEDBACK.0 * FEEDBACK.1).map(|i| encode(PageId::new(0, 0, (i % 512) as u16, (i / 512) as u16))).collect();
+fn distinct_buffer(grid: &TextureGrid) -> Vec<u32> {
+    let mut words: Vec<u32> = (0..FEEDBACK.0 * FEEDBACK.1)
+        .map(|i| encode(PageId::new(0, 0, (i % 512) as u16, (i / 512) as u16), grid))
+        .collect();
     let mut s = 12345;
     for i in (1..words.len()).rev() {
         words.swap(i, (xorshift(&mut s) % (i as u64 + 1)) as usize);
@@ -89,14 +90,14 @@ fn describe(name: &str, a: &Analysis) {
 }
 
 fn main() {
-    let grid = TextureGrid::new(512).unwrap();
+    let grid = TextureGrid::new(512, 512).unwrap();
     let grids = [grid];
 
     // Resident: all of LOD 4 and coarser and a third of LOD 2, found through a hash set the way
     // a page-table stand-in would be (this look-up is the caller's cost, included below).
     let mut resident: HashSet<PageId> = HashSet::new();
-    for lod in 2..grid.lod_count {
-        let n = grid.pages_per_side(lod);
+    for lod in 2..grid.lod_count() {
+        let n = grid.pages_at(lod)[0];
         for y in 0..n {
             for x in 0..n {
                 if lod >= 4 || (x + y) % 3 == 0 {
@@ -111,8 +112,8 @@ fn main() {
     let mut analyzer = Analyzer::new();
     for (name, words) in [
         ("perspective view", perspective_buffer(&grid)),
-        ("400 pages at random", scattered_buffer()),
-        ("14400 distinct pages", distinct_buffer()),
+        ("400 pages at random", scattered_buffer(&grid)),
+        ("14400 distinct pages", distinct_buffer(&grid)),
     ] {
         describe(name, &analyze(&words, &grids, resident_lod));
         let reused = median_us(|| {

@@ -91,7 +91,7 @@ fn main() {
         Some(i) => args.get(i + 1).and_then(|n| n.parse().ok()).filter(|&n: &u32| n > 0).expect("--best-of N, N > 0"),
         None => 1,
     };
-    let grid = TextureGrid::new(PAGES).unwrap();
+    let grid = TextureGrid::new(PAGES.into(), PAGES.into()).unwrap();
     let grids = [grid];
     let base_bias = feedback_bias(FEEDBACK.0, FEEDBACK.1, FRAME.0, FRAME.1);
     let mut residency = Residency::new(&grids, ResidencyConfig::new(SLOTS, BUDGET)).unwrap();
@@ -143,7 +143,7 @@ fn main() {
         FRAME.1,
         FEEDBACK.0,
         FEEDBACK.1,
-        grid.lod_count,
+        grid.lod_count(),
         if best_of > 1 { format!(", best of {best_of} runs of each") } else { String::new() }
     );
     println!(

@@ -24,7 +24,7 @@ const FRAMES: u64 = 3000;
 fn requests(grid: &TextureGrid, cx: u32, cy: u32, out: &mut Vec<PageId>) {
     out.clear();
     for lod in 0..6u8 {
-        let side = grid.pages_per_side(lod) as i64;
+        let side = grid.pages_at(lod)[0] as i64;
         let (x0, y0) = ((cx >> lod) as i64 - 4, (cy >> lod) as i64 - 4);
         for y in y0.max(0)..(y0 + 8).min(side) {
             for x in x0.max(0)..(x0 + 8).min(side) {
@@ -44,7 +44,7 @@ struct Stats {
 }
 
 fn run(pan_per_frame: u32) -> Stats {
-    let grid = TextureGrid::new(PAGES).unwrap();
+    let grid = TextureGrid::new(PAGES.into(), PAGES.into()).unwrap();
     let mut residency = Residency::new(&[grid], ResidencyConfig::new(SLOTS, BUDGET)).unwrap();
     let mut table = PageTable::new(&[grid]);
     table.apply(&residency.update(0, &[]));
@@ -91,7 +91,7 @@ fn us(d: Duration) -> f64 {
 fn main() {
     println!(
         "{PAGES} pages per side ({} entries), {SLOTS} slots, budget {BUDGET}/frame, {FRAMES} frames timed",
-        TextureGrid::new(PAGES).unwrap().page_count()
+        TextureGrid::new(PAGES.into(), PAGES.into()).unwrap().page_count()
     );
     for pan in [1, 4] {
         let mut s = run(pan);
@@ -125,7 +125,7 @@ fn main() {
     }
 
     // The from-scratch alternative, for comparison.
-    let grid = TextureGrid::new(PAGES).unwrap();
+    let grid = TextureGrid::new(PAGES.into(), PAGES.into()).unwrap();
     let mut residency = Residency::new(&[grid], ResidencyConfig::new(SLOTS, SLOTS)).unwrap();
     let mut req = Vec::new();
     requests(&grid, 256, 256, &mut req);

@@ -20,7 +20,7 @@
 //! Resident pages (distance 0) are listed too, last among equals, so that the cache can mark
 //! them used this frame.
 
-use crate::feedback::{LOD_SHIFT, NO_REQUEST, NO_REQUEST_LOD, Y_SHIFT, decode};
+use crate::feedback::{INDEX_MASK, LOD_SHIFT, NO_REQUEST, NO_REQUEST_LOD, decode};
 use crate::page::{PageId, TextureGrid};
 
 /// One page the frame needs.
@@ -114,7 +114,7 @@ impl Analyzer {
                 count += self.runs[i] as u32;
                 i += 1;
             }
-            let valid = decode(word).is_some_and(|p| grids.get(p.texture as usize).is_some_and(|g| g.contains(p)));
+            let valid = decode(word).and_then(|r| r.page(grids)).is_some();
             if valid {
                 r.samples += count;
                 self.runs[kept] = (word as u64) << 32 | count as u64;
@@ -135,7 +135,7 @@ impl Analyzer {
             let grid = grids[texture];
             let mut direct = &self.runs[start..end];
             self.parents.clear();
-            for lod in 0..grid.lod_count {
+            for lod in 0..grid.lod_count() {
                 let n = direct.partition_point(|&r| lod_of((r >> 32) as u32) == lod);
                 merge(&direct[..n], &self.parents, &mut self.level);
                 direct = &direct[n..];
@@ -143,8 +143,9 @@ impl Analyzer {
                     continue;
                 }
                 self.parents.clear();
+                let rows = [grid.pages_at(lod)[0], grid.pages_at(lod + 1)[0]].map(u32::from);
                 for &(word, _, samples) in &self.level {
-                    let p = (parent(word) as u64) << 32 | samples as u64;
+                    let p = (parent(word, rows) as u64) << 32 | samples as u64;
                     match self.parents.last_mut() {
                         // Horizontal neighbours share a parent: merge them before sorting.
                         Some(last) if *last >> 32 == p >> 32 => *last += samples as u64,
@@ -154,9 +155,12 @@ impl Analyzer {
                 self.parents.sort_unstable();
                 merge_in_place(&mut self.parents);
                 for &(word, direct, samples) in &self.level {
-                    // Every word in `level` decoded when it was collected.
-                    let Some(page) = decode(word) else { continue };
-                    let resident = resident_lod(page).unwrap_or(grid.lod_count);
+                    // Every word in `level` named a page of `grid` when it was collected (its
+                    // parents are in the grid too).
+                    let Some(page) = decode(word).and_then(|r| grid.page_at_index(r.texture, r.lod, r.index)) else {
+                        continue;
+                    };
+                    let resident = resident_lod(page).unwrap_or(grid.lod_count());
                     let distance = resident.saturating_sub(page.lod);
                     r.requests.push(PageRequest { page, direct, samples, distance });
                 }
@@ -210,11 +214,12 @@ fn lod_of(word: u32) -> u8 {
     (word >> LOD_SHIFT & 0xF) as u8
 }
 
-/// The word of the parent page: x and y halved, LOD plus one, same texture.
-fn parent(word: u32) -> u32 {
-    let x = word & 0xFFF;
-    let y = word >> Y_SHIFT & 0xFFF;
-    ((word & 0xFF00_0000) + (1 << LOD_SHIFT)) | ((y >> 1) << Y_SHIFT) | (x >> 1)
+/// The word of the parent page: x and y halved, LOD plus one, same texture. `rows` are the
+/// pages per row of the word's LOD and of the next; the index is row by row in each.
+fn parent(word: u32, rows: [u32; 2]) -> u32 {
+    let index = word & INDEX_MASK;
+    let (x, y) = (index % rows[0], index / rows[0]);
+    ((word & !INDEX_MASK) + (1 << LOD_SHIFT)) | ((y >> 1) * rows[1] + (x >> 1))
 }
 
 /// Merges equal words of sorted `(word << 32) | count` entries, summing the counts.
@@ -269,18 +274,18 @@ mod tests {
     use proptest::prelude::*;
 
     use super::*;
-    use crate::feedback::encode;
+    use crate::feedback::{decode, encode, encode_index};
 
     /// The naive oracle: a map over every ancestor of every word.
     fn naive(words: &[u32], grids: &[TextureGrid], resident_lod: impl Fn(PageId) -> Option<u8>) -> Analysis {
         let mut a = Analysis::default();
         let mut map: BTreeMap<PageId, (u32, u32)> = BTreeMap::new();
         for &w in words {
-            let Some(p) = decode(w) else {
+            let Some(r) = decode(w) else {
                 a.no_request += 1;
                 continue;
             };
-            let Some(g) = grids.get(p.texture as usize).filter(|g| g.contains(p)) else {
+            let Some((p, g)) = r.page(grids).map(|p| (p, &grids[p.texture as usize])) else {
                 a.invalid += 1;
                 continue;
             };
@@ -294,7 +299,7 @@ mod tests {
         a.requests = map
             .into_iter()
             .map(|(page, (direct, samples))| {
-                let lod_count = grids[page.texture as usize].lod_count;
+                let lod_count = grids[page.texture as usize].lod_count();
                 let distance = resident_lod(page).unwrap_or(lod_count).saturating_sub(page.lod);
                 PageRequest { page, direct, samples, distance }
             })
@@ -307,18 +312,19 @@ mod tests {
     fn resident(p: PageId, grids: &[TextureGrid]) -> Option<u8> {
         let g = &grids[p.texture as usize];
         p.ancestors_and_self(g)
-            .find(|q| q.lod == g.lod_count - 1 || (q.texture == 0 && q.lod == 2 && q.x % 2 == 0))
+            .find(|q| q.lod == g.lod_count() - 1 || (q.texture == 0 && q.lod == 2 && q.x % 2 == 0))
             .map(|q| q.lod)
     }
 
+    /// A wide grid with odd rows, a tall one and a single page.
     fn grids() -> Vec<TextureGrid> {
-        vec![TextureGrid::new(16).unwrap(), TextureGrid::new(4).unwrap(), TextureGrid::new(1).unwrap()]
+        vec![TextureGrid::new(21, 5).unwrap(), TextureGrid::new(3, 10).unwrap(), TextureGrid::new(1, 1).unwrap()]
     }
 
     #[test]
     fn counts_ancestors_and_priorities() {
-        let g = [TextureGrid::new(4).unwrap()]; // LODs 0 (4x4), 1 (2x2), 2 (1x1)
-        let w = |lod, x, y| encode(PageId::new(0, lod, x, y));
+        let g = [TextureGrid::new(4, 4).unwrap()]; // LODs 0 (4x4), 1 (2x2), 2 (1x1)
+        let w = |lod, x, y| encode(PageId::new(0, lod, x, y), &g[0]);
         let words = [w(0, 3, 3), w(0, 3, 3), w(0, 3, 3), w(0, 0, 0), w(1, 1, 1), NO_REQUEST, w(0, 0, 0)];
         // Only the root is resident.
         let a = analyze(&words, &g, |_| Some(2));
@@ -343,9 +349,9 @@ mod tests {
 
     #[test]
     fn nothing_resident_ranks_beyond_the_root() {
-        let g = [TextureGrid::new(2).unwrap()];
+        let g = [TextureGrid::new(2, 2).unwrap()];
         let nothing: &dyn Fn(PageId) -> Option<u8> = &|_| None; // a `dyn Fn` works too
-        let a = analyze(&[encode(PageId::new(0, 0, 1, 0))], &g, nothing);
+        let a = analyze(&[encode(PageId::new(0, 0, 1, 0), &g[0])], &g, nothing);
         let d: Vec<(u8, u8)> = a.requests.iter().map(|q| (q.page.lod, q.distance)).collect();
         assert_eq!(d, [(0, 2), (1, 1)]);
     }
@@ -354,12 +360,12 @@ mod tests {
     fn invalid_words_are_counted_and_skipped() {
         let g = grids();
         let words = [
-            encode(PageId::new(3, 0, 0, 0)), // unknown texture
-            encode(PageId::new(1, 0, 4, 0)), // x outside a 4-page grid
-            encode(PageId::new(1, 1, 0, 2)), // y outside LOD 1's 2 pages
-            encode(PageId::new(1, 3, 0, 0)), // LOD beyond the grid's 3
-            encode(PageId::new(2, 0, 0, 0)), // valid: the 1-page texture
-            0x3F00_0000,                     // no request (LOD 15), other bits not all set
+            encode_index(3, 0, 0),  // unknown texture
+            encode_index(1, 0, 30), // past the 3x10 pages of LOD 0
+            encode_index(1, 1, 10), // past LOD 1's 2x5
+            encode_index(1, 5, 0),  // LOD beyond the grid's 5
+            encode_index(2, 0, 0),  // valid: the 1-page texture
+            0x3F00_0000,            // no request (LOD 15), other bits not all set
             NO_REQUEST,
         ];
         let a = analyze(&words, &g, |p| resident(p, &g));
@@ -371,8 +377,7 @@ mod tests {
     #[test]
     fn reuse_gives_the_same_answer() {
         let g = grids();
-        let words: Vec<u32> =
-            (0..500u32).map(|i| encode(PageId::new(0, (i % 3) as u8, (i % 16) as u16, (i / 37) as u16))).collect();
+        let words: Vec<u32> = (0..500u32).map(|i| encode_index(0, (i % 3) as u8, i % 37 + (i / 37) * 4)).collect();
         let mut an = Analyzer::new();
         let first = an.analyze(&words, &g, |p| resident(p, &g)).clone();
         an.analyze(&[NO_REQUEST; 7], &g, |_| None);
@@ -384,10 +389,10 @@ mod tests {
     fn more_distinct_pages_than_table_slots() {
         // 4096 + 1024 distinct pages, each twice, far apart: the table must evict and the
         // evicted counts must still add up.
-        let g = [TextureGrid::new(64).unwrap()];
+        let g = [TextureGrid::new(128, 32).unwrap()];
         let mut words: Vec<u32> = (0..2u8)
-            .flat_map(|lod| (0..64u16 >> lod).flat_map(move |y| (0..64u16 >> lod).map(move |x| (lod, x, y))))
-            .map(|(lod, x, y)| encode(PageId::new(0, lod, x, y)))
+            .flat_map(|lod| (0..32u16 >> lod).flat_map(move |y| (0..128u16 >> lod).map(move |x| (lod, x, y))))
+            .map(|(lod, x, y)| encode(PageId::new(0, lod, x, y), &g[0]))
             .collect();
         words.extend(words.clone().iter().rev());
         assert!(words.len() / 2 > SLOTS);
@@ -400,7 +405,8 @@ mod tests {
     /// Words mostly valid, with runs (as neighbouring pixels give), some invalid and no-request.
     fn feedback_words() -> impl Strategy<Value = Vec<u32>> {
         let word = prop_oneof![
-            8 => (0u8..3, 0u8..5, 0u16..16, 0u16..16).prop_map(|(t, l, x, y)| encode(PageId::new(t, l, x, y))),
+            // Indices a little past the largest level (105 pages), so some are invalid.
+            8 => (0u8..3, 0u8..6, 0u32..120).prop_map(|(t, l, i)| encode_index(t, l, i)),
             1 => Just(NO_REQUEST),
             1 => any::<u32>(),
         ];

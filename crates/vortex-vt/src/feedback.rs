@@ -1,65 +1,91 @@
-//! The feedback word, and the math a shader uses to choose the page a sample wants.
+//! The feedback word, and the math a shader uses to choose the LOD a sample wants.
 //!
 //! The feedback pass renders the scene into a small `R32Uint` buffer, writing per pixel the
-//! page it would sample. The word is the original library's 32 bits, least significant first:
+//! page it would sample. The word is 32 bits, least significant first:
 //!
 //! ```text
-//!  31    28 27    24 23                  12 11                   0
-//! +--------+--------+----------------------+----------------------+
-//! | tex id |  LOD   |       page y         |       page x         |
-//! +--------+--------+----------------------+----------------------+
-//!   4 bits   4 bits        12 bits                12 bits
+//!  31    28 27    24 23                                           0
+//! +--------+--------+----------------------------------------------+
+//! | tex id |  LOD   |     page index: y * pages_per_row(LOD) + x   |
+//! +--------+--------+----------------------------------------------+
+//!   4 bits   4 bits                     24 bits
 //! ```
 //!
-//! so a WGSL shader produces it with shifts alone:
-//! `(x & 0xFFFu) | ((y & 0xFFFu) << 12u) | (lod << 24u) | (tex << 28u)`.
+//! The page is its index in its LOD's grid, row by row, rather than fixed-width x and y fields,
+//! so that the 24 bits serve any aspect ratio: a 2^20 x 2^10-texel texture in 120-texel pages
+//! has 8739 x 9 pages, which 12-bit x and y fields (4096 pages per side) could not name, and
+//! the limit is the area, 2^24 pages at LOD 0 ([`MAX_PAGES_AT_LOD0`], as many as a square
+//! 4096 x 4096 grid), whatever the shape. Decoding a page needs its texture's grid (the row
+//! width); [`Request::page`] checks the page against it. A WGSL shader produces the word with
+//! one multiply-add and shifts: `(y * row + x) | (lod << 24u) | (tex << 28u)`.
 //!
 //! LOD 15 is "no request": [`decode`] returns `None` for every word whose LOD field is 15,
 //! whatever its other bits, so [`NO_REQUEST`] (all ones) can never alias a page. The buffer
 //! must be cleared to [`NO_REQUEST`], not to 0: word 0 is page (0, 0) of LOD 0 of texture 0.
 //!
-//! [`lod_for`], [`page_at`] and [`feedback_bias`] mirror the shader so that tests can compare a
-//! CPU prediction with what the GPU wrote. They use f32, like the shader; within about one ulp
-//! of a LOD boundary the two may still disagree (WGSL's `log2` is not correctly rounded).
+//! [`lod_for`] and [`feedback_bias`] mirror the shader so that tests can compare a CPU
+//! prediction with what the GPU wrote (the page itself is `address::uv_at`'s or
+//! `address::WindowOrigin::at`'s). They use f32, like the shader; within about one ulp of a LOD
+//! boundary the two may still disagree (WGSL's `log2` is not correctly rounded).
 
-use crate::page::{MAX_LODS, MAX_PAGES_PER_SIDE, MAX_TEXTURES, PageId, TextureGrid};
+use crate::page::{MAX_LODS, MAX_PAGES_AT_LOD0, MAX_TEXTURES, PageId, TextureGrid};
 
-/// Bit position of page x (12 bits).
-pub const X_SHIFT: u32 = 0;
-/// Bit position of page y (12 bits).
-pub const Y_SHIFT: u32 = 12;
+/// Bit position of the page index (24 bits).
+pub const INDEX_SHIFT: u32 = 0;
 /// Bit position of the LOD (4 bits).
 pub const LOD_SHIFT: u32 = 24;
 /// Bit position of the texture id (4 bits).
 pub const TEXTURE_SHIFT: u32 = 28;
-const COORD_MASK: u32 = 0xFFF;
+/// The page index field.
+pub const INDEX_MASK: u32 = (MAX_PAGES_AT_LOD0 - 1) as u32;
 const NIBBLE_MASK: u32 = 0xF;
 /// The LOD field value that means "no request".
 pub const NO_REQUEST_LOD: u8 = 15;
 /// The clear value of the feedback buffer: a pixel that wants no page (LOD field 15).
 pub const NO_REQUEST: u32 = 0xFFFF_FFFF;
 
-/// The feedback word of `page`. The page must be within the word's limits (texture < 16,
-/// LOD < 15, x and y < 4096); this is checked in debug builds only.
-pub fn encode(page: PageId) -> u32 {
-    debug_assert!(page.texture < MAX_TEXTURES, "texture id {} out of range", page.texture);
-    debug_assert!(page.lod < MAX_LODS, "LOD {} out of range", page.lod);
-    debug_assert!(page.x < MAX_PAGES_PER_SIDE && page.y < MAX_PAGES_PER_SIDE, "page {page:?} out of range");
-    (page.x as u32 & COORD_MASK) << X_SHIFT
-        | (page.y as u32 & COORD_MASK) << Y_SHIFT
-        | (page.lod as u32 & NIBBLE_MASK) << LOD_SHIFT
-        | (page.texture as u32 & NIBBLE_MASK) << TEXTURE_SHIFT
+/// The fields of a feedback word that asks for a page: texture id, LOD and page index in that
+/// LOD's grid (row by row), not yet checked against any grid.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Request {
+    pub texture: u8,
+    pub lod: u8,
+    pub index: u32,
 }
 
-/// The page a feedback word requests, or `None` for "no request" (any word with LOD field 15).
-/// The page is not checked against any texture's grid: see `analysis` for that.
-pub fn decode(word: u32) -> Option<PageId> {
+impl Request {
+    /// The page asked for, if texture `texture` is in `grids` and the LOD and index are in its
+    /// grid.
+    pub fn page(self, grids: &[TextureGrid]) -> Option<PageId> {
+        grids.get(self.texture as usize)?.page_at_index(self.texture, self.lod, self.index)
+    }
+}
+
+/// The word of page index `index` of `lod` of texture `texture`. The fields must be within the
+/// word's limits (texture < 16, LOD < 15, index < 2^24); this is checked in debug builds only.
+pub fn encode_index(texture: u8, lod: u8, index: u32) -> u32 {
+    debug_assert!(texture < MAX_TEXTURES, "texture id {texture} out of range");
+    debug_assert!(lod < MAX_LODS, "LOD {lod} out of range");
+    debug_assert!(index <= INDEX_MASK, "page index {index} out of range");
+    (index & INDEX_MASK) << INDEX_SHIFT
+        | (lod as u32 & NIBBLE_MASK) << LOD_SHIFT
+        | (texture as u32 & NIBBLE_MASK) << TEXTURE_SHIFT
+}
+
+/// The feedback word of `page`, a page of `grid` (its texture's); checked in debug builds only.
+pub fn encode(page: PageId, grid: &TextureGrid) -> u32 {
+    debug_assert!(grid.contains(page), "{page:?} is outside its grid {grid:?}");
+    encode_index(page.texture, page.lod, grid.index(page.lod, page.x, page.y))
+}
+
+/// The fields of a feedback word, or `None` for "no request" (any word with LOD field 15). The
+/// page is not checked against any texture's grid: [`Request::page`] does that.
+pub fn decode(word: u32) -> Option<Request> {
     let lod = ((word >> LOD_SHIFT) & NIBBLE_MASK) as u8;
-    (lod != NO_REQUEST_LOD).then_some(PageId {
+    (lod != NO_REQUEST_LOD).then_some(Request {
         texture: ((word >> TEXTURE_SHIFT) & NIBBLE_MASK) as u8,
         lod,
-        x: ((word >> X_SHIFT) & COORD_MASK) as u16,
-        y: ((word >> Y_SHIFT) & COORD_MASK) as u16,
+        index: (word >> INDEX_SHIFT) & INDEX_MASK,
     })
 }
 
@@ -72,11 +98,14 @@ pub fn decode(word: u32) -> Option<PageId> {
 /// The thesis took the smaller derivative instead; the larger is what the GPU's own isotropic
 /// LOD selection does, so the page asked for is the one the filtered sample will read.
 ///
-/// In WGSL: `let f = max(length(dpdx(uv)), length(dpdy(uv))) * side;`
+/// UV spans the image, `texels` (width, height) at LOD 0, so a derivative is scaled per axis
+/// into texels: on a 4:1 image a step of 0.01 in u is four times as many texels as in v.
+///
+/// In WGSL: `let s = uv * vec2<f32>(size); let f = max(length(dpdx(s)), length(dpdy(s)));`
 /// `let lod = clamp(floor(log2(f) + bias), 0.0, f32(lod_count - 1u));`.
-pub fn lod_for(dudx: f32, dvdx: f32, dudy: f32, dvdy: f32, texture_side_texels: f32, bias: f32, lod_count: u8) -> u8 {
+pub fn lod_for(dudx: f32, dvdx: f32, dudy: f32, dvdy: f32, texels: [f32; 2], bias: f32, lod_count: u8) -> u8 {
     let length = |a: f32, b: f32| {
-        let (a, b) = (a * texture_side_texels, b * texture_side_texels);
+        let (a, b) = (a * texels[0], b * texels[1]);
         (a * a + b * b).sqrt()
     };
     lod_from_footprint(length(dudx, dvdx).max(length(dudy, dvdy)), bias, lod_count)
@@ -95,18 +124,6 @@ pub fn lod_from_footprint(footprint: f32, bias: f32, lod_count: u8) -> u8 {
     } else {
         lod as u8
     }
-}
-
-/// The page of LOD `lod` that holds the sample at (u, v): `floor(u * pages_at_lod)`, clamped to
-/// the grid (so u = 1.0, negative u and NaN stay in range). Exact in f32: the page count is a
-/// power of two.
-pub fn page_at(u: f32, v: f32, lod: u8, grid: &TextureGrid) -> (u16, u16) {
-    let lod = lod.min(grid.lod_count - 1);
-    let n = grid.pages_per_side(lod);
-    let side = n as f32;
-    // `as` saturates: negative and NaN give 0, too-large values give u16::MAX, then clamped.
-    let at = |t: f32| ((t * side).floor() as u16).min(n - 1);
-    (at(u), at(v))
 }
 
 /// The LOD bias that makes a feedback buffer smaller than the frame ask for the LODs the frame
@@ -129,17 +146,34 @@ mod tests {
 
     #[test]
     fn golden_bit_layout() {
-        assert_eq!(encode(PageId::new(0, 0, 0, 0)), 0);
-        assert_eq!(encode(PageId::new(0, 0, 1, 0)), 0x0000_0001);
-        assert_eq!(encode(PageId::new(0, 0, 0, 1)), 0x0000_1000);
-        assert_eq!(encode(PageId::new(0, 1, 0, 0)), 0x0100_0000);
-        assert_eq!(encode(PageId::new(1, 0, 0, 0)), 0x1000_0000);
-        assert_eq!(encode(PageId::new(0xA, 0x3, 0x123, 0x456)), 0xA345_6123);
-        assert_eq!(encode(PageId::new(15, 14, 4095, 4095)), 0xFEFF_FFFF);
-        assert_eq!(decode(0xA345_6123), Some(PageId::new(0xA, 0x3, 0x123, 0x456)));
+        let g = TextureGrid::new(8739, 9).unwrap();
+        let p = |tex, lod, x, y| encode(PageId::new(tex, lod, x, y), &g);
+        assert_eq!(p(0, 0, 0, 0), 0);
+        assert_eq!(p(0, 0, 1, 0), 0x0000_0001);
+        assert_eq!(p(0, 0, 0, 1), 8739);
+        assert_eq!(p(0, 1, 0, 1), 0x0100_0000 | 4370);
+        assert_eq!(p(1, 0, 0, 0), 0x1000_0000);
+        assert_eq!(p(0xA, 0, 8738, 8), 0xA000_0000 | (8 * 8739 + 8738));
+        assert_eq!(encode_index(15, 14, INDEX_MASK), 0xFEFF_FFFF);
+        assert_eq!(encode_index(0xA, 3, 0x45_6123), 0xA345_6123);
+        assert_eq!(decode(0xA345_6123), Some(Request { texture: 0xA, lod: 3, index: 0x45_6123 }));
         // The WGSL expression in the module doc, written out.
-        let (x, y, lod, tex) = (0x123u32, 0x456u32, 3u32, 0xAu32);
-        assert_eq!((x & 0xFFF) | ((y & 0xFFF) << 12) | (lod << 24) | (tex << 28), 0xA345_6123);
+        let (x, y, row, lod, tex) = (0x123u32, 0x45u32, 8739u32, 3u32, 0xAu32);
+        assert_eq!((y * row + x) | (lod << 24) | (tex << 28), encode_index(0xA, 3, 0x45 * 8739 + 0x123));
+    }
+
+    #[test]
+    fn requests_are_checked_against_their_grid() {
+        let grids = [TextureGrid::new(8739, 9).unwrap(), TextureGrid::new(3, 1).unwrap()];
+        let page = PageId::new(0, 0, 8738, 8);
+        assert_eq!(decode(encode(page, &grids[0])).and_then(|r| r.page(&grids)), Some(page));
+        let r = |texture, lod, index| Request { texture, lod, index };
+        assert_eq!(r(0, 0, 8739 * 9).page(&grids), None, "past the last row");
+        assert_eq!(r(1, 0, 2).page(&grids), Some(PageId::new(1, 0, 2, 0)));
+        assert_eq!(r(1, 0, 3).page(&grids), None, "the next row of a one-row grid");
+        assert_eq!(r(1, 2, 0).page(&grids), Some(PageId::new(1, 2, 0, 0)), "the root of 3, 2, 1 pages");
+        assert_eq!(r(1, 3, 0).page(&grids), None, "LOD past the root");
+        assert_eq!(r(2, 0, 0).page(&grids), None, "unknown texture");
     }
 
     #[test]
@@ -157,15 +191,22 @@ mod tests {
     #[test]
     fn every_lod_below_15_decodes() {
         for lod in 0..15u32 {
-            assert_eq!(decode(lod << 24).map(|p| p.lod), Some(lod as u8));
+            assert_eq!(decode(lod << 24).map(|r| r.lod), Some(lod as u8));
         }
     }
 
     proptest! {
         #[test]
-        fn round_trip_of_valid_pages(tex in 0u8..16, lod in 0u8..15, x in 0u16..4096, y in 0u16..4096) {
-            let p = PageId::new(tex, lod, x, y);
-            prop_assert_eq!(decode(encode(p)), Some(p));
+        fn round_trip_of_valid_pages(
+            tex in 0u8..16, w in 1u32..=16384, h in 1u32..=1024, lod in 0u8..15, x in any::<u16>(), y in any::<u16>(),
+        ) {
+            let g = TextureGrid::new(w, h).unwrap();
+            let lod = lod % g.lod_count();
+            let [pw, ph] = g.pages_at(lod);
+            let p = PageId::new(tex, lod, x % pw, y % ph);
+            let mut grids = vec![g; 16];
+            grids[tex as usize] = g;
+            prop_assert_eq!(decode(encode(p, &g)).and_then(|r| r.page(&grids)), Some(p));
         }
 
         #[test]
@@ -176,32 +217,22 @@ mod tests {
 
         #[test]
         fn decode_then_encode_is_identity(word in any::<u32>()) {
-            if let Some(p) = decode(word) {
-                prop_assert_eq!(encode(p), word);
+            if let Some(r) = decode(word) {
+                prop_assert_eq!(encode_index(r.texture, r.lod, r.index), word);
             }
         }
 
         #[test]
         fn lod_is_monotonic_in_the_footprint(a in 1e-9f32..10.0, b in 1e-9f32..10.0) {
             let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
-            let l = |f: f32| lod_for(f / 65536.0, 0.0, 0.0, 0.0, 65536.0, 0.0, 17);
+            let l = |f: f32| lod_for(f / 65536.0, 0.0, 0.0, 0.0, [65536.0; 2], 0.0, 17);
             prop_assert!(l(lo) <= l(hi));
-        }
-
-        #[test]
-        fn the_page_holds_the_sample(u in 0f32..1.0, v in 0f32..1.0, lod in 0u8..10) {
-            let g = TextureGrid::new(512).unwrap();
-            let (x, y) = page_at(u, v, lod, &g);
-            let n = g.pages_per_side(lod) as f32;
-            prop_assert!(g.contains(PageId::new(0, lod, x, y)));
-            prop_assert!(x as f32 / n <= u && u < (x + 1) as f32 / n);
-            prop_assert!(y as f32 / n <= v && v < (y + 1) as f32 / n);
         }
     }
 
     /// The LOD of a footprint of `texels` along u, on a 65536-texel texture with 17 LODs.
     fn lod_of(texels: f32) -> u8 {
-        lod_for(texels / 65536.0, 0.0, 0.0, 0.0, 65536.0, 0.0, 17)
+        lod_for(texels / 65536.0, 0.0, 0.0, 0.0, [65536.0; 2], 0.0, 17)
     }
 
     #[test]
@@ -211,9 +242,9 @@ mod tests {
             assert_eq!(lod_of(f), k as u8, "2^{k}");
             // The same footprint along v, along a diagonal of the y derivative, or split
             // between x and y derivatives (the larger one counts).
-            assert_eq!(lod_for(0.0, f / 65536.0, 0.0, 0.0, 65536.0, 0.0, 17), k as u8);
-            assert_eq!(lod_for(0.0, 0.0, 0.0, f / 65536.0, 65536.0, 0.0, 17), k as u8);
-            assert_eq!(lod_for(f / 131072.0, 0.0, 0.0, f / 65536.0, 65536.0, 0.0, 17), k as u8);
+            assert_eq!(lod_for(0.0, f / 65536.0, 0.0, 0.0, [65536.0; 2], 0.0, 17), k as u8);
+            assert_eq!(lod_for(0.0, 0.0, 0.0, f / 65536.0, [65536.0; 2], 0.0, 17), k as u8);
+            assert_eq!(lod_for(f / 131072.0, 0.0, 0.0, f / 65536.0, [65536.0; 2], 0.0, 17), k as u8);
             if k > 0 {
                 assert_eq!(lod_of(f * 0.999), k as u8 - 1, "just below 2^{k}");
             }
@@ -221,42 +252,36 @@ mod tests {
             assert_eq!(lod_of(f * 1.999), k.min(16) as u8, "just below 2^{}", k + 1);
         }
         // A 3-4-5 triangle: footprint 5 texels, LOD 2.
-        assert_eq!(lod_for(3.0, 4.0, 0.0, 0.0, 1.0, 0.0, 10), 2);
+        assert_eq!(lod_for(3.0, 4.0, 0.0, 0.0, [1.0; 2], 0.0, 10), 2);
         // Bias moves by whole LODs, and half a LOD of bias rounds by the usual floor.
-        assert_eq!(lod_for(4.0, 0.0, 0.0, 0.0, 1.0, 1.0, 10), 3);
-        assert_eq!(lod_for(4.0, 0.0, 0.0, 0.0, 1.0, -1.0, 10), 1);
-        assert_eq!(lod_for(4.0, 0.0, 0.0, 0.0, 1.0, 0.5, 10), 2);
-        assert_eq!(lod_for(4.0, 0.0, 0.0, 0.0, 1.0, -0.5, 10), 1);
+        assert_eq!(lod_for(4.0, 0.0, 0.0, 0.0, [1.0; 2], 1.0, 10), 3);
+        assert_eq!(lod_for(4.0, 0.0, 0.0, 0.0, [1.0; 2], -1.0, 10), 1);
+        assert_eq!(lod_for(4.0, 0.0, 0.0, 0.0, [1.0; 2], 0.5, 10), 2);
+        assert_eq!(lod_for(4.0, 0.0, 0.0, 0.0, [1.0; 2], -0.5, 10), 1);
+    }
+
+    #[test]
+    fn derivatives_scale_per_axis_on_rectangular_images() {
+        // A 4:1 image of 4096 x 1024 texels: the same UV step is 4x the texels along u.
+        assert_eq!(lod_for(1.0 / 256.0, 0.0, 0.0, 0.0, [4096.0, 1024.0], 0.0, 13), 4);
+        assert_eq!(lod_for(0.0, 1.0 / 256.0, 0.0, 0.0, [4096.0, 1024.0], 0.0, 13), 2);
+        // Square pixels over it: u steps 1/4096 and v steps 1/1024 per pixel are one texel each.
+        assert_eq!(lod_for(1.0 / 4096.0, 0.0, 0.0, 1.0 / 1024.0, [4096.0, 1024.0], 0.0, 13), 0);
+        assert_eq!(lod_for(8.0 / 4096.0, 0.0, 0.0, 8.0 / 1024.0, [4096.0, 1024.0], 0.0, 13), 3);
     }
 
     #[test]
     fn lod_is_clamped() {
         assert_eq!(lod_of(0.5), 0, "magnified");
         assert_eq!(lod_of(1e-30), 0);
-        assert_eq!(lod_for(0.0, 0.0, 0.0, 0.0, 65536.0, 0.0, 17), 0, "zero footprint");
-        assert_eq!(lod_for(f32::NAN, 0.0, 0.0, 0.0, 65536.0, 0.0, 17), 0, "NaN");
-        assert_eq!(lod_for(0.0, 0.0, 0.0, 0.0, 65536.0, f32::INFINITY, 17), 0, "-inf + inf");
+        assert_eq!(lod_for(0.0, 0.0, 0.0, 0.0, [65536.0; 2], 0.0, 17), 0, "zero footprint");
+        assert_eq!(lod_for(f32::NAN, 0.0, 0.0, 0.0, [65536.0; 2], 0.0, 17), 0, "NaN");
+        assert_eq!(lod_for(0.0, 0.0, 0.0, 0.0, [65536.0; 2], f32::INFINITY, 17), 0, "-inf + inf");
         assert_eq!(lod_of(65536.0 * 4.0), 16, "beyond the coarsest");
-        assert_eq!(lod_for(f32::INFINITY, 0.0, 0.0, 0.0, 65536.0, 0.0, 17), 16);
-        assert_eq!(lod_for(1.0, 0.0, 0.0, 0.0, 8.0, 0.0, 3), 2, "8 texels, 3 LODs");
-        assert_eq!(lod_for(1.0, 0.0, 0.0, 0.0, 8.0, 0.0, 1), 0, "one LOD");
-        assert_eq!(lod_for(1.0, 0.0, 0.0, 0.0, 8.0, -100.0, 4), 0, "big negative bias");
-    }
-
-    #[test]
-    fn pages_of_samples() {
-        let g = TextureGrid::new(512).unwrap();
-        assert_eq!(page_at(0.0, 0.0, 0, &g), (0, 0));
-        assert_eq!(page_at(0.5, 0.25, 0, &g), (256, 128));
-        assert_eq!(page_at(0.5, 0.25, 3, &g), (32, 16));
-        assert_eq!(page_at(0.999_999, 0.999_999, 0, &g), (511, 511));
-        assert_eq!(page_at(0.5, 0.5, 9, &g), (0, 0), "root");
-        assert_eq!(page_at(1.0, 1.5, 0, &g), (511, 511), "clamped high");
-        assert_eq!(page_at(-0.25, f32::NAN, 1, &g), (0, 0), "clamped low, NaN");
-        assert_eq!(page_at(0.75, 0.75, 200, &g), (0, 0), "LOD clamped to the root");
-        // A page boundary belongs to the page after it.
-        assert_eq!(page_at(1.0 / 512.0, 0.0, 0, &g), (1, 0));
-        assert_eq!(page_at(1.0 / 512.0 - f32::EPSILON / 512.0, 0.0, 0, &g), (0, 0));
+        assert_eq!(lod_for(f32::INFINITY, 0.0, 0.0, 0.0, [65536.0; 2], 0.0, 17), 16);
+        assert_eq!(lod_for(1.0, 0.0, 0.0, 0.0, [8.0; 2], 0.0, 3), 2, "8 texels, 3 LODs");
+        assert_eq!(lod_for(1.0, 0.0, 0.0, 0.0, [8.0; 2], 0.0, 1), 0, "one LOD");
+        assert_eq!(lod_for(1.0, 0.0, 0.0, 0.0, [8.0; 2], -100.0, 4), 0, "big negative bias");
     }
 
     #[test]
@@ -271,10 +296,10 @@ mod tests {
         // bias it asks for the same LOD as the frame pixel.
         for k in 0..14 {
             let d = (k as f32).exp2() / 65536.0 * 1.3;
-            let frame = lod_for(d, 0.0, 0.0, d, 65536.0, 0.0, 17);
-            let fb = lod_for(8.0 * d, 0.0, 0.0, 8.0 * d, 65536.0, feedback_bias(160, 90, 1280, 720), 17);
+            let frame = lod_for(d, 0.0, 0.0, d, [65536.0; 2], 0.0, 17);
+            let fb = lod_for(8.0 * d, 0.0, 0.0, 8.0 * d, [65536.0; 2], feedback_bias(160, 90, 1280, 720), 17);
             assert_eq!(fb, frame, "2^{k} * 1.3 texels");
-            assert_eq!(lod_for(8.0 * d, 0.0, 0.0, 8.0 * d, 65536.0, 0.0, 17), (frame + 3).min(16));
+            assert_eq!(lod_for(8.0 * d, 0.0, 0.0, 8.0 * d, [65536.0; 2], 0.0, 17), (frame + 3).min(16));
         }
     }
 }

@@ -75,10 +75,10 @@ pub fn check(residency: &Residency, table: &PageTable) -> Result<(), Violation> 
     let rebuilt = PageTable::rebuild(grids, residency.resident());
     for (t, g) in grids.iter().enumerate() {
         let t = t as u8;
-        for lod in 0..g.lod_count {
-            let side = g.pages_per_side(lod);
-            for y in 0..side {
-                for x in 0..side {
+        for lod in 0..g.lod_count() {
+            let [w, h] = g.pages_at(lod);
+            for y in 0..h {
+                for x in 0..w {
                     let page = PageId::new(t, lod, x, y);
                     let entry = table.get(page);
                     let expected = page
@@ -110,7 +110,7 @@ mod tests {
     use crate::residency::{FrameUpdate, ResidencyConfig};
 
     fn grids(textures: usize) -> Vec<TextureGrid> {
-        [16, 8][..textures].iter().map(|&p| TextureGrid::new(p).unwrap()).collect()
+        [16, 8][..textures].iter().map(|&p| TextureGrid::new(p, p).unwrap()).collect()
     }
 
     #[test]
@@ -158,9 +158,9 @@ mod tests {
                 let t = t % g.len() as u8;
                 let grid = g[t as usize];
                 // Fine LODs are the common case of real feedback: weight towards LOD 0.
-                let lod = (lod % (2 * grid.lod_count)).saturating_sub(grid.lod_count);
-                let side = grid.pages_per_side(lod);
-                PageId::new(t, lod, x % side, y % side)
+                let lod = (lod % (2 * grid.lod_count())).saturating_sub(grid.lod_count());
+                let [w, h] = grid.pages_at(lod);
+                PageId::new(t, lod, x % w, y % h)
             })
             .collect()
     }
@@ -199,7 +199,8 @@ mod tests {
         prop_assert!(u.loads.len() - root_loads <= budget, "{} loads over a budget of {}", u.loads.len(), budget);
         prop_assert_eq!(u.stats.requested, wanted.len());
         // The controller with the default marks (90%, 70%) and step (0.25).
-        let (n, slots, max_bias) = (wanted.len() as f32, r.slots() as f32, (g[0].lod_count - 1) as f32);
+        let (n, slots, max_bias) =
+            (wanted.len() as f32, r.slots() as f32, g.iter().map(|g| g.lod_count() - 1).max().unwrap_or(0) as f32);
         let bias = if n > 0.9 * slots {
             (bias_before + 0.25).min(max_bias)
         } else if n < 0.7 * slots {
@@ -262,12 +263,13 @@ mod tests {
 
         #[test]
         fn random_frames_keep_every_rule(
-            textures in 1usize..=2,
+            sizes in prop::collection::vec((1u32..40, 1u32..40), 1..=2),
             slots in 8usize..=40,
             budget in 1usize..=8,
             frames in prop::collection::vec(prop::collection::vec(any::<(u8, u8, u16, u16)>(), 0..30), 1..40),
         ) {
-            let g = grids(textures);
+            // Random rectangular grids: odd rows and columns, wide, tall, single pages.
+            let g: Vec<TextureGrid> = sizes.iter().map(|&(w, h)| TextureGrid::new(w, h).unwrap()).collect();
             let mut r = Residency::new(&g, ResidencyConfig::new(slots, budget)).unwrap();
             let mut table = PageTable::new(&g);
             // The GPU's copy, updated only through the changes.
@@ -287,10 +289,10 @@ mod tests {
                 }
                 let rebuilt = PageTable::rebuild(&g, r.resident());
                 for (t, grid) in g.iter().enumerate() {
-                    for lod in 0..grid.lod_count {
-                        let side = grid.pages_per_side(lod);
-                        for y in 0..side {
-                            for x in 0..side {
+                    for lod in 0..grid.lod_count() {
+                        let [w, h] = grid.pages_at(lod);
+                        for y in 0..h {
+                            for x in 0..w {
                                 let p = PageId::new(t as u8, lod, x, y);
                                 prop_assert_eq!(mirror.get(&p).copied().unwrap_or(Entry::UNMAPPED), rebuilt.get(p));
                             }

@@ -1,5 +1,5 @@
-//! The page table (indirection texture): for each texture and each LOD a `pages_per_side(lod)²` grid
-//! of entries, one mip level per LOD. The entry of a page points at the finest resident
+//! The page table (indirection table): for each texture and each LOD a `w x h` grid of entries,
+//! one per page of that LOD (`TextureGrid::pages_at`), row by row. The entry of a page points at the finest resident
 //! ancestor-or-self of that page, so a missing page falls back to its nearest resident coarser page.
 //!
 //! The table is updated incrementally from each [`FrameUpdate`] ([`PageTable::apply`]): a load
@@ -12,8 +12,8 @@
 //!
 //! # Packing for the GPU
 //!
-//! [`Entry::pack`] packs an entry into a `u32` texel of an `R32Uint` texture with one mip level per
-//! LOD, given the cache's slots per row `cache_side` (at most 256; slot `s` sits at
+//! [`Entry::pack`] packs an entry into a `u32` of the GPU's table (`vortex-gpu`'s `page_table`: a
+//! storage buffer laid out as this table, texture by texture, LOD by LOD, row by row), given the cache's slots per row `cache_side` (at most 256; slot `s` sits at
 //! `(s % cache_side, s / cache_side)` in the physical cache texture):
 //!
 //! | bits  | field                                  |
@@ -24,13 +24,14 @@
 //! | 24-31 | 0                                      |
 //!
 //! An unmapped entry (only before the first update has pinned the roots) packs to `0xFFFF_FFFF`
-//! ([`UNMAPPED_WORD`]). In WGSL, with `p` pages per side at LOD 0 and `v` the virtual UV:
+//! ([`UNMAPPED_WORD`]). In WGSL, with `base` the index of the LOD's entry (0, 0), `row` its pages
+//! per row and `at` the sample's address (`vortex_vt::address`):
 //!
 //! ```wgsl
-//! let word = textureLoad(page_table, vec2<u32>(v * f32(p)) >> vec2(lod), lod).r;
+//! let word = page_table[base + at.page.y * row + at.page.x];
 //! let slot = vec2<f32>(f32(word & 0xffu), f32((word >> 8u) & 0xffu));
 //! let page_lod = (word >> 16u) & 0xffu;
-//! let within = fract(v * f32(p >> page_lod)); // position inside the page it points at
+//! let within = ancestor(at, page_lod - lod, payload).within; // inside the page it points at
 //! ```
 
 use crate::page::{MAX_LODS, PageId, TextureGrid};
@@ -108,9 +109,9 @@ impl PageTable {
         let mut len = 0;
         for g in grids {
             let mut b = [0; MAX_LODS as usize];
-            for lod in 0..g.lod_count {
+            for lod in 0..g.lod_count() {
                 b[lod as usize] = len;
-                len += (g.pages_per_side(lod) as usize).pow(2);
+                len += g.level_len(lod);
             }
             base.push(b);
         }
@@ -131,14 +132,15 @@ impl PageTable {
             table.entries[i] = Entry { slot, lod: p.lod };
         }
         for (t, g) in grids.iter().enumerate() {
-            for lod in (0..g.lod_count.saturating_sub(1)).rev() {
-                let side = g.pages_per_side(lod) as usize;
+            for lod in (0..g.lod_count().saturating_sub(1)).rev() {
+                let [w, h] = g.pages_at(lod).map(usize::from);
+                let parent_w = usize::from(g.pages_at(lod + 1)[0]);
                 let (base, parent_base) = (table.base[t][lod as usize], table.base[t][lod as usize + 1]);
-                for y in 0..side {
-                    for x in 0..side {
-                        let i = base + y * side + x;
+                for y in 0..h {
+                    for x in 0..w {
+                        let i = base + y * w + x;
                         if table.entries[i].lod != lod {
-                            table.entries[i] = table.entries[parent_base + (y / 2) * (side / 2) + x / 2];
+                            table.entries[i] = table.entries[parent_base + (y / 2) * parent_w + x / 2];
                         }
                     }
                 }
@@ -164,9 +166,9 @@ impl PageTable {
     /// The entries of one LOD of one texture, row by row.
     pub fn level(&self, texture: u8, lod: u8) -> &[Entry] {
         let g = self.grid(texture);
-        assert!(lod < g.lod_count, "LOD {lod} of a texture of {} LODs", g.lod_count);
+        assert!(lod < g.lod_count(), "LOD {lod} of a texture of {} LODs", g.lod_count());
         let start = self.base[texture as usize][lod as usize];
-        &self.entries[start..start + (g.pages_per_side(lod) as usize).pow(2)]
+        &self.entries[start..start + g.level_len(lod)]
     }
 
     /// One LOD of one texture packed for the GPU (the whole-level upload of the first frame).
@@ -235,11 +237,15 @@ impl PageTable {
                 continue;
             }
             let lod = p.lod - 1;
-            let side = self.grids[p.texture as usize].pages_per_side(lod) as usize;
+            let [w, h] = self.grids[p.texture as usize].pages_at(lod);
             let base = self.base[p.texture as usize][lod as usize];
             for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
                 let (x, y) = (2 * p.x + dx, 2 * p.y + dy);
-                let i = base + y as usize * side + x as usize;
+                // The last page of an odd row or column has one child along that axis.
+                if x >= w || y >= h {
+                    continue;
+                }
+                let i = base + y as usize * w as usize + x as usize;
                 let old = self.entries[i];
                 if old.lod == lod || old == value {
                     continue;
@@ -258,7 +264,7 @@ impl PageTable {
     fn index(&self, p: PageId) -> usize {
         let g = self.grid(p.texture);
         assert!(g.contains(p), "{p:?} is outside its texture's grid");
-        self.base[p.texture as usize][p.lod as usize] + p.y as usize * g.pages_per_side(p.lod) as usize + p.x as usize
+        self.base[p.texture as usize][p.lod as usize] + g.index(p.lod, p.x, p.y) as usize
     }
 }
 
@@ -267,7 +273,12 @@ mod tests {
     use super::*;
 
     fn grids() -> Vec<TextureGrid> {
-        vec![TextureGrid::new(16).unwrap(), TextureGrid::new(8).unwrap()]
+        vec![TextureGrid::new(16, 16).unwrap(), TextureGrid::new(8, 8).unwrap()]
+    }
+
+    /// Odd, rectangular grids: a wide one, a tall one.
+    fn odd_grids() -> Vec<TextureGrid> {
+        vec![TextureGrid::new(11, 3).unwrap(), TextureGrid::new(2, 7).unwrap()]
     }
 
     fn p(lod: u8, x: u16, y: u16) -> PageId {
@@ -322,6 +333,19 @@ mod tests {
     }
 
     #[test]
+    fn odd_edges_have_fewer_children() {
+        // 11x3 pages: LOD 1 is 6x2, so page (5, 1) of LOD 1 covers only (10, 2) of LOD 0.
+        let g = odd_grids();
+        let mut t = PageTable::new(&g);
+        t.apply_mappings(&[], &roots(&g));
+        let c = t.apply_mappings(&[], &[(p(1, 5, 1), 4)]);
+        assert_eq!(c.iter().map(|c| c.at).collect::<Vec<_>>(), [p(1, 5, 1), p(0, 10, 2)]);
+        assert_eq!(t.level(0, 0).len(), 33);
+        assert_eq!(t.level(1, 1).len(), 4, "2x7 pages: LOD 1 is 1x4");
+        assert_eq!(t, PageTable::rebuild(&g, [roots(&g), vec![(p(1, 5, 1), 4)]].concat()));
+    }
+
+    #[test]
     fn changes_are_net_of_the_whole_update() {
         let g = grids();
         let mut t = PageTable::new(&g);
@@ -348,15 +372,15 @@ mod tests {
                 (proptest::collection::vec(proptest::num::u16::ANY, 0..6), proptest::collection::vec(proptest::num::u16::ANY, 0..6)),
                 1..30,
             ),
+            rectangular in proptest::bool::ANY,
         ) {
-            let g = grids();
+            let g = if rectangular { odd_grids() } else { grids() };
             let all: Vec<PageId> = g
                 .iter()
                 .enumerate()
                 .flat_map(|(t, g)| {
-                    (0..g.lod_count).flat_map(move |lod| {
-                        let side = g.pages_per_side(lod);
-                        (0..side * side).map(move |i| PageId::new(t as u8, lod, i % side, i / side))
+                    (0..g.lod_count()).flat_map(move |lod| {
+                        (0..g.level_len(lod) as u32).filter_map(move |i| g.page_at_index(t as u8, lod, i))
                     })
                 })
                 .collect();

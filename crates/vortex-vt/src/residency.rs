@@ -193,7 +193,7 @@ impl Residency {
         if !(config.bias_step.is_finite() && config.bias_step > 0.0) {
             return Err(ConfigError::BiasStep(config.bias_step));
         }
-        let max_bias = grids.iter().map(|g| g.lod_count - 1).max().unwrap_or(0) as f32;
+        let max_bias = grids.iter().map(|g| g.lod_count() - 1).max().unwrap_or(0) as f32;
         Ok(Residency {
             grids: grids.to_vec(),
             config,
@@ -260,7 +260,7 @@ impl Residency {
     /// Panics if `page` is not [valid](Self::is_valid).
     pub fn finest_resident_lod(&self, page: PageId) -> u8 {
         let grid = self.grid(page);
-        page.ancestors_and_self(&grid).find(|p| self.pages.contains_key(p)).map_or(grid.lod_count - 1, |p| p.lod)
+        page.ancestors_and_self(&grid).find(|p| self.pages.contains_key(p)).map_or(grid.lod_count() - 1, |p| p.lod)
     }
 
     pub fn resident_count(&self) -> usize {
@@ -326,7 +326,7 @@ impl Residency {
                     out.stats.hits += 1;
                     if r.stamp != frame {
                         r.stamp = frame;
-                        if p.lod + 1 < self.grids[p.texture as usize].lod_count {
+                        if p.lod + 1 < self.grids[p.texture as usize].lod_count() {
                             self.lru[p.lod as usize].push(Reverse((frame, p)));
                         }
                     }
@@ -416,7 +416,7 @@ mod tests {
     use super::*;
 
     fn grid(pages: u16) -> TextureGrid {
-        TextureGrid::new(pages).unwrap()
+        TextureGrid::new(pages.into(), pages.into()).unwrap()
     }
 
     fn residency(pages: &[u16], slots: usize, budget: usize) -> Residency {

@@ -5,15 +5,19 @@
 //! colour is decoded with the exact sRGB curve, weighted, and encoded back; alpha is linear
 //! and only scaled. Filtering the sRGB values directly is badly off (31 dB on a real image).
 //!
-//! Addressing is clamp-to-edge with texel centres at `(i + 0.5) / size`; trilinear blends the
-//! bilinear samples of `floor(lod)` and `floor(lod) + 1`. Weights are exact f32 here, whereas
+//! UV 0..1 spans LOD 0's image, and LOD k is anchored at its top-left corner with texel `c`
+//! covering LOD-0 texels `[c 2^k, (c + 1) 2^k)` (as the runtime addresses it, `address`): the
+//! texel position of `u` at LOD k is `u * width_0 / 2^k`, not `u * width_k`, which differ when
+//! the width is not a multiple of 2^k (the last texel of such a level is partly outside the
+//! image). Addressing is clamp-to-edge with texel centres at `i + 0.5` in those positions;
+//! trilinear blends the bilinear samples of `floor(lod)` and `floor(lod) + 1`. Weights are exact f32 here, whereas
 //! GPUs quantise them (typically to 8 bits), so compare with a tolerance of a code value or so.
 
 /// The LOD images of one virtual texture: LOD 0 is the finest.
 pub trait LodImages {
     /// At least 1.
     fn lod_count(&self) -> u8;
-    /// Width and height of LOD `lod` in texels (at least 1 each).
+    /// Width and height of LOD `lod` in texels (at least 1 each): `ceil(size(0) / 2^lod)`.
     fn size(&self, lod: u8) -> (u32, u32);
     /// Texel (x, y) of LOD `lod`, RGBA8 with sRGB-encoded colour; x and y are within `size`.
     fn texel(&self, lod: u8, x: u32, y: u32) -> [u8; 4];
@@ -87,30 +91,36 @@ fn lerp(a: Linear, b: Linear, t: f32) -> Linear {
     std::array::from_fn(|i| a[i] + (b[i] - a[i]) * t)
 }
 
+/// The texel position at LOD `lod` of `t` along an axis of `n0` texels at LOD 0: `t * n0 / 2^lod`,
+/// one rounding (the scale is exact), as the runtime's mesh path computes it.
+fn position(t: f32, n0: u32, lod: u8) -> f32 {
+    t * (n0 as f32 * (1.0 / (1u32 << lod) as f32))
+}
+
 /// The texel under (u, v) at LOD `lod` (clamped to the chain), unfiltered.
 pub fn nearest(img: &impl LodImages, lod: u8, u: f32, v: f32) -> [u8; 4] {
     let lod = lod.min(img.lod_count() - 1);
-    let (w, h) = img.size(lod);
+    let ((w0, h0), (w, h)) = (img.size(0), img.size(lod));
     // `as` saturates: negative and NaN give 0.
-    let at = |t: f32, n: u32| ((t * n as f32).floor() as u32).min(n - 1);
-    img.texel(lod, at(u, w), at(v, h))
+    let at = |t: f32, n0: u32, n: u32| (position(t, n0, lod).floor() as u32).min(n - 1);
+    img.texel(lod, at(u, w0, w), at(v, h0, h))
 }
 
 /// Bilinear sample at LOD `lod` (clamped to the chain), in linear light.
 pub fn bilinear_linear(img: &impl LodImages, lod: u8, u: f32, v: f32) -> Linear {
     let lod = lod.min(img.lod_count() - 1);
-    let (w, h) = img.size(lod);
-    // The two texels around t * n - 0.5 and the weight of the second, clamped to the edge.
-    let axis = |t: f32, n: u32| {
-        let p = t * n as f32 - 0.5;
+    let ((w0, h0), (w, h)) = (img.size(0), img.size(lod));
+    // The two texels around the position - 0.5 and the weight of the second, clamped to the edge.
+    let axis = |t: f32, n0: u32, n: u32| {
+        let p = position(t, n0, lod) - 0.5;
         let p = if p.is_nan() { 0.0 } else { p };
         let f = p.floor();
         let i0 = (f as i64).clamp(0, n as i64 - 1) as u32;
         let i1 = (f as i64 + 1).clamp(0, n as i64 - 1) as u32;
         (i0, i1, p - f)
     };
-    let (x0, x1, fx) = axis(u, w);
-    let (y0, y1, fy) = axis(v, h);
+    let (x0, x1, fx) = axis(u, w0, w);
+    let (y0, y1, fy) = axis(v, h0, h);
     let t = |x, y| to_linear(img.texel(lod, x, y));
     let top = lerp(t(x0, y0), t(x1, y0), fx);
     let bottom = lerp(t(x0, y1), t(x1, y1), fx);
@@ -163,10 +173,12 @@ mod tests {
         assert!(increasing);
     }
 
-    /// A chain of `levels` LODs halving from `w` x `h`, texels from `f(lod, x, y)`.
+    /// A chain of `levels` LODs halving (rounded up) from `w` x `h`, texels from `f(lod, x, y)`.
     fn chain(w: u32, h: u32, levels: u8, f: impl Fn(u8, u32, u32) -> [u8; 4]) -> LodChain {
         LodChain(
-            (0..levels).map(|l| Rgba8Image::from_fn((w >> l).max(1), (h >> l).max(1), |x, y| f(l, x, y))).collect(),
+            (0..levels)
+                .map(|l| Rgba8Image::from_fn(w.div_ceil(1 << l), h.div_ceil(1 << l), |x, y| f(l, x, y)))
+                .collect(),
         )
     }
 
@@ -211,6 +223,23 @@ mod tests {
         assert_eq!(trilinear(&img, -3.0, 0.3, 0.6), [0; 4], "below LOD 0");
         assert_eq!(trilinear(&img, 9.5, 0.3, 0.6), [255; 4], "beyond the coarsest");
         assert_eq!(nearest(&img, 9, 0.3, 0.6), [255; 4]);
+    }
+
+    #[test]
+    fn coarse_lods_of_odd_sizes_are_anchored_at_the_top_left() {
+        // 5 texels wide: LOD 1 has 3, the last covering LOD-0 texel 4 only, so the image ends
+        // halfway into it (u = 1 is LOD-1 position 2.5, not 3).
+        let img = chain(5, 1, 2, |l, x, _| [(10 * l as u32 + x) as u8, 0, 0, 255]);
+        assert_eq!(nearest(&img, 1, 0.999, 0.5), [12, 0, 0, 255]);
+        assert_eq!(nearest(&img, 1, 0.79, 0.5), [11, 0, 0, 255], "LOD-0 texel 3 is in LOD-1 texel 1");
+        assert_eq!(nearest(&img, 1, 0.81, 0.5), [12, 0, 0, 255], "LOD-0 texel 4 is in LOD-1 texel 2");
+        // LOD-1 texel 1's centre is LOD-0 position 3, u = 0.6.
+        assert_eq!(bilinear(&img, 1, 0.6, 0.5), [11, 0, 0, 255]);
+        // Between the centres of texels 1 and 2 (u = 0.7 is LOD-1 position 1.75): a quarter of
+        // the way, in linear light.
+        let mix = bilinear_linear(&img, 1, 0.7, 0.5)[0];
+        let want = srgb_to_linear(11) * 0.75 + srgb_to_linear(12) * 0.25;
+        assert!((mix - want).abs() < 1e-6, "{mix} {want}");
     }
 
     proptest! {

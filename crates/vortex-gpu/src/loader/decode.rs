@@ -55,8 +55,8 @@ pub(super) fn texels(
             lod: page.lod,
             x: page.x,
             y: page.y,
-            pages: grid.pages,
-            lod_count: grid.lod_count,
+            pages: grid.pages(),
+            lod_count: grid.lod_count(),
         });
     }
     if bc7 {

@@ -64,7 +64,7 @@ mod tests {
     use super::*;
 
     fn texture(tile_size: u32, border: u32, pages: u16) -> VirtualTexture {
-        let grid = TextureGrid::new(pages).unwrap();
+        let grid = TextureGrid::new(pages.into(), pages.into()).unwrap();
         VirtualTexture { grid, width: 1, height: 1, tile_size, border }
     }
 

@@ -32,7 +32,7 @@ mod pool;
 use std::path::PathBuf;
 
 use vortex_pack::Pack;
-use vortex_vt::page::{MAX_TEXTURES, PageId, TextureGrid};
+use vortex_vt::page::{GridError, MAX_TEXTURES, PageId, TextureGrid};
 use vortex_vt::residency::Slot;
 
 use crate::texture::VirtualTexture;
@@ -42,9 +42,18 @@ pub use pool::Loader;
 /// Why a [`VirtualTexture`] or a [`Loader`] cannot be made.
 #[derive(Debug, thiserror::Error)]
 pub enum LoaderError {
-    /// The pack's layout is not a virtual texture's (square power-of-two page grid, halving per LOD).
+    /// The pack's layout is not a virtual texture's (an image its LOD-0 grid covers).
     #[error("{}: {field}: {message}", path.display())]
     Layout { path: PathBuf, field: &'static str, message: String },
+
+    /// The pack's level table is not a page grid the runtime can address: the levels do not
+    /// halve (rounded up) down to one page, or the grid is over the feedback word's limits.
+    #[error("{}: level table: {source}", path.display())]
+    Grid {
+        path: PathBuf,
+        #[source]
+        source: GridError,
+    },
 
     #[error("a loader needs at least one pack")]
     NoTextures,
@@ -77,10 +86,10 @@ pub enum LoadError {
 
     /// The page lies outside its texture's page grid.
     #[error(
-        "{}: no page (lod {lod}, x {x}, y {y}): the texture has {pages} pages per side at LOD 0 and {lod_count} LODs",
-        path.display()
+        "{}: no page (lod {lod}, x {x}, y {y}): the texture has {}x{} pages at LOD 0 and {lod_count} LODs",
+        path.display(), pages[0], pages[1]
     )]
-    OutOfGrid { path: PathBuf, lod: u8, x: u16, y: u16, pages: u16, lod_count: u8 },
+    OutOfGrid { path: PathBuf, lod: u8, x: u16, y: u16, pages: [u16; 2], lod_count: u8 },
 
     /// A stored tile could not be read, failed its checksum or did not decode. For an absent page
     /// this names the ancestor that failed (the message says which page it was read for).
@@ -99,57 +108,35 @@ pub enum LoadError {
 /// Reading a texture's shape from its pack (the type lives in [`crate::texture`], shared with the
 /// renderer).
 impl VirtualTexture {
-    /// The texture stored in `pack`. The pack must hold a square power-of-two grid of at most
-    /// 4096 pages per side at LOD 0, halving per LOD down to one page (the tiler's layout, which
-    /// the page table and the feedback word assume); levels past that one page are ignored.
+    /// The texture stored in `pack`. Its level table must be a page grid ([`TextureGrid::from_levels`]:
+    /// `w x h` tiles at LOD 0, each level the previous one halved and rounded up, down to one
+    /// page; levels past that one page are ignored) within the feedback word's limits, and its
+    /// LOD-0 grid must cover the image (`width x height` from the header, which UV 0..1 spans).
+    /// The tiler's older square power-of-two packs qualify: their image sits at the top-left
+    /// of the grid, and the pages wholly outside it are never asked for.
     pub fn from_pack(pack: &Pack) -> Result<VirtualTexture, LoaderError> {
-        let layout = |field: &'static str, message: String| LoaderError::Layout {
-            path: pack.path().to_path_buf(),
-            field,
-            message,
-        };
+        let path = || pack.path().to_path_buf();
         let d = pack.description();
         let levels = pack.levels();
-        let first = levels.first().ok_or_else(|| layout("level_count", "the pack has no levels".into()))?;
-        if first.tiles_w != first.tiles_h {
-            return Err(layout(
-                "tiles_h",
-                format!("LOD 0 is {}x{} tiles; a virtual texture's page grid is square", first.tiles_w, first.tiles_h),
-            ));
+        if levels.is_empty() {
+            return Err(LoaderError::Layout {
+                path: path(),
+                field: "level_count",
+                message: "the pack has no levels".into(),
+            });
         }
-        let grid = u16::try_from(first.tiles_w).ok().and_then(TextureGrid::new).ok_or_else(|| {
-            layout("tiles_w", format!("{} tiles per side at LOD 0; expected a power of two up to 4096", first.tiles_w))
-        })?;
-        if levels.len() < grid.lod_count as usize {
-            return Err(layout(
-                "level_count",
-                format!(
-                    "{} levels; {} pages per side need {} (down to one page)",
-                    levels.len(),
-                    grid.pages,
-                    grid.lod_count
-                ),
-            ));
-        }
-        for (lod, level) in levels.iter().enumerate().take(grid.lod_count as usize) {
-            let side = u32::from(grid.pages_per_side(lod as u8));
-            for (field, value) in [("tiles_w", level.tiles_w), ("tiles_h", level.tiles_h)] {
-                if value != side {
-                    return Err(layout(
-                        field,
-                        format!("level {lod} has {field} {value}; a power-of-two pyramid has {side} there"),
-                    ));
-                }
-            }
-        }
+        let grid = TextureGrid::from_levels(levels.iter().map(|l| [l.tiles_w, l.tiles_h]))
+            .map_err(|source| LoaderError::Grid { path: path(), source })?;
         let payload = d.tile_size - 2 * d.border;
-        let covered = u64::from(grid.pages) * u64::from(payload);
-        for (field, value) in [("width", d.width), ("height", d.height)] {
+        for (axis, (field, value)) in [("width", d.width), ("height", d.height)].into_iter().enumerate() {
+            let pages = grid.pages()[axis];
+            let covered = u64::from(pages) * u64::from(payload);
             if u64::from(value) > covered {
-                return Err(layout(
+                return Err(LoaderError::Layout {
+                    path: path(),
                     field,
-                    format!("{field} {value} exceeds the {covered} texels of {} pages of {payload}", grid.pages),
-                ));
+                    message: format!("{field} {value} exceeds the {covered} texels of {pages} pages of {payload}"),
+                });
             }
         }
         Ok(VirtualTexture { grid, width: d.width, height: d.height, tile_size: d.tile_size, border: d.border })

@@ -4,7 +4,9 @@
 // nearest, bilinear, or trilinear (two LODs blended), as the pipeline's `FILTER` constant says.
 // Appended to `virtual.wgsl`.
 
-@group(0) @binding(1) var page_table: texture_2d_array<u32>;
+// `page_table::GpuPageTable`: a header of 16 x 16 words, the index of entry (0, 0) of texture t's
+// LOD l at t * 16 + l, then every texture's entries, LOD by LOD, row by row.
+@group(0) @binding(1) var<storage, read> page_table: array<u32>;
 @group(0) @binding(2) var cache: texture_2d<f32>;
 @group(0) @binding(3) var cache_sampler: sampler;
 
@@ -16,14 +18,15 @@ const UNMAPPED: u32 = 0xffffffffu;
 // The sample at address `at` of LOD `lod` of texture `texture`, from whatever the page table
 // maps there.
 fn sample_at(texture: u32, lod: u32, at: At) -> vec4<f32> {
-    let word = textureLoad(page_table, at.page, texture, lod).r;
+    let t = frame.textures[texture];
+    let word = page_table[page_table[texture * 16u + lod] + at.page.y * pages_per_row(t, lod) + at.page.x];
     if word == UNMAPPED {
         // Only before the first update pinned the root: magenta, never a real texel.
         return vec4<f32>(1.0, 0.0, 1.0, 1.0);
     }
     let slot = vec2<f32>(f32(word & 0xffu), f32((word >> 8u) & 0xffu));
     let page_lod = (word >> 16u) & 0xffu;
-    let a = ancestor(at, page_lod - lod, frame.textures[texture].payload);
+    let a = ancestor(at, page_lod - lod, t.payload);
     // Past the border into the slot; clamped half a texel inside the slot so that a tile
     // without a border never filters in its neighbour's texels.
     let origin = slot * frame.tile.x;

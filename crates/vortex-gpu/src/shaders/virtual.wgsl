@@ -5,16 +5,13 @@
 // part.
 
 struct Texture {
-    // Pages per side at LOD 0, LODs, payload texels per page side, padding.
-    pages: u32,
+    // The real image at LOD 0 in texels (UV 0..1 spans it), LODs, payload texels per page side.
+    size: vec2<u32>,
     lod_count: u32,
     payload: u32,
-    pad0: u32,
-    // Image UV (0..1 over the real image) to virtual UV (0..1 over the page grid).
-    uv_scale: vec2<f32>,
-    // pages * payload: texels per side at LOD 0.
-    side_texels: f32,
-    pad1: f32,
+    // Pages per row and per column at LOD 0 (`vortex_vt::page::TextureGrid`).
+    pages: vec2<u32>,
+    pad: vec2<u32>,
 }
 
 struct Frame {
@@ -72,25 +69,48 @@ struct At {
     within: vec2<f32>,
 }
 
+// Pages per row of LOD `lod`: LOD 0's halved `lod` times, rounded up.
+fn pages_per_row(t: Texture, lod: u32) -> u32 {
+    return ((t.pages.x - 1u) >> lod) + 1u;
+}
+
+// `vortex_vt::address::split`: a texel position into page and position in the page, the
+// rounded quotient's page corrected by the exact remainder.
+fn split(p: vec2<f32>, payload: f32) -> At {
+    var page = floor(p / payload);
+    var within = p - page * payload;
+    let under = within < vec2<f32>(0.0);
+    page = select(page, page - 1.0, under);
+    within = select(within, within + payload, under);
+    let over = within >= vec2<f32>(payload);
+    page = select(page, page + 1.0, over);
+    within = select(within, within - payload, over);
+    return At(vec2<u32>(page), within);
+}
+
 // `vortex_vt::address::uv_at`.
 fn uv_at(uv: vec2<f32>, lod: u32, t: Texture) -> At {
-    let p = clamp(uv * t.uv_scale, vec2<f32>(0.0), vec2<f32>(BELOW_ONE)) * f32(max(t.pages >> lod, 1u));
-    let page = floor(p);
-    return At(vec2<u32>(page), (p - page) * f32(t.payload));
+    let scale = vec2<f32>(t.size) * (1.0 / f32(1u << lod));
+    return split(clamp(uv, vec2<f32>(0.0), vec2<f32>(BELOW_ONE)) * scale, f32(t.payload));
 }
 
 // `vortex_vt::address::WindowOrigin::at`.
 fn window_at(position: vec2<f32>, lod: u32, t: Texture) -> At {
-    let side = i32(max(t.pages >> lod, 1u) * t.payload);
     let mask = (1u << lod) - 1u;
+    let scale = 1.0 / f32(1u << lod);
     let rel = frame.origin_frac + (position + frame.jitter) * frame.step;
-    let r = (vec2<f32>(frame.origin_int & vec2<u32>(mask)) + rel) * (1.0 / f32(1u << lod));
+    let r = (vec2<f32>(frame.origin_int & vec2<u32>(mask)) + rel) * scale;
     let fl = floor(r);
     var texel = vec2<i32>(frame.origin_int >> vec2<u32>(lod)) + vec2<i32>(fl);
     var f = r - fl;
+    // The texel holding the image's last LOD-0 texel, and how far into it the image goes.
+    let size = max(t.size, vec2<u32>(1u));
+    let last = vec2<i32>((size - 1u) >> vec2<u32>(lod));
+    let end = vec2<f32>(((size - 1u) & vec2<u32>(mask)) + 1u) * scale * BELOW_ONE;
+    let beyond = texel > last | (texel == last & f > end);
     f = select(f, vec2<f32>(0.0), texel < vec2<i32>(0));
-    f = select(f, vec2<f32>(BELOW_ONE), texel >= vec2<i32>(side));
-    let c = vec2<u32>(clamp(texel, vec2<i32>(0), vec2<i32>(side - 1)));
+    f = select(f, end, beyond);
+    let c = vec2<u32>(clamp(texel, vec2<i32>(0), last));
     return At(c / t.payload, vec2<f32>(c % t.payload) + f);
 }
 
@@ -104,7 +124,7 @@ fn ancestor(at: At, levels: u32, payload: u32) -> At {
 // LOD-0 texels per pixel: the longer derivative vector (`vortex_vt::feedback::lod_for`), or a
 // window's step. Must be called in uniform control flow.
 fn footprint(is_window: bool, uv: vec2<f32>, t: Texture) -> f32 {
-    let s = uv * t.uv_scale * t.side_texels;
+    let s = uv * vec2<f32>(t.size);
     let derivatives = max(length(dpdx(s)), length(dpdy(s)));
     return select(derivatives, max(abs(frame.step.x), abs(frame.step.y)), is_window);
 }

@@ -15,9 +15,9 @@ const SIZE: u32 = 64;
 #[test]
 fn window_addresses_stay_within_a_sixteenth_of_a_texel_at_the_largest_size() {
     let Some(gpu) = gpu() else { return };
-    let texture = VirtualTexture::square(TextureGrid::new(4096).unwrap(), 1024, 4);
+    let texture = VirtualTexture::filling(TextureGrid::new(4096, 4096).unwrap(), 1024, 4);
     let payload = texture.payload();
-    let side = texture.side_texels() as f64;
+    let side = texture.width as f64;
     let probe = AddressProbe::new(&gpu.device);
     let mut worst_exact: f64 = 0.0;
     let mut worst_mirror: f64 = 0.0;
@@ -34,7 +34,7 @@ fn window_addresses_stay_within_a_sixteenth_of_a_texel_at_the_largest_size() {
         let mirror = window.origin_texels(&texture, (SIZE, SIZE));
         for (i, got) in addresses.iter().enumerate() {
             let (x, y) = (i as u32 % SIZE, i as u32 / SIZE);
-            let want = mirror.at(x as f32 + 0.5, y as f32 + 0.5, lod, 4096, payload);
+            let want = mirror.at(x as f32 + 0.5, y as f32 + 0.5, lod, texture.size(), payload);
             for axis in 0..2 {
                 let texel = |page: u32, within: f32| page as f64 * payload as f64 + within as f64;
                 let pixel = [x, y][axis] as f64 + 0.5;
@@ -53,14 +53,14 @@ fn window_addresses_stay_within_a_sixteenth_of_a_texel_at_the_largest_size() {
 #[test]
 fn lod_selection_at_exact_powers_of_two_is_stable() {
     let Some(gpu) = gpu() else { return };
-    let grid = TextureGrid::new(64).unwrap();
-    let texture = VirtualTexture::square(grid, 136, 4);
+    let grid = TextureGrid::new(64, 64).unwrap();
+    let texture = VirtualTexture::filling(grid, 136, 4);
     let pass = FeedbackPass::new(&gpu.device);
     // Full-size feedback (no bias), 2, 4 and 8 texels per pixel exactly.
     let target = FeedbackTarget::new(&gpu.device, SIZE, SIZE, 1);
     let mut readback = FeedbackReadback::new(&gpu.device, SIZE, SIZE, 2);
     for k in 1..=3u8 {
-        let extent = (1u32 << k) as f64 * SIZE as f64 / texture.side_texels() as f64;
+        let extent = (1u32 << k) as f64 * SIZE as f64 / texture.width as f64;
         let view = View::Window(Window { texture: 0, origin: [0.2371, 0.4113], extent: [extent, extent] });
         let mut first = None;
         for _ in 0..4 {

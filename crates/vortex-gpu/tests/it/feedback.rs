@@ -31,7 +31,7 @@ fn view(texture: u8, origin: [f64; 2], extent: [f64; 2], bias: f32) -> Case {
 
 /// Sixteen textures of the same shape, so that any texture id of a word can be tried.
 fn textures() -> Vec<VirtualTexture> {
-    vec![VirtualTexture::square(TextureGrid::new(PAGES).unwrap(), PAYLOAD + 8, 4); 16]
+    vec![VirtualTexture::filling(TextureGrid::new(PAGES.into(), PAGES.into()).unwrap(), PAYLOAD + 8, 4); 16]
 }
 
 /// What the shader must write: per pixel, `encode` of the page holding the pixel's address at
@@ -44,15 +44,16 @@ fn expected(c: &Case, target: &FeedbackTarget) -> Vec<u32> {
     let origin = c.window.origin_texels(&texture, (w, h));
     let bias = c.bias + target.bias();
     let grid = texture.grid;
-    let lod = origin.lod(bias, grid.lod_count);
+    let lod = origin.lod(bias, grid.lod_count());
     let f = origin.step[0].max(origin.step[1]).log2() + bias;
     assert!((f - f.round()).abs() > 1e-3, "footprint {f} is too close to a LOD boundary");
-    let side = texture.side_texels() as f64;
+    let side = texture.width as f64;
+    assert_eq!(texture.width, texture.height);
     let page_texels = (PAYLOAD << lod) as f64;
     let mut words = Vec::with_capacity((w * h) as usize);
     for y in 0..h {
         for x in 0..w {
-            let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, PAGES as u32, PAYLOAD);
+            let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, texture.size(), PAYLOAD);
             for (i, uv) in c.window.uv(x, y, (w, h)).into_iter().enumerate() {
                 let texel = uv * side;
                 let edge = (texel / page_texels).round() * page_texels;
@@ -61,7 +62,7 @@ fn expected(c: &Case, target: &FeedbackTarget) -> Vec<u32> {
                     "pixel ({x}, {y}) axis {i} is on a page edge"
                 );
             }
-            words.push(encode(PageId::new(c.window.texture, lod, at.page[0] as u16, at.page[1] as u16)));
+            words.push(encode(PageId::new(c.window.texture, lod, at.page[0] as u16, at.page[1] as u16), &grid));
         }
     }
     words
@@ -109,7 +110,7 @@ impl Fixture {
 fn words_match_the_cpu_mirror_and_analysis_finds_the_pages() {
     let Some(gpu) = gpu() else { return };
     let mut fx = Fixture::new(gpu, 2);
-    let grid = TextureGrid::new(PAGES).unwrap();
+    let grid = TextureGrid::new(PAGES.into(), PAGES.into()).unwrap();
     // (view, the LOD it must ask for): non-dyadic windows; the footprint in texels per feedback
     // pixel, after the -3 bias, is max(extent.x * 6, extent.y * 8).
     let cases = [
@@ -141,7 +142,7 @@ fn words_match_the_cpu_mirror_and_analysis_finds_the_pages() {
         // its ancestors, nothing resident.
         let mut direct: BTreeMap<PageId, u32> = BTreeMap::new();
         for &w in &want {
-            let p = vortex_vt::feedback::decode(w).unwrap();
+            let p = vortex_vt::feedback::decode(w).and_then(|r| r.page(&[grid; 16])).unwrap();
             *direct.entry(p).or_default() += 1;
         }
         let all: BTreeSet<PageId> = direct.keys().flat_map(|p| p.ancestors_and_self(&grid)).collect();
@@ -151,7 +152,7 @@ fn words_match_the_cpu_mirror_and_analysis_finds_the_pages() {
         assert_eq!(pages, all, "{v:?}");
         for r in &a.requests {
             assert_eq!(r.direct, direct.get(&r.page).copied().unwrap_or(0), "{:?}", r.page);
-            assert_eq!(r.distance, grid.lod_count - r.page.lod, "{:?}", r.page);
+            assert_eq!(r.distance, grid.lod_count() - r.page.lod, "{:?}", r.page);
         }
         let root = a.requests.iter().find(|r| r.page == grid.root(v.window.texture)).unwrap();
         assert_eq!(root.samples, 1200);
@@ -167,7 +168,7 @@ fn nothing_drawn_reads_no_request() {
     fx.render(Some(&view(0, [0.0; 2], [1.0; 2], 0.0)));
     let words = fx.render(None);
     assert!(words.iter().all(|&w| w == NO_REQUEST));
-    let a = analyze(&words, &[TextureGrid::new(PAGES).unwrap()], |_| None);
+    let a = analyze(&words, &[TextureGrid::new(PAGES.into(), PAGES.into()).unwrap()], |_| None);
     assert_eq!((a.samples, a.no_request, a.requests.len()), (0, 1200, 0));
 }
 

@@ -11,7 +11,7 @@ use vortex_gpu::VirtualTexture;
 use vortex_gpu::loader::{LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS, stand_in_tile};
 use vortex_pack::format::{self, Level};
 use vortex_pack::{Description, NewTile, Pack, PackWriter, Tile, TileId, TileKind, WriteOptions};
-use vortex_vt::page::{PageId, TextureGrid};
+use vortex_vt::page::{GridError, PageId, TextureGrid};
 use vortex_vt::residency::Slot;
 
 const TILE: u32 = 16;
@@ -126,10 +126,10 @@ fn mixed_pack(dir: &Path, name: &str) -> Arc<Pack> {
 /// Every page of the texture, finest LOD first, with distinct slots.
 fn all_pages(texture: u8, grid: TextureGrid, first_slot: Slot) -> Vec<(PageId, Slot)> {
     let mut pages = Vec::new();
-    for lod in 0..grid.lod_count {
-        let side = grid.pages_per_side(lod);
-        for y in 0..side {
-            for x in 0..side {
+    for lod in 0..grid.lod_count() {
+        let [w, h] = grid.pages_at(lod);
+        for y in 0..h {
+            for x in 0..w {
                 pages.push(PageId::new(texture, lod, x, y));
             }
         }
@@ -157,36 +157,51 @@ fn virtual_texture_describes_the_pack() {
     let dir = tempdir();
     let pack = mixed_pack(dir.path(), "a.vtpk");
     let t = VirtualTexture::from_pack(&pack).unwrap();
-    assert_eq!(t.grid, TextureGrid::new(4).unwrap());
-    assert_eq!(t.grid.lod_count, 3);
+    assert_eq!(t.grid, TextureGrid::new(4, 4).unwrap());
+    assert_eq!(t.grid.lod_count(), 3);
     assert_eq!((t.width, t.height, t.tile_size, t.border, t.payload()), (44, 40, 16, 2, 12));
-    assert_eq!(t.uv_scale(), [44.0 / 48.0, 40.0 / 48.0]);
+    // An old square power-of-two pack: UV spans the 44 x 40 image, not the 48 x 48 grid.
+    assert_eq!(t.size(), [44, 40]);
 }
 
 #[test]
-fn packs_that_are_not_a_power_of_two_pyramid_are_rejected_naming_the_field() {
+fn packs_whose_levels_do_not_halve_are_rejected_with_a_typed_error() {
     let dir = tempdir();
-    let cases: [(&str, Description, Vec<Level>, &str); 4] = {
-        let level = |tiles_w, tiles_h, first_entry| Level { tiles_w, tiles_h, first_entry, width: 30, height: 30 };
-        let d = |level_count| Description { level_count, ..description(TILE, BORDER, 4, 30, 30) };
-        [
-            ("three.vtpk", d(2), vec![level(3, 3, 0), level(2, 2, 9)], "tiles_w"),
-            ("oblong.vtpk", d(2), vec![level(2, 1, 0), level(1, 1, 2)], "tiles_h"),
-            ("short.vtpk", d(2), vec![level(4, 4, 0), level(2, 2, 16)], "level_count"),
-            ("odd.vtpk", d(3), vec![level(4, 4, 0), level(2, 3, 16), level(1, 1, 22)], "tiles_h"),
-        ]
-    };
-    for (name, d, levels, field) in cases {
+    let level = |tiles_w, tiles_h, first_entry| Level { tiles_w, tiles_h, first_entry, width: 30, height: 30 };
+    let d = |level_count| Description { level_count, ..description(TILE, BORDER, 4, 30, 30) };
+    let not_halving = |lod, found: [u32; 2], expected: [u32; 2]| move |e: &GridError| matches!(e, GridError::NotHalving { lod: l, found: f, expected: x, .. } if *l == lod && *f == found && *x == expected);
+    let too_few =
+        |levels: usize| move |e: &GridError| matches!(e, GridError::TooFewLevels { levels: l, .. } if *l == levels);
+    type Is = Box<dyn Fn(&GridError) -> bool>;
+    let cases: [(&str, Description, Vec<Level>, Is); 4] = [
+        ("three.vtpk", d(2), vec![level(3, 3, 0), level(2, 2, 9)], Box::new(too_few(2))),
+        ("short.vtpk", d(2), vec![level(4, 4, 0), level(2, 2, 16)], Box::new(too_few(2))),
+        (
+            "odd.vtpk",
+            d(3),
+            vec![level(4, 4, 0), level(2, 3, 16), level(1, 1, 22)],
+            Box::new(not_halving(1, [2, 3], [2, 2])),
+        ),
+        ("floor.vtpk", d(2), vec![level(3, 3, 0), level(1, 1, 9)], Box::new(not_halving(1, [1, 1], [2, 2]))),
+    ];
+    for (name, d, levels, is) in cases {
         let path = dir.path().join(name);
         let pack = write_pack_with_levels(&path, d, levels, |_| Spec::Constant([1, 2, 3]));
         let e = VirtualTexture::from_pack(&pack).unwrap_err();
-        assert!(
-            matches!(&e, LoaderError::Layout { path: p, field: f, .. } if *p == path && *f == field),
-            "{name}: {e}"
-        );
+        assert!(matches!(&e, LoaderError::Grid { path: p, source } if *p == path && is(source)), "{name}: {e}");
         assert!(e.to_string().contains(name), "{e}");
         assert!(Loader::new(vec![pack], 1).is_err());
     }
+    // A rectangular grid whose levels halve rounding up is a texture.
+    let path = dir.path().join("oblong.vtpk");
+    let oblong = write_pack_with_levels(
+        &path,
+        Description { width: 30, height: 10, ..d(3) },
+        vec![level(3, 1, 0), level(2, 1, 3), level(1, 1, 5)],
+        |_| Spec::Constant([1, 2, 3]),
+    );
+    let t = VirtualTexture::from_pack(&oblong).unwrap();
+    assert_eq!((t.grid.pages(), t.grid.lod_count(), t.size()), ([3, 1], 3, [30, 10]));
     // An image larger than the page grid covers.
     let too_wide =
         write_pack(&dir.path().join("wide.vtpk"), description(TILE, BORDER, 2, 25, 10), |_| Spec::Constant([0, 0, 0]));

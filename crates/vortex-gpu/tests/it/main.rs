@@ -8,6 +8,7 @@
 mod address;
 mod common;
 mod feedback;
+mod huge;
 mod loader;
 mod readback;
 mod runtime;

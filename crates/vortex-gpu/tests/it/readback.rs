@@ -43,7 +43,7 @@ fn reading_back_from_a_lost_device_is_an_error_naming_what_was_read() {
     assert_eq!(ring.in_flight(), 0, "the failed frame's buffer is free again");
     let err = cache.read_slot(&gpu, 0).unwrap_err();
     assert!(err.to_string().starts_with("reading back the slot: "), "{err}");
-    let texture = VirtualTexture::square(TextureGrid::new(4).unwrap(), 16, 1);
+    let texture = VirtualTexture::filling(TextureGrid::new(4, 4).unwrap(), 16, 1);
     let window = Window { texture: 0, origin: [0.0, 0.0], extent: [1.0, 1.0] };
     let err = probe.addresses(&gpu, &[texture], &View::Window(window), 0, 8, 8).unwrap_err();
     assert!(err.to_string().starts_with("reading back the probe: "), "{err}");

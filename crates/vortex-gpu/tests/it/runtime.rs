@@ -64,7 +64,7 @@ fn run(rt: &mut Runtime, scene: &Scene) -> (Vec<FrameReport>, Rgba8Image) {
     let mut frames = Vec::new();
     let mut last = None;
     for f in 0..scene.frames {
-        let (report, picture) = rt.frame(&scene.pose(f), f + 1 == scene.frames).unwrap();
+        let (report, picture) = rt.frame(&scene.pose(f, rt.textures()), f + 1 == scene.frames).unwrap();
         frames.push(report);
         last = picture;
     }
@@ -76,12 +76,12 @@ fn run(rt: &mut Runtime, scene: &Scene) -> (Vec<FrameReport>, Rgba8Image) {
 fn expected(rt: &Runtime, tex: &Synthetic, window: &Window, filter: SampleFilter) -> Rgba8Image {
     let size = (SIZE[0], SIZE[1]);
     let origin: WindowOrigin = window.origin_texels(&tex.texture, size);
-    let lods = tex.texture.grid.lod_count;
+    let lods = tex.texture.grid.lod_count();
     let table = rt.page_table();
     Rgba8Image::from_fn(size.0, size.1, |x, y| {
         let [u, v] = window.uv(x, y, size).map(|t| t as f32);
         let lod = origin.lod(0.0, lods);
-        let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, PAGES as u32, tex.texture.payload());
+        let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, tex.texture.size(), tex.texture.payload());
         let entry = table.entry(0, lod, at.page[0] as u16, at.page[1] as u16);
         match filter {
             SampleFilter::Trilinear if entry.lod == lod => {
@@ -135,7 +135,7 @@ fn a_zoom_converges_matches_the_reference_and_repeats_exactly() {
     assert_eq!(report.bytes_read, report.pages_touched as u64 * (TILE * TILE * 4) as u64, "raw tiles, each read once");
 
     // The converged picture is the reference, sampled at the LOD the view wants.
-    let Pose::Window(window) = scene.pose(scene.frames - 1) else { unreachable!() };
+    let Pose::Window(window) = scene.pose(scene.frames - 1, rt.textures()) else { unreachable!() };
     let (max, psnr) = diff(&picture, &expected(&rt, &tex, &window, SampleFilter::Bilinear));
     eprintln!("converged zoom: max difference {max}/255, PSNR {psnr:.1} dB");
     assert!(max <= 2 && psnr >= 50.0, "max {max}, PSNR {psnr:.1} dB");
@@ -236,7 +236,7 @@ fn trilinear_matches_the_reference_between_lods() {
     let mut rt = runtime(gpu, &[&tex], &scene);
     let (frames, picture) = run(&mut rt, &scene);
     assert_eq!(frames.last().unwrap().fallback_fraction, 0.0);
-    let Pose::Window(window) = scene.pose(0) else { unreachable!() };
+    let Pose::Window(window) = scene.pose(0, rt.textures()) else { unreachable!() };
     let (max, psnr) = diff(&picture, &expected(&rt, &tex, &window, SampleFilter::Trilinear));
     eprintln!("trilinear: max difference {max}/255, PSNR {psnr:.1} dB");
     assert!(max <= 2 && psnr >= 50.0, "max {max}, PSNR {psnr:.1} dB");
@@ -259,7 +259,7 @@ fn an_oversubscribed_cache_blurs_but_never_shows_a_wrong_texel() {
     let mut biases = Vec::new();
     let mut worst = (0, f64::INFINITY);
     for f in 0..scene.frames {
-        let pose = scene.pose(f);
+        let pose = scene.pose(f, rt.textures());
         let Pose::Window(window) = pose else { unreachable!() };
         // A frame draws with the table as the previous frame left it: the reference at the LOD
         // of each pixel's entry, however coarse.
@@ -289,7 +289,7 @@ fn uploads_stay_within_the_budget_coarse_before_fine() {
     let mut resident: HashSet<_> = rt.residency().resident().map(|(p, _)| p).collect();
     assert_eq!(resident.len(), 1);
     for f in 0..scene.frames {
-        let (report, _) = rt.frame(&scene.pose(f), false).unwrap();
+        let (report, _) = rt.frame(&scene.pose(f, rt.textures()), false).unwrap();
         let update = rt.last_update();
         assert!(report.loaded <= 3, "frame {f} loaded {}", report.loaded);
         for (page, _) in &update.evictions {
@@ -386,15 +386,15 @@ fn pages_seen_only_between_feedback_samples_are_still_loaded() {
     scene.view = SceneView::Window { texture: 0, path: vec![key(0, [0.3127, 0.4419], 0.125)] };
     let mut rt = runtime(gpu, &[&tex], &scene);
     for f in 0..scene.frames {
-        rt.frame(&scene.pose(f), false).unwrap();
+        rt.frame(&scene.pose(f, rt.textures()), false).unwrap();
     }
-    let Pose::Window(window) = scene.pose(0) else { unreachable!() };
+    let Pose::Window(window) = scene.pose(0, rt.textures()) else { unreachable!() };
     let origin = window.origin_texels(&tex.texture, (size[0], size[1]));
-    let lod = origin.lod(0.0, tex.texture.grid.lod_count);
+    let lod = origin.lod(0.0, tex.texture.grid.lod_count());
     let coarse: Vec<(u32, u32)> = (0..size[1])
         .flat_map(|y| (0..size[0]).map(move |x| (x, y)))
         .filter(|&(x, y)| {
-            let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, PAGES as u32, tex.texture.payload());
+            let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, tex.texture.size(), tex.texture.payload());
             rt.page_table().entry(0, lod, at.page[0] as u16, at.page[1] as u16).lod != lod
         })
         .collect();
@@ -408,13 +408,13 @@ fn a_lost_device_ends_the_frame_loop_with_an_error_not_a_panic() {
     let tex = Synthetic::new(dir.path(), "a.vtpk", PAGES, TILE, BORDER, 1);
     let scene = zoom_scene(effects(16, 16));
     let mut rt = runtime(gpu, &[&tex], &scene);
-    rt.frame(&scene.pose(0), false).unwrap();
+    rt.frame(&scene.pose(0, rt.textures()), false).unwrap();
     // What is recorded on a destroyed device is invalid: wgpu reports it to this handler (the
     // default one panics); the frame itself fails where it reads back.
     let device = &rt.gpu().device;
     device.on_uncaptured_error(std::sync::Arc::new(|e| eprintln!("after the loss, as expected: {e}")));
     device.destroy();
-    let err = rt.frame(&scene.pose(1), true).unwrap_err();
+    let err = rt.frame(&scene.pose(1, rt.textures()), true).unwrap_err();
     assert!(matches!(err, RuntimeError::Readback { frame: 1, .. }), "{err}");
     assert!(err.to_string().starts_with("frame 1: reading back the "), "{err}");
 }

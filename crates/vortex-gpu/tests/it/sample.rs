@@ -43,14 +43,21 @@ struct Fixture {
 
 impl Fixture {
     fn new(gpu: Gpu, requests: &[PageId]) -> Fixture {
-        let grid = TextureGrid::new(PAGES).unwrap();
-        let textures = [VirtualTexture::square(grid, TILE, BORDER)];
-        let chain = pyramid::chain(PAGES as u32 * PAYLOAD, grid.lod_count, 0);
-        let slots = (CACHE_SIDE as usize).pow(2);
+        let grid = TextureGrid::new(PAGES.into(), PAGES.into()).unwrap();
+        let texture = VirtualTexture::filling(grid, TILE, BORDER);
+        let chain = pyramid::chain(PAGES as u32 * PAYLOAD, PAGES as u32 * PAYLOAD, grid.lod_count(), 0);
+        Fixture::of(gpu, texture, chain, CACHE_SIDE, requests)
+    }
+
+    /// The fixture of `texture` (any shape), its LODs `chain`, in a cache of `cache_side²` slots.
+    fn of(gpu: Gpu, texture: VirtualTexture, chain: LodChain, cache_side: u16, requests: &[PageId]) -> Fixture {
+        let grid = texture.grid;
+        let textures = [texture];
+        let slots = (cache_side as usize).pow(2);
         let mut residency = Residency::new(&[grid], ResidencyConfig::new(slots, slots)).unwrap();
         let mut table = PageTable::new(&[grid]);
-        let cache = PageCache::new(&gpu.device, CACHE_SIDE, TILE, BORDER, CacheFormat::Rgba8).unwrap();
-        let gpu_table = GpuPageTable::new(&gpu.device, &gpu.queue, &[grid], CACHE_SIDE);
+        let cache = PageCache::new(&gpu.device, cache_side, TILE, BORDER, CacheFormat::Rgba8).unwrap();
+        let gpu_table = GpuPageTable::new(&gpu.device, &gpu.queue, &[grid], cache_side).unwrap();
         let update = residency.update(0, requests);
         assert_eq!(update.stats.deferred, 0, "every requested page fits in one update");
         for &(page, slot) in &update.loads {
@@ -75,7 +82,8 @@ impl Fixture {
         let origin = window.origin_texels(&self.textures[0], size);
         Rgba8Image::from_fn(TARGET, TARGET, |x, y| {
             let [u, v] = window.uv(x, y, size);
-            let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, PAGES as u32, PAYLOAD);
+            let texture = &self.textures[0];
+            let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, texture.size(), texture.payload());
             let entry = self.table.entry(0, lod, at.page[0] as u16, at.page[1] as u16);
             bilinear(&self.chain, entry.lod, u as f32, v as f32)
         })
@@ -139,6 +147,72 @@ fn all_pages(lod: u8) -> Vec<PageId> {
     (0..side * side).map(|i| PageId::new(0, lod, i % side, i / side)).collect()
 }
 
+/// Every page of `lod` of `grid`.
+fn level(grid: TextureGrid, lod: u8) -> Vec<PageId> {
+    (0..grid.level_len(lod) as u32).filter_map(|i| grid.page_at_index(0, lod, i)).collect()
+}
+
+/// A rectangular texture of `width x height` texels (sides not multiples of the payload nor
+/// of any power of two beyond 2), with LOD 0 resident, or only `requests` when given.
+fn rectangular(gpu: Gpu, width: u32, height: u32, requests: Option<&[PageId]>) -> Fixture {
+    let texture = VirtualTexture::new(width, height, TILE, BORDER).unwrap();
+    let chain = pyramid::chain(width, height, texture.grid.lod_count(), 3);
+    let all = level(texture.grid, 0);
+    let side = (texture.grid.page_count() as f64).sqrt().ceil() as u16;
+    Fixture::of(gpu, texture, chain, side, requests.unwrap_or(&all))
+}
+
+/// Windows over a rectangular texture: the whole image stretched at LODs 0 to 2 (LOD 2 of an
+/// odd side ends inside its last texel), square-pixel windows over its far corner, where the
+/// last page holds padding, and over an inner page corner.
+fn check_rectangle(fx: &Fixture, name: &str) {
+    let t = fx.textures[0];
+    assert!(
+        !t.width.is_multiple_of(t.payload()) && !t.height.is_multiple_of(t.payload()),
+        "{name}: the last pages are partial"
+    );
+    for lod in 0..3 {
+        fx.check(&format!("{name}, whole image at LOD {lod}"), &Window::whole(0), lod);
+    }
+    let size = (TARGET, TARGET);
+    let corner = Window::square_pixels(0, t.size(), [0.97, 0.95], 0.15, size);
+    fx.check(&format!("{name}, far corner at LOD 0"), &corner, 0);
+    let seam = [t.payload() as f64 / t.width as f64, t.payload() as f64 / t.height as f64];
+    let inner = Window::square_pixels(0, t.size(), seam, 0.1, size);
+    fx.check(&format!("{name}, page corner at LOD 0"), &inner, 0);
+}
+
+#[test]
+fn a_4_to_1_texture_matches_the_reference() {
+    let Some(gpu) = gpu() else { return };
+    // 430 x 107 texels: 15 x 4 pages of 30, LOD 1 8 x 2, ... 5 LODs.
+    let fx = rectangular(gpu, 430, 107, None);
+    assert_eq!(fx.textures[0].grid.pages(), [15, 4]);
+    check_rectangle(&fx, "4:1");
+}
+
+#[test]
+fn a_1_to_3_texture_matches_the_reference() {
+    let Some(gpu) = gpu() else { return };
+    // 97 x 293 texels: 4 x 10 pages of 30.
+    let fx = rectangular(gpu, 97, 293, None);
+    assert_eq!(fx.textures[0].grid.pages(), [4, 10]);
+    check_rectangle(&fx, "1:3");
+}
+
+#[test]
+fn a_partly_resident_rectangle_falls_back_within_its_grid() {
+    let Some(gpu) = gpu() else { return };
+    // The last page of each row and column (half padding) and a LOD-1 page at the odd edge.
+    let wanted = [PageId::new(0, 0, 14, 3), PageId::new(0, 0, 14, 0), PageId::new(0, 0, 0, 3), PageId::new(0, 1, 7, 1)];
+    let fx = rectangular(gpu, 430, 107, Some(&wanted));
+    let lods: std::collections::BTreeSet<u8> = fx.table.level(0, 0).iter().map(|e| e.lod).collect();
+    assert!(lods.len() >= 3, "the view mixes LODs: {lods:?}");
+    fx.check("4:1 partly resident, whole image at LOD 0", &Window::whole(0), 0);
+    let corner = Window::square_pixels(0, fx.textures[0].size(), [0.95, 0.9], 0.2, (TARGET, TARGET));
+    fx.check("4:1 partly resident, far corner at LOD 0", &corner, 0);
+}
+
 #[test]
 fn all_resident_matches_the_reference_at_lod_0() {
     let Some(gpu) = gpu() else { return };
@@ -156,7 +230,7 @@ fn all_resident_matches_the_reference_at_lod_0() {
 fn only_the_root_falls_back_to_the_coarsest_lod() {
     let Some(gpu) = gpu() else { return };
     let fx = Fixture::new(gpu, &[]);
-    let root = TextureGrid::new(PAGES).unwrap().lod_count - 1;
+    let root = TextureGrid::new(PAGES.into(), PAGES.into()).unwrap().lod_count() - 1;
     assert!(fx.table.level(0, 0).iter().all(|e| e.lod == root), "every entry points at the root");
     // The expectation is the reference sampler at the root's LOD everywhere.
     let view = Window::whole(0);

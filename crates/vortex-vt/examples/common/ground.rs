@@ -4,7 +4,8 @@
 //! Included by `#[path]`; not an example of its own. Each includer uses only part of it.
 #![allow(dead_code)]
 
-use vortex_vt::feedback::{NO_REQUEST, encode, lod_for, page_at};
+use vortex_vt::address::uv_at;
+use vortex_vt::feedback::{NO_REQUEST, encode, lod_for};
 use vortex_vt::page::{PageId, TextureGrid};
 
 pub const FRAME: (u32, u32) = (1280, 720);
@@ -74,9 +75,11 @@ impl Camera {
                 let (px, py) = (px as f32 + 0.5, py as f32 + 0.5);
                 let word = match (self.uv(px, py), self.uv(px + 1.0, py), self.uv(px, py + 1.0)) {
                     (Some((u, v)), Some((ux, vx)), Some((uy, vy))) => {
-                        let lod = lod_for(ux - u, vx - v, uy - u, vy - v, SIDE_TEXELS, bias, grid.lod_count);
-                        let (x, y) = page_at(u.rem_euclid(1.0), v.rem_euclid(1.0), lod, grid);
-                        encode(PageId::new(0, lod, x, y))
+                        let lod = lod_for(ux - u, vx - v, uy - u, vy - v, [SIDE_TEXELS; 2], bias, grid.lod_count());
+                        let side = SIDE_TEXELS as u32;
+                        let payload = side / u32::from(grid.pages()[0]);
+                        let at = uv_at(u.rem_euclid(1.0), v.rem_euclid(1.0), lod, [side, side], payload);
+                        encode(PageId::new(0, lod, at.page[0] as u16, at.page[1] as u16), grid)
                     }
                     _ => NO_REQUEST,
                 };

@@ -99,14 +99,14 @@ fn main() -> Result<()> {
     let load_before = load_average();
 
     let side = PAGES as u32 * PAYLOAD;
-    let grid = TextureGrid::new(PAGES).context("a page grid of PAGES pages per side")?;
-    let chain = texture::lod_chain(side, grid.lod_count);
+    let grid = TextureGrid::new(PAGES.into(), PAGES.into()).context("a page grid of PAGES pages per side")?;
+    let chain = texture::lod_chain(side, grid.lod_count());
     let dir = tempfile::tempdir().context("a temporary directory")?;
     let packs: Vec<(u32, Arc<Pack>)> = BORDERS
         .iter()
         .map(|&b| {
             let path = dir.path().join(format!("border{b}.vtpk"));
-            let texture = VirtualTexture::square(grid, PAYLOAD + 2 * b, b);
+            let texture = VirtualTexture::filling(grid, PAYLOAD + 2 * b, b);
             let pack = write_pack(&path, &chain, &texture, TileKind::Raw)
                 .with_context(|| format!("writing the pack {}", path.display()))?;
             Ok((b, pack))
@@ -186,7 +186,8 @@ fn main() -> Result<()> {
 fn window(spec: &ViewSpec, side: u32) -> Window {
     let width = spec.texels_per_pixel * SIZE[0] as f64 / side as f64;
     let scene = scene(Effects::default(), spec.center, width);
-    match scene.pose(0) {
+    // A square image: the pose needs no texture to know its aspect ratio.
+    match scene.pose(0, &[]) {
         Pose::Window(w) => w,
         Pose::Camera(_) => unreachable!("a window scene"),
     }

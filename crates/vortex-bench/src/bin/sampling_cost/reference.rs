@@ -2,11 +2,11 @@
 //! (`vortex_vt::sampler`): the runtime's own model (each pixel at its page-table entry's LOD)
 //! and the ideal (trilinear at the exact footprint LOD, no pages in between).
 
+use crate::SIZE;
 use crate::api::{
     LodChain, PageId, Rgba8Image, Runtime, SampleFilter as Filter, VirtualTexture, Window, bilinear, nearest, trilinear,
 };
 use crate::compare::Fallback;
-use crate::{PAGES, SIZE};
 
 /// What the runtime's picture of `window` must be, as `tests/runtime.rs` computes it: at each
 /// pixel the reference sample at the LOD of the page-table entry of the pixel's wanted page
@@ -21,13 +21,13 @@ pub fn model(
 ) -> (Rgba8Image, Fallback) {
     let size = (SIZE[0], SIZE[1]);
     let origin = window.origin_texels(tex, size);
-    let lod = origin.lod(0.0, tex.grid.lod_count);
+    let lod = origin.lod(0.0, tex.grid.lod_count());
     let footprint = origin.step[0].max(origin.step[1]).log2().max(0.0);
     let table = rt.page_table();
     let mut fallback = Fallback::default();
     let image = Rgba8Image::from_fn(size.0, size.1, |x, y| {
         let [u, v] = window.uv(x, y, size).map(|t| t as f32);
-        let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, PAGES as u32, tex.payload());
+        let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, tex.size(), tex.payload());
         let entry = table.entry(0, lod, at.page[0] as u16, at.page[1] as u16);
         if entry.lod != lod {
             fallback.add(x, y, PageId::new(0, lod, at.page[0] as u16, at.page[1] as u16), entry.lod);

@@ -12,7 +12,7 @@ use crate::api::{
 };
 use crate::compare::{Check, Worst, compare, compare_where};
 use crate::reference::model;
-use crate::{DRAWS_PER_SUBMIT, FRAMES_PER_ROUND, MAX_CONVERGE_FRAMES, PAGES, PAYLOAD, SIZE, SUBMITS_PER_ROUND, scene};
+use crate::{DRAWS_PER_SUBMIT, FRAMES_PER_ROUND, MAX_CONVERGE_FRAMES, PAYLOAD, SIZE, SUBMITS_PER_ROUND, scene};
 
 pub struct Run {
     pub border: u32,
@@ -40,7 +40,8 @@ impl Run {
         let device = &rt.gpu().device;
         let pass = SamplePass::new(device, filter);
         let target = RenderTarget::new(device, SIZE[0], SIZE[1]);
-        let table = GpuPageTable::new(device, &rt.gpu().queue, &[texture.grid], rt.cache().slots_per_side());
+        let table = GpuPageTable::new(device, &rt.gpu().queue, &[texture.grid], rt.cache().slots_per_side())
+            .context("a page table")?;
         Ok(Run { border, filter, rt, texture, pass, target, table, converged_after: 0, loaded_while_timed: 0 })
     }
 
@@ -142,14 +143,14 @@ impl Run {
         // Where the mismatches with the own model are: within a texel of a page edge (of the
         // LOD sampled) or inside a page.
         let origin = window.origin_texels(&self.texture, (SIZE[0], SIZE[1]));
-        let lod = origin.lod(0.0, self.texture.grid.lod_count);
+        let lod = origin.lod(0.0, self.texture.grid.lod_count());
         let payload = self.texture.payload() as f32;
         let (mut edge_off, mut inner_off, mut edge_max, mut inner_max) = (0, 0, 0, 0);
         let mut worst = Worst { err: 0, x: 0, y: 0, got: picture.texels[0], want: want.texels[0] };
         for (i, (g, w)) in picture.texels.iter().zip(&want.texels).enumerate() {
             let err = (0..3).map(|c| g[c].abs_diff(w[c])).max().unwrap();
             let (x, y) = (i as u32 % SIZE[0], i as u32 / SIZE[0]);
-            let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, PAGES as u32, self.texture.payload());
+            let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, self.texture.size(), self.texture.payload());
             let at_edge = at.within.iter().any(|&t| t < 1.0 || t > payload - 1.0);
             if at_edge {
                 edge_max = edge_max.max(err);

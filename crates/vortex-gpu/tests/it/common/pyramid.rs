@@ -12,7 +12,7 @@ use vortex_pack::{Pack, TileKind};
 use vortex_vt::page::{PageId, TextureGrid};
 use vortex_vt::sampler::{LodChain, Rgba8Image};
 
-/// A square texture of `pages` pages of `payload` texels, with its pack.
+/// A texture with its LOD chain and its pack.
 pub struct Synthetic {
     pub chain: LodChain,
     pub texture: VirtualTexture,
@@ -36,9 +36,13 @@ impl Synthetic {
         seed: u32,
         kind: TileKind,
     ) -> Synthetic {
-        let grid = TextureGrid::new(pages).unwrap();
-        let texture = VirtualTexture::square(grid, tile_size, border);
-        let chain = chain(texture.side_texels() as u32, grid.lod_count, seed);
+        let grid = TextureGrid::new(pages.into(), pages.into()).unwrap();
+        let texture = VirtualTexture::filling(grid, tile_size, border);
+        Synthetic::of(dir, name, texture, seed, kind)
+    }
+
+    fn of(dir: &Path, name: &str, texture: VirtualTexture, seed: u32, kind: TileKind) -> Synthetic {
+        let chain = chain(texture.width, texture.height, texture.grid.lod_count(), seed);
         let pack = write_pack(&dir.join(name), &chain, &texture, kind).unwrap();
         Synthetic { chain, texture, pack }
     }
@@ -49,17 +53,17 @@ impl Synthetic {
     }
 }
 
-/// LOD 0 of `side²` texels (smooth colour with finer detail, opaque), then each LOD the 2x2
-/// mean of the one above, `lods` in all.
-pub fn chain(side: u32, lods: u8, seed: u32) -> LodChain {
+/// LOD 0 of `width x height` texels (smooth colour with finer detail, opaque), then each LOD
+/// the mean of the (up to) 2x2 texels it covers of the one above, `lods` in all.
+pub fn chain(width: u32, height: u32, lods: u8, seed: u32) -> LodChain {
     let code = |x: f64| x.round().clamp(0.0, 255.0) as u8;
     let s = seed as f64;
-    let lod0 = Rgba8Image::from_fn(side, side, |x, y| {
+    let lod0 = Rgba8Image::from_fn(width, height, |x, y| {
         let (x, y) = (x as f64, y as f64);
         [
             code(127.5 + 100.0 * (x * 0.021 + y * 0.013 + s).sin() + 20.0 * (x * 0.31).sin()),
             code(127.5 + 100.0 * (y * 0.017 - x * 0.009 + 2.0 * s).cos() + 20.0 * (y * 0.27).cos()),
-            code((x + y) * 255.0 / (2.0 * (side - 1) as f64)),
+            code((x + y) * 255.0 / ((width + height).max(3) - 2) as f64),
             255,
         ]
     });
