@@ -62,7 +62,9 @@ pub struct OutputArgs {
     #[command(flatten)]
     pack_layout: super::PackLayout,
 
-    /// Side of a stored tile in texels, borders included [default: 128].
+    /// Side of a stored tile in texels, borders included [default: 128]. LOD 0 has
+    /// ceil(width / payload) x ceil(height / payload) pages (payload = tile size - 2 x border),
+    /// each LOD half as many per axis (rounding up), down to the first LOD of one page.
     #[arg(long, value_name = "N")]
     tile_size: Option<u32>,
 
@@ -74,8 +76,9 @@ pub struct OutputArgs {
     #[command(flatten)]
     enc: CodecArgs,
 
-    /// Fill for the padding between the image and the square power-of-two virtual texture:
-    /// edge (repeat the image's edge), #rrggbb, #rrggbbaa, r,g,b[,a] or a grey level [default: edge].
+    /// Fill for the padding in the last page of each row and column, between the image's edge
+    /// and the page's: edge (repeat the image's edge), #rrggbb, #rrggbbaa, r,g,b[,a] or a grey
+    /// level [default: edge].
     #[arg(long, value_name = "COLOUR")]
     background: Option<Background>,
 
@@ -98,7 +101,9 @@ pub struct OutputArgs {
 
     /// Most memory a run may hold at once, checked before allocating: an image decoded whole
     /// when its format cannot be streamed (interlaced PNG, progressive JPEG, one-strip TIFF,
-    /// WebP, ...), the bands and tiles in flight, a pack's index; e.g. 512M, 4G.
+    /// WebP, ...), the bands and tiles in flight, a pack's index; e.g. 512M, 4G. An image too
+    /// wide for its bands to fit is cut in vertical stripes, reading the source once per
+    /// stripe, for the same tiles.
     #[arg(long, value_name = "SIZE", default_value = "1G", value_parser = super::parse_size)]
     max_memory: u64,
 
