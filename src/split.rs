@@ -20,7 +20,7 @@ use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::pyramid::Filter;
-use crate::pyramid::cascade::{Batch, Cascade, CutTile, Span};
+use crate::pyramid::cascade::{Batch, BatchSender, Cascade, CutTile, Span};
 use crate::pyramid::cut::Padding;
 use crate::pyramid::filter::ExactFilter;
 use crate::pyramid::reduce::{Acc, Reducer};
@@ -152,10 +152,10 @@ fn run<T: Sample>(
 /// tiles on.
 struct Producer<'a, T> {
     layout: Layout,
-    pixels: crate::pixel::PixelLayout,
+    pixels: PixelLayout,
     opts: &'a SplitOptions,
     padding: Padding<T>,
-    out: std::sync::mpsc::SyncSender<Result<Batch<T>>>,
+    out: BatchSender<T>,
     progress: &'a dyn Progress,
 }
 

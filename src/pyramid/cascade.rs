@@ -97,7 +97,7 @@ struct Level<T, A> {
     /// The rows of the level's window (all its columns but in a stripe).
     band: Band<T>,
     next_tile_row: u32,
-    /// Per page column cut, its first column and where its texels come from (band columns).
+    /// Per page column cut: its index, and which band columns its texels come from.
     x_runs: Vec<(u32, Vec<Run>)>,
     down: Option<Down<T, A>>,
     /// The current row, rounded from exact sums.
