@@ -7,22 +7,37 @@ DOC=${DOC:-$ROOT/docs/benchmarks.md}
 mkdir -p "$WORK"
 
 log() { printf '[%(%H:%M:%S)T] %s\n' -1 "$*" >&2; }
+as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 
 # Installs vips and GNU time if missing, builds, snapshots the binaries into $WORK/bin (a
 # concurrent `cargo build` must not swap them between runs), generates the 16384² BigTIFF.
+# VORTEX=PATH times that vortex-tiler binary instead of the repository's own release build (to
+# compare builds of two commits; VORTEX_LABEL names it in the report, default its path); the
+# examples gen_image and psnr always come from the repository. CARGO_TARGET_DIR is honoured.
+# Sets REV, the vortex-tiler build's name in reports.
 bench_setup() {
   if ! command -v vips >/dev/null || [ ! -x /usr/bin/time ]; then
-    export DEBIAN_FRONTEND=noninteractive
-    apt-get update -qq && apt-get install -y -qq libvips-tools time >/dev/null
+    log "installing libvips-tools and time"
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get update -qq
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libvips-tools time >/dev/null
   fi
-  cargo build --release --quiet
-  cargo build --release --quiet --example gen_image
-  REV="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src crates Cargo.toml Cargo.lock || echo +uncommitted)"
+  local target=${CARGO_TARGET_DIR:-$ROOT/target}
+  log "building"
+  cargo build --release --quiet -p vortex-tiler --example gen_image --example psnr
   mkdir -p "$WORK/bin"
-  cp target/release/vortex-tiler target/release/examples/gen_image "$WORK/bin/"
+  if [ -n "${VORTEX:-}" ]; then
+    [ -x "$VORTEX" ] || { echo "error: VORTEX=$VORTEX is not an executable" >&2; exit 1; }
+    cp "$VORTEX" "$WORK/bin/vortex-tiler"
+    REV=${VORTEX_LABEL:-$VORTEX}
+  else
+    cargo build --release --quiet
+    cp "$target/release/vortex-tiler" "$WORK/bin/"
+    REV="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src crates Cargo.toml Cargo.lock || echo +uncommitted)"
+  fi
+  cp "$target/release/examples/gen_image" "$target/release/examples/psnr" "$WORK/bin/"
   if [ ! -s "$WORK/src16k.tif" ]; then
     log "generating src16k.tif"
-    "$WORK/bin/gen_image" 16384 16384 "$WORK/part16k.tif"
+    "$WORK/bin/gen_image" 16384 16384 "$WORK/part16k.tif" # the format follows the extension
     mv "$WORK/part16k.tif" "$WORK/src16k.tif"
   fi
   export VIPS_WARNING=0 # vips 8.14 warns about the TIFF Predictor tag the tiff crate writes

@@ -33,7 +33,7 @@ for run in $(seq 1 "$RUNS"); do
   log "vips run $run: $wall s, $((rss / 1024)) MiB"
 done
 TILES=$(find "$OUT/d${RUNS}_files" -type f | wc -l)
-INFO=$(bin/vortex-tiler info "$OUT/v$RUNS.vtpk" | tail -4)
+INFO=$(bin/vortex-tiler info "$OUT/v$RUNS.vtpk" | sed -n '/^ *lod /,$p') # level table and contents
 rm -rf "$OUT"
 sync
 touch .cleaned
@@ -50,7 +50,7 @@ REPORT=$WORK/pack-report.md
   echo "| vortex-tiler split --pack (default filter, linear-premultiplied) | 1 file | $(calc %.2f "$DW") | $(calc %.1f "268.4355 / $DW") | $(calc %.0f "$DR / 1024") | $(calc %.1f "$(m vortex-default 5) / 1048576") | $(calc %.2fx "$VW / $DW") | $(calc %.2fx "$DR / $VR") |"
   echo "| vips dzsave | $TILES files | $(calc %.2f "$VW") | $(calc %.1f "268.4355 / $VW") | $(calc %.0f "$VR / 1024") | $(calc %.1f "$(m vips 5) / 1048576") | 1.00x | 1.00x |"
   echo
-  echo "The pack holds the square power-of-two grid (256 x 256 pages at LOD 0, of which the image covers 137 x 137); padding pages are stored once or as one colour:"
+  echo "The pack's level table and contents (\`vortex-tiler info\`, last run of \`--filter box\`); vips's $TILES files include its levels below one tile (down to 1x1):"
   echo
   echo '```'
   echo "$INFO"
