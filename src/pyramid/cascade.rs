@@ -36,12 +36,13 @@ pub(crate) struct CutTile<T> {
 }
 
 /// Bytes of texels one batch holds at most: a row of tiles of a wide image is sent in pieces,
-/// so that the tiles in flight do not grow with the width.
-pub(crate) const BATCH_BYTES: usize = 16 << 20;
+/// so that the tiles in flight do not grow with the width (and a stripe can be wider).
+pub(crate) const BATCH_BYTES: usize = 4 << 20;
 
-/// Tiles in one batch of tiles of `texel_bytes`-byte texels (at least one).
+/// Tiles in one batch of tiles of `texel_bytes`-byte texels: [`BATCH_BYTES`] of them, but at
+/// least 8, which keeps a few encoders busy on small machines whatever the tile size.
 pub(crate) fn batch_tiles(layout: &Layout, texel_bytes: usize) -> usize {
-    (BATCH_BYTES / (layout.tile_texels() * texel_bytes)).max(1)
+    (BATCH_BYTES / (layout.tile_texels() * texel_bytes)).max(8)
 }
 
 /// How a level makes the next one.

@@ -90,7 +90,7 @@ pub fn one_band_bytes(layout: &Layout, texel_bytes: u64) -> u64 {
 }
 
 /// Bytes one span's cascade holds at once, rounded up generously: per LOD a band of up to
-/// `tile_size + 1` rows and a row of exact sums (u128 at worst) of its window, and three
+/// `tile_size + 1` rows and a row of exact sums of its window, and three
 /// batches of tiles (a row of its pages, or [`BATCH_BYTES`](crate::pyramid::cascade::BATCH_BYTES)
 /// of them); plus the source row that is read whole.
 pub(crate) fn span_bytes(layout: &Layout, span: &Span, texel_bytes: u64) -> u64 {
@@ -101,7 +101,8 @@ pub(crate) fn span_bytes(layout: &Layout, span: &Span, texel_bytes: u64) -> u64 
         let width = window.end - window.start;
         let rows = (tile + 1).min(layout.level_extent(lod).1 as u64);
         let band = rows * width * texel_bytes;
-        let sums = 16 * width * texel_bytes;
+        // u64 sums per sample, or u128 for 16-bit samples: 8 bytes per texel byte either way.
+        let sums = 8 * width * texel_bytes;
         let pages = span.pages_at(layout, lod);
         let per_batch = batch_tiles(layout, texel_bytes as usize) as u64;
         let batches = 3 * ((pages.end - pages.start) as u64).min(per_batch) * tile * tile * texel_bytes;
@@ -112,7 +113,7 @@ pub(crate) fn span_bytes(layout: &Layout, span: &Span, texel_bytes: u64) -> u64 
 /// [`span_bytes`] of the coarse pass, plus the block sums it builds from whole source rows
 /// (the sums of one coarse row, and one source row as the filter prepares it).
 fn coarse_bytes(layout: &Layout, coarse: &Span, texel_bytes: u64) -> u64 {
-    let block_sums = 16 * layout.level_extent(coarse.lods.start).0 as u64 * texel_bytes;
+    let block_sums = 8 * layout.level_extent(coarse.lods.start).0 as u64 * texel_bytes;
     let prepared = 8 * layout.width as u64 * texel_bytes;
     span_bytes(layout, coarse, texel_bytes).saturating_add(block_sums).saturating_add(prepared)
 }
