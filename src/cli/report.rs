@@ -72,7 +72,11 @@ pub fn summary_line(s: &Summary, out: &Path, width: u32, height: u32, decoder: &
     let peak = peak_rss().map(|b| format!(", peak memory {}", mib(b))).unwrap_or_default();
     let stripes = match s.passes {
         1 => String::new(),
-        n => format!(", in {} vertical stripes and a coarse pass (the source read {n} times)", s.stripes),
+        n => format!(
+            ", in {} vertical stripe{} and a coarse pass (the source read {n} times)",
+            s.stripes,
+            if s.stripes == 1 { "" } else { "s" }
+        ),
     };
     format!(
         "wrote {} tiles ({} encoded, {} LODs from {} x {} pages, {}x{} {}) totalling {} to {} in {:.2} s: {:.1} source Mpx/s [{decoder}]{stripes}{peak}",
