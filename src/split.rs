@@ -184,7 +184,8 @@ impl<T: Sample> Producer<'_, T> {
         Cascade::new(self.layout, span, self.pixels, self.opts.filter, self.padding.clone(), self.out.clone())
     }
 
-    /// LOD 0 onwards for the columns of `span`: whole source rows, the window's part of each.
+    /// LOD 0 onwards for the columns of `span`: the window's part of each source row, read
+    /// alone where the source can ([`RowSource::read_columns`]), else cut from the whole row.
     fn stripe<A: Acc>(&self, span: &Span, source: &mut dyn RowSource) -> Result<()>
     where
         T: Into<A>,
@@ -192,8 +193,13 @@ impl<T: Sample> Producer<'_, T> {
         let mut cascade = self.cascade::<A>(span);
         let channels = self.pixels.channels.count();
         let window = span.window(&self.layout, 0);
-        let columns = window.start as usize * channels..window.end as usize * channels;
-        let mut row = vec![T::default(); self.layout.width as usize * channels];
+        let whole = window.end - window.start == self.layout.width as u64;
+        let narrow = !whole && source.read_columns(window.start as u32..window.end as u32);
+        let columns = match narrow {
+            true => 0..(window.end - window.start) as usize * channels,
+            false => window.start as usize * channels..window.end as usize * channels,
+        };
+        let mut row = vec![T::default(); if narrow { columns.end } else { self.layout.width as usize * channels }];
         for _ in 0..self.layout.height {
             self.check_cancelled()?;
             source.read_row(bytemuck::cast_slice_mut(&mut row))?;

@@ -54,6 +54,12 @@ pub trait RowSource: Send {
     fn rewind(&mut self) -> Result<()> {
         Err(TilerError::Options(format!("{} cannot be read twice, as a striped run needs", self.describe())))
     }
+    /// From the next row on, fills `row` with the texels of `columns` only, if this source can
+    /// read part of a row for less than the whole (a stripe of a wide PPM); returns whether it
+    /// will. Sources that cannot keep giving whole rows.
+    fn read_columns(&mut self, _columns: std::ops::Range<u32>) -> bool {
+        false
+    }
 }
 
 /// A file source that rewinds by opening its file again (a decoder from the top: PNG and
@@ -73,6 +79,9 @@ impl RowSource for Reopening {
     }
     fn describe(&self) -> String {
         self.inner.describe()
+    }
+    fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
+        self.inner.read_columns(columns)
     }
     fn rewind(&mut self) -> Result<()> {
         let again = open_once(&self.path, self.max_memory)?;

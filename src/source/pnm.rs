@@ -20,6 +20,10 @@ pub struct PnmSource {
     maxval: u32,
     layout: PixelLayout,
     next: u64,
+    /// Where the pixel data starts in the file.
+    data_start: u64,
+    /// Texel columns each row is read from, when a stripe asked for fewer than all.
+    columns: Option<std::ops::Range<u32>>,
 }
 
 /// The most header bytes read (comments included) before the pixel data must start.
@@ -58,6 +62,8 @@ pub fn open(path: &Path) -> Result<Box<dyn RowSource>> {
         maxval,
         layout,
         next: 0,
+        data_start: data_start as u64,
+        columns: None,
     }))
 }
 
@@ -116,13 +122,21 @@ impl RowSource for PnmSource {
                 e.to_string()
             },
         };
-        if self.layout.depth == Depth::U8 && self.maxval == 255 {
+        if let Some(columns) = &self.columns {
+            // A stripe's part of the row, read where it lies (the buffer would read the rest).
+            let bpp = self.layout.bytes_per_pixel() as u64;
+            let at = self.data_start + (row * self.width as u64 + columns.start as u64) * bpp;
+            let file = self.reader.get_mut();
+            self.raw.resize(out.len(), 0);
+            file.seek(SeekFrom::Start(at)).and_then(|_| file.read_exact(&mut self.raw)).map_err(ends_early)?;
+        } else if self.layout.depth == Depth::U8 && self.maxval == 255 {
             self.reader.read_exact(out).map_err(ends_early)?;
             self.next += 1;
             return Ok(());
+        } else {
+            self.raw.resize(out.len(), 0);
+            self.reader.read_exact(&mut self.raw).map_err(ends_early)?;
         }
-        self.raw.resize(out.len(), 0);
-        self.reader.read_exact(&mut self.raw).map_err(ends_early)?;
         self.next += 1;
         let data = &self.raw;
         match (self.layout.depth, self.maxval) {
@@ -144,6 +158,11 @@ impl RowSource for PnmSource {
 
     fn describe(&self) -> String {
         "pnm, read by row".into()
+    }
+
+    fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
+        self.columns = Some(columns);
+        true
     }
 }
 

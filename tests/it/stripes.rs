@@ -87,3 +87,26 @@ fn resampling_filters_say_they_cannot_be_striped() {
         .to_string();
     assert!(e.contains("lanczos3") && e.contains("--max-memory"), "{e}");
 }
+
+/// A PPM reads only each stripe's columns (seeking in the file); the tiles are those of one band.
+#[test]
+fn a_ppm_is_read_a_stripe_at_a_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = Image::random(2500, 9, layouts()[4], 11);
+    let path = dir.path().join("wide.ppm");
+    let mut bytes = b"P6\n2500 9\n255\n".to_vec();
+    bytes.extend(image.samples.iter().map(|s| *s as u8));
+    std::fs::write(&path, bytes).unwrap();
+    let opts = SplitOptions { filter: Filter::LinearPremultiplied, ..png_options(16, 2, Background::Edge) };
+    let tiles = |max_memory: u64| {
+        let sink = MemSink::default();
+        let source = vortex_tiler::source::open(&path, 1 << 30).unwrap();
+        let summary = split(source, &sink, &SplitOptions { max_memory, ..opts.clone() }, &()).unwrap();
+        (summary.passes, sink.tiles.into_inner().unwrap())
+    };
+    let (passes, striped) = tiles(budget(&image, &opts, 0.1));
+    assert!(passes > 2, "{passes} passes");
+    let (one, whole) = tiles(1 << 30);
+    assert_eq!(one, 1);
+    assert!(striped == whole);
+}
