@@ -17,6 +17,12 @@ use crate::error::TilerError;
 /// (65535 * 4^24 < 2^64) and is far beyond what any image format here can describe.
 pub const MAX_SIDE: u64 = 1 << 24;
 
+/// LODs of a grid whose longer axis has `pages` pages at LOD 0: one per halving, down to the
+/// first LOD of one page (`info.json` readers check `lodCount` with it too).
+pub fn lods_for(pages: u32) -> u32 {
+    pages.next_power_of_two().trailing_zeros() + 1
+}
+
 /// The page grid of a virtual texture: `columns` x `rows` pages at LOD 0, halving (rounding
 /// up) per LOD down to one page; each stored page is `tile_size` texels per side, of which
 /// `payload = tile_size - 2 * border` are its own and the rest copied from neighbours.
@@ -53,7 +59,7 @@ impl Layout {
         })?;
         // MAX_SIDE / 4 pages per axis at most: every count below fits a u32.
         let (columns, rows) = (width.div_ceil(payload as u64) as u32, height.div_ceil(payload as u64) as u32);
-        let lod_count = columns.max(rows).next_power_of_two().trailing_zeros() + 1;
+        let lod_count = lods_for(columns.max(rows));
         Ok(Layout { width: width as u32, height: height as u32, tile_size, border, columns, rows, lod_count })
     }
 

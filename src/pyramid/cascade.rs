@@ -70,12 +70,12 @@ impl Span {
         Span { lods: 0..layout.lod_count, pages: 0..layout.columns }
     }
 
-    /// Page columns of `lod` that this span cuts.
-    pub fn pages_at(&self, layout: &Layout, lod: u32) -> Range<u32> {
+    /// Page columns of `lod` that this span cuts: the parents of its first LOD's pages (a
+    /// stripe starts on a page of every LOD it makes, and the grid's last column's parent is
+    /// the next LOD's last column, as nested ceilings compose).
+    pub fn pages_at(&self, lod: u32) -> Range<u32> {
         let k = lod - self.lods.start;
-        let end =
-            if self.pages.end == layout.grid(self.lods.start).0 { layout.grid(lod).0 } else { self.pages.end >> k };
-        self.pages.start >> k..end
+        self.pages.start >> k..self.pages.end.div_ceil(1 << k)
     }
 
     /// Texel columns of `lod` the span's cascade holds: its pages, their borders, and as much
@@ -153,7 +153,7 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
                 let row_len = width * channels;
                 let virtual_width = layout.virtual_extent(lod).0;
                 let x_runs = span
-                    .pages_at(&layout, lod)
+                    .pages_at(lod)
                     .map(|t| (t, cut::shifted(cut::runs(&layout, t, extent.0, virtual_width, edge), window.start)))
                     .collect();
                 let down = (lod + 1 < span.lods.end).then(|| {

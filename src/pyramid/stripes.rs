@@ -103,7 +103,7 @@ pub(crate) fn span_bytes(layout: &Layout, span: &Span, texel_bytes: u64) -> u64 
         let band = rows * width * texel_bytes;
         // u64 sums per sample, or u128 for 16-bit samples: 8 bytes per texel byte either way.
         let sums = 8 * width * texel_bytes;
-        let pages = span.pages_at(layout, lod);
+        let pages = span.pages_at(lod);
         let per_batch = batch_tiles(layout, texel_bytes as usize) as u64;
         let batches = 3 * ((pages.end - pages.start) as u64).min(per_batch) * tile * tile * texel_bytes;
         sum.saturating_add(band).saturating_add(sums).saturating_add(batches)

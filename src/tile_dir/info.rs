@@ -6,6 +6,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, TilerError};
+use crate::layout::lods_for;
 
 /// The `formatVersion` this tool writes. Files without the member are the thesis's version 0.
 pub const FORMAT_VERSION: u32 = 2;
@@ -131,11 +132,6 @@ impl InfoFile {
         s.push('\n');
         s
     }
-}
-
-/// LODs of a grid whose longer axis has `pages` pages at LOD 0: down to the first of one page.
-pub fn lods_for(pages: u32) -> u32 {
-    pages.next_power_of_two().trailing_zeros() + 1
 }
 
 #[cfg(test)]

@@ -14,11 +14,11 @@ use vortex_pack::{Description, Level};
 
 use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling};
 use crate::error::{Result, TilerError};
-use crate::layout::Layout;
+use crate::layout::{Layout, lods_for};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::settings::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
 use filename::FilenameFormat;
-use info::{FORMAT_VERSION, InfoFile, lods_for};
+use info::{FORMAT_VERSION, InfoFile};
 
 /// A tiled directory's `info.json`, completed with defaults for the thesis's version-0 files.
 pub struct TiledDir {
