@@ -12,6 +12,7 @@ use std::ops::RangeInclusive;
 
 use crate::error::TilerError;
 use crate::pixel::{Channels, Depth, PixelLayout, Sample, u16_to_u8};
+use crate::viewer::Crop;
 
 /// JPEG chroma subsampling.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -241,8 +242,10 @@ impl<T: Sample> TileEncoder<T> {
         let texels = self.flattened(texels);
         let texels = &texels[..];
         match self.codec {
-            Codec::Jpeg { quality, subsampling } => self.encode_jpeg(texels, quality, subsampling, out),
-            Codec::Png { level } => self.encode_png(texels, level, out),
+            Codec::Jpeg { quality, subsampling } => {
+                self.encode_jpeg(texels, (self.side, self.side), quality, subsampling, out)
+            }
+            Codec::Png { level } => self.encode_png(texels, (self.side, self.side), level, out),
             Codec::Raw => {
                 out.extend_from_slice(&self.stored_bytes(texels));
                 Ok(())
@@ -250,6 +253,31 @@ impl<T: Sample> TileEncoder<T> {
             Codec::Zstd { level, delta } => self.encode_zstd(texels, level, delta, out),
             Codec::Bc1 => self.encode_bc(texels, None, out),
             Codec::Bc7 { effort } => self.encode_bc(texels, Some(effort), out),
+        }
+    }
+
+    /// Encodes the `crop` part of a `side x side` tile as an image file of the crop's size (a
+    /// viewer layout's edge tile). Only image codecs (JPEG, PNG) make files of any size.
+    pub fn encode_crop(&self, texels: &[T], crop: Crop, out: &mut Vec<u8>) -> Result<(), String> {
+        let (side, channels) = (self.side as usize, self.source.channels.count());
+        if crop == Crop::whole(self.side) {
+            return self.encode(texels, out);
+        }
+        if crop.x + crop.width > self.side || crop.y + crop.height > self.side || crop.width == 0 || crop.height == 0 {
+            return Err(format!("crop {crop:?} is not inside a {side}-texel tile"));
+        }
+        let (x, w) = (crop.x as usize * channels, crop.width as usize * channels);
+        let mut part = Vec::with_capacity(w * crop.height as usize);
+        for row in crop.y as usize..(crop.y + crop.height) as usize {
+            part.extend_from_slice(&texels[row * side * channels + x..][..w]);
+        }
+        out.clear();
+        let part = self.flattened(&part);
+        let size = (crop.width, crop.height);
+        match self.codec {
+            Codec::Jpeg { quality, subsampling } => self.encode_jpeg(&part, size, quality, subsampling, out),
+            Codec::Png { level } => self.encode_png(&part, size, level, out),
+            other => Err(format!("{} tiles are square; only jpeg and png tiles can be cropped", other.name())),
         }
     }
 
@@ -326,12 +354,12 @@ impl<T: Sample> TileEncoder<T> {
     fn encode_jpeg(
         &self,
         texels: &[T],
+        (width, height): (u32, u32),
         quality: u8,
         subsampling: Subsampling,
         out: &mut Vec<u8>,
     ) -> Result<(), String> {
         let samples = to_u8(texels);
-        let side = self.side as usize;
         let colour = match self.stored.channels {
             Channels::Grey => mozjpeg::ColorSpace::JCS_GRAYSCALE,
             _ => mozjpeg::ColorSpace::JCS_RGB,
@@ -340,7 +368,7 @@ impl<T: Sample> TileEncoder<T> {
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> std::io::Result<Vec<u8>> {
             let mut c = mozjpeg::Compress::new(colour);
             c.set_fastest_defaults();
-            c.set_size(side, side);
+            c.set_size(width as usize, height as usize);
             c.set_quality(quality as f32);
             if colour == mozjpeg::ColorSpace::JCS_RGB {
                 let px = match subsampling {
@@ -363,8 +391,14 @@ impl<T: Sample> TileEncoder<T> {
         }
     }
 
-    fn encode_png(&self, texels: &[T], level: PngLevel, out: &mut Vec<u8>) -> Result<(), String> {
-        let mut enc = png::Encoder::new(&mut *out, self.side, self.side);
+    fn encode_png(
+        &self,
+        texels: &[T],
+        (width, height): (u32, u32),
+        level: PngLevel,
+        out: &mut Vec<u8>,
+    ) -> Result<(), String> {
+        let mut enc = png::Encoder::new(&mut *out, width, height);
         enc.set_color(match self.stored.channels {
             Channels::Grey => png::ColorType::Grayscale,
             Channels::GreyAlpha => png::ColorType::GrayscaleAlpha,

@@ -63,6 +63,13 @@ impl Layout {
         Ok(Layout { width: width as u32, height: height as u32, tile_size, border, columns, rows, lod_count })
     }
 
+    /// The same grid with LODs on below one page until the image is one texel (Deep Zoom's
+    /// levels): `ceil(log2(max(w, h))) + 1` LODs, the extra ones a single page each.
+    pub fn down_to_one_texel(self) -> Layout {
+        let lod_count = self.lod_count.max(lods_for(self.width.max(self.height)));
+        Layout { lod_count, ..self }
+    }
+
     /// Texels of a page that are its own (the stored tile minus the borders).
     pub fn payload(&self) -> u32 {
         self.tile_size - 2 * self.border
@@ -155,6 +162,15 @@ mod tests {
         let l = Layout::new(1, 1, 128, 4).unwrap();
         assert_eq!((l.columns, l.rows, l.lod_count, l.total_tiles()), (1, 1, 1, 1));
         assert_eq!(l.level_extent(0), (1, 1));
+    }
+
+    #[test]
+    fn deep_zoom_levels_go_on_to_one_texel() {
+        let l = Layout::new(700, 500, 256, 1).unwrap().down_to_one_texel();
+        assert_eq!((l.lod_count, l.grid(10), l.level_extent(9), l.level_extent(10)), (11, (1, 1), (2, 1), (1, 1)));
+        assert_eq!(l.total_tiles(), 6 + 2 + 1 + 8);
+        let one = Layout::new(1, 1, 8, 0).unwrap().down_to_one_texel();
+        assert_eq!(one.lod_count, 1);
     }
 
     #[test]

@@ -32,6 +32,7 @@ pub mod sink;
 pub mod source;
 pub mod split;
 pub mod tile_dir;
+pub mod viewer;
 
 /// Internals the integration tests check directly (the exact sums, the sRGB tables, the
 /// resamplers, the cutting arithmetic). Not an API: only built with the `testing` feature,

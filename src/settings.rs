@@ -145,6 +145,7 @@ pub fn resolve(
             None => parse_member(info.filter.as_deref(), "filter", &field_err)?.unwrap_or_default(),
         },
         max_memory: req.max_memory.unwrap_or(crate::limits::DEFAULT_MEMORY),
+        down_to_one_texel: false,
     };
     let stored = codec.stored_layout(source, flatten, tile_depth)?;
     if let Some(want) = want_channels.filter(|c| *c != stored.channels) {

@@ -27,6 +27,7 @@ use crate::pyramid::reduce::{Acc, Reducer};
 use crate::pyramid::stripes::Plan;
 use crate::sink::TileSink;
 use crate::source::RowSource;
+use crate::viewer::Crop;
 
 /// How to cut and store the pyramid.
 #[derive(Clone, Debug)]
@@ -43,6 +44,17 @@ pub struct SplitOptions {
     pub filter: Filter,
     /// Bytes the pipeline may hold (`--max-memory`); a wider image is cut in stripes.
     pub max_memory: u64,
+    /// Go on below one page until the image is one texel, as Deep Zoom's levels do
+    /// ([`Layout::down_to_one_texel`]).
+    pub down_to_one_texel: bool,
+}
+
+impl SplitOptions {
+    /// The page grid these options cut a `width x height` image into.
+    pub fn layout(&self, width: u32, height: u32) -> Result<Layout> {
+        let layout = Layout::new(width as u64, height as u64, self.tile_size, self.border)?;
+        Ok(if self.down_to_one_texel { layout.down_to_one_texel() } else { layout })
+    }
 }
 
 /// Watches a run: told of finished tiles, asked whether to stop.
@@ -87,7 +99,7 @@ pub fn split(
     opts: &SplitOptions,
     progress: &dyn Progress,
 ) -> Result<Summary> {
-    let layout = Layout::new(source.width() as u64, source.height() as u64, opts.tile_size, opts.border)?;
+    let layout = opts.layout(source.width(), source.height())?;
     match source.layout().depth {
         Depth::U8 => run::<u8>(source, sink, opts, layout, progress),
         Depth::U16 => run::<u16>(source, sink, opts, layout, progress),
@@ -267,24 +279,25 @@ fn consume<T: Sample>(
                 Err(_) => break,
             }
         }
-        let jobs: Vec<(u32, &CutTile<T>)> = work.iter().flat_map(|b| b.tiles.iter().map(move |t| (b.lod, t))).collect();
-        let store = |(lod, tile, stored): (u32, &CutTile<T>, Stored)| -> Result<()> {
-            for &(x, y) in &tile.places {
+        let jobs: Vec<Job<T>> =
+            work.iter().flat_map(|b| b.tiles.iter().flat_map(|t| Job::of(sink, b.lod, t))).collect();
+        let store = |(job, stored): (&Job<T>, Stored)| -> Result<()> {
+            for &(x, y) in &job.places {
                 match &stored {
-                    Stored::Encoded(bytes) => sink.write_tile(lod, x, y, bytes)?,
-                    Stored::Constant(texel) => sink.write_constant(lod, x, y, texel)?,
+                    Stored::Encoded(bytes) => sink.write_tile(job.lod, x, y, bytes)?,
+                    Stored::Constant(texel) => sink.write_constant(job.lod, x, y, texel)?,
                 }
             }
-            tiles.fetch_add(tile.places.len() as u64, Ordering::Relaxed);
-            progress.advance(tile.places.len() as u64);
+            tiles.fetch_add(job.places.len() as u64, Ordering::Relaxed);
+            progress.advance(job.places.len() as u64);
             Ok(())
         };
-        let prepared = jobs.par_iter().map(|&(lod, tile)| {
-            let stored = prepare(encoder, sink, lod, tile)?;
+        let prepared = jobs.par_iter().map(|job| {
+            let stored = prepare(encoder, sink, job)?;
             if matches!(stored, Stored::Encoded(_)) {
                 encoded.fetch_add(1, Ordering::Relaxed);
             }
-            Ok((lod, tile, stored))
+            Ok((job, stored))
         });
         if sink.ordered() {
             // Encode in parallel, store in the producer's (deterministic) order.
@@ -297,6 +310,30 @@ fn consume<T: Sample>(
     Ok(())
 }
 
+/// One encoding: a cut tile, the part of it the sink keeps, and the places that get it.
+struct Job<'a, T> {
+    lod: u32,
+    tile: &'a CutTile<T>,
+    crop: Option<Crop>,
+    places: Vec<(u32, u32)>,
+}
+
+impl<'a, T> Job<'a, T> {
+    /// The encodings a cut tile needs: one, unless the sink crops its places differently
+    /// (identical pages merged at the cut may sit at a viewer tile's edge and in the middle).
+    fn of(sink: &dyn TileSink, lod: u32, tile: &'a CutTile<T>) -> Vec<Job<'a, T>> {
+        let mut jobs: Vec<Job<T>> = Vec::new();
+        for &(x, y) in &tile.places {
+            let crop = sink.crop(lod, x, y);
+            match jobs.iter_mut().find(|j| j.crop == crop) {
+                Some(job) => job.places.push((x, y)),
+                None => jobs.push(Job { lod, tile, crop, places: vec![(x, y)] }),
+            }
+        }
+        jobs
+    }
+}
+
 /// A tile ready for the sink.
 enum Stored {
     Encoded(Vec<u8>),
@@ -304,15 +341,20 @@ enum Stored {
     Constant(Vec<u8>),
 }
 
-/// Encodes a tile, unless it has one colour and the sink stores such tiles as their colour.
-fn prepare<T: Sample>(encoder: &TileEncoder<T>, sink: &dyn TileSink, lod: u32, tile: &CutTile<T>) -> Result<Stored> {
+/// Encodes a tile (or the part the sink keeps), unless it has one colour and the sink stores
+/// such tiles as their colour.
+fn prepare<T: Sample>(encoder: &TileEncoder<T>, sink: &dyn TileSink, job: &Job<T>) -> Result<Stored> {
     let channels = encoder.source_layout().channels.count();
-    let texels = &tile.texels;
+    let texels = &job.tile.texels;
     if sink.takes_constants() && texels.chunks_exact(channels).all(|t| t == &texels[..channels]) {
         return Ok(Stored::Constant(encoder.stored_texel(&texels[..channels])));
     }
     let mut bytes = Vec::new();
-    let (x, y) = tile.places[0];
-    encoder.encode(texels, &mut bytes).map_err(|message| TilerError::Encode { lod, x, y, message })?;
+    let (lod, (x, y)) = (job.lod, job.places[0]);
+    let encoded = match job.crop {
+        None => encoder.encode(texels, &mut bytes),
+        Some(crop) => encoder.encode_crop(texels, crop, &mut bytes),
+    };
+    encoded.map_err(|message| TilerError::Encode { lod, x, y, message })?;
     Ok(Stored::Encoded(bytes))
 }

@@ -39,8 +39,9 @@ pub struct ConvertArgs {
     #[arg(long, visible_alias = "ff", value_name = "PATTERN")]
     filename_format: Option<String>,
 
+    /// How the input is laid out [default: auto].
     #[arg(long, value_enum, default_value = "auto")]
-    layout: InputLayout,
+    input_layout: InputLayout,
 
     /// A missing input tile is an error (otherwise it is filled with --background, or zeros,
     /// and reported as a warning).
@@ -92,7 +93,7 @@ fn open_grid(a: &ConvertArgs) -> Result<Box<dyn TileGrid>> {
         };
         return Ok(Box::new(NamedDir::open(input, pattern)?));
     }
-    if a.layout == InputLayout::Google {
+    if a.input_layout == InputLayout::Google {
         return Ok(Box::new(Xyz::open(input)?));
     }
     if !input.exists() {
@@ -115,7 +116,7 @@ fn open_grid(a: &ConvertArgs) -> Result<Box<dyn TileGrid>> {
         return Ok(Box::new(SplitOutput::open(input)?));
     }
     bail!(
-        "{}: a directory without info.json; for named tiles pass --tiled --filename-format PATTERN, for z/y/x tiles --layout google",
+        "{}: a directory without info.json; for named tiles pass --tiled --filename-format PATTERN, for z/y/x tiles --input-layout google",
         input.display()
     )
 }

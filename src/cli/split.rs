@@ -7,7 +7,6 @@ use anyhow::{Context, Result, bail};
 
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
-use vortex_tiler::layout::Layout;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::output::{Existing, Product};
 use vortex_tiler::pixel::Depth;
@@ -17,6 +16,7 @@ use vortex_tiler::sink::DirSink;
 use vortex_tiler::sink::PackSink;
 use vortex_tiler::source::RowSource;
 use vortex_tiler::tile_dir::info::InfoFile;
+use vortex_tiler::viewer::{Viewer, ViewerTiles, dzi, iiif};
 use vortex_tiler::{source, split};
 
 use super::report;
@@ -62,9 +62,35 @@ pub struct OutputArgs {
     #[command(flatten)]
     pack_layout: super::PackLayout,
 
+    /// How the output directory is laid out: vortex (tiles + info.json, this tool's), or one a
+    /// viewer opens as it is: dzi (NAME.dzi + NAME_files/, Deep Zoom as vips dzsave writes
+    /// it: OpenSeadragon), iiif (IIIF Image API 3.0 level 0: info.json + static tiles), xyz
+    /// ({z}/{x}/{y}, Leaflet/OpenLayers/MapLibre) or google ({z}/{y}/{x} as vips writes it).
+    /// See docs/viewers.md.
+    #[arg(long, value_enum, default_value = "vortex", value_name = "LAYOUT")]
+    layout: OutputLayout,
+
+    /// --layout dzi: the pyramid's name, NAME.dzi and NAME_files/ [default: the input's file
+    /// stem].
+    #[arg(long, value_name = "NAME")]
+    name: Option<String>,
+
+    /// --layout dzi: texels each tile shares with each neighbour (Deep Zoom's Overlap; not
+    /// --border: an edge tile has no overlap where it has no neighbour) [default: 1].
+    #[arg(long, value_name = "N")]
+    overlap: Option<u32>,
+
+    /// --layout iiif: the image's id in info.json, the URL it will be served at, e.g.
+    /// https://example.org/iiif/slide [default: '.', relative to the viewer's page; serve
+    /// rewrites it].
+    #[arg(long, value_name = "URL")]
+    iiif_id: Option<String>,
+
     /// Side of a stored tile in texels, borders included [default: 128]. LOD 0 has
     /// ceil(width / payload) x ceil(height / payload) pages (payload = tile size - 2 x border),
-    /// each LOD half as many per axis (rounding up), down to the first LOD of one page.
+    /// each LOD half as many per axis (rounding up), down to the first LOD of one page. In a
+    /// viewer layout, the viewer's tile side (Deep Zoom: without overlap) [default: dzi 254,
+    /// iiif 512, xyz and google 256].
     #[arg(long, value_name = "N")]
     tile_size: Option<u32>,
 
@@ -115,6 +141,33 @@ pub struct OutputArgs {
     /// No progress bar and no summary line.
     #[arg(short, long)]
     quiet: bool,
+}
+
+/// `--layout`: this tool's tile directory or a viewer's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum OutputLayout {
+    /// Tiles named by --filename-format plus info.json (docs/info-json.md).
+    Vortex,
+    /// Deep Zoom: NAME.dzi and NAME_files/LEVEL/COL_ROW.jpeg, as vips dzsave writes it.
+    Dzi,
+    /// IIIF Image API 3.0, level 0: info.json and {x},{y},{w},{h}/{w},{h}/0/default.jpg.
+    Iiif,
+    /// Web-map tiles {z}/{x}/{y}.jpg in square power-of-two levels, plus tilejson.json.
+    Xyz,
+    /// {z}/{y}/{x}.jpg, the order of vips dzsave --layout google.
+    Google,
+}
+
+impl OutputLayout {
+    fn viewer(self) -> Option<Viewer> {
+        match self {
+            OutputLayout::Vortex => None,
+            OutputLayout::Dzi => Some(Viewer::Dzi),
+            OutputLayout::Iiif => Some(Viewer::Iiif),
+            OutputLayout::Xyz => Some(Viewer::Xyz),
+            OutputLayout::Google => Some(Viewer::Google),
+        }
+    }
 }
 
 /// How tiles are encoded: `split`, `convert` and `pack` share these flags.
@@ -198,6 +251,18 @@ pub fn tile(
     a: &OutputArgs,
     started: Instant,
 ) -> Result<()> {
+    if let Some(viewer) = a.layout.viewer() {
+        return tile_for_viewer(source, input, names, a, viewer, started);
+    }
+    for (given, flag) in
+        [(a.name.is_some(), "--name"), (a.overlap.is_some(), "--overlap"), (a.iiif_id.is_some(), "--iiif-id")]
+    {
+        if given {
+            bail!(
+                "{flag} belongs to a viewer layout (--layout dzi, iiif, xyz or google); this tool's tiles have --border"
+            );
+        }
+    }
     let limits = Limits { memory: a.max_memory, ..Limits::default() };
     limits.check_threads(a.threads.unwrap_or(0))?;
     let (dest, product) = match (&a.output, &a.pack) {
@@ -231,7 +296,7 @@ pub fn tile(
             opts.codec.name()
         );
     }
-    let layout = Layout::new(source.width() as u64, source.height() as u64, opts.tile_size, opts.border)?;
+    let layout = opts.layout(source.width(), source.height())?;
     if let Some((path, info)) = existing_ref {
         settings::check_grid(path, info, &requested, &layout)?;
     }
@@ -296,6 +361,112 @@ pub fn tile(
     };
     if !a.quiet {
         say!("{}", report::summary_line(&summary, destination, width, height, &decoder, started.elapsed()));
+    }
+    Ok(())
+}
+
+/// `split`/`convert --layout dzi|iiif|xyz|google`: the same pipeline into a directory a viewer
+/// opens as it is.
+fn tile_for_viewer(
+    source: Box<dyn RowSource>,
+    input: &Path,
+    names: Option<String>,
+    a: &OutputArgs,
+    viewer: Viewer,
+    started: Instant,
+) -> Result<()> {
+    let Some(dest) = &a.output else {
+        bail!(
+            "--layout {viewer} writes a directory (-o DIR); a pack has one layout, which `vortex-tiler serve PACK` serves as Deep Zoom, IIIF and XYZ"
+        )
+    };
+    if names.is_some() {
+        bail!("--layout {viewer} names its tiles as viewers expect; --filename-format is for --layout vortex");
+    }
+    if a.border.is_some() {
+        bail!(match viewer {
+            Viewer::Dzi =>
+                "--layout dzi shares texels between tiles with --overlap (Deep Zoom's), not --border".to_string(),
+            _ => format!("--layout {viewer} tiles have no border or overlap; --border is for --layout vortex"),
+        });
+    }
+    if a.overlap.is_some() && viewer != Viewer::Dzi {
+        bail!("--overlap is Deep Zoom's (--layout dzi); {viewer} tiles do not overlap");
+    }
+    if a.iiif_id.is_some() && viewer != Viewer::Iiif {
+        bail!("--iiif-id names a IIIF image (--layout iiif)");
+    }
+    let name = match &a.name {
+        Some(name) => name.clone(),
+        None => input.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+    };
+    if name.is_empty() || name.contains(['/', '\\']) || name == "." || name == ".." {
+        bail!("--name '{name}' must be a plain file name (it makes NAME.dzi and NAME_files/)");
+    }
+    let limits = Limits { memory: a.max_memory, ..Limits::default() };
+    limits.check_threads(a.threads.unwrap_or(0))?;
+    let product = Product::Viewer(viewer);
+    let claim = report::claim(dest, product, &[input], a.force)?;
+
+    let tile_size = a.tile_size.unwrap_or(viewer.default_tile_size());
+    let overlap = match viewer {
+        Viewer::Dzi => a.overlap.unwrap_or(dzi::DEFAULT_OVERLAP),
+        _ => 0,
+    };
+    let layout = viewer.page_grid(source.width(), source.height(), tile_size, overlap)?;
+    // Web maps pad their square with a colour (vips: white); the other layouts crop at the image.
+    let background = match viewer {
+        Viewer::Xyz | Viewer::Google => Some(a.background.unwrap_or(Background::Colour([255; 4]))),
+        _ => a.background,
+    };
+    let requested = Requested {
+        tile_size: Some(layout.tile_size),
+        border: Some(layout.border),
+        background,
+        flatten: a.flatten,
+        tile_depth: a.tile_type,
+        filter: a.filter,
+        max_memory: Some(a.max_memory),
+        ..a.enc.requested()
+    };
+    let (mut opts, _) = settings::resolve(&requested, None, source.layout())?;
+    opts.down_to_one_texel = layout.lod_count > opts.layout(source.width(), source.height())?.lod_count;
+    if !matches!(opts.codec.extension(), "jpg" | "png") {
+        bail!("--layout {viewer} tiles are image files: use --codec jpeg or png, not {}", opts.codec.name());
+    }
+    limits.check_pyramid(&layout, false)?;
+    opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
+    let tiles = ViewerTiles {
+        viewer,
+        layout,
+        name,
+        extension: viewer.extension(opts.codec.extension()),
+        iiif_id: a.iiif_id.clone().unwrap_or_else(|| iiif::DEFAULT_ID.to_string()),
+    };
+    let decoder = source.describe();
+    let (width, height) = (source.width(), source.height());
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()
+        .context("starting worker threads")?;
+    let watch = report::Watch::new(layout.total_tiles(), a.quiet)?;
+    let sink = DirSink::for_viewer(&claim, tiles)?;
+    let result = pool.install(|| split::split(source, &sink, &opts, &watch));
+    watch.bar.finish_and_clear();
+    let summary = match result {
+        Ok(s) if s.tiles == layout.total_tiles() => s,
+        Ok(s) => {
+            sink.abandon();
+            bail!("internal error: wrote {} tiles of {}", s.tiles, layout.total_tiles());
+        }
+        Err(e) => {
+            sink.abandon();
+            return Err(e.into());
+        }
+    };
+    sink.finish_viewer()?;
+    if !a.quiet {
+        say!("{}", report::summary_line(&summary, dest, width, height, &decoder, started.elapsed()));
     }
     Ok(())
 }

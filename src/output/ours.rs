@@ -10,6 +10,7 @@ use std::path::Path;
 use crate::settings::DEFAULT_FILENAME_STEM;
 use crate::tile_dir::filename::FilenameFormat;
 use crate::tile_dir::info::InfoFile;
+use crate::viewer::Viewer;
 
 /// What a command writes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -22,6 +23,8 @@ pub enum Product {
     Report,
     /// The folder of PNG frames of `render --frames`.
     Frames,
+    /// A pyramid in a viewer layout (`split --layout dzi|iiif|xyz|google`).
+    Viewer(Viewer),
 }
 
 /// The largest report or `info.json` read to recognise it; ours are far smaller.
@@ -29,7 +32,7 @@ const MAX_JSON_BYTES: u64 = 64 << 20;
 
 impl Product {
     pub fn is_dir(self) -> bool {
-        matches!(self, Product::TileDir | Product::Frames)
+        matches!(self, Product::TileDir | Product::Frames | Product::Viewer(_))
     }
 
     /// The product as the messages name it.
@@ -39,6 +42,9 @@ impl Product {
             Product::TileDir => "a tile directory",
             Product::Report => "a render report",
             Product::Frames => "a folder of rendered frames",
+            Product::Viewer(Viewer::Dzi) => "a Deep Zoom pyramid",
+            Product::Viewer(Viewer::Iiif) => "a IIIF image",
+            Product::Viewer(Viewer::Xyz | Viewer::Google) => "a web-map tile directory",
         }
     }
 
@@ -50,6 +56,7 @@ impl Product {
             Product::TileDir => recognise_tile_dir(path),
             Product::Report => recognise_report(path),
             Product::Frames => recognise_frames(path),
+            Product::Viewer(viewer) => crate::viewer::recognise(viewer, path),
         }
     }
 }

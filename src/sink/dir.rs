@@ -1,4 +1,5 @@
-//! [`DirSink`]: one file per tile plus `info.json`, written into a staging directory beside the
+//! [`DirSink`]: one file per tile plus a manifest (our `info.json`, or a viewer layout's
+//! `.dzi`, IIIF `info.json` or TileJSON), written into a staging directory beside the
 //! destination and renamed into place only when everything is written, so an interrupted run
 //! never leaves a directory that looks like a finished pyramid.
 
@@ -14,21 +15,40 @@ use crate::error::{Result, TilerError};
 use crate::output::{Claim, Product, staging};
 use crate::tile_dir::filename::FilenameFormat;
 use crate::tile_dir::info::Info;
+use crate::viewer::{Crop, ViewerTiles};
 
-/// One image file per tile plus `info.json`.
+/// One image file per tile plus a manifest.
 pub struct DirSink {
     dest: PathBuf,
     staging: PathBuf,
-    names: FilenameFormat,
+    names: Names,
     made_dirs: Mutex<HashSet<PathBuf>>,
     bytes: AtomicU64,
 }
 
+/// How tiles are named.
+enum Names {
+    /// Our tile directory: `info.json`'s `filenameFormat`.
+    Pattern(FilenameFormat),
+    /// A viewer layout, which also crops each page to the viewer's tile.
+    Viewer(ViewerTiles),
+}
+
 impl DirSink {
-    /// Prepares to write into the destination `claim` checked (see [`crate::output::claim`]): absent,
-    /// empty, or a previous output of ours, which `finish` replaces.
+    /// Prepares to write a tile directory into the destination `claim` checked (see
+    /// [`crate::output::claim`]): absent, empty, or a previous output of ours, which `finish`
+    /// replaces.
     pub fn create(claim: &Claim, names: FilenameFormat) -> Result<DirSink> {
-        if claim.product != Product::TileDir {
+        Self::start(claim, Product::TileDir, Names::Pattern(names))
+    }
+
+    /// Prepares to write `tiles`' viewer layout into the destination `claim` checked.
+    pub fn for_viewer(claim: &Claim, tiles: ViewerTiles) -> Result<DirSink> {
+        Self::start(claim, Product::Viewer(tiles.viewer), Names::Viewer(tiles))
+    }
+
+    fn start(claim: &Claim, product: Product, names: Names) -> Result<DirSink> {
+        if claim.product != product {
             return Err(TilerError::Options(format!(
                 "{} was claimed for {}",
                 claim.path.display(),
@@ -55,10 +75,28 @@ impl DirSink {
     /// Writes `info.json` last, then moves the staging directory into place. A previous output
     /// at the destination is moved aside first and deleted only after the new one is in place.
     pub fn finish(self, info: &Info) -> Result<()> {
-        let json = self.staging.join("info.json");
-        if let Err(e) = fs::write(&json, info.to_json_pretty()) {
-            let _ = fs::remove_dir_all(&self.staging);
-            return Err(TilerError::write(&json, e));
+        self.complete(vec![("info.json".to_string(), info.to_json_pretty().into_bytes())])
+    }
+
+    /// [`finish`](Self::finish) for a viewer layout: its manifest (`.dzi`, IIIF `info.json`,
+    /// TileJSON) last.
+    pub fn finish_viewer(self) -> Result<()> {
+        let manifests = match &self.names {
+            Names::Viewer(tiles) => tiles.manifests(),
+            Names::Pattern(_) => {
+                return Err(TilerError::Options("a tile directory is finished with its info.json".into()));
+            }
+        };
+        self.complete(manifests)
+    }
+
+    fn complete(self, manifests: Vec<(String, Vec<u8>)>) -> Result<()> {
+        for (name, bytes) in manifests {
+            let path = self.staging.join(name);
+            if let Err(e) = fs::write(&path, bytes) {
+                let _ = fs::remove_dir_all(&self.staging);
+                return Err(TilerError::write(&path, e));
+            }
         }
         staging::replace_dir(&self.staging, &self.dest).map_err(|e| TilerError::write(&self.dest, e))
     }
@@ -75,7 +113,34 @@ impl DirSink {
 
 impl TileSink for DirSink {
     fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
-        let path = self.staging.join(self.names.format(&[lod, x, y]));
+        match &self.names {
+            Names::Pattern(names) => self.write_file(&names.format(&[lod, x, y]), (lod, x, y), bytes),
+            Names::Viewer(tiles) => {
+                let placed = tiles.place(lod, x, y);
+                for name in std::iter::once(&placed.path).chain(&placed.alias) {
+                    self.write_file(name, (lod, x, y), bytes)?;
+                }
+                Ok(())
+            }
+        }
+    }
+
+    fn crop(&self, lod: u32, x: u32, y: u32) -> Option<Crop> {
+        match &self.names {
+            Names::Pattern(_) => None,
+            Names::Viewer(tiles) => Some(tiles.place(lod, x, y).crop),
+        }
+    }
+
+    fn bytes_written(&self) -> u64 {
+        self.bytes.load(Ordering::Relaxed)
+    }
+}
+
+impl DirSink {
+    /// Writes one tile file at `name` under the staging directory, never over another.
+    fn write_file(&self, name: &str, (lod, x, y): (u32, u32, u32), bytes: &[u8]) -> Result<()> {
+        let path = self.staging.join(name);
         if let Some(dir) = path.parent().filter(|d| *d != self.staging) {
             let mut made = self.made_dirs.lock().unwrap_or_else(|p| p.into_inner());
             if !made.contains(dir) {
@@ -85,18 +150,19 @@ impl TileSink for DirSink {
         }
         let mut file = fs::File::create_new(&path).map_err(|e| match e.kind() {
             std::io::ErrorKind::AlreadyExists => TilerError::Options(format!(
-                "tile (lod {lod}, x {x}, y {y}) would overwrite {}: the filename format '{}' gives two tiles one name; pad the numbers or separate them",
-                self.names.format(&[lod, x, y]),
-                self.names.as_str()
+                "tile (lod {lod}, x {x}, y {y}) would overwrite {name}: {}",
+                match &self.names {
+                    Names::Pattern(names) => format!(
+                        "the filename format '{}' gives two tiles one name; pad the numbers or separate them",
+                        names.as_str()
+                    ),
+                    Names::Viewer(tiles) => format!("two tiles of the {} layout have one name", tiles.viewer),
+                }
             )),
             _ => TilerError::write(&path, e),
         })?;
         file.write_all(bytes).map_err(|e| TilerError::write(&path, e))?;
         self.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
         Ok(())
-    }
-
-    fn bytes_written(&self) -> u64 {
-        self.bytes.load(Ordering::Relaxed)
     }
 }

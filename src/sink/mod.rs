@@ -2,7 +2,8 @@
 //! many threads in any order and is finished once, after the last tile, with the pyramid's
 //! description.
 //!
-//! [`DirSink`] (`dir.rs`) writes the tile directory of [`crate::tile_dir`]; [`PackSink`]
+//! [`DirSink`] (`dir.rs`) writes the tile directory of [`crate::tile_dir`] or a viewer
+//! layout ([`crate::viewer`]); [`PackSink`]
 //! (`pack.rs`) writes one pack file (`crates/vortex-pack`). Both write under a temporary name
 //! and rename into place when complete.
 
@@ -13,6 +14,7 @@ pub use dir::DirSink;
 pub use pack::{PackSink, tile_kind};
 
 use crate::error::{Result, TilerError};
+use crate::viewer::Crop;
 
 /// Takes the encoded tiles of one run.
 pub trait TileSink: Sync {
@@ -31,6 +33,11 @@ pub trait TileSink: Sync {
     /// a directory's do not, and takes them from many threads at once).
     fn ordered(&self) -> bool {
         false
+    }
+    /// The part of page (lod, x, y) to encode, where the sink's layout keeps less than the
+    /// whole page (a viewer layout's edge tiles); `None` keeps it all.
+    fn crop(&self, _lod: u32, _x: u32, _y: u32) -> Option<Crop> {
+        None
     }
     /// Bytes of tile data written so far.
     fn bytes_written(&self) -> u64;

@@ -1,0 +1,104 @@
+//! Deep Zoom (`.dzi`), as Microsoft defines it and `vips dzsave` writes it.
+//!
+//! Level `maxLevel = ceil(log2(max(w, h)))` is the full image and each level below halves it
+//! (rounding up) down to level 0, 1 x 1. A level is cut into `TileSize` tiles; each tile also
+//! holds `Overlap` texels of every neighbour it has, so edge tiles are narrower, and the last
+//! tile of a row or column stops at the image. Our page of payload P and border B is that
+//! tile before cropping: Deep Zoom level `maxLevel - k` is our LOD k, tile size P, overlap B.
+
+use super::Crop;
+use crate::layout::Layout;
+
+/// vips dzsave's default tile size (254 + 2 x 1 overlap = 256 texels stored).
+pub const DEFAULT_TILE_SIZE: u32 = 254;
+/// vips dzsave's default overlap.
+pub const DEFAULT_OVERLAP: u32 = 1;
+
+/// Deep Zoom's finest level: `ceil(log2(max(w, h)))`.
+pub fn max_level(width: u32, height: u32) -> u32 {
+    width.max(height).next_power_of_two().trailing_zeros()
+}
+
+/// The Deep Zoom level of our LOD `lod`.
+pub fn level_of(layout: &Layout, lod: u32) -> u32 {
+    max_level(layout.width, layout.height) - lod
+}
+
+/// `NAME_files/LEVEL/COL_ROW.EXT`.
+pub fn tile_path(name: &str, level: u32, col: u32, row: u32, extension: &str) -> String {
+    format!("{name}_files/{level}/{col}_{row}.{extension}")
+}
+
+/// The texels of page (lod, col, row) that its Deep Zoom tile keeps: the left (top) border
+/// only where there is a tile to the left (above), and nothing past the image's edge.
+pub fn crop(layout: &Layout, lod: u32, col: u32, row: u32) -> Crop {
+    let (p, b) = (layout.payload() as u64, layout.border as u64);
+    let (level_w, level_h) = layout.level_extent(lod);
+    let axis = |index: u32, extent: u32| -> (u32, u32) {
+        let own = index as u64 * p;
+        let start = if index == 0 { own } else { own - b };
+        let end = (own + p + b).min(extent as u64);
+        ((start + b - own) as u32, (end - start) as u32)
+    };
+    let ((x, width), (y, height)) = (axis(col, level_w), axis(row, level_h));
+    Crop { x, y, width, height }
+}
+
+/// The `.dzi` descriptor.
+pub fn descriptor(layout: &Layout, extension: &str) -> String {
+    format!(
+        concat!(
+            "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n",
+            "<Image xmlns=\"http://schemas.microsoft.com/deepzoom/2008\" Format=\"{}\" Overlap=\"{}\" TileSize=\"{}\">\n",
+            "  <Size Width=\"{}\" Height=\"{}\"/>\n",
+            "</Image>\n"
+        ),
+        extension,
+        layout.border,
+        layout.payload(),
+        layout.width,
+        layout.height
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::viewer::Viewer;
+
+    #[test]
+    fn levels_go_down_to_one_texel() {
+        assert_eq!(max_level(1, 1), 0);
+        assert_eq!(max_level(700, 500), 10);
+        assert_eq!(max_level(1024, 3), 10);
+        assert_eq!(max_level(1025, 3), 11);
+        let l = Viewer::Dzi.page_grid(700, 500, 254, 1).unwrap();
+        assert_eq!(l.lod_count, 11);
+        assert_eq!(level_of(&l, 0), 10);
+        assert_eq!(l.level_extent(10), (1, 1));
+    }
+
+    #[test]
+    fn edge_tiles_lose_the_overlap_they_have_no_neighbour_for() {
+        // 700 x 500, tile 254, overlap 1: level 10 is 3 x 2 tiles (vips' 10/0_0 .. 10/2_1).
+        let l = Viewer::Dzi.page_grid(700, 500, 254, 1).unwrap();
+        assert_eq!(l.grid(0), (3, 2));
+        assert_eq!(crop(&l, 0, 0, 0), Crop { x: 1, y: 1, width: 255, height: 255 });
+        assert_eq!(crop(&l, 0, 1, 0), Crop { x: 0, y: 1, width: 256, height: 255 });
+        // The last column starts at 508 - 1 and stops at 700: 193 wide.
+        assert_eq!(crop(&l, 0, 2, 1), Crop { x: 0, y: 0, width: 193, height: 500 - 253 });
+        // Level 9 (350 x 250): 2 x 1 tiles.
+        assert_eq!(l.grid(1), (2, 1));
+        assert_eq!(crop(&l, 1, 1, 0), Crop { x: 0, y: 1, width: 350 - 253, height: 250 });
+        // Level 0: one texel.
+        assert_eq!(crop(&l, 10, 0, 0), Crop { x: 1, y: 1, width: 1, height: 1 });
+    }
+
+    #[test]
+    fn descriptor_names_size_tile_and_overlap() {
+        let l = Viewer::Dzi.page_grid(700, 500, 254, 1).unwrap();
+        let d = descriptor(&l, "jpeg");
+        assert!(d.contains("Format=\"jpeg\" Overlap=\"1\" TileSize=\"254\""), "{d}");
+        assert!(d.contains("<Size Width=\"700\" Height=\"500\"/>"), "{d}");
+    }
+}

@@ -1,0 +1,161 @@
+//! The viewer layouts: how Deep Zoom, IIIF and web-map (XYZ) viewers expect a pyramid's files
+//! to be named and shaped, mapped onto the pages our pipeline cuts.
+//!
+//! Each layout is a view of the same page grid ([`Layout`]), so every level still comes from
+//! the exact, streaming pipeline; what differs is the file name of page (lod, x, y), which part
+//! of the stored page the viewer's tile keeps ([`Crop`]), the LODs a viewer asks for, and a
+//! manifest (`NAME.dzi`, `info.json`, `tilejson.json`). `sink::ViewerSink` writes these files;
+//! `serve` answers the same names from a pack.
+//!
+//! - [`dzi`]: Deep Zoom as `vips dzsave` writes it. Tile size = our payload, overlap = our
+//!   border; an edge tile drops the border it has no neighbour for and stops at the image.
+//! - [`iiif`]: IIIF Image API 3.0, level 0 (static tiles) as libvips 8.18 writes it.
+//! - [`xyz`]: square power-of-two zoom levels, `{z}/{x}/{y}` (or `{z}/{y}/{x}` as vips'
+//!   "google"), edge tiles padded with the background.
+
+pub mod dzi;
+pub mod iiif;
+mod recognise;
+pub mod xyz;
+
+use std::fmt;
+
+use crate::layout::Layout;
+
+pub use recognise::recognise;
+
+/// A file layout a viewer opens directly (`--layout`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Viewer {
+    /// `NAME.dzi` + `NAME_files/LEVEL/COL_ROW.EXT` (OpenSeadragon, Deep Zoom).
+    Dzi,
+    /// `info.json` + `{x},{y},{w},{h}/{w},{h}/0/default.EXT` (IIIF Image API 3.0, level 0).
+    Iiif,
+    /// `{z}/{x}/{y}.EXT` in square power-of-two levels (Leaflet, OpenLayers, MapLibre).
+    Xyz,
+    /// `{z}/{y}/{x}.EXT`, the order `vips dzsave --layout google` writes.
+    Google,
+}
+
+impl Viewer {
+    pub fn name(self) -> &'static str {
+        match self {
+            Viewer::Dzi => "dzi",
+            Viewer::Iiif => "iiif",
+            Viewer::Xyz => "xyz",
+            Viewer::Google => "google",
+        }
+    }
+
+    /// The tile side a viewer of this layout expects by default (vips dzsave's defaults).
+    pub fn default_tile_size(self) -> u32 {
+        match self {
+            Viewer::Dzi => dzi::DEFAULT_TILE_SIZE,
+            Viewer::Iiif => iiif::DEFAULT_TILE_SIZE,
+            Viewer::Xyz | Viewer::Google => xyz::DEFAULT_TILE_SIZE,
+        }
+    }
+
+    /// The pipeline's page grid for a `width x height` image in this layout's tiles of
+    /// `tile_size` texels (Deep Zoom: without the overlap) with `overlap` texels shared with
+    /// each neighbour (Deep Zoom only; 0 elsewhere).
+    pub fn page_grid(self, width: u32, height: u32, tile_size: u32, overlap: u32) -> crate::error::Result<Layout> {
+        let stored = tile_size.checked_add(2 * overlap).ok_or_else(|| {
+            crate::error::TilerError::Geometry(format!("tile size {tile_size} with overlap {overlap} is too large"))
+        })?;
+        let layout = Layout::new(width as u64, height as u64, stored, overlap)?;
+        Ok(match self {
+            // Deep Zoom's levels go on below one tile, down to 1 x 1.
+            Viewer::Dzi => layout.down_to_one_texel(),
+            Viewer::Iiif | Viewer::Xyz | Viewer::Google => layout,
+        })
+    }
+
+    /// The extension of a tile file: `jpeg` as vips writes Deep Zoom tiles, `jpg` elsewhere.
+    pub fn extension(self, codec_extension: &str) -> &'static str {
+        match (self, codec_extension) {
+            (_, "png") => "png",
+            (Viewer::Dzi, _) => "jpeg",
+            _ => "jpg",
+        }
+    }
+}
+
+impl fmt::Display for Viewer {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The part of a stored page that a viewer's tile keeps, in the page's texels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Crop {
+    pub x: u32,
+    pub y: u32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Crop {
+    pub fn whole(side: u32) -> Crop {
+        Crop { x: 0, y: 0, width: side, height: side }
+    }
+}
+
+/// One page as a viewer's file: where it goes under the output directory and what it keeps.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Placed {
+    pub path: String,
+    /// A second name for the same bytes (IIIF's `full/max` of a one-tile image).
+    pub alias: Option<String>,
+    pub crop: Crop,
+}
+
+/// A pyramid in one viewer layout: the page grid it is cut from and its names.
+#[derive(Clone, Debug)]
+pub struct ViewerTiles {
+    pub viewer: Viewer,
+    pub layout: Layout,
+    /// The pyramid's name: Deep Zoom's `NAME.dzi`, the XYZ TileJSON's `name`.
+    pub name: String,
+    /// Tile file extension, without the dot.
+    pub extension: &'static str,
+    /// IIIF: the image's `id` in `info.json`.
+    pub iiif_id: String,
+}
+
+impl ViewerTiles {
+    /// Where page (lod, x, y) goes and which of its texels it keeps.
+    pub fn place(&self, lod: u32, x: u32, y: u32) -> Placed {
+        let l = &self.layout;
+        match self.viewer {
+            Viewer::Dzi => Placed {
+                path: dzi::tile_path(&self.name, dzi::level_of(l, lod), x, y, self.extension),
+                alias: None,
+                crop: dzi::crop(l, lod, x, y),
+            },
+            Viewer::Iiif => Placed {
+                path: iiif::tile_path(l, lod, x, y, self.extension),
+                alias: iiif::full_max_path(l, lod, self.extension),
+                crop: iiif::crop(l, lod, x, y),
+            },
+            Viewer::Xyz | Viewer::Google => Placed {
+                path: xyz::tile_path(self.viewer, l.lod_count - 1 - lod, x, y, self.extension),
+                alias: None,
+                crop: Crop::whole(l.tile_size),
+            },
+        }
+    }
+
+    /// The manifest files, as (path under the output directory, bytes).
+    pub fn manifests(&self) -> Vec<(String, Vec<u8>)> {
+        let l = &self.layout;
+        match self.viewer {
+            Viewer::Dzi => vec![(format!("{}.dzi", self.name), dzi::descriptor(l, self.extension).into_bytes())],
+            Viewer::Iiif => vec![("info.json".into(), iiif::info_json(l, &self.iiif_id, self.extension).into_bytes())],
+            Viewer::Xyz | Viewer::Google => {
+                vec![(xyz::TILEJSON.into(), xyz::tilejson(self.viewer, l, &self.name, self.extension).into_bytes())]
+            }
+        }
+    }
+}

@@ -1,0 +1,68 @@
+//! Web-map tiles ("slippy map"): zoom level z is a 2^z x 2^z grid of tiles, z = 0 one tile
+//! holding the whole image, as Leaflet, OpenLayers and MapLibre number them (`{z}/{x}/{y}`)
+//! or as `vips dzsave --layout google` writes them (`{z}/{y}/{x}`).
+//!
+//! Our LOD k is zoom `Z - k` (Z = the finest). The image sits at the top left of the square;
+//! like vips, only the tiles that hold some of it are written, the part of an edge tile past
+//! the image filled with the background, and a viewer shows its own background where a tile
+//! is missing. A `tilejson.json` (TileJSON 3.0) names the pattern and zoom range.
+
+use serde_json::json;
+
+use super::Viewer;
+use crate::layout::Layout;
+
+/// The tile side web maps use.
+pub const DEFAULT_TILE_SIZE: u32 = 256;
+/// The manifest's file name.
+pub const TILEJSON: &str = "tilejson.json";
+
+/// `{z}/{x}/{y}.EXT`, or `{z}/{y}/{x}.EXT` for [`Viewer::Google`].
+pub fn tile_path(viewer: Viewer, zoom: u32, x: u32, y: u32, extension: &str) -> String {
+    match viewer {
+        Viewer::Google => format!("{zoom}/{y}/{x}.{extension}"),
+        _ => format!("{zoom}/{x}/{y}.{extension}"),
+    }
+}
+
+/// TileJSON 3.0 for the directory, with the image's size under `vortex` (a map has no notion
+/// of it, a viewer that shows one image does).
+pub fn tilejson(viewer: Viewer, layout: &Layout, name: &str, extension: &str) -> String {
+    let pattern = match viewer {
+        Viewer::Google => format!("{{z}}/{{y}}/{{x}}.{extension}"),
+        _ => format!("{{z}}/{{x}}/{{y}}.{extension}"),
+    };
+    let doc = json!({
+        "tilejson": "3.0.0",
+        "name": name,
+        "tiles": [pattern],
+        "minzoom": 0,
+        "maxzoom": layout.lod_count - 1,
+        "scheme": "xyz",
+        "vortex": {
+            "layout": viewer.name(),
+            "width": layout.width,
+            "height": layout.height,
+            "tileSize": layout.tile_size,
+        },
+    });
+    let mut text = serde_json::to_string_pretty(&doc).unwrap_or_default();
+    text.push('\n');
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn zoom_levels_are_lods_upside_down() {
+        // vips --layout google, 700 x 500 in 256-texel tiles: 2/0/0 .. 2/1/2, 1/0/0, 1/0/1, 0/0/0.
+        let l = Viewer::Google.page_grid(700, 500, 256, 0).unwrap();
+        assert_eq!((l.lod_count, l.grid(0), l.grid(1), l.grid(2)), (3, (3, 2), (2, 1), (1, 1)));
+        assert_eq!(tile_path(Viewer::Google, 2, 2, 1, "jpg"), "2/1/2.jpg");
+        assert_eq!(tile_path(Viewer::Xyz, 2, 2, 1, "png"), "2/2/1.png");
+        let doc: serde_json::Value = serde_json::from_str(&tilejson(Viewer::Xyz, &l, "m", "png")).unwrap();
+        assert_eq!((doc["maxzoom"].as_u64(), doc["tiles"][0].as_str()), (Some(2), Some("{z}/{x}/{y}.png")));
+    }
+}
