@@ -20,3 +20,4 @@ mod render;
 mod sources;
 mod stability;
 mod stripes;
+mod viewers;
