@@ -43,3 +43,26 @@ fn readme_quick_start_runs() {
     assert!(r.status.success(), "{args:?}: {}", String::from_utf8_lossy(&r.stderr));
     assert!(out.join("info.json").is_file());
 }
+
+#[test]
+fn viewers_iiif_example_names_are_what_split_writes() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let doc = std::fs::read_to_string(format!("{root}/docs/viewers.md")).unwrap();
+    let block = between(&doc, "<!-- iiif-example:begin", "<!-- iiif-example:end -->");
+    let names: Vec<&str> =
+        between(block, "```text", "```").lines().filter_map(|l| l.split_whitespace().next()).collect();
+    assert_eq!(names.len(), 4, "{block}");
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("img.png");
+    image::RgbImage::from_fn(3000, 1100, |x, y| image::Rgb([x as u8, y as u8, 7])).save(&input).unwrap();
+    let out = dir.path().join("iiif");
+    let status = Command::new(env!("CARGO_BIN_EXE_vortex-tiler"))
+        .args(["split", input.to_str().unwrap(), "--layout", "iiif", "--tile-size", "256", "-q", "-o"])
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    for name in names {
+        assert!(out.join(name).is_file(), "docs/viewers.md names {name}, which split does not write");
+    }
+}

@@ -6,6 +6,7 @@
 //! with `BLESS=1 cargo test --test it golden::` after checking the diff.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests and measurement programs may panic on a broken set-up
 
+mod browser;
 mod cli;
 mod codecs;
 mod common;

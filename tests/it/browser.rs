@@ -1,0 +1,179 @@
+//! A real browser: headless Chromium runs OpenSeadragon (npm, `tests/browser/`) on what we
+//! write and serve, zoomed to known regions, and each screenshot is compared with the same
+//! region of the source image resized (PSNR). A blank, shifted or seamed picture fails: a
+//! shift of two texels costs about 6 dB, a blank viewer 20.
+//!
+//! Needs `chromium` and `npm ci --prefix tests/browser` (both done by `.ci/run`); outside CI
+//! a missing one skips with a note, under `CI=true` it fails.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+use image::{ImageBuffer, Rgb, RgbImage, imageops};
+
+use crate::common::cli::{BIN, ok, s};
+
+/// Below this the picture is wrong; a correct one measured 31 to 42 dB (see the test output).
+const MIN_PSNR_DB: f64 = 26.0;
+/// The viewer's size in CSS pixels; the regions below have its aspect ratio.
+const VIEW: (u32, u32) = (640, 480);
+
+/// The regions shown, as (x, y, width, height) in image texels: the whole image (a coarse
+/// level drawn smaller), a quarter at 1:1 across tile edges, and a small part enlarged 4x.
+const REGIONS: [(u32, u32, u32, u32); 3] = [(0, 0, 2000, 1500), (700, 300, 640, 480), (1234, 987, 160, 120)];
+
+/// A synthetic photograph: smooth rings, colour ramps and hard-edged discs, so that a shift or
+/// a seam shows and resampling differences do not.
+fn test_image() -> RgbImage {
+    ImageBuffer::from_fn(2000, 1500, |x, y| {
+        let (fx, fy) = (x as f64, y as f64);
+        let r = ((fx - 900.0).powi(2) + (fy - 700.0).powi(2)).sqrt();
+        let rings = 0.5 + 0.5 * (r / 9.0).sin();
+        let disc =
+            ((x / 150 + y / 150) % 2 == 0) && ((fx % 150.0 - 75.0).powi(2) + (fy % 150.0 - 75.0).powi(2)) < 40.0 * 40.0;
+        let (mut red, mut green, mut blue) = (fx / 2000.0, fy / 1500.0, rings);
+        if disc {
+            (red, green, blue) = (1.0, 0.85, 0.2);
+        }
+        let g = |v: f64| (40.0 + 200.0 * v.clamp(0.0, 1.0)) as u8;
+        Rgb([g(red * rings), g(green), g(blue)])
+    })
+}
+
+/// Where the browser and OpenSeadragon are, or why the test cannot run.
+fn browser_parts() -> Result<(PathBuf, PathBuf), String> {
+    let chromium = ["chromium", "chromium-browser", "google-chrome"]
+        .iter()
+        .find(|c| Command::new(c).arg("--version").output().is_ok_and(|o| o.status.success()))
+        .map(PathBuf::from)
+        .ok_or("no chromium (apt-get install chromium)")?;
+    let osd =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/browser/node_modules/openseadragon/build/openseadragon");
+    if !osd.join("openseadragon.min.js").is_file() {
+        return Err("no OpenSeadragon (npm ci --prefix tests/browser)".into());
+    }
+    Ok((chromium, osd))
+}
+
+/// `vortex-tiler serve` on a free loopback port, stopped when dropped.
+struct Server {
+    child: Child,
+    url: String,
+}
+
+impl Server {
+    fn start(inputs: &[&Path]) -> Server {
+        let mut child = Command::new(BIN)
+            .arg("serve")
+            .args(inputs)
+            .args(["--addr", "127.0.0.1:0"])
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("serve starts");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+        let url = line.split_whitespace().find(|w| w.starts_with("http://")).expect("serve prints its URL").to_string();
+        Server { child, url: url.trim_end_matches('/').to_string() }
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Screenshots OpenSeadragon showing `region` of the tile source at `source_url`.
+fn screenshot(chromium: &Path, osd: &Path, dir: &Path, source_url: &str, region: (u32, u32, u32, u32)) -> RgbImage {
+    let page = dir.join("view.html");
+    let html = format!(
+        r#"<!doctype html><html><head><style>html,body{{margin:0;background:#000;overflow:hidden}}#v{{width:{w}px;height:{h}px}}</style>
+<script src="{osd}/openseadragon.min.js"></script></head><body><div id="v"></div><script>
+const viewer = OpenSeadragon({{ id: "v", tileSources: "{source_url}", drawer: "canvas", animationTime: 0, blendTime: 0,
+  showNavigationControl: false, crossOriginPolicy: "Anonymous" }});
+viewer.addHandler("open", () => {{
+  const item = viewer.world.getItemAt(0);
+  viewer.viewport.fitBounds(item.imageToViewportRectangle({x}, {y}, {rw}, {rh}), true);
+}});
+</script></body></html>"#,
+        w = VIEW.0,
+        h = VIEW.1,
+        osd = osd.display(),
+        x = region.0,
+        y = region.1,
+        rw = region.2,
+        rh = region.3,
+    );
+    std::fs::write(&page, html).unwrap();
+    let shot = dir.join("shot.png");
+    let _ = std::fs::remove_file(&shot);
+    let out = Command::new(chromium)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--allow-file-access-from-files"])
+        .arg(format!("--window-size={},{}", VIEW.0, VIEW.1))
+        // Virtual time runs only while nothing is loading: the budget is spent after the tiles.
+        .arg("--virtual-time-budget=15000")
+        .arg(format!("--screenshot={}", shot.display()))
+        .arg(format!("file://{}", page.display()))
+        .output()
+        .expect("chromium runs");
+    assert!(shot.is_file(), "no screenshot: {}", String::from_utf8_lossy(&out.stderr));
+    image::open(&shot).unwrap().to_rgb8()
+}
+
+/// Peak signal-to-noise ratio of `shot` against `region` of `source` resized to the view.
+fn psnr(source: &RgbImage, region: (u32, u32, u32, u32), shot: &RgbImage) -> f64 {
+    let part = imageops::crop_imm(source, region.0, region.1, region.2, region.3).to_image();
+    let expected = imageops::resize(&part, VIEW.0, VIEW.1, imageops::FilterType::Triangle);
+    let shot = imageops::crop_imm(shot, 0, 0, VIEW.0, VIEW.1).to_image();
+    let sum: f64 = expected.as_raw().iter().zip(shot.as_raw()).map(|(a, b)| (*a as f64 - *b as f64).powi(2)).sum();
+    let mse = sum / expected.as_raw().len() as f64;
+    10.0 * (255.0f64 * 255.0 / mse.max(1e-9)).log10()
+}
+
+/// OpenSeadragon shows (a) a `--layout dzi` directory, (b) a `--layout iiif` directory and
+/// (c) a pack through `serve` as Deep Zoom, each as the source image looks.
+#[test]
+fn openseadragon_shows_what_we_write_and_serve() {
+    let (chromium, osd) = match browser_parts() {
+        Ok(parts) => parts,
+        Err(why) => {
+            assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and {why}");
+            eprintln!("note: skipping the browser test: {why}");
+            return;
+        }
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let source = test_image();
+    let input = dir.path().join("photo.png");
+    source.save(&input).unwrap();
+    let (dzi, iiif, pack) = (dir.path().join("dzi"), dir.path().join("iiif"), dir.path().join("packed.vtpk"));
+    ok(&["split", s(&input), "--layout", "dzi", "-o", s(&dzi), "--quality", "95", "-q"]);
+    ok(&["split", s(&input), "--layout", "iiif", "-o", s(&iiif), "--tile-size", "256", "--quality", "95", "-q"]);
+    // Borders, as a GPU pack has them: served as Deep Zoom overlap, not shifted by them.
+    ok(&["split", s(&input), "--pack", s(&pack), "--tile-size", "256", "--border", "4", "--quality", "95", "-q"]);
+    let server = Server::start(&[&dzi, &iiif, &pack]);
+    let sources = [
+        ("dzi directory", format!("{}/photo.dzi", server.url)),
+        ("iiif directory", format!("{}/iiif/iiif/info.json", server.url)),
+        ("pack as Deep Zoom", format!("{}/packed.dzi", server.url)),
+    ];
+    let mut failures = Vec::new();
+    for (what, url) in &sources {
+        for region in REGIONS {
+            let shot = screenshot(&chromium, &osd, dir.path(), url, region);
+            let db = psnr(&source, region, &shot);
+            eprintln!("{what}, region {region:?}: {db:.1} dB");
+            if db < MIN_PSNR_DB {
+                let keep = dir.path().join(format!("failed-{}-{}.png", what.replace(' ', "-"), region.0));
+                shot.save(&keep).unwrap();
+                failures.push(format!("{what}, region {region:?}: {db:.1} dB < {MIN_PSNR_DB} dB"));
+            }
+        }
+    }
+    if !failures.is_empty() {
+        let kept = dir.keep();
+        panic!("{} (screenshots in {})", failures.join("; "), kept.display());
+    }
+}
