@@ -1,14 +1,14 @@
 //! What the user sees while and after a run: the progress bar and the summary line.
 
 use std::path::Path;
-use std::time::Duration;
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 use vortex_tiler::output::{self, Claim, Product, staging};
-use vortex_tiler::split::{Progress, Summary};
+use vortex_tiler::split::Progress;
 
 use super::signals;
+use super::split::Finished;
 
 /// The progress bar of a run that SIGINT, SIGTERM or SIGHUP stop cleanly.
 pub struct Watch {
@@ -66,9 +66,10 @@ pub fn progress_bar(total: u64, unit: &'static str, quiet: bool) -> ProgressBar 
 }
 
 /// One line: what was written, how fast, how much memory.
-pub fn summary_line(s: &Summary, out: &Path, width: u32, height: u32, decoder: &str, took: Duration) -> String {
-    let secs = took.as_secs_f64().max(1e-9);
-    let mpx = width as f64 * height as f64 / 1e6;
+pub fn summary_line(done: &Finished, out: &Path) -> String {
+    let s = &done.summary;
+    let secs = done.took.as_secs_f64().max(1e-9);
+    let mpx = done.width as f64 * done.height as f64 / 1e6;
     let peak = peak_rss().map(|b| format!(", peak memory {}", mib(b))).unwrap_or_default();
     let stripes = match s.passes {
         1 => String::new(),
@@ -79,7 +80,7 @@ pub fn summary_line(s: &Summary, out: &Path, width: u32, height: u32, decoder: &
         ),
     };
     format!(
-        "wrote {} tiles ({} encoded, {} LODs from {} x {} pages, {}x{} {}) totalling {} to {} in {:.2} s: {:.1} source Mpx/s [{decoder}]{stripes}{peak}",
+        "wrote {} tiles ({} encoded, {} LODs from {} x {} pages, {}x{} {}) totalling {} to {} in {:.2} s: {:.1} source Mpx/s [{}]{stripes}{peak}",
         s.tiles,
         s.encoded,
         s.layout.lod_count,
@@ -92,7 +93,49 @@ pub fn summary_line(s: &Summary, out: &Path, width: u32, height: u32, decoder: &
         out.display(),
         secs,
         mpx / secs,
+        done.decoder,
     )
+}
+
+/// The summary as one JSON object (`--json`), for scripts: the same numbers as the line.
+pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vortex_pack::WriteSummary>) -> String {
+    let s = &done.summary;
+    let mut doc = serde_json::json!({
+        "output": out.display().to_string(),
+        "layout": layout,
+        "width": done.width,
+        "height": done.height,
+        "source": done.decoder,
+        "tiles": s.tiles,
+        "encoded": s.encoded,
+        "bytes": s.bytes,
+        "lodCount": s.layout.lod_count,
+        "tileColumns": s.layout.columns,
+        "tileRows": s.layout.rows,
+        "tileSize": s.layout.tile_size,
+        "border": s.layout.border,
+        "stored": s.stored.to_string(),
+        "stripes": s.stripes,
+        "passes": s.passes,
+        "seconds": done.took.as_secs_f64(),
+        "peakMemoryBytes": peak_rss(),
+    });
+    if !matches!(layout, "vortex" | "pack") {
+        // The viewer's own terms: its tile side without the overlap (Deep Zoom's TileSize).
+        doc["viewer"] = serde_json::json!({ "tileSize": s.layout.payload(), "overlap": s.layout.border });
+    }
+    if let Some(w) = pack {
+        doc["pack"] = serde_json::json!({
+            "storedPayloads": w.stored_payloads,
+            "deduplicated": w.deduplicated,
+            "constant": w.constant,
+            "absent": w.absent,
+            "payloadBytes": w.payload_bytes,
+            "fileBytes": w.file_bytes,
+            "contentHash": format!("{:016x}", w.content_hash),
+        });
+    }
+    doc.to_string()
 }
 
 /// What a pack writer stored: deduplication and one-colour tiles.

@@ -7,14 +7,15 @@ use anyhow::{Context, Result, bail};
 
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
+use vortex_tiler::layout::Layout;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::output::{Existing, Product};
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::pyramid::Filter;
 use vortex_tiler::settings::{self, CodecChoice, Requested};
-use vortex_tiler::sink::DirSink;
-use vortex_tiler::sink::PackSink;
+use vortex_tiler::sink::{DirSink, PackSink, TileSink};
 use vortex_tiler::source::RowSource;
+use vortex_tiler::split::SplitOptions;
 use vortex_tiler::tile_dir::info::InfoFile;
 use vortex_tiler::viewer::{Viewer, ViewerTiles, dzi, iiif};
 use vortex_tiler::{source, split};
@@ -141,6 +142,11 @@ pub struct OutputArgs {
     /// No progress bar and no summary line.
     #[arg(short, long)]
     quiet: bool,
+
+    /// Print the summary as one JSON object on standard output (for scripts), without the
+    /// progress bar.
+    #[arg(long)]
+    json: bool,
 }
 
 /// `--layout`: this tool's tile directory or a viewer's.
@@ -310,33 +316,12 @@ pub fn tile(
             eprintln!("settings from {}: {}", path.display(), changed.join(", "));
         }
     }
-    let decoder = source.describe();
-    let (width, height) = (source.width(), source.height());
-
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(a.threads.unwrap_or(0))
-        .build()
-        .context("starting worker threads")?;
-    let watch = report::Watch::new(layout.total_tiles(), a.quiet)?;
-    let (summary, destination) = match (&a.output, &a.pack) {
+    let run = Run::start(source, a, &layout, started)?;
+    match (&a.output, &a.pack) {
         (Some(dir), _) => {
             let sink = DirSink::create(&claim, names)?;
-            let result = pool.install(|| split::split(source, &sink, &opts, &watch));
-            watch.bar.finish_and_clear();
-            match result {
-                Ok(s) if s.tiles == layout.total_tiles() => {
-                    sink.finish(&info)?;
-                    (s, dir)
-                }
-                Ok(s) => {
-                    sink.abandon();
-                    bail!("internal error: wrote {} tiles of {}", s.tiles, layout.total_tiles());
-                }
-                Err(e) => {
-                    sink.abandon();
-                    return Err(e.into());
-                }
-            }
+            let summary = run.into_dir(sink, &opts, |sink| sink.finish(&info))?;
+            report(a, "vortex", &summary, dir, None)
         }
         (None, Some(file)) => {
             let sink = PackSink::create(
@@ -348,19 +333,92 @@ pub fn tile(
                 a.pack_layout.options()?,
             )?;
             // On error the sink is dropped, which deletes the unfinished pack.
-            let s = pool.install(|| split::split(source, &sink, &opts, &watch));
-            watch.bar.finish_and_clear();
-            let s = s?;
+            let summary = run.execute(&sink, &opts)?;
             let written = sink.finish()?;
-            if !a.quiet {
-                say!("{}", report::pack_line(&written));
-            }
-            (s, file)
+            report(a, "pack", &summary, file, Some(&written))
         }
         (None, None) => unreachable!("clap requires --output or --pack"),
-    };
-    if !a.quiet {
-        say!("{}", report::summary_line(&summary, destination, width, height, &decoder, started.elapsed()));
+    }
+}
+
+/// A run about to start: the source, the worker threads and the progress bar.
+struct Run {
+    source: Box<dyn RowSource>,
+    pool: rayon::ThreadPool,
+    watch: report::Watch,
+    total: u64,
+    started: Instant,
+}
+
+impl Run {
+    fn start(source: Box<dyn RowSource>, a: &OutputArgs, layout: &Layout, started: Instant) -> Result<Run> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(a.threads.unwrap_or(0))
+            .build()
+            .context("starting worker threads")?;
+        let watch = report::Watch::new(layout.total_tiles(), a.quiet || a.json)?;
+        Ok(Run { source, pool, watch, total: layout.total_tiles(), started })
+    }
+
+    /// Runs the pipeline into `sink`; the summary keeps what the source was.
+    fn execute(self, sink: &dyn TileSink, opts: &SplitOptions) -> Result<Finished> {
+        let (decoder, width, height) = (self.source.describe(), self.source.width(), self.source.height());
+        let Run { source, pool, watch, started, .. } = self;
+        let result = pool.install(|| split::split(source, sink, opts, &watch));
+        watch.bar.finish_and_clear();
+        Ok(Finished { summary: result?, decoder, width, height, took: started.elapsed() })
+    }
+
+    /// Runs the pipeline into a directory sink and `finish`es it when every tile is written,
+    /// else removes what it wrote.
+    fn into_dir(
+        self,
+        sink: DirSink,
+        opts: &SplitOptions,
+        finish: impl FnOnce(DirSink) -> vortex_tiler::error::Result<()>,
+    ) -> Result<Finished> {
+        let total = self.total;
+        match self.execute(&sink, opts) {
+            Ok(done) if done.summary.tiles == total => {
+                finish(sink)?;
+                Ok(done)
+            }
+            Ok(done) => {
+                sink.abandon();
+                bail!("internal error: wrote {} tiles of {total}", done.summary.tiles);
+            }
+            Err(e) => {
+                sink.abandon();
+                Err(e)
+            }
+        }
+    }
+}
+
+/// A finished run and what it read.
+pub struct Finished {
+    pub summary: split::Summary,
+    pub decoder: String,
+    pub width: u32,
+    pub height: u32,
+    pub took: std::time::Duration,
+}
+
+/// The summary line (and a pack's line), or with --json one JSON object; nothing with --quiet.
+fn report(
+    a: &OutputArgs,
+    layout: &str,
+    done: &Finished,
+    dest: &Path,
+    pack: Option<&vortex_pack::WriteSummary>,
+) -> Result<()> {
+    if a.json {
+        say!("{}", report::summary_json(done, layout, dest, pack));
+    } else if !a.quiet {
+        if let Some(written) = pack {
+            say!("{}", report::pack_line(written));
+        }
+        say!("{}", report::summary_line(done, dest));
     }
     Ok(())
 }
@@ -443,30 +501,8 @@ fn tile_for_viewer(
         extension: viewer.extension(opts.codec.extension()),
         iiif_id: a.iiif_id.clone().unwrap_or_else(|| iiif::DEFAULT_ID.to_string()),
     };
-    let decoder = source.describe();
-    let (width, height) = (source.width(), source.height());
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(a.threads.unwrap_or(0))
-        .build()
-        .context("starting worker threads")?;
-    let watch = report::Watch::new(layout.total_tiles(), a.quiet)?;
+    let run = Run::start(source, a, &layout, started)?;
     let sink = DirSink::for_viewer(&claim, tiles)?;
-    let result = pool.install(|| split::split(source, &sink, &opts, &watch));
-    watch.bar.finish_and_clear();
-    let summary = match result {
-        Ok(s) if s.tiles == layout.total_tiles() => s,
-        Ok(s) => {
-            sink.abandon();
-            bail!("internal error: wrote {} tiles of {}", s.tiles, layout.total_tiles());
-        }
-        Err(e) => {
-            sink.abandon();
-            return Err(e.into());
-        }
-    };
-    sink.finish_viewer()?;
-    if !a.quiet {
-        say!("{}", report::summary_line(&summary, dest, width, height, &decoder, started.elapsed()));
-    }
-    Ok(())
+    let done = run.into_dir(sink, &opts, DirSink::finish_viewer)?;
+    report(a, viewer.name(), &done, dest, None)
 }

@@ -420,8 +420,14 @@ fn the_command_line_guards_viewer_layouts() {
         fails_with(&out, &[s(&photos)]);
     }
     assert_eq!(std::fs::read(photos.join("2024/01/05.jpg")).unwrap(), b"a photo");
-    // Our previous output is replaced, with the new options.
-    ok(&["split", s(&input), "--layout", "dzi", "-o", o, "-q"]);
+    // Our previous output is replaced, with the new options; --json says what was written.
+    let json: serde_json::Value =
+        serde_json::from_str(&ok(&["split", s(&input), "--layout", "dzi", "-o", o, "--json"])).unwrap();
+    assert_eq!(
+        (json["layout"].as_str(), json["tiles"].as_u64(), json["lodCount"].as_u64()),
+        (Some("dzi"), Some(17), Some(11))
+    );
+    assert_eq!((json["viewer"]["tileSize"].as_u64(), json["viewer"]["overlap"].as_u64()), (Some(254), Some(1)));
     ok(&["split", s(&input), "--layout", "dzi", "-o", o, "-q", "--tile-size", "510"]);
     let dzi = std::fs::read_to_string(out.join("sample.dzi")).unwrap();
     assert!(dzi.contains("TileSize=\"510\""), "{dzi}");
