@@ -233,7 +233,7 @@ fn every_input_kind_converts_like_splitting_the_original() {
     }
     padded.save(d("padded.png")).unwrap();
     run_ok(&[&["split", &d("padded.png"), "-o", &d("want-xyz")][..], &target].concat());
-    run_ok(&[&["convert", &d("xyz"), "--layout", "google", "-o", &d("from-xyz")][..], &target].concat());
+    run_ok(&[&["convert", &d("xyz"), "--input-layout", "google", "-o", &d("from-xyz")][..], &target].concat());
     assert!(files(Path::new(&d("from-xyz"))) == files(Path::new(&d("want-xyz"))), "from z/y/x");
 }
 
