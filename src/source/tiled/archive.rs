@@ -130,6 +130,9 @@ mod tests {
         read_all(&mut TiledSource::new(grid, vec![0; 3], true)).unwrap()
     }
 
+    /// A zip's entries: names and bytes.
+    type Entries<'a> = Vec<(&'a str, &'a [u8])>;
+
     const DZI: &str = r#"<Image TileSize="254" Overlap="1" Format="png"><Size Width="20" Height="10"/></Image>"#;
 
     #[test]
@@ -138,7 +141,7 @@ mod tests {
         let (texels, tile) = png(20, 10, 3);
         let iiif = r#"{"@context": "http://iiif.io/api/image/3/context.json", "width": 20, "height": 10,
                        "tiles": [{"width": 512, "scaleFactors": [1]}]}"#;
-        let cases: [(&str, Vec<(&str, &[u8])>, &str); 5] = [
+        let cases: [(&str, Entries, &str); 5] = [
             ("dz-top", vec![("dz.dzi", DZI.as_bytes()), ("dz_files/5/0_0.png", &tile)], "Deep Zoom"),
             ("dz-down", vec![("a/a.dzi", DZI.as_bytes()), ("a/a_files/5/0_0.png", &tile)], "Deep Zoom"),
             ("iiif", vec![("i/info.json", iiif.as_bytes()), ("i/full/20,10/0/default.png", &tile)], "IIIF"),
