@@ -7,7 +7,9 @@ use anyhow::{Result, bail};
 use vortex_tiler::background::Background;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::pixel::{Depth, PixelLayout};
-use vortex_tiler::source::tiled::{DeepZoom, NamedDir, PackInput, SplitOutput, TileGrid, TiledSource, Xyz};
+use vortex_tiler::source::tiled::{
+    DeepZoom, Iiif, NamedDir, Order, PackInput, SplitOutput, TileGrid, TiledSource, Xyz, is_iiif_dir, is_zip, open_zip,
+};
 use vortex_tiler::source::{RowSource, Streamed};
 
 use super::split::{OutputArgs, tile};
@@ -15,18 +17,34 @@ use super::split::{OutputArgs, tile};
 /// How the input's tiles are laid out on disk.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum InputLayout {
-    /// Decide from the input: a .dzi descriptor, a pack file, a directory with our info.json,
-    /// or (with --filename-format) a directory of named tiles.
+    /// Decide from the input: a .dzi descriptor, a .zip archive (what is inside), a directory
+    /// with a IIIF info.json or with ours, a pack file, or (with --filename-format) a directory
+    /// of named tiles.
     Auto,
-    /// Google/XYZ tiles as z/y/x.<ext>; the highest z is read.
+    /// Google tiles as z/y/x.<ext> (vips dzsave --layout google); the highest z is read.
     Google,
+    /// XYZ web-map tiles as z/x/y.<ext>; the highest z is read.
+    Xyz,
+}
+
+impl InputLayout {
+    /// The tile order the flag asks for, if it asks for one.
+    fn order(self) -> Option<Order> {
+        match self {
+            InputLayout::Auto => None,
+            InputLayout::Google => Some(Order::Zyx),
+            InputLayout::Xyz => Some(Order::Zxy),
+        }
+    }
 }
 
 #[derive(clap::Args, Debug)]
 pub struct ConvertArgs {
     /// The tiled input: a directory of tiles, this tool's split output (info.json + tiles), a
-    /// pack (.vtpk), a Deep Zoom descriptor (.dzi, e.g. from vips dzsave) or, with --layout
-    /// google, a z/y/x directory. For pyramids, the finest level is the source and coarser input
+    /// pack (.vtpk), a Deep Zoom descriptor (.dzi, e.g. from vips dzsave), a IIIF Image API 2
+    /// or 3 directory (its info.json, vips dzsave --layout iiif|iiif3), a zip archive of one of
+    /// those or of z/y/x tiles (vips dzsave NAME.zip), or, with --input-layout google|xyz, a
+    /// z/y/x or z/x/y directory. For pyramids, the finest level is the source and coarser input
     /// levels are ignored.
     #[arg(value_name = "INPUT")]
     input: PathBuf,
@@ -39,8 +57,8 @@ pub struct ConvertArgs {
     #[arg(long, visible_alias = "ff", value_name = "PATTERN")]
     filename_format: Option<String>,
 
-    /// How the input is laid out [default: auto].
-    #[arg(long, value_enum, default_value = "auto")]
+    /// How the input's tiles are laid out.
+    #[arg(long, value_enum, default_value = "auto", value_name = "LAYOUT")]
     input_layout: InputLayout,
 
     /// A missing input tile is an error (otherwise it is filled with --background, or zeros,
@@ -93,14 +111,23 @@ fn open_grid(a: &ConvertArgs) -> Result<Box<dyn TileGrid>> {
         };
         return Ok(Box::new(NamedDir::open(input, pattern)?));
     }
-    if a.input_layout == InputLayout::Google {
-        return Ok(Box::new(Xyz::open(input)?));
-    }
     if !input.exists() {
         bail!("{}: no such file or directory", input.display());
     }
+    let order = a.input_layout.order();
+    if input.is_file() && is_zip(input) {
+        return Ok(open_zip(input, order)?);
+    }
+    if let Some(order) = order {
+        return Ok(Box::new(Xyz::open(input, order)?));
+    }
     if input.extension().is_some_and(|e| e.eq_ignore_ascii_case("dzi")) {
         return Ok(Box::new(DeepZoom::open(input)?));
+    }
+    if input.is_file() && input.file_name().is_some_and(|n| n == "info.json") {
+        // The descriptor itself names its directory.
+        let dir = input.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        return Ok(if is_iiif_dir(dir) { Box::new(Iiif::open(dir)?) } else { Box::new(SplitOutput::open(dir)?) });
     }
     if input.is_file() {
         if let Some(kind) = image_kind(input) {
@@ -112,11 +139,14 @@ fn open_grid(a: &ConvertArgs) -> Result<Box<dyn TileGrid>> {
         }
         return Ok(Box::new(PackInput::open(input)?));
     }
+    if is_iiif_dir(input) {
+        return Ok(Box::new(Iiif::open(input)?));
+    }
     if input.join("info.json").is_file() {
         return Ok(Box::new(SplitOutput::open(input)?));
     }
     bail!(
-        "{}: a directory without info.json; for named tiles pass --tiled --filename-format PATTERN, for z/y/x tiles --input-layout google",
+        "{}: a directory without info.json; for named tiles pass --tiled --filename-format PATTERN, for z/y/x tiles --input-layout google (z/x/y: --input-layout xyz)",
         input.display()
     )
 }

@@ -54,7 +54,10 @@ enum Command {
     ///   vortex-tiler convert old/ --pack new.vtpk --tile-size 256        # old/ = split output
     ///   vortex-tiler convert old.vtpk -o out/ --tile-size 64 --border 1
     ///   vortex-tiler convert slide.dzi --pack slide.vtpk                  # Deep Zoom (vips dzsave)
+    ///   vortex-tiler convert slide.zip --pack slide.vtpk                  # any of these zipped
+    ///   vortex-tiler convert iiif/ --pack iiif.vtpk                       # IIIF 2/3 (iiif/info.json)
     ///   vortex-tiler convert google_tiles/ --input-layout google --pack map.vtpk
+    ///   vortex-tiler convert osm_tiles/ --input-layout xyz --pack map.vtpk   # z/x/y
     #[command(verbatim_doc_comment)]
     Convert(convert::ConvertArgs),
     /// Put a tiled directory (info.json + tile files, e.g. from split -o) into one pack file.

@@ -6,7 +6,8 @@
 //! `--max-memory`.
 //!
 //! [`tiled`] holds the other kind of input, for `convert`: grids of tiles (named files, a
-//! tile directory this tool wrote, a pack, Deep Zoom, z/y/x) read a row of tiles at a time.
+//! tile directory this tool wrote, a pack, Deep Zoom, IIIF, z/y/x or z/x/y, in a directory or
+//! a zip archive) read a row of tiles at a time.
 
 mod jpeg;
 mod png;

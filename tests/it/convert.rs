@@ -302,3 +302,169 @@ fn square_grids_of_older_versions_still_read() {
     run_ok(&[&["convert", &d("old.vtpk"), "-o", &d("from-old-pack")][..], &target].concat());
     assert!(files(Path::new(&d("from-old-pack"))) == files(Path::new(&d("want"))), "from a square pack");
 }
+
+/// Whether `vips` (libvips-tools) is on PATH; without it the vips tests print a note and pass,
+/// except under `CI=true` (.ci/run installs it), where they fail.
+fn have_vips() -> bool {
+    if Command::new("vips").arg("--version").output().is_ok_and(|o| o.status.success()) {
+        return true;
+    }
+    assert!(
+        std::env::var("CI").map_or(true, |v| v != "true"),
+        "CI=true and no vips on PATH (apt-get install libvips-tools)"
+    );
+    eprintln!("note: skipping a vips test: no vips on PATH (apt-get install libvips-tools; CI=true fails instead)");
+    false
+}
+
+fn run_vips(args: &[&str]) {
+    let out = Command::new("vips").args(args).output().unwrap();
+    assert!(out.status.success(), "vips {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// Converts `input` (plus `extra` flags) to 64-texel PNG pages and checks them against
+/// splitting `original`: the same LOD 0 texels, so the same files at every LOD.
+fn converts_like(input: &Path, extra: &[&str], original: &Path, out: &Path, what: &str) {
+    let target = ["--tile-size", "64", "--border", "2", "--codec", "png", "-q"];
+    let want = out.with_extension("want");
+    if !want.exists() {
+        run_ok(&[&["split", original.to_str().unwrap(), "-o", want.to_str().unwrap()][..], &target].concat());
+    }
+    let args = [&["convert", input.to_str().unwrap(), "-o", out.to_str().unwrap()][..], extra, &target].concat();
+    run_ok(&args);
+    assert!(files(out) == files(&want), "{what}: {args:?}");
+}
+
+/// What `vips dzsave` writes (IIIF 2 and 3 directories, Deep Zoom and Google zip archives,
+/// stored and deflated), converted, gives what splitting the original gives.
+#[test]
+fn vips_dzsave_layouts_convert_like_the_original() {
+    if !have_vips() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    // 300x200 in 128-texel tiles: 3x2 tiles, the last column 44 and the last row 72 wide.
+    let img = test_image(300, 200);
+    img.save(d("orig.png")).unwrap();
+    let orig = d("orig.png");
+    let o = orig.to_str().unwrap();
+    let png = ["--suffix", ".png", "--tile-size", "128"];
+    let cases: [(&str, &[&str], &str); 6] = [
+        ("iiif2", &["--layout", "iiif"], "iiif2"),
+        ("iiif3", &["--layout", "iiif3"], "iiif3"),
+        ("dz.zip", &[], "dz.zip"),
+        ("dzdeflated.zip", &["--compression", "6"], "dzdeflated.zip"),
+        ("iiif3.zip", &["--layout", "iiif3"], "iiif3.zip"),
+        ("dir/slide", &[], "dir/slide.dzi"),
+    ];
+    std::fs::create_dir(d("dir")).unwrap();
+    for (name, flags, input) in cases {
+        run_vips(&[&["dzsave", o, d(name).to_str().unwrap()][..], &png, flags].concat());
+        converts_like(&d(input), &[], &orig, &d(&format!("out-{}", name.replace('/', "-"))), name);
+    }
+    // The info.json itself names a IIIF directory too.
+    converts_like(&d("iiif3/info.json"), &[], &orig, &d("out-info"), "iiif3/info.json");
+
+    // Google tiles are padded to whole tiles: an image of whole tiles compares exactly.
+    let whole = test_image(256, 128);
+    whole.save(d("whole.png")).unwrap();
+    let w = d("whole.png");
+    for (name, flags) in [("google.zip", &["--compression", "6"][..]), ("google", &[][..])] {
+        run_vips(
+            &[&["dzsave", w.to_str().unwrap(), d(name).to_str().unwrap(), "--layout", "google"][..], &png, flags]
+                .concat(),
+        );
+        let extra: &[&str] = if name.ends_with(".zip") { &[] } else { &["--input-layout", "google"] };
+        converts_like(&d(name), extra, &w, &d(&format!("out-{name}")), name);
+    }
+}
+
+/// vips 8.14 writes an image that fits in one IIIF tile with `scaleFactors: []`.
+#[test]
+fn vips_one_tile_iiif_images_convert() {
+    if !have_vips() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    test_image(90, 60).save(d("small.png")).unwrap();
+    for layout in ["iiif", "iiif3"] {
+        let out = d(layout);
+        run_vips(&[
+            "dzsave",
+            d("small.png").to_str().unwrap(),
+            out.to_str().unwrap(),
+            "--layout",
+            layout,
+            "--suffix",
+            ".png",
+        ]);
+        converts_like(&out, &[], &d("small.png"), &d(&format!("out-{layout}")), layout);
+    }
+}
+
+/// libvips 8.18 (pyvips) writes a Deep Zoom zip without the top folder and a one-tile IIIF
+/// image as `full/{w},{h}/0/default.png`. Runs where `VORTEX_PYVIPS` names a Python with
+/// pyvips (`.ci/run` makes one: `python3 -m venv V && V/bin/pip install pyvips pyvips-binary`).
+#[test]
+fn pyvips_layouts_convert_like_the_original() {
+    let Some(python) = std::env::var_os("VORTEX_PYVIPS") else {
+        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and VORTEX_PYVIPS unset");
+        eprintln!("note: skipping the pyvips test: set VORTEX_PYVIPS to a Python with pyvips");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    test_image(300, 200).save(d("orig.png")).unwrap();
+    test_image(90, 60).save(d("small.png")).unwrap();
+    let script = r#"
+import sys, pyvips
+big, small, out = (pyvips.Image.new_from_file(sys.argv[1]), pyvips.Image.new_from_file(sys.argv[2]), sys.argv[3])
+for name, image, layout in [("dz.zip", big, "dz"), ("g3.zip", big, "iiif3"), ("i2", big, "iiif"),
+                            ("s3", small, "iiif3"), ("s2", small, "iiif")]:
+    image.dzsave(out + "/" + name, layout=layout, suffix=".png", tile_size=128)
+"#;
+    let out =
+        Command::new(python).args(["-c", script]).args([d("orig.png"), d("small.png"), dir.path().into()]).output();
+    let out = out.unwrap();
+    assert!(out.status.success(), "pyvips: {}", String::from_utf8_lossy(&out.stderr));
+    for name in ["dz.zip", "g3.zip", "i2"] {
+        converts_like(&d(name), &[], &d("orig.png"), &d(&format!("out-{name}")), name);
+    }
+    for name in ["s3", "s2"] {
+        converts_like(&d(name), &[], &d("small.png"), &d(&format!("out-{name}")), name);
+    }
+}
+
+/// Bad IIIF and zip inputs fail naming the file and the member or entry.
+#[test]
+fn bad_iiif_and_zip_inputs_name_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    let out = d("out");
+    let o = out.to_str().unwrap();
+    std::fs::create_dir(d("iiif")).unwrap();
+    let info = r#"{"@context": "http://iiif.io/api/image/3/context.json", "id": "x", "type": "ImageService3",
+                   "width": 300, "height": 200, "tiles": [{"width": 128, "scaleFactors": [2, 4]}]}"#;
+    std::fs::write(d("iiif/info.json"), info).unwrap();
+    let e = convert_err(&[d("iiif").to_str().unwrap(), "-o", o]);
+    assert!(e.contains("iiif/info.json: tiles[0].scaleFactors") && e.contains("lacks 1"), "{e}");
+    std::fs::write(d("iiif/info.json"), info.replace("[2, 4]", "[1]")).unwrap();
+    let e = convert_err(&[d("iiif").to_str().unwrap(), "-o", o]);
+    assert!(e.contains("holds no full-size tile") && e.contains("0,0,128,128/128,128/0/default.jpg"), "{e}");
+
+    std::fs::write(d("bad.zip"), b"PK\x03\x04 truncated").unwrap();
+    let e = convert_err(&[d("bad.zip").to_str().unwrap(), "-o", o]);
+    assert!(e.contains("bad.zip") && e.contains("zip"), "{e}");
+
+    // --layout is the output's layout now: the input's is --input-layout.
+    let r = Command::new(BIN).args(["convert", d("iiif").to_str().unwrap(), "--layout", "google", "-o", o]).output();
+    let r = r.unwrap();
+    let e = String::from_utf8_lossy(&r.stderr);
+    assert!(!r.status.success() && e.contains("--layout"), "{e}");
+    std::fs::create_dir(d("plain")).unwrap();
+    let e = convert_err(&[d("plain").to_str().unwrap(), "-o", o]);
+    assert!(e.contains("--input-layout google") && e.contains("--input-layout xyz"), "{e}");
+    assert!(!out.exists());
+}

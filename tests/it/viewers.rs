@@ -450,3 +450,34 @@ fn convert_writes_viewer_layouts() {
         assert_eq!(std::fs::read(a.join(&f)).unwrap(), std::fs::read(b.join(&f)).unwrap(), "{f}");
     }
 }
+
+/// `convert` reads each viewer layout we write back: the LOD 0 tiles it cuts from them equal
+/// the tiles `split` cuts from the original (PNG, so lossless). A web-map directory reads as
+/// its whole zoom level, padding included (700 x 500 in 256-texel tiles: 768 x 512), so it
+/// gives these tiles and more.
+#[test]
+fn convert_reads_every_viewer_layout_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = fixture("sample.png");
+    let direct = dir.path().join("direct");
+    ok(&["split", s(&input), "-o", s(&direct), "--codec", "png", "--tile-size", "100", "-q"]);
+    let cases: [(&str, &str, &[&str]); 4] = [
+        ("dzi", "sample.dzi", &[]),
+        ("iiif", "", &[]),
+        ("xyz", "", &["--input-layout", "xyz"]),
+        ("google", "", &["--input-layout", "google"]),
+    ];
+    for (layout, file, flags) in cases {
+        let written = dir.path().join(layout);
+        ok(&["split", s(&input), "--layout", layout, "-o", s(&written), "--codec", "png", "-q"]);
+        let back = dir.path().join(format!("{layout}-back"));
+        let from = written.join(file);
+        let mut args = vec!["convert", s(&from), "-o", s(&back), "--codec", "png", "--tile-size", "100", "-q"];
+        args.extend_from_slice(flags);
+        ok(&args);
+        for name in files(&direct).into_iter().filter(|n| n.starts_with("lod00")) {
+            let read = |d: &Path| decode_png_sized(&std::fs::read(d.join(&name)).unwrap());
+            assert_eq!(read(&direct), read(&back), "{layout}: {name}");
+        }
+    }
+}

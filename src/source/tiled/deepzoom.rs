@@ -6,16 +6,19 @@
 //! Tile (c, r) of that level holds the texels of cell (c, r) plus `Overlap` texels on each side
 //! that has a neighbour, so its first `Overlap` columns (rows) are skipped unless c (r) is 0.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use super::{CellData, TileGrid, probe, read_file};
+use super::store::{Kind, MAX_DESCRIPTOR_BYTES, MAX_TILE_BYTES, TileStore};
+use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, TilerError};
 use crate::source::ImageHeader;
 
 pub struct DeepZoom {
-    dzi: PathBuf,
-    /// `<stem>_files/<level>`.
-    level_dir: PathBuf,
+    store: TileStore,
+    /// The descriptor, relative to the store.
+    dzi: String,
+    /// `<stem>_files/<level>`, relative to the store.
+    level_dir: String,
     level: u32,
     tile_size: u32,
     overlap: u32,
@@ -27,20 +30,34 @@ impl DeepZoom {
     /// Reads the descriptor at `dzi_path` and the first tile of the finest level (for the pixel
     /// layout).
     pub fn open(dzi_path: &Path) -> Result<DeepZoom> {
-        let bytes = std::fs::read(dzi_path).map_err(|e| TilerError::io(dzi_path, e))?;
+        let name = dzi_path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .ok_or_else(|| TilerError::decode(dzi_path, "has no UTF-8 file name to find its tiles by"))?;
+        let parent = dzi_path.parent().unwrap_or(Path::new(""));
+        DeepZoom::open_in(TileStore::dir(parent), name)
+    }
+
+    /// As [`DeepZoom::open`], for the descriptor `dzi` of `store` (a path inside it).
+    pub(crate) fn open_in(store: TileStore, dzi: &str) -> Result<DeepZoom> {
+        let dzi_path = store.name(dzi);
+        let bytes = store.read(dzi, MAX_DESCRIPTOR_BYTES)?.ok_or_else(|| {
+            TilerError::io(&dzi_path, std::io::Error::new(std::io::ErrorKind::NotFound, "No such file or directory"))
+        })?;
         let text = std::str::from_utf8(&bytes)
-            .map_err(|_| TilerError::decode(dzi_path, "is not UTF-8 text, so not a Deep Zoom descriptor (.dzi)"))?;
-        let d = Descriptor::parse(dzi_path, text)?;
+            .map_err(|_| TilerError::decode(&dzi_path, "is not UTF-8 text, so not a Deep Zoom descriptor (.dzi)"))?;
+        let d = Descriptor::parse(&dzi_path, text)?;
         let level = finest_level(d.width.max(d.height));
-        let stem = dzi_path
-            .file_stem()
-            .ok_or_else(|| TilerError::decode(dzi_path, "has no file name to find its tiles by"))?;
-        let mut files = stem.to_os_string();
-        files.push("_files");
-        let level_dir = dzi_path.with_file_name(files).join(level.to_string());
-        if !level_dir.is_dir() {
+        // `dir/name.dzi` has its tiles in `dir/name_files`, as Path::file_stem splits names.
+        let file_at = dzi.rfind('/').map_or(0, |i| i + 1);
+        let stem = match dzi[file_at..].rfind('.') {
+            Some(dot) if dot > 0 => &dzi[..file_at + dot],
+            _ => dzi,
+        };
+        let level_dir = format!("{stem}_files/{level}");
+        if store.kind(&level_dir) != Some(Kind::Dir) {
             return Err(TilerError::decode(
-                &level_dir,
+                store.name(&level_dir),
                 format!(
                     "is missing: {} describes a {}x{} image, whose full-size tiles are level {level}",
                     dzi_path.display(),
@@ -50,10 +67,11 @@ impl DeepZoom {
             ));
         }
         let (cols, rows) = (d.width.div_ceil(d.tile_size), d.height.div_ceil(d.tile_size));
-        let first = first_tile(&level_dir, &d.format, cols, rows)?;
-        let (_, _, layout) = probe(&first)?;
+        let first = first_tile(&store, &level_dir, &d.format, cols, rows)?;
+        let (_, _, layout) = probe_stored(&store, &first)?;
         Ok(DeepZoom {
-            dzi: dzi_path.to_path_buf(),
+            store,
+            dzi: dzi.to_string(),
             level_dir,
             level,
             tile_size: d.tile_size,
@@ -68,7 +86,7 @@ impl DeepZoom {
         self.level
     }
 
-    fn tile_path(&self, col: u32, row: u32) -> PathBuf {
+    fn tile_path(&self, col: u32, row: u32) -> String {
         tile_path(&self.level_dir, &self.format, col, row)
     }
 
@@ -77,31 +95,31 @@ impl DeepZoom {
     }
 }
 
-fn tile_path(level_dir: &Path, format: &str, col: u32, row: u32) -> PathBuf {
-    level_dir.join(format!("{col}_{row}.{format}"))
+fn tile_path(level_dir: &str, format: &str, col: u32, row: u32) -> String {
+    format!("{level_dir}/{col}_{row}.{format}")
 }
 
 /// The first tile of the `cols x rows` grid in reading order: 0_0 if present, else the first
 /// of the level's files.
-fn first_tile(level_dir: &Path, format: &str, cols: u32, rows: u32) -> Result<PathBuf> {
+fn first_tile(store: &TileStore, level_dir: &str, format: &str, cols: u32, rows: u32) -> Result<String> {
     let zero = tile_path(level_dir, format, 0, 0);
-    if zero.is_file() {
+    if store.kind(&zero) == Some(Kind::File) {
         return Ok(zero);
     }
-    let mut best: Option<((u32, u32), PathBuf)> = None;
-    for entry in std::fs::read_dir(level_dir).map_err(|e| TilerError::io(level_dir, e))? {
-        let entry = entry.map_err(|e| TilerError::io(level_dir, e))?;
-        let name = entry.file_name();
-        let Some(name) = name.to_str() else { continue };
-        let Some(rest) = name.strip_suffix(format).and_then(|n| n.strip_suffix('.')) else { continue };
+    let mut best: Option<(u32, u32)> = None;
+    for entry in store.list(level_dir)? {
+        let Some(rest) = entry.name.strip_suffix(format).and_then(|n| n.strip_suffix('.')) else { continue };
         let Some((c, r)) = rest.split_once('_') else { continue };
         let (Ok(c), Ok(r)) = (c.parse::<u32>(), r.parse::<u32>()) else { continue };
-        if c < cols && r < rows && best.as_ref().is_none_or(|(key, _)| (r, c) < *key) {
-            best = Some(((r, c), entry.path()));
+        if entry.kind == Kind::File && c < cols && r < rows && best.is_none_or(|key| (r, c) < key) {
+            best = Some((r, c));
         }
     }
-    best.map(|(_, p)| p).ok_or_else(|| {
-        TilerError::decode(level_dir, format!("holds no tiles named <col>_<row>.{format} of the {cols}x{rows} grid"))
+    best.map(|(r, c)| tile_path(level_dir, format, c, r)).ok_or_else(|| {
+        TilerError::decode(
+            store.name(level_dir),
+            format!("holds no tiles named <col>_<row>.{format} of the {cols}x{rows} grid"),
+        )
     })
 }
 
@@ -116,7 +134,7 @@ impl TileGrid for DeepZoom {
         format!(
             "level {} of the Deep Zoom pyramid {} ({cols}x{rows} tiles of {}, overlap {}, {})",
             self.level,
-            self.dzi.display(),
+            self.store.name(&self.dzi).display(),
             self.tile_size,
             self.overlap,
             self.format
@@ -129,7 +147,8 @@ impl TileGrid for DeepZoom {
         (self.tile_size, self.tile_size)
     }
     fn read(&self, col: u32, row: u32) -> Result<Option<CellData>> {
-        read_file(&self.tile_path(col, row))
+        let path = self.tile_path(col, row);
+        Ok(self.store.read(&path, MAX_TILE_BYTES)?.map(|bytes| CellData::File(self.store.name(&path), bytes)))
     }
     fn crop(&self, col: u32, row: u32) -> (u32, u32) {
         let skip = |i: u32| if i > 0 { self.overlap } else { 0 };
@@ -318,6 +337,7 @@ mod tests {
     use super::*;
     use crate::source::read_all;
     use crate::source::tiled::TiledSource;
+    use std::path::PathBuf;
 
     /// A reproducible RGB image.
     fn rgb_image(width: u32, height: u32, seed: u32) -> Vec<u8> {

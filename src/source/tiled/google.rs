@@ -1,77 +1,123 @@
-//! A Google/XYZ ("slippy map") tile directory laid out `z/y/x.<ext>`: one directory per zoom
-//! level, in it one directory per tile row, in that one file per tile. The highest zoom level
-//! is the image: the bounding box of its tiles, cell (c, r) being tile `(xmin + c, ymin + r)`.
-//! Tiles missing inside the box are missing cells; coarser levels are ignored.
+//! A Google/XYZ ("slippy map") tile directory: one directory per zoom level, in it one
+//! directory per tile row and one file per tile (`z/y/x.<ext>`, [`Order::Zyx`], as `vips
+//! dzsave --layout google` writes), or one directory per tile column and one file per tile
+//! (`z/x/y.<ext>`, [`Order::Zxy`], as web maps number them). The highest zoom level is the
+//! image: the bounding box of its tiles, cell (c, r) being tile `(xmin + c, ymin + r)`. Tiles
+//! missing inside the box are missing cells; coarser levels are ignored.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use super::{CellData, TileGrid, probe, read_file};
+use super::store::{Entry, Kind, MAX_TILE_BYTES, TileStore};
+use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, TilerError};
 use crate::source::ImageHeader;
 
+/// Which coordinate the directories under a zoom level are named by.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Order {
+    /// `z/y/x.ext`: a directory per row (Google, vips dzsave --layout google).
+    Zyx,
+    /// `z/x/y.ext`: a directory per column (XYZ web-map tiles).
+    Zxy,
+}
+
+impl Order {
+    /// The pattern, for messages.
+    fn pattern(self) -> &'static str {
+        match self {
+            Order::Zyx => "z/y/x.ext",
+            Order::Zxy => "z/x/y.ext",
+        }
+    }
+}
+
 pub struct Xyz {
-    dir: PathBuf,
+    store: TileStore,
+    /// The directory holding the zoom directories, relative to the store.
+    root: String,
+    order: Order,
     zoom: u32,
     /// Tile coordinates of cell (0, 0).
     origin: (u32, u32),
-    /// Tile (x, y) -> its file.
-    tiles: HashMap<(u32, u32), PathBuf>,
+    /// Tile (x, y) -> its file, relative to the store.
+    tiles: HashMap<(u32, u32), String>,
     header: ImageHeader,
     cell: (u32, u32),
 }
 
 impl Xyz {
     /// Lists the highest zoom level under `dir` and reads its first tile (size and layout).
+    pub fn open(dir: &Path, order: Order) -> Result<Xyz> {
+        Xyz::open_in(TileStore::dir(dir), "", order)
+    }
+
+    /// As [`Xyz::open`], for the zoom directories in folder `root` of `store`.
     #[expect(clippy::expect_used, reason = "the tile map was checked to be non-empty above")]
-    pub fn open(dir: &Path) -> Result<Xyz> {
-        let (zoom, zoom_dir) = highest_zoom(dir)?;
-        let mut tiles: HashMap<(u32, u32), PathBuf> = HashMap::new();
-        for (y, row_dir) in numbered_entries(&zoom_dir)? {
-            if !row_dir.is_dir() {
+    pub(crate) fn open_in(store: TileStore, root: &str, order: Order) -> Result<Xyz> {
+        let pattern = order.pattern();
+        let (outer_name, inner_name) = match order {
+            Order::Zyx => ("row", "x"),
+            Order::Zxy => ("column", "y"),
+        };
+        let (zoom, zoom_dir) = highest_zoom(&store, root, order)?;
+        let mut tiles: HashMap<(u32, u32), String> = HashMap::new();
+        for (outer, outer_entry) in numbered_entries(&store, &zoom_dir)? {
+            let outer_dir = join(&zoom_dir, &outer_entry.name);
+            if outer_entry.kind != Kind::Dir {
                 return Err(TilerError::decode(
-                    &row_dir,
-                    "is not a directory: a zoom directory of XYZ tiles (z/y/x.ext) holds only row directories named by their y",
+                    store.name(&outer_dir),
+                    format!(
+                        "is not a directory: a zoom directory of tiles laid out {pattern} holds only {outer_name} directories named by their number"
+                    ),
                 ));
             }
-            let Some(y) = y else {
+            let Some(outer) = outer else {
                 return Err(TilerError::decode(
-                    &row_dir,
-                    "is not named by a row number, as XYZ tile directories are (z/y/x.ext)",
+                    store.name(&outer_dir),
+                    format!("is not named by a {outer_name} number, as tile directories laid out {pattern} are"),
                 ));
             };
-            for path in visible_entries(&row_dir)? {
-                let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-                let x = name
+            for entry in visible_entries(&store, &outer_dir)? {
+                let path = join(&outer_dir, &entry.name);
+                let inner = entry
+                    .name
                     .split_once('.')
                     .filter(|(_, ext)| !ext.is_empty())
-                    .and_then(|(x, _)| number(x))
-                    .filter(|_| path.is_file())
+                    .and_then(|(n, _)| number(n))
+                    .filter(|_| entry.kind == Kind::File)
                     .ok_or_else(|| {
-                        TilerError::decode(&path, "is not a tile named <x>.<ext>, as XYZ tiles are (z/y/x.ext)")
+                        TilerError::decode(
+                            store.name(&path),
+                            format!("is not a tile named <{inner_name}>.<ext>, as tiles laid out {pattern} are"),
+                        )
                     })?;
+                let (x, y) = match order {
+                    Order::Zyx => (inner, outer),
+                    Order::Zxy => (outer, inner),
+                };
                 if let Some(other) = tiles.insert((x, y), path.clone()) {
                     return Err(TilerError::decode(
-                        &path,
-                        format!("is the same tile (z {zoom}, y {y}, x {x}) as {}", other.display()),
+                        store.name(&path),
+                        format!("is the same tile (z {zoom}, x {x}, y {y}) as {}", store.name(&other).display()),
                     ));
                 }
             }
         }
         let Some(xmin) = tiles.keys().map(|k| k.0).min() else {
-            return Err(TilerError::decode(&zoom_dir, "holds no tiles (z/y/x.ext)"));
+            return Err(TilerError::decode(store.name(&zoom_dir), format!("holds no tiles ({pattern})")));
         };
         let xmax = tiles.keys().map(|k| k.0).max().expect("not empty");
         let ymin = tiles.keys().map(|k| k.1).min().expect("not empty");
         let ymax = tiles.keys().map(|k| k.1).max().expect("not empty");
         let first = tiles.iter().min_by_key(|((x, y), _)| (*y, *x)).map(|(_, p)| p.clone()).expect("not empty");
-        let (tw, th, layout) = probe(&first)?;
+        let (tw, th, layout) = probe_stored(&store, &first)?;
         // In u64: tiles at x 0 and 2^32 - 1 span 2^32 columns, which wraps a u32 to zero.
         let (cols, rows) = (xmax as u64 - xmin as u64 + 1, ymax as u64 - ymin as u64 + 1);
         let too_big = || {
             TilerError::Geometry(format!(
                 "{cols}x{rows} tiles of {tw}x{th} at zoom {zoom} of {} make an image too large",
-                dir.display()
+                store.name(root).display()
             ))
         };
         let header = ImageHeader {
@@ -79,7 +125,7 @@ impl Xyz {
             height: u32::try_from(rows * th as u64).map_err(|_| too_big())?,
             layout,
         };
-        Ok(Xyz { dir: dir.to_path_buf(), zoom, origin: (xmin, ymin), tiles, header, cell: (tw, th) })
+        Ok(Xyz { store, root: root.to_string(), order, zoom, origin: (xmin, ymin), tiles, header, cell: (tw, th) })
     }
 
     /// The zoom level read (the highest).
@@ -93,41 +139,44 @@ impl Xyz {
     }
 }
 
+/// `dir/name`, or `name` at the root.
+fn join(dir: &str, name: &str) -> String {
+    if dir.is_empty() { name.to_string() } else { format!("{dir}/{name}") }
+}
+
 /// The highest-numbered zoom directory; other entries (metadata files, viewers) are ignored.
-fn highest_zoom(dir: &Path) -> Result<(u32, PathBuf)> {
-    let mut best: Option<(u32, PathBuf)> = None;
-    for (z, path) in numbered_entries(dir)? {
-        let Some(z) = z.filter(|_| path.is_dir()) else { continue };
+fn highest_zoom(store: &TileStore, root: &str, order: Order) -> Result<(u32, String)> {
+    let mut best: Option<(u32, String)> = None;
+    for (z, entry) in numbered_entries(store, root)? {
+        let Some(z) = z.filter(|_| entry.kind == Kind::Dir) else { continue };
+        let path = join(root, &entry.name);
         match &best {
             Some((bz, other)) if *bz == z => {
-                return Err(TilerError::decode(&path, format!("is the same zoom level {z} as {}", other.display())));
+                return Err(TilerError::decode(
+                    store.name(&path),
+                    format!("is the same zoom level {z} as {}", store.name(other).display()),
+                ));
             }
             Some((bz, _)) if *bz > z => {}
             _ => best = Some((z, path)),
         }
     }
-    best.ok_or_else(|| TilerError::decode(dir, "holds no zoom directories named by a number (z/y/x.ext)"))
+    best.ok_or_else(|| {
+        TilerError::decode(
+            store.name(root),
+            format!("holds no zoom directories named by a number ({})", order.pattern()),
+        )
+    })
 }
 
 /// Entries not starting with '.', sorted, each with its name as a number if it is one.
-fn numbered_entries(dir: &Path) -> Result<Vec<(Option<u32>, PathBuf)>> {
-    Ok(visible_entries(dir)?
-        .into_iter()
-        .map(|path| (path.file_name().and_then(|n| n.to_str()).and_then(number), path))
-        .collect())
+fn numbered_entries(store: &TileStore, dir: &str) -> Result<Vec<(Option<u32>, Entry)>> {
+    Ok(visible_entries(store, dir)?.into_iter().map(|entry| (number(&entry.name), entry)).collect())
 }
 
 /// Entries of `dir` whose names do not start with '.', sorted.
-fn visible_entries(dir: &Path) -> Result<Vec<PathBuf>> {
-    let mut out = Vec::new();
-    for entry in std::fs::read_dir(dir).map_err(|e| TilerError::io(dir, e))? {
-        let entry = entry.map_err(|e| TilerError::io(dir, e))?;
-        if !entry.file_name().as_encoded_bytes().starts_with(b".") {
-            out.push(entry.path());
-        }
-    }
-    out.sort();
-    Ok(out)
+fn visible_entries(store: &TileStore, dir: &str) -> Result<Vec<Entry>> {
+    Ok(store.list(dir)?.into_iter().filter(|e| !e.name.starts_with('.')).collect())
 }
 
 /// `s` as a tile coordinate: ASCII digits only, within u32.
@@ -143,9 +192,10 @@ impl TileGrid for Xyz {
         let (cols, rows) = (self.header.width / self.cell.0, self.header.height / self.cell.1);
         let (x, y) = self.origin;
         format!(
-            "zoom {} of the XYZ tiles in {} ({cols}x{rows} tiles of {}x{} from x {x}, y {y})",
+            "zoom {} of the {} tiles in {} ({cols}x{rows} tiles of {}x{} from x {x}, y {y})",
             self.zoom,
-            self.dir.display(),
+            self.order.pattern(),
+            self.store.name(&self.root).display(),
             self.cell.0,
             self.cell.1
         )
@@ -157,10 +207,8 @@ impl TileGrid for Xyz {
         self.cell
     }
     fn read(&self, col: u32, row: u32) -> Result<Option<CellData>> {
-        match self.tiles.get(&(self.origin.0 + col, self.origin.1 + row)) {
-            Some(path) => read_file(path),
-            None => Ok(None),
-        }
+        let Some(path) = self.tiles.get(&(self.origin.0 + col, self.origin.1 + row)) else { return Ok(None) };
+        Ok(self.store.read(path, MAX_TILE_BYTES)?.map(|bytes| CellData::File(self.store.name(path), bytes)))
     }
     fn crop(&self, _: u32, _: u32) -> (u32, u32) {
         (0, 0)
@@ -207,13 +255,13 @@ mod tests {
     }
 
     fn read_image(dir: &Path, fill: Vec<u8>, strict: bool) -> Result<Vec<u8>> {
-        let grid = Xyz::open(dir)?;
+        let grid = Xyz::open(dir, Order::Zyx)?;
         let mut source = TiledSource::new(Box::new(grid), fill, strict);
         read_all(&mut source)
     }
 
     fn open_error(dir: &Path) -> String {
-        Xyz::open(dir).err().expect("an error").to_string()
+        Xyz::open(dir, Order::Zyx).err().expect("an error").to_string()
     }
 
     #[test]
@@ -228,7 +276,7 @@ mod tests {
         std::fs::write(tmp.path().join("metadata.json"), b"{}").unwrap();
         std::fs::write(tmp.path().join("11/.DS_Store"), b"").unwrap();
         std::fs::write(tmp.path().join("11/680/.hidden"), b"").unwrap();
-        let grid = Xyz::open(tmp.path()).unwrap();
+        let grid = Xyz::open(tmp.path(), Order::Zyx).unwrap();
         assert_eq!((grid.zoom(), grid.origin(), grid.cell()), (11, (1021, 680), (TS, TS)));
         assert_eq!((grid.header().width, grid.header().height), (cols * TS, rows * TS));
         assert_eq!(grid.header().layout.to_string(), "rgba 8-bit");
@@ -252,7 +300,7 @@ mod tests {
                 }
             }
         }
-        assert_eq!(Xyz::open(tmp.path()).unwrap().origin(), (2, 5));
+        assert_eq!(Xyz::open(tmp.path(), Order::Zyx).unwrap().origin(), (2, 5));
         assert!(read_image(tmp.path(), fill.to_vec(), false).unwrap() == image);
         let e = read_image(tmp.path(), fill.to_vec(), true).unwrap_err().to_string();
         assert!(e.contains("missing") && e.contains("x 0, y 0"), "{e}");
@@ -337,5 +385,60 @@ mod tests {
         image::save_buffer(&grey, &big, 2 * TS, TS, image::ExtendedColorType::Rgba8).unwrap();
         let e = read_image(tmp.path(), vec![0; 4], false).unwrap_err().to_string();
         assert!(e.contains("1/0/1.png") && e.contains("is 16x8"), "{e}");
+    }
+
+    #[test]
+    fn z_x_y_reads_the_same_image_from_column_directories() {
+        let tmp = tempfile::tempdir().unwrap();
+        let (cols, rows) = (3, 2);
+        let image = rgba_image(cols * TS, rows * TS, 6);
+        let zyx = tmp.path().join("zyx");
+        write_tiles(&zyx, 7, (4, 9), &image, cols, rows, &[]);
+        // The same files with the two directory levels swapped: 7/<x>/<y>.png.
+        let zxy = tmp.path().join("zxy");
+        for r in 0..rows {
+            for c in 0..cols {
+                let (x, y) = (4 + c, 9 + r);
+                std::fs::create_dir_all(zxy.join(format!("7/{x}"))).unwrap();
+                std::fs::copy(zyx.join(format!("7/{y}/{x}.png")), zxy.join(format!("7/{x}/{y}.png"))).unwrap();
+            }
+        }
+        let grid = Xyz::open(&zxy, Order::Zxy).unwrap();
+        assert_eq!((grid.origin(), grid.header().width, grid.header().height), ((4, 9), cols * TS, rows * TS));
+        assert!(grid.describe().contains("z/x/y.ext"), "{}", grid.describe());
+        let mut source = TiledSource::new(Box::new(grid), vec![0; 4], true);
+        assert!(read_all(&mut source).unwrap() == image);
+        // Read in the other order, the tiles are transposed: another box, another image.
+        let wrong = Xyz::open(&zxy, Order::Zyx).unwrap();
+        assert_eq!(wrong.origin(), (9, 4));
+        let e = open_error_in(&zxy.join("7/4"), Order::Zxy);
+        assert!(e.contains("holds no zoom directories") && e.contains("z/x/y.ext"), "{e}");
+    }
+
+    fn open_error_in(dir: &Path, order: Order) -> String {
+        Xyz::open(dir, order).err().expect("an error").to_string()
+    }
+
+    #[test]
+    fn reads_tiles_from_a_folder_of_a_zip() {
+        let tmp = tempfile::tempdir().unwrap();
+        let (cols, rows) = (2, 3);
+        let image = rgba_image(cols * TS, rows * TS, 12);
+        let dir = tmp.path().join("g");
+        write_tiles(&dir, 3, (0, 1), &image, cols, rows, &[]);
+        let mut entries: Vec<(String, Vec<u8>)> = vec![("g/blank.png".into(), b"not read".to_vec())];
+        for r in 0..rows {
+            for c in 0..cols {
+                let name = format!("g/3/{}/{c}.png", 1 + r);
+                entries.push((name.clone(), std::fs::read(tmp.path().join(&name)).unwrap()));
+            }
+        }
+        let entries: Vec<(&str, &[u8])> = entries.iter().map(|(n, b)| (n.as_str(), b.as_slice())).collect();
+        let zip = tmp.path().join("g.zip");
+        crate::source::tiled::store::tests::write_zip(&zip, &entries, false);
+        let grid = Xyz::open_in(TileStore::zip(&zip).unwrap(), "g", Order::Zyx).unwrap();
+        assert!(grid.describe().contains("g.zip:g"), "{}", grid.describe());
+        let mut source = TiledSource::new(Box::new(grid), vec![0; 4], true);
+        assert!(read_all(&mut source).unwrap() == image);
     }
 }

@@ -5,22 +5,28 @@
 //! Only one row of input tiles is decoded and held at a time (decoded in parallel), so memory
 //! does not grow with the grid's height.
 
+mod archive;
 mod deepzoom;
 mod google;
+mod iiif;
 mod named_dir;
 mod pack_input;
 mod split_output;
+mod store;
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
 
+pub use archive::{is_iiif_dir, is_zip, open_zip};
 pub use deepzoom::DeepZoom;
-pub use google::Xyz;
+pub use google::{Order, Xyz};
+pub use iiif::{Iiif, looks_like_iiif};
 pub use named_dir::NamedDir;
 pub use pack_input::PackInput;
 pub use split_output::SplitOutput;
+pub(crate) use store::TileStore;
 
 use crate::error::{Result, TilerError};
 use crate::pixel::PixelLayout;
@@ -230,6 +236,16 @@ pub(crate) fn read_file(path: &Path) -> Result<Option<CellData>> {
 pub(crate) fn probe(path: &Path) -> Result<(u32, u32, PixelLayout)> {
     let bytes = std::fs::read(path).map_err(|e| TilerError::io(path, e))?;
     let d = decode_tile(path, &bytes)?;
+    Ok((d.width, d.height, d.layout))
+}
+
+/// The header of tile `rel` of `store` (size and layout), read under the tile size cap.
+pub(crate) fn probe_stored(store: &TileStore, rel: &str) -> Result<(u32, u32, PixelLayout)> {
+    let name = store.name(rel);
+    let bytes = store
+        .read(rel, store::MAX_TILE_BYTES)?
+        .ok_or_else(|| TilerError::io(&name, std::io::ErrorKind::NotFound.into()))?;
+    let d = decode_tile(&name, &bytes)?;
     Ok((d.width, d.height, d.layout))
 }
 
