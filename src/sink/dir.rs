@@ -113,17 +113,31 @@ impl DirSink {
 
 impl TileSink for DirSink {
     fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+        let taken = |name: &str, why: String| {
+            TilerError::Options(format!("tile (lod {lod}, x {x}, y {y}) would overwrite {name}: {why}"))
+        };
         match &self.names {
-            Names::Pattern(names) => self.write_file(&names.format(&[lod, x, y]), (lod, x, y), bytes),
+            Names::Pattern(names) => {
+                let name = names.format(&[lod, x, y]);
+                match self.write_file(&name, bytes)? {
+                    true => Ok(()),
+                    false => Err(taken(
+                        &name,
+                        format!(
+                            "the filename format '{}' gives two tiles one name; pad the numbers or separate them",
+                            names.as_str()
+                        ),
+                    )),
+                }
+            }
             Names::Viewer(tiles) => {
                 let placed = tiles.place(lod, x, y);
                 for name in std::iter::once(&placed.path).chain(&placed.alias) {
-                    match self.write_file(name, (lod, x, y), bytes) {
-                        // IIIF names a tile by its region and size: a sliver at the image's
-                        // edge (say 1 x 1 texels) can have the same region and size at two
-                        // scale factors, the same texels, and is written once.
-                        Err(TilerError::Options(_)) if tiles.viewer == Viewer::Iiif => {}
-                        other => other?,
+                    // IIIF names a tile by its region and size: a sliver at the image's edge
+                    // (say 1 x 1 texels) can have the same region and size at two scale
+                    // factors, and so the same texels; it is written once.
+                    if !self.write_file(name, bytes)? && tiles.viewer != Viewer::Iiif {
+                        return Err(taken(name, format!("two tiles of the {} layout have one name", tiles.viewer)));
                     }
                 }
                 Ok(())
@@ -144,8 +158,9 @@ impl TileSink for DirSink {
 }
 
 impl DirSink {
-    /// Writes one tile file at `name` under the staging directory, never over another.
-    fn write_file(&self, name: &str, (lod, x, y): (u32, u32, u32), bytes: &[u8]) -> Result<()> {
+    /// Writes one tile file at `name` under the staging directory, never over another: `false`
+    /// if the name is taken.
+    fn write_file(&self, name: &str, bytes: &[u8]) -> Result<bool> {
         let path = self.staging.join(name);
         if let Some(dir) = path.parent().filter(|d| *d != self.staging) {
             let mut made = self.made_dirs.lock().unwrap_or_else(|p| p.into_inner());
@@ -154,21 +169,13 @@ impl DirSink {
                 made.insert(dir.to_path_buf());
             }
         }
-        let mut file = fs::File::create_new(&path).map_err(|e| match e.kind() {
-            std::io::ErrorKind::AlreadyExists => TilerError::Options(format!(
-                "tile (lod {lod}, x {x}, y {y}) would overwrite {name}: {}",
-                match &self.names {
-                    Names::Pattern(names) => format!(
-                        "the filename format '{}' gives two tiles one name; pad the numbers or separate them",
-                        names.as_str()
-                    ),
-                    Names::Viewer(tiles) => format!("two tiles of the {} layout have one name", tiles.viewer),
-                }
-            )),
-            _ => TilerError::write(&path, e),
-        })?;
+        let mut file = match fs::File::create_new(&path) {
+            Ok(file) => file,
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => return Ok(false),
+            Err(e) => return Err(TilerError::write(&path, e)),
+        };
         file.write_all(bytes).map_err(|e| TilerError::write(&path, e))?;
         self.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
-        Ok(())
+        Ok(true)
     }
 }
