@@ -301,7 +301,12 @@ fn open_dir(dir: &Path) -> Result<Source, String> {
             serde_json::from_slice(&text).map_err(|e| format!("{}: not JSON: {e}", tilejson.display()))?;
         let v = &json["vortex"];
         let size = v["width"].as_u64().zip(v["height"].as_u64());
-        return Ok(Source::Static(StaticDir { root: dir.to_path_buf(), layout: StaticLayout::Xyz, etag: hash(&text), size }));
+        return Ok(Source::Static(StaticDir {
+            root: dir.to_path_buf(),
+            layout: StaticLayout::Xyz,
+            etag: hash(&text),
+            size,
+        }));
     }
     let dzis: Vec<String> = fs::read_dir(dir)
         .map_err(|e| format!("{}: {e}", dir.display()))?

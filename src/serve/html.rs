@@ -63,7 +63,11 @@ pub fn index(catalog: &Catalog) -> String {
                 if t.pack().is_some() {
                     links.push_str(&format!(" <a href=\"/{n}.vtpk\">pack</a>"));
                 }
-                (format!("{} x {}", l.width, l.height), format!("{} (tile {}, border {})", l.lod_count, l.tile_size, l.border), links)
+                (
+                    format!("{} x {}", l.width, l.height),
+                    format!("{} (tile {}, border {})", l.lod_count, l.tile_size, l.border),
+                    links,
+                )
             }
             Source::Static(s) => {
                 let size = s.size.map_or("?".into(), |(w, h)| format!("{w} x {h}"));

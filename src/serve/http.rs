@@ -18,10 +18,10 @@ use tokio::sync::Semaphore;
 
 use super::cache::TileCache;
 use super::catalog::{Catalog, Input, Source, StaticDir, StaticLayout, Tiled, map_slice, stored_image};
+use super::html;
 use super::range::{self, RangeError};
 use super::routes::{self, Reject, Route, bad, not_found};
 use super::tiles::{self, Format, Job};
-use super::html;
 use crate::viewer::{Crop, Viewer, dzi, iiif};
 
 /// `Cache-Control` of tiles and packs (their URLs name immutable content).
@@ -133,11 +133,14 @@ async fn answer(state: &Arc<AppState>, path: &str, headers: &HeaderMap) -> Resul
             .ok_or_else(|| not_found(format!("no input is named '{name}'")))
     };
     match route {
-        Route::Index => Ok(Reply::new("text/html; charset=utf-8", html::index(&state.catalog))
-            .with(header::CACHE_CONTROL, PAGE_CACHE)),
+        Route::Index => {
+            Ok(Reply::new("text/html; charset=utf-8", html::index(&state.catalog))
+                .with(header::CACHE_CONTROL, PAGE_CACHE))
+        }
         Route::View(name) => {
             let (_, input) = input_named(&name)?;
-            let source = html::tile_source(input).ok_or_else(|| not_found(format!("'{name}' has no Deep Zoom or IIIF view")))?;
+            let source =
+                html::tile_source(input).ok_or_else(|| not_found(format!("'{name}' has no Deep Zoom or IIIF view")))?;
             let page = html::view(input, &source, state.openseadragon.is_some());
             Ok(Reply::new("text/html; charset=utf-8", page).with(header::CACHE_CONTROL, PAGE_CACHE))
         }
@@ -222,7 +225,9 @@ fn host(state: &AppState, headers: &HeaderMap) -> String {
     headers
         .get(header::HOST)
         .and_then(|h| h.to_str().ok())
-        .filter(|h| !h.is_empty() && h.len() < 256 && h.bytes().all(|b| b.is_ascii_alphanumeric() || b".-:[]_".contains(&b)))
+        .filter(|h| {
+            !h.is_empty() && h.len() < 256 && h.bytes().all(|b| b.is_ascii_alphanumeric() || b".-:[]_".contains(&b))
+        })
         .map_or_else(|| state.local_addr.to_string(), str::to_string)
 }
 
@@ -240,9 +245,10 @@ fn etag(base: u64, key: &str) -> String {
 
 /// 304 if the client holds `etag`, else `make()`.
 fn conditional(headers: &HeaderMap, etag: &str, make: impl FnOnce() -> Reply) -> Reply {
-    let held = headers.get_all(header::IF_NONE_MATCH).iter().filter_map(|v| v.to_str().ok()).any(|v| {
-        v.split(',').map(|t| t.trim()).any(|t| t == "*" || t == etag || t.strip_prefix("W/") == Some(etag))
-    });
+    let held =
+        headers.get_all(header::IF_NONE_MATCH).iter().filter_map(|v| v.to_str().ok()).any(|v| {
+            v.split(',').map(|t| t.trim()).any(|t| t == "*" || t == etag || t.strip_prefix("W/") == Some(etag))
+        });
     if held {
         Reply { status: StatusCode::NOT_MODIFIED, ..Reply::new("text/plain", Bytes::new()) }.cached(TILE_CACHE, etag)
     } else {
@@ -283,7 +289,13 @@ async fn dzi_tile(
     serve_tile(state, index, t, page, job, &key, headers).await
 }
 
-async fn iiif_tile(state: &Arc<AppState>, index: usize, t: &Tiled, rest: &[String], headers: &HeaderMap) -> Result<Reply, Reject> {
+async fn iiif_tile(
+    state: &Arc<AppState>,
+    index: usize,
+    t: &Tiled,
+    rest: &[String],
+    headers: &HeaderMap,
+) -> Result<Reply, Reject> {
     let (l, ext) = (&t.layout, iiif_extension(t));
     let not_a_tile = || not_found(format!("'{}' is not a IIIF tile of this image", rest.join("/")));
     let (lod, col, row) = match routes::iiif_tile(rest)? {
@@ -313,7 +325,13 @@ async fn iiif_tile(state: &Arc<AppState>, index: usize, t: &Tiled, rest: &[Strin
     serve_tile(state, index, t, (lod, col, row), job, &key, headers).await
 }
 
-async fn xyz_tile(state: &Arc<AppState>, index: usize, t: &Tiled, rest: &[String], headers: &HeaderMap) -> Result<Reply, Reject> {
+async fn xyz_tile(
+    state: &Arc<AppState>,
+    index: usize,
+    t: &Tiled,
+    rest: &[String],
+    headers: &HeaderMap,
+) -> Result<Reply, Reject> {
     let tile = routes::xyz_tile(rest)?;
     let l = &t.layout;
     let ext = Viewer::Xyz.extension(if t.format == Format::Jpeg { "jpg" } else { "png" });
@@ -400,7 +418,9 @@ fn pack_file(t: &Tiled, headers: &HeaderMap) -> Result<Reply, Reject> {
     let Some(pack) = t.pack() else { return Err(not_found("not a pack")) };
     let etag = format!("\"{:016x}\"", t.etag);
     let len = pack.file().len() as u64;
-    let ranged = headers.get(header::RANGE).map(|v| v.to_str().map_err(|_| RangeError::Malformed).and_then(|v| range::parse(v, len)));
+    let ranged = headers
+        .get(header::RANGE)
+        .map(|v| v.to_str().map_err(|_| RangeError::Malformed).and_then(|v| range::parse(v, len)));
     let base = |status, body: Bytes| {
         Reply { status, ..Reply::new("application/octet-stream", body) }
             .cached(TILE_CACHE, &etag)
@@ -410,12 +430,18 @@ fn pack_file(t: &Tiled, headers: &HeaderMap) -> Result<Reply, Reject> {
         None => Ok(conditional(headers, &etag, || base(StatusCode::OK, map_slice(pack, 0, len as usize)))),
         Some(Ok((first, last))) => {
             let body = map_slice(pack, first as usize, (last - first + 1) as usize);
-            Ok(base(StatusCode::PARTIAL_CONTENT, body).with(header::CONTENT_RANGE, format!("bytes {first}-{last}/{len}")))
+            Ok(base(StatusCode::PARTIAL_CONTENT, body)
+                .with(header::CONTENT_RANGE, format!("bytes {first}-{last}/{len}")))
         }
         Some(Err(RangeError::Malformed)) => Err(bad("malformed Range header (one range: bytes=A-B, A- or -N)")),
         Some(Err(e)) => {
-            let why = if e == RangeError::Multiple { "only one range per request is served" } else { "the range is past the end" };
-            Ok(Reply::text(StatusCode::RANGE_NOT_SATISFIABLE, why).with(header::CONTENT_RANGE, format!("bytes */{len}")))
+            let why = if e == RangeError::Multiple {
+                "only one range per request is served"
+            } else {
+                "the range is past the end"
+            };
+            Ok(Reply::text(StatusCode::RANGE_NOT_SATISFIABLE, why)
+                .with(header::CONTENT_RANGE, format!("bytes */{len}")))
         }
     }
 }

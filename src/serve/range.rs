@@ -73,7 +73,9 @@ mod tests {
         assert_eq!(parse("bytes=1000-", 1000), Err(RangeError::Unsatisfiable));
         assert_eq!(parse("bytes=-0", 1000), Err(RangeError::Unsatisfiable));
         assert_eq!(parse("bytes=0-1,5-6", 1000), Err(RangeError::Multiple));
-        for bad in ["bytes=", "bytes=-", "bytes=5-1", "bytes=a-b", "items=0-1", "0-1", "bytes=1", "bytes=+1-2", "bytes=0x1-2"] {
+        for bad in
+            ["bytes=", "bytes=-", "bytes=5-1", "bytes=a-b", "items=0-1", "0-1", "bytes=1", "bytes=+1-2", "bytes=0x1-2"]
+        {
             assert_eq!(parse(bad, 1000), Err(RangeError::Malformed), "{bad}");
         }
     }

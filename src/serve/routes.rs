@@ -188,12 +188,7 @@ pub fn xyz_tile(rest: &[String]) -> Result<XyzTile, Reject> {
         return Err(not_found("a web-map tile is NAME/xyz/Z/X/Y.EXT"));
     };
     let (y, extension) = stem_and_extension(file, "tile")?;
-    Ok(XyzTile {
-        zoom: number(z, "zoom")?,
-        x: number(x, "x")?,
-        y: number(y, "y")?,
-        extension: extension.to_string(),
-    })
+    Ok(XyzTile { zoom: number(z, "zoom")?, x: number(x, "x")?, y: number(y, "y")?, extension: extension.to_string() })
 }
 
 /// A IIIF tile path under `NAME/iiif/` (anything but `info.json`).
@@ -252,8 +247,19 @@ mod tests {
 
     #[test]
     fn refuses_traversal_and_garbage() {
-        for p in ["/../etc/passwd", "/a/../b", "/%2e%2e/x", "/a/%2E%2E/b", "/a//b", "/a/./b", "/a%2fb/c", "/a%5cb", "/%zz", "/%e2%28", "x"]
-        {
+        for p in [
+            "/../etc/passwd",
+            "/a/../b",
+            "/%2e%2e/x",
+            "/a/%2E%2E/b",
+            "/a//b",
+            "/a/./b",
+            "/a%2fb/c",
+            "/a%5cb",
+            "/%zz",
+            "/%e2%28",
+            "x",
+        ] {
             assert!(matches!(parse(p), Err(Reject::BadRequest(_))), "{p}: {:?}", parse(p));
         }
         assert!(matches!(parse("/nothing"), Err(Reject::NotFound(_))));
@@ -268,11 +274,21 @@ mod tests {
         assert!(matches!(dzi_tile(&v(&["99999999999999999999", "0_0.jpeg"])), Err(Reject::BadRequest(_))));
         assert!(matches!(dzi_tile(&v(&["4294967296", "0_0.jpeg"])), Err(Reject::BadRequest(_))));
         assert_eq!(dzi_tile(&v(&["4294967295", "0_0.png"])).unwrap().level, u32::MAX);
-        for bad_tile in [["1", "-1_0.jpeg"], ["1", "+1_0.jpeg"], ["1", "0x1_0.jpeg"], ["1", "00.jpeg"], ["1", "0_0"], ["", "0_0.png"]] {
+        for bad_tile in [
+            ["1", "-1_0.jpeg"],
+            ["1", "+1_0.jpeg"],
+            ["1", "0x1_0.jpeg"],
+            ["1", "00.jpeg"],
+            ["1", "0_0"],
+            ["", "0_0.png"],
+        ] {
             assert!(matches!(dzi_tile(&v(&bad_tile)), Err(Reject::BadRequest(_))), "{bad_tile:?}");
         }
         assert!(matches!(dzi_tile(&v(&["1"])), Err(Reject::NotFound(_))));
-        assert_eq!(xyz_tile(&v(&["2", "1", "3.png"])).unwrap(), XyzTile { zoom: 2, x: 1, y: 3, extension: "png".into() });
+        assert_eq!(
+            xyz_tile(&v(&["2", "1", "3.png"])).unwrap(),
+            XyzTile { zoom: 2, x: 1, y: 3, extension: "png".into() }
+        );
         assert!(matches!(xyz_tile(&v(&["2", "1", "99999999999.png"])), Err(Reject::BadRequest(_))));
     }
 

@@ -108,7 +108,8 @@ fn halved_page(page: &Decoded, job: &Job) -> Result<(Decoded, Crop), String> {
         (image, w, h) = halve(&image, w, h, page.layout);
     }
     let crop = job.crop;
-    if (crop.width, crop.height) != (w, h) || crop.x as usize + w as usize > side || crop.y as usize + h as usize > side {
+    if (crop.width, crop.height) != (w, h) || crop.x as usize + w as usize > side || crop.y as usize + h as usize > side
+    {
         return Err(format!("the halved image is {w}x{h}, the tile {}x{}", crop.width, crop.height));
     }
     let mut bytes = vec![0u8; side * side * bpp];
@@ -139,7 +140,8 @@ pub fn halve(image: &[u8], w: u32, h: u32, layout: PixelLayout) -> (Vec<u8>, u32
             let xs: &[u32] = if 2 * x + 1 < w { &[2 * x, 2 * x + 1] } else { &[2 * x] };
             let n = (xs.len() * ys.len()) as u64;
             for c in 0..channels {
-                let sum: u64 = ys.iter().flat_map(|&yy| xs.iter().map(move |&xx| (xx, yy))).map(|(xx, yy)| get(xx, yy, c)).sum();
+                let sum: u64 =
+                    ys.iter().flat_map(|&yy| xs.iter().map(move |&xx| (xx, yy))).map(|(xx, yy)| get(xx, yy, c)).sum();
                 let mean = (sum + n / 2) / n;
                 match layout.depth {
                     Depth::U8 => out.push(mean as u8),

@@ -161,7 +161,11 @@ fn serve_iiif_and_xyz_from_a_pack() {
     // The last column at scale 2: 124-texel regions, the last 700 - 620 wide, 40 texels.
     assert_eq!(server.get("/world/iiif/620,0,80,124/40,62/0/default.jpg", &[]).image_size(), (40, 62));
     assert_eq!(server.get("/world/iiif/full/44,32/0/default.jpg", &[]).image_size(), (44, 32));
-    for path in ["/world/iiif/0,0,62,62/31,31/0/default.jpg", "/world/iiif/1,0,62,62/62,62/0/default.jpg", "/world/iiif/0,0,62,62/62,62/0/default.png"] {
+    for path in [
+        "/world/iiif/0,0,62,62/31,31/0/default.jpg",
+        "/world/iiif/1,0,62,62/62,62/0/default.jpg",
+        "/world/iiif/0,0,62,62/62,62/0/default.png",
+    ] {
         assert_eq!(server.get(path, &[]).status, 404, "{path}");
     }
     assert_eq!(server.get("/world/iiif", &[]).status, 303);
@@ -227,7 +231,11 @@ fn serve_etags_head_and_cors() {
     let b = server.get("/world_files/10/3_3.jpeg", &[]);
     assert_ne!(a.header("etag"), b.header("etag"));
 
-    let pre = server.request("OPTIONS", "/world.vtpk", &[("Origin", "http://x"), ("Access-Control-Request-Headers", "range")]);
+    let pre = server.request(
+        "OPTIONS",
+        "/world.vtpk",
+        &[("Origin", "http://x"), ("Access-Control-Request-Headers", "range")],
+    );
     assert_eq!(pre.status, 204);
     assert_eq!(pre.header("access-control-allow-origin"), Some("*"));
     assert!(pre.header("access-control-allow-headers").unwrap().contains("Range"));
@@ -289,7 +297,9 @@ fn serve_index_and_viewer_pages() {
         assert!(html.contains(needle), "index lacks {needle}: {html}");
     }
     let view = server.get("/view/world", &[]).text();
-    for needle in ["window.viewer = OpenSeadragon(", "crossOriginPolicy: \"Anonymous\"", "\"/world.dzi\"", "openseadragon@6.1"] {
+    for needle in
+        ["window.viewer = OpenSeadragon(", "crossOriginPolicy: \"Anonymous\"", "\"/world.dzi\"", "openseadragon@6.1"]
+    {
         assert!(view.contains(needle), "view lacks {needle}: {view}");
     }
 
@@ -330,7 +340,8 @@ fn serve_split_and_viewer_directories() {
     let t = server.get("/tiles_files/10/3_2.png", &[]);
     assert_eq!((t.status, t.header("content-type")), (200, Some("image/png")));
     let info: serde_json::Value = serde_json::from_slice(&std::fs::read(tiles.join("info.json")).unwrap()).unwrap();
-    let names = vortex_tiler::tile_dir::filename::FilenameFormat::parse(info["filenameFormat"].as_str().unwrap(), 3).unwrap();
+    let names =
+        vortex_tiler::tile_dir::filename::FilenameFormat::parse(info["filenameFormat"].as_str().unwrap(), 3).unwrap();
     assert!(t.body == std::fs::read(tiles.join(names.format(&[0, 3, 2]))).unwrap());
     assert_eq!(t.image_size(), (64, 64));
     assert_eq!(server.get("/tiles_files/10/11_8.png", &[]).image_size(), (700 - (11 * 60 - 2), 500 - (8 * 60 - 2)));
@@ -387,13 +398,19 @@ fn serve_refuses_bad_inputs_at_start() {
     crate::common::cli::fails_with(&missing, &["missing.vtpk"]);
     let not_a_pack = d.join("notes.vtpk");
     std::fs::write(&not_a_pack, "hello").unwrap();
-    crate::common::cli::fails_with(&run(&["serve", s(&not_a_pack), "--addr", "127.0.0.1:0"]), &["notes.vtpk", "not a pack"]);
+    crate::common::cli::fails_with(
+        &run(&["serve", s(&not_a_pack), "--addr", "127.0.0.1:0"]),
+        &["notes.vtpk", "not a pack"],
+    );
 
     let pack = jpeg_pack(d);
     std::fs::create_dir(d.join("other")).unwrap();
     let twin = d.join("other/world.vtpk");
     std::fs::copy(&pack, &twin).unwrap();
-    crate::common::cli::fails_with(&run(&["serve", s(&pack), s(&twin), "--addr", "127.0.0.1:0"]), &["both named 'world'"]);
+    crate::common::cli::fails_with(
+        &run(&["serve", s(&pack), s(&twin), "--addr", "127.0.0.1:0"]),
+        &["both named 'world'"],
+    );
 
     let server = Server::start(&[&pack], &[]);
     let addr = format!("127.0.0.1:{}", server.port);
