@@ -346,6 +346,15 @@ fn serve_split_and_viewer_directories() {
     assert_eq!(t.image_size(), (64, 64));
     assert_eq!(server.get("/tiles_files/10/11_8.png", &[]).image_size(), (700 - (11 * 60 - 2), 500 - (8 * 60 - 2)));
 
+    // IIIF and XYZ tiles of a bordered pyramid are the page's payload: the Deep Zoom tile
+    // (the whole page here) without its 2-texel overlap.
+    let page = image::load_from_memory(&t.body).unwrap().to_rgb8();
+    let payload = image::imageops::crop_imm(&page, 2, 2, 60, 60).to_image();
+    let iiif_tile = server.get("/tiles/iiif/180,120,60,60/60,60/0/default.png", &[]);
+    assert_eq!(image::load_from_memory(&iiif_tile.body).unwrap().to_rgb8(), payload);
+    let xyz_tile = server.get("/tiles/xyz/4/3/2.png", &[]);
+    assert_eq!(image::load_from_memory(&xyz_tile.body).unwrap().to_rgb8(), payload);
+
     // A zstd pack is served as PNG, decoded.
     assert_eq!(server.get("/z_files/10/1_1.png", &[]).image_size(), (64, 64));
     assert_eq!(server.get("/z/xyz/0/0/0.png", &[]).status, 200);
