@@ -16,7 +16,8 @@
 //! geometry), [`pixel`] (channels and depth), [`background`] (what fills the padding),
 //! [`settings`] (flags and `info.json` into options) and [`error`]. Every command checks
 //! [`limits`] before it allocates and claims its destination through [`output`], the one rule
-//! that keeps it from destroying anything the user owns.
+//! that keeps it from destroying anything the user owns. [`viewer`] names pages as Deep Zoom,
+//! IIIF and web-map tiles; [`serve`] answers those names over HTTP from packs and directories.
 
 pub mod background;
 pub mod codec;
@@ -27,6 +28,7 @@ pub mod output;
 pub mod pixel;
 pub mod pyramid;
 pub mod repack;
+pub mod serve;
 pub mod settings;
 pub mod sink;
 pub mod source;

@@ -10,6 +10,7 @@ mod convert;
 mod pack;
 mod render;
 pub(crate) mod report;
+mod serve;
 mod signals;
 mod split;
 
@@ -89,6 +90,28 @@ enum Command {
     ///   vortex-tiler render --pack a.vtpk --pack b.vtpk --scene boxes.json --filter trilinear
     #[command(verbatim_doc_comment)]
     Render(render::RenderArgs),
+    /// Serve packs and tile directories over HTTP to web viewers (Deep Zoom, IIIF, XYZ).
+    ///
+    /// Each input is served under its file stem NAME (a directory under its name):
+    ///   /                           the inputs, each with a link to an OpenSeadragon page
+    ///   /view/NAME                  OpenSeadragon showing NAME
+    ///   /NAME.dzi, /NAME_files/LEVEL/COL_ROW.jpeg|png      Deep Zoom (overlap = border)
+    ///   /NAME/iiif/info.json and its tiles                 IIIF Image API 3.0, level 0
+    ///   /NAME/xyz/Z/X/Y.jpg|png                            web-map tiles (Leaflet, MapLibre)
+    ///   /NAME.vtpk                  the pack itself, with Range requests
+    /// Stored JPEG and PNG tiles are sent as they are; edge tiles, levels below one page and
+    /// raw, zstd or BC payloads are decoded, cropped and re-encoded (PNG unless the input is
+    /// JPEG) and kept in a --cache. Directories written by `split --layout` are served as
+    /// their files. Ctrl-C or SIGTERM stop it; the first line on stdout names the address.
+    /// Details: docs/serve.md.
+    ///
+    /// Examples:
+    ///   vortex-tiler serve world.vtpk                      # http://127.0.0.1:8080/
+    ///   vortex-tiler serve a.vtpk tiles/ dzi_out/ --addr 127.0.0.1:0
+    ///   vortex-tiler serve world.vtpk --openseadragon node_modules/openseadragon/build/openseadragon
+    ///   vortex-tiler serve world.vtpk --addr 0.0.0.0:8080 --cache 512M   # other machines too
+    #[command(verbatim_doc_comment)]
+    Serve(serve::ServeArgs),
 }
 
 /// Where a pack's bytes go.
@@ -143,6 +166,7 @@ pub fn run(args: Args) -> Result<()> {
         Command::Info(a) => pack::run_info(a),
         Command::Verify(a) => pack::run_verify(a),
         Command::Render(a) => render::run(a),
+        Command::Serve(a) => serve::run(a),
     }
 }
 

@@ -18,6 +18,7 @@ mod hostile;
 mod oracle;
 mod pack_cli;
 mod render;
+mod serve;
 mod sources;
 mod stability;
 mod stripes;
