@@ -1,18 +1,22 @@
 //! A real browser: headless Chromium runs OpenSeadragon (npm, `tests/browser/`) on what we
-//! write and serve, zoomed to known regions, and each screenshot is compared with the same
-//! region of the source image resized (PSNR). A blank, shifted or seamed picture fails: a
-//! shift of two texels costs about 6 dB, a blank viewer 20.
+//! write and serve, zoomed to known regions, and each screenshot, taken once OpenSeadragon
+//! says every tile of the view is drawn, is compared with the same region of the source image
+//! resized (PSNR). A blank, shifted or seamed picture fails: a shift of two texels costs about
+//! 6 dB, a blank viewer 20.
 //!
-//! Needs `chromium` and `npm ci --prefix tests/browser` (both done by `.ci/run`); outside CI
-//! a missing one skips with a note, under `CI=true` it fails.
+//! Needs `chromium`, `chromedriver` (Debian's chromium-driver) and `npm ci --prefix
+//! tests/browser` (all done by `.ci/run`); outside CI a missing one skips with a note, under
+//! `CI=true` it fails.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::time::Duration;
 
 use image::{ImageBuffer, Rgb, RgbImage, imageops};
 
 use crate::common::cli::{BIN, ok, s};
+use crate::common::webdriver::Browser;
 
 /// Below this the picture is wrong; a correct one measured 31 to 42 dB (see the test output).
 const MIN_PSNR_DB: f64 = 26.0;
@@ -41,19 +45,23 @@ fn test_image() -> RgbImage {
     })
 }
 
-/// Where the browser and OpenSeadragon are, or why the test cannot run.
-fn browser_parts() -> Result<(PathBuf, PathBuf), String> {
-    let chromium = ["chromium", "chromium-browser", "google-chrome"]
-        .iter()
-        .find(|c| Command::new(c).arg("--version").output().is_ok_and(|o| o.status.success()))
-        .map(PathBuf::from)
-        .ok_or("no chromium (apt-get install chromium)")?;
-    let osd =
+/// The browser, its driver and OpenSeadragon, or why the test cannot run.
+struct Parts {
+    chromium: PathBuf,
+    chromedriver: PathBuf,
+    openseadragon: PathBuf,
+}
+
+fn browser_parts() -> Result<Parts, String> {
+    let found = |names: &[&str]| names.iter().map(|n| Path::new("/usr/bin").join(n)).find(|p| p.is_file());
+    let chromium = found(&["chromium", "chromium-browser"]).ok_or("no chromium (apt-get install chromium)")?;
+    let chromedriver = found(&["chromedriver"]).ok_or("no chromedriver (apt-get install chromium-driver)")?;
+    let openseadragon =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/browser/node_modules/openseadragon/build/openseadragon");
-    if !osd.join("openseadragon.min.js").is_file() {
+    if !openseadragon.join("openseadragon.min.js").is_file() {
         return Err("no OpenSeadragon (npm ci --prefix tests/browser)".into());
     }
-    Ok((chromium, osd))
+    Ok(Parts { chromium, chromedriver, openseadragon })
 }
 
 /// `vortex-tiler serve` on a free loopback port, stopped when dropped.
@@ -85,17 +93,19 @@ impl Drop for Server {
     }
 }
 
-/// Screenshots OpenSeadragon showing `region` of the tile source at `source_url`.
-fn screenshot(chromium: &Path, osd: &Path, dir: &Path, source_url: &str, region: (u32, u32, u32, u32)) -> RgbImage {
+/// OpenSeadragon showing `region` of the tile source at `source_url`, once every tile of the
+/// view is loaded and drawn.
+fn screenshot(browser: &Browser, osd: &Path, dir: &Path, source_url: &str, region: (u32, u32, u32, u32)) -> RgbImage {
     let page = dir.join("view.html");
     let html = format!(
         r#"<!doctype html><html><head><style>html,body{{margin:0;background:#000;overflow:hidden}}#v{{width:{w}px;height:{h}px}}</style>
 <script src="{osd}/openseadragon.min.js"></script></head><body><div id="v"></div><script>
-const viewer = OpenSeadragon({{ id: "v", tileSources: "{source_url}", drawer: "canvas", animationTime: 0, blendTime: 0,
+window.viewer = OpenSeadragon({{ id: "v", tileSources: "{source_url}", drawer: "canvas", animationTime: 0, blendTime: 0,
   showNavigationControl: false, crossOriginPolicy: "Anonymous" }});
 viewer.addHandler("open", () => {{
   const item = viewer.world.getItemAt(0);
   viewer.viewport.fitBounds(item.imageToViewportRectangle({x}, {y}, {rw}, {rh}), true);
+  window.placed = true;
 }});
 </script></body></html>"#,
         w = VIEW.0,
@@ -107,19 +117,9 @@ viewer.addHandler("open", () => {{
         rh = region.3,
     );
     std::fs::write(&page, html).unwrap();
-    let shot = dir.join("shot.png");
-    let _ = std::fs::remove_file(&shot);
-    let out = Command::new(chromium)
-        .args(["--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--allow-file-access-from-files"])
-        .arg(format!("--window-size={},{}", VIEW.0, VIEW.1))
-        // Virtual time runs only while nothing is loading: the budget is spent after the tiles.
-        .arg("--virtual-time-budget=15000")
-        .arg(format!("--screenshot={}", shot.display()))
-        .arg(format!("file://{}", page.display()))
-        .output()
-        .expect("chromium runs");
-    assert!(shot.is_file(), "no screenshot: {}", String::from_utf8_lossy(&out.stderr));
-    image::open(&shot).unwrap().to_rgb8()
+    let ready = "window.placed && viewer.world.getItemAt(0).getFullyLoaded() && !viewer.world.needsDraw()";
+    browser.open_and_wait(&format!("file://{}", page.display()), ready, Duration::from_secs(60));
+    image::load_from_memory(&browser.screenshot("#v")).unwrap().to_rgb8()
 }
 
 /// Peak signal-to-noise ratio of `shot` against `region` of `source` resized to the view.
@@ -136,7 +136,7 @@ fn psnr(source: &RgbImage, region: (u32, u32, u32, u32), shot: &RgbImage) -> f64
 /// (c) a pack through `serve` as Deep Zoom, each as the source image looks.
 #[test]
 fn openseadragon_shows_what_we_write_and_serve() {
-    let (chromium, osd) = match browser_parts() {
+    let parts = match browser_parts() {
         Ok(parts) => parts,
         Err(why) => {
             assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and {why}");
@@ -154,15 +154,16 @@ fn openseadragon_shows_what_we_write_and_serve() {
     // Borders, as a GPU pack has them: served as Deep Zoom overlap, not shifted by them.
     ok(&["split", s(&input), "--pack", s(&pack), "--tile-size", "256", "--border", "4", "--quality", "95", "-q"]);
     let server = Server::start(&[&dzi, &iiif, &pack]);
+    let browser = Browser::start(&parts.chromedriver, &parts.chromium, VIEW);
     let sources = [
-        ("dzi directory", format!("{}/photo.dzi", server.url)),
+        ("dzi directory", format!("{}/dzi.dzi", server.url)),
         ("iiif directory", format!("{}/iiif/iiif/info.json", server.url)),
         ("pack as Deep Zoom", format!("{}/packed.dzi", server.url)),
     ];
     let mut failures = Vec::new();
     for (what, url) in &sources {
         for region in REGIONS {
-            let shot = screenshot(&chromium, &osd, dir.path(), url, region);
+            let shot = screenshot(&browser, &parts.openseadragon, dir.path(), url, region);
             let db = psnr(&source, region, &shot);
             eprintln!("{what}, region {region:?}: {db:.1} dB");
             if db < MIN_PSNR_DB {
