@@ -160,17 +160,15 @@ async fn answer(state: &Arc<AppState>, path: &str, headers: &HeaderMap) -> Resul
             }
             Source::Static(_) => Err(not_found(format!("'{name}' is not a Deep Zoom pyramid"))),
         },
-        Route::DziFiles { name, rest } => match &input_named(&name)?.1.source {
-            Source::Tiled(t) => {
-                let (index, _) = input_named(&name)?;
-                let tile = routes::dzi_tile(&rest)?;
-                dzi_tile(state, index, t, tile, headers).await
+        Route::DziFiles { name, rest } => match input_named(&name)? {
+            (index, Input { source: Source::Tiled(t), .. }) => {
+                dzi_tile(state, index, t, routes::dzi_tile(&rest)?, headers).await
             }
-            Source::Static(s @ StaticDir { layout: StaticLayout::Dzi { stem }, .. }) => {
+            (_, Input { source: Source::Static(s @ StaticDir { layout: StaticLayout::Dzi { stem }, .. }), .. }) => {
                 let rel: Vec<String> = std::iter::once(format!("{stem}_files")).chain(rest).collect();
                 static_file(&s.root, &rel, s.etag, headers).await
             }
-            Source::Static(_) => Err(not_found(format!("'{name}' is not a Deep Zoom pyramid"))),
+            _ => Err(not_found(format!("'{name}' is not a Deep Zoom pyramid"))),
         },
         Route::PackFile(name) => match &input_named(&name)?.1.source {
             Source::Tiled(t) if t.pack().is_some() => pack_file(t, headers),

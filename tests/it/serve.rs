@@ -402,7 +402,9 @@ fn serve_stops_cleanly_on_sigterm() {
 #[test]
 fn serve_help_teaches_the_routes() {
     let help = ok(&["serve", "--help"]);
-    for needle in ["/NAME.dzi", "/NAME/iiif/info.json", "/NAME/xyz/", "Range", "Examples:", "--openseadragon", "[default: 64M]"] {
+    for needle in
+        ["/NAME.dzi", "/NAME/iiif/info.json", "/NAME/xyz/", "Range", "Examples:", "--openseadragon", "[default: 64M]"]
+    {
         assert!(help.contains(needle), "serve --help lacks {needle}");
     }
 }
