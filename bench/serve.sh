@@ -54,7 +54,7 @@ serve_with() {
 }
 stop() { kill -TERM "$PID"; wait "$PID"; }
 
-# run NAME URL_REGEX: oha for DURATION, one line "NAME rps p50_ms p99_ms success".
+# run NAME URL_REGEX (oha generates URLs from the regex; write dots as [.]): oha for DURATION, one line "NAME rps p50_ms p99_ms success".
 run() {
   local name=$1 url=$2
   "$OHA" -z "$DURATION" -c "$CONNS" --no-tui --output-format json --rand-regex-url "$url" >"$WORK/oha-$name.json"
@@ -64,7 +64,9 @@ name, path = sys.argv[1], sys.argv[2]
 r = json.load(open(path))
 s, p = r["summary"], r["latencyPercentiles"]
 codes = r.get("statusCodeDistribution", {})
-print(f"{name}\t{s['requestsPerSec']:.0f}\t{p['p50'] * 1000:.2f}\t{p['p99'] * 1000:.2f}\t{s['successRate']:.3f}\t{codes}")
+if set(codes) != {"200"}:
+    sys.exit(f"error: {name}: answers other than 200: {codes}")
+print(f"{name}\t{s['requestsPerSec']:.0f}\t{p['p50'] * 1000:.2f}\t{p['p99'] * 1000:.2f}\t{sum(codes.values())}\t{s.get('sizePerRequest') or 0}")
 PY
 }
 
@@ -73,14 +75,14 @@ E='([0-9]|[12][0-9]|3[0-2])'           # every row: 0..32
 RESULTS=$WORK/serve-results.tsv
 : >"$RESULTS"
 serve_with
-base="http://127.0.0.1:$PORT/serve8k_files/13"
-run stored "$base/${N}_${N}\\.jpeg" >>"$RESULTS"
-for row in $(seq 0 32); do curl -sf -o /dev/null "$base/32_$row.jpeg"; done # warm the cache
-run edge-warm "$base/32_${E}\\.jpeg" >>"$RESULTS"
+re="http://127[.]0[.]0[.]1:$PORT/serve8k_files/13"
+run stored "$re/${N}_${N}[.]jpeg" >>"$RESULTS"
+for row in $(seq 0 32); do curl -sf -o /dev/null "http://127.0.0.1:$PORT/serve8k_files/13/32_$row.jpeg"; done # warm the cache
+run edge-warm "$re/32_${E}[.]jpeg" >>"$RESULTS"
 stop
 serve_with --cache 0
-base="http://127.0.0.1:$PORT/serve8k_files/13"
-run edge-cold "$base/32_${E}\\.jpeg" >>"$RESULTS"
+re="http://127[.]0[.]0[.]1:$PORT/serve8k_files/13"
+run edge-cold "$re/32_${E}[.]jpeg" >>"$RESULTS"
 stop
-log "results (case, requests/s, p50 ms, p99 ms, success rate, status codes):"
+log "results (case, requests/s, p50 ms, p99 ms, responses, all 200, bytes per response):"
 cat "$RESULTS"

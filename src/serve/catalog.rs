@@ -147,8 +147,8 @@ fn open_pack(path: &Path) -> Result<Source, String> {
         Some(TileKind::Jpeg) => Codec::Jpeg { quality: DEFAULT_QUALITY, subsampling: Subsampling::S420 },
         _ => Codec::Png { level: PngLevel::Fast },
     });
-    let pixels = crate::tile_dir::layout_of(&d);
-    Ok(Source::Tiled(served(Store::Pack(Arc::new(pack)), layout, pixels, codec, 0).with_etag_of_pack()))
+    let (pixels, etag) = (crate::tile_dir::layout_of(&d), pack.header().content_hash);
+    Ok(Source::Tiled(served(Store::Pack(Arc::new(pack)), layout, pixels, codec, etag)))
 }
 
 /// The tiles of a pyramid whose pages are `codec`: JPEG stays JPEG (at its quality), anything
@@ -162,13 +162,6 @@ fn served(store: Store, layout: Layout, pixels: PixelLayout, codec: Codec, etag:
 }
 
 impl Tiled {
-    fn with_etag_of_pack(mut self) -> Tiled {
-        if let Store::Pack(p) = &self.store {
-            self.etag = p.header().content_hash;
-        }
-        self
-    }
-
     /// The pack, if this is one.
     pub fn pack(&self) -> Option<&Arc<Pack>> {
         match &self.store {

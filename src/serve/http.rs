@@ -1,5 +1,6 @@
 //! The one request handler: method, route, input, then the answer with its headers
-//! (`Content-Type`, `ETag` / `If-None-Match`, `Cache-Control`, CORS, `Range` for packs).
+//! (`Content-Type`, `ETag` / `If-None-Match`, `Cache-Control`, CORS, `Range` for packs); the
+//! tiles themselves are `tile_routes`'.
 //!
 //! Every request holds a permit of `--max-concurrent` while it is answered; decoding and
 //! encoding run on tokio's blocking threads, at most one per core at a time. No request can
@@ -17,15 +18,15 @@ use bytes::Bytes;
 use tokio::sync::Semaphore;
 
 use super::cache::TileCache;
-use super::catalog::{Catalog, Input, Source, StaticDir, StaticLayout, Tiled, map_slice, stored_image};
+use super::catalog::{Catalog, Input, Source, StaticDir, StaticLayout, Tiled, map_slice};
 use super::html;
 use super::range::{self, RangeError};
 use super::routes::{self, Reject, Route, bad, not_found};
-use super::tiles::{self, Format, Job};
-use crate::viewer::{Crop, Viewer, dzi, iiif};
+use super::tile_routes::{dzi_extension, dzi_tile, iiif_extension, iiif_tile, xyz_tile};
+use crate::viewer::{dzi, iiif};
 
 /// `Cache-Control` of tiles and packs (their URLs name immutable content).
-const TILE_CACHE: &str = "public, max-age=86400";
+pub(super) const TILE_CACHE: &str = "public, max-age=86400";
 /// `Cache-Control` of manifests and pages.
 const MANIFEST_CACHE: &str = "public, max-age=60";
 const PAGE_CACHE: &str = "no-cache";
@@ -43,7 +44,7 @@ pub struct AppState {
 }
 
 /// A finished answer before the method and CORS headers are applied.
-struct Reply {
+pub(super) struct Reply {
     status: StatusCode,
     content_type: &'static str,
     body: Bytes,
@@ -51,7 +52,7 @@ struct Reply {
 }
 
 impl Reply {
-    fn new(content_type: &'static str, body: impl Into<Bytes>) -> Reply {
+    pub(super) fn new(content_type: &'static str, body: impl Into<Bytes>) -> Reply {
         Reply { status: StatusCode::OK, content_type, body: body.into(), headers: Vec::new() }
     }
     fn text(status: StatusCode, message: impl std::fmt::Display) -> Reply {
@@ -61,7 +62,7 @@ impl Reply {
         self.headers.push((name, value.into()));
         self
     }
-    fn cached(self, cache_control: &str, etag: &str) -> Reply {
+    pub(super) fn cached(self, cache_control: &str, etag: &str) -> Reply {
         self.with(header::CACHE_CONTROL, cache_control).with(header::ETAG, etag)
     }
 }
@@ -75,7 +76,7 @@ impl From<Reject> for Reply {
     }
 }
 
-fn internal(message: impl std::fmt::Display) -> Reply {
+pub(super) fn internal(message: impl std::fmt::Display) -> Reply {
     eprintln!("serve: {message}");
     Reply::text(StatusCode::INTERNAL_SERVER_ERROR, message)
 }
@@ -160,17 +161,15 @@ async fn answer(state: &Arc<AppState>, path: &str, headers: &HeaderMap) -> Resul
             }
             Source::Static(_) => Err(not_found(format!("'{name}' is not a Deep Zoom pyramid"))),
         },
-        Route::DziFiles { name, rest } => match &input_named(&name)?.1.source {
-            Source::Tiled(t) => {
-                let (index, _) = input_named(&name)?;
-                let tile = routes::dzi_tile(&rest)?;
-                dzi_tile(state, index, t, tile, headers).await
+        Route::DziFiles { name, rest } => match input_named(&name)? {
+            (index, Input { source: Source::Tiled(t), .. }) => {
+                dzi_tile(state, index, t, routes::dzi_tile(&rest)?, headers).await
             }
-            Source::Static(s @ StaticDir { layout: StaticLayout::Dzi { stem }, .. }) => {
+            (_, Input { source: Source::Static(s @ StaticDir { layout: StaticLayout::Dzi { stem }, .. }), .. }) => {
                 let rel: Vec<String> = std::iter::once(format!("{stem}_files")).chain(rest).collect();
                 static_file(&s.root, &rel, s.etag, headers).await
             }
-            Source::Static(_) => Err(not_found(format!("'{name}' is not a Deep Zoom pyramid"))),
+            _ => Err(not_found(format!("'{name}' is not a Deep Zoom pyramid"))),
         },
         Route::PackFile(name) => match &input_named(&name)?.1.source {
             Source::Tiled(t) if t.pack().is_some() => pack_file(t, headers),
@@ -231,15 +230,7 @@ fn host(state: &AppState, headers: &HeaderMap) -> String {
         .map_or_else(|| state.local_addr.to_string(), str::to_string)
 }
 
-fn dzi_extension(t: &Tiled) -> &'static str {
-    Viewer::Dzi.extension(if t.format == Format::Jpeg { "jpg" } else { "png" })
-}
-
-fn iiif_extension(t: &Tiled) -> &'static str {
-    Viewer::Iiif.extension(if t.format == Format::Jpeg { "jpg" } else { "png" })
-}
-
-fn etag(base: u64, key: &str) -> String {
+pub(super) fn etag(base: u64, key: &str) -> String {
     format!("\"{base:016x}-{:016x}\"", vortex_pack::format::fnv1a(0xcbf2_9ce4_8422_2325, key.as_bytes()))
 }
 
@@ -256,159 +247,7 @@ fn conditional(headers: &HeaderMap, etag: &str, make: impl FnOnce() -> Reply) ->
     }
 }
 
-async fn dzi_tile(
-    state: &Arc<AppState>,
-    index: usize,
-    t: &Tiled,
-    tile: routes::DziTile,
-    headers: &HeaderMap,
-) -> Result<Reply, Reject> {
-    let ext = dzi_extension(t);
-    if tile.extension != ext {
-        return Err(not_found(format!("the Deep Zoom tiles of this input are .{ext}")));
-    }
-    let l = t.layout.down_to_one_texel();
-    let max = dzi::max_level(l.width, l.height);
-    if tile.level > max {
-        return Err(not_found(format!("level {} is past the finest, {max}", tile.level)));
-    }
-    let lod = max - tile.level;
-    let (c, r) = l.grid(lod);
-    if tile.col >= c || tile.row >= r {
-        return Err(not_found(format!("level {} has {c} x {r} tiles", tile.level)));
-    }
-    let crop = dzi::crop(&l, lod, tile.col, tile.row);
-    let stored = t.layout.lod_count;
-    let (page, halvings, extent) = if lod < stored {
-        ((lod, tile.col, tile.row), 0, (0, 0))
-    } else {
-        ((stored - 1, 0, 0), lod - (stored - 1), t.layout.level_extent(stored - 1))
-    };
-    let key = format!("dzi/{}/{}_{}", tile.level, tile.col, tile.row);
-    let job = Job { side: t.layout.tile_size, border: t.layout.border, crop, extent, halvings, codec: t.codec };
-    serve_tile(state, index, t, page, job, &key, headers).await
-}
-
-async fn iiif_tile(
-    state: &Arc<AppState>,
-    index: usize,
-    t: &Tiled,
-    rest: &[String],
-    headers: &HeaderMap,
-) -> Result<Reply, Reject> {
-    let (l, ext) = (&t.layout, iiif_extension(t));
-    let not_a_tile = || not_found(format!("'{}' is not a IIIF tile of this image", rest.join("/")));
-    let (lod, col, row) = match routes::iiif_tile(rest)? {
-        routes::IiifTile::Full { path } => {
-            let last = l.lod_count - 1;
-            let named = iiif::tile_path(l, last, 0, 0, ext) == path || iiif::full_max_path(l, 0, ext) == Some(path);
-            if !named {
-                return Err(not_a_tile());
-            }
-            (last, 0, 0)
-        }
-        routes::IiifTile::Region { x, y, path } => (0..l.lod_count.saturating_sub(1))
-            .find_map(|lod| {
-                let side = (l.payload() as u64) << lod;
-                let (col, row) = (u32::try_from(x / side).ok()?, u32::try_from(y / side).ok()?);
-                let (c, r) = l.grid(lod);
-                let named = x % side == 0 && y % side == 0 && col < c && row < r;
-                (named && iiif::tile_path(l, lod, col, row, ext) == path).then_some((lod, col, row))
-            })
-            .ok_or_else(not_a_tile)?,
-    };
-    // IIIF tiles have no overlap: the page's payload, cut at the image's edge.
-    let c = iiif::crop(l, lod, col, row);
-    let crop = Crop { x: c.x + l.border, y: c.y + l.border, ..c };
-    let key = format!("iiif/{lod}/{col}/{row}");
-    let job = Job { side: l.tile_size, border: l.border, crop, extent: (0, 0), halvings: 0, codec: t.codec };
-    serve_tile(state, index, t, (lod, col, row), job, &key, headers).await
-}
-
-async fn xyz_tile(
-    state: &Arc<AppState>,
-    index: usize,
-    t: &Tiled,
-    rest: &[String],
-    headers: &HeaderMap,
-) -> Result<Reply, Reject> {
-    let tile = routes::xyz_tile(rest)?;
-    let l = &t.layout;
-    let ext = Viewer::Xyz.extension(if t.format == Format::Jpeg { "jpg" } else { "png" });
-    if tile.extension != ext {
-        return Err(not_found(format!("the XYZ tiles of this input are .{ext}")));
-    }
-    if tile.zoom >= l.lod_count {
-        return Err(not_found(format!("zoom {} is past the finest, {}", tile.zoom, l.lod_count - 1)));
-    }
-    let lod = l.lod_count - 1 - tile.zoom;
-    let (c, r) = l.grid(lod);
-    if tile.x >= c || tile.y >= r {
-        return Err(not_found(format!("zoom {} has {c} x {r} tiles holding the image", tile.zoom)));
-    }
-    // The payload, whole: edge tiles hold the pack's own padding past the image.
-    let p = l.payload();
-    let crop = Crop { x: l.border, y: l.border, width: p, height: p };
-    let key = format!("xyz/{lod}/{}/{}", tile.x, tile.y);
-    let job = Job { side: l.tile_size, border: l.border, crop, extent: (0, 0), halvings: 0, codec: t.codec };
-    serve_tile(state, index, t, (lod, tile.x, tile.y), job, &key, headers).await
-}
-
-/// One viewer tile: the stored bytes when they are it, else from the cache, else decoded,
-/// cropped and encoded on a blocking thread (and cached).
-async fn serve_tile(
-    state: &Arc<AppState>,
-    index: usize,
-    t: &Tiled,
-    (lod, x, y): (u32, u32, u32),
-    job: Job,
-    key: &str,
-    headers: &HeaderMap,
-) -> Result<Reply, Reject> {
-    let etag = etag(t.etag, key);
-    let reply = |bytes: Bytes| Reply::new(t.format.content_type(), bytes).cached(TILE_CACHE, &etag);
-    if let Some(r) = not_modified(headers, &etag) {
-        return Ok(r);
-    }
-    if let Some(pack) = t.pack()
-        && job.halvings == 0
-        && job.crop == Crop::whole(job.side)
-        && let Some((format, bytes)) = stored_image(pack, lod, x, y)
-        && format == t.format
-    {
-        return Ok(reply(bytes));
-    }
-    let cache_key = format!("{index}/{key}");
-    if let Some(bytes) = state.cache.get(&cache_key) {
-        return Ok(reply(bytes));
-    }
-    let permit = state.blocking.clone().acquire_owned().await.map_err(|_| bad("shutting down"))?;
-    let shared = state.clone();
-    let work = tokio::task::spawn_blocking(move || -> Result<Option<(Bytes, bool)>, String> {
-        let _permit = permit;
-        let Some(Source::Tiled(t)) = shared.catalog.inputs.get(index).map(|i| &i.source) else {
-            return Ok(None);
-        };
-        let Some(page) = t.page(lod, x, y)? else { return Ok(None) };
-        if let Some(bytes) = tiles::as_stored(&page, &job, t.format) {
-            return Ok(Some((bytes, false)));
-        }
-        tiles::render(page, &job).map(|b| Some((b, true)))
-    });
-    match work.await {
-        Ok(Ok(Some((bytes, rendered)))) => {
-            if rendered {
-                state.cache.insert(cache_key, bytes.clone());
-            }
-            Ok(reply(bytes))
-        }
-        Ok(Ok(None)) => Err(not_found(format!("page (lod {lod}, x {x}, y {y}) is absent"))),
-        Ok(Err(message)) => Ok(internal(format!("page (lod {lod}, x {x}, y {y}): {message}"))),
-        Err(e) => Ok(internal(format!("page (lod {lod}, x {x}, y {y}): {e}"))),
-    }
-}
-
-fn not_modified(headers: &HeaderMap, etag: &str) -> Option<Reply> {
+pub(super) fn not_modified(headers: &HeaderMap, etag: &str) -> Option<Reply> {
     let r = conditional(headers, etag, || Reply::new("text/plain", Bytes::new()));
     (r.status == StatusCode::NOT_MODIFIED).then_some(r)
 }

@@ -8,6 +8,7 @@
 //! - [`cache`]: the re-encoded tiles, an LRU bounded by bytes;
 //! - [`range`]: one `Range` header;
 //! - [`html`]: the index and the OpenSeadragon page;
+//! - `tile_routes`: a Deep Zoom, IIIF or XYZ tile name into its page, crop and bytes;
 //! - `http`: the axum handler that puts these together, with the headers.
 
 pub mod cache;
@@ -16,6 +17,7 @@ pub mod html;
 mod http;
 pub mod range;
 pub mod routes;
+mod tile_routes;
 pub mod tiles;
 
 use std::future::Future;

@@ -400,6 +400,16 @@ fn serve_stops_cleanly_on_sigterm() {
 }
 
 #[test]
+fn serve_help_teaches_the_routes() {
+    let help = ok(&["serve", "--help"]);
+    for needle in
+        ["/NAME.dzi", "/NAME/iiif/info.json", "/NAME/xyz/", "Range", "Examples:", "--openseadragon", "[default: 64M]"]
+    {
+        assert!(help.contains(needle), "serve --help lacks {needle}");
+    }
+}
+
+#[test]
 fn serve_refuses_bad_inputs_at_start() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

@@ -1,0 +1,175 @@
+//! Viewer tiles of a pyramid of pages: a Deep Zoom, IIIF or XYZ tile name into the page it
+//! comes from and the crop of it (names and crops from [`crate::viewer`]), then the tile
+//! itself: the stored bytes when they are it, else the cache, else decoded, cropped and
+//! encoded on a blocking thread.
+
+use std::sync::Arc;
+
+use axum::http::HeaderMap;
+use bytes::Bytes;
+
+use super::catalog::{Source, Tiled, stored_image};
+use super::http::{AppState, Reply, TILE_CACHE, etag, internal, not_modified};
+use super::routes::{self, Reject, bad, not_found};
+use super::tiles::{self, Format, Job};
+use crate::viewer::{Crop, Viewer, dzi, iiif};
+
+pub(super) fn dzi_extension(t: &Tiled) -> &'static str {
+    Viewer::Dzi.extension(if t.format == Format::Jpeg { "jpg" } else { "png" })
+}
+
+pub(super) fn iiif_extension(t: &Tiled) -> &'static str {
+    Viewer::Iiif.extension(if t.format == Format::Jpeg { "jpg" } else { "png" })
+}
+
+pub(super) async fn dzi_tile(
+    state: &Arc<AppState>,
+    index: usize,
+    t: &Tiled,
+    tile: routes::DziTile,
+    headers: &HeaderMap,
+) -> Result<Reply, Reject> {
+    let ext = dzi_extension(t);
+    if tile.extension != ext {
+        return Err(not_found(format!("the Deep Zoom tiles of this input are .{ext}")));
+    }
+    let l = t.layout.down_to_one_texel();
+    let max = dzi::max_level(l.width, l.height);
+    if tile.level > max {
+        return Err(not_found(format!("level {} is past the finest, {max}", tile.level)));
+    }
+    let lod = max - tile.level;
+    let (c, r) = l.grid(lod);
+    if tile.col >= c || tile.row >= r {
+        return Err(not_found(format!("level {} has {c} x {r} tiles", tile.level)));
+    }
+    let crop = dzi::crop(&l, lod, tile.col, tile.row);
+    let stored = t.layout.lod_count;
+    let (page, halvings, extent) = if lod < stored {
+        ((lod, tile.col, tile.row), 0, (0, 0))
+    } else {
+        ((stored - 1, 0, 0), lod - (stored - 1), t.layout.level_extent(stored - 1))
+    };
+    let key = format!("dzi/{}/{}_{}", tile.level, tile.col, tile.row);
+    let job = Job { side: t.layout.tile_size, border: t.layout.border, crop, extent, halvings, codec: t.codec };
+    serve_tile(state, index, t, page, job, &key, headers).await
+}
+
+pub(super) async fn iiif_tile(
+    state: &Arc<AppState>,
+    index: usize,
+    t: &Tiled,
+    rest: &[String],
+    headers: &HeaderMap,
+) -> Result<Reply, Reject> {
+    let (l, ext) = (&t.layout, iiif_extension(t));
+    let not_a_tile = || not_found(format!("'{}' is not a IIIF tile of this image", rest.join("/")));
+    let (lod, col, row) = match routes::iiif_tile(rest)? {
+        routes::IiifTile::Full { path } => {
+            let last = l.lod_count - 1;
+            let named = iiif::tile_path(l, last, 0, 0, ext) == path || iiif::full_max_path(l, 0, ext) == Some(path);
+            if !named {
+                return Err(not_a_tile());
+            }
+            (last, 0, 0)
+        }
+        routes::IiifTile::Region { x, y, path } => (0..l.lod_count.saturating_sub(1))
+            .find_map(|lod| {
+                let side = (l.payload() as u64) << lod;
+                let (col, row) = (u32::try_from(x / side).ok()?, u32::try_from(y / side).ok()?);
+                let (c, r) = l.grid(lod);
+                let named = x % side == 0 && y % side == 0 && col < c && row < r;
+                (named && iiif::tile_path(l, lod, col, row, ext) == path).then_some((lod, col, row))
+            })
+            .ok_or_else(not_a_tile)?,
+    };
+    // IIIF tiles have no overlap: the page's payload, cut at the image's edge.
+    let c = iiif::crop(l, lod, col, row);
+    let crop = Crop { x: c.x + l.border, y: c.y + l.border, ..c };
+    let key = format!("iiif/{lod}/{col}/{row}");
+    let job = Job { side: l.tile_size, border: l.border, crop, extent: (0, 0), halvings: 0, codec: t.codec };
+    serve_tile(state, index, t, (lod, col, row), job, &key, headers).await
+}
+
+pub(super) async fn xyz_tile(
+    state: &Arc<AppState>,
+    index: usize,
+    t: &Tiled,
+    rest: &[String],
+    headers: &HeaderMap,
+) -> Result<Reply, Reject> {
+    let tile = routes::xyz_tile(rest)?;
+    let l = &t.layout;
+    let ext = Viewer::Xyz.extension(if t.format == Format::Jpeg { "jpg" } else { "png" });
+    if tile.extension != ext {
+        return Err(not_found(format!("the XYZ tiles of this input are .{ext}")));
+    }
+    if tile.zoom >= l.lod_count {
+        return Err(not_found(format!("zoom {} is past the finest, {}", tile.zoom, l.lod_count - 1)));
+    }
+    let lod = l.lod_count - 1 - tile.zoom;
+    let (c, r) = l.grid(lod);
+    if tile.x >= c || tile.y >= r {
+        return Err(not_found(format!("zoom {} has {c} x {r} tiles holding the image", tile.zoom)));
+    }
+    // The payload, whole: edge tiles hold the pack's own padding past the image.
+    let p = l.payload();
+    let crop = Crop { x: l.border, y: l.border, width: p, height: p };
+    let key = format!("xyz/{lod}/{}/{}", tile.x, tile.y);
+    let job = Job { side: l.tile_size, border: l.border, crop, extent: (0, 0), halvings: 0, codec: t.codec };
+    serve_tile(state, index, t, (lod, tile.x, tile.y), job, &key, headers).await
+}
+
+/// One viewer tile: the stored bytes when they are it, else from the cache, else decoded,
+/// cropped and encoded on a blocking thread (and cached).
+async fn serve_tile(
+    state: &Arc<AppState>,
+    index: usize,
+    t: &Tiled,
+    (lod, x, y): (u32, u32, u32),
+    job: Job,
+    key: &str,
+    headers: &HeaderMap,
+) -> Result<Reply, Reject> {
+    let etag = etag(t.etag, key);
+    let reply = |bytes: Bytes| Reply::new(t.format.content_type(), bytes).cached(TILE_CACHE, &etag);
+    if let Some(r) = not_modified(headers, &etag) {
+        return Ok(r);
+    }
+    if let Some(pack) = t.pack()
+        && job.halvings == 0
+        && job.crop == Crop::whole(job.side)
+        && let Some((format, bytes)) = stored_image(pack, lod, x, y)
+        && format == t.format
+    {
+        return Ok(reply(bytes));
+    }
+    let cache_key = format!("{index}/{key}");
+    if let Some(bytes) = state.cache.get(&cache_key) {
+        return Ok(reply(bytes));
+    }
+    let permit = state.blocking.clone().acquire_owned().await.map_err(|_| bad("shutting down"))?;
+    let shared = state.clone();
+    let work = tokio::task::spawn_blocking(move || -> Result<Option<(Bytes, bool)>, String> {
+        let _permit = permit;
+        let Some(Source::Tiled(t)) = shared.catalog.inputs.get(index).map(|i| &i.source) else {
+            return Ok(None);
+        };
+        let Some(page) = t.page(lod, x, y)? else { return Ok(None) };
+        if let Some(bytes) = tiles::as_stored(&page, &job, t.format) {
+            return Ok(Some((bytes, false)));
+        }
+        tiles::render(page, &job).map(|b| Some((b, true)))
+    });
+    match work.await {
+        Ok(Ok(Some((bytes, rendered)))) => {
+            if rendered {
+                state.cache.insert(cache_key, bytes.clone());
+            }
+            Ok(reply(bytes))
+        }
+        Ok(Ok(None)) => Err(not_found(format!("page (lod {lod}, x {x}, y {y}) is absent"))),
+        Ok(Err(message)) => Ok(internal(format!("page (lod {lod}, x {x}, y {y}): {message}"))),
+        Err(e) => Ok(internal(format!("page (lod {lod}, x {x}, y {y}): {e}"))),
+    }
+}
