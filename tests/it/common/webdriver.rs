@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use serde_json::{Value, json};
 
 /// The key W3C WebDriver gives an element reference under.
-const ELEMENT: &str = "element-6066-11e4-a52e-4a6f2fc9e7e5";
+const ELEMENT: &str = "element-6066-11e4-a52e-4f735466cecf";
 
 /// A `chromedriver` with one headless Chromium session; both end when dropped.
 pub struct Browser {
@@ -42,7 +42,7 @@ impl Browser {
             "--disable-gpu".into(),
             "--hide-scrollbars".into(),
             "--allow-file-access-from-files".into(),
-            format!("--window-size={},{}", width + 100, height + 100),
+            format!("--window-size={},{}", width + 200, height + 400),
         ];
         let caps = json!({ "capabilities": { "alwaysMatch": {
             "browserName": "chrome",
@@ -95,10 +95,29 @@ impl Browser {
         );
         stream.write_all(head.as_bytes()).unwrap();
         stream.write_all(body.as_bytes()).unwrap();
+        // chromedriver keeps the connection open: read the head, then Content-Length bytes.
         let mut reply = Vec::new();
-        stream.read_to_end(&mut reply).unwrap();
-        let start = reply.windows(4).position(|w| w == b"\r\n\r\n").expect("an HTTP reply") + 4;
-        let doc: Value = serde_json::from_slice(&reply[start..])
+        let mut chunk = [0u8; 65536];
+        let (start, length) = loop {
+            let n = stream.read(&mut chunk).unwrap();
+            assert!(n > 0, "{method} {path}: the driver closed the connection");
+            reply.extend_from_slice(&chunk[..n]);
+            if let Some(end) = reply.windows(4).position(|w| w == b"\r\n\r\n") {
+                let head = String::from_utf8_lossy(&reply[..end]).to_ascii_lowercase();
+                let length = head
+                    .lines()
+                    .find_map(|l| l.strip_prefix("content-length:"))
+                    .and_then(|v| v.trim().parse::<usize>().ok())
+                    .expect("a Content-Length");
+                break (end + 4, length);
+            }
+        };
+        while reply.len() < start + length {
+            let n = stream.read(&mut chunk).unwrap();
+            assert!(n > 0, "{method} {path}: the reply ended early");
+            reply.extend_from_slice(&chunk[..n]);
+        }
+        let doc: Value = serde_json::from_slice(&reply[start..start + length])
             .unwrap_or_else(|e| panic!("{method} {path}: {e}: {}", String::from_utf8_lossy(&reply)));
         if doc["value"].get("error").is_some() {
             panic!("{method} {path}: {}", doc["value"]);
