@@ -458,11 +458,6 @@ fn bad_iiif_and_zip_inputs_name_the_file() {
     let e = convert_err(&[d("bad.zip").to_str().unwrap(), "-o", o]);
     assert!(e.contains("bad.zip") && e.contains("zip"), "{e}");
 
-    // --layout is the output's layout now: the input's is --input-layout.
-    let r = Command::new(BIN).args(["convert", d("iiif").to_str().unwrap(), "--layout", "google", "-o", o]).output();
-    let r = r.unwrap();
-    let e = String::from_utf8_lossy(&r.stderr);
-    assert!(!r.status.success() && e.contains("--layout"), "{e}");
     std::fs::create_dir(d("plain")).unwrap();
     let e = convert_err(&[d("plain").to_str().unwrap(), "-o", o]);
     assert!(e.contains("--input-layout google") && e.contains("--input-layout xyz"), "{e}");
