@@ -488,12 +488,11 @@ fn tile_for_viewer(
         ..a.enc.requested()
     };
     let (mut opts, _) = settings::resolve(&requested, None, source.layout())?;
-    opts.down_to_one_texel = layout.lod_count > opts.layout(source.width(), source.height())?.lod_count;
+    opts.down_to_one_texel = viewer.down_to_one_texel();
     if !matches!(opts.codec.extension(), "jpg" | "png") {
         bail!("--layout {viewer} tiles are image files: use --codec jpeg or png, not {}", opts.codec.name());
     }
     limits.check_pyramid(&layout, false)?;
-    opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
     let tiles = ViewerTiles {
         viewer,
         layout,

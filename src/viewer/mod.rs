@@ -64,11 +64,12 @@ impl Viewer {
             crate::error::TilerError::Geometry(format!("tile size {tile_size} with overlap {overlap} is too large"))
         })?;
         let layout = Layout::new(width as u64, height as u64, stored, overlap)?;
-        Ok(match self {
-            // Deep Zoom's levels go on below one tile, down to 1 x 1.
-            Viewer::Dzi => layout.down_to_one_texel(),
-            Viewer::Iiif | Viewer::Xyz | Viewer::Google => layout,
-        })
+        Ok(if self.down_to_one_texel() { layout.down_to_one_texel() } else { layout })
+    }
+
+    /// Whether the levels go on below one tile, down to 1 x 1 (Deep Zoom's do).
+    pub fn down_to_one_texel(self) -> bool {
+        self == Viewer::Dzi
     }
 
     /// The extension of a tile file: `jpeg` as vips writes Deep Zoom tiles, `jpg` elsewhere.

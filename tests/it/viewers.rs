@@ -34,10 +34,10 @@ fn write_viewer(
     let opts = SplitOptions {
         tile_size: layout.tile_size,
         border: layout.border,
-        down_to_one_texel: layout.lod_count > opts.layout(image.width, image.height).unwrap().lod_count,
+        down_to_one_texel: viewer.down_to_one_texel(),
         ..opts
     };
-    let summary = split(image.source(), &sink, &SplitOptions { ..opts }, &()).unwrap();
+    let summary = split(image.source(), &sink, &opts, &()).unwrap();
     assert_eq!(summary.tiles, layout.total_tiles());
     sink.finish_viewer().unwrap();
     dest
