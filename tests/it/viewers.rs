@@ -451,10 +451,10 @@ fn convert_writes_viewer_layouts() {
     }
 }
 
-/// `convert` reads each viewer layout we write back: the LOD 0 tiles it cuts from them equal
-/// the tiles `split` cuts from the original (PNG, so lossless). A web-map directory reads as
-/// its whole zoom level, padding included (700 x 500 in 256-texel tiles: 768 x 512), so it
-/// gives these tiles and more.
+/// `convert` reads each viewer layout we write back: every tile it cuts from them equals the
+/// tile `split` cuts from the original (PNG, so lossless), LOD 0 and the same file set. A
+/// web-map directory's padding past the image (700 x 500 in 256-texel tiles is 768 x 512) is
+/// left out by the size `tilejson.json` records.
 #[test]
 fn convert_reads_every_viewer_layout_back() {
     let dir = tempfile::tempdir().unwrap();
@@ -475,6 +475,7 @@ fn convert_reads_every_viewer_layout_back() {
         let mut args = vec!["convert", s(&from), "-o", s(&back), "--codec", "png", "--tile-size", "100", "-q"];
         args.extend_from_slice(flags);
         ok(&args);
+        assert_eq!(files(&back), files(&direct), "{layout}");
         for name in files(&direct).into_iter().filter(|n| n.starts_with("lod00")) {
             let read = |d: &Path| decode_png_sized(&std::fs::read(d.join(&name)).unwrap());
             assert_eq!(read(&direct), read(&back), "{layout}: {name}");

@@ -8,7 +8,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use super::store::{Entry, Kind, MAX_TILE_BYTES, TileStore};
+use super::store::{Entry, Kind, MAX_DESCRIPTOR_BYTES, MAX_TILE_BYTES, TileStore, join};
 use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, TilerError};
 use crate::source::ImageHeader;
@@ -120,11 +120,18 @@ impl Xyz {
                 store.name(root).display()
             ))
         };
-        let header = ImageHeader {
+        let mut header = ImageHeader {
             width: u32::try_from(cols * tw as u64).map_err(|_| too_big())?,
             height: u32::try_from(rows * th as u64).map_err(|_| too_big())?,
             layout,
         };
+        // Our `--layout xyz|google` records the image's size: the padding past it is not read.
+        if (xmin, ymin) == (0, 0)
+            && let Some((width, height)) = recorded_size(&store, root, zoom)?
+        {
+            header.width = header.width.min(width);
+            header.height = header.height.min(height);
+        }
         Ok(Xyz { store, root: root.to_string(), order, zoom, origin: (xmin, ymin), tiles, header, cell: (tw, th) })
     }
 
@@ -139,9 +146,16 @@ impl Xyz {
     }
 }
 
-/// `dir/name`, or `name` at the root.
-fn join(dir: &str, name: &str) -> String {
-    if dir.is_empty() { name.to_string() } else { format!("{dir}/{name}") }
+/// The image's size that `tilejson.json` records under `vortex` (written by `split --layout
+/// xyz|google`), if it describes this zoom level as the finest.
+fn recorded_size(store: &TileStore, root: &str, zoom: u32) -> Result<Option<(u32, u32)>> {
+    let path = join(root, crate::viewer::xyz::TILEJSON);
+    let Some(bytes) = store.read(&path, MAX_DESCRIPTOR_BYTES)? else { return Ok(None) };
+    let doc: serde_json::Value = serde_json::from_slice(&bytes)
+        .map_err(|e| TilerError::decode(store.name(&path), format!("is not JSON: {e}")))?;
+    let number = |v: &serde_json::Value| v.as_u64().and_then(|n| u32::try_from(n).ok()).filter(|n| *n > 0);
+    let size = number(&doc["vortex"]["width"]).zip(number(&doc["vortex"]["height"]));
+    Ok(size.filter(|_| doc["maxzoom"].as_u64() == Some(zoom as u64)))
 }
 
 /// The highest-numbered zoom directory; other entries (metadata files, viewers) are ignored.

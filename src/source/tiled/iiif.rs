@@ -14,7 +14,7 @@ use std::path::Path;
 
 use serde_json::Value;
 
-use super::store::{Kind, MAX_DESCRIPTOR_BYTES, MAX_TILE_BYTES, TileStore};
+use super::store::{Kind, MAX_DESCRIPTOR_BYTES, MAX_TILE_BYTES, TileStore, join};
 use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
@@ -166,11 +166,6 @@ impl Iiif {
         let (cols, rows) = self.grid_size();
         (col < cols && row < rows && self.region(col, row) == (x, y, w, h)).then_some((col, row))
     }
-}
-
-/// `dir/name`, or `name` at the root.
-fn join(dir: &str, name: &str) -> String {
-    if dir.is_empty() { name.to_string() } else { format!("{dir}/{name}") }
 }
 
 impl TileGrid for Iiif {

@@ -109,6 +109,11 @@ impl TileStore {
     }
 }
 
+/// `dir/name`, or `name` at the root: a path inside a store.
+pub fn join(dir: &str, name: &str) -> String {
+    if dir.is_empty() { name.to_string() } else { format!("{dir}/{name}") }
+}
+
 fn too_big(name: &Path, size: u64, cap: u64) -> TilerError {
     TilerError::unsupported(
         name,
