@@ -285,6 +285,19 @@ MPX=$(calc %.4f "$SIDE * $SIDE / 1e6")
 VIPS_WALL=$(m sqvips 3)
 VIPS_RSS=$(m sqvips 4)
 REPORT=$WORK/report.md
+
+# raw_runs PREFIX: the runs of the tools whose names start with PREFIX, as a folded list.
+raw_runs() {
+  echo "<details><summary>Raw runs (wall s, peak RSS MiB, user + system CPU s, tile bytes, tiles, 1-minute load average before the run)</summary>"
+  echo
+  while IFS=$'\t' read -r tool run wall rss user sys bytes load tiles; do
+    [[ $tool == "$1"* ]] || continue
+    echo "- ${tool#"$1"} run $run: wall $wall s, peak RSS $(calc %.1f "$rss / 1024") MiB, CPU $user + $sys s, tiles $bytes B in $tiles files, load $load"
+  done <"$RESULTS"
+  echo
+  echo "</details>"
+}
+
 {
   echo "Run $(date -u '+%Y-%m-%d %H:%M UTC'), $RUNS alternating runs per tool; machine: $(nproc) cores ($CPU_MODEL), $MEM_GIB GiB RAM, $(. /etc/os-release && echo "$PRETTY_NAME"), 1-minute load average $LOADS before the runs; peers: $VIPS_VERSION (Debian libvips-tools)${PYVIPS_VERSION:+, $PYVIPS_VERSION (pyvips-binary from PyPI)}; vortex-tiler at $REV${BEFORE:+ and, before, at $BEFORE_REV}."
   echo
@@ -304,14 +317,7 @@ REPORT=$WORK/report.md
   fi
   echo "Throughput ratio = vips 8.14 median wall / tool median wall (above 1 is faster); memory ratio = tool peak RSS / vips 8.14 peak RSS (below 1 is leaner). Tiles = files written; output = their summed size; vips also writes levels below one tile (down to 1x1), vortex-tiler stops at one 256-texel tile. PSNR is over every RGB sample of the finest level, tiles decoded by the \`image\` crate. Each run writes a fresh directory and outputs are deleted only after all runs (see the script's header on ext4 and recently deleted inodes)."
   echo
-  echo "<details><summary>Raw runs (wall s, peak RSS MiB, user + system CPU s, tile bytes, tiles, 1-minute load average before the run)</summary>"
-  echo
-  while IFS=$'\t' read -r tool run wall rss user sys bytes load tiles; do
-    [[ $tool == sq* ]] || continue
-    echo "- ${tool#sq} run $run: wall $wall s, peak RSS $(calc %.1f "$rss / 1024") MiB, CPU $user + $sys s, tiles $bytes B in $tiles files, load $load"
-  done <"$RESULTS"
-  echo
-  echo "</details>"
+  raw_runs sq
 } >"$REPORT"
 
 BMPX=$(calc %.4f "$SIDE * $BIG_H / 1e6")
@@ -348,14 +354,7 @@ TALL_REPORT=$WORK/report-tall.md
       echo '```'
     done
     echo
-    echo "<details><summary>Raw runs (wall s, peak RSS MiB, user + system CPU s, tile bytes, tiles, 1-minute load average before the run)</summary>"
-    echo
-    while IFS=$'\t' read -r tool run wall rss user sys bytes load tiles; do
-      [[ $tool == tall* ]] || continue
-      echo "- ${tool#tall} run $run: wall $wall s, peak RSS $(calc %.1f "$rss / 1024") MiB, CPU $user + $sys s, tiles $bytes B in $tiles files, load $load"
-    done <"$RESULTS"
-    echo
-    echo "</details>"
+    raw_runs tall
   fi
 } >"$TALL_REPORT"
 
