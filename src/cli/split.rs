@@ -321,7 +321,7 @@ pub fn tile(
         (Some(dir), _) => {
             let sink = DirSink::create(&claim, names)?;
             let summary = run.into_dir(sink, &opts, |sink| sink.finish(&info))?;
-            report(a, "vortex", &summary, dir, None)
+            report(a, "vortex", &summary, dir, None);
         }
         (None, Some(file)) => {
             let sink = PackSink::create(
@@ -335,10 +335,11 @@ pub fn tile(
             // On error the sink is dropped, which deletes the unfinished pack.
             let summary = run.execute(&sink, &opts)?;
             let written = sink.finish()?;
-            report(a, "pack", &summary, file, Some(&written))
+            report(a, "pack", &summary, file, Some(&written));
         }
         (None, None) => unreachable!("clap requires --output or --pack"),
     }
+    Ok(())
 }
 
 /// A run about to start: the source, the worker threads and the progress bar.
@@ -405,13 +406,7 @@ pub struct Finished {
 }
 
 /// The summary line (and a pack's line), or with --json one JSON object; nothing with --quiet.
-fn report(
-    a: &OutputArgs,
-    layout: &str,
-    done: &Finished,
-    dest: &Path,
-    pack: Option<&vortex_pack::WriteSummary>,
-) -> Result<()> {
+fn report(a: &OutputArgs, layout: &str, done: &Finished, dest: &Path, pack: Option<&vortex_pack::WriteSummary>) {
     if a.json {
         say!("{}", report::summary_json(done, layout, dest, pack));
     } else if !a.quiet {
@@ -420,7 +415,6 @@ fn report(
         }
         say!("{}", report::summary_line(done, dest));
     }
-    Ok(())
 }
 
 /// `split`/`convert --layout dzi|iiif|xyz|google`: the same pipeline into a directory a viewer
@@ -503,5 +497,6 @@ fn tile_for_viewer(
     let run = Run::start(source, a, &layout, started)?;
     let sink = DirSink::for_viewer(&claim, tiles)?;
     let done = run.into_dir(sink, &opts, DirSink::finish_viewer)?;
-    report(a, viewer.name(), &done, dest, None)
+    report(a, viewer.name(), &done, dest, None);
+    Ok(())
 }

@@ -148,7 +148,7 @@ impl TileSink for DirSink {
     fn crop(&self, lod: u32, x: u32, y: u32) -> Option<Crop> {
         match &self.names {
             Names::Pattern(_) => None,
-            Names::Viewer(tiles) => Some(tiles.place(lod, x, y).crop),
+            Names::Viewer(tiles) => Some(tiles.crop(lod, x, y)),
         }
     }
 

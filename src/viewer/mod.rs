@@ -128,23 +128,22 @@ pub struct ViewerTiles {
 impl ViewerTiles {
     /// Where page (lod, x, y) goes and which of its texels it keeps.
     pub fn place(&self, lod: u32, x: u32, y: u32) -> Placed {
-        let l = &self.layout;
+        let (l, ext) = (&self.layout, self.extension);
+        let (path, alias) = match self.viewer {
+            Viewer::Dzi => (dzi::tile_path(&self.name, dzi::level_of(l, lod), x, y, ext), None),
+            Viewer::Iiif => (iiif::tile_path(l, lod, x, y, ext), iiif::full_max_path(l, lod, ext)),
+            Viewer::Xyz | Viewer::Google => (xyz::tile_path(self.viewer, l.lod_count - 1 - lod, x, y, ext), None),
+        };
+        Placed { path, alias, crop: self.crop(lod, x, y) }
+    }
+
+    /// Which texels of page (lod, x, y) its tile keeps (no file name made: the encoders ask
+    /// this of every page).
+    pub fn crop(&self, lod: u32, x: u32, y: u32) -> Crop {
         match self.viewer {
-            Viewer::Dzi => Placed {
-                path: dzi::tile_path(&self.name, dzi::level_of(l, lod), x, y, self.extension),
-                alias: None,
-                crop: dzi::crop(l, lod, x, y),
-            },
-            Viewer::Iiif => Placed {
-                path: iiif::tile_path(l, lod, x, y, self.extension),
-                alias: iiif::full_max_path(l, lod, self.extension),
-                crop: iiif::crop(l, lod, x, y),
-            },
-            Viewer::Xyz | Viewer::Google => Placed {
-                path: xyz::tile_path(self.viewer, l.lod_count - 1 - lod, x, y, self.extension),
-                alias: None,
-                crop: Crop::whole(l.tile_size),
-            },
+            Viewer::Dzi => dzi::crop(&self.layout, lod, x, y),
+            Viewer::Iiif => iiif::crop(&self.layout, lod, x, y),
+            Viewer::Xyz | Viewer::Google => Crop::whole(self.layout.tile_size),
         }
     }
 
