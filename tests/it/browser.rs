@@ -9,14 +9,13 @@
 //! tests/browser` (all done by `.ci/run`); outside CI a missing one skips with a note, under
 //! `CI=true` it fails.
 
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 use image::{ImageBuffer, Rgb, RgbImage, imageops};
 
-use crate::common::cli::{BIN, ok, s};
+use crate::common::cli::{ok, s};
+use crate::common::server::Server;
 use crate::common::webdriver::Browser;
 
 /// Below this the picture is wrong (a blank viewer is about 5 dB); a correct one measured 26.8
@@ -65,35 +64,6 @@ fn browser_parts() -> Result<Parts, String> {
         return Err("no OpenSeadragon (npm ci --prefix tests/browser)".into());
     }
     Ok(Parts { chromium, chromedriver, openseadragon })
-}
-
-/// `vortex-tiler serve` on a free loopback port, stopped when dropped.
-struct Server {
-    child: Child,
-    url: String,
-}
-
-impl Server {
-    fn start(inputs: &[&Path]) -> Server {
-        let mut child = Command::new(BIN)
-            .arg("serve")
-            .args(inputs)
-            .args(["--addr", "127.0.0.1:0"])
-            .stdout(Stdio::piped())
-            .spawn()
-            .expect("serve starts");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
-        let url = line.split_whitespace().find(|w| w.starts_with("http://")).expect("serve prints its URL").to_string();
-        Server { child, url: url.trim_end_matches('/').to_string() }
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
 }
 
 /// OpenSeadragon showing `region` of the tile source at `source_url`, once every tile of the
@@ -157,12 +127,12 @@ fn openseadragon_shows_what_we_write_and_serve() {
     ok(&["split", s(&input), "--layout", "iiif", "-o", s(&iiif), "--tile-size", "256", "--quality", "95", "-q"]);
     // Borders, as a GPU pack has them: served as Deep Zoom overlap, not shifted by them.
     ok(&["split", s(&input), "--pack", s(&pack), "--tile-size", "256", "--border", "4", "--quality", "95", "-q"]);
-    let server = Server::start(&[&dzi, &iiif, &pack]);
+    let server = Server::start(&[&dzi, &iiif, &pack], &[]);
     let browser = Browser::start(&parts.chromedriver, &parts.chromium, VIEW);
     let sources = [
-        ("dzi directory", format!("{}/dzi.dzi", server.url)),
-        ("iiif directory", format!("{}/iiif/iiif/info.json", server.url)),
-        ("pack as Deep Zoom", format!("{}/packed.dzi", server.url)),
+        ("dzi directory", format!("{}/dzi.dzi", server.url())),
+        ("iiif directory", format!("{}/iiif/iiif/info.json", server.url())),
+        ("pack as Deep Zoom", format!("{}/packed.dzi", server.url())),
     ];
     let mut failures = Vec::new();
     for (what, url) in &sources {

@@ -1,100 +1,13 @@
 //! `serve`: the built binary on 127.0.0.1:0, asked by a raw HTTP/1.1 client (a socket, so
 //! malformed requests can be sent too), over inputs made by `split` in a temporary directory.
 
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::TcpStream;
+use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
-use crate::common::cli::{BIN, fixture, ok, run, s};
-
-/// A running `vortex-tiler serve`, killed when dropped.
-struct Server {
-    child: Child,
-    port: u16,
-}
-
-impl Server {
-    fn start(inputs: &[&Path], extra: &[&str]) -> Server {
-        let mut cmd = Command::new(BIN);
-        cmd.arg("serve").args(inputs).args(["--addr", "127.0.0.1:0"]).args(extra);
-        let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("serve starts");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
-        let addr = line
-            .trim()
-            .strip_prefix(&format!("serving {} inputs on http://", inputs.len()))
-            .and_then(|rest| rest.strip_suffix('/'))
-            .unwrap_or_else(|| panic!("unexpected first line {line:?}"));
-        let port = addr.rsplit_once(':').unwrap().1.parse().unwrap();
-        Server { child, port }
-    }
-
-    /// Sends `head` (request line and headers, without the blank line) and reads the answer.
-    fn raw(&self, head: &str) -> Reply {
-        let mut stream = TcpStream::connect(("127.0.0.1", self.port)).unwrap();
-        stream.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
-        stream.write_all(format!("{head}\r\nConnection: close\r\n\r\n").as_bytes()).unwrap();
-        let mut bytes = Vec::new();
-        stream.read_to_end(&mut bytes).unwrap();
-        Reply::parse(&bytes)
-    }
-
-    fn get(&self, path: &str, headers: &[(&str, &str)]) -> Reply {
-        self.request("GET", path, headers)
-    }
-
-    fn request(&self, method: &str, path: &str, headers: &[(&str, &str)]) -> Reply {
-        let mut head = format!("{method} {path} HTTP/1.1\r\nHost: 127.0.0.1:{}", self.port);
-        for (k, v) in headers {
-            head.push_str(&format!("\r\n{k}: {v}"));
-        }
-        self.raw(&head)
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-#[derive(Debug)]
-struct Reply {
-    status: u16,
-    headers: Vec<(String, String)>,
-    body: Vec<u8>,
-}
-
-impl Reply {
-    fn parse(bytes: &[u8]) -> Reply {
-        let split = bytes.windows(4).position(|w| w == b"\r\n\r\n").expect("a complete head");
-        let head = String::from_utf8_lossy(&bytes[..split]).into_owned();
-        let mut lines = head.split("\r\n");
-        let status = lines.next().unwrap().split(' ').nth(1).unwrap().parse().unwrap();
-        let headers = lines
-            .filter_map(|l| l.split_once(':'))
-            .map(|(k, v)| (k.trim().to_ascii_lowercase(), v.trim().to_string()))
-            .collect();
-        Reply { status, headers, body: bytes[split + 4..].to_vec() }
-    }
-
-    fn header(&self, name: &str) -> Option<&str> {
-        self.headers.iter().find(|(k, _)| k == name).map(|(_, v)| v.as_str())
-    }
-
-    fn text(&self) -> String {
-        String::from_utf8_lossy(&self.body).into_owned()
-    }
-
-    /// The body decoded as an image: (width, height).
-    fn image_size(&self) -> (u32, u32) {
-        let image = image::load_from_memory(&self.body).unwrap_or_else(|e| panic!("not an image ({e}): {self:?}"));
-        (image.width(), image.height())
-    }
-}
+use crate::common::cli::{fixture, ok, run, s};
+use crate::common::server::Server;
 
 /// sample.png (700 x 500) as a JPEG pack in 64-texel tiles with a border of 1 (payload 62):
 /// LOD 0 is 12 x 9 pages, 5 LODs; Deep Zoom levels 10..6 are stored, 5..0 derived.

@@ -2,6 +2,7 @@
 //! pyramid (the oracle the streaming pipeline must match byte for byte).
 
 pub mod cli;
+pub mod server;
 pub mod webdriver;
 
 use std::collections::BTreeMap;
