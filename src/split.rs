@@ -9,6 +9,7 @@
 //! tiles. Output bytes do not depend on the thread count. This file is only that
 //! orchestration; the stages live in their modules.
 
+use std::borrow::Cow;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, sync_channel};
 
@@ -282,7 +283,7 @@ fn consume<T: Sample>(
         let jobs: Vec<Job<T>> =
             work.iter().flat_map(|b| b.tiles.iter().flat_map(|t| Job::of(sink, b.lod, t))).collect();
         let store = |(job, stored): (&Job<T>, Stored)| -> Result<()> {
-            for &(x, y) in &job.places {
+            for &(x, y) in job.places.iter() {
                 match &stored {
                     Stored::Encoded(bytes) => sink.write_tile(job.lod, x, y, bytes)?,
                     Stored::Constant(texel) => sink.write_constant(job.lod, x, y, texel)?,
@@ -315,19 +316,25 @@ struct Job<'a, T> {
     lod: u32,
     tile: &'a CutTile<T>,
     crop: Option<Crop>,
-    places: Vec<(u32, u32)>,
+    places: Cow<'a, [(u32, u32)]>,
 }
 
 impl<'a, T> Job<'a, T> {
-    /// The encodings a cut tile needs: one, unless the sink crops its places differently
-    /// (identical pages merged at the cut may sit at a viewer tile's edge and in the middle).
+    /// The encodings a cut tile needs: one (borrowing its places), unless the sink crops its
+    /// places differently (identical pages merged at the cut may sit at a viewer tile's edge
+    /// and in the middle).
     fn of(sink: &dyn TileSink, lod: u32, tile: &'a CutTile<T>) -> Vec<Job<'a, T>> {
+        let crop_at = |&(x, y): &(u32, u32)| sink.crop(lod, x, y);
+        let first = crop_at(&tile.places[0]);
+        if tile.places[1..].iter().all(|p| crop_at(p) == first) {
+            return vec![Job { lod, tile, crop: first, places: Cow::Borrowed(&tile.places) }];
+        }
         let mut jobs: Vec<Job<T>> = Vec::new();
-        for &(x, y) in &tile.places {
-            let crop = sink.crop(lod, x, y);
+        for place in &tile.places {
+            let crop = crop_at(place);
             match jobs.iter_mut().find(|j| j.crop == crop) {
-                Some(job) => job.places.push((x, y)),
-                None => jobs.push(Job { lod, tile, crop, places: vec![(x, y)] }),
+                Some(job) => job.places.to_mut().push(*place),
+                None => jobs.push(Job { lod, tile, crop, places: Cow::Owned(vec![*place]) }),
             }
         }
         jobs
