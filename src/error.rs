@@ -50,6 +50,10 @@ pub enum TilerError {
     #[error("{0}")]
     Limit(String),
 
+    /// A shard of a sharded split that does not belong with the others, or is damaged.
+    #[error("{}: {message}", path.display())]
+    Shard { path: PathBuf, message: String },
+
     /// The destination may not be written (see [`crate::output`]).
     #[error(transparent)]
     Output(#[from] crate::output::OutputError),

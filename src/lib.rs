@@ -30,6 +30,7 @@ pub mod pyramid;
 pub mod repack;
 pub mod serve;
 pub mod settings;
+pub mod shard;
 pub mod sink;
 pub mod source;
 pub mod split;

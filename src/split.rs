@@ -19,15 +19,19 @@ use crate::background::Background;
 use crate::codec::{Codec, TileEncoder};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
+use crate::limits::human_bytes;
 use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::pyramid::Filter;
 use crate::pyramid::cascade::{Batch, BatchSender, Cascade, CutTile, Span};
 use crate::pyramid::cut::Padding;
 use crate::pyramid::filter::ExactFilter;
 use crate::pyramid::reduce::{Acc, Reducer};
-use crate::pyramid::stripes::Plan;
+use crate::pyramid::stripes::{Plan, span_bytes};
+use crate::shard::ShardPlan;
+use crate::shard::merge::RootRows;
+use crate::shard::sums::{self, EncodedRoots};
 use crate::sink::TileSink;
-use crate::source::RowSource;
+use crate::source::{ImageHeader, RowSource};
 use crate::viewer::Crop;
 
 /// How to cut and store the pyramid.
@@ -101,20 +105,105 @@ pub fn split(
     progress: &dyn Progress,
 ) -> Result<Summary> {
     let layout = opts.layout(source.width(), source.height())?;
-    match source.layout().depth {
-        Depth::U8 => run::<u8>(source, sink, opts, layout, progress),
-        Depth::U16 => run::<u16>(source, sink, opts, layout, progress),
+    let plan = Plan::choose(&layout, source.layout().bytes_per_pixel() as u64, opts.filter, opts.max_memory)?;
+    let (summary, _) = by_depth(source.header(), sink, opts, layout, Passes::Whole(plan, source), progress)?;
+    Ok(summary)
+}
+
+/// Shard `index` of `shards`: the pages of its subtrees at the cut level and below, and the
+/// exact sums of its roots for `merge` ([`crate::shard`]).
+pub fn split_shard(
+    source: Box<dyn RowSource>,
+    sink: &dyn TileSink,
+    opts: &SplitOptions,
+    shards: &ShardPlan,
+    index: u32,
+    progress: &dyn Progress,
+) -> Result<(Summary, Vec<EncodedRoots>)> {
+    let layout = opts.layout(source.width(), source.height())?;
+    if !opts.filter.is_exact() {
+        return Err(TilerError::Options(format!(
+            "--filter {} cannot be sharded (it resamples each level across the shards' edges); an exact filter such as the default can",
+            opts.filter
+        )));
+    }
+    let spans: Vec<Span> = shards.regions(index).iter().map(|r| shards.span(&layout, r)).collect();
+    let texel_bytes = source.layout().bytes_per_pixel() as u64;
+    let sums = sum_bytes(opts, source.layout(), &layout) as u64;
+    let channels = source.layout().channels.count() as u64;
+    for span in &spans {
+        let roots = span.window(&layout, shards.cut);
+        let roots_rows = span.window_rows(&layout, shards.cut);
+        let need = span_bytes(&layout, span, texel_bytes)
+            .saturating_add((roots.end - roots.start) * (roots_rows.end - roots_rows.start) * channels * sums);
+        if need > opts.max_memory {
+            return Err(TilerError::Limit(format!(
+                "shard {index} of {} makes pages {} texels wide, which needs {}, more than --max-memory ({}); raise --max-memory or cut more shards",
+                shards.count(),
+                (span.window(&layout, 0).end - span.window(&layout, 0).start),
+                human_bytes(need),
+                human_bytes(opts.max_memory)
+            )));
+        }
+    }
+    by_depth(source.header(), sink, opts, layout, Passes::Shard(spans, source), progress)
+}
+
+/// The levels above a sharded run's cut level, from the exact sums of its roots: what
+/// `merge` makes ([`crate::shard::merge`]). `image` is the source's size and texels.
+pub(crate) fn above_cut(
+    image: ImageHeader,
+    roots: RootRows<'_>,
+    sink: &dyn TileSink,
+    opts: &SplitOptions,
+    progress: &dyn Progress,
+) -> Result<Summary> {
+    let layout = opts.layout(image.width, image.height)?;
+    let (summary, _) = by_depth(image, sink, opts, layout, Passes::AboveCut(roots), progress)?;
+    Ok(summary)
+}
+
+/// Bytes of one exact sum of a run of `opts` on a `source` image cut into `layout`: 8, or 16
+/// where the filter's sums could overflow a `u64` over the pyramid's depth.
+pub fn sum_bytes(opts: &SplitOptions, source: PixelLayout, layout: &Layout) -> usize {
+    match ExactFilter::new(opts.filter, source).is_some_and(|f| f.needs_u128(layout.lod_count)) {
+        true => 16,
+        false => 8,
+    }
+}
+
+/// What a run reads, and in which passes.
+enum Passes<'a> {
+    /// The whole pyramid from the source: one band, or stripes and a coarse pass.
+    Whole(Plan, Box<dyn RowSource>),
+    /// A shard's rectangles of the source, top to bottom, keeping their roots' sums.
+    Shard(Vec<Span>, Box<dyn RowSource>),
+    /// The levels above the cut, from the roots' sums.
+    AboveCut(RootRows<'a>),
+}
+
+fn by_depth(
+    image: ImageHeader,
+    sink: &dyn TileSink,
+    opts: &SplitOptions,
+    layout: Layout,
+    passes: Passes,
+    progress: &dyn Progress,
+) -> Result<(Summary, Vec<EncodedRoots>)> {
+    match image.layout.depth {
+        Depth::U8 => run::<u8>(image.layout, sink, opts, layout, passes, progress),
+        Depth::U16 => run::<u16>(image.layout, sink, opts, layout, passes, progress),
     }
 }
 
 fn run<T: Sample>(
-    source: Box<dyn RowSource>,
+    src_layout: PixelLayout,
     sink: &dyn TileSink,
     opts: &SplitOptions,
     layout: Layout,
+    passes: Passes,
     progress: &dyn Progress,
-) -> Result<Summary> {
-    let src_layout = source.layout();
+) -> Result<(Summary, Vec<EncodedRoots>)> {
     let channels = src_layout.channels;
     let matte = opts.background.matte::<T>(channels);
     let encoder =
@@ -124,32 +213,34 @@ fn run<T: Sample>(
         None => Padding::Edge,
     };
 
-    let texel_bytes = src_layout.bytes_per_pixel() as u64;
-    let plan = Plan::choose(&layout, texel_bytes, opts.filter, opts.max_memory)?;
-    let (stripes, passes) = (plan.stripes.len(), plan.stripes.len() + plan.coarse.is_some() as usize);
+    let (stripes, pass_count) = match &passes {
+        Passes::Whole(plan, _) => (plan.stripes.len(), plan.stripes.len() + plan.coarse.is_some() as usize),
+        Passes::Shard(spans, _) => (1, spans.len()),
+        Passes::AboveCut(_) => (1, 0),
+    };
 
     let (tx, rx) = sync_channel::<Result<Batch<T>>>(QUEUE_BATCHES);
     let encoded = AtomicU64::new(0);
     let tiles = AtomicU64::new(0);
-    std::thread::scope(|scope| {
+    let roots = std::thread::scope(|scope| {
         let producer = scope.spawn(move || {
-            let exact = ExactFilter::new(opts.filter, src_layout);
             let producer = Producer { layout, pixels: src_layout, opts, padding, out: tx.clone(), progress };
-            let result = if exact.is_some_and(|f| f.needs_u128(layout.lod_count)) {
-                producer.run::<u128>(&plan, source)
-            } else {
-                producer.run::<u64>(&plan, source)
+            let result = match sum_bytes(opts, src_layout, &layout) {
+                16 => producer.run::<u128>(passes),
+                _ => producer.run::<u64>(passes),
             };
-            if let Err(e) = result {
+            // An error goes to the consumer, which stops and returns it.
+            result.unwrap_or_else(|e| {
                 let _ = tx.send(Err(e));
-            }
+                Vec::new()
+            })
         });
         let consumed = consume(rx, &encoder, sink, &encoded, &tiles, progress);
         // Dropping the receiver (on error) makes the producer's next send fail, so it stops.
-        producer.join().map_err(|_| TilerError::Options("the tiling thread panicked".into()))?;
-        consumed
+        let produced = producer.join().map_err(|_| TilerError::Options("the tiling thread panicked".into()))?;
+        consumed.map(|()| produced)
     })?;
-    Ok(Summary {
+    let summary = Summary {
         layout,
         source: src_layout,
         stored: encoder.stored_layout(),
@@ -157,8 +248,9 @@ fn run<T: Sample>(
         encoded: encoded.into_inner(),
         bytes: sink.bytes_written(),
         stripes,
-        passes,
-    })
+        passes: pass_count,
+    };
+    Ok((summary, roots))
 }
 
 /// The producer: reads the source row by row into each pass's cascade, which sends the cut
@@ -173,21 +265,62 @@ struct Producer<'a, T> {
 }
 
 impl<T: Sample> Producer<'_, T> {
-    fn run<A: Acc>(&self, plan: &Plan, mut source: Box<dyn RowSource>) -> Result<()>
+    fn run<A: Acc>(&self, passes: Passes) -> Result<Vec<EncodedRoots>>
     where
         T: Into<A>,
     {
+        let (plan, mut source) = match passes {
+            Passes::Whole(plan, source) => (plan, source),
+            Passes::Shard(spans, mut source) => return self.shard::<A>(&spans, source.as_mut()),
+            Passes::AboveCut(roots) => return self.above_cut::<A>(roots).map(|()| Vec::new()),
+        };
         for (i, stripe) in plan.stripes.iter().enumerate() {
             if i > 0 {
                 source.rewind()?;
             }
-            self.stripe::<A>(stripe, source.as_mut())?;
+            let mut cascade = self.cascade::<A>(stripe);
+            self.stripe::<A>(stripe, source.as_mut(), &mut cascade)?;
         }
         if let Some(coarse) = &plan.coarse {
             source.rewind()?;
             self.coarse::<A>(coarse, source.as_mut())?;
         }
-        Ok(())
+        Ok(Vec::new())
+    }
+
+    /// A shard's rectangles, each one pass over its rows of the source (with the margin its
+    /// borders read), keeping the exact sums of its roots (halved: the sums of the texels of
+    /// the level above them, or this rectangle's part of them).
+    #[expect(clippy::expect_used, reason = "the cascade was asked to keep its root sums")]
+    fn shard<A: Acc>(&self, spans: &[Span], source: &mut dyn RowSource) -> Result<Vec<EncodedRoots>>
+    where
+        T: Into<A>,
+    {
+        let mut at = 0u64;
+        let mut all = Vec::with_capacity(spans.len());
+        for span in spans {
+            let rows = span.window_rows(&self.layout, 0);
+            if rows.start < at {
+                source.rewind()?;
+                at = 0;
+            }
+            source.skip_rows((rows.start - at) as u32)?;
+            let mut cascade = self.cascade::<A>(span);
+            let above = span.lods.end < self.layout.lod_count;
+            if above {
+                cascade.keep_root_sums(span);
+            }
+            self.stripe::<A>(span, source, &mut cascade)?;
+            at = rows.end;
+            if above {
+                // What merge needs are the sums of the level above the roots.
+                let channels = self.pixels.channels.count();
+                let roots = cascade.take_root_sums().expect("kept").halved(channels);
+                let bytes = sums::encode(&roots, channels)?;
+                all.push(EncodedRoots { columns: roots.columns, rows: roots.rows, bytes });
+            }
+        }
+        Ok(all)
     }
 
     fn cascade<A: Acc>(&self, span: &Span) -> Cascade<T, A>
@@ -197,13 +330,13 @@ impl<T: Sample> Producer<'_, T> {
         Cascade::new(self.layout, span, self.pixels, self.opts.filter, self.padding.clone(), self.out.clone())
     }
 
-    /// LOD 0 onwards for the columns of `span`: the window's part of each source row, read
-    /// alone where the source can ([`RowSource::read_columns`]), else cut from the whole row.
-    fn stripe<A: Acc>(&self, span: &Span, source: &mut dyn RowSource) -> Result<()>
+    /// LOD 0 onwards for the columns and rows of `span`, from the source's next row on: the
+    /// window's part of each source row, read alone where the source can
+    /// ([`RowSource::read_columns`]), else cut from the whole row.
+    fn stripe<A: Acc>(&self, span: &Span, source: &mut dyn RowSource, cascade: &mut Cascade<T, A>) -> Result<()>
     where
         T: Into<A>,
     {
-        let mut cascade = self.cascade::<A>(span);
         let channels = self.pixels.channels.count();
         let window = span.window(&self.layout, 0);
         let whole = window.end - window.start == self.layout.width as u64;
@@ -213,11 +346,38 @@ impl<T: Sample> Producer<'_, T> {
             false => window.start as usize * channels..window.end as usize * channels,
         };
         let mut row = vec![T::default(); if narrow { columns.end } else { self.layout.width as usize * channels }];
-        for _ in 0..self.layout.height {
+        for _ in span.window_rows(&self.layout, 0) {
             self.check_cancelled()?;
             source.read_row(bytemuck::cast_slice_mut(&mut row))?;
             cascade.push_source_row(&row[columns.clone()])?;
         }
+        cascade.finish()
+    }
+
+    /// The LODs above the cut level, from the exact sums of the first of them, assembled row
+    /// by row from the shards' roots.
+    fn above_cut<A: Acc>(&self, mut roots: RootRows) -> Result<()>
+    where
+        T: Into<A>,
+    {
+        let lod = roots.lod();
+        let (columns, rows) = self.layout.grid(lod);
+        let span = Span { lods: lod..self.layout.lod_count, columns: 0..columns, rows: 0..rows };
+        let mut cascade = self.cascade::<A>(&span);
+        let (w, h) = (self.layout.width as u64, self.layout.height as u64);
+        let (width, height) = self.layout.level_extent(lod);
+        let channels = self.pixels.channels.count();
+        // Zero levels: each row of sums comes back as itself, weighed by its place.
+        let mut weigh = Reducer::<A>::window(w, h, lod, 0, 0, width as usize, channels);
+        let mut row = vec![A::default(); width as usize * channels];
+        for y in 0..height as u64 {
+            self.check_cancelled()?;
+            roots.read(y, &mut row)?;
+            if let Some(sums) = weigh.push(&row) {
+                cascade.push_exact(&sums)?;
+            }
+        }
+        roots.finish()?;
         cascade.finish()
     }
 

@@ -13,8 +13,14 @@ pub struct Band<T> {
 }
 
 impl<T: Copy> Band<T> {
+    #[cfg(test)]
     pub fn new(row_len: usize, capacity_rows: usize) -> Band<T> {
-        Band { row_len, first: 0, data: Vec::with_capacity(row_len * capacity_rows) }
+        Band::starting_at(0, row_len, capacity_rows)
+    }
+
+    /// A band whose first row will be image row `first` (a shard's region starts below the top).
+    pub fn starting_at(first: u64, row_len: usize, capacity_rows: usize) -> Band<T> {
+        Band { row_len, first, data: Vec::with_capacity(row_len * capacity_rows) }
     }
 
     /// One past the last row held (= rows received so far).

@@ -56,41 +56,60 @@ enum Down<T, A> {
 }
 
 /// The part of the pyramid one cascade makes: LODs `lods`, and of the first of them the page
-/// columns `pages` (of each LOD below it, the pages above those). The whole pyramid is one
-/// span; a stripe of a wide image ([`crate::pyramid::stripes`]) is the fine LODs of a few page
-/// columns, and its coarse pass the remaining LODs at full width.
+/// columns `columns` and page rows `rows` (of each LOD below it, the pages above those). The
+/// whole pyramid is one span; a stripe of a wide image ([`crate::pyramid::stripes`]) is the
+/// fine LODs of a few page columns, and its coarse pass the remaining LODs at full width; a
+/// shard's region ([`crate::shard`]) is a rectangle of whole subtrees of its last LOD.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub(crate) struct Span {
     pub lods: Range<u32>,
-    pub pages: Range<u32>,
+    pub columns: Range<u32>,
+    pub rows: Range<u32>,
 }
 
 impl Span {
     pub fn whole(layout: &Layout) -> Span {
-        Span { lods: 0..layout.lod_count, pages: 0..layout.columns }
+        Span { lods: 0..layout.lod_count, columns: 0..layout.columns, rows: 0..layout.rows }
     }
 
     /// Page columns of `lod` that this span cuts: the parents of its first LOD's pages (a
     /// stripe starts on a page of every LOD it makes, and the grid's last column's parent is
     /// the next LOD's last column, as nested ceilings compose).
-    pub fn pages_at(&self, lod: u32) -> Range<u32> {
-        let k = lod - self.lods.start;
-        self.pages.start >> k..self.pages.end.div_ceil(1 << k)
+    pub fn columns_at(&self, lod: u32) -> Range<u32> {
+        parents(&self.columns, lod - self.lods.start)
+    }
+
+    /// Page rows of `lod` that this span cuts, as [`columns_at`](Self::columns_at).
+    pub fn rows_at(&self, lod: u32) -> Range<u32> {
+        parents(&self.rows, lod - self.lods.start)
     }
 
     /// Texel columns of `lod` the span's cascade holds: its pages, their borders, and as much
     /// more as keeps every finer LOD's window an exact multiple of its footprints (the margin
     /// of the last LOD, doubled per finer LOD), clipped to the image.
     pub fn window(&self, layout: &Layout, lod: u32) -> Range<u64> {
+        self.texels(layout, lod, &self.columns, layout.level_extent(self.lods.start).0)
+    }
+
+    /// Texel rows of `lod` the span's cascade holds, as [`window`](Self::window) for columns.
+    pub fn window_rows(&self, layout: &Layout, lod: u32) -> Range<u64> {
+        self.texels(layout, lod, &self.rows, layout.level_extent(self.lods.start).1)
+    }
+
+    fn texels(&self, layout: &Layout, lod: u32, pages: &Range<u32>, extent: u32) -> Range<u64> {
         let first = self.lods.start;
         let margin = (layout.border as u64) << (self.lods.end - 1 - first);
         let p = layout.payload() as u64;
-        let width = layout.level_extent(first).0 as u64;
-        let start = (self.pages.start as u64 * p).saturating_sub(margin);
-        let end = (self.pages.end as u64 * p + margin).min(width);
+        let start = (pages.start as u64 * p).saturating_sub(margin);
+        let end = (pages.end as u64 * p + margin).min(extent as u64);
         let k = lod - first;
         (start >> k)..end.div_ceil(1 << k)
     }
+}
+
+/// The pages `k` levels coarser than `pages` that are their parents.
+fn parents(pages: &Range<u32>, k: u32) -> Range<u32> {
+    pages.start >> k..pages.end.div_ceil(1 << k)
 }
 
 /// One LOD in flight: its band, the tile rows cut so far and the reduction to the next LOD.
@@ -102,9 +121,60 @@ struct Level<T, A> {
     next_tile_row: u32,
     /// Per page column cut: its index, and which band columns its texels come from.
     x_runs: Vec<(u32, Vec<Run>)>,
+    /// One past the last page row of the level this span cuts.
+    end_tile_row: u32,
     down: Option<Down<T, A>>,
     /// The current row, rounded from exact sums.
     row: Vec<T>,
+    /// The exact sums this level keeps of its pages (a shard's last level: its subtree roots).
+    roots: Option<RootSums<A>>,
+}
+
+/// The exact sums (not the rounded texels) of a rectangle of one level, row-major, as a shard
+/// hands its subtree roots to `merge` so that the levels above them can be made exactly.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct RootSums<A> {
+    /// Texel columns and rows of the level.
+    pub columns: Range<u64>,
+    pub rows: Range<u64>,
+    /// `columns x rows x channels` sums.
+    pub sums: Vec<A>,
+    /// Where `columns` start in the level's window, in samples.
+    skip: usize,
+}
+
+impl<A: Acc> RootSums<A> {
+    /// The sums one level coarser: texel (x, y) of this level adds into (x / 2, y / 2). Where
+    /// a rectangle's edge is odd, an edge texel of the next level gets only this rectangle's
+    /// part of its footprint; `merge` adds the neighbour's.
+    pub fn halved(&self, channels: usize) -> RootSums<A> {
+        let columns = self.columns.start / 2..self.columns.end.div_ceil(2);
+        let rows = self.rows.start / 2..self.rows.end.div_ceil(2);
+        let width = (columns.end - columns.start) as usize;
+        let mut sums = vec![A::default(); width * (rows.end - rows.start) as usize * channels];
+        let in_width = (self.columns.end - self.columns.start) as usize;
+        for (i, row) in self.sums.chunks_exact(in_width * channels).enumerate() {
+            let y = (self.rows.start + i as u64) / 2 - rows.start;
+            let out = &mut sums[y as usize * width * channels..][..width * channels];
+            for (j, texel) in row.chunks_exact(channels).enumerate() {
+                let x = ((self.columns.start + j as u64) / 2 - columns.start) as usize;
+                for (o, &v) in out[x * channels..][..channels].iter_mut().zip(texel) {
+                    *o = *o + v;
+                }
+            }
+        }
+        RootSums { columns, rows, sums, skip: 0 }
+    }
+}
+
+impl<A: Copy> RootSums<A> {
+    /// Keeps row `y` of the window if it is one of the rectangle's.
+    fn take(&mut self, y: u64, window_row: &[A], channels: usize) {
+        if self.rows.contains(&y) {
+            let len = (self.columns.end - self.columns.start) as usize * channels;
+            self.sums.extend_from_slice(&window_row[self.skip..self.skip + len]);
+        }
+    }
 }
 
 /// What every level's cutting needs.
@@ -153,26 +223,31 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
                 let row_len = width * channels;
                 let virtual_width = layout.virtual_extent(lod).0;
                 let x_runs = span
-                    .pages_at(lod)
+                    .columns_at(lod)
                     .map(|t| (t, cut::shifted(cut::runs(&layout, t, extent.0, virtual_width, edge), window.start)))
                     .collect();
                 let down = (lod + 1 < span.lods.end).then(|| {
                     if filter.is_exact() {
                         let (w, h) = (layout.width as u64, layout.height as u64);
                         let next = span.window(&layout, lod + 1).start;
-                        Down::Exact(Reducer::window(w, h, lod, 1, next, width, channels))
+                        let next_row = span.window_rows(&layout, lod + 1).start;
+                        Down::Exact(Reducer::window(w, h, lod, 1, next, width, channels).from_row(next_row))
                     } else {
                         Down::Resample(Box::new(Resampler::new(filter, pixels, width, extent.1 as u64)))
                     }
                 });
+                let first_row = span.window_rows(&layout, lod).start;
+                let tile_rows = span.rows_at(lod);
                 Level {
                     lod,
                     extent,
-                    band: Band::new(row_len, (layout.tile_size + 1).min(extent.1) as usize),
-                    next_tile_row: 0,
+                    band: Band::starting_at(first_row, row_len, (layout.tile_size + 1).min(extent.1) as usize),
+                    next_tile_row: tile_rows.start,
+                    end_tile_row: tile_rows.end,
                     x_runs,
                     down,
                     row: vec![T::default(); row_len],
+                    roots: None,
                 }
             })
             .collect();
@@ -184,6 +259,28 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
             Vec::new()
         };
         Cascade { layout, channels, padding, levels, out, exact, prepared }
+    }
+
+    /// Keeps the exact sums of the pages of the span's last LOD, its payload texels only (a
+    /// shard's subtree roots), for [`take_root_sums`](Self::take_root_sums).
+    #[expect(clippy::expect_used, reason = "a cascade has at least one level")]
+    pub fn keep_root_sums(&mut self, span: &Span) {
+        let layout = &self.layout;
+        let lod = span.lods.end - 1;
+        let p = layout.payload() as u64;
+        let (width, height) = layout.level_extent(lod);
+        let (columns, rows) = (span.columns_at(lod), span.rows_at(lod));
+        let columns = columns.start as u64 * p..(columns.end as u64 * p).min(width as u64);
+        let skip = (columns.start - span.window(layout, lod).start) as usize * self.channels;
+        let rows = rows.start as u64 * p..(rows.end as u64 * p).min(height as u64);
+        let len = (columns.end - columns.start) * (rows.end - rows.start) * self.channels as u64;
+        let last = self.levels.last_mut().expect("a level");
+        last.roots = Some(RootSums { columns, rows, sums: Vec::with_capacity(len as usize), skip });
+    }
+
+    /// The sums kept by [`keep_root_sums`](Self::keep_root_sums), once [`finish`](Self::finish)ed.
+    pub fn take_root_sums(&mut self) -> Option<RootSums<A>> {
+        self.levels.last_mut().and_then(|l| l.roots.take())
     }
 
     /// Takes the next row of exact sums of the first LOD (a span that starts below LOD 0).
@@ -216,6 +313,18 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
         let (first, rest) = self.levels.split_first_mut().expect("at least one level");
         first.band.push(row);
         first.cut_ready(&cutter)?;
+        if let Some(roots) = &mut first.roots {
+            // LOD 0 is the last level: its sums are the source values, as the filter sums them.
+            let y = first.band.end() - 1;
+            let values: Vec<A> = match &self.exact {
+                None => row.iter().map(|&v| v.into()).collect(),
+                Some(filter) => {
+                    filter.prepare(row, &mut self.prepared);
+                    self.prepared.iter().map(|&v| A::from(v)).collect()
+                }
+            };
+            roots.take(y, &values, self.channels);
+        }
         match &mut first.down {
             Some(Down::Exact(reducer)) => {
                 let exact = match &self.exact {
@@ -251,6 +360,9 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
         }
         this.band.push(&this.row);
         this.cut_ready(cutter)?;
+        if let Some(roots) = &mut this.roots {
+            roots.take(exact.y, exact.sums, cutter.channels);
+        }
         if let Some(Down::Exact(reducer)) = &mut this.down
             && let Some(next) = reducer.push(exact.sums)
         {
@@ -281,9 +393,10 @@ impl<T: Sample, A> Level<T, A> {
     fn cut_ready(&mut self, cutter: &Cutter<T>) -> Result<()> {
         let Cutter { layout, channels, padding, out } = *cutter;
         let (_, height) = self.extent;
-        let (_, rows) = layout.grid(self.lod);
         let virtual_height = layout.virtual_extent(self.lod).1;
-        while self.next_tile_row < rows && self.band.end() > cut::last_row_needed(layout, self.next_tile_row, height) {
+        while self.next_tile_row < self.end_tile_row
+            && self.band.end() > cut::last_row_needed(layout, self.next_tile_row, height)
+        {
             let ty = self.next_tile_row;
             let y_runs = cut::runs(layout, ty, height, virtual_height, *padding == Padding::Edge);
             let mut tiles: Vec<CutTile<T>> = Vec::new();

@@ -27,6 +27,10 @@ pub trait Acc:
     fn round_div(self, d: u64) -> u64;
     /// `round_half_up(self / d)` for a divisor that is itself a sum (`d > 0`).
     fn round_ratio(self, d: Self) -> u64;
+    /// Bytes of one sum, as a shard stores it (little-endian).
+    const BYTES: usize;
+    fn to_le(self, out: &mut [u8]);
+    fn from_le(bytes: &[u8]) -> Self;
 }
 
 impl Acc for u64 {
@@ -42,6 +46,15 @@ impl Acc for u64 {
     fn round_ratio(self, d: u64) -> u64 {
         (2 * self + d) / (2 * d)
     }
+    const BYTES: usize = 8;
+    fn to_le(self, out: &mut [u8]) {
+        out.copy_from_slice(&self.to_le_bytes());
+    }
+    fn from_le(bytes: &[u8]) -> Self {
+        let mut b = [0; 8];
+        b.copy_from_slice(bytes);
+        u64::from_le_bytes(b)
+    }
 }
 
 impl Acc for u128 {
@@ -56,6 +69,15 @@ impl Acc for u128 {
     #[inline]
     fn round_ratio(self, d: u128) -> u64 {
         ((2 * self + d) / (2 * d)) as u64
+    }
+    const BYTES: usize = 16;
+    fn to_le(self, out: &mut [u8]) {
+        out.copy_from_slice(&self.to_le_bytes());
+    }
+    fn from_le(bytes: &[u8]) -> Self {
+        let mut b = [0; 16];
+        b.copy_from_slice(bytes);
+        u128::from_le_bytes(b)
     }
 }
 
@@ -84,7 +106,7 @@ pub struct Reducer<A = u64> {
 /// An exact output row: sums plus what they must be divided by.
 pub struct ExactRow<'a, A = u64> {
     pub sums: &'a [A],
-    #[cfg_attr(not(feature = "testing"), allow(dead_code))] // read by the tests, through `testing`
+    /// Row of the output level.
     pub y: u64,
     row_weight: u64,
     col_weight: &'a [u64],
@@ -130,6 +152,13 @@ impl<A: Acc> Reducer<A> {
             rows_in_acc: 0,
             out_row: 0,
         }
+    }
+
+    /// The same reducer for a window whose first output row is row `out_y0` of its level (a
+    /// shard's region): rows are weighed by their place in the whole image.
+    pub fn from_row(mut self, out_y0: u64) -> Reducer<A> {
+        self.out_row = out_y0;
+        self
     }
 
     #[cfg_attr(not(feature = "testing"), allow(dead_code))] // read by the tests, through `testing`

@@ -53,14 +53,19 @@ impl Plan {
         }
         let mut least = need;
         for fine in 1..layout.lod_count {
-            let coarse = Span { lods: fine..layout.lod_count, pages: 0..layout.grid(fine).0 };
+            let (columns, rows) = layout.grid(fine);
+            let coarse = Span { lods: fine..layout.lod_count, columns: 0..columns, rows: 0..rows };
             let coarse_need = coarse_bytes(layout, &coarse, texel_bytes);
             if coarse_need > memory {
                 least = least.min(coarse_need);
                 continue;
             }
             let unit = 1u32 << (fine - 1);
-            let stripe = |units: u32| Span { lods: 0..fine, pages: 0..(units * unit).min(layout.columns) };
+            let stripe = |units: u32| Span {
+                lods: 0..fine,
+                columns: 0..(units * unit).min(layout.columns),
+                rows: 0..layout.rows,
+            };
             let fits = |units: u32| span_bytes(layout, &stripe(units), texel_bytes) <= memory;
             if !fits(1) {
                 // Wider units only need more.
@@ -75,7 +80,11 @@ impl Plan {
             }
             let pages = lo * unit;
             let stripes = (0..layout.columns.div_ceil(pages))
-                .map(|i| Span { lods: 0..fine, pages: i * pages..((i + 1) * pages).min(layout.columns) })
+                .map(|i| Span {
+                    lods: 0..fine,
+                    columns: i * pages..((i + 1) * pages).min(layout.columns),
+                    rows: 0..layout.rows,
+                })
                 .collect();
             return Ok(Plan { stripes, coarse: Some(coarse) });
         }
@@ -103,7 +112,7 @@ pub(crate) fn span_bytes(layout: &Layout, span: &Span, texel_bytes: u64) -> u64 
         let band = rows * width * texel_bytes;
         // u64 sums per sample, or u128 for 16-bit samples: 8 bytes per texel byte either way.
         let sums = 8 * width * texel_bytes;
-        let pages = span.pages_at(lod);
+        let pages = span.columns_at(lod);
         let per_batch = batch_tiles(layout, texel_bytes as usize) as u64;
         let batches = 3 * ((pages.end - pages.start) as u64).min(per_batch) * tile * tile * texel_bytes;
         sum.saturating_add(band).saturating_add(sums).saturating_add(batches)
@@ -138,12 +147,12 @@ mod tests {
         assert!(plan.stripes.len() > 1);
         let mut next = 0;
         for s in &plan.stripes {
-            assert_eq!((s.lods.clone(), s.pages.start), (0..fine, next));
-            assert_eq!(s.pages.start % (1 << (fine - 1)), 0);
+            assert_eq!((s.lods.clone(), s.columns.start), (0..fine, next));
+            assert_eq!(s.columns.start % (1 << (fine - 1)), 0);
             // Every window starts on a whole footprint of its finest LOD's coarsest level.
             assert_eq!(s.window(&l, 0).start % (1 << (fine - 1)), 0);
             assert!(span_bytes(&l, s, 3) <= 64 << 20);
-            next = s.pages.end;
+            next = s.columns.end;
         }
         assert_eq!(next, l.columns);
         assert!(coarse_bytes(&l, &coarse, 3) <= 64 << 20);

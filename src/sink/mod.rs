@@ -11,7 +11,7 @@ mod dir;
 mod pack;
 
 pub use dir::DirSink;
-pub use pack::{PackSink, tile_kind};
+pub use pack::{PackSink, pack_description, tile_kind};
 
 use crate::error::{Result, TilerError};
 use crate::viewer::Crop;

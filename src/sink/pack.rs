@@ -21,7 +21,7 @@ pub struct PackSink {
 }
 
 /// The pack's description of a tiler layout and stored texel format.
-fn description(layout: &Layout, stored: PixelLayout) -> Description {
+pub fn pack_description(layout: &Layout, stored: PixelLayout) -> Description {
     Description {
         width: layout.width,
         height: layout.height,
@@ -55,7 +55,7 @@ impl PackSink {
         metadata: &[u8],
         options: WriteOptions,
     ) -> Result<PackSink> {
-        let d = description(layout, stored);
+        let d = pack_description(layout, stored);
         let writer = PackWriter::create(dest, d, layout.pack_levels(), metadata, options)?;
         Ok(PackSink { writer: Mutex::new(writer), kind: tile_kind(codec) })
     }
@@ -63,6 +63,13 @@ impl PackSink {
     /// Writes the index and header and renames the pack into place.
     pub fn finish(self) -> Result<WriteSummary> {
         let writer = self.writer.into_inner().map_err(|_| TilerError::Options("a tile writer panicked".into()))?;
+        Ok(writer.finish()?)
+    }
+
+    /// [`finish`](Self::finish) with other metadata than given at the start.
+    pub fn finish_with_metadata(self, metadata: Vec<u8>) -> Result<WriteSummary> {
+        let mut writer = self.writer.into_inner().map_err(|_| TilerError::Options("a tile writer panicked".into()))?;
+        writer.set_metadata(metadata)?;
         Ok(writer.finish()?)
     }
 

@@ -55,6 +55,17 @@ pub trait RowSource: Send {
     fn rewind(&mut self) -> Result<()> {
         Err(TilerError::Options(format!("{} cannot be read twice, as a striped run needs", self.describe())))
     }
+    /// Passes over the next `rows` rows: a shard's region starts below the top. Sources that can
+    /// seek (TIFF strips and tiles, PPM, tiled inputs) go straight there; the others (PNG,
+    /// JPEG) decode the rows and drop them. A source that reads columns
+    /// ([`read_columns`](Self::read_columns)) must seek, since its rows may be narrower.
+    fn skip_rows(&mut self, rows: u32) -> Result<()> {
+        let mut scratch = vec![0u8; self.width() as usize * self.layout().bytes_per_pixel()];
+        for _ in 0..rows {
+            self.read_row(&mut scratch)?;
+        }
+        Ok(())
+    }
     /// From the next row on, fills `row` with the texels of `columns` only, if this source can
     /// read part of a row for less than the whole (a stripe of a wide PPM); returns whether it
     /// will. Sources that cannot keep giving whole rows.
@@ -83,6 +94,9 @@ impl RowSource for Reopening {
     }
     fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
         self.inner.read_columns(columns)
+    }
+    fn skip_rows(&mut self, rows: u32) -> Result<()> {
+        self.inner.skip_rows(rows)
     }
     fn rewind(&mut self) -> Result<()> {
         let again = open_once(&self.path, self.max_memory)?;

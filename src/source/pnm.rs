@@ -164,6 +164,14 @@ impl RowSource for PnmSource {
         self.columns = Some(columns);
         true
     }
+
+    fn skip_rows(&mut self, rows: u32) -> Result<()> {
+        self.next += rows as u64;
+        let row_bytes = self.width as u64 * self.layout.bytes_per_pixel() as u64;
+        let at = self.data_start + self.next * row_bytes;
+        self.reader.seek(SeekFrom::Start(at)).map_err(|e| TilerError::io(&self.path, e))?;
+        Ok(())
+    }
 }
 
 #[cfg(test)]

@@ -403,6 +403,12 @@ impl RowSource for TiffSource {
         Ok(())
     }
 
+    /// Strips and tiles are found by row: the next read loads the one it needs.
+    fn skip_rows(&mut self, rows: u32) -> Result<()> {
+        self.next += rows as u64;
+        Ok(())
+    }
+
     fn describe(&self) -> String {
         let kind = if self.bigtiff { "bigtiff" } else { "tiff" };
         let compression = match self.compression {

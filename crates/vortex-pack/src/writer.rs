@@ -290,6 +290,22 @@ impl PackWriter {
         Ok(offset)
     }
 
+    /// Replaces the metadata given to [`create`](Self::create), which is written at the end,
+    /// so that a writer may describe what it learnt while storing the tiles (a shard's root
+    /// sums). It may not be longer: the data section starts after the room given at `create`
+    /// (the rest of the room stays zero padding).
+    pub fn set_metadata(&mut self, metadata: Vec<u8>) -> Result<()> {
+        if metadata.len() > self.metadata.len() {
+            return Err(PackError::Usage(format!(
+                "metadata of {} bytes is longer than the {} bytes of room left for it",
+                metadata.len(),
+                self.metadata.len()
+            )));
+        }
+        self.metadata = metadata;
+        Ok(())
+    }
+
     /// Payload bytes stored so far (shared tiles counted once).
     pub fn payload_bytes(&self) -> u64 {
         self.summary.payload_bytes

@@ -221,6 +221,12 @@ impl RowSource for TiledSource {
         (self.next, self.band_row, self.rewound) = (0, None, true);
         Ok(())
     }
+
+    /// Rows of cells are loaded by row: the next read loads the one it needs.
+    fn skip_rows(&mut self, rows: u32) -> Result<()> {
+        self.next += rows;
+        Ok(())
+    }
 }
 
 /// Reads a tile file, or `None` if it does not exist.

@@ -1,0 +1,409 @@
+//! `merge`: shard packs into the pack one machine's `split --pack` makes, byte for byte.
+//!
+//! 1. Every shard's manifest is read and checked against the first: the same input
+//!    (fingerprint, size, texels), the same options, the same shard count; then every index
+//!    once and none missing. Each error names the shard file.
+//! 2. The options are read back from the pack metadata the shards carry, through the same
+//!    resolution `split` uses, and must describe that metadata again exactly; the shard plan
+//!    is recomputed and must give each shard the rectangles it says it made.
+//! 3. The levels above the cut are made from the roots' sums ([`RootRows`] assembles each
+//!    row of the cut level from the shards that hold it), through the same exact cascade and
+//!    encoders as `split`, and kept in memory: they are the few coarse pages.
+//! 4. Every page is added to a new pack in the order `split --pack` adds them
+//!    ([`super::order`]): the shards' payloads as they are (their checksums checked), the
+//!    coarse pages from step 3. The pack writer stores identical payloads once, across
+//!    shards as within one.
+
+use std::collections::{HashMap, VecDeque};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use vortex_pack::{NewTile, Pack, PackWriter, Tile, TileId, WriteOptions, WriteSummary};
+
+use super::manifest::{Manifest, shard_error};
+use super::order::split_order;
+use super::plan::ShardPlan;
+use super::sums::RowReader;
+use crate::error::{Result, TilerError};
+use crate::layout::Layout;
+use crate::pyramid::cascade::Span;
+use crate::pyramid::reduce::Acc;
+use crate::pyramid::stripes::Plan;
+use crate::settings::{self, Requested};
+use crate::sink::{TileSink, pack_description, tile_kind};
+use crate::source::ImageHeader;
+use crate::split::{Progress, SplitOptions};
+use crate::tile_dir::info::InfoFile;
+
+/// What a merge made and read.
+#[derive(Clone, Debug)]
+pub struct Merged {
+    pub pack: WriteSummary,
+    pub layout: Layout,
+    pub shards: u32,
+    /// The cut level: LODs above it were made by the merge.
+    pub cut: u32,
+    /// Pages made above the cut.
+    pub made: u64,
+    /// Payload bytes copied from the shards, and compressed sums read.
+    pub copied_bytes: u64,
+    pub sums_bytes: u64,
+}
+
+/// One opened shard.
+struct Shard {
+    path: PathBuf,
+    pack: Pack,
+    manifest: Manifest,
+}
+
+/// Merges the shard packs at `paths` (any order) into a pack at `dest`. Runs the encoders of
+/// the levels above the cut on the current rayon pool.
+pub fn merge(paths: &[PathBuf], dest: &Path, progress: &dyn Progress) -> Result<Merged> {
+    let shards = open_all(paths)?;
+    let first = &shards[0];
+    let m = &first.manifest;
+    let o = &m.options;
+    let pixels = m.source.pixels(&first.path)?;
+    let (opts, layout, stored) = read_options(first, pixels)?;
+    let plan = ShardPlan::choose(&layout, m.count)?;
+    for s in &shards {
+        let regions = plan.regions(s.manifest.index);
+        let theirs: Vec<_> = s.manifest.roots.iter().map(|r| (r.columns, r.rows)).collect();
+        let ours: Vec<_> = match plan.has_levels_above(&layout) {
+            true => regions
+                .iter()
+                .map(|r| {
+                    let (c, rows) = plan.sums_rect(&layout, r);
+                    ([c.start, c.end], [rows.start, rows.end])
+                })
+                .collect(),
+            false => Vec::new(),
+        };
+        if s.manifest.cut_level != plan.cut || theirs != ours {
+            return Err(shard_error(
+                &s.path,
+                format!(
+                    "holds other pages than this version cuts shard {} of {} into (cut at LOD {}, not {}): merge with the vortex-tiler that made it",
+                    s.manifest.index, m.count, s.manifest.cut_level, plan.cut
+                ),
+            ));
+        }
+        if *s.pack.description() != pack_description(&layout, stored) {
+            return Err(shard_error(&s.path, "its pack header does not match its metadata".into()));
+        }
+    }
+
+    // The levels above the cut, into memory.
+    let above = Collected::default();
+    let sums: Vec<(usize, Vec<u8>)> = shards
+        .iter()
+        .enumerate()
+        .flat_map(|(i, s)| s.manifest.roots.iter().map(move |r| (i, r)))
+        .map(|(i, r)| Ok((i, r.sums(&shards[i].path)?)))
+        .collect::<Result<_>>()?;
+    let sums_bytes = sums.iter().map(|(_, b)| b.len() as u64).sum();
+    if plan.has_levels_above(&layout) {
+        let mut roots = RootRows::new(plan.cut + 1, pixels.channels.count(), o.sum_bytes as usize);
+        for ((i, bytes), r) in sums.iter().zip(shards.iter().flat_map(|s| &s.manifest.roots)) {
+            let reader = RowReader::new(
+                bytes,
+                r.columns[0]..r.columns[1],
+                r.rows[0]..r.rows[1],
+                roots.channels,
+                roots.sum_bytes,
+            )?;
+            roots.add(&shards[*i].path, reader);
+        }
+        let image = ImageHeader { width: layout.width, height: layout.height, layout: pixels };
+        crate::split::above_cut(image, roots, &above, &opts, &())?;
+    }
+    let mut above = above.tiles.into_inner().map_err(|_| TilerError::Options("an encoder panicked".into()))?;
+    let made = above.len() as u64;
+
+    // Every page, in the one-machine order.
+    let options = WriteOptions { alignment: o.alignment, payload_alignment: o.payload_alignment };
+    let mut writer =
+        PackWriter::create(dest, pack_description(&layout, stored), layout.pack_levels(), o.info.as_bytes(), options)?;
+    let kind = tile_kind(opts.codec);
+    let order = Plan::choose(&layout, pixels.bytes_per_pixel() as u64, opts.filter, opts.max_memory)
+        .unwrap_or_else(|_| Plan { stripes: vec![Span::whole(&layout)], coarse: None });
+    let mut copied_bytes = 0u64;
+    for row in split_order(&layout, &order) {
+        if progress.cancelled() {
+            return Err(TilerError::Interrupted);
+        }
+        for x in row.columns.clone() {
+            let id = TileId { lod: row.lod, x, y: row.y };
+            if id.lod > plan.cut {
+                let tile = above.remove(&id).ok_or_else(|| missing(dest, id))?;
+                writer.add(id, tile.as_new(kind))?;
+                continue;
+            }
+            let shard = &shards[plan.owner(id.lod, x, id.y) as usize];
+            match shard.pack.tile_checked(id.lod, x, id.y)? {
+                Tile::Absent => return Err(missing(&shard.path, id)),
+                Tile::Constant(texel) => writer.add(id, NewTile::Constant(texel))?,
+                Tile::Data(k, bytes) => {
+                    copied_bytes += bytes.len() as u64;
+                    writer.add(id, NewTile::Data(k, bytes))?;
+                }
+            }
+        }
+        progress.advance(row.columns.len() as u64);
+    }
+    let pack = writer.finish()?;
+    Ok(Merged { pack, layout, shards: m.count, cut: plan.cut, made, copied_bytes, sums_bytes })
+}
+
+fn missing(path: &Path, id: TileId) -> TilerError {
+    shard_error(path, format!("page (lod {}, x {}, y {}) is missing", id.lod, id.x, id.y))
+}
+
+/// Opens every shard, checks that they belong together, and returns them by index.
+fn open_all(paths: &[PathBuf]) -> Result<Vec<Shard>> {
+    if paths.is_empty() {
+        return Err(TilerError::Options("no shards given: merge SHARD... -o PACK".into()));
+    }
+    let mut shards = Vec::with_capacity(paths.len());
+    for path in paths {
+        let pack = Pack::open(path)?;
+        let manifest = Manifest::parse(path, pack.metadata())?;
+        shards.push(Shard { path: path.clone(), pack, manifest });
+    }
+    let first = &shards[0];
+    let (m0, count) = (&first.manifest, first.manifest.count);
+    for s in &shards[1..] {
+        let m = &s.manifest;
+        if m.count != count {
+            return Err(shard_error(
+                &s.path,
+                format!(
+                    "is shard {} of {}, but {} is shard {} of {count}: they are not parts of one split",
+                    m.index,
+                    m.count,
+                    first.path.display(),
+                    m0.index
+                ),
+            ));
+        }
+        if m.source != m0.source {
+            let id = |m: &Manifest| {
+                format!(
+                    "{} ({}x{}, fingerprint {})",
+                    m.source.name, m.source.width, m.source.height, m.source.fingerprint
+                )
+            };
+            return Err(shard_error(
+                &s.path,
+                format!(
+                    "was cut from {}, but {} from {}: every shard must come from the same input",
+                    id(m),
+                    first.path.display(),
+                    id(m0)
+                ),
+            ));
+        }
+        if m.options != m0.options {
+            return Err(shard_error(
+                &s.path,
+                format!(
+                    "was made with other options than {}: {}",
+                    first.path.display(),
+                    differences(&m.options, &m0.options)
+                ),
+            ));
+        }
+    }
+    let mut by_index: Vec<Option<Shard>> = (0..count).map(|_| None).collect();
+    for s in shards {
+        let i = s.manifest.index;
+        if i >= count {
+            return Err(shard_error(&s.path, format!("says it is shard {i} of {count}")));
+        }
+        if let Some(other) = &by_index[i as usize] {
+            return Err(shard_error(
+                &s.path,
+                format!("is shard {i} of {count}, and so is {}: give each shard once", other.path.display()),
+            ));
+        }
+        by_index[i as usize] = Some(s);
+    }
+    let absent: Vec<String> =
+        by_index.iter().enumerate().filter(|(_, s)| s.is_none()).map(|(i, _)| i.to_string()).collect();
+    if !absent.is_empty() {
+        return Err(TilerError::Options(format!(
+            "shard{} {} of {count} missing (`split --shard I/{count}` makes shard I)",
+            if absent.len() == 1 { "" } else { "s" },
+            absent.join(", ")
+        )));
+    }
+    Ok(by_index.into_iter().flatten().collect())
+}
+
+/// The options two shards disagree on, as `member: ours against theirs`.
+fn differences(a: &super::manifest::ShardOptions, b: &super::manifest::ShardOptions) -> String {
+    let mut out = Vec::new();
+    let (ia, ib): (serde_json::Value, serde_json::Value) =
+        (serde_json::from_str(&a.info).unwrap_or_default(), serde_json::from_str(&b.info).unwrap_or_default());
+    if let (Some(ia), Some(ib)) = (ia.as_object(), ib.as_object()) {
+        for key in ia.keys().chain(ib.keys().filter(|k| !ia.contains_key(*k))) {
+            if ia.get(key) != ib.get(key) {
+                let show = |v: Option<&serde_json::Value>| v.map_or("none".to_string(), |v| v.to_string());
+                out.push(format!("{key} {} against {}", show(ia.get(key)), show(ib.get(key))));
+            }
+        }
+    }
+    for (name, x, y) in [
+        ("flatten", a.flatten as u64, b.flatten as u64),
+        ("max-memory", a.max_memory, b.max_memory),
+        ("align", a.alignment as u64, b.alignment as u64),
+        ("tile-align", a.payload_alignment as u64, b.payload_alignment as u64),
+        ("sum bytes", a.sum_bytes as u64, b.sum_bytes as u64),
+    ] {
+        if x != y {
+            out.push(format!("{name} {x} against {y}"));
+        }
+    }
+    out.join(", ")
+}
+
+/// The split options, page grid and stored texels the shards were made with, read back from
+/// the metadata they carry for the merged pack.
+fn read_options(
+    shard: &Shard,
+    pixels: crate::pixel::PixelLayout,
+) -> Result<(SplitOptions, Layout, crate::pixel::PixelLayout)> {
+    let o = &shard.manifest.options;
+    let info: InfoFile = serde_json::from_str(&o.info)
+        .map_err(|e| shard_error(&shard.path, format!("the pack metadata it carries is damaged: {e}")))?;
+    let requested = Requested { flatten: o.flatten, max_memory: Some(o.max_memory), ..Requested::default() };
+    let (opts, names) = settings::resolve(&requested, Some((&shard.path, &info)), pixels)?;
+    let layout = opts.layout(shard.manifest.source.width, shard.manifest.source.height)?;
+    let stored = opts.codec.stored_layout(pixels, opts.flatten, opts.tile_depth)?;
+    if settings::describe(&layout, stored, &opts, &names).to_json_pretty() != o.info {
+        return Err(shard_error(
+            &shard.path,
+            "its options do not read back as they were written (made by another version?)".into(),
+        ));
+    }
+    Ok((opts, layout, stored))
+}
+
+/// The rows of exact sums of the level above the cut, each added up from the shards'
+/// rectangles that hold part of it (two, where a rectangle's edge halves an odd number of
+/// texels). A rectangle's decoder lives only while its rows are read, so memory is the
+/// rectangles of one row of roots.
+pub(crate) struct RootRows<'a> {
+    lod: u32,
+    channels: usize,
+    sum_bytes: usize,
+    /// Rectangles not started, by first row.
+    waiting: VecDeque<(&'a Path, RowReader<'a>)>,
+    /// Rectangles being read.
+    reading: Vec<(&'a Path, RowReader<'a>)>,
+}
+
+impl<'a> RootRows<'a> {
+    fn new(lod: u32, channels: usize, sum_bytes: usize) -> Self {
+        RootRows { lod, channels, sum_bytes, waiting: VecDeque::new(), reading: Vec::new() }
+    }
+
+    fn add(&mut self, path: &'a Path, reader: RowReader<'a>) {
+        let at = self.waiting.partition_point(|(_, r)| r.rows.start <= reader.rows.start);
+        self.waiting.insert(at, (path, reader));
+    }
+
+    /// The level the rows are of.
+    pub fn lod(&self) -> u32 {
+        self.lod
+    }
+
+    /// Row `y` (rows are read in order, each once) into `out`, the level's width of sums.
+    pub fn read<A: Acc>(&mut self, y: u64, out: &mut [A]) -> Result<()> {
+        while self.waiting.front().is_some_and(|(_, r)| r.rows.start <= y) {
+            self.reading.extend(self.waiting.pop_front());
+        }
+        out.fill(A::default());
+        let c = self.channels;
+        let mut part = Vec::new();
+        for (path, reader) in &mut self.reading {
+            let columns = reader.columns.start as usize * c..reader.columns.end as usize * c;
+            if columns.end > out.len() {
+                return Err(shard_error(
+                    path,
+                    format!("its root sums reach past the image at row {y} of LOD {}", self.lod),
+                ));
+            }
+            part.resize(columns.len(), A::default());
+            reader.read_into(&mut part).map_err(|m| shard_error(path, m))?;
+            for (o, &v) in out[columns].iter_mut().zip(&part) {
+                *o = *o + v;
+            }
+        }
+        let mut i = 0;
+        while i < self.reading.len() {
+            if self.reading[i].1.rows.end == y + 1 {
+                let (path, mut reader) = self.reading.remove(i);
+                if !reader.is_complete() {
+                    return Err(shard_error(path, "its root sums hold more rows than it says".into()));
+                }
+            } else {
+                i += 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks that every rectangle was read to its end.
+    pub fn finish(&self) -> Result<()> {
+        match self.waiting.front().or(self.reading.first()) {
+            Some((path, _)) => Err(shard_error(path, "holds root sums below the image".into())),
+            None => Ok(()),
+        }
+    }
+}
+
+/// A page made above the cut.
+enum Made {
+    Encoded(Vec<u8>),
+    Constant(Vec<u8>),
+}
+
+impl Made {
+    fn as_new(&self, kind: vortex_pack::TileKind) -> NewTile<'_> {
+        match self {
+            Made::Encoded(bytes) => NewTile::Data(kind, bytes),
+            Made::Constant(texel) => NewTile::Constant(texel),
+        }
+    }
+}
+
+/// A sink that keeps the pages above the cut in memory until they are stored in order.
+#[derive(Default)]
+struct Collected {
+    tiles: Mutex<HashMap<TileId, Made>>,
+}
+
+impl Collected {
+    fn put(&self, lod: u32, x: u32, y: u32, tile: Made) -> Result<()> {
+        let mut tiles = self.tiles.lock().map_err(|_| TilerError::Options("an encoder panicked".into()))?;
+        tiles.insert(TileId { lod, x, y }, tile);
+        Ok(())
+    }
+}
+
+impl TileSink for Collected {
+    fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+        self.put(lod, x, y, Made::Encoded(bytes.to_vec()))
+    }
+    fn takes_constants(&self) -> bool {
+        true
+    }
+    fn write_constant(&self, lod: u32, x: u32, y: u32, texel: &[u8]) -> Result<()> {
+        self.put(lod, x, y, Made::Constant(texel.to_vec()))
+    }
+    fn bytes_written(&self) -> u64 {
+        0
+    }
+}

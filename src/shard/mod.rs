@@ -1,0 +1,22 @@
+//! Scale-out: one pyramid cut by many machines, merged into the pack one machine makes.
+//!
+//! `split --shard I/N` makes shard `I` of `N` ([`plan`]: whole subtrees of a cut level,
+//! balanced by real pages) into a shard pack: its pages at the cut level and below, and in
+//! its metadata ([`manifest`]) the exact sums of its subtree roots ([`sums`]) and what it was
+//! made from ([`fingerprint`]). `merge` ([`merge`]) checks that the shards belong together,
+//! makes the levels above the cut from the sums (the same exact cascade, so the same texels),
+//! and stores every page in the order one machine's `split --pack` would ([`order`]), copying
+//! the shards' payloads as they are: the merged pack is that pack, byte for byte.
+
+pub mod fingerprint;
+pub mod manifest;
+pub mod merge;
+pub mod order;
+pub mod plan;
+pub mod sums;
+pub mod write;
+
+pub use fingerprint::fingerprint;
+pub use merge::{Merged, merge};
+pub use plan::ShardPlan;
+pub use write::{ShardJob, write_shard};

@@ -1,0 +1,114 @@
+//! Making one shard pack: `split --shard I/N --pack FILE`.
+
+use std::path::Path;
+
+use vortex_pack::{WriteOptions, WriteSummary};
+
+use super::manifest::{FORMAT, Manifest, ShardOptions, SourceId, StoredRoots};
+use super::plan::ShardPlan;
+use crate::error::Result;
+use crate::layout::Layout;
+use crate::sink::PackSink;
+use crate::source::RowSource;
+use crate::split::{self, Progress, SplitOptions, Summary};
+
+/// Which shard to make, and of what.
+pub struct ShardJob<'a> {
+    pub index: u32,
+    pub count: u32,
+    /// The input as given (fingerprinted, and named in the manifest).
+    pub input: &'a Path,
+    /// The metadata of the merged pack: what `split --pack` of the same input and options
+    /// writes.
+    pub info: String,
+    pub pack: WriteOptions,
+}
+
+impl ShardJob<'_> {
+    /// Pages shard `index` makes: its subtrees at the cut level and below.
+    pub fn pages(&self, layout: &Layout) -> Result<u64> {
+        let plan = ShardPlan::choose(layout, self.count)?;
+        let pages = |r: &super::plan::Region| {
+            let span = plan.span(layout, r);
+            span.lods.clone().map(|lod| span.columns_at(lod).len() as u64 * span.rows_at(lod).len() as u64).sum::<u64>()
+        };
+        Ok(plan.regions(self.index).iter().map(pages).sum())
+    }
+}
+
+/// Cuts shard `job.index` of `source` into a shard pack at `dest`.
+pub fn write_shard(
+    source: Box<dyn RowSource>,
+    dest: &Path,
+    opts: &SplitOptions,
+    job: &ShardJob,
+    progress: &dyn Progress,
+) -> Result<(Summary, WriteSummary)> {
+    let header = source.header();
+    let layout = opts.layout(header.width, header.height)?;
+    let plan = ShardPlan::choose(&layout, job.count)?;
+    if job.index >= job.count {
+        return Err(crate::error::TilerError::Options(format!(
+            "shard {} of {}: the index counts from 0 to {}",
+            job.index,
+            job.count,
+            job.count - 1
+        )));
+    }
+    let fingerprint = super::fingerprint(job.input)?;
+    let stored = opts.codec.stored_layout(header.layout, opts.flatten, opts.tile_depth)?;
+    let mut manifest = Manifest {
+        vortex_shard: FORMAT,
+        index: job.index,
+        count: job.count,
+        cut_level: plan.cut,
+        source: SourceId {
+            name: job.input.display().to_string(),
+            fingerprint,
+            width: header.width,
+            height: header.height,
+            tile_format: header.layout.channels.tile_format().into(),
+            sample_bytes: header.layout.depth.bytes() as u8,
+        },
+        options: ShardOptions {
+            info: job.info.clone(),
+            flatten: opts.flatten,
+            max_memory: opts.max_memory,
+            alignment: job.pack.alignment,
+            payload_alignment: job.pack.payload_alignment,
+            sum_bytes: split::sum_bytes(opts, header.layout, &layout) as u32,
+        },
+        roots: Vec::new(),
+    };
+    // The metadata is written last but its room is set first: room for the sums however
+    // little they compress (left as zero padding, a hole in the file, when unused).
+    let channels = header.layout.channels.count() as u64;
+    let sums_room: u64 = match plan.has_levels_above(&layout) {
+        false => 0,
+        true => plan
+            .regions(job.index)
+            .iter()
+            .map(|r| {
+                let (columns, rows) = plan.sums_rect(&layout, r);
+                let raw = (columns.end - columns.start)
+                    * (rows.end - rows.start)
+                    * channels
+                    * manifest.options.sum_bytes as u64;
+                let packed = zstd::zstd_safe::compress_bound(raw as usize) as u64;
+                packed.div_ceil(3) * 4 + 128
+            })
+            .sum(),
+    };
+    let room = manifest.to_json().len() as u64 + sums_room;
+    let room = usize::try_from(room).ok().filter(|&r| u32::try_from(r).is_ok()).ok_or_else(|| {
+        crate::error::TilerError::Limit(format!(
+            "shard {}: its root sums would not fit a pack's metadata; cut more shards",
+            job.index
+        ))
+    })?;
+    let sink = PackSink::create(dest, &layout, stored, opts.codec, &vec![b' '; room], job.pack)?;
+    let (summary, roots) = split::split_shard(source, &sink, opts, &plan, job.index, progress)?;
+    manifest.roots = roots.iter().map(|r| StoredRoots::new(r.columns.clone(), r.rows.clone(), &r.bytes)).collect();
+    let written = sink.finish_with_metadata(manifest.to_json())?;
+    Ok((summary, written))
+}

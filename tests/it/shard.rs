@@ -1,0 +1,206 @@
+//! Sharded splits: `merge` of any number of shards gives the pack one machine makes, byte for
+//! byte, whatever the image, options and pass plan; shards that do not belong together are
+//! refused by name.
+
+use std::path::{Path, PathBuf};
+
+use crate::common::*;
+use proptest::prelude::*;
+use vortex_pack::WriteOptions;
+use vortex_tiler::background::Background;
+use vortex_tiler::codec::Codec;
+use vortex_tiler::layout::Layout;
+use vortex_tiler::pyramid::Filter;
+use vortex_tiler::settings;
+use vortex_tiler::shard::{ShardJob, merge, write_shard};
+use vortex_tiler::sink::PackSink;
+use vortex_tiler::split::{SplitOptions, split};
+use vortex_tiler::testing::one_band_bytes;
+use vortex_tiler::tile_dir::filename::FilenameFormat;
+
+const EXACT: [Filter; 4] = [Filter::Box, Filter::Linear, Filter::Premultiplied, Filter::LinearPremultiplied];
+
+/// A scratch directory, removed when dropped.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(name: &str) -> Scratch {
+        static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let dir = std::env::temp_dir().join(format!("vortex-shard-{name}-{}-{n}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        Scratch(dir)
+    }
+    fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// The metadata `split --pack` writes for `image` and `opts`.
+fn info(image: &Image, opts: &SplitOptions) -> String {
+    let layout = opts.layout(image.width, image.height).unwrap();
+    let stored = opts.codec.stored_layout(image.layout, opts.flatten, opts.tile_depth).unwrap();
+    let names =
+        FilenameFormat::parse(&format!("{}.{}", settings::DEFAULT_FILENAME_STEM, opts.codec.extension()), 3).unwrap();
+    settings::describe(&layout, stored, opts, &names).to_json_pretty()
+}
+
+/// `split --pack` of `image` into `dest`.
+fn one_machine(image: &Image, opts: &SplitOptions, dest: &Path) {
+    let layout = opts.layout(image.width, image.height).unwrap();
+    let stored = opts.codec.stored_layout(image.layout, opts.flatten, opts.tile_depth).unwrap();
+    let sink =
+        PackSink::create(dest, &layout, stored, opts.codec, info(image, opts).as_bytes(), WriteOptions::default())
+            .unwrap();
+    split(image.source(), &sink, opts, &()).unwrap();
+    sink.finish().unwrap();
+}
+
+/// `split --shard i/count --pack` of every shard; the shard files.
+fn shards(image: &Image, opts: &SplitOptions, count: u32, input: &Path, dir: &Scratch) -> Vec<PathBuf> {
+    (0..count)
+        .map(|index| {
+            let dest = dir.path(&format!("shard-{index}.vtpk"));
+            let job = ShardJob { index, count, input, info: info(image, opts), pack: WriteOptions::default() };
+            write_shard(image.source(), &dest, opts, &job, &()).unwrap();
+            dest
+        })
+        .collect()
+}
+
+fn input_file(dir: &Scratch, content: &[u8]) -> PathBuf {
+    let input = dir.path("input.raw");
+    std::fs::write(&input, content).unwrap();
+    input
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, .. ProptestConfig::default() })]
+
+    #[test]
+    fn merged_shards_are_the_one_machine_pack(
+        w in 1u32..260,
+        h in 1u32..260,
+        layout_idx in 0usize..8,
+        filter_idx in 0usize..EXACT.len(),
+        tile in 8u32..24,
+        border in 0u32..3,
+        colour in proptest::option::of(any::<[u8; 4]>()),
+        raw in any::<bool>(),
+        count in 1u32..12,
+        striped in any::<bool>(),
+        seed in any::<u64>(),
+    ) {
+        let image = Image::random(w, h, layouts()[layout_idx], seed);
+        let background = colour.map_or(Background::Edge, Background::Colour);
+        let mut opts = SplitOptions { filter: EXACT[filter_idx], ..png_options(tile, border, background) };
+        if raw {
+            opts.codec = Codec::Raw;
+        }
+        let layout = Layout::new(w as u64, h as u64, tile, border).unwrap();
+        let count = count.min(layout.columns * layout.rows);
+        if striped {
+            // The one-machine run in stripes: its pack's order differs, and merge follows it.
+            opts.max_memory = one_band_bytes(&layout, image.layout.bytes_per_pixel() as u64) / 2;
+        }
+        let dir = Scratch::new("prop");
+        let whole = dir.path("whole.vtpk");
+        let layout_ok = split(image.source(), &MemSink::default(), &opts, &()).is_ok();
+        prop_assume!(layout_ok);
+        one_machine(&image, &opts, &whole);
+        let input = input_file(&dir, &seed.to_le_bytes());
+        let written: Vec<PathBuf> = (0..count)
+            .map(|index| {
+                let dest = dir.path(&format!("shard-{index}.vtpk"));
+                let job = ShardJob { index, count, input: &input, info: info(&image, &opts), pack: WriteOptions::default() };
+                write_shard(image.source(), &dest, &opts, &job, &()).map(|_| dest)
+            })
+            .collect::<Result<_, _>>()
+            .unwrap_or_default();
+        // A shard whose region does not fit the small budget is refused (and said so).
+        prop_assume!(written.len() == count as usize);
+        let mut given = written.clone();
+        given.reverse();
+        let merged = dir.path("merged.vtpk");
+        merge(&given, &merged, &()).unwrap();
+        let (a, b) = (std::fs::read(&whole).unwrap(), std::fs::read(&merged).unwrap());
+        prop_assert!(a == b, "{}x{} {} tile {} border {} in {} shards: {} against {} bytes", w, h, image.layout, tile, border, count, a.len(), b.len());
+    }
+}
+
+#[test]
+fn a_deep_pyramid_in_many_shards_is_the_one_machine_pack() {
+    // 1100 x 37 RGBA 16-bit in 8-texel pages: 138 x 5 pages, 9 LODs, u128 sums under the
+    // premultiplied linear filter.
+    let image = Image::random(1100, 37, layouts()[7], 3);
+    let opts = SplitOptions { filter: Filter::LinearPremultiplied, ..png_options(8, 1, Background::Edge) };
+    let dir = Scratch::new("deep");
+    let whole = dir.path("whole.vtpk");
+    one_machine(&image, &opts, &whole);
+    let input = input_file(&dir, b"deep");
+    for count in [2, 7, 64] {
+        let merged = dir.path(&format!("merged-{count}.vtpk"));
+        merge(&shards(&image, &opts, count, &input, &dir), &merged, &()).unwrap();
+        assert!(std::fs::read(&whole).unwrap() == std::fs::read(&merged).unwrap(), "{count} shards");
+    }
+}
+
+#[test]
+fn shards_that_do_not_belong_together_are_named() {
+    let image = Image::random(100, 80, layouts()[4], 5);
+    let opts = png_options(16, 0, Background::Edge);
+    let dir = Scratch::new("refuse");
+    let input = input_file(&dir, b"one");
+    let four = shards(&image, &opts, 4, &input, &dir);
+    let out = dir.path("out.vtpk");
+    let error = |paths: &[PathBuf]| merge(paths, &out, &()).unwrap_err().to_string();
+
+    let e = error(&four[..3]);
+    assert!(e.contains("shard 3 of 4 missing"), "{e}");
+    let e = error(&[four[0].clone(), four[1].clone(), four[1].clone(), four[2].clone(), four[3].clone()]);
+    assert!(e.contains("shard-1.vtpk") && e.contains("so is"), "{e}");
+
+    // A shard of another input (same image, other file) and one of other options.
+    let other_dir = Scratch::new("refuse-other");
+    let other = input_file(&other_dir, b"two");
+    let foreign = shards(&image, &opts, 4, &other, &other_dir);
+    let e = error(&[four[0].clone(), four[1].clone(), foreign[2].clone(), four[3].clone()]);
+    assert!(e.contains(&foreign[2].display().to_string()) && e.contains("same input"), "{e}");
+    let q_dir = Scratch::new("refuse-q");
+    let jpeg = SplitOptions {
+        codec: Codec::Jpeg { quality: 70, subsampling: vortex_tiler::codec::Subsampling::S420 },
+        ..opts.clone()
+    };
+    let q = shards(&image, &jpeg, 4, &input, &q_dir);
+    let e = error(&[four[0].clone(), q[1].clone(), four[2].clone(), four[3].clone()]);
+    assert!(e.contains("other options") && e.contains("codec"), "{e}");
+
+    // A pack that is not a shard.
+    let plain = dir.path("plain.vtpk");
+    one_machine(&image, &opts, &plain);
+    let e = error(std::slice::from_ref(&plain));
+    assert!(e.contains("plain.vtpk") && e.contains("not a shard"), "{e}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn a_shard_made_again_merges_to_the_same_bytes() {
+    let image = Image::random(300, 200, layouts()[2], 9);
+    let opts = png_options(32, 2, Background::Edge);
+    let dir = Scratch::new("again");
+    let input = input_file(&dir, b"again");
+    let paths = shards(&image, &opts, 5, &input, &dir);
+    let (first, second) = (dir.path("first.vtpk"), dir.path("second.vtpk"));
+    merge(&paths, &first, &()).unwrap();
+    let job = ShardJob { index: 3, count: 5, input: &input, info: info(&image, &opts), pack: WriteOptions::default() };
+    write_shard(image.source(), &paths[3], &opts, &job, &()).unwrap();
+    merge(&paths, &second, &()).unwrap();
+    assert!(std::fs::read(&first).unwrap() == std::fs::read(&second).unwrap());
+}
