@@ -86,9 +86,10 @@ pub struct Summary {
     pub encoded: u64,
     pub bytes: u64,
     /// Vertical stripes the fine LODs were cut in (1: one band over the whole width, or one
-    /// stripe of the fine LODs and a coarse pass).
+    /// stripe of the fine LODs and a coarse pass; 0: a shard, whose passes are its rectangles).
     pub stripes: usize,
-    /// Times the source was read: 1 for one band, the stripes plus one for the coarse pass.
+    /// Times the source was read: 1 for one band, the stripes plus one for the coarse pass, a
+    /// shard's rectangles (each only its rows, where the source can seek).
     pub passes: usize,
 }
 
@@ -215,7 +216,7 @@ fn run<T: Sample>(
 
     let (stripes, pass_count) = match &passes {
         Passes::Whole(plan, _) => (plan.stripes.len(), plan.stripes.len() + plan.coarse.is_some() as usize),
-        Passes::Shard(spans, _) => (1, spans.len()),
+        Passes::Shard(spans, _) => (0, spans.len()),
         Passes::AboveCut(_) => (1, 0),
     };
 

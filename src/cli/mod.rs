@@ -11,6 +11,7 @@ mod pack;
 mod render;
 pub(crate) mod report;
 mod serve;
+mod shard;
 mod signals;
 mod split;
 
@@ -112,6 +113,19 @@ enum Command {
     ///   vortex-tiler serve world.vtpk --addr 0.0.0.0:8080 --cache 512M   # other machines too
     #[command(verbatim_doc_comment)]
     Serve(serve::ServeArgs),
+    /// Join the shard packs of one split (`split --shard I/N`) into the pack one machine makes.
+    ///
+    /// Checks that the shards belong together (same input, same options, each index once,
+    /// none missing), copies their pages without decoding them, makes the levels above the
+    /// shards' cut from the exact sums they carry, and writes a pack byte-identical to
+    /// `split --pack` of the same input and options. Details: docs/scale-out.md.
+    ///
+    /// Examples:
+    ///   for i in 0 1 2 3; do vortex-tiler split huge.tif --pack part-$i.vtpk --shard $i/4; done
+    ///   vortex-tiler merge part-*.vtpk -o huge.vtpk
+    ///   sbatch --array=0-15 ...; vortex-tiler merge parts/*.vtpk -o huge.vtpk   # scripts/slurm/
+    #[command(verbatim_doc_comment)]
+    Merge(shard::MergeArgs),
 }
 
 /// Where a pack's bytes go.
@@ -167,6 +181,7 @@ pub fn run(args: Args) -> Result<()> {
         Command::Verify(a) => pack::run_verify(a),
         Command::Render(a) => render::run(a),
         Command::Serve(a) => serve::run(a),
+        Command::Merge(a) => shard::run_merge(a),
     }
 }
 

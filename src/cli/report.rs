@@ -71,9 +71,10 @@ pub fn summary_line(done: &Finished, out: &Path) -> String {
     let secs = done.took.as_secs_f64().max(1e-9);
     let mpx = done.width as f64 * done.height as f64 / 1e6;
     let peak = peak_rss().map(|b| format!(", peak memory {}", mib(b))).unwrap_or_default();
-    let stripes = match s.passes {
-        1 => String::new(),
-        n => format!(
+    let stripes = match (s.stripes, s.passes) {
+        (_, 1) => String::new(),
+        (0, n) => format!(", in {n} rectangles of the source"),
+        (_, n) => format!(
             ", in {} vertical stripe{} and a coarse pass (the source read {n} times)",
             s.stripes,
             if s.stripes == 1 { "" } else { "s" }
@@ -120,7 +121,7 @@ pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vor
         "seconds": done.took.as_secs_f64(),
         "peakMemoryBytes": peak_rss(),
     });
-    if !matches!(layout, "vortex" | "pack") {
+    if !matches!(layout, "vortex" | "pack" | "shard") {
         // The viewer's own terms: its tile side without the overlap (Deep Zoom's TileSize).
         doc["viewer"] = serde_json::json!({ "tileSize": s.layout.payload(), "overlap": s.layout.border });
     }

@@ -18,9 +18,10 @@ use vortex_tiler::source::RowSource;
 use vortex_tiler::split::SplitOptions;
 use vortex_tiler::tile_dir::info::InfoFile;
 use vortex_tiler::viewer::{Viewer, ViewerTiles, dzi, iiif};
-use vortex_tiler::{source, split};
+use vortex_tiler::{shard, source, split};
 
 use super::report;
+use super::shard::shard_path;
 
 #[derive(clap::Args, Debug)]
 pub struct SplitArgs {
@@ -133,6 +134,20 @@ pub struct OutputArgs {
     /// stripe, for the same tiles.
     #[arg(long, value_name = "SIZE", default_value = "1G", value_parser = super::parse_size)]
     max_memory: u64,
+
+    /// Make one shard of a split across machines, into a shard pack (--pack): I/N is shard I
+    /// of N, counting from 0; auto reads the index from a Slurm job array
+    /// (SLURM_ARRAY_TASK_ID, SLURM_ARRAY_TASK_COUNT) or a Kubernetes Indexed Job
+    /// (JOB_COMPLETION_INDEX, with --shards). '{shard}' in --pack becomes the index.
+    /// `vortex-tiler merge` joins the N shard packs into the pack --pack alone makes, byte for
+    /// byte. See docs/scale-out.md.
+    #[arg(long, value_name = "I/N|auto")]
+    shard: Option<super::shard::ShardArg>,
+
+    /// With --shard auto: how many shards there are (a Kubernetes Job's completions; a Slurm
+    /// array says so itself).
+    #[arg(long, value_name = "N", requires = "shard")]
+    shards: Option<u32>,
 
     /// Worker threads for encoding, at most 4 per core [default: one per core]. Output is
     /// identical for any count.
@@ -271,10 +286,19 @@ pub fn tile(
     }
     let limits = Limits { memory: a.max_memory, ..Limits::default() };
     limits.check_threads(a.threads.unwrap_or(0))?;
-    let (dest, product) = match (&a.output, &a.pack) {
-        (Some(dir), _) => (dir, Product::TileDir),
-        (None, Some(file)) => (file, Product::Pack),
-        (None, None) => unreachable!("clap requires --output or --pack"),
+    let shard = match (&a.shard, &a.pack) {
+        (None, _) => None,
+        (Some(_), None) => bail!("--shard writes a shard pack: give --pack FILE (merge joins them into one pack)"),
+        (Some(s), Some(pack)) => {
+            let chosen = s.choose(a.shards, |name| std::env::var(name).ok())?;
+            Some((shard_path(pack, &chosen), chosen))
+        }
+    };
+    let (dest, product) = match (&a.output, &a.pack, &shard) {
+        (_, _, Some((path, _))) => (path, Product::Pack),
+        (Some(dir), _, _) => (dir, Product::TileDir),
+        (None, Some(file), _) => (file, Product::Pack),
+        (None, None, _) => unreachable!("clap requires --output or --pack"),
     };
     let claim = report::claim(dest, product, &[input], a.force)?;
     // A previous output directory's info.json sets this run's defaults (the original tool's
@@ -316,6 +340,24 @@ pub fn tile(
             eprintln!("settings from {}: {}", path.display(), changed.join(", "));
         }
     }
+    if let Some((path, chosen)) = shard {
+        if !a.quiet && !a.json {
+            eprintln!("shard {} of {} (from {}) into {}", chosen.index, chosen.count, chosen.from, path.display());
+        }
+        let job = chosen.job(input, info.to_json_pretty(), a.pack_layout.options()?);
+        let run = Run::start_counting(source, a, job.pages(&layout)?, started)?;
+        let (done, written) =
+            run.execute_with(|source, watch| shard::write_shard(source, &path, &opts, &job, watch))?;
+        if a.json {
+            let mut doc: serde_json::Value =
+                serde_json::from_str(&report::summary_json(&done, "shard", &path, Some(&written)))?;
+            doc["shard"] = serde_json::json!({ "index": chosen.index, "count": chosen.count, "from": chosen.from });
+            say!("{doc}");
+        } else {
+            report(a, "shard", &done, &path, Some(&written));
+        }
+        return Ok(());
+    }
     let run = Run::start(source, a, &layout, started)?;
     match (&a.output, &a.pack) {
         (Some(dir), _) => {
@@ -353,21 +395,39 @@ struct Run {
 
 impl Run {
     fn start(source: Box<dyn RowSource>, a: &OutputArgs, layout: &Layout, started: Instant) -> Result<Run> {
+        Run::start_counting(source, a, layout.total_tiles(), started)
+    }
+
+    /// A run that writes `total` tiles.
+    fn start_counting(source: Box<dyn RowSource>, a: &OutputArgs, total: u64, started: Instant) -> Result<Run> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(a.threads.unwrap_or(0))
             .build()
             .context("starting worker threads")?;
-        let watch = report::Watch::new(layout.total_tiles(), a.quiet || a.json)?;
-        Ok(Run { source, pool, watch, total: layout.total_tiles(), started })
+        let watch = report::Watch::new(total, a.quiet || a.json)?;
+        Ok(Run { source, pool, watch, total, started })
     }
 
     /// Runs the pipeline into `sink`; the summary keeps what the source was.
     fn execute(self, sink: &dyn TileSink, opts: &SplitOptions) -> Result<Finished> {
+        let (done, ()) = self.execute_with(|source, watch| Ok((split::split(source, sink, opts, watch)?, ())))?;
+        Ok(done)
+    }
+
+    /// Runs `work` on the source in the worker pool, with the progress bar.
+    fn execute_with<R>(
+        self,
+        work: impl FnOnce(Box<dyn RowSource>, &report::Watch) -> vortex_tiler::error::Result<(split::Summary, R)> + Send,
+    ) -> Result<(Finished, R)>
+    where
+        R: Send,
+    {
         let (decoder, width, height) = (self.source.describe(), self.source.width(), self.source.height());
         let Run { source, pool, watch, started, .. } = self;
-        let result = pool.install(|| split::split(source, sink, opts, &watch));
+        let result = pool.install(|| work(source, &watch));
         watch.bar.finish_and_clear();
-        Ok(Finished { summary: result?, decoder, width, height, took: started.elapsed() })
+        let (summary, extra) = result?;
+        Ok((Finished { summary, decoder, width, height, took: started.elapsed() }, extra))
     }
 
     /// Runs the pipeline into a directory sink and `finish`es it when every tile is written,
@@ -434,6 +494,9 @@ fn tile_for_viewer(
     };
     if names.is_some() {
         bail!("--layout {viewer} names its tiles as viewers expect; --filename-format is for --layout vortex");
+    }
+    if a.shard.is_some() {
+        bail!("--shard makes shard packs (--pack); cut the pack in shards, merge it, then serve it as {viewer}");
     }
     if a.border.is_some() {
         bail!(match viewer {

@@ -317,8 +317,13 @@ impl PackWriter {
         let tmp = self.tmp.clone();
         // The file stays in `self.file` until renamed, so that an error on the way leaves `Drop`
         // to delete it.
-        let file = self.file_ref();
         let io_err = |e| io(&tmp, e);
+        let meta_end = HEADER_LEN as u64
+            + (self.levels.len() * LEVEL_LEN) as u64
+            + (self.entries.len() * ENTRY_LEN) as u64
+            + self.metadata.len() as u64;
+        self.reclaim_room(meta_end).map_err(io_err)?;
+        let file = self.file_ref();
         // Pad the file end so that the data section ends the file exactly (the padding of a
         // zero-payload pack is the data section itself).
         file.set_len(self.end).map_err(io_err)?;
@@ -368,6 +373,38 @@ impl PackWriter {
         self.summary.absent += self.written.iter().filter(|w| !**w).count() as u64;
         self.summary.tiles = self.entries.len() as u64;
         Ok(self.summary)
+    }
+}
+
+impl PackWriter {
+    /// Moves the data section down over the room that shorter metadata left unused
+    /// ([`set_metadata`](Self::set_metadata)), in whole units of both alignments so that every
+    /// offset stays aligned; the padding left is less than one unit, as in any pack.
+    fn reclaim_room(&mut self, meta_end: u64) -> std::io::Result<()> {
+        let unit = self.options.alignment.max(self.options.payload_alignment) as u64;
+        let wanted = meta_end.next_multiple_of(self.options.alignment as u64);
+        let shift = self.data_offset.saturating_sub(wanted) / unit * unit;
+        if shift == 0 {
+            return Ok(());
+        }
+        let file = self.file_ref();
+        // Front to back: every chunk lands below where it was read.
+        let mut chunk = vec![0u8; (1 << 20).min((self.end - self.data_offset) as usize)];
+        let mut at = self.data_offset;
+        while at < self.end {
+            let n = chunk.len().min((self.end - at) as usize);
+            file.read_exact_at(&mut chunk[..n], at)?;
+            file.write_all_at(&chunk[..n], at - shift)?;
+            at += n as u64;
+        }
+        for e in &mut self.entries {
+            if TileKind::from_u8(e.kind).is_some_and(TileKind::has_payload) {
+                e.offset_or_value -= shift;
+            }
+        }
+        self.data_offset -= shift;
+        self.end -= shift;
+        Ok(())
     }
 }
 

@@ -450,3 +450,41 @@ fn jpeg_variants_decode() {
         assert!(worst <= 24, "variant {v:?}: off by {worst}");
     }
 }
+
+/// Metadata learnt while writing (a shard's sums) replaces a longer placeholder: the data
+/// section moves down over the unused room, offsets stay aligned, and the pack verifies.
+#[test]
+fn shorter_metadata_set_at_the_end_gives_back_its_room() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = common::description(4, 1);
+    let levels = vortex_pack::format::pyramid_levels(&d, 4);
+    let write = |name: &str, room: usize, meta: &[u8], options: WriteOptions| {
+        let path = dir.path().join(name);
+        let mut w = PackWriter::create(&path, d, levels.clone(), &vec![b' '; room], options).unwrap();
+        for x in 0..4u32 {
+            w.add(TileId { lod: 0, x, y: 0 }, NewTile::Data(TileKind::Raw, &common::raw_tile(&d, x))).unwrap();
+        }
+        w.add(TileId { lod: 0, x: 0, y: 1 }, NewTile::Data(TileKind::Raw, &common::raw_tile(&d, 0))).unwrap();
+        w.set_metadata(meta.to_vec()).unwrap();
+        w.finish().unwrap();
+        std::fs::read(path).unwrap()
+    };
+    let tight = write("tight.vtpk", 7, b"{\"a\":1}", WriteOptions::default());
+    let roomy = write("roomy.vtpk", 3 << 20, b"{\"a\":1}", WriteOptions::default());
+    assert!(tight == roomy, "the room is given back whole");
+    let sparse = WriteOptions { alignment: 4096, payload_alignment: 65536 };
+    // Moved in whole units of the larger alignment: at most one unit more than a tight pack.
+    let (roomy, tight) = (write("aligned.vtpk", 200_000, b"{}", sparse), write("aligned-tight.vtpk", 2, b"{}", sparse));
+    assert!(roomy.len() < tight.len() + 65536, "{} against {}", roomy.len(), tight.len());
+    let pack = Pack::open(dir.path().join("aligned.vtpk")).unwrap();
+    for (_, e) in pack.ids_in_file_order() {
+        assert!(e.len == 0 || e.offset_or_value.is_multiple_of(65536), "{e:?}");
+    }
+    assert!(verify(&pack, DECODE).is_ok());
+    assert_eq!(pack.metadata(), b"{}");
+    assert_eq!(pack.tile(0, 3, 0).unwrap(), Tile::Data(TileKind::Raw, &common::raw_tile(&d, 3)));
+
+    let mut w =
+        PackWriter::create(dir.path().join("x.vtpk"), d, levels.clone(), b"{}", WriteOptions::default()).unwrap();
+    assert!(matches!(w.set_metadata(b"{\"longer\":1}".to_vec()), Err(PackError::Usage(_))));
+}

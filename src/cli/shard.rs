@@ -1,0 +1,221 @@
+//! `split --shard` and `merge`: one split across machines (docs/scale-out.md).
+
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use vortex_tiler::output::Product;
+use vortex_tiler::shard::{self, ShardJob};
+
+use super::report;
+
+/// `--shard`: `I/N`, or `auto` from the scheduler's environment.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ShardArg {
+    Given { index: u32, count: u32 },
+    Auto,
+}
+
+impl FromStr for ShardArg {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        if s == "auto" {
+            return Ok(ShardArg::Auto);
+        }
+        let bad = || format!("'{s}' is not a shard: give I/N (shard I of N, counting from 0, e.g. 3/16) or auto");
+        let (i, n) = s.split_once('/').ok_or_else(bad)?;
+        let (index, count): (u32, u32) = (i.trim().parse().map_err(|_| bad())?, n.trim().parse().map_err(|_| bad())?);
+        if count == 0 || index >= count {
+            return Err(format!("shard '{s}': the index counts from 0 to N - 1 (N >= 1)"));
+        }
+        Ok(ShardArg::Given { index, count })
+    }
+}
+
+/// Which shard this run makes, and where that was read.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Chosen {
+    pub index: u32,
+    pub count: u32,
+    /// `--shard I/N`, or the variables it came from.
+    pub from: String,
+}
+
+impl ShardArg {
+    /// The shard index and count: as given, or from a Slurm job array
+    /// (`SLURM_ARRAY_TASK_ID` less `SLURM_ARRAY_TASK_MIN`, `SLURM_ARRAY_TASK_COUNT`) or a
+    /// Kubernetes Indexed Job (`JOB_COMPLETION_INDEX`, with `--shards N`).
+    pub fn choose(&self, shards: Option<u32>, env: impl Fn(&str) -> Option<String>) -> Result<Chosen> {
+        let number = |name: &str| -> Result<Option<u32>> {
+            env(name)
+                .map(|v| v.trim().parse::<u32>().with_context(|| format!("{name}='{v}' is not a number")))
+                .transpose()
+        };
+        let (index, count, from) = match self {
+            ShardArg::Given { index, count } => {
+                if shards.is_some_and(|n| n != *count) {
+                    bail!("--shards {} contradicts --shard {index}/{count}", shards.unwrap_or(0));
+                }
+                (*index, *count, format!("--shard {index}/{count}"))
+            }
+            ShardArg::Auto => match (number("SLURM_ARRAY_TASK_ID")?, number("JOB_COMPLETION_INDEX")?) {
+                (Some(id), _) => {
+                    let min = number("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
+                    let task_count = number("SLURM_ARRAY_TASK_COUNT")?;
+                    let count = match (shards, task_count) {
+                        (Some(n), Some(t)) if n != t => {
+                            bail!("--shards {n} contradicts SLURM_ARRAY_TASK_COUNT={t}: submit an array of {n} tasks")
+                        }
+                        (Some(n), _) | (None, Some(n)) => n,
+                        (None, None) => {
+                            bail!("--shard auto in a Slurm job without SLURM_ARRAY_TASK_COUNT: give --shards N")
+                        }
+                    };
+                    let index = id.checked_sub(min).context("SLURM_ARRAY_TASK_ID is below SLURM_ARRAY_TASK_MIN")?;
+                    (
+                        index,
+                        count,
+                        format!("SLURM_ARRAY_TASK_ID={id} (array from {min}) of SLURM_ARRAY_TASK_COUNT={count}"),
+                    )
+                }
+                (None, Some(index)) => {
+                    let count = shards
+                        .context("--shard auto in a Kubernetes Indexed Job: give --shards N (the Job's completions)")?;
+                    (index, count, format!("JOB_COMPLETION_INDEX={index} of --shards {count}"))
+                }
+                (None, None) => bail!(
+                    "--shard auto found neither SLURM_ARRAY_TASK_ID (a Slurm job array) nor JOB_COMPLETION_INDEX (a Kubernetes Indexed Job); give --shard I/N"
+                ),
+            },
+        };
+        if count == 0 || index >= count {
+            bail!("shard {index} of {count} ({from}): the index must be below the count");
+        }
+        Ok(Chosen { index, count, from })
+    }
+}
+
+/// `--pack` with `{shard}` replaced by the index, zero-padded to the count's width
+/// (`out/part-{shard}.vtpk` -> `out/part-03.vtpk` of 16), so that one command line serves
+/// every task of an array.
+pub fn shard_path(pack: &Path, chosen: &Chosen) -> PathBuf {
+    let width = (chosen.count - 1).to_string().len();
+    let name = pack.to_string_lossy().replace("{shard}", &format!("{:0width$}", chosen.index));
+    PathBuf::from(name)
+}
+
+impl Chosen {
+    pub fn job<'a>(&self, input: &'a Path, info: String, pack: vortex_pack::WriteOptions) -> ShardJob<'a> {
+        ShardJob { index: self.index, count: self.count, input, info, pack }
+    }
+}
+
+#[derive(clap::Args, Debug)]
+pub struct MergeArgs {
+    /// The shard packs of one split, written by `split --shard I/N --pack FILE`: all N of
+    /// them, in any order.
+    #[arg(value_name = "SHARD", required = true)]
+    shards: Vec<PathBuf>,
+
+    /// The pack to write: the pack `split --pack` of the same input and options makes, byte
+    /// for byte. An existing pack is replaced; any other file only with --force.
+    #[arg(short, long, value_name = "PACK")]
+    output: PathBuf,
+
+    /// Replace a regular file at --output that is not a pack.
+    #[arg(long)]
+    force: bool,
+
+    /// Worker threads for encoding the levels above the cut [default: one per core].
+    #[arg(long, value_name = "N")]
+    threads: Option<usize>,
+
+    /// No progress bar and no summary line.
+    #[arg(short, long)]
+    quiet: bool,
+
+    /// Print the summary as one JSON object on standard output.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run_merge(a: MergeArgs) -> Result<()> {
+    let started = Instant::now();
+    let inputs: Vec<&Path> = a.shards.iter().map(PathBuf::as_path).collect();
+    report::claim(&a.output, Product::Pack, &inputs, a.force)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()
+        .context("starting worker threads")?;
+    // Every shard's level table is the merged pack's: the first one's gives the bar's length.
+    let total = vortex_pack::Pack::open(&a.shards[0])
+        .map(|p| p.levels().iter().map(|l| l.tiles_w as u64 * l.tiles_h as u64).sum())
+        .unwrap_or(0);
+    let watch = report::Watch::new(total, a.quiet || a.json)?;
+    let merged = pool.install(|| shard::merge(&a.shards, &a.output, &watch));
+    watch.bar.finish_and_clear();
+    let merged = merged?;
+    let took = started.elapsed().as_secs_f64();
+    let m = &merged;
+    if a.json {
+        let doc = serde_json::json!({
+            "output": a.output.display().to_string(),
+            "shards": m.shards,
+            "cutLevel": m.cut,
+            "madeAboveCut": m.made,
+            "copiedBytes": m.copied_bytes,
+            "sumsBytes": m.sums_bytes,
+            "tiles": m.pack.tiles,
+            "fileBytes": m.pack.file_bytes,
+            "contentHash": format!("{:016x}", m.pack.content_hash),
+            "seconds": took,
+        });
+        say!("{doc}");
+    } else if !a.quiet {
+        say!("{}", report::pack_line(&m.pack));
+        say!(
+            "merged {} shards into {} in {took:.2} s: copied {} of payloads, made {} pages above the cut (LOD {}) from {} of sums",
+            m.shards,
+            a.output.display(),
+            report::mib(m.copied_bytes),
+            m.made,
+            m.cut,
+            report::mib(m.sums_bytes),
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn env<'a>(vars: &'a [(&'a str, &'a str)]) -> impl Fn(&str) -> Option<String> + 'a {
+        move |name| vars.iter().find(|(k, _)| *k == name).map(|(_, v)| v.to_string())
+    }
+
+    #[test]
+    fn shards_come_from_the_flag_or_the_scheduler() {
+        let given = "3/16".parse::<ShardArg>().unwrap();
+        assert_eq!(given.choose(None, env(&[])).unwrap().index, 3);
+        assert!("16/16".parse::<ShardArg>().is_err() && "x".parse::<ShardArg>().is_err());
+        let slurm = [("SLURM_ARRAY_TASK_ID", "5"), ("SLURM_ARRAY_TASK_MIN", "1"), ("SLURM_ARRAY_TASK_COUNT", "8")];
+        let c = ShardArg::Auto.choose(None, env(&slurm)).unwrap();
+        assert_eq!((c.index, c.count), (4, 8));
+        assert!(c.from.contains("SLURM_ARRAY_TASK_ID=5"));
+        assert!(ShardArg::Auto.choose(Some(4), env(&slurm)).unwrap_err().to_string().contains("contradicts"));
+        let k8s = [("JOB_COMPLETION_INDEX", "2")];
+        assert_eq!(ShardArg::Auto.choose(Some(4), env(&k8s)).unwrap().index, 2);
+        assert!(ShardArg::Auto.choose(None, env(&k8s)).unwrap_err().to_string().contains("--shards"));
+        assert!(ShardArg::Auto.choose(None, env(&[])).unwrap_err().to_string().contains("SLURM_ARRAY_TASK_ID"));
+        assert!(ShardArg::Auto.choose(Some(2), env(&[("JOB_COMPLETION_INDEX", "2")])).is_err());
+    }
+
+    #[test]
+    fn the_index_goes_into_the_pack_name() {
+        let c = Chosen { index: 3, count: 16, from: String::new() };
+        assert_eq!(shard_path(Path::new("out/part-{shard}.vtpk"), &c), PathBuf::from("out/part-03.vtpk"));
+        assert_eq!(shard_path(Path::new("plain.vtpk"), &c), PathBuf::from("plain.vtpk"));
+    }
+}
