@@ -341,7 +341,8 @@ impl<T: Sample> Producer<'_, T> {
         let channels = self.pixels.channels.count();
         let window = span.window(&self.layout, 0);
         let whole = window.end - window.start == self.layout.width as u64;
-        let narrow = !whole && source.read_columns(window.start as u32..window.end as u32);
+        // Asked even for all the columns: a shard's earlier pass may have asked for fewer.
+        let narrow = source.read_columns(window.start as u32..window.end as u32) && !whole;
         let columns = match narrow {
             true => 0..(window.end - window.start) as usize * channels,
             false => window.start as usize * channels..window.end as usize * channels,

@@ -67,8 +67,9 @@ pub trait RowSource: Send {
         Ok(())
     }
     /// From the next row on, fills `row` with the texels of `columns` only, if this source can
-    /// read part of a row for less than the whole (a stripe of a wide PPM); returns whether it
-    /// will. Sources that cannot keep giving whole rows.
+    /// read part of a row for less than the whole (a stripe of a wide PPM, a shard's region of
+    /// a tiled input); returns whether it will. All the columns mean whole rows again. Sources
+    /// that cannot keep giving whole rows.
     fn read_columns(&mut self, _columns: std::ops::Range<u32>) -> bool {
         false
     }

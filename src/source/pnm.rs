@@ -161,7 +161,13 @@ impl RowSource for PnmSource {
     }
 
     fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
-        self.columns = Some(columns);
+        let whole = columns == (0..self.width);
+        self.columns = Some(columns).filter(|_| !whole);
+        if whole {
+            // Buffered reading goes on from the next row.
+            let at = self.data_start + self.next * self.width as u64 * self.layout.bytes_per_pixel() as u64;
+            return self.reader.seek(SeekFrom::Start(at)).is_ok();
+        }
         true
     }
 

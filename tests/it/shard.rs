@@ -204,3 +204,127 @@ fn a_shard_made_again_merges_to_the_same_bytes() {
     merge(&paths, &second, &()).unwrap();
     assert!(std::fs::read(&first).unwrap() == std::fs::read(&second).unwrap());
 }
+
+// From the command line.
+
+const BIN: &str = env!("CARGO_BIN_EXE_vortex-tiler");
+
+fn vortex(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(BIN)
+        .args(args)
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("JOB_COMPLETION_INDEX")
+        .output()
+        .unwrap()
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = vortex(args);
+    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn fails(args: &[&str]) -> String {
+    let out = vortex(args);
+    // 1 for our errors, 2 for clap's usage errors; never a panic.
+    assert!(matches!(out.status.code(), Some(1 | 2)), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// A PPM with some structure: several LODs, no two pages alike.
+fn ppm(dir: &Scratch, w: u32, h: u32) -> PathBuf {
+    let path = dir.path("in.ppm");
+    let mut bytes = format!("P6 {w} {h} 255\n").into_bytes();
+    for y in 0..h {
+        for x in 0..w {
+            bytes.extend([(x * 7 + y) as u8, (y * 5 + x / 3) as u8, (x ^ y) as u8]);
+        }
+    }
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+#[test]
+fn split_and_convert_shards_merge_to_the_one_machine_pack_from_the_command_line() {
+    let dir = Scratch::new("cli");
+    let input = ppm(&dir, 700, 500);
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let (input, whole, merged) = (s(&input), s(&dir.path("whole.vtpk")), s(&dir.path("merged.vtpk")));
+    let opts = ["--tile-size", "64", "--border", "2", "--codec", "png"];
+    ok(&[&["split", &input, "--pack", &whole], &opts[..]].concat());
+    let part = s(&dir.path("part-{shard}.vtpk"));
+    for i in 0..3 {
+        let out =
+            ok(&[&["split", &input, "--pack", &part, "--shard", &format!("{i}/3"), "--json"], &opts[..]].concat());
+        let doc: serde_json::Value = serde_json::from_str(&out).unwrap();
+        assert_eq!((doc["shard"]["index"].as_u64(), doc["shard"]["count"].as_u64()), (Some(i), Some(3)), "{out}");
+    }
+    let parts: Vec<String> = (0..3).map(|i| s(&dir.path(&format!("part-{i}.vtpk")))).collect();
+    let report =
+        ok(&[&["merge"], &parts.iter().map(String::as_str).collect::<Vec<_>>()[..], &["-o", &merged]].concat());
+    assert!(report.contains("merged 3 shards"), "{report}");
+    assert!(std::fs::read(&whole).unwrap() == std::fs::read(&merged).unwrap());
+
+    // convert: a tile directory (split's output) in shards, each decoding only its cells.
+    let tiles = s(&dir.path("tiles"));
+    ok(&["split", &input, "-o", &tiles, "--tile-size", "100", "--codec", "png"]);
+    let (one, joined) = (s(&dir.path("conv.vtpk")), s(&dir.path("conv-merged.vtpk")));
+    ok(&[&["convert", &tiles, "--pack", &one], &opts[..]].concat());
+    let cpart = s(&dir.path("conv-{shard}.vtpk"));
+    for i in 0..4 {
+        ok(&[&["convert", &tiles, "--pack", &cpart, "--shard", &format!("{i}/4"), "-q"], &opts[..]].concat());
+    }
+    let cparts: Vec<String> = (0..4).map(|i| s(&dir.path(&format!("conv-{i}.vtpk")))).collect();
+    ok(&[&["merge", "-q", "-o", &joined], &cparts.iter().map(String::as_str).collect::<Vec<_>>()[..]].concat());
+    assert!(std::fs::read(&one).unwrap() == std::fs::read(&joined).unwrap());
+}
+
+#[test]
+fn shard_flags_are_checked_and_explained() {
+    let dir = Scratch::new("flags");
+    let input = ppm(&dir, 300, 200);
+    let input = input.to_str().unwrap();
+    let pack = dir.path("p.vtpk");
+    let pack = pack.to_str().unwrap();
+    let out = dir.path("o");
+    let e = fails(&["split", input, "-o", out.to_str().unwrap(), "--shard", "0/2"]);
+    assert!(e.contains("--shard writes a shard pack: give --pack"), "{e}");
+    let e = fails(&["split", input, "--pack", pack, "--shard", "2/2"]);
+    assert!(e.contains("counts from 0"), "{e}");
+    let e = fails(&["split", input, "--pack", pack, "--shard", "auto"]);
+    assert!(e.contains("SLURM_ARRAY_TASK_ID") && e.contains("JOB_COMPLETION_INDEX"), "{e}");
+    let e = fails(&["split", input, "--pack", pack, "--shard", "0/500", "--tile-size", "64"]);
+    assert!(e.contains("500 shards for 20 pages"), "{e}");
+    let e = fails(&["split", input, "--pack", pack, "--shard", "0/2", "--filter", "lanczos3"]);
+    assert!(e.contains("lanczos3") && e.contains("sharded"), "{e}");
+    let e = fails(&["split", input, "-o", out.to_str().unwrap(), "--layout", "dzi", "--shard", "0/2"]);
+    assert!(e.contains("--shard"), "{e}");
+
+    // A Kubernetes Indexed Job's index, with --shards.
+    let k8s = std::process::Command::new(BIN)
+        .args([
+            "split",
+            input,
+            "--pack",
+            &dir.path("k-{shard}.vtpk").to_string_lossy(),
+            "--shard",
+            "auto",
+            "--shards",
+            "3",
+        ])
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env("JOB_COMPLETION_INDEX", "1")
+        .output()
+        .unwrap();
+    assert!(k8s.status.success(), "{}", String::from_utf8_lossy(&k8s.stderr));
+    assert!(String::from_utf8_lossy(&k8s.stderr).contains("JOB_COMPLETION_INDEX=1"));
+    assert!(dir.path("k-1.vtpk").is_file());
+
+    // merge names what is wrong and writes nothing.
+    let merged = dir.path("m.vtpk");
+    let e = fails(&["merge", &dir.path("k-1.vtpk").to_string_lossy(), "-o", &merged.to_string_lossy()]);
+    assert!(e.contains("shards 0, 2 of 3 missing"), "{e}");
+    let e = fails(&["merge", input, "-o", &merged.to_string_lossy()]);
+    assert!(e.contains("in.ppm"), "{e}");
+    assert!(!merged.exists());
+}

@@ -14,6 +14,7 @@ mod pack_input;
 mod split_output;
 mod store;
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
@@ -77,6 +78,9 @@ pub struct TiledSource {
     next: u32,
     /// Read again from the top (a striped run): missing cells are already logged.
     rewound: bool,
+    /// Texel columns read, when a stripe or a shard asked for fewer than all: only the
+    /// cells under them are decoded.
+    columns: Option<Range<u32>>,
 }
 
 impl TiledSource {
@@ -94,6 +98,7 @@ impl TiledSource {
             band_row: None,
             next: 0,
             rewound: false,
+            columns: None,
         }
     }
 
@@ -114,24 +119,29 @@ impl TiledSource {
         let (cw, ch) = self.grid.cell();
         let bpp = h.layout.bytes_per_pixel();
         let rows = ch.min(h.height - row * ch) as usize;
-        let cols = h.width.div_ceil(cw);
-        let row_bytes = h.width as usize * bpp;
+        let span = self.columns.clone().unwrap_or(0..h.width);
+        let cols = span.start / cw..span.end.div_ceil(cw);
+        let row_bytes = span.len() * bpp;
         let width_of = |col: u32| cw.min(h.width - col * cw) as usize;
         let cells: Vec<Result<CellTexels>> =
-            (0..cols).into_par_iter().map(|col| self.cell_texels(col, row, width_of(col), rows)).collect();
+            cols.clone().into_par_iter().map(|col| self.cell_texels(col, row, width_of(col), rows)).collect();
         self.band.resize(rows * row_bytes, 0);
-        for (col, cell) in cells.into_iter().enumerate() {
-            let x0 = col * cw as usize * bpp;
-            let width = width_of(col as u32);
+        for (col, cell) in cols.zip(cells) {
+            // The part of the cell under the columns read, and where it goes in the band.
+            let (cell_x0, width) = (col * cw, width_of(col));
+            let from = span.start.max(cell_x0);
+            let to = span.end.min(cell_x0 + width as u32);
+            let (skip, x0, len) =
+                ((from - cell_x0) as usize * bpp, (from - span.start) as usize * bpp, (to - from) as usize * bpp);
             match cell? {
                 Some(texels) => {
                     for (y, src) in texels.chunks_exact(width * bpp).enumerate() {
-                        self.band[y * row_bytes + x0..][..width * bpp].copy_from_slice(src);
+                        self.band[y * row_bytes + x0..][..len].copy_from_slice(&src[skip..skip + len]);
                     }
                 }
                 None => {
                     for y in 0..rows {
-                        for px in self.band[y * row_bytes + x0..][..width * bpp].chunks_exact_mut(bpp) {
+                        for px in self.band[y * row_bytes + x0..][..len].chunks_exact_mut(bpp) {
                             px.copy_from_slice(&self.fill);
                         }
                     }
@@ -218,8 +228,17 @@ impl RowSource for TiledSource {
     }
 
     fn rewind(&mut self) -> Result<()> {
-        (self.next, self.band_row, self.rewound) = (0, None, true);
+        (self.next, self.band_row, self.rewound, self.columns) = (0, None, true, None);
         Ok(())
+    }
+
+    /// Decodes only the cells under `columns` (a stripe of a wide grid, a shard's region).
+    fn read_columns(&mut self, columns: Range<u32>) -> bool {
+        let columns = Some(columns).filter(|c| *c != (0..self.header.width));
+        if columns != self.columns {
+            (self.columns, self.band_row) = (columns, None);
+        }
+        true
     }
 
     /// Rows of cells are loaded by row: the next read loads the one it needs.
