@@ -215,6 +215,7 @@ enum Stored {
 /// returns the tile count.
 pub fn unpack(pack: &Pack, dir: &Claim, progress: &dyn Progress) -> Result<u64> {
     let meta = pack.metadata();
+    crate::shard::manifest::refuse_shard(pack.path(), meta)?;
     let info: InfoFile = serde_json::from_slice(meta).map_err(|e| TilerError::Info {
         path: pack.path().to_path_buf(),
         field: "metadata".into(),

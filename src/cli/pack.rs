@@ -208,6 +208,9 @@ pub fn run_info(a: InfoArgs) -> Result<()> {
         d.level_count
     );
     say!("data aligned to {} bytes, tiles to {}", h.alignment, h.payload_alignment);
+    if let Some(shard) = vortex_tiler::shard::manifest::describe(pack.metadata()) {
+        say!("{shard}");
+    }
     say!("{:>4} {:>11} {:>15} {:>12}", "lod", "tiles", "image texels", "first entry");
     for (lod, l) in pack.levels().iter().enumerate() {
         say!(

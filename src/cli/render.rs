@@ -117,7 +117,11 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let packs = scene
         .textures
         .iter()
-        .map(|p| vortex_pack::Pack::open(p).map(Arc::new).with_context(|| format!("opening {}", p.display())))
+        .map(|p| {
+            let pack = vortex_pack::Pack::open(p).with_context(|| format!("opening {}", p.display()))?;
+            vortex_tiler::shard::manifest::refuse_shard(p, pack.metadata())?;
+            Ok(Arc::new(pack))
+        })
         .collect::<Result<Vec<_>>>()?;
     let loader = Loader::new(packs, scene.effects.threads)?;
     let side = scene.effects.cache_slots_per_side as u32 * loader.tile_size();

@@ -124,6 +124,7 @@ fn open_input(path: &Path) -> Result<Input, ServeError> {
 
 fn open_pack(path: &Path) -> Result<Source, String> {
     let pack = Pack::open(path).map_err(|e| format!("not a pack this tool can read: {e}"))?;
+    crate::shard::manifest::refuse_shard(path, pack.metadata()).map_err(|e| e.to_string())?;
     let d = *pack.description();
     let layout = Layout::new(d.width as u64, d.height as u64, d.tile_size, d.border).map_err(|e| e.to_string())?;
     let levels = pack.levels();

@@ -136,6 +136,33 @@ impl Manifest {
     }
 }
 
+/// What a shard pack is, in one line, if `metadata` is a shard's (for `info`).
+pub fn describe(metadata: &[u8]) -> Option<String> {
+    #[derive(Deserialize)]
+    #[serde(rename_all = "camelCase")]
+    struct Head {
+        vortex_shard: u32,
+        index: u32,
+        count: u32,
+        cut_level: u32,
+        source: SourceId,
+    }
+    let h: Head = serde_json::from_slice(metadata).ok()?;
+    Some(format!(
+        "shard {} of {} (format {}) of a split of {}: its subtrees at LODs 0 to {}; `vortex-tiler merge` joins all {} into the pack",
+        h.index, h.count, h.vortex_shard, h.source.name, h.cut_level, h.count
+    ))
+}
+
+/// Refuses a shard pack where a whole pyramid is needed (`unpack`, `convert`, `serve`,
+/// `render`): it holds only some pages and no levels above its cut.
+pub fn refuse_shard(path: &Path, metadata: &[u8]) -> Result<()> {
+    match describe(metadata) {
+        Some(what) => Err(shard_error(path, format!("is {what} first"))),
+        None => Ok(()),
+    }
+}
+
 pub(crate) fn shard_error(path: &Path, message: String) -> TilerError {
     TilerError::Shard { path: path.to_path_buf(), message }
 }

@@ -319,6 +319,10 @@ fn shard_flags_are_checked_and_explained() {
     assert!(k8s.status.success(), "{}", String::from_utf8_lossy(&k8s.stderr));
     assert!(String::from_utf8_lossy(&k8s.stderr).contains("JOB_COMPLETION_INDEX=1"));
     assert!(dir.path("k-1.vtpk").is_file());
+    // A shard is not a whole pyramid: what needs one says to merge first; info says what it is.
+    let e = fails(&["unpack", &dir.path("k-1.vtpk").to_string_lossy(), "-o", &dir.path("u").to_string_lossy()]);
+    assert!(e.contains("shard 1 of 3") && e.contains("vortex-tiler merge"), "{e}");
+    assert!(ok(&["info", &dir.path("k-1.vtpk").to_string_lossy()]).contains("shard 1 of 3"));
 
     // merge names what is wrong and writes nothing.
     let merged = dir.path("m.vtpk");

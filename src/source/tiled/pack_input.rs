@@ -26,6 +26,7 @@ impl PackInput {
     /// Opens the pack at `path` (checking its structure, not yet its tiles).
     pub fn open(path: &Path) -> Result<PackInput> {
         let pack = Pack::open(path)?;
+        crate::shard::manifest::refuse_shard(path, pack.metadata())?;
         let d = *pack.description();
         // The reader has checked channels (1-4), sample bytes (1-2) and 2 * border < tile size.
         let channels = [Channels::Grey, Channels::GreyAlpha, Channels::Rgb, Channels::Rgba][d.channels as usize - 1];
