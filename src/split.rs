@@ -19,15 +19,13 @@ use crate::background::Background;
 use crate::codec::{Codec, TileEncoder};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
-use crate::limits::human_bytes;
 use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::pyramid::Filter;
 use crate::pyramid::cascade::{Batch, BatchSender, Cascade, CutTile, Span};
 use crate::pyramid::cut::Padding;
 use crate::pyramid::filter::ExactFilter;
 use crate::pyramid::reduce::{Acc, Reducer};
-use crate::pyramid::stripes::{Plan, span_bytes};
-use crate::shard::ShardPlan;
+use crate::pyramid::stripes::Plan;
 use crate::shard::merge::RootRows;
 use crate::shard::sums::{self, EncodedRoots};
 use crate::sink::TileSink;
@@ -111,42 +109,16 @@ pub fn split(
     Ok(summary)
 }
 
-/// Shard `index` of `shards`: the pages of its subtrees at the cut level and below, and the
-/// exact sums of its roots for `merge` ([`crate::shard`]).
-pub fn split_shard(
+/// A shard's rectangles of the pyramid (`spans`, top to bottom, each of the LODs up to the
+/// cut): their pages, and the exact sums of their roots for `merge` ([`crate::shard`]).
+pub(crate) fn split_shard(
     source: Box<dyn RowSource>,
     sink: &dyn TileSink,
     opts: &SplitOptions,
-    shards: &ShardPlan,
-    index: u32,
+    spans: Vec<Span>,
     progress: &dyn Progress,
 ) -> Result<(Summary, Vec<EncodedRoots>)> {
     let layout = opts.layout(source.width(), source.height())?;
-    if !opts.filter.is_exact() {
-        return Err(TilerError::Options(format!(
-            "--filter {} cannot be sharded (it resamples each level across the shards' edges); an exact filter such as the default can",
-            opts.filter
-        )));
-    }
-    let spans: Vec<Span> = shards.regions(index).iter().map(|r| shards.span(&layout, r)).collect();
-    let texel_bytes = source.layout().bytes_per_pixel() as u64;
-    let sums = sum_bytes(opts, source.layout(), &layout) as u64;
-    let channels = source.layout().channels.count() as u64;
-    for span in &spans {
-        let roots = span.window(&layout, shards.cut);
-        let roots_rows = span.window_rows(&layout, shards.cut);
-        let need = span_bytes(&layout, span, texel_bytes)
-            .saturating_add((roots.end - roots.start) * (roots_rows.end - roots_rows.start) * channels * sums);
-        if need > opts.max_memory {
-            return Err(TilerError::Limit(format!(
-                "shard {index} of {} makes pages {} texels wide, which needs {}, more than --max-memory ({}); raise --max-memory or cut more shards",
-                shards.count(),
-                (span.window(&layout, 0).end - span.window(&layout, 0).start),
-                human_bytes(need),
-                human_bytes(opts.max_memory)
-            )));
-        }
-    }
     by_depth(source.header(), sink, opts, layout, Passes::Shard(spans, source), progress)
 }
 

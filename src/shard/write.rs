@@ -6,8 +6,12 @@ use vortex_pack::{WriteOptions, WriteSummary};
 
 use super::manifest::{FORMAT, Manifest, ShardOptions, SourceId, StoredRoots};
 use super::plan::ShardPlan;
-use crate::error::Result;
+use crate::error::{Result, TilerError};
 use crate::layout::Layout;
+use crate::limits::human_bytes;
+use crate::pixel::PixelLayout;
+use crate::pyramid::cascade::Span;
+use crate::pyramid::stripes::span_bytes;
 use crate::sink::PackSink;
 use crate::source::RowSource;
 use crate::split::{self, Progress, SplitOptions, Summary};
@@ -48,13 +52,14 @@ pub fn write_shard(
     let layout = opts.layout(header.width, header.height)?;
     let plan = ShardPlan::choose(&layout, job.count)?;
     if job.index >= job.count {
-        return Err(crate::error::TilerError::Options(format!(
+        return Err(TilerError::Options(format!(
             "shard {} of {}: the index counts from 0 to {}",
             job.index,
             job.count,
             job.count - 1
         )));
     }
+    let spans = shard_spans(&plan, &layout, opts, header.layout, job.index)?;
     let fingerprint = super::fingerprint(job.input)?;
     let stored = opts.codec.stored_layout(header.layout, opts.flatten, opts.tile_depth)?;
     let mut manifest = Manifest {
@@ -107,8 +112,43 @@ pub fn write_shard(
         ))
     })?;
     let sink = PackSink::create(dest, &layout, stored, opts.codec, &vec![b' '; room], job.pack)?;
-    let (summary, roots) = split::split_shard(source, &sink, opts, &plan, job.index, progress)?;
+    let (summary, roots) = split::split_shard(source, &sink, opts, spans, progress)?;
     manifest.roots = roots.iter().map(|r| StoredRoots::new(r.columns.clone(), r.rows.clone(), &r.bytes)).collect();
     let written = sink.finish_with_metadata(manifest.to_json())?;
     Ok((summary, written))
+}
+
+/// The passes of shard `index`, once it is known that they can be made: by an exact filter
+/// (the others resample each level across the shards' edges), each within `--max-memory`.
+fn shard_spans(
+    plan: &ShardPlan,
+    layout: &Layout,
+    opts: &SplitOptions,
+    pixels: PixelLayout,
+    index: u32,
+) -> Result<Vec<Span>> {
+    if !opts.filter.is_exact() {
+        return Err(TilerError::Options(format!(
+            "--filter {} cannot be sharded (it resamples each level across the shards' edges); an exact filter such as the default can",
+            opts.filter
+        )));
+    }
+    let spans: Vec<Span> = plan.regions(index).iter().map(|r| plan.span(layout, r)).collect();
+    let sums = split::sum_bytes(opts, pixels, layout) as u64 * pixels.channels.count() as u64;
+    for span in &spans {
+        let (columns, rows) = (span.window(layout, plan.cut), span.window_rows(layout, plan.cut));
+        let roots = (columns.end - columns.start) * (rows.end - rows.start) * sums;
+        let need = span_bytes(layout, span, pixels.bytes_per_pixel() as u64).saturating_add(roots);
+        if need > opts.max_memory {
+            let window = span.window(layout, 0);
+            return Err(TilerError::Limit(format!(
+                "shard {index} of {} makes pages {} texels wide, which needs {}, more than --max-memory ({}); raise --max-memory or cut more shards",
+                plan.count(),
+                window.end - window.start,
+                human_bytes(need),
+                human_bytes(opts.max_memory)
+            )));
+        }
+    }
+    Ok(spans)
 }
