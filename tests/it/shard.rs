@@ -153,6 +153,21 @@ fn a_deep_pyramid_in_many_shards_is_the_one_machine_pack() {
 }
 
 #[test]
+fn a_long_strip_with_far_coordinates_in_odd_shards_is_the_one_machine_pack() {
+    // 100003 x 3 grey-alpha 16-bit in 8-texel pages, border 1: 16668 pages in a row, 16 LODs,
+    // regions at texel offsets near 100000 and a last page of one texel.
+    let image = Image::random(100_003, 3, layouts()[3], 11);
+    let opts = SplitOptions { codec: Codec::Raw, filter: Filter::Premultiplied, ..png_options(8, 1, Background::Edge) };
+    let dir = Scratch::new("strip");
+    let whole = dir.path("whole.vtpk");
+    one_machine(&image, &opts, &whole);
+    let input = input_file(&dir, b"strip");
+    let merged = dir.path("merged.vtpk");
+    merge(&shards(&image, &opts, 13, &input, &dir), &merged, &()).unwrap();
+    assert!(std::fs::read(&whole).unwrap() == std::fs::read(&merged).unwrap());
+}
+
+#[test]
 fn shards_that_do_not_belong_together_are_named() {
     let image = Image::random(100, 80, layouts()[4], 5);
     let opts = png_options(16, 0, Background::Edge);
