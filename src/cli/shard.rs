@@ -43,9 +43,11 @@ pub struct Chosen {
 }
 
 impl ShardArg {
-    /// The shard index and count: as given, or from a Slurm job array
-    /// (`SLURM_ARRAY_TASK_ID` less `SLURM_ARRAY_TASK_MIN`, `SLURM_ARRAY_TASK_COUNT`) or a
-    /// Kubernetes Indexed Job (`JOB_COMPLETION_INDEX`, with `--shards N`).
+    /// The shard index and count: as given, or from a Slurm job array or a Kubernetes Indexed
+    /// Job (`JOB_COMPLETION_INDEX`, with `--shards N`). In a Slurm array, with `--shards N`
+    /// the task id is the index (so `--array=3,7` re-runs shards 3 and 7); without it the
+    /// array must be one plain range, numbered from its first task, of
+    /// `SLURM_ARRAY_TASK_COUNT` shards.
     pub fn choose(&self, shards: Option<u32>, env: impl Fn(&str) -> Option<String>) -> Result<Chosen> {
         let number = |name: &str| -> Result<Option<u32>> {
             env(name)
@@ -60,25 +62,29 @@ impl ShardArg {
                 (*index, *count, format!("--shard {index}/{count}"))
             }
             ShardArg::Auto => match (number("SLURM_ARRAY_TASK_ID")?, number("JOB_COMPLETION_INDEX")?) {
-                (Some(id), _) => {
-                    let min = number("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
-                    let task_count = number("SLURM_ARRAY_TASK_COUNT")?;
-                    let count = match (shards, task_count) {
-                        (Some(n), Some(t)) if n != t => {
-                            bail!("--shards {n} contradicts SLURM_ARRAY_TASK_COUNT={t}: submit an array of {n} tasks")
+                (Some(id), _) => match shards {
+                    Some(count) => (id, count, format!("SLURM_ARRAY_TASK_ID={id} of --shards {count}")),
+                    None => {
+                        let [min, max, step, count] =
+                            ["MIN", "MAX", "STEP", "COUNT"].map(|v| number(&format!("SLURM_ARRAY_TASK_{v}")));
+                        let (min, max, step) = (min?.unwrap_or(0), max?, step?.unwrap_or(1));
+                        let count = count?
+                            .context("--shard auto in a Slurm job without SLURM_ARRAY_TASK_COUNT: give --shards N")?;
+                        if step != 1 || max.is_some_and(|max| max - min + 1 != count) {
+                            bail!(
+                                "--shard auto: this Slurm array is not one plain range ({count} tasks from {min} to {}, step {step}), so its tasks are not shards 0 to {}; give --shards N, and the task id is the shard index",
+                                max.unwrap_or(min),
+                                count - 1
+                            );
                         }
-                        (Some(n), _) | (None, Some(n)) => n,
-                        (None, None) => {
-                            bail!("--shard auto in a Slurm job without SLURM_ARRAY_TASK_COUNT: give --shards N")
-                        }
-                    };
-                    let index = id.checked_sub(min).context("SLURM_ARRAY_TASK_ID is below SLURM_ARRAY_TASK_MIN")?;
-                    (
-                        index,
-                        count,
-                        format!("SLURM_ARRAY_TASK_ID={id} (array from {min}) of SLURM_ARRAY_TASK_COUNT={count}"),
-                    )
-                }
+                        let index = id.checked_sub(min).context("SLURM_ARRAY_TASK_ID is below SLURM_ARRAY_TASK_MIN")?;
+                        (
+                            index,
+                            count,
+                            format!("SLURM_ARRAY_TASK_ID={id} (array from {min}) of SLURM_ARRAY_TASK_COUNT={count}"),
+                        )
+                    }
+                },
                 (None, Some(index)) => {
                     let count = shards
                         .context("--shard auto in a Kubernetes Indexed Job: give --shards N (the Job's completions)")?;
@@ -200,11 +206,29 @@ mod tests {
         let given = "3/16".parse::<ShardArg>().unwrap();
         assert_eq!(given.choose(None, env(&[])).unwrap().index, 3);
         assert!("16/16".parse::<ShardArg>().is_err() && "x".parse::<ShardArg>().is_err());
-        let slurm = [("SLURM_ARRAY_TASK_ID", "5"), ("SLURM_ARRAY_TASK_MIN", "1"), ("SLURM_ARRAY_TASK_COUNT", "8")];
+        let slurm = [
+            ("SLURM_ARRAY_TASK_ID", "5"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+            ("SLURM_ARRAY_TASK_MAX", "8"),
+            ("SLURM_ARRAY_TASK_COUNT", "8"),
+        ];
         let c = ShardArg::Auto.choose(None, env(&slurm)).unwrap();
         assert_eq!((c.index, c.count), (4, 8));
         assert!(c.from.contains("SLURM_ARRAY_TASK_ID=5"));
-        assert!(ShardArg::Auto.choose(Some(4), env(&slurm)).unwrap_err().to_string().contains("contradicts"));
+        // With --shards the task id is the index: one failed shard re-run as `--array=5`.
+        let rerun = [("SLURM_ARRAY_TASK_ID", "5"), ("SLURM_ARRAY_TASK_COUNT", "1")];
+        let c = ShardArg::Auto.choose(Some(16), env(&rerun)).unwrap();
+        assert_eq!((c.index, c.count), (5, 16));
+        // A list or a step does not number the shards 0 to N - 1.
+        let listed = [
+            ("SLURM_ARRAY_TASK_ID", "3"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+            ("SLURM_ARRAY_TASK_MAX", "8"),
+            ("SLURM_ARRAY_TASK_COUNT", "3"),
+        ];
+        assert!(ShardArg::Auto.choose(None, env(&listed)).unwrap_err().to_string().contains("plain range"));
+        let stepped = [("SLURM_ARRAY_TASK_ID", "2"), ("SLURM_ARRAY_TASK_STEP", "2"), ("SLURM_ARRAY_TASK_COUNT", "4")];
+        assert!(ShardArg::Auto.choose(None, env(&stepped)).unwrap_err().to_string().contains("--shards N"));
         let k8s = [("JOB_COMPLETION_INDEX", "2")];
         assert_eq!(ShardArg::Auto.choose(Some(4), env(&k8s)).unwrap().index, 2);
         assert!(ShardArg::Auto.choose(None, env(&k8s)).unwrap_err().to_string().contains("--shards"));

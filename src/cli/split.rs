@@ -287,11 +287,23 @@ pub fn tile(
     let limits = Limits { memory: a.max_memory, ..Limits::default() };
     limits.check_threads(a.threads.unwrap_or(0))?;
     let shard = match (&a.shard, &a.pack) {
+        (None, Some(pack)) if pack.to_string_lossy().contains("{shard}") => {
+            bail!(
+                "'{{shard}}' in --pack {} stands for a shard's index: add --shard I/N or --shard auto",
+                pack.display()
+            )
+        }
         (None, _) => None,
         (Some(_), None) => bail!("--shard writes a shard pack: give --pack FILE (merge joins them into one pack)"),
         (Some(s), Some(pack)) => {
             let chosen = s.choose(a.shards, |name| std::env::var(name).ok())?;
-            Some((shard_path(pack, &chosen), chosen))
+            let path = shard_path(pack, &chosen);
+            // Every task of an array writes into the same directory: the first makes it.
+            if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("creating {} for the shard packs", dir.display()))?;
+            }
+            Some((path, chosen))
         }
     };
     let (dest, product) = match (&a.output, &a.pack, &shard) {

@@ -222,20 +222,24 @@ fn open_all(paths: &[PathBuf]) -> Result<Vec<Shard>> {
             return Err(shard_error(&s.path, format!("says it is shard {i} of {count}")));
         }
         if let Some(other) = &by_index[i as usize] {
-            return Err(shard_error(
-                &s.path,
-                format!("is shard {i} of {count}, and so is {}: give each shard once", other.path.display()),
-            ));
+            let message = match other.path == s.path {
+                true => "is given twice: give each shard once".to_string(),
+                false => format!("is shard {i} of {count}, and so is {}: give each shard once", other.path.display()),
+            };
+            return Err(shard_error(&s.path, message));
         }
         by_index[i as usize] = Some(s);
     }
     let absent: Vec<String> =
         by_index.iter().enumerate().filter(|(_, s)| s.is_none()).map(|(i, _)| i.to_string()).collect();
     if !absent.is_empty() {
+        let given: Vec<String> = paths.iter().take(4).map(|p| p.display().to_string()).collect();
+        let more = if paths.len() > 4 { format!(" and {} more", paths.len() - 4) } else { String::new() };
         return Err(TilerError::Options(format!(
-            "shard{} {} of {count} missing (`split --shard I/{count}` makes shard I)",
+            "shard{} {} of {count} missing from those given ({}{more}); `split --shard I/{count}` makes shard I",
             if absent.len() == 1 { "" } else { "s" },
-            absent.join(", ")
+            absent.join(", "),
+            given.join(", ")
         )));
     }
     Ok(by_index.into_iter().flatten().collect())

@@ -66,3 +66,41 @@ fn viewers_iiif_example_names_are_what_split_writes() {
         assert!(out.join(name).is_file(), "docs/viewers.md names {name}, which split does not write");
     }
 }
+
+#[test]
+fn scale_out_try_it_loop_merges_the_one_machine_pack() {
+    // docs/scale-out.md's one-machine loop, run as it is by bash in a temporary directory
+    // holding the image it names, with the built binary first on PATH.
+    let root = env!("CARGO_MANIFEST_DIR");
+    let doc = std::fs::read_to_string(format!("{root}/docs/scale-out.md")).unwrap();
+    let script = between(between(&doc, "<!-- try-it:begin -->", "<!-- try-it:end -->"), "```sh", "```");
+    assert!(script.contains("--shard $i/4") && script.contains("vortex-tiler merge"), "{script}");
+    let cmp = script.lines().find(|l| l.trim_start().starts_with("cmp ")).expect("a cmp line");
+    let input = script.split_whitespace().skip_while(|w| *w != "split").nth(1).expect("split INPUT");
+
+    let dir = tempfile::tempdir().unwrap();
+    // 1000x700: 9 x 6 pages of 120 texels at LOD 0 (--tile-size 128 --border 4), 5 LODs.
+    image::RgbImage::from_fn(1000, 700, |x, y| image::Rgb([(x / 3) as u8, (y * 7 / 19) as u8, ((x ^ y) % 251) as u8]))
+        .save(dir.path().join(input))
+        .unwrap();
+    let bin_dir = std::path::Path::new(env!("CARGO_BIN_EXE_vortex-tiler")).parent().unwrap();
+    let path = format!("{}:{}", bin_dir.display(), std::env::var("PATH").unwrap_or_default());
+    let out = Command::new("bash")
+        .args(["-euo", "pipefail", "-c", script])
+        .current_dir(dir.path())
+        .env("PATH", path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "docs/scale-out.md's try-it loop failed ({cmp}):\n{script}\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let files: Vec<&str> = cmp.split_whitespace().skip(1).take(2).collect();
+    let read = |name: &str| std::fs::read(dir.path().join(name)).unwrap();
+    assert!(read(files[0]) == read(files[1]), "{cmp}: the files differ");
+    let shards = std::fs::read_dir(dir.path().join("parts")).unwrap().count();
+    assert_eq!(shards, 4, "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("shard 3 of 4"), "{}", String::from_utf8_lossy(&out.stderr));
+}

@@ -180,7 +180,7 @@ fn shards_that_do_not_belong_together_are_named() {
     let e = error(&four[..3]);
     assert!(e.contains("shard 3 of 4 missing"), "{e}");
     let e = error(&[four[0].clone(), four[1].clone(), four[1].clone(), four[2].clone(), four[3].clone()]);
-    assert!(e.contains("shard-1.vtpk") && e.contains("so is"), "{e}");
+    assert!(e.contains("shard-1.vtpk") && e.contains("given twice"), "{e}");
 
     // A shard of another input (same image, other file) and one of other options.
     let other_dir = Scratch::new("refuse-other");
@@ -304,6 +304,8 @@ fn shard_flags_are_checked_and_explained() {
     let out = dir.path("o");
     let e = fails(&["split", input, "-o", out.to_str().unwrap(), "--shard", "0/2"]);
     assert!(e.contains("--shard writes a shard pack: give --pack"), "{e}");
+    let e = fails(&["split", input, "--pack", &dir.path("p-{shard}.vtpk").to_string_lossy()]);
+    assert!(e.contains("add --shard"), "{e}");
     let e = fails(&["split", input, "--pack", pack, "--shard", "2/2"]);
     assert!(e.contains("counts from 0"), "{e}");
     let e = fails(&["split", input, "--pack", pack, "--shard", "auto"]);
@@ -321,7 +323,7 @@ fn shard_flags_are_checked_and_explained() {
             "split",
             input,
             "--pack",
-            &dir.path("k-{shard}.vtpk").to_string_lossy(),
+            &dir.path("new/k-{shard}.vtpk").to_string_lossy(),
             "--shard",
             "auto",
             "--shards",
@@ -333,15 +335,15 @@ fn shard_flags_are_checked_and_explained() {
         .unwrap();
     assert!(k8s.status.success(), "{}", String::from_utf8_lossy(&k8s.stderr));
     assert!(String::from_utf8_lossy(&k8s.stderr).contains("JOB_COMPLETION_INDEX=1"));
-    assert!(dir.path("k-1.vtpk").is_file());
+    assert!(dir.path("new/k-1.vtpk").is_file());
     // A shard is not a whole pyramid: what needs one says to merge first; info says what it is.
-    let e = fails(&["unpack", &dir.path("k-1.vtpk").to_string_lossy(), "-o", &dir.path("u").to_string_lossy()]);
+    let e = fails(&["unpack", &dir.path("new/k-1.vtpk").to_string_lossy(), "-o", &dir.path("u").to_string_lossy()]);
     assert!(e.contains("shard 1 of 3") && e.contains("vortex-tiler merge"), "{e}");
-    assert!(ok(&["info", &dir.path("k-1.vtpk").to_string_lossy()]).contains("shard 1 of 3"));
+    assert!(ok(&["info", &dir.path("new/k-1.vtpk").to_string_lossy()]).contains("shard 1 of 3"));
 
     // merge names what is wrong and writes nothing.
     let merged = dir.path("m.vtpk");
-    let e = fails(&["merge", &dir.path("k-1.vtpk").to_string_lossy(), "-o", &merged.to_string_lossy()]);
+    let e = fails(&["merge", &dir.path("new/k-1.vtpk").to_string_lossy(), "-o", &merged.to_string_lossy()]);
     assert!(e.contains("shards 0, 2 of 3 missing"), "{e}");
     let e = fails(&["merge", input, "-o", &merged.to_string_lossy()]);
     assert!(e.contains("in.ppm"), "{e}");
