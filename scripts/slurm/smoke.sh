@@ -42,14 +42,16 @@ cleanup() {
   local rc=$?
   exec 8>&- # drop this run's shared hold on users.lock
   # The last smoke.sh out stops the cluster if a smoke.sh started it (parallel test runs share
-  # it): exclusive users.lock means no other smoke.sh is using it.
+  # it): exclusive users.lock means no other user is on it, and holding it while stopping
+  # keeps a newcomer from starting to use it meanwhile (exit 75: the lock is taken).
   if [ -e "$MARK" ] && [ "${VORTEX_SLURM_KEEP:-0}" != 1 ]; then
-    if flock -n -x "$DIR/users.lock" true; then
-      "$LC" stop || rc=1
-      rm -f "$MARK"
-    else
-      echo "smoke: another smoke.sh is using the cluster; it stops it"
-    fi
+    local stopped=0
+    flock -n -x -o -E 75 "$DIR/users.lock" "$LC" stop || stopped=$?
+    case $stopped in
+      0) rm -f "$MARK" ;;
+      75) echo "smoke: another user is on the cluster; the last one out stops it" ;;
+      *) rc=1 ;;
+    esac
   fi
   [ -n "$W" ] && rm -rf "$W"
   exit "$rc"
