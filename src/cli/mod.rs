@@ -128,6 +128,38 @@ enum Command {
     Merge(shard::MergeArgs),
 }
 
+/// How a long run works and reports: `split`, `convert` and `merge` share these flags.
+#[derive(clap::Args, Debug)]
+pub struct RunFlags {
+    /// Worker threads for encoding, at most 4 per core [default: one per core]. Output is
+    /// identical for any count.
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+
+    /// No progress bar and no summary line.
+    #[arg(short, long)]
+    pub quiet: bool,
+
+    /// Print the summary as one JSON object on standard output (for scripts), without the
+    /// progress bar.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl RunFlags {
+    /// The worker pool `--threads` asks for, checked against the cap first.
+    pub fn pool(&self) -> Result<rayon::ThreadPool> {
+        let threads = self.threads.unwrap_or(0);
+        vortex_tiler::limits::Limits::default().check_threads(threads)?;
+        Ok(rayon::ThreadPoolBuilder::new().num_threads(threads).build()?)
+    }
+
+    /// The progress bar of a run of `total` tiles; hidden with --quiet or --json.
+    pub fn watch(&self, total: u64) -> Result<report::Watch> {
+        report::Watch::new(total, self.quiet || self.json)
+    }
+}
+
 /// Where a pack's bytes go.
 #[derive(clap::Args, Debug)]
 pub struct PackLayout {

@@ -133,38 +133,26 @@ pub struct MergeArgs {
     #[arg(long)]
     force: bool,
 
-    /// Worker threads for encoding the levels above the cut [default: one per core].
-    #[arg(long, value_name = "N")]
-    threads: Option<usize>,
-
-    /// No progress bar and no summary line.
-    #[arg(short, long)]
-    quiet: bool,
-
-    /// Print the summary as one JSON object on standard output.
-    #[arg(long)]
-    json: bool,
+    #[command(flatten)]
+    run: super::RunFlags,
 }
 
 pub fn run_merge(a: MergeArgs) -> Result<()> {
     let started = Instant::now();
     let inputs: Vec<&Path> = a.shards.iter().map(PathBuf::as_path).collect();
     report::claim(&a.output, Product::Pack, &inputs, a.force)?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(a.threads.unwrap_or(0))
-        .build()
-        .context("starting worker threads")?;
+    let pool = a.run.pool()?;
     // Every shard's level table is the merged pack's: the first one's gives the bar's length.
     let total = vortex_pack::Pack::open(&a.shards[0])
         .map(|p| p.levels().iter().map(|l| l.tiles_w as u64 * l.tiles_h as u64).sum())
         .unwrap_or(0);
-    let watch = report::Watch::new(total, a.quiet || a.json)?;
+    let watch = a.run.watch(total)?;
     let merged = pool.install(|| shard::merge(&a.shards, &a.output, &watch));
     watch.bar.finish_and_clear();
     let merged = merged?;
     let took = started.elapsed().as_secs_f64();
     let m = &merged;
-    if a.json {
+    if a.run.json {
         let doc = serde_json::json!({
             "output": a.output.display().to_string(),
             "shards": m.shards,
@@ -178,7 +166,7 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
             "seconds": took,
         });
         say!("{doc}");
-    } else if !a.quiet {
+    } else if !a.run.quiet {
         say!("{}", report::pack_line(&m.pack));
         say!(
             "merged {} shards into {} in {took:.2} s: copied {} of payloads, made {} pages above the cut (LOD {}) from {} of sums",

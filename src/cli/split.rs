@@ -149,19 +149,8 @@ pub struct OutputArgs {
     #[arg(long, value_name = "N", requires = "shard")]
     shards: Option<u32>,
 
-    /// Worker threads for encoding, at most 4 per core [default: one per core]. Output is
-    /// identical for any count.
-    #[arg(long, value_name = "N")]
-    threads: Option<usize>,
-
-    /// No progress bar and no summary line.
-    #[arg(short, long)]
-    quiet: bool,
-
-    /// Print the summary as one JSON object on standard output (for scripts), without the
-    /// progress bar.
-    #[arg(long)]
-    json: bool,
+    #[command(flatten)]
+    run: super::RunFlags,
 }
 
 /// `--layout`: this tool's tile directory or a viewer's.
@@ -285,7 +274,6 @@ pub fn tile(
         }
     }
     let limits = Limits { memory: a.max_memory, ..Limits::default() };
-    limits.check_threads(a.threads.unwrap_or(0))?;
     let shard = match (&a.shard, &a.pack) {
         (None, Some(pack)) if pack.to_string_lossy().contains("{shard}") => {
             bail!(
@@ -346,21 +334,21 @@ pub fn tile(
     limits.check_pyramid(&layout, product == Product::Pack)?;
     let info = settings::describe(&layout, stored, &opts, &names);
     // Said once everything is checked, just before the work starts.
-    if let (Some(path), false) = (&info_path, a.quiet) {
+    if let (Some(path), false) = (&info_path, a.run.quiet) {
         let changed = settings::changed_by_file(&requested, source.layout(), source.width(), source.height(), &info);
         if !changed.is_empty() {
             eprintln!("settings from {}: {}", path.display(), changed.join(", "));
         }
     }
     if let Some((path, chosen)) = shard {
-        if !a.quiet && !a.json {
+        if !a.run.quiet && !a.run.json {
             eprintln!("shard {} of {} (from {}) into {}", chosen.index, chosen.count, chosen.from, path.display());
         }
         let job = chosen.job(input, info.to_json_pretty(), a.pack_layout.options()?);
         let run = Run::start_counting(source, a, job.pages(&layout)?, started)?;
         let (done, written) =
             run.execute_with(|source, watch| shard::write_shard(source, &path, &opts, &job, watch))?;
-        if a.json {
+        if a.run.json {
             let mut doc: serde_json::Value =
                 serde_json::from_str(&report::summary_json(&done, "shard", &path, Some(&written)))?;
             doc["shard"] = serde_json::json!({ "index": chosen.index, "count": chosen.count, "from": chosen.from });
@@ -412,12 +400,7 @@ impl Run {
 
     /// A run that writes `total` tiles.
     fn start_counting(source: Box<dyn RowSource>, a: &OutputArgs, total: u64, started: Instant) -> Result<Run> {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(a.threads.unwrap_or(0))
-            .build()
-            .context("starting worker threads")?;
-        let watch = report::Watch::new(total, a.quiet || a.json)?;
-        Ok(Run { source, pool, watch, total, started })
+        Ok(Run { source, pool: a.run.pool()?, watch: a.run.watch(total)?, total, started })
     }
 
     /// Runs the pipeline into `sink`; the summary keeps what the source was.
@@ -479,9 +462,9 @@ pub struct Finished {
 
 /// The summary line (and a pack's line), or with --json one JSON object; nothing with --quiet.
 fn report(a: &OutputArgs, layout: &str, done: &Finished, dest: &Path, pack: Option<&vortex_pack::WriteSummary>) {
-    if a.json {
+    if a.run.json {
         say!("{}", report::summary_json(done, layout, dest, pack));
-    } else if !a.quiet {
+    } else if !a.run.quiet {
         if let Some(written) = pack {
             say!("{}", report::pack_line(written));
         }
@@ -531,7 +514,6 @@ fn tile_for_viewer(
         bail!("--name '{name}' must be a plain file name (it makes NAME.dzi and NAME_files/)");
     }
     let limits = Limits { memory: a.max_memory, ..Limits::default() };
-    limits.check_threads(a.threads.unwrap_or(0))?;
     let product = Product::Viewer(viewer);
     let claim = report::claim(dest, product, &[input], a.force)?;
 
