@@ -26,6 +26,7 @@ use super::plan::ShardPlan;
 use super::sums::RowReader;
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
+use crate::pixel::PixelLayout;
 use crate::pyramid::cascade::Span;
 use crate::pyramid::reduce::Acc;
 use crate::pyramid::stripes::Plan;
@@ -39,7 +40,6 @@ use crate::tile_dir::info::InfoFile;
 #[derive(Clone, Debug)]
 pub struct Merged {
     pub pack: WriteSummary,
-    pub layout: Layout,
     pub shards: u32,
     /// The cut level: LODs above it were made by the merge.
     pub cut: u32,
@@ -62,70 +62,30 @@ struct Shard {
 pub fn merge(paths: &[PathBuf], dest: &Path, progress: &dyn Progress) -> Result<Merged> {
     let shards = open_all(paths)?;
     let first = &shards[0];
-    let m = &first.manifest;
-    let o = &m.options;
-    let pixels = m.source.pixels(&first.path)?;
+    let pixels = first.manifest.source.pixels(&first.path)?;
     let (opts, layout, stored) = read_options(first, pixels)?;
-    let plan = ShardPlan::choose(&layout, m.count)?;
-    for s in &shards {
-        let regions = plan.regions(s.manifest.index);
-        let theirs: Vec<_> = s.manifest.roots.iter().map(|r| (r.columns, r.rows)).collect();
-        let ours: Vec<_> = match plan.has_levels_above(&layout) {
-            true => regions
-                .iter()
-                .map(|r| {
-                    let (c, rows) = plan.sums_rect(&layout, r);
-                    ([c.start, c.end], [rows.start, rows.end])
-                })
-                .collect(),
-            false => Vec::new(),
-        };
-        if s.manifest.cut_level != plan.cut || theirs != ours {
-            return Err(shard_error(
-                &s.path,
-                format!(
-                    "holds other pages than this version cuts shard {} of {} into (cut at LOD {}, not {}): merge with the vortex-tiler that made it",
-                    s.manifest.index, m.count, s.manifest.cut_level, plan.cut
-                ),
-            ));
-        }
-        if *s.pack.description() != pack_description(&layout, stored) {
-            return Err(shard_error(&s.path, "its pack header does not match its metadata".into()));
-        }
+    let plan = ShardPlan::choose(&layout, first.manifest.count)?;
+    for shard in &shards {
+        check_pages(shard, &plan, &layout, stored)?;
     }
-
-    // The levels above the cut, into memory.
-    let above = Collected::default();
-    let sums: Vec<(usize, Vec<u8>)> = shards
-        .iter()
-        .enumerate()
-        .flat_map(|(i, s)| s.manifest.roots.iter().map(move |r| (i, r)))
-        .map(|(i, r)| Ok((i, r.sums(&shards[i].path)?)))
-        .collect::<Result<_>>()?;
-    let sums_bytes = sums.iter().map(|(_, b)| b.len() as u64).sum();
-    if plan.has_levels_above(&layout) {
-        let mut roots = RootRows::new(plan.cut + 1, pixels.channels.count(), o.sum_bytes as usize);
-        for ((i, bytes), r) in sums.iter().zip(shards.iter().flat_map(|s| &s.manifest.roots)) {
-            let reader = RowReader::new(
-                bytes,
-                r.columns[0]..r.columns[1],
-                r.rows[0]..r.rows[1],
-                roots.channels,
-                roots.sum_bytes,
-            )?;
-            roots.add(&shards[*i].path, reader);
-        }
-        let image = ImageHeader { width: layout.width, height: layout.height, layout: pixels };
-        crate::split::above_cut(image, roots, &above, &opts, &())?;
-    }
-    let mut above = above.tiles.into_inner().map_err(|_| TilerError::Options("an encoder panicked".into()))?;
+    // Per shard, per rectangle: the compressed sums.
+    let sums: Vec<Vec<Vec<u8>>> =
+        shards.iter().map(|s| s.manifest.roots.iter().map(|r| r.sums(&s.path)).collect()).collect::<Result<_>>()?;
+    let sums_bytes = sums.iter().flatten().map(|b| b.len() as u64).sum();
+    let mut above = match plan.has_levels_above(&layout) {
+        true => above_cut(&shards, &sums, &plan, &layout, &opts, pixels)?,
+        false => HashMap::new(),
+    };
     let made = above.len() as u64;
 
     // Every page, in the one-machine order.
+    let o = &first.manifest.options;
     let options = WriteOptions { alignment: o.alignment, payload_alignment: o.payload_alignment };
     let mut writer =
         PackWriter::create(dest, pack_description(&layout, stored), layout.pack_levels(), o.info.as_bytes(), options)?;
     let kind = tile_kind(opts.codec);
+    // A run too wide for one machine's memory has no order of its own: merge writes the one
+    // a machine with enough memory would.
     let order = Plan::choose(&layout, pixels.bytes_per_pixel() as u64, opts.filter, opts.max_memory)
         .unwrap_or_else(|_| Plan { stripes: vec![Span::whole(&layout)], coarse: None });
     let mut copied_bytes = 0u64;
@@ -153,7 +113,62 @@ pub fn merge(paths: &[PathBuf], dest: &Path, progress: &dyn Progress) -> Result<
         progress.advance(row.columns.len() as u64);
     }
     let pack = writer.finish()?;
-    Ok(Merged { pack, layout, shards: m.count, cut: plan.cut, made, copied_bytes, sums_bytes })
+    Ok(Merged { pack, shards: plan.count(), cut: plan.cut, made, copied_bytes, sums_bytes })
+}
+
+/// Checks that `shard` holds what this version's plan gives its index: the cut level, its
+/// rectangles of sums, and the pyramid's description.
+fn check_pages(shard: &Shard, plan: &ShardPlan, layout: &Layout, stored: PixelLayout) -> Result<()> {
+    let m = &shard.manifest;
+    let theirs: Vec<_> = m.roots.iter().map(|r| (r.columns, r.rows)).collect();
+    let ours: Vec<_> = match plan.has_levels_above(layout) {
+        false => Vec::new(),
+        true => plan
+            .regions(m.index)
+            .iter()
+            .map(|r| {
+                let (columns, rows) = plan.sums_rect(layout, r);
+                ([columns.start, columns.end], [rows.start, rows.end])
+            })
+            .collect(),
+    };
+    if m.cut_level != plan.cut || theirs != ours {
+        return Err(shard_error(
+            &shard.path,
+            format!(
+                "holds other pages than this version cuts shard {} of {} into (cut at LOD {}, not {}): merge with the vortex-tiler that made it",
+                m.index, m.count, m.cut_level, plan.cut
+            ),
+        ));
+    }
+    if *shard.pack.description() != pack_description(layout, stored) {
+        return Err(shard_error(&shard.path, "its pack header does not match its metadata".into()));
+    }
+    Ok(())
+}
+
+/// The pages above the cut, encoded, from the shards' sums (`sums[shard][rectangle]`).
+fn above_cut(
+    shards: &[Shard],
+    sums: &[Vec<Vec<u8>>],
+    plan: &ShardPlan,
+    layout: &Layout,
+    opts: &SplitOptions,
+    pixels: PixelLayout,
+) -> Result<HashMap<TileId, Made>> {
+    let sum_bytes = shards[0].manifest.options.sum_bytes as usize;
+    let mut roots = RootRows::new(plan.cut + 1, pixels.channels.count());
+    for (shard, sums) in shards.iter().zip(sums) {
+        for (r, bytes) in shard.manifest.roots.iter().zip(sums) {
+            let (columns, rows) = (r.columns[0]..r.columns[1], r.rows[0]..r.rows[1]);
+            let reader = RowReader::new(bytes, columns, rows, roots.channels, sum_bytes)?;
+            roots.add(&shard.path, reader);
+        }
+    }
+    let image = ImageHeader { width: layout.width, height: layout.height, layout: pixels };
+    let made = Collected::default();
+    crate::split::above_cut(image, roots, &made, opts, &())?;
+    made.tiles.into_inner().map_err(|_| TilerError::Options("an encoder panicked".into()))
 }
 
 fn missing(path: &Path, id: TileId) -> TilerError {
@@ -301,7 +316,6 @@ fn read_options(
 pub(crate) struct RootRows<'a> {
     lod: u32,
     channels: usize,
-    sum_bytes: usize,
     /// Rectangles not started, by first row.
     waiting: VecDeque<(&'a Path, RowReader<'a>)>,
     /// Rectangles being read.
@@ -309,8 +323,8 @@ pub(crate) struct RootRows<'a> {
 }
 
 impl<'a> RootRows<'a> {
-    fn new(lod: u32, channels: usize, sum_bytes: usize) -> Self {
-        RootRows { lod, channels, sum_bytes, waiting: VecDeque::new(), reading: Vec::new() }
+    fn new(lod: u32, channels: usize) -> Self {
+        RootRows { lod, channels, waiting: VecDeque::new(), reading: Vec::new() }
     }
 
     fn add(&mut self, path: &'a Path, reader: RowReader<'a>) {
