@@ -168,6 +168,25 @@ fn a_long_strip_with_far_coordinates_in_odd_shards_is_the_one_machine_pack() {
 }
 
 #[test]
+fn identical_pages_in_different_shards_are_stored_once() {
+    // A pattern that repeats every page: LOD 0 is 12 x 8 copies of one page, split over 5 shards.
+    let (w, h, p) = (192u32, 128u32, 16u32);
+    let layout = layouts()[4];
+    let samples = (0..h)
+        .flat_map(|y| (0..w).flat_map(move |x| [(x % p * 13) as u16, (y % p * 7) as u16, ((x % p) ^ (y % p)) as u16]));
+    let image = Image { width: w, height: h, layout, samples: samples.collect() };
+    let opts = SplitOptions { codec: Codec::Raw, ..png_options(p, 0, Background::Edge) };
+    let dir = Scratch::new("dedup");
+    let whole = dir.path("whole.vtpk");
+    one_machine(&image, &opts, &whole);
+    let input = input_file(&dir, b"dedup");
+    let merged = dir.path("merged.vtpk");
+    let summary = merge(&shards(&image, &opts, 5, &input, &dir), &merged, &()).unwrap();
+    assert!(summary.pack.deduplicated >= 95, "{:?}", summary.pack);
+    assert!(std::fs::read(&whole).unwrap() == std::fs::read(&merged).unwrap());
+}
+
+#[test]
 fn shards_that_do_not_belong_together_are_named() {
     let image = Image::random(100, 80, layouts()[4], 5);
     let opts = png_options(16, 0, Background::Edge);
