@@ -136,6 +136,14 @@ pub(crate) fn above_cut(
     Ok(summary)
 }
 
+/// Largest value one source pixel adds to an exact sum of a run of `opts` on `source`.
+pub fn max_summand(opts: &SplitOptions, source: PixelLayout) -> u64 {
+    match ExactFilter::new(opts.filter, source) {
+        Some(filter) => filter.max_value(),
+        None => (1 << (8 * source.depth.bytes())) - 1,
+    }
+}
+
 /// Bytes of one exact sum of a run of `opts` on a `source` image cut into `layout`: 8, or 16
 /// where the filter's sums could overflow a `u64` over the pyramid's depth.
 pub fn sum_bytes(opts: &SplitOptions, source: PixelLayout, layout: &Layout) -> usize {

@@ -192,6 +192,11 @@ impl ExactFilter {
         Some(ExactFilter { table, premultiplied, channels: layout.channels.count(), alpha, max_value })
     }
 
+    /// Largest value one pixel contributes to a sum.
+    pub fn max_value(&self) -> u64 {
+        self.max_value
+    }
+
     /// Whether the sums of a pyramid of `lod_count` levels need a `u128` accumulator: a texel
     /// of the coarsest level sums `4^(lod_count - 1)` pixels, and rounding doubles a sum.
     pub fn needs_u128(&self, lod_count: u32) -> bool {

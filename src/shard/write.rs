@@ -5,7 +5,7 @@ use std::path::Path;
 use vortex_pack::{WriteOptions, WriteSummary};
 
 use super::manifest::{FORMAT, Manifest, ShardOptions, SourceId, StoredRoots};
-use super::plan::ShardPlan;
+use super::plan::{Region, ShardPlan};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::limits::human_bytes;
@@ -32,7 +32,7 @@ impl ShardJob<'_> {
     /// Pages shard `index` makes: its subtrees at the cut level and below.
     pub fn pages(&self, layout: &Layout) -> Result<u64> {
         let plan = ShardPlan::choose(layout, self.count)?;
-        let pages = |r: &super::plan::Region| {
+        let pages = |r: &Region| {
             let span = plan.span(layout, r);
             span.lods.clone().map(|lod| span.columns_at(lod).len() as u64 * span.rows_at(lod).len() as u64).sum::<u64>()
         };
@@ -85,28 +85,15 @@ pub fn write_shard(
         },
         roots: Vec::new(),
     };
-    // The metadata is written last but its room is set first: room for the sums however
-    // little they compress (left as zero padding, a hole in the file, when unused).
-    let channels = header.layout.channels.count() as u64;
+    // The metadata is written last but its room is set first, for the sums however little
+    // they compress (the pack writer gives back what is left unused).
     let sums_room: u64 = match plan.has_levels_above(&layout) {
         false => 0,
-        true => plan
-            .regions(job.index)
-            .iter()
-            .map(|r| {
-                let (columns, rows) = plan.sums_rect(&layout, r);
-                let raw = (columns.end - columns.start)
-                    * (rows.end - rows.start)
-                    * channels
-                    * manifest.options.sum_bytes as u64;
-                let packed = zstd::zstd_safe::compress_bound(raw as usize) as u64;
-                packed.div_ceil(3) * 4 + 128
-            })
-            .sum(),
+        true => plan.regions(job.index).iter().map(|r| sums_room(&plan, &layout, r, opts, header.layout)).sum(),
     };
     let room = manifest.to_json().len() as u64 + sums_room;
     let room = usize::try_from(room).ok().filter(|&r| u32::try_from(r).is_ok()).ok_or_else(|| {
-        crate::error::TilerError::Limit(format!(
+        TilerError::Limit(format!(
             "shard {}: its root sums would not fit a pack's metadata; cut more shards",
             job.index
         ))
@@ -151,4 +138,17 @@ fn shard_spans(
         }
     }
     Ok(spans)
+}
+
+/// The most bytes the stored sums of `region` can take: zstd's bound for the byte planes that
+/// can be non-zero (a sum of `4^(cut + 1)` values up to the filter's largest has that many
+/// significant bytes; the planes above are all zero, a few bytes per row), in base64.
+fn sums_room(plan: &ShardPlan, layout: &Layout, region: &Region, opts: &SplitOptions, pixels: PixelLayout) -> u64 {
+    let (columns, rows) = plan.sums_rect(layout, region);
+    let samples = (columns.end - columns.start) * pixels.channels.count() as u64;
+    let rows = rows.end - rows.start;
+    let largest = split::max_summand(opts, pixels) as u128 * (1u128 << (2 * (plan.cut + 1)));
+    let significant = (128 - largest.leading_zeros()).div_ceil(8) as u64;
+    let packed = zstd::zstd_safe::compress_bound((samples * significant * rows) as usize) as u64 + 64 * rows;
+    packed.div_ceil(3) * 4 + 128
 }

@@ -42,6 +42,19 @@ pub struct TiffSource {
     next: u64,
     /// Set once a strip failed: the decoder's state is not trusted after that.
     failed: bool,
+    /// Uncompressed 8-bit strips, whose rows can be read in part straight from the file.
+    direct: Option<DirectStrips>,
+    /// The columns each row is read from, when fewer than all were asked for and `direct`.
+    columns: Option<std::ops::Range<u32>>,
+}
+
+/// The file offset of every strip of an uncompressed 8-bit TIFF without predictor whose
+/// samples are the texels as they are: a stripe or a shard narrower than the image reads
+/// only its columns of each row (a 4096-texel shard of a 16384-texel image reads a quarter
+/// of the bytes).
+struct DirectStrips {
+    file: File,
+    offsets: Vec<u64>,
 }
 
 #[derive(Clone, Copy)]
@@ -130,6 +143,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
             .map_err(|_| TilerError::unsupported(path, "a strip is too large for this machine"))?
     ];
     let tile = vec![0u8; tile_bytes as usize];
+    let direct = direct_strips(path, &mut decoder, compression, chunking, layout, file_samples)?;
 
     Ok(Box::new(TiffSource {
         path: path.to_path_buf(),
@@ -147,7 +161,35 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         tile,
         next: 0,
         failed: false,
+        direct,
+        columns: None,
     }))
+}
+
+/// [`DirectStrips`] of the TIFF, if its strips hold rows as the texels they are.
+fn direct_strips(
+    path: &Path,
+    decoder: &mut Decoder<BufReader<File>>,
+    compression: CompressionMethod,
+    chunking: Chunking,
+    layout: PixelLayout,
+    file_samples: usize,
+) -> Result<Option<DirectStrips>> {
+    let tag = |decoder: &mut Decoder<BufReader<File>>, t| {
+        decoder.find_tag_unsigned::<u16>(t).map_err(|e| open_error(path, e))
+    };
+    let as_is = compression == CompressionMethod::None
+        && matches!(chunking, Chunking::Strips { .. })
+        && layout.depth == Depth::U8
+        && file_samples == layout.channels.count()
+        && tag(decoder, Tag::Predictor)?.unwrap_or(1) == 1
+        && tag(decoder, Tag::PhotometricInterpretation)? != Some(0); // WhiteIsZero is inverted
+    if !as_is {
+        return Ok(None);
+    }
+    let offsets = decoder.get_tag_u64_vec(Tag::StripOffsets).map_err(|e| open_error(path, e))?;
+    let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
+    Ok(Some(DirectStrips { file, offsets }))
 }
 
 /// Whether the file is a BigTIFF (only for the summary line; the crate reads both).
@@ -361,6 +403,24 @@ impl RowSource for TiffSource {
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
         let y = self.next;
+        if let (Some(direct), Some(columns), Chunking::Strips { rows }) = (&self.direct, &self.columns, self.chunking) {
+            let bpp = self.layout.bytes_per_pixel() as u64;
+            let strip = (y / rows as u64) as usize;
+            let within = (y % rows as u64) * self.width as u64 + columns.start as u64;
+            let at = direct.offsets.get(strip).map(|o| o + within * bpp);
+            let read = at.map(|at| std::os::unix::fs::FileExt::read_exact_at(&direct.file, out, at));
+            return match read {
+                Some(Ok(())) => {
+                    self.next += 1;
+                    Ok(())
+                }
+                _ => Err(TilerError::DecodeRow {
+                    path: self.path.clone(),
+                    row: y,
+                    message: format!("strip {strip} is not where its offset says (a truncated file?)"),
+                }),
+            };
+        }
         if self.failed {
             return Err(TilerError::DecodeRow {
                 path: self.path.clone(),
@@ -407,6 +467,13 @@ impl RowSource for TiffSource {
     fn skip_rows(&mut self, rows: u32) -> Result<()> {
         self.next += rows as u64;
         Ok(())
+    }
+
+    /// Uncompressed 8-bit strips are read in part; others decode whole rows.
+    fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
+        let part = columns != (0..self.width);
+        self.columns = (part && self.direct.is_some()).then_some(columns);
+        self.columns.is_some() || !part
     }
 
     fn describe(&self) -> String {
@@ -566,6 +633,37 @@ mod tests {
         let got = read_all(source.as_mut()).unwrap();
         let got: Vec<u16> = got.chunks_exact(2).map(|b| u16::from_ne_bytes([b[0], b[1]])).collect();
         assert_eq!(got, grey);
+    }
+
+    #[test]
+    fn uncompressed_strips_are_read_in_part_and_the_rest_in_whole_rows() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (90u32, 33u32);
+        let rgb8: Vec<u8> = pattern(w, h, 3, 255).into_iter().map(|v| v as u8).collect();
+        let row = |y: u32, c: &std::ops::Range<u32>| {
+            rgb8[((y * w + c.start) * 3) as usize..((y * w + c.end) * 3) as usize].to_vec()
+        };
+        for (name, compression) in [("raw.tif", Compression::Uncompressed), ("lzw.tif", Compression::Lzw)] {
+            let path = dir.path().join(name);
+            write_with::<colortype::RGB8>(&path, compression, false, Some(4), w, h, &rgb8);
+            let mut source = open(&path, 1 << 30).unwrap();
+            let columns = 17..61;
+            source.skip_rows(5).unwrap();
+            let part = source.read_columns(columns.clone());
+            assert_eq!(part, name == "raw.tif", "{name}");
+            let got_columns = if part { columns.clone() } else { 0..w };
+            let mut out = vec![0u8; got_columns.len() * 3];
+            for y in 5..h {
+                source.read_row(&mut out).unwrap();
+                assert_eq!(out, row(y, &got_columns), "{name} row {y}");
+            }
+            // All the columns again: whole rows.
+            let mut source = open(&path, 1 << 30).unwrap();
+            assert!(source.read_columns(0..w));
+            let mut out = vec![0u8; w as usize * 3];
+            source.read_row(&mut out).unwrap();
+            assert_eq!(out, row(0, &(0..w)));
+        }
     }
 
     #[test]
