@@ -16,8 +16,8 @@
 #        - 16384 x 131072 RGB 8-bit uncompressed BigTIFF (srcbig.tif, ~6.4 GB, written by
 #          examples/gen_image like the first). Skipped with TALL=0, or with a note when the
 #          disk lacks room (it needs about 10 GB free, 4 if the source is there).
-#      Both have 64-row strips: a shard reads only the strips of its rows, but whole strips,
-#      so a shard narrower than the image reads more than its share.
+#      Both have 64-row uncompressed strips: a shard reads only its rows, and of each row only
+#      its columns (uncompressed 8-bit strips are read in part).
 #   2. Merge: wall and CPU time, bytes read (copiedBytes + sumsBytes from `merge --json`), the
 #      shards' total file size, the output pack's size, MB/s = bytes read / wall. The shards
 #      were just written, so they are read from the page cache.
@@ -292,7 +292,7 @@ REPORT=$WORK/scale-out-report.md
   echo "cmp merged.vtpk one.vtpk                                                                        # every merge: identical"
   echo '```'
   echo
-  echo "Sources: RGB 8-bit uncompressed BigTIFFs from \`examples/gen_image\` (64-row strips: a shard reads only the strips of its rows, but whole strips, so a shard narrower than the image reads more than its share), read once before each image's runs so that they come from the page cache. Tall image: ${TALL_NOTE:-measured}."
+  echo "Sources: RGB 8-bit uncompressed BigTIFFs from \`examples/gen_image\` (64-row strips: a shard seeks to the strips of its rows and, the strips being uncompressed, reads only its columns of each row), read once before each image's runs so that they come from the page cache. Tall image: ${TALL_NOTE:-measured}."
   echo
   echo "### Overhead of sharding (CPU time)"
   echo
