@@ -44,7 +44,9 @@ pub struct TiffSource {
     failed: bool,
     /// Uncompressed 8-bit strips, whose rows can be read in part straight from the file.
     direct: Option<DirectStrips>,
-    /// The columns each row is read from, when fewer than all were asked for and `direct`.
+    /// The columns each row is read from, when fewer than all were asked for and the file
+    /// can give them for less: `direct` strips, or tiles (only those under the columns are
+    /// decoded).
     columns: Option<std::ops::Range<u32>>,
 }
 
@@ -345,7 +347,11 @@ impl TiffSource {
             Chunking::Tiles { width: tw, across, .. } => {
                 let pixel_bytes = self.file_samples * self.layout.depth.bytes();
                 let mut result = Ok(());
-                for col in 0..across {
+                let tiles = match &self.columns {
+                    Some(c) => c.start / tw..c.end.div_ceil(tw),
+                    None => 0..across,
+                };
+                for col in tiles {
                     let chunk = index * across + col;
                     let x0 = col as usize * tw as usize;
                     let data_w = (tw as usize).min(self.width as usize - x0);
@@ -441,13 +447,15 @@ impl RowSource for TiffSource {
         let sample = self.layout.depth.bytes();
         let file_pixel = self.file_samples * sample;
         let row_bytes = self.width as usize * file_pixel;
+        let columns = self.columns.clone().unwrap_or(0..self.width);
         let row = &self.band[(y - self.band_first) as usize * row_bytes..][..row_bytes];
+        let row = &row[columns.start as usize * file_pixel..columns.end as usize * file_pixel];
         let out_pixel = self.layout.bytes_per_pixel();
-        if out.len() != self.width as usize * out_pixel {
+        if out.len() != columns.len() * out_pixel {
             return Err(TilerError::DecodeRow {
                 path: self.path.clone(),
                 row: y,
-                message: format!("row buffer has {} bytes, expected {}", out.len(), self.width as usize * out_pixel),
+                message: format!("row buffer has {} bytes, expected {}", out.len(), columns.len() * out_pixel),
             });
         }
         // The crate has already converted samples to native byte order (and applied the
@@ -469,10 +477,16 @@ impl RowSource for TiffSource {
         Ok(())
     }
 
-    /// Uncompressed 8-bit strips are read in part; others decode whole rows.
+    /// Uncompressed 8-bit strips are read in part and only the tiles under the columns are
+    /// decoded; other strips decode whole rows.
     fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
         let part = columns != (0..self.width);
-        self.columns = (part && self.direct.is_some()).then_some(columns);
+        let can = self.direct.is_some() || matches!(self.chunking, Chunking::Tiles { .. });
+        let columns = (part && can).then_some(columns);
+        if columns != self.columns {
+            // A loaded row of tiles may lack the tiles under the new columns.
+            (self.columns, self.band_rows) = (columns, 0);
+        }
         self.columns.is_some() || !part
     }
 
@@ -821,6 +835,20 @@ mod tests {
         assert!(source.describe().contains("tile row (32x16 tiles)"), "{}", source.describe());
         assert_eq!(read_all(source.as_mut()).unwrap(), rgb);
         assert_matches_image_crate(&path, PixelLayout::new(Channels::Rgb, Depth::U8));
+
+        // A shard's columns, from row 20: only the tiles under them, and a change of columns
+        // within a row of tiles decodes the tiles it lacks.
+        let mut source = open(&path, 1 << 30).unwrap();
+        source.skip_rows(20).unwrap();
+        for (columns, rows) in [(40u32..70u32, 20u32..26u32), (5..99, 26..40)] {
+            assert!(source.read_columns(columns.clone()));
+            let mut out = vec![0u8; columns.len() * 3];
+            for y in rows {
+                source.read_row(&mut out).unwrap();
+                let want = &rgb[((y * w + columns.start) * 3) as usize..((y * w + columns.end) * 3) as usize];
+                assert_eq!(out, want, "row {y}, columns {columns:?}");
+            }
+        }
 
         // 16-bit grey, big-endian, tiles larger than the image.
         let grey: Vec<u16> = pattern(w, h, 1, 65535).into_iter().map(|v| v as u16).collect();
