@@ -8,11 +8,11 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use vortex_gpu::{Gpu, Loader, Runtime, SampleFilter, Scene};
 use vortex_tiler::error::TilerError;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::output::{Product, staging};
 use vortex_vt::sampler::Rgba8Image;
+use vortex_vt_wgpu::{Gpu, Loader, Runtime, SampleFilter, Scene};
 
 use super::{report, signals};
 

@@ -1,4 +1,4 @@
-//! Times the CPU side of one virtual-texturing frame as the runtime (`vortex-gpu`'s `Runtime::frame`)
+//! Times the CPU side of one virtual-texturing frame as the runtime (`vortex-vt-wgpu`'s `Runtime::frame`)
 //! runs it, its three decisions together and each on its own (prints percentiles; not a test):
 //!
 //! 1. feedback analysis (`Analyzer::analyze`, the residency answering the finest resident

@@ -1,5 +1,5 @@
 //! Address translation: where a sample of a virtual texture lands, as a page and a position in
-//! that page's payload at one LOD, computed exactly as the shaders do (`vortex-gpu`'s
+//! that page's payload at one LOD, computed exactly as the shaders do (`vortex-vt-wgpu`'s
 //! `shaders/virtual.wgsl`) so that tests can mirror them. Runs on any thread.
 //!
 //! UV 0..1 spans the real image on both axes, whatever its size: the LOD-0 texel of `u` is

@@ -12,7 +12,7 @@
 //!
 //! # Packing for the GPU
 //!
-//! [`Entry::pack`] packs an entry into a `u32` of the GPU's table (`vortex-gpu`'s `page_table`: a
+//! [`Entry::pack`] packs an entry into a `u32` of the GPU's table (`vortex-vt-wgpu`'s `page_table`: a
 //! storage buffer laid out as this table, texture by texture, LOD by LOD, row by row), given the cache's slots per row `cache_side` (at most 256; slot `s` sits at
 //! `(s % cache_side, s / cache_side)` in the physical cache texture):
 //!

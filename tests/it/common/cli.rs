@@ -10,7 +10,7 @@ pub const BIN: &str = env!("CARGO_BIN_EXE_vortex-tiler");
 pub fn run(args: &[&str]) -> Output {
     let mut cmd = Command::new(BIN);
     cmd.args(args).env("NO_COLOR", "1");
-    cmd.envs(vortex_gpu::device::lavapipe_env());
+    cmd.envs(vortex_vt_wgpu::device::lavapipe_env());
     cmd.output().expect("binary runs")
 }
 

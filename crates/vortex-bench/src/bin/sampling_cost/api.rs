@@ -2,14 +2,14 @@
 //! in one place: when those crates rename or move an item (the sampling filter, the sampling
 //! pass), only these paths change.
 
-pub use vortex_gpu::camera::Keyframe;
-pub use vortex_gpu::device::prefer_lavapipe;
-pub use vortex_gpu::scene::WindowKey;
-pub use vortex_gpu::testing::{box_chain, write_pack};
-pub use vortex_gpu::{
-    Effects, Gpu, GpuPageTable, Loader, Pose, RenderTarget, Runtime, SampleFilter, SamplePass, Scene, SceneView,
-    Sources, View, VirtualTexture, Window,
-};
 pub use vortex_pack::{Pack, TileKind};
 pub use vortex_vt::page::{PageId, TextureGrid};
 pub use vortex_vt::sampler::{LodChain, Rgba8Image, bilinear, nearest, trilinear};
+pub use vortex_vt_wgpu::camera::Keyframe;
+pub use vortex_vt_wgpu::device::prefer_lavapipe;
+pub use vortex_vt_wgpu::scene::WindowKey;
+pub use vortex_vt_wgpu::testing::{box_chain, write_pack};
+pub use vortex_vt_wgpu::{
+    Effects, Gpu, GpuPageTable, Loader, Pose, RenderTarget, Runtime, SampleFilter, SamplePass, Scene, SceneView,
+    Sources, View, VirtualTexture, Window,
+};

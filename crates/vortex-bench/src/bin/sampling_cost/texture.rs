@@ -1,6 +1,6 @@
 //! The synthetic texture: one deterministic 2048² RGBA8 image with smooth colour, a fine
 //! grating, thin lines and noise, and its box LOD chain. Its packs (one of raw tiles per border)
-//! are written by `vortex_gpu::testing::write_pack`, in the tiler's layout.
+//! are written by `vortex_vt_wgpu::testing::write_pack`, in the tiler's layout.
 
 use crate::api::{LodChain, Rgba8Image, box_chain};
 

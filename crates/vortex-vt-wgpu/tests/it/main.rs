@@ -1,4 +1,4 @@
-//! The integration tests of `vortex-gpu`, one binary: one link instead of one per file, and the
+//! The integration tests of `vortex-vt-wgpu`, one binary: one link instead of one per file, and the
 //! helpers in `common` shared without `#![allow(dead_code)]`. The GPU tests run on whatever
 //! adapter wgpu finds, pinned to lavapipe (Mesa's CPU Vulkan driver) when it is installed and no
 //! Vulkan driver is chosen; without an adapter they print a note and pass, except under

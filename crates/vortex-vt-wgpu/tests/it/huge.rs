@@ -12,13 +12,13 @@
 //! edges, so no sharp step magnifies the window path's 1/64-texel error into a code value.
 
 use crate::common::gpu;
-use vortex_gpu::camera::Keyframe;
-use vortex_gpu::scene::WindowKey;
-use vortex_gpu::testing::{TestTile, bordered_tile, write_pack_with};
-use vortex_gpu::{Effects, Loader, Pose, Runtime, SampleFilter, Scene, SceneView, VirtualTexture, Window};
 use vortex_pack::TileKind;
 use vortex_vt::page::PageId;
 use vortex_vt::sampler::{LodImages, Rgba8Image, bilinear};
+use vortex_vt_wgpu::camera::Keyframe;
+use vortex_vt_wgpu::scene::WindowKey;
+use vortex_vt_wgpu::testing::{TestTile, bordered_tile, write_pack_with};
+use vortex_vt_wgpu::{Effects, Loader, Pose, Runtime, SampleFilter, Scene, SceneView, VirtualTexture, Window};
 
 const W: u32 = 1 << 20;
 const H: u32 = 1 << 10;

@@ -107,7 +107,12 @@ impl Gpu {
             ..Default::default()
         }))?;
         let info = adapter.get_info();
-        log::info!("vortex-gpu: {} ({:?}, {:?}), 2D textures up to {have}", info.name, info.backend, info.device_type);
+        log::info!(
+            "vortex-vt-wgpu: {} ({:?}, {:?}), 2D textures up to {have}",
+            info.name,
+            info.backend,
+            info.device_type
+        );
         Ok(Gpu { instance, adapter, device, queue })
     }
 

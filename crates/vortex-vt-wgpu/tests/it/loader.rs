@@ -7,12 +7,14 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use vortex_gpu::VirtualTexture;
-use vortex_gpu::loader::{LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS, stand_in_tile};
 use vortex_pack::format::{self, Level};
 use vortex_pack::{Description, NewTile, Pack, PackWriter, Tile, TileId, TileKind, WriteOptions};
 use vortex_vt::page::{GridError, PageId, TextureGrid};
 use vortex_vt::residency::Slot;
+use vortex_vt_wgpu::VirtualTexture;
+use vortex_vt_wgpu::loader::{
+    LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS, stand_in_tile,
+};
 
 const TILE: u32 = 16;
 const BORDER: u32 = 2;
@@ -548,7 +550,7 @@ fn solid_bc7_blocks_decode_to_their_colour_exactly() {
     let d =
         Description { width: 64, height: 64, tile_size: 64, border: 0, level_count: 1, channels: 4, sample_bytes: 1 };
     let colour = |i: usize| [i as u8, 255 - i as u8, (i * 7 % 256) as u8, i as u8];
-    let blocks: Vec<u8> = (0..256).flat_map(|i| vortex_gpu::bc7::solid_block(colour(i))).collect();
+    let blocks: Vec<u8> = (0..256).flat_map(|i| vortex_vt_wgpu::bc7::solid_block(colour(i))).collect();
     let levels = format::pyramid_levels(&d, 1);
     let path = dir.path().join("solid.vtpk");
     let mut w = PackWriter::create(&path, d, levels, b"{}", WriteOptions::default()).unwrap();

@@ -10,14 +10,14 @@ use std::collections::HashSet;
 
 use crate::common::gpu;
 use crate::common::pyramid::Synthetic;
-use vortex_gpu::camera::{Camera, Keyframe};
-use vortex_gpu::scene::WindowKey;
-use vortex_gpu::{
+use vortex_vt::address::WindowOrigin;
+use vortex_vt::sampler::{Rgba8Image, bilinear, trilinear};
+use vortex_vt_wgpu::camera::{Camera, Keyframe};
+use vortex_vt_wgpu::scene::WindowKey;
+use vortex_vt_wgpu::{
     CacheFormat, Effects, FrameReport, Gpu, Loader, Pose, Runtime, RuntimeError, SampleFilter, Scene, SceneView, Shape,
     Window,
 };
-use vortex_vt::address::WindowOrigin;
-use vortex_vt::sampler::{Rgba8Image, bilinear, trilinear};
 
 const TILE: u32 = 136;
 const BORDER: u32 = 4;

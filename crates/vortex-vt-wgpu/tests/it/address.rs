@@ -5,10 +5,10 @@
 //! frame to frame. Device conventions as in `sample.rs` (see `common`).
 
 use crate::common::gpu;
-use vortex_gpu::probe::AddressProbe;
-use vortex_gpu::{FeedbackPass, FeedbackReadback, FeedbackTarget, View, VirtualTexture, Window};
 use vortex_vt::feedback::decode;
 use vortex_vt::page::TextureGrid;
+use vortex_vt_wgpu::probe::AddressProbe;
+use vortex_vt_wgpu::{FeedbackPass, FeedbackReadback, FeedbackTarget, View, VirtualTexture, Window};
 
 const SIZE: u32 = 64;
 

@@ -1,11 +1,11 @@
 //! What the GPU tests share: the device, pinned to lavapipe (Mesa's CPU Vulkan driver) when it
-//! is installed and no Vulkan driver is chosen (`vortex_gpu::device::prefer_lavapipe`), and
+//! is installed and no Vulkan driver is chosen (`vortex_vt_wgpu::device::prefer_lavapipe`), and
 //! wgpu's warnings on stderr. Without an adapter a test prints a note and passes, except under
 //! `CI=true`, where it fails.
 
 use std::sync::Once;
 
-use vortex_gpu::Gpu;
+use vortex_vt_wgpu::Gpu;
 
 /// Prints wgpu's warnings and errors (validation messages come through `log`).
 struct StderrLogger;
@@ -34,7 +34,7 @@ pub fn gpu() -> Option<Gpu> {
         // touches Vulkan, and `Once` holds the other test threads here until these writes are done,
         // so no other thread reads the environment (through libc or std) while it is modified.
         // (The loader's tests read no environment.)
-        unsafe { vortex_gpu::device::prefer_lavapipe() };
+        unsafe { vortex_vt_wgpu::device::prefer_lavapipe() };
     });
     match Gpu::headless(1024) {
         Ok(gpu) => Some(gpu),

@@ -4,12 +4,12 @@
 
 use std::sync::Arc;
 
-use vortex_gpu::probe::AddressProbe;
-use vortex_gpu::{
+use vortex_vt::page::TextureGrid;
+use vortex_vt_wgpu::probe::AddressProbe;
+use vortex_vt_wgpu::{
     CacheFormat, FeedbackReadback, FeedbackTarget, Gpu, PageCache, ReadbackError, RenderTarget, View, VirtualTexture,
     Window,
 };
-use vortex_vt::page::TextureGrid;
 
 use crate::common::gpu;
 

@@ -8,15 +8,15 @@
 //! and pass, except under `CI=true`, where they fail.
 
 use crate::common::{gpu, pyramid};
-use vortex_gpu::testing::bordered_tile;
-use vortex_gpu::{
-    CacheFormat, Gpu, GpuPageTable, PageCache, RenderTarget, SampleFilter, SamplePass, Sources, View, VirtualTexture,
-    Window,
-};
 use vortex_vt::page::{PageId, TextureGrid};
 use vortex_vt::page_table::PageTable;
 use vortex_vt::residency::{Residency, ResidencyConfig};
 use vortex_vt::sampler::{LodChain, Rgba8Image, bilinear};
+use vortex_vt_wgpu::testing::bordered_tile;
+use vortex_vt_wgpu::{
+    CacheFormat, Gpu, GpuPageTable, PageCache, RenderTarget, SampleFilter, SamplePass, Sources, View, VirtualTexture,
+    Window,
+};
 
 const PAGES: u16 = 4;
 const TILE: u32 = 32;

@@ -1,16 +1,16 @@
 //! Synthetic virtual textures for the runtime and sampling tests: a LOD chain whose LOD 0 is made
 //! here (smooth colour with detail that differs from page to page), reduced and cut into a pack
-//! of bordered tiles by `vortex_gpu::testing`, stored raw (or BC7) so that what the cache holds
+//! of bordered tiles by `vortex_vt_wgpu::testing`, stored raw (or BC7) so that what the cache holds
 //! can be compared exactly.
 
 use std::path::Path;
 use std::sync::Arc;
 
-use vortex_gpu::VirtualTexture;
-use vortex_gpu::testing::{bordered_tile, box_chain, write_pack};
 use vortex_pack::{Pack, TileKind};
 use vortex_vt::page::{PageId, TextureGrid};
 use vortex_vt::sampler::{LodChain, Rgba8Image};
+use vortex_vt_wgpu::VirtualTexture;
+use vortex_vt_wgpu::testing::{bordered_tile, box_chain, write_pack};
 
 /// A texture with its LOD chain and its pack.
 pub struct Synthetic {
@@ -26,7 +26,7 @@ impl Synthetic {
     }
 
     /// As [`Synthetic::new`], the tiles stored as `kind`: `Raw`, or `Bc7` (each 4x4 block one
-    /// colour, its top-left texel's: what `vortex_gpu::bc7` encodes exactly).
+    /// colour, its top-left texel's: what `vortex_vt_wgpu::bc7` encodes exactly).
     pub fn with_kind(
         dir: &Path,
         name: &str,

@@ -8,10 +8,10 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use crate::common::gpu;
-use vortex_gpu::{FeedbackPass, FeedbackReadback, FeedbackTarget, Gpu, View, VirtualTexture, Window};
 use vortex_vt::analysis::analyze;
 use vortex_vt::feedback::{NO_REQUEST, encode};
 use vortex_vt::page::{PageId, TextureGrid};
+use vortex_vt_wgpu::{FeedbackPass, FeedbackReadback, FeedbackTarget, Gpu, View, VirtualTexture, Window};
 
 const PAGES: u16 = 16;
 const PAYLOAD: u32 = 120;
