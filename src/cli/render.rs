@@ -1,10 +1,11 @@
 //! `vortex-tiler render`: streams packs through the GPU runtime along a scene's camera path,
-//! headless, writing PNG frames and a JSON residency report.
+//! headless, writing PNG frames and a JSON residency report. It runs the runtime's own harness
+//! (`vortex_vt_wgpu::harness`), which uses the public embedding API as any application does.
 
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
@@ -12,7 +13,9 @@ use vortex_tiler::error::TilerError;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::output::{Product, staging};
 use vortex_vt::sampler::Rgba8Image;
-use vortex_vt_wgpu::{Gpu, Loader, Runtime, SampleFilter, Scene};
+use vortex_vt_wgpu::harness::{Scene, SceneRenderer};
+use vortex_vt_wgpu::source::Delayed;
+use vortex_vt_wgpu::{Gpu, Pacing, PageSource, SampleFilter};
 
 use super::{report, signals};
 
@@ -43,7 +46,9 @@ pub struct RenderArgs {
     /// Override the scene's output size, e.g. 640x480.
     #[arg(long, value_name = "WxH", value_parser = parse_dims)]
     size: Option<[u32; 2]>,
-    /// Override the scene's filter.
+    /// Override the scene's filter [default: the scene's, else auto: trilinear for packs with a
+    /// border, nearest for packs without one, whose page edges would show as seams under
+    /// bilinear and trilinear].
     #[arg(long, value_enum)]
     filter: Option<FilterArg>,
     /// Override the cache size: slots per side (the cache holds this squared).
@@ -52,6 +57,16 @@ pub struct RenderArgs {
     /// Override the most pages uploaded per frame.
     #[arg(long, value_name = "N")]
     budget: Option<usize>,
+    /// Add this latency to every page read, e.g. 50ms: what a slow disk or a network does.
+    /// Frames do not wait for it (real-time pacing): the picture falls back to coarser pages
+    /// until the loads land. The report's io_wait_ms says how long each frame waited for pages.
+    #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
+    io_latency: Option<Duration>,
+    /// offline: each frame waits for the pages the previous one asked for (the same pictures on
+    /// every run); real-time: no frame waits, pages are drawn when they land [default: offline,
+    /// real-time with --io-latency].
+    #[arg(long, value_enum)]
+    pacing: Option<PacingArg>,
     /// No progress bar.
     #[arg(long, short)]
     quiet: bool,
@@ -59,9 +74,32 @@ pub struct RenderArgs {
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 enum FilterArg {
+    Auto,
     Nearest,
     Bilinear,
     Trilinear,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+enum PacingArg {
+    Offline,
+    RealTime,
+}
+
+/// `50ms`, `0.2s`, `1s` or a bare number of milliseconds.
+fn parse_duration(s: &str) -> Result<Duration, String> {
+    let t = s.trim();
+    let (number, scale) = if let Some(ms) = t.strip_suffix("ms") {
+        (ms, 1e-3)
+    } else if let Some(secs) = t.strip_suffix('s') {
+        (secs, 1.0)
+    } else {
+        (t, 1e-3)
+    };
+    match number.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && (0.0..=60.0).contains(&(v * scale)) => Ok(Duration::from_secs_f64(v * scale)),
+        _ => Err(format!("'{s}' is not a duration of 0 to 60 s such as 50ms or 0.2s")),
+    }
 }
 
 fn parse_dims(s: &str) -> Result<[u32; 2], String> {
@@ -93,11 +131,16 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let e = &mut scene.effects;
     if let Some(f) = a.filter {
         e.filter = match f {
-            FilterArg::Nearest => SampleFilter::Nearest,
-            FilterArg::Bilinear => SampleFilter::Bilinear,
-            FilterArg::Trilinear => SampleFilter::Trilinear,
+            FilterArg::Auto => None,
+            FilterArg::Nearest => Some(SampleFilter::Nearest),
+            FilterArg::Bilinear => Some(SampleFilter::Bilinear),
+            FilterArg::Trilinear => Some(SampleFilter::Trilinear),
         };
     }
+    let pacing = match (a.pacing, a.io_latency) {
+        (Some(PacingArg::Offline), _) | (None, None) => Pacing::Offline,
+        (Some(PacingArg::RealTime), _) | (None, Some(_)) => Pacing::RealTime,
+    };
     e.cache_slots_per_side = a.cache_side.unwrap_or(e.cache_slots_per_side);
     e.upload_budget = a.budget.unwrap_or(e.upload_budget);
     scene
@@ -114,20 +157,34 @@ pub fn run(a: RenderArgs) -> Result<()> {
     }
     signals::install().context("installing signal handlers")?;
 
-    let packs = scene
+    let mut tile_size = 0;
+    let sources = scene
         .textures
         .iter()
         .map(|p| {
             let pack = vortex_pack::Pack::open(p).with_context(|| format!("opening {}", p.display()))?;
             vortex_tiler::shard::manifest::refuse_shard(p, pack.metadata())?;
-            Ok(Arc::new(pack))
+            tile_size = tile_size.max(pack.description().tile_size);
+            let source: Arc<dyn PageSource> = Arc::new(pack);
+            Ok(match a.io_latency {
+                Some(latency) => Arc::new(Delayed::new(source, latency)),
+                None => source,
+            })
         })
         .collect::<Result<Vec<_>>>()?;
-    let loader = Loader::new(packs, scene.effects.threads)?;
-    let side = scene.effects.cache_slots_per_side as u32 * loader.tile_size();
+    let side = scene.effects.cache_slots_per_side as u32 * tile_size;
     let gpu = Gpu::headless(side.max(scene.size[0]).max(scene.size[1]))?;
     let adapter = gpu.adapter_info();
-    let mut runtime = Runtime::new(gpu, loader, &scene)?;
+    let mut runtime = SceneRenderer::new(gpu, sources, &scene, pacing)?;
+    let filter = runtime.runtime().filter();
+    let border = runtime.runtime().cache().border();
+    if filter.seams_with(border) {
+        eprintln!(
+            "warning: the packs have no border, so {} filtering shows seams at every page edge; \
+             split them with --border 1, or render with --filter auto (nearest for these packs)",
+            filter.name()
+        );
+    }
     // Frames go into a staging folder, moved into place only when every frame is written.
     let frames = a.frames.as_deref().map(StagedFrames::create).transpose()?;
 
@@ -157,13 +214,18 @@ pub fn run(a: RenderArgs) -> Result<()> {
         .frames_to_converge
         .map_or("did not converge".to_string(), |n| format!("converged {n} frame(s) after the camera stopped"));
     say!(
-        "rendered {} frames of {}x{} on {} in {:.2} s ({:.1} ms/frame); {} of {} pages touched ({:.2}%), {} read; {converge}",
+        "rendered {} frames of {}x{} on {} ({}, {} filter) in {:.2} s ({:.1} ms/frame; frame CPU p50 {:.2} ms, p99 {:.2} ms; longest wait for pages {:.1} ms); {} of {} pages touched ({:.2}%), {} read; {converge}",
         report.frames.len(),
         scene.size[0],
         scene.size[1],
         adapter.name,
+        report.pacing,
+        report.filter,
         took.as_secs_f64(),
         took.as_secs_f64() * 1e3 / report.frames.len().max(1) as f64,
+        report.cpu_ms_p50,
+        report.cpu_ms_p99,
+        report.io_wait_ms_max,
         report.pages_touched,
         report.pages_total,
         100.0 * report.pages_touched as f64 / report.pages_total.max(1) as f64,

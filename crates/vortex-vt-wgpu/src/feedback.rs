@@ -1,120 +1,70 @@
-//! The feedback pass and its readback. The view is drawn a second time, into a small `R32Uint`
-//! target ([`FeedbackTarget`], the frame's size divided by e.g. 8), cleared to
-//! [`NO_REQUEST`]; its fragment shader (`shaders/feedback.wgsl`) writes per pixel the feedback
-//! word (`vortex_vt::feedback::encode`) of the page it wants. The LOD is the one
-//! `vortex_vt::feedback::lod_for` gives for the fragment's footprint, plus the frame's bias and
-//! [`FeedbackTarget::bias`] (`feedback_bias`, which makes up for the reduced size), and the page
-//! is the one holding its address at that LOD (`vortex_vt::address`).
+//! Feedback: which pages the frame's fragments want. The application's fragment shader calls
+//! `vt_feedback` (`shaders/vt.wgsl`), which writes the feedback word
+//! (`vortex_vt::feedback::encode`) of the page the fragment samples into a storage buffer of one
+//! word per block of `block x block` pixels ([`FeedbackBuffer`]); only one pixel per block, the
+//! frame's *elected* pixel, writes. The elected pixel moves every frame along the Halton (2, 3)
+//! sequence ([`elected`]), so that over a few frames every pixel of a block is heard: a page seen
+//! only by a thin sliver or at the frame's edge is still asked for. The LOD is the one
+//! `vortex_vt::feedback::lod_for` gives for the fragment's footprint plus the residency's bias.
 //!
-//! [`FeedbackReadback`] copies the target into one of a small ring of mappable buffers, so that
-//! the CPU picks up the words of an earlier frame when the GPU is done with them and never
-//! waits: [`FeedbackReadback::try_read`] never blocks; a frame whose copy finds every buffer
-//! still in flight is skipped.
+//! After the frame, the buffer is copied into one of a small ring of mappable buffers and reset
+//! to [`NO_REQUEST`](vortex_vt::feedback::NO_REQUEST); the CPU picks up the words of an earlier frame when the GPU is done with
+//! them and never waits: [`FeedbackReadback::try_read`] never blocks, and a frame whose copy
+//! finds every buffer of the ring still in flight is skipped.
 
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
-use vortex_vt::feedback::{NO_REQUEST, feedback_bias};
-
-use crate::draw::{self, Pipelines, Target};
-use crate::params::Frame;
+use crate::params::FeedbackLayout;
 use crate::readback::{Readback, ReadbackError};
-use crate::texture::VirtualTexture;
-use crate::view::View;
 
-/// The format of feedback targets: one feedback word per pixel.
-pub const FEEDBACK_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
-
-/// The `R32Uint` target of the feedback pass, at a fraction of the frame's size.
+/// The storage buffer `vt_feedback` writes: one word per block of the frame.
 #[derive(Debug)]
-pub struct FeedbackTarget {
-    pub width: u32,
-    pub height: u32,
-    /// The size of the frame the feedback stands for (sets [`FeedbackTarget::bias`]).
-    pub frame_width: u32,
-    pub frame_height: u32,
-    target: Target,
+pub struct FeedbackBuffer {
+    buffer: wgpu::Buffer,
+    /// Pixels per block side.
+    pub block: u32,
+    /// Blocks per row and per column: the frame's size divided by `block`, rounded up.
+    pub columns: u32,
+    pub rows: u32,
 }
 
-impl FeedbackTarget {
-    /// A target of the frame's size divided by `divisor` (rounded up, at least one pixel).
-    pub fn new(device: &wgpu::Device, frame_width: u32, frame_height: u32, divisor: u32) -> FeedbackTarget {
-        let divisor = divisor.max(1);
-        let (w, h) = (frame_width.div_ceil(divisor).max(1), frame_height.div_ceil(divisor).max(1));
-        FeedbackTarget::with_size(device, w, h, frame_width, frame_height)
-    }
-
-    /// A `width x height` target for a `frame_width x frame_height` frame.
-    pub fn with_size(
-        device: &wgpu::Device,
-        width: u32,
-        height: u32,
-        frame_width: u32,
-        frame_height: u32,
-    ) -> FeedbackTarget {
-        let target = Target::new(device, "vortex feedback", FEEDBACK_FORMAT, width, height);
-        FeedbackTarget { width, height, frame_width, frame_height, target }
-    }
-
-    /// The LOD bias that makes up for the reduced size: `feedback_bias` (e.g. -3 at 1/8).
-    pub fn bias(&self) -> f32 {
-        feedback_bias(self.width, self.height, self.frame_width, self.frame_height)
-    }
-
-    pub fn view(&self) -> &wgpu::TextureView {
-        &self.target.view
-    }
-}
-
-/// The pipelines of the feedback pass, made once per device.
-#[derive(Debug)]
-pub struct FeedbackPass {
-    pipelines: Pipelines,
-    layout: wgpu::BindGroupLayout,
-}
-
-impl FeedbackPass {
-    pub fn new(device: &wgpu::Device) -> FeedbackPass {
-        let module = draw::shader(device, "vortex feedback.wgsl", include_str!("shaders/feedback.wgsl"));
-        let layout = draw::frame_only_layout(device, "vortex feedback");
-        let pipelines = Pipelines::new(device, "vortex feedback", &module, &layout, FEEDBACK_FORMAT, &[]);
-        FeedbackPass { pipelines, layout }
-    }
-
-    /// Records the feedback pass into `target`: the clear to [`NO_REQUEST`], then the draw of
-    /// `view` if there is one (`None` records the clear alone: nothing virtual on screen). `bias`
-    /// is the frame's own LOD bias (the residency's); the target's is added to it. Each feedback
-    /// pixel samples at `jitter` (feedback pixels, within ±0.5) from its centre: pass
-    /// [`jitter`]`(frame)` so that over frames the samples cover every frame pixel, or `[0, 0]`.
-    #[allow(clippy::too_many_arguments)]
-    pub fn encode(
-        &self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        target: &FeedbackTarget,
-        textures: &[VirtualTexture],
-        view: Option<&View>,
-        bias: f32,
-        jitter: [f32; 2],
-    ) {
-        let bind_group = view.map(|view| {
-            let size = (target.width, target.height);
-            let frame = Frame::new(textures, None, view, size, bias + target.bias(), None).jittered(jitter, size);
-            draw::frame_only_bind_group(device, "vortex feedback", &self.layout, &frame)
+impl FeedbackBuffer {
+    /// The buffer for a `width x height` frame in blocks of `block` pixels (at least 1).
+    pub fn new(device: &wgpu::Device, width: u32, height: u32, block: u32) -> FeedbackBuffer {
+        let block = block.max(1);
+        let (columns, rows) = (width.div_ceil(block).max(1), height.div_ceil(block).max(1));
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("vortex feedback"),
+            size: u64::from(columns * rows) * 4,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
         });
-        // Integer targets take the clear colour converted to the channel type: all ones.
-        let clear = NO_REQUEST as f64;
-        let colour = wgpu::Color { r: clear, g: clear, b: clear, a: clear };
-        let draw = bind_group.as_ref().zip(view).map(|(g, v)| (&self.pipelines, g, v));
-        target.target.record(encoder, "vortex feedback", colour, draw);
+        FeedbackBuffer { buffer, block, columns, rows }
+    }
+
+    pub fn words(&self) -> u32 {
+        self.columns * self.rows
+    }
+
+    pub fn buffer(&self) -> &wgpu::Buffer {
+        &self.buffer
+    }
+
+    /// Resets every word to [`NO_REQUEST`](vortex_vt::feedback::NO_REQUEST) before the next submitted command buffer runs.
+    pub fn clear(&self, queue: &wgpu::Queue) {
+        queue.write_buffer(&self.buffer, 0, &vec![0xff; self.words() as usize * 4]);
+    }
+
+    /// The layout the shader gets for frame `frame`.
+    pub(crate) fn layout(&self, frame: u64) -> FeedbackLayout {
+        FeedbackLayout { block: self.block, columns: self.columns, rows: self.rows, elect: elected(frame, self.block) }
     }
 }
 
-/// Where frame `n`'s feedback samples within its pixels, relative to their centres: the Halton
-/// (2, 3) sequence, so that the samples of a few consecutive frames spread evenly over each
-/// feedback pixel's block of frame pixels. A page seen only by frame pixels between two
-/// feedback samples (at the frame's edge, or a thin sliver) is then still asked for, within a
-/// few frames, instead of never.
-pub fn jitter(n: u64) -> [f32; 2] {
+/// The pixel of each `block x block` block that writes frame `n`'s feedback: the Halton (2, 3)
+/// sequence from index 1 scaled to the block, so that consecutive frames spread over it evenly
+/// (frame 0 takes the pixel at (1/2, 1/3) of the block).
+pub fn elected(n: u64, block: u32) -> [u32; 2] {
     let halton = |mut i: u64, base: u64| {
         let (mut f, mut r) = (1.0f64, 0.0f64);
         while i > 0 {
@@ -124,17 +74,17 @@ pub fn jitter(n: u64) -> [f32; 2] {
         }
         r
     };
-    // Index 1 on, so that frame 0 samples near the centre: (0.5, 1/3) - 0.5.
-    [(halton(n + 1, 2) - 0.5) as f32, (halton(n + 1, 3) - 0.5) as f32]
+    let pick = |h: f64| ((h * f64::from(block)) as u32).min(block.saturating_sub(1));
+    [pick(halton(n + 1, 2)), pick(halton(n + 1, 3))]
 }
 
-/// The words of one read-back feedback target, row-major.
+/// The words of one read-back feedback buffer, row-major.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FeedbackFrame {
     /// The number [`FeedbackReadback::encode_copy`] gave the copy.
     pub frame: u64,
-    pub width: u32,
-    pub height: u32,
+    pub columns: u32,
+    pub rows: u32,
     pub words: Vec<u32>,
 }
 
@@ -161,26 +111,29 @@ struct Slot {
     state: SlotState,
 }
 
-/// A ring of mappable buffers that feedback targets are copied into, read back without making
-/// the CPU wait for the GPU. Per frame: [`FeedbackReadback::encode_copy`] after the feedback
-/// pass, `queue.submit`, [`FeedbackReadback::submitted`], then [`FeedbackReadback::try_read`]
+/// A ring of mappable buffers that feedback buffers are copied into, read back without making
+/// the CPU wait for the GPU. Per frame: [`FeedbackReadback::encode_copy`] after the frame's
+/// passes, `queue.submit`, [`FeedbackReadback::submitted`], then [`FeedbackReadback::try_read`]
 /// for the oldest frame the GPU has finished, if any.
 #[derive(Debug)]
 pub struct FeedbackReadback {
-    pub width: u32,
-    pub height: u32,
+    pub columns: u32,
+    pub rows: u32,
     slots: Vec<Slot>,
     next_frame: u64,
 }
 
 impl FeedbackReadback {
-    /// A ring of `buffers` (at least 1; 2 or 3 keep the CPU from waiting) for `width x height`
-    /// targets.
-    pub fn new(device: &wgpu::Device, width: u32, height: u32, buffers: usize) -> FeedbackReadback {
+    /// A ring of `buffers` (at least 1; 2 or 3 keep the CPU from waiting) for `feedback`.
+    pub fn new(device: &wgpu::Device, feedback: &FeedbackBuffer, buffers: usize) -> FeedbackReadback {
+        let (columns, rows) = (feedback.columns, feedback.rows);
         let slots = (0..buffers.max(1))
-            .map(|_| Slot { readback: Readback::new(device, "feedback", width * 4, height), state: SlotState::Free })
+            .map(|_| Slot {
+                readback: Readback::new(device, "feedback", columns * rows * 4, 1),
+                state: SlotState::Free,
+            })
             .collect();
-        FeedbackReadback { width, height, slots, next_frame: 0 }
+        FeedbackReadback { columns, rows, slots, next_frame: 0 }
     }
 
     /// Copies that are recorded or in flight and not yet read.
@@ -188,14 +141,13 @@ impl FeedbackReadback {
         self.slots.iter().filter(|s| !matches!(s.state, SlotState::Free)).count()
     }
 
-    /// Records the copy of `target` into a free buffer of the ring and returns the frame number
+    /// Records the copy of `feedback` into a free buffer of the ring and returns the frame number
     /// it will be read back under, or `None` when every buffer is still in flight (this frame's
     /// feedback is then skipped). Call [`FeedbackReadback::submitted`] after submitting.
-    pub fn encode_copy(&mut self, encoder: &mut wgpu::CommandEncoder, target: &FeedbackTarget) -> Option<u64> {
-        assert_eq!((target.width, target.height), (self.width, self.height), "feedback target size");
+    pub fn encode_copy(&mut self, encoder: &mut wgpu::CommandEncoder, feedback: &FeedbackBuffer) -> Option<u64> {
+        assert_eq!((feedback.columns, feedback.rows), (self.columns, self.rows), "feedback buffer size");
         let slot = self.slots.iter_mut().find(|s| matches!(s.state, SlotState::Free))?;
-        let (source, extent) = target.target.copy_source();
-        slot.readback.encode_copy(encoder, source, extent);
+        slot.readback.encode_copy_buffer(encoder, &feedback.buffer);
         let frame = self.next_frame;
         self.next_frame += 1;
         slot.state = SlotState::Copied { frame };
@@ -237,11 +189,11 @@ impl FeedbackReadback {
         result.map_err(|source| ReadbackError::Feedback { frame, source })?;
         let words =
             slot.readback.take()?.chunks_exact(4).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]])).collect();
-        Ok(Some(FeedbackFrame { frame, width: self.width, height: self.height, words }))
+        Ok(Some(FeedbackFrame { frame, columns: self.columns, rows: self.rows, words }))
     }
 
     /// Waits for the GPU to finish everything submitted, then reads the oldest frame in flight
-    /// (`Ok(None)` if none was). For tests and tools; a frame loop uses
+    /// (`Ok(None)` if none was). For offline rendering and tests; a frame loop uses
     /// [`FeedbackReadback::try_read`].
     pub fn read_now(&mut self, device: &wgpu::Device) -> Result<Option<FeedbackFrame>, ReadbackError> {
         if !self.slots.iter().any(|s| matches!(s.state, SlotState::Mapping { .. })) {
@@ -257,4 +209,22 @@ impl FeedbackReadback {
 /// The callback holds the lock only to store a value, so a poisoned lock still holds a whole one.
 fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_elected_pixel_visits_every_pixel_of_a_block() {
+        for block in [1u32, 2, 4, 8] {
+            let mut seen = std::collections::HashSet::new();
+            for n in 0..(8 * block * block) as u64 {
+                let [x, y] = elected(n, block);
+                assert!(x < block && y < block);
+                seen.insert((x, y));
+            }
+            assert_eq!(seen.len() as u32, block * block, "block {block}");
+        }
+    }
 }

@@ -1,55 +1,56 @@
-//! The GPU runtime of Vortex virtual texturing, on wgpu. What to load and where it goes is decided
-//! on the CPU by `vortex-vt`; this crate mirrors those decisions into GPU resources, draws with
-//! them and reads the feedback back. The modules are the nouns of the technique, in the order a
-//! frame meets them:
+//! The GPU runtime of Vortex virtual texturing, on wgpu, made to be embedded: created on the
+//! application's own `wgpu::Device` and `Queue`, it streams pages of up to 16 virtual textures
+//! (Vortex packs, or any [`PageSource`]) into a physical page cache, while the application draws
+//! with its own pipelines and shaders, which include this crate's WGSL module ([`shader`]) and
+//! call `vt_sample` and `vt_feedback`. Once per frame the application calls
+//! [`Runtime::end_frame`], which never blocks. What to load and where it goes is decided on the
+//! CPU by `vortex-vt`; this crate mirrors those decisions into GPU resources.
 //!
-//! - [`scene`], [`camera`], [`view`], [`mesh`]: what is drawn, from where;
-//! - [`feedback`]: the feedback pass and its non-blocking readback ring (which pages are wanted);
-//! - [`loader`]: the worker pool that reads those pages from packs ([`loader`]'s `pool`, `decode`
-//!   and `magnify` for absent tiles);
+//! The modules are the nouns of the technique, in the order a frame meets them:
+//!
+//! - [`shader`]: the WGSL module (`vt_sample`, `vt_feedback`) and its bindings;
+//! - [`feedback`]: the buffer `vt_feedback` writes and its non-blocking readback ring;
+//! - [`source`]: where pages come from ([`PageSource`]; packs; [`source::Delayed`] for latency);
+//! - [`loader`]: the worker pool that reads and decodes pages off the render thread;
 //! - [`page_cache`] (the physical texture the pages are uploaded into, RGBA8 or [`bc7`]) and
-//!   [`page_table`] (the texture that maps virtual pages to its slots);
-//! - [`sample`]: the sampling pass through page table and cache, and its [`SampleFilter`];
-//! - [`runtime`]: the frame loop that ties them together; [`device`]: the headless device (and
-//!   lavapipe pinning); [`probe`]: the address probe for tests.
+//!   [`page_table`] (the buffer that maps virtual pages to its slots);
+//! - [`sample`]: the [`SampleFilter`] and which one a border allows;
+//! - [`runtime`]: the frame's end that ties them together;
+//! - [`device`]: a headless device (and lavapipe pinning), for tools and tests.
 //!
-//! The passes share their pipelines, targets and shader prelude (`draw`), their uniform block
-//! (`params`) and their readback (`readback`, whose failures are [`ReadbackError`]s, never
-//! panics). The `testing` feature adds a `testing` module: synthetic LOD chains, bordered tiles
-//! and packs of them, for tests and measurement programs.
+//! The `harness` feature adds [`harness`]: scenes, cameras and an offscreen renderer built on
+//! the public API (what `vortex-tiler render` runs). The `testing` feature adds `testing`
+//! (synthetic LOD chains, bordered tiles and packs of them) and the harness's address probe.
 //!
-//! Everything here is headless (no window or surface) and runs on lavapipe, Mesa's CPU Vulkan
-//! driver, so it is tested on machines without a GPU.
+//! Everything runs on lavapipe, Mesa's CPU Vulkan driver, so it is tested on machines without a
+//! GPU. `examples/embed.rs` draws a pack with its own pipeline in under 200 lines.
 
 pub mod bc7;
-pub mod camera;
+mod bindings;
 pub mod device;
-mod draw;
 pub mod feedback;
+#[cfg(feature = "harness")]
+pub mod harness;
 pub mod loader;
-pub mod mesh;
 pub mod page_cache;
 pub mod page_table;
 mod params;
-pub mod probe;
 mod readback;
 pub mod runtime;
 pub mod sample;
-pub mod scene;
+pub mod shader;
+pub mod source;
 #[cfg(feature = "testing")]
 pub mod testing;
 pub mod texture;
-pub mod view;
 
 pub use device::{DeviceError, Gpu};
-pub use feedback::{FeedbackFrame, FeedbackPass, FeedbackReadback, FeedbackTarget};
+pub use feedback::{FeedbackBuffer, FeedbackFrame, FeedbackReadback};
 pub use loader::{LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS, stand_in_tile};
-pub use mesh::{GpuMesh, Mesh, Vertex};
 pub use page_cache::{CacheError, CacheFormat, PageCache};
 pub use page_table::{GpuPageTable, PageTableError};
 pub use readback::ReadbackError;
-pub use runtime::{FrameReport, Report, Runtime, RuntimeError};
-pub use sample::{RenderTarget, SampleFilter, SamplePass, Sources};
-pub use scene::{Effects, Pose, Scene, SceneError, SceneView, Shape};
+pub use runtime::{FrameStats, Pacing, Runtime, RuntimeConfig, RuntimeError};
+pub use sample::SampleFilter;
+pub use source::{PageSource, ReadError, SourceTile};
 pub use texture::VirtualTexture;
-pub use view::{View, Window};

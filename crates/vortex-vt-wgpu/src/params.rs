@@ -1,16 +1,17 @@
-//! The uniform block both passes read (`Frame` in `shaders/virtual.wgsl`), built on the render
-//! thread once per draw.
+//! The module's uniform block (`VtParams` in `shaders/vt.wgsl`): the textures' shapes, the
+//! cache's geometry, the filter, and this frame's feedback settings. Written by the runtime
+//! whenever one of them changes (every frame, since the elected feedback pixel moves).
 
 use vortex_vt::page::MAX_TEXTURES;
 
-use crate::page_cache::PageCache;
+use crate::page_cache::{CacheFormat, PageCache};
+use crate::sample::SampleFilter;
 use crate::texture::VirtualTexture;
-use crate::view::View;
 
-/// `Texture` in `virtual.wgsl`, 32 bytes.
+/// `VtTextureInfo` in `vt.wgsl`, 32 bytes.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-struct TextureParams {
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+struct TextureInfo {
     size: [u32; 2],
     lod_count: u32,
     payload: u32,
@@ -18,87 +19,60 @@ struct TextureParams {
     pad: [u32; 2],
 }
 
-/// `Frame` in `virtual.wgsl`, 656 bytes.
+/// `VtParams` in `vt.wgsl`, 576 bytes.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-pub(crate) struct Frame {
-    view_proj: [[f32; 4]; 4],
-    origin_int: [u32; 2],
-    origin_frac: [f32; 2],
-    step: [f32; 2],
-    window_texture: u32,
-    lod_override: f32,
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct Params {
     tile: [f32; 4],
-    bias: f32,
-    pad0: f32,
-    jitter: [f32; 2],
-    jitter_ndc: [f32; 2],
-    pad1: [f32; 2],
-    textures: [TextureParams; MAX_TEXTURES as usize],
+    /// Block side in pixels, blocks per row, blocks per column, words.
+    feedback: [u32; 4],
+    elect: [u32; 2],
+    feedback_bias: f32,
+    filter: u32,
+    straight_alpha: u32,
+    pad: [u32; 3],
+    textures: [TextureInfo; MAX_TEXTURES as usize],
 }
 
-impl Frame {
-    /// Samples at `jitter` (in pixels, within ±0.5) from each pixel's centre instead of at it.
-    pub(crate) fn jittered(mut self, jitter: [f32; 2], size: (u32, u32)) -> Frame {
-        self.jitter = jitter;
-        // Sampling a point `j` to the right (and down) is drawing the image `j` to the left
-        // (and up); clip-space y points up, framebuffer y down.
-        self.jitter_ndc = [-2.0 * jitter[0] / size.0 as f32, 2.0 * jitter[1] / size.1 as f32];
-        self
-    }
+/// How the feedback of one frame is gathered: blocks of `block` pixels, `columns x rows` of them,
+/// each written by its pixel `elect`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct FeedbackLayout {
+    pub(crate) block: u32,
+    pub(crate) columns: u32,
+    pub(crate) rows: u32,
+    pub(crate) elect: [u32; 2],
+}
 
-    /// The parameters of drawing `view` into a `size` target: `bias` is added to every LOD,
-    /// `lod_override` (sampling only) replaces the LOD from derivatives.
+impl Params {
     pub(crate) fn new(
         textures: &[VirtualTexture],
-        cache: Option<&PageCache>,
-        view: &View,
-        size: (u32, u32),
-        bias: f32,
-        lod_override: Option<f32>,
-    ) -> Frame {
+        cache: &PageCache,
+        filter: SampleFilter,
+        feedback: FeedbackLayout,
+        feedback_bias: f32,
+    ) -> Params {
         assert!(textures.len() <= MAX_TEXTURES as usize, "{} textures, at most {MAX_TEXTURES}", textures.len());
-        let mut params = [TextureParams::default(); MAX_TEXTURES as usize];
-        for (p, t) in params.iter_mut().zip(textures) {
-            *p = TextureParams {
+        let mut infos = [TextureInfo::default(); MAX_TEXTURES as usize];
+        for (info, t) in infos.iter_mut().zip(textures) {
+            *info = TextureInfo {
                 size: t.size(),
                 lod_count: u32::from(t.grid.lod_count()),
                 payload: t.payload(),
                 pages: t.grid.pages().map(u32::from),
-                ..TextureParams::default()
+                pad: [0; 2],
             };
         }
-        let mut frame = Frame {
-            view_proj: IDENTITY,
-            origin_int: [0; 2],
-            origin_frac: [0.0; 2],
-            step: [0.0; 2],
-            window_texture: 0,
-            lod_override: lod_override.unwrap_or(-1.0),
-            tile: cache.map_or([0.0; 4], |c| {
-                [c.tile_size() as f32, c.border() as f32, c.payload() as f32, c.side_texels() as f32]
-            }),
-            bias,
-            pad0: 0.0,
-            jitter: [0.0; 2],
-            jitter_ndc: [0.0; 2],
-            pad1: [0.0; 2],
-            textures: params,
-        };
-        match view {
-            View::Window(w) => {
-                let t = &textures[w.texture as usize];
-                let o = w.origin_texels(t, size);
-                frame.origin_int = o.int;
-                frame.origin_frac = o.frac;
-                frame.step = o.step;
-                frame.window_texture = w.texture as u32;
-            }
-            View::Meshes { view_proj, .. } => frame.view_proj = *view_proj,
+        let FeedbackLayout { block, columns, rows, elect } = feedback;
+        Params {
+            tile: [cache.tile_size() as f32, cache.border() as f32, cache.payload() as f32, cache.side_texels() as f32],
+            feedback: [block, columns, rows, columns * rows],
+            elect,
+            feedback_bias,
+            filter: filter as u32,
+            straight_alpha: u32::from(cache.format() == CacheFormat::Bc7),
+            pad: [0; 3],
+            textures: infos,
         }
-        frame
     }
 }
-
-const IDENTITY: [[f32; 4]; 4] =
-    [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];

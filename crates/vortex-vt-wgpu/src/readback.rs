@@ -85,6 +85,11 @@ impl Readback {
         );
     }
 
+    /// Records the copy of the whole of `source` (one row of `row_bytes`) into the buffer.
+    pub(crate) fn encode_copy_buffer(&self, encoder: &mut wgpu::CommandEncoder, source: &wgpu::Buffer) {
+        encoder.copy_buffer_to_buffer(source, 0, &self.buffer, 0, u64::from(self.row_bytes));
+    }
+
     /// Requests the mapping of the whole buffer, once the copy is submitted; `done` gets the
     /// result when the device is next polled.
     pub(crate) fn map(&self, done: impl FnOnce(Result<(), wgpu::BufferAsyncError>) + Send + 'static) {

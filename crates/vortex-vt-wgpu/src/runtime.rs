@@ -1,56 +1,66 @@
-//! The frame loop of virtual texturing, on the render thread (the loader's workers decode pages
-//! on theirs). Per frame:
+//! The runtime an application embeds: created on the application's `wgpu::Device` and `Queue`,
+//! over up to 16 virtual textures (packs, or any [`PageSource`]). The application draws with
+//! its own pipelines and shaders, which include the WGSL module (`crate::shader`) and bind
+//! [`Runtime::bind_group`] at the group they chose; after submitting a frame it calls
+//! [`Runtime::end_frame`], which never blocks:
 //!
-//! 1. draw the feedback pass (at the residency's LOD bias) and the sampling pass, and copy the
-//!    feedback (and, if asked, the image) out;
-//! 2. read this frame's feedback back and analyse it (`vortex_vt::analysis`): the pages wanted,
-//!    most urgent first, and the share of samples drawn from a coarser fallback;
-//! 3. update the residency (`vortex_vt::residency`): which pages to load into which slots,
-//!    which to evict, within the upload budget, coarse before fine;
-//! 4. have the loader read and decode the loads from the packs, upload them into the cache;
-//! 5. apply the update to the page table and upload only the entries that changed.
+//! 1. the frame's feedback buffer is copied into a ring of readback buffers and reset;
+//! 2. the oldest feedback the GPU has finished, if any (a frame or more old), is analysed
+//!    (`vortex_vt::analysis`): the pages wanted, most urgent first;
+//! 3. the residency (`vortex_vt::residency`) picks the pages to load and the slots they go to,
+//!    evicting the least recently used; the loads are queued on the loader's threads, and the
+//!    evicted pages are unmapped at once;
+//! 4. the pages the loader has finished are uploaded into their slots, within the frame's budget
+//!    of bytes and of time, coarse before fine (a page is mapped only once its parent is), and
+//!    mapped: only the page-table entries that changed are written.
 //!
-//! So a page the frame asks for is drawn from the next frame on. The headless loop waits for
-//! each frame's feedback (a one-frame latency, and counters that are the same on every run); an
-//! interactive loop would use `FeedbackReadback::try_read` and the loader's `request`/`poll`
-//! instead and never wait.
+//! Until a page lands, its entries point at its nearest mapped ancestor: the picture falls back to
+//! coarser pages and sharpens as the loads land, and no frame waits for a disk.
+//!
+//! [`Pacing::Offline`] instead waits for each frame's feedback and loads (tests, offline
+//! renders: the same pictures and counters on every run); the time it spends waiting for pages is
+//! reported as [`FrameStats::io_wait`].
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet, VecDeque};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
-use serde::Serialize;
+use vortex_pack::Pack;
 use vortex_vt::analysis::Analyzer;
 use vortex_vt::invariants::{self, Violation};
 use vortex_vt::page::{PageId, TextureGrid};
-use vortex_vt::page_table::PageTable;
-use vortex_vt::residency::{ConfigError, FrameUpdate, Residency, ResidencyConfig};
-use vortex_vt::sampler::Rgba8Image;
+use vortex_vt::page_table::{Change, PageTable};
+use vortex_vt::residency::{ConfigError, Residency, ResidencyConfig, Slot};
 
-use crate::device::Gpu;
-use crate::feedback::{FeedbackPass, FeedbackReadback, FeedbackTarget};
-use crate::loader::{LoadError, Loader};
-use crate::mesh::GpuMesh;
+use crate::bindings::Bindings;
+use crate::feedback::{FeedbackBuffer, FeedbackReadback};
+use crate::loader::{LoadError, LoadedPage, Loader, LoaderError};
 use crate::page_cache::{CacheError, CacheFormat, PageCache};
 use crate::page_table::{GpuPageTable, PageTableError};
+use crate::params::Params;
 use crate::readback::ReadbackError;
-use crate::sample::{RenderTarget, SamplePass, Sources};
-use crate::scene::{Pose, Scene};
+use crate::sample::SampleFilter;
+use crate::source::PageSource;
 use crate::texture::VirtualTexture;
-use crate::view::View;
 
 /// Why a runtime cannot be made or a frame went wrong.
 #[derive(Debug, thiserror::Error)]
 pub enum RuntimeError {
+    #[error("{0}")]
+    Loader(#[from] LoaderError),
     #[error("physical page cache: {0}")]
     Cache(#[from] CacheError),
     #[error("residency: {0}")]
     Residency(#[from] ConfigError),
     #[error("page table: {0}")]
     PageTable(#[from] PageTableError),
-    #[error("scene: {0}")]
-    Scene(String),
+    #[error("{0}")]
+    Config(String),
     #[error("frame {frame}: the page-table invariants are broken: {violation}")]
     Invariant { frame: u64, violation: Violation },
-    /// The picture or the feedback could not be read back (a lost device).
+    #[error("frame {frame}: the page table does not map exactly the pages that have landed")]
+    Mapping { frame: u64 },
+    /// The feedback could not be read back (a lost device).
     #[error("frame {frame}: {source}")]
     Readback {
         frame: u64,
@@ -59,58 +69,104 @@ pub enum RuntimeError {
     },
 }
 
-/// The counters of one frame.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
-pub struct FrameReport {
+/// Whether a frame may wait.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Pacing {
+    /// Never wait: feedback is read back when the GPU has finished it, pages are uploaded when
+    /// the loader has them. What an interactive application wants.
+    #[default]
+    RealTime,
+    /// Wait for each frame's feedback and for the pages it asks for, so that a page asked for by
+    /// frame n is drawn from frame n + 1 on, on every run: tests and offline renders.
+    Offline,
+}
+
+/// The knobs of a [`Runtime`]. `RuntimeConfig::default()` suits a 1080p view of 128-texel
+/// tiles.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RuntimeConfig {
+    /// The physical cache is this many slots per side (1..=256).
+    pub cache_slots_per_side: u16,
+    /// The filter; `None` takes the best the textures' border allows ([`SampleFilter::best_for`]).
+    pub filter: Option<SampleFilter>,
+    /// Most pages the residency sends to the loader per frame.
+    pub load_budget: usize,
+    /// Most bytes uploaded into the cache per frame (at least one tile).
+    pub upload_bytes: u64,
+    /// Uploads stop for the frame once they have taken this long (one page always goes).
+    pub upload_time: Duration,
+    /// Feedback blocks are this many pixels per side: one pixel in `block²` writes per frame.
+    pub feedback_block: u32,
+    /// The size of the frames drawn, for the feedback buffer ([`Runtime::resize`] changes it).
+    pub frame_size: [u32; 2],
+    /// Loader threads (0: one per core; sources that wait on I/O want more).
+    pub loader_threads: usize,
+    /// Hold BC7 blocks as stored when the device samples BC and every tile is BC7 or one colour.
+    pub bc7: bool,
+    pub pacing: Pacing,
+}
+
+impl Default for RuntimeConfig {
+    fn default() -> RuntimeConfig {
+        RuntimeConfig {
+            cache_slots_per_side: 16,
+            filter: None,
+            load_budget: 32,
+            upload_bytes: 8 << 20,
+            upload_time: Duration::from_millis(2),
+            feedback_block: 8,
+            frame_size: [1920, 1080],
+            loader_threads: 0,
+            bc7: true,
+            pacing: Pacing::RealTime,
+        }
+    }
+}
+
+/// What one [`Runtime::end_frame`] did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameStats {
+    /// The frame that ended (0 for the first).
     pub frame: u64,
+    /// The frame whose feedback was analysed, if one was ready.
+    pub feedback_of: Option<u64>,
     /// Distinct pages the feedback asked for, ancestors included.
     pub requested: usize,
-    /// Of those, pages already resident.
+    /// Of those, pages resident or on their way.
     pub hits: usize,
-    pub loaded: usize,
+    /// Pages sent to the loader.
+    pub queued: usize,
+    /// Pages uploaded into the cache and mapped.
+    pub uploaded: usize,
     pub evicted: usize,
-    /// Wanted pages left for later frames (budget or cache full).
+    /// Wanted pages left for later frames (load budget, or a cache full of wanted pages).
     pub deferred: usize,
-    /// Share of feedback samples whose page was not resident, so drawn from a coarser ancestor.
+    /// Pages loaded but no longer wanted by the time they landed (their slot was taken).
+    pub discarded: usize,
+    /// Pages on the loader's threads or waiting for an upload, after this frame.
+    pub in_flight: usize,
+    /// Share of the last analysed feedback's samples whose page was not mapped when it was
+    /// analysed, so drawn from a coarser ancestor.
     pub fallback_fraction: f64,
-    /// The LOD bias this frame's feedback was drawn with.
+    /// The LOD bias the next frame's feedback asks with.
     pub lod_bias: f32,
-    /// Payload bytes read from the packs for this frame's loads.
+    /// Bytes read by the sources for the pages uploaded.
     pub bytes_read: u64,
-    /// Pages that failed to load (drawn with a stand-in; see `loader`).
+    pub bytes_uploaded: u64,
+    /// Pages uploaded with the stand-in tile because they failed to load.
     pub load_errors: usize,
+    /// Time this call took on the calling thread.
+    pub cpu: Duration,
+    /// Of that, time spent waiting for pages to be read ([`Pacing::Offline`] only: a real-time
+    /// frame never waits, and this is measured, not assumed).
+    pub io_wait: Duration,
 }
 
-/// What a whole run did: the report `vortex-tiler render --report` writes.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
-pub struct Report {
-    pub adapter: String,
-    pub size: [u32; 2],
-    pub filter: String,
-    /// `rgba8`, or `bc7` when the packs' BC7 blocks went to the GPU as they are.
-    pub cache_format: String,
-    pub cache_slots: usize,
-    pub upload_budget: usize,
-    pub frames: Vec<FrameReport>,
-    /// Distinct pages ever loaded, against all pages of all textures.
-    pub pages_touched: usize,
-    pub pages_total: u64,
-    /// Payload bytes read from the packs, the roots pinned before the first frame included.
-    pub bytes_read: u64,
-    /// Resident hits over pages requested, over all frames.
-    pub hit_rate: f64,
-    /// The first frame of the still camera.
-    pub still_from: u32,
-    /// Frames after `still_from` until the first frame without fallback that stays so to the
-    /// end; `None` if the last frame still falls back.
-    pub frames_to_converge: Option<u32>,
-    /// Messages of the pages that failed to load (at most 20).
-    pub errors: Vec<String>,
-}
-
-/// Everything one scene needs on the GPU and the CPU, driven a frame at a time.
+/// The virtual textures of one application, on its device.
 pub struct Runtime {
-    gpu: Gpu,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    config: RuntimeConfig,
     loader: Loader,
     textures: Vec<VirtualTexture>,
     grids: Vec<TextureGrid>,
@@ -118,207 +174,283 @@ pub struct Runtime {
     table: PageTable,
     gpu_table: GpuPageTable,
     cache: PageCache,
-    sample: SamplePass,
-    feedback: FeedbackPass,
-    target: RenderTarget,
-    feedback_target: FeedbackTarget,
+    filter: SampleFilter,
+    bindings: Bindings,
+    feedback: FeedbackBuffer,
     readback: FeedbackReadback,
     analyzer: Analyzer,
-    meshes: Vec<GpuMesh>,
+    /// The frame being drawn.
     frame: u64,
+    /// Residency updates so far (their frame stamps must increase).
+    updates: u64,
+    /// Pages given a slot and sent to the loader, not yet uploaded.
+    in_flight: HashMap<PageId, Slot>,
+    /// Pages the loader finished, waiting for the upload budget or their parent.
+    landed: VecDeque<LoadedPage>,
     touched: HashSet<PageId>,
     errors: Vec<LoadError>,
-    last_update: FrameUpdate,
+    /// The fallback share of the last feedback analysed.
+    fallback: f64,
     /// Check the page-table invariants after every frame (tests; costs a table rebuild).
     pub check_invariants: bool,
 }
 
 impl Runtime {
-    /// Sets up `scene` (its size, geometry and effects) over the loader's textures.
-    pub fn new(gpu: Gpu, loader: Loader, scene: &Scene) -> Result<Runtime, RuntimeError> {
-        scene.check().map_err(RuntimeError::Scene)?;
+    /// A runtime over packs: [`Runtime::with_sources`].
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        packs: Vec<Arc<Pack>>,
+        config: RuntimeConfig,
+    ) -> Result<Runtime, RuntimeError> {
+        let sources = packs.into_iter().map(|p| p as Arc<dyn PageSource>).collect();
+        Runtime::with_sources(device, queue, sources, config)
+    }
+
+    /// A runtime over `sources` (texture id = index), which must share a tile size and border.
+    /// Loads every texture's coarsest page before returning (blocking, once), so that no frame
+    /// ever shows an unmapped texture.
+    pub fn with_sources(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        sources: Vec<Arc<dyn PageSource>>,
+        config: RuntimeConfig,
+    ) -> Result<Runtime, RuntimeError> {
+        let loader = Loader::with_sources(sources, config.loader_threads)?;
         let textures = loader.textures().to_vec();
-        scene.check_textures(textures.len()).map_err(RuntimeError::Scene)?;
         let grids: Vec<TextureGrid> = textures.iter().map(|t| t.grid).collect();
-        let e = &scene.effects;
-        let side = e.cache_slots_per_side;
-        // BC7 blocks go to the GPU as they are, where the adapter samples them and the scene
-        // allows it; otherwise tiles are decoded to RGBA8.
-        let bc = gpu.device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC);
-        let format = if e.bc7 && bc && loader.holds_only_bc7() { CacheFormat::Bc7 } else { CacheFormat::Rgba8 };
+        let bc = device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC);
+        let format = if config.bc7 && bc && loader.holds_only_bc7() { CacheFormat::Bc7 } else { CacheFormat::Rgba8 };
         loader.set_format(format);
-        let cache = PageCache::new(&gpu.device, side, loader.tile_size(), loader.border(), format)?;
-        let residency = Residency::new(&grids, ResidencyConfig::new(cache.slot_count() as usize, e.upload_budget))?;
-        let gpu_table = GpuPageTable::new(&gpu.device, &gpu.queue, &grids, side)?;
-        let [w, h] = scene.size;
-        let feedback_target = FeedbackTarget::new(&gpu.device, w, h, e.feedback_divisor);
-        let readback = FeedbackReadback::new(&gpu.device, feedback_target.width, feedback_target.height, 2);
-        let mesh = scene.mesh();
-        let meshes = if mesh.indices.is_empty() { vec![] } else { vec![GpuMesh::upload(&gpu.device, &mesh)] };
+        let tile_bytes = format.tile_bytes(loader.tile_size()) as u64;
+        if config.upload_bytes < tile_bytes {
+            return Err(RuntimeError::Config(format!(
+                "an upload budget of {} bytes per frame is less than one {}-byte tile",
+                config.upload_bytes, tile_bytes
+            )));
+        }
+        let side = config.cache_slots_per_side;
+        let cache = PageCache::new(device, side, loader.tile_size(), loader.border(), format)?;
+        let residency = Residency::new(&grids, ResidencyConfig::new(cache.slot_count() as usize, config.load_budget))?;
+        let gpu_table = GpuPageTable::new(device, queue, &grids, side)?;
+        let filter = config.filter.unwrap_or(SampleFilter::best_for(loader.border()));
+        let [w, h] = config.frame_size;
+        let feedback = FeedbackBuffer::new(device, w, h, config.feedback_block);
+        let readback = FeedbackReadback::new(device, &feedback, 3);
+        let bindings = Bindings::new(device, &gpu_table, &cache, &feedback, filter);
         let mut runtime = Runtime {
-            sample: SamplePass::new(&gpu.device, e.filter),
-            feedback: FeedbackPass::new(&gpu.device),
-            target: RenderTarget::new(&gpu.device, w, h),
+            device: device.clone(),
+            queue: queue.clone(),
+            config,
             table: PageTable::new(&grids),
             analyzer: Analyzer::new(),
             frame: 0,
+            updates: 0,
+            in_flight: HashMap::new(),
+            landed: VecDeque::new(),
             touched: HashSet::new(),
             errors: Vec::new(),
-            last_update: FrameUpdate::default(),
+            fallback: 0.0,
             check_invariants: false,
-            gpu,
             loader,
             textures,
             grids,
             residency,
             gpu_table,
             cache,
-            feedback_target,
+            filter,
+            bindings,
+            feedback,
             readback,
-            meshes,
         };
-        // Pin every texture's root before the first draw, so that no frame shows an unmapped
-        // entry.
-        runtime.stream(0, &[])?;
+        // The roots: loaded and mapped before the first frame.
+        let update = runtime.residency.update(0, &[]);
+        let pages = runtime.loader.load(&update.loads);
+        let mut changes = Vec::new();
+        for page in pages {
+            runtime.upload(page, &mut changes);
+        }
+        runtime.gpu_table.write_changes(&runtime.queue, &changes);
+        runtime.feedback.clear(&runtime.queue);
+        runtime.write_params();
         Ok(runtime)
     }
 
-    /// Draws one frame at `pose`, streams what its feedback asks for, and returns its counters
-    /// and, if `image`, the picture.
-    pub fn frame(&mut self, pose: &Pose, image: bool) -> Result<(FrameReport, Option<Rgba8Image>), RuntimeError> {
-        let view = match *pose {
-            Pose::Window(w) => View::Window(w),
-            Pose::Camera(view_proj) => View::Meshes { view_proj, meshes: &self.meshes },
-        };
-        let lod_bias = self.residency.lod_bias();
-        let device = &self.gpu.device;
-        let mut encoder =
-            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex frame") });
-        let jitter = crate::feedback::jitter(self.frame);
-        self.feedback.encode(
-            device,
-            &mut encoder,
-            &self.feedback_target,
-            &self.textures,
-            Some(&view),
-            lod_bias,
-            jitter,
-        );
-        self.readback.encode_copy(&mut encoder, &self.feedback_target);
-        let sources = Sources { textures: &self.textures, table: &self.gpu_table, cache: &self.cache };
-        self.sample.encode(device, &mut encoder, &self.target, &sources, &view, None);
-        if image {
-            self.target.encode_copy_out(&mut encoder);
-        }
-        self.gpu.queue.submit([encoder.finish()]);
-        self.readback.submitted();
-        let failed = |source| RuntimeError::Readback { frame: self.frame, source };
-        let picture = if image { Some(self.target.read(&self.gpu).map_err(failed)?) } else { None };
-        let words = self.readback.read_now(device).map_err(failed)?.map(|f| f.words).unwrap_or_default();
-
-        let residency = &self.residency;
-        let grids = &self.grids;
-        let analysis = self.analyzer.analyze(&words, grids, |p| {
-            let lod = residency.finest_resident_lod(p);
-            residency.is_resident(PageId { lod, ..p }).map(|_| lod)
-        });
-        let fallback: u64 = analysis.requests.iter().filter(|r| r.distance > 0).map(|r| r.direct as u64).sum();
-        let fallback_fraction = if analysis.samples == 0 { 0.0 } else { fallback as f64 / analysis.samples as f64 };
-        let wanted: Vec<PageId> = analysis.requests.iter().map(|r| r.page).collect();
-
-        let (update, bytes_read, load_errors) = self.stream(self.frame + 1, &wanted)?;
-        let s = update.stats;
-        let report = FrameReport {
-            frame: self.frame,
-            requested: s.requested,
-            hits: s.hits,
-            loaded: s.loaded,
-            evicted: s.evicted,
-            deferred: s.deferred,
-            fallback_fraction,
-            lod_bias,
-            bytes_read,
-            load_errors,
-        };
-        self.last_update = update;
-        self.frame += 1;
-        Ok((report, picture))
+    /// The layout of the module's bind group, for the application's pipeline layouts (at the
+    /// group index it gave `crate::shader`).
+    pub fn bind_group_layout(&self) -> &wgpu::BindGroupLayout {
+        self.bindings.layout()
     }
 
-    /// Updates the residency with `wanted`, loads and uploads the new pages, and maps them.
-    /// Returns the update, the bytes read and the pages that failed to load.
-    /// `stamp` is the residency's frame number: `new` pins the roots at 0, frame `n` is `n + 1`.
-    fn stream(&mut self, stamp: u64, wanted: &[PageId]) -> Result<(FrameUpdate, u64, usize), RuntimeError> {
-        let update = self.residency.update(stamp, wanted);
-        let mut bytes_read = 0;
-        let mut load_errors = 0;
-        for page in self.loader.load(&update.loads) {
-            self.cache.upload(&self.gpu.queue, page.slot, &page.texels);
-            self.touched.insert(page.page);
-            bytes_read += page.bytes_read;
-            if let Some(e) = page.error {
-                load_errors += 1;
-                self.errors.push(e);
+    /// The module's bind group. It changes on [`Runtime::resize`] and [`Runtime::set_filter`]:
+    /// take it anew for each frame's passes.
+    pub fn bind_group(&self) -> &wgpu::BindGroup {
+        self.bindings.group()
+    }
+
+    /// Frames are now `width x height` pixels: the feedback buffer follows (feedback in flight
+    /// for the old size is dropped).
+    pub fn resize(&mut self, width: u32, height: u32) {
+        self.config.frame_size = [width, height];
+        self.feedback = FeedbackBuffer::new(&self.device, width, height, self.config.feedback_block);
+        self.readback = FeedbackReadback::new(&self.device, &self.feedback, 3);
+        self.feedback.clear(&self.queue);
+        self.rebind();
+    }
+
+    pub fn filter(&self) -> SampleFilter {
+        self.filter
+    }
+
+    pub fn set_filter(&mut self, filter: SampleFilter) {
+        self.filter = filter;
+        self.rebind();
+    }
+
+    fn rebind(&mut self) {
+        self.bindings.rebind(&self.device, &self.gpu_table, &self.cache, &self.feedback, self.filter);
+        self.write_params();
+    }
+
+    /// Writes the uniform block the next frame reads.
+    fn write_params(&self) {
+        let layout = self.feedback.layout(self.frame);
+        let params = Params::new(&self.textures, &self.cache, self.filter, layout, self.residency.lod_bias());
+        self.queue.write_buffer(self.bindings.params(), 0, bytemuck::bytes_of(&params));
+    }
+
+    /// Ends the frame whose commands the application has just submitted: reads back earlier
+    /// feedback, streams, uploads and maps (see the module documentation). Never blocks under
+    /// [`Pacing::RealTime`].
+    pub fn end_frame(&mut self) -> Result<FrameStats, RuntimeError> {
+        let started = Instant::now();
+        let waited_before = self.loader.waited();
+        let offline = self.config.pacing == Pacing::Offline;
+        let mut stats = FrameStats { frame: self.frame, ..FrameStats::default() };
+
+        let mut encoder =
+            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex feedback copy") });
+        self.readback.encode_copy(&mut encoder, &self.feedback);
+        self.queue.submit([encoder.finish()]);
+        self.readback.submitted();
+        self.feedback.clear(&self.queue);
+
+        let failed = |source| RuntimeError::Readback { frame: self.frame, source };
+        let read = if offline { self.readback.read_now(&self.device) } else { self.readback.try_read(&self.device) };
+        let mut changes = Vec::new();
+        if let Some(feedback) = read.map_err(failed)? {
+            stats.feedback_of = Some(feedback.frame);
+            let loads = self.stream(&feedback.words, &mut stats, &mut changes);
+            if offline {
+                self.landed.extend(self.loader.load(&loads));
+            } else {
+                self.loader.request(&loads);
             }
         }
-        let changes = self.table.apply(&update);
-        self.gpu_table.write_changes(&self.gpu.queue, &changes);
+        self.landed.extend(self.loader.poll());
+        self.upload_landed(offline, &mut stats, &mut changes);
+        self.gpu_table.write_changes(&self.queue, &changes);
         if self.check_invariants {
-            invariants::check(&self.residency, &self.table)
-                .map_err(|violation| RuntimeError::Invariant { frame: self.frame, violation })?;
+            self.check()?;
         }
-        Ok((update, bytes_read, load_errors))
+
+        self.frame += 1;
+        self.write_params();
+        stats.fallback_fraction = self.fallback;
+        stats.in_flight = self.in_flight.len();
+        stats.lod_bias = self.residency.lod_bias();
+        stats.io_wait = self.loader.waited() - waited_before;
+        stats.cpu = started.elapsed();
+        Ok(stats)
     }
 
-    /// Renders every frame of `scene`, handing each frame's counters (and picture, if `images`)
-    /// to `each`, and sums them up.
-    pub fn run<E: From<RuntimeError>>(
-        &mut self,
-        scene: &Scene,
-        images: bool,
-        mut each: impl FnMut(&FrameReport, Option<Rgba8Image>) -> Result<(), E>,
-    ) -> Result<Report, E> {
-        let mut frames = Vec::with_capacity(scene.frames as usize);
-        for f in 0..scene.frames {
-            let (report, picture) = self.frame(&scene.pose(f, &self.textures), images)?;
-            each(&report, picture)?;
-            frames.push(report);
+    /// Analyses one feedback buffer, updates the residency and unmaps its evictions; returns the
+    /// pages to load, coarse before fine, with their slots.
+    fn stream(&mut self, words: &[u32], stats: &mut FrameStats, changes: &mut Vec<Change>) -> Vec<(PageId, Slot)> {
+        let table = &self.table;
+        let analysis = self.analyzer.analyze(words, &self.grids, |p| {
+            let entry = table.get(p);
+            entry.is_mapped().then_some(entry.lod)
+        });
+        let fallback: u64 = analysis.requests.iter().filter(|r| r.distance > 0).map(|r| r.direct as u64).sum();
+        self.fallback = if analysis.samples == 0 { 0.0 } else { fallback as f64 / analysis.samples as f64 };
+        let wanted: Vec<PageId> = analysis.requests.iter().map(|r| r.page).collect();
+        self.updates += 1;
+        let update = self.residency.update(self.updates, &wanted);
+        // A page evicted before it landed was never mapped: nothing to unmap.
+        let unmap: Vec<(PageId, Slot)> =
+            update.evictions.iter().copied().filter(|(page, _)| self.in_flight.remove(page).is_none()).collect();
+        changes.extend(self.table.apply_mappings(&unmap, &[]));
+        self.in_flight.extend(update.loads.iter().copied());
+        let s = update.stats;
+        (stats.requested, stats.hits, stats.queued) = (s.requested, s.hits, update.loads.len());
+        (stats.evicted, stats.deferred) = (s.evicted, s.deferred);
+        update.loads
+    }
+
+    /// Uploads and maps the landed pages that are still wanted, parents first, within the
+    /// frame's budget (none offline); the rest wait for a later frame.
+    fn upload_landed(&mut self, offline: bool, stats: &mut FrameStats, changes: &mut Vec<Change>) {
+        let started = Instant::now();
+        // Coarse before fine, so that a parent landed in the same batch is mapped first.
+        self.landed.make_contiguous().sort_by_key(|page| std::cmp::Reverse(page.page.lod));
+        let mut waiting = VecDeque::new();
+        while let Some(page) = self.landed.pop_front() {
+            let (p, slot) = (page.page, page.slot);
+            if self.in_flight.get(&p) != Some(&slot) || self.residency.slot_owner(slot) != Some(p) {
+                stats.discarded += 1;
+                continue;
+            }
+            let parent_mapped =
+                p.parent(&self.grids[p.texture as usize]).is_none_or(|q| self.table.get(q).lod == q.lod);
+            let bytes = page.texels.len() as u64;
+            let over_budget = !offline
+                && stats.uploaded > 0
+                && (stats.bytes_uploaded + bytes > self.config.upload_bytes
+                    || started.elapsed() >= self.config.upload_time);
+            if !parent_mapped || over_budget {
+                waiting.push_back(page);
+                continue;
+            }
+            stats.uploaded += 1;
+            stats.bytes_uploaded += bytes;
+            stats.bytes_read += page.bytes_read;
+            stats.load_errors += usize::from(page.error.is_some());
+            self.upload(page, changes);
         }
-        Ok(self.report(scene, frames))
+        self.landed = waiting;
     }
 
-    /// The run's summary over `frames`.
-    pub fn report(&self, scene: &Scene, frames: Vec<FrameReport>) -> Report {
-        let still_from = scene.still_from();
-        let converged_at = frames.iter().rposition(|f| f.fallback_fraction > 0.0).map_or(0, |i| i + 1);
-        let frames_to_converge =
-            (converged_at < frames.len()).then(|| converged_at.saturating_sub(still_from as usize) as u32);
-        let (hits, requested) = frames.iter().fold((0, 0), |(h, r), f| (h + f.hits, r + f.requested));
-        Report {
-            adapter: self.gpu.adapter_info().name,
-            size: scene.size,
-            filter: self.sample.filter().name().into(),
-            cache_format: self.cache.format().name().into(),
-            cache_slots: self.residency.slots(),
-            upload_budget: self.residency.config().upload_budget,
-            pages_touched: self.touched.len(),
-            pages_total: self.grids.iter().map(|g| g.page_count()).sum(),
-            bytes_read: self.loader.counters().bytes_read,
-            hit_rate: if requested == 0 { 0.0 } else { hits as f64 / requested as f64 },
-            still_from,
-            frames_to_converge,
-            errors: self.errors.iter().take(20).map(|e| e.to_string()).collect(),
-            frames,
+    /// Writes one page into its slot and maps it.
+    fn upload(&mut self, page: LoadedPage, changes: &mut Vec<Change>) {
+        self.cache.upload(&self.queue, page.slot, &page.texels);
+        self.in_flight.remove(&page.page);
+        self.touched.insert(page.page);
+        changes.extend(self.table.apply_mappings(&[], &[(page.page, page.slot)]));
+        if let Some(e) = page.error {
+            self.errors.push(e);
         }
     }
 
-    /// The residency update of the last frame (its loads, in upload order, and evictions).
-    pub fn last_update(&self) -> &FrameUpdate {
-        &self.last_update
+    /// The residency's invariants, and the table mapping exactly the pages that have landed.
+    fn check(&self) -> Result<(), RuntimeError> {
+        let frame = self.frame;
+        invariants::check(&self.residency, &PageTable::rebuild(&self.grids, self.residency.resident()))
+            .map_err(|violation| RuntimeError::Invariant { frame, violation })?;
+        let landed = self.residency.resident().filter(|(p, _)| !self.in_flight.contains_key(p));
+        if PageTable::rebuild(&self.grids, landed) != self.table {
+            return Err(RuntimeError::Mapping { frame });
+        }
+        Ok(())
     }
 
-    pub fn gpu(&self) -> &Gpu {
-        &self.gpu
+    /// The frame being drawn (the number of frames ended so far).
+    pub fn frame(&self) -> u64 {
+        self.frame
+    }
+
+    pub fn textures(&self) -> &[VirtualTexture] {
+        &self.textures
     }
 
     pub fn loader(&self) -> &Loader {
@@ -337,7 +469,27 @@ impl Runtime {
         &self.cache
     }
 
-    pub fn textures(&self) -> &[VirtualTexture] {
-        &self.textures
+    pub fn config(&self) -> &RuntimeConfig {
+        &self.config
+    }
+
+    /// Distinct pages ever uploaded.
+    pub fn pages_touched(&self) -> usize {
+        self.touched.len()
+    }
+
+    /// The pages that failed to load (drawn with the stand-in tile), in order.
+    pub fn errors(&self) -> &[LoadError] {
+        &self.errors
+    }
+
+    /// Pages in flight: on the loader's threads, or landed and waiting to be uploaded.
+    pub fn in_flight(&self) -> usize {
+        self.in_flight.len()
+    }
+
+    /// The GPU page table's storage buffer (tests read it back).
+    pub fn gpu_page_table(&self) -> &GpuPageTable {
+        &self.gpu_table
     }
 }

@@ -1,20 +1,21 @@
-//! The tile loader: reads the pages the residency asks for from Vortex tile packs and turns them
-//! into RGBA8 texels (or BC7 blocks) ready for `queue.write_texture` into a slot of the page
-//! cache. Decoding runs on the loader's own pool of worker threads (plain std threads named
+//! The tile loader: reads the pages the residency asks for from their [`PageSource`](crate::source::PageSource)s (Vortex
+//! tile packs, or the application's own storage) and turns them into premultiplied RGBA8 texels
+//! (or BC7 blocks) ready for `queue.write_texture` into a slot of the page cache. Decoding runs on the loader's own pool of worker threads (plain std threads named
 //! `vortex-loader-N`); the caller's thread only queues pages and collects texels, blocking
 //! ([`Loader::load`]) or not ([`Loader::request`] and [`Loader::poll`]). Pure CPU: nothing here
 //! touches wgpu.
 //!
-//! Three parts, one file each, because each changes for its own reasons: `pool` (the worker
+//! Four parts, one file each, because each changes for its own reasons: `pool` (the worker
 //! threads, the queue, request and poll, the blocking load, the counters), `decode` (one page
-//! from its pack: a stored tile to RGBA8 or BC7, or an absent one from its ancestor) and
-//! `magnify` (the exact integer magnification of that ancestor). This file holds what callers
-//! see of all three: the errors, a loaded page, the counters and the stand-in tile.
+//! from its source: a stored tile, or an absent one from its ancestor), `magnify` (the exact
+//! integer magnification of that ancestor) and `premultiply` (colour weighted by alpha, so that
+//! the GPU's filter never bleeds the colour of transparent texels). This file holds what callers
+//! see of all of them: the errors, a loaded page, the counters and the stand-in tile.
 //!
 //! Every page gets texels, so a slot is never left holding stale or garbage data:
 //!
-//! - a stored tile (PNG, JPEG, zstd, raw or constant) is decoded by `vortex_pack::decode_rgba8`,
-//!   which checks its CRC-32C;
+//! - a stored tile is read and decoded by its source (for a pack, `vortex_pack::decode_rgba8`,
+//!   which checks its CRC-32C);
 //! - an `absent` tile ("the runtime falls back to the parent tile", pack format) is built from its
 //!   nearest stored ancestor by bilinear magnification (`magnify`); that is not an error;
 //! - a tile that cannot be read or decoded, or a page outside its texture, gets the
@@ -28,18 +29,16 @@
 mod decode;
 mod magnify;
 mod pool;
+mod premultiply;
 
 use std::path::PathBuf;
 
-use vortex_pack::Pack;
-use vortex_vt::page::{GridError, MAX_TEXTURES, PageId, TextureGrid};
+use vortex_vt::page::{GridError, MAX_TEXTURES, PageId};
 use vortex_vt::residency::Slot;
-
-use crate::texture::VirtualTexture;
 
 pub use pool::Loader;
 
-/// Why a [`VirtualTexture`] or a [`Loader`] cannot be made.
+/// Why a [`VirtualTexture`](crate::VirtualTexture) or a [`Loader`] cannot be made.
 #[derive(Debug, thiserror::Error)]
 pub enum LoaderError {
     /// The pack's layout is not a virtual texture's (an image its LOD-0 grid covers).
@@ -105,52 +104,15 @@ pub enum LoadError {
     Lost { page: PageId },
 }
 
-/// Reading a texture's shape from its pack (the type lives in [`crate::texture`], shared with the
-/// renderer).
-impl VirtualTexture {
-    /// The texture stored in `pack`. Its level table must be a page grid ([`TextureGrid::from_levels`]:
-    /// `w x h` tiles at LOD 0, each level the previous one halved and rounded up, down to one
-    /// page; levels past that one page are ignored) within the feedback word's limits, and its
-    /// LOD-0 grid must cover the image (`width x height` from the header, which UV 0..1 spans).
-    /// The tiler's older square power-of-two packs qualify: their image sits at the top-left
-    /// of the grid, and the pages wholly outside it are never asked for.
-    pub fn from_pack(pack: &Pack) -> Result<VirtualTexture, LoaderError> {
-        let path = || pack.path().to_path_buf();
-        let d = pack.description();
-        let levels = pack.levels();
-        if levels.is_empty() {
-            return Err(LoaderError::Layout {
-                path: path(),
-                field: "level_count",
-                message: "the pack has no levels".into(),
-            });
-        }
-        let grid = TextureGrid::from_levels(levels.iter().map(|l| [l.tiles_w, l.tiles_h]))
-            .map_err(|source| LoaderError::Grid { path: path(), source })?;
-        let payload = d.tile_size - 2 * d.border;
-        for (axis, (field, value)) in [("width", d.width), ("height", d.height)].into_iter().enumerate() {
-            let pages = grid.pages()[axis];
-            let covered = u64::from(pages) * u64::from(payload);
-            if u64::from(value) > covered {
-                return Err(LoaderError::Layout {
-                    path: path(),
-                    field,
-                    message: format!("{field} {value} exceeds the {covered} texels of {pages} pages of {payload}"),
-                });
-            }
-        }
-        Ok(VirtualTexture { grid, width: d.width, height: d.height, tile_size: d.tile_size, border: d.border })
-    }
-}
-
 /// The texels of one requested page.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct LoadedPage {
     pub page: PageId,
     /// The slot it was requested for, passed through.
     pub slot: Slot,
-    /// `tile_size²` RGBA8 texels (sRGB-encoded colour, straight alpha), rows top down, borders
-    /// included: one slot of the page cache. The [stand-in](stand_in_tile) when `error` is set.
+    /// `tile_size²` RGBA8 texels (sRGB-encoded premultiplied colour: each colour is
+    /// `srgb(linear(c) * alpha)`), rows top down, borders included: one slot of the page cache;
+    /// or BC7 blocks as stored (straight alpha). The [stand-in](stand_in_tile) when `error` is set.
     pub texels: Vec<u8>,
     /// Payload bytes read from the pack for this page: its tile's, or for an absent tile its
     /// ancestor's; counted even when they failed to decode. Constant tiles have none.

@@ -1,5 +1,5 @@
 //! The loader's pool: plain std threads (`vortex-loader-N`) that take pages from one queue,
-//! decode them (`decode`) and answer on a channel, the blocking [`Loader::load`] and the
+//! read and decode them (`decode`) and answer on a channel, the blocking [`Loader::load`] and the
 //! asynchronous [`Loader::request`] / [`Loader::poll`] over it, and the counters. Everything
 //! about threads and their failures is here: a worker that dies answers nothing, which `load`
 //! turns into [`LoadError::Lost`]; a decoder that panics is caught and answered with the
@@ -11,8 +11,9 @@ use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
-use vortex_pack::{Pack, TileKind};
+use vortex_pack::Pack;
 use vortex_vt::page::{MAX_TEXTURES, PageId};
 use vortex_vt::residency::Slot;
 
@@ -20,6 +21,7 @@ use super::decode::{self, Made, Tally};
 use super::{LoadCounters, LoadError, LoadedPage, LoaderError, stand_in_tile};
 use crate::bc7;
 use crate::page_cache::CacheFormat;
+use crate::source::PageSource;
 use crate::texture::VirtualTexture;
 
 /// One page to load, and where its answer goes.
@@ -37,7 +39,7 @@ struct Queue {
 
 /// What the workers share with the loader.
 struct Shared {
-    packs: Vec<Arc<Pack>>,
+    sources: Vec<Arc<dyn PageSource>>,
     textures: Vec<VirtualTexture>,
     tile_size: u32,
     queue: Mutex<Queue>,
@@ -51,8 +53,8 @@ struct Shared {
     bc7: AtomicBool,
 }
 
-/// Reads pages of up to 16 virtual textures (texture id = index in the packs given to
-/// [`Loader::new`]) on a pool of worker threads. Dropping it stops the workers: queued pages are
+/// Reads pages of up to 16 virtual textures (texture id = index in the sources given to
+/// [`Loader::with_sources`]) on a pool of worker threads. Dropping it stops the workers: queued pages are
 /// discarded and the pages being decoded are finished first (one tile per worker).
 pub struct Loader {
     shared: Arc<Shared>,
@@ -60,31 +62,39 @@ pub struct Loader {
     /// Where workers answer [`Loader::request`]s, and where [`Loader::poll`] collects them.
     async_tx: Sender<(usize, LoadedPage)>,
     async_rx: Mutex<Receiver<(usize, LoadedPage)>>,
-    /// Requested pages not yet returned by `poll`.
+    /// Requested pages not yet returned by [`Loader::poll`].
     pending: AtomicUsize,
+    /// Time callers spent blocked in [`Loader::load`], in nanoseconds.
+    waited: AtomicU64,
 }
 
 impl Loader {
-    /// A loader of `packs` on `threads` worker threads (0: one per available core). The packs
-    /// must all be virtual textures ([`VirtualTexture::from_pack`]) with the same tile size and
-    /// border, since their pages share one physical page cache.
+    /// A loader of `packs` on `threads` worker threads: [`Loader::with_sources`] of packs.
     pub fn new(packs: Vec<Arc<Pack>>, threads: usize) -> Result<Loader, LoaderError> {
-        let first = packs.first().ok_or(LoaderError::NoTextures)?;
-        if packs.len() > MAX_TEXTURES as usize {
-            return Err(LoaderError::TooManyTextures { count: packs.len() });
+        Loader::with_sources(packs.into_iter().map(|p| p as Arc<dyn PageSource>).collect(), threads)
+    }
+
+    /// A loader of `sources` on `threads` worker threads (0: one per available core). The
+    /// sources must all be virtual textures ([`PageSource::texture`]) with the same tile size and
+    /// border, since their pages share one physical page cache. Sources that wait (on a disk or
+    /// a network) want more threads than cores.
+    pub fn with_sources(sources: Vec<Arc<dyn PageSource>>, threads: usize) -> Result<Loader, LoaderError> {
+        let first = sources.first().ok_or(LoaderError::NoTextures)?;
+        if sources.len() > MAX_TEXTURES as usize {
+            return Err(LoaderError::TooManyTextures { count: sources.len() });
         }
-        let textures = packs.iter().map(|p| VirtualTexture::from_pack(p)).collect::<Result<Vec<_>, _>>()?;
+        let textures = sources.iter().map(|s| s.texture()).collect::<Result<Vec<_>, _>>()?;
         let reference = textures[0];
-        for (pack, texture) in packs.iter().zip(&textures).skip(1) {
+        for (source, texture) in sources.iter().zip(&textures).skip(1) {
             for (field, a, b) in
                 [("tile_size", reference.tile_size, texture.tile_size), ("border", reference.border, texture.border)]
             {
                 if a != b {
                     return Err(LoaderError::Mismatch {
                         field,
-                        first: first.path().to_path_buf(),
+                        first: first.location().to_path_buf(),
                         first_value: a,
-                        other: pack.path().to_path_buf(),
+                        other: source.location().to_path_buf(),
                         other_value: b,
                     });
                 }
@@ -95,7 +105,7 @@ impl Loader {
             n => n,
         };
         let shared = Arc::new(Shared {
-            packs,
+            sources,
             textures,
             tile_size: reference.tile_size,
             queue: Mutex::new(Queue { jobs: VecDeque::new(), shutdown: false }),
@@ -115,6 +125,7 @@ impl Loader {
             async_tx,
             async_rx: Mutex::new(async_rx),
             pending: AtomicUsize::new(0),
+            waited: AtomicU64::new(0),
         };
         for index in 0..threads {
             let shared = Arc::clone(&loader.shared);
@@ -132,8 +143,8 @@ impl Loader {
         &self.shared.textures
     }
 
-    pub fn packs(&self) -> &[Arc<Pack>] {
-        &self.shared.packs
+    pub fn sources(&self) -> &[Arc<dyn PageSource>] {
+        &self.shared.sources
     }
 
     /// Side of every tile of every texture, borders included (the page cache's slot side).
@@ -141,16 +152,11 @@ impl Loader {
         self.shared.tile_size
     }
 
-    /// Whether every stored tile of every pack is a BC7 payload or one colour, so that pages can be
-    /// streamed into a BC7 cache as they are (absent tiles would need decoding and re-encoding).
+    /// Whether every source can give every tile as BC7 blocks as stored, so that pages can be
+    /// streamed into a BC7 cache as they are (for packs: every stored tile is a BC7 payload or one
+    /// colour; absent tiles would need decoding and re-encoding).
     pub fn holds_only_bc7(&self) -> bool {
-        self.shared.tile_size.is_multiple_of(4)
-            && self.shared.packs.iter().all(|pack| {
-                (0..pack.header().index_count).all(|i| {
-                    let kind = TileKind::from_u8(pack.entry(i).kind);
-                    matches!(kind, Some(TileKind::Bc7 | TileKind::Constant))
-                })
-            })
+        self.shared.tile_size.is_multiple_of(4) && self.shared.sources.iter().all(|s| s.holds_only_bc7())
     }
 
     /// Makes every later page come in `format`: RGBA8 texels, or BC7 blocks (which only packs
@@ -189,6 +195,7 @@ impl Loader {
         }));
         // Only the jobs hold senders now: if every one of them is gone, `recv` stops waiting.
         drop(tx);
+        let started = Instant::now();
         let mut answers: Vec<Option<LoadedPage>> = vec![None; pages.len()];
         for _ in 0..pages.len() {
             let Ok((index, answer)) = rx.recv() else { break };
@@ -196,6 +203,8 @@ impl Loader {
                 *place = Some(answer);
             }
         }
+        let waited = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        self.waited.fetch_add(waited, Ordering::Relaxed);
         answers
             .into_iter()
             .zip(pages)
@@ -229,6 +238,13 @@ impl Loader {
     /// Pages requested and not yet returned by [`Loader::poll`].
     pub fn pending(&self) -> usize {
         self.pending.load(Ordering::Relaxed)
+    }
+
+    /// The time callers have spent blocked in [`Loader::load`] waiting for pages: what reading
+    /// and decoding cost the calling thread. [`Loader::request`] and [`Loader::poll`] never add
+    /// to it.
+    pub fn waited(&self) -> Duration {
+        Duration::from_nanos(self.waited.load(Ordering::Relaxed))
     }
 
     pub fn counters(&self) -> LoadCounters {
@@ -296,14 +312,15 @@ impl Shared {
     fn load_page(&self, page: PageId, slot: Slot) -> LoadedPage {
         let as_bc7 = self.bc7.load(Ordering::Relaxed);
         let mut tally = Tally::default();
-        let texels = || decode::texels(&self.packs, &self.textures, page, as_bc7, &mut tally);
+        let format = if as_bc7 { CacheFormat::Bc7 } else { CacheFormat::Rgba8 };
+        let texels = || decode::texels(&self.sources, &self.textures, page, format, &mut tally);
         let result = catch_unwind(AssertUnwindSafe(texels)).unwrap_or_else(|panic| {
             let what = panic
                 .downcast_ref::<&str>()
                 .map(|s| s.to_string())
                 .or_else(|| panic.downcast_ref::<String>().cloned())
                 .unwrap_or_default();
-            let path = self.packs.get(page.texture as usize).map(|p| p.path().to_path_buf()).unwrap_or_default();
+            let path = self.sources.get(page.texture as usize).map(|s| s.location().to_path_buf()).unwrap_or_default();
             Err(LoadError::Tile {
                 path,
                 lod: page.lod.into(),

@@ -9,11 +9,11 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::camera::{Camera, Keyframe, at_frame, lerp3};
-use crate::mesh::{Mesh, Vertex};
+use super::camera::{Camera, Keyframe, at_frame, lerp3};
+use super::mesh::{Mesh, Vertex};
+use super::view::Window;
 use crate::sample::SampleFilter;
 use crate::texture::VirtualTexture;
-use crate::view::Window;
 
 /// Why a scene cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -110,9 +110,11 @@ pub enum Shape {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Effects {
+    /// The filter; `auto` (the default) takes the best the textures' border allows
+    /// ([`SampleFilter::best_for`]: trilinear with a border, nearest without).
     #[serde(with = "filter_name")]
-    pub filter: SampleFilter,
-    /// The feedback target is the frame's size divided by this.
+    pub filter: Option<SampleFilter>,
+    /// One pixel in each block of `feedback_divisor²` writes feedback per frame.
     pub feedback_divisor: u32,
     /// The physical cache is this many slots per side (1..=256).
     pub cache_slots_per_side: u16,
@@ -127,8 +129,7 @@ pub struct Effects {
 impl Default for Effects {
     fn default() -> Effects {
         Effects {
-            // docs/gpu-sampling.md: 18 dB closer to the ideal between LODs for ~1.3x the frame.
-            filter: SampleFilter::Trilinear,
+            filter: None,
             feedback_divisor: 8,
             cache_slots_per_side: 16,
             upload_budget: 32,
@@ -143,16 +144,19 @@ mod filter_name {
 
     use crate::sample::SampleFilter;
 
-    pub fn serialize<S: Serializer>(f: &SampleFilter, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_str(f.name())
+    pub fn serialize<S: Serializer>(f: &Option<SampleFilter>, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(f.map_or("auto", SampleFilter::name))
     }
 
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<SampleFilter, D::Error> {
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<SampleFilter>, D::Error> {
         let name = String::deserialize(d)?;
-        SampleFilter::ALL
-            .into_iter()
-            .find(|f| f.name() == name)
-            .ok_or_else(|| D::Error::custom(format!("unknown filter {name:?}: nearest, bilinear or trilinear")))
+        if name == "auto" {
+            return Ok(None);
+        }
+        let filter = SampleFilter::from_name(&name);
+        filter
+            .map(Some)
+            .ok_or_else(|| D::Error::custom(format!("unknown filter {name:?}: auto, nearest, bilinear or trilinear")))
     }
 }
 

@@ -1,9 +1,9 @@
 //! What a draw shows: a 2D window onto one virtual texture (how maps, scans and microscopy are
-//! viewed), or meshes seen through a camera. Both passes draw the same [`View`].
+//! viewed), or meshes seen through a camera.
 
 use vortex_vt::address::WindowOrigin;
 
-use crate::mesh::GpuMesh;
+use super::mesh::GpuMesh;
 use crate::texture::VirtualTexture;
 
 /// What one draw shows.

@@ -1,20 +1,20 @@
-//! What the sampling and the feedback pass (and the address probe) share: their shader
-//! (`virtual.wgsl` followed by the pass's fragment stages), a pipeline per kind of [`View`] (a
-//! full-screen window, or meshes with a depth test), the colour target with its depth buffer,
-//! and the recording of one pass: clear, then draw. Render thread.
+//! The harness's pipelines, targets and passes: its shader (`harness.wgsl` after the module), a
+//! pipeline per kind of [`View`] (a full-screen window, or meshes with a depth test) with the
+//! harness's uniform in group 0 and the module's bindings in group 1, the colour target with its
+//! depth buffer, and the recording of one pass: clear, then draw. Render thread.
 
-use crate::mesh::Vertex;
-use crate::view::View;
+use super::mesh::Vertex;
+use super::view::View;
 
 pub(crate) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
-/// A pass's shader: the shared part followed by the pass's `fs_window` and `fs_mesh`.
-pub(crate) fn shader(device: &wgpu::Device, label: &str, fragment: &str) -> wgpu::ShaderModule {
-    let source = format!("{}\n{fragment}", include_str!("shaders/virtual.wgsl"));
-    device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(label),
-        source: wgpu::ShaderSource::Wgsl(source.into()),
-    })
+/// The bind group index of the module's bindings in the harness's shaders.
+pub(crate) const VT_GROUP: u32 = 1;
+
+/// The harness's shader after the module, followed by `extra` (the probe's fragment stages).
+pub(crate) fn shader(device: &wgpu::Device, label: &str, extra: &str) -> wgpu::ShaderModule {
+    let application = format!("{}\n{extra}", include_str!("harness.wgsl"));
+    device.create_shader_module(crate::shader::descriptor(Some(label), &application, VT_GROUP))
 }
 
 /// The two pipelines of a pass.
@@ -25,29 +25,30 @@ pub(crate) struct Pipelines {
 }
 
 impl Pipelines {
-    /// Pipelines writing `format` without blending; `constants` set the shader's overrides.
+    /// Pipelines writing `format` without blending, with fragment stages `fs_{prefix}window` and
+    /// `fs_{prefix}mesh`, over `layouts` (group 0, the harness's; group 1, the module's).
     pub(crate) fn new(
         device: &wgpu::Device,
         label: &str,
         module: &wgpu::ShaderModule,
-        layout: &wgpu::BindGroupLayout,
+        layouts: [&wgpu::BindGroupLayout; 2],
         format: wgpu::TextureFormat,
-        constants: &[(&str, f64)],
+        prefix: &str,
     ) -> Pipelines {
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some(label),
-            bind_group_layouts: &[Some(layout)],
+            bind_group_layouts: &[Some(layouts[0]), Some(layouts[1])],
             immediate_size: 0,
         });
         let make = |is_window: bool| {
-            let options = wgpu::PipelineCompilationOptions { constants, ..Default::default() };
+            let fragment = format!("fs_{prefix}{}", if is_window { "window" } else { "mesh" });
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(&pipeline_layout),
                 vertex: wgpu::VertexState {
                     module,
                     entry_point: Some(if is_window { "vs_window" } else { "vs_mesh" }),
-                    compilation_options: options.clone(),
+                    compilation_options: Default::default(),
                     buffers: if is_window { &[] } else { &[Some(Vertex::LAYOUT)] },
                 },
                 primitive: wgpu::PrimitiveState::default(),
@@ -62,8 +63,8 @@ impl Pipelines {
                 multisample: wgpu::MultisampleState::default(),
                 fragment: Some(wgpu::FragmentState {
                     module,
-                    entry_point: Some(if is_window { "fs_window" } else { "fs_mesh" }),
-                    compilation_options: options,
+                    entry_point: Some(&fragment),
+                    compilation_options: Default::default(),
                     targets: &[Some(wgpu::ColorTargetState {
                         format,
                         blend: None,
@@ -78,7 +79,7 @@ impl Pipelines {
     }
 }
 
-/// The entry of binding 0 of every pass: the `Frame` uniform.
+/// The entry of binding 0 of group 0: the harness's `Frame` uniform.
 pub(crate) fn frame_entry() -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding: 0,
@@ -86,13 +87,13 @@ pub(crate) fn frame_entry() -> wgpu::BindGroupLayoutEntry {
         ty: wgpu::BindingType::Buffer {
             ty: wgpu::BufferBindingType::Uniform,
             has_dynamic_offset: false,
-            min_binding_size: wgpu::BufferSize::new(size_of::<crate::params::Frame>() as u64),
+            min_binding_size: wgpu::BufferSize::new(size_of::<super::frame::Frame>() as u64),
         },
         count: None,
     }
 }
 
-/// The layout and bind group of a pass that reads the `Frame` uniform alone.
+/// The layout and bind group of group 0: the `Frame` uniform alone.
 pub(crate) fn frame_only_layout(device: &wgpu::Device, label: &str) -> wgpu::BindGroupLayout {
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &[frame_entry()] })
 }
@@ -101,7 +102,7 @@ pub(crate) fn frame_only_bind_group(
     device: &wgpu::Device,
     label: &str,
     layout: &wgpu::BindGroupLayout,
-    frame: &crate::params::Frame,
+    frame: &super::frame::Frame,
 ) -> wgpu::BindGroup {
     let buffer = uniform(device, label, bytemuck::bytes_of(frame));
     device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -177,7 +178,7 @@ impl Target {
         encoder: &mut wgpu::CommandEncoder,
         label: &str,
         clear: wgpu::Color,
-        draw: Option<(&Pipelines, &wgpu::BindGroup, &View)>,
+        draw: Option<(&Pipelines, [&wgpu::BindGroup; 2], &View)>,
     ) {
         record(encoder, label, &self.view, &self.depth, clear, draw);
     }
@@ -200,14 +201,14 @@ fn depth_texture(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Textur
 }
 
 /// Clears `colour` to `clear` and the depth to the far plane, then draws `view` with
-/// `pipelines` and `bind_group` if given.
+/// `pipelines` and the bind groups (the harness's, the module's) if given.
 fn record(
     encoder: &mut wgpu::CommandEncoder,
     label: &str,
     colour: &wgpu::TextureView,
     depth: &wgpu::TextureView,
     clear: wgpu::Color,
-    draw: Option<(&Pipelines, &wgpu::BindGroup, &View)>,
+    draw: Option<(&Pipelines, [&wgpu::BindGroup; 2], &View)>,
 ) {
     let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
         label: Some(label),
@@ -226,8 +227,9 @@ fn record(
         occlusion_query_set: None,
         multiview_mask: None,
     });
-    let Some((pipelines, bind_group, view)) = draw else { return };
-    pass.set_bind_group(0, bind_group, &[]);
+    let Some((pipelines, [frame, vt], view)) = draw else { return };
+    pass.set_bind_group(0, frame, &[]);
+    pass.set_bind_group(VT_GROUP, vt, &[]);
     match view {
         View::Window(_) => {
             pass.set_pipeline(&pipelines.window);

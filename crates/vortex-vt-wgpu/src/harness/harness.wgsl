@@ -1,0 +1,72 @@
+// The harness's own shader, an application shader like any other: it includes the module
+// (`vt.wgsl`, bindings in group 1) and draws a 2D window onto one texture, or meshes whose
+// vertices carry an image UV and a texture id, asking for feedback from every fragment and
+// writing straight alpha (the PNG frames `render` writes).
+
+struct Frame {
+    view_proj: mat4x4<f32>,
+    // Window: the frame's top-left corner is LOD-0 texel origin_int + origin_frac; step is
+    // LOD-0 texels per frame pixel.
+    origin_int: vec2<u32>,
+    origin_frac: vec2<f32>,
+    step: vec2<f32>,
+    window_texture: u32,
+    // At least 0: sample that LOD everywhere; negative: the LOD from the footprint.
+    lod_override: f32,
+}
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+
+struct Varyings {
+    @builtin(position) position: vec4<f32>,
+    // Image UV (meshes only).
+    @location(0) uv: vec2<f32>,
+    @location(1) @interpolate(flat) texture: u32,
+}
+
+// One triangle covering the target: (-1, -1), (3, -1), (-1, 3), at the far plane so meshes are
+// never hidden by it.
+@vertex
+fn vs_window(@builtin(vertex_index) i: u32) -> Varyings {
+    let xy = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u)) * 2.0 - 1.0;
+    return Varyings(vec4<f32>(xy, 1.0, 1.0), vec2<f32>(0.0), frame.window_texture);
+}
+
+@vertex
+fn vs_mesh(@location(0) position: vec3<f32>, @location(1) uv: vec2<f32>, @location(2) texture: u32) -> Varyings {
+    return Varyings(frame.view_proj * vec4<f32>(position, 1.0), uv, texture);
+}
+
+// The window's LOD-0 texel at pixel position `position`.
+fn window_texel(position: vec2<f32>) -> VtTexel {
+    return VtTexel(frame.origin_int, frame.origin_frac + position * frame.step);
+}
+
+fn straight(c: vec4<f32>) -> vec4<f32> {
+    if c.a <= 0.0 {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(c.rgb / c.a, c.a);
+}
+
+@fragment
+fn fs_window(v: Varyings) -> @location(0) vec4<f32> {
+    let texel = window_texel(v.position.xy);
+    let footprint = max(abs(frame.step.x), abs(frame.step.y));
+    vt_feedback_texel(v.texture, texel, footprint, v.position.xy);
+    if frame.lod_override >= 0.0 {
+        return straight(vt_sample_texel_level(v.texture, texel, frame.lod_override));
+    }
+    return straight(vt_sample_texel(v.texture, texel, footprint));
+}
+
+@fragment
+fn fs_mesh(v: Varyings) -> @location(0) vec4<f32> {
+    let ddx = dpdx(v.uv);
+    let ddy = dpdy(v.uv);
+    vt_feedback(v.texture, v.uv, ddx, ddy, v.position.xy);
+    if frame.lod_override >= 0.0 {
+        return straight(vt_sample_level(v.texture, v.uv, frame.lod_override));
+    }
+    return straight(vt_sample(v.texture, v.uv, ddx, ddy));
+}

@@ -1,0 +1,287 @@
+//! The headless renderer of scenes, built on the public API as any application is: a
+//! [`Runtime`] on a headless device, the harness's own shader and pipelines (which include the
+//! module, `crate::shader`), an offscreen target read back to the CPU, and a frame loop along the
+//! scene's camera path that calls [`Runtime::end_frame`] after each frame. `vortex-tiler render`
+//! and the tests drive it.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+use vortex_vt::sampler::Rgba8Image;
+
+use super::draw::{self, Pipelines, Target};
+use super::frame::Frame;
+use super::mesh::GpuMesh;
+use super::scene::{Pose, Scene};
+use super::view::View;
+use crate::device::Gpu;
+use crate::readback::{Readback, ReadbackError};
+use crate::runtime::{FrameStats, Pacing, Runtime, RuntimeConfig, RuntimeError};
+use crate::source::PageSource;
+
+/// The format of the harness's colour target: sRGB, so the linear-light samples are encoded on
+/// write.
+pub const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+
+/// The counters of one frame.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct FrameReport {
+    pub frame: u64,
+    /// Distinct pages the analysed feedback asked for, ancestors included.
+    pub requested: usize,
+    /// Of those, pages resident or on their way.
+    pub hits: usize,
+    /// Pages uploaded and mapped.
+    pub loaded: usize,
+    pub evicted: usize,
+    /// Wanted pages left for later frames (budget or cache full).
+    pub deferred: usize,
+    /// Pages on the loader's threads or waiting to be uploaded after the frame.
+    pub in_flight: usize,
+    /// Share of the analysed feedback's samples whose page was not mapped, so drawn from a
+    /// coarser ancestor.
+    pub fallback_fraction: f64,
+    /// The LOD bias the next frame's feedback asks with.
+    pub lod_bias: f32,
+    /// Bytes read from the sources for the pages uploaded.
+    pub bytes_read: u64,
+    /// Pages that failed to load (drawn with a stand-in; see `loader`).
+    pub load_errors: usize,
+    /// CPU time of the frame on the render thread: recording and submitting its passes and
+    /// `Runtime::end_frame`, not the wait for the picture's readback.
+    pub cpu_ms: f64,
+    /// Of that, time spent waiting for pages to be read (never, in real time).
+    pub io_wait_ms: f64,
+}
+
+/// What a whole run did: the report `vortex-tiler render --report` writes.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Report {
+    pub adapter: String,
+    pub size: [u32; 2],
+    pub filter: String,
+    /// `real-time` (frames never wait) or `offline` (each frame waits for its pages).
+    pub pacing: String,
+    /// `rgba8`, or `bc7` when the packs' BC7 blocks went to the GPU as they are.
+    pub cache_format: String,
+    pub cache_slots: usize,
+    pub upload_budget: usize,
+    pub frames: Vec<FrameReport>,
+    /// Distinct pages ever loaded, against all pages of all textures.
+    pub pages_touched: usize,
+    pub pages_total: u64,
+    /// Payload bytes read from the sources, the roots pinned before the first frame included.
+    pub bytes_read: u64,
+    /// Resident hits over pages requested, over all frames.
+    pub hit_rate: f64,
+    /// The first frame of the still camera.
+    pub still_from: u32,
+    /// Frames after `still_from` until the first frame without fallback that stays so to the
+    /// end; `None` if the last frame still falls back.
+    pub frames_to_converge: Option<u32>,
+    /// Median and 99th percentile of the frames' `cpu_ms`.
+    pub cpu_ms_p50: f64,
+    pub cpu_ms_p99: f64,
+    /// The largest `io_wait_ms` of any frame.
+    pub io_wait_ms_max: f64,
+    /// Messages of the pages that failed to load (at most 20).
+    pub errors: Vec<String>,
+}
+
+/// A scene's runtime, pipelines, target and meshes, driven a frame at a time.
+pub struct SceneRenderer {
+    gpu: Gpu,
+    runtime: Runtime,
+    pipelines: Pipelines,
+    frame_layout: wgpu::BindGroupLayout,
+    target: Target,
+    readback: Readback,
+    meshes: Vec<GpuMesh>,
+}
+
+impl SceneRenderer {
+    /// Sets up `scene` (its size, geometry and effects) over `sources` (texture id = index).
+    pub fn new(
+        gpu: Gpu,
+        sources: Vec<Arc<dyn PageSource>>,
+        scene: &Scene,
+        pacing: Pacing,
+    ) -> Result<SceneRenderer, RuntimeError> {
+        scene.check().map_err(RuntimeError::Config)?;
+        scene.check_textures(sources.len()).map_err(RuntimeError::Config)?;
+        let e = &scene.effects;
+        let config = RuntimeConfig {
+            cache_slots_per_side: e.cache_slots_per_side,
+            filter: e.filter,
+            load_budget: e.upload_budget,
+            feedback_block: e.feedback_divisor,
+            frame_size: scene.size,
+            loader_threads: e.threads,
+            bc7: e.bc7,
+            pacing,
+            ..RuntimeConfig::default()
+        };
+        let runtime = Runtime::with_sources(&gpu.device, &gpu.queue, sources, config)?;
+        let device = &gpu.device;
+        let module = draw::shader(device, "vortex harness", "");
+        let frame_layout = draw::frame_only_layout(device, "vortex harness frame");
+        let layouts = [&frame_layout, runtime.bind_group_layout()];
+        let pipelines = Pipelines::new(device, "vortex harness", &module, layouts, TARGET_FORMAT, "");
+        let [w, h] = scene.size;
+        let target = Target::new(device, "vortex target", TARGET_FORMAT, w, h);
+        let readback = Readback::new(device, "target", w * 4, h);
+        let mesh = scene.mesh();
+        let meshes = if mesh.indices.is_empty() { vec![] } else { vec![GpuMesh::upload(device, &mesh)] };
+        Ok(SceneRenderer { gpu, runtime, pipelines, frame_layout, target, readback, meshes })
+    }
+
+    /// Records and submits one draw at `pose` (`lod` fixes the LOD sampled everywhere), with the
+    /// picture's copy if `image`.
+    fn draw(&self, pose: &Pose, lod: Option<f32>, image: bool) {
+        let view = match *pose {
+            Pose::Window(w) => View::Window(w),
+            Pose::Camera(view_proj) => View::Meshes { view_proj, meshes: &self.meshes },
+        };
+        let device = &self.gpu.device;
+        let size = (self.target.width, self.target.height);
+        let frame = Frame::new(self.runtime.textures(), &view, size, lod);
+        let frame_group = draw::frame_only_bind_group(device, "vortex harness frame", &self.frame_layout, &frame);
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex frame") });
+        let groups = [&frame_group, self.runtime.bind_group()];
+        self.target.record(
+            &mut encoder,
+            "vortex frame",
+            wgpu::Color::TRANSPARENT,
+            Some((&self.pipelines, groups, &view)),
+        );
+        if image {
+            let (source, extent) = self.target.copy_source();
+            self.readback.encode_copy(&mut encoder, source, extent);
+        }
+        self.gpu.queue.submit([encoder.finish()]);
+    }
+
+    fn read_picture(&self) -> Result<Rgba8Image, ReadbackError> {
+        let bytes = self.readback.read(&self.gpu.device)?;
+        let texels = bytes.chunks_exact(4).map(|t| [t[0], t[1], t[2], t[3]]).collect();
+        Ok(Rgba8Image { width: self.target.width, height: self.target.height, texels })
+    }
+
+    /// Draws one frame at `pose`, ends it (streaming what earlier feedback asked for), and
+    /// returns its counters and, if `image`, the picture.
+    pub fn frame(&mut self, pose: &Pose, image: bool) -> Result<(FrameReport, Option<Rgba8Image>), RuntimeError> {
+        let started = Instant::now();
+        self.draw(pose, None, image);
+        let recorded = started.elapsed();
+        let stats = self.runtime.end_frame()?;
+        let frame = stats.frame;
+        let picture = if image {
+            Some(self.read_picture().map_err(|source| RuntimeError::Readback { frame, source })?)
+        } else {
+            None
+        };
+        Ok((report(&stats, recorded + stats.cpu), picture))
+    }
+
+    /// Draws `pose` at the fixed LOD `lod` (or the footprint's) and reads the picture back,
+    /// without ending the frame: nothing streams. For tests that hold the picture against the
+    /// reference sampler at the page table's current state.
+    pub fn still(&self, pose: &Pose, lod: Option<f32>) -> Result<Rgba8Image, ReadbackError> {
+        self.draw(pose, lod, true);
+        self.read_picture()
+    }
+
+    /// Renders every frame of `scene`, handing each frame's counters (and picture, if `images`)
+    /// to `each`, and sums them up.
+    pub fn run<E: From<RuntimeError>>(
+        &mut self,
+        scene: &Scene,
+        images: bool,
+        mut each: impl FnMut(&FrameReport, Option<Rgba8Image>) -> Result<(), E>,
+    ) -> Result<Report, E> {
+        let mut frames = Vec::with_capacity(scene.frames as usize);
+        for f in 0..scene.frames {
+            let (report, picture) = self.frame(&scene.pose(f, self.runtime.textures()), images)?;
+            each(&report, picture)?;
+            frames.push(report);
+        }
+        Ok(self.report(scene, frames))
+    }
+
+    /// The run's summary over `frames`.
+    pub fn report(&self, scene: &Scene, frames: Vec<FrameReport>) -> Report {
+        let still_from = scene.still_from();
+        let converged_at = frames.iter().rposition(|f| f.fallback_fraction > 0.0).map_or(0, |i| i + 1);
+        let frames_to_converge =
+            (converged_at < frames.len()).then(|| converged_at.saturating_sub(still_from as usize) as u32);
+        let (hits, requested) = frames.iter().fold((0, 0), |(h, r), f| (h + f.hits, r + f.requested));
+        let mut cpu: Vec<f64> = frames.iter().map(|f| f.cpu_ms).collect();
+        cpu.sort_by(f64::total_cmp);
+        let rt = &self.runtime;
+        let config = rt.config();
+        Report {
+            adapter: self.gpu.adapter_info().name,
+            size: scene.size,
+            filter: rt.filter().name().into(),
+            pacing: match config.pacing {
+                Pacing::RealTime => "real-time".into(),
+                Pacing::Offline => "offline".into(),
+            },
+            cache_format: rt.cache().format().name().into(),
+            cache_slots: rt.residency().slots(),
+            upload_budget: config.load_budget,
+            pages_touched: rt.pages_touched(),
+            pages_total: rt.textures().iter().map(|t| t.grid.page_count()).sum(),
+            bytes_read: rt.loader().counters().bytes_read,
+            hit_rate: if requested == 0 { 0.0 } else { hits as f64 / requested as f64 },
+            still_from,
+            frames_to_converge,
+            cpu_ms_p50: percentile(&cpu, 0.5),
+            cpu_ms_p99: percentile(&cpu, 0.99),
+            io_wait_ms_max: frames.iter().map(|f| f.io_wait_ms).fold(0.0, f64::max),
+            errors: rt.errors().iter().take(20).map(|e| e.to_string()).collect(),
+            frames,
+        }
+    }
+
+    pub fn gpu(&self) -> &Gpu {
+        &self.gpu
+    }
+
+    pub fn runtime(&self) -> &Runtime {
+        &self.runtime
+    }
+
+    pub fn runtime_mut(&mut self) -> &mut Runtime {
+        &mut self.runtime
+    }
+}
+
+fn report(s: &FrameStats, cpu: Duration) -> FrameReport {
+    FrameReport {
+        frame: s.frame,
+        requested: s.requested,
+        hits: s.hits,
+        loaded: s.uploaded,
+        evicted: s.evicted,
+        deferred: s.deferred,
+        in_flight: s.in_flight,
+        fallback_fraction: s.fallback_fraction,
+        lod_bias: s.lod_bias,
+        bytes_read: s.bytes_read,
+        load_errors: s.load_errors,
+        cpu_ms: cpu.as_secs_f64() * 1e3,
+        io_wait_ms: s.io_wait.as_secs_f64() * 1e3,
+    }
+}
+
+/// The `q` quantile of sorted `values` (nearest rank), 0 for none.
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+    sorted[rank - 1]
+}
