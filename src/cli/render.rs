@@ -57,6 +57,9 @@ pub struct RenderArgs {
     /// Override the most pages uploaded per frame.
     #[arg(long, value_name = "N")]
     budget: Option<usize>,
+    /// Override the loader's threads (at most 4 per core); slow reads want more than cores.
+    #[arg(long, value_name = "N")]
+    threads: Option<usize>,
     /// Add this latency to every page read, e.g. 50ms: what a slow disk or a network does.
     /// Frames do not wait for it (real-time pacing): the picture falls back to coarser pages
     /// until the loads land. The report's io_wait_ms says how long each frame waited for pages.
@@ -143,6 +146,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     };
     e.cache_slots_per_side = a.cache_side.unwrap_or(e.cache_slots_per_side);
     e.upload_budget = a.budget.unwrap_or(e.upload_budget);
+    e.threads = a.threads.unwrap_or(e.threads);
     scene
         .check()
         .and_then(|()| scene.check_textures(scene.textures.len()))

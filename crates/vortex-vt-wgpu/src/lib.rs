@@ -54,3 +54,8 @@ pub use runtime::{FrameStats, Pacing, Runtime, RuntimeConfig, RuntimeError};
 pub use sample::SampleFilter;
 pub use source::{PageSource, ReadError, SourceTile};
 pub use texture::VirtualTexture;
+
+/// The README's examples, compiled as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

@@ -113,11 +113,13 @@ impl GpuPageTable {
     }
 
     /// Uploads the entries that changed. Runs of horizontally adjacent changes in a row are
-    /// written together; other entries are written one by one.
+    /// written together; other entries are written one by one. An entry may change more than
+    /// once (changes gathered from several `apply_mappings`): the later change wins, since the
+    /// sort is stable and the writes land in order.
     pub fn write_changes(&self, queue: &wgpu::Queue, changes: &[Change]) {
         let mut mine: Vec<(u8, u8, u16, u16, u32)> =
             changes.iter().map(|c| (c.at.texture, c.at.lod, c.at.y, c.at.x, c.entry.pack(self.cache_side))).collect();
-        mine.sort_unstable_by_key(|&(t, lod, y, x, _)| (t, lod, y, x));
+        mine.sort_by_key(|&(t, lod, y, x, _)| (t, lod, y, x));
         let mut run: Vec<u32> = Vec::new();
         let mut i = 0;
         while i < mine.len() {
