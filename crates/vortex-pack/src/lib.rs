@@ -1,21 +1,4 @@
-//! Vortex tile packs: every page of a virtual texture in one file that a runtime maps into
-//! memory and reads tiles from with no parsing and no copy. The format is specified in
-//! `docs/pack-format.md`.
-//!
-//! ```no_run
-//! let pack = vortex_pack::Pack::open("world.vtpk")?;
-//! match pack.tile(0, 3, 5)? {
-//!     vortex_pack::Tile::Data(kind, bytes) => println!("{} bytes of {}", bytes.len(), kind.name()),
-//!     other => println!("{other:?}"),
-//! }
-//! # Ok::<(), vortex_pack::PackError>(())
-//! ```
-//!
-//! This crate is a leaf: std, a CRC-32C crate, memmap2, thiserror and zstd. The writer is
-//! behind the `write` feature so that readers need none of it; `decode_rgba8` (PNG, JPEG, BC1
-//! and BC7 decoding, and `verify` with `VerifyOptions::decode`) is behind `decode`. [`verify()`]
-//! checks every byte of a pack and reports every problem it finds. Whatever a header claims is
-//! held to [`Limits`] before anything is sized from it.
+#![doc = include_str!("../README.md")]
 
 #[cfg(feature = "decode")]
 mod decode;
