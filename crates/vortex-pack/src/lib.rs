@@ -1,4 +1,16 @@
-#![doc = include_str!("../README.md")]
+// The README is the crate documentation; its example writes a pack, so it is compiled (and run
+// as a doc test) only with the `write` feature, which this crate's own tests always have (the
+// dev-dependency on itself). Without it the docs are this summary.
+#![cfg_attr(feature = "write", doc = include_str!("../README.md"))]
+#![cfg_attr(
+    not(feature = "write"),
+    doc = "Reader (and, behind the `write` feature, writer) of Vortex tile packs: every tile of a \
+           virtual-texture pyramid in one file that a runtime maps into memory and reads tiles \
+           from with no parsing and no copy. [`Pack`] opens a pack and finds tiles, [`verify()`] \
+           checks every byte of one. The README, with an example that writes a pack and reads \
+           it back, is the crate documentation with the `write` feature (as on \
+           <https://docs.rs/vortex-pack>)."
+)]
 
 #[cfg(feature = "decode")]
 mod decode;
