@@ -5,7 +5,7 @@
 //! a bounded channel, to the calling thread; that thread encodes the tiles in parallel on the
 //! rayon pool ([`crate::codec`]) and hands them to the [sink](crate::sink). Peak memory is a
 //! few bands of the image's width, whatever its height; an image too wide for that under
-//! `max_memory` is read once per vertical stripe ([`crate::pyramid::stripes`]) for the same
+//! `max_memory` is read once per vertical stripe (`pyramid::stripes`) for the same
 //! tiles. Output bytes do not depend on the thread count. This file is only that
 //! orchestration; the stages live in their modules.
 

@@ -37,7 +37,7 @@ pub struct Manifest {
 pub struct SourceId {
     /// The input as named on the shard's command line (for messages only).
     pub name: String,
-    /// [`crate::shard::fingerprint`] of the input.
+    /// [`crate::shard::fingerprint()`] of the input.
     pub fingerprint: String,
     pub width: u32,
     pub height: u32,

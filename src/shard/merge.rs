@@ -6,7 +6,7 @@
 //! 2. The options are read back from the pack metadata the shards carry, through the same
 //!    resolution `split` uses, and must describe that metadata again exactly; the shard plan
 //!    is recomputed and must give each shard the rectangles it says it made.
-//! 3. The levels above the cut are made from the roots' sums ([`RootRows`] assembles each
+//! 3. The levels above the cut are made from the roots' sums (`RootRows` assembles each
 //!    row of the cut level from the shards that hold it), through the same exact cascade and
 //!    encoders as `split`, and kept in memory: they are the few coarse pages.
 //! 4. Every page is added to a new pack in the order `split --pack` adds them

@@ -3,7 +3,7 @@
 //! `split --shard I/N` makes shard `I` of `N` ([`plan`]: whole subtrees of a cut level,
 //! balanced by real pages) into a shard pack: its pages at the cut level and below, and in
 //! its metadata ([`manifest`]) the exact sums of its subtree roots ([`sums`]) and what it was
-//! made from ([`fingerprint`]). `merge` ([`merge`]) checks that the shards belong together,
+//! made from ([`fingerprint`](mod@fingerprint)). `merge` ([`merge()`]) checks that the shards belong together,
 //! makes the levels above the cut from the sums (the same exact cascade, so the same texels),
 //! and stores every page in the order one machine's `split --pack` would ([`order`]), copying
 //! the shards' payloads as they are: the merged pack is that pack, byte for byte.

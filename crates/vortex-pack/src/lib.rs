@@ -1,21 +1,16 @@
-//! Vortex tile packs: every page of a virtual texture in one file that a runtime maps into
-//! memory and reads tiles from with no parsing and no copy. The format is specified in
-//! `docs/pack-format.md`.
-//!
-//! ```no_run
-//! let pack = vortex_pack::Pack::open("world.vtpk")?;
-//! match pack.tile(0, 3, 5)? {
-//!     vortex_pack::Tile::Data(kind, bytes) => println!("{} bytes of {}", bytes.len(), kind.name()),
-//!     other => println!("{other:?}"),
-//! }
-//! # Ok::<(), vortex_pack::PackError>(())
-//! ```
-//!
-//! This crate is a leaf: std, a CRC-32C crate, memmap2, thiserror and zstd. The writer is
-//! behind the `write` feature so that readers need none of it; `decode_rgba8` (PNG, JPEG, BC1
-//! and BC7 decoding, and `verify` with `VerifyOptions::decode`) is behind `decode`. [`verify()`]
-//! checks every byte of a pack and reports every problem it finds. Whatever a header claims is
-//! held to [`Limits`] before anything is sized from it.
+// The README is the crate documentation; its example writes a pack, so it is compiled (and run
+// as a doc test) only with the `write` feature, which this crate's own tests always have (the
+// dev-dependency on itself). Without it the docs are this summary.
+#![cfg_attr(feature = "write", doc = include_str!("../README.md"))]
+#![cfg_attr(
+    not(feature = "write"),
+    doc = "Reader (and, behind the `write` feature, writer) of Vortex tile packs: every tile of a \
+           virtual-texture pyramid in one file that a runtime maps into memory and reads tiles \
+           from with no parsing and no copy. [`Pack`] opens a pack and finds tiles, [`verify()`] \
+           checks every byte of one. The README, with an example that writes a pack and reads \
+           it back, is the crate documentation with the `write` feature (as on \
+           <https://docs.rs/vortex-pack>)."
+)]
 
 #[cfg(feature = "decode")]
 mod decode;

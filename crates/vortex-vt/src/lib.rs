@@ -1,6 +1,4 @@
-//! The CPU side of Vortex virtual texturing, with no GPU dependency: everything that decides
-//! which pages a frame needs and where they live, so that it can be tested exactly on any
-//! machine. The GPU runtime drives it once per frame.
+#![doc = include_str!("../README.md")]
 
 pub mod address;
 pub mod analysis;
