@@ -1,4 +1,5 @@
-//! Headless device creation: one wgpu instance, adapter, device and queue with no surface. Made
+//! Device creation for tools and tests: one wgpu instance, adapter, device and queue, headless
+//! or for a window's surface. Made
 //! once, on the render thread (the thread that records and submits the frame's commands); the
 //! handles are `Send + Sync`, but the rest of the crate expects one thread to drive them.
 //!
@@ -88,9 +89,27 @@ impl Gpu {
             backends: wgpu::Backends::PRIMARY,
             ..wgpu::InstanceDescriptor::new_without_display_handle()
         };
-        let instance = wgpu::Instance::new(descriptor.with_env());
+        Gpu::new(wgpu::Instance::new(descriptor.with_env()), None, min_texture_side)
+    }
+
+    /// A device of `instance` on an adapter that can present to `surface` (a window's), as
+    /// [`Gpu::headless`] otherwise.
+    pub fn for_surface(
+        instance: wgpu::Instance,
+        surface: &wgpu::Surface<'_>,
+        min_texture_side: u32,
+    ) -> Result<Gpu, DeviceError> {
+        Gpu::new(instance, Some(surface), min_texture_side)
+    }
+
+    fn new(
+        instance: wgpu::Instance,
+        surface: Option<&wgpu::Surface<'_>>,
+        min_texture_side: u32,
+    ) -> Result<Gpu, DeviceError> {
         let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
             power_preference: wgpu::PowerPreference::HighPerformance,
+            compatible_surface: surface,
             ..Default::default()
         }))?;
         let have = adapter.limits().max_texture_dimension_2d;
@@ -107,12 +126,7 @@ impl Gpu {
             ..Default::default()
         }))?;
         let info = adapter.get_info();
-        log::info!(
-            "vortex-vt-wgpu: {} ({:?}, {:?}), 2D textures up to {have}",
-            info.name,
-            info.backend,
-            info.device_type
-        );
+        log::info!("vortex-vt-wgpu: {} ({:?}, {:?}), 2D textures up to {have}", info.name, info.backend, info.device_type);
         Ok(Gpu { instance, adapter, device, queue })
     }
 

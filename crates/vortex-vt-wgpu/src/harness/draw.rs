@@ -172,7 +172,8 @@ impl Target {
         )
     }
 
-    /// Records a pass into this target: see [`record`].
+    /// Records a pass into this target: see [`record`]. (The address probe's.)
+    #[cfg(feature = "testing")]
     pub(crate) fn record(
         &self,
         encoder: &mut wgpu::CommandEncoder,
@@ -185,7 +186,7 @@ impl Target {
 }
 
 /// A depth buffer for a `width x height` target.
-fn depth_texture(device: &wgpu::Device, width: u32, height: u32) -> wgpu::TextureView {
+pub(crate) fn depth_texture(device: &wgpu::Device, width: u32, height: u32) -> wgpu::TextureView {
     device
         .create_texture(&wgpu::TextureDescriptor {
             label: Some("vortex depth"),
@@ -202,7 +203,7 @@ fn depth_texture(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Textur
 
 /// Clears `colour` to `clear` and the depth to the far plane, then draws `view` with
 /// `pipelines` and the bind groups (the harness's, the module's) if given.
-fn record(
+pub(crate) fn record(
     encoder: &mut wgpu::CommandEncoder,
     label: &str,
     colour: &wgpu::TextureView,

@@ -13,6 +13,8 @@ struct Frame {
     window_texture: u32,
     // At least 0: sample that LOD everywhere; negative: the LOD from the footprint.
     lod_override: f32,
+    // 0: the picture; 1: the residency view (tinted by the LOD drawn, red where it falls back).
+    mode: u32,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -49,15 +51,35 @@ fn straight(c: vec4<f32>) -> vec4<f32> {
     return vec4<f32>(c.rgb / c.a, c.a);
 }
 
+// The residency view of sample `c` whose LODs (wanted, drawn) are `lods`: a hue per LOD drawn,
+// over the picture's brightness, turning red by a quarter per LOD it falls back.
+fn residency(c: vec4<f32>, lods: vec2<u32>) -> vec4<f32> {
+    let hues = array<vec3<f32>, 6>(
+        vec3<f32>(0.2, 0.4, 1.0), vec3<f32>(0.1, 0.8, 0.9), vec3<f32>(0.2, 0.9, 0.3),
+        vec3<f32>(0.9, 0.9, 0.2), vec3<f32>(0.9, 0.5, 0.1), vec3<f32>(0.8, 0.3, 0.9));
+    let grey = dot(straight(c).rgb, vec3<f32>(0.2126, 0.7152, 0.0722));
+    var rgb = hues[min(lods.y, 255u) % 6u] * (0.35 + 0.65 * grey);
+    if lods.y > lods.x {
+        rgb = mix(rgb, vec3<f32>(1.0, 0.0, 0.0), min(0.25 * f32(lods.y - lods.x), 0.75));
+    }
+    return vec4<f32>(rgb, 1.0);
+}
+
 @fragment
 fn fs_window(v: Varyings) -> @location(0) vec4<f32> {
     let texel = window_texel(v.position.xy);
     let footprint = max(abs(frame.step.x), abs(frame.step.y));
     vt_feedback_texel(v.texture, texel, footprint, v.position.xy);
+    var c: vec4<f32>;
     if frame.lod_override >= 0.0 {
-        return straight(vt_sample_texel_level(v.texture, texel, frame.lod_override));
+        c = vt_sample_texel_level(v.texture, texel, frame.lod_override);
+    } else {
+        c = vt_sample_texel(v.texture, texel, footprint);
     }
-    return straight(vt_sample_texel(v.texture, texel, footprint));
+    if frame.mode == 1u {
+        return residency(c, vt_residency_texel(v.texture, texel, footprint));
+    }
+    return straight(c);
 }
 
 @fragment
@@ -65,8 +87,14 @@ fn fs_mesh(v: Varyings) -> @location(0) vec4<f32> {
     let ddx = dpdx(v.uv);
     let ddy = dpdy(v.uv);
     vt_feedback(v.texture, v.uv, ddx, ddy, v.position.xy);
+    var c: vec4<f32>;
     if frame.lod_override >= 0.0 {
-        return straight(vt_sample_level(v.texture, v.uv, frame.lod_override));
+        c = vt_sample_level(v.texture, v.uv, frame.lod_override);
+    } else {
+        c = vt_sample(v.texture, v.uv, ddx, ddy);
     }
-    return straight(vt_sample(v.texture, v.uv, ddx, ddy));
+    if frame.mode == 1u {
+        return residency(c, vt_residency(v.texture, v.uv, ddx, ddy));
+    }
+    return straight(c);
 }

@@ -89,15 +89,23 @@ pub struct Report {
     pub errors: Vec<String>,
 }
 
-/// A scene's runtime, pipelines, target and meshes, driven a frame at a time.
+/// A scene's runtime, pipelines, target and meshes, driven a frame at a time. It draws into its
+/// own offscreen target, or into any colour view ([`SceneRenderer::draw_to`], e.g. a window's
+/// surface).
 pub struct SceneRenderer {
     gpu: Gpu,
     runtime: Runtime,
+    module: wgpu::ShaderModule,
     pipelines: Pipelines,
     frame_layout: wgpu::BindGroupLayout,
     target: Target,
     readback: Readback,
     meshes: Vec<GpuMesh>,
+    /// Pipelines for other targets' formats, made when first drawn into.
+    other_pipelines: Vec<(wgpu::TextureFormat, Pipelines)>,
+    /// The depth buffer of other targets, for their size.
+    other_depth: Option<((u32, u32), wgpu::TextureView)>,
+    residency_view: bool,
 }
 
 impl SceneRenderer {
@@ -133,34 +141,96 @@ impl SceneRenderer {
         let readback = Readback::new(device, "target", w * 4, h);
         let mesh = scene.mesh();
         let meshes = if mesh.indices.is_empty() { vec![] } else { vec![GpuMesh::upload(device, &mesh)] };
-        Ok(SceneRenderer { gpu, runtime, pipelines, frame_layout, target, readback, meshes })
+        Ok(SceneRenderer {
+            gpu,
+            runtime,
+            module,
+            pipelines,
+            frame_layout,
+            target,
+            readback,
+            meshes,
+            other_pipelines: Vec::new(),
+            other_depth: None,
+            residency_view: false,
+        })
     }
 
-    /// Records and submits one draw at `pose` (`lod` fixes the LOD sampled everywhere), with the
-    /// picture's copy if `image`.
-    fn draw(&self, pose: &Pose, lod: Option<f32>, image: bool) {
+    /// Records one draw at `pose` into `colour` (`size` pixels, with `depth`) through `pipelines`;
+    /// `lod` fixes the LOD sampled everywhere.
+    #[allow(clippy::too_many_arguments)]
+    fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        pose: &Pose,
+        lod: Option<f32>,
+        colour: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        size: (u32, u32),
+        pipelines: &Pipelines,
+    ) {
         let view = match *pose {
             Pose::Window(w) => View::Window(w),
             Pose::Camera(view_proj) => View::Meshes { view_proj, meshes: &self.meshes },
         };
-        let device = &self.gpu.device;
-        let size = (self.target.width, self.target.height);
-        let frame = Frame::new(self.runtime.textures(), &view, size, lod);
-        let frame_group = draw::frame_only_bind_group(device, "vortex harness frame", &self.frame_layout, &frame);
-        let mut encoder =
-            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex frame") });
+        let frame = Frame::new(self.runtime.textures(), &view, size, lod, self.residency_view);
+        let frame_group =
+            draw::frame_only_bind_group(&self.gpu.device, "vortex harness frame", &self.frame_layout, &frame);
         let groups = [&frame_group, self.runtime.bind_group()];
-        self.target.record(
-            &mut encoder,
-            "vortex frame",
-            wgpu::Color::TRANSPARENT,
-            Some((&self.pipelines, groups, &view)),
-        );
+        let draw = Some((pipelines, groups, &view));
+        draw::record(encoder, "vortex frame", colour, depth, wgpu::Color::TRANSPARENT, draw);
+    }
+
+    /// Records and submits one draw at `pose` into the offscreen target (`lod` fixes the LOD
+    /// sampled everywhere), with the picture's copy if `image`.
+    fn draw(&self, pose: &Pose, lod: Option<f32>, image: bool) {
+        let mut encoder =
+            self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex frame") });
+        let t = &self.target;
+        self.encode(&mut encoder, pose, lod, &t.view, &t.depth, (t.width, t.height), &self.pipelines);
         if image {
             let (source, extent) = self.target.copy_source();
             self.readback.encode_copy(&mut encoder, source, extent);
         }
         self.gpu.queue.submit([encoder.finish()]);
+    }
+
+    /// Records and submits one draw at `pose` into `colour`, a `size` view of a `format` texture
+    /// (a window's surface), without ending the frame: call [`SceneRenderer::end_frame`] after.
+    pub fn draw_to(&mut self, pose: &Pose, colour: &wgpu::TextureView, format: wgpu::TextureFormat, size: (u32, u32)) {
+        let device = &self.gpu.device;
+        if !self.other_pipelines.iter().any(|(f, _)| *f == format) {
+            let layouts = [&self.frame_layout, self.runtime.bind_group_layout()];
+            let pipelines = Pipelines::new(device, "vortex harness", &self.module, layouts, format, "");
+            self.other_pipelines.push((format, pipelines));
+        }
+        if self.other_depth.as_ref().is_none_or(|(s, _)| *s != size) {
+            self.other_depth = Some((size, draw::depth_texture(device, size.0, size.1)));
+        }
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex frame") });
+        if let (Some((_, pipelines)), Some((_, depth))) =
+            (self.other_pipelines.iter().find(|(f, _)| *f == format), &self.other_depth)
+        {
+            self.encode(&mut encoder, pose, None, colour, depth, size, pipelines);
+        }
+        self.gpu.queue.submit([encoder.finish()]);
+    }
+
+    /// Ends a frame drawn by [`SceneRenderer::draw_to`] ([`Runtime::end_frame`]); `recorded` is
+    /// the CPU time its recording took, added to the report's `cpu_ms`.
+    pub fn end_frame(&mut self, recorded: Duration) -> Result<FrameReport, RuntimeError> {
+        let stats = self.runtime.end_frame()?;
+        Ok(report(&stats, recorded + stats.cpu))
+    }
+
+    /// Draws the residency view (a hue per LOD drawn, red where a coarser page stands in)
+    /// instead of the picture.
+    pub fn set_residency_view(&mut self, on: bool) {
+        self.residency_view = on;
+    }
+
+    pub fn residency_view(&self) -> bool {
+        self.residency_view
     }
 
     fn read_picture(&self) -> Result<Rgba8Image, ReadbackError> {
@@ -174,15 +244,14 @@ impl SceneRenderer {
     pub fn frame(&mut self, pose: &Pose, image: bool) -> Result<(FrameReport, Option<Rgba8Image>), RuntimeError> {
         let started = Instant::now();
         self.draw(pose, None, image);
-        let recorded = started.elapsed();
-        let stats = self.runtime.end_frame()?;
-        let frame = stats.frame;
+        let report = self.end_frame(started.elapsed())?;
+        let frame = report.frame;
         let picture = if image {
             Some(self.read_picture().map_err(|source| RuntimeError::Readback { frame, source })?)
         } else {
             None
         };
-        Ok((report(&stats, recorded + stats.cpu), picture))
+        Ok((report, picture))
     }
 
     /// Draws `pose` at the fixed LOD `lod` (or the footprint's) and reads the picture back,

@@ -10,13 +10,14 @@
 //                                                   screen derivatives dpdx(uv), dpdy(uv)
 //   vt_sample_level(id, uv, lod) -> vec4<f32>      the same at an explicit LOD
 //   vt_feedback(id, uv, ddx, ddy, frag_coord)      ask for the page this fragment wants
+//   vt_residency(id, uv, ddx, ddy) -> vec2<u32>    the LOD wanted and the LOD drawn (debug views)
 //
 // and, for 2D views deep inside huge images where an f32 UV is not precise enough, the same
 // three addressed by a LOD-0 texel position split into an integer and an f32 part
 // (`VtTexel`), with the footprint in LOD-0 texels per pixel instead of derivatives:
 //
 //   vt_sample_texel(id, texel, footprint), vt_sample_texel_level(id, texel, lod),
-//   vt_feedback_texel(id, texel, footprint, frag_coord)
+//   vt_feedback_texel(id, texel, footprint, frag_coord), vt_residency_texel(id, texel, footprint)
 //
 // Samples are premultiplied-alpha colour in linear light (the cache is sampled through an sRGB
 // view, so filtering happens in linear light on premultiplied texels: no fringes from the
@@ -151,11 +152,17 @@ fn vt_footprint(id: u32, ddx: vec2<f32>, ddy: vec2<f32>) -> f32 {
     return max(length(ddx * size), length(ddy * size));
 }
 
+// The page-table word of address `at` of LOD `lod` of texture `id` (`vortex_vt::page_table`).
+fn vt_entry(id: u32, lod: u32, at: VtAt) -> u32 {
+    let t = vt_params.textures[id];
+    return vt_page_table[vt_page_table[id * 16u + lod] + at.page.y * vt_pages_per_row(t, lod) + at.page.x];
+}
+
 // The sample at address `at` of LOD `lod` of texture `id`, from whatever the page table maps
 // there.
 fn vt_fetch(id: u32, lod: u32, at: VtAt) -> vec4<f32> {
     let t = vt_params.textures[id];
-    let word = vt_page_table[vt_page_table[id * 16u + lod] + at.page.y * vt_pages_per_row(t, lod) + at.page.x];
+    let word = vt_entry(id, lod, at);
     if word == VT_UNMAPPED {
         // Only before the first update pinned the root: magenta, never a real texel.
         return vec4<f32>(1.0, 0.0, 1.0, 1.0);
@@ -190,6 +197,16 @@ fn vt_shade(id: u32, c: VtCoord, wanted: f32) -> vec4<f32> {
     }
     let coarse = vt_fetch(id, lod + 1u, vt_ancestor(at, 1u, t.payload));
     return mix(fine, coarse, blend);
+}
+
+// The LOD `vt_shade` samples first at `c` for the LOD `wanted`, and the LOD of the page the page
+// table maps there (greater when the page has not landed and a coarser one stands in; 255 when
+// nothing is mapped).
+fn vt_lods(id: u32, c: VtCoord, wanted: f32) -> vec2<u32> {
+    let t = vt_params.textures[id];
+    let lod = u32(clamp(floor(wanted), 0.0, f32(t.lod_count - 1u)));
+    let word = vt_entry(id, lod, vt_address(c, lod, t));
+    return vec2<u32>(lod, select((word >> 16u) & 0xffu, 255u, word == VT_UNMAPPED));
 }
 
 // The feedback word of `c` with a footprint of `footprint` LOD-0 texels per pixel, written if
@@ -249,4 +266,14 @@ fn vt_sample_texel_level(id: u32, texel: VtTexel, lod: f32) -> vec4<f32> {
 
 fn vt_feedback_texel(id: u32, texel: VtTexel, footprint: f32, frag_coord: vec2<f32>) {
     vt_write_feedback(id, vt_texel(texel), footprint, frag_coord);
+}
+
+// For residency views: the LOD `vt_sample` wants at `uv` and the LOD of the page it draws from
+// (greater while it falls back to a coarser page).
+fn vt_residency(id: u32, uv: vec2<f32>, ddx: vec2<f32>, ddy: vec2<f32>) -> vec2<u32> {
+    return vt_lods(id, vt_uv(uv), log2(vt_footprint(id, ddx, ddy)));
+}
+
+fn vt_residency_texel(id: u32, texel: VtTexel, footprint: f32) -> vec2<u32> {
+    return vt_lods(id, vt_texel(texel), log2(footprint));
 }
