@@ -79,7 +79,7 @@ TARGET=262144 # side of the projected image
 MACHINES=(16 64 256)
 WIDE_N=16
 WIDE_SRC=wide-200000x2000.png
-TILES=(--tile-size 256 --codec jpeg)
+TILES=(--tile-size 256 --border 0 --codec jpeg)
 
 REPORT_ONLY=${REPORT_ONLY:-0}
 RAW=$WORK/scale-out-runs.tsv     # image kind n run index wall_s rss_kib user_s sys_s load1 minor_faults
@@ -284,9 +284,9 @@ REPORT=$WORK/scale-out-report.md
   echo "Every run cuts 256-texel JPEG tiles at quality 85, no border, into a pack; shards run one after another on this machine, each with the default threads (one per core), under \`/usr/bin/time -v\`:"
   echo
   echo '```sh'
-  echo "vortex-tiler split SRC --pack one.vtpk --tile-size 256 --codec jpeg --quiet                       # one machine"
+  echo "vortex-tiler split SRC --pack one.vtpk --tile-size 256 --border 0 --codec jpeg --quiet            # one machine"
   echo "for i in \$(seq 0 \$((N - 1))); do"
-  echo "  vortex-tiler split SRC --pack 'shards/{shard}.vtpk' --shard \$i/\$N --tile-size 256 --codec jpeg --quiet"
+  echo "  vortex-tiler split SRC --pack 'shards/{shard}.vtpk' --shard \$i/\$N --tile-size 256 --border 0 --codec jpeg --quiet"
   echo "done"
   echo "vortex-tiler merge shards/*.vtpk -o merged.vtpk --json"
   echo "cmp merged.vtpk one.vtpk                                                                        # every merge: identical"

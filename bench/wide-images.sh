@@ -41,7 +41,7 @@ rm -rf "$OUT"
 mkdir -p "$OUT"
 RAW=$WORK/wide-runs.tsv
 : >"$RAW"
-JPEG=(--tile-size 256 --codec jpeg --quality 85)
+JPEG=(--tile-size 256 --border 0 --codec jpeg --quality 85)
 
 # summary LOG: vortex-tiler's summary line (printed without --quiet).
 summary() { grep '^wrote' "$1"; }

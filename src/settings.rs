@@ -12,9 +12,13 @@ use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::pyramid::filter::Filter;
 use crate::split::SplitOptions;
 use crate::tile_dir::filename::FilenameFormat;
-use crate::tile_dir::info::{FORMAT_VERSION, InfoFile};
+use crate::tile_dir::info::{BORDER_WHEN_ABSENT, FORMAT_VERSION, InfoFile};
 
 pub const DEFAULT_TILE_SIZE: u32 = 128;
+/// Border of `--layout vortex` tiles when neither the flag nor an `info.json` sets one: one
+/// texel is what bilinear and trilinear filtering read across a page edge, so the runtime's
+/// default filter shows no seams (border 0 does: docs/gpu-sampling.md).
+pub const DEFAULT_BORDER: u32 = 1;
 pub const DEFAULT_QUALITY: u8 = 85;
 pub const DEFAULT_ZSTD_LEVEL: i32 = 3;
 pub const DEFAULT_BC7_EFFORT: Bc7Effort = Bc7Effort::UltraFast;
@@ -74,7 +78,12 @@ pub fn resolve(
         |field: &str, message: String| TilerError::Info { path: info_path.to_path_buf(), field: field.into(), message };
 
     let tile_size = req.tile_size.or(info.tile_size).unwrap_or(DEFAULT_TILE_SIZE);
-    let border = req.border.or(info.border).unwrap_or(0);
+    // An existing info.json without `border` is the thesis's (its tiles have none): its grid
+    // members and names describe border-0 tiles, as a reader takes them.
+    let border = req.border.or(info.border).unwrap_or(match existing {
+        Some(_) => BORDER_WHEN_ABSENT,
+        None => DEFAULT_BORDER,
+    });
     let names_given = req.filename_format.clone().or(info.filename_format.clone());
     let ext = names_given.as_deref().and_then(|f| FilenameFormat::parse(f, 3).ok()).and_then(|f| f.extension());
 

@@ -96,8 +96,10 @@ pub struct OutputArgs {
     #[arg(long, value_name = "N")]
     tile_size: Option<u32>,
 
-    /// Texels copied from neighbouring pages into each tile edge, for filtering on the GPU
-    /// (1 for bilinear, 4 as in id Tech 5 for anisotropic) [default: 0].
+    /// Texels copied from neighbouring pages into each tile edge, for filtering on the GPU: 1 is
+    /// enough for bilinear and trilinear filtering without seams; 0 for viewers that never
+    /// filter across tiles; 4 as in id Tech 5 for anisotropic [default: 1; 0 where an existing
+    /// info.json has no border, as the thesis's files].
     #[arg(long, value_name = "N")]
     border: Option<u32>,
 

@@ -11,6 +11,10 @@ use crate::layout::lods_for;
 /// The `formatVersion` this tool writes. Files without the member are the thesis's version 0.
 pub const FORMAT_VERSION: u32 = 2;
 
+/// The border of the tiles a file without `border` describes: the thesis's files have no such
+/// member, and their tiles no border.
+pub const BORDER_WHEN_ABSENT: u32 = 0;
+
 /// Every member; on reading, all are optional (the thesis's files have only the first six).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "camelCase", deny_unknown_fields)]

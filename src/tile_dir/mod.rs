@@ -38,7 +38,7 @@ impl TiledDir {
             |field: &str| TilerError::Info { path: path.clone(), field: field.into(), message: "is required".into() };
         let tile_size = info.tile_size.ok_or_else(|| missing("tileSize"))?;
         let (columns, rows) = info.grid().ok_or_else(|| missing("tileColumns"))?;
-        let border = info.border.unwrap_or(0);
+        let border = info.border.unwrap_or(info::BORDER_WHEN_ABSENT);
         let payload = tile_size.checked_sub(2 * border).filter(|p| *p > 0).ok_or_else(|| TilerError::Info {
             path: path.clone(),
             field: "border".into(),

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::common::cli::{fails_with, fixture, run, s};
+use crate::common::cli::{fails_with, fixture, ok, run, s};
 
 /// A small PPM with the given header and `body` bytes of pixels.
 fn ppm(dir: &Path, name: &str, header: &str, body: usize) -> PathBuf {
@@ -61,6 +61,67 @@ fn existing_info_json_sets_the_output_and_flags_override_it() {
     assert_eq!(info["tileSize"], 128);
     assert!(out.join("t/3/0_0.png").is_file(), "128-texel tiles make 4 LODs");
     assert!(!out.join("t/0/99_99.png").exists(), "the previous pyramid was replaced, not mixed in");
+}
+
+#[test]
+fn border_defaults_to_one_texel_and_zero_is_still_there() {
+    // The runtime filters trilinearly by default, which reads one texel across a page edge:
+    // without --border, tiles carry that texel of their neighbours (docs/gpu-sampling.md).
+    let dir = tempfile::tempdir().unwrap();
+    let sample = fixture("sample.png");
+    let source = image::open(&sample).unwrap().to_rgb8();
+    let info = |d: &Path| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(d.join("info.json")).unwrap()).unwrap()
+    };
+    let pack_json = |p: &Path| -> serde_json::Value { serde_json::from_str(&ok(&["info", s(p), "--json"])).unwrap() };
+    // Column 0 of page (1, 0) at LOD 0, and the source column it must repeat.
+    let left_edge = |d: &Path| {
+        let tile = image::open(d.join("lod00-x0001-y0000.png")).unwrap().to_rgb8();
+        (0..tile.height()).map(|y| *tile.get_pixel(0, y)).collect::<Vec<_>>()
+    };
+    let column = |x: u32, rows: std::ops::Range<u32>| rows.map(|y| *source.get_pixel(x, y)).collect::<Vec<_>>();
+
+    let files = dir.path().join("files");
+    ok(&["split", s(&sample), "-o", s(&files), "--codec", "png", "-q"]);
+    assert_eq!((&info(&files)["border"], &info(&files)["tileSize"]), (&1.into(), &128.into()));
+    // 126-texel payloads: page (1, 0) starts at source column 126, its border at 125; its top
+    // border row repeats the image's first row.
+    let want: Vec<_> = column(125, 0..1).into_iter().chain(column(125, 0..127)).collect();
+    assert_eq!(left_edge(&files), want);
+    let pack = dir.path().join("default.vtpk");
+    ok(&["split", s(&sample), "--pack", s(&pack), "-q"]);
+    let json = pack_json(&pack);
+    assert_eq!((&json["border"], &json["metadata"]["border"]), (&1.into(), &1.into()));
+
+    // --border 0 as before: pages meet without shared texels.
+    let flat = dir.path().join("flat");
+    ok(&["split", s(&sample), "-o", s(&flat), "--codec", "png", "--border", "0", "-q"]);
+    assert_eq!(info(&flat)["border"], 0);
+    assert_eq!(left_edge(&flat), column(128, 0..128));
+    let flat_pack = dir.path().join("flat.vtpk");
+    ok(&["split", s(&sample), "--pack", s(&flat_pack), "--border", "0", "-q"]);
+    let json = pack_json(&flat_pack);
+    assert_eq!((&json["border"], &json["metadata"]["border"]), (&0.into(), &0.into()));
+
+    // convert re-tiles with the same default, whatever the input's border.
+    let conv = dir.path().join("conv.vtpk");
+    ok(&["convert", s(&flat_pack), "--pack", s(&conv), "-q"]);
+    assert_eq!(pack_json(&conv)["border"], 1);
+
+    // An existing info.json without border is a thesis file's: its tiles have none.
+    let thesis = dir.path().join("thesis");
+    std::fs::create_dir(&thesis).unwrap();
+    std::fs::write(thesis.join("info.json"), r#"{"tileSize":128,"tileCount":8,"lodCount":4}"#).unwrap();
+    let r = run(&["split", s(&sample), "-o", s(&thesis)]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(info(&thesis)["border"], 0);
+    let said = String::from_utf8_lossy(&r.stderr);
+    assert!(said.contains("settings from") && said.contains("border 0"), "{said}");
+
+    // --help says why.
+    let help =
+        String::from_utf8_lossy(&run(&["split", "--help"]).stdout).split_whitespace().collect::<Vec<_>>().join(" ");
+    assert!(help.contains("bilinear and trilinear filtering without seams") && help.contains("[default: 1;"), "{help}");
 }
 
 #[test]

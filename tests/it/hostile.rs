@@ -120,7 +120,7 @@ fn a_wide_strip_is_cut_in_stripes_within_max_memory() {
     let wide = dir.path().join("wide.png");
     wide_png(&wide, 1_000_000);
     let pack = dir.path().join("wide.vtpk");
-    let args = ["split", s(&wide), "--pack", s(&pack), "--tile-size", "256", "--max-memory", "48M"];
+    let args = ["split", s(&wide), "--pack", s(&pack), "--tile-size", "256", "--border", "0", "--max-memory", "48M"];
     let line = ok(&args);
     assert!(line.contains("from 3907 x 1 pages") && line.contains("vertical stripes"), "{line}");
     let peak: f64 = line.split("peak memory ").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap();
