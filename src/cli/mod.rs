@@ -14,6 +14,7 @@ mod serve;
 mod shard;
 mod signals;
 mod split;
+mod view;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -91,6 +92,24 @@ enum Command {
     ///   vortex-tiler render --pack a.vtpk --pack b.vtpk --scene boxes.json --filter trilinear
     #[command(verbatim_doc_comment)]
     Render(render::RenderArgs),
+    /// Show packs in a window: pan and zoom an image, or fly over a scene's geometry.
+    ///
+    /// Streams in real time through the GPU runtime (no frame waits for a page: the picture
+    /// falls back to coarser pages until they land). The title shows the cache's slots in use,
+    /// pages in flight, the share of pixels drawn from a coarser page, the filter and the frame
+    /// rate.
+    ///   drag, wheel, arrows, + -   pan and zoom (2D)     W A S D, Q E, drag   fly (scenes)
+    ///   F  next filter    P  residency view (a hue per LOD drawn, red where a coarser page
+    ///   stands in)    1-9  texture    R  reset    Esc  quit
+    /// --screenshot FILE --frame-count N draws N frames (each waiting for its pages, as render
+    /// does), saves the last one and exits: `xvfb-run vortex-tiler view ...` without a display.
+    ///
+    /// Examples:
+    ///   vortex-tiler view world.vtpk
+    ///   vortex-tiler view a.vtpk b.vtpk --scene boxes.json --io-latency 50ms
+    ///   xvfb-run vortex-tiler view world.vtpk --size 640x480 --screenshot shot.png --frame-count 30
+    #[command(verbatim_doc_comment)]
+    View(view::ViewArgs),
     /// Serve packs and tile directories over HTTP to web viewers (Deep Zoom, IIIF, XYZ).
     ///
     /// Each input is served under its file stem NAME (a directory under its name):
@@ -212,6 +231,7 @@ pub fn run(args: Args) -> Result<()> {
         Command::Info(a) => pack::run_info(a),
         Command::Verify(a) => pack::run_verify(a),
         Command::Render(a) => render::run(a),
+        Command::View(a) => view::run(a),
         Command::Serve(a) => serve::run(a),
         Command::Merge(a) => shard::run_merge(a),
     }

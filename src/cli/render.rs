@@ -76,11 +76,56 @@ pub struct RenderArgs {
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
-enum FilterArg {
+pub(super) enum FilterArg {
     Auto,
     Nearest,
     Bilinear,
     Trilinear,
+}
+
+impl FilterArg {
+    /// The scene's filter: `None` for auto.
+    pub(super) fn filter(self) -> Option<SampleFilter> {
+        match self {
+            FilterArg::Auto => None,
+            FilterArg::Nearest => Some(SampleFilter::Nearest),
+            FilterArg::Bilinear => Some(SampleFilter::Bilinear),
+            FilterArg::Trilinear => Some(SampleFilter::Trilinear),
+        }
+    }
+}
+
+/// The packs at `paths` as page sources (shards refused: they must be merged first), each read
+/// `latency` late if given, and their largest tile side.
+pub(super) fn open_sources(paths: &[PathBuf], latency: Option<Duration>) -> Result<(Vec<Arc<dyn PageSource>>, u32)> {
+    let mut tile_size = 0;
+    let sources = paths
+        .iter()
+        .map(|p| {
+            let pack = vortex_pack::Pack::open(p).with_context(|| format!("opening {}", p.display()))?;
+            vortex_tiler::shard::manifest::refuse_shard(p, pack.metadata())?;
+            tile_size = tile_size.max(pack.description().tile_size);
+            let source: Arc<dyn PageSource> = Arc::new(pack);
+            Ok(match latency {
+                Some(latency) => Arc::new(Delayed::new(source, latency)),
+                None => source,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok((sources, tile_size))
+}
+
+/// Says so on stderr when the filter shows seams at page edges (a forced bilinear or trilinear
+/// filter over packs without a border).
+pub(super) fn warn_of_seams(renderer: &SceneRenderer) {
+    let filter = renderer.runtime().filter();
+    if filter.seams_with(renderer.runtime().cache().border()) {
+        eprintln!(
+            "warning: the packs have no border, so {} filtering shows seams at every page edge; \
+             split them with --border 1, or use --filter auto (nearest for these packs)",
+            filter.name()
+        );
+    }
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -90,7 +135,7 @@ enum PacingArg {
 }
 
 /// `50ms`, `0.2s`, `1s` or a bare number of milliseconds.
-fn parse_duration(s: &str) -> Result<Duration, String> {
+pub(super) fn parse_duration(s: &str) -> Result<Duration, String> {
     let t = s.trim();
     let (number, scale) = if let Some(ms) = t.strip_suffix("ms") {
         (ms, 1e-3)
@@ -105,7 +150,7 @@ fn parse_duration(s: &str) -> Result<Duration, String> {
     }
 }
 
-fn parse_dims(s: &str) -> Result<[u32; 2], String> {
+pub(super) fn parse_dims(s: &str) -> Result<[u32; 2], String> {
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("'{s}' is not WIDTHxHEIGHT"))?;
     let n = |t: &str| t.trim().parse::<u32>().map_err(|_| format!("'{s}' is not WIDTHxHEIGHT"));
     Ok([n(w)?, n(h)?])
@@ -133,12 +178,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     scene.size = a.size.unwrap_or(scene.size);
     let e = &mut scene.effects;
     if let Some(f) = a.filter {
-        e.filter = match f {
-            FilterArg::Auto => None,
-            FilterArg::Nearest => Some(SampleFilter::Nearest),
-            FilterArg::Bilinear => Some(SampleFilter::Bilinear),
-            FilterArg::Trilinear => Some(SampleFilter::Trilinear),
-        };
+        e.filter = f.filter();
     }
     let pacing = match (a.pacing, a.io_latency) {
         (Some(PacingArg::Offline), _) | (None, None) => Pacing::Offline,
@@ -161,34 +201,12 @@ pub fn run(a: RenderArgs) -> Result<()> {
     }
     signals::install().context("installing signal handlers")?;
 
-    let mut tile_size = 0;
-    let sources = scene
-        .textures
-        .iter()
-        .map(|p| {
-            let pack = vortex_pack::Pack::open(p).with_context(|| format!("opening {}", p.display()))?;
-            vortex_tiler::shard::manifest::refuse_shard(p, pack.metadata())?;
-            tile_size = tile_size.max(pack.description().tile_size);
-            let source: Arc<dyn PageSource> = Arc::new(pack);
-            Ok(match a.io_latency {
-                Some(latency) => Arc::new(Delayed::new(source, latency)),
-                None => source,
-            })
-        })
-        .collect::<Result<Vec<_>>>()?;
+    let (sources, tile_size) = open_sources(&scene.textures, a.io_latency)?;
     let side = scene.effects.cache_slots_per_side as u32 * tile_size;
     let gpu = Gpu::headless(side.max(scene.size[0]).max(scene.size[1]))?;
     let adapter = gpu.adapter_info();
     let mut runtime = SceneRenderer::new(gpu, sources, &scene, pacing)?;
-    let filter = runtime.runtime().filter();
-    let border = runtime.runtime().cache().border();
-    if filter.seams_with(border) {
-        eprintln!(
-            "warning: the packs have no border, so {} filtering shows seams at every page edge; \
-             split them with --border 1, or render with --filter auto (nearest for these packs)",
-            filter.name()
-        );
-    }
+    warn_of_seams(&runtime);
     // Frames go into a staging folder, moved into place only when every frame is written.
     let frames = a.frames.as_deref().map(StagedFrames::create).transpose()?;
 
