@@ -24,4 +24,5 @@ mod slurm;
 mod sources;
 mod stability;
 mod stripes;
+mod view;
 mod viewers;

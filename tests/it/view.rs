@@ -1,0 +1,119 @@
+//! `vortex-tiler view` in a real window: an X server of our own (Xvfb, `apt-get install xvfb`)
+//! and the window's surface on lavapipe. Its `--screenshot` must be the picture `render` makes of
+//! the same view headless, and it must refuse to overwrite a file that is not its own. Without
+//! Xvfb the tests print a note and pass, except under `CI=true`, where they fail.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::common::cli::{BIN, fails_with, fixture, run, s};
+
+/// An Xvfb server on a free display, stopped on drop.
+struct Xvfb {
+    child: Child,
+    display: String,
+}
+
+impl Xvfb {
+    /// A server, or `None` (with a note) when Xvfb is not installed outside CI.
+    fn start() -> Option<Xvfb> {
+        let ci = std::env::var("CI").is_ok_and(|v| v == "true");
+        if Command::new("Xvfb").arg("-help").stderr(Stdio::null()).status().is_err() {
+            assert!(!ci, "CI=true and no Xvfb (apt-get install xvfb)");
+            eprintln!("note: skipping a window test: no Xvfb (apt-get install xvfb; set CI=true to fail instead)");
+            return None;
+        }
+        // A display number nobody holds: Xvfb refuses one whose lock file exists.
+        let n = (std::process::id() % 400 + 100..600)
+            .find(|n| !Path::new(&format!("/tmp/.X{n}-lock")).exists())
+            .expect("a free display number");
+        let display = format!(":{n}");
+        let child = Command::new("Xvfb")
+            .args([display.as_str(), "-screen", "0", "1024x768x24", "-nolisten", "tcp"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("Xvfb starts");
+        let socket = PathBuf::from(format!("/tmp/.X11-unix/X{n}"));
+        let started = Instant::now();
+        while !socket.exists() {
+            assert!(started.elapsed() < Duration::from_secs(20), "Xvfb {display} did not come up");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Some(Xvfb { child, display })
+    }
+
+    /// `vortex-tiler view ARGS` on this display.
+    fn view(&self, args: &[&str]) -> Output {
+        let mut cmd = Command::new(BIN);
+        cmd.arg("view").args(args).env("NO_COLOR", "1").env("DISPLAY", &self.display).env_remove("WAYLAND_DISPLAY");
+        cmd.envs(vortex_vt_wgpu::device::lavapipe_env());
+        cmd.output().expect("binary runs")
+    }
+}
+
+impl Drop for Xvfb {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn rgba(path: &Path) -> (u32, u32, Vec<u8>) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut pixels = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut pixels).unwrap();
+    pixels.truncate(info.buffer_size());
+    (info.width, info.height, pixels)
+}
+
+#[test]
+fn the_windows_screenshot_is_the_headless_render_of_the_same_view() {
+    let Some(x) = Xvfb::start() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let pack = dir.path().join("sample.vtpk");
+    let split = run(&["split", s(&fixture("sample.png")), "--pack", s(&pack), "--codec", "png"]);
+    assert!(split.status.success(), "{}", String::from_utf8_lossy(&split.stderr));
+
+    // The view opens on the whole image; zoom in with a scene to cross page edges at LOD 0.
+    let scene = dir.path().join("scene.json");
+    let json = r#"{"view": {"window": {"path": [{"frame": 0, "center": [0.4, 0.55], "width": 0.35}]}}}"#;
+    std::fs::write(&scene, json).unwrap();
+    for (name, scene_args) in [("whole", vec![]), ("zoomed", vec!["--scene", s(&scene)])] {
+        let shot = dir.path().join(format!("{name}.png"));
+        let mut args = vec![s(&pack), "--size", "320x240", "--screenshot", s(&shot), "--frame-count", "12"];
+        args.extend(&scene_args);
+        let out = x.view(&args);
+        assert!(out.status.success(), "view {name}: {}", String::from_utf8_lossy(&out.stderr));
+
+        let frames = dir.path().join(format!("frames-{name}"));
+        let whole = dir.path().join("whole.json");
+        if scene_args.is_empty() {
+            std::fs::write(&whole, r#"{"view": {"window": {"path": [{"frame": 0, "center": [0.5, 0.5], "width": 1.0}]}}}"#).unwrap();
+        }
+        let scene_file = if scene_args.is_empty() { &whole } else { &scene };
+        let out = run(&[
+            "render", "--pack", s(&pack), "--scene", s(scene_file), "--size", "320x240", "--frame-count", "12",
+            "--frames", s(&frames), "-q",
+        ]);
+        assert!(out.status.success(), "render {name}: {}", String::from_utf8_lossy(&out.stderr));
+        let (w, h, window) = rgba(&shot);
+        let (rw, rh, headless) = rgba(&frames.join("frame-0011.png"));
+        assert_eq!((w, h), (rw, rh), "{name}");
+        let worst = window.iter().zip(&headless).map(|(a, b)| a.abs_diff(*b)).max().unwrap();
+        assert!(worst <= 2, "{name}: the window's picture is {worst} code values off the headless render");
+    }
+}
+
+#[test]
+fn a_screenshot_never_replaces_a_file_it_did_not_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let mine = dir.path().join("holiday.png");
+    std::fs::write(&mine, b"my own picture").unwrap();
+    // Refused before any window opens, so no display is needed.
+    let out = run(&["view", s(&fixture("sample.png")), "--screenshot", s(&mine), "--frame-count", "2"]);
+    fails_with(&out, &["holiday.png", "not a screenshot of vortex-tiler view"]);
+    assert_eq!(std::fs::read(&mine).unwrap(), b"my own picture");
+}
