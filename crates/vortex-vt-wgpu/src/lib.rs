@@ -18,7 +18,7 @@
 //! - [`runtime`]: the frame's end that ties them together;
 //! - [`device`]: a headless device (and lavapipe pinning), for tools and tests.
 //!
-//! The `harness` feature adds [`harness`]: scenes, cameras and an offscreen renderer built on
+//! The `harness` feature adds the `harness` module: scenes, cameras and an offscreen renderer built on
 //! the public API (what `vortex-tiler render` runs). The `testing` feature adds `testing`
 //! (synthetic LOD chains, bordered tiles and packs of them) and the harness's address probe.
 //!
