@@ -119,3 +119,51 @@ fn bad_packs_and_scenes_are_named() {
     std::fs::write(&scene, r#"{"view": {"window": {"path": []}}}"#).unwrap();
     fails_with(&run(&["render", "--pack", s(&pack), "--scene", s(&scene)]), &["no keyframe"]);
 }
+
+#[test]
+fn slow_reads_never_hold_up_a_real_time_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = sample_pack(dir.path());
+    let json = dir.path().join("report.json");
+    let args = ["render", "--pack", s(&pack), "--io-latency", "80ms", "--threads", "4", "--size", "128x96"];
+    let out = run(&[&args[..], &["--frame-count", "40", "--report", s(&json), "-q"]].concat());
+    if no_gpu(&out) {
+        return;
+    }
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let r = report(&json);
+    assert_eq!(r["pacing"], "real-time");
+    let frames = r["frames"].as_array().unwrap();
+    for f in frames {
+        assert_eq!(f["io_wait_ms"], 0.0, "frame {} waited for pages", f["frame"]);
+    }
+    // Frames went on while reads were under way, drawing coarser pages meanwhile.
+    assert!(
+        frames.iter().any(|f| f["in_flight"].as_u64().unwrap() > 0 && f["fallback_fraction"].as_f64().unwrap() > 0.0)
+    );
+    // Offline, the same run waits for its pages.
+    let out =
+        run(&[&args[..], &["--pacing", "offline", "--frame-count", "3", "--report", s(&json), "--force", "-q"]]
+            .concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(report(&json)["io_wait_ms_max"].as_f64().unwrap() >= 80.0);
+}
+
+#[test]
+fn a_filter_that_shows_seams_is_warned_of_and_auto_avoids_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = dir.path().join("bare.vtpk");
+    let split = run(&["split", s(&fixture("sample.png")), "--pack", s(&pack), "--border", "0"]);
+    assert!(split.status.success(), "{}", String::from_utf8_lossy(&split.stderr));
+    let json = dir.path().join("report.json");
+    let base = ["render", "--pack", s(&pack), "--frame-count", "2", "--size", "64x48", "--report", s(&json), "--force"];
+    let out = run(&[&base[..], &["--filter", "bilinear"]].concat());
+    if no_gpu(&out) {
+        return;
+    }
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("shows seams at every page edge"));
+    let out = run(&base);
+    assert!(out.status.success() && !String::from_utf8_lossy(&out.stderr).contains("seams"));
+    assert_eq!(report(&json)["filter"], "nearest");
+}
