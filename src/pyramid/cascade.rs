@@ -231,7 +231,7 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
                         let (w, h) = (layout.width as u64, layout.height as u64);
                         let next = span.window(&layout, lod + 1).start;
                         let next_row = span.window_rows(&layout, lod + 1).start;
-                        Down::Exact(Reducer::window(w, h, lod, 1, next, width, channels).from_row(next_row))
+                        Down::Exact(Reducer::window(w, h, lod, 1, next, width, channels).starting_at_row(next_row))
                     } else {
                         Down::Resample(Box::new(Resampler::new(filter, pixels, width, extent.1 as u64)))
                     }

@@ -156,7 +156,7 @@ impl<A: Acc> Reducer<A> {
 
     /// The same reducer for a window whose first output row is row `out_y0` of its level (a
     /// shard's region): rows are weighed by their place in the whole image.
-    pub fn from_row(mut self, out_y0: u64) -> Reducer<A> {
+    pub fn starting_at_row(mut self, out_y0: u64) -> Reducer<A> {
         self.out_row = out_y0;
         self
     }

@@ -91,12 +91,26 @@ fn the_windows_screenshot_is_the_headless_render_of_the_same_view() {
         let frames = dir.path().join(format!("frames-{name}"));
         let whole = dir.path().join("whole.json");
         if scene_args.is_empty() {
-            std::fs::write(&whole, r#"{"view": {"window": {"path": [{"frame": 0, "center": [0.5, 0.5], "width": 1.0}]}}}"#).unwrap();
+            std::fs::write(
+                &whole,
+                r#"{"view": {"window": {"path": [{"frame": 0, "center": [0.5, 0.5], "width": 1.0}]}}}"#,
+            )
+            .unwrap();
         }
         let scene_file = if scene_args.is_empty() { &whole } else { &scene };
         let out = run(&[
-            "render", "--pack", s(&pack), "--scene", s(scene_file), "--size", "320x240", "--frame-count", "12",
-            "--frames", s(&frames), "-q",
+            "render",
+            "--pack",
+            s(&pack),
+            "--scene",
+            s(scene_file),
+            "--size",
+            "320x240",
+            "--frame-count",
+            "12",
+            "--frames",
+            s(&frames),
+            "-q",
         ]);
         assert!(out.status.success(), "render {name}: {}", String::from_utf8_lossy(&out.stderr));
         let (w, h, window) = rgba(&shot);

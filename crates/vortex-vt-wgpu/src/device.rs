@@ -126,7 +126,12 @@ impl Gpu {
             ..Default::default()
         }))?;
         let info = adapter.get_info();
-        log::info!("vortex-vt-wgpu: {} ({:?}, {:?}), 2D textures up to {have}", info.name, info.backend, info.device_type);
+        log::info!(
+            "vortex-vt-wgpu: {} ({:?}, {:?}), 2D textures up to {have}",
+            info.name,
+            info.backend,
+            info.device_type
+        );
         Ok(Gpu { instance, adapter, device, queue })
     }
 

@@ -2,9 +2,10 @@
 //! `vt_feedback` (`shaders/vt.wgsl`), which writes the feedback word
 //! (`vortex_vt::feedback::encode`) of the page the fragment samples into a storage buffer of one
 //! word per block of `block x block` pixels ([`FeedbackBuffer`]); only one pixel per block, the
-//! frame's *elected* pixel, writes. The elected pixel moves every frame along the Halton (2, 3)
-//! sequence ([`elected`]), so that over a few frames every pixel of a block is heard: a page seen
-//! only by a thin sliver or at the frame's edge is still asked for. The LOD is the one
+//! frame's *elected* pixel, writes. The elected pixel moves every frame in the order of an
+//! ordered-dither matrix ([`elected`]), so that in any `block²` consecutive frames every pixel of
+//! a block is heard once: a page seen only by a thin sliver or at the frame's edge is still asked
+//! for, within `block²` frames. The LOD is the one
 //! `vortex_vt::feedback::lod_for` gives for the fragment's footprint plus the residency's bias.
 //!
 //! After the frame, the buffer is copied into one of a small ring of mappable buffers and reset
@@ -61,21 +62,40 @@ impl FeedbackBuffer {
     }
 }
 
-/// The pixel of each `block x block` block that writes frame `n`'s feedback: the Halton (2, 3)
-/// sequence from index 1 scaled to the block, so that consecutive frames spread over it evenly
-/// (frame 0 takes the pixel at (1/2, 1/3) of the block).
+/// The pixel of each `block x block` block that writes frame `n`'s feedback. The frames take
+/// the block's pixels in the order of the ordered-dither (Bayer) matrix of the next power of two
+/// (its pixels past the block skipped), from its centre on: in any `block²` consecutive frames
+/// every pixel of the block is elected exactly once, and consecutive frames spread over the
+/// block evenly (frame 0 takes the pixel at (1/2, 1/2) of a power-of-two block, frame 1 the one
+/// at (1/2, 0), frame 2 the one at (0, 1/2), ...).
 pub fn elected(n: u64, block: u32) -> [u32; 2] {
-    let halton = |mut i: u64, base: u64| {
-        let (mut f, mut r) = (1.0f64, 0.0f64);
-        while i > 0 {
-            f /= base as f64;
-            r += f * (i % base) as f64;
-            i /= base;
-        }
-        r
-    };
-    let pick = |h: f64| ((h * f64::from(block)) as u32).min(block.saturating_sub(1));
-    [pick(halton(n + 1, 2)), pick(halton(n + 1, 3))]
+    let block = block.max(1);
+    let side = block.next_power_of_two();
+    let bits = side.trailing_zeros();
+    let count = u64::from(block) * u64::from(block);
+    let rank = (n + 1) % count;
+    if side == block {
+        return bayer_pixel(rank, bits);
+    }
+    (0..u64::from(side) * u64::from(side))
+        .map(|r| bayer_pixel(r, bits))
+        .filter(|&[x, y]| x < block && y < block)
+        .nth(rank as usize)
+        .unwrap_or([0, 0])
+}
+
+/// The pixel of rank `rank` in the ordered-dither matrix of side `2^bits`: the rank's base-4
+/// digits, most significant first, are the pixel's coordinate bits, least significant first,
+/// each digit placing the pixel in the (0, 0), (1, 1), (1, 0), (0, 1) quadrant in turn.
+fn bayer_pixel(rank: u64, bits: u32) -> [u32; 2] {
+    let (mut x, mut y) = (0, 0);
+    for i in 0..bits {
+        let digit = (rank >> (2 * (bits - 1 - i))) & 3;
+        let [dx, dy] = [[0, 0], [1, 1], [1, 0], [0, 1]][digit as usize];
+        x |= dx << i;
+        y |= dy << i;
+    }
+    [x, y]
 }
 
 /// The words of one read-back feedback buffer, row-major.
@@ -216,15 +236,28 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_elected_pixel_visits_every_pixel_of_a_block() {
-        for block in [1u32, 2, 4, 8] {
-            let mut seen = std::collections::HashSet::new();
-            for n in 0..(8 * block * block) as u64 {
-                let [x, y] = elected(n, block);
-                assert!(x < block && y < block);
-                seen.insert((x, y));
+    fn any_block_squared_frames_elect_every_pixel_of_a_block_once() {
+        for block in [1u32, 2, 3, 4, 5, 8, 12, 16] {
+            let count = u64::from(block * block);
+            for start in [0, 1, 7, count - 1, 1000] {
+                let mut seen = std::collections::HashSet::new();
+                for n in start..start + count {
+                    let [x, y] = elected(n, block);
+                    assert!(x < block && y < block, "block {block}, frame {n}: ({x}, {y})");
+                    assert!(seen.insert((x, y)), "block {block}: ({x}, {y}) twice from frame {start}");
+                }
             }
-            assert_eq!(seen.len() as u32, block * block, "block {block}");
+        }
+    }
+
+    #[test]
+    fn consecutive_frames_elect_distant_pixels() {
+        assert_eq!(elected(0, 8), [4, 4], "the centre first");
+        assert_eq!([elected(1, 8), elected(2, 8), elected(3, 8)], [[4, 0], [0, 4], [2, 2]]);
+        // A power of two: consecutive frames are never neighbours.
+        for n in 0..64 {
+            let ([a, b], [c, d]) = (elected(n, 8), elected(n + 1, 8));
+            assert!(a.abs_diff(c).max(b.abs_diff(d)) >= 2, "frames {n} and {}: ({a}, {b}), ({c}, {d})", n + 1);
         }
     }
 }

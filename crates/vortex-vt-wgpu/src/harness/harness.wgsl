@@ -65,17 +65,19 @@ fn residency(c: vec4<f32>, lods: vec2<u32>) -> vec4<f32> {
     return vec4<f32>(rgb, 1.0);
 }
 
+// The LOD to sample: the fixed one if given, else the footprint's. One sample call per fragment
+// (lavapipe runs both sides of a branch, even on a uniform, so a branch between two sample calls
+// would cost both).
+fn lod_for(footprint: f32) -> f32 {
+    return select(log2(footprint), frame.lod_override, frame.lod_override >= 0.0);
+}
+
 @fragment
 fn fs_window(v: Varyings) -> @location(0) vec4<f32> {
     let texel = window_texel(v.position.xy);
     let footprint = max(abs(frame.step.x), abs(frame.step.y));
     vt_feedback_texel(v.texture, texel, footprint, v.position.xy);
-    var c: vec4<f32>;
-    if frame.lod_override >= 0.0 {
-        c = vt_sample_texel_level(v.texture, texel, frame.lod_override);
-    } else {
-        c = vt_sample_texel(v.texture, texel, footprint);
-    }
+    let c = vt_sample_texel_level(v.texture, texel, lod_for(footprint));
     if frame.mode == 1u {
         return residency(c, vt_residency_texel(v.texture, texel, footprint));
     }
@@ -87,12 +89,7 @@ fn fs_mesh(v: Varyings) -> @location(0) vec4<f32> {
     let ddx = dpdx(v.uv);
     let ddy = dpdy(v.uv);
     vt_feedback(v.texture, v.uv, ddx, ddy, v.position.xy);
-    var c: vec4<f32>;
-    if frame.lod_override >= 0.0 {
-        c = vt_sample_level(v.texture, v.uv, frame.lod_override);
-    } else {
-        c = vt_sample(v.texture, v.uv, ddx, ddy);
-    }
+    let c = vt_sample_level(v.texture, v.uv, lod_for(vt_footprint(v.texture, ddx, ddy)));
     if frame.mode == 1u {
         return residency(c, vt_residency(v.texture, v.uv, ddx, ddy));
     }

@@ -207,7 +207,8 @@ impl SceneRenderer {
         if self.other_depth.as_ref().is_none_or(|(s, _)| *s != size) {
             self.other_depth = Some((size, draw::depth_texture(device, size.0, size.1)));
         }
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex frame") });
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex frame") });
         if let (Some((_, pipelines)), Some((_, depth))) =
             (self.other_pipelines.iter().find(|(f, _)| *f == format), &self.other_depth)
         {

@@ -427,7 +427,8 @@ mod tests {
         let s = Scene::default_plane();
         let json = serde_json::to_string_pretty(&s).unwrap();
         assert_eq!(serde_json::from_str::<Scene>(&json).unwrap(), s);
-        let bad = json.replace("\"trilinear\"", "\"bicubic\"");
+        assert!(json.contains("\"filter\": \"auto\""), "{json}");
+        let bad = json.replace("\"auto\"", "\"bicubic\"");
         assert!(serde_json::from_str::<Scene>(&bad).unwrap_err().to_string().contains("unknown filter \"bicubic\""));
         let extra = json.replacen("\"frames\"", "\"frame_count\": 3, \"frames\"", 1);
         assert!(serde_json::from_str::<Scene>(&extra).unwrap_err().to_string().contains("frame_count"));

@@ -7,8 +7,9 @@
 use crate::common::gpu;
 use vortex_vt::feedback::decode;
 use vortex_vt::page::TextureGrid;
-use vortex_vt_wgpu::probe::AddressProbe;
-use vortex_vt_wgpu::{FeedbackPass, FeedbackReadback, FeedbackTarget, View, VirtualTexture, Window};
+use vortex_vt_wgpu::VirtualTexture;
+use vortex_vt_wgpu::harness::probe::{AddressProbe, FeedbackProbe};
+use vortex_vt_wgpu::harness::{View, Window};
 
 const SIZE: u32 = 64;
 
@@ -18,7 +19,7 @@ fn window_addresses_stay_within_a_sixteenth_of_a_texel_at_the_largest_size() {
     let texture = VirtualTexture::filling(TextureGrid::new(4096, 4096).unwrap(), 1024, 4);
     let payload = texture.payload();
     let side = texture.width as f64;
-    let probe = AddressProbe::new(&gpu.device);
+    let probe = AddressProbe::new(&gpu, &[texture]);
     let mut worst_exact: f64 = 0.0;
     let mut worst_mirror: f64 = 0.0;
     // (origin, texels per pixel, LOD): deep inside the texture, near its far edge, minified.
@@ -30,7 +31,7 @@ fn window_addresses_stay_within_a_sixteenth_of_a_texel_at_the_largest_size() {
     ] {
         let extent = step * SIZE as f64 / side;
         let window = Window { texture: 0, origin: o, extent: [extent, extent] };
-        let addresses = probe.addresses(&gpu, &[texture], &View::Window(window), lod, SIZE, SIZE).unwrap();
+        let addresses = probe.addresses(&gpu, &View::Window(window), lod, SIZE, SIZE).unwrap();
         let mirror = window.origin_texels(&texture, (SIZE, SIZE));
         for (i, got) in addresses.iter().enumerate() {
             let (x, y) = (i as u32 % SIZE, i as u32 / SIZE);
@@ -55,21 +56,17 @@ fn lod_selection_at_exact_powers_of_two_is_stable() {
     let Some(gpu) = gpu() else { return };
     let grid = TextureGrid::new(64, 64).unwrap();
     let texture = VirtualTexture::filling(grid, 136, 4);
-    let pass = FeedbackPass::new(&gpu.device);
-    // Full-size feedback (no bias), 2, 4 and 8 texels per pixel exactly.
-    let target = FeedbackTarget::new(&gpu.device, SIZE, SIZE, 1);
-    let mut readback = FeedbackReadback::new(&gpu.device, SIZE, SIZE, 2);
+    // Blocks of one pixel: every pixel writes its word, every frame (no bias); 2, 4 and 8
+    // texels per pixel exactly.
+    let mut probe = FeedbackProbe::new(&gpu, &[texture], SIZE, SIZE, 1, 2);
     for k in 1..=3u8 {
         let extent = (1u32 << k) as f64 * SIZE as f64 / texture.width as f64;
         let view = View::Window(Window { texture: 0, origin: [0.2371, 0.4113], extent: [extent, extent] });
         let mut first = None;
-        for _ in 0..4 {
-            let mut encoder = gpu.device.create_command_encoder(&Default::default());
-            pass.encode(&gpu.device, &mut encoder, &target, &[texture], Some(&view), 0.0, [0.0; 2]);
-            readback.encode_copy(&mut encoder, &target).unwrap();
-            gpu.queue.submit([encoder.finish()]);
-            readback.submitted();
-            let words = readback.read_now(&gpu.device).unwrap().unwrap().words;
+        for frame in 0..4 {
+            probe.submit(&gpu, Some(&view), frame, 0.0).unwrap();
+            let words = probe.readback().read_now(&gpu.device).unwrap().unwrap().words;
+            assert_eq!(words.len(), (SIZE * SIZE) as usize);
             assert!(words.iter().all(|&w| decode(w).unwrap().lod == k), "2^{k} texels per pixel is LOD {k}");
             match &first {
                 None => first = Some(words),

@@ -15,10 +15,10 @@ use crate::common::gpu;
 use vortex_pack::TileKind;
 use vortex_vt::page::PageId;
 use vortex_vt::sampler::{LodImages, Rgba8Image, bilinear};
-use vortex_vt_wgpu::camera::Keyframe;
-use vortex_vt_wgpu::scene::WindowKey;
+use vortex_vt_wgpu::harness::camera::Keyframe;
+use vortex_vt_wgpu::harness::{Effects, Pose, Scene, SceneRenderer, SceneView, Window, WindowKey};
 use vortex_vt_wgpu::testing::{TestTile, bordered_tile, write_pack_with};
-use vortex_vt_wgpu::{Effects, Loader, Pose, Runtime, SampleFilter, Scene, SceneView, VirtualTexture, Window};
+use vortex_vt_wgpu::{SampleFilter, VirtualTexture};
 
 const W: u32 = 1 << 20;
 const H: u32 = 1 << 10;
@@ -101,13 +101,13 @@ fn tile(texture: &VirtualTexture, page: PageId) -> TestTile {
 
 /// What the frame must be: per pixel, the reference bilinear sample at the LOD the page table
 /// maps for the pixel's wanted page, from the crop.
-fn expected(rt: &Runtime, texture: &VirtualTexture, window: &Window) -> Rgba8Image {
+fn expected(rt: &SceneRenderer, texture: &VirtualTexture, window: &Window) -> Rgba8Image {
     let origin = window.origin_texels(texture, SIZE);
     let lod = origin.lod(0.0, texture.grid.lod_count());
     Rgba8Image::from_fn(SIZE.0, SIZE.1, |x, y| {
         let [u, v] = window.uv(x, y, SIZE);
         let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, texture.size(), texture.payload());
-        let entry = rt.page_table().entry(0, lod, at.page[0] as u16, at.page[1] as u16);
+        let entry = rt.runtime().page_table().entry(0, lod, at.page[0] as u16, at.page[1] as u16);
         let u_crop = ((u * W as f64 - CROP as f64) / (W - CROP) as f64) as f32;
         bilinear(&Cropped, entry.lod, u_crop, v as f32)
     })
@@ -130,7 +130,7 @@ fn windows_far_to_the_right_of_a_2_20_texel_texture_match_the_reference() {
         frames: 1,
         view: SceneView::Window { texture: 0, path: vec![key(center, width)] },
         effects: Effects {
-            filter: SampleFilter::Bilinear,
+            filter: Some(SampleFilter::Bilinear),
             cache_slots_per_side: 16,
             upload_budget: 64,
             ..Effects::default()
@@ -143,13 +143,11 @@ fn windows_far_to_the_right_of_a_2_20_texel_texture_match_the_reference() {
         ([(W as f64 - 40.7) / W as f64, 200.2 / H as f64], 1.37),
         ([1_000_290.0 / W as f64, 480.0 / H as f64], 5.3),
     ];
-    let loader = Loader::new(vec![pack], 2).unwrap();
     let first = scene(views[0].0, views[0].1 * SIZE.0 as f64 / W as f64);
-    let mut rt = Runtime::new(gpu, loader, &first).unwrap();
-    rt.check_invariants = true;
+    let mut rt = crate::common::renderer(gpu, &[&pack], &first);
     for (center, texels_per_pixel) in views {
         let s = scene(center, texels_per_pixel * SIZE.0 as f64 / W as f64);
-        let pose = s.pose(0, rt.textures());
+        let pose = s.pose(0, rt.runtime().textures());
         let Pose::Window(window) = pose else { unreachable!() };
         let origin = window.origin_texels(&texture, SIZE);
         assert!((origin.step[0] - origin.step[1]).abs() < 1e-6, "square pixels on a 1024:1 image");
@@ -158,7 +156,7 @@ fn windows_far_to_the_right_of_a_2_20_texel_texture_match_the_reference() {
         loop {
             let (report, _) = rt.frame(&pose, false).unwrap();
             assert_eq!(report.load_errors, 0);
-            max_x = max_x.max(rt.residency().resident().map(|(p, _)| p.x).max().unwrap_or(0));
+            max_x = max_x.max(rt.runtime().residency().resident().map(|(p, _)| p.x).max().unwrap_or(0));
             frames += 1;
             if report.fallback_fraction == 0.0 && report.loaded == 0 {
                 break;

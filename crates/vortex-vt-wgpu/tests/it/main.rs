@@ -7,8 +7,11 @@
 
 mod address;
 mod common;
+mod defaults;
+mod embed;
 mod feedback;
 mod huge;
+mod latency;
 mod loader;
 mod readback;
 mod runtime;

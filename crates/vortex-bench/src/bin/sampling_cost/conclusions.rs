@@ -42,7 +42,7 @@ pub fn conclusions(rows: &[Row]) -> String {
     out!(
         s,
         "- **Cost.** Over the three views and borders, a frame with nearest takes {nearest_frame:.2}x the time of \
-         bilinear and one with trilinear {trilinear_frame:.2}x (the sampling pass alone: {:.2}x and {:.2}x). The \
+         bilinear and one with trilinear {trilinear_frame:.2}x (the draw alone: {:.2}x and {:.2}x). The \
          border costs no time: bilinear with border 0 and 1 takes {:.2}x and {:.2}x.",
         relative(Filter::Nearest, &BORDERS, true),
         relative(Filter::Trilinear, &BORDERS, true),

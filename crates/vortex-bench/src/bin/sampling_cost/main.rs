@@ -10,15 +10,18 @@
 //!
 //! One synthetic texture (2048² texels: smooth colour, a fine grating, thin dark lines and a
 //! little noise; each LOD the 2x2 mean of the one above) is cut into 128-texel payloads with each
-//! border and stored raw in three packs. For every border x filter a [`Runtime`] holds each view
-//! still until its feedback shows no fallback, then:
+//! border and stored raw in three packs. For every border x filter a `SceneRenderer` (the
+//! harness, an application of the public runtime, paced offline so that every run streams the
+//! same pages) holds each view still until its feedback shows no fallback, then:
 //!
-//! - **frame time**: `Runtime::frame` without a picture (feedback pass, sampling pass, feedback
-//!   readback and analysis, residency update: what an application pays per frame), median over
-//!   the timed frames, interleaved across the nine runtimes in rounds so that drift in the
-//!   machine's speed spreads over all of them;
-//! - **sampling time**: the sampling pass alone (several draws per submission, no readback),
-//!   through the runtime's own cache and a copy of its page table;
+//! - **frame time**: `SceneRenderer::frame` without a picture (the draw, whose fragment shader
+//!   samples and writes feedback, then `Runtime::end_frame`: feedback copy, readback and
+//!   analysis, residency update; what an application pays per frame), median over the timed
+//!   frames, interleaved across the nine renderers in rounds so that drift in the machine's
+//!   speed spreads over all of them;
+//! - **sampling time**: the draw alone (`SceneRenderer::draw_to` a target of its own, several
+//!   draws per wait, no readback, no end of frame: nothing streams), through the runtime's cache
+//!   and page table;
 //! - **error against the runtime's own model**: per pixel, the reference sampler at the LOD of
 //!   the page-table entry the pixel reads (what `tests/runtime.rs` checks): any difference beyond
 //!   a code value or two is either a missing border (the shader clamps inside the slot, so
@@ -62,14 +65,15 @@ const BORDERS: [u32; 3] = [0, 1, 4];
 const FILTERS: [Filter; 3] = [Filter::Nearest, Filter::Bilinear, Filter::Trilinear];
 /// The output size.
 const SIZE: [u32; 2] = [512, 384];
-/// Timing rounds over all runtimes; each round times `FRAMES_PER_ROUND` frames of each and
-/// `SUBMITS_PER_ROUND` submissions of `DRAWS_PER_SUBMIT` sampling-only draws.
+/// Timing rounds over all renderers; each round times `FRAMES_PER_ROUND` frames of each and
+/// `SUBMITS_PER_ROUND` waits for `DRAWS_PER_SUBMIT` draws alone.
 const ROUNDS: usize = 120;
 const FRAMES_PER_ROUND: usize = 1;
 const SUBMITS_PER_ROUND: usize = 1;
 const DRAWS_PER_SUBMIT: usize = 3;
-/// Frames a still view may take to converge before the run is called off.
-const MAX_CONVERGE_FRAMES: u32 = 60;
+/// Frames a still view may take to converge (including the `block²` quiet frames that show
+/// that every pixel of a feedback block was heard) before the run is called off.
+const MAX_CONVERGE_FRAMES: u32 = 160;
 
 /// One still view: LOD-0 texels per output pixel and the window's centre in virtual UV.
 struct ViewSpec {
@@ -120,7 +124,7 @@ fn main() -> Result<()> {
             runs.push(Run::new(*border, filter, pack.clone())?);
         }
     }
-    let adapter = runs[0].rt.gpu().adapter_info();
+    let adapter = runs[0].renderer.gpu().adapter_info();
     eprintln!("adapter: {} ({:?}); set up in {:.1} s", adapter.name, adapter.backend, started.elapsed().as_secs_f64());
 
     let mut rows: Vec<Row> = Vec::new();
@@ -230,12 +234,14 @@ fn timing() -> String {
     let mut s = String::new();
     out!(
         s,
-        "- **ms/frame**: the median of {frames} `Runtime::frame(pose, false)` calls: feedback pass, sampling
-  pass, feedback readback and analysis, residency update; what an application pays per frame.
-  Timed in {ROUNDS} rounds over the nine runtimes, each round in a new order, so that other
-  load on the machine falls on all of them alike.
-- **sampling ms**: the sampling pass alone, the median over {submits} submissions of {DRAWS_PER_SUBMIT} draws
-  each (no readback), through the runtime's cache and a copy of its page table.",
+        "- **ms/frame**: the median of {frames} `SceneRenderer::frame(pose, false)` calls, paced offline: the
+  draw (its fragment shader samples and writes the feedback of its elected pixels), then
+  `Runtime::end_frame` (feedback copy, readback and analysis, residency update); what an
+  application pays per frame. Timed in {ROUNDS} rounds over the nine renderers, each round in a
+  new order, so that other load on the machine falls on all of them alike.
+- **sampling ms**: the draw alone, the median over {submits} waits for {DRAWS_PER_SUBMIT} draws each
+  (`SceneRenderer::draw_to` a target of the program's own: no readback, no end of frame, so
+  nothing streams), through the runtime's cache and page table.",
         frames = ROUNDS * FRAMES_PER_ROUND,
         submits = ROUNDS * SUBMITS_PER_ROUND,
     );

@@ -101,7 +101,7 @@ pub fn diagnostics(rows: &[Row]) -> String {
                 n.push(format!("{label}: drawn from a coarser page after convergence: {}", c.fallback.describe()));
             }
             if c.sampling_only_differs {
-                n.push(format!("{label}: the sampling-only draw differs from the runtime's frame"));
+                n.push(format!("{label}: the draw without streaming differs from the frame's picture"));
             }
             if c.loaded_while_timed > 0 {
                 n.push(format!("{label}: {} pages loaded during the timed frames", c.loaded_while_timed));
@@ -112,7 +112,7 @@ pub fn diagnostics(rows: &[Row]) -> String {
     if notes.is_empty() {
         s.push_str(
             "\nEvery picture was drawn without fallback, nothing streamed during the timed frames, and the \
-             sampling-only draws gave the runtime's picture exactly.\n",
+             draws without streaming gave the frames' picture exactly.\n",
         );
     } else {
         s.push('\n');

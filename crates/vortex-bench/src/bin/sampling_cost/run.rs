@@ -1,5 +1,6 @@
-//! One border x filter: its runtime, held still on a view until converged, timed frame by frame
-//! and through a sampling-only pass over the runtime's cache, then checked against the models.
+//! One border x filter: its renderer (the harness on the public runtime, paced offline), held
+//! still on a view until converged, timed frame by frame and draw by draw (the same draw without
+//! streaming), then checked against the models.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -7,8 +8,8 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 
 use crate::api::{
-    Effects, Gpu, GpuPageTable, Loader, LodChain, Pack, Pose, RenderTarget, Rgba8Image, Runtime,
-    SampleFilter as Filter, SamplePass, Sources, View, VirtualTexture, Window,
+    Effects, Gpu, LodChain, Pacing, Pack, PageSource, Pose, Rgba8Image, SampleFilter as Filter, SceneRenderer,
+    TARGET_FORMAT, VirtualTexture, Window,
 };
 use crate::compare::{Check, Worst, compare, compare_where};
 use crate::reference::model;
@@ -17,12 +18,10 @@ use crate::{DRAWS_PER_SUBMIT, FRAMES_PER_ROUND, MAX_CONVERGE_FRAMES, PAYLOAD, SI
 pub struct Run {
     pub border: u32,
     pub filter: Filter,
-    pub rt: Runtime,
+    pub renderer: SceneRenderer,
     pub texture: VirtualTexture,
-    /// The sampling-only path: its own pass, target and copy of the runtime's page table.
-    pub pass: SamplePass,
-    pub target: RenderTarget,
-    pub table: GpuPageTable,
+    /// The target of the draws timed alone (never read back).
+    pub target: wgpu::TextureView,
     /// Frames the current view took until its feedback showed no fallback.
     pub converged_after: u32,
     /// Pages loaded during timed frames (should stay 0: nothing streams once converged).
@@ -32,55 +31,69 @@ pub struct Run {
 impl Run {
     pub fn new(border: u32, filter: Filter, pack: Arc<Pack>) -> Result<Run> {
         let tile = PAYLOAD + 2 * border;
-        let effects = Effects { filter, cache_slots_per_side: 16, upload_budget: 64, ..Effects::default() };
+        let effects =
+            Effects { filter: Some(filter), cache_slots_per_side: 16, upload_budget: 64, ..Effects::default() };
         let gpu = Gpu::headless(16 * tile).context("no GPU device; install mesa-vulkan-drivers for lavapipe")?;
-        let loader = Loader::new(vec![pack], 2).context("a loader")?;
-        let rt = Runtime::new(gpu, loader, &scene(effects, [0.5, 0.5], 1.0)).context("a runtime")?;
-        let texture = rt.textures()[0];
-        let device = &rt.gpu().device;
-        let pass = SamplePass::new(device, filter);
-        let target = RenderTarget::new(device, SIZE[0], SIZE[1]);
-        let table = GpuPageTable::new(device, &rt.gpu().queue, &[texture.grid], rt.cache().slots_per_side())
-            .context("a page table")?;
-        Ok(Run { border, filter, rt, texture, pass, target, table, converged_after: 0, loaded_while_timed: 0 })
+        let sources = vec![pack as Arc<dyn PageSource>];
+        let renderer = SceneRenderer::new(gpu, sources, &scene(effects, [0.5, 0.5], 1.0), Pacing::Offline)
+            .context("a renderer")?;
+        let texture = renderer.runtime().textures()[0];
+        let target = renderer
+            .gpu()
+            .device
+            .create_texture(&wgpu::TextureDescriptor {
+                label: Some("sampling_cost target"),
+                size: wgpu::Extent3d { width: SIZE[0], height: SIZE[1], depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: TARGET_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+                view_formats: &[],
+            })
+            .create_view(&wgpu::TextureViewDescriptor::default());
+        let mut run = Run { border, filter, renderer, texture, target, converged_after: 0, loaded_while_timed: 0 };
+        // The first draw into the target makes its pipelines: not timed.
+        run.draw_alone(&Pose::Window(Window::whole(0)))?;
+        Ok(run)
     }
 
     pub fn label(&self) -> String {
         format!("border {} {}", self.border, self.filter.name())
     }
 
-    /// Draws `pose` until a frame shows no fallback and the next 16 load nothing, then copies
-    /// the page table for the sampling-only pass.
+    /// Draws `pose` until a frame shows no fallback and the next `block²` frames (every pixel
+    /// of a feedback block elected once) load nothing.
     pub fn converge(&mut self, pose: &Pose, view: &str) -> Result<()> {
+        let block = self.renderer.runtime().config().feedback_block;
         let mut first_clean = None;
         let mut quiet = 0;
         for f in 0..MAX_CONVERGE_FRAMES {
-            let (report, _) = self.rt.frame(pose, false).with_context(|| format!("{} on {view:?}", self.label()))?;
+            let (report, _) =
+                self.renderer.frame(pose, false).with_context(|| format!("{} on {view:?}", self.label()))?;
             if report.fallback_fraction == 0.0 {
                 first_clean.get_or_insert(f);
             } else {
                 first_clean = None;
             }
             quiet = if first_clean.is_some() && report.loaded == 0 && report.deferred == 0 { quiet + 1 } else { 0 };
-            // The feedback jitter visits every sample position of a pixel block within 16 frames.
-            if quiet >= 16
+            if quiet >= block * block
                 && let Some(first_clean) = first_clean
             {
                 self.converged_after = first_clean;
-                self.table.write_all(&self.rt.gpu().queue, self.rt.page_table());
                 return Ok(());
             }
         }
         bail!("{} did not converge on view {view:?} in {MAX_CONVERGE_FRAMES} frames", self.label());
     }
 
-    /// Times `FRAMES_PER_ROUND` runtime frames, in ms each.
+    /// Times `FRAMES_PER_ROUND` frames, in ms each.
     pub fn time_frames(&mut self, pose: &Pose, view: &str) -> Result<Vec<f64>> {
         (0..FRAMES_PER_ROUND)
             .map(|_| {
                 let start = Instant::now();
                 let (report, _) =
-                    self.rt.frame(pose, false).with_context(|| format!("{} on {view:?}", self.label()))?;
+                    self.renderer.frame(pose, false).with_context(|| format!("{} on {view:?}", self.label()))?;
                 let ms = start.elapsed().as_secs_f64() * 1e3;
                 if report.loaded > 0 || report.fallback_fraction > 0.0 {
                     eprintln!("note: {} on {view:?} streamed while timed: {report:?}", self.label());
@@ -91,41 +104,43 @@ impl Run {
             .collect()
     }
 
-    /// Times `SUBMITS_PER_ROUND` submissions of `DRAWS_PER_SUBMIT` sampling-only draws, in ms per
-    /// draw.
-    pub fn time_sampling(&self, window: &Window) -> Result<Vec<f64>> {
-        let gpu = self.rt.gpu();
-        let sources = Sources { textures: self.rt.textures(), table: &self.table, cache: self.rt.cache() };
-        let view = View::Window(*window);
+    /// Times `SUBMITS_PER_ROUND` rounds of `DRAWS_PER_SUBMIT` draws of `window` into the run's
+    /// own target (`SceneRenderer::draw_to`: no readback, no end of frame, nothing streams), in
+    /// ms per draw.
+    pub fn time_sampling(&mut self, window: &Window) -> Result<Vec<f64>> {
+        let pose = Pose::Window(*window);
         (0..SUBMITS_PER_ROUND)
             .map(|_| {
                 let start = Instant::now();
-                let mut encoder = gpu.device.create_command_encoder(&Default::default());
-                for _ in 0..DRAWS_PER_SUBMIT {
-                    self.pass.encode(&gpu.device, &mut encoder, &self.target, &sources, &view, None);
+                for _ in 0..DRAWS_PER_SUBMIT - 1 {
+                    self.renderer.draw_to(&pose, &self.target, TARGET_FORMAT, (SIZE[0], SIZE[1]));
                 }
-                gpu.queue.submit([encoder.finish()]);
-                gpu.wait_idle().with_context(|| format!("{}: sampling-only draws", self.label()))?;
+                self.draw_alone(&pose)?;
                 Ok(start.elapsed().as_secs_f64() * 1e3 / DRAWS_PER_SUBMIT as f64)
             })
             .collect()
     }
 
+    /// One draw of `pose` into the run's own target, waited for.
+    fn draw_alone(&mut self, pose: &Pose) -> Result<()> {
+        self.renderer.draw_to(pose, &self.target, TARGET_FORMAT, (SIZE[0], SIZE[1]));
+        self.renderer.gpu().wait_idle().with_context(|| format!("{}: draws alone", self.label()))
+    }
+
     /// Renders one picture of `window` and compares it with the reference sampler's model of
     /// this runtime and with `ideal`.
     pub fn check(&mut self, chain: &LodChain, window: &Window, ideal: &Rgba8Image) -> Result<Check> {
-        let (want, mut fallback) = model(&self.rt, chain, &self.texture, window, self.filter);
+        let (want, mut fallback) = model(self.renderer.runtime(), chain, &self.texture, window, self.filter);
         let (_, picture) = self
-            .rt
+            .renderer
             .frame(&Pose::Window(*window), true)
             .with_context(|| format!("{}: the checked frame", self.label()))?;
-        let picture = picture.context("the runtime returned no picture though one was asked for")?;
-        // The sampling-only path draws the same thing.
-        let sources = Sources { textures: self.rt.textures(), table: &self.table, cache: self.rt.cache() };
+        let picture = picture.context("the renderer returned no picture though one was asked for")?;
+        // The draw without streaming draws the same thing.
         let alone = self
-            .pass
-            .render_and_read(self.rt.gpu(), &self.target, &sources, &View::Window(*window), None)
-            .with_context(|| format!("{}: the sampling-only picture", self.label()))?;
+            .renderer
+            .still(&Pose::Window(*window), None)
+            .with_context(|| format!("{}: the picture without streaming", self.label()))?;
         let sampling_only_differs = alone != picture;
 
         let own = compare(&picture, &want);

@@ -3,9 +3,11 @@
 //! wgpu's warnings on stderr. Without an adapter a test prints a note and passes, except under
 //! `CI=true`, where it fails.
 
-use std::sync::Once;
+use std::sync::{Arc, Once};
 
-use vortex_vt_wgpu::Gpu;
+use vortex_pack::Pack;
+use vortex_vt_wgpu::harness::{FrameReport, Scene, SceneRenderer};
+use vortex_vt_wgpu::{Gpu, Pacing, PageSource};
 
 /// Prints wgpu's warnings and errors (validation messages come through `log`).
 struct StderrLogger;
@@ -46,6 +48,22 @@ pub fn gpu() -> Option<Gpu> {
             None
         }
     }
+}
+
+/// The renderer of `scene` over `packs` (texture id = index), paced offline (each frame's
+/// feedback is read back and its pages land before the next frame: the same counters and
+/// pictures on every run), checking the residency's and the page table's invariants after every
+/// frame.
+pub fn renderer(gpu: Gpu, packs: &[&Arc<Pack>], scene: &Scene) -> SceneRenderer {
+    let sources = packs.iter().map(|&p| p.clone() as Arc<dyn PageSource>).collect();
+    let mut renderer = SceneRenderer::new(gpu, sources, scene, Pacing::Offline).unwrap();
+    renderer.runtime_mut().check_invariants = true;
+    renderer
+}
+
+/// `frames` without their timings, which differ from run to run: the counters alone.
+pub fn untimed(frames: &[FrameReport]) -> Vec<FrameReport> {
+    frames.iter().map(|f| FrameReport { cpu_ms: 0.0, io_wait_ms: 0.0, ..f.clone() }).collect()
 }
 
 pub mod pyramid;
