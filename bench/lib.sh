@@ -61,6 +61,16 @@ median() {
     awk '{ v[NR] = $1 } END { if (NR % 2) print v[(NR + 1) / 2]; else print (v[NR / 2] + v[NR / 2 + 1]) / 2 }'
 }
 
+# The runtime benchmarks' pack: src16k.tif at 136-texel tiles with a 4-texel border (128-texel
+# pages), made once; prints its path.
+world_pack() {
+  local pack=$WORK/world16k.vtpk
+  if [ ! -s "$pack" ]; then
+    log "packing src16k.tif"
+    "$WORK/bin/vortex-tiler" split "$WORK/src16k.tif" --pack "$pack" --tile-size 136 --border 4 -q
+  fi
+  echo "$pack"
+}
 calc() { awk "BEGIN { printf \"$1\", $2 }"; }
 
 # splice NAME REPORT INTRO: puts REPORT between NAME's markers in $DOC, adding a section with

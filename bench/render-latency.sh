@@ -18,11 +18,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source bench/lib.sh
 bench_setup
-PACK=$WORK/world16k.vtpk
-if [ ! -s "$PACK" ]; then
-  log "packing src16k.tif"
-  "$WORK/bin/vortex-tiler" split "$WORK/src16k.tif" --pack "$PACK" --tile-size 136 --border 4 -q
-fi
+PACK=$(world_pack)
 REPORT=$WORK/latency-report.md
 {
   echo "$(date -u +%F), $(nproc) cores, rev $REV; pack: src16k.tif at 136-texel tiles, 4-texel border, JPEG Q85."

@@ -13,11 +13,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source bench/lib.sh
 bench_setup
-PACK=$WORK/world16k.vtpk
-if [ ! -s "$PACK" ]; then
-  log "packing src16k.tif"
-  "$WORK/bin/vortex-tiler" split "$WORK/src16k.tif" --pack "$PACK" --tile-size 136 --border 4 -q
-fi
+PACK=$(world_pack)
 REPORT=$WORK/render-report.md
 {
   echo "$(date -u +%F), $(nproc) cores, rev $REV."

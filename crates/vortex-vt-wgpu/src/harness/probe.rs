@@ -40,13 +40,7 @@ impl AddressProbe {
     /// border). Panics if the placeholders cannot be made (a page table over the device's limit).
     pub fn new(gpu: &Gpu, textures: &[VirtualTexture]) -> AddressProbe {
         let device = &gpu.device;
-        let t = textures[0];
-        let grids: Vec<_> = textures.iter().map(|t| t.grid).collect();
-        #[expect(clippy::expect_used, reason = "a test tool: its textures are the test's")]
-        let (table, cache) = (
-            GpuPageTable::new(device, &gpu.queue, &grids, 1).expect("a page table for the probe"),
-            PageCache::new(device, 1, t.tile_size, t.border, CacheFormat::Rgba8).expect("a cache for the probe"),
-        );
+        let (table, cache) = placeholders(gpu, textures);
         let feedback = FeedbackBuffer::new(device, 1, 1, 1);
         let bindings = Bindings::new(device, &table, &cache, &feedback, SampleFilter::Nearest);
         let params = Params::new(textures, &cache, SampleFilter::Nearest, feedback.layout(0), 0.0);
@@ -117,13 +111,7 @@ impl FeedbackProbe {
         ring: usize,
     ) -> FeedbackProbe {
         let device = &gpu.device;
-        let t = textures[0];
-        let grids: Vec<_> = textures.iter().map(|t| t.grid).collect();
-        #[expect(clippy::expect_used, reason = "a test tool: its textures are the test's")]
-        let (table, cache) = (
-            GpuPageTable::new(device, &gpu.queue, &grids, 1).expect("a page table for the probe"),
-            PageCache::new(device, 1, t.tile_size, t.border, CacheFormat::Rgba8).expect("a cache for the probe"),
-        );
+        let (table, cache) = placeholders(gpu, textures);
         let feedback = FeedbackBuffer::new(device, width, height, block);
         let readback = FeedbackReadback::new(device, &feedback, ring);
         let bindings = Bindings::new(device, &table, &cache, &feedback, SampleFilter::Nearest);
@@ -178,4 +166,17 @@ impl FeedbackProbe {
         self.readback.submitted();
         copied
     }
+}
+
+/// A page table with nothing mapped and a one-slot cache for `textures`: what a probe binds,
+/// which reads only the textures' shapes. Panics if they cannot be made (a page table over the
+/// device's limit).
+#[expect(clippy::expect_used, reason = "a test tool: its textures are the test's")]
+fn placeholders(gpu: &Gpu, textures: &[VirtualTexture]) -> (GpuPageTable, PageCache) {
+    let t = textures[0];
+    let grids: Vec<_> = textures.iter().map(|t| t.grid).collect();
+    (
+        GpuPageTable::new(&gpu.device, &gpu.queue, &grids, 1).expect("a page table for the probe"),
+        PageCache::new(&gpu.device, 1, t.tile_size, t.border, CacheFormat::Rgba8).expect("a cache for the probe"),
+    )
 }
