@@ -299,10 +299,11 @@ impl State {
             (Key::Character(c), _) if c.as_str() == "+" || c.as_str() == "=" => self.zoom(1.25, centre),
             (Key::Character(c), _) if c.as_str() == "-" => self.zoom(0.8, centre),
             (Key::Character(c), _) => {
-                if let (Some(d), Start::Image(v)) = (c.chars().next().and_then(|c| c.to_digit(10)), &mut self.view) {
-                    if (1..=self.images.len() as u32).contains(&d) {
-                        v.texture = (d - 1) as u8;
-                    }
+                let digit = c.chars().next().and_then(|c| c.to_digit(10));
+                if let (Some(d), Start::Image(v)) = (digit, &mut self.view)
+                    && (1..=self.images.len() as u32).contains(&d)
+                {
+                    v.texture = (d - 1) as u8;
                 }
             }
             (Key::Named(NamedKey::ArrowLeft), _) => self.pan([f64::from(size.0) / 10.0, 0.0]),
