@@ -76,13 +76,16 @@ pub fn run(pack: &Path, out: &Path, frames: u32) -> Result<(), Box<dyn std::erro
         immediate_size: 0,
     });
     let format = wgpu::TextureFormat::Rgba8UnormSrgb;
+    // The runtime's filter fixed in the pipeline: only its code is compiled in (optional).
+    let constants = [shader::filter_constant(vt.filter())];
+    let options = wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() };
     let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some("embed"),
         layout: Some(&layout),
         vertex: wgpu::VertexState {
             module: &module,
             entry_point: Some("vs_main"),
-            compilation_options: Default::default(),
+            compilation_options: options.clone(),
             buffers: &[Some(wgpu::VertexBufferLayout {
                 array_stride: 16,
                 step_mode: wgpu::VertexStepMode::Vertex,
@@ -95,7 +98,7 @@ pub fn run(pack: &Path, out: &Path, frames: u32) -> Result<(), Box<dyn std::erro
         fragment: Some(wgpu::FragmentState {
             module: &module,
             entry_point: Some("fs_main"),
-            compilation_options: Default::default(),
+            compilation_options: options,
             targets: &[Some(format.into())],
         }),
         multiview_mask: None,

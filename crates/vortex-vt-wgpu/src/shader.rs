@@ -34,6 +34,15 @@ pub fn with_module(application: &str, group: u32) -> String {
     format!("{}\n{application}", module(group))
 }
 
+/// The pipeline constant that fixes the module's filter when a pipeline is made (pass it in
+/// `PipelineCompilationOptions::constants`): the other filters' code is compiled out. Without
+/// it the filter comes from the uniform block and [`Runtime::set_filter`](crate::Runtime::set_filter)
+/// changes it without a new pipeline; pass the runtime's filter, and make the pipeline anew when
+/// it changes. Worth it on CPU drivers (lavapipe), which run both sides of a branch.
+pub fn filter_constant(filter: crate::SampleFilter) -> (&'static str, f64) {
+    ("VT_FILTER", f64::from(filter as u32))
+}
+
 /// A shader module descriptor of [`with_module`], for `Device::create_shader_module`.
 pub fn descriptor<'a>(label: Option<&'a str>, application: &str, group: u32) -> wgpu::ShaderModuleDescriptor<'a> {
     wgpu::ShaderModuleDescriptor {

@@ -18,7 +18,7 @@ pub(crate) fn shader(device: &wgpu::Device, label: &str, extra: &str) -> wgpu::S
 }
 
 /// The two pipelines of a pass.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub(crate) struct Pipelines {
     window: wgpu::RenderPipeline,
     mesh: wgpu::RenderPipeline,
@@ -26,7 +26,8 @@ pub(crate) struct Pipelines {
 
 impl Pipelines {
     /// Pipelines writing `format` without blending, with fragment stages `fs_{prefix}window` and
-    /// `fs_{prefix}mesh`, over `layouts` (group 0, the harness's; group 1, the module's).
+    /// `fs_{prefix}mesh`, over `layouts` (group 0, the harness's; group 1, the module's), with
+    /// the shader's overrides set to `constants`.
     pub(crate) fn new(
         device: &wgpu::Device,
         label: &str,
@@ -34,6 +35,7 @@ impl Pipelines {
         layouts: [&wgpu::BindGroupLayout; 2],
         format: wgpu::TextureFormat,
         prefix: &str,
+        constants: &[(&str, f64)],
     ) -> Pipelines {
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some(label),
@@ -41,6 +43,7 @@ impl Pipelines {
             immediate_size: 0,
         });
         let make = |is_window: bool| {
+            let options = wgpu::PipelineCompilationOptions { constants, ..Default::default() };
             let fragment = format!("fs_{prefix}{}", if is_window { "window" } else { "mesh" });
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
@@ -48,7 +51,7 @@ impl Pipelines {
                 vertex: wgpu::VertexState {
                     module,
                     entry_point: Some(if is_window { "vs_window" } else { "vs_mesh" }),
-                    compilation_options: Default::default(),
+                    compilation_options: options.clone(),
                     buffers: if is_window { &[] } else { &[Some(Vertex::LAYOUT)] },
                 },
                 primitive: wgpu::PrimitiveState::default(),
@@ -64,7 +67,7 @@ impl Pipelines {
                 fragment: Some(wgpu::FragmentState {
                     module,
                     entry_point: Some(&fragment),
-                    compilation_options: Default::default(),
+                    compilation_options: options,
                     targets: &[Some(wgpu::ColorTargetState {
                         format,
                         blend: None,

@@ -5,7 +5,7 @@
 use super::view::View;
 use crate::texture::VirtualTexture;
 
-/// `Frame` in `harness.wgsl`, 112 bytes.
+/// `Frame` in `harness.wgsl`, 96 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub(crate) struct Frame {
@@ -15,8 +15,6 @@ pub(crate) struct Frame {
     step: [f32; 2],
     window_texture: u32,
     lod_override: f32,
-    mode: u32,
-    pad: [u32; 3],
 }
 
 const IDENTITY: [[f32; 4]; 4] =
@@ -24,15 +22,8 @@ const IDENTITY: [[f32; 4]; 4] =
 
 impl Frame {
     /// The parameters of drawing `view` of `textures` into a `size` target; `lod_override`
-    /// replaces the LOD from the footprint; `residency` draws the residency view instead of the
-    /// picture.
-    pub(crate) fn new(
-        textures: &[VirtualTexture],
-        view: &View,
-        size: (u32, u32),
-        lod_override: Option<f32>,
-        residency: bool,
-    ) -> Frame {
+    /// replaces the LOD from the footprint.
+    pub(crate) fn new(textures: &[VirtualTexture], view: &View, size: (u32, u32), lod_override: Option<f32>) -> Frame {
         let mut frame = Frame {
             view_proj: IDENTITY,
             origin_int: [0; 2],
@@ -40,8 +31,6 @@ impl Frame {
             step: [0.0; 2],
             window_texture: 0,
             lod_override: lod_override.unwrap_or(-1.0),
-            mode: u32::from(residency),
-            pad: [0; 3],
         };
         match view {
             View::Window(w) => {

@@ -13,9 +13,11 @@ struct Frame {
     window_texture: u32,
     // At least 0: sample that LOD everywhere; negative: the LOD from the footprint.
     lod_override: f32,
-    // 0: the picture; 1: the residency view (tinted by the LOD drawn, red where it falls back).
-    mode: u32,
 }
+
+// The residency view (tinted by the LOD drawn, red where it falls back) instead of the picture:
+// a pipeline constant, so that the picture's pipelines never compute it.
+override RESIDENCY_VIEW: bool = false;
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 
@@ -78,7 +80,7 @@ fn fs_window(v: Varyings) -> @location(0) vec4<f32> {
     let footprint = max(abs(frame.step.x), abs(frame.step.y));
     vt_feedback_texel(v.texture, texel, footprint, v.position.xy);
     let c = vt_sample_texel_level(v.texture, texel, lod_for(footprint));
-    if frame.mode == 1u {
+    if RESIDENCY_VIEW {
         return residency(c, vt_residency_texel(v.texture, texel, footprint));
     }
     return straight(c);
@@ -90,7 +92,7 @@ fn fs_mesh(v: Varyings) -> @location(0) vec4<f32> {
     let ddy = dpdy(v.uv);
     vt_feedback(v.texture, v.uv, ddx, ddy, v.position.xy);
     let c = vt_sample_level(v.texture, v.uv, lod_for(vt_footprint(v.texture, ddx, ddy)));
-    if frame.mode == 1u {
+    if RESIDENCY_VIEW {
         return residency(c, vt_residency(v.texture, v.uv, ddx, ddy));
     }
     return straight(c);

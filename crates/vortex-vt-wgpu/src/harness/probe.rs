@@ -48,7 +48,7 @@ impl AddressProbe {
         let module = draw::shader(device, "vortex probe", include_str!("probe.wgsl"));
         let frame_layout = draw::frame_only_layout(device, "vortex probe frame");
         let pipelines =
-            Pipelines::new(device, "vortex probe", &module, [&frame_layout, bindings.layout()], FORMAT, "probe_");
+            Pipelines::new(device, "vortex probe", &module, [&frame_layout, bindings.layout()], FORMAT, "probe_", &[]);
         AddressProbe { pipelines, frame_layout, bindings, textures: textures.to_vec() }
     }
 
@@ -64,7 +64,7 @@ impl AddressProbe {
     ) -> Result<Vec<At>, ReadbackError> {
         let device = &gpu.device;
         let target = Target::new(device, "vortex probe", FORMAT, width, height);
-        let frame = Frame::new(&self.textures, view, (width, height), Some(lod as f32), false);
+        let frame = Frame::new(&self.textures, view, (width, height), Some(lod as f32));
         let frame_group = draw::frame_only_bind_group(device, "vortex probe", &self.frame_layout, &frame);
         let readback = Readback::new(device, "probe", width * 16, height);
         let mut encoder =
@@ -118,7 +118,7 @@ impl FeedbackProbe {
         let module = draw::shader(device, "vortex feedback probe", "");
         let frame_layout = draw::frame_only_layout(device, "vortex feedback probe frame");
         let layouts = [&frame_layout, bindings.layout()];
-        let pipelines = Pipelines::new(device, "vortex feedback probe", &module, layouts, TARGET_FORMAT, "");
+        let pipelines = Pipelines::new(device, "vortex feedback probe", &module, layouts, TARGET_FORMAT, "", &[]);
         let target = Target::new(device, "vortex feedback probe", TARGET_FORMAT, width, height);
         FeedbackProbe {
             pipelines,
@@ -155,7 +155,7 @@ impl FeedbackProbe {
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex feedback probe") });
         let size = (self.target.width, self.target.height);
         let frame_group = view.map(|view| {
-            let frame = Frame::new(&self.textures, view, size, None, false);
+            let frame = Frame::new(&self.textures, view, size, None);
             draw::frame_only_bind_group(device, "vortex feedback probe", &self.frame_layout, &frame)
         });
         let draw =

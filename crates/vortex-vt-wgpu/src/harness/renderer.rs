@@ -4,6 +4,7 @@
 //! scene's camera path that calls [`Runtime::end_frame`] after each frame. `vortex-tiler render`
 //! and the tests drive it.
 
+use std::cell::RefCell;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -18,11 +19,21 @@ use super::view::View;
 use crate::device::Gpu;
 use crate::readback::{Readback, ReadbackError};
 use crate::runtime::{FrameStats, Pacing, Runtime, RuntimeConfig, RuntimeError};
+use crate::sample::SampleFilter;
+use crate::shader;
 use crate::source::PageSource;
 
 /// The format of the harness's colour target: sRGB, so the linear-light samples are encoded on
 /// write.
 pub const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+
+/// What a pipeline of the harness is specialised for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct PipelineKey {
+    format: wgpu::TextureFormat,
+    filter: SampleFilter,
+    residency_view: bool,
+}
 
 /// The counters of one frame.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -96,13 +107,14 @@ pub struct SceneRenderer {
     gpu: Gpu,
     runtime: Runtime,
     module: wgpu::ShaderModule,
-    pipelines: Pipelines,
+    /// The pipelines made so far, one pair per target format, filter and view (picture or
+    /// residency): the filter and the view are pipeline constants, so that a pipeline holds only
+    /// its own filter's code.
+    pipelines: RefCell<Vec<(PipelineKey, Pipelines)>>,
     frame_layout: wgpu::BindGroupLayout,
     target: Target,
     readback: Readback,
     meshes: Vec<GpuMesh>,
-    /// Pipelines for other targets' formats, made when first drawn into.
-    other_pipelines: Vec<(wgpu::TextureFormat, Pipelines)>,
     /// The depth buffer of other targets, for their size.
     other_depth: Option<((u32, u32), wgpu::TextureView)>,
     residency_view: bool,
@@ -134,8 +146,6 @@ impl SceneRenderer {
         let device = &gpu.device;
         let module = draw::shader(device, "vortex harness", "");
         let frame_layout = draw::frame_only_layout(device, "vortex harness frame");
-        let layouts = [&frame_layout, runtime.bind_group_layout()];
-        let pipelines = Pipelines::new(device, "vortex harness", &module, layouts, TARGET_FORMAT, "");
         let [w, h] = scene.size;
         let target = Target::new(device, "vortex target", TARGET_FORMAT, w, h);
         let readback = Readback::new(device, "target", w * 4, h);
@@ -145,19 +155,33 @@ impl SceneRenderer {
             gpu,
             runtime,
             module,
-            pipelines,
+            pipelines: RefCell::new(Vec::new()),
             frame_layout,
             target,
             readback,
             meshes,
-            other_pipelines: Vec::new(),
             other_depth: None,
             residency_view: false,
         })
     }
 
-    /// Records one draw at `pose` into `colour` (`size` pixels, with `depth`) through `pipelines`;
-    /// `lod` fixes the LOD sampled everywhere.
+    /// The pipelines drawing into `format` with the runtime's filter and the current view.
+    fn pipelines(&self, format: wgpu::TextureFormat) -> Pipelines {
+        let key = PipelineKey { format, filter: self.runtime.filter(), residency_view: self.residency_view };
+        let mut made = self.pipelines.borrow_mut();
+        if let Some((_, p)) = made.iter().find(|(k, _)| *k == key) {
+            return p.clone();
+        }
+        let constants =
+            [shader::filter_constant(key.filter), ("RESIDENCY_VIEW", f64::from(u8::from(key.residency_view)))];
+        let layouts = [&self.frame_layout, self.runtime.bind_group_layout()];
+        let p = Pipelines::new(&self.gpu.device, "vortex harness", &self.module, layouts, format, "", &constants);
+        made.push((key, p.clone()));
+        p
+    }
+
+    /// Records one draw at `pose` into `colour`, a `size` view of a `format` texture, with
+    /// `depth`; `lod` fixes the LOD sampled everywhere.
     #[allow(clippy::too_many_arguments)]
     fn encode(
         &self,
@@ -165,19 +189,20 @@ impl SceneRenderer {
         pose: &Pose,
         lod: Option<f32>,
         colour: &wgpu::TextureView,
+        format: wgpu::TextureFormat,
         depth: &wgpu::TextureView,
         size: (u32, u32),
-        pipelines: &Pipelines,
     ) {
+        let pipelines = self.pipelines(format);
         let view = match *pose {
             Pose::Window(w) => View::Window(w),
             Pose::Camera(view_proj) => View::Meshes { view_proj, meshes: &self.meshes },
         };
-        let frame = Frame::new(self.runtime.textures(), &view, size, lod, self.residency_view);
+        let frame = Frame::new(self.runtime.textures(), &view, size, lod);
         let frame_group =
             draw::frame_only_bind_group(&self.gpu.device, "vortex harness frame", &self.frame_layout, &frame);
         let groups = [&frame_group, self.runtime.bind_group()];
-        let draw = Some((pipelines, groups, &view));
+        let draw = Some((&pipelines, groups, &view));
         draw::record(encoder, "vortex frame", colour, depth, wgpu::Color::TRANSPARENT, draw);
     }
 
@@ -187,7 +212,7 @@ impl SceneRenderer {
         let mut encoder =
             self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex frame") });
         let t = &self.target;
-        self.encode(&mut encoder, pose, lod, &t.view, &t.depth, (t.width, t.height), &self.pipelines);
+        self.encode(&mut encoder, pose, lod, &t.view, TARGET_FORMAT, &t.depth, (t.width, t.height));
         if image {
             let (source, extent) = self.target.copy_source();
             self.readback.encode_copy(&mut encoder, source, extent);
@@ -199,20 +224,13 @@ impl SceneRenderer {
     /// (a window's surface), without ending the frame: call [`SceneRenderer::end_frame`] after.
     pub fn draw_to(&mut self, pose: &Pose, colour: &wgpu::TextureView, format: wgpu::TextureFormat, size: (u32, u32)) {
         let device = &self.gpu.device;
-        if !self.other_pipelines.iter().any(|(f, _)| *f == format) {
-            let layouts = [&self.frame_layout, self.runtime.bind_group_layout()];
-            let pipelines = Pipelines::new(device, "vortex harness", &self.module, layouts, format, "");
-            self.other_pipelines.push((format, pipelines));
-        }
         if self.other_depth.as_ref().is_none_or(|(s, _)| *s != size) {
             self.other_depth = Some((size, draw::depth_texture(device, size.0, size.1)));
         }
         let mut encoder =
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("vortex frame") });
-        if let (Some((_, pipelines)), Some((_, depth))) =
-            (self.other_pipelines.iter().find(|(f, _)| *f == format), &self.other_depth)
-        {
-            self.encode(&mut encoder, pose, None, colour, depth, size, pipelines);
+        if let Some((_, depth)) = &self.other_depth {
+            self.encode(&mut encoder, pose, None, colour, format, depth, size);
         }
         self.gpu.queue.submit([encoder.finish()]);
     }

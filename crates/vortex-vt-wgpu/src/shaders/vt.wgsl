@@ -64,6 +64,12 @@ struct VtParams {
 // One word per feedback block (`vortex_vt::feedback::encode`), all ones where nothing asked.
 @group(VT_GROUP) @binding(4) var<storage, read_write> vt_feedback_words: array<u32>;
 
+// The filter: 3 (the default) takes it from the uniform block (`Runtime::set_filter`, no pipeline
+// change); 0 nearest, 1 bilinear, 2 trilinear fix it when the pipeline is made
+// (`shader::filter_constant`), so that the others' code is compiled out. CPU drivers such as
+// lavapipe run both sides of a branch, so there a fixed filter makes nearest and bilinear cheaper.
+override VT_FILTER: u32 = 3u;
+
 const VT_BELOW_ONE: f32 = 0.99999994;
 const VT_UNMAPPED: u32 = 0xffffffffu;
 
@@ -175,11 +181,9 @@ fn vt_fetch(id: u32, lod: u32, at: VtAt) -> vec4<f32> {
     let tile = vt_params.tile;
     let origin = slot * tile.x;
     let texel = clamp(origin + tile.y + a.within, origin + 0.5, origin + tile.x - 0.5);
-    var s = textureSampleLevel(vt_cache, vt_cache_sampler, texel / tile.w, 0.0);
-    if vt_params.straight_alpha != 0u {
-        s = vec4<f32>(s.rgb * s.a, s.a);
-    }
-    return s;
+    let s = textureSampleLevel(vt_cache, vt_cache_sampler, texel / tile.w, 0.0);
+    // Without a branch: a straight-alpha cache (BC7) is premultiplied here.
+    return vec4<f32>(s.rgb * select(1.0, s.a, vt_params.straight_alpha != 0u), s.a);
 }
 
 // The filtered sample of `c` at the (fractional) LOD `wanted`.
@@ -192,7 +196,8 @@ fn vt_shade(id: u32, c: VtCoord, wanted: f32) -> vec4<f32> {
     let fine = vt_fetch(id, lod, at);
     let blend = clamp(wanted - level, 0.0, 1.0);
     // Magnified (or at the coarsest LOD) trilinear is bilinear: no second sample.
-    if vt_params.sample_filter != 2u || level >= top || blend == 0.0 {
+    let mode = select(VT_FILTER, vt_params.sample_filter, VT_FILTER > 2u);
+    if mode != 2u || level >= top || blend == 0.0 {
         return fine;
     }
     let coarse = vt_fetch(id, lod + 1u, vt_ancestor(at, 1u, t.payload));

@@ -144,7 +144,7 @@ pub fn surprises(rows: &[Row]) -> String {
     out!(
         s,
         "- Magnified, trilinear draws the bilinear picture exactly (its blend weight is 0 below LOD 0: the \
-         same PSNRs) and still takes {:.2}x the frame time, although `sample.wgsl` skips the coarser LOD's \
+         same PSNRs) and still takes {:.2}x the frame time, although the module (`shaders/vt.wgsl`) skips the coarser LOD's \
          sample when its weight is 0. The branch depends on a per-fragment value, and lavapipe runs \
          fragments in SIMD groups under a mask, so it appears to pay for the skipped sample anyway; a GPU \
          that branches per warp would not.",
