@@ -10,7 +10,9 @@
 # From each report: p50 and p99 of the frames' cpu_ms (recording and submitting the frame and
 # Runtime::end_frame, without the wait for the picture, which a headless run reads back only
 # when asked), the longest io_wait_ms (time a frame waited for pages), the frames that still
-# fell back, and the frames to converge once the camera is still. 8 loader threads (the most
+# fell back, and the frames to converge once the camera is still. Every run is 400 frames (the
+# scenes' paths end by frame 44; the rest is a still camera, long enough for 50 ms reads to
+# land while frames run at a few milliseconds each). 8 loader threads (the most
 # `render` allows on 2 cores), as slow reads want more threads than cores. Results go to
 # docs/benchmarks.md (or $DOC) between `<!-- render-latency:begin -->` and `:end -->`.
 #     bench/render-latency.sh
@@ -28,7 +30,7 @@ REPORT=$WORK/latency-report.md
 } >"$REPORT"
 for scene in default bench/scenes/zoom.json; do
   for mode in offline real-time latency; do
-    args=(--pack "$PACK" -q)
+    args=(--pack "$PACK" --frame-count 400 -q)
     [ "$scene" != default ] && args+=(--scene "$ROOT/$scene")
     case $mode in
       offline) args+=(--pacing offline) ;;

@@ -143,6 +143,8 @@ pub struct FrameStats {
     pub deferred: usize,
     /// Pages loaded but no longer wanted by the time they landed (their slot was taken).
     pub discarded: usize,
+    /// Queued reads taken back because their page was evicted before a worker started it.
+    pub cancelled: usize,
     /// Pages on the loader's threads or waiting for an upload, after this frame.
     pub in_flight: usize,
     /// Share of the last analysed feedback's samples whose page was not mapped when it was
@@ -377,9 +379,12 @@ impl Runtime {
         let wanted: Vec<PageId> = analysis.requests.iter().map(|r| r.page).collect();
         self.updates += 1;
         let update = self.residency.update(self.updates, &wanted);
-        // A page evicted before it landed was never mapped: nothing to unmap.
-        let unmap: Vec<(PageId, Slot)> =
-            update.evictions.iter().copied().filter(|(page, _)| self.in_flight.remove(page).is_none()).collect();
+        // A page evicted before it landed was never mapped: nothing to unmap, and its read is
+        // taken back if no worker has started it (with slow reads, a moving camera would
+        // otherwise queue pages it has already left behind).
+        let (stale, unmap): (Vec<(PageId, Slot)>, Vec<(PageId, Slot)>) =
+            update.evictions.iter().copied().partition(|(page, _)| self.in_flight.remove(page).is_some());
+        stats.cancelled = self.loader.cancel(&stale);
         changes.extend(self.table.apply_mappings(&unmap, &[]));
         self.in_flight.extend(update.loads.iter().copied());
         let s = update.stats;

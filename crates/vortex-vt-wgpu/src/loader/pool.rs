@@ -30,6 +30,8 @@ struct Job {
     page: PageId,
     slot: Slot,
     reply: Sender<(usize, LoadedPage)>,
+    /// Queued by [`Loader::request`] (so [`Loader::cancel`] may take it back), not by `load`.
+    requested: bool,
 }
 
 struct Queue {
@@ -192,6 +194,7 @@ impl Loader {
             page,
             slot,
             reply: tx.clone(),
+            requested: false,
         }));
         // Only the jobs hold senders now: if every one of them is gone, `recv` stops waiting.
         drop(tx);
@@ -224,7 +227,30 @@ impl Loader {
     /// entry is answered once (a page requested twice is loaded twice).
     pub fn request(&self, pages: &[(PageId, Slot)]) {
         self.pending.fetch_add(pages.len(), Ordering::Relaxed);
-        self.enqueue(pages.iter().map(|&(page, slot)| Job { index: 0, page, slot, reply: self.async_tx.clone() }));
+        self.enqueue(pages.iter().map(|&(page, slot)| Job {
+            index: 0,
+            page,
+            slot,
+            reply: self.async_tx.clone(),
+            requested: true,
+        }));
+    }
+
+    /// Takes back the [`Loader::request`]ed loads of `pages` (page, slot) that no worker has
+    /// started yet: their answers will never come. Returns how many it took back. Pages being
+    /// read are answered as usual.
+    pub fn cancel(&self, pages: &[(PageId, Slot)]) -> usize {
+        if pages.is_empty() {
+            return 0;
+        }
+        let cancelled: std::collections::HashSet<(PageId, Slot)> = pages.iter().copied().collect();
+        let mut queue = lock(&self.shared.queue);
+        let before = queue.jobs.len();
+        queue.jobs.retain(|job| !job.requested || !cancelled.contains(&(job.page, job.slot)));
+        let taken = before - queue.jobs.len();
+        drop(queue);
+        self.pending.fetch_sub(taken, Ordering::Relaxed);
+        taken
     }
 
     /// The requested pages finished since the last call, in the order they finished; never waits.

@@ -563,3 +563,26 @@ fn solid_bc7_blocks_decode_to_their_colour_exactly() {
         assert_eq!(t, colour((y / 4) * 16 + x / 4), "texel ({x}, {y})");
     }
 }
+
+#[test]
+fn cancelled_requests_are_never_answered_and_the_rest_are() {
+    let dir = tempdir();
+    let pack = mixed_pack(dir.path(), "a.vtpk");
+    let slow: Arc<dyn vortex_vt_wgpu::PageSource> =
+        Arc::new(vortex_vt_wgpu::source::Delayed::new(pack, Duration::from_millis(40)));
+    let loader = Loader::with_sources(vec![slow], 1).unwrap();
+    let pages = all_pages(0, loader.textures()[0].grid, 0);
+    loader.request(&pages[..6]);
+    // The one worker is reading the first page; the other five wait in the queue.
+    std::thread::sleep(Duration::from_millis(10));
+    assert_eq!(loader.cancel(&pages[2..6]), 4);
+    assert_eq!(loader.cancel(&pages[2..6]), 0, "taken back once");
+    let started = Instant::now();
+    let mut answered = Vec::new();
+    while loader.pending() > 0 {
+        assert!(started.elapsed() < Duration::from_secs(5), "{} still pending", loader.pending());
+        answered.extend(loader.poll().into_iter().map(|p| (p.page, p.slot)));
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    assert_eq!(answered, pages[..2]);
+}
