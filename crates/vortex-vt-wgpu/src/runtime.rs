@@ -382,7 +382,7 @@ impl Runtime {
         // A page evicted before it landed was never mapped: nothing to unmap, and its read is
         // taken back if no worker has started it (with slow reads, a moving camera would
         // otherwise queue pages it has already left behind).
-        let (stale, unmap): (Vec<(PageId, Slot)>, Vec<(PageId, Slot)>) =
+        let (stale, unmap): (Vec<_>, Vec<_>) =
             update.evictions.iter().copied().partition(|(page, _)| self.in_flight.remove(page).is_some());
         stats.cancelled = self.loader.cancel(&stale);
         changes.extend(self.table.apply_mappings(&unmap, &[]));
