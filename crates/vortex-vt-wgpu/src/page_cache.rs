@@ -20,15 +20,27 @@ pub enum CacheFormat {
     /// 4 bytes per texel; tiles are uploaded as RGBA8.
     #[default]
     Rgba8,
+    /// BC1 blocks (8 bytes per 4x4 texels, opaque): an eighth of RGBA8's memory. Tiles are
+    /// transcoded on the loader's threads. Needs what BC7 needs.
+    Bc1,
     /// BC7 blocks (16 bytes per 4x4 texels); tiles are uploaded as blocks, rows of blocks top
     /// down. Needs `Features::TEXTURE_COMPRESSION_BC` and a tile side that is a multiple of 4.
     Bc7,
 }
 
 impl CacheFormat {
+    /// Every format, largest first.
+    pub const ALL: [CacheFormat; 3] = [CacheFormat::Rgba8, CacheFormat::Bc7, CacheFormat::Bc1];
+
+    /// The format `name` names (`rgba8`, `bc1`, `bc7`).
+    pub fn from_name(name: &str) -> Option<CacheFormat> {
+        CacheFormat::ALL.into_iter().find(|f| f.name() == name)
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             CacheFormat::Rgba8 => "rgba8",
+            CacheFormat::Bc1 => "bc1",
             CacheFormat::Bc7 => "bc7",
         }
     }
@@ -38,6 +50,7 @@ impl CacheFormat {
         let side = tile_size as usize;
         match self {
             CacheFormat::Rgba8 => side * side * 4,
+            CacheFormat::Bc1 => (side / 4) * (side / 4) * 8,
             CacheFormat::Bc7 => (side / 4) * (side / 4) * 16,
         }
     }
@@ -46,6 +59,7 @@ impl CacheFormat {
     fn rows(self, tile_size: u32) -> (u32, u32) {
         match self {
             CacheFormat::Rgba8 => (tile_size * 4, tile_size),
+            CacheFormat::Bc1 => (tile_size / 4 * 8, tile_size / 4),
             CacheFormat::Bc7 => (tile_size / 4 * 16, tile_size / 4),
         }
     }
@@ -53,6 +67,7 @@ impl CacheFormat {
     fn formats(self) -> (wgpu::TextureFormat, wgpu::TextureFormat) {
         match self {
             CacheFormat::Rgba8 => (wgpu::TextureFormat::Rgba8Unorm, wgpu::TextureFormat::Rgba8UnormSrgb),
+            CacheFormat::Bc1 => (wgpu::TextureFormat::Bc1RgbaUnorm, wgpu::TextureFormat::Bc1RgbaUnormSrgb),
             CacheFormat::Bc7 => (wgpu::TextureFormat::Bc7RgbaUnorm, wgpu::TextureFormat::Bc7RgbaUnormSrgb),
         }
     }
@@ -68,9 +83,9 @@ pub enum CacheError {
     #[error("a {side}-texel cache is over the device's {max}-texel 2D texture limit")]
     TooLarge { side: u32, max: u32 },
     #[error(
-        "a BC7 cache needs the device feature TEXTURE_COMPRESSION_BC and a tile side that is a multiple of 4 (it is {tile_size})"
+        "a BC cache needs the device feature TEXTURE_COMPRESSION_BC and a tile side that is a multiple of 4 (it is {tile_size})"
     )]
-    Bc7 { tile_size: u32 },
+    Bc { tile_size: u32 },
 }
 
 /// The physical page cache texture and its geometry.
@@ -100,10 +115,10 @@ impl PageCache {
         if tile_size == 0 || 2 * border >= tile_size {
             return Err(CacheError::Border { tile_size, border });
         }
-        if format == CacheFormat::Bc7
+        if format != CacheFormat::Rgba8
             && (!tile_size.is_multiple_of(4) || !device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC))
         {
-            return Err(CacheError::Bc7 { tile_size });
+            return Err(CacheError::Bc { tile_size });
         }
         let side = slots_per_side as u32 * tile_size;
         let max = device.limits().max_texture_dimension_2d;

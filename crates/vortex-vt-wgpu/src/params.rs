@@ -4,7 +4,7 @@
 
 use vortex_vt::page::MAX_TEXTURES;
 
-use crate::page_cache::{CacheFormat, PageCache};
+use crate::page_cache::PageCache;
 use crate::sample::SampleFilter;
 use crate::texture::VirtualTexture;
 
@@ -51,6 +51,7 @@ impl Params {
         filter: SampleFilter,
         feedback: FeedbackLayout,
         feedback_bias: f32,
+        straight_alpha: bool,
     ) -> Params {
         assert!(textures.len() <= MAX_TEXTURES as usize, "{} textures, at most {MAX_TEXTURES}", textures.len());
         let mut infos = [TextureInfo::default(); MAX_TEXTURES as usize];
@@ -70,7 +71,7 @@ impl Params {
             elect,
             feedback_bias,
             filter: filter as u32,
-            straight_alpha: u32::from(cache.format() == CacheFormat::Bc7),
+            straight_alpha: u32::from(straight_alpha),
             pad: [0; 3],
             textures: infos,
         }

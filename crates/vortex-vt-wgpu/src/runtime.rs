@@ -101,8 +101,13 @@ pub struct RuntimeConfig {
     pub frame_size: [u32; 2],
     /// Loader threads (0: one per core; sources that wait on I/O want more).
     pub loader_threads: usize,
-    /// Hold BC7 blocks as stored when the device samples BC and every tile is BC7 or one colour.
+    /// Hold BC7 blocks as stored when the device samples BC and every tile is BC7 or one colour
+    /// (with `cache_format` automatic).
     pub bc7: bool,
+    /// What the physical cache holds: `None` chooses (stored BC7 as above, else RGBA8);
+    /// `Some(Bc1)` (opaque textures only) or `Some(Bc7)` transcodes every page on the loader's
+    /// threads: an eighth or a quarter of RGBA8's GPU memory and upload bytes.
+    pub cache_format: Option<CacheFormat>,
     pub pacing: Pacing,
 }
 
@@ -118,6 +123,7 @@ impl Default for RuntimeConfig {
             frame_size: [1920, 1080],
             loader_threads: 0,
             bc7: true,
+            cache_format: None,
             pacing: Pacing::RealTime,
         }
     }
@@ -222,7 +228,16 @@ impl Runtime {
         let textures = loader.textures().to_vec();
         let grids: Vec<TextureGrid> = textures.iter().map(|t| t.grid).collect();
         let bc = device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC);
-        let format = if config.bc7 && bc && loader.holds_only_bc7() { CacheFormat::Bc7 } else { CacheFormat::Rgba8 };
+        let format = match config.cache_format {
+            None if config.bc7 && bc && loader.holds_only_bc7() => CacheFormat::Bc7,
+            None => CacheFormat::Rgba8,
+            Some(CacheFormat::Bc1) if !loader.opaque() => {
+                return Err(RuntimeError::Config(
+                    "a BC1 cache holds no alpha, and these textures have an alpha channel: use bc7".into(),
+                ));
+            }
+            Some(format) => format,
+        };
         loader.set_format(format);
         let tile_bytes = format.tile_bytes(loader.tile_size()) as u64;
         if config.upload_bytes < tile_bytes {
@@ -317,7 +332,14 @@ impl Runtime {
     /// Writes the uniform block the next frame reads.
     fn write_params(&self) {
         let layout = self.feedback.layout(self.frame);
-        let params = Params::new(&self.textures, &self.cache, self.filter, layout, self.residency.lod_bias());
+        let params = Params::new(
+            &self.textures,
+            &self.cache,
+            self.filter,
+            layout,
+            self.residency.lod_bias(),
+            self.loader.straight_alpha(),
+        );
         self.queue.write_buffer(self.bindings.params(), 0, bytemuck::bytes_of(&params));
     }
 

@@ -105,6 +105,17 @@ pub fn write_pack(
     write_pack_with(path, texture, kind, |page| TestTile::Texels(bordered_tile(chain, texture, page)))
 }
 
+/// Writes a pack at `path` of every page of `texture` (texture id 0), each the bordered tile of
+/// `chain` stored raw with three channels (its alpha dropped): an opaque texture, as the tiler
+/// writes an RGB image. Opens it.
+pub fn write_opaque_pack(
+    path: &Path,
+    chain: &impl LodImages,
+    texture: &VirtualTexture,
+) -> Result<Arc<Pack>, PackError> {
+    write_pack_channels(path, texture, TileKind::Raw, 3, |page| TestTile::Texels(bordered_tile(chain, texture, page)))
+}
+
 /// Writes a pack at `path` of every page of `texture` (texture id 0), each as `tile` says, the
 /// texels stored as `kind` (`Raw` or `Bc7`, as [`write_pack`]). For textures too large to hold
 /// as a [`LodChain`]: most of their tiles can be one colour or absent. Opens it.
@@ -112,6 +123,17 @@ pub fn write_pack_with(
     path: &Path,
     texture: &VirtualTexture,
     kind: TileKind,
+    tile: impl FnMut(PageId) -> TestTile,
+) -> Result<Arc<Pack>, PackError> {
+    write_pack_channels(path, texture, kind, 4, tile)
+}
+
+/// [`write_pack_with`] with `channels` (3 or 4) per texel: RGBA tiles lose their alpha for 3.
+fn write_pack_channels(
+    path: &Path,
+    texture: &VirtualTexture,
+    kind: TileKind,
+    channels: u8,
     mut tile: impl FnMut(PageId) -> TestTile,
 ) -> Result<Arc<Pack>, PackError> {
     let d = Description {
@@ -120,7 +142,7 @@ pub fn write_pack_with(
         tile_size: texture.tile_size,
         border: texture.border,
         level_count: u32::from(texture.grid.lod_count()),
-        channels: 4,
+        channels,
         sample_bytes: 1,
     };
     let levels = levels(texture);
@@ -133,6 +155,8 @@ pub fn write_pack_with(
                     TestTile::Texels(mut bytes) => {
                         if kind == TileKind::Bc7 {
                             bytes = crate::bc7::solid_blocks(&bytes, texture.tile_size);
+                        } else if channels == 3 {
+                            bytes = bytes.chunks_exact(4).flat_map(|t| [t[0], t[1], t[2]]).collect();
                         }
                         writer.add(id, NewTile::Data(kind, &bytes))?;
                     }

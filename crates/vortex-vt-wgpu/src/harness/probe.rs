@@ -43,7 +43,7 @@ impl AddressProbe {
         let (table, cache) = placeholders(gpu, textures);
         let feedback = FeedbackBuffer::new(device, 1, 1, 1);
         let bindings = Bindings::new(device, &table, &cache, &feedback, SampleFilter::Nearest);
-        let params = Params::new(textures, &cache, SampleFilter::Nearest, feedback.layout(0), 0.0);
+        let params = Params::new(textures, &cache, SampleFilter::Nearest, feedback.layout(0), 0.0, false);
         gpu.queue.write_buffer(bindings.params(), 0, bytemuck::bytes_of(&params));
         let module = draw::shader(device, "vortex probe", include_str!("probe.wgsl"));
         let frame_layout = draw::frame_only_layout(device, "vortex probe frame");
@@ -148,7 +148,8 @@ impl FeedbackProbe {
     /// when every buffer of the ring is in flight (the words are then not copied).
     pub fn submit(&mut self, gpu: &Gpu, view: Option<&View>, frame: u64, bias: f32) -> Option<u64> {
         let device = &gpu.device;
-        let params = Params::new(&self.textures, &self.cache, SampleFilter::Nearest, self.feedback.layout(frame), bias);
+        let params =
+            Params::new(&self.textures, &self.cache, SampleFilter::Nearest, self.feedback.layout(frame), bias, false);
         gpu.queue.write_buffer(self.bindings.params(), 0, bytemuck::bytes_of(&params));
         self.feedback.clear(&gpu.queue);
         let mut encoder =

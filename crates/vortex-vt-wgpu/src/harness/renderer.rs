@@ -139,6 +139,7 @@ impl SceneRenderer {
             frame_size: scene.size,
             loader_threads: e.threads,
             bc7: e.bc7,
+            cache_format: e.cache_format,
             pacing,
             ..RuntimeConfig::default()
         };

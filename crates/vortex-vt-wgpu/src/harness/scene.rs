@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 use super::camera::{Camera, Keyframe, at_frame, lerp3};
 use super::mesh::{Mesh, Vertex};
 use super::view::Window;
+use crate::page_cache::CacheFormat;
 use crate::sample::SampleFilter;
 use crate::texture::VirtualTexture;
 
@@ -124,6 +125,10 @@ pub struct Effects {
     pub threads: usize,
     /// Use a BC7 cache when the adapter samples BC and every tile is BC7 (or one colour).
     pub bc7: bool,
+    /// What the physical cache holds: `auto` (the default: stored BC7 as `bc7` says, else
+    /// RGBA8), `rgba8`, or `bc1` / `bc7`: every page transcoded on the loader's threads.
+    #[serde(with = "cache_format_name")]
+    pub cache_format: Option<CacheFormat>,
 }
 
 impl Default for Effects {
@@ -135,7 +140,28 @@ impl Default for Effects {
             upload_budget: 32,
             threads: 2,
             bc7: true,
+            cache_format: None,
         }
+    }
+}
+
+mod cache_format_name {
+    use serde::{Deserialize, Deserializer, Serializer, de::Error};
+
+    use crate::page_cache::CacheFormat;
+
+    pub fn serialize<S: Serializer>(f: &Option<CacheFormat>, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(f.map_or("auto", CacheFormat::name))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<CacheFormat>, D::Error> {
+        let name = String::deserialize(d)?;
+        if name == "auto" {
+            return Ok(None);
+        }
+        CacheFormat::from_name(&name)
+            .map(Some)
+            .ok_or_else(|| D::Error::custom(format!("unknown cache format {name:?}: auto, rgba8, bc1 or bc7")))
     }
 }
 

@@ -30,6 +30,7 @@ mod decode;
 mod magnify;
 mod pool;
 mod premultiply;
+mod transcode;
 
 use std::path::PathBuf;
 

@@ -7,7 +7,7 @@
 
 use std::collections::VecDeque;
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU8, AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
@@ -18,6 +18,7 @@ use vortex_vt::page::{MAX_TEXTURES, PageId};
 use vortex_vt::residency::Slot;
 
 use super::decode::{self, Made, Tally};
+use super::transcode::transcode;
 use super::{LoadCounters, LoadError, LoadedPage, LoaderError, stand_in_tile};
 use crate::bc7;
 use crate::page_cache::CacheFormat;
@@ -51,8 +52,11 @@ struct Shared {
     absent_filled: AtomicU64,
     bytes_read: AtomicU64,
     errors: AtomicU64,
-    /// Answer BC7 blocks instead of RGBA8 texels ([`Loader::set_format`]).
-    bc7: AtomicBool,
+    /// The format pages are answered in ([`Loader::set_format`]), as its index in
+    /// [`CacheFormat::ALL`].
+    format: AtomicU8,
+    /// Every source gives every tile as BC7 blocks as stored: a BC7 cache takes them as they are.
+    stored_bc7: bool,
 }
 
 /// Reads pages of up to 16 virtual textures (texture id = index in the sources given to
@@ -106,6 +110,7 @@ impl Loader {
             0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
             n => n,
         };
+        let stored_bc7 = reference.tile_size.is_multiple_of(4) && sources.iter().all(|s| s.holds_only_bc7());
         let shared = Arc::new(Shared {
             sources,
             textures,
@@ -117,7 +122,8 @@ impl Loader {
             absent_filled: AtomicU64::new(0),
             bytes_read: AtomicU64::new(0),
             errors: AtomicU64::new(0),
-            bc7: AtomicBool::new(false),
+            format: AtomicU8::new(0),
+            stored_bc7,
         });
         let (async_tx, async_rx) = mpsc::channel();
         // Built before the workers so that, if one fails to start, Drop stops those already started.
@@ -158,18 +164,30 @@ impl Loader {
     /// streamed into a BC7 cache as they are (for packs: every stored tile is a BC7 payload or one
     /// colour; absent tiles would need decoding and re-encoding).
     pub fn holds_only_bc7(&self) -> bool {
-        self.shared.tile_size.is_multiple_of(4) && self.shared.sources.iter().all(|s| s.holds_only_bc7())
+        self.shared.stored_bc7
     }
 
-    /// Makes every later page come in `format`: RGBA8 texels, or BC7 blocks (which only packs
-    /// that [hold only BC7](Loader::holds_only_bc7) can give; other tiles then get the stand-in
-    /// and an error).
+    /// Whether every source's tiles are opaque, so that BC1 (which has no alpha) can hold them.
+    pub fn opaque(&self) -> bool {
+        self.shared.sources.iter().all(|s| s.opaque())
+    }
+
+    /// Whether pages come in with straight alpha: BC7 blocks taken as stored. Everything else is
+    /// premultiplied on the loader's threads.
+    pub fn straight_alpha(&self) -> bool {
+        self.format() == CacheFormat::Bc7 && self.shared.stored_bc7
+    }
+
+    /// Makes every later page come in `format`: RGBA8 texels, or BC1 or BC7 blocks. BC7 blocks
+    /// are taken as stored where every source [holds only BC7](Loader::holds_only_bc7); other
+    /// pages are decoded, premultiplied and transcoded on the loader's threads.
     pub fn set_format(&self, format: CacheFormat) {
-        self.shared.bc7.store(format == CacheFormat::Bc7, Ordering::Relaxed);
+        let index = CacheFormat::ALL.iter().position(|&f| f == format).unwrap_or(0);
+        self.shared.format.store(index as u8, Ordering::Relaxed);
     }
 
     pub fn format(&self) -> CacheFormat {
-        if self.shared.bc7.load(Ordering::Relaxed) { CacheFormat::Bc7 } else { CacheFormat::Rgba8 }
+        self.shared.format()
     }
 
     /// Texels of border on each side of every tile.
@@ -333,13 +351,22 @@ fn work(shared: &Shared) {
 }
 
 impl Shared {
+    fn format(&self) -> CacheFormat {
+        CacheFormat::ALL[usize::from(self.format.load(Ordering::Relaxed)).min(CacheFormat::ALL.len() - 1)]
+    }
+
     /// One page, its counters updated. Never panics on bad data: a panicking decoder is caught and
     /// reported like any other decoding error.
     fn load_page(&self, page: PageId, slot: Slot) -> LoadedPage {
-        let as_bc7 = self.bc7.load(Ordering::Relaxed);
+        let format = self.format();
+        // Stored BC7 blocks are taken as they are; anything else is decoded (and transcoded).
+        let read_as = if format == CacheFormat::Bc7 && self.stored_bc7 { CacheFormat::Bc7 } else { CacheFormat::Rgba8 };
         let mut tally = Tally::default();
-        let format = if as_bc7 { CacheFormat::Bc7 } else { CacheFormat::Rgba8 };
-        let texels = || decode::texels(&self.sources, &self.textures, page, format, &mut tally);
+        let texels = || {
+            decode::texels(&self.sources, &self.textures, page, read_as, &mut tally).map(|(texels, made)| {
+                (if read_as == format { texels } else { transcode(texels, self.tile_size, format) }, made)
+            })
+        };
         let result = catch_unwind(AssertUnwindSafe(texels)).unwrap_or_else(|panic| {
             let what = panic
                 .downcast_ref::<&str>()
@@ -369,7 +396,11 @@ impl Shared {
             Err(e) => {
                 self.errors.fetch_add(1, Ordering::Relaxed);
                 let stand_in = stand_in_tile(self.tile_size);
-                (if as_bc7 { bc7::solid_blocks(&stand_in, self.tile_size) } else { stand_in }, Some(e))
+                let texels = match format {
+                    CacheFormat::Bc7 => bc7::solid_blocks(&stand_in, self.tile_size),
+                    other => transcode(stand_in, self.tile_size, other),
+                };
+                (texels, Some(e))
             }
         };
         LoadedPage { page, slot, texels, bytes_read, error }

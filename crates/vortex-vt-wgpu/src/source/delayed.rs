@@ -40,4 +40,8 @@ impl PageSource for Delayed {
     fn holds_only_bc7(&self) -> bool {
         self.inner.holds_only_bc7()
     }
+
+    fn opaque(&self) -> bool {
+        self.inner.opaque()
+    }
 }

@@ -33,6 +33,11 @@ pub trait PageSource: Send + Sync {
     fn holds_only_bc7(&self) -> bool {
         false
     }
+
+    /// Whether every texel is opaque, so that a BC1 cache (which has no alpha) can hold it.
+    fn opaque(&self) -> bool {
+        false
+    }
 }
 
 /// What [`PageSource::read_tile`] found.

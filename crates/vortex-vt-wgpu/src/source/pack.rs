@@ -29,7 +29,14 @@ impl PageSource for Pack {
         match format {
             CacheFormat::Rgba8 => texels(self, lod, x, y, tile_size),
             CacheFormat::Bc7 => blocks(self, lod, x, y, tile_size),
+            // The loader transcodes RGBA8 to BC1; it never asks a source for BC1.
+            CacheFormat::Bc1 => Err(ReadError::new("a pack gives RGBA8 texels or stored BC7 blocks, not BC1")),
         }
+    }
+
+    /// One or three channels: no alpha stored.
+    fn opaque(&self) -> bool {
+        matches!(self.description().channels, 1 | 3)
     }
 
     fn holds_only_bc7(&self) -> bool {

@@ -16,7 +16,7 @@ use vortex_vt_wgpu::{Gpu, Pacing, PageSource, SampleFilter, VirtualTexture};
 use crate::common::gpu;
 
 /// A still window of `size` centred on texel `center` of `texture`, `magnify` pixels per texel.
-fn window_scene(texture: &VirtualTexture, size: [u32; 2], center: [f64; 2], magnify: f64) -> Scene {
+pub(crate) fn window_scene(texture: &VirtualTexture, size: [u32; 2], center: [f64; 2], magnify: f64) -> Scene {
     let [w, h] = texture.size().map(f64::from);
     let key = WindowKey { center: [center[0] / w, center[1] / h], width: size[0] as f64 / magnify / w };
     Scene {
@@ -29,7 +29,7 @@ fn window_scene(texture: &VirtualTexture, size: [u32; 2], center: [f64; 2], magn
 }
 
 /// The renderer of `scene` over `chain` stored as a raw pack, run until nothing falls back.
-fn converged(
+pub(crate) fn converged(
     gpu: Gpu,
     dir: &std::path::Path,
     chain: &LodChain,

@@ -16,3 +16,4 @@ mod loader;
 mod readback;
 mod runtime;
 mod sample;
+mod transcode;

@@ -1,0 +1,11 @@
+//! intel_tex_2's prebuilt kernels (BC1 and BC7 tiles) contain C++ code that needs the C++
+//! runtime, which the crate does not link itself.
+
+fn main() {
+    println!("cargo:rerun-if-changed=build.rs");
+    match std::env::var("CARGO_CFG_TARGET_OS").as_deref() {
+        Ok("macos" | "ios") => println!("cargo:rustc-link-lib=dylib=c++"),
+        Ok("windows") => {}
+        _ => println!("cargo:rustc-link-lib=dylib=stdc++"),
+    }
+}

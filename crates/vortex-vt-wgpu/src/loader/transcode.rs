@@ -1,0 +1,49 @@
+//! Transcoding at load: a page decoded to (premultiplied) RGBA8 is encoded to BC1 or BC7 on the
+//! loader's thread, so that the physical cache holds BC whatever the pack stores: an eighth (BC1)
+//! or a quarter (BC7) of RGBA8's GPU memory and upload bytes, as id Tech 5 transcoded its pages to
+//! DXT on their way into the physical texture. Intel's ISPC texture compressor, at its "very
+//! fast" BC7 settings (the tiler offers the slower ones offline).
+
+use crate::page_cache::CacheFormat;
+
+/// `texels` (`tile_size²` RGBA8) as `format`'s blocks, rows of blocks top down; RGBA8 as it is.
+/// BC1 keeps no alpha: it is for opaque textures.
+pub(super) fn transcode(texels: Vec<u8>, tile_size: u32, format: CacheFormat) -> Vec<u8> {
+    let surface =
+        intel_tex_2::RgbaSurface { data: &texels, width: tile_size, height: tile_size, stride: tile_size * 4 };
+    match format {
+        CacheFormat::Rgba8 => texels,
+        CacheFormat::Bc1 => intel_tex_2::bc1::compress_blocks(&surface),
+        CacheFormat::Bc7 => {
+            let opaque = texels.chunks_exact(4).all(|t| t[3] == 255);
+            let settings = if opaque {
+                intel_tex_2::bc7::opaque_very_fast_settings()
+            } else {
+                intel_tex_2::bc7::alpha_very_fast_settings()
+            };
+            intel_tex_2::bc7::compress_blocks(&settings, &surface)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blocks_have_the_formats_sizes_and_one_colour_stays_that_colour() {
+        let texels = [40u8, 120, 200, 255].repeat(16 * 16);
+        assert_eq!(transcode(texels.clone(), 16, CacheFormat::Rgba8), texels);
+        let bc1 = transcode(texels.clone(), 16, CacheFormat::Bc1);
+        let bc7 = transcode(texels.clone(), 16, CacheFormat::Bc7);
+        assert_eq!((bc1.len(), bc7.len()), (CacheFormat::Bc1.tile_bytes(16), CacheFormat::Bc7.tile_bytes(16)));
+        let mut decoded = vec![0u8; 16 * 16 * 4];
+        for (i, block) in bc7.chunks_exact(16).enumerate() {
+            let (bx, by) = (i % 4, i / 4);
+            bcdec_rs::bc7(block, &mut decoded[(by * 4 * 16 + bx * 4) * 4..], 16 * 4);
+        }
+        assert!(
+            decoded.chunks_exact(4).all(|t| t.iter().zip(&[40u8, 120, 200, 255]).all(|(a, b)| a.abs_diff(*b) <= 1))
+        );
+    }
+}
