@@ -13,9 +13,9 @@ use vortex_tiler::error::TilerError;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::output::{Product, staging};
 use vortex_vt::sampler::Rgba8Image;
-use vortex_vt_wgpu::harness::{Scene, SceneRenderer};
+use vortex_vt_wgpu::harness::{Effects, Scene, SceneRenderer};
 use vortex_vt_wgpu::source::Delayed;
-use vortex_vt_wgpu::{Gpu, Pacing, PageSource, SampleFilter};
+use vortex_vt_wgpu::{CacheFormat, Gpu, Pacing, PageSource, SampleFilter};
 
 use super::{report, signals};
 
@@ -46,25 +46,11 @@ pub struct RenderArgs {
     /// Override the scene's output size, e.g. 640x480.
     #[arg(long, value_name = "WxH", value_parser = parse_dims)]
     size: Option<[u32; 2]>,
-    /// Override the scene's filter [default: the scene's, else auto: trilinear for packs with a
-    /// border, nearest for packs without one, whose page edges would show as seams under
-    /// bilinear and trilinear].
-    #[arg(long, value_enum)]
-    filter: Option<FilterArg>,
-    /// Override the cache size: slots per side (the cache holds this squared).
-    #[arg(long, value_name = "N")]
-    cache_side: Option<u16>,
+    #[command(flatten)]
+    stream: StreamArgs,
     /// Override the most pages uploaded per frame.
     #[arg(long, value_name = "N")]
     budget: Option<usize>,
-    /// Override the loader's threads (at most 4 per core); slow reads want more than cores.
-    #[arg(long, value_name = "N")]
-    threads: Option<usize>,
-    /// Add this latency to every page read, e.g. 50ms: what a slow disk or a network does.
-    /// Frames do not wait for it (real-time pacing): the picture falls back to coarser pages
-    /// until the loads land. The report's io_wait_ms says how long each frame waited for pages.
-    #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
-    io_latency: Option<Duration>,
     /// offline: each frame waits for the pages the previous one asked for (the same pictures on
     /// every run); real-time: no frame waits, pages are drawn when they land [default: offline,
     /// real-time with --io-latency].
@@ -75,8 +61,49 @@ pub struct RenderArgs {
     quiet: bool,
 }
 
+/// How pages are streamed and drawn: the flags `render` and `view` share, each overriding the
+/// scene's effect of the same name.
+#[derive(Args, Debug)]
+pub(super) struct StreamArgs {
+    /// The filter [default: the scene's, else auto: trilinear for packs with a border, nearest
+    /// for packs without one, whose page edges would show as seams under bilinear and
+    /// trilinear].
+    #[arg(long, value_enum)]
+    filter: Option<FilterArg>,
+    /// The cache size: slots per side (the cache holds this squared).
+    #[arg(long, value_name = "N")]
+    cache_side: Option<u16>,
+    /// What the physical cache holds: auto (stored BC7 where every tile is BC7, else RGBA8),
+    /// rgba8, bc1 (opaque packs: an eighth of RGBA8's GPU memory) or bc7 (a quarter): bc1 and
+    /// bc7 transcode every page on the loader's threads [default: the scene's, else auto].
+    #[arg(long, value_enum)]
+    cache_format: Option<CacheFormatArg>,
+    /// The loader's threads (at most 4 per core); slow reads want more than cores.
+    #[arg(long, value_name = "N")]
+    threads: Option<usize>,
+    /// Add this latency to every page read, e.g. 50ms: what a slow disk or a network does.
+    /// Frames do not wait for it in real time: the picture falls back to coarser pages until
+    /// the reads land.
+    #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
+    pub(super) io_latency: Option<Duration>,
+}
+
+impl StreamArgs {
+    /// Sets the scene's effects these flags override.
+    pub(super) fn apply(&self, e: &mut Effects) {
+        if let Some(f) = self.filter {
+            e.filter = f.filter();
+        }
+        if let Some(f) = self.cache_format {
+            e.cache_format = f.format();
+        }
+        e.cache_slots_per_side = self.cache_side.unwrap_or(e.cache_slots_per_side);
+        e.threads = self.threads.unwrap_or(e.threads);
+    }
+}
+
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
-pub(super) enum FilterArg {
+enum FilterArg {
     Auto,
     Nearest,
     Bilinear,
@@ -85,7 +112,7 @@ pub(super) enum FilterArg {
 
 impl FilterArg {
     /// The scene's filter: `None` for auto.
-    pub(super) fn filter(self) -> Option<SampleFilter> {
+    fn filter(self) -> Option<SampleFilter> {
         match self {
             FilterArg::Auto => None,
             FilterArg::Nearest => Some(SampleFilter::Nearest),
@@ -125,6 +152,26 @@ pub(super) fn warn_of_seams(renderer: &SceneRenderer) {
              split them with --border 1, or use --filter auto (nearest for these packs)",
             filter.name()
         );
+    }
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+enum CacheFormatArg {
+    Auto,
+    Rgba8,
+    Bc1,
+    Bc7,
+}
+
+impl CacheFormatArg {
+    /// The scene's cache format: `None` for auto.
+    fn format(self) -> Option<CacheFormat> {
+        match self {
+            CacheFormatArg::Auto => None,
+            CacheFormatArg::Rgba8 => Some(CacheFormat::Rgba8),
+            CacheFormatArg::Bc1 => Some(CacheFormat::Bc1),
+            CacheFormatArg::Bc7 => Some(CacheFormat::Bc7),
+        }
     }
 }
 
@@ -177,16 +224,12 @@ pub fn run(a: RenderArgs) -> Result<()> {
     scene.frames = a.frame_count.unwrap_or(scene.frames);
     scene.size = a.size.unwrap_or(scene.size);
     let e = &mut scene.effects;
-    if let Some(f) = a.filter {
-        e.filter = f.filter();
-    }
-    let pacing = match (a.pacing, a.io_latency) {
+    a.stream.apply(e);
+    let pacing = match (a.pacing, a.stream.io_latency) {
         (Some(PacingArg::Offline), _) | (None, None) => Pacing::Offline,
         (Some(PacingArg::RealTime), _) | (None, Some(_)) => Pacing::RealTime,
     };
-    e.cache_slots_per_side = a.cache_side.unwrap_or(e.cache_slots_per_side);
     e.upload_budget = a.budget.unwrap_or(e.upload_budget);
-    e.threads = a.threads.unwrap_or(e.threads);
     scene
         .check()
         .and_then(|()| scene.check_textures(scene.textures.len()))
@@ -201,7 +244,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     }
     signals::install().context("installing signal handlers")?;
 
-    let (sources, tile_size) = open_sources(&scene.textures, a.io_latency)?;
+    let (sources, tile_size) = open_sources(&scene.textures, a.stream.io_latency)?;
     let side = scene.effects.cache_slots_per_side as u32 * tile_size;
     let gpu = Gpu::headless(side.max(scene.size[0]).max(scene.size[1]))?;
     let adapter = gpu.adapter_info();

@@ -11,14 +11,13 @@ mod controls;
 mod screenshot;
 
 use std::path::PathBuf;
-use std::time::Duration;
 
 use anyhow::{Result, bail};
 use clap::Args;
 use vortex_vt_wgpu::harness::camera::at_frame;
 use vortex_vt_wgpu::harness::{Scene, SceneView};
 
-use super::render::{FilterArg, parse_dims, parse_duration};
+use super::render::{StreamArgs, parse_dims};
 use controls::{Fly, PanZoom};
 
 #[derive(Args, Debug)]
@@ -33,20 +32,8 @@ pub struct ViewArgs {
     /// The window's size in pixels.
     #[arg(long, value_name = "WxH", value_parser = parse_dims, default_value = "1024x768")]
     size: [u32; 2],
-    /// The filter [default: the scene's, else auto: trilinear for packs with a border, nearest
-    /// for packs without]. F cycles through them.
-    #[arg(long, value_enum)]
-    filter: Option<FilterArg>,
-    /// The cache: slots per side (it holds this squared).
-    #[arg(long, value_name = "N")]
-    cache_side: Option<u16>,
-    /// Loader threads (at most 4 per core).
-    #[arg(long, value_name = "N")]
-    threads: Option<usize>,
-    /// Add this latency to every page read, e.g. 50ms, to watch the picture fall back and
-    /// sharpen as slow reads land.
-    #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
-    io_latency: Option<Duration>,
+    #[command(flatten)]
+    stream: StreamArgs,
     /// Draw --frame-count frames, save the window's last frame as a PNG here and exit. Each
     /// frame waits for the pages the previous one asked for, as `render` does, so the picture
     /// is the same on every run.
@@ -84,12 +71,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
     }
     scene.size = a.size;
     scene.frames = a.frame_count.unwrap_or(1).max(1);
-    let e = &mut scene.effects;
-    if let Some(f) = a.filter {
-        e.filter = f.filter();
-    }
-    e.cache_slots_per_side = a.cache_side.unwrap_or(e.cache_slots_per_side);
-    e.threads = a.threads.unwrap_or(e.threads);
+    a.stream.apply(&mut scene.effects);
     scene
         .check()
         .and_then(|()| scene.check_textures(scene.textures.len()))
@@ -107,7 +89,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
     app::run(app::Options {
         scene,
         start,
-        io_latency: a.io_latency,
+        io_latency: a.stream.io_latency,
         residency_view: a.residency_view,
         screenshot: a.screenshot.zip(a.frame_count),
     })
