@@ -7,7 +7,7 @@
 //! ```
 //!
 //! The quad fills the frame and the frame is the image's size, so once the pages have landed the
-//! picture is the pack's LOD 0, texel for texel (the crate's tests check that).
+//! picture is the pack's LOD 0, within one code value (the crate's tests check that).
 
 use std::path::Path;
 use std::sync::Arc;

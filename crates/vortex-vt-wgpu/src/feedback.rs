@@ -22,6 +22,8 @@ use crate::readback::{Readback, ReadbackError};
 #[derive(Debug)]
 pub struct FeedbackBuffer {
     buffer: wgpu::Buffer,
+    /// The buffer's bytes when nothing asked: made once, written every frame.
+    no_requests: Vec<u8>,
     /// Pixels per block side.
     pub block: u32,
     /// Blocks per row and per column: the frame's size divided by `block`, rounded up.
@@ -40,7 +42,8 @@ impl FeedbackBuffer {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        FeedbackBuffer { buffer, block, columns, rows }
+        let no_requests = vec![0xff; (columns * rows) as usize * 4];
+        FeedbackBuffer { buffer, no_requests, block, columns, rows }
     }
 
     pub fn words(&self) -> u32 {
@@ -53,7 +56,7 @@ impl FeedbackBuffer {
 
     /// Resets every word to [`NO_REQUEST`](vortex_vt::feedback::NO_REQUEST) before the next submitted command buffer runs.
     pub fn clear(&self, queue: &wgpu::Queue) {
-        queue.write_buffer(&self.buffer, 0, &vec![0xff; self.words() as usize * 4]);
+        queue.write_buffer(&self.buffer, 0, &self.no_requests);
     }
 
     /// The layout the shader gets for frame `frame`.

@@ -514,9 +514,4 @@ impl Runtime {
     pub fn in_flight(&self) -> usize {
         self.in_flight.len()
     }
-
-    /// The GPU page table's storage buffer (tests read it back).
-    pub fn gpu_page_table(&self) -> &GpuPageTable {
-        &self.gpu_table
-    }
 }
