@@ -73,9 +73,11 @@ pub(super) struct StreamArgs {
     /// The cache size: slots per side (the cache holds this squared).
     #[arg(long, value_name = "N")]
     cache_side: Option<u16>,
-    /// What the physical cache holds: auto (stored BC7 where every tile is BC7, else RGBA8),
-    /// rgba8, bc1 (opaque packs: an eighth of RGBA8's GPU memory) or bc7 (a quarter): bc1 and
-    /// bc7 transcode every page on the loader's threads [default: the scene's, else auto].
+    /// What the physical cache holds: auto (BC where the GPU samples it: stored BC7 as it is,
+    /// else bc1 for opaque packs, bc7 for alpha; RGBA8 without BC), rgba8 (exact texels), bc1
+    /// (an eighth of RGBA8's GPU memory, about 32 dB from exact) or bc7 (a quarter, about 43 dB,
+    /// 17x bc1's loader time): both transcode every page on the loader's threads [default: the
+    /// scene's, else auto].
     #[arg(long, value_enum)]
     cache_format: Option<CacheFormatArg>,
     /// The loader's threads (at most 4 per core); slow reads want more than cores.

@@ -104,9 +104,12 @@ pub struct RuntimeConfig {
     /// Hold BC7 blocks as stored when the device samples BC and every tile is BC7 or one colour
     /// (with `cache_format` automatic).
     pub bc7: bool,
-    /// What the physical cache holds: `None` chooses (stored BC7 as above, else RGBA8);
-    /// `Some(Bc1)` (opaque textures only) or `Some(Bc7)` transcodes every page on the loader's
-    /// threads: an eighth or a quarter of RGBA8's GPU memory and upload bytes.
+    /// What the physical cache holds. `None` (the default) chooses BC wherever the device
+    /// samples it: BC7 blocks as stored (see `bc7`), else BC1 for opaque textures (an eighth of
+    /// RGBA8's GPU memory and upload bytes, 1.2x the loader's time per page) and BC7 for
+    /// textures with alpha (a quarter, 17x the time); RGBA8 on devices without BC.
+    /// `Some(Rgba8)` keeps every texel exact (what tests comparing pictures want); `Some(Bc1)`
+    /// (opaque textures only) or `Some(Bc7)` force a transcode on the loader's threads.
     pub cache_format: Option<CacheFormat>,
     pub pacing: Pacing,
 }
@@ -127,6 +130,22 @@ impl Default for RuntimeConfig {
             pacing: Pacing::RealTime,
         }
     }
+}
+
+/// The physical cache's format for `config` on a device that samples BC (`bc`) or not.
+fn cache_format(config: &RuntimeConfig, bc: bool, loader: &Loader) -> Result<CacheFormat, RuntimeError> {
+    Ok(match config.cache_format {
+        None if !bc => CacheFormat::Rgba8,
+        None if config.bc7 && loader.holds_only_bc7() => CacheFormat::Bc7,
+        None if loader.opaque() => CacheFormat::Bc1,
+        None => CacheFormat::Bc7,
+        Some(CacheFormat::Bc1) if !loader.opaque() => {
+            return Err(RuntimeError::Config(
+                "a BC1 cache holds no alpha, and these textures have an alpha channel: use bc7".into(),
+            ));
+        }
+        Some(format) => format,
+    })
 }
 
 /// What one [`Runtime::end_frame`] did.
@@ -228,16 +247,7 @@ impl Runtime {
         let textures = loader.textures().to_vec();
         let grids: Vec<TextureGrid> = textures.iter().map(|t| t.grid).collect();
         let bc = device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC);
-        let format = match config.cache_format {
-            None if config.bc7 && bc && loader.holds_only_bc7() => CacheFormat::Bc7,
-            None => CacheFormat::Rgba8,
-            Some(CacheFormat::Bc1) if !loader.opaque() => {
-                return Err(RuntimeError::Config(
-                    "a BC1 cache holds no alpha, and these textures have an alpha channel: use bc7".into(),
-                ));
-            }
-            Some(format) => format,
-        };
+        let format = cache_format(&config, bc, &loader)?;
         loader.set_format(format);
         let tile_bytes = format.tile_bytes(loader.tile_size()) as u64;
         if config.upload_bytes < tile_bytes {

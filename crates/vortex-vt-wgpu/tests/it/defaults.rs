@@ -24,7 +24,7 @@ pub(crate) fn window_scene(texture: &VirtualTexture, size: [u32; 2], center: [f6
         size,
         frames: 1,
         view: SceneView::Window { texture: 0, path: vec![Keyframe { frame: 0, at: key }] },
-        effects: Effects::default(),
+        effects: Effects::exact(),
     }
 }
 

@@ -34,7 +34,7 @@ fn frames_never_wait_for_slow_reads_and_converge_when_they_land() {
         size: [248, 248],
         frames: 1,
         view: SceneView::Window { texture: 0, path: vec![Keyframe { frame: 0, at: key }] },
-        effects: Effects { threads: 4, ..Effects::default() },
+        effects: Effects { threads: 4, ..Effects::exact() },
     };
     let mut renderer = SceneRenderer::new(gpu, vec![slow], &scene, Pacing::RealTime).unwrap();
     let pose = scene.pose(0, renderer.runtime().textures());

@@ -47,7 +47,7 @@ fn effects(slots_per_side: u16, budget: usize) -> Effects {
         filter: Some(SampleFilter::Bilinear),
         cache_slots_per_side: slots_per_side,
         upload_budget: budget,
-        ..Effects::default()
+        ..Effects::exact()
     }
 }
 
@@ -349,7 +349,7 @@ fn bc7_blocks_stream_as_they_are_and_draw_what_rgba8_draws() {
     }
     let dir = tempfile::tempdir().unwrap();
     let tex = Synthetic::with_kind(dir.path(), "bc7.vtpk", PAGES, TILE, BORDER, 8, vortex_pack::TileKind::Bc7);
-    let scene = zoom_scene(effects(16, 16));
+    let scene = zoom_scene(Effects { cache_format: None, ..effects(16, 16) });
     let mut bc7 = runtime(gpu, &[&tex], &scene);
     assert_eq!(bc7.runtime().cache().format(), CacheFormat::Bc7);
     let (frames, picture) = run(&mut bc7, &scene);
@@ -366,7 +366,7 @@ fn bc7_blocks_stream_as_they_are_and_draw_what_rgba8_draws() {
     // The same scene through an RGBA8 cache (the blocks decoded on the CPU) streams the same
     // pages and draws the same picture.
     let mut scene = scene;
-    scene.effects.bc7 = false;
+    scene.effects.cache_format = Some(CacheFormat::Rgba8);
     let mut rgba = runtime(crate::common::gpu().unwrap(), &[&tex], &scene);
     assert_eq!(rgba.runtime().cache().format(), CacheFormat::Rgba8);
     let (frames_rgba, picture_rgba) = run(&mut rgba, &scene);

@@ -120,7 +120,7 @@ fn scene(cache_side: u16) -> Scene {
             filter: Some(SampleFilter::Bilinear),
             cache_slots_per_side: cache_side,
             upload_budget: 128,
-            ..Effects::default()
+            ..Effects::exact()
         },
     }
 }

@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use vortex_pack::TileKind;
 use vortex_vt::sampler::{self, Rgba8Image};
-use vortex_vt_wgpu::harness::{Pose, Scene, SceneRenderer};
+use vortex_vt_wgpu::harness::{Effects, Pose, Scene, SceneRenderer};
 use vortex_vt_wgpu::testing::{box_chain, write_opaque_pack, write_pack};
 use vortex_vt_wgpu::{CacheFormat, Pacing, PageSource, RuntimeError, VirtualTexture};
 
@@ -93,5 +93,28 @@ fn alpha_stays_premultiplied_through_bc7_and_bc1_refuses_it() {
         Err(RuntimeError::Config(message)) => assert!(message.contains("BC1"), "{message}"),
         Err(e) => panic!("{e}"),
         Ok(_) => panic!("a BC1 cache for a texture with alpha"),
+    }
+}
+
+#[test]
+fn the_automatic_cache_is_bc1_for_opaque_textures_and_bc7_for_alpha() {
+    let Some(gpu) = gpu() else { return };
+    if !gpu.device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC) {
+        eprintln!("note: the adapter samples no BC formats; the automatic cache is RGBA8 there");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let texture = VirtualTexture::new(96, 64, 32, 1).unwrap();
+    let lod0 = Rgba8Image::from_fn(96, 64, |x, y| [(x * 2) as u8, (y * 3) as u8, 90, 255]);
+    let chain = box_chain(lod0, texture.grid.lod_count());
+    let mut scene = window_scene(&texture, [96, 64], [48.0, 32.0], 1.0);
+    scene.effects = Effects::default();
+    assert_eq!(scene.effects.cache_format, None, "scenes default to the automatic cache");
+    let opaque = write_opaque_pack(&dir.path().join("rgb.vtpk"), &chain, &texture).unwrap();
+    let alpha = write_pack(&dir.path().join("rgba.vtpk"), &chain, &texture, TileKind::Raw).unwrap();
+    for (pack, format) in [(opaque, CacheFormat::Bc1), (alpha, CacheFormat::Bc7)] {
+        let sources = vec![pack as Arc<dyn PageSource>];
+        let renderer = SceneRenderer::new(crate::common::gpu().unwrap(), sources, &scene, Pacing::Offline).unwrap();
+        assert_eq!(renderer.runtime().cache().format(), format);
     }
 }
