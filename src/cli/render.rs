@@ -13,9 +13,9 @@ use vortex_tiler::error::TilerError;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::output::{Product, staging};
 use vortex_vt::sampler::Rgba8Image;
-use vortex_vt_wgpu::harness::{Effects, Scene, SceneRenderer};
+use vortex_vt_wgpu::harness::{Effects, Scene, SceneLayer, SceneRenderer};
 use vortex_vt_wgpu::source::Delayed;
-use vortex_vt_wgpu::{CacheFormat, Gpu, Pacing, PageSource, SampleFilter};
+use vortex_vt_wgpu::{CacheFormat, Gpu, Layer, LayerKind, Pacing, PageSource, SampleFilter};
 
 use super::{report, signals};
 
@@ -48,6 +48,15 @@ pub struct RenderArgs {
     size: Option<[u32; 2]>,
     #[command(flatten)]
     stream: StreamArgs,
+    /// Another layer of the textures' stacks, on their page grid: KIND:PACK[,PACK...] with one
+    /// pack per texture, KIND colour (sRGB, premultiplied, BC where the GPU samples it) or data
+    /// (normals, roughness: filtered as stored, RGBA8). Repeat for more layers (up to 4 in all);
+    /// every layer is streamed together, under one page table. Replaces the scene's "layers".
+    #[arg(long = "layer", value_name = "KIND:PACKS", value_parser = parse_layer)]
+    layers: Vec<SceneLayer>,
+    /// The layer drawn: 0 (the --pack textures) or one of the --layer layers, counted from 1.
+    #[arg(long, value_name = "N")]
+    show_layer: Option<u32>,
     /// Override the most pages uploaded per frame.
     #[arg(long, value_name = "N")]
     budget: Option<usize>,
@@ -122,6 +131,25 @@ impl FilterArg {
             FilterArg::Trilinear => Some(SampleFilter::Trilinear),
         }
     }
+}
+
+fn parse_layer(s: &str) -> Result<SceneLayer, String> {
+    let (kind, packs) = s.split_once(':').ok_or_else(|| format!("{s:?}: give KIND:PACK, e.g. data:normal.vtpk"))?;
+    let kind = LayerKind::from_name(kind).ok_or_else(|| format!("layer kind {kind:?}: colour or data"))?;
+    Ok(SceneLayer { kind, textures: packs.split(',').map(PathBuf::from).collect() })
+}
+
+/// The scene's layer stacks as page sources: its `textures` as layer 0 (colour), then its
+/// `layers`, each read `latency` late if given; and the largest tile side.
+pub(super) fn open_layers(scene: &Scene, latency: Option<Duration>) -> Result<(Vec<Layer>, u32)> {
+    let (sources, mut tile_size) = open_sources(&scene.textures, latency)?;
+    let mut layers = vec![Layer::colour(sources)];
+    for layer in &scene.layers {
+        let (sources, side) = open_sources(&layer.textures, latency)?;
+        tile_size = tile_size.max(side);
+        layers.push(Layer { kind: layer.kind, sources });
+    }
+    Ok((layers, tile_size))
 }
 
 /// The packs at `paths` as page sources (shards refused: they must be merged first), each read
@@ -220,6 +248,10 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if !a.pack.is_empty() {
         scene.textures = a.pack.clone();
     }
+    if !a.layers.is_empty() {
+        scene.layers = a.layers.clone();
+    }
+    scene.effects.layer = a.show_layer.unwrap_or(scene.effects.layer);
     if scene.textures.is_empty() {
         bail!("no texture: give --pack PACK (or a scene whose \"textures\" names packs)");
     }
@@ -237,7 +269,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
         .and_then(|()| scene.check_textures(scene.textures.len()))
         .map_err(|m| anyhow::anyhow!("scene: {m}"))?;
     Limits::default().check_frames(scene.frames as u64)?;
-    let inputs: Vec<&Path> = scene.textures.iter().map(PathBuf::as_path).chain(a.scene.as_deref()).collect();
+    let layer_packs = scene.layers.iter().flat_map(|l| &l.textures);
+    let inputs: Vec<&Path> =
+        scene.textures.iter().chain(layer_packs).map(PathBuf::as_path).chain(a.scene.as_deref()).collect();
     if let Some(path) = &a.report {
         report::claim(path, Product::Report, &inputs, a.force)?;
     }
@@ -246,11 +280,11 @@ pub fn run(a: RenderArgs) -> Result<()> {
     }
     signals::install().context("installing signal handlers")?;
 
-    let (sources, tile_size) = open_sources(&scene.textures, a.stream.io_latency)?;
+    let (layers, tile_size) = open_layers(&scene, a.stream.io_latency)?;
     let side = scene.effects.cache_slots_per_side as u32 * tile_size;
     let gpu = Gpu::headless(side.max(scene.size[0]).max(scene.size[1]))?;
     let adapter = gpu.adapter_info();
-    let mut runtime = SceneRenderer::new(gpu, sources, &scene, pacing)?;
+    let mut runtime = SceneRenderer::with_layers(gpu, layers, &scene, pacing)?;
     warn_of_seams(&runtime);
     // Frames go into a staging folder, moved into place only when every frame is written.
     let frames = a.frames.as_deref().map(StagedFrames::create).transpose()?;

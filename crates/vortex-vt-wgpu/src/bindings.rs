@@ -1,9 +1,11 @@
-//! The module's bind group (`shaders/vt.wgsl`, bindings 0-4): the uniform block, the page table,
-//! the cache through its sRGB view, the cache's sampler (nearest for the nearest filter, linear
-//! otherwise) and the feedback buffer. One layout per runtime; the group is remade when what it
+//! The module's bind group (`shaders/vt.wgsl`, bindings 0-7): the uniform block, the page table,
+//! layer 0's cache, the caches' sampler (nearest for the nearest filter, linear otherwise), the
+//! feedback buffer, and layers 1-3's caches (bindings 5-7; layer 0's again where a runtime has
+//! fewer layers, so that one layout serves every runtime). One layout per runtime; the group is remade when what it
 //! binds changes (a resize makes a new feedback buffer, a filter change a new sampler).
 
 use crate::feedback::FeedbackBuffer;
+use crate::layer::MAX_LAYERS;
 use crate::page_cache::PageCache;
 use crate::page_table::GpuPageTable;
 use crate::params::Params;
@@ -21,7 +23,7 @@ impl Bindings {
     pub(crate) fn new(
         device: &wgpu::Device,
         table: &GpuPageTable,
-        cache: &PageCache,
+        caches: &[PageCache],
         feedback: &FeedbackBuffer,
         filter: SampleFilter,
     ) -> Bindings {
@@ -33,7 +35,7 @@ impl Bindings {
             mapped_at_creation: false,
         });
         let sampler = sampler(device, filter);
-        let group = group(device, &layout, &params, table.buffer(), cache.srgb_view(), &sampler, feedback.buffer());
+        let group = group(device, &layout, &params, table.buffer(), caches, &sampler, feedback.buffer());
         Bindings { layout, group, params }
     }
 
@@ -42,13 +44,12 @@ impl Bindings {
         &mut self,
         device: &wgpu::Device,
         table: &GpuPageTable,
-        cache: &PageCache,
+        caches: &[PageCache],
         feedback: &FeedbackBuffer,
         filter: SampleFilter,
     ) {
         let sampler = sampler(device, filter);
-        self.group =
-            group(device, &self.layout, &self.params, table.buffer(), cache.srgb_view(), &sampler, feedback.buffer());
+        self.group = group(device, &self.layout, &self.params, table.buffer(), caches, &sampler, feedback.buffer());
     }
 
     pub(crate) fn layout(&self) -> &wgpu::BindGroupLayout {
@@ -64,7 +65,12 @@ impl Bindings {
     }
 }
 
-/// The layout of bindings 0-4, visible to vertex and fragment stages (a vertex shader may sample
+/// The binding of layer `layer`'s cache.
+fn cache_binding(layer: usize) -> u32 {
+    if layer == 0 { 2 } else { 4 + layer as u32 }
+}
+
+/// The layout of bindings 0-7, visible to vertex and fragment stages (a vertex shader may sample
 /// a virtual texture too, e.g. a height field).
 fn layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     let stages = wgpu::ShaderStages::VERTEX_FRAGMENT;
@@ -74,33 +80,28 @@ fn layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
         has_dynamic_offset: false,
         min_binding_size: None,
     };
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("vortex vt"),
-        entries: &[
-            entry(
-                0,
-                stages,
-                wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: wgpu::BufferSize::new(size_of::<Params>() as u64),
-                },
-            ),
-            entry(1, stages, storage(true)),
-            entry(
-                2,
-                stages,
-                wgpu::BindingType::Texture {
-                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                    multisampled: false,
-                },
-            ),
-            entry(3, stages, wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering)),
-            // Written from fragment shaders only: vertex-stage storage writes need a feature.
-            entry(4, wgpu::ShaderStages::FRAGMENT, storage(false)),
-        ],
-    })
+    let cache = wgpu::BindingType::Texture {
+        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+        view_dimension: wgpu::TextureViewDimension::D2,
+        multisampled: false,
+    };
+    let mut entries = vec![
+        entry(
+            0,
+            stages,
+            wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: wgpu::BufferSize::new(size_of::<Params>() as u64),
+            },
+        ),
+        entry(1, stages, storage(true)),
+        entry(3, stages, wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering)),
+        // Written from fragment shaders only: vertex-stage storage writes need a feature.
+        entry(4, wgpu::ShaderStages::FRAGMENT, storage(false)),
+    ];
+    entries.extend((0..MAX_LAYERS).map(|layer| entry(cache_binding(layer), stages, cache)));
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("vortex vt"), entries: &entries })
 }
 
 /// The cache's sampler: within a slot only (the border, or the shader's clamp, keeps neighbouring
@@ -121,19 +122,19 @@ fn group(
     layout: &wgpu::BindGroupLayout,
     params: &wgpu::Buffer,
     table: &wgpu::Buffer,
-    cache: &wgpu::TextureView,
+    caches: &[PageCache],
     sampler: &wgpu::Sampler,
     feedback: &wgpu::Buffer,
 ) -> wgpu::BindGroup {
-    device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("vortex vt"),
-        layout,
-        entries: &[
-            wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 1, resource: table.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(cache) },
-            wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(sampler) },
-            wgpu::BindGroupEntry { binding: 4, resource: feedback.as_entire_binding() },
-        ],
-    })
+    let mut entries = vec![
+        wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
+        wgpu::BindGroupEntry { binding: 1, resource: table.as_entire_binding() },
+        wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(sampler) },
+        wgpu::BindGroupEntry { binding: 4, resource: feedback.as_entire_binding() },
+    ];
+    entries.extend((0..MAX_LAYERS).map(|layer| wgpu::BindGroupEntry {
+        binding: cache_binding(layer),
+        resource: wgpu::BindingResource::TextureView(caches.get(layer).unwrap_or(&caches[0]).view()),
+    }));
+    device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("vortex vt"), layout, entries: &entries })
 }

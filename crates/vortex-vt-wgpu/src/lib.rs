@@ -12,6 +12,8 @@
 //! - [`feedback`]: the buffer `vt_feedback` writes and its non-blocking readback ring;
 //! - [`source`]: where pages come from ([`PageSource`]; packs; [`source::Delayed`] for latency);
 //! - [`loader`]: the worker pool that reads and decodes pages off the render thread;
+//! - [`layer`]: layer stacks, several textures on one page grid (albedo, normal, roughness)
+//!   streamed as one;
 //! - [`page_cache`] (the physical texture the pages are uploaded into, RGBA8 or [`bc7`]) and
 //!   [`page_table`] (the buffer that maps virtual pages to its slots);
 //! - [`sample`]: the [`SampleFilter`] and which one a border allows;
@@ -31,6 +33,8 @@ pub mod device;
 pub mod feedback;
 #[cfg(feature = "harness")]
 pub mod harness;
+mod landing;
+pub mod layer;
 pub mod loader;
 pub mod page_cache;
 pub mod page_table;
@@ -46,6 +50,7 @@ pub mod texture;
 
 pub use device::{DeviceError, Gpu};
 pub use feedback::{FeedbackBuffer, FeedbackFrame, FeedbackReadback};
+pub use layer::{Layer, LayerKind, MAX_LAYERS};
 pub use loader::{LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS, stand_in_tile};
 pub use page_cache::{CacheError, CacheFormat, PageCache};
 pub use page_table::{GpuPageTable, PageTableError};

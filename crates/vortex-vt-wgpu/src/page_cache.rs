@@ -9,9 +9,12 @@
 //! as the reference sampler does; tiles are RGBA8 with sRGB-encoded colour. Or, when the adapter
 //! samples BC formats and the packs hold BC7 tiles, `Bc7RgbaUnorm` sampled through
 //! `Bc7RgbaUnormSrgb`: the packs' blocks are uploaded as they are, a quarter of RGBA8's memory.
+//! A cache of a [data layer](crate::layer::LayerKind::Data) is sampled through a plain view: its
+//! values are filtered as stored.
 
 use vortex_vt::residency::Slot;
 
+use crate::layer::LayerKind;
 use crate::readback::{Readback, ReadbackError};
 
 /// How the cache stores texels.
@@ -92,7 +95,7 @@ pub enum CacheError {
 #[derive(Debug)]
 pub struct PageCache {
     texture: wgpu::Texture,
-    srgb_view: wgpu::TextureView,
+    view: wgpu::TextureView,
     slots_per_side: u16,
     tile_size: u32,
     border: u32,
@@ -101,13 +104,26 @@ pub struct PageCache {
 
 impl PageCache {
     /// A cache of `slots_per_side²` slots of `tile_size`-texel tiles with `border` texels of border
-    /// on each side. Its texels start as zero (transparent black).
+    /// on each side, for colour. Its texels start as zero (transparent black).
     pub fn new(
         device: &wgpu::Device,
         slots_per_side: u16,
         tile_size: u32,
         border: u32,
         format: CacheFormat,
+    ) -> Result<PageCache, CacheError> {
+        PageCache::for_layer(device, slots_per_side, tile_size, border, format, LayerKind::Colour)
+    }
+
+    /// [`PageCache::new`] for a layer of `kind`: sampled through an sRGB view for colour, as
+    /// stored for data.
+    pub fn for_layer(
+        device: &wgpu::Device,
+        slots_per_side: u16,
+        tile_size: u32,
+        border: u32,
+        format: CacheFormat,
+        kind: LayerKind,
     ) -> Result<PageCache, CacheError> {
         if !(1..=256).contains(&slots_per_side) {
             return Err(CacheError::SlotsPerSide { slots_per_side });
@@ -125,22 +141,23 @@ impl PageCache {
         if side > max {
             return Err(CacheError::TooLarge { side, max });
         }
+        let (storage, srgb) = format.formats();
         let texture = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("vortex page cache"),
             size: wgpu::Extent3d { width: side, height: side, depth_or_array_layers: 1 },
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
-            format: format.formats().0,
+            format: storage,
             usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[format.formats().1],
+            view_formats: &[srgb],
         });
-        let srgb_view = texture.create_view(&wgpu::TextureViewDescriptor {
-            label: Some("vortex page cache (sRGB)"),
-            format: Some(format.formats().1),
+        let view = texture.create_view(&wgpu::TextureViewDescriptor {
+            label: Some("vortex page cache"),
+            format: Some(if kind == LayerKind::Colour { srgb } else { storage }),
             ..Default::default()
         });
-        Ok(PageCache { texture, srgb_view, slots_per_side, tile_size, border, format })
+        Ok(PageCache { texture, view, slots_per_side, tile_size, border, format })
     }
 
     /// Writes one stored tile (border included, in the cache's format: `tile_size²` RGBA8 texels
@@ -230,8 +247,8 @@ impl PageCache {
         &self.texture
     }
 
-    /// The `Rgba8UnormSrgb` view that sampling goes through.
-    pub fn srgb_view(&self) -> &wgpu::TextureView {
-        &self.srgb_view
+    /// The view sampling goes through: sRGB for colour, the storage format for data.
+    pub fn view(&self) -> &wgpu::TextureView {
+        &self.view
     }
 }

@@ -29,8 +29,10 @@ pub(crate) struct Params {
     elect: [u32; 2],
     feedback_bias: f32,
     filter: u32,
+    /// Bit `k` set: layer `k`'s cache holds straight alpha (BC7 blocks as stored).
     straight_alpha: u32,
-    pad: [u32; 3],
+    layers: u32,
+    pad: [u32; 2],
     textures: [TextureInfo; MAX_TEXTURES as usize],
 }
 
@@ -51,7 +53,8 @@ impl Params {
         filter: SampleFilter,
         feedback: FeedbackLayout,
         feedback_bias: f32,
-        straight_alpha: bool,
+        straight_alpha: u32,
+        layers: u32,
     ) -> Params {
         assert!(textures.len() <= MAX_TEXTURES as usize, "{} textures, at most {MAX_TEXTURES}", textures.len());
         let mut infos = [TextureInfo::default(); MAX_TEXTURES as usize];
@@ -71,8 +74,9 @@ impl Params {
             elect,
             feedback_bias,
             filter: filter as u32,
-            straight_alpha: u32::from(straight_alpha),
-            pad: [0; 3],
+            straight_alpha,
+            layers,
+            pad: [0; 2],
             textures: infos,
         }
     }

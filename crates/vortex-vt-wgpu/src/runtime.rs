@@ -34,7 +34,9 @@ use vortex_vt::residency::{ConfigError, Residency, ResidencyConfig, Slot};
 
 use crate::bindings::Bindings;
 use crate::feedback::{FeedbackBuffer, FeedbackReadback};
-use crate::loader::{LoadError, LoadedPage, Loader, LoaderError};
+use crate::landing::{Arrivals, Landed};
+use crate::layer::{Layer, LayerKind, MAX_LAYERS};
+use crate::loader::{LoadError, Loader, LoaderError};
 use crate::page_cache::{CacheError, CacheFormat, PageCache};
 use crate::page_table::{GpuPageTable, PageTableError};
 use crate::params::Params;
@@ -148,6 +150,38 @@ fn cache_format(config: &RuntimeConfig, bc: bool, loader: &Loader) -> Result<Cac
     })
 }
 
+/// Every layer's texture `t` must have layer 0's grid, size, tile size and border.
+fn same_grids(layers: &[Layer], loaders: &[Loader]) -> Result<(), RuntimeError> {
+    let (first, first_loader) = (&layers[0], &loaders[0]);
+    for (k, (layer, loader)) in layers.iter().zip(loaders).enumerate().skip(1) {
+        if layer.sources.len() != first.sources.len() {
+            return Err(RuntimeError::Config(format!(
+                "layer {k} has {} textures and layer 0 has {}: every layer has one source per texture",
+                layer.sources.len(),
+                first.sources.len()
+            )));
+        }
+        for (t, (a, b)) in first_loader.textures().iter().zip(loader.textures()).enumerate() {
+            if a != b {
+                return Err(RuntimeError::Config(format!(
+                    "{}: {}x{} texels in {}-texel tiles with border {}, but {} (layer 0 of texture {t}) has {}x{} in {}-texel tiles with border {}; the layers of a texture share one page grid",
+                    layer.sources[t].location().display(),
+                    b.width,
+                    b.height,
+                    b.tile_size,
+                    b.border,
+                    first.sources[t].location().display(),
+                    a.width,
+                    a.height,
+                    a.tile_size,
+                    a.border,
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// What one [`Runtime::end_frame`] did.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FrameStats {
@@ -161,8 +195,10 @@ pub struct FrameStats {
     pub hits: usize,
     /// Pages sent to the loader.
     pub queued: usize,
-    /// Pages uploaded into the cache and mapped.
+    /// Pages uploaded into the cache and mapped (every layer of each).
     pub uploaded: usize,
+    /// Page-table entries written (once per page mapped or unmapped, whatever the layers).
+    pub table_writes: usize,
     pub evicted: usize,
     /// Wanted pages left for later frames (load budget, or a cache full of wanted pages).
     pub deferred: usize,
@@ -177,7 +213,7 @@ pub struct FrameStats {
     pub fallback_fraction: f64,
     /// The LOD bias the next frame's feedback asks with.
     pub lod_bias: f32,
-    /// Bytes read by the sources for the pages uploaded.
+    /// Bytes read by the sources for the pages uploaded (every layer's).
     pub bytes_read: u64,
     pub bytes_uploaded: u64,
     /// Pages uploaded with the stand-in tile because they failed to load.
@@ -194,13 +230,14 @@ pub struct Runtime {
     device: wgpu::Device,
     queue: wgpu::Queue,
     config: RuntimeConfig,
-    loader: Loader,
+    /// One loader and one cache per layer; layer 0's cache fixes the slots' geometry.
+    loaders: Vec<Loader>,
+    caches: Vec<PageCache>,
     textures: Vec<VirtualTexture>,
     grids: Vec<TextureGrid>,
     residency: Residency,
     table: PageTable,
     gpu_table: GpuPageTable,
-    cache: PageCache,
     filter: SampleFilter,
     bindings: Bindings,
     feedback: FeedbackBuffer,
@@ -212,8 +249,10 @@ pub struct Runtime {
     updates: u64,
     /// Pages given a slot and sent to the loader, not yet uploaded.
     in_flight: HashMap<PageId, Slot>,
-    /// Pages the loader finished, waiting for the upload budget or their parent.
-    landed: VecDeque<LoadedPage>,
+    /// Pages some of whose layers have landed.
+    arrivals: Arrivals,
+    /// Pages every layer of which has landed, waiting for the upload budget or their parent.
+    landed: VecDeque<Landed>,
     touched: HashSet<PageId>,
     errors: Vec<LoadError>,
     /// The fallback share of the last feedback analysed.
@@ -243,28 +282,61 @@ impl Runtime {
         sources: Vec<Arc<dyn PageSource>>,
         config: RuntimeConfig,
     ) -> Result<Runtime, RuntimeError> {
-        let loader = Loader::with_sources(sources, config.loader_threads)?;
-        let textures = loader.textures().to_vec();
-        let grids: Vec<TextureGrid> = textures.iter().map(|t| t.grid).collect();
+        Runtime::with_layers(device, queue, vec![Layer::colour(sources)], config)
+    }
+
+    /// A runtime over layer stacks (`crate::layer`): texture `t` is every layer's source `t`,
+    /// all on one page grid; one feedback, page table and residency serve every layer. Up to
+    /// [`MAX_LAYERS`] layers, each with the same number of sources; a layer's cache holds the
+    /// format that suits its kind (colour as `config.cache_format` says, data in RGBA8), and
+    /// each layer has its own loader threads.
+    pub fn with_layers(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        layers: Vec<Layer>,
+        config: RuntimeConfig,
+    ) -> Result<Runtime, RuntimeError> {
+        if !(1..=MAX_LAYERS).contains(&layers.len()) {
+            return Err(RuntimeError::Config(format!("{} layers: a runtime has 1 to {MAX_LAYERS}", layers.len())));
+        }
         let bc = device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC);
-        let format = cache_format(&config, bc, &loader)?;
-        loader.set_format(format);
-        let tile_bytes = format.tile_bytes(loader.tile_size()) as u64;
+        let mut loaders = Vec::with_capacity(layers.len());
+        for layer in &layers {
+            let loader = Loader::with_sources(layer.sources.clone(), config.loader_threads)?;
+            let format = match layer.kind {
+                LayerKind::Colour => cache_format(&config, bc, &loader)?,
+                LayerKind::Data => CacheFormat::Rgba8,
+            };
+            loader.set_kind(layer.kind);
+            loader.set_format(format);
+            loaders.push(loader);
+        }
+        same_grids(&layers, &loaders)?;
+        let first = &loaders[0];
+        let textures = first.textures().to_vec();
+        let grids: Vec<TextureGrid> = textures.iter().map(|t| t.grid).collect();
+        let tile_bytes: u64 = loaders.iter().map(|l| l.format().tile_bytes(l.tile_size()) as u64).sum();
         if config.upload_bytes < tile_bytes {
             return Err(RuntimeError::Config(format!(
-                "an upload budget of {} bytes per frame is less than one {}-byte tile",
+                "an upload budget of {} bytes per frame is less than one {}-byte page",
                 config.upload_bytes, tile_bytes
             )));
         }
         let side = config.cache_slots_per_side;
-        let cache = PageCache::new(device, side, loader.tile_size(), loader.border(), format)?;
-        let residency = Residency::new(&grids, ResidencyConfig::new(cache.slot_count() as usize, config.load_budget))?;
+        let (tile_size, border) = (first.tile_size(), first.border());
+        let caches = layers
+            .iter()
+            .zip(&loaders)
+            .map(|(layer, l)| PageCache::for_layer(device, side, tile_size, border, l.format(), layer.kind))
+            .collect::<Result<Vec<_>, _>>()?;
+        let residency =
+            Residency::new(&grids, ResidencyConfig::new(caches[0].slot_count() as usize, config.load_budget))?;
         let gpu_table = GpuPageTable::new(device, queue, &grids, side)?;
-        let filter = config.filter.unwrap_or(SampleFilter::best_for(loader.border()));
+        let filter = config.filter.unwrap_or(SampleFilter::best_for(border));
         let [w, h] = config.frame_size;
         let feedback = FeedbackBuffer::new(device, w, h, config.feedback_block);
         let readback = FeedbackReadback::new(device, &feedback, 3);
-        let bindings = Bindings::new(device, &gpu_table, &cache, &feedback, filter);
+        let bindings = Bindings::new(device, &gpu_table, &caches, &feedback, filter);
         let mut runtime = Runtime {
             device: device.clone(),
             queue: queue.clone(),
@@ -274,17 +346,18 @@ impl Runtime {
             frame: 0,
             updates: 0,
             in_flight: HashMap::new(),
+            arrivals: Arrivals::new(layers.len()),
             landed: VecDeque::new(),
             touched: HashSet::new(),
             errors: Vec::new(),
             fallback: 0.0,
             check_invariants: false,
-            loader,
+            loaders,
+            caches,
             textures,
             grids,
             residency,
             gpu_table,
-            cache,
             filter,
             bindings,
             feedback,
@@ -292,7 +365,7 @@ impl Runtime {
         };
         // The roots: loaded and mapped before the first frame.
         let update = runtime.residency.update(0, &[]);
-        let pages = runtime.loader.load(&update.loads);
+        let pages = runtime.load_now(&update.loads);
         let mut changes = Vec::new();
         for page in pages {
             runtime.upload(page, &mut changes);
@@ -301,6 +374,15 @@ impl Runtime {
         runtime.feedback.clear(&runtime.queue);
         runtime.write_params();
         Ok(runtime)
+    }
+
+    /// Loads every layer of `pages`, waiting for them.
+    fn load_now(&self, pages: &[(PageId, Slot)]) -> Vec<Landed> {
+        let mut layers: Vec<_> = self.loaders.iter().map(|l| l.load(pages).into_iter()).collect();
+        pages
+            .iter()
+            .map(|&(page, slot)| Landed { page, slot, layers: layers.iter_mut().filter_map(Iterator::next).collect() })
+            .collect()
     }
 
     /// The layout of the module's bind group, for the application's pipeline layouts (at the
@@ -335,7 +417,7 @@ impl Runtime {
     }
 
     fn rebind(&mut self) {
-        self.bindings.rebind(&self.device, &self.gpu_table, &self.cache, &self.feedback, self.filter);
+        self.bindings.rebind(&self.device, &self.gpu_table, &self.caches, &self.feedback, self.filter);
         self.write_params();
     }
 
@@ -344,11 +426,12 @@ impl Runtime {
         let layout = self.feedback.layout(self.frame);
         let params = Params::new(
             &self.textures,
-            &self.cache,
+            &self.caches[0],
             self.filter,
             layout,
             self.residency.lod_bias(),
-            self.loader.straight_alpha(),
+            self.loaders.iter().enumerate().map(|(k, l)| u32::from(l.straight_alpha()) << k).sum(),
+            self.loaders.len() as u32,
         );
         self.queue.write_buffer(self.bindings.params(), 0, bytemuck::bytes_of(&params));
     }
@@ -358,7 +441,8 @@ impl Runtime {
     /// [`Pacing::RealTime`].
     pub fn end_frame(&mut self) -> Result<FrameStats, RuntimeError> {
         let started = Instant::now();
-        let waited_before = self.loader.waited();
+        let waited = |loaders: &[Loader]| loaders.iter().map(Loader::waited).sum::<Duration>();
+        let waited_before = waited(&self.loaders);
         let offline = self.config.pacing == Pacing::Offline;
         let mut stats = FrameStats { frame: self.frame, ..FrameStats::default() };
 
@@ -376,13 +460,15 @@ impl Runtime {
             stats.feedback_of = Some(feedback.frame);
             let loads = self.stream(&feedback.words, &mut stats, &mut changes);
             if offline {
-                self.landed.extend(self.loader.load(&loads));
+                let pages = self.load_now(&loads);
+                self.landed.extend(pages);
             } else {
-                self.loader.request(&loads);
+                self.loaders.iter().for_each(|l| l.request(&loads));
             }
         }
-        self.landed.extend(self.loader.poll());
+        self.collect_landed(&mut stats);
         self.upload_landed(offline, &mut stats, &mut changes);
+        stats.table_writes = changes.len();
         self.gpu_table.write_changes(&self.queue, &changes);
         if self.check_invariants {
             self.check()?;
@@ -393,7 +479,7 @@ impl Runtime {
         stats.fallback_fraction = self.fallback;
         stats.in_flight = self.in_flight.len();
         stats.lod_bias = self.residency.lod_bias();
-        stats.io_wait = self.loader.waited() - waited_before;
+        stats.io_wait = waited(&self.loaders) - waited_before;
         stats.cpu = started.elapsed();
         Ok(stats)
     }
@@ -416,13 +502,30 @@ impl Runtime {
         // otherwise queue pages it has already left behind).
         let (stale, unmap): (Vec<_>, Vec<_>) =
             update.evictions.iter().copied().partition(|(page, _)| self.in_flight.remove(page).is_some());
-        stats.cancelled = self.loader.cancel(&stale);
+        stats.cancelled = self.loaders.iter().map(|l| l.cancel(&stale)).sum();
+        for &(page, slot) in &stale {
+            self.arrivals.forget(page, slot);
+        }
         changes.extend(self.table.apply_mappings(&unmap, &[]));
         self.in_flight.extend(update.loads.iter().copied());
         let s = update.stats;
         (stats.requested, stats.hits, stats.queued) = (s.requested, s.hits, update.loads.len());
         (stats.evicted, stats.deferred) = (s.evicted, s.deferred);
         update.loads
+    }
+
+    /// Joins the layers the loaders have finished into pages; a layer of a page no longer in
+    /// flight for its slot is discarded at once.
+    fn collect_landed(&mut self, stats: &mut FrameStats) {
+        for (layer, loader) in self.loaders.iter().enumerate() {
+            for page in loader.poll() {
+                if self.in_flight.get(&page.page) != Some(&page.slot) {
+                    stats.discarded += usize::from(layer == 0);
+                    continue;
+                }
+                self.landed.extend(self.arrivals.add(layer, page));
+            }
+        }
     }
 
     /// Uploads and maps the landed pages that are still wanted, parents first, within the
@@ -440,7 +543,7 @@ impl Runtime {
             }
             let parent_mapped =
                 p.parent(&self.grids[p.texture as usize]).is_none_or(|q| self.table.get(q).lod == q.lod);
-            let bytes = page.texels.len() as u64;
+            let bytes = page.bytes();
             let over_budget = !offline
                 && stats.uploaded > 0
                 && (stats.bytes_uploaded + bytes > self.config.upload_bytes
@@ -451,22 +554,23 @@ impl Runtime {
             }
             stats.uploaded += 1;
             stats.bytes_uploaded += bytes;
-            stats.bytes_read += page.bytes_read;
-            stats.load_errors += usize::from(page.error.is_some());
+            stats.bytes_read += page.layers.iter().map(|l| l.bytes_read).sum::<u64>();
+            stats.load_errors += page.layers.iter().filter(|l| !l.is_ok()).count();
             self.upload(page, changes);
         }
         self.landed = waiting;
     }
 
-    /// Writes one page into its slot and maps it.
-    fn upload(&mut self, page: LoadedPage, changes: &mut Vec<Change>) {
-        self.cache.upload(&self.queue, page.slot, &page.texels);
+    /// Writes every layer of one page into its slot and maps it, once.
+    fn upload(&mut self, page: Landed, changes: &mut Vec<Change>) {
+        for (cache, layer) in self.caches.iter().zip(&page.layers) {
+            cache.upload(&self.queue, page.slot, &layer.texels);
+        }
         self.in_flight.remove(&page.page);
+        self.arrivals.forget(page.page, page.slot);
         self.touched.insert(page.page);
         changes.extend(self.table.apply_mappings(&[], &[(page.page, page.slot)]));
-        if let Some(e) = page.error {
-            self.errors.push(e);
-        }
+        self.errors.extend(page.layers.into_iter().filter_map(|l| l.error));
     }
 
     /// The residency's invariants, and the table mapping exactly the pages that have landed.
@@ -490,8 +594,14 @@ impl Runtime {
         &self.textures
     }
 
+    /// Layer 0's loader.
     pub fn loader(&self) -> &Loader {
-        &self.loader
+        &self.loaders[0]
+    }
+
+    /// Every layer's loader, layer 0 first.
+    pub fn loaders(&self) -> &[Loader] {
+        &self.loaders
     }
 
     pub fn residency(&self) -> &Residency {
@@ -502,8 +612,14 @@ impl Runtime {
         &self.table
     }
 
+    /// Layer 0's cache.
     pub fn cache(&self) -> &PageCache {
-        &self.cache
+        &self.caches[0]
+    }
+
+    /// Every layer's cache, layer 0 first: the same slots, each in its layer's format.
+    pub fn caches(&self) -> &[PageCache] {
+        &self.caches
     }
 
     pub fn config(&self) -> &RuntimeConfig {

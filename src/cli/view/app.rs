@@ -19,7 +19,7 @@ use winit::window::{Window, WindowId};
 
 use super::Start;
 use super::screenshot;
-use crate::cli::render::{open_sources, warn_of_seams};
+use crate::cli::render::{open_layers, warn_of_seams};
 
 pub(super) struct Options {
     pub scene: Scene,
@@ -146,7 +146,7 @@ impl State {
         };
         let instance = wgpu::Instance::new(descriptor.with_env());
         let surface = instance.create_surface(Arc::clone(&window)).context("making the window's GPU surface")?;
-        let (sources, tile_size) = open_sources(&scene.textures, options.io_latency)?;
+        let (layers, tile_size) = open_layers(&scene, options.io_latency)?;
         let side = u32::from(scene.effects.cache_slots_per_side) * tile_size;
         let gpu = Gpu::for_surface(instance, &surface, side)?;
 
@@ -175,7 +175,7 @@ impl State {
         let pacing = if options.screenshot.is_some() { Pacing::Offline } else { Pacing::RealTime };
         let mut scene = scene.clone();
         scene.size = [width, height];
-        let mut renderer = SceneRenderer::new(gpu, sources, &scene, pacing)?;
+        let mut renderer = SceneRenderer::with_layers(gpu, layers, &scene, pacing)?;
         renderer.set_residency_view(options.residency_view);
         warn_of_seams(&renderer);
         let images = renderer.runtime().textures().iter().map(|t| t.size()).collect();

@@ -18,6 +18,8 @@ struct Frame {
 // The residency view (tinted by the LOD drawn, red where it falls back) instead of the picture:
 // a pipeline constant, so that the picture's pipelines never compute it.
 override RESIDENCY_VIEW: bool = false;
+// The layer of the textures' stacks drawn (the scene effect `layer`).
+override LAYER: u32 = 0u;
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 
@@ -79,7 +81,7 @@ fn fs_window(v: Varyings) -> @location(0) vec4<f32> {
     let texel = window_texel(v.position.xy);
     let footprint = max(abs(frame.step.x), abs(frame.step.y));
     vt_feedback_texel(v.texture, texel, footprint, v.position.xy);
-    let c = vt_sample_texel_level(v.texture, texel, lod_for(footprint));
+    let c = vt_sample_texel_layer_level(v.texture, LAYER, texel, lod_for(footprint));
     if RESIDENCY_VIEW {
         return residency(c, vt_residency_texel(v.texture, texel, footprint));
     }
@@ -91,7 +93,7 @@ fn fs_mesh(v: Varyings) -> @location(0) vec4<f32> {
     let ddx = dpdx(v.uv);
     let ddy = dpdy(v.uv);
     vt_feedback(v.texture, v.uv, ddx, ddy, v.position.xy);
-    let c = vt_sample_level(v.texture, v.uv, lod_for(vt_footprint(v.texture, ddx, ddy)));
+    let c = vt_sample_layer_level(v.texture, LAYER, v.uv, lod_for(vt_footprint(v.texture, ddx, ddy)));
     if RESIDENCY_VIEW {
         return residency(c, vt_residency(v.texture, v.uv, ddx, ddy));
     }

@@ -16,5 +16,5 @@ pub mod view;
 
 pub use mesh::{GpuMesh, Mesh, Vertex};
 pub use renderer::{FrameReport, Report, SceneRenderer, TARGET_FORMAT};
-pub use scene::{Effects, Pose, Scene, SceneError, SceneView, Shape, WindowKey};
+pub use scene::{Effects, Pose, Scene, SceneError, SceneLayer, SceneView, Shape, WindowKey};
 pub use view::{View, Window};

@@ -42,8 +42,8 @@ impl AddressProbe {
         let device = &gpu.device;
         let (table, cache) = placeholders(gpu, textures);
         let feedback = FeedbackBuffer::new(device, 1, 1, 1);
-        let bindings = Bindings::new(device, &table, &cache, &feedback, SampleFilter::Nearest);
-        let params = Params::new(textures, &cache, SampleFilter::Nearest, feedback.layout(0), 0.0, false);
+        let bindings = Bindings::new(device, &table, std::slice::from_ref(&cache), &feedback, SampleFilter::Nearest);
+        let params = Params::new(textures, &cache, SampleFilter::Nearest, feedback.layout(0), 0.0, 0, 1);
         gpu.queue.write_buffer(bindings.params(), 0, bytemuck::bytes_of(&params));
         let module = draw::shader(device, "vortex probe", include_str!("probe.wgsl"));
         let frame_layout = draw::frame_only_layout(device, "vortex probe frame");
@@ -114,7 +114,7 @@ impl FeedbackProbe {
         let (table, cache) = placeholders(gpu, textures);
         let feedback = FeedbackBuffer::new(device, width, height, block);
         let readback = FeedbackReadback::new(device, &feedback, ring);
-        let bindings = Bindings::new(device, &table, &cache, &feedback, SampleFilter::Nearest);
+        let bindings = Bindings::new(device, &table, std::slice::from_ref(&cache), &feedback, SampleFilter::Nearest);
         let module = draw::shader(device, "vortex feedback probe", "");
         let frame_layout = draw::frame_only_layout(device, "vortex feedback probe frame");
         let layouts = [&frame_layout, bindings.layout()];
@@ -149,7 +149,7 @@ impl FeedbackProbe {
     pub fn submit(&mut self, gpu: &Gpu, view: Option<&View>, frame: u64, bias: f32) -> Option<u64> {
         let device = &gpu.device;
         let params =
-            Params::new(&self.textures, &self.cache, SampleFilter::Nearest, self.feedback.layout(frame), bias, false);
+            Params::new(&self.textures, &self.cache, SampleFilter::Nearest, self.feedback.layout(frame), bias, 0, 1);
         gpu.queue.write_buffer(self.bindings.params(), 0, bytemuck::bytes_of(&params));
         self.feedback.clear(&gpu.queue);
         let mut encoder =

@@ -17,6 +17,7 @@ use super::mesh::GpuMesh;
 use super::scene::{Pose, Scene};
 use super::view::View;
 use crate::device::Gpu;
+use crate::layer::Layer;
 use crate::readback::{Readback, ReadbackError};
 use crate::runtime::{FrameStats, Pacing, Runtime, RuntimeConfig, RuntimeError};
 use crate::sample::SampleFilter;
@@ -33,6 +34,7 @@ struct PipelineKey {
     format: wgpu::TextureFormat,
     filter: SampleFilter,
     residency_view: bool,
+    layer: u32,
 }
 
 /// The counters of one frame.
@@ -43,8 +45,10 @@ pub struct FrameReport {
     pub requested: usize,
     /// Of those, pages resident or on their way.
     pub hits: usize,
-    /// Pages uploaded and mapped.
+    /// Pages uploaded and mapped (every layer of each).
     pub loaded: usize,
+    /// Page-table entries written: one per page mapped or unmapped, whatever the layers.
+    pub table_writes: usize,
     pub evicted: usize,
     /// Wanted pages left for later frames (budget or cache full).
     pub deferred: usize,
@@ -74,11 +78,14 @@ pub struct Report {
     pub filter: String,
     /// `real-time` (frames never wait) or `offline` (each frame waits for its pages).
     pub pacing: String,
-    /// `rgba8`, or `bc7` when the packs' BC7 blocks went to the GPU as they are.
+    /// Layer 0's cache: `rgba8`, `bc1` or `bc7`.
     pub cache_format: String,
     pub cache_slots: usize,
     pub upload_budget: usize,
     pub frames: Vec<FrameReport>,
+    /// Layers of every texture, and the one drawn.
+    pub layers: usize,
+    pub layer: u32,
     /// Distinct pages ever loaded, against all pages of all textures.
     pub pages_touched: usize,
     pub pages_total: u64,
@@ -118,6 +125,8 @@ pub struct SceneRenderer {
     /// The depth buffer of other targets, for their size.
     other_depth: Option<((u32, u32), wgpu::TextureView)>,
     residency_view: bool,
+    /// The layer drawn (the scene effect `layer`).
+    layer: u32,
 }
 
 impl SceneRenderer {
@@ -128,8 +137,26 @@ impl SceneRenderer {
         scene: &Scene,
         pacing: Pacing,
     ) -> Result<SceneRenderer, RuntimeError> {
+        SceneRenderer::with_layers(gpu, vec![Layer::colour(sources)], scene, pacing)
+    }
+
+    /// Sets up `scene` over layer stacks (`crate::layer`), drawing the layer its effect `layer`
+    /// names.
+    pub fn with_layers(
+        gpu: Gpu,
+        layers: Vec<Layer>,
+        scene: &Scene,
+        pacing: Pacing,
+    ) -> Result<SceneRenderer, RuntimeError> {
         scene.check().map_err(RuntimeError::Config)?;
-        scene.check_textures(sources.len()).map_err(RuntimeError::Config)?;
+        scene.check_textures(layers.first().map_or(0, |l| l.sources.len())).map_err(RuntimeError::Config)?;
+        if scene.effects.layer as usize >= layers.len() {
+            return Err(RuntimeError::Config(format!(
+                "effects.layer {} is not one of the {} layers",
+                scene.effects.layer,
+                layers.len()
+            )));
+        }
         let e = &scene.effects;
         let config = RuntimeConfig {
             cache_slots_per_side: e.cache_slots_per_side,
@@ -143,7 +170,7 @@ impl SceneRenderer {
             pacing,
             ..RuntimeConfig::default()
         };
-        let runtime = Runtime::with_sources(&gpu.device, &gpu.queue, sources, config)?;
+        let runtime = Runtime::with_layers(&gpu.device, &gpu.queue, layers, config)?;
         let device = &gpu.device;
         let module = draw::shader(device, "vortex harness", "");
         let frame_layout = draw::frame_only_layout(device, "vortex harness frame");
@@ -163,18 +190,27 @@ impl SceneRenderer {
             meshes,
             other_depth: None,
             residency_view: false,
+            layer: scene.effects.layer,
         })
     }
 
     /// The pipelines drawing into `format` with the runtime's filter and the current view.
     fn pipelines(&self, format: wgpu::TextureFormat) -> Pipelines {
-        let key = PipelineKey { format, filter: self.runtime.filter(), residency_view: self.residency_view };
+        let key = PipelineKey {
+            format,
+            filter: self.runtime.filter(),
+            residency_view: self.residency_view,
+            layer: self.layer,
+        };
         let mut made = self.pipelines.borrow_mut();
         if let Some((_, p)) = made.iter().find(|(k, _)| *k == key) {
             return p.clone();
         }
-        let constants =
-            [shader::filter_constant(key.filter), ("RESIDENCY_VIEW", f64::from(u8::from(key.residency_view)))];
+        let constants = [
+            shader::filter_constant(key.filter),
+            ("RESIDENCY_VIEW", f64::from(u8::from(key.residency_view))),
+            ("LAYER", f64::from(key.layer)),
+        ];
         let layouts = [&self.frame_layout, self.runtime.bind_group_layout()];
         let p = Pipelines::new(&self.gpu.device, "vortex harness", &self.module, layouts, format, "", &constants);
         made.push((key, p.clone()));
@@ -319,11 +355,13 @@ impl SceneRenderer {
                 Pacing::Offline => "offline".into(),
             },
             cache_format: rt.cache().format().name().into(),
+            layers: rt.caches().len(),
+            layer: self.layer,
             cache_slots: rt.residency().slots(),
             upload_budget: config.load_budget,
             pages_touched: rt.pages_touched(),
             pages_total: rt.textures().iter().map(|t| t.grid.page_count()).sum(),
-            bytes_read: rt.loader().counters().bytes_read,
+            bytes_read: rt.loaders().iter().map(|l| l.counters().bytes_read).sum(),
             hit_rate: if requested == 0 { 0.0 } else { hits as f64 / requested as f64 },
             still_from,
             frames_to_converge,
@@ -354,6 +392,7 @@ fn report(s: &FrameStats, cpu: Duration) -> FrameReport {
         requested: s.requested,
         hits: s.hits,
         loaded: s.uploaded,
+        table_writes: s.table_writes,
         evicted: s.evicted,
         deferred: s.deferred,
         in_flight: s.in_flight,

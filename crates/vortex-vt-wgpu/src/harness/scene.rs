@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 use super::camera::{Camera, Keyframe, at_frame, lerp3};
 use super::mesh::{Mesh, Vertex};
 use super::view::Window;
+use crate::layer::LayerKind;
 use crate::page_cache::CacheFormat;
 use crate::sample::SampleFilter;
 use crate::texture::VirtualTexture;
@@ -35,6 +36,10 @@ pub struct Scene {
     /// empty when the command line names the packs.
     #[serde(default)]
     pub textures: Vec<PathBuf>,
+    /// More layers of the same textures (`crate::layer`): `textures` is layer 0 (colour), and
+    /// each of these names its kind and one pack per texture, on the same page grid.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub layers: Vec<SceneLayer>,
     /// Output width and height in pixels.
     #[serde(default = "default_size")]
     pub size: [u32; 2],
@@ -44,6 +49,31 @@ pub struct Scene {
     pub view: SceneView,
     #[serde(default)]
     pub effects: Effects,
+}
+
+/// A layer beyond the first: its kind and its packs (one per texture, paths as `textures`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneLayer {
+    #[serde(with = "layer_kind_name", default)]
+    pub kind: LayerKind,
+    pub textures: Vec<PathBuf>,
+}
+
+mod layer_kind_name {
+    use serde::{Deserialize, Deserializer, Serializer, de::Error};
+
+    use crate::layer::LayerKind;
+
+    pub fn serialize<S: Serializer>(k: &LayerKind, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(k.name())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<LayerKind, D::Error> {
+        let name = String::deserialize(d)?;
+        LayerKind::from_name(&name)
+            .ok_or_else(|| D::Error::custom(format!("unknown layer kind {name:?}: colour or data")))
+    }
 }
 
 /// What the camera looks at.
@@ -130,6 +160,8 @@ pub struct Effects {
     /// BC), `rgba8` (exact), or `bc1` / `bc7`: every page transcoded on the loader's threads.
     #[serde(with = "cache_format_name")]
     pub cache_format: Option<CacheFormat>,
+    /// The layer of the textures' stacks drawn (0, the colour of `textures`, by default).
+    pub layer: u32,
 }
 
 impl Default for Effects {
@@ -142,6 +174,7 @@ impl Default for Effects {
             threads: 2,
             bc7: true,
             cache_format: None,
+            layer: 0,
         }
     }
 }
@@ -222,6 +255,7 @@ impl Scene {
         let key = |frame, eye, target| Keyframe { frame, at: Camera { eye, target } };
         Scene {
             textures: vec![],
+            layers: vec![],
             size: default_size(),
             frames: 60,
             view: SceneView::Camera {
@@ -243,7 +277,8 @@ impl Scene {
         let mut scene: Scene =
             serde_json::from_str(&text).map_err(|source| SceneError::Parse { path: path.into(), source })?;
         let dir = path.parent().unwrap_or(Path::new(""));
-        for t in &mut scene.textures {
+        let layers = scene.layers.iter_mut().flat_map(|l| l.textures.iter_mut());
+        for t in scene.textures.iter_mut().chain(layers) {
             if t.is_relative() {
                 *t = dir.join(&*t);
             }

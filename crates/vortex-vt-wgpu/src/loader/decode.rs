@@ -33,13 +33,15 @@ pub(super) struct Tally {
 }
 
 /// The page's texels from its tile, or from its nearest stored ancestor if the tile is absent,
-/// premultiplied; for a BC7 cache, its BC7 blocks instead. `sources` and `textures` are indexed
+/// premultiplied if they are `colour` (data is taken as stored); for a BC7 cache, its BC7 blocks
+/// instead. `sources` and `textures` are indexed
 /// by texture id.
 pub(super) fn texels(
     sources: &[Arc<dyn PageSource>],
     textures: &[VirtualTexture],
     page: PageId,
     format: CacheFormat,
+    colour: bool,
     tally: &mut Tally,
 ) -> Result<(Vec<u8>, Made), LoadError> {
     let index = page.texture as usize;
@@ -79,7 +81,9 @@ pub(super) fn texels(
         if format == CacheFormat::Bc7 {
             return Ok((texels, Made::Stored));
         }
-        premultiply(&mut texels);
+        if colour {
+            premultiply(&mut texels);
+        }
         let levels_up = tile.lod - page.lod;
         return Ok(if levels_up == 0 {
             (texels, Made::Stored)

@@ -7,7 +7,7 @@
 
 use std::collections::VecDeque;
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::sync::atomic::{AtomicU8, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
@@ -21,6 +21,7 @@ use super::decode::{self, Made, Tally};
 use super::transcode::transcode;
 use super::{LoadCounters, LoadError, LoadedPage, LoaderError, stand_in_tile};
 use crate::bc7;
+use crate::layer::LayerKind;
 use crate::page_cache::CacheFormat;
 use crate::source::PageSource;
 use crate::texture::VirtualTexture;
@@ -55,6 +56,8 @@ struct Shared {
     /// The format pages are answered in ([`Loader::set_format`]), as its index in
     /// [`CacheFormat::ALL`].
     format: AtomicU8,
+    /// The sources hold colour, premultiplied on load, not data ([`Loader::set_kind`]).
+    colour: AtomicBool,
     /// Every source gives every tile as BC7 blocks as stored: a BC7 cache takes them as they are.
     stored_bc7: bool,
 }
@@ -123,6 +126,7 @@ impl Loader {
             bytes_read: AtomicU64::new(0),
             errors: AtomicU64::new(0),
             format: AtomicU8::new(0),
+            colour: AtomicBool::new(true),
             stored_bc7,
         });
         let (async_tx, async_rx) = mpsc::channel();
@@ -188,6 +192,11 @@ impl Loader {
 
     pub fn format(&self) -> CacheFormat {
         self.shared.format()
+    }
+
+    /// Makes every later page be taken as `kind`: colour is premultiplied on load, data is not.
+    pub fn set_kind(&self, kind: LayerKind) {
+        self.shared.colour.store(kind == LayerKind::Colour, Ordering::Relaxed);
     }
 
     /// Texels of border on each side of every tile.
@@ -361,9 +370,10 @@ impl Shared {
         let format = self.format();
         // Stored BC7 blocks are taken as they are; anything else is decoded (and transcoded).
         let read_as = if format == CacheFormat::Bc7 && self.stored_bc7 { CacheFormat::Bc7 } else { CacheFormat::Rgba8 };
+        let colour = self.colour.load(Ordering::Relaxed);
         let mut tally = Tally::default();
         let texels = || {
-            decode::texels(&self.sources, &self.textures, page, read_as, &mut tally).map(|(texels, made)| {
+            decode::texels(&self.sources, &self.textures, page, read_as, colour, &mut tally).map(|(texels, made)| {
                 (if read_as == format { texels } else { transcode(texels, self.tile_size, format) }, made)
             })
         };

@@ -11,15 +11,20 @@
 //   vt_sample_level(id, uv, lod) -> vec4<f32>      the same at an explicit LOD
 //   vt_feedback(id, uv, ddx, ddy, frag_coord)      ask for the page this fragment wants
 //   vt_residency(id, uv, ddx, ddy) -> vec2<u32>    the LOD wanted and the LOD drawn (debug views)
+//   vt_sample_layer(id, layer, uv, ddx, ddy)       layer `layer` of a layer stack (`crate::layer`;
+//   vt_sample_layer_level(id, layer, uv, lod)      `vt_sample` is layer 0): the same page, slot and
+//                                                   address for every layer, so one feedback call
+//                                                   serves them all
 //
 // and, for 2D views deep inside huge images where an f32 UV is not precise enough, the same
 // three addressed by a LOD-0 texel position split into an integer and an f32 part
 // (`VtTexel`), with the footprint in LOD-0 texels per pixel instead of derivatives:
 //
 //   vt_sample_texel(id, texel, footprint), vt_sample_texel_level(id, texel, lod),
+//   vt_sample_texel_layer(id, layer, texel, footprint), vt_sample_texel_layer_level(id, layer, texel, lod),
 //   vt_feedback_texel(id, texel, footprint, frag_coord), vt_residency_texel(id, texel, footprint)
 //
-// Samples are premultiplied-alpha colour in linear light (the cache is sampled through an sRGB
+// Samples of colour layers are premultiplied-alpha colour in linear light (the cache is sampled through an sRGB
 // view, so filtering happens in linear light on premultiplied texels: no fringes from the
 // colour under transparent texels). Blend them with (One, OneMinusSrcAlpha), or divide by alpha.
 //
@@ -47,9 +52,11 @@ struct VtParams {
     feedback_bias: f32,
     // 0 nearest, 1 bilinear, 2 trilinear (`SampleFilter`).
     sample_filter: u32,
-    // 1 when the cache holds straight alpha (BC7 blocks as stored): premultiply after filtering.
+    // Bit k set when layer k's cache holds straight alpha (BC7 blocks as stored): premultiply
+    // after filtering.
     straight_alpha: u32,
-    pad0: u32,
+    // Layers of every texture (1..=4).
+    layers: u32,
     pad1: u32,
     pad2: u32,
     textures: array<VtTextureInfo, 16>,
@@ -63,6 +70,11 @@ struct VtParams {
 @group(VT_GROUP) @binding(3) var vt_cache_sampler: sampler;
 // One word per feedback block (`vortex_vt::feedback::encode`), all ones where nothing asked.
 @group(VT_GROUP) @binding(4) var<storage, read_write> vt_feedback_words: array<u32>;
+// Layers 1-3's caches (layer 0's where the runtime has fewer layers): the same slots as vt_cache,
+// each in its layer's format.
+@group(VT_GROUP) @binding(5) var vt_cache_1: texture_2d<f32>;
+@group(VT_GROUP) @binding(6) var vt_cache_2: texture_2d<f32>;
+@group(VT_GROUP) @binding(7) var vt_cache_3: texture_2d<f32>;
 
 // The filter: 3 (the default) takes it from the uniform block (`Runtime::set_filter`, no pipeline
 // change); 0 nearest, 1 bilinear, 2 trilinear fix it when the pipeline is made
@@ -164,9 +176,20 @@ fn vt_entry(id: u32, lod: u32, at: VtAt) -> u32 {
     return vt_page_table[vt_page_table[id * 16u + lod] + at.page.y * vt_pages_per_row(t, lod) + at.page.x];
 }
 
-// The sample at address `at` of LOD `lod` of texture `id`, from whatever the page table maps
-// there.
-fn vt_fetch(id: u32, lod: u32, at: VtAt) -> vec4<f32> {
+// Layer `layer`'s cache at cache UV `uv`. A switch, since the caches' formats differ; a shader
+// that passes a constant layer has the others compiled out.
+fn vt_cache_sample(layer: u32, uv: vec2<f32>) -> vec4<f32> {
+    switch layer {
+        case 1u: { return textureSampleLevel(vt_cache_1, vt_cache_sampler, uv, 0.0); }
+        case 2u: { return textureSampleLevel(vt_cache_2, vt_cache_sampler, uv, 0.0); }
+        case 3u: { return textureSampleLevel(vt_cache_3, vt_cache_sampler, uv, 0.0); }
+        default: { return textureSampleLevel(vt_cache, vt_cache_sampler, uv, 0.0); }
+    }
+}
+
+// The sample at address `at` of LOD `lod` of layer `layer` of texture `id`, from whatever the
+// page table maps there.
+fn vt_fetch(id: u32, layer: u32, lod: u32, at: VtAt) -> vec4<f32> {
     let t = vt_params.textures[id];
     let word = vt_entry(id, lod, at);
     if word == VT_UNMAPPED {
@@ -181,26 +204,27 @@ fn vt_fetch(id: u32, lod: u32, at: VtAt) -> vec4<f32> {
     let tile = vt_params.tile;
     let origin = slot * tile.x;
     let texel = clamp(origin + tile.y + a.within, origin + 0.5, origin + tile.x - 0.5);
-    let s = textureSampleLevel(vt_cache, vt_cache_sampler, texel / tile.w, 0.0);
+    let s = vt_cache_sample(layer, texel / tile.w);
     // Without a branch: a straight-alpha cache (BC7) is premultiplied here.
-    return vec4<f32>(s.rgb * select(1.0, s.a, vt_params.straight_alpha != 0u), s.a);
+    let straight = (vt_params.straight_alpha & (1u << layer)) != 0u;
+    return vec4<f32>(s.rgb * select(1.0, s.a, straight), s.a);
 }
 
-// The filtered sample of `c` at the (fractional) LOD `wanted`.
-fn vt_shade(id: u32, c: VtCoord, wanted: f32) -> vec4<f32> {
+// The filtered sample of layer `layer` of `c` at the (fractional) LOD `wanted`.
+fn vt_shade(id: u32, layer: u32, c: VtCoord, wanted: f32) -> vec4<f32> {
     let t = vt_params.textures[id];
     let top = f32(t.lod_count - 1u);
     let level = clamp(floor(wanted), 0.0, top);
     let lod = u32(level);
     let at = vt_address(c, lod, t);
-    let fine = vt_fetch(id, lod, at);
+    let fine = vt_fetch(id, layer, lod, at);
     let blend = clamp(wanted - level, 0.0, 1.0);
     // Magnified (or at the coarsest LOD) trilinear is bilinear: no second sample.
     let mode = select(VT_FILTER, vt_params.sample_filter, VT_FILTER > 2u);
     if mode != 2u || level >= top || blend == 0.0 {
         return fine;
     }
-    let coarse = vt_fetch(id, lod + 1u, vt_ancestor(at, 1u, t.payload));
+    let coarse = vt_fetch(id, layer, lod + 1u, vt_ancestor(at, 1u, t.payload));
     return mix(fine, coarse, blend);
 }
 
@@ -244,13 +268,23 @@ fn vt_texel(texel: VtTexel) -> VtCoord {
 // Texture `id` at image UV `uv`, filtered at the LOD of the UV's screen derivatives
 // (`dpdx(uv)`, `dpdy(uv)`, taken by the caller in uniform control flow). Premultiplied linear RGBA.
 fn vt_sample(id: u32, uv: vec2<f32>, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
-    return vt_shade(id, vt_uv(uv), log2(vt_footprint(id, ddx, ddy)));
+    return vt_shade(id, 0u, vt_uv(uv), log2(vt_footprint(id, ddx, ddy)));
+}
+
+// Layer `layer` (clamped to the layers there are) of texture `id`, as `vt_sample` samples layer 0.
+// Colour layers give premultiplied linear RGBA; data layers their values as stored.
+fn vt_sample_layer(id: u32, layer: u32, uv: vec2<f32>, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
+    return vt_shade(id, min(layer, vt_params.layers - 1u), vt_uv(uv), log2(vt_footprint(id, ddx, ddy)));
+}
+
+fn vt_sample_layer_level(id: u32, layer: u32, uv: vec2<f32>, lod: f32) -> vec4<f32> {
+    return vt_shade(id, min(layer, vt_params.layers - 1u), vt_uv(uv), lod);
 }
 
 // Texture `id` at image UV `uv` at LOD `lod` (0 is the full resolution; fractions blend two
 // LODs under trilinear filtering).
 fn vt_sample_level(id: u32, uv: vec2<f32>, lod: f32) -> vec4<f32> {
-    return vt_shade(id, vt_uv(uv), lod);
+    return vt_shade(id, 0u, vt_uv(uv), lod);
 }
 
 // Asks for the page that `vt_sample` with the same arguments reads, from pixel `frag_coord`
@@ -262,11 +296,19 @@ fn vt_feedback(id: u32, uv: vec2<f32>, ddx: vec2<f32>, ddy: vec2<f32>, frag_coor
 
 // Texture `id` at LOD-0 texel position `texel`, at the LOD of `footprint` LOD-0 texels per pixel.
 fn vt_sample_texel(id: u32, texel: VtTexel, footprint: f32) -> vec4<f32> {
-    return vt_shade(id, vt_texel(texel), log2(footprint));
+    return vt_shade(id, 0u, vt_texel(texel), log2(footprint));
 }
 
 fn vt_sample_texel_level(id: u32, texel: VtTexel, lod: f32) -> vec4<f32> {
-    return vt_shade(id, vt_texel(texel), lod);
+    return vt_shade(id, 0u, vt_texel(texel), lod);
+}
+
+fn vt_sample_texel_layer(id: u32, layer: u32, texel: VtTexel, footprint: f32) -> vec4<f32> {
+    return vt_shade(id, min(layer, vt_params.layers - 1u), vt_texel(texel), log2(footprint));
+}
+
+fn vt_sample_texel_layer_level(id: u32, layer: u32, texel: VtTexel, lod: f32) -> vec4<f32> {
+    return vt_shade(id, min(layer, vt_params.layers - 1u), vt_texel(texel), lod);
 }
 
 fn vt_feedback_texel(id: u32, texel: VtTexel, footprint: f32, frag_coord: vec2<f32>) {

@@ -21,6 +21,7 @@ pub(crate) fn window_scene(texture: &VirtualTexture, size: [u32; 2], center: [f6
     let key = WindowKey { center: [center[0] / w, center[1] / h], width: size[0] as f64 / magnify / w };
     Scene {
         textures: vec![],
+        layers: vec![],
         size,
         frames: 1,
         view: SceneView::Window { texture: 0, path: vec![Keyframe { frame: 0, at: key }] },

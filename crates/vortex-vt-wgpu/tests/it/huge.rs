@@ -126,6 +126,7 @@ fn windows_far_to_the_right_of_a_2_20_texel_texture_match_the_reference() {
     let key = |center, width| Keyframe { frame: 0, at: WindowKey { center, width } };
     let scene = |center, width| Scene {
         textures: vec![],
+        layers: vec![],
         size: [SIZE.0, SIZE.1],
         frames: 1,
         view: SceneView::Window { texture: 0, path: vec![key(center, width)] },

@@ -31,6 +31,7 @@ fn frames_never_wait_for_slow_reads_and_converge_when_they_land() {
     let key = WindowKey { center: [0.5, 0.5], width: 1.0 };
     let scene = Scene {
         textures: vec![],
+        layers: vec![],
         size: [248, 248],
         frames: 1,
         view: SceneView::Window { texture: 0, path: vec![Keyframe { frame: 0, at: key }] },

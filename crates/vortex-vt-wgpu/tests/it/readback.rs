@@ -30,6 +30,7 @@ fn reading_back_from_a_lost_device_is_an_error_naming_what_was_read() {
     let key = Keyframe { frame: 0, at: WindowKey { center: [0.5, 0.5], width: 1.0 } };
     let scene = Scene {
         textures: vec![],
+        layers: vec![],
         size: [16, 16],
         frames: 1,
         view: SceneView::Window { texture: 0, path: vec![key] },

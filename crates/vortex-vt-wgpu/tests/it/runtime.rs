@@ -32,6 +32,7 @@ fn key(frame: u32, center: [f64; 2], width: f64) -> Keyframe<WindowKey> {
 fn zoom_scene(effects: Effects) -> Scene {
     Scene {
         textures: vec![],
+        layers: vec![],
         size: SIZE,
         frames: 30,
         view: SceneView::Window {
@@ -317,6 +318,7 @@ fn several_textures_stream_side_by_side() {
     let key = |frame, eye, target| Keyframe { frame, at: Camera { eye, target } };
     let scene = Scene {
         textures: vec![],
+        layers: vec![],
         size: [128, 96],
         frames: 40,
         view: SceneView::Camera {

@@ -110,6 +110,7 @@ impl Fixture {
 fn scene(cache_side: u16) -> Scene {
     Scene {
         textures: vec![],
+        layers: vec![],
         size: [TARGET, TARGET],
         frames: 1,
         view: SceneView::Window {

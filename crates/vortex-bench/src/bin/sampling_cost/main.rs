@@ -200,6 +200,7 @@ fn window(spec: &ViewSpec, side: u32) -> Window {
 fn scene(effects: Effects, center: [f64; 2], width: f64) -> Scene {
     Scene {
         textures: vec![],
+        layers: vec![],
         size: SIZE,
         frames: 1,
         view: SceneView::Window { texture: 0, path: vec![Keyframe { frame: 0, at: WindowKey { center, width } }] },
