@@ -43,6 +43,31 @@ pub fn box_chain(lod0: Rgba8Image, lods: u8) -> LodChain {
     LodChain(levels)
 }
 
+/// A material's three layers made from one picture, as a test's layer stack: the picture
+/// (albedo, colour), a tangent-space normal map of its luma taken as a height field (data: each
+/// channel `(n + 1) / 2` in code values, blue up), and a roughness map (data: grey, the inverse
+/// luma). Each layer differs from the others wherever the picture is not flat.
+pub fn material_stack(albedo: &Rgba8Image) -> [Rgba8Image; 3] {
+    let (w, h) = (albedo.width, albedo.height);
+    let luma = |x: u32, y: u32| {
+        let t = albedo.texels[(y.min(h - 1) * w + x.min(w - 1)) as usize];
+        (2126 * u32::from(t[0]) + 7152 * u32::from(t[1]) + 722 * u32::from(t[2])) as f32 / 10000.0 / 255.0
+    };
+    let normal = Rgba8Image::from_fn(w, h, |x, y| {
+        let dx = luma(x + 1, y) - luma(x.saturating_sub(1), y);
+        let dy = luma(x, y + 1) - luma(x, y.saturating_sub(1));
+        let n = [-dx * 4.0, -dy * 4.0, 1.0];
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        let code = |c: f32| ((c / len * 0.5 + 0.5) * 255.0).round() as u8;
+        [code(n[0]), code(n[1]), code(n[2]), 255]
+    });
+    let roughness = Rgba8Image::from_fn(w, h, |x, y| {
+        let r = 255 - (luma(x, y) * 255.0).round() as u8;
+        [r, r, r, 255]
+    });
+    [albedo.clone(), normal, roughness]
+}
+
 /// The stored tile of `page` of `texture`: its payload and `border` texels of its neighbours on
 /// each side, texels beyond the level's edge repeating the edge (the tiler's layout with
 /// `--background edge`); RGBA8 row-major, `tile_size²` texels.

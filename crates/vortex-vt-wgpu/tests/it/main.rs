@@ -12,6 +12,7 @@ mod embed;
 mod feedback;
 mod huge;
 mod latency;
+mod layers;
 mod loader;
 mod readback;
 mod runtime;
