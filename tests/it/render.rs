@@ -167,3 +167,42 @@ fn a_filter_that_shows_seams_is_warned_of_and_auto_avoids_it() {
     assert!(out.status.success() && !String::from_utf8_lossy(&out.stderr).contains("seams"));
     assert_eq!(report(&json)["filter"], "nearest");
 }
+
+#[test]
+fn a_layer_stack_renders_with_one_page_table_write_per_page() {
+    let dir = tempfile::tempdir().unwrap();
+    let albedo = sample_pack(dir.path());
+    // A second layer on the same grid: the fixture reduced as stored values (as data is).
+    let data = dir.path().join("data.vtpk");
+    let source = fixture("sample.png");
+    let r = run(&["split", s(&source), "--pack", s(&data), "--tile-size", "136", "--border", "4", "--filter", "box"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let render = |json: &Path, extra: &[&str]| {
+        let base =
+            ["render", "--pack", s(&albedo), "--report", s(json), "--size", "128x96", "--frame-count", "20", "-q"];
+        run(&[&base[..], extra].concat())
+    };
+    let (one, two) = (dir.path().join("one.json"), dir.path().join("two.json"));
+    let out = render(&one, &[]);
+    if no_gpu(&out) {
+        return;
+    }
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let layer = format!("data:{}", data.display());
+    let out = render(&two, &["--layer", &layer, "--show-layer", "1"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (r1, r2) = (report(&one), report(&two));
+    assert_eq!((r2["layers"].as_u64(), r2["layer"].as_u64()), (Some(2), Some(1)));
+    let sum = |r: &serde_json::Value, key: &str| {
+        r["frames"].as_array().unwrap().iter().map(|f| f[key].as_u64().unwrap()).sum::<u64>()
+    };
+    assert!(sum(&r1, "table_writes") > 0);
+    assert_eq!(sum(&r2, "table_writes"), sum(&r1, "table_writes"), "one page-table write per page");
+    assert_eq!(sum(&r2, "loaded"), sum(&r1, "loaded"));
+
+    let bad = dir.path().join("bad.json");
+    let out = render(&bad, &["--layer", "bump:x.vtpk"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("layer kind \"bump\": colour or data"), "{err}");
+    fails_with(&render(&bad, &["--show-layer", "1"]), &["effects.layer 1 is not one of the 1 layers"]);
+}
