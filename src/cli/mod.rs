@@ -90,6 +90,7 @@ enum Command {
     /// Examples:
     ///   vortex-tiler render --pack world.vtpk --frames out/frames/ --report out/report.json
     ///   vortex-tiler render --pack a.vtpk --pack b.vtpk --scene boxes.json --filter trilinear
+    ///   vortex-tiler render --pack albedo.vtpk --layer data:normal.vtpk --show-layer 1
     #[command(verbatim_doc_comment)]
     Render(render::RenderArgs),
     /// Show packs in a window: pan and zoom an image, or fly over a scene's geometry.
@@ -100,13 +101,14 @@ enum Command {
     /// rate.
     ///   drag, wheel, arrows, + -   pan and zoom (2D)     W A S D, Q E, drag   fly (scenes)
     ///   F  next filter    P  residency view (a hue per LOD drawn, red where a coarser page
-    ///   stands in)    1-9  texture    R  reset    Esc  quit
+    ///   stands in)    L  next layer (--layer)    1-9  texture    R  reset    Esc  quit
     /// --screenshot FILE --frame-count N draws N frames (each waiting for its pages, as render
     /// does), saves the last one and exits: `xvfb-run vortex-tiler view ...` without a display.
     ///
     /// Examples:
     ///   vortex-tiler view world.vtpk
     ///   vortex-tiler view a.vtpk b.vtpk --scene boxes.json --io-latency 50ms
+    ///   vortex-tiler view albedo.vtpk --layer data:normal.vtpk --show-layer 1
     ///   xvfb-run vortex-tiler view world.vtpk --size 640x480 --screenshot shot.png --frame-count 30
     #[command(verbatim_doc_comment)]
     View(view::ViewArgs),

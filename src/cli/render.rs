@@ -13,7 +13,7 @@ use vortex_tiler::error::TilerError;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::output::{Product, staging};
 use vortex_vt::sampler::Rgba8Image;
-use vortex_vt_wgpu::harness::{Effects, Scene, SceneLayer, SceneRenderer};
+use vortex_vt_wgpu::harness::{Scene, SceneLayer, SceneRenderer};
 use vortex_vt_wgpu::source::Delayed;
 use vortex_vt_wgpu::{CacheFormat, Gpu, Layer, LayerKind, Pacing, PageSource, SampleFilter};
 
@@ -48,15 +48,6 @@ pub struct RenderArgs {
     size: Option<[u32; 2]>,
     #[command(flatten)]
     stream: StreamArgs,
-    /// Another layer of the textures' stacks, on their page grid: KIND:PACK[,PACK...] with one
-    /// pack per texture, KIND colour (sRGB, premultiplied, BC where the GPU samples it) or data
-    /// (normals, roughness: filtered as stored, RGBA8). Repeat for more layers (up to 4 in all);
-    /// every layer is streamed together, under one page table. Replaces the scene's "layers".
-    #[arg(long = "layer", value_name = "KIND:PACKS", value_parser = parse_layer)]
-    layers: Vec<SceneLayer>,
-    /// The layer drawn: 0 (the --pack textures) or one of the --layer layers, counted from 1.
-    #[arg(long, value_name = "N")]
-    show_layer: Option<u32>,
     /// Override the most pages uploaded per frame.
     #[arg(long, value_name = "N")]
     budget: Option<usize>,
@@ -97,11 +88,25 @@ pub(super) struct StreamArgs {
     /// the reads land.
     #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
     pub(super) io_latency: Option<Duration>,
+    /// Another layer of the textures' stacks, on their page grid: KIND:PACK[,PACK...] with one
+    /// pack per texture, KIND colour (sRGB, premultiplied, BC where the GPU samples it) or data
+    /// (normals, roughness: filtered as stored, RGBA8). Repeat for more layers (up to 4 in all);
+    /// every layer is streamed together, under one page table. Replaces the scene's "layers".
+    #[arg(long = "layer", value_name = "KIND:PACKS", value_parser = parse_layer)]
+    layers: Vec<SceneLayer>,
+    /// The layer drawn: 0 (the packs given first) or one of the --layer layers, counted from 1.
+    #[arg(long, value_name = "N")]
+    show_layer: Option<u32>,
 }
 
 impl StreamArgs {
-    /// Sets the scene's effects these flags override.
-    pub(super) fn apply(&self, e: &mut Effects) {
+    /// Sets the scene's layers and effects these flags override.
+    pub(super) fn apply(&self, scene: &mut Scene) {
+        if !self.layers.is_empty() {
+            scene.layers = self.layers.clone();
+        }
+        let e = &mut scene.effects;
+        e.layer = self.show_layer.unwrap_or(e.layer);
         if let Some(f) = self.filter {
             e.filter = f.filter();
         }
@@ -248,17 +253,13 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if !a.pack.is_empty() {
         scene.textures = a.pack.clone();
     }
-    if !a.layers.is_empty() {
-        scene.layers = a.layers.clone();
-    }
-    scene.effects.layer = a.show_layer.unwrap_or(scene.effects.layer);
     if scene.textures.is_empty() {
         bail!("no texture: give --pack PACK (or a scene whose \"textures\" names packs)");
     }
     scene.frames = a.frame_count.unwrap_or(scene.frames);
     scene.size = a.size.unwrap_or(scene.size);
+    a.stream.apply(&mut scene);
     let e = &mut scene.effects;
-    a.stream.apply(e);
     let pacing = match (a.pacing, a.stream.io_latency) {
         (Some(PacingArg::Offline), _) | (None, None) => Pacing::Offline,
         (Some(PacingArg::RealTime), _) | (None, Some(_)) => Pacing::RealTime,

@@ -261,7 +261,11 @@ impl State {
         let [w, h] = self.images[texture];
         let name = self.renderer.runtime().loader().sources()[texture].location().display().to_string();
         self.window.set_title(&format!(
-            "vortex view: {name} ({w}x{h}) | {}/{} slots, {} in flight, {:.1}% fallback | {}{} | {fps:.0} fps",
+            "vortex view: {name} ({w}x{h}){} | {}/{} slots, {} in flight, {:.1}% fallback | {}{} | {fps:.0} fps",
+            match rt.caches().len() {
+                1 => String::new(),
+                n => format!(" layer {} of {n}", self.renderer.layer()),
+            },
             rt.residency().resident_count(),
             rt.residency().slots(),
             rt.in_flight(),
@@ -294,6 +298,10 @@ impl State {
             (_, KeyCode::KeyP) if !event.repeat => {
                 let on = !self.renderer.residency_view();
                 self.renderer.set_residency_view(on);
+            }
+            (_, KeyCode::KeyL) if !event.repeat => {
+                let layers = self.renderer.runtime().caches().len() as u32;
+                self.renderer.set_layer((self.renderer.layer() + 1) % layers);
             }
             (_, KeyCode::KeyR | KeyCode::Home) => self.view = options.start,
             (Key::Character(c), _) if c.as_str() == "+" || c.as_str() == "=" => self.zoom(1.25, centre),

@@ -71,7 +71,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
     }
     scene.size = a.size;
     scene.frames = a.frame_count.unwrap_or(1).max(1);
-    a.stream.apply(&mut scene.effects);
+    a.stream.apply(&mut scene);
     scene
         .check()
         .and_then(|()| scene.check_textures(scene.textures.len()))

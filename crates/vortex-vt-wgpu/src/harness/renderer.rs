@@ -289,6 +289,15 @@ impl SceneRenderer {
         self.residency_view
     }
 
+    /// Draws layer `layer` of the stacks from now on (clamped to the layers there are).
+    pub fn set_layer(&mut self, layer: u32) {
+        self.layer = layer.min(self.runtime.caches().len() as u32 - 1);
+    }
+
+    pub fn layer(&self) -> u32 {
+        self.layer
+    }
+
     fn read_picture(&self) -> Result<Rgba8Image, ReadbackError> {
         let bytes = self.readback.read(&self.gpu.device)?;
         let texels = bytes.chunks_exact(4).map(|t| [t[0], t[1], t[2], t[3]]).collect();
