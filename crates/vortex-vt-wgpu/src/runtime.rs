@@ -376,9 +376,14 @@ impl Runtime {
         Ok(runtime)
     }
 
-    /// Loads every layer of `pages`, waiting for them.
+    /// Loads every layer of `pages`, waiting for them: the layers' loaders work at once (each
+    /// answers every page, with a stand-in where one fails).
     fn load_now(&self, pages: &[(PageId, Slot)]) -> Vec<Landed> {
-        let mut layers: Vec<_> = self.loaders.iter().map(|l| l.load(pages).into_iter()).collect();
+        let answers: Vec<_> = std::thread::scope(|scope| {
+            let loads: Vec<_> = self.loaders.iter().map(|l| scope.spawn(move || l.load(pages))).collect();
+            loads.into_iter().map(|h| h.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))).collect()
+        });
+        let mut layers: Vec<_> = answers.into_iter().map(Vec::into_iter).collect();
         pages
             .iter()
             .map(|&(page, slot)| Landed { page, slot, layers: layers.iter_mut().filter_map(Iterator::next).collect() })
