@@ -506,6 +506,20 @@ mod tests {
     }
 
     #[test]
+    fn layers_read_with_their_kind_and_paths_beside_the_scene() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("stack.json");
+        let json = r#"{"textures": ["albedo.vtpk"], "layers": [{"kind": "data", "textures": ["normal.vtpk"]}],
+            "view": {"window": {"path": [{"frame": 0, "center": [0.5, 0.5], "width": 1.0}]}}, "effects": {"layer": 1}}"#;
+        std::fs::write(&path, json).unwrap();
+        let s = Scene::read(&path).unwrap();
+        assert_eq!(s.layers, [SceneLayer { kind: LayerKind::Data, textures: vec![dir.path().join("normal.vtpk")] }]);
+        assert_eq!(s.effects.layer, 1);
+        let bad = json.replace("\"data\"", "\"bump\"");
+        assert!(serde_json::from_str::<Scene>(&bad).unwrap_err().to_string().contains("unknown layer kind \"bump\""));
+    }
+
+    #[test]
     fn checks_catch_what_serde_cannot() {
         let mut s = Scene::default_plane();
         s.effects.cache_slots_per_side = 0;
