@@ -197,7 +197,7 @@ fn a_layer_stack_renders_with_one_page_table_write_per_page() {
         r["frames"].as_array().unwrap().iter().map(|f| f[key].as_u64().unwrap()).sum::<u64>()
     };
     assert!(sum(&r1, "table_writes") > 0);
-    assert_eq!(sum(&r2, "table_writes"), sum(&r1, "table_writes"), "one page-table write per page");
+    assert_eq!(sum(&r2, "table_writes"), sum(&r1, "table_writes"), "the page-table writes of one layer");
     assert_eq!(sum(&r2, "loaded"), sum(&r1, "loaded"));
 
     let bad = dir.path().join("bad.json");

@@ -197,7 +197,8 @@ pub struct FrameStats {
     pub queued: usize,
     /// Pages uploaded into the cache and mapped (every layer of each).
     pub uploaded: usize,
-    /// Page-table entries written (once per page mapped or unmapped, whatever the layers).
+    /// Page-table entries written: mapping or unmapping a page rewrites the entries it stands in
+    /// for (its own and its unmapped descendants'), once whatever the layers.
     pub table_writes: usize,
     pub evicted: usize,
     /// Wanted pages left for later frames (load budget, or a cache full of wanted pages).

@@ -47,7 +47,8 @@ pub struct FrameReport {
     pub hits: usize,
     /// Pages uploaded and mapped (every layer of each).
     pub loaded: usize,
-    /// Page-table entries written: one per page mapped or unmapped, whatever the layers.
+    /// Page-table entries written (a page mapped rewrites the entries it stands in for), the same
+    /// whatever the layers.
     pub table_writes: usize,
     pub evicted: usize,
     /// Wanted pages left for later frames (budget or cache full).
