@@ -146,7 +146,7 @@ impl State {
         };
         let instance = wgpu::Instance::new(descriptor.with_env());
         let surface = instance.create_surface(Arc::clone(&window)).context("making the window's GPU surface")?;
-        let (layers, tile_size) = open_layers(&scene, options.io_latency)?;
+        let (layers, tile_size) = open_layers(scene, options.io_latency)?;
         let side = u32::from(scene.effects.cache_slots_per_side) * tile_size;
         let gpu = Gpu::for_surface(instance, &surface, side)?;
 
