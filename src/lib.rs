@@ -34,6 +34,7 @@ pub mod shard;
 pub mod sink;
 pub mod source;
 pub mod split;
+pub mod stages;
 pub mod tile_dir;
 pub mod viewer;
 

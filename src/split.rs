@@ -10,6 +10,7 @@
 //! orchestration; the stages live in their modules.
 
 use std::borrow::Cow;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, sync_channel};
 
@@ -30,6 +31,7 @@ use crate::shard::merge::RootRows;
 use crate::shard::sums::{self, EncodedRoots};
 use crate::sink::TileSink;
 use crate::source::{ImageHeader, RowSource};
+use crate::stages::{Stage, StageClock, StageTimes};
 use crate::viewer::Crop;
 
 /// How to cut and store the pyramid.
@@ -89,6 +91,8 @@ pub struct Summary {
     /// Times the source was read: 1 for one band, the stripes plus one for the coarse pass, a
     /// shard's rectangles (each only its rows, where the source can seek).
     pub passes: usize,
+    /// Where the wall time went.
+    pub stages: StageTimes,
 }
 
 /// Batches of tiles waiting for the encoder: cutting is much cheaper than encoding, so one
@@ -201,22 +205,33 @@ fn run<T: Sample>(
     };
 
     let (tx, rx) = sync_channel::<Result<Batch<T>>>(QUEUE_BATCHES);
+    let clock = StageClock::new();
+    let tx = BatchSender::new(tx, Arc::clone(&clock));
     let encoded = AtomicU64::new(0);
     let tiles = AtomicU64::new(0);
     let roots = std::thread::scope(|scope| {
+        let producer_clock = Arc::clone(&clock);
         let producer = scope.spawn(move || {
-            let producer = Producer { layout, pixels: src_layout, opts, padding, out: tx.clone(), progress };
-            let result = match sum_bytes(opts, src_layout, &layout) {
+            let producer = Producer {
+                layout,
+                pixels: src_layout,
+                opts,
+                padding,
+                out: tx.clone(),
+                progress,
+                clock: producer_clock,
+            };
+            let result = producer.clock.time(Stage::Producer, || match sum_bytes(opts, src_layout, &layout) {
                 16 => producer.run::<u128>(passes),
                 _ => producer.run::<u64>(passes),
-            };
+            });
             // An error goes to the consumer, which stops and returns it.
             result.unwrap_or_else(|e| {
                 let _ = tx.send(Err(e));
                 Vec::new()
             })
         });
-        let consumed = consume(rx, &encoder, sink, &encoded, &tiles, progress);
+        let consumed = consume(rx, &encoder, sink, &encoded, &tiles, progress, &clock);
         // Dropping the receiver (on error) makes the producer's next send fail, so it stops.
         let produced = producer.join().map_err(|_| TilerError::Options("the tiling thread panicked".into()))?;
         consumed.map(|()| produced)
@@ -230,6 +245,7 @@ fn run<T: Sample>(
         bytes: sink.bytes_written(),
         stripes,
         passes: pass_count,
+        stages: clock.times(),
     };
     Ok((summary, roots))
 }
@@ -243,6 +259,7 @@ struct Producer<'a, T> {
     padding: Padding<T>,
     out: BatchSender<T>,
     progress: &'a dyn Progress,
+    clock: Arc<StageClock>,
 }
 
 impl<T: Sample> Producer<'_, T> {
@@ -330,7 +347,7 @@ impl<T: Sample> Producer<'_, T> {
         let mut row = vec![T::default(); if narrow { columns.end } else { self.layout.width as usize * channels }];
         for _ in span.window_rows(&self.layout, 0) {
             self.check_cancelled()?;
-            source.read_row(bytemuck::cast_slice_mut(&mut row))?;
+            self.clock.time(Stage::Read, || source.read_row(bytemuck::cast_slice_mut(&mut row)))?;
             cascade.push_source_row(&row[columns.clone()])?;
         }
         cascade.finish()
@@ -377,7 +394,7 @@ impl<T: Sample> Producer<'_, T> {
         let mut row = vec![T::default(); w as usize * channels];
         for _ in 0..h {
             self.check_cancelled()?;
-            source.read_row(bytemuck::cast_slice_mut(&mut row))?;
+            self.clock.time(Stage::Read, || source.read_row(bytemuck::cast_slice_mut(&mut row)))?;
             let sums = match &exact {
                 None => blocks.push(&row),
                 Some(filter) => filter.push_row(&mut blocks, &row, &mut prepared),
@@ -409,8 +426,9 @@ fn consume<T: Sample>(
     encoded: &AtomicU64,
     tiles: &AtomicU64,
     progress: &dyn Progress,
+    clock: &StageClock,
 ) -> Result<()> {
-    while let Ok(first) = rx.recv() {
+    while let Ok(first) = clock.time(Stage::EncodersIdle, || rx.recv()) {
         if progress.cancelled() {
             return Err(TilerError::Interrupted);
         }
@@ -444,10 +462,10 @@ fn consume<T: Sample>(
         });
         if sink.ordered() {
             // Encode in parallel, store in the producer's (deterministic) order.
-            let prepared: Vec<Result<_>> = prepared.collect();
-            prepared.into_iter().try_for_each(|p| store(p?))?;
+            let prepared: Vec<Result<_>> = clock.time(Stage::Encode, || prepared.collect());
+            clock.time(Stage::Store, || prepared.into_iter().try_for_each(|p| store(p?)))?;
         } else {
-            prepared.try_for_each(|p| store(p?))?;
+            clock.time(Stage::Encode, || prepared.try_for_each(|p| store(p?)))?;
         }
     }
     Ok(())

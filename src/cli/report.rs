@@ -120,6 +120,7 @@ pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vor
         "passes": s.passes,
         "seconds": done.took.as_secs_f64(),
         "peakMemoryBytes": peak_rss(),
+        "stages": stages_json(&s.stages),
     });
     if !matches!(layout, "vortex" | "pack" | "shard") {
         // The viewer's own terms: its tile side without the overlap (Deep Zoom's TileSize).
@@ -137,6 +138,18 @@ pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vor
         });
     }
     doc.to_string()
+}
+
+/// Where a run's wall time went, in seconds per stage (`split::Summary::stages`).
+fn stages_json(t: &vortex_tiler::stages::StageTimes) -> serde_json::Value {
+    serde_json::json!({
+        "readSeconds": t.read.as_secs_f64(),
+        "pyramidSeconds": t.pyramid.as_secs_f64(),
+        "producerBlockedSeconds": t.producer_blocked.as_secs_f64(),
+        "encodersIdleSeconds": t.encoders_idle.as_secs_f64(),
+        "encodeSeconds": t.encode.as_secs_f64(),
+        "storeSeconds": t.store.as_secs_f64(),
+    })
 }
 
 /// What a pack writer stored: deduplication and one-colour tiles.

@@ -8,7 +8,8 @@
 //! where rows come from or where tiles go: `split.rs` feeds it and drains the channel.
 
 use std::ops::Range;
-use std::sync::mpsc::SyncSender;
+use std::sync::Arc;
+use std::sync::mpsc::{SendError, SyncSender};
 
 use super::band::Band;
 use super::cut::{self, Padding, Run};
@@ -18,9 +19,31 @@ use super::resample::Resampler;
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::{PixelLayout, Sample};
+use crate::stages::{Stage, StageClock};
 
-/// Where the cascade sends each row of tiles (or the error that stopped it).
-pub(crate) type BatchSender<T> = SyncSender<Result<Batch<T>>>;
+/// Where the cascade sends each row of tiles (or the error that stopped it): a bounded channel
+/// to the encoders, whose waits are timed as the producer's [`Stage::ProducerBlocked`].
+pub(crate) struct BatchSender<T> {
+    tx: SyncSender<Result<Batch<T>>>,
+    clock: Arc<StageClock>,
+}
+
+impl<T> Clone for BatchSender<T> {
+    fn clone(&self) -> Self {
+        BatchSender { tx: self.tx.clone(), clock: Arc::clone(&self.clock) }
+    }
+}
+
+impl<T> BatchSender<T> {
+    pub(crate) fn new(tx: SyncSender<Result<Batch<T>>>, clock: Arc<StageClock>) -> BatchSender<T> {
+        BatchSender { tx, clock }
+    }
+
+    /// Sends `batch`, waiting while the channel is full; fails once the encoders have stopped.
+    pub(crate) fn send(&self, batch: Result<Batch<T>>) -> std::result::Result<(), SendError<Result<Batch<T>>>> {
+        self.clock.time(Stage::ProducerBlocked, || self.tx.send(batch))
+    }
+}
 
 /// One row of tiles of one LOD.
 pub(crate) struct Batch<T> {

@@ -41,6 +41,22 @@ fn splits_the_fixture_with_both_spellings() {
 }
 
 #[test]
+fn json_summary_says_where_the_time_went() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = dir.path().join("t.vtpk");
+    let r = run(&["split", s(&fixture("sample.png")), "--pack", s(&pack), "--json"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let stage = |name: &str| json["stages"][name].as_f64().unwrap_or_else(|| panic!("stages.{name}: {json}"));
+    let (seconds, read, pyramid, encode) =
+        (json["seconds"].as_f64().unwrap(), stage("readSeconds"), stage("pyramidSeconds"), stage("encodeSeconds"));
+    assert!(read > 0.0 && pyramid > 0.0 && encode > 0.0, "{json}");
+    // The producer's stages happen in its run, the encoders' in theirs: neither exceeds the whole.
+    assert!(read + pyramid + stage("producerBlockedSeconds") <= seconds, "{json}");
+    assert!(stage("encodersIdleSeconds") + encode + stage("storeSeconds") <= seconds, "{json}");
+}
+
+#[test]
 fn existing_info_json_sets_the_output_and_flags_override_it() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");

@@ -1,0 +1,121 @@
+//! Where a `split` run's wall time goes, stage by stage: what the producer thread spends reading
+//! the source and building the pyramid, how long it waits for the encoders (they are the
+//! bottleneck) and how long the encoders wait for it (it is), and the encoders' and the sink's
+//! share. Measured on every run (a few clock reads per source row and per batch of tiles) and
+//! reported by `split --json` under `stages`, so that a benchmark can say which stage bounds a
+//! run without a profiler.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+/// The clocks of one run, shared by the producer thread and the encoders' caller.
+#[derive(Debug, Default)]
+pub(crate) struct StageClock {
+    read: AtomicU64,
+    producer: AtomicU64,
+    producer_blocked: AtomicU64,
+    encoders_idle: AtomicU64,
+    encode: AtomicU64,
+    store: AtomicU64,
+}
+
+/// One of [`StageClock`]'s clocks.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Stage {
+    /// The producer reading and decoding source rows.
+    Read,
+    /// The producer's whole run, waits included.
+    Producer,
+    /// The producer waiting to hand a batch of tiles to the encoders.
+    ProducerBlocked,
+    /// The encoders' caller waiting for a batch from the producer.
+    EncodersIdle,
+    /// Encoding batches on the pool (for sinks that store as tiles finish, storing too).
+    Encode,
+    /// Storing encoded tiles in order on the caller's thread (ordered sinks: packs).
+    Store,
+}
+
+impl StageClock {
+    pub(crate) fn new() -> Arc<StageClock> {
+        Arc::new(StageClock::default())
+    }
+
+    fn clock(&self, stage: Stage) -> &AtomicU64 {
+        match stage {
+            Stage::Read => &self.read,
+            Stage::Producer => &self.producer,
+            Stage::ProducerBlocked => &self.producer_blocked,
+            Stage::EncodersIdle => &self.encoders_idle,
+            Stage::Encode => &self.encode,
+            Stage::Store => &self.store,
+        }
+    }
+
+    /// Runs `f`, adding its wall time to `stage`.
+    pub(crate) fn time<R>(&self, stage: Stage, f: impl FnOnce() -> R) -> R {
+        let started = Instant::now();
+        let result = f();
+        let nanos = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        self.clock(stage).fetch_add(nanos, Ordering::Relaxed);
+        result
+    }
+
+    fn get(&self, stage: Stage) -> Duration {
+        Duration::from_nanos(self.clock(stage).load(Ordering::Relaxed))
+    }
+
+    pub(crate) fn times(&self) -> StageTimes {
+        let producer = self.get(Stage::Producer);
+        let (read, blocked) = (self.get(Stage::Read), self.get(Stage::ProducerBlocked));
+        StageTimes {
+            read,
+            pyramid: producer.saturating_sub(read + blocked),
+            producer_blocked: blocked,
+            encoders_idle: self.get(Stage::EncodersIdle),
+            encode: self.get(Stage::Encode),
+            store: self.get(Stage::Store),
+        }
+    }
+}
+
+/// Wall time per stage of a finished run. The producer's `read + pyramid + producer_blocked`
+/// is its whole run; the encoders' caller spends `encoders_idle + encode + store`. A run bound by
+/// the producer shows a large `encoders_idle`; one bound by the encoders a large
+/// `producer_blocked`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StageTimes {
+    /// Reading and decoding the source.
+    pub read: Duration,
+    /// Building the pyramid and cutting tiles (the producer's time neither reading nor waiting).
+    pub pyramid: Duration,
+    /// The producer waiting for the encoders to take a batch.
+    pub producer_blocked: Duration,
+    /// The encoders waiting for the producer.
+    pub encoders_idle: Duration,
+    /// Encoding (and, for unordered sinks, storing) on the pool.
+    pub encode: Duration,
+    /// Storing in order on one thread (packs).
+    pub store: Duration,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_pyramid_is_what_the_producer_spends_neither_reading_nor_waiting() {
+        let clock = StageClock::new();
+        clock.clock(Stage::Producer).store(10_000, Ordering::Relaxed);
+        clock.clock(Stage::Read).store(3_000, Ordering::Relaxed);
+        clock.clock(Stage::ProducerBlocked).store(2_000, Ordering::Relaxed);
+        let t = clock.times();
+        assert_eq!(
+            (t.read, t.pyramid, t.producer_blocked),
+            (Duration::from_nanos(3_000), Duration::from_nanos(5_000), Duration::from_nanos(2_000))
+        );
+        assert_eq!(clock.time(Stage::Store, || 7), 7);
+        assert!(clock.times().store > Duration::ZERO);
+    }
+}
