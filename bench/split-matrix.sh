@@ -1,0 +1,143 @@
+#!/usr/bin/env bash
+# bench/split-matrix.sh: how busy `split --pack` keeps the cores, for every kind of source and
+# every codec (issue 18), and which stage bounds each run.
+#
+# The 16384² RGB image of bench/split-vs-vips.sh (src16k.tif, an uncompressed strip BigTIFF;
+# generated if missing) is saved by Debian's vips as six more sources: a tiled TIFF (256²
+# tiles), Deflate and LZW strip TIFFs, a PNG (zlib level 1), a baseline JPEG (Q90) and a PPM.
+# Each source is cut by `split --pack --tile-size 256 --border 0` (default filter) with each
+# codec: jpeg (Q85), png (fast), raw, zstd, bc1, bc7 (ultra-fast). Per run, from /usr/bin/time
+# -v: wall time, CPU time (user + sys) and their ratio (2.0 would be both cores busy the whole
+# run), throughput in source megapixels per second and peak memory; from `split --json`'s
+# `stages`: the producer thread's time reading the source and building the pyramid, the time it
+# waited for the encoders and the time they waited for it. A run whose encoders waited longer
+# than the producer did is bound by the producer (decode, pyramid, cutting: one thread), the
+# other way round by the encoders. As a peer, libvips 8.18 (pyvips-binary from PyPI, in
+# bench/work/venv) writes each source as 256-texel JPEG tiles (Q85) into a .zip, the nearest it
+# has to one pack file. RUNS runs per cell (default 1), alternating tools; medians.
+#
+# Results go to docs/benchmarks.md (or $DOC) between `<!-- split-matrix:begin -->` and `:end -->`.
+#     bench/split-matrix.sh                 # about 10 minutes on 2 cores, 6 GB of sources
+#     SOURCES="strip jpeg" CODECS="jpeg png" bench/split-matrix.sh
+set -euo pipefail
+cd "$(dirname "$0")/.."
+source bench/lib.sh
+RUNS=${RUNS:-1}
+SOURCES=${SOURCES:-strip tiled deflate lzw png jpeg ppm}
+CODECS=${CODECS:-jpeg png raw zstd bc1 bc7}
+bench_setup
+SRC=$WORK/src16k.tif
+M=$WORK/matrix
+mkdir -p "$M"
+PY=$WORK/venv/bin/python
+if ! "$PY" -c 'import pyvips' 2>/dev/null; then
+  log "installing pyvips + pyvips-binary into $WORK/venv"
+  { python3 -m venv "$WORK/venv" && "$WORK/venv/bin/pip" install -q pyvips pyvips-binary; } >"$WORK/pip.log" 2>&1 ||
+    { echo "note: no pyvips (see $WORK/pip.log): the peer column stays empty" >&2; PY=; }
+fi
+PYVIPS_VERSION=${PY:+$("$PY" -c 'import pyvips; print("%d.%d.%d" % tuple(pyvips.version(i) for i in range(3)))')}
+
+# source NAME: the path of that source, made from src16k.tif the first time.
+source_file() {
+  local f
+  case $1 in
+    strip) echo "$SRC"; return ;;
+    tiled) f=$M/tiled.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --tile --tile-width 256 --tile-height 256 --bigtiff ;;
+    deflate) f=$M/deflate.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --compression deflate --bigtiff ;;
+    lzw) f=$M/lzw.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --compression lzw --bigtiff ;;
+    png) f=$M/src.png; [ -s "$f" ] || vips pngsave "$SRC" "$f" --compression 1 ;;
+    jpeg) f=$M/src.jpg; [ -s "$f" ] || vips jpegsave "$SRC" "$f" --Q 90 ;;
+    ppm) f=$M/src.ppm; [ -s "$f" ] || vips ppmsave "$SRC" "$f" ;;
+    *) echo "error: unknown source $1" >&2; exit 1 ;;
+  esac
+  echo "$f"
+}
+
+codec_args() {
+  case $1 in
+    jpeg) echo "--codec jpeg --quality 85" ;;
+    png) echo "--codec png --png-compression fast" ;;
+    bc7) echo "--codec bc7 --bc7-effort ultra-fast" ;;
+    *) echo "--codec $1" ;;
+  esac
+}
+
+PEER='import sys, pyvips
+im = pyvips.Image.new_from_file(sys.argv[1], access="sequential")
+im.dzsave(sys.argv[2], tile_size=256, overlap=0, suffix=".jpg[Q=85]")'
+
+RAW=$M/runs.tsv
+: >"$RAW"
+# run ID COMMAND...: times one run, appends "ID wall cpu rss json" to $RAW.
+run() {
+  local id=$1
+  shift
+  sync
+  /usr/bin/time -v -o "$M/time.txt" "$@" >"$M/out.json" 2>"$M/err.txt" || { cat "$M/err.txt" >&2; exit 1; }
+  local wall user sys rss
+  wall=$(sed -n 's/^[[:space:]]*Elapsed (wall clock) time (h:mm:ss or m:ss): //p' "$M/time.txt" |
+    awk -F: '{ s = 0; for (i = 1; i <= NF; i++) s = s * 60 + $i; printf "%.2f", s }')
+  user=$(sed -n 's/^[[:space:]]*User time (seconds): //p' "$M/time.txt")
+  sys=$(sed -n 's/^[[:space:]]*System time (seconds): //p' "$M/time.txt")
+  rss=$(sed -n 's/^[[:space:]]*Maximum resident set size (kbytes): //p' "$M/time.txt")
+  printf '%s\t%s\t%s\t%s\t%s\n' "$id" "$wall" "$(calc %.2f "$user + $sys")" "$rss" "$(tr -d '\n' <"$M/out.json")" >>"$RAW"
+}
+
+for name in $SOURCES; do
+  log "source $name"
+  file=$(source_file "$name")
+  cat "$file" >/dev/null # in the page cache: this measures decoding, not the disk
+  for round in $(seq "$RUNS"); do
+    for codec in $CODECS; do
+      # shellcheck disable=SC2046 # codec_args is word-split on purpose
+      run "$name $codec" "$WORK/bin/vortex-tiler" split "$file" --pack "$M/out.vtpk" --force --tile-size 256 --border 0 \
+        $(codec_args "$codec") --json
+      rm -f "$M/out.vtpk"
+    done
+    if [ -n "$PY" ]; then
+      rm -rf "$M/peer.zip"
+      run "$name peer" "$PY" -c "$PEER" "$file" "$M/peer.zip"
+      rm -f "$M/peer.zip"
+    fi
+  done
+done
+
+REPORT=$M/report.md
+python3 - "$RAW" "$PYVIPS_VERSION" "$REV" "$SOURCES" "$CODECS" >"$REPORT" <<'PY'
+import json, statistics, sys, datetime, os
+raw, peer_version, rev, sources, codecs = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4].split(), sys.argv[5].split()
+runs = {}
+for line in open(raw):
+    rid, wall, cpu, rss, out = line.rstrip("\n").split("\t", 4)
+    runs.setdefault(rid, []).append((float(wall), float(cpu), int(rss), out))
+def median(rid):
+    rs = sorted(runs[rid], key=lambda r: r[0])
+    return rs[len(rs) // 2]
+mpx = 16384 * 16384 / 1e6
+print(f"{datetime.date.today()}, {os.cpu_count()} cores, vortex-tiler {rev}"
+      + (f", peer libvips {peer_version} (pyvips-binary) writing a .zip of 256-texel JPEG tiles" if peer_version else "")
+      + "; `split --pack --tile-size 256 --border 0`, default filter; the median of the runs per cell.")
+print()
+print("| source | codec | wall | CPU | CPU / wall | Mpx/s | peak RSS | read | pyramid | producer waits | encoders wait | encode | store | bound by | vs peer |")
+print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|")
+for s in sources:
+    peer = median(f"{s} peer") if f"{s} peer" in runs else None
+    for c in codecs:
+        wall, cpu, rss, out = median(f"{s} {c}")
+        st = json.loads(out)["stages"]
+        bound = "producer" if st["encodersIdleSeconds"] > st["producerBlockedSeconds"] else "encoders"
+        vs = f"{peer[0] / wall:.2f}x" if peer and c == "jpeg" else ""
+        print(f"| {s} | {c} | {wall:.2f} s | {cpu:.2f} s | {cpu / wall:.2f} | {mpx / wall:.0f} | {rss / 1024:.0f} MiB "
+              f"| {st['readSeconds']:.2f} | {st['pyramidSeconds']:.2f} | {st['producerBlockedSeconds']:.2f} "
+              f"| {st['encodersIdleSeconds']:.2f} | {st['encodeSeconds']:.2f} | {st['storeSeconds']:.2f} | {bound} | {vs} |")
+    if peer:
+        print(f"| {s} | peer: libvips .zip (JPEG) | {peer[0]:.2f} s | {peer[1]:.2f} s | {peer[1] / peer[0]:.2f} | {mpx / peer[0]:.0f} "
+              f"| {peer[2] / 1024:.0f} MiB | | | | | | | | |")
+PY
+cat "$REPORT"
+splice split-matrix "$REPORT" "## Every source with every codec: how busy split keeps the cores (\`bench/split-matrix.sh\`)
+
+Stage times are seconds of wall time from \`split --json\`'s \`stages\`: the producer thread reads
+the source, builds the pyramid and cuts tiles, and waits when the encoders have not taken the last
+batch (*producer waits*); the encoders wait when it has none ready (*encoders wait*); *store* is
+the pack writer's ordered part on one thread. *vs peer*: libvips' wall time over ours, JPEG only."
