@@ -26,11 +26,11 @@ use crate::pyramid::cascade::{Batch, BatchSender, Cascade, CutTile, Span};
 use crate::pyramid::cut::Padding;
 use crate::pyramid::filter::ExactFilter;
 use crate::pyramid::reduce::{Acc, Reducer};
-use crate::pyramid::stripes::Plan;
+use crate::pyramid::stripes::{Plan, span_bytes};
 use crate::shard::merge::RootRows;
 use crate::shard::sums::{self, EncodedRoots};
 use crate::sink::TileSink;
-use crate::source::{ImageHeader, RowSource};
+use crate::source::{ImageHeader, RowSource, read_ahead};
 use crate::stages::{Stage, StageClock, StageTimes};
 use crate::viewer::Crop;
 
@@ -272,12 +272,13 @@ impl<T: Sample> Producer<'_, T> {
             Passes::Shard(spans, mut source) => return self.shard::<A>(&spans, source.as_mut()),
             Passes::AboveCut(roots) => return self.above_cut::<A>(roots).map(|()| Vec::new()),
         };
+        let chunk_rows = self.read_ahead_rows(&plan);
         for (i, stripe) in plan.stripes.iter().enumerate() {
             if i > 0 {
                 source.rewind()?;
             }
             let mut cascade = self.cascade::<A>(stripe);
-            self.stripe::<A>(stripe, source.as_mut(), &mut cascade)?;
+            self.stripe::<A>(stripe, source.as_mut(), &mut cascade, chunk_rows)?;
         }
         if let Some(coarse) = &plan.coarse {
             source.rewind()?;
@@ -308,7 +309,7 @@ impl<T: Sample> Producer<'_, T> {
             if above {
                 cascade.keep_root_sums(span);
             }
-            self.stripe::<A>(span, source, &mut cascade)?;
+            self.stripe::<A>(span, source, &mut cascade, 0)?;
             at = rows.end;
             if above {
                 // What merge needs are the sums of the level above the roots.
@@ -328,10 +329,31 @@ impl<T: Sample> Producer<'_, T> {
         Cascade::new(self.layout, span, self.pixels, self.opts.filter, self.padding.clone(), self.out.clone())
     }
 
+    /// Rows per chunk the source is read ahead in (`source::read_ahead`), 0 to read it on this
+    /// thread: a one-band run reads ahead where the chunks fit `--max-memory` beside the band; a
+    /// striped run, short of memory already, and a shard's rectangles do not.
+    fn read_ahead_rows(&self, plan: &Plan) -> u64 {
+        let texel_bytes = self.pixels.bytes_per_pixel() as u64;
+        let row_bytes = self.layout.width as u64 * texel_bytes;
+        let band = span_bytes(&self.layout, &Span::whole(&self.layout), texel_bytes);
+        let fits = band.saturating_add(read_ahead::bytes(row_bytes)) <= self.opts.max_memory;
+        match plan.stripes.len() == 1 && plan.coarse.is_none() && fits {
+            true => read_ahead::rows_per_chunk(row_bytes),
+            false => 0,
+        }
+    }
+
     /// LOD 0 onwards for the columns and rows of `span`, from the source's next row on: the
     /// window's part of each source row, read alone where the source can
-    /// ([`RowSource::read_columns`]), else cut from the whole row.
-    fn stripe<A: Acc>(&self, span: &Span, source: &mut dyn RowSource, cascade: &mut Cascade<T, A>) -> Result<()>
+    /// ([`RowSource::read_columns`]), else cut from the whole row; read ahead in chunks of
+    /// `chunk_rows` (0: on this thread).
+    fn stripe<A: Acc>(
+        &self,
+        span: &Span,
+        source: &mut dyn RowSource,
+        cascade: &mut Cascade<T, A>,
+        chunk_rows: u64,
+    ) -> Result<()>
     where
         T: Into<A>,
     {
@@ -344,12 +366,12 @@ impl<T: Sample> Producer<'_, T> {
             true => 0..(window.end - window.start) as usize * channels,
             false => window.start as usize * channels..window.end as usize * channels,
         };
-        let mut row = vec![T::default(); if narrow { columns.end } else { self.layout.width as usize * channels }];
-        for _ in span.window_rows(&self.layout, 0) {
+        let row_len = if narrow { columns.end } else { self.layout.width as usize * channels };
+        let rows = span.window_rows(&self.layout, 0);
+        read_ahead::rows(source, rows.end - rows.start, row_len, chunk_rows, &self.clock, |row: &[T]| {
             self.check_cancelled()?;
-            self.clock.time(Stage::Read, || source.read_row(bytemuck::cast_slice_mut(&mut row)))?;
-            cascade.push_source_row(&row[columns.clone()])?;
-        }
+            cascade.push_source_row(&row[columns.clone()])
+        })?;
         cascade.finish()
     }
 
@@ -391,18 +413,17 @@ impl<T: Sample> Producer<'_, T> {
         let mut blocks = Reducer::<A>::window(w as u64, h as u64, 0, span.lods.start, 0, w as usize, channels);
         let exact = ExactFilter::new(self.opts.filter, self.pixels);
         let mut prepared = vec![0u64; if exact.is_some() { w as usize * channels } else { 0 }];
-        let mut row = vec![T::default(); w as usize * channels];
-        for _ in 0..h {
+        read_ahead::rows(source, h as u64, w as usize * channels, 0, &self.clock, |row: &[T]| {
             self.check_cancelled()?;
-            self.clock.time(Stage::Read, || source.read_row(bytemuck::cast_slice_mut(&mut row)))?;
             let sums = match &exact {
-                None => blocks.push(&row),
-                Some(filter) => filter.push_row(&mut blocks, &row, &mut prepared),
+                None => blocks.push(row),
+                Some(filter) => filter.push_row(&mut blocks, row, &mut prepared),
             };
-            if let Some(sums) = sums {
-                cascade.push_exact(&sums)?;
+            match sums {
+                Some(sums) => cascade.push_exact(&sums),
+                None => Ok(()),
             }
-        }
+        })?;
         if let Some(sums) = blocks.finish() {
             cascade.push_exact(&sums)?;
         }

@@ -1,5 +1,6 @@
-//! Where a `split` run's wall time goes, stage by stage: what the producer thread spends reading
-//! the source and building the pyramid, how long it waits for the encoders (they are the
+//! Where a `split` run's wall time goes, stage by stage: what reading the source takes (on its
+//! own thread), what the producer thread spends waiting for rows and building the pyramid, how
+//! long it waits for the encoders (they are the
 //! bottleneck) and how long the encoders wait for it (it is), and the encoders' and the sink's
 //! share. Measured on every run (a few clock reads per source row and per batch of tiles) and
 //! reported by `split --json` under `stages`, so that a benchmark can say which stage bounds a
@@ -13,6 +14,7 @@ use std::time::{Duration, Instant};
 #[derive(Debug, Default)]
 pub(crate) struct StageClock {
     read: AtomicU64,
+    read_wait: AtomicU64,
     producer: AtomicU64,
     producer_blocked: AtomicU64,
     encoders_idle: AtomicU64,
@@ -23,8 +25,10 @@ pub(crate) struct StageClock {
 /// One of [`StageClock`]'s clocks.
 #[derive(Clone, Copy, Debug)]
 pub(crate) enum Stage {
-    /// The producer reading and decoding source rows.
+    /// Reading and decoding source rows, on the source's own thread (`source::read_ahead`).
     Read,
+    /// The producer waiting for source rows.
+    ReadWait,
     /// The producer's whole run, waits included.
     Producer,
     /// The producer waiting to hand a batch of tiles to the encoders.
@@ -45,6 +49,7 @@ impl StageClock {
     fn clock(&self, stage: Stage) -> &AtomicU64 {
         match stage {
             Stage::Read => &self.read,
+            Stage::ReadWait => &self.read_wait,
             Stage::Producer => &self.producer,
             Stage::ProducerBlocked => &self.producer_blocked,
             Stage::EncodersIdle => &self.encoders_idle,
@@ -68,10 +73,11 @@ impl StageClock {
 
     pub(crate) fn times(&self) -> StageTimes {
         let producer = self.get(Stage::Producer);
-        let (read, blocked) = (self.get(Stage::Read), self.get(Stage::ProducerBlocked));
+        let (read_wait, blocked) = (self.get(Stage::ReadWait), self.get(Stage::ProducerBlocked));
         StageTimes {
-            read,
-            pyramid: producer.saturating_sub(read + blocked),
+            read: self.get(Stage::Read),
+            read_wait,
+            pyramid: producer.saturating_sub(read_wait + blocked),
             producer_blocked: blocked,
             encoders_idle: self.get(Stage::EncodersIdle),
             encode: self.get(Stage::Encode),
@@ -80,15 +86,18 @@ impl StageClock {
     }
 }
 
-/// Wall time per stage of a finished run. The producer's `read + pyramid + producer_blocked`
-/// is its whole run; the encoders' caller spends `encoders_idle + encode + store`. A run bound by
-/// the producer shows a large `encoders_idle`; one bound by the encoders a large
+/// Wall time per stage of a finished run. The source is read on a thread of its own (`read`);
+/// the producer's `read_wait + pyramid + producer_blocked` is its whole run; the encoders' caller
+/// spends `encoders_idle + encode + store`. A run bound by reading shows a large `read_wait`; by
+/// the pyramid, a large `encoders_idle` and little `read_wait`; by the encoders, a large
 /// `producer_blocked`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StageTimes {
-    /// Reading and decoding the source.
+    /// Reading and decoding the source (on its own thread).
     pub read: Duration,
-    /// Building the pyramid and cutting tiles (the producer's time neither reading nor waiting).
+    /// The producer waiting for source rows.
+    pub read_wait: Duration,
+    /// Building the pyramid and cutting tiles (the producer's time not waiting).
     pub pyramid: Duration,
     /// The producer waiting for the encoders to take a batch.
     pub producer_blocked: Duration,
@@ -105,14 +114,14 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_pyramid_is_what_the_producer_spends_neither_reading_nor_waiting() {
+    fn the_pyramid_is_what_the_producer_spends_not_waiting() {
         let clock = StageClock::new();
         clock.clock(Stage::Producer).store(10_000, Ordering::Relaxed);
-        clock.clock(Stage::Read).store(3_000, Ordering::Relaxed);
+        clock.clock(Stage::ReadWait).store(3_000, Ordering::Relaxed);
         clock.clock(Stage::ProducerBlocked).store(2_000, Ordering::Relaxed);
         let t = clock.times();
         assert_eq!(
-            (t.read, t.pyramid, t.producer_blocked),
+            (t.read_wait, t.pyramid, t.producer_blocked),
             (Duration::from_nanos(3_000), Duration::from_nanos(5_000), Duration::from_nanos(2_000))
         );
         assert_eq!(clock.time(Stage::Store, || 7), 7);

@@ -144,6 +144,7 @@ pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vor
 fn stages_json(t: &vortex_tiler::stages::StageTimes) -> serde_json::Value {
     serde_json::json!({
         "readSeconds": t.read.as_secs_f64(),
+        "readWaitSeconds": t.read_wait.as_secs_f64(),
         "pyramidSeconds": t.pyramid.as_secs_f64(),
         "producerBlockedSeconds": t.producer_blocked.as_secs_f64(),
         "encodersIdleSeconds": t.encoders_idle.as_secs_f64(),

@@ -12,6 +12,7 @@
 mod jpeg;
 mod png;
 mod pnm;
+pub mod read_ahead;
 mod tiff;
 pub mod tiled;
 mod whole;
