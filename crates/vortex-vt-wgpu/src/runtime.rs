@@ -34,7 +34,7 @@ use vortex_vt::residency::{ConfigError, Residency, ResidencyConfig, Slot};
 
 use crate::bindings::Bindings;
 use crate::feedback::{FeedbackBuffer, FeedbackReadback};
-use crate::loader::{LoadError, LoadedPage, Loader, LoaderError};
+use crate::loader::{DEFAULT_MEMORY_TIER_BYTES, LoadError, LoadedPage, Loader, LoaderError};
 use crate::page_cache::{CacheError, CacheFormat, PageCache};
 use crate::page_table::{GpuPageTable, PageTableError};
 use crate::params::Params;
@@ -109,6 +109,10 @@ pub struct RuntimeConfig {
     /// threads: an eighth or a quarter of RGBA8's GPU memory and upload bytes.
     pub cache_format: Option<CacheFormat>,
     pub pacing: Pacing,
+    /// Bytes of stored (compressed) tiles the loader keeps in RAM, least recently used out first,
+    /// so that a page the cache evicted and the view wants again is decoded without a read
+    /// ([`Loader::set_memory_tier`]); 0 turns the tier off.
+    pub memory_tier_bytes: u64,
 }
 
 impl Default for RuntimeConfig {
@@ -125,6 +129,7 @@ impl Default for RuntimeConfig {
             bc7: true,
             cache_format: None,
             pacing: Pacing::RealTime,
+            memory_tier_bytes: DEFAULT_MEMORY_TIER_BYTES,
         }
     }
 }
@@ -158,8 +163,12 @@ pub struct FrameStats {
     pub fallback_fraction: f64,
     /// The LOD bias the next frame's feedback asks with.
     pub lod_bias: f32,
-    /// Bytes read by the sources for the pages uploaded.
+    /// Bytes read by the sources for the pages uploaded (none for tiles the memory tier held).
     pub bytes_read: u64,
+    /// Tiles of the pages uploaded that the memory tier held (decoded from RAM, not read), and
+    /// those read from the sources.
+    pub tier_hits: usize,
+    pub tier_misses: usize,
     pub bytes_uploaded: u64,
     /// Pages uploaded with the stand-in tile because they failed to load.
     pub load_errors: usize,
@@ -225,6 +234,7 @@ impl Runtime {
         config: RuntimeConfig,
     ) -> Result<Runtime, RuntimeError> {
         let loader = Loader::with_sources(sources, config.loader_threads)?;
+        loader.set_memory_tier(config.memory_tier_bytes);
         let textures = loader.textures().to_vec();
         let grids: Vec<TextureGrid> = textures.iter().map(|t| t.grid).collect();
         let bc = device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC);
@@ -442,6 +452,8 @@ impl Runtime {
             stats.uploaded += 1;
             stats.bytes_uploaded += bytes;
             stats.bytes_read += page.bytes_read;
+            stats.tier_hits += page.tier_hits as usize;
+            stats.tier_misses += page.tier_misses as usize;
             stats.load_errors += usize::from(page.error.is_some());
             self.upload(page, changes);
         }

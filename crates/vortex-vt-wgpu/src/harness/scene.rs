@@ -129,6 +129,10 @@ pub struct Effects {
     /// RGBA8), `rgba8`, or `bc1` / `bc7`: every page transcoded on the loader's threads.
     #[serde(with = "cache_format_name")]
     pub cache_format: Option<CacheFormat>,
+    /// MiB of stored (compressed) tiles the loader keeps in RAM, so that pages the cache
+    /// evicted come back without a read ([`RuntimeConfig::memory_tier_bytes`](crate::RuntimeConfig));
+    /// 0 turns the tier off.
+    pub memory_tier_mib: u32,
 }
 
 impl Default for Effects {
@@ -141,6 +145,7 @@ impl Default for Effects {
             threads: 2,
             bc7: true,
             cache_format: None,
+            memory_tier_mib: (crate::DEFAULT_MEMORY_TIER_BYTES >> 20) as u32,
         }
     }
 }
