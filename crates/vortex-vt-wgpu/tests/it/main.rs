@@ -16,4 +16,5 @@ mod loader;
 mod readback;
 mod runtime;
 mod sample;
+mod tier;
 mod transcode;
