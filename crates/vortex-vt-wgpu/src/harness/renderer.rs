@@ -93,6 +93,8 @@ pub struct Report {
     pub memory_tier_bytes: u64,
     pub tier_hits: u64,
     pub tier_misses: u64,
+    /// Bytes the tier held at the end: its cost in RAM (stored tiles and their bookkeeping).
+    pub memory_tier_held: u64,
     /// Resident hits over pages requested, over all frames.
     pub hit_rate: f64,
     /// The first frame of the still camera.
@@ -337,6 +339,7 @@ impl SceneRenderer {
             memory_tier_bytes: config.memory_tier_bytes,
             tier_hits: rt.loader().counters().tier_hits,
             tier_misses: rt.loader().counters().tier_misses,
+            memory_tier_held: rt.loader().memory_tier().bytes,
             hit_rate: if requested == 0 { 0.0 } else { hits as f64 / requested as f64 },
             still_from,
             frames_to_converge,
