@@ -5,13 +5,16 @@
 # 4-texel border, JPEG; made if missing, or PACK=PATH to use one already made): a window looks at
 # region A, flies to region B at the other corner, stays, and flies back to A, with a cache of 8²
 # slots, so that B's pages evict A's. Every page read takes 20 ms more (`--io-latency 20ms`, a
-# slow disk or a network share). Two runs, the memory tier on (64 MiB) and off (0), each 200
-# frames in real time (frames never wait; the scene's path ends at frame 64, the rest is the
-# still camera at A): from each report, the bytes read and the tier's hits and misses, all told
-# and on the way back (frames 48 on, when the camera leaves B), the frames that fell back on the
-# way back, and the frames to converge once the camera is still at A; for the tier, the RAM it
-# held at the end. 8 loader threads. Results go to docs/benchmarks.md (or $DOC) between
-# `<!-- memory-tier:begin -->` and `:end -->`.
+# slow disk or a network share). Runs of 200 frames (the scene's path ends at frame 64, the
+# rest is the still camera at A), the memory tier on (64 MiB) and off (0), each in real time
+# (frames never wait: the picture falls back to coarser pages until reads land; when they land
+# varies, so the median of 5 runs) and offline (each frame waits for the pages the previous one
+# asked for: the wait is what the reads cost).
+# From each report: the bytes read, all told and on the way back (frames 48 on, when the camera
+# leaves B), the tier's hits and misses on the way back, the frames that fell back on the way back
+# (real time), the time frames waited for reads on the way back (offline), the frames to
+# converge once the camera is still at A, and the RAM the tier held at the end. 8 loader threads.
+# Results go to docs/benchmarks.md (or $DOC) between `<!-- memory-tier:begin -->` and `:end -->`.
 #     bench/memory-tier.sh
 #     PACK=../main/bench/work/world16k.vtpk bench/memory-tier.sh
 set -euo pipefail
@@ -30,30 +33,43 @@ else
 fi
 REPORT=$WORK/memory-tier-report.md
 {
-  echo "$(date -u +%F), $(nproc) cores, rev $REV; pack: $(basename "$PACK") (16384², 136-texel tiles, 4-texel border, JPEG), every read +20 ms."
+  echo "$(date -u +%F), $(nproc) cores, rev $REV; pack: $(basename "$PACK") (16384², 136-texel tiles, 4-texel border, JPEG), every read +20 ms; 8 loader threads."
   echo
-  echo "| memory tier | bytes read | on the way back | tier hits / misses | on the way back | frames falling back on the way back | frames to converge at A | tier RAM at the end |"
-  echo "|---|---:|---:|---:|---:|---:|---|---:|"
+  echo "| pacing | memory tier | bytes read | on the way back | tier hits / misses on the way back | frames falling back on the way back | waiting for reads on the way back | frames to converge at A | tier RAM at the end |"
+  echo "|---|---|---:|---:|---:|---:|---:|---|---:|"
 } >"$REPORT"
-for tier in 64 0; do
-  json=$WORK/memory-tier-$tier.json
-  "$WORK/bin/vortex-tiler" render --pack "$PACK" --scene "$ROOT/bench/scenes/away-and-back.json" --frame-count 200 \
-    --io-latency 20ms --threads 8 --memory-tier "$tier" --report "$json" --force -q
-  python3 - "$json" "$tier" >>"$REPORT" <<'PY'
-import json, sys
-r = json.load(open(sys.argv[1]))
-back = [f for f in r["frames"] if f["frame"] >= 48]
-mib = lambda b: f"{b / 2**20:.1f} MiB"
-conv = r["frames_to_converge"]
-tier = f"{sys.argv[2]} MiB" if sys.argv[2] != "0" else "off"
-print(f"| {tier} | {mib(r['bytes_read'])} | {mib(sum(f['bytes_read'] for f in back))} "
-      f"| {r['tier_hits']} / {r['tier_misses']} | {sum(f['tier_hits'] for f in back)} / {sum(f['tier_misses'] for f in back)} "
-      f"| {sum(1 for f in back if f['fallback_fraction'] > 0)} | {'never' if conv is None else conv} "
-      f"| {mib(r['memory_tier_held'])} |")
+for pacing in real-time offline; do
+  # Real time depends on when reads land: the median of 5 runs. Offline is the same every run.
+  runs=1
+  [ "$pacing" = real-time ] && runs=5
+  for tier in 64 0; do
+    jsons=()
+    for run in $(seq "$runs"); do
+      json=$WORK/memory-tier-$pacing-$tier-$run.json
+      "$WORK/bin/vortex-tiler" render --pack "$PACK" --scene "$ROOT/bench/scenes/away-and-back.json" --frame-count 200 \
+        --pacing "$pacing" --io-latency 20ms --threads 8 --memory-tier "$tier" --report "$json" --force -q >/dev/null
+      jsons+=("$json")
+    done
+    python3 - "$tier" "${jsons[@]}" >>"$REPORT" <<'PY'
+import json, statistics, sys
+tier, paths = sys.argv[1], sys.argv[2:]
+def row(r):
+    back = [f for f in r["frames"] if f["frame"] >= 48]
+    conv = r["frames_to_converge"]
+    return [r["bytes_read"], sum(f["bytes_read"] for f in back), sum(f["tier_hits"] for f in back),
+            sum(f["tier_misses"] for f in back), sum(1 for f in back if f["fallback_fraction"] > 0),
+            sum(f["io_wait_ms"] for f in back), float("inf") if conv is None else conv, r["memory_tier_held"]]
+reports = [json.load(open(p)) for p in paths]
+m = [statistics.median(column) for column in zip(*map(row, reports))]
+kib = lambda b: f"{b / 1024:.0f} KiB"
+pacing = reports[0]["pacing"] + (f" (median of {len(paths)})" if len(paths) > 1 else "")
+print(f"| {pacing} | {tier + ' MiB' if tier != '0' else 'off'} | {kib(m[0])} | {kib(m[1])} | {m[2]:g} / {m[3]:g} "
+      f"| {m[4]:g} | {m[5]:.0f} ms | {'never' if m[6] == float('inf') else f'{m[6]:g}'} | {kib(m[7])} |")
 PY
-  log "memory tier $tier done"
+    log "$pacing, memory tier $tier done"
+  done
 done
 echo >>"$REPORT"
-echo "Adapter: $(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['adapter'])" "$WORK/memory-tier-0.json")." >>"$REPORT"
+echo "Adapter: $(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['adapter'])" "$WORK/memory-tier-offline-0.json")." >>"$REPORT"
 splice memory-tier "$REPORT" "## Memory tier: a view that comes back (\`bench/memory-tier.sh\`)"
 cat "$REPORT"
