@@ -641,7 +641,7 @@ impl PageSource for Counting {
 
 /// Every kind of tile, and absent ones (magnified from an ancestor that is itself a page).
 fn mixed_with_holes(id: TileId) -> Spec {
-    if id.lod == 0 && (id.x + id.y) % 3 == 0 { Spec::Absent } else { mixed(id) }
+    if id.lod == 0 && (id.x + id.y).is_multiple_of(3) { Spec::Absent } else { mixed(id) }
 }
 
 #[test]
