@@ -97,6 +97,11 @@ pub(super) struct StreamArgs {
     /// The layer drawn: 0 (the packs given first) or one of the --layer layers, counted from 1.
     #[arg(long, value_name = "N")]
     show_layer: Option<u32>,
+    /// MiB of stored (compressed) tiles kept in RAM, least recently used out first: a page the
+    /// GPU cache evicted and the view wants again is decoded from RAM instead of read from the
+    /// pack (the report's tier_hits); 0 turns the tier off [default: the scene's, else 64].
+    #[arg(long, value_name = "MIB")]
+    memory_tier: Option<u32>,
 }
 
 impl StreamArgs {
@@ -115,6 +120,7 @@ impl StreamArgs {
         }
         e.cache_slots_per_side = self.cache_side.unwrap_or(e.cache_slots_per_side);
         e.threads = self.threads.unwrap_or(e.threads);
+        e.memory_tier_mib = self.memory_tier.unwrap_or(e.memory_tier_mib);
     }
 }
 
@@ -316,7 +322,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         .frames_to_converge
         .map_or("did not converge".to_string(), |n| format!("converged {n} frame(s) after the camera stopped"));
     say!(
-        "rendered {} frames of {}x{} on {} ({}, {} filter) in {:.2} s ({:.1} ms/frame; frame CPU p50 {:.2} ms, p99 {:.2} ms; longest wait for pages {:.1} ms); {} of {} pages touched ({:.2}%), {} read; {converge}",
+        "rendered {} frames of {}x{} on {} ({}, {} filter) in {:.2} s ({:.1} ms/frame; frame CPU p50 {:.2} ms, p99 {:.2} ms; longest wait for pages {:.1} ms); {} of {} pages touched ({:.2}%), {} read, {} tile(s) from the memory tier; {converge}",
         report.frames.len(),
         scene.size[0],
         scene.size[1],
@@ -332,6 +338,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         report.pages_total,
         100.0 * report.pages_touched as f64 / report.pages_total.max(1) as f64,
         super::report::mib(report.bytes_read),
+        report.tier_hits,
     );
     if !report.errors.is_empty() {
         bail!(

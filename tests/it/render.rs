@@ -206,3 +206,46 @@ fn a_layer_stack_renders_with_one_page_table_write_per_page() {
     assert!(!out.status.success() && err.contains("layer kind \"bump\": colour or data"), "{err}");
     fails_with(&render(&bad, &["--show-layer", "1"]), &["effects.layer 1 is not one of the 1 layers"]);
 }
+
+#[test]
+fn a_view_that_comes_back_is_read_from_the_memory_tier_and_drawn_the_same() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = sample_pack(dir.path());
+    let scene = root("bench/scenes/away-and-back.json");
+    // A cache of 3² slots: the way to B evicts A's pages.
+    let render = |tier: &str| {
+        let (frames, json) = (dir.path().join(format!("frames-{tier}")), dir.path().join(format!("{tier}.json")));
+        let args = ["render", "--pack", s(&pack), "--scene", s(&scene), "--size", "128x96", "--cache-side", "3"];
+        let out =
+            run(&[&args[..], &["--memory-tier", tier, "--frames", s(&frames), "--report", s(&json), "-q"]].concat());
+        (out, frames, json)
+    };
+    let (out, on_frames, on_json) = render("64");
+    if no_gpu(&out) {
+        return;
+    }
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (out, off_frames, off_json) = render("0");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (on, off) = (report(&on_json), report(&off_json));
+    let back = |r: &serde_json::Value, key: &str| -> u64 {
+        let frames = r["frames"].as_array().unwrap();
+        frames.iter().filter(|f| f["frame"].as_u64().unwrap() >= 48).map(|f| f[key].as_u64().unwrap()).sum()
+    };
+    assert_eq!((on["memory_tier_bytes"].as_u64(), off["memory_tier_bytes"].as_u64()), (Some(64 << 20), Some(0)));
+    assert!(
+        back(&on, "tier_hits") > 0 && back(&off, "tier_hits") == 0,
+        "{} {}",
+        back(&on, "tier_hits"),
+        back(&off, "tier_hits")
+    );
+    assert!(
+        back(&on, "bytes_read") < back(&off, "bytes_read"),
+        "{} {}",
+        back(&on, "bytes_read"),
+        back(&off, "bytes_read")
+    );
+    assert!(on["memory_tier_held"].as_u64().unwrap() > 0 && off["memory_tier_held"] == 0);
+    let last = |dir: &Path| std::fs::read(dir.join("frame-0095.png")).unwrap();
+    assert!(last(&on_frames) == last(&off_frames), "the tier changed the last frame");
+}

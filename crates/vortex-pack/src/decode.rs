@@ -47,6 +47,25 @@ pub fn decode_rgba8_limited(pack: &Pack, lod: u32, x: u32, y: u32, max_bytes: u6
     }
 }
 
+/// A tile as stored ([`Pack::tile_checked`]'s answer, or a copy of its bytes kept since) as
+/// `tile_size^2` RGBA8 texels, exactly as [`decode_rgba8`] decodes it in place; `None` if it is
+/// absent. For a cache that keeps tiles in their stored (compressed) form, away from the pack,
+/// and decodes them when they are wanted again. The checksum is not checked here: check it when
+/// the bytes are read. An error is a [`PackError::Payload`](crate::PackError::Payload) (no file,
+/// no position: the caller knows which tile it decoded).
+pub fn tile_rgba8(tile: Tile<'_>, d: &Description, max_bytes: u64) -> Result<Option<Vec<u8>>> {
+    match tile {
+        Tile::Absent => Ok(None),
+        Tile::Constant(value) => constant_rgba8(d, value, max_bytes)
+            .map(Some)
+            .map_err(|message| PackError::Payload { kind: TileKind::Constant.name(), message }),
+        Tile::Data(kind, bytes) => PayloadDecoder::default()
+            .decode(kind, bytes, d, max_bytes)
+            .map(Some)
+            .map_err(|message| PackError::Payload { kind: kind.name(), message }),
+    }
+}
+
 /// A payload of `kind` that decodes to texels in the pack's own texel format (raw, zstd,
 /// zstd-delta, BC1, BC7) as one raw tile: `tile_size^2` texels of `channels` samples, rows top
 /// down, samples little-endian. For converting packs; PNG and JPEG payloads are image files

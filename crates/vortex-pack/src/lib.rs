@@ -23,7 +23,7 @@ pub mod verify;
 mod writer;
 
 #[cfg(feature = "decode")]
-pub use decode::{decode_rgba8, decode_rgba8_limited, payload_texels};
+pub use decode::{decode_rgba8, decode_rgba8_limited, payload_texels, tile_rgba8};
 pub use error::{PackError, Result};
 pub use format::{Description, Entry, Header, Level, TileKind};
 pub use limits::{DEFAULT_MAX_DECODED_BYTES, Limits};

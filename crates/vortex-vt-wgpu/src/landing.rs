@@ -65,7 +65,7 @@ mod tests {
     use super::*;
 
     fn loaded(page: PageId, slot: Slot, byte: u8) -> LoadedPage {
-        LoadedPage { page, slot, texels: vec![byte; 4], bytes_read: 1, error: None }
+        LoadedPage { page, slot, texels: vec![byte; 4], bytes_read: 1, tier_hits: 0, tier_misses: 1, error: None }
     }
 
     #[test]

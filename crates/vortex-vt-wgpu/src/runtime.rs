@@ -36,7 +36,7 @@ use crate::bindings::Bindings;
 use crate::feedback::{FeedbackBuffer, FeedbackReadback};
 use crate::landing::{Arrivals, Landed};
 use crate::layer::{Layer, LayerKind, MAX_LAYERS};
-use crate::loader::{LoadError, Loader, LoaderError};
+use crate::loader::{DEFAULT_MEMORY_TIER_BYTES, LoadError, Loader, LoaderError};
 use crate::page_cache::{CacheError, CacheFormat, PageCache};
 use crate::page_table::{GpuPageTable, PageTableError};
 use crate::params::Params;
@@ -114,6 +114,10 @@ pub struct RuntimeConfig {
     /// (opaque textures only) or `Some(Bc7)` force a transcode on the loader's threads.
     pub cache_format: Option<CacheFormat>,
     pub pacing: Pacing,
+    /// Bytes of stored (compressed) tiles the loader keeps in RAM, least recently used out first,
+    /// so that a page the cache evicted and the view wants again is decoded without a read
+    /// ([`Loader::set_memory_tier`]); 0 turns the tier off.
+    pub memory_tier_bytes: u64,
 }
 
 impl Default for RuntimeConfig {
@@ -130,6 +134,7 @@ impl Default for RuntimeConfig {
             bc7: true,
             cache_format: None,
             pacing: Pacing::RealTime,
+            memory_tier_bytes: DEFAULT_MEMORY_TIER_BYTES,
         }
     }
 }
@@ -214,8 +219,13 @@ pub struct FrameStats {
     pub fallback_fraction: f64,
     /// The LOD bias the next frame's feedback asks with.
     pub lod_bias: f32,
-    /// Bytes read by the sources for the pages uploaded (every layer's).
+    /// Bytes read by the sources for the pages uploaded, every layer's (none for tiles the
+    /// memory tier held).
     pub bytes_read: u64,
+    /// Tiles of the pages uploaded that the memory tier held (decoded from RAM, not read), and
+    /// those read from the sources.
+    pub tier_hits: usize,
+    pub tier_misses: usize,
     pub bytes_uploaded: u64,
     /// Pages uploaded with the stand-in tile because they failed to load.
     pub load_errors: usize,
@@ -304,6 +314,8 @@ impl Runtime {
         let mut loaders = Vec::with_capacity(layers.len());
         for layer in &layers {
             let loader = Loader::with_sources(layer.sources.clone(), config.loader_threads)?;
+            // The layers share the tier's budget equally.
+            loader.set_memory_tier(config.memory_tier_bytes / layers.len() as u64);
             let format = match layer.kind {
                 LayerKind::Colour => cache_format(&config, bc, &loader)?,
                 LayerKind::Data => CacheFormat::Rgba8,
@@ -561,6 +573,8 @@ impl Runtime {
             stats.uploaded += 1;
             stats.bytes_uploaded += bytes;
             stats.bytes_read += page.layers.iter().map(|l| l.bytes_read).sum::<u64>();
+            stats.tier_hits += page.layers.iter().map(|l| l.tier_hits as usize).sum::<usize>();
+            stats.tier_misses += page.layers.iter().map(|l| l.tier_misses as usize).sum::<usize>();
             stats.load_errors += page.layers.iter().filter(|l| !l.is_ok()).count();
             self.upload(page, changes);
         }

@@ -4,8 +4,8 @@
 
 use vortex_pack::format::{self, at, delta_decode_rows, delta_encode_rows, pyramid_levels};
 use vortex_pack::{
-    Description, NewTile, Pack, PackWriter, TileId, TileKind, VerifyOptions, WriteOptions, decode_rgba8,
-    payload_texels, verify,
+    Description, NewTile, Pack, PackError, PackWriter, Tile, TileId, TileKind, VerifyOptions, WriteOptions,
+    decode_rgba8, payload_texels, tile_rgba8, verify,
 };
 
 use crate::common::{self, reseal};
@@ -271,4 +271,33 @@ fn hostile_payloads_are_errors_not_panics() {
     assert!(e.contains("png payloads are image files, not texels"), "{e}");
     let e = payload_texels(TileKind::Raw, &[0; 256], &common::description(4, 1), 100).unwrap_err().to_string();
     assert!(e.contains("exceeds the decoding limit of 100 bytes"), "{e}");
+}
+
+#[test]
+fn a_tile_decoded_away_from_its_pack_is_the_tile_decoded_in_place() {
+    let dir = tempfile::tempdir().unwrap();
+    for (i, (channels, sample_bytes, options)) in common::sample_variants().into_iter().enumerate() {
+        let path = dir.path().join(format!("sample{i}.vtpk"));
+        common::write_sample(&path, channels, sample_bytes, options);
+        let pack = Pack::open(&path).unwrap();
+        let d = pack.description();
+        for id in pack.ids() {
+            // A copy of the stored bytes, as a cache keeps them once the map is gone.
+            let (kept, stored) = match pack.tile_checked(id.lod, id.x, id.y).unwrap() {
+                Tile::Absent => (vec![], None),
+                Tile::Constant(value) => (value.to_vec(), Some(TileKind::Constant)),
+                Tile::Data(kind, bytes) => (bytes.to_vec(), Some(kind)),
+            };
+            let copy = match stored {
+                None => Tile::Absent,
+                Some(TileKind::Constant) => Tile::Constant(&kept),
+                Some(kind) => Tile::Data(kind, &kept),
+            };
+            let in_place = decode_rgba8(&pack, id.lod, id.x, id.y).unwrap();
+            assert_eq!(tile_rgba8(copy, d, LIMIT).unwrap(), in_place, "{id:?}");
+        }
+    }
+    let d = common::description(3, 1);
+    let e = tile_rgba8(Tile::Data(TileKind::Raw, &[1, 2, 3]), &d, LIMIT).unwrap_err();
+    assert!(matches!(&e, PackError::Payload { kind: "raw", .. }), "{e}");
 }

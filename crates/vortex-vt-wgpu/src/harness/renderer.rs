@@ -62,6 +62,10 @@ pub struct FrameReport {
     pub lod_bias: f32,
     /// Bytes read from the sources for the pages uploaded.
     pub bytes_read: u64,
+    /// Tiles of the pages uploaded found in the memory tier (nothing read), and read from the
+    /// sources.
+    pub tier_hits: usize,
+    pub tier_misses: usize,
     /// Pages that failed to load (drawn with a stand-in; see `loader`).
     pub load_errors: usize,
     /// CPU time of the frame on the render thread: recording and submitting its passes and
@@ -92,6 +96,13 @@ pub struct Report {
     pub pages_total: u64,
     /// Payload bytes read from the sources, the roots pinned before the first frame included.
     pub bytes_read: u64,
+    /// The memory tier's budget in bytes (0: off), and its tiles found in it and read from the
+    /// sources over the run, the roots included.
+    pub memory_tier_bytes: u64,
+    pub tier_hits: u64,
+    pub tier_misses: u64,
+    /// Bytes the tier held at the end: its cost in RAM (stored tiles and their bookkeeping).
+    pub memory_tier_held: u64,
     /// Resident hits over pages requested, over all frames.
     pub hit_rate: f64,
     /// The first frame of the still camera.
@@ -168,6 +179,7 @@ impl SceneRenderer {
             loader_threads: e.threads,
             bc7: e.bc7,
             cache_format: e.cache_format,
+            memory_tier_bytes: u64::from(e.memory_tier_mib) << 20,
             pacing,
             ..RuntimeConfig::default()
         };
@@ -372,6 +384,10 @@ impl SceneRenderer {
             pages_touched: rt.pages_touched(),
             pages_total: rt.textures().iter().map(|t| t.grid.page_count()).sum(),
             bytes_read: rt.loaders().iter().map(|l| l.counters().bytes_read).sum(),
+            memory_tier_bytes: config.memory_tier_bytes,
+            tier_hits: rt.loaders().iter().map(|l| l.counters().tier_hits).sum(),
+            tier_misses: rt.loaders().iter().map(|l| l.counters().tier_misses).sum(),
+            memory_tier_held: rt.loaders().iter().map(|l| l.memory_tier().bytes).sum(),
             hit_rate: if requested == 0 { 0.0 } else { hits as f64 / requested as f64 },
             still_from,
             frames_to_converge,
@@ -409,6 +425,8 @@ fn report(s: &FrameStats, cpu: Duration) -> FrameReport {
         fallback_fraction: s.fallback_fraction,
         lod_bias: s.lod_bias,
         bytes_read: s.bytes_read,
+        tier_hits: s.tier_hits,
+        tier_misses: s.tier_misses,
         load_errors: s.load_errors,
         cpu_ms: cpu.as_secs_f64() * 1e3,
         io_wait_ms: s.io_wait.as_secs_f64() * 1e3,

@@ -162,6 +162,10 @@ pub struct Effects {
     pub cache_format: Option<CacheFormat>,
     /// The layer of the textures' stacks drawn (0, the colour of `textures`, by default).
     pub layer: u32,
+    /// MiB of stored (compressed) tiles the loader keeps in RAM, so that pages the cache
+    /// evicted come back without a read ([`RuntimeConfig::memory_tier_bytes`](crate::RuntimeConfig));
+    /// 0 turns the tier off.
+    pub memory_tier_mib: u32,
 }
 
 impl Default for Effects {
@@ -175,6 +179,7 @@ impl Default for Effects {
             bc7: true,
             cache_format: None,
             layer: 0,
+            memory_tier_mib: (crate::DEFAULT_MEMORY_TIER_BYTES >> 20) as u32,
         }
     }
 }

@@ -1,6 +1,7 @@
 //! One page from its source, on a loader worker: its stored tile, premultiplied; an absent tile
 //! built from its nearest stored ancestor (`magnify`); or, for a BC7 cache, the tile's BC7
-//! blocks as stored. Every failure is a [`LoadError`] naming the source and the tile.
+//! blocks as stored. Tiles are read through the memory tier (`tier`), which may hold their
+//! stored bytes. Every failure is a [`LoadError`] naming the source and the tile.
 //!
 //! Apart from the pool so that what a page's texels are depends on the source and the page
 //! alone: these are plain functions of their arguments, with no thread, queue or shared counter
@@ -13,8 +14,9 @@ use vortex_vt::page::PageId;
 use super::LoadError;
 use super::magnify::magnify;
 use super::premultiply::premultiply;
+use super::tier::{self, Tier};
 use crate::page_cache::CacheFormat;
-use crate::source::{PageSource, ReadError, SourceTile};
+use crate::source::{PageSource, ReadError};
 use crate::texture::VirtualTexture;
 
 /// How a page's texels were made.
@@ -30,15 +32,20 @@ pub(super) struct Tally {
     pub(super) bytes_read: u64,
     /// Stored tiles decoded to texels or taken as BC7 blocks (0 or 1).
     pub(super) tiles_decoded: u64,
+    /// Tiles (the page's, or its ancestors' while they are absent) the memory tier held, and
+    /// those read from the source instead.
+    pub(super) tier_hits: u32,
+    pub(super) tier_misses: u32,
 }
 
 /// The page's texels from its tile, or from its nearest stored ancestor if the tile is absent,
 /// premultiplied if they are `colour` (data is taken as stored); for a BC7 cache, its BC7 blocks
-/// instead. `sources` and `textures` are indexed
-/// by texture id.
+/// instead. `sources` and `textures` are indexed by texture id. Every tile is read through the
+/// memory `tier`.
 pub(super) fn texels(
     sources: &[Arc<dyn PageSource>],
     textures: &[VirtualTexture],
+    tier: &Tier,
     page: PageId,
     format: CacheFormat,
     colour: bool,
@@ -62,16 +69,13 @@ pub(super) fn texels(
     let wanted = format.tile_bytes(texture.tile_size);
     for tile in page.ancestors_and_self(&grid) {
         let failed = |e: ReadError| tile_error(source.as_ref(), page, tile, e.message);
-        let read = source.read_tile(tile.lod, tile.x, tile.y, format).inspect_err(|e| tally.bytes_read += e.bytes_read);
-        let (mut texels, bytes_read) = match read.map_err(failed)? {
-            SourceTile::Absent if format == CacheFormat::Rgba8 => continue,
-            SourceTile::Absent => {
-                let message = "an absent tile cannot be made into BC7 blocks".to_string();
-                return Err(tile_error(source.as_ref(), page, tile, message));
+        let Some(mut texels) = tier::read(tier, source.as_ref(), tile, format, tally).map_err(failed)? else {
+            if format == CacheFormat::Rgba8 {
+                continue;
             }
-            SourceTile::Texels { texels, bytes_read } => (texels, bytes_read),
+            let message = "an absent tile cannot be made into BC7 blocks".to_string();
+            return Err(tile_error(source.as_ref(), page, tile, message));
         };
-        tally.bytes_read += bytes_read;
         if texels.len() != wanted {
             let message =
                 format!("the source gave {} bytes, not the {wanted} of a {} tile", texels.len(), format.name());

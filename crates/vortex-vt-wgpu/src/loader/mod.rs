@@ -22,14 +22,18 @@
 //!   [stand-in tile](stand_in_tile) (a magenta and black checkerboard) and a [`LoadError`] that
 //!   names the pack and the tile.
 //!
-//! A page's result depends only on the pack and the page, never on the thread that decoded it or
-//! on other pages (nothing is cached between pages), so results and counters are the same
-//! whatever the thread count.
+//! A page's texels depend only on the pack and the page, never on the thread that decoded it or
+//! on other pages, so they are the same whatever the thread count. The memory tier (`tier`, off
+//! unless [`Loader::set_memory_tier`] gives it a budget) keeps tiles' stored bytes between pages:
+//! it changes what is read, never what is decoded. Without it the counters too are the same
+//! whatever the thread count; with it, which of two pages that share an absent ancestor reads it
+//! and which finds it in RAM depends on their order.
 
 mod decode;
 mod magnify;
 mod pool;
 mod premultiply;
+mod tier;
 mod transcode;
 
 use std::path::PathBuf;
@@ -38,6 +42,7 @@ use vortex_vt::page::{GridError, MAX_TEXTURES, PageId};
 use vortex_vt::residency::Slot;
 
 pub use pool::Loader;
+pub use tier::{DEFAULT_MEMORY_TIER_BYTES, TIER_ENTRY_OVERHEAD, TierUsage};
 
 /// Why a [`VirtualTexture`](crate::VirtualTexture) or a [`Loader`] cannot be made.
 #[derive(Debug, thiserror::Error)]
@@ -116,8 +121,14 @@ pub struct LoadedPage {
     /// or BC7 blocks as stored (straight alpha). The [stand-in](stand_in_tile) when `error` is set.
     pub texels: Vec<u8>,
     /// Payload bytes read from the pack for this page: its tile's, or for an absent tile its
-    /// ancestor's; counted even when they failed to decode. Constant tiles have none.
+    /// ancestor's; counted even when they failed to decode. Constant tiles have none, and
+    /// neither have tiles the memory tier held.
     pub bytes_read: u64,
+    /// Tiles read for this page (its own, or its ancestors' while they are absent) that the
+    /// memory tier held: decoded from RAM, nothing read.
+    pub tier_hits: u32,
+    /// Tiles read for this page from its source, the tier not holding them (or off).
+    pub tier_misses: u32,
     pub error: Option<LoadError>,
 }
 
@@ -141,6 +152,10 @@ pub struct LoadCounters {
     pub bytes_read: u64,
     /// Pages answered with the stand-in tile and an error.
     pub errors: u64,
+    /// Tiles the memory tier held (the sum of [`LoadedPage::tier_hits`]).
+    pub tier_hits: u64,
+    /// Tiles read from the sources (the sum of [`LoadedPage::tier_misses`]).
+    pub tier_misses: u64,
 }
 
 /// The two colours of the [stand-in tile](stand_in_tile): opaque magenta and opaque black, which

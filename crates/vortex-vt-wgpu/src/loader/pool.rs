@@ -18,6 +18,7 @@ use vortex_vt::page::{MAX_TEXTURES, PageId};
 use vortex_vt::residency::Slot;
 
 use super::decode::{self, Made, Tally};
+use super::tier::{Tier, TierUsage};
 use super::transcode::transcode;
 use super::{LoadCounters, LoadError, LoadedPage, LoaderError, stand_in_tile};
 use crate::bc7;
@@ -53,6 +54,10 @@ struct Shared {
     absent_filled: AtomicU64,
     bytes_read: AtomicU64,
     errors: AtomicU64,
+    tier_hits: AtomicU64,
+    tier_misses: AtomicU64,
+    /// Stored tiles kept in RAM ([`Loader::set_memory_tier`]).
+    tier: Tier,
     /// The format pages are answered in ([`Loader::set_format`]), as its index in
     /// [`CacheFormat::ALL`].
     format: AtomicU8,
@@ -125,6 +130,9 @@ impl Loader {
             absent_filled: AtomicU64::new(0),
             bytes_read: AtomicU64::new(0),
             errors: AtomicU64::new(0),
+            tier_hits: AtomicU64::new(0),
+            tier_misses: AtomicU64::new(0),
+            tier: Tier::new(0),
             format: AtomicU8::new(0),
             colour: AtomicBool::new(true),
             stored_bc7,
@@ -199,6 +207,18 @@ impl Loader {
         self.shared.colour.store(kind == LayerKind::Colour, Ordering::Relaxed);
     }
 
+    /// Keeps up to `bytes` of stored tiles in RAM (the memory tier, least recently used out
+    /// first), so that a page read again is decoded from RAM instead of read from its source;
+    /// 0 (a new loader's setting) keeps none. A smaller budget drops tiles at once.
+    pub fn set_memory_tier(&self, bytes: u64) {
+        self.shared.tier.set_budget(bytes);
+    }
+
+    /// What the memory tier holds now.
+    pub fn memory_tier(&self) -> TierUsage {
+        self.shared.tier.usage()
+    }
+
     /// Texels of border on each side of every tile.
     pub fn border(&self) -> u32 {
         self.shared.textures[0].border
@@ -244,6 +264,8 @@ impl Loader {
                     slot,
                     texels: stand_in_tile(self.shared.tile_size),
                     bytes_read: 0,
+                    tier_hits: 0,
+                    tier_misses: 0,
                     error: Some(LoadError::Lost { page }),
                 })
             })
@@ -308,6 +330,8 @@ impl Loader {
             absent_filled: s.absent_filled.load(Ordering::Relaxed),
             bytes_read: s.bytes_read.load(Ordering::Relaxed),
             errors: s.errors.load(Ordering::Relaxed),
+            tier_hits: s.tier_hits.load(Ordering::Relaxed),
+            tier_misses: s.tier_misses.load(Ordering::Relaxed),
         }
     }
 
@@ -373,9 +397,11 @@ impl Shared {
         let colour = self.colour.load(Ordering::Relaxed);
         let mut tally = Tally::default();
         let texels = || {
-            decode::texels(&self.sources, &self.textures, page, read_as, colour, &mut tally).map(|(texels, made)| {
-                (if read_as == format { texels } else { transcode(texels, self.tile_size, format) }, made)
-            })
+            decode::texels(&self.sources, &self.textures, &self.tier, page, read_as, colour, &mut tally).map(
+                |(texels, made)| {
+                    (if read_as == format { texels } else { transcode(texels, self.tile_size, format) }, made)
+                },
+            )
         };
         let result = catch_unwind(AssertUnwindSafe(texels)).unwrap_or_else(|panic| {
             let what = panic
@@ -392,8 +418,10 @@ impl Shared {
                 message: format!("the decoder panicked: {what}"),
             })
         });
-        let Tally { bytes_read, tiles_decoded } = tally;
+        let Tally { bytes_read, tiles_decoded, tier_hits, tier_misses } = tally;
         self.tiles_decoded.fetch_add(tiles_decoded, Ordering::Relaxed);
+        self.tier_hits.fetch_add(tier_hits.into(), Ordering::Relaxed);
+        self.tier_misses.fetch_add(tier_misses.into(), Ordering::Relaxed);
         self.pages.fetch_add(1, Ordering::Relaxed);
         self.bytes_read.fetch_add(bytes_read, Ordering::Relaxed);
         let (texels, error) = match result {
@@ -413,6 +441,6 @@ impl Shared {
                 (texels, Some(e))
             }
         };
-        LoadedPage { page, slot, texels, bytes_read, error }
+        LoadedPage { page, slot, texels, bytes_read, tier_hits, tier_misses, error }
     }
 }

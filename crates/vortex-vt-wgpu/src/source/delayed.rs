@@ -1,12 +1,13 @@
 //! A source that answers every tile after a fixed latency: what a slow disk, a network share or
 //! an object store does to a frame loop, without one. `render --io-latency` and the never-stall
-//! tests wrap their packs in it.
+//! tests wrap their packs in it. Only reads wait: decoding stored bytes the memory tier kept
+//! does not, which is the tier's whole gain.
 
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
-use super::{PageSource, ReadError, SourceTile};
+use super::{PageSource, ReadError, SourceTile, StoredRead};
 use crate::loader::LoaderError;
 use crate::page_cache::CacheFormat;
 use crate::texture::VirtualTexture;
@@ -35,6 +36,27 @@ impl PageSource for Delayed {
     fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
         std::thread::sleep(self.latency);
         self.inner.read_tile(lod, x, y, format)
+    }
+
+    fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
+        let stored = self.inner.read_stored(lod, x, y);
+        // A source with no stored form is read (and waited for) by `read_tile` instead.
+        if !matches!(stored, Ok(None)) {
+            std::thread::sleep(self.latency);
+        }
+        stored
+    }
+
+    fn decode(
+        &self,
+        lod: u8,
+        x: u16,
+        y: u16,
+        kind: u8,
+        bytes: &[u8],
+        format: CacheFormat,
+    ) -> Result<Vec<u8>, ReadError> {
+        self.inner.decode(lod, x, y, kind, bytes, format)
     }
 
     fn holds_only_bc7(&self) -> bool {

@@ -3,11 +3,18 @@
 //! up a frame. Vortex packs are sources ([`Pack`](vortex_pack::Pack) implements the trait, in
 //! `pack`); an application streams from its own storage by implementing it; [`Delayed`] adds a
 //! fixed latency to any source, to show what a slow disk or network does to a frame loop.
+//!
+//! A source may also split a read in two, [`PageSource::read_stored`] (the tile's bytes as
+//! stored, compressed) and [`PageSource::decode`] (those bytes to texels), so that the loader's
+//! memory tier can keep recently read tiles in RAM in their stored form and serve a page the GPU
+//! cache evicted without reading the source again. A source that does not is still read, one
+//! [`PageSource::read_tile`] per page; the tier passes it by.
 
 mod delayed;
 mod pack;
 
 use std::path::Path;
+use std::sync::Arc;
 
 pub use delayed::Delayed;
 
@@ -29,6 +36,33 @@ pub trait PageSource: Send + Sync {
     /// only): the loader then magnifies the nearest stored ancestor.
     fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError>;
 
+    /// The tile of page (`lod`, `x`, `y`) as stored, not decoded, for the loader's memory tier to
+    /// keep (stored bytes are a fraction of the texels); [`PageSource::decode`] makes the texels.
+    /// `None`, the default, for a source with no stored form worth keeping: the tier then passes
+    /// it by and every read is a [`PageSource::read_tile`]. A source that answers `Some` must
+    /// implement `decode`, and `decode(read_stored)` must give what `read_tile` gives.
+    fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
+        let _ = (lod, x, y);
+        Ok(None)
+    }
+
+    /// The texels, in `format`, of `bytes`: what [`PageSource::read_stored`] gave for page
+    /// (`lod`, `x`, `y`) as [`StoredTile::Stored`], perhaps long ago. Runs on a loader thread
+    /// with no lock held. It must not read the source: a tile served from the memory tier costs
+    /// no read.
+    fn decode(
+        &self,
+        lod: u8,
+        x: u16,
+        y: u16,
+        kind: u8,
+        bytes: &[u8],
+        format: CacheFormat,
+    ) -> Result<Vec<u8>, ReadError> {
+        let _ = (kind, bytes, format);
+        Err(ReadError::new(format!("tile (lod {lod}, x {x}, y {y}): this source decodes no stored tiles")))
+    }
+
     /// Whether every tile can come as BC7 blocks as stored, so that the cache can hold BC7.
     fn holds_only_bc7(&self) -> bool {
         false
@@ -47,6 +81,26 @@ pub enum SourceTile {
     Texels { texels: Vec<u8>, bytes_read: u64 },
     /// No tile is stored for this page: it is its nearest stored ancestor, magnified.
     Absent,
+}
+
+/// A tile as its source stores it: what the loader's memory tier keeps.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum StoredTile {
+    /// No tile is stored for this page: it is its nearest stored ancestor, magnified.
+    Absent,
+    /// The tile's bytes as stored; `kind` says what they are, in the source's own terms (for a
+    /// pack, its `TileKind` as a byte), for [`PageSource::decode`]. Shared, so that the tier and
+    /// a decoding worker hold one copy.
+    Stored { kind: u8, bytes: Arc<[u8]> },
+}
+
+/// What [`PageSource::read_stored`] read.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StoredRead {
+    pub tile: StoredTile,
+    /// Bytes read to get it (for the counters): a pack's payload length; none for a tile the
+    /// index alone describes (absent, or one colour).
+    pub bytes_read: u64,
 }
 
 /// Why a tile could not be read or decoded.

@@ -1,14 +1,16 @@
-//! Vortex packs as page sources: a stored tile (PNG, JPEG, zstd, raw or constant) decoded to
-//! RGBA8 by `vortex_pack::decode_rgba8`, which checks its CRC-32C; for a BC7 cache, the tile's
-//! BC7 payload as stored (or blocks of a constant tile's one colour); an absent tile reported as
+//! Vortex packs as page sources. A stored tile is read as it is stored (its payload, checksum
+//! checked, or its one colour) and decoded on its own: to RGBA8 by `vortex_pack::tile_rgba8`, or
+//! for a BC7 cache taken as stored BC7 blocks (or blocks of a constant tile's one colour). The
+//! loader's memory tier keeps the stored bytes between the two; an absent tile is reported as
 //! such, for the loader to magnify its ancestor.
 
 use std::path::Path;
+use std::sync::Arc;
 
-use vortex_pack::{Pack, PackError, Tile, TileKind};
+use vortex_pack::{Description, Pack, PackError, Tile, TileKind};
 use vortex_vt::page::TextureGrid;
 
-use super::{PageSource, ReadError, SourceTile};
+use super::{PageSource, ReadError, SourceTile, StoredRead, StoredTile};
 use crate::bc7;
 use crate::loader::LoaderError;
 use crate::page_cache::CacheFormat;
@@ -23,12 +25,33 @@ impl PageSource for Pack {
         VirtualTexture::from_pack(self)
     }
 
+    /// [`PageSource::read_stored`], then [`PageSource::decode`]: one path whether or not the
+    /// memory tier keeps the bytes in between.
     fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
-        let (lod, x, y) = (u32::from(lod), u32::from(x), u32::from(y));
-        let tile_size = self.description().tile_size;
+        let StoredRead { tile, bytes_read } = stored(self, lod, x, y)?;
+        match tile {
+            StoredTile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
+            StoredTile::Absent => Err(ReadError::new(format!("an absent tile cannot be made into {}", format.name()))),
+            StoredTile::Stored { kind, bytes } => self
+                .decode(lod, x, y, kind, &bytes, format)
+                .map(|texels| SourceTile::Texels { texels, bytes_read })
+                .map_err(|e| ReadError { bytes_read, ..e }),
+        }
+    }
+
+    fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
+        stored(self, lod, x, y).map(Some)
+    }
+
+    /// RGBA8 texels of any stored kind; BC7 blocks of a BC7 or one-colour tile (the loader asks
+    /// for BC7 only when every tile is one of those); never BC1, which the loader transcodes.
+    fn decode(&self, _: u8, _: u16, _: u16, kind: u8, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
+        let kind = TileKind::from_u8(kind).ok_or_else(|| ReadError::new(format!("unknown tile kind {kind}")))?;
+        let tile = if kind == TileKind::Constant { Tile::Constant(bytes) } else { Tile::Data(kind, bytes) };
+        let (d, limit) = (self.description(), self.limits().max_decoded_bytes);
         match format {
-            CacheFormat::Rgba8 => texels(self, lod, x, y, tile_size),
-            CacheFormat::Bc7 => blocks(self, lod, x, y, tile_size),
+            CacheFormat::Rgba8 => texels(tile, d, limit),
+            CacheFormat::Bc7 => blocks(tile, d, limit),
             // The loader transcodes RGBA8 to BC1; it never asks a source for BC1.
             CacheFormat::Bc1 => Err(ReadError::new("a pack gives RGBA8 texels or stored BC7 blocks, not BC1")),
         }
@@ -46,33 +69,45 @@ impl PageSource for Pack {
     }
 }
 
-/// The tile's RGBA8 texels, or `Absent`.
-fn texels(pack: &Pack, lod: u32, x: u32, y: u32, tile_size: u32) -> Result<SourceTile, ReadError> {
-    let bytes_read = match pack.tile(lod, x, y).map_err(read_error)? {
-        Tile::Absent => return Ok(SourceTile::Absent),
-        Tile::Constant(_) => 0,
-        Tile::Data(_, payload) => payload.len() as u64,
+/// The tile as stored: its payload (checksum checked) or one colour, copied out of the map so that
+/// the memory tier may keep it; or `Absent`. A payload that fails its checksum still counts as
+/// read.
+fn stored(pack: &Pack, lod: u8, x: u16, y: u16) -> Result<StoredRead, ReadError> {
+    let (lod, x, y) = (u32::from(lod), u32::from(x), u32::from(y));
+    let tile = pack.tile_checked(lod, x, y).map_err(|e| {
+        let bytes_read = match pack.tile(lod, x, y) {
+            Ok(Tile::Data(_, payload)) => payload.len() as u64,
+            _ => 0,
+        };
+        ReadError { bytes_read, ..read_error(e) }
+    })?;
+    let (kind, bytes, bytes_read) = match tile {
+        Tile::Absent => return Ok(StoredRead { tile: StoredTile::Absent, bytes_read: 0 }),
+        Tile::Constant(value) => (TileKind::Constant, value, 0),
+        Tile::Data(kind, payload) => (kind, payload, payload.len() as u64),
     };
-    let failed = |e| ReadError { bytes_read, ..read_error(e) };
-    let texels = vortex_pack::decode_rgba8(pack, lod, x, y).map_err(failed)?.unwrap_or_default();
-    let expected = (tile_size as usize).pow(2) * 4;
-    if texels.len() != expected {
-        let message = format!("decodes to {} bytes, not {expected} of RGBA8", texels.len());
-        return Err(ReadError { message, bytes_read });
-    }
-    Ok(SourceTile::Texels { texels, bytes_read })
+    Ok(StoredRead { tile: StoredTile::Stored { kind: kind as u8, bytes: Arc::from(bytes) }, bytes_read })
 }
 
-/// The tile's BC7 blocks: its BC7 payload as stored (checksum checked), or blocks of its one
-/// colour.
-fn blocks(pack: &Pack, lod: u32, x: u32, y: u32, tile_size: u32) -> Result<SourceTile, ReadError> {
-    let wanted = CacheFormat::Bc7.tile_bytes(tile_size);
-    let (blocks, bytes_read) = match pack.tile_checked(lod, x, y).map_err(read_error)? {
-        Tile::Data(TileKind::Bc7, payload) => (payload.to_vec(), payload.len() as u64),
+/// The tile's RGBA8 texels.
+fn texels(tile: Tile<'_>, d: &Description, limit: u64) -> Result<Vec<u8>, ReadError> {
+    let texels = vortex_pack::tile_rgba8(tile, d, limit).map_err(read_error)?.unwrap_or_default();
+    let expected = (d.tile_size as usize).pow(2) * 4;
+    if texels.len() != expected {
+        return Err(ReadError::new(format!("decodes to {} bytes, not {expected} of RGBA8", texels.len())));
+    }
+    Ok(texels)
+}
+
+/// The tile's BC7 blocks: its BC7 payload as stored, or blocks of its one colour.
+fn blocks(tile: Tile<'_>, d: &Description, limit: u64) -> Result<Vec<u8>, ReadError> {
+    let wanted = CacheFormat::Bc7.tile_bytes(d.tile_size);
+    let blocks = match tile {
+        Tile::Data(TileKind::Bc7, payload) => payload.to_vec(),
         Tile::Constant(_) => {
-            let texels = vortex_pack::decode_rgba8(pack, lod, x, y).map_err(read_error)?.unwrap_or_default();
+            let texels = vortex_pack::tile_rgba8(tile, d, limit).map_err(read_error)?.unwrap_or_default();
             let colour = texels.first_chunk::<4>().copied().unwrap_or_default();
-            (bc7::solid_block(colour).repeat(wanted / bc7::BLOCK_BYTES), 0)
+            bc7::solid_block(colour).repeat(wanted / bc7::BLOCK_BYTES)
         }
         Tile::Data(kind, _) => {
             return Err(ReadError::new(format!("a BC7 cache takes BC7 and one-colour tiles, not {}", kind.name())));
@@ -80,10 +115,9 @@ fn blocks(pack: &Pack, lod: u32, x: u32, y: u32, tile_size: u32) -> Result<Sourc
         Tile::Absent => return Err(ReadError::new("an absent tile cannot be made into BC7 blocks")),
     };
     if blocks.len() != wanted {
-        let message = format!("holds {} bytes of BC7 blocks, not {wanted}", blocks.len());
-        return Err(ReadError { message, bytes_read });
+        return Err(ReadError::new(format!("holds {} bytes of BC7 blocks, not {wanted}", blocks.len())));
     }
-    Ok(SourceTile::Texels { texels: blocks, bytes_read })
+    Ok(blocks)
 }
 
 /// A pack error as a read error: the pack error already names the path and tile, which the
@@ -92,6 +126,7 @@ fn read_error(e: PackError) -> ReadError {
     ReadError::new(match e {
         PackError::Tile { offset, message, .. } => format!("at byte {offset}: {message}"),
         PackError::OutOfRange { message, .. } => message,
+        PackError::Payload { kind, message } => format!("{kind} payload: {message}"),
         other => other.to_string(),
     })
 }

@@ -1,20 +1,23 @@
 //! The tile loader on small packs written here (4x4 pages of 16 texels with a 2-texel border):
 //! texels as `decode_rgba8` gives them, the same answers whatever the thread count, stand-ins and
-//! errors for bad tiles, absent tiles from their ancestors, the asynchronous API. No GPU needed.
+//! errors for bad tiles, absent tiles from their ancestors, the asynchronous API, the memory tier
+//! (pages read again from RAM with the same texels; its budget and LRU order). No GPU needed.
 
 use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use vortex_pack::format::{self, Level};
 use vortex_pack::{Description, NewTile, Pack, PackWriter, Tile, TileId, TileKind, WriteOptions};
 use vortex_vt::page::{GridError, PageId, TextureGrid};
 use vortex_vt::residency::Slot;
-use vortex_vt_wgpu::VirtualTexture;
 use vortex_vt_wgpu::loader::{
-    LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS, stand_in_tile,
+    LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS, TIER_ENTRY_OVERHEAD, TierUsage,
+    stand_in_tile,
 };
+use vortex_vt_wgpu::{CacheFormat, PageSource, ReadError, SourceTile, StoredRead, VirtualTexture};
 
 const TILE: u32 = 16;
 const BORDER: u32 = 2;
@@ -585,4 +588,155 @@ fn cancelled_requests_are_never_answered_and_the_rest_are() {
         std::thread::sleep(Duration::from_millis(5));
     }
     assert_eq!(answered, pages[..2]);
+}
+
+/// A pack that counts its reads, with or without a stored form (without: only `read_tile`, as an
+/// application's own source may be written).
+struct Counting {
+    pack: Arc<Pack>,
+    stored: bool,
+    reads: AtomicUsize,
+}
+
+impl Counting {
+    fn new(pack: &Arc<Pack>, stored: bool) -> Arc<Counting> {
+        Arc::new(Counting { pack: Arc::clone(pack), stored, reads: AtomicUsize::new(0) })
+    }
+}
+
+impl PageSource for Counting {
+    fn location(&self) -> &Path {
+        self.pack.path()
+    }
+
+    fn texture(&self) -> Result<VirtualTexture, LoaderError> {
+        VirtualTexture::from_pack(&self.pack)
+    }
+
+    fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
+        self.reads.fetch_add(1, Ordering::Relaxed);
+        self.pack.read_tile(lod, x, y, format)
+    }
+
+    fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
+        if !self.stored {
+            return Ok(None);
+        }
+        self.reads.fetch_add(1, Ordering::Relaxed);
+        self.pack.read_stored(lod, x, y)
+    }
+
+    fn decode(
+        &self,
+        lod: u8,
+        x: u16,
+        y: u16,
+        kind: u8,
+        bytes: &[u8],
+        format: CacheFormat,
+    ) -> Result<Vec<u8>, ReadError> {
+        self.pack.decode(lod, x, y, kind, bytes, format)
+    }
+}
+
+/// Every kind of tile, and absent ones (magnified from an ancestor that is itself a page).
+fn mixed_with_holes(id: TileId) -> Spec {
+    if id.lod == 0 && (id.x + id.y).is_multiple_of(3) { Spec::Absent } else { mixed(id) }
+}
+
+#[test]
+fn the_memory_tier_serves_pages_again_without_a_read_and_with_the_same_texels() {
+    let dir = tempdir();
+    let pack = write_pack(&dir.path().join("holes.vtpk"), description(TILE, BORDER, PAGES, 44, 40), mixed_with_holes);
+    let grid = VirtualTexture::from_pack(&pack).unwrap().grid;
+    let pages = all_pages(0, grid, 0);
+    // Twice over, in two loads: the second finds every tile the first read.
+    let run = |tier: u64, threads: usize| {
+        let source = Counting::new(&pack, true);
+        let loader = Loader::with_sources(vec![Arc::clone(&source) as Arc<dyn PageSource>], threads).unwrap();
+        loader.set_memory_tier(tier);
+        let first = loader.load(&pages);
+        let reads = source.reads.load(Ordering::Relaxed);
+        let second = loader.load(&pages);
+        (first, second, reads, source.reads.load(Ordering::Relaxed) - reads, loader.counters(), loader.memory_tier())
+    };
+    let (off_first, off_second, off_reads, off_reads_again, off_counters, off_usage) = run(0, 2);
+    assert!(off_first.iter().all(LoadedPage::is_ok) && off_counters.absent_filled > 0, "{off_counters:?}");
+    assert_eq!(off_reads_again, off_reads, "without the tier every page is read again");
+    assert_eq!((off_counters.tier_hits, off_counters.tier_misses), (0, 2 * off_reads as u64));
+    assert_eq!(off_usage, TierUsage::default());
+    for threads in [1, 4] {
+        let (first, second, reads, reads_again, counters, usage) = run(1 << 20, threads);
+        assert_eq!(reads_again, 0, "{threads} threads: the second pass read the pack");
+        for (i, (on, off)) in first.iter().chain(&second).zip(off_first.iter().chain(&off_second)).enumerate() {
+            assert_eq!((&on.page, &on.texels, &on.error), (&off.page, &off.texels, &off.error), "answer {i}");
+        }
+        for page in &second {
+            assert_eq!((page.bytes_read, page.tier_misses), (0, 0), "{:?}", page.page);
+            assert!(page.tier_hits >= 1, "{:?}", page.page);
+        }
+        let hits: u64 = first.iter().chain(&second).map(|p| u64::from(p.tier_hits)).sum();
+        assert_eq!((counters.tier_hits, counters.tier_misses), (hits, reads as u64));
+        // Every tile is held once (an absent one as the answer "absent").
+        assert_eq!(usage.tiles, pages.len());
+        let stored: u64 = pages.iter().map(|(page, _)| stored_len(&pack, *page)).sum();
+        assert_eq!(usage.bytes, stored + pages.len() as u64 * TIER_ENTRY_OVERHEAD);
+        if threads == 1 {
+            // Finest first: an absent page's ancestor is read for it, and found when its own turn
+            // comes. Two threads may both miss a tile they want at once.
+            assert_eq!(reads, pages.len(), "each tile read once");
+            let payloads: u64 = pages.iter().map(|(page, _)| payload_len(&pack, *page)).sum();
+            assert_eq!(counters.bytes_read, payloads);
+            assert!(counters.bytes_read < off_counters.bytes_read / 2, "{counters:?} against {off_counters:?}");
+        }
+    }
+}
+
+/// A tile's stored bytes: its payload, or its constant value.
+fn stored_len(pack: &Pack, page: PageId) -> u64 {
+    match pack.tile(page.lod.into(), page.x.into(), page.y.into()).unwrap() {
+        Tile::Data(_, bytes) | Tile::Constant(bytes) => bytes.len() as u64,
+        Tile::Absent => 0,
+    }
+}
+
+#[test]
+fn a_small_tier_keeps_the_latest_tiles_within_its_budget() {
+    let dir = tempdir();
+    let pack =
+        write_pack(&dir.path().join("raw.vtpk"), description(TILE, BORDER, PAGES, 44, 40), |id| Spec::Raw(seed(id)));
+    let tile_cost = stored_len(&pack, PageId::new(0, 0, 0, 0)) + TIER_ENTRY_OVERHEAD;
+    let loader = Loader::new(vec![pack], 2).unwrap();
+    loader.set_memory_tier(3 * tile_cost + tile_cost / 2);
+    let page = |x| (PageId::new(0, 0, x, 0), Slot::from(x));
+    for x in 0..4 {
+        loader.load(&[page(x)]);
+    }
+    let usage = loader.memory_tier();
+    assert_eq!((usage.tiles, usage.bytes), (3, 3 * tile_cost));
+    let hits = |x| loader.load(&[page(x)])[0].tier_hits;
+    // 1, 2 and 3 are held; 0, the least recently used, went to make room for 3.
+    assert_eq!([hits(3), hits(1), hits(2)], [1, 1, 1]);
+    assert_eq!(hits(0), 0, "0 is read again, and 3 (now the least recently used) goes");
+    assert_eq!([hits(1), hits(2), hits(0), hits(3)], [1, 1, 1, 0]);
+    loader.set_memory_tier(tile_cost);
+    assert_eq!(loader.memory_tier().tiles, 1);
+    loader.set_memory_tier(0);
+    assert_eq!(loader.memory_tier(), TierUsage::default());
+}
+
+#[test]
+fn a_source_without_a_stored_form_is_read_every_time() {
+    let dir = tempdir();
+    let pack = mixed_pack(dir.path(), "a.vtpk");
+    let source = Counting::new(&pack, false);
+    let loader = Loader::with_sources(vec![Arc::clone(&source) as Arc<dyn PageSource>], 2).unwrap();
+    loader.set_memory_tier(1 << 20);
+    let pages = all_pages(0, loader.textures()[0].grid, 0);
+    let first = loader.load(&pages);
+    let second = loader.load(&pages);
+    assert_eq!(source.reads.load(Ordering::Relaxed), 2 * pages.len());
+    assert!(first == second);
+    assert!(second.iter().all(|p| p.tier_hits == 0 && p.tier_misses == 1));
+    assert_eq!(loader.memory_tier().tiles, 0);
 }

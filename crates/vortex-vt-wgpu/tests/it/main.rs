@@ -17,4 +17,5 @@ mod loader;
 mod readback;
 mod runtime;
 mod sample;
+mod tier;
 mod transcode;
