@@ -184,7 +184,13 @@ pub fn anisotropic_linear(
 /// each derivative (at most `max_per_axis`, at least one), so it does not alias where the LODs
 /// would: no LOD, no pyramid, just the image. A footprint longer than `max_per_axis / 2` texels
 /// is undersampled; choose the cap for the footprints measured.
-pub fn supersampled_linear(img: &impl LodImages, uv: [f32; 2], ddx: [f32; 2], ddy: [f32; 2], max_per_axis: u32) -> Linear {
+pub fn supersampled_linear(
+    img: &impl LodImages,
+    uv: [f32; 2],
+    ddx: [f32; 2],
+    ddy: [f32; 2],
+    max_per_axis: u32,
+) -> Linear {
     let (w, h) = img.size(0);
     let count = |d: [f32; 2]| {
         let texels = ((d[0] * w as f32).powi(2) + (d[1] * h as f32).powi(2)).sqrt();
@@ -300,7 +306,15 @@ mod tests {
     #[test]
     fn anisotropy_keeps_detail_along_the_minor_axis() {
         // Stripes across v, one texel each: a footprint 8 texels long in u and 1 in v sees them.
-        let img = chain(64, 64, 7, |l, _, y| if l == 0 && y % 2 == 0 { [255; 4] } else if l == 0 { [0, 0, 0, 255] } else { [188, 188, 188, 255] });
+        let img = chain(64, 64, 7, |l, _, y| {
+            if l == 0 && y % 2 == 0 {
+                [255; 4]
+            } else if l == 0 {
+                [0, 0, 0, 255]
+            } else {
+                [188, 188, 188, 255]
+            }
+        });
         let (ddx, ddy) = ([8.0 / 64.0, 0.0], [0.0, 1.0 / 64.0]);
         let uv = [0.5, 20.5 / 64.0];
         let iso = anisotropic_linear(&img, uv, ddx, ddy, 1, true);

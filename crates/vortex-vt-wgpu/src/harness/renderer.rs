@@ -32,6 +32,7 @@ pub const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSr
 struct PipelineKey {
     format: wgpu::TextureFormat,
     filter: SampleFilter,
+    anisotropy: u32,
     residency_view: bool,
 }
 
@@ -118,6 +119,8 @@ pub struct SceneRenderer {
     /// The depth buffer of other targets, for their size.
     other_depth: Option<((u32, u32), wgpu::TextureView)>,
     residency_view: bool,
+    /// Most probes per sample (`shader::anisotropy_constant`): 1 is isotropic.
+    anisotropy: u32,
 }
 
 impl SceneRenderer {
@@ -163,18 +166,27 @@ impl SceneRenderer {
             meshes,
             other_depth: None,
             residency_view: false,
+            anisotropy: e.anisotropy,
         })
     }
 
     /// The pipelines drawing into `format` with the runtime's filter and the current view.
     fn pipelines(&self, format: wgpu::TextureFormat) -> Pipelines {
-        let key = PipelineKey { format, filter: self.runtime.filter(), residency_view: self.residency_view };
+        let key = PipelineKey {
+            format,
+            filter: self.runtime.filter(),
+            anisotropy: self.anisotropy,
+            residency_view: self.residency_view,
+        };
         let mut made = self.pipelines.borrow_mut();
         if let Some((_, p)) = made.iter().find(|(k, _)| *k == key) {
             return p.clone();
         }
-        let constants =
-            [shader::filter_constant(key.filter), ("RESIDENCY_VIEW", f64::from(u8::from(key.residency_view)))];
+        let constants = [
+            shader::filter_constant(key.filter),
+            shader::anisotropy_constant(key.anisotropy),
+            ("RESIDENCY_VIEW", f64::from(u8::from(key.residency_view))),
+        ];
         let layouts = [&self.frame_layout, self.runtime.bind_group_layout()];
         let p = Pipelines::new(&self.gpu.device, "vortex harness", &self.module, layouts, format, "", &constants);
         made.push((key, p.clone()));
@@ -345,6 +357,17 @@ impl SceneRenderer {
 
     pub fn runtime_mut(&mut self) -> &mut Runtime {
         &mut self.runtime
+    }
+
+    /// Most probes per sample (1: isotropic).
+    pub fn anisotropy(&self) -> u32 {
+        self.anisotropy
+    }
+
+    /// Changes the anisotropy from the next frame on (a pipeline per value, made once; clamped to
+    /// 1..=16).
+    pub fn set_anisotropy(&mut self, anisotropy: u32) {
+        self.anisotropy = anisotropy.clamp(1, vortex_vt::anisotropy::MAX_ANISOTROPY);
     }
 }
 

@@ -129,6 +129,11 @@ pub struct Effects {
     /// RGBA8), `rgba8`, or `bc1` / `bc7`: every page transcoded on the loader's threads.
     #[serde(with = "cache_format_name")]
     pub cache_format: Option<CacheFormat>,
+    /// Anisotropic filtering: at most this many probes per sample along the pixel's footprint,
+    /// at the LOD of its shorter axis (1, the default, is isotropic; 2, 4, 8 or 16). Sharper
+    /// surfaces seen at a grazing angle, for up to that many samples per pixel there
+    /// (docs/gpu-sampling.md).
+    pub anisotropy: u32,
 }
 
 impl Default for Effects {
@@ -141,6 +146,7 @@ impl Default for Effects {
             threads: 2,
             bc7: true,
             cache_format: None,
+            anisotropy: 1,
         }
     }
 }
@@ -258,6 +264,9 @@ impl Scene {
         }
         if !(1..=256).contains(&e.cache_slots_per_side) {
             return Err(format!("effects.cache_slots_per_side {} must be 1..=256", e.cache_slots_per_side));
+        }
+        if ![1, 2, 4, 8, 16].contains(&e.anisotropy) {
+            return Err(format!("effects.anisotropy {} must be 1 (off), 2, 4, 8 or 16", e.anisotropy));
         }
         let most_threads = 4 * std::thread::available_parallelism().map_or(1, |n| n.get());
         if !(1..=most_threads).contains(&e.threads) {
