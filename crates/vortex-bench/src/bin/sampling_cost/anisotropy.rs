@@ -20,13 +20,15 @@ use vortex_vt_wgpu::harness::camera::Camera;
 use crate::api::{
     Gpu, LodChain, Pacing, Pack, PageSource, Pose, Rgba8Image, SampleFilter, Scene, SceneRenderer, SceneView, Shape,
 };
+use vortex_bench::run_info::{cores, today};
+
 use crate::report::quantile;
 
 pub const ANISOTROPY: [u32; 4] = [1, 2, 4, 8];
 /// Ground-truth samples per derivative at most: footprints up to half as many texels long are
 /// fully sampled.
 const MAX_PER_AXIS: u32 = 96;
-const ROUNDS: usize = 30;
+const ROUNDS: usize = 100;
 const MAX_CONVERGE_FRAMES: u32 = 400;
 
 /// One anisotropy's numbers.
@@ -191,6 +193,21 @@ fn psnr(picture: &Rgba8Image, truth: &Truth) -> (f64, f64) {
     debug_assert_eq!(picture.width, truth.width);
     let db = |(sq, n): (f64, usize)| 10.0 * (255.0f64.powi(2) / (sq / n.max(1) as f64)).log10();
     (db(all), db(far))
+}
+
+/// Where and when the section was measured.
+pub fn run_line(adapter: &str, load_before: Option<f64>, load_after: Option<f64>) -> String {
+    let load = match (load_before, load_after) {
+        (Some(a), Some(b)) => format!("{a:.1} at the start and {b:.1} at the end"),
+        _ => "unknown".into(),
+    };
+    format!(
+        "Measured by `sampling_cost --anisotropy` on {} on the adapter `{adapter}` (lavapipe) with {} cores; \
+         the 1-minute load average was {load} (frame times of the four filters interleaved, so that load \
+         spreads over all of them; the PSNRs are the same on every run).",
+        today(),
+        cores()
+    )
 }
 
 /// The section's table.

@@ -132,10 +132,7 @@ fn main() -> Result<()> {
     let aniso_table = anisotropy::table(&aniso);
     println!("{aniso_table}");
     let aniso_blocks = [
-        Block::new(
-            "gpu-aniso:run",
-            run_line(&aniso_adapter, load_before, load_average(), started.elapsed().as_secs_f64()),
-        ),
+        Block::new("gpu-aniso:run", anisotropy::run_line(&aniso_adapter, load_before, load_average())),
         Block::new("gpu-aniso:table", aniso_table),
     ];
     splice_file(&output, "gpu-aniso:", &aniso_blocks)?;
