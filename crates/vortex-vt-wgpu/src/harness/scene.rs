@@ -474,6 +474,11 @@ mod tests {
         let mut s = Scene::default_plane();
         s.effects.cache_slots_per_side = 0;
         assert!(s.check().unwrap_err().contains("cache_slots_per_side"));
+        for (n, ok) in [(0, false), (1, true), (3, false), (8, true), (16, true), (32, false)] {
+            let mut s = Scene::default_plane();
+            s.effects.anisotropy = n;
+            assert_eq!(s.check().is_ok(), ok, "anisotropy {n}");
+        }
         let mut s = Scene::default_plane();
         if let SceneView::Camera { path, .. } = &mut s.view {
             path[1].frame = 0;
