@@ -15,7 +15,6 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use vortex_vt::sampler::{encode, supersampled_linear};
-use vortex_vt_wgpu::harness::camera::Camera;
 
 use crate::api::{
     Gpu, LodChain, Pacing, Pack, PageSource, Pose, Rgba8Image, SampleFilter, Scene, SceneRenderer, SceneView, Shape,
@@ -115,7 +114,7 @@ fn ground_truth(scene: &Scene, chain: &LodChain) -> Truth {
         _ => unreachable!("a plane"),
     };
     let [w, h] = scene.size;
-    let uv = |x: f32, y: f32| plane_uv(&camera, *fov_y_deg, [w as f32, h as f32], size, x, y);
+    let uv = |x: f32, y: f32| camera.plane_uv(*fov_y_deg, [w as f32, h as f32], size, x, y);
     let texels = [chain.0[0].width as f32, chain.0[0].height as f32];
     let rows: Vec<u32> = (0..h).collect();
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -150,32 +149,6 @@ fn ground_truth(scene: &Scene, chain: &LodChain) -> Truth {
         parts.into_iter().flat_map(|p| p.join().expect("a ground-truth thread")).collect()
     });
     Truth { width: w, pixels }
-}
-
-/// The UV where pixel position (`x`, `y`) of a `size` frame sees the plane y = 0 (a square of
-/// side `size` centred on the origin, UV (0, 0) at (-size/2, -size/2)), as `Camera::view_proj`
-/// projects it; `None` where the ray misses the plane.
-fn plane_uv(c: &Camera, fov_y_deg: f32, frame: [f32; 2], size: f32, x: f32, y: f32) -> Option<[f32; 2]> {
-    let sub = |a: [f32; 3], b: [f32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    let norm = |a: [f32; 3]| {
-        let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-        [a[0] / l, a[1] / l, a[2] / l]
-    };
-    let cross =
-        |a: [f32; 3], b: [f32; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
-    let forward = norm(sub(c.target, c.eye));
-    let right = norm(cross(forward, [0.0, 1.0, 0.0]));
-    let up = cross(right, forward);
-    let f = 1.0 / (fov_y_deg.to_radians() / 2.0).tan();
-    let (nx, ny) = (2.0 * x / frame[0] - 1.0, 1.0 - 2.0 * y / frame[1]);
-    let (sx, sy) = (nx * frame[0] / frame[1] / f, ny / f);
-    let d: [f32; 3] = std::array::from_fn(|i| forward[i] + right[i] * sx + up[i] * sy);
-    if d[1] >= 0.0 {
-        return None;
-    }
-    let t = -c.eye[1] / d[1];
-    let (px, pz) = (c.eye[0] + t * d[0], c.eye[2] + t * d[2]);
-    Some([px / size + 0.5, pz / size + 0.5])
 }
 
 /// PSNR of `picture` against the truth over all plane pixels and over the far ones.
