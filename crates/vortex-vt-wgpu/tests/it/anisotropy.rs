@@ -191,10 +191,13 @@ fn feedback_asks_for_the_lod_the_probes_read() {
     }
 }
 
+/// A pixel's UV and its derivatives across and down.
+type Footprint = ([f32; 2], [f32; 2], [f32; 2]);
+
 /// The default plane's still view (low, toward the plane's far edge) over the checker texture:
 /// each pixel's UV from the camera ray, its derivatives from its 2x2 quad's neighbours as the
 /// GPU takes them, or `None` off the plane or within 2 pixels of its edge.
-fn plane_pixels(scene: &Scene) -> Vec<Option<([f32; 2], [f32; 2], [f32; 2])>> {
+fn plane_pixels(scene: &Scene) -> Vec<Option<Footprint>> {
     let SceneView::Camera { fov_y_deg, path, .. } = &scene.view else { unreachable!("the plane scene") };
     let camera = path.last().unwrap().at;
     let [w, h] = scene.size;
