@@ -73,6 +73,8 @@ pub struct Report {
     pub adapter: String,
     pub size: [u32; 2],
     pub filter: String,
+    /// Most probes per sample: 1 is isotropic.
+    pub anisotropy: u32,
     /// `real-time` (frames never wait) or `offline` (each frame waits for its pages).
     pub pacing: String,
     /// `rgba8`, or `bc7` when the packs' BC7 blocks went to the GPU as they are.
@@ -326,6 +328,7 @@ impl SceneRenderer {
             adapter: self.gpu.adapter_info().name,
             size: scene.size,
             filter: rt.filter().name().into(),
+            anisotropy: self.anisotropy,
             pacing: match config.pacing {
                 Pacing::RealTime => "real-time".into(),
                 Pacing::Offline => "offline".into(),
