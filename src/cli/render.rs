@@ -80,6 +80,12 @@ pub(super) struct StreamArgs {
     /// scene's, else auto].
     #[arg(long, value_enum)]
     cache_format: Option<CacheFormatArg>,
+    /// Anisotropic filtering: up to N probes per pixel along the footprint of surfaces seen at a
+    /// grazing angle, each at the LOD of the footprint's short side: 1 (off), 2, 4, 8 or 16.
+    /// Keeps a receding floor sharp toward the horizon where trilinear blurs it, for up to N
+    /// samples per pixel there and pages up to log2(N) LODs finer [default: the scene's, else 1].
+    #[arg(long, value_name = "N", value_parser = parse_anisotropy)]
+    anisotropy: Option<u32>,
     /// The loader's threads (at most 4 per core); slow reads want more than cores.
     #[arg(long, value_name = "N")]
     threads: Option<usize>,
@@ -121,6 +127,15 @@ impl StreamArgs {
         e.cache_slots_per_side = self.cache_side.unwrap_or(e.cache_slots_per_side);
         e.threads = self.threads.unwrap_or(e.threads);
         e.memory_tier_mib = self.memory_tier.unwrap_or(e.memory_tier_mib);
+        e.anisotropy = self.anisotropy.unwrap_or(e.anisotropy);
+    }
+}
+
+/// `--anisotropy`: 1, 2, 4, 8 or 16.
+fn parse_anisotropy(s: &str) -> Result<u32, String> {
+    match s.parse::<u32>() {
+        Ok(n @ (1 | 2 | 4 | 8 | 16)) => Ok(n),
+        _ => Err(format!("{s:?}: must be 1 (off), 2, 4, 8 or 16")),
     }
 }
 

@@ -97,9 +97,11 @@ pub struct OutputArgs {
     tile_size: Option<u32>,
 
     /// Texels copied from neighbouring pages into each tile edge, for filtering on the GPU: 1 is
-    /// enough for bilinear and trilinear filtering without seams; 0 for viewers that never
-    /// filter across tiles; 4 as in id Tech 5 for anisotropic [default: 1; 0 where an existing
-    /// info.json has no border, as the thesis's files].
+    /// enough for bilinear and trilinear filtering without seams, with or without anisotropic
+    /// filtering (vortex's probes each look up their own page; id Tech 5 used a border of 4 for
+    /// its anisotropic filtering); 0 for the nearest filter and for viewers that never filter across
+    /// tiles (docs/gpu-sampling.md) [default: 1; 0 where an existing info.json has no border, as
+    /// the thesis's files].
     #[arg(long, value_name = "N")]
     border: Option<u32>,
 

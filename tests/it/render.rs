@@ -71,6 +71,35 @@ fn the_default_scene_streams_a_small_share_of_the_pack_and_converges() {
 }
 
 #[test]
+fn anisotropy_is_asked_for_and_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = sample_pack(dir.path());
+    let json = dir.path().join("report.json");
+    let bad = run(&["render", "--pack", s(&pack), "--anisotropy", "3", "-q"]);
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("must be 1 (off), 2, 4, 8 or 16"));
+    let out = run(&[
+        "render",
+        "--pack",
+        s(&pack),
+        "--report",
+        s(&json),
+        "--size",
+        "128x96",
+        "--frame-count",
+        "8",
+        "--anisotropy",
+        "8",
+        "-q",
+    ]);
+    if no_gpu(&out) {
+        return;
+    }
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(report(&json)["anisotropy"], 8);
+}
+
+#[test]
 fn the_documented_example_scene_renders() {
     let dir = tempfile::tempdir().unwrap();
     let pack = sample_pack(dir.path());

@@ -43,6 +43,16 @@ pub fn filter_constant(filter: crate::SampleFilter) -> (&'static str, f64) {
     ("VT_FILTER", f64::from(filter as u32))
 }
 
+/// The pipeline constant that turns on anisotropic filtering in `vt_sample` and `vt_feedback`:
+/// up to `max_probes` probes per sample along the pixel's footprint (clamped to
+/// 1..=[`MAX_ANISOTROPY`](vortex_vt::anisotropy::MAX_ANISOTROPY); 1, the default without it, is
+/// isotropic). A constant rather than a uniform so that the probes' loop costs nothing when off.
+/// Feedback asks for the finer LOD the probes read, so pass the same constant to the pipelines
+/// that write feedback.
+pub fn anisotropy_constant(max_probes: u32) -> (&'static str, f64) {
+    ("VT_ANISO", f64::from(max_probes.clamp(1, vortex_vt::anisotropy::MAX_ANISOTROPY)))
+}
+
 /// A shader module descriptor of [`with_module`], for `Device::create_shader_module`.
 pub fn descriptor<'a>(label: Option<&'a str>, application: &str, group: u32) -> wgpu::ShaderModuleDescriptor<'a> {
     wgpu::ShaderModuleDescriptor {

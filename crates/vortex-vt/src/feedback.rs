@@ -111,6 +111,22 @@ pub fn lod_for(dudx: f32, dvdx: f32, dudy: f32, dvdy: f32, texels: [f32; 2], bia
     lod_from_footprint(length(dudx, dvdx).max(length(dudy, dvdy)), bias, lod_count)
 }
 
+/// The LOD an anisotropic sample with at most `max_anisotropy` probes wants: the LOD its probes
+/// read ([`crate::anisotropy::Probes`]), finer than [`lod_for`]'s by up to `log2(max_anisotropy)`
+/// on oblique surfaces. Feedback must ask for this LOD, or the finer pages the probes read would
+/// never be loaded. With `max_anisotropy` 1 it is [`lod_for`].
+pub fn lod_for_anisotropic(
+    ddx: [f32; 2],
+    ddy: [f32; 2],
+    texels: [f32; 2],
+    max_anisotropy: u32,
+    bias: f32,
+    lod_count: u8,
+) -> u8 {
+    let probes = crate::anisotropy::Probes::new(ddx, ddy, texels, max_anisotropy);
+    lod_from_footprint(probes.footprint, bias, lod_count)
+}
+
 /// `floor(log2(footprint) + bias)` clamped to `[0, lod_count - 1]`, for a footprint in LOD-0
 /// texels per pixel (what [`lod_for`] computes from derivatives, and a 2D window from its step).
 pub fn lod_from_footprint(footprint: f32, bias: f32, lod_count: u8) -> u8 {
@@ -174,6 +190,19 @@ mod tests {
         assert_eq!(r(1, 2, 0).page(&grids), Some(PageId::new(1, 2, 0, 0)), "the root of 3, 2, 1 pages");
         assert_eq!(r(1, 3, 0).page(&grids), None, "LOD past the root");
         assert_eq!(r(2, 0, 0).page(&grids), None, "unknown texture");
+    }
+
+    #[test]
+    fn anisotropic_feedback_asks_for_the_finer_lod() {
+        let texels = [1024.0, 1024.0];
+        // 32 texels per pixel along x, 4 along y: isotropic LOD 5, 8x anisotropic LOD 2.
+        let (ddx, ddy) = ([32.0 / 1024.0, 0.0], [0.0, 4.0 / 1024.0]);
+        assert_eq!(lod_for(ddx[0], ddx[1], ddy[0], ddy[1], texels, 0.0, 11), 5);
+        let lods: Vec<u8> =
+            [1, 2, 4, 8, 16].iter().map(|&n| lod_for_anisotropic(ddx, ddy, texels, n, 0.0, 11)).collect();
+        assert_eq!(lods, [5, 4, 3, 2, 2], "never finer than the minor axis");
+        assert_eq!(lod_for_anisotropic(ddx, ddy, texels, 8, -1.0, 11), 1, "the bias applies");
+        assert_eq!(lod_for_anisotropic(ddx, ddy, texels, 8, 0.0, 2), 1, "clamped to the chain");
     }
 
     #[test]

@@ -2,6 +2,7 @@
 
 pub mod address;
 pub mod analysis;
+pub mod anisotropy;
 pub mod feedback;
 pub mod invariants;
 pub mod page;

@@ -149,6 +149,67 @@ pub fn trilinear(img: &impl LodImages, lod: f32, u: f32, v: f32) -> [u8; 4] {
     encode(trilinear_linear(img, lod, u, v))
 }
 
+/// Anisotropic sample at `uv` with UV derivatives `ddx`, `ddy` per pixel and at most
+/// `max_anisotropy` probes, in linear light: the mean of the probes of
+/// [`Probes`](crate::anisotropy::Probes), each trilinear (or, with `trilinear` false, bilinear at
+/// the LOD below), as the runtime's shader samples.
+pub fn anisotropic_linear(
+    img: &impl LodImages,
+    uv: [f32; 2],
+    ddx: [f32; 2],
+    ddy: [f32; 2],
+    max_anisotropy: u32,
+    trilinear: bool,
+) -> Linear {
+    let (w, h) = img.size(0);
+    let probes = crate::anisotropy::Probes::new(ddx, ddy, [w as f32, h as f32], max_anisotropy);
+    let lod = probes.lod();
+    let mut sum = [0.0f32; 4];
+    for i in 0..probes.count {
+        let [u, v] = probes.at(uv, i);
+        let s = if trilinear {
+            trilinear_linear(img, lod, u, v)
+        } else {
+            // `as` saturates: below 0 (and NaN) is LOD 0.
+            bilinear_linear(img, lod.floor() as u8, u, v)
+        };
+        sum = std::array::from_fn(|c| sum[c] + s[c]);
+    }
+    sum.map(|c| c / probes.count as f32)
+}
+
+/// The ground truth the filters are measured against: the mean of LOD 0 over the pixel's whole
+/// footprint, the parallelogram `uv + a ddx + b ddy` for `a`, `b` in [-1/2, 1/2], in linear
+/// light. It is integrated by a regular grid of LOD-0 bilinear samples, two per texel along
+/// each derivative (at most `max_per_axis`, at least one), so it does not alias where the LODs
+/// would: no LOD, no pyramid, just the image. A footprint longer than `max_per_axis / 2` texels
+/// is undersampled; choose the cap for the footprints measured.
+pub fn supersampled_linear(
+    img: &impl LodImages,
+    uv: [f32; 2],
+    ddx: [f32; 2],
+    ddy: [f32; 2],
+    max_per_axis: u32,
+) -> Linear {
+    let (w, h) = img.size(0);
+    let count = |d: [f32; 2]| {
+        let texels = ((d[0] * w as f32).powi(2) + (d[1] * h as f32).powi(2)).sqrt();
+        // `as` saturates: NaN gives 0, raised to 1.
+        ((2.0 * texels).ceil() as u32).clamp(1, max_per_axis.max(1))
+    };
+    let (nx, ny) = (count(ddx), count(ddy));
+    let mut sum = [0.0f64; 4];
+    for j in 0..ny {
+        let b = (j as f32 + 0.5) / ny as f32 - 0.5;
+        for i in 0..nx {
+            let a = (i as f32 + 0.5) / nx as f32 - 0.5;
+            let s = bilinear_linear(img, 0, uv[0] + a * ddx[0] + b * ddy[0], uv[1] + a * ddx[1] + b * ddy[1]);
+            sum = std::array::from_fn(|c| sum[c] + s[c] as f64);
+        }
+    }
+    sum.map(|c| (c / (nx * ny) as f64) as f32)
+}
+
 #[cfg(test)]
 mod tests {
     use proptest::prelude::*;
@@ -240,6 +301,39 @@ mod tests {
         let mix = bilinear_linear(&img, 1, 0.7, 0.5)[0];
         let want = srgb_to_linear(11) * 0.75 + srgb_to_linear(12) * 0.25;
         assert!((mix - want).abs() < 1e-6, "{mix} {want}");
+    }
+
+    #[test]
+    fn anisotropy_keeps_detail_along_the_minor_axis() {
+        // Stripes across v, one texel each: a footprint 8 texels long in u and 1 in v sees them.
+        let img = chain(64, 64, 7, |l, _, y| {
+            if l == 0 && y % 2 == 0 {
+                [255; 4]
+            } else if l == 0 {
+                [0, 0, 0, 255]
+            } else {
+                [188, 188, 188, 255]
+            }
+        });
+        let (ddx, ddy) = ([8.0 / 64.0, 0.0], [0.0, 1.0 / 64.0]);
+        let uv = [0.5, 20.5 / 64.0];
+        let iso = anisotropic_linear(&img, uv, ddx, ddy, 1, true);
+        let aniso = anisotropic_linear(&img, uv, ddx, ddy, 8, true);
+        assert_eq!(iso, trilinear_linear(&img, 3.0, uv[0], uv[1]), "one probe is trilinear");
+        assert_eq!(encode(iso), [188, 188, 188, 255], "LOD 3: grey");
+        assert_eq!(encode(aniso), [255; 4], "eight LOD-0 probes along the white row");
+        // The ground truth over the 8 x 1 footprint: LOD 0's bilinear samples a quarter texel
+        // either side of the row's centre, each three quarters white.
+        let truth = supersampled_linear(&img, uv, ddx, ddy, 64);
+        assert!((truth[0] - 0.75).abs() < 1e-6, "{truth:?}");
+    }
+
+    #[test]
+    fn supersampling_a_constant_is_the_constant() {
+        let img = chain(16, 16, 1, |_, _, _| [10, 20, 30, 255]);
+        let s = supersampled_linear(&img, [0.3, 0.7], [0.5, 0.1], [-0.2, 0.3], 64);
+        assert_eq!(encode(s), [10, 20, 30, 255]);
+        assert_eq!(encode(supersampled_linear(&img, [0.3, 0.7], [0.0; 2], [f32::NAN; 2], 0)), [10, 20, 30, 255]);
     }
 
     proptest! {

@@ -261,7 +261,7 @@ impl State {
         let [w, h] = self.images[texture];
         let name = self.renderer.runtime().loader().sources()[texture].location().display().to_string();
         self.window.set_title(&format!(
-            "vortex view: {name} ({w}x{h}){} | {}/{} slots, {} in flight, {:.1}% fallback | {}{} | {fps:.0} fps",
+            "vortex view: {name} ({w}x{h}){} | {}/{} slots, {} in flight, {:.1}% fallback | {}{}{} | {fps:.0} fps",
             match rt.caches().len() {
                 1 => String::new(),
                 n => format!(" layer {} of {n}", self.renderer.layer()),
@@ -271,6 +271,10 @@ impl State {
             rt.in_flight(),
             self.last.fallback_fraction * 100.0,
             rt.filter().name(),
+            match self.renderer.anisotropy() {
+                1 => String::new(),
+                n => format!(", {n}x anisotropic"),
+            },
             if self.renderer.residency_view() { ", residency view" } else { "" },
         ));
         self.title_at = Instant::now();
@@ -294,6 +298,11 @@ impl State {
                 let next = SampleFilter::ALL[(rt.filter() as usize + 1) % SampleFilter::ALL.len()];
                 rt.set_filter(next);
                 warn_of_seams(&self.renderer);
+            }
+            (_, KeyCode::KeyI) if !event.repeat => {
+                // 1, 2, 4, 8, 16, 1, ...: each value makes its pipelines once.
+                let next = self.renderer.anisotropy() * 2;
+                self.renderer.set_anisotropy(if next > 16 { 1 } else { next });
             }
             (_, KeyCode::KeyP) if !event.repeat => {
                 let on = !self.renderer.residency_view();

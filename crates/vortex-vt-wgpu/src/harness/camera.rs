@@ -41,6 +41,29 @@ impl Camera {
     }
 }
 
+impl Camera {
+    /// The UV where the centre of pixel position (`x`, `y`) of a `frame` (width, height) sees the
+    /// plane y = 0 of `Shape::Plane { size }` (a square centred on the origin, UV (0, 0) at
+    /// (-size/2, -size/2)), as [`Camera::view_proj`] projects it; `None` where the ray misses the
+    /// plane. The CPU side of a picture of the plane: references and ground truths need each
+    /// pixel's UV (and, from its neighbours', its derivatives).
+    pub fn plane_uv(&self, fov_y_deg: f32, frame: [f32; 2], size: f32, x: f32, y: f32) -> Option<[f32; 2]> {
+        let forward = normalize(sub(self.target, self.eye));
+        let up_hint = if forward[1].abs() > 0.999 { [0.0, 0.0, -1.0] } else { [0.0, 1.0, 0.0] };
+        let right = normalize(cross(forward, up_hint));
+        let up = cross(right, forward);
+        let f = 1.0 / (fov_y_deg.to_radians() / 2.0).tan();
+        let (nx, ny) = (2.0 * x / frame[0] - 1.0, 1.0 - 2.0 * y / frame[1]);
+        let (sx, sy) = (nx * frame[0] / frame[1] / f, ny / f);
+        let d: [f32; 3] = std::array::from_fn(|i| forward[i] + right[i] * sx + up[i] * sy);
+        if d[1] >= 0.0 || self.eye[1] <= 0.0 {
+            return None;
+        }
+        let t = -self.eye[1] / d[1];
+        Some([(self.eye[0] + t * d[0]) / size + 0.5, (self.eye[2] + t * d[2]) / size + 0.5])
+    }
+}
+
 /// One keyframe of a camera path: where the camera is at `frame`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -79,9 +79,17 @@ fn lod_for(footprint: f32) -> f32 {
 @fragment
 fn fs_window(v: Varyings) -> @location(0) vec4<f32> {
     let texel = window_texel(v.position.xy);
-    let footprint = max(abs(frame.step.x), abs(frame.step.y));
+    let dx = vec2<f32>(frame.step.x, 0.0);
+    let dy = vec2<f32>(0.0, frame.step.y);
+    let footprint = vt_footprint_texels(dx, dy);
     vt_feedback_texel(v.texture, texel, footprint, v.position.xy);
-    let c = vt_sample_texel_layer_level(v.texture, LAYER, texel, lod_for(footprint));
+    // Anisotropy (a pipeline constant: one side is compiled out) ignores `lod_override`.
+    var c: vec4<f32>;
+    if VT_ANISO > 1u {
+        c = vt_sample_texel_layer_grad(v.texture, LAYER, texel, dx, dy);
+    } else {
+        c = vt_sample_texel_layer_level(v.texture, LAYER, texel, lod_for(footprint));
+    }
     if RESIDENCY_VIEW {
         return residency(c, vt_residency_texel(v.texture, texel, footprint));
     }
@@ -93,7 +101,12 @@ fn fs_mesh(v: Varyings) -> @location(0) vec4<f32> {
     let ddx = dpdx(v.uv);
     let ddy = dpdy(v.uv);
     vt_feedback(v.texture, v.uv, ddx, ddy, v.position.xy);
-    let c = vt_sample_layer_level(v.texture, LAYER, v.uv, lod_for(vt_footprint(v.texture, ddx, ddy)));
+    var c: vec4<f32>;
+    if VT_ANISO > 1u {
+        c = vt_sample_layer(v.texture, LAYER, v.uv, ddx, ddy);
+    } else {
+        c = vt_sample_layer_level(v.texture, LAYER, v.uv, lod_for(vt_footprint(v.texture, ddx, ddy)));
+    }
     if RESIDENCY_VIEW {
         return residency(c, vt_residency(v.texture, v.uv, ddx, ddy));
     }

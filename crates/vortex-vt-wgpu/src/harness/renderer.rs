@@ -33,6 +33,7 @@ pub const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSr
 struct PipelineKey {
     format: wgpu::TextureFormat,
     filter: SampleFilter,
+    anisotropy: u32,
     residency_view: bool,
     layer: u32,
 }
@@ -81,6 +82,8 @@ pub struct Report {
     pub adapter: String,
     pub size: [u32; 2],
     pub filter: String,
+    /// Most probes per sample: 1 is isotropic.
+    pub anisotropy: u32,
     /// `real-time` (frames never wait) or `offline` (each frame waits for its pages).
     pub pacing: String,
     /// Layer 0's cache: `rgba8`, `bc1` or `bc7`.
@@ -139,6 +142,8 @@ pub struct SceneRenderer {
     residency_view: bool,
     /// The layer drawn (the scene effect `layer`).
     layer: u32,
+    /// Most probes per sample (`shader::anisotropy_constant`): 1 is isotropic.
+    anisotropy: u32,
 }
 
 impl SceneRenderer {
@@ -204,6 +209,7 @@ impl SceneRenderer {
             other_depth: None,
             residency_view: false,
             layer: scene.effects.layer,
+            anisotropy: e.anisotropy,
         })
     }
 
@@ -212,6 +218,7 @@ impl SceneRenderer {
         let key = PipelineKey {
             format,
             filter: self.runtime.filter(),
+            anisotropy: self.anisotropy,
             residency_view: self.residency_view,
             layer: self.layer,
         };
@@ -221,6 +228,7 @@ impl SceneRenderer {
         }
         let constants = [
             shader::filter_constant(key.filter),
+            shader::anisotropy_constant(key.anisotropy),
             ("RESIDENCY_VIEW", f64::from(u8::from(key.residency_view))),
             ("LAYER", f64::from(key.layer)),
         ];
@@ -372,6 +380,7 @@ impl SceneRenderer {
             adapter: self.gpu.adapter_info().name,
             size: scene.size,
             filter: rt.filter().name().into(),
+            anisotropy: self.anisotropy,
             pacing: match config.pacing {
                 Pacing::RealTime => "real-time".into(),
                 Pacing::Offline => "offline".into(),
@@ -409,6 +418,17 @@ impl SceneRenderer {
 
     pub fn runtime_mut(&mut self) -> &mut Runtime {
         &mut self.runtime
+    }
+
+    /// Most probes per sample (1: isotropic).
+    pub fn anisotropy(&self) -> u32 {
+        self.anisotropy
+    }
+
+    /// Changes the anisotropy from the next frame on (a pipeline per value, made once; clamped to
+    /// 1..=16).
+    pub fn set_anisotropy(&mut self, anisotropy: u32) {
+        self.anisotropy = anisotropy.clamp(1, vortex_vt::anisotropy::MAX_ANISOTROPY);
     }
 }
 

@@ -166,6 +166,11 @@ pub struct Effects {
     /// evicted come back without a read ([`RuntimeConfig::memory_tier_bytes`](crate::RuntimeConfig));
     /// 0 turns the tier off.
     pub memory_tier_mib: u32,
+    /// Anisotropic filtering: at most this many probes per sample along the pixel's footprint,
+    /// at the LOD of its shorter axis (1, the default, is isotropic; 2, 4, 8 or 16). Sharper
+    /// surfaces seen at a grazing angle, for up to that many samples per pixel there
+    /// (docs/gpu-sampling.md).
+    pub anisotropy: u32,
 }
 
 impl Default for Effects {
@@ -180,6 +185,7 @@ impl Default for Effects {
             cache_format: None,
             layer: 0,
             memory_tier_mib: (crate::DEFAULT_MEMORY_TIER_BYTES >> 20) as u32,
+            anisotropy: 1,
         }
     }
 }
@@ -308,6 +314,9 @@ impl Scene {
         }
         if !(1..=256).contains(&e.cache_slots_per_side) {
             return Err(format!("effects.cache_slots_per_side {} must be 1..=256", e.cache_slots_per_side));
+        }
+        if ![1, 2, 4, 8, 16].contains(&e.anisotropy) {
+            return Err(format!("effects.anisotropy {} must be 1 (off), 2, 4, 8 or 16", e.anisotropy));
         }
         let most_threads = 4 * std::thread::available_parallelism().map_or(1, |n| n.get());
         if !(1..=most_threads).contains(&e.threads) {
@@ -529,6 +538,11 @@ mod tests {
         let mut s = Scene::default_plane();
         s.effects.cache_slots_per_side = 0;
         assert!(s.check().unwrap_err().contains("cache_slots_per_side"));
+        for (n, ok) in [(0, false), (1, true), (3, false), (8, true), (16, true), (32, false)] {
+            let mut s = Scene::default_plane();
+            s.effects.anisotropy = n;
+            assert_eq!(s.check().is_ok(), ok, "anisotropy {n}");
+        }
         let mut s = Scene::default_plane();
         if let SceneView::Camera { path, .. } = &mut s.view {
             path[1].frame = 0;

@@ -7,7 +7,8 @@
 //
 //   vt_sample(id, uv, ddx, ddy) -> vec4<f32>       sample texture `id` at image UV `uv` (0..1
 //                                                   over the real image), the LOD from the UV's
-//                                                   screen derivatives dpdx(uv), dpdy(uv)
+//                                                   screen derivatives dpdx(uv), dpdy(uv);
+//                                                   anisotropic with VT_ANISO > 1
 //   vt_sample_level(id, uv, lod) -> vec4<f32>      the same at an explicit LOD
 //   vt_feedback(id, uv, ddx, ddy, frag_coord)      ask for the page this fragment wants
 //   vt_residency(id, uv, ddx, ddy) -> vec2<u32>    the LOD wanted and the LOD drawn (debug views)
@@ -22,6 +23,9 @@
 //
 //   vt_sample_texel(id, texel, footprint), vt_sample_texel_level(id, texel, lod),
 //   vt_sample_texel_layer(id, layer, texel, footprint), vt_sample_texel_layer_level(id, layer, texel, lod),
+//   vt_sample_texel_grad(id, texel, dx, dy), vt_sample_texel_layer_grad(id, layer, texel, dx, dy)
+//   (anisotropic with VT_ANISO > 1; the scalar-footprint ones never are),
+//   vt_footprint_texels(dx, dy) (the footprint feedback should ask with),
 //   vt_feedback_texel(id, texel, footprint, frag_coord), vt_residency_texel(id, texel, footprint)
 //
 // Samples of colour layers are premultiplied-alpha colour in linear light (the cache is sampled through an sRGB
@@ -81,6 +85,11 @@ struct VtParams {
 // (`shader::filter_constant`), so that the others' code is compiled out. CPU drivers such as
 // lavapipe run both sides of a branch, so there a fixed filter makes nearest and bilinear cheaper.
 override VT_FILTER: u32 = 3u;
+
+// Anisotropic filtering: the most probes per sample of `vt_sample` (`shader::anisotropy_constant`,
+// `vortex_vt::anisotropy`). 1, the default, is isotropic and compiles the probes' loop out; 2 to
+// 16 spread up to that many probes along the longer UV derivative, at the LOD of the shorter one.
+override VT_ANISO: u32 = 1u;
 
 const VT_BELOW_ONE: f32 = 0.99999994;
 const VT_UNMAPPED: u32 = 0xffffffffu;
@@ -163,11 +172,55 @@ fn vt_ancestor(at: VtAt, levels: u32, payload: u32) -> VtAt {
     return VtAt(at.page >> vec2<u32>(levels), within);
 }
 
-// LOD-0 texels per pixel of UV derivatives: the longer derivative vector
-// (`vortex_vt::feedback::lod_for`).
+// LOD-0 texels per pixel of UV derivatives, whose log2 is the LOD sampled (`vt_footprint_texels`).
 fn vt_footprint(id: u32, ddx: vec2<f32>, ddy: vec2<f32>) -> f32 {
     let size = vec2<f32>(vt_params.textures[id].size);
-    return max(length(ddx * size), length(ddy * size));
+    return vt_footprint_texels(ddx * size, ddy * size);
+}
+
+// The same for derivatives in LOD-0 texels: the longer derivative vector
+// (`vortex_vt::feedback::lod_for`), or with anisotropy each probe's share of it
+// (`vortex_vt::feedback::lod_for_anisotropic`), so that feedback asks for the LOD the probes read.
+fn vt_footprint_texels(dx: vec2<f32>, dy: vec2<f32>) -> f32 {
+    if VT_ANISO <= 1u {
+        return max(length(dx), length(dy));
+    }
+    return vt_probes(dx, dy, dx, dy).footprint;
+}
+
+// `vortex_vt::anisotropy::Probes`: `count` probes spaced along `axis` (the longer derivative, in
+// the coordinate's units: UV or texels), each filtered at the LOD of `footprint` LOD-0 texels.
+struct VtProbes {
+    count: u32,
+    axis: vec2<f32>,
+    footprint: f32,
+}
+
+// The probes of derivatives `dx`, `dy` in LOD-0 texels, which are `ax`, `ay` in the coordinate's
+// units.
+fn vt_probes(dx: vec2<f32>, dy: vec2<f32>, ax: vec2<f32>, ay: vec2<f32>) -> VtProbes {
+    let lx = length(dx);
+    let ly = length(dy);
+    let major = max(lx, ly);
+    let minor = min(lx, ly);
+    // The smallest normal f32 keeps 0 / 0 out (one probe) and sends a line's ratio to the cap.
+    let count = clamp(ceil(major / max(minor, 1.17549435e-38)), 1.0, f32(VT_ANISO));
+    return VtProbes(u32(count), select(ay, ax, lx >= ly), max(major / count, minor));
+}
+
+// The mean of the probes `p` around `c`, each an ordinary filtered sample (`vt_shade`) with its
+// own page-table lookup: a probe past a page edge reads the neighbouring page, so anisotropy
+// needs no wider border than the filter of one probe.
+fn vt_aniso(id: u32, layer: u32, c: VtCoord, p: VtProbes) -> vec4<f32> {
+    let lod = log2(p.footprint);
+    let n = f32(p.count);
+    var sum = vec4<f32>(0.0);
+    for (var i = 0u; i < p.count; i++) {
+        var probe = c;
+        probe.texel.offset += p.axis * ((f32(i) + 0.5) / n - 0.5);
+        sum += vt_shade(id, layer, probe, lod);
+    }
+    return sum / n;
 }
 
 // The page-table word of address `at` of LOD `lod` of texture `id` (`vortex_vt::page_table`).
@@ -268,13 +321,18 @@ fn vt_texel(texel: VtTexel) -> VtCoord {
 // Texture `id` at image UV `uv`, filtered at the LOD of the UV's screen derivatives
 // (`dpdx(uv)`, `dpdy(uv)`, taken by the caller in uniform control flow). Premultiplied linear RGBA.
 fn vt_sample(id: u32, uv: vec2<f32>, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
-    return vt_shade(id, 0u, vt_uv(uv), log2(vt_footprint(id, ddx, ddy)));
+    return vt_sample_layer(id, 0u, uv, ddx, ddy);
 }
 
 // Layer `layer` (clamped to the layers there are) of texture `id`, as `vt_sample` samples layer 0.
 // Colour layers give premultiplied linear RGBA; data layers their values as stored.
 fn vt_sample_layer(id: u32, layer: u32, uv: vec2<f32>, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
-    return vt_shade(id, min(layer, vt_params.layers - 1u), vt_uv(uv), log2(vt_footprint(id, ddx, ddy)));
+    let l = min(layer, vt_params.layers - 1u);
+    if VT_ANISO > 1u {
+        let size = vec2<f32>(vt_params.textures[id].size);
+        return vt_aniso(id, l, vt_uv(uv), vt_probes(ddx * size, ddy * size, ddx, ddy));
+    }
+    return vt_shade(id, l, vt_uv(uv), log2(vt_footprint(id, ddx, ddy)));
 }
 
 fn vt_sample_layer_level(id: u32, layer: u32, uv: vec2<f32>, lod: f32) -> vec4<f32> {
@@ -297,6 +355,21 @@ fn vt_feedback(id: u32, uv: vec2<f32>, ddx: vec2<f32>, ddy: vec2<f32>, frag_coor
 // Texture `id` at LOD-0 texel position `texel`, at the LOD of `footprint` LOD-0 texels per pixel.
 fn vt_sample_texel(id: u32, texel: VtTexel, footprint: f32) -> vec4<f32> {
     return vt_shade(id, 0u, vt_texel(texel), log2(footprint));
+}
+
+// Texture `id` at LOD-0 texel position `texel`, a pixel stepping `dx` texels across and `dy`
+// down: anisotropic with VT_ANISO > 1 (a window stretched more one way than the other), else
+// `vt_sample_texel` with their footprint.
+fn vt_sample_texel_grad(id: u32, texel: VtTexel, dx: vec2<f32>, dy: vec2<f32>) -> vec4<f32> {
+    return vt_sample_texel_layer_grad(id, 0u, texel, dx, dy);
+}
+
+fn vt_sample_texel_layer_grad(id: u32, layer: u32, texel: VtTexel, dx: vec2<f32>, dy: vec2<f32>) -> vec4<f32> {
+    let l = min(layer, vt_params.layers - 1u);
+    if VT_ANISO > 1u {
+        return vt_aniso(id, l, vt_texel(texel), vt_probes(dx, dy, dx, dy));
+    }
+    return vt_shade(id, l, vt_texel(texel), log2(vt_footprint_texels(dx, dy)));
 }
 
 fn vt_sample_texel_level(id: u32, texel: VtTexel, lod: f32) -> vec4<f32> {

@@ -6,6 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests and measurement programs may panic on a broken set-up
 
 mod address;
+mod anisotropy;
 mod common;
 mod defaults;
 mod embed;

@@ -7,6 +7,8 @@ pub use vortex_vt::page::{PageId, TextureGrid};
 pub use vortex_vt::sampler::{LodChain, Rgba8Image, bilinear, nearest, trilinear};
 pub use vortex_vt_wgpu::device::prefer_lavapipe;
 pub use vortex_vt_wgpu::harness::camera::Keyframe;
-pub use vortex_vt_wgpu::harness::{Effects, Pose, Scene, SceneRenderer, SceneView, TARGET_FORMAT, Window, WindowKey};
+pub use vortex_vt_wgpu::harness::{
+    Effects, Pose, Scene, SceneRenderer, SceneView, Shape, TARGET_FORMAT, Window, WindowKey,
+};
 pub use vortex_vt_wgpu::testing::{box_chain, write_pack};
 pub use vortex_vt_wgpu::{Gpu, Pacing, PageSource, Runtime, SampleFilter, VirtualTexture};

@@ -5,8 +5,12 @@
 //! written by hand.
 //!
 //! ```sh
-//! cargo run --release -p vortex-bench --bin sampling_cost [-- OUTPUT.md]
+//! cargo run --release -p vortex-bench --bin sampling_cost [-- [--anisotropy] OUTPUT.md]
 //! ```
+//!
+//! `--anisotropy` runs only the anisotropy section (`anisotropy`: the plane scene toward the
+//! horizon, trilinear against 2x, 4x and 8x anisotropic, against a supersampled ground truth),
+//! whose blocks are `gpu-aniso:*`.
 //!
 //! One synthetic texture (2048² texels: smooth colour, a fine grating, thin dark lines and a
 //! little noise; each LOD the 2x2 mean of the one above) is cut into 128-texel payloads with each
@@ -33,6 +37,7 @@
 //! `VK_DRIVER_FILES` nor `VK_ICD_FILENAMES` is set, as in the tests.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // measurement programs may panic on a broken set-up
 
+mod anisotropy;
 mod api;
 mod compare;
 mod conclusions;
@@ -95,7 +100,12 @@ fn main() -> Result<()> {
     // SAFETY: first thing in `main`, before any thread is spawned (the loaders' workers and the
     // drivers' threads start later, in `Run::new`), so no other thread reads the environment.
     unsafe { prefer_lavapipe() };
-    let output = std::env::args_os().nth(1).map(PathBuf::from).unwrap_or_else(|| {
+    let mut args: Vec<_> = std::env::args_os().skip(1).collect();
+    let only_anisotropy = args.first().is_some_and(|a| a == "--anisotropy");
+    if only_anisotropy {
+        args.remove(0);
+    }
+    let output = args.first().map(PathBuf::from).unwrap_or_else(|| {
         let docs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs");
         docs.canonicalize().unwrap_or(docs).join("gpu-sampling.md")
     });
@@ -117,6 +127,19 @@ fn main() -> Result<()> {
         })
         .collect::<Result<_>>()?;
     eprintln!("packs written in {:.1} s", started.elapsed().as_secs_f64());
+    let (_, border1) = packs.iter().find(|(b, _)| *b == 1).context("the border-1 pack")?;
+    let (aniso, aniso_adapter) = anisotropy::measure(border1, PAYLOAD + 2, &chain, SIZE)?;
+    let aniso_table = anisotropy::table(&aniso);
+    println!("{aniso_table}");
+    let aniso_blocks = [
+        Block::new("gpu-aniso:run", anisotropy::run_line(&aniso_adapter, load_before, load_average())),
+        Block::new("gpu-aniso:table", aniso_table),
+    ];
+    splice_file(&output, "gpu-aniso:", &aniso_blocks)?;
+    if only_anisotropy {
+        eprintln!("wrote the anisotropy section of {} in {:.1} s", output.display(), started.elapsed().as_secs_f64());
+        return Ok(());
+    }
 
     let mut runs: Vec<Run> = Vec::new();
     for (border, pack) in &packs {
@@ -189,7 +212,7 @@ fn main() -> Result<()> {
 /// The window of `spec` on a `side`-texel texture, as a scene's pose gives it.
 fn window(spec: &ViewSpec, side: u32) -> Window {
     let width = spec.texels_per_pixel * SIZE[0] as f64 / side as f64;
-    let scene = scene(Effects::default(), spec.center, width);
+    let scene = scene(Effects::exact(), spec.center, width);
     // A square image: the pose needs no texture to know its aspect ratio.
     match scene.pose(0, &[]) {
         Pose::Window(w) => w,

@@ -31,8 +31,7 @@ pub struct Run {
 impl Run {
     pub fn new(border: u32, filter: Filter, pack: Arc<Pack>) -> Result<Run> {
         let tile = PAYLOAD + 2 * border;
-        let effects =
-            Effects { filter: Some(filter), cache_slots_per_side: 16, upload_budget: 64, ..Effects::default() };
+        let effects = Effects { filter: Some(filter), cache_slots_per_side: 16, upload_budget: 64, ..Effects::exact() };
         let gpu = Gpu::headless(16 * tile).context("no GPU device; install mesa-vulkan-drivers for lavapipe")?;
         let sources = vec![pack as Arc<dyn PageSource>];
         let renderer = SceneRenderer::new(gpu, sources, &scene(effects, [0.5, 0.5], 1.0), Pacing::Offline)
