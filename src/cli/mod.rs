@@ -101,7 +101,8 @@ enum Command {
     /// rate.
     ///   drag, wheel, arrows, + -   pan and zoom (2D)     W A S D, Q E, drag   fly (scenes)
     ///   F  next filter    P  residency view (a hue per LOD drawn, red where a coarser page
-    ///   stands in)    L  next layer (--layer)    1-9  texture    R  reset    Esc  quit
+    ///   stands in)    I  anisotropy 1-16    L  next layer (--layer)    1-9  texture    R  reset
+    ///   Esc  quit
     /// --screenshot FILE --frame-count N draws N frames (each waiting for its pages, as render
     /// does), saves the last one and exits: `xvfb-run vortex-tiler view ...` without a display.
     ///
