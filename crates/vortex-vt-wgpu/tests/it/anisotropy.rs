@@ -16,7 +16,7 @@ use vortex_vt_wgpu::harness::{Effects, Pose, Scene, SceneRenderer, SceneView, Wi
 use vortex_vt_wgpu::testing::{box_chain, write_pack};
 use vortex_vt_wgpu::{SampleFilter, VirtualTexture};
 
-use crate::common::{gpu, renderer};
+use crate::common::{diff, gpu, renderer};
 
 const PAGES: u16 = 8;
 const TILE: u32 = 32;
@@ -105,20 +105,6 @@ impl Fixture {
             f([u as f32, v as f32], ddx, ddy)
         })
     }
-}
-
-/// Largest difference in any channel, and PSNR in dB.
-fn diff(got: &Rgba8Image, want: &Rgba8Image) -> (u8, f64) {
-    let mut max = 0;
-    let mut sq = 0.0;
-    for (g, w) in got.texels.iter().zip(&want.texels) {
-        for c in 0..4 {
-            max = max.max(g[c].abs_diff(w[c]));
-            sq += (g[c] as f64 - w[c] as f64).powi(2);
-        }
-    }
-    let mse = sq / (got.texels.len() * 4) as f64;
-    (max, if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64.powi(2) / mse).log10() })
 }
 
 /// The two stretched windows: long across (60 x 128 pixels over 240 x 64 texels) and long down,

@@ -11,7 +11,7 @@
 use std::collections::HashSet;
 
 use crate::common::pyramid::Synthetic;
-use crate::common::{gpu, untimed};
+use crate::common::{diff, gpu, untimed};
 use vortex_vt::address::WindowOrigin;
 use vortex_vt::sampler::{Rgba8Image, bilinear, trilinear};
 use vortex_vt_wgpu::harness::camera::{Camera, Keyframe};
@@ -89,20 +89,6 @@ fn expected(rt: &SceneRenderer, tex: &Synthetic, window: &Window, filter: Sample
             _ => bilinear(&tex.chain, entry.lod, u, v),
         }
     })
-}
-
-/// Largest channel difference and PSNR over all channels.
-fn diff(got: &Rgba8Image, want: &Rgba8Image) -> (u8, f64) {
-    let mut max = 0;
-    let mut sq = 0.0;
-    for (g, w) in got.texels.iter().zip(&want.texels) {
-        for c in 0..4 {
-            max = max.max(g[c].abs_diff(w[c]));
-            sq += (g[c] as f64 - w[c] as f64).powi(2);
-        }
-    }
-    let mse = sq / (got.texels.len() * 4) as f64;
-    (max, if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64.powi(2) / mse).log10() })
 }
 
 #[test]

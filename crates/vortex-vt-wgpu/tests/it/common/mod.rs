@@ -6,6 +6,7 @@
 use std::sync::{Arc, Once};
 
 use vortex_pack::Pack;
+use vortex_vt::sampler::Rgba8Image;
 use vortex_vt_wgpu::harness::{FrameReport, Scene, SceneRenderer};
 use vortex_vt_wgpu::{Gpu, Pacing, PageSource};
 
@@ -67,3 +68,17 @@ pub fn untimed(frames: &[FrameReport]) -> Vec<FrameReport> {
 }
 
 pub mod pyramid;
+
+/// Largest difference in any channel, and PSNR over all channels in dB.
+pub fn diff(got: &Rgba8Image, want: &Rgba8Image) -> (u8, f64) {
+    let mut max = 0;
+    let mut sq = 0.0;
+    for (g, w) in got.texels.iter().zip(&want.texels) {
+        for c in 0..4 {
+            max = max.max(g[c].abs_diff(w[c]));
+            sq += (g[c] as f64 - w[c] as f64).powi(2);
+        }
+    }
+    let mse = sq / (got.texels.len() * 4) as f64;
+    (max, if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64.powi(2) / mse).log10() })
+}
