@@ -19,6 +19,7 @@
 # Results go to docs/benchmarks.md (or $DOC) between `<!-- split-matrix:begin -->` and `:end -->`.
 #     bench/split-matrix.sh                 # about 10 minutes on 2 cores, 6 GB of sources
 #     SOURCES="strip jpeg" CODECS="jpeg png" bench/split-matrix.sh
+#     REPORT_ONLY=1 bench/split-matrix.sh   # the table again from the last runs (bench/work/matrix/runs.tsv)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source bench/lib.sh
@@ -67,13 +68,18 @@ im = pyvips.Image.new_from_file(sys.argv[1], access="sequential")
 im.dzsave(sys.argv[2], tile_size=256, overlap=0, suffix=".jpg[Q=85]")'
 
 RAW=$M/runs.tsv
-: >"$RAW"
-# run ID COMMAND...: times one run, appends "ID wall cpu rss json" to $RAW.
+# run ID COMMAND...: times one run, appends "ID wall cpu rss json" to $RAW. A failed run stops the
+# script, except the peer's (libvips from PyPI reads no PPM): that cell stays empty.
 run() {
   local id=$1
   shift
   sync
-  /usr/bin/time -v -o "$M/time.txt" "$@" >"$M/out.json" 2>"$M/err.txt" || { cat "$M/err.txt" >&2; exit 1; }
+  if ! /usr/bin/time -v -o "$M/time.txt" "$@" >"$M/out.json" 2>"$M/err.txt"; then
+    case $id in
+      *peer) echo "note: $id failed, left out: $(tail -1 "$M/err.txt")" >&2; return ;;
+      *) cat "$M/err.txt" >&2; exit 1 ;;
+    esac
+  fi
   local wall user sys rss
   wall=$(sed -n 's/^[[:space:]]*Elapsed (wall clock) time (h:mm:ss or m:ss): //p' "$M/time.txt" |
     awk -F: '{ s = 0; for (i = 1; i <= NF; i++) s = s * 60 + $i; printf "%.2f", s }')
@@ -83,7 +89,9 @@ run() {
   printf '%s\t%s\t%s\t%s\t%s\n' "$id" "$wall" "$(calc %.2f "$user + $sys")" "$rss" "$(tr -d '\n' <"$M/out.json")" >>"$RAW"
 }
 
-for name in $SOURCES; do
+[ "${REPORT_ONLY:-0}" = 1 ] && SOURCES_RUN= || SOURCES_RUN=$SOURCES
+[ -z "$SOURCES_RUN" ] || : >"$RAW"
+for name in $SOURCES_RUN; do
   log "source $name"
   file=$(source_file "$name")
   cat "$file" >/dev/null # in the page cache: this measures decoding, not the disk
@@ -118,26 +126,33 @@ print(f"{datetime.date.today()}, {os.cpu_count()} cores, vortex-tiler {rev}"
       + (f", peer libvips {peer_version} (pyvips-binary) writing a .zip of 256-texel JPEG tiles" if peer_version else "")
       + "; `split --pack --tile-size 256 --border 0`, default filter; the median of the runs per cell.")
 print()
-print("| source | codec | wall | CPU | CPU / wall | Mpx/s | peak RSS | read | pyramid | producer waits | encoders wait | encode | store | bound by | vs peer |")
-print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|")
+print("| source | codec | wall | CPU | CPU / wall | Mpx/s | peak RSS | read | waits for rows | pyramid | waits for encoders | encoders wait | encode | store | bound by | vs peer |")
+print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|")
 for s in sources:
     peer = median(f"{s} peer") if f"{s} peer" in runs else None
     for c in codecs:
         wall, cpu, rss, out = median(f"{s} {c}")
         st = json.loads(out)["stages"]
-        bound = "producer" if st["encodersIdleSeconds"] > st["producerBlockedSeconds"] else "encoders"
+        if st["encodersIdleSeconds"] <= st["producerBlockedSeconds"]:
+            bound = "storing" if st["storeSeconds"] > st["encodeSeconds"] else "encoders"
+        else:
+            bound = "reading" if st.get("readWaitSeconds", 0) > st["pyramidSeconds"] else "pyramid"
         vs = f"{peer[0] / wall:.2f}x" if peer and c == "jpeg" else ""
         print(f"| {s} | {c} | {wall:.2f} s | {cpu:.2f} s | {cpu / wall:.2f} | {mpx / wall:.0f} | {rss / 1024:.0f} MiB "
-              f"| {st['readSeconds']:.2f} | {st['pyramidSeconds']:.2f} | {st['producerBlockedSeconds']:.2f} "
+              f"| {st['readSeconds']:.2f} | {st.get('readWaitSeconds', 0):.2f} | {st['pyramidSeconds']:.2f} | {st['producerBlockedSeconds']:.2f} "
               f"| {st['encodersIdleSeconds']:.2f} | {st['encodeSeconds']:.2f} | {st['storeSeconds']:.2f} | {bound} | {vs} |")
     if peer:
         print(f"| {s} | peer: libvips .zip (JPEG) | {peer[0]:.2f} s | {peer[1]:.2f} s | {peer[1] / peer[0]:.2f} | {mpx / peer[0]:.0f} "
-              f"| {peer[2] / 1024:.0f} MiB | | | | | | | | |")
+              f"| {peer[2] / 1024:.0f} MiB | | | | | | | | | |")
 PY
 cat "$REPORT"
 splice split-matrix "$REPORT" "## Every source with every codec: how busy split keeps the cores (\`bench/split-matrix.sh\`)
 
-Stage times are seconds of wall time from \`split --json\`'s \`stages\`: the producer thread reads
-the source, builds the pyramid and cuts tiles, and waits when the encoders have not taken the last
-batch (*producer waits*); the encoders wait when it has none ready (*encoders wait*); *store* is
-the pack writer's ordered part on one thread. *vs peer*: libvips' wall time over ours, JPEG only."
+Stage times are seconds of wall time from \`split --json\`'s \`stages\`: a thread reads and
+decodes the source (*read*); the producer thread waits for its rows (*waits for rows*), builds the
+pyramid and cuts tiles (*pyramid*), and waits when the encoders have not taken the last batch
+(*waits for encoders*); the encoders wait when it has none ready (*encoders wait*); *store* is the
+pack writer's ordered part on one thread. *Bound by*: the encoders (or storing, where it took longer
+than encoding) where the producer waited for them longer than they for it, else reading or the
+pyramid, whichever the producer spent more on.
+*vs peer*: libvips' wall time over ours, JPEG only."
