@@ -1,6 +1,6 @@
 //! Decoding the source on a thread of its own, ahead of the pyramid: a JPEG or PNG source costs
 //! as much CPU as the pyramid built from it, and one thread doing both left a core idle while the
-//! encoders waited for tiles (issue 18). [`rows`] reads exactly the rows a pass asks for, in
+//! encoders waited for tiles (issue 18). `rows` reads exactly the rows a pass asks for, in
 //! chunks of about [`CHUNK_BYTES`], a few chunks ahead of the caller, and hands them over in
 //! order: the rows, and so the output, are the same as read on the caller's thread, and the
 //! source is left at the same position. With chunks of 0 rows it reads on the caller's thread
