@@ -439,7 +439,10 @@ impl<T: Sample> Producer<'_, T> {
 }
 
 /// Encodes and writes batches as they arrive. Small batches (coarse levels, narrow images) are
-/// merged with the ones waiting behind them so that every thread has work.
+/// merged with the ones waiting behind them so that every thread has work. A sink that takes
+/// tiles in any order stores them from the encoders; an ordered one (a pack) gets them in the
+/// producer's order from a writer thread of its own, which stores one batch while the pool
+/// encodes the next.
 fn consume<T: Sample>(
     rx: Receiver<Result<Batch<T>>>,
     encoder: &TileEncoder<T>,
@@ -448,6 +451,50 @@ fn consume<T: Sample>(
     tiles: &AtomicU64,
     progress: &dyn Progress,
     clock: &StageClock,
+) -> Result<()> {
+    let prepare_counted = |job: &Job<T>| -> Result<Ready> {
+        let stored = prepare(encoder, sink, job)?;
+        if matches!(stored, Stored::Encoded(_)) {
+            encoded.fetch_add(1, Ordering::Relaxed);
+        }
+        Ok(Ready { lod: job.lod, places: job.places.to_vec(), stored })
+    };
+    let store = |ready: &Ready| store(sink, ready, tiles, progress);
+    if !sink.ordered() {
+        return each_batch(&rx, sink, progress, clock, |jobs| {
+            clock.time(Stage::Encode, || jobs.par_iter().try_for_each(|job| store(&prepare_counted(job)?)))
+        });
+    }
+    // Encoded in parallel, stored in the producer's (deterministic) order. A rendezvous channel:
+    // one batch is stored while the next is encoded, never more.
+    let (to_writer, batches) = sync_channel::<Vec<Result<Ready>>>(0);
+    std::thread::scope(|scope| {
+        let writer = scope.spawn(move || -> Result<()> {
+            for batch in batches {
+                clock.time(Stage::Store, || batch.into_iter().try_for_each(|ready| store(&ready?)))?;
+            }
+            Ok(())
+        });
+        let encoding = each_batch(&rx, sink, progress, clock, |jobs| {
+            let prepared: Vec<Result<Ready>> =
+                clock.time(Stage::Encode, || jobs.par_iter().map(prepare_counted).collect());
+            // Only a writer that failed hangs up: its error is the one to report.
+            to_writer.send(prepared).map_err(|_| TilerError::Options("the tile writer stopped".into()))
+        });
+        drop(to_writer);
+        let written = writer.join().map_err(|_| TilerError::Options("the tile writer panicked".into()))?;
+        written.and(encoding)
+    })
+}
+
+/// Receives batches until the producer is done, merging small ones, and hands each lot's jobs
+/// to `encode`.
+fn each_batch<T: Sample>(
+    rx: &Receiver<Result<Batch<T>>>,
+    sink: &dyn TileSink,
+    progress: &dyn Progress,
+    clock: &StageClock,
+    mut encode: impl FnMut(&[Job<T>]) -> Result<()>,
 ) -> Result<()> {
     while let Ok(first) = clock.time(Stage::EncodersIdle, || rx.recv()) {
         if progress.cancelled() {
@@ -463,33 +510,30 @@ fn consume<T: Sample>(
         }
         let jobs: Vec<Job<T>> =
             work.iter().flat_map(|b| b.tiles.iter().flat_map(|t| Job::of(sink, b.lod, t))).collect();
-        let store = |(job, stored): (&Job<T>, Stored)| -> Result<()> {
-            for &(x, y) in job.places.iter() {
-                match &stored {
-                    Stored::Encoded(bytes) => sink.write_tile(job.lod, x, y, bytes)?,
-                    Stored::Constant(texel) => sink.write_constant(job.lod, x, y, texel)?,
-                }
-            }
-            tiles.fetch_add(job.places.len() as u64, Ordering::Relaxed);
-            progress.advance(job.places.len() as u64);
-            Ok(())
-        };
-        let prepared = jobs.par_iter().map(|job| {
-            let stored = prepare(encoder, sink, job)?;
-            if matches!(stored, Stored::Encoded(_)) {
-                encoded.fetch_add(1, Ordering::Relaxed);
-            }
-            Ok((job, stored))
-        });
-        if sink.ordered() {
-            // Encode in parallel, store in the producer's (deterministic) order.
-            let prepared: Vec<Result<_>> = clock.time(Stage::Encode, || prepared.collect());
-            clock.time(Stage::Store, || prepared.into_iter().try_for_each(|p| store(p?)))?;
-        } else {
-            clock.time(Stage::Encode, || prepared.try_for_each(|p| store(p?)))?;
-        }
+        encode(&jobs)?;
     }
     Ok(())
+}
+
+/// Writes a prepared tile to every place that gets it.
+fn store(sink: &dyn TileSink, ready: &Ready, tiles: &AtomicU64, progress: &dyn Progress) -> Result<()> {
+    for &(x, y) in &ready.places {
+        match &ready.stored {
+            Stored::Encoded(bytes) => sink.write_tile(ready.lod, x, y, bytes)?,
+            Stored::Constant(texel) => sink.write_constant(ready.lod, x, y, texel)?,
+        }
+    }
+    tiles.fetch_add(ready.places.len() as u64, Ordering::Relaxed);
+    progress.advance(ready.places.len() as u64);
+    Ok(())
+}
+
+/// A tile ready for the sink and the places that get it, owned, so that the writer thread can
+/// store it while the encoders' batch is gone.
+struct Ready {
+    lod: u32,
+    places: Vec<(u32, u32)>,
+    stored: Stored,
 }
 
 /// One encoding: a cut tile, the part of it the sink keeps, and the places that get it.

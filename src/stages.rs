@@ -37,7 +37,8 @@ pub(crate) enum Stage {
     EncodersIdle,
     /// Encoding batches on the pool (for sinks that store as tiles finish, storing too).
     Encode,
-    /// Storing encoded tiles in order on the caller's thread (ordered sinks: packs).
+    /// Storing encoded tiles in order on the writer thread (ordered sinks: packs), beside the
+    /// encoding of the next batch.
     Store,
 }
 
@@ -88,9 +89,9 @@ impl StageClock {
 
 /// Wall time per stage of a finished run. The source is read on a thread of its own (`read`);
 /// the producer's `read_wait + pyramid + producer_blocked` is its whole run; the encoders' caller
-/// spends `encoders_idle + encode + store`. A run bound by reading shows a large `read_wait`; by
+/// spends `encoders_idle + encode` and the writer `store`. A run bound by reading shows a large `read_wait`; by
 /// the pyramid, a large `encoders_idle` and little `read_wait`; by the encoders, a large
-/// `producer_blocked`.
+/// `producer_blocked` (and by the pack writer, a `store` longer than `encode`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StageTimes {
     /// Reading and decoding the source (on its own thread).
@@ -105,7 +106,7 @@ pub struct StageTimes {
     pub encoders_idle: Duration,
     /// Encoding (and, for unordered sinks, storing) on the pool.
     pub encode: Duration,
-    /// Storing in order on one thread (packs).
+    /// Storing in order on the writer thread (packs), beside the encoding of the next batch.
     pub store: Duration,
 }
 

@@ -101,7 +101,8 @@ pub fn one_band_bytes(layout: &Layout, texel_bytes: u64) -> u64 {
 /// Bytes one span's cascade holds at once, rounded up generously: per LOD a band of up to
 /// `tile_size + 1` rows and a row of exact sums of its window, and three
 /// batches of tiles (a row of its pages, or [`BATCH_BYTES`](crate::pyramid::cascade::BATCH_BYTES)
-/// of them); plus the source row that is read whole.
+/// of them: at most four are held at once, over all LODs, being cut, queued, encoded and
+/// stored); plus the source row that is read whole.
 pub(crate) fn span_bytes(layout: &Layout, span: &Span, texel_bytes: u64) -> u64 {
     let tile = layout.tile_size as u64;
     let source_row = layout.width as u64 * texel_bytes;
