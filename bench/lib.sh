@@ -71,6 +71,15 @@ world_pack() {
   fi
   echo "$pack"
 }
+# world_png_pack: the same image and grid as world_pack, lossless (PNG tiles), made the first time.
+world_png_pack() {
+  local pack=$WORK/world16k-png.vtpk
+  if [ ! -s "$pack" ]; then
+    log "packing src16k.tif losslessly"
+    "$WORK/bin/vortex-tiler" split "$WORK/src16k.tif" --pack "$pack" --tile-size 136 --border 4 --codec png -q
+  fi
+  echo "$pack"
+}
 calc() { awk "BEGIN { printf \"$1\", $2 }"; }
 
 # splice NAME REPORT INTRO: puts REPORT between NAME's markers in $DOC, adding a section with

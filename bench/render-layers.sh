@@ -14,11 +14,7 @@ cd "$(dirname "$0")/.."
 source bench/lib.sh
 bench_setup
 PACK=$(world_pack)
-DATA=$WORK/world16k-png.vtpk
-if [ ! -s "$DATA" ]; then
-  log "packing src16k.tif losslessly"
-  "$WORK/bin/vortex-tiler" split "$WORK/src16k.tif" --pack "$DATA" --tile-size 136 --border 4 --codec png -q
-fi
+DATA=$(world_png_pack)
 REPORT=$WORK/layers-report.md
 {
   echo "$(date -u +%F), $(nproc) cores, rev $REV; the built-in plane scene, 512x384, 120 frames, offline; layer 0: src16k.tif at 136-texel tiles, 4-texel border, JPEG Q85 (BC1 cache); data layers: the same grid as PNG (RGBA8 caches)."

@@ -13,10 +13,6 @@ cd "$(dirname "$0")/.."
 source bench/lib.sh
 bench_setup
 PACK=$(world_pack)
-SOURCE=$WORK/world16k-png.vtpk
-if [ ! -s "$SOURCE" ]; then
-  log "packing src16k.tif losslessly"
-  "$WORK/bin/vortex-tiler" split "$WORK/src16k.tif" --pack "$SOURCE" --tile-size 136 --border 4 --codec png -q
-fi
+SOURCE=$(world_png_pack)
 # The block lives in docs/accuracy.md, not in bench/lib.sh's default $DOC.
 cargo run --release -q -p vortex-bench --bin transcode_cost -- "$PACK" "$SOURCE" "${ACCURACY_DOC:-$ROOT/docs/accuracy.md}"

@@ -26,7 +26,7 @@ use crate::pyramid::cascade::{Batch, BatchSender, Cascade, CutTile, Span};
 use crate::pyramid::cut::Padding;
 use crate::pyramid::filter::ExactFilter;
 use crate::pyramid::reduce::{Acc, Reducer};
-use crate::pyramid::stripes::{Plan, span_bytes};
+use crate::pyramid::stripes::Plan;
 use crate::shard::merge::RootRows;
 use crate::shard::sums::{self, EncodedRoots};
 use crate::sink::TileSink;
@@ -272,13 +272,12 @@ impl<T: Sample> Producer<'_, T> {
             Passes::Shard(spans, mut source) => return self.shard::<A>(&spans, source.as_mut()),
             Passes::AboveCut(roots) => return self.above_cut::<A>(roots).map(|()| Vec::new()),
         };
-        let chunk_rows = self.read_ahead_rows(&plan);
         for (i, stripe) in plan.stripes.iter().enumerate() {
             if i > 0 {
                 source.rewind()?;
             }
             let mut cascade = self.cascade::<A>(stripe);
-            self.stripe::<A>(stripe, source.as_mut(), &mut cascade, chunk_rows)?;
+            self.stripe::<A>(stripe, source.as_mut(), &mut cascade, plan.read_ahead_rows)?;
         }
         if let Some(coarse) = &plan.coarse {
             source.rewind()?;
@@ -327,20 +326,6 @@ impl<T: Sample> Producer<'_, T> {
         T: Into<A>,
     {
         Cascade::new(self.layout, span, self.pixels, self.opts.filter, self.padding.clone(), self.out.clone())
-    }
-
-    /// Rows per chunk the source is read ahead in (`source::read_ahead`), 0 to read it on this
-    /// thread: a one-band run reads ahead where the chunks fit `--max-memory` beside the band; a
-    /// striped run, short of memory already, and a shard's rectangles do not.
-    fn read_ahead_rows(&self, plan: &Plan) -> u64 {
-        let texel_bytes = self.pixels.bytes_per_pixel() as u64;
-        let row_bytes = self.layout.width as u64 * texel_bytes;
-        let band = span_bytes(&self.layout, &Span::whole(&self.layout), texel_bytes);
-        let fits = band.saturating_add(read_ahead::bytes(row_bytes)) <= self.opts.max_memory;
-        match plan.stripes.len() == 1 && plan.coarse.is_none() && fits {
-            true => read_ahead::rows_per_chunk(row_bytes),
-            false => 0,
-        }
     }
 
     /// LOD 0 onwards for the columns and rows of `span`, from the source's next row on: the
@@ -452,17 +437,18 @@ fn consume<T: Sample>(
     progress: &dyn Progress,
     clock: &StageClock,
 ) -> Result<()> {
-    let prepare_counted = |job: &Job<T>| -> Result<Ready> {
+    let prepare_counted = |job: &Job<T>| -> Result<Stored> {
         let stored = prepare(encoder, sink, job)?;
         if matches!(stored, Stored::Encoded(_)) {
             encoded.fetch_add(1, Ordering::Relaxed);
         }
-        Ok(Ready { lod: job.lod, places: job.places.to_vec(), stored })
+        Ok(stored)
     };
-    let store = |ready: &Ready| store(sink, ready, tiles, progress);
+    let store = |lod: u32, places: &[(u32, u32)], stored: &Stored| store(sink, lod, places, stored, tiles, progress);
     if !sink.ordered() {
         return each_batch(&rx, sink, progress, clock, |jobs| {
-            clock.time(Stage::Encode, || jobs.par_iter().try_for_each(|job| store(&prepare_counted(job)?)))
+            let encode_and_store = |job: &Job<T>| store(job.lod, &job.places, &prepare_counted(job)?);
+            clock.time(Stage::Encode, || jobs.par_iter().try_for_each(encode_and_store))
         });
     }
     // Encoded in parallel, stored in the producer's (deterministic) order. A rendezvous channel:
@@ -471,13 +457,16 @@ fn consume<T: Sample>(
     std::thread::scope(|scope| {
         let writer = scope.spawn(move || -> Result<()> {
             for batch in batches {
-                clock.time(Stage::Store, || batch.into_iter().try_for_each(|ready| store(&ready?)))?;
+                let store_ready = |ready: Result<Ready>| ready.and_then(|r| store(r.lod, &r.places, &r.stored));
+                clock.time(Stage::Store, || batch.into_iter().try_for_each(store_ready))?;
             }
             Ok(())
         });
         let encoding = each_batch(&rx, sink, progress, clock, |jobs| {
-            let prepared: Vec<Result<Ready>> =
-                clock.time(Stage::Encode, || jobs.par_iter().map(prepare_counted).collect());
+            let ready = |job: &Job<T>| {
+                prepare_counted(job).map(|stored| Ready { lod: job.lod, places: job.places.to_vec(), stored })
+            };
+            let prepared: Vec<Result<Ready>> = clock.time(Stage::Encode, || jobs.par_iter().map(ready).collect());
             // Only a writer that failed hangs up: its error is the one to report.
             to_writer.send(prepared).map_err(|_| TilerError::Options("the tile writer stopped".into()))
         });
@@ -515,21 +504,28 @@ fn each_batch<T: Sample>(
     Ok(())
 }
 
-/// Writes a prepared tile to every place that gets it.
-fn store(sink: &dyn TileSink, ready: &Ready, tiles: &AtomicU64, progress: &dyn Progress) -> Result<()> {
-    for &(x, y) in &ready.places {
-        match &ready.stored {
-            Stored::Encoded(bytes) => sink.write_tile(ready.lod, x, y, bytes)?,
-            Stored::Constant(texel) => sink.write_constant(ready.lod, x, y, texel)?,
+/// Writes a prepared tile of `lod` to every place that gets it.
+fn store(
+    sink: &dyn TileSink,
+    lod: u32,
+    places: &[(u32, u32)],
+    stored: &Stored,
+    tiles: &AtomicU64,
+    progress: &dyn Progress,
+) -> Result<()> {
+    for &(x, y) in places {
+        match stored {
+            Stored::Encoded(bytes) => sink.write_tile(lod, x, y, bytes)?,
+            Stored::Constant(texel) => sink.write_constant(lod, x, y, texel)?,
         }
     }
-    tiles.fetch_add(ready.places.len() as u64, Ordering::Relaxed);
-    progress.advance(ready.places.len() as u64);
+    tiles.fetch_add(places.len() as u64, Ordering::Relaxed);
+    progress.advance(places.len() as u64);
     Ok(())
 }
 
-/// A tile ready for the sink and the places that get it, owned, so that the writer thread can
-/// store it while the encoders' batch is gone.
+/// A tile ready for an ordered sink and the places that get it, owned, so that the writer thread
+/// can store it after the encoders' batch is gone.
 struct Ready {
     lod: u32,
     places: Vec<(u32, u32)>,

@@ -19,12 +19,18 @@ use crate::layout::Layout;
 use crate::limits::human_bytes;
 use crate::pyramid::Filter;
 use crate::pyramid::cascade::{Span, batch_tiles};
+use crate::source::read_ahead;
 
-/// The passes of one run, in order: the stripes, then the coarse pass (if any).
+/// The passes of one run, in order: the stripes, then the coarse pass (if any); and how the
+/// source is read.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub(crate) struct Plan {
     pub stripes: Vec<Span>,
     pub coarse: Option<Span>,
+    /// Rows per chunk the source is read ahead in on its own thread (`source::read_ahead`), 0 to
+    /// read it on the producer's: a one-band run reads ahead where the chunks fit the memory
+    /// beside the band; a striped run, short of memory already, does not.
+    pub read_ahead_rows: u64,
 }
 
 impl Plan {
@@ -33,7 +39,12 @@ impl Plan {
         let whole = Span::whole(layout);
         let need = span_bytes(layout, &whole, texel_bytes);
         if need <= memory {
-            return Ok(Plan { stripes: vec![whole], coarse: None });
+            let row_bytes = layout.width as u64 * texel_bytes;
+            let read_ahead_rows = match need.saturating_add(read_ahead::bytes(row_bytes)) <= memory {
+                true => read_ahead::rows_per_chunk(row_bytes),
+                false => 0,
+            };
+            return Ok(Plan { stripes: vec![whole], coarse: None, read_ahead_rows });
         }
         let too_wide = |need: u64| {
             TilerError::Limit(format!(
@@ -86,7 +97,7 @@ impl Plan {
                     rows: 0..layout.rows,
                 })
                 .collect();
-            return Ok(Plan { stripes, coarse: Some(coarse) });
+            return Ok(Plan { stripes, coarse: Some(coarse), read_ahead_rows: 0 });
         }
         Err(too_wide(least))
     }
@@ -137,6 +148,7 @@ mod tests {
         let l = Layout::new(16384, 16384, 256, 0).unwrap();
         let plan = Plan::choose(&l, 3, Filter::default(), 1 << 30).unwrap();
         assert_eq!((plan.stripes, plan.coarse), (vec![Span::whole(&l)], None));
+        assert_eq!(plan.read_ahead_rows, read_ahead::rows_per_chunk(16384 * 3), "read ahead within 1 GiB");
     }
 
     #[test]

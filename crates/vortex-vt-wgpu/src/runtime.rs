@@ -109,7 +109,7 @@ pub struct RuntimeConfig {
     /// What the physical cache holds. `None` (the default) chooses BC wherever the device
     /// samples it: BC7 blocks as stored (see `bc7`), else BC1 for opaque textures (an eighth of
     /// RGBA8's GPU memory and upload bytes, 1.2x the loader's time per page) and BC7 for
-    /// textures with alpha (a quarter, 17x the time); RGBA8 on devices without BC.
+    /// textures with alpha (a quarter, 17x RGBA8's loader time); RGBA8 on devices without BC.
     /// `Some(Rgba8)` keeps every texel exact (what tests comparing pictures want); `Some(Bc1)`
     /// (opaque textures only) or `Some(Bc7)` force a transcode on the loader's threads.
     pub cache_format: Option<CacheFormat>,
@@ -392,9 +392,14 @@ impl Runtime {
     /// Loads every layer of `pages`, waiting for them: the layers' loaders work at once (each
     /// answers every page, with a stand-in where one fails).
     fn load_now(&self, pages: &[(PageId, Slot)]) -> Vec<Landed> {
+        // Layer 0 on this thread, the others on threads of their own meanwhile.
+        let Some((first, rest)) = self.loaders.split_first().filter(|_| !pages.is_empty()) else {
+            return Vec::new();
+        };
         let answers: Vec<_> = std::thread::scope(|scope| {
-            let loads: Vec<_> = self.loaders.iter().map(|l| scope.spawn(move || l.load(pages))).collect();
-            loads.into_iter().map(|h| h.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))).collect()
+            let loads: Vec<_> = rest.iter().map(|l| scope.spawn(move || l.load(pages))).collect();
+            let joined = loads.into_iter().map(|h| h.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)));
+            std::iter::once(first.load(pages)).chain(joined).collect()
         });
         let mut layers: Vec<_> = answers.into_iter().map(Vec::into_iter).collect();
         pages

@@ -302,7 +302,7 @@ impl State {
             (_, KeyCode::KeyI) if !event.repeat => {
                 // 1, 2, 4, 8, 16, 1, ...: each value makes its pipelines once.
                 let next = self.renderer.anisotropy() * 2;
-                self.renderer.set_anisotropy(if next > 16 { 1 } else { next });
+                self.renderer.set_anisotropy(if next > vortex_vt::anisotropy::MAX_ANISOTROPY { 1 } else { next });
             }
             (_, KeyCode::KeyP) if !event.repeat => {
                 let on = !self.renderer.residency_view();

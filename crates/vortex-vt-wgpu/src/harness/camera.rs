@@ -16,11 +16,7 @@ impl Camera {
     /// an `aspect` (width / height), with near and far planes scaled to the distance to the
     /// target so that depth precision follows the camera.
     pub fn view_proj(&self, fov_y_deg: f32, aspect: f32) -> [[f32; 4]; 4] {
-        let forward = normalize(sub(self.target, self.eye));
-        // Looking straight down or up: any horizontal "up" will do.
-        let up_hint = if forward[1].abs() > 0.999 { [0.0, 0.0, -1.0] } else { [0.0, 1.0, 0.0] };
-        let right = normalize(cross(forward, up_hint));
-        let up = cross(right, forward);
+        let [forward, right, up] = self.basis();
         let eye = self.eye;
         let view = [
             [right[0], up[0], -forward[0], 0.0],
@@ -30,7 +26,7 @@ impl Camera {
         ];
         let distance = length(sub(self.target, self.eye)).max(1e-6);
         let (near, far) = (distance * 1e-3, distance * 1e3);
-        let f = 1.0 / (fov_y_deg.to_radians() / 2.0).tan();
+        let f = focal(fov_y_deg);
         let proj = [
             [f / aspect, 0.0, 0.0, 0.0],
             [0.0, f, 0.0, 0.0],
@@ -39,20 +35,24 @@ impl Camera {
         ];
         mul(&proj, &view)
     }
-}
 
-impl Camera {
+    /// The camera's forward, right and up unit vectors.
+    fn basis(&self) -> [[f32; 3]; 3] {
+        let forward = normalize(sub(self.target, self.eye));
+        // Looking straight down or up: any horizontal "up" will do.
+        let up_hint = if forward[1].abs() > 0.999 { [0.0, 0.0, -1.0] } else { [0.0, 1.0, 0.0] };
+        let right = normalize(cross(forward, up_hint));
+        [forward, right, cross(right, forward)]
+    }
+
     /// The UV where the centre of pixel position (`x`, `y`) of a `frame` (width, height) sees the
     /// plane y = 0 of `Shape::Plane { size }` (a square centred on the origin, UV (0, 0) at
     /// (-size/2, -size/2)), as [`Camera::view_proj`] projects it; `None` where the ray misses the
     /// plane. The CPU side of a picture of the plane: references and ground truths need each
     /// pixel's UV (and, from its neighbours', its derivatives).
     pub fn plane_uv(&self, fov_y_deg: f32, frame: [f32; 2], size: f32, x: f32, y: f32) -> Option<[f32; 2]> {
-        let forward = normalize(sub(self.target, self.eye));
-        let up_hint = if forward[1].abs() > 0.999 { [0.0, 0.0, -1.0] } else { [0.0, 1.0, 0.0] };
-        let right = normalize(cross(forward, up_hint));
-        let up = cross(right, forward);
-        let f = 1.0 / (fov_y_deg.to_radians() / 2.0).tan();
+        let [forward, right, up] = self.basis();
+        let f = focal(fov_y_deg);
         let (nx, ny) = (2.0 * x / frame[0] - 1.0, 1.0 - 2.0 * y / frame[1]);
         let (sx, sy) = (nx * frame[0] / frame[1] / f, ny / f);
         let d: [f32; 3] = std::array::from_fn(|i| forward[i] + right[i] * sx + up[i] * sy);
@@ -62,6 +62,11 @@ impl Camera {
         let t = -self.eye[1] / d[1];
         Some([(self.eye[0] + t * d[0]) / size + 0.5, (self.eye[2] + t * d[2]) / size + 0.5])
     }
+}
+
+/// The projection's focal length for a vertical field of view of `fov_y_deg`.
+fn focal(fov_y_deg: f32) -> f32 {
+    1.0 / (fov_y_deg.to_radians() / 2.0).tan()
 }
 
 /// One keyframe of a camera path: where the camera is at `frame`.

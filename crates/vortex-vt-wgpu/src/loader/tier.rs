@@ -59,6 +59,11 @@ impl Tier {
         TierUsage { budget: lru.budget, bytes: lru.bytes, tiles: lru.entries.len() }
     }
 
+    /// Whether it keeps anything (a budget above 0).
+    fn is_on(&self) -> bool {
+        self.lock().budget > 0
+    }
+
     /// A held tile (a shared handle: no copy of its bytes), now the most recently used.
     fn get(&self, tile: PageId) -> Option<StoredTile> {
         self.lock().get(&tile).cloned()
@@ -80,8 +85,9 @@ impl Tier {
 
 /// Tile `tile` of `source` in `format`, `None` if it is absent: decoded from the tier's copy of its
 /// stored bytes when the tier holds one (a hit: nothing read), else read from the source (a miss)
-/// and kept. A source with no stored form is read whole every time (a miss). Bytes read are
-/// tallied even when the read fails.
+/// and kept. With the tier off, or for a source with no stored form, the tile is read whole every
+/// time (a miss): no copy of its stored bytes is made. Bytes read are tallied even when the read
+/// fails.
 pub(super) fn read(
     tier: &Tier,
     source: &dyn PageSource,
@@ -89,25 +95,31 @@ pub(super) fn read(
     format: CacheFormat,
     tally: &mut Tally,
 ) -> Result<Option<Vec<u8>>, ReadError> {
-    let stored = match tier.get(tile) {
+    let read_whole = |tally: &mut Tally| {
+        let whole = source.read_tile(tile.lod, tile.x, tile.y, format);
+        match whole.inspect_err(|e| tally.bytes_read += e.bytes_read)? {
+            SourceTile::Absent => Ok(None),
+            SourceTile::Texels { texels, bytes_read } => {
+                tally.bytes_read += bytes_read;
+                Ok(Some(texels))
+            }
+        }
+    };
+    let on = tier.is_on();
+    let held = if on { tier.get(tile) } else { None };
+    let stored = match held {
         Some(stored) => {
             tally.tier_hits += 1;
             stored
         }
         None => {
             tally.tier_misses += 1;
+            if !on {
+                return read_whole(tally);
+            }
             let read =
                 source.read_stored(tile.lod, tile.x, tile.y).inspect_err(|e| tally.bytes_read += e.bytes_read)?;
-            let Some(StoredRead { tile: stored, bytes_read }) = read else {
-                let whole = source.read_tile(tile.lod, tile.x, tile.y, format);
-                return match whole.inspect_err(|e| tally.bytes_read += e.bytes_read)? {
-                    SourceTile::Absent => Ok(None),
-                    SourceTile::Texels { texels, bytes_read } => {
-                        tally.bytes_read += bytes_read;
-                        Ok(Some(texels))
-                    }
-                };
-            };
+            let Some(StoredRead { tile: stored, bytes_read }) = read else { return read_whole(tally) };
             tally.bytes_read += bytes_read;
             tier.insert(tile, stored.clone());
             stored
@@ -155,12 +167,7 @@ impl<K: Copy + Eq + Hash, V> Lru<K, V> {
         if cost > self.budget {
             return;
         }
-        while self.bytes + cost > self.budget {
-            let Some((_, oldest)) = self.order.pop_first() else { break };
-            if let Some((_, cost, _)) = self.entries.remove(&oldest) {
-                self.bytes -= cost;
-            }
-        }
+        self.evict_to(self.budget - cost);
         let stamp = self.tick();
         self.order.insert(stamp, key);
         self.entries.insert(key, (value, cost, stamp));
@@ -176,7 +183,12 @@ impl<K: Copy + Eq + Hash, V> Lru<K, V> {
 
     fn set_budget(&mut self, budget: u64) {
         self.budget = budget;
-        while self.bytes > self.budget {
+        self.evict_to(budget);
+    }
+
+    /// Drops the least recently used entries until they cost at most `bytes`.
+    fn evict_to(&mut self, bytes: u64) {
+        while self.bytes > bytes {
             let Some((_, oldest)) = self.order.pop_first() else { break };
             if let Some((_, cost, _)) = self.entries.remove(&oldest) {
                 self.bytes -= cost;

@@ -25,36 +25,34 @@ impl PageSource for Pack {
         VirtualTexture::from_pack(self)
     }
 
-    /// [`PageSource::read_stored`], then [`PageSource::decode`]: one path whether or not the
-    /// memory tier keeps the bytes in between.
+    /// The tile decoded where it lies in the pack, with no copy of its stored bytes (what the
+    /// loader reads when the memory tier is off).
     fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
-        let StoredRead { tile, bytes_read } = stored(self, lod, x, y)?;
+        let (tile, bytes_read) = checked(self, lod, x, y)?;
         match tile {
-            StoredTile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
-            StoredTile::Absent => Err(ReadError::new(format!("an absent tile cannot be made into {}", format.name()))),
-            StoredTile::Stored { kind, bytes } => self
-                .decode(lod, x, y, kind, &bytes, format)
+            Tile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
+            Tile::Absent => Err(ReadError::new(format!("an absent tile cannot be made into {}", format.name()))),
+            tile => decode_tile(self, tile, format)
                 .map(|texels| SourceTile::Texels { texels, bytes_read })
                 .map_err(|e| ReadError { bytes_read, ..e }),
         }
     }
 
+    /// The tile's stored bytes, copied out of the pack so that the memory tier may keep them.
     fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
-        stored(self, lod, x, y).map(Some)
+        let (tile, bytes_read) = checked(self, lod, x, y)?;
+        let tile = match tile {
+            Tile::Absent => StoredTile::Absent,
+            Tile::Constant(value) => StoredTile::Stored { kind: TileKind::Constant as u8, bytes: Arc::from(value) },
+            Tile::Data(kind, payload) => StoredTile::Stored { kind: kind as u8, bytes: Arc::from(payload) },
+        };
+        Ok(Some(StoredRead { tile, bytes_read }))
     }
 
-    /// RGBA8 texels of any stored kind; BC7 blocks of a BC7 or one-colour tile (the loader asks
-    /// for BC7 only when every tile is one of those); never BC1, which the loader transcodes.
     fn decode(&self, _: u8, _: u16, _: u16, kind: u8, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
         let kind = TileKind::from_u8(kind).ok_or_else(|| ReadError::new(format!("unknown tile kind {kind}")))?;
         let tile = if kind == TileKind::Constant { Tile::Constant(bytes) } else { Tile::Data(kind, bytes) };
-        let (d, limit) = (self.description(), self.limits().max_decoded_bytes);
-        match format {
-            CacheFormat::Rgba8 => texels(tile, d, limit),
-            CacheFormat::Bc7 => blocks(tile, d, limit),
-            // The loader transcodes RGBA8 to BC1; it never asks a source for BC1.
-            CacheFormat::Bc1 => Err(ReadError::new("a pack gives RGBA8 texels or stored BC7 blocks, not BC1")),
-        }
+        decode_tile(self, tile, format)
     }
 
     /// One or three channels: no alpha stored.
@@ -69,24 +67,29 @@ impl PageSource for Pack {
     }
 }
 
-/// The tile as stored: its payload (checksum checked) or one colour, copied out of the map so that
-/// the memory tier may keep it; or `Absent`. A payload that fails its checksum still counts as
-/// read.
-fn stored(pack: &Pack, lod: u8, x: u16, y: u16) -> Result<StoredRead, ReadError> {
+/// The tile as stored, in the pack (its payload, checksum checked, or its one colour, or
+/// `Absent`), and the bytes read for it. A payload that fails its checksum still counts as read.
+fn checked(pack: &Pack, lod: u8, x: u16, y: u16) -> Result<(Tile<'_>, u64), ReadError> {
     let (lod, x, y) = (u32::from(lod), u32::from(x), u32::from(y));
+    let payload_len = |tile: &Tile| if let Tile::Data(_, payload) = tile { payload.len() as u64 } else { 0 };
     let tile = pack.tile_checked(lod, x, y).map_err(|e| {
-        let bytes_read = match pack.tile(lod, x, y) {
-            Ok(Tile::Data(_, payload)) => payload.len() as u64,
-            _ => 0,
-        };
+        let bytes_read = pack.tile(lod, x, y).map_or(0, |tile| payload_len(&tile));
         ReadError { bytes_read, ..read_error(e) }
     })?;
-    let (kind, bytes, bytes_read) = match tile {
-        Tile::Absent => return Ok(StoredRead { tile: StoredTile::Absent, bytes_read: 0 }),
-        Tile::Constant(value) => (TileKind::Constant, value, 0),
-        Tile::Data(kind, payload) => (kind, payload, payload.len() as u64),
-    };
-    Ok(StoredRead { tile: StoredTile::Stored { kind: kind as u8, bytes: Arc::from(bytes) }, bytes_read })
+    let bytes_read = payload_len(&tile);
+    Ok((tile, bytes_read))
+}
+
+/// A stored tile's RGBA8 texels (any kind), or its BC7 blocks (a BC7 or one-colour tile: the
+/// loader asks for BC7 only when every tile is one of those); never BC1, which the loader
+/// transcodes.
+fn decode_tile(pack: &Pack, tile: Tile<'_>, format: CacheFormat) -> Result<Vec<u8>, ReadError> {
+    let (d, limit) = (pack.description(), pack.limits().max_decoded_bytes);
+    match format {
+        CacheFormat::Rgba8 => texels(tile, d, limit),
+        CacheFormat::Bc7 => blocks(tile, d, limit),
+        CacheFormat::Bc1 => Err(ReadError::new("a pack gives RGBA8 texels or stored BC7 blocks, not BC1")),
+    }
 }
 
 /// The tile's RGBA8 texels.
