@@ -26,6 +26,7 @@ pub mod layout;
 pub mod limits;
 pub mod output;
 pub mod pixel;
+pub mod priority;
 pub mod pyramid;
 pub mod repack;
 pub mod serve;

@@ -141,13 +141,13 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
     let started = Instant::now();
     let inputs: Vec<&Path> = a.shards.iter().map(PathBuf::as_path).collect();
     report::claim(&a.output, Product::Pack, &inputs, a.force)?;
-    let pool = a.run.pool()?;
+    a.run.init_pool()?;
     // Every shard's level table is the merged pack's: the first one's gives the bar's length.
     let total = vortex_pack::Pack::open(&a.shards[0])
         .map(|p| p.levels().iter().map(|l| l.tiles_w as u64 * l.tiles_h as u64).sum())
         .unwrap_or(0);
     let watch = a.run.watch(total)?;
-    let merged = pool.install(|| shard::merge(&a.shards, &a.output, &watch));
+    let merged = shard::merge(&a.shards, &a.output, &watch);
     watch.bar.finish_and_clear();
     let merged = merged?;
     let took = started.elapsed().as_secs_f64();

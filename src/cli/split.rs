@@ -391,7 +391,6 @@ pub fn tile(
 /// A run about to start: the source, the worker threads and the progress bar.
 struct Run {
     source: Box<dyn RowSource>,
-    pool: rayon::ThreadPool,
     watch: report::Watch,
     total: u64,
     started: Instant,
@@ -404,7 +403,8 @@ impl Run {
 
     /// A run that writes `total` tiles.
     fn start_counting(source: Box<dyn RowSource>, a: &OutputArgs, total: u64, started: Instant) -> Result<Run> {
-        Ok(Run { source, pool: a.run.pool()?, watch: a.run.watch(total)?, total, started })
+        a.run.init_pool()?;
+        Ok(Run { source, watch: a.run.watch(total)?, total, started })
     }
 
     /// Runs the pipeline into `sink`; the summary keeps what the source was.
@@ -413,7 +413,7 @@ impl Run {
         Ok(done)
     }
 
-    /// Runs `work` on the source in the worker pool, with the progress bar.
+    /// Runs `work` on the source, its encoders on the worker pool, with the progress bar.
     fn execute_with<R>(
         self,
         work: impl FnOnce(Box<dyn RowSource>, &report::Watch) -> vortex_tiler::error::Result<(split::Summary, R)> + Send,
@@ -422,8 +422,8 @@ impl Run {
         R: Send,
     {
         let (decoder, width, height) = (self.source.describe(), self.source.width(), self.source.height());
-        let Run { source, pool, watch, started, .. } = self;
-        let result = pool.install(|| work(source, &watch));
+        let Run { source, watch, started, .. } = self;
+        let result = work(source, &watch);
         watch.bar.finish_and_clear();
         let (summary, extra) = result?;
         Ok((Finished { summary, decoder, width, height, took: started.elapsed() }, extra))

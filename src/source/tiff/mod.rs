@@ -5,7 +5,10 @@
 //! contiguously (PlanarConfiguration 1), uncompressed or compressed with LZW, Deflate or
 //! PackBits, with or without the horizontal predictor. Everything else (palette, CMYK, YCbCr,
 //! Lab, floating point or signed samples, 1/2/4-bit, separate planes, JPEG-in-TIFF, ...) is
-//! refused with a message naming what the file is.
+//! refused with a message naming what the file is. Compressed strips are decoded a few ahead,
+//! several at once ([`strips_ahead`]).
+
+mod strips_ahead;
 
 use std::fs::File;
 use std::io::BufReader;
@@ -16,6 +19,7 @@ use tiff::decoder::{ChunkType, Decoder, Limits};
 use tiff::tags::{CompressionMethod, PhotometricInterpretation, PlanarConfiguration, Predictor, SampleFormat, Tag};
 use tiff::{ColorType, TiffError};
 
+use self::strips_ahead::{DecodeStrip, StripsAhead};
 use super::{ImageHeader, RowSource};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
@@ -48,6 +52,11 @@ pub struct TiffSource {
     /// can give them for less: `direct` strips, or tiles (only those under the columns are
     /// decoded).
     columns: Option<std::ops::Range<u32>>,
+    /// Decoders for the workers of `ahead`, one per worker, where compressed strips are
+    /// decoded ahead (0: on this thread).
+    ahead_workers: usize,
+    ahead: Option<StripsAhead>,
+    max_memory: u64,
 }
 
 /// The file offset of every strip of an uncompressed 8-bit TIFF without predictor whose
@@ -78,23 +87,8 @@ impl Chunking {
 }
 
 pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
-    let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
     let bigtiff = is_bigtiff(path)?;
-    // The first directory is read with the crate's default limits (256 MiB of tag values, ample
-    // for the strip tables of any image this tool can take); the limits below apply to the rest.
-    let decoder = Decoder::new(BufReader::with_capacity(1 << 16, file)).map_err(|e| open_error(path, e))?;
-    let max = usize::try_from(max_memory).unwrap_or(usize::MAX);
-    let mut limits = Limits::default();
-    // Bounds every buffer the crate allocates itself (tag value arrays, whole-chunk results).
-    limits.decoding_buffer_size = max;
-    limits.ifd_value_size = max;
-    // Checked against a chunk's *compressed* byte count. None of the accepted compressions buffer
-    // the compressed chunk (they stream it from the file), and an uncompressed strip of a wide
-    // image easily exceeds the crate's 128 MiB default, so this limit is lifted; the decoded size
-    // of a strip or tile row is checked against --max-memory below instead.
-    limits.intermediate_buffer_size = usize::MAX;
-    let mut decoder = decoder.with_limits(limits);
-
+    let mut decoder = open_decoder(path, max_memory)?;
     let (width, height) = decoder.dimensions().map_err(|e| open_error(path, e))?;
     let compression = check_compression(path, &mut decoder)?;
     let (layout, file_samples) = pixel_layout(path, &mut decoder)?;
@@ -146,6 +140,16 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     ];
     let tile = vec![0u8; tile_bytes as usize];
     let direct = direct_strips(path, &mut decoder, compression, chunking, layout, file_samples)?;
+    let strip_bytes = row_bytes * band_rows;
+    let ahead_workers = match chunking {
+        Chunking::Strips { .. } if compression != CompressionMethod::None && height as u64 > 2 * band_rows => {
+            let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(4);
+            let held = strip_bytes.saturating_mul(workers as u64 * (strips_ahead::AHEAD_PER_WORKER as u64 + 1));
+            let fits = held <= strips_ahead::MAX_AHEAD_BYTES && held <= max_memory / 4;
+            if workers > 1 && fits { workers } else { 0 }
+        }
+        _ => 0,
+    };
 
     Ok(Box::new(TiffSource {
         path: path.to_path_buf(),
@@ -165,7 +169,29 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         failed: false,
         direct,
         columns: None,
+        ahead_workers,
+        ahead: None,
+        max_memory,
     }))
+}
+
+/// A decoder of the TIFF's first image, its buffers bounded by `max_memory`.
+fn open_decoder(path: &Path, max_memory: u64) -> Result<Decoder<BufReader<File>>> {
+    let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
+    // The first directory is read with the crate's default limits (256 MiB of tag values, ample
+    // for the strip tables of any image this tool can take); the limits below apply to the rest.
+    let decoder = Decoder::new(BufReader::with_capacity(1 << 16, file)).map_err(|e| open_error(path, e))?;
+    let max = usize::try_from(max_memory).unwrap_or(usize::MAX);
+    let mut limits = Limits::default();
+    // Bounds every buffer the crate allocates itself (tag value arrays, whole-chunk results).
+    limits.decoding_buffer_size = max;
+    limits.ifd_value_size = max;
+    // Checked against a chunk's *compressed* byte count. None of the accepted compressions buffer
+    // the compressed chunk (they stream it from the file), and an uncompressed strip of a wide
+    // image easily exceeds the crate's 128 MiB default, so this limit is lifted; the decoded size
+    // of a strip or tile row is checked against --max-memory below instead.
+    limits.intermediate_buffer_size = usize::MAX;
+    Ok(decoder.with_limits(limits))
 }
 
 /// [`DirectStrips`] of the TIFF, if its strips hold rows as the texels they are.
@@ -338,13 +364,17 @@ impl TiffSource {
         let first = index as u64 * rows_per;
         let rows = rows_per.min(self.height as u64 - first);
         let row_bytes = self.width as usize * self.file_samples * self.layout.depth.bytes();
-        let band = &mut self.band[..row_bytes * rows as usize];
-        let decoder = &mut self.decoder;
+        let strip_bytes = row_bytes * rows as usize;
         let result = match self.chunking {
+            Chunking::Strips { .. } if self.ahead_workers > 0 => {
+                self.take_strip_ahead(index, row_bytes).map_err(|m| (format!("strip {index}"), m))
+            }
             Chunking::Strips { .. } => {
+                let (decoder, band) = (&mut self.decoder, &mut self.band[..strip_bytes]);
                 guarded(|| decoder.read_chunk_bytes(index, band)).map_err(|m| (format!("strip {index}"), m))
             }
             Chunking::Tiles { width: tw, across, .. } => {
+                let (decoder, band) = (&mut self.decoder, &mut self.band[..strip_bytes]);
                 let pixel_bytes = self.file_samples * self.layout.depth.bytes();
                 let mut result = Ok(());
                 let tiles = match &self.columns {
@@ -379,6 +409,39 @@ impl TiffSource {
         self.band_first = first;
         self.band_rows = rows;
         Ok(())
+    }
+}
+
+impl TiffSource {
+    /// Strip `index` from the workers decoding ahead, into `band`; they are started at that
+    /// strip if they are not there (the first strip, or after a skip or a rewind).
+    fn take_strip_ahead(&mut self, index: u32, row_bytes: usize) -> std::result::Result<(), String> {
+        let mut ahead = match self.ahead.take() {
+            Some(ahead) if ahead.next() == index => ahead,
+            elsewhere => {
+                drop(elsewhere); // stops its workers
+                self.start_ahead(index, row_bytes)?
+            }
+        };
+        let strip = ahead.take(std::mem::take(&mut self.band));
+        self.ahead = Some(ahead);
+        self.band = strip?;
+        Ok(())
+    }
+
+    /// One worker per `ahead_workers`, each with a decoder of its own, from strip `first` on.
+    fn start_ahead(&self, first: u32, row_bytes: usize) -> std::result::Result<StripsAhead, String> {
+        let decoders = (0..self.ahead_workers)
+            .map(|_| -> std::result::Result<DecodeStrip, String> {
+                let mut decoder = open_decoder(&self.path, self.max_memory).map_err(|e| e.to_string())?;
+                Ok(Box::new(move |strip, buffer: &mut Vec<u8>| guarded(|| decoder.read_chunk_bytes(strip, buffer))))
+            })
+            .collect::<std::result::Result<Vec<_>, _>>()?;
+        let (height, rows) = (self.height as usize, self.chunking.rows() as usize);
+        let strip_bytes = Box::new(move |s: u32| row_bytes * rows.min(height - s as usize * rows));
+        let count = self.height.div_ceil(self.chunking.rows());
+        StripsAhead::start(decoders, first, count, strip_bytes)
+            .map_err(|e| format!("cannot start the strip decoders: {e}"))
     }
 }
 
