@@ -22,7 +22,7 @@ use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::pyramid::Filter;
-use crate::pyramid::cascade::{Batch, BatchSender, Cascade, CutTile, Span};
+use crate::pyramid::cascade::{Batch, BatchSender, Cascade, CutTile, Derived, Span};
 use crate::pyramid::cut::Padding;
 use crate::pyramid::filter::ExactFilter;
 use crate::pyramid::reduce::{Acc, Reducer};
@@ -98,6 +98,10 @@ pub struct Summary {
 /// Batches of tiles waiting for the encoder: cutting is much cheaper than encoding, so one
 /// waiting batch keeps the encoders busy, and each extra one would cost a row of tiles of memory.
 const QUEUE_BATCHES: usize = 1;
+
+/// Chunks of source rows, with the rows the pyramid's sums made of them, waiting for the
+/// cutting thread ([`read_ahead::CHUNKS_HANDED_ON`] counts them and the one it cuts).
+const HANDOFF_CHUNKS: usize = 1;
 
 /// Cuts `source` into the pyramid and writes every tile to `sink`. Runs the encoders on the
 /// current rayon pool; `progress` hears of every finished tile and can stop the run.
@@ -353,11 +357,75 @@ impl<T: Sample> Producer<'_, T> {
         };
         let row_len = if narrow { columns.end } else { self.layout.width as usize * channels };
         let rows = span.window_rows(&self.layout, 0);
-        read_ahead::rows(source, rows.end - rows.start, row_len, chunk_rows, &self.clock, |row: &[T]| {
+        let count = rows.end - rows.start;
+        if chunk_rows > 0 && cascade.has_levels_below() {
+            return self.two_threads(source, cascade, count, row_len, columns, chunk_rows);
+        }
+        read_ahead::rows(source, count, row_len, chunk_rows, &self.clock, |row: &[T]| {
             self.check_cancelled()?;
             cascade.push_source_row(&row[columns.clone()])
         })?;
         cascade.finish()
+    }
+
+    /// [`stripe`](Self::stripe)'s pass with the pyramid's arithmetic on this thread and its
+    /// cutting on another (issue 18: one thread doing both bound the run). Each chunk of source
+    /// rows goes from the sums to the cutter with the rows the sums made of it; the cutter
+    /// replays them in the order one thread would have, so the tiles and their order are the same.
+    fn two_threads<A: Acc>(
+        &self,
+        source: &mut dyn RowSource,
+        cascade: &mut Cascade<T, A>,
+        count: u64,
+        row_len: usize,
+        columns: std::ops::Range<usize>,
+        chunk_rows: u64,
+    ) -> Result<()>
+    where
+        T: Into<A>,
+    {
+        let (sums, cuts) = cascade.parts();
+        let (to_cutter, from_sums) = sync_channel::<(Option<read_ahead::Chunk<T>>, Derived<T>)>(HANDOFF_CHUNKS);
+        let (spare_tx, spare_rx) = std::sync::mpsc::channel::<Derived<T>>();
+        let clock = &self.clock;
+        let cut_columns = columns.clone();
+        std::thread::scope(|scope| {
+            let cutter = std::thread::Builder::new().name("vortex-cut".into()).spawn_scoped(scope, move || {
+                clock.time(Stage::Cutter, || -> Result<()> {
+                    while let Ok((chunk, derived)) = clock.time(Stage::CutWait, || from_sums.recv()) {
+                        let source_rows = chunk.iter().flat_map(|c| c.rows().chunks_exact(row_len));
+                        cuts.replay(source_rows.map(|row| &row[cut_columns.clone()]), &derived)?;
+                        let _ = spare_tx.send(derived);
+                    }
+                    Ok(())
+                })
+            });
+            let cutter = cutter.map_err(|e| TilerError::Options(format!("cannot start the cutting thread: {e}")))?;
+            let hand_on = move |chunk, derived| {
+                let sent = clock.time(Stage::Handoff, || to_cutter.send((chunk, derived)));
+                sent.map_err(|_| TilerError::Options("the cutting thread stopped".into()))
+            };
+            let summed =
+                read_ahead::chunks(source, count, row_len, chunk_rows, clock, |chunk: read_ahead::Chunk<T>| {
+                    let mut derived = spare_rx.try_recv().unwrap_or_default();
+                    derived.clear();
+                    for row in chunk.rows().chunks_exact(row_len) {
+                        self.check_cancelled()?;
+                        sums.push_source_row(&row[columns.clone()], &mut derived)?;
+                        derived.end_source_row();
+                    }
+                    hand_on(Some(chunk), derived)
+                })
+                .and_then(|()| {
+                    let mut derived = Derived::default();
+                    sums.finish(&mut derived);
+                    hand_on(None, derived)
+                });
+            drop(hand_on);
+            let cut = cutter.join().map_err(|_| TilerError::Options("the cutting thread panicked".into()))?;
+            // A cutter that failed made the sums' hand-over fail: its error is the one to report.
+            cut.and(summed)
+        })
     }
 
     /// The LODs above the cut level, from the exact sums of the first of them, assembled row

@@ -17,6 +17,9 @@ pub(crate) struct StageClock {
     read_wait: AtomicU64,
     producer: AtomicU64,
     producer_blocked: AtomicU64,
+    handoff: AtomicU64,
+    cutter: AtomicU64,
+    cut_wait: AtomicU64,
     encoders_idle: AtomicU64,
     encode: AtomicU64,
     store: AtomicU64,
@@ -31,8 +34,15 @@ pub(crate) enum Stage {
     ReadWait,
     /// The producer's whole run, waits included.
     Producer,
-    /// The producer waiting to hand a batch of tiles to the encoders.
+    /// The thread that cuts tiles waiting to hand a batch of them to the encoders.
     ProducerBlocked,
+    /// The producer waiting to hand a chunk of rows to the cutting thread, where the pyramid's
+    /// sums and its cutting run on two (`split.rs`).
+    Handoff,
+    /// The cutting thread's whole run, waits included.
+    Cutter,
+    /// The cutting thread waiting for the producer's next chunk of rows.
+    CutWait,
     /// The encoders' caller waiting for a batch from the producer.
     EncodersIdle,
     /// Encoding batches on the pool (for sinks that store as tiles finish, storing too).
@@ -53,6 +63,9 @@ impl StageClock {
             Stage::ReadWait => &self.read_wait,
             Stage::Producer => &self.producer,
             Stage::ProducerBlocked => &self.producer_blocked,
+            Stage::Handoff => &self.handoff,
+            Stage::Cutter => &self.cutter,
+            Stage::CutWait => &self.cut_wait,
             Stage::EncodersIdle => &self.encoders_idle,
             Stage::Encode => &self.encode,
             Stage::Store => &self.store,
@@ -75,10 +88,17 @@ impl StageClock {
     pub(crate) fn times(&self) -> StageTimes {
         let producer = self.get(Stage::Producer);
         let (read_wait, blocked) = (self.get(Stage::ReadWait), self.get(Stage::ProducerBlocked));
+        let cutter = self.get(Stage::Cutter);
+        // With a cutting thread, the producer's sends to the encoders are the cutter's.
+        let (producer_waits, cutter_waits) = match cutter.is_zero() {
+            true => (read_wait + blocked, Duration::ZERO),
+            false => (read_wait + self.get(Stage::Handoff), self.get(Stage::CutWait) + blocked),
+        };
         StageTimes {
             read: self.get(Stage::Read),
             read_wait,
-            pyramid: producer.saturating_sub(read_wait + blocked),
+            pyramid: producer.saturating_sub(producer_waits),
+            cut: cutter.saturating_sub(cutter_waits),
             producer_blocked: blocked,
             encoders_idle: self.get(Stage::EncodersIdle),
             encode: self.get(Stage::Encode),
@@ -88,7 +108,9 @@ impl StageClock {
 }
 
 /// Wall time per stage of a finished run. The source is read on a thread of its own (`read`);
-/// the producer's `read_wait + pyramid + producer_blocked` is its whole run; the encoders' caller
+/// the producer's `read_wait + pyramid + producer_blocked` is its whole run, or, where a
+/// thread of its own cuts the tiles, `pyramid` is the producer's sums and `cut` the cutting
+/// (the cutter then is the one that waits for the encoders); the encoders' caller
 /// spends `encoders_idle + encode` and the writer `store`. A run bound by reading shows a large `read_wait`; by
 /// the pyramid, a large `encoders_idle` and little `read_wait`; by the encoders, a large
 /// `producer_blocked` (and by the pack writer, a `store` longer than `encode`).
@@ -98,8 +120,11 @@ pub struct StageTimes {
     pub read: Duration,
     /// The producer waiting for source rows.
     pub read_wait: Duration,
-    /// Building the pyramid and cutting tiles (the producer's time not waiting).
+    /// Building the pyramid, and cutting tiles where `cut` is zero (the producer's time not
+    /// waiting).
     pub pyramid: Duration,
+    /// Cutting tiles on a thread of their own, beside the pyramid's sums (its time not waiting).
+    pub cut: Duration,
     /// The producer waiting for the encoders to take a batch.
     pub producer_blocked: Duration,
     /// The encoders waiting for the producer.

@@ -146,6 +146,7 @@ fn stages_json(t: &vortex_tiler::stages::StageTimes) -> serde_json::Value {
         "readSeconds": t.read.as_secs_f64(),
         "readWaitSeconds": t.read_wait.as_secs_f64(),
         "pyramidSeconds": t.pyramid.as_secs_f64(),
+        "cutSeconds": t.cut.as_secs_f64(),
         "producerBlockedSeconds": t.producer_blocked.as_secs_f64(),
         "encodersIdleSeconds": t.encoders_idle.as_secs_f64(),
         "encodeSeconds": t.encode.as_secs_f64(),

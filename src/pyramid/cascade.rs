@@ -6,6 +6,12 @@
 //! completes rows; whenever a level's band holds every row a row of tiles reads, those tiles
 //! are cut ([`cut`]) and sent as one [`Batch`] to the encoders. The cascade knows nothing of
 //! where rows come from or where tiles go: `split.rs` feeds it and drains the channel.
+//!
+//! The work has two halves that can run on two threads (issue 18): [`Sums`], the arithmetic
+//! (every level's sums, rounding, resampling), which records the rows it makes in order as
+//! [`Derived`] rows; and [`Cuts`], every level's band and the tiles cut from it, which replays
+//! them after the source rows that made them. The tiles, and the order they are sent in, are
+//! the same whether one thread runs both halves ([`Cascade`]) or two do.
 
 use std::ops::Range;
 use std::sync::Arc;
@@ -135,24 +141,6 @@ fn parents(pages: &Range<u32>, k: u32) -> Range<u32> {
     pages.start >> k..pages.end.div_ceil(1 << k)
 }
 
-/// One LOD in flight: its band, the tile rows cut so far and the reduction to the next LOD.
-struct Level<T, A> {
-    lod: u32,
-    extent: (u32, u32),
-    /// The rows of the level's window (all its columns but in a stripe).
-    band: Band<T>,
-    next_tile_row: u32,
-    /// Per page column cut: its index, and which band columns its texels come from.
-    x_runs: Vec<(u32, Vec<Run>)>,
-    /// One past the last page row of the level this span cuts.
-    end_tile_row: u32,
-    down: Option<Down<T, A>>,
-    /// The current row, rounded from exact sums.
-    row: Vec<T>,
-    /// The exact sums this level keeps of its pages (a shard's last level: its subtree roots).
-    roots: Option<RootSums<A>>,
-}
-
 /// The exact sums (not the rounded texels) of a rectangle of one level, row-major, as a shard
 /// hands its subtree roots to `merge` so that the levels above them can be made exactly.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -200,26 +188,261 @@ impl<A: Copy> RootSums<A> {
     }
 }
 
-/// What every level's cutting needs.
-struct Cutter<'a, T> {
-    layout: &'a Layout,
-    channels: usize,
-    padding: &'a Padding<T>,
-    out: &'a BatchSender<T>,
+/// The cutting side of one LOD: its band and the tiles cut from it so far.
+struct LevelCuts<T> {
+    lod: u32,
+    extent: (u32, u32),
+    /// The rows of the level's window (all its columns but in a stripe).
+    band: Band<T>,
+    next_tile_row: u32,
+    /// Per page column cut: its index, and which band columns its texels come from.
+    x_runs: Vec<(u32, Vec<Run>)>,
+    /// One past the last page row of the level this span cuts.
+    end_tile_row: u32,
 }
 
-/// Every LOD of one run, from LOD 0 (fed source rows) down to the coarsest; sends each row of
-/// tiles, as soon as it is cut, to the encoders.
-pub(crate) struct Cascade<T, A> {
+/// The arithmetic side of one LOD: how its rows are made and passed down.
+struct LevelSums<T, A> {
+    down: Option<Down<T, A>>,
+    /// The current row, rounded from exact sums.
+    row: Vec<T>,
+    /// The exact sums this level keeps of its pages (a shard's last level: its subtree roots).
+    roots: Option<RootSums<A>>,
+}
+
+/// Rows [`Sums`] made, in the order it made them, each with the index of its level in the
+/// span; marked after each source row, so that [`Cuts::replay`] can push them into the bands
+/// exactly when the one-thread cascade would have.
+#[derive(Default)]
+pub(crate) struct Derived<T> {
+    samples: Vec<T>,
+    /// Per row: its level and where its samples end.
+    rows: Vec<(usize, usize)>,
+    /// Per source row: how many of `rows` had been made once it was in.
+    after_source_row: Vec<usize>,
+}
+
+impl<T: Copy> Derived<T> {
+    fn push(&mut self, level: usize, row: &[T]) {
+        self.samples.extend_from_slice(row);
+        self.rows.push((level, self.samples.len()));
+    }
+
+    /// Marks the end of what one source row made.
+    pub fn end_source_row(&mut self) {
+        self.after_source_row.push(self.rows.len());
+    }
+
+    /// Empties it for reuse, keeping the memory.
+    pub fn clear(&mut self) {
+        self.samples.clear();
+        self.rows.clear();
+        self.after_source_row.clear();
+    }
+
+    /// Rows `range` of `rows`, with their levels.
+    fn rows(&self, range: Range<usize>) -> impl Iterator<Item = (usize, &[T])> {
+        range.map(|i| {
+            let start = if i == 0 { 0 } else { self.rows[i - 1].1 };
+            let (level, end) = self.rows[i];
+            (level, &self.samples[start..end])
+        })
+    }
+}
+
+/// Every level's band and the tiles cut from it, sent on as soon as they are cut.
+pub(crate) struct Cuts<T> {
     layout: Layout,
     channels: usize,
     padding: Padding<T>,
-    levels: Vec<Level<T, A>>,
+    levels: Vec<LevelCuts<T>>,
     out: BatchSender<T>,
+}
+
+impl<T: Sample> Cuts<T> {
+    /// Pushes the span's first level's `source_rows` (none when it is fed exact sums) and the
+    /// rows `derived` made of them, in the order they were made, cutting tiles as they complete.
+    pub fn replay<'r>(&mut self, source_rows: impl Iterator<Item = &'r [T]>, derived: &Derived<T>) -> Result<()> {
+        let mut done = 0;
+        for (i, row) in source_rows.enumerate() {
+            self.push(0, row)?;
+            let made = derived.after_source_row[i];
+            for (level, row) in derived.rows(done..made) {
+                self.push(level, row)?;
+            }
+            done = made;
+        }
+        // Rows made after the last source row: from exact sums, or by `finish`.
+        for (level, row) in derived.rows(done..derived.rows.len()) {
+            self.push(level, row)?;
+        }
+        Ok(())
+    }
+
+    /// Row `row` into level `level`'s band; cuts every tile row whose rows are all in it.
+    fn push(&mut self, level: usize, row: &[T]) -> Result<()> {
+        let Cuts { layout, channels, padding, levels, out } = self;
+        let l = &mut levels[level];
+        l.band.push(row);
+        let (_, height) = l.extent;
+        let virtual_height = layout.virtual_extent(l.lod).1;
+        while l.next_tile_row < l.end_tile_row && l.band.end() > cut::last_row_needed(layout, l.next_tile_row, height) {
+            let ty = l.next_tile_row;
+            let y_runs = cut::runs(layout, ty, height, virtual_height, *padding == Padding::Edge);
+            let mut tiles: Vec<CutTile<T>> = Vec::new();
+            let mut texels = Vec::with_capacity(layout.tile_texels() * *channels);
+            let per_batch = batch_tiles(layout, *channels * size_of::<T>());
+            for (tx, x_runs) in &l.x_runs {
+                if tiles.len() == per_batch {
+                    let full = std::mem::take(&mut tiles);
+                    out.send(Ok(Batch { lod: l.lod, tiles: full }))
+                        .map_err(|_| TilerError::Options("the encoder stopped".into()))?;
+                }
+                cut::cut_tile(&l.band, *channels, x_runs, &y_runs, padding, &mut texels);
+                // Neighbours with the same texels (most often one colour) share one encoding.
+                match tiles.last_mut() {
+                    Some(prev) if prev.texels == texels => prev.places.push((*tx, ty)),
+                    _ => {
+                        let full = std::mem::replace(&mut texels, Vec::with_capacity(layout.tile_texels() * *channels));
+                        tiles.push(CutTile { texels: full, places: vec![(*tx, ty)] })
+                    }
+                }
+            }
+            out.send(Ok(Batch { lod: l.lod, tiles })).map_err(|_| TilerError::Options("the encoder stopped".into()))?;
+            l.next_tile_row = ty + 1;
+            l.band.drop_before(cut::first_row_kept(layout, ty, height));
+        }
+        Ok(())
+    }
+}
+
+/// Every level's arithmetic: the sums (or resampling) that make each level's rows from the one
+/// above, recorded as [`Derived`] rows for [`Cuts`].
+pub(crate) struct Sums<T, A> {
+    channels: usize,
+    levels: Vec<LevelSums<T, A>>,
     /// What the exact cascade sums when it is not the samples themselves.
     exact: Option<ExactFilter>,
     /// A source row as `exact` sums it.
     prepared: Vec<u64>,
+    /// Image row of the first level that the next source row is.
+    next_row: u64,
+}
+
+impl<T: Sample + Into<A>, A: Acc> Sums<T, A> {
+    /// Takes the next source row (the first level is LOD 0) and makes what it completes below.
+    #[expect(clippy::expect_used, reason = "a cascade has at least one level")]
+    pub fn push_source_row(&mut self, row: &[T], derived: &mut Derived<T>) -> Result<()> {
+        let channels = self.channels;
+        let (first, rest) = self.levels.split_first_mut().expect("at least one level");
+        let y = self.next_row;
+        self.next_row += 1;
+        if let Some(roots) = &mut first.roots {
+            // LOD 0 is the last level: its sums are the source values, as the filter sums them.
+            let values: Vec<A> = match &self.exact {
+                None => row.iter().map(|&v| v.into()).collect(),
+                Some(filter) => {
+                    filter.prepare(row, &mut self.prepared);
+                    self.prepared.iter().map(|&v| A::from(v)).collect()
+                }
+            };
+            roots.take(y, &values, channels);
+        }
+        match &mut first.down {
+            Some(Down::Exact(reducer)) => {
+                let exact = match &self.exact {
+                    None => reducer.push(row),
+                    Some(filter) => filter.push_row(reducer, row, &mut self.prepared),
+                };
+                if let Some(exact) = exact {
+                    feed_exact(rest, 1, &exact, self.exact.as_ref(), channels, derived);
+                }
+            }
+            Some(Down::Resample(resampler)) => {
+                if let Some(rows) = resampler.push(row)? {
+                    feed_rows(rest, 1, rows, derived)?;
+                }
+            }
+            None => {}
+        }
+        Ok(())
+    }
+
+    /// Takes the next row of exact sums of the first level (a span that starts below LOD 0).
+    pub fn push_exact(&mut self, exact: &ExactRow<A>, derived: &mut Derived<T>) {
+        feed_exact(&mut self.levels, 0, exact, self.exact.as_ref(), self.channels, derived);
+    }
+
+    /// Completes the pyramid once the last source row is in: odd heights leave a half-built
+    /// row in each reducer, flushed top-down. (Resamplers finish with their last input row.)
+    #[expect(clippy::expect_used, reason = "k indexes the levels")]
+    pub fn finish(&mut self, derived: &mut Derived<T>) {
+        for k in 0..self.levels.len() {
+            let (this, rest) = self.levels[k..].split_first_mut().expect("level k exists");
+            if let Some(Down::Exact(reducer)) = &mut this.down
+                && let Some(exact) = reducer.finish()
+            {
+                feed_exact(rest, k + 1, &exact, self.exact.as_ref(), self.channels, derived);
+            }
+        }
+    }
+}
+
+/// Gives `levels[0]` (level `index` of the span) its next exact row and cascades into the
+/// levels below it.
+#[expect(clippy::expect_used, reason = "a level below the reducer exists")]
+fn feed_exact<T: Sample, A: Acc>(
+    levels: &mut [LevelSums<T, A>],
+    index: usize,
+    exact: &ExactRow<A>,
+    filter: Option<&ExactFilter>,
+    channels: usize,
+    derived: &mut Derived<T>,
+) {
+    let (this, rest) = levels.split_first_mut().expect("a level below the reducer");
+    match filter {
+        None => exact.round_into(&mut this.row),
+        Some(f) => f.finish(exact, &mut this.row),
+    }
+    derived.push(index, &this.row);
+    if let Some(roots) = &mut this.roots {
+        roots.take(exact.y, exact.sums, channels);
+    }
+    if let Some(Down::Exact(reducer)) = &mut this.down
+        && let Some(next) = reducer.push(exact.sums)
+    {
+        feed_exact(rest, index + 1, &next, filter, channels, derived);
+    }
+}
+
+/// Gives `levels[0]` (level `index`) its next rows (row-major) and resamples them into the
+/// levels below it.
+#[expect(clippy::expect_used, reason = "a level below the resampler exists")]
+fn feed_rows<T: Sample, A>(
+    levels: &mut [LevelSums<T, A>],
+    index: usize,
+    rows: &[T],
+    derived: &mut Derived<T>,
+) -> Result<()> {
+    let (this, rest) = levels.split_first_mut().expect("a level below the resampler");
+    for row in rows.chunks_exact(this.row.len()) {
+        derived.push(index, row);
+        if let Some(Down::Resample(resampler)) = &mut this.down
+            && let Some(next) = resampler.push(row)?
+        {
+            feed_rows(rest, index + 1, next, derived)?;
+        }
+    }
+    Ok(())
+}
+
+/// Every LOD of one pass, from its first level (fed source rows or exact sums) down to the
+/// coarsest, both halves on the calling thread; sends each row of tiles, as soon as it is cut,
+/// to the encoders. [`parts`](Self::parts) hands the halves to two threads instead.
+pub(crate) struct Cascade<T, A> {
+    sums: Sums<T, A>,
+    cuts: Cuts<T>,
+    derived: Derived<T>,
 }
 
 impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
@@ -236,44 +459,39 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
     ) -> Self {
         let edge = padding == Padding::Edge;
         let channels = pixels.channels.count();
-        let levels = span
-            .lods
-            .clone()
-            .map(|lod| {
-                let extent = layout.level_extent(lod);
-                let window = span.window(&layout, lod);
-                let width = (window.end - window.start) as usize;
-                let row_len = width * channels;
-                let virtual_width = layout.virtual_extent(lod).0;
-                let x_runs = span
-                    .columns_at(lod)
-                    .map(|t| (t, cut::shifted(cut::runs(&layout, t, extent.0, virtual_width, edge), window.start)))
-                    .collect();
-                let down = (lod + 1 < span.lods.end).then(|| {
-                    if filter.is_exact() {
-                        let (w, h) = (layout.width as u64, layout.height as u64);
-                        let next = span.window(&layout, lod + 1).start;
-                        let next_row = span.window_rows(&layout, lod + 1).start;
-                        Down::Exact(Reducer::window(w, h, lod, 1, next, width, channels).starting_at_row(next_row))
-                    } else {
-                        Down::Resample(Box::new(Resampler::new(filter, pixels, width, extent.1 as u64)))
-                    }
-                });
-                let first_row = span.window_rows(&layout, lod).start;
-                let tile_rows = span.rows_at(lod);
-                Level {
-                    lod,
-                    extent,
-                    band: Band::starting_at(first_row, row_len, (layout.tile_size + 1).min(extent.1) as usize),
-                    next_tile_row: tile_rows.start,
-                    end_tile_row: tile_rows.end,
-                    x_runs,
-                    down,
-                    row: vec![T::default(); row_len],
-                    roots: None,
+        let (mut cut_levels, mut sum_levels) = (Vec::new(), Vec::new());
+        for lod in span.lods.clone() {
+            let extent = layout.level_extent(lod);
+            let window = span.window(&layout, lod);
+            let width = (window.end - window.start) as usize;
+            let row_len = width * channels;
+            let virtual_width = layout.virtual_extent(lod).0;
+            let x_runs = span
+                .columns_at(lod)
+                .map(|t| (t, cut::shifted(cut::runs(&layout, t, extent.0, virtual_width, edge), window.start)))
+                .collect();
+            let down = (lod + 1 < span.lods.end).then(|| {
+                if filter.is_exact() {
+                    let (w, h) = (layout.width as u64, layout.height as u64);
+                    let next = span.window(&layout, lod + 1).start;
+                    let next_row = span.window_rows(&layout, lod + 1).start;
+                    Down::Exact(Reducer::window(w, h, lod, 1, next, width, channels).starting_at_row(next_row))
+                } else {
+                    Down::Resample(Box::new(Resampler::new(filter, pixels, width, extent.1 as u64)))
                 }
-            })
-            .collect();
+            });
+            let first_row = span.window_rows(&layout, lod).start;
+            let tile_rows = span.rows_at(lod);
+            cut_levels.push(LevelCuts {
+                lod,
+                extent,
+                band: Band::starting_at(first_row, row_len, (layout.tile_size + 1).min(extent.1) as usize),
+                next_tile_row: tile_rows.start,
+                end_tile_row: tile_rows.end,
+                x_runs,
+            });
+            sum_levels.push(LevelSums { down, row: vec![T::default(); row_len], roots: None });
+        }
         let exact = ExactFilter::new(filter, pixels);
         let first_width = span.window(&layout, span.lods.start);
         let prepared = if exact.is_some() {
@@ -281,171 +499,128 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
         } else {
             Vec::new()
         };
-        Cascade { layout, channels, padding, levels, out, exact, prepared }
+        let next_row = span.window_rows(&layout, span.lods.start).start;
+        Cascade {
+            sums: Sums { channels, levels: sum_levels, exact, prepared, next_row },
+            cuts: Cuts { layout, channels, padding, levels: cut_levels, out },
+            derived: Derived::default(),
+        }
     }
 
     /// Keeps the exact sums of the pages of the span's last LOD, its payload texels only (a
     /// shard's subtree roots), for [`take_root_sums`](Self::take_root_sums).
     #[expect(clippy::expect_used, reason = "a cascade has at least one level")]
     pub fn keep_root_sums(&mut self, span: &Span) {
-        let layout = &self.layout;
+        let layout = &self.cuts.layout;
+        let channels = self.sums.channels;
         let lod = span.lods.end - 1;
         let p = layout.payload() as u64;
         let (width, height) = layout.level_extent(lod);
         let (columns, rows) = (span.columns_at(lod), span.rows_at(lod));
         let columns = columns.start as u64 * p..(columns.end as u64 * p).min(width as u64);
-        let skip = (columns.start - span.window(layout, lod).start) as usize * self.channels;
+        let skip = (columns.start - span.window(layout, lod).start) as usize * channels;
         let rows = rows.start as u64 * p..(rows.end as u64 * p).min(height as u64);
-        let len = (columns.end - columns.start) * (rows.end - rows.start) * self.channels as u64;
-        let last = self.levels.last_mut().expect("a level");
+        let len = (columns.end - columns.start) * (rows.end - rows.start) * channels as u64;
+        let last = self.sums.levels.last_mut().expect("a level");
         last.roots = Some(RootSums { columns, rows, sums: Vec::with_capacity(len as usize), skip });
     }
 
     /// The sums kept by [`keep_root_sums`](Self::keep_root_sums), once [`finish`](Self::finish)ed.
     pub fn take_root_sums(&mut self) -> Option<RootSums<A>> {
-        self.levels.last_mut().and_then(|l| l.roots.take())
+        self.sums.levels.last_mut().and_then(|l| l.roots.take())
+    }
+
+    /// Whether the span has levels below its first: only then is there arithmetic to run
+    /// beside the cutting.
+    pub fn has_levels_below(&self) -> bool {
+        self.sums.levels.len() > 1
+    }
+
+    /// The two halves, for two threads: the sums' [`Derived`] rows go to the cuts' `replay`
+    /// after the source rows that made them.
+    pub fn parts(&mut self) -> (&mut Sums<T, A>, &mut Cuts<T>) {
+        (&mut self.sums, &mut self.cuts)
+    }
+
+    /// Takes the next source row: into LOD 0's band, and on down the levels below.
+    pub fn push_source_row(&mut self, row: &[T]) -> Result<()> {
+        self.derived.clear();
+        self.sums.push_source_row(row, &mut self.derived)?;
+        self.derived.end_source_row();
+        self.cuts.replay(std::iter::once(row), &self.derived)
     }
 
     /// Takes the next row of exact sums of the first LOD (a span that starts below LOD 0).
     pub fn push_exact(&mut self, exact: &ExactRow<A>) -> Result<()> {
-        let cutter = Cutter { layout: &self.layout, channels: self.channels, padding: &self.padding, out: &self.out };
-        Self::feed_exact(&mut self.levels, exact, &cutter, self.exact.as_ref())
+        self.derived.clear();
+        self.sums.push_exact(exact, &mut self.derived);
+        self.cuts.replay(std::iter::empty(), &self.derived)
     }
 
     /// Completes the pyramid once the last source row is in.
-    #[expect(clippy::expect_used, reason = "a cascade has one level per LOD and the callers index within them")]
     pub fn finish(&mut self) -> Result<()> {
-        // Odd heights leave a half-built row in each reducer: flush them top-down. (Resamplers
-        // finish with their last input row.)
-        let cutter = Cutter { layout: &self.layout, channels: self.channels, padding: &self.padding, out: &self.out };
-        for k in 0..self.levels.len() {
-            let (this, rest) = self.levels[k..].split_first_mut().expect("level k exists");
-            if let Some(Down::Exact(reducer)) = &mut this.down
-                && let Some(exact) = reducer.finish()
-            {
-                Self::feed_exact(rest, &exact, &cutter, self.exact.as_ref())?;
-            }
-        }
-        Ok(())
-    }
-
-    /// Takes the next source row: into LOD 0's band, and on down the levels below.
-    #[expect(clippy::expect_used, reason = "a cascade has one level per LOD and the callers index within them")]
-    pub fn push_source_row(&mut self, row: &[T]) -> Result<()> {
-        let cutter = Cutter { layout: &self.layout, channels: self.channels, padding: &self.padding, out: &self.out };
-        let (first, rest) = self.levels.split_first_mut().expect("at least one level");
-        first.band.push(row);
-        first.cut_ready(&cutter)?;
-        if let Some(roots) = &mut first.roots {
-            // LOD 0 is the last level: its sums are the source values, as the filter sums them.
-            let y = first.band.end() - 1;
-            let values: Vec<A> = match &self.exact {
-                None => row.iter().map(|&v| v.into()).collect(),
-                Some(filter) => {
-                    filter.prepare(row, &mut self.prepared);
-                    self.prepared.iter().map(|&v| A::from(v)).collect()
-                }
-            };
-            roots.take(y, &values, self.channels);
-        }
-        match &mut first.down {
-            Some(Down::Exact(reducer)) => {
-                let exact = match &self.exact {
-                    None => reducer.push(row),
-                    Some(filter) => filter.push_row(reducer, row, &mut self.prepared),
-                };
-                if let Some(exact) = exact {
-                    Self::feed_exact(rest, &exact, &cutter, self.exact.as_ref())?;
-                }
-            }
-            Some(Down::Resample(resampler)) => {
-                if let Some(rows) = resampler.push(row)? {
-                    Self::feed_rows(rest, rows, &cutter)?;
-                }
-            }
-            None => {}
-        }
-        Ok(())
-    }
-
-    /// Gives `levels[0]` its next exact row and cascades into the levels below it.
-    #[expect(clippy::expect_used, reason = "a cascade has one level per LOD and the callers index within them")]
-    fn feed_exact(
-        levels: &mut [Level<T, A>],
-        exact: &ExactRow<A>,
-        cutter: &Cutter<T>,
-        filter: Option<&ExactFilter>,
-    ) -> Result<()> {
-        let (this, rest) = levels.split_first_mut().expect("a level below the reducer");
-        match filter {
-            None => exact.round_into(&mut this.row),
-            Some(f) => f.finish(exact, &mut this.row),
-        }
-        this.band.push(&this.row);
-        this.cut_ready(cutter)?;
-        if let Some(roots) = &mut this.roots {
-            roots.take(exact.y, exact.sums, cutter.channels);
-        }
-        if let Some(Down::Exact(reducer)) = &mut this.down
-            && let Some(next) = reducer.push(exact.sums)
-        {
-            Self::feed_exact(rest, &next, cutter, filter)?;
-        }
-        Ok(())
-    }
-
-    /// Gives `levels[0]` its next rows (row-major) and resamples them into the levels below it.
-    #[expect(clippy::expect_used, reason = "a cascade has one level per LOD and the callers index within them")]
-    fn feed_rows(levels: &mut [Level<T, A>], rows: &[T], cutter: &Cutter<T>) -> Result<()> {
-        let (this, rest) = levels.split_first_mut().expect("a level below the resampler");
-        for row in rows.chunks_exact(this.row.len()) {
-            this.band.push(row);
-            this.cut_ready(cutter)?;
-            if let Some(Down::Resample(resampler)) = &mut this.down
-                && let Some(next) = resampler.push(row)?
-            {
-                Self::feed_rows(rest, next, cutter)?;
-            }
-        }
-        Ok(())
+        self.derived.clear();
+        self.sums.finish(&mut self.derived);
+        self.cuts.replay(std::iter::empty(), &self.derived)
     }
 }
 
-impl<T: Sample, A> Level<T, A> {
-    /// Cuts every tile row whose rows are all in the band, then drops rows no longer needed.
-    fn cut_ready(&mut self, cutter: &Cutter<T>) -> Result<()> {
-        let Cutter { layout, channels, padding, out } = *cutter;
-        let (_, height) = self.extent;
-        let virtual_height = layout.virtual_extent(self.lod).1;
-        while self.next_tile_row < self.end_tile_row
-            && self.band.end() > cut::last_row_needed(layout, self.next_tile_row, height)
-        {
-            let ty = self.next_tile_row;
-            let y_runs = cut::runs(layout, ty, height, virtual_height, *padding == Padding::Edge);
-            let mut tiles: Vec<CutTile<T>> = Vec::new();
-            let mut texels = Vec::with_capacity(layout.tile_texels() * channels);
-            let per_batch = batch_tiles(layout, channels * size_of::<T>());
-            for (tx, x_runs) in &self.x_runs {
-                if tiles.len() == per_batch {
-                    let full = std::mem::take(&mut tiles);
-                    out.send(Ok(Batch { lod: self.lod, tiles: full }))
-                        .map_err(|_| TilerError::Options("the encoder stopped".into()))?;
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pixel::{Channels, Depth};
+    use std::sync::mpsc::sync_channel;
+
+    /// Every batch a pass sends: its LOD, and each tile's places and texels.
+    type Sent = Vec<(u32, Vec<(Vec<(u32, u32)>, Vec<u8>)>)>;
+
+    /// A 61 x 45 RGBA image (odd sizes, partial footprints) in 8-texel tiles with a border of 1:
+    /// 4 LODs, several tile rows of each cut after the same source row.
+    fn pass(filter: Filter, run: impl FnOnce(&mut Cascade<u8, u64>, &[Vec<u8>])) -> Sent {
+        let (w, h) = (61u32, 45u32);
+        let layout = Layout::new(w as u64, h as u64, 8, 1).unwrap();
+        let pixels = PixelLayout::new(Channels::Rgba, Depth::U8);
+        let rows: Vec<Vec<u8>> =
+            (0..h).map(|y| (0..w * 4).map(|i| ((i * 37 + y * 101) % 256) as u8).collect()).collect();
+        let (tx, rx) = sync_channel(usize::MAX >> 4);
+        let out = BatchSender::new(tx, StageClock::new());
+        let mut cascade = Cascade::new(layout, &Span::whole(&layout), pixels, filter, Padding::Edge, out);
+        run(&mut cascade, &rows);
+        drop(cascade);
+        rx.into_iter()
+            .map(|b| {
+                let b = b.unwrap();
+                (b.lod, b.tiles.into_iter().map(|t| (t.places, t.texels)).collect())
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_halves_on_their_own_send_what_the_whole_cascade_sends() {
+        for filter in [Filter::LinearPremultiplied, Filter::Box, Filter::Lanczos3] {
+            let one_thread = pass(filter, |cascade, rows| {
+                for row in rows {
+                    cascade.push_source_row(row).unwrap();
                 }
-                cut::cut_tile(&self.band, channels, x_runs, &y_runs, padding, &mut texels);
-                // Neighbours with the same texels (most often one colour) share one encoding.
-                match tiles.last_mut() {
-                    Some(prev) if prev.texels == texels => prev.places.push((*tx, ty)),
-                    _ => {
-                        let full = std::mem::replace(&mut texels, Vec::with_capacity(layout.tile_texels() * channels));
-                        tiles.push(CutTile { texels: full, places: vec![(*tx, ty)] })
+                cascade.finish().unwrap();
+            });
+            assert!(one_thread.iter().map(|(lod, _)| *lod).max() == Some(3), "every LOD is cut");
+            // The sums run ahead by chunks of 7 rows; the cuts replay each chunk afterwards.
+            let halves = pass(filter, |cascade, rows| {
+                let (sums, cuts) = cascade.parts();
+                for chunk in rows.chunks(7) {
+                    let mut derived = Derived::default();
+                    for row in chunk {
+                        sums.push_source_row(row, &mut derived).unwrap();
+                        derived.end_source_row();
                     }
+                    cuts.replay(chunk.iter().map(Vec::as_slice), &derived).unwrap();
                 }
-            }
-            out.send(Ok(Batch { lod: self.lod, tiles }))
-                .map_err(|_| TilerError::Options("the encoder stopped".into()))?;
-            self.next_tile_row = ty + 1;
-            self.band.drop_before(cut::first_row_kept(layout, ty, height));
+                let mut derived = Derived::default();
+                sums.finish(&mut derived);
+                cuts.replay(std::iter::empty(), &derived).unwrap();
+            });
+            assert!(one_thread == halves, "{filter}: the same batches in the same order");
         }
-        Ok(())
     }
 }

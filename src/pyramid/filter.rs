@@ -244,9 +244,7 @@ impl ExactFilter {
     /// Rounds an exact row into samples.
     pub fn finish<T: Sample, A: Acc>(&self, exact: &ExactRow<'_, A>, out: &mut [T]) {
         if let (Some(t), None) = (self.table, self.alpha) {
-            for (o, v) in out.iter_mut().zip(exact.means()) {
-                *o = T::from_u16(t.encode(v));
-            }
+            exact.map_means(out, |v| T::from_u16(t.encode(v)));
             return;
         }
         let c = self.channels;

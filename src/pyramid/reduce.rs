@@ -213,21 +213,25 @@ impl<A: Acc> Reducer<A> {
 impl<A: Acc> ExactRow<'_, A> {
     /// The row's texels rounded to the nearest sample value (halves round up): the `box` filter.
     pub fn round_into<T: Sample>(&self, out: &mut [T]) {
-        debug_assert_eq!(out.len(), self.sums.len());
-        for (o, v) in out.iter_mut().zip(self.means()) {
-            *o = T::from_u64(v);
-        }
+        self.map_means(out, T::from_u64);
     }
 
-    /// Every sum divided by its texel's pixel count, rounded half up, in row order: a shift
-    /// for the leading texels with complete footprints, a division for the rest.
-    pub fn means(&self) -> impl Iterator<Item = u64> + '_ {
+    /// `out[i] = f(mean i)`: every sum divided by its texel's pixel count, rounded half up, in
+    /// row order; a shift for the leading texels with complete footprints, a division for the
+    /// rest. Two plain loops, not one iterator over both, so that each compiles to a tight one
+    /// (this is most of a level's cost: issue 18).
+    pub fn map_means<T>(&self, out: &mut [T], f: impl Fn(u64) -> T) {
+        debug_assert_eq!(out.len(), self.sums.len());
         let c = self.channels;
         let (head, tail) = self.sums.split_at(self.full_cols * c);
+        let (out_head, out_tail) = out.split_at_mut(self.full_cols * c);
         let shift = (self.footprint * self.footprint).trailing_zeros();
-        let head = head.iter().map(move |s| s.round_shift(shift));
-        let tail = tail.iter().enumerate().map(move |(i, s)| s.round_div(self.weight(self.full_cols + i / c)));
-        head.chain(tail)
+        for (o, s) in out_head.iter_mut().zip(head) {
+            *o = f(s.round_shift(shift));
+        }
+        for (i, (o, s)) in out_tail.iter_mut().zip(tail).enumerate() {
+            *o = f(s.round_div(self.weight(self.full_cols + i / c)));
+        }
     }
 
     /// Real source pixels under texel `x`.

@@ -4,9 +4,11 @@
 //! chunks of about [`CHUNK_BYTES`], a few chunks ahead of the caller, and hands them over in
 //! order: the rows, and so the output, are the same as read on the caller's thread, and the
 //! source is left at the same position. With chunks of 0 rows it reads on the caller's thread
-//! (runs short of memory: striped ones).
+//! (runs short of memory: striped ones). [`chunks`] hands the chunks themselves over, for a
+//! caller that passes them on to another thread; a [`Chunk`] goes back to the reader when it is
+//! dropped, wherever that is.
 
-use std::sync::mpsc::{channel, sync_channel};
+use std::sync::mpsc::{Sender, channel, sync_channel};
 
 use crate::error::{Result, TilerError};
 use crate::source::RowSource;
@@ -20,14 +22,43 @@ pub const CHUNK_BYTES: u64 = 1 << 20;
 /// holds at most `CHUNKS_AHEAD + 2` chunks.
 const CHUNKS_AHEAD: usize = 2;
 
+/// Chunks a caller of [`chunks`] may hold beyond the one it is given: the pyramid's sums hand
+/// each chunk on to the cutting thread, which holds one and has one queued
+/// (`split::HANDOFF_CHUNKS`).
+pub const CHUNKS_HANDED_ON: u64 = 2;
+
 /// Rows per chunk of `row_bytes`-byte rows: as many as fit [`CHUNK_BYTES`], at least one.
 pub fn rows_per_chunk(row_bytes: u64) -> u64 {
     (CHUNK_BYTES / row_bytes.max(1)).max(1)
 }
 
-/// Bytes the read-ahead holds at most for rows of `row_bytes` bytes.
+/// Bytes the read-ahead holds at most for rows of `row_bytes` bytes, the chunks handed on
+/// included, and what the pyramid's sums make of each of those (a third of a chunk at most:
+/// a quarter for the next LOD, a sixteenth for the one after, ...).
 pub fn bytes(row_bytes: u64) -> u64 {
-    (CHUNKS_AHEAD as u64 + 2).saturating_mul(rows_per_chunk(row_bytes).saturating_mul(row_bytes))
+    let chunks = CHUNKS_AHEAD as u64 + 2 + CHUNKS_HANDED_ON;
+    let chunk = rows_per_chunk(row_bytes).saturating_mul(row_bytes);
+    chunks.saturating_mul(chunk).saturating_add(CHUNKS_HANDED_ON.saturating_mul(chunk / 3 + row_bytes))
+}
+
+/// Rows read ahead, in order; dropping it gives its memory back to the reader.
+pub(crate) struct Chunk<T> {
+    rows: Vec<T>,
+    back: Sender<Vec<T>>,
+}
+
+impl<T> Chunk<T> {
+    /// The chunk's rows, one after the other.
+    pub fn rows(&self) -> &[T] {
+        &self.rows
+    }
+}
+
+impl<T> Drop for Chunk<T> {
+    fn drop(&mut self) {
+        // The reader may be gone already: then nobody needs the buffer.
+        let _ = self.back.send(std::mem::take(&mut self.rows));
+    }
 }
 
 /// Reads the next `count` rows of `row_len` samples from `source` on another thread, in chunks
@@ -53,7 +84,21 @@ pub(crate) fn rows<T: bytemuck::Pod + Send>(
         }
         return Ok(());
     }
-    let per_chunk = chunk_rows;
+    chunks(source, count, row_len, chunk_rows, clock, |chunk: Chunk<T>| {
+        chunk.rows().chunks_exact(row_len).try_for_each(&mut each)
+    })
+}
+
+/// As [`rows`] with chunks of `chunk_rows > 0` rows, handing `each` every chunk whole.
+pub(crate) fn chunks<T: bytemuck::Pod + Send>(
+    source: &mut dyn RowSource,
+    count: u64,
+    row_len: usize,
+    chunk_rows: u64,
+    clock: &StageClock,
+    mut each: impl FnMut(Chunk<T>) -> Result<()>,
+) -> Result<()> {
+    let per_chunk = chunk_rows.max(1);
     let (full_tx, full_rx) = sync_channel::<Result<Vec<T>>>(CHUNKS_AHEAD);
     let (empty_tx, empty_rx) = channel::<Vec<T>>();
     std::thread::scope(|scope| {
@@ -79,12 +124,7 @@ pub(crate) fn rows<T: bytemuck::Pod + Send>(
             reader.map_err(|e| TilerError::Options(format!("cannot start the source's reading thread: {e}")))?;
         let mut used = Ok(());
         while let Ok(chunk) = clock.time(Stage::ReadWait, || full_rx.recv()) {
-            used = chunk.and_then(|chunk| {
-                chunk.chunks_exact(row_len).try_for_each(&mut each)?;
-                // The reader may be gone already: then nobody needs the buffer.
-                let _ = empty_tx.send(chunk);
-                Ok(())
-            });
+            used = chunk.and_then(|rows| each(Chunk { rows, back: empty_tx.clone() }));
             if used.is_err() {
                 break;
             }
@@ -182,6 +222,6 @@ mod tests {
         .unwrap();
         assert_eq!(rows_seen, [vec![0x0101u16; 6], vec![0x0202; 6]]);
         assert_eq!(rows_per_chunk(12), CHUNK_BYTES / 12);
-        assert_eq!(bytes(3 << 20), 4 * (3 << 20), "one row a chunk when a row is over a chunk");
+        assert_eq!(bytes(3 << 20), 6 * (3 << 20) + 2 * (4 << 20), "one row a chunk when a row is over a chunk");
     }
 }
