@@ -582,7 +582,7 @@ mod tests {
         let pixels = PixelLayout::new(Channels::Rgba, Depth::U8);
         let rows: Vec<Vec<u8>> =
             (0..h).map(|y| (0..w * 4).map(|i| ((i * 37 + y * 101) % 256) as u8).collect()).collect();
-        let (tx, rx) = sync_channel(usize::MAX >> 4);
+        let (tx, rx) = sync_channel(1000); // more than the batches of this image
         let out = BatchSender::new(tx, StageClock::new());
         let mut cascade = Cascade::new(layout, &Span::whole(&layout), pixels, filter, Padding::Edge, out);
         run(&mut cascade, &rows);
