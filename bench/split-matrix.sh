@@ -5,14 +5,15 @@
 # The 16384² RGB image of bench/split-vs-vips.sh (src16k.tif, an uncompressed strip BigTIFF;
 # generated if missing) is saved by Debian's vips as six more sources: a tiled TIFF (256²
 # tiles), Deflate and LZW strip TIFFs, a PNG (zlib level 1), a baseline JPEG (Q90) and a PPM.
-# Each source is cut by `split --pack --tile-size 256 --border 0` (default filter) with each
-# codec: jpeg (Q85), png (fast), raw, zstd, bc1, bc7 (ultra-fast). Per run, from /usr/bin/time
+# A seventh, `tiles`, is the same image as 4096 256-texel JPEG tiles (Q90, a directory), which
+# `convert` reads instead of `split`. Each source is cut by `split --pack --tile-size 256
+# --border 0` (default filter) with each codec: jpeg (Q85), png (fast), raw, zstd, bc1, bc7 (ultra-fast). Per run, from /usr/bin/time
 # -v: wall time, CPU time (user + sys) and their ratio (2.0 would be both cores busy the whole
 # run), throughput in source megapixels per second and peak memory; from `split --json`'s
-# `stages`: the producer thread's time reading the source and building the pyramid, the time it
-# waited for the encoders and the time they waited for it. A run whose encoders waited longer
-# than the producer did is bound by the producer (decode, pyramid, cutting: one thread), the
-# other way round by the encoders. As a peer, libvips 8.18 (pyvips-binary from PyPI, in
+# `stages`: the time reading the source, the producer's pyramid sums and the cutting thread's
+# cutting, the time the cutter waited for the encoders and the time they waited for it. A run
+# whose encoders waited longer than the cutter did is bound by the busiest of the serial threads
+# (reading, pyramid, cutting), the other way round by the encoders. As a peer, libvips 8.18 (pyvips-binary from PyPI, in
 # bench/work/venv) writes each source as 256-texel JPEG tiles (Q85) into a .zip, the nearest it
 # has to one pack file. RUNS runs per cell (default 1), alternating tools; medians.
 #
@@ -24,7 +25,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source bench/lib.sh
 RUNS=${RUNS:-1}
-SOURCES=${SOURCES:-strip tiled deflate lzw png jpeg ppm}
+SOURCES=${SOURCES:-strip tiled deflate lzw png jpeg ppm tiles}
 CODECS=${CODECS:-jpeg png raw zstd bc1 bc7}
 bench_setup
 SRC=$WORK/src16k.tif
@@ -49,6 +50,11 @@ source_file() {
     png) f=$M/src.png; [ -s "$f" ] || vips pngsave "$SRC" "$f" --compression 1 ;;
     jpeg) f=$M/src.jpg; [ -s "$f" ] || vips jpegsave "$SRC" "$f" --Q 90 ;;
     ppm) f=$M/src.ppm; [ -s "$f" ] || vips ppmsave "$SRC" "$f" ;;
+    tiles)
+      f=$M/tiles256
+      [ -s "$f/info.json" ] || "$WORK/bin/vortex-tiler" split "$SRC" -o "$f" --tile-size 256 --border 0 --codec jpeg \
+        --quality 90 --filter box -q
+      ;;
     *) echo "error: unknown source $1" >&2; exit 1 ;;
   esac
   echo "$f"
@@ -94,15 +100,17 @@ run() {
 for name in $SOURCES_RUN; do
   log "source $name"
   file=$(source_file "$name")
-  cat "$file" >/dev/null # in the page cache: this measures decoding, not the disk
+  find "$file" -type f -exec cat {} + >/dev/null # in the page cache: this measures decoding, not the disk
+  command=split
+  [ "$name" = tiles ] && command=convert
   for round in $(seq "$RUNS"); do
     for codec in $CODECS; do
       # shellcheck disable=SC2046 # codec_args is word-split on purpose
-      run "$name $codec" "$WORK/bin/vortex-tiler" split "$file" --pack "$M/out.vtpk" --force --tile-size 256 --border 0 \
+      run "$name $codec" "$WORK/bin/vortex-tiler" "$command" "$file" --pack "$M/out.vtpk" --force --tile-size 256 --border 0 \
         $(codec_args "$codec") --json
       rm -f "$M/out.vtpk"
     done
-    if [ -n "$PY" ]; then
+    if [ -n "$PY" ] && [ "$name" != tiles ]; then
       rm -rf "$M/peer.zip"
       run "$name peer" "$PY" -c "$PEER" "$file" "$M/peer.zip"
       rm -f "$M/peer.zip"
@@ -126,8 +134,8 @@ print(f"{datetime.date.today()}, {os.cpu_count()} cores, vortex-tiler {rev}"
       + (f", peer libvips {peer_version} (pyvips-binary) writing a .zip of 256-texel JPEG tiles" if peer_version else "")
       + "; `split --pack --tile-size 256 --border 0`, default filter; the median of the runs per cell.")
 print()
-print("| source | codec | wall | CPU | CPU / wall | Mpx/s | peak RSS | read | waits for rows | pyramid | waits for encoders | encoders wait | encode | store | bound by | vs peer |")
-print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|")
+print("| source | codec | wall | CPU | CPU / wall | Mpx/s | peak RSS | read | waits for rows | pyramid | cut | waits for encoders | encoders wait | encode | store | bound by | vs peer |")
+print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|")
 for s in sources:
     peer = median(f"{s} peer") if f"{s} peer" in runs else None
     for c in codecs:
@@ -136,23 +144,25 @@ for s in sources:
         if st["encodersIdleSeconds"] <= st["producerBlockedSeconds"]:
             bound = "storing" if st["storeSeconds"] > st["encodeSeconds"] else "encoders"
         else:
-            bound = "reading" if st.get("readWaitSeconds", 0) > st["pyramidSeconds"] else "pyramid"
+            serial = {"reading": st["readSeconds"], "pyramid": st["pyramidSeconds"], "cutting": st.get("cutSeconds", 0)}
+            bound = max(serial, key=serial.get)
         vs = f"{peer[0] / wall:.2f}x" if peer and c == "jpeg" else ""
         print(f"| {s} | {c} | {wall:.2f} s | {cpu:.2f} s | {cpu / wall:.2f} | {mpx / wall:.0f} | {rss / 1024:.0f} MiB "
-              f"| {st['readSeconds']:.2f} | {st.get('readWaitSeconds', 0):.2f} | {st['pyramidSeconds']:.2f} | {st['producerBlockedSeconds']:.2f} "
+              f"| {st['readSeconds']:.2f} | {st.get('readWaitSeconds', 0):.2f} | {st['pyramidSeconds']:.2f} | {st.get('cutSeconds', 0):.2f} | {st['producerBlockedSeconds']:.2f} "
               f"| {st['encodersIdleSeconds']:.2f} | {st['encodeSeconds']:.2f} | {st['storeSeconds']:.2f} | {bound} | {vs} |")
     if peer:
         print(f"| {s} | peer: libvips .zip (JPEG) | {peer[0]:.2f} s | {peer[1]:.2f} s | {peer[1] / peer[0]:.2f} | {mpx / peer[0]:.0f} "
-              f"| {peer[2] / 1024:.0f} MiB | | | | | | | | | |")
+              f"| {peer[2] / 1024:.0f} MiB | | | | | | | | | | |")
 PY
 cat "$REPORT"
 splice split-matrix "$REPORT" "## Every source with every codec: how busy split keeps the cores (\`bench/split-matrix.sh\`)
 
 Stage times are seconds of wall time from \`split --json\`'s \`stages\`: a thread reads and
-decodes the source (*read*); the producer thread waits for its rows (*waits for rows*), builds the
-pyramid and cuts tiles (*pyramid*), and waits when the encoders have not taken the last batch
-(*waits for encoders*); the encoders wait when it has none ready (*encoders wait*); *store* is the
-pack writer's ordered part on one thread. *Bound by*: the encoders (or storing, where it took longer
-than encoding) where the producer waited for them longer than they for it, else reading or the
-pyramid, whichever the producer spent more on.
+decodes the source (*read*); the producer thread waits for its rows (*waits for rows*) and makes
+the pyramid's sums (*pyramid*); a cutting thread cuts tiles out of the levels (*cut*) and waits
+when the encoders have not taken the last batch (*waits for encoders*); the encoders wait when it
+has none ready (*encoders wait*); *store* is the pack writer's ordered part on one thread. *Bound
+by*: the encoders (or storing, where it took longer than encoding) where the cutter waited for
+them longer than they for it, else the busiest of reading, the pyramid and cutting. The
+\`tiles\` source is 4096 JPEG tiles, read by \`convert\`.
 *vs peer*: libvips' wall time over ours, JPEG only."

@@ -21,12 +21,12 @@
 
 pub mod background;
 pub mod codec;
+mod encoders;
 pub mod error;
 pub mod layout;
 pub mod limits;
 pub mod output;
 pub mod pixel;
-pub mod priority;
 pub mod pyramid;
 pub mod repack;
 pub mod serve;

@@ -9,20 +9,17 @@
 //! tiles. Output bytes do not depend on the thread count. This file is only that
 //! orchestration; the stages live in their modules.
 
-use std::borrow::Cow;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, sync_channel};
-
-use rayon::prelude::*;
+use std::sync::mpsc::sync_channel;
 
 use crate::background::Background;
 use crate::codec::{Codec, TileEncoder};
+use crate::encoders;
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::pyramid::Filter;
-use crate::pyramid::cascade::{Batch, BatchSender, Cascade, CutTile, Derived, Span};
+use crate::pyramid::cascade::{Batch, BatchSender, Cascade, Derived, Span};
 use crate::pyramid::cut::Padding;
 use crate::pyramid::filter::ExactFilter;
 use crate::pyramid::reduce::{Acc, Reducer};
@@ -32,7 +29,6 @@ use crate::shard::sums::{self, EncodedRoots};
 use crate::sink::TileSink;
 use crate::source::{ImageHeader, RowSource, read_ahead};
 use crate::stages::{Stage, StageClock, StageTimes};
-use crate::viewer::Crop;
 
 /// How to cut and store the pyramid.
 #[derive(Clone, Debug)]
@@ -104,7 +100,9 @@ const QUEUE_BATCHES: usize = 1;
 const HANDOFF_CHUNKS: usize = 1;
 
 /// Cuts `source` into the pyramid and writes every tile to `sink`. Runs the encoders on the
-/// current rayon pool; `progress` hears of every finished tile and can stop the run.
+/// current rayon pool, from the calling thread, which waits there for tiles: call it from
+/// outside the pool (inside, it would keep a worker waiting); `progress` hears of every
+/// finished tile and can stop the run.
 pub fn split(
     source: Box<dyn RowSource>,
     sink: &dyn TileSink,
@@ -211,8 +209,7 @@ fn run<T: Sample>(
     let (tx, rx) = sync_channel::<Result<Batch<T>>>(QUEUE_BATCHES);
     let clock = StageClock::new();
     let tx = BatchSender::new(tx, Arc::clone(&clock));
-    let encoded = AtomicU64::new(0);
-    let tiles = AtomicU64::new(0);
+    let counts = encoders::Counts::default();
     let roots = std::thread::scope(|scope| {
         let producer_clock = Arc::clone(&clock);
         let producer = scope.spawn(move || {
@@ -235,7 +232,7 @@ fn run<T: Sample>(
                 Vec::new()
             })
         });
-        let consumed = consume(rx, &encoder, sink, &encoded, &tiles, progress, &clock);
+        let consumed = encoders::consume(rx, &encoder, sink, &counts, progress, &clock);
         // Dropping the receiver (on error) makes the producer's next send fail, so it stops.
         let produced = producer.join().map_err(|_| TilerError::Options("the tiling thread panicked".into()))?;
         consumed.map(|()| produced)
@@ -244,8 +241,8 @@ fn run<T: Sample>(
         layout,
         source: src_layout,
         stored: encoder.stored_layout(),
-        tiles: tiles.into_inner(),
-        encoded: encoded.into_inner(),
+        tiles: counts.tiles.into_inner(),
+        encoded: counts.encoded.into_inner(),
         bytes: sink.bytes_written(),
         stripes,
         passes: pass_count,
@@ -489,168 +486,4 @@ impl<T: Sample> Producer<'_, T> {
             false => Ok(()),
         }
     }
-}
-
-/// Encodes and writes batches as they arrive. Small batches (coarse levels, narrow images) are
-/// merged with the ones waiting behind them so that every thread has work. A sink that takes
-/// tiles in any order stores them from the encoders; an ordered one (a pack) gets them in the
-/// producer's order from a writer thread of its own, which stores one batch while the pool
-/// encodes the next.
-fn consume<T: Sample>(
-    rx: Receiver<Result<Batch<T>>>,
-    encoder: &TileEncoder<T>,
-    sink: &dyn TileSink,
-    encoded: &AtomicU64,
-    tiles: &AtomicU64,
-    progress: &dyn Progress,
-    clock: &StageClock,
-) -> Result<()> {
-    let prepare_counted = |job: &Job<T>| -> Result<Stored> {
-        let stored = prepare(encoder, sink, job)?;
-        if matches!(stored, Stored::Encoded(_)) {
-            encoded.fetch_add(1, Ordering::Relaxed);
-        }
-        Ok(stored)
-    };
-    let store = |lod: u32, places: &[(u32, u32)], stored: &Stored| store(sink, lod, places, stored, tiles, progress);
-    if !sink.ordered() {
-        return each_batch(&rx, sink, progress, clock, |jobs| {
-            let encode_and_store = |job: &Job<T>| store(job.lod, &job.places, &prepare_counted(job)?);
-            clock.time(Stage::Encode, || jobs.par_iter().try_for_each(encode_and_store))
-        });
-    }
-    // Encoded in parallel, stored in the producer's (deterministic) order. A rendezvous channel:
-    // one batch is stored while the next is encoded, never more.
-    let (to_writer, batches) = sync_channel::<Vec<Result<Ready>>>(0);
-    std::thread::scope(|scope| {
-        let writer = scope.spawn(move || -> Result<()> {
-            for batch in batches {
-                let store_ready = |ready: Result<Ready>| ready.and_then(|r| store(r.lod, &r.places, &r.stored));
-                clock.time(Stage::Store, || batch.into_iter().try_for_each(store_ready))?;
-            }
-            Ok(())
-        });
-        let encoding = each_batch(&rx, sink, progress, clock, |jobs| {
-            let ready = |job: &Job<T>| {
-                prepare_counted(job).map(|stored| Ready { lod: job.lod, places: job.places.to_vec(), stored })
-            };
-            let prepared: Vec<Result<Ready>> = clock.time(Stage::Encode, || jobs.par_iter().map(ready).collect());
-            // Only a writer that failed hangs up: its error is the one to report.
-            to_writer.send(prepared).map_err(|_| TilerError::Options("the tile writer stopped".into()))
-        });
-        drop(to_writer);
-        let written = writer.join().map_err(|_| TilerError::Options("the tile writer panicked".into()))?;
-        written.and(encoding)
-    })
-}
-
-/// Receives batches until the producer is done, merging small ones, and hands each lot's jobs
-/// to `encode`.
-fn each_batch<T: Sample>(
-    rx: &Receiver<Result<Batch<T>>>,
-    sink: &dyn TileSink,
-    progress: &dyn Progress,
-    clock: &StageClock,
-    mut encode: impl FnMut(&[Job<T>]) -> Result<()>,
-) -> Result<()> {
-    while let Ok(first) = clock.time(Stage::EncodersIdle, || rx.recv()) {
-        if progress.cancelled() {
-            return Err(TilerError::Interrupted);
-        }
-        let mut work = vec![first?];
-        let enough = 2 * rayon::current_num_threads();
-        while work.iter().map(|b| b.tiles.len()).sum::<usize>() < enough {
-            match rx.try_recv() {
-                Ok(more) => work.push(more?),
-                Err(_) => break,
-            }
-        }
-        let jobs: Vec<Job<T>> =
-            work.iter().flat_map(|b| b.tiles.iter().flat_map(|t| Job::of(sink, b.lod, t))).collect();
-        encode(&jobs)?;
-    }
-    Ok(())
-}
-
-/// Writes a prepared tile of `lod` to every place that gets it.
-fn store(
-    sink: &dyn TileSink,
-    lod: u32,
-    places: &[(u32, u32)],
-    stored: &Stored,
-    tiles: &AtomicU64,
-    progress: &dyn Progress,
-) -> Result<()> {
-    for &(x, y) in places {
-        match stored {
-            Stored::Encoded(bytes) => sink.write_tile(lod, x, y, bytes)?,
-            Stored::Constant(texel) => sink.write_constant(lod, x, y, texel)?,
-        }
-    }
-    tiles.fetch_add(places.len() as u64, Ordering::Relaxed);
-    progress.advance(places.len() as u64);
-    Ok(())
-}
-
-/// A tile ready for an ordered sink and the places that get it, owned, so that the writer thread
-/// can store it after the encoders' batch is gone.
-struct Ready {
-    lod: u32,
-    places: Vec<(u32, u32)>,
-    stored: Stored,
-}
-
-/// One encoding: a cut tile, the part of it the sink keeps, and the places that get it.
-struct Job<'a, T> {
-    lod: u32,
-    tile: &'a CutTile<T>,
-    crop: Option<Crop>,
-    places: Cow<'a, [(u32, u32)]>,
-}
-
-impl<'a, T> Job<'a, T> {
-    /// The encodings a cut tile needs: one (borrowing its places), unless the sink crops its
-    /// places differently (identical pages merged at the cut may sit at a viewer tile's edge
-    /// and in the middle).
-    fn of(sink: &dyn TileSink, lod: u32, tile: &'a CutTile<T>) -> Vec<Job<'a, T>> {
-        let crop_at = |&(x, y): &(u32, u32)| sink.crop(lod, x, y);
-        let first = crop_at(&tile.places[0]);
-        if tile.places[1..].iter().all(|p| crop_at(p) == first) {
-            return vec![Job { lod, tile, crop: first, places: Cow::Borrowed(&tile.places) }];
-        }
-        let mut jobs: Vec<Job<T>> = Vec::new();
-        for place in &tile.places {
-            let crop = crop_at(place);
-            match jobs.iter_mut().find(|j| j.crop == crop) {
-                Some(job) => job.places.to_mut().push(*place),
-                None => jobs.push(Job { lod, tile, crop, places: Cow::Owned(vec![*place]) }),
-            }
-        }
-        jobs
-    }
-}
-
-/// A tile ready for the sink.
-enum Stored {
-    Encoded(Vec<u8>),
-    /// Every texel is this one (stored layout, little-endian samples).
-    Constant(Vec<u8>),
-}
-
-/// Encodes a tile (or the part the sink keeps), unless it has one colour and the sink stores
-/// such tiles as their colour.
-fn prepare<T: Sample>(encoder: &TileEncoder<T>, sink: &dyn TileSink, job: &Job<T>) -> Result<Stored> {
-    let channels = encoder.source_layout().channels.count();
-    let texels = &job.tile.texels;
-    if sink.takes_constants() && texels.chunks_exact(channels).all(|t| t == &texels[..channels]) {
-        return Ok(Stored::Constant(encoder.stored_texel(&texels[..channels])));
-    }
-    let mut bytes = Vec::new();
-    let (lod, (x, y)) = (job.lod, job.places[0]);
-    let encoded = match job.crop {
-        None => encoder.encode(texels, &mut bytes),
-        Some(crop) => encoder.encode_crop(texels, crop, &mut bytes),
-    };
-    encoded.map_err(|message| TilerError::Encode { lod, x, y, message })?;
-    Ok(Stored::Encoded(bytes))
 }

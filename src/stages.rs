@@ -43,9 +43,10 @@ pub(crate) enum Stage {
     Cutter,
     /// The cutting thread waiting for the producer's next chunk of rows.
     CutWait,
-    /// The encoders' caller waiting for a batch from the producer.
+    /// Every encoder idle at once, waiting for tiles.
     EncodersIdle,
-    /// Encoding batches on the pool (for sinks that store as tiles finish, storing too).
+    /// Encoding (for sinks that store as tiles finish, storing too), per encoder thread: the
+    /// tasks' time over the threads.
     Encode,
     /// Storing encoded tiles in order on the writer thread (ordered sinks: packs), beside the
     /// encoding of the next batch.
@@ -79,6 +80,12 @@ impl StageClock {
         let nanos = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
         self.clock(stage).fetch_add(nanos, Ordering::Relaxed);
         result
+    }
+
+    /// Adds `d` to `stage` (a time measured elsewhere).
+    pub(crate) fn add(&self, stage: Stage, d: Duration) {
+        let nanos = u64::try_from(d.as_nanos()).unwrap_or(u64::MAX);
+        self.clock(stage).fetch_add(nanos, Ordering::Relaxed);
     }
 
     fn get(&self, stage: Stage) -> Duration {

@@ -170,22 +170,12 @@ pub struct RunFlags {
 
 impl RunFlags {
     /// Makes the worker pool `--threads` asks for (checked against the cap first) the process's
-    /// global one, its threads below the serial stages' priority ([`priority`]). The work is
-    /// then started from the calling thread, not inside the pool, so that the threads it spawns
-    /// for its serial stages keep the normal priority.
-    ///
-    /// [`priority`]: vortex_tiler::priority
+    /// global one. The work is then started from the calling thread, not inside the pool: the
+    /// encoders' stage waits for batches there, where it blocks no worker.
     pub fn init_pool(&self) -> Result<()> {
         let threads = self.threads.unwrap_or(0);
         vortex_tiler::limits::Limits::default().check_threads(threads)?;
-        let nice: i32 = std::env::var("VORTEX_NICE")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(vortex_tiler::priority::ENCODER_NICENESS);
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .start_handler(move |_| vortex_tiler::priority::lower_this_thread(nice))
-            .build_global()?;
+        rayon::ThreadPoolBuilder::new().num_threads(threads).build_global()?;
         Ok(())
     }
 

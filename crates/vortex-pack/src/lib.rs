@@ -20,6 +20,8 @@ mod limits;
 mod reader;
 pub mod verify;
 #[cfg(feature = "write")]
+mod writeback;
+#[cfg(feature = "write")]
 mod writer;
 
 #[cfg(feature = "decode")]

@@ -18,6 +18,7 @@ use crate::error::{PackError, Result};
 use crate::format::{self, Description, ENTRY_LEN, Entry, FNV_OFFSET, HEADER_LEN, Header, LEVEL_LEN, Level, TileKind};
 use crate::limits::Limits;
 use crate::reader::TileId;
+use crate::writeback::Writeback;
 
 /// A tile handed to the writer.
 #[derive(Clone, Copy, Debug)]
@@ -73,6 +74,7 @@ pub struct PackWriter {
     /// Required-feature bits of the kinds stored so far.
     required_features: u64,
     summary: WriteSummary,
+    writeback: Writeback,
 }
 
 impl PackWriter {
@@ -176,6 +178,7 @@ impl PackWriter {
             end: data_offset,
             required_features: 0,
             summary: WriteSummary::default(),
+            writeback: Writeback::default(),
         };
         // Placeholders up to the data section: zeros, so that an unfinished file has no signature.
         w.file_mut().set_len(data_offset).map_err(|e| io(&w.tmp, e))?;
@@ -284,6 +287,9 @@ impl PackWriter {
         }
         file.write_all(bytes).map_err(|e| io(&tmp, e))?;
         self.end = offset + bytes.len() as u64;
+        if let Some(file) = &self.file {
+            self.writeback.written(file, self.end);
+        }
         self.stored.entry((crc, bytes.len() as u32)).or_default().push(offset);
         self.summary.stored_payloads += 1;
         self.summary.payload_bytes += bytes.len() as u64;

@@ -563,7 +563,13 @@ impl RowSource for TiffSource {
             _ => "compressed",
         };
         match self.chunking {
-            Chunking::Strips { rows } => format!("{kind}, {compression}, streamed by strip ({rows} rows)"),
+            Chunking::Strips { rows } => {
+                let at_once = match self.ahead_workers {
+                    0 => String::new(),
+                    n => format!(", {n} decoded at once"),
+                };
+                format!("{kind}, {compression}, streamed by strip ({rows} rows{at_once})")
+            }
             Chunking::Tiles { width, height, .. } => {
                 format!("{kind}, {compression}, streamed by tile row ({width}x{height} tiles)")
             }
@@ -683,6 +689,11 @@ mod tests {
                 assert_matches_image_crate(&p("g16"), PixelLayout::new(Channels::Grey, Depth::U16));
                 assert_matches_image_crate(&p("rgb16"), PixelLayout::new(Channels::Rgb, Depth::U16));
                 assert_matches_image_crate(&p("rgba16"), PixelLayout::new(Channels::Rgba, Depth::U16));
+                // Compressed strips, more than two: decoded on a worker per core, where there are several.
+                let ahead = name != "none" && matches!(rows, Some(1 | 7));
+                let several = std::thread::available_parallelism().is_ok_and(|n| n.get() > 1);
+                let described = open(&p("rgb8"), 1 << 30).unwrap().describe();
+                assert_eq!(described.contains("decoded at once"), ahead && several, "{described}");
             }
         }
     }

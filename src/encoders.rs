@@ -1,0 +1,299 @@
+//! The encode-and-store stage: batches of cut tiles encoded on the rayon pool and handed to the
+//! sink.
+//!
+//! Tiles are encoded as tasks on the pool with no barrier between batches: a batch's tiles are
+//! spawned as soon as it arrives, while the last tiles of the one before are still being
+//! encoded. (A parallel loop per batch left one core idle at the end of every batch, waiting for
+//! the other's last tile: about 7 ms of every 64-tile batch, a quarter of a 16384² `split`'s
+//! idle time; issue 18.) A sink that takes tiles in any order stores each as it is encoded; an
+//! ordered one (a pack) gets them from a writer thread, in the producer's order, batch by batch
+//! as each completes, so that its bytes do not depend on the thread count. At most
+//! [`LOTS_IN_FLIGHT`] lots are encoding or waiting for the writer at once.
+
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, sync_channel};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::Instant;
+
+use crate::codec::TileEncoder;
+use crate::error::{Result, TilerError};
+use crate::pixel::Sample;
+use crate::pyramid::cascade::{Batch, CutTile};
+use crate::sink::TileSink;
+use crate::split::Progress;
+use crate::stages::{Stage, StageClock};
+use crate::viewer::Crop;
+
+/// Lots (batches received together) spawned on the pool and not yet stored: the one the writer
+/// stores and the one encoding behind it.
+const LOTS_IN_FLIGHT: usize = 2;
+
+/// What the stage counts: tiles encoded, tiles stored (places).
+#[derive(Default)]
+pub(crate) struct Counts {
+    pub encoded: AtomicU64,
+    pub tiles: AtomicU64,
+}
+
+/// Encodes and writes batches as they arrive, until the producer is done or something fails.
+pub(crate) fn consume<T: Sample>(
+    rx: Receiver<Result<Batch<T>>>,
+    encoder: &TileEncoder<T>,
+    sink: &dyn TileSink,
+    counts: &Counts,
+    progress: &dyn Progress,
+    clock: &StageClock,
+) -> Result<()> {
+    let busy = Busy::default();
+    let stage = Encoding { encoder, sink, counts, progress, busy: &busy };
+    // The writer waits for each lot in turn; the channel's bound keeps the rest from running ahead.
+    let (to_writer, lots) = sync_channel::<Arc<Lot<T>>>(LOTS_IN_FLIGHT - 1);
+    let result = std::thread::scope(|threads| {
+        let writer = threads.spawn(|| -> Result<()> {
+            for lot in lots {
+                let results = lot.wait();
+                // Only an ordered sink has anything left to store; every other one stored its
+                // tiles as they were encoded.
+                clock.time(Stage::Store, || {
+                    results.into_iter().zip(&lot.jobs).try_for_each(|(result, job)| match result? {
+                        Some(stored) => stage.store(job.lod, &job.places, &stored),
+                        None => Ok(()),
+                    })
+                })?;
+            }
+            Ok(())
+        });
+        let fed = rayon::in_place_scope(|pool| -> Result<()> {
+            while let Ok(first) = rx.recv() {
+                if progress.cancelled() {
+                    return Err(TilerError::Interrupted);
+                }
+                let lot = Arc::new(Lot::of(gather(first?, &rx)?, sink));
+                for k in 0..lot.jobs.len() {
+                    let lot = Arc::clone(&lot);
+                    let stage = &stage;
+                    pool.spawn(move |_| {
+                        // A task that panicked must still finish its job, or the writer waits forever.
+                        let run = catch_unwind(AssertUnwindSafe(|| stage.run(&lot.batches, &lot.jobs[k])));
+                        let panicked = || Err(TilerError::Options("a tile encoder panicked".into()));
+                        lot.finish_job(k, run.unwrap_or_else(|_| panicked()));
+                    });
+                }
+                // Only a writer that failed hangs up: its error is the one to report.
+                if to_writer.send(lot).is_err() {
+                    break;
+                }
+            }
+            Ok(())
+        });
+        drop(to_writer);
+        let written = writer.join().map_err(|_| TilerError::Options("the tile writer panicked".into()))?;
+        written.and(fed)
+    });
+    clock.add(Stage::EncodersIdle, busy.idle());
+    clock.add(Stage::Encode, busy.encoding() / rayon::current_num_threads().max(1) as u32);
+    result
+}
+
+/// The first batch and those waiting behind it, merged while they are fewer tiles than keep
+/// every thread busy (coarse levels, narrow images).
+fn gather<T>(first: Batch<T>, rx: &Receiver<Result<Batch<T>>>) -> Result<Vec<Batch<T>>> {
+    let mut work = vec![first];
+    let enough = 2 * rayon::current_num_threads();
+    while work.iter().map(|b| b.tiles.len()).sum::<usize>() < enough {
+        match rx.try_recv() {
+            Ok(more) => work.push(more?),
+            Err(_) => break,
+        }
+    }
+    Ok(work)
+}
+
+/// What every encoding task needs.
+struct Encoding<'a, T> {
+    encoder: &'a TileEncoder<T>,
+    sink: &'a dyn TileSink,
+    counts: &'a Counts,
+    progress: &'a dyn Progress,
+    busy: &'a Busy,
+}
+
+impl<T: Sample> Encoding<'_, T> {
+    /// Encodes one job; stores it too unless the sink is ordered, whose writer stores it.
+    fn run(&self, batches: &[Batch<T>], job: &Job) -> Result<Option<Stored>> {
+        let _busy = self.busy.start();
+        let tile = &batches[job.batch].tiles[job.tile];
+        let stored = prepare(self.encoder, self.sink, job, tile)?;
+        if matches!(stored, Stored::Encoded(_)) {
+            self.counts.encoded.fetch_add(1, Ordering::Relaxed);
+        }
+        if self.sink.ordered() {
+            return Ok(Some(stored));
+        }
+        self.store(job.lod, &job.places, &stored)?;
+        Ok(None)
+    }
+
+    /// Writes a prepared tile of `lod` to every place that gets it.
+    fn store(&self, lod: u32, places: &[(u32, u32)], stored: &Stored) -> Result<()> {
+        for &(x, y) in places {
+            match stored {
+                Stored::Encoded(bytes) => self.sink.write_tile(lod, x, y, bytes)?,
+                Stored::Constant(texel) => self.sink.write_constant(lod, x, y, texel)?,
+            }
+        }
+        self.counts.tiles.fetch_add(places.len() as u64, Ordering::Relaxed);
+        self.progress.advance(places.len() as u64);
+        Ok(())
+    }
+}
+
+/// Batches received together, their encodings, and what became of each.
+struct Lot<T> {
+    batches: Vec<Batch<T>>,
+    jobs: Vec<Job>,
+    /// Each job's result once it has one, and how many have none yet.
+    finished: Mutex<(Vec<Option<Result<Option<Stored>>>>, usize)>,
+    done: Condvar,
+}
+
+impl<T> Lot<T> {
+    fn of(batches: Vec<Batch<T>>, sink: &dyn TileSink) -> Lot<T> {
+        let jobs: Vec<Job> = batches
+            .iter()
+            .enumerate()
+            .flat_map(|(b, batch)| {
+                batch.tiles.iter().enumerate().flat_map(move |(t, tile)| Job::of(sink, batch.lod, b, t, tile))
+            })
+            .collect();
+        let finished = Mutex::new(((0..jobs.len()).map(|_| None).collect(), jobs.len()));
+        Lot { batches, jobs, finished, done: Condvar::new() }
+    }
+
+    fn finish_job(&self, k: usize, result: Result<Option<Stored>>) {
+        let mut finished = self.finished.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        finished.0[k] = Some(result);
+        finished.1 -= 1;
+        if finished.1 == 0 {
+            self.done.notify_all();
+        }
+    }
+
+    /// Waits until every job has finished; their results, in order.
+    fn wait(&self) -> Vec<Result<Option<Stored>>> {
+        let mut finished = self.finished.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        while finished.1 > 0 {
+            finished = self.done.wait(finished).unwrap_or_else(|poisoned| poisoned.into_inner());
+        }
+        let missing = || Err(TilerError::Options("an encoding task stopped without a result".into()));
+        finished.0.iter_mut().map(|r| r.take().unwrap_or_else(missing)).collect()
+    }
+}
+
+/// One encoding: a cut tile (by its batch and index), the part of it the sink keeps, and the
+/// places that get it.
+struct Job {
+    lod: u32,
+    batch: usize,
+    tile: usize,
+    crop: Option<Crop>,
+    places: Vec<(u32, u32)>,
+}
+
+impl Job {
+    /// The encodings a cut tile needs: one, unless the sink crops its places differently
+    /// (identical pages merged at the cut may sit at a viewer tile's edge and in the middle).
+    fn of<T>(sink: &dyn TileSink, lod: u32, batch: usize, tile: usize, cut: &CutTile<T>) -> Vec<Job> {
+        let mut jobs: Vec<Job> = Vec::new();
+        for &place in &cut.places {
+            let crop = sink.crop(lod, place.0, place.1);
+            match jobs.iter_mut().find(|j| j.crop == crop) {
+                Some(job) => job.places.push(place),
+                None => jobs.push(Job { lod, batch, tile, crop, places: vec![place] }),
+            }
+        }
+        jobs
+    }
+}
+
+/// A tile ready for the sink.
+enum Stored {
+    Encoded(Vec<u8>),
+    /// Every texel is this one (stored layout, little-endian samples).
+    Constant(Vec<u8>),
+}
+
+/// Encodes a tile (or the part the sink keeps), unless it has one colour and the sink stores
+/// such tiles as their colour.
+fn prepare<T: Sample>(encoder: &TileEncoder<T>, sink: &dyn TileSink, job: &Job, tile: &CutTile<T>) -> Result<Stored> {
+    let channels = encoder.source_layout().channels.count();
+    let texels = &tile.texels;
+    if sink.takes_constants() && texels.chunks_exact(channels).all(|t| t == &texels[..channels]) {
+        return Ok(Stored::Constant(encoder.stored_texel(&texels[..channels])));
+    }
+    let mut bytes = Vec::new();
+    let (lod, (x, y)) = (job.lod, job.places[0]);
+    let encoded = match job.crop {
+        None => encoder.encode(texels, &mut bytes),
+        Some(crop) => encoder.encode_crop(texels, crop, &mut bytes),
+    };
+    encoded.map_err(|message| TilerError::Encode { lod, x, y, message })?;
+    Ok(Stored::Encoded(bytes))
+}
+
+/// When the pool's encoders were busy: the time all of them waited at once, and the time spent
+/// encoding (summed over threads).
+#[derive(Default)]
+struct Busy {
+    state: Mutex<BusyState>,
+}
+
+#[derive(Default)]
+struct BusyState {
+    running: usize,
+    /// When the last task before an idle spell finished (`None` before the first task).
+    idle_since: Option<Instant>,
+    idle: std::time::Duration,
+    encoding: std::time::Duration,
+}
+
+impl Busy {
+    /// Marks a task running until the guard drops.
+    fn start(&self) -> BusyGuard<'_> {
+        let now = Instant::now();
+        let mut s = self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        if s.running == 0
+            && let Some(since) = s.idle_since
+        {
+            s.idle += now - since;
+        }
+        s.running += 1;
+        BusyGuard { busy: self, started: now }
+    }
+
+    fn idle(&self) -> std::time::Duration {
+        self.state.lock().map_or_else(|p| p.into_inner().idle, |s| s.idle)
+    }
+
+    fn encoding(&self) -> std::time::Duration {
+        self.state.lock().map_or_else(|p| p.into_inner().encoding, |s| s.encoding)
+    }
+}
+
+struct BusyGuard<'a> {
+    busy: &'a Busy,
+    started: Instant,
+}
+
+impl Drop for BusyGuard<'_> {
+    fn drop(&mut self) {
+        let now = Instant::now();
+        let mut s = self.busy.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        s.encoding += now - self.started;
+        s.running -= 1;
+        if s.running == 0 {
+            s.idle_since = Some(now);
+        }
+    }
+}
