@@ -12,7 +12,7 @@
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, sync_channel};
+use std::sync::mpsc::{Receiver, TryRecvError, TrySendError, sync_channel};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::Instant;
 
@@ -65,7 +65,13 @@ pub(crate) fn consume<T: Sample>(
             Ok(())
         });
         let fed = rayon::in_place_scope(|pool| -> Result<()> {
-            while let Ok(first) = rx.recv() {
+            // Off the pool, plain blocking waits; on one of its threads, waits that run its tasks.
+            let on_pool = rayon::current_thread_index().is_some();
+            let next = || match on_pool {
+                true => helping(|| rx.try_recv().map_err(|e| e == TryRecvError::Empty)),
+                false => rx.recv().map_err(|_| ()),
+            };
+            while let Ok(first) = next() {
                 if progress.cancelled() {
                     return Err(TilerError::Interrupted);
                 }
@@ -81,7 +87,21 @@ pub(crate) fn consume<T: Sample>(
                     });
                 }
                 // Only a writer that failed hangs up: its error is the one to report.
-                if to_writer.send(lot).is_err() {
+                let sent = match on_pool {
+                    false => to_writer.send(lot).map_err(|_| ()),
+                    true => {
+                        let mut lot = Some(lot);
+                        helping(|| match lot.take().map(|l| to_writer.try_send(l)) {
+                            Some(Err(TrySendError::Full(l))) => {
+                                lot = Some(l);
+                                Err(true)
+                            }
+                            Some(Err(TrySendError::Disconnected(_))) | None => Err(false),
+                            Some(Ok(())) => Ok(()),
+                        })
+                    }
+                };
+                if sent.is_err() {
                     break;
                 }
             }
@@ -94,6 +114,24 @@ pub(crate) fn consume<T: Sample>(
     clock.add(Stage::EncodersIdle, busy.idle());
     clock.add(Stage::Encode, busy.encoding() / rayon::current_num_threads().max(1) as u32);
     result
+}
+
+/// On one of the pool's threads (a caller inside `ThreadPool::install`), waits for `attempt` to
+/// succeed (`Ok`) or to fail for good (`Err(false)`; `Err(true)` means "not yet"), running the
+/// pool's pending tasks meanwhile: some may be the very tasks it waits for, which a one-thread
+/// pool has no other thread to run. With none pending it sleeps a little between attempts.
+fn helping<R>(mut attempt: impl FnMut() -> std::result::Result<R, bool>) -> std::result::Result<R, ()> {
+    loop {
+        match attempt() {
+            Ok(r) => return Ok(r),
+            Err(false) => return Err(()),
+            Err(true) => {
+                if rayon::yield_now() != Some(rayon::Yield::Executed) {
+                    std::thread::sleep(std::time::Duration::from_micros(100));
+                }
+            }
+        }
+    }
 }
 
 /// The first batch and those waiting behind it, merged while they are fewer tiles than keep
