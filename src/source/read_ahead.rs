@@ -4,8 +4,8 @@
 //! chunks of about [`CHUNK_BYTES`], a few chunks ahead of the caller, and hands them over in
 //! order: the rows, and so the output, are the same as read on the caller's thread, and the
 //! source is left at the same position. With chunks of 0 rows it reads on the caller's thread
-//! (runs short of memory: striped ones). [`chunks`] hands the chunks themselves over, for a
-//! caller that passes them on to another thread; a [`Chunk`] goes back to the reader when it is
+//! (runs short of memory: striped ones). `chunks` hands the chunks themselves over, for a
+//! caller that passes them on to another thread; a `Chunk` goes back to the reader when it is
 //! dropped, wherever that is.
 
 use std::sync::mpsc::{Sender, channel, sync_channel};
