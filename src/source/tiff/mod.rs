@@ -144,8 +144,10 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     let ahead_workers = match chunking {
         Chunking::Strips { .. } if compression != CompressionMethod::None && height as u64 > 2 * band_rows => {
             let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(4);
-            let held = strip_bytes.saturating_mul(workers as u64 * (strips_ahead::AHEAD_PER_WORKER as u64 + 1));
-            let fits = held <= strips_ahead::MAX_AHEAD_BYTES && held <= max_memory / 4;
+            // The strips being decoded and the one taken: within an eighth of --max-memory
+            // (vips writes Deflate strips of 128 rows: 6 MiB each at 16384 RGB texels).
+            let held = strip_bytes.saturating_mul(workers as u64 * strips_ahead::AHEAD_PER_WORKER as u64 + 1);
+            let fits = held <= max_memory / 8;
             if workers > 1 && fits { workers } else { 0 }
         }
         _ => 0,

@@ -10,12 +10,9 @@
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::thread::JoinHandle;
 
-/// Strips each worker decodes ahead of the one the reader waits for.
-pub const AHEAD_PER_WORKER: u32 = 2;
-
-/// Bytes of decoded strips the workers may hold at most; strips larger than that leave too
-/// few in flight to gain anything, and are decoded on the reader's thread.
-pub const MAX_AHEAD_BYTES: u64 = 32 << 20;
+/// Strips each worker decodes ahead of the one the reader waits for: one keeps every worker
+/// busy while the reader takes strips as fast as they come, and holds the least memory.
+pub const AHEAD_PER_WORKER: u32 = 1;
 
 /// What a worker decodes a strip with: `decode(strip, buffer)` fills `buffer` (sized by the
 /// caller for that strip) or says why it cannot.
