@@ -159,7 +159,7 @@ struct Encoding<'a, T> {
 
 impl<T: Sample> Encoding<'_, T> {
     /// Encodes one job; stores it too unless the sink is ordered, whose writer stores it.
-    fn run(&self, batches: &[Batch<T>], job: &Job) -> Result<Option<Stored>> {
+    fn run(&self, batches: &[Batch<T>], job: &Job) -> JobResult {
         let _busy = self.busy.start();
         let tile = &batches[job.batch].tiles[job.tile];
         let stored = prepare(self.encoder, self.sink, job, tile)?;
@@ -187,12 +187,15 @@ impl<T: Sample> Encoding<'_, T> {
     }
 }
 
+/// What became of a job: the tile for an ordered sink's writer to store (`None`: stored already).
+type JobResult = Result<Option<Stored>>;
+
 /// Batches received together, their encodings, and what became of each.
 struct Lot<T> {
     batches: Vec<Batch<T>>,
     jobs: Vec<Job>,
     /// Each job's result once it has one, and how many have none yet.
-    finished: Mutex<(Vec<Option<Result<Option<Stored>>>>, usize)>,
+    finished: Mutex<(Vec<Option<JobResult>>, usize)>,
     done: Condvar,
 }
 
@@ -209,7 +212,7 @@ impl<T> Lot<T> {
         Lot { batches, jobs, finished, done: Condvar::new() }
     }
 
-    fn finish_job(&self, k: usize, result: Result<Option<Stored>>) {
+    fn finish_job(&self, k: usize, result: JobResult) {
         let mut finished = self.finished.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         finished.0[k] = Some(result);
         finished.1 -= 1;
@@ -219,7 +222,7 @@ impl<T> Lot<T> {
     }
 
     /// Waits until every job has finished; their results, in order.
-    fn wait(&self) -> Vec<Result<Option<Stored>>> {
+    fn wait(&self) -> Vec<JobResult> {
         let mut finished = self.finished.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         while finished.1 > 0 {
             finished = self.done.wait(finished).unwrap_or_else(|poisoned| poisoned.into_inner());
