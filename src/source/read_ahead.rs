@@ -22,7 +22,7 @@ pub const CHUNK_BYTES: u64 = 1 << 20;
 /// holds at most `CHUNKS_AHEAD + 2` chunks.
 const CHUNKS_AHEAD: usize = 2;
 
-/// Chunks a caller of [`chunks`] may hold beyond the one it is given: the pyramid's sums hand
+/// Chunks a caller of `chunks` may hold beyond the one it is given: the pyramid's sums hand
 /// each chunk on to the cutting thread, which holds one and has one queued
 /// (`split::HANDOFF_CHUNKS`).
 pub const CHUNKS_HANDED_ON: u64 = 2;
