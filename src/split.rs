@@ -1,13 +1,13 @@
 //! The `split` pipeline's wiring: source -> pyramid cascade -> encoders -> sink.
 //!
-//! A producer thread reads the source row by row into the [LOD cascade](crate::pyramid),
-//! which cuts each row of tiles as soon as its bands hold every row it reads and sends it, in
-//! a bounded channel, to the calling thread; that thread encodes the tiles in parallel on the
-//! rayon pool ([`crate::codec`]) and hands them to the [sink](crate::sink). Peak memory is a
-//! few bands of the image's width, whatever its height; an image too wide for that under
-//! `max_memory` is read once per vertical stripe (`pyramid::stripes`) for the same
-//! tiles. Output bytes do not depend on the thread count. This file is only that
-//! orchestration; the stages live in their modules.
+//! The source is read ahead on a thread of its own; a producer thread makes the [LOD
+//! cascade](crate::pyramid)'s sums from it and a cutting thread cuts each row of tiles as soon as
+//! its bands hold every row it reads, and sends it, in a bounded channel, to the calling thread;
+//! that thread spawns each tile's encoding on the rayon pool ([`crate::codec`]) and a writer
+//! hands them to the [sink](crate::sink). Peak memory is a few bands of the image's width,
+//! whatever its height; an image too wide for that under `max_memory` is read once per vertical
+//! stripe (`pyramid::stripes`) for the same tiles. Output bytes do not depend on the thread
+//! count. This file is only that orchestration; the stages live in their modules.
 
 use std::sync::Arc;
 use std::sync::mpsc::sync_channel;
@@ -100,9 +100,9 @@ const QUEUE_BATCHES: usize = 1;
 const HANDOFF_CHUNKS: usize = 1;
 
 /// Cuts `source` into the pyramid and writes every tile to `sink`. Runs the encoders on the
-/// current rayon pool, from the calling thread, which waits there for tiles: call it from
-/// outside the pool (inside, it would keep a worker waiting); `progress` hears of every
-/// finished tile and can stop the run.
+/// current rayon pool; best called from outside it (inside, the calling worker runs the pool's
+/// tasks while it waits for tiles, polling). `progress` hears of every finished tile and can
+/// stop the run.
 pub fn split(
     source: Box<dyn RowSource>,
     sink: &dyn TileSink,
