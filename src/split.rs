@@ -96,8 +96,8 @@ pub struct Summary {
 const QUEUE_BATCHES: usize = 1;
 
 /// Chunks of source rows, with the rows the pyramid's sums made of them, waiting for the
-/// cutting thread ([`read_ahead::CHUNKS_HANDED_ON`] counts them and the one it cuts).
-const HANDOFF_CHUNKS: usize = 1;
+/// cutting thread: those the read-ahead's memory bound allows beyond the one it cuts.
+const HANDOFF_CHUNKS: usize = read_ahead::CHUNKS_HANDED_ON as usize - 1;
 
 /// Cuts `source` into the pyramid and writes every tile to `sink`. Runs the encoders on the
 /// current rayon pool; best called from outside it (inside, the calling worker runs the pool's

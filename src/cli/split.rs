@@ -416,11 +416,8 @@ impl Run {
     /// Runs `work` on the source, its encoders on the worker pool, with the progress bar.
     fn execute_with<R>(
         self,
-        work: impl FnOnce(Box<dyn RowSource>, &report::Watch) -> vortex_tiler::error::Result<(split::Summary, R)> + Send,
-    ) -> Result<(Finished, R)>
-    where
-        R: Send,
-    {
+        work: impl FnOnce(Box<dyn RowSource>, &report::Watch) -> vortex_tiler::error::Result<(split::Summary, R)>,
+    ) -> Result<(Finished, R)> {
         let (decoder, width, height) = (self.source.describe(), self.source.width(), self.source.height());
         let Run { source, watch, started, .. } = self;
         let result = work(source, &watch);

@@ -23,8 +23,7 @@ pub const CHUNK_BYTES: u64 = 1 << 20;
 const CHUNKS_AHEAD: usize = 2;
 
 /// Chunks a caller of `chunks` may hold beyond the one it is given: the pyramid's sums hand
-/// each chunk on to the cutting thread, which holds one and has one queued
-/// (`split::HANDOFF_CHUNKS`).
+/// each chunk on to the cutting thread, which holds one and has the rest queued.
 pub const CHUNKS_HANDED_ON: u64 = 2;
 
 /// Rows per chunk of `row_bytes`-byte rows: as many as fit [`CHUNK_BYTES`], at least one.

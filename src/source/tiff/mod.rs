@@ -133,14 +133,14 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
             ),
         ));
     }
+    let strip_bytes = row_bytes * band_rows;
     let band = vec![
         0u8;
-        usize::try_from(row_bytes * band_rows)
+        usize::try_from(strip_bytes)
             .map_err(|_| TilerError::unsupported(path, "a strip is too large for this machine"))?
     ];
     let tile = vec![0u8; tile_bytes as usize];
     let direct = direct_strips(path, &mut decoder, compression, chunking, layout, file_samples)?;
-    let strip_bytes = row_bytes * band_rows;
     let ahead_workers = match chunking {
         Chunking::Strips { .. } if compression != CompressionMethod::None && height as u64 > 2 * band_rows => {
             let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(4);
