@@ -44,7 +44,7 @@ pub mod viewer;
 /// which the crate's own dev-dependency on itself turns on for `cargo test`.
 #[cfg(feature = "testing")]
 pub mod testing {
-    pub use crate::pyramid::cut::{first_row_kept, last_row_needed};
+    pub use crate::pyramid::cut::{first_row_read, last_row_needed};
     pub use crate::pyramid::filter::{ExactFilter, SrgbTable, linear_to_srgb, srgb_to_linear, sums_need_u128};
     pub use crate::pyramid::reduce::{Acc, ExactRow, Reducer};
     pub use crate::pyramid::resample::{Resampler, resample_level};

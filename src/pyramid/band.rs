@@ -1,53 +1,129 @@
-//! A horizontal band of one LOD: the few real rows that the next row of tiles needs.
+//! A horizontal band of one LOD, held as the tiles it is cut into.
 //!
-//! A tile row of LOD k needs `payload + 2 * border` rows; once it is cut, only the rows the next
-//! tile row shares with it (its top border) are kept. The band therefore never holds more than
-//! `tile_size` rows of its level's width, whatever the image height.
+//! A row of tiles of LOD k reads `payload + 2 * border` rows of its level. Each row, as it
+//! arrives, is copied straight into every tile of every row of tiles that reads it (two where
+//! borders overlap), so a texel is copied once between the pyramid and the encoders: a band of
+//! rows cut into tiles once complete copied it twice, the larger part of the cutting thread's
+//! time (issue 18). A row of tiles is handed on, complete, once its last row is in. The band
+//! therefore never holds more than two rows of tiles of its level's width, the second only
+//! for the border rows they share, whatever the image height.
+
+use std::collections::VecDeque;
+use std::ops::Range;
+
+use crate::layout::Layout;
+use crate::pyramid::cut::{self, Padding, Run};
 
 pub struct Band<T> {
-    /// Samples per row (texels x channels).
-    row_len: usize,
-    /// Image row index of the first row held.
-    first: u64,
-    data: Vec<T>,
+    layout: Layout,
+    channels: usize,
+    /// The level's image height and its virtual texture's (the pages' payloads).
+    height: u32,
+    virtual_height: u64,
+    edge_padding: bool,
+    /// Per page column cut: its index, and which of a row's columns its texels come from.
+    x_runs: Vec<(u32, Vec<Run>)>,
+    /// Rows of tiles begun and not complete, top first.
+    open: VecDeque<OpenRow<T>>,
+    /// The next row of tiles to begin, and one past the last.
+    next_tile_row: u32,
+    end_tile_row: u32,
+    /// Image row index of the next row to arrive.
+    next_row: u64,
+}
+
+/// A row of tiles being filled.
+struct OpenRow<T> {
+    index: u32,
+    /// Per row of the tiles, top to bottom: the image row it holds (`None`: the background).
+    sources: Vec<Option<u32>>,
+    /// Rows of the tiles written so far.
+    written: usize,
+    /// One per entry of `x_runs`.
+    tiles: Vec<Vec<T>>,
+}
+
+/// A complete row of tiles: its index, and each tile's column and texels, left to right.
+pub struct TileRow<T> {
+    pub index: u32,
+    pub tiles: Vec<(u32, Vec<T>)>,
 }
 
 impl<T: Copy> Band<T> {
-    #[cfg(test)]
-    pub fn new(row_len: usize, capacity_rows: usize) -> Band<T> {
-        Band::starting_at(0, row_len, capacity_rows)
-    }
-
-    /// A band whose first row will be image row `first` (a shard's region starts below the top).
-    pub fn starting_at(first: u64, row_len: usize, capacity_rows: usize) -> Band<T> {
-        Band { row_len, first, data: Vec::with_capacity(row_len * capacity_rows) }
-    }
-
-    /// One past the last row held (= rows received so far).
-    pub fn end(&self) -> u64 {
-        self.first + (self.data.len() / self.row_len.max(1)) as u64
-    }
-
-    pub fn push(&mut self, row: &[T]) {
-        debug_assert_eq!(row.len(), self.row_len);
-        self.data.extend_from_slice(row);
-    }
-
-    /// Row `y` of the image; it must be held.
-    pub fn row(&self, y: u64) -> &[T] {
-        assert!(y >= self.first && y < self.end(), "row {y} is not in the band [{}, {})", self.first, self.end());
-        let start = (y - self.first) as usize * self.row_len;
-        &self.data[start..start + self.row_len]
-    }
-
-    /// Forgets every row before `y`.
-    pub fn drop_before(&mut self, y: u64) {
-        let y = y.min(self.end());
-        if y > self.first {
-            let n = (y - self.first) as usize * self.row_len;
-            self.data.drain(..n);
-            self.first = y;
+    /// The band of level `lod` that cuts the page columns of `x_runs` (whose
+    /// runs index the rows it is given) in the rows of tiles `tile_rows`, given the level's
+    /// rows from image row `first_row` on (a span's window may start above its first tile's).
+    pub fn new(
+        layout: Layout,
+        lod: u32,
+        channels: usize,
+        x_runs: Vec<(u32, Vec<Run>)>,
+        tile_rows: Range<u32>,
+        first_row: u64,
+        edge_padding: bool,
+    ) -> Band<T> {
+        Band {
+            layout,
+            channels,
+            height: layout.level_extent(lod).1,
+            virtual_height: layout.virtual_extent(lod).1,
+            edge_padding,
+            x_runs,
+            open: VecDeque::new(),
+            next_row: first_row,
+            next_tile_row: tile_rows.start,
+            end_tile_row: tile_rows.end,
         }
+    }
+
+    /// Copies the next row into every tile that holds it; `done` gets each row of tiles this
+    /// completes, top first.
+    pub fn push<E>(
+        &mut self,
+        row: &[T],
+        padding: &Padding<T>,
+        mut done: impl FnMut(TileRow<T>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let y = self.next_row;
+        self.next_row += 1;
+        while self.next_tile_row < self.end_tile_row && cut::first_row_read(&self.layout, self.next_tile_row) <= y {
+            let open = self.begin(self.next_tile_row);
+            self.open.push_back(open);
+            self.next_tile_row += 1;
+        }
+        let fill = match padding {
+            Padding::Colour(c) => c.as_slice(),
+            Padding::Edge => &[],
+        };
+        for open in &mut self.open {
+            // Rows repeat where a border reaches past the virtual edge; the background rows
+            // below an image that ends inside its last page come after its last row.
+            while let Some(&source) = open.sources.get(open.written) {
+                let texels = match source {
+                    Some(s) if s as u64 == y => Some(row),
+                    Some(_) => break,
+                    None => None,
+                };
+                for (tile, (_, runs)) in open.tiles.iter_mut().zip(&self.x_runs) {
+                    cut::push_row(tile, runs, texels, self.channels, fill);
+                }
+                open.written += 1;
+            }
+        }
+        while self.open.front().is_some_and(|open| open.written == open.sources.len()) {
+            if let Some(open) = self.open.pop_front() {
+                let tiles = self.x_runs.iter().map(|(x, _)| *x).zip(open.tiles).collect();
+                done(TileRow { index: open.index, tiles })?;
+            }
+        }
+        Ok(())
+    }
+
+    fn begin(&self, index: u32) -> OpenRow<T> {
+        let sources = cut::expand(&cut::runs(&self.layout, index, self.height, self.virtual_height, self.edge_padding));
+        let texels = self.layout.tile_texels() * self.channels;
+        let tiles = self.x_runs.iter().map(|_| Vec::with_capacity(texels)).collect();
+        OpenRow { index, sources, written: 0, tiles }
     }
 }
 
@@ -55,15 +131,46 @@ impl<T: Copy> Band<T> {
 mod tests {
     use super::*;
 
-    #[test]
-    fn keeps_rows_by_image_index() {
-        let mut b = Band::new(2, 4);
-        for y in 0..5u8 {
-            b.push(&[y, y]);
+    /// Every row of tiles of a `w x h` one-channel image whose texel (x, y) is `y * 100 + x`,
+    /// cut through a band: as `cut::runs` says, texel for texel.
+    fn check(w: u32, h: u32, tile: u32, border: u32, padding: Padding<u16>) {
+        let layout = Layout::new(w as u64, h as u64, tile, border).unwrap();
+        let edge = padding == Padding::Edge;
+        let virtual_len = layout.virtual_extent(0);
+        let x_runs: Vec<(u32, Vec<Run>)> =
+            (0..layout.columns).map(|t| (t, cut::runs(&layout, t, w, virtual_len.0, edge))).collect();
+        let mut band = Band::new(layout, 0, 1, x_runs.clone(), 0..layout.rows, 0, edge);
+        let mut got = Vec::new();
+        for y in 0..h {
+            let row: Vec<u16> = (0..w).map(|x| (y * 100 + x) as u16).collect();
+            band.push(&row, &padding, |r| -> Result<(), ()> {
+                got.push(r);
+                Ok(())
+            })
+            .unwrap();
         }
-        b.drop_before(3);
-        assert_eq!((b.end(), b.row(3), b.row(4)), (5, &[3u8, 3][..], &[4u8, 4][..]));
-        b.drop_before(99);
-        assert_eq!(b.end(), 5);
+        assert_eq!(got.iter().map(|r| r.index).collect::<Vec<_>>(), (0..layout.rows).collect::<Vec<_>>());
+        let texel = |x: Option<u32>, y: Option<u32>| match (x, y) {
+            (Some(x), Some(y)) => (y * 100 + x) as u16,
+            _ => 9999,
+        };
+        for r in &got {
+            let ys = cut::expand(&cut::runs(&layout, r.index, h, virtual_len.1, edge));
+            for (tx, texels) in &r.tiles {
+                let xs = cut::expand(&x_runs[*tx as usize].1);
+                let want: Vec<u16> = ys.iter().flat_map(|&y| xs.iter().map(move |&x| texel(x, y))).collect();
+                assert_eq!(texels, &want, "{w}x{h} tile {tile} border {border}: tile ({tx}, {})", r.index);
+            }
+        }
+    }
+
+    #[test]
+    fn every_tile_holds_what_its_runs_say() {
+        for (w, h) in [(1, 1), (20, 20), (24, 24), (13, 7), (7, 40), (29, 31)] {
+            for (tile, border) in [(16, 2), (8, 0), (8, 1), (8, 2), (16, 5)] {
+                check(w, h, tile, border, Padding::Edge);
+                check(w, h, tile, border, Padding::Colour(vec![9999]));
+            }
+        }
     }
 }

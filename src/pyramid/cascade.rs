@@ -3,13 +3,13 @@
 //! Each level keeps its own [`Band`] and the means to make the next level: a [`Reducer`] of
 //! exact sums for the exact filters (one half-built row of sums per level), a [`Resampler`] for
 //! lanczos3 and mitchell. A source row goes into LOD 0 and cascades down as far as it
-//! completes rows; whenever a level's band holds every row a row of tiles reads, those tiles
-//! are cut ([`cut`]) and sent as one [`Batch`] to the encoders. The cascade knows nothing of
+//! completes rows; each row is copied into the tiles that hold it ([`cut`]), and whenever a
+//! level's band completes a row of tiles, those tiles are sent as one [`Batch`] to the encoders. The cascade knows nothing of
 //! where rows come from or where tiles go: `split.rs` feeds it and drains the channel.
 //!
 //! The work has two halves that can run on two threads (issue 18): [`Sums`], the arithmetic
 //! (every level's sums, rounding, resampling), which records the rows it makes in order as
-//! [`Derived`] rows; and [`Cuts`], every level's band and the tiles cut from it, which replays
+//! [`Derived`] rows; and [`Cuts`], every level's band of tiles being filled, which replays
 //! them after the source rows that made them. The tiles, and the order they are sent in, are
 //! the same whether one thread runs both halves ([`Cascade`]) or two do.
 
@@ -18,7 +18,7 @@ use std::sync::Arc;
 use std::sync::mpsc::{SendError, SyncSender};
 
 use super::band::Band;
-use super::cut::{self, Padding, Run};
+use super::cut::{self, Padding};
 use super::filter::{ExactFilter, Filter};
 use super::reduce::{Acc, ExactRow, Reducer};
 use super::resample::Resampler;
@@ -188,17 +188,10 @@ impl<A: Copy> RootSums<A> {
     }
 }
 
-/// The cutting side of one LOD: its band and the tiles cut from it so far.
+/// The cutting side of one LOD: its band, which fills the tiles as the rows arrive.
 struct LevelCuts<T> {
     lod: u32,
-    extent: (u32, u32),
-    /// The rows of the level's window (all its columns but in a stripe).
     band: Band<T>,
-    next_tile_row: u32,
-    /// Per page column cut: its index, and which band columns its texels come from.
-    x_runs: Vec<(u32, Vec<Run>)>,
-    /// One past the last page row of the level this span cuts.
-    end_tile_row: u32,
 }
 
 /// The arithmetic side of one LOD: how its rows are made and passed down.
@@ -279,40 +272,29 @@ impl<T: Sample> Cuts<T> {
         Ok(())
     }
 
-    /// Row `row` into level `level`'s band; cuts every tile row whose rows are all in it.
+    /// Row `row` into level `level`'s band; sends every row of tiles it completes.
     fn push(&mut self, level: usize, row: &[T]) -> Result<()> {
         let Cuts { layout, channels, padding, levels, out } = self;
-        let l = &mut levels[level];
-        l.band.push(row);
-        let (_, height) = l.extent;
-        let virtual_height = layout.virtual_extent(l.lod).1;
-        while l.next_tile_row < l.end_tile_row && l.band.end() > cut::last_row_needed(layout, l.next_tile_row, height) {
-            let ty = l.next_tile_row;
-            let y_runs = cut::runs(layout, ty, height, virtual_height, *padding == Padding::Edge);
+        let LevelCuts { lod, band } = &mut levels[level];
+        let per_batch = batch_tiles(layout, *channels * size_of::<T>());
+        let send = |tiles| {
+            out.send(Ok(Batch { lod: *lod, tiles })).map_err(|_| TilerError::Options("the encoder stopped".into()))
+        };
+        band.push(row, padding, |row| {
             let mut tiles: Vec<CutTile<T>> = Vec::new();
-            let mut texels = Vec::with_capacity(layout.tile_texels() * *channels);
-            let per_batch = batch_tiles(layout, *channels * size_of::<T>());
-            for (tx, x_runs) in &l.x_runs {
+            for (tx, texels) in row.tiles {
                 if tiles.len() == per_batch {
-                    let full = std::mem::take(&mut tiles);
-                    out.send(Ok(Batch { lod: l.lod, tiles: full }))
-                        .map_err(|_| TilerError::Options("the encoder stopped".into()))?;
+                    send(std::mem::take(&mut tiles))?;
                 }
-                cut::cut_tile(&l.band, *channels, x_runs, &y_runs, padding, &mut texels);
-                // Neighbours with the same texels (most often one colour) share one encoding.
+                // Neighbours in a batch with the same texels (most often one colour) share one
+                // encoding.
                 match tiles.last_mut() {
-                    Some(prev) if prev.texels == texels => prev.places.push((*tx, ty)),
-                    _ => {
-                        let full = std::mem::replace(&mut texels, Vec::with_capacity(layout.tile_texels() * *channels));
-                        tiles.push(CutTile { texels: full, places: vec![(*tx, ty)] })
-                    }
+                    Some(prev) if prev.texels == texels => prev.places.push((tx, row.index)),
+                    _ => tiles.push(CutTile { texels, places: vec![(tx, row.index)] }),
                 }
             }
-            out.send(Ok(Batch { lod: l.lod, tiles })).map_err(|_| TilerError::Options("the encoder stopped".into()))?;
-            l.next_tile_row = ty + 1;
-            l.band.drop_before(cut::first_row_kept(layout, ty, height));
-        }
-        Ok(())
+            send(tiles)
+        })
     }
 }
 
@@ -481,15 +463,8 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
                 }
             });
             let first_row = span.window_rows(&layout, lod).start;
-            let tile_rows = span.rows_at(lod);
-            cut_levels.push(LevelCuts {
-                lod,
-                extent,
-                band: Band::starting_at(first_row, row_len, (layout.tile_size + 1).min(extent.1) as usize),
-                next_tile_row: tile_rows.start,
-                end_tile_row: tile_rows.end,
-                x_runs,
-            });
+            let band = Band::new(layout, lod, channels, x_runs, span.rows_at(lod), first_row, edge);
+            cut_levels.push(LevelCuts { lod, band });
             sum_levels.push(LevelSums { down, row: vec![T::default(); row_len], roots: None });
         }
         let exact = ExactFilter::new(filter, pixels);

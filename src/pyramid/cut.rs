@@ -3,11 +3,11 @@
 //! A stored tile at `(x, y)` of LOD k covers virtual texels `[x*P - B, x*P + P + B)` in both
 //! directions. Coordinates outside the virtual texture (its page grid) repeat its edge texels;
 //! coordinates in the padding between the image and the virtual edge (inside the last page of
-//! a row or column) repeat the image's last texel ("edge") or take the background colour. Each direction is precomputed once per tile column or row as
-//! a few runs, so cutting is mostly `memcpy`.
+//! a row or column) repeat the image's last texel ("edge") or take the background colour.
+//! Each direction is precomputed once per tile column or row as a few runs, so cutting is
+//! mostly `memcpy` ([`band`](super::band) does it, a row at a time).
 
 use crate::layout::Layout;
-use crate::pyramid::band::Band;
 
 /// Where the texels of one direction of a tile come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -77,57 +77,33 @@ pub fn shifted(runs: Vec<Run>, origin: u64) -> Vec<Run> {
         .collect()
 }
 
-/// Assembles one tile from `band`: `x_runs` pick columns, `y_runs` pick rows.
-pub fn cut_tile<T: Copy>(
-    band: &Band<T>,
-    channels: usize,
-    x_runs: &[Run],
-    y_runs: &[Run],
-    padding: &Padding<T>,
-    out: &mut Vec<T>,
-) {
-    out.clear();
-    let fill = match padding {
-        Padding::Colour(c) => c.as_slice(),
-        Padding::Edge => &[],
-    };
-    let push_row = |row: Option<&[T]>, out: &mut Vec<T>| {
-        for run in x_runs {
-            match (*run, row) {
-                (Run::Copy { start, len }, Some(r)) => {
-                    out.extend_from_slice(&r[start as usize * channels..(start + len) as usize * channels])
-                }
-                (Run::Repeat { at, len }, Some(r)) => {
-                    repeat_texel(out, &r[at as usize * channels..(at as usize + 1) * channels], len)
-                }
-                (Run::Copy { len, .. } | Run::Repeat { len, .. } | Run::Fill { len }, _) => {
-                    repeat_texel(out, fill, len)
-                }
+/// Appends one row of a tile to `out`: `x_runs` pick the columns of `row`, or of the background
+/// `fill` (one texel) where `row` is `None`.
+pub fn push_row<T: Copy>(out: &mut Vec<T>, x_runs: &[Run], row: Option<&[T]>, channels: usize, fill: &[T]) {
+    for run in x_runs {
+        match (*run, row) {
+            (Run::Copy { start, len }, Some(r)) => {
+                out.extend_from_slice(&r[start as usize * channels..(start + len) as usize * channels])
             }
-        }
-    };
-    for run in y_runs {
-        match *run {
-            Run::Copy { start, len } => {
-                for y in start..start + len {
-                    push_row(Some(band.row(y as u64)), out);
-                }
+            (Run::Repeat { at, len }, Some(r)) => {
+                repeat_texel(out, &r[at as usize * channels..(at as usize + 1) * channels], len)
             }
-            Run::Repeat { at, len } => {
-                let first = out.len();
-                push_row(Some(band.row(at as u64)), out);
-                let row = out.len() - first;
-                for _ in 1..len {
-                    out.extend_from_within(first..first + row);
-                }
-            }
-            Run::Fill { len } => {
-                for _ in 0..len {
-                    push_row(None, out);
-                }
-            }
+            (Run::Copy { len, .. } | Run::Repeat { len, .. } | Run::Fill { len }, _) => repeat_texel(out, fill, len),
         }
     }
+}
+
+/// Each texel of `runs` in turn: the real texel it holds, or `None` for the background.
+pub fn expand(runs: &[Run]) -> Vec<Option<u32>> {
+    let mut out = Vec::new();
+    for run in runs {
+        match *run {
+            Run::Copy { start, len } => out.extend((start..start + len).map(Some)),
+            Run::Repeat { at, len } => out.extend(std::iter::repeat_n(Some(at), len as usize)),
+            Run::Fill { len } => out.extend(std::iter::repeat_n(None, len as usize)),
+        }
+    }
+    out
 }
 
 /// Appends `len` copies of `texel`, doubling what is already written instead of copying
@@ -151,24 +127,15 @@ pub fn last_row_needed(layout: &Layout, t: u32, extent: u32) -> u64 {
     (end - 1).min(extent as u64 - 1)
 }
 
-/// First image row the tile rows after `t` still read.
-pub fn first_row_kept(layout: &Layout, t: u32, extent: u32) -> u64 {
-    ((t as u64 + 1) * layout.payload() as u64).saturating_sub(layout.border as u64).min(extent as u64 - 1)
+/// First image row that tile row `t` reads (real texels start above the image's last row:
+/// a row of tiles exists only where its payload does).
+pub fn first_row_read(layout: &Layout, t: u32) -> u64 {
+    (t as u64 * layout.payload() as u64).saturating_sub(layout.border as u64)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn expand(runs: &[Run]) -> Vec<Option<u32>> {
-        runs.iter()
-            .flat_map(|r| match *r {
-                Run::Copy { start, len } => (start..start + len).map(Some).collect::<Vec<_>>(),
-                Run::Repeat { at, len } => vec![Some(at); len as usize],
-                Run::Fill { len } => vec![None; len as usize],
-            })
-            .collect()
-    }
 
     #[test]
     fn border_repeats_the_virtual_edge() {

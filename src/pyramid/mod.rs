@@ -2,11 +2,11 @@
 //! stored tiles cut out of each level, in memory bounded by `--max-memory` whatever the size.
 //!
 //! In data order:
-//! - `band`: the few rows of one level that its next row of tiles needs;
+//! - `band`: one level's rows of tiles, filled as its rows arrive;
 //! - `reduce`: exact 2x2 sums passed from each level to the next, rounded once per texel;
 //! - `filter`: what those sums add up (`--filter`: box, linear light, premultiplied);
 //! - `resample`: the filters that cannot cascade sums (lanczos3, mitchell), band by band;
-//! - `cut`: the tiles (payload, borders, padding) cut out of a band;
+//! - `cut`: which texels make a tile (payload, borders, padding), and copying a row of them;
 //! - `cascade`: all levels in flight at once, wiring the above together for one pass;
 //! - `stripes`: the passes of an image too wide for one band: vertical stripes of the fine
 //!   levels, then the coarse levels from block sums.

@@ -109,8 +109,9 @@ pub fn one_band_bytes(layout: &Layout, texel_bytes: u64) -> u64 {
     span_bytes(layout, &Span::whole(layout), texel_bytes)
 }
 
-/// Bytes one span's cascade holds at once, rounded up generously: per LOD a band of up to
-/// `tile_size + 1` rows and a row of exact sums of its window, and three
+/// Bytes one span's cascade holds at once, rounded up generously: per LOD its band (the row of
+/// its pages being filled, and the border rows the next one shares with it) and a row of
+/// exact sums of its window, and three
 /// batches of tiles (a row of its pages, or [`BATCH_BYTES`](crate::pyramid::cascade::BATCH_BYTES)
 /// of them: at most four are held at once, over all LODs, being cut, queued, encoded and
 /// stored); plus the source row that is read whole.
@@ -120,11 +121,10 @@ pub(crate) fn span_bytes(layout: &Layout, span: &Span, texel_bytes: u64) -> u64 
     span.lods.clone().fold(source_row, |sum, lod| {
         let window = span.window(layout, lod);
         let width = window.end - window.start;
-        let rows = (tile + 1).min(layout.level_extent(lod).1 as u64);
-        let band = rows * width * texel_bytes;
+        let pages = span.columns_at(lod);
+        let band = (tile + 2 * layout.border as u64) * (pages.end - pages.start) as u64 * tile * texel_bytes;
         // u64 sums per sample, or u128 for 16-bit samples: 8 bytes per texel byte either way.
         let sums = 8 * width * texel_bytes;
-        let pages = span.columns_at(lod);
         let per_batch = batch_tiles(layout, texel_bytes as usize) as u64;
         let batches = 3 * ((pages.end - pages.start) as u64).min(per_batch) * tile * tile * texel_bytes;
         sum.saturating_add(band).saturating_add(sums).saturating_add(batches)

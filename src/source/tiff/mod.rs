@@ -46,7 +46,7 @@ pub struct TiffSource {
     next: u64,
     /// Set once a strip failed: the decoder's state is not trusted after that.
     failed: bool,
-    /// Uncompressed 8-bit strips, whose rows can be read in part straight from the file.
+    /// Uncompressed 8-bit strips, whose rows (or parts of them) are read straight from the file.
     direct: Option<DirectStrips>,
     /// The columns each row is read from, when fewer than all were asked for and the file
     /// can give them for less: `direct` strips, or tiles (only those under the columns are
@@ -474,37 +474,30 @@ impl RowSource for TiffSource {
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
         let y = self.next;
-        if let (Some(direct), Some(columns), Chunking::Strips { rows }) = (&self.direct, &self.columns, self.chunking) {
-            let bpp = self.layout.bytes_per_pixel() as u64;
+        let fail = |message: String| TilerError::DecodeRow { path: self.path.clone(), row: y, message };
+        if y >= self.height as u64 {
+            return Err(fail("read past the last row".into()));
+        }
+        let columns = self.columns.clone().unwrap_or(0..self.width);
+        let out_pixel = self.layout.bytes_per_pixel();
+        if out.len() != columns.len() * out_pixel {
+            return Err(fail(format!("row buffer has {} bytes, expected {}", out.len(), columns.len() * out_pixel)));
+        }
+        if let (Some(direct), Chunking::Strips { rows }) = (&self.direct, self.chunking) {
+            // Straight from the file into `out`, whole rows or a part: no band, no copy.
             let strip = (y / rows as u64) as usize;
             let within = (y % rows as u64) * self.width as u64 + columns.start as u64;
-            let at = direct.offsets.get(strip).map(|o| o + within * bpp);
-            let read = at.map(|at| std::os::unix::fs::FileExt::read_exact_at(&direct.file, out, at));
-            return match read {
+            let at = direct.offsets.get(strip).map(|o| o + within * out_pixel as u64);
+            return match at.map(|at| std::os::unix::fs::FileExt::read_exact_at(&direct.file, out, at)) {
                 Some(Ok(())) => {
                     self.next += 1;
                     Ok(())
                 }
-                _ => Err(TilerError::DecodeRow {
-                    path: self.path.clone(),
-                    row: y,
-                    message: format!("strip {strip} is not where its offset says (a truncated file?)"),
-                }),
+                _ => Err(fail(format!("strip {strip} is not where its offset says (a truncated file?)"))),
             };
         }
         if self.failed {
-            return Err(TilerError::DecodeRow {
-                path: self.path.clone(),
-                row: y,
-                message: "an earlier strip failed to decode".into(),
-            });
-        }
-        if y >= self.height as u64 {
-            return Err(TilerError::DecodeRow {
-                path: self.path.clone(),
-                row: y,
-                message: "read past the last row".into(),
-            });
+            return Err(fail("an earlier strip failed to decode".into()));
         }
         if y >= self.band_first + self.band_rows {
             self.load_band(y)?;
@@ -512,17 +505,8 @@ impl RowSource for TiffSource {
         let sample = self.layout.depth.bytes();
         let file_pixel = self.file_samples * sample;
         let row_bytes = self.width as usize * file_pixel;
-        let columns = self.columns.clone().unwrap_or(0..self.width);
         let row = &self.band[(y - self.band_first) as usize * row_bytes..][..row_bytes];
         let row = &row[columns.start as usize * file_pixel..columns.end as usize * file_pixel];
-        let out_pixel = self.layout.bytes_per_pixel();
-        if out.len() != columns.len() * out_pixel {
-            return Err(TilerError::DecodeRow {
-                path: self.path.clone(),
-                row: y,
-                message: format!("row buffer has {} bytes, expected {}", out.len(), columns.len() * out_pixel),
-            });
-        }
         // The crate has already converted samples to native byte order (and applied the
         // predictor and WhiteIsZero inversion); only surplus extra samples are dropped here.
         if file_pixel == out_pixel {
@@ -979,13 +963,14 @@ mod tests {
         let path = dir.path().join("cut.tif");
         write_tiff(&path, false, basic_tags(w, h, &[8, 8, 8], 2, Some(8)), &strips_of(&rgb, w as usize * 3, 8), false);
         let bytes = std::fs::read(&path).unwrap();
-        // Strips are 50 x 8 x 3 = 1200 bytes: drop the last and 100 bytes of the one before.
+        // Strips are 50 x 8 x 3 = 1200 bytes: drop the last and 100 bytes of the one before,
+        // which cuts its last row (31; uncompressed rows are read from the file one by one).
         std::fs::write(&path, &bytes[..bytes.len() - 1200 - 100]).unwrap();
         let mut source = open(&path, 1 << 30).unwrap();
         let err = read_all(source.as_mut()).unwrap_err();
         match &err {
             TilerError::DecodeRow { row, message, .. } => {
-                assert_eq!(*row, 24, "{err}");
+                assert_eq!(*row, 31, "{err}");
                 assert!(message.contains("strip 3"), "{err}");
             }
             other => panic!("unexpected {other}"),
