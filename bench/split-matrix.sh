@@ -21,6 +21,8 @@
 #     bench/split-matrix.sh                 # about 10 minutes on 2 cores, 6 GB of sources
 #     SOURCES="strip jpeg" CODECS="jpeg png" bench/split-matrix.sh
 #     REPORT_ONLY=1 bench/split-matrix.sh   # the table again from the last runs (bench/work/matrix/runs.tsv)
+#     OUT_DIR=/dev/shm DOC=/tmp/shm.md SOURCES=strip CODECS=jpeg bench/split-matrix.sh
+#                                           # outputs on tmpfs: what the disk's writeback costs
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source bench/lib.sh
@@ -30,7 +32,8 @@ CODECS=${CODECS:-jpeg png raw zstd bc1 bc7}
 bench_setup
 SRC=$WORK/src16k.tif
 M=$WORK/matrix
-mkdir -p "$M"
+OUT=${OUT_DIR:-$M} # where the packs (and the peer's .zip) are written
+mkdir -p "$M" "$OUT"
 PY=$WORK/venv/bin/python
 if ! "$PY" -c 'import pyvips' 2>/dev/null; then
   log "installing pyvips + pyvips-binary into $WORK/venv"
@@ -106,14 +109,14 @@ for name in $SOURCES_RUN; do
   for round in $(seq "$RUNS"); do
     for codec in $CODECS; do
       # shellcheck disable=SC2046 # codec_args is word-split on purpose
-      run "$name $codec" "$WORK/bin/vortex-tiler" "$command" "$file" --pack "$M/out.vtpk" --force --tile-size 256 --border 0 \
+      run "$name $codec" "$WORK/bin/vortex-tiler" "$command" "$file" --pack "$OUT/out.vtpk" --force --tile-size 256 --border 0 \
         $(codec_args "$codec") --json
-      rm -f "$M/out.vtpk"
+      rm -f "$OUT/out.vtpk"
     done
     if [ -n "$PY" ] && [ "$name" != tiles ]; then
-      rm -rf "$M/peer.zip"
-      run "$name peer" "$PY" -c "$PEER" "$file" "$M/peer.zip"
-      rm -f "$M/peer.zip"
+      rm -rf "$OUT/peer.zip"
+      run "$name peer" "$PY" -c "$PEER" "$file" "$OUT/peer.zip"
+      rm -f "$OUT/peer.zip"
     fi
   done
 done

@@ -16,6 +16,7 @@ use crate::pyramid::cut::{self, Padding, Run};
 
 pub struct Band<T> {
     layout: Layout,
+    lod: u32,
     channels: usize,
     /// The level's image height and its virtual texture's (the pages' payloads).
     height: u32,
@@ -64,6 +65,7 @@ impl<T: Copy> Band<T> {
     ) -> Band<T> {
         Band {
             layout,
+            lod,
             channels,
             height: layout.level_extent(lod).1,
             virtual_height: layout.virtual_extent(lod).1,
@@ -74,6 +76,10 @@ impl<T: Copy> Band<T> {
             next_tile_row: tile_rows.start,
             end_tile_row: tile_rows.end,
         }
+    }
+
+    pub fn lod(&self) -> u32 {
+        self.lod
     }
 
     /// Copies the next row into every tile that holds it; `done` gets each row of tiles this

@@ -4,8 +4,9 @@
 //! exact sums for the exact filters (one half-built row of sums per level), a [`Resampler`] for
 //! lanczos3 and mitchell. A source row goes into LOD 0 and cascades down as far as it
 //! completes rows; each row is copied into the tiles that hold it ([`cut`]), and whenever a
-//! level's band completes a row of tiles, those tiles are sent as one [`Batch`] to the encoders. The cascade knows nothing of
-//! where rows come from or where tiles go: `split.rs` feeds it and drains the channel.
+//! level's band completes a row of tiles, those tiles are sent as one [`Batch`] to the
+//! encoders. The cascade knows nothing of where rows come from or where tiles go: `split.rs`
+//! feeds it and drains the channel.
 //!
 //! The work has two halves that can run on two threads (issue 18): [`Sums`], the arithmetic
 //! (every level's sums, rounding, resampling), which records the rows it makes in order as
@@ -188,12 +189,6 @@ impl<A: Copy> RootSums<A> {
     }
 }
 
-/// The cutting side of one LOD: its band, which fills the tiles as the rows arrive.
-struct LevelCuts<T> {
-    lod: u32,
-    band: Band<T>,
-}
-
 /// The arithmetic side of one LOD: how its rows are made and passed down.
 struct LevelSums<T, A> {
     down: Option<Down<T, A>>,
@@ -248,7 +243,8 @@ pub(crate) struct Cuts<T> {
     layout: Layout,
     channels: usize,
     padding: Padding<T>,
-    levels: Vec<LevelCuts<T>>,
+    /// Per level, the band that fills its tiles as its rows arrive.
+    levels: Vec<Band<T>>,
     out: BatchSender<T>,
 }
 
@@ -275,11 +271,11 @@ impl<T: Sample> Cuts<T> {
     /// Row `row` into level `level`'s band; sends every row of tiles it completes.
     fn push(&mut self, level: usize, row: &[T]) -> Result<()> {
         let Cuts { layout, channels, padding, levels, out } = self;
-        let LevelCuts { lod, band } = &mut levels[level];
+        let band = &mut levels[level];
+        let lod = band.lod();
         let per_batch = batch_tiles(layout, *channels * size_of::<T>());
-        let send = |tiles| {
-            out.send(Ok(Batch { lod: *lod, tiles })).map_err(|_| TilerError::Options("the encoder stopped".into()))
-        };
+        let send =
+            |tiles| out.send(Ok(Batch { lod, tiles })).map_err(|_| TilerError::Options("the encoder stopped".into()));
         band.push(row, padding, |row| {
             let mut tiles: Vec<CutTile<T>> = Vec::new();
             for (tx, texels) in row.tiles {
@@ -463,8 +459,7 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
                 }
             });
             let first_row = span.window_rows(&layout, lod).start;
-            let band = Band::new(layout, lod, channels, x_runs, span.rows_at(lod), first_row, edge);
-            cut_levels.push(LevelCuts { lod, band });
+            cut_levels.push(Band::new(layout, lod, channels, x_runs, span.rows_at(lod), first_row, edge));
             sum_levels.push(LevelSums { down, row: vec![T::default(); row_len], roots: None });
         }
         let exact = ExactFilter::new(filter, pixels);
