@@ -143,6 +143,12 @@ impl SrgbTable {
         self.decode[c as usize]
     }
 
+    /// 8-bit codes only: the code of every fixed-point value up to `scale`, for callers that
+    /// encode whole rows (one lookup, no branch per value).
+    pub fn encode_table(&self) -> Option<&[u8]> {
+        (!self.encode.is_empty()).then_some(self.encode.as_slice())
+    }
+
     /// The code nearest to the fixed-point linear value `v` (clamped to `scale`).
     #[inline]
     pub fn encode(&self, v: u64) -> u16 {
@@ -244,7 +250,15 @@ impl ExactFilter {
     /// Rounds an exact row into samples.
     pub fn finish<T: Sample, A: Acc>(&self, exact: &ExactRow<'_, A>, out: &mut [T]) {
         if let (Some(t), None) = (self.table, self.alpha) {
-            exact.map_means(out, |v| T::from_u16(t.encode(v)));
+            match t.encode_table() {
+                Some(codes) => {
+                    // Clamped to the table's last entry (`scale`), which also spares the
+                    // bounds check: this loop is most of a level's rounding.
+                    let last = codes.len() as u64 - 1;
+                    exact.map_means(out, |v| T::from_u16(codes[v.min(last) as usize] as u16))
+                }
+                None => exact.map_means(out, |v| T::from_u16(t.encode(v))),
+            }
             return;
         }
         let c = self.channels;
