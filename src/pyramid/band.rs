@@ -5,8 +5,9 @@
 //! borders overlap), so a texel is copied once between the pyramid and the encoders: a band of
 //! rows cut into tiles once complete copied it twice, the larger part of the cutting thread's
 //! time (issue 18). A row of tiles is handed on, complete, once its last row is in. The band
-//! therefore never holds more than two rows of tiles of its level's width, the second only
-//! for the border rows they share, whatever the image height.
+//! therefore holds one row of tiles of its level's width, and the border rows the next one
+//! shares with it (more only where a border is over half the payload), whatever the image
+//! height.
 
 use std::collections::VecDeque;
 use std::ops::Range;

@@ -140,7 +140,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
             .map_err(|_| TilerError::unsupported(path, "a strip is too large for this machine"))?
     ];
     let tile = vec![0u8; tile_bytes as usize];
-    let direct = direct_strips(path, &mut decoder, compression, chunking, layout, file_samples)?;
+    let direct = direct_strips(path, &mut decoder, compression, (chunking, height, row_bytes), layout, file_samples)?;
     let ahead_workers = match chunking {
         Chunking::Strips { .. } if compression != CompressionMethod::None && height as u64 > 2 * band_rows => {
             let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(4);
@@ -197,14 +197,16 @@ fn open_decoder(path: &Path, max_memory: u64) -> Result<Decoder<BufReader<File>>
 }
 
 /// [`DirectStrips`] of the TIFF, if its strips hold rows as the texels they are.
+/// `strips` is the file's chunking, its height and the bytes of one of its rows.
 fn direct_strips(
     path: &Path,
     decoder: &mut Decoder<BufReader<File>>,
     compression: CompressionMethod,
-    chunking: Chunking,
+    strips: (Chunking, u32, u64),
     layout: PixelLayout,
     file_samples: usize,
 ) -> Result<Option<DirectStrips>> {
+    let (chunking, height, row_bytes) = strips;
     let tag = |decoder: &mut Decoder<BufReader<File>>, t| {
         decoder.find_tag_unsigned::<u16>(t).map_err(|e| open_error(path, e))
     };
@@ -218,6 +220,19 @@ fn direct_strips(
         return Ok(None);
     }
     let offsets = decoder.get_tag_u64_vec(Tag::StripOffsets).map_err(|e| open_error(path, e))?;
+    // A row read straight from the file must lie inside its strip, not run on into whatever
+    // follows a short one: an uncompressed strip holds its rows whole, or the file is corrupt.
+    let counts = decoder.get_tag_u64_vec(Tag::StripByteCounts).map_err(|e| open_error(path, e))?;
+    let Chunking::Strips { rows } = chunking else { return Ok(None) };
+    for strip in 0..height.div_ceil(rows) {
+        let need = rows.min(height - strip * rows) as u64 * row_bytes;
+        let (count, offset) = (counts.get(strip as usize), offsets.get(strip as usize));
+        if count.is_none_or(|&c| c < need) || offset.is_none() {
+            let holds = count.map_or("no byte count".to_string(), |c| format!("{c} bytes"));
+            let message = format!("corrupt TIFF: uncompressed strip {strip} holds {holds}, its rows need {need}");
+            return Err(TilerError::decode(path, message));
+        }
+    }
     let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
     Ok(Some(DirectStrips { file, offsets }))
 }
@@ -953,6 +968,22 @@ mod tests {
         let mut source = open(&path, 1 << 30).unwrap();
         let inverted: Vec<u8> = grey.iter().map(|v| 255 - v).collect();
         assert_eq!(read_all(source.as_mut()).unwrap(), inverted);
+    }
+
+    #[test]
+    fn a_strip_shorter_than_its_rows_is_refused() {
+        // Strip 2 (rows 16-23) says it holds 100 bytes fewer than its rows: a row read straight
+        // from the file would run on into strip 3.
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (50u32, 40u32);
+        let rgb: Vec<u8> = pattern(w, h, 3, 255).into_iter().map(|v| v as u8).collect();
+        let mut strips = strips_of(&rgb, w as usize * 3, 8);
+        strips[2].truncate(1200 - 100);
+        let path = dir.path().join("short.tif");
+        write_tiff(&path, false, basic_tags(w, h, &[8, 8, 8], 2, Some(8)), &strips, false);
+        let err = open(&path, 1 << 30).err().expect("a short strip is refused");
+        let text = err.to_string();
+        assert!(text.contains("short.tif") && text.contains("strip 2 holds 1100 bytes"), "{text}");
     }
 
     #[test]
