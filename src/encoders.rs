@@ -2,12 +2,12 @@
 //! sink.
 //!
 //! Tiles are encoded as tasks on the pool with no barrier between batches: a batch's tiles are
-//! spawned as soon as it arrives, while the last tiles of the one before are still being
-//! encoded. (A parallel loop per batch left a core idle at the end of every batch, waiting for
-//! the other's last tile; issue 18.) A sink that takes tiles in any order stores each as it is encoded; an
-//! ordered one (a pack) gets them from a writer thread, in the producer's order, batch by batch
-//! as each completes, so that its bytes do not depend on the thread count. At most
-//! [`LOTS_IN_FLIGHT`] lots are encoding or waiting for the writer at once.
+//! spawned as soon as it arrives, while the last tiles of the one before are still being encoded.
+//! (A parallel loop per batch left a core idle at the end of every batch, waiting for the other's
+//! last tile; issue 18.) A sink that takes tiles in any order stores each as it is encoded; an
+//! ordered one (a pack) gets them from a writer thread, in the producer's order, batch by batch as
+//! each completes, so that its bytes do not depend on the thread count. At most [`LOTS_IN_FLIGHT`]
+//! lots are encoding or waiting for the writer at once.
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::atomic::{AtomicU64, Ordering};

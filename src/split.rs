@@ -1,13 +1,13 @@
 //! The `split` pipeline's wiring: source -> pyramid cascade -> encoders -> sink.
 //!
 //! The source is read ahead on a thread of its own; a producer thread makes the [LOD
-//! cascade](crate::pyramid)'s sums from it and a cutting thread cuts each row of tiles as soon as
-//! its bands hold every row it reads, and sends it, in a bounded channel, to the calling thread;
-//! that thread spawns each tile's encoding on the rayon pool ([`crate::codec`]) and a writer
-//! hands them to the [sink](crate::sink). Peak memory is a few bands of the image's width,
+//! cascade](crate::pyramid)'s sums from it and a cutting thread copies every level's rows into
+//! their tiles and sends each row of tiles, once complete, in a bounded channel, to the calling
+//! thread; that thread spawns each tile's encoding on the rayon pool ([`crate::codec`]) and a
+//! writer hands them to the [sink](crate::sink). Peak memory is a few bands of the image's width,
 //! whatever its height; an image too wide for that under `max_memory` is read once per vertical
-//! stripe (`pyramid::stripes`) for the same tiles. Output bytes do not depend on the thread
-//! count. This file is only that orchestration; the stages live in their modules.
+//! stripe (`pyramid::stripes`) for the same tiles. Output bytes do not depend on the thread count.
+//! This file is only that orchestration; the stages live in their modules.
 
 use std::sync::Arc;
 use std::sync::mpsc::sync_channel;

@@ -117,11 +117,10 @@ impl<T: Copy> Band<T> {
                 open.written += 1;
             }
         }
-        while self.open.front().is_some_and(|open| open.written == open.sources.len()) {
-            if let Some(open) = self.open.pop_front() {
-                let tiles = self.x_runs.iter().map(|(x, _)| *x).zip(open.tiles).collect();
-                done(TileRow { index: open.index, tiles })?;
-            }
+        let complete = self.open.iter().take_while(|open| open.written == open.sources.len()).count();
+        for open in self.open.drain(..complete) {
+            let tiles = self.x_runs.iter().map(|(x, _)| *x).zip(open.tiles).collect();
+            done(TileRow { index: open.index, tiles })?;
         }
         Ok(())
     }
@@ -138,15 +137,23 @@ impl<T: Copy> Band<T> {
 mod tests {
     use super::*;
 
-    /// Every row of tiles of a `w x h` one-channel image whose texel (x, y) is `y * 100 + x`,
-    /// cut through a band: as `cut::runs` says, texel for texel.
+    /// The image texel a tile's texel `i` along one direction holds, from the page geometry
+    /// alone (not from `cut::runs`): virtual texel `t * payload - border + i`, clamped to the
+    /// virtual texture, then the image's last texel (edge) or `None` (background) past it.
+    fn naive(layout: &Layout, t: u32, i: u32, extent: u32, virtual_len: u64, edge: bool) -> Option<u32> {
+        let v = (t as i64 * layout.payload() as i64 - layout.border as i64 + i as i64).clamp(0, virtual_len as i64 - 1);
+        if v < extent as i64 { Some(v as u32) } else { edge.then_some(extent - 1) }
+    }
+
+    /// Every row of tiles of a `w x h` one-channel image whose texel (x, y) is `y * 100 + x`
+    /// (9999 for the background), cut through a band, against [`naive`].
     fn check(w: u32, h: u32, tile: u32, border: u32, padding: Padding<u16>) {
         let layout = Layout::new(w as u64, h as u64, tile, border).unwrap();
         let edge = padding == Padding::Edge;
-        let virtual_len = layout.virtual_extent(0);
+        let (virtual_w, virtual_h) = layout.virtual_extent(0);
         let x_runs: Vec<(u32, Vec<Run>)> =
-            (0..layout.columns).map(|t| (t, cut::runs(&layout, t, w, virtual_len.0, edge))).collect();
-        let mut band = Band::new(layout, 0, 1, x_runs.clone(), 0..layout.rows, 0, edge);
+            (0..layout.columns).map(|t| (t, cut::runs(&layout, t, w, virtual_w, edge))).collect();
+        let mut band = Band::new(layout, 0, 1, x_runs, 0..layout.rows, 0, edge);
         let mut got = Vec::new();
         for y in 0..h {
             let row: Vec<u16> = (0..w).map(|x| (y * 100 + x) as u16).collect();
@@ -157,22 +164,24 @@ mod tests {
             .unwrap();
         }
         assert_eq!(got.iter().map(|r| r.index).collect::<Vec<_>>(), (0..layout.rows).collect::<Vec<_>>());
-        let texel = |x: Option<u32>, y: Option<u32>| match (x, y) {
-            (Some(x), Some(y)) => (y * 100 + x) as u16,
-            _ => 9999,
-        };
         for r in &got {
-            let ys = cut::expand(&cut::runs(&layout, r.index, h, virtual_len.1, edge));
+            assert_eq!(r.tiles.iter().map(|(tx, _)| *tx).collect::<Vec<_>>(), (0..layout.columns).collect::<Vec<_>>());
             for (tx, texels) in &r.tiles {
-                let xs = cut::expand(&x_runs[*tx as usize].1);
-                let want: Vec<u16> = ys.iter().flat_map(|&y| xs.iter().map(move |&x| texel(x, y))).collect();
+                let want: Vec<u16> = (0..tile)
+                    .flat_map(|j| (0..tile).map(move |i| (i, j)))
+                    .map(|(i, j)| {
+                        let x = naive(&layout, *tx, i, w, virtual_w, edge);
+                        let y = naive(&layout, r.index, j, h, virtual_h, edge);
+                        x.zip(y).map_or(9999, |(x, y)| (y * 100 + x) as u16)
+                    })
+                    .collect();
                 assert_eq!(texels, &want, "{w}x{h} tile {tile} border {border}: tile ({tx}, {})", r.index);
             }
         }
     }
 
     #[test]
-    fn every_tile_holds_what_its_runs_say() {
+    fn every_tile_holds_what_its_geometry_says() {
         for (w, h) in [(1, 1), (20, 20), (24, 24), (13, 7), (7, 40), (29, 31)] {
             for (tile, border) in [(16, 2), (8, 0), (8, 1), (8, 2), (16, 5)] {
                 check(w, h, tile, border, Padding::Edge);

@@ -26,7 +26,7 @@ const CHUNKS_AHEAD: usize = 2;
 /// each chunk on to the cutting thread, which holds one and has the rest queued. With 2 (a
 /// chunk queued), the reader, the sums and the cutter stalled together whenever the encoders
 /// fell behind, and the encoders then waited for a whole row of tiles to come through them:
-/// on the 16384² benchmark their idle time fell from 0.5-0.7 s to 0.16-0.24 s with 8, for
+/// on the 16384² benchmark their idle time fell from 0.46-0.70 s to 0.16-0.24 s with 8, for
 /// about 15 MiB more (issue 18).
 pub const CHUNKS_HANDED_ON: u64 = 8;
 

@@ -108,15 +108,19 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         }
     };
 
-    // Memory held: one strip or tile row of whole image rows, plus one tile.
     let pixel_bytes = (file_samples * layout.depth.bytes()) as u64;
     let row_bytes = width as u64 * pixel_bytes;
+    let samples_as_stored = layout.depth == Depth::U8 && file_samples == layout.channels.count();
+    let direct = direct_strips(path, &mut decoder, compression, chunking, samples_as_stored, height, row_bytes)?;
+    // Memory held: one strip or tile row of whole image rows (none where rows are read
+    // straight from the file), plus one tile.
     let band_rows = chunking.rows().min(height) as u64;
+    let held_rows = if direct.is_some() { 0 } else { band_rows };
     let tile_bytes = match chunking {
         Chunking::Strips { .. } => 0,
         Chunking::Tiles { width: tw, height: th, .. } => tw as u64 * th as u64 * pixel_bytes,
     };
-    let need = row_bytes.saturating_mul(band_rows).saturating_add(tile_bytes);
+    let need = row_bytes.saturating_mul(held_rows).saturating_add(tile_bytes);
     if need > max_memory {
         let what = match chunking {
             Chunking::Strips { .. } if band_rows == height as u64 => "the TIFF is stored as a single strip".to_string(),
@@ -133,14 +137,13 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
             ),
         ));
     }
-    let strip_bytes = row_bytes * band_rows;
     let band = vec![
         0u8;
-        usize::try_from(strip_bytes)
+        usize::try_from(row_bytes * held_rows)
             .map_err(|_| TilerError::unsupported(path, "a strip is too large for this machine"))?
     ];
     let tile = vec![0u8; tile_bytes as usize];
-    let direct = direct_strips(path, &mut decoder, compression, (chunking, height, row_bytes), layout, file_samples)?;
+    let strip_bytes = row_bytes * band_rows;
     let ahead_workers = match chunking {
         Chunking::Strips { .. } if compression != CompressionMethod::None && height as u64 > 2 * band_rows => {
             let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(4);
@@ -196,24 +199,23 @@ fn open_decoder(path: &Path, max_memory: u64) -> Result<Decoder<BufReader<File>>
     Ok(decoder.with_limits(limits))
 }
 
-/// [`DirectStrips`] of the TIFF, if its strips hold rows as the texels they are.
-/// `strips` is the file's chunking, its height and the bytes of one of its rows.
+/// [`DirectStrips`] of the TIFF, if its strips hold rows as the texels they are
+/// (`samples_as_stored`: 8-bit, no extra samples to drop); `row_bytes` is one row's size.
 fn direct_strips(
     path: &Path,
     decoder: &mut Decoder<BufReader<File>>,
     compression: CompressionMethod,
-    strips: (Chunking, u32, u64),
-    layout: PixelLayout,
-    file_samples: usize,
+    chunking: Chunking,
+    samples_as_stored: bool,
+    height: u32,
+    row_bytes: u64,
 ) -> Result<Option<DirectStrips>> {
-    let (chunking, height, row_bytes) = strips;
+    let Chunking::Strips { rows } = chunking else { return Ok(None) };
     let tag = |decoder: &mut Decoder<BufReader<File>>, t| {
         decoder.find_tag_unsigned::<u16>(t).map_err(|e| open_error(path, e))
     };
     let as_is = compression == CompressionMethod::None
-        && matches!(chunking, Chunking::Strips { .. })
-        && layout.depth == Depth::U8
-        && file_samples == layout.channels.count()
+        && samples_as_stored
         && tag(decoder, Tag::Predictor)?.unwrap_or(1) == 1
         && tag(decoder, Tag::PhotometricInterpretation)? != Some(0); // WhiteIsZero is inverted
     if !as_is {
@@ -223,7 +225,6 @@ fn direct_strips(
     // A row read straight from the file must lie inside its strip, not run on into whatever
     // follows a short one: an uncompressed strip holds its rows whole, or the file is corrupt.
     let counts = decoder.get_tag_u64_vec(Tag::StripByteCounts).map_err(|e| open_error(path, e))?;
-    let Chunking::Strips { rows } = chunking else { return Ok(None) };
     for strip in 0..height.div_ceil(rows) {
         let need = rows.min(height - strip * rows) as u64 * row_bytes;
         let (count, offset) = (counts.get(strip as usize), offsets.get(strip as usize));
@@ -1109,8 +1110,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let (w, h) = (256u32, 256u32);
         let rgb = vec![100u8; (w * h * 3) as usize];
-        let path = dir.path().join("one-strip.tif");
+        // Uncompressed rows are read straight from the file: one strip holds no memory.
+        let path = dir.path().join("one-raw-strip.tif");
         write_with::<colortype::RGB8>(&path, Compression::Uncompressed, false, Some(h), w, h, &rgb);
+        let mut source = open(&path, 100_000).unwrap();
+        assert_eq!(read_all(source.as_mut()).unwrap(), rgb);
+        // A compressed one is decoded whole.
+        let path = dir.path().join("one-strip.tif");
+        write_with::<colortype::RGB8>(&path, Compression::Lzw, false, Some(h), w, h, &rgb);
         let err = open(&path, 100_000).err().unwrap();
         assert!(matches!(err, TilerError::Unsupported { .. }), "{err}");
         let text = err.to_string();
