@@ -9,7 +9,7 @@
 #       (levels averaged in stored values, as vips does) and the same with the default filter
 #       (linear-premultiplied: averaged in linear light)
 #     - vips dzsave SRC OUT/src16k --tile-size 254 --overlap 1 --suffix .jpeg[Q=85]   (Debian 8.14)
-#     - pyvips dzsave(tile_size=254, overlap=1, suffix=".jpeg[Q=85]"), sequential access
+#     - pyvips dzsave(tile_size=254, overlap=1, Q=85), sequential access (direct mode: bench/lib.sh)
 #       (libvips 8.18 from PyPI's pyvips-binary, in a venv; skipped with a note without it)
 #   each under /usr/bin/time -v: wall clock and peak RSS, medians over the runs; the tile files
 #   each wrote are counted, and the runs stop if vortex-tiler's set of file names differs from
@@ -26,17 +26,8 @@ PYVIPS=${PYVIPS:-1}
 
 bench_setup # vips, time, bin/vortex-tiler, src16k.tif, REV
 VIPS_VERSION=$(vips --version)
-PY=$WORK/venv/bin/python
 PYVIPS_VERSION=
-if [ "$PYVIPS" = 1 ]; then
-  if ! "$PY" -c 'import pyvips' 2>/dev/null; then
-    log "installing pyvips + pyvips-binary into $WORK/venv"
-    { python3 -m venv "$WORK/venv" && "$WORK/venv/bin/pip" install -q pyvips pyvips-binary; } >"$WORK/pip.log" 2>&1 ||
-      echo "note: could not install pyvips (see $WORK/pip.log); skipping libvips 8.18" >&2
-  fi
-  "$PY" -c 'import pyvips' 2>/dev/null &&
-    PYVIPS_VERSION=$("$PY" -c 'import pyvips; print("libvips-%d.%d.%d" % tuple(pyvips.version(i) for i in range(3)))')
-fi
+[ "$PYVIPS" = 1 ] && pyvips_setup
 
 cd "$WORK"
 OUT=$WORK/out-dzi
@@ -54,7 +45,7 @@ run_tool() {
     vortex-box) result=$(measure "$WORK/$tool.log" "$VT" split src16k.tif --layout dzi -o "$dest" --tile-size 254 --overlap 1 --quality 85 --filter box -q) ;;
     vortex-linear) result=$(measure "$WORK/$tool.log" "$VT" split src16k.tif --layout dzi -o "$dest" --tile-size 254 --overlap 1 --quality 85 -q) ;;
     vips) mkdir -p "$dest" && result=$(measure "$WORK/$tool.log" vips dzsave src16k.tif "$dest/src16k" --tile-size 254 --overlap 1 --suffix '.jpeg[Q=85]') ;;
-    pyvips) mkdir -p "$dest" && result=$(measure "$WORK/$tool.log" "$PY" -c "import pyvips; pyvips.Image.new_from_file('src16k.tif', access='sequential').dzsave('$dest/src16k', tile_size=254, overlap=1, suffix='.jpeg[Q=85]')") ;;
+    pyvips) mkdir -p "$dest" && result=$(measure "$WORK/$tool.log" "$PY" -c "import pyvips; pyvips.Image.new_from_file('src16k.tif', access='sequential').dzsave('$dest/src16k', tile_size=254, overlap=1, Q=85)") ;;
   esac
   printf '%s\t%s\t%s\t%s\t%s\n' "$tool" "$run" "${result% *}" "${result#* }" "$(tiles "$dest")" >>"$RESULTS"
   log "$tool run $run: ${result% *} s, $((${result#* } / 1024)) MiB peak"

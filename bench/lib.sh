@@ -93,3 +93,51 @@ splice() {
     !skip { print }' "$DOC" >"$DOC.tmp"
   mv "$DOC.tmp" "$DOC"
 }
+
+# pyvips_setup: libvips 8.18 from PyPI (pyvips + pyvips-binary) in $WORK/venv, installed the first
+# time. Sets PY (its python) and PYVIPS_VERSION ("libvips-8.18.7"), both empty when it cannot be
+# had (a note says why), and checks that the peer runs at its best (pyvips_direct_check).
+pyvips_setup() {
+  PY=$WORK/venv/bin/python
+  PYVIPS_VERSION=
+  if ! "$PY" -c 'import pyvips' 2>/dev/null; then
+    log "installing pyvips + pyvips-binary into $WORK/venv"
+    if ! { python3 -m venv "$WORK/venv" && "$WORK/venv/bin/pip" install -q pyvips pyvips-binary; } >"$WORK/pip.log" 2>&1; then
+      echo "note: could not install pyvips/pyvips-binary (see $WORK/pip.log); no libvips 8.18 peer" >&2
+      PY=
+      return
+    fi
+  fi
+  PYVIPS_VERSION=$("$PY" -c 'import pyvips; print("libvips-%d.%d.%d" % tuple(pyvips.version(i) for i in range(3)))')
+  pyvips_direct_check
+}
+
+# pyvips_direct_check: libvips 8.15 and later write JPEG tiles straight from dzsave's pyramid
+# ("direct mode") when the quality is given as `Q=`; a quality inside `suffix=".jpg[Q=85]"` sends
+# every tile through a generic save instead, at less than half the speed (issue 28: the peer of
+# docs/benchmarks.md ran that way until 2026-11-26). Every peer call in bench/ passes `Q=`
+# (tests/it/docs.rs checks the scripts); this check makes sure that call is the fast one on the
+# installed libvips: on a smooth 4096² image (into a .zip, where per-tile costs show) its user CPU
+# time must stay under 0.8x the suffix call's (0.35x measured), or the benchmark stops, since its
+# peer column would be wrong.
+pyvips_direct_check() {
+  local check=$WORK/direct-check
+  rm -rf "$check" && mkdir -p "$check"
+  "$PY" - "$check" <<'PY' || { echo "error: libvips $PYVIPS_VERSION does not run dzsave in direct mode with Q=: the peer would be handicapped" >&2; exit 1; }
+import resource, sys, pyvips
+out = sys.argv[1]
+im = pyvips.Image.xyz(4096, 4096).bandsplit()[0].cast("uchar").bandjoin([128, 64]).copy_memory()
+def cpu(**kw):
+    best = float("inf")
+    for i in range(3):  # the least of 3: a busy moment must not fail the check
+        before = resource.getrusage(resource.RUSAGE_SELF)
+        im.dzsave(f"{out}/{len(kw)}-{i}.zip", tile_size=256, overlap=0, **kw)
+        after = resource.getrusage(resource.RUSAGE_SELF)
+        best = min(best, after.ru_utime - before.ru_utime)  # user time: the file system is not the question
+    return best
+direct, generic = cpu(Q=85), cpu(suffix=".jpg[Q=85]", Q=85)
+print(f"pyvips direct-mode check: dzsave Q=85 {direct:.2f} user CPU s, suffix='.jpg[Q=85]' {generic:.2f}", file=sys.stderr)
+sys.exit(0 if direct < 0.8 * generic else 1)
+PY
+  rm -rf "$check"
+}

@@ -34,13 +34,7 @@ SRC=$WORK/src16k.tif
 M=$WORK/matrix
 OUT=${OUT_DIR:-$M} # where the packs (and the peer's .zip) are written
 mkdir -p "$M" "$OUT"
-PY=$WORK/venv/bin/python
-if ! "$PY" -c 'import pyvips' 2>/dev/null; then
-  log "installing pyvips + pyvips-binary into $WORK/venv"
-  { python3 -m venv "$WORK/venv" && "$WORK/venv/bin/pip" install -q pyvips pyvips-binary; } >"$WORK/pip.log" 2>&1 ||
-    { echo "note: no pyvips (see $WORK/pip.log): the peer column stays empty" >&2; PY=; }
-fi
-PYVIPS_VERSION=${PY:+$("$PY" -c 'import pyvips; print("%d.%d.%d" % tuple(pyvips.version(i) for i in range(3)))')}
+pyvips_setup # PY and PYVIPS_VERSION ("libvips-8.18.7"), both empty without the peer: its column stays empty
 
 # source NAME: the path of that source, made from src16k.tif the first time.
 source_file() {
@@ -74,7 +68,7 @@ codec_args() {
 
 PEER='import sys, pyvips
 im = pyvips.Image.new_from_file(sys.argv[1], access="sequential")
-im.dzsave(sys.argv[2], tile_size=256, overlap=0, suffix=".jpg[Q=85]")'
+im.dzsave(sys.argv[2], tile_size=256, overlap=0, Q=85)'
 
 RAW=$M/runs.tsv
 # run ID COMMAND...: times one run, appends "ID wall cpu rss json" to $RAW. A failed run stops the
@@ -134,7 +128,7 @@ def median(rid):
     return rs[len(rs) // 2]
 mpx = 16384 * 16384 / 1e6
 print(f"{datetime.date.today()}, {os.cpu_count()} cores, vortex-tiler {rev}"
-      + (f", peer libvips {peer_version} (pyvips-binary) writing a .zip of 256-texel JPEG tiles" if peer_version else "")
+      + (f", peer {peer_version} (pyvips-binary, direct mode: `Q=85`) writing a .zip of 256-texel JPEG tiles" if peer_version else "")
       + "; `split --pack --tile-size 256 --border 0`, default filter; the median of the runs per cell.")
 print()
 print("| source | codec | wall | CPU | CPU / wall | Mpx/s | peak RSS | read | waits for rows | pyramid | cut | waits for encoders | encoders wait | encode | store | bound by | vs peer |")

@@ -72,19 +72,8 @@ if [ -n "$BEFORE" ]; then
   BEFORE_REV=${BEFORE_LABEL:-$BEFORE}
 fi
 
-PY=$WORK/venv/bin/python
 PYVIPS_VERSION=
-if [ "$PYVIPS" = 1 ]; then
-  if ! "$PY" -c 'import pyvips' 2>/dev/null; then
-    log "installing pyvips + pyvips-binary into $WORK/venv"
-    if ! { python3 -m venv "$WORK/venv" && "$WORK/venv/bin/pip" install -q pyvips pyvips-binary; } >"$WORK/pip.log" 2>&1; then
-      echo "note: could not install pyvips/pyvips-binary (see $WORK/pip.log); skipping the PyPI libvips peer" >&2
-    fi
-  fi
-  if "$PY" -c 'import pyvips' 2>/dev/null; then
-    PYVIPS_VERSION=$("$PY" -c 'import pyvips; print("libvips-%d.%d.%d" % tuple(pyvips.version(i) for i in range(3)))')
-  fi
-fi
+[ "$PYVIPS" = 1 ] && pyvips_setup
 
 cd "$WORK"
 OUT=$WORK/out

@@ -104,3 +104,26 @@ fn scale_out_try_it_loop_merges_the_one_machine_pack() {
     assert_eq!(shards, 4, "{}", String::from_utf8_lossy(&out.stderr));
     assert!(String::from_utf8_lossy(&out.stderr).contains("shard 3 of 4"), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// libvips 8.15 and later write JPEG tiles in "direct mode" only when dzsave gets the quality as
+/// `Q=`; a quality inside `suffix` (".jpg[Q=85]") takes a generic path at less than half the
+/// speed, which made every ratio against libvips 8.18 in docs/benchmarks.md too flattering until
+/// issue 28. Debian's vips 8.14 has no `Q` and no direct mode, so its command lines keep `--suffix`.
+#[test]
+fn bench_scripts_run_libvips_at_its_best() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let mut calls = 0;
+    for entry in std::fs::read_dir(format!("{root}/bench")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "sh") {
+            continue;
+        }
+        let script = std::fs::read_to_string(&path).unwrap();
+        for (n, line) in script.lines().enumerate().filter(|(_, l)| l.contains(".dzsave(") && !l.trim_start().starts_with('#')) {
+            calls += 1;
+            let handicapped = line.split("suffix=").skip(1).any(|arg| arg.split([',', ')']).next().unwrap().contains("[Q="));
+            assert!(!handicapped, "{}:{}: pass the JPEG quality as Q=, not in suffix: {line}", path.display(), n + 1);
+        }
+    }
+    assert!(calls >= 3, "found only {calls} pyvips dzsave calls in bench/*.sh");
+}
