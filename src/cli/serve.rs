@@ -22,10 +22,20 @@ pub struct ServeArgs {
     /// least recently used evicted first; 0 turns the cache off.
     #[arg(long, value_name = "SIZE", default_value = "64M", value_parser = super::parse_size)]
     cache: u64,
-    /// Requests answered at once; more wait their turn.
+    /// Requests answered at once, 1 to 65536; more wait their turn.
     #[arg(long, value_name = "N", default_value_t = 64)]
     max_concurrent: usize,
-    /// Tiles decoded and re-encoded at once [default: the number of cores].
+    /// Connections open at once, 1 to 65536; more wait in the listen queue until one closes.
+    /// Each takes a file descriptor: the default stays under a `ulimit -n` of 256, so idle
+    /// clients cannot exhaust the descriptors the server needs to open tiles.
+    #[arg(long, value_name = "N", default_value_t = 200)]
+    max_connections: usize,
+    /// Seconds a connection may take to send a request's headers, and may stay idle between
+    /// requests, before it is closed (1 to 3600). It frees the connections of clients that
+    /// connect and send nothing, or trickle their headers (slowloris).
+    #[arg(long, value_name = "SECONDS", default_value_t = 15)]
+    idle_timeout: u64,
+    /// Tiles decoded and re-encoded at once, 1 to 4 per core [default: the number of cores].
     #[arg(long, value_name = "N")]
     threads: Option<usize>,
     /// A local OpenSeadragon build to serve at /openseadragon/ for the viewer pages, e.g.
@@ -42,27 +52,35 @@ pub fn run(args: ServeArgs) -> Result<()> {
         cache_bytes: args.cache,
         max_concurrent: args.max_concurrent,
         blocking_jobs: args.threads.unwrap_or(cores),
+        max_connections: args.max_connections,
+        idle_timeout: Duration::from_secs(args.idle_timeout),
         openseadragon: args.openseadragon,
     };
-    if !options.addr.ip().is_loopback() {
-        eprintln!(
-            "warning: listening on {}, reachable from other machines; anyone who can reach it can read every input",
-            options.addr
-        );
-    }
+    // Before the runtime is sized from them.
+    options.check()?;
     let catalog = Catalog::open(&args.inputs)?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
-        .max_blocking_threads(options.blocking_jobs.max(1) + 4)
+        .max_blocking_threads(options.blocking_jobs + 4)
         .build()
         .context("starting the async runtime")?;
-    runtime.block_on(async {
+    let served = runtime.block_on(async {
         let server = Server::bind(catalog, &options).await?;
-        say!("serving {} inputs on http://{}/", server.input_count(), server.local_addr());
+        let addr = server.local_addr();
+        if !addr.ip().is_loopback() {
+            eprintln!(
+                "warning: listening on {addr}, reachable from other machines; anyone who can reach it can read every input"
+            );
+        }
+        say!("serving {} inputs on http://{addr}/", server.input_count());
         server.serve(stop_signal(), Duration::from_secs(5)).await?;
         eprintln!("stopped");
-        Ok(())
-    })
+        anyhow::Ok(())
+    });
+    // A read still blocked on a slow disk after the grace period is not waited for (dropping
+    // the runtime would wait for its blocking threads for ever).
+    runtime.shutdown_background();
+    served
 }
 
 /// Completes on Ctrl-C or SIGTERM, saying which on stderr.

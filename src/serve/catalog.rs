@@ -12,6 +12,7 @@ use bytes::Bytes;
 use vortex_pack::{Pack, Tile, TileKind};
 
 use super::ServeError;
+use super::files::{self, Refused};
 use super::tiles::{Format, Page};
 use crate::codec::{Codec, PngLevel, Subsampling};
 use crate::layout::Layout;
@@ -107,6 +108,10 @@ impl Catalog {
 fn open_input(path: &Path) -> Result<Input, ServeError> {
     let fail = |message: String| ServeError::Input { path: path.to_path_buf(), message };
     let meta = fs::metadata(path).map_err(|e| fail(e.to_string()))?;
+    // A FIFO would block the open until a writer comes; a device is no pack.
+    if !meta.is_dir() && !meta.is_file() {
+        return Err(fail("is neither a regular file (a pack) nor a directory".into()));
+    }
     let canonical = fs::canonicalize(path).map_err(|e| fail(e.to_string()))?;
     let name = if meta.is_dir() { canonical.file_name() } else { canonical.file_stem() }
         .and_then(|n| n.to_str())
@@ -124,7 +129,11 @@ fn open_input(path: &Path) -> Result<Input, ServeError> {
 
 fn open_pack(path: &Path) -> Result<Source, String> {
     let pack = Pack::open(path).map_err(|e| format!("not a pack this tool can read: {e}"))?;
-    crate::shard::manifest::refuse_shard(path, pack.metadata()).map_err(|e| e.to_string())?;
+    crate::shard::manifest::refuse_shard(path, pack.metadata()).map_err(|e| match e {
+        // The caller names the path.
+        crate::error::TilerError::Shard { message, .. } => message,
+        e => e.to_string(),
+    })?;
     let d = *pack.description();
     let layout = Layout::new(d.width as u64, d.height as u64, d.tile_size, d.border).map_err(|e| e.to_string())?;
     let levels = pack.levels();
@@ -178,21 +187,38 @@ impl Tiled {
             Store::Pack(pack) => pack_page(pack, lod, x, y),
             Store::Dir { dir, names } => {
                 let path = dir.join(names.format(&[lod, x, y]));
-                match fs::read(&path) {
+                match files::read_under(dir, &path, self.max_page_file_bytes()) {
                     Ok(bytes) => Ok(Some(Page::Image(self.format, Bytes::from(bytes)))),
-                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-                    Err(e) => Err(format!("{}: {e}", path.display())),
+                    Err(Refused::Missing) => Ok(None),
+                    Err(Refused::Refused(message)) => Err(message),
                 }
             }
         }
     }
 }
 
-/// A JPEG or PNG payload of `pack` as bytes that borrow its memory map (no copy).
+impl Tiled {
+    /// The largest tile file of a split directory read: a compressed page is at most a little
+    /// over its raw texels, so twice them and a MiB leave room for any encoder's overhead
+    /// while a file that is no tile (a link to a disk image, `/dev/zero`) is refused unread.
+    fn max_page_file_bytes(&self) -> u64 {
+        let side = self.layout.tile_size as u64;
+        side * side * self.pixels.bytes_per_pixel() as u64 * 2 + (1 << 20)
+    }
+}
+
+/// A JPEG or PNG payload of `pack`, its checksum checked, as bytes that borrow its memory map
+/// (no copy); `None` for any other tile, and for a damaged one (which the decoding path then
+/// reports).
 pub fn stored_image(pack: &Arc<Pack>, lod: u32, x: u32, y: u32) -> Option<(Format, Bytes)> {
-    let (format, bytes) = match pack.tile(lod, x, y) {
-        Ok(Tile::Data(TileKind::Jpeg, b)) => (Format::Jpeg, b),
-        Ok(Tile::Data(TileKind::Png, b)) => (Format::Png, b),
+    image_of(pack, &pack.tile_checked(lod, x, y).ok()?)
+}
+
+/// A JPEG or PNG tile of `pack` as bytes that borrow its memory map.
+fn image_of(pack: &Arc<Pack>, tile: &Tile) -> Option<(Format, Bytes)> {
+    let (format, bytes) = match tile {
+        Tile::Data(TileKind::Jpeg, b) => (Format::Jpeg, b),
+        Tile::Data(TileKind::Png, b) => (Format::Png, b),
         _ => return None,
     };
     let start = (bytes.as_ptr() as usize).checked_sub(pack.file().as_ptr() as usize)?;
@@ -231,7 +257,7 @@ fn pack_page(pack: &Arc<Pack>, lod: u32, x: u32, y: u32) -> Result<Option<Page>,
             Page::Texels(texels(value.iter().copied().cycle().take(n * value.len()).collect()))
         }
         Tile::Data(TileKind::Jpeg, _) | Tile::Data(TileKind::Png, _) => {
-            let (format, bytes) = stored_image(pack, lod, x, y).ok_or("the payload moved")?;
+            let (format, bytes) = image_of(pack, &tile).ok_or("the payload lies outside the pack's file")?;
             Page::Image(format, bytes)
         }
         Tile::Data(kind, bytes) => {
@@ -251,12 +277,14 @@ fn native(mut bytes: Vec<u8>, pixels: PixelLayout) -> Vec<u8> {
     bytes
 }
 
-fn read_manifest(path: &Path) -> Result<Vec<u8>, String> {
-    let meta = fs::metadata(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    if meta.len() > MAX_MANIFEST_BYTES {
-        return Err(format!("{} is over {MAX_MANIFEST_BYTES} bytes", path.display()));
-    }
-    fs::read(path).map_err(|e| format!("{}: {e}", path.display()))
+/// A manifest of the directory `dir` (canonical): a regular file inside it, as every file
+/// served from it.
+fn read_manifest(dir: &Path, name: &str) -> Result<Vec<u8>, String> {
+    let path = dir.join(name);
+    files::read_under(dir, &path, MAX_MANIFEST_BYTES).map_err(|e| match e {
+        Refused::Missing => format!("{}: not found", path.display()),
+        Refused::Refused(message) => message,
+    })
 }
 
 fn hash(bytes: &[u8]) -> u64 {
@@ -267,7 +295,7 @@ fn hash(bytes: &[u8]) -> u64 {
 fn open_dir(dir: &Path) -> Result<Source, String> {
     let info_path = dir.join("info.json");
     if info_path.is_file() {
-        let text = read_manifest(&info_path)?;
+        let text = read_manifest(dir, "info.json")?;
         let json: serde_json::Value =
             serde_json::from_slice(&text).map_err(|e| format!("{}: not JSON: {e}", info_path.display()))?;
         if json.get("@context").is_some() {
@@ -290,7 +318,7 @@ fn open_dir(dir: &Path) -> Result<Source, String> {
     }
     let tilejson = dir.join(xyz::TILEJSON);
     if tilejson.is_file() {
-        let text = read_manifest(&tilejson)?;
+        let text = read_manifest(dir, xyz::TILEJSON)?;
         let json: serde_json::Value =
             serde_json::from_slice(&text).map_err(|e| format!("{}: not JSON: {e}", tilejson.display()))?;
         let v = &json["vortex"];
@@ -310,7 +338,7 @@ fn open_dir(dir: &Path) -> Result<Source, String> {
         .collect();
     match dzis.as_slice() {
         [stem] => {
-            let text = read_manifest(&dir.join(format!("{stem}.dzi")))?;
+            let text = read_manifest(dir, &format!("{stem}.dzi"))?;
             let s = String::from_utf8_lossy(&text);
             let attr = |name: &str| -> Option<u64> {
                 let at = s.find(&format!("{name}=\""))? + name.len() + 2;

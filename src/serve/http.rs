@@ -8,22 +8,28 @@
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
+use std::pin::Pin;
 use std::sync::Arc;
+use std::task::{Context, Poll};
+use std::time::UNIX_EPOCH;
 
 use axum::body::Body;
 use axum::extract::{Request, State};
 use axum::http::{HeaderMap, HeaderName, HeaderValue, Method, StatusCode, header};
 use axum::response::Response;
 use bytes::Bytes;
+use hyper::body::{Body as HttpBody, Frame, SizeHint};
+use tokio::io::{AsyncRead, ReadBuf};
 use tokio::sync::Semaphore;
 
 use super::cache::TileCache;
 use super::catalog::{Catalog, Input, Source, StaticDir, StaticLayout, Tiled, map_slice};
+use super::files::{self, Refused};
 use super::html;
 use super::range::{self, RangeError};
 use super::routes::{self, Reject, Route, bad, not_found};
 use super::tile_routes::{dzi_extension, dzi_tile, iiif_extension, iiif_tile, xyz_tile};
-use crate::viewer::{dzi, iiif};
+use crate::viewer::{dzi, iiif, xyz};
 
 /// `Cache-Control` of tiles and packs (their URLs name immutable content).
 pub(super) const TILE_CACHE: &str = "public, max-age=86400";
@@ -47,13 +53,28 @@ pub struct AppState {
 pub(super) struct Reply {
     status: StatusCode,
     content_type: &'static str,
-    body: Bytes,
+    body: Payload,
     headers: Vec<(HeaderName, String)>,
+}
+
+/// A body in memory (tiles, manifests, pages, the pack's map) or a file streamed from disk.
+enum Payload {
+    Bytes(Bytes),
+    File(FileBody),
+}
+
+impl Payload {
+    fn len(&self) -> u64 {
+        match self {
+            Payload::Bytes(b) => b.len() as u64,
+            Payload::File(f) => f.left,
+        }
+    }
 }
 
 impl Reply {
     pub(super) fn new(content_type: &'static str, body: impl Into<Bytes>) -> Reply {
-        Reply { status: StatusCode::OK, content_type, body: body.into(), headers: Vec::new() }
+        Reply { status: StatusCode::OK, content_type, body: Payload::Bytes(body.into()), headers: Vec::new() }
     }
     fn text(status: StatusCode, message: impl std::fmt::Display) -> Reply {
         Reply { status, ..Reply::new("text/plain; charset=utf-8", format!("{message}\n")) }
@@ -86,7 +107,11 @@ pub async fn handle(State(state): State<Arc<AppState>>, request: Request) -> Res
         return respond(Reply::text(StatusCode::SERVICE_UNAVAILABLE, "shutting down"), false);
     };
     let method = request.method().clone();
-    let reply = if method == Method::GET || method == Method::HEAD {
+    // RFC 9112, 3.2: a request with more than one Host is answered 400 (which one the IIIF id
+    // would name is ambiguous).
+    let reply = if request.headers().get_all(header::HOST).iter().nth(1).is_some() {
+        Reply::from(bad("more than one Host header"))
+    } else if method == Method::GET || method == Method::HEAD {
         answer(&state, request.uri().path(), request.headers()).await.unwrap_or_else(Reply::from)
     } else if method == Method::OPTIONS {
         Reply { status: StatusCode::NO_CONTENT, ..Reply::new("text/plain", Bytes::new()) }
@@ -102,7 +127,12 @@ pub async fn handle(State(state): State<Arc<AppState>>, request: Request) -> Res
 
 fn respond(reply: Reply, head: bool) -> Response {
     let len = reply.body.len();
-    let mut response = Response::new(if head { Body::empty() } else { Body::from(reply.body) });
+    let body = match reply.body {
+        _ if head => Body::empty(),
+        Payload::Bytes(b) => Body::from(b),
+        Payload::File(f) => Body::new(f),
+    };
+    let mut response = Response::new(body);
     *response.status_mut() = reply.status;
     let h = response.headers_mut();
     h.insert(header::CONTENT_TYPE, HeaderValue::from_static(reply.content_type));
@@ -166,6 +196,7 @@ async fn answer(state: &Arc<AppState>, path: &str, headers: &HeaderMap) -> Resul
                 dzi_tile(state, index, t, routes::dzi_tile(&rest)?, headers).await
             }
             (_, Input { source: Source::Static(s @ StaticDir { layout: StaticLayout::Dzi { stem }, .. }), .. }) => {
+                image_name(&routes::dzi_tile(&rest)?.extension)?;
                 let rel: Vec<String> = std::iter::once(format!("{stem}_files")).chain(rest).collect();
                 static_file(&s.root, &rel, s.etag, headers).await
             }
@@ -187,7 +218,7 @@ async fn answer(state: &Arc<AppState>, path: &str, headers: &HeaderMap) -> Resul
             match &input.source {
                 Source::Tiled(t) if is_info => {
                     let body = iiif::info_json(&t.layout, &id, iiif_extension(t));
-                    Ok(Reply::new("application/json", body).with(header::CACHE_CONTROL, MANIFEST_CACHE))
+                    Ok(iiif_info(body))
                 }
                 Source::Tiled(t) => iiif_tile(state, index, t, &rest, headers).await,
                 Source::Static(StaticDir { layout: StaticLayout::Iiif { info }, .. }) if is_info => {
@@ -197,9 +228,10 @@ async fn answer(state: &Arc<AppState>, path: &str, headers: &HeaderMap) -> Resul
                     }
                     info["id"] = id.into();
                     let body = serde_json::to_string_pretty(&info).map_err(|e| bad(e.to_string()))?;
-                    Ok(Reply::new("application/json", body).with(header::CACHE_CONTROL, MANIFEST_CACHE))
+                    Ok(iiif_info(body))
                 }
                 Source::Static(s @ StaticDir { layout: StaticLayout::Iiif { .. }, .. }) => {
+                    image_name(routes::iiif_tile(&rest)?.extension())?;
                     static_file(&s.root, &rest, s.etag, headers).await
                 }
                 Source::Static(_) => Err(not_found(format!("'{name}' is not a IIIF image"))),
@@ -210,11 +242,29 @@ async fn answer(state: &Arc<AppState>, path: &str, headers: &HeaderMap) -> Resul
             match &input.source {
                 Source::Tiled(t) => xyz_tile(state, index, t, &rest, headers).await,
                 Source::Static(s @ StaticDir { layout: StaticLayout::Xyz, .. }) => {
+                    if rest != [xyz::TILEJSON] {
+                        image_name(&routes::xyz_tile(&rest)?.extension)?;
+                    }
                     static_file(&s.root, &rest, s.etag, headers).await
                 }
                 Source::Static(_) => Err(not_found(format!("'{name}' has no XYZ tiles"))),
             }
         }
+    }
+}
+
+/// An `info.json`: its `id` names the Host the request named, so a shared cache must keep one
+/// per Host.
+fn iiif_info(body: String) -> Reply {
+    Reply::new("application/json", body).with(header::CACHE_CONTROL, MANIFEST_CACHE).with(header::VARY, "Host")
+}
+
+/// Only tile images are served from a viewer-layout directory, with the manifest: no other
+/// file a directory may hold (`.git/`, notes, a key).
+fn image_name(extension: &str) -> Result<(), Reject> {
+    match extension {
+        "jpg" | "jpeg" | "png" | "webp" => Ok(()),
+        _ => Err(not_found(format!("'.{extension}' files are not tiles of this directory"))),
     }
 }
 
@@ -257,6 +307,10 @@ fn pack_file(t: &Tiled, headers: &HeaderMap) -> Result<Reply, Reject> {
     let Some(pack) = t.pack() else { return Err(not_found("not a pack")) };
     let etag = format!("\"{:016x}\"", t.etag);
     let len = pack.file().len() as u64;
+    // RFC 9110, 13.2.2: If-None-Match is evaluated before Range.
+    if let Some(r) = not_modified(headers, &etag) {
+        return Ok(r);
+    }
     let ranged = headers
         .get(header::RANGE)
         .map(|v| v.to_str().map_err(|_| RangeError::Malformed).and_then(|v| range::parse(v, len)));
@@ -266,8 +320,9 @@ fn pack_file(t: &Tiled, headers: &HeaderMap) -> Result<Reply, Reject> {
             .with(header::ACCEPT_RANGES, "bytes")
     };
     match ranged {
-        None => Ok(conditional(headers, &etag, || base(StatusCode::OK, map_slice(pack, 0, len as usize)))),
-        Some(Ok((first, last))) => {
+        // No Range, or one in a unit other than bytes (ignored, RFC 9110 14.2).
+        None | Some(Ok(None)) => Ok(base(StatusCode::OK, map_slice(pack, 0, len as usize))),
+        Some(Ok(Some((first, last)))) => {
             let body = map_slice(pack, first as usize, (last - first + 1) as usize);
             Ok(base(StatusCode::PARTIAL_CONTENT, body)
                 .with(header::CONTENT_RANGE, format!("bytes {first}-{last}/{len}")))
@@ -285,23 +340,24 @@ fn pack_file(t: &Tiled, headers: &HeaderMap) -> Result<Reply, Reject> {
     }
 }
 
-/// A file under `root` (a viewer-layout directory, OpenSeadragon's build): the segments were
-/// checked by `routes`; the canonical path must still lie under `root` (no link out of it).
+/// A file under `root` (a viewer-layout directory, OpenSeadragon's build), streamed from
+/// disk: the segments were checked by `routes`; it is opened only as a regular file whose
+/// canonical path lies under `root` (no link out of it, no FIFO or device).
 async fn static_file(root: &Path, rel: &[String], base: u64, headers: &HeaderMap) -> Result<Reply, Reject> {
-    let missing = || not_found(format!("/{}", rel.join("/")));
     let mut path = root.to_path_buf();
     path.extend(rel);
     let root = root.to_path_buf();
-    // Reads the file on a blocking thread: its canonical path, its size and mtime, its bytes.
-    let read = tokio::task::spawn_blocking(move || -> Option<(PathBuf, u64, u128, Vec<u8>)> {
-        let path = std::fs::canonicalize(&path).ok().filter(|p| p.starts_with(&root))?;
-        let meta = std::fs::metadata(&path).ok().filter(|m| m.is_file())?;
-        let mtime = meta.modified().ok()?.duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
-        let bytes = std::fs::read(&path).ok()?;
-        Some((path, meta.len(), mtime, bytes))
-    });
-    let (path, len, mtime, bytes) = read.await.ok().flatten().ok_or_else(missing)?;
-    let etag = etag(base, &format!("{}:{len}:{mtime}", rel.join("/")));
+    let opened = tokio::task::spawn_blocking(move || files::open_under(&root, &path).map(|f| (path, f)));
+    let (path, (file, meta)) = match opened.await {
+        Ok(Ok(opened)) => opened,
+        Ok(Err(Refused::Refused(why))) => {
+            eprintln!("serve: {why}");
+            return Err(not_found(format!("/{}", rel.join("/"))));
+        }
+        Ok(Err(Refused::Missing)) | Err(_) => return Err(not_found(format!("/{}", rel.join("/")))),
+    };
+    let (len, mtime) = (meta.len(), meta.modified().ok().and_then(|t| t.duration_since(UNIX_EPOCH).ok()));
+    let etag = etag(base, &format!("{}:{len}:{}", rel.join("/"), mtime.map_or(0, |d| d.as_nanos())));
     if let Some(r) = not_modified(headers, &etag) {
         return Ok(r);
     }
@@ -317,5 +373,57 @@ async fn static_file(root: &Path, rel: &[String], base: u64, headers: &HeaderMap
         "html" => ("text/html; charset=utf-8", PAGE_CACHE),
         _ => ("application/octet-stream", MANIFEST_CACHE),
     };
-    Ok(Reply::new(content_type, bytes).cached(cache, &etag))
+    let body = Payload::File(FileBody { file: tokio::fs::File::from_std(file), left: len, chunk: Vec::new() });
+    Ok(Reply { body, ..Reply::new(content_type, Bytes::new()) }.cached(cache, &etag))
+}
+
+/// A file sent in chunks as the client takes them, so a download holds one chunk in memory,
+/// not the file. Exactly the length the headers announced is sent: a file that shrank while
+/// it was sent ends the connection with an error, one that grew is cut at that length.
+pub(super) struct FileBody {
+    file: tokio::fs::File,
+    left: u64,
+    /// The buffer a read fills (kept across polls: a read may be pending).
+    chunk: Vec<u8>,
+}
+
+/// Bytes read from a file at a time.
+const CHUNK: usize = 64 << 10;
+
+impl HttpBody for FileBody {
+    type Data = Bytes;
+    type Error = std::io::Error;
+
+    fn poll_frame(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+    ) -> Poll<Option<Result<Frame<Bytes>, std::io::Error>>> {
+        let this = &mut *self;
+        if this.left == 0 {
+            return Poll::Ready(None);
+        }
+        let want = this.left.min(CHUNK as u64) as usize;
+        this.chunk.resize(want, 0);
+        let mut buf = ReadBuf::new(&mut this.chunk);
+        match Pin::new(&mut this.file).poll_read(cx, &mut buf) {
+            Poll::Pending => Poll::Pending,
+            Poll::Ready(Err(e)) => Poll::Ready(Some(Err(e))),
+            Poll::Ready(Ok(())) if buf.filled().is_empty() => {
+                Poll::Ready(Some(Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the file shrank"))))
+            }
+            Poll::Ready(Ok(())) => {
+                let data = Bytes::copy_from_slice(buf.filled());
+                this.left -= data.len() as u64;
+                Poll::Ready(Some(Ok(Frame::data(data))))
+            }
+        }
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.left == 0
+    }
+
+    fn size_hint(&self) -> SizeHint {
+        SizeHint::with_exact(self.left)
+    }
 }

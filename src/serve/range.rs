@@ -3,12 +3,13 @@
 //!
 //! `a-b`, `a-` and `-n` are served as 206. A range that starts past the end (or `-0`) is 416
 //! with `Content-Range: bytes */LEN`; several ranges (`a-b,c-d`) are refused with 416 too
-//! rather than sent as multipart; anything else malformed is 400.
+//! rather than sent as multipart; a malformed byte range is 400. A range in another unit than
+//! bytes is ignored, as RFC 9110 (14.2) asks: the whole file, 200.
 
 /// Why a `Range` header is not served.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RangeError {
-    /// Not `bytes=` followed by one well-formed range (400).
+    /// `bytes=` not followed by one well-formed range (400).
     Malformed,
     /// Well formed, but no byte of it is in the file (416).
     Unsatisfiable,
@@ -16,9 +17,20 @@ pub enum RangeError {
     Multiple,
 }
 
-/// The first and last byte (inclusive) that `header` asks for in a file of `len` bytes.
-pub fn parse(header: &str, len: u64) -> Result<(u64, u64), RangeError> {
-    let spec = header.trim().strip_prefix("bytes=").ok_or(RangeError::Malformed)?.trim();
+/// The first and last byte (inclusive) that `header` asks for in a file of `len` bytes;
+/// `None` for a range in another unit (to be ignored).
+pub fn parse(header: &str, len: u64) -> Result<Option<(u64, u64)>, RangeError> {
+    let Some((unit, spec)) = header.trim().split_once('=') else {
+        return Err(RangeError::Malformed);
+    };
+    // Range units are case-insensitive (RFC 9110, 14.1).
+    if !unit.trim().eq_ignore_ascii_case("bytes") {
+        return Ok(None);
+    }
+    byte_range(spec.trim(), len).map(Some)
+}
+
+fn byte_range(spec: &str, len: u64) -> Result<(u64, u64), RangeError> {
     if spec.contains(',') {
         return Err(RangeError::Multiple);
     }
@@ -60,12 +72,19 @@ mod tests {
 
     #[test]
     fn the_three_forms() {
-        assert_eq!(parse("bytes=0-99", 1000), Ok((0, 99)));
-        assert_eq!(parse("bytes=900-2000", 1000), Ok((900, 999)));
-        assert_eq!(parse("bytes=10-", 1000), Ok((10, 999)));
-        assert_eq!(parse("bytes=-100", 1000), Ok((900, 999)));
-        assert_eq!(parse("bytes=-5000", 1000), Ok((0, 999)));
-        assert_eq!(parse("bytes=0-99999999999999999999999", 1000), Ok((0, 999)));
+        assert_eq!(parse("bytes=0-99", 1000), Ok(Some((0, 99))));
+        assert_eq!(parse("bytes=900-2000", 1000), Ok(Some((900, 999))));
+        assert_eq!(parse("bytes=10-", 1000), Ok(Some((10, 999))));
+        assert_eq!(parse("bytes=-100", 1000), Ok(Some((900, 999))));
+        assert_eq!(parse("bytes=-5000", 1000), Ok(Some((0, 999))));
+        assert_eq!(parse("bytes=0-99999999999999999999999", 1000), Ok(Some((0, 999))));
+        assert_eq!(parse("Bytes=0-1", 1000), Ok(Some((0, 1))));
+    }
+
+    #[test]
+    fn other_units_are_ignored() {
+        assert_eq!(parse("items=0-1", 1000), Ok(None));
+        assert_eq!(parse("lines=whatever", 1000), Ok(None));
     }
 
     #[test]
@@ -73,9 +92,7 @@ mod tests {
         assert_eq!(parse("bytes=1000-", 1000), Err(RangeError::Unsatisfiable));
         assert_eq!(parse("bytes=-0", 1000), Err(RangeError::Unsatisfiable));
         assert_eq!(parse("bytes=0-1,5-6", 1000), Err(RangeError::Multiple));
-        for bad in
-            ["bytes=", "bytes=-", "bytes=5-1", "bytes=a-b", "items=0-1", "0-1", "bytes=1", "bytes=+1-2", "bytes=0x1-2"]
-        {
+        for bad in ["bytes=", "bytes=-", "bytes=5-1", "bytes=a-b", "0-1", "bytes=1", "bytes=+1-2", "bytes=0x1-2"] {
             assert_eq!(parse(bad, 1000), Err(RangeError::Malformed), "{bad}");
         }
     }

@@ -79,6 +79,14 @@ pub enum IiifTile {
     Full { path: String },
 }
 
+impl IiifTile {
+    /// The extension of the tile's file name (`default.EXT`).
+    pub fn extension(&self) -> &str {
+        let (IiifTile::Region { path, .. } | IiifTile::Full { path }) = self;
+        path.rsplit_once('.').map_or("", |(_, ext)| ext)
+    }
+}
+
 /// Parses the path of a request URI (without the query).
 pub fn parse(raw_path: &str) -> Result<Route, Reject> {
     let segments = segments(raw_path)?;

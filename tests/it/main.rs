@@ -19,6 +19,7 @@ mod oracle;
 mod pack_cli;
 mod render;
 mod serve;
+mod serve_hostile;
 mod shard;
 mod slurm;
 mod sources;

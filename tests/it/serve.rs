@@ -119,7 +119,7 @@ fn serve_pack_file_with_ranges() {
     let past = server.get("/world.vtpk", &[("Range", &format!("bytes={len}-"))]);
     assert_eq!((past.status, past.header("content-range")), (416, Some(format!("bytes */{len}").as_str())));
     assert_eq!(server.get("/world.vtpk", &[("Range", "bytes=0-1,4-5")]).status, 416);
-    for bad in ["bytes=abc", "bytes=5-1", "lines=0-1", "bytes=-"] {
+    for bad in ["bytes=abc", "bytes=5-1", "bytes=-"] {
         assert_eq!(server.get("/world.vtpk", &[("Range", bad)]).status, 400, "{bad}");
     }
 }
