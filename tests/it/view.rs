@@ -38,7 +38,7 @@ impl Xvfb {
         let socket = PathBuf::from(format!("/tmp/.X11-unix/X{n}"));
         let started = Instant::now();
         while !socket.exists() {
-            assert!(started.elapsed() < Duration::from_secs(20), "Xvfb {display} did not come up");
+            assert!(started.elapsed() < Duration::from_secs(60), "Xvfb {display} did not come up");
             std::thread::sleep(Duration::from_millis(50));
         }
         Some(Xvfb { child, display })
