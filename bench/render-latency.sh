@@ -9,7 +9,10 @@
 #   real-time, 50 ms reads  the same with `--io-latency 50ms`: every page read takes 50 ms more.
 # From each report: p50 and p99 of the frames' cpu_ms (recording and submitting the frame and
 # Runtime::end_frame, without the wait for the picture, which a headless run reads back only
-# when asked), the longest io_wait_ms (time a frame waited for pages), the frames that still
+# when asked) and the longest (the timing the tests leave to this script: a busy machine must
+# not fail a test, so crates/vortex-vt-wgpu/tests/it/latency.rs shows without a clock that
+# frames go on while reads are held), the longest io_wait_ms (time a frame waited for pages),
+# the frames that still
 # fell back, and the frames to converge once the camera is still. Every run is 400 frames (the
 # scenes' paths end by frame 44; the rest is a still camera, long enough for 50 ms reads to
 # land while frames run at a few milliseconds each). 8 loader threads (the most
@@ -25,8 +28,8 @@ REPORT=$WORK/latency-report.md
 {
   echo "$(date -u +%F), $(nproc) cores, rev $REV; pack: src16k.tif at 136-texel tiles, 4-texel border, JPEG Q85."
   echo
-  echo "| scene | pacing | reads | frames | frame CPU p50 | p99 | longest wait for pages | frames falling back | frames to converge |"
-  echo "|---|---|---|---|---:|---:|---:|---:|---|"
+  echo "| scene | pacing | reads | frames | frame CPU p50 | p99 | longest | longest wait for pages | frames falling back | frames to converge |"
+  echo "|---|---|---|---|---:|---:|---:|---:|---:|---|"
 } >"$REPORT"
 for scene in default bench/scenes/zoom.json; do
   for mode in offline real-time latency; do
@@ -46,7 +49,8 @@ scene, mode = sys.argv[2], sys.argv[3]
 reads = "+50 ms" if mode == "latency" else "as stored"
 falling = sum(1 for f in r["frames"] if f["fallback_fraction"] > 0)
 conv = r["frames_to_converge"]
-print(f"| {scene} | {r['pacing']} | {reads} | {len(r['frames'])} | {r['cpu_ms_p50']:.2f} ms | {r['cpu_ms_p99']:.2f} ms "
+longest = max(f["cpu_ms"] for f in r["frames"])
+print(f"| {scene} | {r['pacing']} | {reads} | {len(r['frames'])} | {r['cpu_ms_p50']:.2f} ms | {r['cpu_ms_p99']:.2f} ms | {longest:.2f} ms "
       f"| {r['io_wait_ms_max']:.1f} ms | {falling} | {'never' if conv is None else conv} (still from frame {r['still_from']}) |")
 PY
     log "$scene $mode done"

@@ -3,6 +3,7 @@
 //! (`vortex_vt_wgpu::harness`), which uses the public embedding API as any application does.
 
 use std::fs;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -15,7 +16,7 @@ use vortex_tiler::output::{Product, staging};
 use vortex_vt::sampler::Rgba8Image;
 use vortex_vt_wgpu::harness::{Scene, SceneLayer, SceneRenderer};
 use vortex_vt_wgpu::source::Delayed;
-use vortex_vt_wgpu::{CacheFormat, Gpu, Layer, LayerKind, Pacing, PageSource, SampleFilter};
+use vortex_vt_wgpu::{CacheFormat, Gpu, Layer, LayerKind, Pacing, PageSource, Runtime, SampleFilter};
 
 use super::{report, signals};
 
@@ -177,6 +178,10 @@ pub(super) fn open_sources(paths: &[PathBuf], latency: Option<Duration>) -> Resu
     let sources = paths
         .iter()
         .map(|p| {
+            // A directory maps as "No such device"; say what is wrong instead.
+            if p.is_dir() {
+                bail!("{} is a directory, not a pack (split an image with --pack to make one)", p.display());
+            }
             let pack = vortex_pack::Pack::open(p).with_context(|| format!("opening {}", p.display()))?;
             vortex_tiler::shard::manifest::refuse_shard(p, pack.metadata())?;
             tile_size = tile_size.max(pack.description().tile_size);
@@ -278,11 +283,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         (Some(PacingArg::RealTime), _) | (None, Some(_)) => Pacing::RealTime,
     };
     e.upload_budget = a.budget.unwrap_or(e.upload_budget);
-    scene
-        .check()
-        .and_then(|()| scene.check_textures(scene.textures.len()))
-        .map_err(|m| anyhow::anyhow!("scene: {m}"))?;
-    Limits::default().check_frames(scene.frames as u64)?;
+    check_scene(&scene)?;
     let layer_packs = scene.layers.iter().flat_map(|l| &l.textures);
     let inputs: Vec<&Path> =
         scene.textures.iter().chain(layer_packs).map(PathBuf::as_path).chain(a.scene.as_deref()).collect();
@@ -293,6 +294,10 @@ pub fn run(a: RenderArgs) -> Result<()> {
         report::claim(dir, Product::Frames, &inputs, false)?;
     }
     signals::install().context("installing signal handlers")?;
+    // Both outputs' temporaries are made before the first frame, so that a destination that
+    // cannot be written is refused at once, not after the whole run.
+    let report_file = a.report.as_deref().map(StagedFile::create).transpose()?;
+    let frames = a.frames.as_deref().map(StagedFrames::create).transpose()?;
 
     let (layers, tile_size) = open_layers(&scene, a.stream.io_latency)?;
     let side = scene.effects.cache_slots_per_side as u32 * tile_size;
@@ -300,8 +305,6 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let adapter = gpu.adapter_info();
     let mut runtime = SceneRenderer::with_layers(gpu, layers, &scene, pacing)?;
     warn_of_seams(&runtime);
-    // Frames go into a staging folder, moved into place only when every frame is written.
-    let frames = a.frames.as_deref().map(StagedFrames::create).transpose()?;
 
     let bar = report::progress_bar(scene.frames as u64, "frames", a.quiet);
     let start = Instant::now();
@@ -318,9 +321,8 @@ pub fn run(a: RenderArgs) -> Result<()> {
     })?;
     bar.finish_and_clear();
     let took = start.elapsed();
-    if let Some(path) = &a.report {
-        let json = serde_json::to_string_pretty(&report)?;
-        staging::write_file(path, json.as_bytes()).with_context(|| format!("writing {}", path.display()))?;
+    if let Some(file) = report_file {
+        file.finish(serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     if let Some(frames) = frames {
         frames.finish()?;
@@ -347,14 +349,30 @@ pub fn run(a: RenderArgs) -> Result<()> {
         super::report::mib(report.bytes_read),
         report.tier_hits,
     );
-    if !report.errors.is_empty() {
-        bail!(
-            "{} page(s) failed to load and were drawn as a stand-in; first: {}",
-            report.errors.len(),
-            report.errors[0]
-        );
-    }
+    refuse_load_errors(runtime.runtime())
+}
+
+/// The checks `render` and `view` share, after the flags have overridden the scene: the scene's
+/// own (`Scene::check`), its texture ids against its packs, and the most frames a run may draw.
+pub(super) fn check_scene(scene: &Scene) -> Result<()> {
+    scene
+        .check()
+        .and_then(|()| scene.check_textures(scene.textures.len()))
+        .map_err(|m| anyhow::anyhow!("scene: {m}"))?;
+    Limits::default().check_frames(u64::from(scene.frames))?;
     Ok(())
+}
+
+/// The rule `render` and `view` share once their pictures are out: a page that failed to load
+/// was drawn as the magenta and black stand-in, so the pictures are not the packs', and the run
+/// fails (exit 1) naming the first such page. What was written stays, to show where.
+pub(super) fn refuse_load_errors(runtime: &Runtime) -> Result<()> {
+    match runtime.errors() {
+        [] => Ok(()),
+        [first, ..] => {
+            bail!("{} page(s) failed to load and were drawn as a stand-in; first: {first}", runtime.errors().len())
+        }
+    }
 }
 
 fn write_png(path: &Path, image: &Rgba8Image) -> Result<()> {
@@ -367,6 +385,38 @@ fn write_png(path: &Path, image: &Rgba8Image) -> Result<()> {
     writer.write_image_data(image.texels.as_flattened())?;
     writer.finish()?;
     fs::write(path, &bytes).with_context(|| format!("writing {}", path.display()))
+}
+
+/// The report while it is written: its temporary beside the destination, made before the first
+/// frame (so that a destination that cannot be written fails the run at once) and renamed into
+/// place at the end; removed if the run ends early.
+struct StagedFile {
+    staging: PathBuf,
+    file: fs::File,
+    dest: PathBuf,
+}
+
+impl StagedFile {
+    fn create(dest: &Path) -> Result<StagedFile> {
+        let staging = staging::partial_path(dest);
+        let file = fs::File::create(&staging)
+            .with_context(|| format!("cannot write {}: creating {}", dest.display(), staging.display()))?;
+        Ok(StagedFile { staging, file, dest: dest.to_path_buf() })
+    }
+
+    fn finish(self, bytes: &[u8]) -> Result<()> {
+        (&self.file)
+            .write_all(bytes)
+            .and_then(|()| fs::rename(&self.staging, &self.dest))
+            .with_context(|| format!("writing {}", self.dest.display()))
+    }
+}
+
+impl Drop for StagedFile {
+    fn drop(&mut self) {
+        // After `finish` the temporary has become the destination and is gone.
+        let _ = fs::remove_file(&self.staging);
+    }
 }
 
 /// The frames folder while it is written: a staging folder beside the destination, removed

@@ -278,3 +278,78 @@ fn a_view_that_comes_back_is_read_from_the_memory_tier_and_drawn_the_same() {
     let last = |dir: &Path| std::fs::read(dir.join("frame-0095.png")).unwrap();
     assert!(last(&on_frames) == last(&off_frames), "the tier changed the last frame");
 }
+
+/// Flips a byte of every stored payload of `pack`: every tile fails its checksum.
+pub(crate) fn damage_every_tile(pack: &Path) {
+    let entries = vortex_pack::Pack::open(pack).unwrap().ids_in_file_order();
+    assert!(!entries.is_empty());
+    let mut bytes = std::fs::read(pack).unwrap();
+    for (_, entry) in &entries {
+        bytes[entry.offset_or_value as usize] ^= 0xff;
+    }
+    std::fs::write(pack, bytes).unwrap();
+}
+
+#[test]
+fn pages_that_fail_to_load_fail_the_run_naming_the_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = sample_pack(dir.path());
+    damage_every_tile(&pack);
+    let json = dir.path().join("report.json");
+    let out = run(&["render", "--pack", s(&pack), "--size", "64x48", "--frame-count", "3", "--report", s(&json), "-q"]);
+    if no_gpu(&out) {
+        return;
+    }
+    fails_with(&out, &["page(s) failed to load and were drawn as a stand-in", "sample.vtpk: tile (lod"]);
+    // The report is written all the same, to show which pages.
+    assert!(!report(&json)["errors"].as_array().unwrap().is_empty());
+}
+
+#[test]
+fn scene_numbers_out_of_range_are_refused_naming_the_member() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = sample_pack(dir.path());
+    let scene = dir.path().join("scene.json");
+    for cells in [0u64, 1025, 4294967295] {
+        let json = format!(
+            r#"{{"view": {{"camera": {{"path": [{{"frame": 0, "eye": [0, 1, 1], "target": [0, 0, 0]}}],
+                "geometry": [{{"terrain": {{"cells": {cells}}}}}]}}}}}}"#
+        );
+        std::fs::write(&scene, json).unwrap();
+        // Refused when the scene is read, before any GPU is needed.
+        let out = run(&["render", "--pack", s(&pack), "--scene", s(&scene), "-q"]);
+        fails_with(&out, &["scene.json", &format!("view.camera.geometry[0].cells {cells} must be 1..=1024")]);
+    }
+}
+
+#[test]
+fn a_directory_given_as_a_pack_is_named_as_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(&["render", "--pack", s(dir.path()), "-q"]);
+    fails_with(&out, &[&format!("{} is a directory, not a pack", dir.path().display())]);
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("os error"));
+}
+
+#[test]
+fn a_report_that_cannot_be_written_is_refused_before_the_first_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = sample_pack(dir.path());
+    let frames = dir.path().join("frames");
+    let mut unwritable = vec![dir.path().join("missing").join("report.json")];
+    // A read-only folder holds root back from nothing: try it only where it holds.
+    let read_only = dir.path().join("read-only");
+    std::fs::create_dir(&read_only).unwrap();
+    std::fs::set_permissions(&read_only, std::os::unix::fs::PermissionsExt::from_mode(0o555)).unwrap();
+    if std::fs::write(read_only.join("probe"), b"").is_err() {
+        unwritable.push(read_only.join("report.json"));
+    }
+    for json in &unwritable {
+        let out = run(&["render", "--pack", s(&pack), "--frames", s(&frames), "--report", s(json), "-q"]);
+        fails_with(&out, &[&format!("cannot write {}", json.display())]);
+        // Nothing was rendered, and nothing is left behind.
+        assert!(!String::from_utf8_lossy(&out.stdout).contains("rendered"));
+        assert!(!frames.exists());
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(left.len(), 2, "{left:?}");
+    }
+}

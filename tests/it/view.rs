@@ -38,7 +38,7 @@ impl Xvfb {
         let socket = PathBuf::from(format!("/tmp/.X11-unix/X{n}"));
         let started = Instant::now();
         while !socket.exists() {
-            assert!(started.elapsed() < Duration::from_secs(20), "Xvfb {display} did not come up");
+            assert!(started.elapsed() < Duration::from_secs(60), "Xvfb {display} did not come up");
             std::thread::sleep(Duration::from_millis(50));
         }
         Some(Xvfb { child, display })
@@ -130,4 +130,34 @@ fn a_screenshot_never_replaces_a_file_it_did_not_write() {
     let out = run(&["view", s(&fixture("sample.png")), "--screenshot", s(&mine), "--frame-count", "2"]);
     fails_with(&out, &["holiday.png", "not a screenshot of vortex-tiler view"]);
     assert_eq!(std::fs::read(&mine).unwrap(), b"my own picture");
+}
+
+#[test]
+fn frame_counts_render_refuses_are_refused_before_any_window_opens() {
+    let dir = tempfile::tempdir().unwrap();
+    let shot = dir.path().join("shot.png");
+    for (count, needle) in [("0", "frames must be at least 1"), ("4294967295", "more than the 1000000 a run may draw")]
+    {
+        let out = run(&["view", s(&fixture("sample.png")), "--screenshot", s(&shot), "--frame-count", count]);
+        fails_with(&out, &[needle]);
+        let render = run(&["render", "--pack", s(&fixture("sample.png")), "--frame-count", count]);
+        fails_with(&render, &[needle]);
+    }
+    assert!(!shot.exists());
+}
+
+#[test]
+fn a_screenshot_of_pages_that_failed_to_load_fails_as_render_does() {
+    let Some(x) = Xvfb::start() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let pack = dir.path().join("sample.vtpk");
+    let split = run(&["split", s(&fixture("sample.png")), "--pack", s(&pack)]);
+    assert!(split.status.success(), "{}", String::from_utf8_lossy(&split.stderr));
+    crate::render::damage_every_tile(&pack);
+    let shot = dir.path().join("shot.png");
+    let out = x.view(&[s(&pack), "--size", "64x48", "--screenshot", s(&shot), "--frame-count", "3"]);
+    let render = run(&["render", "--pack", s(&pack), "--size", "64x48", "--frame-count", "3", "-q"]);
+    for out in [out, render] {
+        fails_with(&out, &["page(s) failed to load and were drawn as a stand-in", "sample.vtpk: tile (lod"]);
+    }
 }

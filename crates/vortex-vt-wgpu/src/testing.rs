@@ -10,13 +10,153 @@
 //! tests of `vortex-tiler render` need it without this feature.
 
 use std::path::Path;
-use std::sync::Arc;
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::time::Duration;
 
 use vortex_pack::{Description, Level, NewTile, Pack, PackError, PackWriter, TileId, TileKind, WriteOptions};
 use vortex_vt::page::PageId;
 use vortex_vt::sampler::{LodChain, LodImages, Rgba8Image};
 
+use crate::loader::LoaderError;
+use crate::page_cache::CacheFormat;
+use crate::source::{PageSource, ReadError, SourceTile, StoredRead};
 use crate::texture::VirtualTexture;
+
+/// A gate that the reads of a [`Gated`] source wait at while it is closed: a test holds reads
+/// in flight for as long as it likes and knows when they have started, so that what must not
+/// wait for a read ("a frame never waits", "a queued load is taken back") is shown without
+/// sleeping or timing anything.
+#[derive(Debug, Default)]
+pub struct Gate {
+    state: Mutex<GateState>,
+    changed: Condvar,
+}
+
+#[derive(Debug, Default)]
+struct GateState {
+    open: bool,
+    /// Reads waiting at the closed gate now.
+    waiting: usize,
+}
+
+/// The longest a read waits at a closed gate: a test that never opens it (or fails while it is
+/// closed) ends with errored reads instead of hanging. No test relies on it.
+pub const GATE_FAIL_SAFE: Duration = Duration::from_secs(60);
+
+impl Gate {
+    /// A closed gate.
+    pub fn closed() -> Arc<Gate> {
+        Arc::new(Gate::default())
+    }
+
+    /// An open gate.
+    pub fn opened() -> Arc<Gate> {
+        let gate = Gate::default();
+        gate.lock().open = true;
+        Arc::new(gate)
+    }
+
+    fn lock(&self) -> MutexGuard<'_, GateState> {
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Lets the waiting reads through, and every read after them until [`Gate::close`].
+    pub fn open(&self) {
+        self.lock().open = true;
+        self.changed.notify_all();
+    }
+
+    /// Holds every read from now on (those already past the gate go on).
+    pub fn close(&self) {
+        self.lock().open = false;
+    }
+
+    /// Reads waiting at the closed gate now.
+    pub fn waiting(&self) -> usize {
+        self.lock().waiting
+    }
+
+    /// Waits until at least `n` reads wait at the gate; `false` if they do not within
+    /// `fail_safe` (a bound against a hang, not a measurement).
+    pub fn wait_for_readers(&self, n: usize, fail_safe: Duration) -> bool {
+        let state = self.lock();
+        let (state, _) = self
+            .changed
+            .wait_timeout_while(state, fail_safe, |s| s.waiting < n)
+            .unwrap_or_else(PoisonError::into_inner);
+        state.waiting >= n
+    }
+
+    /// Returns once the gate is open, or with an error after [`GATE_FAIL_SAFE`].
+    fn pass(&self) -> Result<(), ReadError> {
+        let mut state = self.lock();
+        if state.open {
+            return Ok(());
+        }
+        state.waiting += 1;
+        self.changed.notify_all();
+        let (mut state, _) =
+            self.changed.wait_timeout_while(state, GATE_FAIL_SAFE, |s| !s.open).unwrap_or_else(PoisonError::into_inner);
+        state.waiting -= 1;
+        match state.open {
+            true => Ok(()),
+            false => Err(ReadError::new(format!("the test never opened the gate in {GATE_FAIL_SAFE:?}"))),
+        }
+    }
+}
+
+/// `inner`, each read waiting at `gate` while it is closed (decoding does not wait: the memory
+/// tier's tiles come through at once, as with [`crate::source::Delayed`]).
+pub struct Gated {
+    inner: Arc<dyn PageSource>,
+    gate: Arc<Gate>,
+}
+
+impl Gated {
+    pub fn new(inner: Arc<dyn PageSource>, gate: Arc<Gate>) -> Gated {
+        Gated { inner, gate }
+    }
+}
+
+impl PageSource for Gated {
+    fn location(&self) -> &Path {
+        self.inner.location()
+    }
+
+    fn texture(&self) -> Result<VirtualTexture, LoaderError> {
+        self.inner.texture()
+    }
+
+    fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
+        self.gate.pass()?;
+        self.inner.read_tile(lod, x, y, format)
+    }
+
+    fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
+        self.gate.pass()?;
+        self.inner.read_stored(lod, x, y)
+    }
+
+    fn decode(
+        &self,
+        lod: u8,
+        x: u16,
+        y: u16,
+        kind: u8,
+        bytes: &[u8],
+        format: CacheFormat,
+    ) -> Result<Vec<u8>, ReadError> {
+        self.inner.decode(lod, x, y, kind, bytes, format)
+    }
+
+    fn holds_only_bc7(&self) -> bool {
+        self.inner.holds_only_bc7()
+    }
+
+    fn opaque(&self) -> bool {
+        self.inner.opaque()
+    }
+}
 
 /// `lods` levels: `lod0`, then each level the mean of the (up to) 2x2 texels of the one above
 /// that it covers, in code values, rounded half up (the tiler's `box` filter, cascaded): level

@@ -19,7 +19,7 @@ use winit::window::{Window, WindowId};
 
 use super::Start;
 use super::screenshot;
-use crate::cli::render::{open_layers, warn_of_seams};
+use crate::cli::render::{open_layers, refuse_load_errors, warn_of_seams};
 
 pub(super) struct Options {
     pub scene: Scene,
@@ -34,9 +34,11 @@ pub(super) fn run(options: Options) -> Result<()> {
     let event_loop = EventLoop::new().context("opening the display (is DISPLAY or WAYLAND_DISPLAY set?)")?;
     let mut app = App { options, state: None, error: None };
     event_loop.run_app(&mut app).context("running the window's event loop")?;
-    match app.error {
-        Some(e) => Err(e),
-        None => Ok(()),
+    match (app.error, &app.state) {
+        (Some(e), _) => Err(e),
+        // Pages drawn as the stand-in fail the run, as they fail `render`.
+        (None, Some(state)) => refuse_load_errors(state.renderer.runtime()),
+        (None, None) => Ok(()),
     }
 }
 

@@ -17,7 +17,7 @@ use clap::Args;
 use vortex_vt_wgpu::harness::camera::at_frame;
 use vortex_vt_wgpu::harness::{Scene, SceneView};
 
-use super::render::{StreamArgs, parse_dims};
+use super::render::{StreamArgs, check_scene, parse_dims};
 use controls::{Fly, PanZoom};
 
 #[derive(Args, Debug)]
@@ -36,10 +36,11 @@ pub struct ViewArgs {
     stream: StreamArgs,
     /// Draw --frame-count frames, save the window's last frame as a PNG here and exit. Each
     /// frame waits for the pages the previous one asked for, as `render` does, so the picture
-    /// is the same on every run.
+    /// is the same on every run; and as `render` does, the run fails (exit 1) if a page failed
+    /// to load and was drawn as the magenta stand-in.
     #[arg(long, value_name = "PNG", requires = "frame_count")]
     screenshot: Option<PathBuf>,
-    /// Frames to draw before the screenshot.
+    /// Frames to draw before the screenshot: 1 to 1,000,000, as `render` allows.
     #[arg(long, value_name = "N")]
     frame_count: Option<u32>,
     /// Start with the residency view (P toggles it): a hue per LOD drawn, red where a coarser
@@ -70,12 +71,10 @@ pub fn run(a: ViewArgs) -> Result<()> {
         bail!("no texture: give a PACK (or a --scene whose \"textures\" names packs)");
     }
     scene.size = a.size;
-    scene.frames = a.frame_count.unwrap_or(1).max(1);
+    // `render`'s checks, the cap on frames included: 0 and 4294967295 are refused, not drawn.
+    scene.frames = a.frame_count.unwrap_or(1);
     a.stream.apply(&mut scene);
-    scene
-        .check()
-        .and_then(|()| scene.check_textures(scene.textures.len()))
-        .map_err(|m| anyhow::anyhow!("scene: {m}"))?;
+    check_scene(&scene)?;
     let start = match &scene.view {
         SceneView::Window { texture, path } => {
             let key = at_frame(path, 0, |a, _, _| *a).ok_or_else(|| anyhow::anyhow!("scene: no keyframe"))?;

@@ -252,6 +252,10 @@ fn default_fov() -> f32 {
 fn one() -> f32 {
     1.0
 }
+/// The most cells per side of a terrain: 2 million triangles, far more than a test scene needs,
+/// and a mesh that fits in memory.
+pub const MAX_TERRAIN_CELLS: u32 = 1024;
+
 fn default_cells() -> u32 {
     64
 }
@@ -335,6 +339,13 @@ impl Scene {
                 }
                 if geometry.is_empty() {
                     return Err("view.camera.geometry is empty: nothing to draw".into());
+                }
+                for (i, shape) in geometry.iter().enumerate() {
+                    if let Shape::Terrain { cells, .. } = shape
+                        && !(1..=MAX_TERRAIN_CELLS).contains(cells)
+                    {
+                        return Err(format!("view.camera.geometry[{i}].cells {cells} must be 1..={MAX_TERRAIN_CELLS}"));
+                    }
                 }
                 if let Some(k) = path.iter().find(|k| k.at.eye == k.at.target) {
                     return Err(format!("view.camera.path: frame {} has eye == target", k.frame));
@@ -439,7 +450,9 @@ impl Shape {
         match *self {
             Shape::Plane { texture, size } => grid(texture as u32, size, 1, |_, _| 0.0),
             Shape::Terrain { texture, size, cells, height } => {
-                grid(texture as u32, size, cells.clamp(1, 1024), |x, z| {
+                // `Scene::check` refuses other counts; the clamp only keeps an unchecked shape's
+                // mesh within memory.
+                grid(texture as u32, size, cells.clamp(1, MAX_TERRAIN_CELLS), |x, z| {
                     let (x, z) = (x / size * std::f32::consts::TAU, z / size * std::f32::consts::TAU);
                     height * 0.5 * ((2.0 * x).sin() * (3.0 * z).cos() + 0.5 * (5.0 * x + z).sin())
                 })
@@ -553,6 +566,18 @@ mod tests {
             geometry.push(Shape::Box { texture: 3, center: [0.0; 3], size: [0.1; 3] });
         }
         assert!(s.check_textures(2).unwrap_err().contains("texture 3"));
+        for (cells, ok) in
+            [(0, false), (1, true), (MAX_TERRAIN_CELLS, true), (MAX_TERRAIN_CELLS + 1, false), (u32::MAX, false)]
+        {
+            let mut s = Scene::default_plane();
+            if let SceneView::Camera { geometry, .. } = &mut s.view {
+                geometry.push(Shape::Terrain { texture: 0, size: 1.0, cells, height: 0.1 });
+            }
+            match s.check() {
+                Ok(()) => assert!(ok, "cells {cells} accepted"),
+                Err(e) => assert!(!ok && e.contains("view.camera.geometry[1].cells"), "cells {cells}: {e}"),
+            }
+        }
     }
 
     #[test]

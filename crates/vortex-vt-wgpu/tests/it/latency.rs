@@ -1,32 +1,40 @@
-//! Never stalls: every page read takes 200 ms (`source::Delayed`), and real-time frames go on
-//! regardless. No frame waits for a read (each frame's CPU time is far below one read, and its
-//! measured wait for pages is zero), the picture falls back to coarser pages meanwhile, and once
-//! the loads land it converges to the reference.
+//! Never stalls, shown without a clock: every page read waits at a gate the test holds closed
+//! (`testing::Gated`). Real-time frames go on regardless: each frame returns while the reads are
+//! held, with the pages in flight, the picture falling back to coarser pages and no time spent
+//! waiting for pages; once the test opens the gate the loads land and the picture converges to
+//! the reference. How long such frames take is measured by `bench/render-latency.sh`, not here:
+//! a busy machine must not fail a test.
 
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use vortex_pack::TileKind;
 use vortex_vt::sampler::{self, Rgba8Image};
 use vortex_vt_wgpu::harness::camera::Keyframe;
-use vortex_vt_wgpu::harness::{Effects, Pose, Scene, SceneRenderer, SceneView, WindowKey};
-use vortex_vt_wgpu::source::Delayed;
-use vortex_vt_wgpu::testing::{box_chain, write_pack};
+use vortex_vt_wgpu::harness::{Effects, FrameReport, Pose, Scene, SceneRenderer, SceneView, WindowKey};
+use vortex_vt_wgpu::testing::{Gate, Gated, box_chain, write_pack};
 use vortex_vt_wgpu::{Pacing, PageSource, VirtualTexture};
 
 use crate::common::gpu;
 
-const LATENCY: Duration = Duration::from_millis(200);
+/// Loader threads: each holds one read at the gate.
+const THREADS: usize = 4;
+/// Frames drawn while the reads are held, after the first that has pages in flight.
+const HELD_FRAMES: usize = 20;
+/// Bounds against a hang, never reached when the runtime works, however slow the machine.
+const FAIL_SAFE: Duration = Duration::from_secs(120);
 
 #[test]
-fn frames_never_wait_for_slow_reads_and_converge_when_they_land() {
+fn frames_never_wait_for_held_reads_and_converge_when_they_land() {
     let Some(gpu) = gpu() else { return };
     let dir = tempfile::tempdir().unwrap();
     let lod0 = Rgba8Image::from_fn(248, 248, |x, y| [(x * 5) as u8, (y * 3) as u8, ((x ^ y) * 11) as u8, 255]);
     let texture = VirtualTexture::new(248, 248, 64, 1).unwrap();
     let chain = box_chain(lod0, texture.grid.lod_count());
-    let pack = write_pack(&dir.path().join("slow.vtpk"), &chain, &texture, TileKind::Raw).unwrap();
-    let slow: Arc<dyn PageSource> = Arc::new(Delayed::new(pack, LATENCY));
+    let pack = write_pack(&dir.path().join("held.vtpk"), &chain, &texture, TileKind::Raw).unwrap();
+    // Open while the runtime pins the root before the first frame (a blocking load), then closed.
+    let gate = Gate::opened();
+    let held: Arc<dyn PageSource> = Arc::new(Gated::new(pack, Arc::clone(&gate)));
     // The whole image, one texel per pixel: the 16 pages of LOD 0 and their 5 ancestors.
     let key = WindowKey { center: [0.5, 0.5], width: 1.0 };
     let scene = Scene {
@@ -35,31 +43,44 @@ fn frames_never_wait_for_slow_reads_and_converge_when_they_land() {
         size: [248, 248],
         frames: 1,
         view: SceneView::Window { texture: 0, path: vec![Keyframe { frame: 0, at: key }] },
-        effects: Effects { threads: 4, ..Effects::exact() },
+        effects: Effects { threads: THREADS, ..Effects::exact() },
     };
-    let mut renderer = SceneRenderer::new(gpu, vec![slow], &scene, Pacing::RealTime).unwrap();
+    let mut renderer = SceneRenderer::new(gpu, vec![held], &scene, Pacing::RealTime).unwrap();
     let pose = scene.pose(0, renderer.runtime().textures());
+    gate.close();
 
-    let started = Instant::now();
-    let mut frames = Vec::new();
-    loop {
+    // Frames until one has asked for pages: the feedback comes back when the GPU has it, a
+    // frame or a few later. Every frame returns although no read can finish.
+    let mut frames: Vec<FrameReport> = Vec::new();
+    let frame = |renderer: &mut SceneRenderer, frames: &mut Vec<FrameReport>| {
         let (report, _) = renderer.frame(&pose, false).unwrap();
+        assert_eq!(report.io_wait_ms, 0.0, "frame {} waited for pages", report.frame);
         frames.push(report.clone());
-        let done = report.fallback_fraction == 0.0 && report.in_flight == 0 && report.requested > 0;
-        if done || started.elapsed() > Duration::from_secs(20) {
+        report
+    };
+    let started = std::time::Instant::now();
+    while frame(&mut renderer, &mut frames).in_flight == 0 {
+        assert!(started.elapsed() < FAIL_SAFE, "no frame asked for a page in {} frames", frames.len());
+    }
+    // The loader's threads are all at the gate, and the frames go on.
+    assert!(gate.wait_for_readers(THREADS, FAIL_SAFE), "{} reads at the gate", gate.waiting());
+    for _ in 0..HELD_FRAMES {
+        let report = frame(&mut renderer, &mut frames);
+        assert!(report.in_flight > 0 && report.fallback_fraction > 0.0, "{report:?}");
+        assert_eq!(report.loaded, 0, "frame {}: a page landed through a closed gate", report.frame);
+    }
+    assert_eq!(gate.waiting(), THREADS, "the reads stayed at the gate");
+
+    // The reads land, and the picture converges.
+    gate.open();
+    loop {
+        let report = frame(&mut renderer, &mut frames);
+        if report.fallback_fraction == 0.0 && report.in_flight == 0 {
             break;
         }
-        // A display's refresh: the frame loop has other work than streaming.
-        std::thread::sleep(Duration::from_millis(4));
+        assert!(started.elapsed() < FAIL_SAFE, "did not converge in {} frames: {report:?}", frames.len());
     }
-    for f in &frames {
-        assert_eq!(f.io_wait_ms, 0.0, "frame {} waited for pages", f.frame);
-        assert!(f.cpu_ms < LATENCY.as_secs_f64() * 1e3 / 2.0, "frame {} took {} ms of CPU", f.frame, f.cpu_ms);
-    }
-    let waiting = frames.iter().filter(|f| f.fallback_fraction > 0.0 && f.in_flight > 0).count();
-    assert!(waiting >= 5, "frames went on while the pages were read: {waiting}");
-    let last = frames.last().unwrap();
-    assert!(last.fallback_fraction == 0.0 && last.in_flight == 0, "did not converge in 20 s: {last:?}");
+    assert!(renderer.runtime().errors().is_empty(), "{:?}", renderer.runtime().errors());
 
     let picture = renderer.still(&pose, None).unwrap();
     let Pose::Window(window) = pose else { unreachable!() };

@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use vortex_pack::format::{self, Level};
 use vortex_pack::{Description, NewTile, Pack, PackWriter, Tile, TileId, TileKind, WriteOptions};
@@ -17,6 +17,7 @@ use vortex_vt_wgpu::loader::{
     LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS, TIER_ENTRY_OVERHEAD, TierUsage,
     stand_in_tile,
 };
+use vortex_vt_wgpu::testing::{Gate, Gated};
 use vortex_vt_wgpu::{CacheFormat, PageSource, ReadError, SourceTile, StoredRead, VirtualTexture};
 
 const TILE: u32 = 16;
@@ -490,32 +491,53 @@ fn a_broken_ancestor_of_an_absent_tile_is_named() {
     assert_eq!(loaded[0].texels, stand_in_tile(TILE));
 }
 
+/// A bound against a hang, never reached when the loader works, however slow the machine.
+const FAIL_SAFE: Duration = Duration::from_secs(120);
+
+/// Returns once every job queued on `loader` so far has been answered, without a clock: a
+/// blocking load of one page of `gated` (a texture whose reads wait at the closed `gate`) per
+/// worker, let through only once every worker holds one. Workers take jobs in order and answer
+/// each before taking the next, so by then every earlier job has been answered.
+fn answered_so_far(loader: &Loader, gated: u8, gate: &Gate) {
+    let threads = loader.threads();
+    let barrier: Vec<(PageId, Slot)> =
+        (0..threads as Slot).map(|i| (PageId::new(gated, 0, 0, 0), 60_000 + i)).collect();
+    std::thread::scope(|scope| {
+        let load = scope.spawn(|| loader.load(&barrier));
+        assert!(gate.wait_for_readers(threads, FAIL_SAFE), "{} of {threads} workers at the gate", gate.waiting());
+        gate.open();
+        assert_eq!(load.join().unwrap().len(), threads);
+    });
+    gate.close();
+}
+
 #[test]
 fn request_and_poll_answer_every_page_exactly_once() {
     let dir = tempdir();
     let pack = mixed_pack(dir.path(), "a.vtpk");
-    let loader = Loader::new(vec![Arc::clone(&pack)], 3).unwrap();
+    // Texture 1 (the same pack, its reads held at a gate) is only for `answered_so_far`.
+    let gate = Gate::closed();
+    let gated: Arc<dyn PageSource> = Arc::new(Gated::new(Arc::clone(&pack) as _, Arc::clone(&gate)));
+    let loader = Loader::with_sources(vec![Arc::clone(&pack) as _, gated], 3).unwrap();
     let grid = loader.textures()[0].grid;
     let pages: Vec<(PageId, Slot)> = (0..3).flat_map(|round| all_pages(0, grid, round * 100)).collect();
     let reference: HashMap<PageId, LoadedPage> =
         loader.load(&all_pages(0, grid, 0)).into_iter().map(|p| (p.page, p)).collect();
     let mut seen: HashMap<Slot, LoadedPage> = HashMap::new();
-    let deadline = Instant::now() + Duration::from_secs(30);
+    let mut collect = |finished: Vec<LoadedPage>| {
+        for page in finished {
+            assert!(seen.insert(page.slot, page).is_none(), "answered twice");
+        }
+    };
     for chunk in pages.chunks(10) {
         loader.request(chunk);
         // A blocking load meanwhile shares the workers and is not mixed into the polled pages.
         assert_eq!(loader.load(&chunk[..1])[0].page, chunk[0].0);
-        for page in loader.poll() {
-            assert!(seen.insert(page.slot, page).is_none(), "answered twice");
-        }
+        collect(loader.poll());
     }
-    while loader.pending() > 0 {
-        assert!(Instant::now() < deadline, "{} pages never came", loader.pending());
-        for page in loader.poll() {
-            assert!(seen.insert(page.slot, page).is_none(), "answered twice");
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    }
+    answered_so_far(&loader, 1, &gate);
+    collect(loader.poll());
+    assert_eq!(loader.pending(), 0);
     assert!(loader.poll().is_empty());
     assert_eq!(seen.len(), pages.len());
     for (page, slot) in &pages {
@@ -571,23 +593,21 @@ fn solid_bc7_blocks_decode_to_their_colour_exactly() {
 fn cancelled_requests_are_never_answered_and_the_rest_are() {
     let dir = tempdir();
     let pack = mixed_pack(dir.path(), "a.vtpk");
-    let slow: Arc<dyn vortex_vt_wgpu::PageSource> =
-        Arc::new(vortex_vt_wgpu::source::Delayed::new(pack, Duration::from_millis(40)));
-    let loader = Loader::with_sources(vec![slow], 1).unwrap();
+    let gate = Gate::closed();
+    let held: Arc<dyn PageSource> = Arc::new(Gated::new(pack, Arc::clone(&gate)));
+    let loader = Loader::with_sources(vec![held], 1).unwrap();
     let pages = all_pages(0, loader.textures()[0].grid, 0);
     loader.request(&pages[..6]);
-    // The one worker is reading the first page; the other five wait in the queue.
-    std::thread::sleep(Duration::from_millis(10));
+    // The one worker holds the first page at the gate; the other five wait in the queue.
+    assert!(gate.wait_for_readers(1, FAIL_SAFE), "the worker never read the first page");
     assert_eq!(loader.cancel(&pages[2..6]), 4);
     assert_eq!(loader.cancel(&pages[2..6]), 0, "taken back once");
-    let started = Instant::now();
-    let mut answered = Vec::new();
-    while loader.pending() > 0 {
-        assert!(started.elapsed() < Duration::from_secs(5), "{} still pending", loader.pending());
-        answered.extend(loader.poll().into_iter().map(|p| (p.page, p.slot)));
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    gate.open();
+    // One worker answers in order: once a blocking load behind them is answered, so are they.
+    assert_eq!(loader.load(&pages[..1]).len(), 1);
+    let answered: Vec<(PageId, Slot)> = loader.poll().into_iter().map(|p| (p.page, p.slot)).collect();
     assert_eq!(answered, pages[..2]);
+    assert_eq!(loader.pending(), 0);
 }
 
 /// A pack that counts its reads, with or without a stored form (without: only `read_tile`, as an
