@@ -68,9 +68,16 @@ pub fn merge(paths: &[PathBuf], dest: &Path, progress: &dyn Progress) -> Result<
     let first = &shards[0];
     let pixels = first.manifest.source.pixels(&first.path)?;
     let (opts, layout, stored) = read_options(first, pixels)?;
+    // The pyramid the manifest describes must be the one each shard's level table holds, whose
+    // size its file bounds, before the plan and the page order are sized from it.
+    for shard in &shards {
+        if *shard.pack.description() != pack_description(&layout, stored) {
+            return Err(shard_error(&shard.path, "its pack header does not match its metadata".into()));
+        }
+    }
     let plan = ShardPlan::choose(&layout, first.manifest.count)?;
     for shard in &shards {
-        check_pages(shard, &plan, &layout, stored)?;
+        check_pages(shard, &plan, &layout)?;
     }
     // Per shard, per rectangle: the compressed sums.
     let sums: Vec<Vec<Vec<u8>>> =
@@ -120,9 +127,9 @@ pub fn merge(paths: &[PathBuf], dest: &Path, progress: &dyn Progress) -> Result<
     Ok(Merged { pack, shards: plan.count(), cut: plan.cut, made, copied_bytes, sums_bytes })
 }
 
-/// Checks that `shard` holds what this version's plan gives its index: the cut level, its
-/// rectangles of sums, and the pyramid's description.
-fn check_pages(shard: &Shard, plan: &ShardPlan, layout: &Layout, stored: PixelLayout) -> Result<()> {
+/// Checks that `shard` holds what this version's plan gives its index: the cut level and its
+/// rectangles of sums.
+fn check_pages(shard: &Shard, plan: &ShardPlan, layout: &Layout) -> Result<()> {
     let m = &shard.manifest;
     let theirs: Vec<_> = m.roots.iter().map(|r| (r.columns, r.rows)).collect();
     let ours: Vec<_> = match plan.has_levels_above(layout) {
@@ -144,9 +151,6 @@ fn check_pages(shard: &Shard, plan: &ShardPlan, layout: &Layout, stored: PixelLa
                 m.index, m.count, m.cut_level, plan.cut
             ),
         ));
-    }
-    if *shard.pack.description() != pack_description(layout, stored) {
-        return Err(shard_error(&shard.path, "its pack header does not match its metadata".into()));
     }
     Ok(())
 }
