@@ -192,21 +192,28 @@ pub struct PackLayout {
     #[arg(long, value_name = "SIZE", default_value = "4K", value_parser = parse_size)]
     align: u64,
     /// Alignment of every tile's bytes in a pack; 64K gives each tile its own Vulkan sparse block.
+    /// At most 1M: every tile is padded to it.
     #[arg(long, value_name = "SIZE", default_value = "8", value_parser = parse_size)]
     tile_align: u64,
 }
 
 impl PackLayout {
     fn options(&self) -> Result<WriteOptions> {
-        let check = |v: u64, flag: &str| -> Result<u32> {
+        let check = |v: u64, flag: &str, most: u32| -> Result<u32> {
             match u32::try_from(v) {
-                Ok(v) if v.is_power_of_two() && v >= 8 => Ok(v),
-                _ => anyhow::bail!("{flag} {v} must be a power of two from 8 to 2G"),
+                Ok(v) if v.is_power_of_two() && (8..=most).contains(&v) => Ok(v),
+                _ => anyhow::bail!(
+                    "{flag} {v} must be a power of two from 8 to {}",
+                    vortex_tiler::limits::human_bytes(most.into())
+                ),
             }
         };
+        // The data section is padded to --align once; every tile to --tile-align, hence its
+        // lower cap.
+        use vortex_tiler::shard::manifest::{MAX_ALIGN, MAX_TILE_ALIGN};
         Ok(WriteOptions {
-            alignment: check(self.align, "--align")?,
-            payload_alignment: check(self.tile_align, "--tile-align")?,
+            alignment: check(self.align, "--align", MAX_ALIGN)?,
+            payload_alignment: check(self.tile_align, "--tile-align", MAX_TILE_ALIGN)?,
         })
     }
 }

@@ -15,6 +15,15 @@ use crate::pixel::{Channels, Depth, PixelLayout};
 /// The manifest's version: `merge` refuses others.
 pub const FORMAT: u32 = 1;
 
+/// The largest `--tile-align` (a pack's payload alignment) that `split`, `pack` and `convert`
+/// accept and that `merge` accepts from a shard: 1 MiB. Each payload is padded to it, so a
+/// larger one makes a file mostly of padding (2 GiB made 44 tiles a 71 GB file), and no
+/// memory page or GPU sparse block (64 KiB) asks for more.
+pub const MAX_TILE_ALIGN: u32 = 1 << 20;
+
+/// The largest `--align` (of the data section, padded to it once): 2 GiB.
+pub const MAX_ALIGN: u32 = 1 << 31;
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "camelCase", deny_unknown_fields)]
 pub struct Manifest {
@@ -48,6 +57,16 @@ pub struct SourceId {
 }
 
 impl SourceId {
+    /// Whether two shards were cut from the same input: everything but the name, which is the
+    /// input as each command line spelled it (`src.tif`, `./src.tif`, an absolute path on
+    /// another machine) and serves only to name it in messages.
+    pub fn same_input(&self, other: &SourceId) -> bool {
+        // Every other member by name, so that one added later is not left out.
+        let SourceId { name: _, fingerprint, width, height, tile_format, sample_bytes } = self;
+        (fingerprint, width, height, tile_format, sample_bytes)
+            == (&other.fingerprint, &other.width, &other.height, &other.tile_format, &other.sample_bytes)
+    }
+
     pub fn pixels(&self, path: &Path) -> Result<PixelLayout> {
         let channels = Channels::from_tile_format(&self.tile_format);
         let depth = match self.sample_bytes {

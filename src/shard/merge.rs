@@ -1,14 +1,17 @@
 //! `merge`: shard packs into the pack one machine's `split --pack` makes, byte for byte.
 //!
-//! 1. Every shard's manifest is read and checked against the first: the same input
-//!    (fingerprint, size, texels), the same options, the same shard count; then every index
-//!    once and none missing. Each error names the shard file.
+//! 1. Every shard's header, metadata and index checksums are checked, then its manifest is
+//!    read and checked against the first: the same input (fingerprint, size, texels; not the
+//!    name it was given by), the same options, the same shard count; then every index once
+//!    and none missing. Each error names the shard file.
 //! 2. The options are read back from the pack metadata the shards carry, through the same
-//!    resolution `split` uses, and must describe that metadata again exactly; the shard plan
+//!    resolution `split` uses, and must describe that metadata again exactly; the numbers the
+//!    options imply (sum width, alignments) must be the ones `split` writes; the shard plan
 //!    is recomputed and must give each shard the rectangles it says it made.
 //! 3. The levels above the cut are made from the roots' sums (`RootRows` assembles each
 //!    row of the cut level from the shards that hold it), through the same exact cascade and
-//!    encoders as `split`, and kept in memory: they are the few coarse pages.
+//!    encoders as `split`, and kept in memory: they are the few coarse pages. Each sum must be
+//!    one the source could give (at most its pixels' largest value times their number).
 //! 4. Every page is added to a new pack in the order `split --pack` adds them
 //!    ([`super::order`]): the shards' payloads as they are (their checksums checked), the
 //!    coarse pages from step 3. The pack writer stores identical payloads once, across
@@ -20,12 +23,13 @@ use std::sync::Mutex;
 
 use vortex_pack::{NewTile, Pack, PackWriter, Tile, TileId, WriteOptions, WriteSummary};
 
-use super::manifest::{Manifest, shard_error};
+use super::manifest::{MAX_ALIGN, MAX_TILE_ALIGN, Manifest, shard_error};
 use super::order::split_order;
 use super::plan::ShardPlan;
 use super::sums::RowReader;
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
+use crate::limits::human_bytes;
 use crate::pixel::PixelLayout;
 use crate::pyramid::cascade::Span;
 use crate::pyramid::reduce::Acc;
@@ -64,9 +68,16 @@ pub fn merge(paths: &[PathBuf], dest: &Path, progress: &dyn Progress) -> Result<
     let first = &shards[0];
     let pixels = first.manifest.source.pixels(&first.path)?;
     let (opts, layout, stored) = read_options(first, pixels)?;
+    // The pyramid the manifest describes must be the one each shard's level table holds, whose
+    // size its file bounds, before the plan and the page order are sized from it.
+    for shard in &shards {
+        if *shard.pack.description() != pack_description(&layout, stored) {
+            return Err(shard_error(&shard.path, "its pack header does not match its metadata".into()));
+        }
+    }
     let plan = ShardPlan::choose(&layout, first.manifest.count)?;
     for shard in &shards {
-        check_pages(shard, &plan, &layout, stored)?;
+        check_pages(shard, &plan, &layout)?;
     }
     // Per shard, per rectangle: the compressed sums.
     let sums: Vec<Vec<Vec<u8>>> =
@@ -116,9 +127,9 @@ pub fn merge(paths: &[PathBuf], dest: &Path, progress: &dyn Progress) -> Result<
     Ok(Merged { pack, shards: plan.count(), cut: plan.cut, made, copied_bytes, sums_bytes })
 }
 
-/// Checks that `shard` holds what this version's plan gives its index: the cut level, its
-/// rectangles of sums, and the pyramid's description.
-fn check_pages(shard: &Shard, plan: &ShardPlan, layout: &Layout, stored: PixelLayout) -> Result<()> {
+/// Checks that `shard` holds what this version's plan gives its index: the cut level and its
+/// rectangles of sums.
+fn check_pages(shard: &Shard, plan: &ShardPlan, layout: &Layout) -> Result<()> {
     let m = &shard.manifest;
     let theirs: Vec<_> = m.roots.iter().map(|r| (r.columns, r.rows)).collect();
     let ours: Vec<_> = match plan.has_levels_above(layout) {
@@ -141,9 +152,6 @@ fn check_pages(shard: &Shard, plan: &ShardPlan, layout: &Layout, stored: PixelLa
             ),
         ));
     }
-    if *shard.pack.description() != pack_description(layout, stored) {
-        return Err(shard_error(&shard.path, "its pack header does not match its metadata".into()));
-    }
     Ok(())
 }
 
@@ -157,11 +165,18 @@ fn above_cut(
     pixels: PixelLayout,
 ) -> Result<HashMap<TileId, Made>> {
     let sum_bytes = shards[0].manifest.options.sum_bytes as usize;
-    let mut roots = RootRows::new(plan.cut + 1, pixels.channels.count());
+    let bound = SumBound {
+        lod: plan.cut + 1,
+        channels: pixels.channels.count(),
+        width: layout.width.into(),
+        height: layout.height.into(),
+        summand: crate::split::max_summand(opts, pixels),
+    };
+    let mut roots = RootRows::new(bound);
     for (shard, sums) in shards.iter().zip(sums) {
         for (r, bytes) in shard.manifest.roots.iter().zip(sums) {
             let (columns, rows) = (r.columns[0]..r.columns[1], r.rows[0]..r.rows[1]);
-            let reader = RowReader::new(bytes, columns, rows, roots.channels, sum_bytes)?;
+            let reader = RowReader::new(bytes, columns, rows, bound.channels, sum_bytes)?;
             roots.add(&shard.path, reader);
         }
     }
@@ -183,6 +198,10 @@ fn open_all(paths: &[PathBuf]) -> Result<Vec<Shard>> {
     let mut shards = Vec::with_capacity(paths.len());
     for path in paths {
         let pack = Pack::open(path)?;
+        // `open` checked the header and metadata checksums; the index is read entry by entry
+        // below, and a damaged entry can still read as a valid one (a page's kind turned to
+        // constant has no payload CRC to fail), so its checksum is checked before any is used.
+        pack.check_index()?;
         let manifest = Manifest::parse(path, pack.metadata())?;
         shards.push(Shard { path: path.clone(), pack, manifest });
     }
@@ -202,7 +221,7 @@ fn open_all(paths: &[PathBuf]) -> Result<Vec<Shard>> {
                 ),
             ));
         }
-        if m.source != m0.source {
+        if !m.source.same_input(&m0.source) {
             let id = |m: &Manifest| {
                 format!(
                     "{} ({}x{}, fingerprint {})",
@@ -230,12 +249,24 @@ fn open_all(paths: &[PathBuf]) -> Result<Vec<Shard>> {
             ));
         }
     }
-    let mut by_index: Vec<Option<Shard>> = (0..count).map(|_| None).collect();
-    for s in shards {
+    for s in &shards {
         let i = s.manifest.index;
         if i >= count {
             return Err(shard_error(&s.path, format!("says it is shard {i} of {count}")));
         }
+    }
+    // The count is the manifest's word: fewer shards than it says are missing some, and the
+    // table of shards by index is sized only once it is known to be no longer than the list
+    // of files given.
+    if count as usize > shards.len() {
+        let mut given: Vec<u32> = shards.iter().map(|s| s.manifest.index).collect();
+        given.sort_unstable();
+        given.dedup();
+        return Err(missing_shards(count, &given, paths));
+    }
+    let mut by_index: Vec<Option<Shard>> = (0..count).map(|_| None).collect();
+    for s in shards {
+        let i = s.manifest.index;
         if let Some(other) = &by_index[i as usize] {
             let message = match other.path == s.path {
                 true => "is given twice: give each shard once".to_string(),
@@ -245,19 +276,39 @@ fn open_all(paths: &[PathBuf]) -> Result<Vec<Shard>> {
         }
         by_index[i as usize] = Some(s);
     }
-    let absent: Vec<String> =
-        by_index.iter().enumerate().filter(|(_, s)| s.is_none()).map(|(i, _)| i.to_string()).collect();
-    if !absent.is_empty() {
-        let given: Vec<String> = paths.iter().take(4).map(|p| p.display().to_string()).collect();
-        let more = if paths.len() > 4 { format!(" and {} more", paths.len() - 4) } else { String::new() };
-        return Err(TilerError::Options(format!(
-            "shard{} {} of {count} missing from those given ({}{more}); `split --shard I/{count}` makes shard I",
-            if absent.len() == 1 { "" } else { "s" },
-            absent.join(", "),
-            given.join(", ")
-        )));
+    if by_index.iter().any(Option::is_none) {
+        let given: Vec<u32> = (0..count).filter(|&i| by_index[i as usize].is_some()).collect();
+        return Err(missing_shards(count, &given, paths));
     }
     Ok(by_index.into_iter().flatten().collect())
+}
+
+/// The most missing indices an error lists: the count comes from a file and may be billions.
+const LISTED: usize = 8;
+
+/// The error for shards missing from `given` (sorted indices below `count`, each once): the
+/// first few indices, how many more, and the first few files given.
+fn missing_shards(count: u32, given: &[u32], paths: &[PathBuf]) -> TilerError {
+    // Walks the gaps between the given indices, so as to list a few of billions without
+    // counting through them.
+    let mut absent = Vec::new();
+    let mut next = 0u64;
+    for i in given.iter().chain([&count]).map(|&i| i as u64) {
+        absent.extend((next..i).take(LISTED - absent.len()).map(|i| i.to_string()));
+        next = i + 1;
+    }
+    let total = count as u64 - given.len() as u64;
+    if total > absent.len() as u64 {
+        absent.push(format!("and {} more", total - absent.len() as u64));
+    }
+    let files: Vec<String> = paths.iter().take(4).map(|p| p.display().to_string()).collect();
+    let more = if paths.len() > 4 { format!(" and {} more", paths.len() - 4) } else { String::new() };
+    TilerError::Options(format!(
+        "shard{} {} of {count} missing from those given ({}{more}); `split --shard I/{count}` makes shard I",
+        if total == 1 { "" } else { "s" },
+        absent.join(", "),
+        files.join(", ")
+    ))
 }
 
 /// The options two shards disagree on, as `member: ours against theirs`.
@@ -306,7 +357,34 @@ fn read_options(
             "its options do not read back as they were written (made by another version?)".into(),
         ));
     }
+    check_written(shard, &opts, pixels, &layout)?;
     Ok((opts, layout, stored))
+}
+
+/// The manifest's numbers that are not tiling options must be what `split --shard` writes
+/// for those options: the width of a stored sum sizes how the sums are read, and the
+/// alignments how the merged pack is padded.
+fn check_written(shard: &Shard, opts: &SplitOptions, pixels: PixelLayout, layout: &Layout) -> Result<()> {
+    let o = &shard.manifest.options;
+    let field = |name: &str, value: u32, wanted: String| {
+        shard_error(
+            &shard.path,
+            format!("its options.{name} is {value}, where a shard holds {wanted}: the shard is damaged or forged"),
+        )
+    };
+    let sum_bytes = crate::split::sum_bytes(opts, pixels, layout) as u32;
+    if o.sum_bytes != sum_bytes {
+        let wanted = format!("{sum_bytes} for its filter and pyramid depth");
+        return Err(field("sumBytes", o.sum_bytes, wanted));
+    }
+    for (name, value, most) in
+        [("alignment", o.alignment, MAX_ALIGN), ("payloadAlignment", o.payload_alignment, MAX_TILE_ALIGN)]
+    {
+        if !value.is_power_of_two() || !(8..=most).contains(&value) {
+            return Err(field(name, value, format!("a power of two from 8 to {}", human_bytes(most.into()))));
+        }
+    }
+    Ok(())
 }
 
 /// The rows of exact sums of the level above the cut, each added up from the shards'
@@ -314,8 +392,7 @@ fn read_options(
 /// texels). A rectangle's decoder lives only while its rows are read, so memory is the
 /// rectangles of one row of roots.
 pub(crate) struct RootRows<'a> {
-    lod: u32,
-    channels: usize,
+    bound: SumBound,
     /// Rectangles not started, by first row.
     waiting: VecDeque<(&'a Path, RowReader<'a>)>,
     /// Rectangles being read.
@@ -323,8 +400,8 @@ pub(crate) struct RootRows<'a> {
 }
 
 impl<'a> RootRows<'a> {
-    fn new(lod: u32, channels: usize) -> Self {
-        RootRows { lod, channels, waiting: VecDeque::new(), reading: Vec::new() }
+    fn new(bound: SumBound) -> Self {
+        RootRows { bound, waiting: VecDeque::new(), reading: Vec::new() }
     }
 
     fn add(&mut self, path: &'a Path, reader: RowReader<'a>) {
@@ -334,7 +411,7 @@ impl<'a> RootRows<'a> {
 
     /// The level the rows are of.
     pub fn lod(&self) -> u32 {
-        self.lod
+        self.bound.lod
     }
 
     /// Row `y` (rows are read in order, each once) into `out`, the level's width of sums.
@@ -343,19 +420,31 @@ impl<'a> RootRows<'a> {
             self.reading.extend(self.waiting.pop_front());
         }
         out.fill(A::default());
-        let c = self.channels;
+        let c = self.bound.channels;
+        let lod = self.bound.lod;
         let mut part = Vec::new();
         for (path, reader) in &mut self.reading {
             let columns = reader.columns.start as usize * c..reader.columns.end as usize * c;
             if columns.end > out.len() {
-                return Err(shard_error(
-                    path,
-                    format!("its root sums reach past the image at row {y} of LOD {}", self.lod),
-                ));
+                return Err(shard_error(path, format!("its root sums reach past the image at row {y} of LOD {lod}")));
             }
+            let first = columns.start;
             part.resize(columns.len(), A::default());
             reader.read_into(&mut part).map_err(|m| shard_error(path, m))?;
-            for (o, &v) in out[columns].iter_mut().zip(&part) {
+            for (i, (o, &v)) in out[columns].iter_mut().zip(&part).enumerate() {
+                // Checked before it is added: no sum the shards hold can overflow the total.
+                let (x, channel) = ((first + i) / c, (first + i) % c);
+                let (total, most) = (wide(*o) + wide(v), self.bound.most(x as u64, y));
+                if total > most {
+                    return Err(shard_error(
+                        path,
+                        format!(
+                            "its root sums are out of range: channel {channel} of texel ({x}, {y}) of LOD {lod} sums to {total}, over {most} ({} for each of the {} source pixels under it): the shard is damaged or forged",
+                            self.bound.summand,
+                            most / self.bound.summand.max(1) as u128
+                        ),
+                    ));
+                }
                 *o = *o + v;
             }
         }
@@ -380,6 +469,35 @@ impl<'a> RootRows<'a> {
             None => Ok(()),
         }
     }
+}
+
+/// What the exact sums of the level above the cut can reach: no source pixel adds more than
+/// `summand` to a sum, and a texel sums the pixels under it (`2^lod` on a side, fewer along
+/// the right and bottom edges). A sum over that is none the source could give.
+#[derive(Clone, Copy, Debug)]
+struct SumBound {
+    lod: u32,
+    channels: usize,
+    /// The image at LOD 0.
+    width: u64,
+    height: u64,
+    summand: u64,
+}
+
+impl SumBound {
+    /// The largest sum texel (x, y) of the level can hold.
+    fn most(&self, x: u64, y: u64) -> u128 {
+        let side = 1u64 << self.lod;
+        let pixels = |at: u64, extent: u64| side.min(extent.saturating_sub(at.saturating_mul(side)));
+        self.summand as u128 * pixels(x, self.width) as u128 * pixels(y, self.height) as u128
+    }
+}
+
+/// A sum as a `u128`, whichever width it is kept in.
+fn wide<A: Acc>(sum: A) -> u128 {
+    let mut le = [0u8; 16];
+    sum.to_le(&mut le[..A::BYTES]);
+    u128::from_le_bytes(le)
 }
 
 /// A page made above the cut.

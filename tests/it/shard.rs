@@ -368,3 +368,194 @@ fn shard_flags_are_checked_and_explained() {
     assert!(e.contains("in.ppm"), "{e}");
     assert!(!merged.exists());
 }
+
+// Damaged and forged shards: each refused with an error naming the shard (and the field),
+// exit 1, nothing written; never an abort, a panic or a wrong pack.
+
+/// Three shards of `input` made by the binary (PNG unless `codec` says otherwise), and their
+/// file names as strings.
+fn cli_shards(dir: &Scratch, input: &str, codec: &str) -> Vec<String> {
+    let part = dir.path("part-{shard}.vtpk").to_string_lossy().into_owned();
+    for i in 0..3 {
+        ok(&[
+            "split",
+            input,
+            "--pack",
+            &part,
+            "--shard",
+            &format!("{i}/3"),
+            "--tile-size",
+            "64",
+            "--codec",
+            codec,
+            "-q",
+        ]);
+    }
+    (0..3).map(|i| dir.path(&format!("part-{i}.vtpk")).to_string_lossy().into_owned()).collect()
+}
+
+/// `shard` rewritten in place with its manifest changed by `edit`, tiles and checksums intact
+/// (as a forger would: every checksum of the file matches).
+fn edit_manifest(shard: &str, edit: impl Fn(&mut serde_json::Value)) {
+    use vortex_pack::{NewTile, Pack, PackWriter, Tile};
+    let p = Pack::open(shard).unwrap();
+    let mut manifest: serde_json::Value = serde_json::from_slice(p.metadata()).unwrap();
+    edit(&mut manifest);
+    let edited = format!("{shard}.edited");
+    let metadata = manifest.to_string();
+    let mut w = PackWriter::create(
+        &edited,
+        *p.description(),
+        p.levels().to_vec(),
+        metadata.as_bytes(),
+        WriteOptions::default(),
+    )
+    .unwrap();
+    for id in p.ids() {
+        let tile = match p.tile_checked(id.lod, id.x, id.y).unwrap() {
+            Tile::Absent => NewTile::Absent,
+            Tile::Constant(t) => NewTile::Constant(t),
+            Tile::Data(k, b) => NewTile::Data(k, b),
+        };
+        w.add(id, tile).unwrap();
+    }
+    w.finish().unwrap();
+    std::fs::rename(&edited, shard).unwrap();
+}
+
+/// `merge` of `shards` into `out` fails (exit 1) with a short error holding every one of `words`.
+fn merge_fails(shards: &[String], out: &Path, words: &[&str]) {
+    let args: Vec<&str> =
+        ["merge", "-o", out.to_str().unwrap()].into_iter().chain(shards.iter().map(String::as_str)).collect();
+    let out_ = vortex(&args);
+    let e = String::from_utf8_lossy(&out_.stderr);
+    assert_eq!(out_.status.code(), Some(1), "{args:?}: {e}");
+    // Short: a count from the file once made a 7.9 MB error line (only its start is shown).
+    let start: String = e.chars().take(600).collect();
+    assert!(words.iter().all(|w| e.contains(w)) && e.len() < 1000, "{args:?} should say {words:?}: {start}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn a_count_of_billions_is_refused_before_anything_is_sized_from_it() {
+    let dir = Scratch::new("count");
+    let input = ppm(&dir, 300, 200);
+    let parts = cli_shards(&dir, input.to_str().unwrap(), "png");
+    let out = dir.path("m.vtpk");
+    for part in &parts {
+        edit_manifest(part, |m| m["count"] = 1_000_000.into());
+    }
+    merge_fails(&parts, &out, &["shards 3, 4, 5, 6, 7, 8, 9, 10, and 999989 more of 1000000 missing"]);
+    // One shard that says it is one of 2^32 - 1: the table of shards by index would be 1.8 TB.
+    edit_manifest(&parts[0], |m| m["count"] = u32::MAX.into());
+    merge_fails(&parts[..1], &out, &["shards 1, 2,", "and 4294967286 more of 4294967295 missing"]);
+}
+
+#[test]
+fn stored_options_other_than_split_writes_are_refused_by_field() {
+    let dir = Scratch::new("options");
+    let input = ppm(&dir, 300, 200);
+    let parts = cli_shards(&dir, input.to_str().unwrap(), "png");
+    let out = dir.path("m.vtpk");
+    let all = |field: &str, value: u64| {
+        for part in &parts {
+            edit_manifest(part, |m| m["options"][field] = value.into());
+        }
+    };
+    // 0 and 1 made a worker panic reading the sums, 2^32 - 1 an abort; 16 is what a deeper
+    // pyramid or another filter stores, not this one.
+    for bytes in [0, 1, 16, u32::MAX as u64] {
+        all("sumBytes", bytes);
+        merge_fails(&parts, &out, &["part-0.vtpk", "options.sumBytes", &format!("is {bytes},"), "8"]);
+    }
+    all("sumBytes", 8);
+    all("payloadAlignment", 1 << 31);
+    merge_fails(&parts, &out, &["part-0.vtpk", "options.payloadAlignment", "1.0 MiB"]);
+    all("payloadAlignment", 12);
+    merge_fails(&parts, &out, &["options.payloadAlignment", "is 12,"]);
+    all("payloadAlignment", 8);
+    ok(&[&["merge", "-q", "-o", out.to_str().unwrap()], &parts.iter().map(String::as_str).collect::<Vec<_>>()[..]]
+        .concat());
+}
+
+#[test]
+fn forged_root_sums_out_of_range_are_refused_naming_the_shard() {
+    use base64::Engine;
+    let b64 = base64::engine::general_purpose::STANDARD;
+    let dir = Scratch::new("sums");
+    let input = ppm(&dir, 300, 200);
+    let parts = cli_shards(&dir, input.to_str().unwrap(), "png");
+    let out = dir.path("m.vtpk");
+    // Every byte of shard 1's sums 0xFF: as many bytes as it holds, so every row reads whole.
+    edit_manifest(&parts[1], |m| {
+        for root in m["roots"].as_array_mut().unwrap() {
+            let sums = zstd::decode_all(&b64.decode(root["sums"].as_str().unwrap()).unwrap()[..]).unwrap();
+            let forged = zstd::encode_all(&vec![0xFFu8; sums.len()][..], 3).unwrap();
+            root["sums"] = b64.encode(forged).into();
+        }
+    });
+    merge_fails(
+        &parts,
+        &out,
+        &["part-1.vtpk", "root sums are out of range", "LOD 1", "for each of the 4 source pixels"],
+    );
+}
+
+#[test]
+fn a_flipped_index_byte_in_a_shard_is_refused_naming_it() {
+    use vortex_pack::{Pack, TileKind};
+    let dir = Scratch::new("index");
+    let input = ppm(&dir, 300, 200);
+    let parts = cli_shards(&dir, input.to_str().unwrap(), "jpeg");
+    let out = dir.path("m.vtpk");
+    // A JPEG page's kind turned to constant: it reads as a valid constant page, and only the
+    // index checksum tells.
+    let mut bytes = std::fs::read(&parts[2]).unwrap();
+    let kind_at = {
+        let p = Pack::open(&parts[2]).unwrap();
+        let position = (0..p.header().index_count).find(|&i| p.entry(i).kind == TileKind::Jpeg as u8).unwrap();
+        (p.header().index_offset + position * vortex_pack::format::ENTRY_LEN as u64 + 16) as usize
+    };
+    bytes[kind_at] = TileKind::Constant as u8;
+    std::fs::write(&parts[2], bytes).unwrap();
+    merge_fails(&parts, &out, &["part-2.vtpk", "index", "checksum mismatch"]);
+}
+
+#[test]
+fn shards_of_one_input_spelled_two_ways_merge() {
+    let dir = Scratch::new("spelling");
+    let input = ppm(&dir, 300, 200);
+    let plain = input.to_str().unwrap();
+    let dotted = dir.0.join(".").join("in.ppm");
+    let part = dir.path("part-{shard}.vtpk").to_string_lossy().into_owned();
+    for (i, spelled) in [plain, dotted.to_str().unwrap(), plain].into_iter().enumerate() {
+        ok(&["split", spelled, "--pack", &part, "--shard", &format!("{i}/3"), "--tile-size", "64", "-q"]);
+    }
+    let whole = dir.path("whole.vtpk");
+    ok(&["split", plain, "--pack", whole.to_str().unwrap(), "--tile-size", "64", "-q"]);
+    let parts: Vec<String> =
+        (0..3).map(|i| dir.path(&format!("part-{i}.vtpk")).to_string_lossy().into_owned()).collect();
+    let merged = dir.path("merged.vtpk");
+    ok(&[&["merge", "-q", "-o", merged.to_str().unwrap()], &parts.iter().map(String::as_str).collect::<Vec<_>>()[..]]
+        .concat());
+    assert!(std::fs::read(&whole).unwrap() == std::fs::read(&merged).unwrap());
+}
+
+#[test]
+fn tile_alignment_is_capped_at_one_mebibyte() {
+    let dir = Scratch::new("align");
+    let input = ppm(&dir, 100, 80);
+    let input = input.to_str().unwrap();
+    let pack = dir.path("p.vtpk");
+    let pack = pack.to_str().unwrap();
+    for command in [&["split", input, "--pack", pack][..], &["split", input, "--pack", pack, "--shard", "0/2"]] {
+        let e = fails(&[command, &["--tile-align", "2M"]].concat());
+        assert!(e.contains("--tile-align 2097152") && e.contains("1.0 MiB"), "{e}");
+    }
+    let tiles = dir.path("tiles");
+    ok(&["split", input, "-o", tiles.to_str().unwrap(), "-q"]);
+    let e = fails(&["pack", tiles.to_str().unwrap(), "-o", pack, "--tile-align", "2G"]);
+    assert!(e.contains("--tile-align") && e.contains("1.0 MiB"), "{e}");
+    assert!(!Path::new(pack).exists());
+    ok(&["split", input, "--pack", pack, "--tile-align", "1M", "-q"]);
+}
