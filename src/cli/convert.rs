@@ -8,7 +8,8 @@ use vortex_tiler::background::Background;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::pixel::{Depth, PixelLayout};
 use vortex_tiler::source::tiled::{
-    DeepZoom, Iiif, NamedDir, Order, PackInput, SplitOutput, TileGrid, TiledSource, Xyz, is_iiif_dir, is_zip, open_zip,
+    DeepZoom, Iiif, NamedDir, Order, PackInput, SplitOutput, TileGrid, TiledSource, Xyz, check_tiles_found,
+    is_iiif_dir, is_zip, open_zip,
 };
 use vortex_tiler::source::{RowSource, Streamed};
 
@@ -66,6 +67,12 @@ pub struct ConvertArgs {
     #[arg(long)]
     strict: bool,
 
+    /// Convert a .dzi or IIIF input even when most of the tiles its descriptor declares are
+    /// missing. Off by default: such an input is more likely damaged or hostile (a descriptor
+    /// claiming 300000x300000 over one tile) than sparse, and would be filled for minutes.
+    #[arg(long)]
+    allow_missing_tiles: bool,
+
     /// Output tile names, as split's --filename-format [default: lod%1$02s-x%2$04s-y%3$04s.<ext>].
     #[arg(long, value_name = "PATTERN")]
     output_filename_format: Option<String>,
@@ -77,15 +84,17 @@ pub struct ConvertArgs {
 pub fn run(a: ConvertArgs) -> Result<()> {
     let started = Instant::now();
     let grid = open_grid(&a)?;
+    check_tiles_found(grid.as_ref(), a.allow_missing_tiles)?;
     let header = grid.header();
     let grid_cell = grid.cell();
-    let source = TiledSource::new(grid, fill_texel(a.out.background(), header.layout), a.strict);
+    let source = TiledSource::new(grid, fill_texel(a.out.background(), header.layout), a.strict)
+        .with_max_memory(a.out.max_memory());
     Limits { memory: a.out.max_memory(), ..Limits::default() }.check_memory(
         &format!(
-            "reading a row of {}x{} input tiles of the {}x{} image",
+            "reading a row of {}x{} input tiles of the {}x{} image (and one tile at a time)",
             grid_cell.0, grid_cell.1, header.width, header.height
         ),
-        source.band_bytes(),
+        source.memory_needed(),
     )?;
     let missing = source.missing_log();
     let result =

@@ -35,6 +35,7 @@ impl Progress for Watch {
 /// writing it and says so: a run killed outright (power loss, SIGKILL) cannot clean up.
 pub fn claim(dest: &Path, product: Product, inputs: &[&Path], force: bool) -> Result<Claim> {
     let claim = output::claim(dest, product, inputs, force)?;
+    signals::remove_on_forced_exit(dest);
     let removed = staging::remove_stale(dest)
         .with_context(|| format!("removing temporaries that earlier runs left beside {}", dest.display()))?;
     for path in removed {

@@ -17,7 +17,7 @@ mod tiff;
 pub mod tiled;
 mod whole;
 
-pub use whole::{Decoded, decode_tile, probe_tile};
+pub use whole::{Decoded, decode_tile, decode_tile_within, probe_tile};
 
 use std::fs::File;
 use std::io::Read;

@@ -47,8 +47,29 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     limits.max_alloc = Some(max_memory);
     decoder.set_limits(limits).map_err(|e| image_error(path, e))?;
     let image = DynamicImage::from_decoder(decoder).map_err(|e| image_error(path, e))?;
-    let bytes = native_bytes(path, image)?;
+    let mut bytes = native_bytes(path, image)?;
+    let mut layout = layout;
+    // A GIF has no alpha channel, only a palette entry that may be transparent, and is always
+    // decoded as RGBA: where no texel is transparent it is RGB (as vips reads it), so that
+    // `--codec auto` can take JPEG. This costs one pass over the decoded texels, which stops
+    // at the first transparent one, and one more to drop the alpha in place.
+    if format == image::ImageFormat::Gif
+        && layout == PixelLayout::new(Channels::Rgba, Depth::U8)
+        && bytes.chunks_exact(4).all(|texel| texel[3] == 255)
+    {
+        drop_alpha(&mut bytes);
+        layout = PixelLayout::new(Channels::Rgb, Depth::U8);
+    }
     Ok(Box::new(WholeSource { format: format!("{format:?}").to_lowercase(), width, height, layout, bytes, next: 0 }))
+}
+
+/// 8-bit RGBA texels made RGB in place.
+fn drop_alpha(bytes: &mut Vec<u8>) {
+    let texels = bytes.len() / 4;
+    for i in 0..texels {
+        bytes.copy_within(i * 4..i * 4 + 3, i * 3);
+    }
+    bytes.truncate(texels * 3);
 }
 
 /// An image's samples in native byte order, in one of the pipeline's layouts.
@@ -78,8 +99,21 @@ pub struct Decoded {
 /// Decodes a tile file's bytes; `path` names it in errors. Tiles are small, so the `image`
 /// crate's default allocation limit applies.
 pub fn decode_tile(path: &Path, bytes: &[u8]) -> Result<Decoded> {
-    let image = image::load_from_memory(bytes).map_err(|e| image_error(path, e))?;
-    let (width, height) = (image.width(), image.height());
+    decode_tile_within(path, bytes, (u32::MAX, u32::MAX))
+}
+
+/// [`decode_tile`] of a tile at most `max` (width, height) texels: a larger one is refused
+/// from its header, before its texels are allocated.
+pub fn decode_tile_within(path: &Path, bytes: &[u8], max: (u32, u32)) -> Result<Decoded> {
+    let reader =
+        ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format().map_err(|e| TilerError::io(path, e))?;
+    let decoder = reader.into_decoder().map_err(|e| image_error(path, e))?;
+    let (width, height) = decoder.dimensions();
+    if width > max.0 || height > max.1 {
+        let message = format!("is {width}x{height}, larger than the {}x{} a tile of this input can be", max.0, max.1);
+        return Err(TilerError::decode(path, message));
+    }
+    let image = DynamicImage::from_decoder(decoder).map_err(|e| image_error(path, e))?;
     let layout = layout_of(image.color())
         .ok_or_else(|| TilerError::unsupported(path, format!("pixel type {:?} is not supported", image.color())))?;
     Ok(Decoded { width, height, layout, bytes: native_bytes(path, image)? })
@@ -138,5 +172,46 @@ impl RowSource for WholeSource {
 
     fn describe(&self) -> String {
         format!("{}, decoded whole", self.format)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::source::read_all;
+
+    /// A GIF of a few colours (no quantisation loss), texel (0, 0) transparent where asked.
+    fn gif(path: &Path, transparent: bool) -> Vec<u8> {
+        let (w, h) = (23u32, 9u32);
+        let colours = [[200u8, 30, 40], [10, 250, 90], [0, 0, 0], [255, 255, 255]];
+        let rgba: Vec<u8> = (0..w * h)
+            .flat_map(|i| {
+                let [r, g, b] = colours[(i % 7 % 4) as usize];
+                [r, g, b, if transparent && i == 0 { 0 } else { 255 }]
+            })
+            .collect();
+        let frame = image::Frame::new(image::RgbaImage::from_raw(w, h, rgba.clone()).unwrap());
+        let mut encoder = image::codecs::gif::GifEncoder::new(std::fs::File::create(path).unwrap());
+        encoder.encode_frame(frame).unwrap();
+        rgba
+    }
+
+    #[test]
+    fn an_opaque_gif_is_rgb_and_a_transparent_one_rgba() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("opaque.gif");
+        let rgba = gif(&path, false);
+        let mut source = crate::source::open(&path, 1 << 20).unwrap();
+        assert_eq!(source.layout(), PixelLayout::new(Channels::Rgb, Depth::U8));
+        let rgb: Vec<u8> = rgba.chunks_exact(4).flat_map(|t| [t[0], t[1], t[2]]).collect();
+        assert_eq!(read_all(source.as_mut()).unwrap(), rgb);
+
+        let path = dir.path().join("transparent.gif");
+        gif(&path, true);
+        let mut source = crate::source::open(&path, 1 << 20).unwrap();
+        assert_eq!(source.layout(), PixelLayout::new(Channels::Rgba, Depth::U8));
+        let got = read_all(source.as_mut()).unwrap();
+        assert_eq!(got[3], 0);
+        assert!(got[4..].chunks_exact(4).all(|t| t[3] == 255));
     }
 }

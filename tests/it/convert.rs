@@ -463,3 +463,170 @@ fn bad_iiif_and_zip_inputs_name_the_file() {
     assert!(e.contains("--input-layout google") && e.contains("--input-layout xyz"), "{e}");
     assert!(!out.exists());
 }
+
+/// `image` as PNG bytes.
+fn png_bytes(image: &image::RgbImage) -> Vec<u8> {
+    let mut out = Vec::new();
+    image.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png).unwrap();
+    out
+}
+
+/// Waits for `child`, failing (and killing it) if it is still running after two minutes: a
+/// fail-safe against a hang, not a timing.
+fn wait_or_kill(child: std::process::Child, what: &str) -> std::process::Output {
+    let pid = child.id();
+    let (done, result) = std::sync::mpsc::channel();
+    std::thread::spawn(move || done.send(child.wait_with_output()));
+    match result.recv_timeout(std::time::Duration::from_secs(120)) {
+        Ok(out) => out.unwrap(),
+        Err(_) => {
+            let _ = Command::new("kill").args(["-KILL", &pid.to_string()]).status();
+            panic!("{what}: still running after two minutes");
+        }
+    }
+}
+
+/// A tile whose zip entry inflates far past any tile is refused from its declared size, naming
+/// the entry, instead of being inflated (up to 256 MiB per thread) under --max-memory 64M.
+#[test]
+fn a_zip_bomb_tile_is_refused_naming_the_entry() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let zip = dir.path().join("bomb.zip");
+    let out = dir.path().join("out");
+    let image = test_image(128, 64);
+    let mut w = zip::ZipWriter::new(std::fs::File::create(&zip).unwrap());
+    let deflated = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+    w.start_file("dz.dzi", deflated).unwrap();
+    w.write_all(br#"<Image TileSize="64" Overlap="0" Format="png"><Size Width="128" Height="64"/></Image>"#).unwrap();
+    w.start_file("dz_files/7/0_0.png", deflated).unwrap();
+    w.write_all(&png_bytes(&image::imageops::crop_imm(&image, 0, 0, 64, 64).to_image())).unwrap();
+    w.start_file("dz_files/7/1_0.png", deflated).unwrap();
+    w.write_all(&vec![0u8; 32 << 20]).unwrap();
+    w.finish().unwrap();
+    assert!(std::fs::metadata(&zip).unwrap().len() < 100_000);
+    let e = convert_err(&[zip.to_str().unwrap(), "-o", out.to_str().unwrap(), "--max-memory", "64M"]);
+    assert!(e.contains("bomb.zip:dz_files/7/1_0.png") && e.contains("32.0 MiB, more than"), "{e}");
+    assert!(!out.exists());
+}
+
+/// A FIFO among the tiles is refused, naming it, instead of blocking the run for good.
+#[cfg(unix)]
+#[test]
+fn a_fifo_among_the_tiles_is_refused_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let tiles = dir.path().join("tiles");
+    write_named(&test_image(60, 40), &tiles, "x%02s-y%02s.png", 32, 32);
+    let fifo = tiles.join("x01-y00.png");
+    std::fs::remove_file(&fifo).unwrap();
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let out = dir.path().join("out.vtpk");
+    let child = Command::new(BIN)
+        .args(["convert", tiles.to_str().unwrap(), "--ff", "x%02s-y%02s.png", "--pack", out.to_str().unwrap()])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let result = wait_or_kill(child, "convert of tiles holding a FIFO");
+    let e = String::from_utf8_lossy(&result.stderr);
+    assert_eq!(result.status.code(), Some(1), "{e}");
+    assert!(e.contains("x01-y00.png") && e.contains("not a regular file"), "{e}");
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left, ["tiles"], "nothing written, no temporary left");
+}
+
+/// A second signal ends the run at once (the first asks it to stop between tiles, which a
+/// blocked read would never reach), and removes the temporary output on the way.
+#[cfg(unix)]
+#[test]
+fn a_second_signal_removes_the_temporary_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    // Noise, slow to compress at best: the run is stopped long before it ends.
+    let side = 2000u32;
+    let mut state = 0x2545_F491_4F6C_DD1Du64;
+    let noise = image::RgbImage::from_fn(side, side, |_, _| {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        image::Rgb([state as u8, (state >> 8) as u8, (state >> 16) as u8])
+    });
+    noise.save(d("noise.png")).unwrap();
+    run_ok(&["split", d("noise.png").to_str().unwrap(), "-o", d("tiles").to_str().unwrap(), "-q", "--codec", "png"]);
+    let child = Command::new(BIN)
+        .args(["convert", d("tiles").to_str().unwrap(), "--pack", d("out.vtpk").to_str().unwrap(), "-q"])
+        .args(["--codec", "png", "--png-compression", "best"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = child.id().to_string();
+    let temporary = || {
+        std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .any(|n| n.starts_with(".out.vtpk.tmp-"))
+    };
+    // Until the run has its temporary (a fail-safe deadline, not a timing).
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    while !temporary() && std::time::Instant::now() < deadline {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    // Stopped, the run takes both signals at once when it goes on: the second finds the first
+    // not yet acted on.
+    let kill = |signal: &str| assert!(Command::new("kill").args([signal, &pid]).status().unwrap().success());
+    kill("-STOP");
+    assert!(temporary(), "the run wrote no temporary, or finished before it was stopped");
+    kill("-TERM");
+    kill("-INT");
+    kill("-CONT");
+    let result = wait_or_kill(child, "convert after two signals");
+    let e = String::from_utf8_lossy(&result.stderr);
+    assert!(matches!(result.status.code(), Some(130 | 143)), "{:?}: {e}", result.status);
+    assert!(!e.contains("panicked"), "{e}");
+    assert!(!temporary() && !d("out.vtpk").exists(), "{e}");
+}
+
+/// A descriptor declaring far more tiles than are there is refused up front (a .dzi claiming
+/// 300000² over one tile would be filled for minutes), unless --allow-missing-tiles.
+#[test]
+fn a_descriptor_over_mostly_missing_tiles_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    let o = d("out");
+    let o = o.to_str().unwrap();
+    let dzi = |w: u32, h: u32| {
+        format!(r#"<Image TileSize="254" Overlap="1" Format="png"><Size Width="{w}" Height="{h}"/></Image>"#)
+    };
+    std::fs::create_dir_all(d("big_files/19")).unwrap();
+    std::fs::write(d("big.dzi"), dzi(300_000, 300_000)).unwrap();
+    test_image(255, 255).save(d("big_files/19/0_0.png")).unwrap();
+    let e = convert_err(&[d("big.dzi").to_str().unwrap(), "-o", o]);
+    assert!(e.contains("big.dzi") && e.contains("only 1 of its 1397124 tiles"), "{e}");
+    assert!(e.contains("--allow-missing-tiles"), "{e}");
+
+    // 500x300 in 254-texel tiles: 2x2, one there.
+    std::fs::create_dir_all(d("small_files/9")).unwrap();
+    std::fs::write(d("small.dzi"), dzi(500, 300)).unwrap();
+    test_image(255, 255).save(d("small_files/9/0_0.png")).unwrap();
+    let e = convert_err(&[d("small.dzi").to_str().unwrap(), "-o", o]);
+    assert!(e.contains("only 1 of its 4 tiles"), "{e}");
+    let r = Command::new(BIN)
+        .args(["convert", d("small.dzi").to_str().unwrap(), "-o", o, "-q", "--allow-missing-tiles"])
+        .output()
+        .unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("3 input tile(s) missing"));
+    // Half there is not most missing.
+    test_image(247, 255).save(d("small_files/9/1_0.png")).unwrap();
+    run_ok(&["convert", d("small.dzi").to_str().unwrap(), "-o", d("out2").to_str().unwrap(), "-q"]);
+
+    // IIIF: 300000² in 512-texel tiles, one region there.
+    std::fs::create_dir_all(d("iiif/0,0,512,512/512,512/0")).unwrap();
+    let info = r#"{"@context": "http://iiif.io/api/image/3/context.json", "id": "x", "type": "ImageService3",
+                   "width": 300000, "height": 300000, "tiles": [{"width": 512, "scaleFactors": [1]}]}"#;
+    std::fs::write(d("iiif/info.json"), info).unwrap();
+    test_image(512, 512).save(d("iiif/0,0,512,512/512,512/0/default.png")).unwrap();
+    let e = convert_err(&[d("iiif").to_str().unwrap(), "-o", d("out3").to_str().unwrap()]);
+    assert!(e.contains("IIIF") && e.contains("only 1 of its 343396 tiles"), "{e}");
+}

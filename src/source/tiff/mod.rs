@@ -7,6 +7,10 @@
 //! Lab, floating point or signed samples, 1/2/4-bit, separate planes, JPEG-in-TIFF, ...) is
 //! refused with a message naming what the file is. Compressed strips are decoded a few ahead,
 //! several at once ([`strips_ahead`]).
+//!
+//! As libvips reads them: extra samples past grey, grey+alpha, RGB or RGBA (ExtraSamples
+//! unspecified, or any after the alpha) are dropped, and associated (premultiplied) alpha is
+//! turned into straight alpha ([`unpremultiply`] says how it rounds).
 
 mod strips_ahead;
 
@@ -36,6 +40,8 @@ pub struct TiffSource {
     /// Samples per pixel as the decoder delivers them (the crate already drops extra samples of
     /// RGB/RGBA images; grey images keep theirs and are compacted here).
     file_samples: usize,
+    /// The alpha is associated (premultiplied, ExtraSamples 1): rows are un-premultiplied.
+    associated: bool,
     /// The current strip or tile row, as whole image rows of `file_samples` native-endian samples.
     band: Vec<u8>,
     /// First image row held in `band`, and how many rows it holds.
@@ -66,6 +72,21 @@ pub struct TiffSource {
 struct DirectStrips {
     file: File,
     offsets: Vec<u64>,
+    /// Bytes of one stored texel: SamplesPerPixel, extra samples included.
+    pixel: usize,
+    /// A row as stored, where its texels carry extra samples to drop.
+    row: Vec<u8>,
+}
+
+/// What a TIFF's texels hold, as stored and as delivered.
+struct Samples {
+    layout: PixelLayout,
+    /// Samples per texel the decoder delivers.
+    delivered: usize,
+    /// Samples per texel in the file (SamplesPerPixel).
+    stored: usize,
+    /// The alpha is associated (premultiplied).
+    associated: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -91,7 +112,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     let mut decoder = open_decoder(path, max_memory)?;
     let (width, height) = decoder.dimensions().map_err(|e| open_error(path, e))?;
     let compression = check_compression(path, &mut decoder)?;
-    let (layout, file_samples) = pixel_layout(path, &mut decoder)?;
+    let Samples { layout, delivered: file_samples, stored, associated } = pixel_layout(path, &mut decoder)?;
 
     let chunking = match decoder.get_chunk_type() {
         ChunkType::Strip => {
@@ -110,8 +131,10 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
 
     let pixel_bytes = (file_samples * layout.depth.bytes()) as u64;
     let row_bytes = width as u64 * pixel_bytes;
-    let samples_as_stored = layout.depth == Depth::U8 && file_samples == layout.channels.count();
-    let direct = direct_strips(path, &mut decoder, compression, chunking, samples_as_stored, height, row_bytes)?;
+    let direct = match layout.depth {
+        Depth::U8 => direct_strips(path, &mut decoder, compression, chunking, stored, height, width)?,
+        Depth::U16 => None,
+    };
     // Memory held: one strip or tile row of whole image rows (none where rows are read
     // straight from the file), plus one tile.
     let band_rows = chunking.rows().min(height) as u64;
@@ -166,6 +189,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         compression,
         bigtiff,
         file_samples,
+        associated,
         band,
         band_first: 0,
         band_rows: 0,
@@ -199,23 +223,23 @@ fn open_decoder(path: &Path, max_memory: u64) -> Result<Decoder<BufReader<File>>
     Ok(decoder.with_limits(limits))
 }
 
-/// [`DirectStrips`] of the TIFF, if its strips hold rows as the texels they are
-/// (`samples_as_stored`: 8-bit, no extra samples to drop); `row_bytes` is one row's size.
+/// [`DirectStrips`] of an 8-bit TIFF, if its strips hold rows as the texels they are, each of
+/// `stored` samples (extra samples included, dropped as rows are read).
 fn direct_strips(
     path: &Path,
     decoder: &mut Decoder<BufReader<File>>,
     compression: CompressionMethod,
     chunking: Chunking,
-    samples_as_stored: bool,
+    stored: usize,
     height: u32,
-    row_bytes: u64,
+    width: u32,
 ) -> Result<Option<DirectStrips>> {
     let Chunking::Strips { rows } = chunking else { return Ok(None) };
     let tag = |decoder: &mut Decoder<BufReader<File>>, t| {
         decoder.find_tag_unsigned::<u16>(t).map_err(|e| open_error(path, e))
     };
+    let row_bytes = width as u64 * stored as u64;
     let as_is = compression == CompressionMethod::None
-        && samples_as_stored
         && tag(decoder, Tag::Predictor)?.unwrap_or(1) == 1
         && tag(decoder, Tag::PhotometricInterpretation)? != Some(0); // WhiteIsZero is inverted
     if !as_is {
@@ -235,7 +259,7 @@ fn direct_strips(
         }
     }
     let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
-    Ok(Some(DirectStrips { file, offsets }))
+    Ok(Some(DirectStrips { file, offsets, pixel: stored, row: Vec::new() }))
 }
 
 /// Whether the file is a BigTIFF (only for the summary line; the crate reads both).
@@ -290,8 +314,8 @@ fn check_compression(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Res
     }
 }
 
-/// The output layout, and the samples per pixel the decoder delivers.
-fn pixel_layout(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<(PixelLayout, usize)> {
+/// The output layout, and the samples per texel as stored and as the decoder delivers them.
+fn pixel_layout(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<Samples> {
     let tag_err = |e| open_error(path, e);
     let photometric_code: Option<u16> = decoder.find_tag_unsigned(Tag::PhotometricInterpretation).map_err(tag_err)?;
     let photometric = photometric_code.and_then(PhotometricInterpretation::from_u16);
@@ -371,7 +395,14 @@ fn pixel_layout(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<(
         ColorType::RGBA(_) => (Channels::Rgba, 4),
         other => return unsupported(format!("a {other:?}")),
     };
-    Ok((PixelLayout::new(channels, depth), file_samples))
+    // ExtraSamples 1 is associated alpha: colours premultiplied by it, which vips undoes.
+    let associated = channels.has_alpha() && extra.first() == Some(&1);
+    Ok(Samples {
+        layout: PixelLayout::new(channels, depth),
+        delivered: file_samples,
+        stored: samples as usize,
+        associated,
+    })
 }
 
 impl TiffSource {
@@ -499,38 +530,29 @@ impl RowSource for TiffSource {
         if out.len() != columns.len() * out_pixel {
             return Err(fail(format!("row buffer has {} bytes, expected {}", out.len(), columns.len() * out_pixel)));
         }
-        if let (Some(direct), Chunking::Strips { rows }) = (&self.direct, self.chunking) {
-            // Straight from the file into `out`, whole rows or a part: no band, no copy.
+        if let (Some(direct), Chunking::Strips { rows }) = (&mut self.direct, self.chunking) {
+            // Straight from the file, whole rows or a part: into `out` with no band and no copy,
+            // or, where texels carry extra samples, through one stored row.
             let strip = (y / rows as u64) as usize;
             let within = (y % rows as u64) * self.width as u64 + columns.start as u64;
-            let at = direct.offsets.get(strip).map(|o| o + within * out_pixel as u64);
-            return match at.map(|at| std::os::unix::fs::FileExt::read_exact_at(&direct.file, out, at)) {
-                Some(Ok(())) => {
-                    self.next += 1;
-                    Ok(())
-                }
-                _ => Err(fail(format!("strip {strip} is not where its offset says (a truncated file?)"))),
-            };
-        }
-        if self.failed {
-            return Err(fail("an earlier strip failed to decode".into()));
-        }
-        if y >= self.band_first + self.band_rows {
-            self.load_band(y)?;
-        }
-        let sample = self.layout.depth.bytes();
-        let file_pixel = self.file_samples * sample;
-        let row_bytes = self.width as usize * file_pixel;
-        let row = &self.band[(y - self.band_first) as usize * row_bytes..][..row_bytes];
-        let row = &row[columns.start as usize * file_pixel..columns.end as usize * file_pixel];
-        // The crate has already converted samples to native byte order (and applied the
-        // predictor and WhiteIsZero inversion); only surplus extra samples are dropped here.
-        if file_pixel == out_pixel {
-            out.copy_from_slice(row);
-        } else {
-            for (o, i) in out.chunks_exact_mut(out_pixel).zip(row.chunks_exact(file_pixel)) {
-                o.copy_from_slice(&i[..out_pixel]);
+            let at = direct.offsets.get(strip).map(|o| o + within * direct.pixel as u64);
+            let as_stored = direct.pixel == out_pixel;
+            if !as_stored {
+                direct.row.resize(columns.len() * direct.pixel, 0);
             }
+            let into = if as_stored { &mut *out } else { &mut direct.row[..] };
+            if at.is_none_or(|at| std::os::unix::fs::FileExt::read_exact_at(&direct.file, into, at).is_err()) {
+                let message = format!("strip {strip} is not where its offset says (a truncated file?)");
+                return Err(TilerError::DecodeRow { path: self.path.clone(), row: y, message });
+            }
+            if !as_stored {
+                keep_leading(out, out_pixel, &direct.row, direct.pixel);
+            }
+        } else {
+            self.read_band_row(y, out, columns)?;
+        }
+        if self.associated {
+            unpremultiply(out, self.layout);
         }
         self.next += 1;
         Ok(())
@@ -574,6 +596,65 @@ impl RowSource for TiffSource {
             }
             Chunking::Tiles { width, height, .. } => {
                 format!("{kind}, {compression}, streamed by tile row ({width}x{height} tiles)")
+            }
+        }
+    }
+}
+
+impl TiffSource {
+    /// Row `y` (the `columns` of it) out of the strip or tile row holding it, decoded into
+    /// `band` first if it is not there.
+    fn read_band_row(&mut self, y: u64, out: &mut [u8], columns: std::ops::Range<u32>) -> Result<()> {
+        let fail = |message: String| TilerError::DecodeRow { path: self.path.clone(), row: y, message };
+        if self.failed {
+            return Err(fail("an earlier strip failed to decode".into()));
+        }
+        if y >= self.band_first + self.band_rows {
+            self.load_band(y)?;
+        }
+        let sample = self.layout.depth.bytes();
+        let file_pixel = self.file_samples * sample;
+        let row_bytes = self.width as usize * file_pixel;
+        let row = &self.band[(y - self.band_first) as usize * row_bytes..][..row_bytes];
+        let row = &row[columns.start as usize * file_pixel..columns.end as usize * file_pixel];
+        // The crate has already converted samples to native byte order (and applied the
+        // predictor and WhiteIsZero inversion); only surplus extra samples are dropped here.
+        keep_leading(out, self.layout.bytes_per_pixel(), row, file_pixel);
+        Ok(())
+    }
+}
+
+/// Copies the first `out_pixel` bytes of each `pixel`-byte texel of `row` into `out`: extra
+/// samples dropped.
+fn keep_leading(out: &mut [u8], out_pixel: usize, row: &[u8], pixel: usize) {
+    if pixel == out_pixel {
+        out.copy_from_slice(row);
+    } else {
+        for (o, i) in out.chunks_exact_mut(out_pixel).zip(row.chunks_exact(pixel)) {
+            o.copy_from_slice(&i[..out_pixel]);
+        }
+    }
+}
+
+/// Straight alpha from associated (premultiplied) alpha, as libvips's TIFF loader gives it: each
+/// colour sample times `max / alpha`, in single precision, truncated and clamped to `max` (255
+/// or 65535); a texel of alpha 0 has colour 0. Matches libvips 8.18 on every 8-bit pair of
+/// sample and alpha.
+fn unpremultiply(row: &mut [u8], layout: PixelLayout) {
+    let (b, n) = (layout.depth.bytes(), layout.channels.count());
+    let max = if b == 1 { 255.0f32 } else { 65535.0 };
+    let get = |s: &[u8]| if b == 1 { s[0] as f32 } else { u16::from_ne_bytes([s[0], s[1]]) as f32 };
+    for texel in row.chunks_exact_mut(n * b) {
+        let (colour, alpha) = texel.split_at_mut((n - 1) * b);
+        let alpha = get(alpha);
+        let factor = if alpha == 0.0 { 0.0 } else { max / alpha };
+        for sample in colour.chunks_exact_mut(b) {
+            // `as` truncates toward zero, as vips's cast does.
+            let v = (get(sample) * factor).min(max) as u16;
+            if b == 1 {
+                sample[0] = v as u8;
+            } else {
+                sample.copy_from_slice(&v.to_ne_bytes());
             }
         }
     }
@@ -969,6 +1050,117 @@ mod tests {
         let mut source = open(&path, 1 << 30).unwrap();
         let inverted: Vec<u8> = grey.iter().map(|v| 255 - v).collect();
         assert_eq!(read_all(source.as_mut()).unwrap(), inverted);
+    }
+
+    /// `data` (texels of `stored` 8-bit samples) written with `extra` as ExtraSamples, in
+    /// uncompressed strips of 16 rows or in 16x16 tiles.
+    fn write_extra(path: &Path, w: u32, h: u32, photometric: u32, extra: &[u32], data: &[u8], tiled: bool) {
+        let stored = data.len() / (w * h) as usize;
+        let bits = vec![8; stored];
+        let mut tags = match tiled {
+            true => tiled_tags(w, h, &bits, photometric, 16, 16),
+            false => basic_tags(w, h, &bits, photometric, Some(16)),
+        };
+        tags.push((338, SHORT, extra.to_vec()));
+        let chunks = match tiled {
+            true => tiles_of(data, w as usize, h as usize, stored, 16, 16),
+            false => strips_of(data, w as usize * stored, 16),
+        };
+        write_tiff(path, false, tags, &chunks, tiled);
+    }
+
+    #[test]
+    fn extra_samples_of_any_count_are_dropped_at_the_stored_stride() {
+        // Uncompressed 8-bit strips, read straight from the file, once took the texels at the
+        // stride of the samples kept: scrambled rows (issue 27).
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (45u32, 40u32);
+        let cases: [(u32, &[u32], Channels); 7] = [
+            (2, &[0], Channels::Rgb),
+            (2, &[0, 0], Channels::Rgb),
+            (2, &[0, 0, 0], Channels::Rgb),
+            (2, &[2, 0], Channels::Rgba),
+            (2, &[2, 0, 0], Channels::Rgba),
+            (1, &[0, 0], Channels::Grey),
+            (1, &[2, 0], Channels::GreyAlpha),
+        ];
+        for (photometric, extra, channels) in cases {
+            let stored = if photometric == 2 { 3 } else { 1 } + extra.len();
+            let data: Vec<u8> = pattern(w, h, stored, 255).into_iter().map(|v| v as u8).collect();
+            // The naive decode: each texel's first samples.
+            let keep = channels.count();
+            let naive: Vec<u8> = data.chunks_exact(stored).flat_map(|t| t[..keep].to_vec()).collect();
+            for tiled in [false, true] {
+                let what = format!("{channels:?} + {extra:?}, tiled {tiled}");
+                let path = dir.path().join("extra.tif");
+                write_extra(&path, w, h, photometric, extra, &data, tiled);
+                let mut source = open(&path, 1 << 30).unwrap();
+                assert_eq!(source.layout(), PixelLayout::new(channels, Depth::U8), "{what}");
+                assert!(read_all(source.as_mut()).unwrap() == naive, "{what}");
+                // A shard's columns, from row 17.
+                let mut source = open(&path, 1 << 30).unwrap();
+                source.skip_rows(17).unwrap();
+                assert!(source.read_columns(5..33), "{what}");
+                let mut out = vec![0u8; 28 * keep];
+                for y in 17..h as usize {
+                    source.read_row(&mut out).unwrap();
+                    assert_eq!(out, naive[(y * w as usize + 5) * keep..][..28 * keep], "{what}, row {y}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn associated_alpha_is_unpremultiplied_as_vips_does() {
+        // Every 8-bit pair: red is the column (the premultiplied sample), alpha the row.
+        let dir = tempfile::tempdir().unwrap();
+        let data: Vec<u8> = (0..256u32)
+            .flat_map(|a| (0..256u32).flat_map(move |v| [v, v * 7 % 256, 255 - v, a]))
+            .map(|s| s as u8)
+            .collect();
+        for tiled in [false, true] {
+            let path = dir.path().join("assoc.tif");
+            write_extra(&path, 256, 256, 2, &[1], &data, tiled);
+            let mut source = open(&path, 1 << 30).unwrap();
+            assert_eq!(source.layout(), PixelLayout::new(Channels::Rgba, Depth::U8));
+            let got = read_all(source.as_mut()).unwrap();
+            let at = |v: usize, a: usize| &got[(a * 256 + v) * 4..][..4];
+            // colour x 255 / alpha in single precision, truncated, clamped; alpha kept.
+            assert_eq!(at(100, 200)[0], 127, "127.5 truncates");
+            assert_eq!(at(3, 7)[0], 109, "109.29 truncates");
+            assert_eq!(at(7, 7)[0], 254, "7 x (255 / 7) in single precision is just under 255");
+            assert_eq!(at(128, 255)[0], 128);
+            assert_eq!(at(200, 100)[0], 255, "more than the alpha clamps");
+            assert_eq!(at(5, 0), [0, 0, 0, 0], "alpha 0: colour 0");
+            assert_eq!(at(77, 90)[3], 90);
+            // The whole table as libvips 8.18 loads it (FNV-1a 64 of its bytes).
+            let fnv = got.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3));
+            assert_eq!(fnv, 0x549b_dea1_9d70_e7ed, "tiled {tiled}");
+        }
+
+        // 16-bit (decoded strips), against what libvips 8.18 gives for the same pairs.
+        let pairs: [(u16, u16, u16); 9] = [
+            (17183, 32968, 34157),
+            (28243, 61666, 30014),
+            (52347, 52971, 64763),
+            (15500, 21643, 46934),
+            (40000, 30000, 65535),
+            (1234, 0, 0),
+            (7, 7, 65535),
+            (32767, 65535, 32767),
+            (3, 5, 39321),
+        ];
+        let texels: Vec<u8> = pairs.iter().flat_map(|&(v, a, _)| [v, v, 0, a]).flat_map(|s| s.to_le_bytes()).collect();
+        let path = dir.path().join("assoc16.tif");
+        let mut tags = basic_tags(pairs.len() as u32, 1, &[16; 4], 2, None);
+        tags.push((338, SHORT, vec![1]));
+        write_tiff(&path, false, tags, &[texels], false);
+        let mut source = open(&path, 1 << 30).unwrap();
+        let got = read_all(source.as_mut()).unwrap();
+        let got: Vec<u16> = got.chunks_exact(2).map(|b| u16::from_ne_bytes([b[0], b[1]])).collect();
+        for (texel, &(v, a, want)) in got.chunks_exact(4).zip(&pairs) {
+            assert_eq!([texel[0], texel[1], texel[2], texel[3]], [want, want, 0, a], "sample {v}, alpha {a}");
+        }
     }
 
     #[test]

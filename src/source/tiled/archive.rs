@@ -24,7 +24,8 @@ pub fn is_zip(path: &Path) -> bool {
 /// pyramid).
 pub fn is_iiif_dir(dir: &Path) -> bool {
     let mut head = Vec::new();
-    let Ok(file) = std::fs::File::open(dir.join("info.json")) else { return false };
+    // Not a FIFO or a device: opening or reading one would block.
+    let Ok(Some(file)) = super::store::open_regular(&dir.join("info.json")) else { return false };
     file.take(MAX_DESCRIPTOR_BYTES).read_to_end(&mut head).is_ok() && looks_like_iiif(&head)
 }
 

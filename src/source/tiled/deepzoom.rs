@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use super::store::{Kind, MAX_DESCRIPTOR_BYTES, MAX_TILE_BYTES, TileStore};
+use super::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore};
 use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, TilerError};
 use crate::source::ImageHeader;
@@ -146,9 +146,9 @@ impl TileGrid for DeepZoom {
     fn cell(&self) -> (u32, u32) {
         (self.tile_size, self.tile_size)
     }
-    fn read(&self, col: u32, row: u32) -> Result<Option<CellData>> {
+    fn read(&self, col: u32, row: u32, cap: u64) -> Result<Option<CellData>> {
         let path = self.tile_path(col, row);
-        Ok(self.store.read(&path, MAX_TILE_BYTES)?.map(|bytes| CellData::File(self.store.name(&path), bytes)))
+        Ok(self.store.read(&path, cap)?.map(|bytes| CellData::File(self.store.name(&path), bytes)))
     }
     fn crop(&self, col: u32, row: u32) -> (u32, u32) {
         let skip = |i: u32| if i > 0 { self.overlap } else { 0 };
@@ -163,6 +163,19 @@ impl TileGrid for DeepZoom {
             (end - start) as u32
         };
         Some((side(col, self.header.width), side(row, self.header.height)))
+    }
+    /// The level directory's files named as tiles of the grid (`{col}_{row}.{format}`).
+    fn tiles_found(&self) -> Result<Option<u64>> {
+        let (cols, rows) = self.grid_size();
+        let suffix = format!(".{}", self.format);
+        let is_tile = |name: &str| {
+            let Some((col, row)) = name.strip_suffix(&suffix).and_then(|stem| stem.split_once('_')) else {
+                return false;
+            };
+            col.parse::<u32>().is_ok_and(|c| c < cols) && row.parse::<u32>().is_ok_and(|r| r < rows)
+        };
+        let entries = self.store.list(&self.level_dir)?;
+        Ok(Some(entries.iter().filter(|e| e.kind == Kind::File && is_tile(&e.name)).count() as u64))
     }
 }
 

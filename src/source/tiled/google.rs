@@ -8,7 +8,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use super::store::{Entry, Kind, MAX_DESCRIPTOR_BYTES, MAX_TILE_BYTES, TileStore, join};
+use super::store::{Entry, Kind, MAX_DESCRIPTOR_BYTES, TileStore, join};
 use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, TilerError};
 use crate::source::ImageHeader;
@@ -220,9 +220,9 @@ impl TileGrid for Xyz {
     fn cell(&self) -> (u32, u32) {
         self.cell
     }
-    fn read(&self, col: u32, row: u32) -> Result<Option<CellData>> {
+    fn read(&self, col: u32, row: u32, cap: u64) -> Result<Option<CellData>> {
         let Some(path) = self.tiles.get(&(self.origin.0 + col, self.origin.1 + row)) else { return Ok(None) };
-        Ok(self.store.read(path, MAX_TILE_BYTES)?.map(|bytes| CellData::File(self.store.name(path), bytes)))
+        Ok(self.store.read(path, cap)?.map(|bytes| CellData::File(self.store.name(path), bytes)))
     }
     fn crop(&self, _: u32, _: u32) -> (u32, u32) {
         (0, 0)

@@ -14,7 +14,7 @@ use std::path::Path;
 
 use serde_json::Value;
 
-use super::store::{Kind, MAX_DESCRIPTOR_BYTES, MAX_TILE_BYTES, TileStore, join};
+use super::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore, join};
 use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
@@ -189,12 +189,12 @@ impl TileGrid for Iiif {
     fn cell(&self) -> (u32, u32) {
         self.cell
     }
-    fn read(&self, col: u32, row: u32) -> Result<Option<CellData>> {
+    fn read(&self, col: u32, row: u32, cap: u64) -> Result<Option<CellData>> {
         let path = match &self.names {
             Names::Regions { with_height, ext } => self.region_path(col, row, *with_height, ext),
             Names::Whole(path) => path.clone(),
         };
-        Ok(self.store.read(&path, MAX_TILE_BYTES)?.map(|bytes| CellData::File(self.store.name(&path), bytes)))
+        Ok(self.store.read(&path, cap)?.map(|bytes| CellData::File(self.store.name(&path), bytes)))
     }
     fn crop(&self, _: u32, _: u32) -> (u32, u32) {
         (0, 0)
@@ -203,6 +203,18 @@ impl TileGrid for Iiif {
     fn stored_size(&self, col: u32, row: u32) -> Option<(u32, u32)> {
         let (_, _, w, h) = self.region(col, row);
         Some((w, h))
+    }
+    /// The full-size region directories the root lists (the one image of a one-cell grid).
+    fn tiles_found(&self) -> Result<Option<u64>> {
+        if let Names::Whole(_) = self.names {
+            return Ok(Some(1));
+        }
+        let entries = self.store.list(&self.root)?;
+        Ok(
+            Some(
+                entries.iter().filter(|e| e.kind == Kind::Dir && self.cell_of_region(&e.name).is_some()).count() as u64
+            ),
+        )
     }
 }
 

@@ -31,7 +31,7 @@ pub(crate) use store::TileStore;
 
 use crate::error::{Result, TilerError};
 use crate::pixel::PixelLayout;
-use crate::source::{ImageHeader, RowSource, decode_tile};
+use crate::source::{ImageHeader, RowSource, decode_tile, decode_tile_within};
 
 /// Where a cell's texels come from.
 pub enum CellData {
@@ -50,8 +50,9 @@ pub trait TileGrid: Send + Sync {
     fn header(&self) -> ImageHeader;
     /// Nominal cell size in image texels.
     fn cell(&self) -> (u32, u32);
-    /// The stored tile of cell (c, r), or `None` if it is missing.
-    fn read(&self, col: u32, row: u32) -> Result<Option<CellData>>;
+    /// The stored tile of cell (c, r), or `None` if it is missing; a tile file over `cap` bytes
+    /// (declared or read) is an error naming it, before more than `cap` bytes are held.
+    fn read(&self, col: u32, row: u32, cap: u64) -> Result<Option<CellData>>;
     /// Texels to skip at the left and top of the stored tile of cell (c, r).
     fn crop(&self, col: u32, row: u32) -> (u32, u32);
     /// The exact size the stored tile of cell (c, r) must have, where the layout fixes it;
@@ -59,6 +60,36 @@ pub trait TileGrid: Send + Sync {
     fn stored_size(&self, _col: u32, _row: u32) -> Option<(u32, u32)> {
         None
     }
+    /// How many of the grid's tiles are stored, counted from listings without reading them,
+    /// where a descriptor declares the grid (`None` where the grid is what was found).
+    fn tiles_found(&self) -> Result<Option<u64>> {
+        Ok(None)
+    }
+}
+
+/// Refuses a grid whose descriptor declares more tiles than half of which are missing (a
+/// `.dzi` claiming 300000² over one tile would be converted as minutes of filled cells):
+/// `allow` proceeds anyway.
+pub fn check_tiles_found(grid: &dyn TileGrid, allow: bool) -> Result<()> {
+    let Some(found) = grid.tiles_found()? else { return Ok(()) };
+    let (h, (cw, ch)) = (grid.header(), grid.cell());
+    let declared = h.width.div_ceil(cw) as u64 * h.height.div_ceil(ch) as u64;
+    if allow || declared - found.min(declared) <= declared / 2 {
+        return Ok(());
+    }
+    Err(TilerError::Options(format!(
+        "{}: only {found} of its {declared} tiles are there; the missing ones would be filled (--background, else zeros). Pass --allow-missing-tiles to convert it anyway",
+        grid.describe()
+    )))
+}
+
+/// The most bytes a tile file of `width x height` texels of `layout` may have: twice its
+/// texels (a PNG stored without compression, or a JPEG of noise at quality 100, stays under
+/// that) and 4 MiB for metadata (ICC profiles, EXIF), within [`store::MAX_TILE_BYTES`].
+/// Anything larger is refused unread: an entry of a zip bomb inflates no further.
+pub(crate) fn tile_file_cap(width: u32, height: u32, layout: PixelLayout) -> u64 {
+    let texels = width as u64 * height as u64 * layout.bytes_per_pixel() as u64;
+    (2 * texels + (4 << 20)).min(store::MAX_TILE_BYTES)
 }
 
 /// A cell's texels, cropped to the cell; `None` for a missing cell.
@@ -81,6 +112,9 @@ pub struct TiledSource {
     /// Texel columns read, when a stripe or a shard asked for fewer than all: only the
     /// cells under them are decoded.
     columns: Option<Range<u32>>,
+    /// Bytes the tiles being read and decoded at once may hold together (`--max-memory` less
+    /// the band).
+    in_flight: u64,
 }
 
 impl TiledSource {
@@ -99,7 +133,50 @@ impl TiledSource {
             next: 0,
             rewound: false,
             columns: None,
+            in_flight: u64::MAX,
         }
+    }
+
+    /// Holds the run within `max_memory`: the band, and as many tiles read and decoded at once
+    /// as the rest holds (at least one; [`memory_needed`](Self::memory_needed) says whether
+    /// one fits).
+    pub fn with_max_memory(mut self, max_memory: u64) -> TiledSource {
+        self.in_flight = max_memory.saturating_sub(self.band_bytes());
+        self
+    }
+
+    /// Bytes a run holds at least: the band and one tile in flight.
+    pub fn memory_needed(&self) -> u64 {
+        self.band_bytes().saturating_add(self.tile_charge())
+    }
+
+    /// The largest size a stored tile of cell (c, r) may have: what the layout fixes, else
+    /// twice the cell and its crop each way (named tiles are all meant to be the first's size).
+    fn stored_bound(&self, col: u32, row: u32) -> (u32, u32) {
+        self.grid.stored_size(col, row).unwrap_or_else(|| {
+            let ((cw, ch), (sx, sy)) = (self.grid.cell(), self.grid.crop(col, row));
+            (cw.saturating_add(sx).saturating_mul(2), ch.saturating_add(sy).saturating_mul(2))
+        })
+    }
+
+    /// Bytes one tile in flight holds at most: its file, its decoded texels and its cell's
+    /// texels cropped out of them; the largest over the first two cells each way (the
+    /// interior ones, which carry overlap on every side).
+    fn tile_charge(&self) -> u64 {
+        let (h, (cw, ch)) = (self.header, self.grid.cell());
+        let (cols, rows) = (h.width.div_ceil(cw), h.height.div_ceil(ch));
+        let bpp = h.layout.bytes_per_pixel() as u64;
+        let cell = cw as u64 * ch as u64 * bpp;
+        let charge = |(c, r): (u32, u32)| {
+            let (w, sh) = self.stored_bound(c, r);
+            tile_file_cap(w, sh, h.layout) + w as u64 * sh as u64 * bpp + cell
+        };
+        [(0, 0), (1, 0), (0, 1), (1, 1)]
+            .into_iter()
+            .filter(|&(c, r)| c < cols && r < rows)
+            .map(charge)
+            .max()
+            .unwrap_or(0)
     }
 
     /// Bytes held while a row of cells is read: the decoded cells of the row and the band
@@ -123,8 +200,13 @@ impl TiledSource {
         let cols = span.start / cw..span.end.div_ceil(cw);
         let row_bytes = span.len() * bpp;
         let width_of = |col: u32| cw.min(h.width - col * cw) as usize;
-        let cells: Vec<Result<CellTexels>> =
-            cols.clone().into_par_iter().map(|col| self.cell_texels(col, row, width_of(col), rows)).collect();
+        // Tiles in flight are charged against --max-memory: at most as many at once as fit.
+        let at_once = (self.in_flight / self.tile_charge().max(1)).clamp(1, cols.len().max(1) as u64) as usize;
+        let all: Vec<u32> = cols.clone().collect();
+        let mut cells: Vec<Result<CellTexels>> = Vec::with_capacity(all.len());
+        for some in all.chunks(at_once) {
+            cells.par_extend(some.par_iter().map(|&col| self.cell_texels(col, row, width_of(col), rows)));
+        }
         self.band.resize(rows * row_bytes, 0);
         for (col, cell) in cols.zip(cells) {
             // The part of the cell under the columns read, and where it goes in the band.
@@ -155,7 +237,9 @@ impl TiledSource {
     /// The `width x rows` texels of cell (col, row), cropped out of its stored tile.
     fn cell_texels(&self, col: u32, row: u32, width: usize, rows: usize) -> Result<CellTexels> {
         let h = self.header;
-        let (name, tile_w, tile_h, layout, bytes) = match self.grid.read(col, row)? {
+        let (max_w, max_h) = self.stored_bound(col, row);
+        let cap = tile_file_cap(max_w, max_h, h.layout);
+        let (name, tile_w, tile_h, layout, bytes) = match self.grid.read(col, row, cap)? {
             None => {
                 let name = format!("cell (x {col}, y {row})");
                 if self.strict {
@@ -170,7 +254,7 @@ impl TiledSource {
                 return Ok(None);
             }
             Some(CellData::File(path, bytes)) => {
-                let d = decode_tile(&path, &bytes)?;
+                let d = decode_tile_within(&path, &bytes, (max_w, max_h))?;
                 (path, d.width, d.height, d.layout, d.bytes)
             }
             Some(CellData::Samples { name, width, height, bytes }) => (name, width, height, h.layout, bytes),
@@ -248,18 +332,15 @@ impl RowSource for TiledSource {
     }
 }
 
-/// Reads a tile file, or `None` if it does not exist.
-pub(crate) fn read_file(path: &Path) -> Result<Option<CellData>> {
-    match std::fs::read(path) {
-        Ok(bytes) => Ok(Some(CellData::File(path.to_path_buf(), bytes))),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(e) => Err(TilerError::io(path, e)),
-    }
+/// Reads a tile file of at most `cap` bytes, or `None` if it does not exist.
+pub(crate) fn read_file(path: &Path, cap: u64) -> Result<Option<CellData>> {
+    Ok(store::read_capped(path, cap)?.map(|bytes| CellData::File(path.to_path_buf(), bytes)))
 }
 
 /// The header of the tile at `path` (size and layout), from its first bytes.
 pub(crate) fn probe(path: &Path) -> Result<(u32, u32, PixelLayout)> {
-    let bytes = std::fs::read(path).map_err(|e| TilerError::io(path, e))?;
+    let bytes = store::read_capped(path, store::MAX_TILE_BYTES)?
+        .ok_or_else(|| TilerError::io(path, std::io::ErrorKind::NotFound.into()))?;
     let d = decode_tile(path, &bytes)?;
     Ok((d.width, d.height, d.layout))
 }

@@ -113,9 +113,9 @@ impl TileGrid for NamedDir {
     fn cell(&self) -> (u32, u32) {
         self.cell
     }
-    fn read(&self, col: u32, row: u32) -> Result<Option<CellData>> {
+    fn read(&self, col: u32, row: u32, cap: u64) -> Result<Option<CellData>> {
         match self.cells.get(&(col, row)) {
-            Some(path) => read_file(path),
+            Some(path) => read_file(path, cap),
             None => Ok(None),
         }
     }

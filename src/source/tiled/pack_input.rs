@@ -98,7 +98,8 @@ impl TileGrid for PackInput {
     fn cell(&self) -> (u32, u32) {
         (self.payload, self.payload)
     }
-    fn read(&self, col: u32, row: u32) -> Result<Option<CellData>> {
+    /// Tiles come out of the pack, whose index bounds them: `_cap` is for files.
+    fn read(&self, col: u32, row: u32, _cap: u64) -> Result<Option<CellData>> {
         let name = || self.name(col, row);
         Ok(Some(match self.pack.tile_checked(0, col, row)? {
             Tile::Absent => return Ok(None),

@@ -51,8 +51,8 @@ impl TileGrid for SplitOutput {
     fn cell(&self) -> (u32, u32) {
         (self.payload, self.payload)
     }
-    fn read(&self, col: u32, row: u32) -> Result<Option<CellData>> {
-        read_file(&self.dir.join(self.names.format(&[0, col, row])))
+    fn read(&self, col: u32, row: u32, cap: u64) -> Result<Option<CellData>> {
+        read_file(&self.dir.join(self.names.format(&[0, col, row])), cap)
     }
     fn crop(&self, _: u32, _: u32) -> (u32, u32) {
         (self.border, self.border)

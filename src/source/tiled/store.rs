@@ -117,17 +117,37 @@ pub fn join(dir: &str, name: &str) -> String {
 fn too_big(name: &Path, size: u64, cap: u64) -> TilerError {
     TilerError::unsupported(
         name,
-        format!("is {}, more than the {} a tile or descriptor may have", human_bytes(size), human_bytes(cap)),
+        format!(
+            "is {}, more than the {} a tile of this input (or a descriptor) can be",
+            human_bytes(size),
+            human_bytes(cap)
+        ),
     )
 }
 
-/// Reads the file at `path` if it exists and has at most `cap` bytes.
-fn read_capped(path: &Path, cap: u64) -> Result<Option<Vec<u8>>> {
-    let file = match File::open(path) {
+/// Opens `path` for reading if it is a regular file, `None` if there is none. A FIFO, socket
+/// or device is refused: reading one waits for a writer or never ends. It is opened
+/// non-blocking (which a FIFO's open would otherwise wait for) and then checked, so nothing
+/// swapped in between the check and the open can block either.
+pub(crate) fn open_regular(path: &Path) -> Result<Option<File>> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let file = match std::fs::OpenOptions::new().read(true).custom_flags(libc::O_NONBLOCK).open(path) {
         Ok(f) => f,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(TilerError::io(path, e)),
     };
+    if !file.metadata().map_err(|e| TilerError::io(path, e))?.is_file() {
+        return Err(TilerError::unsupported(
+            path,
+            "is not a regular file (a FIFO, socket, device or directory); tiles and descriptors are read from files",
+        ));
+    }
+    Ok(Some(file))
+}
+
+/// Reads the file at `path` if it exists and has at most `cap` bytes.
+pub(crate) fn read_capped(path: &Path, cap: u64) -> Result<Option<Vec<u8>>> {
+    let Some(file) = open_regular(path)? else { return Ok(None) };
     let len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
     if len > cap {
         return Err(too_big(path, len, cap));
@@ -158,7 +178,11 @@ impl ZipStore {
         let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
         let len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
         let reader = SharedFile { file: Arc::new(file), pos: 0, len };
-        let archive = ZipArchive::new(reader).map_err(|e| zip_error(path, e))?;
+        let archive = ZipArchive::new(reader.clone()).map_err(|e| zip_error(path, e))?;
+        if let Some(name) = duplicate_name(reader, archive.central_directory_start()).map_err(|e| zip_error(path, e))? {
+            let name = String::from_utf8_lossy(&name).into_owned();
+            return Err(TilerError::decode(path, format!("holds the entry \"{}\" twice", name.escape_debug())));
+        }
         let mut files = BTreeMap::new();
         let mut dirs = BTreeMap::new();
         for index in 0..archive.len() {
@@ -233,6 +257,33 @@ impl ZipStore {
             return Err(too_big(&name, bytes.len() as u64, cap));
         }
         Ok(Some(bytes))
+    }
+}
+
+/// The first name the central directory at `start` lists twice. The zip crate indexes entries
+/// by name and keeps the last of a name, so two tiles of one name would be read as one with
+/// no word said; this walks the directory's headers (46 bytes and the name, extra field and
+/// comment each) to find them.
+fn duplicate_name(reader: SharedFile, start: u64) -> std::io::Result<Option<Vec<u8>>> {
+    let mut reader = std::io::BufReader::new(reader);
+    reader.seek(SeekFrom::Start(start))?;
+    let mut seen = std::collections::HashSet::new();
+    let mut header = [0u8; 46];
+    loop {
+        match reader.read_exact(&mut header) {
+            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(None),
+            other => other?,
+        }
+        if header[..4] != *b"PK\x01\x02" {
+            return Ok(None);
+        }
+        let field = |at: usize| u16::from_le_bytes([header[at], header[at + 1]]);
+        let mut name = vec![0u8; field(28) as usize];
+        reader.read_exact(&mut name)?;
+        reader.seek_relative(field(30) as i64 + field(32) as i64)?;
+        if !seen.insert(name.clone()) {
+            return Ok(Some(name));
+        }
     }
 }
 
@@ -399,6 +450,22 @@ pub(crate) mod tests {
             let e = TileStore::zip(&zip).err().expect("refused").to_string();
             assert!(e.contains("h.zip") && e.contains(expected), "{name}: {e}");
         }
+    }
+
+    #[test]
+    fn duplicate_entry_names_are_refused() {
+        // The writer refuses a second entry of a name; write two names of one length, then make
+        // the second the first's in the central directory (and its local header).
+        let tmp = tempfile::tempdir().unwrap();
+        let zip = tmp.path().join("dup.zip");
+        write_zip(&zip, &[("t/0_0.png", b"first"), ("t/0_1.png", b"second"), ("t/1_0.png", b"x")], false);
+        let mut bytes = std::fs::read(&zip).unwrap();
+        while let Some(at) = bytes.windows(9).position(|w| w == b"t/0_1.png") {
+            bytes[at..at + 9].copy_from_slice(b"t/0_0.png");
+        }
+        std::fs::write(&zip, bytes).unwrap();
+        let e = TileStore::zip(&zip).err().expect("refused").to_string();
+        assert!(e.contains("dup.zip") && e.contains("\"t/0_0.png\" twice"), "{e}");
     }
 
     #[test]
