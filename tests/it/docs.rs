@@ -119,9 +119,12 @@ fn bench_scripts_run_libvips_at_its_best() {
             continue;
         }
         let script = std::fs::read_to_string(&path).unwrap();
-        for (n, line) in script.lines().enumerate().filter(|(_, l)| l.contains(".dzsave(") && !l.trim_start().starts_with('#')) {
+        for (n, line) in
+            script.lines().enumerate().filter(|(_, l)| l.contains(".dzsave(") && !l.trim_start().starts_with('#'))
+        {
             calls += 1;
-            let handicapped = line.split("suffix=").skip(1).any(|arg| arg.split([',', ')']).next().unwrap().contains("[Q="));
+            let handicapped =
+                line.split("suffix=").skip(1).any(|arg| arg.split([',', ')']).next().unwrap().contains("[Q="));
             assert!(!handicapped, "{}:{}: pass the JPEG quality as Q=, not in suffix: {line}", path.display(), n + 1);
         }
     }
