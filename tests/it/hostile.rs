@@ -309,24 +309,6 @@ fn pack_checks_every_tile_file_against_info_json() {
     assert_eq!(listing(dir.path()), ["in.png", "out", "p.vtpk", "small"]);
 }
 
-/// `pack` rewritten with `metadata` in place of its own, tiles unchanged.
-fn with_metadata(pack: &Path, metadata: &str, dest: &Path) {
-    use vortex_pack::{NewTile, Pack, PackWriter, Tile, WriteOptions};
-    let p = Pack::open(pack).unwrap();
-    let mut w =
-        PackWriter::create(dest, *p.description(), p.levels().to_vec(), metadata.as_bytes(), WriteOptions::default())
-            .unwrap();
-    for id in p.ids() {
-        let tile = match p.tile_checked(id.lod, id.x, id.y).unwrap() {
-            Tile::Absent => NewTile::Absent,
-            Tile::Constant(t) => NewTile::Constant(t),
-            Tile::Data(k, b) => NewTile::Data(k, b),
-        };
-        w.add(id, tile).unwrap();
-    }
-    w.finish().unwrap();
-}
-
 #[test]
 fn unpack_refuses_metadata_that_lies() {
     let (dir, input) = scratch_with_input();
@@ -342,7 +324,7 @@ fn unpack_refuses_metadata_that_lies() {
     ] {
         let mut lie = info.clone();
         lie[field] = value;
-        with_metadata(&pack, &lie.to_string(), &liar);
+        crate::common::with_metadata(&pack, &lie.to_string(), &liar);
         fails_with(&run(&["unpack", s(&liar), "-o", s(&dir.path().join("out"))]), &["liar.vtpk", "metadata"]);
     }
     assert_eq!(listing(dir.path()), ["in.png", "liar.vtpk", "p.vtpk"]);

@@ -397,29 +397,11 @@ fn cli_shards(dir: &Scratch, input: &str, codec: &str) -> Vec<String> {
 /// `shard` rewritten in place with its manifest changed by `edit`, tiles and checksums intact
 /// (as a forger would: every checksum of the file matches).
 fn edit_manifest(shard: &str, edit: impl Fn(&mut serde_json::Value)) {
-    use vortex_pack::{NewTile, Pack, PackWriter, Tile};
-    let p = Pack::open(shard).unwrap();
-    let mut manifest: serde_json::Value = serde_json::from_slice(p.metadata()).unwrap();
+    let metadata = vortex_pack::Pack::open(shard).unwrap().metadata().to_vec();
+    let mut manifest: serde_json::Value = serde_json::from_slice(&metadata).unwrap();
     edit(&mut manifest);
     let edited = format!("{shard}.edited");
-    let metadata = manifest.to_string();
-    let mut w = PackWriter::create(
-        &edited,
-        *p.description(),
-        p.levels().to_vec(),
-        metadata.as_bytes(),
-        WriteOptions::default(),
-    )
-    .unwrap();
-    for id in p.ids() {
-        let tile = match p.tile_checked(id.lod, id.x, id.y).unwrap() {
-            Tile::Absent => NewTile::Absent,
-            Tile::Constant(t) => NewTile::Constant(t),
-            Tile::Data(k, b) => NewTile::Data(k, b),
-        };
-        w.add(id, tile).unwrap();
-    }
-    w.finish().unwrap();
+    crate::common::with_metadata(Path::new(shard), &manifest.to_string(), Path::new(&edited));
     std::fs::rename(&edited, shard).unwrap();
 }
 

@@ -277,3 +277,22 @@ pub fn layouts() -> Vec<PixelLayout> {
     }
     v
 }
+
+/// `pack` rewritten to `dest` with `metadata` in place of its own, tiles unchanged and every
+/// checksum valid (as a forger would write it).
+pub fn with_metadata(pack: &std::path::Path, metadata: &str, dest: &std::path::Path) {
+    use vortex_pack::{NewTile, Pack, PackWriter, Tile, WriteOptions};
+    let p = Pack::open(pack).unwrap();
+    let mut w =
+        PackWriter::create(dest, *p.description(), p.levels().to_vec(), metadata.as_bytes(), WriteOptions::default())
+            .unwrap();
+    for id in p.ids() {
+        let tile = match p.tile_checked(id.lod, id.x, id.y).unwrap() {
+            Tile::Absent => NewTile::Absent,
+            Tile::Constant(t) => NewTile::Constant(t),
+            Tile::Data(k, b) => NewTile::Data(k, b),
+        };
+        w.add(id, tile).unwrap();
+    }
+    w.finish().unwrap();
+}
