@@ -9,7 +9,8 @@
 # `convert` reads instead of `split`. Each source is cut by `split --pack --tile-size 256
 # --border 0` (default filter) with each codec: jpeg (Q85), png (fast), raw, zstd, bc1, bc7 (ultra-fast). Per run, from /usr/bin/time
 # -v: wall time, CPU time (user + sys) and their ratio (2.0 would be both cores busy the whole
-# run), throughput in source megapixels per second and peak memory; from `split --json`'s
+# run), CPU milliseconds per source megapixel (the work, whatever the cores: compare it with the
+# peer's), throughput in source megapixels per second and peak memory; from `split --json`'s
 # `stages`: the time reading the source, the producer's pyramid sums and the cutting thread's
 # cutting, the time the cutter waited for the encoders and the time they waited for it. A run
 # whose encoders waited longer than the cutter did is bound by the busiest of the serial threads
@@ -131,8 +132,8 @@ print(f"{datetime.date.today()}, {os.cpu_count()} cores, vortex-tiler {rev}"
       + (f", peer {peer_version} (pyvips-binary, direct mode: `Q=85`) writing a .zip of 256-texel JPEG tiles" if peer_version else "")
       + "; `split --pack --tile-size 256 --border 0`, default filter; the median of the runs per cell.")
 print()
-print("| source | codec | wall | CPU | CPU / wall | Mpx/s | peak RSS | read | waits for rows | pyramid | cut | waits for encoders | encoders wait | encode | store | bound by | vs peer |")
-print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|")
+print("| source | codec | wall | CPU | CPU / wall | CPU ms / Mpx | Mpx/s | peak RSS | read | waits for rows | pyramid | cut | waits for encoders | encoders wait | encode | store | bound by | vs peer |")
+print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|")
 for s in sources:
     peer = median(f"{s} peer") if f"{s} peer" in runs else None
     for c in codecs:
@@ -144,11 +145,11 @@ for s in sources:
             serial = {"reading": st["readSeconds"], "pyramid": st["pyramidSeconds"], "cutting": st.get("cutSeconds", 0)}
             bound = max(serial, key=serial.get)
         vs = f"{peer[0] / wall:.2f}x" if peer and c == "jpeg" else ""
-        print(f"| {s} | {c} | {wall:.2f} s | {cpu:.2f} s | {cpu / wall:.2f} | {mpx / wall:.0f} | {rss / 1024:.0f} MiB "
+        print(f"| {s} | {c} | {wall:.2f} s | {cpu:.2f} s | {cpu / wall:.2f} | {cpu / mpx * 1e3:.1f} | {mpx / wall:.0f} | {rss / 1024:.0f} MiB "
               f"| {st['readSeconds']:.2f} | {st.get('readWaitSeconds', 0):.2f} | {st['pyramidSeconds']:.2f} | {st.get('cutSeconds', 0):.2f} | {st['producerBlockedSeconds']:.2f} "
               f"| {st['encodersIdleSeconds']:.2f} | {st['encodeSeconds']:.2f} | {st['storeSeconds']:.2f} | {bound} | {vs} |")
     if peer:
-        print(f"| {s} | peer: libvips .zip (JPEG) | {peer[0]:.2f} s | {peer[1]:.2f} s | {peer[1] / peer[0]:.2f} | {mpx / peer[0]:.0f} "
+        print(f"| {s} | peer: libvips .zip (JPEG) | {peer[0]:.2f} s | {peer[1]:.2f} s | {peer[1] / peer[0]:.2f} | {peer[1] / mpx * 1e3:.1f} | {mpx / peer[0]:.0f} "
               f"| {peer[2] / 1024:.0f} MiB | | | | | | | | | | |")
 PY
 cat "$REPORT"
