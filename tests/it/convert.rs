@@ -3,6 +3,7 @@
 use std::path::Path;
 use std::process::Command;
 
+use crate::common::cli::{BIN, wait_or_kill};
 use crate::common::{Image, MemSink, layouts, png_options};
 use proptest::prelude::*;
 use vortex_tiler::background::Background;
@@ -13,8 +14,6 @@ use vortex_tiler::source::tiled::{NamedDir, SplitOutput, TileGrid, TiledSource};
 use vortex_tiler::split::split;
 use vortex_tiler::tile_dir::filename::FilenameFormat;
 use vortex_tiler::tile_dir::info::InfoFile;
-
-const BIN: &str = env!("CARGO_BIN_EXE_vortex-tiler");
 
 /// Every tile's PNG bytes by (lod, x, y).
 type Tiles = std::collections::BTreeMap<(u32, u32, u32), Vec<u8>>;
@@ -471,21 +470,6 @@ fn png_bytes(image: &image::RgbImage) -> Vec<u8> {
     out
 }
 
-/// Waits for `child`, failing (and killing it) if it is still running after two minutes: a
-/// fail-safe against a hang, not a timing.
-fn wait_or_kill(child: std::process::Child, what: &str) -> std::process::Output {
-    let pid = child.id();
-    let (done, result) = std::sync::mpsc::channel();
-    std::thread::spawn(move || done.send(child.wait_with_output()));
-    match result.recv_timeout(std::time::Duration::from_secs(120)) {
-        Ok(out) => out.unwrap(),
-        Err(_) => {
-            let _ = Command::new("kill").args(["-KILL", &pid.to_string()]).status();
-            panic!("{what}: still running after two minutes");
-        }
-    }
-}
-
 /// A tile whose zip entry inflates far past any tile is refused from its declared size, naming
 /// the entry, instead of being inflated (up to 256 MiB per thread) under --max-memory 64M.
 #[test]
@@ -527,7 +511,7 @@ fn a_fifo_among_the_tiles_is_refused_naming_it() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let result = wait_or_kill(child, "convert of tiles holding a FIFO");
+    let result = wait_or_kill(child.id(), "convert of tiles holding a FIFO", || child.wait_with_output().unwrap());
     let e = String::from_utf8_lossy(&result.stderr);
     assert_eq!(result.status.code(), Some(1), "{e}");
     assert!(e.contains("x01-y00.png") && e.contains("not a regular file"), "{e}");
@@ -580,7 +564,7 @@ fn a_second_signal_removes_the_temporary_output() {
     kill("-TERM");
     kill("-INT");
     kill("-CONT");
-    let result = wait_or_kill(child, "convert after two signals");
+    let result = wait_or_kill(child.id(), "convert after two signals", || child.wait_with_output().unwrap());
     let e = String::from_utf8_lossy(&result.stderr);
     assert!(matches!(result.status.code(), Some(130 | 143)), "{:?}: {e}", result.status);
     assert!(!e.contains("panicked"), "{e}");

@@ -7,9 +7,9 @@ use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use crate::common::cli::{BIN, fails_with, fixture, ok, run, s};
+use crate::common::cli::{BIN, fails_with, fixture, ok, run, s, wait_or_kill};
 use crate::common::server::{Reply, Server};
 
 /// Fail-safe for reads that must end: far past any timeout the server is given here.
@@ -109,14 +109,8 @@ fn fifos_devices_and_oversized_tiles_are_never_read() {
     // And it still stops at once on SIGTERM.
     let kill = Command::new("kill").args(["-TERM", &server.child.id().to_string()]).status().unwrap();
     assert!(kill.success());
-    let started = Instant::now();
-    let status = loop {
-        if let Some(status) = server.child.try_wait().unwrap() {
-            break status;
-        }
-        assert!(started.elapsed() < FAIL_SAFE, "still running after SIGTERM");
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let child = &mut server.child;
+    let status = wait_or_kill(child.id(), "serve after SIGTERM", || child.wait().unwrap());
     assert_eq!(status.code(), Some(0));
 
     // A FIFO or a device as an input is refused before anything opens it.

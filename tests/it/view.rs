@@ -3,9 +3,9 @@
 //! the same view headless, and it must refuse to overwrite a file that is not its own. Without
 //! Xvfb the tests print a note and pass, except under `CI=true`, where they fail.
 
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
-use std::time::{Duration, Instant};
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, ChildStdout, Command, Output, Stdio};
 
 use crate::common::cli::{BIN, fails_with, fixture, run, s};
 
@@ -13,6 +13,8 @@ use crate::common::cli::{BIN, fails_with, fixture, run, s};
 struct Xvfb {
     child: Child,
     display: String,
+    /// Held open: a write by Xvfb after its display number must not meet a closed pipe.
+    _stdout: BufReader<ChildStdout>,
 }
 
 impl Xvfb {
@@ -24,24 +26,21 @@ impl Xvfb {
             eprintln!("note: skipping a window test: no Xvfb (apt-get install xvfb; set CI=true to fail instead)");
             return None;
         }
-        // A display number nobody holds: Xvfb refuses one whose lock file exists.
-        let n = (std::process::id() % 400 + 100..600)
-            .find(|n| !Path::new(&format!("/tmp/.X{n}-lock")).exists())
-            .expect("a free display number");
-        let display = format!(":{n}");
-        let child = Command::new("Xvfb")
-            .args([display.as_str(), "-screen", "0", "1024x768x24", "-nolisten", "tcp"])
-            .stdout(Stdio::null())
+        // Xvfb picks a free display itself and writes its number to `-displayfd` (here its
+        // stdout, a pipe) once it accepts clients: the line is the readiness signal, and the
+        // pipe's end (Xvfb gone) the failure, with nothing polled.
+        let mut child = Command::new("Xvfb")
+            .args(["-displayfd", "1", "-screen", "0", "1024x768x24", "-nolisten", "tcp"])
+            .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
             .expect("Xvfb starts");
-        let socket = PathBuf::from(format!("/tmp/.X11-unix/X{n}"));
-        let started = Instant::now();
-        while !socket.exists() {
-            assert!(started.elapsed() < Duration::from_secs(60), "Xvfb {display} did not come up");
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        Some(Xvfb { child, display })
+        let mut line = String::new();
+        let mut stdout = BufReader::new(child.stdout.take().expect("Xvfb's stdout"));
+        stdout.read_line(&mut line).expect("Xvfb's display number");
+        let n: u32 = line.trim().parse().unwrap_or_else(|_| panic!("Xvfb exited before it took a display: {line:?}"));
+        let display = format!(":{n}");
+        Some(Xvfb { child, display, _stdout: stdout })
     }
 
     /// `vortex-tiler view ARGS` on this display.

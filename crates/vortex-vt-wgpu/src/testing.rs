@@ -17,12 +17,10 @@ use vortex_pack::{Description, Level, NewTile, Pack, PackError, PackWriter, Tile
 use vortex_vt::page::PageId;
 use vortex_vt::sampler::{LodChain, LodImages, Rgba8Image};
 
-use crate::loader::LoaderError;
-use crate::page_cache::CacheFormat;
-use crate::source::{PageSource, ReadError, SourceTile, StoredRead};
+use crate::source::{Delayed, PageSource, ReadError};
 use crate::texture::VirtualTexture;
 
-/// A gate that the reads of a [`Gated`] source wait at while it is closed: a test holds reads
+/// A gate that the reads of a [`gated`] source wait at while it is closed: a test holds reads
 /// in flight for as long as it likes and knows when they have started, so that what must not
 /// wait for a read ("a frame never waits", "a queued load is taken back") is shown without
 /// sleeping or timing anything.
@@ -106,56 +104,9 @@ impl Gate {
 }
 
 /// `inner`, each read waiting at `gate` while it is closed (decoding does not wait: the memory
-/// tier's tiles come through at once, as with [`crate::source::Delayed`]).
-pub struct Gated {
-    inner: Arc<dyn PageSource>,
-    gate: Arc<Gate>,
-}
-
-impl Gated {
-    pub fn new(inner: Arc<dyn PageSource>, gate: Arc<Gate>) -> Gated {
-        Gated { inner, gate }
-    }
-}
-
-impl PageSource for Gated {
-    fn location(&self) -> &Path {
-        self.inner.location()
-    }
-
-    fn texture(&self) -> Result<VirtualTexture, LoaderError> {
-        self.inner.texture()
-    }
-
-    fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
-        self.gate.pass()?;
-        self.inner.read_tile(lod, x, y, format)
-    }
-
-    fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
-        self.gate.pass()?;
-        self.inner.read_stored(lod, x, y)
-    }
-
-    fn decode(
-        &self,
-        lod: u8,
-        x: u16,
-        y: u16,
-        kind: u8,
-        bytes: &[u8],
-        format: CacheFormat,
-    ) -> Result<Vec<u8>, ReadError> {
-        self.inner.decode(lod, x, y, kind, bytes, format)
-    }
-
-    fn holds_only_bc7(&self) -> bool {
-        self.inner.holds_only_bc7()
-    }
-
-    fn opaque(&self) -> bool {
-        self.inner.opaque()
-    }
+/// tier's tiles come through at once, as with [`Delayed`]'s latency).
+pub fn gated(inner: Arc<dyn PageSource>, gate: Arc<Gate>) -> Delayed {
+    Delayed::with_wait(inner, move || gate.pass())
 }
 
 /// `lods` levels: `lod0`, then each level the mean of the (up to) 2x2 texels of the one above

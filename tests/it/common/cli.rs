@@ -40,3 +40,21 @@ pub fn fixture(name: &str) -> PathBuf {
 pub fn s(p: &Path) -> &str {
     p.to_str().expect("a UTF-8 path")
 }
+
+/// `wait()` for the process `pid` (e.g. `child.wait_with_output()`), killing it and failing if it
+/// is still running after two minutes: a fail-safe against a hang that no working run comes
+/// near, not a timing.
+pub fn wait_or_kill<T: Send>(pid: u32, what: &str, wait: impl FnOnce() -> T + Send) -> T {
+    std::thread::scope(|scope| {
+        let (done, result) = std::sync::mpsc::channel();
+        scope.spawn(move || done.send(wait()));
+        match result.recv_timeout(std::time::Duration::from_secs(120)) {
+            Ok(out) => out,
+            Err(_) => {
+                // The waiting thread returns once the process is gone; the scope then ends.
+                let _ = Command::new("kill").args(["-KILL", &pid.to_string()]).status();
+                panic!("{what}: still running after two minutes");
+            }
+        }
+    })
+}

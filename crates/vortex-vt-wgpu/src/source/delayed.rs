@@ -1,7 +1,8 @@
 //! A source that answers every tile after a fixed latency: what a slow disk, a network share or
-//! an object store does to a frame loop, without one. `render --io-latency` and the never-stall
-//! tests wrap their packs in it. Only reads wait: decoding stored bytes the memory tier kept
-//! does not, which is the tier's whole gain.
+//! an object store does to a frame loop, without one. `render --io-latency` wraps its packs in
+//! it, and the tests' gated source (reads held until the test lets them through) is the same
+//! wrapper with another wait. Only reads wait: decoding stored bytes the memory tier kept does
+//! not, which is the tier's whole gain.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -12,15 +13,31 @@ use crate::loader::LoaderError;
 use crate::page_cache::CacheFormat;
 use crate::texture::VirtualTexture;
 
-/// `inner`, each tile read `latency` late (the worker thread sleeps; a frame never does).
+/// What a read waits for before it is answered; an error fails that read.
+type Wait = Box<dyn Fn() -> Result<(), ReadError> + Send + Sync>;
+
+/// `inner`, each tile read answered after a wait on the loader's worker thread (a frame never
+/// waits).
 pub struct Delayed {
     inner: Arc<dyn PageSource>,
-    latency: Duration,
+    wait: Wait,
 }
 
 impl Delayed {
+    /// Each read `latency` late.
     pub fn new(inner: Arc<dyn PageSource>, latency: Duration) -> Delayed {
-        Delayed { inner, latency }
+        Delayed::with_wait(inner, move || {
+            std::thread::sleep(latency);
+            Ok(())
+        })
+    }
+
+    /// Each read answered once `wait` returns (or failed with its error).
+    pub fn with_wait(
+        inner: Arc<dyn PageSource>,
+        wait: impl Fn() -> Result<(), ReadError> + Send + Sync + 'static,
+    ) -> Delayed {
+        Delayed { inner, wait: Box::new(wait) }
     }
 }
 
@@ -34,7 +51,7 @@ impl PageSource for Delayed {
     }
 
     fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
-        std::thread::sleep(self.latency);
+        (self.wait)()?;
         self.inner.read_tile(lod, x, y, format)
     }
 
@@ -42,7 +59,7 @@ impl PageSource for Delayed {
         let stored = self.inner.read_stored(lod, x, y);
         // A source with no stored form is read (and waited for) by `read_tile` instead.
         if !matches!(stored, Ok(None)) {
-            std::thread::sleep(self.latency);
+            (self.wait)()?;
         }
         stored
     }

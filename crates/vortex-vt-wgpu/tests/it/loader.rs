@@ -17,7 +17,7 @@ use vortex_vt_wgpu::loader::{
     LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS, TIER_ENTRY_OVERHEAD, TierUsage,
     stand_in_tile,
 };
-use vortex_vt_wgpu::testing::{Gate, Gated};
+use vortex_vt_wgpu::testing::{Gate, gated};
 use vortex_vt_wgpu::{CacheFormat, PageSource, ReadError, SourceTile, StoredRead, VirtualTexture};
 
 const TILE: u32 = 16;
@@ -517,7 +517,7 @@ fn request_and_poll_answer_every_page_exactly_once() {
     let pack = mixed_pack(dir.path(), "a.vtpk");
     // Texture 1 (the same pack, its reads held at a gate) is only for `answered_so_far`.
     let gate = Gate::closed();
-    let gated: Arc<dyn PageSource> = Arc::new(Gated::new(Arc::clone(&pack) as _, Arc::clone(&gate)));
+    let gated: Arc<dyn PageSource> = Arc::new(gated(Arc::clone(&pack) as _, Arc::clone(&gate)));
     let loader = Loader::with_sources(vec![Arc::clone(&pack) as _, gated], 3).unwrap();
     let grid = loader.textures()[0].grid;
     let pages: Vec<(PageId, Slot)> = (0..3).flat_map(|round| all_pages(0, grid, round * 100)).collect();
@@ -594,7 +594,7 @@ fn cancelled_requests_are_never_answered_and_the_rest_are() {
     let dir = tempdir();
     let pack = mixed_pack(dir.path(), "a.vtpk");
     let gate = Gate::closed();
-    let held: Arc<dyn PageSource> = Arc::new(Gated::new(pack, Arc::clone(&gate)));
+    let held: Arc<dyn PageSource> = Arc::new(gated(pack, Arc::clone(&gate)));
     let loader = Loader::with_sources(vec![held], 1).unwrap();
     let pages = all_pages(0, loader.textures()[0].grid, 0);
     loader.request(&pages[..6]);
