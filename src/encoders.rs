@@ -80,7 +80,7 @@ pub(crate) fn consume<T: Sample>(
                     let stage = &stage;
                     pool.spawn(move |_| {
                         // A task that panicked must still finish its job, or the writer waits forever.
-                        let run = catch_unwind(AssertUnwindSafe(|| stage.run(&lot.batches, &lot.jobs[k])));
+                        let run = catch_unwind(AssertUnwindSafe(|| stage.run(&lot.jobs[k])));
                         let panicked = || Err(TilerError::Options("a tile encoder panicked".into()));
                         lot.finish_job(k, run.unwrap_or_else(|_| panicked()));
                     });
@@ -158,10 +158,12 @@ struct Encoding<'a, T> {
 
 impl<T: Sample> Encoding<'_, T> {
     /// Encodes one job; stores it too unless the sink is ordered, whose writer stores it.
-    fn run(&self, batches: &[Batch<T>], job: &Job) -> JobResult {
+    fn run(&self, job: &Job<T>) -> JobResult {
         let _busy = self.busy.start();
-        let tile = &batches[job.batch].tiles[job.tile];
-        let stored = prepare(self.encoder, self.sink, job, tile)?;
+        let texels = job.take_texels()?;
+        let stored = prepare(self.encoder, self.sink, job, &texels)?;
+        // The last job of a tile frees its texels here, not when the writer stores the lot.
+        drop(texels);
         if matches!(stored, Stored::Encoded(_)) {
             self.counts.encoded.fetch_add(1, Ordering::Relaxed);
         }
@@ -189,10 +191,9 @@ impl<T: Sample> Encoding<'_, T> {
 /// What became of a job: the tile for an ordered sink's writer to store (`None`: stored already).
 type JobResult = Result<Option<Stored>>;
 
-/// Batches received together, their encodings, and what became of each.
+/// Batches received together, as the encodings they need, and what became of each.
 struct Lot<T> {
-    batches: Vec<Batch<T>>,
-    jobs: Vec<Job>,
+    jobs: Vec<Job<T>>,
     /// Each job's result once it has one, and how many have none yet.
     finished: Mutex<(Vec<Option<JobResult>>, usize)>,
     done: Condvar,
@@ -200,15 +201,12 @@ struct Lot<T> {
 
 impl<T> Lot<T> {
     fn of(batches: Vec<Batch<T>>, sink: &dyn TileSink) -> Lot<T> {
-        let jobs: Vec<Job> = batches
-            .iter()
-            .enumerate()
-            .flat_map(|(b, batch)| {
-                batch.tiles.iter().enumerate().flat_map(move |(t, tile)| Job::of(sink, batch.lod, b, t, tile))
-            })
+        let jobs: Vec<Job<T>> = batches
+            .into_iter()
+            .flat_map(|batch| batch.tiles.into_iter().flat_map(move |tile| Job::of(sink, batch.lod, tile)))
             .collect();
         let finished = Mutex::new(((0..jobs.len()).map(|_| None).collect(), jobs.len()));
-        Lot { batches, jobs, finished, done: Condvar::new() }
+        Lot { jobs, finished, done: Condvar::new() }
     }
 
     fn finish_job(&self, k: usize, result: JobResult) {
@@ -231,29 +229,40 @@ impl<T> Lot<T> {
     }
 }
 
-/// One encoding: a cut tile (by its batch and index), the part of it the sink keeps, and the
-/// places that get it.
-struct Job {
+/// One encoding: a cut tile's texels, the part of them the sink keeps, and the places that
+/// get it.
+struct Job<T> {
     lod: u32,
-    batch: usize,
-    tile: usize,
     crop: Option<Crop>,
     places: Vec<(u32, u32)>,
+    /// Until the encoding takes them: the texels are freed as soon as every encoding of the
+    /// tile is done, not kept until the writer has stored the whole lot, so that a row of
+    /// tiles less is held at once (issue 28).
+    texels: Mutex<Option<Arc<Vec<T>>>>,
 }
 
-impl Job {
+impl<T> Job<T> {
     /// The encodings a cut tile needs: one, unless the sink crops its places differently
     /// (identical pages merged at the cut may sit at a viewer tile's edge and in the middle).
-    fn of<T>(sink: &dyn TileSink, lod: u32, batch: usize, tile: usize, cut: &CutTile<T>) -> Vec<Job> {
-        let mut jobs: Vec<Job> = Vec::new();
-        for &place in &cut.places {
+    fn of(sink: &dyn TileSink, lod: u32, cut: CutTile<T>) -> Vec<Job<T>> {
+        let texels = Arc::new(cut.texels);
+        let mut jobs: Vec<Job<T>> = Vec::new();
+        for place in cut.places {
             let crop = sink.crop(lod, place.0, place.1);
             match jobs.iter_mut().find(|j| j.crop == crop) {
                 Some(job) => job.places.push(place),
-                None => jobs.push(Job { lod, batch, tile, crop, places: vec![place] }),
+                None => {
+                    jobs.push(Job { lod, crop, places: vec![place], texels: Mutex::new(Some(Arc::clone(&texels))) })
+                }
             }
         }
         jobs
+    }
+
+    /// The texels, for the one run of this job.
+    fn take_texels(&self) -> Result<Arc<Vec<T>>> {
+        let mut slot = self.texels.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        slot.take().ok_or_else(|| TilerError::Options("a tile was encoded twice".into()))
     }
 }
 
@@ -266,9 +275,8 @@ enum Stored {
 
 /// Encodes a tile (or the part the sink keeps), unless it has one colour and the sink stores
 /// such tiles as their colour.
-fn prepare<T: Sample>(encoder: &TileEncoder<T>, sink: &dyn TileSink, job: &Job, tile: &CutTile<T>) -> Result<Stored> {
+fn prepare<T: Sample>(encoder: &TileEncoder<T>, sink: &dyn TileSink, job: &Job<T>, texels: &[T]) -> Result<Stored> {
     let channels = encoder.source_layout().channels.count();
-    let texels = &tile.texels;
     if sink.takes_constants() && texels.chunks_exact(channels).all(|t| t == &texels[..channels]) {
         return Ok(Stored::Constant(encoder.stored_texel(&texels[..channels])));
     }

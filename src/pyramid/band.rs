@@ -122,12 +122,24 @@ impl<T: Copy> Band<T> {
             let tiles = self.x_runs.iter().map(|(x, _)| *x).zip(open.tiles).collect();
             done(TileRow { index: open.index, tiles })?;
         }
+        if complete > 0
+            && let Some(front) = self.open.front_mut()
+        {
+            let texels = self.layout.tile_texels() * self.channels;
+            for tile in &mut front.tiles {
+                tile.reserve_exact(texels - tile.len());
+            }
+        }
         Ok(())
     }
 
+    /// A row of tiles whose first rows arrive: its tiles have room for all their texels if it
+    /// is the only one open; below another (the rows their borders share), only once the one
+    /// above is handed on, so that a band never holds two rows of tiles' worth of memory while
+    /// the encoders' queue is full (12 MiB more at a 16384-texel width, issue 28).
     fn begin(&self, index: u32) -> OpenRow<T> {
         let sources = cut::expand(&cut::runs(&self.layout, index, self.height, self.virtual_height, self.edge_padding));
-        let texels = self.layout.tile_texels() * self.channels;
+        let texels = if self.open.is_empty() { self.layout.tile_texels() * self.channels } else { 0 };
         let tiles = self.x_runs.iter().map(|_| Vec::with_capacity(texels)).collect();
         OpenRow { index, sources, written: 0, tiles }
     }
