@@ -144,8 +144,9 @@ fn vtpk_source_shows_packs_from_a_static_host() {
 }
 
 /// A tile whose payload was changed after writing is reported by the JS source (with its
-/// position and CRC) and never handed to OpenSeadragon; the rest of the view is drawn. A pack
-/// of zstd tiles is refused at open with a message naming the codec and the way out.
+/// position and CRC) and never handed to OpenSeadragon; the rest of the view is drawn. So is a
+/// damaged index entry. A pack of zstd tiles is refused at open with a message naming the codec
+/// and the way out.
 #[test]
 fn vtpk_source_reports_a_damaged_tile_and_refuses_undecodable_packs() {
     let Some(site) = Site::start("the static-host browser test") else { return };
@@ -182,6 +183,25 @@ fn vtpk_source_reports_a_damaged_tile_and_refuses_undecodable_packs() {
     assert!(!state["loaded"].as_array().unwrap().iter().any(is_victim), "the damaged tile was drawn: {state}");
     assert!(state["failed"].as_array().unwrap().iter().any(is_victim), "OpenSeadragon was not told: {state}");
     assert!(state["loaded"].as_array().unwrap().len() >= loaded.len() - 1, "the rest was not drawn: {state}");
+
+    // The same tile's index entry made constant: caught by the index CRC when the index is read
+    // whole, by the entry's own fields (length and CRC set) when it is read in blocks.
+    let mut bytes = std::fs::read(&good).unwrap();
+    let position = p.position(vortex_pack::TileId { lod, x, y }).unwrap();
+    bytes[(p.header().index_offset + 24 * position + 16) as usize] = 1;
+    std::fs::write(site.dir.path().join("bad-index.vtpk"), &bytes).unwrap();
+    let (_, state) = site.show("bad-index.vtpk", home, 1 << 18);
+    let message = state["openError"].as_str().unwrap_or_else(|| panic!("a damaged index was used: {state}"));
+    assert!(message.contains("index is damaged"), "{message}");
+    let (_, state) = site.show("bad-index.vtpk", home, 0);
+    let errors = state["errors"].as_array().unwrap();
+    assert!(
+        errors
+            .iter()
+            .any(|e| e.as_str().unwrap().contains(&expected) && e.as_str().unwrap().contains("index is damaged")),
+        "the damaged entry of {expected} is not reported: {state}"
+    );
+    assert!(!state["loaded"].as_array().unwrap().iter().any(is_victim), "the damaged entry was drawn: {state}");
 
     pack(&site, &input, "zstd.vtpk", &["--tile-size", "256", "--codec", "zstd"]);
     let (_, state) = site.show("zstd.vtpk", home, 1 << 18);
@@ -224,16 +244,16 @@ fn measure_requests_against_dzi() {
     let (w, h) = (d.width, d.height);
     let views = [("first view", (0, 0, w, h)), ("deep zoom 1:1", (w / 2, h / 2, VIEW.0, VIEW.1))];
     println!(
-        "| view | maxTilesPerFrame | DZI requests | DZI bytes | pack requests | pack bytes | ratio requests | ratio bytes |"
+        "| view | maxTilesPerFrame | index | DZI requests | DZI bytes | pack requests | pack bytes | requests ratio | bytes ratio |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---|---:|---:|---:|---:|---:|---:|");
     for (what, region) in views {
-        for per_frame in [1, 16] {
+        for (per_frame, whole) in [(1, 1 << 18), (16, 1 << 18), (1, 0), (16, 0)] {
             let fetched = |query: &str| {
                 site.nginx.clear_requests();
                 let (x, y, rw, rh) = region;
                 let url = format!(
-                    "{}/view.html?{query}&region={x},{y},{rw},{rh}&whole=262144&perFrame={per_frame}",
+                    "{}/view.html?{query}&region={x},{y},{rw},{rh}&whole={whole}&perFrame={per_frame}",
                     site.nginx.url()
                 );
                 site.browser.open_and_wait(&url, READY, Duration::from_secs(120));
@@ -250,7 +270,8 @@ fn measure_requests_against_dzi() {
             let (dr, db) = fetched(&format!("dzi=/dzi/{dzi}"));
             let (pr, pb) = fetched("pack=photo.vtpk");
             println!(
-                "| {what} | {per_frame} | {dr} | {db} | {pr} | {pb} | {:.2} | {:.2} |",
+                "| {what} | {per_frame} | {} | {dr} | {db} | {pr} | {pb} | {:.2} | {:.2} |",
+                if whole > 0 { "whole" } else { "blocks" },
                 pr as f64 / dr as f64,
                 pb as f64 / db as f64
             );

@@ -36,9 +36,9 @@ export interface VtpkOptions {
   fetch?: typeof fetch;
   /** Extra request headers. */
   headers?: Record<string, string>;
-  /** Read and check the whole index first when it is at most this many bytes (default 262144). */
+  /** Read and check the whole index first when it is at most this many bytes (default 32768). */
   wholeIndexUpTo?: number;
-  /** Merge reads less than this many bytes apart (default 32768). */
+  /** Merge reads less than this many bytes apart (default 4096, or the payload alignment if larger). */
   gap?: number;
   /** Never merge reads into a request longer than this (default 4 MiB). */
   maxSpan?: number;

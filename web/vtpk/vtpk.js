@@ -8,9 +8,9 @@
  * OpenSeadragon({ id: "viewer", tileSources: await VtpkTileSource.open("photo.vtpk") });
  * ```
  *
- * What it reads, in order: the first 64 KiB (header, level table and, for a small pack, the
+ * What it reads, in order: the first 2 KiB (header, level table and, for a small pack, the
  * whole index and metadata), then the index (whole when it is at most `wholeIndexUpTo` bytes,
- * else in blocks of 512 entries as tiles need them), then tile payloads. Reads asked for within
+ * else in blocks of 256 entries as tiles need them), then tile payloads. Reads asked for within
  * a few milliseconds of each other are sorted and merged when they lie close together in the
  * file, so a view's tiles usually arrive in a handful of requests. Everything fetched is
  * checked: the header's CRC-32C and fields before anything is sized from them, the metadata's
@@ -30,10 +30,12 @@ const SIGNATURE = [0x89, 0x56, 0x54, 0x50, 0x0d, 0x0a, 0x1a, 0x0a];
 const HEADER_LEN = 192;
 const LEVEL_LEN = 32;
 const ENTRY_LEN = 24;
-/** Index entries fetched together in block mode: 12 KiB, a few JPEG tiles' worth. */
-const BLOCK_ENTRIES = 512;
-/** The first read: header, level table and, for packs up to ~2,500 tiles, index and metadata. */
-const FIRST_READ = 65536;
+/** Index entries fetched together in block mode: 6 KiB, less than a JPEG tile. */
+const BLOCK_ENTRIES = 256;
+/** The first read: header and level table (at most 1,216 bytes) and, for packs up to ~35
+ * tiles, index and metadata; small, since what follows them is index entries and finest-level
+ * tiles that a first view does not show. */
+const FIRST_READ = 2048;
 /** The caps vortex_pack::Limits holds a header to, so a hostile header sizes nothing big. */
 const MAX_TILE_SIZE = 16384;
 const MAX_TILES = 2 ** 29;
@@ -93,7 +95,7 @@ class RangeReader {
   constructor(url, options) {
     this.url = url;
     this.fetch = options.fetch ?? globalThis.fetch.bind(globalThis);
-    this.gap = options.gap ?? 32768;
+    this.gap = options.gap ?? 4096;
     this.maxSpan = options.maxSpan ?? 4 << 20;
     this.headers = options.headers ?? {};
     /** @type {VtpkStats} */
@@ -215,9 +217,10 @@ class RangeReader {
  * @property {typeof fetch} [fetch] the fetch to use (default: the page's)
  * @property {Record<string, string>} [headers] extra request headers (authorisation, ...)
  * @property {number} [wholeIndexUpTo] read and check the whole index before use when it is at
- *   most this many bytes (default 256 KiB, a 16384^2 image in 256-texel tiles); larger indexes
- *   are read in blocks
- * @property {number} [gap] merge reads less than this many bytes apart (default 32 KiB)
+ *   most this many bytes (default 32 KiB, about 1,300 tiles: a 4096^2 image in 128-texel tiles
+ *   or 8192^2 in 256); larger indexes are read in blocks, which a first view needs few of
+ * @property {number} [gap] merge reads less than this many bytes apart (default 4 KiB, or the
+ *   pack's payload alignment where larger: tiles of a row lie that far apart)
  * @property {number} [maxSpan] never merge reads into a request longer than this (default 4 MiB)
  * @property {number} [wait] gather reads until none has come for this many milliseconds
  *   (default 20: OpenSeadragon asks for a tile or a few per frame)
@@ -284,6 +287,7 @@ export class VtpkPack {
     this.channels = first[68];
     this.sampleBytes = first[69];
     const alignment = u32(72);
+    const payloadAlignment = u32(76);
     const levelsOffset = u64(80, "levels_offset");
     this.indexOffset = u64(88, "index_offset");
     this.indexCount = u64(96, "index_count");
@@ -300,6 +304,11 @@ export class VtpkPack {
     if (this.channels < 1 || this.channels > 4) fail(`channels ${this.channels}, not 1 to 4`);
     if (this.sampleBytes !== 1 && this.sampleBytes !== 2) fail(`sample_bytes ${this.sampleBytes}, not 1 or 2`);
     if (alignment < 8 || alignment & (alignment - 1)) fail(`alignment ${alignment}, not a power of two of at least 8`);
+    if (payloadAlignment < 8 || payloadAlignment & (payloadAlignment - 1)) {
+      fail(`payload_alignment ${payloadAlignment}, not a power of two of at least 8`);
+    }
+    // Payloads are padded to their alignment: neighbours in a row are that far apart at most.
+    if (options.gap === undefined) reader.gap = Math.max(reader.gap, payloadAlignment);
     if (this.indexCount > MAX_TILES) fail(`index_count ${this.indexCount}, over the cap of ${MAX_TILES} tiles`);
     if (u32(104) !== ENTRY_LEN) fail(`entry_len ${u32(104)}, not ${ENTRY_LEN}`);
     if (levelsOffset !== HEADER_LEN) fail(`levels_offset ${levelsOffset}, not ${HEADER_LEN}`);
@@ -343,7 +352,7 @@ export class VtpkPack {
   async readIndexAndMetadata(first) {
     const metaEnd = this.metaOffset + this.metaLen;
     const indexBytes = this.metaOffset - this.indexOffset;
-    const whole = indexBytes <= (this.options.wholeIndexUpTo ?? 262144);
+    const whole = indexBytes <= (this.options.wholeIndexUpTo ?? 32768);
     // Whole: level table to metadata end in one read. Blocks: the level table (always in the
     // first read, 32 levels being 1 KiB), then the metadata with the last index block beside
     // it, which holds the coarse levels every view starts with.
@@ -434,7 +443,15 @@ export class VtpkPack {
       value: block.subarray(o, o + 8),
     };
     if (block.subarray(o + 17, o + 24).some((b) => b)) throw new VtpkError(`${where}: reserved index bytes are not zero`);
-    if (entry.kind === KIND.constant || entry.kind === KIND.absent) return entry;
+    if (entry.kind === KIND.constant || entry.kind === KIND.absent) {
+      // No payload: length and CRC zero, and nothing past the texel's samples (all of it for
+      // absent). Until the index CRC is checked, this is what catches a damaged entry.
+      const used = entry.kind === KIND.constant ? this.channels * this.sampleBytes : 0;
+      if (entry.len || entry.crc || entry.value.subarray(used).some((b) => b)) {
+        throw new VtpkError(`${where}: a ${KIND_NAMES[entry.kind]} entry with payload fields set: the index is damaged`);
+      }
+      return entry;
+    }
     if (![KIND.raw, KIND.png, KIND.jpeg].includes(entry.kind)) {
       if (entry.kind < KIND_NAMES.length) this.refuse(KIND_NAMES[entry.kind]);
       throw new VtpkError(`${where}: unknown tile kind ${entry.kind}`);
