@@ -240,6 +240,19 @@ fn measure_requests_against_dzi() {
         .map(|e| e.unwrap().file_name().into_string().unwrap())
         .find(|n| n.ends_with(".dzi"))
         .unwrap();
+    // The upload-cost stand-in: files and bytes of each.
+    let (mut files, mut bytes, mut stack) = (0u64, 0u64, vec![site.dir.path().join("dzi")]);
+    while let Some(dir) = stack.pop() {
+        for e in std::fs::read_dir(dir).unwrap().map(|e| e.unwrap()) {
+            if e.file_type().unwrap().is_dir() {
+                stack.push(e.path());
+            } else {
+                (files, bytes) = (files + 1, bytes + e.metadata().unwrap().len());
+            }
+        }
+    }
+    let pack_len = std::fs::metadata(site.dir.path().join("photo.vtpk")).unwrap().len();
+    println!("upload: DZI {files} files, {bytes} bytes; pack 1 file, {pack_len} bytes\n");
     let d = *vortex_pack::Pack::open(site.dir.path().join("photo.vtpk")).unwrap().description();
     let (w, h) = (d.width, d.height);
     let views = [("first view", (0, 0, w, h)), ("deep zoom 1:1", (w / 2, h / 2, VIEW.0, VIEW.1))];
