@@ -291,3 +291,104 @@ fn measure_requests_against_dzi() {
         }
     }
 }
+
+/// The JS reader's checks before anything is sized from a header, run in Node with a `fetch`
+/// that answers `Range` requests from a file as a static host would: each damaged pack is
+/// refused with a message naming what is wrong, and a host that ignores `Range` is named too.
+/// Needs `node` (Debian's nodejs, which `.ci/run` installs with npm).
+#[test]
+fn vtpk_js_refuses_damaged_headers() {
+    let Some(node) = ["/usr/bin/node", "/usr/local/bin/node"].iter().map(Path::new).find(|p| p.is_file()) else {
+        return skip_unless_ci("the vtpk.js header test", "no node (apt-get install nodejs)");
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("photo.png");
+    image::RgbImage::from_fn(300, 200, |x, y| image::Rgb([x as u8, y as u8, (x ^ y) as u8])).save(&input).unwrap();
+    let good = dir.path().join("good.vtpk");
+    ok(&["split", s(&input), "--pack", s(&good), "--tile-size", "64", "-q"]);
+    let bytes = std::fs::read(&good).unwrap();
+    let header = *vortex_pack::Pack::open(&good).unwrap().header();
+    // A header field set to `value`, its CRC made valid again (a writer's bug, not a flipped bit).
+    let field = |at: usize, value: &[u8]| {
+        let mut b = bytes.clone();
+        b[at..at + value.len()].copy_from_slice(value);
+        let crc = crc32c::crc32c(&b[..188]);
+        b[188..192].copy_from_slice(&crc.to_le_bytes());
+        b
+    };
+    let flipped = |at: usize| {
+        let mut b = bytes.clone();
+        b[at] ^= 0x01;
+        b
+    };
+    let mut zeroed = bytes.clone();
+    zeroed[..192].fill(0);
+    let mut extended = bytes.clone();
+    extended.extend_from_slice(&[0; 16]);
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("good", bytes.clone(), "OK"),
+        ("truncated", bytes[..bytes.len() - 1].to_vec(), "truncated or extended"),
+        ("extended", extended, "truncated or extended"),
+        ("unfinished", zeroed, "unfinished pack"),
+        ("not a pack", b"GIF89a, not a pack at all".to_vec(), "no pack signature"),
+        ("short", bytes[..100].to_vec(), "shorter than a pack header"),
+        ("header bit", flipped(50), "header's CRC-32C does not match"),
+        ("major 2", field(8, &2u16.to_le_bytes()), "major version 2"),
+        ("unknown feature", field(16, &2u64.to_le_bytes()), "required features"),
+        ("huge tile", field(56, &65536u32.to_le_bytes()), "tile_size 65536"),
+        ("border too wide", field(60, &32u32.to_le_bytes()), "border 32"),
+        ("too many tiles", field(96, &(1u64 << 40).to_le_bytes()), "over the cap"),
+        ("index elsewhere", field(88, &(header.index_offset + 8).to_le_bytes()), "index_offset"),
+        ("metadata bit", flipped(header.meta_offset as usize), "metadata's CRC-32C"),
+        ("index bit", flipped(header.index_offset as usize + 3), "index is damaged"),
+        ("level table bit", flipped(192 + 16), "level 0"),
+        ("no ranges", bytes.clone(), "ignored the Range header"),
+    ];
+    let mut list = Vec::new();
+    for (i, (name, data, expected)) in cases.iter().enumerate() {
+        let path = dir.path().join(format!("case{i}.vtpk"));
+        std::fs::write(&path, data).unwrap();
+        list.push(
+            serde_json::json!({ "name": name, "path": path, "expected": expected, "ranges": *name != "no ranges" }),
+        );
+    }
+    let module = Path::new(env!("CARGO_MANIFEST_DIR")).join("web/vtpk/vtpk.js");
+    // The fake host: 206 with Content-Range for a range, the whole file with 200 when it
+    // ignores ranges, 416 past the end; the index is read whole so that its CRC is checked.
+    let script = format!(
+        r#"import {{ readFileSync }} from "node:fs";
+import {{ VtpkPack }} from {module:?};
+const out = [];
+for (const c of {cases}) {{
+  const file = readFileSync(c.path);
+  const fetch = async (url, init) => {{
+    const [, a, b] = /bytes=(\d+)-(\d+)/.exec(init.headers.Range).map(Number);
+    if (!c.ranges) return new Response(file, {{ status: 200 }});
+    if (a >= file.length) return new Response("", {{ status: 416 }});
+    const end = Math.min(b + 1, file.length);
+    return new Response(file.subarray(a, end), {{ status: 206,
+      headers: {{ "Content-Range": `bytes ${{a}}-${{end - 1}}/${{file.length}}` }} }});
+  }};
+  try {{
+    const pack = await VtpkPack.open("http://host/" + c.name + ".vtpk", {{ fetch, wholeIndexUpTo: 1 << 20 }});
+    await pack.entry(0, 0, 0);
+    out.push([c.name, c.expected, "OK"]);
+  }} catch (e) {{
+    out.push([c.name, c.expected, (e.name === "VtpkError" ? "" : e.name + ": ") + e.message]);
+  }}
+}}
+console.log(JSON.stringify(out));
+"#,
+        module = module.display().to_string(),
+        cases = serde_json::Value::Array(list),
+    );
+    let run = std::process::Command::new(node).args(["--input-type=module", "-e", &script]).output().unwrap();
+    assert!(run.status.success(), "node: {}", String::from_utf8_lossy(&run.stderr));
+    let results: Vec<(String, String, String)> = serde_json::from_slice(&run.stdout).unwrap();
+    let wrong: Vec<_> = results.iter().filter(|(_, expected, got)| !got.contains(expected.as_str())).collect();
+    for (name, _, got) in &results {
+        eprintln!("{name}: {got}");
+    }
+    assert_eq!(results.len(), cases.len());
+    assert!(wrong.is_empty(), "messages without what they should name: {wrong:?}");
+}

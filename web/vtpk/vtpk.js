@@ -259,12 +259,12 @@ export class VtpkPack {
     const fail = (/** @type {string} */ what) => {
       throw new VtpkError(`${url}: ${what}`);
     };
-    if (first.length < HEADER_LEN) fail(`${first.length} bytes, shorter than a pack header`);
-    if (SIGNATURE.some((b, i) => first[i] !== b)) {
+    if (SIGNATURE.some((b, i) => i < first.length && first[i] !== b)) {
       fail(first.subarray(0, 8).every((b) => b === 0)
         ? "starts with zeros: an unfinished pack (the writer was stopped before its header)"
         : "not a .vtpk pack (no pack signature)");
     }
+    if (first.length < HEADER_LEN) fail(`${first.length} bytes, shorter than a pack header`);
     const view = new DataView(first.buffer, first.byteOffset, HEADER_LEN);
     const u16 = (/** @type {number} */ o) => view.getUint16(o, true);
     const u32 = (/** @type {number} */ o) => view.getUint32(o, true);
