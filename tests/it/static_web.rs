@@ -392,3 +392,76 @@ console.log(JSON.stringify(out));
     assert_eq!(results.len(), cases.len());
     assert!(wrong.is_empty(), "messages without what they should name: {wrong:?}");
 }
+
+/// One-colour tiles are drawn from the index without a request, and tiles that share a payload
+/// (stored once) fetch it once: an image whose left part is flat (constant tiles) and whose
+/// right part repeats a pattern every payload width (identical tiles, borders included), shown
+/// at 1:1 across both, must look right and read exactly one payload per distinct offset.
+#[test]
+fn vtpk_source_draws_constants_without_a_request_and_fetches_shared_tiles_once() {
+    let Some(site) = Site::start("the static-host browser test") else { return };
+    // Payload 126 (128-texel tiles, border 1); the pattern repeats every 126 texels from x = 252,
+    // so the interior tiles right of it are the same tile.
+    let period = 126u32;
+    let source = RgbImage::from_fn(1260, 756, |x, y| {
+        if x < 2 * period {
+            return image::Rgb([200, 60, 40]);
+        }
+        let (u, v) = ((x % period) as f64 - 63.0, (y % period) as f64 - 63.0);
+        let ring = 0.5 + 0.5 * ((u * u + v * v).sqrt() / 5.0).sin();
+        image::Rgb([(40.0 + 200.0 * ring) as u8, (x % period * 2) as u8, (y % period * 2) as u8])
+    });
+    let input = site.dir.path().join("tiles.png");
+    source.save(&input).unwrap();
+    pack(&site, &input, "shared.vtpk", &["--tile-size", "128", "--border", "1", "--codec", "png"]);
+    let region = (60, 100, 640, 480);
+    let (shot, state) = site.show("shared.vtpk", region, 1 << 18);
+    assert_eq!(state["errors"], serde_json::json!([]), "{state}");
+    let verdict = judge(&source, region, &shot);
+    eprintln!("shared.vtpk, region {region:?}: {}", verdict.as_ref().unwrap_or_else(|e| e));
+    verdict.unwrap();
+    // What the page loaded, against the pack's index and nginx's log: constant tiles come from
+    // the index (no payload to read), and each distinct payload the view needed reached the
+    // host in exactly one request, however many tiles share it.
+    let p = vortex_pack::Pack::open(site.dir.path().join("shared.vtpk")).unwrap();
+    let (mut constants, mut with_payload, mut payloads) = (0, 0, std::collections::BTreeSet::new());
+    for t in state["loaded"].as_array().unwrap() {
+        let id = vortex_pack::TileId {
+            lod: t[0].as_u64().unwrap() as u32,
+            x: t[1].as_u64().unwrap() as u32,
+            y: t[2].as_u64().unwrap() as u32,
+        };
+        let e = p.entry(p.position(id).unwrap());
+        match e.kind {
+            1 => constants += 1,
+            _ => {
+                with_payload += 1;
+                payloads.insert((e.offset_or_value, e.len as u64));
+            }
+        }
+    }
+    eprintln!(
+        "{constants} constant tiles, {with_payload} with a payload, {} distinct: {}",
+        payloads.len(),
+        state["stats"]
+    );
+    assert!(constants > 0 && payloads.len() < with_payload, "the view has no constant or shared tiles: {state}");
+    assert!(
+        state["stats"]["constants"].as_u64().unwrap() >= constants,
+        "constant tiles not drawn from the index: {state}"
+    );
+    let ranges: Vec<(u64, u64)> = site
+        .nginx
+        .requests()
+        .iter()
+        .filter(|r| r.2.contains("shared.vtpk HTTP/"))
+        .filter_map(|r| {
+            let (a, b) = r.3.strip_prefix("bytes=")?.split_once('-')?;
+            Some((a.parse().ok()?, b.parse().ok()?))
+        })
+        .collect();
+    for (offset, len) in payloads {
+        let covering = ranges.iter().filter(|(a, b)| *a <= offset && offset + len - 1 <= *b).count();
+        assert_eq!(covering, 1, "the payload at {offset} ({len} bytes) was fetched {covering} times: {ranges:?}");
+    }
+}

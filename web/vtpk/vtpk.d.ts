@@ -8,10 +8,12 @@ export class VtpkError extends Error {
 /** CRC-32C (Castagnoli) of `bytes`, continuing from `crc`. */
 export function crc32c(bytes: Uint8Array, crc?: number): number;
 
-/** Requests and bytes fetched so far. */
+/** Requests and bytes fetched so far; payloads read (a shared one once); constant tiles drawn. */
 export interface VtpkStats {
   requests: number;
   bytes: number;
+  payloads?: number;
+  constants?: number;
 }
 
 export interface VtpkLevel {

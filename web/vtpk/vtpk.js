@@ -79,8 +79,9 @@ export function crc32c(bytes, crc = 0) {
 const hex = (v) => "0x" + (v >>> 0).toString(16).padStart(8, "0");
 
 /**
- * Counts of what was fetched, for measuring.
- * @typedef {{ requests: number, bytes: number }} VtpkStats
+ * Counts for measuring: HTTP requests and bytes fetched, payloads read (a shared payload
+ * once), and tiles drawn without a payload (constant, from the index).
+ * @typedef {{ requests: number, bytes: number, payloads?: number, constants?: number }} VtpkStats
  */
 
 /**
@@ -329,11 +330,13 @@ export class VtpkPack {
     /** The index CRC: null until every block is here, then whether it matched. @type {boolean | null} */
     this.indexChecked = null;
     this.metadata = {};
+    this.payloadReads = 0;
+    this.constants = 0;
   }
 
   /** What was fetched so far. @returns {VtpkStats} */
   get stats() {
-    return this.reader.stats;
+    return { ...this.reader.stats, payloads: this.payloadReads, constants: this.constants };
   }
 
   /** @param {string} codec @returns {never} */
@@ -496,6 +499,7 @@ export class VtpkPack {
     const key = `${entry.offset}:${entry.len}`;
     let bytes = this.payloads.get(key);
     if (!bytes) {
+      this.payloadReads++;
       bytes = this.reader.read(entry.offset, entry.offset + entry.len).then((b) => {
         const crc = crc32c(b);
         if (crc !== entry.crc) {
@@ -527,6 +531,7 @@ export class VtpkPack {
     const ctx = /** @type {CanvasRenderingContext2D} */ (canvas.getContext("2d"));
     if (entry.kind === KIND.absent) return { canvas, absent: true };
     if (entry.kind === KIND.constant) {
+      this.constants++;
       const [r, g, b, a] = this.rgba(entry.value, 0);
       ctx.fillStyle = `rgba(${r},${g},${b},${a / 255})`;
       ctx.fillRect(0, 0, size, size);
