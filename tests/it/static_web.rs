@@ -343,18 +343,21 @@ fn vtpk_js_refuses_damaged_headers() {
         ("index bit", flipped(header.index_offset as usize + 3), "index is damaged"),
         ("level table bit", flipped(192 + 16), "level 0"),
         ("no ranges", bytes.clone(), "ignored the Range header"),
+        ("hidden range", bytes.clone(), "Access-Control-Expose-Headers"),
     ];
     let mut list = Vec::new();
     for (i, (name, data, expected)) in cases.iter().enumerate() {
         let path = dir.path().join(format!("case{i}.vtpk"));
         std::fs::write(&path, data).unwrap();
+        let (ranges, hidden) = (*name != "no ranges", *name == "hidden range");
         list.push(
-            serde_json::json!({ "name": name, "path": path, "expected": expected, "ranges": *name != "no ranges" }),
+            serde_json::json!({ "name": name, "path": path, "expected": expected, "ranges": ranges, "hidden": hidden }),
         );
     }
     let module = Path::new(env!("CARGO_MANIFEST_DIR")).join("web/vtpk/vtpk.js");
-    // The fake host: 206 with Content-Range for a range, the whole file with 200 when it
-    // ignores ranges, 416 past the end; the index is read whole so that its CRC is checked.
+    // The fake host: 206 with Content-Range for a range (hidden from the page for one case),
+    // the whole file with 200 when it ignores ranges, 416 past the end; the index is read
+    // whole so that its CRC is checked.
     let script = format!(
         r#"import {{ readFileSync }} from "node:fs";
 import {{ VtpkPack }} from {module:?};
@@ -366,8 +369,9 @@ for (const c of {cases}) {{
     if (!c.ranges) return new Response(file, {{ status: 200 }});
     if (a >= file.length) return new Response("", {{ status: 416 }});
     const end = Math.min(b + 1, file.length);
+    // "hidden": another origin that does not expose Content-Range to the page.
     return new Response(file.subarray(a, end), {{ status: 206,
-      headers: {{ "Content-Range": `bytes ${{a}}-${{end - 1}}/${{file.length}}` }} }});
+      headers: c.hidden ? {{}} : {{ "Content-Range": `bytes ${{a}}-${{end - 1}}/${{file.length}}` }} }});
   }};
   try {{
     const pack = await VtpkPack.open("http://host/" + c.name + ".vtpk", {{ fetch, wholeIndexUpTo: 1 << 20 }});

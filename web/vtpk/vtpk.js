@@ -177,9 +177,15 @@ class RangeReader {
       );
     }
     if (reply.status !== 206) throw new VtpkError(`${this.url}: bytes ${start}-${end - 1}: HTTP ${reply.status}`);
-    const range = /^bytes (\d+)-(\d+)\/(\d+)$/.exec(reply.headers.get("Content-Range") ?? "");
+    const header = reply.headers.get("Content-Range");
+    if (header === null) {
+      throw new VtpkError(
+        `${this.url}: a 206 reply without Content-Range (a host on another origin must expose it: Access-Control-Expose-Headers: Content-Range)`,
+      );
+    }
+    const range = /^bytes (\d+)-(\d+)\/(\d+)$/.exec(header);
     if (!range || Number(range[1]) !== start) {
-      throw new VtpkError(`${this.url}: asked for bytes ${start}-${end - 1}, got Content-Range "${reply.headers.get("Content-Range")}"`);
+      throw new VtpkError(`${this.url}: asked for bytes ${start}-${end - 1}, got Content-Range "${header}"`);
     }
     const total = Number(range[3]);
     if (this.length >= 0 && total !== this.length) {
