@@ -24,6 +24,7 @@ mod shard;
 mod slurm;
 mod sources;
 mod stability;
+mod static_web;
 mod stripes;
 mod view;
 mod viewers;

@@ -2,6 +2,8 @@
 //! pyramid (the oracle the streaming pipeline must match byte for byte).
 
 pub mod cli;
+pub mod nginx;
+pub mod picture;
 pub mod server;
 pub mod webdriver;
 

@@ -71,6 +71,11 @@ impl Browser {
         }
     }
 
+    /// Runs `script` (a function body) in the page and returns what it returns.
+    pub fn execute(&self, script: &str) -> Value {
+        self.call("POST", &self.path("execute/sync"), &json!({ "script": script, "args": [] }))
+    }
+
     /// A PNG screenshot of the first element matching `css`.
     pub fn screenshot(&self, css: &str) -> Vec<u8> {
         let element = self.call("POST", &self.path("element"), &json!({ "using": "css selector", "value": css }));

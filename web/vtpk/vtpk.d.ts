@@ -1,0 +1,89 @@
+// Types for vtpk.js (which carries the same in JSDoc, checked with `// @ts-check`).
+
+/** An error about a pack, naming the URL and the field or tile. */
+export class VtpkError extends Error {
+  constructor(message: string);
+}
+
+/** CRC-32C (Castagnoli) of `bytes`, continuing from `crc`. */
+export function crc32c(bytes: Uint8Array, crc?: number): number;
+
+/** Requests and bytes fetched so far; payloads read (a shared one once); constant tiles drawn. */
+export interface VtpkStats {
+  requests: number;
+  bytes: number;
+  payloads?: number;
+  constants?: number;
+}
+
+export interface VtpkLevel {
+  tilesW: number;
+  tilesH: number;
+  firstEntry: number;
+  width: number;
+  height: number;
+}
+
+export interface VtpkEntry {
+  /** 0 absent, 1 constant, 2 raw, 4 png, 5 jpeg. */
+  kind: number;
+  offset: number;
+  len: number;
+  crc: number;
+  value: Uint8Array;
+}
+
+export interface VtpkOptions {
+  /** The fetch to use (default: the page's). */
+  fetch?: typeof fetch;
+  /** Extra request headers. */
+  headers?: Record<string, string>;
+  /** Read and check the whole index first when it is at most this many bytes (default 32768). */
+  wholeIndexUpTo?: number;
+  /** Merge reads less than this many bytes apart (default 4096, or the payload alignment if larger). */
+  gap?: number;
+  /** Never merge reads into a request longer than this (default 4 MiB). */
+  maxSpan?: number;
+  /** Gather reads until none has come for this many milliseconds (default 20). */
+  wait?: number;
+  /** But never hold a read back longer than this (default 60). */
+  maxWait?: number;
+  /** Called with each tile (or index) that fails its checks. */
+  onError?: (error: VtpkError) => void;
+  /** The OpenSeadragon namespace (default: the global one). */
+  OpenSeadragon?: unknown;
+}
+
+/** An open pack: header, levels, metadata; tiles on demand. */
+export class VtpkPack {
+  static open(url: string, options?: VtpkOptions): Promise<VtpkPack>;
+  readonly url: string;
+  readonly width: number;
+  readonly height: number;
+  readonly tileSize: number;
+  readonly border: number;
+  readonly levelCount: number;
+  readonly channels: number;
+  readonly sampleBytes: number;
+  readonly levels: VtpkLevel[];
+  readonly metadata: Record<string, unknown>;
+  /** Whether the level table and index matched their CRC (null until all of it was read). */
+  readonly indexChecked: boolean | null;
+  readonly stats: VtpkStats;
+  entry(lod: number, x: number, y: number): Promise<VtpkEntry>;
+  tile(lod: number, x: number, y: number): Promise<{ canvas: HTMLCanvasElement | OffscreenCanvas; absent: boolean }>;
+}
+
+/** An OpenSeadragon.TileSource showing a pack, with the pack and the errors met. */
+export interface VtpkOpenSeadragonSource {
+  vtpk: VtpkPack;
+  errors: string[];
+  minLevel: number;
+  maxLevel: number;
+  [key: string]: unknown;
+}
+
+export class VtpkTileSource {
+  /** Opens the pack at `url` and gives a tile source for `OpenSeadragon({tileSources})`. */
+  static open(url: string, options?: VtpkOptions): Promise<VtpkOpenSeadragonSource>;
+}
