@@ -12,17 +12,20 @@
 //! unspecified, or any after the alpha) are dropped, and associated (premultiplied) alpha is
 //! turned into straight alpha ([`unpremultiply`] says how it rounds).
 
+mod lzw;
 mod strips_ahead;
 
 use std::fs::File;
 use std::io::BufReader;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use tiff::decoder::{ChunkType, Decoder, Limits};
 use tiff::tags::{CompressionMethod, PhotometricInterpretation, PlanarConfiguration, Predictor, SampleFormat, Tag};
 use tiff::{ColorType, TiffError};
 
+use self::lzw::{LzwStrips, StripReader};
 use self::strips_ahead::{DecodeStrip, StripsAhead};
 use super::{ImageHeader, RowSource};
 use crate::error::{Result, TilerError};
@@ -62,6 +65,8 @@ pub struct TiffSource {
     /// decoded ahead (0: on this thread).
     ahead_workers: usize,
     ahead: Option<StripsAhead>,
+    /// LZW strips the workers decode with our own decoder rather than the crate's.
+    lzw: Option<Arc<LzwStrips>>,
     max_memory: u64,
 }
 
@@ -178,6 +183,10 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         }
         _ => 0,
     };
+    let lzw = match compression == CompressionMethod::LZW && stored == file_samples {
+        true => lzw_strips(path, &mut decoder, chunking, row_bytes, stored, layout.depth)?.map(Arc::new),
+        false => None,
+    };
 
     Ok(Box::new(TiffSource {
         path: path.to_path_buf(),
@@ -200,8 +209,35 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         columns: None,
         ahead_workers,
         ahead: None,
+        lzw,
         max_memory,
     }))
+}
+
+/// [`LzwStrips`] of an LZW TIFF stored in strips whose samples are delivered as they are
+/// stored (no extra samples dropped, no WhiteIsZero inversion).
+fn lzw_strips(
+    path: &Path,
+    decoder: &mut Decoder<BufReader<File>>,
+    chunking: Chunking,
+    row_bytes: u64,
+    samples: usize,
+    depth: Depth,
+) -> Result<Option<LzwStrips>> {
+    let Chunking::Strips { .. } = chunking else { return Ok(None) };
+    let tag = |decoder: &mut Decoder<BufReader<File>>, t| {
+        decoder.find_tag_unsigned::<u16>(t).map_err(|e| open_error(path, e))
+    };
+    if tag(decoder, Tag::PhotometricInterpretation)? == Some(0) {
+        return Ok(None);
+    }
+    let predictor = tag(decoder, Tag::Predictor)?.unwrap_or(1) == 2;
+    let sixteen_bit = depth == Depth::U16;
+    let offsets = decoder.get_tag_u64_vec(Tag::StripOffsets).map_err(|e| open_error(path, e))?;
+    let counts = decoder.get_tag_u64_vec(Tag::StripByteCounts).map_err(|e| open_error(path, e))?;
+    let big_endian = decoder.byte_order() == tiff::tags::ByteOrder::BigEndian;
+    let row_bytes = row_bytes as usize;
+    Ok(Some(LzwStrips { offsets, counts, row_bytes, samples, sixteen_bit, big_endian, predictor }))
 }
 
 /// A decoder of the TIFF's first image, its buffers bounded by `max_memory`.
@@ -482,6 +518,11 @@ impl TiffSource {
     fn start_ahead(&self, first: u32, row_bytes: usize) -> std::result::Result<StripsAhead, String> {
         let decoders = (0..self.ahead_workers)
             .map(|_| -> std::result::Result<DecodeStrip, String> {
+                if let Some(strips) = &self.lzw {
+                    let file = File::open(&self.path).map_err(|e| TilerError::io(&self.path, e).to_string())?;
+                    let mut reader = StripReader { file, strips: Arc::clone(strips), raw: Vec::new() };
+                    return Ok(Box::new(move |strip, buffer: &mut Vec<u8>| reader.read(strip, buffer)));
+                }
                 let mut decoder = open_decoder(&self.path, self.max_memory).map_err(|e| e.to_string())?;
                 Ok(Box::new(move |strip, buffer: &mut Vec<u8>| guarded(|| decoder.read_chunk_bytes(strip, buffer))))
             })
