@@ -411,3 +411,30 @@ fn split_says_what_it_did_and_keeps_the_profile_when_asked() {
     let out = run(&["split", s(&jpg), "-o", s(&dir.path().join("dzi")), "--layout", "dzi", "--keep-icc"]);
     fails_with(&out, &["--keep-icc", "dzi"]);
 }
+
+#[test]
+fn a_rotated_tiff_larger_than_max_memory_is_read_in_passes() {
+    if !have_tools() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("big.png");
+    write_png(&png, 96, 64, RGB8);
+    let tif = dir.path().join("big.tif");
+    tool("vips", &["tiffsave", s(&png), s(&tif), "--tile", "--tile-width", "16", "--tile-height", "16"]);
+    // 96x64 RGB is 18 KiB; 7 KiB of --max-memory holds a third of it.
+    let max_memory = 7 * 1024;
+    for (orientation, passes) in [(6u16, "3 passes"), (3, "3 passes"), (2, "streamed")] {
+        let path = dir.path().join(format!("big-{orientation}.tif"));
+        std::fs::copy(&tif, &path).unwrap();
+        tag_orientation(&path, orientation);
+        let (source, _) = source::open_with(&path, OpenOptions::shown(max_memory)).unwrap();
+        assert!(source.describe().contains(passes), "{}", source.describe());
+        let theirs = dir.path().join("vips.png");
+        tool("vips", &["autorot", s(&path), s(&theirs)]);
+        let (tw, th, want) = png_of(&theirs);
+        let (w, h, _, got) = read_all(source);
+        // Lossless on both sides: the same texels.
+        assert_eq!((w, h, got), (tw, th, want), "orientation {orientation}");
+    }
+}
