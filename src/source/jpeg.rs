@@ -285,7 +285,9 @@ fn scan_markers(reader: &mut BufReader<File>, header: &mut Header) -> std::io::R
                     0xE1 if data.starts_with(b"Exif\0\0") && header.orientation.is_none() => {
                         header.orientation = Some(orient::from_exif(&data));
                     }
-                    0xE2 if data.starts_with(b"ICC_PROFILE\0") && data.len() >= 14 => {
+                    // A profile has at most 255 chunks (the sequence number is one byte):
+                    // more is not a profile, and is not kept (memory stays bounded).
+                    0xE2 if data.starts_with(b"ICC_PROFILE\0") && data.len() >= 14 && header.icc_chunks.len() < 255 => {
                         header.icc_chunks.push((data[12], data[14..].to_vec()));
                     }
                     0xEE if data.starts_with(b"Adobe") => header.adobe = true,
