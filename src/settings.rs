@@ -387,6 +387,7 @@ pub fn describe(l: &Layout, stored: PixelLayout, opts: &SplitOptions, names: &Fi
         zstd_level: codec.zstd_level,
         bc7_effort: codec.bc7_effort,
         filter: Some(opts.filter.name().into()),
+        icc_profile: None,
     }
 }
 

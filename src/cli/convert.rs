@@ -98,7 +98,7 @@ pub fn run(a: ConvertArgs) -> Result<()> {
     )?;
     let missing = source.missing_log();
     let result =
-        tile(Box::new(source) as Box<dyn RowSource>, &a.input, a.output_filename_format.clone(), &a.out, started);
+        tile(Box::new(source) as Box<dyn RowSource>, &a.input, a.output_filename_format.clone(), &a.out, started, None);
     let missing = missing.lock().map(|m| m.clone()).unwrap_or_default();
     if !missing.is_empty() {
         eprintln!(

@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use base64::Engine;
 
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
@@ -38,6 +39,19 @@ pub struct SplitArgs {
     /// subdirectories [default: lod%1$02s-x%2$04s-y%3$04s.<ext>].
     #[arg(long, visible_alias = "ff", value_name = "PATTERN")]
     filename_format: Option<String>,
+
+    /// Keep the stored row order: by default an EXIF orientation (JPEG, TIFF, PNG eXIf) is
+    /// applied, so the tiles show the image as viewers and `vips autorot` do (orientations
+    /// other than a left-right mirror hold the image, or read it in passes, within
+    /// --max-memory).
+    #[arg(long)]
+    no_autorotate: bool,
+
+    /// Keep the texels in the colours of the input's ICC profile, and the profile in
+    /// info.json (base64, `iccProfile`), instead of converting them to sRGB [default: convert:
+    /// browsers show untagged tiles as sRGB, and the linear-light LOD filters assume sRGB].
+    #[arg(long)]
+    keep_icc: bool,
 
     #[command(flatten)]
     out: OutputArgs,
@@ -242,12 +256,15 @@ impl CodecArgs {
 pub fn run(a: SplitArgs) -> Result<()> {
     let started = Instant::now();
     let input = a.input.or(a.input_flag).context("an input image is required")?;
-    let source = source::open(&input, a.out.max_memory)?;
-    tile(source, &input, a.filename_format, &a.out, started)
+    let options =
+        source::OpenOptions { max_memory: a.out.max_memory, autorotate: !a.no_autorotate, keep_icc: a.keep_icc };
+    let (source, kept_icc) = source::open_with(&input, options)?;
+    tile(source, &input, a.filename_format, &a.out, started, kept_icc)
 }
 
 /// Runs the pipeline from `source` into the output `out` names, with the progress bar and
-/// the summary line. `names` is the output filename format flag.
+/// the summary line. `names` is the output filename format flag; `kept_icc` the profile the
+/// texels are in (`--keep-icc`), for info.json.
 impl OutputArgs {
     pub fn background(&self) -> Option<Background> {
         self.background
@@ -264,7 +281,13 @@ pub fn tile(
     names: Option<String>,
     a: &OutputArgs,
     started: Instant,
+    kept_icc: Option<Vec<u8>>,
 ) -> Result<()> {
+    if let (Some(viewer), Some(_)) = (a.layout.viewer(), &kept_icc) {
+        bail!(
+            "--keep-icc keeps the profile in info.json (--layout vortex, or a pack); --layout {viewer} has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
+        );
+    }
     if let Some(viewer) = a.layout.viewer() {
         return tile_for_viewer(source, input, names, a, viewer, started);
     }
@@ -336,7 +359,8 @@ pub fn tile(
     }
     let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
     limits.check_pyramid(&layout, product == Product::Pack)?;
-    let info = settings::describe(&layout, stored, &opts, &names);
+    let mut info = settings::describe(&layout, stored, &opts, &names);
+    info.icc_profile = kept_icc.map(|icc| base64::engine::general_purpose::STANDARD.encode(icc));
     // Said once everything is checked, just before the work starts.
     if let (Some(path), false) = (&info_path, a.run.quiet) {
         let changed = settings::changed_by_file(&requested, source.layout(), source.width(), source.height(), &info);

@@ -24,7 +24,8 @@ use mozjpeg::decompress::DecompressStarted;
 use mozjpeg::{ColorSpace, Decompress};
 use mozjpeg_sys::{jpeg_common_struct, jpeg_error_mgr};
 
-use super::{ImageHeader, RowSource};
+use super::icc::Cmyk;
+use super::{Embedded, ImageHeader, RowSource, orient};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 
@@ -40,6 +41,9 @@ pub struct JpegSource {
     whole_coefficients: Option<u64>,
     /// libjpeg has reached the end of the file (harmless unless data turns out to be missing).
     hit_eof: bool,
+    /// A CMYK (or YCCK) image: libjpeg's CMYK rows and their conversion to RGB.
+    cmyk: Option<(Cmyk, Vec<u8>)>,
+    embedded: Embedded,
 }
 
 /// A started libjpeg decompressor reading the file.
@@ -60,6 +64,22 @@ struct Header {
     components: u8,
     /// Components in the first scan (fewer than `components`: non-interleaved, multi-scan).
     first_scan_components: Option<u8>,
+    /// The first APP1 Exif block's orientation.
+    orientation: Option<orient::Orientation>,
+    /// APP2 ICC_PROFILE chunks: (sequence number, bytes).
+    icc_chunks: Vec<(u8, Vec<u8>)>,
+    /// An Adobe APP14 marker: CMYK is stored inverted, as Photoshop writes it.
+    adobe: bool,
+}
+
+impl Header {
+    /// The ICC profile: the APP2 chunks joined in their order (a profile missing a chunk
+    /// fails when LittleCMS opens it).
+    fn icc(&self) -> Option<Vec<u8>> {
+        let mut chunks: Vec<&(u8, Vec<u8>)> = self.icc_chunks.iter().collect();
+        chunks.sort_by_key(|(seq, _)| *seq);
+        (!chunks.is_empty()).then(|| chunks.iter().flat_map(|(_, b)| b.iter().copied()).collect())
+    }
 }
 
 pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
@@ -105,11 +125,15 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
                 TilerError::decode(path, format!("not a readable JPEG (truncated or damaged header?): {e}"))
             })?;
         let (width, height) = (decompress.width() as u64, decompress.height() as u64);
-        let channels = match decompress.color_space() {
-            ColorSpace::JCS_GRAYSCALE => Channels::Grey,
-            ColorSpace::JCS_YCbCr | ColorSpace::JCS_RGB => Channels::Rgb,
-            ColorSpace::JCS_CMYK => return Err(unsupported_colour(path, "CMYK")),
-            ColorSpace::JCS_YCCK => return Err(unsupported_colour(path, "YCCK (Adobe CMYK)")),
+        let (channels, cmyk) = match decompress.color_space() {
+            ColorSpace::JCS_GRAYSCALE => (Channels::Grey, None),
+            ColorSpace::JCS_YCbCr | ColorSpace::JCS_RGB => (Channels::Rgb, None),
+            // libjpeg turns YCCK into CMYK; the profile (or the default one) into sRGB.
+            ColorSpace::JCS_CMYK | ColorSpace::JCS_YCCK => {
+                let cmyk = Cmyk::new(path, header.icc().as_deref(), header.adobe)?;
+                let row = vec![0u8; decompress.width() * 4];
+                (Channels::Rgb, Some((cmyk, row)))
+            }
             other => {
                 let n = decompress.components().len();
                 return Err(unsupported_colour(path, &format!("{n}-component ({other:?})")));
@@ -138,14 +162,15 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
             None
         };
         // Reads every scan of a multi-scan image; fails here on corrupt or truncated data.
-        let started = match channels {
-            Channels::Grey => decompress.grayscale(),
+        let started = match (channels, &cmyk) {
+            (_, Some(_)) => decompress.to_colorspace(ColorSpace::JCS_CMYK),
+            (Channels::Grey, None) => decompress.grayscale(),
             _ => decompress.rgb(),
         }
         .map_err(|e| TilerError::decode(path, format!("libjpeg could not start decoding: {e}")))?;
-        Ok((started, width, height, layout, whole))
+        Ok((started, width, height, layout, whole, cmyk))
     }));
-    let (started, width, height, layout, whole_coefficients) = match started {
+    let (started, width, height, layout, whole_coefficients, cmyk) = match started {
         Ok(result) => result?,
         Err(payload) => {
             let message = panic_message(payload);
@@ -164,13 +189,19 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         decoder: Some(Libjpeg(started)),
         whole_coefficients,
         hit_eof: HIT_EOF.with(Cell::get),
+        // A CMYK image's profile is used up turning it into sRGB.
+        embedded: Embedded {
+            orientation: header.orientation.unwrap_or_default(),
+            icc: if cmyk.is_some() { None } else { header.icc() },
+        },
+        cmyk,
     }))
 }
 
 fn unsupported_colour(path: &Path, what: &str) -> TilerError {
     TilerError::unsupported(
         path,
-        format!("{what} JPEG is not supported (greyscale and YCbCr/RGB are); convert it to RGB first"),
+        format!("{what} JPEG is not supported (greyscale, YCbCr/RGB and CMYK/YCCK are); convert it to RGB first"),
     )
 }
 
@@ -245,6 +276,23 @@ fn scan_markers(reader: &mut BufReader<File>, header: &mut Header) -> std::io::R
                     header.first_scan_components = Some(read_u8(reader)?);
                 }
                 return Ok(());
+            }
+            // APP1 (Exif), APP2 (ICC_PROFILE), APP14 (Adobe): at most 65533 bytes each.
+            0xE1 | 0xE2 | 0xEE => {
+                let mut data = vec![0u8; body];
+                reader.read_exact(&mut data)?;
+                match marker {
+                    0xE1 if data.starts_with(b"Exif\0\0") && header.orientation.is_none() => {
+                        header.orientation = Some(orient::from_exif(&data));
+                    }
+                    // A profile has at most 255 chunks (the sequence number is one byte):
+                    // more is not a profile, and is not kept (memory stays bounded).
+                    0xE2 if data.starts_with(b"ICC_PROFILE\0") && data.len() >= 14 && header.icc_chunks.len() < 255 => {
+                        header.icc_chunks.push((data[12], data[14..].to_vec()));
+                    }
+                    0xEE if data.starts_with(b"Adobe") => header.adobe = true,
+                    _ => {}
+                }
             }
             _ => skip(reader, body)?,
         }
@@ -389,11 +437,18 @@ impl RowSource for JpegSource {
             return Err(row_error("an earlier row failed to decode".into()));
         };
         HIT_EOF.with(|eof| eof.set(false));
-        let result = catch_unwind(AssertUnwindSafe(|| decoder.0.read_scanlines_into::<u8>(out).map(|_| ())));
+        let into = match &mut self.cmyk {
+            Some((_, cmyk_row)) => cmyk_row.as_mut_slice(),
+            None => &mut *out,
+        };
+        let result = catch_unwind(AssertUnwindSafe(|| decoder.0.read_scanlines_into::<u8>(into).map(|_| ())));
         // libjpeg may reach the end of the file a few rows before it runs out of data.
         self.hit_eof |= HIT_EOF.with(Cell::get);
         let message = match result {
             Ok(Ok(())) => {
+                if let Some((cmyk, cmyk_row)) = &self.cmyk {
+                    cmyk.convert(cmyk_row, out);
+                }
                 self.next += 1;
                 return Ok(());
             }
@@ -406,13 +461,21 @@ impl RowSource for JpegSource {
         Err(TilerError::DecodeRow { path: self.path.clone(), row: y, message })
     }
 
+    fn embedded(&self) -> Embedded {
+        self.embedded.clone()
+    }
+
     fn describe(&self) -> String {
-        match self.whole_coefficients {
+        let how = match self.whole_coefficients {
             None => "jpeg, streamed by scanline (libjpeg-turbo)".into(),
             Some(bytes) => format!(
                 "jpeg, multi-scan: {} MiB of coefficients held, then streamed by scanline",
                 bytes.div_ceil(1 << 20)
             ),
+        };
+        match &self.cmyk {
+            Some((cmyk, _)) => format!("{how}; {}", cmyk.note),
+            None => how,
         }
     }
 }
@@ -599,16 +662,28 @@ mod tests {
     }
 
     #[test]
-    fn cmyk_and_ycck_are_unsupported() {
+    fn cmyk_and_ycck_decode_to_rgb() {
+        if !Path::new(crate::source::icc::DEFAULT_CMYK_PROFILE).is_file() {
+            eprintln!("note: skipped: no default CMYK profile (apt-get install libgs-common)");
+            return;
+        }
         let dir = tempfile::tempdir().unwrap();
         let (w, h) = (32, 24);
-        for (name, colour, needle) in [("cmyk", Jc::Cmyk, "CMYK"), ("ycck", Jc::CmykAsYcck, "YCCK")] {
+        let mut decoded = Vec::new();
+        for (name, colour) in [("cmyk", Jc::Cmyk), ("ycck", Jc::CmykAsYcck)] {
             let path = dir.path().join(format!("{name}.jpg"));
             write_jpeg(&path, &pattern(w, h, 4), w, h, colour, &PLAIN);
-            let err = open(&path, 1 << 30).err().unwrap();
-            assert!(matches!(err, TilerError::Unsupported { .. }), "{err}");
-            assert!(err.to_string().contains(needle), "{err}");
+            let mut source = open(&path, 1 << 30).unwrap();
+            assert_eq!(source.layout(), PixelLayout::new(Channels::Rgb, Depth::U8));
+            assert!(source.describe().contains("CMYK") && source.describe().contains("sRGB"), "{}", source.describe());
+            decoded.push(read_all(source.as_mut()).unwrap());
         }
+        // The same CMYK texels stored two ways, quantised in different colour spaces: close on
+        // average (a stored-inverted or swapped channel would be off by ~100), apart by tens of
+        // levels at the pattern's hard edges, where K's ringing differs.
+        let (a, b) = (&decoded[0], &decoded[1]);
+        let mean = a.iter().zip(b).map(|(a, b)| a.abs_diff(*b) as f64).sum::<f64>() / a.len() as f64;
+        assert!(mean < 3.0, "CMYK and YCCK differ by {mean} on average");
     }
 
     #[test]

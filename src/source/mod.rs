@@ -9,7 +9,9 @@
 //! tile directory this tool wrote, a pack, Deep Zoom, IIIF, z/y/x or z/x/y, in a directory or
 //! a zip archive) read a row of tiles at a time.
 
+pub mod icc;
 mod jpeg;
+pub mod orient;
 mod png;
 mod pnm;
 pub mod read_ahead;
@@ -74,6 +76,66 @@ pub trait RowSource: Send {
     fn read_columns(&mut self, _columns: std::ops::Range<u32>) -> bool {
         false
     }
+    /// The EXIF orientation and ICC profile the file carries (applied by [`open_with`], not by
+    /// the decoder: its rows are the stored ones).
+    fn embedded(&self) -> Embedded {
+        Embedded::default()
+    }
+}
+
+/// What a file says about how its stored texels are to be shown.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Embedded {
+    pub orientation: orient::Orientation,
+    /// The ICC profile, whole (JPEG's APP2 chunks joined).
+    pub icc: Option<Vec<u8>>,
+}
+
+/// How [`open_with`] presents an image file.
+#[derive(Clone, Copy, Debug)]
+pub struct OpenOptions {
+    pub max_memory: u64,
+    /// Apply the EXIF orientation (`--no-autorotate` turns it off).
+    pub autorotate: bool,
+    /// Keep the pixels as stored instead of converting an ICC profile to sRGB (`--keep-icc`).
+    pub keep_icc: bool,
+}
+
+impl OpenOptions {
+    /// Orientation applied and colours converted to sRGB, as viewers show the image.
+    pub fn shown(max_memory: u64) -> OpenOptions {
+        OpenOptions { max_memory, autorotate: true, keep_icc: false }
+    }
+}
+
+/// A source as [`open_with`] presents it, and the ICC profile its texels are in when kept.
+pub type Opened = (Box<dyn RowSource>, Option<Vec<u8>>);
+
+/// Opens `path` as viewers show it (or as `opts` says): its orientation applied and its ICC
+/// profile converted to sRGB. Returns the profile when `keep_icc` keeps it, for the output to
+/// carry.
+pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
+    let mut source = open(path, opts.max_memory)?;
+    let Embedded { orientation, icc } = source.embedded();
+    let mut kept = None;
+    if let Some(icc) = icc {
+        if opts.keep_icc {
+            source = Box::new(icc::Described {
+                inner: source,
+                note: format!("ICC profile kept ({} bytes, --keep-icc): pixels as stored", icc.len()),
+            });
+            kept = Some(icc);
+        } else {
+            source = icc::to_srgb(path, source, &icc)?;
+        }
+    }
+    if opts.autorotate {
+        source = orient::apply(path, source, orientation, opts.max_memory)?;
+    } else if orientation != orient::Orientation::NORMAL {
+        let note = format!("EXIF orientation {} not applied (--no-autorotate)", orientation.value());
+        source = Box::new(icc::Described { inner: source, note });
+    }
+    Ok((source, kept))
 }
 
 /// A file source that rewinds by opening its file again (a decoder from the top: PNG and
@@ -99,6 +161,9 @@ impl RowSource for Reopening {
     }
     fn skip_rows(&mut self, rows: u32) -> Result<()> {
         self.inner.skip_rows(rows)
+    }
+    fn embedded(&self) -> Embedded {
+        self.inner.embedded()
     }
     fn rewind(&mut self) -> Result<()> {
         let again = open_once(&self.path, self.max_memory)?;

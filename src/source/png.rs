@@ -5,7 +5,7 @@ use std::fs::File;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
-use super::{ImageHeader, RowSource, check_whole_fits};
+use super::{Embedded, ImageHeader, RowSource, check_whole_fits, orient};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 
@@ -16,6 +16,7 @@ pub struct PngSource {
     layout: PixelLayout,
     next: u64,
     rows: Rows,
+    embedded: Embedded,
 }
 
 enum Rows {
@@ -46,6 +47,11 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     };
     let layout = PixelLayout::new(channels, depth);
     let (width, height) = (reader.info().width, reader.info().height);
+    // iCCP and eXIf as the decoder found them before the image data.
+    let embedded = Embedded {
+        orientation: reader.info().exif_metadata.as_deref().map(orient::from_exif).unwrap_or_default(),
+        icc: reader.info().icc_profile.as_deref().map(<[u8]>::to_vec),
+    };
     let rows = if reader.info().interlaced {
         check_whole_fits(
             path,
@@ -63,7 +69,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     } else {
         Rows::Streamed(Box::new(reader))
     };
-    Ok(Box::new(PngSource { path: path.to_path_buf(), width, height, layout, next: 0, rows }))
+    Ok(Box::new(PngSource { path: path.to_path_buf(), width, height, layout, next: 0, rows, embedded }))
 }
 
 impl RowSource for PngSource {
@@ -94,6 +100,10 @@ impl RowSource for PngSource {
             }
         }
         Ok(())
+    }
+
+    fn embedded(&self) -> Embedded {
+        self.embedded.clone()
     }
 
     fn describe(&self) -> String {

@@ -54,6 +54,9 @@ pub struct InfoFile {
     /// How LODs were made (`--filter`); absent in files written before it existed (`box`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub filter: Option<String>,
+    /// The source's ICC profile, base64, when `--keep-icc` left the texels in its colours.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub icc_profile: Option<String>,
 }
 
 /// A complete description, as written after a successful run.

@@ -9,6 +9,7 @@
 mod browser;
 mod cli;
 mod codecs;
+mod color;
 mod common;
 mod convert;
 mod docs;

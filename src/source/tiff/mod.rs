@@ -68,6 +68,8 @@ pub struct TiffSource {
     /// LZW strips the workers decode with our own decoder rather than the crate's.
     lzw: Option<Arc<LzwStrips>>,
     max_memory: u64,
+    /// Orientation (274) and ICC profile (34675), which `source::open_with` applies.
+    embedded: super::Embedded,
 }
 
 /// The file offset of every strip of an uncompressed 8-bit TIFF without predictor whose
@@ -118,6 +120,19 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     let (width, height) = decoder.dimensions().map_err(|e| open_error(path, e))?;
     let compression = check_compression(path, &mut decoder)?;
     let Samples { layout, delivered: file_samples, stored, associated } = pixel_layout(path, &mut decoder)?;
+    let embedded = super::Embedded {
+        orientation: decoder
+            .find_tag_unsigned::<u16>(Tag::Orientation)
+            .map_err(|e| open_error(path, e))?
+            .map(super::orient::Orientation::from_tag)
+            .unwrap_or_default(),
+        icc: decoder
+            .find_tag(Tag::IccProfile)
+            .map_err(|e| open_error(path, e))?
+            .map(|v| v.into_u8_vec())
+            .transpose()
+            .map_err(|e| open_error(path, e))?,
+    };
 
     let chunking = match decoder.get_chunk_type() {
         ChunkType::Strip => {
@@ -211,6 +226,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         ahead: None,
         lzw,
         max_memory,
+        embedded,
     }))
 }
 
@@ -558,6 +574,10 @@ fn guarded(read: impl FnOnce() -> tiff::TiffResult<()>) -> std::result::Result<(
 impl RowSource for TiffSource {
     fn header(&self) -> ImageHeader {
         ImageHeader { width: self.width, height: self.height, layout: self.layout }
+    }
+
+    fn embedded(&self) -> super::Embedded {
+        self.embedded.clone()
     }
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
