@@ -23,6 +23,8 @@ use vortex_tiler::{shard, source, split};
 use super::report;
 use super::shard::shard_path;
 
+mod ome_zarr;
+
 #[derive(clap::Args, Debug)]
 pub struct SplitArgs {
     /// Image to cut: PNG, TIFF/BigTIFF, JPEG, PPM/PGM stream in bands; WebP, GIF, BMP, TGA and
@@ -68,7 +70,8 @@ pub struct OutputArgs {
     /// viewer opens as it is: dzi (NAME.dzi + NAME_files/, Deep Zoom as vips dzsave writes
     /// it: OpenSeadragon), iiif (IIIF Image API 3.0 level 0: info.json + static tiles), xyz
     /// ({z}/{x}/{y}, Leaflet/OpenLayers/MapLibre) or google ({z}/{y}/{x} as vips writes it).
-    /// See docs/viewers.md.
+    /// See docs/viewers.md. ome-zarr: an OME-Zarr image for microscopy tools (napari, Fiji,
+    /// QuPath), -o DIR.ome.zarr or -o FILE.ozx (docs/ome-zarr.md).
     #[arg(long, value_enum, default_value = "vortex", value_name = "LAYOUT")]
     layout: OutputLayout,
 
@@ -88,11 +91,14 @@ pub struct OutputArgs {
     #[arg(long, value_name = "URL")]
     iiif_id: Option<String>,
 
+    #[command(flatten)]
+    ome_zarr: ome_zarr::OmeZarrArgs,
+
     /// Side of a stored tile in texels, borders included [default: 128]. LOD 0 has
     /// ceil(width / payload) x ceil(height / payload) pages (payload = tile size - 2 x border),
     /// each LOD half as many per axis (rounding up), down to the first LOD of one page. In a
     /// viewer layout, the viewer's tile side (Deep Zoom: without overlap) [default: dzi 254,
-    /// iiif 512, xyz and google 256].
+    /// iiif 512, xyz and google 256]. In --layout ome-zarr, the chunk side [default: 256].
     #[arg(long, value_name = "N")]
     tile_size: Option<u32>,
 
@@ -170,12 +176,14 @@ pub enum OutputLayout {
     Xyz,
     /// {z}/{y}/{x}.jpg, the order of vips dzsave --layout google.
     Google,
+    /// OME-Zarr (-o DIR.ome.zarr, or -o FILE.ozx zipped): one array per level, chunks = pages.
+    OmeZarr,
 }
 
 impl OutputLayout {
     fn viewer(self) -> Option<Viewer> {
         match self {
-            OutputLayout::Vortex => None,
+            OutputLayout::Vortex | OutputLayout::OmeZarr => None,
             OutputLayout::Dzi => Some(Viewer::Dzi),
             OutputLayout::Iiif => Some(Viewer::Iiif),
             OutputLayout::Xyz => Some(Viewer::Xyz),
@@ -265,6 +273,10 @@ pub fn tile(
     a: &OutputArgs,
     started: Instant,
 ) -> Result<()> {
+    if a.layout == OutputLayout::OmeZarr {
+        return ome_zarr::tile(source, input, names, a, started);
+    }
+    a.ome_zarr.refuse_elsewhere()?;
     if let Some(viewer) = a.layout.viewer() {
         return tile_for_viewer(source, input, names, a, viewer, started);
     }
