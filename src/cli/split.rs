@@ -128,7 +128,11 @@ pub struct OutputArgs {
     /// premultiplied and linear-premultiplied are exact means over the source footprint,
     /// rounded once (linear: in linear light; premultiplied: colour weighted by alpha, no
     /// fringes from transparent texels; box: of the stored values, as vips dzsave averages);
-    /// lanczos3 and mitchell resample each LOD from the previous one.
+    /// lanczos3 and mitchell resample each LOD from the previous one. mode and nearest are for
+    /// label (segmentation) images: each texel is one of its 2x2 block in the previous LOD (the
+    /// most frequent, ties to the first of top-left, top-right, bottom-left, bottom-right; or
+    /// the top-left), so no level holds a value the image does not; lossless codecs only.
+    /// --layout ome-zarr defaults to box.
     #[arg(long, value_enum)]
     filter: Option<Filter>,
 

@@ -410,3 +410,129 @@ fn readers_validate_and_open_every_level_exactly() {
         }
     }
 }
+
+/// A level of a run, from its tiles (border 0): `(width, height, samples)`, one channel.
+fn level_of(tiles: &crate::common::Tiles, layout: &vortex_tiler::layout::Layout, lod: u32) -> (usize, usize, Vec<u16>) {
+    let (w, h) = layout.level_extent(lod);
+    let (w, h, t) = (w as usize, h as usize, layout.tile_size as usize);
+    let mut level = vec![0u16; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            level[y * w + x] = tiles[&(lod, (x / t) as u32, (y / t) as u32)][(y % t) * t + x % t];
+        }
+    }
+    (w, h, level)
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+
+    /// `--filter mode` and `nearest` through the whole pipeline: no level holds a value absent
+    /// from the source; under mode each texel is a most frequent value of its 2x2 block of the
+    /// level above (the first of them in block order), under nearest the block's top-left.
+    #[test]
+    fn label_filters_never_invent_a_label(
+        w in 1u32..90,
+        h in 1u32..90,
+        sixteen in proptest::bool::ANY,
+        mode in proptest::bool::ANY,
+        seed in 0u64..1000,
+    ) {
+        let depth = if sixteen { Depth::U16 } else { Depth::U8 };
+        let labels: &[u16] = if sixteen { &[0, 7, 300, 40000, 65535] } else { &[0, 3, 128, 255] };
+        let mut image = Image::random(w, h, PixelLayout::new(Channels::Grey, depth), seed);
+        // Few labels in patches, so that blocks hold repeated values and ties.
+        for v in image.samples.iter_mut() {
+            *v = labels[*v as usize % labels.len()];
+        }
+        for (i, v) in image.samples.clone().iter().enumerate() {
+            if i % 3 == 0 && i + 1 < image.samples.len() {
+                image.samples[i + 1] = *v;
+            }
+        }
+        let filter = if mode { vortex_tiler::pyramid::Filter::Mode } else { vortex_tiler::pyramid::Filter::Nearest };
+        let mut opts = crate::common::png_options(16, 0, vortex_tiler::background::Background::Edge);
+        opts.filter = filter;
+        let (summary, tiles) = crate::common::run_pipeline(&image, &opts, 2);
+        let layout = summary.layout;
+        let present: std::collections::BTreeSet<u16> = image.samples.iter().copied().collect();
+        let mut above = (w as usize, h as usize, image.samples.clone());
+        for lod in 0..layout.lod_count {
+            let (lw, lh, level) = level_of(&tiles, &layout, lod);
+            for v in &level {
+                proptest::prop_assert!(present.contains(v), "level {} holds {}, absent from the source", lod, v);
+            }
+            if lod == 0 {
+                proptest::prop_assert_eq!(&level, &image.samples);
+            } else {
+                let (aw, ah, prev) = &above;
+                for y in 0..lh {
+                    for x in 0..lw {
+                        let block: Vec<u16> = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                            .iter()
+                            .map(|(dx, dy)| (2 * x + dx, 2 * y + dy))
+                            .filter(|(bx, by)| bx < aw && by < ah)
+                            .map(|(bx, by)| prev[by * aw + bx])
+                            .collect();
+                        let count = |v: u16| block.iter().filter(|b| **b == v).count();
+                        let most = block.iter().map(|v| count(*v)).max().unwrap();
+                        let expect = match mode {
+                            true => *block.iter().find(|v| count(**v) == most).unwrap(),
+                            false => block[0],
+                        };
+                        proptest::prop_assert_eq!(level[y * lw + x], expect, "level {} ({}, {}) of block {:?}", lod, x, y, block);
+                    }
+                }
+            }
+            above = (lw, lh, level);
+        }
+    }
+}
+
+/// A 16-bit label image through `--layout ome-zarr --filter mode`: the levels hold only its
+/// labels, and the multiscales name the filter.
+#[test]
+fn label_image_to_ome_zarr_with_mode() {
+    let dir = tempfile::tempdir().unwrap();
+    let grey16 = PixelLayout::new(Channels::Grey, Depth::U16);
+    let mut image = Image::random(97, 61, grey16, 3);
+    for (i, v) in image.samples.iter_mut().enumerate() {
+        let (x, y) = (i % 97, i / 97);
+        // Objects: squares of 12 texels, each a label from the random field.
+        *v = [1, 500, 9000, 65000][(x / 12 + 3 * (y / 12) + (*v as usize % 2)) % 4];
+    }
+    let source = dir.path().join("labels.png");
+    write_png(&source, &image);
+    let out = dir.path().join("labels.ome.zarr");
+    ok(&[
+        "split",
+        s(&source),
+        "--layout",
+        "ome-zarr",
+        "--filter",
+        "mode",
+        "-o",
+        s(&out),
+        "--tile-size",
+        "32",
+        "--shard-chunks",
+        "2",
+        "-q",
+    ]);
+    let root = read_json(&out.join("zarr.json"));
+    assert_eq!(root["attributes"]["ome"]["multiscales"][0]["type"], "mode");
+    let n = 2;
+    for lod in 0..3u32 {
+        for entry in std::fs::read_dir(out.join(format!("{lod}/c"))).unwrap() {
+            for shard in std::fs::read_dir(entry.unwrap().path()).unwrap() {
+                for chunk in shard_chunks(&std::fs::read(shard.unwrap().path()).unwrap(), n).into_iter().flatten() {
+                    for v in chunk.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])) {
+                        assert!([1, 500, 9000, 65000].contains(&v), "level {lod} holds {v}");
+                    }
+                }
+            }
+        }
+    }
+    let refused = run(&["split", s(&source), "--filter", "mode", "--codec", "jpeg", "-o", s(&dir.path().join("j"))]);
+    fails_with(&refused, &["--filter mode", "jpeg"]);
+}
