@@ -536,3 +536,43 @@ fn label_image_to_ome_zarr_with_mode() {
     let refused = run(&["split", s(&source), "--filter", "mode", "--codec", "jpeg", "-o", s(&dir.path().join("j"))]);
     fails_with(&refused, &["--filter mode", "jpeg"]);
 }
+
+/// Ctrl-C during a run removes the staging directory: nothing is left at the destination.
+#[cfg(unix)]
+#[test]
+fn an_interrupted_run_leaves_nothing() {
+    use crate::common::cli::{BIN, wait_or_kill};
+    let dir = tempfile::tempdir().unwrap();
+    // Noise at zstd's slowest level: the run is stopped long before it ends.
+    let source = dir.path().join("noise.png");
+    write_png(&source, &Image::random(2000, 2000, PixelLayout::new(Channels::Rgb, Depth::U8), 11));
+    for out in ["noise.ome.zarr", "noise.ozx"] {
+        let dest = dir.path().join(out);
+        let child = Command::new(BIN)
+            .args(["split", s(&source), "--layout", "ome-zarr", "-o", s(&dest), "-q", "--zstd-level", "22"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let pid = child.id().to_string();
+        let staging = || {
+            std::fs::read_dir(dir.path())
+                .unwrap()
+                .any(|e| e.unwrap().file_name().to_string_lossy().starts_with(&format!(".{out}.partial-")))
+        };
+        // Until the run has its staging directory (a fail-safe deadline, not a timing).
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+        while !staging() && std::time::Instant::now() < deadline {
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        let kill = |signal: &str| assert!(Command::new("kill").args([signal, &pid]).status().unwrap().success());
+        kill("-STOP");
+        assert!(staging(), "the run made no staging directory, or finished before it was stopped");
+        kill("-INT");
+        kill("-CONT");
+        let result = wait_or_kill(child.id(), "an interrupted ome-zarr split", || child.wait_with_output().unwrap());
+        let e = String::from_utf8_lossy(&result.stderr);
+        assert_eq!(result.status.code(), Some(130), "{e}");
+        assert!(!staging() && !dest.exists(), "{out}: {e}");
+    }
+}
