@@ -161,6 +161,13 @@ pub fn tile(
         name: name.trim_end_matches(".ome").to_string(),
         filter: opts.filter.name().to_string(),
     };
+    limits.check_memory(
+        &format!(
+            "holding the indexes of {} shards of {shard_chunks}x{shard_chunks} chunks (all open at worst; larger chunks, --tile-size, need fewer)",
+            spec.shard_count()
+        ),
+        spec.index_bytes(),
+    )?;
     let claim = report::claim(dest, product, &[input], a.force)?;
     let run = Run::start(source, a, &layout, started)?;
     let total = layout.total_tiles();

@@ -240,6 +240,26 @@ impl Spec {
         })
     }
 
+    /// Shards over all levels (0.5; 0 for 0.4).
+    pub fn shard_count(&self) -> u64 {
+        if self.version == Version::V04 {
+            return 0;
+        }
+        let n = self.shard_chunks;
+        let count = |lod| {
+            let (columns, rows) = self.layout.grid(lod);
+            columns.div_ceil(n) as u64 * rows.div_ceil(n) as u64
+        };
+        (0..self.layout.lod_count).map(count).sum()
+    }
+
+    /// The most memory the open shards' indexes can take: every shard open at once (an image
+    /// cut in vertical stripes keeps a level's shards open from one stripe to the next).
+    pub fn index_bytes(&self) -> u64 {
+        let n = self.shard_chunks as u64;
+        self.shard_count() * (n * n * 16 + 4)
+    }
+
     /// Where chunk (`x`, `y`) of level `lod` goes: its file (0.4) or its shard's (0.5).
     pub fn chunk_key(&self, lod: u32, x: u32, y: u32) -> String {
         let c = if self.has_channel_axis() { "0/" } else { "" };
