@@ -409,6 +409,19 @@ fn readers_validate_and_open_every_level_exactly() {
             assert!(said.contains("Multiscales"), "{said}");
         }
     }
+    // A label image in an image's labels group (made from the grey case's source).
+    let case = dir.path().join("300");
+    for (image, extra) in [("v04.ome.zarr", "0.4"), ("v05.ome.zarr", "0.5")] {
+        let image = case.join(image);
+        let cells = image.join("labels/cells");
+        ok(&["split", s(&case.join("img.png")), "--layout", "ome-zarr", "--filter", "mode", "-o", s(&cells), "-q"]);
+        let said = tool_ok(&python, "ome-zarr-models", &["validate", s(&image)]);
+        assert!(said.contains("Valid OME-Zarr") && !said.contains("Invalid"), "{extra}: {said}");
+        let said = tool_ok(&python, "ome-zarr-models", &["validate", s(&cells)]);
+        assert!(said.contains("Valid OME-Zarr") && !said.contains("Invalid"), "{extra}: {said}");
+        let said = tool_ok(&python, "ome_zarr", &["info", s(&image)]);
+        assert!(said.contains("Label") && said.contains("labels/cells"), "{extra}: {said}");
+    }
 }
 
 /// A level of a run, from its tiles (border 0): `(width, height, samples)`, one channel.
@@ -535,6 +548,34 @@ fn label_image_to_ome_zarr_with_mode() {
     }
     let refused = run(&["split", s(&source), "--filter", "mode", "--codec", "jpeg", "-o", s(&dir.path().join("j"))]);
     fails_with(&refused, &["--filter mode", "jpeg"]);
+    // -o IMAGE/labels/NAME: the labels group of an image, in the image's version.
+    for version in ["0.4", "0.5"] {
+        let image = dir.path().join(format!("image{version}.ome.zarr"));
+        let split = |extra: &[&str]| {
+            let mut args = vec!["split", s(&source), "--layout", "ome-zarr", "-q"];
+            args.extend_from_slice(extra);
+            run(&args)
+        };
+        assert!(split(&["--ome-zarr-version", version, "-o", s(&image)]).status.success());
+        let cells = image.join("labels/cells");
+        fails_with(&split(&["-o", s(&cells)]), &["labels/cells", "--filter mode"]);
+        let other = if version == "0.4" { "0.5" } else { "0.4" };
+        fails_with(&split(&["--filter", "nearest", "--ome-zarr-version", other, "-o", s(&cells)]), &[version]);
+        fails_with(&split(&["--filter", "mode", "--tile-size", "16", "-o", s(&cells)]), &["matches its image"]);
+        assert!(split(&["--filter", "mode", "-o", s(&cells)]).status.success());
+        assert!(split(&["--filter", "nearest", "-o", s(&image.join("labels/near"))]).status.success());
+        let (group, label) = match version {
+            "0.4" => (read_json(&image.join("labels/.zattrs")), read_json(&cells.join(".zattrs"))),
+            _ => (
+                read_json(&image.join("labels/zarr.json"))["attributes"]["ome"].clone(),
+                read_json(&cells.join("zarr.json"))["attributes"]["ome"].clone(),
+            ),
+        };
+        assert_eq!(group["labels"], serde_json::json!(["cells", "near"]));
+        assert_eq!(label["image-label"]["source"]["image"], "../../");
+        // The image with its labels is still ours to replace.
+        assert!(split(&["--ome-zarr-version", version, "-o", s(&image)]).status.success());
+    }
 }
 
 /// Ctrl-C during a run removes the staging directory: nothing is left at the destination.

@@ -13,7 +13,8 @@ use vortex_tiler::pyramid::Filter;
 use vortex_tiler::settings::{self, CodecChoice, Requested};
 use vortex_tiler::sink::OmeZarrSink;
 use vortex_tiler::sink::ome_zarr::{
-    DEFAULT_CHUNK, DEFAULT_SHARD_CHUNKS, MAX_SHARD_CHUNKS, PixelSize, Spec, Version, is_ozx,
+    DEFAULT_CHUNK, DEFAULT_SHARD_CHUNKS, MAX_SHARD_CHUNKS, PixelSize, Spec, Version, is_ozx, label_parent,
+    register_label,
 };
 use vortex_tiler::source::RowSource;
 
@@ -106,10 +107,28 @@ pub fn tile(
             bail!("{flag} does not apply to --layout ome-zarr, whose chunks are zstd-compressed (--zstd-level)");
         }
     }
-    let version = match a.ome_zarr.ome_zarr_version {
-        Some(OmeZarrVersion::V04) => Version::V04,
-        Some(OmeZarrVersion::V05) | None => Version::V05,
+    let asked = a.ome_zarr.ome_zarr_version.map(|v| match v {
+        OmeZarrVersion::V04 => Version::V04,
+        OmeZarrVersion::V05 => Version::V05,
+    });
+    // -o IMAGE/labels/NAME: a label image of IMAGE, in IMAGE's version.
+    let parent = label_parent(dest);
+    let version = match (&parent, asked) {
+        (Some(p), Some(ours)) if p.version != ours => bail!(
+            "{} is OME-Zarr {}: its labels are too; leave out --ome-zarr-version {}",
+            p.image.display(),
+            p.version.name(),
+            ours.name()
+        ),
+        (Some(p), _) => p.version,
+        (None, asked) => asked.unwrap_or(Version::V05),
     };
+    if parent.is_some() && !a.filter.is_some_and(Filter::is_label) {
+        bail!(
+            "{}: a label image's levels need --filter mode or --filter nearest (a mean would invent labels)",
+            dest.display()
+        );
+    }
     let shard_chunks = match (version, a.ome_zarr.shard_chunks) {
         (Version::V04, Some(_)) => bail!("--shard-chunks: OME-Zarr 0.4 (Zarr v2) has no shards; it is for 0.5"),
         (_, Some(n)) if !(1..=MAX_SHARD_CHUNKS).contains(&n) => {
@@ -126,7 +145,8 @@ pub fn tile(
     }
     let limits = Limits { memory: a.max_memory, ..Limits::default() };
     let requested = Requested {
-        tile_size: Some(a.tile_size.unwrap_or(DEFAULT_CHUNK)),
+        // A label image's levels are its image's: the same chunks by default.
+        tile_size: Some(a.tile_size.or(parent.as_ref().map(|p| p.chunk)).unwrap_or(DEFAULT_CHUNK)),
         border: Some(0),
         codec: Some(CodecChoice::Raw),
         background: a.background,
@@ -147,6 +167,22 @@ pub fn tile(
     let layout = opts.layout(source.width(), source.height())?;
     let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
     limits.check_pyramid(&layout, false)?;
+    if let Some(p) = &parent {
+        let ours = (layout.width as u64, layout.height as u64, layout.lod_count);
+        if ours != (p.size.0, p.size.1, p.levels) {
+            bail!(
+                "{} is {}x{} in {} levels, but this label image is {}x{} in {} levels (--tile-size {}); a label image matches its image",
+                p.image.display(),
+                p.size.0,
+                p.size.1,
+                p.levels,
+                ours.0,
+                ours.1,
+                ours.2,
+                layout.tile_size
+            );
+        }
+    }
     let name = match &a.name {
         Some(name) => name.clone(),
         None => input.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
@@ -160,6 +196,7 @@ pub fn tile(
         pixel_size: a.ome_zarr.pixel_size,
         name: name.trim_end_matches(".ome").to_string(),
         filter: opts.filter.name().to_string(),
+        label: parent.is_some(),
     };
     limits.check_memory(
         &format!(
@@ -178,6 +215,9 @@ pub fn tile(
         bail!("internal error: wrote {} tiles of {total}", done.summary.tiles);
     }
     sink.finish()?;
+    if let (Some(p), Some(label)) = (&parent, dest.file_name()) {
+        register_label(&p.image.join("labels"), version, &label.to_string_lossy())?;
+    }
     super::report(a, "ome-zarr", &done, dest, None);
     Ok(())
 }

@@ -76,6 +76,8 @@ pub struct Spec {
     pub name: String,
     /// How the levels were made (`multiscales.type`).
     pub filter: String,
+    /// A label image (`IMAGE/labels/NAME`): `image-label` metadata instead of `omero`.
+    pub label: bool,
 }
 
 impl Spec {
@@ -105,15 +107,25 @@ impl Spec {
                 files.push((".zgroup".to_string(), pretty(&json!({ "zarr_format": 2 }))));
                 let mut multiscale = self.multiscale();
                 multiscale["version"] = json!("0.4");
-                let mut omero = self.omero();
-                omero["version"] = json!("0.4");
-                files.push((".zattrs".to_string(), pretty(&json!({ "multiscales": [multiscale], "omero": omero }))));
+                let attributes = match self.label {
+                    true => json!({ "multiscales": [multiscale], "image-label": self.image_label(Some("0.4")) }),
+                    false => {
+                        let mut omero = self.omero();
+                        omero["version"] = json!("0.4");
+                        json!({ "multiscales": [multiscale], "omero": omero })
+                    }
+                };
+                files.push((".zattrs".to_string(), pretty(&attributes)));
                 for lod in 0..self.layout.lod_count {
                     files.push((format!("{lod}/.zarray"), pretty(&self.zarray(lod))));
                 }
             }
             Version::V05 => {
-                let ome = json!({ "version": "0.5", "multiscales": [self.multiscale()], "omero": self.omero() });
+                let mut ome = json!({ "version": "0.5", "multiscales": [self.multiscale()] });
+                match self.label {
+                    true => ome["image-label"] = self.image_label(None),
+                    false => ome["omero"] = self.omero(),
+                }
                 let root = json!({ "zarr_format": 3, "node_type": "group", "attributes": { "ome": ome } });
                 files.push(("zarr.json".to_string(), pretty(&root)));
                 for lod in 0..self.layout.lod_count {
@@ -173,6 +185,15 @@ impl Spec {
             .collect();
         let model = if self.has_channel_axis() { "color" } else { "greyscale" };
         json!({ "channels": channels, "rdefs": { "model": model } })
+    }
+
+    /// A label image's tie to its image, two levels up (`IMAGE/labels/NAME`).
+    fn image_label(&self, version: Option<&str>) -> Value {
+        let mut label = json!({ "source": { "image": "../../" } });
+        if let Some(v) = version {
+            label["version"] = json!(v);
+        }
+        label
     }
 
     fn max_value(&self) -> u32 {

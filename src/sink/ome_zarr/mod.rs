@@ -366,9 +366,91 @@ pub fn recognise_dir(path: &Path) -> std::result::Result<(), String> {
         let name = entry.file_name();
         let name = name.to_string_lossy();
         let level = entry.file_type().is_ok_and(|t| t.is_dir()) && name.bytes().all(|b| b.is_ascii_digit());
-        if !(level || [".zgroup", ".zattrs", "zarr.json"].contains(&name.as_ref())) {
+        if !(level || [".zgroup", ".zattrs", "zarr.json", "labels"].contains(&name.as_ref())) {
             return Err(format!("holds {name}, which is not part of an OME-Zarr image"));
         }
+    }
+    Ok(())
+}
+
+/// The OME-Zarr image a label image belongs to, as its labels must match it.
+pub struct LabelParent {
+    pub image: PathBuf,
+    pub version: Version,
+    /// Its levels, its full size (width, height) and its chunk side, as its metadata says.
+    pub levels: u32,
+    pub size: (u64, u64),
+    pub chunk: u32,
+}
+
+/// The image `dest` is a label image of, where `dest` is `IMAGE/labels/NAME` and IMAGE holds
+/// OME-Zarr metadata we can read.
+pub fn label_parent(dest: &Path) -> Option<LabelParent> {
+    let labels = dest.parent().filter(|p| p.file_name().is_some_and(|n| n == "labels"))?;
+    let image = labels.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let json =
+        |name: &str| -> Option<serde_json::Value> { serde_json::from_slice(&fs::read(image.join(name)).ok()?).ok() };
+    let (version, multiscales, level0) = match json("zarr.json") {
+        Some(root) => (Version::V05, root.pointer("/attributes/ome/multiscales/0")?.clone(), json("0/zarr.json")?),
+        None => (Version::V04, json(".zattrs")?.pointer("/multiscales/0")?.clone(), json("0/.zarray")?),
+    };
+    let levels = multiscales.get("datasets")?.as_array()?.len() as u32;
+    let last_two = |v: &serde_json::Value| -> Option<(u64, u64)> {
+        let a = v.as_array()?;
+        Some((a.get(a.len().checked_sub(1)?)?.as_u64()?, a.get(a.len().checked_sub(2)?)?.as_u64()?))
+    };
+    let size = last_two(level0.get("shape")?)?;
+    let chunk = match version {
+        Version::V04 => level0.get("chunks"),
+        // The inner chunks of a sharded array, else its chunk grid's.
+        Version::V05 => level0
+            .pointer("/codecs/0/configuration/chunk_shape")
+            .or_else(|| level0.pointer("/chunk_grid/configuration/chunk_shape")),
+    };
+    let chunk = u32::try_from(last_two(chunk?)?.0).ok()?;
+    Some(LabelParent { image: image.to_path_buf(), version, levels, size, chunk })
+}
+
+/// Adds `name` to the `labels` list of the group `labels` (made if absent), each file
+/// replaced whole through a temporary.
+pub fn register_label(labels: &Path, version: Version, name: &str) -> Result<()> {
+    let attributes_file = labels.join(match version {
+        Version::V04 => ".zattrs",
+        Version::V05 => "zarr.json",
+    });
+    let mut doc: serde_json::Value = match fs::read(&attributes_file) {
+        Ok(bytes) => serde_json::from_slice(&bytes).map_err(|e| TilerError::Info {
+            path: attributes_file.clone(),
+            field: "labels".into(),
+            message: format!("is not JSON ({e})"),
+        })?,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => match version {
+            Version::V04 => serde_json::json!({ "labels": [] }),
+            Version::V05 => serde_json::json!({
+                "zarr_format": 3, "node_type": "group", "attributes": { "ome": { "version": "0.5", "labels": [] } }
+            }),
+        },
+        Err(e) => return Err(TilerError::write(&attributes_file, e)),
+    };
+    let list = match version {
+        Version::V04 => doc.get_mut("labels"),
+        Version::V05 => doc.pointer_mut("/attributes/ome/labels"),
+    };
+    let Some(serde_json::Value::Array(list)) = list else {
+        return Err(TilerError::Info {
+            path: attributes_file,
+            field: "labels".into(),
+            message: "is not a list of label names".into(),
+        });
+    };
+    if !list.iter().any(|n| n == name) {
+        list.push(serde_json::json!(name));
+    }
+    let bytes = serde_json::to_vec_pretty(&doc).unwrap_or_default();
+    staging::write_file(&attributes_file, &bytes).map_err(|e| TilerError::write(&attributes_file, e))?;
+    if version == Version::V04 {
+        let group = labels.join(".zgroup");
+        staging::write_file(&group, br#"{ "zarr_format": 2 }"#).map_err(|e| TilerError::write(&group, e))?;
     }
     Ok(())
 }
