@@ -112,11 +112,25 @@ pub fn resolve(
     let tile_depth = req.tile_depth.or(info_depth);
     refuse_lossy_defaults(req, info, source, want_channels, info_depth, info_codec, &field_err)?;
     let flatten = req.flatten;
+    // A label image's values name objects: a lossy codec would invent labels as a mean does.
+    let labels = match req.filter {
+        Some(f) => Some(f),
+        None => parse_member::<Filter>(info.filter.as_deref(), "filter", &field_err)?,
+    }
+    .filter(|f| f.is_label());
     if choice == CodecChoice::Auto {
-        let lossless = (source.channels.has_alpha() && !flatten) || tile_depth.unwrap_or(source.depth) == Depth::U16;
+        let lossless = (source.channels.has_alpha() && !flatten)
+            || tile_depth.unwrap_or(source.depth) == Depth::U16
+            || labels.is_some();
         choice = if lossless { CodecChoice::Png } else { CodecChoice::Jpeg };
     }
     let codec = build_codec(choice, req, info, &field_err)?;
+    if let (Some(filter), true) = (labels, matches!(codec, Codec::Jpeg { .. } | Codec::Bc1 | Codec::Bc7 { .. })) {
+        return Err(TilerError::Options(format!(
+            "--filter {filter} keeps label values exact, which --codec {} would blur; use png, raw, zstd or zstd-delta",
+            codec.name()
+        )));
+    }
     codec.check_tile_size(tile_size)?;
     if let (Some(e), false) = (&ext, ext_codec.is_none_or(|c| c == choice)) {
         let message = format!("ends in .{e} but the codec is {}", codec.name());

@@ -24,6 +24,8 @@ use vortex_tiler::{shard, source, split};
 use super::report;
 use super::shard::shard_path;
 
+mod ome_zarr;
+
 #[derive(clap::Args, Debug)]
 pub struct SplitArgs {
     /// Image to cut: PNG, TIFF/BigTIFF, JPEG, PPM/PGM stream in bands; WebP, GIF, BMP, TGA and
@@ -82,7 +84,8 @@ pub struct OutputArgs {
     /// viewer opens as it is: dzi (NAME.dzi + NAME_files/, Deep Zoom as vips dzsave writes
     /// it: OpenSeadragon), iiif (IIIF Image API 3.0 level 0: info.json + static tiles), xyz
     /// ({z}/{x}/{y}, Leaflet/OpenLayers/MapLibre) or google ({z}/{y}/{x} as vips writes it).
-    /// See docs/viewers.md.
+    /// See docs/viewers.md. ome-zarr: an OME-Zarr image for microscopy tools (napari, Fiji,
+    /// QuPath), -o DIR.ome.zarr or -o FILE.ozx (docs/ome-zarr.md).
     #[arg(long, value_enum, default_value = "vortex", value_name = "LAYOUT")]
     layout: OutputLayout,
 
@@ -102,11 +105,14 @@ pub struct OutputArgs {
     #[arg(long, value_name = "URL")]
     iiif_id: Option<String>,
 
+    #[command(flatten)]
+    ome_zarr: ome_zarr::OmeZarrArgs,
+
     /// Side of a stored tile in texels, borders included [default: 128]. LOD 0 has
     /// ceil(width / payload) x ceil(height / payload) pages (payload = tile size - 2 x border),
     /// each LOD half as many per axis (rounding up), down to the first LOD of one page. In a
     /// viewer layout, the viewer's tile side (Deep Zoom: without overlap) [default: dzi 254,
-    /// iiif 512, xyz and google 256].
+    /// iiif 512, xyz and google 256]. In --layout ome-zarr, the chunk side [default: 256].
     #[arg(long, value_name = "N")]
     tile_size: Option<u32>,
 
@@ -136,7 +142,11 @@ pub struct OutputArgs {
     /// premultiplied and linear-premultiplied are exact means over the source footprint,
     /// rounded once (linear: in linear light; premultiplied: colour weighted by alpha, no
     /// fringes from transparent texels; box: of the stored values, as vips dzsave averages);
-    /// lanczos3 and mitchell resample each LOD from the previous one.
+    /// lanczos3 and mitchell resample each LOD from the previous one. mode and nearest are for
+    /// label (segmentation) images: each texel is one of its 2x2 block in the previous LOD (the
+    /// most frequent, ties to the first of top-left, top-right, bottom-left, bottom-right; or
+    /// the top-left), so no level holds a value the image does not; lossless codecs only.
+    /// --layout ome-zarr defaults to box.
     #[arg(long, value_enum)]
     filter: Option<Filter>,
 
@@ -184,12 +194,14 @@ pub enum OutputLayout {
     Xyz,
     /// {z}/{y}/{x}.jpg, the order of vips dzsave --layout google.
     Google,
+    /// OME-Zarr (-o DIR.ome.zarr, or -o FILE.ozx zipped): one array per level, chunks = pages.
+    OmeZarr,
 }
 
 impl OutputLayout {
     fn viewer(self) -> Option<Viewer> {
         match self {
-            OutputLayout::Vortex => None,
+            OutputLayout::Vortex | OutputLayout::OmeZarr => None,
             OutputLayout::Dzi => Some(Viewer::Dzi),
             OutputLayout::Iiif => Some(Viewer::Iiif),
             OutputLayout::Xyz => Some(Viewer::Xyz),
@@ -288,6 +300,15 @@ pub fn tile(
             "--keep-icc keeps the profile in info.json (--layout vortex, or a pack); --layout {viewer} has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
         );
     }
+    if a.layout == OutputLayout::OmeZarr {
+        if kept_icc.is_some() {
+            bail!(
+                "--keep-icc keeps the profile in info.json (--layout vortex, or a pack); OME-Zarr has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
+            );
+        }
+        return ome_zarr::tile(source, input, names, a, started);
+    }
+    a.ome_zarr.refuse_elsewhere()?;
     if let Some(viewer) = a.layout.viewer() {
         return tile_for_viewer(source, input, names, a, viewer, started);
     }

@@ -25,6 +25,10 @@ pub enum Product {
     Frames,
     /// A pyramid in a viewer layout (`split --layout dzi|iiif|xyz|google`).
     Viewer(Viewer),
+    /// An OME-Zarr image directory (`split --layout ome-zarr -o DIR.ome.zarr`).
+    OmeZarr,
+    /// A zipped OME-Zarr file (`split --layout ome-zarr -o FILE.ozx`).
+    Ozx,
 }
 
 /// The largest report or `info.json` read to recognise it; ours are far smaller.
@@ -32,7 +36,7 @@ const MAX_JSON_BYTES: u64 = 64 << 20;
 
 impl Product {
     pub fn is_dir(self) -> bool {
-        matches!(self, Product::TileDir | Product::Frames | Product::Viewer(_))
+        matches!(self, Product::TileDir | Product::Frames | Product::Viewer(_) | Product::OmeZarr)
     }
 
     /// The product as the messages name it.
@@ -45,6 +49,8 @@ impl Product {
             Product::Viewer(Viewer::Dzi) => "a Deep Zoom pyramid",
             Product::Viewer(Viewer::Iiif) => "a IIIF image",
             Product::Viewer(Viewer::Xyz | Viewer::Google) => "a web-map tile directory",
+            Product::OmeZarr => "an OME-Zarr image",
+            Product::Ozx => "a zipped OME-Zarr image",
         }
     }
 
@@ -57,6 +63,8 @@ impl Product {
             Product::Report => recognise_report(path),
             Product::Frames => recognise_frames(path),
             Product::Viewer(viewer) => crate::viewer::recognise(viewer, path),
+            Product::OmeZarr => crate::sink::ome_zarr::recognise_dir(path),
+            Product::Ozx => crate::sink::ome_zarr::recognise_ozx(path),
         }
     }
 }

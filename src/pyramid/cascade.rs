@@ -21,6 +21,7 @@ use std::sync::mpsc::{SendError, SyncSender};
 use super::band::Band;
 use super::cut::{self, Padding};
 use super::filter::{ExactFilter, Filter};
+use super::labels::LabelReducer;
 use super::reduce::{Acc, ExactRow, Reducer};
 use super::resample::Resampler;
 use crate::error::{Result, TilerError};
@@ -83,6 +84,8 @@ enum Down<T, A> {
     Exact(Reducer<A>),
     /// The resampling filters: the next level from this one's rounded rows.
     Resample(Box<Resampler<T>>),
+    /// The label filters: one texel of each 2x2 block of this level's rows.
+    Labels(LabelReducer<T>),
 }
 
 /// The part of the pyramid one cascade makes: LODs `lods`, and of the first of them the page
@@ -341,6 +344,11 @@ impl<T: Sample + Into<A>, A: Acc> Sums<T, A> {
                     feed_rows(rest, 1, rows, derived)?;
                 }
             }
+            Some(Down::Labels(labels)) => {
+                if let Some(next) = labels.push(row) {
+                    feed_rows(rest, 1, next, derived)?;
+                }
+            }
             None => {}
         }
         Ok(())
@@ -405,9 +413,12 @@ fn feed_rows<T: Sample, A>(
     let (this, rest) = levels.split_first_mut().expect("a level below the resampler");
     for row in rows.chunks_exact(this.row.len()) {
         derived.push(index, row);
-        if let Some(Down::Resample(resampler)) = &mut this.down
-            && let Some(next) = resampler.push(row)?
-        {
+        let next = match &mut this.down {
+            Some(Down::Resample(resampler)) => resampler.push(row)?,
+            Some(Down::Labels(labels)) => labels.push(row),
+            _ => None,
+        };
+        if let Some(next) = next {
             feed_rows(rest, index + 1, next, derived)?;
         }
     }
@@ -454,6 +465,8 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
                     let next = span.window(&layout, lod + 1).start;
                     let next_row = span.window_rows(&layout, lod + 1).start;
                     Down::Exact(Reducer::window(w, h, lod, 1, next, width, channels).starting_at_row(next_row))
+                } else if filter.is_label() {
+                    Down::Labels(LabelReducer::new(filter, channels, width, extent.1 as u64))
                 } else {
                     Down::Resample(Box::new(Resampler::new(filter, pixels, width, extent.1 as u64)))
                 }

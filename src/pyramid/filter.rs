@@ -35,10 +35,15 @@ pub enum Filter {
     Lanczos3,
     /// Mitchell-Netravali cubic (B = C = 1/3), like lanczos3.
     Mitchell,
+    /// For label images: the most frequent texel of each 2x2 block of the previous LOD, ties
+    /// to the first of top-left, top-right, bottom-left, bottom-right; never a new value.
+    Mode,
+    /// For label images: the top-left texel of each 2x2 block; never a new value.
+    Nearest,
 }
 
 impl Filter {
-    /// Every filter, in the order `--help` lists them.
+    /// Every filter of images, in the order `--help` lists them.
     pub const ALL: [Filter; 6] = [
         Filter::Box,
         Filter::Linear,
@@ -47,6 +52,8 @@ impl Filter {
         Filter::Lanczos3,
         Filter::Mitchell,
     ];
+    /// The filters of label images, listed after [`ALL`](Self::ALL).
+    pub const LABELS: [Filter; 2] = [Filter::Mode, Filter::Nearest];
 
     /// The name used on the command line and in `info.json`.
     pub fn name(self) -> &'static str {
@@ -57,13 +64,20 @@ impl Filter {
             Filter::LinearPremultiplied => "linear-premultiplied",
             Filter::Lanczos3 => "lanczos3",
             Filter::Mitchell => "mitchell",
+            Filter::Mode => "mode",
+            Filter::Nearest => "nearest",
         }
     }
 
     /// Whether this filter is an exact footprint mean (the cascade of sums) rather than a
     /// resampling kernel applied level by level.
     pub fn is_exact(self) -> bool {
-        !matches!(self, Filter::Lanczos3 | Filter::Mitchell)
+        !matches!(self, Filter::Lanczos3 | Filter::Mitchell | Filter::Mode | Filter::Nearest)
+    }
+
+    /// Whether this filter picks one texel of each 2x2 block (`pyramid::labels`).
+    pub fn is_label(self) -> bool {
+        matches!(self, Filter::Mode | Filter::Nearest)
     }
 
     fn linear(self) -> bool {
@@ -301,6 +315,7 @@ mod tests {
 
     #[test]
     fn all_lists_every_filter_once() {
-        assert_eq!(Filter::ALL.as_slice(), <Filter as clap::ValueEnum>::value_variants());
+        let every: Vec<Filter> = Filter::ALL.into_iter().chain(Filter::LABELS).collect();
+        assert_eq!(every.as_slice(), <Filter as clap::ValueEnum>::value_variants());
     }
 }

@@ -8,9 +8,11 @@
 //! and rename into place when complete.
 
 mod dir;
+pub mod ome_zarr;
 mod pack;
 
 pub use dir::DirSink;
+pub use ome_zarr::OmeZarrSink;
 pub use pack::{PackSink, pack_description, tile_kind};
 
 use crate::error::{Result, TilerError};

@@ -1,0 +1,481 @@
+//! [`OmeZarrSink`]: the pyramid as an OME-Zarr image (`split --layout ome-zarr`), each level
+//! one array whose chunks are our pages (border 0).
+//!
+//! Tiles come from the encoders as raw texels (interleaved, little-endian); the sink reorders
+//! them into the arrays' channel-first order and compresses them with zstd, on the encoder
+//! threads. OME-Zarr 0.4 writes one file per chunk. 0.5 gathers `N x N` chunks into a shard
+//! file: chunks are appended to their shard as they come, in any order (the sharding codec
+//! lets a shard's index say where each chunk lies), and the index goes at the shard's end once
+//! its last chunk is in. No chunk is held in memory beyond its own write, only the open
+//! shards' indexes (16 bytes a chunk).
+//!
+//! Everything is written into a staging directory beside the destination and renamed into
+//! place when complete ([`crate::output::staging`]). A `.ozx` (RFC-9 zipped OME-Zarr) is one
+//! zip file written in one pass: the metadata first (known before the first tile), then each
+//! shard as it completes, copied from its staging file into the zip (stored, not deflated: the
+//! chunks are compressed already), with the RFC's zip comment.
+
+mod meta;
+
+use std::collections::{HashMap, HashSet};
+use std::fs;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+pub use meta::{PixelSize, Spec, Version};
+
+use super::TileSink;
+use crate::error::{Result, TilerError};
+use crate::output::{Claim, Product, staging};
+
+/// Chunks per shard side of OME-Zarr 0.5 when not asked: with 256-texel chunks a shard is
+/// 4096 x 4096 texels, so a 100-gigapixel image is about 8000 files (all levels), and a
+/// shard's index is 4 KiB.
+pub const DEFAULT_SHARD_CHUNKS: u32 = 16;
+/// Chunk side when not asked: the common OME-Zarr chunk, a few hundred KiB raw.
+pub const DEFAULT_CHUNK: u32 = 256;
+/// The most chunks per shard side: a shard's index (16 bytes a chunk) stays within 1 MiB.
+pub const MAX_SHARD_CHUNKS: u32 = 256;
+
+/// A chunk slot of a shard's index that holds no chunk (the sharding codec's "empty").
+const EMPTY: u64 = u64::MAX;
+/// The zip's name inside the staging directory, and the folder of unfinished shards.
+const ARCHIVE: &str = "archive.ozx";
+const SHARDS: &str = "shards";
+
+pub struct OmeZarrSink {
+    spec: Spec,
+    dest: PathBuf,
+    staging: PathBuf,
+    /// Whether the output is a `.ozx`, and its zip while being written.
+    zipped: bool,
+    zip: Mutex<Option<zip::ZipWriter<fs::File>>>,
+    /// 0.5: the shards with chunks still to come.
+    open: Mutex<HashMap<ShardKey, Arc<Mutex<Shard>>>>,
+    made_dirs: Mutex<HashSet<PathBuf>>,
+    bytes: AtomicU64,
+    finished: AtomicBool,
+}
+
+/// A shard by its level and its column and row of shards.
+type ShardKey = (u32, u32, u32);
+
+/// A shard being filled: where its chunks went, and how many are still to come.
+struct Shard {
+    path: PathBuf,
+    end: u64,
+    index: Vec<[u64; 2]>,
+    missing: u64,
+}
+
+/// Whether `path` names a zipped OME-Zarr.
+pub fn is_ozx(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ozx"))
+}
+
+impl OmeZarrSink {
+    /// Prepares to write `spec`'s image into the destination `claim` checked: a directory
+    /// (`Product::OmeZarr`) or a `.ozx` file (`Product::Ozx`).
+    pub fn create(claim: &Claim, spec: Spec) -> Result<OmeZarrSink> {
+        let zipped = match claim.product {
+            Product::OmeZarr => false,
+            Product::Ozx => true,
+            other => {
+                return Err(TilerError::Options(format!("{} was claimed for {}", claim.path.display(), other.noun())));
+            }
+        };
+        if zipped && spec.version != Version::V05 {
+            return Err(TilerError::Options(format!(
+                "{}: a zipped OME-Zarr (.ozx, RFC-9) holds OME-Zarr 0.5; use --ome-zarr-version 0.5 or write a directory",
+                claim.path.display()
+            )));
+        }
+        let dest = claim.path.clone();
+        let staging = staging::partial_path(&dest);
+        if staging.exists() {
+            fs::remove_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
+        }
+        fs::create_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
+        let mut sink = OmeZarrSink {
+            spec,
+            dest,
+            staging,
+            zipped,
+            zip: Mutex::new(None),
+            open: Mutex::new(HashMap::new()),
+            made_dirs: Mutex::new(HashSet::new()),
+            bytes: AtomicU64::new(0),
+            finished: AtomicBool::new(false),
+        };
+        if zipped {
+            // The metadata first: RFC-9 asks for every zarr.json ahead of the chunks.
+            let path = sink.staging.join(ARCHIVE);
+            let file = fs::File::create(&path).map_err(|e| TilerError::write(&path, e))?;
+            let mut zip = zip::ZipWriter::new(file);
+            for (name, bytes) in sink.spec.files() {
+                add_entry(&mut zip, &path, &name, &mut bytes.as_slice())?;
+            }
+            sink.zip = Mutex::new(Some(zip));
+        }
+        Ok(sink)
+    }
+
+    /// Writes the metadata (a directory's; a zip has it already) and the zip's directory,
+    /// then renames the output into place.
+    pub fn finish(self) -> Result<()> {
+        let open = lock(&self.open).len();
+        if open > 0 {
+            return Err(TilerError::Options(format!(
+                "internal error: {open} shard(s) of {} never completed",
+                self.dest.display()
+            )));
+        }
+        match lock(&self.zip).take() {
+            None => {
+                for (name, bytes) in self.spec.files() {
+                    let path = self.staging.join(&name);
+                    self.make_parent(&path)?;
+                    fs::write(&path, bytes).map_err(|e| TilerError::write(&path, e))?;
+                }
+                staging::replace_dir(&self.staging, &self.dest).map_err(|e| TilerError::write(&self.dest, e))?;
+            }
+            Some(mut zip) => {
+                let path = self.staging.join(ARCHIVE);
+                zip.set_comment(self.spec.zip_comment()).map_err(|e| zip_err(&path, e))?;
+                let file = zip.finish().map_err(|e| zip_err(&path, e))?;
+                file.sync_all().map_err(|e| TilerError::write(&path, e))?;
+                fs::rename(&path, &self.dest).map_err(|e| TilerError::write(&self.dest, e))?;
+                let _ = fs::remove_dir_all(&self.staging);
+            }
+        }
+        self.finished.store(true, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// Chunk bytes as the arrays hold them: channel planes, zstd-compressed.
+    fn chunk(&self, raw: &[u8]) -> std::result::Result<Vec<u8>, String> {
+        let channels = self.spec.channels();
+        let sample = self.spec.stored.depth.bytes();
+        let side = self.spec.layout.tile_size as usize;
+        if raw.len() != side * side * channels * sample {
+            return Err(format!(
+                "{} bytes where a {side}x{side} raw tile has {}",
+                raw.len(),
+                side * side * channels * sample
+            ));
+        }
+        let planar = planes(raw, channels, sample);
+        compress(&planar, self.spec.zstd_level)
+    }
+
+    fn make_parent(&self, path: &Path) -> Result<()> {
+        let Some(dir) = path.parent().filter(|d| *d != self.staging) else { return Ok(()) };
+        let mut made = lock(&self.made_dirs);
+        if !made.contains(dir) {
+            fs::create_dir_all(dir).map_err(|e| TilerError::write(dir, e))?;
+            made.insert(dir.to_path_buf());
+        }
+        Ok(())
+    }
+
+    /// 0.4: one file per chunk.
+    fn write_chunk_file(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+        let path = self.staging.join(self.spec.chunk_key(lod, x, y));
+        self.make_parent(&path)?;
+        let mut file = match fs::File::create_new(&path) {
+            Ok(file) => file,
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                return Err(TilerError::Encode { lod, x, y, message: "this chunk was written twice".into() });
+            }
+            Err(e) => return Err(TilerError::write(&path, e)),
+        };
+        file.write_all(bytes).map_err(|e| TilerError::write(&path, e))
+    }
+
+    /// 0.5: appends the chunk to its shard; the shard's last chunk closes it with its index.
+    fn write_to_shard(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+        let n = self.spec.shard_chunks;
+        let key = (lod, x / n, y / n);
+        let shard = {
+            let mut open = lock(&self.open);
+            match open.get(&key) {
+                Some(shard) => Arc::clone(shard),
+                None => {
+                    let shard = Arc::new(Mutex::new(self.new_shard(key)?));
+                    open.insert(key, Arc::clone(&shard));
+                    shard
+                }
+            }
+        };
+        let mut s = lock(&shard);
+        let slot = ((y % n) * n + (x % n)) as usize;
+        if s.index[slot][0] != EMPTY {
+            return Err(TilerError::Encode { lod, x, y, message: "this chunk was written twice".into() });
+        }
+        self.make_parent(&s.path)?;
+        let mut file = fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&s.path)
+            .map_err(|e| TilerError::write(&s.path, e))?;
+        file.write_all(bytes).map_err(|e| TilerError::write(&s.path, e))?;
+        s.index[slot] = [s.end, bytes.len() as u64];
+        s.end += bytes.len() as u64;
+        s.missing -= 1;
+        if s.missing > 0 {
+            return Ok(());
+        }
+        // The index: (offset, length) per chunk, little-endian, then its CRC-32C.
+        let mut index: Vec<u8> = s.index.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+        index.extend_from_slice(&crc32c::crc32c(&index).to_le_bytes());
+        file.write_all(&index).map_err(|e| TilerError::write(&s.path, e))?;
+        drop(file);
+        lock(&self.open).remove(&key);
+        if self.zipped {
+            let name = self.spec.chunk_key(lod, x, y);
+            let mut shard_file = fs::File::open(&s.path).map_err(|e| TilerError::write(&s.path, e))?;
+            let archive = self.staging.join(ARCHIVE);
+            let mut zip = lock(&self.zip);
+            let zip = zip.as_mut().ok_or_else(|| TilerError::Options("the .ozx was finished early".into()))?;
+            add_entry(zip, &archive, &name, &mut shard_file)?;
+            fs::remove_file(&s.path).map_err(|e| TilerError::write(&s.path, e))?;
+        }
+        Ok(())
+    }
+
+    /// Shard `(lod, sx, sy)` before its first chunk: its file, an empty index, and how many
+    /// chunks of the level's grid it covers (fewer at the level's right and bottom edges).
+    fn new_shard(&self, (lod, sx, sy): ShardKey) -> Result<Shard> {
+        let n = self.spec.shard_chunks;
+        let (columns, rows) = self.spec.layout.grid(lod);
+        let covered = |first: u32, count: u32| (count.saturating_sub(first)).min(n) as u64;
+        let path = match self.zipped {
+            false => self.staging.join(self.spec.chunk_key(lod, sx * n, sy * n)),
+            true => self.staging.join(SHARDS).join(format!("{lod}-{sx}-{sy}")),
+        };
+        Ok(Shard {
+            path,
+            end: 0,
+            index: vec![[EMPTY, EMPTY]; (n * n) as usize],
+            missing: covered(sx * n, columns) * covered(sy * n, rows),
+        })
+    }
+}
+
+impl TileSink for OmeZarrSink {
+    fn write_tile(&self, lod: u32, x: u32, y: u32, raw: &[u8]) -> Result<()> {
+        let bytes = self.chunk(raw).map_err(|message| TilerError::Encode { lod, x, y, message })?;
+        match self.spec.version {
+            Version::V04 => self.write_chunk_file(lod, x, y, &bytes)?,
+            Version::V05 => self.write_to_shard(lod, x, y, &bytes)?,
+        }
+        self.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
+        Ok(())
+    }
+
+    fn bytes_written(&self) -> u64 {
+        self.bytes.load(Ordering::Relaxed)
+    }
+}
+
+impl Drop for OmeZarrSink {
+    /// An unfinished output (an error, an interruption) leaves nothing behind.
+    fn drop(&mut self) {
+        if !self.finished.load(Ordering::Relaxed) {
+            let _ = fs::remove_dir_all(&self.staging);
+        }
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+fn zip_err(path: &Path, e: zip::result::ZipError) -> TilerError {
+    TilerError::write(path, std::io::Error::other(e.to_string()))
+}
+
+/// Adds one stored (uncompressed) entry; ZIP64 fields always, as RFC-9 recommends, so that
+/// entries and offsets past 4 GiB need nothing else.
+fn add_entry(zip: &mut zip::ZipWriter<fs::File>, path: &Path, name: &str, body: &mut dyn Read) -> Result<()> {
+    let options =
+        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored).large_file(true);
+    zip.start_file(name, options).map_err(|e| zip_err(path, e))?;
+    std::io::copy(body, zip).map_err(|e| TilerError::write(path, e))?;
+    Ok(())
+}
+
+/// Interleaved texels as channel planes (Zarr's C order over `c, y, x`).
+fn planes(raw: &[u8], channels: usize, sample: usize) -> std::borrow::Cow<'_, [u8]> {
+    if channels == 1 {
+        return std::borrow::Cow::Borrowed(raw);
+    }
+    let texel = channels * sample;
+    let texels = raw.len() / texel;
+    let mut out = vec![0u8; raw.len()];
+    for (i, t) in raw.chunks_exact(texel).enumerate() {
+        for c in 0..channels {
+            out[(c * texels + i) * sample..][..sample].copy_from_slice(&t[c * sample..][..sample]);
+        }
+    }
+    std::borrow::Cow::Owned(out)
+}
+
+/// One zstd frame; one compression context per thread.
+fn compress(bytes: &[u8], level: i32) -> std::result::Result<Vec<u8>, String> {
+    use std::cell::RefCell;
+    thread_local! {
+        static ZSTD: RefCell<Option<(i32, zstd::bulk::Compressor<'static>)>> = const { RefCell::new(None) };
+    }
+    ZSTD.with(|cell| {
+        let mut cell = cell.borrow_mut();
+        if cell.as_ref().is_none_or(|(l, _)| *l != level) {
+            *cell = Some((level, zstd::bulk::Compressor::new(level).map_err(|e| format!("zstd: {e}"))?));
+        }
+        let Some((_, compressor)) = cell.as_mut() else { unreachable!("filled above") };
+        compressor.compress(bytes).map_err(|e| format!("zstd: {e}"))
+    })
+}
+
+/// Whether `path` holds a previous OME-Zarr output: an empty directory, or OME metadata at
+/// the root and nothing but the level arrays beside it.
+pub fn recognise_dir(path: &Path) -> std::result::Result<(), String> {
+    let entries: Vec<_> = fs::read_dir(path)
+        .and_then(|r| r.collect::<std::io::Result<Vec<_>>>())
+        .map_err(|e| format!("unreadable ({e})"))?;
+    if entries.is_empty() {
+        return Ok(());
+    }
+    let metadata = ["zarr.json", ".zattrs"].iter().map(|n| path.join(n)).find(|p| p.is_file());
+    let Some(metadata) = metadata else {
+        let first = entries[0].file_name();
+        return Err(format!("holds {} and no OME-Zarr metadata (zarr.json or .zattrs)", first.to_string_lossy()));
+    };
+    let text = fs::File::open(&metadata)
+        .and_then(|f| {
+            let mut s = String::new();
+            f.take(16 << 20).read_to_string(&mut s).map(|_| s)
+        })
+        .map_err(|e| format!("unreadable ({e})"))?;
+    if !text.contains("\"multiscales\"") {
+        return Err(format!("a Zarr hierarchy whose {} has no multiscales", metadata.display()));
+    }
+    for entry in entries {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        let level = entry.file_type().is_ok_and(|t| t.is_dir()) && name.bytes().all(|b| b.is_ascii_digit());
+        if !(level || [".zgroup", ".zattrs", "zarr.json", "labels"].contains(&name.as_ref())) {
+            return Err(format!("holds {name}, which is not part of an OME-Zarr image"));
+        }
+    }
+    Ok(())
+}
+
+/// The OME-Zarr image a label image belongs to, as its labels must match it.
+pub struct LabelParent {
+    pub image: PathBuf,
+    pub version: Version,
+    /// Its levels, its full size (width, height) and its chunk side, as its metadata says.
+    pub levels: u32,
+    pub size: (u64, u64),
+    pub chunk: u32,
+}
+
+/// The image `dest` is a label image of, where `dest` is `IMAGE/labels/NAME` and IMAGE holds
+/// OME-Zarr metadata we can read.
+pub fn label_parent(dest: &Path) -> Option<LabelParent> {
+    let labels = dest.parent().filter(|p| p.file_name().is_some_and(|n| n == "labels"))?;
+    let image = labels.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let json =
+        |name: &str| -> Option<serde_json::Value> { serde_json::from_slice(&fs::read(image.join(name)).ok()?).ok() };
+    let (version, multiscales, level0) = match json("zarr.json") {
+        Some(root) => (Version::V05, root.pointer("/attributes/ome/multiscales/0")?.clone(), json("0/zarr.json")?),
+        None => (Version::V04, json(".zattrs")?.pointer("/multiscales/0")?.clone(), json("0/.zarray")?),
+    };
+    let levels = multiscales.get("datasets")?.as_array()?.len() as u32;
+    let last_two = |v: &serde_json::Value| -> Option<(u64, u64)> {
+        let a = v.as_array()?;
+        Some((a.get(a.len().checked_sub(1)?)?.as_u64()?, a.get(a.len().checked_sub(2)?)?.as_u64()?))
+    };
+    let size = last_two(level0.get("shape")?)?;
+    let chunk = match version {
+        Version::V04 => level0.get("chunks"),
+        // The inner chunks of a sharded array, else its chunk grid's.
+        Version::V05 => level0
+            .pointer("/codecs/0/configuration/chunk_shape")
+            .or_else(|| level0.pointer("/chunk_grid/configuration/chunk_shape")),
+    };
+    let chunk = u32::try_from(last_two(chunk?)?.0).ok()?;
+    Some(LabelParent { image: image.to_path_buf(), version, levels, size, chunk })
+}
+
+/// Adds `name` to the `labels` list of the group `labels` (made if absent), each file
+/// replaced whole through a temporary.
+pub fn register_label(labels: &Path, version: Version, name: &str) -> Result<()> {
+    let attributes_file = labels.join(match version {
+        Version::V04 => ".zattrs",
+        Version::V05 => "zarr.json",
+    });
+    let mut doc: serde_json::Value = match fs::read(&attributes_file) {
+        Ok(bytes) => serde_json::from_slice(&bytes).map_err(|e| TilerError::Info {
+            path: attributes_file.clone(),
+            field: "labels".into(),
+            message: format!("is not JSON ({e})"),
+        })?,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => match version {
+            Version::V04 => serde_json::json!({ "labels": [] }),
+            Version::V05 => serde_json::json!({
+                "zarr_format": 3, "node_type": "group", "attributes": { "ome": { "version": "0.5", "labels": [] } }
+            }),
+        },
+        Err(e) => return Err(TilerError::write(&attributes_file, e)),
+    };
+    let list = match version {
+        Version::V04 => doc.get_mut("labels"),
+        Version::V05 => doc.pointer_mut("/attributes/ome/labels"),
+    };
+    let Some(serde_json::Value::Array(list)) = list else {
+        return Err(TilerError::Info {
+            path: attributes_file,
+            field: "labels".into(),
+            message: "is not a list of label names".into(),
+        });
+    };
+    if !list.iter().any(|n| n == name) {
+        list.push(serde_json::json!(name));
+    }
+    let bytes = serde_json::to_vec_pretty(&doc).unwrap_or_default();
+    staging::write_file(&attributes_file, &bytes).map_err(|e| TilerError::write(&attributes_file, e))?;
+    if version == Version::V04 {
+        let group = labels.join(".zgroup");
+        staging::write_file(&group, br#"{ "zarr_format": 2 }"#).map_err(|e| TilerError::write(&group, e))?;
+    }
+    Ok(())
+}
+
+/// Whether `path` holds a previous `.ozx`: a zip whose first entry is the root `zarr.json`.
+pub fn recognise_ozx(path: &Path) -> std::result::Result<(), String> {
+    let mut head = Vec::with_capacity(40);
+    fs::File::open(path).and_then(|f| f.take(39).read_to_end(&mut head)).map_err(|e| format!("unreadable ({e})"))?;
+    let first_name = head.get(30..39);
+    if head.starts_with(b"PK\x03\x04") && head.get(26..28) == Some(&[9, 0][..]) && first_name == Some(b"zarr.json") {
+        Ok(())
+    } else {
+        Err("a file that is not a zipped OME-Zarr".into())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn texels_become_channel_planes() {
+        let raw = [1u8, 2, 3, 4, 5, 6];
+        assert_eq!(&planes(&raw, 3, 1)[..], &[1, 4, 2, 5, 3, 6]);
+        let raw16 = [1u8, 0, 2, 0, 3, 0, 4, 0];
+        assert_eq!(&planes(&raw16, 2, 2)[..], &[1, 0, 3, 0, 2, 0, 4, 0]);
+    }
+}
