@@ -123,7 +123,7 @@ pub struct OutputArgs {
     /// rounded once (linear: in linear light; premultiplied: colour weighted by alpha, no
     /// fringes from transparent texels; box: of the stored values, as vips dzsave averages);
     /// lanczos3 and mitchell resample each LOD from the previous one.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::named::<Filter>())]
     filter: Option<Filter>,
 
     /// Sample type of stored tiles: unsignedByte or unsignedShort (png, raw, zstd, zstd-delta)
@@ -189,7 +189,7 @@ impl OutputLayout {
 pub struct CodecArgs {
     /// Tile codec [default: auto, or what the filename format's extension says]. raw, zstd,
     /// zstd-delta, bc1 and bc7 have no file format and write packs only.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::named::<CodecChoice>())]
     pub codec: Option<CodecChoice>,
 
     /// JPEG quality, 1-100 [default: 85].
@@ -197,11 +197,11 @@ pub struct CodecArgs {
     pub quality: Option<u8>,
 
     /// JPEG chroma subsampling [default: 420].
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::named::<Subsampling>())]
     pub subsampling: Option<Subsampling>,
 
     /// PNG compression effort [default: fast].
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::named::<PngLevel>())]
     pub png_compression: Option<PngLevel>,
 
     /// zstd level for --codec zstd and zstd-delta, 1-22 [default: 3].
@@ -209,7 +209,7 @@ pub struct CodecArgs {
     pub zstd_level: Option<i32>,
 
     /// BC7 encoder effort, fastest first (Intel ISPC presets) [default: ultra-fast].
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::named::<Bc7Effort>())]
     pub bc7_effort: Option<Bc7Effort>,
 }
 

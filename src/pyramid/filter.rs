@@ -14,7 +14,7 @@ use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::pyramid::reduce::{Acc, ExactRow, Reducer};
 
 /// How LOD k+1 is made from LOD k.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Filter {
     /// Exact mean of the stored (sRGB-encoded) values of the source pixels under the texel,
     /// rounded once, halves up.
@@ -57,6 +57,33 @@ impl Filter {
             Filter::LinearPremultiplied => "linear-premultiplied",
             Filter::Lanczos3 => "lanczos3",
             Filter::Mitchell => "mitchell",
+        }
+    }
+
+    /// The filter `name` names, if any.
+    pub fn from_name(name: &str) -> Option<Filter> {
+        Filter::ALL.into_iter().find(|f| f.name() == name)
+    }
+
+    /// One line on what the filter does (`--help` lists it).
+    pub fn about(self) -> &'static str {
+        match self {
+            Filter::Box => {
+                "Exact mean of the stored (sRGB-encoded) values of the source pixels under the texel, rounded once, halves up"
+            }
+            Filter::Linear => {
+                "Exact mean in linear light: colour decoded from sRGB, averaged, encoded back (nearest code value); alpha averaged as stored"
+            }
+            Filter::Premultiplied => {
+                "Colour weighted by alpha (premultiplied), then divided by the mean alpha: transparent texels never tint visible ones; fully transparent results are black. Same as box without alpha"
+            }
+            Filter::LinearPremultiplied => {
+                "Premultiplied and in linear light. Same as linear without alpha. The default: of the filters measured in docs/accuracy.md it comes closest to the linear-light reference"
+            }
+            Filter::Lanczos3 => {
+                "Lanczos3 (fast_image_resize) in stored values, each LOD from the previous one, alpha premultiplied"
+            }
+            Filter::Mitchell => "Mitchell-Netravali cubic (B = C = 1/3), like lanczos3",
         }
     }
 
@@ -300,7 +327,11 @@ mod tests {
     use super::*;
 
     #[test]
-    fn all_lists_every_filter_once() {
-        assert_eq!(Filter::ALL.as_slice(), <Filter as clap::ValueEnum>::value_variants());
+    fn every_filter_is_found_by_its_name_once() {
+        for f in Filter::ALL {
+            assert_eq!(Filter::ALL.iter().filter(|g| g.name() == f.name()).count(), 1, "{f}");
+            assert_eq!(Filter::from_name(f.name()), Some(f));
+        }
+        assert_eq!(Filter::from_name("Box"), None, "names are matched exactly, as clap did");
     }
 }
