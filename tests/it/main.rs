@@ -15,6 +15,7 @@ mod docs;
 mod failures;
 mod golden;
 mod hostile;
+mod library;
 mod oracle;
 mod pack_cli;
 mod render;
