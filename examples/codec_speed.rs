@@ -71,12 +71,12 @@ fn main() -> Result<()> {
     if !alpha {
         for quality in [50, 75, 85, 95] {
             for subsampling in [Subsampling::S420, Subsampling::S444] {
-                codecs.push((format!("jpeg q{quality} {}", name(subsampling)), Codec::Jpeg { quality, subsampling }));
+                codecs.push((format!("jpeg q{quality} {}", subsampling.name()), Codec::Jpeg { quality, subsampling }));
             }
         }
     }
     for level in [PngLevel::Fast, PngLevel::Default, PngLevel::Best] {
-        codecs.push((format!("png {}", name(level)), Codec::Png { level }));
+        codecs.push((format!("png {}", level.name()), Codec::Png { level }));
     }
     codecs.push(("raw".into(), Codec::Raw));
     for delta in [false, true] {
@@ -89,7 +89,7 @@ fn main() -> Result<()> {
         codecs.push(("bc1".into(), Codec::Bc1));
     }
     for effort in [Bc7Effort::UltraFast, Bc7Effort::VeryFast, Bc7Effort::Fast, Bc7Effort::Basic, Bc7Effort::Slow] {
-        codecs.push((format!("bc7 {}", name(effort)), Codec::Bc7 { effort }));
+        codecs.push((format!("bc7 {}", effort.name()), Codec::Bc7 { effort }));
     }
 
     println!(
@@ -134,8 +134,4 @@ fn decode(kind: TileKind, bytes: &[u8], d: &Description) -> Result<Vec<u8>> {
         }
         _ => payload_texels(kind, bytes, d, 1 << 30)?,
     })
-}
-
-fn name<V: clap::ValueEnum>(v: V) -> String {
-    v.to_possible_value().expect("no hidden values").get_name().to_string()
 }

@@ -15,18 +15,44 @@ use crate::pixel::{Channels, Depth, PixelLayout, Sample, u16_to_u8};
 use crate::viewer::Crop;
 
 /// JPEG chroma subsampling.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Subsampling {
     /// 4:2:0: chroma at half resolution both ways (smaller files, what libjpeg does below q90).
-    #[value(name = "420")]
     S420,
     /// 4:4:4: full-resolution chroma.
-    #[value(name = "444")]
     S444,
 }
 
+impl Subsampling {
+    /// Every value, in the order `--help` lists them.
+    pub const ALL: [Subsampling; 2] = [Subsampling::S420, Subsampling::S444];
+
+    /// The name used on the command line (`--subsampling`) and in `info.json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Subsampling::S420 => "420",
+            Subsampling::S444 => "444",
+        }
+    }
+
+    /// The value `name` names, if any.
+    pub fn from_name(name: &str) -> Option<Subsampling> {
+        Subsampling::ALL.into_iter().find(|v| v.name() == name)
+    }
+
+    /// One line on what the value does (`--help` lists it).
+    pub fn about(self) -> &'static str {
+        match self {
+            Subsampling::S420 => {
+                "4:2:0: chroma at half resolution both ways (smaller files, what libjpeg does below q90)"
+            }
+            Subsampling::S444 => "4:4:4: full-resolution chroma",
+        }
+    }
+}
+
 /// PNG effort.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PngLevel {
     /// fdeflate: very fast, files a little larger.
     Fast,
@@ -36,8 +62,36 @@ pub enum PngLevel {
     Best,
 }
 
+impl PngLevel {
+    /// Every value, in the order `--help` lists them.
+    pub const ALL: [PngLevel; 3] = [PngLevel::Fast, PngLevel::Default, PngLevel::Best];
+
+    /// The name used on the command line (`--png-compression`) and in `info.json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            PngLevel::Fast => "fast",
+            PngLevel::Default => "default",
+            PngLevel::Best => "best",
+        }
+    }
+
+    /// The value `name` names, if any.
+    pub fn from_name(name: &str) -> Option<PngLevel> {
+        PngLevel::ALL.into_iter().find(|v| v.name() == name)
+    }
+
+    /// One line on what the value does (`--help` lists it).
+    pub fn about(self) -> &'static str {
+        match self {
+            PngLevel::Fast => "fdeflate: very fast, files a little larger",
+            PngLevel::Default => "zlib-like default",
+            PngLevel::Best => "Slowest, smallest",
+        }
+    }
+}
+
 /// BC7 encoder effort: the presets of Intel's ISPC texture compressor, fastest first.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Bc7Effort {
     /// About 1 ms per 256-texel RGB tile on one core.
     UltraFast,
@@ -49,6 +103,39 @@ pub enum Bc7Effort {
     Basic,
     /// About 160x slower, best.
     Slow,
+}
+
+impl Bc7Effort {
+    /// Every value, fastest first, in the order `--help` lists them.
+    pub const ALL: [Bc7Effort; 5] =
+        [Bc7Effort::UltraFast, Bc7Effort::VeryFast, Bc7Effort::Fast, Bc7Effort::Basic, Bc7Effort::Slow];
+
+    /// The name used on the command line (`--bc7-effort`) and in `info.json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Bc7Effort::UltraFast => "ultra-fast",
+            Bc7Effort::VeryFast => "very-fast",
+            Bc7Effort::Fast => "fast",
+            Bc7Effort::Basic => "basic",
+            Bc7Effort::Slow => "slow",
+        }
+    }
+
+    /// The value `name` names, if any.
+    pub fn from_name(name: &str) -> Option<Bc7Effort> {
+        Bc7Effort::ALL.into_iter().find(|v| v.name() == name)
+    }
+
+    /// One line on what the value does (`--help` lists it).
+    pub fn about(self) -> &'static str {
+        match self {
+            Bc7Effort::UltraFast => "About 1 ms per 256-texel RGB tile on one core",
+            Bc7Effort::VeryFast => "About 10x slower than ultra-fast, about 3 dB better",
+            Bc7Effort::Fast => "About 18x slower, a little better",
+            Bc7Effort::Basic => "About 45x slower",
+            Bc7Effort::Slow => "About 160x slower, best",
+        }
+    }
 }
 
 /// zstd levels `--zstd-level` accepts (zstd's negative "fast" levels are left out).

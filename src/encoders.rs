@@ -81,7 +81,7 @@ pub(crate) fn consume<T: Sample>(
                     pool.spawn(move |_| {
                         // A task that panicked must still finish its job, or the writer waits forever.
                         let run = catch_unwind(AssertUnwindSafe(|| stage.run(&lot.jobs[k])));
-                        let panicked = || Err(TilerError::Options("a tile encoder panicked".into()));
+                        let panicked = || Err(TilerError::panicked("a tile encoder"));
                         lot.finish_job(k, run.unwrap_or_else(|_| panicked()));
                     });
                 }
@@ -107,7 +107,7 @@ pub(crate) fn consume<T: Sample>(
             Ok(())
         });
         drop(to_writer);
-        let written = writer.join().map_err(|_| TilerError::Options("the tile writer panicked".into()))?;
+        let written = writer.join().map_err(|_| TilerError::panicked("the tile writer"))?;
         written.and(fed)
     });
     clock.add(Stage::EncodersIdle, busy.idle());

@@ -4,7 +4,9 @@
 use std::io;
 use std::path::PathBuf;
 
+/// New variants may come in any release: match the ones you act on and keep a `_` arm.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum TilerError {
     /// The file could not be opened or read at all.
     #[error("{}: {source}", path.display())]
@@ -62,6 +64,11 @@ pub enum TilerError {
     #[error("interrupted; nothing was left at the destination")]
     Interrupted,
 
+    /// A thread of the run panicked: a bug, not bad input. The run stopped and left nothing at
+    /// the destination.
+    #[error("internal error: {0}")]
+    Internal(String),
+
     /// Writing output failed (unwritable directory, full disk, ...).
     #[error("{}: {source}", path.display())]
     Write {
@@ -82,6 +89,11 @@ impl TilerError {
 
     pub fn unsupported(path: impl Into<PathBuf>, message: impl ToString) -> Self {
         TilerError::Unsupported { path: path.into(), message: message.to_string() }
+    }
+
+    /// A thread that panicked (`what`: which one), or a lock it left poisoned.
+    pub fn panicked(what: &str) -> Self {
+        TilerError::Internal(format!("{what} panicked"))
     }
 
     pub fn write(path: impl Into<PathBuf>, source: io::Error) -> Self {

@@ -17,7 +17,81 @@
 //! [`settings`] (flags and `info.json` into options) and [`error`]. Every command checks
 //! [`limits`] before it allocates and claims its destination through [`output`], the one rule
 //! that keeps it from destroying anything the user owns. [`viewer`] names pages as Deep Zoom,
-//! IIIF and web-map tiles; [`serve`] answers those names over HTTP from packs and directories.
+//! IIIF and web-map tiles; `serve` (feature `serve`) answers those names over HTTP from packs and
+//! directories.
+//!
+//! # Tiling from Rust
+//!
+//! Without its default features (`vortex-tiler = { version = "0.1", default-features = false }`)
+//! the package is this library alone: none of the command line's, the server's or the GPU's
+//! crates (features `cli`, `serve`, `gpu`). A run reports finished tiles to a [`split::Progress`]
+//! and stops, with [`error::TilerError::Interrupted`] and nothing left at the destination, once
+//! its `cancelled` says so: the command line's Ctrl-C is that flag, set by a signal handler.
+//!
+//! ```
+//! use std::path::Path;
+//! use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+//!
+//! use vortex_tiler::error::{Result, TilerError};
+//! use vortex_tiler::output::{self, Product};
+//! use vortex_tiler::settings::{self, Requested};
+//! use vortex_tiler::sink::PackSink;
+//! use vortex_tiler::split::{self, Progress, Summary};
+//! use vortex_tiler::{limits::Limits, source, vortex_pack::WriteOptions};
+//!
+//! /// Counts finished tiles; stops the run when `stop` is set.
+//! #[derive(Default)]
+//! struct Watch {
+//!     tiles: AtomicU64,
+//!     stop: AtomicBool,
+//! }
+//!
+//! impl Progress for Watch {
+//!     fn advance(&self, tiles: u64) {
+//!         self.tiles.fetch_add(tiles, Ordering::Relaxed);
+//!     }
+//!     fn cancelled(&self) -> bool {
+//!         self.stop.load(Ordering::Relaxed)
+//!     }
+//! }
+//!
+//! /// Cuts `input` into 256-texel pages with every LOD, into the pack `dest`.
+//! fn tile(input: &Path, dest: &Path, watch: &Watch) -> Result<Summary> {
+//!     output::claim(dest, Product::Pack, &[input], false)?; // replaces only an older pack
+//!     let limits = Limits::default();
+//!     let source = source::open(input, limits.memory)?;
+//!     let asked = Requested { tile_size: Some(256), ..Requested::default() };
+//!     let (opts, names) = settings::resolve(&asked, None, source.layout())?;
+//!     let layout = opts.layout(source.width(), source.height())?;
+//!     limits.check_pyramid(&layout, true)?;
+//!     let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
+//!     let info = settings::describe(&layout, stored, &opts, &names).to_json_pretty();
+//!     let sink = PackSink::create(dest, &layout, stored, opts.codec, info.as_bytes(), WriteOptions::default())?;
+//!     // On an error the sink is dropped, and its unfinished pack with it.
+//!     let summary = split::split(source, &sink, &opts, watch)?;
+//!     sink.finish()?;
+//!     Ok(summary)
+//! }
+//!
+//! # fn main() -> Result<()> {
+//! # let temp = tempfile::tempdir().expect("a temporary directory");
+//! # let (input, dir) = (temp.path().join("huge.png"), temp.path());
+//! # image::RgbImage::from_fn(600, 300, |x, y| image::Rgb([x as u8, y as u8, 128])).save(&input).expect("a PNG");
+//! let watch = Watch::default();
+//! let summary = tile(&input, &dir.join("huge.vtpk"), &watch)?;
+//! assert_eq!(watch.tiles.load(Ordering::Relaxed), summary.tiles);
+//!
+//! // Set from anywhere (another thread, a signal handler, a web request's cancellation).
+//! watch.stop.store(true, Ordering::Relaxed);
+//! let stopped = tile(&input, &dir.join("stopped.vtpk"), &watch);
+//! assert!(matches!(stopped, Err(TilerError::Interrupted)));
+//! assert!(!dir.join("stopped.vtpk").exists());
+//! # let pack = vortex_tiler::vortex_pack::Pack::open(&dir.join("huge.vtpk")).expect("the pack");
+//! # assert_eq!(pack.description().width, 600);
+//! # assert_eq!(std::fs::read_dir(dir).expect("the directory").count(), 2, "no temporary left");
+//! # Ok(())
+//! # }
+//! ```
 
 pub mod background;
 pub mod codec;
@@ -29,6 +103,7 @@ pub mod output;
 pub mod pixel;
 pub mod pyramid;
 pub mod repack;
+#[cfg(feature = "serve")]
 pub mod serve;
 pub mod settings;
 pub mod shard;
@@ -38,6 +113,10 @@ pub mod split;
 pub mod stages;
 pub mod tile_dir;
 pub mod viewer;
+
+/// The pack format's crate, whose reader ([`vortex_pack::Pack`]) and [`vortex_pack::WriteOptions`]
+/// this library's API uses.
+pub use vortex_pack;
 
 /// Internals the integration tests check directly (the exact sums, the sRGB tables, the
 /// resamplers, the cutting arithmetic). Not an API: only built with the `testing` feature,

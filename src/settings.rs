@@ -26,7 +26,7 @@ pub const DEFAULT_BC7_EFFORT: Bc7Effort = Bc7Effort::UltraFast;
 pub const DEFAULT_FILENAME_STEM: &str = "lod%1$02s-x%2$04s-y%3$04s";
 
 /// Which codec: `auto` picks JPEG for 8-bit grey or RGB and PNG for anything with alpha or 16 bits.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CodecChoice {
     /// JPEG for 8-bit grey or RGB, PNG with alpha or 16 bits.
     Auto,
@@ -44,6 +44,53 @@ pub enum CodecChoice {
     Bc1,
     /// Packs only: BC7 blocks, 8-bit RGB or RGBA (tile size a multiple of 4; --bc7-effort).
     Bc7,
+}
+
+impl CodecChoice {
+    /// Every choice, in the order `--help` lists them.
+    pub const ALL: [CodecChoice; 8] = [
+        CodecChoice::Auto,
+        CodecChoice::Jpeg,
+        CodecChoice::Png,
+        CodecChoice::Raw,
+        CodecChoice::Zstd,
+        CodecChoice::ZstdDelta,
+        CodecChoice::Bc1,
+        CodecChoice::Bc7,
+    ];
+
+    /// The name used on the command line (`--codec`) and in `info.json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            CodecChoice::Auto => "auto",
+            CodecChoice::Jpeg => "jpeg",
+            CodecChoice::Png => "png",
+            CodecChoice::Raw => "raw",
+            CodecChoice::Zstd => "zstd",
+            CodecChoice::ZstdDelta => "zstd-delta",
+            CodecChoice::Bc1 => "bc1",
+            CodecChoice::Bc7 => "bc7",
+        }
+    }
+
+    /// The choice `name` names, if any.
+    pub fn from_name(name: &str) -> Option<CodecChoice> {
+        CodecChoice::ALL.into_iter().find(|c| c.name() == name)
+    }
+
+    /// One line on what the choice does (`--help` lists it).
+    pub fn about(self) -> &'static str {
+        match self {
+            CodecChoice::Auto => "JPEG for 8-bit grey or RGB, PNG with alpha or 16 bits",
+            CodecChoice::Jpeg => "Lossy, 8-bit grey or RGB (--quality, --subsampling)",
+            CodecChoice::Png => "Lossless, any layout (--png-compression)",
+            CodecChoice::Raw => "Packs only: texels as a GPU uploads them, any layout",
+            CodecChoice::Zstd => "Packs only: raw texels compressed with zstd (--zstd-level)",
+            CodecChoice::ZstdDelta => "Packs only: zstd of raw texels whose rows are left-delta filtered first",
+            CodecChoice::Bc1 => "Packs only: BC1 blocks, opaque 8-bit RGB (tile size a multiple of 4)",
+            CodecChoice::Bc7 => "Packs only: BC7 blocks, 8-bit RGB or RGBA (tile size a multiple of 4; --bc7-effort)",
+        }
+    }
 }
 
 /// What the command line asked for; `None` means "not given".
@@ -115,7 +162,7 @@ pub fn resolve(
     // A label image's values name objects: a lossy codec would invent labels as a mean does.
     let labels = match req.filter {
         Some(f) => Some(f),
-        None => parse_member::<Filter>(info.filter.as_deref(), "filter", &field_err)?,
+        None => parse_member(info.filter.as_deref(), Filter::from_name, "filter", &field_err)?,
     }
     .filter(|f| f.is_label());
     if choice == CodecChoice::Auto {
@@ -165,7 +212,7 @@ pub fn resolve(
         tile_depth,
         filter: match req.filter {
             Some(f) => f,
-            None => parse_member(info.filter.as_deref(), "filter", &field_err)?.unwrap_or_default(),
+            None => parse_member(info.filter.as_deref(), Filter::from_name, "filter", &field_err)?.unwrap_or_default(),
         },
         max_memory: req.max_memory.unwrap_or(crate::limits::DEFAULT_MEMORY),
         down_to_one_texel: false,
@@ -296,7 +343,7 @@ pub fn check_grid(info_path: &Path, info: &InfoFile, req: &Requested, layout: &L
 fn info_codec(info: &InfoFile, field_err: &dyn Fn(&str, String) -> TilerError) -> Result<Option<CodecChoice>> {
     match info.codec.as_deref() {
         None | Some("auto") => Ok(None),
-        Some(name) => <CodecChoice as clap::ValueEnum>::from_str(name, false).map(Some).map_err(|_| {
+        Some(name) => CodecChoice::from_name(name).map(Some).ok_or_else(|| {
             field_err("codec", format!("'{name}' is not a codec (jpeg, png, raw, zstd, zstd-delta, bc1, bc7)"))
         }),
     }
@@ -315,13 +362,13 @@ fn build_codec(
             quality: req.quality.or(info.quality).unwrap_or(DEFAULT_QUALITY),
             subsampling: req
                 .subsampling
-                .or(parse_member(info.subsampling.as_deref(), "subsampling", field_err)?)
+                .or(parse_member(info.subsampling.as_deref(), Subsampling::from_name, "subsampling", field_err)?)
                 .unwrap_or(Subsampling::S420),
         },
         CodecChoice::Auto | CodecChoice::Png => Codec::Png {
             level: req
                 .png_level
-                .or(parse_member(info.png_compression.as_deref(), "pngCompression", field_err)?)
+                .or(parse_member(info.png_compression.as_deref(), PngLevel::from_name, "pngCompression", field_err)?)
                 .unwrap_or(PngLevel::Fast),
         },
         CodecChoice::Raw => Codec::Raw,
@@ -331,7 +378,7 @@ fn build_codec(
         CodecChoice::Bc7 => Codec::Bc7 {
             effort: req
                 .bc7_effort
-                .or(parse_member(info.bc7_effort.as_deref(), "bc7Effort", field_err)?)
+                .or(parse_member(info.bc7_effort.as_deref(), Bc7Effort::from_name, "bc7Effort", field_err)?)
                 .unwrap_or(DEFAULT_BC7_EFFORT),
         },
     };
@@ -369,12 +416,14 @@ pub fn resolve_codec(req: &Requested, info_path: &Path, info: &InfoFile, source:
     Ok(codec)
 }
 
-fn parse_member<V: clap::ValueEnum>(
+/// The value an `info.json` member names (`from_name` of its type), if the member is present.
+fn parse_member<V>(
     value: Option<&str>,
+    from_name: fn(&str) -> Option<V>,
     field: &str,
     err: &dyn Fn(&str, String) -> TilerError,
 ) -> Result<Option<V>> {
-    value.map(|v| V::from_str(v, false).map_err(|_| err(field, format!("'{v}' is not a valid value")))).transpose()
+    value.map(|v| from_name(v).ok_or_else(|| err(field, format!("'{v}' is not a valid value")))).transpose()
 }
 
 /// The `info.json` describing a finished run.
@@ -410,17 +459,12 @@ pub fn describe_codec(codec: Codec) -> InfoFile {
     let mut info = InfoFile { codec: Some(codec.name().into()), ..InfoFile::default() };
     match codec {
         Codec::Jpeg { quality, subsampling } => {
-            (info.quality, info.subsampling) = (Some(quality), Some(value_name(subsampling)))
+            (info.quality, info.subsampling) = (Some(quality), Some(subsampling.name().into()))
         }
-        Codec::Png { level } => info.png_compression = Some(value_name(level)),
+        Codec::Png { level } => info.png_compression = Some(level.name().into()),
         Codec::Zstd { level, .. } => info.zstd_level = Some(level),
-        Codec::Bc7 { effort } => info.bc7_effort = Some(value_name(effort)),
+        Codec::Bc7 { effort } => info.bc7_effort = Some(effort.name().into()),
         Codec::Raw | Codec::Bc1 => {}
     }
     info
-}
-
-#[expect(clippy::expect_used, reason = "our value enums hide no value")]
-fn value_name<V: clap::ValueEnum>(v: V) -> String {
-    v.to_possible_value().expect("no hidden values").get_name().to_string()
 }

@@ -234,7 +234,7 @@ fn run<T: Sample>(
         });
         let consumed = encoders::consume(rx, &encoder, sink, &counts, progress, &clock);
         // Dropping the receiver (on error) makes the producer's next send fail, so it stops.
-        let produced = producer.join().map_err(|_| TilerError::Options("the tiling thread panicked".into()))?;
+        let produced = producer.join().map_err(|_| TilerError::panicked("the tiling thread"))?;
         consumed.map(|()| produced)
     })?;
     let summary = Summary {
@@ -419,7 +419,7 @@ impl<T: Sample> Producer<'_, T> {
                     hand_on(None, derived)
                 });
             drop(hand_on);
-            let cut = cutter.join().map_err(|_| TilerError::Options("the cutting thread panicked".into()))?;
+            let cut = cutter.join().map_err(|_| TilerError::panicked("the cutting thread"))?;
             // A cutter that failed made the sums' hand-over fail: its error is the one to report.
             cut.and(summed)
         })

@@ -7,17 +7,22 @@ macro_rules! say {
 }
 
 mod convert;
+mod names;
 mod pack;
+#[cfg(feature = "gpu")]
 mod render;
 pub(crate) mod report;
+#[cfg(feature = "serve")]
 mod serve;
 mod shard;
 mod signals;
 mod split;
+#[cfg(feature = "gpu")]
 mod view;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
+use names::named;
 use vortex_pack::WriteOptions;
 use vortex_tiler::pixel::Depth;
 
@@ -91,6 +96,7 @@ enum Command {
     ///   vortex-tiler render --pack world.vtpk --frames out/frames/ --report out/report.json
     ///   vortex-tiler render --pack a.vtpk --pack b.vtpk --scene boxes.json --filter trilinear
     ///   vortex-tiler render --pack albedo.vtpk --layer data:normal.vtpk --show-layer 1
+    #[cfg(feature = "gpu")]
     #[command(verbatim_doc_comment)]
     Render(render::RenderArgs),
     /// Show packs in a window: pan and zoom an image, or fly over a scene's geometry.
@@ -111,6 +117,7 @@ enum Command {
     ///   vortex-tiler view a.vtpk b.vtpk --scene boxes.json --io-latency 50ms
     ///   vortex-tiler view albedo.vtpk --layer data:normal.vtpk --show-layer 1
     ///   xvfb-run vortex-tiler view world.vtpk --size 640x480 --screenshot shot.png --frame-count 30
+    #[cfg(feature = "gpu")]
     #[command(verbatim_doc_comment)]
     View(view::ViewArgs),
     /// Serve packs and tile directories over HTTP to web viewers (Deep Zoom, IIIF, XYZ).
@@ -133,6 +140,7 @@ enum Command {
     ///   vortex-tiler serve a.vtpk tiles/ dzi_out/ --addr 127.0.0.1:0
     ///   vortex-tiler serve world.vtpk --openseadragon node_modules/openseadragon/build/openseadragon
     ///   vortex-tiler serve world.vtpk --addr 0.0.0.0:8080 --cache 512M   # other machines too
+    #[cfg(feature = "serve")]
     #[command(verbatim_doc_comment)]
     Serve(serve::ServeArgs),
     /// Join the shard packs of one split (`split --shard I/N`) into the pack one machine makes.
@@ -243,8 +251,11 @@ pub fn run(args: Args) -> Result<()> {
         Command::Unpack(a) => pack::run_unpack(a),
         Command::Info(a) => pack::run_info(a),
         Command::Verify(a) => pack::run_verify(a),
+        #[cfg(feature = "gpu")]
         Command::Render(a) => render::run(a),
+        #[cfg(feature = "gpu")]
         Command::View(a) => view::run(a),
+        #[cfg(feature = "serve")]
         Command::Serve(a) => serve::run(a),
         Command::Merge(a) => shard::run_merge(a),
     }

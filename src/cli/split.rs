@@ -147,7 +147,7 @@ pub struct OutputArgs {
     /// most frequent, ties to the first of top-left, top-right, bottom-left, bottom-right; or
     /// the top-left), so no level holds a value the image does not; lossless codecs only.
     /// --layout ome-zarr defaults to box.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::named::<Filter>())]
     filter: Option<Filter>,
 
     /// Sample type of stored tiles: unsignedByte or unsignedShort (png, raw, zstd, zstd-delta)
@@ -215,7 +215,7 @@ impl OutputLayout {
 pub struct CodecArgs {
     /// Tile codec [default: auto, or what the filename format's extension says]. raw, zstd,
     /// zstd-delta, bc1 and bc7 have no file format and write packs only.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::named::<CodecChoice>())]
     pub codec: Option<CodecChoice>,
 
     /// JPEG quality, 1-100 [default: 85].
@@ -223,11 +223,11 @@ pub struct CodecArgs {
     pub quality: Option<u8>,
 
     /// JPEG chroma subsampling [default: 420].
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::named::<Subsampling>())]
     pub subsampling: Option<Subsampling>,
 
     /// PNG compression effort [default: fast].
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::named::<PngLevel>())]
     pub png_compression: Option<PngLevel>,
 
     /// zstd level for --codec zstd and zstd-delta, 1-22 [default: 3].
@@ -235,7 +235,7 @@ pub struct CodecArgs {
     pub zstd_level: Option<i32>,
 
     /// BC7 encoder effort, fastest first (Intel ISPC presets) [default: ultra-fast].
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::named::<Bc7Effort>())]
     pub bc7_effort: Option<Bc7Effort>,
 }
 

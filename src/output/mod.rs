@@ -27,6 +27,7 @@ pub use ours::Product;
 
 /// Why a destination was refused.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum OutputError {
     #[error("{}: is {what}; nothing replaces one: choose a regular path", path.display())]
     Special { path: PathBuf, what: &'static str },

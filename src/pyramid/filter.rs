@@ -14,7 +14,7 @@ use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::pyramid::reduce::{Acc, ExactRow, Reducer};
 
 /// How LOD k+1 is made from LOD k.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Filter {
     /// Exact mean of the stored (sRGB-encoded) values of the source pixels under the texel,
     /// rounded once, halves up.
@@ -54,6 +54,17 @@ impl Filter {
     ];
     /// The filters of label images, listed after [`ALL`](Self::ALL).
     pub const LABELS: [Filter; 2] = [Filter::Mode, Filter::Nearest];
+    /// Every filter by name: [`ALL`](Self::ALL), then [`LABELS`](Self::LABELS).
+    pub const NAMED: [Filter; 8] = [
+        Filter::Box,
+        Filter::Linear,
+        Filter::Premultiplied,
+        Filter::LinearPremultiplied,
+        Filter::Lanczos3,
+        Filter::Mitchell,
+        Filter::Mode,
+        Filter::Nearest,
+    ];
 
     /// The name used on the command line and in `info.json`.
     pub fn name(self) -> &'static str {
@@ -66,6 +77,37 @@ impl Filter {
             Filter::Mitchell => "mitchell",
             Filter::Mode => "mode",
             Filter::Nearest => "nearest",
+        }
+    }
+
+    /// The filter `name` names, if any.
+    pub fn from_name(name: &str) -> Option<Filter> {
+        Filter::NAMED.into_iter().find(|f| f.name() == name)
+    }
+
+    /// One line on what the filter does (`--help` lists it).
+    pub fn about(self) -> &'static str {
+        match self {
+            Filter::Box => {
+                "Exact mean of the stored (sRGB-encoded) values of the source pixels under the texel, rounded once, halves up"
+            }
+            Filter::Linear => {
+                "Exact mean in linear light: colour decoded from sRGB, averaged, encoded back (nearest code value); alpha averaged as stored"
+            }
+            Filter::Premultiplied => {
+                "Colour weighted by alpha (premultiplied), then divided by the mean alpha: transparent texels never tint visible ones; fully transparent results are black. Same as box without alpha"
+            }
+            Filter::LinearPremultiplied => {
+                "Premultiplied and in linear light. Same as linear without alpha. The default: of the filters measured in docs/accuracy.md it comes closest to the linear-light reference"
+            }
+            Filter::Lanczos3 => {
+                "Lanczos3 (fast_image_resize) in stored values, each LOD from the previous one, alpha premultiplied"
+            }
+            Filter::Mitchell => "Mitchell-Netravali cubic (B = C = 1/3), like lanczos3",
+            Filter::Mode => {
+                "For label images: the most frequent texel of each 2x2 block of the previous LOD, ties to the first of top-left, top-right, bottom-left, bottom-right; never a new value"
+            }
+            Filter::Nearest => "For label images: the top-left texel of each 2x2 block; never a new value",
         }
     }
 
@@ -314,8 +356,13 @@ mod tests {
     use super::*;
 
     #[test]
-    fn all_lists_every_filter_once() {
+    fn every_filter_is_found_by_its_name_once() {
+        for f in Filter::NAMED {
+            assert_eq!(Filter::NAMED.iter().filter(|g| g.name() == f.name()).count(), 1, "{f}");
+            assert_eq!(Filter::from_name(f.name()), Some(f));
+        }
         let every: Vec<Filter> = Filter::ALL.into_iter().chain(Filter::LABELS).collect();
-        assert_eq!(every.as_slice(), <Filter as clap::ValueEnum>::value_variants());
+        assert_eq!(every, Filter::NAMED, "images' filters, then labels'");
+        assert_eq!(Filter::from_name("Box"), None, "names are matched exactly, as clap did");
     }
 }

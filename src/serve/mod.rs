@@ -37,6 +37,7 @@ pub use catalog::Catalog;
 
 /// What stops the server before it serves.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum ServeError {
     /// An input that is missing, unreadable or not something this server serves.
     #[error("{}: {message}", path.display())]

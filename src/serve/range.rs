@@ -8,6 +8,7 @@
 
 /// Why a `Range` header is not served.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum RangeError {
     /// `bytes=` not followed by one well-formed range (400).
     Malformed,

@@ -183,7 +183,7 @@ fn above_cut(
     let image = ImageHeader { width: layout.width, height: layout.height, layout: pixels };
     let made = Collected::default();
     crate::split::above_cut(image, roots, &made, opts, &())?;
-    made.tiles.into_inner().map_err(|_| TilerError::Options("an encoder panicked".into()))
+    made.tiles.into_inner().map_err(|_| TilerError::panicked("an encoder"))
 }
 
 fn missing(path: &Path, id: TileId) -> TilerError {
@@ -523,7 +523,7 @@ struct Collected {
 
 impl Collected {
     fn put(&self, lod: u32, x: u32, y: u32, tile: Made) -> Result<()> {
-        let mut tiles = self.tiles.lock().map_err(|_| TilerError::Options("an encoder panicked".into()))?;
+        let mut tiles = self.tiles.lock().map_err(|_| TilerError::panicked("an encoder"))?;
         tiles.insert(TileId { lod, x, y }, tile);
         Ok(())
     }

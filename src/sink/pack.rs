@@ -62,19 +62,19 @@ impl PackSink {
 
     /// Writes the index and header and renames the pack into place.
     pub fn finish(self) -> Result<WriteSummary> {
-        let writer = self.writer.into_inner().map_err(|_| TilerError::Options("a tile writer panicked".into()))?;
+        let writer = self.writer.into_inner().map_err(|_| TilerError::panicked("a tile writer"))?;
         Ok(writer.finish()?)
     }
 
     /// [`finish`](Self::finish) with other metadata than given at the start.
     pub fn finish_with_metadata(self, metadata: Vec<u8>) -> Result<WriteSummary> {
-        let mut writer = self.writer.into_inner().map_err(|_| TilerError::Options("a tile writer panicked".into()))?;
+        let mut writer = self.writer.into_inner().map_err(|_| TilerError::panicked("a tile writer"))?;
         writer.set_metadata(metadata)?;
         Ok(writer.finish()?)
     }
 
     fn add(&self, lod: u32, x: u32, y: u32, tile: NewTile) -> Result<()> {
-        let mut w = self.writer.lock().map_err(|_| TilerError::Options("a tile writer panicked".into()))?;
+        let mut w = self.writer.lock().map_err(|_| TilerError::panicked("a tile writer"))?;
         Ok(w.add(TileId { lod, x, y }, tile)?)
     }
 }

@@ -138,7 +138,7 @@ pub(crate) fn codec_of(info: &InfoFile, extension: Option<String>) -> Option<Cod
         _ => PngLevel::Fast,
     };
     let zstd_level = info.zstd_level.unwrap_or(DEFAULT_ZSTD_LEVEL);
-    let effort = info.bc7_effort.as_deref().and_then(|e| <Bc7Effort as clap::ValueEnum>::from_str(e, false).ok());
+    let effort = info.bc7_effort.as_deref().and_then(Bc7Effort::from_name);
     match name.as_str() {
         "jpeg" | "jpg" => Some(Codec::Jpeg { quality: info.quality.unwrap_or(85), subsampling }),
         "png" => Some(Codec::Png { level }),

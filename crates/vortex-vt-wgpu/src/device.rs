@@ -57,6 +57,7 @@ pub unsafe fn prefer_lavapipe() {
 
 /// Why no device could be made, or why it stopped answering.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum DeviceError {
     /// No adapter on any enabled backend (no driver, or none matching the environment).
     #[error("no GPU adapter found (is a Vulkan driver such as mesa-vulkan-drivers installed?): {0}")]

@@ -78,6 +78,7 @@ impl CacheFormat {
 
 /// Why a cache cannot be made.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum CacheError {
     #[error("{slots_per_side} slots per side: the page-table entry has room for 1..=256")]
     SlotsPerSide { slots_per_side: u16 },

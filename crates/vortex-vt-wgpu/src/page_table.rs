@@ -37,6 +37,7 @@ const HEADER: usize = MAX_TEXTURES as usize * 16;
 
 /// Why the page table cannot be made on this device.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum PageTableError {
     #[error(
         "the page tables of {textures} texture(s) need {bytes} bytes, over the device's largest storage buffer binding of {max} bytes"

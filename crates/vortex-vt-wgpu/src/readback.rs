@@ -11,6 +11,7 @@ use std::sync::mpsc;
 
 /// Why a readback gave no bytes.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum ReadbackError {
     /// Waiting for the GPU to finish the copy failed.
     #[error("reading back the {what}: waiting for the GPU failed (is the device lost?): {source}")]

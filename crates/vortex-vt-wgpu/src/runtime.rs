@@ -30,7 +30,7 @@ use vortex_vt::analysis::Analyzer;
 use vortex_vt::invariants::{self, Violation};
 use vortex_vt::page::{PageId, TextureGrid};
 use vortex_vt::page_table::{Change, PageTable};
-use vortex_vt::residency::{ConfigError, Residency, ResidencyConfig, Slot};
+use vortex_vt::residency::{ConfigError, Residency, ResidencyConfig, Slot, UpdateError};
 
 use crate::bindings::Bindings;
 use crate::feedback::{FeedbackBuffer, FeedbackReadback};
@@ -47,6 +47,7 @@ use crate::texture::VirtualTexture;
 
 /// Why a runtime cannot be made or a frame went wrong.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum RuntimeError {
     #[error("{0}")]
     Loader(#[from] LoaderError),
@@ -54,6 +55,8 @@ pub enum RuntimeError {
     Cache(#[from] CacheError),
     #[error("residency: {0}")]
     Residency(#[from] ConfigError),
+    #[error("residency: {0}")]
+    ResidencyUpdate(#[from] UpdateError),
     #[error("page table: {0}")]
     PageTable(#[from] PageTableError),
     #[error("{0}")]
@@ -377,7 +380,7 @@ impl Runtime {
             readback,
         };
         // The roots: loaded and mapped before the first frame.
-        let update = runtime.residency.update(0, &[]);
+        let update = runtime.residency.update(0, &[])?;
         let pages = runtime.load_now(&update.loads);
         let mut changes = Vec::new();
         for page in pages {
@@ -481,7 +484,7 @@ impl Runtime {
         let mut changes = Vec::new();
         if let Some(feedback) = read.map_err(failed)? {
             stats.feedback_of = Some(feedback.frame);
-            let loads = self.stream(&feedback.words, &mut stats, &mut changes);
+            let loads = self.stream(&feedback.words, &mut stats, &mut changes)?;
             if offline {
                 let pages = self.load_now(&loads);
                 self.landed.extend(pages);
@@ -509,7 +512,12 @@ impl Runtime {
 
     /// Analyses one feedback buffer, updates the residency and unmaps its evictions; returns the
     /// pages to load, coarse before fine, with their slots.
-    fn stream(&mut self, words: &[u32], stats: &mut FrameStats, changes: &mut Vec<Change>) -> Vec<(PageId, Slot)> {
+    fn stream(
+        &mut self,
+        words: &[u32],
+        stats: &mut FrameStats,
+        changes: &mut Vec<Change>,
+    ) -> Result<Vec<(PageId, Slot)>, RuntimeError> {
         let table = &self.table;
         let analysis = self.analyzer.analyze(words, &self.grids, |p| {
             let entry = table.get(p);
@@ -519,7 +527,7 @@ impl Runtime {
         self.fallback = if analysis.samples == 0 { 0.0 } else { fallback as f64 / analysis.samples as f64 };
         let wanted: Vec<PageId> = analysis.requests.iter().map(|r| r.page).collect();
         self.updates += 1;
-        let update = self.residency.update(self.updates, &wanted);
+        let update = self.residency.update(self.updates, &wanted)?;
         // A page evicted before it landed was never mapped: nothing to unmap, and its read is
         // taken back if no worker has started it (with slow reads, a moving camera would
         // otherwise queue pages it has already left behind).
@@ -534,7 +542,7 @@ impl Runtime {
         let s = update.stats;
         (stats.requested, stats.hits, stats.queued) = (s.requested, s.hits, update.loads.len());
         (stats.evicted, stats.deferred) = (s.evicted, s.deferred);
-        update.loads
+        Ok(update.loads)
     }
 
     /// Joins the layers the loaders have finished into pages; a layer of a page no longer in

@@ -76,7 +76,7 @@ fn frame(
     });
     let wanted: Vec<PageId> = analysis.requests.iter().map(|r| r.page).collect();
     let t1 = Instant::now();
-    let update = residency.update(stamp, &wanted);
+    let update = residency.update(stamp, &wanted).unwrap();
     let t2 = Instant::now();
     let changes = table.apply(&update);
     let t3 = Instant::now();
@@ -97,7 +97,7 @@ fn main() {
     let mut residency = Residency::new(&grids, ResidencyConfig::new(SLOTS, BUDGET)).unwrap();
     let mut table = PageTable::new(&grids);
     // As `Runtime::new`: frame 0 pins the root.
-    table.apply(&residency.update(0, &[]));
+    table.apply(&residency.update(0, &[]).unwrap());
     let mut analyzer = Analyzer::new();
     let mut words = Vec::with_capacity((FEEDBACK.0 * FEEDBACK.1) as usize);
 

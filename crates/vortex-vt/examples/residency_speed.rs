@@ -47,7 +47,7 @@ fn run(pan_per_frame: u32) -> Stats {
     let grid = TextureGrid::new(PAGES.into(), PAGES.into()).unwrap();
     let mut residency = Residency::new(&[grid], ResidencyConfig::new(SLOTS, BUDGET)).unwrap();
     let mut table = PageTable::new(&[grid]);
-    table.apply(&residency.update(0, &[]));
+    table.apply(&residency.update(0, &[]).unwrap());
     let mut req = Vec::new();
     let mut upload: Vec<(PageId, u32)> = Vec::new();
     let mut s = Stats { residency: vec![], table: vec![], requested: 0, loads: 0, evictions: 0, changes: 0 };
@@ -59,7 +59,7 @@ fn run(pan_per_frame: u32) -> Stats {
         requests(&grid, cx, cy, &mut req);
 
         let t0 = Instant::now();
-        let update = residency.update(frame, &req);
+        let update = residency.update(frame, &req).unwrap();
         let t1 = Instant::now();
         let changes = table.apply(&update);
         upload.clear();
@@ -129,7 +129,7 @@ fn main() {
     let mut residency = Residency::new(&[grid], ResidencyConfig::new(SLOTS, SLOTS)).unwrap();
     let mut req = Vec::new();
     requests(&grid, 256, 256, &mut req);
-    residency.update(0, &req);
+    residency.update(0, &req).unwrap();
     let mut times: Vec<Duration> = (0..50)
         .map(|_| {
             let t = Instant::now();

@@ -119,7 +119,7 @@ mod tests {
         let mut r = Residency::new(&g, ResidencyConfig::new(8, 2)).unwrap();
         let mut t = PageTable::new(&g);
         assert_eq!(check(&r, &t), Err(Violation::RootNotResident(0)));
-        let u = r.update(0, &[]);
+        let u = r.update(0, &[]).unwrap();
         assert_eq!(
             check(&r, &t),
             Err(Violation::WrongEntry {
@@ -138,8 +138,8 @@ mod tests {
         let g = grids(1);
         let mut r = Residency::new(&g, ResidencyConfig::new(8, 2)).unwrap();
         let mut t = PageTable::new(&g);
-        t.apply(&r.update(0, &[]));
-        let _ = r.update(1, &[PageId::new(0, 3, 1, 0)]);
+        t.apply(&r.update(0, &[]).unwrap());
+        let _ = r.update(1, &[PageId::new(0, 3, 1, 0)]).unwrap();
         let err = check(&r, &t).unwrap_err();
         assert_eq!(
             err,
@@ -277,7 +277,7 @@ mod tests {
             for (f, raw) in frames.iter().enumerate() {
                 let requests = fold(&g, raw);
                 let before = Before::of(&r);
-                let u = r.update(f as u64, &requests);
+                let u = r.update(f as u64, &requests).unwrap();
                 check_update(&before, &r, &u, &requests, budget, f == 0)?;
                 let changes = table.apply(&u);
                 let mut seen = HashSet::new();
@@ -318,7 +318,7 @@ mod tests {
             let all: Vec<PageId> = (0..16).flat_map(|y| (0..16).map(move |x| PageId::new(0, 0, x, y))).collect();
             let mut last = 0.0;
             for f in 0..busy {
-                let u = r.update(f as u64, &all);
+                let u = r.update(f as u64, &all).unwrap();
                 prop_assert!(u.lod_bias > last || u.lod_bias == 4.0, "frame {}: {} after {}", f, u.lod_bias, last);
                 prop_assert!(u.lod_bias <= 4.0);
                 last = u.lod_bias;
@@ -326,7 +326,7 @@ mod tests {
             prop_assert!(last >= 2.0);
             // The request shrinks to the root: the bias falls every frame down to 0.
             for f in busy..busy + 20 {
-                let u = r.update(f as u64, &[PageId::new(0, 4, 0, 0)]);
+                let u = r.update(f as u64, &[PageId::new(0, 4, 0, 0)]).unwrap();
                 prop_assert!(u.lod_bias < last || u.lod_bias == 0.0);
                 prop_assert!(u.lod_bias >= 0.0);
                 last = u.lod_bias;

@@ -48,6 +48,7 @@ impl PageId {
 
 /// Why a page grid cannot be made.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum GridError {
     #[error("a grid of {w}x{h} pages: each axis needs at least one page")]
     Empty { w: u64, h: u64 },

@@ -69,6 +69,7 @@ impl ResidencyConfig {
 
 /// Why a [`Residency`] cannot be made.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
 pub enum ConfigError {
     #[error("a residency needs at least one texture")]
     NoTextures,
@@ -80,6 +81,16 @@ pub enum ConfigError {
     WaterMarks { low: f32, high: f32 },
     #[error("the bias step ({0}) must be finite and positive")]
     BiasStep(f32),
+}
+
+/// Why a [`Residency::update`] was refused; the residency is left as it was.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum UpdateError {
+    /// The frame numbers stamp the pages' last use (the LRU order): each call's must be greater
+    /// than the last's.
+    #[error("frame numbers must increase: {frame} after {last}")]
+    FrameOrder { frame: u64, last: u64 },
 }
 
 /// Counters of one [`Residency::update`]. "Wanted" pages are the requests expanded with their
@@ -278,10 +289,11 @@ impl Residency {
     }
 
     /// One frame: `frame` must increase from call to call; `requests` are the pages the frame wants,
-    /// most wanted first (ancestors implied, repeats and invalid pages ignored).
-    pub fn update(&mut self, frame: u64, requests: &[PageId]) -> FrameUpdate {
-        if let Some(last) = self.last_frame {
-            assert!(frame > last, "frame numbers must increase: {frame} after {last}");
+    /// most wanted first (ancestors implied, repeats and invalid pages ignored). A `frame` not
+    /// after the last call's is refused, and nothing changes.
+    pub fn update(&mut self, frame: u64, requests: &[PageId]) -> Result<FrameUpdate, UpdateError> {
+        if let Some(last) = self.last_frame.filter(|&last| frame <= last) {
+            return Err(UpdateError::FrameOrder { frame, last });
         }
         self.last_frame = Some(frame);
         let mut out = FrameUpdate { frame, ..FrameUpdate::default() };
@@ -386,7 +398,7 @@ impl Residency {
         out.stats.loaded = out.loads.len();
         out.stats.evicted = out.evictions.len();
         out.stats.deferred = self.missing.len() - (out.loads.len() - roots_loaded);
-        out
+        Ok(out)
     }
 
     /// Takes the slot of the unprotected page of the finest LOD, least recently used, smallest id.
@@ -447,27 +459,27 @@ mod tests {
     fn roots_are_loaded_first_outside_the_budget() {
         let mut r = residency(&[16, 8], 8, 1);
         assert_eq!(r.finest_resident_lod(p(0, 3, 3)), 4);
-        let u = r.update(0, &[p(4, 0, 0), p(3, 1, 1)]);
+        let u = r.update(0, &[p(4, 0, 0), p(3, 1, 1)]).unwrap();
         // Both roots, then one page of budget.
         assert_eq!(u.loads, vec![(p(4, 0, 0), 0), (PageId::new(1, 3, 0, 0), 1), (p(3, 1, 1), 2)]);
         assert_eq!(u.stats, FrameStats { requested: 2, hits: 1, loaded: 3, evicted: 0, deferred: 0, invalid: 0 });
         assert_eq!(r.is_resident(PageId::new(1, 3, 0, 0)), Some(1));
         // Later frames find them resident.
-        assert!(r.update(1, &[]).loads.is_empty());
+        assert!(r.update(1, &[]).unwrap().loads.is_empty());
     }
 
     #[test]
     fn roots_are_never_evicted() {
         let mut r = residency(&[16, 8], 2, 8);
-        r.update(0, &[]);
+        r.update(0, &[]).unwrap();
         for f in 1..20 {
-            let u = r.update(f, &[p(3, (f % 2) as u16, 0), PageId::new(1, 2, 1, 1)]);
+            let u = r.update(f, &[p(3, (f % 2) as u16, 0), PageId::new(1, 2, 1, 1)]).unwrap();
             assert!(u.loads.is_empty() && u.evictions.is_empty());
             assert_eq!(u.stats.deferred, 2);
         }
         let mut r = residency(&[16, 8], 3, 8);
         for f in 0..20 {
-            let u = r.update(f, &[p(3, (f % 2) as u16, (f % 3 % 2) as u16)]);
+            let u = r.update(f, &[p(3, (f % 2) as u16, (f % 3 % 2) as u16)]).unwrap();
             assert!(u.evictions.iter().all(|(v, _)| !r.is_root(*v)));
             assert!(r.is_resident(p(4, 0, 0)).is_some() && r.is_resident(PageId::new(1, 3, 0, 0)).is_some());
         }
@@ -480,7 +492,7 @@ mod tests {
         let want = [p(0, 13, 6)];
         let mut got = vec![];
         for f in 0..6 {
-            let u = r.update(f, &want);
+            let u = r.update(f, &want).unwrap();
             assert_eq!(u.stats.requested, 5);
             got.extend(u.loads.iter().map(|&(q, _)| q));
         }
@@ -494,11 +506,11 @@ mod tests {
     fn loading_stops_when_every_slot_is_protected() {
         // 3 slots: root + 2. The third wanted page finds neither a free slot nor a victim.
         let mut r = residency(&[16], 3, 8);
-        r.update(0, &[]);
-        let u = r.update(1, &[p(3, 0, 0), p(3, 1, 1), p(2, 2, 2)]);
+        r.update(0, &[]).unwrap();
+        let u = r.update(1, &[p(3, 0, 0), p(3, 1, 1), p(2, 2, 2)]).unwrap();
         assert_eq!(u.loads.iter().map(|l| l.0).collect::<Vec<_>>(), vec![p(3, 0, 0), p(3, 1, 1)]);
         assert_eq!(u.stats.deferred, 1);
-        let u = r.update(2, &[p(2, 0, 0), p(3, 1, 1)]);
+        let u = r.update(2, &[p(2, 0, 0), p(3, 1, 1)]).unwrap();
         // p(3,0,0) is the parent of p(2,0,0) and is wanted, so protected; nothing else to evict.
         assert!(u.loads.is_empty() && u.evictions.is_empty());
     }
@@ -506,34 +518,34 @@ mod tests {
     #[test]
     fn the_budget_caps_loads() {
         let mut r = residency(&[16], 64, 3);
-        r.update(0, &[]);
+        r.update(0, &[]).unwrap();
         let want: Vec<PageId> = (0..4).flat_map(|y| (0..4).map(move |x| p(2, x, y))).collect();
         let mut total = 0;
         for f in 1..10 {
-            let u = r.update(f, &want);
+            let u = r.update(f, &want).unwrap();
             assert!(u.loads.len() <= 3);
             total += u.loads.len();
         }
         // 4 LOD-3 pages + 16 LOD-2 pages, 3 per frame.
         assert_eq!(total, 20);
-        assert_eq!(r.update(10, &want).stats.hits, 21);
-        assert!(r.update(11, &want).stats.deferred == 0);
+        assert_eq!(r.update(10, &want).unwrap().stats.hits, 21);
+        assert!(r.update(11, &want).unwrap().stats.deferred == 0);
     }
 
     #[test]
     fn pages_wanted_this_frame_are_never_evicted() {
         let mut r = residency(&[16], 4, 8);
         let want = [p(3, 0, 0), p(3, 1, 0), p(3, 0, 1)];
-        r.update(0, &want);
+        r.update(0, &want).unwrap();
         assert_eq!(r.resident_count(), 4);
         // Full of wanted pages: a new want waits instead of evicting.
         let mut more = want.to_vec();
         more.push(p(3, 1, 1));
-        let u = r.update(1, &more);
+        let u = r.update(1, &more).unwrap();
         assert!(u.evictions.is_empty() && u.loads.is_empty());
         assert_eq!(u.stats.deferred, 1);
         // Once one of them is no longer wanted, it makes room.
-        let u = r.update(2, &[p(3, 1, 1), p(3, 0, 0), p(3, 1, 0)]);
+        let u = r.update(2, &[p(3, 1, 1), p(3, 0, 0), p(3, 1, 0)]).unwrap();
         assert_eq!(u.evictions, vec![(p(3, 0, 1), 3)]);
         assert_eq!(u.loads, vec![(p(3, 1, 1), 3)]);
     }
@@ -542,34 +554,34 @@ mod tests {
     fn victims_are_finer_lod_first_then_lru_then_smallest_id() {
         let mut r = residency(&[16], 8, 8);
         // Frame 0: a LOD-3 page and its LOD-2 child; frame 1: two LOD-2 pages of another parent.
-        r.update(0, &[p(2, 0, 0)]);
-        r.update(1, &[p(2, 3, 3), p(2, 2, 2)]);
+        r.update(0, &[p(2, 0, 0)]).unwrap();
+        r.update(1, &[p(2, 3, 3), p(2, 2, 2)]).unwrap();
         // Resident: root, (3,0,0)@0, (2,0,0)@0, (3,1,1)@1, (2,3,3)@1, (2,2,2)@1: 6 of 8.
         assert_eq!(r.resident_count(), 6);
         // Frame 2 wants (3,0,1) and two of its children: 3 loads, 2 free slots -> 1 victim: the
         // finest LOD is 2, the oldest there is (2,0,0) (stamped 0), even though (3,0,0) is as old.
-        let u = r.update(2, &[p(2, 0, 2), p(2, 1, 3)]);
+        let u = r.update(2, &[p(2, 0, 2), p(2, 1, 3)]).unwrap();
         assert_eq!(u.evictions.iter().map(|e| e.0).collect::<Vec<_>>(), vec![p(2, 0, 0)]);
         // Frame 3 wants 3 new LOD-3 pages... with 8 slots all full: victims are LOD 2 first, oldest
         // first ((2,3,3) and (2,2,2) from frame 1, ties by id: (2,2,2) < (2,3,3)), then LOD 3.
-        let u = r.update(3, &[p(3, 1, 0)]);
+        let u = r.update(3, &[p(3, 1, 0)]).unwrap();
         assert_eq!(u.evictions.iter().map(|e| e.0).collect::<Vec<_>>(), vec![p(2, 2, 2)]);
-        let u = r.update(4, &[p(3, 1, 0), p(2, 2, 0)]);
+        let u = r.update(4, &[p(3, 1, 0), p(2, 2, 0)]).unwrap();
         assert_eq!(u.evictions.iter().map(|e| e.0).collect::<Vec<_>>(), vec![p(2, 3, 3)]);
         // Now only (2,0,2), (2,1,3) (frame 2) remain at LOD 2 besides the protected (2,2,0).
-        let u = r.update(5, &[p(3, 1, 0), p(2, 2, 0), p(2, 3, 0), p(2, 2, 1)]);
+        let u = r.update(5, &[p(3, 1, 0), p(2, 2, 0), p(2, 3, 0), p(2, 2, 1)]).unwrap();
         assert_eq!(u.evictions.iter().map(|e| e.0).collect::<Vec<_>>(), vec![p(2, 0, 2), p(2, 1, 3)]);
         // Then LOD 3 goes, oldest first: (3,0,0) (frame 0), not the root.
-        let u = r.update(6, &[p(3, 1, 0), p(2, 2, 0), p(2, 3, 0), p(2, 2, 1), p(2, 3, 1)]);
+        let u = r.update(6, &[p(3, 1, 0), p(2, 2, 0), p(2, 3, 0), p(2, 2, 1), p(2, 3, 1)]).unwrap();
         assert_eq!(u.evictions.iter().map(|e| e.0).collect::<Vec<_>>(), vec![p(3, 0, 0)]);
     }
 
     #[test]
     fn a_replaced_page_is_evicted_in_the_same_update_with_its_slot() {
         let mut r = residency(&[16], 3, 8);
-        r.update(0, &[p(3, 0, 0), p(3, 1, 0)]);
+        r.update(0, &[p(3, 0, 0), p(3, 1, 0)]).unwrap();
         let old = r.is_resident(p(3, 0, 0)).unwrap();
-        let u = r.update(1, &[p(3, 1, 1), p(3, 1, 0)]);
+        let u = r.update(1, &[p(3, 1, 1), p(3, 1, 0)]).unwrap();
         assert_eq!(u.evictions, vec![(p(3, 0, 0), old)]);
         assert_eq!(u.loads, vec![(p(3, 1, 1), old)]);
         assert_eq!(r.slot_owner(old), Some(p(3, 1, 1)));
@@ -579,18 +591,21 @@ mod tests {
     #[test]
     fn repeats_and_invalid_requests_are_ignored() {
         let mut r = residency(&[16], 8, 8);
-        let u = r.update(0, &[p(3, 0, 0), p(3, 0, 0), p(0, 16, 0), p(5, 0, 0), PageId::new(1, 0, 0, 0)]);
+        let u = r.update(0, &[p(3, 0, 0), p(3, 0, 0), p(0, 16, 0), p(5, 0, 0), PageId::new(1, 0, 0, 0)]).unwrap();
         assert_eq!(u.stats.invalid, 3);
         assert_eq!(u.stats.requested, 2);
         assert_eq!(u.loads.len(), 2);
     }
 
     #[test]
-    #[should_panic(expected = "frame numbers must increase")]
     fn frames_must_increase() {
         let mut r = residency(&[16], 8, 8);
-        r.update(3, &[]);
-        r.update(3, &[]);
+        let first = r.update(3, &[]).unwrap();
+        assert_eq!(r.update(3, &[p(3, 0, 0)]), Err(UpdateError::FrameOrder { frame: 3, last: 3 }));
+        assert_eq!(r.update(2, &[]), Err(UpdateError::FrameOrder { frame: 2, last: 3 }));
+        // Refused calls change nothing: the next frame sees what the first one left.
+        assert_eq!(r.resident_count(), first.loads.len());
+        assert_eq!(r.update(4, &[p(3, 0, 0)]).unwrap().stats.loaded, 1);
     }
 
     #[test]
@@ -600,31 +615,31 @@ mod tests {
         let lod2: Vec<PageId> = (0..4).flat_map(|y| (0..4).map(move |x| p(2, x, y))).collect(); // 21 wanted
         let mut biases = vec![];
         for f in 0..20 {
-            biases.push(r.update(f, &lod2).lod_bias);
+            biases.push(r.update(f, &lod2).unwrap().lod_bias);
         }
         assert_eq!(&biases[..5], &[0.25, 0.5, 0.75, 1.0, 1.25]);
         assert_eq!(biases[19], 4.0, "capped at lod_count - 1");
         assert_eq!(r.lod_bias(), 4.0);
         // 8 wanted: between the marks, the bias holds.
         let eight = [p(2, 0, 0), p(2, 1, 0), p(2, 0, 1), p(2, 1, 1), p(3, 1, 1), p(3, 0, 1)];
-        assert_eq!(r.update(20, &eight).stats.requested, 8);
+        assert_eq!(r.update(20, &eight).unwrap().stats.requested, 8);
         assert_eq!(r.lod_bias(), 4.0);
         // 9 wanted is not over 9.
-        assert_eq!(r.update(21, &[&eight[..], &[p(3, 1, 0)]].concat()).lod_bias, 4.0);
+        assert_eq!(r.update(21, &[&eight[..], &[p(3, 1, 0)]].concat()).unwrap().lod_bias, 4.0);
         // 2 wanted: it falls to 0 and stays there.
         for f in 22..50 {
-            r.update(f, &[p(3, 0, 0)]);
+            r.update(f, &[p(3, 0, 0)]).unwrap();
         }
         assert_eq!(r.lod_bias(), 0.0);
-        assert_eq!(r.update(50, &[p(3, 0, 0)]).lod_bias, 0.0);
+        assert_eq!(r.update(50, &[p(3, 0, 0)]).unwrap().lod_bias, 0.0);
         // The marks exactly: 10 wanted is over 9 (rises), 7 is not under 7 (holds), 6 is (falls).
         let ten = [&eight[..], &[p(3, 1, 0), p(2, 2, 0)]].concat();
-        assert_eq!(r.update(51, &ten).stats.requested, 10);
+        assert_eq!(r.update(51, &ten).unwrap().stats.requested, 10);
         assert_eq!(r.lod_bias(), 0.25);
         let seven = &eight[..5];
-        assert_eq!(r.update(52, seven).stats.requested, 7);
+        assert_eq!(r.update(52, seven).unwrap().stats.requested, 7);
         assert_eq!(r.lod_bias(), 0.25);
-        assert_eq!(r.update(53, &eight[..4]).stats.requested, 6);
+        assert_eq!(r.update(53, &eight[..4]).unwrap().stats.requested, 6);
         assert_eq!(r.lod_bias(), 0.0);
     }
 
@@ -633,10 +648,10 @@ mod tests {
         let config = ResidencyConfig { bias_step: 1.0, ..ResidencyConfig::new(4, 1) };
         let mut r = Residency::new(&[grid(8)], config).unwrap();
         let all: Vec<PageId> = (0..4).flat_map(|y| (0..4).map(move |x| p(1, x, y))).collect();
-        assert_eq!(r.update(0, &all).lod_bias, 1.0);
-        assert_eq!(r.update(1, &all).lod_bias, 2.0);
-        assert_eq!(r.update(2, &all).lod_bias, 3.0);
-        assert_eq!(r.update(3, &all).lod_bias, 3.0);
-        assert_eq!(r.update(4, &[]).lod_bias, 2.0);
+        assert_eq!(r.update(0, &all).unwrap().lod_bias, 1.0);
+        assert_eq!(r.update(1, &all).unwrap().lod_bias, 2.0);
+        assert_eq!(r.update(2, &all).unwrap().lod_bias, 3.0);
+        assert_eq!(r.update(3, &all).unwrap().lod_bias, 3.0);
+        assert_eq!(r.update(4, &[]).unwrap().lod_bias, 2.0);
     }
 }

@@ -92,9 +92,9 @@ pub fn tile(
     }
     let enc = &a.enc;
     if let Some(codec) = enc.codec.filter(|c| *c != CodecChoice::Zstd) {
-        let name = clap::ValueEnum::to_possible_value(&codec).map(|v| v.get_name().to_string()).unwrap_or_default();
         bail!(
-            "--codec {name}: OME-Zarr chunks are zstd-compressed (the codec every Zarr reader has); leave --codec out or set --zstd-level"
+            "--codec {}: OME-Zarr chunks are zstd-compressed (the codec every Zarr reader has); leave --codec out or set --zstd-level",
+            codec.name()
         );
     }
     for (given, flag) in [

@@ -249,7 +249,7 @@ impl TiledSource {
                     )));
                 }
                 if !self.rewound {
-                    self.missing.lock().map_err(|_| TilerError::Options("poisoned".into()))?.push(name);
+                    self.missing.lock().map_err(|_| TilerError::panicked("a tile reader"))?.push(name);
                 }
                 return Ok(None);
             }

@@ -19,6 +19,7 @@ use crate::texture::VirtualTexture;
 
 /// Why a scene cannot be used.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum SceneError {
     #[error("cannot read scene {path}: {source}")]
     Read { path: PathBuf, source: std::io::Error },

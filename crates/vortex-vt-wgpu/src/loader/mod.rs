@@ -46,6 +46,7 @@ pub use tier::{DEFAULT_MEMORY_TIER_BYTES, TIER_ENTRY_OVERHEAD, TierUsage};
 
 /// Why a [`VirtualTexture`](crate::VirtualTexture) or a [`Loader`] cannot be made.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum LoaderError {
     /// The pack's layout is not a virtual texture's (an image its LOD-0 grid covers).
     #[error("{}: {field}: {message}", path.display())]
@@ -84,6 +85,7 @@ pub enum LoaderError {
 
 /// Why a page came back with stand-in texels.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum LoadError {
     /// The page's texture id is not an index of the loader's packs.
     #[error("page {page:?}: no texture {}; the loader has {textures}", page.texture)]
