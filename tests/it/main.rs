@@ -25,5 +25,6 @@ mod slurm;
 mod sources;
 mod stability;
 mod stripes;
+mod tiff_slides;
 mod view;
 mod viewers;

@@ -12,6 +12,8 @@
 //! unspecified, or any after the alpha) are dropped, and associated (premultiplied) alpha is
 //! turned into straight alpha ([`unpremultiply`] says how it rounds).
 
+mod jpeg;
+mod libjpeg;
 mod strips_ahead;
 
 use std::fs::File;
@@ -110,6 +112,10 @@ impl Chunking {
 pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     let bigtiff = is_bigtiff(path)?;
     let mut decoder = open_decoder(path, max_memory)?;
+    if jpeg::is_jpeg(path, &mut decoder)? {
+        let label = if bigtiff { "bigtiff" } else { "tiff" };
+        return jpeg::open(path, &mut decoder, label.to_string(), max_memory);
+    }
     let (width, height) = decoder.dimensions().map_err(|e| open_error(path, e))?;
     let compression = check_compression(path, &mut decoder)?;
     let Samples { layout, delivered: file_samples, stored, associated } = pixel_layout(path, &mut decoder)?;
@@ -298,7 +304,12 @@ fn check_compression(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Res
                 CompressionMethod::Huffman => "CCITT modified Huffman (fax)".to_string(),
                 CompressionMethod::Fax3 => "CCITT Group 3 fax".to_string(),
                 CompressionMethod::Fax4 => "CCITT Group 4 fax".to_string(),
-                CompressionMethod::JPEG => "old-style JPEG".to_string(),
+                CompressionMethod::JPEG => {
+                    return Err(TilerError::unsupported(
+                        path,
+                        "TIFF compression 6 (old-style JPEG, withdrawn in 1995) is not supported (new-style JPEG, compression 7, is); re-save it with libtiff, e.g. `tiffcp -c jpeg in.tif out.tif`",
+                    ));
+                }
                 CompressionMethod::ModernJPEG => "JPEG".to_string(),
                 CompressionMethod::ZSTD => "Zstandard".to_string(),
                 CompressionMethod::WebP => "WebP".to_string(),
@@ -1290,11 +1301,12 @@ mod tests {
         write_tiff(&path, false, tags, &[vec![0; (w * h * 3) as usize]], false);
         expect_unsupported(&path, "YCbCr");
 
-        let path = dir.path().join("jpeg-in-tiff.tif");
+        // New-style JPEG (7) is read (jpeg.rs); old-style is not.
+        let path = dir.path().join("old-jpeg-in-tiff.tif");
         let mut tags = basic_tags(w, h, &[8, 8, 8], 2, None);
-        set_tag(&mut tags, (259, SHORT, vec![7]));
+        set_tag(&mut tags, (259, SHORT, vec![6]));
         write_tiff(&path, false, tags, &[vec![0; 10]], false);
-        expect_unsupported(&path, "compression JPEG");
+        expect_unsupported(&path, "old-style JPEG");
     }
 
     #[test]
