@@ -81,7 +81,18 @@ pub trait RowSource: Send {
 struct Reopening {
     path: std::path::PathBuf,
     max_memory: u64,
+    pick: Pick,
     inner: Box<dyn RowSource>,
+}
+
+/// Which image of a file holding several is read (`--page`, `--series`): only TIFF has more
+/// than one; by default the first full-resolution image (docs/sources.md).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Pick {
+    /// The Nth directory of a TIFF, counted from 0 as `tiffinfo` and libvips count them.
+    pub page: Option<u32>,
+    /// The Nth series: an OME-TIFF's Nth `Image`, else the Nth full-resolution page.
+    pub series: Option<u32>,
 }
 
 impl RowSource for Reopening {
@@ -101,7 +112,7 @@ impl RowSource for Reopening {
         self.inner.skip_rows(rows)
     }
     fn rewind(&mut self) -> Result<()> {
-        let again = open_once(&self.path, self.max_memory)?;
+        let again = open_once(&self.path, self.max_memory, self.pick)?;
         if again.header() != self.inner.header() {
             return Err(TilerError::decode(&self.path, "changed while it was being read"));
         }
@@ -112,11 +123,16 @@ impl RowSource for Reopening {
 
 /// Opens `path`, choosing the decoder from the file's first bytes (not its extension).
 pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
-    let inner = open_once(path, max_memory)?;
-    Ok(Box::new(Reopening { path: path.to_path_buf(), max_memory, inner }))
+    open_picked(path, max_memory, Pick::default())
 }
 
-fn open_once(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
+/// [`open`], reading the page or series `pick` names of a file holding several.
+pub fn open_picked(path: &Path, max_memory: u64, pick: Pick) -> Result<Box<dyn RowSource>> {
+    let inner = open_once(path, max_memory, pick)?;
+    Ok(Box::new(Reopening { path: path.to_path_buf(), max_memory, pick, inner }))
+}
+
+fn open_once(path: &Path, max_memory: u64, pick: Pick) -> Result<Box<dyn RowSource>> {
     // Checked before opening: opening a FIFO blocks until a writer comes.
     let meta = std::fs::metadata(path).map_err(|e| TilerError::io(path, e))?;
     if meta.is_dir() {
@@ -135,9 +151,17 @@ fn open_once(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     if n == 0 {
         return Err(TilerError::decode(path, "the file is empty"));
     }
-    match Streamed::sniff(magic) {
+    let format = Streamed::sniff(magic);
+    if pick != Pick::default() && format != Some(Streamed::Tiff) {
+        let name = format.map_or("this", Streamed::name);
+        return Err(TilerError::unsupported(
+            path,
+            format!("--page and --series choose among a TIFF's images; a {name} file holds one"),
+        ));
+    }
+    match format {
         Some(Streamed::Png) => png::open(path, max_memory),
-        Some(Streamed::Tiff) => tiff::open(path, max_memory),
+        Some(Streamed::Tiff) => tiff::open(path, max_memory, pick),
         Some(Streamed::Jpeg) => jpeg::open(path, max_memory),
         Some(Streamed::Pnm) => pnm::open(path),
         None => whole::open(path, max_memory),

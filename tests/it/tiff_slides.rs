@@ -325,3 +325,155 @@ fn columns_and_skipped_rows_match_whole_rows() {
         }
     }
 }
+
+/// The Python with tifffile and imagecodecs that `.ci/run` makes (VORTEX_PYVIPS), or a skip
+/// with a note outside CI.
+fn venv_python() -> Option<std::ffi::OsString> {
+    let python = std::env::var_os("VORTEX_PYVIPS");
+    if python.is_none() {
+        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and VORTEX_PYVIPS unset");
+        eprintln!("note: skipping a tifffile-made TIFF: set VORTEX_PYVIPS to a Python with tifffile and imagecodecs");
+    }
+    python
+}
+
+fn python(python: &std::ffi::OsStr, script: &str, args: &[&str]) {
+    let out = Command::new(python).arg("-c").arg(script).args(args).output().unwrap();
+    assert!(out.status.success(), "{script}: {}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// An Aperio-like SVS as tifffile writes it: a 240-texel JPEG-tiled full resolution, a
+/// thumbnail in strips, a tiled reduced level, an LZW label and a JPEG macro; the texels of
+/// the image it was made from go to OUT.rgb.
+const MAKE_SVS: &str = r#"
+import sys, numpy as np, tifffile
+out = sys.argv[1]
+h, w = 500, 720
+y, x = np.mgrid[0:h, 0:w]
+img = np.stack([x * 255 // w, y * 255 // h, (x ^ y) & 255], -1).astype(np.int32)
+img += np.random.default_rng(7).integers(0, 40, img.shape) * (((x // 16 + y // 16) % 3 == 0)[..., None])
+img = np.clip(img, 0, 255).astype(np.uint8)
+head = "Aperio Image Library v12.0.15 \r\n%dx%d" % (w, h)
+with tifffile.TiffWriter(out) as t:
+    t.write(img, tile=(240, 240), compression="jpeg", compressionargs={"level": 80}, photometric="rgb", description=head + " [0,0 %dx%d] (240x240) JPEG/RGB Q=80|AppMag = 20|MPP = 0.5" % (w, h), metadata=None)
+    t.write(img[::8, ::8].copy(), compression="jpeg", photometric="rgb", description=head + " -> 90x63", metadata=None)
+    t.write(img[::4, ::4].copy(), tile=(240, 240), compression="jpeg", photometric="rgb", description=head + " -> 180x125", metadata=None)
+    t.write(img[:100, :80].copy(), compression="lzw", photometric="rgb", subfiletype=1, description="Aperio Image Library v12.0.15\nlabel 80x100", metadata=None)
+    t.write(img[:60, :200].copy(), compression="jpeg", photometric="rgb", subfiletype=9, description="Aperio Image Library v12.0.15\nmacro 200x60", metadata=None)
+"#;
+
+/// OpenSlide's level 0 of a slide as RGB texels (Debian's python3-openslide, run by
+/// /usr/bin/python3), or a skip with a note outside CI.
+fn openslide_texels(slide: &Path) -> Option<Vec<u8>> {
+    let raw = slide.with_extension("openslide.rgba");
+    let script = "import sys, openslide\ns = openslide.OpenSlide(sys.argv[1])\nassert s.properties['openslide.vendor'] == 'aperio'\nopen(sys.argv[2], 'wb').write(s.read_region((0, 0), 0, s.dimensions).tobytes())";
+    let out = Command::new("/usr/bin/python3").args(["-c", script, s(slide), s(&raw)]).output();
+    match out {
+        Ok(out) if out.status.success() => {}
+        Ok(out) if !String::from_utf8_lossy(&out.stderr).contains("No module named 'openslide'") => {
+            panic!("OpenSlide failed: {}", String::from_utf8_lossy(&out.stderr))
+        }
+        _ => {
+            assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and no python3-openslide");
+            eprintln!("note: skipping the OpenSlide comparison: apt-get install python3-openslide");
+            return None;
+        }
+    }
+    let rgba = std::fs::read(raw).unwrap();
+    Some(rgba.chunks_exact(4).flat_map(|t| [t[0], t[1], t[2]]).collect())
+}
+
+/// An Aperio SVS: recognised, its full-resolution level read as OpenSlide reads it, its
+/// thumbnail, label and macro skipped and listed; `--page` reads any directory.
+#[test]
+fn aperio_svs_reads_level_0_as_openslide_does() {
+    let Some(py) = venv_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let svs = dir.path().join("slide.svs");
+    python(&py, MAKE_SVS, &[s(&svs)]);
+    let (source, ours) = our_texels(&svs, 1 << 30);
+    let described = source.describe();
+    for needle in [
+        "tiff (Aperio SVS, page 0 of 5: full resolution, 1 reduced level(s) not read; ",
+        "skipped thumbnail 90x63 (page 1), label 80x100 (page 3), macro 200x60 (page 4)), ",
+        // tifffile writes each tile as a complete JPEG (no shared JPEGTables).
+        "jpeg (YCbCr, libjpeg-turbo)",
+    ] {
+        assert!(described.contains(needle), "{needle:?} missing from: {described}");
+    }
+    if let Some(theirs) = openslide_texels(&svs) {
+        assert_eq!(ours.len(), theirs.len());
+        let differ = ours.iter().zip(&theirs).filter(|(a, b)| a != b).count();
+        assert!(differ == 0, "{differ} samples differ from OpenSlide's level 0");
+    }
+    // The label by its page, exactly as stored (LZW).
+    let label = source::open_picked(&svs, 1 << 30, source::Pick { page: Some(3), series: None }).unwrap();
+    assert_eq!((label.width(), label.height()), (80, 100));
+    assert!(label.describe().contains("page 3 of 5: label; skipped thumbnail"), "{}", label.describe());
+    let err = source::open_picked(&svs, 1 << 30, source::Pick { page: Some(5), series: None }).err().unwrap();
+    assert!(err.to_string().contains("--page 5: the TIFF has 5 page(s)"), "{err}");
+    // Series: the full-resolution images only (here one).
+    let err = source::open_picked(&svs, 1 << 30, source::Pick { page: None, series: Some(1) }).err().unwrap();
+    assert!(err.to_string().contains("1 full-resolution image(s)"), "{err}");
+    // The tool says so too.
+    let out = dir.path().join("out");
+    let stdout = cli::ok(&["split", s(&svs), "-o", s(&out), "--tile-size", "256"]);
+    assert!(stdout.contains("Aperio SVS") && stdout.contains("label 80x100"), "{stdout}");
+}
+
+/// An OME-TIFF of two series as tifffile writes it: series 0 a Deflate pyramid whose reduced
+/// levels are SubIFDs, series 1 a JPEG-tiled image; tifffile's reads of each go to
+/// OUT.sN.rgb.
+const MAKE_OME: &str = r#"
+import sys, numpy as np, tifffile
+out = sys.argv[1]
+def pattern(h, w, seed):
+    y, x = np.mgrid[0:h, 0:w]
+    img = np.stack([x * 255 // w, y * 255 // h, (x * 3 ^ y) & 255], -1).astype(np.int32)
+    img += np.random.default_rng(seed).integers(0, 40, img.shape) * (((x // 16 + y // 16) % 3 == 0)[..., None])
+    return np.clip(img, 0, 255).astype(np.uint8)
+a, b = pattern(300, 410, 1), pattern(200, 260, 2)
+with tifffile.TiffWriter(out, ome=True) as t:
+    t.write(a, subifds=2, tile=(128, 128), compression="zlib", photometric="rgb", metadata={"axes": "YXS"})
+    t.write(a[::2, ::2].copy(), tile=(128, 128), compression="zlib", photometric="rgb", subfiletype=1)
+    t.write(a[::4, ::4].copy(), tile=(128, 128), compression="zlib", photometric="rgb", subfiletype=1)
+    t.write(b, tile=(64, 64), compression="jpeg", photometric="rgb", metadata={"axes": "YXS"})
+for n in range(2):
+    tifffile.imread(out, series=n, level=0).tofile("%s.s%d.rgb" % (out, n))
+"#;
+
+/// `--series N` of an OME-TIFF reads the Nth OME-XML image at full resolution, as tifffile
+/// does (series 0 exactly; series 1's JPEG tiles too: imagecodecs decodes with libjpeg-turbo).
+#[test]
+fn ome_tiff_series_read_as_tifffile_does() {
+    let Some(py) = venv_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let ome = dir.path().join("two.ome.tif");
+    python(&py, MAKE_OME, &[s(&ome)]);
+    for (series, size, says) in [
+        (0u32, (410, 300), "tiff (OME-TIFF, series 0, page 0 of 2: full resolution, 2 reduced level(s) not read)"),
+        (1, (260, 200), "tiff (OME-TIFF, series 1, page 1 of 2: full resolution)"),
+    ] {
+        let pick = source::Pick { page: None, series: Some(series) };
+        let mut source = source::open_picked(&ome, 1 << 30, pick).unwrap();
+        assert_eq!((source.width(), source.height()), size);
+        assert!(source.describe().starts_with(says), "{}", source.describe());
+        let mut ours = vec![0u8; size.0 as usize * size.1 as usize * 3];
+        for row in ours.chunks_exact_mut(size.0 as usize * 3) {
+            source.read_row(row).unwrap();
+        }
+        let theirs = std::fs::read(format!("{}.s{series}.rgb", ome.display())).unwrap();
+        let differ = ours.iter().zip(&theirs).filter(|(a, b)| a != b).count();
+        assert!(ours.len() == theirs.len() && differ == 0, "series {series}: {differ} samples differ from tifffile");
+    }
+    // The default is series 0; a series past the last is refused, naming the count.
+    assert!(source::open(&ome, 1 << 30).unwrap().describe().contains("series 0"));
+    let err = source::open_picked(&ome, 1 << 30, source::Pick { page: None, series: Some(2) }).err().unwrap();
+    assert!(err.to_string().contains("--series 2: the OME-TIFF has 2 series"), "{err}");
+    let out = dir.path().join("out");
+    let stdout = cli::ok(&["split", s(&ome), "-o", s(&out), "--series", "1", "--tile-size", "256"]);
+    assert!(stdout.contains("series 1"), "{stdout}");
+    let both = cli::run(&["split", s(&ome), "-o", s(&out), "--series", "1", "--page", "0"]);
+    assert_eq!(both.status.code(), Some(2), "a usage error");
+    assert!(String::from_utf8_lossy(&both.stderr).contains("cannot be used with"));
+}

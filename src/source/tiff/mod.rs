@@ -14,6 +14,8 @@
 
 mod jpeg;
 mod libjpeg;
+mod pyramid;
+mod slide;
 mod strips_ahead;
 
 use std::fs::File;
@@ -38,7 +40,10 @@ pub struct TiffSource {
     layout: PixelLayout,
     chunking: Chunking,
     compression: CompressionMethod,
-    bigtiff: bool,
+    /// The file kind, page and vendor, for the summary line ([`pyramid`]).
+    label: String,
+    /// The directory read (workers decoding ahead open the file again and go there).
+    page: usize,
     /// Samples per pixel as the decoder delivers them (the crate already drops extra samples of
     /// RGB/RGBA images; grey images keep theirs and are compacted here).
     file_samples: usize,
@@ -109,12 +114,12 @@ impl Chunking {
     }
 }
 
-pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
+pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<Box<dyn RowSource>> {
     let bigtiff = is_bigtiff(path)?;
     let mut decoder = open_decoder(path, max_memory)?;
+    let chosen = pyramid::choose(path, &mut decoder, pick, bigtiff, max_memory)?;
     if jpeg::is_jpeg(path, &mut decoder)? {
-        let label = if bigtiff { "bigtiff" } else { "tiff" };
-        return jpeg::open(path, &mut decoder, label.to_string(), max_memory);
+        return jpeg::open(path, &mut decoder, chosen.label, max_memory);
     }
     let (width, height) = decoder.dimensions().map_err(|e| open_error(path, e))?;
     let compression = check_compression(path, &mut decoder)?;
@@ -193,7 +198,8 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         layout,
         chunking,
         compression,
-        bigtiff,
+        label: chosen.label,
+        page: chosen.index,
         file_samples,
         associated,
         band,
@@ -494,6 +500,9 @@ impl TiffSource {
         let decoders = (0..self.ahead_workers)
             .map(|_| -> std::result::Result<DecodeStrip, String> {
                 let mut decoder = open_decoder(&self.path, self.max_memory).map_err(|e| e.to_string())?;
+                if self.page > 0 {
+                    decoder.seek_to_image(self.page).map_err(|e| e.to_string())?;
+                }
                 Ok(Box::new(move |strip, buffer: &mut Vec<u8>| guarded(|| decoder.read_chunk_bytes(strip, buffer))))
             })
             .collect::<std::result::Result<Vec<_>, _>>()?;
@@ -589,7 +598,7 @@ impl RowSource for TiffSource {
     }
 
     fn describe(&self) -> String {
-        let kind = if self.bigtiff { "bigtiff" } else { "tiff" };
+        let kind = &self.label;
         let compression = match self.compression {
             CompressionMethod::None => "uncompressed",
             CompressionMethod::LZW => "lzw",
@@ -675,6 +684,11 @@ fn unpremultiply(row: &mut [u8], layout: PixelLayout) {
 mod tests {
     use super::*;
     use crate::source::read_all;
+
+    /// The first page, as `source::open` reads it.
+    fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
+        super::open(path, max_memory, crate::source::Pick::default())
+    }
     use tiff::encoder::{Compression, DeflateLevel, TiffEncoder, TiffKind, colortype};
 
     /// The `image` crate's whole-image decode, as native-endian bytes.
