@@ -1,10 +1,11 @@
 //! The TIFF files gigapixel users hold: JPEG-compressed tiles and strips as libvips and libtiff
-//! write them, decoded as libvips decodes them.
+//! write them, pyramidal and OME-TIFF, Aperio slides; decoded as the makers' readers decode them.
 //!
-//! Inputs are made in the test by the makers' tools (`vips tiffsave`, `tiffcp`) from a
-//! generated image. The reference is Debian's libvips (`vips rawsave`), which decodes through
-//! libtiff and libjpeg-turbo as we do: the same integer IDCT and the same fancy upsampling of
-//! each tile on its own, so the texels must be equal (tolerance 0).
+//! Inputs are made in the test by the makers' tools (`vips tiffsave`, `tiffcp`, tifffile) from
+//! a generated image. The references are Debian's libvips (`vips rawsave`), OpenSlide 3.4.1 for
+//! slides and tifffile for OME-TIFF, which all decode JPEG through libjpeg-turbo as we do: the
+//! same integer IDCT and the same fancy upsampling of each tile on its own, so the texels must
+//! be equal (tolerance 0).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -274,6 +275,12 @@ fn a_jpeg_tiff_larger_than_max_memory_streams() {
     // The whole tool within the same bound.
     let out = dir.path().join("out");
     cli::ok(&["split", s(&tif), "-o", s(&out), "--max-memory", "6M", "--tile-size", "256"]);
+    // In strips (libvips writes JPEG strips of 8 rows): a group of them at a time.
+    let strips = dir.path().join("strips.tif");
+    tool("vips", &["tiffsave", s(&png), s(&strips), "--compression", "jpeg"]);
+    let (source, tight) = our_texels(&strips, 4 << 20);
+    assert!(source.describe().contains("streamed by strip"), "{}", source.describe());
+    assert!(tight == our_texels(&strips, 1 << 30).1);
 }
 
 /// Old-style JPEG (Compression 6) is refused, saying what is read instead.
@@ -476,4 +483,43 @@ fn ome_tiff_series_read_as_tifffile_does() {
     let both = cli::run(&["split", s(&ome), "-o", s(&out), "--series", "1", "--page", "0"]);
     assert_eq!(both.status.code(), Some(2), "a usage error");
     assert!(String::from_utf8_lossy(&both.stderr).contains("cannot be used with"));
+}
+
+/// Every byte of a small JPEG-tiled TIFF damaged in turn (and the file cut short at many
+/// places): each opens and reads to the end or fails with an error naming the file, never a
+/// panic or an abort.
+#[test]
+fn damaged_jpeg_tiffs_never_panic() {
+    if !have_tools() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = pattern_png(dir.path(), 150, 100);
+    let tif = dir.path().join("small.tif");
+    tool(
+        "vips",
+        &["tiffsave", s(&png), s(&tif), "--tile", "--tile-width", "64", "--tile-height", "64", "--compression", "jpeg"],
+    );
+    let bytes = std::fs::read(&tif).unwrap();
+    let path = dir.path().join("mutated.tif");
+    let read = |data: &[u8]| {
+        std::fs::write(&path, data).unwrap();
+        let result = source::open(&path, 64 << 20).and_then(|mut source| {
+            let mut row = vec![0u8; source.width() as usize * source.layout().bytes_per_pixel()];
+            (0..source.height()).try_for_each(|_| source.read_row(&mut row))
+        });
+        if let Err(e) = result {
+            assert!(e.to_string().contains("mutated.tif"), "{e}");
+        }
+    };
+    let mut state = 12345u32;
+    for at in (0..bytes.len()).step_by(3) {
+        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        let mut damaged = bytes.clone();
+        damaged[at] ^= (state >> 24) as u8 | 1;
+        read(&damaged);
+    }
+    for keep in (0..bytes.len()).step_by(97) {
+        read(&bytes[..keep]);
+    }
 }
