@@ -523,3 +523,30 @@ fn damaged_jpeg_tiffs_never_panic() {
         read(&bytes[..keep]);
     }
 }
+
+/// A small file carrying Hamamatsu's NDPI tag (65420), its image one JPEG strip as NDPI keeps
+/// it: recognised and named, and (it fits in memory) read as libvips reads it (tifffile, seeing
+/// the tag, looks for NDPI's 64-bit offsets and cannot read it back).
+#[test]
+fn ndpi_tag_is_recognised_and_a_small_one_strip_jpeg_is_read() {
+    if !have_tools() {
+        return;
+    }
+    let Some(py) = venv_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let ndpi = dir.path().join("small.ndpi");
+    let script = r#"
+import sys, numpy as np, tifffile
+y, x = np.mgrid[0:120, 0:200]
+img = np.stack([x, y * 2, (x ^ y) & 255], -1).astype(np.uint8)
+tifffile.imwrite(sys.argv[1], img, photometric="rgb", compression="jpeg", rowsperstrip=120, metadata=None, extratags=[(65420, "I", 1, 1, True)])
+"#;
+    python(&py, script, &[s(&ndpi)]);
+    let (source, ours) = our_texels(&ndpi, 1 << 30);
+    assert!(source.describe().contains("Hamamatsu NDPI, page 0 of 1"), "{}", source.describe());
+    assert!(source.describe().contains("streamed by strip (120 rows"), "{}", source.describe());
+    // Through libvips's TIFF loader: its OpenSlide loader would claim the file and want more tags.
+    let loaded = dir.path().join("loaded.v");
+    tool("vips", &["tiffload", s(&ndpi), s(&loaded)]);
+    assert!(ours == vips_texels(&loaded), "differs from libvips");
+}

@@ -23,6 +23,11 @@ use crate::source::Pick;
 /// Directories surveyed at most: real files have a few dozen (an OME-TIFF one per plane).
 const MAX_PAGES: usize = 65_536;
 
+/// Hamamatsu NDPI's private tag, in every directory of its files.
+const NDPI_FORMAT_FLAG: u16 = 65420;
+/// The XMP packet, where Ventana BIF files say `iScan`.
+const XMP: u16 = 700;
+
 /// One directory of the main chain.
 #[derive(Clone, Debug)]
 pub(super) struct Page {
@@ -34,6 +39,8 @@ pub(super) struct Page {
     pub description: String,
     /// Entries of its SubIFDs tag (the reduced levels of an OME-TIFF or `vips --subifd` pyramid).
     pub sub_ifds: usize,
+    /// A private tag or XMP packet only one vendor writes (Hamamatsu's 65420, Ventana's iScan).
+    pub hint: Option<Vendor>,
 }
 
 /// The page chosen, and what the summary line says about it.
@@ -92,6 +99,16 @@ fn page(decoder: &mut Decoder<BufReader<File>>) -> Page {
         tiff::decoder::ifd::Value::List(items) => items.len(),
         _ => 1,
     });
+    let has = |decoder: &mut Decoder<BufReader<File>>, tag| decoder.find_tag(Tag::Unknown(tag)).ok().flatten();
+    let hint = if has(decoder, NDPI_FORMAT_FLAG).is_some() {
+        Some(Vendor::Hamamatsu)
+    } else if has(decoder, XMP).is_some()
+        && decoder.get_tag_u8_vec(Tag::Unknown(XMP)).is_ok_and(|x| x.windows(5).any(|w| w == b"iScan"))
+    {
+        Some(Vendor::Ventana)
+    } else {
+        None
+    };
     Page {
         width,
         height,
@@ -99,6 +116,7 @@ fn page(decoder: &mut Decoder<BufReader<File>>) -> Page {
         tiled: decoder.get_chunk_type() == tiff::decoder::ChunkType::Tile,
         description,
         sub_ifds,
+        hint,
     }
 }
 

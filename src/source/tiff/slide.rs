@@ -1,7 +1,8 @@
 //! Vendor formats built on TIFF, recognised as OpenSlide and Bio-Formats recognise them: by the
 //! first directory's ImageDescription (Aperio SVS starts it with "Aperio", OME-TIFF holds
-//! OME-XML, Philips TIFF a `DPUfsImport` XML), or as a generic pyramid where later directories
-//! are reduced-resolution copies. Also which directories are associated images (label, macro,
+//! OME-XML, Philips TIFF a `DPUfsImport` XML), a vendor's private tag (Hamamatsu NDPI) or XMP
+//! packet (Ventana BIF), or as a generic pyramid where later directories are reduced-resolution
+//! copies. Also which directories are associated images (label, macro,
 //! thumbnail): they are never the image cut, only listed.
 
 use super::pyramid::Page;
@@ -15,6 +16,8 @@ pub(super) enum Vendor {
     Aperio,
     Ome,
     Philips,
+    Hamamatsu,
+    Ventana,
 }
 
 impl Vendor {
@@ -25,13 +28,17 @@ impl Vendor {
             Vendor::Aperio => "Aperio SVS",
             Vendor::Ome => "OME-TIFF",
             Vendor::Philips => "Philips TIFF",
+            Vendor::Hamamatsu => "Hamamatsu NDPI",
+            Vendor::Ventana => "Ventana BIF",
         }
     }
 }
 
 pub(super) fn recognise(pages: &[Page]) -> Vendor {
     let first = &pages[0].description;
-    if first.starts_with("Aperio") {
+    if let Some(vendor) = pages[0].hint {
+        vendor
+    } else if first.starts_with("Aperio") {
         Vendor::Aperio
     } else if first.contains("<OME") || first.contains(":OME") {
         Vendor::Ome
@@ -161,6 +168,7 @@ mod tests {
             tiled,
             description: description.into(),
             sub_ifds: 0,
+            hint: None,
         };
         let pages = vec![
             page("Aperio Image Library v12\r\n46000x32914 (240x240) JPEG/RGB Q=70|AppMag = 20", true),
