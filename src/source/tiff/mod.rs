@@ -3,10 +3,11 @@
 //!
 //! Accepted: grey, grey+alpha, RGB and RGBA with 8- or 16-bit unsigned samples stored
 //! contiguously (PlanarConfiguration 1), uncompressed or compressed with LZW, Deflate or
-//! PackBits, with or without the horizontal predictor. Everything else (palette, CMYK, YCbCr,
-//! Lab, floating point or signed samples, 1/2/4-bit, separate planes, JPEG-in-TIFF, ...) is
-//! refused with a message naming what the file is. Compressed strips are decoded a few ahead,
-//! several at once ([`strips_ahead`]).
+//! PackBits, with or without the horizontal predictor; JPEG-compressed images go to [`jpeg`]
+//! (libjpeg-turbo). Everything else (palette, CMYK, uncompressed YCbCr, Lab, floating point or
+//! signed samples, 1/2/4-bit, separate planes, old-style JPEG, ...) is refused with a message
+//! naming what the file is. Compressed strips are decoded a few ahead, several at once
+//! ([`strips_ahead`]). Which image of a multi-image file is read: [`pyramid`].
 //!
 //! As libvips reads them: extra samples past grey, grey+alpha, RGB or RGBA (ExtraSamples
 //! unspecified, or any after the alpha) are dropped, and associated (premultiplied) alpha is
