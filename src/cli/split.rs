@@ -55,6 +55,18 @@ pub struct SplitArgs {
     #[arg(long)]
     keep_icc: bool,
 
+    /// A TIFF holding several images: cut its Nth directory, counted from 0 as tiffinfo and
+    /// libvips count them (a reduced level or a slide's label included) [default: the first
+    /// full-resolution image; the summary says which page was read and what was skipped].
+    #[arg(long, value_name = "N", conflicts_with = "series")]
+    page: Option<u32>,
+
+    /// Cut the Nth series: an OME-TIFF's Nth OME-XML Image, or the Nth full-resolution image
+    /// of another multi-page TIFF (reduced levels and label/macro/thumbnail images skipped)
+    /// [default: 0].
+    #[arg(long, value_name = "N")]
+    series: Option<u32>,
+
     #[command(flatten)]
     out: OutputArgs,
 }
@@ -268,8 +280,9 @@ impl CodecArgs {
 pub fn run(a: SplitArgs) -> Result<()> {
     let started = Instant::now();
     let input = a.input.or(a.input_flag).context("an input image is required")?;
+    let pick = source::Pick { page: a.page, series: a.series };
     let options =
-        source::OpenOptions { max_memory: a.out.max_memory, autorotate: !a.no_autorotate, keep_icc: a.keep_icc };
+        source::OpenOptions { max_memory: a.out.max_memory, autorotate: !a.no_autorotate, keep_icc: a.keep_icc, pick };
     let (source, kept_icc) = source::open_with(&input, options)?;
     tile(source, &input, a.filename_format, &a.out, started, kept_icc)
 }

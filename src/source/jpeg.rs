@@ -316,7 +316,7 @@ fn skip(reader: &mut BufReader<File>, mut n: usize) -> std::io::Result<()> {
 /// warnings both unwind with the formatted message.
 /// `multi_scan`: whether the image may have several scans (progressive, or not known).
 #[expect(unsafe_code, reason = "libjpeg's C interface")]
-fn error_manager(multi_scan: bool) -> jpeg_error_mgr {
+pub(super) fn error_manager(multi_scan: bool) -> jpeg_error_mgr {
     // SAFETY: `jpeg_std_error` fills in every field of the zeroed struct (method pointers and
     // pointers to libjpeg's static message tables); the struct holds no pointer to itself, so it
     // may be moved afterwards.
@@ -411,7 +411,7 @@ fn format_message(cinfo: &mut jpeg_common_struct) -> String {
     String::from_utf8_lossy(&buffer[..end]).into_owned()
 }
 
-fn panic_message(payload: Box<dyn std::any::Any + Send>) -> String {
+pub(super) fn panic_message(payload: Box<dyn std::any::Any + Send>) -> String {
     match payload.downcast::<String>() {
         Ok(s) => *s,
         Err(payload) => match payload.downcast::<&'static str>() {

@@ -99,12 +99,14 @@ pub struct OpenOptions {
     pub autorotate: bool,
     /// Keep the pixels as stored instead of converting an ICC profile to sRGB (`--keep-icc`).
     pub keep_icc: bool,
+    /// Which image of a file holding several (`--page`, `--series`).
+    pub pick: Pick,
 }
 
 impl OpenOptions {
     /// Orientation applied and colours converted to sRGB, as viewers show the image.
     pub fn shown(max_memory: u64) -> OpenOptions {
-        OpenOptions { max_memory, autorotate: true, keep_icc: false }
+        OpenOptions { max_memory, autorotate: true, keep_icc: false, pick: Pick::default() }
     }
 }
 
@@ -115,7 +117,7 @@ pub type Opened = (Box<dyn RowSource>, Option<Vec<u8>>);
 /// profile converted to sRGB. Returns the profile when `keep_icc` keeps it, for the output to
 /// carry.
 pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
-    let mut source = open(path, opts.max_memory)?;
+    let mut source = open_picked(path, opts.max_memory, opts.pick)?;
     let Embedded { orientation, icc } = source.embedded();
     let mut kept = None;
     if let Some(icc) = icc {
@@ -143,7 +145,18 @@ pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
 struct Reopening {
     path: std::path::PathBuf,
     max_memory: u64,
+    pick: Pick,
     inner: Box<dyn RowSource>,
+}
+
+/// Which image of a file holding several is read (`--page`, `--series`): only TIFF has more
+/// than one; by default the first full-resolution image (docs/sources.md).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Pick {
+    /// The Nth directory of a TIFF, counted from 0 as `tiffinfo` and libvips count them.
+    pub page: Option<u32>,
+    /// The Nth series: an OME-TIFF's Nth `Image`, else the Nth full-resolution page.
+    pub series: Option<u32>,
 }
 
 impl RowSource for Reopening {
@@ -166,7 +179,7 @@ impl RowSource for Reopening {
         self.inner.embedded()
     }
     fn rewind(&mut self) -> Result<()> {
-        let again = open_once(&self.path, self.max_memory)?;
+        let again = open_once(&self.path, self.max_memory, self.pick)?;
         if again.header() != self.inner.header() {
             return Err(TilerError::decode(&self.path, "changed while it was being read"));
         }
@@ -177,11 +190,16 @@ impl RowSource for Reopening {
 
 /// Opens `path`, choosing the decoder from the file's first bytes (not its extension).
 pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
-    let inner = open_once(path, max_memory)?;
-    Ok(Box::new(Reopening { path: path.to_path_buf(), max_memory, inner }))
+    open_picked(path, max_memory, Pick::default())
 }
 
-fn open_once(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
+/// [`open`], reading the page or series `pick` names of a file holding several.
+pub fn open_picked(path: &Path, max_memory: u64, pick: Pick) -> Result<Box<dyn RowSource>> {
+    let inner = open_once(path, max_memory, pick)?;
+    Ok(Box::new(Reopening { path: path.to_path_buf(), max_memory, pick, inner }))
+}
+
+fn open_once(path: &Path, max_memory: u64, pick: Pick) -> Result<Box<dyn RowSource>> {
     // Checked before opening: opening a FIFO blocks until a writer comes.
     let meta = std::fs::metadata(path).map_err(|e| TilerError::io(path, e))?;
     if meta.is_dir() {
@@ -200,9 +218,17 @@ fn open_once(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     if n == 0 {
         return Err(TilerError::decode(path, "the file is empty"));
     }
-    match Streamed::sniff(magic) {
+    let format = Streamed::sniff(magic);
+    if pick != Pick::default() && format != Some(Streamed::Tiff) {
+        let name = format.map_or("this", Streamed::name);
+        return Err(TilerError::unsupported(
+            path,
+            format!("--page and --series choose among a TIFF's images; a {name} file holds one"),
+        ));
+    }
+    match format {
         Some(Streamed::Png) => png::open(path, max_memory),
-        Some(Streamed::Tiff) => tiff::open(path, max_memory),
+        Some(Streamed::Tiff) => tiff::open(path, max_memory, pick),
         Some(Streamed::Jpeg) => jpeg::open(path, max_memory),
         Some(Streamed::Pnm) => pnm::open(path),
         None => whole::open(path, max_memory),

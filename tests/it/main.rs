@@ -29,5 +29,6 @@ mod sources;
 mod stability;
 mod static_web;
 mod stripes;
+mod tiff_slides;
 mod view;
 mod viewers;

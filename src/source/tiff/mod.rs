@@ -3,16 +3,21 @@
 //!
 //! Accepted: grey, grey+alpha, RGB and RGBA with 8- or 16-bit unsigned samples stored
 //! contiguously (PlanarConfiguration 1), uncompressed or compressed with LZW, Deflate or
-//! PackBits, with or without the horizontal predictor. Everything else (palette, CMYK, YCbCr,
-//! Lab, floating point or signed samples, 1/2/4-bit, separate planes, JPEG-in-TIFF, ...) is
-//! refused with a message naming what the file is. Compressed strips are decoded a few ahead,
-//! several at once ([`strips_ahead`]).
+//! PackBits, with or without the horizontal predictor; JPEG-compressed images go to [`jpeg`]
+//! (libjpeg-turbo). Everything else (palette, CMYK, uncompressed YCbCr, Lab, floating point or
+//! signed samples, 1/2/4-bit, separate planes, old-style JPEG, ...) is refused with a message
+//! naming what the file is. Compressed strips are decoded a few ahead, several at once
+//! ([`strips_ahead`]). Which image of a multi-image file is read: [`pyramid`].
 //!
 //! As libvips reads them: extra samples past grey, grey+alpha, RGB or RGBA (ExtraSamples
 //! unspecified, or any after the alpha) are dropped, and associated (premultiplied) alpha is
 //! turned into straight alpha ([`unpremultiply`] says how it rounds).
 
+mod jpeg;
+mod libjpeg;
 mod lzw;
+mod pyramid;
+mod slide;
 mod strips_ahead;
 
 use std::fs::File;
@@ -39,7 +44,10 @@ pub struct TiffSource {
     layout: PixelLayout,
     chunking: Chunking,
     compression: CompressionMethod,
-    bigtiff: bool,
+    /// The file kind, page and vendor, for the summary line ([`pyramid`]).
+    label: String,
+    /// The directory read (workers decoding ahead open the file again and go there).
+    page: usize,
     /// Samples per pixel as the decoder delivers them (the crate already drops extra samples of
     /// RGB/RGBA images; grey images keep theirs and are compacted here).
     file_samples: usize,
@@ -114,9 +122,13 @@ impl Chunking {
     }
 }
 
-pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
+pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<Box<dyn RowSource>> {
     let bigtiff = is_bigtiff(path)?;
     let mut decoder = open_decoder(path, max_memory)?;
+    let chosen = pyramid::choose(path, &mut decoder, pick, bigtiff, max_memory)?;
+    if jpeg::is_jpeg(path, &mut decoder)? {
+        return jpeg::open(path, &mut decoder, chosen.label, max_memory);
+    }
     let (width, height) = decoder.dimensions().map_err(|e| open_error(path, e))?;
     let compression = check_compression(path, &mut decoder)?;
     let Samples { layout, delivered: file_samples, stored, associated } = pixel_layout(path, &mut decoder)?;
@@ -211,7 +223,8 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         layout,
         chunking,
         compression,
-        bigtiff,
+        label: chosen.label,
+        page: chosen.index,
         file_samples,
         associated,
         band,
@@ -350,7 +363,12 @@ fn check_compression(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Res
                 CompressionMethod::Huffman => "CCITT modified Huffman (fax)".to_string(),
                 CompressionMethod::Fax3 => "CCITT Group 3 fax".to_string(),
                 CompressionMethod::Fax4 => "CCITT Group 4 fax".to_string(),
-                CompressionMethod::JPEG => "old-style JPEG".to_string(),
+                CompressionMethod::JPEG => {
+                    return Err(TilerError::unsupported(
+                        path,
+                        "TIFF compression 6 (old-style JPEG, withdrawn in 1995) is not supported (new-style JPEG, compression 7, is); re-save it with libtiff, e.g. `tiffcp -c jpeg in.tif out.tif`",
+                    ));
+                }
                 CompressionMethod::ModernJPEG => "JPEG".to_string(),
                 CompressionMethod::ZSTD => "Zstandard".to_string(),
                 CompressionMethod::WebP => "WebP".to_string(),
@@ -540,6 +558,9 @@ impl TiffSource {
                     return Ok(Box::new(move |strip, buffer: &mut Vec<u8>| reader.read(strip, buffer)));
                 }
                 let mut decoder = open_decoder(&self.path, self.max_memory).map_err(|e| e.to_string())?;
+                if self.page > 0 {
+                    decoder.seek_to_image(self.page).map_err(|e| e.to_string())?;
+                }
                 Ok(Box::new(move |strip, buffer: &mut Vec<u8>| guarded(|| decoder.read_chunk_bytes(strip, buffer))))
             })
             .collect::<std::result::Result<Vec<_>, _>>()?;
@@ -639,7 +660,7 @@ impl RowSource for TiffSource {
     }
 
     fn describe(&self) -> String {
-        let kind = if self.bigtiff { "bigtiff" } else { "tiff" };
+        let kind = &self.label;
         let compression = match self.compression {
             CompressionMethod::None => "uncompressed",
             CompressionMethod::LZW => "lzw",
@@ -725,6 +746,11 @@ fn unpremultiply(row: &mut [u8], layout: PixelLayout) {
 mod tests {
     use super::*;
     use crate::source::read_all;
+
+    /// The first page, as `source::open` reads it.
+    fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
+        super::open(path, max_memory, crate::source::Pick::default())
+    }
     use tiff::encoder::{Compression, DeflateLevel, TiffEncoder, TiffKind, colortype};
 
     /// The `image` crate's whole-image decode, as native-endian bytes.
@@ -1351,11 +1377,12 @@ mod tests {
         write_tiff(&path, false, tags, &[vec![0; (w * h * 3) as usize]], false);
         expect_unsupported(&path, "YCbCr");
 
-        let path = dir.path().join("jpeg-in-tiff.tif");
+        // New-style JPEG (7) is read (jpeg.rs); old-style is not.
+        let path = dir.path().join("old-jpeg-in-tiff.tif");
         let mut tags = basic_tags(w, h, &[8, 8, 8], 2, None);
-        set_tag(&mut tags, (259, SHORT, vec![7]));
+        set_tag(&mut tags, (259, SHORT, vec![6]));
         write_tiff(&path, false, tags, &[vec![0; 10]], false);
-        expect_unsupported(&path, "compression JPEG");
+        expect_unsupported(&path, "old-style JPEG");
     }
 
     #[test]

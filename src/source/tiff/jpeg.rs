@@ -1,0 +1,360 @@
+//! JPEG inside TIFF (Compression 7, "new-style" JPEG of TIFF Technical Note 2), tiled or in
+//! strips, as libtiff, libvips, GDAL and slide scanners write it: each tile or strip is a JPEG
+//! stream, usually abbreviated (its quantisation and Huffman tables kept once in the
+//! JPEGTables tag and spliced back in here), holding YCbCr (subsampled or not), RGB or grey.
+//!
+//! Read one row of tiles (or a group of strips) at a time, the chunks of a band decoded in
+//! parallel on the rayon pool by libjpeg-turbo ([`libjpeg`]), each straight from the file with a
+//! positioned read. Only the chunks under the columns asked for are decoded. Memory: one band
+//! of decoded texels plus a compressed chunk per worker, checked against `--max-memory` before
+//! anything is allocated. A damaged or missing chunk is an error naming the file and the
+//! chunk's column and row.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::ops::Range;
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+use tiff::decoder::{ChunkType, Decoder};
+use tiff::tags::Tag;
+
+use super::libjpeg::{self, Colour, Extent};
+use super::open_error;
+use crate::error::{Result, TilerError};
+use crate::pixel::{Channels, Depth, PixelLayout};
+use crate::source::{ImageHeader, RowSource};
+
+/// Chunk rows decoded together when the TIFF is in strips: enough strips to keep every core
+/// busy (libtiff writes JPEG strips of 8 or 16 rows), within an eighth of `--max-memory`.
+const STRIPS_PER_CORE: usize = 4;
+
+pub(super) struct JpegTiff {
+    path: PathBuf,
+    file: File,
+    file_len: u64,
+    width: u32,
+    height: u32,
+    colour: Colour,
+    /// Texels of one chunk as the TIFF lays it out (a strip is as wide as the image).
+    chunk_w: u32,
+    chunk_h: u32,
+    across: u32,
+    tiled: bool,
+    offsets: Vec<u64>,
+    counts: Vec<u64>,
+    /// The JPEGTables marker segments (no SOI/EOI), empty where each chunk is complete.
+    tables: Vec<u8>,
+    /// Chunk rows held in one band.
+    group: u32,
+    /// The decoded chunks of the band, `[chunk row in band * across + column]`, each its
+    /// texels inside the image only; those outside the columns read are left empty.
+    band: Vec<Vec<u8>>,
+    band_first: u64,
+    band_rows: u64,
+    columns: Option<Range<u32>>,
+    next: u64,
+    failed: bool,
+    /// What the summary line says before the chunking (file kind, page, vendor).
+    label: String,
+}
+
+/// Whether the current image is JPEG-compressed (new-style, Compression 7).
+pub(super) fn is_jpeg(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<bool> {
+    let code: Option<u16> = decoder.find_tag_unsigned(Tag::Compression).map_err(|e| open_error(path, e))?;
+    Ok(code == Some(7))
+}
+
+pub(super) fn open(
+    path: &Path,
+    decoder: &mut Decoder<BufReader<File>>,
+    label: String,
+    max_memory: u64,
+) -> Result<Box<dyn RowSource>> {
+    let tag_err = |e| open_error(path, e);
+    let (width, height) = decoder.dimensions().map_err(tag_err)?;
+    if width == 0 || height == 0 {
+        return Err(TilerError::decode(path, format!("the TIFF says {width}x{height}: the image has no pixels")));
+    }
+    let colour = colour(path, decoder)?;
+    let tiled = decoder.get_chunk_type() == ChunkType::Tile;
+    let (chunk_w, chunk_h) = if tiled {
+        let (tw, th) = decoder.chunk_dimensions();
+        if tw == 0 || th == 0 || tw % 8 != 0 || th % 8 != 0 {
+            return Err(TilerError::decode(
+                path,
+                format!("the JPEG TIFF declares {tw}x{th} tiles (not multiples of 8)"),
+            ));
+        }
+        (tw, th)
+    } else {
+        let (_, rows) = decoder.chunk_dimensions();
+        // RowsPerStrip is often 2^32-1 ("one strip"): clamp it to the image.
+        (width, rows.clamp(1, height))
+    };
+    let across = width.div_ceil(chunk_w);
+    let down = height.div_ceil(chunk_h);
+    let (offset_tag, count_tag) =
+        if tiled { (Tag::TileOffsets, Tag::TileByteCounts) } else { (Tag::StripOffsets, Tag::StripByteCounts) };
+    let offsets = decoder.get_tag_u64_vec(offset_tag).map_err(tag_err)?;
+    let counts = decoder.get_tag_u64_vec(count_tag).map_err(tag_err)?;
+    let chunks = across as u64 * down as u64;
+    if (offsets.len() as u64) < chunks || (counts.len() as u64) < chunks {
+        let message = format!(
+            "corrupt TIFF: {} offsets and {} byte counts for {chunks} {}",
+            offsets.len(),
+            counts.len(),
+            if tiled { "tiles" } else { "strips" }
+        );
+        return Err(TilerError::decode(path, message));
+    }
+    let tables = match decoder.find_tag(Tag::JPEGTables).map_err(tag_err)? {
+        None => Vec::new(),
+        Some(_) => {
+            let raw = decoder.get_tag_u8_vec(Tag::JPEGTables).map_err(tag_err)?;
+            let body = libjpeg::tables_body(&raw).ok_or_else(|| {
+                TilerError::decode(path, "corrupt TIFF: JPEGTables does not start with a JPEG SOI marker")
+            })?;
+            body.to_vec()
+        }
+    };
+
+    // One band of decoded texels: a row of tiles, or a group of strips.
+    let row_bytes = width as u64 * colour.components() as u64;
+    let band_bytes = |group: u64| row_bytes.saturating_mul(chunk_h as u64).saturating_mul(group);
+    let group = if tiled {
+        1
+    } else {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as u64;
+        let fits = (max_memory / 8) / band_bytes(1).max(1);
+        (cores * STRIPS_PER_CORE as u64).min(fits).min(down as u64).max(1)
+    };
+    // Plus, while a band is decoded, a compressed chunk twice and a scanline per worker.
+    // (A byte count past the end of the file is reported with its chunk when it is read.)
+    let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
+    let largest = counts.iter().take(chunks as usize).copied().max().unwrap_or(0).min(file_len);
+    let workers = std::thread::available_parallelism().map_or(1, |n| n.get()) as u64;
+    let per_worker = largest.saturating_mul(2).saturating_add(row_bytes); // read, spliced, a scanline
+    let need = band_bytes(group).saturating_add(workers.saturating_mul(per_worker));
+    if need > max_memory {
+        let what = if tiled {
+            format!("a row of {chunk_w}x{chunk_h} JPEG tiles")
+        } else {
+            format!("a JPEG strip of {chunk_h} rows")
+        };
+        return Err(TilerError::unsupported(
+            path,
+            format!(
+                "{what} of the {width}x{height} image ({} MiB decoded) would have to be held in memory, more than --max-memory ({} MiB); raise --max-memory or re-save it tiled (e.g. `vips tiffsave in.tif out.tif --tile --compression jpeg`)",
+                need.div_ceil(1 << 20),
+                max_memory >> 20
+            ),
+        ));
+    }
+    Ok(Box::new(JpegTiff {
+        path: path.to_path_buf(),
+        file,
+        file_len,
+        width,
+        height,
+        colour,
+        chunk_w,
+        chunk_h,
+        across,
+        tiled,
+        offsets,
+        counts,
+        tables,
+        group: group as u32,
+        band: Vec::new(),
+        band_first: 0,
+        band_rows: 0,
+        columns: None,
+        next: 0,
+        failed: false,
+        label,
+    }))
+}
+
+/// The colour the JPEG chunks hold, from PhotometricInterpretation and SamplesPerPixel.
+fn colour(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<Colour> {
+    let tag_err = |e| open_error(path, e);
+    let photometric: Option<u16> = decoder.find_tag_unsigned(Tag::PhotometricInterpretation).map_err(tag_err)?;
+    let samples: u16 = decoder.find_tag_unsigned(Tag::SamplesPerPixel).map_err(tag_err)?.unwrap_or(1);
+    let bits: Vec<u16> = decoder.find_tag_unsigned_vec(Tag::BitsPerSample).map_err(tag_err)?.unwrap_or_else(|| vec![1]);
+    let planar: u16 = decoder.find_tag_unsigned(Tag::PlanarConfiguration).map_err(tag_err)?.unwrap_or(1);
+    let refuse = |what: String| {
+        Err(TilerError::unsupported(
+            path,
+            format!("{what} is not supported in a JPEG-compressed TIFF (8-bit grey, YCbCr and RGB are)"),
+        ))
+    };
+    if bits.iter().any(|&b| b != 8) {
+        return refuse(format!("{}-bit JPEG", bits.first().copied().unwrap_or(0)));
+    }
+    if planar != 1 && samples > 1 {
+        return refuse("one JPEG stream per colour plane (PlanarConfiguration 2)".into());
+    }
+    let colour = match photometric {
+        Some(0 | 1) => Colour::Grey,
+        Some(2) => Colour::Rgb,
+        Some(6) => Colour::YCbCr,
+        Some(5) => return refuse("CMYK".into()),
+        Some(other) => return refuse(format!("photometric interpretation {other}")),
+        None => return Err(TilerError::decode(path, "the TIFF has no PhotometricInterpretation tag")),
+    };
+    if photometric == Some(0) {
+        return refuse("WhiteIsZero grey".into());
+    }
+    if samples as usize != colour.components() {
+        return refuse(format!("{samples} samples per texel ({colour:?} with extra samples)"));
+    }
+    Ok(colour)
+}
+
+impl JpegTiff {
+    fn layout(&self) -> PixelLayout {
+        let channels = if self.colour == Colour::Grey { Channels::Grey } else { Channels::Rgb };
+        PixelLayout::new(channels, Depth::U8)
+    }
+
+    /// Decodes the band holding image row `y`: its chunks under the columns read, in parallel.
+    fn load_band(&mut self, y: u64) -> std::result::Result<(), String> {
+        let band_h = self.chunk_h as u64 * self.group as u64;
+        let first = y / band_h * band_h;
+        let first_chunk_row = (first / self.chunk_h as u64) as u32;
+        let chunk_rows = (self.height as u64 - first).div_ceil(self.chunk_h as u64).min(self.group as u64) as u32;
+        let cols = match &self.columns {
+            Some(c) => c.start / self.chunk_w..c.end.div_ceil(self.chunk_w),
+            None => 0..self.across,
+        };
+        let across = self.across;
+        self.band.resize_with((chunk_rows * across) as usize, Vec::new);
+        let mut band = std::mem::take(&mut self.band);
+        let this = &*self;
+        let result = band.par_iter_mut().enumerate().try_for_each(|(i, texels)| {
+            let (r, c) = (i as u32 / across, i as u32 % across);
+            if !cols.contains(&c) {
+                texels.clear();
+                return Ok(());
+            }
+            this.decode_chunk(first_chunk_row + r, c, texels)
+        });
+        self.band = band;
+        result?;
+        self.band_first = first;
+        self.band_rows = band_h.min(self.height as u64 - first);
+        Ok(())
+    }
+
+    /// The texels of the chunk at `col`, `row` (in chunks) inside the image, into `texels`.
+    fn decode_chunk(&self, row: u32, col: u32, texels: &mut Vec<u8>) -> std::result::Result<(), String> {
+        let index = row as usize * self.across as usize + col as usize;
+        let name = if self.tiled {
+            format!("JPEG tile at column {col}, row {row} (tile {index})")
+        } else {
+            format!("JPEG strip {row}")
+        };
+        let (offset, count) = (self.offsets[index], self.counts[index]);
+        if count == 0 {
+            return Err(format!("{name} is missing (its byte count is 0)"));
+        }
+        if offset.checked_add(count).is_none_or(|end| end > self.file_len) {
+            return Err(format!(
+                "{name} lies past the end of the file ({count} bytes at {offset}, the file has {}): a truncated TIFF?",
+                self.file_len
+            ));
+        }
+        let mut compressed = vec![0u8; count as usize];
+        self.file.read_exact_at(&mut compressed, offset).map_err(|e| format!("{name}: cannot be read: {e}"))?;
+        let mut stream = Vec::new();
+        libjpeg::splice(&self.tables, &compressed, &mut stream).map_err(|m| format!("{name}: {m}"))?;
+        drop(compressed);
+        let x0 = col * self.chunk_w;
+        let y0 = row as u64 * self.chunk_h as u64;
+        let extent = Extent {
+            columns: self.chunk_w.min(self.width - x0) as usize,
+            rows: (self.chunk_h as u64).min(self.height as u64 - y0) as usize,
+            max_columns: self.chunk_w as usize,
+            max_rows: self.chunk_h as usize,
+        };
+        texels.resize(extent.columns * extent.rows * self.colour.components(), 0);
+        libjpeg::decode(&stream, self.colour, extent, texels).map_err(|m| format!("{name}: {m}"))
+    }
+}
+
+impl RowSource for JpegTiff {
+    fn header(&self) -> ImageHeader {
+        ImageHeader { width: self.width, height: self.height, layout: self.layout() }
+    }
+
+    fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
+        let y = self.next;
+        let fail = |message: String| TilerError::DecodeRow { path: self.path.clone(), row: y, message };
+        if y >= self.height as u64 {
+            return Err(fail("read past the last row".into()));
+        }
+        let columns = self.columns.clone().unwrap_or(0..self.width);
+        let pixel = self.colour.components();
+        if out.len() != columns.len() * pixel {
+            return Err(fail(format!("row buffer has {} bytes, expected {}", out.len(), columns.len() * pixel)));
+        }
+        if self.failed {
+            return Err(fail("an earlier JPEG tile or strip failed to decode".into()));
+        }
+        let loaded = self.band_first..self.band_first + self.band_rows;
+        if !loaded.contains(&y)
+            && let Err(message) = self.load_band(y)
+        {
+            self.failed = true;
+            return Err(TilerError::DecodeRow { path: self.path.clone(), row: y, message });
+        }
+        // The row's part of each chunk under the columns.
+        let within = y - self.band_first;
+        let (chunk_row, chunk_y) = ((within / self.chunk_h as u64) as usize, (within % self.chunk_h as u64) as usize);
+        for col in columns.start / self.chunk_w..columns.end.div_ceil(self.chunk_w) {
+            let x0 = col * self.chunk_w;
+            let w = self.chunk_w.min(self.width - x0) as usize;
+            let texels = &self.band[chunk_row * self.across as usize + col as usize];
+            let row = &texels[chunk_y * w * pixel..][..w * pixel];
+            let (from, to) = (columns.start.max(x0), columns.end.min(x0 + w as u32));
+            let src = &row[(from - x0) as usize * pixel..(to - x0) as usize * pixel];
+            out[(from - columns.start) as usize * pixel..][..src.len()].copy_from_slice(src);
+        }
+        self.next += 1;
+        Ok(())
+    }
+
+    /// Chunks are found by row: the next read loads the band it needs.
+    fn skip_rows(&mut self, rows: u32) -> Result<()> {
+        self.next += rows as u64;
+        Ok(())
+    }
+
+    /// Only the chunks under the columns are decoded (tiles; a strip is always whole).
+    fn read_columns(&mut self, columns: Range<u32>) -> bool {
+        let columns = (columns != (0..self.width)).then_some(columns);
+        if columns != self.columns {
+            // The loaded band may lack the chunks under the new columns.
+            (self.columns, self.band_rows) = (columns, 0);
+        }
+        true
+    }
+
+    fn describe(&self) -> String {
+        let colour = match self.colour {
+            Colour::Grey => "grey",
+            Colour::YCbCr => "YCbCr",
+            Colour::Rgb => "RGB",
+        };
+        let tables = if self.tables.is_empty() { "" } else { ", shared tables" };
+        let chunks = if self.tiled {
+            format!("streamed by tile row ({}x{} tiles, decoded in parallel)", self.chunk_w, self.chunk_h)
+        } else {
+            format!("streamed by strip ({} rows, {} strips decoded at once)", self.chunk_h, self.group)
+        };
+        format!("{}, jpeg ({colour}{tables}, libjpeg-turbo), {chunks}", self.label)
+    }
+}

@@ -1,0 +1,193 @@
+//! Which image of a multi-image TIFF is read: pyramidal TIFFs, OME-TIFF series and whole-slide
+//! images keep their full-resolution image next to reduced levels and associated images (a
+//! slide's label, macro photograph and thumbnail).
+//!
+//! The main chain of directories is surveyed once (sizes, NewSubfileType, ImageDescription,
+//! SubIFDs), the vendor recognised from the first description ([`super::slide`]), and one page
+//! chosen: `--page N` (the Nth directory, as `tiffinfo` and libvips count them), `--series N`
+//! (OME-XML's Nth `Image`, or else the Nth full-resolution page), or by default the first
+//! (OME: series 0). The summary line says what was read and what was skipped.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::Path;
+
+use tiff::decoder::Decoder;
+use tiff::tags::Tag;
+
+use super::slide::{self, Vendor};
+use super::{open_decoder, open_error};
+use crate::error::{Result, TilerError};
+use crate::source::Pick;
+
+/// Directories surveyed at most: real files have a few dozen (an OME-TIFF one per plane).
+const MAX_PAGES: usize = 65_536;
+
+/// Hamamatsu NDPI's private tag, in every directory of its files.
+const NDPI_FORMAT_FLAG: u16 = 65420;
+/// The XMP packet, where Ventana BIF files say `iScan`.
+const XMP: u16 = 700;
+
+/// One directory of the main chain.
+#[derive(Clone, Debug)]
+pub(super) struct Page {
+    pub width: u32,
+    pub height: u32,
+    /// NewSubfileType bit 0: a reduced-resolution copy of another page.
+    pub reduced: bool,
+    pub tiled: bool,
+    pub description: String,
+    /// Entries of its SubIFDs tag (the reduced levels of an OME-TIFF or `vips --subifd` pyramid).
+    pub sub_ifds: usize,
+    /// A private tag or XMP packet only one vendor writes (Hamamatsu's 65420, Ventana's iScan).
+    pub hint: Option<Vendor>,
+}
+
+/// The page chosen, and what the summary line says about it.
+pub(super) struct Chosen {
+    pub index: usize,
+    pub label: String,
+}
+
+/// Surveys the file, picks a page and positions `decoder` on it.
+pub(super) fn choose(
+    path: &Path,
+    decoder: &mut Decoder<BufReader<File>>,
+    pick: Pick,
+    bigtiff: bool,
+    max_memory: u64,
+) -> Result<Chosen> {
+    let pages = survey(path, max_memory)?;
+    let vendor = slide::recognise(&pages);
+    let index = match (pick.page, pick.series) {
+        (Some(_), Some(_)) => return Err(TilerError::Options("--page and --series cannot be given together".into())),
+        (Some(page), None) => {
+            if page as usize >= pages.len() {
+                return Err(TilerError::unsupported(
+                    path,
+                    format!("--page {page}: the TIFF has {} page(s), 0 to {}", pages.len(), pages.len() - 1),
+                ));
+            }
+            page as usize
+        }
+        (None, series) => series_page(path, &pages, vendor, series.unwrap_or(0))?,
+    };
+    if index > 0 {
+        decoder.seek_to_image(index).map_err(|e| open_error(path, e))?;
+    }
+    Ok(Chosen { index, label: label(&pages, vendor, index, bigtiff) })
+}
+
+/// The main chain's directories, as far as they can be read.
+fn survey(path: &Path, max_memory: u64) -> Result<Vec<Page>> {
+    let mut decoder = open_decoder(path, max_memory)?;
+    let mut pages = Vec::new();
+    loop {
+        pages.push(page(&mut decoder));
+        // A later directory the crate cannot read ends the survey: it is never chosen.
+        if pages.len() >= MAX_PAGES || !decoder.more_images() || decoder.next_image().is_err() {
+            return Ok(pages);
+        }
+    }
+}
+
+fn page(decoder: &mut Decoder<BufReader<File>>) -> Page {
+    let (width, height) = decoder.dimensions().unwrap_or((0, 0));
+    let subfile: u32 = decoder.find_tag_unsigned(Tag::NewSubfileType).ok().flatten().unwrap_or(0);
+    let description = decoder.get_tag_ascii_string(Tag::ImageDescription).unwrap_or_default();
+    let sub_ifds = decoder.find_tag(Tag::SubIfd).ok().flatten().map_or(0, |v| match v {
+        tiff::decoder::ifd::Value::List(items) => items.len(),
+        _ => 1,
+    });
+    let has = |decoder: &mut Decoder<BufReader<File>>, tag| decoder.find_tag(Tag::Unknown(tag)).ok().flatten();
+    let hint = if has(decoder, NDPI_FORMAT_FLAG).is_some() {
+        Some(Vendor::Hamamatsu)
+    } else if has(decoder, XMP).is_some()
+        && decoder.get_tag_u8_vec(Tag::Unknown(XMP)).is_ok_and(|x| x.windows(5).any(|w| w == b"iScan"))
+    {
+        Some(Vendor::Ventana)
+    } else {
+        None
+    };
+    Page {
+        width,
+        height,
+        reduced: subfile & 1 == 1,
+        tiled: decoder.get_chunk_type() == tiff::decoder::ChunkType::Tile,
+        description,
+        sub_ifds,
+        hint,
+    }
+}
+
+/// The first page of series `n`: OME-XML's Nth `Image`, or else the Nth page that is
+/// neither a reduced level nor an associated image.
+fn series_page(path: &Path, pages: &[Page], vendor: Vendor, n: u32) -> Result<usize> {
+    if vendor == Vendor::Ome {
+        let series = slide::ome_series(&pages[0].description);
+        return match series.get(n as usize) {
+            Some(&Some(ifd)) if ifd < pages.len() => Ok(ifd),
+            Some(_) => Err(TilerError::decode(
+                path,
+                format!(
+                    "the OME-XML's series {n} names no directory of the file (TiffData IFD missing or past the last page)"
+                ),
+            )),
+            None => Err(TilerError::unsupported(
+                path,
+                format!(
+                    "--series {n}: the OME-TIFF has {} series, 0 to {}",
+                    series.len(),
+                    series.len().saturating_sub(1)
+                ),
+            )),
+        };
+    }
+    let full: Vec<usize> = (0..pages.len())
+        .filter(|&i| slide::associated(vendor, pages, i).is_none() && !slide::is_level(vendor, pages, i))
+        .collect();
+    full.get(n as usize).copied().ok_or_else(|| {
+        TilerError::unsupported(
+            path,
+            format!("--series {n}: the TIFF has {} full-resolution image(s); --page N picks any directory", full.len()),
+        )
+    })
+}
+
+/// "tiff (Aperio SVS, page 0 of 6: full resolution, 3 reduced level(s) not read; skipped
+/// thumbnail 1024x768 (page 1), ...)"
+fn label(pages: &[Page], vendor: Vendor, index: usize, bigtiff: bool) -> String {
+    let kind = if bigtiff { "bigtiff" } else { "tiff" };
+    if pages.len() == 1 && pages[0].sub_ifds == 0 && vendor == Vendor::Plain {
+        return kind.to_string();
+    }
+    let chosen = &pages[index];
+    let levels = (index + 1..pages.len()).filter(|&i| slide::is_level(vendor, pages, i)).count() + chosen.sub_ifds;
+    let what = match slide::associated(vendor, pages, index) {
+        Some(kind) => kind.to_string(),
+        None if slide::is_level(vendor, pages, index) => "a reduced-resolution level".to_string(),
+        None if levels > 0 => format!("full resolution, {levels} reduced level(s) not read"),
+        None => "full resolution".to_string(),
+    };
+    let series = match vendor {
+        Vendor::Ome => slide::ome_series(&pages[0].description)
+            .iter()
+            .position(|&ifd| ifd == Some(index))
+            .map_or(String::new(), |s| format!("series {s}, ")),
+        _ => String::new(),
+    };
+    let named = if vendor == Vendor::Plain { String::new() } else { format!("{}, ", vendor.name()) };
+    let mut label = format!("{kind} ({named}{series}page {index} of {}: {what}", pages.len());
+    let skipped: Vec<String> = (0..pages.len())
+        .filter(|&i| i != index)
+        .filter_map(|i| {
+            let p = &pages[i];
+            slide::associated(vendor, pages, i).map(|kind| format!("{kind} {}x{} (page {i})", p.width, p.height))
+        })
+        .collect();
+    if !skipped.is_empty() {
+        label += &format!("; skipped {}", skipped.join(", "));
+    }
+    label += ")";
+    label
+}
