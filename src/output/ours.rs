@@ -25,6 +25,8 @@ pub enum Product {
     Frames,
     /// A pyramid in a viewer layout (`split --layout dzi|iiif|xyz|google`).
     Viewer(Viewer),
+    /// A PMTiles v3 archive (`split --pmtiles`).
+    Pmtiles,
 }
 
 /// The largest report or `info.json` read to recognise it; ours are far smaller.
@@ -45,6 +47,7 @@ impl Product {
             Product::Viewer(Viewer::Dzi) => "a Deep Zoom pyramid",
             Product::Viewer(Viewer::Iiif) => "a IIIF image",
             Product::Viewer(Viewer::Xyz | Viewer::Google) => "a web-map tile directory",
+            Product::Pmtiles => "a PMTiles archive",
         }
     }
 
@@ -57,6 +60,7 @@ impl Product {
             Product::Report => recognise_report(path),
             Product::Frames => recognise_frames(path),
             Product::Viewer(viewer) => crate::viewer::recognise(viewer, path),
+            Product::Pmtiles => recognise_pmtiles(path),
         }
     }
 }
@@ -71,6 +75,17 @@ fn recognise_pack(path: &Path) -> Result<(), String> {
         return Err("a file without a pack's signature".into());
     }
     Ok(())
+}
+
+/// Any PMTiles v3 archive, ours or not: it holds nothing but tiles another run can make again.
+fn recognise_pmtiles(path: &Path) -> Result<(), String> {
+    let mut head = Vec::with_capacity(8);
+    fs::File::open(path).and_then(|f| f.take(8).read_to_end(&mut head)).map_err(|e| format!("unreadable ({e})"))?;
+    match &head[..] {
+        [] => Err("an empty file".into()),
+        b"PMTiles\x03" => Ok(()),
+        _ => Err("a file without a PMTiles v3 signature".into()),
+    }
 }
 
 fn recognise_report(path: &Path) -> Result<(), String> {

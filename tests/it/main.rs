@@ -17,6 +17,7 @@ mod golden;
 mod hostile;
 mod oracle;
 mod pack_cli;
+mod pmtiles;
 mod render;
 mod serve;
 mod serve_hostile;
