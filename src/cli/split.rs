@@ -282,7 +282,8 @@ pub fn tile(
 ) -> Result<()> {
     if a.pmtiles.is_some() {
         if !matches!(a.layout, OutputLayout::Vortex | OutputLayout::Xyz) {
-            bail!("--pmtiles holds the web-map (xyz) pyramid; --layout {:?} writes a directory (-o DIR)", a.layout);
+            let layout = a.layout.viewer().map_or("vortex", Viewer::name);
+            bail!("--pmtiles holds the web-map (xyz) pyramid; --layout {layout} writes a directory (-o DIR)");
         }
         return tile_for_viewer(source, input, names, a, Viewer::Xyz, started);
     }

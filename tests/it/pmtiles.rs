@@ -182,7 +182,10 @@ fn pmtiles_output_follows_the_output_rules() {
     ok(&["split", s(&input), "--pmtiles", s(&notes), "-q", "--force"]);
     assert_eq!(&std::fs::read(&notes).unwrap()[..8], b"PMTiles\x03");
 
-    fails_with(&run(&["split", s(&input), "--pmtiles", s(&archive), "--layout", "dzi"]), &["--pmtiles", "xyz"]);
+    fails_with(
+        &run(&["split", s(&input), "--pmtiles", s(&archive), "--layout", "dzi"]),
+        &["--pmtiles", "--layout dzi", "xyz"],
+    );
     fails_with(&run(&["split", s(&input), "--pmtiles", s(&archive), "--codec", "zstd"]), &["zstd"]);
     let out = run(&["split", s(&input), "--pmtiles", s(&archive), "--pack", "x.vtpk"]);
     assert_eq!(out.status.code(), Some(2), "clap refuses two outputs");
