@@ -14,7 +14,7 @@ use vortex_tiler::output::{Existing, Product};
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::pyramid::Filter;
 use vortex_tiler::settings::{self, CodecChoice, Requested};
-use vortex_tiler::sink::{DirSink, PackSink, TileSink};
+use vortex_tiler::sink::{DirSink, PackSink, PmtilesSink, TileSink};
 use vortex_tiler::source::RowSource;
 use vortex_tiler::split::SplitOptions;
 use vortex_tiler::tile_dir::info::InfoFile;
@@ -76,7 +76,13 @@ pub struct SplitArgs {
 pub struct OutputArgs {
     /// Output directory (created; replaced only if it holds nothing but a previous output:
     /// its info.json and the tiles that names).
-    #[arg(short, long, value_name = "DIR", required_unless_present = "pack", conflicts_with = "pack")]
+    #[arg(
+        short,
+        long,
+        value_name = "DIR",
+        required_unless_present_any = ["pack", "pmtiles"],
+        conflicts_with_all = ["pack", "pmtiles"]
+    )]
     output: Option<PathBuf>,
 
     /// Write one pack file instead of a directory of tiles (docs/pack-format.md). An existing
@@ -84,7 +90,16 @@ pub struct OutputArgs {
     #[arg(long, value_name = "FILE")]
     pack: Option<PathBuf>,
 
-    /// Replace a regular file at --pack that is not a pack. Never replaces a directory, a
+    /// Write one PMTiles v3 archive of the web-map (XYZ) pyramid instead of a directory:
+    /// one file any static web host serves to Leaflet, MapLibre or OpenLayers with the
+    /// `pmtiles` JavaScript package (docs/web.md). JPEG or PNG tiles of --tile-size (default
+    /// 256), zoom 0 the whole image; bounds name the image's place on the web-mercator square,
+    /// as the image has no map coordinates. An existing PMTiles archive is replaced; any other
+    /// file only with --force.
+    #[arg(long, value_name = "FILE", conflicts_with = "pack")]
+    pmtiles: Option<PathBuf>,
+
+    /// Replace a regular file at --pack or --pmtiles that is not one. Never replaces a directory, a
     /// device, a FIFO, a link or the input.
     #[arg(long)]
     force: bool,
@@ -322,6 +337,18 @@ pub fn tile(
         return ome_zarr::tile(source, input, names, a, started);
     }
     a.ome_zarr.refuse_elsewhere()?;
+    if a.pmtiles.is_some() {
+        if kept_icc.is_some() {
+            bail!(
+                "--keep-icc keeps the profile in info.json (--layout vortex, or a pack); a PMTiles archive has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
+            );
+        }
+        if !matches!(a.layout, OutputLayout::Vortex | OutputLayout::Xyz) {
+            let layout = a.layout.viewer().map_or("ome-zarr", Viewer::name);
+            bail!("--pmtiles holds the web-map (xyz) pyramid; --layout {layout} writes a directory (-o DIR)");
+        }
+        return tile_for_viewer(source, input, names, a, Viewer::Xyz, started);
+    }
     if let Some(viewer) = a.layout.viewer() {
         return tile_for_viewer(source, input, names, a, viewer, started);
     }
@@ -541,10 +568,12 @@ fn tile_for_viewer(
     viewer: Viewer,
     started: Instant,
 ) -> Result<()> {
-    let Some(dest) = &a.output else {
-        bail!(
+    let (dest, product) = match (&a.output, &a.pmtiles) {
+        (_, Some(file)) => (file, Product::Pmtiles),
+        (Some(dir), None) => (dir, Product::Viewer(viewer)),
+        (None, None) => bail!(
             "--layout {viewer} writes a directory (-o DIR); a pack has one layout, which `vortex-tiler serve PACK` serves as Deep Zoom, IIIF and XYZ"
-        )
+        ),
     };
     if names.is_some() {
         bail!("--layout {viewer} names its tiles as viewers expect; --filename-format is for --layout vortex");
@@ -573,7 +602,6 @@ fn tile_for_viewer(
         bail!("--name '{name}' must be a plain file name (it makes NAME.dzi and NAME_files/)");
     }
     let limits = Limits { memory: a.max_memory, ..Limits::default() };
-    let product = Product::Viewer(viewer);
     let claim = report::claim(dest, product, &[input], a.force)?;
 
     let tile_size = a.tile_size.unwrap_or(viewer.default_tile_size());
@@ -603,6 +631,9 @@ fn tile_for_viewer(
         bail!("--layout {viewer} tiles are image files: use --codec jpeg or png, not {}", opts.codec.name());
     }
     limits.check_pyramid(&layout, false)?;
+    if product == Product::Pmtiles {
+        return tile_to_pmtiles(source, a, &claim, &layout, &opts, &name, started);
+    }
     let tiles = ViewerTiles {
         viewer,
         layout,
@@ -614,5 +645,64 @@ fn tile_for_viewer(
     let sink = DirSink::for_viewer(&claim, tiles)?;
     let done = run.into_dir(sink, &opts, DirSink::finish_viewer)?;
     report(a, viewer.name(), &done, dest, None);
+    Ok(())
+}
+
+/// `split`/`convert --pmtiles FILE`: the web-map pyramid into one PMTiles archive.
+fn tile_to_pmtiles(
+    source: Box<dyn RowSource>,
+    a: &OutputArgs,
+    claim: &vortex_tiler::output::Claim,
+    layout: &Layout,
+    opts: &SplitOptions,
+    name: &str,
+    started: Instant,
+) -> Result<()> {
+    use vortex_tiler::sink::pmtiles::{self, Bounds, TileType};
+    let need = layout.total_tiles().saturating_mul(pmtiles::ENTRY_MEMORY_BYTES);
+    Limits { memory: a.max_memory, ..Limits::default() }
+        .check_memory(&format!("the PMTiles directory of {} tiles", layout.total_tiles()), need)?;
+    let (tile_type, format) = match opts.codec.extension() {
+        "png" => (TileType::Png, "png"),
+        _ => (TileType::Jpeg, "jpg"),
+    };
+    let run = Run::start(source, a, layout, started)?;
+    // On error the sink is dropped, which deletes its temporaries.
+    let sink = PmtilesSink::create(&claim.path, layout, tile_type)?;
+    let done = run.execute(&sink, opts)?;
+    if done.summary.tiles != layout.total_tiles() {
+        bail!("internal error: wrote {} tiles of {}", done.summary.tiles, layout.total_tiles());
+    }
+    let metadata = serde_json::json!({
+        "name": name,
+        "format": format,
+        "type": "baselayer",
+        "description": "an image without map coordinates: zoom 0 is the whole image at the top left of the web-mercator square",
+        "vortex": { "layout": "xyz", "width": layout.width, "height": layout.height, "tileSize": layout.tile_size },
+    });
+    let written = sink.finish(&Bounds::of_image(layout), metadata.to_string().as_bytes())?;
+    let file = &claim.path;
+    if a.run.json {
+        let mut doc: serde_json::Value = serde_json::from_str(&report::summary_json(&done, "pmtiles", file, None))?;
+        doc["pmtiles"] = serde_json::json!({
+            "tiles": written.tiles,
+            "entries": written.entries,
+            "contents": written.contents,
+            "leafDirectories": written.leaves,
+            "dataBytes": written.data_bytes,
+            "fileBytes": written.file_bytes,
+        });
+        say!("{doc}");
+    } else if !a.run.quiet {
+        say!(
+            "pmtiles: {} tiles in {} directory entries, {} distinct payloads, {} leaf directories, {} file bytes",
+            written.tiles,
+            written.entries,
+            written.contents,
+            written.leaves,
+            written.file_bytes
+        );
+        say!("{}", report::summary_line(&done, file));
+    }
     Ok(())
 }

@@ -29,6 +29,8 @@ pub enum Product {
     OmeZarr,
     /// A zipped OME-Zarr file (`split --layout ome-zarr -o FILE.ozx`).
     Ozx,
+    /// A PMTiles v3 archive (`split --pmtiles`).
+    Pmtiles,
 }
 
 /// The largest report or `info.json` read to recognise it; ours are far smaller.
@@ -51,6 +53,7 @@ impl Product {
             Product::Viewer(Viewer::Xyz | Viewer::Google) => "a web-map tile directory",
             Product::OmeZarr => "an OME-Zarr image",
             Product::Ozx => "a zipped OME-Zarr image",
+            Product::Pmtiles => "a PMTiles archive",
         }
     }
 
@@ -65,6 +68,7 @@ impl Product {
             Product::Viewer(viewer) => crate::viewer::recognise(viewer, path),
             Product::OmeZarr => crate::sink::ome_zarr::recognise_dir(path),
             Product::Ozx => crate::sink::ome_zarr::recognise_ozx(path),
+            Product::Pmtiles => recognise_pmtiles(path),
         }
     }
 }
@@ -79,6 +83,17 @@ fn recognise_pack(path: &Path) -> Result<(), String> {
         return Err("a file without a pack's signature".into());
     }
     Ok(())
+}
+
+/// Any PMTiles v3 archive, ours or not: it holds nothing but tiles another run can make again.
+fn recognise_pmtiles(path: &Path) -> Result<(), String> {
+    let mut head = Vec::with_capacity(8);
+    fs::File::open(path).and_then(|f| f.take(8).read_to_end(&mut head)).map_err(|e| format!("unreadable ({e})"))?;
+    match &head[..] {
+        [] => Err("an empty file".into()),
+        b"PMTiles\x03" => Ok(()),
+        _ => Err("a file without a PMTiles v3 signature".into()),
+    }
 }
 
 fn recognise_report(path: &Path) -> Result<(), String> {

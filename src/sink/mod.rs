@@ -4,16 +4,19 @@
 //!
 //! [`DirSink`] (`dir.rs`) writes the tile directory of [`crate::tile_dir`] or a viewer
 //! layout ([`crate::viewer`]); [`PackSink`]
-//! (`pack.rs`) writes one pack file (`crates/vortex-pack`). Both write under a temporary name
-//! and rename into place when complete.
+//! (`pack.rs`) writes one pack file (`crates/vortex-pack`); [`PmtilesSink`] (`pmtiles.rs`) one
+//! PMTiles v3 archive of the web-map pyramid. All write under a temporary name and rename into
+//! place when complete.
 
 mod dir;
 pub mod ome_zarr;
 mod pack;
+pub mod pmtiles;
 
 pub use dir::DirSink;
 pub use ome_zarr::OmeZarrSink;
 pub use pack::{PackSink, pack_description, tile_kind};
+pub use pmtiles::PmtilesSink;
 
 use crate::error::{Result, TilerError};
 use crate::viewer::Crop;

@@ -20,6 +20,7 @@ mod library;
 mod ome_zarr;
 mod oracle;
 mod pack_cli;
+mod pmtiles;
 mod render;
 mod serve;
 mod serve_hostile;
