@@ -554,7 +554,7 @@ impl TiffSource {
             .map(|_| -> std::result::Result<DecodeStrip, String> {
                 if let Some(strips) = &self.lzw {
                     let file = File::open(&self.path).map_err(|e| TilerError::io(&self.path, e).to_string())?;
-                    let mut reader = StripReader { file, strips: Arc::clone(strips), raw: Vec::new() };
+                    let mut reader = StripReader { file, strips: Arc::clone(strips) };
                     return Ok(Box::new(move |strip, buffer: &mut Vec<u8>| reader.read(strip, buffer)));
                 }
                 let mut decoder = open_decoder(&self.path, self.max_memory).map_err(|e| e.to_string())?;
