@@ -256,7 +256,11 @@ fn icc_profiles_are_converted_to_srgb_as_vips_does() {
         let tif = png.with_extension("tif");
         tool("vips", &["copy", s(&png), &format!("{}[Q=95,strip]", s(&jpg))]);
         tool("vips", &["tiffsave", s(&png), s(&tif), "--tile", "--tile-width", "16", "--tile-height", "16"]);
-        for path in [&png, &jpg, &tif] {
+        // A JPEG-compressed TIFF has a source of its own (`tiff/jpeg.rs`): its profile too.
+        let jpeg_tif = dir.path().join(format!("{name}-jpeg.tif"));
+        let tiled = ["--tile", "--tile-width", "16", "--tile-height", "16", "--compression", "jpeg", "--Q", "95"];
+        tool("vips", &[&["tiffsave", s(&png), s(&jpeg_tif)][..], &tiled].concat());
+        for path in [&png, &jpg, &tif, &jpeg_tif] {
             tag_profile(path, &icc);
             assert!(source::open(path, 1 << 30).unwrap().embedded().icc.is_some(), "{}", path.display());
             compare_with_vips_icc(path, false, 2, 0.5);

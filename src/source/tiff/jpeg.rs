@@ -58,6 +58,8 @@ pub(super) struct JpegTiff {
     failed: bool,
     /// What the summary line says before the chunking (file kind, page, vendor).
     label: String,
+    /// The orientation and ICC profile of the image's directory.
+    embedded: crate::source::Embedded,
 }
 
 /// Whether the current image is JPEG-compressed (new-style, Compression 7).
@@ -70,6 +72,7 @@ pub(super) fn open(
     path: &Path,
     decoder: &mut Decoder<BufReader<File>>,
     label: String,
+    embedded: crate::source::Embedded,
     max_memory: u64,
 ) -> Result<Box<dyn RowSource>> {
     let tag_err = |e| open_error(path, e);
@@ -175,6 +178,7 @@ pub(super) fn open(
         next: 0,
         failed: false,
         label,
+        embedded,
     }))
 }
 
@@ -288,6 +292,10 @@ impl JpegTiff {
 impl RowSource for JpegTiff {
     fn header(&self) -> ImageHeader {
         ImageHeader { width: self.width, height: self.height, layout: self.layout() }
+    }
+
+    fn embedded(&self) -> crate::source::Embedded {
+        self.embedded.clone()
     }
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {

@@ -126,12 +126,6 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
     let bigtiff = is_bigtiff(path)?;
     let mut decoder = open_decoder(path, max_memory)?;
     let chosen = pyramid::choose(path, &mut decoder, pick, bigtiff, max_memory)?;
-    if jpeg::is_jpeg(path, &mut decoder)? {
-        return jpeg::open(path, &mut decoder, chosen.label, max_memory);
-    }
-    let (width, height) = decoder.dimensions().map_err(|e| open_error(path, e))?;
-    let compression = check_compression(path, &mut decoder)?;
-    let Samples { layout, delivered: file_samples, stored, associated } = pixel_layout(path, &mut decoder)?;
     let embedded = super::Embedded {
         orientation: decoder
             .find_tag_unsigned::<u16>(Tag::Orientation)
@@ -145,6 +139,12 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
             .transpose()
             .map_err(|e| open_error(path, e))?,
     };
+    if jpeg::is_jpeg(path, &mut decoder)? {
+        return jpeg::open(path, &mut decoder, chosen.label, embedded, max_memory);
+    }
+    let (width, height) = decoder.dimensions().map_err(|e| open_error(path, e))?;
+    let compression = check_compression(path, &mut decoder)?;
+    let Samples { layout, delivered: file_samples, stored, associated } = pixel_layout(path, &mut decoder)?;
 
     let chunking = match decoder.get_chunk_type() {
         ChunkType::Strip => {
