@@ -376,18 +376,8 @@ impl<T: Sample> TileEncoder<T> {
             let (c, sb) = (self.stored.channels.count(), self.stored.depth.bytes());
             vortex_pack::format::delta_encode_rows(raw.to_mut(), self.side as usize, c, sb);
         }
-        thread_local! {
-            static ZSTD: RefCell<Option<(i32, zstd::bulk::Compressor<'static>)>> = const { RefCell::new(None) };
-        }
-        ZSTD.with(|cell| {
-            let mut cell = cell.borrow_mut();
-            if cell.as_ref().is_none_or(|(l, _)| *l != level) {
-                *cell = Some((level, zstd::bulk::Compressor::new(level).map_err(|e| format!("zstd: {e}"))?));
-            }
-            let Some((_, compressor)) = cell.as_mut() else { unreachable!("filled above") };
-            *out = compressor.compress(&raw).map_err(|e| format!("zstd: {e}"))?;
-            Ok(())
-        })
+        *out = zstd_frame(&raw, level)?;
+        Ok(())
     }
 
     /// BC1 (`bc7` None) or BC7 blocks of an 8-bit RGB or RGBA tile, by Intel's ISPC texture
@@ -535,6 +525,22 @@ fn flatten<T: Sample>(texels: &[T], channels: usize, matte: &[T]) -> Vec<T> {
         }
     }
     out
+}
+
+/// One zstd frame of `bytes` (tiles, OME-Zarr chunks); one compression context per thread, kept
+/// for the next call at the same level.
+pub(crate) fn zstd_frame(bytes: &[u8], level: i32) -> Result<Vec<u8>, String> {
+    thread_local! {
+        static ZSTD: RefCell<Option<(i32, zstd::bulk::Compressor<'static>)>> = const { RefCell::new(None) };
+    }
+    ZSTD.with(|cell| {
+        let mut cell = cell.borrow_mut();
+        if cell.as_ref().is_none_or(|(l, _)| *l != level) {
+            *cell = Some((level, zstd::bulk::Compressor::new(level).map_err(|e| format!("zstd: {e}"))?));
+        }
+        let Some((_, compressor)) = cell.as_mut() else { unreachable!("filled above") };
+        compressor.compress(bytes).map_err(|e| format!("zstd: {e}"))
+    })
 }
 
 #[cfg(test)]

@@ -167,7 +167,7 @@ impl OmeZarrSink {
             ));
         }
         let planar = planes(raw, channels, sample);
-        compress(&planar, self.spec.zstd_level)
+        crate::codec::zstd_frame(&planar, self.spec.zstd_level)
     }
 
     fn make_parent(&self, path: &Path) -> Result<()> {
@@ -321,22 +321,6 @@ fn planes(raw: &[u8], channels: usize, sample: usize) -> std::borrow::Cow<'_, [u
         }
     }
     std::borrow::Cow::Owned(out)
-}
-
-/// One zstd frame; one compression context per thread.
-fn compress(bytes: &[u8], level: i32) -> std::result::Result<Vec<u8>, String> {
-    use std::cell::RefCell;
-    thread_local! {
-        static ZSTD: RefCell<Option<(i32, zstd::bulk::Compressor<'static>)>> = const { RefCell::new(None) };
-    }
-    ZSTD.with(|cell| {
-        let mut cell = cell.borrow_mut();
-        if cell.as_ref().is_none_or(|(l, _)| *l != level) {
-            *cell = Some((level, zstd::bulk::Compressor::new(level).map_err(|e| format!("zstd: {e}"))?));
-        }
-        let Some((_, compressor)) = cell.as_mut() else { unreachable!("filled above") };
-        compressor.compress(bytes).map_err(|e| format!("zstd: {e}"))
-    })
 }
 
 /// Whether `path` holds a previous OME-Zarr output: an empty directory, or OME metadata at
