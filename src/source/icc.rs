@@ -101,9 +101,17 @@ pub fn to_srgb(path: &Path, inner: Box<dyn RowSource>, icc: &[u8]) -> Result<Box
     .map_err(|e| lcms_error(path, "LittleCMS cannot convert from the embedded ICC profile", e))?;
     let name = name(&profile);
     if is_identity(&transform, layout) {
-        return Ok(Box::new(Described { inner, note: format!("ICC profile '{name}' is sRGB: left as is") }));
+        return Ok(Box::new(Described {
+            inner,
+            note: format!("ICC profile '{name}' is sRGB: left as is"),
+            transform: None,
+        }));
     }
-    Ok(Box::new(ToSrgb { inner, transform, note: format!("ICC '{name}' converted to sRGB (LittleCMS)") }))
+    Ok(Box::new(Described {
+        inner,
+        note: format!("ICC '{name}' converted to sRGB (LittleCMS)"),
+        transform: Some(transform),
+    }))
 }
 
 /// Whether `transform` leaves a grid of colours (and greys) unchanged within one step.
@@ -147,40 +155,12 @@ fn is_identity(transform: &RowTransform, layout: PixelLayout) -> bool {
     }
 }
 
-/// A source whose rows are converted to sRGB as they pass.
-struct ToSrgb {
-    inner: Box<dyn RowSource>,
-    transform: RowTransform,
-    note: String,
-}
-
-impl RowSource for ToSrgb {
-    fn header(&self) -> ImageHeader {
-        self.inner.header()
-    }
-    fn read_row(&mut self, row: &mut [u8]) -> Result<()> {
-        self.inner.read_row(row)?;
-        self.transform.transform_in_place(row);
-        Ok(())
-    }
-    fn describe(&self) -> String {
-        format!("{}; {}", self.inner.describe(), self.note)
-    }
-    fn rewind(&mut self) -> Result<()> {
-        self.inner.rewind()
-    }
-    fn skip_rows(&mut self, rows: u32) -> Result<()> {
-        self.inner.skip_rows(rows)
-    }
-    fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
-        self.inner.read_columns(columns)
-    }
-}
-
-/// A source passed through as it is, with a note for the summary line.
+/// A source with a note for the summary line, its rows converted by `transform` as they pass
+/// (to sRGB), or passed through as they are.
 pub(crate) struct Described {
     pub inner: Box<dyn RowSource>,
     pub note: String,
+    pub transform: Option<RowTransform>,
 }
 
 impl RowSource for Described {
@@ -188,7 +168,11 @@ impl RowSource for Described {
         self.inner.header()
     }
     fn read_row(&mut self, row: &mut [u8]) -> Result<()> {
-        self.inner.read_row(row)
+        self.inner.read_row(row)?;
+        if let Some(transform) = &self.transform {
+            transform.transform_in_place(row);
+        }
+        Ok(())
     }
     fn describe(&self) -> String {
         format!("{}; {}", self.inner.describe(), self.note)

@@ -125,6 +125,7 @@ pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
             source = Box::new(icc::Described {
                 inner: source,
                 note: format!("ICC profile kept ({} bytes, --keep-icc): pixels as stored", icc.len()),
+                transform: None,
             });
             kept = Some(icc);
         } else {
@@ -135,7 +136,7 @@ pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
         source = orient::apply(path, source, orientation, opts.max_memory)?;
     } else if orientation != orient::Orientation::NORMAL {
         let note = format!("EXIF orientation {} not applied (--no-autorotate)", orientation.value());
-        source = Box::new(icc::Described { inner: source, note });
+        source = Box::new(icc::Described { inner: source, note, transform: None });
     }
     Ok((source, kept))
 }

@@ -301,14 +301,9 @@ impl RowSource for JpegTiff {
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
         let y = self.next;
         let fail = |message: String| TilerError::DecodeRow { path: self.path.clone(), row: y, message };
-        if y >= self.height as u64 {
-            return Err(fail("read past the last row".into()));
-        }
         let columns = self.columns.clone().unwrap_or(0..self.width);
         let pixel = self.colour.components();
-        if out.len() != columns.len() * pixel {
-            return Err(fail(format!("row buffer has {} bytes, expected {}", out.len(), columns.len() * pixel)));
-        }
+        super::check_row(y, self.height, &columns, pixel, out.len()).map_err(fail)?;
         if self.failed {
             return Err(fail("an earlier JPEG tile or strip failed to decode".into()));
         }

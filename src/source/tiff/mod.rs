@@ -572,6 +572,25 @@ impl TiffSource {
     }
 }
 
+/// Why row `y` of a `height`-row image cannot be read into `out_len` bytes of `columns` of
+/// `pixel`-byte texels, if it cannot (both TIFF sources check the same).
+fn check_row(
+    y: u64,
+    height: u32,
+    columns: &std::ops::Range<u32>,
+    pixel: usize,
+    out_len: usize,
+) -> std::result::Result<(), String> {
+    if y >= height as u64 {
+        return Err("read past the last row".into());
+    }
+    let want = columns.len() * pixel;
+    if out_len != want {
+        return Err(format!("row buffer has {out_len} bytes, expected {want}"));
+    }
+    Ok(())
+}
+
 /// Runs a chunk read, turning both its errors and any panic inside the crate (which a corrupt
 /// file should not cause, but a decoder bug must not take the whole run down) into a message.
 fn guarded(read: impl FnOnce() -> tiff::TiffResult<()>) -> std::result::Result<(), String> {
@@ -604,14 +623,9 @@ impl RowSource for TiffSource {
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
         let y = self.next;
         let fail = |message: String| TilerError::DecodeRow { path: self.path.clone(), row: y, message };
-        if y >= self.height as u64 {
-            return Err(fail("read past the last row".into()));
-        }
         let columns = self.columns.clone().unwrap_or(0..self.width);
         let out_pixel = self.layout.bytes_per_pixel();
-        if out.len() != columns.len() * out_pixel {
-            return Err(fail(format!("row buffer has {} bytes, expected {}", out.len(), columns.len() * out_pixel)));
-        }
+        check_row(y, self.height, &columns, out_pixel, out.len()).map_err(fail)?;
         if let (Some(direct), Chunking::Strips { rows }) = (&mut self.direct, self.chunking) {
             // Straight from the file, whole rows or a part: into `out` with no band and no copy,
             // or, where texels carry extra samples, through one stored row.
