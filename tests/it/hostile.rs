@@ -233,10 +233,11 @@ fn output_to_a_closed_pipe_ends_quietly() {
     let pack = dir.path().join("p.vtpk");
     ok(&["split", s(&input), "--pack", s(&pack), "--quiet"]);
     for command in ["verify", "info"] {
-        let mut child =
-            Command::new(BIN).args([command, s(&pack)]).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
-        drop(child.stdout.take());
-        let out = child.wait_with_output().unwrap();
+        // The reading end is closed before the child starts, so its first write finds no reader
+        // whatever the scheduling (closing it after the spawn could race the child's output).
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let out = Command::new(BIN).args([command, s(&pack)]).stdout(writer).stderr(Stdio::piped()).output().unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(matches!(out.status.code(), Some(0 | 141)), "{command}: {:?} {err}", out.status);
         assert!(err.is_empty(), "{command}: {err}");
