@@ -225,7 +225,7 @@ fn a_tile_the_server_always_garbles_is_reported_and_never_drawn() {
     assert!(!r["errors"].as_array().unwrap().is_empty());
     // Each bad payload read twice (once again in case the fault was passing), then given up.
     let corrupt = r["remote"]["corrupt"].as_u64().unwrap();
-    assert!(corrupt >= 2 && corrupt % 2 == 0, "{}", r["remote"]);
+    assert!(corrupt >= 2 && corrupt.is_multiple_of(2), "{}", r["remote"]);
 }
 
 #[test]
