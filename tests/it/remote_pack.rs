@@ -81,6 +81,27 @@ fn a_pack_on_nginx_renders_the_frames_of_the_local_file() {
     }
 }
 
+#[test]
+fn view_of_a_pack_on_nginx_shows_the_local_files_picture() {
+    let Some(x) = crate::view::Xvfb::start() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let pack = sample_pack(dir.path());
+    let Some(server) = nginx(dir.path(), "view_of_a_pack_on_nginx_shows_the_local_files_picture") else { return };
+    let url = format!("{}/sample.vtpk", server.url());
+    let mut shots = Vec::new();
+    for (name, pack) in [("local", s(&pack)), ("remote", &url)] {
+        let shot = dir.path().join(format!("{name}.png"));
+        let args =
+            [pack, "--size", "320x240", "--screenshot", s(&shot), "--frame-count", "12", "--cache-format", "rgba8"];
+        let out = x.view(&args);
+        assert!(out.status.success(), "view {name}: {}", String::from_utf8_lossy(&out.stderr));
+        shots.push(std::fs::read(&shot).unwrap());
+    }
+    // The same pages in the same window path: the same PNG.
+    assert!(shots[0] == shots[1], "the remote pack's window differs from the local file's");
+    assert!(server.requests().iter().all(|r| r.0 == 206), "{:?}", server.requests());
+}
+
 /// What the test server does with one request.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Act {
