@@ -381,6 +381,9 @@ struct Fetcher {
 struct FetchState {
     /// The file's length, from the first reply (0 until then).
     file_len: u64,
+    /// The first reply's strong `ETag`, sent as `If-Match` with every later request: a pack
+    /// replaced on the server is refused (412) instead of mixed with the old one's bytes.
+    etag: Option<String>,
     /// Ranges waiting for a request: (start, ticket) -> end.
     queued: BTreeMap<(u64, u64), u64>,
     /// Requests in flight.
@@ -513,15 +516,19 @@ impl Fetcher {
         let io = |m: String| FetchError::Io(format!("bytes {start}..{end}: {m}"));
         let fatal = |m: String| FetchError::Fatal(format!("bytes {start}..{end}: {m}"));
         add(&self.counters.requests, 1);
-        let response = self.agent.get(&self.url).header("Range", format!("bytes={start}-{}", end - 1)).call().map_err(
-            |e| match e {
-                ureq::Error::BadUri(_) | ureq::Error::HostNotFound if first => fatal(e.to_string()),
-                e => io(e.to_string()),
-            },
-        )?;
+        let mut get = self.agent.get(&self.url).header("Range", format!("bytes={start}-{}", end - 1));
+        let etag = lock(&self.state).etag.clone();
+        if let Some(etag) = &etag {
+            get = get.header("If-Match", etag);
+        }
+        let response = get.call().map_err(|e| match e {
+            ureq::Error::BadUri(_) | ureq::Error::HostNotFound if first => fatal(e.to_string()),
+            e => io(e.to_string()),
+        })?;
         let status = response.status().as_u16();
         let header = |name: &str| response.headers().get(name).and_then(|v| v.to_str().ok()).map(str::to_string);
         let known_len = self.file_len();
+        let etag_of_reply = header("etag");
         // What the reply holds: from which byte, how many, and the file's length.
         let (from, total) = match status {
             206 => {
@@ -536,6 +543,12 @@ impl Fetcher {
                 (0, total.ok_or_else(|| io("a 200 reply of unknown length to a Range request".into()))?)
             }
             416 if first => return Err(fatal("the file is empty (416 Range Not Satisfiable)".into())),
+            412 => {
+                let etag = etag.unwrap_or_default();
+                return Err(fatal(format!(
+                    "the pack changed on the server since it was opened (ETag {etag} no longer matches)"
+                )));
+            }
             408 | 429 | 500..=599 => return Err(io(format!("HTTP {status}"))),
             _ => return Err(fatal(format!("HTTP {status}"))),
         };
@@ -563,7 +576,10 @@ impl Fetcher {
             return Err(io(format!("the reply ended after {} of {len} bytes", bytes.len())));
         }
         if first {
-            lock(&self.state).file_len = total;
+            let mut state = lock(&self.state);
+            state.file_len = total;
+            // A weak ETag (W/...) may stay when the bytes change: only a strong one says they did not.
+            state.etag = etag_of_reply.filter(|e| e.starts_with('"'));
         }
         Ok(bytes)
     }
