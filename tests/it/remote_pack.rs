@@ -372,4 +372,8 @@ fn urls_that_do_not_serve_a_pack_are_named() {
     fails_with(&run(&["render", "--pack", &missing, "-q"]), &["opening", "missing.vtpk", "HTTP 404"]);
     let text = format!("{}/note.txt", server.url());
     fails_with(&run(&["render", "--pack", &text, "-q"]), &["note.txt", "bad signature: not a Vortex pack"]);
+    // Nobody listening: retried with backoff, then named (the port was free a moment ago).
+    let port = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let refused = format!("http://127.0.0.1:{port}/x.vtpk");
+    fails_with(&run(&["render", "--pack", &refused, "-q"]), &["opening http://127.0.0.1", "(6 attempts)"]);
 }

@@ -168,6 +168,18 @@ impl HttpPack {
             }
         };
         let raw_levels = section(h.levels_offset, h.description.level_count as u64 * LEVEL_LEN as u64)?;
+        // A local reader maps what a header claims; this one allocates it, so held to the cap on
+        // any one buffer (the header's claims were checked against the file's length only).
+        if u64::from(h.meta_len) > limits.max_decoded_bytes {
+            return Err(PackError::LimitExceeded {
+                path: location.clone(),
+                field: "meta_len".into(),
+                offset: vortex_pack::format::at::META_LEN as u64,
+                value: h.meta_len.into(),
+                limit: limits.max_decoded_bytes,
+                cap: "max_decoded_bytes",
+            });
+        }
         let meta = section(h.meta_offset, h.meta_len as u64)?;
         let head = PackHead::new(&location, h, &raw_levels, &meta, limits)?;
         let pack = HttpPack {
@@ -281,6 +293,14 @@ impl HttpPack {
                 }
                 Place::Data { kind, offset, len, crc } => (kind, offset, len, crc),
             };
+            // No stored tile is larger than its texels: a bigger one is refused, not allocated.
+            let most = self.head.limits().max_decoded_bytes;
+            if u64::from(len) > most {
+                let message = format!(
+                    "a payload of {len} bytes at byte {offset}, over the limit of {most} (Limits::max_decoded_bytes)"
+                );
+                return Err(ReadError::new(message));
+            }
             let bytes = self
                 .fetcher
                 .read(offset, offset + len as u64)
