@@ -360,6 +360,39 @@ fn a_pack_replaced_on_the_server_is_refused_not_mixed() {
 }
 
 #[test]
+fn damaged_packs_are_refused_over_http_as_the_local_reader_refuses_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = sample_pack(dir.path());
+    let good = std::fs::read(&pack).unwrap();
+    let h = *Pack::open(&pack).unwrap().header();
+    let flip = |at: u64| {
+        let mut b = good.clone();
+        b[at as usize] ^= 0x40;
+        b
+    };
+    let damaged = [
+        ("truncated", good[..good.len() - 1].to_vec()),
+        ("header", flip(40)),
+        ("metadata", flip(h.meta_offset)),
+        ("index", flip(h.index_offset + 3)),
+        ("signature", flip(1)),
+    ];
+    for (name, bytes) in &damaged {
+        std::fs::write(dir.path().join(format!("{name}.vtpk")), bytes).unwrap();
+    }
+    let Some(server) = nginx(dir.path(), "damaged_packs_are_refused_over_http_as_the_local_reader_refuses_them") else {
+        return;
+    };
+    for (name, _) in damaged {
+        let (path, url) = (dir.path().join(format!("{name}.vtpk")), format!("{}/{name}.vtpk", server.url()));
+        // Opening checks the index too when it is read whole (the local reader on request).
+        let local = Pack::open(&path).and_then(|p| p.check_index().map(|()| p)).err().unwrap().to_string();
+        let remote = HttpPack::open(&url).err().unwrap().to_string();
+        assert_eq!(remote.replace(&url, "PACK"), local.replace(s(&path), "PACK"), "{name}");
+    }
+}
+
+#[test]
 fn urls_that_do_not_serve_a_pack_are_named() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(

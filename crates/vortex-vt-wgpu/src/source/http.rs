@@ -180,26 +180,36 @@ impl HttpPack {
                 cap: "max_decoded_bytes",
             });
         }
-        let meta = section(h.meta_offset, h.meta_len as u64)?;
-        let head = PackHead::new(&location, h, &raw_levels, &meta, limits)?;
-        let pack = HttpPack {
-            location: location.clone(),
-            head,
-            fetcher,
-            index: Mutex::default(),
-            raw_levels,
-            metadata: meta,
-            index_corrupt: Mutex::default(),
-        };
+        // The index (when read whole) and the metadata lie side by side: one read for both.
         let index_len = h.index_count * ENTRY_LEN as u64;
-        if index_len <= options.whole_index_up_to {
-            let index = pack.fetcher.read(h.index_offset, h.index_offset + index_len).map_err(|e| io(e.message()))?;
-            pack.head.check_index(&pack.raw_levels, &index)?;
-            let mut blocks = lock(&pack.index);
+        let meta_end = h.meta_offset + u64::from(h.meta_len);
+        let whole_index = index_len <= options.whole_index_up_to;
+        let (index, meta) = if whole_index && h.meta_offset - (h.index_offset + index_len) <= options.gap {
+            let mut both = section(h.index_offset, meta_end - h.index_offset)?;
+            let meta = both.split_off((h.meta_offset - h.index_offset) as usize);
+            both.truncate(index_len as usize);
+            (Some(both), meta)
+        } else {
+            let index = whole_index.then(|| section(h.index_offset, index_len)).transpose()?;
+            (index, section(h.meta_offset, u64::from(h.meta_len))?)
+        };
+        let head = PackHead::new(&location, h, &raw_levels, &meta, limits)?;
+        let mut blocks = HashMap::new();
+        if let Some(index) = index {
+            head.check_index(&raw_levels, &index)?;
             for (n, block) in index.chunks(INDEX_BLOCK as usize * ENTRY_LEN).enumerate() {
                 blocks.insert(n as u64, Arc::from(block));
             }
         }
+        let pack = HttpPack {
+            location: location.clone(),
+            head,
+            fetcher,
+            index: Mutex::new(blocks),
+            raw_levels,
+            metadata: meta,
+            index_corrupt: Mutex::default(),
+        };
         Ok(pack)
     }
 
