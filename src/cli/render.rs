@@ -160,13 +160,9 @@ fn parse_layer(s: &str) -> Result<SceneLayer, String> {
 }
 
 /// The scene's layer stacks as page sources: its `textures` as layer 0 (colour), then its
-/// `layers`, each read `latency` late if given; and the largest tile side.
-pub(super) fn open_layers(scene: &Scene, latency: Option<Duration>) -> Result<(Vec<Layer>, u32)> {
-    open_layers_remote(scene, latency).map(|(layers, tile_size, _)| (layers, tile_size))
-}
-
-/// As [`open_layers`], and the packs among them read over HTTP (for their counters).
-fn open_layers_remote(scene: &Scene, latency: Option<Duration>) -> Result<(Vec<Layer>, u32, Vec<Arc<HttpPack>>)> {
+/// `layers`, each read `latency` late if given; the largest tile side; and the packs among them
+/// read over HTTP (for their counters).
+pub(super) fn open_layers(scene: &Scene, latency: Option<Duration>) -> Result<(Vec<Layer>, u32, Vec<Arc<HttpPack>>)> {
     let mut remote = Vec::new();
     let (sources, mut tile_size) = open_sources(&scene.textures, latency, &mut remote)?;
     let mut layers = vec![Layer::colour(sources)];
@@ -220,9 +216,8 @@ fn as_url(p: &Path) -> Option<&str> {
     p.to_str().filter(|s| s.starts_with("http://") || s.starts_with("https://"))
 }
 
-/// The counters of the packs read over HTTP, summed, for the report: requests, bytes, retries,
-/// I/O errors, payloads that failed their CRC, whole-file replies to `Range` requests.
-fn remote_counters(remote: &[Arc<HttpPack>]) -> serde_json::Value {
+/// The counters of the packs read over HTTP, summed.
+pub(super) fn remote_stats(remote: &[Arc<HttpPack>]) -> HttpStats {
     let mut sum = HttpStats::default();
     for s in remote.iter().map(|p| p.stats()) {
         sum.requests += s.requests;
@@ -233,6 +228,13 @@ fn remote_counters(remote: &[Arc<HttpPack>]) -> serde_json::Value {
         sum.whole_file_replies += s.whole_file_replies;
         sum.merged_reads += s.merged_reads;
     }
+    sum
+}
+
+/// The report's `remote` object: requests, bytes, retries, I/O errors, payloads that failed their
+/// CRC, whole-file replies to `Range` requests, reads merged.
+fn remote_counters(remote: &[Arc<HttpPack>]) -> serde_json::Value {
+    let sum = remote_stats(remote);
     serde_json::json!({
         "packs": remote.len(),
         "requests": sum.requests,
@@ -349,7 +351,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let report_file = a.report.as_deref().map(StagedFile::create).transpose()?;
     let frames = a.frames.as_deref().map(StagedFrames::create).transpose()?;
 
-    let (layers, tile_size, remote) = open_layers_remote(&scene, a.stream.io_latency)?;
+    let (layers, tile_size, remote) = open_layers(&scene, a.stream.io_latency)?;
     let side = scene.effects.cache_slots_per_side as u32 * tile_size;
     let gpu = Gpu::headless(side.max(scene.size[0]).max(scene.size[1]))?;
     let adapter = gpu.adapter_info();
