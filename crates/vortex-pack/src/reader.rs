@@ -470,8 +470,15 @@ impl PackHead {
 
     /// The level table's bytes and the whole index's must match the header's CRC-32C of both.
     pub fn check_index(&self, levels: &[u8], index: &[u8]) -> Result<()> {
+        self.check_index_parts(levels, [index])
+    }
+
+    /// As [`PackHead::check_index`], the index given in consecutive parts (blocks fetched one by
+    /// one), none copied.
+    pub fn check_index_parts<'a>(&self, levels: &[u8], index: impl IntoIterator<Item = &'a [u8]>) -> Result<()> {
         let h = &self.header;
-        if crc32c::crc32c_append(crc32c::crc32c(levels), index) != h.index_crc {
+        let crc = index.into_iter().fold(crc32c::crc32c(levels), crc32c::crc32c_append);
+        if crc != h.index_crc {
             return Err(PackError::Corrupt {
                 path: self.path.clone(),
                 section: "index",

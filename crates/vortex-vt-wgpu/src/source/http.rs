@@ -275,12 +275,10 @@ impl HttpPack {
         if blocks.len() as u64 != h.index_count.div_ceil(INDEX_BLOCK) {
             return Ok(());
         }
-        let mut index = Vec::with_capacity(h.index_count as usize * ENTRY_LEN);
-        for n in 0..blocks.len() as u64 {
-            index.extend_from_slice(blocks.get(&n).map_or(&[][..], |b| &b[..]));
-        }
+        let parts = (0..blocks.len() as u64).map(|n| blocks.get(&n).map_or(&[][..], |b| &b[..]));
+        let checked = self.head.check_index_parts(&self.raw_levels, parts);
         drop(blocks);
-        self.head.check_index(&self.raw_levels, &index).map_err(|e| {
+        checked.map_err(|e| {
             let message = e.to_string();
             *lock(&self.index_corrupt) = Some(message.clone());
             ReadError::new(message)
