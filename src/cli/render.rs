@@ -15,15 +15,16 @@ use vortex_tiler::limits::Limits;
 use vortex_tiler::output::{Product, staging};
 use vortex_vt::sampler::Rgba8Image;
 use vortex_vt_wgpu::harness::{Scene, SceneLayer, SceneRenderer};
-use vortex_vt_wgpu::source::Delayed;
+use vortex_vt_wgpu::source::{Delayed, HttpPack, HttpStats};
 use vortex_vt_wgpu::{CacheFormat, Gpu, Layer, LayerKind, Pacing, PageSource, Runtime, SampleFilter};
 
 use super::{report, signals};
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
-    /// A pack to stream (texture 0; repeat the flag for textures 1, 2, ...). Replaces the
-    /// scene's own list of textures.
+    /// A pack to stream (texture 0; repeat the flag for textures 1, 2, ...): a file, or an
+    /// http:// or https:// URL read with Range requests (docs/remote.md). Replaces the scene's
+    /// own list of textures.
     #[arg(long, value_name = "PACK")]
     pack: Vec<PathBuf>,
     /// The scene (docs/scenes.md); without it, a plane under a zoom-and-pan camera path that
@@ -159,33 +160,48 @@ fn parse_layer(s: &str) -> Result<SceneLayer, String> {
 }
 
 /// The scene's layer stacks as page sources: its `textures` as layer 0 (colour), then its
-/// `layers`, each read `latency` late if given; and the largest tile side.
-pub(super) fn open_layers(scene: &Scene, latency: Option<Duration>) -> Result<(Vec<Layer>, u32)> {
-    let (sources, mut tile_size) = open_sources(&scene.textures, latency)?;
+/// `layers`, each read `latency` late if given; the largest tile side; and the packs among them
+/// read over HTTP (for their counters).
+pub(super) fn open_layers(scene: &Scene, latency: Option<Duration>) -> Result<(Vec<Layer>, u32, Vec<Arc<HttpPack>>)> {
+    let mut remote = Vec::new();
+    let (sources, mut tile_size) = open_sources(&scene.textures, latency, &mut remote)?;
     let mut layers = vec![Layer::colour(sources)];
     for layer in &scene.layers {
-        let (sources, side) = open_sources(&layer.textures, latency)?;
+        let (sources, side) = open_sources(&layer.textures, latency, &mut remote)?;
         tile_size = tile_size.max(side);
         layers.push(Layer { kind: layer.kind, sources });
     }
-    Ok((layers, tile_size))
+    Ok((layers, tile_size, remote))
 }
 
 /// The packs at `paths` as page sources (shards refused: they must be merged first), each read
-/// `latency` late if given, and their largest tile side.
-pub(super) fn open_sources(paths: &[PathBuf], latency: Option<Duration>) -> Result<(Vec<Arc<dyn PageSource>>, u32)> {
+/// `latency` late if given, and their largest tile side. A path that is an `http://` or
+/// `https://` URL is read from the web server with `Range` requests, and added to `remote`.
+fn open_sources(
+    paths: &[PathBuf],
+    latency: Option<Duration>,
+    remote: &mut Vec<Arc<HttpPack>>,
+) -> Result<(Vec<Arc<dyn PageSource>>, u32)> {
     let mut tile_size = 0;
     let sources = paths
         .iter()
         .map(|p| {
-            // A directory maps as "No such device"; say what is wrong instead.
-            if p.is_dir() {
-                bail!("{} is a directory, not a pack (split an image with --pack to make one)", p.display());
-            }
-            let pack = vortex_pack::Pack::open(p).with_context(|| format!("opening {}", p.display()))?;
-            vortex_tiler::shard::manifest::refuse_shard(p, pack.metadata())?;
-            tile_size = tile_size.max(pack.description().tile_size);
-            let source: Arc<dyn PageSource> = Arc::new(pack);
+            let source: Arc<dyn PageSource> = if let Some(url) = as_url(p) {
+                let pack = Arc::new(HttpPack::open(url).with_context(|| format!("opening {url}"))?);
+                vortex_tiler::shard::manifest::refuse_shard(p, pack.metadata())?;
+                tile_size = tile_size.max(pack.head().header().description.tile_size);
+                remote.push(Arc::clone(&pack));
+                pack
+            } else {
+                // A directory maps as "No such device"; say what is wrong instead.
+                if p.is_dir() {
+                    bail!("{} is a directory, not a pack (split an image with --pack to make one)", p.display());
+                }
+                let pack = vortex_pack::Pack::open(p).with_context(|| format!("opening {}", p.display()))?;
+                vortex_tiler::shard::manifest::refuse_shard(p, pack.metadata())?;
+                tile_size = tile_size.max(pack.description().tile_size);
+                Arc::new(pack)
+            };
             Ok(match latency {
                 Some(latency) => Arc::new(Delayed::new(source, latency)),
                 None => source,
@@ -193,6 +209,42 @@ pub(super) fn open_sources(paths: &[PathBuf], latency: Option<Duration>) -> Resu
         })
         .collect::<Result<Vec<_>>>()?;
     Ok((sources, tile_size))
+}
+
+/// The URL `p` spells, if it is an `http://` or `https://` one rather than a file's path.
+fn as_url(p: &Path) -> Option<&str> {
+    p.to_str().filter(|s| s.starts_with("http://") || s.starts_with("https://"))
+}
+
+/// The counters of the packs read over HTTP, summed.
+pub(super) fn remote_stats(remote: &[Arc<HttpPack>]) -> HttpStats {
+    let mut sum = HttpStats::default();
+    for s in remote.iter().map(|p| p.stats()) {
+        sum.requests += s.requests;
+        sum.bytes += s.bytes;
+        sum.retries += s.retries;
+        sum.io_errors += s.io_errors;
+        sum.corrupt += s.corrupt;
+        sum.whole_file_replies += s.whole_file_replies;
+        sum.merged_reads += s.merged_reads;
+    }
+    sum
+}
+
+/// The report's `remote` object: requests, bytes, retries, I/O errors, payloads that failed their
+/// CRC, whole-file replies to `Range` requests, reads merged.
+fn remote_counters(remote: &[Arc<HttpPack>]) -> serde_json::Value {
+    let sum = remote_stats(remote);
+    serde_json::json!({
+        "packs": remote.len(),
+        "requests": sum.requests,
+        "bytes": sum.bytes,
+        "retries": sum.retries,
+        "io_errors": sum.io_errors,
+        "corrupt": sum.corrupt,
+        "whole_file_replies": sum.whole_file_replies,
+        "merged_reads": sum.merged_reads,
+    })
 }
 
 /// Says so on stderr when the filter shows seams at page edges (a forced bilinear or trilinear
@@ -299,7 +351,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let report_file = a.report.as_deref().map(StagedFile::create).transpose()?;
     let frames = a.frames.as_deref().map(StagedFrames::create).transpose()?;
 
-    let (layers, tile_size) = open_layers(&scene, a.stream.io_latency)?;
+    let (layers, tile_size, remote) = open_layers(&scene, a.stream.io_latency)?;
     let side = scene.effects.cache_slots_per_side as u32 * tile_size;
     let gpu = Gpu::headless(side.max(scene.size[0]).max(scene.size[1]))?;
     let adapter = gpu.adapter_info();
@@ -322,7 +374,11 @@ pub fn run(a: RenderArgs) -> Result<()> {
     bar.finish_and_clear();
     let took = start.elapsed();
     if let Some(file) = report_file {
-        file.finish(serde_json::to_string_pretty(&report)?.as_bytes())?;
+        let mut json = serde_json::to_value(&report)?;
+        if !remote.is_empty() {
+            json["remote"] = remote_counters(&remote);
+        }
+        file.finish(serde_json::to_string_pretty(&json)?.as_bytes())?;
     }
     if let Some(frames) = frames {
         frames.finish()?;

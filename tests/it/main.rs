@@ -21,6 +21,7 @@ mod ome_zarr;
 mod oracle;
 mod pack_cli;
 mod pmtiles;
+mod remote_pack;
 mod render;
 mod serve;
 mod serve_hostile;

@@ -13,7 +13,7 @@ fn root(p: &str) -> PathBuf {
 }
 
 /// The fixture as a pack of 136-texel tiles with a 4-texel border.
-fn sample_pack(dir: &Path) -> PathBuf {
+pub(crate) fn sample_pack(dir: &Path) -> PathBuf {
     let pack = dir.join("sample.vtpk");
     let r = run(&["split", s(&fixture("sample.png")), "--pack", s(&pack), "--tile-size", "136", "--border", "4"]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
@@ -21,7 +21,7 @@ fn sample_pack(dir: &Path) -> PathBuf {
 }
 
 /// Whether the render failed for want of a GPU (and that is allowed here).
-fn no_gpu(out: &Output) -> bool {
+pub(crate) fn no_gpu(out: &Output) -> bool {
     let err = String::from_utf8_lossy(&out.stderr);
     if out.status.success() || !err.contains("no GPU adapter") {
         return false;
@@ -31,7 +31,7 @@ fn no_gpu(out: &Output) -> bool {
     true
 }
 
-fn report(path: &Path) -> serde_json::Value {
+pub(crate) fn report(path: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
 }
 

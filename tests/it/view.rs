@@ -10,7 +10,7 @@ use std::process::{Child, ChildStdout, Command, Output, Stdio};
 use crate::common::cli::{BIN, fails_with, fixture, run, s};
 
 /// An Xvfb server on a free display, stopped on drop.
-struct Xvfb {
+pub(crate) struct Xvfb {
     child: Child,
     display: String,
     /// Held open: a write by Xvfb after its display number must not meet a closed pipe.
@@ -19,7 +19,7 @@ struct Xvfb {
 
 impl Xvfb {
     /// A server, or `None` (with a note) when Xvfb is not installed outside CI.
-    fn start() -> Option<Xvfb> {
+    pub(crate) fn start() -> Option<Xvfb> {
         let ci = std::env::var("CI").is_ok_and(|v| v == "true");
         if Command::new("Xvfb").arg("-help").stderr(Stdio::null()).status().is_err() {
             assert!(!ci, "CI=true and no Xvfb (apt-get install xvfb)");
@@ -44,7 +44,7 @@ impl Xvfb {
     }
 
     /// `vortex-tiler view ARGS` on this display.
-    fn view(&self, args: &[&str]) -> Output {
+    pub(crate) fn view(&self, args: &[&str]) -> Output {
         let mut cmd = Command::new(BIN);
         cmd.arg("view").args(args).env("NO_COLOR", "1").env("DISPLAY", &self.display).env_remove("WAYLAND_DISPLAY");
         cmd.envs(vortex_vt_wgpu::device::lavapipe_env());

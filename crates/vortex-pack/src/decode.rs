@@ -37,12 +37,12 @@ pub fn decode_rgba8_limited(pack: &Pack, lod: u32, x: u32, y: u32, max_bytes: u6
         Tile::Absent => Ok(None),
         Tile::Constant(value) => {
             let entry_at = pack.header().index_offset + position * ENTRY_LEN as u64;
-            constant_rgba8(d, value, max_bytes).map(Some).map_err(|m| pack.tile_error(id, entry_at, m))
+            constant_rgba8(d, value, max_bytes).map(Some).map_err(|m| pack.head().tile_error(id, entry_at, m))
         }
         Tile::Data(kind, bytes) => {
             let offset = pack.entry(position).offset_or_value;
             let mut decoder = PayloadDecoder::default();
-            decoder.decode(kind, bytes, d, max_bytes).map(Some).map_err(|m| pack.tile_error(id, offset, m))
+            decoder.decode(kind, bytes, d, max_bytes).map(Some).map_err(|m| pack.head().tile_error(id, offset, m))
         }
     }
 }

@@ -29,7 +29,7 @@ pub use decode::{decode_rgba8, decode_rgba8_limited, payload_texels, tile_rgba8}
 pub use error::{PackError, Result};
 pub use format::{Description, Entry, Header, Level, TileKind};
 pub use limits::{DEFAULT_MAX_DECODED_BYTES, Limits};
-pub use reader::{Pack, Tile, TileId};
+pub use reader::{Pack, PackHead, Place, Tile, TileId};
 pub use verify::{Problem, Report, VerifyOptions, verify};
 #[cfg(feature = "write")]
 pub use writer::{NewTile, PackWriter, WriteOptions, WriteSummary};

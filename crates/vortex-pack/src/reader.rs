@@ -39,11 +39,39 @@ impl Bytes {
 
 /// An open pack. `Send + Sync`: lookups take `&self` and touch no shared state.
 pub struct Pack {
-    path: PathBuf,
     bytes: Bytes,
+    head: PackHead,
+}
+
+/// What a reader checks and keeps of a pack before it reads any tile: the header, the level
+/// table and the caps, with the checks of each part and of each index entry and payload. A
+/// [`Pack`] has one over its whole file; a reader that fetches a pack in pieces (over HTTP
+/// `Range` requests, say) builds one from the pieces it fetched ([`PackHead::read_header`],
+/// then [`PackHead::new`]) and checks every entry ([`PackHead::place`]) and payload
+/// ([`PackHead::check_payload`]) with the same code, so both readers refuse the same bytes with
+/// the same errors.
+#[derive(Clone, Debug)]
+pub struct PackHead {
+    path: PathBuf,
     header: Header,
     levels: Vec<Level>,
     limits: Limits,
+}
+
+/// Where a tile's index entry says its texels are (see [`PackHead::place`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Place<'a> {
+    Absent,
+    /// One colour: these samples, a prefix of the entry's bytes.
+    Constant(&'a [u8]),
+    /// A payload of `kind` at `offset` of `len` bytes, inside the data section, whose CRC-32C
+    /// must be `crc`.
+    Data {
+        kind: TileKind,
+        offset: u64,
+        len: u32,
+        crc: u32,
+    },
 }
 
 /// A tile as stored.
@@ -117,17 +145,143 @@ impl Pack {
 
     fn new(path: &Path, bytes: Bytes, limits: Limits) -> Result<Pack> {
         let b = bytes.as_slice();
-        let corrupt = |section: &'static str, offset: u64, message: String| PackError::Corrupt {
+        let h = PackHead::read_header(path, b, b.len() as u64, limits)?;
+        let levels = &b[h.levels_offset as usize..][..h.description.level_count as usize * LEVEL_LEN];
+        let meta = &b[h.meta_offset as usize..][..h.meta_len as usize];
+        let head = PackHead::new(path, h, levels, meta, limits)?;
+        Ok(Pack { bytes, head })
+    }
+
+    /// The checked header and level table.
+    pub fn head(&self) -> &PackHead {
+        &self.head
+    }
+
+    /// The caps this pack was opened with (and that decoding it is held to).
+    pub fn limits(&self) -> &Limits {
+        &self.head.limits
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.head.path
+    }
+
+    /// Checks the level table and index against their CRC-32C. Not done by `open`, which reads
+    /// nothing per tile (an index of 350,000 tiles is 8 MiB); `verify` does it, and `tile()`
+    /// checks each entry it returns.
+    pub fn check_index(&self) -> Result<()> {
+        let h = &self.head.header;
+        let b = self.file();
+        let levels = &b[h.levels_offset as usize..][..self.head.levels.len() * LEVEL_LEN];
+        let index = &b[h.index_offset as usize..][..h.index_count as usize * ENTRY_LEN];
+        self.head.check_index(levels, index)
+    }
+
+    pub fn header(&self) -> &Header {
+        &self.head.header
+    }
+
+    pub fn description(&self) -> &Description {
+        &self.head.header.description
+    }
+
+    pub fn levels(&self) -> &[Level] {
+        &self.head.levels
+    }
+
+    /// The metadata: JSON text with the `info.json` members (not needed for addressing).
+    pub fn metadata(&self) -> &[u8] {
+        let h = &self.head.header;
+        &self.file()[h.meta_offset as usize..][..h.meta_len as usize]
+    }
+
+    /// The whole file.
+    pub fn file(&self) -> &[u8] {
+        self.bytes.as_slice()
+    }
+
+    /// Index position of a tile: `first_entry[lod] + y * tiles_w[lod] + x`.
+    pub fn position(&self, id: TileId) -> Result<u64> {
+        self.head.position(id)
+    }
+
+    /// The raw index entry at `position`.
+    pub fn entry(&self, position: u64) -> Entry {
+        Entry::decode(self.raw_entry(position))
+    }
+
+    fn raw_entry(&self, position: u64) -> &[u8] {
+        &self.file()[self.head.entry_offset(position) as usize..][..ENTRY_LEN]
+    }
+
+    /// The tile at `(lod, x, y)`: O(1), zero copy. Checks that the entry is well formed and its
+    /// bytes lie in the data section; does not check the payload's CRC (see `tile_checked`).
+    pub fn tile(&self, lod: u32, x: u32, y: u32) -> Result<Tile<'_>> {
+        let id = TileId { lod, x, y };
+        let position = self.position(id)?;
+        self.tile_at(id, position)
+    }
+
+    /// As [`Pack::tile`], and the payload's CRC-32C must match.
+    pub fn tile_checked(&self, lod: u32, x: u32, y: u32) -> Result<Tile<'_>> {
+        let id = TileId { lod, x, y };
+        let position = self.position(id)?;
+        let tile = self.tile_at(id, position)?;
+        if let Tile::Data(_, bytes) = tile {
+            let e = self.entry(position);
+            self.head.check_payload(id, e.offset_or_value, e.crc, bytes)?;
+        }
+        Ok(tile)
+    }
+
+    pub(crate) fn tile_at(&self, id: TileId, position: u64) -> Result<Tile<'_>> {
+        Ok(match self.head.place(id, position, self.raw_entry(position))? {
+            Place::Absent => Tile::Absent,
+            Place::Constant(value) => Tile::Constant(value),
+            Place::Data { kind, offset, len, .. } => Tile::Data(kind, &self.file()[offset as usize..][..len as usize]),
+        })
+    }
+
+    /// Every tile address, level by level (coarsest last), rows top down.
+    pub fn ids(&self) -> impl Iterator<Item = TileId> + '_ {
+        self.head.levels.iter().enumerate().flat_map(|(lod, l)| {
+            (0..l.tiles_h).flat_map(move |y| (0..l.tiles_w).map(move |x| TileId { lod: lod as u32, x, y }))
+        })
+    }
+
+    /// Tiles with payload in the order their bytes lie in the file (for sequential readers).
+    pub fn ids_in_file_order(&self) -> Vec<(TileId, Entry)> {
+        let mut v: Vec<(TileId, Entry)> = self
+            .ids()
+            .enumerate()
+            .map(|(i, id)| (id, self.entry(i as u64)))
+            .filter(|(_, e)| TileKind::from_u8(e.kind).is_some_and(TileKind::has_payload))
+            .collect();
+        v.sort_by_key(|(_, e)| e.offset_or_value);
+        v
+    }
+}
+
+impl PackHead {
+    /// The header of a pack of `file_len` bytes from its first bytes `first` (at least
+    /// [`HEADER_LEN`] of them when the file has as many), checked as [`Pack::open`] checks it:
+    /// signature, checksum, reserved bytes, version, required features, fixed lengths, the
+    /// claims against `limits`, and that every section lies inside the file in order.
+    pub fn read_header(path: &Path, first: &[u8], file_len: u64, limits: Limits) -> Result<Header> {
+        let b = first;
+        let corrupt = |offset: u64, message: String| PackError::Corrupt {
             path: path.to_path_buf(),
-            section,
+            section: "header",
             offset,
             message,
         };
         if b.len() < HEADER_LEN {
             return Err(corrupt(
-                "header",
                 0,
-                format!("the file is {} bytes, shorter than a pack header ({HEADER_LEN})", b.len()),
+                format!(
+                    "the file is {} bytes, shorter than a pack header ({HEADER_LEN})",
+                    file_len.min(b.len() as u64)
+                ),
             ));
         }
         if b[..8] != MAGIC {
@@ -138,15 +292,15 @@ impl Pack {
             } else {
                 "not a Vortex pack"
             };
-            return Err(corrupt("header", 0, format!("bad signature: {hint}")));
+            return Err(corrupt(0, format!("bad signature: {hint}")));
         }
         let stored_crc = format::u32_at(b, format::at::HEADER_CRC);
         if crc32c::crc32c(&b[..format::at::HEADER_CRC]) != stored_crc {
-            return Err(corrupt("header", format::at::HEADER_CRC as u64, "header checksum mismatch".into()));
+            return Err(corrupt(format::at::HEADER_CRC as u64, "header checksum mismatch".into()));
         }
         let reserved = [70usize, 71].into_iter().chain(format::at::RESERVED..format::at::HEADER_CRC);
         if let Some(at) = reserved.into_iter().find(|at| b[*at] != 0) {
-            return Err(corrupt("header", at as u64, "reserved byte is not zero".into()));
+            return Err(corrupt(at as u64, "reserved byte is not zero".into()));
         }
         let h = Header::decode(b);
         let unsupported = |message: String| PackError::Unsupported { path: path.to_path_buf(), message };
@@ -166,7 +320,7 @@ impl Pack {
         for (field, expected) in [(format::at::HEADER_LEN, HEADER_LEN), (format::at::ENTRY_LEN, ENTRY_LEN)] {
             let value = format::u32_at(b, field);
             if value as usize != expected {
-                return Err(corrupt("header", field as u64, format!("length field says {value}, expected {expected}")));
+                return Err(corrupt(field as u64, format!("length field says {value}, expected {expected}")));
             }
         }
         let over = |field: String, offset: u64, value: u64, limit: u64, cap: &'static str| PackError::LimitExceeded {
@@ -187,76 +341,64 @@ impl Pack {
             let offset = format::at::INDEX_COUNT as u64;
             return Err(over("index_count".into(), offset, h.index_count, limits.max_tiles, "max_tiles"));
         }
-        check_header(&h, b.len() as u64).map_err(|(offset, m)| corrupt("header", offset, m))?;
+        check_header(&h, file_len).map_err(|(offset, m)| corrupt(offset, m))?;
+        Ok(h)
+    }
 
+    /// The head of a pack whose header [`PackHead::read_header`] checked, from its level table
+    /// (`levels`, the header's `level_count` rows) and metadata (`meta`, `meta_len` bytes):
+    /// the level table's claims against `limits` and its sense, and the metadata's checksum.
+    pub fn new(path: &Path, h: Header, levels: &[u8], meta: &[u8], limits: Limits) -> Result<PackHead> {
+        let corrupt = |section: &'static str, offset: u64, message: String| PackError::Corrupt {
+            path: path.to_path_buf(),
+            section,
+            offset,
+            message,
+        };
         let levels_len = h.description.level_count as usize * LEVEL_LEN;
-        let levels: Vec<Level> =
-            b[h.levels_offset as usize..][..levels_len].chunks_exact(LEVEL_LEN).map(Level::decode).collect();
+        if levels.len() != levels_len || meta.len() != h.meta_len as usize {
+            let message = format!("{} bytes of level table and {} of metadata given", levels.len(), meta.len());
+            return Err(PackError::Usage(format!("{}: {message}", path.display())));
+        }
+        let raw_levels = levels;
+        let levels: Vec<Level> = raw_levels.chunks_exact(LEVEL_LEN).map(Level::decode).collect();
         let mut tiles = 0u64;
         for (lod, l) in levels.iter().enumerate() {
             tiles = tiles.saturating_add(l.tiles_w as u64 * l.tiles_h as u64);
             if tiles > limits.max_tiles {
                 let field = format!("the tile count of levels 0..={lod} (level {lod}: {}x{})", l.tiles_w, l.tiles_h);
                 let offset = h.levels_offset + (lod * LEVEL_LEN) as u64;
-                return Err(over(field, offset, tiles, limits.max_tiles, "max_tiles"));
+                return Err(PackError::LimitExceeded {
+                    path: path.to_path_buf(),
+                    field,
+                    offset,
+                    value: tiles,
+                    limit: limits.max_tiles,
+                    cap: "max_tiles",
+                });
             }
         }
-        check_levels(&h, &levels, &b[h.levels_offset as usize..][..levels_len])
-            .map_err(|(o, m)| corrupt("levels", h.levels_offset + o, m))?;
-        if crc32c::crc32c(&b[h.meta_offset as usize..][..h.meta_len as usize]) != h.meta_crc {
+        check_levels(&h, &levels, raw_levels).map_err(|(o, m)| corrupt("levels", h.levels_offset + o, m))?;
+        if crc32c::crc32c(meta) != h.meta_crc {
             return Err(corrupt("metadata", h.meta_offset, "metadata checksum mismatch".into()));
         }
-        Ok(Pack { path: path.to_path_buf(), bytes, header: h, levels, limits })
-    }
-
-    /// The caps this pack was opened with (and that decoding it is held to).
-    pub fn limits(&self) -> &Limits {
-        &self.limits
+        Ok(PackHead { path: path.to_path_buf(), header: h, levels, limits })
     }
 
     pub fn path(&self) -> &Path {
         &self.path
     }
 
-    /// Checks the level table and index against their CRC-32C. Not done by `open`, which reads
-    /// nothing per tile (an index of 350,000 tiles is 8 MiB); `verify` does it, and `tile()`
-    /// checks each entry it returns.
-    pub fn check_index(&self) -> Result<()> {
-        let h = &self.header;
-        let b = self.file();
-        let levels = &b[h.levels_offset as usize..][..self.levels.len() * LEVEL_LEN];
-        let index = &b[h.index_offset as usize..][..h.index_count as usize * ENTRY_LEN];
-        if crc32c::crc32c_append(crc32c::crc32c(levels), index) != h.index_crc {
-            return Err(PackError::Corrupt {
-                path: self.path.clone(),
-                section: "index",
-                offset: h.index_offset,
-                message: "level table or index checksum mismatch".into(),
-            });
-        }
-        Ok(())
-    }
-
     pub fn header(&self) -> &Header {
         &self.header
-    }
-
-    pub fn description(&self) -> &Description {
-        &self.header.description
     }
 
     pub fn levels(&self) -> &[Level] {
         &self.levels
     }
 
-    /// The metadata: JSON text with the `info.json` members (not needed for addressing).
-    pub fn metadata(&self) -> &[u8] {
-        &self.file()[self.header.meta_offset as usize..][..self.header.meta_len as usize]
-    }
-
-    /// The whole file.
-    pub fn file(&self) -> &[u8] {
-        self.bytes.as_slice()
+    pub fn limits(&self) -> &Limits {
+        &self.limits
     }
 
     /// Index position of a tile: `first_entry[lod] + y * tiles_w[lod] + x`.
@@ -273,37 +415,17 @@ impl Pack {
         Ok(level.first_entry + id.y as u64 * level.tiles_w as u64 + id.x as u64)
     }
 
-    /// The raw index entry at `position`.
-    pub fn entry(&self, position: u64) -> Entry {
-        let at = self.header.index_offset as usize + position as usize * ENTRY_LEN;
-        Entry::decode(&self.file()[at..at + ENTRY_LEN])
+    /// The file offset of index entry `position` (one of [`PackHead::position`]'s answers).
+    pub fn entry_offset(&self, position: u64) -> u64 {
+        self.header.index_offset + position * ENTRY_LEN as u64
     }
 
-    /// The tile at `(lod, x, y)`: O(1), zero copy. Checks that the entry is well formed and its
-    /// bytes lie in the data section; does not check the payload's CRC (see `tile_checked`).
-    pub fn tile(&self, lod: u32, x: u32, y: u32) -> Result<Tile<'_>> {
-        let id = TileId { lod, x, y };
-        let position = self.position(id)?;
-        self.tile_at(id, position)
-    }
-
-    /// As [`Pack::tile`], and the payload's CRC-32C must match.
-    pub fn tile_checked(&self, lod: u32, x: u32, y: u32) -> Result<Tile<'_>> {
-        let id = TileId { lod, x, y };
-        let position = self.position(id)?;
-        let tile = self.tile_at(id, position)?;
-        if let Tile::Data(_, bytes) = tile {
-            let e = self.entry(position);
-            if crc32c::crc32c(bytes) != e.crc {
-                return Err(self.tile_error(id, e.offset_or_value, "payload checksum mismatch".into()));
-            }
-        }
-        Ok(tile)
-    }
-
-    pub(crate) fn tile_at(&self, id: TileId, position: u64) -> Result<Tile<'_>> {
-        let e = self.entry(position);
-        let entry_at = self.header.index_offset + position * ENTRY_LEN as u64;
+    /// Where tile `id`'s entry (`raw`, the [`ENTRY_LEN`] bytes at index `position`) says its
+    /// texels are, once the entry is checked: a known kind the header's required features allow,
+    /// reserved bytes zero, a payload inside the data section.
+    pub fn place<'a>(&self, id: TileId, position: u64, raw: &'a [u8]) -> Result<Place<'a>> {
+        let entry_at = self.entry_offset(position);
+        let e = Entry::decode(raw);
         let kind = TileKind::from_u8(e.kind)
             .ok_or_else(|| self.tile_error(id, entry_at, format!("unknown tile kind {}", e.kind)))?;
         if self.header.required_features & kind.required_feature() != kind.required_feature() {
@@ -311,23 +433,21 @@ impl Pack {
                 format!("a {} tile in a pack without required-feature bit {:#x}", kind.name(), kind.required_feature());
             return Err(self.tile_error(id, entry_at + 16, message));
         }
-        let raw = &self.file()[entry_at as usize..][..ENTRY_LEN];
-        if raw[17..].iter().any(|b| *b != 0) {
+        if raw[17..ENTRY_LEN].iter().any(|b| *b != 0) {
             return Err(self.tile_error(id, entry_at + 17, "reserved entry bytes are not zero".into()));
         }
         match kind {
-            TileKind::Absent => Ok(Tile::Absent),
+            TileKind::Absent => Ok(Place::Absent),
             TileKind::Constant => {
-                let n = self.header.description.channels as usize * self.header.description.sample_bytes as usize;
-                let at = entry_at as usize;
-                Ok(Tile::Constant(&self.file()[at..at + n]))
+                let d = &self.header.description;
+                Ok(Place::Constant(&raw[..d.channels as usize * d.sample_bytes as usize]))
             }
             _ => {
                 let (start, end) = (e.offset_or_value, e.offset_or_value.checked_add(e.len as u64));
                 let data = self.header.data_offset..self.header.data_offset + self.header.data_len;
                 match end {
                     Some(end) if start >= data.start && end <= data.end => {
-                        Ok(Tile::Data(kind, &self.file()[start as usize..end as usize]))
+                        Ok(Place::Data { kind, offset: start, len: e.len, crc: e.crc })
                     }
                     _ => Err(self.tile_error(
                         id,
@@ -339,27 +459,38 @@ impl Pack {
         }
     }
 
+    /// Tile `id`'s payload `bytes`, read from `offset`, must have the CRC-32C `crc` its entry
+    /// gives.
+    pub fn check_payload(&self, id: TileId, offset: u64, crc: u32, bytes: &[u8]) -> Result<()> {
+        if crc32c::crc32c(bytes) != crc {
+            return Err(self.tile_error(id, offset, "payload checksum mismatch".into()));
+        }
+        Ok(())
+    }
+
+    /// The level table's bytes and the whole index's must match the header's CRC-32C of both.
+    pub fn check_index(&self, levels: &[u8], index: &[u8]) -> Result<()> {
+        self.check_index_parts(levels, [index])
+    }
+
+    /// As [`PackHead::check_index`], the index given in consecutive parts (blocks fetched one by
+    /// one), none copied.
+    pub fn check_index_parts<'a>(&self, levels: &[u8], index: impl IntoIterator<Item = &'a [u8]>) -> Result<()> {
+        let h = &self.header;
+        let crc = index.into_iter().fold(crc32c::crc32c(levels), crc32c::crc32c_append);
+        if crc != h.index_crc {
+            return Err(PackError::Corrupt {
+                path: self.path.clone(),
+                section: "index",
+                offset: h.index_offset,
+                message: "level table or index checksum mismatch".into(),
+            });
+        }
+        Ok(())
+    }
+
     pub(crate) fn tile_error(&self, id: TileId, offset: u64, message: String) -> PackError {
         PackError::Tile { path: self.path.clone(), lod: id.lod, x: id.x, y: id.y, offset, message }
-    }
-
-    /// Every tile address, level by level (coarsest last), rows top down.
-    pub fn ids(&self) -> impl Iterator<Item = TileId> + '_ {
-        self.levels.iter().enumerate().flat_map(|(lod, l)| {
-            (0..l.tiles_h).flat_map(move |y| (0..l.tiles_w).map(move |x| TileId { lod: lod as u32, x, y }))
-        })
-    }
-
-    /// Tiles with payload in the order their bytes lie in the file (for sequential readers).
-    pub fn ids_in_file_order(&self) -> Vec<(TileId, Entry)> {
-        let mut v: Vec<(TileId, Entry)> = self
-            .ids()
-            .enumerate()
-            .map(|(i, id)| (id, self.entry(i as u64)))
-            .filter(|(_, e)| TileKind::from_u8(e.kind).is_some_and(TileKind::has_payload))
-            .collect();
-        v.sort_by_key(|(_, e)| e.offset_or_value);
-        v
     }
 }
 

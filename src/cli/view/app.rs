@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, anyhow};
 use vortex_vt_wgpu::harness::{FrameReport, Pose, Scene, SceneRenderer};
+use vortex_vt_wgpu::source::HttpPack;
 use vortex_vt_wgpu::{Gpu, Pacing, SampleFilter};
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
@@ -19,7 +20,7 @@ use winit::window::{Window, WindowId};
 
 use super::Start;
 use super::screenshot;
-use crate::cli::render::{open_layers, refuse_load_errors, warn_of_seams};
+use crate::cli::render::{open_layers, refuse_load_errors, remote_stats, warn_of_seams};
 
 pub(super) struct Options {
     pub scene: Scene,
@@ -65,6 +66,8 @@ struct State {
     title_at: Instant,
     frames_since_title: u32,
     last: FrameReport,
+    /// The packs read over HTTP, whose requests the title counts.
+    remote: Vec<Arc<HttpPack>>,
 }
 
 impl ApplicationHandler for App {
@@ -148,7 +151,7 @@ impl State {
         };
         let instance = wgpu::Instance::new(descriptor.with_env());
         let surface = instance.create_surface(Arc::clone(&window)).context("making the window's GPU surface")?;
-        let (layers, tile_size) = open_layers(scene, options.io_latency)?;
+        let (layers, tile_size, remote) = open_layers(scene, options.io_latency)?;
         let side = u32::from(scene.effects.cache_slots_per_side) * tile_size;
         let gpu = Gpu::for_surface(instance, &surface, side)?;
 
@@ -197,6 +200,7 @@ impl State {
             title_at: now,
             frames_since_title: 0,
             last: FrameReport::default(),
+            remote,
         })
     }
 
@@ -262,8 +266,17 @@ impl State {
         };
         let [w, h] = self.images[texture];
         let name = self.renderer.runtime().loader().sources()[texture].location().display().to_string();
+        let remote = match remote_stats(&self.remote) {
+            _ if self.remote.is_empty() => String::new(),
+            s => format!(
+                " | {} requests, {:.1} MiB, {} retries",
+                s.requests,
+                s.bytes as f64 / (1 << 20) as f64,
+                s.retries
+            ),
+        };
         self.window.set_title(&format!(
-            "vortex view: {name} ({w}x{h}){} | {}/{} slots, {} in flight, {:.1}% fallback | {}{}{} | {fps:.0} fps",
+            "vortex view: {name} ({w}x{h}){} | {}/{} slots, {} in flight, {:.1}% fallback | {}{}{}{remote} | {fps:.0} fps",
             match rt.caches().len() {
                 1 => String::new(),
                 n => format!(" layer {} of {n}", self.renderer.layer()),

@@ -22,7 +22,8 @@ use controls::{Fly, PanZoom};
 
 #[derive(Args, Debug)]
 pub struct ViewArgs {
-    /// Packs to show (texture 0, 1, ...; keys 1-9 switch the 2D view between them).
+    /// Packs to show (texture 0, 1, ...; keys 1-9 switch the 2D view between them): files, or
+    /// http:// or https:// URLs read with Range requests (docs/remote.md).
     #[arg(value_name = "PACK")]
     packs: Vec<PathBuf>,
     /// A scene (docs/scenes.md) for its geometry and effects: the fly camera starts at its

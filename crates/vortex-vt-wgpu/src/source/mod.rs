@@ -2,7 +2,8 @@
 //! worker threads, so a source may block (read a file, wait on the network) without ever holding
 //! up a frame. Vortex packs are sources ([`Pack`](vortex_pack::Pack) implements the trait, in
 //! `pack`); an application streams from its own storage by implementing it; [`Delayed`] adds a
-//! fixed latency to any source, to show what a slow disk or network does to a frame loop.
+//! fixed latency to any source, to show what a slow disk or network does to a frame loop. With
+//! the `http` feature, [`HttpPack`] reads a pack from a web server with `Range` requests.
 //!
 //! A source may also split a read in two, [`PageSource::read_stored`] (the tile's bytes as
 //! stored, compressed) and [`PageSource::decode`] (those bytes to texels), so that the loader's
@@ -11,12 +12,16 @@
 //! [`PageSource::read_tile`] per page; the tier passes it by.
 
 mod delayed;
+#[cfg(feature = "http")]
+mod http;
 mod pack;
 
 use std::path::Path;
 use std::sync::Arc;
 
 pub use delayed::Delayed;
+#[cfg(feature = "http")]
+pub use http::{HttpOptions, HttpPack, HttpStats, INDEX_BLOCK};
 
 use crate::loader::LoaderError;
 use crate::page_cache::CacheFormat;

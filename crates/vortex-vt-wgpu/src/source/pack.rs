@@ -7,7 +7,7 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use vortex_pack::{Description, Pack, PackError, Tile, TileKind};
+use vortex_pack::{Description, Pack, PackError, PackHead, Tile, TileKind};
 use vortex_vt::page::TextureGrid;
 
 use super::{PageSource, ReadError, SourceTile, StoredRead, StoredTile};
@@ -32,7 +32,7 @@ impl PageSource for Pack {
         match tile {
             Tile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
             Tile::Absent => Err(ReadError::new(format!("an absent tile cannot be made into {}", format.name()))),
-            tile => decode_tile(self, tile, format)
+            tile => decode_tile(self.head(), tile, format)
                 .map(|texels| SourceTile::Texels { texels, bytes_read })
                 .map_err(|e| ReadError { bytes_read, ..e }),
         }
@@ -50,9 +50,7 @@ impl PageSource for Pack {
     }
 
     fn decode(&self, _: u8, _: u16, _: u16, kind: u8, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
-        let kind = TileKind::from_u8(kind).ok_or_else(|| ReadError::new(format!("unknown tile kind {kind}")))?;
-        let tile = if kind == TileKind::Constant { Tile::Constant(bytes) } else { Tile::Data(kind, bytes) };
-        decode_tile(self, tile, format)
+        decode_stored(self.head(), kind, bytes, format)
     }
 
     /// One or three channels: no alpha stored.
@@ -83,13 +81,26 @@ fn checked(pack: &Pack, lod: u8, x: u16, y: u16) -> Result<(Tile<'_>, u64), Read
 /// A stored tile's RGBA8 texels (any kind), or its BC7 blocks (a BC7 or one-colour tile: the
 /// loader asks for BC7 only when every tile is one of those); never BC1, which the loader
 /// transcodes.
-fn decode_tile(pack: &Pack, tile: Tile<'_>, format: CacheFormat) -> Result<Vec<u8>, ReadError> {
-    let (d, limit) = (pack.description(), pack.limits().max_decoded_bytes);
+pub(super) fn decode_tile(head: &PackHead, tile: Tile<'_>, format: CacheFormat) -> Result<Vec<u8>, ReadError> {
+    let (d, limit) = (&head.header().description, head.limits().max_decoded_bytes);
     match format {
         CacheFormat::Rgba8 => texels(tile, d, limit),
         CacheFormat::Bc7 => blocks(tile, d, limit),
         CacheFormat::Bc1 => Err(ReadError::new("a pack gives RGBA8 texels or stored BC7 blocks, not BC1")),
     }
+}
+
+/// What [`PageSource::decode`] does for a pack: the stored tile of `kind` (a [`TileKind`] byte)
+/// decoded as [`decode_tile`] does.
+pub(super) fn decode_stored(
+    head: &PackHead,
+    kind: u8,
+    bytes: &[u8],
+    format: CacheFormat,
+) -> Result<Vec<u8>, ReadError> {
+    let kind = TileKind::from_u8(kind).ok_or_else(|| ReadError::new(format!("unknown tile kind {kind}")))?;
+    let tile = if kind == TileKind::Constant { Tile::Constant(bytes) } else { Tile::Data(kind, bytes) };
+    decode_tile(head, tile, format)
 }
 
 /// The tile's RGBA8 texels.
@@ -125,7 +136,7 @@ fn blocks(tile: Tile<'_>, d: &Description, limit: u64) -> Result<Vec<u8>, ReadEr
 
 /// A pack error as a read error: the pack error already names the path and tile, which the
 /// loader's error names too, so keep only what it adds.
-fn read_error(e: PackError) -> ReadError {
+pub(super) fn read_error(e: PackError) -> ReadError {
     ReadError::new(match e {
         PackError::Tile { offset, message, .. } => format!("at byte {offset}: {message}"),
         PackError::OutOfRange { message, .. } => message,
@@ -143,9 +154,15 @@ impl VirtualTexture {
     /// The tiler's older square power-of-two packs qualify: their image sits at the top-left
     /// of the grid, and the pages wholly outside it are never asked for.
     pub fn from_pack(pack: &Pack) -> Result<VirtualTexture, LoaderError> {
-        let path = || pack.path().to_path_buf();
-        let d = pack.description();
-        let levels = pack.levels();
+        VirtualTexture::from_head(pack.head())
+    }
+
+    /// As [`VirtualTexture::from_pack`], from a pack's checked header and level table (a pack
+    /// read in pieces, over HTTP say).
+    pub fn from_head(head: &PackHead) -> Result<VirtualTexture, LoaderError> {
+        let path = || head.path().to_path_buf();
+        let d = &head.header().description;
+        let levels = head.levels();
         if levels.is_empty() {
             return Err(LoaderError::Layout {
                 path: path(),

@@ -1,0 +1,663 @@
+//! Vortex packs read over HTTP(S) with `Range` requests, from any static host: the header and
+//! level table first, the index whole when it is small or in blocks as tiles need them, then each
+//! tile's payload on demand. Everything is checked as [`Pack::open`](vortex_pack::Pack::open)
+//! and [`Pack::tile_checked`](vortex_pack::Pack::tile_checked) check a local file, by the same
+//! code ([`PackHead`]): the header's CRC and claims before anything is sized from them, the
+//! level table, the metadata's CRC, the index's CRC (before any entry is used when it is read
+//! whole; once its last block has arrived otherwise, each entry checked for sense before use),
+//! and every payload's CRC.
+//!
+//! Reads run on the loader's worker threads, which block on the network and never on a frame.
+//! At most [`HttpOptions::connections`] requests are in flight; reads that queue behind them
+//! meanwhile are sorted and those lying close together in the file are fetched as one request
+//! ([`Fetcher`]), so a view's tiles arrive in a few requests without any timer. A failed request
+//! (connection refused, reset or dropped, a timeout, a 5xx, a reply of the wrong range or
+//! length) is retried with exponential backoff; a payload whose bytes fail their CRC is read
+//! again once, with its index block, and then reported as corrupt: a server that keeps sending
+//! wrong bytes is never retried forever, and its bytes are never drawn. A server that ignores
+//! `Range` and sends the whole file (200) is read up to the bytes wanted and the connection
+//! dropped. What it all cost is counted ([`HttpStats`]).
+
+use std::collections::{BTreeMap, HashMap};
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::time::Duration;
+
+use vortex_pack::format::{ENTRY_LEN, LEVEL_LEN};
+use vortex_pack::{Limits, PackError, PackHead, Place, TileId, TileKind};
+
+use super::pack::{decode_stored, read_error};
+use super::{PageSource, ReadError, SourceTile, StoredRead, StoredTile};
+use crate::loader::LoaderError;
+use crate::page_cache::CacheFormat;
+use crate::texture::VirtualTexture;
+
+/// How a remote pack is read. `HttpOptions::default()` suits a pack on a web server or CDN.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct HttpOptions {
+    /// Most requests in flight at once (HTTP/1.1 keeps one per connection): 6, a browser's
+    /// per-host limit, which servers and CDNs are tuned for.
+    pub connections: usize,
+    /// Attempts of one request that fails with an I/O error before the read fails: 6, the last
+    /// after `backoff` x (1 + 2 + 4 + 8 + 16) of waiting, about 3 s with the default backoff.
+    pub attempts: u32,
+    /// The wait before the first retry, doubled before each next one (100 ms).
+    pub backoff: Duration,
+    /// Reads closer than this many bytes are fetched as one request, the gap fetched and
+    /// dropped (16 KiB: a round trip costs more than that on any link slower than ~10 Gbit/s
+    /// at 10 ms).
+    pub gap: u64,
+    /// Most bytes one merged request spans (4 MiB).
+    pub max_span: u64,
+    /// The index is read whole at open when it is at most this many bytes (1 MiB, some 43,000
+    /// tiles), else in blocks of [`INDEX_BLOCK`] entries as tiles need them.
+    pub whole_index_up_to: u64,
+    /// A connection attempt, or a wait for the next bytes of a reply, that takes longer than
+    /// this fails (and is retried): 10 s.
+    pub timeout: Duration,
+}
+
+impl Default for HttpOptions {
+    fn default() -> Self {
+        HttpOptions {
+            connections: 6,
+            attempts: 6,
+            backoff: Duration::from_millis(100),
+            gap: 16 << 10,
+            max_span: 4 << 20,
+            whole_index_up_to: 1 << 20,
+            timeout: Duration::from_secs(10),
+        }
+    }
+}
+
+/// Index entries fetched together when the index is read in blocks: 6 KiB, less than a tile.
+pub const INDEX_BLOCK: u64 = 256;
+
+/// What a remote pack's reads have cost so far.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct HttpStats {
+    /// HTTP requests sent, retries included.
+    pub requests: u64,
+    /// Body bytes received (a whole-file reply's bytes up to those wanted).
+    pub bytes: u64,
+    /// Requests sent again after an I/O error.
+    pub retries: u64,
+    /// Requests that failed with an I/O error (dropped connection, timeout, 5xx, wrong range).
+    pub io_errors: u64,
+    /// Payloads whose bytes failed their CRC (each read again once, then reported).
+    pub corrupt: u64,
+    /// Replies of the whole file (200) to a `Range` request.
+    pub whole_file_replies: u64,
+    /// Payloads (and index blocks) that were fetched as part of a merged request with others.
+    pub merged_reads: u64,
+}
+
+#[derive(Default)]
+struct Counters {
+    requests: AtomicU64,
+    bytes: AtomicU64,
+    retries: AtomicU64,
+    io_errors: AtomicU64,
+    corrupt: AtomicU64,
+    whole_file_replies: AtomicU64,
+    merged_reads: AtomicU64,
+}
+
+fn add(counter: &AtomicU64, n: u64) {
+    counter.fetch_add(n, Ordering::Relaxed);
+}
+
+/// Why a fetch failed.
+#[derive(Clone, Debug)]
+enum FetchError {
+    /// Worth retrying: the network or the server failed this time.
+    Io(String),
+    /// Not worth retrying: the URL is wrong, the server refuses, the file changed.
+    Fatal(String),
+}
+
+impl FetchError {
+    fn message(self) -> String {
+        match self {
+            FetchError::Io(m) | FetchError::Fatal(m) => m,
+        }
+    }
+}
+
+/// A pack on a web server, read with `Range` requests: a [`PageSource`].
+pub struct HttpPack {
+    location: PathBuf,
+    head: PackHead,
+    fetcher: Fetcher,
+    /// The index by block number ([`INDEX_BLOCK`] entries each), as fetched.
+    index: Mutex<HashMap<u64, Arc<[u8]>>>,
+    /// The level table's bytes, for the index's CRC.
+    raw_levels: Vec<u8>,
+    metadata: Vec<u8>,
+    /// Set once every index block has been fetched and their CRC did not match: every read fails.
+    index_corrupt: Mutex<Option<String>>,
+}
+
+impl HttpPack {
+    /// Opens the pack at `url` (`http://` or `https://`) with [`HttpOptions::default`] and the
+    /// default [`Limits`].
+    pub fn open(url: &str) -> Result<HttpPack, PackError> {
+        HttpPack::open_with(url, HttpOptions::default(), Limits::default())
+    }
+
+    /// Opens the pack at `url`: its header, level table and metadata (and its whole index, when
+    /// small) are fetched and checked before this returns.
+    pub fn open_with(url: &str, options: HttpOptions, limits: Limits) -> Result<HttpPack, PackError> {
+        let location = PathBuf::from(url);
+        let io = |message: String| PackError::Io { path: location.clone(), source: std::io::Error::other(message) };
+        if !(url.starts_with("http://") || url.starts_with("https://")) {
+            return Err(io("not an http:// or https:// URL".into()));
+        }
+        let fetcher = Fetcher::new(url, options);
+        // The first read: the header and, for most packs, the level table and metadata.
+        let first = fetcher.fetch_first(2048).map_err(|e| io(e.message()))?;
+        let file_len = fetcher.file_len();
+        let h = PackHead::read_header(&location, &first, file_len, limits)?;
+        let section = |offset: u64, len: u64| -> Result<Vec<u8>, PackError> {
+            match first.get(offset as usize..).and_then(|rest| rest.get(..len as usize)) {
+                Some(held) => Ok(held.to_vec()),
+                None => fetcher.read(offset, offset + len).map_err(|e| io(e.message())),
+            }
+        };
+        let raw_levels = section(h.levels_offset, h.description.level_count as u64 * LEVEL_LEN as u64)?;
+        // A local reader maps what a header claims; this one allocates it, so held to the cap on
+        // any one buffer (the header's claims were checked against the file's length only).
+        if u64::from(h.meta_len) > limits.max_decoded_bytes {
+            return Err(PackError::LimitExceeded {
+                path: location.clone(),
+                field: "meta_len".into(),
+                offset: vortex_pack::format::at::META_LEN as u64,
+                value: h.meta_len.into(),
+                limit: limits.max_decoded_bytes,
+                cap: "max_decoded_bytes",
+            });
+        }
+        // The index (when read whole) and the metadata lie side by side: one read for both.
+        let index_len = h.index_count * ENTRY_LEN as u64;
+        let meta_end = h.meta_offset + u64::from(h.meta_len);
+        let whole_index = index_len <= options.whole_index_up_to;
+        let (index, meta) = if whole_index && h.meta_offset - (h.index_offset + index_len) <= options.gap {
+            let mut both = section(h.index_offset, meta_end - h.index_offset)?;
+            let meta = both.split_off((h.meta_offset - h.index_offset) as usize);
+            both.truncate(index_len as usize);
+            (Some(both), meta)
+        } else {
+            let index = whole_index.then(|| section(h.index_offset, index_len)).transpose()?;
+            (index, section(h.meta_offset, u64::from(h.meta_len))?)
+        };
+        let head = PackHead::new(&location, h, &raw_levels, &meta, limits)?;
+        let mut blocks = HashMap::new();
+        if let Some(index) = index {
+            head.check_index(&raw_levels, &index)?;
+            for (n, block) in index.chunks(INDEX_BLOCK as usize * ENTRY_LEN).enumerate() {
+                blocks.insert(n as u64, Arc::from(block));
+            }
+        }
+        let pack = HttpPack {
+            location: location.clone(),
+            head,
+            fetcher,
+            index: Mutex::new(blocks),
+            raw_levels,
+            metadata: meta,
+            index_corrupt: Mutex::default(),
+        };
+        Ok(pack)
+    }
+
+    /// The checked header and level table.
+    pub fn head(&self) -> &PackHead {
+        &self.head
+    }
+
+    /// The metadata: JSON text with the `info.json` members, its CRC checked.
+    pub fn metadata(&self) -> &[u8] {
+        &self.metadata
+    }
+
+    /// What its reads have cost so far.
+    pub fn stats(&self) -> HttpStats {
+        let c = &self.fetcher.counters;
+        let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        HttpStats {
+            requests: get(&c.requests),
+            bytes: get(&c.bytes),
+            retries: get(&c.retries),
+            io_errors: get(&c.io_errors),
+            corrupt: get(&c.corrupt),
+            whole_file_replies: get(&c.whole_file_replies),
+            merged_reads: get(&c.merged_reads),
+        }
+    }
+
+    /// The index entry at `position`, from its block (fetched if not held).
+    fn raw_entry(&self, position: u64) -> Result<[u8; ENTRY_LEN], ReadError> {
+        if let Some(message) = lock(&self.index_corrupt).clone() {
+            return Err(ReadError::new(message));
+        }
+        let n = position / INDEX_BLOCK;
+        let held = lock(&self.index).get(&n).cloned();
+        let block = match held {
+            Some(block) => block,
+            None => {
+                let h = self.head.header();
+                let first = n * INDEX_BLOCK;
+                let count = INDEX_BLOCK.min(h.index_count - first);
+                let start = self.head.entry_offset(first);
+                let bytes: Arc<[u8]> = self
+                    .fetcher
+                    .read(start, start + count * ENTRY_LEN as u64)
+                    .map_err(|e| ReadError::new(format!("index block at byte {start}: {}", e.message())))?
+                    .into();
+                self.keep_block(n, Arc::clone(&bytes))?;
+                bytes
+            }
+        };
+        let at = (position % INDEX_BLOCK) as usize * ENTRY_LEN;
+        let mut entry = [0u8; ENTRY_LEN];
+        entry.copy_from_slice(&block[at..at + ENTRY_LEN]);
+        Ok(entry)
+    }
+
+    /// Keeps index block `n`; once every block is held, checks the index's CRC.
+    fn keep_block(&self, n: u64, bytes: Arc<[u8]>) -> Result<(), ReadError> {
+        let h = self.head.header();
+        let mut blocks = lock(&self.index);
+        blocks.insert(n, bytes);
+        if blocks.len() as u64 != h.index_count.div_ceil(INDEX_BLOCK) {
+            return Ok(());
+        }
+        let parts = (0..blocks.len() as u64).map(|n| blocks.get(&n).map_or(&[][..], |b| &b[..]));
+        let checked = self.head.check_index_parts(&self.raw_levels, parts);
+        drop(blocks);
+        checked.map_err(|e| {
+            let message = e.to_string();
+            *lock(&self.index_corrupt) = Some(message.clone());
+            ReadError::new(message)
+        })
+    }
+
+    /// Tile (`lod`, `x`, `y`) as stored, its payload's CRC checked; a payload that fails is read
+    /// again once, with its index block (the entry may be what was wrong), then reported.
+    fn stored(&self, lod: u8, x: u16, y: u16) -> Result<StoredRead, ReadError> {
+        let id = TileId { lod: lod.into(), x: x.into(), y: y.into() };
+        let position = self.head.position(id).map_err(read_error)?;
+        let mut attempt = 0;
+        loop {
+            let raw = self.raw_entry(position)?;
+            let (kind, offset, len, crc) = match self.head.place(id, position, &raw).map_err(read_error)? {
+                Place::Absent => return Ok(StoredRead { tile: StoredTile::Absent, bytes_read: 0 }),
+                Place::Constant(value) => {
+                    let tile = StoredTile::Stored { kind: TileKind::Constant as u8, bytes: Arc::from(value) };
+                    return Ok(StoredRead { tile, bytes_read: 0 });
+                }
+                Place::Data { kind, offset, len, crc } => (kind, offset, len, crc),
+            };
+            // No stored tile is larger than its texels: a bigger one is refused, not allocated.
+            let most = self.head.limits().max_decoded_bytes;
+            if u64::from(len) > most {
+                let message = format!(
+                    "a payload of {len} bytes at byte {offset}, over the limit of {most} (Limits::max_decoded_bytes)"
+                );
+                return Err(ReadError::new(message));
+            }
+            let bytes = self
+                .fetcher
+                .read(offset, offset + len as u64)
+                .map_err(|e| ReadError::new(format!("payload at byte {offset}: {}", e.message())))?;
+            let bytes_read = bytes.len() as u64;
+            match self.head.check_payload(id, offset, crc, &bytes) {
+                Ok(()) => {
+                    let tile = StoredTile::Stored { kind: kind as u8, bytes: bytes.into() };
+                    return Ok(StoredRead { tile, bytes_read });
+                }
+                Err(e) => {
+                    add(&self.fetcher.counters.corrupt, 1);
+                    if attempt == 1 {
+                        return Err(ReadError { bytes_read, ..read_error(e) });
+                    }
+                    attempt += 1;
+                    // Unless the index was read whole and its CRC checked, its entry is suspect too.
+                    if self.head.header().index_count * ENTRY_LEN as u64 > self.fetcher.options.whole_index_up_to {
+                        lock(&self.index).remove(&(position / INDEX_BLOCK));
+                    }
+                }
+            }
+        }
+    }
+}
+
+impl PageSource for HttpPack {
+    fn location(&self) -> &Path {
+        &self.location
+    }
+
+    fn texture(&self) -> Result<VirtualTexture, LoaderError> {
+        VirtualTexture::from_head(&self.head)
+    }
+
+    fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
+        let StoredRead { tile, bytes_read } = self.stored(lod, x, y)?;
+        match tile {
+            StoredTile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
+            StoredTile::Absent => Err(ReadError::new(format!("an absent tile cannot be made into {}", format.name()))),
+            StoredTile::Stored { kind, bytes } => decode_stored(&self.head, kind, &bytes, format)
+                .map(|texels| SourceTile::Texels { texels, bytes_read })
+                .map_err(|e| ReadError { bytes_read, ..e }),
+        }
+    }
+
+    fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
+        self.stored(lod, x, y).map(Some)
+    }
+
+    fn decode(&self, _: u8, _: u16, _: u16, kind: u8, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
+        decode_stored(&self.head, kind, bytes, format)
+    }
+
+    fn opaque(&self) -> bool {
+        matches!(self.head.header().description.channels, 1 | 3)
+    }
+
+    /// Answered from the index when it was read whole (else not known without reading it all:
+    /// such a pack is decoded and transcoded like any other).
+    fn holds_only_bc7(&self) -> bool {
+        let h = self.head.header();
+        if !h.description.tile_size.is_multiple_of(4)
+            || h.index_count * ENTRY_LEN as u64 > self.fetcher.options.whole_index_up_to
+        {
+            return false;
+        }
+        let blocks = lock(&self.index);
+        (0..h.index_count).all(|i| {
+            blocks.get(&(i / INDEX_BLOCK)).is_some_and(|b| {
+                let kind = b[(i % INDEX_BLOCK) as usize * ENTRY_LEN + 16];
+                matches!(TileKind::from_u8(kind), Some(TileKind::Bc7 | TileKind::Constant))
+            })
+        })
+    }
+}
+
+/// Nothing that can panic runs under these locks, so a poisoned one still holds consistent data.
+fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Byte ranges of one URL read by many threads, at most `connections` requests at a time. A read
+/// queues its range; a thread whose range is queued and finds a connection free takes it, with
+/// the queued ranges close to it, as one request, and hands each waiting thread its slice. While
+/// every connection is busy, ranges pile up and are merged: the busier the link, the fewer and
+/// larger the requests, and nothing waits on a timer.
+struct Fetcher {
+    url: String,
+    agent: ureq::Agent,
+    options: HttpOptions,
+    counters: Counters,
+    state: Mutex<FetchState>,
+    changed: Condvar,
+}
+
+#[derive(Default)]
+struct FetchState {
+    /// The file's length, from the first reply (0 until then).
+    file_len: u64,
+    /// The first reply's strong `ETag`, sent as `If-Match` with every later request: a pack
+    /// replaced on the server is refused (412) instead of mixed with the old one's bytes.
+    etag: Option<String>,
+    /// Ranges waiting for a request: (start, ticket) -> end.
+    queued: BTreeMap<(u64, u64), u64>,
+    /// Requests in flight.
+    running: usize,
+    /// Answers not yet taken by their thread, by ticket.
+    answers: HashMap<u64, Result<Vec<u8>, FetchError>>,
+    next_ticket: u64,
+}
+
+/// One request's share of a merged read: the ticket and its range.
+type Share = (u64, u64, u64);
+
+impl Fetcher {
+    fn new(url: &str, options: HttpOptions) -> Fetcher {
+        let config = ureq::Agent::config_builder()
+            // Statuses are answered here: a 5xx is retried, a 404 is not.
+            .http_status_as_error(false)
+            .timeout_connect(Some(options.timeout))
+            .timeout_recv_response(Some(options.timeout))
+            .timeout_per_read(Some(options.timeout))
+            .max_idle_connections_per_host(options.connections.max(1))
+            .user_agent(concat!("vortex-vt-wgpu/", env!("CARGO_PKG_VERSION")))
+            .build();
+        Fetcher {
+            url: url.to_string(),
+            agent: config.into(),
+            options,
+            counters: Counters::default(),
+            state: Mutex::default(),
+            changed: Condvar::new(),
+        }
+    }
+
+    fn file_len(&self) -> u64 {
+        lock(&self.state).file_len
+    }
+
+    /// The first `n` bytes (fewer if the file is shorter), learning the file's length.
+    fn fetch_first(&self, n: u64) -> Result<Vec<u8>, FetchError> {
+        self.with_retries(|| self.request(0, n, true))
+    }
+
+    /// Bytes `start..end` of the file, merged with the ranges other threads are waiting for.
+    fn read(&self, start: u64, end: u64) -> Result<Vec<u8>, FetchError> {
+        // An empty range is no request (and `Range: bytes=a-(a-1)` is not one).
+        if start >= end {
+            return Ok(Vec::new());
+        }
+        let mut state = lock(&self.state);
+        let ticket = state.next_ticket;
+        state.next_ticket += 1;
+        state.queued.insert((start, ticket), end);
+        loop {
+            if let Some(answer) = state.answers.remove(&ticket) {
+                return answer;
+            }
+            if state.running < self.options.connections.max(1) && state.queued.contains_key(&(start, ticket)) {
+                let shares = self.take_run(&mut state, (start, ticket));
+                state.running += 1;
+                drop(state);
+                if shares.len() > 1 {
+                    add(&self.counters.merged_reads, shares.len() as u64);
+                }
+                let (from, to) = (shares[0].1, shares.iter().map(|s| s.2).max().unwrap_or(end));
+                let result = self.with_retries(|| self.request(from, to, false));
+                state = lock(&self.state);
+                state.running -= 1;
+                for (t, s, e) in shares {
+                    let answer = result.as_ref().map(|b| b[(s - from) as usize..(e - from) as usize].to_vec());
+                    state.answers.insert(t, answer.map_err(Clone::clone));
+                }
+                self.changed.notify_all();
+                continue;
+            }
+            state = self.changed.wait(state).unwrap_or_else(PoisonError::into_inner);
+        }
+    }
+
+    /// Takes from the queue the run of ranges that holds `mine`: neighbours in file order whose
+    /// gaps are at most `gap` bytes, spanning at most `max_span`. Sorted by start.
+    fn take_run(&self, state: &mut FetchState, mine: (u64, u64)) -> Vec<Share> {
+        let (gap, span) = (self.options.gap, self.options.max_span);
+        let mut run: Vec<Share> = Vec::new();
+        let mut end = 0u64;
+        let mut has_mine = false;
+        for (&(s, t), &e) in &state.queued {
+            let joins = !run.is_empty() && s <= end.saturating_add(gap) && e.max(end) - run[0].1 <= span;
+            if !joins {
+                if has_mine {
+                    break;
+                }
+                run.clear();
+                end = 0;
+            }
+            run.push((t, s, e));
+            end = end.max(e);
+            has_mine |= (s, t) == mine;
+        }
+        for &(t, s, _) in &run {
+            state.queued.remove(&(s, t));
+        }
+        run
+    }
+
+    /// `attempt`, tried again after each I/O error (waiting `backoff`, doubled each time) up to
+    /// `attempts` times in all.
+    fn with_retries(&self, attempt: impl Fn() -> Result<Vec<u8>, FetchError>) -> Result<Vec<u8>, FetchError> {
+        let mut wait = self.options.backoff;
+        let mut tries = 1;
+        loop {
+            match attempt() {
+                Err(FetchError::Io(message)) => {
+                    add(&self.counters.io_errors, 1);
+                    if tries >= self.options.attempts {
+                        return Err(FetchError::Io(format!("{message} ({tries} attempts)")));
+                    }
+                    add(&self.counters.retries, 1);
+                    std::thread::sleep(wait);
+                    wait = wait.saturating_mul(2);
+                    tries += 1;
+                }
+                other => return other,
+            }
+        }
+    }
+
+    /// One `Range` request for bytes `start..end`. `first`: the opening read, which learns the
+    /// file's length and may get fewer bytes than asked for (a file shorter than `end`).
+    fn request(&self, start: u64, end: u64, first: bool) -> Result<Vec<u8>, FetchError> {
+        let io = |m: String| FetchError::Io(format!("bytes {start}..{end}: {m}"));
+        let fatal = |m: String| FetchError::Fatal(format!("bytes {start}..{end}: {m}"));
+        add(&self.counters.requests, 1);
+        let mut get = self.agent.get(&self.url).header("Range", format!("bytes={start}-{}", end - 1));
+        let etag = lock(&self.state).etag.clone();
+        if let Some(etag) = &etag {
+            get = get.header("If-Match", etag);
+        }
+        let response = get.call().map_err(|e| match e {
+            ureq::Error::BadUri(_) | ureq::Error::HostNotFound if first => fatal(e.to_string()),
+            e => io(e.to_string()),
+        })?;
+        let status = response.status().as_u16();
+        let header = |name: &str| response.headers().get(name).and_then(|v| v.to_str().ok()).map(str::to_string);
+        let known_len = self.file_len();
+        let etag_of_reply = header("etag");
+        // What the reply holds: from which byte, how many, and the file's length.
+        let (from, total) = match status {
+            206 => {
+                let range = header("content-range").unwrap_or_default();
+                let (from, _, total) = parse_content_range(&range)
+                    .ok_or_else(|| io(format!("a 206 reply with Content-Range {range:?}")))?;
+                (from, total)
+            }
+            200 => {
+                add(&self.counters.whole_file_replies, 1);
+                let total = header("content-length").and_then(|v| v.parse().ok());
+                (0, total.ok_or_else(|| io("a 200 reply of unknown length to a Range request".into()))?)
+            }
+            416 if first => return Err(fatal("the file is empty (416 Range Not Satisfiable)".into())),
+            412 => {
+                let etag = etag.unwrap_or_default();
+                return Err(fatal(format!(
+                    "the pack changed on the server since it was opened (ETag {etag} no longer matches)"
+                )));
+            }
+            408 | 429 | 500..=599 => return Err(io(format!("HTTP {status}"))),
+            _ => return Err(fatal(format!("HTTP {status}"))),
+        };
+        if known_len != 0 && total != known_len {
+            return Err(fatal(format!("the file is now {total} bytes, not {known_len}: it changed on the server")));
+        }
+        let end = if first { end.min(total) } else { end };
+        if from != start || end > total {
+            return Err(io(format!("the reply holds bytes from {from} of a {total}-byte file")));
+        }
+        let mut body = response.into_body().into_reader();
+        // A whole-file reply: skip to the bytes wanted (the rest is never read: the connection
+        // is dropped with it).
+        if status == 200 && start > 0 {
+            let skipped =
+                std::io::copy(&mut (&mut body).take(start), &mut std::io::sink()).map_err(|e| io(e.to_string()))?;
+            add(&self.counters.bytes, skipped);
+        }
+        let len = end - start;
+        let mut bytes = Vec::new();
+        bytes.try_reserve_exact(len as usize).map_err(|e| fatal(e.to_string()))?;
+        body.take(len).read_to_end(&mut bytes).map_err(|e| io(e.to_string()))?;
+        add(&self.counters.bytes, bytes.len() as u64);
+        if bytes.len() as u64 != len {
+            return Err(io(format!("the reply ended after {} of {len} bytes", bytes.len())));
+        }
+        if first {
+            let mut state = lock(&self.state);
+            state.file_len = total;
+            // A weak ETag (W/...) may stay when the bytes change: only a strong one says they did not.
+            state.etag = etag_of_reply.filter(|e| e.starts_with('"'));
+        }
+        Ok(bytes)
+    }
+}
+
+/// `bytes FIRST-LAST/TOTAL` as (first, last, total).
+fn parse_content_range(v: &str) -> Option<(u64, u64, u64)> {
+    let (range, total) = v.trim().strip_prefix("bytes ")?.split_once('/')?;
+    let (first, last) = range.split_once('-')?;
+    let (first, last, total) = (first.trim().parse().ok()?, last.trim().parse().ok()?, total.trim().parse().ok()?);
+    (first <= last && last < total).then_some((first, last, total))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn content_ranges_parse_and_nonsense_does_not() {
+        assert_eq!(parse_content_range("bytes 0-191/5000"), Some((0, 191, 5000)));
+        assert_eq!(parse_content_range("bytes 10-9/5000"), None);
+        assert_eq!(parse_content_range("bytes 0-5000/5000"), None);
+        assert_eq!(parse_content_range("bytes */5000"), None);
+        assert_eq!(parse_content_range(""), None);
+    }
+
+    fn fetcher_with(queued: &[(u64, u64)], gap: u64, max_span: u64) -> (Fetcher, FetchState) {
+        let options = HttpOptions { gap, max_span, ..HttpOptions::default() };
+        let mut state = FetchState::default();
+        for (t, &(s, e)) in queued.iter().enumerate() {
+            state.queued.insert((s, t as u64), e);
+        }
+        (Fetcher::new("http://localhost/x.vtpk", options), state)
+    }
+
+    #[test]
+    fn a_run_takes_close_neighbours_and_leaves_the_rest() {
+        let (f, mut state) = fetcher_with(&[(0, 100), (150, 200), (10_000, 10_100), (10_100, 10_200)], 64, 1 << 20);
+        let run = f.take_run(&mut state, (150, 1));
+        assert_eq!(run, vec![(0, 0, 100), (1, 150, 200)]);
+        assert_eq!(state.queued.len(), 2, "the far pair stays queued");
+        let run = f.take_run(&mut state, (10_100, 3));
+        assert_eq!(run, vec![(2, 10_000, 10_100), (3, 10_100, 10_200)]);
+    }
+
+    #[test]
+    fn a_run_stops_at_the_span_and_overlaps_merge() {
+        let (f, mut state) = fetcher_with(&[(0, 100), (50, 120), (120, 300), (300, 400)], 0, 300);
+        let run = f.take_run(&mut state, (0, 0));
+        assert_eq!(run, vec![(0, 0, 100), (1, 50, 120), (2, 120, 300)], "300..400 would span 400 > 300");
+        assert_eq!(state.queued.len(), 1);
+    }
+}
