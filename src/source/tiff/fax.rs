@@ -16,7 +16,6 @@ pub(super) fn decode(raw: &[u8], group4: bool, width: u32, out: &mut [u8]) -> Re
     };
     let row_bytes = (width as usize).div_ceil(8);
     let rows = out.len() / row_bytes;
-    let mut lines = out.chunks_exact_mut(row_bytes);
     let short = |done: usize| format!("the fax data ends after {done} of {rows} rows");
     // The decoders look up to 16 bits ahead and fail on a last code with fewer bits after it;
     // libtiff ends a strip without an end marker, so one is added: an EOL after Group 3 (a
@@ -25,9 +24,9 @@ pub(super) fn decode(raw: &[u8], group4: bool, width: u32, out: &mut [u8]) -> Re
     let bytes = raw.iter().chain(end).map(|&b| Ok::<u8, std::convert::Infallible>(b));
     if group4 {
         let mut decoder = Group4Decoder::new(bytes, width).map_err(|_| short(0))?;
-        for done in 0..rows {
+        for (done, line) in out.chunks_exact_mut(row_bytes).enumerate() {
             match decoder.advance() {
-                Ok(DecodeStatus::Incomplete) => fill(decoder.transition(), width, lines.next().unwrap()),
+                Ok(DecodeStatus::Incomplete) => fill(decoder.transition(), width, line),
                 Ok(DecodeStatus::End) => return Err(short(done)),
                 Err(e) => return Err(format!("corrupt Group 4 fax data in row {done}: {e:?}")),
             }
@@ -35,11 +34,9 @@ pub(super) fn decode(raw: &[u8], group4: bool, width: u32, out: &mut [u8]) -> Re
     } else {
         let mut decoder =
             Group3Decoder::new(bytes).map_err(|_| "no EOL code opens the Group 3 fax data".to_string())?;
-        for done in 0..rows {
+        for (done, line) in out.chunks_exact_mut(row_bytes).enumerate() {
             match decoder.advance() {
-                Ok(_) if decoder.transitions().last() == Some(&width) => {
-                    fill(decoder.transitions(), width, lines.next().unwrap())
-                }
+                Ok(_) if decoder.transitions().last() == Some(&width) => fill(decoder.transitions(), width, line),
                 Ok(_) if decoder.transitions().is_empty() => return Err(short(done)),
                 Ok(_) => return Err(format!("Group 3 fax row {done} does not cover its {width} texels")),
                 Err(e) => return Err(format!("corrupt Group 3 fax data in row {done}: {e:?}")),

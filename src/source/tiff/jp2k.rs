@@ -172,6 +172,7 @@ impl Jp2kTiff {
         }
         let mut raw = vec![0u8; count as usize];
         self.file.read_exact_at(&mut raw, offset).map_err(|e| format!("cannot read it: {e}"))?;
+        self.check_size(&raw)?;
         // OpenJPEG reports damage through its result; a panic in the binding must not take the
         // whole run down either.
         let image = std::panic::catch_unwind(|| jpeg2k::Image::from_bytes(&raw))
@@ -181,8 +182,9 @@ impl Jp2kTiff {
         if comps.len() < 3 {
             return Err(format!("the JPEG 2000 tile has {} components, 3 expected", comps.len()));
         }
+        let (cw, ch) = (comps[0].width(), comps[0].height());
         for c in &comps[..3] {
-            if c.width() < w || c.height() < h || c.precision() != 8 || c.is_signed() {
+            if c.width() != cw || c.height() != ch || cw < w || ch < h || c.precision() != 8 || c.is_signed() {
                 return Err(format!(
                     "a JPEG 2000 component is {}x{} of {}{} bits; {w}x{h} unsigned 8-bit expected (subsampled components are not read)",
                     c.width(),
@@ -204,6 +206,30 @@ impl Jp2kTiff {
                 let rgb = if self.ycbcr { ycbcr_to_rgb(a, b, c) } else { [a as u8, b as u8, c as u8] };
                 texels.extend_from_slice(&rgb);
             }
+        }
+        Ok(())
+    }
+}
+
+impl Jp2kTiff {
+    /// Refuses a codestream whose SIZ marker declares more texels or components than a tile
+    /// holds, before OpenJPEG allocates for them.
+    fn check_size(&self, raw: &[u8]) -> std::result::Result<(), String> {
+        let be32 = |at: usize| raw.get(at..at + 4).map(|b| u32::from_be_bytes([b[0], b[1], b[2], b[3]]));
+        if raw.get(..4) != Some(&[0xFF, 0x4F, 0xFF, 0x51]) {
+            return Err("not a JPEG 2000 codestream (no SOC and SIZ markers at its start)".into());
+        }
+        let size = (be32(8), be32(12), be32(16), be32(20));
+        let (Some(x), Some(y), Some(x0), Some(y0)) = size else {
+            return Err("the JPEG 2000 SIZ marker is cut short".into());
+        };
+        let components = raw.get(40..42).map_or(0, |b| u16::from_be_bytes([b[0], b[1]]));
+        let (w, h) = (x.saturating_sub(x0), y.saturating_sub(y0));
+        if w > self.chunk_w || h > self.chunk_h || !(1..=4).contains(&components) {
+            let (tw, th) = (self.chunk_w, self.chunk_h);
+            return Err(format!(
+                "the codestream declares {w}x{h} texels of {components} components in a {tw}x{th} tile"
+            ));
         }
         Ok(())
     }

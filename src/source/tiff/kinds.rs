@@ -256,7 +256,7 @@ fn finish(
         ChunkType::Strip => Chunking::Strips { rows: decoder.chunk_dimensions().1.clamp(1, height) },
         ChunkType::Tile => {
             let (tw, th) = decoder.chunk_dimensions();
-            if tw == 0 || th == 0 || (tw as u64 * p.bits as u64) % 8 != 0 {
+            if tw == 0 || th == 0 || !(tw as u64 * p.bits as u64).is_multiple_of(8) {
                 return Err(TilerError::decode(
                     path,
                     format!("corrupt TIFF: {tw}x{th} tiles of {}-bit samples", p.bits),
