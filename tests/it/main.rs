@@ -31,6 +31,7 @@ mod sources;
 mod stability;
 mod static_web;
 mod stripes;
+mod tiff_kinds;
 mod tiff_slides;
 mod view;
 mod viewers;

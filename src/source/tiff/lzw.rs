@@ -313,7 +313,7 @@ fn undo_predictor_8<const S: usize>(row: &mut [u8]) {
 }
 
 /// 16-bit samples of one row into native byte order, and the horizontal predictor undone.
-fn undo_predictor_16(row: &mut [u8], samples: usize, big_endian: bool, predictor: bool) {
+pub(super) fn undo_predictor_16(row: &mut [u8], samples: usize, big_endian: bool, predictor: bool) {
     let read = |b: &[u8]| if big_endian { u16::from_be_bytes([b[0], b[1]]) } else { u16::from_le_bytes([b[0], b[1]]) };
     let stride = 2 * samples;
     for i in (0..row.len()).step_by(2) {

@@ -4,16 +4,20 @@
 //! Accepted: grey, grey+alpha, RGB and RGBA with 8- or 16-bit unsigned samples stored
 //! contiguously (PlanarConfiguration 1), uncompressed or compressed with LZW, Deflate or
 //! PackBits, with or without the horizontal predictor; JPEG-compressed images go to [`jpeg`]
-//! (libjpeg-turbo). Everything else (palette, CMYK, uncompressed YCbCr, Lab, floating point or
-//! signed samples, 1/2/4-bit, separate planes, old-style JPEG, ...) is refused with a message
-//! naming what the file is. Compressed strips are decoded a few ahead, several at once
+//! (libjpeg-turbo); planar-separate, 1/2/4-bit, palette, CMYK and CCITT fax images to
+//! [`kinds`]; Aperio's JPEG 2000 (33003/33005) to [`jp2k`] (OpenJPEG). Everything else (uncompressed YCbCr, Lab, floating point or signed samples,
+//! old-style JPEG, ...) is refused with a message naming what the file is. Compressed strips are decoded a few ahead, several at once
 //! ([`strips_ahead`]). Which image of a multi-image file is read: [`pyramid`].
 //!
 //! As libvips reads them: extra samples past grey, grey+alpha, RGB or RGBA (ExtraSamples
 //! unspecified, or any after the alpha) are dropped, and associated (premultiplied) alpha is
 //! turned into straight alpha ([`unpremultiply`] says how it rounds).
 
+mod chunks;
+mod fax;
+mod jp2k;
 mod jpeg;
+mod kinds;
 mod libjpeg;
 mod lzw;
 mod pyramid;
@@ -141,6 +145,12 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
     };
     if jpeg::is_jpeg(path, &mut decoder)? {
         return jpeg::open(path, &mut decoder, chosen.label, embedded, max_memory);
+    }
+    if jp2k::is_jp2k(path, &mut decoder)? {
+        return jp2k::open(path, &mut decoder, chosen.label, embedded, max_memory);
+    }
+    if kinds::handles(path, &mut decoder)? {
+        return kinds::open(path, &mut decoder, chosen.label, embedded, max_memory);
     }
     let (width, height) = decoder.dimensions().map_err(|e| open_error(path, e))?;
     let compression = check_compression(path, &mut decoder)?;
@@ -1344,18 +1354,6 @@ mod tests {
             assert!(err.to_string().contains(needle), "{err} lacks {needle:?}");
         };
 
-        let path = dir.path().join("cmyk.tif");
-        write_with::<colortype::CMYK8>(
-            &path,
-            Compression::Uncompressed,
-            false,
-            None,
-            w,
-            h,
-            &vec![7u8; (w * h * 4) as usize],
-        );
-        expect_unsupported(&path, "CMYK");
-
         let path = dir.path().join("float.tif");
         write_with::<colortype::Gray32Float>(
             &path,
@@ -1367,23 +1365,6 @@ mod tests {
             &vec![0.5f32; (w * h) as usize],
         );
         expect_unsupported(&path, "floating-point");
-
-        let path = dir.path().join("palette.tif");
-        let mut tags = basic_tags(w, h, &[8], 3, None);
-        tags.push((320, SHORT, vec![0; 3 * 256]));
-        write_tiff(&path, false, tags, &[vec![0; (w * h) as usize]], false);
-        expect_unsupported(&path, "palette");
-
-        let path = dir.path().join("planar.tif");
-        let mut tags = basic_tags(w, h, &[8, 8, 8], 2, None);
-        tags.push((284, SHORT, vec![2]));
-        let plane = vec![9u8; (w * h) as usize];
-        write_tiff(&path, false, tags, &[plane.clone(), plane.clone(), plane], false);
-        expect_unsupported(&path, "planar-separate");
-
-        let path = dir.path().join("bilevel.tif");
-        write_tiff(&path, false, basic_tags(w, h, &[1], 1, None), &[vec![0xAA; (w / 8 * h) as usize]], false);
-        expect_unsupported(&path, "1-bit");
 
         let path = dir.path().join("ycbcr.tif");
         let mut tags = basic_tags(w, h, &[8, 8, 8], 6, None);

@@ -1,0 +1,293 @@
+//! JPEG 2000 inside TIFF, as Aperio writes its SVS slides: each tile a raw J2K codestream,
+//! Compression 33003 (the components are Y, Cb, Cr, turned into RGB here as OpenSlide does) or
+//! 33005 (R, G, B). Decoded by OpenJPEG (the `jpeg2k` crate over `openjpeg-sys`), one row of
+//! tiles at a time, the tiles of a row in parallel on the rayon pool, each read straight from
+//! the file. Memory: one row of decoded tiles plus, per worker, a compressed tile and
+//! OpenJPEG's 32-bit samples of one tile, checked against `--max-memory` before anything is
+//! allocated. A damaged tile, or one whose bytes lie past the end of the file, is an error
+//! naming the file and the tile's column and row.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+use tiff::decoder::{ChunkType, Decoder};
+use tiff::tags::Tag;
+
+use super::open_error;
+use crate::error::{Result, TilerError};
+use crate::pixel::{Channels, Depth, PixelLayout};
+use crate::source::{Embedded, ImageHeader, RowSource};
+
+/// Whether the image is JPEG 2000 in Aperio's two forms.
+pub(super) fn is_jp2k(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<bool> {
+    let code: Option<u16> = decoder.find_tag_unsigned(Tag::Compression).map_err(|e| open_error(path, e))?;
+    Ok(matches!(code, Some(33003 | 33005)))
+}
+
+pub(super) struct Jp2kTiff {
+    path: PathBuf,
+    file: File,
+    file_len: u64,
+    width: u32,
+    height: u32,
+    /// The components are Y, Cb, Cr (33003), not R, G, B (33005).
+    ycbcr: bool,
+    chunk_w: u32,
+    chunk_h: u32,
+    across: u32,
+    offsets: Vec<u64>,
+    counts: Vec<u64>,
+    /// The decoded tiles of the current row, RGB texels inside the image only.
+    band: Vec<Vec<u8>>,
+    band_first: u64,
+    band_rows: u64,
+    next: u64,
+    label: String,
+    embedded: Embedded,
+}
+
+pub(super) fn open(
+    path: &Path,
+    decoder: &mut Decoder<BufReader<File>>,
+    label: String,
+    embedded: Embedded,
+    max_memory: u64,
+) -> Result<Box<dyn RowSource>> {
+    let tag_err = |e| open_error(path, e);
+    let (width, height) = decoder.dimensions().map_err(tag_err)?;
+    if width == 0 || height == 0 {
+        return Err(TilerError::decode(path, format!("the TIFF says {width}x{height}: the image has no pixels")));
+    }
+    let ycbcr = decoder.find_tag_unsigned::<u16>(Tag::Compression).map_err(tag_err)? == Some(33003);
+    let samples: u16 = decoder.find_tag_unsigned(Tag::SamplesPerPixel).map_err(tag_err)?.unwrap_or(1);
+    let bits: Vec<u16> = decoder.find_tag_unsigned_vec(Tag::BitsPerSample).map_err(tag_err)?.unwrap_or(vec![1]);
+    if samples != 3 || bits.iter().any(|&b| b != 8) {
+        let message = format!(
+            "JPEG 2000 TIFF with {samples} samples of {bits:?} bits is not supported (8-bit RGB and YCbCr are)"
+        );
+        return Err(TilerError::unsupported(path, message));
+    }
+    let (chunk_w, chunk_h, tiled) = match decoder.get_chunk_type() {
+        ChunkType::Tile => {
+            let (w, h) = decoder.chunk_dimensions();
+            (w, h, true)
+        }
+        ChunkType::Strip => (width, decoder.chunk_dimensions().1.clamp(1, height), false),
+    };
+    if chunk_w == 0 || chunk_h == 0 {
+        return Err(TilerError::decode(path, format!("the TIFF declares {chunk_w}x{chunk_h} tiles")));
+    }
+    let across = width.div_ceil(chunk_w);
+    let (offsets_tag, counts_tag) =
+        if tiled { (Tag::TileOffsets, Tag::TileByteCounts) } else { (Tag::StripOffsets, Tag::StripByteCounts) };
+    let offsets = decoder.get_tag_u64_vec(offsets_tag).map_err(tag_err)?;
+    let counts = decoder.get_tag_u64_vec(counts_tag).map_err(tag_err)?;
+    // A row of tiles of RGB texels, and per worker a compressed tile (at most twice its
+    // texels, checked per tile) and OpenJPEG's i32 per sample.
+    let tile = chunk_w as u64 * chunk_h as u64 * 3;
+    // (The cores, not the rayon pool's size: asking the pool would start it before the CLI
+    // sizes it.)
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let workers = cores.min(across as usize) as u64;
+    let need = (tile * across as u64).saturating_add(tile.saturating_mul(6).saturating_mul(workers));
+    if need > max_memory {
+        return Err(TilerError::unsupported(
+            path,
+            format!(
+                "the JPEG 2000 TIFF is stored in {chunk_w}x{chunk_h} tiles: a row of them and the tiles being decoded ({} MiB) would have to be held in memory, more than --max-memory ({} MiB); raise --max-memory",
+                need.div_ceil(1 << 20),
+                max_memory >> 20
+            ),
+        ));
+    }
+    let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
+    Ok(Box::new(Jp2kTiff {
+        path: path.to_path_buf(),
+        file,
+        file_len,
+        width,
+        height,
+        ycbcr,
+        chunk_w,
+        chunk_h,
+        across,
+        offsets,
+        counts,
+        band: vec![Vec::new(); across as usize],
+        band_first: 0,
+        band_rows: 0,
+        next: 0,
+        label,
+        embedded,
+    }))
+}
+
+impl Jp2kTiff {
+    /// Decodes the row of tiles holding row `y`, the tiles in parallel.
+    fn load_band(&mut self, y: u64) -> Result<()> {
+        let row = (y / self.chunk_h as u64) as u32;
+        let first = row as u64 * self.chunk_h as u64;
+        let rows = (self.chunk_h as u64).min(self.height as u64 - first) as u32;
+        let mut band = std::mem::take(&mut self.band);
+        let this = &*self;
+        let result = band.par_iter_mut().enumerate().try_for_each(|(col, texels)| {
+            let index = (row * this.across) as usize + col;
+            let data_w = this.chunk_w.min(this.width - col as u32 * this.chunk_w);
+            this.decode_tile(index, data_w, rows, texels).map_err(|m| (col, index, m))
+        });
+        self.band = band;
+        if let Err((col, index, message)) = result {
+            self.band_rows = 0;
+            return Err(TilerError::DecodeRow {
+                path: self.path.clone(),
+                row: y,
+                message: format!(
+                    "tile {index} (tile row {row}, column {col}; rows {first}..{}): {message}",
+                    first + rows as u64
+                ),
+            });
+        }
+        (self.band_first, self.band_rows) = (first, rows as u64);
+        Ok(())
+    }
+
+    /// Tile `index` into `texels`: its `w` x `h` texels inside the image, as RGB.
+    fn decode_tile(&self, index: usize, w: u32, h: u32, texels: &mut Vec<u8>) -> std::result::Result<(), String> {
+        let (offset, count) = match (self.offsets.get(index), self.counts.get(index)) {
+            (Some(&o), Some(&c)) if c > 0 => (o, c),
+            _ => return Err("the TIFF gives it no data (offset or byte count missing or 0)".into()),
+        };
+        if offset.checked_add(count).is_none_or(|end| end > self.file_len) {
+            return Err(format!(
+                "its {count} bytes at offset {offset} run past the end of the file: a truncated TIFF?"
+            ));
+        }
+        let bound = self.chunk_w as u64 * self.chunk_h as u64 * 6 + (1 << 16);
+        if count > bound {
+            return Err(format!("it claims {count} compressed bytes for a {}x{} tile", self.chunk_w, self.chunk_h));
+        }
+        let mut raw = vec![0u8; count as usize];
+        self.file.read_exact_at(&mut raw, offset).map_err(|e| format!("cannot read it: {e}"))?;
+        self.check_size(&raw)?;
+        // OpenJPEG reports damage through its result; a panic in the binding must not take the
+        // whole run down either.
+        let image = std::panic::catch_unwind(|| jpeg2k::Image::from_bytes(&raw))
+            .map_err(|_| "the JPEG 2000 decoder failed".to_string())?
+            .map_err(|e| format!("corrupt JPEG 2000 data: {e}"))?;
+        let comps = image.components();
+        if comps.len() < 3 {
+            return Err(format!("the JPEG 2000 tile has {} components, 3 expected", comps.len()));
+        }
+        let (cw, ch) = (comps[0].width(), comps[0].height());
+        for c in &comps[..3] {
+            if c.width() != cw || c.height() != ch || cw < w || ch < h || c.precision() != 8 || c.is_signed() {
+                return Err(format!(
+                    "a JPEG 2000 component is {}x{} of {}{} bits; {w}x{h} unsigned 8-bit expected (subsampled components are not read)",
+                    c.width(),
+                    c.height(),
+                    if c.is_signed() { "signed " } else { "" },
+                    c.precision()
+                ));
+            }
+        }
+        let (c0, c1, c2) = (comps[0].data(), comps[1].data(), comps[2].data());
+        let stride = comps[0].width() as usize;
+        texels.clear();
+        texels.reserve(w as usize * h as usize * 3);
+        let clamp = |v: i32| v.clamp(0, 255);
+        for r in 0..h as usize {
+            for x in 0..w as usize {
+                let at = r * stride + x;
+                let (a, b, c) = (clamp(c0[at]), clamp(c1[at]), clamp(c2[at]));
+                let rgb = if self.ycbcr { ycbcr_to_rgb(a, b, c) } else { [a as u8, b as u8, c as u8] };
+                texels.extend_from_slice(&rgb);
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Jp2kTiff {
+    /// Refuses a codestream whose SIZ marker declares more texels or components than a tile
+    /// holds, before OpenJPEG allocates for them.
+    fn check_size(&self, raw: &[u8]) -> std::result::Result<(), String> {
+        let be32 = |at: usize| raw.get(at..at + 4).map(|b| u32::from_be_bytes([b[0], b[1], b[2], b[3]]));
+        if raw.get(..4) != Some(&[0xFF, 0x4F, 0xFF, 0x51]) {
+            return Err("not a JPEG 2000 codestream (no SOC and SIZ markers at its start)".into());
+        }
+        let size = (be32(8), be32(12), be32(16), be32(20));
+        let (Some(x), Some(y), Some(x0), Some(y0)) = size else {
+            return Err("the JPEG 2000 SIZ marker is cut short".into());
+        };
+        let components = raw.get(40..42).map_or(0, |b| u16::from_be_bytes([b[0], b[1]]));
+        let (w, h) = (x.saturating_sub(x0), y.saturating_sub(y0));
+        if w > self.chunk_w || h > self.chunk_h || !(1..=4).contains(&components) {
+            let (tw, th) = (self.chunk_w, self.chunk_h);
+            return Err(format!(
+                "the codestream declares {w}x{h} texels of {components} components in a {tw}x{th} tile"
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// JFIF YCbCr to RGB in libjpeg's fixed point (16 fractional bits, each term rounded), the
+/// conversion OpenSlide applies to Aperio's YCbCr JPEG 2000 tiles.
+fn ycbcr_to_rgb(y: i32, cb: i32, cr: i32) -> [u8; 3] {
+    const HALF: i32 = 1 << 15;
+    let fix = |v: f64| (v * 65536.0 + 0.5) as i32;
+    let (cb, cr) = (cb - 128, cr - 128);
+    let r = y + ((fix(1.402) * cr + HALF) >> 16);
+    let g = y + ((-fix(0.34414) * cb - fix(0.71414) * cr + HALF) >> 16);
+    let b = y + ((fix(1.772) * cb + HALF) >> 16);
+    [r.clamp(0, 255) as u8, g.clamp(0, 255) as u8, b.clamp(0, 255) as u8]
+}
+
+impl RowSource for Jp2kTiff {
+    fn header(&self) -> ImageHeader {
+        ImageHeader { width: self.width, height: self.height, layout: PixelLayout::new(Channels::Rgb, Depth::U8) }
+    }
+
+    fn embedded(&self) -> Embedded {
+        self.embedded.clone()
+    }
+
+    fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
+        let y = self.next;
+        let fail = |message: String| TilerError::DecodeRow { path: self.path.clone(), row: y, message };
+        super::check_row(y, self.height, &(0..self.width), 3, out.len()).map_err(fail)?;
+        if y < self.band_first || y >= self.band_first + self.band_rows {
+            self.load_band(y)?;
+        }
+        let r = (y - self.band_first) as usize;
+        for (col, texels) in self.band.iter().enumerate() {
+            let x0 = col * self.chunk_w as usize;
+            let w = (self.chunk_w as usize).min(self.width as usize - x0);
+            out[x0 * 3..(x0 + w) * 3].copy_from_slice(&texels[r * w * 3..(r + 1) * w * 3]);
+        }
+        self.next += 1;
+        Ok(())
+    }
+
+    fn skip_rows(&mut self, rows: u32) -> Result<()> {
+        self.next += rows as u64;
+        Ok(())
+    }
+
+    fn rewind(&mut self) -> Result<()> {
+        self.next = 0;
+        Ok(())
+    }
+
+    fn describe(&self) -> String {
+        let colour = if self.ycbcr { "YCbCr" } else { "RGB" };
+        format!(
+            "{}, jpeg 2000 ({colour}, OpenJPEG), streamed by tile row ({}x{} tiles, decoded in parallel)",
+            self.label, self.chunk_w, self.chunk_h
+        )
+    }
+}

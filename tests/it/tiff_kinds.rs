@@ -1,0 +1,473 @@
+//! The rest of TIFF that scanners, slide vendors and document systems write: planar-separate,
+//! 1/2/4-bit grey, CCITT fax, palette and CMYK. Inputs are made here by the tools that write
+//! them (libvips, libtiff's `tiffcp`, tifffile) from a generated image; the texels are compared
+//! with libvips's decode (`vips rawsave`, through libtiff) or tifffile's, exactly: these are
+//! lossless kinds (CMYK goes through LittleCMS on both sides and has a stated tolerance).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use crate::common::cli::{self, s};
+use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
+use vortex_tiler::source::{self, RowSource};
+
+/// Whether `vips` and `tiffcp` run; outside CI a missing one skips the test with a note.
+fn have_tools() -> bool {
+    let runs = |tool: &str, arg: &str| Command::new(tool).arg(arg).output().is_ok();
+    let found = runs("vips", "--version") && runs("tiffcp", "-h");
+    if !found {
+        assert!(
+            std::env::var("CI").map_or(true, |v| v != "true"),
+            "CI=true and no vips or tiffcp (apt-get install libvips-tools libtiff-tools)"
+        );
+        eprintln!(
+            "note: skipping a TIFF kinds test: vips or tiffcp missing (apt-get install libvips-tools libtiff-tools)"
+        );
+    }
+    found
+}
+
+fn tool(name: &str, args: &[&str]) {
+    let out = Command::new(name).args(args).output().unwrap();
+    assert!(out.status.success(), "{name} {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// An RGB image with ramps, hard edges and noisy blocks, as PNG.
+fn pattern_png(dir: &Path, width: u32, height: u32) -> PathBuf {
+    let mut state = 0x9E37_79B9u32;
+    let img = image::RgbImage::from_fn(width, height, |x, y| {
+        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        let noise = if (x / 16 + y / 16) % 3 == 0 { (state >> 24) % 48 } else { 0 };
+        let r = (x * 255 / width + noise).min(255);
+        let g = (y * 255 / height + noise).min(255);
+        let b = ((x ^ y) & 255).saturating_sub(noise);
+        image::Rgb([r as u8, g as u8, b as u8])
+    });
+    let path = dir.join(format!("pattern-{width}x{height}.png"));
+    img.save(&path).unwrap();
+    path
+}
+
+/// libvips's decode of `path`: its bands as they are, 16-bit samples native.
+fn vips_texels(path: &Path) -> Vec<u8> {
+    let raw = path.with_extension("vips.raw");
+    tool("vips", &["rawsave", s(path), s(&raw)]);
+    std::fs::read(raw).unwrap()
+}
+
+fn our_texels(path: &Path, max_memory: u64) -> (Box<dyn RowSource>, Vec<u8>) {
+    let mut source = source::open(path, max_memory).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let row = source.width() as usize * source.layout().bytes_per_pixel();
+    let mut all = vec![0u8; row * source.height() as usize];
+    for chunk in all.chunks_exact_mut(row) {
+        source.read_row(chunk).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    }
+    (source, all)
+}
+
+/// Each `(file, summary needle)` decodes to libvips's texels exactly.
+fn assert_as_vips(files: &[(PathBuf, &str)]) {
+    for (path, says) in files {
+        let (source, ours) = our_texels(path, 1 << 30);
+        let described = source.describe();
+        assert!(described.contains(says), "{}: {described} lacks {says:?}", path.display());
+        let theirs = vips_texels(path);
+        assert_eq!(ours.len(), theirs.len(), "{}: {described}", path.display());
+        let differ = ours.iter().zip(&theirs).filter(|(a, b)| a != b).count();
+        assert!(differ == 0, "{}: {differ} samples differ from libvips's decode ({described})", path.display());
+    }
+}
+
+/// `tiffcp ARGS from to`.
+fn tiffcp(from: &Path, to: &Path, args: &[&str]) -> PathBuf {
+    let mut all = args.to_vec();
+    all.extend([s(from), s(to)]);
+    tool("tiffcp", &all);
+    to.to_path_buf()
+}
+
+/// Planar-separate RGB, RGBA and 16-bit, in strips and tiles, with every compression read,
+/// predictor included, as libtiff and tifffile write them: libvips's texels of the contiguous
+/// file they were made from, exactly (libvips 8.14 reads planar strips but not planar tiles).
+#[test]
+fn planar_separate_decodes_as_libvips_does() {
+    if !have_tools() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    let png = pattern_png(dir.path(), 301, 203);
+    let rgb = d("rgb.tif");
+    tool("vips", &["copy", s(&png), s(&rgb)]);
+    let rgba = d("rgba.tif");
+    tool("vips", &["bandjoin_const", s(&png), s(&rgba), "200"]);
+    // (planar file, the contiguous file it was made from)
+    let mut files = Vec::new();
+    for (name, args) in [
+        ("none-strips", vec!["-c", "none", "-r", "16"]),
+        ("lzw-strips", vec!["-c", "lzw", "-r", "7"]),
+        ("lzw-predictor", vec!["-c", "lzw:2", "-r", "32"]),
+        ("zip-tiles", vec!["-c", "zip", "-t", "-w", "64", "-l", "48"]),
+        ("packbits-tiles", vec!["-c", "packbits", "-t", "-w", "128", "-l", "128"]),
+        ("one-strip", vec!["-c", "zip:2"]),
+    ] {
+        let mut args = args.clone();
+        args.extend(["-p", "separate"]);
+        for from in [&rgb, &rgba] {
+            let to = d(&format!("{name}-{}", from.file_name().unwrap().to_str().unwrap()));
+            files.push((tiffcp(from, &to, &args), from.clone()));
+        }
+    }
+    // libtiff's tiffcp separates 8-bit planes only: 16-bit ones are written by tifffile.
+    if let Some(py) = venv_python() {
+        python(&py, MAKE_PLANAR_16, &[s(&d("planar16"))]);
+        for name in ["planar16-strips.tif", "planar16-tiles.tif"] {
+            files.push((d(name), d("planar16-contig.tif")));
+        }
+    }
+    for (path, from) in &files {
+        let (source, ours) = our_texels(path, 1 << 30);
+        let described = source.describe();
+        assert!(described.contains("planar-separate") && described.contains("-bit RGB"), "{described}");
+        assert!(
+            ours == vips_texels(from),
+            "{}: differs from libvips's decode of {} ({described})",
+            path.display(),
+            from.display()
+        );
+    }
+}
+
+/// 1-bit grey raw, PackBits, LZW, CCITT Group 3 and Group 4 (strips and tiles), 2- and 4-bit
+/// grey, WhiteIsZero: libvips's texels (0/255 for bilevel, scaled for 2/4 bits) exactly.
+#[test]
+fn bilevel_fax_and_sub_byte_grey_decode_as_libvips_does() {
+    if !have_tools() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    let png = pattern_png(dir.path(), 333, 201);
+    let grey = d("grey.v");
+    tool("vips", &["colourspace", s(&png), s(&grey), "b-w"]);
+    let one = d("one.tif");
+    tool("vips", &["tiffsave", s(&grey), s(&one), "--bitdepth", "1"]);
+    let white_is_zero = d("wiz.tif");
+    tool("vips", &["tiffsave", s(&grey), s(&white_is_zero), "--bitdepth", "1", "--miniswhite"]);
+    let mut files = vec![(one.clone(), "1-bit grey"), (white_is_zero.clone(), "WhiteIsZero")];
+    for (name, args, says) in [
+        ("g4", vec!["-c", "g4"], "ccitt g4"),
+        ("g4-strips", vec!["-c", "g4", "-r", "10"], "ccitt g4"),
+        ("g4-tiles", vec!["-c", "g4", "-t", "-w", "64", "-l", "32"], "ccitt g4"),
+        ("g3", vec!["-c", "g3"], "ccitt g3"),
+        ("g3-fill", vec!["-c", "g3:fill", "-r", "9"], "ccitt g3"),
+        ("packbits", vec!["-c", "packbits", "-r", "5"], "packbits"),
+        ("lzw-tiles", vec!["-c", "lzw", "-t", "-w", "32", "-l", "32"], "lzw"),
+        ("lsb-first", vec!["-c", "g4", "-f", "lsb2msb"], "ccitt g4"),
+    ] {
+        files.push((tiffcp(&one, &d(&format!("{name}.tif")), &args), says));
+        files.push((tiffcp(&white_is_zero, &d(&format!("{name}-wiz.tif")), &args), says));
+    }
+    for bits in ["2", "4"] {
+        let path = d(&format!("grey{bits}.tif"));
+        tool("vips", &["tiffsave", s(&grey), s(&path), "--bitdepth", bits]);
+        let lzw = tiffcp(&path, &d(&format!("grey{bits}-lzw.tif")), &["-c", "lzw", "-r", "3"]);
+        let wiz = d(&format!("grey{bits}-wiz.tif"));
+        tool("vips", &["tiffsave", s(&grey), s(&wiz), "--bitdepth", bits, "--miniswhite"]);
+        files.extend([(path, "-bit grey"), (lzw, "lzw"), (wiz, "WhiteIsZero")]);
+    }
+    assert_as_vips(&files);
+
+    // Two-dimensional Group 3 is refused by name.
+    let g32d = tiffcp(&one, &d("g3-2d.tif"), &["-c", "g3:2d"]);
+    let err = source::open(&g32d, 1 << 30).err().expect("2-D G3 is refused");
+    assert!(err.to_string().contains("two-dimensional Group 3") && err.to_string().contains("g3-2d.tif"), "{err}");
+}
+
+/// The Python with tifffile that `.ci/run` makes (VORTEX_PYVIPS), or a skip with a note
+/// outside CI.
+fn venv_python() -> Option<std::ffi::OsString> {
+    let python = std::env::var_os("VORTEX_PYVIPS");
+    if python.is_none() {
+        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and VORTEX_PYVIPS unset");
+        eprintln!("note: skipping a tifffile-made TIFF: set VORTEX_PYVIPS to a Python with tifffile");
+    }
+    python
+}
+
+fn python(python: &std::ffi::OsStr, script: &str, args: &[&str]) {
+    let out = Command::new(python).arg("-c").arg(script).args(args).output().unwrap();
+    assert!(out.status.success(), "{script}: {}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// 16-bit planar-separate RGB, Deflate with the predictor, in strips and in tiles.
+const MAKE_PLANAR_16: &str = r#"
+import sys, numpy as np, tifffile
+h, w = 77, 123
+y, x = np.mgrid[0:h, 0:w]
+img = np.stack([x * 531, y * 850, (x * y * 37) % 65536], -1).astype(np.uint16)
+img[::5] = np.random.default_rng(3).integers(0, 65536, img[::5].shape)
+kw = dict(planarconfig="separate", photometric="rgb", compression="zlib", predictor=True, metadata=None)
+planes = np.ascontiguousarray(np.moveaxis(img, -1, 0))
+tifffile.imwrite(sys.argv[1] + "-strips.tif", planes, rowsperstrip=10, **kw)
+tifffile.imwrite(sys.argv[1] + "-tiles.tif", planes, tile=(32, 48), **kw)
+tifffile.imwrite(sys.argv[1] + "-contig.tif", img, photometric="rgb", metadata=None)
+"#;
+
+/// Palette TIFFs of 1, 2, 4 and 8-bit indices. tifffile writes only 8-bit palettes with a
+/// ColorMap libtiff accepts, so the smaller ones are written as grey and retagged (the
+/// ColorMap added as an extra tag, PhotometricInterpretation set to 3). Maps of 8-bit values
+/// (each entry v x 257, as libtiff-based writers store them) go to NAME-BITS.tif; one 4-bit map
+/// of full 16-bit values goes to NAME-deep.tif with its expected RGB16 texels (native order)
+/// in NAME-deep.rgb, the map applied to the indices tifffile reads back.
+const MAKE_PALETTES: &str = r#"
+import sys, numpy as np, tifffile
+h, w = 61, 83
+y, x = np.mgrid[0:h, 0:w]
+rng = np.random.default_rng(5)
+def write(path, bits, cmap):
+    n = 1 << bits
+    idx = ((x // 3 + y // 5 + (x * y) % 7) % n).astype(np.uint8)
+    idx[::4] = rng.integers(0, n, idx[::4].shape)
+    if bits == 8:
+        tifffile.imwrite(path, idx, photometric="palette", colormap=cmap, rowsperstrip=9, metadata=None)
+    else:
+        tifffile.imwrite(path, idx, photometric="minisblack", bitspersample=bits, rowsperstrip=9, metadata=None,
+                         extratags=[(320, "H", 3 * n, cmap.ravel(), True)])
+        with tifffile.TiffFile(path, mode="r+b") as t:
+            t.pages[0].tags["PhotometricInterpretation"].overwrite(3)
+    return idx
+for bits in (1, 2, 4, 8):
+    n = 1 << bits
+    cmap = (rng.integers(0, 256, (3, n)) * 257).astype(np.uint16)
+    write("%s-%d.tif" % (sys.argv[1], bits), bits, cmap)
+deep = rng.integers(0, 65536, (3, 16)).astype(np.uint16)
+idx = write(sys.argv[1] + "-deep.tif", 4, deep)
+back = tifffile.imread(sys.argv[1] + "-deep.tif")
+assert (back == idx).all()
+open(sys.argv[1] + "-deep.rgb", "wb").write(np.ascontiguousarray(deep[:, back].transpose(1, 2, 0)).astype("=u2").tobytes())
+"#;
+
+/// Palette images of every index depth, uncompressed and recompressed by libtiff: libvips's
+/// texels for maps of 8-bit values; a map of full 16-bit values is kept at 16 bits and matches
+/// the map applied to tifffile's indices.
+#[test]
+fn palettes_decode_as_libvips_and_tifffile_do() {
+    if !have_tools() {
+        return;
+    }
+    let Some(py) = venv_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    python(&py, MAKE_PALETTES, &[s(&d("pal"))]);
+    let mut files = Vec::new();
+    for bits in [1, 2, 4, 8] {
+        let plain = d(&format!("pal-{bits}.tif"));
+        let lzw = tiffcp(&plain, &d(&format!("pal-{bits}-lzw.tif")), &["-c", "lzw", "-r", "4"]);
+        let tiles =
+            tiffcp(&plain, &d(&format!("pal-{bits}-tiles.tif")), &["-c", "packbits", "-t", "-w", "32", "-l", "16"]);
+        files.extend([(plain, "-bit palette to RGB (16-bit map of 8-bit values)"), (lzw, "lzw"), (tiles, "packbits")]);
+    }
+    assert_as_vips(&files);
+
+    let deep = d("pal-deep.tif");
+    let (source, ours) = our_texels(&deep, 1 << 30);
+    assert!(source.describe().contains("4-bit palette to RGB (16-bit map, kept at 16 bits)"), "{}", source.describe());
+    assert_eq!(source.layout(), PixelLayout::new(Channels::Rgb, Depth::U16));
+    assert!(ours == std::fs::read(d("pal-deep.rgb")).unwrap(), "the 16-bit palette differs from tifffile's");
+}
+
+/// CMYK TIFF (InkSet 1) with its embedded profile, contiguous and planar, and without one
+/// (the default CMYK profile): converted to sRGB as `vips icc_transform` converts it.
+#[test]
+fn cmyk_tiff_is_converted_through_its_profile_or_the_default_one() {
+    let default = Path::new(source::icc::DEFAULT_CMYK_PROFILE);
+    if !have_tools() || !default.is_file() {
+        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and no {}", default.display());
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    let png = pattern_png(dir.path(), 97, 66);
+    let tagged = d("cmyk.tif");
+    tool("vips", &["icc_export", s(&png), s(&tagged), "--output-profile", s(default)]);
+    let planar = tiffcp(&tagged, &d("cmyk-planar.tif"), &["-p", "separate", "-c", "lzw", "-r", "8"]);
+    let bare = d("bare.tif");
+    tool("vips", &["copy", s(&tagged), &format!("{}[strip]", s(&bare))]);
+    for (path, embedded) in [(&tagged, true), (&planar, true), (&bare, false)] {
+        let (source, _) = source::open_with(path, source::OpenOptions::shown(1 << 30)).unwrap();
+        let described = source.describe();
+        let whence = if embedded { "embedded ICC" } else { "no profile embedded" };
+        assert!(described.contains("CMYK") && described.contains(whence), "{described}");
+        assert!(source.embedded().icc.is_none(), "the profile is used up");
+        let theirs = d("theirs.png");
+        let mut args = vec!["icc_transform", s(path), s(&theirs), "srgb", "--intent", "relative"];
+        match embedded {
+            true => args.push("--embedded"),
+            false => args.extend(["--input-profile", s(default)]),
+        }
+        tool("vips", &args);
+        let theirs = image::open(&theirs).unwrap().to_rgb8().into_raw();
+        let (_, ours) = our_texels(path, 1 << 30);
+        // LittleCMS on both sides through the same CLUT profile; libvips goes through Lab in
+        // float and we convert 8-bit to 8-bit, so rounding differs by a step or two.
+        let worst = ours.iter().zip(&theirs).map(|(a, b)| a.abs_diff(*b)).max().unwrap();
+        let mean = ours.iter().zip(&theirs).map(|(a, b)| a.abs_diff(*b) as f64).sum::<f64>() / ours.len() as f64;
+        assert!(worst <= 3 && mean < 0.6, "{}: worst {worst}, mean {mean}", path.display());
+    }
+}
+
+/// A strip past the end of the file and fax data that is not fax data: errors naming the file,
+/// the strip (and plane) and the rows; a planar image larger than --max-memory streams, and
+/// `split` takes it end to end.
+#[test]
+fn damaged_kinds_name_the_strip_and_large_ones_stream() {
+    if !have_tools() {
+        return;
+    }
+    let Some(py) = venv_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    let png = pattern_png(dir.path(), 512, 384);
+    let rgb = d("rgb.tif");
+    tool("vips", &["copy", s(&png), s(&rgb)]);
+
+    // Plane 1's third strip moved past the end of the file.
+    let planar = tiffcp(&rgb, &d("planar.tif"), &["-p", "separate", "-c", "none", "-r", "16"]);
+    let moved = d("moved.tif");
+    std::fs::copy(&planar, &moved).unwrap();
+    let script = "import sys, tifffile\nwith tifffile.TiffFile(sys.argv[1], mode='r+b') as t:\n    tag = t.pages[0].tags['StripOffsets']\n    v = list(tag.value)\n    v[24 + 2] = 1 << 30\n    tag.overwrite(v)";
+    python(&py, script, &[s(&moved)]);
+    let mut source = source::open(&moved, 1 << 30).unwrap();
+    let mut row = vec![0u8; 512 * 3];
+    for _ in 0..32 {
+        source.read_row(&mut row).unwrap();
+    }
+    let err = source.read_row(&mut row).unwrap_err().to_string();
+    for needle in ["moved.tif", "row 32", "strip 26 of plane 1 (rows 32..48)", "past the end of the file"] {
+        assert!(err.contains(needle), "{needle:?} missing from: {err}");
+    }
+
+    // Group 4 strips whose bytes are zeroed: no valid code.
+    let grey = d("grey.v");
+    tool("vips", &["colourspace", s(&png), s(&grey), "b-w"]);
+    let one = d("one.tif");
+    tool("vips", &["tiffsave", s(&grey), s(&one), "--bitdepth", "1"]);
+    let g4 = tiffcp(&one, &d("g4.tif"), &["-c", "g4", "-r", "64"]);
+    let script = "import sys, tifffile\nwith tifffile.TiffFile(sys.argv[1]) as t:\n    p = t.pages[0]\n    o, n = p.dataoffsets[2], p.databytecounts[2]\nf = open(sys.argv[1], 'r+b'); f.seek(o); f.write(bytes(n))";
+    python(&py, script, &[s(&g4)]);
+    let mut source = source::open(&g4, 1 << 30).unwrap();
+    let mut row = vec![0u8; 512];
+    let err = (0..384).find_map(|_| source.read_row(&mut row).err()).expect("zeroed fax data fails").to_string();
+    for needle in ["g4.tif", "row 128", "strip 2 (rows 128..192)", "fax"] {
+        assert!(err.contains(needle), "{needle:?} missing from: {err}");
+    }
+
+    // 576 KiB of texels read through 64 KiB: one 16-row strip of each plane at a time.
+    let lzw = tiffcp(&rgb, &d("planar-lzw.tif"), &["-p", "separate", "-c", "lzw", "-r", "16"]);
+    let (_, ours) = our_texels(&lzw, 64 << 10);
+    assert!(ours == vips_texels(&lzw), "streamed planar texels differ from libvips's");
+    let err = source::open(&lzw, 16 << 10).err().expect("over --max-memory").to_string();
+    assert!(err.contains("--max-memory") && err.contains("planar-lzw.tif"), "{err}");
+    // And through `split`, end to end.
+    let out = d("out");
+    let line = cli::ok(&["split", s(&lzw), "-o", s(&out), "--tile-size", "256", "--border", "0", "--codec", "png"]);
+    assert!(line.contains("planar-separate 8-bit RGB"), "{line}");
+    let tile = image::open(out.join("lod00-x0001-y0000.png")).unwrap().to_rgb8();
+    let theirs = vips_texels(&lzw);
+    for (x, y, texel) in tile.enumerate_pixels() {
+        let at = ((y as usize) * 512 + 256 + x as usize) * 3;
+        assert_eq!(texel.0, theirs[at..at + 3], "lod00-x0001-y0000 at ({x}, {y})");
+    }
+}
+
+/// Aperio SVS slides with JPEG 2000 tiles as tifffile writes them with imagecodecs' OpenJPEG
+/// encoder (lossless, so any difference is the decoder's): Compression 33005 (RGB components)
+/// to NAME-rgb.svs, 33003 (Y, Cb, Cr components, no multi-component transform) to
+/// NAME-ycbcr.svs, 128-texel tiles, the Aperio ImageDescription OpenSlide recognises.
+const MAKE_J2K_SVS: &str = r#"
+import sys, numpy as np, tifffile, imagecodecs
+h, w, t = 1500, 600, 128
+y, x = np.mgrid[0:h, 0:w]
+img = np.stack([x * 255 // w, y * 255 // h, (x ^ y) & 255], -1).astype(np.int32)
+img += np.random.default_rng(9).integers(0, 40, img.shape) * (((x // 16 + y // 16) % 3 == 0)[..., None])
+img = np.clip(img, 0, 255).astype(np.uint8)
+f = img.astype(np.float64)
+ycc = np.stack([0.299 * f[..., 0] + 0.587 * f[..., 1] + 0.114 * f[..., 2],
+                128 - 0.168736 * f[..., 0] - 0.331264 * f[..., 1] + 0.5 * f[..., 2],
+                128 + 0.5 * f[..., 0] - 0.418688 * f[..., 1] - 0.081312 * f[..., 2]], -1)
+ycc = np.clip(np.round(ycc), 0, 255).astype(np.uint8)
+def tiles(a):
+    for ty in range(0, h, t):
+        for tx in range(0, w, t):
+            tile = np.zeros((t, t, 3), np.uint8)
+            part = a[ty:ty + t, tx:tx + t]
+            tile[:part.shape[0], :part.shape[1]] = part
+            yield imagecodecs.jpeg2k_encode(tile, level=0, codecformat="J2K", mct=False)
+for name, a, code in (("rgb", img, 33005), ("ycbcr", ycc, 33003)):
+    desc = "Aperio Image Library v12.0.15 \r\n%dx%d [0,0 %dx%d] (%dx%d) J2K/KDU Q=70|AppMag = 20|MPP = 0.5" % (w, h, w, h, t, t)
+    tifffile.imwrite("%s-%s.svs" % (sys.argv[1], name), tiles(a), shape=(h, w, 3), dtype="uint8", tile=(t, t),
+                     compression=code, photometric="rgb", description=desc, metadata=None)
+"#;
+
+/// OpenSlide's level 0 of an Aperio slide as RGB texels (Debian's python3-openslide, run by
+/// /usr/bin/python3), or a skip with a note outside CI.
+fn openslide_texels(slide: &Path) -> Option<Vec<u8>> {
+    let raw = slide.with_extension("openslide.rgba");
+    let script = "import sys, openslide\ns = openslide.OpenSlide(sys.argv[1])\nassert s.properties['openslide.vendor'] == 'aperio'\nopen(sys.argv[2], 'wb').write(s.read_region((0, 0), 0, s.dimensions).tobytes())";
+    let out = Command::new("/usr/bin/python3").args(["-c", script, s(slide), s(&raw)]).output();
+    match out {
+        Ok(out) if out.status.success() => {}
+        Ok(out) if !String::from_utf8_lossy(&out.stderr).contains("No module named 'openslide'") => {
+            panic!("OpenSlide failed: {}", String::from_utf8_lossy(&out.stderr))
+        }
+        _ => {
+            assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and no python3-openslide");
+            eprintln!("note: skipping the OpenSlide comparison: apt-get install python3-openslide");
+            return None;
+        }
+    }
+    let rgba = std::fs::read(raw).unwrap();
+    Some(rgba.chunks_exact(4).flat_map(|t| [t[0], t[1], t[2]]).collect())
+}
+
+/// Aperio JPEG 2000 (33005 RGB, 33003 YCbCr): OpenSlide's level 0, streamed within a
+/// --max-memory below the image's size; a damaged tile is an error naming it; `split` takes it.
+#[test]
+fn aperio_jpeg_2000_decodes_as_openslide_does() {
+    let Some(py) = venv_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    python(&py, MAKE_J2K_SVS, &[s(&d("slide"))]);
+    // 600 x 1500 RGB is 2.6 MiB; a row of 128-texel tiles and the tiles being decoded fit in 2.
+    for (name, colour, tolerance) in [("slide-rgb.svs", "RGB", 0u8), ("slide-ycbcr.svs", "YCbCr", 1)] {
+        let (source, ours) = our_texels(&d(name), 2 << 20);
+        let described = source.describe();
+        assert!(
+            described.contains("Aperio SVS") && described.contains(&format!("jpeg 2000 ({colour}, OpenJPEG)")),
+            "{described}"
+        );
+        let Some(theirs) = openslide_texels(&d(name)) else { return };
+        assert_eq!(ours.len(), theirs.len());
+        // RGB: lossless tiles decoded by OpenJPEG on both sides, exactly. YCbCr: OpenSlide's
+        // own YCbCr tables round the green term once where libjpeg's fixed point (used here)
+        // rounds two products: one level apart at most.
+        let worst = ours.iter().zip(&theirs).map(|(a, b)| a.abs_diff(*b)).max().unwrap();
+        assert!(worst <= tolerance, "{name}: {worst} levels from OpenSlide's level 0");
+    }
+
+    // Tile 7 (tile row 1, column 2) zeroed: not a codestream.
+    let slide = d("slide-rgb.svs");
+    let script = "import sys, tifffile\nwith tifffile.TiffFile(sys.argv[1]) as t:\n    p = t.pages[0]\n    o, n = p.dataoffsets[7], p.databytecounts[7]\nf = open(sys.argv[1], 'r+b'); f.seek(o); f.write(bytes(n))";
+    python(&py, script, &[s(&slide)]);
+    let mut source = source::open(&slide, 1 << 30).unwrap();
+    let mut row = vec![0u8; 600 * 3];
+    let err = (0..1500).find_map(|_| source.read_row(&mut row).err()).expect("a zeroed tile fails").to_string();
+    for needle in ["slide-rgb.svs", "row 128", "tile 7 (tile row 1, column 2; rows 128..256)", "JPEG 2000"] {
+        assert!(err.contains(needle), "{needle:?} missing from: {err}");
+    }
+    // `split` on the intact YCbCr slide, end to end.
+    let out = d("out");
+    let line = cli::ok(&["split", s(&d("slide-ycbcr.svs")), "-o", s(&out), "--tile-size", "256", "--codec", "png"]);
+    assert!(line.contains("jpeg 2000 (YCbCr"), "{line}");
+}
