@@ -341,6 +341,14 @@ mod tests {
         }
         for d in Depth::ALL {
             assert_eq!(Depth::from_tile_type(d.tile_type()), Some(d));
+            assert_eq!(Depth::from_pack(d.bytes() as u8, d.pack_sample_format()), Some(d));
         }
+        assert_eq!(Depth::from_pack(1, vortex_pack::format::SAMPLE_FLOAT), None);
+    }
+
+    #[test]
+    fn a_background_byte_fills_each_range() {
+        assert_eq!((u8::from_u8_scaled(0xAB), u16::from_u8_scaled(0xAB)), (0xAB, 0xABAB));
+        assert_eq!((u32::from_u8_scaled(255), f32::from_u8_scaled(255)), (u32::MAX, 1.0));
     }
 }

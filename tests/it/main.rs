@@ -22,6 +22,7 @@ mod oracle;
 mod pack_cli;
 mod pmtiles;
 mod render;
+mod sample_types;
 mod serve;
 mod serve_hostile;
 mod shard;
