@@ -571,7 +571,7 @@ fn le_bytes<T: Sample>(texels: &[T]) -> Cow<'_, [u8]> {
 /// Composites straight alpha over `matte` (the colour channels of one texel), rounding once.
 fn flatten<T: Sample>(texels: &[T], channels: usize, matte: &[T]) -> Vec<T> {
     let colour = channels - 1;
-    let max = T::MAX as u64;
+    let max = T::MAX;
     let mut out = Vec::with_capacity(texels.len() / channels * colour);
     for px in texels.chunks_exact(channels) {
         let a = px[colour].to_u64();
