@@ -65,6 +65,7 @@ fn main() -> Result<()> {
         level_count: 1,
         channels: c as u8,
         sample_bytes: 1,
+        sample_format: 0,
     };
 
     let mut codecs = Vec::new();

@@ -16,7 +16,8 @@ pub enum Background {
 
 impl Background {
     /// One texel of the colour in the given channels, or `None` for `Edge`. Grey is the
-    /// Rec. 601 luma of the colour; 16-bit samples are the 8-bit value times 257.
+    /// Rec. 601 luma of the colour; wider samples are the 8-bit value scaled to their range
+    /// ([`Sample::from_u8_scaled`]).
     pub fn texel<T: Sample>(&self, channels: Channels) -> Option<Vec<T>> {
         let Background::Colour([r, g, b, a]) = *self else { return None };
         let luma = ((299 * r as u32 + 587 * g as u32 + 114 * b as u32 + 500) / 1000) as u8;
@@ -26,8 +27,7 @@ impl Background {
             Channels::Rgb => &[r, g, b],
             Channels::Rgba => &[r, g, b, a],
         };
-        let scale = if T::MAX == u8::MAX as u16 { 1 } else { 257 };
-        Some(values.iter().map(|v| T::from_u16(*v as u16 * scale)).collect())
+        Some(values.iter().map(|v| T::from_u8_scaled(*v)).collect())
     }
 
     /// The colour alpha is flattened over: the background colour, or black for `Edge`.

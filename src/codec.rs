@@ -217,6 +217,9 @@ impl Codec {
         depth: Option<Depth>,
     ) -> Result<PixelLayout, TilerError> {
         let channels = if flatten { source.channels.without_alpha() } else { source.channels };
+        if !source.depth.is_narrow_int() || depth.is_some_and(|d| !d.is_narrow_int()) {
+            return self.stored_wide(source, flatten, depth);
+        }
         match self {
             Codec::Png { .. } | Codec::Raw | Codec::Zstd { .. } => {
                 Ok(PixelLayout::new(channels, depth.unwrap_or(source.depth)))
@@ -250,6 +253,40 @@ impl Codec {
                 Ok(PixelLayout::new(channels, Depth::U8))
             }
         }
+    }
+}
+
+impl Codec {
+    /// [`stored_layout`](Self::stored_layout) for 32-bit and float samples: raw and zstd
+    /// tiles keep them as they are, float ones also as half floats (`--tile-type half`); the
+    /// other codecs hold 8 or 16 bits, and a silent cut of the range would lose the data.
+    fn stored_wide(&self, source: PixelLayout, flatten: bool, depth: Option<Depth>) -> Result<PixelLayout, TilerError> {
+        let name = self.name();
+        if flatten && source.channels.has_alpha() {
+            return Err(TilerError::Options(format!(
+                "--flatten composites 8- and 16-bit samples; the source is {source}: keep its alpha with --codec raw or zstd"
+            )));
+        }
+        if !matches!(self, Codec::Raw | Codec::Zstd { .. }) {
+            return Err(TilerError::Options(format!(
+                "the source is {source}, which --codec {name} cannot hold without cutting its range: use --codec raw, zstd or zstd-delta (packs) or --layout ome-zarr to keep it"
+            )));
+        }
+        let stored = match (source.depth, depth) {
+            (d, None) => d,
+            (d, Some(want)) if want == d => d,
+            (Depth::F32, Some(Depth::F16)) => Depth::F16,
+            (d, Some(want)) => {
+                return Err(TilerError::Options(format!(
+                    "--tile-type {} cannot store {} samples: raw and zstd tiles keep them as {}{}",
+                    want.tile_type(),
+                    d.tile_type(),
+                    d.tile_type(),
+                    if d == Depth::F32 { " or half" } else { "" }
+                )));
+            }
+        };
+        Ok(PixelLayout::new(source.channels, stored))
     }
 }
 
@@ -315,6 +352,14 @@ impl<T: Sample> TileEncoder<T> {
                 let widen = if T::DEPTH == Depth::U8 { 257 } else { 1 };
                 Cow::Owned(texels.iter().flat_map(|s| (s.to_u16() * widen).to_le_bytes()).collect())
             }
+            // `stored_wide` allows these only from samples of the same depth (f32 for half).
+            Depth::U32 | Depth::F32 => le_bytes(texels),
+            Depth::F16 => Cow::Owned(
+                bytemuck::cast_slice::<T, u32>(texels)
+                    .iter()
+                    .flat_map(|bits| half::f16::from_f32(f32::from_bits(*bits)).to_bits().to_le_bytes())
+                    .collect(),
+            ),
         }
     }
 
@@ -497,6 +542,7 @@ impl<T: Sample> TileEncoder<T> {
                 let widen = if T::DEPTH == Depth::U8 { 257 } else { 1 };
                 Cow::Owned(texels.iter().flat_map(|s| (s.to_u16() * widen).to_be_bytes()).collect())
             }
+            other => return Err(format!("PNG holds 8 or 16-bit samples, not {}", other.tile_type())),
         };
         let mut writer = enc.write_header().map_err(|e| e.to_string())?;
         writer.write_image_data(&data).map_err(|e| e.to_string())?;
@@ -504,18 +550,28 @@ impl<T: Sample> TileEncoder<T> {
     }
 }
 
-/// Samples as 8-bit, rounding 16-bit ones to the nearest 8-bit value.
+/// Samples as 8-bit, rounding 16-bit ones to the nearest 8-bit value. (32-bit and float
+/// samples never reach an 8-bit codec: `Codec::stored_wide` refuses them.)
 fn to_u8<T: Sample>(texels: &[T]) -> Cow<'_, [u8]> {
     match T::DEPTH {
-        Depth::U8 => Cow::Borrowed(bytemuck::cast_slice(texels)),
         Depth::U16 => Cow::Owned(texels.iter().map(|s| u16_to_u8(s.to_u16())).collect()),
+        _ => Cow::Borrowed(bytemuck::cast_slice(texels)),
     }
+}
+
+/// Samples as their little-endian bytes, as raw tiles store them.
+fn le_bytes<T: Sample>(texels: &[T]) -> Cow<'_, [u8]> {
+    let bytes: &[u8] = bytemuck::cast_slice(texels);
+    if cfg!(target_endian = "little") {
+        return Cow::Borrowed(bytes);
+    }
+    Cow::Owned(bytes.chunks_exact(T::DEPTH.bytes()).flat_map(|s| s.iter().rev().copied()).collect())
 }
 
 /// Composites straight alpha over `matte` (the colour channels of one texel), rounding once.
 fn flatten<T: Sample>(texels: &[T], channels: usize, matte: &[T]) -> Vec<T> {
     let colour = channels - 1;
-    let max = T::MAX as u64;
+    let max = T::MAX;
     let mut out = Vec::with_capacity(texels.len() / channels * colour);
     for px in texels.chunks_exact(channels) {
         let a = px[colour].to_u64();

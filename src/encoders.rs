@@ -277,7 +277,11 @@ enum Stored {
 /// such tiles as their colour.
 fn prepare<T: Sample>(encoder: &TileEncoder<T>, sink: &dyn TileSink, job: &Job<T>, texels: &[T]) -> Result<Stored> {
     let channels = encoder.source_layout().channels.count();
-    if sink.takes_constants() && texels.chunks_exact(channels).all(|t| t == &texels[..channels]) {
+    // A pack entry holds a constant texel of up to 8 bytes (not 3 or 4 samples of 32 bits).
+    if sink.takes_constants()
+        && encoder.stored_layout().bytes_per_pixel() <= 8
+        && texels.chunks_exact(channels).all(|t| t == &texels[..channels])
+    {
         return Ok(Stored::Constant(encoder.stored_texel(&texels[..channels])));
     }
     let mut bytes = Vec::new();

@@ -1,9 +1,14 @@
-//! Pixel layouts the pipeline carries: 1-4 channels of 8- or 16-bit unsigned samples.
+//! Pixel layouts the pipeline carries: 1-4 channels of 8-, 16- or 32-bit unsigned samples, or
+//! of 32-bit floats.
 //!
 //! The whole pipeline is generic over the sample type ([`Sample`]) so that 8-bit images pay
-//! for 8-bit bands, while 16-bit images keep every bit until the codec.
+//! for 8-bit bands, while 16-bit, 32-bit and float images keep every bit until the codec.
+//! Half floats (`--tile-type half`) are only a way to store float tiles: the pipeline carries
+//! them as `f32`, which holds every half exactly.
 
 use std::fmt;
+
+use crate::pyramid::reduce::{Acc, ExactRow};
 
 /// Channel arrangement of a texel, in the names `info.json` uses for `tileFormat`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -54,19 +59,41 @@ impl Channels {
     }
 }
 
-/// Bits per sample.
+/// What one sample is: its size and whether it is an unsigned integer or an IEEE float.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Depth {
     U8,
     U16,
+    /// 32-bit unsigned integers (counts, label images with many objects).
+    U32,
+    /// 32-bit IEEE floats (measurements, HDR, elevation).
+    F32,
+    /// 16-bit IEEE floats: a way to store `F32` tiles (`--tile-type half`, what a GPU uploads
+    /// as R16F), never what the pipeline carries.
+    F16,
 }
 
 impl Depth {
+    /// Every depth, in the order `--tile-type` lists them.
+    pub const ALL: [Depth; 5] = [Depth::U8, Depth::U16, Depth::U32, Depth::F32, Depth::F16];
+
     pub fn bytes(self) -> usize {
         match self {
             Depth::U8 => 1,
-            Depth::U16 => 2,
+            Depth::U16 | Depth::F16 => 2,
+            Depth::U32 | Depth::F32 => 4,
         }
+    }
+
+    /// Whether samples are IEEE floats rather than unsigned integers.
+    pub fn is_float(self) -> bool {
+        matches!(self, Depth::F32 | Depth::F16)
+    }
+
+    /// Whether this depth is one of the 8/16-bit integer depths that every codec and filter
+    /// takes; the others (32-bit, float) go through fewer of them.
+    pub fn is_narrow_int(self) -> bool {
+        matches!(self, Depth::U8 | Depth::U16)
     }
 
     /// `tileType` as written in `info.json`.
@@ -74,11 +101,24 @@ impl Depth {
         match self {
             Depth::U8 => "unsignedByte",
             Depth::U16 => "unsignedShort",
+            Depth::U32 => "unsignedInt",
+            Depth::F32 => "float",
+            Depth::F16 => "half",
         }
     }
 
     pub fn from_tile_type(name: &str) -> Option<Depth> {
-        [Depth::U8, Depth::U16].into_iter().find(|d| d.tile_type() == name)
+        Depth::ALL.into_iter().find(|d| d.tile_type() == name)
+    }
+
+    /// A pack header's `sample_format` for this depth (docs/pack-format.md).
+    pub fn pack_sample_format(self) -> u8 {
+        if self.is_float() { vortex_pack::format::SAMPLE_FLOAT } else { vortex_pack::format::SAMPLE_UNSIGNED }
+    }
+
+    /// The depth of a pack's `sample_bytes` and `sample_format`, if it is one.
+    pub fn from_pack(sample_bytes: u8, sample_format: u8) -> Option<Depth> {
+        Depth::ALL.into_iter().find(|d| d.bytes() == sample_bytes as usize && d.pack_sample_format() == sample_format)
     }
 }
 
@@ -102,62 +142,174 @@ impl PixelLayout {
 impl fmt::Display for PixelLayout {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let bits = self.depth.bytes() * 8;
-        write!(f, "{} {bits}-bit", self.channels.tile_format())
+        let kind = if self.depth.is_float() { " float" } else { "" };
+        write!(f, "{} {bits}-bit{kind}", self.channels.tile_format())
     }
 }
 
-/// A sample type the pipeline can carry. Sums are taken in `u64`, which holds the sum of
-/// 4^24 samples of 16 bits, far beyond any pyramid a 2^24-texel side can have (some LOD
-/// filters sum wider values, in `u128` where needed).
-pub trait Sample: Copy + Default + PartialEq + Send + Sync + Into<u64> + Into<u128> + bytemuck::Pod + 'static {
+/// A sample type the pipeline can carry: `u8`, `u16`, `u32` or `f32`.
+///
+/// The exact filters sum samples into [`Sample::Narrow`] where that cannot overflow over the
+/// pyramid's depth, [`Sample::Wide`] otherwise: `u64`/`u128` for the integers (a `u64` holds
+/// the sum of 4^24 samples of 16 bits, far beyond any pyramid a 2^24-texel side can have; 32-bit
+/// samples need the `u128` past 4^15 of them), [`FloatSum`] for floats.
+///
+/// The integer conversions (`to_u64`, `from_u64`, `from_u16`, `to_u16`) are those of the
+/// 8/16-bit filters and codecs (sRGB tables, premultiplying, 16-to-8 rounding). The filters and
+/// codecs that use them refuse 32-bit and float samples before a run starts.
+pub trait Sample: Copy + Default + PartialEq + Send + Sync + bytemuck::Pod + 'static {
     const DEPTH: Depth;
-    const MAX: u16;
+    /// The largest sample of an opaque alpha, as a `u64` (floats: 1.0, read as 1).
+    const MAX: u64;
+    /// Exact sums of pyramids shallow enough not to overflow them.
+    type Narrow: Acc + From<Self>;
+    /// Exact sums of any pyramid.
+    type Wide: Acc + From<Self>;
     fn to_u64(self) -> u64;
     /// Caller guarantees `v <= MAX`.
     fn from_u64(v: u64) -> Self;
+    /// Caller guarantees `v <= MAX`.
     fn from_u16(v: u16) -> Self;
+    /// An 8-bit value (a `--background` colour) scaled to the type's full range: times 257
+    /// for 16 bits, times 0x01010101 for 32, over 255 for floats (whose range is 0 to 1).
+    fn from_u8_scaled(v: u8) -> Self;
     fn to_u16(self) -> u16;
+    /// The means of an exact row's sums: each rounded half up to the nearest integer sample
+    /// (`box`), or for floats divided in f64 and rounded to the nearest `f32`.
+    fn means<A: Acc>(row: &ExactRow<'_, A>, out: &mut [Self]) {
+        row.map_means(out, Self::from_u64);
+    }
 }
 
-impl Sample for u8 {
-    const DEPTH: Depth = Depth::U8;
-    const MAX: u16 = u8::MAX as u16;
+macro_rules! int_sample {
+    ($t:ty, $depth:expr, $wide:ty) => {
+        impl Sample for $t {
+            const DEPTH: Depth = $depth;
+            const MAX: u64 = <$t>::MAX as u64;
+            type Narrow = u64;
+            type Wide = $wide;
+            #[inline]
+            fn to_u64(self) -> u64 {
+                self as u64
+            }
+            #[inline]
+            fn from_u64(v: u64) -> Self {
+                v as $t
+            }
+            #[inline]
+            fn from_u16(v: u16) -> Self {
+                v as $t
+            }
+            fn from_u8_scaled(v: u8) -> Self {
+                // The byte repeated: 0xAB -> 0xABAB -> 0xABABABAB, so 255 is the maximum.
+                (v as u64 * (<$t>::MAX as u64 / 255)) as $t
+            }
+            #[inline]
+            fn to_u16(self) -> u16 {
+                self as u16
+            }
+        }
+    };
+}
+
+int_sample!(u8, Depth::U8, u128);
+int_sample!(u16, Depth::U16, u128);
+int_sample!(u32, Depth::U32, u128);
+
+impl Sample for f32 {
+    const DEPTH: Depth = Depth::F32;
+    const MAX: u64 = 1;
+    type Narrow = FloatSum;
+    type Wide = FloatSum;
     #[inline]
     fn to_u64(self) -> u64 {
+        // Saturating, NaN to 0 (Rust's `as`): never reached by a float run, see the trait.
         self as u64
     }
     #[inline]
     fn from_u64(v: u64) -> Self {
-        v as u8
+        v as f32
     }
     #[inline]
     fn from_u16(v: u16) -> Self {
-        v as u8
+        v as f32
+    }
+    fn from_u8_scaled(v: u8) -> Self {
+        v as f32 / 255.0
     }
     #[inline]
     fn to_u16(self) -> u16 {
         self as u16
     }
+    fn means<A: Acc>(row: &ExactRow<'_, A>, out: &mut [Self]) {
+        row.map_float_means(out);
+    }
 }
 
-impl Sample for u16 {
-    const DEPTH: Depth = Depth::U16;
-    const MAX: u16 = u16::MAX;
+/// The exact pyramid's sum of `f32` samples: an `f64`, whose 53-bit mantissa holds the sum of
+/// 2^29 floats of one binade exactly; beyond that, and between magnitudes, each addition rounds
+/// once (the bound is in docs/sources.md, "More sample types", and tested in
+/// `tests/it/sample_types.rs`). NaN and infinities propagate as IEEE addition makes them: a
+/// footprint holding a NaN (or both infinities) is NaN, one holding an infinity is that infinity.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FloatSum(pub f64);
+
+impl std::ops::Add for FloatSum {
+    type Output = FloatSum;
     #[inline]
-    fn to_u64(self) -> u64 {
-        self as u64
+    fn add(self, other: FloatSum) -> FloatSum {
+        FloatSum(self.0 + other.0)
     }
+}
+
+impl From<f32> for FloatSum {
     #[inline]
-    fn from_u64(v: u64) -> Self {
-        v as u16
+    fn from(v: f32) -> FloatSum {
+        FloatSum(v as f64)
     }
-    #[inline]
-    fn from_u16(v: u16) -> Self {
-        v
+}
+
+impl From<u8> for FloatSum {
+    fn from(v: u8) -> FloatSum {
+        FloatSum(v as f64)
     }
-    #[inline]
-    fn to_u16(self) -> u16 {
-        self
+}
+
+impl From<u16> for FloatSum {
+    fn from(v: u16) -> FloatSum {
+        FloatSum(v as f64)
+    }
+}
+
+impl From<u64> for FloatSum {
+    fn from(v: u64) -> FloatSum {
+        FloatSum(v as f64)
+    }
+}
+
+impl Acc for FloatSum {
+    // The rounded integer means: what the integer filters would take, saturating (`as`). A
+    // float run reads `to_f64` instead (`Sample::means`).
+    fn round_shift(self, shift: u32) -> u64 {
+        (self.0 / (1u64 << shift) as f64).round() as u64
+    }
+    fn round_div(self, d: u64) -> u64 {
+        (self.0 / d as f64).round() as u64
+    }
+    fn round_ratio(self, d: Self) -> u64 {
+        (self.0 / d.0).round() as u64
+    }
+    fn to_f64(self) -> f64 {
+        self.0
+    }
+    const BYTES: usize = 8;
+    fn to_le(self, out: &mut [u8]) {
+        out.copy_from_slice(&self.0.to_le_bytes());
+    }
+    fn from_le(bytes: &[u8]) -> Self {
+        let mut b = [0; 8];
+        b.copy_from_slice(bytes);
+        FloatSum(f64::from_le_bytes(b))
     }
 }
 
@@ -187,8 +339,16 @@ mod tests {
         for c in [Channels::Grey, Channels::GreyAlpha, Channels::Rgb, Channels::Rgba] {
             assert_eq!(Channels::from_tile_format(c.tile_format()), Some(c));
         }
-        for d in [Depth::U8, Depth::U16] {
+        for d in Depth::ALL {
             assert_eq!(Depth::from_tile_type(d.tile_type()), Some(d));
+            assert_eq!(Depth::from_pack(d.bytes() as u8, d.pack_sample_format()), Some(d));
         }
+        assert_eq!(Depth::from_pack(1, vortex_pack::format::SAMPLE_FLOAT), None);
+    }
+
+    #[test]
+    fn a_background_byte_fills_each_range() {
+        assert_eq!((u8::from_u8_scaled(0xAB), u16::from_u8_scaled(0xAB)), (0xAB, 0xABAB));
+        assert_eq!((u32::from_u8_scaled(255), f32::from_u8_scaled(255)), (u32::MAX, 1.0));
     }
 }

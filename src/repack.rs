@@ -136,6 +136,7 @@ fn reencode_dir<T: Sample>(
     let description = Description {
         channels: stored.channels.count() as u8,
         sample_bytes: stored.depth.bytes() as u8,
+        sample_format: stored.depth.pack_sample_format(),
         ..t.description
     };
     let mut info = t.info.clone();
@@ -276,6 +277,8 @@ pub fn unpack(pack: &Pack, dir: &Claim, progress: &dyn Progress) -> Result<u64> 
                     let bytes = match layout.depth {
                         Depth::U8 => encode_constant::<u8>(codec, layout, d.tile_size, texel)?,
                         Depth::U16 => encode_constant::<u16>(codec, layout, d.tile_size, texel)?,
+                        // Raw and zstd packs are refused above: nothing holds these as files.
+                        other => return Err(no_files(other.tile_type())),
                     };
                     sink.write_tile(id.lod, id.x, id.y, &bytes)?
                 }

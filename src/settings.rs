@@ -149,13 +149,15 @@ pub fn resolve(
             field_err("tileFormat", format!("'{f}' is not supported (luminance, luminanceAlpha, rgb, rgba)"))
         })?),
     };
-    let info_depth =
-        match info.tile_type.as_deref() {
-            None => None,
-            Some(t) => Some(Depth::from_tile_type(t).ok_or_else(|| {
-                field_err("tileType", format!("'{t}' is not supported (unsignedByte, unsignedShort)"))
-            })?),
-        };
+    let info_depth = match info.tile_type.as_deref() {
+        None => None,
+        Some(t) => Some(Depth::from_tile_type(t).ok_or_else(|| {
+            field_err(
+                "tileType",
+                format!("'{t}' is not supported (unsignedByte, unsignedShort, unsignedInt, float, half)"),
+            )
+        })?),
+    };
     let tile_depth = req.tile_depth.or(info_depth);
     refuse_lossy_defaults(req, info, source, want_channels, info_depth, info_codec, &field_err)?;
     let flatten = req.flatten;
@@ -167,7 +169,7 @@ pub fn resolve(
     .filter(|f| f.is_label());
     if choice == CodecChoice::Auto {
         let lossless = (source.channels.has_alpha() && !flatten)
-            || tile_depth.unwrap_or(source.depth) == Depth::U16
+            || tile_depth.unwrap_or(source.depth) != Depth::U8
             || labels.is_some();
         choice = if lossless { CodecChoice::Png } else { CodecChoice::Jpeg };
     }
@@ -212,11 +214,13 @@ pub fn resolve(
         tile_depth,
         filter: match req.filter {
             Some(f) => f,
-            None => parse_member(info.filter.as_deref(), Filter::from_name, "filter", &field_err)?.unwrap_or_default(),
+            None => parse_member(info.filter.as_deref(), Filter::from_name, "filter", &field_err)?
+                .unwrap_or(Filter::default_for(source.depth)),
         },
         max_memory: req.max_memory.unwrap_or(crate::limits::DEFAULT_MEMORY),
         down_to_one_texel: false,
     };
+    opts.filter.check(source).map_err(TilerError::Options)?;
     let stored = codec.stored_layout(source, flatten, tile_depth)?;
     if let Some(want) = want_channels.filter(|c| *c != stored.channels) {
         return Err(field_err(
@@ -263,7 +267,7 @@ fn refuse_lossy_defaults(
             ),
         ));
     }
-    let lossless_source = (has_alpha && !req.flatten) || source.depth == Depth::U16;
+    let lossless_source = (has_alpha && !req.flatten) || source.depth != Depth::U8;
     let lossy = matches!(info_codec, Some(CodecChoice::Jpeg | CodecChoice::Bc1 | CodecChoice::Bc7));
     if lossless_source && lossy && req.codec.is_none() {
         return Err(field_err(
@@ -402,7 +406,7 @@ pub fn resolve_codec(req: &Requested, info_path: &Path, info: &InfoFile, source:
         |field: &str, message: String| TilerError::Info { path: info_path.to_path_buf(), field: field.into(), message };
     let mut choice = req.codec.or(info_codec(info, &field_err)?).unwrap_or(CodecChoice::Auto);
     if choice == CodecChoice::Auto {
-        let lossless = source.channels.has_alpha() || source.depth == Depth::U16;
+        let lossless = source.channels.has_alpha() || source.depth != Depth::U8;
         choice = if lossless { CodecChoice::Png } else { CodecChoice::Jpeg };
     }
     // Settings of the directory's own codec apply only to that codec.

@@ -21,7 +21,7 @@ use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::pyramid::Filter;
 use crate::pyramid::cascade::{Batch, BatchSender, Cascade, Derived, Span};
 use crate::pyramid::cut::Padding;
-use crate::pyramid::filter::ExactFilter;
+use crate::pyramid::filter::{ExactFilter, sums_need_u128};
 use crate::pyramid::reduce::{Acc, Reducer};
 use crate::pyramid::stripes::Plan;
 use crate::shard::merge::RootRows;
@@ -125,6 +125,13 @@ pub(crate) fn split_shard(
     progress: &dyn Progress,
 ) -> Result<(Summary, Vec<EncodedRoots>)> {
     let layout = opts.layout(source.width(), source.height())?;
+    if !source.layout().depth.is_narrow_int() {
+        // A shard's manifest names its texels by their size alone, which f32 and u32 share.
+        return Err(TilerError::Options(format!(
+            "--shard takes 8- and 16-bit images; the source is {}: split it on one machine",
+            source.layout()
+        )));
+    }
     by_depth(source.header(), sink, opts, layout, Passes::Shard(spans, source), progress)
 }
 
@@ -143,20 +150,25 @@ pub(crate) fn above_cut(
 }
 
 /// Largest value one source pixel adds to an exact sum of a run of `opts` on `source`.
+/// (Floats: the sums are `f64`, which do not overflow; this is `u32::MAX` for them, unused.)
 pub fn max_summand(opts: &SplitOptions, source: PixelLayout) -> u64 {
     match ExactFilter::new(opts.filter, source) {
         Some(filter) => filter.max_value(),
+        None if source.depth.is_float() => u32::MAX as u64,
         None => (1 << (8 * source.depth.bytes())) - 1,
     }
 }
 
 /// Bytes of one exact sum of a run of `opts` on a `source` image cut into `layout`: 8, or 16
-/// where the filter's sums could overflow a `u64` over the pyramid's depth.
+/// where the filter's sums could overflow a `u64` over the pyramid's depth (32-bit samples'
+/// `box` past 4^15 pixels a texel). Float sums are 8-byte `f64`s.
 pub fn sum_bytes(opts: &SplitOptions, source: PixelLayout, layout: &Layout) -> usize {
-    match ExactFilter::new(opts.filter, source).is_some_and(|f| f.needs_u128(layout.lod_count)) {
-        true => 16,
-        false => 8,
-    }
+    let wide = match source.depth {
+        Depth::U32 => sums_need_u128(u32::MAX as u64, layout.lod_count),
+        Depth::F32 | Depth::F16 => false,
+        Depth::U8 | Depth::U16 => ExactFilter::new(opts.filter, source).is_some_and(|f| f.needs_u128(layout.lod_count)),
+    };
+    if wide { 16 } else { 8 }
 }
 
 /// What a run reads, and in which passes.
@@ -180,6 +192,11 @@ fn by_depth(
     match image.layout.depth {
         Depth::U8 => run::<u8>(image.layout, sink, opts, layout, passes, progress),
         Depth::U16 => run::<u16>(image.layout, sink, opts, layout, passes, progress),
+        Depth::U32 => run::<u32>(image.layout, sink, opts, layout, passes, progress),
+        Depth::F32 => run::<f32>(image.layout, sink, opts, layout, passes, progress),
+        Depth::F16 => Err(TilerError::Options(
+            "half-float samples are read as 32-bit floats; a source never hands them on as half".into(),
+        )),
     }
 }
 
@@ -223,8 +240,8 @@ fn run<T: Sample>(
                 clock: producer_clock,
             };
             let result = producer.clock.time(Stage::Producer, || match sum_bytes(opts, src_layout, &layout) {
-                16 => producer.run::<u128>(passes),
-                _ => producer.run::<u64>(passes),
+                16 => producer.run::<T::Wide>(passes),
+                _ => producer.run::<T::Narrow>(passes),
             });
             // An error goes to the consumer, which stops and returns it.
             result.unwrap_or_else(|e| {

@@ -169,14 +169,17 @@ fn image_kind(path: &Path) -> Option<&'static str> {
 
 /// One texel of `background` in the grid's layout, native-endian; zeros without a colour.
 fn fill_texel(background: Option<Background>, layout: PixelLayout) -> Vec<u8> {
+    fn bytes<T: vortex_tiler::pixel::Sample>(colour: Background, layout: PixelLayout) -> Vec<u8> {
+        let texel = colour.texel::<T>(layout.channels).unwrap_or_else(|| vec![T::default(); layout.channels.count()]);
+        bytemuck::cast_slice(&texel).to_vec()
+    }
     let colour = background.unwrap_or_default();
     match layout.depth {
-        Depth::U8 => colour.texel::<u8>(layout.channels).unwrap_or_else(|| vec![0; layout.channels.count()]),
-        Depth::U16 => colour
-            .texel::<u16>(layout.channels)
-            .unwrap_or_else(|| vec![0; layout.channels.count()])
-            .iter()
-            .flat_map(|s| s.to_ne_bytes())
-            .collect(),
+        Depth::U8 => bytes::<u8>(colour, layout),
+        Depth::U16 => bytes::<u16>(colour, layout),
+        Depth::U32 => bytes::<u32>(colour, layout),
+        Depth::F32 => bytes::<f32>(colour, layout),
+        // Never a grid the pipeline reads (half is a stored type only).
+        Depth::F16 => vec![0; layout.bytes_per_pixel()],
     }
 }

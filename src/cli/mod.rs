@@ -262,7 +262,8 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 fn parse_tile_type(s: &str) -> Result<Depth, String> {
-    Depth::from_tile_type(s).ok_or_else(|| format!("'{s}' is not a tile type (unsignedByte, unsignedShort)"))
+    Depth::from_tile_type(s)
+        .ok_or_else(|| format!("'{s}' is not a tile type (unsignedByte, unsignedShort, unsignedInt, float, half)"))
 }
 
 /// `1048576`, `512K`, `64M`, `2G`, `1GiB`...

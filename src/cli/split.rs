@@ -173,12 +173,15 @@ pub struct OutputArgs {
     /// label (segmentation) images: each texel is one of its 2x2 block in the previous LOD (the
     /// most frequent, ties to the first of top-left, top-right, bottom-left, bottom-right; or
     /// the top-left), so no level holds a value the image does not; lossless codecs only.
-    /// --layout ome-zarr defaults to box.
+    /// --layout ome-zarr defaults to box. 32-bit integer and float images default to box (their
+    /// values are not sRGB codes) and take box, nearest and (integers) mode only.
     #[arg(long, value_parser = super::named::<Filter>())]
     filter: Option<Filter>,
 
-    /// Sample type of stored tiles: unsignedByte or unsignedShort (png, raw, zstd, zstd-delta)
-    /// [default: the source's].
+    /// Sample type of stored tiles: unsignedByte or unsignedShort (png, raw, zstd, zstd-delta),
+    /// or for a float source half (raw, zstd: 16-bit floats, what a GPU uploads as R16F, half
+    /// the bytes; rounded to nearest even, beyond 65504 infinite) [default: the source's;
+    /// 32-bit integer and float sources keep unsignedInt and float].
     #[arg(long, value_name = "TYPE", value_parser = super::parse_tile_type)]
     tile_type: Option<Depth>,
 

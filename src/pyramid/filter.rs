@@ -121,6 +121,37 @@ impl Filter {
         matches!(self, Filter::Mode | Filter::Nearest)
     }
 
+    /// The filter a run uses on `depth` samples when none is asked for: the default for 8- and
+    /// 16-bit images, `box` for 32-bit and float ones (their values are not sRGB codes).
+    pub fn default_for(depth: Depth) -> Filter {
+        if depth.is_narrow_int() { Filter::default() } else { Filter::Box }
+    }
+
+    /// Refuses a filter that makes no sense on `layout`: the linear-light and premultiplied
+    /// filters decode 8/16-bit sRGB codes and weigh them by an alpha of that range, and
+    /// lanczos3/mitchell resample 8/16-bit levels, so 32-bit and float images take `box` (an
+    /// exact mean), `nearest`, and for 32-bit integers (label images) `mode` too.
+    pub fn check(self, layout: PixelLayout) -> Result<(), String> {
+        let depth = layout.depth;
+        let ok = match self {
+            _ if depth.is_narrow_int() => true,
+            Filter::Box | Filter::Nearest => true,
+            Filter::Mode => !depth.is_float(),
+            _ => false,
+        };
+        if ok {
+            return Ok(());
+        }
+        let why = match self {
+            Filter::Mode => "mode compares values exactly, which float samples are not made for; use nearest or box",
+            Filter::Lanczos3 | Filter::Mitchell => {
+                "it resamples 8- and 16-bit levels; use box (an exact mean) or, for label images, mode or nearest"
+            }
+            _ => "it decodes 8- and 16-bit sRGB codes (and their alpha); use box, the exact mean of the stored values",
+        };
+        Err(format!("--filter {self} cannot take a {layout} image: {why}"))
+    }
+
     fn linear(self) -> bool {
         matches!(self, Filter::Linear | Filter::LinearPremultiplied)
     }
@@ -188,7 +219,8 @@ impl SrgbTable {
         static U16: OnceLock<SrgbTable> = OnceLock::new();
         match depth {
             Depth::U8 => U8.get_or_init(|| SrgbTable::build(255, 65535)),
-            Depth::U16 => U16.get_or_init(|| SrgbTable::build(65535, (1 << 20) - 1)),
+            // `Filter::check` keeps 32-bit and float samples away from the sRGB tables.
+            _ => U16.get_or_init(|| SrgbTable::build(65535, (1 << 20) - 1)),
         }
     }
 
@@ -240,14 +272,12 @@ impl ExactFilter {
     pub fn new(filter: Filter, layout: PixelLayout) -> Option<ExactFilter> {
         let alpha = layout.channels.has_alpha().then(|| layout.channels.count() - 1);
         let premultiplied = filter.premultiplied() && alpha.is_some();
-        if !filter.is_exact() || (!filter.linear() && !premultiplied) {
+        // 32-bit and float samples take box alone of the exact filters (`Filter::check`).
+        if !filter.is_exact() || (!filter.linear() && !premultiplied) || !layout.depth.is_narrow_int() {
             return None;
         }
         let table = filter.linear().then(|| SrgbTable::get(layout.depth));
-        let sample_max = match layout.depth {
-            Depth::U8 => 255u64,
-            Depth::U16 => 65535,
-        };
+        let sample_max = if layout.depth == Depth::U8 { 255u64 } else { 65535 };
         let colour_max = table.map_or(sample_max, |t| t.scale as u64);
         let max_value = if premultiplied { colour_max * sample_max } else { colour_max };
         Some(ExactFilter { table, premultiplied, channels: layout.channels.count(), alpha, max_value })

@@ -27,6 +27,8 @@ pub trait Acc:
     fn round_div(self, d: u64) -> u64;
     /// `round_half_up(self / d)` for a divisor that is itself a sum (`d > 0`).
     fn round_ratio(self, d: Self) -> u64;
+    /// The sum as an `f64` (rounded to nearest where it does not fit), for float means.
+    fn to_f64(self) -> f64;
     /// Bytes of one sum, as a shard stores it (little-endian).
     const BYTES: usize;
     fn to_le(self, out: &mut [u8]);
@@ -45,6 +47,9 @@ impl Acc for u64 {
     #[inline]
     fn round_ratio(self, d: u64) -> u64 {
         (2 * self + d) / (2 * d)
+    }
+    fn to_f64(self) -> f64 {
+        self as f64
     }
     const BYTES: usize = 8;
     fn to_le(self, out: &mut [u8]) {
@@ -69,6 +74,9 @@ impl Acc for u128 {
     #[inline]
     fn round_ratio(self, d: u128) -> u64 {
         ((2 * self + d) / (2 * d)) as u64
+    }
+    fn to_f64(self) -> f64 {
+        self as f64
     }
     const BYTES: usize = 16;
     fn to_le(self, out: &mut [u8]) {
@@ -212,8 +220,20 @@ impl<A: Acc> Reducer<A> {
 
 impl<A: Acc> ExactRow<'_, A> {
     /// The row's texels rounded to the nearest sample value (halves round up): the `box` filter.
+    /// Float samples: each sum divided by its pixel count in f64, then rounded to the nearest
+    /// `f32` (see [`crate::pixel::FloatSum`] for the bound).
     pub fn round_into<T: Sample>(&self, out: &mut [T]) {
-        self.map_means(out, T::from_u64);
+        T::means(self, out);
+    }
+
+    /// `out[i] = mean i` in f64, rounded to the nearest `f32`: a power-of-two divisor for the
+    /// complete footprints is exact, any other one rounds once.
+    pub fn map_float_means(&self, out: &mut [f32]) {
+        debug_assert_eq!(out.len(), self.sums.len());
+        let c = self.channels;
+        for (i, (o, s)) in out.iter_mut().zip(self.sums).enumerate() {
+            *o = (s.to_f64() / self.weight(i / c) as f64) as f32;
+        }
     }
 
     /// `out[i] = f(mean i)`: every sum divided by its texel's pixel count, rounded half up, in

@@ -75,11 +75,14 @@ pub fn render(page: Page, job: &Job) -> Result<Bytes, String> {
     if (decoded.width, decoded.height) != (job.side, job.side) {
         return Err(format!("the page is {}x{}, not {side}x{side}", decoded.width, decoded.height, side = job.side));
     }
+    if !decoded.layout.depth.is_narrow_int() {
+        return Err(format!("{} pages have no image tile to serve (JPEG and PNG hold 8 or 16 bits)", decoded.layout));
+    }
     let (decoded, crop) = if job.halvings > 0 { halved_page(&decoded, job)? } else { (decoded, job.crop) };
     let mut out = Vec::new();
     match decoded.layout.depth {
         Depth::U8 => encoder::<u8>(job, decoded.layout)?.encode_crop(&decoded.bytes, crop, &mut out)?,
-        Depth::U16 => {
+        _ => {
             let samples: Vec<u16> = bytemuck::pod_collect_to_vec(&decoded.bytes);
             encoder::<u16>(job, decoded.layout)?.encode_crop(&samples, crop, &mut out)?
         }
@@ -121,7 +124,8 @@ fn halved_page(page: &Decoded, job: &Job) -> Result<(Decoded, Crop), String> {
 }
 
 /// A 2 x 2 box halving of a `w x h` image of native-endian samples: each texel the mean of the
-/// real texels under it (one or two on an odd edge), rounded half up.
+/// real texels under it (one or two on an odd edge), rounded half up. 8- and 16-bit samples
+/// only (`render` serves no others).
 pub fn halve(image: &[u8], w: u32, h: u32, layout: PixelLayout) -> (Vec<u8>, u32, u32) {
     let (nw, nh) = (w.div_ceil(2), h.div_ceil(2));
     let channels = layout.channels.count();
@@ -130,7 +134,7 @@ pub fn halve(image: &[u8], w: u32, h: u32, layout: PixelLayout) -> (Vec<u8>, u32
         let at = ((y as usize * w as usize + x as usize) * channels + c) * sample_bytes;
         match layout.depth {
             Depth::U8 => image[at] as u64,
-            Depth::U16 => u16::from_ne_bytes([image[at], image[at + 1]]) as u64,
+            _ => u16::from_ne_bytes([image[at], image[at + 1]]) as u64,
         }
     };
     let mut out = Vec::with_capacity(nw as usize * nh as usize * channels * sample_bytes);
@@ -145,7 +149,7 @@ pub fn halve(image: &[u8], w: u32, h: u32, layout: PixelLayout) -> (Vec<u8>, u32
                 let mean = (sum + n / 2) / n;
                 match layout.depth {
                     Depth::U8 => out.push(mean as u8),
-                    Depth::U16 => out.extend_from_slice(&(mean as u16).to_ne_bytes()),
+                    _ => out.extend_from_slice(&(mean as u16).to_ne_bytes()),
                 }
             }
         }

@@ -30,6 +30,7 @@ pub fn pack_description(layout: &Layout, stored: PixelLayout) -> Description {
         level_count: layout.lod_count,
         channels: stored.channels.count() as u8,
         sample_bytes: stored.depth.bytes() as u8,
+        sample_format: stored.depth.pack_sample_format(),
     }
 }
 

@@ -45,6 +45,8 @@ fn format_of(layout: PixelLayout) -> PixelFormat {
         (Channels::GreyAlpha, Depth::U16) => PixelFormat::GRAYA_16,
         (Channels::Rgb, Depth::U16) => PixelFormat::RGB_16,
         (Channels::Rgba, Depth::U16) => PixelFormat::RGBA_16,
+        // `to_srgb` converts 8- and 16-bit images only.
+        (_, _) => PixelFormat::RGBA_16,
     }
 }
 
@@ -88,6 +90,14 @@ pub fn to_srgb(path: &Path, inner: Box<dyn RowSource>, icc: &[u8]) -> Result<Box
             "they do not match",
         ));
     }
+    if !layout.depth.is_narrow_int() {
+        // Colour management of measurements (float, 32-bit) is not what their users want.
+        return Ok(Box::new(Described {
+            inner,
+            note: format!("ICC profile of a {layout} image kept as data, not converted"),
+            transform: None,
+        }));
+    }
     let format = format_of(layout);
     let transform = RowTransform::new_flags_context(
         ThreadContext::new(),
@@ -123,7 +133,7 @@ fn is_identity(transform: &RowTransform, layout: PixelLayout) -> bool {
         for &s in v {
             match layout.depth {
                 Depth::U8 => probe.push(s as u8),
-                Depth::U16 => probe.extend_from_slice(&(s * 257).to_ne_bytes()),
+                _ => probe.extend_from_slice(&(s * 257).to_ne_bytes()),
             }
         }
     };
@@ -142,13 +152,10 @@ fn is_identity(transform: &RowTransform, layout: PixelLayout) -> bool {
     }
     let mut out = probe.clone();
     transform.transform_in_place(&mut out);
-    let step = match layout.depth {
-        Depth::U8 => 1,
-        Depth::U16 => 257,
-    };
+    let step = if layout.depth == Depth::U8 { 1 } else { 257 };
     match layout.depth {
         Depth::U8 => probe.iter().zip(&out).all(|(a, b)| a.abs_diff(*b) <= step as u8),
-        Depth::U16 => {
+        _ => {
             let wide = |v: &[u8]| -> Vec<u16> { v.chunks_exact(2).map(|c| u16::from_ne_bytes([c[0], c[1]])).collect() };
             wide(&probe).iter().zip(&wide(&out)).all(|(a, b)| a.abs_diff(*b) <= step)
         }

@@ -93,7 +93,8 @@ impl RowSource for PngSource {
         }
         match self.layout.depth {
             Depth::U8 => out.copy_from_slice(data),
-            Depth::U16 => {
+            // PNG has 8 and 16 bits only.
+            _ => {
                 for (o, i) in out.chunks_exact_mut(2).zip(data.chunks_exact(2)) {
                     o.copy_from_slice(&u16::from_be_bytes([i[0], i[1]]).to_ne_bytes());
                 }

@@ -145,7 +145,8 @@ impl RowSource for PnmSource {
                     *o = ((*v as u32).min(m) * 255 * 2 + m).div_euclid(2 * m) as u8;
                 }
             }
-            (Depth::U16, m) => {
+            // PNM has 8 and 16 bits only.
+            (_, m) => {
                 for (o, i) in out.chunks_exact_mut(2).zip(data.chunks_exact(2)) {
                     let v = (u16::from_be_bytes([i[0], i[1]]) as u32).min(m);
                     let v = if m == 65535 { v } else { ((v as u64 * 65535 * 2 + m as u64) / (2 * m as u64)) as u32 };

@@ -78,6 +78,7 @@ impl TiledDir {
             level_count: lod_count,
             channels: channels.count() as u8,
             sample_bytes: depth.bytes() as u8,
+            sample_format: depth.pack_sample_format(),
         };
         let levels = if info.tile_columns.is_some() {
             // A per-axis grid is the one the image and tile size give.

@@ -56,7 +56,8 @@ fn read_all(mut source: Box<dyn RowSource>) -> (u32, u32, PixelLayout, Vec<u16>)
         source.read_row(&mut row).unwrap();
         match layout.depth {
             Depth::U8 => all.extend(row.iter().map(|&v| v as u16)),
-            Depth::U16 => all.extend(row.chunks_exact(2).map(|b| u16::from_ne_bytes([b[0], b[1]]))),
+            // These sources are 8- or 16-bit.
+            _ => all.extend(row.chunks_exact(2).map(|b| u16::from_ne_bytes([b[0], b[1]]))),
         }
     }
     (w, h, layout, all)
@@ -91,7 +92,7 @@ fn picture(width: u32, height: u32, layout: PixelLayout) -> Vec<u8> {
                 match layout.depth {
                     Depth::U8 => v.push(value as u8),
                     // Low bits that 8-bit sources lack.
-                    Depth::U16 => v.extend_from_slice(&(value * 257).saturating_add(x as u16).to_be_bytes()),
+                    _ => v.extend_from_slice(&(value * 257).saturating_add(x as u16).to_be_bytes()),
                 }
             }
         }

@@ -23,6 +23,7 @@ mod pack_cli;
 mod pmtiles;
 mod remote_pack;
 mod render;
+mod sample_types;
 mod serve;
 mod serve_hostile;
 mod shard;

@@ -24,7 +24,7 @@ fn write_png(path: &Path, image: &Image) {
     });
     let bytes: Vec<u8> = match image.layout.depth {
         Depth::U8 => image.samples.iter().map(|v| *v as u8).collect(),
-        Depth::U16 => {
+        _ => {
             enc.set_depth(png::BitDepth::Sixteen);
             image.samples.iter().flat_map(|v| v.to_be_bytes()).collect()
         }
@@ -81,7 +81,7 @@ fn reference_chunk(tiles: &Path, lod: u32, x: u32, y: u32, layout: PixelLayout) 
         for v in samples.iter().skip(ch).step_by(c) {
             match layout.depth {
                 Depth::U8 => planar.push(*v as u8),
-                Depth::U16 => planar.extend_from_slice(&v.to_le_bytes()),
+                _ => planar.extend_from_slice(&v.to_le_bytes()),
             }
         }
     }

@@ -38,8 +38,8 @@ fn pyramid<T: Sample>(
     }
     let deepest = Layout::new(w as u64, h as u64, 8, 0).unwrap().lod_count.max(levels + 1);
     match ExactFilter::new(filter, layout) {
-        Some(f) if f.needs_u128(deepest) => exact::<T, u128>(src, w, h, layout, Some(f), levels),
-        f => exact::<T, u64>(src, w, h, layout, f, levels),
+        Some(f) if f.needs_u128(deepest) => exact::<T, T::Wide>(src, w, h, layout, Some(f), levels),
+        f => exact::<T, T::Narrow>(src, w, h, layout, f, levels),
     }
 }
 

@@ -30,6 +30,7 @@ fn main() {
         level_count: 10,
         channels: 3,
         sample_bytes: 1,
+        sample_format: 0,
     };
     let levels = pyramid_levels(&d, 512);
     let started = Instant::now();

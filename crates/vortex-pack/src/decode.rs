@@ -100,6 +100,7 @@ pub fn payload_texels(kind: TileKind, bytes: &[u8], d: &Description, max_bytes: 
 
 /// A tile whose every texel is `value` (channels x sample bytes, little-endian).
 pub(crate) fn constant_rgba8(d: &Description, value: &[u8], max_bytes: u64) -> Result<Vec<u8>, String> {
+    refuse_wide(d)?;
     let len = rgba_len(d, max_bytes)?;
     let texel = texels_to_rgba8(value, d.channels, d.sample_bytes, Endian::Little)?;
     let mut out = alloc(len)?;
@@ -124,6 +125,7 @@ impl PayloadDecoder {
         d: &Description,
         max_bytes: u64,
     ) -> Result<Vec<u8>, String> {
+        refuse_wide(d)?;
         let rgba = rgba_len(d, max_bytes)?;
         let out = match kind {
             TileKind::Raw => {
@@ -233,6 +235,15 @@ fn alloc(len: u64) -> Result<Vec<u8>, String> {
 enum Endian {
     Little,
     Big,
+}
+
+/// 32-bit and float samples have no one RGBA8 form (which range would map to 0-255?): their
+/// texels are read with [`payload_texels`].
+fn refuse_wide(d: &Description) -> Result<(), String> {
+    if d.required_features() != 0 {
+        return Err(format!("{} have no RGBA8 form; read the texels (payload_texels)", d.texel_name()));
+    }
+    Ok(())
 }
 
 /// Packed texels of `channels` samples of `sample_bytes` each, as RGBA8.

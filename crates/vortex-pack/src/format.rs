@@ -16,8 +16,16 @@ pub const ENTRY_LEN: usize = 24;
 /// Required-feature bit 0: the pack holds `zstd-delta` tiles (kind 8), which a 1.0 reader does
 /// not know. A writer sets it exactly when it stores such a tile.
 pub const REQUIRED_ZSTD_DELTA: u64 = 1 << 0;
+/// Required-feature bit 1: the samples are 32-bit, or floats ([`Description::sample_format`]
+/// 1): a 1.1 reader without this bit would take float bits for integers. A writer sets it
+/// exactly for such packs, so that every other pack's bytes are as 1.1 made them.
+pub const REQUIRED_WIDE_SAMPLES: u64 = 1 << 1;
 /// Required-feature bits this reader understands.
-pub const KNOWN_REQUIRED_FEATURES: u64 = REQUIRED_ZSTD_DELTA;
+pub const KNOWN_REQUIRED_FEATURES: u64 = REQUIRED_ZSTD_DELTA | REQUIRED_WIDE_SAMPLES;
+/// [`Description::sample_format`] of unsigned integer samples.
+pub const SAMPLE_UNSIGNED: u8 = 0;
+/// [`Description::sample_format`] of IEEE 754 float samples (binary16 or binary32).
+pub const SAMPLE_FLOAT: u8 = 1;
 
 /// How a tile's bytes are stored.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -98,8 +106,10 @@ pub struct Description {
     pub level_count: u32,
     /// 1 grey, 2 grey+alpha, 3 RGB, 4 RGBA.
     pub channels: u8,
-    /// 1 or 2.
+    /// 1, 2 or 4.
     pub sample_bytes: u8,
+    /// What a sample is: [`SAMPLE_UNSIGNED`] (0) or [`SAMPLE_FLOAT`] (1, with 2 or 4 bytes).
+    pub sample_format: u8,
 }
 
 impl Description {
@@ -119,6 +129,28 @@ impl Description {
             TileKind::Bc7 => Some(blocks * 16),
             _ => None,
         }
+    }
+
+    /// Whether the texel format is one a pack holds: 1-4 channels of 1, 2 or 4-byte unsigned
+    /// samples or 2 or 4-byte floats.
+    pub fn texel_ok(&self) -> bool {
+        (1..=4).contains(&self.channels)
+            && match self.sample_format {
+                SAMPLE_UNSIGNED => matches!(self.sample_bytes, 1 | 2 | 4),
+                SAMPLE_FLOAT => matches!(self.sample_bytes, 2 | 4),
+                _ => false,
+            }
+    }
+
+    /// The required-feature bits the texel format needs ([`REQUIRED_WIDE_SAMPLES`]).
+    pub fn required_features(&self) -> u64 {
+        if self.sample_bytes == 4 || self.sample_format != SAMPLE_UNSIGNED { REQUIRED_WIDE_SAMPLES } else { 0 }
+    }
+
+    /// The texel format in words, for messages.
+    pub fn texel_name(&self) -> String {
+        let kind = if self.sample_format == SAMPLE_FLOAT { " float" } else { "" };
+        format!("{} channels of {} bytes{kind}", self.channels, self.sample_bytes)
     }
 
     /// Why tiles of `kind` cannot be stored in a pack of this description, if they cannot: BC
@@ -148,9 +180,10 @@ impl Description {
 }
 
 /// The row filter of `zstd-delta` tiles, in place: in each row of `width` texels of `channels`
-/// samples of `sample_bytes` (1, or 2 little-endian), every sample after the row's first texel
-/// becomes its difference from the same channel's sample of the texel to its left, modulo
-/// 2^(8 x sample_bytes). Rows are independent; a partial row at the end is filtered as a row.
+/// samples of `sample_bytes` (1, or 2 or 4 little-endian; floats as their bits), every sample
+/// after the row's first texel becomes its difference from the same channel's sample of the
+/// texel to its left, modulo 2^(8 x sample_bytes). Rows are independent; a partial row at the
+/// end is filtered as a row.
 pub fn delta_encode_rows(bytes: &mut [u8], width: usize, channels: usize, sample_bytes: usize) {
     let texel = channels * sample_bytes;
     for row in bytes.chunks_mut((width * texel).max(1)) {
@@ -161,6 +194,13 @@ pub fn delta_encode_rows(bytes: &mut [u8], width: usize, channels: usize, sample
                     let v = u16::from_le_bytes([row[i], row[i + 1]]);
                     let left = u16::from_le_bytes([row[i - texel], row[i + 1 - texel]]);
                     row[i..i + 2].copy_from_slice(&v.wrapping_sub(left).to_le_bytes());
+                }
+            }
+            4 => {
+                for i in (texel..row.len() - row.len() % 4).step_by(4).rev() {
+                    let v = u32_at(row, i);
+                    let left = u32_at(row, i - texel);
+                    row[i..i + 4].copy_from_slice(&v.wrapping_sub(left).to_le_bytes());
                 }
             }
             _ => {
@@ -182,6 +222,13 @@ pub fn delta_decode_rows(bytes: &mut [u8], width: usize, channels: usize, sample
                     let d = u16::from_le_bytes([row[i], row[i + 1]]);
                     let left = u16::from_le_bytes([row[i - texel], row[i + 1 - texel]]);
                     row[i..i + 2].copy_from_slice(&d.wrapping_add(left).to_le_bytes());
+                }
+            }
+            4 => {
+                for i in (texel..row.len() - row.len() % 4).step_by(4) {
+                    let d = u32_at(row, i);
+                    let left = u32_at(row, i - texel);
+                    row[i..i + 4].copy_from_slice(&d.wrapping_add(left).to_le_bytes());
                 }
             }
             _ => {
@@ -289,6 +336,8 @@ pub mod at {
     pub const LEVEL_COUNT: usize = 64;
     pub const CHANNELS: usize = 68;
     pub const SAMPLE_BYTES: usize = 69;
+    /// Since 1.1 with required-feature bit 1; zero (unsigned) in every other pack.
+    pub const SAMPLE_FORMAT: usize = 70;
     pub const ALIGNMENT: usize = 72;
     pub const PAYLOAD_ALIGNMENT: usize = 76;
     pub const LEVELS_OFFSET: usize = 80;
@@ -326,6 +375,7 @@ impl Header {
         put_u32(&mut b, at::LEVEL_COUNT, d.level_count);
         b[at::CHANNELS] = d.channels;
         b[at::SAMPLE_BYTES] = d.sample_bytes;
+        b[at::SAMPLE_FORMAT] = d.sample_format;
         put_u32(&mut b, at::ALIGNMENT, self.alignment);
         put_u32(&mut b, at::PAYLOAD_ALIGNMENT, self.payload_alignment);
         put_u64(&mut b, at::LEVELS_OFFSET, self.levels_offset);
@@ -360,6 +410,7 @@ impl Header {
                 level_count: u32_at(b, at::LEVEL_COUNT),
                 channels: b[at::CHANNELS],
                 sample_bytes: b[at::SAMPLE_BYTES],
+                sample_format: b[at::SAMPLE_FORMAT],
             },
             alignment: u32_at(b, at::ALIGNMENT),
             payload_alignment: u32_at(b, at::PAYLOAD_ALIGNMENT),

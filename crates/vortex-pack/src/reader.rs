@@ -298,7 +298,7 @@ impl PackHead {
         if crc32c::crc32c(&b[..format::at::HEADER_CRC]) != stored_crc {
             return Err(corrupt(format::at::HEADER_CRC as u64, "header checksum mismatch".into()));
         }
-        let reserved = [70usize, 71].into_iter().chain(format::at::RESERVED..format::at::HEADER_CRC);
+        let reserved = [71usize].into_iter().chain(format::at::RESERVED..format::at::HEADER_CRC);
         if let Some(at) = reserved.into_iter().find(|at| b[*at] != 0) {
             return Err(corrupt(at as u64, "reserved byte is not zero".into()));
         }
@@ -440,7 +440,12 @@ impl PackHead {
             TileKind::Absent => Ok(Place::Absent),
             TileKind::Constant => {
                 let d = &self.header.description;
-                Ok(Place::Constant(&raw[..d.channels as usize * d.sample_bytes as usize]))
+                let n = d.channels as usize * d.sample_bytes as usize;
+                if n > 8 {
+                    let message = format!("a constant tile, but a texel of {n} bytes does not fit an entry");
+                    return Err(self.tile_error(id, entry_at + 16, message));
+                }
+                Ok(Place::Constant(&raw[..n]))
             }
             _ => {
                 let (start, end) = (e.offset_or_value, e.offset_or_value.checked_add(e.len as u64));
@@ -505,11 +510,12 @@ fn check_header(h: &Header, file_len: u64) -> std::result::Result<(), (u64, Stri
             format!("the header says {} bytes but the file has {file_len}: {what}", h.file_len),
         ));
     }
-    if !(1..=4).contains(&d.channels) || !(1..=2).contains(&d.sample_bytes) {
-        return Err((
-            at::CHANNELS as u64,
-            format!("{} channels of {} bytes is not a texel format", d.channels, d.sample_bytes),
-        ));
+    if !d.texel_ok() {
+        return Err((at::CHANNELS as u64, format!("{} is not a texel format", d.texel_name())));
+    }
+    if h.required_features & d.required_features() != d.required_features() {
+        let message = format!("{} samples without required-feature bit {:#x}", d.texel_name(), d.required_features());
+        return Err((at::REQUIRED as u64, message));
     }
     if d.tile_size == 0 || d.border.checked_mul(2).is_none_or(|b| b >= d.tile_size) || d.width == 0 || d.height == 0 {
         return Err((

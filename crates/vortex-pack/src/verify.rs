@@ -381,7 +381,10 @@ impl Verifier<'_> {
                         let message = "a constant entry's length and checksum must be zero".into();
                         self.problem("index", Some(entry_at + 8 + i as u64), tile, message);
                     }
-                    if let Some(i) = raw[texel..8].iter().position(|b| *b != 0) {
+                    if texel > 8 {
+                        let message = format!("a constant tile, but a {texel}-byte texel does not fit an entry");
+                        self.problem("index", Some(entry_at + 16), tile, message);
+                    } else if let Some(i) = raw[texel..8].iter().position(|b| *b != 0) {
                         let message = format!("the bytes after the {texel}-byte constant value must be zero");
                         self.problem("index", Some(entry_at + (texel + i) as u64), tile, message);
                     }

@@ -100,8 +100,8 @@ impl PackWriter {
         }
         // What the reader refuses, refused here (a texel over 8 bytes would not fit an entry).
         let d = &description;
-        if !(1..=4).contains(&d.channels) || !(1..=2).contains(&d.sample_bytes) {
-            return Err(usage(format!("{} channels of {} bytes is not a texel format", d.channels, d.sample_bytes)));
+        if !d.texel_ok() {
+            return Err(usage(format!("{} is not a texel format", d.texel_name())));
         }
         if d.tile_size == 0 || d.border.checked_mul(2).is_none_or(|b| b >= d.tile_size) || d.width == 0 || d.height == 0
         {
@@ -176,7 +176,7 @@ impl PackWriter {
             stored: HashMap::new(),
             data_offset,
             end: data_offset,
-            required_features: 0,
+            required_features: description.required_features(),
             summary: WriteSummary::default(),
             writeback: Writeback::default(),
         };
@@ -212,6 +212,9 @@ impl PackWriter {
             NewTile::Constant(value) => {
                 if value.len() != texel {
                     return Err(PackError::Usage(format!("a constant texel has {texel} bytes, not {}", value.len())));
+                }
+                if texel > 8 {
+                    return Err(PackError::Usage(format!("a constant texel of {texel} bytes does not fit an entry")));
                 }
                 let mut v = [0u8; 8];
                 v[..texel].copy_from_slice(value);

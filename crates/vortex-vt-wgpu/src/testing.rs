@@ -260,6 +260,7 @@ fn write_pack_channels(
         level_count: u32::from(texture.grid.lod_count()),
         channels,
         sample_bytes: 1,
+        sample_format: 0,
     };
     let levels = levels(texture);
     let mut writer = PackWriter::create(path, d, levels.clone(), b"{}", WriteOptions::default())?;

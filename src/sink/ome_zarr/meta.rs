@@ -200,6 +200,9 @@ impl Spec {
         match self.stored.depth {
             Depth::U8 => u8::MAX as u32,
             Depth::U16 => u16::MAX as u32,
+            Depth::U32 => u32::MAX,
+            // The window of floats: 0 to 1, the range of normalised data (a reader rescales it).
+            Depth::F32 | Depth::F16 => 1,
         }
     }
 
@@ -216,6 +219,9 @@ impl Spec {
         let dtype = match self.stored.depth {
             Depth::U8 => "|u1",
             Depth::U16 => "<u2",
+            Depth::U32 => "<u4",
+            Depth::F32 => "<f4",
+            Depth::F16 => "<f2",
         };
         json!({
             "zarr_format": 2,
@@ -234,6 +240,9 @@ impl Spec {
         let data_type = match self.stored.depth {
             Depth::U8 => "uint8",
             Depth::U16 => "uint16",
+            Depth::U32 => "uint32",
+            Depth::F32 => "float32",
+            Depth::F16 => "float16",
         };
         let chunk = self.layout.tile_size as u64;
         let shard = chunk * self.shard_chunks as u64;

@@ -1,12 +1,14 @@
 //! TIFF and BigTIFF through the `tiff` crate, read one strip (or one row of tiles) at a time:
 //! only the current strip or tile row is held, never the whole image.
 //!
-//! Accepted: grey, grey+alpha, RGB and RGBA with 8- or 16-bit unsigned samples stored
-//! contiguously (PlanarConfiguration 1), uncompressed or compressed with LZW, Deflate or
-//! PackBits, with or without the horizontal predictor; JPEG-compressed images go to [`jpeg`]
+//! Accepted: grey, grey+alpha, RGB and RGBA with 8-, 16- or 32-bit unsigned, 16- or 32-bit
+//! float or 16-bit signed samples ([`samples`]) stored contiguously (PlanarConfiguration 1),
+//! uncompressed or compressed with LZW, Deflate or PackBits, with or without the horizontal
+//! (or, for floats, floating-point) predictor; JPEG-compressed images go to [`jpeg`]
 //! (libjpeg-turbo); planar-separate, 1/2/4-bit, palette, CMYK and CCITT fax images to
-//! [`kinds`]; Aperio's JPEG 2000 (33003/33005) to [`jp2k`] (OpenJPEG). Everything else (uncompressed YCbCr, Lab, floating point or signed samples,
-//! old-style JPEG, ...) is refused with a message naming what the file is. Compressed strips are decoded a few ahead, several at once
+//! [`kinds`]; Aperio's JPEG 2000 (33003/33005) to [`jp2k`] (OpenJPEG). Everything else
+//! (uncompressed YCbCr, Lab, other sample formats, old-style JPEG, ...) is refused with a
+//! message naming what the file is. Compressed strips are decoded a few ahead, several at once
 //! ([`strips_ahead`]). Which image of a multi-image file is read: [`pyramid`].
 //!
 //! As libvips reads them: extra samples past grey, grey+alpha, RGB or RGBA (ExtraSamples
@@ -21,6 +23,7 @@ mod kinds;
 mod libjpeg;
 mod lzw;
 mod pyramid;
+mod samples;
 mod slide;
 mod strips_ahead;
 
@@ -31,7 +34,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use tiff::decoder::{ChunkType, Decoder, Limits};
-use tiff::tags::{CompressionMethod, PhotometricInterpretation, PlanarConfiguration, Predictor, SampleFormat, Tag};
+use tiff::tags::{CompressionMethod, PhotometricInterpretation, PlanarConfiguration, Predictor, Tag};
 use tiff::{ColorType, TiffError};
 
 use self::lzw::{LzwStrips, StripReader};
@@ -106,6 +109,8 @@ struct Samples {
     stored: usize,
     /// The alpha is associated (premultiplied).
     associated: bool,
+    /// What the samples are; `layout` has their size as stored.
+    kind: samples::Stored,
 }
 
 #[derive(Clone, Copy)]
@@ -154,7 +159,7 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
     }
     let (width, height) = decoder.dimensions().map_err(|e| open_error(path, e))?;
     let compression = check_compression(path, &mut decoder)?;
-    let Samples { layout, delivered: file_samples, stored, associated } = pixel_layout(path, &mut decoder)?;
+    let Samples { layout, delivered: file_samples, stored, associated, kind } = pixel_layout(path, &mut decoder)?;
 
     let chunking = match decoder.get_chunk_type() {
         ChunkType::Strip => {
@@ -175,7 +180,7 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
     let row_bytes = width as u64 * pixel_bytes;
     let direct = match layout.depth {
         Depth::U8 => direct_strips(path, &mut decoder, compression, chunking, stored, height, width)?,
-        Depth::U16 => None,
+        _ => None,
     };
     // Memory held: one strip or tile row of whole image rows (none where rows are read
     // straight from the file), plus one tile.
@@ -220,37 +225,41 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
         }
         _ => 0,
     };
-    let lzw = match compression == CompressionMethod::LZW && stored == file_samples {
+    // Our LZW decoder's predictor and byte order are those of 8- and 16-bit samples.
+    let lzw = match compression == CompressionMethod::LZW && stored == file_samples && layout.depth.is_narrow_int() {
         true => lzw_strips(path, &mut decoder, chunking, row_bytes, stored, layout.depth)?.map(Arc::new),
         false => None,
     };
 
-    Ok(Box::new(TiffSource {
-        path: path.to_path_buf(),
-        decoder,
-        width,
-        height,
-        layout,
-        chunking,
-        compression,
-        label: chosen.label,
-        page: chosen.index,
-        file_samples,
-        associated,
-        band,
-        band_first: 0,
-        band_rows: 0,
-        tile,
-        next: 0,
-        failed: false,
-        direct,
-        columns: None,
-        ahead_workers,
-        ahead: None,
-        lzw,
-        max_memory,
-        embedded,
-    }))
+    Ok(samples::widen(
+        Box::new(TiffSource {
+            path: path.to_path_buf(),
+            decoder,
+            width,
+            height,
+            layout,
+            chunking,
+            compression,
+            label: chosen.label,
+            page: chosen.index,
+            file_samples,
+            associated,
+            band,
+            band_first: 0,
+            band_rows: 0,
+            tile,
+            next: 0,
+            failed: false,
+            direct,
+            columns: None,
+            ahead_workers,
+            ahead: None,
+            lzw,
+            max_memory,
+            embedded,
+        }),
+        kind,
+    ))
 }
 
 /// [`LzwStrips`] of an LZW TIFF stored in strips whose samples are delivered as they are
@@ -403,7 +412,7 @@ fn pixel_layout(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<S
         Err(TilerError::unsupported(
             path,
             format!(
-                "{what} TIFF is not supported (8/16-bit grey, grey+alpha, RGB and RGBA are); convert it first, e.g. to 8-bit RGB"
+                "{what} TIFF is not supported (grey, grey+alpha, RGB and RGBA of 8/16/32-bit unsigned, 16/32-bit float or 16-bit signed samples are); convert it first, e.g. to 8-bit RGB"
             ),
         ))
     };
@@ -430,24 +439,12 @@ fn pixel_layout(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<S
     }
 
     let formats: Vec<u16> = decoder.find_tag_unsigned_vec(Tag::SampleFormat).map_err(tag_err)?.unwrap_or_default();
-    if let Some(&f) = formats.iter().find(|&&f| f != 1) {
-        let what = match SampleFormat::from_u16_exhaustive(f) {
-            SampleFormat::Int => "a signed-integer".to_string(),
-            SampleFormat::IEEEFP => "a floating-point".to_string(),
-            SampleFormat::Void => "an untyped (void) sample".to_string(),
-            _ => format!("a sample-format-{f}"),
-        };
-        return unsupported(what);
-    }
     let bits: Vec<u16> = decoder.find_tag_unsigned_vec(Tag::BitsPerSample).map_err(tag_err)?.unwrap_or_else(|| vec![1]);
-    let depth = match bits.first().copied().unwrap_or(1) {
-        8 => Depth::U8,
-        16 => Depth::U16,
-        b => return unsupported(format!("a {b}-bit")),
+    let kind = match samples::stored(&formats, &bits) {
+        Ok(kind) => kind,
+        Err(what) => return unsupported(what),
     };
-    if bits.iter().any(|&b| b != bits[0]) {
-        return unsupported(format!("a mixed-depth ({bits:?} bits per sample)"));
-    }
+    let depth = kind.file_depth();
     let samples: u16 = decoder.find_tag_unsigned(Tag::SamplesPerPixel).map_err(tag_err)?.unwrap_or(1);
     let planar: u16 = decoder.find_tag_unsigned(Tag::PlanarConfiguration).map_err(tag_err)?.unwrap_or(1);
     if PlanarConfiguration::from_u16(planar) != Some(PlanarConfiguration::Chunky) && samples > 1 {
@@ -456,6 +453,8 @@ fn pixel_layout(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<S
     let predictor: u16 = decoder.find_tag_unsigned(Tag::Predictor).map_err(tag_err)?.unwrap_or(1);
     match Predictor::from_u16(predictor) {
         Some(Predictor::None | Predictor::Horizontal) => {}
+        // The crate undoes it for floats (and refuses it on other samples).
+        Some(Predictor::FloatingPoint) if depth.is_float() => {}
         _ => return unsupported(format!("a predictor-{predictor}")),
     }
     let extra: Vec<u16> = decoder.find_tag_unsigned_vec(Tag::ExtraSamples).map_err(tag_err)?.unwrap_or_default();
@@ -477,11 +476,16 @@ fn pixel_layout(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<S
     };
     // ExtraSamples 1 is associated alpha: colours premultiplied by it, which vips undoes.
     let associated = channels.has_alpha() && extra.first() == Some(&1);
+    if !depth.is_narrow_int() && (associated || photometric == Some(PhotometricInterpretation::WhiteIsZero)) {
+        let what = if associated { "associated (premultiplied) alpha" } else { "WhiteIsZero" };
+        return unsupported(format!("a {}-bit {} {what}", depth.bytes() * 8, depth.tile_type()));
+    }
     Ok(Samples {
         layout: PixelLayout::new(channels, depth),
         delivered: file_samples,
         stored: samples as usize,
         associated,
+        kind,
     })
 }
 
@@ -1354,17 +1358,18 @@ mod tests {
             assert!(err.to_string().contains(needle), "{err} lacks {needle:?}");
         };
 
-        let path = dir.path().join("float.tif");
-        write_with::<colortype::Gray32Float>(
+        // 32-bit and half floats are read (samples.rs); doubles are not.
+        let path = dir.path().join("double.tif");
+        write_with::<colortype::Gray64Float>(
             &path,
             Compression::Uncompressed,
             false,
             None,
             w,
             h,
-            &vec![0.5f32; (w * h) as usize],
+            &vec![0.5f64; (w * h) as usize],
         );
-        expect_unsupported(&path, "floating-point");
+        expect_unsupported(&path, "64-bit floating-point (SampleFormat 3");
 
         let path = dir.path().join("ycbcr.tif");
         let mut tags = basic_tags(w, h, &[8, 8, 8], 6, None);

@@ -28,9 +28,9 @@ impl PackInput {
         let pack = Pack::open(path)?;
         crate::shard::manifest::refuse_shard(path, pack.metadata())?;
         let d = *pack.description();
-        // The reader has checked channels (1-4), sample bytes (1-2) and 2 * border < tile size.
+        // The reader has checked channels (1-4), the sample format and 2 * border < tile size.
         let channels = [Channels::Grey, Channels::GreyAlpha, Channels::Rgb, Channels::Rgba][d.channels as usize - 1];
-        let depth = if d.sample_bytes == 2 { Depth::U16 } else { Depth::U8 };
+        let depth = Depth::from_pack(d.sample_bytes, d.sample_format).unwrap_or(Depth::U8);
         let header = ImageHeader { width: d.width, height: d.height, layout: PixelLayout::new(channels, depth) };
         let payload = d.tile_size - 2 * d.border;
         let raw_len = d
@@ -191,6 +191,7 @@ mod tests {
             level_count: levels,
             channels,
             sample_bytes,
+            sample_format: 0,
         }
     }
 

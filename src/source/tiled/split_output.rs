@@ -23,7 +23,7 @@ impl SplitOutput {
         let t = TiledDir::read(dir)?;
         let d = t.description;
         let channels = [Channels::Grey, Channels::GreyAlpha, Channels::Rgb, Channels::Rgba][d.channels as usize - 1];
-        let depth = if d.sample_bytes == 2 { Depth::U16 } else { Depth::U8 };
+        let depth = Depth::from_pack(d.sample_bytes, d.sample_format).unwrap_or(Depth::U8);
         // A JPEG pyramid stores 8-bit samples whatever tileType says.
         let header = ImageHeader { width: d.width, height: d.height, layout: PixelLayout::new(channels, depth) };
         Ok(SplitOutput {

@@ -23,7 +23,16 @@ pub struct Sample {
 
 /// 20x12 texels in 8-texel tiles with a 1-texel border: 4x4, 2x2 and 1x1 tiles.
 pub fn description(channels: u8, sample_bytes: u8) -> Description {
-    Description { width: 20, height: 12, tile_size: 8, border: 1, level_count: 3, channels, sample_bytes }
+    Description {
+        width: 20,
+        height: 12,
+        tile_size: 8,
+        border: 1,
+        level_count: 3,
+        channels,
+        sample_bytes,
+        sample_format: 0,
+    }
 }
 
 /// A raw tile whose bytes depend on `seed`.

@@ -116,11 +116,12 @@ fn zstd_delta_tiles_read_back_exactly_and_need_their_feature_bit() {
     write(&path, d, |x, y| (TileKind::Zstd, zstd::bulk::compress(&noise(192, x + y), 1).unwrap()));
     let mut b = std::fs::read(&path).unwrap();
     assert_eq!(b[at::REQUIRED], 0);
-    b[at::REQUIRED] = 2;
+    // (Bit 1 marks 32-bit and float samples: bit 2 is the first one not defined.)
+    b[at::REQUIRED] = 4;
     reseal(&mut b);
     std::fs::write(&path, &b).unwrap();
     let e = Pack::open(&path).err().unwrap().to_string();
-    assert!(e.contains("required features 0x2 unknown"), "{e}");
+    assert!(e.contains("required features 0x4 unknown"), "{e}");
 }
 
 /// Appends `value`'s low `bits` bits to a little-endian bit stream (as BC7 reads it).

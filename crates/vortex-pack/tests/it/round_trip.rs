@@ -177,8 +177,8 @@ fn writer_refuses_misuse_and_leaves_no_file() {
 
     // Texel formats and geometry the reader would refuse.
     for bad in [
-        vortex_pack::Description { channels: 5, sample_bytes: 2, ..d },
-        vortex_pack::Description { sample_bytes: 3, ..d },
+        vortex_pack::Description { channels: 5, sample_bytes: 2, sample_format: 0, ..d },
+        vortex_pack::Description { sample_bytes: 3, sample_format: 0, ..d },
         vortex_pack::Description { border: 4, ..d },
         vortex_pack::Description { width: 0, ..d },
     ] {
@@ -201,6 +201,7 @@ fn writer_refuses_what_readers_would_refuse_before_allocating() {
         level_count: 17,
         channels: 3,
         sample_bytes: 1,
+        sample_format: 0,
     };
     let levels = vortex_pack::format::pyramid_levels(&d, 1 << 16);
     let e = PackWriter::create(&path, d, levels, b"", WriteOptions::default()).err().unwrap();
@@ -403,6 +404,7 @@ fn jpeg_variants_decode() {
         level_count: 1,
         channels: 3,
         sample_bytes: 1,
+        sample_format: 0,
     };
     let rgb: Vec<u8> = (0..16 * 16).flat_map(|i| [200u8, 100, (i % 16 * 10) as u8]).collect();
     let grey: Vec<u8> = vec![77; 16 * 16];

@@ -11,7 +11,16 @@ const END: &str = "```\n<!-- hexdump:end -->";
 /// The spec's example: a 6x5 grey image in 4-texel tiles without border: 2x2 tiles at LOD 0,
 /// one at LOD 1.
 fn tiny_pack(path: &std::path::Path) {
-    let d = Description { width: 6, height: 5, tile_size: 4, border: 0, level_count: 2, channels: 1, sample_bytes: 1 };
+    let d = Description {
+        width: 6,
+        height: 5,
+        tile_size: 4,
+        border: 0,
+        level_count: 2,
+        channels: 1,
+        sample_bytes: 1,
+        sample_format: 0,
+    };
     let opts = WriteOptions { alignment: 64, payload_alignment: 8 };
     let mut w = PackWriter::create(path, d, pyramid_levels(&d, 2), br#"{"tileSize":4}"#, opts).unwrap();
     let ramp: Vec<u8> = (0..16).collect();

@@ -39,7 +39,7 @@ enum Spec {
 
 fn description(tile_size: u32, border: u32, pages: u32, width: u32, height: u32) -> Description {
     let level_count = pages.trailing_zeros() + 1;
-    Description { width, height, tile_size, border, level_count, channels: 3, sample_bytes: 1 }
+    Description { width, height, tile_size, border, level_count, channels: 3, sample_bytes: 1, sample_format: 0 }
 }
 
 /// RGB texels of one tile that depend on `seed` and vary across the tile.
@@ -572,8 +572,16 @@ fn solid_bc7_blocks_decode_to_their_colour_exactly() {
     // Every 8-bit value in every channel: a 64x64 tile of 256 blocks, block i of colour
     // (i, 255 - i, 7i mod 256, i).
     let dir = tempfile::tempdir().unwrap();
-    let d =
-        Description { width: 64, height: 64, tile_size: 64, border: 0, level_count: 1, channels: 4, sample_bytes: 1 };
+    let d = Description {
+        width: 64,
+        height: 64,
+        tile_size: 64,
+        border: 0,
+        level_count: 1,
+        channels: 4,
+        sample_bytes: 1,
+        sample_format: 0,
+    };
     let colour = |i: usize| [i as u8, 255 - i as u8, (i * 7 % 256) as u8, i as u8];
     let blocks: Vec<u8> = (0..256).flat_map(|i| vortex_vt_wgpu::bc7::solid_block(colour(i))).collect();
     let levels = format::pyramid_levels(&d, 1);
