@@ -404,6 +404,8 @@ export class VtpkPack {
       }
     } else {
       this.blocks.set(lastBlock, Promise.resolve(bytes.subarray(0, this.metaOffset - from)));
+      // An index of one block is whole now: check it.
+      await this.checkIndexWhenComplete();
     }
   }
 
