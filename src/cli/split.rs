@@ -126,9 +126,11 @@ pub struct OutputArgs {
     #[arg(long, value_name = "N")]
     overlap: Option<u32>,
 
-    /// --layout iiif: the image's id in info.json, the URL it will be served at, e.g.
-    /// https://example.org/iiif/slide [default: '.', relative to the viewer's page; serve
-    /// rewrites it].
+    /// --layout iiif: the absolute http(s) URL the directory will be served at, e.g.
+    /// https://example.org/iiif/slide. It becomes info.json's id and makes the directory a
+    /// conformant IIIF level-0 service there: full/max (at most 2048 texels on a side, as
+    /// maxWidth/maxHeight say) and the whole-image sizes are written too [default: '.',
+    /// relative to the viewer's page, only the files libvips writes; serve rewrites it].
     #[arg(long, value_name = "URL")]
     iiif_id: Option<String>,
 
@@ -597,6 +599,7 @@ fn tile_for_viewer(
     if a.iiif_id.is_some() && viewer != Viewer::Iiif {
         bail!("--iiif-id names a IIIF image (--layout iiif)");
     }
+    let iiif_service = a.iiif_id.as_deref().map(iiif::absolute_id).transpose().map_err(anyhow::Error::msg)?;
     let name = match &a.name {
         Some(name) => name.clone(),
         None => input.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
@@ -633,6 +636,13 @@ fn tile_for_viewer(
     if !matches!(opts.codec.extension(), "jpg" | "png") {
         bail!("--layout {viewer} tiles are image files: use --codec jpeg or png, not {}", opts.codec.name());
     }
+    if iiif_service.is_some() && opts.codec.extension() != "jpg" {
+        bail!(
+            "--iiif-id makes a conformant IIIF level-0 service, whose one required format is JPEG (default.jpg): \
+             use --codec jpeg, or leave --iiif-id out for {} tiles under a relative id",
+            opts.codec.name()
+        );
+    }
     limits.check_pyramid(&layout, false)?;
     if product == Product::Pmtiles {
         return tile_to_pmtiles(source, a, &claim, &layout, &opts, &name, started);
@@ -642,7 +652,7 @@ fn tile_for_viewer(
         layout,
         name,
         extension: viewer.extension(opts.codec.extension()),
-        iiif_id: a.iiif_id.clone().unwrap_or_else(|| iiif::DEFAULT_ID.to_string()),
+        iiif: iiif_service.map(|id| iiif::Service { id, codec: opts.codec }),
     };
     let run = Run::start(source, a, &layout, started)?;
     let sink = DirSink::for_viewer(&claim, tiles)?;

@@ -217,7 +217,7 @@ async fn answer(state: &Arc<AppState>, path: &str, headers: &HeaderMap) -> Resul
             let is_info = rest.len() == 1 && rest[0] == "info.json";
             match &input.source {
                 Source::Tiled(t) if is_info => {
-                    let body = iiif::info_json(&t.layout, &id, iiif_extension(t));
+                    let body = iiif::info_json(&t.layout, &id, iiif_extension(t), true);
                     Ok(iiif_info(body))
                 }
                 Source::Tiled(t) => iiif_tile(state, index, t, &rest, headers).await,

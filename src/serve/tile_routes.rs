@@ -12,7 +12,8 @@ use super::catalog::{Source, Tiled, stored_image};
 use super::http::{AppState, Reply, TILE_CACHE, etag, internal, not_modified};
 use super::routes::{self, Reject, bad, not_found};
 use super::tiles::{self, Format, Job};
-use crate::viewer::{Crop, Viewer, dzi, iiif};
+use crate::source::decode_tile;
+use crate::viewer::{Crop, Viewer, dzi, iiif, iiif_whole};
 
 pub(super) fn dzi_extension(t: &Tiled) -> &'static str {
     Viewer::Dzi.extension(if t.format == Format::Jpeg { "jpg" } else { "png" })
@@ -66,12 +67,17 @@ pub(super) async fn iiif_tile(
     let not_a_tile = || not_found(format!("'{}' is not a IIIF tile of this image", rest.join("/")));
     let (lod, col, row) = match routes::iiif_tile(rest)? {
         routes::IiifTile::Full { path } => {
-            let last = l.lod_count - 1;
-            let named = iiif::tile_path(l, last, 0, 0, ext) == path || iiif::full_max_path(l, 0, ext) == Some(path);
-            if !named {
-                return Err(not_a_tile());
+            // `full/max` and the sizes info.json lists: the whole image at one LOD.
+            let max = iiif::max_lod(l);
+            let lod = iiif::whole_sizes(l)
+                .into_iter()
+                .find(|&(lod, w, h)| iiif::full_path(w, h, ext) == path || (lod == max && iiif::max_path(ext) == path))
+                .map(|(lod, ..)| lod)
+                .ok_or_else(not_a_tile)?;
+            if lod + 1 < l.lod_count {
+                return whole_image(state, index, t, lod, headers).await;
             }
-            (last, 0, 0)
+            (lod, 0, 0)
         }
         routes::IiifTile::Region { x, y, path } => (0..l.lod_count.saturating_sub(1))
             .find_map(|lod| {
@@ -89,6 +95,57 @@ pub(super) async fn iiif_tile(
     let key = format!("iiif/{lod}/{col}/{row}");
     let job = Job { side: l.tile_size, border: l.border, crop, extent: (0, 0), halvings: 0, codec: t.codec };
     serve_tile(state, index, t, (lod, col, row), job, &key, headers).await
+}
+
+/// The whole image at `lod` (more than one page), assembled from its pages on a blocking
+/// thread and cached.
+async fn whole_image(
+    state: &Arc<AppState>,
+    index: usize,
+    t: &Tiled,
+    lod: u32,
+    headers: &HeaderMap,
+) -> Result<Reply, Reject> {
+    let key = format!("iiif/full/{lod}");
+    let etag = etag(t.etag, &key);
+    let reply = |bytes: Bytes| Reply::new(t.format.content_type(), bytes).cached(TILE_CACHE, &etag);
+    if let Some(r) = not_modified(headers, &etag) {
+        return Ok(r);
+    }
+    let cache_key = format!("{index}/{key}");
+    if let Some(bytes) = state.cache.get(&cache_key) {
+        return Ok(reply(bytes));
+    }
+    let permit = state.blocking.clone().acquire_owned().await.map_err(|_| bad("shutting down"))?;
+    let shared = state.clone();
+    let work = tokio::task::spawn_blocking(move || -> Result<Bytes, String> {
+        let _permit = permit;
+        let Some(Source::Tiled(t)) = shared.catalog.inputs.get(index).map(|i| &i.source) else {
+            return Err("the input is gone".into());
+        };
+        let l = &t.layout;
+        let bytes = iiif_whole::assemble(l, lod, t.codec, |col, row| {
+            let page = t.page(lod, col, row)?.ok_or_else(|| format!("page (lod {lod}, x {col}, y {row}) is absent"))?;
+            let decoded = match page {
+                tiles::Page::Image(_, bytes) => {
+                    decode_tile(std::path::Path::new("page"), &bytes).map_err(|e| e.to_string())?
+                }
+                tiles::Page::Texels(decoded) => decoded,
+            };
+            // IIIF tiles have no overlap: the page's payload, cut at the image's edge.
+            let c = iiif::crop(l, lod, col, row);
+            Ok((decoded, Crop { x: c.x + l.border, y: c.y + l.border, ..c }))
+        })?;
+        Ok(Bytes::from(bytes))
+    });
+    match work.await {
+        Ok(Ok(bytes)) => {
+            state.cache.insert(cache_key, bytes.clone());
+            Ok(reply(bytes))
+        }
+        Ok(Err(message)) => Ok(internal(format!("the whole image at LOD {lod}: {message}"))),
+        Err(e) => Ok(internal(format!("the whole image at LOD {lod}: {e}"))),
+    }
 }
 
 pub(super) async fn xyz_tile(

@@ -82,7 +82,21 @@ impl DirSink {
     /// TileJSON) last.
     pub fn finish_viewer(self) -> Result<()> {
         let manifests = match &self.names {
-            Names::Viewer(tiles) => tiles.manifests(),
+            Names::Viewer(tiles) => {
+                // A IIIF service's whole-image files, made from the tiles just written.
+                let read = |name: &str| fs::read(self.staging.join(name)).map_err(|e| format!("{name}: {e}"));
+                match tiles.whole_images(read) {
+                    Ok(mut files) => {
+                        files.extend(tiles.manifests());
+                        files
+                    }
+                    Err(message) => {
+                        let _ = fs::remove_dir_all(&self.staging);
+                        let message = format!("the IIIF whole image: {message}");
+                        return Err(TilerError::Decode { path: self.dest.clone(), message });
+                    }
+                }
+            }
             Names::Pattern(_) => {
                 return Err(TilerError::Options("a tile directory is finished with its info.json".into()));
             }
@@ -93,7 +107,9 @@ impl DirSink {
     fn complete(self, manifests: Vec<(String, Vec<u8>)>) -> Result<()> {
         for (name, bytes) in manifests {
             let path = self.staging.join(name);
-            if let Err(e) = fs::write(&path, bytes) {
+            // IIIF's whole-image files go into folders of their own (`full/max/0/`).
+            let folder = path.parent().map_or(Ok(()), fs::create_dir_all);
+            if let Err(e) = folder.and_then(|()| fs::write(&path, bytes)) {
                 let _ = fs::remove_dir_all(&self.staging);
                 return Err(TilerError::write(&path, e));
             }

@@ -7,10 +7,19 @@
 //! coarsest LOD (one page) is the whole image, which viewers ask for as `full/{w},{h}`; when
 //! that is the full resolution too, OpenSeadragon asks for `full/max`, so that name is written
 //! as well (libvips does not).
+//!
+//! With an absolute id (`--iiif-id`, [`Service`]) the directory is a conformant level-0
+//! service once uploaded there: level 0 also requires `full/max`, and every size `info.json`
+//! lists in `sizes`, as files. `max` of a gigapixel image would be the whole image at full
+//! resolution, which no client wants in one file, so `max` is bounded by `maxWidth` and
+//! `maxHeight`: it is the finest LOD whose long side is at most [`MAX_WHOLE_SIDE`], and `sizes`
+//! lists it and every coarser LOD. Those whole-image files are made from the LOD's tiles
+//! ([`super::iiif_whole`]).
 
 use serde_json::json;
 
 use super::Crop;
+use crate::codec::Codec;
 use crate::layout::Layout;
 
 /// libvips' default tile size for IIIF.
@@ -19,12 +28,87 @@ pub const DEFAULT_TILE_SIZE: u32 = 512;
 /// runs in (see docs/viewers.md); `serve` rewrites it to its own URL.
 pub const DEFAULT_ID: &str = ".";
 
+/// The longest side `full/max` may have: 2048 texels fill a 4K screen's height twice over,
+/// yet take at most 16 MiB to assemble (RGBA, 8-bit) and about a megabyte as a JPEG.
+pub const MAX_WHOLE_SIDE: u32 = 2048;
+
+/// A conformant IIIF service: its absolute id, and the codec its whole-image files (`full/max`,
+/// the `sizes`) are encoded with, the tiles' own.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Service {
+    pub id: String,
+    pub codec: Codec,
+}
+
+/// `--iiif-id`'s URL as the `id` of `info.json`: an absolute `http` or `https` URL with a host
+/// and no query or fragment (the id is the base every request is built on, and a viewer
+/// appends `/info.json` and `/region/size/...` to it); a trailing slash is dropped, since the
+/// id names the image, not a directory of it.
+pub fn absolute_id(url: &str) -> Result<String, String> {
+    let why = |what: &str| format!("--iiif-id '{url}' {what}");
+    let rest = url
+        .strip_prefix("https://")
+        .or_else(|| url.strip_prefix("http://"))
+        .ok_or_else(|| why("must be an absolute http:// or https:// URL, the address the directory is uploaded to"))?;
+    if url.chars().any(|c| c.is_whitespace() || c.is_control()) {
+        return Err(why("has a space or control character; percent-encode it"));
+    }
+    if url.contains(['?', '#']) {
+        return Err(why("has a query or fragment; a IIIF id is a plain path that requests are appended to"));
+    }
+    let (host, path) = rest.split_once('/').unwrap_or((rest, ""));
+    if host.is_empty() || host.starts_with(':') || host.contains('@') {
+        return Err(why("has no host name (or one with a user name, which viewers would send in clear)"));
+    }
+    let path = path.strip_suffix('/').unwrap_or(path);
+    if path.is_empty() {
+        return Err(why("names no image: add its path, e.g. https://example.org/iiif/photo"));
+    }
+    if path.split('/').any(|s| s.is_empty() || s == "." || s == "..") {
+        return Err(why("has an empty, '.' or '..' path segment"));
+    }
+    let id = format!("{}{host}/{path}", &url[..url.len() - rest.len()]);
+    Ok(id)
+}
+
+/// The LOD `full/max` is: the finest whose long side is at most [`MAX_WHOLE_SIDE`], else the
+/// coarsest (a tile side above the bound).
+pub fn max_lod(layout: &Layout) -> u32 {
+    let within = |lod: &u32| {
+        let (w, h) = layout.level_extent(*lod);
+        w.max(h) <= MAX_WHOLE_SIDE
+    };
+    (0..layout.lod_count).find(within).unwrap_or(layout.lod_count - 1)
+}
+
+/// The whole-image sizes a service lists and holds as `full/{w},{h}`: LOD [`max_lod`] and
+/// every coarser one, as (lod, width, height), smallest first.
+pub fn whole_sizes(layout: &Layout) -> Vec<(u32, u32, u32)> {
+    (max_lod(layout)..layout.lod_count)
+        .rev()
+        .map(|lod| {
+            let (w, h) = layout.level_extent(lod);
+            (lod, w, h)
+        })
+        .collect()
+}
+
+/// The file of the whole image at `width x height`.
+pub fn full_path(width: u32, height: u32, extension: &str) -> String {
+    format!("full/{width},{height}/0/default.{extension}")
+}
+
+/// The file of the whole image at the service's `max` size.
+pub fn max_path(extension: &str) -> String {
+    format!("full/max/0/default.{extension}")
+}
+
 /// The tile of page (lod, col, row): `{rx},{ry},{rw},{rh}/{w},{h}/0/default.{ext}`, or
 /// `full/{w},{h}/0/default.{ext}` for the coarsest LOD.
 pub fn tile_path(layout: &Layout, lod: u32, col: u32, row: u32, extension: &str) -> String {
     let Crop { width, height, .. } = crop(layout, lod, col, row);
     if lod + 1 == layout.lod_count {
-        return format!("full/{width},{height}/0/default.{extension}");
+        return full_path(width, height, extension);
     }
     let side = (layout.payload() as u64) << lod;
     let (x, y) = (col as u64 * side, row as u64 * side);
@@ -35,7 +119,7 @@ pub fn tile_path(layout: &Layout, lod: u32, col: u32, row: u32, extension: &str)
 /// The second name of the full-resolution tile when the image is a single tile
 /// (`full/max/...`, what OpenSeadragon asks for then).
 pub fn full_max_path(layout: &Layout, lod: u32, extension: &str) -> Option<String> {
-    (layout.lod_count == 1 && lod == 0).then(|| format!("full/max/0/default.{extension}"))
+    (layout.lod_count == 1 && lod == 0).then(|| max_path(extension))
 }
 
 /// The texels a tile keeps: the page, cut at the image's edge (IIIF tiles have no overlap).
@@ -45,8 +129,11 @@ pub fn crop(layout: &Layout, lod: u32, col: u32, row: u32) -> Crop {
     Crop { x: 0, y: 0, width: p.min(level_w - col * p), height: p.min(level_h - row * p) }
 }
 
-/// `info.json`: the image service description a viewer starts from.
-pub fn info_json(layout: &Layout, id: &str, extension: &str) -> String {
+/// `info.json`: the image service description a viewer starts from. A `service` (an absolute
+/// id: `--iiif-id`, `serve`) also lists the whole-image `sizes` and bounds `max` by
+/// `maxWidth`/`maxHeight` where it is smaller than the image; without, the file is what
+/// libvips writes.
+pub fn info_json(layout: &Layout, id: &str, extension: &str, service: bool) -> String {
     let scale_factors: Vec<u64> = (0..layout.lod_count).map(|k| 1u64 << k).collect();
     let mut info = json!({
         "@context": "http://iiif.io/api/image/3/context.json",
@@ -58,6 +145,16 @@ pub fn info_json(layout: &Layout, id: &str, extension: &str) -> String {
         "width": layout.width,
         "height": layout.height,
     });
+    if service {
+        let sizes: Vec<_> = whole_sizes(layout).iter().map(|&(_, w, h)| json!({"width": w, "height": h})).collect();
+        info["sizes"] = json!(sizes);
+        let lod = max_lod(layout);
+        if lod > 0 {
+            let (w, h) = layout.level_extent(lod);
+            info["maxWidth"] = json!(w);
+            info["maxHeight"] = json!(h);
+        }
+    }
     if extension != "jpg" {
         // Level 0's default format is JPEG; viewers pick another only when told.
         info["preferredFormats"] = json!([extension]);
@@ -92,12 +189,12 @@ mod tests {
     #[test]
     fn info_lists_every_scale_factor() {
         let l = Viewer::Iiif.page_grid(700, 500, 512, 0).unwrap();
-        let info: serde_json::Value = serde_json::from_str(&info_json(&l, "https://x/y", "jpg")).unwrap();
+        let info: serde_json::Value = serde_json::from_str(&info_json(&l, "https://x/y", "jpg", false)).unwrap();
         assert_eq!(info["tiles"][0]["scaleFactors"], json!([1, 2]));
         assert_eq!((info["width"].as_u64(), info["height"].as_u64()), (Some(700), Some(500)));
         assert_eq!(info["id"], "https://x/y");
         assert!(info.get("preferredFormats").is_none());
-        let png: serde_json::Value = serde_json::from_str(&info_json(&l, ".", "png")).unwrap();
+        let png: serde_json::Value = serde_json::from_str(&info_json(&l, ".", "png", false)).unwrap();
         assert_eq!(png["preferredFormats"], json!(["png"]));
     }
 }

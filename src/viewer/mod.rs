@@ -15,6 +15,7 @@
 
 pub mod dzi;
 pub mod iiif;
+pub mod iiif_whole;
 mod recognise;
 pub mod xyz;
 
@@ -121,8 +122,9 @@ pub struct ViewerTiles {
     pub name: String,
     /// Tile file extension, without the dot.
     pub extension: &'static str,
-    /// IIIF: the image's `id` in `info.json`.
-    pub iiif_id: String,
+    /// IIIF: a conformant service at an absolute id (`--iiif-id`), or `None` for the
+    /// relative id `.` and only the files libvips writes.
+    pub iiif: Option<iiif::Service>,
 }
 
 impl ViewerTiles {
@@ -147,12 +149,48 @@ impl ViewerTiles {
         }
     }
 
+    /// The files a IIIF service needs besides its tiles: `full/max` and each size it lists that
+    /// no tile is (see [`iiif_whole`]), made from the tiles `read(path)` gives back. None for
+    /// other layouts, or IIIF without a service.
+    pub fn whole_images(
+        &self,
+        read: impl Fn(&str) -> Result<Vec<u8>, String>,
+    ) -> Result<Vec<(String, Vec<u8>)>, String> {
+        let (Viewer::Iiif, Some(service)) = (self.viewer, &self.iiif) else { return Ok(Vec::new()) };
+        let (l, ext) = (&self.layout, self.extension);
+        let max = iiif::max_lod(l);
+        let mut files = Vec::new();
+        for (lod, w, h) in iiif::whole_sizes(l) {
+            let bytes = if lod + 1 == l.lod_count {
+                // The coarsest LOD is one tile, written under this name already.
+                read(&iiif::full_path(w, h, ext))?
+            } else {
+                let bytes = iiif_whole::assemble(l, lod, service.codec, |col, row| {
+                    let path = iiif::tile_path(l, lod, col, row, ext);
+                    let decoded = crate::source::decode_tile(std::path::Path::new(&path), &read(&path)?)
+                        .map_err(|e| e.to_string())?;
+                    let whole = Crop { x: 0, y: 0, width: decoded.width, height: decoded.height };
+                    Ok((decoded, whole))
+                })?;
+                files.push((iiif::full_path(w, h, ext), bytes.clone()));
+                bytes
+            };
+            if lod == max && iiif::full_max_path(l, lod, ext).is_none() {
+                files.push((iiif::max_path(ext), bytes));
+            }
+        }
+        Ok(files)
+    }
+
     /// The manifest files, as (path under the output directory, bytes).
     pub fn manifests(&self) -> Vec<(String, Vec<u8>)> {
         let l = &self.layout;
         match self.viewer {
             Viewer::Dzi => vec![(format!("{}.dzi", self.name), dzi::descriptor(l, self.extension).into_bytes())],
-            Viewer::Iiif => vec![("info.json".into(), iiif::info_json(l, &self.iiif_id, self.extension).into_bytes())],
+            Viewer::Iiif => {
+                let id = self.iiif.as_ref().map_or(iiif::DEFAULT_ID, |s| s.id.as_str());
+                vec![("info.json".into(), iiif::info_json(l, id, self.extension, self.iiif.is_some()).into_bytes())]
+            }
             Viewer::Xyz | Viewer::Google => {
                 vec![(xyz::TILEJSON.into(), xyz::tilejson(self.viewer, l, &self.name, self.extension).into_bytes())]
             }

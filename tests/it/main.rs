@@ -16,6 +16,7 @@ mod docs;
 mod failures;
 mod golden;
 mod hostile;
+mod iiif;
 mod library;
 mod ome_zarr;
 mod oracle;

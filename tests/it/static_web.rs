@@ -79,9 +79,14 @@ impl Site {
 
     /// Shows `region` of the pack `name` (in the site dir); the screenshot and the page's state.
     fn show(&self, name: &str, region: (u32, u32, u32, u32), whole_index_up_to: u64) -> (RgbImage, Value) {
+        self.show_query(&format!("pack={name}&whole={whole_index_up_to}"), region)
+    }
+
+    /// Shows `region` of what `query` names (`pack=NAME&whole=N`, or `dzi=URL`, a tile source
+    /// OpenSeadragon opens itself); the screenshot and the page's state.
+    fn show_query(&self, query: &str, region: (u32, u32, u32, u32)) -> (RgbImage, Value) {
         let (x, y, w, h) = region;
-        let url =
-            format!("{}/view.html?pack={name}&region={x},{y},{w},{h}&whole={whole_index_up_to}", self.nginx.url());
+        let url = format!("{}/view.html?{query}&region={x},{y},{w},{h}", self.nginx.url());
         self.browser.open_and_wait(&url, READY, Duration::from_secs(60));
         let state = self.browser.execute(STATE);
         let shot = image::load_from_memory(&self.browser.screenshot("#v")).unwrap().to_rgb8();
@@ -209,6 +214,41 @@ fn vtpk_source_reports_a_damaged_tile_and_refuses_undecodable_packs() {
     assert!(message.contains("zstd") && message.contains("--codec jpeg"), "{message}");
 }
 
+/// (c) A IIIF directory written with an absolute id (`--iiif-id`), uploaded to that id's URL on
+/// a plain static host, opens in OpenSeadragon from its `info.json` alone and shows the three
+/// regions; every request nginx answered was for a file the directory holds.
+#[test]
+fn openseadragon_shows_a_static_iiif_service_at_its_id() {
+    let Some(site) = Site::start("the static IIIF browser test") else { return };
+    let source = test_image();
+    let input = site.dir.path().join("photo.png");
+    source.save(&input).unwrap();
+    let id = format!("{}/iiif/photo", site.nginx.url());
+    let out = site.dir.path().join("iiif/photo");
+    let split = ["split", s(&input), "--layout", "iiif", "-o", s(&out), "--tile-size", "256", "--quality", "95"];
+    ok(&[&split[..], &["-q", "--iiif-id", &id]].concat());
+    let mut failures = Vec::new();
+    for region in REGIONS {
+        let (shot, state) = site.show_query(&format!("dzi={id}/info.json"), region);
+        assert_eq!(state["openError"], Value::Null, "{state}");
+        assert_eq!(state["failed"], serde_json::json!([]), "tiles failed to load: {state}");
+        let verdict = judge(&source, region, &shot);
+        eprintln!("static IIIF, region {region:?}: {}", verdict.as_ref().unwrap_or_else(|e| e));
+        if let Err(why) = verdict {
+            shot.save(site.dir.path().join(format!("failed-iiif-{}.png", region.0))).unwrap();
+            failures.push(format!("region {region:?}: {why}"));
+        }
+    }
+    if !failures.is_empty() {
+        let kept = site.dir.keep();
+        panic!("{} (screenshots in {})", failures.join("; "), kept.display());
+    }
+    let requests = site.nginx.requests();
+    let iiif: Vec<_> = requests.iter().filter(|r| r.2.contains(" /iiif/photo/")).collect();
+    assert!(iiif.iter().any(|r| r.2.contains("/info.json ")), "{requests:?}");
+    assert!(iiif.len() > 3 && iiif.iter().all(|r| r.0 == 200), "{iiif:?}");
+}
+
 /// Requests and bytes fetched from the host for a first view and a deep zoom: the JS source on
 /// a pack against OpenSeadragon's own Deep Zoom reader on a `--layout dzi` directory of the same
 /// pyramid (254-texel payloads, 1 texel of overlap or border, JPEG q85), counted in nginx's
@@ -278,6 +318,10 @@ fn measure_requests_against_dzi() {
                     .into_iter()
                     .filter(|r| r.2.contains(".vtpk HTTP/") || r.2.contains("/dzi/"))
                     .collect();
+                // VORTEX_WEB_REQUESTS=1 lists them: where the bytes go.
+                if std::env::var_os("VORTEX_WEB_REQUESTS").is_some() {
+                    counted.iter().for_each(|r| println!("    {} {} {} {}", r.0, r.1, r.2, r.3));
+                }
                 (counted.len(), counted.iter().map(|r| r.1).sum::<u64>())
             };
             let (dr, db) = fetched(&format!("dzi=/dzi/{dzi}"));

@@ -29,7 +29,7 @@ fn write_viewer(
     let layout = viewer.page_grid(image.width, image.height, tile, overlap).unwrap();
     let dest = dir.join("out");
     let claim = output::claim(&dest, Product::Viewer(viewer), &[], false).unwrap();
-    let tiles = ViewerTiles { viewer, layout, name: "img".into(), extension: "png", iiif_id: ".".into() };
+    let tiles = ViewerTiles { viewer, layout, name: "img".into(), extension: "png", iiif: None };
     let sink = DirSink::for_viewer(&claim, tiles).unwrap();
     let opts = SplitOptions {
         tile_size: layout.tile_size,

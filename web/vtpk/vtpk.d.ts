@@ -48,6 +48,10 @@ export interface VtpkOptions {
   wait?: number;
   /** But never hold a read back longer than this (default 60). */
   maxWait?: number;
+  /** OpenSeadragon gets no level whose long side is under this many texels, past the first one
+   * under it (default 512; 0: every level). The coarsest levels are only placeholders while a
+   * view loads, and a pack stores them as whole, padded tiles. */
+  minSide?: number;
   /** Called with each tile (or index) that fails its checks. */
   onError?: (error: VtpkError) => void;
   /** The OpenSeadragon namespace (default: the global one). */

@@ -8,9 +8,9 @@
  * OpenSeadragon({ id: "viewer", tileSources: await VtpkTileSource.open("photo.vtpk") });
  * ```
  *
- * What it reads, in order: the first 2 KiB (header, level table and, for a small pack, the
+ * What it reads, in order: the first 512 bytes (header, level table and, for a tiny pack, the
  * whole index and metadata), then the index (whole when it is at most `wholeIndexUpTo` bytes,
- * else in blocks of 256 entries as tiles need them), then tile payloads. Reads asked for within
+ * else in blocks of 64 entries as tiles need them), then tile payloads. Reads asked for within
  * a few milliseconds of each other are sorted and merged when they lie close together in the
  * file, so a view's tiles usually arrive in a handful of requests. Everything fetched is
  * checked: the header's CRC-32C and fields before anything is sized from them, the metadata's
@@ -30,12 +30,15 @@ const SIGNATURE = [0x89, 0x56, 0x54, 0x50, 0x0d, 0x0a, 0x1a, 0x0a];
 const HEADER_LEN = 192;
 const LEVEL_LEN = 32;
 const ENTRY_LEN = 24;
-/** Index entries fetched together in block mode: 6 KiB, less than a JPEG tile. */
-const BLOCK_ENTRIES = 256;
-/** The first read: header and level table (at most 1,216 bytes) and, for packs up to ~35
- * tiles, index and metadata; small, since what follows them is index entries and finest-level
- * tiles that a first view does not show. */
-const FIRST_READ = 2048;
+/** Index entries fetched together in block mode: 1.5 KiB. A view needs a few entries of each
+ * of a few tile rows; neighbouring blocks are merged into one request, so small blocks cost
+ * no requests and fetch fewer entries no view needs (256-entry blocks made the first view of a
+ * 16384² pack fetch 2 KiB of entries it never used). */
+const BLOCK_ENTRIES = 64;
+/** The first read: the header and a level table of up to 10 levels (a pack up to 512 pages a
+ * side; a longer table is read next) and, for packs of a few tiles, index and metadata; small,
+ * since what follows is index entries and finest-level tiles that a first view does not show. */
+const FIRST_READ = 512;
 /** The caps vortex_pack::Limits holds a header to, so a hostile header sizes nothing big. */
 const MAX_TILE_SIZE = 16384;
 const MAX_TILES = 2 ** 29;
@@ -232,6 +235,10 @@ class RangeReader {
  * @property {number} [wait] gather reads until none has come for this many milliseconds
  *   (default 20: OpenSeadragon asks for a tile or a few per frame)
  * @property {number} [maxWait] but never hold a read back longer than this (default 60 ms)
+ * @property {number} [minSide] OpenSeadragon is given no level whose long side is under this
+ *   many texels, beyond the first one under it (default 512, a small viewer's width): it draws
+ *   the coarsest levels first as placeholders, and a pack stores those whole, padding and all,
+ *   where Deep Zoom crops them to a few texels; 0 gives it every level
  * @property {(error: VtpkError) => void} [onError] called with each tile that fails
  * @property {any} [OpenSeadragon] the OpenSeadragon namespace (default: the global one)
  */
@@ -367,9 +374,12 @@ export class VtpkPack {
     // it, which holds the coarse levels every view starts with.
     const lastBlock = Math.floor((this.indexCount - 1) / BLOCK_ENTRIES);
     const from = whole ? HEADER_LEN : Math.min(this.indexOffset + lastBlock * BLOCK_ENTRIES * ENTRY_LEN, this.metaOffset);
+    // A level table longer than the first read is read beside the index block (whole: with it).
+    const inFirst = this.indexOffset <= first.length;
+    const rest = inFirst || whole ? null : this.reader.read(HEADER_LEN, this.indexOffset);
     const bytes = metaEnd <= first.length ? first : await this.reader.read(from, metaEnd);
     const at = (/** @type {number} */ offset) => (bytes === first ? offset : offset - from);
-    const table = first.subarray(HEADER_LEN, this.indexOffset);
+    const table = inFirst ? first.subarray(HEADER_LEN, this.indexOffset) : (await rest) ?? bytes.subarray(0, at(this.indexOffset));
     this.levelTable = table;
     this.readLevels(table);
     const meta = bytes.subarray(at(this.metaOffset), at(metaEnd));
@@ -394,6 +404,8 @@ export class VtpkPack {
       }
     } else {
       this.blocks.set(lastBlock, Promise.resolve(bytes.subarray(0, this.metaOffset - from)));
+      // An index of one block is whole now: check it.
+      await this.checkIndexWhenComplete();
     }
   }
 
@@ -625,6 +637,9 @@ export class VtpkTileSource {
     const maxLevel = Math.ceil(Math.log2(Math.max(pack.width, pack.height)));
     // Pack levels past OpenSeadragon's 1-texel level (a pack made down to one texel) are unused.
     const lods = Math.min(pack.levelCount, maxLevel + 1);
+    // The first LOD whose long side is at most minSide: the coarsest level shown.
+    const minSide = options.minSide ?? 512;
+    const coarsest = minSide > 0 ? Math.max(0, Math.ceil(Math.log2(Math.max(pack.width, pack.height) / minSide))) : lods - 1;
     const payload = pack.tileSize - 2 * pack.border;
     const border = pack.border;
     const source = new OSD.TileSource({
@@ -632,7 +647,7 @@ export class VtpkTileSource {
       height: pack.height,
       tileSize: payload,
       tileOverlap: border,
-      minLevel: maxLevel - (lods - 1),
+      minLevel: maxLevel - Math.min(lods - 1, coarsest),
       maxLevel,
       getTileUrl: (/** @type {number} */ level, /** @type {number} */ x, /** @type {number} */ y) =>
         `${pack.url}#${maxLevel - level}/${x}/${y}`,
