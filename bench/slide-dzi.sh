@@ -41,6 +41,7 @@ mkdir -p "$WORK/bin"
 cp "$BIN" "$WORK/bin/vortex-tiler" # a concurrent build must not swap it between runs
 VT=$WORK/bin/vortex-tiler
 REV="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src crates Cargo.toml Cargo.lock || echo +uncommitted)"
+[ -n "${VORTEX:-}" ] && REV=${VORTEX_LABEL:-$VORTEX}
 if [ -n "${VORTEX_PYVIPS:-}" ]; then
   PY=$VORTEX_PYVIPS
   PYVIPS_VERSION=$("$PY" -c 'import pyvips; print("libvips-%d.%d.%d" % tuple(pyvips.version(i) for i in range(3)))')
@@ -122,7 +123,7 @@ run_tool() {
   log "$tool run $run: ${result% *} s, $(cpu) s CPU, $((${result#* } / 1024)) MiB peak, copied $copied, encoded $encoded"
 }
 
-# The first 64 finest tiles are the slide's stored tiles with its tables spliced in (and a
+# The whole tiles among the first 64 finest tiles are the slide's stored tiles with its tables spliced in (and a
 # colour marker where they have none: what tests/it/copy_tiles.rs checks in full on small files).
 check_copies() {
   "$PY" - "$SLIDE" "$1" <<'PY' || { echo "error: a copied tile is not the stored one" >&2; exit 1; }
@@ -134,13 +135,16 @@ with tifffile.TiffFile(slide) as t:
     tables = page.jpegtables
     fh = t.filehandle
     cols = -(-page.imagewidth // page.tilewidth)
+    whole = page.imagewidth // page.tilewidth  # the edge column is cropped, so encoded
     for i, (offset, count) in enumerate(zip(page.dataoffsets[:64], page.databytecounts[:64])):
+        if i % cols >= whole:
+            continue
         fh.seek(offset)
         tile = fh.read(count)
         stream = tile[:2] + tables[2:-2] + tile[2:]
         ours = open("%s/%d/%d_%d.jpeg" % (files, finest, i % cols, i // cols), "rb").read()
         # The stored stream, or with a JFIF APP0 (YCbCr) or Adobe APP14 (RGB) added after SOI
-        # where it has none (libtiff 4.5+ writes an Adobe marker into RGB tiles itself).
+        # where it has none (the libtiff in pyvips-binary writes an Adobe marker into RGB tiles).
         added = 2 + int.from_bytes(ours[4:6], "big")
         assert ours == stream or ours[:2] + ours[2 + added:] == stream, "tile %d" % i
 PY
@@ -158,7 +162,8 @@ REPORT=$WORK/slide-report.md
   echo
   echo "| tool | wall | CPU (user+sys) | peak RSS | tile files | copied / encoded | pyvips 8.18 wall / tool |"
   echo "|---|---:|---:|---:|---:|---:|---:|"
-  ref=$(median "$RESULTS" pyvips 3)
+  ref=
+  grep -q '^pyvips' "$RESULTS" && ref=$(median "$RESULTS" pyvips 3)
   for tool in "${TOOLS[@]}"; do
     wall=$(median "$RESULTS" "$tool" 3)
     rss=$(median "$RESULTS" "$tool" 4)

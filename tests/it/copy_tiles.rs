@@ -266,7 +266,8 @@ fn other_layouts_copy_and_misfits_say_why() {
     for (i, (input, flags, why)) in misfits.into_iter().enumerate() {
         let out = d(&format!("misfit{i}"));
         let line = cli::ok(&[&["split", s(input), "-o", s(&out)], flags].concat());
-        assert!(line.contains(&format!("re-encoded, not copied: {why}")), "{flags:?}: {line}");
+        let said = line.split_once("re-encoded, not copied: ").map(|(_, said)| said);
+        assert!(said.is_some_and(|said| said.contains(why)), "{flags:?}: {line}");
         let done = json(&[&["split", s(input), "-o", s(&out)], flags].concat());
         assert_eq!(done["copied"], 0, "{flags:?}: {done}");
         assert!(done["encoded"].as_u64().unwrap() > 0, "{flags:?}: {done}");
