@@ -8,6 +8,9 @@
 //! ordered one (a pack) gets them from a writer thread, in the producer's order, batch by batch as
 //! each completes, so that its bytes do not depend on the thread count. At most [`LOTS_IN_FLIGHT`]
 //! lots are encoding or waiting for the writer at once.
+//!
+//! Where the source's stored JPEG tiles line up with the finest level's pages, a [`Copier`]
+//! hands those pages' files over instead of encoding them ([`crate::source::stored`]).
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -20,6 +23,7 @@ use crate::error::{Result, TilerError};
 use crate::pixel::Sample;
 use crate::pyramid::cascade::{Batch, CutTile};
 use crate::sink::TileSink;
+use crate::source::stored::StoredTiles;
 use crate::split::Progress;
 use crate::stages::{Stage, StageClock};
 use crate::viewer::Crop;
@@ -28,11 +32,30 @@ use crate::viewer::Crop;
 /// stores and the one encoding behind it.
 const LOTS_IN_FLIGHT: usize = 2;
 
-/// What the stage counts: tiles encoded, tiles stored (places).
+/// What the stage counts: tiles encoded, tiles copied from the source, tiles stored (places).
 #[derive(Default)]
 pub(crate) struct Counts {
     pub encoded: AtomicU64,
+    pub copied: AtomicU64,
     pub tiles: AtomicU64,
+}
+
+/// The finest level's pages that are a stored tile of the source, texel for texel: same grid,
+/// no border, wholly inside the image (an edge tile is padded past the image, and the stored
+/// tile's padding is not ours).
+pub(crate) struct Copier {
+    pub tiles: std::sync::Arc<dyn StoredTiles>,
+    /// Pages of LOD 0 wholly inside the image, across and down.
+    pub columns: u32,
+    pub rows: u32,
+    pub side: u32,
+}
+
+impl Copier {
+    /// Whether page (`lod`, `x`, `y`), kept as `crop` by the sink, is copied.
+    fn covers(&self, lod: u32, (x, y): (u32, u32), crop: Option<Crop>) -> bool {
+        lod == 0 && x < self.columns && y < self.rows && crop.is_none_or(|c| c == Crop::whole(self.side))
+    }
 }
 
 /// Encodes and writes batches as they arrive, until the producer is done or something fails.
@@ -41,11 +64,12 @@ pub(crate) fn consume<T: Sample>(
     encoder: &TileEncoder<T>,
     sink: &dyn TileSink,
     counts: &Counts,
+    copier: Option<&Copier>,
     progress: &dyn Progress,
     clock: &StageClock,
 ) -> Result<()> {
     let busy = Busy::default();
-    let stage = Encoding { encoder, sink, counts, progress, busy: &busy };
+    let stage = Encoding { encoder, sink, counts, copier, progress, busy: &busy };
     // The writer waits for each lot in turn; the channel's bound keeps the rest from running ahead.
     let (to_writer, lots) = sync_channel::<Arc<Lot<T>>>(LOTS_IN_FLIGHT - 1);
     let result = std::thread::scope(|threads| {
@@ -74,7 +98,7 @@ pub(crate) fn consume<T: Sample>(
                 if progress.cancelled() {
                     return Err(TilerError::Interrupted);
                 }
-                let lot = Arc::new(Lot::of(gather(first?, &rx)?, sink));
+                let lot = Arc::new(Lot::of(gather(first?, &rx)?, sink, copier));
                 for k in 0..lot.jobs.len() {
                     let lot = Arc::clone(&lot);
                     let stage = &stage;
@@ -152,6 +176,7 @@ struct Encoding<'a, T> {
     encoder: &'a TileEncoder<T>,
     sink: &'a dyn TileSink,
     counts: &'a Counts,
+    copier: Option<&'a Copier>,
     progress: &'a dyn Progress,
     busy: &'a Busy,
 }
@@ -161,12 +186,14 @@ impl<T: Sample> Encoding<'_, T> {
     fn run(&self, job: &Job<T>) -> JobResult {
         let _busy = self.busy.start();
         let texels = job.take_texels()?;
-        let stored = prepare(self.encoder, self.sink, job, &texels)?;
+        let stored = prepare(self.encoder, self.sink, job, &texels, self.copier)?;
         // The last job of a tile frees its texels here, not when the writer stores the lot.
         drop(texels);
-        if matches!(stored, Stored::Encoded(_)) {
-            self.counts.encoded.fetch_add(1, Ordering::Relaxed);
-        }
+        match stored {
+            Stored::Encoded(_) => self.counts.encoded.fetch_add(1, Ordering::Relaxed),
+            Stored::Copied(_) => self.counts.copied.fetch_add(1, Ordering::Relaxed),
+            Stored::Constant(_) => 0,
+        };
         if self.sink.ordered() {
             return Ok(Some(stored));
         }
@@ -178,7 +205,7 @@ impl<T: Sample> Encoding<'_, T> {
     fn store(&self, lod: u32, places: &[(u32, u32)], stored: &Stored) -> Result<()> {
         for &(x, y) in places {
             match stored {
-                Stored::Encoded(bytes) => self.sink.write_tile(lod, x, y, bytes)?,
+                Stored::Encoded(bytes) | Stored::Copied(bytes) => self.sink.write_tile(lod, x, y, bytes)?,
                 Stored::Constant(texel) => self.sink.write_constant(lod, x, y, texel)?,
             }
         }
@@ -200,10 +227,10 @@ struct Lot<T> {
 }
 
 impl<T> Lot<T> {
-    fn of(batches: Vec<Batch<T>>, sink: &dyn TileSink) -> Lot<T> {
+    fn of(batches: Vec<Batch<T>>, sink: &dyn TileSink, copier: Option<&Copier>) -> Lot<T> {
         let jobs: Vec<Job<T>> = batches
             .into_iter()
-            .flat_map(|batch| batch.tiles.into_iter().flat_map(move |tile| Job::of(sink, batch.lod, tile)))
+            .flat_map(|batch| batch.tiles.into_iter().flat_map(move |tile| Job::of(sink, copier, batch.lod, tile)))
             .collect();
         let finished = Mutex::new(((0..jobs.len()).map(|_| None).collect(), jobs.len()));
         Lot { jobs, finished, done: Condvar::new() }
@@ -234,6 +261,9 @@ impl<T> Lot<T> {
 struct Job<T> {
     lod: u32,
     crop: Option<Crop>,
+    /// One place whose source tile is copied rather than encoded (pages identical at the cut
+    /// may have different stored bytes, so each place is a job of its own).
+    copy: bool,
     places: Vec<(u32, u32)>,
     /// Until the encoding takes them: the texels are freed as soon as every encoding of the
     /// tile is done, not kept until the writer has stored the whole lot, so that a row of
@@ -244,16 +274,21 @@ struct Job<T> {
 impl<T> Job<T> {
     /// The encodings a cut tile needs: one, unless the sink crops its places differently
     /// (identical pages merged at the cut may sit at a viewer tile's edge and in the middle).
-    fn of(sink: &dyn TileSink, lod: u32, cut: CutTile<T>) -> Vec<Job<T>> {
+    fn of(sink: &dyn TileSink, copier: Option<&Copier>, lod: u32, cut: CutTile<T>) -> Vec<Job<T>> {
         let texels = Arc::new(cut.texels);
         let mut jobs: Vec<Job<T>> = Vec::new();
         for place in cut.places {
             let crop = sink.crop(lod, place.0, place.1);
-            match jobs.iter_mut().find(|j| j.crop == crop) {
+            let copy = copier.is_some_and(|c| c.covers(lod, place, crop));
+            match jobs.iter_mut().find(|j| j.crop == crop && !copy && !j.copy) {
                 Some(job) => job.places.push(place),
-                None => {
-                    jobs.push(Job { lod, crop, places: vec![place], texels: Mutex::new(Some(Arc::clone(&texels))) })
-                }
+                None => jobs.push(Job {
+                    lod,
+                    crop,
+                    copy,
+                    places: vec![place],
+                    texels: Mutex::new(Some(Arc::clone(&texels))),
+                }),
             }
         }
         jobs
@@ -269,13 +304,21 @@ impl<T> Job<T> {
 /// A tile ready for the sink.
 enum Stored {
     Encoded(Vec<u8>),
+    /// The source's stored tile, as a file.
+    Copied(Vec<u8>),
     /// Every texel is this one (stored layout, little-endian samples).
     Constant(Vec<u8>),
 }
 
 /// Encodes a tile (or the part the sink keeps), unless it has one colour and the sink stores
-/// such tiles as their colour.
-fn prepare<T: Sample>(encoder: &TileEncoder<T>, sink: &dyn TileSink, job: &Job<T>, texels: &[T]) -> Result<Stored> {
+/// such tiles as their colour, or it is copied from the source as stored.
+fn prepare<T: Sample>(
+    encoder: &TileEncoder<T>,
+    sink: &dyn TileSink,
+    job: &Job<T>,
+    texels: &[T],
+    copier: Option<&Copier>,
+) -> Result<Stored> {
     let channels = encoder.source_layout().channels.count();
     // A pack entry holds a constant texel of up to 8 bytes (not 3 or 4 samples of 32 bits).
     if sink.takes_constants()
@@ -284,8 +327,13 @@ fn prepare<T: Sample>(encoder: &TileEncoder<T>, sink: &dyn TileSink, job: &Job<T
     {
         return Ok(Stored::Constant(encoder.stored_texel(&texels[..channels])));
     }
-    let mut bytes = Vec::new();
     let (lod, (x, y)) = (job.lod, job.places[0]);
+    if let Some(copier) = copier.filter(|_| job.copy)
+        && let Some(file) = copier.tiles.jpeg(x, y)?
+    {
+        return Ok(Stored::Copied(file));
+    }
+    let mut bytes = Vec::new();
     let encoded = match job.crop {
         None => encoder.encode(texels, &mut bytes),
         Some(crop) => encoder.encode_crop(texels, crop, &mut bytes),

@@ -111,6 +111,8 @@ pub struct Requested {
     pub filter: Option<Filter>,
     /// `--max-memory` (not an `info.json` member).
     pub max_memory: Option<u64>,
+    /// `--reencode`: encode the source's stored JPEG tiles again rather than copy them.
+    pub reencode: bool,
 }
 
 /// Combines flags, an existing `info.json` (at `info_path`) and the source into settings.
@@ -219,6 +221,14 @@ pub fn resolve(
         },
         max_memory: req.max_memory.unwrap_or(crate::limits::DEFAULT_MEMORY),
         down_to_one_texel: false,
+        // A quality or subsampling asked for on the command line is one the copies would not
+        // have (one from an earlier run's info.json is only that run's default).
+        reencode: match (req.reencode, req.quality, req.subsampling) {
+            (true, _, _) => Some("--reencode"),
+            (_, Some(_), _) => Some("--quality"),
+            (_, _, Some(_)) => Some("--subsampling"),
+            _ => None,
+        },
     };
     opts.filter.check(source).map_err(TilerError::Options)?;
     let stored = codec.stored_layout(source, flatten, tile_depth)?;

@@ -14,7 +14,7 @@ use std::sync::mpsc::sync_channel;
 
 use crate::background::Background;
 use crate::codec::{Codec, TileEncoder};
-use crate::encoders;
+use crate::encoders::{self, Copier};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::{Depth, PixelLayout, Sample};
@@ -27,6 +27,7 @@ use crate::pyramid::stripes::Plan;
 use crate::shard::merge::RootRows;
 use crate::shard::sums::{self, EncodedRoots};
 use crate::sink::TileSink;
+use crate::source::stored::Quality;
 use crate::source::{ImageHeader, RowSource, read_ahead};
 use crate::stages::{Stage, StageClock, StageTimes};
 
@@ -48,6 +49,10 @@ pub struct SplitOptions {
     /// Go on below one page until the image is one texel, as Deep Zoom's levels do
     /// ([`Layout::down_to_one_texel`]).
     pub down_to_one_texel: bool,
+    /// Why the source's stored JPEG tiles are encoded again rather than copied where they
+    /// line up with the finest level's pages (`--reencode`, an explicit `--quality` or
+    /// `--subsampling`); `None` copies them ([`crate::source::stored`]).
+    pub reencode: Option<&'static str>,
 }
 
 impl SplitOptions {
@@ -78,8 +83,13 @@ pub struct Summary {
     pub source: PixelLayout,
     pub stored: PixelLayout,
     pub tiles: u64,
-    /// Tiles encoded; the others share an identical neighbour's bytes or were stored as their one colour.
+    /// Tiles encoded; the others share an identical neighbour's bytes, were stored as their one
+    /// colour or were copied.
     pub encoded: u64,
+    /// Tiles of the finest level copied from the source's stored JPEG tiles.
+    pub copied: u64,
+    /// The source's stored tiles, where it has some, and whether they were copied.
+    pub stored_tiles: Option<StoredReport>,
     pub bytes: u64,
     /// Vertical stripes the fine LODs were cut in (1: one band over the whole width, or one
     /// stripe of the fine LODs and a coarse pass; 0: a shard, whose passes are its rectangles).
@@ -89,6 +99,43 @@ pub struct Summary {
     pub passes: usize,
     /// Where the wall time went.
     pub stages: StageTimes,
+}
+
+/// A source's stored JPEG tiles as the summary tells of them.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StoredReport {
+    /// Texels across and down of a stored tile.
+    pub tile_size: (u32, u32),
+    /// The quality they were stored at, from their quantisation tables.
+    pub quality: Option<Quality>,
+    /// Why none was copied (`None`: those wholly inside the image and on the pages' grid were).
+    pub declined: Option<String>,
+}
+
+/// Whether the finest level's pages are copied from `source`'s stored tiles (the copier) and
+/// what the summary says of them; neither where the source stores none.
+fn plan_copy(source: &dyn RowSource, opts: &SplitOptions, layout: &Layout) -> (Option<Copier>, Option<StoredReport>) {
+    let Some(tiles) = source.stored_tiles() else { return (None, None) };
+    let (tile_size, side) = (tiles.tile_size(), layout.tile_size);
+    let declined = if let Some(why) = opts.reencode {
+        Some(format!("{why} asked"))
+    } else if !matches!(opts.codec, Codec::Jpeg { .. }) {
+        Some(format!("the tiles are {}", opts.codec.name()))
+    } else if layout.border != 0 {
+        Some(format!("the pages have a border (overlap) of {}", layout.border))
+    } else if tile_size != (side, side) {
+        Some(format!("they are not on the grid of {side}-texel pages"))
+    } else {
+        None
+    };
+    let report = StoredReport { tile_size, quality: tiles.quality(), declined };
+    let copier = report.declined.is_none().then(|| Copier {
+        tiles,
+        columns: layout.width / side,
+        rows: layout.height / side,
+        side,
+    });
+    (copier, Some(report))
 }
 
 /// Batches of tiles waiting for the encoder: cutting is much cheaper than encoding, so one
@@ -111,7 +158,8 @@ pub fn split(
 ) -> Result<Summary> {
     let layout = opts.layout(source.width(), source.height())?;
     let plan = Plan::choose(&layout, source.layout().bytes_per_pixel() as u64, opts.filter, opts.max_memory)?;
-    let (summary, _) = by_depth(source.header(), sink, opts, layout, Passes::Whole(plan, source), progress)?;
+    let copy = plan_copy(source.as_ref(), opts, &layout);
+    let (summary, _) = by_depth(source.header(), sink, opts, layout, copy, Passes::Whole(plan, source), progress)?;
     Ok(summary)
 }
 
@@ -132,7 +180,8 @@ pub(crate) fn split_shard(
             source.layout()
         )));
     }
-    by_depth(source.header(), sink, opts, layout, Passes::Shard(spans, source), progress)
+    let copy = plan_copy(source.as_ref(), opts, &layout);
+    by_depth(source.header(), sink, opts, layout, copy, Passes::Shard(spans, source), progress)
 }
 
 /// The levels above a sharded run's cut level, from the exact sums of its roots: what
@@ -145,7 +194,7 @@ pub(crate) fn above_cut(
     progress: &dyn Progress,
 ) -> Result<Summary> {
     let layout = opts.layout(image.width, image.height)?;
-    let (summary, _) = by_depth(image, sink, opts, layout, Passes::AboveCut(roots), progress)?;
+    let (summary, _) = by_depth(image, sink, opts, layout, (None, None), Passes::AboveCut(roots), progress)?;
     Ok(summary)
 }
 
@@ -181,19 +230,23 @@ enum Passes<'a> {
     AboveCut(RootRows<'a>),
 }
 
+/// Which of the finest level's pages are copied from the source, and what the summary says.
+type CopyPlan = (Option<Copier>, Option<StoredReport>);
+
 fn by_depth(
     image: ImageHeader,
     sink: &dyn TileSink,
     opts: &SplitOptions,
     layout: Layout,
+    copy: CopyPlan,
     passes: Passes,
     progress: &dyn Progress,
 ) -> Result<(Summary, Vec<EncodedRoots>)> {
     match image.layout.depth {
-        Depth::U8 => run::<u8>(image.layout, sink, opts, layout, passes, progress),
-        Depth::U16 => run::<u16>(image.layout, sink, opts, layout, passes, progress),
-        Depth::U32 => run::<u32>(image.layout, sink, opts, layout, passes, progress),
-        Depth::F32 => run::<f32>(image.layout, sink, opts, layout, passes, progress),
+        Depth::U8 => run::<u8>(image.layout, sink, opts, layout, copy, passes, progress),
+        Depth::U16 => run::<u16>(image.layout, sink, opts, layout, copy, passes, progress),
+        Depth::U32 => run::<u32>(image.layout, sink, opts, layout, copy, passes, progress),
+        Depth::F32 => run::<f32>(image.layout, sink, opts, layout, copy, passes, progress),
         Depth::F16 => Err(TilerError::Options(
             "half-float samples are read as 32-bit floats; a source never hands them on as half".into(),
         )),
@@ -205,6 +258,7 @@ fn run<T: Sample>(
     sink: &dyn TileSink,
     opts: &SplitOptions,
     layout: Layout,
+    (copier, stored_tiles): CopyPlan,
     passes: Passes,
     progress: &dyn Progress,
 ) -> Result<(Summary, Vec<EncodedRoots>)> {
@@ -249,7 +303,7 @@ fn run<T: Sample>(
                 Vec::new()
             })
         });
-        let consumed = encoders::consume(rx, &encoder, sink, &counts, progress, &clock);
+        let consumed = encoders::consume(rx, &encoder, sink, &counts, copier.as_ref(), progress, &clock);
         // Dropping the receiver (on error) makes the producer's next send fail, so it stops.
         let produced = producer.join().map_err(|_| TilerError::panicked("the tiling thread"))?;
         consumed.map(|()| produced)
@@ -260,6 +314,8 @@ fn run<T: Sample>(
         stored: encoder.stored_layout(),
         tiles: counts.tiles.into_inner(),
         encoded: counts.encoded.into_inner(),
+        copied: counts.copied.into_inner(),
+        stored_tiles,
         bytes: sink.bytes_written(),
         stripes,
         passes: pass_count,

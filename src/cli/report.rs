@@ -81,8 +81,9 @@ pub fn summary_line(done: &Finished, out: &Path) -> String {
             if s.stripes == 1 { "" } else { "s" }
         ),
     };
+    let stored = s.stored_tiles.as_ref().map(|t| stored_clause(s.copied, t)).unwrap_or_default();
     format!(
-        "wrote {} tiles ({} encoded, {} LODs from {} x {} pages, {}x{} {}) totalling {} to {} in {:.2} s: {:.1} source Mpx/s [{}]{stripes}{peak}",
+        "wrote {} tiles ({} encoded, {} LODs from {} x {} pages, {}x{} {}) totalling {} to {} in {:.2} s: {:.1} source Mpx/s [{}]{stripes}{peak}{stored}",
         s.tiles,
         s.encoded,
         s.layout.lod_count,
@@ -99,6 +100,16 @@ pub fn summary_line(done: &Finished, out: &Path) -> String {
     )
 }
 
+/// What became of the source's stored JPEG tiles, for the summary line.
+fn stored_clause(copied: u64, t: &vortex_tiler::split::StoredReport) -> String {
+    let quality = t.quality.map(|q| format!(" ({q} by their quantisation tables)")).unwrap_or_default();
+    let tiles = format!("the source's {}x{} JPEG tiles{quality}", t.tile_size.0, t.tile_size.1);
+    match &t.declined {
+        None => format!("; {copied} tiles copied as stored from {tiles}"),
+        Some(why) => format!("; {tiles} re-encoded, not copied: {why}"),
+    }
+}
+
 /// The summary as one JSON object (`--json`), for scripts: the same numbers as the line.
 pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vortex_pack::WriteSummary>) -> String {
     let s = &done.summary;
@@ -110,6 +121,7 @@ pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vor
         "source": done.decoder,
         "tiles": s.tiles,
         "encoded": s.encoded,
+        "copied": s.copied,
         "bytes": s.bytes,
         "lodCount": s.layout.lod_count,
         "tileColumns": s.layout.columns,
@@ -126,6 +138,16 @@ pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vor
     if !matches!(layout, "vortex" | "pack" | "shard") {
         // The viewer's own terms: its tile side without the overlap (Deep Zoom's TileSize).
         doc["viewer"] = serde_json::json!({ "tileSize": s.layout.payload(), "overlap": s.layout.border });
+    }
+    if let Some(t) = &s.stored_tiles {
+        doc["storedTiles"] = serde_json::json!({
+            "tileWidth": t.tile_size.0,
+            "tileHeight": t.tile_size.1,
+            "quality": t.quality.map(|q| q.estimate),
+            "qualityExact": t.quality.map(|q| q.exact),
+            "copied": s.copied,
+            "declined": t.declined,
+        });
     }
     if let Some(w) = pack {
         doc["pack"] = serde_json::json!({

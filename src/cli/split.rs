@@ -157,6 +157,16 @@ pub struct OutputArgs {
     #[command(flatten)]
     enc: CodecArgs,
 
+    /// Decode and encode every tile, even those the source stores as JPEG tiles on the grid of
+    /// the finest level's pages [default: copy those: a JPEG-tiled TIFF or slide (or, for
+    /// convert, JPEG tiles without overlap) cut at its tile size with no border or overlap
+    /// (--layout dzi --overlap 0, iiif, xyz, or --border 0) keeps the stored tiles byte for
+    /// byte, with no generation loss and no encoding time; the summary says how many were
+    /// copied and at what quality they were stored. An explicit --quality or --subsampling
+    /// re-encodes them too; docs/sources.md].
+    #[arg(long)]
+    reencode: bool,
+
     /// Fill for the padding in the last page of each row and column, between the image's edge
     /// and the page's: edge (repeat the image's edge), #rrggbb, #rrggbbaa, r,g,b[,a] or a grey
     /// level [default: edge].
@@ -409,6 +419,7 @@ pub fn tile(
         filename_format: names,
         filter: a.filter,
         max_memory: Some(a.max_memory),
+        reencode: a.reencode,
         ..a.enc.requested()
     };
     let existing_ref = info_path.as_deref().zip(existing.as_ref());
@@ -629,6 +640,7 @@ fn tile_for_viewer(
         tile_depth: a.tile_type,
         filter: a.filter,
         max_memory: Some(a.max_memory),
+        reencode: a.reencode,
         ..a.enc.requested()
     };
     let (mut opts, _) = settings::resolve(&requested, None, source.layout())?;

@@ -193,6 +193,10 @@ impl RowSource for Described {
     fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
         self.inner.read_columns(columns)
     }
+    /// Only rows passed through as they are may be copied as stored.
+    fn stored_tiles(&self) -> Option<std::sync::Arc<dyn crate::source::stored::StoredTiles>> {
+        self.transform.is_none().then(|| self.inner.stored_tiles()).flatten()
+    }
 }
 
 /// CMYK texels (8 bits, Adobe-inverted or not) to sRGB through a CMYK profile.

@@ -15,6 +15,7 @@ pub mod orient;
 mod png;
 mod pnm;
 pub mod read_ahead;
+pub mod stored;
 mod tiff;
 pub mod tiled;
 mod whole;
@@ -80,6 +81,12 @@ pub trait RowSource: Send {
     /// the decoder: its rows are the stored ones).
     fn embedded(&self) -> Embedded {
         Embedded::default()
+    }
+    /// The compressed tiles the rows are decoded from, where a run may copy them as they are
+    /// ([`stored`]); `None` for sources whose rows are not a stored tile's texels (decoded
+    /// from strips or whole, or changed on the way: rotated, converted to sRGB).
+    fn stored_tiles(&self) -> Option<std::sync::Arc<dyn stored::StoredTiles>> {
+        None
     }
 }
 
@@ -178,6 +185,9 @@ impl RowSource for Reopening {
     }
     fn embedded(&self) -> Embedded {
         self.inner.embedded()
+    }
+    fn stored_tiles(&self) -> Option<std::sync::Arc<dyn stored::StoredTiles>> {
+        self.inner.stored_tiles()
     }
     fn rewind(&mut self) -> Result<()> {
         let again = open_once(&self.path, self.max_memory, self.pick)?;

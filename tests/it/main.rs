@@ -12,6 +12,7 @@ mod codecs;
 mod color;
 mod common;
 mod convert;
+mod copy_tiles;
 mod docs;
 mod failures;
 mod golden;

@@ -15,6 +15,7 @@ use std::io::BufReader;
 use std::ops::Range;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use rayon::prelude::*;
 use tiff::decoder::{ChunkType, Decoder};
@@ -24,6 +25,7 @@ use super::libjpeg::{self, Colour, Extent};
 use super::open_error;
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
+use crate::source::stored::{self, Quality, Samples, StoredTiles};
 use crate::source::{ImageHeader, RowSource};
 
 /// Chunk rows decoded together when the TIFF is in strips: enough strips to keep every core
@@ -31,9 +33,7 @@ use crate::source::{ImageHeader, RowSource};
 const STRIPS_PER_CORE: usize = 4;
 
 pub(super) struct JpegTiff {
-    path: PathBuf,
-    file: File,
-    file_len: u64,
+    chunks: Arc<Chunks>,
     width: u32,
     height: u32,
     colour: Colour,
@@ -42,10 +42,6 @@ pub(super) struct JpegTiff {
     chunk_h: u32,
     across: u32,
     tiled: bool,
-    offsets: Vec<u64>,
-    counts: Vec<u64>,
-    /// The JPEGTables marker segments (no SOI/EOI), empty where each chunk is complete.
-    tables: Vec<u8>,
     /// Chunk rows held in one band.
     group: u32,
     /// The decoded chunks of the band, `[chunk row in band * across + column]`, each its
@@ -60,6 +56,45 @@ pub(super) struct JpegTiff {
     label: String,
     /// The orientation and ICC profile of the image's directory.
     embedded: crate::source::Embedded,
+}
+
+/// Where the compressed chunks are, shared with the [`StoredTiles`] a run copies them through.
+struct Chunks {
+    path: PathBuf,
+    file: File,
+    file_len: u64,
+    offsets: Vec<u64>,
+    counts: Vec<u64>,
+    /// The JPEGTables marker segments (no SOI/EOI), empty where each chunk is complete.
+    tables: Vec<u8>,
+}
+
+impl Chunks {
+    /// Chunk `index`'s complete JPEG stream (the shared tables spliced in); `name` says which
+    /// chunk in an error.
+    fn stream(&self, index: usize, name: &str) -> std::result::Result<Vec<u8>, String> {
+        let (offset, count) = (self.offsets[index], self.counts[index]);
+        if count == 0 {
+            return Err(format!("{name} is missing (its byte count is 0)"));
+        }
+        if offset.checked_add(count).is_none_or(|end| end > self.file_len) {
+            return Err(format!(
+                "{name} lies past the end of the file ({count} bytes at {offset}, the file has {}): a truncated TIFF?",
+                self.file_len
+            ));
+        }
+        let mut compressed = vec![0u8; count as usize];
+        self.file.read_exact_at(&mut compressed, offset).map_err(|e| format!("{name}: cannot be read: {e}"))?;
+        if self.tables.is_empty() {
+            return match compressed.starts_with(&[0xFF, 0xD8]) {
+                true => Ok(compressed),
+                false => Err(format!("{name}: the data does not start with a JPEG SOI marker")),
+            };
+        }
+        let mut stream = Vec::new();
+        libjpeg::splice(&self.tables, &compressed, &mut stream).map_err(|m| format!("{name}: {m}"))?;
+        Ok(stream)
+    }
 }
 
 /// Whether the current image is JPEG-compressed (new-style, Compression 7).
@@ -156,10 +191,9 @@ pub(super) fn open(
             ),
         ));
     }
+    let chunks = Chunks { path: path.to_path_buf(), file, file_len, offsets, counts, tables };
     Ok(Box::new(JpegTiff {
-        path: path.to_path_buf(),
-        file,
-        file_len,
+        chunks: Arc::new(chunks),
         width,
         height,
         colour,
@@ -167,9 +201,6 @@ pub(super) fn open(
         chunk_h,
         across,
         tiled,
-        offsets,
-        counts,
-        tables,
         group: group as u32,
         band: Vec::new(),
         band_first: 0,
@@ -256,26 +287,11 @@ impl JpegTiff {
     /// The texels of the chunk at `col`, `row` (in chunks) inside the image, into `texels`.
     fn decode_chunk(&self, row: u32, col: u32, texels: &mut Vec<u8>) -> std::result::Result<(), String> {
         let index = row as usize * self.across as usize + col as usize;
-        let name = if self.tiled {
-            format!("JPEG tile at column {col}, row {row} (tile {index})")
-        } else {
-            format!("JPEG strip {row}")
+        let name = match self.tiled {
+            true => tile_name(col, row, index),
+            false => format!("JPEG strip {row}"),
         };
-        let (offset, count) = (self.offsets[index], self.counts[index]);
-        if count == 0 {
-            return Err(format!("{name} is missing (its byte count is 0)"));
-        }
-        if offset.checked_add(count).is_none_or(|end| end > self.file_len) {
-            return Err(format!(
-                "{name} lies past the end of the file ({count} bytes at {offset}, the file has {}): a truncated TIFF?",
-                self.file_len
-            ));
-        }
-        let mut compressed = vec![0u8; count as usize];
-        self.file.read_exact_at(&mut compressed, offset).map_err(|e| format!("{name}: cannot be read: {e}"))?;
-        let mut stream = Vec::new();
-        libjpeg::splice(&self.tables, &compressed, &mut stream).map_err(|m| format!("{name}: {m}"))?;
-        drop(compressed);
+        let stream = self.chunks.stream(index, &name)?;
         let x0 = col * self.chunk_w;
         let y0 = row as u64 * self.chunk_h as u64;
         let extent = Extent {
@@ -300,7 +316,7 @@ impl RowSource for JpegTiff {
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
         let y = self.next;
-        let fail = |message: String| TilerError::DecodeRow { path: self.path.clone(), row: y, message };
+        let fail = |message: String| TilerError::DecodeRow { path: self.chunks.path.clone(), row: y, message };
         let columns = self.columns.clone().unwrap_or(0..self.width);
         let pixel = self.colour.components();
         super::check_row(y, self.height, &columns, pixel, out.len()).map_err(fail)?;
@@ -312,7 +328,7 @@ impl RowSource for JpegTiff {
             && let Err(message) = self.load_band(y)
         {
             self.failed = true;
-            return Err(TilerError::DecodeRow { path: self.path.clone(), row: y, message });
+            return Err(TilerError::DecodeRow { path: self.chunks.path.clone(), row: y, message });
         }
         // The row's part of each chunk under the columns.
         let within = y - self.band_first;
@@ -346,18 +362,81 @@ impl RowSource for JpegTiff {
         true
     }
 
+    /// The tiles, to copy where the output's pages line up with them (strips never do).
+    fn stored_tiles(&self) -> Option<Arc<dyn StoredTiles>> {
+        let samples = match self.colour {
+            Colour::Grey => Samples::Grey,
+            Colour::YCbCr => Samples::YCbCr,
+            Colour::Rgb => Samples::Rgb,
+        };
+        // The tables are in JPEGTables, or in each tile: the first tile's say the quality.
+        let quality = match self.chunks.tables.is_empty() {
+            false => stored::read_header(&[&[0xFF, 0xD8], &self.chunks.tables[..]].concat()),
+            true => self.chunks.stream(0, "tile 0").ok().and_then(|s| stored::read_header(&s)),
+        }
+        .and_then(|h| h.luma_table)
+        .map(|t| stored::estimate_quality(&t));
+        let tiles = JpegTiles {
+            chunks: Arc::clone(&self.chunks),
+            samples,
+            size: (self.chunk_w, self.chunk_h),
+            across: self.across,
+            down: self.height.div_ceil(self.chunk_h),
+            quality,
+        };
+        self.tiled.then(|| Arc::new(tiles) as Arc<dyn StoredTiles>)
+    }
+
     fn describe(&self) -> String {
         let colour = match self.colour {
             Colour::Grey => "grey",
             Colour::YCbCr => "YCbCr",
             Colour::Rgb => "RGB",
         };
-        let tables = if self.tables.is_empty() { "" } else { ", shared tables" };
+        let tables = if self.chunks.tables.is_empty() { "" } else { ", shared tables" };
         let chunks = if self.tiled {
             format!("streamed by tile row ({}x{} tiles, decoded in parallel)", self.chunk_w, self.chunk_h)
         } else {
             format!("streamed by strip ({} rows, {} strips decoded at once)", self.chunk_h, self.group)
         };
         format!("{}, jpeg ({colour}{tables}, libjpeg-turbo), {chunks}", self.label)
+    }
+}
+
+/// How a tile is named in errors.
+fn tile_name(col: u32, row: u32, index: usize) -> String {
+    format!("JPEG tile at column {col}, row {row} (tile {index})")
+}
+
+/// The JPEG tiles of a tiled TIFF, handed out as files.
+struct JpegTiles {
+    chunks: Arc<Chunks>,
+    samples: Samples,
+    size: (u32, u32),
+    across: u32,
+    down: u32,
+    quality: Option<Quality>,
+}
+
+impl StoredTiles for JpegTiles {
+    fn tile_size(&self) -> (u32, u32) {
+        self.size
+    }
+
+    fn quality(&self) -> Option<Quality> {
+        self.quality
+    }
+
+    fn jpeg(&self, col: u32, row: u32) -> Result<Option<Vec<u8>>> {
+        let index = row as usize * self.across as usize + col as usize;
+        let name = tile_name(col, row, index);
+        if col >= self.across || row >= self.down {
+            return Err(TilerError::decode(
+                &self.chunks.path,
+                format!("{name}: outside the {}x{} tiles", self.across, self.down),
+            ));
+        }
+        let stream = self.chunks.stream(index, &name).map_err(|m| TilerError::decode(&self.chunks.path, m))?;
+        Ok(stored::as_file(&stream, self.samples, self.size))
     }
 }

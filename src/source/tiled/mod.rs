@@ -31,6 +31,7 @@ pub(crate) use store::TileStore;
 
 use crate::error::{Result, TilerError};
 use crate::pixel::PixelLayout;
+use crate::source::stored::{self, Quality, StoredTiles};
 use crate::source::{ImageHeader, RowSource, decode_tile, decode_tile_within};
 
 /// Where a cell's texels come from.
@@ -97,7 +98,8 @@ type CellTexels = Option<Vec<u8>>;
 
 /// Rows of a [`TileGrid`], one row of cells decoded at a time.
 pub struct TiledSource {
-    grid: Box<dyn TileGrid>,
+    /// Shared with the [`StoredTiles`] a run copies JPEG cells through.
+    grid: Arc<dyn TileGrid>,
     header: ImageHeader,
     /// Samples used for missing cells (one texel).
     fill: Vec<u8>,
@@ -123,7 +125,7 @@ impl TiledSource {
     pub fn new(grid: Box<dyn TileGrid>, fill: Vec<u8>, strict: bool) -> TiledSource {
         let header = grid.header();
         TiledSource {
-            grid,
+            grid: Arc::from(grid),
             header,
             fill,
             strict,
@@ -311,6 +313,23 @@ impl RowSource for TiledSource {
         self.grid.describe()
     }
 
+    /// The cells as their JPEG files, where cells are stored without overlap (a Deep Zoom or
+    /// IIIF input with overlap 0, XYZ, a pack of JPEG tiles without border) and the first is
+    /// a JPEG file.
+    fn stored_tiles(&self) -> Option<Arc<dyn StoredTiles>> {
+        let (h, (cw, ch)) = (self.header, self.grid.cell());
+        let inner = (1.min(h.width.div_ceil(cw) - 1), 1.min(h.height.div_ceil(ch) - 1));
+        if self.grid.crop(0, 0) != (0, 0) || self.grid.crop(inner.0, inner.1) != (0, 0) {
+            return None;
+        }
+        let cap = tile_file_cap(cw, ch, h.layout);
+        let Ok(Some(CellData::File(_, first))) = self.grid.read(0, 0, cap) else { return None };
+        let header = stored::read_header(&first).filter(|h| h.frame != 0)?;
+        let quality = header.luma_table.map(|t| stored::estimate_quality(&t));
+        let channels = h.layout.channels.count() as u8;
+        Some(Arc::new(JpegCells { grid: Arc::clone(&self.grid), cell: (cw, ch), cap, channels, quality }))
+    }
+
     fn rewind(&mut self) -> Result<()> {
         (self.next, self.band_row, self.rewound, self.columns) = (0, None, true, None);
         Ok(())
@@ -333,6 +352,42 @@ impl RowSource for TiledSource {
 }
 
 /// Reads a tile file of at most `cap` bytes, or `None` if it does not exist.
+/// The cells of a grid stored as JPEG files, handed out as they are.
+struct JpegCells {
+    grid: Arc<dyn TileGrid>,
+    cell: (u32, u32),
+    cap: u64,
+    channels: u8,
+    quality: Option<Quality>,
+}
+
+impl StoredTiles for JpegCells {
+    fn tile_size(&self) -> (u32, u32) {
+        self.cell
+    }
+
+    fn quality(&self) -> Option<Quality> {
+        self.quality
+    }
+
+    /// The cell's file where it is a JPEG file of exactly the cell, as decoders read it
+    /// (8-bit, Huffman-coded, as many components as the image); a missing cell, a PNG, an
+    /// overlapping one or any other is encoded.
+    fn jpeg(&self, col: u32, row: u32) -> Result<Option<Vec<u8>>> {
+        if self.grid.crop(col, row) != (0, 0) {
+            return Ok(None);
+        }
+        let Some(CellData::File(_, bytes)) = self.grid.read(col, row, self.cap)? else { return Ok(None) };
+        let fits = stored::read_header(&bytes).is_some_and(|h| {
+            matches!(h.frame, 0xC0..=0xC2)
+                && h.precision == 8
+                && (h.width as u32, h.height as u32) == self.cell
+                && h.components == self.channels
+        });
+        Ok(fits.then_some(bytes))
+    }
+}
+
 pub(crate) fn read_file(path: &Path, cap: u64) -> Result<Option<CellData>> {
     Ok(store::read_capped(path, cap)?.map(|bytes| CellData::File(path.to_path_buf(), bytes)))
 }

@@ -1,0 +1,188 @@
+#!/usr/bin/env bash
+# bench/slide-dzi.sh: a whole-slide-like JPEG-tiled TIFF into Deep Zoom, copying the stored
+# tiles (issue 30) against the tools pathology users run today, writing the same tiles.
+#
+# The input: SIZE (default 50000x40000) texels made with vips from a generated image (Perlin
+# noise in three bands, tissue-like blotches on a near-white background, a little grain), saved
+# as a scanner saves a slide: `vips tiffsave --tile --tile-width 256 --tile-height 256
+# --pyramid --compression jpeg --Q 90` (JPEG tiles with shared tables, RGB as libvips writes
+# them from Q90 on, reduced levels OpenSlide uses); and the same image (its decoded texels) as an LZW tiled TIFF.
+# Then, alternately RUNS times, each under /usr/bin/time -v (wall, user+system CPU, peak RSS):
+#   vortex        vortex-tiler split slide.tif --layout dzi --tile-size 256 --overlap 0 -q
+#                 (the finest level's whole tiles copied, the rest encoded at --quality default)
+#   vortex-reenc  the same with --reencode (every tile decoded and encoded)
+#   vortex-lzw    the same from the LZW TIFF (no JPEG to copy or to decode)
+#   vips          vips dzsave slide.tif OUT --tile-size 256 --overlap 0 --suffix .jpeg[Q=85] (Debian 8.14)
+#   pyvips        libvips 8.18 (PyPI) dzsave(tile_size=256, overlap=0, Q=85), sequential, direct mode
+#   openslide     OpenSlide's DeepZoomGenerator(tile_size=256, overlap=0, limit_bounds=False),
+#                 its tiles saved by PIL at quality 85 by nproc processes, as OpenSlide's
+#                 examples/deepzoom/deepzoom_tile.py does (Debian's python3-openslide)
+# Medians over the runs, the tile files each wrote, tiles copied vs encoded (from --json), and
+# a check that every copied finest tile is the stored stream (bench checks the first 64).
+#
+# Usage, from the repository root:  bench/slide-dzi.sh   (RUNS=3, SIZE=50000x40000; TOOLS to
+# pick some, e.g. TOOLS="vortex vortex-reenc pyvips"). VORTEX_PYVIPS=PYTHON names a Python with
+# pyvips (the CI venv), else bench/lib.sh installs one. Needs a release build
+# (`cargo build --release -p vortex-tiler`) and about 12 GB of disk in bench/work.
+set -euo pipefail
+
+cd "$(dirname "$0")/.."
+source bench/lib.sh
+RUNS=${RUNS:-3}
+SIZE=${SIZE:-50000x40000}
+W=${SIZE%x*}
+H=${SIZE#*x}
+TOOLS=(${TOOLS:-vortex vortex-reenc vortex-lzw vips pyvips openslide})
+
+target=${CARGO_TARGET_DIR:-$ROOT/target}
+BIN=${VORTEX:-$target/release/vortex-tiler} # VORTEX=PATH times another build
+[ -x "$BIN" ] || { echo "error: build it first: cargo build --release -p vortex-tiler" >&2; exit 1; }
+mkdir -p "$WORK/bin"
+cp "$BIN" "$WORK/bin/vortex-tiler" # a concurrent build must not swap it between runs
+VT=$WORK/bin/vortex-tiler
+REV="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src crates Cargo.toml Cargo.lock || echo +uncommitted)"
+[ -n "${VORTEX:-}" ] && REV=${VORTEX_LABEL:-$VORTEX}
+if [ -n "${VORTEX_PYVIPS:-}" ]; then
+  PY=$VORTEX_PYVIPS
+  PYVIPS_VERSION=$("$PY" -c 'import pyvips; print("libvips-%d.%d.%d" % tuple(pyvips.version(i) for i in range(3)))')
+  pyvips_direct_check
+else
+  pyvips_setup
+fi
+export VIPS_WARNING=0
+
+cd "$WORK"
+SLIDE=slide-$SIZE.tif
+LZW=slide-$SIZE-lzw.tif
+if [ ! -s "$SLIDE" ]; then
+  log "making $SLIDE"
+  # One lazy pipeline (no full-size intermediates): three Perlin fields, two for the stain's
+  # hue and one for where tissue is, over a near-white background, with grain on top.
+  "$PY" - "$W" "$H" "$SLIDE" <<'PY'
+import sys, pyvips
+w, h, out = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+p1 = pyvips.Image.perlin(w, h, cell_size=512, seed=1)
+p2 = pyvips.Image.perlin(w, h, cell_size=128, seed=2)
+t = (pyvips.Image.perlin(w, h, cell_size=2048, seed=3) * 3 + 0.5).cast("float")
+t = (t > 1).ifthenelse(1, (t < 0).ifthenelse(0, t))
+stain = (p1 * 70 + 180).bandjoin([p2 * 60 + 120, p1 * -40 + 200])
+mix = stain * t + (1 - t) * 242 + pyvips.Image.gaussnoise(w, h, sigma=6, mean=0)
+mix.cast("uchar").copy(interpretation="srgb").tiffsave(out, tile=True, tile_width=256, tile_height=256, pyramid=True, compression="jpeg", Q=90, bigtiff=True)
+PY
+fi
+if [ ! -s "$LZW" ] && [[ " ${TOOLS[*]} " == *" vortex-lzw "* ]]; then
+  log "making $LZW (the slide's decoded texels, lossless)"
+  vips tiffsave "$SLIDE" "$LZW" --tile --tile-width 256 --tile-height 256 --compression lzw --bigtiff
+fi
+
+OUT=$WORK/out-slide
+RESULTS=$WORK/slide-runs.tsv # tool run wall_s rss_kib cpu_s tiles copied encoded
+: >"$RESULTS"
+tiles() { find "$1" -type f -name '*.jpeg' | wc -l; }
+cpu() { awk -F': ' '/User time|System time/ { s += $2 } END { printf "%.1f", s }' "$WORK/time.txt"; }
+
+# deepzoom_tile.py's way: one DeepZoomGenerator per worker process, tiles handed out by level.
+OPENSLIDE_PY=$(cat <<'PY'
+import os, sys, multiprocessing, openslide, openslide.deepzoom
+src, out = sys.argv[1], sys.argv[2]
+def init():
+    global dz
+    dz = openslide.deepzoom.DeepZoomGenerator(openslide.OpenSlide(src), tile_size=256, overlap=0, limit_bounds=False)
+def work(job):
+    level, col, row = job
+    dz.get_tile(level, (col, row)).save("%s/%d/%d_%d.jpeg" % (out, level, col, row), quality=85)
+if __name__ == "__main__":
+    init()
+    jobs = []
+    for level, (cols, rows) in enumerate(dz.level_tiles):
+        os.makedirs("%s/%d" % (out, level))
+        jobs += [(level, c, r) for r in range(rows) for c in range(cols)]
+    with multiprocessing.Pool(os.cpu_count(), init) as pool:
+        for _ in pool.imap_unordered(work, jobs, chunksize=64):
+            pass
+PY
+)
+
+run_tool() {
+  local tool=$1 run=$2 dest=$OUT/$1 result copied=- encoded=-
+  rm -rf "$OUT" && mkdir -p "$dest"
+  case $tool in
+    vortex) result=$(measure "$WORK/$tool.log" "$VT" split "$SLIDE" --layout dzi -o "$dest/slide" --name slide --tile-size 256 --overlap 0 --json) ;;
+    vortex-reenc) result=$(measure "$WORK/$tool.log" "$VT" split "$SLIDE" --layout dzi -o "$dest/slide" --name slide --tile-size 256 --overlap 0 --reencode --json) ;;
+    vortex-lzw) result=$(measure "$WORK/$tool.log" "$VT" split "$LZW" --layout dzi -o "$dest/slide" --name slide --tile-size 256 --overlap 0 --json) ;;
+    vips) result=$(measure "$WORK/$tool.log" vips dzsave "$SLIDE" "$dest/slide" --tile-size 256 --overlap 0 --suffix '.jpeg[Q=85]') ;;
+    pyvips) result=$(measure "$WORK/$tool.log" "$PY" -c "import pyvips; pyvips.Image.new_from_file('$SLIDE', access='sequential').dzsave('$dest/slide', tile_size=256, overlap=0, Q=85)") ;;
+    openslide) result=$(measure "$WORK/$tool.log" /usr/bin/python3 -c "$OPENSLIDE_PY" "$SLIDE" "$dest/slide_files") ;;
+  esac
+  if [[ $tool == vortex* ]]; then
+    copied=$(grep -o '"copied":[0-9]*' "$WORK/$tool.log" | head -1 | cut -d: -f2)
+    encoded=$(grep -o '"encoded":[0-9]*' "$WORK/$tool.log" | head -1 | cut -d: -f2)
+  fi
+  [ "$tool" = vortex ] && [ "$run" = 1 ] && check_copies "$dest/slide/slide_files"
+  printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$tool" "$run" "${result% *}" "${result#* }" "$(cpu)" "$(tiles "$dest")" "$copied" "$encoded" >>"$RESULTS"
+  log "$tool run $run: ${result% *} s, $(cpu) s CPU, $((${result#* } / 1024)) MiB peak, copied $copied, encoded $encoded"
+}
+
+# The whole tiles among the first 64 finest tiles are the slide's stored tiles with its tables spliced in (and a
+# colour marker where they have none: what tests/it/copy_tiles.rs checks in full on small files).
+check_copies() {
+  "$PY" - "$SLIDE" "$1" <<'PY' || { echo "error: a copied tile is not the stored one" >&2; exit 1; }
+import sys, os, tifffile
+slide, files = sys.argv[1], sys.argv[2]
+finest = max(int(d) for d in os.listdir(files))
+with tifffile.TiffFile(slide) as t:
+    page = t.pages[0]
+    tables = page.jpegtables
+    fh = t.filehandle
+    cols = -(-page.imagewidth // page.tilewidth)
+    whole = page.imagewidth // page.tilewidth  # the edge column is cropped, so encoded
+    for i, (offset, count) in enumerate(zip(page.dataoffsets[:64], page.databytecounts[:64])):
+        if i % cols >= whole:
+            continue
+        fh.seek(offset)
+        tile = fh.read(count)
+        stream = tile[:2] + tables[2:-2] + tile[2:]
+        ours = open("%s/%d/%d_%d.jpeg" % (files, finest, i % cols, i // cols), "rb").read()
+        # The stored stream, or with a JFIF APP0 (YCbCr) or Adobe APP14 (RGB) added after SOI
+        # where it has none (the libtiff in pyvips-binary writes an Adobe marker into RGB tiles).
+        added = 2 + int.from_bytes(ours[4:6], "big")
+        assert ours == stream or ours[:2] + ours[2 + added:] == stream, "tile %d" % i
+PY
+}
+
+for run in $(seq 1 "$RUNS"); do
+  for tool in "${TOOLS[@]}"; do run_tool "$tool" "$run"; done
+done
+rm -rf "$OUT"
+
+REPORT=$WORK/slide-report.md
+{
+  echo "Measured $(date -u +%Y-%m-%d) with \`bench/slide-dzi.sh\` (vortex-tiler $REV, RUNS=$RUNS, medians; $(nproc) cores${LOADED:+, $LOADED}):"
+  echo "a ${W} x ${H} slide-like TIFF ($(du -m "$SLIDE" | cut -f1) MiB: 256-texel JPEG tiles, Q90, RGB, pyramidal, made by libvips) into Deep Zoom tiles of 256 texels, overlap 0."
+  echo
+  echo "| tool | wall | CPU (user+sys) | peak RSS | tile files | copied / encoded | pyvips 8.18 wall / tool |"
+  echo "|---|---:|---:|---:|---:|---:|---:|"
+  ref=
+  grep -q '^pyvips' "$RESULTS" && ref=$(median "$RESULTS" pyvips 3)
+  for tool in "${TOOLS[@]}"; do
+    wall=$(median "$RESULTS" "$tool" 3)
+    rss=$(median "$RESULTS" "$tool" 4)
+    cpu_s=$(median "$RESULTS" "$tool" 5)
+    files=$(awk -F'\t' -v t="$tool" '$1 == t { print $6; exit }' "$RESULTS")
+    counts=$(awk -F'\t' -v t="$tool" '$1 == t { print $7 " / " $8; exit }' "$RESULTS")
+    case $tool in
+      vortex) label="vortex-tiler (stored tiles copied)" ;;
+      vortex-reenc) label="vortex-tiler \`--reencode\`" ;;
+      vortex-lzw) label="vortex-tiler, the LZW TIFF ($(du -m "$LZW" | cut -f1) MiB)" ;;
+      vips) label="vips dzsave $(vips --version) \`--suffix .jpeg[Q=85]\`" ;;
+      pyvips) label="pyvips dzsave $PYVIPS_VERSION (\`Q=85\`, direct)" ;;
+      openslide) label="OpenSlide $(/usr/bin/python3 -c 'import openslide; print(openslide.__library_version__)') DeepZoomGenerator, $(nproc) processes" ;;
+    esac
+    ratio=-
+    [ -n "$ref" ] && ratio="$(calc '%.2f' "$ref / $wall")x"
+    [ "$counts" = "- / -" ] && counts=-
+    echo "| $label | $(calc '%.1f' "$wall") s | $(calc '%.1f' "$cpu_s") s | $(calc '%.0f' "$rss / 1024") MiB | $files | $counts | $ratio |"
+  done
+} >"$REPORT"
+splice slide-dzi "$REPORT" "## A slide into Deep Zoom: stored JPEG tiles copied (issue 30)"
+cat "$REPORT"

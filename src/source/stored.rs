@@ -1,0 +1,227 @@
+//! A source's tiles as it stores them, for a run to copy into its output instead of decoding
+//! them and encoding them again (issue 30, "copy instead of re-encode").
+//!
+//! A slide scanner's JPEG tiles already are what a viewer's JPEG tile is. Where the output's
+//! finest pages line up with them one for one, [`StoredTiles::jpeg`] hands tile (x, y) over as a
+//! complete JPEG file: the stored bytes as they are, the TIFF's shared tables spliced in, and a
+//! marker that tells every decoder the colour space the TIFF declares. The run still decodes
+//! every tile, for the coarser levels; what it saves is the finest level's encoding (three
+//! quarters of the tiles) and that level's generation loss: a viewer decodes the scanner's
+//! pixels, bit for bit.
+//!
+//! The source reads a tile's bytes again when the encoder asks for them (one positioned read,
+//! from the page cache: they were read moments before to be decoded) rather than carry them
+//! through the read-ahead, the pyramid and its stripes and rewinds beside the decoded rows.
+
+/// What a run may copy: a grid of tiles stored as JPEG.
+pub trait StoredTiles: Send + Sync {
+    /// Texels of a stored tile across and down.
+    fn tile_size(&self) -> (u32, u32);
+    /// The quality the tiles were stored at, from their quantisation tables.
+    fn quality(&self) -> Option<Quality>;
+    /// Tile (`col`, `row`) of the grid as a complete JPEG file, or `None` where it cannot be
+    /// copied as it is (a stream that is not a whole tile, or that a browser cannot decode):
+    /// that tile is encoded instead. An error names the file and the tile.
+    fn jpeg(&self, col: u32, row: u32) -> crate::error::Result<Option<Vec<u8>>>;
+}
+
+/// A JPEG quality estimated from a luminance quantisation table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Quality {
+    /// The IJG quality (1-100) whose scaled standard table is nearest the stored one.
+    pub estimate: u8,
+    /// Whether the stored table is exactly libjpeg's at that quality (libjpeg, libtiff,
+    /// libvips, tifffile and most scanners use them); else it is the nearest, by the sum of
+    /// absolute differences.
+    pub exact: bool,
+}
+
+impl std::fmt::Display for Quality {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.exact {
+            true => write!(f, "Q{}", self.estimate),
+            false => write!(f, "about Q{} (not libjpeg's tables)", self.estimate),
+        }
+    }
+}
+
+/// libjpeg's standard luminance table (ITU T.81 Annex K), in natural (row-major) order.
+const STD_LUMINANCE: [u16; 64] = [
+    16, 11, 10, 16, 24, 40, 51, 61, 12, 12, 14, 19, 26, 58, 60, 55, 14, 13, 16, 24, 40, 57, 69, 56, 14, 17, 22, 29, 51,
+    87, 80, 62, 18, 22, 37, 56, 68, 109, 103, 77, 24, 35, 55, 64, 81, 104, 113, 92, 49, 64, 78, 87, 103, 121, 120, 101,
+    72, 92, 95, 98, 112, 100, 103, 99,
+];
+
+/// The natural-order index of each zigzag position: a DQT segment lists its values in zigzag order.
+const ZIGZAG: [usize; 64] = [
+    0, 1, 8, 16, 9, 2, 3, 10, 17, 24, 32, 25, 18, 11, 4, 5, 12, 19, 26, 33, 40, 48, 41, 34, 27, 20, 13, 6, 7, 14, 21,
+    28, 35, 42, 49, 56, 57, 50, 43, 36, 29, 22, 15, 23, 30, 37, 44, 51, 58, 59, 52, 45, 38, 31, 39, 46, 53, 60, 61, 54,
+    47, 55, 62, 63,
+];
+
+/// The quality whose libjpeg luminance table (`jpeg_set_quality`: the standard table scaled by
+/// 5000/Q below 50 and 200-2Q above, rounded, clamped to 1..=255) is nearest `table` (natural
+/// order). Exact for what libjpeg made; the nearest for other encoders' tables.
+pub fn estimate_quality(table: &[u16; 64]) -> Quality {
+    let distance = |q: u32| -> u32 {
+        let scale = if q < 50 { 5000 / q } else { 200 - 2 * q };
+        let scaled = |v: u16| ((v as u32 * scale + 50) / 100).clamp(1, 255);
+        STD_LUMINANCE.iter().zip(table).map(|(&s, &t)| scaled(s).abs_diff(t as u32)).sum()
+    };
+    // Of qualities that give the same table (near 100, where every value is 1 or 2), the highest.
+    let (q, d) = (1..=100).map(|q| (q, distance(q))).min_by_key(|&(q, d)| (d, std::cmp::Reverse(q))).unwrap_or((0, 1));
+    Quality { estimate: q as u8, exact: d == 0 }
+}
+
+/// What the header of a JPEG stream (its segments before the first scan) says.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Header {
+    /// The SOF marker's second byte (0xC0 baseline, 0xC1 extended, 0xC2 progressive, ...).
+    pub frame: u8,
+    pub precision: u8,
+    pub width: u16,
+    pub height: u16,
+    pub components: u8,
+    /// Table 0, the luminance table by convention, in natural order.
+    pub luma_table: Option<[u16; 64]>,
+    pub jfif: bool,
+    /// An Adobe APP14 marker's transform (0: RGB or CMYK as is, 1: YCbCr, 2: YCCK).
+    pub adobe: Option<u8>,
+}
+
+/// Reads the segments of `stream` (SOI, then marker segments) up to its first SOS, or its end
+/// (a JPEGTables stream has no scan). `None` for data that is not such a stream.
+pub fn read_header(stream: &[u8]) -> Option<Header> {
+    let mut at = 2;
+    if !stream.starts_with(&[0xFF, 0xD8]) {
+        return None;
+    }
+    let mut header = Header::default();
+    while at + 4 <= stream.len() {
+        if stream[at] != 0xFF {
+            return None;
+        }
+        let marker = stream[at + 1];
+        if marker == 0xFF {
+            at += 1; // fill byte
+            continue;
+        }
+        if marker == 0xD9 || marker == 0xDA {
+            break;
+        }
+        let len = u16::from_be_bytes([stream[at + 2], stream[at + 3]]) as usize;
+        let body = stream.get(at + 4..(at + 2).checked_add(len)?)?;
+        match marker {
+            0xC0..=0xCF if !matches!(marker, 0xC4 | 0xC8 | 0xCC) => {
+                let [precision, h0, h1, w0, w1, components, ..] = *body else { return None };
+                header.frame = marker;
+                header.precision = precision;
+                header.height = u16::from_be_bytes([h0, h1]);
+                header.width = u16::from_be_bytes([w0, w1]);
+                header.components = components;
+            }
+            0xDB => read_dqt(body, &mut header)?,
+            0xE0 => header.jfif |= body.starts_with(b"JFIF\0"),
+            0xEE if body.starts_with(b"Adobe") && body.len() >= 12 => header.adobe = Some(body[11]),
+            _ => {}
+        }
+        at += 2 + len;
+    }
+    Some(header)
+}
+
+/// The tables of one DQT segment; table 0 is kept.
+fn read_dqt(mut body: &[u8], header: &mut Header) -> Option<()> {
+    while let [pq_tq, rest @ ..] = body {
+        let wide = pq_tq >> 4 == 1;
+        let size = if wide { 128 } else { 64 };
+        let values = rest.get(..size)?;
+        if pq_tq & 0x0F == 0 {
+            let mut table = [0u16; 64];
+            for (k, &natural) in ZIGZAG.iter().enumerate() {
+                table[natural] =
+                    if wide { u16::from_be_bytes([values[2 * k], values[2 * k + 1]]) } else { values[k] as u16 };
+            }
+            header.luma_table = Some(table);
+        }
+        body = &rest[size..];
+    }
+    Some(())
+}
+
+/// What a stored tile's samples are, as the file around it (a TIFF's photometric
+/// interpretation) declares.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Samples {
+    Grey,
+    YCbCr,
+    Rgb,
+}
+
+/// A stored tile's complete stream (`stream`: tables spliced in) as a JPEG file any decoder
+/// reads as the TIFF declares it: a JFIF APP0 marker after SOI for YCbCr and grey, an Adobe
+/// APP14 marker with transform 0 for RGB (without one, decoders take three components for
+/// YCbCr unless their ids are 'R', 'G', 'B'; libtiff's streams have neither marker). `None`
+/// where the stream cannot be copied as a `width x height` tile: another size or component
+/// count, not 8-bit Huffman-coded (browsers decode no arithmetic coding), or a marker already
+/// there that says another colour space.
+pub fn as_file(stream: &[u8], samples: Samples, (width, height): (u32, u32)) -> Option<Vec<u8>> {
+    let header = read_header(stream)?;
+    let components = if samples == Samples::Grey { 1 } else { 3 };
+    let huffman = matches!(header.frame, 0xC0..=0xC2);
+    if !huffman
+        || header.precision != 8
+        || (header.width as u32, header.height as u32) != (width, height)
+        || header.components != components
+    {
+        return None;
+    }
+    let marker: &[u8] = match (samples, header.jfif, header.adobe) {
+        (Samples::Rgb, false, Some(0)) | (Samples::YCbCr | Samples::Grey, true, None) => &[],
+        (Samples::YCbCr, false, Some(1)) | (Samples::Grey, false, Some(0)) => &[],
+        (Samples::Rgb, false, None) => &ADOBE_RGB,
+        (Samples::YCbCr | Samples::Grey, false, None) => &JFIF,
+        _ => return None,
+    };
+    let mut file = Vec::with_capacity(stream.len() + marker.len());
+    file.extend_from_slice(&stream[..2]);
+    file.extend_from_slice(marker);
+    file.extend_from_slice(&stream[2..]);
+    Some(file)
+}
+
+/// JFIF 1.01 APP0, no thumbnail, aspect 1:1: what libjpeg writes.
+const JFIF: [u8; 18] = [0xFF, 0xE0, 0, 16, b'J', b'F', b'I', b'F', 0, 1, 1, 0, 0, 1, 0, 1, 0, 0];
+
+/// Adobe APP14, version 100, flags 0, transform 0 (the components are R, G, B as they are).
+const ADOBE_RGB: [u8; 16] = [0xFF, 0xEE, 0, 14, b'A', b'd', b'o', b'b', b'e', 0, 100, 0, 0, 0, 0, 0];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// libjpeg's table for `q`, as jpeg_set_quality makes it.
+    fn ijg(q: u32) -> [u16; 64] {
+        let scale = if q < 50 { 5000 / q } else { 200 - 2 * q };
+        STD_LUMINANCE.map(|v| ((v as u32 * scale + 50) / 100).clamp(1, 255) as u16)
+    }
+
+    #[test]
+    fn libjpeg_tables_give_their_quality_back() {
+        for q in [10, 50, 75, 85, 90, 95] {
+            assert_eq!(estimate_quality(&ijg(q)), Quality { estimate: q as u8, exact: true });
+        }
+        let mut other = ijg(90);
+        other[5] += 3;
+        assert_eq!(estimate_quality(&other), Quality { estimate: 90, exact: false });
+    }
+
+    #[test]
+    fn a_dqt_segment_is_read_in_zigzag_order() {
+        let table = ijg(80);
+        let mut dqt = vec![0xFF, 0xD8, 0xFF, 0xDB, 0, 67, 0];
+        dqt.extend(ZIGZAG.iter().map(|&n| table[n] as u8));
+        assert_eq!(read_header(&dqt).unwrap().luma_table, Some(table));
+        assert!(read_header(&dqt[..dqt.len() - 1]).is_none(), "a segment past the end");
+    }
+}
