@@ -234,6 +234,8 @@ fn tiff_channels(path: &Path, pick: Pick, max_memory: u64) -> Result<Option<Chan
         }
         (Some(Some(planes)), _) => planes.ifds[0] as usize,
         (_, Some(page)) => page as usize,
+        // Another TIFF's Nth series is its Nth full-resolution page: the TIFF reader's choice.
+        (_, None) if pick.series.is_some_and(|n| n > 0) => return Ok(None),
         _ => 0,
     };
     if page > 0 && decoder.seek_to_image(page).is_err() {
