@@ -125,7 +125,8 @@ def ngff_zarr(npy, out, version):
 
 
 def mode2x2(a):
-    """The most frequent value of each 2x2 block, ties to the smallest (vortex-tiler's rule):
+    """The most frequent value of each 2x2 block, ties to the smallest value (vortex-tiler
+    breaks them by position instead, top-left first; the work is the same):
     the four values sorted, then each counted against the others, all vectorised."""
     h, w = a.shape[0] // 2 * 2, a.shape[1] // 2 * 2
     v = np.stack([a[0:h:2, 0:w:2], a[0:h:2, 1:w:2], a[1:h:2, 0:w:2], a[1:h:2, 1:w:2]], axis=-1)
