@@ -30,7 +30,7 @@ mod ome_zarr;
 pub struct SplitArgs {
     /// Image to cut: PNG, TIFF/BigTIFF, JPEG, PPM/PGM stream in bands; WebP, GIF, BMP, TGA and
     /// QOI are decoded whole within --max-memory.
-    #[arg(value_name = "INPUT", required_unless_present = "input_flag")]
+    #[arg(value_name = "INPUT", required_unless_present_any = ["input_flag", "channel"])]
     input: Option<PathBuf>,
 
     /// The input, spelled as the original tool did (--input=in.png).
@@ -66,6 +66,19 @@ pub struct SplitArgs {
     /// [default: 0].
     #[arg(long, value_name = "N")]
     series: Option<u32>,
+
+    /// One channel's image, a grey image of the others' size and sample type; repeated, in
+    /// channel order, in place of INPUT: with --layout ome-zarr, one array of that many
+    /// channels (docs/ome-zarr.md).
+    #[arg(long, value_name = "FILE")]
+    channel: Vec<PathBuf>,
+
+    /// Channels to cut, counted from 0, e.g. 0,1,2: any number of them into --layout ome-zarr
+    /// (a `c` axis), one (grey) or three (RGB) into the other layouts [default: every channel;
+    /// an image of more than four (a TIFF of more samples or separate planes, an OME-TIFF's
+    /// planes, --channel files) needs --layout ome-zarr or a pick].
+    #[arg(long, value_name = "LIST", value_delimiter = ',')]
+    channels: Option<Vec<usize>>,
 
     #[command(flatten)]
     out: OutputArgs,
@@ -309,8 +322,16 @@ impl CodecArgs {
 
 pub fn run(a: SplitArgs) -> Result<()> {
     let started = Instant::now();
-    let input = a.input.or(a.input_flag).context("an input image is required")?;
+    let input = a.input.or(a.input_flag);
     let pick = source::Pick { page: a.page, series: a.series };
+    // Many channels (docs/ome-zarr.md): --channel files, --channels picks, or an image of more
+    // channels than a texel holds.
+    if let Some((set, inputs)) =
+        ome_zarr::channel_set(input.as_deref(), &a.channel, a.channels.is_some(), pick, &a.out)?
+    {
+        return ome_zarr::tile_channels(set, a.channels.as_deref(), &inputs, a.filename_format, &a.out, started);
+    }
+    let input = input.context("an input image is required")?;
     let options =
         source::OpenOptions { max_memory: a.out.max_memory, autorotate: !a.no_autorotate, keep_icc: a.keep_icc, pick };
     let (source, kept_icc) = source::open_with(&input, options)?;

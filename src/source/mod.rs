@@ -9,6 +9,7 @@
 //! tile directory this tool wrote, a pack, Deep Zoom, IIIF, z/y/x or z/x/y, in a directory or
 //! a zip archive) read a row of tiles at a time.
 
+pub mod channels;
 pub mod icc;
 mod jpeg;
 pub mod orient;

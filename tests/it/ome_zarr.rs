@@ -617,3 +617,332 @@ fn an_interrupted_run_leaves_nothing() {
         assert!(!staging() && !dest.exists(), "{out}: {e}");
     }
 }
+
+/// The zstd-decoded chunks of a level of channel `c` of an OME-Zarr directory (`c`: `None`
+/// for a grey image without a channel axis), by (x, y), from its chunk files or shards.
+fn level_chunks(out: &Path, lod: u32, c: Option<u32>, v05: Option<u32>) -> Vec<((u32, u32), Vec<u8>)> {
+    let c = c.map_or(String::new(), |c| format!("{c}/"));
+    let mut chunks = Vec::new();
+    let root = match v05 {
+        None => out.join(format!("{lod}/{c}")),
+        Some(_) => out.join(format!("{lod}/c/{c}")),
+    };
+    for row in std::fs::read_dir(&root).unwrap() {
+        let row = row.unwrap().path();
+        // The level's own metadata (`.zarray`, `zarr.json`) beside its rows.
+        let Ok(r) = row.file_name().unwrap().to_str().unwrap().parse::<u32>() else { continue };
+        for file in std::fs::read_dir(&row).unwrap() {
+            let file = file.unwrap().path();
+            let q: u32 = file.file_name().unwrap().to_str().unwrap().parse().unwrap();
+            let bytes = std::fs::read(&file).unwrap();
+            match v05 {
+                None => chunks.push(((q, r), zstd::decode_all(&bytes[..]).unwrap())),
+                Some(n) => {
+                    for (i, chunk) in shard_chunks(&bytes, n as usize).into_iter().enumerate() {
+                        let (x, y) = (q * n + i as u32 % n, r * n + i as u32 / n);
+                        chunks.extend(chunk.map(|c| ((x, y), c)));
+                    }
+                }
+            }
+        }
+    }
+    chunks.sort();
+    chunks
+}
+
+#[test]
+fn channel_files_make_one_array_each_channel_its_grey_pyramid() {
+    let dir = tempfile::tempdir().unwrap();
+    let grey16 = PixelLayout::new(Channels::Grey, Depth::U16);
+    let (w, h, channels) = (150u32, 97u32, 5u32);
+    let mut files = Vec::new();
+    let mut ranges = Vec::new();
+    for k in 0..channels {
+        // Each channel its own content and range, so that a swapped channel shows.
+        let mut image = Image::random(w, h, grey16, 11 + k as u64);
+        for v in image.samples.iter_mut() {
+            *v = *v / (k as u16 + 2) + 1000 * k as u16;
+        }
+        ranges.push((*image.samples.iter().min().unwrap(), *image.samples.iter().max().unwrap()));
+        let path = dir.path().join(format!("ch{k}.png"));
+        write_png(&path, &image);
+        files.push(path);
+    }
+    let channel_args: Vec<&str> = files.iter().flat_map(|f| ["--channel", s(f)]).collect();
+    for (name, v05, extra) in [
+        ("v04.ome.zarr", None, &["--ome-zarr-version", "0.4"][..]),
+        ("v05.ome.zarr", Some(2), &["--shard-chunks", "2"]),
+    ] {
+        let out = dir.path().join(name);
+        let mut args = vec!["split", "--layout", "ome-zarr", "-o", s(&out), "--tile-size", "32", "-q"];
+        args.extend_from_slice(&channel_args);
+        args.extend_from_slice(extra);
+        ok(&args);
+        let (meta, attrs) = match v05 {
+            None => (read_json(&out.join("0/.zarray")), read_json(&out.join(".zattrs"))),
+            Some(_) => {
+                let root = read_json(&out.join("zarr.json"));
+                (read_json(&out.join("0/zarr.json")), root["attributes"]["ome"].clone())
+            }
+        };
+        assert_eq!(meta["shape"], serde_json::json!([channels, h, w]));
+        let chunk = match v05 {
+            None => &meta["chunks"],
+            Some(_) => &meta["codecs"][0]["configuration"]["chunk_shape"],
+        };
+        assert_eq!(*chunk, serde_json::json!([1, 32, 32]));
+        assert_eq!(attrs["multiscales"][0]["axes"][0]["name"], "c");
+        let omero = attrs["omero"]["channels"].as_array().unwrap();
+        assert_eq!(omero.len(), channels as usize);
+        for (k, entry) in omero.iter().enumerate() {
+            // Named by their files, windowed by their data.
+            assert_eq!(entry["label"], format!("ch{k}"));
+            assert_eq!(entry["window"]["start"], ranges[k].0);
+            assert_eq!(entry["window"]["end"], ranges[k].1);
+        }
+        let levels = attrs["multiscales"][0]["datasets"].as_array().unwrap().len() as u32;
+        for (k, file) in files.iter().enumerate() {
+            let grey = dir.path().join(format!("{k}-{name}"));
+            let mut args = vec!["split", s(file), "--layout", "ome-zarr", "-o", s(&grey), "--tile-size", "32", "-q"];
+            args.extend_from_slice(extra);
+            ok(&args);
+            for lod in 0..levels {
+                let ours = level_chunks(&out, lod, Some(k as u32), v05);
+                assert!(!ours.is_empty());
+                assert!(ours == level_chunks(&grey, lod, None, v05), "{name}: channel {k}, level {lod}");
+            }
+        }
+    }
+}
+
+#[test]
+fn many_channels_are_refused_where_a_texel_holds_four() {
+    let dir = tempfile::tempdir().unwrap();
+    let grey = PixelLayout::new(Channels::Grey, Depth::U8);
+    let files: Vec<PathBuf> = (0..5).map(|k| input(dir.path(), &format!("c{k}"), 40, 30, grey)).collect();
+    let channel_args: Vec<&str> = files.iter().flat_map(|f| ["--channel", s(f)]).collect();
+    let split = |extra: &[&str]| {
+        let mut args = vec!["split"];
+        args.extend_from_slice(&channel_args);
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let out = dir.path().join("out");
+    let o = s(&out);
+    fails_with(&split(&["-o", o]), &["5 channels", "--layout vortex", "--channels 0,1,2", "--layout ome-zarr"]);
+    fails_with(&split(&["-o", o, "--layout", "dzi"]), &["--layout dzi", "--channels 0,1,2"]);
+    fails_with(&split(&["-o", o, "--layout", "dzi", "--channels", "0,1"]), &["2 channels", "--channels 0,1,2"]);
+    fails_with(&split(&["--pack", o]), &["5 channels", "a pack", "--channels 0,1,2"]);
+    assert!(!out.exists());
+    // One or three picked are a grey or an RGB image.
+    ok(&["split", "--channel", s(&files[0]), "--channel", s(&files[1]), "-o", o, "--channels", "1", "-q"]);
+    assert_eq!(read_json(&out.join("info.json"))["tileFormat"], "luminance");
+    let rgb = dir.path().join("rgb");
+    let three = ["--channel", s(&files[0]), "--channel", s(&files[1]), "--channel", s(&files[2])];
+    ok(&[&["split", "-o", s(&rgb), "--channels", "2,0,1", "-q"][..], &three].concat());
+    assert_eq!(read_json(&rgb.join("info.json"))["tileFormat"], "rgb");
+    // A channel past the last, or named twice, is refused.
+    let five = dir.path().join("five.ome.zarr");
+    let f = s(&five);
+    fails_with(&split(&["--layout", "ome-zarr", "-o", f, "--channels", "0,5"]), &["--channels 5", "0 to 4"]);
+    fails_with(&split(&["--layout", "ome-zarr", "-o", f, "--channels", "1,1"]), &["channel 1 twice"]);
+    // Channels of different sizes, an INPUT beside --channel.
+    let small = input(dir.path(), "small", 20, 30, grey);
+    fails_with(
+        &run(&["split", "--channel", s(&files[0]), "--channel", s(&small), "--layout", "ome-zarr", "-o", s(&five)]),
+        &["small.png", "20x30", "40x30"],
+    );
+    fails_with(&run(&["split", s(&files[0]), "--channel", s(&files[1]), "-o", s(&five)]), &["--channel", "INPUT"]);
+    assert!(!five.exists());
+}
+
+/// Writes 5-channel 16-bit TIFFs with tifffile: samples stored together (strips), separate
+/// planes (strips; tiles with Deflate), an OME-TIFF of named grey planes; and each channel
+/// alone as a grey TIFF.
+const MANY_CHANNELS: &str = r#"
+import sys
+import numpy as np, tifffile
+out = sys.argv[1]
+h, w, c = 301, 410, 5
+rng = np.random.default_rng(5)
+y, x = np.mgrid[0:h, 0:w]
+data = np.stack([((x * (k + 1) * 37 + y * 11 * (k + 2)) % 60000 + rng.integers(0, 50, (h, w))).astype(np.uint16) for k in range(c)])
+tifffile.imwrite(f"{out}/chunky.tif", np.moveaxis(data, 0, -1), photometric="minisblack", planarconfig="contig", rowsperstrip=16)
+tifffile.imwrite(f"{out}/planar.tif", data, photometric="minisblack", planarconfig="separate", rowsperstrip=16)
+tifffile.imwrite(f"{out}/tiled.tif", data, photometric="minisblack", planarconfig="separate", tile=(64, 64), compression="zlib")
+names = ["DAPI", "GFP", "RFP", "Cy5", "BF"]
+tifffile.imwrite(f"{out}/ome.ome.tif", data, metadata={"axes": "CYX", "Channel": {"Name": names}})
+for k in range(c):
+    tifffile.imwrite(f"{out}/c{k}.tif", data[k])
+"#;
+
+/// Every level of an OME-Zarr of channels, read by zarr: each channel equals the grey
+/// OME-Zarr of its own file, and the omero names are the ones given.
+const CHANNELS_COMPARE: &str = r#"
+import sys
+import numpy as np, zarr
+path, names, greys = sys.argv[1], sys.argv[2].split(","), sys.argv[3:]
+root = zarr.open_group(zarr.storage.ZipStore(path, mode="r") if path.endswith(".ozx") else path, mode="r")
+attrs = root.attrs.asdict()
+ome = attrs.get("ome", attrs)
+assert [c["label"] for c in ome["omero"]["channels"]] == names, ome["omero"]
+levels = 0
+for d in ome["multiscales"][0]["datasets"]:
+    a = root[d["path"]][...]
+    assert a.shape[0] == len(greys), a.shape
+    for k, grey in enumerate(greys):
+        b = zarr.open_group(grey, mode="r")[d["path"]][...]
+        assert a.dtype == b.dtype and np.array_equal(a[k], b), f"level {d['path']}, channel {k}"
+    levels += 1
+print(f"{levels} levels x {len(greys)} channels identical")
+"#;
+
+#[test]
+fn five_channel_tiffs_go_end_to_end() {
+    let Some(python) = readers() else { return };
+    let has_tifffile = Command::new(&python).args(["-c", "import tifffile"]).output().is_ok_and(|o| o.status.success());
+    if !has_tifffile {
+        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and no tifffile");
+        eprintln!("note: skipping the 5-channel TIFFs: no tifffile in VORTEX_PYVIPS");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    python_ok(&python, &["-c", MANY_CHANNELS, s(d)]);
+    for (version, extra) in [("0.4", &["--ome-zarr-version", "0.4"][..]), ("0.5", &["--shard-chunks", "2"][..])] {
+        let mut greys = Vec::new();
+        for k in 0..5 {
+            let grey = d.join(format!("g{k}-{version}.ome.zarr"));
+            let mut args = vec!["split", "--layout", "ome-zarr", "--tile-size", "128", "-q", "-o", s(&grey)];
+            args.extend_from_slice(extra);
+            let file = d.join(format!("c{k}.tif"));
+            args.push(s(&file));
+            ok(&args);
+            greys.push(grey);
+        }
+        let greys: Vec<&str> = greys.iter().map(|g| s(g)).collect();
+        for (input, names) in [
+            ("chunky.tif", "c0,c1,c2,c3,c4"),
+            ("planar.tif", "c0,c1,c2,c3,c4"),
+            ("tiled.tif", "c0,c1,c2,c3,c4"),
+            ("ome.ome.tif", "DAPI,GFP,RFP,Cy5,BF"),
+        ] {
+            let out = d.join(format!("{input}-{version}.ome.zarr"));
+            let source = d.join(input);
+            let mut args = vec!["split", s(&source), "--layout", "ome-zarr", "--tile-size", "128", "-q", "-o", s(&out)];
+            args.extend_from_slice(extra);
+            ok(&args);
+            let mut compare = vec!["-c", CHANNELS_COMPARE, s(&out), names];
+            compare.extend_from_slice(&greys);
+            let said = python_ok(&python, &compare);
+            assert!(said.contains("3 levels x 5 channels identical"), "{input} {version}: {said}");
+            let said = tool_ok(&python, "ome-zarr-models", &["validate", s(&out)]);
+            assert!(said.contains("Valid OME-Zarr") && !said.contains("Invalid"), "{input} {version}: {said}");
+        }
+    }
+    // Picked channels, in the order picked: the OME-TIFF's 4 and 0.
+    let out = d.join("picked.ome.zarr");
+    ok(&[
+        "split",
+        s(&d.join("ome.ome.tif")),
+        "--layout",
+        "ome-zarr",
+        "--tile-size",
+        "128",
+        "--channels",
+        "4,0",
+        "-q",
+        "-o",
+        s(&out),
+    ]);
+    let greys = [d.join("g4-0.5.ome.zarr"), d.join("g0-0.5.ome.zarr")];
+    let said = python_ok(&python, &["-c", CHANNELS_COMPARE, s(&out), "BF,DAPI", s(&greys[0]), s(&greys[1])]);
+    assert!(said.contains("3 levels x 2 channels identical"), "{said}");
+}
+
+/// The Python with napari and its OME-Zarr reader (VORTEX_NAPARI, which `.ci/run` makes), and
+/// `xvfb-run` to give its Qt window a display; else a skip with a note, and a failure under CI.
+fn napari() -> Option<PathBuf> {
+    let python = std::env::var_os("VORTEX_NAPARI").map(PathBuf::from);
+    let works = python.as_ref().is_some_and(|p| {
+        Command::new(p)
+            .args(["-c", "import napari, napari_ome_zarr, imageio"])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    }) && Command::new("xvfb-run").arg("--help").output().is_ok();
+    if !works {
+        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and no napari or xvfb-run");
+        eprintln!("note: skipping napari: set VORTEX_NAPARI to a Python with napari and napari-ome-zarr, install xvfb");
+        return None;
+    }
+    python
+}
+
+/// Opens an OME-Zarr in napari (its own reader plugin, in a shown window under Xvfb: a
+/// hidden one renders nothing), exports the figure at the data's resolution, saves it, and
+/// compares it with what the `omero` metadata asks for, worked out from the source images
+/// alone: each channel windowed to its own range, in blue, green, red, added up.
+const NAPARI_SHOT: &str = r#"
+import sys
+import numpy as np
+import imageio.v3 as iio
+import napari
+from qtpy.QtWidgets import QApplication
+
+path, shot_path, sources = sys.argv[1], sys.argv[2], sys.argv[3:]
+viewer = napari.Viewer(show=True)
+viewer.open(path, plugin="napari-ome-zarr")
+assert len(viewer.layers) == len(sources), [layer.name for layer in viewer.layers]
+for _ in range(20):
+    QApplication.processEvents()
+shot = viewer.export_figure(flash=False)[..., :3]
+iio.imwrite(shot_path, shot)
+colours = [(0, 0, 1), (0, 1, 0), (1, 0, 0)]
+expect = np.zeros(shot.shape)
+for k, src in enumerate(sources):
+    v = iio.imread(src).astype(np.float64)
+    expect += np.clip((v - v.min()) / (v.max() - v.min()), 0, 1)[..., None] * np.array(colours[k])
+expect = np.clip(expect, 0, 1) * 255
+assert shot.shape == expect.shape, (shot.shape, expect.shape)
+mse = np.mean((shot.astype(np.float64) - expect) ** 2)
+psnr = 10 * np.log10(255**2 / mse) if mse > 0 else 99.0
+print(f"PSNR {psnr:.2f}")
+viewer.close()
+"#;
+
+#[test]
+fn napari_shows_the_channels_as_the_metadata_says() {
+    let Some(python) = napari() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let grey16 = PixelLayout::new(Channels::Grey, Depth::U16);
+    // Three channels of different ranges, each a gradient of its own direction with noise.
+    let (w, h) = (320u32, 200u32);
+    let mut files = Vec::new();
+    for k in 0..3u32 {
+        let mut image = Image::random(w, h, grey16, 21 + k as u64);
+        for (i, v) in image.samples.iter_mut().enumerate() {
+            let (x, y) = (i as u32 % w, i as u32 / w);
+            let ramp = [x * 40000 / w, y * 30000 / h, (x + y) * 20000 / (w + h)][k as usize];
+            *v = (ramp + 5000 * k + (*v as u32 % 2000)) as u16;
+        }
+        let path = dir.path().join(format!("ch{k}.png"));
+        write_png(&path, &image);
+        files.push(path);
+    }
+    let out = dir.path().join("img.ome.zarr");
+    let mut args = vec!["split", "--layout", "ome-zarr", "-o", s(&out), "--tile-size", "64", "-q"];
+    args.extend(files.iter().flat_map(|f| ["--channel", s(f)]));
+    ok(&args);
+    let shot = dir.path().join("shot.png");
+    let mut cmd = vec!["-a", "-s", "-screen 0 1280x1024x24", s(&python), "-c", NAPARI_SHOT, s(&out), s(&shot)];
+    cmd.extend(files.iter().map(|f| s(f)));
+    let run = Command::new("xvfb-run").args(&cmd).output().unwrap();
+    let said = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "napari: {said}{}", String::from_utf8_lossy(&run.stderr));
+    let psnr: f64 = said.trim().rsplit(' ').next().and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("{said}"));
+    // The 8-bit screenshot rounds what the metadata asks for (about 59 dB here); 40 dB leaves
+    // room for the GPU's arithmetic and still fails a wrong window (a channel dark or burnt
+    // out) or a wrong colour or order (each channel is a gradient of its own direction); a
+    // blank canvas scores about 7 dB.
+    assert!(psnr >= 40.0, "napari's screenshot is {psnr:.2} dB from the source");
+}

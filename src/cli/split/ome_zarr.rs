@@ -1,7 +1,7 @@
 //! `split`/`convert --layout ome-zarr`: the same pipeline into an OME-Zarr image, a directory
 //! or a `.ozx` file (docs/ome-zarr.md).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Result, bail};
@@ -13,12 +13,14 @@ use vortex_tiler::pyramid::Filter;
 use vortex_tiler::settings::{self, CodecChoice, Requested};
 use vortex_tiler::sink::OmeZarrSink;
 use vortex_tiler::sink::ome_zarr::{
-    DEFAULT_CHUNK, DEFAULT_SHARD_CHUNKS, MAX_SHARD_CHUNKS, PixelSize, Spec, Version, is_ozx, label_parent,
-    register_label,
+    DEFAULT_CHUNK, DEFAULT_SHARD_CHUNKS, LabelParent, MAX_SHARD_CHUNKS, PixelSize, Plane, Spec, Version, is_ozx,
+    label_parent, register_label,
 };
-use vortex_tiler::source::RowSource;
+use vortex_tiler::source::channels::{ChannelSet, Ranged};
+use vortex_tiler::source::{ImageHeader, Pick, RowSource};
+use vortex_tiler::split::{self, SplitOptions, Summary};
 
-use super::{OutputArgs, Run, report};
+use super::{Finished, OutputArgs, OutputLayout, Run, report};
 
 /// The flags only `--layout ome-zarr` reads.
 #[derive(clap::Args, Debug)]
@@ -72,6 +74,45 @@ pub fn tile(
     a: &OutputArgs,
     started: Instant,
 ) -> Result<()> {
+    let plan = plan(source.header(), input, names, a, None)?;
+    let claim = report::claim(&plan.dest, plan.product, &[input], a.force)?;
+    let layout = plan.spec.layout;
+    let run = Run::start(source, a, &layout, started)?;
+    let total = layout.total_tiles();
+    let version = plan.spec.version;
+    let sink = OmeZarrSink::create(&claim, plan.spec)?;
+    // On error the sink is dropped, which removes what it wrote.
+    let done = run.execute(&sink, &plan.opts)?;
+    if done.summary.tiles != total {
+        bail!("internal error: wrote {} tiles of {total}", done.summary.tiles);
+    }
+    sink.finish()?;
+    if let (Some(p), Some(label)) = (&plan.parent, plan.dest.file_name()) {
+        register_label(&p.image.join("labels"), version, &label.to_string_lossy())?;
+    }
+    super::report(a, "ome-zarr", &done, &plan.dest, None);
+    Ok(())
+}
+
+/// A run into OME-Zarr as the flags and the source make it, before the first tile.
+struct Plan {
+    dest: PathBuf,
+    product: Product,
+    spec: Spec,
+    opts: SplitOptions,
+    /// The image a label image belongs to (`-o IMAGE/labels/NAME`).
+    parent: Option<LabelParent>,
+}
+
+/// Checks the flags against the layout and the source (`header`: a channel's, for channels
+/// written one pass each, `planes`) and works out the metadata.
+fn plan(
+    header: ImageHeader,
+    input: &Path,
+    names: Option<String>,
+    a: &OutputArgs,
+    planes: Option<Vec<Plane>>,
+) -> Result<Plan> {
     let Some(dest) = &a.output else {
         bail!("--layout ome-zarr writes a directory or a .ozx file (-o DIR.ome.zarr or -o FILE.ozx), not a pack")
     };
@@ -158,14 +199,14 @@ pub fn tile(
         max_memory: Some(a.max_memory),
         ..Requested::default()
     };
-    let (opts, _) = settings::resolve(&requested, None, source.layout())?;
+    let (opts, _) = settings::resolve(&requested, None, header.layout)?;
     // Raw tiles go to the sink, which compresses the chunks itself.
     let zstd_level = enc.zstd_level.unwrap_or(settings::DEFAULT_ZSTD_LEVEL);
     if !ZSTD_LEVELS.contains(&zstd_level) {
         bail!("zstd level {zstd_level} (--zstd-level) is outside {}..={}", ZSTD_LEVELS.start(), ZSTD_LEVELS.end());
     }
-    let layout = opts.layout(source.width(), source.height())?;
-    let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
+    let layout = opts.layout(header.width, header.height)?;
+    let stored = opts.codec.stored_layout(header.layout, opts.flatten, opts.tile_depth)?;
     limits.check_pyramid(&layout, false)?;
     if let Some(p) = &parent {
         let ours = (layout.width as u64, layout.height as u64, layout.lod_count);
@@ -197,6 +238,7 @@ pub fn tile(
         name: name.trim_end_matches(".ome").to_string(),
         filter: opts.filter.name().to_string(),
         label: parent.is_some(),
+        planes,
     };
     limits.check_memory(
         &format!(
@@ -205,19 +247,131 @@ pub fn tile(
         ),
         spec.index_bytes(),
     )?;
-    let claim = report::claim(dest, product, &[input], a.force)?;
-    let run = Run::start(source, a, &layout, started)?;
-    let total = layout.total_tiles();
-    let sink = OmeZarrSink::create(&claim, spec)?;
-    // On error the sink is dropped, which removes what it wrote.
-    let done = run.execute(&sink, &opts)?;
-    if done.summary.tiles != total {
-        bail!("internal error: wrote {} tiles of {total}", done.summary.tiles);
+    Ok(Plan { dest: dest.clone(), product, spec, opts, parent })
+}
+
+/// The channels of a run, where they are not an image's 1 to 4 samples as the pipeline reads
+/// them: `--channel` files, an image of more channels than a texel holds (a TIFF of more than
+/// four samples or of separate planes, an OME-TIFF of several grey planes), or any image whose
+/// channels `--channels` picks. `None`: the input read as it is.
+pub fn channel_set(
+    input: Option<&Path>,
+    files: &[PathBuf],
+    picks: bool,
+    pick: Pick,
+    a: &OutputArgs,
+) -> Result<Option<(ChannelSet, Vec<PathBuf>)>> {
+    if !files.is_empty() {
+        if input.is_some() {
+            bail!("--channel names every channel's image; leave out the INPUT");
+        }
+        return Ok(Some((ChannelSet::files(files, a.max_memory)?, files.to_vec())));
     }
+    let Some(input) = input else { bail!("an input image is required (or --channel FILE per channel)") };
+    let set = match picks {
+        true => Some(ChannelSet::open(input, pick, a.max_memory)?),
+        false => ChannelSet::beyond_texels(input, pick, a.max_memory)?,
+    };
+    Ok(set.map(|set| (set, vec![input.to_path_buf()])))
+}
+
+/// Cuts the channels `picks` (all by default) of `set`: into OME-Zarr, one pass per channel
+/// (docs/ome-zarr.md); into another layout, as one grey or RGB image.
+pub fn tile_channels(
+    set: ChannelSet,
+    picks: Option<&[usize]>,
+    inputs: &[PathBuf],
+    names: Option<String>,
+    a: &OutputArgs,
+    started: Instant,
+) -> Result<()> {
+    let all: Vec<usize> = (0..set.count()).collect();
+    let picks = picks.unwrap_or(&all);
+    for (i, &k) in picks.iter().enumerate() {
+        if k >= set.count() {
+            bail!("--channels {k}: {} has {} channel(s), 0 to {}", inputs[0].display(), set.count(), set.count() - 1);
+        }
+        if picks[..i].contains(&k) {
+            bail!("--channels names channel {k} twice");
+        }
+    }
+    if picks.is_empty() {
+        bail!("--channels names no channel");
+    }
+    if a.layout != OutputLayout::OmeZarr {
+        if ![1, 3].contains(&picks.len()) {
+            bail!(
+                "{}: {} channels, and --layout {} (or a pack) holds one (grey) or three (RGB) of them: pick them with --channels 0,1,2, or write every channel with --layout ome-zarr",
+                inputs[0].display(),
+                picks.len(),
+                clap::ValueEnum::to_possible_value(&a.layout).map(|v| v.get_name().to_string()).unwrap_or_default()
+            );
+        }
+        let source = set.interleave(picks)?;
+        return super::tile(source, &inputs[0], names, a, started, None);
+    }
+    let planes = picks.iter().map(|&k| Plane { name: set.names[k].clone(), window: None }).collect();
+    let mut first = Some(set.channel(picks[0])?);
+    let header =
+        first.as_ref().map(|s| s.header()).unwrap_or(ImageHeader { width: 0, height: 0, layout: set.layout() });
+    let plan = plan(header, &inputs[0], names, a, Some(planes))?;
+    if plan.parent.is_some() {
+        bail!("{}: a label image has one channel; pick it with --channels N", plan.dest.display());
+    }
+    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    let claim = report::claim(&plan.dest, plan.product, &inputs, a.force)?;
+    let total = plan.spec.layout.total_tiles();
+    a.run.init_pool()?;
+    let watch = a.run.watch(total * picks.len() as u64)?;
+    let mut sink = OmeZarrSink::create(&claim, plan.spec)?;
+    let mut summary: Option<Summary> = None;
+    // One pass per channel, one after another: memory stays one grey pipeline's.
+    for (c, &k) in picks.iter().enumerate() {
+        let source = match first.take() {
+            Some(source) => source,
+            None => set.channel(k)?,
+        };
+        let (source, range) = Ranged::new(source);
+        let done = split::split(Box::new(source), &sink.plane(c as u32), &plan.opts, &watch);
+        let done = done.inspect_err(|_| watch.bar.finish_and_clear())?;
+        if done.tiles != total {
+            bail!("internal error: wrote {} tiles of {total} of channel {k}", done.tiles);
+        }
+        let window = *range.lock().unwrap_or_else(|p| p.into_inner());
+        sink.set_window(c, window);
+        summary = Some(match summary {
+            None => done,
+            Some(sum) => add(sum, done),
+        });
+    }
+    watch.bar.finish_and_clear();
     sink.finish()?;
-    if let (Some(p), Some(label)) = (&parent, dest.file_name()) {
-        register_label(&p.image.join("labels"), version, &label.to_string_lossy())?;
-    }
-    super::report(a, "ome-zarr", &done, dest, None);
+    let Some(summary) = summary else { bail!("--channels names no channel") };
+    let done =
+        Finished { summary, decoder: set.describe(), width: set.width, height: set.height, took: started.elapsed() };
+    super::report(a, "ome-zarr", &done, &plan.dest, None);
     Ok(())
+}
+
+/// Two passes' summaries as one run's: their tiles, reads and stage times added up.
+fn add(mut sum: Summary, pass: Summary) -> Summary {
+    sum.tiles += pass.tiles;
+    sum.encoded += pass.encoded;
+    // The sink counts every pass's bytes.
+    sum.bytes = pass.bytes;
+    sum.passes += pass.passes;
+    let (s, p) = (&mut sum.stages, pass.stages);
+    for (to, from) in [
+        (&mut s.read, p.read),
+        (&mut s.read_wait, p.read_wait),
+        (&mut s.pyramid, p.pyramid),
+        (&mut s.cut, p.cut),
+        (&mut s.producer_blocked, p.producer_blocked),
+        (&mut s.encoders_idle, p.encoders_idle),
+        (&mut s.encode, p.encode),
+        (&mut s.store, p.store),
+    ] {
+        *to += from;
+    }
+    sum
 }

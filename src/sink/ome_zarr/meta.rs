@@ -78,16 +78,35 @@ pub struct Spec {
     pub filter: String,
     /// A label image (`IMAGE/labels/NAME`): `image-label` metadata instead of `omero`.
     pub label: bool,
+    /// Channels written one pass each ([`crate::source::channels`]): a `c` axis of their
+    /// count, chunks of one channel. `None`: the stored texels' 1 to 4 samples, in each chunk.
+    pub planes: Option<Vec<Plane>>,
 }
+
+/// A channel written in a pass of its own.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plane {
+    pub name: String,
+    /// The smallest and largest sample, where known before the metadata is written.
+    pub window: Option<(f64, f64)>,
+}
+
+/// Colours of the channels written one pass each, in turn: the ones microscopy viewers give
+/// fluorescence channels by default, so that any few channels are told apart.
+const PLANE_COLOURS: [&str; 7] = ["0000FF", "00FF00", "FF0000", "FF00FF", "00FFFF", "FFFF00", "FFFFFF"];
 
 impl Spec {
     pub fn channels(&self) -> usize {
-        self.stored.channels.count()
+        match &self.planes {
+            Some(planes) => planes.len(),
+            None => self.stored.channels.count(),
+        }
     }
 
-    /// Grey images are 2-D (`y`, `x`); others have a channel axis first (`c`, `y`, `x`).
+    /// Grey images are 2-D (`y`, `x`); others, and channels written one pass each, have a
+    /// channel axis first (`c`, `y`, `x`).
     pub fn has_channel_axis(&self) -> bool {
-        self.channels() > 1
+        self.channels() > 1 || self.planes.is_some()
     }
 
     /// An array's shape for `y, x` extents, with the channel axis where there is one.
@@ -160,15 +179,41 @@ impl Spec {
         json!({ "name": self.name, "axes": axes, "datasets": datasets, "type": self.filter })
     }
 
-    /// Rendering hints for viewers: each channel's name, colour and full value range.
+    /// Rendering hints for viewers: each channel's name, colour and value range (the data's
+    /// where known, else the sample type's).
     fn omero(&self) -> Value {
+        let max = self.max_value();
+        if let Some(planes) = &self.planes {
+            let channels: Vec<Value> = planes
+                .iter()
+                .enumerate()
+                .map(|(c, plane)| {
+                    let (start, end) = plane.window.unwrap_or((0.0, max as f64));
+                    // Integer samples' ranges are written as integers.
+                    let number = |v: f64| match v.fract() == 0.0 && v.abs() < 9e15 {
+                        true => json!(v as i64),
+                        false => json!(v),
+                    };
+                    let (start, end) = (number(start), number(end));
+                    json!({
+                        "label": plane.name,
+                        "color": PLANE_COLOURS[c % PLANE_COLOURS.len()],
+                        "active": true,
+                        "coefficient": 1,
+                        "family": "linear",
+                        "inverted": false,
+                        "window": { "min": 0, "max": max, "start": start, "end": end },
+                    })
+                })
+                .collect();
+            return json!({ "channels": channels, "rdefs": { "model": "color" } });
+        }
         let names: &[(&str, &str)] = match self.stored.channels {
             Channels::Grey => &[("grey", "FFFFFF")],
             Channels::GreyAlpha => &[("grey", "FFFFFF"), ("alpha", "FFFFFF")],
             Channels::Rgb => &[("red", "FF0000"), ("green", "00FF00"), ("blue", "0000FF")],
             Channels::Rgba => &[("red", "FF0000"), ("green", "00FF00"), ("blue", "0000FF"), ("alpha", "FFFFFF")],
         };
-        let max = self.max_value();
         let channels: Vec<Value> = names
             .iter()
             .map(|(label, colour)| {
@@ -212,7 +257,10 @@ impl Spec {
     }
 
     fn chunk_shape(&self, side: u64) -> Vec<u64> {
-        self.shape(side, side)
+        match self.planes {
+            Some(_) => vec![1, side, side],
+            None => self.shape(side, side),
+        }
     }
 
     fn zarray(&self, lod: u32) -> Value {
@@ -280,7 +328,8 @@ impl Spec {
             let (columns, rows) = self.layout.grid(lod);
             columns.div_ceil(n) as u64 * rows.div_ceil(n) as u64
         };
-        (0..self.layout.lod_count).map(count).sum()
+        let planes = self.planes.as_ref().map_or(1, |p| p.len() as u64);
+        (0..self.layout.lod_count).map(count).sum::<u64>() * planes
     }
 
     /// The most memory the open shards' indexes can take: every shard open at once (an image
@@ -290,9 +339,14 @@ impl Spec {
         self.shard_count() * (n * n * 16 + 4)
     }
 
-    /// Where chunk (`x`, `y`) of level `lod` goes: its file (0.4) or its shard's (0.5).
-    pub fn chunk_key(&self, lod: u32, x: u32, y: u32) -> String {
-        let c = if self.has_channel_axis() { "0/" } else { "" };
+    /// Where chunk (`x`, `y`) of level `lod` goes (of channel `c`, for channels written one
+    /// pass each): its file (0.4) or its shard's (0.5).
+    pub fn chunk_key(&self, lod: u32, c: u32, x: u32, y: u32) -> String {
+        let c = match (self.has_channel_axis(), &self.planes) {
+            (true, Some(_)) => format!("{c}/"),
+            (true, None) => "0/".to_string(),
+            (false, _) => String::new(),
+        };
         match self.version {
             Version::V04 => format!("{lod}/{c}{y}/{x}"),
             Version::V05 => {

@@ -24,7 +24,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 
-pub use meta::{PixelSize, Spec, Version};
+pub use meta::{PixelSize, Plane, Spec, Version};
 
 use super::TileSink;
 use crate::error::{Result, TilerError};
@@ -59,8 +59,9 @@ pub struct OmeZarrSink {
     finished: AtomicBool,
 }
 
-/// A shard by its level and its column and row of shards.
-type ShardKey = (u32, u32, u32);
+/// A shard by its level, its channel (0 but for channels written one pass each) and its
+/// column and row of shards.
+type ShardKey = (u32, u32, u32, u32);
 
 /// A shard being filled: where its chunks went, and how many are still to come.
 struct Shard {
@@ -154,9 +155,19 @@ impl OmeZarrSink {
         Ok(())
     }
 
+    /// The range of channel `c`'s samples, for its `omero` window: a directory's metadata is
+    /// written at the end, so it shows the data's range; a `.ozx`'s went first, with the
+    /// sample type's.
+    pub fn set_window(&mut self, c: usize, window: Option<(f64, f64)>) {
+        if let Some(plane) = self.spec.planes.as_mut().and_then(|p| p.get_mut(c)) {
+            plane.window = window;
+        }
+    }
+
     /// Chunk bytes as the arrays hold them: channel planes, zstd-compressed.
     fn chunk(&self, raw: &[u8]) -> std::result::Result<Vec<u8>, String> {
-        let channels = self.spec.channels();
+        // Channels written one pass each come as grey tiles, one channel's chunk each.
+        let channels = if self.spec.planes.is_some() { 1 } else { self.spec.channels() };
         let sample = self.spec.stored.depth.bytes();
         let side = self.spec.layout.tile_size as usize;
         if raw.len() != side * side * channels * sample {
@@ -181,8 +192,8 @@ impl OmeZarrSink {
     }
 
     /// 0.4: one file per chunk.
-    fn write_chunk_file(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
-        let path = self.staging.join(self.spec.chunk_key(lod, x, y));
+    fn write_chunk_file(&self, lod: u32, c: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+        let path = self.staging.join(self.spec.chunk_key(lod, c, x, y));
         self.make_parent(&path)?;
         let mut file = match fs::File::create_new(&path) {
             Ok(file) => file,
@@ -195,9 +206,9 @@ impl OmeZarrSink {
     }
 
     /// 0.5: appends the chunk to its shard; the shard's last chunk closes it with its index.
-    fn write_to_shard(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+    fn write_to_shard(&self, lod: u32, c: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
         let n = self.spec.shard_chunks;
-        let key = (lod, x / n, y / n);
+        let key = (lod, c, x / n, y / n);
         let shard = {
             let mut open = lock(&self.open);
             match open.get(&key) {
@@ -234,7 +245,7 @@ impl OmeZarrSink {
         drop(file);
         lock(&self.open).remove(&key);
         if self.zipped {
-            let name = self.spec.chunk_key(lod, x, y);
+            let name = self.spec.chunk_key(lod, c, x, y);
             let mut shard_file = fs::File::open(&s.path).map_err(|e| TilerError::write(&s.path, e))?;
             let archive = self.staging.join(ARCHIVE);
             let mut zip = lock(&self.zip);
@@ -247,13 +258,13 @@ impl OmeZarrSink {
 
     /// Shard `(lod, sx, sy)` before its first chunk: its file, an empty index, and how many
     /// chunks of the level's grid it covers (fewer at the level's right and bottom edges).
-    fn new_shard(&self, (lod, sx, sy): ShardKey) -> Result<Shard> {
+    fn new_shard(&self, (lod, c, sx, sy): ShardKey) -> Result<Shard> {
         let n = self.spec.shard_chunks;
         let (columns, rows) = self.spec.layout.grid(lod);
         let covered = |first: u32, count: u32| (count.saturating_sub(first)).min(n) as u64;
         let path = match self.zipped {
-            false => self.staging.join(self.spec.chunk_key(lod, sx * n, sy * n)),
-            true => self.staging.join(SHARDS).join(format!("{lod}-{sx}-{sy}")),
+            false => self.staging.join(self.spec.chunk_key(lod, c, sx * n, sy * n)),
+            true => self.staging.join(SHARDS).join(format!("{lod}-{c}-{sx}-{sy}")),
         };
         Ok(Shard {
             path,
@@ -264,15 +275,44 @@ impl OmeZarrSink {
     }
 }
 
-impl TileSink for OmeZarrSink {
-    fn write_tile(&self, lod: u32, x: u32, y: u32, raw: &[u8]) -> Result<()> {
+impl OmeZarrSink {
+    /// Chunk (`x`, `y`) of level `lod` of channel `c` (0 but for channels written one pass
+    /// each), from a raw tile.
+    fn write_plane(&self, c: u32, lod: u32, x: u32, y: u32, raw: &[u8]) -> Result<()> {
         let bytes = self.chunk(raw).map_err(|message| TilerError::Encode { lod, x, y, message })?;
         match self.spec.version {
-            Version::V04 => self.write_chunk_file(lod, x, y, &bytes)?,
-            Version::V05 => self.write_to_shard(lod, x, y, &bytes)?,
+            Version::V04 => self.write_chunk_file(lod, c, x, y, &bytes)?,
+            Version::V05 => self.write_to_shard(lod, c, x, y, &bytes)?,
         }
         self.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
         Ok(())
+    }
+
+    /// The sink of channel `c`'s pass, for channels written one pass each.
+    pub fn plane(&self, c: u32) -> PlaneSink<'_> {
+        PlaneSink { sink: self, c }
+    }
+}
+
+/// One channel's pass into an [`OmeZarrSink`] of channels written one pass each.
+pub struct PlaneSink<'a> {
+    sink: &'a OmeZarrSink,
+    c: u32,
+}
+
+impl TileSink for PlaneSink<'_> {
+    fn write_tile(&self, lod: u32, x: u32, y: u32, raw: &[u8]) -> Result<()> {
+        self.sink.write_plane(self.c, lod, x, y, raw)
+    }
+
+    fn bytes_written(&self) -> u64 {
+        self.sink.bytes_written()
+    }
+}
+
+impl TileSink for OmeZarrSink {
+    fn write_tile(&self, lod: u32, x: u32, y: u32, raw: &[u8]) -> Result<()> {
+        self.write_plane(0, lod, x, y, raw)
     }
 
     fn bytes_written(&self) -> u64 {

@@ -24,7 +24,8 @@ mod libjpeg;
 mod lzw;
 mod pyramid;
 mod samples;
-mod slide;
+// Its OME-XML scanning serves the channel source too (`source::channels`).
+pub(super) mod slide;
 mod strips_ahead;
 
 use std::fs::File;
@@ -289,7 +290,7 @@ fn lzw_strips(
 }
 
 /// A decoder of the TIFF's first image, its buffers bounded by `max_memory`.
-fn open_decoder(path: &Path, max_memory: u64) -> Result<Decoder<BufReader<File>>> {
+pub(super) fn open_decoder(path: &Path, max_memory: u64) -> Result<Decoder<BufReader<File>>> {
     let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
     // The first directory is read with the crate's default limits (256 MiB of tag values, ample
     // for the strip tables of any image this tool can take); the limits below apply to the rest.
@@ -355,7 +356,7 @@ fn is_bigtiff(path: &Path) -> Result<bool> {
     Ok(n == 4 && (head == *b"II+\0" || head == *b"MM\0+"))
 }
 
-fn open_error(path: &Path, e: TiffError) -> TilerError {
+pub(super) fn open_error(path: &Path, e: TiffError) -> TilerError {
     match e {
         TiffError::UnsupportedError(u) => TilerError::unsupported(path, format!("unsupported TIFF: {u}")),
         TiffError::LimitsExceeded => {
@@ -368,7 +369,7 @@ fn open_error(path: &Path, e: TiffError) -> TilerError {
     }
 }
 
-fn check_compression(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<CompressionMethod> {
+pub(super) fn check_compression(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<CompressionMethod> {
     let code: u16 = decoder.find_tag_unsigned(Tag::Compression).map_err(|e| open_error(path, e))?.unwrap_or(1);
     let method = CompressionMethod::from_u16_exhaustive(code);
     match method {
@@ -607,7 +608,7 @@ fn check_row(
 
 /// Runs a chunk read, turning both its errors and any panic inside the crate (which a corrupt
 /// file should not cause, but a decoder bug must not take the whole run down) into a message.
-fn guarded(read: impl FnOnce() -> tiff::TiffResult<()>) -> std::result::Result<(), String> {
+pub(super) fn guarded(read: impl FnOnce() -> tiff::TiffResult<()>) -> std::result::Result<(), String> {
     match catch_unwind(AssertUnwindSafe(read)) {
         Ok(Ok(())) => Ok(()),
         Ok(Err(TiffError::IoError(e))) if e.kind() == std::io::ErrorKind::UnexpectedEof => {

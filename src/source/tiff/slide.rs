@@ -96,7 +96,7 @@ pub(super) fn ome_series(xml: &str) -> Vec<Option<usize>> {
 }
 
 /// Where the next `<name` or `<prefix:name` start tag begins (not `<ImageRef`, `</Image>`).
-fn find_element(xml: &str, name: &str) -> Option<usize> {
+pub(in crate::source) fn find_element(xml: &str, name: &str) -> Option<usize> {
     let mut from = 0;
     while let Some(lt) = xml[from..].find('<') {
         let at = from + lt;
@@ -112,7 +112,7 @@ fn find_element(xml: &str, name: &str) -> Option<usize> {
 }
 
 /// The end of the element starting `xml` (after its `</name>` or its self-closing tag).
-fn find_closing(xml: &str, name: &str) -> Option<usize> {
+pub(in crate::source) fn find_closing(xml: &str, name: &str) -> Option<usize> {
     let mut from = 1;
     while let Some(lt) = xml[from..].find("</") {
         let at = from + lt;
@@ -126,7 +126,7 @@ fn find_closing(xml: &str, name: &str) -> Option<usize> {
     None
 }
 
-fn attribute<'a>(tag: &'a str, name: &str) -> Option<&'a str> {
+pub(in crate::source) fn attribute<'a>(tag: &'a str, name: &str) -> Option<&'a str> {
     let mut rest = tag;
     while let Some(at) = rest.find(name) {
         let before = rest[..at].chars().last();
