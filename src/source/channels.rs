@@ -654,6 +654,10 @@ impl RowSource for Ranged {
         let seen = match self.layout().depth {
             Depth::U8 => row_range::<u8>(row),
             Depth::U16 => row_range::<u16>(row),
+            Depth::U32 => row_range::<u32>(row),
+            Depth::F32 => row_range::<f32>(row),
+            // Sources hand on half floats as f32; nothing reaches here as F16.
+            Depth::F16 => None,
         };
         if let Some((lo, hi)) = seen {
             let mut range = self.range.lock().unwrap_or_else(|p| p.into_inner());

@@ -70,6 +70,8 @@ pub fn assemble(
             let samples: Vec<u16> = bytemuck::pod_collect_to_vec(&bytes);
             encoder::<u16>(codec, pixels, side)?.encode_crop(&samples, whole, &mut out)?
         }
+        // Split refuses JPEG and PNG tiles for 32-bit and float images before any is written.
+        other => return Err(format!("{other:?} samples have no JPEG or PNG tiles")),
     }
     Ok(out)
 }
