@@ -2,7 +2,7 @@
 //! read one channel at a time, each as a grey source.
 //!
 //! A [`ChannelSet`] is one of: a TIFF page of more than four samples per texel (stored
-//! contiguously) or of separate planes (PlanarConfiguration 2, any count); an OME-TIFF series
+//! contiguously or in separate planes; up to four planes are texels `tiff::kinds` reads); an OME-TIFF series
 //! whose channels are grey pages (the OME-XML's planes); a list of grey images of one size
 //! and type (`--channel FILE`, repeated); or any image the pipeline reads, its texels' samples
 //! being the channels. [`ChannelSet::channel`] opens channel `k` as a grey source of its own,
@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use tiff::decoder::{ChunkType, Decoder};
-use tiff::tags::{PlanarConfiguration, SampleFormat, Tag};
+use tiff::tags::{SampleFormat, Tag};
 
 use super::tiff::slide::{attribute, find_closing, find_element};
 use super::tiff::{check_compression, guarded, open_decoder, open_error};
@@ -73,7 +73,7 @@ impl ChannelSet {
     }
 
     /// The channels of `path` if the pipeline cannot read them as texels: a TIFF page of
-    /// more than four samples or of separate planes, an OME-TIFF series of several grey pages.
+    /// more than four samples (together or in planes), an OME-TIFF series of several grey pages.
     pub fn beyond_texels(path: &Path, pick: Pick, max_memory: u64) -> Result<Option<ChannelSet>> {
         match is_tiff(path)? {
             true => tiff_channels(path, pick, max_memory),
@@ -243,10 +243,9 @@ fn tiff_channels(path: &Path, pick: Pick, max_memory: u64) -> Result<Option<Chan
         return Ok(None);
     }
     let samples: u16 = decoder.find_tag_unsigned(Tag::SamplesPerPixel).map_err(|e| open_error(path, e))?.unwrap_or(1);
-    let planar: u16 =
-        decoder.find_tag_unsigned(Tag::PlanarConfiguration).map_err(|e| open_error(path, e))?.unwrap_or(1);
-    let planar = PlanarConfiguration::from_u16(planar) == Some(PlanarConfiguration::Planar);
-    if !(samples > 4 || (planar && samples > 1)) {
+    // Up to four samples, stored together or in planes, are texels the TIFF reader gives
+    // (planes: `tiff::kinds`, which also applies the photometric and the profile).
+    if samples <= 4 {
         return Ok(None);
     }
     let plane = TiffPlane::open(path, page, 0, max_memory)?;
@@ -387,7 +386,15 @@ impl TiffPlane {
             .find_tag_unsigned_vec::<u16>(Tag::BitsPerSample)
             .map_err(|e| open_error(path, e))?
             .unwrap_or_else(|| vec![1]);
-        let format = tag(&mut decoder, Tag::SampleFormat)?.unwrap_or(1);
+        // One SampleFormat per sample, as BitsPerSample (tifffile writes all of them).
+        let formats = decoder
+            .find_tag_unsigned_vec::<u16>(Tag::SampleFormat)
+            .map_err(|e| open_error(path, e))?
+            .unwrap_or_else(|| vec![1]);
+        if formats.iter().any(|f| *f != formats[0]) {
+            return Err(TilerError::unsupported(path, format!("samples of different formats ({formats:?})")));
+        }
+        let format = u64::from(formats[0]);
         if bits.iter().any(|b| *b != bits[0]) {
             return Err(TilerError::unsupported(path, format!("samples of different sizes ({bits:?} bits)")));
         }
@@ -400,7 +407,10 @@ impl TiffPlane {
             };
             TilerError::unsupported(
                 path,
-                format!("{}-bit {kind} samples: channels of 8- or 16-bit unsigned samples are read", bits[0]),
+                format!(
+                    "{}-bit {kind} samples: channels of 8-, 16- or 32-bit unsigned or 32-bit float samples are read",
+                    bits[0]
+                ),
             )
         })?;
         if samples > MAX_CHANNELS {
@@ -516,6 +526,8 @@ fn depth_of(bits: u16, format: u64) -> Option<Depth> {
     match (bits, format) {
         (8, 1) => Some(Depth::U8),
         (16, 1) => Some(Depth::U16),
+        (32, 1) => Some(Depth::U32),
+        (32, 3) => Some(Depth::F32),
         _ => None,
     }
 }

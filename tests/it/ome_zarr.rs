@@ -767,6 +767,13 @@ h, w, c = 301, 410, 5
 rng = np.random.default_rng(5)
 y, x = np.mgrid[0:h, 0:w]
 data = np.stack([((x * (k + 1) * 37 + y * 11 * (k + 2)) % 60000 + rng.integers(0, 50, (h, w))).astype(np.uint16) for k in range(c)])
+# Optional second argument: the same values as uint32 (spread over the whole range) or float32
+# (not whole numbers, so that means are not rounded).
+kind = sys.argv[2] if len(sys.argv) > 2 else "uint16"
+if kind == "uint32":
+    data = data.astype(np.uint32) * 65537
+elif kind == "float32":
+    data = data.astype(np.float32) / 7.0 - 1000.0
 tifffile.imwrite(f"{out}/chunky.tif", np.moveaxis(data, 0, -1), photometric="minisblack", planarconfig="contig", rowsperstrip=16)
 tifffile.imwrite(f"{out}/planar.tif", data, photometric="minisblack", planarconfig="separate", rowsperstrip=16)
 tifffile.imwrite(f"{out}/tiled.tif", data, photometric="minisblack", planarconfig="separate", tile=(64, 64), compression="zlib")
@@ -797,15 +804,21 @@ for d in ome["multiscales"][0]["datasets"]:
 print(f"{levels} levels x {len(greys)} channels identical")
 "#;
 
-#[test]
-fn five_channel_tiffs_go_end_to_end() {
-    let Some(python) = readers() else { return };
+/// The readers' Python when it also has tifffile, which writes the multi-channel TIFFs.
+fn readers_and_tifffile() -> Option<PathBuf> {
+    let python = readers()?;
     let has_tifffile = Command::new(&python).args(["-c", "import tifffile"]).output().is_ok_and(|o| o.status.success());
     if !has_tifffile {
         assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and no tifffile");
-        eprintln!("note: skipping the 5-channel TIFFs: no tifffile in VORTEX_PYVIPS");
-        return;
+        eprintln!("note: skipping the multi-channel TIFFs: no tifffile in VORTEX_PYVIPS");
+        return None;
     }
+    Some(python)
+}
+
+#[test]
+fn five_channel_tiffs_go_end_to_end() {
+    let Some(python) = readers_and_tifffile() else { return };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     python_ok(&python, &["-c", MANY_CHANNELS, s(d)]);
@@ -858,6 +871,48 @@ fn five_channel_tiffs_go_end_to_end() {
     let greys = [d.join("g4-0.5.ome.zarr"), d.join("g0-0.5.ome.zarr")];
     let said = python_ok(&python, &["-c", CHANNELS_COMPARE, s(&out), "BF,DAPI", s(&greys[0]), s(&greys[1])]);
     assert!(said.contains("3 levels x 2 channels identical"), "{said}");
+}
+
+/// 32-bit unsigned and float channel sets: the same five channels as above as `uint32` and
+/// `float32`, each channel of the array equal to the grey pyramid of its own file.
+#[test]
+fn five_channel_32_bit_tiffs_go_end_to_end() {
+    let Some(python) = readers_and_tifffile() else { return };
+    for kind in ["uint32", "float32"] {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        python_ok(&python, &["-c", MANY_CHANNELS, s(d), kind]);
+        let split = |input: &Path, out: &Path| {
+            ok(&[
+                "split",
+                s(input),
+                "--layout",
+                "ome-zarr",
+                "--tile-size",
+                "128",
+                "--shard-chunks",
+                "2",
+                "-q",
+                "-o",
+                s(out),
+            ])
+        };
+        let greys: Vec<PathBuf> = (0..5).map(|k| d.join(format!("g{k}.ome.zarr"))).collect();
+        for (k, grey) in greys.iter().enumerate() {
+            split(&d.join(format!("c{k}.tif")), grey);
+        }
+        let greys: Vec<&str> = greys.iter().map(|g| s(g)).collect();
+        for input in ["chunky.tif", "planar.tif", "tiled.tif"] {
+            let out = d.join(format!("{input}.ome.zarr"));
+            split(&d.join(input), &out);
+            let mut compare = vec!["-c", CHANNELS_COMPARE, s(&out), "c0,c1,c2,c3,c4"];
+            compare.extend_from_slice(&greys);
+            let said = python_ok(&python, &compare);
+            assert!(said.contains("3 levels x 5 channels identical"), "{kind} {input}: {said}");
+            let said = tool_ok(&python, "ome-zarr-models", &["validate", s(&out)]);
+            assert!(said.contains("Valid OME-Zarr") && !said.contains("Invalid"), "{kind} {input}: {said}");
+        }
+    }
 }
 
 /// The Python with napari and its OME-Zarr reader (VORTEX_NAPARI, which `.ci/run` makes), and

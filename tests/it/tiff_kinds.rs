@@ -5,65 +5,13 @@
 //! lossless kinds (CMYK goes through LittleCMS on both sides and has a stated tolerance).
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use crate::common::cli::{self, s};
+use crate::tiff_slides::{
+    have_tools, openslide_texels, our_texels, pattern_png, python, tool, venv_python, vips_texels,
+};
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
-use vortex_tiler::source::{self, RowSource};
-
-/// Whether `vips` and `tiffcp` run; outside CI a missing one skips the test with a note.
-fn have_tools() -> bool {
-    let runs = |tool: &str, arg: &str| Command::new(tool).arg(arg).output().is_ok();
-    let found = runs("vips", "--version") && runs("tiffcp", "-h");
-    if !found {
-        assert!(
-            std::env::var("CI").map_or(true, |v| v != "true"),
-            "CI=true and no vips or tiffcp (apt-get install libvips-tools libtiff-tools)"
-        );
-        eprintln!(
-            "note: skipping a TIFF kinds test: vips or tiffcp missing (apt-get install libvips-tools libtiff-tools)"
-        );
-    }
-    found
-}
-
-fn tool(name: &str, args: &[&str]) {
-    let out = Command::new(name).args(args).output().unwrap();
-    assert!(out.status.success(), "{name} {args:?}: {}", String::from_utf8_lossy(&out.stderr));
-}
-
-/// An RGB image with ramps, hard edges and noisy blocks, as PNG.
-fn pattern_png(dir: &Path, width: u32, height: u32) -> PathBuf {
-    let mut state = 0x9E37_79B9u32;
-    let img = image::RgbImage::from_fn(width, height, |x, y| {
-        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-        let noise = if (x / 16 + y / 16) % 3 == 0 { (state >> 24) % 48 } else { 0 };
-        let r = (x * 255 / width + noise).min(255);
-        let g = (y * 255 / height + noise).min(255);
-        let b = ((x ^ y) & 255).saturating_sub(noise);
-        image::Rgb([r as u8, g as u8, b as u8])
-    });
-    let path = dir.join(format!("pattern-{width}x{height}.png"));
-    img.save(&path).unwrap();
-    path
-}
-
-/// libvips's decode of `path`: its bands as they are, 16-bit samples native.
-fn vips_texels(path: &Path) -> Vec<u8> {
-    let raw = path.with_extension("vips.raw");
-    tool("vips", &["rawsave", s(path), s(&raw)]);
-    std::fs::read(raw).unwrap()
-}
-
-fn our_texels(path: &Path, max_memory: u64) -> (Box<dyn RowSource>, Vec<u8>) {
-    let mut source = source::open(path, max_memory).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let row = source.width() as usize * source.layout().bytes_per_pixel();
-    let mut all = vec![0u8; row * source.height() as usize];
-    for chunk in all.chunks_exact_mut(row) {
-        source.read_row(chunk).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    }
-    (source, all)
-}
+use vortex_tiler::source;
 
 /// Each `(file, summary needle)` decodes to libvips's texels exactly.
 fn assert_as_vips(files: &[(PathBuf, &str)]) {
@@ -182,22 +130,6 @@ fn bilevel_fax_and_sub_byte_grey_decode_as_libvips_does() {
     let g32d = tiffcp(&one, &d("g3-2d.tif"), &["-c", "g3:2d"]);
     let err = source::open(&g32d, 1 << 30).err().expect("2-D G3 is refused");
     assert!(err.to_string().contains("two-dimensional Group 3") && err.to_string().contains("g3-2d.tif"), "{err}");
-}
-
-/// The Python with tifffile that `.ci/run` makes (VORTEX_PYVIPS), or a skip with a note
-/// outside CI.
-fn venv_python() -> Option<std::ffi::OsString> {
-    let python = std::env::var_os("VORTEX_PYVIPS");
-    if python.is_none() {
-        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and VORTEX_PYVIPS unset");
-        eprintln!("note: skipping a tifffile-made TIFF: set VORTEX_PYVIPS to a Python with tifffile");
-    }
-    python
-}
-
-fn python(python: &std::ffi::OsStr, script: &str, args: &[&str]) {
-    let out = Command::new(python).arg("-c").arg(script).args(args).output().unwrap();
-    assert!(out.status.success(), "{script}: {}", String::from_utf8_lossy(&out.stderr));
 }
 
 /// 16-bit planar-separate RGB, Deflate with the predictor, in strips and in tiles.
@@ -409,27 +341,6 @@ for name, a, code in (("rgb", img, 33005), ("ycbcr", ycc, 33003)):
     tifffile.imwrite("%s-%s.svs" % (sys.argv[1], name), tiles(a), shape=(h, w, 3), dtype="uint8", tile=(t, t),
                      compression=code, photometric="rgb", description=desc, metadata=None)
 "#;
-
-/// OpenSlide's level 0 of an Aperio slide as RGB texels (Debian's python3-openslide, run by
-/// /usr/bin/python3), or a skip with a note outside CI.
-fn openslide_texels(slide: &Path) -> Option<Vec<u8>> {
-    let raw = slide.with_extension("openslide.rgba");
-    let script = "import sys, openslide\ns = openslide.OpenSlide(sys.argv[1])\nassert s.properties['openslide.vendor'] == 'aperio'\nopen(sys.argv[2], 'wb').write(s.read_region((0, 0), 0, s.dimensions).tobytes())";
-    let out = Command::new("/usr/bin/python3").args(["-c", script, s(slide), s(&raw)]).output();
-    match out {
-        Ok(out) if out.status.success() => {}
-        Ok(out) if !String::from_utf8_lossy(&out.stderr).contains("No module named 'openslide'") => {
-            panic!("OpenSlide failed: {}", String::from_utf8_lossy(&out.stderr))
-        }
-        _ => {
-            assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and no python3-openslide");
-            eprintln!("note: skipping the OpenSlide comparison: apt-get install python3-openslide");
-            return None;
-        }
-    }
-    let rgba = std::fs::read(raw).unwrap();
-    Some(rgba.chunks_exact(4).flat_map(|t| [t[0], t[1], t[2]]).collect())
-}
 
 /// Aperio JPEG 2000 (33005 RGB, 33003 YCbCr): OpenSlide's level 0, streamed within a
 /// --max-memory below the image's size; a damaged tile is an error naming it; `split` takes it.

@@ -14,7 +14,7 @@ use crate::common::cli::{self, s};
 use vortex_tiler::source::{self, RowSource};
 
 /// Whether `vips` and `tiffcp` can run; outside CI a missing one skips the test with a note.
-fn have_tools() -> bool {
+pub(crate) fn have_tools() -> bool {
     let runs = |tool: &str, arg: &str| Command::new(tool).arg(arg).output().is_ok();
     let found = runs("vips", "--version") && runs("tiffcp", "-h");
     if !found {
@@ -22,20 +22,18 @@ fn have_tools() -> bool {
             std::env::var("CI").map_or(true, |v| v != "true"),
             "CI=true and no vips or tiffcp (apt-get install libvips-tools libtiff-tools)"
         );
-        eprintln!(
-            "note: skipping a JPEG-in-TIFF test: vips or tiffcp missing (apt-get install libvips-tools libtiff-tools)"
-        );
+        eprintln!("note: skipping a TIFF test: vips or tiffcp missing (apt-get install libvips-tools libtiff-tools)");
     }
     found
 }
 
-fn tool(name: &str, args: &[&str]) {
+pub(crate) fn tool(name: &str, args: &[&str]) {
     let out = Command::new(name).args(args).output().unwrap();
     assert!(out.status.success(), "{name} {args:?}: {}", String::from_utf8_lossy(&out.stderr));
 }
 
 /// An RGB image with smooth ramps, hard edges and noisy blocks (what JPEG finds hard), as PNG.
-fn pattern_png(dir: &Path, width: u32, height: u32) -> PathBuf {
+pub(crate) fn pattern_png(dir: &Path, width: u32, height: u32) -> PathBuf {
     let mut state = 0x9E37_79B9u32;
     let img = image::RgbImage::from_fn(width, height, |x, y| {
         state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
@@ -51,13 +49,13 @@ fn pattern_png(dir: &Path, width: u32, height: u32) -> PathBuf {
 }
 
 /// libvips's decode of `path` (8.14, through libtiff): its bands as they are.
-fn vips_texels(path: &Path) -> Vec<u8> {
+pub(crate) fn vips_texels(path: &Path) -> Vec<u8> {
     let raw = path.with_extension("vips.raw");
     tool("vips", &["rawsave", s(path), s(&raw)]);
     std::fs::read(raw).unwrap()
 }
 
-fn our_texels(path: &Path, max_memory: u64) -> (Box<dyn RowSource>, Vec<u8>) {
+pub(crate) fn our_texels(path: &Path, max_memory: u64) -> (Box<dyn RowSource>, Vec<u8>) {
     let mut source = source::open(path, max_memory).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let row = source.width() as usize * source.layout().bytes_per_pixel();
     let mut all = vec![0u8; row * source.height() as usize];
@@ -335,7 +333,7 @@ fn columns_and_skipped_rows_match_whole_rows() {
 
 /// The Python with tifffile and imagecodecs that `.ci/run` makes (VORTEX_PYVIPS), or a skip
 /// with a note outside CI.
-fn venv_python() -> Option<std::ffi::OsString> {
+pub(crate) fn venv_python() -> Option<std::ffi::OsString> {
     let python = std::env::var_os("VORTEX_PYVIPS");
     if python.is_none() {
         assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and VORTEX_PYVIPS unset");
@@ -344,7 +342,7 @@ fn venv_python() -> Option<std::ffi::OsString> {
     python
 }
 
-fn python(python: &std::ffi::OsStr, script: &str, args: &[&str]) {
+pub(crate) fn python(python: &std::ffi::OsStr, script: &str, args: &[&str]) {
     let out = Command::new(python).arg("-c").arg(script).args(args).output().unwrap();
     assert!(out.status.success(), "{script}: {}", String::from_utf8_lossy(&out.stderr));
 }
@@ -371,7 +369,7 @@ with tifffile.TiffWriter(out) as t:
 
 /// OpenSlide's level 0 of a slide as RGB texels (Debian's python3-openslide, run by
 /// /usr/bin/python3), or a skip with a note outside CI.
-fn openslide_texels(slide: &Path) -> Option<Vec<u8>> {
+pub(crate) fn openslide_texels(slide: &Path) -> Option<Vec<u8>> {
     let raw = slide.with_extension("openslide.rgba");
     let script = "import sys, openslide\ns = openslide.OpenSlide(sys.argv[1])\nassert s.properties['openslide.vendor'] == 'aperio'\nopen(sys.argv[2], 'wb').write(s.read_region((0, 0), 0, s.dimensions).tobytes())";
     let out = Command::new("/usr/bin/python3").args(["-c", script, s(slide), s(&raw)]).output();
