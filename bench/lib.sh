@@ -94,13 +94,14 @@ splice() {
   mv "$DOC.tmp" "$DOC"
 }
 
-# pyvips_setup: libvips 8.18 from PyPI (pyvips + pyvips-binary) in $WORK/venv, installed the first
-# time. Sets PY (its python) and PYVIPS_VERSION ("libvips-8.18.7"), both empty when it cannot be
-# had (a note says why), and checks that the peer runs at its best (pyvips_direct_check).
+# pyvips_setup: libvips 8.18 from PyPI (pyvips + pyvips-binary): VORTEX_PYVIPS's Python (as the
+# tests use) where it is set, else $WORK/venv, installed the first time. Sets PY (its python) and
+# PYVIPS_VERSION ("libvips-8.18.7"), both empty when it cannot be had (a note says why), and
+# checks that the peer runs at its best (pyvips_direct_check).
 pyvips_setup() {
-  PY=$WORK/venv/bin/python
+  PY=${VORTEX_PYVIPS:-$WORK/venv/bin/python}
   PYVIPS_VERSION=
-  if ! "$PY" -c 'import pyvips' 2>/dev/null; then
+  if [ -z "${VORTEX_PYVIPS:-}" ] && ! "$PY" -c 'import pyvips' 2>/dev/null; then
     log "installing pyvips + pyvips-binary into $WORK/venv"
     if ! { python3 -m venv "$WORK/venv" && "$WORK/venv/bin/pip" install -q pyvips pyvips-binary; } >"$WORK/pip.log" 2>&1; then
       echo "note: could not install pyvips/pyvips-binary (see $WORK/pip.log); no libvips 8.18 peer" >&2

@@ -27,13 +27,7 @@ else
   bench_setup
 fi
 # VORTEX_PYVIPS=PYTHON: a Python with pyvips (libvips 8.18) already, as the tests use.
-if [ -n "${VORTEX_PYVIPS:-}" ]; then
-  PY=$VORTEX_PYVIPS
-  PYVIPS_VERSION=$("$PY" -c 'import pyvips; print("libvips-%d.%d.%d" % tuple(pyvips.version(i) for i in range(3)))')
-  pyvips_direct_check
-else
-  pyvips_setup
-fi
+pyvips_setup
 [ -n "$PY" ] || { echo "error: no libvips 8.18 peer (pyvips); see $WORK/pip.log" >&2; exit 1; }
 SRC=${SRC:-$WORK/src16k.tif} # SRC=PATH: another 16384² image
 P=$WORK/pmtiles

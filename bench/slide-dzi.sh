@@ -42,13 +42,7 @@ cp "$BIN" "$WORK/bin/vortex-tiler" # a concurrent build must not swap it between
 VT=$WORK/bin/vortex-tiler
 REV="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src crates Cargo.toml Cargo.lock || echo +uncommitted)"
 [ -n "${VORTEX:-}" ] && REV=${VORTEX_LABEL:-$VORTEX}
-if [ -n "${VORTEX_PYVIPS:-}" ]; then
-  PY=$VORTEX_PYVIPS
-  PYVIPS_VERSION=$("$PY" -c 'import pyvips; print("libvips-%d.%d.%d" % tuple(pyvips.version(i) for i in range(3)))')
-  pyvips_direct_check
-else
-  pyvips_setup
-fi
+pyvips_setup
 export VIPS_WARNING=0
 
 cd "$WORK"

@@ -18,8 +18,9 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use tiff::decoder::{ChunkType, Decoder};
-use tiff::tags::{SampleFormat, Tag};
+use tiff::tags::Tag;
 
+use super::tiff::samples::{self, Stored};
 use super::tiff::slide::{attribute, find_closing, find_element};
 use super::tiff::{check_compression, guarded, open_decoder, open_error};
 use super::{ImageHeader, Pick, RowSource, Streamed};
@@ -382,37 +383,28 @@ impl TiffPlane {
         };
         let samples = tag(&mut decoder, Tag::SamplesPerPixel)?.unwrap_or(1) as usize;
         let planar = tag(&mut decoder, Tag::PlanarConfiguration)?.unwrap_or(1) == 2;
-        let bits = decoder
-            .find_tag_unsigned_vec::<u16>(Tag::BitsPerSample)
+        let formats: Vec<u16> =
+            decoder.find_tag_unsigned_vec(Tag::SampleFormat).map_err(|e| open_error(path, e))?.unwrap_or_default();
+        let bits: Vec<u16> = decoder
+            .find_tag_unsigned_vec(Tag::BitsPerSample)
             .map_err(|e| open_error(path, e))?
             .unwrap_or_else(|| vec![1]);
-        // One SampleFormat per sample, as BitsPerSample (tifffile writes all of them).
-        let formats = decoder
-            .find_tag_unsigned_vec::<u16>(Tag::SampleFormat)
-            .map_err(|e| open_error(path, e))?
-            .unwrap_or_else(|| vec![1]);
-        if formats.iter().any(|f| *f != formats[0]) {
-            return Err(TilerError::unsupported(path, format!("samples of different formats ({formats:?})")));
-        }
-        let format = u64::from(formats[0]);
-        if bits.iter().any(|b| *b != bits[0]) {
-            return Err(TilerError::unsupported(path, format!("samples of different sizes ({bits:?} bits)")));
-        }
-        let depth = depth_of(bits[0], format).ok_or_else(|| {
-            let kind = match SampleFormat::from_u16(format as u16) {
-                Some(SampleFormat::Uint) => "unsigned",
-                Some(SampleFormat::Int) => "signed",
-                Some(SampleFormat::IEEEFP) => "floating-point",
-                _ => "unknown-format",
-            };
-            TilerError::unsupported(
-                path,
-                format!(
-                    "{}-bit {kind} samples: channels of 8-, 16- or 32-bit unsigned or 32-bit float samples are read",
-                    bits[0]
-                ),
-            )
-        })?;
+        // The TIFF reader's reading of the two tags; channels carry the samples as stored.
+        let depth = match samples::stored(&formats, &bits) {
+            Ok(Stored::AsIs(depth)) => depth,
+            Ok(_) => {
+                return Err(TilerError::unsupported(
+                    path,
+                    "channels of half floats or signed 16-bit samples: channels of 8/16/32-bit unsigned or 32-bit float samples are read",
+                ));
+            }
+            Err(what) => {
+                return Err(TilerError::unsupported(
+                    path,
+                    format!("{what} TIFF: channels of 8/16/32-bit unsigned or 32-bit float samples are read"),
+                ));
+            }
+        };
         if samples > MAX_CHANNELS {
             return Err(TilerError::unsupported(path, format!("{samples} samples per texel: at most {MAX_CHANNELS}")));
         }
@@ -518,17 +510,6 @@ impl TiffPlane {
         }
         self.band_at = Some(r);
         Ok(())
-    }
-}
-
-/// The pipeline's sample type for `bits` of TIFF SampleFormat `format` (1 unsigned, the default).
-fn depth_of(bits: u16, format: u64) -> Option<Depth> {
-    match (bits, format) {
-        (8, 1) => Some(Depth::U8),
-        (16, 1) => Some(Depth::U16),
-        (32, 1) => Some(Depth::U32),
-        (32, 3) => Some(Depth::F32),
-        _ => None,
     }
 }
 

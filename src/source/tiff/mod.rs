@@ -23,7 +23,8 @@ mod kinds;
 mod libjpeg;
 mod lzw;
 mod pyramid;
-mod samples;
+// Its reading of SampleFormat and BitsPerSample serves the channel source too.
+pub(super) mod samples;
 // Its OME-XML scanning serves the channel source too (`source::channels`).
 pub(super) mod slide;
 mod strips_ahead;

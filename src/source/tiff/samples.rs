@@ -19,7 +19,7 @@ use crate::pixel::{Depth, PixelLayout};
 
 /// How the decoder's samples (native byte order) become the pipeline's.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Stored {
+pub(in crate::source) enum Stored {
     /// Carried as they are, at this depth.
     AsIs(Depth),
     /// 16-bit floats, widened to `f32`.
@@ -42,7 +42,7 @@ impl Stored {
 /// What the samples are, from the SampleFormat (one value per sample, 1 where absent) and
 /// BitsPerSample values; `Err` says what the file is, for the caller's "... TIFF is not
 /// supported" message.
-pub(super) fn stored(formats: &[u16], bits: &[u16]) -> std::result::Result<Stored, String> {
+pub(in crate::source) fn stored(formats: &[u16], bits: &[u16]) -> std::result::Result<Stored, String> {
     let format = formats.first().copied().unwrap_or(1);
     if formats.iter().any(|&f| f != format) {
         return Err(format!("a mixed-format (SampleFormat {formats:?})"));
