@@ -774,7 +774,11 @@ if kind == "uint32":
     data = data.astype(np.uint32) * 65537
 elif kind == "float32":
     data = data.astype(np.float32) / 7.0 - 1000.0
+elif kind == "float16":
+    data = (data % 2048).astype(np.float16)
 tifffile.imwrite(f"{out}/chunky.tif", np.moveaxis(data, 0, -1), photometric="minisblack", planarconfig="contig", rowsperstrip=16)
+if kind == "float16":
+    sys.exit(0)  # only the chunky file: it is refused
 tifffile.imwrite(f"{out}/planar.tif", data, photometric="minisblack", planarconfig="separate", rowsperstrip=16)
 tifffile.imwrite(f"{out}/tiled.tif", data, photometric="minisblack", planarconfig="separate", tile=(64, 64), compression="zlib")
 names = ["DAPI", "GFP", "RFP", "Cy5", "BF"]
@@ -913,6 +917,16 @@ fn five_channel_32_bit_tiffs_go_end_to_end() {
             assert!(said.contains("Valid OME-Zarr") && !said.contains("Invalid"), "{kind} {input}: {said}");
         }
     }
+    // Half floats, which a single image widens to f32, are refused as channels, naming why.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    python_ok(&python, &["-c", MANY_CHANNELS, s(d), "float16"]);
+    let out = d.join("half.ome.zarr");
+    fails_with(
+        &run(&["split", s(&d.join("chunky.tif")), "--layout", "ome-zarr", "-q", "-o", s(&out)]),
+        &["chunky.tif", "half floats"],
+    );
+    assert!(!out.exists());
 }
 
 /// The Python with napari and its OME-Zarr reader (VORTEX_NAPARI, which `.ci/run` makes), and
