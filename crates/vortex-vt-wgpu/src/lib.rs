@@ -24,11 +24,17 @@
 //! the public API (what `vortex-tiler render` runs). The `testing` feature adds `testing`
 //! (synthetic LOD chains, bordered tiles and packs of them) and the harness's address probe.
 //!
+//! The crate also builds for `wasm32-unknown-unknown` and draws on WebGPU (`docs/web-runtime.md`):
+//! there the loader runs on the browser's event loop instead of threads, packs are read with
+//! `fetch` (`source::WebPack`, the same protocol code as the native `source::HttpPack`), and
+//! the cache holds RGBA8 (or BC7 as stored: no BC transcoder builds for wasm).
+//!
 //! Everything runs on lavapipe, Mesa's CPU Vulkan driver, so it is tested on machines without a
 //! GPU. `examples/embed.rs` draws a pack with its own pipeline in under 200 lines.
 
 pub mod bc7;
 mod bindings;
+mod clock;
 pub mod device;
 pub mod feedback;
 #[cfg(feature = "harness")]

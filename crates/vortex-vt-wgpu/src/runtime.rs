@@ -23,7 +23,7 @@
 
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use vortex_pack::Pack;
 use vortex_vt::analysis::Analyzer;
@@ -33,6 +33,7 @@ use vortex_vt::page_table::{Change, PageTable};
 use vortex_vt::residency::{ConfigError, Residency, ResidencyConfig, Slot, UpdateError};
 
 use crate::bindings::Bindings;
+use crate::clock::Instant;
 use crate::feedback::{FeedbackBuffer, FeedbackReadback};
 use crate::landing::{Arrivals, Landed};
 use crate::layer::{Layer, LayerKind, MAX_LAYERS};
@@ -144,6 +145,21 @@ impl Default for RuntimeConfig {
 
 /// The physical cache's format for `config` on a device that samples BC (`bc`) or not.
 fn cache_format(config: &RuntimeConfig, bc: bool, loader: &Loader) -> Result<CacheFormat, RuntimeError> {
+    // In the browser no BC transcoder builds (Intel's kernels are native code): the cache holds
+    // BC7 only as stored, else RGBA8.
+    #[cfg(target_arch = "wasm32")]
+    return Ok(match config.cache_format {
+        None if bc && config.bc7 && loader.holds_only_bc7() => CacheFormat::Bc7,
+        None | Some(CacheFormat::Rgba8) => CacheFormat::Rgba8,
+        Some(CacheFormat::Bc7) if loader.holds_only_bc7() => CacheFormat::Bc7,
+        Some(format) => {
+            return Err(RuntimeError::Config(format!(
+                "a {} cache needs a transcoder, and none builds for the web: use rgba8 (or a pack of BC7 tiles)",
+                format.name()
+            )));
+        }
+    });
+    #[cfg(not(target_arch = "wasm32"))]
     Ok(match config.cache_format {
         None if !bc => CacheFormat::Rgba8,
         None if config.bc7 && loader.holds_only_bc7() => CacheFormat::Bc7,
@@ -399,6 +415,10 @@ impl Runtime {
         let Some((first, rest)) = self.loaders.split_first().filter(|_| !pages.is_empty()) else {
             return Vec::new();
         };
+        // In the browser there are no threads to wait on: the layers load one after another.
+        #[cfg(target_arch = "wasm32")]
+        let answers: Vec<_> = std::iter::once(first).chain(rest).map(|l| l.load(pages)).collect();
+        #[cfg(not(target_arch = "wasm32"))]
         let answers: Vec<_> = std::thread::scope(|scope| {
             let loads: Vec<_> = rest.iter().map(|l| scope.spawn(move || l.load(pages))).collect();
             let joined = loads.into_iter().map(|h| h.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)));

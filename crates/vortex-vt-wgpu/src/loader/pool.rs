@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use vortex_pack::Pack;
 use vortex_vt::page::{MAX_TEXTURES, PageId};
@@ -22,6 +22,8 @@ use super::tier::{Tier, TierUsage};
 use super::transcode::transcode;
 use super::{LoadCounters, LoadError, LoadedPage, LoaderError, stand_in_tile};
 use crate::bc7;
+#[cfg(not(target_arch = "wasm32"))]
+use crate::clock::Instant;
 use crate::layer::LayerKind;
 use crate::page_cache::CacheFormat;
 use crate::source::PageSource;
@@ -65,6 +67,11 @@ struct Shared {
     colour: AtomicBool,
     /// Every source gives every tile as BC7 blocks as stored: a BC7 cache takes them as they are.
     stored_bc7: bool,
+    /// In the browser: the most pages read at once, and the tasks reading them now (`web`).
+    #[cfg(target_arch = "wasm32")]
+    concurrency: usize,
+    #[cfg(target_arch = "wasm32")]
+    drivers: AtomicUsize,
 }
 
 /// Reads pages of up to 16 virtual textures (texture id = index in the sources given to
@@ -114,7 +121,12 @@ impl Loader {
                 }
             }
         }
+        // In the browser `threads` is how many pages are read at once (0: six, a browser's
+        // connections per host), on the page's event loop.
+        #[cfg(target_arch = "wasm32")]
+        let (concurrency, threads) = (if threads == 0 { 6 } else { threads }, 0);
         let threads = match threads {
+            #[cfg(not(target_arch = "wasm32"))]
             0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
             n => n,
         };
@@ -136,9 +148,14 @@ impl Loader {
             format: AtomicU8::new(0),
             colour: AtomicBool::new(true),
             stored_bc7,
+            #[cfg(target_arch = "wasm32")]
+            concurrency,
+            #[cfg(target_arch = "wasm32")]
+            drivers: AtomicUsize::new(0),
         });
         let (async_tx, async_rx) = mpsc::channel();
         // Built before the workers so that, if one fails to start, Drop stops those already started.
+        #[cfg_attr(target_arch = "wasm32", allow(unused_mut))]
         let mut loader = Loader {
             shared,
             workers: Vec::with_capacity(threads),
@@ -147,6 +164,7 @@ impl Loader {
             pending: AtomicUsize::new(0),
             waited: AtomicU64::new(0),
         };
+        #[cfg(not(target_arch = "wasm32"))]
         for index in 0..threads {
             let shared = Arc::clone(&loader.shared);
             let worker = std::thread::Builder::new()
@@ -235,6 +253,16 @@ impl Loader {
         if pages.is_empty() {
             return Vec::new();
         }
+        // In the browser nothing may wait: the pages are decoded here, from what their sources
+        // hold without waiting (`PageSource::prepare` is not awaited).
+        #[cfg(target_arch = "wasm32")]
+        return pages.iter().map(|&(page, slot)| self.shared.load_page(page, slot)).collect();
+        #[cfg(not(target_arch = "wasm32"))]
+        self.load_on_workers(pages)
+    }
+
+    #[cfg(not(target_arch = "wasm32"))]
+    fn load_on_workers(&self, pages: &[(PageId, Slot)]) -> Vec<LoadedPage> {
         let (tx, rx) = mpsc::channel();
         self.enqueue(pages.iter().enumerate().map(|(index, &(page, slot))| Job {
             index,
@@ -340,6 +368,8 @@ impl Loader {
         queue.jobs.extend(jobs);
         drop(queue);
         self.shared.ready.notify_all();
+        #[cfg(target_arch = "wasm32")]
+        drive(&self.shared);
     }
 }
 
@@ -362,7 +392,70 @@ fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
+impl Shared {
+    /// The next queued job, or `None` once there is none or the loader shut down.
+    #[cfg(target_arch = "wasm32")]
+    fn next_job(&self) -> Option<Job> {
+        let mut queue = lock(&self.queue);
+        if queue.shutdown { None } else { queue.jobs.pop_front() }
+    }
+
+    /// Answers `job` with its page, loaded now.
+    #[cfg(target_arch = "wasm32")]
+    fn answer(&self, job: Job) {
+        let answer = self.load_page(job.page, job.slot);
+        let _ = job.reply.send((job.index, answer));
+    }
+}
+
+/// In the browser: starts tasks on the page's event loop, up to the loader's concurrency, each of
+/// which takes queued jobs until none is left. A task awaits its page's [`PageSource::prepare`]
+/// (the page's tile, and while that is absent its ancestors', fetched) and then decodes it at
+/// once, as a worker thread would.
+#[cfg(target_arch = "wasm32")]
+fn drive(shared: &Arc<Shared>) {
+    while shared.drivers.load(Ordering::Relaxed) < shared.concurrency && !lock(&shared.queue).jobs.is_empty() {
+        shared.drivers.fetch_add(1, Ordering::Relaxed);
+        let shared = Arc::clone(shared);
+        wasm_bindgen_futures::spawn_local(async move {
+            while let Some(job) = shared.next_job() {
+                shared.prepare(job.page).await;
+                shared.answer(job);
+            }
+            shared.drivers.fetch_sub(1, Ordering::Relaxed);
+        });
+    }
+}
+
+#[cfg(target_arch = "wasm32")]
+impl Shared {
+    /// Awaits the page's tile and, while it is absent, its ancestors' (what `decode` will read).
+    async fn prepare(&self, page: PageId) {
+        let (Some(source), Some(texture)) =
+            (self.sources.get(page.texture as usize), self.textures.get(page.texture as usize))
+        else {
+            return;
+        };
+        if !texture.grid.contains(page) {
+            return;
+        }
+        for tile in page.ancestors_and_self(&texture.grid) {
+            if let Some(ready) = source.prepare(tile.lod, tile.x, tile.y) {
+                ready.await;
+            }
+            let absent = matches!(
+                source.read_stored(tile.lod, tile.x, tile.y),
+                Ok(Some(crate::source::StoredRead { tile: crate::source::StoredTile::Absent, .. }))
+            );
+            if !absent {
+                return;
+            }
+        }
+    }
+}
+
 /// A worker: takes jobs until the loader shuts down.
+#[cfg(not(target_arch = "wasm32"))]
 fn work(shared: &Shared) {
     loop {
         let job = {

@@ -8,6 +8,7 @@ use crate::page_cache::CacheFormat;
 
 /// `texels` (`tile_size²` RGBA8) as `format`'s blocks, rows of blocks top down; RGBA8 as it is.
 /// BC1 keeps no alpha: it is for opaque textures.
+#[cfg(not(target_arch = "wasm32"))]
 pub(super) fn transcode(texels: Vec<u8>, tile_size: u32, format: CacheFormat) -> Vec<u8> {
     let surface =
         intel_tex_2::RgbaSurface { data: &texels, width: tile_size, height: tile_size, stride: tile_size * 4 };
@@ -23,6 +24,20 @@ pub(super) fn transcode(texels: Vec<u8>, tile_size: u32, format: CacheFormat) ->
             };
             intel_tex_2::bc7::compress_blocks(&settings, &surface)
         }
+    }
+}
+
+/// In the browser, where Intel's kernels do not build, the runtime never asks for a transcoded
+/// cache (`Runtime` refuses one); the loader still makes its stand-in tile in a BC7 cache of
+/// stored blocks, which [`bc7::solid_blocks`] does without a transcoder. A BC1 cache cannot
+/// occur; it gets BC7-sized blocks' worth of nothing only to keep the signature total, and never
+/// reaches a texture (the cache was refused first).
+#[cfg(target_arch = "wasm32")]
+pub(super) fn transcode(texels: Vec<u8>, tile_size: u32, format: CacheFormat) -> Vec<u8> {
+    match format {
+        CacheFormat::Rgba8 => texels,
+        CacheFormat::Bc7 => crate::bc7::solid_blocks(&texels, tile_size),
+        CacheFormat::Bc1 => vec![0; format.tile_bytes(tile_size)],
     }
 }
 

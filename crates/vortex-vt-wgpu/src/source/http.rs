@@ -7,6 +7,9 @@
 //! whole; once its last block has arrived otherwise, each entry checked for sense before use),
 //! and every payload's CRC.
 //!
+//! The protocol (what is read, and every check) is `remote`'s, which the browser's `WebPack`
+//! drives too; this module is its blocking transport.
+//!
 //! Reads run on the loader's worker threads, which block on the network and never on a frame.
 //! At most [`HttpOptions::connections`] requests are in flight; reads that queue behind them
 //! meanwhile are sorted and those lying close together in the file are fetched as one request
@@ -22,13 +25,13 @@ use std::collections::{BTreeMap, HashMap};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::sync::{Condvar, Mutex, PoisonError};
 use std::time::Duration;
 
-use vortex_pack::format::{ENTRY_LEN, LEVEL_LEN};
-use vortex_pack::{Limits, PackError, PackHead, Place, TileId, TileKind};
+use vortex_pack::{Limits, PackError, PackHead};
 
-use super::pack::{decode_stored, read_error};
+use super::pack::decode_stored;
+use super::remote::{IndexPlan, RangeRead, RemotePack, lock, parse_content_range};
 use super::{PageSource, ReadError, SourceTile, StoredRead, StoredTile};
 use crate::loader::LoaderError;
 use crate::page_cache::CacheFormat;
@@ -72,9 +75,6 @@ impl Default for HttpOptions {
         }
     }
 }
-
-/// Index entries fetched together when the index is read in blocks: 6 KiB, less than a tile.
-pub const INDEX_BLOCK: u64 = 256;
 
 /// What a remote pack's reads have cost so far.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -127,18 +127,10 @@ impl FetchError {
     }
 }
 
-/// A pack on a web server, read with `Range` requests: a [`PageSource`].
+/// A pack on a web server, read with `Range` requests: a [`PageSource`]. The protocol is
+/// [`RemotePack`]'s (shared with the browser's `WebPack`); this is its blocking transport.
 pub struct HttpPack {
-    location: PathBuf,
-    head: PackHead,
-    fetcher: Fetcher,
-    /// The index by block number ([`INDEX_BLOCK`] entries each), as fetched.
-    index: Mutex<HashMap<u64, Arc<[u8]>>>,
-    /// The level table's bytes, for the index's CRC.
-    raw_levels: Vec<u8>,
-    metadata: Vec<u8>,
-    /// Set once every index block has been fetched and their CRC did not match: every read fails.
-    index_corrupt: Mutex<Option<String>>,
+    remote: RemotePack<Fetcher>,
 }
 
 impl HttpPack {
@@ -152,80 +144,29 @@ impl HttpPack {
     /// small) are fetched and checked before this returns.
     pub fn open_with(url: &str, options: HttpOptions, limits: Limits) -> Result<HttpPack, PackError> {
         let location = PathBuf::from(url);
-        let io = |message: String| PackError::Io { path: location.clone(), source: std::io::Error::other(message) };
         if !(url.starts_with("http://") || url.starts_with("https://")) {
-            return Err(io("not an http:// or https:// URL".into()));
+            let source = std::io::Error::other("not an http:// or https:// URL");
+            return Err(PackError::Io { path: location, source });
         }
-        let fetcher = Fetcher::new(url, options);
-        // The first read: the header and, for most packs, the level table and metadata.
-        let first = fetcher.fetch_first(2048).map_err(|e| io(e.message()))?;
-        let file_len = fetcher.file_len();
-        let h = PackHead::read_header(&location, &first, file_len, limits)?;
-        let section = |offset: u64, len: u64| -> Result<Vec<u8>, PackError> {
-            match first.get(offset as usize..).and_then(|rest| rest.get(..len as usize)) {
-                Some(held) => Ok(held.to_vec()),
-                None => fetcher.read(offset, offset + len).map_err(|e| io(e.message())),
-            }
-        };
-        let raw_levels = section(h.levels_offset, h.description.level_count as u64 * LEVEL_LEN as u64)?;
-        // A local reader maps what a header claims; this one allocates it, so held to the cap on
-        // any one buffer (the header's claims were checked against the file's length only).
-        if u64::from(h.meta_len) > limits.max_decoded_bytes {
-            return Err(PackError::LimitExceeded {
-                path: location.clone(),
-                field: "meta_len".into(),
-                offset: vortex_pack::format::at::META_LEN as u64,
-                value: h.meta_len.into(),
-                limit: limits.max_decoded_bytes,
-                cap: "max_decoded_bytes",
-            });
-        }
-        // The index (when read whole) and the metadata lie side by side: one read for both.
-        let index_len = h.index_count * ENTRY_LEN as u64;
-        let meta_end = h.meta_offset + u64::from(h.meta_len);
-        let whole_index = index_len <= options.whole_index_up_to;
-        let (index, meta) = if whole_index && h.meta_offset - (h.index_offset + index_len) <= options.gap {
-            let mut both = section(h.index_offset, meta_end - h.index_offset)?;
-            let meta = both.split_off((h.meta_offset - h.index_offset) as usize);
-            both.truncate(index_len as usize);
-            (Some(both), meta)
-        } else {
-            let index = whole_index.then(|| section(h.index_offset, index_len)).transpose()?;
-            (index, section(h.meta_offset, u64::from(h.meta_len))?)
-        };
-        let head = PackHead::new(&location, h, &raw_levels, &meta, limits)?;
-        let mut blocks = HashMap::new();
-        if let Some(index) = index {
-            head.check_index(&raw_levels, &index)?;
-            for (n, block) in index.chunks(INDEX_BLOCK as usize * ENTRY_LEN).enumerate() {
-                blocks.insert(n as u64, Arc::from(block));
-            }
-        }
-        let pack = HttpPack {
-            location: location.clone(),
-            head,
-            fetcher,
-            index: Mutex::new(blocks),
-            raw_levels,
-            metadata: meta,
-            index_corrupt: Mutex::default(),
-        };
-        Ok(pack)
+        let plan = IndexPlan { whole_up_to: options.whole_index_up_to, gap: options.gap };
+        // The reads block on this thread, so the future is ready whenever it is polled.
+        let remote = pollster::block_on(RemotePack::open(location, Fetcher::new(url, options), plan, limits))?;
+        Ok(HttpPack { remote })
     }
 
     /// The checked header and level table.
     pub fn head(&self) -> &PackHead {
-        &self.head
+        self.remote.head()
     }
 
     /// The metadata: JSON text with the `info.json` members, its CRC checked.
     pub fn metadata(&self) -> &[u8] {
-        &self.metadata
+        self.remote.metadata()
     }
 
     /// What its reads have cost so far.
     pub fn stats(&self) -> HttpStats {
-        let c = &self.fetcher.counters;
+        let c = &self.remote.reader().counters;
         let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
         HttpStats {
             requests: get(&c.requests),
@@ -238,110 +179,18 @@ impl HttpPack {
         }
     }
 
-    /// The index entry at `position`, from its block (fetched if not held).
-    fn raw_entry(&self, position: u64) -> Result<[u8; ENTRY_LEN], ReadError> {
-        if let Some(message) = lock(&self.index_corrupt).clone() {
-            return Err(ReadError::new(message));
-        }
-        let n = position / INDEX_BLOCK;
-        let held = lock(&self.index).get(&n).cloned();
-        let block = match held {
-            Some(block) => block,
-            None => {
-                let h = self.head.header();
-                let first = n * INDEX_BLOCK;
-                let count = INDEX_BLOCK.min(h.index_count - first);
-                let start = self.head.entry_offset(first);
-                let bytes: Arc<[u8]> = self
-                    .fetcher
-                    .read(start, start + count * ENTRY_LEN as u64)
-                    .map_err(|e| ReadError::new(format!("index block at byte {start}: {}", e.message())))?
-                    .into();
-                self.keep_block(n, Arc::clone(&bytes))?;
-                bytes
-            }
-        };
-        let at = (position % INDEX_BLOCK) as usize * ENTRY_LEN;
-        let mut entry = [0u8; ENTRY_LEN];
-        entry.copy_from_slice(&block[at..at + ENTRY_LEN]);
-        Ok(entry)
-    }
-
-    /// Keeps index block `n`; once every block is held, checks the index's CRC.
-    fn keep_block(&self, n: u64, bytes: Arc<[u8]>) -> Result<(), ReadError> {
-        let h = self.head.header();
-        let mut blocks = lock(&self.index);
-        blocks.insert(n, bytes);
-        if blocks.len() as u64 != h.index_count.div_ceil(INDEX_BLOCK) {
-            return Ok(());
-        }
-        let parts = (0..blocks.len() as u64).map(|n| blocks.get(&n).map_or(&[][..], |b| &b[..]));
-        let checked = self.head.check_index_parts(&self.raw_levels, parts);
-        drop(blocks);
-        checked.map_err(|e| {
-            let message = e.to_string();
-            *lock(&self.index_corrupt) = Some(message.clone());
-            ReadError::new(message)
-        })
-    }
-
-    /// Tile (`lod`, `x`, `y`) as stored, its payload's CRC checked; a payload that fails is read
-    /// again once, with its index block (the entry may be what was wrong), then reported.
     fn stored(&self, lod: u8, x: u16, y: u16) -> Result<StoredRead, ReadError> {
-        let id = TileId { lod: lod.into(), x: x.into(), y: y.into() };
-        let position = self.head.position(id).map_err(read_error)?;
-        let mut attempt = 0;
-        loop {
-            let raw = self.raw_entry(position)?;
-            let (kind, offset, len, crc) = match self.head.place(id, position, &raw).map_err(read_error)? {
-                Place::Absent => return Ok(StoredRead { tile: StoredTile::Absent, bytes_read: 0 }),
-                Place::Constant(value) => {
-                    let tile = StoredTile::Stored { kind: TileKind::Constant as u8, bytes: Arc::from(value) };
-                    return Ok(StoredRead { tile, bytes_read: 0 });
-                }
-                Place::Data { kind, offset, len, crc } => (kind, offset, len, crc),
-            };
-            // No stored tile is larger than its texels: a bigger one is refused, not allocated.
-            let most = self.head.limits().max_decoded_bytes;
-            if u64::from(len) > most {
-                let message = format!(
-                    "a payload of {len} bytes at byte {offset}, over the limit of {most} (Limits::max_decoded_bytes)"
-                );
-                return Err(ReadError::new(message));
-            }
-            let bytes = self
-                .fetcher
-                .read(offset, offset + len as u64)
-                .map_err(|e| ReadError::new(format!("payload at byte {offset}: {}", e.message())))?;
-            let bytes_read = bytes.len() as u64;
-            match self.head.check_payload(id, offset, crc, &bytes) {
-                Ok(()) => {
-                    let tile = StoredTile::Stored { kind: kind as u8, bytes: bytes.into() };
-                    return Ok(StoredRead { tile, bytes_read });
-                }
-                Err(e) => {
-                    add(&self.fetcher.counters.corrupt, 1);
-                    if attempt == 1 {
-                        return Err(ReadError { bytes_read, ..read_error(e) });
-                    }
-                    attempt += 1;
-                    // Unless the index was read whole and its CRC checked, its entry is suspect too.
-                    if self.head.header().index_count * ENTRY_LEN as u64 > self.fetcher.options.whole_index_up_to {
-                        lock(&self.index).remove(&(position / INDEX_BLOCK));
-                    }
-                }
-            }
-        }
+        pollster::block_on(self.remote.stored(lod, x, y))
     }
 }
 
 impl PageSource for HttpPack {
     fn location(&self) -> &Path {
-        &self.location
+        self.remote.location()
     }
 
     fn texture(&self) -> Result<VirtualTexture, LoaderError> {
-        VirtualTexture::from_head(&self.head)
+        VirtualTexture::from_head(self.remote.head())
     }
 
     fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
@@ -349,7 +198,7 @@ impl PageSource for HttpPack {
         match tile {
             StoredTile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
             StoredTile::Absent => Err(ReadError::new(format!("an absent tile cannot be made into {}", format.name()))),
-            StoredTile::Stored { kind, bytes } => decode_stored(&self.head, kind, &bytes, format)
+            StoredTile::Stored { kind, bytes } => decode_stored(self.remote.head(), kind, &bytes, format)
                 .map(|texels| SourceTile::Texels { texels, bytes_read })
                 .map_err(|e| ReadError { bytes_read, ..e }),
         }
@@ -360,35 +209,31 @@ impl PageSource for HttpPack {
     }
 
     fn decode(&self, _: u8, _: u16, _: u16, kind: u8, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
-        decode_stored(&self.head, kind, bytes, format)
+        decode_stored(self.remote.head(), kind, bytes, format)
     }
 
     fn opaque(&self) -> bool {
-        matches!(self.head.header().description.channels, 1 | 3)
+        self.remote.opaque()
     }
 
-    /// Answered from the index when it was read whole (else not known without reading it all:
-    /// such a pack is decoded and transcoded like any other).
     fn holds_only_bc7(&self) -> bool {
-        let h = self.head.header();
-        if !h.description.tile_size.is_multiple_of(4)
-            || h.index_count * ENTRY_LEN as u64 > self.fetcher.options.whole_index_up_to
-        {
-            return false;
-        }
-        let blocks = lock(&self.index);
-        (0..h.index_count).all(|i| {
-            blocks.get(&(i / INDEX_BLOCK)).is_some_and(|b| {
-                let kind = b[(i % INDEX_BLOCK) as usize * ENTRY_LEN + 16];
-                matches!(TileKind::from_u8(kind), Some(TileKind::Bc7 | TileKind::Constant))
-            })
-        })
+        self.remote.holds_only_bc7()
     }
 }
 
-/// Nothing that can panic runs under these locks, so a poisoned one still holds consistent data.
-fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+impl RangeRead for Fetcher {
+    async fn first(&self, n: u64) -> Result<(Vec<u8>, u64), String> {
+        let bytes = self.fetch_first(n).map_err(FetchError::message)?;
+        Ok((bytes, self.file_len()))
+    }
+
+    async fn read(&self, start: u64, end: u64) -> Result<Vec<u8>, String> {
+        self.read(start, end).map_err(FetchError::message)
+    }
+
+    fn corrupt(&self) {
+        add(&self.counters.corrupt, 1);
+    }
 }
 
 /// Byte ranges of one URL read by many threads, at most `connections` requests at a time. A read
@@ -611,14 +456,6 @@ impl Fetcher {
         }
         Ok(bytes)
     }
-}
-
-/// `bytes FIRST-LAST/TOTAL` as (first, last, total).
-fn parse_content_range(v: &str) -> Option<(u64, u64, u64)> {
-    let (range, total) = v.trim().strip_prefix("bytes ")?.split_once('/')?;
-    let (first, last) = range.split_once('-')?;
-    let (first, last, total) = (first.trim().parse().ok()?, last.trim().parse().ok()?, total.trim().parse().ok()?);
-    (first <= last && last < total).then_some((first, last, total))
 }
 
 #[cfg(test)]

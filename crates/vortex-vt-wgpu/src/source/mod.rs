@@ -3,7 +3,8 @@
 //! up a frame. Vortex packs are sources ([`Pack`](vortex_pack::Pack) implements the trait, in
 //! `pack`); an application streams from its own storage by implementing it; [`Delayed`] adds a
 //! fixed latency to any source, to show what a slow disk or network does to a frame loop. With
-//! the `http` feature, [`HttpPack`] reads a pack from a web server with `Range` requests.
+//! the `http` feature, `HttpPack` reads a pack from a web server with `Range` requests; in the
+//! browser (wasm32), `WebPack` reads one with `fetch`, by the same protocol code (`remote`).
 //!
 //! A source may also split a read in two, [`PageSource::read_stored`] (the tile's bytes as
 //! stored, compressed) and [`PageSource::decode`] (those bytes to texels), so that the loader's
@@ -15,13 +16,21 @@ mod delayed;
 #[cfg(feature = "http")]
 mod http;
 mod pack;
+#[cfg(any(feature = "http", target_arch = "wasm32"))]
+mod remote;
+#[cfg(target_arch = "wasm32")]
+mod web;
 
 use std::path::Path;
 use std::sync::Arc;
 
 pub use delayed::Delayed;
 #[cfg(feature = "http")]
-pub use http::{HttpOptions, HttpPack, HttpStats, INDEX_BLOCK};
+pub use http::{HttpOptions, HttpPack, HttpStats};
+#[cfg(any(feature = "http", target_arch = "wasm32"))]
+pub use remote::INDEX_BLOCK;
+#[cfg(target_arch = "wasm32")]
+pub use web::{WebPack, WebStats};
 
 use crate::loader::LoaderError;
 use crate::page_cache::CacheFormat;
@@ -68,6 +77,16 @@ pub trait PageSource: Send + Sync {
         Err(ReadError::new(format!("tile (lod {lod}, x {x}, y {y}): this source decodes no stored tiles")))
     }
 
+    /// In the browser, where nothing may block: a future that completes once
+    /// [`PageSource::read_stored`] and [`PageSource::read_tile`] of page (`lod`, `x`, `y`) answer
+    /// without waiting (its fetch done, or failed). `None`, the default: the source never waits.
+    /// The web loader awaits it on the page's event loop before it decodes the page.
+    #[cfg(target_arch = "wasm32")]
+    fn prepare(&self, lod: u8, x: u16, y: u16) -> Option<LocalFuture<'_>> {
+        let _ = (lod, x, y);
+        None
+    }
+
     /// Whether every tile can come as BC7 blocks as stored, so that the cache can hold BC7.
     fn holds_only_bc7(&self) -> bool {
         false
@@ -78,6 +97,10 @@ pub trait PageSource: Send + Sync {
         false
     }
 }
+
+/// A future on the browser's event loop ([`PageSource::prepare`]): not `Send`, as nothing there is.
+#[cfg(target_arch = "wasm32")]
+pub type LocalFuture<'a> = std::pin::Pin<Box<dyn std::future::Future<Output = ()> + 'a>>;
 
 /// What [`PageSource::read_tile`] found.
 #[derive(Clone, Debug, PartialEq, Eq)]
