@@ -3,6 +3,10 @@
 
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
+    // In the browser there are no kernels (and no C++ runtime to link).
+    if std::env::var("CARGO_CFG_TARGET_ARCH").as_deref() == Ok("wasm32") {
+        return;
+    }
     match std::env::var("CARGO_CFG_TARGET_OS").as_deref() {
         Ok("macos" | "ios") => println!("cargo:rustc-link-lib=dylib=c++"),
         Ok("windows") => {}

@@ -38,3 +38,4 @@ mod tiff_kinds;
 mod tiff_slides;
 mod view;
 mod viewers;
+mod web_runtime;

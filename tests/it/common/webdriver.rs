@@ -22,7 +22,12 @@ pub struct Browser {
 
 impl Browser {
     /// Starts `chromedriver` and a headless `chromium` of `width x height` CSS pixels.
-    pub fn start(chromedriver: &Path, chromium: &Path, (width, height): (u32, u32)) -> Browser {
+    pub fn start(chromedriver: &Path, chromium: &Path, size: (u32, u32)) -> Browser {
+        Browser::start_with(chromedriver, chromium, size, &["--disable-gpu"])
+    }
+
+    /// [`Browser::start`] with `flags` (e.g. WebGPU's) in place of `--disable-gpu`.
+    pub fn start_with(chromedriver: &Path, chromium: &Path, (width, height): (u32, u32), flags: &[&str]) -> Browser {
         let port = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
         let driver = Command::new(chromedriver)
             .arg(format!("--port={port}"))
@@ -36,14 +41,14 @@ impl Browser {
             assert!(Instant::now() < deadline, "chromedriver did not listen on port {port}");
             std::thread::sleep(Duration::from_millis(50));
         }
-        let args = [
+        let mut args = vec![
             "--headless=new".to_string(),
             "--no-sandbox".into(),
-            "--disable-gpu".into(),
             "--hide-scrollbars".into(),
             "--allow-file-access-from-files".into(),
             format!("--window-size={},{}", width + 200, height + 400),
         ];
+        args.extend(flags.iter().map(|f| f.to_string()));
         let caps = json!({ "capabilities": { "alwaysMatch": {
             "browserName": "chrome",
             "goog:chromeOptions": { "binary": chromium, "args": args },
@@ -67,6 +72,28 @@ impl Browser {
                 return;
             }
             assert!(Instant::now() < deadline, "{url}: not ready after {timeout:?} ({ready})");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// Opens `url` without waiting for anything but the load.
+    pub fn open(&self, url: &str) {
+        self.call("POST", &self.path("url"), &json!({ "url": url }));
+    }
+
+    /// Waits until `ready` (a JavaScript expression) is true, polling every 100 ms.
+    pub fn wait_js(&self, ready: &str, timeout: Duration) {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let done = self.execute(&format!("return !!({ready});"));
+            if done == json!(true) {
+                return;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "not ready after {timeout:?} ({ready}): {}",
+                self.execute("return document.body.innerText;")
+            );
             std::thread::sleep(Duration::from_millis(100));
         }
     }

@@ -150,7 +150,7 @@ fn vt_texel_at(texel: VtTexel, lod: u32, t: VtTextureInfo) -> VtAt {
     let size = max(t.size, vec2<u32>(1u));
     let last = vec2<i32>((size - 1u) >> vec2<u32>(lod));
     let end = vec2<f32>(((size - 1u) & vec2<u32>(mask)) + 1u) * scale * VT_BELOW_ONE;
-    let beyond = at > last | (at == last & f > end);
+    let beyond = (at > last) | ((at == last) & (f > end));
     f = select(f, vec2<f32>(0.0), at < vec2<i32>(0));
     f = select(f, end, beyond);
     let c = vec2<u32>(clamp(at, vec2<i32>(0), last));

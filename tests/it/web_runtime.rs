@@ -1,0 +1,212 @@
+//! The runtime in the browser: the viewer page (`scripts/build-web.sh`, `web/viewer/`) served
+//! by nginx with a pack beside it, opened by headless Chromium on WebGPU (SwiftShader), draws the
+//! home view until it converges; the screenshot is compared with `render`'s frame of the same
+//! view on lavapipe. A second load holds the tile reads back and takes a frame meanwhile: the
+//! root page stands in, magnified, with no hole and no stand-in tile.
+//!
+//! The page is built once per checkout into target/web-viewer (or taken from `VORTEX_WEB_DIR`,
+//! which CI sets after building it once). Missing wasm tools, Chromium or nginx skip the test
+//! with a note outside CI and fail it under `CI=true`.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use image::{Rgb, RgbImage};
+use serde_json::Value;
+
+use crate::common::cli::{run, s};
+use crate::common::nginx::{Nginx, nginx_binary};
+use crate::common::picture::{skip_unless_ci, test_image};
+use crate::common::webdriver::Browser;
+use crate::render::no_gpu;
+
+/// The canvas, in device pixels (headless Chromium's pixel ratio is 1).
+const SIZE: (u32, u32) = (640, 480);
+
+/// Chromium's WebGPU on SwiftShader, headless, with the canvas in screenshots
+/// (/work/shared/tech-notes.md).
+const WEBGPU_FLAGS: [&str; 8] = [
+    "--enable-unsafe-webgpu",
+    "--enable-features=Vulkan",
+    "--use-vulkan=swiftshader",
+    "--use-webgpu-adapter=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--use-gl=angle",
+    "--use-angle=swiftshader",
+    "--force-device-scale-factor=1",
+];
+
+/// Convergence on SwiftShader takes a few dozen frames; the page is polled every 100 ms.
+const CONVERGE: Duration = Duration::from_secs(120);
+
+/// The tolerance against `render`'s frame, per channel of 8 bits. SwiftShader and lavapipe both
+/// filter in fixed point but round the bilinear weights, the sRGB conversions and the trilinear
+/// blend each their own way: measured, a mean of 0.21 and no channel off by more than 1. The
+/// bounds leave room for a pixel whose LOD lies on a mip boundary to take the other mip on one
+/// of them; a wrong page, a shifted view or a missing LOD differs by tens over whole tiles.
+const MAX_MEAN_DIFF: f64 = 0.5;
+const MAX_PIXEL_DIFF: u8 = 8;
+
+/// The built page's directory, or why there is none.
+fn page_dir() -> Result<PathBuf, String> {
+    if let Some(dir) = std::env::var_os("VORTEX_WEB_DIR") {
+        let dir = PathBuf::from(dir);
+        return if dir.join("vortex_web_bg.wasm").is_file() {
+            Ok(dir)
+        } else {
+            Err(format!("VORTEX_WEB_DIR={} holds no built page", dir.display()))
+        };
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let targets = Command::new("rustup").args(["target", "list", "--installed"]).output();
+    if !targets.is_ok_and(|o| String::from_utf8_lossy(&o.stdout).contains("wasm32-unknown-unknown")) {
+        return Err("no wasm32-unknown-unknown target (rustup target add wasm32-unknown-unknown)".into());
+    }
+    if !root.join("target/wasm-tools/bin/wasm-bindgen").is_file() {
+        return Err("no wasm-bindgen CLI in target/wasm-tools (scripts/build-web.sh installs it)".into());
+    }
+    let dir = root.join("target/web-viewer");
+    let out = Command::new(root.join("scripts/build-web.sh")).arg(&dir).output().map_err(|e| e.to_string())?;
+    assert!(out.status.success(), "scripts/build-web.sh failed: {}", String::from_utf8_lossy(&out.stderr));
+    Ok(dir)
+}
+
+/// Everything the test needs from outside, or `None` after the skip note.
+fn parts(test: &str) -> Option<(PathBuf, PathBuf, PathBuf, PathBuf)> {
+    let found = |names: &[&str]| names.iter().map(|n| Path::new("/usr/bin").join(n)).find(|p| p.is_file());
+    let all = || -> Result<_, String> {
+        let chromium = found(&["chromium", "chromium-browser"]).ok_or("no chromium (apt-get install chromium)")?;
+        let driver = found(&["chromedriver"]).ok_or("no chromedriver (apt-get install chromium-driver)")?;
+        Ok((chromium, driver, nginx_binary()?, page_dir()?))
+    };
+    all().map_err(|why| skip_unless_ci(test, &why)).ok()
+}
+
+/// The page's state. Not under `error`: the WebDriver client takes a reply with that key for
+/// its own error.
+fn state(browser: &Browser) -> Value {
+    browser.execute(
+        "return { failure: vortex.error, frames: vortex.frames, counters: vortex.counters, view: vortex.view };",
+    )
+}
+
+/// The canvas alone: the panel and the counters, which lie over it, hidden first.
+fn screenshot(browser: &Browser) -> RgbImage {
+    browser.execute("for (const id of ['panel', 'counters']) document.getElementById(id).style.display = 'none';");
+    image::load_from_memory(&browser.screenshot("#view")).unwrap().to_rgb8()
+}
+
+/// `render`'s frame of the window `view` (the page's `{center, width}`) of `pack`, offline
+/// (each frame waits for its pages) until it has converged, exact texels.
+fn rendered(pack: &Path, view: &Value, dir: &Path) -> Option<RgbImage> {
+    let scene = serde_json::json!({
+        "size": [SIZE.0, SIZE.1],
+        "frames": 16,
+        "view": { "window": { "path": [{ "frame": 0, "center": view["center"], "width": view["width"] }] } },
+        "effects": { "cache_format": "rgba8" },
+    });
+    let (scene_path, frames) = (dir.join("scene.json"), dir.join("frames"));
+    std::fs::write(&scene_path, scene.to_string()).unwrap();
+    let out = run(&["render", "--pack", s(pack), "--scene", s(&scene_path), "--frames", s(&frames), "-q"]);
+    if no_gpu(&out) {
+        return None;
+    }
+    assert!(out.status.success(), "render: {}", String::from_utf8_lossy(&out.stderr));
+    Some(image::open(frames.join("frame-0015.png")).unwrap().to_rgb8())
+}
+
+/// The mean and largest per-channel difference, and a picture of it (x8) for a failure.
+fn compare(a: &RgbImage, b: &RgbImage) -> (f64, u8, RgbImage) {
+    assert_eq!(a.dimensions(), b.dimensions());
+    let mut sum = 0u64;
+    let mut worst = 0u8;
+    let diff = RgbImage::from_fn(a.width(), a.height(), |x, y| {
+        let (p, q) = (a.get_pixel(x, y), b.get_pixel(x, y));
+        Rgb(std::array::from_fn(|c| {
+            let d = p[c].abs_diff(q[c]);
+            sum += u64::from(d);
+            worst = worst.max(d);
+            d.saturating_mul(8)
+        }))
+    });
+    (sum as f64 / (a.width() * a.height() * 3) as f64, worst, diff)
+}
+
+/// Where the failing pictures go: target/web-runtime/NAME-{actual,expected,difference}.png.
+fn keep(name: &str, actual: &RgbImage, expected: &RgbImage, difference: &RgbImage) -> PathBuf {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/web-runtime");
+    std::fs::create_dir_all(&dir).unwrap();
+    actual.save(dir.join(format!("{name}-actual.png"))).unwrap();
+    expected.save(dir.join(format!("{name}-expected.png"))).unwrap();
+    difference.save(dir.join(format!("{name}-difference.png"))).unwrap();
+    dir
+}
+
+#[test]
+fn the_browser_draws_a_pack_as_render_does_and_falls_back_while_pages_are_in_flight() {
+    let Some((chromium, driver, nginx, page)) = parts("the web runtime test") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("photo.png");
+    test_image().save(&input).unwrap();
+    let pack = dir.path().join("photo.vtpk");
+    // JPEG tiles of 256 texels with a border of 4: trilinear, decoded by the same Rust decoder
+    // on both sides.
+    let out =
+        run(&["split", s(&input), "--pack", s(&pack), "--tile-size", "256", "--border", "4", "--codec", "jpeg", "-q"]);
+    assert!(out.status.success(), "split: {}", String::from_utf8_lossy(&out.stderr));
+    let data = dir.path().join("data");
+    std::fs::create_dir(&data).unwrap();
+    std::fs::copy(&pack, data.join("photo.vtpk")).unwrap();
+    let server = Nginx::start(&nginx, &page, &[("data", &data)]);
+    let browser = Browser::start_with(&driver, &chromium, SIZE, &WEBGPU_FLAGS);
+    let url = format!("{}/index.html?pack=/data/photo.vtpk&size={}x{}", server.url(), SIZE.0, SIZE.1);
+
+    // Pages held back: the frames draw the root page (fetched at open), magnified.
+    browser.open(&format!("{url}&hold"));
+    // Once the feedback has asked for pages, they stay in flight: the frames draw the root.
+    browser
+        .wait_js("window.vortex && (vortex.error || (vortex.frames >= 8 && vortex.counters.in_flight > 0))", CONVERGE);
+    let held = state(&browser);
+    assert_eq!(held["failure"], "", "{held}");
+    let fallback = screenshot(&browser);
+    assert!(held["counters"]["in_flight"].as_u64().unwrap() > 0, "nothing in flight while held: {held}");
+    assert_eq!(held["counters"]["load_errors"], 0, "{held}");
+    // The home view shows the whole 2000 x 1500 image across the canvas's width (640 x 480 has
+    // its aspect): every pixel is the image, whose darkest value is 40, and none is the
+    // stand-in's magenta.
+    let holes = fallback.pixels().filter(|p| p.0.iter().all(|&v| v < 20)).count();
+    let stand_ins = fallback.pixels().filter(|p| p.0 == [255, 0, 255]).count();
+    if (holes, stand_ins) != (0, 0) {
+        let dir = keep("held", &fallback, &fallback, &fallback);
+        panic!("{holes} black and {stand_ins} stand-in pixels while pages were in flight (see {dir:?}): {held}");
+    }
+
+    // Let the reads go: the view converges.
+    browser.execute("vortex.release(); return null;");
+    browser.wait_js("vortex.error || vortex.converged", CONVERGE);
+    let done = state(&browser);
+    assert_eq!(done["failure"], "", "{done}");
+    assert_eq!(done["counters"]["load_errors"], 0, "{done}");
+    let shot = screenshot(&browser);
+    let Some(expected) = rendered(&pack, &done["view"], dir.path()) else { return };
+    let (mean, worst, difference) = compare(&shot, &expected);
+    let (fallback_mean, _, _) = compare(&fallback, &expected);
+    eprintln!(
+        "web runtime: {} frames to converge, {} requests, {} bytes; against render: mean {mean:.3}, worst {worst}; \
+         the held frame's mean {fallback_mean:.2}",
+        done["frames"], done["counters"]["requests"], done["counters"]["bytes_fetched"]
+    );
+    let kept = (mean > MAX_MEAN_DIFF || worst > MAX_PIXEL_DIFF).then(|| keep("home", &shot, &expected, &difference));
+    assert!(
+        kept.is_none(),
+        "mean {mean:.3} (at most {MAX_MEAN_DIFF}), worst {worst} (at most {MAX_PIXEL_DIFF}): see {kept:?}"
+    );
+    // The held frame was the coarse fallback, visibly not the converged picture.
+    assert!(
+        fallback_mean > 2.0 * mean.max(0.5),
+        "the held frame is as sharp as the converged one ({fallback_mean:.2})"
+    );
+    // The README's picture of the viewer.
+    shot.save(Path::new(env!("CARGO_MANIFEST_DIR")).join("target/web-runtime-home.png")).unwrap();
+}
