@@ -192,6 +192,16 @@ fn the_browser_draws_a_pack_as_render_does_and_falls_back_while_pages_are_in_fli
     let Some(expected) = rendered(&pack, &done["view"], dir.path()) else { return };
     let (mean, worst, difference) = compare(&shot, &expected);
     let (fallback_mean, _, _) = compare(&fallback, &expected);
+    let timing = browser.execute(
+        "const c = [...vortex.cpuMs].sort((a, b) => a - b); \
+         return { first: vortex.firstPictureMs, p50: c[Math.floor(c.length / 2)], p99: c[Math.floor(c.length * 0.99)] };",
+    );
+    eprintln!(
+        "web runtime: first picture {:.0} ms after the page's start; frame CPU p50 {} ms, p99 {} ms",
+        timing["first"].as_f64().unwrap_or(0.0),
+        timing["p50"],
+        timing["p99"]
+    );
     eprintln!(
         "web runtime: {} frames to converge, {} requests, {} bytes; against render: mean {mean:.3}, worst {worst}; \
          the held frame's mean {fallback_mean:.2}",
