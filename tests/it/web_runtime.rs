@@ -116,6 +116,17 @@ fn rendered(pack: &Path, view: &Value, dir: &Path) -> Option<RgbImage> {
     Some(image::open(frames.join("frame-0015.png")).unwrap().to_rgb8())
 }
 
+/// Milliseconds per decode of `pack`'s root tile to RGBA8 natively, over `rounds`.
+fn native_decode_ms(pack: &Path, rounds: u32) -> f64 {
+    let pack = vortex_pack::Pack::open(pack).unwrap();
+    let root = pack.description().level_count - 1;
+    let started = std::time::Instant::now();
+    for _ in 0..rounds {
+        vortex_pack::decode_rgba8(&pack, root, 0, 0).unwrap();
+    }
+    started.elapsed().as_secs_f64() * 1000.0 / f64::from(rounds)
+}
+
 /// The mean and largest per-channel difference, and a picture of it (x8) for a failure.
 fn compare(a: &RgbImage, b: &RgbImage) -> (f64, u8, RgbImage) {
     assert_eq!(a.dimensions(), b.dimensions());
@@ -192,6 +203,17 @@ fn the_browser_draws_a_pack_as_render_does_and_falls_back_while_pages_are_in_fli
     let Some(expected) = rendered(&pack, &done["view"], dir.path()) else { return };
     let (mean, worst, difference) = compare(&shot, &expected);
     let (fallback_mean, _, _) = compare(&fallback, &expected);
+    // The root tile (a 256-texel JPEG) decoded by the runtime's Rust decoder in wasm, by the
+    // browser's createImageBitmap (read back through a canvas), and natively: printed, not judged.
+    browser.execute("vortex.measureDecode(50); return null;");
+    browser.wait_js("vortex.error || vortex.decode", CONVERGE);
+    let decode = browser.execute("return vortex.decode;");
+    eprintln!(
+        "web runtime: a 256-texel JPEG tile decodes in {} ms in wasm, {} ms by createImageBitmap, {:.3} ms natively",
+        decode["wasm"],
+        decode["bitmap"],
+        native_decode_ms(&pack, 50)
+    );
     let timing = browser.execute(
         "const c = [...vortex.cpuMs].sort((a, b) => a - b); \
          return { first: vortex.firstPictureMs, p50: c[Math.floor(c.length / 2)], p99: c[Math.floor(c.length * 0.99)] };",

@@ -14,6 +14,9 @@ const state = {
   counters: {},
   view: {},
   release: () => {},
+  measureDecode: async (/** @type {number} */ _rounds) => {},
+  /** @type {{ wasm: number, bitmap: number } | null} */
+  decode: null,
   /** Milliseconds from the page's start to its first frame drawn. */
   firstPictureMs: 0,
   /** Each frame's CPU time (ms), the last 10,000 frames: for measurements. */
@@ -46,6 +49,23 @@ async function main() {
   await init();
   const viewer = await Viewer.open(canvas, new URL(pack, location.href).href, params.has("hold"));
   state.release = () => viewer.release();
+  // The decoders measured on the root tile (docs/benchmarks.md): the runtime's, in wasm, and the
+  // browser's (createImageBitmap, then the texels read back through a canvas, as a loader would
+  // need them). Sets `state.decode` to milliseconds per tile.
+  state.measureDecode = async (/** @type {number} */ rounds) => {
+    const wasm = viewer.decode_ms(rounds);
+    const blob = new Blob([viewer.root_payload()], { type: "image/jpeg" });
+    const started = performance.now();
+    for (let i = 0; i < rounds; i++) {
+      const bitmap = await createImageBitmap(blob, { premultiplyAlpha: "none", colorSpaceConversion: "none" });
+      const canvas = new OffscreenCanvas(bitmap.width, bitmap.height);
+      const context = /** @type {OffscreenCanvasRenderingContext2D} */ (canvas.getContext("2d"));
+      context.drawImage(bitmap, 0, 0);
+      context.getImageData(0, 0, bitmap.width, bitmap.height);
+      bitmap.close();
+    }
+    state.decode = { wasm, bitmap: (performance.now() - started) / rounds };
+  };
   controls(viewer);
   let shown = 0;
   const frame = (/** @type {number} */ now) => {
