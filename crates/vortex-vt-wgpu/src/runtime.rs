@@ -105,7 +105,8 @@ pub struct RuntimeConfig {
     pub feedback_block: u32,
     /// The size of the frames drawn, for the feedback buffer ([`Runtime::resize`] changes it).
     pub frame_size: [u32; 2],
-    /// Loader threads (0: one per core; sources that wait on I/O want more).
+    /// Loader threads (0: one per core; sources that wait on I/O want more). In the browser,
+    /// pages read at once on the page's event loop (0: six).
     pub loader_threads: usize,
     /// Hold BC7 blocks as stored when the device samples BC and every tile is BC7 or one colour
     /// (with `cache_format` automatic).
