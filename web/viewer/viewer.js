@@ -67,6 +67,14 @@ async function main() {
     state.decode = { wasm, bitmap: (performance.now() - started) / rounds };
   };
   controls(viewer);
+  if (!size) {
+    // The canvas follows the window, in device pixels.
+    new ResizeObserver(() => {
+      canvas.width = Math.max(1, Math.round(canvas.clientWidth * devicePixelRatio));
+      canvas.height = Math.max(1, Math.round(canvas.clientHeight * devicePixelRatio));
+      viewer.resize(canvas.width, canvas.height);
+    }).observe(canvas);
+  }
   let shown = 0;
   const frame = (/** @type {number} */ now) => {
     try {

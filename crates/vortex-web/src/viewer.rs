@@ -188,6 +188,18 @@ impl Viewer {
         self.center = [0, 1].map(|i| anchor[i] + (self.center[i] - anchor[i]) * scale);
     }
 
+    /// The canvas is now `width x height` device pixels: the surface and the feedback follow
+    /// (the view keeps its centre and the share of the image's width it shows).
+    pub fn resize(&mut self, width: u32, height: u32) {
+        let (width, height) = (width.max(1), height.max(1));
+        if (width, height) == (self.config.width, self.config.height) {
+            return;
+        }
+        (self.config.width, self.config.height) = (width, height);
+        self.surface.configure(&self.renderer.gpu().device, &self.config);
+        self.renderer.runtime_mut().resize(width, height);
+    }
+
     /// Back to the whole image, fit and centred.
     pub fn home(&mut self) {
         (self.center, self.width) = home(self.image, (self.config.width, self.config.height));
