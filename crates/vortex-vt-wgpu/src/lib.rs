@@ -52,7 +52,7 @@ pub use device::{DeviceError, Gpu};
 pub use feedback::{FeedbackBuffer, FeedbackFrame, FeedbackReadback};
 pub use layer::{Layer, LayerKind, MAX_LAYERS};
 pub use loader::{
-    DEFAULT_MEMORY_TIER_BYTES, LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS,
+    DEFAULT_MEMORY_TIER_BYTES, LoadCounters, LoadError, LoadedPage, Loader, LoaderError, RetryPolicy, STAND_IN_COLORS,
     TIER_ENTRY_OVERHEAD, TierUsage, stand_in_tile,
 };
 pub use page_cache::{CacheError, CacheFormat, PageCache};
@@ -60,7 +60,7 @@ pub use page_table::{GpuPageTable, PageTableError};
 pub use readback::ReadbackError;
 pub use runtime::{FrameStats, Pacing, Runtime, RuntimeConfig, RuntimeError};
 pub use sample::SampleFilter;
-pub use source::{PageSource, ReadError, SourceTile, StoredRead, StoredTile};
+pub use source::{PageSource, ReadError, ReadErrorKind, SourceTile, StoredRead, StoredTile, TileId, TileKind};
 pub use texture::VirtualTexture;
 
 /// The README's examples, compiled as doc tests.

@@ -98,7 +98,7 @@ impl Gate {
         state.waiting -= 1;
         match state.open {
             true => Ok(()),
-            false => Err(ReadError::new(format!("the test never opened the gate in {GATE_FAIL_SAFE:?}"))),
+            false => Err(ReadError::unavailable(format!("the test never opened the gate in {GATE_FAIL_SAFE:?}"))),
         }
     }
 }

@@ -28,7 +28,9 @@ use std::time::Duration;
 use vortex_pack::format::{ENTRY_LEN, LEVEL_LEN};
 use vortex_pack::{Limits, PackError, PackHead, Place, TileId, TileKind};
 
-use super::pack::{decode_stored, read_error};
+#[cfg(doc)]
+use super::ReadErrorKind;
+use super::pack::{absent_as, decode_stored, read_error};
 use super::{PageSource, ReadError, SourceTile, StoredRead, StoredTile};
 use crate::loader::LoaderError;
 use crate::page_cache::CacheFormat;
@@ -123,6 +125,15 @@ impl FetchError {
     fn message(self) -> String {
         match self {
             FetchError::Io(m) | FetchError::Fatal(m) => m,
+        }
+    }
+
+    /// The failed fetch of `what` as a tile's read error: an I/O error that outlasted its
+    /// retries may still pass later ([`ReadErrorKind::Io`]); a fatal one will not.
+    fn read_error(self, what: String) -> ReadError {
+        match self {
+            FetchError::Io(m) => ReadError::io(format!("{what}: {m}")),
+            FetchError::Fatal(m) => ReadError::unavailable(format!("{what}: {m}")),
         }
     }
 }
@@ -241,7 +252,7 @@ impl HttpPack {
     /// The index entry at `position`, from its block (fetched if not held).
     fn raw_entry(&self, position: u64) -> Result<[u8; ENTRY_LEN], ReadError> {
         if let Some(message) = lock(&self.index_corrupt).clone() {
-            return Err(ReadError::new(message));
+            return Err(ReadError::corrupt(message));
         }
         let n = position / INDEX_BLOCK;
         let held = lock(&self.index).get(&n).cloned();
@@ -255,7 +266,7 @@ impl HttpPack {
                 let bytes: Arc<[u8]> = self
                     .fetcher
                     .read(start, start + count * ENTRY_LEN as u64)
-                    .map_err(|e| ReadError::new(format!("index block at byte {start}: {}", e.message())))?
+                    .map_err(|e| e.read_error(format!("index block at byte {start}")))?
                     .into();
                 self.keep_block(n, Arc::clone(&bytes))?;
                 bytes
@@ -281,14 +292,13 @@ impl HttpPack {
         checked.map_err(|e| {
             let message = e.to_string();
             *lock(&self.index_corrupt) = Some(message.clone());
-            ReadError::new(message)
+            ReadError::corrupt(message)
         })
     }
 
-    /// Tile (`lod`, `x`, `y`) as stored, its payload's CRC checked; a payload that fails is read
-    /// again once, with its index block (the entry may be what was wrong), then reported.
-    fn stored(&self, lod: u8, x: u16, y: u16) -> Result<StoredRead, ReadError> {
-        let id = TileId { lod: lod.into(), x: x.into(), y: y.into() };
+    /// Tile `id` as stored, its payload's CRC checked; a payload that fails is read again once,
+    /// with its index block (the entry may be what was wrong), then reported as corrupt.
+    fn stored(&self, id: TileId) -> Result<StoredRead, ReadError> {
         let position = self.head.position(id).map_err(read_error)?;
         let mut attempt = 0;
         loop {
@@ -296,7 +306,7 @@ impl HttpPack {
             let (kind, offset, len, crc) = match self.head.place(id, position, &raw).map_err(read_error)? {
                 Place::Absent => return Ok(StoredRead { tile: StoredTile::Absent, bytes_read: 0 }),
                 Place::Constant(value) => {
-                    let tile = StoredTile::Stored { kind: TileKind::Constant as u8, bytes: Arc::from(value) };
+                    let tile = StoredTile::Stored { kind: TileKind::Constant, bytes: Arc::from(value) };
                     return Ok(StoredRead { tile, bytes_read: 0 });
                 }
                 Place::Data { kind, offset, len, crc } => (kind, offset, len, crc),
@@ -307,22 +317,22 @@ impl HttpPack {
                 let message = format!(
                     "a payload of {len} bytes at byte {offset}, over the limit of {most} (Limits::max_decoded_bytes)"
                 );
-                return Err(ReadError::new(message));
+                return Err(ReadError::unsupported(message));
             }
             let bytes = self
                 .fetcher
                 .read(offset, offset + len as u64)
-                .map_err(|e| ReadError::new(format!("payload at byte {offset}: {}", e.message())))?;
+                .map_err(|e| e.read_error(format!("payload at byte {offset}")))?;
             let bytes_read = bytes.len() as u64;
             match self.head.check_payload(id, offset, crc, &bytes) {
                 Ok(()) => {
-                    let tile = StoredTile::Stored { kind: kind as u8, bytes: bytes.into() };
+                    let tile = StoredTile::Stored { kind, bytes: bytes.into() };
                     return Ok(StoredRead { tile, bytes_read });
                 }
                 Err(e) => {
                     add(&self.fetcher.counters.corrupt, 1);
                     if attempt == 1 {
-                        return Err(ReadError { bytes_read, ..read_error(e) });
+                        return Err(read_error(e).with_bytes_read(bytes_read));
                     }
                     attempt += 1;
                     // Unless the index was read whole and its CRC checked, its entry is suspect too.
@@ -344,22 +354,22 @@ impl PageSource for HttpPack {
         VirtualTexture::from_head(&self.head)
     }
 
-    fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
-        let StoredRead { tile, bytes_read } = self.stored(lod, x, y)?;
+    fn read_tile(&self, id: TileId, format: CacheFormat) -> Result<SourceTile, ReadError> {
+        let StoredRead { tile, bytes_read } = self.stored(id)?;
         match tile {
             StoredTile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
-            StoredTile::Absent => Err(ReadError::new(format!("an absent tile cannot be made into {}", format.name()))),
+            StoredTile::Absent => Err(absent_as(format)),
             StoredTile::Stored { kind, bytes } => decode_stored(&self.head, kind, &bytes, format)
                 .map(|texels| SourceTile::Texels { texels, bytes_read })
-                .map_err(|e| ReadError { bytes_read, ..e }),
+                .map_err(|e| e.with_bytes_read(bytes_read)),
         }
     }
 
-    fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
-        self.stored(lod, x, y).map(Some)
+    fn read_stored(&self, id: TileId) -> Result<Option<StoredRead>, ReadError> {
+        self.stored(id).map(Some)
     }
 
-    fn decode(&self, _: u8, _: u16, _: u16, kind: u8, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
+    fn decode(&self, _: TileId, kind: TileKind, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
         decode_stored(&self.head, kind, bytes, format)
     }
 
