@@ -288,7 +288,7 @@ fn read_manifest(dir: &Path, name: &str) -> Result<Vec<u8>, String> {
 }
 
 fn hash(bytes: &[u8]) -> u64 {
-    vortex_pack::format::fnv1a(0xcbf2_9ce4_8422_2325, bytes)
+    crate::fnv::hash(bytes)
 }
 
 /// A split directory (our `info.json`), or a directory in a viewer layout.

@@ -270,13 +270,26 @@ pub struct Header {
 /// One row of the level table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Level {
+    /// Columns of tiles.
     pub tiles_w: u32,
+    /// Rows of tiles.
     pub tiles_h: u32,
-    /// Index position of tile (0, 0) of this level.
+    /// Index position of tile (0, 0) of this level: the levels' entries follow each other,
+    /// LOD 0 first. A reader finds it in the file; [`PackWriter`](crate::PackWriter) places the
+    /// levels itself and ignores what a level given to it says.
     pub first_entry: u64,
-    /// Real image size at this level in texels (`ceil(width / 2^lod)`).
+    /// Real image width at this level in texels (`ceil(width / 2^lod)`).
     pub width: u32,
+    /// Real image height at this level in texels.
     pub height: u32,
+}
+
+impl Level {
+    /// A level of `tiles_w x tiles_h` tiles covering `width x height` texels of the image, for
+    /// a writer (which places it in the index: `first_entry` is 0 until then).
+    pub fn new(tiles_w: u32, tiles_h: u32, width: u32, height: u32) -> Level {
+        Level { tiles_w, tiles_h, first_entry: 0, width, height }
+    }
 }
 
 /// One index entry.
@@ -298,10 +311,10 @@ impl Entry {
 fn put_u16(b: &mut [u8], at: usize, v: u16) {
     b[at..at + 2].copy_from_slice(&v.to_le_bytes());
 }
-fn put_u32(b: &mut [u8], at: usize, v: u32) {
+pub(crate) fn put_u32(b: &mut [u8], at: usize, v: u32) {
     b[at..at + 4].copy_from_slice(&v.to_le_bytes());
 }
-fn put_u64(b: &mut [u8], at: usize, v: u64) {
+pub(crate) fn put_u64(b: &mut [u8], at: usize, v: u64) {
     b[at..at + 8].copy_from_slice(&v.to_le_bytes());
 }
 /// The `N` bytes at `at` (panics past the end, like indexing: callers check lengths first).
@@ -320,8 +333,10 @@ pub(crate) fn u64_at(b: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(bytes_at(b, at))
 }
 
-/// Byte offsets of the header's fields (see the spec's diagram).
-pub mod at {
+/// Byte offsets of the header's fields (see the spec's diagram). The crate's own: a reader or
+/// writer of packs goes through [`Header`]; the tests and fuzzers that edit a pack's bytes get
+/// them from the hidden `fuzzing` feature.
+pub(crate) mod at {
     pub const MAJOR: usize = 8;
     pub const MINOR: usize = 10;
     pub const HEADER_LEN: usize = 12;
@@ -466,56 +481,9 @@ impl Entry {
 
 /// FNV-1a, 64 bits: the content hash is for identification (cache keys, "same pack?"), not
 /// for security; per-tile CRC-32C values are what it covers.
-pub fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
+pub(crate) fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
     bytes.iter().fold(hash, |h, b| (h ^ *b as u64).wrapping_mul(0x0000_0100_0000_01B3))
 }
 
-pub const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-
-/// The levels of a square power-of-two pyramid of `description` (the tiler's layout).
-pub fn pyramid_levels(d: &Description, tiles_at_lod0: u32) -> Vec<Level> {
-    let mut first = 0u64;
-    (0..d.level_count)
-        .map(|lod| {
-            let n = tiles_at_lod0 >> lod;
-            let shrink = |v: u32| ((v as u64 + (1u64 << lod) - 1) >> lod) as u32;
-            let level =
-                Level { tiles_w: n, tiles_h: n, first_entry: first, width: shrink(d.width), height: shrink(d.height) };
-            first += n as u64 * n as u64;
-            level
-        })
-        .collect()
-}
-
-/// For tests and fuzzing: recomputes every checksum the header's offsets let it find (index,
-/// metadata, content hash, header), so that a deliberate change to a pack's bytes gets past the
-/// checksums to the checks behind them. Sections the header places outside `b` keep their old
-/// checksums.
-pub fn reseal(b: &mut [u8]) {
-    fn section(b: &[u8], offset: u64, len: Option<u64>) -> Option<&[u8]> {
-        let start = usize::try_from(offset).ok()?;
-        let end = start.checked_add(usize::try_from(len?).ok()?)?;
-        b.get(start..end)
-    }
-    if b.len() < HEADER_LEN {
-        return;
-    }
-    let count = |field| u32_at(b, field) as u64;
-    let levels = section(b, u64_at(b, at::LEVELS_OFFSET), count(at::LEVEL_COUNT).checked_mul(LEVEL_LEN as u64));
-    let index = section(b, u64_at(b, at::INDEX_OFFSET), u64_at(b, at::INDEX_COUNT).checked_mul(ENTRY_LEN as u64));
-    let meta = section(b, u64_at(b, at::META_OFFSET), Some(count(at::META_LEN)));
-    let index_crc = levels.zip(index).map(|(l, i)| crc32c::crc32c_append(crc32c::crc32c(l), i));
-    let meta_crc = meta.map(crc32c::crc32c);
-    let hash = meta.zip(index).map(|(m, i)| fnv1a(fnv1a(FNV_OFFSET, m), i));
-    if let Some(c) = index_crc {
-        put_u32(b, at::INDEX_CRC, c);
-    }
-    if let Some(c) = meta_crc {
-        put_u32(b, at::META_CRC, c);
-    }
-    if let Some(h) = hash {
-        put_u64(b, at::CONTENT_HASH, h);
-    }
-    let crc = crc32c::crc32c(&b[..at::HEADER_CRC]);
-    put_u32(b, at::HEADER_CRC, crc);
-}
+/// FNV-1a's offset basis: the hash of no bytes.
+pub(crate) const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;

@@ -16,6 +16,9 @@
 mod decode;
 mod error;
 pub mod format;
+#[cfg(feature = "fuzzing")]
+#[doc(hidden)]
+pub mod fuzzing;
 mod limits;
 mod reader;
 pub mod verify;
@@ -32,4 +35,4 @@ pub use limits::{DEFAULT_MAX_DECODED_BYTES, Limits};
 pub use reader::{Pack, PackHead, Place, Tile, TileId};
 pub use verify::{Problem, Report, VerifyOptions, verify};
 #[cfg(feature = "write")]
-pub use writer::{NewTile, PackWriter, WriteOptions, WriteSummary};
+pub use writer::{NewTile, PackWriter, WriteOptions, WriteSummary, temporary_path, temporary_pid};

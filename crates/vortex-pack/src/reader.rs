@@ -345,6 +345,24 @@ impl PackHead {
         Ok(h)
     }
 
+    /// For a reader that allocates the metadata it reads (one that fetches a pack in pieces; a
+    /// mapped pack costs nothing): the header's `meta_len` held to `limits.max_decoded_bytes`,
+    /// the cap on any one buffer, before it is fetched. `read_header` checked the claim against
+    /// the file's length only.
+    pub fn check_metadata_len(path: &Path, h: &Header, limits: Limits) -> Result<()> {
+        if u64::from(h.meta_len) > limits.max_decoded_bytes {
+            return Err(PackError::LimitExceeded {
+                path: path.to_path_buf(),
+                field: "meta_len".into(),
+                offset: format::at::META_LEN as u64,
+                value: h.meta_len.into(),
+                limit: limits.max_decoded_bytes,
+                cap: "max_decoded_bytes",
+            });
+        }
+        Ok(())
+    }
+
     /// The head of a pack whose header [`PackHead::read_header`] checked, from its level table
     /// (`levels`, the header's `level_count` rows) and metadata (`meta`, `meta_len` bytes):
     /// the level table's claims against `limits` and its sense, and the metadata's checksum.

@@ -9,7 +9,8 @@
 
 use std::path::Path;
 
-use vortex_pack::format::{HEADER_LEN, at, reseal};
+use vortex_pack::format::HEADER_LEN;
+use vortex_pack::fuzzing::{at, reseal};
 use vortex_pack::{Limits, Pack, VerifyOptions, decode_rgba8, verify};
 
 /// The decoding limit of the checks: small, so that a payload claiming a large image is

@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use proptest::prelude::*;
-use vortex_pack::format::{self, at};
+use vortex_pack::format;
+use vortex_pack::fuzzing::at;
 use vortex_pack::{Limits, Pack, PackError, Tile, VerifyOptions, decode_rgba8_limited, verify};
 
 use crate::common;

@@ -4,7 +4,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use vortex_pack::format::at;
+use vortex_pack::fuzzing::at;
 use vortex_pack::{
     Limits, NewTile, Pack, PackError, PackWriter, Tile, TileId, TileKind, VerifyOptions, WriteOptions, decode_rgba8,
     decode_rgba8_limited, verify,
@@ -146,8 +146,8 @@ fn empty_and_absent_packs_verify() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("empty.vtpk");
     let d = common::description(4, 1);
-    let w =
-        PackWriter::create(&path, d, vortex_pack::format::pyramid_levels(&d, 4), b"", WriteOptions::default()).unwrap();
+    let w = PackWriter::create(&path, d, vortex_pack::fuzzing::pyramid_levels(&d, 4), b"", WriteOptions::default())
+        .unwrap();
     let summary = w.finish().unwrap();
     assert_eq!(summary.absent, 21);
     let pack = Pack::open(&path).unwrap();
@@ -163,7 +163,7 @@ fn writer_refuses_misuse_and_leaves_no_file() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("bad.vtpk");
     let d = common::description(3, 1);
-    let levels = vortex_pack::format::pyramid_levels(&d, 4);
+    let levels = vortex_pack::fuzzing::pyramid_levels(&d, 4);
     let mut w = PackWriter::create(&path, d, levels.clone(), b"{}", WriteOptions::default()).unwrap();
     let id = TileId { lod: 0, x: 0, y: 0 };
     assert!(w.add(id, NewTile::Data(TileKind::Raw, &[1, 2, 3])).is_err());
@@ -203,13 +203,13 @@ fn writer_refuses_what_readers_would_refuse_before_allocating() {
         sample_bytes: 1,
         sample_format: 0,
     };
-    let levels = vortex_pack::format::pyramid_levels(&d, 1 << 16);
+    let levels = vortex_pack::fuzzing::pyramid_levels(&d, 1 << 16);
     let e = PackWriter::create(&path, d, levels, b"", WriteOptions::default()).err().unwrap();
     assert!(matches!(&e, PackError::LimitExceeded { cap: "max_tiles", .. }), "{e}");
     assert!(e.to_string().contains("index_count (byte 96) is 5726623061, over the limit of 536870912"), "{e}");
 
     let d = vortex_pack::Description { tile_size: 1 << 15, level_count: 1, ..common::description(3, 1) };
-    let levels = vortex_pack::format::pyramid_levels(&d, 1);
+    let levels = vortex_pack::fuzzing::pyramid_levels(&d, 1);
     let e = PackWriter::create(&path, d, levels, b"", WriteOptions::default()).err().unwrap();
     assert!(
         e.to_string().contains("tile_size (byte 56) is 32768, over the limit of 16384 (Limits::max_tile_size)"),
@@ -459,7 +459,7 @@ fn jpeg_variants_decode() {
 fn shorter_metadata_set_at_the_end_gives_back_its_room() {
     let dir = tempfile::tempdir().unwrap();
     let d = common::description(4, 1);
-    let levels = vortex_pack::format::pyramid_levels(&d, 4);
+    let levels = vortex_pack::fuzzing::pyramid_levels(&d, 4);
     let write = |name: &str, room: usize, meta: &[u8], options: WriteOptions| {
         let path = dir.path().join(name);
         let mut w = PackWriter::create(&path, d, levels.clone(), &vec![b' '; room], options).unwrap();

@@ -179,18 +179,8 @@ impl HttpPack {
             }
         };
         let raw_levels = section(h.levels_offset, h.description.level_count as u64 * LEVEL_LEN as u64)?;
-        // A local reader maps what a header claims; this one allocates it, so held to the cap on
-        // any one buffer (the header's claims were checked against the file's length only).
-        if u64::from(h.meta_len) > limits.max_decoded_bytes {
-            return Err(PackError::LimitExceeded {
-                path: location.clone(),
-                field: "meta_len".into(),
-                offset: vortex_pack::format::at::META_LEN as u64,
-                value: h.meta_len.into(),
-                limit: limits.max_decoded_bytes,
-                cap: "max_decoded_bytes",
-            });
-        }
+        // A local reader maps what a header claims; this one allocates it.
+        PackHead::check_metadata_len(&location, &h, limits)?;
         // The index (when read whole) and the metadata lie side by side: one read for both.
         let index_len = h.index_count * ENTRY_LEN as u64;
         let meta_end = h.meta_offset + u64::from(h.meta_len);

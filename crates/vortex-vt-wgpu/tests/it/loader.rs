@@ -9,7 +9,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
-use vortex_pack::format::{self, Level};
+use vortex_pack::Level;
+use vortex_pack::fuzzing::pyramid_levels;
 use vortex_pack::{Description, NewTile, Pack, PackWriter, Tile, TileId, TileKind, WriteOptions};
 use vortex_vt::page::{GridError, PageId, TextureGrid};
 use vortex_vt::residency::Slot;
@@ -75,7 +76,7 @@ fn jpeg(tile_size: u32, seed: u32) -> Vec<u8> {
 
 /// Writes a pack of `description` with the pyramid's levels, each tile as `spec` says.
 fn write_pack(path: &Path, d: Description, spec: impl Fn(TileId) -> Spec) -> Arc<Pack> {
-    let levels = format::pyramid_levels(&d, 1 << (d.level_count - 1));
+    let levels = pyramid_levels(&d, 1 << (d.level_count - 1));
     write_pack_with_levels(path, d, levels, spec)
 }
 
@@ -587,7 +588,7 @@ fn solid_bc7_blocks_decode_to_their_colour_exactly() {
     };
     let colour = |i: usize| [i as u8, 255 - i as u8, (i * 7 % 256) as u8, i as u8];
     let blocks: Vec<u8> = (0..256).flat_map(|i| vortex_vt_wgpu::bc7::solid_block(colour(i))).collect();
-    let levels = format::pyramid_levels(&d, 1);
+    let levels = pyramid_levels(&d, 1);
     let path = dir.path().join("solid.vtpk");
     let mut w = PackWriter::create(&path, d, levels, b"{}", WriteOptions::default()).unwrap();
     w.add(TileId { lod: 0, x: 0, y: 0 }, NewTile::Data(TileKind::Bc7, &blocks)).unwrap();
