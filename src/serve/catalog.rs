@@ -262,7 +262,7 @@ fn pack_page(pack: &Arc<Pack>, lod: u32, x: u32, y: u32) -> Result<Option<Page>,
         }
         Tile::Data(kind, bytes) => {
             let limit = vortex_pack::DEFAULT_MAX_DECODED_BYTES;
-            Page::Texels(texels(vortex_pack::payload_texels(kind, bytes, d, limit).map_err(|e| e.to_string())?))
+            Page::Texels(texels(Tile::Data(kind, bytes).decode_texels(d, limit).map_err(|e| e.to_string())?))
         }
     }))
 }

@@ -11,7 +11,6 @@
            it back, is the crate documentation with the `write` feature (as on \
            <https://docs.rs/vortex-pack>)."
 )]
-
 #[cfg(feature = "decode")]
 mod decode;
 mod error;
@@ -27,8 +26,6 @@ mod writeback;
 #[cfg(feature = "write")]
 mod writer;
 
-#[cfg(feature = "decode")]
-pub use decode::{decode_rgba8, decode_rgba8_limited, payload_texels, tile_rgba8};
 pub use error::{PackError, Result};
 pub use format::{Description, Entry, Header, Level, TileKind};
 pub use limits::{DEFAULT_MAX_DECODED_BYTES, Limits};

@@ -113,7 +113,8 @@ impl TileGrid for PackInput {
             Tile::Data(TileKind::Png | TileKind::Jpeg, bytes) => CellData::File(name(), bytes.to_vec()),
             Tile::Data(kind, bytes) => {
                 let limit = vortex_pack::DEFAULT_MAX_DECODED_BYTES;
-                let raw = vortex_pack::payload_texels(kind, bytes, self.pack.description(), limit)
+                let raw = Tile::Data(kind, bytes)
+                    .decode_texels(self.pack.description(), limit)
                     .map_err(|e| TilerError::decode(name(), e))?;
                 self.samples(name(), raw)
             }

@@ -6,8 +6,7 @@ use std::path::Path;
 
 use vortex_pack::fuzzing::at;
 use vortex_pack::{
-    Limits, NewTile, Pack, PackError, PackWriter, Tile, TileId, TileKind, VerifyOptions, WriteOptions, decode_rgba8,
-    decode_rgba8_limited, verify,
+    Limits, NewTile, Pack, PackError, PackWriter, Tile, TileId, TileKind, VerifyOptions, WriteOptions, verify,
 };
 
 use crate::common::{self, Written, reseal, write_sample};
@@ -114,7 +113,7 @@ fn tiles_decode_to_rgba8() {
                 .collect()
         };
         for (i, (id, written)) in sample.tiles.iter().enumerate() {
-            let rgba = decode_rgba8(&pack, id.lod, id.x, id.y).unwrap();
+            let rgba = pack.decode_rgba8(*id).unwrap();
             match written {
                 Written::Absent | Written::Skipped => assert_eq!(rgba, None),
                 Written::Constant(v) => assert_eq!(rgba.unwrap(), expand(v).repeat(texels)),
@@ -135,9 +134,10 @@ fn tiles_decode_to_rgba8() {
         }
         // A limit below one tile is refused before decoding.
         let (id, _) = sample.tiles.iter().find(|(_, w)| matches!(w, Written::Data(TileKind::Png, _))).unwrap();
-        let err = decode_rgba8_limited(&pack, id.lod, id.x, id.y, 100).unwrap_err();
+        let tight = Pack::open_with_limits(&path, Limits { max_decoded_bytes: 100, ..Limits::default() }).unwrap();
+        let err = tight.decode_rgba8(*id).unwrap_err();
         assert!(matches!(err, PackError::Tile { .. }), "{err}");
-        assert!(decode_rgba8(&pack, 9, 0, 0).is_err());
+        assert!(pack.decode_rgba8(TileId { lod: 9, x: 0, y: 0 }).is_err());
     }
 }
 
@@ -358,8 +358,8 @@ fn verify_decodes_every_payload_when_asked() {
     assert!(bad.iter().any(|p| p.tile == Some(png_id) && p.message.starts_with("jpeg")), "{report}");
     assert!(bad.iter().any(|p| p.tile == Some(zstd_id) && p.message.starts_with("zstd")), "{report}");
     assert!(report.problems.iter().all(|p| p.tile.is_some()));
-    assert!(decode_rgba8(&pack, png_id.lod, png_id.x, png_id.y).is_err());
-    assert!(decode_rgba8(&pack, zstd_id.lod, zstd_id.x, zstd_id.y).is_err());
+    assert!(pack.decode_rgba8(png_id).is_err());
+    assert!(pack.decode_rgba8(zstd_id).is_err());
 
     // A limit below one tile: every decodable payload is refused, none is decoded.
     let limits = Limits { max_decoded_bytes: d.raw_tile_len().unwrap() - 1, ..Limits::default() };
@@ -441,7 +441,7 @@ fn jpeg_variants_decode() {
     assert!(report.is_ok(), "{report}");
     assert_eq!(report.decoded_payloads, 6);
     for (i, v) in variants.iter().enumerate() {
-        let rgba = decode_rgba8(&pack, 0, i as u32 % 3, i as u32 / 3).unwrap().unwrap();
+        let rgba = pack.decode_rgba8(TileId { lod: 0, x: i as u32 % 3, y: i as u32 / 3 }).unwrap().unwrap();
         assert_eq!(rgba.len(), 16 * 16 * 4);
         let expected: Vec<u8> = if v.3 {
             (0..256).flat_map(|_| [77, 77, 77, 255]).collect()

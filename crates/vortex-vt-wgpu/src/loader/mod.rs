@@ -14,7 +14,7 @@
 //!
 //! Every page gets texels, so a slot is never left holding stale or garbage data:
 //!
-//! - a stored tile is read and decoded by its source (for a pack, `vortex_pack::tile_rgba8`,
+//! - a stored tile is read and decoded by its source (for a pack, `vortex_pack::Tile::decode_rgba8`,
 //!   which checks its CRC-32C);
 //! - an `absent` tile ("the runtime falls back to the parent tile", pack format) is built from its
 //!   nearest stored ancestor by bilinear magnification (`magnify`); that is not an error;

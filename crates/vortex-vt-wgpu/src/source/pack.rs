@@ -1,5 +1,5 @@
 //! Vortex packs as page sources. A stored tile is read as it is stored (its payload, checksum
-//! checked, or its one colour) and decoded on its own: to RGBA8 by `vortex_pack::tile_rgba8`, or
+//! checked, or its one colour) and decoded on its own: to RGBA8 by `Tile::decode_rgba8`, or
 //! for a BC7 cache taken as stored BC7 blocks (or blocks of a constant tile's one colour). The
 //! loader's memory tier keeps the stored bytes between the two; an absent tile is reported as
 //! such, for the loader to magnify its ancestor.
@@ -114,7 +114,7 @@ pub(super) fn absent_as(format: CacheFormat) -> ReadError {
 
 /// The tile's RGBA8 texels.
 fn texels(tile: Tile<'_>, d: &Description, limit: u64) -> Result<Vec<u8>, ReadError> {
-    let texels = vortex_pack::tile_rgba8(tile, d, limit).map_err(read_error)?.unwrap_or_default();
+    let texels = tile.decode_rgba8(d, limit).map_err(read_error)?.unwrap_or_default();
     let expected = (d.tile_size as usize).pow(2) * 4;
     if texels.len() != expected {
         return Err(ReadError::corrupt(format!("decodes to {} bytes, not {expected} of RGBA8", texels.len())));
@@ -128,7 +128,7 @@ fn blocks(tile: Tile<'_>, d: &Description, limit: u64) -> Result<Vec<u8>, ReadEr
     let blocks = match tile {
         Tile::Data(TileKind::Bc7, payload) => payload.to_vec(),
         Tile::Constant(_) => {
-            let texels = vortex_pack::tile_rgba8(tile, d, limit).map_err(read_error)?.unwrap_or_default();
+            let texels = tile.decode_rgba8(d, limit).map_err(read_error)?.unwrap_or_default();
             let colour = texels.first_chunk::<4>().copied().unwrap_or_default();
             bc7::solid_block(colour).repeat(wanted / bc7::BLOCK_BYTES)
         }

@@ -145,7 +145,7 @@ fn all_pages(texture: u8, grid: TextureGrid, first_slot: Slot) -> Vec<(PageId, S
 }
 
 fn expected_texels(pack: &Pack, page: PageId) -> Vec<u8> {
-    vortex_pack::decode_rgba8(pack, page.lod.into(), page.x.into(), page.y.into()).unwrap().unwrap()
+    pack.decode_rgba8(TileId { lod: page.lod.into(), x: page.x.into(), y: page.y.into() }).unwrap().unwrap()
 }
 
 fn payload_len(pack: &Pack, page: PageId) -> u64 {
@@ -594,7 +594,7 @@ fn solid_bc7_blocks_decode_to_their_colour_exactly() {
     w.add(TileId { lod: 0, x: 0, y: 0 }, NewTile::Data(TileKind::Bc7, &blocks)).unwrap();
     w.finish().unwrap();
     let pack = Pack::open(&path).unwrap();
-    let texels = vortex_pack::decode_rgba8(&pack, 0, 0, 0).unwrap().unwrap();
+    let texels = pack.decode_rgba8(TileId { lod: 0, x: 0, y: 0 }).unwrap().unwrap();
     for (i, t) in texels.chunks_exact(4).enumerate() {
         let (x, y) = (i % 64, i / 64);
         assert_eq!(t, colour((y / 4) * 16 + x / 4), "texel ({x}, {y})");
