@@ -6,12 +6,16 @@
 /// `\x89VTP\r\n\x1a\n`: the high bit catches 7-bit transfers, CR LF and LF catch newline
 /// conversion, 0x1A stops `type` on DOS, as in PNG's signature.
 pub const MAGIC: [u8; 8] = *b"\x89VTP\r\n\x1a\n";
+/// The format's major version: a reader reads packs of its own major version only.
 pub const MAJOR: u16 = 1;
 /// 1.1 adds the `zstd-delta` tile kind (and required-feature bit 0 for it) and specifies the
 /// BC1 and BC7 payloads that 1.0 reserved.
 pub const MINOR: u16 = 1;
+/// Bytes of the header.
 pub const HEADER_LEN: usize = 192;
+/// Bytes of one level-table row.
 pub const LEVEL_LEN: usize = 32;
+/// Bytes of one index entry.
 pub const ENTRY_LEN: usize = 24;
 /// Required-feature bit 0: the pack holds `zstd-delta` tiles (kind 8), which a 1.0 reader does
 /// not know. A writer sets it exactly when it stores such a tile.
@@ -39,7 +43,9 @@ pub enum TileKind {
     Raw = 2,
     /// `Raw` compressed with zstd.
     Zstd = 3,
+    /// A PNG file of the tile (8 or 16-bit samples, big-endian as PNG defines them).
     Png = 4,
+    /// A baseline JPEG file of the tile (8-bit samples; grey or RGB).
     Jpeg = 5,
     /// BC1 blocks (opaque RGB, 8 bytes per 4x4 texels), uploadable as-is.
     Bc1 = 6,
@@ -57,10 +63,12 @@ impl TileKind {
         [Absent, Constant, Raw, Zstd, Png, Jpeg, Bc1, Bc7, ZstdDelta]
     };
 
+    /// The kind of byte `v` of an index entry; `None` for a byte no kind has.
     pub fn from_u8(v: u8) -> Option<TileKind> {
         TileKind::ALL.get(v as usize).copied()
     }
 
+    /// The kind in a word, as the tiler's options and reports spell it.
     pub fn name(self) -> &'static str {
         match self {
             TileKind::Absent => "absent",
@@ -99,10 +107,13 @@ impl TileKind {
 pub struct Description {
     /// Real image size at LOD 0, in texels.
     pub width: u32,
+    /// Real image height at LOD 0, in texels.
     pub height: u32,
     /// Stored tile side, borders included.
     pub tile_size: u32,
+    /// Texels of each tile's border, repeated from its neighbours, on each side.
     pub border: u32,
+    /// Levels in the level table, LOD 0 first.
     pub level_count: u32,
     /// 1 grey, 2 grey+alpha, 3 RGB, 4 RGBA.
     pub channels: u8,
@@ -243,27 +254,43 @@ pub fn delta_decode_rows(bytes: &mut [u8], width: usize, channels: usize, sample
 /// The fixed header at offset 0.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Header {
+    /// Format major version ([`MAJOR`]).
     pub major: u16,
+    /// Format minor version ([`MINOR`]): what this writer's format adds, which older readers of the
+    /// same major version ignore.
     pub minor: u16,
+    /// Features a reader must understand to read the pack (bits such as [`REQUIRED_ZSTD_DELTA`]).
     pub required_features: u64,
+    /// Features a reader may ignore.
     pub optional_features: u64,
+    /// The file's length in bytes.
     pub file_len: u64,
     /// Identifies the content: FNV-1a 64 over the metadata and every index entry.
     pub content_hash: u64,
+    /// What the texture is.
     pub description: Description,
     /// Power of two >= 8: the data section starts at a multiple of it.
     pub alignment: u32,
     /// Power of two >= 8: every payload starts at a multiple of it (65536 gives each tile its
     /// own Vulkan sparse block).
     pub payload_alignment: u32,
+    /// Where the level table starts.
     pub levels_offset: u64,
+    /// Where the index starts.
     pub index_offset: u64,
+    /// Index entries: every tile of every level.
     pub index_count: u64,
+    /// CRC-32C of the level table and the index together.
     pub index_crc: u32,
+    /// Where the metadata (JSON text) starts.
     pub meta_offset: u64,
+    /// Bytes of metadata.
     pub meta_len: u32,
+    /// CRC-32C of the metadata.
     pub meta_crc: u32,
+    /// Where the data section (the payloads) starts.
     pub data_offset: u64,
+    /// Bytes of the data section, which ends the file.
     pub data_len: u64,
 }
 
@@ -298,13 +325,16 @@ pub struct Entry {
     /// Payload offset in the file; for `Constant`, the texel's samples (little-endian, packed
     /// from byte 0); 0 for `Absent`.
     pub offset_or_value: u64,
+    /// Payload bytes (0 without payload).
     pub len: u32,
     /// CRC-32C of the payload (0 without payload).
     pub crc: u32,
+    /// The tile's [`TileKind`], as its byte (an unknown byte is an error of the entry).
     pub kind: u8,
 }
 
 impl Entry {
+    /// The entry of an absent tile.
     pub const ABSENT: Entry = Entry { offset_or_value: 0, len: 0, crc: 0, kind: TileKind::Absent as u8 };
 }
 
@@ -337,6 +367,8 @@ pub(crate) fn u64_at(b: &[u8], at: usize) -> u64 {
 /// writer of packs goes through [`Header`]; the tests and fuzzers that edit a pack's bytes get
 /// them from the hidden `fuzzing` feature.
 pub(crate) mod at {
+    // Each is named as the field it locates, which `Header` documents.
+    #![allow(missing_docs)]
     pub const MAJOR: usize = 8;
     pub const MINOR: usize = 10;
     pub const HEADER_LEN: usize = 12;
@@ -443,6 +475,7 @@ impl Header {
 }
 
 impl Level {
+    /// The row's bytes.
     pub fn encode(&self) -> [u8; LEVEL_LEN] {
         let mut b = [0u8; LEVEL_LEN];
         put_u32(&mut b, 0, self.tiles_w);
@@ -465,6 +498,7 @@ impl Level {
 }
 
 impl Entry {
+    /// The entry's bytes.
     pub fn encode(&self) -> [u8; ENTRY_LEN] {
         let mut b = [0u8; ENTRY_LEN];
         put_u64(&mut b, 0, self.offset_or_value);

@@ -61,15 +61,20 @@ pub struct PackHead {
 /// Where a tile's index entry says its texels are (see [`PackHead::place`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Place<'a> {
+    /// No tile: a runtime falls back to the parent tile.
     Absent,
     /// One colour: these samples, a prefix of the entry's bytes.
     Constant(&'a [u8]),
     /// A payload of `kind` at `offset` of `len` bytes, inside the data section, whose CRC-32C
     /// must be `crc`.
     Data {
+        /// How the payload is stored.
         kind: TileKind,
+        /// Its first byte in the file.
         offset: u64,
+        /// Its length in bytes.
         len: u32,
+        /// The CRC-32C its bytes must have.
         crc: u32,
     },
 }
@@ -77,6 +82,7 @@ pub enum Place<'a> {
 /// A tile as stored.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Tile<'a> {
+    /// No tile: a runtime falls back to the parent tile.
     Absent,
     /// Every texel is these samples (channels x sample bytes, little-endian).
     Constant(&'a [u8]),
@@ -87,8 +93,11 @@ pub enum Tile<'a> {
 /// A tile's address.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct TileId {
+    /// The level, 0 the finest.
     pub lod: u32,
+    /// The column of tiles in that level, 0 at the left.
     pub x: u32,
+    /// The row of tiles in that level, 0 at the top.
     pub y: u32,
 }
 
@@ -162,6 +171,7 @@ impl Pack {
         &self.head.limits
     }
 
+    /// The file it was opened from (or the name given to its bytes), for messages.
     pub fn path(&self) -> &Path {
         &self.head.path
     }
@@ -177,14 +187,17 @@ impl Pack {
         self.head.check_index(levels, index)
     }
 
+    /// The checked header.
     pub fn header(&self) -> &Header {
         &self.head.header
     }
 
+    /// What the texture is: its size, tiles and texels.
     pub fn description(&self) -> &Description {
         &self.head.header.description
     }
 
+    /// The level table, LOD 0 first.
     pub fn levels(&self) -> &[Level] {
         &self.head.levels
     }
@@ -403,18 +416,22 @@ impl PackHead {
         Ok(PackHead { path: path.to_path_buf(), header: h, levels, limits })
     }
 
+    /// The pack's file or URL, for messages.
     pub fn path(&self) -> &Path {
         &self.path
     }
 
+    /// The checked header.
     pub fn header(&self) -> &Header {
         &self.header
     }
 
+    /// The level table, LOD 0 first.
     pub fn levels(&self) -> &[Level] {
         &self.levels
     }
 
+    /// The caps the pack was checked against.
     pub fn limits(&self) -> &Limits {
         &self.limits
     }

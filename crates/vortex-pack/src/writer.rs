@@ -23,9 +23,11 @@ use crate::writeback::Writeback;
 /// A tile handed to the writer.
 #[derive(Clone, Copy, Debug)]
 pub enum NewTile<'a> {
+    /// No tile: a runtime falls back to the parent tile (what a tile never added is, too).
     Absent,
     /// One texel's samples (channels x sample bytes, little-endian).
     Constant(&'a [u8]),
+    /// A payload of this kind, stored as given (identical payloads once).
     Data(TileKind, &'a [u8]),
 }
 
@@ -47,16 +49,27 @@ impl Default for WriteOptions {
 /// What a finished pack holds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct WriteSummary {
+    /// Tiles in the index.
     pub tiles: u64,
+    /// Payloads stored (each distinct payload once).
     pub stored_payloads: u64,
+    /// Tiles whose payload equalled one already stored, which they share.
     pub deduplicated: u64,
+    /// One-colour tiles, held in their entry.
     pub constant: u64,
+    /// Absent tiles (added as such, or never added).
     pub absent: u64,
+    /// Bytes of stored payloads.
     pub payload_bytes: u64,
+    /// The file's length in bytes.
     pub file_bytes: u64,
+    /// The header's content hash.
     pub content_hash: u64,
 }
 
+/// Writes a pack in one pass: tiles in any order ([`PackWriter::add`]), then
+/// [`PackWriter::finish`], which writes the index and header and renames the file into place.
+/// Dropped unfinished, it removes its temporary file: a pack is whole or absent.
 pub struct PackWriter {
     dest: PathBuf,
     tmp: PathBuf,
