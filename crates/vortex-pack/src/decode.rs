@@ -33,12 +33,12 @@ impl Pack {
             Tile::Absent => Ok(None),
             Tile::Constant(value) => {
                 let entry_at = self.header().index_offset + position * ENTRY_LEN as u64;
-                constant_rgba8(d, value, max_bytes).map(Some).map_err(|m| self.head().tile_error(id, entry_at, m))
+                constant_rgba8(d, value, max_bytes).map(Some).map_err(|m| self.layout().tile_error(id, entry_at, m))
             }
             Tile::Data(kind, bytes) => {
                 let offset = self.entry(position).offset_or_value;
                 let mut decoder = PayloadDecoder::default();
-                decoder.decode(kind, bytes, d, max_bytes).map(Some).map_err(|m| self.head().tile_error(id, offset, m))
+                decoder.decode(kind, bytes, d, max_bytes).map(Some).map_err(|m| self.layout().tile_error(id, offset, m))
             }
         }
     }

@@ -32,7 +32,7 @@ mod writer;
 pub use error::{PackError, Result};
 pub use format::{Description, Entry, Header, Level, TileKind};
 pub use limits::{DEFAULT_MAX_DECODED_BYTES, Limits};
-pub use reader::{Pack, PackHead, Place, Tile, TileId};
+pub use reader::{Pack, PackLayout, Place, Tile, TileId};
 pub use verify::{Problem, Report, VerifyOptions, verify};
 #[cfg(feature = "write")]
 pub use writer::{NewTile, PackWriter, WriteOptions, WriteSummary, temporary_path, temporary_pid};

@@ -40,25 +40,26 @@ impl Bytes {
 /// An open pack. `Send + Sync`: lookups take `&self` and touch no shared state.
 pub struct Pack {
     bytes: Bytes,
-    head: PackHead,
+    head: PackLayout,
 }
 
-/// What a reader checks and keeps of a pack before it reads any tile: the header, the level
-/// table and the caps, with the checks of each part and of each index entry and payload. A
+/// Where everything in a pack lies, checked: the header, the level table and the caps a reader
+/// holds it to, with the checks of each part and of each index entry and payload: what a
+/// reader knows of a pack before it reads any tile. A
 /// [`Pack`] has one over its whole file; a reader that fetches a pack in pieces (over HTTP
-/// `Range` requests, say) builds one from the pieces it fetched ([`PackHead::read_header`],
-/// then [`PackHead::new`]) and checks every entry ([`PackHead::place`]) and payload
-/// ([`PackHead::check_payload`]) with the same code, so both readers refuse the same bytes with
+/// `Range` requests, say) builds one from the pieces it fetched ([`PackLayout::read_header`],
+/// then [`PackLayout::new`]) and checks every entry ([`PackLayout::place`]) and payload
+/// ([`PackLayout::check_payload`]) with the same code, so both readers refuse the same bytes with
 /// the same errors.
 #[derive(Clone, Debug)]
-pub struct PackHead {
+pub struct PackLayout {
     path: PathBuf,
     header: Header,
     levels: Vec<Level>,
     limits: Limits,
 }
 
-/// Where a tile's index entry says its texels are (see [`PackHead::place`]).
+/// Where a tile's index entry says its texels are (see [`PackLayout::place`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Place<'a> {
     /// No tile: a runtime falls back to the parent tile.
@@ -154,15 +155,15 @@ impl Pack {
 
     fn new(path: &Path, bytes: Bytes, limits: Limits) -> Result<Pack> {
         let b = bytes.as_slice();
-        let h = PackHead::read_header(path, b, b.len() as u64, limits)?;
+        let h = PackLayout::read_header(path, b, b.len() as u64, limits)?;
         let levels = &b[h.levels_offset as usize..][..h.description.level_count as usize * LEVEL_LEN];
         let meta = &b[h.meta_offset as usize..][..h.meta_len as usize];
-        let head = PackHead::new(path, h, levels, meta, limits)?;
+        let head = PackLayout::new(path, h, levels, meta, limits)?;
         Ok(Pack { bytes, head })
     }
 
     /// The checked header and level table.
-    pub fn head(&self) -> &PackHead {
+    pub fn layout(&self) -> &PackLayout {
         &self.head
     }
 
@@ -275,7 +276,7 @@ impl Pack {
     }
 }
 
-impl PackHead {
+impl PackLayout {
     /// The header of a pack of `file_len` bytes from its first bytes `first` (at least
     /// [`HEADER_LEN`] of them when the file has as many), checked as [`Pack::open`] checks it:
     /// signature, checksum, reserved bytes, version, required features, fixed lengths, the
@@ -376,10 +377,10 @@ impl PackHead {
         Ok(())
     }
 
-    /// The head of a pack whose header [`PackHead::read_header`] checked, from its level table
+    /// The head of a pack whose header [`PackLayout::read_header`] checked, from its level table
     /// (`levels`, the header's `level_count` rows) and metadata (`meta`, `meta_len` bytes):
     /// the level table's claims against `limits` and its sense, and the metadata's checksum.
-    pub fn new(path: &Path, h: Header, levels: &[u8], meta: &[u8], limits: Limits) -> Result<PackHead> {
+    pub fn new(path: &Path, h: Header, levels: &[u8], meta: &[u8], limits: Limits) -> Result<PackLayout> {
         let corrupt = |section: &'static str, offset: u64, message: String| PackError::Corrupt {
             path: path.to_path_buf(),
             section,
@@ -413,7 +414,7 @@ impl PackHead {
         if crc32c::crc32c(meta) != h.meta_crc {
             return Err(corrupt("metadata", h.meta_offset, "metadata checksum mismatch".into()));
         }
-        Ok(PackHead { path: path.to_path_buf(), header: h, levels, limits })
+        Ok(PackLayout { path: path.to_path_buf(), header: h, levels, limits })
     }
 
     /// The pack's file or URL, for messages.
@@ -450,7 +451,7 @@ impl PackHead {
         Ok(level.first_entry + id.y as u64 * level.tiles_w as u64 + id.x as u64)
     }
 
-    /// The file offset of index entry `position` (one of [`PackHead::position`]'s answers).
+    /// The file offset of index entry `position` (one of [`PackLayout::position`]'s answers).
     pub fn entry_offset(&self, position: u64) -> u64 {
         self.header.index_offset + position * ENTRY_LEN as u64
     }
@@ -513,7 +514,7 @@ impl PackHead {
         self.check_index_parts(levels, [index])
     }
 
-    /// As [`PackHead::check_index`], the index given in consecutive parts (blocks fetched one by
+    /// As [`PackLayout::check_index`], the index given in consecutive parts (blocks fetched one by
     /// one), none copied.
     pub fn check_index_parts<'a>(&self, levels: &[u8], index: impl IntoIterator<Item = &'a [u8]>) -> Result<()> {
         let h = &self.header;

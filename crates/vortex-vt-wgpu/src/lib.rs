@@ -62,6 +62,12 @@ pub use runtime::{FrameStats, Pacing, Runtime, RuntimeConfig, RuntimeError};
 pub use sample::SampleFilter;
 pub use source::{PageSource, ReadError, ReadErrorKind, SourceTile, StoredRead, StoredTile, TileId, TileKind};
 pub use texture::VirtualTexture;
+// What an embedder names from the crates below (opening packs, pages and slots for the loader),
+// and those crates themselves: no direct dependency on them to keep in step with this one.
+pub use vortex_pack::{self, Limits, Pack, PackError};
+pub use vortex_vt::page::PageId;
+pub use vortex_vt::residency::Slot;
+pub use vortex_vt::{self};
 
 /// The README's examples, compiled as doc tests.
 #[cfg(doctest)]

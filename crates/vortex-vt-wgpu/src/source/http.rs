@@ -2,7 +2,7 @@
 //! level table first, the index whole when it is small or in blocks as tiles need them, then each
 //! tile's payload on demand. Everything is checked as [`Pack::open`](vortex_pack::Pack::open)
 //! and [`Pack::tile_checked`](vortex_pack::Pack::tile_checked) check a local file, by the same
-//! code ([`PackHead`]): the header's CRC and claims before anything is sized from them, the
+//! code ([`PackLayout`]): the header's CRC and claims before anything is sized from them, the
 //! level table, the metadata's CRC, the index's CRC (before any entry is used when it is read
 //! whole; once its last block has arrived otherwise, each entry checked for sense before use),
 //! and every payload's CRC.
@@ -26,7 +26,7 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
 
 use vortex_pack::format::{ENTRY_LEN, LEVEL_LEN};
-use vortex_pack::{Limits, PackError, PackHead, Place, TileId, TileKind};
+use vortex_pack::{Limits, PackError, PackLayout, Place, TileId, TileKind};
 
 #[cfg(doc)]
 use super::ReadErrorKind;
@@ -141,7 +141,7 @@ impl FetchError {
 /// A pack on a web server, read with `Range` requests: a [`PageSource`].
 pub struct HttpPack {
     location: PathBuf,
-    head: PackHead,
+    head: PackLayout,
     fetcher: Fetcher,
     /// The index by block number ([`INDEX_BLOCK`] entries each), as fetched.
     index: Mutex<HashMap<u64, Arc<[u8]>>>,
@@ -171,7 +171,7 @@ impl HttpPack {
         // The first read: the header and, for most packs, the level table and metadata.
         let first = fetcher.fetch_first(2048).map_err(|e| io(e.message()))?;
         let file_len = fetcher.file_len();
-        let h = PackHead::read_header(&location, &first, file_len, limits)?;
+        let h = PackLayout::read_header(&location, &first, file_len, limits)?;
         let section = |offset: u64, len: u64| -> Result<Vec<u8>, PackError> {
             match first.get(offset as usize..).and_then(|rest| rest.get(..len as usize)) {
                 Some(held) => Ok(held.to_vec()),
@@ -180,7 +180,7 @@ impl HttpPack {
         };
         let raw_levels = section(h.levels_offset, h.description.level_count as u64 * LEVEL_LEN as u64)?;
         // A local reader maps what a header claims; this one allocates it.
-        PackHead::check_metadata_len(&location, &h, limits)?;
+        PackLayout::check_metadata_len(&location, &h, limits)?;
         // The index (when read whole) and the metadata lie side by side: one read for both.
         let index_len = h.index_count * ENTRY_LEN as u64;
         let meta_end = h.meta_offset + u64::from(h.meta_len);
@@ -194,7 +194,7 @@ impl HttpPack {
             let index = whole_index.then(|| section(h.index_offset, index_len)).transpose()?;
             (index, section(h.meta_offset, u64::from(h.meta_len))?)
         };
-        let head = PackHead::new(&location, h, &raw_levels, &meta, limits)?;
+        let head = PackLayout::new(&location, h, &raw_levels, &meta, limits)?;
         let mut blocks = HashMap::new();
         if let Some(index) = index {
             head.check_index(&raw_levels, &index)?;
@@ -215,7 +215,7 @@ impl HttpPack {
     }
 
     /// The checked header and level table.
-    pub fn head(&self) -> &PackHead {
+    pub fn layout(&self) -> &PackLayout {
         &self.head
     }
 
@@ -341,7 +341,7 @@ impl PageSource for HttpPack {
     }
 
     fn texture(&self) -> Result<VirtualTexture, LoaderError> {
-        VirtualTexture::from_head(&self.head)
+        VirtualTexture::from_layout(&self.head)
     }
 
     fn read_tile(&self, id: TileId, format: CacheFormat) -> Result<SourceTile, ReadError> {

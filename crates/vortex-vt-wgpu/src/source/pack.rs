@@ -7,7 +7,7 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use vortex_pack::{Description, Pack, PackError, PackHead, Tile, TileId, TileKind};
+use vortex_pack::{Description, Pack, PackError, PackLayout, Tile, TileId, TileKind};
 use vortex_vt::page::TextureGrid;
 
 use super::{PageSource, ReadError, ReadErrorKind, SourceTile, StoredRead, StoredTile};
@@ -32,7 +32,7 @@ impl PageSource for Pack {
         match tile {
             Tile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
             Tile::Absent => Err(absent_as(format)),
-            tile => decode_tile(self.head(), tile, format)
+            tile => decode_tile(self.layout(), tile, format)
                 .map(|texels| SourceTile::Texels { texels, bytes_read })
                 .map_err(|e| e.with_bytes_read(bytes_read)),
         }
@@ -50,7 +50,7 @@ impl PageSource for Pack {
     }
 
     fn decode(&self, _: TileId, kind: TileKind, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
-        decode_stored(self.head(), kind, bytes, format)
+        decode_stored(self.layout(), kind, bytes, format)
     }
 
     /// One or three channels: no alpha stored.
@@ -81,7 +81,7 @@ fn checked(pack: &Pack, id: TileId) -> Result<(Tile<'_>, u64), ReadError> {
 /// A stored tile's RGBA8 texels (any kind), or its BC7 blocks (a BC7 or one-colour tile: the
 /// loader asks for BC7 only when every tile is one of those); never BC1, which the loader
 /// transcodes.
-pub(super) fn decode_tile(head: &PackHead, tile: Tile<'_>, format: CacheFormat) -> Result<Vec<u8>, ReadError> {
+pub(super) fn decode_tile(head: &PackLayout, tile: Tile<'_>, format: CacheFormat) -> Result<Vec<u8>, ReadError> {
     let (d, limit) = (&head.header().description, head.limits().max_decoded_bytes);
     match format {
         CacheFormat::Rgba8 => texels(tile, d, limit),
@@ -93,7 +93,7 @@ pub(super) fn decode_tile(head: &PackHead, tile: Tile<'_>, format: CacheFormat) 
 /// What [`PageSource::decode`] does for a pack: the stored tile of `kind` decoded as
 /// [`decode_tile`] does.
 pub(super) fn decode_stored(
-    head: &PackHead,
+    head: &PackLayout,
     kind: TileKind,
     bytes: &[u8],
     format: CacheFormat,
@@ -176,12 +176,12 @@ impl VirtualTexture {
     /// The tiler's older square power-of-two packs qualify: their image sits at the top-left
     /// of the grid, and the pages wholly outside it are never asked for.
     pub fn from_pack(pack: &Pack) -> Result<VirtualTexture, LoaderError> {
-        VirtualTexture::from_head(pack.head())
+        VirtualTexture::from_layout(pack.layout())
     }
 
     /// As [`VirtualTexture::from_pack`], from a pack's checked header and level table (a pack
     /// read in pieces, over HTTP say).
-    pub fn from_head(head: &PackHead) -> Result<VirtualTexture, LoaderError> {
+    pub fn from_layout(head: &PackLayout) -> Result<VirtualTexture, LoaderError> {
         let path = || head.path().to_path_buf();
         let d = &head.header().description;
         let levels = head.levels();
