@@ -77,22 +77,36 @@ impl Default for RetryPolicy {
 pub enum LoaderError {
     /// The pack's layout is not a virtual texture's (an image its LOD-0 grid covers).
     #[error("{}: {field}: {message}", path.display())]
-    Layout { path: PathBuf, field: &'static str, message: String },
+    Layout {
+        /// The source's location.
+        path: PathBuf,
+        /// The field that does not fit.
+        field: &'static str,
+        /// Why.
+        message: String,
+    },
 
     /// The pack's level table is not a page grid the runtime can address: the levels do not
     /// halve (rounded up) down to one page, or the grid is over the feedback word's limits.
     #[error("{}: level table: {source}", path.display())]
     Grid {
+        /// The source's location.
         path: PathBuf,
+        /// What is wrong with the grid.
         #[source]
         source: GridError,
     },
 
+    /// No source given.
     #[error("a loader needs at least one pack")]
     NoTextures,
 
+    /// More sources than a feedback word can name.
     #[error("{count} packs: a scene has at most {MAX_TEXTURES} virtual textures")]
-    TooManyTextures { count: usize },
+    TooManyTextures {
+        /// Sources given.
+        count: usize,
+    },
 
     /// Two packs whose tiles cannot share one physical page cache.
     #[error(
@@ -100,11 +114,25 @@ pub enum LoaderError {
         first.display(),
         other.display()
     )]
-    Mismatch { field: &'static str, first: PathBuf, first_value: u32, other: PathBuf, other_value: u32 },
+    Mismatch {
+        /// `tile_size` or `border`.
+        field: &'static str,
+        /// The first source's location.
+        first: PathBuf,
+        /// Its value.
+        first_value: u32,
+        /// The other source's location.
+        other: PathBuf,
+        /// Its value.
+        other_value: u32,
+    },
 
+    /// A worker thread could not be started.
     #[error("cannot start loader thread {index}: {source}")]
     Spawn {
+        /// The worker's number.
         index: usize,
+        /// What the system said.
         #[source]
         source: std::io::Error,
     },
@@ -116,14 +144,32 @@ pub enum LoaderError {
 pub enum LoadError {
     /// The page's texture id is not an index of the loader's packs.
     #[error("page {page:?}: no texture {}; the loader has {textures}", page.texture)]
-    UnknownTexture { page: PageId, textures: usize },
+    UnknownTexture {
+        /// The page.
+        page: PageId,
+        /// Textures the loader has.
+        textures: usize,
+    },
 
     /// The page lies outside its texture's page grid.
     #[error(
         "{}: no page (lod {lod}, x {x}, y {y}): the texture has {}x{} pages at LOD 0 and {lod_count} LODs",
         path.display(), pages[0], pages[1]
     )]
-    OutOfGrid { path: PathBuf, lod: u8, x: u16, y: u16, pages: [u16; 2], lod_count: u8 },
+    OutOfGrid {
+        /// The source's location.
+        path: PathBuf,
+        /// The page's LOD.
+        lod: u8,
+        /// Its column.
+        x: u16,
+        /// Its row.
+        y: u16,
+        /// The texture's pages across and down at LOD 0.
+        pages: [u16; 2],
+        /// Its LODs.
+        lod_count: u8,
+    },
 
     /// A stored tile could not be read, failed its checksum or did not decode. For an absent page
     /// this names the ancestor that failed (the message says which page it was read for).
@@ -145,16 +191,29 @@ pub enum LoadError {
 
     /// The tile and every coarser tile covering it are absent: nothing to build it from.
     #[error("{}: tile (lod {lod}, x {x}, y {y}) is absent and so is every coarser tile covering it", path.display())]
-    NoAncestor { path: PathBuf, lod: u8, x: u16, y: u16 },
+    NoAncestor {
+        /// The source's location.
+        path: PathBuf,
+        /// The page's LOD.
+        lod: u8,
+        /// Its column.
+        x: u16,
+        /// Its row.
+        y: u16,
+    },
 
     /// A worker stopped without answering (it cannot happen unless a worker thread died).
     #[error("page {page:?}: the loader's worker stopped before loading it")]
-    Lost { page: PageId },
+    Lost {
+        /// The page.
+        page: PageId,
+    },
 }
 
 /// The texels of one requested page.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct LoadedPage {
+    /// The page.
     pub page: PageId,
     /// The slot it was requested for, passed through.
     pub slot: Slot,
@@ -171,10 +230,12 @@ pub struct LoadedPage {
     pub tier_hits: u32,
     /// Tiles read for this page from its source, the tier not holding them (or off).
     pub tier_misses: u32,
+    /// Why the texels are the stand-in tile, if they are.
     pub error: Option<LoadError>,
 }
 
 impl LoadedPage {
+    /// Whether it loaded (its texels are its own, not the stand-in).
     pub fn is_ok(&self) -> bool {
         self.error.is_none()
     }

@@ -168,6 +168,7 @@ impl Loader {
         &self.shared.textures
     }
 
+    /// The sources, by texture id.
     pub fn sources(&self) -> &[Arc<dyn PageSource>] {
         &self.shared.sources
     }
@@ -203,6 +204,7 @@ impl Loader {
         self.shared.format.store(index as u8, Ordering::Relaxed);
     }
 
+    /// The format pages come in ([`Loader::set_format`]).
     pub fn format(&self) -> CacheFormat {
         self.shared.format()
     }
@@ -235,6 +237,7 @@ impl Loader {
         self.shared.textures[0].border
     }
 
+    /// Worker threads.
     pub fn threads(&self) -> usize {
         self.workers.len()
     }
@@ -333,6 +336,7 @@ impl Loader {
         Duration::from_nanos(self.waited.load(Ordering::Relaxed))
     }
 
+    /// What it has done so far.
     pub fn counters(&self) -> LoadCounters {
         let s = &self.shared;
         LoadCounters {

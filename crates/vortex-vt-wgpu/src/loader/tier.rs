@@ -37,6 +37,7 @@ pub struct TierUsage {
     pub budget: u64,
     /// Bytes charged against it: stored bytes plus [`TIER_ENTRY_OVERHEAD`] per tile.
     pub bytes: u64,
+    /// Tiles held.
     pub tiles: usize,
 }
 
