@@ -14,7 +14,7 @@
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use vortex_pack::{Description, TileKind, payload_texels};
+use vortex_pack::{Description, Tile, TileKind};
 use vortex_tiler::codec::{Bc7Effort, Codec, PngLevel, Subsampling, TileEncoder};
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
 use vortex_tiler::sink::tile_kind;
@@ -133,6 +133,6 @@ fn decode(kind: TileKind, bytes: &[u8], d: &Description) -> Result<Vec<u8>> {
             let image = image::load_from_memory(bytes)?;
             if d.channels == 4 { image.to_rgba8().into_raw() } else { image.to_rgb8().into_raw() }
         }
-        _ => payload_texels(kind, bytes, d, 1 << 30)?,
+        _ => Tile::Data(kind, bytes).decode_texels(d, 1 << 30)?,
     })
 }

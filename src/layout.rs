@@ -102,13 +102,10 @@ impl Layout {
 
     /// The pack's level table for this grid (docs/pack-format.md), LOD 0 first.
     pub fn pack_levels(&self) -> Vec<vortex_pack::Level> {
-        let mut first_entry = 0;
         (0..self.lod_count)
             .map(|lod| {
                 let ((tiles_w, tiles_h), (width, height)) = (self.grid(lod), self.level_extent(lod));
-                let level = vortex_pack::Level { tiles_w, tiles_h, first_entry, width, height };
-                first_entry += tiles_w as u64 * tiles_h as u64;
-                level
+                vortex_pack::Level::new(tiles_w, tiles_h, width, height)
             })
             .collect()
     }

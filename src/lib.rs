@@ -97,6 +97,7 @@ pub mod background;
 pub mod codec;
 mod encoders;
 pub mod error;
+mod fnv;
 pub mod layout;
 pub mod limits;
 pub mod output;

@@ -189,7 +189,7 @@ fn open_sources(
             let source: Arc<dyn PageSource> = if let Some(url) = as_url(p) {
                 let pack = Arc::new(HttpPack::open(url).with_context(|| format!("opening {url}"))?);
                 vortex_tiler::shard::manifest::refuse_shard(p, pack.metadata())?;
-                tile_size = tile_size.max(pack.head().header().description.tile_size);
+                tile_size = tile_size.max(pack.layout().header().description.tile_size);
                 remote.push(Arc::clone(&pack));
                 pack
             } else {

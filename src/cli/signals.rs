@@ -60,8 +60,7 @@ pub fn remove_on_forced_exit(dest: &Path) {
 fn remove_temporaries() {
     let Ok(destinations) = DESTINATIONS.lock() else { return };
     for dest in destinations.iter() {
-        let name = dest.file_name().map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
-        let pack = staging::parent_of(dest).join(format!(".{name}.tmp-{}", std::process::id()));
+        let pack = vortex_pack::temporary_path(dest);
         for path in [staging::partial_path(dest), pack] {
             // The run's other threads may still be adding tiles to a staging directory: a few
             // tries, then what is left is for the next run's clean-up (`staging::remove_stale`).

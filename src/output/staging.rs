@@ -69,7 +69,8 @@ pub fn replace_dir(staging: &Path, dest: &Path) -> io::Result<()> {
 /// what was removed so that the caller can say so.
 pub fn remove_stale(dest: &Path) -> io::Result<Vec<PathBuf>> {
     let parent = parent_of(dest);
-    let prefix = format!(".{}.", name_of(dest));
+    let name = name_of(dest);
+    let prefix = format!(".{name}.");
     let mut removed = Vec::new();
     let entries = match fs::read_dir(&parent) {
         Ok(e) => e,
@@ -78,10 +79,11 @@ pub fn remove_stale(dest: &Path) -> io::Result<Vec<PathBuf>> {
     };
     for entry in entries {
         let entry = entry?;
-        let name = entry.file_name();
-        let Some(pid) = name.to_str().and_then(|n| n.strip_prefix(&prefix)).and_then(temporary_pid) else {
-            continue;
-        };
+        let file_name = entry.file_name();
+        let pid = file_name.to_str().and_then(|n| {
+            n.strip_prefix(&prefix).and_then(partial_pid).or_else(|| vortex_pack::temporary_pid(&name, n))
+        });
+        let Some(pid) = pid else { continue };
         if pid == std::process::id() || process_alive(pid) != Some(false) {
             continue;
         }
@@ -98,9 +100,10 @@ pub fn remove_stale(dest: &Path) -> io::Result<Vec<PathBuf>> {
     Ok(removed)
 }
 
-/// The PID in `partial-PID`, `partial-PID.old` or `tmp-PID`.
-fn temporary_pid(suffix: &str) -> Option<u32> {
-    let digits = suffix.strip_prefix("partial-").or_else(|| suffix.strip_prefix("tmp-"))?;
+/// The PID in `partial-PID` or `partial-PID.old` (a pack writer's `tmp-PID` is
+/// [`vortex_pack::temporary_pid`]'s to read).
+fn partial_pid(suffix: &str) -> Option<u32> {
+    let digits = suffix.strip_prefix("partial-")?;
     let digits = digits.strip_suffix(".old").unwrap_or(digits);
     if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
         return None;
@@ -131,12 +134,12 @@ mod tests {
 
     #[test]
     fn names_carry_the_pid() {
-        assert_eq!(temporary_pid("partial-123"), Some(123));
-        assert_eq!(temporary_pid("partial-123.old"), Some(123));
-        assert_eq!(temporary_pid("tmp-9"), Some(9));
-        assert_eq!(temporary_pid("partial-"), None);
-        assert_eq!(temporary_pid("partial-12x"), None);
-        assert_eq!(temporary_pid("backup"), None);
+        assert_eq!(partial_pid("partial-123"), Some(123));
+        assert_eq!(partial_pid("partial-123.old"), Some(123));
+        assert_eq!(partial_pid("tmp-9"), None, "the pack writer's");
+        assert_eq!(partial_pid("partial-"), None);
+        assert_eq!(partial_pid("partial-12x"), None);
+        assert_eq!(partial_pid("backup"), None);
     }
 
     #[test]

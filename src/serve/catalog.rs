@@ -262,7 +262,7 @@ fn pack_page(pack: &Arc<Pack>, lod: u32, x: u32, y: u32) -> Result<Option<Page>,
         }
         Tile::Data(kind, bytes) => {
             let limit = vortex_pack::DEFAULT_MAX_DECODED_BYTES;
-            Page::Texels(texels(vortex_pack::payload_texels(kind, bytes, d, limit).map_err(|e| e.to_string())?))
+            Page::Texels(texels(Tile::Data(kind, bytes).decode_texels(d, limit).map_err(|e| e.to_string())?))
         }
     }))
 }
@@ -288,7 +288,7 @@ fn read_manifest(dir: &Path, name: &str) -> Result<Vec<u8>, String> {
 }
 
 fn hash(bytes: &[u8]) -> u64 {
-    vortex_pack::format::fnv1a(0xcbf2_9ce4_8422_2325, bytes)
+    crate::fnv::hash(bytes)
 }
 
 /// A split directory (our `info.json`), or a directory in a viewer layout.

@@ -281,7 +281,7 @@ fn host(state: &AppState, headers: &HeaderMap) -> String {
 }
 
 pub(super) fn etag(base: u64, key: &str) -> String {
-    format!("\"{base:016x}-{:016x}\"", vortex_pack::format::fnv1a(0xcbf2_9ce4_8422_2325, key.as_bytes()))
+    format!("\"{base:016x}-{:016x}\"", crate::fnv::hash(key.as_bytes()))
 }
 
 /// 304 if the client holds `etag`, else `make()`.

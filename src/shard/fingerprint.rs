@@ -14,6 +14,7 @@ use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 
 use crate::error::{Result, TilerError};
+use crate::fnv::Fnv;
 
 const ENDS: u64 = 1 << 20;
 const BLOCKS: u64 = 64;
@@ -76,24 +77,6 @@ fn directory(dir: &Path, rel: &Path, hash: &mut Fnv) -> Result<u64> {
         }
     }
     Ok(total)
-}
-
-/// FNV-1a 64: stable across builds and machines, unlike the standard library's hasher.
-struct Fnv(u64);
-
-impl Default for Fnv {
-    fn default() -> Self {
-        Fnv(0xcbf2_9ce4_8422_2325)
-    }
-}
-
-impl Hasher for Fnv {
-    fn write(&mut self, bytes: &[u8]) {
-        self.0 = vortex_pack::format::fnv1a(self.0, bytes);
-    }
-    fn finish(&self) -> u64 {
-        self.0
-    }
 }
 
 #[cfg(test)]

@@ -9,7 +9,6 @@ pub mod info;
 
 use std::path::Path;
 
-use vortex_pack::format::pyramid_levels;
 use vortex_pack::{Description, Level};
 
 use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling};
@@ -96,7 +95,7 @@ impl TiledDir {
             layout.pack_levels()
         } else {
             // Older files: a square power-of-two grid, the image at its top-left.
-            pyramid_levels(&description, columns)
+            square_levels(&description, columns)
         };
         // The pack's metadata is the completed description.
         info.format_version = Some(FORMAT_VERSION);
@@ -152,4 +151,16 @@ pub(crate) fn codec_of(info: &InfoFile, extension: Option<String>) -> Option<Cod
         "bc7" => Some(Codec::Bc7 { effort: effort.unwrap_or(DEFAULT_BC7_EFFORT) }),
         _ => None,
     }
+}
+
+/// The level table of an older directory: a square power-of-two grid of `tiles` x `tiles`
+/// pages at LOD 0, halved at each level, the image (`ceil(size / 2^lod)` at each) at its
+/// top-left.
+pub(crate) fn square_levels(d: &Description, tiles: u32) -> Vec<Level> {
+    (0..d.level_count)
+        .map(|lod| {
+            let shrink = |v: u32| ((u64::from(v) + (1u64 << lod) - 1) >> lod) as u32;
+            Level::new(tiles >> lod, tiles >> lod, shrink(d.width), shrink(d.height))
+        })
+        .collect()
 }

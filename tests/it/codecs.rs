@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use crate::common::cli::{fixture, ok, run, s};
-use vortex_pack::{Pack, TileKind, decode_rgba8, payload_texels};
+use vortex_pack::{Pack, Tile, TileKind};
 
 /// The error of a run that must fail.
 fn fails(args: &[&str]) -> String {
@@ -26,7 +26,7 @@ fn smooth(path: &Path, width: u32, height: u32) {
 /// Every tile of every level of a pack as RGBA8, in index order (absent tiles empty).
 fn decoded(pack: &Path) -> Vec<Vec<u8>> {
     let pack = Pack::open(pack).unwrap();
-    pack.ids().map(|id| decode_rgba8(&pack, id.lod, id.x, id.y).unwrap().unwrap_or_default()).collect()
+    pack.ids().map(|id| pack.decode_rgba8(id).unwrap().unwrap_or_default()).collect()
 }
 
 /// PSNR in dB of `b` against `a` over the first `channels` samples of each RGBA texel.
@@ -207,7 +207,7 @@ fn pack_and_convert_reencode_with_the_codec_flags() {
     assert_eq!(meta(&again)["tileFormat"], "rgb");
     let p = Pack::open(&again).unwrap();
     let vortex_pack::Tile::Data(TileKind::Bc7, bytes) = p.tile(0, 3, 1).unwrap() else { panic!() };
-    let texels = payload_texels(TileKind::Bc7, bytes, p.description(), 1 << 20).unwrap();
+    let texels = Tile::Data(TileKind::Bc7, bytes).decode_texels(p.description(), 1 << 20).unwrap();
     assert_eq!(texels.len(), 64 * 64 * 3);
 }
 
@@ -230,7 +230,7 @@ fn bc7_ignores_colour_under_alpha_zero() {
     ok(&["split", s(&src), "--pack", s(&pack), "--tile-size", "32", "--border", "0", "--codec", "bc7", "-q"]);
     let p = Pack::open(&pack).unwrap();
     let id = vortex_pack::TileId { lod: 0, x: 1, y: 0 };
-    let got = decode_rgba8(&p, id.lod, id.x, id.y).unwrap().unwrap();
+    let got = p.decode_rgba8(id).unwrap().unwrap();
     // The tile's source texels: x 32..64, y 0..32 of the image.
     let want: Vec<u8> =
         (0..32).flat_map(|y| (32..64).map(move |x| (x, y))).flat_map(|(x, y)| img.get_pixel(x, y).0).collect();

@@ -13,7 +13,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use vortex_pack::{Pack, Tile};
 use vortex_vt_wgpu::source::{HttpOptions, HttpPack};
-use vortex_vt_wgpu::{CacheFormat, PageSource, StoredTile};
+use vortex_vt_wgpu::{CacheFormat, PageSource, ReadErrorKind, StoredTile, TileKind};
 
 use crate::common::cli::{fails_with, fixture, run, s};
 use crate::common::nginx::{Nginx, nginx_binary};
@@ -296,18 +296,14 @@ fn an_index_read_in_blocks_gives_every_tile_of_the_local_file() {
     assert!(local.header().index_count > 3 * vortex_vt_wgpu::source::INDEX_BLOCK);
     assert_eq!(remote.metadata(), local.metadata());
     for id in local.ids() {
-        let (lod, x, y) = (id.lod as u8, id.x as u16, id.y as u16);
-        let stored = remote.read_stored(lod, x, y).unwrap().unwrap().tile;
+        let stored = remote.read_stored(id).unwrap().unwrap().tile;
         let want = match local.tile_checked(id.lod, id.x, id.y).unwrap() {
             Tile::Absent => StoredTile::Absent,
-            Tile::Constant(v) => StoredTile::Stored { kind: 1, bytes: v.into() },
-            Tile::Data(kind, bytes) => StoredTile::Stored { kind: kind as u8, bytes: bytes.into() },
+            Tile::Constant(v) => StoredTile::Stored { kind: TileKind::Constant, bytes: v.into() },
+            Tile::Data(kind, bytes) => StoredTile::Stored { kind, bytes: bytes.into() },
         };
         assert_eq!(stored, want, "{id:?}");
-        assert_eq!(
-            remote.read_tile(lod, x, y, CacheFormat::Rgba8).unwrap(),
-            local.read_tile(lod, x, y, CacheFormat::Rgba8).unwrap()
-        );
+        assert_eq!(remote.read_tile(id, CacheFormat::Rgba8).unwrap(), local.read_tile(id, CacheFormat::Rgba8).unwrap());
     }
     let stats = remote.stats();
     assert_eq!(stats.requests as usize, server.requests().len());
@@ -330,7 +326,8 @@ fn a_wrong_index_block_is_caught_by_the_index_checksum() {
     let remote = HttpPack::open_with(&server.url(), options, vortex_pack::Limits::default()).unwrap();
     let mut failures = Vec::new();
     for id in local.ids() {
-        if let Err(e) = remote.read_stored(id.lod as u8, id.x as u16, id.y as u16) {
+        if let Err(e) = remote.read_stored(id) {
+            assert_eq!(e.kind, ReadErrorKind::Corrupt, "{}", e.message);
             failures.push(e.message);
         }
     }
@@ -354,8 +351,9 @@ fn a_pack_replaced_on_the_server_is_refused_not_mixed() {
     std::fs::write(&pack, &bytes).unwrap();
     let hour_later = std::time::SystemTime::now() + std::time::Duration::from_secs(3600);
     std::fs::File::options().write(true).open(&pack).unwrap().set_modified(hour_later).unwrap();
-    let e = remote.read_stored(first.lod as u8, first.x as u16, first.y as u16).unwrap_err();
+    let e = remote.read_stored(first).unwrap_err();
     assert!(e.message.contains("the pack changed on the server since it was opened"), "{}", e.message);
+    assert_eq!(e.kind, ReadErrorKind::Unavailable, "not worth reading again");
     assert_eq!(remote.stats().retries, 0, "a changed pack is not retried");
 }
 

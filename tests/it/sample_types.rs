@@ -23,7 +23,7 @@ fn pack_level(pack: &Pack, lod: u32) -> (usize, usize, Vec<Vec<u8>>) {
     for ty in 0..level.tiles_h {
         for tx in 0..level.tiles_w {
             let texels = match pack.tile_checked(lod, tx, ty).unwrap() {
-                Tile::Data(kind, bytes) => vortex_pack::payload_texels(kind, bytes, &d, 1 << 30).unwrap(),
+                tile @ Tile::Data(..) => tile.decode_texels(&d, 1 << 30).unwrap(),
                 Tile::Constant(texel) => texel.repeat(side * side),
                 Tile::Absent => panic!("tile ({lod}, {tx}, {ty}) is absent"),
             };

@@ -11,8 +11,9 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use vortex_pack::format::pyramid_levels;
-use vortex_pack::{Description, NewTile, Pack, PackWriter, TileId, TileKind, VerifyOptions, WriteOptions, verify};
+use vortex_pack::{
+    Description, Level, NewTile, Pack, PackWriter, TileId, TileKind, VerifyOptions, WriteOptions, verify,
+};
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -32,7 +33,9 @@ fn main() {
         sample_bytes: 1,
         sample_format: 0,
     };
-    let levels = pyramid_levels(&d, 512);
+    // A square grid of 512 x 512 tiles at LOD 0, halved at each level.
+    let levels: Vec<Level> =
+        (0..d.level_count).map(|lod| Level::new(512 >> lod, 512 >> lod, d.width >> lod, d.height >> lod)).collect();
     let started = Instant::now();
     let mut w = PackWriter::create(&path, d, levels.clone(), b"{}", WriteOptions::default()).unwrap();
     let mut state = 0x9E37_79B9_7F4A_7C15u64;

@@ -18,83 +18,92 @@ use crate::error::{PackError, Result};
 use crate::format::{Description, ENTRY_LEN, TileKind, delta_decode_rows};
 use crate::reader::{Pack, Tile, TileId};
 
-/// The tile at `(lod, x, y)` as `tile_size^2` RGBA8 texels, rows top down; `None` if it is
-/// absent. Payload checksums are checked ([`Pack::tile_checked`]); a payload that does not
-/// decode to exactly one tile, or would need more than the pack's
-/// [`Limits::max_decoded_bytes`](crate::Limits::max_decoded_bytes), is a
-/// [`PackError::Tile`](crate::PackError::Tile).
-pub fn decode_rgba8(pack: &Pack, lod: u32, x: u32, y: u32) -> Result<Option<Vec<u8>>> {
-    decode_rgba8_limited(pack, lod, x, y, pack.limits().max_decoded_bytes)
-}
-
-/// As [`decode_rgba8`] with a limit of `max_bytes` (instead of the pack's) on the decoded tile
-/// and on any buffer that decoding it needs.
-pub fn decode_rgba8_limited(pack: &Pack, lod: u32, x: u32, y: u32, max_bytes: u64) -> Result<Option<Vec<u8>>> {
-    let id = TileId { lod, x, y };
-    let position = pack.position(id)?;
-    let d = pack.description();
-    match pack.tile_checked(lod, x, y)? {
-        Tile::Absent => Ok(None),
-        Tile::Constant(value) => {
-            let entry_at = pack.header().index_offset + position * ENTRY_LEN as u64;
-            constant_rgba8(d, value, max_bytes).map(Some).map_err(|m| pack.head().tile_error(id, entry_at, m))
-        }
-        Tile::Data(kind, bytes) => {
-            let offset = pack.entry(position).offset_or_value;
-            let mut decoder = PayloadDecoder::default();
-            decoder.decode(kind, bytes, d, max_bytes).map(Some).map_err(|m| pack.head().tile_error(id, offset, m))
+impl Pack {
+    /// Tile `id` as `tile_size^2` RGBA8 texels, rows top down; `None` if it is absent. Payload
+    /// checksums are checked ([`Pack::tile_checked`]); a payload that does not decode to exactly
+    /// one tile, or would need more than the pack's
+    /// [`Limits::max_decoded_bytes`](crate::Limits::max_decoded_bytes), is a
+    /// [`PackError::Tile`](crate::PackError::Tile) naming the tile and its byte.
+    pub fn decode_rgba8(&self, id: TileId) -> Result<Option<Vec<u8>>> {
+        let TileId { lod, x, y } = id;
+        let position = self.position(id)?;
+        let max_bytes = self.limits().max_decoded_bytes;
+        let d = self.description();
+        match self.tile_checked(lod, x, y)? {
+            Tile::Absent => Ok(None),
+            Tile::Constant(value) => {
+                let entry_at = self.header().index_offset + position * ENTRY_LEN as u64;
+                constant_rgba8(d, value, max_bytes).map(Some).map_err(|m| self.layout().tile_error(id, entry_at, m))
+            }
+            Tile::Data(kind, bytes) => {
+                let offset = self.entry(position).offset_or_value;
+                let mut decoder = PayloadDecoder::default();
+                decoder.decode(kind, bytes, d, max_bytes).map(Some).map_err(|m| self.layout().tile_error(id, offset, m))
+            }
         }
     }
 }
 
-/// A tile as stored ([`Pack::tile_checked`]'s answer, or a copy of its bytes kept since) as
-/// `tile_size^2` RGBA8 texels, exactly as [`decode_rgba8`] decodes it in place; `None` if it is
-/// absent. For a cache that keeps tiles in their stored (compressed) form, away from the pack,
-/// and decodes them when they are wanted again. The checksum is not checked here: check it when
-/// the bytes are read. An error is a [`PackError::Payload`](crate::PackError::Payload) (no file,
-/// no position: the caller knows which tile it decoded).
-pub fn tile_rgba8(tile: Tile<'_>, d: &Description, max_bytes: u64) -> Result<Option<Vec<u8>>> {
-    match tile {
-        Tile::Absent => Ok(None),
-        Tile::Constant(value) => constant_rgba8(d, value, max_bytes)
-            .map(Some)
-            .map_err(|message| PackError::Payload { kind: TileKind::Constant.name(), message }),
-        Tile::Data(kind, bytes) => PayloadDecoder::default()
-            .decode(kind, bytes, d, max_bytes)
-            .map(Some)
-            .map_err(|message| PackError::Payload { kind: kind.name(), message }),
+impl Tile<'_> {
+    /// The tile as `tile_size^2` RGBA8 texels of a pack described by `d`, exactly as
+    /// [`Pack::decode_rgba8`] decodes it in place; `None` if it is absent. For a tile held away
+    /// from its pack ([`Pack::tile_checked`]'s answer, or a copy of its bytes kept since: a cache
+    /// of stored tiles). The checksum is not checked here: check it when the bytes are read.
+    /// Nothing larger than `max_bytes` is allocated. An error is a
+    /// [`PackError::Payload`](crate::PackError::Payload) (no file, no position: the caller knows
+    /// which tile it decoded).
+    pub fn decode_rgba8(self, d: &Description, max_bytes: u64) -> Result<Option<Vec<u8>>> {
+        match self {
+            Tile::Absent => Ok(None),
+            Tile::Constant(value) => constant_rgba8(d, value, max_bytes)
+                .map(Some)
+                .map_err(|message| PackError::Payload { kind: TileKind::Constant.name(), message }),
+            Tile::Data(kind, bytes) => PayloadDecoder::default()
+                .decode(kind, bytes, d, max_bytes)
+                .map(Some)
+                .map_err(|message| PackError::Payload { kind: kind.name(), message }),
+        }
     }
-}
 
-/// A payload of `kind` that decodes to texels in the pack's own texel format (raw, zstd,
-/// zstd-delta, BC1, BC7) as one raw tile: `tile_size^2` texels of `channels` samples, rows top
-/// down, samples little-endian. For converting packs; PNG and JPEG payloads are image files
-/// (see [`decode_rgba8`]) and are refused here. Nothing larger than `max_bytes` is allocated.
-pub fn payload_texels(kind: TileKind, bytes: &[u8], d: &Description, max_bytes: u64) -> Result<Vec<u8>> {
-    let fail = |message: String| PackError::Payload { kind: kind.name(), message };
-    let mut decoder = PayloadDecoder::default();
-    match kind {
-        TileKind::Raw => {
-            let raw = raw_len(d, max_bytes).map_err(fail)?;
-            if bytes.len() as u64 != raw {
-                return Err(fail(format!("a raw tile is {raw} bytes, this payload {}", bytes.len())));
+    /// The tile's payload as texels in the pack's own texel format, for converting packs: one
+    /// raw tile, `tile_size^2` texels of `channels` samples, rows top down, samples
+    /// little-endian. Raw, zstd, zstd-delta, BC1 and BC7 payloads decode; PNG and JPEG payloads
+    /// are image files (see [`Tile::decode_rgba8`]), and absent and constant tiles have no
+    /// payload: those are refused. Nothing larger than `max_bytes` is allocated.
+    pub fn decode_texels(self, d: &Description, max_bytes: u64) -> Result<Vec<u8>> {
+        let (kind, bytes) = match self {
+            Tile::Data(kind, bytes) => (kind, bytes),
+            Tile::Absent => (TileKind::Absent, &[][..]),
+            Tile::Constant(value) => (TileKind::Constant, value),
+        };
+        let fail = |message: String| PackError::Payload { kind: kind.name(), message };
+        let mut decoder = PayloadDecoder::default();
+        match kind {
+            TileKind::Raw => {
+                let raw = raw_len(d, max_bytes).map_err(fail)?;
+                if bytes.len() as u64 != raw {
+                    return Err(fail(format!("a raw tile is {raw} bytes, this payload {}", bytes.len())));
+                }
+                Ok(bytes.to_vec())
             }
-            Ok(bytes.to_vec())
+            TileKind::Zstd | TileKind::ZstdDelta => decoder.unzstd(kind, bytes, d, max_bytes).map_err(fail),
+            TileKind::Bc1 | TileKind::Bc7 => {
+                let rgba = decode_blocks(kind, bytes, d, max_bytes).map_err(fail)?;
+                let channels = d.channels as usize;
+                if channels == 4 {
+                    return Ok(rgba);
+                }
+                let mut out = alloc(raw_len(d, max_bytes).map_err(fail)?).map_err(fail)?;
+                for (o, px) in out.chunks_exact_mut(channels).zip(rgba.chunks_exact(4)) {
+                    o.copy_from_slice(&px[..channels]);
+                }
+                Ok(out)
+            }
+            TileKind::Png | TileKind::Jpeg => {
+                Err(fail(format!("{} payloads are image files, not texels (see decode_rgba8)", kind.name())))
+            }
+            TileKind::Absent | TileKind::Constant => Err(fail(format!("{} tiles have no payload", kind.name()))),
         }
-        TileKind::Zstd | TileKind::ZstdDelta => decoder.unzstd(kind, bytes, d, max_bytes).map_err(fail),
-        TileKind::Bc1 | TileKind::Bc7 => {
-            let rgba = decode_blocks(kind, bytes, d, max_bytes).map_err(fail)?;
-            let channels = d.channels as usize;
-            if channels == 4 {
-                return Ok(rgba);
-            }
-            let mut out = alloc(raw_len(d, max_bytes).map_err(fail)?).map_err(fail)?;
-            for (o, px) in out.chunks_exact_mut(channels).zip(rgba.chunks_exact(4)) {
-                o.copy_from_slice(&px[..channels]);
-            }
-            Ok(out)
-        }
-        _ => Err(fail(format!("{} payloads are image files, not texels (see decode_rgba8)", kind.name()))),
     }
 }
 

@@ -6,12 +6,16 @@
 /// `\x89VTP\r\n\x1a\n`: the high bit catches 7-bit transfers, CR LF and LF catch newline
 /// conversion, 0x1A stops `type` on DOS, as in PNG's signature.
 pub const MAGIC: [u8; 8] = *b"\x89VTP\r\n\x1a\n";
+/// The format's major version: a reader reads packs of its own major version only.
 pub const MAJOR: u16 = 1;
 /// 1.1 adds the `zstd-delta` tile kind (and required-feature bit 0 for it) and specifies the
 /// BC1 and BC7 payloads that 1.0 reserved.
 pub const MINOR: u16 = 1;
+/// Bytes of the header.
 pub const HEADER_LEN: usize = 192;
+/// Bytes of one level-table row.
 pub const LEVEL_LEN: usize = 32;
+/// Bytes of one index entry.
 pub const ENTRY_LEN: usize = 24;
 /// Required-feature bit 0: the pack holds `zstd-delta` tiles (kind 8), which a 1.0 reader does
 /// not know. A writer sets it exactly when it stores such a tile.
@@ -39,7 +43,9 @@ pub enum TileKind {
     Raw = 2,
     /// `Raw` compressed with zstd.
     Zstd = 3,
+    /// A PNG file of the tile (8 or 16-bit samples, big-endian as PNG defines them).
     Png = 4,
+    /// A baseline JPEG file of the tile (8-bit samples; grey or RGB).
     Jpeg = 5,
     /// BC1 blocks (opaque RGB, 8 bytes per 4x4 texels), uploadable as-is.
     Bc1 = 6,
@@ -57,10 +63,12 @@ impl TileKind {
         [Absent, Constant, Raw, Zstd, Png, Jpeg, Bc1, Bc7, ZstdDelta]
     };
 
+    /// The kind of byte `v` of an index entry; `None` for a byte no kind has.
     pub fn from_u8(v: u8) -> Option<TileKind> {
         TileKind::ALL.get(v as usize).copied()
     }
 
+    /// The kind in a word, as the tiler's options and reports spell it.
     pub fn name(self) -> &'static str {
         match self {
             TileKind::Absent => "absent",
@@ -99,10 +107,13 @@ impl TileKind {
 pub struct Description {
     /// Real image size at LOD 0, in texels.
     pub width: u32,
+    /// Real image height at LOD 0, in texels.
     pub height: u32,
     /// Stored tile side, borders included.
     pub tile_size: u32,
+    /// Texels of each tile's border, repeated from its neighbours, on each side.
     pub border: u32,
+    /// Levels in the level table, LOD 0 first.
     pub level_count: u32,
     /// 1 grey, 2 grey+alpha, 3 RGB, 4 RGBA.
     pub channels: u8,
@@ -243,40 +254,69 @@ pub fn delta_decode_rows(bytes: &mut [u8], width: usize, channels: usize, sample
 /// The fixed header at offset 0.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Header {
+    /// Format major version ([`MAJOR`]).
     pub major: u16,
+    /// Format minor version ([`MINOR`]): what this writer's format adds, which older readers of the
+    /// same major version ignore.
     pub minor: u16,
+    /// Features a reader must understand to read the pack (bits such as [`REQUIRED_ZSTD_DELTA`]).
     pub required_features: u64,
+    /// Features a reader may ignore.
     pub optional_features: u64,
+    /// The file's length in bytes.
     pub file_len: u64,
     /// Identifies the content: FNV-1a 64 over the metadata and every index entry.
     pub content_hash: u64,
+    /// What the texture is.
     pub description: Description,
     /// Power of two >= 8: the data section starts at a multiple of it.
     pub alignment: u32,
     /// Power of two >= 8: every payload starts at a multiple of it (65536 gives each tile its
     /// own Vulkan sparse block).
     pub payload_alignment: u32,
+    /// Where the level table starts.
     pub levels_offset: u64,
+    /// Where the index starts.
     pub index_offset: u64,
+    /// Index entries: every tile of every level.
     pub index_count: u64,
+    /// CRC-32C of the level table and the index together.
     pub index_crc: u32,
+    /// Where the metadata (JSON text) starts.
     pub meta_offset: u64,
+    /// Bytes of metadata.
     pub meta_len: u32,
+    /// CRC-32C of the metadata.
     pub meta_crc: u32,
+    /// Where the data section (the payloads) starts.
     pub data_offset: u64,
+    /// Bytes of the data section, which ends the file.
     pub data_len: u64,
 }
 
 /// One row of the level table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Level {
+    /// Columns of tiles.
     pub tiles_w: u32,
+    /// Rows of tiles.
     pub tiles_h: u32,
-    /// Index position of tile (0, 0) of this level.
+    /// Index position of tile (0, 0) of this level: the levels' entries follow each other,
+    /// LOD 0 first. A reader finds it in the file; [`PackWriter`](crate::PackWriter) places the
+    /// levels itself and ignores what a level given to it says.
     pub first_entry: u64,
-    /// Real image size at this level in texels (`ceil(width / 2^lod)`).
+    /// Real image width at this level in texels (`ceil(width / 2^lod)`).
     pub width: u32,
+    /// Real image height at this level in texels.
     pub height: u32,
+}
+
+impl Level {
+    /// A level of `tiles_w x tiles_h` tiles covering `width x height` texels of the image, for
+    /// a writer (which places it in the index: `first_entry` is 0 until then).
+    pub fn new(tiles_w: u32, tiles_h: u32, width: u32, height: u32) -> Level {
+        Level { tiles_w, tiles_h, first_entry: 0, width, height }
+    }
 }
 
 /// One index entry.
@@ -285,23 +325,26 @@ pub struct Entry {
     /// Payload offset in the file; for `Constant`, the texel's samples (little-endian, packed
     /// from byte 0); 0 for `Absent`.
     pub offset_or_value: u64,
+    /// Payload bytes (0 without payload).
     pub len: u32,
     /// CRC-32C of the payload (0 without payload).
     pub crc: u32,
+    /// The tile's [`TileKind`], as its byte (an unknown byte is an error of the entry).
     pub kind: u8,
 }
 
 impl Entry {
+    /// The entry of an absent tile.
     pub const ABSENT: Entry = Entry { offset_or_value: 0, len: 0, crc: 0, kind: TileKind::Absent as u8 };
 }
 
 fn put_u16(b: &mut [u8], at: usize, v: u16) {
     b[at..at + 2].copy_from_slice(&v.to_le_bytes());
 }
-fn put_u32(b: &mut [u8], at: usize, v: u32) {
+pub(crate) fn put_u32(b: &mut [u8], at: usize, v: u32) {
     b[at..at + 4].copy_from_slice(&v.to_le_bytes());
 }
-fn put_u64(b: &mut [u8], at: usize, v: u64) {
+pub(crate) fn put_u64(b: &mut [u8], at: usize, v: u64) {
     b[at..at + 8].copy_from_slice(&v.to_le_bytes());
 }
 /// The `N` bytes at `at` (panics past the end, like indexing: callers check lengths first).
@@ -320,8 +363,12 @@ pub(crate) fn u64_at(b: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(bytes_at(b, at))
 }
 
-/// Byte offsets of the header's fields (see the spec's diagram).
-pub mod at {
+/// Byte offsets of the header's fields (see the spec's diagram). The crate's own: a reader or
+/// writer of packs goes through [`Header`]; the tests and fuzzers that edit a pack's bytes get
+/// them from the hidden `fuzzing` feature.
+pub(crate) mod at {
+    // Each is named as the field it locates, which `Header` documents.
+    #![allow(missing_docs)]
     pub const MAJOR: usize = 8;
     pub const MINOR: usize = 10;
     pub const HEADER_LEN: usize = 12;
@@ -428,6 +475,7 @@ impl Header {
 }
 
 impl Level {
+    /// The row's bytes.
     pub fn encode(&self) -> [u8; LEVEL_LEN] {
         let mut b = [0u8; LEVEL_LEN];
         put_u32(&mut b, 0, self.tiles_w);
@@ -450,6 +498,7 @@ impl Level {
 }
 
 impl Entry {
+    /// The entry's bytes.
     pub fn encode(&self) -> [u8; ENTRY_LEN] {
         let mut b = [0u8; ENTRY_LEN];
         put_u64(&mut b, 0, self.offset_or_value);
@@ -466,56 +515,9 @@ impl Entry {
 
 /// FNV-1a, 64 bits: the content hash is for identification (cache keys, "same pack?"), not
 /// for security; per-tile CRC-32C values are what it covers.
-pub fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
+pub(crate) fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
     bytes.iter().fold(hash, |h, b| (h ^ *b as u64).wrapping_mul(0x0000_0100_0000_01B3))
 }
 
-pub const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-
-/// The levels of a square power-of-two pyramid of `description` (the tiler's layout).
-pub fn pyramid_levels(d: &Description, tiles_at_lod0: u32) -> Vec<Level> {
-    let mut first = 0u64;
-    (0..d.level_count)
-        .map(|lod| {
-            let n = tiles_at_lod0 >> lod;
-            let shrink = |v: u32| ((v as u64 + (1u64 << lod) - 1) >> lod) as u32;
-            let level =
-                Level { tiles_w: n, tiles_h: n, first_entry: first, width: shrink(d.width), height: shrink(d.height) };
-            first += n as u64 * n as u64;
-            level
-        })
-        .collect()
-}
-
-/// For tests and fuzzing: recomputes every checksum the header's offsets let it find (index,
-/// metadata, content hash, header), so that a deliberate change to a pack's bytes gets past the
-/// checksums to the checks behind them. Sections the header places outside `b` keep their old
-/// checksums.
-pub fn reseal(b: &mut [u8]) {
-    fn section(b: &[u8], offset: u64, len: Option<u64>) -> Option<&[u8]> {
-        let start = usize::try_from(offset).ok()?;
-        let end = start.checked_add(usize::try_from(len?).ok()?)?;
-        b.get(start..end)
-    }
-    if b.len() < HEADER_LEN {
-        return;
-    }
-    let count = |field| u32_at(b, field) as u64;
-    let levels = section(b, u64_at(b, at::LEVELS_OFFSET), count(at::LEVEL_COUNT).checked_mul(LEVEL_LEN as u64));
-    let index = section(b, u64_at(b, at::INDEX_OFFSET), u64_at(b, at::INDEX_COUNT).checked_mul(ENTRY_LEN as u64));
-    let meta = section(b, u64_at(b, at::META_OFFSET), Some(count(at::META_LEN)));
-    let index_crc = levels.zip(index).map(|(l, i)| crc32c::crc32c_append(crc32c::crc32c(l), i));
-    let meta_crc = meta.map(crc32c::crc32c);
-    let hash = meta.zip(index).map(|(m, i)| fnv1a(fnv1a(FNV_OFFSET, m), i));
-    if let Some(c) = index_crc {
-        put_u32(b, at::INDEX_CRC, c);
-    }
-    if let Some(c) = meta_crc {
-        put_u32(b, at::META_CRC, c);
-    }
-    if let Some(h) = hash {
-        put_u64(b, at::CONTENT_HASH, h);
-    }
-    let crc = crc32c::crc32c(&b[..at::HEADER_CRC]);
-    put_u32(b, at::HEADER_CRC, crc);
-}
+/// FNV-1a's offset basis: the hash of no bytes.
+pub(crate) const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;

@@ -40,36 +40,42 @@ impl Bytes {
 /// An open pack. `Send + Sync`: lookups take `&self` and touch no shared state.
 pub struct Pack {
     bytes: Bytes,
-    head: PackHead,
+    head: PackLayout,
 }
 
-/// What a reader checks and keeps of a pack before it reads any tile: the header, the level
-/// table and the caps, with the checks of each part and of each index entry and payload. A
+/// Where everything in a pack lies, checked: the header, the level table and the caps a reader
+/// holds it to, with the checks of each part and of each index entry and payload: what a
+/// reader knows of a pack before it reads any tile. A
 /// [`Pack`] has one over its whole file; a reader that fetches a pack in pieces (over HTTP
-/// `Range` requests, say) builds one from the pieces it fetched ([`PackHead::read_header`],
-/// then [`PackHead::new`]) and checks every entry ([`PackHead::place`]) and payload
-/// ([`PackHead::check_payload`]) with the same code, so both readers refuse the same bytes with
+/// `Range` requests, say) builds one from the pieces it fetched ([`PackLayout::read_header`],
+/// then [`PackLayout::new`]) and checks every entry ([`PackLayout::place`]) and payload
+/// ([`PackLayout::check_payload`]) with the same code, so both readers refuse the same bytes with
 /// the same errors.
 #[derive(Clone, Debug)]
-pub struct PackHead {
+pub struct PackLayout {
     path: PathBuf,
     header: Header,
     levels: Vec<Level>,
     limits: Limits,
 }
 
-/// Where a tile's index entry says its texels are (see [`PackHead::place`]).
+/// Where a tile's index entry says its texels are (see [`PackLayout::place`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Place<'a> {
+    /// No tile: a runtime falls back to the parent tile.
     Absent,
     /// One colour: these samples, a prefix of the entry's bytes.
     Constant(&'a [u8]),
     /// A payload of `kind` at `offset` of `len` bytes, inside the data section, whose CRC-32C
     /// must be `crc`.
     Data {
+        /// How the payload is stored.
         kind: TileKind,
+        /// Its first byte in the file.
         offset: u64,
+        /// Its length in bytes.
         len: u32,
+        /// The CRC-32C its bytes must have.
         crc: u32,
     },
 }
@@ -77,6 +83,7 @@ pub enum Place<'a> {
 /// A tile as stored.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Tile<'a> {
+    /// No tile: a runtime falls back to the parent tile.
     Absent,
     /// Every texel is these samples (channels x sample bytes, little-endian).
     Constant(&'a [u8]),
@@ -87,8 +94,11 @@ pub enum Tile<'a> {
 /// A tile's address.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct TileId {
+    /// The level, 0 the finest.
     pub lod: u32,
+    /// The column of tiles in that level, 0 at the left.
     pub x: u32,
+    /// The row of tiles in that level, 0 at the top.
     pub y: u32,
 }
 
@@ -145,15 +155,15 @@ impl Pack {
 
     fn new(path: &Path, bytes: Bytes, limits: Limits) -> Result<Pack> {
         let b = bytes.as_slice();
-        let h = PackHead::read_header(path, b, b.len() as u64, limits)?;
+        let h = PackLayout::read_header(path, b, b.len() as u64, limits)?;
         let levels = &b[h.levels_offset as usize..][..h.description.level_count as usize * LEVEL_LEN];
         let meta = &b[h.meta_offset as usize..][..h.meta_len as usize];
-        let head = PackHead::new(path, h, levels, meta, limits)?;
+        let head = PackLayout::new(path, h, levels, meta, limits)?;
         Ok(Pack { bytes, head })
     }
 
     /// The checked header and level table.
-    pub fn head(&self) -> &PackHead {
+    pub fn layout(&self) -> &PackLayout {
         &self.head
     }
 
@@ -162,6 +172,7 @@ impl Pack {
         &self.head.limits
     }
 
+    /// The file it was opened from (or the name given to its bytes), for messages.
     pub fn path(&self) -> &Path {
         &self.head.path
     }
@@ -177,14 +188,17 @@ impl Pack {
         self.head.check_index(levels, index)
     }
 
+    /// The checked header.
     pub fn header(&self) -> &Header {
         &self.head.header
     }
 
+    /// What the texture is: its size, tiles and texels.
     pub fn description(&self) -> &Description {
         &self.head.header.description
     }
 
+    /// The level table, LOD 0 first.
     pub fn levels(&self) -> &[Level] {
         &self.head.levels
     }
@@ -262,7 +276,7 @@ impl Pack {
     }
 }
 
-impl PackHead {
+impl PackLayout {
     /// The header of a pack of `file_len` bytes from its first bytes `first` (at least
     /// [`HEADER_LEN`] of them when the file has as many), checked as [`Pack::open`] checks it:
     /// signature, checksum, reserved bytes, version, required features, fixed lengths, the
@@ -345,10 +359,28 @@ impl PackHead {
         Ok(h)
     }
 
-    /// The head of a pack whose header [`PackHead::read_header`] checked, from its level table
+    /// For a reader that allocates the metadata it reads (one that fetches a pack in pieces; a
+    /// mapped pack costs nothing): the header's `meta_len` held to `limits.max_decoded_bytes`,
+    /// the cap on any one buffer, before it is fetched. `read_header` checked the claim against
+    /// the file's length only.
+    pub fn check_metadata_len(path: &Path, h: &Header, limits: Limits) -> Result<()> {
+        if u64::from(h.meta_len) > limits.max_decoded_bytes {
+            return Err(PackError::LimitExceeded {
+                path: path.to_path_buf(),
+                field: "meta_len".into(),
+                offset: format::at::META_LEN as u64,
+                value: h.meta_len.into(),
+                limit: limits.max_decoded_bytes,
+                cap: "max_decoded_bytes",
+            });
+        }
+        Ok(())
+    }
+
+    /// The head of a pack whose header [`PackLayout::read_header`] checked, from its level table
     /// (`levels`, the header's `level_count` rows) and metadata (`meta`, `meta_len` bytes):
     /// the level table's claims against `limits` and its sense, and the metadata's checksum.
-    pub fn new(path: &Path, h: Header, levels: &[u8], meta: &[u8], limits: Limits) -> Result<PackHead> {
+    pub fn new(path: &Path, h: Header, levels: &[u8], meta: &[u8], limits: Limits) -> Result<PackLayout> {
         let corrupt = |section: &'static str, offset: u64, message: String| PackError::Corrupt {
             path: path.to_path_buf(),
             section,
@@ -382,21 +414,25 @@ impl PackHead {
         if crc32c::crc32c(meta) != h.meta_crc {
             return Err(corrupt("metadata", h.meta_offset, "metadata checksum mismatch".into()));
         }
-        Ok(PackHead { path: path.to_path_buf(), header: h, levels, limits })
+        Ok(PackLayout { path: path.to_path_buf(), header: h, levels, limits })
     }
 
+    /// The pack's file or URL, for messages.
     pub fn path(&self) -> &Path {
         &self.path
     }
 
+    /// The checked header.
     pub fn header(&self) -> &Header {
         &self.header
     }
 
+    /// The level table, LOD 0 first.
     pub fn levels(&self) -> &[Level] {
         &self.levels
     }
 
+    /// The caps the pack was checked against.
     pub fn limits(&self) -> &Limits {
         &self.limits
     }
@@ -415,7 +451,7 @@ impl PackHead {
         Ok(level.first_entry + id.y as u64 * level.tiles_w as u64 + id.x as u64)
     }
 
-    /// The file offset of index entry `position` (one of [`PackHead::position`]'s answers).
+    /// The file offset of index entry `position` (one of [`PackLayout::position`]'s answers).
     pub fn entry_offset(&self, position: u64) -> u64 {
         self.header.index_offset + position * ENTRY_LEN as u64
     }
@@ -478,7 +514,7 @@ impl PackHead {
         self.check_index_parts(levels, [index])
     }
 
-    /// As [`PackHead::check_index`], the index given in consecutive parts (blocks fetched one by
+    /// As [`PackLayout::check_index`], the index given in consecutive parts (blocks fetched one by
     /// one), none copied.
     pub fn check_index_parts<'a>(&self, levels: &[u8], index: impl IntoIterator<Item = &'a [u8]>) -> Result<()> {
         let h = &self.header;

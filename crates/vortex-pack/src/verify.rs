@@ -39,14 +39,18 @@ pub struct Problem {
     pub tile: Option<TileId>,
     /// `header`, `levels`, `index`, `metadata`, `data` or `padding`.
     pub section: &'static str,
+    /// What is wrong.
     pub message: String,
 }
 
 /// Everything `verify` found: counts, and every problem in file order.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Report {
+    /// The pack's file.
     pub path: PathBuf,
+    /// Its length in bytes.
     pub file_bytes: u64,
+    /// The header's content hash.
     pub content_hash: u64,
     /// Index entries (every tile address of every level).
     pub tiles: u64,
@@ -56,6 +60,7 @@ pub struct Report {
     pub unknown_kinds: u64,
     /// Distinct payloads in the data section (inside it and not empty), and their bytes.
     pub stored_payloads: u64,
+    /// Bytes of stored payloads (each shared payload once).
     pub payload_bytes: u64,
     /// Entries that point at a payload an earlier entry already points at (deduplication).
     pub shared_payloads: u64,
@@ -63,6 +68,7 @@ pub struct Report {
     pub padding_bytes: u64,
     /// Payloads decoded (with `VerifyOptions::decode`, feature `decode`).
     pub decoded_payloads: u64,
+    /// Every problem found, in file order; none for a sound pack.
     pub problems: Vec<Problem>,
 }
 

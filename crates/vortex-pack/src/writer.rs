@@ -23,9 +23,11 @@ use crate::writeback::Writeback;
 /// A tile handed to the writer.
 #[derive(Clone, Copy, Debug)]
 pub enum NewTile<'a> {
+    /// No tile: a runtime falls back to the parent tile (what a tile never added is, too).
     Absent,
     /// One texel's samples (channels x sample bytes, little-endian).
     Constant(&'a [u8]),
+    /// A payload of this kind, stored as given (identical payloads once).
     Data(TileKind, &'a [u8]),
 }
 
@@ -47,16 +49,27 @@ impl Default for WriteOptions {
 /// What a finished pack holds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct WriteSummary {
+    /// Tiles in the index.
     pub tiles: u64,
+    /// Payloads stored (each distinct payload once).
     pub stored_payloads: u64,
+    /// Tiles whose payload equalled one already stored, which they share.
     pub deduplicated: u64,
+    /// One-colour tiles, held in their entry.
     pub constant: u64,
+    /// Absent tiles (added as such, or never added).
     pub absent: u64,
+    /// Bytes of stored payloads.
     pub payload_bytes: u64,
+    /// The file's length in bytes.
     pub file_bytes: u64,
+    /// The header's content hash.
     pub content_hash: u64,
 }
 
+/// Writes a pack in one pass: tiles in any order ([`PackWriter::add`]), then
+/// [`PackWriter::finish`], which writes the index and header and renames the file into place.
+/// Dropped unfinished, it removes its temporary file: a pack is whole or absent.
 pub struct PackWriter {
     dest: PathBuf,
     tmp: PathBuf,
@@ -78,13 +91,15 @@ pub struct PackWriter {
 }
 
 impl PackWriter {
-    /// Starts `dest` (written as `.<name>.tmp-<pid>` beside it until `finish`). A pack that
-    /// readers with the default [`Limits`] would refuse (a tile side or tile count over them) is
-    /// refused here with [`PackError::LimitExceeded`], before its index is allocated.
+    /// Starts `dest` (written as [`temporary_path`] beside it until `finish`). `levels` are the
+    /// level table's rows, LOD 0 first; the writer places their entries one after another in
+    /// the index (each level's `first_entry`, whatever it said). A pack that readers with the
+    /// default [`Limits`] would refuse (a tile side or tile count over them) is refused here
+    /// with [`PackError::LimitExceeded`], before its index is allocated.
     pub fn create(
         dest: impl AsRef<Path>,
         description: Description,
-        levels: Vec<Level>,
+        mut levels: Vec<Level>,
         metadata: &[u8],
         options: WriteOptions,
     ) -> Result<PackWriter> {
@@ -115,10 +130,11 @@ impl PackWriter {
         }
         let meta_len = u32::try_from(metadata.len()).map_err(|_| usage("metadata over 4 GiB".into()))?;
         let mut count = 0u64;
-        for l in &levels {
-            if l.first_entry != count || l.tiles_w == 0 || l.tiles_h == 0 {
-                return Err(usage("levels must follow each other in the index and hold tiles".into()));
+        for l in &mut levels {
+            if l.tiles_w == 0 || l.tiles_h == 0 {
+                return Err(usage(format!("a level of {}x{} tiles: every level holds tiles", l.tiles_w, l.tiles_h)));
             }
+            l.first_entry = count;
             count =
                 count.checked_add(l.tiles_w as u64 * l.tiles_h as u64).ok_or_else(|| usage("too many tiles".into()))?;
         }
@@ -152,8 +168,7 @@ impl PackWriter {
         let mut written = Vec::new();
         written.try_reserve_exact(count_usize).map_err(out_of_memory)?;
         written.resize(count_usize, false);
-        let name = dest.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "pack".into());
-        let tmp = dest.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
+        let tmp = temporary_path(&dest);
         let file =
             OpenOptions::new().write(true).read(true).create(true).truncate(true).open(&tmp).map_err(|e| {
                 io(&dest, std::io::Error::new(e.kind(), format!("cannot create {}: {e}", tmp.display())))
@@ -427,6 +442,42 @@ impl Drop for PackWriter {
     }
 }
 
+/// Where [`PackWriter::create`] writes `dest` until `finish` renames it over `dest`:
+/// `.NAME.tmp-PID` in the same directory, NAME being `dest`'s file name and PID this process's
+/// id. A killed writer leaves it behind; [`temporary_pid`] recognises it, to clean up after.
+pub fn temporary_path(dest: &Path) -> PathBuf {
+    let name = dest.file_name().map_or_else(|| "pack".into(), |n| n.to_string_lossy());
+    dest.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+}
+
+/// The id of the process that was writing a pack named `dest_name` (a file name, no directory)
+/// as `file_name`, if `file_name` is such a temporary ([`temporary_path`]): `.NAME.tmp-PID`.
+pub fn temporary_pid(dest_name: &str, file_name: &str) -> Option<u32> {
+    let digits = file_name.strip_prefix('.')?.strip_prefix(dest_name)?.strip_prefix(".tmp-")?;
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    digits.parse().ok()
+}
+
 fn io(path: &Path, source: std::io::Error) -> PackError {
     PackError::Io { path: path.to_path_buf(), source }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_temporary_name_is_parsed_as_it_is_made() {
+        let tmp = temporary_path(Path::new("/some/dir/world.vtpk"));
+        assert_eq!(tmp.parent(), Some(Path::new("/some/dir")));
+        let name = tmp.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+        assert_eq!(temporary_pid("world.vtpk", name), Some(std::process::id()));
+        assert_eq!(temporary_pid("other.vtpk", name), None);
+        assert_eq!(temporary_pid("p", ".p.tmp-123"), Some(123));
+        for not in [".p.tmp-", ".p.tmp-12x", ".p.partial-12", "p.tmp-12", ".p.tmp-12.old", ".pq.tmp-1"] {
+            assert_eq!(temporary_pid("p", not), None, "{not}");
+        }
+    }
 }

@@ -62,8 +62,15 @@ pub enum DeviceError {
     /// No adapter on any enabled backend (no driver, or none matching the environment).
     #[error("no GPU adapter found (is a Vulkan driver such as mesa-vulkan-drivers installed?): {0}")]
     NoAdapter(#[from] wgpu::RequestAdapterError),
+    /// The adapter's largest 2D texture is smaller than the harness needs.
     #[error("the adapter's largest 2D texture is {have} texels per side; {need} are needed")]
-    TextureTooSmall { have: u32, need: u32 },
+    TextureTooSmall {
+        /// Texels per side the adapter allows.
+        have: u32,
+        /// Texels per side needed.
+        need: u32,
+    },
+    /// The adapter refused the device (features or limits it lacks).
     #[error("the adapter refused the device: {0}")]
     Device(#[from] wgpu::RequestDeviceError),
     /// Waiting for the GPU to finish its work failed (the device is lost, or the wait timed out).
@@ -74,9 +81,13 @@ pub enum DeviceError {
 /// A headless device and its queue.
 #[derive(Debug)]
 pub struct Gpu {
+    /// The instance the adapter came from.
     pub instance: wgpu::Instance,
+    /// The adapter.
     pub adapter: wgpu::Adapter,
+    /// The device.
     pub device: wgpu::Device,
+    /// Its queue.
     pub queue: wgpu::Queue,
 }
 

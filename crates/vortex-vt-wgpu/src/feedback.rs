@@ -26,8 +26,9 @@ pub struct FeedbackBuffer {
     no_requests: Vec<u8>,
     /// Pixels per block side.
     pub block: u32,
-    /// Blocks per row and per column: the frame's size divided by `block`, rounded up.
+    /// Blocks per row: the frame's width divided by `block`, rounded up.
     pub columns: u32,
+    /// Blocks per column: the frame's height divided by `block`, rounded up.
     pub rows: u32,
 }
 
@@ -46,10 +47,12 @@ impl FeedbackBuffer {
         FeedbackBuffer { buffer, no_requests, block, columns, rows }
     }
 
+    /// Words in the buffer: one per block.
     pub fn words(&self) -> u32 {
         self.columns * self.rows
     }
 
+    /// The storage buffer `vt_feedback` writes (bind it where the shader module says).
     pub fn buffer(&self) -> &wgpu::Buffer {
         &self.buffer
     }
@@ -106,8 +109,11 @@ fn bayer_pixel(rank: u64, bits: u32) -> [u32; 2] {
 pub struct FeedbackFrame {
     /// The number [`FeedbackReadback::encode_copy`] gave the copy.
     pub frame: u64,
+    /// Words per row.
     pub columns: u32,
+    /// Rows.
     pub rows: u32,
+    /// The words, row by row.
     pub words: Vec<u32>,
 }
 
@@ -140,7 +146,9 @@ struct Slot {
 /// for the oldest frame the GPU has finished, if any.
 #[derive(Debug)]
 pub struct FeedbackReadback {
+    /// Words per row of the buffers it reads.
     pub columns: u32,
+    /// Rows of the buffers it reads.
     pub rows: u32,
     slots: Vec<Slot>,
     next_frame: u64,

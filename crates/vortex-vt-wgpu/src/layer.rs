@@ -31,6 +31,7 @@ pub enum LayerKind {
 }
 
 impl LayerKind {
+    /// The kind in a word (`colour`, `data`), as scenes and the command line spell it.
     pub fn name(self) -> &'static str {
         match self {
             LayerKind::Colour => "colour",
@@ -47,15 +48,19 @@ impl LayerKind {
 /// One layer of every texture of a runtime: `sources[t]` is texture `t`'s.
 #[derive(Clone)]
 pub struct Layer {
+    /// Colour or data.
     pub kind: LayerKind,
+    /// Texture `t`'s pages of this layer at index `t`.
     pub sources: Vec<Arc<dyn PageSource>>,
 }
 
 impl Layer {
+    /// A colour layer of `sources`.
     pub fn colour(sources: Vec<Arc<dyn PageSource>>) -> Layer {
         Layer { kind: LayerKind::Colour, sources }
     }
 
+    /// A data layer of `sources` (normals, roughness: filtered as stored).
     pub fn data(sources: Vec<Arc<dyn PageSource>>) -> Layer {
         Layer { kind: LayerKind::Data, sources }
     }

@@ -32,6 +32,9 @@
 //! Everything runs on lavapipe, Mesa's CPU Vulkan driver, so it is tested on machines without a
 //! GPU. `examples/embed.rs` draws a pack with its own pipeline in under 200 lines.
 
+// Every public item documented: clippy -D warnings (CI) makes it stick.
+#![warn(missing_docs)]
+
 pub mod bc7;
 mod bindings;
 mod clock;
@@ -58,7 +61,7 @@ pub use device::{DeviceError, Gpu};
 pub use feedback::{FeedbackBuffer, FeedbackFrame, FeedbackReadback};
 pub use layer::{Layer, LayerKind, MAX_LAYERS};
 pub use loader::{
-    DEFAULT_MEMORY_TIER_BYTES, LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS,
+    DEFAULT_MEMORY_TIER_BYTES, LoadCounters, LoadError, LoadedPage, Loader, LoaderError, RetryPolicy, STAND_IN_COLORS,
     TIER_ENTRY_OVERHEAD, TierUsage, stand_in_tile,
 };
 pub use page_cache::{CacheError, CacheFormat, PageCache};
@@ -66,8 +69,14 @@ pub use page_table::{GpuPageTable, PageTableError};
 pub use readback::ReadbackError;
 pub use runtime::{FrameStats, Pacing, Runtime, RuntimeConfig, RuntimeError};
 pub use sample::SampleFilter;
-pub use source::{PageSource, ReadError, SourceTile, StoredRead, StoredTile};
+pub use source::{PageSource, ReadError, ReadErrorKind, SourceTile, StoredRead, StoredTile, TileId, TileKind};
 pub use texture::VirtualTexture;
+// What an embedder names from the crates below (opening packs, pages and slots for the loader),
+// and those crates themselves: no direct dependency on them to keep in step with this one.
+pub use vortex_pack::{self, Limits, Pack, PackError};
+pub use vortex_vt::page::PageId;
+pub use vortex_vt::residency::Slot;
+pub use vortex_vt::{self};
 
 /// The README's examples, compiled as doc tests.
 #[cfg(doctest)]

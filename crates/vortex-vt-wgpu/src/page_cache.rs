@@ -40,6 +40,7 @@ impl CacheFormat {
         CacheFormat::ALL.into_iter().find(|f| f.name() == name)
     }
 
+    /// The format in a word (`rgba8`, `bc1`, `bc7`), as the command line spells it.
     pub fn name(self) -> &'static str {
         match self {
             CacheFormat::Rgba8 => "rgba8",
@@ -80,16 +81,36 @@ impl CacheFormat {
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[non_exhaustive]
 pub enum CacheError {
+    /// Slots per side outside what a page-table entry can address.
     #[error("{slots_per_side} slots per side: the page-table entry has room for 1..=256")]
-    SlotsPerSide { slots_per_side: u16 },
+    SlotsPerSide {
+        /// Slots per side asked for.
+        slots_per_side: u16,
+    },
+    /// A border that leaves no payload.
     #[error("border {border} leaves no payload in a {tile_size}-texel tile")]
-    Border { tile_size: u32, border: u32 },
+    Border {
+        /// Stored tile side.
+        tile_size: u32,
+        /// Border on each side.
+        border: u32,
+    },
+    /// A cache larger than the device's largest 2D texture.
     #[error("a {side}-texel cache is over the device's {max}-texel 2D texture limit")]
-    TooLarge { side: u32, max: u32 },
+    TooLarge {
+        /// The cache's side in texels.
+        side: u32,
+        /// The device's largest.
+        max: u32,
+    },
+    /// A BC cache the device or the tile size does not allow.
     #[error(
         "a BC cache needs the device feature TEXTURE_COMPRESSION_BC and a tile side that is a multiple of 4 (it is {tile_size})"
     )]
-    Bc { tile_size: u32 },
+    Bc {
+        /// Stored tile side.
+        tile_size: u32,
+    },
 }
 
 /// The physical page cache texture and its geometry.
@@ -212,10 +233,12 @@ impl PageCache {
         (slot as u32 % side * self.tile_size, slot as u32 / side * self.tile_size)
     }
 
+    /// Slots in all.
     pub fn slot_count(&self) -> u32 {
         (self.slots_per_side as u32).pow(2)
     }
 
+    /// Slots per side of the square cache.
     pub fn slots_per_side(&self) -> u16 {
         self.slots_per_side
     }
@@ -225,10 +248,12 @@ impl PageCache {
         self.tile_size
     }
 
+    /// Texels of border on each side of a tile.
     pub fn border(&self) -> u32 {
         self.border
     }
 
+    /// The format texels are held in.
     pub fn format(&self) -> CacheFormat {
         self.format
     }

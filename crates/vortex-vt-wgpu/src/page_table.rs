@@ -39,10 +39,19 @@ const HEADER: usize = MAX_TEXTURES as usize * 16;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum PageTableError {
+    /// The tables are larger than the device lets a shader bind.
     #[error(
         "the page tables of {textures} texture(s) need {bytes} bytes, over the device's largest storage buffer binding of {max} bytes"
     )]
-    TooLarge { textures: usize, bytes: u64, max: u64 },
+    TooLarge {
+        /// Textures.
+        textures: usize,
+        /// Bytes their tables need.
+        bytes: u64,
+        /// The device's largest storage buffer binding.
+        max: u64,
+    },
+    /// No texture given.
     #[error("a page table for no texture")]
     NoTextures,
 }
@@ -155,10 +164,12 @@ impl GpuPageTable {
         queue.write_buffer(&self.buffer, index * 4, bytemuck::cast_slice(words));
     }
 
+    /// The textures' grids, by texture id.
     pub fn grids(&self) -> &[TextureGrid] {
         &self.grids
     }
 
+    /// Slots per side of the cache its entries point into.
     pub fn cache_side(&self) -> u16 {
         self.cache_side
     }

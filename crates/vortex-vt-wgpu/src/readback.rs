@@ -16,27 +16,38 @@ pub enum ReadbackError {
     /// Waiting for the GPU to finish the copy failed.
     #[error("reading back the {what}: waiting for the GPU failed (is the device lost?): {source}")]
     Wait {
+        /// What was read back.
         what: &'static str,
+        /// What wgpu said.
         #[source]
         source: wgpu::PollError,
     },
     /// The buffer could not be mapped: the device was lost, or the buffer destroyed.
     #[error("reading back the {what}: mapping the buffer failed (is the device lost?): {source}")]
     Map {
+        /// What was read back.
         what: &'static str,
+        /// What wgpu said.
         #[source]
         source: wgpu::BufferAsyncError,
     },
     /// The mapping of one frame's feedback failed (the ring goes on with the next frames).
     #[error("reading back the feedback of frame {frame}: mapping the buffer failed (is the device lost?): {source}")]
     Feedback {
+        /// The frame.
         frame: u64,
+        /// What wgpu said.
         #[source]
         source: wgpu::BufferAsyncError,
     },
     /// The GPU was done, yet the map was never answered, or the mapped range was refused.
     #[error("reading back the {what}: the buffer is not mapped: {message}")]
-    NotMapped { what: &'static str, message: String },
+    NotMapped {
+        /// What was read back.
+        what: &'static str,
+        /// What happened.
+        message: String,
+    },
 }
 
 /// A mappable buffer that a `width x height` texture region is copied into, row by row.

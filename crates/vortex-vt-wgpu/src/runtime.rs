@@ -50,26 +50,44 @@ use crate::texture::VirtualTexture;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum RuntimeError {
+    /// The loader cannot be made (its sources).
     #[error("{0}")]
     Loader(#[from] LoaderError),
+    /// The physical page cache cannot be made.
     #[error("physical page cache: {0}")]
     Cache(#[from] CacheError),
+    /// The residency cannot be made (its configuration).
     #[error("residency: {0}")]
     Residency(#[from] ConfigError),
+    /// The residency refused a frame's update.
     #[error("residency: {0}")]
     ResidencyUpdate(#[from] UpdateError),
+    /// The page table cannot be made.
     #[error("page table: {0}")]
     PageTable(#[from] PageTableError),
+    /// The configuration does not fit the textures (layers of other grids, say).
     #[error("{0}")]
     Config(String),
+    /// The checked invariants broke (with `RuntimeConfig::check_invariants`).
     #[error("frame {frame}: the page-table invariants are broken: {violation}")]
-    Invariant { frame: u64, violation: Violation },
+    Invariant {
+        /// The frame.
+        frame: u64,
+        /// The first broken rule.
+        violation: Violation,
+    },
+    /// The page table maps other pages than those that landed.
     #[error("frame {frame}: the page table does not map exactly the pages that have landed")]
-    Mapping { frame: u64 },
+    Mapping {
+        /// The frame.
+        frame: u64,
+    },
     /// The feedback could not be read back (a lost device).
     #[error("frame {frame}: {source}")]
     Readback {
+        /// The frame.
         frame: u64,
+        /// What failed.
         #[source]
         source: ReadbackError,
     },
@@ -118,6 +136,7 @@ pub struct RuntimeConfig {
     /// `Some(Rgba8)` keeps every texel exact (what tests comparing pictures want); `Some(Bc1)`
     /// (opaque textures only) or `Some(Bc7)` force a transcode on the loader's threads.
     pub cache_format: Option<CacheFormat>,
+    /// How the frame's end paces loads: real time, or each frame waiting for its pages.
     pub pacing: Pacing,
     /// Bytes of stored (compressed) tiles the loader keeps in RAM, least recently used out first,
     /// so that a page the cache evicted and the view wants again is decoded without a read
@@ -225,6 +244,7 @@ pub struct FrameStats {
     /// Page-table entries written: mapping or unmapping a page rewrites the entries it stands in
     /// for (its own and its unmapped descendants'), once whatever the layers.
     pub table_writes: usize,
+    /// Pages evicted this frame.
     pub evicted: usize,
     /// Wanted pages left for later frames (load budget, or a cache full of wanted pages).
     pub deferred: usize,
@@ -245,7 +265,9 @@ pub struct FrameStats {
     /// Tiles of the pages uploaded that the memory tier held (decoded from RAM, not read), and
     /// those read from the sources.
     pub tier_hits: usize,
+    /// Tiles of the pages uploaded read from the sources, the memory tier not holding them.
     pub tier_misses: usize,
+    /// Bytes written into the page caches.
     pub bytes_uploaded: u64,
     /// Pages uploaded with the stand-in tile because they failed to load.
     pub load_errors: usize,
@@ -454,10 +476,12 @@ impl Runtime {
         self.rebind();
     }
 
+    /// How the cache is filtered.
     pub fn filter(&self) -> SampleFilter {
         self.filter
     }
 
+    /// Filters the cache as `filter` says from the next frame on.
     pub fn set_filter(&mut self, filter: SampleFilter) {
         self.filter = filter;
         self.rebind();
@@ -644,6 +668,7 @@ impl Runtime {
         self.frame
     }
 
+    /// The textures, by texture id.
     pub fn textures(&self) -> &[VirtualTexture] {
         &self.textures
     }
@@ -658,10 +683,12 @@ impl Runtime {
         &self.loaders
     }
 
+    /// What is resident, and why.
     pub fn residency(&self) -> &Residency {
         &self.residency
     }
 
+    /// The CPU side of the page table.
     pub fn page_table(&self) -> &PageTable {
         &self.table
     }
@@ -676,6 +703,7 @@ impl Runtime {
         &self.caches
     }
 
+    /// What it was made with.
     pub fn config(&self) -> &RuntimeConfig {
         &self.config
     }

@@ -10,7 +10,9 @@
 /// How the cache is filtered. Only trilinear reads two LODs per sample.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum SampleFilter {
+    /// The nearest texel of the footprint's LOD.
     Nearest,
+    /// The four nearest texels of the footprint's LOD, blended.
     #[default]
     Bilinear,
     /// Bilinear in the LOD below and above the footprint, blended.

@@ -98,7 +98,7 @@ impl Gate {
         state.waiting -= 1;
         match state.open {
             true => Ok(()),
-            false => Err(ReadError::new(format!("the test never opened the gate in {GATE_FAIL_SAFE:?}"))),
+            false => Err(ReadError::unavailable(format!("the test never opened the gate in {GATE_FAIL_SAFE:?}"))),
         }
     }
 }
@@ -180,20 +180,11 @@ pub fn bordered_tile(chain: &impl LodImages, texture: &VirtualTexture, page: Pag
 /// The level table of `texture`'s pack: its grid's pages per LOD, and the image at each LOD
 /// (`ceil(size / 2^lod)`).
 pub fn levels(texture: &VirtualTexture) -> Vec<Level> {
-    let mut first_entry = 0u64;
     (0..texture.grid.lod_count())
         .map(|lod| {
             let [w, h] = texture.grid.pages_at(lod).map(u32::from);
             let shrink = |v: u32| v.div_ceil(1 << lod);
-            let level = Level {
-                tiles_w: w,
-                tiles_h: h,
-                first_entry,
-                width: shrink(texture.width),
-                height: shrink(texture.height),
-            };
-            first_entry += u64::from(w) * u64::from(h);
-            level
+            Level::new(w, h, shrink(texture.width), shrink(texture.height))
         })
         .collect()
 }

@@ -8,12 +8,15 @@ use vortex_vt::page::{GridError, TextureGrid};
 /// The shape of one virtual texture.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct VirtualTexture {
+    /// Its pages at every LOD.
     pub grid: TextureGrid,
     /// Real image size at LOD 0, in texels.
     pub width: u32,
+    /// Real image height at LOD 0, in texels.
     pub height: u32,
     /// Stored tile side, borders included.
     pub tile_size: u32,
+    /// Texels of border on each side of a tile.
     pub border: u32,
 }
 

@@ -36,7 +36,9 @@ pub const BELOW_ONE: f32 = 1.0 - f32::EPSILON / 2.0;
 /// of that LOD (`0 <= within < payload`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct At {
+    /// The page, column and row in that LOD's grid.
     pub page: [u32; 2],
+    /// The position in the page's payload, in texels of that LOD.
     pub within: [f32; 2],
 }
 
@@ -88,8 +90,11 @@ pub fn uv_at(u: f32, v: f32, lod: u8, size: [u32; 2], payload: u32) -> At {
 /// frame pixel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WindowOrigin {
+    /// The integer part of the top-left corner's LOD-0 texel position.
     pub int: [u32; 2],
+    /// Its fractional part.
     pub frac: [f32; 2],
+    /// LOD-0 texels per frame pixel, along x and y.
     pub step: [f32; 2],
 }
 

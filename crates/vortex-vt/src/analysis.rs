@@ -26,6 +26,7 @@ use crate::page::{PageId, TextureGrid};
 /// One page the frame needs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PageRequest {
+    /// The page.
     pub page: PageId,
     /// Samples that asked for exactly this page (0 for a page only needed as an ancestor).
     pub direct: u32,
@@ -66,6 +67,7 @@ pub struct Analyzer {
 }
 
 impl Analyzer {
+    /// An analyzer with nothing seen yet.
     pub fn new() -> Analyzer {
         Analyzer::default()
     }

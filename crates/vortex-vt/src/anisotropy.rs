@@ -29,6 +29,8 @@ pub const MAX_ANISOTROPY: u32 = 16;
 /// `footprint` LOD-0 texels.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Probes {
+    /// How many probes: 1 for an isotropic footprint, up to the filter's maximum along its longer
+    /// axis.
     pub count: u32,
     /// The longer derivative, in UV: probes span it, centred on the sample.
     pub axis: [f32; 2],

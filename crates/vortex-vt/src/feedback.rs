@@ -48,8 +48,11 @@ pub const NO_REQUEST: u32 = 0xFFFF_FFFF;
 /// LOD's grid (row by row), not yet checked against any grid.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct Request {
+    /// The texture id.
     pub texture: u8,
+    /// The LOD.
     pub lod: u8,
+    /// The page's index in that LOD's grid, row by row.
     pub index: u32,
 }
 

@@ -11,22 +11,66 @@ use crate::residency::{Residency, Slot};
 /// The first broken rule [`check`] finds.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum Violation {
+    /// The page table and the residency address different grids.
     #[error("the page table's texture grids differ from the residency's")]
     GridMismatch,
+    /// A texture's root page (its coarsest, which every page falls back to) is not resident.
     #[error("the root of texture {0} is not resident")]
     RootNotResident(u8),
+    /// More pages are resident than the cache has slots.
     #[error("{resident} pages resident in a cache of {slots} slots")]
-    TooManyResident { resident: usize, slots: usize },
+    TooManyResident {
+        /// Pages resident.
+        resident: usize,
+        /// Slots of the cache.
+        slots: usize,
+    },
+    /// Two resident pages hold one slot.
     #[error("slot {slot} holds both {a:?} and {b:?}")]
-    SlotShared { slot: Slot, a: PageId, b: PageId },
+    SlotShared {
+        /// The slot.
+        slot: Slot,
+        /// One page that holds it.
+        a: PageId,
+        /// The other.
+        b: PageId,
+    },
+    /// A slot's recorded owner is not the page resident in it.
     #[error("slot {slot} is recorded as holding {owner:?}, but the resident page there is {page:?}")]
-    SlotOwner { slot: Slot, page: Option<PageId>, owner: Option<PageId> },
+    SlotOwner {
+        /// The slot.
+        slot: Slot,
+        /// The page resident in it.
+        page: Option<PageId>,
+        /// The page recorded as its owner.
+        owner: Option<PageId>,
+    },
+    /// A resident page's parent is not resident.
     #[error("{page:?} is resident but its parent is not: the fallback chain has a hole")]
-    Hole { page: PageId },
+    Hole {
+        /// The page.
+        page: PageId,
+    },
+    /// A page-table entry is not its page's finest resident ancestor-or-self.
     #[error("the entry of {page:?} is {entry:?}, but its finest resident ancestor-or-self gives {expected:?}")]
-    WrongEntry { page: PageId, entry: Entry, expected: Entry },
+    WrongEntry {
+        /// The page.
+        page: PageId,
+        /// Its entry.
+        entry: Entry,
+        /// The entry it should have.
+        expected: Entry,
+    },
+    /// A page-table entry differs from a table rebuilt from the resident pages.
     #[error("the entry of {page:?} is {entry:?}, but a rebuilt table has {rebuilt:?}")]
-    DiffersFromRebuild { page: PageId, entry: Entry, rebuilt: Entry },
+    DiffersFromRebuild {
+        /// The page.
+        page: PageId,
+        /// Its entry.
+        entry: Entry,
+        /// The rebuilt table's entry.
+        rebuilt: Entry,
+    },
 }
 
 /// Checks, after at least one update has been applied to both:

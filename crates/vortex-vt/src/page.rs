@@ -24,13 +24,18 @@ pub const MAX_PAGES_AT_LOD0: u64 = 1 << 24;
 /// One page of one virtual texture.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct PageId {
+    /// The virtual texture, an index of the runtime's textures.
     pub texture: u8,
+    /// The level, 0 the finest.
     pub lod: u8,
+    /// The column of pages in that level.
     pub x: u16,
+    /// The row of pages in that level.
     pub y: u16,
 }
 
 impl PageId {
+    /// The page (`texture`, `lod`, `x`, `y`).
     pub const fn new(texture: u8, lod: u8, x: u16, y: u16) -> PageId {
         PageId { texture, lod, x, y }
     }
@@ -50,20 +55,62 @@ impl PageId {
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[non_exhaustive]
 pub enum GridError {
+    /// An axis has no page.
     #[error("a grid of {w}x{h} pages: each axis needs at least one page")]
-    Empty { w: u64, h: u64 },
+    Empty {
+        /// Pages across at LOD 0.
+        w: u64,
+        /// Pages down at LOD 0.
+        h: u64,
+    },
+    /// An axis has more pages than the feedback word's LODs can halve down to one.
     #[error(
         "{w}x{h} pages at LOD 0: at most {MAX_PAGES_PER_AXIS} along each axis (the feedback word's {MAX_LODS} LODs)"
     )]
-    TooWide { w: u64, h: u64 },
+    TooWide {
+        /// Pages across at LOD 0.
+        w: u64,
+        /// Pages down at LOD 0.
+        h: u64,
+    },
+    /// More pages at LOD 0 than the feedback word's page index can name.
     #[error("{w}x{h} pages at LOD 0: at most {MAX_PAGES_AT_LOD0} in all (the feedback word's 24-bit page index)")]
-    TooManyPages { w: u64, h: u64 },
+    TooManyPages {
+        /// Pages across at LOD 0.
+        w: u64,
+        /// Pages down at LOD 0.
+        h: u64,
+    },
+    /// Pages whose payload (tile size less its borders) has no texel.
     #[error("a {payload}-texel payload: pages need at least one texel")]
-    NoPayload { payload: u32 },
+    NoPayload {
+        /// The payload's side in texels.
+        payload: u32,
+    },
+    /// A level is not the previous one halved, rounded up.
     #[error("level {lod} has {found:?} pages; halving level {} ({:?}) gives {expected:?}", .lod - 1, .previous)]
-    NotHalving { lod: u8, found: [u32; 2], previous: [u32; 2], expected: [u32; 2] },
+    NotHalving {
+        /// The level.
+        lod: u8,
+        /// Its pages across and down.
+        found: [u32; 2],
+        /// The previous level's.
+        previous: [u32; 2],
+        /// What halving those gives.
+        expected: [u32; 2],
+    },
+    /// The levels stop before one page.
     #[error("{levels} levels; a grid of {w}x{h} pages at LOD 0 needs {needed} (down to one page)")]
-    TooFewLevels { levels: usize, w: u16, h: u16, needed: u8 },
+    TooFewLevels {
+        /// Levels given.
+        levels: usize,
+        /// Pages across at LOD 0.
+        w: u16,
+        /// Pages down at LOD 0.
+        h: u16,
+        /// Levels needed.
+        needed: u8,
+    },
 }
 
 /// The page grid of one virtual texture: `w x h` pages at LOD 0, halving (rounded up) per LOD
@@ -157,6 +204,7 @@ impl TextureGrid {
         PageId::new(texture, self.lod_count - 1, 0, 0)
     }
 
+    /// Whether `p` lies in this grid (its LOD below `lod_count`, its page inside that level).
     pub fn contains(&self, p: PageId) -> bool {
         let [w, h] = self.pages_at(p.lod);
         p.lod < self.lod_count && p.x < w && p.y < h

@@ -40,7 +40,9 @@ use crate::residency::{FrameUpdate, Slot};
 /// What a page-table entry points at: the slot of a resident page and that page's LOD.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Entry {
+    /// The slot of the physical cache holding the page.
     pub slot: Slot,
+    /// The LOD of that page (`u8::MAX`: unmapped).
     pub lod: u8,
 }
 
@@ -51,6 +53,7 @@ impl Entry {
     /// Points at nothing: the entries of a texture whose root is not resident yet.
     pub const UNMAPPED: Entry = Entry { slot: Slot::MAX, lod: u8::MAX };
 
+    /// Whether it points at a slot.
     pub fn is_mapped(self) -> bool {
         self.lod != u8::MAX
     }
@@ -80,7 +83,9 @@ impl Entry {
 /// One entry whose value changed: the entry of page `at` (texture, LOD, x, y) is now `entry`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Change {
+    /// The page whose entry changed.
     pub at: PageId,
+    /// Its new entry.
     pub entry: Entry,
 }
 
@@ -149,6 +154,7 @@ impl PageTable {
         table
     }
 
+    /// The grids of the textures, by texture id.
     pub fn grids(&self) -> &[TextureGrid] {
         &self.grids
     }

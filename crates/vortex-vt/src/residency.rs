@@ -71,14 +71,29 @@ impl ResidencyConfig {
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum ConfigError {
+    /// No texture given.
     #[error("a residency needs at least one texture")]
     NoTextures,
+    /// More textures than a feedback word can name.
     #[error("{0} textures, at most {MAX_TEXTURES}")]
     TooManyTextures(usize),
+    /// Too few slots for the textures' roots, or more than the page table can address.
     #[error("{slots} slots for {textures} textures: need one per texture at least, {MAX_SLOTS} at most")]
-    Slots { slots: usize, textures: usize },
+    Slots {
+        /// Slots asked for.
+        slots: usize,
+        /// Textures given.
+        textures: usize,
+    },
+    /// Water marks that are not `0 <= low <= high`, finite.
     #[error("water marks must be finite with 0 <= low ({low}) <= high ({high})")]
-    WaterMarks { low: f32, high: f32 },
+    WaterMarks {
+        /// The low water mark.
+        low: f32,
+        /// The high water mark.
+        high: f32,
+    },
+    /// A LOD bias step that is not finite and positive.
     #[error("the bias step ({0}) must be finite and positive")]
     BiasStep(f32),
 }
@@ -90,7 +105,12 @@ pub enum UpdateError {
     /// The frame numbers stamp the pages' last use (the LRU order): each call's must be greater
     /// than the last's.
     #[error("frame numbers must increase: {frame} after {last}")]
-    FrameOrder { frame: u64, last: u64 },
+    FrameOrder {
+        /// The frame number given.
+        frame: u64,
+        /// The last call's.
+        last: u64,
+    },
 }
 
 /// Counters of one [`Residency::update`]. "Wanted" pages are the requests expanded with their
@@ -115,6 +135,7 @@ pub struct FrameStats {
 /// slot in `evictions` is reused by a page in `loads`.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FrameUpdate {
+    /// The frame the update is for.
     pub frame: u64,
     /// Pages to upload and map, coarse before fine, with their slots.
     pub loads: Vec<(PageId, Slot)>,
@@ -122,6 +143,7 @@ pub struct FrameUpdate {
     pub evictions: Vec<(PageId, Slot)>,
     /// The LOD bias for the next feedback pass (see [`Residency::lod_bias`]).
     pub lod_bias: f32,
+    /// What the frame did, counted.
     pub stats: FrameStats,
 }
 
@@ -187,6 +209,8 @@ pub struct Residency {
 }
 
 impl Residency {
+    /// A residency of the textures of `grids` (texture id = index), with nothing resident; refused
+    /// with a [`ConfigError`] when `config` cannot work with them.
     pub fn new(grids: &[TextureGrid], config: ResidencyConfig) -> Result<Residency, ConfigError> {
         if grids.is_empty() {
             return Err(ConfigError::NoTextures);
@@ -223,14 +247,17 @@ impl Residency {
         })
     }
 
+    /// The grids of the textures, by texture id.
     pub fn grids(&self) -> &[TextureGrid] {
         &self.grids
     }
 
+    /// What it was made with.
     pub fn config(&self) -> &ResidencyConfig {
         &self.config
     }
 
+    /// Slots of the physical cache.
     pub fn slots(&self) -> usize {
         self.config.slots
     }
@@ -274,6 +301,7 @@ impl Residency {
         page.ancestors_and_self(&grid).find(|p| self.pages.contains_key(p)).map_or(grid.lod_count() - 1, |p| p.lod)
     }
 
+    /// Pages resident now.
     pub fn resident_count(&self) -> usize {
         self.pages.len()
     }

@@ -26,12 +26,16 @@ pub trait LodImages {
 /// One RGBA8 image, row-major.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Rgba8Image {
+    /// Width in texels.
     pub width: u32,
+    /// Height in texels.
     pub height: u32,
+    /// The texels, row by row, top down.
     pub texels: Vec<[u8; 4]>,
 }
 
 impl Rgba8Image {
+    /// An image whose texel `(x, y)` is `f(x, y)`.
     pub fn from_fn(width: u32, height: u32, mut f: impl FnMut(u32, u32) -> [u8; 4]) -> Rgba8Image {
         assert!(width > 0 && height > 0, "an empty {width}x{height} image");
         let texels = (0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(|(x, y)| f(x, y)).collect();

@@ -4,7 +4,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use vortex_vt_wgpu::harness::camera::Keyframe;
 use vortex_vt_wgpu::harness::{Effects, FrameReport, Pose, Scene, SceneRenderer, SceneView, Window, WindowKey};
-use vortex_vt_wgpu::source::WebPack;
+use vortex_vt_wgpu::source::{TileId, TileKind, WebPack};
 use vortex_vt_wgpu::{CacheFormat, Gpu, Pacing, PageSource, SampleFilter, StoredRead, StoredTile};
 use wasm_bindgen::prelude::*;
 
@@ -238,19 +238,19 @@ impl Viewer {
     /// The pack's root tile as stored (its payload) and its kind: what the measurement of the
     /// page's decoders decodes.
     pub fn root_payload(&self) -> Result<Vec<u8>, JsError> {
-        let (lod, kind, bytes) = self.root()?;
+        let (root, kind, bytes) = self.root()?;
         // The texels must decode, or the measurement would time an error.
-        self.pack.decode(lod, 0, 0, kind, &bytes, CacheFormat::Rgba8).map_err(error)?;
+        self.pack.decode(root, kind, &bytes, CacheFormat::Rgba8).map_err(error)?;
         Ok(bytes.to_vec())
     }
 
     /// Decodes the root tile `rounds` times with the runtime's decoder (Rust, in wasm); the
     /// milliseconds per decode, on the page's clock (a measurement, docs/benchmarks.md).
     pub fn decode_ms(&self, rounds: u32) -> Result<f64, JsError> {
-        let (lod, kind, bytes) = self.root()?;
+        let (root, kind, bytes) = self.root()?;
         let started = web_time::Instant::now();
         for _ in 0..rounds.max(1) {
-            self.pack.decode(lod, 0, 0, kind, &bytes, CacheFormat::Rgba8).map_err(error)?;
+            self.pack.decode(root, kind, &bytes, CacheFormat::Rgba8).map_err(error)?;
         }
         Ok(started.elapsed().as_secs_f64() * 1000.0 / f64::from(rounds.max(1)))
     }
@@ -295,11 +295,12 @@ impl Viewer {
         Window::square_pixels(0, self.image, self.center, self.width, (self.config.width, self.config.height))
     }
 
-    /// The root tile's LOD, kind and stored bytes (fetched at open).
-    fn root(&self) -> Result<(u8, u8, Arc<[u8]>), JsError> {
+    /// The root tile, its kind and its stored bytes (fetched at open).
+    fn root(&self) -> Result<(TileId, TileKind, Arc<[u8]>), JsError> {
         let lod = self.renderer.runtime().textures()[0].grid.lod_count().saturating_sub(1);
-        match self.pack.read_stored(lod, 0, 0).map_err(error)? {
-            Some(StoredRead { tile: StoredTile::Stored { kind, bytes }, .. }) => Ok((lod, kind, bytes)),
+        let root = TileId { lod: lod.into(), x: 0, y: 0 };
+        match self.pack.read_stored(root).map_err(error)? {
+            Some(StoredRead { tile: StoredTile::Stored { kind, bytes }, .. }) => Ok((root, kind, bytes)),
             _ => Err(JsError::new("the root tile is not stored as a payload")),
         }
     }

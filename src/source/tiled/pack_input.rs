@@ -113,7 +113,8 @@ impl TileGrid for PackInput {
             Tile::Data(TileKind::Png | TileKind::Jpeg, bytes) => CellData::File(name(), bytes.to_vec()),
             Tile::Data(kind, bytes) => {
                 let limit = vortex_pack::DEFAULT_MAX_DECODED_BYTES;
-                let raw = vortex_pack::payload_texels(kind, bytes, self.pack.description(), limit)
+                let raw = Tile::Data(kind, bytes)
+                    .decode_texels(self.pack.description(), limit)
                     .map_err(|e| TilerError::decode(name(), e))?;
                 self.samples(name(), raw)
             }
@@ -132,12 +133,12 @@ mod tests {
     use std::io::Cursor;
 
     use image::ImageEncoder;
-    use vortex_pack::format::pyramid_levels;
     use vortex_pack::{Description, Level, NewTile, PackWriter, TileId, WriteOptions};
 
     use super::*;
     use crate::source::read_all;
     use crate::source::tiled::TiledSource;
+    use crate::tile_dir::square_levels;
 
     const TILE: u32 = 16;
     const BORDER: u32 = 2;
@@ -246,7 +247,7 @@ mod tests {
             })
             .collect();
         let path = tmp.path().join("world.vtpk");
-        write_pack(&path, d, pyramid_levels(&d, 4), &tiles);
+        write_pack(&path, d, square_levels(&d, 4), &tiles);
         let grid = PackInput::open(&path).unwrap();
         assert_eq!(
             grid.header(),
@@ -286,7 +287,7 @@ mod tests {
             })
             .collect();
         let path = tmp.path().join("deep.vtpk");
-        write_pack(&path, d, pyramid_levels(&d, 4), &tiles);
+        write_pack(&path, d, square_levels(&d, 4), &tiles);
         assert_eq!(PackInput::open(&path).unwrap().header().layout.to_string(), "luminanceAlpha 16-bit");
         assert!(read_image(&path, vec![0; 4], true).unwrap() == image.bytes);
     }
@@ -299,7 +300,7 @@ mod tests {
         let raw = image.tile(0, 0);
         // Tile (1, 0) is never added: absent.
         let path = tmp.path().join("holes.vtpk");
-        write_pack(&path, d, pyramid_levels(&d, 2), &[((0, 0), NewTile::Data(TileKind::Raw, &raw))]);
+        write_pack(&path, d, square_levels(&d, 2), &[((0, 0), NewTile::Data(TileKind::Raw, &raw))]);
         for y in 0..10 {
             for x in 12..20 {
                 image.bytes[y * 20 + x] = 77;
@@ -315,7 +316,7 @@ mod tests {
         let tmp = tempfile::tempdir().unwrap();
         let image = Image { width: 12, height: 12, bpp: 1, bytes: noise(144, 4) };
         let d = description(&image, 1, 1, 1);
-        let levels = pyramid_levels(&d, 1);
+        let levels = square_levels(&d, 1);
         let raw_len = (TILE * TILE) as usize;
         let too_long = zstd::bulk::compress(&vec![5u8; raw_len + 1], 1).unwrap();
         let too_short = zstd::bulk::compress(&vec![5u8; raw_len - 1], 1).unwrap();

@@ -9,8 +9,9 @@
 
 use std::path::Path;
 
-use vortex_pack::format::{HEADER_LEN, at, reseal};
-use vortex_pack::{Limits, Pack, VerifyOptions, decode_rgba8, verify};
+use vortex_pack::format::HEADER_LEN;
+use vortex_pack::fuzzing::{at, reseal};
+use vortex_pack::{Limits, Pack, VerifyOptions, verify};
 
 /// The decoding limit of the checks: small, so that a payload claiming a large image is
 /// refused rather than allocated.
@@ -46,7 +47,7 @@ pub fn open_and_read(data: &[u8]) {
     for id in ids {
         let _ = pack.tile(id.lod, id.x, id.y);
         let checked = pack.tile_checked(id.lod, id.x, id.y);
-        let decoded = decode_rgba8(&pack, id.lod, id.x, id.y);
+        let decoded = pack.decode_rgba8(id);
         if let Ok(Some(rgba)) = &decoded {
             let side = pack.description().tile_size as usize;
             assert_eq!(rgba.len(), side * side * 4);

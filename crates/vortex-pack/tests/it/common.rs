@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use vortex_pack::format::{self, at};
+use vortex_pack::fuzzing::{self, at};
 use vortex_pack::{Description, NewTile, PackWriter, TileId, TileKind, WriteOptions, WriteSummary};
 
 /// A tile as written, to compare with what is read back.
@@ -88,7 +88,7 @@ pub fn jpeg_tile(d: &Description, seed: u32) -> Vec<u8> {
 /// PNG, JPEG, and payloads shared by several tiles.
 pub fn write_sample(path: &Path, channels: u8, sample_bytes: u8, options: WriteOptions) -> Sample {
     let d = description(channels, sample_bytes);
-    let levels = format::pyramid_levels(&d, 4);
+    let levels = fuzzing::pyramid_levels(&d, 4);
     let metadata = br#"{"generator":"vortex-pack tests","note":"caf\u00e9 \"quoted\""}"#;
     let mut w = PackWriter::create(path, d, levels.clone(), metadata, options).unwrap();
     let texel = channels as usize * sample_bytes as usize;
@@ -143,7 +143,7 @@ fn get_u64(b: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(b[at..at + 8].try_into().unwrap())
 }
 
-pub use vortex_pack::format::reseal;
+pub use vortex_pack::fuzzing::reseal;
 
 /// Index entries of a (well-formed) pack's bytes: (entry offset, payload offset, length).
 pub fn payload_entries(b: &[u8]) -> Vec<(usize, u64, u64)> {

@@ -10,8 +10,9 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use proptest::prelude::*;
-use vortex_pack::format::{self, at};
-use vortex_pack::{Limits, Pack, PackError, Tile, VerifyOptions, decode_rgba8_limited, verify};
+use vortex_pack::format;
+use vortex_pack::fuzzing::at;
+use vortex_pack::{Limits, Pack, PackError, Tile, TileId, VerifyOptions, verify};
 
 use crate::common;
 
@@ -124,7 +125,7 @@ fn exercise(mapped: &Pack, read: &Pack) -> bool {
         if let Ok(Tile::Data(_, bytes)) = a {
             assert!(bytes.len() as u64 <= mapped.header().data_len);
         }
-        let decoded = decode_rgba8_limited(mapped, id.lod, id.x, id.y, LIMIT);
+        let decoded = mapped.decode_rgba8(id);
         if let Ok(Some(rgba)) = &decoded {
             let side = mapped.description().tile_size as usize;
             assert_eq!(rgba.len(), side * side * 4);
@@ -356,7 +357,7 @@ fn a_huge_tile_size_is_refused_naming_the_field() {
     let raised = Limits { max_tile_size: u32::MAX, ..Limits::default() };
     if let Ok(pack) = Pack::from_bytes_with_limits("raised.vtpk", bytes, raised) {
         assert!(!verify(&pack, VerifyOptions::default()).is_ok());
-        assert!(vortex_pack::decode_rgba8(&pack, 0, 1, 0).is_err());
+        assert!(pack.decode_rgba8(TileId { lod: 0, x: 1, y: 0 }).is_err());
     }
     check_allocations();
 }

@@ -2,10 +2,10 @@
 //! BC7 blocks. Blocks here are written by hand, bit by bit, from the Direct3D definitions, so
 //! that the decoder is checked against the format rather than against an encoder.
 
-use vortex_pack::format::{self, at, delta_decode_rows, delta_encode_rows, pyramid_levels};
+use vortex_pack::format::{self, delta_decode_rows, delta_encode_rows};
+use vortex_pack::fuzzing::{at, pyramid_levels};
 use vortex_pack::{
-    Description, NewTile, Pack, PackError, PackWriter, Tile, TileId, TileKind, VerifyOptions, WriteOptions,
-    decode_rgba8, payload_texels, tile_rgba8, verify,
+    Description, NewTile, Pack, PackError, PackWriter, Tile, TileId, TileKind, VerifyOptions, WriteOptions, verify,
 };
 
 use crate::common::{self, reseal};
@@ -81,8 +81,8 @@ fn zstd_delta_tiles_read_back_exactly_and_need_their_feature_bit() {
         assert!(report.is_ok() && report.count(TileKind::ZstdDelta) == 16, "{report}");
         assert!(report.to_json().contains("\"zstd-delta\":16"), "{}", report.to_json());
         let vortex_pack::Tile::Data(TileKind::ZstdDelta, bytes) = pack.tile(0, 2, 1).unwrap() else { panic!() };
-        assert_eq!(payload_texels(TileKind::ZstdDelta, bytes, &d, LIMIT).unwrap(), raw(2, 1));
-        let rgba = decode_rgba8(&pack, 0, 2, 1).unwrap().unwrap();
+        assert_eq!(Tile::Data(TileKind::ZstdDelta, bytes).decode_texels(&d, LIMIT).unwrap(), raw(2, 1));
+        let rgba = pack.decode_rgba8(TileId { lod: 0, x: 2, y: 1 }).unwrap().unwrap();
         let first = &raw(2, 1)[..texel];
         let expected_first = match (channels, sample_bytes) {
             (3, 1) => vec![first[0], first[1], first[2], 255],
@@ -180,7 +180,7 @@ fn bc1_and_bc7_blocks_decode_as_direct3d_defines_them() {
     let pack = Pack::open(&path).unwrap();
     let report = verify(&pack, DECODE);
     assert!(report.is_ok() && report.decoded_payloads == 1 && report.count(TileKind::Bc1) == 16, "{report}");
-    let rgba = decode_rgba8(&pack, 0, 1, 1).unwrap().unwrap();
+    let rgba = pack.decode_rgba8(TileId { lod: 0, x: 1, y: 1 }).unwrap().unwrap();
     let row: Vec<[u8; 4]> = (0..8).map(|x| texel(&rgba, 8, x, 0)).collect();
     assert_eq!(row[..4], [[255, 0, 0, 255], [0, 0, 255, 255], [170, 0, 85, 255], [85, 0, 170, 255]]);
     // Three-colour mode: index 2 is the mean, index 3 black, opaque in an RGB pack.
@@ -188,7 +188,7 @@ fn bc1_and_bc7_blocks_decode_as_direct3d_defines_them() {
     assert_eq!(texel(&rgba, 8, 5, 3), [0, 0, 255, 255]);
     assert_eq!(texel(&rgba, 8, 0, 4), [0, 0, 255, 255]);
     let vortex_pack::Tile::Data(_, bytes) = pack.tile(0, 0, 0).unwrap() else { panic!() };
-    let rgb = payload_texels(TileKind::Bc1, bytes, &d, LIMIT).unwrap();
+    let rgb = Tile::Data(TileKind::Bc1, bytes).decode_texels(&d, LIMIT).unwrap();
     assert_eq!((rgb.len(), &rgb[..6]), (192, &[255, 0, 0, 0, 0, 255][..]));
 
     for channels in [3, 4] {
@@ -198,7 +198,7 @@ fn bc1_and_bc7_blocks_decode_as_direct3d_defines_them() {
         let pack = Pack::open(&path).unwrap();
         let report = verify(&pack, DECODE);
         assert!(report.is_ok() && report.count(TileKind::Bc7) == 16, "{report}");
-        let rgba = decode_rgba8(&pack, 0, 3, 0).unwrap().unwrap();
+        let rgba = pack.decode_rgba8(TileId { lod: 0, x: 3, y: 0 }).unwrap().unwrap();
         let alpha = if channels == 4 { 254 } else { 255 };
         for (bx, by) in [(0, 0), (4, 0), (0, 4), (4, 4)] {
             assert_eq!(texel(&rgba, 8, bx, by), [255, 129, 1, 255]);
@@ -206,7 +206,7 @@ fn bc1_and_bc7_blocks_decode_as_direct3d_defines_them() {
             assert_eq!(texel(&rgba, 8, bx + 1, by + 2), [255, 129, 1, 255]);
         }
         let vortex_pack::Tile::Data(_, bytes) = pack.tile(0, 0, 0).unwrap() else { panic!() };
-        let texels = payload_texels(TileKind::Bc7, bytes, &d, LIMIT).unwrap();
+        let texels = Tile::Data(TileKind::Bc7, bytes).decode_texels(&d, LIMIT).unwrap();
         assert_eq!(texels.len(), 64 * channels as usize);
     }
 }
@@ -236,7 +236,7 @@ fn block_tiles_need_a_texture_they_can_describe() {
         let mut w = PackWriter::create(&path, d, levels, b"{}", WriteOptions::default()).unwrap();
         let e = w.add(TileId { lod: 0, x: 0, y: 0 }, NewTile::Data(kind, bytes)).unwrap_err().to_string();
         assert!(e.contains(expected), "{expected}: {e}");
-        let e = payload_texels(kind, bytes, &d, LIMIT).unwrap_err().to_string();
+        let e = Tile::Data(kind, bytes).decode_texels(&d, LIMIT).unwrap_err().to_string();
         assert!(e.contains(expected), "{expected}: {e}");
     }
 
@@ -252,7 +252,7 @@ fn block_tiles_need_a_texture_they_can_describe() {
     let report = verify(&pack, DECODE);
     assert_eq!(report.problems.len(), 1, "{report}");
     assert!(report.problems[0].message.contains("16 bc1 tile(s), but bc1 tiles need 3 channels"), "{report}");
-    let e = decode_rgba8(&pack, 0, 0, 0).unwrap_err().to_string();
+    let e = pack.decode_rgba8(TileId { lod: 0, x: 0, y: 0 }).unwrap_err().to_string();
     assert!(e.contains("tile (lod 0, x 0, y 0)") && e.contains("bc1 tiles need 3 channels"), "{e}");
 }
 
@@ -263,14 +263,15 @@ fn hostile_payloads_are_errors_not_panics() {
         let len = (seed as usize * 7) % 300;
         let bytes = noise(len, seed);
         for kind in [TileKind::Raw, TileKind::Zstd, TileKind::ZstdDelta, TileKind::Bc1, TileKind::Bc7] {
-            let _ = payload_texels(kind, &bytes, &d, LIMIT);
+            let _ = Tile::Data(kind, &bytes).decode_texels(&d, LIMIT);
         }
     }
     // Right-sized random blocks decode to something (every bit pattern is a block).
-    assert_eq!(payload_texels(TileKind::Bc7, &noise(64, 1), &d, LIMIT).unwrap().len(), 256);
-    let e = payload_texels(TileKind::Png, b"\x89PNG", &d, LIMIT).unwrap_err().to_string();
+    assert_eq!(Tile::Data(TileKind::Bc7, &noise(64, 1)).decode_texels(&d, LIMIT).unwrap().len(), 256);
+    let e = Tile::Data(TileKind::Png, b"\x89PNG").decode_texels(&d, LIMIT).unwrap_err().to_string();
     assert!(e.contains("png payloads are image files, not texels"), "{e}");
-    let e = payload_texels(TileKind::Raw, &[0; 256], &common::description(4, 1), 100).unwrap_err().to_string();
+    let e =
+        Tile::Data(TileKind::Raw, &[0; 256]).decode_texels(&common::description(4, 1), 100).unwrap_err().to_string();
     assert!(e.contains("exceeds the decoding limit of 100 bytes"), "{e}");
 }
 
@@ -294,11 +295,11 @@ fn a_tile_decoded_away_from_its_pack_is_the_tile_decoded_in_place() {
                 Some(TileKind::Constant) => Tile::Constant(&kept),
                 Some(kind) => Tile::Data(kind, &kept),
             };
-            let in_place = decode_rgba8(&pack, id.lod, id.x, id.y).unwrap();
-            assert_eq!(tile_rgba8(copy, d, LIMIT).unwrap(), in_place, "{id:?}");
+            let in_place = pack.decode_rgba8(id).unwrap();
+            assert_eq!(copy.decode_rgba8(d, LIMIT).unwrap(), in_place, "{id:?}");
         }
     }
     let d = common::description(3, 1);
-    let e = tile_rgba8(Tile::Data(TileKind::Raw, &[1, 2, 3]), &d, LIMIT).unwrap_err();
+    let e = Tile::Data(TileKind::Raw, &[1, 2, 3]).decode_rgba8(&d, LIMIT).unwrap_err();
     assert!(matches!(&e, PackError::Payload { kind: "raw", .. }), "{e}");
 }

@@ -4,10 +4,9 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use vortex_pack::format::at;
+use vortex_pack::fuzzing::at;
 use vortex_pack::{
-    Limits, NewTile, Pack, PackError, PackWriter, Tile, TileId, TileKind, VerifyOptions, WriteOptions, decode_rgba8,
-    decode_rgba8_limited, verify,
+    Limits, NewTile, Pack, PackError, PackWriter, Tile, TileId, TileKind, VerifyOptions, WriteOptions, verify,
 };
 
 use crate::common::{self, Written, reseal, write_sample};
@@ -114,7 +113,7 @@ fn tiles_decode_to_rgba8() {
                 .collect()
         };
         for (i, (id, written)) in sample.tiles.iter().enumerate() {
-            let rgba = decode_rgba8(&pack, id.lod, id.x, id.y).unwrap();
+            let rgba = pack.decode_rgba8(*id).unwrap();
             match written {
                 Written::Absent | Written::Skipped => assert_eq!(rgba, None),
                 Written::Constant(v) => assert_eq!(rgba.unwrap(), expand(v).repeat(texels)),
@@ -135,9 +134,10 @@ fn tiles_decode_to_rgba8() {
         }
         // A limit below one tile is refused before decoding.
         let (id, _) = sample.tiles.iter().find(|(_, w)| matches!(w, Written::Data(TileKind::Png, _))).unwrap();
-        let err = decode_rgba8_limited(&pack, id.lod, id.x, id.y, 100).unwrap_err();
+        let tight = Pack::open_with_limits(&path, Limits { max_decoded_bytes: 100, ..Limits::default() }).unwrap();
+        let err = tight.decode_rgba8(*id).unwrap_err();
         assert!(matches!(err, PackError::Tile { .. }), "{err}");
-        assert!(decode_rgba8(&pack, 9, 0, 0).is_err());
+        assert!(pack.decode_rgba8(TileId { lod: 9, x: 0, y: 0 }).is_err());
     }
 }
 
@@ -146,8 +146,8 @@ fn empty_and_absent_packs_verify() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("empty.vtpk");
     let d = common::description(4, 1);
-    let w =
-        PackWriter::create(&path, d, vortex_pack::format::pyramid_levels(&d, 4), b"", WriteOptions::default()).unwrap();
+    let w = PackWriter::create(&path, d, vortex_pack::fuzzing::pyramid_levels(&d, 4), b"", WriteOptions::default())
+        .unwrap();
     let summary = w.finish().unwrap();
     assert_eq!(summary.absent, 21);
     let pack = Pack::open(&path).unwrap();
@@ -163,7 +163,7 @@ fn writer_refuses_misuse_and_leaves_no_file() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("bad.vtpk");
     let d = common::description(3, 1);
-    let levels = vortex_pack::format::pyramid_levels(&d, 4);
+    let levels = vortex_pack::fuzzing::pyramid_levels(&d, 4);
     let mut w = PackWriter::create(&path, d, levels.clone(), b"{}", WriteOptions::default()).unwrap();
     let id = TileId { lod: 0, x: 0, y: 0 };
     assert!(w.add(id, NewTile::Data(TileKind::Raw, &[1, 2, 3])).is_err());
@@ -203,13 +203,13 @@ fn writer_refuses_what_readers_would_refuse_before_allocating() {
         sample_bytes: 1,
         sample_format: 0,
     };
-    let levels = vortex_pack::format::pyramid_levels(&d, 1 << 16);
+    let levels = vortex_pack::fuzzing::pyramid_levels(&d, 1 << 16);
     let e = PackWriter::create(&path, d, levels, b"", WriteOptions::default()).err().unwrap();
     assert!(matches!(&e, PackError::LimitExceeded { cap: "max_tiles", .. }), "{e}");
     assert!(e.to_string().contains("index_count (byte 96) is 5726623061, over the limit of 536870912"), "{e}");
 
     let d = vortex_pack::Description { tile_size: 1 << 15, level_count: 1, ..common::description(3, 1) };
-    let levels = vortex_pack::format::pyramid_levels(&d, 1);
+    let levels = vortex_pack::fuzzing::pyramid_levels(&d, 1);
     let e = PackWriter::create(&path, d, levels, b"", WriteOptions::default()).err().unwrap();
     assert!(
         e.to_string().contains("tile_size (byte 56) is 32768, over the limit of 16384 (Limits::max_tile_size)"),
@@ -358,8 +358,8 @@ fn verify_decodes_every_payload_when_asked() {
     assert!(bad.iter().any(|p| p.tile == Some(png_id) && p.message.starts_with("jpeg")), "{report}");
     assert!(bad.iter().any(|p| p.tile == Some(zstd_id) && p.message.starts_with("zstd")), "{report}");
     assert!(report.problems.iter().all(|p| p.tile.is_some()));
-    assert!(decode_rgba8(&pack, png_id.lod, png_id.x, png_id.y).is_err());
-    assert!(decode_rgba8(&pack, zstd_id.lod, zstd_id.x, zstd_id.y).is_err());
+    assert!(pack.decode_rgba8(png_id).is_err());
+    assert!(pack.decode_rgba8(zstd_id).is_err());
 
     // A limit below one tile: every decodable payload is refused, none is decoded.
     let limits = Limits { max_decoded_bytes: d.raw_tile_len().unwrap() - 1, ..Limits::default() };
@@ -441,7 +441,7 @@ fn jpeg_variants_decode() {
     assert!(report.is_ok(), "{report}");
     assert_eq!(report.decoded_payloads, 6);
     for (i, v) in variants.iter().enumerate() {
-        let rgba = decode_rgba8(&pack, 0, i as u32 % 3, i as u32 / 3).unwrap().unwrap();
+        let rgba = pack.decode_rgba8(TileId { lod: 0, x: i as u32 % 3, y: i as u32 / 3 }).unwrap().unwrap();
         assert_eq!(rgba.len(), 16 * 16 * 4);
         let expected: Vec<u8> = if v.3 {
             (0..256).flat_map(|_| [77, 77, 77, 255]).collect()
@@ -459,7 +459,7 @@ fn jpeg_variants_decode() {
 fn shorter_metadata_set_at_the_end_gives_back_its_room() {
     let dir = tempfile::tempdir().unwrap();
     let d = common::description(4, 1);
-    let levels = vortex_pack::format::pyramid_levels(&d, 4);
+    let levels = vortex_pack::fuzzing::pyramid_levels(&d, 4);
     let write = |name: &str, room: usize, meta: &[u8], options: WriteOptions| {
         let path = dir.path().join(name);
         let mut w = PackWriter::create(&path, d, levels.clone(), &vec![b' '; room], options).unwrap();

@@ -2,7 +2,7 @@
 //! real writer and compares every byte, so the spec and the code cannot drift apart. After an
 //! intended format change, `BLESS=1 cargo test -p vortex-pack --test it spec` rewrites the dump.
 
-use vortex_pack::format::pyramid_levels;
+use vortex_pack::fuzzing::pyramid_levels;
 use vortex_pack::{Description, NewTile, Pack, PackWriter, Tile, TileId, TileKind, WriteOptions};
 
 const BEGIN: &str = "<!-- hexdump:begin -->\n```text\n";

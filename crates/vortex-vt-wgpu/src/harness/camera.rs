@@ -7,7 +7,9 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {
+    /// Where the camera is.
     pub eye: [f32; 3],
+    /// The point it looks at.
     pub target: [f32; 3],
 }
 
@@ -73,7 +75,9 @@ fn focal(fov_y_deg: f32) -> f32 {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Keyframe<T> {
+    /// The frame.
     pub frame: u32,
+    /// Where the camera is then (between keyframes it is interpolated).
     #[serde(flatten)]
     pub at: T,
 }

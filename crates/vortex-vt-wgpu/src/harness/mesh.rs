@@ -8,8 +8,11 @@ use wgpu::util::DeviceExt;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Vertex {
+    /// Position in world units.
     pub position: [f32; 3],
+    /// Image UV (0..1 over the texture's real image).
     pub uv: [f32; 2],
+    /// The virtual texture it shows.
     pub texture: u32,
 }
 
@@ -24,7 +27,9 @@ impl Vertex {
 /// Indexed triangles (counter-clockwise seen from the front; both faces are drawn).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Mesh {
+    /// The vertices.
     pub vertices: Vec<Vertex>,
+    /// Three vertex indices per triangle.
     pub indices: Vec<u32>,
 }
 
@@ -46,6 +51,7 @@ pub struct GpuMesh {
 }
 
 impl GpuMesh {
+    /// `mesh`'s vertex and index buffers on `device`.
     pub fn upload(device: &wgpu::Device, mesh: &Mesh) -> GpuMesh {
         let buffer = |label, contents: &[u8], usage| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })

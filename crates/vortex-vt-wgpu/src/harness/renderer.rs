@@ -43,6 +43,7 @@ struct PipelineKey {
 /// The counters of one frame.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct FrameReport {
+    /// The frame's number, from 0.
     pub frame: u64,
     /// Distinct pages the analysed feedback asked for, ancestors included.
     pub requested: usize,
@@ -53,6 +54,7 @@ pub struct FrameReport {
     /// Page-table entries written (a page mapped rewrites the entries it stands in for), the same
     /// whatever the layers.
     pub table_writes: usize,
+    /// Pages evicted.
     pub evicted: usize,
     /// Wanted pages left for later frames (budget or cache full).
     pub deferred: usize,
@@ -68,6 +70,7 @@ pub struct FrameReport {
     /// Tiles of the pages uploaded found in the memory tier (nothing read), and read from the
     /// sources.
     pub tier_hits: usize,
+    /// Tiles of the pages uploaded read from the sources.
     pub tier_misses: usize,
     /// Pages that failed to load (drawn with a stand-in; see `loader`).
     pub load_errors: usize,
@@ -81,8 +84,11 @@ pub struct FrameReport {
 /// What a whole run did: the report `vortex-tiler render --report` writes.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Report {
+    /// The GPU adapter's name and driver.
     pub adapter: String,
+    /// Output width and height in pixels.
     pub size: [u32; 2],
+    /// The sample filter's name.
     pub filter: String,
     /// Most probes per sample: 1 is isotropic.
     pub anisotropy: u32,
@@ -90,21 +96,27 @@ pub struct Report {
     pub pacing: String,
     /// Layer 0's cache: `rgba8`, `bc1` or `bc7`.
     pub cache_format: String,
+    /// Slots of the page cache.
     pub cache_slots: usize,
+    /// Most pages uploaded per frame.
     pub upload_budget: usize,
+    /// Every frame's counters.
     pub frames: Vec<FrameReport>,
     /// Layers of every texture, and the one drawn.
     pub layers: usize,
+    /// The layer drawn.
     pub layer: u32,
     /// Distinct pages ever loaded, against all pages of all textures.
     pub pages_touched: usize,
+    /// Pages of all textures.
     pub pages_total: u64,
     /// Payload bytes read from the sources, the roots pinned before the first frame included.
     pub bytes_read: u64,
-    /// The memory tier's budget in bytes (0: off), and its tiles found in it and read from the
-    /// sources over the run, the roots included.
+    /// The memory tier's budget in bytes (0: off).
     pub memory_tier_bytes: u64,
+    /// Tiles found in the memory tier over the run, the roots included.
     pub tier_hits: u64,
+    /// Tiles read from the sources over the run.
     pub tier_misses: u64,
     /// Bytes the tier held at the end: its cost in RAM (stored tiles and their bookkeeping).
     pub memory_tier_held: u64,
@@ -117,6 +129,7 @@ pub struct Report {
     pub frames_to_converge: Option<u32>,
     /// Median and 99th percentile of the frames' `cpu_ms`.
     pub cpu_ms_p50: f64,
+    /// 99th percentile of the frames' `cpu_ms`.
     pub cpu_ms_p99: f64,
     /// The largest `io_wait_ms` of any frame.
     pub io_wait_ms_max: f64,
@@ -308,6 +321,7 @@ impl SceneRenderer {
         self.residency_view = on;
     }
 
+    /// Whether pages are drawn tinted by their LOD ([`SceneRenderer::set_residency_view`]).
     pub fn residency_view(&self) -> bool {
         self.residency_view
     }
@@ -317,6 +331,7 @@ impl SceneRenderer {
         self.layer = layer.min(self.runtime.caches().len() as u32 - 1);
     }
 
+    /// The layer drawn.
     pub fn layer(&self) -> u32 {
         self.layer
     }
@@ -410,14 +425,17 @@ impl SceneRenderer {
         }
     }
 
+    /// The device it draws on.
     pub fn gpu(&self) -> &Gpu {
         &self.gpu
     }
 
+    /// The runtime it draws with.
     pub fn runtime(&self) -> &Runtime {
         &self.runtime
     }
 
+    /// The runtime, to change its settings between frames.
     pub fn runtime_mut(&mut self) -> &mut Runtime {
         &mut self.runtime
     }

@@ -21,12 +21,30 @@ use crate::texture::VirtualTexture;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum SceneError {
+    /// The file cannot be read.
     #[error("cannot read scene {path}: {source}")]
-    Read { path: PathBuf, source: std::io::Error },
+    Read {
+        /// The scene file.
+        path: PathBuf,
+        /// What the system said.
+        source: std::io::Error,
+    },
+    /// The file is not a scene's JSON.
     #[error("scene {path}: {source}")]
-    Parse { path: PathBuf, source: serde_json::Error },
+    Parse {
+        /// The scene file.
+        path: PathBuf,
+        /// What the parser said.
+        source: serde_json::Error,
+    },
+    /// The scene does not make sense (a texture it does not have, an empty path).
     #[error("scene {path}: {message}")]
-    Invalid { path: PathBuf, message: String },
+    Invalid {
+        /// The scene file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
 }
 
 /// A scene as written in JSON. Every member but `view` has a default.
@@ -47,7 +65,9 @@ pub struct Scene {
     /// Frames to render.
     #[serde(default = "default_frames")]
     pub frames: u32,
+    /// What the camera looks at.
     pub view: SceneView,
+    /// Filtering, caching and loading settings.
     #[serde(default)]
     pub effects: Effects,
 }
@@ -56,8 +76,10 @@ pub struct Scene {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SceneLayer {
+    /// Colour or data.
     #[serde(with = "layer_kind_name", default)]
     pub kind: LayerKind,
+    /// Its pack of each texture, in the order of the scene's textures.
     pub textures: Vec<PathBuf>,
 }
 
@@ -83,15 +105,20 @@ mod layer_kind_name {
 pub enum SceneView {
     /// A 2D window onto one texture, moving along `path` (a viewer's pan and zoom).
     Window {
+        /// The texture shown.
         #[serde(default)]
         texture: u8,
+        /// Where the window is, by frame.
         path: Vec<Keyframe<WindowKey>>,
     },
     /// Meshes through a perspective camera moving along `path`.
     Camera {
+        /// Vertical field of view in degrees.
         #[serde(default = "default_fov")]
         fov_y_deg: f32,
+        /// Where the camera is, by frame.
         path: Vec<Keyframe<Camera>>,
+        /// The meshes.
         geometry: Vec<Shape>,
     },
 }
@@ -102,7 +129,9 @@ pub enum SceneView {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WindowKey {
+    /// Image UV at the window's centre.
     pub center: [f64; 2],
+    /// Share of the image's width shown.
     pub width: f64,
 }
 
@@ -112,28 +141,37 @@ pub struct WindowKey {
 pub enum Shape {
     /// A flat square in the y = 0 plane, centred on the origin, `size` units per side.
     Plane {
+        /// The texture shown.
         #[serde(default)]
         texture: u8,
+        /// Units per side.
         #[serde(default = "one")]
         size: f32,
     },
     /// A height field over a square (`size` units, `cells` per side) with rolling hills of
     /// amplitude `height`.
     Terrain {
+        /// The texture shown.
         #[serde(default)]
         texture: u8,
+        /// Units per side.
         #[serde(default = "one")]
         size: f32,
+        /// Cells per side.
         #[serde(default = "default_cells")]
         cells: u32,
+        /// The hills' amplitude in units.
         #[serde(default = "default_height")]
         height: f32,
     },
     /// An axis-aligned box; each face shows the whole image.
     Box {
+        /// The texture shown.
         #[serde(default)]
         texture: u8,
+        /// Its centre.
         center: [f32; 3],
+        /// Its extent along x, y and z.
         size: [f32; 3],
     },
 }
@@ -434,12 +472,14 @@ impl Scene {
 /// Where the camera is in one frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Pose {
+    /// A window onto one texture.
     Window(Window),
     /// A view-projection matrix for the scene's meshes.
     Camera([[f32; 4]; 4]),
 }
 
 impl Shape {
+    /// The texture it shows.
     pub fn texture(&self) -> u8 {
         match self {
             Shape::Plane { texture, .. } | Shape::Terrain { texture, .. } | Shape::Box { texture, .. } => *texture,

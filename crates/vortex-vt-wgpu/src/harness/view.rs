@@ -9,11 +9,14 @@ use crate::texture::VirtualTexture;
 /// What one draw shows.
 #[derive(Clone, Copy, Debug)]
 pub enum View<'a> {
+    /// A window onto one texture.
     Window(Window),
     /// Meshes (their vertices name their texture) through a column-major view-projection
     /// matrix (wgpu's clip space: depth 0..1).
     Meshes {
+        /// The view-projection matrix.
         view_proj: [[f32; 4]; 4],
+        /// The meshes.
         meshes: &'a [GpuMesh],
     },
 }
@@ -24,6 +27,7 @@ pub enum View<'a> {
 /// texels: [`Window::square_pixels`] makes a window whose pixels are square.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Window {
+    /// The texture shown.
     pub texture: u8,
     /// Image UV of the target's top-left corner.
     pub origin: [f64; 2],

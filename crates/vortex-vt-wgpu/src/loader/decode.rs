@@ -11,12 +11,12 @@ use std::sync::Arc;
 
 use vortex_vt::page::PageId;
 
-use super::LoadError;
 use super::magnify::magnify;
 use super::premultiply::premultiply;
 use super::tier::{self, Tier};
+use super::{LoadError, RetryPolicy};
 use crate::page_cache::CacheFormat;
-use crate::source::{PageSource, ReadError};
+use crate::source::{PageSource, ReadError, ReadErrorKind};
 use crate::texture::VirtualTexture;
 
 /// How a page's texels were made.
@@ -36,16 +36,20 @@ pub(super) struct Tally {
     /// those read from the source instead.
     pub(super) tier_hits: u32,
     pub(super) tier_misses: u32,
+    /// Reads tried again after an I/O error.
+    pub(super) read_retries: u32,
 }
 
 /// The page's texels from its tile, or from its nearest stored ancestor if the tile is absent,
 /// premultiplied if they are `colour` (data is taken as stored); for a BC7 cache, its BC7 blocks
 /// instead. `sources` and `textures` are indexed by texture id. Every tile is read through the
-/// memory `tier`.
+/// memory `tier`, and read again as `retry` says when its read fails with an I/O error.
+#[allow(clippy::too_many_arguments)] // the page's whole context, each of which it needs
 pub(super) fn texels(
     sources: &[Arc<dyn PageSource>],
     textures: &[VirtualTexture],
     tier: &Tier,
+    retry: RetryPolicy,
     page: PageId,
     format: CacheFormat,
     colour: bool,
@@ -68,18 +72,18 @@ pub(super) fn texels(
     }
     let wanted = format.tile_bytes(texture.tile_size);
     for tile in page.ancestors_and_self(&grid) {
-        let failed = |e: ReadError| tile_error(source.as_ref(), page, tile, e.message);
-        let Some(mut texels) = tier::read(tier, source.as_ref(), tile, format, tally).map_err(failed)? else {
+        let failed = |e: ReadError| tile_error(source.as_ref(), page, tile, e.kind, e.message);
+        let Some(mut texels) = tier::read(tier, source.as_ref(), tile, format, retry, tally).map_err(failed)? else {
             if format == CacheFormat::Rgba8 {
                 continue;
             }
             let message = "an absent tile cannot be made into BC7 blocks".to_string();
-            return Err(tile_error(source.as_ref(), page, tile, message));
+            return Err(tile_error(source.as_ref(), page, tile, ReadErrorKind::Unsupported, message));
         };
         if texels.len() != wanted {
             let message =
                 format!("the source gave {} bytes, not the {wanted} of a {} tile", texels.len(), format.name());
-            return Err(tile_error(source.as_ref(), page, tile, message));
+            return Err(tile_error(source.as_ref(), page, tile, ReadErrorKind::Corrupt, message));
         }
         tally.tiles_decoded += 1;
         if format == CacheFormat::Bc7 {
@@ -100,7 +104,13 @@ pub(super) fn texels(
 
 /// `message`, read for `page` from its tile or ancestor `tile`, as a [`LoadError::Tile`] naming
 /// `tile`.
-fn tile_error(source: &dyn PageSource, page: PageId, tile: PageId, mut message: String) -> LoadError {
+fn tile_error(
+    source: &dyn PageSource,
+    page: PageId,
+    tile: PageId,
+    kind: ReadErrorKind,
+    mut message: String,
+) -> LoadError {
     if tile != page {
         message.push_str(&format!(
             " (the nearest stored ancestor of absent tile lod {}, x {}, y {})",
@@ -112,6 +122,7 @@ fn tile_error(source: &dyn PageSource, page: PageId, tile: PageId, mut message: 
         lod: tile.lod.into(),
         x: tile.x.into(),
         y: tile.y.into(),
+        kind,
         message,
     }
 }

@@ -14,13 +14,16 @@
 //!
 //! Every page gets texels, so a slot is never left holding stale or garbage data:
 //!
-//! - a stored tile is read and decoded by its source (for a pack, `vortex_pack::decode_rgba8`,
+//! - a stored tile is read and decoded by its source (for a pack, `vortex_pack::Tile::decode_rgba8`,
 //!   which checks its CRC-32C);
 //! - an `absent` tile ("the runtime falls back to the parent tile", pack format) is built from its
 //!   nearest stored ancestor by bilinear magnification (`magnify`); that is not an error;
-//! - a tile that cannot be read or decoded, or a page outside its texture, gets the
-//!   [stand-in tile](stand_in_tile) (a magenta and black checkerboard) and a [`LoadError`] that
-//!   names the pack and the tile.
+//! - a read that fails with an I/O error ([`ReadErrorKind::Io`]) is tried again, after a
+//!   backoff, as the [`RetryPolicy`] says: what fails for a moment does not show;
+//! - a tile that cannot be read or decoded (corrupt, unsupported, or I/O errors past the
+//!   retries), or a page outside its texture, gets the [stand-in tile](stand_in_tile) (a magenta
+//!   and black checkerboard) and a [`LoadError`] that names the pack, the tile and the error's
+//!   kind.
 //!
 //! A page's texels depend only on the pack and the page, never on the thread that decoded it or
 //! on other pages, so they are the same whatever the thread count. The memory tier (`tier`, off
@@ -37,6 +40,7 @@ mod tier;
 mod transcode;
 
 use std::path::PathBuf;
+use std::time::Duration;
 
 use vortex_vt::page::{GridError, MAX_TEXTURES, PageId};
 use vortex_vt::residency::Slot;
@@ -44,28 +48,65 @@ use vortex_vt::residency::Slot;
 pub use pool::Loader;
 pub use tier::{DEFAULT_MEMORY_TIER_BYTES, TIER_ENTRY_OVERHEAD, TierUsage};
 
+use crate::source::ReadErrorKind;
+
+/// How a loader reads a tile again when its read failed with [`ReadErrorKind::Io`] (a dropped
+/// connection, a timeout: what may pass), on the worker that read it; set with
+/// [`Loader::set_retry`]. Any other kind of failure is final at once: the page gets the
+/// stand-in tile and its error.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RetryPolicy {
+    /// Reads of one tile in all, the first included (1: no retry). Default 3.
+    pub attempts: u32,
+    /// The wait before the first retry, doubled before each next one. Default 100 ms: with 3
+    /// attempts a tile is given up on after 0.3 s of waiting, which a passing hiccup outlasts
+    /// while a source that is down costs a worker little. A source may retry on its own too
+    /// ([`HttpPack`](crate::source) retries each request): these retries come on top.
+    pub backoff: Duration,
+}
+
+impl Default for RetryPolicy {
+    fn default() -> Self {
+        RetryPolicy { attempts: 3, backoff: Duration::from_millis(100) }
+    }
+}
+
 /// Why a [`VirtualTexture`](crate::VirtualTexture) or a [`Loader`] cannot be made.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum LoaderError {
     /// The pack's layout is not a virtual texture's (an image its LOD-0 grid covers).
     #[error("{}: {field}: {message}", path.display())]
-    Layout { path: PathBuf, field: &'static str, message: String },
+    Layout {
+        /// The source's location.
+        path: PathBuf,
+        /// The field that does not fit.
+        field: &'static str,
+        /// Why.
+        message: String,
+    },
 
     /// The pack's level table is not a page grid the runtime can address: the levels do not
     /// halve (rounded up) down to one page, or the grid is over the feedback word's limits.
     #[error("{}: level table: {source}", path.display())]
     Grid {
+        /// The source's location.
         path: PathBuf,
+        /// What is wrong with the grid.
         #[source]
         source: GridError,
     },
 
+    /// No source given.
     #[error("a loader needs at least one pack")]
     NoTextures,
 
+    /// More sources than a feedback word can name.
     #[error("{count} packs: a scene has at most {MAX_TEXTURES} virtual textures")]
-    TooManyTextures { count: usize },
+    TooManyTextures {
+        /// Sources given.
+        count: usize,
+    },
 
     /// Two packs whose tiles cannot share one physical page cache.
     #[error(
@@ -73,11 +114,25 @@ pub enum LoaderError {
         first.display(),
         other.display()
     )]
-    Mismatch { field: &'static str, first: PathBuf, first_value: u32, other: PathBuf, other_value: u32 },
+    Mismatch {
+        /// `tile_size` or `border`.
+        field: &'static str,
+        /// The first source's location.
+        first: PathBuf,
+        /// Its value.
+        first_value: u32,
+        /// The other source's location.
+        other: PathBuf,
+        /// Its value.
+        other_value: u32,
+    },
 
+    /// A worker thread could not be started.
     #[error("cannot start loader thread {index}: {source}")]
     Spawn {
+        /// The worker's number.
         index: usize,
+        /// What the system said.
         #[source]
         source: std::io::Error,
     },
@@ -89,32 +144,76 @@ pub enum LoaderError {
 pub enum LoadError {
     /// The page's texture id is not an index of the loader's packs.
     #[error("page {page:?}: no texture {}; the loader has {textures}", page.texture)]
-    UnknownTexture { page: PageId, textures: usize },
+    UnknownTexture {
+        /// The page.
+        page: PageId,
+        /// Textures the loader has.
+        textures: usize,
+    },
 
     /// The page lies outside its texture's page grid.
     #[error(
         "{}: no page (lod {lod}, x {x}, y {y}): the texture has {}x{} pages at LOD 0 and {lod_count} LODs",
         path.display(), pages[0], pages[1]
     )]
-    OutOfGrid { path: PathBuf, lod: u8, x: u16, y: u16, pages: [u16; 2], lod_count: u8 },
+    OutOfGrid {
+        /// The source's location.
+        path: PathBuf,
+        /// The page's LOD.
+        lod: u8,
+        /// Its column.
+        x: u16,
+        /// Its row.
+        y: u16,
+        /// The texture's pages across and down at LOD 0.
+        pages: [u16; 2],
+        /// Its LODs.
+        lod_count: u8,
+    },
 
     /// A stored tile could not be read, failed its checksum or did not decode. For an absent page
     /// this names the ancestor that failed (the message says which page it was read for).
     #[error("{}: tile (lod {lod}, x {x}, y {y}): {message}", path.display())]
-    Tile { path: PathBuf, lod: u32, x: u32, y: u32, message: String },
+    Tile {
+        /// The source's location.
+        path: PathBuf,
+        /// The tile that failed: the page's own, or the ancestor an absent page is made from.
+        lod: u32,
+        /// Its column.
+        x: u32,
+        /// Its row.
+        y: u32,
+        /// What went wrong: [`ReadErrorKind::Io`] once the loader's retries are spent.
+        kind: ReadErrorKind,
+        /// What went wrong, in words.
+        message: String,
+    },
 
     /// The tile and every coarser tile covering it are absent: nothing to build it from.
     #[error("{}: tile (lod {lod}, x {x}, y {y}) is absent and so is every coarser tile covering it", path.display())]
-    NoAncestor { path: PathBuf, lod: u8, x: u16, y: u16 },
+    NoAncestor {
+        /// The source's location.
+        path: PathBuf,
+        /// The page's LOD.
+        lod: u8,
+        /// Its column.
+        x: u16,
+        /// Its row.
+        y: u16,
+    },
 
     /// A worker stopped without answering (it cannot happen unless a worker thread died).
     #[error("page {page:?}: the loader's worker stopped before loading it")]
-    Lost { page: PageId },
+    Lost {
+        /// The page.
+        page: PageId,
+    },
 }
 
 /// The texels of one requested page.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct LoadedPage {
+    /// The page.
     pub page: PageId,
     /// The slot it was requested for, passed through.
     pub slot: Slot,
@@ -131,10 +230,12 @@ pub struct LoadedPage {
     pub tier_hits: u32,
     /// Tiles read for this page from its source, the tier not holding them (or off).
     pub tier_misses: u32,
+    /// Why the texels are the stand-in tile, if they are.
     pub error: Option<LoadError>,
 }
 
 impl LoadedPage {
+    /// Whether it loaded (its texels are its own, not the stand-in).
     pub fn is_ok(&self) -> bool {
         self.error.is_none()
     }
@@ -158,6 +259,8 @@ pub struct LoadCounters {
     pub tier_hits: u64,
     /// Tiles read from the sources (the sum of [`LoadedPage::tier_misses`]).
     pub tier_misses: u64,
+    /// Reads tried again after an I/O error ([`RetryPolicy`]).
+    pub read_retries: u64,
 }
 
 /// The two colours of the [stand-in tile](stand_in_tile): opaque magenta and opaque black, which

@@ -20,13 +20,13 @@ use vortex_vt::residency::Slot;
 use super::decode::{self, Made, Tally};
 use super::tier::{Tier, TierUsage};
 use super::transcode::transcode;
-use super::{LoadCounters, LoadError, LoadedPage, LoaderError, stand_in_tile};
+use super::{LoadCounters, LoadError, LoadedPage, LoaderError, RetryPolicy, stand_in_tile};
 use crate::bc7;
 #[cfg(not(target_arch = "wasm32"))]
 use crate::clock::Instant;
 use crate::layer::LayerKind;
 use crate::page_cache::CacheFormat;
-use crate::source::PageSource;
+use crate::source::{PageSource, ReadErrorKind};
 use crate::texture::VirtualTexture;
 
 /// One page to load, and where its answer goes.
@@ -58,6 +58,9 @@ struct Shared {
     errors: AtomicU64,
     tier_hits: AtomicU64,
     tier_misses: AtomicU64,
+    read_retries: AtomicU64,
+    /// How reads that fail with an I/O error are tried again ([`Loader::set_retry`]).
+    retry: Mutex<RetryPolicy>,
     /// Stored tiles kept in RAM ([`Loader::set_memory_tier`]).
     tier: Tier,
     /// The format pages are answered in ([`Loader::set_format`]), as its index in
@@ -144,6 +147,8 @@ impl Loader {
             errors: AtomicU64::new(0),
             tier_hits: AtomicU64::new(0),
             tier_misses: AtomicU64::new(0),
+            read_retries: AtomicU64::new(0),
+            retry: Mutex::new(RetryPolicy::default()),
             tier: Tier::new(0),
             format: AtomicU8::new(0),
             colour: AtomicBool::new(true),
@@ -181,6 +186,7 @@ impl Loader {
         &self.shared.textures
     }
 
+    /// The sources, by texture id.
     pub fn sources(&self) -> &[Arc<dyn PageSource>] {
         &self.shared.sources
     }
@@ -216,6 +222,7 @@ impl Loader {
         self.shared.format.store(index as u8, Ordering::Relaxed);
     }
 
+    /// The format pages come in ([`Loader::set_format`]).
     pub fn format(&self) -> CacheFormat {
         self.shared.format()
     }
@@ -232,6 +239,12 @@ impl Loader {
         self.shared.tier.set_budget(bytes);
     }
 
+    /// Makes every later read that fails with an I/O error be tried again as `retry` says
+    /// ([`RetryPolicy::default`] for a new loader).
+    pub fn set_retry(&self, retry: RetryPolicy) {
+        *lock(&self.shared.retry) = retry;
+    }
+
     /// What the memory tier holds now.
     pub fn memory_tier(&self) -> TierUsage {
         self.shared.tier.usage()
@@ -242,6 +255,7 @@ impl Loader {
         self.shared.textures[0].border
     }
 
+    /// Worker threads.
     pub fn threads(&self) -> usize {
         self.workers.len()
     }
@@ -350,6 +364,7 @@ impl Loader {
         Duration::from_nanos(self.waited.load(Ordering::Relaxed))
     }
 
+    /// What it has done so far.
     pub fn counters(&self) -> LoadCounters {
         let s = &self.shared;
         LoadCounters {
@@ -360,6 +375,7 @@ impl Loader {
             errors: s.errors.load(Ordering::Relaxed),
             tier_hits: s.tier_hits.load(Ordering::Relaxed),
             tier_misses: s.tier_misses.load(Ordering::Relaxed),
+            read_retries: s.read_retries.load(Ordering::Relaxed),
         }
     }
 
@@ -440,11 +456,12 @@ impl Shared {
             return;
         }
         for tile in page.ancestors_and_self(&texture.grid) {
-            if let Some(ready) = source.prepare(tile.lod, tile.x, tile.y) {
+            let tile = crate::source::tile_id(tile);
+            if let Some(ready) = source.prepare(tile) {
                 ready.await;
             }
             let absent = matches!(
-                source.read_stored(tile.lod, tile.x, tile.y),
+                source.read_stored(tile),
                 Ok(Some(crate::source::StoredRead { tile: crate::source::StoredTile::Absent, .. }))
             );
             if !absent {
@@ -488,9 +505,10 @@ impl Shared {
         // Stored BC7 blocks are taken as they are; anything else is decoded (and transcoded).
         let read_as = if format == CacheFormat::Bc7 && self.stored_bc7 { CacheFormat::Bc7 } else { CacheFormat::Rgba8 };
         let colour = self.colour.load(Ordering::Relaxed);
+        let retry = *lock(&self.retry);
         let mut tally = Tally::default();
         let texels = || {
-            decode::texels(&self.sources, &self.textures, &self.tier, page, read_as, colour, &mut tally).map(
+            decode::texels(&self.sources, &self.textures, &self.tier, retry, page, read_as, colour, &mut tally).map(
                 |(texels, made)| {
                     (if read_as == format { texels } else { transcode(texels, self.tile_size, format) }, made)
                 },
@@ -508,10 +526,12 @@ impl Shared {
                 lod: page.lod.into(),
                 x: page.x.into(),
                 y: page.y.into(),
+                kind: ReadErrorKind::Corrupt,
                 message: format!("the decoder panicked: {what}"),
             })
         });
-        let Tally { bytes_read, tiles_decoded, tier_hits, tier_misses } = tally;
+        let Tally { bytes_read, tiles_decoded, tier_hits, tier_misses, read_retries } = tally;
+        self.read_retries.fetch_add(read_retries.into(), Ordering::Relaxed);
         self.tiles_decoded.fetch_add(tiles_decoded, Ordering::Relaxed);
         self.tier_hits.fetch_add(tier_hits.into(), Ordering::Relaxed);
         self.tier_misses.fetch_add(tier_misses.into(), Ordering::Relaxed);

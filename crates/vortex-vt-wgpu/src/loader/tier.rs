@@ -17,9 +17,10 @@ use std::sync::{Mutex, PoisonError};
 
 use vortex_vt::page::PageId;
 
+use super::RetryPolicy;
 use super::decode::Tally;
 use crate::page_cache::CacheFormat;
-use crate::source::{PageSource, ReadError, SourceTile, StoredRead, StoredTile};
+use crate::source::{PageSource, ReadError, ReadErrorKind, SourceTile, StoredRead, StoredTile, tile_id};
 
 /// The runtime's default budget: 64 MiB, some 3000 JPEG tiles of 136² texels, or five full
 /// 16²-slot caches of them, for about as much RAM as one 16²-slot RGBA8 cache takes on the GPU.
@@ -36,6 +37,7 @@ pub struct TierUsage {
     pub budget: u64,
     /// Bytes charged against it: stored bytes plus [`TIER_ENTRY_OVERHEAD`] per tile.
     pub bytes: u64,
+    /// Tiles held.
     pub tiles: usize,
 }
 
@@ -93,16 +95,15 @@ pub(super) fn read(
     source: &dyn PageSource,
     tile: PageId,
     format: CacheFormat,
+    retry: RetryPolicy,
     tally: &mut Tally,
 ) -> Result<Option<Vec<u8>>, ReadError> {
-    let read_whole = |tally: &mut Tally| {
-        let whole = source.read_tile(tile.lod, tile.x, tile.y, format);
-        match whole.inspect_err(|e| tally.bytes_read += e.bytes_read)? {
-            SourceTile::Absent => Ok(None),
-            SourceTile::Texels { texels, bytes_read } => {
-                tally.bytes_read += bytes_read;
-                Ok(Some(texels))
-            }
+    let id = tile_id(tile);
+    let read_whole = |tally: &mut Tally| match with_retries(retry, tally, || source.read_tile(id, format))? {
+        SourceTile::Absent => Ok(None),
+        SourceTile::Texels { texels, bytes_read } => {
+            tally.bytes_read += bytes_read;
+            Ok(Some(texels))
         }
     };
     let on = tier.is_on();
@@ -117,8 +118,7 @@ pub(super) fn read(
             if !on {
                 return read_whole(tally);
             }
-            let read =
-                source.read_stored(tile.lod, tile.x, tile.y).inspect_err(|e| tally.bytes_read += e.bytes_read)?;
+            let read = with_retries(retry, tally, || source.read_stored(id))?;
             let Some(StoredRead { tile: stored, bytes_read }) = read else { return read_whole(tally) };
             tally.bytes_read += bytes_read;
             tier.insert(tile, stored.clone());
@@ -127,7 +127,31 @@ pub(super) fn read(
     };
     match stored {
         StoredTile::Absent => Ok(None),
-        StoredTile::Stored { kind, bytes } => source.decode(tile.lod, tile.x, tile.y, kind, &bytes, format).map(Some),
+        StoredTile::Stored { kind, bytes } => source.decode(id, kind, &bytes, format).map(Some),
+    }
+}
+
+/// `read`, tried again while it fails with an I/O error, up to `retry.attempts` times in all,
+/// waiting `retry.backoff` before the first retry and twice as long before each next one. The
+/// bytes every attempt read are tallied, failed ones included.
+fn with_retries<T>(
+    retry: RetryPolicy,
+    tally: &mut Tally,
+    read: impl Fn() -> Result<T, ReadError>,
+) -> Result<T, ReadError> {
+    let mut wait = retry.backoff;
+    let mut tries = 1;
+    loop {
+        match read() {
+            Err(e) if e.kind == ReadErrorKind::Io && tries < retry.attempts => {
+                tally.bytes_read += e.bytes_read;
+                tally.read_retries += 1;
+                std::thread::sleep(wait);
+                wait = wait.saturating_mul(2);
+                tries += 1;
+            }
+            result => return result.inspect_err(|e| tally.bytes_read += e.bytes_read),
+        }
     }
 }
 
@@ -260,7 +284,7 @@ mod tests {
     fn tiles_are_charged_their_bytes_and_the_overhead() {
         let tier = Tier::new(1000);
         let bytes: std::sync::Arc<[u8]> = vec![7u8; 300].into();
-        tier.insert(PageId::new(0, 1, 2, 3), StoredTile::Stored { kind: 5, bytes });
+        tier.insert(PageId::new(0, 1, 2, 3), StoredTile::Stored { kind: crate::source::TileKind::Jpeg, bytes });
         tier.insert(PageId::new(1, 1, 2, 3), StoredTile::Absent);
         let usage = tier.usage();
         assert_eq!(usage, TierUsage { budget: 1000, bytes: 300 + 2 * TIER_ENTRY_OVERHEAD, tiles: 2 });

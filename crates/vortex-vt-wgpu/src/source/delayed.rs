@@ -8,7 +8,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
-use super::{PageSource, ReadError, SourceTile, StoredRead};
+use super::{PageSource, ReadError, SourceTile, StoredRead, TileId, TileKind};
 use crate::loader::LoaderError;
 use crate::page_cache::CacheFormat;
 use crate::texture::VirtualTexture;
@@ -50,13 +50,13 @@ impl PageSource for Delayed {
         self.inner.texture()
     }
 
-    fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
+    fn read_tile(&self, tile: TileId, format: CacheFormat) -> Result<SourceTile, ReadError> {
         (self.wait)()?;
-        self.inner.read_tile(lod, x, y, format)
+        self.inner.read_tile(tile, format)
     }
 
-    fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
-        let stored = self.inner.read_stored(lod, x, y);
+    fn read_stored(&self, tile: TileId) -> Result<Option<StoredRead>, ReadError> {
+        let stored = self.inner.read_stored(tile);
         // A source with no stored form is read (and waited for) by `read_tile` instead.
         if !matches!(stored, Ok(None)) {
             (self.wait)()?;
@@ -64,16 +64,8 @@ impl PageSource for Delayed {
         stored
     }
 
-    fn decode(
-        &self,
-        lod: u8,
-        x: u16,
-        y: u16,
-        kind: u8,
-        bytes: &[u8],
-        format: CacheFormat,
-    ) -> Result<Vec<u8>, ReadError> {
-        self.inner.decode(lod, x, y, kind, bytes, format)
+    fn decode(&self, tile: TileId, kind: TileKind, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
+        self.inner.decode(tile, kind, bytes, format)
     }
 
     fn holds_only_bc7(&self) -> bool {

@@ -2,7 +2,7 @@
 //! level table first, the index whole when it is small or in blocks as tiles need them, then each
 //! tile's payload on demand. Everything is checked as [`Pack::open`](vortex_pack::Pack::open)
 //! and [`Pack::tile_checked`](vortex_pack::Pack::tile_checked) check a local file, by the same
-//! code ([`PackHead`]): the header's CRC and claims before anything is sized from them, the
+//! code ([`PackLayout`]): the header's CRC and claims before anything is sized from them, the
 //! level table, the metadata's CRC, the index's CRC (before any entry is used when it is read
 //! whole; once its last block has arrived otherwise, each entry checked for sense before use),
 //! and every payload's CRC.
@@ -28,9 +28,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Condvar, Mutex, PoisonError};
 use std::time::Duration;
 
-use vortex_pack::{Limits, PackError, PackHead};
+use vortex_pack::{Limits, PackError, PackLayout, TileId, TileKind};
 
-use super::pack::decode_stored;
+use super::pack::{absent_as, decode_stored};
 use super::remote::{IndexPlan, RangeRead, RemotePack, lock, parse_content_range};
 use super::{PageSource, ReadError, SourceTile, StoredRead, StoredTile};
 use crate::loader::LoaderError;
@@ -120,9 +120,12 @@ enum FetchError {
 }
 
 impl FetchError {
-    fn message(self) -> String {
+    /// The failed fetch as a read error: an I/O error that outlasted its retries may still pass
+    /// later ([`ReadErrorKind::Io`](super::ReadErrorKind::Io)); a fatal one will not.
+    fn read_error(self) -> ReadError {
         match self {
-            FetchError::Io(m) | FetchError::Fatal(m) => m,
+            FetchError::Io(m) => ReadError::io(m),
+            FetchError::Fatal(m) => ReadError::unavailable(m),
         }
     }
 }
@@ -155,8 +158,8 @@ impl HttpPack {
     }
 
     /// The checked header and level table.
-    pub fn head(&self) -> &PackHead {
-        self.remote.head()
+    pub fn layout(&self) -> &PackLayout {
+        self.remote.layout()
     }
 
     /// The metadata: JSON text with the `info.json` members, its CRC checked.
@@ -179,8 +182,8 @@ impl HttpPack {
         }
     }
 
-    fn stored(&self, lod: u8, x: u16, y: u16) -> Result<StoredRead, ReadError> {
-        pollster::block_on(self.remote.stored(lod, x, y))
+    fn stored(&self, id: TileId) -> Result<StoredRead, ReadError> {
+        pollster::block_on(self.remote.stored(id))
     }
 }
 
@@ -190,26 +193,26 @@ impl PageSource for HttpPack {
     }
 
     fn texture(&self) -> Result<VirtualTexture, LoaderError> {
-        VirtualTexture::from_head(self.remote.head())
+        VirtualTexture::from_layout(self.remote.layout())
     }
 
-    fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
-        let StoredRead { tile, bytes_read } = self.stored(lod, x, y)?;
+    fn read_tile(&self, id: TileId, format: CacheFormat) -> Result<SourceTile, ReadError> {
+        let StoredRead { tile, bytes_read } = self.stored(id)?;
         match tile {
             StoredTile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
-            StoredTile::Absent => Err(ReadError::new(format!("an absent tile cannot be made into {}", format.name()))),
-            StoredTile::Stored { kind, bytes } => decode_stored(self.remote.head(), kind, &bytes, format)
+            StoredTile::Absent => Err(absent_as(format)),
+            StoredTile::Stored { kind, bytes } => decode_stored(self.remote.layout(), kind, &bytes, format)
                 .map(|texels| SourceTile::Texels { texels, bytes_read })
-                .map_err(|e| ReadError { bytes_read, ..e }),
+                .map_err(|e| e.with_bytes_read(bytes_read)),
         }
     }
 
-    fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
-        self.stored(lod, x, y).map(Some)
+    fn read_stored(&self, id: TileId) -> Result<Option<StoredRead>, ReadError> {
+        self.stored(id).map(Some)
     }
 
-    fn decode(&self, _: u8, _: u16, _: u16, kind: u8, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
-        decode_stored(self.remote.head(), kind, bytes, format)
+    fn decode(&self, _: TileId, kind: TileKind, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
+        decode_stored(self.remote.layout(), kind, bytes, format)
     }
 
     fn opaque(&self) -> bool {
@@ -222,13 +225,13 @@ impl PageSource for HttpPack {
 }
 
 impl RangeRead for Fetcher {
-    async fn first(&self, n: u64) -> Result<(Vec<u8>, u64), String> {
-        let bytes = self.fetch_first(n).map_err(FetchError::message)?;
+    async fn first(&self, n: u64) -> Result<(Vec<u8>, u64), ReadError> {
+        let bytes = self.fetch_first(n).map_err(FetchError::read_error)?;
         Ok((bytes, self.file_len()))
     }
 
-    async fn read(&self, start: u64, end: u64) -> Result<Vec<u8>, String> {
-        self.read(start, end).map_err(FetchError::message)
+    async fn read(&self, start: u64, end: u64) -> Result<Vec<u8>, ReadError> {
+        self.read(start, end).map_err(FetchError::read_error)
     }
 
     fn corrupt(&self) {

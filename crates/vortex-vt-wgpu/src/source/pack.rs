@@ -1,5 +1,5 @@
 //! Vortex packs as page sources. A stored tile is read as it is stored (its payload, checksum
-//! checked, or its one colour) and decoded on its own: to RGBA8 by `vortex_pack::tile_rgba8`, or
+//! checked, or its one colour) and decoded on its own: to RGBA8 by `Tile::decode_rgba8`, or
 //! for a BC7 cache taken as stored BC7 blocks (or blocks of a constant tile's one colour). The
 //! loader's memory tier keeps the stored bytes between the two; an absent tile is reported as
 //! such, for the loader to magnify its ancestor.
@@ -7,10 +7,10 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use vortex_pack::{Description, Pack, PackError, PackHead, Tile, TileKind};
+use vortex_pack::{Description, Pack, PackError, PackLayout, Tile, TileId, TileKind};
 use vortex_vt::page::TextureGrid;
 
-use super::{PageSource, ReadError, SourceTile, StoredRead, StoredTile};
+use super::{PageSource, ReadError, ReadErrorKind, SourceTile, StoredRead, StoredTile};
 use crate::bc7;
 use crate::loader::LoaderError;
 use crate::page_cache::CacheFormat;
@@ -27,30 +27,30 @@ impl PageSource for Pack {
 
     /// The tile decoded where it lies in the pack, with no copy of its stored bytes (what the
     /// loader reads when the memory tier is off).
-    fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
-        let (tile, bytes_read) = checked(self, lod, x, y)?;
+    fn read_tile(&self, id: TileId, format: CacheFormat) -> Result<SourceTile, ReadError> {
+        let (tile, bytes_read) = checked(self, id)?;
         match tile {
             Tile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
-            Tile::Absent => Err(ReadError::new(format!("an absent tile cannot be made into {}", format.name()))),
-            tile => decode_tile(self.head(), tile, format)
+            Tile::Absent => Err(absent_as(format)),
+            tile => decode_tile(self.layout(), tile, format)
                 .map(|texels| SourceTile::Texels { texels, bytes_read })
-                .map_err(|e| ReadError { bytes_read, ..e }),
+                .map_err(|e| e.with_bytes_read(bytes_read)),
         }
     }
 
     /// The tile's stored bytes, copied out of the pack so that the memory tier may keep them.
-    fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
-        let (tile, bytes_read) = checked(self, lod, x, y)?;
+    fn read_stored(&self, id: TileId) -> Result<Option<StoredRead>, ReadError> {
+        let (tile, bytes_read) = checked(self, id)?;
         let tile = match tile {
             Tile::Absent => StoredTile::Absent,
-            Tile::Constant(value) => StoredTile::Stored { kind: TileKind::Constant as u8, bytes: Arc::from(value) },
-            Tile::Data(kind, payload) => StoredTile::Stored { kind: kind as u8, bytes: Arc::from(payload) },
+            Tile::Constant(value) => StoredTile::Stored { kind: TileKind::Constant, bytes: Arc::from(value) },
+            Tile::Data(kind, payload) => StoredTile::Stored { kind, bytes: Arc::from(payload) },
         };
         Ok(Some(StoredRead { tile, bytes_read }))
     }
 
-    fn decode(&self, _: u8, _: u16, _: u16, kind: u8, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
-        decode_stored(self.head(), kind, bytes, format)
+    fn decode(&self, _: TileId, kind: TileKind, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
+        decode_stored(self.layout(), kind, bytes, format)
     }
 
     /// One or three channels: no alpha stored.
@@ -67,12 +67,12 @@ impl PageSource for Pack {
 
 /// The tile as stored, in the pack (its payload, checksum checked, or its one colour, or
 /// `Absent`), and the bytes read for it. A payload that fails its checksum still counts as read.
-fn checked(pack: &Pack, lod: u8, x: u16, y: u16) -> Result<(Tile<'_>, u64), ReadError> {
-    let (lod, x, y) = (u32::from(lod), u32::from(x), u32::from(y));
+fn checked(pack: &Pack, id: TileId) -> Result<(Tile<'_>, u64), ReadError> {
+    let TileId { lod, x, y } = id;
     let payload_len = |tile: &Tile| if let Tile::Data(_, payload) = tile { payload.len() as u64 } else { 0 };
     let tile = pack.tile_checked(lod, x, y).map_err(|e| {
         let bytes_read = pack.tile(lod, x, y).map_or(0, |tile| payload_len(&tile));
-        ReadError { bytes_read, ..read_error(e) }
+        read_error(e).with_bytes_read(bytes_read)
     })?;
     let bytes_read = payload_len(&tile);
     Ok((tile, bytes_read))
@@ -81,34 +81,43 @@ fn checked(pack: &Pack, lod: u8, x: u16, y: u16) -> Result<(Tile<'_>, u64), Read
 /// A stored tile's RGBA8 texels (any kind), or its BC7 blocks (a BC7 or one-colour tile: the
 /// loader asks for BC7 only when every tile is one of those); never BC1, which the loader
 /// transcodes.
-pub(super) fn decode_tile(head: &PackHead, tile: Tile<'_>, format: CacheFormat) -> Result<Vec<u8>, ReadError> {
+pub(super) fn decode_tile(head: &PackLayout, tile: Tile<'_>, format: CacheFormat) -> Result<Vec<u8>, ReadError> {
     let (d, limit) = (&head.header().description, head.limits().max_decoded_bytes);
     match format {
         CacheFormat::Rgba8 => texels(tile, d, limit),
         CacheFormat::Bc7 => blocks(tile, d, limit),
-        CacheFormat::Bc1 => Err(ReadError::new("a pack gives RGBA8 texels or stored BC7 blocks, not BC1")),
+        CacheFormat::Bc1 => Err(ReadError::unsupported("a pack gives RGBA8 texels or stored BC7 blocks, not BC1")),
     }
 }
 
-/// What [`PageSource::decode`] does for a pack: the stored tile of `kind` (a [`TileKind`] byte)
-/// decoded as [`decode_tile`] does.
+/// What [`PageSource::decode`] does for a pack: the stored tile of `kind` decoded as
+/// [`decode_tile`] does.
 pub(super) fn decode_stored(
-    head: &PackHead,
-    kind: u8,
+    head: &PackLayout,
+    kind: TileKind,
     bytes: &[u8],
     format: CacheFormat,
 ) -> Result<Vec<u8>, ReadError> {
-    let kind = TileKind::from_u8(kind).ok_or_else(|| ReadError::new(format!("unknown tile kind {kind}")))?;
-    let tile = if kind == TileKind::Constant { Tile::Constant(bytes) } else { Tile::Data(kind, bytes) };
+    let tile = match kind {
+        TileKind::Absent => return Err(absent_as(format)),
+        TileKind::Constant => Tile::Constant(bytes),
+        kind => Tile::Data(kind, bytes),
+    };
     decode_tile(head, tile, format)
+}
+
+/// Why an absent tile is no answer in `format`: only an RGBA8 page can be magnified from its
+/// ancestor.
+pub(super) fn absent_as(format: CacheFormat) -> ReadError {
+    ReadError::unsupported(format!("an absent tile cannot be made into {}", format.name()))
 }
 
 /// The tile's RGBA8 texels.
 fn texels(tile: Tile<'_>, d: &Description, limit: u64) -> Result<Vec<u8>, ReadError> {
-    let texels = vortex_pack::tile_rgba8(tile, d, limit).map_err(read_error)?.unwrap_or_default();
+    let texels = tile.decode_rgba8(d, limit).map_err(read_error)?.unwrap_or_default();
     let expected = (d.tile_size as usize).pow(2) * 4;
     if texels.len() != expected {
-        return Err(ReadError::new(format!("decodes to {} bytes, not {expected} of RGBA8", texels.len())));
+        return Err(ReadError::corrupt(format!("decodes to {} bytes, not {expected} of RGBA8", texels.len())));
     }
     Ok(texels)
 }
@@ -119,30 +128,43 @@ fn blocks(tile: Tile<'_>, d: &Description, limit: u64) -> Result<Vec<u8>, ReadEr
     let blocks = match tile {
         Tile::Data(TileKind::Bc7, payload) => payload.to_vec(),
         Tile::Constant(_) => {
-            let texels = vortex_pack::tile_rgba8(tile, d, limit).map_err(read_error)?.unwrap_or_default();
+            let texels = tile.decode_rgba8(d, limit).map_err(read_error)?.unwrap_or_default();
             let colour = texels.first_chunk::<4>().copied().unwrap_or_default();
             bc7::solid_block(colour).repeat(wanted / bc7::BLOCK_BYTES)
         }
         Tile::Data(kind, _) => {
-            return Err(ReadError::new(format!("a BC7 cache takes BC7 and one-colour tiles, not {}", kind.name())));
+            return Err(ReadError::unsupported(format!(
+                "a BC7 cache takes BC7 and one-colour tiles, not {}",
+                kind.name()
+            )));
         }
-        Tile::Absent => return Err(ReadError::new("an absent tile cannot be made into BC7 blocks")),
+        Tile::Absent => return Err(absent_as(CacheFormat::Bc7)),
     };
     if blocks.len() != wanted {
-        return Err(ReadError::new(format!("holds {} bytes of BC7 blocks, not {wanted}", blocks.len())));
+        return Err(ReadError::corrupt(format!("holds {} bytes of BC7 blocks, not {wanted}", blocks.len())));
     }
     Ok(blocks)
 }
 
 /// A pack error as a read error: the pack error already names the path and tile, which the
-/// loader's error names too, so keep only what it adds.
+/// loader's error names too, so keep only what it adds. Its kind: an I/O error may pass; bytes
+/// that fail a check or do not decode are corrupt; what this reader refuses (a newer format, a
+/// limit, a tile outside the pack) is unsupported.
 pub(super) fn read_error(e: PackError) -> ReadError {
-    ReadError::new(match e {
-        PackError::Tile { offset, message, .. } => format!("at byte {offset}: {message}"),
-        PackError::OutOfRange { message, .. } => message,
-        PackError::Payload { kind, message } => format!("{kind} payload: {message}"),
-        other => other.to_string(),
-    })
+    let kind = match &e {
+        PackError::Io { .. } => ReadErrorKind::Io,
+        PackError::Corrupt { .. } | PackError::Tile { .. } | PackError::Payload { .. } => ReadErrorKind::Corrupt,
+        _ => ReadErrorKind::Unsupported,
+    };
+    ReadError::new(
+        kind,
+        match e {
+            PackError::Tile { offset, message, .. } => format!("at byte {offset}: {message}"),
+            PackError::OutOfRange { message, .. } => message,
+            PackError::Payload { kind, message } => format!("{kind} payload: {message}"),
+            other => other.to_string(),
+        },
+    )
 }
 
 /// Reading a texture's shape from its pack.
@@ -154,12 +176,12 @@ impl VirtualTexture {
     /// The tiler's older square power-of-two packs qualify: their image sits at the top-left
     /// of the grid, and the pages wholly outside it are never asked for.
     pub fn from_pack(pack: &Pack) -> Result<VirtualTexture, LoaderError> {
-        VirtualTexture::from_head(pack.head())
+        VirtualTexture::from_layout(pack.layout())
     }
 
     /// As [`VirtualTexture::from_pack`], from a pack's checked header and level table (a pack
     /// read in pieces, over HTTP say).
-    pub fn from_head(head: &PackHead) -> Result<VirtualTexture, LoaderError> {
+    pub fn from_layout(head: &PackLayout) -> Result<VirtualTexture, LoaderError> {
         let path = || head.path().to_path_buf();
         let d = &head.header().description;
         let levels = head.levels();

@@ -1,5 +1,5 @@
 //! The pack protocol over byte ranges, apart from how the bytes travel: what to read first, how
-//! the header, level table, metadata and index are checked ([`PackHead`], the code
+//! the header, level table, metadata and index are checked ([`PackLayout`], the code
 //! [`Pack::open`](vortex_pack::Pack::open) checks a local file with), the index held whole or in
 //! blocks of [`INDEX_BLOCK`] entries (its CRC checked once every block is held), and each tile's
 //! payload read and its CRC checked (a payload that fails is read again once, with its index
@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
 use vortex_pack::format::{ENTRY_LEN, LEVEL_LEN};
-use vortex_pack::{Limits, PackError, PackHead, Place, TileId, TileKind};
+use vortex_pack::{Limits, PackError, PackLayout, Place, TileId, TileKind};
 
 use super::pack::read_error;
 use super::{ReadError, StoredRead, StoredTile};
@@ -21,13 +21,14 @@ use super::{ReadError, StoredRead, StoredTile};
 pub const INDEX_BLOCK: u64 = 256;
 
 /// Bytes of one file, by range: the transport under [`RemotePack`]. Messages name the range; the
-/// transport retries what is worth retrying before it answers.
+/// transport retries what is worth retrying before it answers, and its error's kind says whether
+/// a later read may pass ([`ReadErrorKind::Io`](super::ReadErrorKind::Io)) or not.
 #[allow(async_fn_in_trait)]
 pub(crate) trait RangeRead {
     /// The first `n` bytes (fewer if the file is shorter) and the file's length.
-    async fn first(&self, n: u64) -> Result<(Vec<u8>, u64), String>;
+    async fn first(&self, n: u64) -> Result<(Vec<u8>, u64), ReadError>;
     /// Bytes `start..end`.
-    async fn read(&self, start: u64, end: u64) -> Result<Vec<u8>, String>;
+    async fn read(&self, start: u64, end: u64) -> Result<Vec<u8>, ReadError>;
     /// A payload's bytes failed their CRC (for the transport's counters).
     fn corrupt(&self);
 }
@@ -44,7 +45,7 @@ pub(crate) struct IndexPlan {
 /// A pack read through `R`: its checked head, and the index as far as it has been read.
 pub(crate) struct RemotePack<R> {
     location: PathBuf,
-    head: PackHead,
+    head: PackLayout,
     reader: R,
     plan: IndexPlan,
     /// The index by block number ([`INDEX_BLOCK`] entries each), as fetched.
@@ -60,10 +61,10 @@ impl<R: RangeRead> RemotePack<R> {
     /// Opens the pack at `location` through `reader`: its header, level table and metadata (and
     /// its whole index, when small) are read and checked before this answers.
     pub(crate) async fn open(location: PathBuf, reader: R, plan: IndexPlan, limits: Limits) -> Result<Self, PackError> {
-        let io = |message: String| PackError::Io { path: location.clone(), source: std::io::Error::other(message) };
+        let io = |e: ReadError| PackError::Io { path: location.clone(), source: std::io::Error::other(e.message) };
         // The first read: the header and, for most packs, the level table and metadata.
         let (first, file_len) = reader.first(2048).await.map_err(io)?;
-        let h = PackHead::read_header(&location, &first, file_len, limits)?;
+        let h = PackLayout::read_header(&location, &first, file_len, limits)?;
         let section = async |offset: u64, len: u64| -> Result<Vec<u8>, PackError> {
             match first.get(offset as usize..).and_then(|rest| rest.get(..len as usize)) {
                 Some(held) => Ok(held.to_vec()),
@@ -71,18 +72,8 @@ impl<R: RangeRead> RemotePack<R> {
             }
         };
         let raw_levels = section(h.levels_offset, h.description.level_count as u64 * LEVEL_LEN as u64).await?;
-        // A local reader maps what a header claims; this one allocates it, so held to the cap on
-        // any one buffer (the header's claims were checked against the file's length only).
-        if u64::from(h.meta_len) > limits.max_decoded_bytes {
-            return Err(PackError::LimitExceeded {
-                path: location.clone(),
-                field: "meta_len".into(),
-                offset: vortex_pack::format::at::META_LEN as u64,
-                value: h.meta_len.into(),
-                limit: limits.max_decoded_bytes,
-                cap: "max_decoded_bytes",
-            });
-        }
+        // A local reader maps what a header claims; this one allocates it.
+        PackLayout::check_metadata_len(&location, &h, limits)?;
         // The index (when read whole) and the metadata lie side by side: one read for both.
         let index_len = h.index_count * ENTRY_LEN as u64;
         let meta_end = h.meta_offset + u64::from(h.meta_len);
@@ -96,7 +87,7 @@ impl<R: RangeRead> RemotePack<R> {
             let index = if whole_index { Some(section(h.index_offset, index_len).await?) } else { None };
             (index, section(h.meta_offset, u64::from(h.meta_len)).await?)
         };
-        let head = PackHead::new(&location, h, &raw_levels, &meta, limits)?;
+        let head = PackLayout::new(&location, h, &raw_levels, &meta, limits)?;
         let mut blocks = HashMap::new();
         if let Some(index) = index {
             head.check_index(&raw_levels, &index)?;
@@ -120,7 +111,7 @@ impl<R: RangeRead> RemotePack<R> {
         &self.location
     }
 
-    pub(crate) fn head(&self) -> &PackHead {
+    pub(crate) fn layout(&self) -> &PackLayout {
         &self.head
     }
 
@@ -135,7 +126,7 @@ impl<R: RangeRead> RemotePack<R> {
     /// The index entry at `position`, from its block (fetched if not held).
     async fn raw_entry(&self, position: u64) -> Result<[u8; ENTRY_LEN], ReadError> {
         if let Some(message) = lock(&self.index_corrupt).clone() {
-            return Err(ReadError::new(message));
+            return Err(ReadError::corrupt(message));
         }
         let n = position / INDEX_BLOCK;
         let held = lock(&self.index).get(&n).cloned();
@@ -150,7 +141,7 @@ impl<R: RangeRead> RemotePack<R> {
                     .reader
                     .read(start, start + count * ENTRY_LEN as u64)
                     .await
-                    .map_err(|e| ReadError::new(format!("index block at byte {start}: {e}")))?
+                    .map_err(|e| e.context(format!("index block at byte {start}")))?
                     .into();
                 self.keep_block(n, Arc::clone(&bytes))?;
                 bytes
@@ -176,14 +167,13 @@ impl<R: RangeRead> RemotePack<R> {
         checked.map_err(|e| {
             let message = e.to_string();
             *lock(&self.index_corrupt) = Some(message.clone());
-            ReadError::new(message)
+            ReadError::corrupt(message)
         })
     }
 
-    /// Tile (`lod`, `x`, `y`) as stored, its payload's CRC checked; a payload that fails is read
-    /// again once, with its index block (the entry may be what was wrong), then reported.
-    pub(crate) async fn stored(&self, lod: u8, x: u16, y: u16) -> Result<StoredRead, ReadError> {
-        let id = TileId { lod: lod.into(), x: x.into(), y: y.into() };
+    /// Tile `id` as stored, its payload's CRC checked; a payload that fails is read again once,
+    /// with its index block (the entry may be what was wrong), then reported as corrupt.
+    pub(crate) async fn stored(&self, id: TileId) -> Result<StoredRead, ReadError> {
         let position = self.head.position(id).map_err(read_error)?;
         let mut attempt = 0;
         loop {
@@ -191,7 +181,7 @@ impl<R: RangeRead> RemotePack<R> {
             let (kind, offset, len, crc) = match self.head.place(id, position, &raw).map_err(read_error)? {
                 Place::Absent => return Ok(StoredRead { tile: StoredTile::Absent, bytes_read: 0 }),
                 Place::Constant(value) => {
-                    let tile = StoredTile::Stored { kind: TileKind::Constant as u8, bytes: Arc::from(value) };
+                    let tile = StoredTile::Stored { kind: TileKind::Constant, bytes: Arc::from(value) };
                     return Ok(StoredRead { tile, bytes_read: 0 });
                 }
                 Place::Data { kind, offset, len, crc } => (kind, offset, len, crc),
@@ -202,23 +192,23 @@ impl<R: RangeRead> RemotePack<R> {
                 let message = format!(
                     "a payload of {len} bytes at byte {offset}, over the limit of {most} (Limits::max_decoded_bytes)"
                 );
-                return Err(ReadError::new(message));
+                return Err(ReadError::unsupported(message));
             }
             let bytes = self
                 .reader
                 .read(offset, offset + len as u64)
                 .await
-                .map_err(|e| ReadError::new(format!("payload at byte {offset}: {e}")))?;
+                .map_err(|e| e.context(format!("payload at byte {offset}")))?;
             let bytes_read = bytes.len() as u64;
             match self.head.check_payload(id, offset, crc, &bytes) {
                 Ok(()) => {
-                    let tile = StoredTile::Stored { kind: kind as u8, bytes: bytes.into() };
+                    let tile = StoredTile::Stored { kind, bytes: bytes.into() };
                     return Ok(StoredRead { tile, bytes_read });
                 }
                 Err(e) => {
                     self.reader.corrupt();
                     if attempt == 1 {
-                        return Err(ReadError { bytes_read, ..read_error(e) });
+                        return Err(read_error(e).with_bytes_read(bytes_read));
                     }
                     attempt += 1;
                     // Unless the index was read whole and its CRC checked, its entry is suspect too.

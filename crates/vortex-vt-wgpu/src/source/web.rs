@@ -18,11 +18,11 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::task::{Context, Poll, Waker};
 
-use vortex_pack::{Limits, PackError, PackHead};
+use vortex_pack::{Limits, PackError, PackLayout, TileId, TileKind};
 use wasm_bindgen::{JsCast, JsValue};
 use wasm_bindgen_futures::JsFuture;
 
-use super::pack::decode_stored;
+use super::pack::{absent_as, decode_stored};
 use super::remote::{IndexPlan, RangeRead, RemotePack, lock, parse_content_range};
 use super::{LocalFuture, PageSource, ReadError, SourceTile, StoredRead, StoredTile};
 use crate::loader::LoaderError;
@@ -60,8 +60,8 @@ pub struct WebPack {
 
 #[derive(Default)]
 struct Held {
-    tiles: HashMap<(u8, u16, u16), Result<StoredRead, ReadError>>,
-    order: VecDeque<(u8, u16, u16)>,
+    tiles: HashMap<TileId, Result<StoredRead, ReadError>>,
+    order: VecDeque<TileId>,
 }
 
 /// Reads held back ([`WebPack::hold`]): tests take a frame while pages are in flight.
@@ -82,15 +82,14 @@ impl WebPack {
         let plan = IndexPlan { whole_up_to: 1 << 20, gap: 16 << 10 };
         let remote = RemotePack::open(location, reader, plan, Limits::default()).await?;
         let pack = WebPack { remote, held: Mutex::default(), gate: Mutex::default() };
-        let root = pack.remote.head().header().description.level_count.saturating_sub(1);
-        if let Ok(root) = u8::try_from(root) {
-            pack.fetch(root, 0, 0).await;
-        }
+        let root = pack.remote.layout().header().description.level_count.saturating_sub(1);
+        pack.fetch(TileId { lod: root, x: 0, y: 0 }).await;
         Ok(pack)
     }
 
-    pub fn head(&self) -> &PackHead {
-        self.remote.head()
+    /// The checked header and level table.
+    pub fn layout(&self) -> &PackLayout {
+        self.remote.layout()
     }
 
     /// The metadata: JSON text with the `info.json` members, its CRC checked.
@@ -98,6 +97,7 @@ impl WebPack {
         self.remote.metadata()
     }
 
+    /// What its reads have cost so far.
     pub fn stats(&self) -> WebStats {
         let c = &self.remote.reader().counters;
         let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
@@ -115,6 +115,7 @@ impl WebPack {
         lock(&self.gate).closed = true;
     }
 
+    /// Lets the reads held by [`WebPack::hold`] go on.
     pub fn release(&self) {
         let waiting = {
             let mut gate = lock(&self.gate);
@@ -124,16 +125,16 @@ impl WebPack {
         waiting.into_iter().for_each(Waker::wake);
     }
 
-    /// Fetches tile (`lod`, `x`, `y`) (once the gate is open) and keeps what came, or why not.
-    async fn fetch(&self, lod: u8, x: u16, y: u16) {
-        if lock(&self.held).tiles.contains_key(&(lod, x, y)) {
+    /// Fetches tile `id` (once the gate is open) and keeps what came, or why not.
+    async fn fetch(&self, id: TileId) {
+        if lock(&self.held).tiles.contains_key(&id) {
             return;
         }
         Opened(&self.gate).await;
-        let read = self.remote.stored(lod, x, y).await;
+        let read = self.remote.stored(id).await;
         let mut held = lock(&self.held);
-        if held.tiles.insert((lod, x, y), read).is_none() {
-            held.order.push_back((lod, x, y));
+        if held.tiles.insert(id, read).is_none() {
+            held.order.push_back(id);
         }
         while held.order.len() > HELD_TILES {
             if let Some(oldest) = held.order.pop_front() {
@@ -149,36 +150,39 @@ impl PageSource for WebPack {
     }
 
     fn texture(&self) -> Result<VirtualTexture, LoaderError> {
-        VirtualTexture::from_head(self.remote.head())
+        VirtualTexture::from_layout(self.remote.layout())
     }
 
-    fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
-        let Some(StoredRead { tile, bytes_read }) = self.read_stored(lod, x, y)? else {
+    fn read_tile(&self, id: TileId, format: CacheFormat) -> Result<SourceTile, ReadError> {
+        let Some(StoredRead { tile, bytes_read }) = self.read_stored(id)? else {
             return Ok(SourceTile::Absent);
         };
         match tile {
             StoredTile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
-            StoredTile::Absent => Err(ReadError::new(format!("an absent tile cannot be made into {}", format.name()))),
-            StoredTile::Stored { kind, bytes } => decode_stored(self.remote.head(), kind, &bytes, format)
+            StoredTile::Absent => Err(absent_as(format)),
+            StoredTile::Stored { kind, bytes } => decode_stored(self.remote.layout(), kind, &bytes, format)
                 .map(|texels| SourceTile::Texels { texels, bytes_read })
-                .map_err(|e| ReadError { bytes_read, ..e }),
+                .map_err(|e| e.with_bytes_read(bytes_read)),
         }
     }
 
     /// What [`PageSource::prepare`] fetched; a tile not fetched is an error, never a wait.
-    fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
-        match lock(&self.held).tiles.get(&(lod, x, y)) {
+    fn read_stored(&self, id: TileId) -> Result<Option<StoredRead>, ReadError> {
+        match lock(&self.held).tiles.get(&id) {
             Some(read) => read.clone().map(Some),
-            None => Err(ReadError::new("not fetched yet: the web loader prepares every tile before it reads it")),
+            // Not a wait, and not worth one: the loader prepares each tile before reading it.
+            None => {
+                Err(ReadError::unavailable("not fetched yet: the web loader prepares every tile before it reads it"))
+            }
         }
     }
 
-    fn decode(&self, _: u8, _: u16, _: u16, kind: u8, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
-        decode_stored(self.remote.head(), kind, bytes, format)
+    fn decode(&self, _: TileId, kind: TileKind, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
+        decode_stored(self.remote.layout(), kind, bytes, format)
     }
 
-    fn prepare(&self, lod: u8, x: u16, y: u16) -> Option<LocalFuture<'_>> {
-        Some(Box::pin(self.fetch(lod, x, y)))
+    fn prepare(&self, id: TileId) -> Option<LocalFuture<'_>> {
+        Some(Box::pin(self.fetch(id)))
     }
 
     fn opaque(&self) -> bool {
@@ -231,11 +235,11 @@ struct FetchRange {
 }
 
 impl RangeRead for FetchRange {
-    async fn first(&self, n: u64) -> Result<(Vec<u8>, u64), String> {
+    async fn first(&self, n: u64) -> Result<(Vec<u8>, u64), ReadError> {
         self.with_retries(0, n, true).await
     }
 
-    async fn read(&self, start: u64, end: u64) -> Result<Vec<u8>, String> {
+    async fn read(&self, start: u64, end: u64) -> Result<Vec<u8>, ReadError> {
         if start >= end {
             return Ok(Vec::new());
         }
@@ -248,15 +252,15 @@ impl RangeRead for FetchRange {
 }
 
 impl FetchRange {
-    async fn with_retries(&self, start: u64, end: u64, first: bool) -> Result<(Vec<u8>, u64), String> {
+    async fn with_retries(&self, start: u64, end: u64, first: bool) -> Result<(Vec<u8>, u64), ReadError> {
         let mut wait = BACKOFF_MS;
         let mut tries = 1;
         loop {
             match self.request(start, end, first).await {
                 Ok(answer) => return Ok(answer),
-                Err(Failure::Fatal(message)) => return Err(message),
+                Err(Failure::Fatal(message)) => return Err(ReadError::unavailable(message)),
                 Err(Failure::Retry(message)) if tries >= ATTEMPTS => {
-                    return Err(format!("{message} ({tries} attempts)"));
+                    return Err(ReadError::io(format!("{message} ({tries} attempts)")));
                 }
                 Err(Failure::Retry(_)) => {
                     add(&self.counters.retries, 1);

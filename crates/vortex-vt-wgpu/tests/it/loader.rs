@@ -9,16 +9,17 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
-use vortex_pack::format::{self, Level};
+use vortex_pack::Level;
+use vortex_pack::fuzzing::pyramid_levels;
 use vortex_pack::{Description, NewTile, Pack, PackWriter, Tile, TileId, TileKind, WriteOptions};
 use vortex_vt::page::{GridError, PageId, TextureGrid};
 use vortex_vt::residency::Slot;
 use vortex_vt_wgpu::loader::{
-    LoadCounters, LoadError, LoadedPage, Loader, LoaderError, STAND_IN_COLORS, TIER_ENTRY_OVERHEAD, TierUsage,
-    stand_in_tile,
+    LoadCounters, LoadError, LoadedPage, Loader, LoaderError, RetryPolicy, STAND_IN_COLORS, TIER_ENTRY_OVERHEAD,
+    TierUsage, stand_in_tile,
 };
 use vortex_vt_wgpu::testing::{Gate, gated};
-use vortex_vt_wgpu::{CacheFormat, PageSource, ReadError, SourceTile, StoredRead, VirtualTexture};
+use vortex_vt_wgpu::{CacheFormat, PageSource, ReadError, ReadErrorKind, SourceTile, StoredRead, VirtualTexture};
 
 const TILE: u32 = 16;
 const BORDER: u32 = 2;
@@ -75,7 +76,7 @@ fn jpeg(tile_size: u32, seed: u32) -> Vec<u8> {
 
 /// Writes a pack of `description` with the pyramid's levels, each tile as `spec` says.
 fn write_pack(path: &Path, d: Description, spec: impl Fn(TileId) -> Spec) -> Arc<Pack> {
-    let levels = format::pyramid_levels(&d, 1 << (d.level_count - 1));
+    let levels = pyramid_levels(&d, 1 << (d.level_count - 1));
     write_pack_with_levels(path, d, levels, spec)
 }
 
@@ -144,7 +145,7 @@ fn all_pages(texture: u8, grid: TextureGrid, first_slot: Slot) -> Vec<(PageId, S
 }
 
 fn expected_texels(pack: &Pack, page: PageId) -> Vec<u8> {
-    vortex_pack::decode_rgba8(pack, page.lod.into(), page.x.into(), page.y.into()).unwrap().unwrap()
+    pack.decode_rgba8(TileId { lod: page.lod.into(), x: page.x.into(), y: page.y.into() }).unwrap().unwrap()
 }
 
 fn payload_len(pack: &Pack, page: PageId) -> u64 {
@@ -341,8 +342,11 @@ fn a_corrupted_payload_gives_the_stand_in_and_an_error_naming_the_tile() {
     for (page, x, y) in [(bad[0], 1, 0), (bad[1], 1, 1)] {
         assert_eq!((page.page.lod, page.page.x, page.page.y), (1, x, y));
         match page.error.as_ref().unwrap() {
-            LoadError::Tile { path, lod: 1, x: ex, y: ey, message } if (*ex, *ey) == (u32::from(x), u32::from(y)) => {
+            LoadError::Tile { path, lod: 1, x: ex, y: ey, kind, message }
+                if (*ex, *ey) == (u32::from(x), u32::from(y)) =>
+            {
                 assert_eq!(path, &corrupt_path);
+                assert_eq!(*kind, ReadErrorKind::Corrupt, "a failed checksum is corrupt, not retried");
                 assert!(message.contains("checksum"), "{message}");
             }
             other => panic!("{other}"),
@@ -584,13 +588,13 @@ fn solid_bc7_blocks_decode_to_their_colour_exactly() {
     };
     let colour = |i: usize| [i as u8, 255 - i as u8, (i * 7 % 256) as u8, i as u8];
     let blocks: Vec<u8> = (0..256).flat_map(|i| vortex_vt_wgpu::bc7::solid_block(colour(i))).collect();
-    let levels = format::pyramid_levels(&d, 1);
+    let levels = pyramid_levels(&d, 1);
     let path = dir.path().join("solid.vtpk");
     let mut w = PackWriter::create(&path, d, levels, b"{}", WriteOptions::default()).unwrap();
     w.add(TileId { lod: 0, x: 0, y: 0 }, NewTile::Data(TileKind::Bc7, &blocks)).unwrap();
     w.finish().unwrap();
     let pack = Pack::open(&path).unwrap();
-    let texels = vortex_pack::decode_rgba8(&pack, 0, 0, 0).unwrap().unwrap();
+    let texels = pack.decode_rgba8(TileId { lod: 0, x: 0, y: 0 }).unwrap().unwrap();
     for (i, t) in texels.chunks_exact(4).enumerate() {
         let (x, y) = (i % 64, i / 64);
         assert_eq!(t, colour((y / 4) * 16 + x / 4), "texel ({x}, {y})");
@@ -641,29 +645,108 @@ impl PageSource for Counting {
         VirtualTexture::from_pack(&self.pack)
     }
 
-    fn read_tile(&self, lod: u8, x: u16, y: u16, format: CacheFormat) -> Result<SourceTile, ReadError> {
+    fn read_tile(&self, tile: TileId, format: CacheFormat) -> Result<SourceTile, ReadError> {
         self.reads.fetch_add(1, Ordering::Relaxed);
-        self.pack.read_tile(lod, x, y, format)
+        self.pack.read_tile(tile, format)
     }
 
-    fn read_stored(&self, lod: u8, x: u16, y: u16) -> Result<Option<StoredRead>, ReadError> {
+    fn read_stored(&self, tile: TileId) -> Result<Option<StoredRead>, ReadError> {
         if !self.stored {
             return Ok(None);
         }
         self.reads.fetch_add(1, Ordering::Relaxed);
-        self.pack.read_stored(lod, x, y)
+        self.pack.read_stored(tile)
     }
 
-    fn decode(
-        &self,
-        lod: u8,
-        x: u16,
-        y: u16,
-        kind: u8,
-        bytes: &[u8],
-        format: CacheFormat,
-    ) -> Result<Vec<u8>, ReadError> {
-        self.pack.decode(lod, x, y, kind, bytes, format)
+    fn decode(&self, tile: TileId, kind: TileKind, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
+        self.pack.decode(tile, kind, bytes, format)
+    }
+}
+
+/// A pack whose reads fail with `kind` until `failures` of them have failed, then read as usual;
+/// it counts every read. An application's own source, reading its storage with `read_tile` only.
+struct Failing {
+    pack: Arc<Pack>,
+    kind: ReadErrorKind,
+    failures: usize,
+    reads: AtomicUsize,
+}
+
+impl PageSource for Failing {
+    fn location(&self) -> &Path {
+        self.pack.path()
+    }
+
+    fn texture(&self) -> Result<VirtualTexture, LoaderError> {
+        VirtualTexture::from_pack(&self.pack)
+    }
+
+    fn read_tile(&self, tile: TileId, format: CacheFormat) -> Result<SourceTile, ReadError> {
+        if self.reads.fetch_add(1, Ordering::Relaxed) < self.failures {
+            return Err(ReadError::new(self.kind, "this read fails").with_bytes_read(10));
+        }
+        self.pack.read_tile(tile, format)
+    }
+}
+
+/// One page (the root) read from a source that fails `failures` times with `kind`, by a loader
+/// that reads at most `attempts` times with no wait between (the backoff is what a real source
+/// waits for, not what a test should): the answer, how often the source was read, the counters.
+fn read_failing(kind: ReadErrorKind, failures: usize, attempts: u32) -> (LoadedPage, usize, LoadCounters) {
+    let dir = tempdir();
+    let pack = mixed_pack(dir.path(), "a.vtpk");
+    let source = Arc::new(Failing { pack, kind, failures, reads: AtomicUsize::new(0) });
+    let loader = Loader::with_sources(vec![Arc::clone(&source) as Arc<dyn PageSource>], 1).unwrap();
+    loader.set_retry(RetryPolicy { attempts, backoff: Duration::ZERO });
+    let root = PageId::new(0, loader.textures()[0].grid.lod_count() - 1, 0, 0);
+    let page = loader.load(&[(root, 7)]).remove(0);
+    (page, source.reads.load(Ordering::Relaxed), loader.counters())
+}
+
+#[test]
+fn io_errors_are_read_again_and_the_page_loads() {
+    let (page, reads, counters) = read_failing(ReadErrorKind::Io, 2, 3);
+    assert!(page.is_ok(), "{:?}", page.error);
+    assert_ne!(page.texels, stand_in_tile(TILE));
+    assert_eq!(reads, 3, "two failed reads and the one that passed");
+    assert_eq!((counters.read_retries, counters.errors), (2, 0));
+    assert_eq!(page.bytes_read, 20 + root_payload_len(), "the failed reads' bytes count too");
+}
+
+#[test]
+fn io_errors_past_the_attempts_give_the_stand_in_and_say_io() {
+    let (page, reads, counters) = read_failing(ReadErrorKind::Io, usize::MAX, 4);
+    assert_eq!(reads, 4, "as many reads as attempts, no more");
+    assert_eq!((counters.read_retries, counters.errors), (3, 1));
+    assert_eq!(page.texels, stand_in_tile(TILE));
+    assert!(matches!(page.error, Some(LoadError::Tile { kind: ReadErrorKind::Io, .. })), "{:?}", page.error);
+}
+
+#[test]
+fn other_errors_are_not_read_again() {
+    for kind in [ReadErrorKind::Corrupt, ReadErrorKind::Unsupported, ReadErrorKind::Unavailable] {
+        let (page, reads, counters) = read_failing(kind, usize::MAX, 5);
+        assert_eq!(reads, 1, "{kind:?} was read again");
+        assert_eq!((counters.read_retries, counters.errors), (0, 1));
+        assert_eq!(page.texels, stand_in_tile(TILE), "{kind:?}");
+        match page.error {
+            Some(LoadError::Tile { kind: got, message, .. }) => {
+                assert_eq!(got, kind);
+                assert!(message.contains("fails"), "{message}");
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+}
+
+/// The root payload's length in [`mixed_pack`] (what a successful read of it counts).
+fn root_payload_len() -> u64 {
+    let dir = tempdir();
+    let pack = mixed_pack(dir.path(), "a.vtpk");
+    let root = TileId { lod: pack.levels().len() as u32 - 1, x: 0, y: 0 };
+    match pack.tile(root.lod, root.x, root.y).unwrap() {
+        Tile::Data(_, payload) => payload.len() as u64,
+        _ => 0,
     }
 }
 

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use vortex_pack::{Pack, Tile, WriteOptions, decode_rgba8};
+use vortex_pack::{Pack, Tile, TileId, WriteOptions};
 
 use crate::choice::Choice;
 use crate::images::Img;
@@ -160,7 +160,7 @@ pub fn measure(
                     _ => 0,
                 };
                 tiles += 1;
-                let rgba = decode_rgba8(&pack, lod, tx, ty)?.context("a tile is absent")?;
+                let rgba = pack.decode_rgba8(TileId { lod, x: tx, y: ty })?.context("a tile is absent")?;
                 for y in ty * p..((ty + 1) * p).min(lh) {
                     let src = (((y - ty * p + b) * TILE_SIZE + b) * 4) as usize;
                     let x0 = tx * p;

@@ -87,7 +87,7 @@ pub fn setup(all: &[ImageResult], run: &RunInfo) -> String {
     let mut s = String::new();
     out!(
         s,
-        "Every choice builds the whole pyramid of {w}x{h} 8-bit synthetic images through the real pipeline (`split::split` into a pack, as `split --pack` does) in {}-texel tiles with a border of {} ({}-texel payloads: {} x {} tiles at LOD 0, {} LODs; neither side is a multiple of 8, so the last texel column and row of LODs 1-{} have partial footprints). The pack's tiles are decoded with `vortex_pack::decode_rgba8` (as `verify --decode` and the runtime's loader do) and every texel of every LOD is compared with a float64 reference pyramid computed from the source. The images are generated, deterministically, by the program:",
+        "Every choice builds the whole pyramid of {w}x{h} 8-bit synthetic images through the real pipeline (`split::split` into a pack, as `split --pack` does) in {}-texel tiles with a border of {} ({}-texel payloads: {} x {} tiles at LOD 0, {} LODs; neither side is a multiple of 8, so the last texel column and row of LODs 1-{} have partial footprints). The pack's tiles are decoded with `Pack::decode_rgba8` (as `verify --decode` and the runtime's loader do) and every texel of every LOD is compared with a float64 reference pyramid computed from the source. The images are generated, deterministically, by the program:",
         TILE_SIZE,
         BORDER,
         layout.payload(),
