@@ -14,7 +14,7 @@
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, TryRecvError, TrySendError, sync_channel};
+use std::sync::mpsc::{Receiver, TryRecvError, sync_channel};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::Instant;
 
@@ -29,7 +29,9 @@ use crate::stages::{Stage, StageClock};
 use crate::viewer::Crop;
 
 /// Lots (batches received together) spawned on the pool and not yet stored: the one the writer
-/// stores and the one encoding behind it.
+/// stores and the one encoding behind it. A lot is received only once one of these places is
+/// free: spawned first and then queued for the writer, a third lot's texels waited on the pool
+/// (a row of tiles, 12 MiB at a 16384-texel width: issue 28).
 const LOTS_IN_FLIGHT: usize = 2;
 
 /// What the stage counts: tiles encoded, tiles copied from the source, tiles stored (places).
@@ -70,10 +72,17 @@ pub(crate) fn consume<T: Sample>(
 ) -> Result<()> {
     let busy = Busy::default();
     let stage = Encoding { encoder, sink, counts, copier, progress, busy: &busy };
-    // The writer waits for each lot in turn; the channel's bound keeps the rest from running ahead.
-    let (to_writer, lots) = sync_channel::<Arc<Lot<T>>>(LOTS_IN_FLIGHT - 1);
+    // The writer waits for each lot in turn and frees its place once it is stored; a lot is
+    // received only into a free place, so the writer's queue never fills.
+    let (to_writer, lots) = sync_channel::<Arc<Lot<T>>>(LOTS_IN_FLIGHT);
+    let (free_place, places) = sync_channel::<()>(LOTS_IN_FLIGHT);
+    for _ in 0..LOTS_IN_FLIGHT {
+        let _ = free_place.send(());
+    }
     let result = std::thread::scope(|threads| {
         let writer = threads.spawn(|| -> Result<()> {
+            // Owned here, so that a writer that stops drops it.
+            let free_place = free_place;
             for lot in lots {
                 let results = lot.wait();
                 // Only an ordered sink has anything left to store; every other one stored its
@@ -84,6 +93,9 @@ pub(crate) fn consume<T: Sample>(
                         None => Ok(()),
                     })
                 })?;
+                // The consumer holds none: this never waits. A writer that failed drops
+                // `free_place`, which stops the consumer.
+                let _ = free_place.try_send(());
             }
             Ok(())
         });
@@ -94,7 +106,13 @@ pub(crate) fn consume<T: Sample>(
                 true => helping(|| rx.try_recv().map_err(|e| e == TryRecvError::Empty)),
                 false => rx.recv().map_err(|_| ()),
             };
-            while let Ok(first) = next() {
+            let place = || match on_pool {
+                true => helping(|| places.try_recv().map_err(|e| e == TryRecvError::Empty)),
+                false => places.recv().map_err(|_| ()),
+            };
+            while place().is_ok()
+                && let Ok(first) = next()
+            {
                 if progress.cancelled() {
                     return Err(TilerError::Interrupted);
                 }
@@ -109,22 +127,9 @@ pub(crate) fn consume<T: Sample>(
                         lot.finish_job(k, run.unwrap_or_else(|_| panicked()));
                     });
                 }
-                // Only a writer that failed hangs up: its error is the one to report.
-                let sent = match on_pool {
-                    false => to_writer.send(lot).map_err(|_| ()),
-                    true => {
-                        let mut lot = Some(lot);
-                        helping(|| match lot.take().map(|l| to_writer.try_send(l)) {
-                            Some(Err(TrySendError::Full(l))) => {
-                                lot = Some(l);
-                                Err(true)
-                            }
-                            Some(Err(TrySendError::Disconnected(_))) | None => Err(false),
-                            Some(Ok(())) => Ok(()),
-                        })
-                    }
-                };
-                if sent.is_err() {
+                // The lot has a place, so this never waits. Only a writer that failed hangs up:
+                // its error is the one to report.
+                if to_writer.try_send(lot).is_err() {
                     break;
                 }
             }
