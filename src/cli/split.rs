@@ -55,6 +55,14 @@ pub struct SplitArgs {
     #[arg(long)]
     keep_icc: bool,
 
+    /// Map 32-bit integer or float samples linearly onto 8 bits (16 with --tile-type
+    /// unsignedShort): MIN to 0, MAX to the top code, e.g. 0:4095 or -0.5:1.5 [default: none;
+    /// without it such sources go only to raw/zstd packs and OME-Zarr, since JPEG and PNG would
+    /// cut their range]. Every channel is mapped, alpha included; samples outside (and NaN) are
+    /// clamped and counted in the summary, never cut silently.
+    #[arg(long, value_name = "MIN:MAX")]
+    range: Option<source::range::Range>,
+
     /// A TIFF holding several images: cut its Nth directory, counted from 0 as tiffinfo and
     /// libvips count them (a reduced level or a slide's label included) [default: the first
     /// full-resolution image; the summary says which page was read and what was skipped].
@@ -334,7 +342,10 @@ pub fn run(a: SplitArgs) -> Result<()> {
     let input = input.context("an input image is required")?;
     let options =
         source::OpenOptions { max_memory: a.out.max_memory, autorotate: !a.no_autorotate, keep_icc: a.keep_icc, pick };
-    let (source, kept_icc) = source::open_with(&input, options)?;
+    let (mut source, kept_icc) = source::open_with(&input, options)?;
+    if let Some(range) = a.range {
+        source = source::range::map(source, range, a.out.tile_type.unwrap_or(Depth::U8))?;
+    }
     tile(source, &input, a.filename_format, &a.out, started, kept_icc)
 }
 
@@ -541,10 +552,15 @@ impl Run {
         work: impl FnOnce(Box<dyn RowSource>, &report::Watch) -> vortex_tiler::error::Result<(split::Summary, R)>,
     ) -> Result<(Finished, R)> {
         let (decoder, width, height) = (self.source.describe(), self.source.width(), self.source.height());
+        let after_run = self.source.after_run();
         let Run { source, watch, started, .. } = self;
         let result = work(source, &watch);
         watch.bar.finish_and_clear();
         let (summary, extra) = result?;
+        let decoder = match after_run {
+            Some(note) => format!("{decoder}; {}", note()),
+            None => decoder,
+        };
         Ok((Finished { summary, decoder, width, height, took: started.elapsed() }, extra))
     }
 

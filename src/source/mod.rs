@@ -15,6 +15,7 @@ mod jpeg;
 pub mod orient;
 mod png;
 mod pnm;
+pub mod range;
 pub mod read_ahead;
 pub mod stored;
 mod tiff;
@@ -87,6 +88,11 @@ pub trait RowSource: Send {
     /// ([`stored`]); `None` for sources whose rows are not a stored tile's texels (decoded
     /// from strips or whole, or changed on the way: rotated, converted to sRGB).
     fn stored_tiles(&self) -> Option<std::sync::Arc<dyn stored::StoredTiles>> {
+        None
+    }
+    /// What the source has to add to the summary once its rows are read (the samples
+    /// `--range` clamped), asked after the run.
+    fn after_run(&self) -> Option<Box<dyn Fn() -> String + Send>> {
         None
     }
 }
