@@ -18,6 +18,7 @@ mod failures;
 mod golden;
 mod hostile;
 mod iiif;
+mod keep_icc;
 mod library;
 mod ndpi;
 mod ome_zarr;
