@@ -269,7 +269,7 @@ impl Codec {
         }
         if !matches!(self, Codec::Raw | Codec::Zstd { .. }) {
             return Err(TilerError::Options(format!(
-                "the source is {source}, which --codec {name} cannot hold without cutting its range: use --codec raw, zstd or zstd-delta (packs) or --layout ome-zarr to keep it"
+                "the source is {source}, which --codec {name} cannot hold without cutting its range: use --codec raw, zstd or zstd-delta (packs) or --layout ome-zarr to keep it, or map it onto 8 or 16 bits with --range MIN:MAX"
             )));
         }
         let stored = match (source.depth, depth) {

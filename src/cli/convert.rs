@@ -11,7 +11,7 @@ use vortex_tiler::source::tiled::{
     DeepZoom, Iiif, NamedDir, Order, PackInput, SplitOutput, TileGrid, TiledSource, Xyz, check_tiles_found,
     is_iiif_dir, is_zip, open_zip,
 };
-use vortex_tiler::source::{RowSource, Streamed};
+use vortex_tiler::source::{self, Streamed};
 
 use super::split::{OutputArgs, tile};
 
@@ -77,6 +77,14 @@ pub struct ConvertArgs {
     #[arg(long, value_name = "PATTERN")]
     output_filename_format: Option<String>,
 
+    /// Keep the texels in the colours of the input pyramid's ICC profile (the `iccProfile` of
+    /// a tile directory or pack a `split --keep-icc` run wrote), and the profile in the output's
+    /// JPEG and PNG tiles and info.json, as `split --keep-icc` does [default: convert them to
+    /// sRGB, as split does]. (A tile pyramid carries no EXIF orientation: there is no
+    /// --no-autorotate here.)
+    #[arg(long)]
+    keep_icc: bool,
+
     #[command(flatten)]
     out: OutputArgs,
 }
@@ -87,6 +95,7 @@ pub fn run(a: ConvertArgs) -> Result<()> {
     check_tiles_found(grid.as_ref(), a.allow_missing_tiles)?;
     let header = grid.header();
     let grid_cell = grid.cell();
+    let icc = grid.icc_profile()?;
     let source = TiledSource::new(grid, fill_texel(a.out.background(), header.layout), a.strict)
         .with_max_memory(a.out.max_memory());
     Limits { memory: a.out.max_memory(), ..Limits::default() }.check_memory(
@@ -97,8 +106,8 @@ pub fn run(a: ConvertArgs) -> Result<()> {
         source.memory_needed(),
     )?;
     let missing = source.missing_log();
-    let result =
-        tile(Box::new(source) as Box<dyn RowSource>, &a.input, a.output_filename_format.clone(), &a.out, started, None);
+    let (source, kept_icc) = source::with_profile(&a.input, Box::new(source), icc, a.keep_icc)?;
+    let result = tile(source, &a.input, a.output_filename_format.clone(), &a.out, started, kept_icc);
     let missing = missing.lock().map(|m| m.clone()).unwrap_or_default();
     if !missing.is_empty() {
         eprintln!(

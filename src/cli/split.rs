@@ -14,6 +14,7 @@ use vortex_tiler::output::{Existing, Product};
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::pyramid::Filter;
 use vortex_tiler::settings::{self, CodecChoice, Requested};
+use vortex_tiler::sink::icc::{Profile, WithProfile};
 use vortex_tiler::sink::{DirSink, PackSink, PmtilesSink, TileSink};
 use vortex_tiler::source::RowSource;
 use vortex_tiler::split::SplitOptions;
@@ -49,11 +50,20 @@ pub struct SplitArgs {
     #[arg(long)]
     no_autorotate: bool,
 
-    /// Keep the texels in the colours of the input's ICC profile, and the profile in
-    /// info.json (base64, `iccProfile`), instead of converting them to sRGB [default: convert:
-    /// browsers show untagged tiles as sRGB, and the linear-light LOD filters assume sRGB].
+    /// Keep the texels in the colours of the input's ICC profile, and the profile in every
+    /// JPEG and PNG tile file (APP2, iCCP) and in info.json (base64, `iccProfile`; a pack's
+    /// tiles rely on it), instead of converting them to sRGB [default: convert: browsers show
+    /// untagged tiles as sRGB, and the linear-light LOD filters assume sRGB].
     #[arg(long)]
     keep_icc: bool,
+
+    /// Map 32-bit integer or float samples linearly onto 8 bits (16 with --tile-type
+    /// unsignedShort): MIN to 0, MAX to the top code, e.g. 0:4095 or -0.5:1.5 [default: none;
+    /// without it such sources go only to raw/zstd packs and OME-Zarr, since JPEG and PNG would
+    /// cut their range]. Every channel is mapped, alpha included; samples outside (and NaN) are
+    /// clamped and counted in the summary, never cut silently.
+    #[arg(long, value_name = "MIN:MAX")]
+    range: Option<source::range::Range>,
 
     /// A TIFF holding several images: cut its Nth directory, counted from 0 as tiffinfo and
     /// libvips count them (a reduced level or a slide's label included) [default: the first
@@ -334,7 +344,10 @@ pub fn run(a: SplitArgs) -> Result<()> {
     let input = input.context("an input image is required")?;
     let options =
         source::OpenOptions { max_memory: a.out.max_memory, autorotate: !a.no_autorotate, keep_icc: a.keep_icc, pick };
-    let (source, kept_icc) = source::open_with(&input, options)?;
+    let (mut source, kept_icc) = source::open_with(&input, options)?;
+    if let Some(range) = a.range {
+        source = source::range::map(source, range, a.out.tile_type.unwrap_or(Depth::U8))?;
+    }
     tile(source, &input, a.filename_format, &a.out, started, kept_icc)
 }
 
@@ -359,15 +372,12 @@ pub fn tile(
     started: Instant,
     kept_icc: Option<Vec<u8>>,
 ) -> Result<()> {
-    if let (Some(viewer), Some(_)) = (a.layout.viewer(), &kept_icc) {
-        bail!(
-            "--keep-icc keeps the profile in info.json (--layout vortex, or a pack); --layout {viewer} has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
-        );
-    }
+    // The JPEG and PNG tiles of a directory carry the kept profile (a pack's info.json does).
+    let profile = kept_icc.as_deref().map(Profile::new).transpose()?;
     if a.layout == OutputLayout::OmeZarr {
         if kept_icc.is_some() {
             bail!(
-                "--keep-icc keeps the profile in info.json (--layout vortex, or a pack); OME-Zarr has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
+                "--keep-icc keeps the profile in the JPEG and PNG tiles of a directory and in info.json (a pack's too); OME-Zarr has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
             );
         }
         return ome_zarr::tile(source, input, names, a, started);
@@ -376,17 +386,17 @@ pub fn tile(
     if a.pmtiles.is_some() {
         if kept_icc.is_some() {
             bail!(
-                "--keep-icc keeps the profile in info.json (--layout vortex, or a pack); a PMTiles archive has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
+                "--keep-icc keeps the profile in the JPEG and PNG tiles of a directory and in info.json (a pack's too); a PMTiles archive has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
             );
         }
         if !matches!(a.layout, OutputLayout::Vortex | OutputLayout::Xyz) {
             let layout = a.layout.viewer().map_or("ome-zarr", Viewer::name);
             bail!("--pmtiles holds the web-map (xyz) pyramid; --layout {layout} writes a directory (-o DIR)");
         }
-        return tile_for_viewer(source, input, names, a, Viewer::Xyz, started);
+        return tile_for_viewer(source, input, names, a, Viewer::Xyz, started, None);
     }
     if let Some(viewer) = a.layout.viewer() {
-        return tile_for_viewer(source, input, names, a, viewer, started);
+        return tile_for_viewer(source, input, names, a, viewer, started, profile);
     }
     for (given, flag) in
         [(a.name.is_some(), "--name"), (a.overlap.is_some(), "--overlap"), (a.iiif_id.is_some(), "--iiif-id")]
@@ -484,9 +494,10 @@ pub fn tile(
         }
         return Ok(());
     }
-    let run = Run::start(source, a, &layout, started)?;
+    let mut run = Run::start(source, a, &layout, started)?;
     match (&a.output, &a.pack) {
         (Some(dir), _) => {
+            run.profile = profile;
             let sink = DirSink::create(&claim, names)?;
             let summary = run.into_dir(sink, &opts, |sink| sink.finish(&info))?;
             report(a, "vortex", &summary, dir, None);
@@ -516,6 +527,8 @@ struct Run {
     watch: report::Watch,
     total: u64,
     started: Instant,
+    /// The kept ICC profile (`--keep-icc`), for the JPEG and PNG tiles of a directory.
+    profile: Option<Profile>,
 }
 
 impl Run {
@@ -526,11 +539,14 @@ impl Run {
     /// A run that writes `total` tiles.
     fn start_counting(source: Box<dyn RowSource>, a: &OutputArgs, total: u64, started: Instant) -> Result<Run> {
         a.run.init_pool()?;
-        Ok(Run { source, watch: a.run.watch(total)?, total, started })
+        Ok(Run { source, watch: a.run.watch(total)?, total, started, profile: None })
     }
 
     /// Runs the pipeline into `sink`; the summary keeps what the source was.
-    fn execute(self, sink: &dyn TileSink, opts: &SplitOptions) -> Result<Finished> {
+    fn execute(mut self, sink: &dyn TileSink, opts: &SplitOptions) -> Result<Finished> {
+        let profile = self.profile.take();
+        let tagged = profile.as_ref().map(|profile| WithProfile { inner: sink, profile });
+        let sink = tagged.as_ref().map_or(sink, |t| t as &dyn TileSink);
         let (done, ()) = self.execute_with(|source, watch| Ok((split::split(source, sink, opts, watch)?, ())))?;
         Ok(done)
     }
@@ -541,10 +557,15 @@ impl Run {
         work: impl FnOnce(Box<dyn RowSource>, &report::Watch) -> vortex_tiler::error::Result<(split::Summary, R)>,
     ) -> Result<(Finished, R)> {
         let (decoder, width, height) = (self.source.describe(), self.source.width(), self.source.height());
+        let after_run = self.source.after_run();
         let Run { source, watch, started, .. } = self;
         let result = work(source, &watch);
         watch.bar.finish_and_clear();
         let (summary, extra) = result?;
+        let decoder = match after_run {
+            Some(note) => format!("{decoder}; {}", note()),
+            None => decoder,
+        };
         Ok((Finished { summary, decoder, width, height, took: started.elapsed() }, extra))
     }
 
@@ -604,6 +625,7 @@ fn tile_for_viewer(
     a: &OutputArgs,
     viewer: Viewer,
     started: Instant,
+    profile: Option<Profile>,
 ) -> Result<()> {
     let (dest, product) = match (&a.output, &a.pmtiles) {
         (_, Some(file)) => (file, Product::Pmtiles),
@@ -687,7 +709,8 @@ fn tile_for_viewer(
         extension: viewer.extension(opts.codec.extension()),
         iiif: iiif_service.map(|id| iiif::Service { id, codec: opts.codec }),
     };
-    let run = Run::start(source, a, &layout, started)?;
+    let mut run = Run::start(source, a, &layout, started)?;
+    run.profile = profile;
     let sink = DirSink::for_viewer(&claim, tiles)?;
     let done = run.into_dir(sink, &opts, DirSink::finish_viewer)?;
     report(a, viewer.name(), &done, dest, None);

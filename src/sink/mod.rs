@@ -9,6 +9,7 @@
 //! place when complete.
 
 mod dir;
+pub mod icc;
 pub mod ome_zarr;
 mod pack;
 pub mod pmtiles;

@@ -15,6 +15,7 @@ mod jpeg;
 pub mod orient;
 mod png;
 mod pnm;
+pub mod range;
 pub mod read_ahead;
 pub mod stored;
 mod tiff;
@@ -89,6 +90,11 @@ pub trait RowSource: Send {
     fn stored_tiles(&self) -> Option<std::sync::Arc<dyn stored::StoredTiles>> {
         None
     }
+    /// What the source has to add to the summary once its rows are read (the samples
+    /// `--range` clamped), asked after the run.
+    fn after_run(&self) -> Option<Box<dyn Fn() -> String + Send>> {
+        None
+    }
 }
 
 /// What a file says about how its stored texels are to be shown.
@@ -125,21 +131,9 @@ pub type Opened = (Box<dyn RowSource>, Option<Vec<u8>>);
 /// profile converted to sRGB. Returns the profile when `keep_icc` keeps it, for the output to
 /// carry.
 pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
-    let mut source = open_picked(path, opts.max_memory, opts.pick)?;
+    let source = open_picked(path, opts.max_memory, opts.pick)?;
     let Embedded { orientation, icc } = source.embedded();
-    let mut kept = None;
-    if let Some(icc) = icc {
-        if opts.keep_icc {
-            source = Box::new(icc::Described {
-                inner: source,
-                note: format!("ICC profile kept ({} bytes, --keep-icc): pixels as stored", icc.len()),
-                transform: None,
-            });
-            kept = Some(icc);
-        } else {
-            source = icc::to_srgb(path, source, &icc)?;
-        }
-    }
+    let (mut source, kept) = with_profile(path, source, icc, opts.keep_icc)?;
     if opts.autorotate {
         source = orient::apply(path, source, orientation, opts.max_memory)?;
     } else if orientation != orient::Orientation::NORMAL {
@@ -147,6 +141,20 @@ pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
         source = Box::new(icc::Described { inner: source, note, transform: None });
     }
     Ok((source, kept))
+}
+
+/// `source`, whose texels are in the colours of `icc`, converted to sRGB, or kept as they are
+/// with `keep` (`--keep-icc`, which returns the profile for the output to carry); `split` and
+/// `convert` share it.
+pub fn with_profile(path: &Path, source: Box<dyn RowSource>, icc: Option<Vec<u8>>, keep: bool) -> Result<Opened> {
+    match icc {
+        None => Ok((source, None)),
+        Some(icc) if keep => {
+            let note = format!("ICC profile kept ({} bytes, --keep-icc): pixels as stored", icc.len());
+            Ok((Box::new(icc::Described { inner: source, note, transform: None }), Some(icc)))
+        }
+        Some(icc) => Ok((icc::to_srgb(path, source, &icc)?, None)),
+    }
 }
 
 /// A file source that rewinds by opening its file again (a decoder from the top: PNG and

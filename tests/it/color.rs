@@ -412,9 +412,7 @@ fn split_says_what_it_did_and_keeps_the_profile_when_asked() {
     use base64::Engine;
     let kept = base64::engine::general_purpose::STANDARD.decode(info["iccProfile"].as_str().unwrap()).unwrap();
     assert_eq!(kept, std::fs::read(&icc).unwrap());
-    // A viewer layout has no info.json of ours to keep it in.
-    let out = run(&["split", s(&jpg), "-o", s(&dir.path().join("dzi")), "--layout", "dzi", "--keep-icc"]);
-    fails_with(&out, &["--keep-icc", "dzi"]);
+    // A viewer layout keeps it in its tiles (tests/it/keep_icc.rs).
 }
 
 #[test]

@@ -5,7 +5,7 @@
 //! float or 16-bit signed samples ([`samples`]) stored contiguously (PlanarConfiguration 1),
 //! uncompressed or compressed with LZW, Deflate or PackBits, with or without the horizontal
 //! (or, for floats, floating-point) predictor; JPEG-compressed images go to [`jpeg`]
-//! (libjpeg-turbo); planar-separate, 1/2/4-bit, palette, CMYK and CCITT fax images to
+//! (libjpeg-turbo), or to [`ndpi`] where one strip is cut by restart markers; planar-separate, 1/2/4-bit, palette, CMYK and CCITT fax images to
 //! [`kinds`]; Aperio's JPEG 2000 (33003/33005) to [`jp2k`] (OpenJPEG). Everything else
 //! (uncompressed YCbCr, Lab, other sample formats, old-style JPEG, ...) is refused with a
 //! message naming what the file is. Compressed strips are decoded a few ahead, several at once
@@ -22,6 +22,7 @@ mod jpeg;
 mod kinds;
 mod libjpeg;
 mod lzw;
+mod ndpi;
 mod pyramid;
 // Its reading of SampleFormat and BitsPerSample serves the channel source too.
 pub(super) mod samples;
@@ -151,6 +152,10 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
             .map_err(|e| open_error(path, e))?,
     };
     if jpeg::is_jpeg(path, &mut decoder)? {
+        // One strip cut by restart markers (Hamamatsu NDPI) is read an interval at a time.
+        if let Some(source) = ndpi::open(path, &mut decoder, &chosen.label, &embedded, max_memory)? {
+            return Ok(source);
+        }
         return jpeg::open(path, &mut decoder, chosen.label, embedded, max_memory);
     }
     if jp2k::is_jp2k(path, &mut decoder)? {

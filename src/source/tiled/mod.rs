@@ -51,6 +51,11 @@ pub trait TileGrid: Send + Sync {
     fn header(&self) -> ImageHeader;
     /// Nominal cell size in image texels.
     fn cell(&self) -> (u32, u32);
+    /// The ICC profile the texels are in, where the input says so (the `iccProfile` of a
+    /// tile directory or pack a `--keep-icc` run wrote); `None`: sRGB.
+    fn icc_profile(&self) -> Result<Option<Vec<u8>>> {
+        Ok(None)
+    }
     /// The stored tile of cell (c, r), or `None` if it is missing; a tile file over `cap` bytes
     /// (declared or read) is an error naming it, before more than `cap` bytes are held.
     fn read(&self, col: u32, row: u32, cap: u64) -> Result<Option<CellData>>;
@@ -422,4 +427,18 @@ pub(crate) fn noise(len: usize, seed: u32) -> Vec<u8> {
             (state >> 24) as u8
         })
         .collect()
+}
+
+/// The `iccProfile` member (base64) of an info.json document, decoded; `path` names the
+/// document in errors.
+pub(crate) fn info_icc_profile(path: &std::path::Path, json: &[u8]) -> Result<Option<Vec<u8>>> {
+    use base64::Engine;
+    let doc: serde_json::Value =
+        serde_json::from_slice(json).map_err(|e| TilerError::decode(path, format!("not JSON: {e}")))?;
+    let Some(value) = doc.get("iccProfile") else { return Ok(None) };
+    let text = value.as_str().ok_or_else(|| TilerError::decode(path, "iccProfile is not a string"))?;
+    let icc = base64::engine::general_purpose::STANDARD
+        .decode(text)
+        .map_err(|e| TilerError::decode(path, format!("iccProfile is not base64: {e}")))?;
+    Ok(Some(icc))
 }

@@ -98,6 +98,9 @@ impl TileGrid for PackInput {
     fn cell(&self) -> (u32, u32) {
         (self.payload, self.payload)
     }
+    fn icc_profile(&self) -> Result<Option<Vec<u8>>> {
+        super::info_icc_profile(self.pack.path(), self.metadata())
+    }
     /// Tiles come out of the pack, whose index bounds them: `_cap` is for files.
     fn read(&self, col: u32, row: u32, _cap: u64) -> Result<Option<CellData>> {
         let name = || self.name(col, row);

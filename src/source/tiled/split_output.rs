@@ -51,6 +51,11 @@ impl TileGrid for SplitOutput {
     fn cell(&self) -> (u32, u32) {
         (self.payload, self.payload)
     }
+    fn icc_profile(&self) -> Result<Option<Vec<u8>>> {
+        let path = self.dir.join("info.json");
+        let json = std::fs::read(&path).map_err(|e| crate::error::TilerError::io(&path, e))?;
+        super::info_icc_profile(&path, &json)
+    }
     fn read(&self, col: u32, row: u32, cap: u64) -> Result<Option<CellData>> {
         read_file(&self.dir.join(self.names.format(&[0, col, row])), cap)
     }

@@ -1,0 +1,132 @@
+//! `split --keep-icc`: the kept profile written into every JPEG and PNG tile file (APP2
+//! ICC_PROFILE, iCCP) as well as info.json, read back by exiftool and libvips.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use crate::common::cli::{ok, s};
+use crate::tiff_slides::{have_tools, pattern_png, tool};
+
+const ADOBE_RGB: &str = "/usr/share/color/icc/colord/AdobeRGB1998.icc";
+
+/// Every tile file (by extension) under `dir`.
+fn tiles(dir: &Path, extension: &str) -> Vec<PathBuf> {
+    let mut found = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if path.extension().is_some_and(|e| e == extension) {
+                found.push(path);
+            }
+        }
+    }
+    found
+}
+
+/// The ICC profile exiftool finds in `file` (its APP2 chunks joined, or its iCCP inflated).
+fn exiftool_profile(file: &Path) -> Vec<u8> {
+    let out = Command::new("exiftool").args(["-b", "-ICC_Profile", s(file)]).output().unwrap();
+    assert!(out.status.success(), "exiftool {}: {}", file.display(), String::from_utf8_lossy(&out.stderr));
+    out.stdout
+}
+
+/// An Adobe RGB JPEG cut with --keep-icc into JPEG tiles (tile directory) and PNG tiles (Deep
+/// Zoom): every tile carries the profile, byte for byte, as exiftool and libvips read it.
+#[test]
+fn kept_profiles_are_in_every_tile() {
+    if !have_tools() || !Path::new(ADOBE_RGB).is_file() {
+        eprintln!("note: skipping: colord-data's AdobeRGB1998.icc or vips missing");
+        return;
+    }
+    let Ok(probe) = Command::new("exiftool").arg("-ver").output() else {
+        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and no exiftool");
+        eprintln!("note: skipping: exiftool missing (apt-get install libimage-exiftool-perl)");
+        return;
+    };
+    assert!(probe.status.success());
+    let dir = tempfile::tempdir().unwrap();
+    let png = pattern_png(dir.path(), 300, 200);
+    let jpg = dir.path().join("adobe.jpg");
+    tool("vips", &["jpegsave", s(&png), s(&jpg), "--profile", ADOBE_RGB]);
+    let profile = std::fs::read(ADOBE_RGB).unwrap();
+    assert_eq!(exiftool_profile(&jpg), profile, "the input carries the profile");
+
+    let out = dir.path().join("jpeg-tiles");
+    ok(&["split", s(&jpg), "-o", s(&out), "--keep-icc", "--tile-size", "128", "--codec", "jpeg"]);
+    let jpegs = tiles(&out, "jpg");
+    assert!(jpegs.len() >= 6, "{jpegs:?}");
+    for tile in &jpegs {
+        assert_eq!(exiftool_profile(tile), profile, "{}", tile.display());
+    }
+    let dzi = dir.path().join("slide.dzi");
+    ok(&["split", s(&jpg), "-o", s(&dzi), "--layout", "dzi", "--keep-icc", "--tile-size", "128", "--codec", "png"]);
+    let pngs = tiles(&dzi, "png");
+    assert!(pngs.len() >= 6, "{pngs:?}");
+    for tile in &pngs {
+        assert_eq!(exiftool_profile(tile), profile, "{}", tile.display());
+    }
+    // libvips reads the same profile from both kinds of tile (`vipsheader` prints it in base64).
+    for tile in [&jpegs[0], &pngs[0]] {
+        let header = Command::new("vipsheader").args(["-f", "icc-profile-data", s(tile)]).output().unwrap();
+        use base64::Engine;
+        let said = String::from_utf8_lossy(&header.stdout);
+        let read = base64::engine::general_purpose::STANDARD.decode(said.trim()).unwrap();
+        assert_eq!(read, profile, "{}", tile.display());
+    }
+    // Without --keep-icc the texels are converted to sRGB and no tile carries a profile.
+    let plain = dir.path().join("plain");
+    ok(&["split", s(&jpg), "-o", s(&plain), "--tile-size", "128", "--codec", "jpeg"]);
+    for tile in tiles(&plain, "jpg") {
+        assert!(exiftool_profile(&tile).is_empty(), "{}", tile.display());
+    }
+}
+
+/// `convert` of a pyramid a `split --keep-icc` run wrote: with --keep-icc the profile goes on
+/// into the new tiles and info.json; without, the texels are converted to sRGB, the same as
+/// `split` converts the original (tile for tile, byte for byte).
+#[test]
+fn convert_keeps_or_converts_a_kept_profile() {
+    if !have_tools() || !Path::new(ADOBE_RGB).is_file() {
+        eprintln!("note: skipping: colord-data's AdobeRGB1998.icc or vips missing");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = pattern_png(dir.path(), 300, 200);
+    let jpg = dir.path().join("adobe.jpg");
+    tool("vips", &["jpegsave", s(&png), s(&jpg), "--profile", ADOBE_RGB]);
+    let profile = std::fs::read(ADOBE_RGB).unwrap();
+    let args = ["--tile-size", "128", "--codec", "png", "--border", "0"];
+    let kept = dir.path().join("kept");
+    ok(&[&["split", s(&jpg), "-o", s(&kept), "--keep-icc"][..], &args].concat());
+
+    let still = dir.path().join("still-kept");
+    let said = ok(&[&["convert", s(&kept), "-o", s(&still), "--keep-icc"][..], &args].concat());
+    assert!(said.contains("ICC profile kept"), "{said}");
+    let info = std::fs::read_to_string(still.join("info.json")).unwrap();
+    assert!(info.contains("\"iccProfile\""), "{info}");
+    for tile in tiles(&still, "png") {
+        let header = Command::new("vipsheader").args(["-f", "icc-profile-data", s(&tile)]).output().unwrap();
+        use base64::Engine;
+        let read = base64::engine::general_purpose::STANDARD.decode(String::from_utf8_lossy(&header.stdout).trim());
+        assert_eq!(read.unwrap(), profile, "{}", tile.display());
+    }
+
+    let converted = dir.path().join("converted");
+    let said = ok(&[&["convert", s(&kept), "-o", s(&converted)][..], &args].concat());
+    assert!(said.contains("converted to sRGB"), "{said}");
+    let split = dir.path().join("split");
+    ok(&[&["split", s(&jpg), "-o", s(&split)][..], &args].concat());
+    let info = std::fs::read_to_string(converted.join("info.json")).unwrap();
+    assert!(!info.contains("iccProfile"), "{info}");
+    let lod0 = |d: &Path| {
+        let mut t: Vec<PathBuf> = tiles(d, "png").into_iter().filter(|p| s(p).contains("lod00")).collect();
+        t.sort();
+        t.iter().map(|p| image::open(p).unwrap().to_rgb8().into_raw()).collect::<Vec<_>>()
+    };
+    let (ours, theirs) = (lod0(&converted), lod0(&split));
+    assert_eq!(ours.len(), 6);
+    assert!(ours == theirs, "convert's sRGB texels differ from split's");
+}

@@ -1,0 +1,361 @@
+//! Hamamatsu NDPI: each level one baseline JPEG in one TIFF strip, cut by restart markers,
+//! read a band of restart intervals at a time and checked against OpenSlide 3.4.1.
+//!
+//! The test slides are made as the scanner makes them: each restart interval (a run of MCUs
+//! within one MCU row) encoded with the same tables, their entropy-coded data joined with
+//! RST0..RST7 between them under one header with a DRI segment, so the JPEG can be wider than
+//! libjpeg can encode (65535); the TIFF around it carries the tags OpenSlide's NDPI reader wants
+//! (Software `NDP.scan`, 65420 format flag, 65421 source lens, 65424 focal plane, 65426
+//! interval offsets,
+//! RowsPerStrip = ImageLength). OpenSlide decodes each interval with libjpeg-turbo as we do, so
+//! the texels must be equal (tolerance 0).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use crate::common::cli::{self, s};
+use crate::tiff_slides::our_texels;
+use vortex_tiler::source;
+
+/// Chroma subsampling of a test slide: its MCU's width and height.
+#[derive(Clone, Copy)]
+enum Chroma {
+    /// 4:4:4, 8x8 MCUs.
+    Full,
+    /// 4:2:2, 16x8 MCUs.
+    Half,
+    /// 4:2:0, 16x16 MCUs.
+    Quarter,
+}
+
+impl Chroma {
+    fn mcu(self) -> (u32, u32) {
+        match self {
+            Chroma::Full => (8, 8),
+            Chroma::Half => (16, 8),
+            Chroma::Quarter => (16, 16),
+        }
+    }
+
+    fn factor(self) -> jpeg_encoder::SamplingFactor {
+        match self {
+            Chroma::Full => jpeg_encoder::SamplingFactor::F_1_1,
+            Chroma::Half => jpeg_encoder::SamplingFactor::F_2_1,
+            Chroma::Quarter => jpeg_encoder::SamplingFactor::F_2_2,
+        }
+    }
+}
+
+/// The test picture at (x, y): ramps, a hard diagonal and noisy blocks; defined past the
+/// image too (the padding of edge MCUs).
+fn texel(x: u32, y: u32) -> [u8; 3] {
+    let noise = (x.wrapping_mul(2_654_435_761) ^ y.wrapping_mul(40_503)).rotate_left(7) % 40;
+    let noisy = (x / 32 + y / 32).is_multiple_of(3);
+    let n = if noisy { noise } else { 0 };
+    [((x / 3) % 256) as u8, ((y * 2 + n) % 256) as u8, if x > y { 200 } else { (40 + n) as u8 }]
+}
+
+/// How the frame header states the size.
+#[derive(Clone, Copy, PartialEq)]
+enum Sof {
+    /// The image's size.
+    Size,
+    /// 0 by 0, as NDPI writes it for a JPEG wider or taller than 65535.
+    Zero,
+}
+
+/// An NDPI file of `width` x `height` texels with restart intervals `interval` texels wide.
+fn make_ndpi(path: &Path, width: u32, height: u32, interval: u32, chroma: Chroma, sof: Sof) {
+    let (mcu_w, mcu_h) = chroma.mcu();
+    let across = width.div_ceil(mcu_w).div_ceil(interval / mcu_w);
+    let down = height.div_ceil(mcu_h);
+    let mut header = Vec::new();
+    let mut strip = Vec::new();
+    let mut starts = Vec::new();
+    for row in 0..down {
+        for col in 0..across {
+            let mut tile = Vec::with_capacity((interval * mcu_h * 3) as usize);
+            for y in 0..mcu_h {
+                for x in 0..interval {
+                    tile.extend_from_slice(&texel(col * interval + x, row * mcu_h + y));
+                }
+            }
+            let mut jpeg = Vec::new();
+            let mut encoder = jpeg_encoder::Encoder::new(&mut jpeg, 85);
+            encoder.set_sampling_factor(chroma.factor());
+            encoder.set_restart_interval((interval / mcu_w) as u16);
+            encoder.encode(&tile, interval as u16, mcu_h as u16, jpeg_encoder::ColorType::Rgb).unwrap();
+            let data_at = scan_data(&jpeg);
+            if header.is_empty() {
+                header = jpeg[..data_at].to_vec();
+                strip.extend_from_slice(&header);
+            } else {
+                assert_eq!(jpeg[..data_at], header[..], "every interval is encoded with the same tables");
+                let n = (row * across + col - 1) % 8;
+                strip.extend_from_slice(&[0xFF, 0xD0 + n as u8]);
+            }
+            starts.push(strip.len() as u32);
+            strip.extend_from_slice(&jpeg[data_at..jpeg.len() - 2]);
+        }
+    }
+    strip.extend_from_slice(&[0xFF, 0xD9]);
+    // The frame header's size: SOF0's height and width.
+    let sof_at = strip.windows(2).position(|w| w == [0xFF, 0xC0]).unwrap();
+    let (w, h) = match sof {
+        Sof::Size => (width as u16, height as u16),
+        Sof::Zero => (0, 0),
+    };
+    strip[sof_at + 5..sof_at + 7].copy_from_slice(&h.to_be_bytes());
+    strip[sof_at + 7..sof_at + 9].copy_from_slice(&w.to_be_bytes());
+    std::fs::write(path, tiff(width, height, &strip, &starts)).unwrap();
+}
+
+/// Where the entropy-coded data of a JPEG starts (after its SOS segment).
+fn scan_data(jpeg: &[u8]) -> usize {
+    let mut at = 2;
+    loop {
+        let len = u16::from_be_bytes([jpeg[at + 2], jpeg[at + 3]]) as usize;
+        if jpeg[at + 1] == 0xDA {
+            return at + 2 + len;
+        }
+        at += 2 + len;
+    }
+}
+
+/// A little-endian classic TIFF of one directory holding `strip` as NDPI lays it out: the
+/// directory first, then its values, then the strip.
+fn tiff(width: u32, height: u32, strip: &[u8], starts: &[u32]) -> Vec<u8> {
+    const SHORT: u16 = 3;
+    const LONG: u16 = 4;
+    let le16 = |v: u16| v.to_le_bytes().to_vec();
+    let le32 = |v: u32| v.to_le_bytes().to_vec();
+    let mut entries: Vec<(u16, u16, u32, Vec<u8>)> = vec![
+        (256, LONG, 1, le32(width)),
+        (257, LONG, 1, le32(height)),
+        (258, SHORT, 3, [le16(8), le16(8), le16(8)].concat()),
+        (259, SHORT, 1, le16(7)),
+        (262, SHORT, 1, le16(6)),
+        (273, LONG, 1, le32(0)), // the strip's offset, known below
+        (277, SHORT, 1, le16(3)),
+        (278, LONG, 1, le32(height)),
+        (279, LONG, 1, le32(strip.len() as u32)),
+        (305, 2, 9, b"NDP.scan\0".to_vec()),
+        (65420, LONG, 1, le32(1)),
+        (65421, 11, 1, 20f32.to_le_bytes().to_vec()),
+        (65424, 9, 1, le32(0)), // focal plane 0
+        (65426, LONG, starts.len() as u32, starts.iter().flat_map(|s| s.to_le_bytes()).collect()),
+    ];
+    entries.sort_by_key(|e| e.0);
+    let ifd_at = 8;
+    let mut extra_at = ifd_at + 2 + entries.len() * 12 + 4;
+    let extra_len: usize = entries.iter().map(|e| if e.3.len() > 4 { e.3.len() } else { 0 }).sum();
+    let strip_at = (extra_at + extra_len + 1) & !1;
+    entries.iter_mut().find(|e| e.0 == 273).unwrap().3 = le32(strip_at as u32);
+    let mut out = b"II*\0".to_vec();
+    out.extend_from_slice(&le32(ifd_at as u32));
+    let mut extra = Vec::new();
+    out.extend_from_slice(&le16(entries.len() as u16));
+    for (tag, kind, count, value) in &entries {
+        out.extend_from_slice(&le16(*tag));
+        out.extend_from_slice(&le16(*kind));
+        out.extend_from_slice(&le32(*count));
+        if value.len() <= 4 {
+            let mut inline = value.clone();
+            inline.resize(4, 0);
+            out.extend_from_slice(&inline);
+        } else {
+            out.extend_from_slice(&le32(extra_at as u32));
+            extra.extend_from_slice(value);
+            extra_at += value.len();
+        }
+    }
+    out.extend_from_slice(&le32(0));
+    out.extend_from_slice(&extra);
+    out.resize(strip_at, 0);
+    out.extend_from_slice(strip);
+    out
+}
+
+/// OpenSlide's level 0 of an NDPI slide, `width` x `height` from the top left, as RGB texels
+/// (Debian's python3-openslide), or a skip with a note outside CI.
+fn openslide_region(slide: &Path, width: u32, height: u32) -> Option<Vec<u8>> {
+    let raw = slide.with_extension("openslide.rgba");
+    let script = "import sys, openslide\ns = openslide.OpenSlide(sys.argv[1])\nassert s.properties['openslide.vendor'] == 'hamamatsu', s.properties['openslide.vendor']\nopen(sys.argv[2], 'wb').write(s.read_region((0, 0), 0, (int(sys.argv[3]), int(sys.argv[4]))).tobytes())";
+    let (w, h) = (width.to_string(), height.to_string());
+    let out = Command::new("/usr/bin/python3").args(["-c", script, s(slide), s(&raw), &w, &h]).output();
+    match out {
+        Ok(out) if out.status.success() => {}
+        Ok(out) if !String::from_utf8_lossy(&out.stderr).contains("No module named 'openslide'") => {
+            panic!("OpenSlide failed: {}", String::from_utf8_lossy(&out.stderr))
+        }
+        _ => {
+            assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and no python3-openslide");
+            eprintln!("note: skipping the OpenSlide comparison: apt-get install python3-openslide");
+            return None;
+        }
+    }
+    let rgba = std::fs::read(raw).unwrap();
+    assert!(rgba.chunks_exact(4).all(|t| t[3] == 255), "OpenSlide left texels of the region blank");
+    Some(rgba.chunks_exact(4).flat_map(|t| [t[0], t[1], t[2]]).collect())
+}
+
+/// The top-left `width` x `height` of an image `stride` texels wide.
+fn crop(texels: &[u8], stride: u32, width: u32, height: u32) -> Vec<u8> {
+    let row = (stride * 3) as usize;
+    texels.chunks_exact(row).take(height as usize).flat_map(|r| &r[..(width * 3) as usize]).copied().collect()
+}
+
+fn slide(dir: &Path, name: &str, (width, height): (u32, u32), interval: u32, chroma: Chroma, sof: Sof) -> PathBuf {
+    let path = dir.join(name);
+    make_ndpi(&path, width, height, interval, chroma, sof);
+    path
+}
+
+/// An NDPI slide reads as OpenSlide reads it (4:4:4 and 4:2:2; OpenSlide cannot read 4:2:0
+/// slides: it decodes an interval with the frame's height, and libjpeg's 4:2:0 upsampling then
+/// wants the MCU row below, past the interval's end), ragged edges too (OpenSlide shows only
+/// whole intervals: the ragged column and row, and the 4:2:0 slide, are checked against the
+/// picture, within JPEG's loss at quality 85); `split` takes it.
+#[test]
+fn ndpi_reads_as_openslide_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut even_half = Vec::new();
+    for (name, chroma, interval, height) in
+        [("full.ndpi", Chroma::Full, 128, 480), ("half.ndpi", Chroma::Half, 256, 504)]
+    {
+        let even = slide(dir.path(), name, (1024, height), interval, chroma, Sof::Size);
+        let (source, ours) = our_texels(&even, 1 << 30);
+        let describe = source.describe();
+        let intervals = format!("restart interval ({interval}x8 intervals, {} to an MCU row", 1024 / interval);
+        for needle in ["Hamamatsu NDPI, page 0 of 1", &intervals, "YCbCr"] {
+            assert!(describe.contains(needle), "{needle:?} missing from {describe}");
+        }
+        if let Some(theirs) = openslide_region(&even, 1024, height) {
+            assert!(ours == theirs, "{name} differs from OpenSlide");
+        }
+        even_half = ours;
+    }
+    // 1020 x 500: the last interval of a row reaches 4 texels past the image, the last MCU row
+    // 4 rows past it.
+    let ragged = slide(dir.path(), "ragged.ndpi", (1020, 500), 256, Chroma::Half, Sof::Size);
+    let (_, ours) = our_texels(&ragged, 1 << 30);
+    assert_eq!(ours.len(), 1020 * 500 * 3);
+    // Its intervals are those of the even 4:2:2 slide (1024 x 504), cropped. (OpenSlide 3.4.1
+    // misplaces them: it counts 1020 / 256 = 3 intervals to a row, where the JPEG has 4.)
+    assert!(ours == crop(&even_half, 1024, 1020, 500), "the ragged slide differs from the even one, cropped");
+    let picture: Vec<u8> = (0..500).flat_map(|y| (0..1020).flat_map(move |x| texel(x, y))).collect();
+    let mean_error = |ours: &[u8]| {
+        let error: u64 = ours.iter().zip(&picture).map(|(a, b)| a.abs_diff(*b) as u64).sum();
+        error as f64 / ours.len() as f64
+    };
+    // JPEG at quality 85 on this picture (a third of it noise of up to 40 levels) is off by 3.5
+    // on average (measured); a misplaced interval or row is off by tens.
+    assert!(mean_error(&ours) < 6.0, "mean error {} against the picture encoded", mean_error(&ours));
+    let quarter = slide(dir.path(), "quarter.ndpi", (1020, 500), 256, Chroma::Quarter, Sof::Size);
+    let (source, quartered) = our_texels(&quarter, 1 << 30);
+    assert!(source.describe().contains("256x16 intervals"), "{}", source.describe());
+    assert!(mean_error(&quartered) < 6.0, "4:2:0: mean error {} against the picture", mean_error(&quartered));
+    // Through the tool: split, then convert of a column range (only those intervals decoded).
+    let out = dir.path().join("tiles");
+    let summary = cli::ok(&["split", s(&ragged), "-o", s(&out), "--tile-size", "256"]);
+    assert!(summary.contains("Hamamatsu NDPI"), "{summary}");
+    let dzi = dir.path().join("slide.dzi");
+    cli::ok(&["split", s(&ragged), "-o", s(&dzi), "--layout", "dzi", "--tile-size", "256", "--overlap", "0"]);
+    let mut columns = source::open(&ragged, 1 << 30).unwrap();
+    assert!(columns.read_columns(300..700));
+    columns.skip_rows(100).unwrap();
+    let mut row = vec![0u8; 400 * 3];
+    for y in 100..500usize {
+        columns.read_row(&mut row).unwrap();
+        assert!(row[..] == ours[(y * 1020 + 300) * 3..][..400 * 3], "row {y}");
+    }
+}
+
+/// Wider than a JPEG header can say: NDPI writes 0 for the frame's size and the TIFF holds
+/// it; read as OpenSlide reads it.
+#[test]
+fn an_ndpi_wider_than_65535_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let wide = slide(dir.path(), "wide.ndpi", (70_144, 32), 512, Chroma::Half, Sof::Zero);
+    let (source, ours) = our_texels(&wide, 1 << 30);
+    assert_eq!((source.width(), source.height()), (70_144, 32));
+    if let Some(theirs) = openslide_region(&wide, 70_144, 32) {
+        assert!(ours == theirs, "differs from OpenSlide");
+    }
+}
+
+/// A slide larger than --max-memory is read a band of MCU rows at a time, the same texels as
+/// with memory to spare, and split within the bound; below one MCU row it is refused, saying so.
+#[test]
+fn an_ndpi_larger_than_max_memory_streams() {
+    let dir = tempfile::tempdir().unwrap();
+    // 131 MiB decoded; one MCU row (8 rows) is 1.6 MiB, its bound with compressed data 8.2 MiB.
+    let big = slide(dir.path(), "big.ndpi", (71_680, 640), 1024, Chroma::Half, Sof::Zero);
+    let (_, roomy) = our_texels(&big, 1 << 30);
+    let (_, tight) = our_texels(&big, 24 << 20);
+    assert!(roomy == tight);
+    let err = source::open(&big, 4 << 20).err().expect("refused").to_string();
+    for needle in ["big.ndpi", "--max-memory", "one MCU row"] {
+        assert!(err.contains(needle), "{needle:?} missing from: {err}");
+    }
+    let out = dir.path().join("out");
+    cli::ok(&["split", s(&big), "-o", s(&out), "--max-memory", "100M", "--tile-size", "512"]);
+}
+
+/// A truncated slide, a restart marker out of order and one missing are errors naming the
+/// file and the interval; never a panic or wrong texels.
+#[test]
+fn damaged_ndpi_names_the_interval() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = slide(dir.path(), "good.ndpi", (1024, 48), 256, Chroma::Half, Sof::Size);
+    let bytes = std::fs::read(&good).unwrap();
+    let read = |name: &str, data: &[u8]| -> String {
+        let path = dir.path().join(name);
+        std::fs::write(&path, data).unwrap();
+        let result = source::open(&path, 1 << 30).and_then(|mut source| {
+            let mut row = vec![0u8; source.width() as usize * 3];
+            (0..source.height()).try_for_each(|_| source.read_row(&mut row))
+        });
+        let err = result.err().unwrap_or_else(|| panic!("{name}: no error")).to_string();
+        assert!(err.contains(name), "{err}");
+        err
+    };
+    // The strip's markers: RST3 (closing interval 3) becomes RST5.
+    let strip_at = bytes.windows(3).position(|w| w == [0xFF, 0xD8, 0xFF]).unwrap();
+    let data = strip_at + scan_data(&bytes[strip_at..]);
+    let rst3 = data + bytes[data..].windows(2).position(|w| w == [0xFF, 0xD3]).unwrap();
+    let mut swapped = bytes.clone();
+    swapped[rst3 + 1] = 0xD5;
+    let err = read("swapped.ndpi", &swapped);
+    for needle in ["restart interval 3 (column 3 of MCU row 0)", "RST5 found where RST3 was due"] {
+        assert!(err.contains(needle), "{needle:?} missing from: {err}");
+    }
+    // The second half of the strip zeroed: no marker comes where one is due.
+    let half = strip_at + (bytes.len() - strip_at) / 2;
+    let mut zeroed = bytes.clone();
+    zeroed[half..].fill(0);
+    let err = read("zeroed.ndpi", &zeroed);
+    assert!(err.contains("JPEG restart interval"), "{err}");
+    // Cut short: in its directory, in the JPEG header, in the strip.
+    for keep in [4, 100, strip_at + 100, half] {
+        let err = read("truncated.ndpi", &bytes[..keep]);
+        assert!(err.contains("truncat"), "{err}");
+    }
+    // Any byte changed: an error naming the file, or texels (a changed coefficient), never a
+    // panic.
+    let path = dir.path().join("mutated.ndpi");
+    let mut state = 12345u32;
+    for at in (0..bytes.len()).step_by(11) {
+        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        let mut mutated = bytes.clone();
+        mutated[at] ^= (state >> 24) as u8 | 1;
+        std::fs::write(&path, &mutated).unwrap();
+        let result = source::open(&path, 64 << 20).and_then(|mut source| {
+            let mut row = vec![0u8; source.width() as usize * source.layout().bytes_per_pixel()];
+            (0..source.height()).try_for_each(|_| source.read_row(&mut row))
+        });
+        if let Err(e) = result {
+            assert!(e.to_string().contains("mutated.ndpi"), "{e}");
+        }
+    }
+}
