@@ -122,7 +122,7 @@ fn native_decode_ms(pack: &Path, rounds: u32) -> f64 {
     let root = pack.description().level_count - 1;
     let started = std::time::Instant::now();
     for _ in 0..rounds {
-        vortex_pack::decode_rgba8(&pack, root, 0, 0).unwrap();
+        pack.decode_rgba8(vortex_pack::TileId { lod: root, x: 0, y: 0 }).unwrap();
     }
     started.elapsed().as_secs_f64() * 1000.0 / f64::from(rounds)
 }
