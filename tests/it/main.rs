@@ -19,6 +19,7 @@ mod golden;
 mod hostile;
 mod iiif;
 mod library;
+mod module_graph;
 mod ome_zarr;
 mod oracle;
 mod pack_cli;
