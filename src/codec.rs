@@ -11,8 +11,8 @@ use std::cell::RefCell;
 use std::ops::RangeInclusive;
 
 use crate::error::TilerError;
+use crate::layout::Crop;
 use crate::pixel::{Channels, Depth, PixelLayout, Sample, u16_to_u8};
-use crate::viewer::Crop;
 
 /// JPEG chroma subsampling.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

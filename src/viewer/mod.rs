@@ -21,6 +21,7 @@ pub mod xyz;
 
 use std::fmt;
 
+pub use crate::layout::Crop;
 use crate::layout::Layout;
 
 pub use recognise::recognise;
@@ -86,21 +87,6 @@ impl Viewer {
 impl fmt::Display for Viewer {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
-    }
-}
-
-/// The part of a stored page that a viewer's tile keeps, in the page's texels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct Crop {
-    pub x: u32,
-    pub y: u32,
-    pub width: u32,
-    pub height: u32,
-}
-
-impl Crop {
-    pub fn whole(side: u32) -> Crop {
-        Crop { x: 0, y: 0, width: side, height: side }
     }
 }
 
