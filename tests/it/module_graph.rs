@@ -180,7 +180,9 @@ fn edges(files: &[(PathBuf, String)], top: &BTreeSet<String>) -> Edges {
         let mut depth = 0;
         let mut record = |to: &str, line: usize| {
             if to != from && top.contains(to) {
-                found.entry((from.clone(), to.to_string())).or_insert_with(|| format!("src/{}:{line}", relative.display()));
+                found
+                    .entry((from.clone(), to.to_string()))
+                    .or_insert_with(|| format!("src/{}:{line}", relative.display()));
             }
         };
         let mut i = 0;
@@ -208,14 +210,19 @@ fn edges(files: &[(PathBuf, String)], top: &BTreeSet<String>) -> Edges {
                     // Climb: `crate` is the root; each `super` one level up from this module.
                     let mut level = if word == "crate" { 0 } else { path.len().saturating_sub(1) };
                     let mut k = i + 1;
-                    while word == "super" && tokens.get(k).map(|t| &t.0) == Some(&Token::Colons) && ident(k + 1) == Some("super") {
+                    while word == "super"
+                        && tokens.get(k).map(|t| &t.0) == Some(&Token::Colons)
+                        && ident(k + 1) == Some("super")
+                    {
                         level = level.saturating_sub(1);
                         k += 2;
                     }
                     if level == 0 && tokens.get(k).map(|t| &t.0) == Some(&Token::Colons) {
                         match tokens.get(k + 1) {
                             Some((Token::Ident(name), line)) => record(name, *line),
-                            Some((Token::Open, _)) => group_heads(&tokens, k + 1).iter().for_each(|(n, l)| record(n, *l)),
+                            Some((Token::Open, _)) => {
+                                group_heads(&tokens, k + 1).iter().for_each(|(n, l)| record(n, *l))
+                            }
                             _ => {}
                         }
                     }
@@ -275,7 +282,14 @@ fn cycles(nodes: &BTreeSet<String>, edges: &Edges) -> Vec<Vec<String>> {
     for (from, to) in edges.keys() {
         next.entry(from).or_default().push(to);
     }
-    let mut state = State { next, index: BTreeMap::new(), low: BTreeMap::new(), stack: Vec::new(), on_stack: BTreeSet::new(), found: Vec::new() };
+    let mut state = State {
+        next,
+        index: BTreeMap::new(),
+        low: BTreeMap::new(),
+        stack: Vec::new(),
+        on_stack: BTreeSet::new(),
+        found: Vec::new(),
+    };
     for v in nodes {
         if !state.index.contains_key(v.as_str()) {
             visit(&mut state, v);
@@ -365,7 +379,8 @@ fn the_check_finds_a_cycle_through_groups_and_super() {
         ("c.rs", "#[cfg(test)]\nmod tests {\n    use super::super::a::Z;\n}\n"),
     ]);
     assert_eq!(top, ["a", "b", "c"].map(String::from).into());
-    let listed: Vec<(&str, &str, &str)> = edges.iter().map(|((f, t), at)| (f.as_str(), t.as_str(), at.as_str())).collect();
+    let listed: Vec<(&str, &str, &str)> =
+        edges.iter().map(|((f, t), at)| (f.as_str(), t.as_str(), at.as_str())).collect();
     assert_eq!(listed, [("a", "b", "src/a/inner.rs:3"), ("b", "c", "src/b.rs:4"), ("c", "a", "src/c.rs:3")]);
     let found = cycles(&top, &edges);
     assert_eq!(found, [vec!["a".to_string(), "b".to_string(), "c".to_string()]]);
@@ -377,7 +392,10 @@ fn the_check_finds_a_cycle_through_groups_and_super() {
 fn the_check_passes_layers_and_ignores_paths_that_do_not_leave_a_module() {
     let (top, edges) = fixture(&[
         ("lib.rs", "pub mod low;\npub mod high;\n"),
-        ("low.rs", "mod inner { use super::Thing; }\nmacro_rules! m { () => { $crate::high::X } }\nlet r = r#\"crate::high\"#; let c = '\"';\n"),
+        (
+            "low.rs",
+            "mod inner { use super::Thing; }\nmacro_rules! m { () => { $crate::high::X } }\nlet r = r#\"crate::high\"#; let c = '\"';\n",
+        ),
         ("high.rs", "use crate::low::Thing;\npub(crate) fn f() {}\n"),
     ]);
     let listed: Vec<&(String, String)> = edges.keys().collect();
