@@ -95,6 +95,7 @@
 
 pub mod background;
 pub mod codec;
+mod decode;
 mod encoders;
 pub mod error;
 pub mod layout;

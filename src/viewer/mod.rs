@@ -153,7 +153,7 @@ impl ViewerTiles {
             } else {
                 let bytes = iiif_whole::assemble(l, lod, service.codec, |col, row| {
                     let path = iiif::tile_path(l, lod, col, row, ext);
-                    let decoded = crate::source::decode_tile(std::path::Path::new(&path), &read(&path)?)
+                    let decoded = crate::decode::decode_tile(std::path::Path::new(&path), &read(&path)?)
                         .map_err(|e| e.to_string())?;
                     let whole = Crop { x: 0, y: 0, width: decoded.width, height: decoded.height };
                     Ok((decoded, whole))
