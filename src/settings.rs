@@ -6,11 +6,13 @@ use std::path::Path;
 
 use crate::background::Background;
 use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling, ZSTD_LEVELS};
+pub use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::pyramid::filter::Filter;
 use crate::split::SplitOptions;
+pub use crate::tile_dir::filename::DEFAULT_FILENAME_STEM;
 use crate::tile_dir::filename::FilenameFormat;
 use crate::tile_dir::info::{BORDER_WHEN_ABSENT, FORMAT_VERSION, InfoFile};
 
@@ -20,10 +22,6 @@ pub const DEFAULT_TILE_SIZE: u32 = 128;
 /// default filter shows no seams (border 0 does: docs/gpu-sampling.md).
 pub const DEFAULT_BORDER: u32 = 1;
 pub const DEFAULT_QUALITY: u8 = 85;
-pub const DEFAULT_ZSTD_LEVEL: i32 = 3;
-pub const DEFAULT_BC7_EFFORT: Bc7Effort = Bc7Effort::UltraFast;
-/// The thesis's default names, with the codec's extension.
-pub const DEFAULT_FILENAME_STEM: &str = "lod%1$02s-x%2$04s-y%3$04s";
 
 /// Which codec: `auto` picks JPEG for 8-bit grey or RGB and PNG for anything with alpha or 16 bits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
