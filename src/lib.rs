@@ -98,6 +98,7 @@ pub mod codec;
 mod decode;
 mod encoders;
 pub mod error;
+pub mod job;
 pub mod layout;
 pub mod limits;
 pub mod output;
