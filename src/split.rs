@@ -22,7 +22,7 @@ use crate::pyramid::cut::Padding;
 use crate::pyramid::filter::{ExactFilter, sums_need_u128};
 use crate::pyramid::reduce::{Acc, Reducer};
 use crate::pyramid::stripes::Plan;
-use crate::shard::merge::RootRows;
+use crate::shard::sums::RootRows;
 use crate::shard::sums::{self, EncodedRoots};
 use crate::sink::TileSink;
 use crate::source::{ImageHeader, RowSource, read_ahead};
