@@ -105,6 +105,7 @@ pub mod output;
 pub mod pixel;
 pub mod pyramid;
 pub mod repack;
+pub mod scale_out;
 #[cfg(feature = "serve")]
 pub mod serve;
 pub mod settings;

@@ -103,7 +103,7 @@ pub(crate) fn split_shard(
 }
 
 /// The levels above a sharded run's cut level, from the exact sums of its roots: what
-/// `merge` makes ([`crate::shard::merge`]). `image` is the source's size and texels.
+/// `merge` makes ([`crate::scale_out::merge`]). `image` is the source's size and texels.
 pub(crate) fn above_cut(
     image: ImageHeader,
     roots: RootRows<'_>,

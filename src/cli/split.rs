@@ -19,7 +19,7 @@ use vortex_tiler::source::RowSource;
 use vortex_tiler::split::SplitOptions;
 use vortex_tiler::tile_dir::info::InfoFile;
 use vortex_tiler::viewer::{Viewer, ViewerTiles, dzi, iiif};
-use vortex_tiler::{shard, source, split};
+use vortex_tiler::{scale_out, source, split};
 
 use super::report;
 use super::shard::shard_path;
@@ -473,7 +473,7 @@ pub fn tile(
         let job = chosen.job(input, info.to_json_pretty(), a.pack_layout.options()?);
         let run = Run::start_counting(source, a, job.pages(&layout)?, started)?;
         let (done, written) =
-            run.execute_with(|source, watch| shard::write_shard(source, &path, &opts, &job, watch))?;
+            run.execute_with(|source, watch| scale_out::write_shard(source, &path, &opts, &job, watch))?;
         if a.run.json {
             let mut doc: serde_json::Value =
                 serde_json::from_str(&report::summary_json(&done, "shard", &path, Some(&written)))?;
