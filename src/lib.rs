@@ -8,7 +8,10 @@
 //!   the LOD cascade, and the cutting of tiles with their borders;
 //! - [`codec`]: tile encoders (JPEG, PNG, raw, zstd, BC1/BC7);
 //! - [`sink`]: where encoded tiles go (a tile directory or a pack);
-//! - [`split`]: the orchestration that runs source -> pyramid -> codec -> sink.
+//! - [`split`]: the orchestration that runs source -> pyramid -> codec -> sink, with the
+//!   options, progress and summary of a run in [`job`];
+//! - [`scale_out`]: one split on many machines (a shard's run, the merge), sharing the plan,
+//!   manifest and sums of [`shard`].
 //!
 //! Beside the stages: [`tile_dir`] is the tile-directory format (`info.json`, file names) that
 //! the directory sink writes and the tiled sources read; [`repack`] moves tiles between a tile

@@ -402,3 +402,49 @@ fn the_check_passes_layers_and_ignores_paths_that_do_not_leave_a_module() {
     assert_eq!(listed, [&("high".to_string(), "low".to_string())]);
     assert!(cycles(&top, &edges).is_empty());
 }
+
+/// The modules in layers, each above everything it uses: layer 0 uses no other module, and
+/// each module is one layer above the highest it uses. One line per module, with what it uses.
+fn layers(top: &BTreeSet<String>, edges: &Edges) -> String {
+    let uses = |m: &str| -> Vec<&str> { edges.keys().filter(|(f, _)| f == m).map(|(_, t)| t.as_str()).collect() };
+    let mut layer: BTreeMap<&str, usize> = BTreeMap::new();
+    // Without a cycle, each pass settles at least one more module.
+    while layer.len() < top.len() {
+        for m in top {
+            let below: Option<Vec<usize>> = uses(m).iter().map(|u| layer.get(u).copied()).collect();
+            if let (false, Some(below)) = (layer.contains_key(m.as_str()), below) {
+                layer.insert(m, below.iter().max().map_or(0, |l| l + 1));
+            }
+        }
+    }
+    let mut text = String::new();
+    for depth in 0..=layer.values().copied().max().unwrap_or(0) {
+        for (m, _) in layer.iter().filter(|(_, l)| **l == depth) {
+            let line = format!("{depth:>2}  {m:<11}{}", uses(m).join(" "));
+            text += line.trim_end();
+            text.push('\n');
+        }
+    }
+    text
+}
+
+/// docs/architecture.md lists the layers as the sources have them; `BLESS=1` rewrites its list.
+#[test]
+fn the_architecture_doc_lists_the_real_layers() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let src = root.join("src");
+    let top = top_level(&std::fs::read_to_string(src.join("lib.rs")).unwrap());
+    let edges = edges(&library_sources(&src), &top);
+    assert!(cycles(&top, &edges).is_empty(), "the_library_modules_form_no_import_cycle says which");
+    let listed = layers(&top, &edges);
+    let doc_path = root.join("docs/architecture.md");
+    let doc = std::fs::read_to_string(&doc_path).unwrap();
+    let (begin, end) = ("<!-- module-layers:begin -->\n```text\n", "```\n<!-- module-layers:end -->");
+    let start = doc.find(begin).expect("the module-layers begin marker") + begin.len();
+    let stop = doc[start..].find(end).expect("the module-layers end marker") + start;
+    if std::env::var_os("BLESS").is_some() {
+        std::fs::write(&doc_path, format!("{}{listed}{}", &doc[..start], &doc[stop..])).unwrap();
+    } else {
+        assert_eq!(&doc[start..stop], listed, "docs/architecture.md's module layers are stale: rerun with BLESS=1");
+    }
+}
