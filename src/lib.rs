@@ -37,7 +37,7 @@
 //!
 //! use vortex_tiler::error::{Result, TilerError};
 //! use vortex_tiler::output::{self, Product};
-//! use vortex_tiler::settings::{self, Requested};
+//! use vortex_tiler::settings::{Destination, Plan, Requested};
 //! use vortex_tiler::sink::PackSink;
 //! use vortex_tiler::split::{self, Progress, Summary};
 //! use vortex_tiler::{limits::Limits, source, vortex_pack::WriteOptions};
@@ -63,15 +63,13 @@
 //!     output::claim(dest, Product::Pack, &[input], false)?; // replaces only an older pack
 //!     let limits = Limits::default();
 //!     let source = source::open(input, limits.memory)?;
+//!     // Each setting: the flag asked for, else a previous output's info.json (none here), else the default.
 //!     let asked = Requested { tile_size: Some(256), ..Requested::default() };
-//!     let (opts, names) = settings::resolve(&asked, None, source.layout())?;
-//!     let layout = opts.layout(source.width(), source.height())?;
-//!     limits.check_pyramid(&layout, true)?;
-//!     let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
-//!     let info = settings::describe(&layout, stored, &opts, &names).to_json_pretty();
-//!     let sink = PackSink::create(dest, &layout, stored, opts.codec, info.as_bytes(), WriteOptions::default())?;
+//!     let plan = Plan::new(&asked, None, &source.header(), Destination::Pack, &limits, None)?;
+//!     let info = plan.info.to_json_pretty();
+//!     let sink = PackSink::create(dest, &plan.layout, plan.stored, plan.opts.codec, info.as_bytes(), WriteOptions::default())?;
 //!     // On an error the sink is dropped, and its unfinished pack with it.
-//!     let summary = split::split(source, &sink, &opts, watch)?;
+//!     let summary = split::split(source, &sink, &plan.opts, watch)?;
 //!     sink.finish()?;
 //!     Ok(summary)
 //! }
