@@ -61,8 +61,8 @@ fn tokens(text: &str) -> Vec<(Token, usize)> {
                     i += 1;
                 }
             }
-        } else if c == 'r' && (at(i + 1) == '#' || at(i + 1) == '"') && raw_string_hashes(&chars, i + 1).is_some()
-            || c == 'b' && at(i + 1) == 'r' && raw_string_hashes(&chars, i + 2).is_some()
+        } else if (c == 'r' && (at(i + 1) == '#' || at(i + 1) == '"') && raw_string_hashes(&chars, i + 1).is_some())
+            || (c == 'b' && at(i + 1) == 'r' && raw_string_hashes(&chars, i + 2).is_some())
         {
             let start = if c == 'b' { i + 2 } else { i + 1 };
             let hashes = raw_string_hashes(&chars, start).unwrap_or(0);
