@@ -447,10 +447,10 @@ pub fn tile(
     let plan = Plan::new(&requested, existing_ref, &source.header(), destination, &limits, kept_icc.as_deref())?;
     let Plan { opts, names, layout, stored, info, changed } = plan;
     // Said once everything is checked, just before the work starts.
-    if let (Some(path), false) = (&info_path, a.run.quiet) {
-        if !changed.is_empty() {
-            eprintln!("settings from {}: {}", path.display(), changed.join(", "));
-        }
+    if let (Some(path), false) = (&info_path, a.run.quiet)
+        && !changed.is_empty()
+    {
+        eprintln!("settings from {}: {}", path.display(), changed.join(", "));
     }
     if let Some((path, chosen)) = shard {
         if !a.run.quiet && !a.run.json {

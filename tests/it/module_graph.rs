@@ -317,10 +317,11 @@ fn top_level(lib: &str) -> BTreeSet<String> {
     let tokens = tokens(lib);
     let mut names = BTreeSet::new();
     for (i, (token, _)) in tokens.iter().enumerate() {
-        if let (Token::Ident(word), Some((Token::Ident(name), _))) = (token, tokens.get(i + 1)) {
-            if word == "mod" && tokens.get(i + 2).map(|t| &t.0) == Some(&Token::Other) {
-                names.insert(name.clone());
-            }
+        if let (Token::Ident(word), Some((Token::Ident(name), _))) = (token, tokens.get(i + 1))
+            && word == "mod"
+            && tokens.get(i + 2).map(|t| &t.0) == Some(&Token::Other)
+        {
+            names.insert(name.clone());
         }
     }
     names
