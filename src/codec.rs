@@ -11,8 +11,11 @@ use std::cell::RefCell;
 use std::ops::RangeInclusive;
 
 use crate::error::TilerError;
+use crate::layout::Crop;
 use crate::pixel::{Channels, Depth, PixelLayout, Sample, u16_to_u8};
-use crate::viewer::Crop;
+
+pub const DEFAULT_ZSTD_LEVEL: i32 = 3;
+pub const DEFAULT_BC7_EFFORT: Bc7Effort = Bc7Effort::UltraFast;
 
 /// JPEG chroma subsampling.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -20,11 +20,11 @@ use std::time::Instant;
 
 use crate::codec::TileEncoder;
 use crate::error::{Result, TilerError};
+use crate::job::Progress;
 use crate::pixel::Sample;
 use crate::pyramid::cascade::{Batch, CutTile};
 use crate::sink::TileSink;
 use crate::source::stored::StoredTiles;
-use crate::split::Progress;
 use crate::stages::{Stage, StageClock};
 use crate::viewer::Crop;
 

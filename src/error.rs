@@ -58,7 +58,7 @@ pub enum TilerError {
 
     /// The destination may not be written (see [`crate::output`]).
     #[error(transparent)]
-    Output(#[from] crate::output::OutputError),
+    Output(#[from] OutputError),
 
     /// The caller asked the run to stop (Ctrl-C).
     #[error("interrupted; nothing was left at the destination")]
@@ -102,3 +102,36 @@ impl TilerError {
 }
 
 pub type Result<T, E = TilerError> = std::result::Result<T, E>;
+
+/// Why a destination was refused.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum OutputError {
+    #[error("{}: is {what}; nothing replaces one: choose a regular path", path.display())]
+    Special { path: PathBuf, what: &'static str },
+
+    #[error("{}: is a symbolic link (to {}); give the real path, or remove the link first", path.display(), target.display())]
+    Symlink { path: PathBuf, target: PathBuf },
+
+    #[error("{}: is {found} where {product} goes; choose another path", path.display())]
+    WrongType { path: PathBuf, found: &'static str, product: &'static str },
+
+    #[error("{}: {what}, not {product} written by vortex-tiler; {advice}", path.display())]
+    Foreign { path: PathBuf, what: String, product: &'static str, advice: &'static str },
+
+    #[error("{}: is the input {}; write the output somewhere else", path.display(), input.display())]
+    IsInput { path: PathBuf, input: PathBuf },
+
+    #[error("{}: lies inside the input {}; write the output somewhere else", path.display(), input.display())]
+    InsideInput { path: PathBuf, input: PathBuf },
+
+    #[error("{}: holds the input {}, which replacing it would delete; write the output somewhere else", path.display(), input.display())]
+    ContainsInput { path: PathBuf, input: PathBuf },
+
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: io::Error,
+    },
+}

@@ -121,6 +121,21 @@ impl Layout {
     }
 }
 
+/// The part of a stored page that a viewer's tile keeps, in the page's texels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Crop {
+    pub x: u32,
+    pub y: u32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Crop {
+    pub fn whole(side: u32) -> Crop {
+        Crop { x: 0, y: 0, width: side, height: side }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

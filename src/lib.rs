@@ -8,7 +8,10 @@
 //!   the LOD cascade, and the cutting of tiles with their borders;
 //! - [`codec`]: tile encoders (JPEG, PNG, raw, zstd, BC1/BC7);
 //! - [`sink`]: where encoded tiles go (a tile directory or a pack);
-//! - [`split`]: the orchestration that runs source -> pyramid -> codec -> sink.
+//! - [`split`]: the orchestration that runs source -> pyramid -> codec -> sink, with the
+//!   options, progress and summary of a run in [`job`];
+//! - [`scale_out`]: one split on many machines (a shard's run, the merge), sharing the plan,
+//!   manifest and sums of [`shard`].
 //!
 //! Beside the stages: [`tile_dir`] is the tile-directory format (`info.json`, file names) that
 //! the directory sink writes and the tiled sources read; [`repack`] moves tiles between a tile
@@ -34,7 +37,7 @@
 //!
 //! use vortex_tiler::error::{Result, TilerError};
 //! use vortex_tiler::output::{self, Product};
-//! use vortex_tiler::settings::{self, Requested};
+//! use vortex_tiler::settings::{Destination, Plan, Requested};
 //! use vortex_tiler::sink::PackSink;
 //! use vortex_tiler::split::{self, Progress, Summary};
 //! use vortex_tiler::{limits::Limits, source, vortex_pack::WriteOptions};
@@ -60,15 +63,13 @@
 //!     output::claim(dest, Product::Pack, &[input], false)?; // replaces only an older pack
 //!     let limits = Limits::default();
 //!     let source = source::open(input, limits.memory)?;
+//!     // Each setting: the flag asked for, else a previous output's info.json (none here), else the default.
 //!     let asked = Requested { tile_size: Some(256), ..Requested::default() };
-//!     let (opts, names) = settings::resolve(&asked, None, source.layout())?;
-//!     let layout = opts.layout(source.width(), source.height())?;
-//!     limits.check_pyramid(&layout, true)?;
-//!     let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
-//!     let info = settings::describe(&layout, stored, &opts, &names).to_json_pretty();
-//!     let sink = PackSink::create(dest, &layout, stored, opts.codec, info.as_bytes(), WriteOptions::default())?;
+//!     let plan = Plan::new(&asked, None, &source.header(), Destination::Pack, &limits, None)?;
+//!     let info = plan.info.to_json_pretty();
+//!     let sink = PackSink::create(dest, &plan.layout, plan.stored, plan.opts.codec, info.as_bytes(), WriteOptions::default())?;
 //!     // On an error the sink is dropped, and its unfinished pack with it.
-//!     let summary = split::split(source, &sink, &opts, watch)?;
+//!     let summary = split::split(source, &sink, &plan.opts, watch)?;
 //!     sink.finish()?;
 //!     Ok(summary)
 //! }
@@ -95,15 +96,18 @@
 
 pub mod background;
 pub mod codec;
+mod decode;
 mod encoders;
 pub mod error;
 mod fnv;
+pub mod job;
 pub mod layout;
 pub mod limits;
 pub mod output;
 pub mod pixel;
 pub mod pyramid;
 pub mod repack;
+pub mod scale_out;
 #[cfg(feature = "serve")]
 pub mod serve;
 pub mod settings;

@@ -7,8 +7,7 @@
 //! them as `f32`, which holds every half exactly.
 
 use std::fmt;
-
-use crate::pyramid::reduce::{Acc, ExactRow};
+use std::ops::Add;
 
 /// Channel arrangement of a texel, in the names `info.json` uses for `tileFormat`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -318,6 +317,144 @@ impl Acc for FloatSum {
 #[inline]
 pub fn u16_to_u8(v: u16) -> u8 {
     ((v as u32 + 128) / 257) as u8
+}
+
+/// An exact sum: `u64`, or `u128` for the filters whose sums could exceed it.
+pub trait Acc:
+    Copy + Default + PartialEq + Send + Sync + 'static + Add<Output = Self> + From<u8> + From<u16> + From<u64>
+{
+    /// `round_half_up(self / 2^shift)`; the result fits in a `u64`.
+    fn round_shift(self, shift: u32) -> u64;
+    /// `round_half_up(self / d)`; the result fits in a `u64`.
+    fn round_div(self, d: u64) -> u64;
+    /// `round_half_up(self / d)` for a divisor that is itself a sum (`d > 0`).
+    fn round_ratio(self, d: Self) -> u64;
+    /// The sum as an `f64` (rounded to nearest where it does not fit), for float means.
+    fn to_f64(self) -> f64;
+    /// Bytes of one sum, as a shard stores it (little-endian).
+    const BYTES: usize;
+    fn to_le(self, out: &mut [u8]);
+    fn from_le(bytes: &[u8]) -> Self;
+}
+
+impl Acc for u64 {
+    #[inline]
+    fn round_shift(self, shift: u32) -> u64 {
+        (self + (1 << shift >> 1)) >> shift
+    }
+    #[inline]
+    fn round_div(self, d: u64) -> u64 {
+        (2 * self + d) / (2 * d)
+    }
+    #[inline]
+    fn round_ratio(self, d: u64) -> u64 {
+        (2 * self + d) / (2 * d)
+    }
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    const BYTES: usize = 8;
+    fn to_le(self, out: &mut [u8]) {
+        out.copy_from_slice(&self.to_le_bytes());
+    }
+    fn from_le(bytes: &[u8]) -> Self {
+        let mut b = [0; 8];
+        b.copy_from_slice(bytes);
+        u64::from_le_bytes(b)
+    }
+}
+
+impl Acc for u128 {
+    #[inline]
+    fn round_shift(self, shift: u32) -> u64 {
+        ((self + (1 << shift >> 1)) >> shift) as u64
+    }
+    #[inline]
+    fn round_div(self, d: u64) -> u64 {
+        ((2 * self + d as u128) / (2 * d as u128)) as u64
+    }
+    #[inline]
+    fn round_ratio(self, d: u128) -> u64 {
+        ((2 * self + d) / (2 * d)) as u64
+    }
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    const BYTES: usize = 16;
+    fn to_le(self, out: &mut [u8]) {
+        out.copy_from_slice(&self.to_le_bytes());
+    }
+    fn from_le(bytes: &[u8]) -> Self {
+        let mut b = [0; 16];
+        b.copy_from_slice(bytes);
+        u128::from_le_bytes(b)
+    }
+}
+
+/// An exact output row: sums plus what they must be divided by.
+pub struct ExactRow<'a, A = u64> {
+    pub sums: &'a [A],
+    /// Row of the output level.
+    pub y: u64,
+    pub(crate) row_weight: u64,
+    pub(crate) col_weight: &'a [u64],
+    /// Leading texels whose footprint is complete: their divisor is `footprint^2`, a shift.
+    pub(crate) full_cols: usize,
+    pub(crate) footprint: u64,
+    pub(crate) channels: usize,
+}
+
+impl<A: Acc> ExactRow<'_, A> {
+    /// The row's texels rounded to the nearest sample value (halves round up): the `box` filter.
+    /// Float samples: each sum divided by its pixel count in f64, then rounded to the nearest
+    /// `f32` (see [`crate::pixel::FloatSum`] for the bound).
+    pub fn round_into<T: Sample>(&self, out: &mut [T]) {
+        T::means(self, out);
+    }
+
+    /// `out[i] = mean i` in f64, rounded to the nearest `f32`: a power-of-two divisor for the
+    /// complete footprints is exact, any other one rounds once.
+    pub fn map_float_means(&self, out: &mut [f32]) {
+        debug_assert_eq!(out.len(), self.sums.len());
+        let c = self.channels;
+        for (i, (o, s)) in out.iter_mut().zip(self.sums).enumerate() {
+            *o = (s.to_f64() / self.weight(i / c) as f64) as f32;
+        }
+    }
+
+    /// `out[i] = f(mean i)`: every sum divided by its texel's pixel count, rounded half up, in
+    /// row order; a shift for the leading texels with complete footprints, a division for the
+    /// rest. Two plain loops, not one iterator over both, so that each compiles to a tight one
+    /// (this is most of a level's cost: issue 18).
+    pub fn map_means<T>(&self, out: &mut [T], f: impl Fn(u64) -> T) {
+        debug_assert_eq!(out.len(), self.sums.len());
+        let c = self.channels;
+        let (head, tail) = self.sums.split_at(self.full_cols * c);
+        let (out_head, out_tail) = out.split_at_mut(self.full_cols * c);
+        let shift = (self.footprint * self.footprint).trailing_zeros();
+        for (o, s) in out_head.iter_mut().zip(head) {
+            *o = f(s.round_shift(shift));
+        }
+        for (i, (o, s)) in out_tail.iter_mut().zip(tail).enumerate() {
+            *o = f(s.round_div(self.weight(self.full_cols + i / c)));
+        }
+    }
+
+    /// Real source pixels under texel `x`.
+    #[inline]
+    pub fn weight(&self, x: usize) -> u64 {
+        self.col_weight[x] * self.row_weight
+    }
+
+    /// `sum` (one of texel `x`'s sums) divided by the texel's pixel count, rounded half up.
+    #[inline]
+    pub fn mean(&self, x: usize, sum: A) -> u64 {
+        if x < self.full_cols {
+            sum.round_shift((self.footprint * self.footprint).trailing_zeros())
+        } else {
+            sum.round_div(self.weight(x))
+        }
+    }
 }
 
 #[cfg(test)]

@@ -4,13 +4,19 @@
 
 use std::path::Path;
 
+use base64::Engine;
+
 use crate::background::Background;
 use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling, ZSTD_LEVELS};
+pub use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
 use crate::error::{Result, TilerError};
+use crate::job::SplitOptions;
 use crate::layout::Layout;
+use crate::limits::Limits;
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::pyramid::filter::Filter;
-use crate::split::SplitOptions;
+use crate::source::ImageHeader;
+pub use crate::tile_dir::filename::DEFAULT_FILENAME_STEM;
 use crate::tile_dir::filename::FilenameFormat;
 use crate::tile_dir::info::{BORDER_WHEN_ABSENT, FORMAT_VERSION, InfoFile};
 
@@ -20,10 +26,6 @@ pub const DEFAULT_TILE_SIZE: u32 = 128;
 /// default filter shows no seams (border 0 does: docs/gpu-sampling.md).
 pub const DEFAULT_BORDER: u32 = 1;
 pub const DEFAULT_QUALITY: u8 = 85;
-pub const DEFAULT_ZSTD_LEVEL: i32 = 3;
-pub const DEFAULT_BC7_EFFORT: Bc7Effort = Bc7Effort::UltraFast;
-/// The thesis's default names, with the codec's extension.
-pub const DEFAULT_FILENAME_STEM: &str = "lod%1$02s-x%2$04s-y%3$04s";
 
 /// Which codec: `auto` picks JPEG for 8-bit grey or RGB and PNG for anything with alpha or 16 bits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -244,6 +246,68 @@ pub fn resolve(
         ));
     }
     Ok((opts, names))
+}
+
+/// What a `--layout vortex` run writes: a tile directory holds image files; a pack holds the
+/// tiles of any codec.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Destination {
+    TileDir,
+    Pack,
+}
+
+/// A `--layout vortex` run (a tile directory or a pack) as the user asked for it, checked
+/// against the source and a previous output's `info.json` before the first tile is cut: each
+/// setting is the flag's where one is given, else the previous `info.json`'s (the original
+/// tool's way of configuring a run), else the default ([`resolve`]).
+#[derive(Clone, Debug)]
+pub struct Plan {
+    pub opts: SplitOptions,
+    pub names: FilenameFormat,
+    /// The page grid the source is cut into.
+    pub layout: Layout,
+    /// The texels the tiles hold, after flattening and the tile depth.
+    pub stored: PixelLayout,
+    /// The output's `info.json`.
+    pub info: InfoFile,
+    /// `name value` of each member the previous `info.json` changed from what the flags alone
+    /// give ([`changed_by_file`]); empty without one.
+    pub changed: Vec<String>,
+}
+
+impl Plan {
+    /// Plans a run of `source` into `destination` from the flags `asked` and the `info.json`
+    /// of the output it replaces (`existing`, with its path), within `limits`; `icc` is the
+    /// source's colour profile where the run keeps it (`--keep-icc`).
+    pub fn new(
+        asked: &Requested,
+        existing: Option<(&Path, &InfoFile)>,
+        source: &ImageHeader,
+        destination: Destination,
+        limits: &Limits,
+        icc: Option<&[u8]>,
+    ) -> Result<Plan> {
+        let (opts, names) = resolve(asked, existing, source.layout)?;
+        if destination == Destination::TileDir && !opts.codec.writes_files() {
+            return Err(TilerError::Options(format!(
+                "--codec {} writes packs only (its tiles are not image files): write --pack FILE instead of --output, or use --codec png for lossless tile files",
+                opts.codec.name()
+            )));
+        }
+        let layout = opts.layout(source.width, source.height)?;
+        if let Some((path, info)) = existing {
+            check_grid(path, info, asked, &layout)?;
+        }
+        let stored = opts.codec.stored_layout(source.layout, opts.flatten, opts.tile_depth)?;
+        limits.check_pyramid(&layout, destination == Destination::Pack)?;
+        let mut info = describe(&layout, stored, &opts, &names);
+        info.icc_profile = icc.map(|icc| base64::engine::general_purpose::STANDARD.encode(icc));
+        let changed = match existing {
+            Some(_) => changed_by_file(asked, source.layout, source.width, source.height, &info),
+            None => Vec::new(),
+        };
+        Ok(Plan { opts, names, layout, stored, info, changed })
+    }
 }
 
 /// An existing `info.json` sets this run's defaults, but never ones that would lose data the
@@ -481,4 +545,194 @@ pub fn describe_codec(codec: Codec) -> InfoFile {
         Codec::Raw | Codec::Bc1 => {}
     }
     info
+}
+
+#[cfg(test)]
+mod tests {
+    use serde_json::{Value, json};
+
+    use super::*;
+
+    /// A 1000x600 source of `channels` at `depth`.
+    fn header(channels: Channels, depth: Depth) -> ImageHeader {
+        ImageHeader { width: 1000, height: 600, layout: PixelLayout::new(channels, depth) }
+    }
+
+    /// The plan for `flags` over a previous `info.json` holding `previous` (none where `None`).
+    fn plan(flags: &Requested, previous: Option<Value>, source: ImageHeader, to: Destination) -> Result<Plan> {
+        let file: Option<InfoFile> = previous.map(|v| serde_json::from_value(v).expect("an info.json"));
+        let at = Path::new("out/info.json");
+        Plan::new(flags, file.as_ref().map(|f| (at, f)), &source, to, &Limits::default(), None)
+    }
+
+    /// Each row is one rule: the flags, a previous `info.json` (or none), and the member of the
+    /// new `info.json` they decide. The expected values are written out, not the library's
+    /// constants, so that a changed default fails here (docs/info-json.md lists them).
+    #[test]
+    fn a_flag_wins_over_info_json_which_wins_over_the_default() {
+        let none = Requested::default;
+        let cases: Vec<(&str, Requested, Option<Value>, &str, Value)> = vec![
+            ("tile size by default", none(), None, "tileSize", json!(128)),
+            ("tile size from info.json", none(), Some(json!({"tileSize": 256})), "tileSize", json!(256)),
+            (
+                "tile size: the flag over info.json",
+                Requested { tile_size: Some(64), ..none() },
+                Some(json!({"tileSize": 256})),
+                "tileSize",
+                json!(64),
+            ),
+            ("border by default", none(), None, "border", json!(1)),
+            ("border of an info.json without one (the thesis's)", none(), Some(json!({})), "border", json!(0)),
+            ("border from info.json", none(), Some(json!({"border": 2})), "border", json!(2)),
+            (
+                "border: the flag over info.json",
+                Requested { border: Some(3), ..none() },
+                Some(json!({"border": 2})),
+                "border",
+                json!(3),
+            ),
+            ("codec by default for 8-bit RGB", none(), None, "codec", json!("jpeg")),
+            ("codec from info.json", none(), Some(json!({"codec": "png"})), "codec", json!("png")),
+            (
+                "codec from info.json's file names",
+                none(),
+                Some(json!({"filenameFormat": "t%1$d_%2$d_%3$d.png"})),
+                "codec",
+                json!("png"),
+            ),
+            (
+                "codec: info.json's codec over its file names",
+                none(),
+                Some(json!({"codec": "zstd", "filenameFormat": "t%1$d_%2$d_%3$d.bin"})),
+                "codec",
+                json!("zstd"),
+            ),
+            (
+                "codec: the flag over info.json",
+                Requested { codec: Some(CodecChoice::Zstd), ..none() },
+                Some(json!({"codec": "png"})),
+                "codec",
+                json!("zstd"),
+            ),
+            ("quality by default", none(), None, "quality", json!(85)),
+            ("quality from info.json", none(), Some(json!({"quality": 70})), "quality", json!(70)),
+            (
+                "quality: the flag over info.json",
+                Requested { quality: Some(90), ..none() },
+                Some(json!({"quality": 70})),
+                "quality",
+                json!(90),
+            ),
+            (
+                "zstd level by default",
+                Requested { codec: Some(CodecChoice::Zstd), ..none() },
+                None,
+                "zstdLevel",
+                json!(3),
+            ),
+            (
+                "zstd level from info.json",
+                Requested { codec: Some(CodecChoice::Zstd), ..none() },
+                Some(json!({"zstdLevel": 9})),
+                "zstdLevel",
+                json!(9),
+            ),
+            (
+                "zstd level: the flag over info.json",
+                Requested { codec: Some(CodecChoice::Zstd), zstd_level: Some(5), ..none() },
+                Some(json!({"zstdLevel": 9})),
+                "zstdLevel",
+                json!(5),
+            ),
+            ("filter by default for 8 bits", none(), None, "filter", json!("linear-premultiplied")),
+            ("filter from info.json", none(), Some(json!({"filter": "lanczos3"})), "filter", json!("lanczos3")),
+            (
+                "filter: the flag over info.json",
+                Requested { filter: Some(Filter::Box), ..none() },
+                Some(json!({"filter": "lanczos3"})),
+                "filter",
+                json!("box"),
+            ),
+            ("background by default", none(), None, "background", json!("edge")),
+            (
+                "background from info.json",
+                none(),
+                Some(json!({"background": "#102030"})),
+                "background",
+                json!("#102030"),
+            ),
+            (
+                "background: the flag over info.json",
+                Requested { background: Some(Background::Colour([1, 2, 3, 255])), ..none() },
+                Some(json!({"background": "#102030"})),
+                "background",
+                json!("#010203"),
+            ),
+            ("names by default", none(), None, "filenameFormat", json!("lod%1$02s-x%2$04s-y%3$04s.jpg")),
+            (
+                "names from info.json",
+                none(),
+                Some(json!({"filenameFormat": "t%1$d_%2$d_%3$d.jpg"})),
+                "filenameFormat",
+                json!("t%1$d_%2$d_%3$d.jpg"),
+            ),
+            (
+                "names: the flag over info.json",
+                Requested { filename_format: Some("%1$d/%2$d/%3$d.jpg".into()), ..none() },
+                Some(json!({"filenameFormat": "t%1$d_%2$d_%3$d.jpg"})),
+                "filenameFormat",
+                json!("%1$d/%2$d/%3$d.jpg"),
+            ),
+        ];
+        for (rule, flags, previous, member, want) in cases {
+            let plan = plan(&flags, previous, header(Channels::Rgb, Depth::U8), Destination::Pack)
+                .unwrap_or_else(|e| panic!("{rule}: {e}"));
+            let info = serde_json::to_value(&plan.info).expect("info.json as JSON");
+            assert_eq!(info[member], want, "{rule}");
+        }
+    }
+
+    #[test]
+    fn the_source_decides_what_neither_flag_nor_info_json_does() {
+        // The codec is asked for only where the source's own default (png) cannot hold it.
+        let cases = [
+            ("8-bit grey", Channels::Grey, Depth::U8, None, "jpeg", "linear-premultiplied"),
+            ("8-bit RGBA", Channels::Rgba, Depth::U8, None, "png", "linear-premultiplied"),
+            ("16-bit grey", Channels::Grey, Depth::U16, None, "png", "linear-premultiplied"),
+            ("float grey in raw tiles", Channels::Grey, Depth::F32, Some(CodecChoice::Raw), "raw", "box"),
+        ];
+        for (what, channels, depth, codec_flag, codec, filter) in cases {
+            let flags = Requested { codec: codec_flag, ..Requested::default() };
+            let plan = plan(&flags, None, header(channels, depth), Destination::Pack).expect(what);
+            assert_eq!((plan.opts.codec.name(), plan.opts.filter.name()), (codec, filter), "{what}");
+        }
+    }
+
+    #[test]
+    fn the_plan_says_what_info_json_changed_and_refuses_what_a_destination_cannot_hold() {
+        let source = header(Channels::Rgb, Depth::U8);
+        let changed =
+            plan(&Requested::default(), Some(json!({"tileSize": 256, "quality": 70})), source, Destination::Pack)
+                .expect("a plan")
+                .changed;
+        // An info.json without a border is the thesis's, whose tiles have none.
+        assert_eq!(changed, ["border 0", "quality 70", "tileSize 256"]);
+        let flagged = Requested { tile_size: Some(256), ..Requested::default() };
+        let plan_of_flags =
+            plan(&flagged, Some(json!({"tileSize": 256, "border": 1})), source, Destination::Pack).expect("a plan");
+        assert!(plan_of_flags.changed.is_empty(), "{:?}", plan_of_flags.changed);
+        assert!(plan(&Requested::default(), None, source, Destination::Pack).expect("a plan").changed.is_empty());
+
+        let raw = Requested { codec: Some(CodecChoice::Raw), ..Requested::default() };
+        assert!(plan(&raw, None, source, Destination::Pack).is_ok());
+        let err = plan(&raw, None, source, Destination::TileDir).expect_err("raw tiles are not image files");
+        assert!(matches!(&err, TilerError::Options(m) if m.starts_with("--codec raw writes packs only")), "{err}");
+        let lossy_over_16 = plan(
+            &Requested::default(),
+            Some(json!({"codec": "jpeg"})),
+            header(Channels::Grey, Depth::U16),
+            Destination::Pack,
+        );
+        assert!(matches!(&lossy_over_16, Err(TilerError::Info { field, .. }) if field == "codec"), "{lossy_over_16:?}");
+    }
 }

@@ -12,105 +12,23 @@
 use std::sync::Arc;
 use std::sync::mpsc::sync_channel;
 
-use crate::background::Background;
 use crate::codec::{Codec, TileEncoder};
 use crate::encoders::{self, Copier};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::{Depth, PixelLayout, Sample};
-use crate::pyramid::Filter;
 use crate::pyramid::cascade::{Batch, BatchSender, Cascade, Derived, Span};
 use crate::pyramid::cut::Padding;
 use crate::pyramid::filter::{ExactFilter, sums_need_u128};
 use crate::pyramid::reduce::{Acc, Reducer};
 use crate::pyramid::stripes::Plan;
-use crate::shard::merge::RootRows;
+use crate::shard::sums::RootRows;
 use crate::shard::sums::{self, EncodedRoots};
 use crate::sink::TileSink;
-use crate::source::stored::Quality;
 use crate::source::{ImageHeader, RowSource, read_ahead};
-use crate::stages::{Stage, StageClock, StageTimes};
+use crate::stages::{Stage, StageClock};
 
-/// How to cut and store the pyramid.
-#[derive(Clone, Debug)]
-pub struct SplitOptions {
-    pub tile_size: u32,
-    pub border: u32,
-    pub codec: Codec,
-    pub background: Background,
-    /// Composite alpha over the background (or black) instead of storing it.
-    pub flatten: bool,
-    /// Store tiles at this depth instead of the source's (JPEG is always 8-bit).
-    pub tile_depth: Option<Depth>,
-    /// How each LOD is made from the finer ones.
-    pub filter: Filter,
-    /// Bytes the pipeline may hold (`--max-memory`); a wider image is cut in stripes.
-    pub max_memory: u64,
-    /// Go on below one page until the image is one texel, as Deep Zoom's levels do
-    /// ([`Layout::down_to_one_texel`]).
-    pub down_to_one_texel: bool,
-    /// Why the source's stored JPEG tiles are encoded again rather than copied where they
-    /// line up with the finest level's pages (`--reencode`, an explicit `--quality` or
-    /// `--subsampling`); `None` copies them ([`crate::source::stored`]).
-    pub reencode: Option<&'static str>,
-}
-
-impl SplitOptions {
-    /// The page grid these options cut a `width x height` image into.
-    pub fn layout(&self, width: u32, height: u32) -> Result<Layout> {
-        let layout = Layout::new(width as u64, height as u64, self.tile_size, self.border)?;
-        Ok(if self.down_to_one_texel { layout.down_to_one_texel() } else { layout })
-    }
-}
-
-/// Watches a run: told of finished tiles, asked whether to stop.
-pub trait Progress: Sync {
-    fn advance(&self, _tiles: u64) {}
-    /// Checked once per source row and per batch of tiles; a run that sees `true` stops with
-    /// [`TilerError::Interrupted`].
-    fn cancelled(&self) -> bool {
-        false
-    }
-}
-
-/// No progress reporting, never cancelled.
-impl Progress for () {}
-
-/// What a finished run produced.
-#[derive(Clone, Debug)]
-pub struct Summary {
-    pub layout: Layout,
-    pub source: PixelLayout,
-    pub stored: PixelLayout,
-    pub tiles: u64,
-    /// Tiles encoded; the others share an identical neighbour's bytes, were stored as their one
-    /// colour or were copied.
-    pub encoded: u64,
-    /// Tiles of the finest level copied from the source's stored JPEG tiles.
-    pub copied: u64,
-    /// The source's stored tiles, where it has some, and whether they were copied.
-    pub stored_tiles: Option<StoredReport>,
-    pub bytes: u64,
-    /// Vertical stripes the fine LODs were cut in (1: one band over the whole width, or one
-    /// stripe of the fine LODs and a coarse pass; 0: a shard, whose passes are its rectangles).
-    pub stripes: usize,
-    /// Times the source was read: 1 for one band, the stripes plus one for the coarse pass, a
-    /// shard's rectangles (each only its rows, where the source can seek).
-    pub passes: usize,
-    /// Where the wall time went.
-    pub stages: StageTimes,
-}
-
-/// A source's stored JPEG tiles as the summary tells of them.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct StoredReport {
-    /// Texels across and down of a stored tile.
-    pub tile_size: (u32, u32),
-    /// The quality they were stored at, from their quantisation tables.
-    pub quality: Option<Quality>,
-    /// Why none was copied (`None`: those wholly inside the image and on the pages' grid were).
-    pub declined: Option<String>,
-}
+pub use crate::job::{Progress, SplitOptions, StoredReport, Summary};
 
 /// Whether the finest level's pages are copied from `source`'s stored tiles (the copier) and
 /// what the summary says of them; neither where the source stores none.
@@ -185,7 +103,7 @@ pub(crate) fn split_shard(
 }
 
 /// The levels above a sharded run's cut level, from the exact sums of its roots: what
-/// `merge` makes ([`crate::shard::merge`]). `image` is the source's size and texels.
+/// `merge` makes ([`crate::scale_out::merge`]). `image` is the source's size and texels.
 pub(crate) fn above_cut(
     image: ImageHeader,
     roots: RootRows<'_>,

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use vortex_tiler::output::Product;
-use vortex_tiler::shard::{self, ShardJob};
+use vortex_tiler::scale_out::{self, ShardJob};
 
 use super::report;
 
@@ -147,7 +147,7 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
         .map(|p| p.levels().iter().map(|l| l.tiles_w as u64 * l.tiles_h as u64).sum())
         .unwrap_or(0);
     let watch = a.run.watch(total)?;
-    let merged = shard::merge(&a.shards, &a.output, &watch);
+    let merged = scale_out::merge(&a.shards, &a.output, &watch);
     watch.bar.finish_and_clear();
     let merged = merged?;
     let took = started.elapsed().as_secs_f64();

@@ -4,7 +4,6 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use base64::Engine;
 
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
@@ -13,14 +12,14 @@ use vortex_tiler::limits::Limits;
 use vortex_tiler::output::{Existing, Product};
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::pyramid::Filter;
-use vortex_tiler::settings::{self, CodecChoice, Requested};
+use vortex_tiler::settings::{self, CodecChoice, Destination, Plan, Requested};
 use vortex_tiler::sink::icc::{Profile, WithProfile};
 use vortex_tiler::sink::{DirSink, PackSink, PmtilesSink, TileSink};
 use vortex_tiler::source::RowSource;
 use vortex_tiler::split::SplitOptions;
 use vortex_tiler::tile_dir::info::InfoFile;
 use vortex_tiler::viewer::{Viewer, ViewerTiles, dzi, iiif};
-use vortex_tiler::{shard, source, split};
+use vortex_tiler::{scale_out, source, split};
 
 use super::report;
 use super::shard::shard_path;
@@ -454,27 +453,14 @@ pub fn tile(
         ..a.enc.requested()
     };
     let existing_ref = info_path.as_deref().zip(existing.as_ref());
-    let (opts, names) = settings::resolve(&requested, existing_ref, source.layout())?;
-    if a.output.is_some() && !opts.codec.writes_files() {
-        bail!(
-            "--codec {} writes packs only (its tiles are not image files): write --pack FILE instead of --output, or use --codec png for lossless tile files",
-            opts.codec.name()
-        );
-    }
-    let layout = opts.layout(source.width(), source.height())?;
-    if let Some((path, info)) = existing_ref {
-        settings::check_grid(path, info, &requested, &layout)?;
-    }
-    let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
-    limits.check_pyramid(&layout, product == Product::Pack)?;
-    let mut info = settings::describe(&layout, stored, &opts, &names);
-    info.icc_profile = kept_icc.map(|icc| base64::engine::general_purpose::STANDARD.encode(icc));
+    let destination = if product == Product::Pack { Destination::Pack } else { Destination::TileDir };
+    let plan = Plan::new(&requested, existing_ref, &source.header(), destination, &limits, kept_icc.as_deref())?;
+    let Plan { opts, names, layout, stored, info, changed } = plan;
     // Said once everything is checked, just before the work starts.
-    if let (Some(path), false) = (&info_path, a.run.quiet) {
-        let changed = settings::changed_by_file(&requested, source.layout(), source.width(), source.height(), &info);
-        if !changed.is_empty() {
-            eprintln!("settings from {}: {}", path.display(), changed.join(", "));
-        }
+    if let (Some(path), false) = (&info_path, a.run.quiet)
+        && !changed.is_empty()
+    {
+        eprintln!("settings from {}: {}", path.display(), changed.join(", "));
     }
     if let Some((path, chosen)) = shard {
         if !a.run.quiet && !a.run.json {
@@ -483,7 +469,7 @@ pub fn tile(
         let job = chosen.job(input, info.to_json_pretty(), a.pack_layout.options()?);
         let run = Run::start_counting(source, a, job.pages(&layout)?, started)?;
         let (done, written) =
-            run.execute_with(|source, watch| shard::write_shard(source, &path, &opts, &job, watch))?;
+            run.execute_with(|source, watch| scale_out::write_shard(source, &path, &opts, &job, watch))?;
         if a.run.json {
             let mut doc: serde_json::Value =
                 serde_json::from_str(&report::summary_json(&done, "shard", &path, Some(&written)))?;

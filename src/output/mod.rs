@@ -23,40 +23,8 @@ use std::fs;
 use std::io;
 use std::path::{Component, Path, PathBuf};
 
+pub use crate::error::OutputError;
 pub use ours::Product;
-
-/// Why a destination was refused.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum OutputError {
-    #[error("{}: is {what}; nothing replaces one: choose a regular path", path.display())]
-    Special { path: PathBuf, what: &'static str },
-
-    #[error("{}: is a symbolic link (to {}); give the real path, or remove the link first", path.display(), target.display())]
-    Symlink { path: PathBuf, target: PathBuf },
-
-    #[error("{}: is {found} where {product} goes; choose another path", path.display())]
-    WrongType { path: PathBuf, found: &'static str, product: &'static str },
-
-    #[error("{}: {what}, not {product} written by vortex-tiler; {advice}", path.display())]
-    Foreign { path: PathBuf, what: String, product: &'static str, advice: &'static str },
-
-    #[error("{}: is the input {}; write the output somewhere else", path.display(), input.display())]
-    IsInput { path: PathBuf, input: PathBuf },
-
-    #[error("{}: lies inside the input {}; write the output somewhere else", path.display(), input.display())]
-    InsideInput { path: PathBuf, input: PathBuf },
-
-    #[error("{}: holds the input {}, which replacing it would delete; write the output somewhere else", path.display(), input.display())]
-    ContainsInput { path: PathBuf, input: PathBuf },
-
-    #[error("{}: {source}", path.display())]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: io::Error,
-    },
-}
 
 fn io_err(path: &Path) -> impl FnOnce(io::Error) -> OutputError + '_ {
     move |source| OutputError::Io { path: path.to_path_buf(), source }

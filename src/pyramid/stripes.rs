@@ -17,9 +17,9 @@
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::limits::human_bytes;
+use crate::limits::read_ahead;
 use crate::pyramid::Filter;
 use crate::pyramid::cascade::{Span, batch_tiles};
-use crate::source::read_ahead;
 
 /// The passes of one run, in order: the stripes, then the coarse pass (if any); and how the
 /// source is read.

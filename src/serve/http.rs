@@ -6,101 +6,29 @@
 //! encoding run on tokio's blocking threads, at most one per core at a time. No request can
 //! panic the server: each path returns a status and a short text.
 
-use std::net::SocketAddr;
-use std::path::{Path, PathBuf};
-use std::pin::Pin;
+use std::path::Path;
 use std::sync::Arc;
-use std::task::{Context, Poll};
 use std::time::UNIX_EPOCH;
 
 use axum::body::Body;
 use axum::extract::{Request, State};
-use axum::http::{HeaderMap, HeaderName, HeaderValue, Method, StatusCode, header};
-use axum::response::Response;
+use axum::http::{HeaderMap, Method, StatusCode, header};
+use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
-use hyper::body::{Body as HttpBody, Frame, SizeHint};
-use tokio::io::{AsyncRead, ReadBuf};
-use tokio::sync::Semaphore;
 
-use super::cache::TileCache;
-use super::catalog::{Catalog, Input, Source, StaticDir, StaticLayout, Tiled, map_slice};
+use super::AppState;
+use super::catalog::{Input, Source, StaticDir, StaticLayout, Tiled, map_slice};
 use super::files::{self, Refused};
 use super::html;
 use super::range::{self, RangeError};
+use super::reply::{FileBody, Payload, Reply, TILE_CACHE, conditional, etag, not_modified};
 use super::routes::{self, Reject, Route, bad, not_found};
 use super::tile_routes::{dzi_extension, dzi_tile, iiif_extension, iiif_tile, xyz_tile};
 use crate::viewer::{dzi, iiif, xyz};
 
-/// `Cache-Control` of tiles and packs (their URLs name immutable content).
-pub(super) const TILE_CACHE: &str = "public, max-age=86400";
 /// `Cache-Control` of manifests and pages.
 const MANIFEST_CACHE: &str = "public, max-age=60";
 const PAGE_CACHE: &str = "no-cache";
-
-pub struct AppState {
-    pub catalog: Catalog,
-    pub cache: TileCache,
-    /// `--max-concurrent`: requests answered at once.
-    pub requests: Semaphore,
-    /// Decode-and-encode jobs at once (one per core).
-    pub blocking: Arc<Semaphore>,
-    /// The local OpenSeadragon build (canonical), if given.
-    pub openseadragon: Option<PathBuf>,
-    pub local_addr: SocketAddr,
-}
-
-/// A finished answer before the method and CORS headers are applied.
-pub(super) struct Reply {
-    status: StatusCode,
-    content_type: &'static str,
-    body: Payload,
-    headers: Vec<(HeaderName, String)>,
-}
-
-/// A body in memory (tiles, manifests, pages, the pack's map) or a file streamed from disk.
-enum Payload {
-    Bytes(Bytes),
-    File(FileBody),
-}
-
-impl Payload {
-    fn len(&self) -> u64 {
-        match self {
-            Payload::Bytes(b) => b.len() as u64,
-            Payload::File(f) => f.left,
-        }
-    }
-}
-
-impl Reply {
-    pub(super) fn new(content_type: &'static str, body: impl Into<Bytes>) -> Reply {
-        Reply { status: StatusCode::OK, content_type, body: Payload::Bytes(body.into()), headers: Vec::new() }
-    }
-    fn text(status: StatusCode, message: impl std::fmt::Display) -> Reply {
-        Reply { status, ..Reply::new("text/plain; charset=utf-8", format!("{message}\n")) }
-    }
-    fn with(mut self, name: HeaderName, value: impl Into<String>) -> Reply {
-        self.headers.push((name, value.into()));
-        self
-    }
-    pub(super) fn cached(self, cache_control: &str, etag: &str) -> Reply {
-        self.with(header::CACHE_CONTROL, cache_control).with(header::ETAG, etag)
-    }
-}
-
-impl From<Reject> for Reply {
-    fn from(r: Reject) -> Reply {
-        match r {
-            Reject::BadRequest(_) => Reply::text(StatusCode::BAD_REQUEST, r),
-            Reject::NotFound(_) => Reply::text(StatusCode::NOT_FOUND, r),
-        }
-    }
-}
-
-pub(super) fn internal(message: impl std::fmt::Display) -> Reply {
-    eprintln!("serve: {message}");
-    Reply::text(StatusCode::INTERNAL_SERVER_ERROR, message)
-}
 
 pub async fn handle(State(state): State<Arc<AppState>>, request: Request) -> Response {
     let Ok(_permit) = state.requests.acquire().await else {
@@ -125,29 +53,11 @@ pub async fn handle(State(state): State<Arc<AppState>>, request: Request) -> Res
     respond(reply, method == Method::HEAD)
 }
 
+/// The reply as an HTTP response; a HEAD request's has the same headers and no body.
 fn respond(reply: Reply, head: bool) -> Response {
-    let len = reply.body.len();
-    let body = match reply.body {
-        _ if head => Body::empty(),
-        Payload::Bytes(b) => Body::from(b),
-        Payload::File(f) => Body::new(f),
-    };
-    let mut response = Response::new(body);
-    *response.status_mut() = reply.status;
-    let h = response.headers_mut();
-    h.insert(header::CONTENT_TYPE, HeaderValue::from_static(reply.content_type));
-    if reply.status != StatusCode::NOT_MODIFIED && reply.status != StatusCode::NO_CONTENT {
-        h.insert(header::CONTENT_LENGTH, HeaderValue::from(len));
-    }
-    h.insert(header::ACCESS_CONTROL_ALLOW_ORIGIN, HeaderValue::from_static("*"));
-    h.insert(
-        header::ACCESS_CONTROL_EXPOSE_HEADERS,
-        HeaderValue::from_static("ETag, Content-Length, Content-Range, Accept-Ranges"),
-    );
-    for (name, value) in reply.headers {
-        if let Ok(v) = HeaderValue::from_str(&value) {
-            h.append(name, v);
-        }
+    let mut response = reply.into_response();
+    if head {
+        *response.body_mut() = Body::empty();
     }
     response
 }
@@ -280,28 +190,6 @@ fn host(state: &AppState, headers: &HeaderMap) -> String {
         .map_or_else(|| state.local_addr.to_string(), str::to_string)
 }
 
-pub(super) fn etag(base: u64, key: &str) -> String {
-    format!("\"{base:016x}-{:016x}\"", crate::fnv::hash(key.as_bytes()))
-}
-
-/// 304 if the client holds `etag`, else `make()`.
-fn conditional(headers: &HeaderMap, etag: &str, make: impl FnOnce() -> Reply) -> Reply {
-    let held =
-        headers.get_all(header::IF_NONE_MATCH).iter().filter_map(|v| v.to_str().ok()).any(|v| {
-            v.split(',').map(|t| t.trim()).any(|t| t == "*" || t == etag || t.strip_prefix("W/") == Some(etag))
-        });
-    if held {
-        Reply { status: StatusCode::NOT_MODIFIED, ..Reply::new("text/plain", Bytes::new()) }.cached(TILE_CACHE, etag)
-    } else {
-        make()
-    }
-}
-
-pub(super) fn not_modified(headers: &HeaderMap, etag: &str) -> Option<Reply> {
-    let r = conditional(headers, etag, || Reply::new("text/plain", Bytes::new()));
-    (r.status == StatusCode::NOT_MODIFIED).then_some(r)
-}
-
 /// The pack file, whole or one byte range of it, straight from its memory map.
 fn pack_file(t: &Tiled, headers: &HeaderMap) -> Result<Reply, Reject> {
     let Some(pack) = t.pack() else { return Err(not_found("not a pack")) };
@@ -375,55 +263,4 @@ async fn static_file(root: &Path, rel: &[String], base: u64, headers: &HeaderMap
     };
     let body = Payload::File(FileBody { file: tokio::fs::File::from_std(file), left: len, chunk: Vec::new() });
     Ok(Reply { body, ..Reply::new(content_type, Bytes::new()) }.cached(cache, &etag))
-}
-
-/// A file sent in chunks as the client takes them, so a download holds one chunk in memory,
-/// not the file. Exactly the length the headers announced is sent: a file that shrank while
-/// it was sent ends the connection with an error, one that grew is cut at that length.
-pub(super) struct FileBody {
-    file: tokio::fs::File,
-    left: u64,
-    /// The buffer a read fills (kept across polls: a read may be pending).
-    chunk: Vec<u8>,
-}
-
-/// Bytes read from a file at a time.
-const CHUNK: usize = 64 << 10;
-
-impl HttpBody for FileBody {
-    type Data = Bytes;
-    type Error = std::io::Error;
-
-    fn poll_frame(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-    ) -> Poll<Option<Result<Frame<Bytes>, std::io::Error>>> {
-        let this = &mut *self;
-        if this.left == 0 {
-            return Poll::Ready(None);
-        }
-        let want = this.left.min(CHUNK as u64) as usize;
-        this.chunk.resize(want, 0);
-        let mut buf = ReadBuf::new(&mut this.chunk);
-        match Pin::new(&mut this.file).poll_read(cx, &mut buf) {
-            Poll::Pending => Poll::Pending,
-            Poll::Ready(Err(e)) => Poll::Ready(Some(Err(e))),
-            Poll::Ready(Ok(())) if buf.filled().is_empty() => {
-                Poll::Ready(Some(Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "the file shrank"))))
-            }
-            Poll::Ready(Ok(())) => {
-                let data = Bytes::copy_from_slice(buf.filled());
-                this.left -= data.len() as u64;
-                Poll::Ready(Some(Ok(Frame::data(data))))
-            }
-        }
-    }
-
-    fn is_end_stream(&self) -> bool {
-        self.left == 0
-    }
-
-    fn size_hint(&self) -> SizeHint {
-        SizeHint::with_exact(self.left)
-    }
 }

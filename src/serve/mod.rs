@@ -19,6 +19,7 @@ mod files;
 pub mod html;
 mod http;
 pub mod range;
+mod reply;
 pub mod routes;
 mod tile_routes;
 pub mod tiles;
@@ -33,7 +34,21 @@ use hyper_util::rt::{TokioIo, TokioTimer};
 use hyper_util::service::TowerToHyperService;
 use tokio::sync::Semaphore;
 
+use cache::TileCache;
 pub use catalog::Catalog;
+
+/// What every request reads: the inputs, the tile cache and the limits on work at once.
+pub struct AppState {
+    pub catalog: Catalog,
+    pub cache: TileCache,
+    /// `--max-concurrent`: requests answered at once.
+    pub requests: Semaphore,
+    /// Decode-and-encode jobs at once (one per core).
+    pub blocking: Arc<Semaphore>,
+    /// The local OpenSeadragon build (canonical), if given.
+    pub openseadragon: Option<PathBuf>,
+    pub local_addr: SocketAddr,
+}
 
 /// What stops the server before it serves.
 #[derive(Debug, thiserror::Error)]
@@ -116,7 +131,7 @@ impl ServeOptions {
 /// A server bound to its address, not yet serving.
 pub struct Server {
     listener: tokio::net::TcpListener,
-    state: Arc<http::AppState>,
+    state: Arc<AppState>,
     max_connections: usize,
     idle_timeout: Duration,
 }
@@ -140,7 +155,7 @@ impl Server {
             .await
             .map_err(|source| ServeError::Bind { addr: options.addr, source })?;
         let local_addr = listener.local_addr()?;
-        let state = Arc::new(http::AppState {
+        let state = Arc::new(AppState {
             catalog,
             cache: cache::TileCache::new(options.cache_bytes),
             requests: Semaphore::new(options.max_concurrent),

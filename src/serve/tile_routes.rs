@@ -8,8 +8,9 @@ use std::sync::Arc;
 use axum::http::HeaderMap;
 use bytes::Bytes;
 
+use super::AppState;
 use super::catalog::{Source, Tiled, stored_image};
-use super::http::{AppState, Reply, TILE_CACHE, etag, internal, not_modified};
+use super::reply::{Reply, TILE_CACHE, etag, internal, not_modified};
 use super::routes::{self, Reject, bad, not_found};
 use super::tiles::{self, Format, Job};
 use crate::source::decode_tile;

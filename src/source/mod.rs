@@ -22,7 +22,7 @@ mod tiff;
 pub mod tiled;
 mod whole;
 
-pub use whole::{Decoded, decode_tile, decode_tile_within, probe_tile};
+pub use crate::decode::{Decoded, decode_tile, decode_tile_within, probe_tile};
 
 use std::fs::File;
 use std::io::Read;

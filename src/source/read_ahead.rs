@@ -14,35 +14,8 @@ use crate::error::{Result, TilerError};
 use crate::source::RowSource;
 use crate::stages::{Stage, StageClock};
 
-/// Bytes of rows read per chunk at most (at least one row): enough rows that handing a chunk
-/// over costs nothing next to decoding it.
-pub const CHUNK_BYTES: u64 = 1 << 20;
-
-/// Chunks queued ahead of the caller; with the one being read and the one being used, memory
-/// holds at most `CHUNKS_AHEAD + 2` chunks.
-const CHUNKS_AHEAD: usize = 2;
-
-/// Chunks a caller of `chunks` may hold beyond the one it is given: the pyramid's sums hand
-/// each chunk on to the cutting thread, which holds one and has the rest queued. With 2 (a
-/// chunk queued), the reader, the sums and the cutter stalled together whenever the encoders
-/// fell behind, and the encoders then waited for a whole row of tiles to come through them:
-/// on the 16384² benchmark their idle time fell from 0.46-0.70 s to 0.16-0.24 s with 8, for
-/// about 15 MiB more (issue 18).
-pub const CHUNKS_HANDED_ON: u64 = 8;
-
-/// Rows per chunk of `row_bytes`-byte rows: as many as fit [`CHUNK_BYTES`], at least one.
-pub fn rows_per_chunk(row_bytes: u64) -> u64 {
-    (CHUNK_BYTES / row_bytes.max(1)).max(1)
-}
-
-/// Bytes the read-ahead holds at most for rows of `row_bytes` bytes, the chunks handed on
-/// included, and what the pyramid's sums make of each of those (a third of a chunk at most:
-/// a quarter for the next LOD, a sixteenth for the one after, ...).
-pub fn bytes(row_bytes: u64) -> u64 {
-    let chunks = CHUNKS_AHEAD as u64 + 2 + CHUNKS_HANDED_ON;
-    let chunk = rows_per_chunk(row_bytes).saturating_mul(row_bytes);
-    chunks.saturating_mul(chunk).saturating_add(CHUNKS_HANDED_ON.saturating_mul(chunk / 3 + row_bytes))
-}
+use crate::limits::read_ahead::CHUNKS_AHEAD;
+pub use crate::limits::read_ahead::{CHUNK_BYTES, CHUNKS_HANDED_ON, bytes, rows_per_chunk};
 
 /// Rows read ahead, in order; dropping it gives its memory back to the reader.
 pub(crate) struct Chunk<T> {

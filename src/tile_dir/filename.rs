@@ -16,6 +16,9 @@ enum Piece {
 /// 255 bytes of a file name part.
 const MAX_WIDTH: usize = 32;
 
+/// The thesis's default names, with the codec's extension.
+pub const DEFAULT_FILENAME_STEM: &str = "lod%1$02s-x%2$04s-y%3$04s";
+
 /// A parsed pattern.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FilenameFormat {

@@ -12,10 +12,10 @@ use std::path::Path;
 use vortex_pack::{Description, Level};
 
 use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling};
+use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
 use crate::error::{Result, TilerError};
 use crate::layout::{Layout, lods_for};
 use crate::pixel::{Channels, Depth, PixelLayout};
-use crate::settings::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
 use filename::FilenameFormat;
 use info::{FORMAT_VERSION, InfoFile};
 

@@ -14,9 +14,11 @@ pub const DEFAULT_TILE_SIZE: u32 = 254;
 /// vips dzsave's default overlap.
 pub const DEFAULT_OVERLAP: u32 = 1;
 
-/// Deep Zoom's finest level: `ceil(log2(max(w, h)))`.
+/// Deep Zoom's finest level, where the image has its full size: `ceil(log2(max(w, h)))`. The
+/// writer's level names and the reader's finest level (`source::tiled::deepzoom`) both come
+/// from here; any side a descriptor can state has one, `u32::MAX` included.
 pub fn max_level(width: u32, height: u32) -> u32 {
-    width.max(height).next_power_of_two().trailing_zeros()
+    u32::BITS - width.max(height).saturating_sub(1).leading_zeros()
 }
 
 /// The Deep Zoom level of our LOD `lod`.
@@ -24,9 +26,28 @@ pub fn level_of(layout: &Layout, lod: u32) -> u32 {
     max_level(layout.width, layout.height) - lod
 }
 
+/// `NAME_files/LEVEL`: the directory of a level's tiles, beside `NAME.dzi`.
+pub fn level_dir(name: &str, level: u32) -> String {
+    format!("{name}_files/{level}")
+}
+
+/// `LEVEL_DIR/COL_ROW.EXT`: a tile in its level's directory.
+pub fn tile_in(level_dir: &str, col: u32, row: u32, extension: &str) -> String {
+    format!("{level_dir}/{col}_{row}.{extension}")
+}
+
 /// `NAME_files/LEVEL/COL_ROW.EXT`.
 pub fn tile_path(name: &str, level: u32, col: u32, row: u32, extension: &str) -> String {
-    format!("{name}_files/{level}/{col}_{row}.{extension}")
+    tile_in(&level_dir(name, level), col, row, extension)
+}
+
+/// The texels of its level that tile `index` of a row (column) holds, `start..end`: its cell
+/// of `cell` texels, plus `overlap` on each side that has a neighbour, stopping at the level's
+/// `extent`. What the writer crops a page to and what the reader expects a tile to hold.
+pub fn tile_span(index: u32, cell: u64, overlap: u64, extent: u32) -> (u64, u64) {
+    let own = index as u64 * cell;
+    let start = if index == 0 { own } else { own.saturating_sub(overlap) };
+    (start, (own + cell + overlap).min(extent as u64))
 }
 
 /// The texels of page (lod, col, row) that its Deep Zoom tile keeps: the left (top) border
@@ -35,10 +56,8 @@ pub fn crop(layout: &Layout, lod: u32, col: u32, row: u32) -> Crop {
     let (p, b) = (layout.payload() as u64, layout.border as u64);
     let (level_w, level_h) = layout.level_extent(lod);
     let axis = |index: u32, extent: u32| -> (u32, u32) {
-        let own = index as u64 * p;
-        let start = if index == 0 { own } else { own - b };
-        let end = (own + p + b).min(extent as u64);
-        ((start + b - own) as u32, (end - start) as u32)
+        let (start, end) = tile_span(index, p, b, extent);
+        ((start + b - index as u64 * p) as u32, (end - start) as u32)
     };
     let ((x, width), (y, height)) = (axis(col, level_w), axis(row, level_h));
     Crop { x, y, width, height }
@@ -64,6 +83,15 @@ pub fn descriptor(layout: &Layout, extension: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn max_level_is_ceil_log2() {
+        let cases = [(1, 0), (2, 1), (3, 2), (4, 2), (5, 3), (255, 8), (256, 8), (257, 9), (u32::MAX, 32)];
+        for (side, level) in cases {
+            assert_eq!(max_level(side, 1), level, "side {side}");
+            assert_eq!(max_level(1, side), level, "side {side}");
+        }
+    }
     use crate::viewer::Viewer;
 
     #[test]

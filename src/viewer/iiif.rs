@@ -93,14 +93,26 @@ pub fn whole_sizes(layout: &Layout) -> Vec<(u32, u32, u32)> {
         .collect()
 }
 
+/// `full/{size}/0/default.{ext}`: the whole image at `size` (`w,h`, IIIF 2's `w,`, `max` or
+/// `full`), as this writer names it and the IIIF reader (`source::tiled::iiif`) looks for it.
+pub fn whole_file(size: &str, extension: &str) -> String {
+    format!("full/{size}/0/default.{extension}")
+}
+
+/// `{x},{y},{w},{h}/{size}/0/default.{ext}`: the region of the image at `size` (IIIF 3's
+/// `w,h`, IIIF 2's `w,`), a tile's file for this writer and the IIIF reader alike.
+pub fn region_file(x: u64, y: u64, w: u64, h: u64, size: &str, extension: &str) -> String {
+    format!("{x},{y},{w},{h}/{size}/0/default.{extension}")
+}
+
 /// The file of the whole image at `width x height`.
 pub fn full_path(width: u32, height: u32, extension: &str) -> String {
-    format!("full/{width},{height}/0/default.{extension}")
+    whole_file(&format!("{width},{height}"), extension)
 }
 
 /// The file of the whole image at the service's `max` size.
 pub fn max_path(extension: &str) -> String {
-    format!("full/max/0/default.{extension}")
+    whole_file("max", extension)
 }
 
 /// The tile of page (lod, col, row): `{rx},{ry},{rw},{rh}/{w},{h}/0/default.{ext}`, or
@@ -113,7 +125,7 @@ pub fn tile_path(layout: &Layout, lod: u32, col: u32, row: u32, extension: &str)
     let side = (layout.payload() as u64) << lod;
     let (x, y) = (col as u64 * side, row as u64 * side);
     let (rw, rh) = (side.min(layout.width as u64 - x), side.min(layout.height as u64 - y));
-    format!("{x},{y},{rw},{rh}/{width},{height}/0/default.{extension}")
+    region_file(x, y, rw, rh, &format!("{width},{height}"), extension)
 }
 
 /// The second name of the full-resolution tile when the image is a single tile

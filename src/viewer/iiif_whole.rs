@@ -10,9 +10,9 @@
 use super::Crop;
 use super::iiif::{MAX_WHOLE_SIDE, crop};
 use crate::codec::{Codec, TileEncoder};
+use crate::decode::Decoded;
 use crate::layout::Layout;
 use crate::pixel::{Depth, PixelLayout};
-use crate::source::Decoded;
 
 /// The whole image at `lod`, encoded with `codec`, from its tiles: `tile(col, row)` gives the
 /// decoded page or tile and the part of it that is IIIF's tile of (col, row) (the part
@@ -84,8 +84,8 @@ fn encoder<T: crate::pixel::Sample>(codec: Codec, layout: PixelLayout, side: u32
 mod tests {
     use super::*;
     use crate::codec::PngLevel;
+    use crate::decode::decode_tile;
     use crate::pixel::Channels;
-    use crate::source::decode_tile;
     use crate::viewer::Viewer;
 
     #[test]

@@ -21,6 +21,7 @@ pub mod xyz;
 
 use std::fmt;
 
+pub use crate::layout::Crop;
 use crate::layout::Layout;
 
 pub use recognise::recognise;
@@ -89,21 +90,6 @@ impl fmt::Display for Viewer {
     }
 }
 
-/// The part of a stored page that a viewer's tile keeps, in the page's texels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct Crop {
-    pub x: u32,
-    pub y: u32,
-    pub width: u32,
-    pub height: u32,
-}
-
-impl Crop {
-    pub fn whole(side: u32) -> Crop {
-        Crop { x: 0, y: 0, width: side, height: side }
-    }
-}
-
 /// One page as a viewer's file: where it goes under the output directory and what it keeps.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Placed {
@@ -167,7 +153,7 @@ impl ViewerTiles {
             } else {
                 let bytes = iiif_whole::assemble(l, lod, service.codec, |col, row| {
                     let path = iiif::tile_path(l, lod, col, row, ext);
-                    let decoded = crate::source::decode_tile(std::path::Path::new(&path), &read(&path)?)
+                    let decoded = crate::decode::decode_tile(std::path::Path::new(&path), &read(&path)?)
                         .map_err(|e| e.to_string())?;
                     let whole = Crop { x: 0, y: 0, width: decoded.width, height: decoded.height };
                     Ok((decoded, whole))

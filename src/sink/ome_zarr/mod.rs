@@ -363,40 +363,6 @@ fn planes(raw: &[u8], channels: usize, sample: usize) -> std::borrow::Cow<'_, [u
     std::borrow::Cow::Owned(out)
 }
 
-/// Whether `path` holds a previous OME-Zarr output: an empty directory, or OME metadata at
-/// the root and nothing but the level arrays beside it.
-pub fn recognise_dir(path: &Path) -> std::result::Result<(), String> {
-    let entries: Vec<_> = fs::read_dir(path)
-        .and_then(|r| r.collect::<std::io::Result<Vec<_>>>())
-        .map_err(|e| format!("unreadable ({e})"))?;
-    if entries.is_empty() {
-        return Ok(());
-    }
-    let metadata = ["zarr.json", ".zattrs"].iter().map(|n| path.join(n)).find(|p| p.is_file());
-    let Some(metadata) = metadata else {
-        let first = entries[0].file_name();
-        return Err(format!("holds {} and no OME-Zarr metadata (zarr.json or .zattrs)", first.to_string_lossy()));
-    };
-    let text = fs::File::open(&metadata)
-        .and_then(|f| {
-            let mut s = String::new();
-            f.take(16 << 20).read_to_string(&mut s).map(|_| s)
-        })
-        .map_err(|e| format!("unreadable ({e})"))?;
-    if !text.contains("\"multiscales\"") {
-        return Err(format!("a Zarr hierarchy whose {} has no multiscales", metadata.display()));
-    }
-    for entry in entries {
-        let name = entry.file_name();
-        let name = name.to_string_lossy();
-        let level = entry.file_type().is_ok_and(|t| t.is_dir()) && name.bytes().all(|b| b.is_ascii_digit());
-        if !(level || [".zgroup", ".zattrs", "zarr.json", "labels"].contains(&name.as_ref())) {
-            return Err(format!("holds {name}, which is not part of an OME-Zarr image"));
-        }
-    }
-    Ok(())
-}
-
 /// The OME-Zarr image a label image belongs to, as its labels must match it.
 pub struct LabelParent {
     pub image: PathBuf,
@@ -477,18 +443,6 @@ pub fn register_label(labels: &Path, version: Version, name: &str) -> Result<()>
         staging::write_file(&group, br#"{ "zarr_format": 2 }"#).map_err(|e| TilerError::write(&group, e))?;
     }
     Ok(())
-}
-
-/// Whether `path` holds a previous `.ozx`: a zip whose first entry is the root `zarr.json`.
-pub fn recognise_ozx(path: &Path) -> std::result::Result<(), String> {
-    let mut head = Vec::with_capacity(40);
-    fs::File::open(path).and_then(|f| f.take(39).read_to_end(&mut head)).map_err(|e| format!("unreadable ({e})"))?;
-    let first_name = head.get(30..39);
-    if head.starts_with(b"PK\x03\x04") && head.get(26..28) == Some(&[9, 0][..]) && first_name == Some(b"zarr.json") {
-        Ok(())
-    } else {
-        Err("a file that is not a zipped OME-Zarr".into())
-    }
 }
 
 #[cfg(test)]

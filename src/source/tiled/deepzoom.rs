@@ -12,6 +12,7 @@ use super::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore};
 use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, TilerError};
 use crate::source::ImageHeader;
+use crate::viewer::dzi;
 
 pub struct DeepZoom {
     store: TileStore,
@@ -47,14 +48,14 @@ impl DeepZoom {
         let text = std::str::from_utf8(&bytes)
             .map_err(|_| TilerError::decode(&dzi_path, "is not UTF-8 text, so not a Deep Zoom descriptor (.dzi)"))?;
         let d = Descriptor::parse(&dzi_path, text)?;
-        let level = finest_level(d.width.max(d.height));
+        let level = dzi::max_level(d.width, d.height);
         // `dir/name.dzi` has its tiles in `dir/name_files`, as Path::file_stem splits names.
         let file_at = dzi.rfind('/').map_or(0, |i| i + 1);
         let stem = match dzi[file_at..].rfind('.') {
             Some(dot) if dot > 0 => &dzi[..file_at + dot],
             _ => dzi,
         };
-        let level_dir = format!("{stem}_files/{level}");
+        let level_dir = dzi::level_dir(stem, level);
         if store.kind(&level_dir) != Some(Kind::Dir) {
             return Err(TilerError::decode(
                 store.name(&level_dir),
@@ -96,7 +97,7 @@ impl DeepZoom {
 }
 
 fn tile_path(level_dir: &str, format: &str, col: u32, row: u32) -> String {
-    format!("{level_dir}/{col}_{row}.{format}")
+    dzi::tile_in(level_dir, col, row, format)
 }
 
 /// The first tile of the `cols x rows` grid in reading order: 0_0 if present, else the first
@@ -121,11 +122,6 @@ fn first_tile(store: &TileStore, level_dir: &str, format: &str, cols: u32, rows:
             format!("holds no tiles named <col>_<row>.{format} of the {cols}x{rows} grid"),
         )
     })
-}
-
-/// `ceil(log2(side))`: the Deep Zoom level at which the image has its full size.
-fn finest_level(side: u32) -> u32 {
-    u32::BITS - side.saturating_sub(1).leading_zeros()
 }
 
 impl TileGrid for DeepZoom {
@@ -158,8 +154,7 @@ impl TileGrid for DeepZoom {
     fn stored_size(&self, col: u32, row: u32) -> Option<(u32, u32)> {
         let (ts, ov) = (self.tile_size as u64, self.overlap as u64);
         let side = |i: u32, size: u32| {
-            let start = (i as u64 * ts).saturating_sub(if i > 0 { ov } else { 0 });
-            let end = ((i as u64 + 1) * ts + ov).min(size as u64);
+            let (start, end) = dzi::tile_span(i, ts, ov, size);
             (end - start) as u32
         };
         Some((side(col, self.header.width), side(row, self.header.height)))
@@ -360,7 +355,7 @@ mod tests {
     /// Writes the finest level of a Deep Zoom pyramid of `image` (RGB, PNG tiles) as dzsave
     /// does, plus `dzi` as `<dir>/img.dzi`; returns the .dzi path.
     fn write_pyramid(dir: &Path, image: &[u8], width: u32, height: u32, ts: u32, overlap: u32, dzi: &str) -> PathBuf {
-        let level = finest_level(width.max(height));
+        let level = dzi::max_level(width, height);
         let level_dir = dir.join("img_files").join(level.to_string());
         std::fs::create_dir_all(&level_dir).unwrap();
         for r in 0..height.div_ceil(ts) {
@@ -404,14 +399,6 @@ mod tests {
         let grid = DeepZoom::open(dzi_path)?;
         let mut source = TiledSource::new(Box::new(grid), fill, strict);
         read_all(&mut source)
-    }
-
-    #[test]
-    fn finest_level_is_ceil_log2() {
-        let cases = [(1, 0), (2, 1), (3, 2), (4, 2), (5, 3), (255, 8), (256, 8), (257, 9), (u32::MAX, 32)];
-        for (side, level) in cases {
-            assert_eq!(finest_level(side), level, "side {side}");
-        }
     }
 
     #[test]

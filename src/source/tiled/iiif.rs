@@ -19,6 +19,7 @@ use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::ImageHeader;
+use crate::viewer::iiif::{region_file, whole_file};
 
 /// Tile file extensions tried, in this order.
 const EXTENSIONS: [&str; 3] = ["jpg", "png", "webp"];
@@ -103,7 +104,7 @@ impl Iiif {
     fn region_path(&self, col: u32, row: u32, with_height: bool, ext: &str) -> String {
         let (x, y, w, h) = self.region(col, row);
         let size = if with_height { format!("{w},{h}") } else { format!("{w},") };
-        join(&self.root, &format!("{x},{y},{w},{h}/{size}/0/default.{ext}"))
+        join(&self.root, &region_file(x.into(), y.into(), w.into(), h.into(), &size, ext))
     }
 
     /// The naming of the tiles and the first tile's path: the first cell in reading order
@@ -138,7 +139,7 @@ impl Iiif {
             let sizes = [format!("{w},{h}"), format!("{w},"), "max".into(), "full".into()];
             for size in &sizes {
                 for ext in EXTENSIONS {
-                    let path = join(&self.root, &format!("full/{size}/0/default.{ext}"));
+                    let path = join(&self.root, &whole_file(size, ext));
                     if self.store.kind(&path) == Some(Kind::File) {
                         return Ok((Names::Whole(path.clone()), path));
                     }

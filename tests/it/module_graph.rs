@@ -1,0 +1,451 @@
+//! No import cycle between the library's top-level modules (`src/<module>.rs` or
+//! `src/<module>/`): the tree reads like the data flow of docs/architecture.md only while every
+//! module depends on the ones below it and none above.
+//!
+//! The check reads the sources itself (std only): it strips comments, strings and character
+//! literals, then follows every path that leaves a module, `crate::x`, `use crate::{x, y::z}`
+//! and `super::` climbing to the crate root, recording one file:line for each edge. The binary's
+//! modules (`main.rs`, `cli/`) are a crate of their own and are not part of the graph.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+/// One edge of the graph: module `from` refers to module `to` at `file:line`.
+type Edges = BTreeMap<(String, String), String>;
+
+#[derive(Debug, PartialEq)]
+enum Token {
+    Ident(String),
+    Colons,
+    Open,
+    Close,
+    Comma,
+    Other,
+}
+
+/// The tokens that matter for paths, with their line numbers; comments, string and character
+/// literals and lifetimes are dropped (a path inside them is not a dependency).
+fn tokens(text: &str) -> Vec<(Token, usize)> {
+    let chars: Vec<char> = text.chars().collect();
+    let mut out = Vec::new();
+    let (mut i, mut line) = (0, 1);
+    let at = |i: usize| chars.get(i).copied().unwrap_or('\0');
+    while i < chars.len() {
+        let c = chars[i];
+        if c == '\n' {
+            line += 1;
+            i += 1;
+        } else if c.is_whitespace() {
+            i += 1;
+        } else if c == '/' && at(i + 1) == '/' {
+            while i < chars.len() && chars[i] != '\n' {
+                i += 1;
+            }
+        } else if c == '/' && at(i + 1) == '*' {
+            // Block comments nest in Rust.
+            let mut depth = 0;
+            loop {
+                if i >= chars.len() {
+                    break;
+                } else if chars[i] == '/' && at(i + 1) == '*' {
+                    depth += 1;
+                    i += 2;
+                } else if chars[i] == '*' && at(i + 1) == '/' {
+                    depth -= 1;
+                    i += 2;
+                    if depth == 0 {
+                        break;
+                    }
+                } else {
+                    line += usize::from(chars[i] == '\n');
+                    i += 1;
+                }
+            }
+        } else if (c == 'r' && (at(i + 1) == '#' || at(i + 1) == '"') && raw_string_hashes(&chars, i + 1).is_some())
+            || (c == 'b' && at(i + 1) == 'r' && raw_string_hashes(&chars, i + 2).is_some())
+        {
+            let start = if c == 'b' { i + 2 } else { i + 1 };
+            let hashes = raw_string_hashes(&chars, start).unwrap_or(0);
+            i = start + hashes + 1;
+            while i < chars.len() && !(chars[i] == '"' && (1..=hashes).all(|k| at(i + k) == '#')) {
+                line += usize::from(chars[i] == '\n');
+                i += 1;
+            }
+            i += hashes + 1;
+        } else if c == '"' {
+            i += 1;
+            while i < chars.len() && chars[i] != '"' {
+                line += usize::from(chars[i] == '\n');
+                i += if chars[i] == '\\' { 2 } else { 1 };
+            }
+            i += 1;
+        } else if c == '\'' {
+            // A character literal ('a', '\n', '\u{1F600}') or a lifetime ('a): skip either.
+            if at(i + 1) == '\\' {
+                i += 2;
+                while i < chars.len() && chars[i] != '\'' {
+                    i += 1;
+                }
+                i += 1;
+            } else if at(i + 2) == '\'' {
+                i += 3;
+            } else {
+                i += 1;
+                while i < chars.len() && (chars[i].is_alphanumeric() || chars[i] == '_') {
+                    i += 1;
+                }
+            }
+        } else if c.is_alphabetic() || c == '_' || c == '$' {
+            let start = i;
+            i += 1;
+            while i < chars.len() && (chars[i].is_alphanumeric() || chars[i] == '_') {
+                i += 1;
+            }
+            out.push((Token::Ident(chars[start..i].iter().collect()), line));
+        } else if c == ':' && at(i + 1) == ':' {
+            out.push((Token::Colons, line));
+            i += 2;
+        } else {
+            out.push((
+                match c {
+                    '{' => Token::Open,
+                    '}' => Token::Close,
+                    ',' => Token::Comma,
+                    _ => Token::Other,
+                },
+                line,
+            ));
+            i += 1;
+        }
+    }
+    out
+}
+
+/// How many `#` open a raw string whose `#`s or quote start at `i`, if one does.
+fn raw_string_hashes(chars: &[char], i: usize) -> Option<usize> {
+    let hashes = chars[i.min(chars.len())..].iter().take_while(|&&c| c == '#').count();
+    (chars.get(i + hashes) == Some(&'"')).then_some(hashes)
+}
+
+/// The module path of a source file under `src/`: `a.rs` and `a/mod.rs` are `[a]`.
+fn module_path(relative: &Path) -> Vec<String> {
+    let mut parts: Vec<String> = relative.iter().map(|p| p.to_string_lossy().into_owned()).collect();
+    let last = parts.pop().unwrap_or_default();
+    let stem = last.trim_end_matches(".rs");
+    if stem != "mod" && stem != "lib" {
+        parts.push(stem.to_string());
+    }
+    parts
+}
+
+/// The first segments of the items of a `{ a, b::c, d::{e, f} }` group starting at `tokens[i]`
+/// (the opening brace), with their lines.
+fn group_heads(tokens: &[(Token, usize)], mut i: usize) -> Vec<(String, usize)> {
+    let mut heads = Vec::new();
+    let (mut depth, mut expect_head) = (0, true);
+    while let Some((token, line)) = tokens.get(i) {
+        match token {
+            Token::Open => {
+                depth += 1;
+                expect_head = depth == 1;
+            }
+            Token::Close => {
+                depth -= 1;
+                if depth == 0 {
+                    break;
+                }
+            }
+            Token::Comma if depth == 1 => expect_head = true,
+            Token::Ident(name) if expect_head && depth == 1 => {
+                heads.push((name.clone(), *line));
+                expect_head = false;
+            }
+            _ => expect_head = false,
+        }
+        i += 1;
+    }
+    heads
+}
+
+/// Every edge between distinct top-level modules (`top`) in `files` (paths relative to `src/`).
+fn edges(files: &[(PathBuf, String)], top: &BTreeSet<String>) -> Edges {
+    let mut found = Edges::new();
+    for (relative, text) in files {
+        let file_path = module_path(relative);
+        let Some(from) = file_path.first() else { continue };
+        let tokens = tokens(text);
+        // Inline `mod name { ... }` blocks deepen the path `super::` climbs from.
+        let mut inline: Vec<(usize, usize)> = Vec::new(); // (brace depth it opened at, path length)
+        let mut path = file_path.clone();
+        let mut depth = 0;
+        let mut record = |to: &str, line: usize| {
+            if to != from && top.contains(to) {
+                found
+                    .entry((from.clone(), to.to_string()))
+                    .or_insert_with(|| format!("src/{}:{line}", relative.display()));
+            }
+        };
+        let mut i = 0;
+        while i < tokens.len() {
+            let ident = |k: usize| match tokens.get(k) {
+                Some((Token::Ident(name), _)) => Some(name.as_str()),
+                _ => None,
+            };
+            match &tokens[i].0 {
+                Token::Open => depth += 1,
+                Token::Close => {
+                    depth -= 1;
+                    if inline.last().is_some_and(|&(d, _)| d == depth) {
+                        let (_, len) = inline.pop().unwrap();
+                        path.truncate(len);
+                    }
+                }
+                Token::Ident(word) if word == "mod" => {
+                    if let (Some(name), Some((Token::Open, _))) = (ident(i + 1), tokens.get(i + 2)) {
+                        inline.push((depth, path.len()));
+                        path.push(name.to_string());
+                    }
+                }
+                Token::Ident(word) if word == "crate" || word == "super" => {
+                    // Climb: `crate` is the root; each `super` one level up from this module.
+                    let mut level = if word == "crate" { 0 } else { path.len().saturating_sub(1) };
+                    let mut k = i + 1;
+                    while word == "super"
+                        && tokens.get(k).map(|t| &t.0) == Some(&Token::Colons)
+                        && ident(k + 1) == Some("super")
+                    {
+                        level = level.saturating_sub(1);
+                        k += 2;
+                    }
+                    if level == 0 && tokens.get(k).map(|t| &t.0) == Some(&Token::Colons) {
+                        match tokens.get(k + 1) {
+                            Some((Token::Ident(name), line)) => record(name, *line),
+                            Some((Token::Open, _)) => {
+                                group_heads(&tokens, k + 1).iter().for_each(|(n, l)| record(n, *l))
+                            }
+                            _ => {}
+                        }
+                    }
+                    i = k;
+                    continue;
+                }
+                _ => {}
+            }
+            i += 1;
+        }
+    }
+    found
+}
+
+/// The strongly connected components of more than one module (Tarjan's algorithm).
+fn cycles(nodes: &BTreeSet<String>, edges: &Edges) -> Vec<Vec<String>> {
+    struct State<'a> {
+        next: BTreeMap<&'a str, Vec<&'a str>>,
+        index: BTreeMap<&'a str, usize>,
+        low: BTreeMap<&'a str, usize>,
+        stack: Vec<&'a str>,
+        on_stack: BTreeSet<&'a str>,
+        found: Vec<Vec<String>>,
+    }
+    fn visit<'a>(s: &mut State<'a>, v: &'a str) {
+        let n = s.index.len();
+        s.index.insert(v, n);
+        s.low.insert(v, n);
+        s.stack.push(v);
+        s.on_stack.insert(v);
+        for w in s.next.get(v).cloned().unwrap_or_default() {
+            if !s.index.contains_key(w) {
+                visit(s, w);
+                let low = s.low[v].min(s.low[w]);
+                s.low.insert(v, low);
+            } else if s.on_stack.contains(w) {
+                let low = s.low[v].min(s.index[w]);
+                s.low.insert(v, low);
+            }
+        }
+        if s.low[v] == s.index[v] {
+            let mut component = Vec::new();
+            while let Some(w) = s.stack.pop() {
+                s.on_stack.remove(w);
+                component.push(w.to_string());
+                if w == v {
+                    break;
+                }
+            }
+            if component.len() > 1 {
+                component.sort();
+                s.found.push(component);
+            }
+        }
+    }
+    let mut next: BTreeMap<&str, Vec<&str>> = BTreeMap::new();
+    for (from, to) in edges.keys() {
+        next.entry(from).or_default().push(to);
+    }
+    let mut state = State {
+        next,
+        index: BTreeMap::new(),
+        low: BTreeMap::new(),
+        stack: Vec::new(),
+        on_stack: BTreeSet::new(),
+        found: Vec::new(),
+    };
+    for v in nodes {
+        if !state.index.contains_key(v.as_str()) {
+            visit(&mut state, v);
+        }
+    }
+    state.found
+}
+
+/// What a failure says of each cycle: its modules, and for each edge inside it where it is.
+fn describe(cycles: &[Vec<String>], edges: &Edges) -> String {
+    let mut text = String::new();
+    for component in cycles {
+        text += &format!("import cycle between {}:\n", component.join(", "));
+        for ((from, to), at) in edges {
+            if component.contains(from) && component.contains(to) {
+                text += &format!("  {from} -> {to}  ({at})\n");
+            }
+        }
+    }
+    text
+}
+
+/// The library's top-level modules, as `src/lib.rs` declares them.
+fn top_level(lib: &str) -> BTreeSet<String> {
+    let tokens = tokens(lib);
+    let mut names = BTreeSet::new();
+    for (i, (token, _)) in tokens.iter().enumerate() {
+        if let (Token::Ident(word), Some((Token::Ident(name), _))) = (token, tokens.get(i + 1))
+            && word == "mod"
+            && tokens.get(i + 2).map(|t| &t.0) == Some(&Token::Other)
+        {
+            names.insert(name.clone());
+        }
+    }
+    names
+}
+
+/// Every library source file, relative to `src/`, with its text.
+fn library_sources(src: &Path) -> Vec<(PathBuf, String)> {
+    fn walk(dir: &Path, src: &Path, out: &mut Vec<(PathBuf, String)>) {
+        let mut entries: Vec<PathBuf> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
+        entries.sort();
+        for path in entries {
+            let relative = path.strip_prefix(src).unwrap().to_path_buf();
+            if relative == Path::new("main.rs") || relative == Path::new("cli") {
+                continue; // the binary's crate
+            }
+            if path.is_dir() {
+                walk(&path, src, out);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                out.push((relative, std::fs::read_to_string(&path).unwrap()));
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(src, src, &mut out);
+    out
+}
+
+#[test]
+fn the_library_modules_form_no_import_cycle() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let files = library_sources(&src);
+    let top = top_level(&std::fs::read_to_string(src.join("lib.rs")).unwrap());
+    assert!(top.len() > 10 && top.contains("split") && top.contains("source"), "the modules of src/lib.rs: {top:?}");
+    let edges = edges(&files, &top);
+    assert!(edges.contains_key(&("split".to_string(), "source".to_string())), "split reads a source: {edges:?}");
+    let found = cycles(&top, &edges);
+    assert!(found.is_empty(), "{}", describe(&found, &edges));
+}
+
+fn fixture(files: &[(&str, &str)]) -> (BTreeSet<String>, Edges) {
+    let files: Vec<(PathBuf, String)> = files.iter().map(|(p, t)| (PathBuf::from(p), t.to_string())).collect();
+    let lib = files.iter().find(|(p, _)| p == Path::new("lib.rs")).map(|(_, t)| t.as_str()).unwrap_or("");
+    let top = top_level(lib);
+    let edges = edges(&files, &top);
+    (top, edges)
+}
+
+#[test]
+fn the_check_finds_a_cycle_through_groups_and_super() {
+    let (top, edges) = fixture(&[
+        ("lib.rs", "pub mod a;\nmod b;\n#[cfg(test)]\npub mod c;\n"),
+        ("a/mod.rs", "mod inner;\n"),
+        // `super::super` from a/inner.rs is the crate root; the group names b.
+        ("a/inner.rs", "// crate::c is in a comment\nfn f() {\n    use super::super::{b::X, self as _};\n}\n"),
+        ("b.rs", "const S: &str = \"crate::a\";\nfn g(_: &'static str) {}\nuse crate::{\n    c::Y,\n};\n"),
+        ("c.rs", "#[cfg(test)]\nmod tests {\n    use super::super::a::Z;\n}\n"),
+    ]);
+    assert_eq!(top, ["a", "b", "c"].map(String::from).into());
+    let listed: Vec<(&str, &str, &str)> =
+        edges.iter().map(|((f, t), at)| (f.as_str(), t.as_str(), at.as_str())).collect();
+    assert_eq!(listed, [("a", "b", "src/a/inner.rs:3"), ("b", "c", "src/b.rs:4"), ("c", "a", "src/c.rs:3")]);
+    let found = cycles(&top, &edges);
+    assert_eq!(found, [vec!["a".to_string(), "b".to_string(), "c".to_string()]]);
+    let text = describe(&found, &edges);
+    assert!(text.contains("import cycle between a, b, c") && text.contains("c -> a  (src/c.rs:3)"), "{text}");
+}
+
+#[test]
+fn the_check_passes_layers_and_ignores_paths_that_do_not_leave_a_module() {
+    let (top, edges) = fixture(&[
+        ("lib.rs", "pub mod low;\npub mod high;\n"),
+        (
+            "low.rs",
+            "mod inner { use super::Thing; }\nmacro_rules! m { () => { $crate::high::X } }\nlet r = r#\"crate::high\"#; let c = '\"';\n",
+        ),
+        ("high.rs", "use crate::low::Thing;\npub(crate) fn f() {}\n"),
+    ]);
+    let listed: Vec<&(String, String)> = edges.keys().collect();
+    assert_eq!(listed, [&("high".to_string(), "low".to_string())]);
+    assert!(cycles(&top, &edges).is_empty());
+}
+
+/// The modules in layers, each above everything it uses: layer 0 uses no other module, and
+/// each module is one layer above the highest it uses. One line per module, with what it uses.
+fn layers(top: &BTreeSet<String>, edges: &Edges) -> String {
+    let uses = |m: &str| -> Vec<&str> { edges.keys().filter(|(f, _)| f == m).map(|(_, t)| t.as_str()).collect() };
+    let mut layer: BTreeMap<&str, usize> = BTreeMap::new();
+    // Without a cycle, each pass settles at least one more module.
+    while layer.len() < top.len() {
+        for m in top {
+            let below: Option<Vec<usize>> = uses(m).iter().map(|u| layer.get(u).copied()).collect();
+            if let (false, Some(below)) = (layer.contains_key(m.as_str()), below) {
+                layer.insert(m, below.iter().max().map_or(0, |l| l + 1));
+            }
+        }
+    }
+    let mut text = String::new();
+    for depth in 0..=layer.values().copied().max().unwrap_or(0) {
+        for (m, _) in layer.iter().filter(|(_, l)| **l == depth) {
+            let line = format!("{depth:>2}  {m:<11}{}", uses(m).join(" "));
+            text += line.trim_end();
+            text.push('\n');
+        }
+    }
+    text
+}
+
+/// docs/architecture.md lists the layers as the sources have them; `BLESS=1` rewrites its list.
+#[test]
+fn the_architecture_doc_lists_the_real_layers() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let src = root.join("src");
+    let top = top_level(&std::fs::read_to_string(src.join("lib.rs")).unwrap());
+    let edges = edges(&library_sources(&src), &top);
+    assert!(cycles(&top, &edges).is_empty(), "the_library_modules_form_no_import_cycle says which");
+    let listed = layers(&top, &edges);
+    let doc_path = root.join("docs/architecture.md");
+    let doc = std::fs::read_to_string(&doc_path).unwrap();
+    let (begin, end) = ("<!-- module-layers:begin -->\n```text\n", "```\n<!-- module-layers:end -->");
+    let start = doc.find(begin).expect("the module-layers begin marker") + begin.len();
+    let stop = doc[start..].find(end).expect("the module-layers end marker") + start;
+    if std::env::var_os("BLESS").is_some() {
+        std::fs::write(&doc_path, format!("{}{listed}{}", &doc[..start], &doc[stop..])).unwrap();
+    } else {
+        assert_eq!(&doc[start..stop], listed, "docs/architecture.md's module layers are stale: rerun with BLESS=1");
+    }
+}
