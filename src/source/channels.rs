@@ -659,17 +659,7 @@ impl RowSource for Ranged {
         Ok(())
     }
 
-    fn skip_rows(&mut self, rows: u32) -> Result<()> {
-        self.inner.skip_rows(rows)
-    }
-
-    fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
-        self.inner.read_columns(columns)
-    }
-
-    fn rewind(&mut self) -> Result<()> {
-        self.inner.rewind()
-    }
+    forward_row_order_to_inner!();
 
     fn describe(&self) -> String {
         self.inner.describe()

@@ -184,15 +184,7 @@ impl RowSource for Described {
     fn describe(&self) -> String {
         format!("{}; {}", self.inner.describe(), self.note)
     }
-    fn rewind(&mut self) -> Result<()> {
-        self.inner.rewind()
-    }
-    fn skip_rows(&mut self, rows: u32) -> Result<()> {
-        self.inner.skip_rows(rows)
-    }
-    fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
-        self.inner.read_columns(columns)
-    }
+    forward_row_order_to_inner!();
     /// Only rows passed through as they are may be copied as stored.
     fn stored_tiles(&self) -> Option<std::sync::Arc<dyn crate::source::stored::StoredTiles>> {
         self.transform.is_none().then(|| self.inner.stored_tiles()).flatten()

@@ -9,6 +9,25 @@
 //! tile directory this tool wrote, a pack, Deep Zoom, IIIF, z/y/x or z/x/y, in a directory or
 //! a zip archive) read a row of tiles at a time.
 
+/// The row-order methods of a [`RowSource`] that wraps another in its field `inner` and changes
+/// what its rows hold but not which rows come (ICC conversion, widened or mapped samples, picked
+/// channels): rewinding, skipping and narrowing go straight to the wrapped source.
+macro_rules! forward_row_order_to_inner {
+    () => {
+        fn rewind(&mut self) -> $crate::error::Result<()> {
+            self.inner.rewind()
+        }
+
+        fn skip_rows(&mut self, rows: u32) -> $crate::error::Result<()> {
+            self.inner.skip_rows(rows)
+        }
+
+        fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
+            self.inner.read_columns(columns)
+        }
+    };
+}
+
 pub mod channels;
 pub mod icc;
 mod jpeg;

@@ -333,15 +333,8 @@ impl RowSource for JpegTiff {
         // The row's part of each chunk under the columns.
         let within = y - self.band_first;
         let (chunk_row, chunk_y) = ((within / self.chunk_h as u64) as usize, (within % self.chunk_h as u64) as usize);
-        for col in columns.start / self.chunk_w..columns.end.div_ceil(self.chunk_w) {
-            let x0 = col * self.chunk_w;
-            let w = self.chunk_w.min(self.width - x0) as usize;
-            let texels = &self.band[chunk_row * self.across as usize + col as usize];
-            let row = &texels[chunk_y * w * pixel..][..w * pixel];
-            let (from, to) = (columns.start.max(x0), columns.end.min(x0 + w as u32));
-            let src = &row[(from - x0) as usize * pixel..(to - x0) as usize * pixel];
-            out[(from - columns.start) as usize * pixel..][..src.len()].copy_from_slice(src);
-        }
+        let chunks = &self.band[chunk_row * self.across as usize..];
+        copy_row(chunks, self.chunk_w, self.width, pixel, chunk_y, columns, out);
         self.next += 1;
         Ok(())
     }
@@ -438,5 +431,26 @@ impl StoredTiles for JpegTiles {
         }
         let stream = self.chunks.stream(index, &name).map_err(|m| TilerError::decode(&self.chunks.path, m))?;
         Ok(stored::as_file(&stream, self.samples, self.size))
+    }
+}
+
+/// Copies texel row `chunk_y` of a band's row of decoded chunks (`chunks[col]`, each `chunk_w`
+/// wide but the last, of an image `width` wide) under `columns` into `out`.
+pub(super) fn copy_row(
+    chunks: &[Vec<u8>],
+    chunk_w: u32,
+    width: u32,
+    pixel: usize,
+    chunk_y: usize,
+    columns: Range<u32>,
+    out: &mut [u8],
+) {
+    for col in columns.start / chunk_w..columns.end.div_ceil(chunk_w) {
+        let x0 = col * chunk_w;
+        let w = chunk_w.min(width - x0) as usize;
+        let row = &chunks[col as usize][chunk_y * w * pixel..][..w * pixel];
+        let (from, to) = (columns.start.max(x0), columns.end.min(x0 + w as u32));
+        let src = &row[(from - x0) as usize * pixel..(to - x0) as usize * pixel];
+        out[(from - columns.start) as usize * pixel..][..src.len()].copy_from_slice(src);
     }
 }

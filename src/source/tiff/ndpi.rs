@@ -27,6 +27,7 @@ use rayon::prelude::*;
 use tiff::decoder::{ChunkType, Decoder};
 use tiff::tags::Tag;
 
+use super::jpeg::copy_row;
 use super::libjpeg::{self, Colour, Extent};
 use super::open_error;
 use crate::error::{Result, TilerError};
@@ -534,15 +535,8 @@ impl RowSource for Ndpi {
         }
         let within = y - self.band_first as u64 * mcu_h;
         let (band_row, interval_y) = ((within / mcu_h) as usize, (within % mcu_h) as usize);
-        for col in columns.start / self.interval_w..columns.end.div_ceil(self.interval_w) {
-            let x0 = col * self.interval_w;
-            let w = self.interval_w.min(self.width - x0) as usize;
-            let texels = &self.decoded[band_row * self.across as usize + col as usize];
-            let row = &texels[interval_y * w * pixel..][..w * pixel];
-            let (from, to) = (columns.start.max(x0), columns.end.min(x0 + w as u32));
-            let src = &row[(from - x0) as usize * pixel..(to - x0) as usize * pixel];
-            out[(from - columns.start) as usize * pixel..][..src.len()].copy_from_slice(src);
-        }
+        let intervals = &self.decoded[band_row * self.across as usize..];
+        copy_row(intervals, self.interval_w, self.width, pixel, interval_y, columns, out);
         self.next += 1;
         Ok(())
     }

@@ -109,17 +109,7 @@ impl RowSource for Widened {
         format!("{}; {what} read as 32-bit floats (exactly)", self.inner.describe())
     }
 
-    fn rewind(&mut self) -> Result<()> {
-        self.inner.rewind()
-    }
-
-    fn skip_rows(&mut self, rows: u32) -> Result<()> {
-        self.inner.skip_rows(rows)
-    }
-
-    fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
-        self.inner.read_columns(columns)
-    }
+    forward_row_order_to_inner!();
 
     fn embedded(&self) -> Embedded {
         self.inner.embedded()

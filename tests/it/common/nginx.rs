@@ -7,6 +7,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+/// The path [`Nginx::requests`] asks for (a 404) before it reads the access log.
+const LOG_BARRIER: &str = "/.vortex-log-barrier";
+
 /// One nginx serving `root` at `/` and each alias at its URL prefix; stopped when dropped.
 pub struct Nginx {
     child: Child,
@@ -95,8 +98,10 @@ http {{
 
     /// The requests served so far: (status, body bytes, request line, Range header).
     pub fn requests(&self) -> Vec<(u16, u64, String, String)> {
+        self.log_barrier();
         let log = std::fs::read_to_string(self.dir.path().join("access.log")).unwrap_or_default();
         log.lines()
+            .filter(|line| !line.contains(LOG_BARRIER))
             .filter_map(|line| {
                 let (status, rest) = line.split_once(' ')?;
                 let (bytes, rest) = rest.split_once(' ')?;
@@ -109,6 +114,17 @@ http {{
                 ))
             })
             .collect()
+    }
+
+    /// nginx logs a request once its reply is sent, so a client can hold the whole reply before
+    /// its line is in the log. Its one worker handles requests in turn: once it has answered one
+    /// more, the lines of every request answered before are written. (A wait on an event, not on
+    /// a clock.)
+    fn log_barrier(&self) {
+        use std::io::{Read, Write};
+        let mut stream = TcpStream::connect(("127.0.0.1", self.port)).unwrap();
+        write!(stream, "GET {LOG_BARRIER} HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n").unwrap();
+        stream.read_to_end(&mut Vec::new()).unwrap();
     }
 
     /// Forgets the requests served so far (the access log is written as each one ends).

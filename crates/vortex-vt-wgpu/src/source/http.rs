@@ -30,9 +30,9 @@ use std::time::Duration;
 
 use vortex_pack::{Limits, PackError, PackLayout, TileId, TileKind};
 
-use super::pack::{absent_as, decode_stored};
+use super::pack::decode_stored;
 use super::remote::{IndexPlan, RangeRead, RemotePack, lock, parse_content_range};
-use super::{PageSource, ReadError, SourceTile, StoredRead, StoredTile};
+use super::{PageSource, ReadError, SourceTile, StoredRead};
 use crate::loader::LoaderError;
 use crate::page_cache::CacheFormat;
 use crate::texture::VirtualTexture;
@@ -197,14 +197,7 @@ impl PageSource for HttpPack {
     }
 
     fn read_tile(&self, id: TileId, format: CacheFormat) -> Result<SourceTile, ReadError> {
-        let StoredRead { tile, bytes_read } = self.stored(id)?;
-        match tile {
-            StoredTile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
-            StoredTile::Absent => Err(absent_as(format)),
-            StoredTile::Stored { kind, bytes } => decode_stored(self.remote.layout(), kind, &bytes, format)
-                .map(|texels| SourceTile::Texels { texels, bytes_read })
-                .map_err(|e| e.with_bytes_read(bytes_read)),
-        }
+        self.remote.texels(self.stored(id)?, format)
     }
 
     fn read_stored(&self, id: TileId) -> Result<Option<StoredRead>, ReadError> {

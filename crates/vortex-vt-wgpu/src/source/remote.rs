@@ -14,8 +14,9 @@ use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use vortex_pack::format::{ENTRY_LEN, LEVEL_LEN};
 use vortex_pack::{Limits, PackError, PackLayout, Place, TileId, TileKind};
 
-use super::pack::read_error;
-use super::{ReadError, StoredRead, StoredTile};
+use super::pack::{absent_as, decode_stored, read_error};
+use super::{ReadError, SourceTile, StoredRead, StoredTile};
+use crate::page_cache::CacheFormat;
 
 /// Index entries fetched together when the index is read in blocks: 6 KiB, less than a tile.
 pub const INDEX_BLOCK: u64 = 256;
@@ -223,6 +224,19 @@ impl<R: RangeRead> RemotePack<R> {
     /// Whether the index was read whole at open (and its CRC checked before any entry was used).
     fn index_whole(&self) -> bool {
         self.head.header().index_count * ENTRY_LEN as u64 <= self.plan.whole_up_to
+    }
+
+    /// A tile as [`RemotePack::stored`] read it, made into `format` (an absent tile stays
+    /// absent, for the loader to magnify its ancestor: RGBA8 only).
+    pub(crate) fn texels(&self, read: StoredRead, format: CacheFormat) -> Result<SourceTile, ReadError> {
+        let StoredRead { tile, bytes_read } = read;
+        match tile {
+            StoredTile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
+            StoredTile::Absent => Err(absent_as(format)),
+            StoredTile::Stored { kind, bytes } => decode_stored(&self.head, kind, &bytes, format)
+                .map(|texels| SourceTile::Texels { texels, bytes_read })
+                .map_err(|e| e.with_bytes_read(bytes_read)),
+        }
     }
 
     /// One or three channels: no alpha stored.

@@ -22,9 +22,9 @@ use vortex_pack::{Limits, PackError, PackLayout, TileId, TileKind};
 use wasm_bindgen::{JsCast, JsValue};
 use wasm_bindgen_futures::JsFuture;
 
-use super::pack::{absent_as, decode_stored};
+use super::pack::decode_stored;
 use super::remote::{IndexPlan, RangeRead, RemotePack, lock, parse_content_range};
-use super::{LocalFuture, PageSource, ReadError, SourceTile, StoredRead, StoredTile};
+use super::{LocalFuture, PageSource, ReadError, SourceTile, StoredRead};
 use crate::loader::LoaderError;
 use crate::page_cache::CacheFormat;
 use crate::texture::VirtualTexture;
@@ -154,15 +154,9 @@ impl PageSource for WebPack {
     }
 
     fn read_tile(&self, id: TileId, format: CacheFormat) -> Result<SourceTile, ReadError> {
-        let Some(StoredRead { tile, bytes_read }) = self.read_stored(id)? else {
-            return Ok(SourceTile::Absent);
-        };
-        match tile {
-            StoredTile::Absent if format == CacheFormat::Rgba8 => Ok(SourceTile::Absent),
-            StoredTile::Absent => Err(absent_as(format)),
-            StoredTile::Stored { kind, bytes } => decode_stored(self.remote.layout(), kind, &bytes, format)
-                .map(|texels| SourceTile::Texels { texels, bytes_read })
-                .map_err(|e| e.with_bytes_read(bytes_read)),
+        match self.read_stored(id)? {
+            Some(read) => self.remote.texels(read, format),
+            None => Ok(SourceTile::Absent),
         }
     }
 
