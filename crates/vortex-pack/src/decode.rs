@@ -247,10 +247,10 @@ enum Endian {
 }
 
 /// 32-bit and float samples have no one RGBA8 form (which range would map to 0-255?): their
-/// texels are read with [`payload_texels`].
+/// texels are read with [`Tile::decode_texels`].
 fn refuse_wide(d: &Description) -> Result<(), String> {
     if d.required_features() != 0 {
-        return Err(format!("{} have no RGBA8 form; read the texels (payload_texels)", d.texel_name()));
+        return Err(format!("{} have no RGBA8 form; read the texels (Tile::decode_texels)", d.texel_name()));
     }
     Ok(())
 }
