@@ -302,7 +302,7 @@ pub struct Level {
     /// Rows of tiles.
     pub tiles_h: u32,
     /// Index position of tile (0, 0) of this level: the levels' entries follow each other,
-    /// LOD 0 first. A reader finds it in the file; [`PackWriter`](crate::PackWriter) places the
+    /// LOD 0 first. A reader finds it in the file; `PackWriter` (feature `write`) places the
     /// levels itself and ignores what a level given to it says.
     pub first_entry: u64,
     /// Real image width at this level in texels (`ceil(width / 2^lod)`).
