@@ -15,8 +15,9 @@ use std::time::Duration;
 use image::RgbImage;
 
 use crate::common::cli::{ok, s};
-use crate::common::picture::{VIEW, browser_parts, judge, skip_unless_ci, test_image};
+use crate::common::picture::{VIEW, browser_parts, judge, test_image};
 use crate::common::server::Server;
+use crate::common::skip_unless_ci;
 use crate::common::webdriver::Browser;
 
 /// The regions shown, as (x, y, width, height) in image texels: the whole image (a coarse

@@ -305,15 +305,7 @@ fn square_grids_of_older_versions_still_read() {
 /// Whether `vips` (libvips-tools) is on PATH; without it the vips tests print a note and pass,
 /// except under `CI=true` (.ci/run installs it), where they fail.
 fn have_vips() -> bool {
-    if Command::new("vips").arg("--version").output().is_ok_and(|o| o.status.success()) {
-        return true;
-    }
-    assert!(
-        std::env::var("CI").map_or(true, |v| v != "true"),
-        "CI=true and no vips on PATH (apt-get install libvips-tools)"
-    );
-    eprintln!("note: skipping a vips test: no vips on PATH (apt-get install libvips-tools; CI=true fails instead)");
-    false
+    crate::common::have_program("vips", "--version", "libvips-tools")
 }
 
 fn run_vips(args: &[&str]) {
@@ -409,8 +401,7 @@ fn vips_one_tile_iiif_images_convert() {
 #[test]
 fn pyvips_layouts_convert_like_the_original() {
     let Some(python) = std::env::var_os("VORTEX_PYVIPS") else {
-        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and VORTEX_PYVIPS unset");
-        eprintln!("note: skipping the pyvips test: set VORTEX_PYVIPS to a Python with pyvips");
+        crate::common::skip_unless_ci("the pyvips test", "VORTEX_PYVIPS unset: set it to a Python with pyvips");
         return;
     };
     let dir = tempfile::tempdir().unwrap();

@@ -17,15 +17,7 @@ use crate::common::cli::{self, s};
 
 /// Whether `vips` runs; outside CI a missing one skips the test with a note.
 fn have_vips() -> bool {
-    let found = Command::new("vips").arg("--version").output().is_ok();
-    if !found {
-        assert!(
-            std::env::var("CI").map_or(true, |v| v != "true"),
-            "CI=true and no vips (apt-get install libvips-tools)"
-        );
-        eprintln!("note: skipping a copied-tiles test: vips missing (apt-get install libvips-tools)");
-    }
-    found
+    crate::common::have_program("vips", "--version", "libvips-tools")
 }
 
 fn tool(name: &str, args: &[&str]) {
@@ -212,8 +204,10 @@ fn whole_tiles_are_copied_as_stored() {
         check_dzi_copies(&tiff, Some(marker), quality);
     }
     let Some(py) = std::env::var_os("VORTEX_PYVIPS") else {
-        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and VORTEX_PYVIPS unset");
-        eprintln!("note: skipping tifffile's JPEG TIFF: set VORTEX_PYVIPS to a Python with tifffile and imagecodecs");
+        crate::common::skip_unless_ci(
+            "tifffile's JPEG TIFF",
+            "VORTEX_PYVIPS unset: set it to a Python with tifffile and imagecodecs",
+        );
         return;
     };
     let tiff = d("tifffile.tif");

@@ -296,9 +296,9 @@ fn readers() -> Option<PathBuf> {
             .is_ok_and(|o| o.status.success())
     });
     if !works {
-        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and no zarr/ome-zarr/ome-zarr-models");
-        eprintln!(
-            "note: skipping the OME-Zarr readers: set VORTEX_PYVIPS to a Python with zarr 3, ome-zarr, ome-zarr-models"
+        crate::common::skip_unless_ci(
+            "the OME-Zarr readers",
+            "no zarr/ome-zarr/ome-zarr-models: set VORTEX_PYVIPS to a Python with zarr 3, ome-zarr, ome-zarr-models",
         );
         return None;
     }
@@ -813,8 +813,7 @@ fn readers_and_tifffile() -> Option<PathBuf> {
     let python = readers()?;
     let has_tifffile = Command::new(&python).args(["-c", "import tifffile"]).output().is_ok_and(|o| o.status.success());
     if !has_tifffile {
-        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and no tifffile");
-        eprintln!("note: skipping the multi-channel TIFFs: no tifffile in VORTEX_PYVIPS");
+        crate::common::skip_unless_ci("the multi-channel TIFFs", "no tifffile in VORTEX_PYVIPS");
         return None;
     }
     Some(python)
@@ -940,8 +939,10 @@ fn napari() -> Option<PathBuf> {
             .is_ok_and(|o| o.status.success())
     }) && Command::new("xvfb-run").arg("--help").output().is_ok();
     if !works {
-        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and no napari or xvfb-run");
-        eprintln!("note: skipping napari: set VORTEX_NAPARI to a Python with napari and napari-ome-zarr, install xvfb");
+        crate::common::skip_unless_ci(
+            "napari",
+            "no napari or xvfb-run: set VORTEX_NAPARI to a Python with napari and napari-ome-zarr, install xvfb",
+        );
         return None;
     }
     python

@@ -15,8 +15,10 @@ use crate::common::cli::{fails_with, ok, run, s};
 /// The Python with the `pmtiles` package, or `None` after a note (a failure under CI).
 fn python() -> Option<PathBuf> {
     let Some(python) = std::env::var_os("VORTEX_PYVIPS") else {
-        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and VORTEX_PYVIPS unset");
-        eprintln!("note: skipping the PMTiles reader check: set VORTEX_PYVIPS to a Python with pmtiles");
+        crate::common::skip_unless_ci(
+            "the PMTiles reader check",
+            "VORTEX_PYVIPS unset: set it to a Python with pmtiles",
+        );
         return None;
     };
     Some(PathBuf::from(python))
@@ -236,7 +238,8 @@ window.errors = [];
 fn leaflet_shows_an_archive_from_a_static_host() {
     use crate::browser::REGIONS;
     use crate::common::nginx::{Nginx, nginx_binary};
-    use crate::common::picture::{VIEW, browser_parts, judge, skip_unless_ci, test_image};
+    use crate::common::picture::{VIEW, browser_parts, judge, test_image};
+    use crate::common::skip_unless_ci;
     use crate::common::webdriver::Browser;
 
     let test = "the Leaflet PMTiles test";

@@ -17,7 +17,7 @@ use vortex_vt_wgpu::{CacheFormat, PageSource, ReadErrorKind, StoredTile, TileKin
 
 use crate::common::cli::{fails_with, fixture, run, s};
 use crate::common::nginx::{Nginx, nginx_binary};
-use crate::common::picture::skip_unless_ci;
+use crate::common::skip_unless_ci;
 use crate::render::{no_gpu, report, sample_pack};
 
 /// nginx serving `dir`, or `None` (with a note; a failure under CI) when it is not installed.

@@ -331,7 +331,7 @@ fn tifffile() -> Option<PathBuf> {
         Command::new(p).args(["-c", "import tifffile, zarr, numpy"]).output().is_ok_and(|o| o.status.success())
     });
     if !works {
-        crate::common::picture::skip_unless_ci("sample_types (tifffile)", "no Python with tifffile, zarr, numpy");
+        crate::common::skip_unless_ci("sample_types (tifffile)", "no Python with tifffile, zarr, numpy");
         return None;
     }
     python

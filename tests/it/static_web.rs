@@ -17,7 +17,8 @@ use serde_json::Value;
 use crate::browser::REGIONS;
 use crate::common::cli::{ok, s};
 use crate::common::nginx::{Nginx, nginx_binary};
-use crate::common::picture::{VIEW, browser_parts, judge, skip_unless_ci, test_image};
+use crate::common::picture::{VIEW, browser_parts, judge, test_image};
+use crate::common::skip_unless_ci;
 use crate::common::webdriver::Browser;
 
 /// The page: OpenSeadragon from a classic script, our module beside it, both from the host.

@@ -15,16 +15,8 @@ use vortex_tiler::source::{self, RowSource};
 
 /// Whether `vips` and `tiffcp` can run; outside CI a missing one skips the test with a note.
 pub(crate) fn have_tools() -> bool {
-    let runs = |tool: &str, arg: &str| Command::new(tool).arg(arg).output().is_ok();
-    let found = runs("vips", "--version") && runs("tiffcp", "-h");
-    if !found {
-        assert!(
-            std::env::var("CI").map_or(true, |v| v != "true"),
-            "CI=true and no vips or tiffcp (apt-get install libvips-tools libtiff-tools)"
-        );
-        eprintln!("note: skipping a TIFF test: vips or tiffcp missing (apt-get install libvips-tools libtiff-tools)");
-    }
-    found
+    crate::common::have_program("vips", "--version", "libvips-tools")
+        && crate::common::have_program("tiffcp", "-h", "libtiff-tools")
 }
 
 pub(crate) fn tool(name: &str, args: &[&str]) {
@@ -336,8 +328,10 @@ fn columns_and_skipped_rows_match_whole_rows() {
 pub(crate) fn venv_python() -> Option<std::ffi::OsString> {
     let python = std::env::var_os("VORTEX_PYVIPS");
     if python.is_none() {
-        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and VORTEX_PYVIPS unset");
-        eprintln!("note: skipping a tifffile-made TIFF: set VORTEX_PYVIPS to a Python with tifffile and imagecodecs");
+        crate::common::skip_unless_ci(
+            "a tifffile-made TIFF",
+            "VORTEX_PYVIPS unset: set it to a Python with tifffile and imagecodecs",
+        );
     }
     python
 }
@@ -379,8 +373,10 @@ pub(crate) fn openslide_texels(slide: &Path) -> Option<Vec<u8>> {
             panic!("OpenSlide failed: {}", String::from_utf8_lossy(&out.stderr))
         }
         _ => {
-            assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and no python3-openslide");
-            eprintln!("note: skipping the OpenSlide comparison: apt-get install python3-openslide");
+            crate::common::skip_unless_ci(
+                "the OpenSlide comparison",
+                "no python3-openslide (apt-get install python3-openslide)",
+            );
             return None;
         }
     }

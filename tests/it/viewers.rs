@@ -230,17 +230,7 @@ fn xyz_tiles_are_levels_padded_with_the_background() {
 
 /// Whether `vips` (libvips-tools) can run; outside CI a missing one skips the test with a note.
 fn have_vips() -> bool {
-    let found = Command::new("vips").arg("--version").output().is_ok_and(|o| o.status.success());
-    if !found {
-        assert!(
-            std::env::var("CI").map_or(true, |v| v != "true"),
-            "CI=true and no vips (apt-get install libvips-tools)"
-        );
-        eprintln!(
-            "note: skipping a comparison with vips dzsave: vips is not installed (apt-get install libvips-tools)"
-        );
-    }
-    found
+    crate::common::have_program("vips", "--version", "libvips-tools")
 }
 
 /// The width and height of every PNG tile under `dir`, by relative name (vips' metadata and
@@ -348,8 +338,10 @@ fn google_file_set_matches_vips_dzsave() {
 #[test]
 fn iiif_file_set_matches_libvips_8_18() {
     let Some(python) = std::env::var_os("VORTEX_PYVIPS") else {
-        assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and VORTEX_PYVIPS unset");
-        eprintln!("note: skipping the IIIF comparison with libvips 8.18: set VORTEX_PYVIPS to a Python with pyvips");
+        crate::common::skip_unless_ci(
+            "the IIIF comparison with libvips 8.18",
+            "VORTEX_PYVIPS unset: set it to a Python with pyvips",
+        );
         return;
     };
     let dir = tempfile::tempdir().unwrap();

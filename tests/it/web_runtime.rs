@@ -17,7 +17,8 @@ use serde_json::Value;
 
 use crate::common::cli::{run, s};
 use crate::common::nginx::{Nginx, nginx_binary};
-use crate::common::picture::{skip_unless_ci, test_image};
+use crate::common::picture::test_image;
+use crate::common::skip_unless_ci;
 use crate::common::webdriver::Browser;
 use crate::render::no_gpu;
 

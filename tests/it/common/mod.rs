@@ -18,6 +18,22 @@ use vortex_tiler::pyramid::Filter;
 use vortex_tiler::sink::TileSink;
 use vortex_tiler::source::{ImageHeader, RowSource};
 use vortex_tiler::split::{SplitOptions, Summary, split};
+
+/// Outside CI a test that lacks an outside part skips with a note; under `CI=true` (where
+/// `.ci/run` installs every part) it fails instead, saying what was missing.
+pub fn skip_unless_ci(what: &str, why: &str) {
+    assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and {why}");
+    eprintln!("note: skipping {what}: {why}");
+}
+
+/// Whether `program arg` runs; if not, [`skip_unless_ci`] naming the Debian `package` that has it.
+pub fn have_program(program: &str, arg: &str, package: &str) -> bool {
+    let found = std::process::Command::new(program).arg(arg).output().is_ok();
+    if !found {
+        skip_unless_ci(&format!("a test that runs {program}"), &format!("no {program} (apt-get install {package})"));
+    }
+    found
+}
 use vortex_tiler::testing::{SrgbTable, resample_level};
 
 /// An image in memory: samples widened to u16 whatever the depth.

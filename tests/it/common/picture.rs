@@ -50,12 +50,6 @@ pub fn browser_parts() -> Result<Parts, String> {
     Ok(Parts { chromium, chromedriver, openseadragon })
 }
 
-/// Outside CI a test that lacks an outside part skips with a note; under `CI=true` it fails.
-pub fn skip_unless_ci(test: &str, why: &str) {
-    assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and {why}");
-    eprintln!("note: skipping {test}: {why}");
-}
-
 /// Peak signal-to-noise ratio of `shot` against `region` of `source` resized to the view.
 pub fn psnr(source: &RgbImage, region: (u32, u32, u32, u32), shot: &RgbImage) -> f64 {
     let part = imageops::crop_imm(source, region.0, region.1, region.2, region.3).to_image();
