@@ -11,10 +11,9 @@
 //! the texels must be equal (tolerance 0).
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use crate::common::cli::{self, s};
-use crate::tiff_slides::our_texels;
+use crate::tiff_slides::{openslide_region, our_texels};
 use vortex_tiler::source;
 
 /// Chroma subsampling of a test slide: its MCU's width and height.
@@ -176,31 +175,6 @@ fn tiff(width: u32, height: u32, strip: &[u8], starts: &[u32]) -> Vec<u8> {
     out
 }
 
-/// OpenSlide's level 0 of an NDPI slide, `width` x `height` from the top left, as RGB texels
-/// (Debian's python3-openslide), or a skip with a note outside CI.
-fn openslide_region(slide: &Path, width: u32, height: u32) -> Option<Vec<u8>> {
-    let raw = slide.with_extension("openslide.rgba");
-    let script = "import sys, openslide\ns = openslide.OpenSlide(sys.argv[1])\nassert s.properties['openslide.vendor'] == 'hamamatsu', s.properties['openslide.vendor']\nopen(sys.argv[2], 'wb').write(s.read_region((0, 0), 0, (int(sys.argv[3]), int(sys.argv[4]))).tobytes())";
-    let (w, h) = (width.to_string(), height.to_string());
-    let out = Command::new("/usr/bin/python3").args(["-c", script, s(slide), s(&raw), &w, &h]).output();
-    match out {
-        Ok(out) if out.status.success() => {}
-        Ok(out) if !String::from_utf8_lossy(&out.stderr).contains("No module named 'openslide'") => {
-            panic!("OpenSlide failed: {}", String::from_utf8_lossy(&out.stderr))
-        }
-        _ => {
-            crate::common::skip_unless_ci(
-                "the OpenSlide comparison",
-                "no python3-openslide (apt-get install python3-openslide)",
-            );
-            return None;
-        }
-    }
-    let rgba = std::fs::read(raw).unwrap();
-    assert!(rgba.chunks_exact(4).all(|t| t[3] == 255), "OpenSlide left texels of the region blank");
-    Some(rgba.chunks_exact(4).flat_map(|t| [t[0], t[1], t[2]]).collect())
-}
-
 /// The top-left `width` x `height` of an image `stride` texels wide.
 fn crop(texels: &[u8], stride: u32, width: u32, height: u32) -> Vec<u8> {
     let row = (stride * 3) as usize;
@@ -232,7 +206,7 @@ fn ndpi_reads_as_openslide_does() {
         for needle in ["Hamamatsu NDPI, page 0 of 1", &intervals, "YCbCr"] {
             assert!(describe.contains(needle), "{needle:?} missing from {describe}");
         }
-        if let Some(theirs) = openslide_region(&even, 1024, height) {
+        if let Some(theirs) = openslide_region(&even, "hamamatsu", Some((1024, height))) {
             assert!(ours == theirs, "{name} differs from OpenSlide");
         }
         even_half = ours;
@@ -281,7 +255,7 @@ fn an_ndpi_wider_than_65535_is_read() {
     let wide = slide(dir.path(), "wide.ndpi", (70_144, 32), 512, Chroma::Half, Sof::Zero);
     let (source, ours) = our_texels(&wide, 1 << 30);
     assert_eq!((source.width(), source.height()), (70_144, 32));
-    if let Some(theirs) = openslide_region(&wide, 70_144, 32) {
+    if let Some(theirs) = openslide_region(&wide, "hamamatsu", Some((70_144, 32))) {
         assert!(ours == theirs, "differs from OpenSlide");
     }
 }

@@ -361,12 +361,19 @@ with tifffile.TiffWriter(out) as t:
     t.write(img[:60, :200].copy(), compression="jpeg", photometric="rgb", subfiletype=9, description="Aperio Image Library v12.0.15\nmacro 200x60", metadata=None)
 "#;
 
-/// OpenSlide's level 0 of a slide as RGB texels (Debian's python3-openslide, run by
+/// OpenSlide's level 0 of an Aperio slide as RGB texels (Debian's python3-openslide, run by
 /// /usr/bin/python3), or a skip with a note outside CI.
 pub(crate) fn openslide_texels(slide: &Path) -> Option<Vec<u8>> {
+    openslide_region(slide, "aperio", None)
+}
+
+/// OpenSlide's level 0 of a slide it must recognise as `vendor`'s, its top-left `size` (the
+/// whole level without one), as RGB texels, or a skip with a note outside CI.
+pub(crate) fn openslide_region(slide: &Path, vendor: &str, size: Option<(u32, u32)>) -> Option<Vec<u8>> {
     let raw = slide.with_extension("openslide.rgba");
-    let script = "import sys, openslide\ns = openslide.OpenSlide(sys.argv[1])\nassert s.properties['openslide.vendor'] == 'aperio'\nopen(sys.argv[2], 'wb').write(s.read_region((0, 0), 0, s.dimensions).tobytes())";
-    let out = Command::new("/usr/bin/python3").args(["-c", script, s(slide), s(&raw)]).output();
+    let script = "import sys, openslide\ns = openslide.OpenSlide(sys.argv[1])\nassert s.properties['openslide.vendor'] == sys.argv[3], s.properties['openslide.vendor']\nsize = (int(sys.argv[4]), int(sys.argv[5])) if len(sys.argv) > 5 else s.dimensions\nopen(sys.argv[2], 'wb').write(s.read_region((0, 0), 0, size).tobytes())";
+    let size: Vec<String> = size.map_or(vec![], |(w, h)| vec![w.to_string(), h.to_string()]);
+    let out = Command::new("/usr/bin/python3").args(["-c", script, s(slide), s(&raw), vendor]).args(&size).output();
     match out {
         Ok(out) if out.status.success() => {}
         Ok(out) if !String::from_utf8_lossy(&out.stderr).contains("No module named 'openslide'") => {
@@ -381,6 +388,7 @@ pub(crate) fn openslide_texels(slide: &Path) -> Option<Vec<u8>> {
         }
     }
     let rgba = std::fs::read(raw).unwrap();
+    assert!(rgba.chunks_exact(4).all(|t| t[3] == 255), "OpenSlide left texels of the region blank");
     Some(rgba.chunks_exact(4).flat_map(|t| [t[0], t[1], t[2]]).collect())
 }
 
