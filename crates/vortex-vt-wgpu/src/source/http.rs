@@ -55,7 +55,7 @@ pub struct HttpOptions {
     /// Most bytes one merged request spans (4 MiB).
     pub max_span: u64,
     /// The index is read whole at open when it is at most this many bytes (1 MiB, some 43,000
-    /// tiles), else in blocks of [`INDEX_BLOCK`] entries as tiles need them.
+    /// tiles), else in blocks of [`INDEX_BLOCK`](super::INDEX_BLOCK) entries as tiles need them.
     pub whole_index_up_to: u64,
     /// A connection attempt, or a wait for the next bytes of a reply, that takes longer than
     /// this fails (and is retried): 10 s.
@@ -131,7 +131,7 @@ impl FetchError {
 }
 
 /// A pack on a web server, read with `Range` requests: a [`PageSource`]. The protocol is
-/// [`RemotePack`]'s (shared with the browser's `WebPack`); this is its blocking transport.
+/// `RemotePack`'s (shared with the browser's `WebPack`); this is its blocking transport.
 pub struct HttpPack {
     remote: RemotePack<Fetcher>,
 }

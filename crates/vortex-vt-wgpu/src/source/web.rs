@@ -1,4 +1,4 @@
-//! Vortex packs in the browser: the pack protocol of [`RemotePack`] (the same code as the native
+//! Vortex packs in the browser: the pack protocol of `RemotePack` (the same code as the native
 //! `HttpPack`'s: every header, index and payload CRC checked) over the page's `fetch` with
 //! `Range` requests, awaited on the page's event loop. Nothing blocks: the web loader awaits
 //! [`PageSource::prepare`] for a page, which fetches its tile and keeps it, and then decodes it
