@@ -10,7 +10,8 @@ fn fnv1a(hash: u64, bytes: &[u8]) -> u64 {
     bytes.iter().fold(hash, |h, b| (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01B3))
 }
 
-/// The hash of `bytes`.
+/// The hash of `bytes` (the server's catalog keys and ETags).
+#[cfg(any(feature = "serve", test))]
 pub(crate) fn hash(bytes: &[u8]) -> u64 {
     fnv1a(OFFSET, bytes)
 }
