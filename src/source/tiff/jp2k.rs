@@ -57,10 +57,7 @@ pub(super) fn open(
     max_memory: u64,
 ) -> Result<Box<dyn RowSource>> {
     let tag_err = |e| open_error(path, e);
-    let (width, height) = decoder.dimensions().map_err(tag_err)?;
-    if width == 0 || height == 0 {
-        return Err(TilerError::decode(path, format!("the TIFF says {width}x{height}: the image has no pixels")));
-    }
+    let (width, height) = super::dimensions(path, decoder)?;
     let ycbcr = decoder.find_tag_unsigned::<u16>(Tag::Compression).map_err(tag_err)? == Some(33003);
     let samples: u16 = decoder.find_tag_unsigned(Tag::SamplesPerPixel).map_err(tag_err)?.unwrap_or(1);
     let bits: Vec<u16> = decoder.find_tag_unsigned_vec(Tag::BitsPerSample).map_err(tag_err)?.unwrap_or(vec![1]);

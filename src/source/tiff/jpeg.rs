@@ -111,10 +111,7 @@ pub(super) fn open(
     max_memory: u64,
 ) -> Result<Box<dyn RowSource>> {
     let tag_err = |e| open_error(path, e);
-    let (width, height) = decoder.dimensions().map_err(tag_err)?;
-    if width == 0 || height == 0 {
-        return Err(TilerError::decode(path, format!("the TIFF says {width}x{height}: the image has no pixels")));
-    }
+    let (width, height) = super::dimensions(path, decoder)?;
     let colour = colour(path, decoder)?;
     let tiled = decoder.get_chunk_type() == ChunkType::Tile;
     let (chunk_w, chunk_h) = if tiled {

@@ -91,10 +91,7 @@ pub(super) fn open(
 ) -> Result<Box<dyn RowSource>> {
     let tag_err = |e| open_error(path, e);
     let unsupported = |what: String| Err(TilerError::unsupported(path, format!("{what} TIFF is not supported")));
-    let (width, height) = decoder.dimensions().map_err(tag_err)?;
-    if width == 0 || height == 0 {
-        return Err(TilerError::decode(path, format!("the TIFF says {width}x{height}: the image has no pixels")));
-    }
+    let (width, _) = super::dimensions(path, decoder)?;
     let u16_tag = |decoder: &mut Decoder<BufReader<File>>, t| -> Result<Option<u16>> {
         decoder.find_tag_unsigned::<u16>(t).map_err(|e| open_error(path, e))
     };

@@ -362,6 +362,15 @@ fn is_bigtiff(path: &Path) -> Result<bool> {
     Ok(n == 4 && (head == *b"II+\0" || head == *b"MM\0+"))
 }
 
+/// The image's size, refused where it has no pixels.
+pub(super) fn dimensions(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<(u32, u32)> {
+    let (width, height) = decoder.dimensions().map_err(|e| open_error(path, e))?;
+    if width == 0 || height == 0 {
+        return Err(TilerError::decode(path, format!("the TIFF says {width}x{height}: the image has no pixels")));
+    }
+    Ok((width, height))
+}
+
 pub(super) fn open_error(path: &Path, e: TiffError) -> TilerError {
     match e {
         TiffError::UnsupportedError(u) => TilerError::unsupported(path, format!("unsupported TIFF: {u}")),
