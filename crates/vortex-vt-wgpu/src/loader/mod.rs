@@ -52,7 +52,8 @@ use crate::source::ReadErrorKind;
 
 /// How a loader reads a tile again when its read failed with [`ReadErrorKind::Io`] (a dropped
 /// connection, a timeout: what may pass), on the worker that read it; set with
-/// [`Loader::set_retry`]. Any other kind of failure is final at once: the page gets the
+/// [`Loader::set_retry`]. Natively only: in the browser a loader never waits, and its source
+/// retried the fetch already. Any other kind of failure is final at once: the page gets the
 /// stand-in tile and its error.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RetryPolicy {

@@ -131,6 +131,11 @@ pub(super) fn read(
     }
 }
 
+/// Whether a loader may wait to read again. Not in the browser: nothing there may block (a
+/// thread sleep panics on wasm32), and a web source's reads were fetched, with its own retries,
+/// before the loader reads them, so a read again would answer the same.
+const CAN_WAIT: bool = cfg!(not(target_arch = "wasm32"));
+
 /// `read`, tried again while it fails with an I/O error, up to `retry.attempts` times in all,
 /// waiting `retry.backoff` before the first retry and twice as long before each next one. The
 /// bytes every attempt read are tallied, failed ones included.
@@ -143,7 +148,7 @@ fn with_retries<T>(
     let mut tries = 1;
     loop {
         match read() {
-            Err(e) if e.kind == ReadErrorKind::Io && tries < retry.attempts => {
+            Err(e) if CAN_WAIT && e.kind == ReadErrorKind::Io && tries < retry.attempts => {
                 tally.bytes_read += e.bytes_read;
                 tally.read_retries += 1;
                 std::thread::sleep(wait);
