@@ -250,7 +250,7 @@ pub fn unpack(pack: &Pack, dir: &Claim, progress: &dyn Progress) -> Result<u64> 
             if progress.cancelled() {
                 return Err(TilerError::Interrupted);
             }
-            match pack.tile_checked(id.lod, id.x, id.y)? {
+            match pack.tile_checked(id)? {
                 Tile::Absent => continue,
                 Tile::Data(kind @ (TileKind::Png | TileKind::Jpeg), bytes) => {
                     if let Some(c) = codec.filter(|c| tile_kind(*c) != kind) {

@@ -111,7 +111,7 @@ pub fn merge(paths: &[PathBuf], dest: &Path, progress: &dyn Progress) -> Result<
                 continue;
             }
             let shard = &shards[plan.owner(id.lod, x, id.y) as usize];
-            match shard.pack.tile_checked(id.lod, x, id.y)? {
+            match shard.pack.tile_checked(vortex_pack::TileId::new(id.lod, x, id.y))? {
                 Tile::Absent => return Err(missing(&shard.path, id)),
                 Tile::Constant(texel) => writer.add(id, NewTile::Constant(texel))?,
                 Tile::Data(k, bytes) => {

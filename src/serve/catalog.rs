@@ -149,7 +149,7 @@ fn open_pack(path: &Path) -> Result<Source, String> {
         ));
     }
     let info: Option<InfoFile> = serde_json::from_slice(pack.metadata()).ok();
-    let first_kind = pack.ids().take(64).find_map(|id| match pack.tile(id.lod, id.x, id.y) {
+    let first_kind = pack.ids().take(64).find_map(|id| match pack.tile(id) {
         Ok(Tile::Data(kind, _)) => Some(kind),
         _ => None,
     });
@@ -211,7 +211,7 @@ impl Tiled {
 /// (no copy); `None` for any other tile, and for a damaged one (which the decoding path then
 /// reports).
 pub fn stored_image(pack: &Arc<Pack>, lod: u32, x: u32, y: u32) -> Option<(Format, Bytes)> {
-    image_of(pack, &pack.tile_checked(lod, x, y).ok()?)
+    image_of(pack, &pack.tile_checked(vortex_pack::TileId::new(lod, x, y)).ok()?)
 }
 
 /// A JPEG or PNG tile of `pack` as bytes that borrow its memory map.
@@ -242,7 +242,7 @@ pub fn map_slice(pack: &Arc<Pack>, start: usize, len: usize) -> Bytes {
 
 fn pack_page(pack: &Arc<Pack>, lod: u32, x: u32, y: u32) -> Result<Option<Page>, String> {
     let d = pack.description();
-    let tile = match pack.tile_checked(lod, x, y) {
+    let tile = match pack.tile_checked(vortex_pack::TileId::new(lod, x, y)) {
         Ok(t) => t,
         Err(vortex_pack::PackError::OutOfRange { .. }) => return Ok(None),
         Err(e) => return Err(e.to_string()),

@@ -78,7 +78,9 @@ fn every_codec_in_a_pack_decodes_losslessly_or_within_its_bound() {
         assert!(db >= bound, "{codec} {extra:?}: {db:.1} dB < {bound}");
         let blocks = (32 / 4) * (32 / 4) * if codec == "bc1" { 8 } else { 16 };
         let p = Pack::open(&pack).unwrap();
-        let vortex_pack::Tile::Data(kind, bytes) = p.tile(0, 0, 0).unwrap() else { panic!("{codec}") };
+        let vortex_pack::Tile::Data(kind, bytes) = p.tile(vortex_pack::TileId::new(0, 0, 0)).unwrap() else {
+            panic!("{codec}")
+        };
         assert_eq!((kind.name(), bytes.len()), (codec, blocks));
     }
 }
@@ -206,7 +208,9 @@ fn pack_and_convert_reencode_with_the_codec_flags() {
     assert_eq!(meta(&again)["bc7Effort"], "basic");
     assert_eq!(meta(&again)["tileFormat"], "rgb");
     let p = Pack::open(&again).unwrap();
-    let vortex_pack::Tile::Data(TileKind::Bc7, bytes) = p.tile(0, 3, 1).unwrap() else { panic!() };
+    let vortex_pack::Tile::Data(TileKind::Bc7, bytes) = p.tile(vortex_pack::TileId::new(0, 3, 1)).unwrap() else {
+        panic!()
+    };
     let texels = Tile::Data(TileKind::Bc7, bytes).decode_texels(p.description(), 1 << 20).unwrap();
     assert_eq!(texels.len(), 64 * 64 * 3);
 }

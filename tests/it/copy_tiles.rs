@@ -239,7 +239,11 @@ fn other_layouts_copy_and_misfits_say_why() {
     assert_eq!(done["copied"], 6, "{done}");
     let p = vortex_pack::Pack::open(&pack).unwrap();
     for (x, y) in [(0, 0), (2, 1)] {
-        let vortex_pack::Tile::Data(vortex_pack::TileKind::Jpeg, bytes) = p.tile(0, x, y).unwrap() else { panic!() };
+        let vortex_pack::Tile::Data(vortex_pack::TileKind::Jpeg, bytes) =
+            p.tile(vortex_pack::TileId::new(0, x, y)).unwrap()
+        else {
+            panic!()
+        };
         assert_copied(bytes, &stored_stream(&tiff, (y * 4 + x) as usize), Some(Marker::AdobeRgb), "pack");
     }
     for layout in ["iiif", "xyz"] {
@@ -290,7 +294,11 @@ fn convert_copies_jpeg_cells() {
     assert_eq!(done["storedTiles"]["quality"], 80, "{done}");
     let p = vortex_pack::Pack::open(&pack).unwrap();
     for (x, y) in [(0, 0), (1, 1), (2, 0)] {
-        let vortex_pack::Tile::Data(vortex_pack::TileKind::Jpeg, bytes) = p.tile(0, x, y).unwrap() else { panic!() };
+        let vortex_pack::Tile::Data(vortex_pack::TileKind::Jpeg, bytes) =
+            p.tile(vortex_pack::TileId::new(0, x, y)).unwrap()
+        else {
+            panic!()
+        };
         let file = std::fs::read(d(&format!("dz0_files/9/{x}_{y}.jpeg"))).unwrap();
         assert!(bytes == file, "tile {x},{y} is not vips's file");
     }

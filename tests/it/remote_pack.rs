@@ -297,7 +297,7 @@ fn an_index_read_in_blocks_gives_every_tile_of_the_local_file() {
     assert_eq!(remote.metadata(), local.metadata());
     for id in local.ids() {
         let stored = remote.read_stored(id).unwrap().unwrap().tile;
-        let want = match local.tile_checked(id.lod, id.x, id.y).unwrap() {
+        let want = match local.tile_checked(id).unwrap() {
             Tile::Absent => StoredTile::Absent,
             Tile::Constant(v) => StoredTile::Stored { kind: TileKind::Constant, bytes: v.into() },
             Tile::Data(kind, bytes) => StoredTile::Stored { kind, bytes: bytes.into() },

@@ -22,7 +22,7 @@ fn pack_level(pack: &Pack, lod: u32) -> (usize, usize, Vec<Vec<u8>>) {
     let mut out = vec![Vec::new(); w * h * c];
     for ty in 0..level.tiles_h {
         for tx in 0..level.tiles_w {
-            let texels = match pack.tile_checked(lod, tx, ty).unwrap() {
+            let texels = match pack.tile_checked(vortex_pack::TileId::new(lod, tx, ty)).unwrap() {
                 tile @ Tile::Data(..) => tile.decode_texels(&d, 1 << 30).unwrap(),
                 Tile::Constant(texel) => texel.repeat(side * side),
                 Tile::Absent => panic!("tile ({lod}, {tx}, {ty}) is absent"),

@@ -34,7 +34,9 @@ fn serve_deep_zoom_from_a_pack() {
 
     // An interior tile of the finest level is the stored page, byte for byte.
     let pack = vortex_pack::Pack::open(&pack_path).unwrap();
-    let vortex_pack::Tile::Data(vortex_pack::TileKind::Jpeg, stored) = pack.tile(0, 3, 2).unwrap() else {
+    let vortex_pack::Tile::Data(vortex_pack::TileKind::Jpeg, stored) =
+        pack.tile(vortex_pack::TileId::new(0, 3, 2)).unwrap()
+    else {
         panic!("a JPEG page")
     };
     let tile = server.get("/world_files/10/3_2.jpeg", &[]);

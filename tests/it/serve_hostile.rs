@@ -176,7 +176,9 @@ fn a_damaged_stored_tile_is_a_500_by_every_route() {
     split_png(&["--pack", s(&pack_path)]);
     let at = {
         let pack = vortex_pack::Pack::open(&pack_path).unwrap();
-        let vortex_pack::Tile::Data(vortex_pack::TileKind::Png, bytes) = pack.tile(0, 1, 1).unwrap() else {
+        let vortex_pack::Tile::Data(vortex_pack::TileKind::Png, bytes) =
+            pack.tile(vortex_pack::TileId::new(0, 1, 1)).unwrap()
+        else {
             panic!("a PNG page")
         };
         bytes.as_ptr() as usize - pack.file().as_ptr() as usize + bytes.len() / 2

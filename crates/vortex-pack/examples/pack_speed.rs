@@ -79,7 +79,7 @@ fn main() {
             .map(|_| {
                 let t = Instant::now();
                 for &(lod, x, y) in &addresses {
-                    black_box(pack.tile(lod, x, y).unwrap());
+                    black_box(pack.tile(vortex_pack::TileId::new(lod, x, y)).unwrap());
                 }
                 t.elapsed().as_secs_f64() * 1e9 / lookups as f64
             })

@@ -25,11 +25,10 @@ impl Pack {
     /// [`Limits::max_decoded_bytes`](crate::Limits::max_decoded_bytes), is a
     /// [`PackError::Tile`](crate::PackError::Tile) naming the tile and its byte.
     pub fn decode_rgba8(&self, id: TileId) -> Result<Option<Vec<u8>>> {
-        let TileId { lod, x, y } = id;
         let position = self.position(id)?;
         let max_bytes = self.limits().max_decoded_bytes;
         let d = self.description();
-        match self.tile_checked(lod, x, y)? {
+        match self.tile_checked(id)? {
             Tile::Absent => Ok(None),
             Tile::Constant(value) => {
                 let entry_at = self.header().index_offset + position * ENTRY_LEN as u64;

@@ -102,6 +102,13 @@ pub struct TileId {
     pub y: u32,
 }
 
+impl TileId {
+    /// Tile `(x, y)` of level `lod`.
+    pub const fn new(lod: u32, x: u32, y: u32) -> TileId {
+        TileId { lod, x, y }
+    }
+}
+
 impl Pack {
     /// Maps `path` read-only and checks its structure against the default [`Limits`].
     pub fn open(path: impl AsRef<Path>) -> Result<Pack> {
@@ -228,17 +235,15 @@ impl Pack {
         &self.file()[self.head.entry_offset(position) as usize..][..ENTRY_LEN]
     }
 
-    /// The tile at `(lod, x, y)`: O(1), zero copy. Checks that the entry is well formed and its
-    /// bytes lie in the data section; does not check the payload's CRC (see `tile_checked`).
-    pub fn tile(&self, lod: u32, x: u32, y: u32) -> Result<Tile<'_>> {
-        let id = TileId { lod, x, y };
+    /// Tile `id`: O(1), zero copy. Checks that the entry is well formed and its bytes lie in
+    /// the data section; does not check the payload's CRC (see `tile_checked`).
+    pub fn tile(&self, id: TileId) -> Result<Tile<'_>> {
         let position = self.position(id)?;
         self.tile_at(id, position)
     }
 
     /// As [`Pack::tile`], and the payload's CRC-32C must match.
-    pub fn tile_checked(&self, lod: u32, x: u32, y: u32) -> Result<Tile<'_>> {
-        let id = TileId { lod, x, y };
+    pub fn tile_checked(&self, id: TileId) -> Result<Tile<'_>> {
         let position = self.position(id)?;
         let tile = self.tile_at(id, position)?;
         if let Tile::Data(_, bytes) = tile {

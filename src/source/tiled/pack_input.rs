@@ -104,7 +104,7 @@ impl TileGrid for PackInput {
     /// Tiles come out of the pack, whose index bounds them: `_cap` is for files.
     fn read(&self, col: u32, row: u32, _cap: u64) -> Result<Option<CellData>> {
         let name = || self.name(col, row);
-        Ok(Some(match self.pack.tile_checked(0, col, row)? {
+        Ok(Some(match self.pack.tile_checked(vortex_pack::TileId::new(0, col, row))? {
             Tile::Absent => return Ok(None),
             Tile::Constant(texel) => {
                 let mut bytes = Vec::with_capacity(self.raw_len);

@@ -307,7 +307,7 @@ pub fn with_metadata(pack: &std::path::Path, metadata: &str, dest: &std::path::P
         PackWriter::create(dest, *p.description(), p.levels().to_vec(), metadata.as_bytes(), WriteOptions::default())
             .unwrap();
     for id in p.ids() {
-        let tile = match p.tile_checked(id.lod, id.x, id.y).unwrap() {
+        let tile = match p.tile_checked(id).unwrap() {
             Tile::Absent => NewTile::Absent,
             Tile::Constant(t) => NewTile::Constant(t),
             Tile::Data(k, b) => NewTile::Data(k, b),

@@ -45,8 +45,8 @@ pub fn open_and_read(data: &[u8]) {
     let Ok(pack) = Pack::from_bytes_with_limits("fuzz.vtpk", bytes, limits()) else { return };
     let ids: Vec<_> = pack.ids().collect();
     for id in ids {
-        let _ = pack.tile(id.lod, id.x, id.y);
-        let checked = pack.tile_checked(id.lod, id.x, id.y);
+        let _ = pack.tile(id);
+        let checked = pack.tile_checked(id);
         let decoded = pack.decode_rgba8(id);
         if let Ok(Some(rgba)) = &decoded {
             let side = pack.description().tile_size as usize;
@@ -79,8 +79,8 @@ pub fn backends_agree(data: &[u8], scratch: &Path) {
             let ids: Vec<_> = a.ids().collect();
             assert!(ids.iter().copied().eq(b.ids()));
             for id in ids {
-                let ta = a.tile_checked(id.lod, id.x, id.y).map_err(|e| e.to_string());
-                let tb = b.tile_checked(id.lod, id.x, id.y).map_err(|e| e.to_string());
+                let ta = a.tile_checked(id).map_err(|e| e.to_string());
+                let tb = b.tile_checked(id).map_err(|e| e.to_string());
                 assert_eq!(ta, tb);
             }
             assert_eq!(a.ids_in_file_order(), b.ids_in_file_order());

@@ -118,10 +118,10 @@ fn open_both(path: &Path) -> Option<(Pack, Pack)> {
 /// problem.
 fn exercise(mapped: &Pack, read: &Pack) -> bool {
     for id in mapped.ids().collect::<Vec<_>>() {
-        let a = mapped.tile(id.lod, id.x, id.y).map_err(|e| e.to_string());
-        let b = read.tile(id.lod, id.x, id.y).map_err(|e| e.to_string());
+        let a = mapped.tile(id).map_err(|e| e.to_string());
+        let b = read.tile(id).map_err(|e| e.to_string());
         assert_eq!(a, b);
-        let checked = mapped.tile_checked(id.lod, id.x, id.y);
+        let checked = mapped.tile_checked(id);
         if let Ok(Tile::Data(_, bytes)) = a {
             assert!(bytes.len() as u64 <= mapped.header().data_len);
         }

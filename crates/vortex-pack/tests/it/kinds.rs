@@ -80,7 +80,10 @@ fn zstd_delta_tiles_read_back_exactly_and_need_their_feature_bit() {
         let report = verify(&pack, DECODE);
         assert!(report.is_ok() && report.count(TileKind::ZstdDelta) == 16, "{report}");
         assert!(report.to_json().contains("\"zstd-delta\":16"), "{}", report.to_json());
-        let vortex_pack::Tile::Data(TileKind::ZstdDelta, bytes) = pack.tile(0, 2, 1).unwrap() else { panic!() };
+        let vortex_pack::Tile::Data(TileKind::ZstdDelta, bytes) = pack.tile(vortex_pack::TileId::new(0, 2, 1)).unwrap()
+        else {
+            panic!()
+        };
         assert_eq!(Tile::Data(TileKind::ZstdDelta, bytes).decode_texels(&d, LIMIT).unwrap(), raw(2, 1));
         let rgba = pack.decode_rgba8(TileId { lod: 0, x: 2, y: 1 }).unwrap().unwrap();
         let first = &raw(2, 1)[..texel];
@@ -101,7 +104,7 @@ fn zstd_delta_tiles_read_back_exactly_and_need_their_feature_bit() {
         let bad = dir.path().join(format!("nobit{channels}{sample_bytes}.vtpk"));
         std::fs::write(&bad, &b).unwrap();
         let pack = Pack::open(&bad).unwrap();
-        let e = pack.tile(0, 0, 0).unwrap_err().to_string();
+        let e = pack.tile(vortex_pack::TileId::new(0, 0, 0)).unwrap_err().to_string();
         assert!(e.contains("zstd-delta") && e.contains("required-feature bit 0x1"), "{e}");
         let report = verify(&pack, VerifyOptions::default());
         assert!(
@@ -187,7 +190,7 @@ fn bc1_and_bc7_blocks_decode_as_direct3d_defines_them() {
     assert_eq!(row[4..], [[0, 0, 255, 255], [255, 0, 0, 255], [128, 0, 128, 255], [0, 0, 0, 255]]);
     assert_eq!(texel(&rgba, 8, 5, 3), [0, 0, 255, 255]);
     assert_eq!(texel(&rgba, 8, 0, 4), [0, 0, 255, 255]);
-    let vortex_pack::Tile::Data(_, bytes) = pack.tile(0, 0, 0).unwrap() else { panic!() };
+    let vortex_pack::Tile::Data(_, bytes) = pack.tile(vortex_pack::TileId::new(0, 0, 0)).unwrap() else { panic!() };
     let rgb = Tile::Data(TileKind::Bc1, bytes).decode_texels(&d, LIMIT).unwrap();
     assert_eq!((rgb.len(), &rgb[..6]), (192, &[255, 0, 0, 0, 0, 255][..]));
 
@@ -205,7 +208,7 @@ fn bc1_and_bc7_blocks_decode_as_direct3d_defines_them() {
             assert_eq!(texel(&rgba, 8, bx + 3, by + 3), [0, 128, 254, alpha]);
             assert_eq!(texel(&rgba, 8, bx + 1, by + 2), [255, 129, 1, 255]);
         }
-        let vortex_pack::Tile::Data(_, bytes) = pack.tile(0, 0, 0).unwrap() else { panic!() };
+        let vortex_pack::Tile::Data(_, bytes) = pack.tile(vortex_pack::TileId::new(0, 0, 0)).unwrap() else { panic!() };
         let texels = Tile::Data(TileKind::Bc7, bytes).decode_texels(&d, LIMIT).unwrap();
         assert_eq!(texels.len(), 64 * channels as usize);
     }
@@ -285,7 +288,7 @@ fn a_tile_decoded_away_from_its_pack_is_the_tile_decoded_in_place() {
         let d = pack.description();
         for id in pack.ids() {
             // A copy of the stored bytes, as a cache keeps them once the map is gone.
-            let (kept, stored) = match pack.tile_checked(id.lod, id.x, id.y).unwrap() {
+            let (kept, stored) = match pack.tile_checked(id).unwrap() {
                 Tile::Absent => (vec![], None),
                 Tile::Constant(value) => (value.to_vec(), Some(TileKind::Constant)),
                 Tile::Data(kind, bytes) => (bytes.to_vec(), Some(kind)),

@@ -40,8 +40,8 @@ fn every_kind_round_trips_through_both_backends() {
 
         let mut offsets: HashMap<Vec<u8>, u64> = HashMap::new();
         for (id, written) in &sample.tiles {
-            let a = mapped.tile_checked(id.lod, id.x, id.y).unwrap();
-            let b = read.tile_checked(id.lod, id.x, id.y).unwrap();
+            let a = mapped.tile_checked(*id).unwrap();
+            let b = read.tile_checked(*id).unwrap();
             assert_eq!(a, b);
             let expected = if *written == Written::Skipped { Written::Absent } else { written.clone() };
             assert_eq!(as_written(a), expected, "{id:?}");
@@ -155,7 +155,7 @@ fn empty_and_absent_packs_verify() {
     let report = verify(&pack, DECODE);
     assert!(report.is_ok(), "{report}");
     assert_eq!(report.count(TileKind::Absent), 21);
-    assert_eq!(pack.tile(2, 0, 0).unwrap(), Tile::Absent);
+    assert_eq!(pack.tile(vortex_pack::TileId::new(2, 0, 0)).unwrap(), Tile::Absent);
 }
 
 #[test]
@@ -484,7 +484,10 @@ fn shorter_metadata_set_at_the_end_gives_back_its_room() {
     }
     assert!(verify(&pack, DECODE).is_ok());
     assert_eq!(pack.metadata(), b"{}");
-    assert_eq!(pack.tile(0, 3, 0).unwrap(), Tile::Data(TileKind::Raw, &common::raw_tile(&d, 3)));
+    assert_eq!(
+        pack.tile(vortex_pack::TileId::new(0, 3, 0)).unwrap(),
+        Tile::Data(TileKind::Raw, &common::raw_tile(&d, 3))
+    );
 
     let mut w =
         PackWriter::create(dir.path().join("x.vtpk"), d, levels.clone(), b"{}", WriteOptions::default()).unwrap();

@@ -70,12 +70,12 @@ fn spec_hexdump_is_what_the_writer_writes() {
     // And the example reads back as the spec describes it.
     let pack = Pack::open(&path).unwrap();
     assert_eq!(bytes.len(), 480);
-    assert_eq!(pack.tile(0, 0, 0).unwrap(), Tile::Constant(&[0x80]));
-    assert_eq!(pack.tile(0, 0, 1).unwrap(), Tile::Absent);
-    let Tile::Data(TileKind::Raw, shared) = pack.tile(0, 1, 0).unwrap() else { panic!() };
+    assert_eq!(pack.tile(vortex_pack::TileId::new(0, 0, 0)).unwrap(), Tile::Constant(&[0x80]));
+    assert_eq!(pack.tile(vortex_pack::TileId::new(0, 0, 1)).unwrap(), Tile::Absent);
+    let Tile::Data(TileKind::Raw, shared) = pack.tile(vortex_pack::TileId::new(0, 1, 0)).unwrap() else { panic!() };
     assert_eq!(
         shared.as_ptr(),
-        match pack.tile(1, 0, 0).unwrap() {
+        match pack.tile(vortex_pack::TileId::new(1, 0, 0)).unwrap() {
             Tile::Data(_, b) => b.as_ptr(),
             _ => panic!(),
         }

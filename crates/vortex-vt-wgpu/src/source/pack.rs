@@ -68,10 +68,9 @@ impl PageSource for Pack {
 /// The tile as stored, in the pack (its payload, checksum checked, or its one colour, or
 /// `Absent`), and the bytes read for it. A payload that fails its checksum still counts as read.
 fn checked(pack: &Pack, id: TileId) -> Result<(Tile<'_>, u64), ReadError> {
-    let TileId { lod, x, y } = id;
     let payload_len = |tile: &Tile| if let Tile::Data(_, payload) = tile { payload.len() as u64 } else { 0 };
-    let tile = pack.tile_checked(lod, x, y).map_err(|e| {
-        let bytes_read = pack.tile(lod, x, y).map_or(0, |tile| payload_len(&tile));
+    let tile = pack.tile_checked(id).map_err(|e| {
+        let bytes_read = pack.tile(id).map_or(0, |tile| payload_len(&tile));
         read_error(e).with_bytes_read(bytes_read)
     })?;
     let bytes_read = payload_len(&tile);

@@ -149,7 +149,7 @@ fn expected_texels(pack: &Pack, page: PageId) -> Vec<u8> {
 }
 
 fn payload_len(pack: &Pack, page: PageId) -> u64 {
-    match pack.tile(page.lod.into(), page.x.into(), page.y.into()).unwrap() {
+    match pack.tile(vortex_pack::TileId::new(page.lod.into(), page.x.into(), page.y.into())).unwrap() {
         Tile::Data(_, bytes) => bytes.len() as u64,
         Tile::Constant(_) | Tile::Absent => 0,
     }
@@ -231,7 +231,7 @@ fn texels_equal_decode_rgba8_for_every_tile_kind() {
         assert_eq!(answer.error, None, "{page:?}");
         assert_eq!(answer.texels, expected_texels(&pack, *page), "{page:?}");
         assert_eq!(answer.bytes_read, payload_len(&pack, *page), "{page:?}");
-        let kind = match pack.tile(page.lod.into(), page.x.into(), page.y.into()).unwrap() {
+        let kind = match pack.tile(vortex_pack::TileId::new(page.lod.into(), page.x.into(), page.y.into())).unwrap() {
             Tile::Data(kind, _) => kind,
             Tile::Constant(_) => TileKind::Constant,
             Tile::Absent => TileKind::Absent,
@@ -744,7 +744,7 @@ fn root_payload_len() -> u64 {
     let dir = tempdir();
     let pack = mixed_pack(dir.path(), "a.vtpk");
     let root = TileId { lod: pack.levels().len() as u32 - 1, x: 0, y: 0 };
-    match pack.tile(root.lod, root.x, root.y).unwrap() {
+    match pack.tile(root).unwrap() {
         Tile::Data(_, payload) => payload.len() as u64,
         _ => 0,
     }
@@ -805,7 +805,7 @@ fn the_memory_tier_serves_pages_again_without_a_read_and_with_the_same_texels() 
 
 /// A tile's stored bytes: its payload, or its constant value.
 fn stored_len(pack: &Pack, page: PageId) -> u64 {
-    match pack.tile(page.lod.into(), page.x.into(), page.y.into()).unwrap() {
+    match pack.tile(vortex_pack::TileId::new(page.lod.into(), page.x.into(), page.y.into())).unwrap() {
         Tile::Data(_, bytes) | Tile::Constant(bytes) => bytes.len() as u64,
         Tile::Absent => 0,
     }

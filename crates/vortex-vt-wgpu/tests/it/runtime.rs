@@ -344,7 +344,8 @@ fn bc7_blocks_stream_as_they_are_and_draw_what_rgba8_draws() {
     // The cache holds the pack's blocks byte for byte.
     let state = bc7.runtime();
     for (page, slot) in state.residency().resident() {
-        let vortex_pack::Tile::Data(_, blocks) = tex.pack.tile(page.lod.into(), page.x.into(), page.y.into()).unwrap()
+        let vortex_pack::Tile::Data(_, blocks) =
+            tex.pack.tile(vortex_pack::TileId::new(page.lod.into(), page.x.into(), page.y.into())).unwrap()
         else {
             panic!("{page:?} is stored as BC7")
         };

@@ -155,7 +155,7 @@ pub fn measure(
         for ty in 0..lh.div_ceil(p) {
             for tx in 0..lw.div_ceil(p) {
                 let lod = lod as u32;
-                bytes += match pack.tile(lod, tx, ty)? {
+                bytes += match pack.tile(vortex_pack::TileId::new(lod, tx, ty))? {
                     Tile::Data(_, payload) => payload.len() as u64,
                     _ => 0,
                 };
