@@ -93,53 +93,8 @@ impl PngLevel {
     }
 }
 
-/// BC7 encoder effort: the presets of Intel's ISPC texture compressor, fastest first.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Bc7Effort {
-    /// About 1 ms per 256-texel RGB tile on one core.
-    UltraFast,
-    /// About 10x slower than ultra-fast, about 3 dB better.
-    VeryFast,
-    /// About 18x slower, a little better.
-    Fast,
-    /// About 45x slower.
-    Basic,
-    /// About 160x slower, best.
-    Slow,
-}
-
-impl Bc7Effort {
-    /// Every value, fastest first, in the order `--help` lists them.
-    pub const ALL: [Bc7Effort; 5] =
-        [Bc7Effort::UltraFast, Bc7Effort::VeryFast, Bc7Effort::Fast, Bc7Effort::Basic, Bc7Effort::Slow];
-
-    /// The name used on the command line (`--bc7-effort`) and in `info.json`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Bc7Effort::UltraFast => "ultra-fast",
-            Bc7Effort::VeryFast => "very-fast",
-            Bc7Effort::Fast => "fast",
-            Bc7Effort::Basic => "basic",
-            Bc7Effort::Slow => "slow",
-        }
-    }
-
-    /// The value `name` names, if any.
-    pub fn from_name(name: &str) -> Option<Bc7Effort> {
-        Bc7Effort::ALL.into_iter().find(|v| v.name() == name)
-    }
-
-    /// One line on what the value does (`--help` lists it).
-    pub fn about(self) -> &'static str {
-        match self {
-            Bc7Effort::UltraFast => "About 1 ms per 256-texel RGB tile on one core",
-            Bc7Effort::VeryFast => "About 10x slower than ultra-fast, about 3 dB better",
-            Bc7Effort::Fast => "About 18x slower, a little better",
-            Bc7Effort::Basic => "About 45x slower",
-            Bc7Effort::Slow => "About 160x slower, best",
-        }
-    }
-}
+/// BC7 encoder effort (the BC encoders are vortex-bc's, shared with the runtime's transcoding).
+pub use vortex_bc::Bc7Effort;
 
 /// zstd levels `--zstd-level` accepts (zstd's negative "fast" levels are left out).
 pub const ZSTD_LEVELS: RangeInclusive<i32> = 1..=22;
@@ -446,32 +401,11 @@ impl<T: Sample> TileEncoder<T> {
             _ => Cow::Owned(samples.chunks_exact(3).flat_map(|t| [t[0], t[1], t[2], 255]).collect()),
         };
         let side = self.side;
-        let surface = intel_tex_2::RgbaSurface { data: &rgba, width: side, height: side, stride: side * 4 };
         match bc7 {
-            None => {
-                out.resize(intel_tex_2::bc1::calc_output_size(side, side), 0);
-                intel_tex_2::bc1::compress_blocks_into(&surface, out);
-            }
-            Some(effort) => {
-                use intel_tex_2::bc7;
-                let alpha = self.stored.channels.has_alpha();
-                let settings = match (effort, alpha) {
-                    (Bc7Effort::UltraFast, false) => bc7::opaque_ultra_fast_settings(),
-                    (Bc7Effort::VeryFast, false) => bc7::opaque_very_fast_settings(),
-                    (Bc7Effort::Fast, false) => bc7::opaque_fast_settings(),
-                    (Bc7Effort::Basic, false) => bc7::opaque_basic_settings(),
-                    (Bc7Effort::Slow, false) => bc7::opaque_slow_settings(),
-                    (Bc7Effort::UltraFast, true) => bc7::alpha_ultra_fast_settings(),
-                    (Bc7Effort::VeryFast, true) => bc7::alpha_very_fast_settings(),
-                    (Bc7Effort::Fast, true) => bc7::alpha_fast_settings(),
-                    (Bc7Effort::Basic, true) => bc7::alpha_basic_settings(),
-                    (Bc7Effort::Slow, true) => bc7::alpha_slow_settings(),
-                };
-                out.resize(bc7::calc_output_size(side, side), 0);
-                bc7::compress_blocks_into(&settings, &surface, out);
-            }
+            None => vortex_bc::encode_bc1(&rgba, side, side, out),
+            Some(effort) => vortex_bc::encode_bc7(&rgba, side, side, effort, self.stored.channels.has_alpha(), out),
         }
-        Ok(())
+        .map_err(|e| e.to_string())
     }
 
     /// libjpeg-turbo's encoder (MozJPEG in its libjpeg-turbo-compatible "fastest" profile: no

@@ -1,7 +1,7 @@
 //! Transcoding at load: a page decoded to (premultiplied) RGBA8 is encoded to BC1 or BC7 on the
 //! loader's thread, so that the physical cache holds BC whatever the pack stores: an eighth (BC1)
 //! or a quarter (BC7) of RGBA8's GPU memory and upload bytes, as id Tech 5 transcoded its pages to
-//! DXT on their way into the physical texture. Intel's ISPC texture compressor, at its "very
+//! DXT on their way into the physical texture. Intel's ISPC texture compressor (vortex-bc), at its "very
 //! fast" BC7 settings (the tiler offers the slower ones offline).
 
 use crate::page_cache::CacheFormat;
@@ -9,22 +9,19 @@ use crate::page_cache::CacheFormat;
 /// `texels` (`tile_size²` RGBA8) as `format`'s blocks, rows of blocks top down; RGBA8 as it is.
 /// BC1 keeps no alpha: it is for opaque textures.
 #[cfg(not(target_arch = "wasm32"))]
+#[expect(clippy::expect_used, reason = "the page cache refuses BC formats for tile sizes that are not multiples of 4")]
 pub(super) fn transcode(texels: Vec<u8>, tile_size: u32, format: CacheFormat) -> Vec<u8> {
-    let surface =
-        intel_tex_2::RgbaSurface { data: &texels, width: tile_size, height: tile_size, stride: tile_size * 4 };
-    match format {
-        CacheFormat::Rgba8 => texels,
-        CacheFormat::Bc1 => intel_tex_2::bc1::compress_blocks(&surface),
+    let mut blocks = Vec::new();
+    let encoded = match format {
+        CacheFormat::Rgba8 => return texels,
+        CacheFormat::Bc1 => vortex_bc::encode_bc1(&texels, tile_size, tile_size, &mut blocks),
         CacheFormat::Bc7 => {
-            let opaque = texels.chunks_exact(4).all(|t| t[3] == 255);
-            let settings = if opaque {
-                intel_tex_2::bc7::opaque_very_fast_settings()
-            } else {
-                intel_tex_2::bc7::alpha_very_fast_settings()
-            };
-            intel_tex_2::bc7::compress_blocks(&settings, &surface)
+            let alpha = texels.chunks_exact(4).any(|t| t[3] != 255);
+            vortex_bc::encode_bc7(&texels, tile_size, tile_size, vortex_bc::Bc7Effort::VeryFast, alpha, &mut blocks)
         }
-    }
+    };
+    encoded.expect("a BC cache holds tiles of whole 4x4 blocks");
+    blocks
 }
 
 /// In the browser, where Intel's kernels do not build, the runtime never asks for a transcoded

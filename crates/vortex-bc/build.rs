@@ -1,9 +1,9 @@
-//! intel_tex_2's prebuilt kernels (BC1 and BC7 tiles) contain C++ code that needs the C++
-//! runtime, which the crate does not link itself.
+//! intel_tex_2's prebuilt kernels contain C++ code that needs the C++ runtime, which that crate
+//! does not link itself. Linked here, once, for every crate that encodes BC blocks.
 
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
-    // In the browser there are no kernels (and no C++ runtime to link).
+    // In the browser there are no kernels (and no C++ runtime to link): see the crate's docs.
     if std::env::var("CARGO_CFG_TARGET_ARCH").as_deref() == Ok("wasm32") {
         return;
     }
