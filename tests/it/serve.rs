@@ -4,7 +4,6 @@
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::{Duration, Instant};
 
 use crate::common::cli::{fixture, ok, run, s};
 use crate::common::server::Server;
@@ -298,16 +297,11 @@ fn serve_stops_cleanly_on_sigterm() {
     let dir = tempfile::tempdir().unwrap();
     let mut server = Server::start(&[&jpeg_pack(dir.path())], &[]);
     assert_eq!(server.get("/world.dzi", &[]).status, 200);
-    let started = Instant::now();
     let kill = Command::new("kill").args(["-TERM", &server.child.id().to_string()]).status().unwrap();
     assert!(kill.success());
-    let status = loop {
-        if let Some(status) = server.child.try_wait().unwrap() {
-            break status;
-        }
-        assert!(started.elapsed() < Duration::from_secs(10), "still running 10 s after SIGTERM");
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    // The child's exit is the event: waited for, not polled (a server that never stops hangs
+    // the test, which the harness's own timeout reports, rather than a guess at how long is long).
+    let status = server.child.wait().unwrap();
     assert_eq!(status.code(), Some(0));
     let mut err = String::new();
     server.child.stderr.take().unwrap().read_to_string(&mut err).unwrap();

@@ -61,9 +61,16 @@ pub struct RetryPolicy {
     pub attempts: u32,
     /// The wait before the first retry, doubled before each next one. Default 100 ms: with 3
     /// attempts a tile is given up on after 0.3 s of waiting, which a passing hiccup outlasts
-    /// while a source that is down costs a worker little. A source may retry on its own too
-    /// ([`HttpPack`](crate::source) retries each request): these retries come on top.
+    /// while a source that is down costs a worker little. A source that retries on its own
+    /// says how the loader should through
+    /// [`PageSource::retry_policy`](crate::source::PageSource::retry_policy) (`HttpPack`, which
+    /// retries each request, asks for [`RetryPolicy::NONE`]).
     pub backoff: Duration,
+}
+
+impl RetryPolicy {
+    /// One read, never another: for a source that retried already before it failed.
+    pub const NONE: RetryPolicy = RetryPolicy { attempts: 1, backoff: Duration::ZERO };
 }
 
 impl Default for RetryPolicy {

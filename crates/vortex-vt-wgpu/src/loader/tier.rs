@@ -99,6 +99,7 @@ pub(super) fn read(
     tally: &mut Tally,
 ) -> Result<Option<Vec<u8>>, ReadError> {
     let id = tile_id(tile);
+    let retry = source.retry_policy(retry);
     let read_whole = |tally: &mut Tally| match with_retries(retry, tally, || source.read_tile(id, format))? {
         SourceTile::Absent => Ok(None),
         SourceTile::Texels { texels, bytes_read } => {

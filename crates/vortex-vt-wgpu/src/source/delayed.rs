@@ -9,7 +9,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use super::{PageSource, ReadError, SourceTile, StoredRead, TileId, TileKind};
-use crate::loader::LoaderError;
+use crate::loader::{LoaderError, RetryPolicy};
 use crate::page_cache::CacheFormat;
 use crate::texture::VirtualTexture;
 
@@ -66,6 +66,10 @@ impl PageSource for Delayed {
 
     fn decode(&self, tile: TileId, kind: TileKind, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
         self.inner.decode(tile, kind, bytes, format)
+    }
+
+    fn retry_policy(&self, loader: RetryPolicy) -> RetryPolicy {
+        self.inner.retry_policy(loader)
     }
 
     fn holds_only_bc7(&self) -> bool {

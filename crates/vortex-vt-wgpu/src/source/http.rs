@@ -33,7 +33,7 @@ use vortex_pack::{Limits, PackError, PackLayout, TileId, TileKind};
 use super::pack::decode_stored;
 use super::remote::{IndexPlan, RangeRead, RemotePack, lock, parse_content_range};
 use super::{PageSource, ReadError, SourceTile, StoredRead};
-use crate::loader::LoaderError;
+use crate::loader::{LoaderError, RetryPolicy};
 use crate::page_cache::CacheFormat;
 use crate::texture::VirtualTexture;
 
@@ -206,6 +206,12 @@ impl PageSource for HttpPack {
 
     fn decode(&self, _: TileId, kind: TileKind, bytes: &[u8], format: CacheFormat) -> Result<Vec<u8>, ReadError> {
         decode_stored(self.remote.layout(), kind, bytes, format)
+    }
+
+    /// None from the loader: each request was tried `HttpOptions::attempts` times already, so
+    /// one page of a dead server costs that many requests, not that many times the loader's.
+    fn retry_policy(&self, _loader: RetryPolicy) -> RetryPolicy {
+        RetryPolicy::NONE
     }
 
     fn opaque(&self) -> bool {

@@ -35,7 +35,7 @@ pub use remote::INDEX_BLOCK;
 #[cfg(target_arch = "wasm32")]
 pub use web::{WebPack, WebStats};
 
-use crate::loader::LoaderError;
+use crate::loader::{LoaderError, RetryPolicy};
 use crate::page_cache::CacheFormat;
 use crate::texture::VirtualTexture;
 
@@ -82,6 +82,15 @@ pub trait PageSource: Send + Sync {
     fn prepare(&self, tile: TileId) -> Option<LocalFuture<'_>> {
         let _ = tile;
         None
+    }
+
+    /// How the loader reads a tile of this source again after a [`ReadErrorKind::Io`] failure,
+    /// given the loader's own policy (`loader`, [`Loader::set_retry`](crate::Loader::set_retry)).
+    /// The default takes it. A source that retries its reads itself answers
+    /// [`RetryPolicy::NONE`]: its retries and the loader's would multiply (`HttpPack`'s 6 tries
+    /// a request times the loader's 3 reads were 18 requests for one page of a dead server).
+    fn retry_policy(&self, loader: RetryPolicy) -> RetryPolicy {
+        loader
     }
 
     /// Whether every tile can come as BC7 blocks as stored, so that the cache can hold BC7.
@@ -144,7 +153,7 @@ pub struct StoredRead {
 #[non_exhaustive]
 pub enum ReadErrorKind {
     /// The read failed this time (a dropped connection, a timeout, a disk error): reading again
-    /// may succeed, so the loader does, after a backoff ([`RetryPolicy`](crate::loader::RetryPolicy)).
+    /// may succeed, so the loader does, after a backoff, as [`PageSource::retry_policy`] says.
     Io,
     /// The stored bytes are wrong: a checksum fails, a payload does not decode, an index entry
     /// makes no sense. Reading again gives the same bytes: the page gets the stand-in tile.

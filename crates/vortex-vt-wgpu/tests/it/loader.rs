@@ -739,6 +739,57 @@ fn other_errors_are_not_read_again() {
     }
 }
 
+/// A source that retries its own reads, as `HttpPack` does, and says so: its reads fail with an
+/// I/O error every time.
+struct RetriesItself(Failing);
+
+impl PageSource for RetriesItself {
+    fn location(&self) -> &Path {
+        self.0.location()
+    }
+
+    fn texture(&self) -> Result<VirtualTexture, LoaderError> {
+        self.0.texture()
+    }
+
+    fn read_tile(&self, tile: TileId, format: CacheFormat) -> Result<SourceTile, ReadError> {
+        self.0.read_tile(tile, format)
+    }
+
+    fn retry_policy(&self, _loader: RetryPolicy) -> RetryPolicy {
+        RetryPolicy::NONE
+    }
+}
+
+#[test]
+fn a_source_that_retries_itself_is_read_once_by_the_loader() {
+    let dir = tempdir();
+    let pack = mixed_pack(dir.path(), "a.vtpk");
+    let failing = || Failing {
+        pack: Arc::clone(&pack),
+        kind: ReadErrorKind::Io,
+        failures: usize::MAX,
+        reads: AtomicUsize::new(0),
+    };
+    let own = Arc::new(RetriesItself(failing()));
+    // Wrapped too: a wrapper (here the latency one, with no wait) keeps the source's policy.
+    let wrapped = Arc::new(RetriesItself(failing()));
+    let delayed =
+        Arc::new(vortex_vt_wgpu::source::Delayed::with_wait(Arc::clone(&wrapped) as Arc<dyn PageSource>, || Ok(())));
+    let plain = Arc::new(failing());
+    let sources: Vec<Arc<dyn PageSource>> = vec![own.clone(), delayed, plain.clone()];
+    let loader = Loader::with_sources(sources, 1).unwrap();
+    loader.set_retry(RetryPolicy { attempts: 4, backoff: Duration::ZERO });
+    let lods = loader.textures()[0].grid.lod_count();
+    let pages: Vec<_> = (0..3).map(|t| (PageId::new(t, lods - 1, 0, 0), Slot::from(t))).collect();
+    let loaded = loader.load(&pages);
+    assert!(loaded.iter().all(|p| matches!(p.error, Some(LoadError::Tile { kind: ReadErrorKind::Io, .. }))));
+    let reads = |f: &Failing| f.reads.load(Ordering::Relaxed);
+    assert_eq!((reads(&own.0), reads(&wrapped.0)), (1, 1), "the loader read a self-retrying source again");
+    assert_eq!(reads(&plain), 4, "a source that does not retry itself gets the loader's attempts");
+    assert_eq!(loader.counters().read_retries, 3);
+}
+
 /// The root payload's length in [`mixed_pack`] (what a successful read of it counts).
 fn root_payload_len() -> u64 {
     let dir = tempdir();
