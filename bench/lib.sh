@@ -13,7 +13,7 @@ as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 # concurrent `cargo build` must not swap them between runs), generates the 16384² BigTIFF.
 # VORTEX=PATH times that vortex-tiler binary instead of the repository's own release build (to
 # compare builds of two commits; VORTEX_LABEL names it in the report, default its path); the
-# examples gen_image and psnr always come from the repository. CARGO_TARGET_DIR is honoured.
+# tools gen_image and psnr (crates/vortex-bench) always come from the repository. CARGO_TARGET_DIR is honoured.
 # Sets REV, the vortex-tiler build's name in reports.
 bench_setup() {
   if ! command -v vips >/dev/null || [ ! -x /usr/bin/time ]; then
@@ -23,7 +23,7 @@ bench_setup() {
   fi
   local target=${CARGO_TARGET_DIR:-$ROOT/target}
   log "building"
-  cargo build --release --quiet -p vortex-tiler --example gen_image --example psnr
+  cargo build --release --quiet -p vortex-bench --bin gen_image --bin psnr
   mkdir -p "$WORK/bin"
   if [ -n "${VORTEX:-}" ]; then
     [ -x "$VORTEX" ] || { echo "error: VORTEX=$VORTEX is not an executable" >&2; exit 1; }
@@ -34,7 +34,7 @@ bench_setup() {
     cp "$target/release/vortex-tiler" "$WORK/bin/"
     REV="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src crates Cargo.toml Cargo.lock || echo +uncommitted)"
   fi
-  cp "$target/release/examples/gen_image" "$target/release/examples/psnr" "$WORK/bin/"
+  cp "$target/release/gen_image" "$target/release/psnr" "$WORK/bin/"
   if [ ! -s "$WORK/src16k.tif" ]; then
     log "generating src16k.tif"
     "$WORK/bin/gen_image" 16384 16384 "$WORK/part16k.tif" # the format follows the extension

@@ -14,7 +14,7 @@
 #      they differ. Goal of the issue: at most 1.1x at N = 16. Images:
 #        - 16384 x 16384 RGB 8-bit uncompressed BigTIFF (bench_setup's src16k.tif);
 #        - 16384 x 131072 RGB 8-bit uncompressed BigTIFF (srcbig.tif, ~6.4 GB, written by
-#          examples/gen_image like the first). Skipped with TALL=0, or with a note when the
+#          gen_image (crates/vortex-bench) like the first). Skipped with TALL=0, or with a note when the
 #          disk lacks room (it needs about 10 GB free, 4 if the source is there).
 #      Both have 64-row uncompressed strips: a shard reads only its rows, and of each row only
 #      its columns (uncompressed 8-bit strips are read in part).
@@ -292,7 +292,7 @@ REPORT=$WORK/scale-out-report.md
   echo "cmp merged.vtpk one.vtpk                                                                        # every merge: identical"
   echo '```'
   echo
-  echo "Sources: RGB 8-bit uncompressed BigTIFFs from \`examples/gen_image\` (64-row strips: a shard seeks to the strips of its rows and, the strips being uncompressed, reads only its columns of each row), read once before each image's runs so that they come from the page cache. Tall image: ${TALL_NOTE:-measured}."
+  echo "Sources: RGB 8-bit uncompressed BigTIFFs from \`gen_image\` (crates/vortex-bench; 64-row strips: a shard seeks to the strips of its rows and, the strips being uncompressed, reads only its columns of each row), read once before each image's runs so that they come from the page cache. Tall image: ${TALL_NOTE:-measured}."
   echo
   echo "### Overhead of sharding (CPU time)"
   echo
@@ -385,7 +385,7 @@ REPORT=$WORK/scale-out-report.md
   if [ "$WIDE" = 1 ]; then
     echo "### Memory: a 200000 x 2000 image in $WIDE_N shards"
     echo
-    echo "\`bench/work/$WIDE_SRC\` (RGB 8-bit PNG, 400 Mpx, from \`examples/gen_image\` as in bench/wide-images.sh), the same commands with N = $WIDE_N, default \`--max-memory\` (1G), one round:"
+    echo "\`bench/work/$WIDE_SRC\` (RGB 8-bit PNG, 400 Mpx, from \`gen_image\` (crates/vortex-bench) as in bench/wide-images.sh), the same commands with N = $WIDE_N, default \`--max-memory\` (1G), one round:"
     echo
     k=wide:$WIDE_N
     row() { awk -F'\t' -v k="$k" -v c="$1" '$1 == k { print $c }' "$AGG"; }

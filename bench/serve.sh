@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # bench/serve.sh: requests per second and latency of `vortex-tiler serve`, measured with oha.
 #
-# An 8192 x 8192 RGB image (examples/gen_image, generated once into bench/work) is cut into a
+# An 8192 x 8192 RGB image (gen_image of crates/vortex-bench, generated once into bench/work) is cut into a
 # JPEG Q85 pack of 256-texel pages with a border of 1 (Deep Zoom tiles of 254 + overlap 1, the
 # vips default): Deep Zoom level 13 is 33 x 33 tiles. Then, for DURATION (default 10s) at CONNS
 # connections (default 32), oha asks the release build for random tiles of level 13 from
@@ -26,11 +26,12 @@ log() { printf '[%(%H:%M:%S)T] %s\n' -1 "$*" >&2; }
 
 command -v "$OHA" >/dev/null || { echo "error: oha not found (OHA=$OHA); cargo install oha --locked" >&2; exit 1; }
 log "building"
-cargo build --release --quiet -p vortex-tiler --bin vortex-tiler --example gen_image
+cargo build --release --quiet -p vortex-tiler --bin vortex-tiler
+cargo build --release --quiet -p vortex-bench --bin gen_image
 BIN=$TARGET/release/vortex-tiler
 if [ ! -s "$WORK/serve8k.ppm" ]; then
   log "generating serve8k.ppm"
-  "$TARGET/release/examples/gen_image" 8192 8192 "$WORK/serve8k.part.ppm"
+  "$TARGET/release/gen_image" 8192 8192 "$WORK/serve8k.part.ppm"
   mv "$WORK/serve8k.part.ppm" "$WORK/serve8k.ppm"
 fi
 PACK=$WORK/serve8k.vtpk

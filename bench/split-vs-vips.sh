@@ -5,7 +5,7 @@
 # What it measures (results go to docs/benchmarks.md, or $DOC: case 1 between the
 # split-vs-vips markers, case 2 between the split-tall markers, left as they are with BIG=0):
 #   Case 1, 16384 x 16384 RGB 8-bit uncompressed BigTIFF (268.4 Mpx, ~805 MB, from
-#   examples/gen_image: gradients, zone plate, discs, per-pixel noise), cut into 256-texel
+#   gen_image of crates/vortex-bench: gradients, zone plate, discs, per-pixel noise), cut into 256-texel
 #   JPEG tiles at quality 85 with no border/overlap, alternately RUNS times by
 #     - vortex-tiler split SRC -o OUT --tile-size 256 --border 0 --codec jpeg --quality 85 --filter box --quiet
 #       (levels averaged in stored values, as vips does), and the same with the default filter,
@@ -16,7 +16,7 @@
 #       PyPI, pyvips-binary, in a venv; skipped with a note if pip cannot install it)
 #   each under /usr/bin/time -v: wall clock, peak RSS; medians over the runs. Output size is the
 #   sum of the tile files' sizes (tiles only: no info.json, .dzi or vips-properties.xml).
-#   PSNR of the finest level against the source over all RGB samples (examples/psnr.rs).
+#   PSNR of the finest level against the source over all RGB samples (crates/vortex-bench/src/bin/psnr.rs).
 #   Case 2, tall image: 16384 x 131072 (2147.5 Mpx, ~6.4 GB), the same options (vortex-tiler
 #   with --filter box and without --quiet, for its summary line), TALL_RUNS times (default 1)
 #   per tool: VORTEX_BEFORE when set, vortex-tiler, vips, pyvips. Tiles written (files

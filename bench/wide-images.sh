@@ -2,7 +2,7 @@
 # bench/wide-images.sh: very wide and very tall images, in bounded memory (issue 13).
 #
 # What it measures (results go to docs/benchmarks.md between the wide-images markers):
-#   Case 1, a 200000 x 2000 RGB PNG (examples/gen_image: gradients, zone plate, discs, noise)
+#   Case 1, a 200000 x 2000 RGB PNG (gen_image of crates/vortex-bench: gradients, zone plate, discs, noise)
 #   cut into 256-texel JPEG tiles at quality 85, RUNS times alternately
 #     - with the default --max-memory (1G): one band over the whole width;
 #     - with --max-memory 64M: vertical stripes of the fine LODs and one coarse pass;
@@ -22,10 +22,10 @@ RUNS=${RUNS:-3}
 
 [ -x /usr/bin/time ] || { export DEBIAN_FRONTEND=noninteractive; apt-get update -qq && apt-get install -y -qq time >/dev/null; }
 cargo build --release --quiet
-cargo build --release --quiet --example gen_image
+cargo build --release --quiet -p vortex-bench --bin gen_image
 REV="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src crates Cargo.toml Cargo.lock || echo +uncommitted)"
 mkdir -p "$WORK/bin"
-cp target/release/vortex-tiler target/release/examples/gen_image "$WORK/bin/"
+cp target/release/vortex-tiler target/release/gen_image "$WORK/bin/"
 VT=$WORK/bin/vortex-tiler
 
 for spec in 200000x2000 16000000x1 1x16000000; do

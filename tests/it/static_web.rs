@@ -263,11 +263,13 @@ fn measure_requests_against_dzi() {
     let input = match spec.parse::<u32>() {
         Ok(side) => {
             let input = site.dir.path().join("photo.tif");
-            let generator = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/debug/examples/gen_image");
+            let generator = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/debug/gen_image");
             let status = std::process::Command::new(&generator)
                 .args([&side.to_string(), &side.to_string(), s(&input)])
                 .status()
-                .unwrap_or_else(|e| panic!("{}: {e} (cargo build --example gen_image)", generator.display()));
+                .unwrap_or_else(|e| {
+                    panic!("{}: {e} (cargo build -p vortex-bench --bin gen_image)", generator.display())
+                });
             assert!(status.success());
             input
         }

@@ -153,7 +153,7 @@ fn psnr(a: &[Vec<u8>], b: &[Vec<u8>]) -> f64 {
             }
         }
     }
-    if sum == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64.powi(2) * n / sum).log10() }
+    vortex_bench::measure::psnr_8bit(sum, n)
 }
 
 fn db(v: f64) -> String {

@@ -44,9 +44,7 @@ impl Err {
     }
 }
 
-pub fn psnr(sse: f64, samples: f64) -> f64 {
-    if sse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64 * 255.0 * samples / sse).log10() }
-}
+pub use vortex_bench::measure::psnr_8bit as psnr;
 
 /// What one choice gave on one image.
 pub struct Measured {
@@ -62,10 +60,7 @@ pub struct Measured {
 
 impl Measured {
     pub fn median_s(&self) -> f64 {
-        let mut t = self.times.clone();
-        t.sort_by(f64::total_cmp);
-        let n = t.len();
-        if n % 2 == 1 { t[n / 2] } else { (t[n / 2 - 1] + t[n / 2]) / 2.0 }
+        vortex_bench::measure::median(&mut self.times.clone())
     }
 
     /// How far the runs spread: (slowest - fastest) / median, leaving out the slowest and the

@@ -2,7 +2,7 @@
 //! a zone plate (every spatial frequency), hard-edged discs and per-pixel noise, so that codecs
 //! and filters meet photo-like, high-frequency and line content at once.
 //!
-//!     cargo run --release --example gen_image -- WIDTH HEIGHT OUT.{tif,png,ppm} [--grey] [--alpha] [--16] [--noise F]
+//!     cargo run --release -p vortex-bench --bin gen_image -- WIDTH HEIGHT OUT.{tif,png,ppm} [--grey] [--alpha] [--16] [--noise F]
 //!
 //! `--noise` sets the noise amplitude (default 0.12 of full scale; small fixtures use less so
 //! that they compress).

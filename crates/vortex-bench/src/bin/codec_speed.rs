@@ -2,10 +2,10 @@
 //! PSNR against the tile's texels, for every codec and setting `split --pack` offers. A
 //! benchmark, not a test.
 //!
-//!     cargo run --release --example codec_speed -- IMAGE [--tile-size N] [--tiles N] [--alpha]
+//!     cargo run --release -p vortex-bench --bin codec_speed -- IMAGE [--tile-size N] [--tiles N] [--alpha]
 //!
 //! IMAGE is decoded whole (keep it small: a few thousand texels a side, e.g. from
-//! `cargo run --release --example gen_image -- 2048 2048 img.png`); its first `--tiles` whole
+//! `cargo run --release -p vortex-bench --bin gen_image -- 2048 2048 img.png`); its first `--tiles` whole
 //! tiles (default 64) of `--tile-size` (default 256) are encoded, RGB 8-bit (RGBA with
 //! `--alpha`). Prints a markdown table: ms per tile (median), KiB per tile (mean), bits per
 //! texel, PSNR in dB over the colour samples (and alpha, with `--alpha`).
@@ -14,6 +14,7 @@
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use vortex_bench::measure;
 use vortex_pack::{Description, Tile, TileKind};
 use vortex_tiler::codec::{Bc7Effort, Codec, PngLevel, Subsampling, TileEncoder};
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
@@ -112,12 +113,11 @@ fn main() -> Result<()> {
                 samples += 1.0;
             }
         }
-        times.sort_by(f64::total_cmp);
         let per_tile = bytes as f64 / tiles.len() as f64;
-        let psnr = if squared == 0.0 { f64::INFINITY } else { 10.0 * (255f64.powi(2) * samples / squared).log10() };
+        let psnr = measure::psnr_8bit(squared, samples);
         println!(
             "| {label} | {:.3} | {:.1} | {:.2} | {} |",
-            times[times.len() / 2],
+            measure::median(&mut times),
             per_tile / 1024.0,
             per_tile * 8.0 / (side * side) as f64,
             if psnr.is_finite() { format!("{psnr:.2}") } else { "lossless".into() }

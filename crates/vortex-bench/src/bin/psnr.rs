@@ -2,8 +2,8 @@
 //! top to bottom and decoding one row of tiles at a time, so that memory stays at about one
 //! tile row whatever the image height.
 //!
-//!     cargo run --release --example psnr -- SOURCE --vortex OUT_DIR
-//!     cargo run --release --example psnr -- SOURCE --dzi OUT_files
+//!     cargo run --release -p vortex-bench --bin psnr -- SOURCE --vortex OUT_DIR
+//!     cargo run --release -p vortex-bench --bin psnr -- SOURCE --dzi OUT_files
 //!
 //! `--vortex` reads vortex-tiler output: LOD 0 tiles named by `OUT_DIR/info.json`
 //! (`filenameFormat`, default `lod%1$02s-x%2$04s-y%3$04s.<ext>`), each of `tileSize` texels of
@@ -157,7 +157,7 @@ fn run() -> Result<()> {
     if sum_sq == 0 {
         println!("inf");
     } else {
-        println!("{:.3}", 10.0 * (255.0f64 * 255.0 / mse).log10());
+        println!("{:.3}", vortex_bench::measure::psnr_8bit(sum_sq as f64, samples as f64));
     }
     Ok(())
 }
