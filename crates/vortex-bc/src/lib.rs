@@ -105,6 +105,7 @@ pub enum BcError {
 
 /// The bytes of the blocks covering `width x height` texels, `block_bytes` each, after checking
 /// that `rgba` holds exactly those texels and that the sides cut into whole blocks.
+#[cfg(not(target_arch = "wasm32"))]
 fn checked_len(rgba: &[u8], width: u32, height: u32, block_bytes: usize) -> Result<usize, BcError> {
     if width == 0 || height == 0 || !width.is_multiple_of(4) || !height.is_multiple_of(4) {
         return Err(BcError::Size { width, height });
