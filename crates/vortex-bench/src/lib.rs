@@ -15,6 +15,7 @@
 //! ```
 #![allow(clippy::unwrap_used, clippy::expect_used)] // measurement programs may panic on a broken set-up
 
+pub mod ground;
 pub mod measure;
 pub mod run_info;
 pub mod splice;

@@ -1,8 +1,6 @@
-//! The camera both timing examples look through: 2 m above a ground plane that one 65536²
+//! The camera `analysis_speed` and `frame_cost` look through: 2 m above a ground plane that one 65536²
 //! virtual texture covers (128 m, 2 mm per texel, repeating), pitched 40° down, 75° vertical field
 //! of view, and the feedback pass of a 1280x720 frame at 1/8 (160x90 words) made on the CPU.
-//! Included by `#[path]`; not an example of its own. Each includer uses only part of it.
-#![allow(dead_code)]
 
 use vortex_vt::address::uv_at;
 use vortex_vt::feedback::{NO_REQUEST, encode, lod_for};

@@ -1,6 +1,6 @@
 //! How fast a pack opens, looks tiles up and verifies: a benchmark, not a test.
 //!
-//!     cargo run --release -p vortex-pack --example pack_speed [-- DIR]
+//!     cargo run --release -p vortex-bench --bin pack_speed [-- DIR]
 //!
 //! Writes a pack of 349,525 tiles (a 512 x 512 grid at LOD 0, 10 levels: a 65536² texture in
 //! 128-texel pages) with 1-4 KiB payloads into DIR (default: the system temp dir), then times
@@ -16,8 +16,7 @@ use vortex_pack::{
 };
 
 fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    vortex_bench::measure::median(&mut v)
 }
 
 fn main() {
@@ -110,7 +109,7 @@ fn main() {
     println!("| file size | {:.2} GB |", gb);
     println!("| write (one pass, with dedup lookups) | {write_s:.2} s |");
     println!("| `Pack::open` (median of 200) | {:.1} µs |", median(opens) * 1e6);
-    println!("| `tile(lod, x, y)` at random addresses (median of 5 x 4M) | {lookup_ns:.1} ns |");
+    println!("| `tile(TileId)` at random addresses (median of 5 x 4M) | {lookup_ns:.1} ns |");
     println!("| `verify` (page cache, median of 3) | {verify_s:.3} s = {:.2} GB/s |", gb / verify_s);
     println!("| CRC-32C over the whole file | {crc_s:.3} s = {:.2} GB/s |", gb / crc_s);
     std::fs::remove_file(&path).unwrap();

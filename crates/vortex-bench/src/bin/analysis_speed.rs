@@ -6,7 +6,7 @@
 //! from the texture's axes. Near pages want LOD 0, far ones coarser LODs. Then two harder
 //! buffers: 400 pages over LODs 0-3 in random order (no run coherence), and 14400 distinct pages.
 //!
-//! `cargo run --release -p vortex-vt --example analysis_speed`
+//! `cargo run --release -p vortex-bench --bin analysis_speed`
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests and measurement programs may panic on a broken set-up
 
 use std::collections::{BTreeMap, HashSet};
@@ -17,10 +17,7 @@ use vortex_vt::analysis::{Analysis, Analyzer, analyze};
 use vortex_vt::feedback::{encode, feedback_bias};
 use vortex_vt::page::{PageId, TextureGrid};
 
-#[path = "common/ground.rs"]
-mod ground;
-
-use ground::{Camera, FEEDBACK, FRAME};
+use vortex_bench::ground::{Camera, FEEDBACK, FRAME};
 
 /// The still view: the camera at (64 m, 32 m), turned 30° from the texture's axes.
 fn perspective_buffer(grid: &TextureGrid) -> Vec<u32> {

@@ -4,7 +4,7 @@
 //! (an 8x8 window of pages around the view centre at each of LODs 0-5, finest first), the cache full
 //! and evicting after the first frames. The full `rebuild()` is timed for comparison.
 //!
-//! `cargo run --release -p vortex-vt --example residency_speed`
+//! `cargo run --release -p vortex-bench --bin residency_speed`
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests and measurement programs may panic on a broken set-up
 
 use std::time::{Duration, Instant};

@@ -14,7 +14,7 @@
 //! controller takes part. Cache of 1024 slots (32x32), upload budget 32 pages per frame; 2000
 //! frames timed after 300 of warm-up. Making the feedback buffer (the GPU's job) is not timed.
 //!
-//! `cargo run --release -p vortex-vt --example frame_cost` (add `-- --best-of 3` to time each frame
+//! `cargo run --release -p vortex-bench --bin frame_cost` (add `-- --best-of 3` to time each frame
 //! three times, on clones of the state, and keep each part's fastest: preemption filtered out).
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests and measurement programs may panic on a broken set-up
 
@@ -27,10 +27,7 @@ use vortex_vt::page::{PageId, TextureGrid};
 use vortex_vt::page_table::{Change, PageTable};
 use vortex_vt::residency::{FrameUpdate, Residency, ResidencyConfig};
 
-#[path = "common/ground.rs"]
-mod ground;
-
-use ground::{Camera, FEEDBACK, FRAME};
+use vortex_bench::ground::{Camera, FEEDBACK, FRAME};
 
 const PAGES: u16 = 512;
 const SLOTS: usize = 1024;
