@@ -425,3 +425,55 @@ fn cmyk_16_bit_tiff_is_converted_at_16_bits() {
     // The texels are not 8-bit values widened: the 16 bits carry more than 8.
     assert!(ours.iter().any(|v| v % 257 != 0), "the 16-bit conversion holds only 8-bit values");
 }
+
+/// Aperio 33003 slides whose JPEG 2000 tiles hold subsampled chroma, as OpenJPEG's own encoder
+/// writes them from raw planes (`opj_compress -F W,H,3,8,u@1x1:DXxDY:DXxDY`, lossless): NAME-420.svs
+/// (Cb, Cr 2x2) and NAME-422.svs (2x1); 128-texel tiles.
+const MAKE_J2K_SUBSAMPLED: &str = r#"
+import sys, os, subprocess, numpy as np, tifffile
+h, w, t = 300, 260, 128
+y, x = np.mgrid[0:h, 0:w]
+ycc = np.stack([(x * 255 // w) ^ (y & 15), 128 + (y * 90 // h) - (x & 7) * 5, 60 + ((x // 4 + y // 3) % 120)], -1)
+ycc = np.clip(ycc, 0, 255).astype(np.uint8)
+def tiles(dx, dy):
+    raw = sys.argv[1] + ".raw"
+    for ty in range(0, h, t):
+        for tx in range(0, w, t):
+            tile = np.zeros((t, t, 3), np.uint8)
+            part = ycc[ty:ty + t, tx:tx + t]
+            tile[:part.shape[0], :part.shape[1]] = part
+            planes = [tile[..., 0]] + [tile[::dy, ::dx, c] for c in (1, 2)]
+            open(raw, "wb").write(b"".join(np.ascontiguousarray(p).tobytes() for p in planes))
+            subprocess.run(["opj_compress", "-i", raw, "-o", raw + ".j2k", "-F", "%d,%d,3,8,u@1x1:%dx%d:%dx%d" % (t, t, dx, dy, dx, dy), "-mct", "0"], check=True, capture_output=True)
+            yield open(raw + ".j2k", "rb").read()
+for name, dx, dy in (("420", 2, 2), ("422", 2, 1)):
+    desc = "Aperio Image Library v12.0.15 \r\n%dx%d [0,0 %dx%d] (%dx%d) J2K/KDU Q=70|AppMag = 20|MPP = 0.5" % (w, h, w, h, t, t)
+    tifffile.imwrite("%s-%s.svs" % (sys.argv[1], name), tiles(dx, dy), shape=(h, w, 3), dtype="uint8", tile=(t, t),
+                     compression=33003, photometric="rgb", description=desc, metadata=None)
+"#;
+
+/// Subsampled JPEG 2000 components (4:2:0 and 4:2:2 chroma) are upsampled by nearest neighbour
+/// to the texels, as OpenSlide does: its level 0 within a level, the YCbCr rounding apart.
+#[test]
+fn subsampled_jpeg_2000_is_upsampled_as_openslide_does() {
+    let Some(py) = venv_python() else { return };
+    if !crate::common::have_program("opj_compress", "-h", "libopenjp2-tools") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    python(&py, MAKE_J2K_SUBSAMPLED, &[s(&d("slide"))]);
+    for name in ["slide-420.svs", "slide-422.svs"] {
+        let (source, ours) = our_texels(&d(name), 1 << 30);
+        assert!(source.describe().contains("jpeg 2000 (YCbCr, OpenJPEG)"), "{}", source.describe());
+        let Some(theirs) = openslide_texels(&d(name)) else { return };
+        assert_eq!(ours.len(), theirs.len());
+        // Lossless tiles, the same nearest upsampling: only OpenSlide's YCbCr tables, which round
+        // the green term once where libjpeg's fixed point rounds two products, set them apart.
+        let worst = ours.iter().zip(&theirs).map(|(a, b)| a.abs_diff(*b)).max().unwrap();
+        assert!(worst <= 1, "{name}: {worst} levels from OpenSlide's level 0");
+    }
+    let out = d("out");
+    let line = cli::ok(&["split", s(&d("slide-420.svs")), "-o", s(&out), "--tile-size", "256"]);
+    assert!(line.contains("jpeg 2000 (YCbCr"), "{line}");
+}
