@@ -197,26 +197,16 @@ fn codec(path: &Path, decoder: &mut Decoder<BufReader<File>>, bits: u16, stored:
         3 => {
             let options: u32 =
                 decoder.find_tag_unsigned(Tag::Unknown(292)).map_err(|e| open_error(path, e))?.unwrap_or(0);
-            if options & 3 != 0 {
-                let what = if options & 1 != 0 {
-                    "two-dimensional Group 3 fax (T4Options bit 0)"
-                } else {
-                    "Group 3 fax with uncompressed mode (T4Options bit 1)"
-                };
+            if options & 2 != 0 {
                 return Err(TilerError::unsupported(
                     path,
-                    format!(
-                        "{what} is not supported (one-dimensional Group 3 and Group 4 are); re-save it with `tiffcp -c g4 in.tif out.tif`"
-                    ),
+                    "Group 3 fax with uncompressed mode (T4Options bit 1) is not supported (Group 3 without it and Group 4 are); re-save it with `tiffcp -c g4 in.tif out.tif`",
                 ));
             }
-            fax_only(Codec::Fax3)
+            fax_only(if options & 1 != 0 { Codec::Fax3TwoD } else { Codec::Fax3 })
         }
         4 => fax_only(Codec::Fax4),
-        2 => Err(TilerError::unsupported(
-            path,
-            "TIFF compression 2 (CCITT modified Huffman without EOL codes) is not supported (Group 3 and Group 4 fax are); re-save it with `tiffcp -c g4 in.tif out.tif`",
-        )),
+        2 => fax_only(Codec::FaxMh),
         other => Err(TilerError::unsupported(
             path,
             format!(
