@@ -153,6 +153,17 @@ fn bilevel_fax_and_sub_byte_grey_decode_as_libvips_does() {
     for needle in ["zeroed-2d.tif", "strip 0 (rows 0..9)", "fax row 0"] {
         assert!(err.contains(needle), "{needle:?} missing from: {err}");
     }
+    // Compression 2 whose first strip is zeroed: no white run code is all zeros.
+    if let Some(py) = venv_python() {
+        let mh = d("mh-one.tif");
+        let script = "import sys, tifffile\nwith tifffile.TiffFile(sys.argv[1]) as t:\n    p = t.pages[0]\n    o, n = p.dataoffsets[0], p.databytecounts[0]\nf = open(sys.argv[1], 'r+b'); f.seek(o); f.write(bytes(n))";
+        python(&py, script, &[s(&mh)]);
+        let mut source = source::open(&mh, 1 << 30).unwrap();
+        let err = source.read_row(&mut row).expect_err("zeroed fax data fails").to_string();
+        for needle in ["mh-one.tif", "strip 0", "a bad run length in fax row 0"] {
+            assert!(err.contains(needle), "{needle:?} missing from: {err}");
+        }
+    }
 }
 
 /// 16-bit planar-separate RGB, Deflate with the predictor, in strips and in tiles.
