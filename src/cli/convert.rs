@@ -85,6 +85,14 @@ pub struct ConvertArgs {
     #[arg(long)]
     keep_icc: bool,
 
+    /// Map a float or 32-bit integer input (a raw/zstd pack or tile directory of `float` or
+    /// `unsignedInt` tiles) linearly onto 8 bits (16 with --tile-type unsignedShort), as split's
+    /// --range does: MIN to 0, MAX to the top code [default: none; without it such an input goes
+    /// only to raw/zstd packs, since JPEG and PNG would cut its range]. Samples outside (and NaN)
+    /// are clamped and counted in the summary.
+    #[arg(long, value_name = "MIN:MAX")]
+    range: Option<source::range::Range>,
+
     #[command(flatten)]
     out: OutputArgs,
 }
@@ -106,7 +114,10 @@ pub fn run(a: ConvertArgs) -> Result<()> {
         source.memory_needed(),
     )?;
     let missing = source.missing_log();
-    let (source, kept_icc) = source::with_profile(&a.input, Box::new(source), icc, a.keep_icc)?;
+    let (mut source, kept_icc) = source::with_profile(&a.input, Box::new(source), icc, a.keep_icc)?;
+    if let Some(range) = a.range {
+        source = source::range::map(source, range, a.out.tile_type().unwrap_or(Depth::U8))?;
+    }
     let result = tile(source, &a.input, a.output_filename_format.clone(), &a.out, started, kept_icc);
     let missing = missing.lock().map(|m| m.clone()).unwrap_or_default();
     if !missing.is_empty() {

@@ -361,6 +361,11 @@ impl OutputArgs {
     pub fn max_memory(&self) -> u64 {
         self.max_memory
     }
+
+    /// --tile-type, where given (convert's --range maps onto it as split's does).
+    pub fn tile_type(&self) -> Option<Depth> {
+        self.tile_type
+    }
 }
 
 pub fn tile(

@@ -191,7 +191,7 @@ impl RowSource for Described {
     }
 }
 
-/// CMYK texels (8 bits, Adobe-inverted or not) to sRGB through a CMYK profile.
+/// CMYK texels (8 bits, Adobe-inverted or not, or 16 bits) to sRGB through a CMYK profile.
 pub struct Cmyk {
     transform: Transform<u8, u8, ThreadContext>,
     /// Where the profile came from, for the summary line.
@@ -201,8 +201,9 @@ pub struct Cmyk {
 impl Cmyk {
     /// The converter for a CMYK image with the embedded profile `icc`, or without one the
     /// default CMYK profile. `inverted`: 0 means full ink, as Photoshop writes CMYK JPEGs (an
-    /// Adobe APP14 marker says so).
-    pub fn new(path: &Path, icc: Option<&[u8]>, inverted: bool) -> Result<Cmyk> {
+    /// Adobe APP14 marker says so). `sixteen`: 16-bit samples in and out (native byte order),
+    /// as a 16-bit CMYK TIFF holds them, kept at 16 bits.
+    pub fn new(path: &Path, icc: Option<&[u8]>, inverted: bool, sixteen: bool) -> Result<Cmyk> {
         let (profile, whence) = match icc {
             Some(icc) => {
                 let profile = open_profile(path, icc)?;
@@ -230,13 +231,18 @@ impl Cmyk {
                 "they do not match",
             ));
         }
-        let input = if inverted { PixelFormat::CMYK_8_REV } else { PixelFormat::CMYK_8 };
+        let (input, output) = match (sixteen, inverted) {
+            (false, false) => (PixelFormat::CMYK_8, PixelFormat::RGB_8),
+            (false, true) => (PixelFormat::CMYK_8_REV, PixelFormat::RGB_8),
+            (true, false) => (PixelFormat::CMYK_16, PixelFormat::RGB_16),
+            (true, true) => (PixelFormat::CMYK_16_REV, PixelFormat::RGB_16),
+        };
         let transform = Transform::new_flags_context(
             ThreadContext::new(),
             &profile,
             input,
             &Profile::new_srgb_context(ThreadContext::new()),
-            PixelFormat::RGB_8,
+            output,
             INTENT,
             Flags::default(),
         )
@@ -245,7 +251,7 @@ impl Cmyk {
         Ok(Cmyk { transform, note: format!("CMYK{inverted} to sRGB through {whence} (LittleCMS)") })
     }
 
-    /// Converts one row of CMYK texels into RGB texels.
+    /// Converts one row of CMYK texels into RGB texels (each sample 2 bytes where `sixteen`).
     pub fn convert(&self, cmyk: &[u8], rgb: &mut [u8]) {
         self.transform.transform_pixels(cmyk, rgb);
     }

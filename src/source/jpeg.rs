@@ -130,7 +130,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
             ColorSpace::JCS_YCbCr | ColorSpace::JCS_RGB => (Channels::Rgb, None),
             // libjpeg turns YCCK into CMYK; the profile (or the default one) into sRGB.
             ColorSpace::JCS_CMYK | ColorSpace::JCS_YCCK => {
-                let cmyk = Cmyk::new(path, header.icc().as_deref(), header.adobe)?;
+                let cmyk = Cmyk::new(path, header.icc().as_deref(), header.adobe, false)?;
                 let row = vec![0u8; decompress.width() * 4];
                 (Channels::Rgb, Some((cmyk, row)))
             }

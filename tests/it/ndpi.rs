@@ -10,6 +10,7 @@
 //! RowsPerStrip = ImageLength). OpenSlide decodes each interval with libjpeg-turbo as we do, so
 //! the texels must be equal (tolerance 0).
 
+use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use crate::common::cli::{self, s};
@@ -63,8 +64,33 @@ enum Sof {
     Zero,
 }
 
+/// How the TIFF around the strip is laid out.
+#[derive(Clone, Copy)]
+struct Layout {
+    /// NDPI's 64-bit layout (8-byte directory offsets, each entry's high 32 bits after the
+    /// directory), as Hamamatsu writes it; otherwise plain classic TIFF.
+    wide: bool,
+    /// The restart-interval offset table (tag 65426).
+    table: bool,
+    /// Where the strip lies (after the directory where `None`); the file is written sparse.
+    strip_at: Option<u64>,
+}
+
+const CLASSIC: Layout = Layout { wide: false, table: true, strip_at: None };
+
 /// An NDPI file of `width` x `height` texels with restart intervals `interval` texels wide.
 fn make_ndpi(path: &Path, width: u32, height: u32, interval: u32, chroma: Chroma, sof: Sof) {
+    make_ndpi_laid_out(path, (width, height), interval, chroma, sof, CLASSIC);
+}
+
+fn make_ndpi_laid_out(
+    path: &Path,
+    (width, height): (u32, u32),
+    interval: u32,
+    chroma: Chroma,
+    sof: Sof,
+    layout: Layout,
+) {
     let (mcu_w, mcu_h) = chroma.mcu();
     let across = width.div_ceil(mcu_w).div_ceil(interval / mcu_w);
     let down = height.div_ceil(mcu_h);
@@ -106,7 +132,12 @@ fn make_ndpi(path: &Path, width: u32, height: u32, interval: u32, chroma: Chroma
     };
     strip[sof_at + 5..sof_at + 7].copy_from_slice(&h.to_be_bytes());
     strip[sof_at + 7..sof_at + 9].copy_from_slice(&w.to_be_bytes());
-    std::fs::write(path, tiff(width, height, &strip, &starts)).unwrap();
+    let (head, strip_at) = tiff(width, height, &strip, &starts, layout);
+    let mut file = std::fs::File::create(path).unwrap();
+    file.write_all(&head).unwrap();
+    // Seeking past the end leaves a hole: a strip past 4 GiB costs no disk.
+    file.seek(SeekFrom::Start(strip_at)).unwrap();
+    file.write_all(&strip).unwrap();
 }
 
 /// Where the entropy-coded data of a JPEG starts (after its SOS segment).
@@ -121,9 +152,10 @@ fn scan_data(jpeg: &[u8]) -> usize {
     }
 }
 
-/// A little-endian classic TIFF of one directory holding `strip` as NDPI lays it out: the
-/// directory first, then its values, then the strip.
-fn tiff(width: u32, height: u32, strip: &[u8], starts: &[u32]) -> Vec<u8> {
+/// A little-endian TIFF of one directory holding `strip` as NDPI lays it out: the directory
+/// first, then its values, then (where `layout` does not place it) the strip. Returns the bytes
+/// before the strip and where the strip goes.
+fn tiff(width: u32, height: u32, strip: &[u8], starts: &[u32], layout: Layout) -> (Vec<u8>, u64) {
     const SHORT: u16 = 3;
     const LONG: u16 = 4;
     let le16 = |v: u16| v.to_le_bytes().to_vec();
@@ -144,17 +176,23 @@ fn tiff(width: u32, height: u32, strip: &[u8], starts: &[u32]) -> Vec<u8> {
         (65424, 9, 1, le32(0)), // focal plane 0
         (65426, LONG, starts.len() as u32, starts.iter().flat_map(|s| s.to_le_bytes()).collect()),
     ];
+    entries.retain(|e| layout.table || e.0 != 65426);
     entries.sort_by_key(|e| e.0);
-    let ifd_at = 8;
-    let mut extra_at = ifd_at + 2 + entries.len() * 12 + 4;
+    // The wide layout's header offset, next-directory offset and high words are wider.
+    let (ifd_at, next_len, highs_len) = if layout.wide { (16, 8, 4 * entries.len()) } else { (8, 4, 0) };
+    let mut extra_at = ifd_at + 2 + entries.len() * 12 + next_len + highs_len;
     let extra_len: usize = entries.iter().map(|e| if e.3.len() > 4 { e.3.len() } else { 0 }).sum();
-    let strip_at = (extra_at + extra_len + 1) & !1;
+    let strip_at = layout.strip_at.unwrap_or(((extra_at + extra_len + 1) & !1) as u64);
     entries.iter_mut().find(|e| e.0 == 273).unwrap().3 = le32(strip_at as u32);
     let mut out = b"II*\0".to_vec();
     out.extend_from_slice(&le32(ifd_at as u32));
+    out.resize(ifd_at, 0);
     let mut extra = Vec::new();
+    let mut highs = Vec::new();
     out.extend_from_slice(&le16(entries.len() as u16));
     for (tag, kind, count, value) in &entries {
+        // Only the strip's offset has high bits here (the values lie near the directory).
+        highs.extend_from_slice(&le32(if *tag == 273 { (strip_at >> 32) as u32 } else { 0 }));
         out.extend_from_slice(&le16(*tag));
         out.extend_from_slice(&le16(*kind));
         out.extend_from_slice(&le32(*count));
@@ -168,11 +206,13 @@ fn tiff(width: u32, height: u32, strip: &[u8], starts: &[u32]) -> Vec<u8> {
             extra_at += value.len();
         }
     }
-    out.extend_from_slice(&le32(0));
+    out.resize(out.len() + next_len, 0);
+    if layout.wide {
+        out.extend_from_slice(&highs);
+    }
     out.extend_from_slice(&extra);
-    out.resize(strip_at, 0);
-    out.extend_from_slice(strip);
-    out
+    assert!(strip_at as usize >= out.len());
+    (out, strip_at)
 }
 
 /// The top-left `width` x `height` of an image `stride` texels wide.
@@ -279,11 +319,18 @@ fn an_ndpi_larger_than_max_memory_streams() {
 }
 
 /// A truncated slide, a restart marker out of order and one missing are errors naming the
-/// file and the interval; never a panic or wrong texels.
+/// file and the interval, whether the intervals are located by the offset table or found by
+/// scanning; never a panic or wrong texels.
 #[test]
 fn damaged_ndpi_names_the_interval() {
+    damaged_ndpi(CLASSIC);
+    damaged_ndpi(Layout { table: false, ..CLASSIC });
+}
+
+fn damaged_ndpi(layout: Layout) {
     let dir = tempfile::tempdir().unwrap();
-    let good = slide(dir.path(), "good.ndpi", (1024, 48), 256, Chroma::Half, Sof::Size);
+    let good = dir.path().join("good.ndpi");
+    make_ndpi_laid_out(&good, (1024, 48), 256, Chroma::Half, Sof::Size, layout);
     let bytes = std::fs::read(&good).unwrap();
     let read = |name: &str, data: &[u8]| -> String {
         let path = dir.path().join(name);
@@ -333,5 +380,110 @@ fn damaged_ndpi_names_the_interval() {
         if let Err(e) = result {
             assert!(e.to_string().contains("mutated.ndpi"), "{e}");
         }
+    }
+}
+
+/// The offset table (tag 65426) locates the intervals: the same texels as scanning for the
+/// markers finds, the summary saying which was done; a table of the wrong length is passed over
+/// (scanning instead), and one that puts an interval where its marker is not is an error naming
+/// the file and the interval.
+#[test]
+fn the_offset_table_locates_intervals_and_is_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let laid_out = |name: &str, layout: Layout| {
+        let path = dir.path().join(name);
+        make_ndpi_laid_out(&path, (1024, 48), 256, Chroma::Half, Sof::Size, layout);
+        path
+    };
+    let with_table = laid_out("table.ndpi", CLASSIC);
+    let (source, tabled) = our_texels(&with_table, 1 << 30);
+    assert!(source.describe().contains("located by its offset table"), "{}", source.describe());
+    let without = laid_out("scan.ndpi", Layout { table: false, ..CLASSIC });
+    let (source, scanned) = our_texels(&without, 1 << 30);
+    assert!(source.describe().contains("found by scanning (no offset table (tag 65426))"), "{}", source.describe());
+    assert!(tabled == scanned, "the table and the scan find different intervals");
+    // The table's directory entry: tag 65426, LONG, 24 intervals (4 across, 6 MCU rows of 8).
+    let bytes = std::fs::read(&with_table).unwrap();
+    let entry = bytes.windows(8).position(|w| w[..4] == [0x92, 0xFF, 4, 0] && w[4..] == 24u32.to_le_bytes());
+    let entry = entry.expect("the table's directory entry");
+    let table_at = u32::from_le_bytes(bytes[entry + 8..entry + 12].try_into().unwrap()) as usize;
+    // A count of 23 does not fit the JPEG: the strip is scanned.
+    let mut short = bytes.clone();
+    short[entry + 4] = 23;
+    let path = dir.path().join("short.ndpi");
+    std::fs::write(&path, &short).unwrap();
+    let (source, texels) = our_texels(&path, 1 << 30);
+    assert!(source.describe().contains("not 24 LONGs"), "{}", source.describe());
+    assert!(texels == tabled);
+    // Interval 5 said to start 3 bytes late: interval 4 then ends where no RST4 is.
+    let mut late = bytes.clone();
+    let entry = table_at + 5 * 4;
+    let start = u32::from_le_bytes(late[entry..entry + 4].try_into().unwrap());
+    late[entry..entry + 4].copy_from_slice(&(start + 3).to_le_bytes());
+    let path = dir.path().join("late.ndpi");
+    std::fs::write(&path, &late).unwrap();
+    let err = source::open(&path, 1 << 30)
+        .and_then(|mut source| {
+            let mut row = vec![0u8; 1024 * 3];
+            (0..48).try_for_each(|_| source.read_row(&mut row))
+        })
+        .expect_err("a table that disagrees with the markers is an error")
+        .to_string();
+    for needle in ["late.ndpi", "restart interval 4 (column 0 of MCU row 1)", "the table disagrees with the markers"] {
+        assert!(err.contains(needle), "{needle:?} missing from: {err}");
+    }
+}
+
+/// An NDPI file past 4 GiB, its strip beyond it, the offset's high 32 bits in the directory's
+/// extension (NDPI's 64-bit layout): read as tifffile reads it, and as the same slide laid out
+/// small. The file is sparse (a hole up to the strip), so it costs a few KiB of disk.
+#[test]
+fn an_ndpi_past_4_gib_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let small = dir.path().join("small.ndpi");
+    // 4:4:4, so that no chroma is upsampled: tifffile decodes the strip whole, upsampling across
+    // the intervals' edges, where OpenSlide and this reader decode each interval alone.
+    make_ndpi_laid_out(&small, (1024, 48), 256, Chroma::Full, Sof::Size, Layout { wide: true, ..CLASSIC });
+    let big = dir.path().join("big.ndpi");
+    let layout = Layout { wide: true, table: true, strip_at: Some((5 << 30) + 4096) };
+    make_ndpi_laid_out(&big, (1024, 48), 256, Chroma::Full, Sof::Size, layout);
+    {
+        use std::os::unix::fs::MetadataExt;
+        let meta = std::fs::metadata(&big).unwrap();
+        assert!(meta.len() > 5 << 30);
+        // Where the file system cannot hold holes it holds all of it; the tempdir goes at the end.
+        assert!(meta.blocks() * 512 < 1 << 30, "the test file is not sparse here: {} blocks", meta.blocks());
+    }
+    let (source, ours) = our_texels(&big, 1 << 30);
+    assert!(source.describe().contains("located by its offset table"), "{}", source.describe());
+    assert!(ours == our_texels(&small, 1 << 30).1, "the slide past 4 GiB differs from the same slide small");
+    // tifffile reads NDPI's high words (and its offset table) as OpenSlide 4 does; Debian's
+    // OpenSlide 3.4.1 guesses the high bits from the directory's offset instead (the data below
+    // the directory), which does not hold for a directory placed first.
+    if let Some(py) = crate::tiff_slides::venv_python() {
+        let theirs = dir.path().join("theirs.rgb");
+        let script = "import sys, tifffile\nopen(sys.argv[2], 'wb').write(tifffile.imread(sys.argv[1]).tobytes())";
+        crate::tiff_slides::python(&py, script, &[s(&big), s(&theirs)]);
+        assert!(ours == std::fs::read(&theirs).unwrap(), "differs from tifffile's reading");
+    }
+    let out = dir.path().join("tiles");
+    let summary = cli::ok(&["split", s(&big), "-o", s(&out), "--tile-size", "256"]);
+    assert!(summary.contains("Hamamatsu NDPI"), "{summary}");
+    // The directory moved past 6 GiB (as Hamamatsu may write it, after the data): refused by
+    // name, never read from the wrong bytes.
+    let mut head = vec![0u8; 4096];
+    std::fs::File::open(&big).unwrap().read_exact(&mut head).unwrap();
+    let entries = u16::from_le_bytes([head[16], head[17]]) as usize;
+    let directory = head[16..16 + 2 + 16 * entries + 8].to_vec();
+    head[4..12].copy_from_slice(&(6u64 << 30).to_le_bytes());
+    let far = dir.path().join("far.ndpi");
+    let mut file = std::fs::File::create(&far).unwrap();
+    file.write_all(&head).unwrap();
+    file.seek(SeekFrom::Start(6 << 30)).unwrap();
+    file.write_all(&directory).unwrap();
+    drop(file);
+    let err = source::open(&far, 1 << 30).err().expect("a directory past 4 GiB is refused").to_string();
+    for needle in ["far.ndpi", "NDPI directory 0 lies at byte 6442450944, past 4 GiB"] {
+        assert!(err.contains(needle), "{needle:?} missing from: {err}");
     }
 }

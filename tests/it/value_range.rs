@@ -105,3 +105,29 @@ fn integers_map_onto_16_bits_exactly() {
     let out = run(&["split", s(&png), "-o", s(&dir.path().join("r8")), "--range", "0:1"]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("8-bit"), "{:?}", out);
 }
+
+/// `convert --range`: a float pack (raw tiles, kept as float) re-tiled into 8-bit PNG maps as
+/// split's --range does, code for code; without --range the PNG codec refuses, naming the flag.
+#[test]
+fn convert_maps_a_float_pack_as_split_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let tif = dir.path().join("f.tif");
+    let values: Vec<f32> = (0..32).map(|i| i as f32 / 20.0 - 0.2).collect(); // -0.2 ..= 1.35
+    let mut encoder = TiffEncoder::new(std::fs::File::create(&tif).unwrap()).unwrap();
+    encoder.write_image::<colortype::Gray32Float>(8, 4, &values).unwrap();
+    let pack = dir.path().join("f.vtpk");
+    let tiles = ["--tile-size", "8", "--border", "0", "--filter", "box"];
+    ok(&[&["split", s(&tif), "--pack", s(&pack), "--codec", "raw"][..], &tiles].concat());
+    let out = dir.path().join("out");
+    let said = ok(&[&["convert", s(&pack), "-o", s(&out), "--codec", "png", "--range", "0:1"][..], &tiles].concat());
+    let outside = values.iter().filter(|v| !(0.0..=1.0).contains(*v)).count();
+    assert!(said.contains(&format!("{outside} samples outside --range clamped to it")), "{said}");
+    let img = finest_png(&out, 8, 4).to_luma8();
+    for (i, v) in values.iter().enumerate() {
+        let want = (*v as f64 * 255.0).clamp(0.0, 255.0).round() as u8;
+        assert_eq!(img.get_pixel(i as u32 % 8, i as u32 / 8).0[0], want, "{v}");
+    }
+    let refused = run(&["convert", s(&pack), "-o", s(&dir.path().join("refused")), "--codec", "png"]);
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && err.contains("--range MIN:MAX"), "{err}");
+}

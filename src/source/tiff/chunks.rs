@@ -5,7 +5,7 @@
 //! Decoded rows are as stored: samples packed MSB-first at 1, 2 or 4 bits (each row starting
 //! on a byte), 8-bit samples as they are, 16-bit samples in native byte order; the horizontal
 //! predictor is undone. Compressions: none, LZW ([`super::lzw`]), Deflate (flate2), PackBits,
-//! CCITT Group 3 one-dimensional and Group 4 fax (the `fax` crate, [`super::fax`]).
+//! CCITT Group 3 (one- and two-dimensional), Group 4 and modified Huffman fax ([`super::fax`]).
 
 use std::fs::File;
 use std::io::Read;
@@ -22,6 +22,10 @@ pub(super) enum Codec {
     Fax3,
     /// CCITT T.6 (Compression 4).
     Fax4,
+    /// CCITT T.4 two-dimensional (Compression 3, T4Options bit 0).
+    Fax3TwoD,
+    /// CCITT modified Huffman without EOLs (Compression 2).
+    FaxMh,
 }
 
 impl Codec {
@@ -33,6 +37,8 @@ impl Codec {
             Codec::PackBits => "packbits",
             Codec::Fax3 => "ccitt g3",
             Codec::Fax4 => "ccitt g4",
+            Codec::Fax3TwoD => "ccitt g3 2-d",
+            Codec::FaxMh => "ccitt modified huffman",
         }
     }
 }
@@ -119,6 +125,8 @@ impl Chunks {
                 super::fax::decode(raw, self.codec == Codec::Fax4, shape.width, out)
             }))
             .unwrap_or_else(|_| Err("the fax decoder failed on this data".into())),
+            Codec::Fax3TwoD => super::fax::decode_lines(raw, super::fax::Lines::TwoDimensional, shape.width, out),
+            Codec::FaxMh => super::fax::decode_lines(raw, super::fax::Lines::ModifiedHuffman, shape.width, out),
         }
     }
 

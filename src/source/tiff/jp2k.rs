@@ -169,7 +169,7 @@ impl Jp2kTiff {
         }
         let mut raw = vec![0u8; count as usize];
         self.file.read_exact_at(&mut raw, offset).map_err(|e| format!("cannot read it: {e}"))?;
-        self.check_size(&raw)?;
+        let siz = self.check_size(&raw)?;
         // OpenJPEG reports damage through its result; a panic in the binding must not take the
         // whole run down either.
         let image = std::panic::catch_unwind(|| jpeg2k::Image::from_bytes(&raw))
@@ -179,27 +179,43 @@ impl Jp2kTiff {
         if comps.len() < 3 {
             return Err(format!("the JPEG 2000 tile has {} components, 3 expected", comps.len()));
         }
-        let (cw, ch) = (comps[0].width(), comps[0].height());
-        for c in &comps[..3] {
-            if c.width() != cw || c.height() != ch || cw < w || ch < h || c.precision() != 8 || c.is_signed() {
+        // Where texel (x, y) of the tile finds each component's sample: subsampled components
+        // (dx, dy > 1, e.g. 4:2:0 chroma) are upsampled by nearest neighbour, the sample whose
+        // footprint covers the texel, as OpenSlide and opj_decompress do (with an odd origin the
+        // first texel takes the first sample).
+        let mut planes = Vec::with_capacity(3);
+        for (i, c) in comps[..3].iter().enumerate() {
+            let (dx, dy) = siz.factors[i];
+            let first = |origin: u64, d: u64| origin.div_ceil(d);
+            let (fx, fy) = (first(siz.origin.0, dx), first(siz.origin.1, dy));
+            // The component's sample under the tile's last texel must be there.
+            let covers = |origin: u64, n: u32, d: u64, f: u64, have: u32| {
+                ((origin + n as u64 - 1) / d).saturating_sub(f) < have as u64
+            };
+            let shaped = covers(siz.origin.0, w, dx, fx, c.width()) && covers(siz.origin.1, h, dy, fy, c.height());
+            if !shaped || c.precision() != 8 || c.is_signed() || c.data().len() < (c.width() * c.height()) as usize {
                 return Err(format!(
-                    "a JPEG 2000 component is {}x{} of {}{} bits; {w}x{h} unsigned 8-bit expected (subsampled components are not read)",
+                    "JPEG 2000 component {i} is {}x{} of {}{} bits, subsampled {dx}x{dy}; unsigned 8-bit covering {w}x{h} texels expected",
                     c.width(),
                     c.height(),
                     if c.is_signed() { "signed " } else { "" },
                     c.precision()
                 ));
             }
+            let columns: Vec<usize> =
+                (0..w as u64).map(|x| ((siz.origin.0 + x) / dx).saturating_sub(fx) as usize).collect();
+            planes.push((c.data(), c.width() as usize, dy, fy, columns));
         }
-        let (c0, c1, c2) = (comps[0].data(), comps[1].data(), comps[2].data());
-        let stride = comps[0].width() as usize;
+        let sample = |plane: usize, r: u32, x: usize| {
+            let (data, stride, dy, fy, columns) = &planes[plane];
+            let row = ((siz.origin.1 + r as u64) / dy).saturating_sub(*fy) as usize;
+            data[row * stride + columns[x]].clamp(0, 255)
+        };
         texels.clear();
         texels.reserve(w as usize * h as usize * 3);
-        let clamp = |v: i32| v.clamp(0, 255);
-        for r in 0..h as usize {
+        for r in 0..h {
             for x in 0..w as usize {
-                let at = r * stride + x;
-                let (a, b, c) = (clamp(c0[at]), clamp(c1[at]), clamp(c2[at]));
+                let (a, b, c) = (sample(0, r, x), sample(1, r, x), sample(2, r, x));
                 let rgb = if self.ycbcr { ycbcr_to_rgb(a, b, c) } else { [a as u8, b as u8, c as u8] };
                 texels.extend_from_slice(&rgb);
             }
@@ -210,8 +226,9 @@ impl Jp2kTiff {
 
 impl Jp2kTiff {
     /// Refuses a codestream whose SIZ marker declares more texels or components than a tile
-    /// holds, before OpenJPEG allocates for them.
-    fn check_size(&self, raw: &[u8]) -> std::result::Result<(), String> {
+    /// holds, before OpenJPEG allocates for them; returns the image's origin and its first three
+    /// components' subsampling.
+    fn check_size(&self, raw: &[u8]) -> std::result::Result<Siz, String> {
         let be32 = |at: usize| raw.get(at..at + 4).map(|b| u32::from_be_bytes([b[0], b[1], b[2], b[3]]));
         if raw.get(..4) != Some(&[0xFF, 0x4F, 0xFF, 0x51]) {
             return Err("not a JPEG 2000 codestream (no SOC and SIZ markers at its start)".into());
@@ -228,8 +245,27 @@ impl Jp2kTiff {
                 "the codestream declares {w}x{h} texels of {components} components in a {tw}x{th} tile"
             ));
         }
-        Ok(())
+        // Each component's Ssiz, XRsiz and YRsiz follow; a factor of 0 is not JPEG 2000.
+        let mut factors = [(1, 1); 3];
+        for (i, factor) in factors.iter_mut().enumerate().take(components as usize) {
+            let Some(&[_, dx, dy]) = raw.get(42 + 3 * i..45 + 3 * i) else {
+                return Err("the JPEG 2000 SIZ marker is cut short".into());
+            };
+            if dx == 0 || dy == 0 {
+                return Err(format!("JPEG 2000 component {i} is subsampled {dx}x{dy}"));
+            }
+            *factor = (dx as u64, dy as u64);
+        }
+        Ok(Siz { origin: (x0 as u64, y0 as u64), factors })
     }
+}
+
+/// What a tile's SIZ marker says about where its components' samples lie.
+struct Siz {
+    /// The image area's origin on the reference grid (XOsiz, YOsiz).
+    origin: (u64, u64),
+    /// The first three components' subsampling (XRsiz, YRsiz).
+    factors: [(u64, u64); 3],
 }
 
 /// JFIF YCbCr to RGB in libjpeg's fixed point (16 fractional bits, each term rounded), the

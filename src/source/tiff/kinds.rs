@@ -10,7 +10,7 @@
 //!   holds no more than 8 bits (every entry below 256, as some old writers store it and libtiff
 //!   takes it, or every entry a multiple of 257, the exact 16-bit form of an 8-bit value), else
 //!   16-bit with the map's values as they are, so no colour is rounded away.
-//! - CMYK (InkSet 1, 8-bit) goes to sRGB through the embedded ICC profile, or without one the
+//! - CMYK (InkSet 1, 8- or 16-bit) goes to sRGB through the embedded ICC profile, or without one the
 //!   default CMYK profile, as CMYK JPEG does ([`crate::source::icc::Cmyk`]).
 //!
 //! [`chunks`]: super::chunks
@@ -153,7 +153,7 @@ pub(super) fn open(
             let what = format!("{bits}-bit palette to RGB ({note})");
             (Kind::Palette { map, shift }, PixelLayout::new(Channels::Rgb, depth), what)
         }
-        5 if stored >= 4 && bits == 8 => {
+        5 if stored >= 4 && matches!(bits, 8 | 16) => {
             let ink_set = u16_tag(decoder, Tag::Unknown(332))?.unwrap_or(1);
             if alpha {
                 return unsupported("a CMYK with alpha".into());
@@ -161,15 +161,15 @@ pub(super) fn open(
             if ink_set != 1 {
                 return unsupported(format!("a multi-ink (InkSet {ink_set}, not CMYK)"));
             }
-            let cmyk = Cmyk::new(path, embedded.icc.as_deref(), false)?;
+            let cmyk = Cmyk::new(path, embedded.icc.as_deref(), false, bits == 16)?;
             // The profile is used up turning CMYK into sRGB.
             embedded.icc = None;
-            let what = format!("CMYK, {}", cmyk.note);
-            let row = vec![0u8; width as usize * 4];
-            (Kind::Cmyk { cmyk, row }, PixelLayout::new(Channels::Rgb, Depth::U8), what)
+            let what = format!("{bits}-bit CMYK, {}", cmyk.note);
+            let row = vec![0u8; width as usize * 4 * depth.bytes()];
+            (Kind::Cmyk { cmyk, row }, PixelLayout::new(Channels::Rgb, depth), what)
         }
         3 => return unsupported(format!("a {bits}-bit palette with {stored} samples per texel")),
-        5 => return unsupported(format!("a {bits}-bit CMYK (8-bit CMYK is read)")),
+        5 => return unsupported(format!("a {bits}-bit CMYK (8- and 16-bit CMYK are read)")),
         p => return unsupported(format!("a {bits}-bit photometric-{p} image with {stored} samples per texel:")),
     };
     let associated = alpha && extra.first() == Some(&1);
@@ -197,26 +197,16 @@ fn codec(path: &Path, decoder: &mut Decoder<BufReader<File>>, bits: u16, stored:
         3 => {
             let options: u32 =
                 decoder.find_tag_unsigned(Tag::Unknown(292)).map_err(|e| open_error(path, e))?.unwrap_or(0);
-            if options & 3 != 0 {
-                let what = if options & 1 != 0 {
-                    "two-dimensional Group 3 fax (T4Options bit 0)"
-                } else {
-                    "Group 3 fax with uncompressed mode (T4Options bit 1)"
-                };
+            if options & 2 != 0 {
                 return Err(TilerError::unsupported(
                     path,
-                    format!(
-                        "{what} is not supported (one-dimensional Group 3 and Group 4 are); re-save it with `tiffcp -c g4 in.tif out.tif`"
-                    ),
+                    "Group 3 fax with uncompressed mode (T4Options bit 1) is not supported (Group 3 without it and Group 4 are); re-save it with `tiffcp -c g4 in.tif out.tif`",
                 ));
             }
-            fax_only(Codec::Fax3)
+            fax_only(if options & 1 != 0 { Codec::Fax3TwoD } else { Codec::Fax3 })
         }
         4 => fax_only(Codec::Fax4),
-        2 => Err(TilerError::unsupported(
-            path,
-            "TIFF compression 2 (CCITT modified Huffman without EOL codes) is not supported (Group 3 and Group 4 fax are); re-save it with `tiffcp -c g4 in.tif out.tif`",
-        )),
+        2 => fax_only(Codec::FaxMh),
         other => Err(TilerError::unsupported(
             path,
             format!(
@@ -458,9 +448,13 @@ impl RowSource for KindsSource {
                 }
             }
             Kind::Cmyk { cmyk, row } => {
-                for (texel, s) in row.chunks_exact_mut(4).zip(self.samples.chunks_exact(stored)) {
-                    for c in 0..4 {
-                        texel[c] = s[c] as u8;
+                let sample = self.layout.depth.bytes();
+                for (texel, s) in row.chunks_exact_mut(4 * sample).zip(self.samples.chunks_exact(stored)) {
+                    for (c, bytes) in texel.chunks_exact_mut(sample).enumerate() {
+                        match sample {
+                            2 => bytes.copy_from_slice(&s[c].to_ne_bytes()),
+                            _ => bytes[0] = s[c] as u8,
+                        }
                     }
                 }
                 cmyk.convert(row, out);

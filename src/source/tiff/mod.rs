@@ -23,6 +23,7 @@ mod kinds;
 mod libjpeg;
 mod lzw;
 mod ndpi;
+mod ndpi_dir;
 mod pyramid;
 // Its reading of SampleFormat and BitsPerSample serves the channel source too.
 pub(super) mod samples;
@@ -136,6 +137,7 @@ impl Chunking {
 
 pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<Box<dyn RowSource>> {
     let bigtiff = is_bigtiff(path)?;
+    ndpi_dir::check_reachable(path)?;
     let mut decoder = open_decoder(path, max_memory)?;
     let chosen = pyramid::choose(path, &mut decoder, pick, bigtiff, max_memory)?;
     let embedded = super::Embedded {
@@ -153,7 +155,7 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
     };
     if jpeg::is_jpeg(path, &mut decoder)? {
         // One strip cut by restart markers (Hamamatsu NDPI) is read an interval at a time.
-        if let Some(source) = ndpi::open(path, &mut decoder, &chosen.label, &embedded, max_memory)? {
+        if let Some(source) = ndpi::open(path, &mut decoder, &chosen.label, &embedded, max_memory, chosen.index)? {
             return Ok(source);
         }
         return jpeg::open(path, &mut decoder, chosen.label, embedded, max_memory);

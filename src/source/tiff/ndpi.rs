@@ -29,6 +29,7 @@ use tiff::tags::Tag;
 
 use super::jpeg::copy_row;
 use super::libjpeg::{self, Colour, Extent};
+use super::ndpi_dir::Directory;
 use super::open_error;
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
@@ -86,6 +87,8 @@ pub(super) struct Ndpi {
     next: u64,
     failed: bool,
     label: String,
+    /// How the intervals are found, for the summary line.
+    located: String,
     embedded: crate::source::Embedded,
 }
 
@@ -97,6 +100,7 @@ pub(super) fn open(
     label: &str,
     embedded: &crate::source::Embedded,
     max_memory: u64,
+    page: usize,
 ) -> Result<Option<Box<dyn RowSource>>> {
     let tag_err = |e| open_error(path, e);
     let (width, height) = decoder.dimensions().map_err(tag_err)?;
@@ -109,15 +113,17 @@ pub(super) fn open(
     let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
     let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
     let ndpi = decoder.find_tag(Tag::Unknown(NDPI_FORMAT_FLAG)).map_err(tag_err)?.is_some();
-    if ndpi && file_len > u32::MAX as u64 {
-        return Err(TilerError::unsupported(
-            path,
-            format!(
-                "an NDPI file over 4 GiB ({} bytes) keeps the high bits of its offsets in an extension of each directory, which is not read yet",
-                file_len
-            ),
-        ));
-    }
+    // NDPI's own reading of the directory: offsets past 4 GiB and the offset table. Where it
+    // fails the file is read as the tiff crate reads it (and scanned), unless the file is too
+    // large for that to be right.
+    let directory = match ndpi.then(|| Directory::read(&file, file_len, page)) {
+        Some(Err(m)) if file_len > u32::MAX as u64 => {
+            return Err(TilerError::decode(path, format!("its NDPI directory {page}: {m}")));
+        }
+        Some(read) => read.ok(),
+        None => None,
+    };
+    let (offset, count) = directory.as_ref().and_then(|d| d.strip).unwrap_or((offset, count));
     if offset.checked_add(count).is_none_or(|end| end > file_len) {
         return Err(TilerError::decode(
             path,
@@ -189,9 +195,31 @@ pub(super) fn open(
     let fits = (max_memory / 8) / (mcu_row_bytes * (MAX_EXPANSION as u64 + 1));
     let group = wanted.min(fits).min(rows).max(1) as u32;
     let band_limit = usize::try_from(mcu_row_bytes * group as u64 * MAX_EXPANSION as u64).unwrap_or(usize::MAX);
+    // Where each interval starts, from the offset table where it is there, consistent and held
+    // (12 bytes an interval while read) within an eighth of --max-memory.
+    let intervals = across as u64 * rows;
+    let table = match &directory {
+        Some(_) if intervals * 12 > max_memory / 8 => {
+            Err(format!("its offset table ({intervals} entries) is larger than an eighth of --max-memory"))
+        }
+        Some(d) => d.mcu_starts(&file, file_len, intervals, (header.data_start, count)),
+        None => Err("no NDPI directory was read".to_string()),
+    };
+    let (table, located) = match table {
+        Ok(starts) => (Some(Table { starts, strip_at: offset, len: count }), "located by its offset table".to_string()),
+        Err(why) => (None, format!("found by scanning ({why})")),
+    };
     let mut reader = BufReader::with_capacity(1 << 16, file);
     reader.seek(SeekFrom::Start(offset + header.data_start)).map_err(|e| TilerError::io(path, e))?;
-    let scanner = Scanner { reader, left: count - header.data_start, pending_ff: false, marker: 0, rows_read: 0 };
+    let scanner = Scanner {
+        reader,
+        left: count - header.data_start,
+        pending_ff: false,
+        marker: 0,
+        rows_read: 0,
+        table,
+        index: 0,
+    };
     Ok(Some(Box::new(Ndpi {
         path: path.to_path_buf(),
         width,
@@ -211,6 +239,7 @@ pub(super) fn open(
         next: 0,
         failed: false,
         label: label.to_string(),
+        located,
         embedded: embedded.clone(),
     })))
 }
@@ -342,12 +371,32 @@ struct Scanner {
     marker: u8,
     /// MCU rows read so far.
     rows_read: u32,
+    /// Where the intervals start, where the file's offset table says so.
+    table: Option<Table>,
+    /// The number of the next interval.
+    index: u64,
+}
+
+/// The offset table, checked to be in order within the strip: each interval is read where it
+/// says, and the restart marker that closes it checked to be there.
+struct Table {
+    /// Where each interval's data starts, from the start of the strip.
+    starts: Vec<u64>,
+    /// The strip's offset in the file and its length.
+    strip_at: u64,
+    len: u64,
 }
 
 impl Scanner {
     /// Appends the next interval's data (without its closing marker) to `out`, at most `limit`
     /// bytes; `last`: the image's last interval, which ends with EOI or the strip.
-    fn interval(&mut self, out: &mut Vec<u8>, limit: usize, last: bool) -> std::result::Result<(), String> {
+    /// `keep` false: the interval is passed over (with the table, without reading it).
+    fn interval(&mut self, out: &mut Vec<u8>, limit: usize, last: bool, keep: bool) -> std::result::Result<(), String> {
+        let index = self.index;
+        self.index += 1;
+        if let Some(table) = &self.table {
+            return if keep { table.read(self.reader.get_ref(), index, out, limit, last) } else { Ok(()) };
+        }
         loop {
             if out.len() > limit {
                 return Err(format!("no restart marker within {limit} bytes: a damaged JPEG"));
@@ -406,6 +455,51 @@ impl Scanner {
     }
 }
 
+impl Table {
+    /// Reads interval `index` into `out`, checking that the marker which should close it (RSTn,
+    /// or EOI closing the last) is where the next interval's start says.
+    fn read(
+        &self,
+        file: &File,
+        index: u64,
+        out: &mut Vec<u8>,
+        limit: usize,
+        last: bool,
+    ) -> std::result::Result<(), String> {
+        let start = self.starts[index as usize];
+        let end = if last { self.len } else { self.starts[index as usize + 1] };
+        let len = (end - start) as usize;
+        if len > limit + 2 {
+            return Err(format!(
+                "the offset table (tag 65426) gives it {len} bytes, more than its bound ({limit}): a damaged table?"
+            ));
+        }
+        out.resize(len, 0);
+        file.read_exact_at(out, self.strip_at + start).map_err(|e| format!("cannot be read: {e}"))?;
+        let closing = if last { 0xD9 } else { 0xD0 + (index % 8) as u8 };
+        match out[len.saturating_sub(2)..] {
+            [0xFF, found] if found == closing => out.truncate(len - 2),
+            // The strip may end without EOI, as the scan allows.
+            _ if last => {}
+            [0xFF, found @ 0xD0..=0xD7] => {
+                return Err(format!(
+                    "RST{} found where RST{} was due, at the end the offset table (tag 65426) gives it: the table disagrees with the markers",
+                    found - 0xD0,
+                    closing - 0xD0
+                ));
+            }
+            _ => {
+                return Err(format!(
+                    "no RST{} marker at byte {} of the strip, where the offset table (tag 65426) ends it: the table disagrees with the markers",
+                    closing - 0xD0,
+                    end - 2
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Ndpi {
     fn mcu_rows(&self) -> u32 {
         self.height.div_ceil(self.header.mcu_h)
@@ -436,7 +530,7 @@ impl Ndpi {
                 };
                 out.clear();
                 let name = || interval_name(self.across, mcu_row, col);
-                self.scanner.interval(out, interval_limit, last).map_err(|m| format!("{}: {m}", name()))?;
+                self.scanner.interval(out, interval_limit, last, kept).map_err(|m| format!("{}: {m}", name()))?;
                 held += if kept { out.len() } else { 0 };
                 if held > self.band_limit {
                     return Err(format!(
@@ -564,8 +658,8 @@ impl RowSource for Ndpi {
             Colour::Rgb => "RGB",
         };
         format!(
-            "{}, jpeg ({colour}, libjpeg-turbo), streamed by restart interval ({}x{} intervals, {} to an MCU row, decoded in parallel)",
-            self.label, self.interval_w, self.header.mcu_h, self.across
+            "{}, jpeg ({colour}, libjpeg-turbo), streamed by restart interval ({}x{} intervals, {} to an MCU row, {}, decoded in parallel)",
+            self.label, self.interval_w, self.header.mcu_h, self.across, self.located
         )
     }
 }
