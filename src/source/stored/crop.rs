@@ -36,10 +36,10 @@ pub fn exact(header: &Header, full: (u32, u32), (width, height): (u32, u32)) -> 
     let mut halved = (false, false);
     for &(h, v) in &header.sampling {
         for (factor, max, half) in [(h, max_h, &mut halved.0), (v, max_v, &mut halved.1)] {
-            match () {
-                _ if factor == max => {}
-                _ if factor * 2 == max => *half = true,
-                _ => return false,
+            if factor * 2 == max {
+                *half = true;
+            } else if factor != max {
+                return false;
             }
         }
     }
@@ -125,7 +125,9 @@ fn transcode(
         // -optimize` makes.
         dst.optimize_coding = 1;
         (dst.scan_info, dst.num_scans) = (std::ptr::null(), 0);
-        dst.dest = &mut out.manager;
+        // A pointer to the whole struct, whose first field is the manager: the callbacks reach
+        // `bytes` through it.
+        dst.dest = std::ptr::from_mut(out).cast();
         mozjpeg_sys::jpeg_write_coefficients(dst, coefficients);
         mozjpeg_sys::jpeg_finish_compress(dst);
         mozjpeg_sys::jpeg_finish_decompress(src);
@@ -167,8 +169,8 @@ impl VecDestination {
 
 #[expect(unsafe_code, reason = "libjpeg's C interface")]
 fn destination(cinfo: &mut jpeg_compress_struct) -> &mut VecDestination {
-    // SAFETY: `dest` is the `manager` field, the first of a live `VecDestination` (repr(C)),
-    // set by `transcode`; libjpeg calls back on the thread that called it, holding no other
+    // SAFETY: `dest` points at a live `VecDestination` (repr(C), the manager first), set by
+    // `transcode`; libjpeg calls back on the thread that called it, holding no other
     // reference to it.
     unsafe { &mut *(cinfo.dest as *mut VecDestination) }
 }
