@@ -24,7 +24,7 @@ use crate::job::Progress;
 use crate::pixel::Sample;
 use crate::pyramid::cascade::{Batch, CutTile};
 use crate::sink::TileSink;
-use crate::source::stored::StoredTiles;
+use crate::source::stored::{StoredTiles, crop};
 use crate::stages::{Stage, StageClock};
 use crate::viewer::Crop;
 
@@ -34,29 +34,57 @@ use crate::viewer::Crop;
 /// (a row of tiles, 12 MiB at a 16384-texel width: issue 28).
 const LOTS_IN_FLIGHT: usize = 2;
 
-/// What the stage counts: tiles encoded, tiles copied from the source, tiles stored (places).
+/// What the stage counts: tiles encoded, tiles copied from the source (some cropped), tiles
+/// stored (places).
 #[derive(Default)]
 pub(crate) struct Counts {
     pub encoded: AtomicU64,
     pub copied: AtomicU64,
+    /// Of the copied tiles, those cropped at the image's edge.
+    pub cropped: AtomicU64,
     pub tiles: AtomicU64,
 }
 
 /// The finest level's pages that are a stored tile of the source, texel for texel: same grid,
-/// no border, wholly inside the image (an edge tile is padded past the image, and the stored
-/// tile's padding is not ours).
+/// no border, and what the sink keeps of the page inside the image. A page the sink keeps
+/// whole there is the stored tile as it is; an edge page the sink crops (Deep Zoom, IIIF) is
+/// the stored tile cropped losslessly ([`crop`]). A page padded past the image (a pack's or
+/// XYZ's edge page) is encoded: the stored tile's padding is not ours.
 pub(crate) struct Copier {
     pub tiles: std::sync::Arc<dyn StoredTiles>,
-    /// Pages of LOD 0 wholly inside the image, across and down.
-    pub columns: u32,
-    pub rows: u32,
+    /// The finest level's image, across and down.
+    pub width: u32,
+    pub height: u32,
     pub side: u32,
 }
 
 impl Copier {
-    /// Whether page (`lod`, `x`, `y`), kept as `crop` by the sink, is copied.
+    /// Whether page (`lod`, `x`, `y`), kept as `crop` by the sink (`None`: whole), is copied.
     fn covers(&self, lod: u32, (x, y): (u32, u32), crop: Option<Crop>) -> bool {
-        lod == 0 && x < self.columns && y < self.rows && crop.is_none_or(|c| c == Crop::whole(self.side))
+        let c = crop.unwrap_or(Crop::whole(self.side));
+        let inside = |at: u32, len: u32, extent: u32| at as u64 * self.side as u64 + len as u64 <= extent as u64;
+        lod == 0 && (c.x, c.y) == (0, 0) && inside(x, c.width, self.width) && inside(y, c.height, self.height)
+    }
+
+    /// Page (`x`, `y`) of the finest level, kept as `crop`, as a file made from the stored
+    /// tile; `None` where the stored tile cannot be copied, or not cropped to exactly the texels
+    /// the run decoded ([`crop::exact`]).
+    fn file(&self, (x, y): (u32, u32), crop: Option<Crop>) -> Result<Option<Stored>> {
+        let Some(file) = self.tiles.jpeg(x, y)? else { return Ok(None) };
+        let size = crop.map_or((self.side, self.side), |c| (c.width, c.height));
+        if size == (self.side, self.side) {
+            return Ok(Some(Stored::Copied(file)));
+        }
+        if !crate::source::stored::read_header(&file).is_some_and(|h| crop::exact(&h, (self.side, self.side), size)) {
+            return Ok(None);
+        }
+        let cropped = crop::crop(&file, size).map_err(|m| TilerError::Encode {
+            lod: 0,
+            x,
+            y,
+            message: format!("cropping the stored JPEG tile: {m}"),
+        })?;
+        Ok(Some(Stored::Cropped(cropped)))
     }
 }
 
@@ -197,6 +225,10 @@ impl<T: Sample> Encoding<'_, T> {
         match stored {
             Stored::Encoded(_) => self.counts.encoded.fetch_add(1, Ordering::Relaxed),
             Stored::Copied(_) => self.counts.copied.fetch_add(1, Ordering::Relaxed),
+            Stored::Cropped(_) => {
+                self.counts.cropped.fetch_add(1, Ordering::Relaxed);
+                self.counts.copied.fetch_add(1, Ordering::Relaxed)
+            }
             Stored::Constant(_) => 0,
         };
         if self.sink.ordered() {
@@ -210,7 +242,9 @@ impl<T: Sample> Encoding<'_, T> {
     fn store(&self, lod: u32, places: &[(u32, u32)], stored: &Stored) -> Result<()> {
         for &(x, y) in places {
             match stored {
-                Stored::Encoded(bytes) | Stored::Copied(bytes) => self.sink.write_tile(lod, x, y, bytes)?,
+                Stored::Encoded(bytes) | Stored::Copied(bytes) | Stored::Cropped(bytes) => {
+                    self.sink.write_tile(lod, x, y, bytes)?
+                }
                 Stored::Constant(texel) => self.sink.write_constant(lod, x, y, texel)?,
             }
         }
@@ -311,6 +345,8 @@ enum Stored {
     Encoded(Vec<u8>),
     /// The source's stored tile, as a file.
     Copied(Vec<u8>),
+    /// The source's stored tile cropped losslessly to the part of an edge page the sink keeps.
+    Cropped(Vec<u8>),
     /// Every texel is this one (stored layout, little-endian samples).
     Constant(Vec<u8>),
 }
@@ -334,9 +370,9 @@ fn prepare<T: Sample>(
     }
     let (lod, (x, y)) = (job.lod, job.places[0]);
     if let Some(copier) = copier.filter(|_| job.copy)
-        && let Some(file) = copier.tiles.jpeg(x, y)?
+        && let Some(file) = copier.file((x, y), job.crop)?
     {
-        return Ok(Stored::Copied(file));
+        return Ok(file);
     }
     let mut bytes = Vec::new();
     let encoded = match job.crop {

@@ -68,6 +68,8 @@ pub struct Summary {
     pub encoded: u64,
     /// Tiles of the finest level copied from the source's stored JPEG tiles.
     pub copied: u64,
+    /// Of the copied tiles, those cropped losslessly to an edge page's part inside the image.
+    pub cropped: u64,
     /// The source's stored tiles, where it has some, and whether they were copied.
     pub stored_tiles: Option<StoredReport>,
     pub bytes: u64,

@@ -47,12 +47,7 @@ fn plan_copy(source: &dyn RowSource, opts: &SplitOptions, layout: &Layout) -> (O
         None
     };
     let report = StoredReport { tile_size, quality: tiles.quality(), declined };
-    let copier = report.declined.is_none().then(|| Copier {
-        tiles,
-        columns: layout.width / side,
-        rows: layout.height / side,
-        side,
-    });
+    let copier = report.declined.is_none().then(|| Copier { tiles, width: layout.width, height: layout.height, side });
     (copier, Some(report))
 }
 
@@ -233,6 +228,7 @@ fn run<T: Sample>(
         tiles: counts.tiles.into_inner(),
         encoded: counts.encoded.into_inner(),
         copied: counts.copied.into_inner(),
+        cropped: counts.cropped.into_inner(),
         stored_tiles,
         bytes: sink.bytes_written(),
         stripes,

@@ -81,7 +81,7 @@ pub fn summary_line(done: &Finished, out: &Path) -> String {
             if s.stripes == 1 { "" } else { "s" }
         ),
     };
-    let stored = s.stored_tiles.as_ref().map(|t| stored_clause(s.copied, t)).unwrap_or_default();
+    let stored = s.stored_tiles.as_ref().map(|t| stored_clause(s.copied, s.cropped, t)).unwrap_or_default();
     format!(
         "wrote {} tiles ({} encoded, {} LODs from {} x {} pages, {}x{} {}) totalling {} to {} in {:.2} s: {:.1} source Mpx/s [{}]{stripes}{peak}{stored}",
         s.tiles,
@@ -101,11 +101,13 @@ pub fn summary_line(done: &Finished, out: &Path) -> String {
 }
 
 /// What became of the source's stored JPEG tiles, for the summary line.
-fn stored_clause(copied: u64, t: &vortex_tiler::split::StoredReport) -> String {
+fn stored_clause(copied: u64, cropped: u64, t: &vortex_tiler::split::StoredReport) -> String {
     let quality = t.quality.map(|q| format!(" ({q} by their quantisation tables)")).unwrap_or_default();
     let tiles = format!("the source's {}x{} JPEG tiles{quality}", t.tile_size.0, t.tile_size.1);
     match &t.declined {
-        None => format!("; {copied} tiles copied as stored from {tiles}"),
+        None => {
+            format!("; {copied} tiles copied as stored, {cropped} of them cropped losslessly at the edge, from {tiles}")
+        }
         Some(why) => format!("; {tiles} re-encoded, not copied: {why}"),
     }
 }
@@ -122,6 +124,7 @@ pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vor
         "tiles": s.tiles,
         "encoded": s.encoded,
         "copied": s.copied,
+        "cropped": s.cropped,
         "bytes": s.bytes,
         "lodCount": s.layout.lod_count,
         "tileColumns": s.layout.columns,
@@ -146,6 +149,7 @@ pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vor
             "quality": t.quality.map(|q| q.estimate),
             "qualityExact": t.quality.map(|q| q.exact),
             "copied": s.copied,
+            "cropped": s.cropped,
             "declined": t.declined,
         });
     }

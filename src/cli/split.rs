@@ -183,8 +183,9 @@ pub struct OutputArgs {
     /// the finest level's pages [default: copy those: a JPEG-tiled TIFF or slide (or, for
     /// convert, JPEG tiles without overlap) cut at its tile size with no border or overlap
     /// (--layout dzi --overlap 0, iiif, xyz, or --border 0) keeps the stored tiles byte for
-    /// byte, with no generation loss and no encoding time; the summary says how many were
-    /// copied and at what quality they were stored. An explicit --quality or --subsampling
+    /// byte, with no generation loss and no encoding time (edge tiles that dzi and iiif crop
+    /// are cropped losslessly from them); the summary says how many were copied, how many of
+    /// them cropped, and at what quality they were stored. An explicit --quality or --subsampling
     /// re-encodes them too; docs/sources.md].
     #[arg(long)]
     reencode: bool,

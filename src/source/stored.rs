@@ -13,6 +13,8 @@
 //! from the page cache: they were read moments before to be decoded) rather than carry them
 //! through the read-ahead, the pyramid and its stripes and rewinds beside the decoded rows.
 
+pub mod crop;
+
 /// What a run may copy: a grid of tiles stored as JPEG.
 pub trait StoredTiles: Send + Sync {
     /// Texels of a stored tile across and down.
@@ -82,6 +84,8 @@ pub struct Header {
     pub width: u16,
     pub height: u16,
     pub components: u8,
+    /// Each component's horizontal and vertical sampling factors, as the frame lists them.
+    pub sampling: Vec<(u8, u8)>,
     /// Table 0, the luminance table by convention, in natural order.
     pub luma_table: Option<[u16; 64]>,
     pub jfif: bool,
@@ -119,6 +123,9 @@ pub fn read_header(stream: &[u8]) -> Option<Header> {
                 header.height = u16::from_be_bytes([h0, h1]);
                 header.width = u16::from_be_bytes([w0, w1]);
                 header.components = components;
+                // Three bytes a component: its id, its sampling factors (high nibble across), its table.
+                let specs = body.get(6..6 + 3 * components as usize)?;
+                header.sampling = specs.chunks_exact(3).map(|c| (c[1] >> 4, c[1] & 0x0F)).collect();
             }
             0xDB => read_dqt(body, &mut header)?,
             0xE0 => header.jfif |= body.starts_with(b"JFIF\0"),

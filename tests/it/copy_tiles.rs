@@ -28,13 +28,18 @@ fn tool(name: &str, args: &[&str]) {
 /// An RGB image with ramps, edges and noise, 400x300: 3x2 whole 128-texel tiles and a partial
 /// column and row.
 fn pattern_png(dir: &Path) -> PathBuf {
+    pattern_png_sized(dir, 400, 300)
+}
+
+/// The pattern at `w x h`.
+fn pattern_png_sized(dir: &Path, w: u32, h: u32) -> PathBuf {
     let mut state = 0x2545_F491u32;
-    let img = image::RgbImage::from_fn(400, 300, |x, y| {
+    let img = image::RgbImage::from_fn(w, h, |x, y| {
         state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
         let noise = (state >> 24) % 40;
-        image::Rgb([(x * 255 / 400 + noise).min(255) as u8, (y * 255 / 300) as u8, ((x ^ y) & 255) as u8])
+        image::Rgb([(x * 255 / w + noise).min(255) as u8, (y * 255 / h) as u8, ((x ^ y) & 255) as u8])
     });
-    let path = dir.join("pattern.png");
+    let path = dir.join(format!("pattern-{w}x{h}.png"));
     img.save(&path).unwrap();
     path
 }
@@ -96,15 +101,16 @@ fn assert_copied(file: &[u8], stored: &[u8], marker: Option<Marker>, what: &str)
     assert!(ours == theirs, "{what}: the marker segments differ");
 }
 
-/// Texels libvips decodes from `path` (a region of it with `crop`), as raw bytes.
-fn vips_texels(path: &Path, crop: Option<(u32, u32, u32)>, scratch: &Path) -> Vec<u8> {
+/// Texels libvips decodes from `path` (a region of it with `crop`: x, y, width, height), as raw
+/// bytes.
+fn vips_texels(path: &Path, crop: Option<(u32, u32, u32, u32)>, scratch: &Path) -> Vec<u8> {
     let raw = scratch.with_extension("raw");
     match crop {
         None => tool("vips", &["rawsave", s(path), s(&raw)]),
-        Some((x, y, side)) => {
+        Some((x, y, w, h)) => {
             let cut = scratch.with_extension("v");
-            let (x, y, side) = (x.to_string(), y.to_string(), side.to_string());
-            tool("vips", &["crop", s(path), s(&cut), &x, &y, &side, &side]);
+            let (x, y, w, h) = (x.to_string(), y.to_string(), w.to_string(), h.to_string());
+            tool("vips", &["crop", s(path), s(&cut), &x, &y, &w, &h]);
             tool("vips", &["rawsave", s(&cut), s(&raw)]);
         }
     }
@@ -137,16 +143,27 @@ fn json(args: &[&str]) -> serde_json::Value {
     serde_json::from_str(&cli::ok(&args)).unwrap()
 }
 
-/// One JPEG TIFF through `split --layout dzi --overlap 0`: the 3x2 whole tiles copied (the
-/// stored bytes, decoding to the source tile's texels), the edge tiles and coarser levels
-/// what `--reencode` makes, byte for byte.
-fn check_dzi_copies(tiff: &Path, marker: Option<Marker>, quality: u8) {
+/// Whether a JPEG stream's chroma is subsampled (a component's sampling factors below another's).
+fn subsampled(stream: &[u8]) -> bool {
+    let (list, _) = segments(stream);
+    let (_, sof) = list.iter().find(|(m, _)| matches!(m, 0xC0..=0xC2)).expect("no SOF");
+    let factors: Vec<u8> = sof[6..].chunks_exact(3).map(|c| c[1]).collect();
+    factors.iter().any(|&f| f != factors[0])
+}
+
+/// One JPEG TIFF of a 4x3-page image through `split --layout dzi --overlap 0`: the 3x2 whole
+/// tiles copied (the stored bytes, decoding to the source tile's texels); the edge pages, where
+/// `crops`, the stored tiles cropped losslessly (one baseline scan, decoding to the source's
+/// texels there, exactly), else what `--reencode` makes, byte for byte, as every coarser tile.
+fn check_dzi_copies(tiff: &Path, marker: Option<Marker>, quality: u8, crops: bool) {
     let dir = tiff.parent().unwrap();
     let stem = tiff.file_stem().unwrap().to_string_lossy().into_owned();
     let (copy, again) = (dir.join(format!("{stem}-copy")), dir.join(format!("{stem}-again")));
     let dzi = ["split", s(tiff), "--layout", "dzi", "--tile-size", "128", "--overlap", "0"];
     let done = json(&[&dzi[..], &["-o", s(&copy)]].concat());
-    assert_eq!(done["copied"], 6, "{stem}: {done}");
+    let cropped = if crops { 6 } else { 0 };
+    assert_eq!((&done["copied"], &done["cropped"]), (&(6 + cropped).into(), &cropped.into()), "{stem}: {done}");
+    assert_eq!(done["storedTiles"]["cropped"], cropped, "{stem}: {done}");
     assert_eq!(done["storedTiles"]["quality"], quality, "{stem}: {done}");
     assert_eq!(done["storedTiles"]["qualityExact"], true, "{stem}: {done}");
     let redone = json(&[&dzi[..], &["-o", s(&again), "--reencode"]].concat());
@@ -154,30 +171,45 @@ fn check_dzi_copies(tiff: &Path, marker: Option<Marker>, quality: u8) {
     assert_eq!(redone["storedTiles"]["declined"], "--reencode asked", "{stem}: {redone}");
     assert_eq!(done["tiles"], redone["tiles"]);
 
+    let (width, height) = (done["width"].as_u64().unwrap() as u32, done["height"].as_u64().unwrap() as u32);
     let (ours, reencoded) = (files(&copy), files(&again));
     assert_eq!(ours.keys().collect::<Vec<_>>(), reencoded.keys().collect::<Vec<_>>());
-    let finest = format!("{stem}_files/9/"); // 400 texels wide: Deep Zoom level ceil(log2 400)
-    let mut copied = 0;
+    let finest = format!("{stem}_files/9/"); // 400 texels wide or so: Deep Zoom level ceil(log2 400)
+    let (mut copied, mut edges) = (0, 0);
     for (name, bytes) in &ours {
-        let whole_tile = name.strip_prefix(&finest).and_then(|t| t.strip_suffix(".jpeg")).and_then(|t| {
+        let page = name.strip_prefix(&finest).and_then(|t| t.strip_suffix(".jpeg")).and_then(|t| {
             let (x, y) = t.split_once('_')?;
-            let (x, y) = (x.parse::<u32>().ok()?, y.parse::<u32>().ok()?);
-            (x < 3 && y < 2).then_some((x, y))
+            Some((x.parse::<u32>().ok()?, y.parse::<u32>().ok()?))
         });
-        let Some((x, y)) = whole_tile else {
+        let edge = page.is_some_and(|(x, y)| x == 3 || y == 2);
+        let Some((x, y)) = page.filter(|_| !edge || crops) else {
             assert!(bytes == &reencoded[name], "{stem}: {name} differs from the --reencode run's");
             continue;
         };
-        copied += 1;
         let what = format!("{stem}: tile {x},{y}");
-        assert_copied(bytes, &stored_stream(tiff, (y * 4 + x) as usize), marker, &what);
+        let stored = stored_stream(tiff, (y * 4 + x) as usize);
+        let (w, h) = ((width - x * 128).min(128), (height - y * 128).min(128));
+        if edge {
+            edges += 1;
+            let (list, _) = segments(bytes);
+            assert!(list.iter().any(|(m, _)| *m == 0xC0), "{what}: the crop is not baseline");
+            let sof = list.iter().find(|(m, _)| *m == 0xC0).unwrap();
+            assert_eq!(sof.1[1..5], [(h >> 8) as u8, h as u8, (w >> 8) as u8, w as u8], "{what}: its size");
+            let tables = |l: &[(u8, Vec<u8>)]| {
+                l.iter().filter(|(m, _)| *m == 0xDB).flat_map(|(_, b)| b.clone()).collect::<Vec<u8>>()
+            };
+            assert_eq!(tables(&list), tables(&segments(&stored).0), "{what}: other quantisation tables");
+        } else {
+            copied += 1;
+            assert_copied(bytes, &stored, marker, &what);
+        }
         assert!(bytes != &reencoded[name], "{what}: the copy is the re-encoded tile");
         let scratch = dir.join(format!("{stem}-{x}-{y}"));
-        let source = vips_texels(tiff, Some((x * 128, y * 128, 128)), &scratch.with_extension("src"));
+        let source = vips_texels(tiff, Some((x * 128, y * 128, w, h)), &scratch.with_extension("src"));
         let shown = vips_texels(&copy.join(name), None, &scratch.with_extension("copy"));
         assert!(source == shown, "{what}: libvips decodes other texels from the copy");
     }
-    assert_eq!(copied, 6, "{stem}");
+    assert_eq!((copied, edges), (6, cropped), "{stem}");
 }
 
 /// libvips's JPEG TIFFs (shared tables; YCbCr 4:2:0, RGB and grey) and tifffile's (complete
@@ -193,15 +225,18 @@ fn whole_tiles_are_copied_as_stored() {
     let grey = d("grey.v");
     tool("vips", &["colourspace", s(&png), s(&grey), "b-w"]);
     let tiled = ["--tile", "--tile-width", "128", "--tile-height", "128", "--compression", "jpeg"];
-    for (name, input, extra, marker, quality) in [
-        ("ycbcr", &png, &["--Q", "75"][..], Marker::Jfif, 75),
+    for (name, input, extra, marker, quality, crops) in [
+        // 4:2:0: the edge pages are 16 and 44 texels: even, so chroma upsampling at their new
+        // edge would differ (`crop::exact`); they are encoded. At 405x301 (21 and 45) they are cropped.
+        ("ycbcr", &png, &["--Q", "75"][..], Marker::Jfif, 75, false),
+        ("ycbcr-odd", &pattern_png_sized(dir.path(), 405, 301), &["--Q", "75"][..], Marker::Jfif, 75, true),
         // At Q >= 90 libvips writes RGB (PhotometricInterpretation 2), chroma whole.
-        ("rgb", &png, &["--Q", "90"][..], Marker::AdobeRgb, 90),
-        ("grey", &grey, &["--Q", "85"][..], Marker::Jfif, 85),
+        ("rgb", &png, &["--Q", "90"][..], Marker::AdobeRgb, 90, true),
+        ("grey", &grey, &["--Q", "85"][..], Marker::Jfif, 85, true),
     ] {
         let tiff = d(&format!("{name}.tif"));
         tool("vips", &[&["tiffsave", s(input), s(&tiff)], &tiled[..], extra].concat());
-        check_dzi_copies(&tiff, Some(marker), quality);
+        check_dzi_copies(&tiff, Some(marker), quality, crops);
     }
     let Some(py) = std::env::var_os("VORTEX_PYVIPS") else {
         crate::common::skip_unless_ci(
@@ -216,7 +251,8 @@ fn whole_tiles_are_copied_as_stored() {
     assert!(out.status.success(), "tifffile: {}", String::from_utf8_lossy(&out.stderr));
     // Each tile is a complete JPEG; a JFIF marker of its own is kept, not added twice.
     let has_jfif = stored_stream(&tiff, 0).windows(5).any(|w| w == b"JFIF\0");
-    check_dzi_copies(&tiff, (!has_jfif).then_some(Marker::Jfif), 80);
+    let crops = !subsampled(&stored_stream(&tiff, 0));
+    check_dzi_copies(&tiff, (!has_jfif).then_some(Marker::Jfif), 80, crops);
 }
 
 /// Packs (border 0), IIIF and XYZ copy the same whole tiles; a grid that does not line up, a
@@ -246,10 +282,11 @@ fn other_layouts_copy_and_misfits_say_why() {
         };
         assert_copied(bytes, &stored_stream(&tiff, (y * 4 + x) as usize), Some(Marker::AdobeRgb), "pack");
     }
-    for layout in ["iiif", "xyz"] {
+    // IIIF crops its edge tiles (RGB: cropped copies); XYZ pads them, as a pack does: encoded.
+    for (layout, copied, cropped) in [("iiif", 12, 6), ("xyz", 6, 0)] {
         let out = d(layout);
         let done = json(&["split", s(&tiff), "-o", s(&out), "--layout", layout, "--tile-size", "128"]);
-        assert_eq!(done["copied"], 6, "{layout}: {done}");
+        assert_eq!((&done["copied"], &done["cropped"]), (&copied.into(), &cropped.into()), "{layout}: {done}");
     }
 
     let tiff240 = d("slide240.tif");
