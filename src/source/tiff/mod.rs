@@ -1511,7 +1511,11 @@ mod tests {
         let path = dir.path().join("tiles.tif");
         let tiles = tiles_of(&rgb, w as usize, h as usize, 3, 256, 256);
         write_tiff(&path, false, tiled_tags(w, h, &[8, 8, 8], 2, 256, 256), &tiles, true);
-        let err = open(&path, 100_000).err().unwrap();
+        // Uncompressed, they are read straight from the file 43 rows at a time (32 KiB of each
+        // tile): 64 KiB held, not the 192 KiB of the row of tiles.
+        let mut source = open(&path, 100_000).unwrap();
+        assert_eq!(read_all(source.as_mut()).unwrap(), rgb);
+        let err = open(&path, 50_000).err().unwrap();
         assert!(err.to_string().contains("row of tiles"), "{err}");
     }
 
