@@ -84,15 +84,19 @@ fn json_says_where_the_memory_went_for_strip_and_tiled_tiffs() {
     let strips = dir.path().join("strips.tif");
     strip_tiff(&strips, 1000, 600);
     let mut inputs = vec![(strips.clone(), false)];
+    // (input, whether its decoder holds buffers of its own)
     if have_program("tiffcp", "-h", "libtiff-tools") {
-        for (name, compression) in [("tiled.tif", "none"), ("lzw.tif", "lzw")] {
-            let tiled = dir.path().join(name);
-            let out = std::process::Command::new("tiffcp")
-                .args(["-c", compression, "-t", "-w", "128", "-l", "128", s(&strips), s(&tiled)])
-                .output()
-                .unwrap();
+        // Tiles, and Deflate strips (decoded into the source's band, some by workers ahead).
+        for (name, args) in [("tiled.tif", "none -t"), ("lzw.tif", "lzw -t"), ("deflate.tif", "zip -r 16")] {
+            let file = dir.path().join(name);
+            let mut tiffcp = std::process::Command::new("tiffcp");
+            tiffcp.arg("-c").args(args.split(' '));
+            if args.ends_with("-t") {
+                tiffcp.args(["-w", "128", "-l", "128"]);
+            }
+            let out = tiffcp.args([s(&strips), s(&file)]).output().unwrap();
             assert!(out.status.success(), "tiffcp: {}", String::from_utf8_lossy(&out.stderr));
-            inputs.push((tiled, true));
+            inputs.push((file, true));
         }
     }
     for (input, tiled) in &inputs {
@@ -120,7 +124,8 @@ fn json_says_where_the_memory_went_for_strip_and_tiled_tiffs() {
             check(&MemoryReport { budget: field("maxMemoryBytes"), planned, peaks }, &what);
             // A pack's writer takes the encoded tiles in order: some wait for it.
             assert!(field("encodedBytes") > 0, "{what}");
-            // Strips of 16 rows are read straight into the rows; tiles are decoded first.
+            // Uncompressed strips are read straight into the rows; tiles and Deflate strips are
+            // decoded first.
             assert_eq!(field("decoderBytes") > 0, *tiled, "{what}");
         }
     }

@@ -763,11 +763,12 @@ impl RowSource for TiffSource {
         Ok(())
     }
 
-    /// The decoded strip or row of tiles, the one tile and a stored row (not the strips the
-    /// workers decode ahead, which they hold).
+    /// The decoded strip or row of tiles, the one tile, a stored row and the strips the workers
+    /// decode ahead (each the size of the one taken).
     fn buffer_bytes(&self) -> u64 {
         let row = self.direct.as_ref().map_or(0, |d| d.row.capacity());
-        (self.band.capacity() + self.tile.capacity() + row) as u64
+        let ahead = self.ahead.as_ref().map_or(0, |a| a.in_flight() as usize * self.band.capacity());
+        (self.band.capacity() + self.tile.capacity() + row + ahead) as u64
     }
 
     /// Strips and tiles are found by row: the next read loads the one it needs.
