@@ -33,11 +33,13 @@ cat "$src" >/dev/null # in the page cache
 rm -f "$OUT/profile.vtpk"
 sync
 perf record -q -F 999 -o "$WORK/profile.data" -- "$bin" split "$src" --pack "$OUT/profile.vtpk" --force \
-  --tile-size 256 --border 0 "${codec[@]}" -q
+  --tile-size 256 --border 0 "${codec[@]}" --json >"$WORK/profile.json"
 rm -f "$OUT/profile.vtpk"
 perf script -i "$WORK/profile.data" -F comm,tid,time,ip,sym 2>/dev/null | python3 -c '
-import collections, sys
+import collections, json, sys
 HZ = 999
+run = json.load(open(sys.argv[1]))
+mpx = run["width"] * run["height"] / 1e6
 threads, symbols, buckets = collections.Counter(), collections.defaultdict(collections.Counter), collections.Counter()
 names, start = {}, None
 for line in sys.stdin:
@@ -53,11 +55,12 @@ for line in sys.stdin:
     threads[tid] += 1
     symbols[tid][sym] += 1
     buckets[int((t - start) * 10)] += 1
-print(f"{sum(threads.values()) / HZ:.2f} s of CPU sampled")
+total = sum(threads.values()) / HZ
+print(f"{total:.2f} s of CPU sampled, {total / mpx * 1e3:.1f} ms per source Mpx")
 for tid, n in threads.most_common():
     if n < HZ // 20:
         continue
     top = ", ".join(f"{s[:48]} {c / n:.0%}" for s, c in symbols[tid].most_common(4))
     print(f"  {names[tid]:>14} {n / HZ:5.2f} s: {top}")
 print("cores busy per 100 ms:", " ".join(f"{buckets[b] / (HZ / 10):.1f}" for b in range(max(buckets) + 1)))
-'
+' "$WORK/profile.json"

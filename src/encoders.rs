@@ -21,6 +21,7 @@ use std::time::Instant;
 use crate::codec::TileEncoder;
 use crate::error::{Result, TilerError};
 use crate::job::Progress;
+use crate::limits::{Gauge, Part};
 use crate::pixel::Sample;
 use crate::pyramid::cascade::{Batch, CutTile};
 use crate::sink::TileSink;
@@ -99,7 +100,8 @@ pub(crate) fn consume<T: Sample>(
     clock: &StageClock,
 ) -> Result<()> {
     let busy = Busy::default();
-    let stage = Encoding { encoder, sink, counts, copier, progress, busy: &busy };
+    let memory = &clock.memory;
+    let stage = Encoding { encoder, sink, counts, copier, progress, busy: &busy, memory };
     // The writer waits for each lot in turn and frees its place once it is stored; a lot is
     // received only into a free place, so the writer's queue never fills.
     let (to_writer, lots) = sync_channel::<Arc<Lot<T>>>(LOTS_IN_FLIGHT);
@@ -117,7 +119,10 @@ pub(crate) fn consume<T: Sample>(
                 // tiles as they were encoded.
                 clock.time(Stage::Store, || {
                     results.into_iter().zip(&lot.jobs).try_for_each(|(result, job)| match result? {
-                        Some(stored) => stage.store(job.lod, &job.places, &stored),
+                        Some(stored) => {
+                            memory.add(Part::Encoded, -(stored.bytes() as i64));
+                            stage.store(job.lod, &job.places, &stored)
+                        }
                         None => Ok(()),
                     })
                 })?;
@@ -212,6 +217,7 @@ struct Encoding<'a, T> {
     copier: Option<&'a Copier>,
     progress: &'a dyn Progress,
     busy: &'a Busy,
+    memory: &'a Gauge,
 }
 
 impl<T: Sample> Encoding<'_, T> {
@@ -221,7 +227,9 @@ impl<T: Sample> Encoding<'_, T> {
         let texels = job.take_texels()?;
         let stored = prepare(self.encoder, self.sink, job, &texels, self.copier)?;
         // The last job of a tile frees its texels here, not when the writer stores the lot.
-        drop(texels);
+        if let Some(texels) = Arc::into_inner(texels) {
+            self.memory.add(Part::Tiles, -((texels.capacity() * size_of::<T>()) as i64));
+        }
         match stored {
             Stored::Encoded(_) => self.counts.encoded.fetch_add(1, Ordering::Relaxed),
             Stored::Copied(_) => self.counts.copied.fetch_add(1, Ordering::Relaxed),
@@ -232,6 +240,7 @@ impl<T: Sample> Encoding<'_, T> {
             Stored::Constant(_) => 0,
         };
         if self.sink.ordered() {
+            self.memory.add(Part::Encoded, stored.bytes() as i64);
             return Ok(Some(stored));
         }
         self.store(job.lod, &job.places, &stored)?;
@@ -349,6 +358,15 @@ enum Stored {
     Cropped(Vec<u8>),
     /// Every texel is this one (stored layout, little-endian samples).
     Constant(Vec<u8>),
+}
+
+impl Stored {
+    /// Bytes held until the writer stores it.
+    fn bytes(&self) -> usize {
+        match self {
+            Stored::Encoded(b) | Stored::Copied(b) | Stored::Constant(b) => b.capacity(),
+        }
+    }
 }
 
 /// Encodes a tile (or the part the sink keeps), unless it has one colour and the sink stores

@@ -6,6 +6,7 @@ use crate::background::Background;
 use crate::codec::Codec;
 use crate::error::Result;
 use crate::layout::Layout;
+use crate::limits::Peaks;
 use crate::pixel::{Depth, PixelLayout};
 use crate::pyramid::Filter;
 use crate::source::stored::Quality;
@@ -81,6 +82,21 @@ pub struct Summary {
     pub passes: usize,
     /// Where the wall time went.
     pub stages: StageTimes,
+    /// Where the memory went.
+    pub memory: MemoryReport,
+}
+
+/// Where a run's memory went (issue 28), by the stages' own count of their buffers beside the
+/// budget: what `split --json` reports under `memory` (docs/cli.md).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MemoryReport {
+    /// `--max-memory`.
+    pub budget: u64,
+    /// What the plan counted on holding at most, its bound for the parts below
+    /// (`pyramid::stripes`); `None` where no plan was made (a shard, merge's coarse levels).
+    pub planned: Option<u64>,
+    /// What each part held at most, and all of them at once.
+    pub peaks: Peaks,
 }
 
 /// A source's stored JPEG tiles as the summary tells of them.

@@ -6,6 +6,8 @@
 //! length) and checks it here; over a cap the error names the figure, the cap and the flag
 //! that raises it, instead of an abort, an OOM kill or a run that never ends.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use crate::error::TilerError;
 use crate::layout::Layout;
 
@@ -122,6 +124,82 @@ pub fn human_bytes(bytes: u64) -> String {
     if unit == 0 { format!("{bytes} B") } else { format!("{value:.1} {}", units[unit]) }
 }
 
+/// What a run holds, part by part, as its stages count their own buffers (issue 28): where the
+/// memory under `--max-memory` went, for `split --json`. Each part's bytes now and at most, and
+/// the most all parts held at once (at most the sum of the parts' peaks, which need not
+/// coincide). Capacities, not lengths: what the allocator was asked for.
+#[derive(Debug, Default)]
+pub struct Gauge {
+    now: [AtomicU64; PARTS],
+    peak: [AtomicU64; PARTS],
+    total: AtomicU64,
+    total_peak: AtomicU64,
+}
+
+/// The parts a [`Gauge`] counts, in the pipeline's order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    /// The source decoder's own buffers beyond the rows it fills (a TIFF's row of tiles).
+    Decoder,
+    /// Chunks of source rows read ahead, queued, summed or being cut (`source::read_ahead`).
+    ReadAhead,
+    /// The rows the pyramid's sums made of those chunks, waiting for the cutting thread.
+    SumRows,
+    /// Every level's row of tiles being filled (`pyramid::band`).
+    Bands,
+    /// Tiles cut and not yet encoded: queued for the encoders, in lots, being encoded.
+    Tiles,
+    /// Encoded tiles waiting for the writer (ordered sinks: packs).
+    Encoded,
+}
+
+const PARTS: usize = 6;
+
+/// Each part's most bytes, and the most all of them held at once.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Peaks {
+    pub parts: [u64; PARTS],
+    pub total: u64,
+}
+
+impl Peaks {
+    pub fn part(&self, part: Part) -> u64 {
+        self.parts[part as usize]
+    }
+}
+
+impl Gauge {
+    /// `bytes` more (or fewer, negative) held for `part`.
+    pub fn add(&self, part: Part, bytes: i64) {
+        if bytes == 0 {
+            return;
+        }
+        // Two's complement: a negative delta wraps back down. A part briefly below zero (one
+        // thread frees what another has not counted yet) is not a peak.
+        let mark = |now: &AtomicU64, peak: &AtomicU64| {
+            let new = now.fetch_add(bytes as u64, Ordering::Relaxed).wrapping_add(bytes as u64);
+            if new <= i64::MAX as u64 {
+                peak.fetch_max(new, Ordering::Relaxed);
+            }
+        };
+        mark(&self.now[part as usize], &self.peak[part as usize]);
+        mark(&self.total, &self.total_peak);
+    }
+
+    /// `part` holds `bytes` now (a buffer that is resized rather than allocated and freed).
+    pub fn set(&self, part: Part, bytes: u64) {
+        let old = self.now[part as usize].load(Ordering::Relaxed);
+        self.add(part, bytes as i64 - old as i64);
+    }
+
+    pub fn peaks(&self) -> Peaks {
+        Peaks {
+            parts: std::array::from_fn(|i| self.peak[i].load(Ordering::Relaxed)),
+            total: self.total_peak.load(Ordering::Relaxed),
+        }
+    }
+}
+
 /// What the source's read-ahead (`source::read_ahead`) holds, which the stripes' plan counts
 /// before it picks how a source is read: below both, so that the pyramid needs no source.
 pub mod read_ahead {
@@ -176,6 +254,25 @@ mod tests {
     #[test]
     fn ordinary_runs_pass() {
         Limits::default().check_pyramid(&Layout::new(16384, 16384, 256, 0).unwrap(), true).unwrap();
+    }
+
+    #[test]
+    fn the_gauge_keeps_each_part_s_peak_and_the_total_s() {
+        let g = Gauge::default();
+        g.add(Part::Bands, 100);
+        g.add(Part::Tiles, 50);
+        g.add(Part::Bands, -100);
+        g.add(Part::Tiles, 70);
+        g.set(Part::Decoder, 30);
+        g.set(Part::Decoder, 10);
+        let p = g.peaks();
+        assert_eq!((p.part(Part::Bands), p.part(Part::Tiles), p.part(Part::Decoder)), (100, 120, 30));
+        // 150 with both bands and tiles held; 150 again with 120 + 30, never more.
+        assert_eq!(p.total, 150);
+        // Freed before counted: not a peak.
+        g.add(Part::Encoded, -5);
+        g.add(Part::Encoded, 5);
+        assert_eq!(g.peaks().part(Part::Encoded), 0);
     }
 
     #[test]

@@ -16,6 +16,7 @@ use crate::codec::{Codec, TileEncoder};
 use crate::encoders::{self, Copier};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
+use crate::limits::Part;
 use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::pyramid::cascade::{Batch, BatchSender, Cascade, Derived, Span};
 use crate::pyramid::cut::Padding;
@@ -28,7 +29,7 @@ use crate::sink::TileSink;
 use crate::source::{ImageHeader, RowSource, read_ahead};
 use crate::stages::{Stage, StageClock};
 
-pub use crate::job::{Progress, SplitOptions, StoredReport, Summary};
+pub use crate::job::{MemoryReport, Progress, SplitOptions, StoredReport, Summary};
 
 /// Whether the finest level's pages are copied from `source`'s stored tiles (the copier) and
 /// what the summary says of them; neither where the source stores none.
@@ -184,10 +185,12 @@ fn run<T: Sample>(
         None => Padding::Edge,
     };
 
-    let (stripes, pass_count) = match &passes {
-        Passes::Whole(plan, _) => (plan.stripes.len(), plan.stripes.len() + plan.coarse.is_some() as usize),
-        Passes::Shard(spans, _) => (0, spans.len()),
-        Passes::AboveCut(_) => (1, 0),
+    let (stripes, pass_count, planned) = match &passes {
+        Passes::Whole(plan, _) => {
+            (plan.stripes.len(), plan.stripes.len() + plan.coarse.is_some() as usize, Some(plan.held))
+        }
+        Passes::Shard(spans, _) => (0, spans.len(), None),
+        Passes::AboveCut(_) => (1, 0, None),
     };
 
     let (tx, rx) = sync_channel::<Result<Batch<T>>>(QUEUE_BATCHES);
@@ -234,6 +237,7 @@ fn run<T: Sample>(
         stripes,
         passes: pass_count,
         stages: clock.times(),
+        memory: MemoryReport { budget: opts.max_memory, planned, peaks: clock.memory.peaks() },
     };
     Ok((summary, roots))
 }
@@ -372,8 +376,16 @@ impl<T: Sample> Producer<'_, T> {
         let (to_cutter, from_sums) = sync_channel::<(Option<read_ahead::Chunk<T>>, Derived<T>)>(HANDOFF_CHUNKS);
         let (spare_tx, spare_rx) = std::sync::mpsc::channel::<Derived<T>>();
         let clock = &self.clock;
+        // Bytes of the rows handed on to the cutter: live until the pass ends (they come back to
+        // be filled again).
+        let mut derived_bytes = 0;
+        let mut count_derived = |derived: &Derived<T>, had: usize| {
+            let grown = derived.bytes() as i64 - had as i64;
+            clock.memory.add(Part::SumRows, grown);
+            derived_bytes += grown;
+        };
         let cut_columns = columns.clone();
-        std::thread::scope(|scope| {
+        let result = std::thread::scope(|scope| {
             let cutter = std::thread::Builder::new().name("vortex-cut".into()).spawn_scoped(scope, move || {
                 clock.time(Stage::Cutter, || -> Result<()> {
                     while let Ok((chunk, derived)) = clock.time(Stage::CutWait, || from_sums.recv()) {
@@ -393,23 +405,28 @@ impl<T: Sample> Producer<'_, T> {
                 read_ahead::chunks(source, count, row_len, chunk_rows, clock, |chunk: read_ahead::Chunk<T>| {
                     let mut derived = spare_rx.try_recv().unwrap_or_default();
                     derived.clear();
+                    let had = derived.bytes();
                     for row in chunk.rows().chunks_exact(row_len) {
                         self.check_cancelled()?;
                         sums.push_source_row(&row[columns.clone()], &mut derived)?;
                         derived.end_source_row();
                     }
+                    count_derived(&derived, had);
                     hand_on(Some(chunk), derived)
                 })
                 .and_then(|()| {
                     let mut derived = Derived::default();
                     sums.finish(&mut derived);
+                    count_derived(&derived, 0);
                     hand_on(None, derived)
                 });
             drop(hand_on);
             let cut = cutter.join().map_err(|_| TilerError::panicked("the cutting thread"))?;
             // A cutter that failed made the sums' hand-over fail: its error is the one to report.
             cut.and(summed)
-        })
+        });
+        clock.memory.add(Part::SumRows, -derived_bytes);
+        result
     }
 
     /// The LODs above the cut level, from the exact sums of the first of them, assembled row

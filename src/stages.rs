@@ -23,6 +23,8 @@ pub(crate) struct StageClock {
     encoders_idle: AtomicU64,
     encode: AtomicU64,
     store: AtomicU64,
+    /// What the stages hold, part by part (`--json`'s `memory`).
+    pub(crate) memory: crate::limits::Gauge,
 }
 
 /// One of [`StageClock`]'s clocks.

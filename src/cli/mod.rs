@@ -174,6 +174,13 @@ pub struct RunFlags {
     /// progress bar.
     #[arg(long)]
     pub json: bool,
+
+    /// After the summary line, a line saying where the memory went: what each stage held at
+    /// most (the source decoder, the read-ahead, the pyramid's rows and bands, the tiles
+    /// waiting for or in the encoders, the encoded tiles waiting for the writer) beside
+    /// --max-memory and the plan's bound; --json always says it, under `memory`.
+    #[arg(short, long, conflicts_with = "quiet")]
+    pub verbose: bool,
 }
 
 impl RunFlags {

@@ -137,6 +137,7 @@ pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vor
         "seconds": done.took.as_secs_f64(),
         "peakMemoryBytes": peak_rss(),
         "stages": stages_json(&s.stages),
+        "memory": memory_json(&s.memory),
     });
     if !matches!(layout, "vortex" | "pack" | "shard") {
         // The viewer's own terms: its tile side without the overlap (Deep Zoom's TileSize).
@@ -179,6 +180,42 @@ fn stages_json(t: &vortex_tiler::stages::StageTimes) -> serde_json::Value {
         "encodeSeconds": t.encode.as_secs_f64(),
         "storeSeconds": t.store.as_secs_f64(),
     })
+}
+
+/// Where a run's memory went (`split::Summary::memory`): the budget, the plan's bound and what
+/// each stage held at most by its own count (docs/cli.md).
+fn memory_json(m: &vortex_tiler::split::MemoryReport) -> serde_json::Value {
+    use vortex_tiler::limits::Part;
+    let part = |p| m.peaks.part(p);
+    serde_json::json!({
+        "maxMemoryBytes": m.budget,
+        "plannedBytes": m.planned,
+        "peakBytes": m.peaks.total,
+        "decoderBytes": part(Part::Decoder),
+        "readAheadBytes": part(Part::ReadAhead),
+        "sumRowsBytes": part(Part::SumRows),
+        "bandBytes": part(Part::Bands),
+        "tilesBytes": part(Part::Tiles),
+        "encodedBytes": part(Part::Encoded),
+    })
+}
+
+/// With `--verbose`, the line after the summary: where the memory went, in MiB.
+pub fn memory_line(m: &vortex_tiler::split::MemoryReport) -> String {
+    use vortex_tiler::limits::Part;
+    let part = |p| mib(m.peaks.part(p));
+    let planned = m.planned.map(|b| format!(", planned {}", mib(b))).unwrap_or_default();
+    format!(
+        "memory held by the stages: peak {} of --max-memory {}{planned}; each part at most: decoder {}, read-ahead {}, sum rows {}, bands {}, tiles {}, encoded {}",
+        mib(m.peaks.total),
+        mib(m.budget),
+        part(Part::Decoder),
+        part(Part::ReadAhead),
+        part(Part::SumRows),
+        part(Part::Bands),
+        part(Part::Tiles),
+        part(Part::Encoded),
+    )
 }
 
 /// What a pack writer stored: deduplication and one-colour tiles.

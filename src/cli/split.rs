@@ -605,6 +605,9 @@ fn report(a: &OutputArgs, layout: &str, done: &Finished, dest: &Path, pack: Opti
             say!("{}", report::pack_line(written));
         }
         say!("{}", report::summary_line(done, dest));
+        if a.run.verbose {
+            say!("{}", report::memory_line(&done.summary.memory));
+        }
     }
 }
 

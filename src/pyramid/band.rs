@@ -83,6 +83,12 @@ impl<T: Copy> Band<T> {
         self.lod
     }
 
+    /// Bytes of the rows of tiles being filled (their capacity), for the memory gauge.
+    pub fn held_bytes(&self) -> usize {
+        let texels: usize = self.open.iter().flat_map(|open| &open.tiles).map(Vec::capacity).sum();
+        texels * size_of::<T>()
+    }
+
     /// Copies the next row into every tile that holds it; `done` gets each row of tiles this
     /// completes, top first.
     pub fn push<E>(

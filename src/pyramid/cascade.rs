@@ -26,6 +26,7 @@ use super::reduce::{Acc, ExactRow, Reducer};
 use super::resample::Resampler;
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
+use crate::limits::Part;
 use crate::pixel::{PixelLayout, Sample};
 use crate::stages::{Stage, StageClock};
 
@@ -224,6 +225,13 @@ impl<T: Copy> Derived<T> {
         self.after_source_row.push(self.rows.len());
     }
 
+    /// Bytes it holds (its capacity), for the memory gauge.
+    pub fn bytes(&self) -> usize {
+        self.samples.capacity() * size_of::<T>()
+            + self.rows.capacity() * size_of::<(usize, usize)>()
+            + self.after_source_row.capacity() * size_of::<usize>()
+    }
+
     /// Empties it for reuse, keeping the memory.
     pub fn clear(&mut self) {
         self.samples.clear();
@@ -277,9 +285,15 @@ impl<T: Sample> Cuts<T> {
         let band = &mut levels[level];
         let lod = band.lod();
         let per_batch = batch_tiles(layout, *channels * size_of::<T>());
-        let send =
-            |tiles| out.send(Ok(Batch { lod, tiles })).map_err(|_| TilerError::Options("the encoder stopped".into()));
-        band.push(row, padding, |row| {
+        let memory = &out.clock.memory;
+        let send = |tiles: Vec<CutTile<T>>| {
+            // Counted as the encoders' from here until they free the texels (`encoders.rs`).
+            let bytes: usize = tiles.iter().map(|t| t.texels.capacity() * size_of::<T>()).sum();
+            memory.add(Part::Tiles, bytes as i64);
+            out.send(Ok(Batch { lod, tiles })).map_err(|_| TilerError::Options("the encoder stopped".into()))
+        };
+        let held = band.held_bytes();
+        let pushed = band.push(row, padding, |row| {
             let mut tiles: Vec<CutTile<T>> = Vec::new();
             for (tx, texels) in row.tiles {
                 if tiles.len() == per_batch {
@@ -293,7 +307,9 @@ impl<T: Sample> Cuts<T> {
                 }
             }
             send(tiles)
-        })
+        });
+        memory.add(Part::Bands, band.held_bytes() as i64 - held as i64);
+        pushed
     }
 }
 

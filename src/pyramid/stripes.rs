@@ -31,6 +31,9 @@ pub(crate) struct Plan {
     /// read it on the producer's: a one-band run reads ahead where the chunks fit the memory
     /// beside the band; a striped run, short of memory already, does not.
     pub read_ahead_rows: u64,
+    /// Bytes the plan counts on holding at most: its largest pass's, the read-ahead included
+    /// (what `--json`'s `memory.plannedBytes` reports beside what the stages held).
+    pub held: u64,
 }
 
 impl Plan {
@@ -40,11 +43,12 @@ impl Plan {
         let need = span_bytes(layout, &whole, texel_bytes);
         if need <= memory {
             let row_bytes = layout.width as u64 * texel_bytes;
-            let read_ahead_rows = match need.saturating_add(read_ahead::bytes(row_bytes)) <= memory {
-                true => read_ahead::rows_per_chunk(row_bytes),
-                false => 0,
+            let with_read_ahead = need.saturating_add(read_ahead::bytes(row_bytes));
+            let (read_ahead_rows, held) = match with_read_ahead <= memory {
+                true => (read_ahead::rows_per_chunk(row_bytes), with_read_ahead),
+                false => (0, need),
             };
-            return Ok(Plan { stripes: vec![whole], coarse: None, read_ahead_rows });
+            return Ok(Plan { stripes: vec![whole], coarse: None, read_ahead_rows, held });
         }
         let too_wide = |need: u64| {
             TilerError::Limit(format!(
@@ -97,7 +101,8 @@ impl Plan {
                     rows: 0..layout.rows,
                 })
                 .collect();
-            return Ok(Plan { stripes, coarse: Some(coarse), read_ahead_rows: 0 });
+            let held = span_bytes(layout, &stripe(lo), texel_bytes).max(coarse_need);
+            return Ok(Plan { stripes, coarse: Some(coarse), read_ahead_rows: 0, held });
         }
         Err(too_wide(least))
     }

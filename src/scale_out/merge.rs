@@ -97,7 +97,7 @@ pub fn merge(paths: &[PathBuf], dest: &Path, progress: &dyn Progress) -> Result<
     // A run too wide for one machine's memory has no order of its own: merge writes the one
     // a machine with enough memory would.
     let order = Plan::choose(&layout, pixels.bytes_per_pixel() as u64, opts.filter, opts.max_memory)
-        .unwrap_or_else(|_| Plan { stripes: vec![Span::whole(&layout)], coarse: None, read_ahead_rows: 0 });
+        .unwrap_or_else(|_| Plan { stripes: vec![Span::whole(&layout)], coarse: None, read_ahead_rows: 0, held: 0 });
     let mut copied_bytes = 0u64;
     for row in split_order(&layout, &order) {
         if progress.cancelled() {

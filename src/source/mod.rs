@@ -75,6 +75,12 @@ pub trait RowSource: Send {
     fn read_row(&mut self, row: &mut [u8]) -> Result<()>;
     /// Short name of the decoder path taken, for the summary line.
     fn describe(&self) -> String;
+    /// Bytes the decoder holds now beyond the row it fills (a TIFF's decoded row of tiles),
+    /// for `split --json`'s memory (`limits::Part::Decoder`); 0 where it keeps no more than a
+    /// row's worth of its own.
+    fn buffer_bytes(&self) -> u64 {
+        0
+    }
     /// Starts again from the first row: an image too wide for one band is read once per
     /// vertical stripe. Sources that cannot say so.
     fn rewind(&mut self) -> Result<()> {
@@ -204,6 +210,9 @@ impl RowSource for Reopening {
     }
     fn describe(&self) -> String {
         self.inner.describe()
+    }
+    fn buffer_bytes(&self) -> u64 {
+        self.inner.buffer_bytes()
     }
     fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
         self.inner.read_columns(columns)

@@ -11,6 +11,7 @@
 use std::sync::mpsc::{Sender, channel, sync_channel};
 
 use crate::error::{Result, TilerError};
+use crate::limits::Part;
 use crate::source::RowSource;
 use crate::stages::{Stage, StageClock};
 
@@ -52,13 +53,17 @@ pub(crate) fn rows<T: bytemuck::Pod + Send>(
 ) -> Result<()> {
     if chunk_rows == 0 {
         let mut row = vec![T::zeroed(); row_len];
-        for _ in 0..count {
+        let row_bytes = (row_len * size_of::<T>()) as i64;
+        clock.memory.add(Part::ReadAhead, row_bytes);
+        let result = (0..count).try_for_each(|_| {
             // Read on this thread: the caller waits for every row.
             let read = || clock.time(Stage::Read, || source.read_row(bytemuck::cast_slice_mut(&mut row)));
             clock.time(Stage::ReadWait, read)?;
-            each(&row)?;
-        }
-        return Ok(());
+            clock.memory.set(Part::Decoder, source.buffer_bytes());
+            each(&row)
+        });
+        clock.memory.add(Part::ReadAhead, -row_bytes);
+        return result;
     }
     chunks(source, count, row_len, chunk_rows, clock, |chunk: Chunk<T>| {
         chunk.rows().chunks_exact(row_len).try_for_each(&mut each)
@@ -78,23 +83,31 @@ pub(crate) fn chunks<T: bytemuck::Pod + Send>(
     let (full_tx, full_rx) = sync_channel::<Result<Vec<T>>>(CHUNKS_AHEAD);
     let (empty_tx, empty_rx) = channel::<Vec<T>>();
     std::thread::scope(|scope| {
+        // Returns the bytes of chunks it allocated: all of them live until the pass ends (a chunk
+        // comes back to be read into again).
         let reader = std::thread::Builder::new().name("vortex-read".into()).spawn_scoped(scope, move || {
-            let mut left = count;
+            let (mut left, mut allocated) = (count, 0);
             while left > 0 {
                 let n = left.min(per_chunk);
                 // A chunk the caller has finished with, or a new one.
                 let mut chunk = empty_rx.try_recv().unwrap_or_default();
+                let had = chunk.capacity();
                 chunk.resize(n as usize * row_len, T::zeroed());
+                let grown = ((chunk.capacity() - had) * size_of::<T>()) as i64;
+                clock.memory.add(Part::ReadAhead, grown);
+                allocated += grown;
                 let read = clock.time(Stage::Read, || {
                     chunk.chunks_exact_mut(row_len).try_for_each(|row| source.read_row(bytemuck::cast_slice_mut(row)))
                 });
+                clock.memory.set(Part::Decoder, source.buffer_bytes());
                 let failed = read.is_err();
                 // The caller has stopped if it hung up.
                 if full_tx.send(read.map(|()| chunk)).is_err() || failed {
-                    return;
+                    break;
                 }
                 left -= n;
             }
+            allocated
         });
         let reader =
             reader.map_err(|e| TilerError::Options(format!("cannot start the source's reading thread: {e}")))?;
@@ -107,7 +120,8 @@ pub(crate) fn chunks<T: bytemuck::Pod + Send>(
         }
         // A reader blocked on a full queue sees the hang-up and stops.
         drop(full_rx);
-        reader.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        let allocated = reader.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        clock.memory.add(Part::ReadAhead, -allocated);
         used
     })
 }

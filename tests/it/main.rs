@@ -20,6 +20,7 @@ mod hostile;
 mod iiif;
 mod keep_icc;
 mod library;
+mod memory;
 mod module_graph;
 mod ndpi;
 mod ome_zarr;

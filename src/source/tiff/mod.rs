@@ -91,18 +91,29 @@ pub struct TiffSource {
     embedded: super::Embedded,
 }
 
-/// The file offset of every strip of an uncompressed 8-bit TIFF without predictor whose
+/// The file offset of every strip or tile of an uncompressed 8-bit TIFF without predictor whose
 /// samples are the texels as they are: a stripe or a shard narrower than the image reads
 /// only its columns of each row (a 4096-texel shard of a 16384-texel image reads a quarter
-/// of the bytes).
+/// of the bytes); a tiled one reads [`rows`](Self::rows) rows of each tile at a time, not
+/// whole tiles (a row of 256-texel tiles of a 16384-texel image is 12 MiB decoded: issue 28).
 struct DirectStrips {
     file: File,
     offsets: Vec<u64>,
     /// Bytes of one stored texel: SamplesPerPixel, extra samples included.
     pixel: usize,
-    /// A row as stored, where its texels carry extra samples to drop.
+    /// A row as stored, where its texels carry extra samples to drop; of tiles, the rows of one
+    /// tile being read.
     row: Vec<u8>,
+    /// Rows of each tile read at once (tiles only): as few as keep each read at least
+    /// [`DIRECT_TILE_READ`] bytes.
+    rows: u32,
 }
+
+/// Bytes read at once from one tile, where a tiled TIFF's rows are read straight from the file:
+/// large enough that the reads' count adds little to the kernel's copy (a few per tile, 16384
+/// reads for a 16384² image of 256-texel tiles), small enough that the rows held across the
+/// image's width are a small part of a whole row of tiles (an eighth, for 256-texel tiles).
+const DIRECT_TILE_READ: u64 = 32 << 10;
 
 /// What a TIFF's texels hold, as stored and as delivered.
 struct Samples {
@@ -188,15 +199,22 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
     let pixel_bytes = (file_samples * layout.depth.bytes()) as u64;
     let row_bytes = width as u64 * pixel_bytes;
     let direct = match layout.depth {
-        Depth::U8 => direct_strips(path, &mut decoder, compression, chunking, stored, height, width)?,
+        // Tiles are read into a band of the delivered texels: only where they are the stored ones.
+        Depth::U8 if matches!(chunking, Chunking::Strips { .. }) || stored == file_samples => {
+            direct_strips(path, &mut decoder, compression, chunking, stored, height, width)?
+        }
         _ => None,
     };
-    // Memory held: one strip or tile row of whole image rows (none where rows are read
-    // straight from the file), plus one tile.
+    // Memory held: one strip or tile row of whole image rows, plus one tile; where rows are read
+    // straight from the file, none of a strip, a few of a tile row.
     let band_rows = chunking.rows().min(height) as u64;
-    let held_rows = if direct.is_some() { 0 } else { band_rows };
+    let held_rows = match &direct {
+        Some(direct) => (direct.rows as u64).min(band_rows),
+        None => band_rows,
+    };
     let tile_bytes = match chunking {
         Chunking::Strips { .. } => 0,
+        Chunking::Tiles { width: tw, .. } if direct.is_some() => held_rows * tw as u64 * pixel_bytes,
         Chunking::Tiles { width: tw, height: th, .. } => tw as u64 * th as u64 * pixel_bytes,
     };
     let need = row_bytes.saturating_mul(held_rows).saturating_add(tile_bytes);
@@ -327,32 +345,48 @@ fn direct_strips(
     height: u32,
     width: u32,
 ) -> Result<Option<DirectStrips>> {
-    let Chunking::Strips { rows } = chunking else { return Ok(None) };
     let tag = |decoder: &mut Decoder<BufReader<File>>, t| {
         decoder.find_tag_unsigned::<u16>(t).map_err(|e| open_error(path, e))
     };
-    let row_bytes = width as u64 * stored as u64;
     let as_is = compression == CompressionMethod::None
         && tag(decoder, Tag::Predictor)?.unwrap_or(1) == 1
         && tag(decoder, Tag::PhotometricInterpretation)? != Some(0); // WhiteIsZero is inverted
     if !as_is {
         return Ok(None);
     }
-    let offsets = decoder.get_tag_u64_vec(Tag::StripOffsets).map_err(|e| open_error(path, e))?;
-    // A row read straight from the file must lie inside its strip, not run on into whatever
-    // follows a short one: an uncompressed strip holds its rows whole, or the file is corrupt.
-    let counts = decoder.get_tag_u64_vec(Tag::StripByteCounts).map_err(|e| open_error(path, e))?;
-    for strip in 0..height.div_ceil(rows) {
-        let need = rows.min(height - strip * rows) as u64 * row_bytes;
-        let (count, offset) = (counts.get(strip as usize), offsets.get(strip as usize));
+    // Per strip or tile: the bytes its rows need (an edge tile is stored whole, padded), and
+    // what it is called in an error.
+    let (offsets_tag, counts_tag, chunks, need, rows_at_once): (_, _, u32, Box<dyn Fn(u32) -> u64>, u32) =
+        match chunking {
+            Chunking::Strips { rows } => {
+                let row_bytes = width as u64 * stored as u64;
+                let need = move |strip: u32| rows.min(height - strip * rows) as u64 * row_bytes;
+                (Tag::StripOffsets, Tag::StripByteCounts, height.div_ceil(rows), Box::new(need), 0)
+            }
+            Chunking::Tiles { width: tw, height: th, across } => {
+                let tile_row = tw as u64 * stored as u64;
+                let rows = DIRECT_TILE_READ.div_ceil(tile_row).min(th as u64) as u32;
+                let tiles = across.saturating_mul(height.div_ceil(th));
+                (Tag::TileOffsets, Tag::TileByteCounts, tiles, Box::new(move |_| th as u64 * tile_row), rows)
+            }
+        };
+    let what = if rows_at_once == 0 { "strip" } else { "tile" };
+    let offsets = decoder.get_tag_u64_vec(offsets_tag).map_err(|e| open_error(path, e))?;
+    // A row read straight from the file must lie inside its strip or tile, not run on into
+    // whatever follows a short one: an uncompressed chunk holds its rows whole, or the file is
+    // corrupt.
+    let counts = decoder.get_tag_u64_vec(counts_tag).map_err(|e| open_error(path, e))?;
+    for chunk in 0..chunks {
+        let need = need(chunk);
+        let (count, offset) = (counts.get(chunk as usize), offsets.get(chunk as usize));
         if count.is_none_or(|&c| c < need) || offset.is_none() {
             let holds = count.map_or("no byte count".to_string(), |c| format!("{c} bytes"));
-            let message = format!("corrupt TIFF: uncompressed strip {strip} holds {holds}, its rows need {need}");
+            let message = format!("corrupt TIFF: uncompressed {what} {chunk} holds {holds}, its rows need {need}");
             return Err(TilerError::decode(path, message));
         }
     }
     let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
-    Ok(Some(DirectStrips { file, offsets, pixel: stored, row: Vec::new() }))
+    Ok(Some(DirectStrips { file, offsets, pixel: stored, row: Vec::new(), rows: rows_at_once }))
 }
 
 /// Whether the file is a BigTIFF (only for the summary line; the crate reads both).
@@ -512,11 +546,26 @@ impl TiffSource {
     fn load_band(&mut self, y: u64) -> Result<()> {
         let rows_per = self.chunking.rows() as u64;
         let index = (y / rows_per) as u32;
-        let first = index as u64 * rows_per;
-        let rows = rows_per.min(self.height as u64 - first);
+        // Tiles read straight from the file: the few rows of the tile row from `y`'s on.
+        let (first, end) = match &self.direct {
+            Some(DirectStrips { rows: at_once @ 1.., .. }) => {
+                let first = y - y % rows_per + (y % rows_per) / *at_once as u64 * *at_once as u64;
+                (first, (first + *at_once as u64).min((index as u64 + 1) * rows_per))
+            }
+            _ => (index as u64 * rows_per, (index as u64 + 1) * rows_per),
+        };
+        let rows = end.min(self.height as u64) - first;
         let row_bytes = self.width as usize * self.file_samples * self.layout.depth.bytes();
         let strip_bytes = row_bytes * rows as usize;
         let result = match self.chunking {
+            Chunking::Tiles { width: tw, across, .. } if self.direct.is_some() => {
+                let tiles = match &self.columns {
+                    Some(c) => c.start / tw..c.end.div_ceil(tw),
+                    None => 0..across,
+                };
+                let within = first % rows_per;
+                self.read_direct_tiles(index, tiles, within, rows as usize, row_bytes)
+            }
             Chunking::Strips { .. } if self.ahead_workers > 0 => {
                 self.take_strip_ahead(index, row_bytes).map_err(|m| (format!("strip {index}"), m))
             }
@@ -564,6 +613,36 @@ impl TiffSource {
 }
 
 impl TiffSource {
+    /// Rows `within..within + rows` of the tiles `tiles` of tile row `index`, read straight from
+    /// the file into `band` (each tile's rows are one read, into `tile`).
+    fn read_direct_tiles(
+        &mut self,
+        index: u32,
+        tiles: std::ops::Range<u32>,
+        within: u64,
+        rows: usize,
+        row_bytes: usize,
+    ) -> std::result::Result<(), (String, String)> {
+        let Chunking::Tiles { width: tw, across, .. } = self.chunking else { return Ok(()) };
+        let Some(direct) = &self.direct else { return Ok(()) };
+        let tile_row = tw as usize * direct.pixel;
+        let read = &mut self.tile[..tile_row * rows];
+        for col in tiles {
+            let chunk = index * across + col;
+            let x0 = col as usize * tw as usize;
+            let data = (tw as usize).min(self.width as usize - x0) * direct.pixel;
+            let at = direct.offsets[chunk as usize] + within * tile_row as u64;
+            if std::os::unix::fs::FileExt::read_exact_at(&direct.file, read, at).is_err() {
+                let message = "the tile is not where its offset says (a truncated file?)".to_string();
+                return Err((format!("tile {chunk} (tile row {index}, column {col})"), message));
+            }
+            for (dst, src) in self.band.chunks_exact_mut(row_bytes).zip(read.chunks_exact(tile_row)) {
+                dst[x0 * direct.pixel..][..data].copy_from_slice(&src[..data]);
+            }
+        }
+        Ok(())
+    }
+
     /// Strip `index` from the workers decoding ahead, into `band`; they are started at that
     /// strip if they are not there (the first strip, or after a skip or a rewind).
     fn take_strip_ahead(&mut self, index: u32, row_bytes: usize) -> std::result::Result<(), String> {
@@ -684,6 +763,14 @@ impl RowSource for TiffSource {
         }
         self.next += 1;
         Ok(())
+    }
+
+    /// The decoded strip or row of tiles, the one tile, a stored row and the strips the workers
+    /// decode ahead (each the size of the one taken).
+    fn buffer_bytes(&self) -> u64 {
+        let row = self.direct.as_ref().map_or(0, |d| d.row.capacity());
+        let ahead = self.ahead.as_ref().map_or(0, |a| a.in_flight() as usize * self.band.capacity());
+        (self.band.capacity() + self.tile.capacity() + row + ahead) as u64
     }
 
     /// Strips and tiles are found by row: the next read loads the one it needs.
@@ -1427,7 +1514,11 @@ mod tests {
         let path = dir.path().join("tiles.tif");
         let tiles = tiles_of(&rgb, w as usize, h as usize, 3, 256, 256);
         write_tiff(&path, false, tiled_tags(w, h, &[8, 8, 8], 2, 256, 256), &tiles, true);
-        let err = open(&path, 100_000).err().unwrap();
+        // Uncompressed, they are read straight from the file 43 rows at a time (32 KiB of each
+        // tile): 64 KiB held, not the 192 KiB of the row of tiles.
+        let mut source = open(&path, 100_000).unwrap();
+        assert_eq!(read_all(source.as_mut()).unwrap(), rgb);
+        let err = open(&path, 50_000).err().unwrap();
         assert!(err.to_string().contains("row of tiles"), "{err}");
     }
 

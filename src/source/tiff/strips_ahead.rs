@@ -76,6 +76,11 @@ impl StripsAhead {
         self.next
     }
 
+    /// Strips requested and not taken yet: decoding or decoded, each in a buffer of its own.
+    pub fn in_flight(&self) -> u32 {
+        self.requested.saturating_sub(self.next)
+    }
+
     /// Takes strip [`next`](Self::next), waiting for its worker, and asks for one more. `spare`
     /// is a buffer the reader is done with.
     pub fn take(&mut self, spare: Vec<u8>) -> Result<Vec<u8>, String> {
