@@ -275,7 +275,7 @@ pub struct Plan {
     /// The output's `info.json`.
     pub info: InfoFile,
     /// `name value` of each member the previous `info.json` changed from what the flags alone
-    /// give ([`changed_by_file`]); empty without one.
+    /// give; empty without one.
     pub changed: Vec<String>,
 }
 
