@@ -364,7 +364,7 @@ impl Stored {
     /// Bytes held until the writer stores it.
     fn bytes(&self) -> usize {
         match self {
-            Stored::Encoded(b) | Stored::Copied(b) | Stored::Constant(b) => b.capacity(),
+            Stored::Encoded(b) | Stored::Copied(b) | Stored::Cropped(b) | Stored::Constant(b) => b.capacity(),
         }
     }
 }

@@ -32,7 +32,7 @@ pub struct SplitOptions {
     pub down_to_one_texel: bool,
     /// Why the source's stored JPEG tiles are encoded again rather than copied where they
     /// line up with the finest level's pages (`--reencode`, an explicit `--quality` or
-    /// `--subsampling`); `None` copies them ([`crate::source::stored`]).
+    /// `--subsampling`); `None` copies them ([`crate::source::StoredTiles`]).
     pub reencode: Option<&'static str>,
 }
 

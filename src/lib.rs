@@ -9,9 +9,9 @@
 //! - [`codec`]: tile encoders (JPEG, PNG, raw, zstd, BC1/BC7);
 //! - [`sink`]: where encoded tiles go (a tile directory or a pack);
 //! - [`split`]: the orchestration that runs source -> pyramid -> codec -> sink, with the
-//!   options, progress and summary of a run in [`job`];
-//! - [`scale_out`]: one split on many machines (a shard's run, the merge), sharing the plan,
-//!   manifest and sums of [`shard`].
+//!   options, progress and summary of a run ([`split::SplitOptions`], [`split::Progress`],
+//!   [`split::Summary`]);
+//! - [`scale_out`]: one split on many machines (a shard's run, the merge).
 //!
 //! Beside the stages: [`tile_dir`] is the tile-directory format (`info.json`, file names) that
 //! the directory sink writes and the tiled sources read; [`repack`] moves tiles between a tile
@@ -100,7 +100,7 @@ mod decode;
 mod encoders;
 pub mod error;
 mod fnv;
-pub mod job;
+pub(crate) mod job;
 pub mod layout;
 pub mod limits;
 pub mod output;
@@ -111,11 +111,11 @@ pub mod scale_out;
 #[cfg(feature = "serve")]
 pub mod serve;
 pub mod settings;
-pub mod shard;
+pub(crate) mod shard;
 pub mod sink;
 pub mod source;
 pub mod split;
-pub mod stages;
+pub(crate) mod stages;
 pub mod tile_dir;
 pub mod viewer;
 

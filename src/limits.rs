@@ -30,6 +30,15 @@ pub struct Limits {
 /// `--max-memory`'s default.
 pub const DEFAULT_MEMORY: u64 = 1 << 30;
 
+/// The largest `--tile-align` (a pack's payload alignment) that `split`, `pack` and `convert`
+/// accept and that `merge` accepts from a shard: 1 MiB. Each payload is padded to it, so a
+/// larger one makes a file mostly of padding (2 GiB made 44 tiles a 71 GB file), and no
+/// memory page or GPU sparse block (64 KiB) asks for more.
+pub const MAX_TILE_ALIGN: u32 = 1 << 20;
+
+/// The largest `--align` (of the data section, padded to it once): 2 GiB.
+pub const MAX_ALIGN: u32 = 1 << 31;
+
 impl Default for Limits {
     fn default() -> Limits {
         Limits {
@@ -202,7 +211,7 @@ impl Gauge {
 
 /// What the source's read-ahead (`source::read_ahead`) holds, which the stripes' plan counts
 /// before it picks how a source is read: below both, so that the pyramid needs no source.
-pub mod read_ahead {
+pub(crate) mod read_ahead {
     /// Bytes of rows read per chunk at most (at least one row): enough rows that handing a chunk
     /// over costs nothing next to decoding it.
     pub const CHUNK_BYTES: u64 = 1 << 20;

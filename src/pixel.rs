@@ -315,7 +315,7 @@ impl Acc for FloatSum {
 /// 16-bit to 8-bit with correct rounding: `round(v * 255 / 65535)`, which is exact integer
 /// arithmetic because 65535 = 255 * 257.
 #[inline]
-pub fn u16_to_u8(v: u16) -> u8 {
+pub(crate) fn u16_to_u8(v: u16) -> u8 {
     ((v as u32 + 128) / 257) as u8
 }
 

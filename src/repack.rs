@@ -26,7 +26,7 @@ use crate::tile_dir::{TiledDir, codec_of, layout_of};
 /// Every tile of `levels`, coarsest level first, each level in raster order (rows top down).
 /// Raster beats Morton order for rectangular views (`bench/order-locality.py`,
 /// docs/pack-format.md).
-pub fn pack_order(levels: &[Level]) -> impl Iterator<Item = TileId> + '_ {
+pub(crate) fn pack_order(levels: &[Level]) -> impl Iterator<Item = TileId> + '_ {
     levels.iter().enumerate().rev().flat_map(|(lod, l)| {
         (0..l.tiles_h).flat_map(move |y| (0..l.tiles_w).map(move |x| TileId { lod: lod as u32, x, y }))
     })

@@ -30,6 +30,7 @@ use crate::source::{ImageHeader, RowSource, read_ahead};
 use crate::stages::{Stage, StageClock};
 
 pub use crate::job::{MemoryReport, Progress, SplitOptions, StoredReport, Summary};
+pub use crate::stages::StageTimes;
 
 /// Whether the finest level's pages are copied from `source`'s stored tiles (the copier) and
 /// what the summary says of them; neither where the source stores none.
@@ -114,7 +115,7 @@ pub(crate) fn above_cut(
 
 /// Largest value one source pixel adds to an exact sum of a run of `opts` on `source`.
 /// (Floats: the sums are `f64`, which do not overflow; this is `u32::MAX` for them, unused.)
-pub fn max_summand(opts: &SplitOptions, source: PixelLayout) -> u64 {
+pub(crate) fn max_summand(opts: &SplitOptions, source: PixelLayout) -> u64 {
     match ExactFilter::new(opts.filter, source) {
         Some(filter) => filter.max_value(),
         None if source.depth.is_float() => u32::MAX as u64,
@@ -125,7 +126,7 @@ pub fn max_summand(opts: &SplitOptions, source: PixelLayout) -> u64 {
 /// Bytes of one exact sum of a run of `opts` on a `source` image cut into `layout`: 8, or 16
 /// where the filter's sums could overflow a `u64` over the pyramid's depth (32-bit samples'
 /// `box` past 4^15 pixels a texel). Float sums are 8-byte `f64`s.
-pub fn sum_bytes(opts: &SplitOptions, source: PixelLayout, layout: &Layout) -> usize {
+pub(crate) fn sum_bytes(opts: &SplitOptions, source: PixelLayout, layout: &Layout) -> usize {
     let wide = match source.depth {
         Depth::U32 => sums_need_u128(u32::MAX as u64, layout.lod_count),
         Depth::F32 | Depth::F16 => false,

@@ -225,7 +225,7 @@ impl PackLayout {
         };
         // The data section is padded to --align once; every tile to --tile-align, hence its
         // lower cap.
-        use vortex_tiler::shard::manifest::{MAX_ALIGN, MAX_TILE_ALIGN};
+        use vortex_tiler::limits::{MAX_ALIGN, MAX_TILE_ALIGN};
         Ok(WriteOptions {
             alignment: check(self.align, "--align", MAX_ALIGN)?,
             payload_alignment: check(self.tile_align, "--tile-align", MAX_TILE_ALIGN)?,

@@ -208,7 +208,7 @@ pub fn run_info(a: InfoArgs) -> Result<()> {
         d.level_count
     );
     say!("data aligned to {} bytes, tiles to {}", h.alignment, h.payload_alignment);
-    if let Some(shard) = vortex_tiler::shard::manifest::describe(pack.metadata()) {
+    if let Some(shard) = vortex_tiler::scale_out::describe(pack.metadata()) {
         say!("{shard}");
     }
     say!("{:>4} {:>11} {:>15} {:>12}", "lod", "tiles", "image texels", "first entry");

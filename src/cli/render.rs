@@ -12,7 +12,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use vortex_tiler::error::TilerError;
 use vortex_tiler::limits::Limits;
-use vortex_tiler::output::{Product, staging};
+use vortex_tiler::output::{self, Product};
 use vortex_vt::sampler::Rgba8Image;
 use vortex_vt_wgpu::harness::{Scene, SceneLayer, SceneRenderer};
 use vortex_vt_wgpu::source::{Delayed, HttpPack, HttpStats};
@@ -188,7 +188,7 @@ fn open_sources(
         .map(|p| {
             let source: Arc<dyn PageSource> = if let Some(url) = as_url(p) {
                 let pack = Arc::new(HttpPack::open(url).with_context(|| format!("opening {url}"))?);
-                vortex_tiler::shard::manifest::refuse_shard(p, pack.metadata())?;
+                vortex_tiler::scale_out::refuse_shard(p, pack.metadata())?;
                 tile_size = tile_size.max(pack.layout().header().description.tile_size);
                 remote.push(Arc::clone(&pack));
                 pack
@@ -198,7 +198,7 @@ fn open_sources(
                     bail!("{} is a directory, not a pack (split an image with --pack to make one)", p.display());
                 }
                 let pack = vortex_pack::Pack::open(p).with_context(|| format!("opening {}", p.display()))?;
-                vortex_tiler::shard::manifest::refuse_shard(p, pack.metadata())?;
+                vortex_tiler::scale_out::refuse_shard(p, pack.metadata())?;
                 tile_size = tile_size.max(pack.description().tile_size);
                 Arc::new(pack)
             };
@@ -454,7 +454,7 @@ struct StagedFile {
 
 impl StagedFile {
     fn create(dest: &Path) -> Result<StagedFile> {
-        let staging = staging::partial_path(dest);
+        let staging = output::partial_path(dest);
         let file = fs::File::create(&staging)
             .with_context(|| format!("cannot write {}: creating {}", dest.display(), staging.display()))?;
         Ok(StagedFile { staging, file, dest: dest.to_path_buf() })
@@ -484,13 +484,13 @@ struct StagedFrames {
 
 impl StagedFrames {
     fn create(dest: &Path) -> Result<StagedFrames> {
-        let staging = staging::partial_path(dest);
+        let staging = output::partial_path(dest);
         fs::create_dir_all(&staging).with_context(|| format!("creating {}", staging.display()))?;
         Ok(StagedFrames { staging, dest: dest.to_path_buf() })
     }
 
     fn finish(self) -> Result<()> {
-        staging::replace_dir(&self.staging, &self.dest).with_context(|| format!("writing {}", self.dest.display()))
+        output::replace_dir(&self.staging, &self.dest).with_context(|| format!("writing {}", self.dest.display()))
     }
 }
 

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
-use vortex_tiler::output::{self, Claim, Product, staging};
+use vortex_tiler::output::{self, Claim, Product};
 use vortex_tiler::split::Progress;
 
 use super::signals;
@@ -36,7 +36,7 @@ impl Progress for Watch {
 pub fn claim(dest: &Path, product: Product, inputs: &[&Path], force: bool) -> Result<Claim> {
     let claim = output::claim(dest, product, inputs, force)?;
     signals::remove_on_forced_exit(dest);
-    let removed = staging::remove_stale(dest)
+    let removed = output::remove_stale(dest)
         .with_context(|| format!("removing temporaries that earlier runs left beside {}", dest.display()))?;
     for path in removed {
         eprintln!("note: removed {}, left by a run that did not finish", path.display());
@@ -169,7 +169,7 @@ pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vor
 }
 
 /// Where a run's wall time went, in seconds per stage (`split::Summary::stages`).
-fn stages_json(t: &vortex_tiler::stages::StageTimes) -> serde_json::Value {
+fn stages_json(t: &vortex_tiler::split::StageTimes) -> serde_json::Value {
     serde_json::json!({
         "readSeconds": t.read.as_secs_f64(),
         "readWaitSeconds": t.read_wait.as_secs_f64(),

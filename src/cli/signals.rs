@@ -15,7 +15,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
 use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
-use vortex_tiler::output::staging;
+use vortex_tiler::output;
 
 /// The signal received last, 0 while none.
 static RECEIVED: OnceLock<Arc<AtomicUsize>> = OnceLock::new();
@@ -61,9 +61,9 @@ fn remove_temporaries() {
     let Ok(destinations) = DESTINATIONS.lock() else { return };
     for dest in destinations.iter() {
         let pack = vortex_pack::temporary_path(dest);
-        for path in [staging::partial_path(dest), pack] {
+        for path in [output::partial_path(dest), pack] {
             // The run's other threads may still be adding tiles to a staging directory: a few
-            // tries, then what is left is for the next run's clean-up (`staging::remove_stale`).
+            // tries, then what is left is for the next run's clean-up (`output::remove_stale`).
             for _ in 0..5 {
                 let removed = match std::fs::symlink_metadata(&path) {
                     Ok(meta) if meta.is_dir() => std::fs::remove_dir_all(&path),

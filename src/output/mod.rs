@@ -13,11 +13,12 @@
 //!   inside an input directory, or would contain an input when replaced, is refused.
 //!
 //! Every output is then written under a temporary name in the destination's directory
-//! ([`staging`]) and renamed into place only when complete; temporaries that a dead process
-//! left behind are found and removed by the next run for the same destination.
+//! ([`partial_path`], [`write_file`], [`replace_dir`]) and renamed into place only when
+//! complete; temporaries that a dead process left behind are found and removed by the next run
+//! for the same destination ([`remove_stale`]).
 
 mod ours;
-pub mod staging;
+pub(crate) mod staging;
 
 use std::fs;
 use std::io;
@@ -25,6 +26,9 @@ use std::path::{Component, Path, PathBuf};
 
 pub use crate::error::OutputError;
 pub use ours::Product;
+// The temporary names, for outputs a caller writes itself (render's frames and report, a
+// screenshot) and for clean-up after a signal.
+pub use staging::{partial_path, remove_stale, replace_dir, write_file};
 
 fn io_err(path: &Path) -> impl FnOnce(io::Error) -> OutputError + '_ {
     move |source| OutputError::Io { path: path.to_path_buf(), source }

@@ -23,13 +23,13 @@ use std::sync::Mutex;
 
 use vortex_pack::{NewTile, Pack, PackWriter, Tile, TileId, WriteOptions, WriteSummary};
 
-use super::manifest::{MAX_ALIGN, MAX_TILE_ALIGN, Manifest, shard_error};
+use super::manifest::{Manifest, shard_error};
 use super::order::split_order;
 use super::plan::ShardPlan;
 use super::sums::{RootRows, RowReader, SumBound};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
-use crate::limits::human_bytes;
+use crate::limits::{MAX_ALIGN, MAX_TILE_ALIGN, human_bytes};
 use crate::pixel::PixelLayout;
 use crate::pyramid::cascade::Span;
 use crate::pyramid::stripes::Plan;

@@ -2,27 +2,29 @@
 //! Deep Zoom, IIIF level 0 and XYZ tiles (the names and crops of [`crate::viewer`]), and packs
 //! as files with `Range` requests. See docs/serve.md for the routes and headers.
 //!
-//! - [`catalog`]: the inputs, opened and checked at start, and their names;
-//! - [`routes`]: URL paths into typed requests (400/404 for the rest);
-//! - [`tiles`]: a stored page into a viewer tile (the stored bytes, or decode, crop, encode);
-//! - [`cache`]: the re-encoded tiles, an LRU bounded by bytes;
-//! - [`range`]: one `Range` header;
-//! - [`html`]: the index and the OpenSeadragon page;
+//! A program embeds it with three types: a [`Catalog`] of inputs, [`ServeOptions`] and the
+//! [`Server`]. Its parts are private:
+//! - `catalog`: the inputs, opened and checked at start, and their names;
+//! - `routes`: URL paths into typed requests (400/404 for the rest);
+//! - `tiles`: a stored page into a viewer tile (the stored bytes, or decode, crop, encode);
+//! - `cache`: the re-encoded tiles, an LRU bounded by bytes;
+//! - `range`: one `Range` header;
+//! - `html`: the index and the OpenSeadragon page;
 //! - `tile_routes`: a Deep Zoom, IIIF or XYZ tile name into its page, crop and bytes;
 //! - `http`: the axum handler that puts these together, with the headers;
 //! - `files`: the files of a served directory, opened only if regular and inside it;
 //! - [`Server`]: the accept loop, with its cap on connections and its idle timeout.
 
-pub mod cache;
-pub mod catalog;
+mod cache;
+mod catalog;
 mod files;
-pub mod html;
+mod html;
 mod http;
-pub mod range;
+mod range;
 mod reply;
-pub mod routes;
+mod routes;
 mod tile_routes;
-pub mod tiles;
+mod tiles;
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -38,7 +40,7 @@ use cache::TileCache;
 pub use catalog::Catalog;
 
 /// What every request reads: the inputs, the tile cache and the limits on work at once.
-pub struct AppState {
+pub(crate) struct AppState {
     pub catalog: Catalog,
     pub cache: TileCache,
     /// `--max-concurrent`: requests answered at once.

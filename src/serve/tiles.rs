@@ -15,8 +15,8 @@
 use bytes::Bytes;
 
 use crate::codec::{Codec, TileEncoder};
+use crate::decode::{Decoded, decode_tile};
 use crate::pixel::{Depth, PixelLayout};
-use crate::source::{Decoded, decode_tile};
 use crate::viewer::Crop;
 
 /// The image format of the tiles an input is served in.

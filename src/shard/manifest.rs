@@ -15,15 +15,6 @@ use crate::pixel::{Channels, Depth, PixelLayout};
 /// The manifest's version: `merge` refuses others.
 pub const FORMAT: u32 = 1;
 
-/// The largest `--tile-align` (a pack's payload alignment) that `split`, `pack` and `convert`
-/// accept and that `merge` accepts from a shard: 1 MiB. Each payload is padded to it, so a
-/// larger one makes a file mostly of padding (2 GiB made 44 tiles a 71 GB file), and no
-/// memory page or GPU sparse block (64 KiB) asks for more.
-pub const MAX_TILE_ALIGN: u32 = 1 << 20;
-
-/// The largest `--align` (of the data section, padded to it once): 2 GiB.
-pub const MAX_ALIGN: u32 = 1 << 31;
-
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "camelCase", deny_unknown_fields)]
 pub struct Manifest {

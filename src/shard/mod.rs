@@ -16,4 +16,3 @@ pub mod plan;
 pub mod sums;
 
 pub use fingerprint::fingerprint;
-pub use plan::ShardPlan;

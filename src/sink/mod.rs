@@ -16,7 +16,8 @@ pub mod pmtiles;
 
 pub use dir::DirSink;
 pub use ome_zarr::OmeZarrSink;
-pub use pack::{PackSink, pack_description, tile_kind};
+pub(crate) use pack::pack_description;
+pub use pack::{PackSink, tile_kind};
 pub use pmtiles::PmtilesSink;
 
 use crate::error::{Result, TilerError};

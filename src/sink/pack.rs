@@ -21,7 +21,7 @@ pub struct PackSink {
 }
 
 /// The pack's description of a tiler layout and stored texel format.
-pub fn pack_description(layout: &Layout, stored: PixelLayout) -> Description {
+pub(crate) fn pack_description(layout: &Layout, stored: PixelLayout) -> Description {
     Description {
         width: layout.width,
         height: layout.height,

@@ -30,7 +30,7 @@ use crate::layout::Layout;
 use crate::output::staging;
 
 /// The header's length; the root directory follows it.
-pub const HEADER_LEN: usize = 127;
+pub(crate) const HEADER_LEN: usize = 127;
 /// The header and the root directory together must fit in the first 16 KiB (the spec), so
 /// that a reader's first request gets both.
 const ROOT_LIMIT: usize = 16384 - HEADER_LEN;
@@ -52,7 +52,7 @@ pub enum TileType {
 /// One directory entry: `run_length` consecutive tile ids from `tile_id` share the bytes at
 /// `offset` (relative to the data section); run length 0 points to a leaf directory instead.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Entry {
+pub(crate) struct Entry {
     pub tile_id: u64,
     pub offset: u64,
     pub length: u32,
@@ -76,7 +76,7 @@ pub struct PmtilesSummary {
 
 /// The PMTiles tile id of web-map tile (z, x, y): the tiles of all coarser zooms, then the
 /// position of (x, y) along the Hilbert curve over the 2^z x 2^z grid.
-pub fn tile_id(z: u32, x: u32, y: u32) -> u64 {
+pub(crate) fn tile_id(z: u32, x: u32, y: u32) -> u64 {
     let n = 1u64 << z;
     let coarser = ((1u64 << (2 * z)) - 1) / 3;
     let (mut x, mut y) = (x as u64, y as u64);
@@ -488,7 +488,7 @@ fn push_varint(out: &mut Vec<u8>, mut v: u64) {
 /// A directory as the spec stores it (before compression): the count, then each column of
 /// the entries: tile-id deltas, run lengths, lengths, offsets (0 for "right after the
 /// previous entry's bytes", else offset + 1).
-pub fn serialize_directory(entries: &[Entry]) -> Vec<u8> {
+pub(crate) fn serialize_directory(entries: &[Entry]) -> Vec<u8> {
     let mut out = Vec::with_capacity(entries.len() * 6 + 10);
     push_varint(&mut out, entries.len() as u64);
     let mut last = 0;
@@ -510,7 +510,7 @@ pub fn serialize_directory(entries: &[Entry]) -> Vec<u8> {
 }
 
 /// Reads a directory [`serialize_directory`] wrote; `None` if it is not one.
-pub fn deserialize_directory(bytes: &[u8]) -> Option<Vec<Entry>> {
+pub(crate) fn deserialize_directory(bytes: &[u8]) -> Option<Vec<Entry>> {
     let mut at = 0;
     let mut next = || -> Option<u64> {
         let mut v = 0u64;

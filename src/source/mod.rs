@@ -35,13 +35,14 @@ pub mod orient;
 mod png;
 mod pnm;
 pub mod range;
-pub mod read_ahead;
-pub mod stored;
+pub(crate) mod read_ahead;
+pub(crate) mod stored;
 mod tiff;
 pub mod tiled;
 mod whole;
 
-pub use crate::decode::{Decoded, decode_tile, decode_tile_within, probe_tile};
+pub(crate) use crate::decode::{decode_tile, decode_tile_within, probe_tile};
+pub use stored::{Quality, StoredTiles};
 
 use std::fs::File;
 use std::io::Read;
@@ -110,7 +111,7 @@ pub trait RowSource: Send {
         Embedded::default()
     }
     /// The compressed tiles the rows are decoded from, where a run may copy them as they are
-    /// ([`stored`]); `None` for sources whose rows are not a stored tile's texels (decoded
+    /// ([`StoredTiles`]); `None` for sources whose rows are not a stored tile's texels (decoded
     /// from strips or whole, or changed on the way: rotated, converted to sRGB).
     fn stored_tiles(&self) -> Option<std::sync::Arc<dyn stored::StoredTiles>> {
         None

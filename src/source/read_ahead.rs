@@ -16,7 +16,7 @@ use crate::source::RowSource;
 use crate::stages::{Stage, StageClock};
 
 use crate::limits::read_ahead::CHUNKS_AHEAD;
-pub use crate::limits::read_ahead::{CHUNK_BYTES, CHUNKS_HANDED_ON, bytes, rows_per_chunk};
+pub use crate::limits::read_ahead::CHUNKS_HANDED_ON;
 
 /// Rows read ahead, in order; dropping it gives its memory back to the reader.
 pub(crate) struct Chunk<T> {
@@ -129,6 +129,7 @@ pub(crate) fn chunks<T: bytemuck::Pod + Send>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::limits::read_ahead::{CHUNK_BYTES, bytes, rows_per_chunk};
     use crate::pixel::{Channels, Depth, PixelLayout};
     use crate::source::ImageHeader;
 

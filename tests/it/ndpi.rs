@@ -14,6 +14,7 @@ use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use crate::common::cli::{self, s};
+use crate::common::compare::{Picture, Tolerance, assert_close};
 use crate::tiff_slides::{openslide_region, our_texels};
 use vortex_tiler::source;
 
@@ -260,17 +261,17 @@ fn ndpi_reads_as_openslide_does() {
     // misplaces them: it counts 1020 / 256 = 3 intervals to a row, where the JPEG has 4.)
     assert!(ours == crop(&even_half, 1024, 1020, 500), "the ragged slide differs from the even one, cropped");
     let picture: Vec<u8> = (0..500).flat_map(|y| (0..1020).flat_map(move |x| texel(x, y))).collect();
-    let mean_error = |ours: &[u8]| {
-        let error: u64 = ours.iter().zip(&picture).map(|(a, b)| a.abs_diff(*b) as u64).sum();
-        error as f64 / ours.len() as f64
-    };
     // JPEG at quality 85 on this picture (a third of it noise of up to 40 levels) is off by 3.5
     // on average (measured); a misplaced interval or row is off by tens.
-    assert!(mean_error(&ours) < 6.0, "mean error {} against the picture encoded", mean_error(&ours));
+    let jpeg = Tolerance::mean(6.0, "JPEG at quality 85 of a picture a third noise is off by 3.5 on average");
+    let against_picture = |name: &str, ours: &[u8]| {
+        assert_close(name, Picture::new(1020, 500, 3, ours), Picture::new(1020, 500, 3, &picture), jpeg)
+    };
+    against_picture("ndpi-ragged", &ours);
     let quarter = slide(dir.path(), "quarter.ndpi", (1020, 500), 256, Chroma::Quarter, Sof::Size);
     let (source, quartered) = our_texels(&quarter, 1 << 30);
     assert!(source.describe().contains("256x16 intervals"), "{}", source.describe());
-    assert!(mean_error(&quartered) < 6.0, "4:2:0: mean error {} against the picture", mean_error(&quartered));
+    against_picture("ndpi-4:2:0", &quartered);
     // Through the tool: split, then convert of a column range (only those intervals decoded).
     let out = dir.path().join("tiles");
     let summary = cli::ok(&["split", s(&ragged), "-o", s(&out), "--tile-size", "256"]);

@@ -6,16 +6,11 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 
-use vortex_tiler::codec::ZSTD_LEVELS;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::output::Product;
-use vortex_tiler::pyramid::Filter;
-use vortex_tiler::settings::{self, CodecChoice, Requested};
+use vortex_tiler::settings::{OmeZarrPlan, OmeZarrRequested, Requested};
 use vortex_tiler::sink::OmeZarrSink;
-use vortex_tiler::sink::ome_zarr::{
-    DEFAULT_CHUNK, DEFAULT_SHARD_CHUNKS, LabelParent, MAX_SHARD_CHUNKS, PixelSize, Plane, Spec, Version, is_ozx,
-    label_parent, register_label,
-};
+use vortex_tiler::sink::ome_zarr::{LabelParent, PixelSize, Plane, Spec, Version, label_parent, register_label};
 use vortex_tiler::source::channels::{ChannelSet, Ranged};
 use vortex_tiler::source::{ImageHeader, Pick, RowSource};
 use vortex_tiler::split::{self, SplitOptions, Summary};
@@ -104,8 +99,9 @@ struct Plan {
     parent: Option<LabelParent>,
 }
 
-/// Checks the flags against the layout and the source (`header`: a channel's, for channels
-/// written one pass each, `planes`) and works out the metadata.
+/// Checks the flags that belong to other layouts, then plans the run through the library
+/// ([`OmeZarrPlan`]) from the source (`header`: a channel's, for channels written one pass
+/// each, `planes`).
 fn plan(
     header: ImageHeader,
     input: &Path,
@@ -116,9 +112,6 @@ fn plan(
     let Some(dest) = &a.output else {
         bail!("--layout ome-zarr writes a directory or a .ozx file (-o DIR.ome.zarr or -o FILE.ozx), not a pack")
     };
-    if names.is_some() {
-        bail!("--layout ome-zarr names its chunks as Zarr does; --filename-format is for --layout vortex");
-    }
     if a.shard.is_some() {
         bail!("--shard makes shard packs (--pack); --layout ome-zarr is written by one run");
     }
@@ -127,126 +120,35 @@ fn plan(
             bail!("{flag} belongs to a viewer layout; OME-Zarr chunks do not overlap");
         }
     }
-    // Zarr chunks tile the array edge to edge: a border would be texels stored twice.
-    if let Some(border) = a.border.filter(|b| *b != 0) {
-        bail!("--border {border}: OME-Zarr chunks have no border (each texel is stored once); leave it out");
-    }
-    let enc = &a.enc;
-    if let Some(codec) = enc.codec.filter(|c| *c != CodecChoice::Zstd) {
-        bail!(
-            "--codec {}: OME-Zarr chunks are zstd-compressed (the codec every Zarr reader has); leave --codec out or set --zstd-level",
-            codec.name()
-        );
-    }
-    for (given, flag) in [
-        (enc.quality.is_some(), "--quality"),
-        (enc.subsampling.is_some(), "--subsampling"),
-        (enc.png_compression.is_some(), "--png-compression"),
-        (enc.bc7_effort.is_some(), "--bc7-effort"),
-    ] {
-        if given {
-            bail!("{flag} does not apply to --layout ome-zarr, whose chunks are zstd-compressed (--zstd-level)");
-        }
-    }
-    let asked = a.ome_zarr.ome_zarr_version.map(|v| match v {
-        OmeZarrVersion::V04 => Version::V04,
-        OmeZarrVersion::V05 => Version::V05,
-    });
-    // -o IMAGE/labels/NAME: a label image of IMAGE, in IMAGE's version.
-    let parent = label_parent(dest);
-    let version = match (&parent, asked) {
-        (Some(p), Some(ours)) if p.version != ours => bail!(
-            "{} is OME-Zarr {}: its labels are too; leave out --ome-zarr-version {}",
-            p.image.display(),
-            p.version.name(),
-            ours.name()
-        ),
-        (Some(p), _) => p.version,
-        (None, asked) => asked.unwrap_or(Version::V05),
-    };
-    if parent.is_some() && !a.filter.is_some_and(Filter::is_label) {
-        bail!(
-            "{}: a label image's levels need --filter mode or --filter nearest (a mean would invent labels)",
-            dest.display()
-        );
-    }
-    let shard_chunks = match (version, a.ome_zarr.shard_chunks) {
-        (Version::V04, Some(_)) => bail!("--shard-chunks: OME-Zarr 0.4 (Zarr v2) has no shards; it is for 0.5"),
-        (_, Some(n)) if !(1..=MAX_SHARD_CHUNKS).contains(&n) => {
-            bail!("--shard-chunks {n} must be from 1 to {MAX_SHARD_CHUNKS}")
-        }
-        (_, n) => n.unwrap_or(DEFAULT_SHARD_CHUNKS),
-    };
-    let product = if is_ozx(dest) { Product::Ozx } else { Product::OmeZarr };
-    if product == Product::Ozx && version != Version::V05 {
-        bail!(
-            "{}: a zipped OME-Zarr (.ozx, RFC-9) holds OME-Zarr 0.5; leave out --ome-zarr-version 0.4 or write a directory",
-            dest.display()
-        );
-    }
-    let limits = Limits { memory: a.max_memory, ..Limits::default() };
     let requested = Requested {
-        // A label image's levels are its image's: the same chunks by default.
-        tile_size: Some(a.tile_size.or(parent.as_ref().map(|p| p.chunk)).unwrap_or(DEFAULT_CHUNK)),
-        border: Some(0),
-        codec: Some(CodecChoice::Raw),
+        tile_size: a.tile_size,
+        border: a.border,
         background: a.background,
         flatten: a.flatten,
         tile_depth: a.tile_type,
-        // Microscopy samples measure intensity linearly: the mean of the stored values is the
-        // right reduction, not one in sRGB's linear light.
-        filter: Some(a.filter.unwrap_or(Filter::Box)),
+        filename_format: names,
+        filter: a.filter,
         max_memory: Some(a.max_memory),
-        ..Requested::default()
+        ..a.enc.requested()
     };
-    let (opts, _) = settings::resolve(&requested, None, header.layout)?;
-    // Raw tiles go to the sink, which compresses the chunks itself.
-    let zstd_level = enc.zstd_level.unwrap_or(settings::DEFAULT_ZSTD_LEVEL);
-    if !ZSTD_LEVELS.contains(&zstd_level) {
-        bail!("zstd level {zstd_level} (--zstd-level) is outside {}..={}", ZSTD_LEVELS.start(), ZSTD_LEVELS.end());
-    }
-    let layout = opts.layout(header.width, header.height)?;
-    let stored = opts.codec.stored_layout(header.layout, opts.flatten, opts.tile_depth)?;
-    limits.check_pyramid(&layout, false)?;
-    if let Some(p) = &parent {
-        let ours = (layout.width as u64, layout.height as u64, layout.lod_count);
-        if ours != (p.size.0, p.size.1, p.levels) {
-            bail!(
-                "{} is {}x{} in {} levels, but this label image is {}x{} in {} levels (--tile-size {}); a label image matches its image",
-                p.image.display(),
-                p.size.0,
-                p.size.1,
-                p.levels,
-                ours.0,
-                ours.1,
-                ours.2,
-                layout.tile_size
-            );
-        }
-    }
-    let name = match &a.name {
-        Some(name) => name.clone(),
-        None => input.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
-    };
-    let spec = Spec {
-        version,
-        layout,
-        stored,
-        shard_chunks,
-        zstd_level,
+    let zarr = OmeZarrRequested {
+        version: a.ome_zarr.ome_zarr_version.map(|v| match v {
+            OmeZarrVersion::V04 => Version::V04,
+            OmeZarrVersion::V05 => Version::V05,
+        }),
+        shard_chunks: a.ome_zarr.shard_chunks,
         pixel_size: a.ome_zarr.pixel_size,
-        name: name.trim_end_matches(".ome").to_string(),
-        filter: opts.filter.name().to_string(),
-        label: parent.is_some(),
+        name: match &a.name {
+            Some(name) => name.clone(),
+            None => input.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+        },
         planes,
     };
-    limits.check_memory(
-        &format!(
-            "holding the indexes of {} shards of {shard_chunks}x{shard_chunks} chunks (all open at worst; larger chunks, --tile-size, need fewer)",
-            spec.shard_count()
-        ),
-        spec.index_bytes(),
-    )?;
+    // -o IMAGE/labels/NAME: a label image of IMAGE, in IMAGE's version.
+    let parent = label_parent(dest);
+    let limits = Limits { memory: a.max_memory, ..Limits::default() };
+    let OmeZarrPlan { product, spec, opts } =
+        OmeZarrPlan::new(&requested, zarr, dest, parent.as_ref(), &header, &limits)?;
     Ok(Plan { dest: dest.clone(), product, spec, opts, parent })
 }
 

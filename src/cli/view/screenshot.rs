@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result, anyhow, bail};
-use vortex_tiler::output::staging;
+use vortex_tiler::output;
 use vortex_vt_wgpu::Gpu;
 
 /// The PNG text chunk that marks a screenshot of ours.
@@ -56,7 +56,7 @@ pub(super) fn save(gpu: &Gpu, texture: &wgpu::Texture, path: &Path) -> Result<()
     let mut writer = encoder.write_header()?;
     writer.write_image_data(&pixels)?;
     writer.finish()?;
-    staging::write_file(path, &bytes).with_context(|| format!("writing {}", path.display()))
+    output::write_file(path, &bytes).with_context(|| format!("writing {}", path.display()))
 }
 
 /// Refuses to replace a file at `path` that is not a screenshot of ours.

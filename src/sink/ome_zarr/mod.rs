@@ -10,7 +10,7 @@
 //! shards' indexes (16 bytes a chunk).
 //!
 //! Everything is written into a staging directory beside the destination and renamed into
-//! place when complete ([`crate::output::staging`]). A `.ozx` (RFC-9 zipped OME-Zarr) is one
+//! place when complete ([`crate::output::replace_dir`]). A `.ozx` (RFC-9 zipped OME-Zarr) is one
 //! zip file written in one pass: the metadata first (known before the first tile), then each
 //! shard as it completes, copied from its staging file into the zip (stored, not deflated: the
 //! chunks are compressed already), with the RFC's zip comment.

@@ -12,25 +12,7 @@ use super::store::{Entry, Kind, MAX_DESCRIPTOR_BYTES, TileStore, join};
 use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, TilerError};
 use crate::source::ImageHeader;
-
-/// Which coordinate the directories under a zoom level are named by.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Order {
-    /// `z/y/x.ext`: a directory per row (Google, vips dzsave --layout google).
-    Zyx,
-    /// `z/x/y.ext`: a directory per column (XYZ web-map tiles).
-    Zxy,
-}
-
-impl Order {
-    /// The pattern, for messages.
-    fn pattern(self) -> &'static str {
-        match self {
-            Order::Zyx => "z/y/x.ext",
-            Order::Zxy => "z/x/y.ext",
-        }
-    }
-}
+use crate::viewer::xyz::Order;
 
 pub struct Xyz {
     store: TileStore,
@@ -56,10 +38,7 @@ impl Xyz {
     #[expect(clippy::expect_used, reason = "the tile map was checked to be non-empty above")]
     pub(crate) fn open_in(store: TileStore, root: &str, order: Order) -> Result<Xyz> {
         let pattern = order.pattern();
-        let (outer_name, inner_name) = match order {
-            Order::Zyx => ("row", "x"),
-            Order::Zxy => ("column", "y"),
-        };
+        let (outer_name, inner_name) = order.names();
         let (zoom, zoom_dir) = highest_zoom(&store, root, order)?;
         let mut tiles: HashMap<(u32, u32), String> = HashMap::new();
         for (outer, outer_entry) in numbered_entries(&store, &zoom_dir)? {
@@ -92,10 +71,7 @@ impl Xyz {
                             format!("is not a tile named <{inner_name}>.<ext>, as tiles laid out {pattern} are"),
                         )
                     })?;
-                let (x, y) = match order {
-                    Order::Zyx => (inner, outer),
-                    Order::Zxy => (outer, inner),
-                };
+                let (x, y) = order.xy(outer, inner);
                 if let Some(other) = tiles.insert((x, y), path.clone()) {
                     return Err(TilerError::decode(
                         store.name(&path),

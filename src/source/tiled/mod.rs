@@ -20,9 +20,10 @@ use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
 
+pub use crate::viewer::xyz::Order;
 pub use archive::{is_iiif_dir, is_zip, open_zip};
 pub use deepzoom::DeepZoom;
-pub use google::{Order, Xyz};
+pub use google::Xyz;
 pub use iiif::{Iiif, looks_like_iiif};
 pub use named_dir::NamedDir;
 pub use pack_input::PackInput;

@@ -2,6 +2,7 @@
 //! pyramid (the oracle the streaming pipeline must match byte for byte).
 
 pub mod cli;
+pub mod compare;
 pub mod nginx;
 pub mod picture;
 pub mod server;

@@ -2,6 +2,8 @@
 //! output directory (the thesis tool's way of configuring a run), which overrides defaults.
 //! Members that contradict each other, the flags or the input are errors naming the member.
 
+mod ome_zarr;
+
 use std::path::Path;
 
 use base64::Engine;
@@ -19,6 +21,8 @@ use crate::source::ImageHeader;
 pub use crate::tile_dir::filename::DEFAULT_FILENAME_STEM;
 use crate::tile_dir::filename::FilenameFormat;
 use crate::tile_dir::info::{BORDER_WHEN_ABSENT, FORMAT_VERSION, InfoFile};
+
+pub use ome_zarr::{OmeZarrPlan, OmeZarrRequested};
 
 pub const DEFAULT_TILE_SIZE: u32 = 128;
 /// Border of `--layout vortex` tiles when neither the flag nor an `info.json` sets one: one
@@ -271,7 +275,7 @@ pub struct Plan {
     /// The output's `info.json`.
     pub info: InfoFile,
     /// `name value` of each member the previous `info.json` changed from what the flags alone
-    /// give ([`changed_by_file`]); empty without one.
+    /// give; empty without one.
     pub changed: Vec<String>,
 }
 
@@ -359,7 +363,7 @@ fn refuse_lossy_defaults(
 /// The members of `this_run`'s description that an existing `info.json` changed: what the
 /// flags alone would have given differs. `name value` each, for the line that says so; every
 /// settable member when the flags alone give no valid run.
-pub fn changed_by_file(
+pub(crate) fn changed_by_file(
     req: &Requested,
     source: PixelLayout,
     width: u32,
@@ -389,7 +393,7 @@ pub fn changed_by_file(
 }
 
 /// Checks an existing `info.json`'s derived members against what this run will produce.
-pub fn check_grid(info_path: &Path, info: &InfoFile, req: &Requested, layout: &Layout) -> Result<()> {
+pub(crate) fn check_grid(info_path: &Path, info: &InfoFile, req: &Requested, layout: &Layout) -> Result<()> {
     // Flags that change the grid make the old counts moot.
     if req.tile_size.is_some() || req.border.is_some() {
         return Ok(());
@@ -533,7 +537,7 @@ pub fn describe(l: &Layout, stored: PixelLayout, opts: &SplitOptions, names: &Fi
 }
 
 /// The `info.json` members that describe `codec` (`codec` and its settings); no others.
-pub fn describe_codec(codec: Codec) -> InfoFile {
+pub(crate) fn describe_codec(codec: Codec) -> InfoFile {
     let mut info = InfoFile { codec: Some(codec.name().into()), ..InfoFile::default() };
     match codec {
         Codec::Jpeg { quality, subsampling } => {
