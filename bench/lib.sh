@@ -83,16 +83,11 @@ world_png_pack() {
 calc() { awk "BEGIN { printf \"$1\", $2 }"; }
 
 # splice NAME REPORT INTRO: puts REPORT between NAME's markers in $DOC, adding a section with
-# INTRO the first time.
-splice() {
-  local begin="<!-- $1:begin -->" end="<!-- $1:end -->"
-  grep -qF "$begin" "$DOC" || printf '\n%s\n\n%s\n%s\n' "$3" "$begin" "$end" >>"$DOC"
-  awk -v b="$begin" -v e="$end" -v rep="$2" '
-    $0 == b { print; print ""; while ((getline l < rep) > 0) print l; print ""; skip = 1; next }
-    $0 == e { skip = 0 }
-    !skip { print }' "$DOC" >"$DOC.tmp"
-  mv "$DOC.tmp" "$DOC"
-}
+# INTRO the first time (none where INTRO is empty: the markers must be there). splice_check NAME:
+# fails unless NAME's markers are in $DOC, once each and in order (before measuring anything).
+# Both are crates/vortex-bench's `splice`, the one implementation of the convention.
+splice() { cargo run --release --quiet --manifest-path "$ROOT/Cargo.toml" -p vortex-bench --bin splice -- "$DOC" "$1" "$2" "$3"; }
+splice_check() { cargo run --release --quiet --manifest-path "$ROOT/Cargo.toml" -p vortex-bench --bin splice -- --check "$DOC" "$1"; }
 
 # pyvips_setup: libvips 8.18 from PyPI (pyvips + pyvips-binary): VORTEX_PYVIPS's Python (as the
 # tests use) where it is set, else $WORK/venv, installed the first time. Sets PY (its python) and

@@ -49,25 +49,9 @@ set -euo pipefail
 
 cd "$(dirname "$0")/.."
 DOC=${DOC:-$PWD/docs/scale-out.md}
-BEGIN_MARK='<!-- scale-out:begin -->'
-END_MARK='<!-- scale-out:end -->'
-# The report replaces only what lies between the markers: they must be there, once each, in order.
-check_markers() {
-  local b e
-  if [ ! -f "$DOC" ]; then
-    echo "error: $DOC does not exist; it needs the lines '$BEGIN_MARK' and '$END_MARK' (the report goes between them)" >&2
-    exit 1
-  fi
-  b=$(grep -nxF "$BEGIN_MARK" "$DOC" | cut -d: -f1 | tr '\n' ' ' || true)
-  e=$(grep -nxF "$END_MARK" "$DOC" | cut -d: -f1 | tr '\n' ' ' || true)
-  if [ -z "$b" ] || [ -z "$e" ] || [ "$(wc -w <<<"$b")" != 1 ] || [ "$(wc -w <<<"$e")" != 1 ] || [ "$b" -ge "$e" ]; then
-    echo "error: $DOC needs the lines '$BEGIN_MARK' and '$END_MARK', once each and in that order, each on a line of its own (found begin at line(s) '${b% }', end at '${e% }'); the report goes between them" >&2
-    exit 1
-  fi
-}
-check_markers
 
 source bench/lib.sh
+splice_check scale-out # the report's place, before anything is measured
 NS=${NS:-2 4 16 64}
 RUNS=${RUNS:-3}
 TALL=${TALL:-1}
@@ -405,7 +389,6 @@ REPORT=$WORK/scale-out-report.md
   echo "Raw numbers: \`bench/work/scale-out-runs.tsv\` (every process: image, kind, N, round, shard index, wall s, peak RSS KiB, user s, system s, load, minor page faults), \`scale-out-merge.tsv\` (merge --json per N and round), \`scale-out-rounds.tsv\` (per round sums). Reproduce with \`bench/scale-out.sh\` (see its header)."
 } >"$REPORT"
 
-check_markers # the doc may have been edited while this ran
-splice scale-out "$REPORT" "" # the markers are there: splice only replaces what lies between them
+splice scale-out "$REPORT" "" # no INTRO: fails if the doc lost its markers while this ran
 cat "$REPORT"
 log "wrote $DOC"

@@ -29,9 +29,9 @@
 # Usage, from the repository root:  bench/slide-dzi.sh   (RUNS=3, SIZE=50000x40000; TOOLS to
 # pick some, e.g. TOOLS="vortex vortex-reenc pyvips"). VORTEX_PYVIPS=PYTHON names a Python with
 # pyvips (the CI venv), else bench/lib.sh installs one. Needs a release build
-# (`cargo build --release -p vortex-tiler`) and about 12 GB of disk in bench/work. The full run
-# takes about 20 minutes on 2 quiet cores: a few to make the slides, 3 runs of the five fast
-# tools, one of OpenSlide on the quarter-size slide.
+# (`cargo build --release -p vortex-tiler`) and about 12 GB of disk in bench/work. Measured on
+# 2 quiet cores (2026-11-27): 9 minutes once the 50000x40000 slide exists (1.5 of them making
+# the LZW copy and the quarter-size slide), 3 runs of the five tools, one of OpenSlide.
 set -euo pipefail
 
 cd "$(dirname "$0")/.."

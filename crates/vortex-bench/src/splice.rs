@@ -27,6 +27,20 @@ fn end(name: &str) -> String {
     format!("<!-- {name}:end -->")
 }
 
+/// `doc` as it is if it has block `name`'s opening marker, else with a new section `intro` and
+/// the block's (empty) markers appended: how a benchmark adds its table the first time.
+pub fn with_block(doc: &str, name: &str, intro: &str) -> String {
+    if doc.lines().any(|line| line.trim_end() == begin(name)) {
+        return doc.to_string();
+    }
+    let mut out = doc.to_string();
+    if !out.ends_with('\n') {
+        out.push('\n');
+    }
+    out.push_str(&format!("\n{intro}\n\n{}\n{}\n", begin(name), end(name)));
+    out
+}
+
 /// `doc` with the block between `name`'s markers replaced by `body`. Fails when the markers are
 /// missing, repeated or out of order: a document whose prose lost its place for a table.
 pub fn splice(doc: &str, name: &str, body: &str) -> Result<String> {
@@ -98,5 +112,14 @@ mod tests {
         let doc = "<!-- p:a:begin -->\n<!-- p:a:end -->\n<!-- p:b:begin -->\n<!-- p:b:end -->\n";
         assert!(splice_all(doc, "p:", &[Block::new("p:a", "x")]).is_err());
         assert!(splice_all(doc, "p:", &[Block::new("p:a", "x"), Block::new("p:b", "y")]).is_ok());
+    }
+
+    #[test]
+    fn a_new_block_comes_with_its_section_once() {
+        let doc = with_block("prose", "t", "## T");
+        assert_eq!(doc, "prose\n\n## T\n\n<!-- t:begin -->\n<!-- t:end -->\n");
+        assert_eq!(with_block(&doc, "t", "## T"), doc, "a block already there is left as it is");
+        let out = splice(&doc, "t", "table").unwrap();
+        assert_eq!(out, "prose\n\n## T\n\n<!-- t:begin -->\n\ntable\n\n<!-- t:end -->\n");
     }
 }
