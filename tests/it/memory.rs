@@ -24,12 +24,14 @@ const PARTS: [(&str, Part); 6] = [
     ("encodedBytes", Part::Encoded),
 ];
 
-/// The parts' peaks add up to no more than the budget; all of them at once is no more than
-/// that sum nor less than any one part.
+/// What the stages held at once stays under the budget, and is no more than the parts' peaks
+/// together nor less than any one of them. (The parts' peaks themselves may come at different
+/// moments, which the threads' scheduling decides: their sum is no bound, and a run on a busy
+/// machine went over the budget with it while holding 93% of it at once.)
 fn check(m: &MemoryReport, what: &str) {
     let parts: Vec<u64> = PARTS.iter().map(|&(_, p)| m.peaks.part(p)).collect();
     let sum: u64 = parts.iter().sum();
-    assert!(sum <= m.budget, "{what}: the parts' peaks {parts:?} add up to {sum}, over --max-memory {}", m.budget);
+    assert!(m.peaks.total <= m.budget, "{what}: held {} at once, over --max-memory {}", m.peaks.total, m.budget);
     assert!(m.peaks.total <= sum && parts.iter().all(|&p| p <= m.peaks.total), "{what}: {m:?}");
     // Every run fills bands and cuts tiles.
     assert!(m.peaks.part(Part::Bands) > 0 && m.peaks.part(Part::Tiles) > 0, "{what}: {m:?}");
