@@ -1,6 +1,6 @@
 //! Where a run's memory goes (issue 28): `split --json`'s `memory` names every part the stages
 //! count, and the parts stay under `--max-memory` together, in one band and in stripes, from
-//! rows in memory and from strip and tiled TIFFs (whose decoder holds a row of tiles).
+//! rows in memory and from strip, tiled, LZW and Deflate TIFFs (whose decoders hold buffers of their own).
 //! Byte counts only: nothing here depends on timing.
 
 use std::path::Path;

@@ -7,7 +7,6 @@
 //!                                  # section INTRO with it is appended first (none without INTRO)
 //! splice --check DOC NAME          # only check that NAME's markers are there, once each, in order
 //! ```
-#![allow(clippy::unwrap_used, clippy::expect_used)] // measurement programs may panic on a broken set-up
 
 use std::path::Path;
 
