@@ -174,6 +174,7 @@ pub(crate) fn consume<T: Sample>(
     });
     clock.add(Stage::EncodersIdle, busy.idle());
     clock.add(Stage::Encode, busy.encoding() / rayon::current_num_threads().max(1) as u32);
+    clock.add_cpu(Stage::Encode, busy.encoding_cpu());
     result
 }
 
@@ -415,6 +416,8 @@ struct BusyState {
     idle_since: Option<Instant>,
     idle: std::time::Duration,
     encoding: std::time::Duration,
+    /// The tasks' CPU time, from their threads' CPU clocks (summed, not divided by threads).
+    encoding_cpu: std::time::Duration,
 }
 
 impl Busy {
@@ -428,7 +431,7 @@ impl Busy {
             s.idle += now - since;
         }
         s.running += 1;
-        BusyGuard { busy: self, started: now }
+        BusyGuard { busy: self, started: now, cpu: crate::stages::thread_cpu() }
     }
 
     fn idle(&self) -> std::time::Duration {
@@ -438,18 +441,25 @@ impl Busy {
     fn encoding(&self) -> std::time::Duration {
         self.state.lock().map_or_else(|p| p.into_inner().encoding, |s| s.encoding)
     }
+
+    fn encoding_cpu(&self) -> std::time::Duration {
+        self.state.lock().map_or_else(|p| p.into_inner().encoding_cpu, |s| s.encoding_cpu)
+    }
 }
 
 struct BusyGuard<'a> {
     busy: &'a Busy,
     started: Instant,
+    cpu: Option<std::time::Duration>,
 }
 
 impl Drop for BusyGuard<'_> {
     fn drop(&mut self) {
+        let cpu = self.cpu.zip(crate::stages::thread_cpu()).map(|(from, to)| to.saturating_sub(from));
         let now = Instant::now();
         let mut s = self.busy.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         s.encoding += now - self.started;
+        s.encoding_cpu += cpu.unwrap_or_default();
         s.running -= 1;
         if s.running == 0 {
             s.idle_since = Some(now);

@@ -30,7 +30,7 @@ use crate::source::{ImageHeader, RowSource, read_ahead};
 use crate::stages::{Stage, StageClock};
 
 pub use crate::job::{MemoryReport, Progress, SplitOptions, StoredReport, Summary};
-pub use crate::stages::StageTimes;
+pub use crate::stages::{StageCpu, StageTimes};
 
 /// Whether the finest level's pages are copied from `source`'s stored tiles (the copier) and
 /// what the summary says of them; neither where the source stores none.

@@ -1,31 +1,28 @@
-//! Where a `split` run's wall time goes, stage by stage: what reading the source takes (on its
+//! Where a `split` run's time goes, stage by stage: what reading the source takes (on its
 //! own thread), what the producer thread spends waiting for rows and building the pyramid, how
 //! long it waits for the encoders (they are the
 //! bottleneck) and how long the encoders wait for it (it is), and the encoders' and the sink's
-//! share. Measured on every run (a few clock reads per source row and per batch of tiles) and
-//! reported by `split --json` under `stages`, so that a benchmark can say which stage bounds a
-//! run without a profiler.
+//! share. Measured on every run (a few clock reads per chunk of source rows, per batch of tiles
+//! and per tile) and reported by `split --json` under `stages`, so that a benchmark can say
+//! which stage bounds a run without a profiler. Each stage's CPU time is read beside its wall
+//! time from the CPU clock of the thread that runs it (issue 28: CPU per source megapixel, the
+//! work whatever the cores, is what compares with another tool).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-/// The clocks of one run, shared by the producer thread and the encoders' caller.
+/// The clocks of one run, shared by the producer thread and the encoders' caller: each stage's
+/// wall time and the CPU time of the thread that ran it, measured around the same calls.
 #[derive(Debug, Default)]
 pub(crate) struct StageClock {
-    read: AtomicU64,
-    read_wait: AtomicU64,
-    producer: AtomicU64,
-    producer_blocked: AtomicU64,
-    handoff: AtomicU64,
-    cutter: AtomicU64,
-    cut_wait: AtomicU64,
-    encoders_idle: AtomicU64,
-    encode: AtomicU64,
-    store: AtomicU64,
+    wall: [AtomicU64; STAGES],
+    cpu: [AtomicU64; STAGES],
     /// What the stages hold, part by part (`--json`'s `memory`).
     pub(crate) memory: crate::limits::Gauge,
 }
+
+const STAGES: usize = Stage::Store as usize + 1;
 
 /// One of [`StageClock`]'s clocks.
 #[derive(Clone, Copy, Debug)]
@@ -60,59 +57,118 @@ impl StageClock {
         Arc::new(StageClock::default())
     }
 
-    fn clock(&self, stage: Stage) -> &AtomicU64 {
-        match stage {
-            Stage::Read => &self.read,
-            Stage::ReadWait => &self.read_wait,
-            Stage::Producer => &self.producer,
-            Stage::ProducerBlocked => &self.producer_blocked,
-            Stage::Handoff => &self.handoff,
-            Stage::Cutter => &self.cutter,
-            Stage::CutWait => &self.cut_wait,
-            Stage::EncodersIdle => &self.encoders_idle,
-            Stage::Encode => &self.encode,
-            Stage::Store => &self.store,
-        }
+    /// Runs `f`, adding its wall time to `stage` and the CPU time this thread spent in it
+    /// (the CPU clock read inside the wall clock, so that a stage never has more CPU than wall).
+    pub(crate) fn time<R>(&self, stage: Stage, f: impl FnOnce() -> R) -> R {
+        self.time_all(&[stage], f)
     }
 
-    /// Runs `f`, adding its wall time to `stage`.
-    pub(crate) fn time<R>(&self, stage: Stage, f: impl FnOnce() -> R) -> R {
+    /// As [`time`](Self::time), adding the same times to each of `stages` (a source row read
+    /// on the producer's thread is both the reading and the producer's wait for it): one pair
+    /// of clock reads instead of a pair per stage, in the loop over every row.
+    pub(crate) fn time_all<R>(&self, stages: &[Stage], f: impl FnOnce() -> R) -> R {
         let started = Instant::now();
+        let cpu = thread_cpu();
         let result = f();
-        self.add(stage, started.elapsed());
+        let cpu = cpu.zip(thread_cpu()).map(|(from, to)| to.saturating_sub(from));
+        let wall = started.elapsed();
+        for &stage in stages {
+            self.add_cpu(stage, cpu.unwrap_or_default());
+            self.add(stage, wall);
+        }
         result
     }
 
-    /// Adds `d` to `stage` (a time measured elsewhere).
+    /// Adds `d` to `stage`'s wall time (a time measured elsewhere).
     pub(crate) fn add(&self, stage: Stage, d: Duration) {
-        let nanos = u64::try_from(d.as_nanos()).unwrap_or(u64::MAX);
-        self.clock(stage).fetch_add(nanos, Ordering::Relaxed);
+        add(&self.wall[stage as usize], d);
     }
 
-    fn get(&self, stage: Stage) -> Duration {
-        Duration::from_nanos(self.clock(stage).load(Ordering::Relaxed))
+    /// Adds `d` to `stage`'s CPU time (measured elsewhere: the encoders' tasks, summed over
+    /// the pool's threads).
+    pub(crate) fn add_cpu(&self, stage: Stage, d: Duration) {
+        add(&self.cpu[stage as usize], d);
     }
 
     pub(crate) fn times(&self) -> StageTimes {
-        let producer = self.get(Stage::Producer);
-        let (read_wait, blocked) = (self.get(Stage::ReadWait), self.get(Stage::ProducerBlocked));
-        let cutter = self.get(Stage::Cutter);
+        let wall = Split::of(&self.wall);
+        let cpu = Split::of(&self.cpu);
+        StageTimes {
+            read: wall.read,
+            read_wait: wall.read_wait,
+            pyramid: wall.pyramid,
+            cut: wall.cut,
+            producer_blocked: wall.blocked,
+            encoders_idle: get(&self.wall, Stage::EncodersIdle),
+            encode: get(&self.wall, Stage::Encode),
+            store: get(&self.wall, Stage::Store),
+            cpu: thread_cpu().map(|_| StageCpu {
+                read: cpu.read,
+                pyramid: cpu.pyramid,
+                cut: cpu.cut,
+                encode: get(&self.cpu, Stage::Encode),
+                store: get(&self.cpu, Stage::Store),
+            }),
+        }
+    }
+}
+
+fn add(clock: &AtomicU64, d: Duration) {
+    let nanos = u64::try_from(d.as_nanos()).unwrap_or(u64::MAX);
+    clock.fetch_add(nanos, Ordering::Relaxed);
+}
+
+fn get(clocks: &[AtomicU64; STAGES], stage: Stage) -> Duration {
+    Duration::from_nanos(clocks[stage as usize].load(Ordering::Relaxed))
+}
+
+/// The producer's and the cutter's runs less their waits, the same way for wall and CPU time
+/// (a blocked thread spends next to no CPU, but a wait for rows read on the producer's own
+/// thread is the reading's CPU, which is `read`'s, not the pyramid's).
+struct Split {
+    read: Duration,
+    read_wait: Duration,
+    pyramid: Duration,
+    cut: Duration,
+    blocked: Duration,
+}
+
+impl Split {
+    fn of(clocks: &[AtomicU64; STAGES]) -> Split {
+        let get = |stage| get(clocks, stage);
+        let producer = get(Stage::Producer);
+        let (read_wait, blocked) = (get(Stage::ReadWait), get(Stage::ProducerBlocked));
+        let cutter = get(Stage::Cutter);
         // With a cutting thread, the producer's sends to the encoders are the cutter's.
         let (producer_waits, cutter_waits) = match cutter.is_zero() {
             true => (read_wait + blocked, Duration::ZERO),
-            false => (read_wait + self.get(Stage::Handoff), self.get(Stage::CutWait) + blocked),
+            false => (read_wait + get(Stage::Handoff), get(Stage::CutWait) + blocked),
         };
-        StageTimes {
-            read: self.get(Stage::Read),
+        Split {
+            read: get(Stage::Read),
             read_wait,
             pyramid: producer.saturating_sub(producer_waits),
             cut: cutter.saturating_sub(cutter_waits),
-            producer_blocked: blocked,
-            encoders_idle: self.get(Stage::EncodersIdle),
-            encode: self.get(Stage::Encode),
-            store: self.get(Stage::Store),
+            blocked,
         }
     }
+}
+
+/// The CPU time (user and system) the calling thread has used since it started; `None` where
+/// the platform has no clock for it (then `split --json` reports no CPU times).
+#[cfg(any(target_os = "linux", target_os = "android", target_os = "macos", target_os = "freebsd"))]
+#[expect(unsafe_code, reason = "clock_gettime, the one way to read a thread's CPU clock")]
+pub(crate) fn thread_cpu() -> Option<Duration> {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `ts` is a valid, writable timespec for the call to fill; nothing else is passed.
+    let ok = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) } == 0;
+    let (secs, nanos) = (u64::try_from(ts.tv_sec).ok()?, u32::try_from(ts.tv_nsec).ok()?);
+    ok.then(|| Duration::new(secs, nanos))
+}
+
+#[cfg(not(any(target_os = "linux", target_os = "android", target_os = "macos", target_os = "freebsd")))]
+pub(crate) fn thread_cpu() -> Option<Duration> {
+    None
 }
 
 /// Wall time per stage of a finished run. The source is read on a thread of its own (`read`);
@@ -141,6 +197,32 @@ pub struct StageTimes {
     pub encode: Duration,
     /// Storing in order on the writer thread (packs), beside the encoding of the next batch.
     pub store: Duration,
+    /// The CPU time of the same stages; `None` where the platform has no per-thread CPU clock.
+    pub cpu: Option<StageCpu>,
+}
+
+/// CPU time (user and system) per stage of a finished run, read from the CPU clock of the
+/// thread that runs each stage around the same calls as its wall time: the reading thread's
+/// reading, the producer's sums (and cutting where `cut` is zero), the cutting thread's cutting,
+/// every encoding task's (summed over the pool's threads, not divided by them as the wall time
+/// is) and the writer's storing. Not counted: threads a source decodes on besides its reading
+/// thread (a compressed TIFF's strip workers, a tiled JPEG TIFF's tiles decoded on the pool),
+/// the encoders' caller and the process's start and end; the process's CPU time is the
+/// stages' and these.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StageCpu {
+    pub read: Duration,
+    pub pyramid: Duration,
+    pub cut: Duration,
+    pub encode: Duration,
+    pub store: Duration,
+}
+
+impl StageCpu {
+    /// The stages' CPU time together.
+    pub fn total(&self) -> Duration {
+        self.read + self.pyramid + self.cut + self.encode + self.store
+    }
 }
 
 #[cfg(test)]
@@ -150,9 +232,9 @@ mod tests {
     #[test]
     fn the_pyramid_is_what_the_producer_spends_not_waiting() {
         let clock = StageClock::new();
-        clock.clock(Stage::Producer).store(10_000, Ordering::Relaxed);
-        clock.clock(Stage::ReadWait).store(3_000, Ordering::Relaxed);
-        clock.clock(Stage::ProducerBlocked).store(2_000, Ordering::Relaxed);
+        clock.add(Stage::Producer, Duration::from_nanos(10_000));
+        clock.add(Stage::ReadWait, Duration::from_nanos(3_000));
+        clock.add(Stage::ProducerBlocked, Duration::from_nanos(2_000));
         let t = clock.times();
         assert_eq!(
             (t.read_wait, t.pyramid, t.producer_blocked),
@@ -160,5 +242,24 @@ mod tests {
         );
         assert_eq!(clock.time(Stage::Store, || 7), 7);
         assert!(clock.times().store > Duration::ZERO);
+    }
+
+    #[test]
+    fn the_cpu_of_a_stage_is_its_threads_and_no_more_than_its_wall_time() {
+        let clock = StageClock::new();
+        // Work the optimiser cannot drop: the thread's CPU clock must move.
+        let sum = clock.time(Stage::Read, || (0..2_000_000u64).map(std::hint::black_box).sum::<u64>());
+        assert_eq!(sum, 1_999_999_000_000);
+        // A wait for rows read on this thread holds their reading: not the pyramid's.
+        clock.time(Stage::Producer, || clock.time(Stage::ReadWait, || clock.time(Stage::Read, || ())));
+        let t = clock.times();
+        let Some(cpu) = t.cpu else {
+            assert!(thread_cpu().is_none());
+            return;
+        };
+        assert!(cpu.read > Duration::ZERO && cpu.read <= t.read, "{t:?}");
+        assert_eq!((cpu.cut, cpu.encode, cpu.store), (Duration::ZERO, Duration::ZERO, Duration::ZERO));
+        clock.add_cpu(Stage::Encode, Duration::from_millis(5));
+        assert_eq!(clock.times().cpu.map(|c| c.encode), Some(Duration::from_millis(5)));
     }
 }

@@ -175,7 +175,9 @@ pub struct RunFlags {
     #[arg(long)]
     pub json: bool,
 
-    /// After the summary line, a line saying where the memory went: what each stage held at
+    /// After the summary line, a line saying what each stage cost (CPU milliseconds per source
+    /// megapixel, which compare across machines' core counts and with other tools, then wall
+    /// seconds) and a line saying where the memory went: what each stage held at
     /// most (the source decoder, the read-ahead, the pyramid's rows and bands, the tiles
     /// waiting for or in the encoders, the encoded tiles waiting for the writer) beside
     /// --max-memory and the plan's bound; --json always says it, under `memory`.

@@ -606,6 +606,7 @@ fn report(a: &OutputArgs, layout: &str, done: &Finished, dest: &Path, pack: Opti
         }
         say!("{}", report::summary_line(done, dest));
         if a.run.verbose {
+            say!("{}", report::stages_line(&done.summary.stages, done.width, done.height));
             say!("{}", report::memory_line(&done.summary.memory));
         }
     }

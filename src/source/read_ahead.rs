@@ -57,8 +57,7 @@ pub(crate) fn rows<T: bytemuck::Pod + Send>(
         clock.memory.add(Part::ReadAhead, row_bytes);
         let result = (0..count).try_for_each(|_| {
             // Read on this thread: the caller waits for every row.
-            let read = || clock.time(Stage::Read, || source.read_row(bytemuck::cast_slice_mut(&mut row)));
-            clock.time(Stage::ReadWait, read)?;
+            clock.time_all(&[Stage::Read, Stage::ReadWait], || source.read_row(bytemuck::cast_slice_mut(&mut row)))?;
             clock.memory.set(Part::Decoder, source.buffer_bytes());
             each(&row)
         });

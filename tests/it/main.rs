@@ -36,6 +36,7 @@ mod shard;
 mod slurm;
 mod sources;
 mod stability;
+mod stage_cpu;
 mod static_web;
 mod stripes;
 mod tiff_kinds;
