@@ -122,3 +122,20 @@ version = (pyvips.version(0), pyvips.version(1))
 sys.exit(0 if version >= (8, 15) and "Q" in pyvips.Introspect.get("dzsave").optional_input else 1)
 PY
 }
+
+# split_variant_args NAME: how bench/split-matrix.sh's row NAME cuts its source: the variants of
+# the strip BigTIFF that issue 28's goals name (`strip-box`: libvips' own 2x2 mean;
+# `strip-border1`: our default border), every other row with no border.
+split_variant_args() {
+  case $1 in
+    strip-box) echo "--border 0 --filter box" ;;
+    strip-border1) echo "--border 1" ;;
+    *) echo "--border 0" ;;
+  esac
+}
+# peer_grid NAME: the peer's tile size and overlap giving the same 256-texel files as that row.
+peer_grid() { [ "$1" = strip-border1 ] && echo "254 1" || echo "256 0"; }
+# The peer's call: dzsave SOURCE into OUT (a .zip) at TILE_SIZE and OVERLAP, JPEG Q85 in direct mode.
+PEER_DZSAVE='import sys, pyvips
+im = pyvips.Image.new_from_file(sys.argv[1], access="sequential")
+im.dzsave(sys.argv[2], tile_size=int(sys.argv[3]), overlap=int(sys.argv[4]), Q=85)'

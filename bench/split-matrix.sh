@@ -20,9 +20,17 @@
 # only the JPEG codec, the one the peer writes too (issue 28's goals); CODECS adds the others.
 # *held* is what the stages held at most by their own count (`split --json`'s
 # `memory.peakBytes`), beside the peak RSS.
+# Two more rows cut the strip BigTIFF as issue 28's goals name them: `strip-box` with
+# `--filter box` (libvips' own 2x2 mean), `strip-border1` with the default border of 1 (the peer
+# then writes 254-texel tiles with an overlap of 1: the same 256-texel files).
+# A second table gives the CPU time per source megapixel, ours by stage from `split --json`'s
+# `stages.cpu` (read, the pyramid's sums, cutting, encoding, storing, and *other*: the rest of
+# the process's CPU, mostly a compressed TIFF's strip workers), the peer's whole; and the wall
+# time over the encode floor (the encoders' CPU time divided by the cores). For the peer's CPU by
+# kind of work, see `bench/split-profile.sh peer SOURCE`.
 #
 # Results go to docs/benchmarks.md (or $DOC) between `<!-- split-matrix:begin -->` and `:end -->`.
-#     bench/split-matrix.sh                 # JPEG rows, 5 runs: about 6 minutes on 2 quiet cores
+#     bench/split-matrix.sh                 # JPEG rows, 5 runs: about 7 minutes on 2 quiet cores
 #                                           # (and 2 more the first time, making 6 GB of sources)
 #     RUNS=1 CODECS="jpeg png raw zstd bc1 bc7" bench/split-matrix.sh   # every codec, one run each
 #     SOURCES="strip jpeg" CODECS="jpeg png" bench/split-matrix.sh
@@ -33,7 +41,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source bench/lib.sh
 RUNS=${RUNS:-5}
-SOURCES=${SOURCES:-strip tiled deflate lzw png jpeg ppm tiles}
+SOURCES=${SOURCES:-strip strip-box strip-border1 tiled deflate lzw png jpeg ppm tiles}
 CODECS=${CODECS:-jpeg}
 bench_setup
 SRC=$WORK/src16k.tif
@@ -46,7 +54,7 @@ pyvips_setup # PY and PYVIPS_VERSION ("libvips-8.18.7"), both empty without the 
 source_file() {
   local f
   case $1 in
-    strip) echo "$SRC"; return ;;
+    strip | strip-box | strip-border1) echo "$SRC"; return ;;
     tiled) f=$M/tiled.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --tile --tile-width 256 --tile-height 256 --bigtiff ;;
     deflate) f=$M/deflate.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --compression deflate --bigtiff ;;
     lzw) f=$M/lzw.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --compression lzw --bigtiff ;;
@@ -71,10 +79,6 @@ codec_args() {
     *) echo "--codec $1" ;;
   esac
 }
-
-PEER='import sys, pyvips
-im = pyvips.Image.new_from_file(sys.argv[1], access="sequential")
-im.dzsave(sys.argv[2], tile_size=256, overlap=0, Q=85)'
 
 RAW=$M/runs.tsv
 # run ID COMMAND...: times one run, appends "ID wall cpu rss json" to $RAW. A failed run stops the
@@ -108,14 +112,15 @@ for name in $SOURCES_RUN; do
   [ "$name" = tiles ] && command=convert
   for round in $(seq "$RUNS"); do
     for codec in $CODECS; do
-      # shellcheck disable=SC2046 # codec_args is word-split on purpose
-      run "$name $codec" "$WORK/bin/vortex-tiler" "$command" "$file" --pack "$OUT/out.vtpk" --force --tile-size 256 --border 0 \
-        $(codec_args "$codec") --json
+      # shellcheck disable=SC2046 # codec_args and split_variant_args are word-split on purpose
+      run "$name $codec" "$WORK/bin/vortex-tiler" "$command" "$file" --pack "$OUT/out.vtpk" --force --tile-size 256 \
+        $(split_variant_args "$name") $(codec_args "$codec") --json
       rm -f "$OUT/out.vtpk"
     done
     if [ -n "$PY" ] && [ "$name" != tiles ]; then
       rm -rf "$OUT/peer.zip"
-      run "$name peer" "$PY" -c "$PEER" "$file" "$OUT/peer.zip"
+      # shellcheck disable=SC2046 # peer_grid is word-split on purpose
+      run "$name peer" "$PY" -c "$PEER_DZSAVE" "$file" "$OUT/peer.zip" $(peer_grid "$name")
       rm -f "$OUT/peer.zip"
     fi
   done
@@ -135,13 +140,16 @@ def median(rid):
 mpx = 16384 * 16384 / 1e6
 print(f"{datetime.date.today()}, {os.cpu_count()} cores, vortex-tiler {rev}"
       + (f", peer {peer_version} (pyvips-binary, direct mode: `Q=85`) writing a .zip of 256-texel JPEG tiles" if peer_version else "")
-      + "; `split --pack --tile-size 256 --border 0`, default filter; the median of the runs per cell.")
+      + "; `split --pack --tile-size 256 --border 0`, default filter (`strip-box`: `--filter box`; `strip-border1`: `--border 1`,"
+      + " the peer's tiles 254 texels with an overlap of 1); the median of the runs per cell.")
 print()
 print("| source | codec | wall | CPU | CPU / wall | CPU ms / Mpx | Mpx/s | peak RSS | held | read | waits for rows | pyramid | cut | waits for encoders | encoders wait | encode | store | bound by | vs peer |")
 print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|")
 for s in sources:
     peer = median(f"{s} peer") if f"{s} peer" in runs else None
     for c in codecs:
+        if f"{s} {c}" not in runs:  # REPORT_ONLY on runs made with other SOURCES or CODECS
+            continue
         wall, cpu, rss, out = median(f"{s} {c}")
         doc = json.loads(out)
         st = doc["stages"]
@@ -160,6 +168,32 @@ for s in sources:
     if peer:
         print(f"| {s} | peer: libvips .zip (JPEG) | {peer[0]:.2f} s | {peer[1]:.2f} s | {peer[1] / peer[0]:.2f} | {peer[1] / mpx * 1e3:.1f} | {mpx / peer[0]:.0f} "
               f"| {peer[2] / 1024:.0f} MiB | | | | | | | | | | | |")
+print()
+print("CPU milliseconds per source megapixel, by stage (`split --json`'s `stages.cpu`, the same median runs); *other* is the rest of the process's CPU.")
+print()
+print("| source | codec | CPU ms / Mpx | read | sums | cut | encode | store | other | wall / encode floor | CPU vs peer |")
+print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+cores = os.cpu_count() or 1
+ms = lambda seconds: f"{seconds / mpx * 1e3:.1f}"
+for s in sources:
+    peer = median(f"{s} peer") if f"{s} peer" in runs else None
+    for c in codecs:
+        if f"{s} {c}" not in runs:  # REPORT_ONLY on runs made with other SOURCES or CODECS
+            continue
+        wall, cpu, rss, out = median(f"{s} {c}")
+        st = json.loads(out)["stages"].get("cpu")
+        vs = f"{cpu / peer[1]:.2f}" if peer and c == "jpeg" else ""
+        if not st:  # runs from before stages.cpu, or a platform without thread CPU clocks
+            print(f"| {s} | {c} | {ms(cpu)} | | | | | | | | {vs} |")
+            continue
+        names = ["readSeconds", "pyramidSeconds", "cutSeconds", "encodeSeconds", "storeSeconds"]
+        floor = st["encodeSeconds"] / cores
+        over_floor = f"{wall / floor:.2f}" if floor > 0 else ""
+        other = max(cpu - sum(st[n] for n in names), 0)
+        cells = " | ".join(ms(st[n]) for n in names)
+        print(f"| {s} | {c} | {ms(cpu)} | {cells} | {ms(other)} | {over_floor} | {vs} |")
+    if peer:
+        print(f"| {s} | peer | {ms(peer[1])} | | | | | | | | |")
 PY
 cat "$REPORT"
 splice split-matrix "$REPORT" "## Every source with every codec: how busy split keeps the cores (\`bench/split-matrix.sh\`)
@@ -174,4 +208,10 @@ them longer than they for it, else the busiest of reading, the pyramid and cutti
 the stages held at most by their own count (\`split --json\`'s \`memory.peakBytes\`, docs/cli.md);
 the rest of the peak RSS is code, stacks, tables and the allocator's. The
 \`tiles\` source is 4096 JPEG tiles, read by \`convert\`.
-*vs peer*: libvips' wall time over ours, JPEG only."
+*vs peer*: libvips' wall time over ours, JPEG only. In the CPU table, *read*, *sums*, *cut*,
+*encode* and *store* are each stage's CPU time by its thread's CPU clock (\`split --json\`'s
+\`stages.cpu\`), *other* the rest of the process's (a compressed TIFF's strip workers, the
+encoders' caller, start and end); *wall / encode floor* the wall time over the encoders' CPU
+time divided by the cores (issue 28's goal: at most 1.25); *CPU vs peer* our CPU time over
+libvips' (goal: at most 1). \`bench/split-profile.sh peer SOURCE\` splits the peer's CPU by kind
+of work."
