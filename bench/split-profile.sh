@@ -81,11 +81,13 @@ USER = [
     ("read", r"idct|ycc_rgb|upsample|decode_mcu|decompress|jpeg_read|fill_bit_buffer|vortex_tiler::source|vortex_tiler::decode|"
              r"tiff::|png::|fdeflate|zune|inflate|weezl|TIFF|rtiff|vips_foreign_load"),
     ("JPEG encode", r"jsimd_|encode_mcu|forward_DCT|fdct|rgb_ycc|downsample|compress_data|jpeg_|emit_|dump_buffer|finish_pass|"
-                    r"quantize|huff|jcopy|vortex_tiler::codec"),
-    ("shrink (pyramid sums)", r"pyramid::(sums|reduce|filter)|Sums|Reducer|ExactFilter|ExactRow|vips_region_shrink|vips_shrink|shrink"),
+                    r"quantize|huff|jcopy|pre_process_data|process_data_simple_main|jinit_|start_pass|vortex_tiler::codec"),
+    ("shrink (pyramid sums)", r"pyramid::(sums|reduce|filter)|feed_exact|reciprocal|Sums|Reducer|ExactFilter|ExactRow|vips_region_shrink|vips_shrink|shrink"),
     ("cut, copy", r"pyramid::(cut|band)|Cuts|replay|memcpy|memmove|memset|vips_region_copy|vips__region_copy"),
     ("allocator", r"malloc|free|_int_|realloc|calloc|tcache|arena|mmap_chunk"),
-    ("write", r"vortex_pack|crc32|sink::|zip::|archive|deflate|vips_target|xxh"),
+    ("write", r"vortex_pack|crc32|sink::|zip::|archive|deflate|vips_target|xxh|libc_write|__write|pwrite"),
+    # What reading the clocks of src/stages.rs costs: ours only.
+    ("stage clocks", r"clock_gettime|StageClock|Instant>::now"),
     ("start-up (interpreter, loader)", r"^_?Py|^py|_dl_|do_lookup_x|dl_main"),
 ]
 STARTUP = ("libpython", "python3", "ld-linux", "_libvips")
@@ -116,7 +118,8 @@ print(f"total\t{sum(count.values()) / HZ / mpx * 1e3:.2f}")
 
 # peer_profile NAME: our JPEG cell of NAME and the peer's run of the same source, by family.
 peer_profile() {
-  local name=$1 mpx grid
+  local name=$1 mpx
+  export VIPS_WARNING=0 # vipsheader 8.14 warns about the TIFF Predictor tag the tiff crate writes
   pyvips_setup
   [ -n "$PY" ] || { echo "error: no libvips 8.18 peer (pyvips)" >&2; exit 1; }
   mpx=$(vipsheader -f width "$src" | awk -v h="$(vipsheader -f height "$src")" '{ print $1 * h / 1e6 }')
