@@ -46,9 +46,11 @@ pub(crate) fn most_tiles_in_lots(batch_tiles: u64) -> u64 {
 
 /// The most tiles a lot is gathered up to, whatever the thread count: the plan's memory bound,
 /// and with it the stripes a run is cut in and so a pack's order, must not depend on the
-/// machine. Machines of up to 4 threads gather twice their threads; larger ones keep
-/// the tiles of small batches (narrow images, coarse levels) to 8 a lot.
-const GATHER_MOST: usize = 8;
+/// machine, and each tile it allows is a tile more the plan counts in every lot. Up to 2
+/// threads gather twice their threads, as before; more threads gather small batches (images
+/// a few tiles wide, the coarsest levels) into lots of 4 tiles or more all the same, which
+/// leaves some of them idle on those few tiles.
+const GATHER_MOST: usize = 4;
 
 /// Tiles a lot is gathered up to: enough to keep every thread of the pool busy twice over.
 fn gather_target() -> usize {
@@ -418,6 +420,9 @@ fn prepare<T: Sample>(
         Some(crop) => encoder.encode_crop(texels, crop, &mut bytes),
     };
     encoded.map_err(|message| TilerError::Encode { lod, x, y, message })?;
+    // A JPEG or PNG grows its buffer as it writes, up to twice its length: what waits for the
+    // writer is only the encoding, as the plan counts it (`Codec::most_encoded_bytes`).
+    bytes.shrink_to_fit();
     Ok(Stored::Encoded(bytes))
 }
 

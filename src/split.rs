@@ -72,13 +72,14 @@ pub fn split(
     progress: &dyn Progress,
 ) -> Result<Summary> {
     let layout = opts.layout(source.width(), source.height())?;
+    let copy = plan_copy(source.as_ref(), opts, &layout);
     let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
     let beside = Beside {
         decoder: source.most_buffer_bytes(),
         encoded_tile: if sink.ordered() { opts.codec.most_encoded_bytes(layout.tile_size, stored) } else { 0 },
+        copies: copy.0.is_some(),
     };
     let plan = Plan::choose(&layout, source.layout().bytes_per_pixel() as u64, opts.filter, opts.max_memory, beside)?;
-    let copy = plan_copy(source.as_ref(), opts, &layout);
     let (summary, _) = by_depth(source.header(), sink, opts, layout, copy, Passes::Whole(plan, source), progress)?;
     Ok(summary)
 }

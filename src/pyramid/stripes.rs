@@ -10,7 +10,9 @@
 //! passed down. Every texel therefore comes from the same exact sums as in one band, and the
 //! tiles are the same, byte for byte; the source is read once per pass.
 //!
-//! The plan picks the smallest `J` whose coarse pass fits, then the widest stripe that fits.
+//! The plan picks the smallest `J` whose coarse pass and narrowest stripe fit, then the widest
+//! stripe that fits; what fits counts every part a run holds at once, the source's decoder
+//! and the tiles in flight included ([`Plan::held`]).
 //! Only the exact filters can be striped: lanczos3 and mitchell resample each level from the
 //! one above across stripe edges.
 
@@ -46,6 +48,9 @@ pub(crate) struct Beside {
     /// One tile's encoding at most, while it waits for an ordered sink's writer
     /// (`Codec::most_encoded_bytes`); 0 where the sink stores each tile as it is encoded.
     pub encoded_tile: u64,
+    /// Some of the finest level's pages are copied from the source as stored: a page's copy is
+    /// held while its texels still are (each other encoding is made after they are freed).
+    pub copies: bool,
 }
 
 impl Plan {
@@ -113,9 +118,10 @@ impl Plan {
                 held(cascades, pass_batch(layout, &stripe, texel_bytes).max(coarse_batch))
             };
             if need(1) > memory {
-                // Wider units only need more.
+                // A finer split's stripes are wider, but its coarse pass, and its batches in
+                // flight beside every stripe, are smaller: it may still fit.
                 least = least.min(need(1));
-                break;
+                continue;
             }
             let max_units = layout.columns.div_ceil(unit);
             let (mut lo, mut hi) = (1, max_units);
@@ -173,16 +179,19 @@ fn pass_batch(layout: &Layout, span: &Span, texel_bytes: u64) -> u64 {
     ((pages.end - pages.start) as u64).min(batch_tiles(layout, texel_bytes as usize) as u64)
 }
 
-/// Bytes of the tiles cut and not yet stored, where batches hold at most `batch` tiles: the
-/// batch the cutting thread is sending, those queued for the encoders
-/// ([`QUEUE_BATCHES`](crate::split::QUEUE_BATCHES)), and the encoders' lots
-/// ([`most_tiles_in_lots`]), with their encodings waiting for an ordered sink's writer.
+/// Bytes of the tiles cut and not yet stored, where batches hold at most `batch` tiles: those
+/// queued for the encoders ([`QUEUE_BATCHES`](crate::split::QUEUE_BATCHES); the one the
+/// cutting thread is sending is its band's row of tiles, counted there), and the encoders' lots
+/// ([`most_tiles_in_lots`]), each of whose tiles is its texels until they are encoded and then
+/// its encoding, waiting for an ordered sink's writer (both at once where pages are copied).
 fn in_flight_bytes(layout: &Layout, batch: u64, texel_bytes: u64, beside: Beside) -> u64 {
-    let lots = most_tiles_in_lots(batch);
-    let tiles = (1 + crate::split::QUEUE_BATCHES as u64).saturating_mul(batch).saturating_add(lots);
-    tiles
-        .saturating_mul(band::most_tile_bytes(layout, texel_bytes))
-        .saturating_add(lots.saturating_mul(beside.encoded_tile))
+    let tile = band::most_tile_bytes(layout, texel_bytes);
+    let in_lots = match beside.copies {
+        true => tile.saturating_add(beside.encoded_tile),
+        false => tile.max(beside.encoded_tile),
+    };
+    let sent = (crate::split::QUEUE_BATCHES as u64).saturating_mul(batch).saturating_mul(tile);
+    sent.saturating_add(most_tiles_in_lots(batch).saturating_mul(in_lots))
 }
 
 /// [`cascade_bytes`] of the coarse pass, plus the block sums it builds from whole source rows
