@@ -1,9 +1,10 @@
 //! Where a run's memory goes (issue 28): `split --json`'s `memory` names every part the stages
 //! count, and what they held at once stays under the plan's figure (`plannedBytes`), itself
-//! under `--max-memory`, in one band and in stripes, from rows in memory, PNG, JPEG and strip,
-//! tiled, LZW, Deflate and JPEG-tiled TIFFs (whose decoders hold buffers of their own); a budget
-//! too small for that is refused before the run, naming the flag. Byte counts only: nothing
-//! here depends on timing.
+//! under `--max-memory`, in one band and in stripes, from rows in memory, PNG (streamed and
+//! interlaced), JPEG (baseline and progressive) and strip, tiled, LZW, Deflate and JPEG-tiled
+//! TIFFs (the interlaced, progressive and all but the strip TIFF hold buffers of their own);
+//! a budget too small for that is refused before the run, naming the flag. Byte counts only:
+//! nothing here depends on timing.
 
 use std::path::Path;
 
@@ -85,8 +86,8 @@ fn the_parts_stay_under_the_plan_in_one_band_and_in_stripes() {
 }
 
 /// A `width x height` RGB image of random texels: as a TIFF in strips of 16 rows (by the `tiff`
-/// crate), a PNG and a JPEG (by the `image` crate).
-fn sources(dir: &Path, width: u32, height: u32) -> [std::path::PathBuf; 3] {
+/// crate), a PNG and a JPEG (by the `image` crate), and a progressive JPEG (by libjpeg-turbo).
+fn sources(dir: &Path, width: u32, height: u32) -> [std::path::PathBuf; 4] {
     let image = Image::random(width, height, PixelLayout::new(Channels::Rgb, Depth::U8), 7);
     let texels: Vec<u8> = image.samples.iter().map(|&v| v as u8).collect();
     let strips = dir.join("strips.tif");
@@ -94,20 +95,30 @@ fn sources(dir: &Path, width: u32, height: u32) -> [std::path::PathBuf; 3] {
     let mut img = tif.new_image::<colortype::RGB8>(width, height).unwrap();
     img.rows_per_strip(16).unwrap();
     img.write_data(&texels).unwrap();
+    let progressive = dir.join("progressive.jpg");
+    let mut c = mozjpeg::Compress::new(mozjpeg::ColorSpace::JCS_RGB);
+    c.set_size(width as usize, height as usize);
+    c.set_progressive_mode();
+    let mut started = c.start_compress(Vec::new()).unwrap();
+    started.write_scanlines(&texels).unwrap();
+    std::fs::write(&progressive, started.finish().unwrap()).unwrap();
     let rgb = image::RgbImage::from_raw(width, height, texels).unwrap();
     let (png, jpeg) = (dir.join("src.png"), dir.join("src.jpg"));
     rgb.save(&png).unwrap();
     rgb.save(&jpeg).unwrap();
-    [strips, png, jpeg]
+    [strips, png, jpeg, progressive]
 }
 
 #[test]
 fn json_says_where_the_memory_went_and_the_plan_bounds_it() {
     let dir = tempfile::tempdir().unwrap();
     let (width, height) = (1000, 600);
-    let [strips, png, jpeg] = sources(dir.path(), width, height);
-    // (input, whether its decoder holds buffers of its own)
-    let mut inputs = vec![(strips.clone(), false), (png, false), (jpeg, false)];
+    let [strips, png, jpeg, progressive] = sources(dir.path(), width, height);
+    // (input, whether its decoder holds buffers of its own): a progressive JPEG's coefficients
+    // and an interlaced PNG decoded whole do.
+    let interlaced = cli::fixture("interlaced-61x47.png");
+    let mut inputs =
+        vec![(strips.clone(), false), (png, false), (jpeg, false), (progressive, true), (interlaced, true)];
     if have_program("tiffcp", "-h", "libtiff-tools") {
         // Tiles, LZW tiles, Deflate strips (decoded into the source's band, some by workers
         // ahead) and JPEG tiles.
