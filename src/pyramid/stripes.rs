@@ -237,6 +237,26 @@ mod tests {
     }
 
     #[test]
+    fn what_the_source_and_the_sink_hold_is_in_the_plan() {
+        let l = Layout::new(8000, 2000, 256, 1).unwrap();
+        let none = Beside::default();
+        let budget = one_band_bytes(&l, 3);
+        let alone = Plan::choose(&l, 3, Filter::default(), budget, none).unwrap();
+        assert_eq!((alone.coarse, alone.read_ahead_rows, alone.held), (None, 0, budget));
+        // A decoder's band of 8 MiB beside it: stripes and a coarse pass, within the budget.
+        let decoder = Beside { decoder: 8 << 20, ..none };
+        let striped = Plan::choose(&l, 3, Filter::default(), budget, decoder).unwrap();
+        assert!(striped.coarse.is_some() && striped.held <= budget, "{striped:?}");
+        // Encodings waiting for a pack's writer, at a JPEG's worst case, count in every lot.
+        let pack = Beside { encoded_tile: 3 * 256 * 256 + 2048, ..none };
+        let p = Plan::choose(&l, 3, Filter::default(), budget, pack).unwrap();
+        assert!(p.coarse.is_some() && p.held <= budget, "{p:?}");
+        // More than the budget alone: refused, naming the decoder's part.
+        let e = Plan::choose(&l, 3, Filter::default(), budget, Beside { decoder: budget, ..none }).unwrap_err();
+        assert!(e.to_string().contains("the source's decoder holds"), "{e}");
+    }
+
+    #[test]
     fn resampling_filters_are_not_striped() {
         let l = Layout::new(200_000, 2000, 256, 0).unwrap();
         let e = Plan::choose(&l, 3, Filter::Lanczos3, 64 << 20, Beside::default()).unwrap_err().to_string();
