@@ -124,6 +124,37 @@ pub enum Codec {
 }
 
 impl Codec {
+    /// The most bytes (capacity) one encoding of a `side`-texel tile stored as `stored` can
+    /// hold, for the plan's memory bound (`pyramid::stripes`): raw and BC tiles are a fixed
+    /// size; zstd's output buffer is `ZSTD_compressBound`; a JPEG is at most libjpeg-turbo's
+    /// `tj3JPEGBufSize` (6 bytes a texel at 4:4:4, 3 at 4:2:0, 2 for grey, and 2048 of
+    /// headers), a PNG its filtered rows in stored Deflate blocks with every chunk's framing
+    /// (generously: an eighth more and 1 KiB). Both grow their buffer as they write, which
+    /// `split`'s encoders shrink to the length once a tile is encoded (`encoders::prepare`).
+    pub fn most_encoded_bytes(&self, side: u32, stored: PixelLayout) -> u64 {
+        let side = side as u64;
+        let (texels, channels) = (side * side, stored.channels);
+        let stored = texels * stored.bytes_per_pixel() as u64;
+        match *self {
+            Codec::Raw => stored,
+            Codec::Zstd { .. } => zstd::zstd_safe::compress_bound(stored as usize) as u64,
+            Codec::Bc1 => side.div_ceil(4).pow(2) * 8,
+            Codec::Bc7 { .. } => side.div_ceil(4).pow(2) * 16,
+            Codec::Jpeg { subsampling, .. } => {
+                let per_texel = match (channels, subsampling) {
+                    (Channels::Grey, _) => 2,
+                    (_, Subsampling::S420) => 3,
+                    (_, Subsampling::S444) => 6,
+                };
+                side.next_multiple_of(16).pow(2) * per_texel + 2048
+            }
+            Codec::Png { .. } => {
+                let filtered = stored + side;
+                filtered + filtered / 8 + 1024
+            }
+        }
+    }
+
     /// The `codec` member of `info.json` (and `--codec`).
     pub fn name(&self) -> &'static str {
         match self {

@@ -35,6 +35,28 @@ use crate::viewer::Crop;
 /// (a row of tiles, 12 MiB at a 16384-texel width: issue 28).
 const LOTS_IN_FLIGHT: usize = 2;
 
+/// Cut tiles the stage holds at most, received and not yet stored, where the producer's batches
+/// hold at most `batch_tiles` tiles each: [`LOTS_IN_FLIGHT`] lots, each gathered from batches
+/// until it holds [`gather_target`] tiles (so fewer than [`GATHER_MOST`], plus one more batch).
+/// An ordered sink's encodings wait among them, one per tile (a pack neither crops nor splits a
+/// tile's places; the plan counts each at the codec's most, `Codec::most_encoded_bytes`).
+pub(crate) fn most_tiles_in_lots(batch_tiles: u64) -> u64 {
+    LOTS_IN_FLIGHT as u64 * (batch_tiles + GATHER_MOST as u64)
+}
+
+/// The most tiles a lot is gathered up to, whatever the thread count: the plan's memory bound,
+/// and with it the stripes a run is cut in and so a pack's order, must not depend on the
+/// machine, and each tile it allows is a tile more the plan counts in every lot. Up to 2
+/// threads gather twice their threads, as before; more threads gather small batches (images
+/// a few tiles wide, the coarsest levels) into lots of 4 tiles or more all the same, which
+/// leaves some of them idle on those few tiles.
+const GATHER_MOST: usize = 4;
+
+/// Tiles a lot is gathered up to: enough to keep every thread of the pool busy twice over.
+fn gather_target() -> usize {
+    (2 * rayon::current_num_threads()).min(GATHER_MOST)
+}
+
 /// What the stage counts: tiles encoded, tiles copied from the source (some cropped), tiles
 /// stored (places).
 #[derive(Default)]
@@ -200,7 +222,7 @@ fn helping<R>(mut attempt: impl FnMut() -> std::result::Result<R, bool>) -> std:
 /// every thread busy (coarse levels, narrow images).
 fn gather<T>(first: Batch<T>, rx: &Receiver<Result<Batch<T>>>) -> Result<Vec<Batch<T>>> {
     let mut work = vec![first];
-    let enough = 2 * rayon::current_num_threads();
+    let enough = gather_target();
     while work.iter().map(|b| b.tiles.len()).sum::<usize>() < enough {
         match rx.try_recv() {
             Ok(more) => work.push(more?),
@@ -399,6 +421,9 @@ fn prepare<T: Sample>(
         Some(crop) => encoder.encode_crop(texels, crop, &mut bytes),
     };
     encoded.map_err(|message| TilerError::Encode { lod, x, y, message })?;
+    // A JPEG or PNG grows its buffer as it writes, up to twice its length: what waits for the
+    // writer is only the encoding, as the plan counts it (`Codec::most_encoded_bytes`).
+    bytes.shrink_to_fit();
     Ok(Stored::Encoded(bytes))
 }
 

@@ -185,20 +185,34 @@ impl Gauge {
         }
         // Two's complement: a negative delta wraps back down. A part briefly below zero (one
         // thread frees what another has not counted yet) is not a peak.
-        let mark = |now: &AtomicU64, peak: &AtomicU64| {
-            let new = now.fetch_add(bytes as u64, Ordering::Relaxed).wrapping_add(bytes as u64);
-            if new <= i64::MAX as u64 {
-                peak.fetch_max(new, Ordering::Relaxed);
-            }
-        };
-        mark(&self.now[part as usize], &self.peak[part as usize]);
-        mark(&self.total, &self.total_peak);
+        let new = self.now[part as usize].fetch_add(bytes as u64, Ordering::Relaxed).wrapping_add(bytes as u64);
+        if new <= i64::MAX as u64 {
+            self.peak[part as usize].fetch_max(new, Ordering::Relaxed);
+        }
+        self.add_to_total(bytes as u64);
     }
 
-    /// `part` holds `bytes` now (a buffer that is resized rather than allocated and freed).
+    /// `part` holds `bytes` now (a buffer that is resized rather than allocated and freed), for
+    /// a part only ever set, never added to. One atomic swap: two threads setting the part at
+    /// once each move the total by the difference from what they replaced, so the deltas add
+    /// up to the last value set whatever the order (a load then an add could count one twice).
     pub fn set(&self, part: Part, bytes: u64) {
-        let old = self.now[part as usize].load(Ordering::Relaxed);
-        self.add(part, bytes as i64 - old as i64);
+        let old = self.now[part as usize].swap(bytes, Ordering::Relaxed);
+        self.peak[part as usize].fetch_max(bytes, Ordering::Relaxed);
+        self.add_to_total(bytes.wrapping_sub(old));
+    }
+
+    /// Moves the total by `delta` (two's complement) and keeps its peak.
+    fn add_to_total(&self, delta: u64) {
+        let new = self.total.fetch_add(delta, Ordering::Relaxed).wrapping_add(delta);
+        if new <= i64::MAX as u64 {
+            self.total_peak.fetch_max(new, Ordering::Relaxed);
+        }
+    }
+
+    /// What all parts hold now.
+    pub fn held(&self) -> u64 {
+        self.total.load(Ordering::Relaxed)
     }
 
     pub fn peaks(&self) -> Peaks {
@@ -233,13 +247,30 @@ pub(crate) mod read_ahead {
         (CHUNK_BYTES / row_bytes.max(1)).max(1)
     }
 
-    /// Bytes the read-ahead holds at most for rows of `row_bytes` bytes, the chunks handed on
-    /// included, and what the pyramid's sums make of each of those (a third of a chunk at most:
-    /// a quarter for the next LOD, a sixteenth for the one after, ...).
-    pub fn bytes(row_bytes: u64) -> u64 {
+    /// Bytes the read-ahead holds at most for rows of `row_bytes` bytes of `texel_bytes`-byte
+    /// texels (`readAheadBytes` and `sumRowsBytes`): every chunk that can be alive at once
+    /// ([`CHUNKS_AHEAD`] queued, the one being read, and [`CHUNKS_HANDED_ON`] with the sums and
+    /// the cutting thread), and what the pyramid's sums made of each of those that is handed
+    /// on, and of the one they are filling ([`derived_bytes`]).
+    pub fn bytes(row_bytes: u64, texel_bytes: u64) -> u64 {
         let chunks = CHUNKS_AHEAD as u64 + 2 + CHUNKS_HANDED_ON;
         let chunk = rows_per_chunk(row_bytes).saturating_mul(row_bytes);
-        chunks.saturating_mul(chunk).saturating_add(CHUNKS_HANDED_ON.saturating_mul(chunk / 3 + row_bytes))
+        let derived = derived_bytes(row_bytes, texel_bytes);
+        chunks.saturating_mul(chunk).saturating_add((CHUNKS_HANDED_ON + 1).saturating_mul(derived))
+    }
+
+    /// Bytes (capacity) of the rows the pyramid's sums make of one chunk (`cascade::Derived`),
+    /// at most: level `k` below the source gets at most `R / 2^k + 8` rows of `W / 2^k + 1`
+    /// texels from `R` rows `W` texels wide (the 8: a resampling filter's rows still due when
+    /// the pass ends), so over at most 64 levels a third of the chunk, `R` texels, 8 rows and
+    /// 512 texels; with a row's place (16 bytes) per row made and per source row (8). Each
+    /// `Vec` grows by doubling: twice all that.
+    pub fn derived_bytes(row_bytes: u64, texel_bytes: u64) -> u64 {
+        let rows = rows_per_chunk(row_bytes);
+        let chunk = rows.saturating_mul(row_bytes);
+        let samples = (chunk / 3).saturating_add(rows * texel_bytes).saturating_add(8 * row_bytes + 512 * texel_bytes);
+        let places = 16 * (rows + 512) + 8 * rows;
+        2 * samples.saturating_add(places)
     }
 }
 
@@ -282,6 +313,28 @@ mod tests {
         g.add(Part::Encoded, -5);
         g.add(Part::Encoded, 5);
         assert_eq!(g.peaks().part(Part::Encoded), 0);
+    }
+
+    #[test]
+    fn parts_set_from_several_threads_add_up() {
+        // Each thread sets the part to its own figures and then 0: whatever the interleaving,
+        // the total ends where the other parts leave it (a load then an add could leave a
+        // thread's figure counted twice or not at all).
+        let g = Gauge::default();
+        g.add(Part::Bands, 1000);
+        std::thread::scope(|s| {
+            for t in 1..=4u64 {
+                let g = &g;
+                s.spawn(move || {
+                    for i in 0..20_000 {
+                        g.set(Part::Decoder, t * 100 + i % 7);
+                    }
+                });
+            }
+        });
+        g.set(Part::Decoder, 0);
+        assert_eq!(g.held(), 1000);
+        assert_eq!(g.peaks().part(Part::Decoder), 406);
     }
 
     #[test]

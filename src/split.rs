@@ -22,7 +22,7 @@ use crate::pyramid::cascade::{Batch, BatchSender, Cascade, Derived, Span};
 use crate::pyramid::cut::Padding;
 use crate::pyramid::filter::{ExactFilter, sums_need_u128};
 use crate::pyramid::reduce::{Acc, Reducer};
-use crate::pyramid::stripes::Plan;
+use crate::pyramid::stripes::{Beside, Plan};
 use crate::shard::sums::RootRows;
 use crate::shard::sums::{self, EncodedRoots};
 use crate::sink::TileSink;
@@ -55,7 +55,7 @@ fn plan_copy(source: &dyn RowSource, opts: &SplitOptions, layout: &Layout) -> (O
 
 /// Batches of tiles waiting for the encoder: cutting is much cheaper than encoding, so one
 /// waiting batch keeps the encoders busy, and each extra one would cost a row of tiles of memory.
-const QUEUE_BATCHES: usize = 1;
+pub(crate) const QUEUE_BATCHES: usize = 1;
 
 /// Chunks of source rows, with the rows the pyramid's sums made of them, waiting for the
 /// cutting thread: those the read-ahead's memory bound allows beyond the one it cuts.
@@ -72,8 +72,14 @@ pub fn split(
     progress: &dyn Progress,
 ) -> Result<Summary> {
     let layout = opts.layout(source.width(), source.height())?;
-    let plan = Plan::choose(&layout, source.layout().bytes_per_pixel() as u64, opts.filter, opts.max_memory)?;
     let copy = plan_copy(source.as_ref(), opts, &layout);
+    let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
+    let beside = Beside {
+        decoder: source.most_buffer_bytes(),
+        encoded_tile: if sink.ordered() { opts.codec.most_encoded_bytes(layout.tile_size, stored) } else { 0 },
+        copies: copy.0.is_some(),
+    };
+    let plan = Plan::choose(&layout, source.layout().bytes_per_pixel() as u64, opts.filter, opts.max_memory, beside)?;
     let (summary, _) = by_depth(source.header(), sink, opts, layout, copy, Passes::Whole(plan, source), progress)?;
     Ok(summary)
 }

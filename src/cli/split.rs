@@ -222,9 +222,11 @@ pub struct OutputArgs {
 
     /// Most memory a run may hold at once, checked before allocating: an image decoded whole
     /// when its format cannot be streamed (interlaced PNG, progressive JPEG, one-strip TIFF,
-    /// WebP, ...), the bands and tiles in flight, a pack's index; e.g. 512M, 4G. An image too
-    /// wide for its bands to fit is cut in vertical stripes, reading the source once per
-    /// stripe, for the same tiles.
+    /// WebP, ...), a pack's index, and the run's stages together (the source decoder's
+    /// buffers, the read-ahead, the bands, the tiles and encodings in flight: --json's
+    /// memory.plannedBytes, their most at once); e.g. 512M, 4G. An image too wide for that is
+    /// cut in vertical stripes, reading the source once per stripe, for the same tiles; a
+    /// budget too small even for those is refused before the run, saying what it needs.
     #[arg(long, value_name = "SIZE", default_value = "1G", value_parser = super::parse_size)]
     max_memory: u64,
 

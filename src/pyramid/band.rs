@@ -151,6 +151,26 @@ impl<T: Copy> Band<T> {
     }
 }
 
+/// Bytes a band cutting `pages` page columns of `texel_bytes`-byte texels holds at most, for the
+/// plan ([`crate::pyramid::stripes`]), from what [`Band::push`] and `begin` allocate: the front
+/// row of tiles whole (reserved exactly), and each row of tiles below it that has begun (it
+/// shares the rows its border reads) grown row by row: up to twice those rows, as a `Vec`
+/// grows, plus its smallest allocation (8 samples of at most 4 bytes).
+pub fn most_bytes(layout: &Layout, pages: u64, texel_bytes: u64) -> u64 {
+    let (tile, payload) = (layout.tile_size as u64, layout.payload() as u64);
+    // Rows of tiles `j` below the front one read `tile - j * payload` of its rows.
+    let shared_rows: u64 = (1..).map(|j| tile.saturating_sub(j * payload)).take_while(|&rows| rows > 0).sum();
+    let per_page = (tile * tile + 2 * shared_rows * tile) * texel_bytes + 32 * tile.div_ceil(payload);
+    pages.saturating_mul(per_page)
+}
+
+/// Bytes (capacity) of one tile a band hands on, at most: its texels, reserved exactly, unless
+/// the rows it shared with the row of tiles above had grown it past them already.
+pub fn most_tile_bytes(layout: &Layout, texel_bytes: u64) -> u64 {
+    let (tile, payload) = (layout.tile_size as u64, layout.payload() as u64);
+    (tile * tile).max(2 * tile.saturating_sub(payload) * tile) * texel_bytes + 32
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

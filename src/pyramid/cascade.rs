@@ -286,10 +286,16 @@ impl<T: Sample> Cuts<T> {
         let lod = band.lod();
         let per_batch = batch_tiles(layout, *channels * size_of::<T>());
         let memory = &out.clock.memory;
+        // Bytes of the band's tiles moved into batches during this push.
+        let moved = std::cell::Cell::new(0i64);
         let send = |tiles: Vec<CutTile<T>>| {
-            // Counted as the encoders' from here until they free the texels (`encoders.rs`).
-            let bytes: usize = tiles.iter().map(|t| t.texels.capacity() * size_of::<T>()).sum();
-            memory.add(Part::Tiles, bytes as i64);
+            // Counted as the encoders' from here until they free the texels (`encoders.rs`), and
+            // no longer as the band's: moved, not copied, so never counted twice (the plan
+            // counts the batch being sent within the band's bytes).
+            let bytes = tiles.iter().map(|t| (t.texels.capacity() * size_of::<T>()) as i64).sum::<i64>();
+            memory.add(Part::Bands, -bytes);
+            memory.add(Part::Tiles, bytes);
+            moved.set(moved.get() + bytes);
             out.send(Ok(Batch { lod, tiles })).map_err(|_| TilerError::Options("the encoder stopped".into()))
         };
         let held = band.held_bytes();
@@ -308,7 +314,7 @@ impl<T: Sample> Cuts<T> {
             }
             send(tiles)
         });
-        memory.add(Part::Bands, band.held_bytes() as i64 - held as i64);
+        memory.add(Part::Bands, band.held_bytes() as i64 - held as i64 + moved.get());
         pushed
     }
 }

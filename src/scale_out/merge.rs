@@ -32,7 +32,7 @@ use crate::layout::Layout;
 use crate::limits::{MAX_ALIGN, MAX_TILE_ALIGN, human_bytes};
 use crate::pixel::PixelLayout;
 use crate::pyramid::cascade::Span;
-use crate::pyramid::stripes::Plan;
+use crate::pyramid::stripes::{Beside, Plan};
 use crate::settings::{self, Requested};
 use crate::sink::{TileSink, pack_description, tile_kind};
 use crate::source::ImageHeader;
@@ -95,8 +95,12 @@ pub fn merge(paths: &[PathBuf], dest: &Path, progress: &dyn Progress) -> Result<
         PackWriter::create(dest, pack_description(&layout, stored), layout.pack_levels(), o.info.as_bytes(), options)?;
     let kind = tile_kind(opts.codec);
     // A run too wide for one machine's memory has no order of its own: merge writes the one
-    // a machine with enough memory would.
-    let order = Plan::choose(&layout, pixels.bytes_per_pixel() as u64, opts.filter, opts.max_memory)
+    // a machine with enough memory would, into a pack, from a source that holds no decoder
+    // buffers of its own (rows in memory, PNG, JPEG, uncompressed strips) and stores no tiles
+    // to copy.
+    let encoded_tile = opts.codec.most_encoded_bytes(layout.tile_size, stored);
+    let beside = Beside { decoder: 0, encoded_tile, copies: false };
+    let order = Plan::choose(&layout, pixels.bytes_per_pixel() as u64, opts.filter, opts.max_memory, beside)
         .unwrap_or_else(|_| Plan { stripes: vec![Span::whole(&layout)], coarse: None, read_ahead_rows: 0, held: 0 });
     let mut copied_bytes = 0u64;
     for row in split_order(&layout, &order) {

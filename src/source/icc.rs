@@ -184,9 +184,6 @@ impl RowSource for Described {
     fn describe(&self) -> String {
         format!("{}; {}", self.inner.describe(), self.note)
     }
-    fn buffer_bytes(&self) -> u64 {
-        self.inner.buffer_bytes()
-    }
     forward_row_order_to_inner!();
     /// Only rows passed through as they are may be copied as stored.
     fn stored_tiles(&self) -> Option<std::sync::Arc<dyn crate::source::stored::StoredTiles>> {

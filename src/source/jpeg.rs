@@ -426,6 +426,16 @@ impl RowSource for JpegSource {
         ImageHeader { width: self.width, height: self.height, layout: self.layout }
     }
 
+    /// A multi-scan image's DCT coefficients, which libjpeg holds whole from the start. (A
+    /// sequential one's row of MCUs is libjpeg's own, not counted.)
+    fn buffer_bytes(&self) -> u64 {
+        self.whole_coefficients.unwrap_or(0)
+    }
+
+    fn most_buffer_bytes(&self) -> u64 {
+        self.buffer_bytes()
+    }
+
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
         let y = self.next;
         let row_error = |message: String| TilerError::DecodeRow { path: self.path.clone(), row: y, message };

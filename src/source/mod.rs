@@ -11,7 +11,8 @@
 
 /// The row-order methods of a [`RowSource`] that wraps another in its field `inner` and changes
 /// what its rows hold but not which rows come (ICC conversion, widened or mapped samples, picked
-/// channels): rewinding, skipping and narrowing go straight to the wrapped source.
+/// channels): rewinding, skipping and narrowing go straight to the wrapped source, and the
+/// decoder's buffers are the wrapped source's.
 macro_rules! forward_row_order_to_inner {
     () => {
         fn rewind(&mut self) -> $crate::error::Result<()> {
@@ -24,6 +25,14 @@ macro_rules! forward_row_order_to_inner {
 
         fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
             self.inner.read_columns(columns)
+        }
+
+        fn buffer_bytes(&self) -> u64 {
+            self.inner.buffer_bytes()
+        }
+
+        fn most_buffer_bytes(&self) -> u64 {
+            self.inner.most_buffer_bytes()
         }
     };
 }
@@ -80,6 +89,12 @@ pub trait RowSource: Send {
     /// for `split --json`'s memory (`limits::Part::Decoder`); 0 where it keeps no more than a
     /// row's worth of its own.
     fn buffer_bytes(&self) -> u64 {
+        0
+    }
+    /// The most [`buffer_bytes`](Self::buffer_bytes) can say during a run, known once the
+    /// source is open (from its header, by the same arithmetic that sizes the buffers): the
+    /// plan counts it before the pipeline allocates anything (`pyramid::stripes`).
+    fn most_buffer_bytes(&self) -> u64 {
         0
     }
     /// Starts again from the first row: an image too wide for one band is read once per
@@ -214,6 +229,9 @@ impl RowSource for Reopening {
     }
     fn buffer_bytes(&self) -> u64 {
         self.inner.buffer_bytes()
+    }
+    fn most_buffer_bytes(&self) -> u64 {
+        self.inner.most_buffer_bytes()
     }
     fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
         self.inner.read_columns(columns)

@@ -107,6 +107,19 @@ impl RowSource for PngSource {
         self.embedded.clone()
     }
 
+    /// An interlaced image, decoded whole at open. (A streamed one's decoder keeps about two
+    /// rows of its own, not counted.)
+    fn buffer_bytes(&self) -> u64 {
+        match &self.rows {
+            Rows::Streamed(_) => 0,
+            Rows::Whole(buf, _) => buf.capacity() as u64,
+        }
+    }
+
+    fn most_buffer_bytes(&self) -> u64 {
+        self.buffer_bytes()
+    }
+
     fn describe(&self) -> String {
         match self.rows {
             Rows::Streamed(_) => "png, streamed by row".into(),

@@ -78,6 +78,15 @@ impl RowSource for WholeSource {
         ImageHeader { width: self.width, height: self.height, layout: self.layout }
     }
 
+    /// The whole decoded image, held from open to the end.
+    fn buffer_bytes(&self) -> u64 {
+        self.bytes.capacity() as u64
+    }
+
+    fn most_buffer_bytes(&self) -> u64 {
+        self.bytes.capacity() as u64
+    }
+
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
         let start = self.next * out.len();
         out.copy_from_slice(&self.bytes[start..start + out.len()]);

@@ -307,6 +307,18 @@ impl RowSource for JpegTiff {
         ImageHeader { width: self.width, height: self.height, layout: self.layout() }
     }
 
+    /// The band's decoded chunks. (The compressed chunk each worker reads is freed as soon as
+    /// it is decoded, and not counted.)
+    fn buffer_bytes(&self) -> u64 {
+        self.band.iter().map(|chunk| chunk.capacity() as u64).sum()
+    }
+
+    /// A band of whole chunks: each is resized to its texels inside the image, never more.
+    fn most_buffer_bytes(&self) -> u64 {
+        let chunk = self.chunk_w as u64 * self.chunk_h as u64 * self.colour.components() as u64;
+        (self.group as u64 * self.across as u64).saturating_mul(chunk)
+    }
+
     fn embedded(&self) -> crate::source::Embedded {
         self.embedded.clone()
     }

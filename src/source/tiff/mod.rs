@@ -84,6 +84,8 @@ pub struct TiffSource {
     /// decoded ahead (0: on this thread).
     ahead_workers: usize,
     ahead: Option<StripsAhead>,
+    /// The most [`buffer_bytes`](RowSource::buffer_bytes) can say, from the sizes chosen at open.
+    most_buffer_bytes: u64,
     /// LZW strips the workers decode with our own decoder rather than the crate's.
     lzw: Option<Arc<LzwStrips>>,
     max_memory: u64,
@@ -252,6 +254,12 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
         }
         _ => 0,
     };
+    // What `buffer_bytes` can say at most: the band and the tile as allocated here, a stored row
+    // of direct strips (resized to the columns read: at most twice the widest), and a strip per
+    // worker decoding ahead, each the size of the band.
+    let ahead_bytes = strip_bytes.saturating_mul(ahead_workers as u64 * strips_ahead::AHEAD_PER_WORKER as u64);
+    let direct_row = direct.as_ref().map_or(0, |d| 2 * width as u64 * d.pixel as u64);
+    let most_buffer_bytes = (band.len() as u64 + tile_bytes).saturating_add(direct_row).saturating_add(ahead_bytes);
     // Our LZW decoder's predictor and byte order are those of 8- and 16-bit samples.
     let lzw = match compression == CompressionMethod::LZW && stored == file_samples && layout.depth.is_narrow_int() {
         true => lzw_strips(path, &mut decoder, chunking, row_bytes, stored, layout.depth)?.map(Arc::new),
@@ -281,6 +289,7 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
             columns: None,
             ahead_workers,
             ahead: None,
+            most_buffer_bytes,
             lzw,
             max_memory,
             embedded,
@@ -771,6 +780,10 @@ impl RowSource for TiffSource {
         let row = self.direct.as_ref().map_or(0, |d| d.row.capacity());
         let ahead = self.ahead.as_ref().map_or(0, |a| a.in_flight() as usize * self.band.capacity());
         (self.band.capacity() + self.tile.capacity() + row + ahead) as u64
+    }
+
+    fn most_buffer_bytes(&self) -> u64 {
+        self.most_buffer_bytes
     }
 
     /// Strips and tiles are found by row: the next read loads the one it needs.
