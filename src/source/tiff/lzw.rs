@@ -221,11 +221,12 @@ fn copy_earlier(out: &mut [u8], src: usize, n: usize, pos: usize) {
     }
 }
 
-/// Where the LZW strips of a TIFF lie and how their rows are stored: for strips that hold the
-/// texels as the `tiff` crate delivers them (every stored sample, 8 or 16 bits, no
-/// WhiteIsZero inversion), [`StripReader::read`] gives the bytes the crate's `read_chunk_bytes`
-/// would, from a decoder several times faster.
-pub(crate) struct LzwStrips {
+/// Where the LZW or Deflate strips of a TIFF lie and how their rows are stored: for strips
+/// that hold the texels as the `tiff` crate delivers them (every stored sample, 8 or 16 bits,
+/// no WhiteIsZero inversion), a [`StripReader`] gives the bytes the crate's `read_chunk_bytes`
+/// would: LZW from a decoder several times faster, a strip at a time; Deflate as a stream, in
+/// pieces of rows (`strips_ahead`: the strip is never held whole).
+pub(crate) struct OwnStrips {
     pub offsets: Vec<u64>,
     pub counts: Vec<u64>,
     /// Bytes of one row of the image, and samples per texel.
@@ -235,23 +236,51 @@ pub(crate) struct LzwStrips {
     pub big_endian: bool,
     /// The horizontal predictor (2) is undone after decoding.
     pub predictor: bool,
+    /// Deflate (compression 8 or 32946), not LZW.
+    pub deflate: bool,
 }
 
-/// One worker's reader of [`LzwStrips`], with a file handle of its own.
+impl OwnStrips {
+    /// 16-bit samples into native byte order and the predictor undone, on whole rows.
+    fn as_delivered(&self, rows: &mut [u8]) {
+        for row in rows.chunks_exact_mut(self.row_bytes) {
+            if self.sixteen_bit {
+                undo_predictor_16(row, self.samples, self.big_endian, self.predictor);
+            } else if self.predictor {
+                match self.samples {
+                    1 => undo_predictor_8::<1>(row),
+                    2 => undo_predictor_8::<2>(row),
+                    3 => undo_predictor_8::<3>(row),
+                    4 => undo_predictor_8::<4>(row),
+                    n => {
+                        for i in n..row.len() {
+                            row[i] = row[i].wrapping_add(row[i - n]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// One worker's reader of [`OwnStrips`], with a file handle of its own.
 pub(crate) struct StripReader {
-    pub file: std::fs::File,
-    pub strips: std::sync::Arc<LzwStrips>,
+    file: std::sync::Arc<std::fs::File>,
+    strips: std::sync::Arc<OwnStrips>,
+    /// The strip begun, and of a Deflate strip the stream, where the next piece starts.
+    strip: u32,
+    inflate: Option<flate2::read::ZlibDecoder<Span>>,
 }
 
 /// `left` bytes of `file` from `offset` on, as a reader; a file that ends before them is an
 /// error, not the end of the strip.
-struct Span<'a> {
-    file: &'a std::fs::File,
+struct Span {
+    file: std::sync::Arc<std::fs::File>,
     offset: u64,
     left: u64,
 }
 
-impl std::io::Read for Span<'_> {
+impl std::io::Read for Span {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         use std::os::unix::fs::FileExt;
         let want = buf.len().min(usize::try_from(self.left).unwrap_or(usize::MAX));
@@ -269,32 +298,44 @@ impl std::io::Read for Span<'_> {
 }
 
 impl StripReader {
-    /// Decodes strip `strip` into `out` (its rows, whole).
-    pub fn read(&mut self, strip: u32, out: &mut [u8]) -> Result<(), String> {
+    pub fn new(file: std::fs::File, strips: std::sync::Arc<OwnStrips>) -> StripReader {
+        StripReader { file: std::sync::Arc::new(file), strips, strip: 0, inflate: None }
+    }
+
+    /// The compressed bytes of strip `strip`.
+    fn span(&self, strip: u32) -> Result<Span, String> {
         let s = &*self.strips;
-        let (offset, left) = match (s.offsets.get(strip as usize), s.counts.get(strip as usize)) {
-            (Some(&o), Some(&c)) => (o, c),
-            _ => return Err(format!("strip {strip} has no offset or byte count")),
+        match (s.offsets.get(strip as usize), s.counts.get(strip as usize)) {
+            (Some(&offset), Some(&left)) => Ok(Span { file: std::sync::Arc::clone(&self.file), offset, left }),
+            _ => Err(format!("strip {strip} has no offset or byte count")),
+        }
+    }
+}
+
+impl super::strips_ahead::StripDecoder for StripReader {
+    fn begin(&mut self, strip: u32) -> Result<(), String> {
+        self.strip = strip;
+        self.inflate = match self.strips.deflate {
+            true => Some(flate2::read::ZlibDecoder::new(self.span(strip)?)),
+            false => None,
         };
-        let input = Span { file: &self.file, offset, left };
-        decode(input, out).map_err(|e| format!("corrupt or undecodable TIFF data: {e}"))?;
-        for row in out.chunks_exact_mut(s.row_bytes) {
-            if s.sixteen_bit {
-                undo_predictor_16(row, s.samples, s.big_endian, s.predictor);
-            } else if s.predictor {
-                match s.samples {
-                    1 => undo_predictor_8::<1>(row),
-                    2 => undo_predictor_8::<2>(row),
-                    3 => undo_predictor_8::<3>(row),
-                    4 => undo_predictor_8::<4>(row),
-                    n => {
-                        for i in n..row.len() {
-                            row[i] = row[i].wrapping_add(row[i - n]);
-                        }
-                    }
-                }
+        Ok(())
+    }
+
+    /// The next rows of the strip begun: the whole strip for LZW, any number of its rows in
+    /// turn for Deflate.
+    fn fill(&mut self, out: &mut [u8]) -> Result<(), String> {
+        match &mut self.inflate {
+            Some(inflate) => std::io::Read::read_exact(inflate, out).map_err(|e| match e.kind() {
+                std::io::ErrorKind::UnexpectedEof => format!("the Deflate data ends before the strip is full: {e}"),
+                _ => format!("corrupt or undecodable TIFF data: deflate: {e}"),
+            })?,
+            None => {
+                let input = self.span(self.strip)?;
+                decode(input, out).map_err(|e| format!("corrupt or undecodable TIFF data: {e}"))?
             }
         }
+        self.strips.as_delivered(out);
         Ok(())
     }
 }
@@ -327,6 +368,7 @@ pub(super) fn undo_predictor_16(row: &mut [u8], samples: usize, big_endian: bool
 
 #[cfg(test)]
 mod tests {
+    use super::super::strips_ahead::StripDecoder;
     use super::*;
 
     /// A TIFF LZW encoder written from the specification for these tests alone: a dictionary
@@ -468,7 +510,7 @@ mod tests {
         let mut decoder = tiff::decoder::Decoder::new(std::fs::File::open(path).unwrap()).unwrap();
         let (w, h) = decoder.dimensions().unwrap();
         let row_bytes = w as usize * samples * if sixteen_bit { 2 } else { 1 };
-        let strips = LzwStrips {
+        let strips = OwnStrips {
             offsets: decoder.get_tag_u64_vec(Tag::StripOffsets).unwrap(),
             counts: decoder.get_tag_u64_vec(Tag::StripByteCounts).unwrap(),
             row_bytes,
@@ -476,13 +518,14 @@ mod tests {
             sixteen_bit,
             big_endian: false,
             predictor: true,
+            deflate: false,
         };
         let file = std::fs::File::open(path).unwrap();
-        let mut reader = StripReader { file, strips: std::sync::Arc::new(strips) };
+        let mut reader = StripReader::new(file, std::sync::Arc::new(strips));
         for strip in 0..h.div_ceil(5) {
             let len = row_bytes * 5.min(h - strip * 5) as usize;
             let (mut ours, mut theirs) = (vec![0u8; len], vec![0u8; len]);
-            reader.read(strip, &mut ours).unwrap();
+            reader.begin(strip).and_then(|()| reader.fill(&mut ours)).unwrap();
             decoder.read_chunk_bytes(strip, &mut theirs).unwrap();
             assert!(ours == theirs, "{}: strip {strip}", path.display());
         }
