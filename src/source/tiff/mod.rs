@@ -1140,6 +1140,46 @@ mod tests {
         assert_eq!(read_all(source.as_mut()).unwrap(), rgb8);
     }
 
+    /// Deflate strips larger than a piece are handed over a few rows at a time: the rows written,
+    /// in order, with the workers and the reader holding at most `strips_ahead::bytes_at_most`
+    /// of pieces, less than the whole strips (one taken and one per worker) they held before.
+    #[test]
+    fn deflate_strips_come_in_pieces_within_the_bound() {
+        let dir = tempfile::tempdir().unwrap();
+        // 6 KiB rows in strips of 256 (1.5 MiB; the last one short): pieces of 42 rows.
+        let (w, h, strip_rows) = (2048u32, 1100u32, 256u32);
+        let rgb8: Vec<u8> = pattern(w, h, 3, 255).into_iter().map(|v| v as u8).collect();
+        let path = dir.path().join("wide.tif");
+        let encoder = TiffEncoder::new(File::create(&path).unwrap())
+            .unwrap()
+            .with_compression(Compression::Deflate(DeflateLevel::Fast))
+            .with_predictor(Predictor::Horizontal);
+        encode::<_, colortype::RGB8>(encoder, w, h, Some(strip_rows), &rgb8);
+        let mut source = open(&path, 1 << 30).unwrap();
+        let (row_bytes, mut most, mut got) = (w as usize * 3, 0, Vec::new());
+        let mut row = vec![0u8; row_bytes];
+        for _ in 0..h {
+            source.read_row(&mut row).unwrap();
+            most = most.max(source.buffer_bytes());
+            got.extend_from_slice(&row);
+        }
+        assert!(got == rgb8, "the rows differ from those written");
+        let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(4) as u64;
+        if workers > 1 {
+            let rows = strips_ahead::Shape::rows_per_piece(row_bytes as u64, strip_rows as u64);
+            assert_eq!(rows, 42);
+            let shape = strips_ahead::Shape {
+                height: h as u64,
+                strip_rows: strip_rows as u64,
+                piece_rows: rows,
+                row_bytes: row_bytes as u64,
+            };
+            let strip = strip_rows as u64 * row_bytes as u64;
+            assert!(most <= strips_ahead::bytes_at_most(&shape, workers), "{most} bytes held");
+            assert!(most < (workers + 1) * strip, "{most} bytes held: whole strips");
+        }
+    }
+
     // ---- A minimal TIFF writer for layouts the `tiff` encoder cannot make (tiles, grey+alpha,
     // big-endian, directory before the data, unsupported kinds).
 
