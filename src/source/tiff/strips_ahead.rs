@@ -36,6 +36,10 @@ pub const PIECE_BYTES: u64 = 256 << 10;
 pub trait StripDecoder: Send {
     fn begin(&mut self, strip: u32) -> Result<(), String>;
     fn fill(&mut self, out: &mut [u8]) -> Result<(), String>;
+    /// Bytes the decoder holds of its own between pieces (an LZW window), beyond the pieces.
+    fn held_bytes(&self) -> u64 {
+        0
+    }
 }
 
 /// How the strips are cut: the image's rows, rows per strip and per piece, bytes per row.
@@ -172,6 +176,8 @@ impl StripsAhead {
             let pool = Arc::clone(&pool);
             let mine = (first as u64 + i as u64..strips).step_by(count);
             let thread = std::thread::Builder::new().name(format!("vortex-tiff-{i}")).spawn(move || {
+                // The decoder's own bytes counted in `pool.held` so far.
+                let mut counted = 0u64;
                 for strip in mine {
                     let start = strip * shape.strip_rows;
                     let end = (start + shape.strip_rows).min(shape.height);
@@ -183,6 +189,9 @@ impl StripsAhead {
                         let rows = shape.piece_rows.min(end - row);
                         let mut buffer = pool.take((rows * shape.row_bytes) as usize);
                         let piece = begun.clone().and_then(|()| decoder.fill(&mut buffer)).map(|()| buffer);
+                        let own = decoder.held_bytes();
+                        pool.held.fetch_add(own.wrapping_sub(counted), Ordering::Relaxed);
+                        counted = own;
                         begun = piece.as_ref().map(|_| ()).map_err(Clone::clone);
                         // A reader that hung up stops the worker; a failed strip stops it too
                         // (the reader stops at the first error).
