@@ -1,4 +1,4 @@
-//! TIFF's LZW, decoded straight into the strip's buffer.
+//! TIFF's LZW, decoded straight into the strip's buffer, or a piece at a time ([`Stream`]).
 //!
 //! TIFF LZW (compression 5) packs codes most significant bit first, 9 to 12 bits wide, with
 //! 256 the clear code and 257 the end of the strip, and widens the codes one code early (at
