@@ -1185,6 +1185,23 @@ mod tests {
             assert!(most <= strips_ahead::bytes_at_most(&shape, workers) + windows, "{name}: {most} bytes held");
             assert!(most < (workers + 1) * strip, "{name}: {most} bytes held: whole strips");
         }
+        // A strip whose data is garbage from its middle on: an error naming the strip and a row
+        // of it, not a panic or rows of garbage.
+        let mut bytes = std::fs::read(&path).unwrap();
+        let mut decoder = Decoder::new(File::open(&path).unwrap()).unwrap();
+        let offsets = decoder.get_tag_u64_vec(Tag::StripOffsets).unwrap();
+        let counts = decoder.get_tag_u64_vec(Tag::StripByteCounts).unwrap();
+        let (at, len) = (offsets[2] as usize, counts[2] as usize);
+        bytes[at + len / 2..at + len].fill(0xFF);
+        std::fs::write(&path, &bytes).unwrap();
+        let mut source = open(&path, 1 << 30).unwrap();
+        match read_all(source.as_mut()).unwrap_err() {
+            TilerError::DecodeRow { row, message, .. } => {
+                assert!((512..768).contains(&row), "{name}: row {row}: {message}");
+                assert!(message.contains("strip 2"), "{name}: {message}");
+            }
+            other => panic!("{name}: unexpected {other}"),
+        }
     }
 
     // ---- A minimal TIFF writer for layouts the `tiff` encoder cannot make (tiles, grey+alpha,
