@@ -41,8 +41,8 @@ use tiff::decoder::{ChunkType, Decoder, Limits};
 use tiff::tags::{CompressionMethod, PhotometricInterpretation, PlanarConfiguration, Predictor, Tag};
 use tiff::{ColorType, TiffError};
 
-use self::lzw::{LzwStrips, StripReader};
-use self::strips_ahead::{DecodeStrip, StripsAhead};
+use self::lzw::{OwnStrips, StripReader};
+use self::strips_ahead::{StripDecoder, StripsAhead};
 use super::{ImageHeader, RowSource};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
@@ -86,8 +86,8 @@ pub struct TiffSource {
     ahead: Option<StripsAhead>,
     /// The most [`buffer_bytes`](RowSource::buffer_bytes) can say, from the sizes chosen at open.
     most_buffer_bytes: u64,
-    /// LZW strips the workers decode with our own decoder rather than the crate's.
-    lzw: Option<Arc<LzwStrips>>,
+    /// LZW or Deflate strips the workers decode with our own decoder rather than the crate's.
+    own: Option<Arc<OwnStrips>>,
     max_memory: u64,
     /// Orientation (274) and ICC profile (34675), which `source::open_with` applies.
     embedded: super::Embedded,
@@ -236,35 +236,46 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
             ),
         ));
     }
-    let band = vec![
-        0u8;
-        usize::try_from(row_bytes * held_rows)
-            .map_err(|_| TilerError::unsupported(path, "a strip is too large for this machine"))?
-    ];
-    let tile = vec![0u8; tile_bytes as usize];
-    let strip_bytes = row_bytes * band_rows;
+    // Our LZW and Deflate decoders' predictor and byte order are those of 8- and 16-bit samples.
+    let ours =
+        matches!(compression, CompressionMethod::LZW | CompressionMethod::Deflate | CompressionMethod::OldDeflate);
+    let own = match ours && stored == file_samples && layout.depth.is_narrow_int() {
+        true => own_strips(path, &mut decoder, chunking, row_bytes, stored, layout.depth, compression)?.map(Arc::new),
+        false => None,
+    };
     let ahead_workers = match chunking {
         Chunking::Strips { .. } if compression != CompressionMethod::None && height as u64 > 2 * band_rows => {
             let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(4);
-            // The strips being decoded and the one taken: within an eighth of --max-memory
-            // (vips writes Deflate strips of 128 rows: 6 MiB each at 16384 RGB texels).
-            let held = strip_bytes.saturating_mul(workers as u64 * strips_ahead::AHEAD_PER_WORKER as u64 + 1);
-            let fits = held <= max_memory / 8;
+            // What the workers and the reader hold: within an eighth of --max-memory (vips
+            // writes Deflate strips of 128 rows: 6 MiB each at 16384 RGB texels).
+            let fits =
+                strips_ahead::bytes_at_most(&ahead_shape(own.as_deref(), height, band_rows, row_bytes), workers as u64)
+                    <= max_memory / 8;
             if workers > 1 && fits { workers } else { 0 }
         }
         _ => 0,
     };
+    // Strips decoded ahead come in pieces the workers allocate: no band of its own.
+    let band_bytes = if ahead_workers > 0 { 0 } else { row_bytes * held_rows };
+    let band = vec![
+        0u8;
+        usize::try_from(band_bytes)
+            .map_err(|_| TilerError::unsupported(path, "a strip is too large for this machine"))?
+    ];
+    let tile = vec![0u8; tile_bytes as usize];
     // What `buffer_bytes` can say at most: the band and the tile as allocated here, a stored row
-    // of direct strips (resized to the columns read: at most twice the widest), and a strip per
-    // worker decoding ahead, each the size of the band.
-    let ahead_bytes = strip_bytes.saturating_mul(ahead_workers as u64 * strips_ahead::AHEAD_PER_WORKER as u64);
-    let direct_row = direct.as_ref().map_or(0, |d| 2 * width as u64 * d.pixel as u64);
-    let most_buffer_bytes = (band.len() as u64 + tile_bytes).saturating_add(direct_row).saturating_add(ahead_bytes);
-    // Our LZW decoder's predictor and byte order are those of 8- and 16-bit samples.
-    let lzw = match compression == CompressionMethod::LZW && stored == file_samples && layout.depth.is_narrow_int() {
-        true => lzw_strips(path, &mut decoder, chunking, row_bytes, stored, layout.depth)?.map(Arc::new),
-        false => None,
+    // of direct strips (resized to the columns read: at most twice the widest), and the pieces
+    // of the strips decoded ahead with each worker's LZW window.
+    let ahead_bytes = match ahead_workers as u64 {
+        0 => 0,
+        workers => {
+            let shape = ahead_shape(own.as_deref(), height, band_rows, row_bytes);
+            let windows = own.as_deref().map_or(0, |own| own.worker_bytes_at_most(band_rows * row_bytes));
+            strips_ahead::bytes_at_most(&shape, workers).saturating_add(workers.saturating_mul(windows))
+        }
     };
+    let direct_row = direct.as_ref().map_or(0, |d| 2 * width as u64 * d.pixel as u64);
+    let most_buffer_bytes = (band_bytes + tile_bytes).saturating_add(direct_row).saturating_add(ahead_bytes);
 
     Ok(samples::widen(
         Box::new(TiffSource {
@@ -290,7 +301,7 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
             ahead_workers,
             ahead: None,
             most_buffer_bytes,
-            lzw,
+            own,
             max_memory,
             embedded,
         }),
@@ -298,16 +309,27 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
     ))
 }
 
-/// [`LzwStrips`] of an LZW TIFF stored in strips whose samples are delivered as they are
-/// stored (no extra samples dropped, no WhiteIsZero inversion).
-fn lzw_strips(
+/// How strips decoded ahead are handed over: in pieces of a few rows where our own decoders
+/// stream them (LZW, Deflate), else whole (the `tiff` crate decodes a strip at once).
+fn ahead_shape(own: Option<&OwnStrips>, height: u32, strip_rows: u64, row_bytes: u64) -> strips_ahead::Shape {
+    let piece_rows = match own {
+        Some(_) => strips_ahead::Shape::rows_per_piece(row_bytes, strip_rows),
+        None => strip_rows,
+    };
+    strips_ahead::Shape { height: height as u64, strip_rows, piece_rows, row_bytes }
+}
+
+/// [`OwnStrips`] of an LZW or Deflate TIFF stored in strips whose samples are delivered as
+/// they are stored (no extra samples dropped, no WhiteIsZero inversion).
+fn own_strips(
     path: &Path,
     decoder: &mut Decoder<BufReader<File>>,
     chunking: Chunking,
     row_bytes: u64,
     samples: usize,
     depth: Depth,
-) -> Result<Option<LzwStrips>> {
+    compression: CompressionMethod,
+) -> Result<Option<OwnStrips>> {
     let Chunking::Strips { .. } = chunking else { return Ok(None) };
     let tag = |decoder: &mut Decoder<BufReader<File>>, t| {
         decoder.find_tag_unsigned::<u16>(t).map_err(|e| open_error(path, e))
@@ -315,13 +337,18 @@ fn lzw_strips(
     if tag(decoder, Tag::PhotometricInterpretation)? == Some(0) {
         return Ok(None);
     }
-    let predictor = tag(decoder, Tag::Predictor)?.unwrap_or(1) == 2;
+    let predictor = match tag(decoder, Tag::Predictor)?.unwrap_or(1) {
+        1 => false,
+        2 => true,
+        _ => return Ok(None),
+    };
     let sixteen_bit = depth == Depth::U16;
     let offsets = decoder.get_tag_u64_vec(Tag::StripOffsets).map_err(|e| open_error(path, e))?;
     let counts = decoder.get_tag_u64_vec(Tag::StripByteCounts).map_err(|e| open_error(path, e))?;
     let big_endian = decoder.byte_order() == tiff::tags::ByteOrder::BigEndian;
     let row_bytes = row_bytes as usize;
-    Ok(Some(LzwStrips { offsets, counts, row_bytes, samples, sixteen_bit, big_endian, predictor }))
+    let deflate = compression != CompressionMethod::LZW;
+    Ok(Some(OwnStrips { offsets, counts, row_bytes, samples, sixteen_bit, big_endian, predictor, deflate }))
 }
 
 /// A decoder of the TIFF's first image, its buffers bounded by `max_memory`.
@@ -576,7 +603,14 @@ impl TiffSource {
                 self.read_direct_tiles(index, tiles, within, rows as usize, row_bytes)
             }
             Chunking::Strips { .. } if self.ahead_workers > 0 => {
-                self.take_strip_ahead(index, row_bytes).map_err(|m| (format!("strip {index}"), m))
+                // A piece of the strip, from `y`'s row on: its rows are the band.
+                match self.take_strip_ahead(y, row_bytes) {
+                    Ok((first, rows)) => {
+                        (self.band_first, self.band_rows) = (first, rows);
+                        return Ok(());
+                    }
+                    Err(m) => Err((format!("strip {index}"), m)),
+                }
             }
             Chunking::Strips { .. } => {
                 let (decoder, band) = (&mut self.decoder, &mut self.band[..strip_bytes]);
@@ -652,43 +686,65 @@ impl TiffSource {
         Ok(())
     }
 
-    /// Strip `index` from the workers decoding ahead, into `band`; they are started at that
-    /// strip if they are not there (the first strip, or after a skip or a rewind).
-    fn take_strip_ahead(&mut self, index: u32, row_bytes: usize) -> std::result::Result<(), String> {
+    /// The piece holding image row `y` from the workers decoding ahead, into `band`: its first
+    /// row and its rows. They are started at `y`'s strip if they are not at `y` (the first
+    /// strip, or after a skip or a rewind), and the pieces of that strip above `y` passed over.
+    fn take_strip_ahead(&mut self, y: u64, row_bytes: usize) -> std::result::Result<(u64, u64), String> {
+        let strip_rows = self.chunking.rows() as u64;
         let mut ahead = match self.ahead.take() {
-            Some(ahead) if ahead.next() == index => ahead,
+            Some(ahead) if ahead.next_row() == y => ahead,
             elsewhere => {
                 drop(elsewhere); // stops its workers
-                self.start_ahead(index, row_bytes)?
+                self.start_ahead((y / strip_rows) as u32, row_bytes)?
             }
         };
-        let strip = ahead.take(std::mem::take(&mut self.band));
-        self.ahead = Some(ahead);
-        self.band = strip?;
-        Ok(())
+        loop {
+            let piece = ahead.take(std::mem::take(&mut self.band));
+            let (first, band) = piece?;
+            self.band = band;
+            let rows = (self.band.len() / row_bytes.max(1)) as u64;
+            if y < first + rows {
+                self.ahead = Some(ahead);
+                return Ok((first, rows));
+            }
+        }
     }
 
     /// One worker per `ahead_workers`, each with a decoder of its own, from strip `first` on.
     fn start_ahead(&self, first: u32, row_bytes: usize) -> std::result::Result<StripsAhead, String> {
         let decoders = (0..self.ahead_workers)
-            .map(|_| -> std::result::Result<DecodeStrip, String> {
-                if let Some(strips) = &self.lzw {
+            .map(|_| -> std::result::Result<Box<dyn StripDecoder>, String> {
+                if let Some(strips) = &self.own {
                     let file = File::open(&self.path).map_err(|e| TilerError::io(&self.path, e).to_string())?;
-                    let mut reader = StripReader { file, strips: Arc::clone(strips) };
-                    return Ok(Box::new(move |strip, buffer: &mut Vec<u8>| reader.read(strip, buffer)));
+                    return Ok(Box::new(StripReader::new(file, Arc::clone(strips))));
                 }
                 let mut decoder = open_decoder(&self.path, self.max_memory).map_err(|e| e.to_string())?;
                 if self.page > 0 {
                     decoder.seek_to_image(self.page).map_err(|e| e.to_string())?;
                 }
-                Ok(Box::new(move |strip, buffer: &mut Vec<u8>| guarded(|| decoder.read_chunk_bytes(strip, buffer))))
+                Ok(Box::new(WholeStrips { decoder, strip: 0 }))
             })
             .collect::<std::result::Result<Vec<_>, _>>()?;
-        let (height, rows) = (self.height as usize, self.chunking.rows() as usize);
-        let strip_bytes = Box::new(move |s: u32| row_bytes * rows.min(height - s as usize * rows));
-        let count = self.height.div_ceil(self.chunking.rows());
-        StripsAhead::start(decoders, first, count, strip_bytes)
-            .map_err(|e| format!("cannot start the strip decoders: {e}"))
+        let shape = ahead_shape(self.own.as_deref(), self.height, self.chunking.rows() as u64, row_bytes as u64);
+        StripsAhead::start(decoders, first, shape).map_err(|e| format!("cannot start the strip decoders: {e}"))
+    }
+}
+
+/// The `tiff` crate's decoder, for a worker: a strip can only be decoded whole.
+struct WholeStrips {
+    decoder: Decoder<BufReader<File>>,
+    strip: u32,
+}
+
+impl StripDecoder for WholeStrips {
+    fn begin(&mut self, strip: u32) -> std::result::Result<(), String> {
+        self.strip = strip;
+        Ok(())
+    }
+
+    fn fill(&mut self, out: &mut [u8]) -> std::result::Result<(), String> {
+        let (decoder, strip) = (&mut self.decoder, self.strip);
+        guarded(|| decoder.read_chunk_bytes(strip, out))
     }
 }
 
@@ -774,12 +830,12 @@ impl RowSource for TiffSource {
         Ok(())
     }
 
-    /// The decoded strip or row of tiles, the one tile, a stored row and the strips the workers
-    /// decode ahead (each the size of the one taken).
+    /// The decoded strip, piece of a strip or row of tiles, the one tile, a stored row and the
+    /// pieces the workers decoded ahead, are decoding or keep spare.
     fn buffer_bytes(&self) -> u64 {
         let row = self.direct.as_ref().map_or(0, |d| d.row.capacity());
-        let ahead = self.ahead.as_ref().map_or(0, |a| a.in_flight() as usize * self.band.capacity());
-        (self.band.capacity() + self.tile.capacity() + row + ahead) as u64
+        let ahead = self.ahead.as_ref().map_or(0, StripsAhead::held_bytes);
+        (self.band.capacity() + self.tile.capacity() + row) as u64 + ahead
     }
 
     fn most_buffer_bytes(&self) -> u64 {
@@ -1102,6 +1158,70 @@ mod tests {
         encode::<_, colortype::RGB8>(encoder, w, h, Some(8), &rgb8);
         let mut source = open(&path, 1 << 30).unwrap();
         assert_eq!(read_all(source.as_mut()).unwrap(), rgb8);
+    }
+
+    /// LZW and Deflate strips larger than a piece are handed over a few rows at a time: the rows written,
+    /// in order, with the workers and the reader holding at most `strips_ahead::bytes_at_most`
+    /// of pieces, less than the whole strips (one taken and one per worker) they held before.
+    #[test]
+    fn compressed_strips_come_in_pieces_within_the_bound() {
+        strips_in_pieces("deflate", Compression::Deflate(DeflateLevel::Fast));
+        strips_in_pieces("lzw", Compression::Lzw);
+    }
+
+    fn strips_in_pieces(name: &str, compression: Compression) {
+        let dir = tempfile::tempdir().unwrap();
+        // 6 KiB rows in strips of 256 (1.5 MiB; the last one short): pieces of 42 rows.
+        let (w, h, strip_rows) = (2048u32, 1100u32, 256u32);
+        let rgb8: Vec<u8> = pattern(w, h, 3, 255).into_iter().map(|v| v as u8).collect();
+        let path = dir.path().join("wide.tif");
+        let encoder = TiffEncoder::new(File::create(&path).unwrap())
+            .unwrap()
+            .with_compression(compression)
+            .with_predictor(Predictor::Horizontal);
+        encode::<_, colortype::RGB8>(encoder, w, h, Some(strip_rows), &rgb8);
+        let mut source = open(&path, 1 << 30).unwrap();
+        let (row_bytes, mut most, mut got) = (w as usize * 3, 0, Vec::new());
+        let mut row = vec![0u8; row_bytes];
+        for _ in 0..h {
+            source.read_row(&mut row).unwrap();
+            most = most.max(source.buffer_bytes());
+            got.extend_from_slice(&row);
+        }
+        assert!(got == rgb8, "{name}: the rows differ from those written");
+        let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(4) as u64;
+        if workers > 1 {
+            let rows = strips_ahead::Shape::rows_per_piece(row_bytes as u64, strip_rows as u64);
+            assert_eq!(rows, 42);
+            let shape = strips_ahead::Shape {
+                height: h as u64,
+                strip_rows: strip_rows as u64,
+                piece_rows: rows,
+                row_bytes: row_bytes as u64,
+            };
+            let strip = strip_rows as u64 * row_bytes as u64;
+            // An LZW worker's window (the strings since the last clear code) besides.
+            let windows = if name == "lzw" { workers * (512 << 10) } else { 0 };
+            assert!(most <= strips_ahead::bytes_at_most(&shape, workers) + windows, "{name}: {most} bytes held");
+            assert!(most < (workers + 1) * strip, "{name}: {most} bytes held: whole strips");
+        }
+        // A strip whose data is garbage from its middle on: an error naming the strip and a row
+        // of it, not a panic or rows of garbage.
+        let mut bytes = std::fs::read(&path).unwrap();
+        let mut decoder = Decoder::new(File::open(&path).unwrap()).unwrap();
+        let offsets = decoder.get_tag_u64_vec(Tag::StripOffsets).unwrap();
+        let counts = decoder.get_tag_u64_vec(Tag::StripByteCounts).unwrap();
+        let (at, len) = (offsets[2] as usize, counts[2] as usize);
+        bytes[at + len / 2..at + len].fill(0xFF);
+        std::fs::write(&path, &bytes).unwrap();
+        let mut source = open(&path, 1 << 30).unwrap();
+        match read_all(source.as_mut()).unwrap_err() {
+            TilerError::DecodeRow { row, message, .. } => {
+                assert!((512..768).contains(&row), "{name}: row {row}: {message}");
+                assert!(message.contains("strip 2"), "{name}: {message}");
+            }
+            other => panic!("{name}: unexpected {other}"),
+        }
     }
 
     // ---- A minimal TIFF writer for layouts the `tiff` encoder cannot make (tiles, grey+alpha,
