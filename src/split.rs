@@ -53,9 +53,12 @@ fn plan_copy(source: &dyn RowSource, opts: &SplitOptions, layout: &Layout) -> (O
     (copier, Some(report))
 }
 
-/// Batches of tiles waiting for the encoder: cutting is much cheaper than encoding, so one
-/// waiting batch keeps the encoders busy, and each extra one would cost a row of tiles of memory.
-pub(crate) const QUEUE_BATCHES: usize = 1;
+/// Batches of tiles waiting for the encoders besides the one the cutting thread is sending: none,
+/// the channel is a rendezvous. The encoders' two lots in flight (`encoders.rs`) keep them busy;
+/// a batch waiting in the queue too cost a row of tiles of memory (11 MiB at a 16384-texel width:
+/// 84.7 against 73.6 MiB of peak RSS) for 3% of wall time (0.86 against 0.89 s, medians of 9 on
+/// the strip BigTIFF, issue 28's sixth round in docs/benchmarks.md).
+pub(crate) const QUEUE_BATCHES: usize = 0;
 
 /// Chunks of source rows, with the rows the pyramid's sums made of them, waiting for the
 /// cutting thread: those the read-ahead's memory bound allows beyond the one it cuts.
