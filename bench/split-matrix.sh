@@ -137,6 +137,12 @@ for line in open(raw):
 def median(rid):
     rs = sorted(runs[rid], key=lambda r: r[0])
     return rs[len(rs) // 2]
+def cells():
+    """Per source: its peer's median run (or None) and, per codec run, the codec and its median
+    run; cells missing from runs.tsv (REPORT_ONLY on runs made with other SOURCES or CODECS) left out."""
+    for s in sources:
+        peer = median(f"{s} peer") if f"{s} peer" in runs else None
+        yield s, peer, [(c, median(f"{s} {c}")) for c in codecs if f"{s} {c}" in runs]
 mpx = 16384 * 16384 / 1e6
 print(f"{datetime.date.today()}, {os.cpu_count()} cores, vortex-tiler {rev}"
       + (f", peer {peer_version} (pyvips-binary, direct mode: `Q=85`) writing a .zip of 256-texel JPEG tiles" if peer_version else "")
@@ -145,12 +151,8 @@ print(f"{datetime.date.today()}, {os.cpu_count()} cores, vortex-tiler {rev}"
 print()
 print("| source | codec | wall | CPU | CPU / wall | CPU ms / Mpx | Mpx/s | peak RSS | held | read | waits for rows | pyramid | cut | waits for encoders | encoders wait | encode | store | bound by | vs peer |")
 print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|")
-for s in sources:
-    peer = median(f"{s} peer") if f"{s} peer" in runs else None
-    for c in codecs:
-        if f"{s} {c}" not in runs:  # REPORT_ONLY on runs made with other SOURCES or CODECS
-            continue
-        wall, cpu, rss, out = median(f"{s} {c}")
+for s, peer, ours in cells():
+    for c, (wall, cpu, rss, out) in ours:
         doc = json.loads(out)
         st = doc["stages"]
         # What the stages held at most by their own count (runs before `memory` existed: blank).
@@ -175,12 +177,8 @@ print("| source | codec | CPU ms / Mpx | read | sums | cut | encode | store | ot
 print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 cores = os.cpu_count() or 1
 ms = lambda seconds: f"{seconds / mpx * 1e3:.1f}"
-for s in sources:
-    peer = median(f"{s} peer") if f"{s} peer" in runs else None
-    for c in codecs:
-        if f"{s} {c}" not in runs:  # REPORT_ONLY on runs made with other SOURCES or CODECS
-            continue
-        wall, cpu, rss, out = median(f"{s} {c}")
+for s, peer, ours in cells():
+    for c, (wall, cpu, rss, out) in ours:
         st = json.loads(out)["stages"].get("cpu")
         vs = f"{cpu / peer[1]:.2f}" if peer and c == "jpeg" else ""
         if not st:  # runs from before stages.cpu, or a platform without thread CPU clocks
