@@ -6,7 +6,7 @@
 //! (A parallel loop per batch left a core idle at the end of every batch, waiting for the other's
 //! last tile; issue 18.) A sink that takes tiles in any order stores each as it is encoded; an
 //! ordered one (a pack) gets them from a writer thread, in the producer's order, batch by batch as
-//! each completes, so that its bytes do not depend on the thread count. At most [`LOTS_IN_FLIGHT`]
+//! each completes, so that its bytes do not depend on the thread count. At most `LOTS_IN_FLIGHT`
 //! lots are encoding or waiting for the writer at once.
 //!
 //! Where the source's stored JPEG tiles line up with the finest level's pages, a [`Copier`]
@@ -21,6 +21,7 @@ use std::time::Instant;
 use crate::codec::TileEncoder;
 use crate::error::{Result, TilerError};
 use crate::job::Progress;
+use crate::limits::in_flight::{GATHER_MOST, LOTS_IN_FLIGHT};
 use crate::limits::{Gauge, Part};
 use crate::pixel::Sample;
 use crate::pyramid::cascade::{Batch, CutTile};
@@ -28,29 +29,6 @@ use crate::sink::TileSink;
 use crate::source::stored::{StoredTiles, crop};
 use crate::stages::{Stage, StageClock};
 use crate::viewer::Crop;
-
-/// Lots (batches received together) spawned on the pool and not yet stored: the one the writer
-/// stores and the one encoding behind it. A lot is received only once one of these places is
-/// free: spawned first and then queued for the writer, a third lot's texels waited on the pool
-/// (a row of tiles, 12 MiB at a 16384-texel width: issue 28).
-const LOTS_IN_FLIGHT: usize = 2;
-
-/// Cut tiles the stage holds at most, received and not yet stored, where the producer's batches
-/// hold at most `batch_tiles` tiles each: [`LOTS_IN_FLIGHT`] lots, each gathered from batches
-/// until it holds [`gather_target`] tiles (so fewer than [`GATHER_MOST`], plus one more batch).
-/// An ordered sink's encodings wait among them, one per tile (a pack neither crops nor splits a
-/// tile's places; the plan counts each at the codec's most, `Codec::most_encoded_bytes`).
-pub(crate) fn most_tiles_in_lots(batch_tiles: u64) -> u64 {
-    LOTS_IN_FLIGHT as u64 * (batch_tiles + GATHER_MOST as u64)
-}
-
-/// The most tiles a lot is gathered up to, whatever the thread count: the plan's memory bound,
-/// and with it the stripes a run is cut in and so a pack's order, must not depend on the
-/// machine, and each tile it allows is a tile more the plan counts in every lot. Up to 2
-/// threads gather twice their threads, as before; more threads gather small batches (images
-/// a few tiles wide, the coarsest levels) into lots of 4 tiles or more all the same, which
-/// leaves some of them idle on those few tiles.
-const GATHER_MOST: usize = 4;
 
 /// Tiles a lot is gathered up to: enough to keep every thread of the pool busy twice over.
 fn gather_target() -> usize {

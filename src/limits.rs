@@ -274,6 +274,41 @@ pub(crate) mod read_ahead {
     }
 }
 
+/// How many cut tiles the stages keep between the cutting thread and the pack writer, which the
+/// stripes' plan counts: below both, so that the pyramid needs neither the encoders nor `split`.
+pub(crate) mod in_flight {
+    /// Batches of tiles waiting for the encoders besides the one the cutting thread is sending:
+    /// none, the channel is a rendezvous. The encoders' lots in flight keep them busy; a batch
+    /// waiting in the queue too cost a row of tiles of memory (11 MiB at a 16384-texel width:
+    /// 84.7 against 73.6 MiB of peak RSS) for 3% of wall time (0.86 against 0.89 s, medians of
+    /// 9 on the strip BigTIFF, issue 28's sixth round in docs/benchmarks.md).
+    pub const QUEUE_BATCHES: usize = 0;
+
+    /// Lots (batches received together) spawned on the pool and not yet stored: the one the
+    /// writer stores and the one encoding behind it. A lot is received only once one of these
+    /// places is free: spawned first and then queued for the writer, a third lot's texels
+    /// waited on the pool (a row of tiles, 12 MiB at a 16384-texel width: issue 28).
+    pub const LOTS_IN_FLIGHT: usize = 2;
+
+    /// The most tiles a lot is gathered up to, whatever the thread count: the plan's memory
+    /// bound, and with it the stripes a run is cut in and so a pack's order, must not depend on
+    /// the machine, and each tile it allows is a tile more the plan counts in every lot. Up to
+    /// 2 threads gather twice their threads; more threads gather small batches (images a few
+    /// tiles wide, the coarsest levels) into lots of 4 tiles or more all the same, which leaves
+    /// some of them idle on those few tiles.
+    pub const GATHER_MOST: usize = 4;
+
+    /// Cut tiles the encoders hold at most, received and not yet stored, where the producer's
+    /// batches hold at most `batch_tiles` tiles each: [`LOTS_IN_FLIGHT`] lots, each gathered
+    /// from batches until it holds up to [`GATHER_MOST`] tiles (so fewer than that, plus one
+    /// more batch). An ordered sink's encodings wait among them, one per tile (a pack neither
+    /// crops nor splits a tile's places; the plan counts each at the codec's most,
+    /// `Codec::most_encoded_bytes`).
+    pub fn most_tiles_in_lots(batch_tiles: u64) -> u64 {
+        LOTS_IN_FLIGHT as u64 * (batch_tiles + GATHER_MOST as u64)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -16,7 +16,7 @@ use crate::codec::{Codec, TileEncoder};
 use crate::encoders::{self, Copier};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
-use crate::limits::Part;
+use crate::limits::{Part, in_flight};
 use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::pyramid::cascade::{Batch, BatchSender, Cascade, Derived, Span};
 use crate::pyramid::cut::Padding;
@@ -52,13 +52,6 @@ fn plan_copy(source: &dyn RowSource, opts: &SplitOptions, layout: &Layout) -> (O
     let copier = report.declined.is_none().then(|| Copier { tiles, width: layout.width, height: layout.height, side });
     (copier, Some(report))
 }
-
-/// Batches of tiles waiting for the encoders besides the one the cutting thread is sending: none,
-/// the channel is a rendezvous. The encoders' two lots in flight (`encoders.rs`) keep them busy;
-/// a batch waiting in the queue too cost a row of tiles of memory (11 MiB at a 16384-texel width:
-/// 84.7 against 73.6 MiB of peak RSS) for 3% of wall time (0.86 against 0.89 s, medians of 9 on
-/// the strip BigTIFF, issue 28's sixth round in docs/benchmarks.md).
-pub(crate) const QUEUE_BATCHES: usize = 0;
 
 /// Chunks of source rows, with the rows the pyramid's sums made of them, waiting for the
 /// cutting thread: those the read-ahead's memory bound allows beyond the one it cuts.
@@ -203,7 +196,7 @@ fn run<T: Sample>(
         Passes::AboveCut(_) => (1, 0, None),
     };
 
-    let (tx, rx) = sync_channel::<Result<Batch<T>>>(QUEUE_BATCHES);
+    let (tx, rx) = sync_channel::<Result<Batch<T>>>(in_flight::QUEUE_BATCHES);
     let clock = StageClock::new();
     let tx = BatchSender::new(tx, Arc::clone(&clock));
     let counts = encoders::Counts::default();

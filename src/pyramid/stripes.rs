@@ -16,10 +16,10 @@
 //! Only the exact filters can be striped: lanczos3 and mitchell resample each level from the
 //! one above across stripe edges.
 
-use crate::encoders::most_tiles_in_lots;
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::limits::human_bytes;
+use crate::limits::in_flight::{QUEUE_BATCHES, most_tiles_in_lots};
 use crate::limits::read_ahead;
 use crate::pyramid::Filter;
 use crate::pyramid::band;
@@ -180,7 +180,7 @@ fn pass_batch(layout: &Layout, span: &Span, texel_bytes: u64) -> u64 {
 }
 
 /// Bytes of the tiles cut and not yet stored, where batches hold at most `batch` tiles: those
-/// queued for the encoders ([`QUEUE_BATCHES`](crate::split::QUEUE_BATCHES); the one the
+/// queued for the encoders ([`QUEUE_BATCHES`]; the one the
 /// cutting thread is sending is its band's row of tiles, counted there), and the encoders' lots
 /// ([`most_tiles_in_lots`]), each of whose tiles is its texels until they are encoded and then
 /// its encoding, waiting for an ordered sink's writer (both at once where pages are copied).
@@ -190,7 +190,7 @@ fn in_flight_bytes(layout: &Layout, batch: u64, texel_bytes: u64, beside: Beside
         true => tile.saturating_add(beside.encoded_tile),
         false => tile.max(beside.encoded_tile),
     };
-    let sent = (crate::split::QUEUE_BATCHES as u64).saturating_mul(batch).saturating_mul(tile);
+    let sent = (QUEUE_BATCHES as u64).saturating_mul(batch).saturating_mul(tile);
     sent.saturating_add(most_tiles_in_lots(batch).saturating_mul(in_lots))
 }
 
