@@ -183,13 +183,8 @@ impl Gauge {
         if bytes == 0 {
             return;
         }
-        // Two's complement: a negative delta wraps back down. A part briefly below zero (one
-        // thread frees what another has not counted yet) is not a peak.
-        let new = self.now[part as usize].fetch_add(bytes as u64, Ordering::Relaxed).wrapping_add(bytes as u64);
-        if new <= i64::MAX as u64 {
-            self.peak[part as usize].fetch_max(new, Ordering::Relaxed);
-        }
-        self.add_to_total(bytes as u64);
+        bump(&self.now[part as usize], &self.peak[part as usize], bytes as u64);
+        bump(&self.total, &self.total_peak, bytes as u64);
     }
 
     /// `part` holds `bytes` now (a buffer that is resized rather than allocated and freed), for
@@ -199,19 +194,12 @@ impl Gauge {
     pub fn set(&self, part: Part, bytes: u64) {
         let old = self.now[part as usize].swap(bytes, Ordering::Relaxed);
         self.peak[part as usize].fetch_max(bytes, Ordering::Relaxed);
-        self.add_to_total(bytes.wrapping_sub(old));
-    }
-
-    /// Moves the total by `delta` (two's complement) and keeps its peak.
-    fn add_to_total(&self, delta: u64) {
-        let new = self.total.fetch_add(delta, Ordering::Relaxed).wrapping_add(delta);
-        if new <= i64::MAX as u64 {
-            self.total_peak.fetch_max(new, Ordering::Relaxed);
-        }
+        bump(&self.total, &self.total_peak, bytes.wrapping_sub(old));
     }
 
     /// What all parts hold now.
-    pub fn held(&self) -> u64 {
+    #[cfg(test)]
+    fn held(&self) -> u64 {
         self.total.load(Ordering::Relaxed)
     }
 
@@ -220,6 +208,16 @@ impl Gauge {
             parts: std::array::from_fn(|i| self.peak[i].load(Ordering::Relaxed)),
             total: self.total_peak.load(Ordering::Relaxed),
         }
+    }
+}
+
+/// Moves `now` by `delta` (two's complement: a negative delta wraps back down) and keeps `peak`.
+/// A counter briefly below zero (one thread frees what another has not counted yet) is not a
+/// peak.
+fn bump(now: &AtomicU64, peak: &AtomicU64, delta: u64) {
+    let new = now.fetch_add(delta, Ordering::Relaxed).wrapping_add(delta);
+    if new <= i64::MAX as u64 {
+        peak.fetch_max(new, Ordering::Relaxed);
     }
 }
 

@@ -432,10 +432,6 @@ impl RowSource for JpegSource {
         self.whole_coefficients.unwrap_or(0)
     }
 
-    fn most_buffer_bytes(&self) -> u64 {
-        self.buffer_bytes()
-    }
-
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
         let y = self.next;
         let row_error = |message: String| TilerError::DecodeRow { path: self.path.clone(), row: y, message };

@@ -93,9 +93,10 @@ pub trait RowSource: Send {
     }
     /// The most [`buffer_bytes`](Self::buffer_bytes) can say during a run, known once the
     /// source is open (from its header, by the same arithmetic that sizes the buffers): the
-    /// plan counts it before the pipeline allocates anything (`pyramid::stripes`).
+    /// plan counts it before the pipeline allocates anything (`pyramid::stripes`). By default
+    /// what it holds once open: sources whose buffers are all allocated at open say no more.
     fn most_buffer_bytes(&self) -> u64 {
-        0
+        self.buffer_bytes()
     }
     /// Starts again from the first row: an image too wide for one band is read once per
     /// vertical stripe. Sources that cannot say so.

@@ -116,10 +116,6 @@ impl RowSource for PngSource {
         }
     }
 
-    fn most_buffer_bytes(&self) -> u64 {
-        self.buffer_bytes()
-    }
-
     fn describe(&self) -> String {
         match self.rows {
             Rows::Streamed(_) => "png, streamed by row".into(),

@@ -83,10 +83,6 @@ impl RowSource for WholeSource {
         self.bytes.capacity() as u64
     }
 
-    fn most_buffer_bytes(&self) -> u64 {
-        self.bytes.capacity() as u64
-    }
-
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
         let start = self.next * out.len();
         out.copy_from_slice(&self.bytes[start..start + out.len()]);
