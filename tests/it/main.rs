@@ -44,4 +44,5 @@ mod tiff_slides;
 mod value_range;
 mod view;
 mod viewers;
+mod vtpk_js;
 mod web_runtime;

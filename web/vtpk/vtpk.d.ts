@@ -1,8 +1,18 @@
 // Types for vtpk.js (which carries the same in JSDoc, checked with `// @ts-check`).
 
-/** An error about a pack, naming the URL and the field or tile. */
+/**
+ * What the caller can do about an error: `io` try again later (no connection, a reply cut short,
+ * the timeout, HTTP 408/429/5xx); `host` fix the server (it ignores Range, hides Content-Range,
+ * answers another range, sends more than asked or compresses); `unavailable` the pack is not
+ * there (HTTP 404, 403, other 4xx) or changed while being read; `corrupt` the pack's bytes are
+ * wrong; `unsupported` a sound pack this module does not show; `usage` the caller's mistake.
+ */
+export type VtpkErrorKind = "io" | "host" | "unavailable" | "corrupt" | "unsupported" | "usage";
+
+/** An error about a pack, naming the URL and the field or tile, and its kind. */
 export class VtpkError extends Error {
-  constructor(message: string);
+  constructor(kind: VtpkErrorKind, message: string, cause?: unknown);
+  readonly kind: VtpkErrorKind;
 }
 
 /** CRC-32C (Castagnoli) of `bytes`, continuing from `crc`. */
@@ -52,6 +62,9 @@ export interface VtpkOptions {
    * under it (default 512; 0: every level). The coarsest levels are only placeholders while a
    * view loads, and a pack stores them as whole, padded tiles. */
   minSide?: number;
+  /** The most milliseconds one request may take, reply and body together (default 30000; 0:
+   * none); a request that takes longer fails with a `VtpkError` of kind `io`. */
+  timeout?: number;
   /** Called with each tile (or index) that fails its checks. */
   onError?: (error: VtpkError) => void;
   /** The OpenSeadragon namespace (default: the global one). */
@@ -71,7 +84,8 @@ export class VtpkPack {
   readonly sampleBytes: number;
   readonly levels: VtpkLevel[];
   readonly metadata: Record<string, unknown>;
-  /** Whether the level table and index matched their CRC (null until all of it was read). */
+  /** Whether the level table and index matched their CRC and the content hash (null until all
+   * of it was read; once false, every `entry` fails). */
   readonly indexChecked: boolean | null;
   readonly stats: VtpkStats;
   entry(lod: number, x: number, y: number): Promise<VtpkEntry>;
