@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 
 use crate::common::cli::{fails_with, fixture, run, s};
+use crate::common::compare::{Picture, Tolerance, assert_close};
 
 fn root(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
@@ -351,4 +352,54 @@ fn a_report_that_cannot_be_written_is_refused_before_the_first_frame() {
         let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(left.len(), 2, "{left:?}");
     }
+}
+
+/// A window that shows more than the image (a 2:1 image whole in a square frame, as the home
+/// views of `view` and the web viewer place it) draws the background beyond the image: the clear
+/// colour, transparent, exactly, where the samples (clamped to the image's edges) would repeat
+/// its first and last rows over 50 rows each (issue 41). Inside, at one texel per pixel with
+/// pixel centres on texel centres, each pixel is its texel.
+#[test]
+fn beyond_the_image_a_window_draws_the_background() {
+    let dir = tempfile::tempdir().unwrap();
+    // No texel is transparent black, so the background cannot pass for the image.
+    let source = image::RgbaImage::from_fn(200, 100, |x, y| {
+        image::Rgba([(x * 5 + y) as u8, (y * 2 + 40) as u8, ((x ^ y) * 3) as u8, 255])
+    });
+    let input = dir.path().join("wide.png");
+    source.save(&input).unwrap();
+    let pack = dir.path().join("wide.vtpk");
+    let split = ["split", s(&input), "--pack", s(&pack), "--codec", "png", "--tile-size", "64", "--border", "1", "-q"];
+    let out = run(&split);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let scene = dir.path().join("scene.json");
+    let json = r#"{"size": [200, 200], "frames": 8,
+        "view": {"window": {"path": [{"frame": 0, "center": [0.5, 0.5], "width": 1}]}},
+        "effects": {"filter": "bilinear", "cache_format": "rgba8"}}"#;
+    std::fs::write(&scene, json).unwrap();
+    let (frames, report_path) = (dir.path().join("frames"), dir.path().join("report.json"));
+    let out =
+        run(&["render", "--pack", s(&pack), "--scene", s(&scene), "--frames", s(&frames), "--report", s(&report_path)]);
+    if no_gpu(&out) {
+        return;
+    }
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(report(&report_path)["frames"][7]["fallback_fraction"], 0.0, "the view did not converge");
+    let frame = image::open(frames.join("frame-0007.png")).unwrap().to_rgba8();
+    assert_eq!(frame.dimensions(), (200, 200));
+    let rows = |from: u32, to: u32| frame.as_raw()[(from * 200 * 4) as usize..(to * 200 * 4) as usize].to_vec();
+    let background = vec![0u8; 200 * 50 * 4];
+    let exact = Tolerance::max(0, "the background is the frame's clear colour: nothing is sampled there");
+    for (name, band) in [("render-above-the-image", rows(0, 50)), ("render-below-the-image", rows(150, 200))] {
+        assert_close(name, Picture::new(200, 50, 4, &band), Picture::new(200, 50, 4, &background), exact);
+    }
+    let image = rows(50, 150);
+    let why = "bilinear at texel centres reads one texel, through the cache's sRGB view and into the sRGB \
+               frame: the two conversions round-trip within a code value (measured: exact on lavapipe)";
+    assert_close(
+        "render-the-image",
+        Picture::new(200, 100, 4, &image),
+        Picture::new(200, 100, 4, source.as_raw()),
+        Tolerance::max(1, why),
+    );
 }

@@ -181,7 +181,12 @@ fn vtpk_js_refuses_what_verify_refuses() {
         Case {
             read: Read::Blocks,
             // Entry 70's offset, far from tile (0, 0, 0)'s block; no checksum fixed.
-            ..case("index bit, in blocks", many.flipped(many.header.index_offset as usize + 70 * 24 + 5), "corrupt", "index is damaged")
+            ..case(
+                "index bit, in blocks",
+                many.flipped(many.header.index_offset as usize + 70 * 24 + 5),
+                "corrupt",
+                "index is damaged",
+            )
         },
         Case { read: Read::NoRanges, ..case("no ranges", bytes.clone(), "host", "ignored the Range header") },
         Case {
@@ -336,7 +341,10 @@ fn vtpk_js_stops_at_the_bytes_asked_from_hostile_hosts() {
             wrong.push(format!("{case}: expected {kind}: \"{expected}\", got {}: {}", o.kind, o.message));
         }
         if o.max_rss_kib > MOST_RSS_KIB || o.served >= POURED / 4 {
-            wrong.push(format!("{case}: {} bytes served, peak {} KiB: the reply was read past the bytes asked", o.served, o.max_rss_kib));
+            wrong.push(format!(
+                "{case}: {} bytes served, peak {} KiB: the reply was read past the bytes asked",
+                o.served, o.max_rss_kib
+            ));
         }
     }
     // The same machinery with a plain static host: the pack opens and a tile reads, and Node's

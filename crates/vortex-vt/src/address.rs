@@ -147,6 +147,18 @@ impl WindowOrigin {
         let ((px, wx), (py, wy)) = (axis(0, x), axis(1, y));
         At { page: [px, py], within: [wx, wy] }
     }
+
+    /// Whether frame position (`x`, `y`) lies on an image of `size` LOD-0 texels: `[0, size)` on
+    /// each axis. [`WindowOrigin::at`] clamps positions beyond the image to its edges, so a
+    /// window that shows more than the image draws its background where this is false (the
+    /// shaders' `vt_texel_on_image`, in the same f32 arithmetic).
+    pub fn on_image(&self, x: f32, y: f32, size: [u32; 2]) -> bool {
+        let axis = |i: usize, p: f32| {
+            let at = self.int[i] as i64 + (self.frac[i] + p * self.step[i]).floor() as i64;
+            (0..size[i] as i64).contains(&at)
+        };
+        axis(0, x) && axis(1, y)
+    }
 }
 
 #[cfg(test)]
@@ -224,6 +236,20 @@ mod tests {
         // Inside the image nothing is clamped, even in its last, partial texel.
         let edge = WindowOrigin::new([249.0, 0.0], [1.0, 1.0]);
         assert_eq!(edge.at(0.25, 0.5, 2, [250, 90], 100).within[0], 62.3125);
+    }
+
+    #[test]
+    fn positions_beyond_the_image_are_off_it() {
+        // A 200 x 100 image in a 200 x 200 frame at one texel per pixel, centred: 50 rows of
+        // background above and below, and the image's first and last rows on it.
+        let w = WindowOrigin::new([0.0, -50.0], [1.0, 1.0]);
+        let rows: Vec<u32> = (0..200).filter(|y| w.on_image(100.5, *y as f32 + 0.5, [200, 100])).collect();
+        assert_eq!(rows, (50..150).collect::<Vec<_>>());
+        assert!(!w.on_image(-0.5, 60.5, [200, 100]) && !w.on_image(200.5, 60.5, [200, 100]));
+        assert!(w.on_image(0.5, 60.5, [200, 100]) && w.on_image(199.5, 60.5, [200, 100]));
+        // Far beyond the right edge, where the integer part carries the position.
+        let far = WindowOrigin::new([1e9, 0.0], [1.0, 1.0]);
+        assert!(!far.on_image(0.5, 0.5, [1 << 20, 1]));
     }
 
     #[test]

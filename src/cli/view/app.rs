@@ -174,6 +174,11 @@ impl State {
             config.usage |= wgpu::TextureUsages::COPY_SRC;
         }
         config.present_mode = wgpu::PresentMode::AutoVsync;
+        // Black where nothing is drawn (beside the image, around the meshes), never what lies
+        // behind the window: the frame is cleared to transparent.
+        if caps.alpha_modes.contains(&wgpu::CompositeAlphaMode::Opaque) {
+            config.alpha_mode = wgpu::CompositeAlphaMode::Opaque;
+        }
         surface.configure(&gpu.device, &config);
 
         // A screenshot waits for each frame's pages, as `render` does; a person never waits.

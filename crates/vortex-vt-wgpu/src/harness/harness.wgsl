@@ -90,6 +90,12 @@ fn fs_window(v: Varyings) -> @location(0) vec4<f32> {
     } else {
         c = vt_sample_texel_layer_level(v.texture, LAYER, texel, lod_for(footprint));
     }
+    // Beyond the image the samples repeat its edge texels: the background (the target's clear
+    // colour) there instead. The feedback above stays: it asks for the edge's pages, which the
+    // image's own pixels beside them want anyway.
+    if !vt_texel_on_image(v.texture, texel) {
+        return vec4<f32>(0.0);
+    }
     if RESIDENCY_VIEW {
         return residency(c, vt_residency_texel(v.texture, texel, footprint));
     }

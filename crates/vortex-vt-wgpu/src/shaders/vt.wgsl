@@ -26,7 +26,9 @@
 //   vt_sample_texel_grad(id, texel, dx, dy), vt_sample_texel_layer_grad(id, layer, texel, dx, dy)
 //   (anisotropic with VT_ANISO > 1; the scalar-footprint ones never are),
 //   vt_footprint_texels(dx, dy) (the footprint feedback should ask with),
-//   vt_feedback_texel(id, texel, footprint, frag_coord), vt_residency_texel(id, texel, footprint)
+//   vt_feedback_texel(id, texel, footprint, frag_coord), vt_residency_texel(id, texel, footprint),
+//   vt_texel_on_image(id, texel) (whether the position lies on the image: the samples clamp to
+//   its edges, so a window that shows more than the image must draw its background there)
 //
 // Samples of colour layers are premultiplied-alpha colour in linear light (the cache is sampled through an sRGB
 // view, so filtering happens in linear light on premultiplied texels: no fringes from the
@@ -386,6 +388,14 @@ fn vt_sample_texel_layer_level(id: u32, layer: u32, texel: VtTexel, lod: f32) ->
 
 fn vt_feedback_texel(id: u32, texel: VtTexel, footprint: f32, frag_coord: vec2<f32>) {
     vt_write_feedback(id, vt_texel(texel), footprint, frag_coord);
+}
+
+// Whether LOD-0 texel position `texel` lies on texture `id`'s image, `[0, size)` on each axis
+// (`vortex_vt::address::WindowOrigin::on_image`). Sampling clamps to the image's edges, which
+// beyond them repeats the edge texels: a window larger than the image tests this first.
+fn vt_texel_on_image(id: u32, texel: VtTexel) -> bool {
+    let at = vec2<i32>(texel.origin) + vec2<i32>(floor(texel.offset));
+    return all(at >= vec2<i32>(0)) && all(at < vec2<i32>(vt_params.textures[id].size));
 }
 
 // For residency views: the LOD `vt_sample` wants at `uv` and the LOD of the page it draws from
