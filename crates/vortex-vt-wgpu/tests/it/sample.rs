@@ -78,13 +78,17 @@ impl Fixture {
     }
 
     /// What the render must be: at each pixel's UV, the reference bilinear sample at the LOD of
-    /// the page-table entry the shader reads (the finest resident ancestor of the wanted page).
+    /// the page-table entry the shader reads (the finest resident ancestor of the wanted page);
+    /// off the image (a window hanging past its edge), the background, transparent.
     fn expected(&self, window: &Window, lod: u8) -> Rgba8Image {
         let size = (TARGET, TARGET);
         let origin = window.origin_texels(&self.texture, size);
         Rgba8Image::from_fn(TARGET, TARGET, |x, y| {
             let [u, v] = window.uv(x, y, size);
             let texture = &self.texture;
+            if !origin.on_image(x as f32 + 0.5, y as f32 + 0.5, texture.size()) {
+                return [0; 4];
+            }
             let at = origin.at(x as f32 + 0.5, y as f32 + 0.5, lod, texture.size(), texture.payload());
             let entry = self.table().entry(0, lod, at.page[0] as u16, at.page[1] as u16);
             bilinear(&self.chain, entry.lod, u as f32, v as f32)
