@@ -2,7 +2,9 @@
 //! by nginx with a pack beside it, opened by headless Chromium on WebGPU (SwiftShader), draws the
 //! home view until it converges; the screenshot is compared with `render`'s frame of the same
 //! view on lavapipe. A second load holds the tile reads back and takes a frame meanwhile: the
-//! root page stands in, magnified, with no hole and no stand-in tile.
+//! root page stands in, magnified, with no hole and no stand-in tile. The canvas is wider than
+//! the image's aspect, so the home view has the background (black) left and right of the image,
+//! never the image's edge columns stretched over it.
 //!
 //! The page is built once per checkout into target/web-viewer (or taken from `VORTEX_WEB_DIR`,
 //! which CI sets after building it once). Missing wasm tools, Chromium or nginx skip the test
@@ -23,8 +25,14 @@ use crate::common::skip_unless_ci;
 use crate::common::webdriver::Browser;
 use crate::render::no_gpu;
 
-/// The canvas, in device pixels (headless Chromium's pixel ratio is 1).
-const SIZE: (u32, u32) = (640, 480);
+/// The canvas, in device pixels (headless Chromium's pixel ratio is 1): 16:10, wider than the
+/// 4:3 test image, whose home view (its height fit) spans columns `IMAGE_COLUMNS`.
+const SIZE: (u32, u32) = (640, 400);
+
+/// The home view shows 1.2 image widths across the canvas (16:10 over 4:3), the image centred:
+/// pixel `x` samples LOD-0 texel `(x + 0.5) * 3.75 - 200`, on the 2000-texel image for `x` in
+/// 53..=586; the nearest pixels off it sample texels -3.1 and 2000.6, clear of the edges.
+const IMAGE_COLUMNS: std::ops::RangeInclusive<u32> = 53..=586;
 
 /// Chromium's WebGPU on SwiftShader, headless, with the canvas in screenshots
 /// (/work/shared/tech-notes.md).
@@ -167,14 +175,19 @@ fn the_browser_draws_a_pack_as_render_does_and_falls_back_while_pages_are_in_fli
     let fallback = screenshot(&browser);
     assert!(held["counters"]["in_flight"].as_u64().unwrap() > 0, "nothing in flight while held: {held}");
     assert_eq!(held["counters"]["load_errors"], 0, "{held}");
-    // The home view shows the whole 2000 x 1500 image across the canvas's width (640 x 480 has
-    // its aspect): every pixel is the image, whose darkest value is 40, and none is the
-    // stand-in's magenta.
-    let holes = fallback.pixels().filter(|p| p.0.iter().all(|&v| v < 20)).count();
+    // The home view shows the whole 2000 x 1500 image across the canvas's height: every pixel
+    // of it is the image, whose darkest value is 40, and none is the stand-in's magenta; every
+    // pixel beside it is the background, black.
+    let on_image = |x: u32| IMAGE_COLUMNS.contains(&x);
+    let holes = fallback.enumerate_pixels().filter(|(x, _, p)| on_image(*x) && p.0.iter().all(|&v| v < 20)).count();
     let stand_ins = fallback.pixels().filter(|p| p.0 == [255, 0, 255]).count();
-    if (holes, stand_ins) != (0, 0) {
+    let stretched = fallback.enumerate_pixels().filter(|(x, _, p)| !on_image(*x) && p.0 != [0, 0, 0]).count();
+    if (holes, stand_ins, stretched) != (0, 0, 0) {
         let kept = keep("held", &fallback);
-        panic!("{holes} black and {stand_ins} stand-in pixels while pages were in flight (see {kept:?}): {held}");
+        panic!(
+            "{holes} black and {stand_ins} stand-in pixels on the image, {stretched} not black beside it, while pages \
+             were in flight (see {kept:?}): {held}"
+        );
     }
 
     // Let the reads go: the view converges.
@@ -184,6 +197,12 @@ fn the_browser_draws_a_pack_as_render_does_and_falls_back_while_pages_are_in_fli
     assert_eq!(done["failure"], "", "{done}");
     assert_eq!(done["counters"]["load_errors"], 0, "{done}");
     let shot = screenshot(&browser);
+    // Beside the image, the background exactly: not the image's edge columns stretched.
+    let stretched = shot.enumerate_pixels().filter(|(x, _, p)| !IMAGE_COLUMNS.contains(x) && p.0 != [0, 0, 0]).count();
+    if stretched > 0 {
+        let kept = keep("beside-the-image", &shot);
+        panic!("{stretched} pixels beside the image are not the black background (see {kept:?}): {done}");
+    }
     let Some(expected) = rendered(&pack, &done["view"], dir.path()) else { return };
     let (worst, mean) = differences(shot.as_raw(), expected.as_raw());
     let (_, fallback_mean) = differences(fallback.as_raw(), expected.as_raw());
