@@ -351,7 +351,8 @@ fn ome_channels(xml: &str, series: Option<u32>, file: &str) -> std::result::Resu
     };
     let runs = slide::tiff_data(xml, image, file)?;
     for run in &runs {
-        for (k, (name, size)) in [("FirstC", planes_c), ("FirstZ", size_z), ("FirstT", size_t)].into_iter().enumerate() {
+        for (k, (name, size)) in [("FirstC", planes_c), ("FirstZ", size_z), ("FirstT", size_t)].into_iter().enumerate()
+        {
             if run.first[k] >= size {
                 let pixels = ["SizeC", "SizeZ", "SizeT"][k];
                 return Err(format!("TiffData {name} {} is past Pixels {pixels} {size}", run.first[k]));
@@ -740,7 +741,8 @@ mod tests {
     /// read as page 0 alone.
     #[test]
     fn ome_xml_that_does_not_map_is_refused_naming_the_field() {
-        let pixels = |attrs: &str, inner: &str| format!(r#"<OME><Image><Pixels {attrs}>{inner}</Pixels></Image></OME>"#);
+        let pixels =
+            |attrs: &str, inner: &str| format!(r#"<OME><Image><Pixels {attrs}>{inner}</Pixels></Image></OME>"#);
         let planes = r#"<TiffData IFD="0" PlaneCount="2"/>"#;
         for (xml, says) in [
             (pixels(r#"SizeC="1000000000""#, planes), "Pixels SizeC is 1000000000: at most 4096"),

@@ -31,11 +31,11 @@ pub const MAX_PROFILE_BYTES: u64 = 16 << 20;
 /// (`None`: more than the cap, where it was cut off while inflating), past
 /// [`MAX_PROFILE_BYTES`].
 pub(crate) fn too_large(path: &Path, bytes: Option<u64>, whence: &str) -> TilerError {
-    let holds = bytes.map_or_else(|| "more".to_string(), |n| format!("{n} bytes,"));
+    let holds = bytes.map_or_else(String::new, |n| format!("{n} bytes, "));
     TilerError::unsupported(
         path,
         format!(
-            "the embedded ICC profile ({whence}) holds {holds} more than the {} MiB a profile may have here; strip it (`exiftool -icc_profile= FILE`) or convert the image to sRGB first",
+            "the embedded ICC profile ({whence}) holds {holds}more than the {} MiB a profile may have here; strip it (`exiftool -icc_profile= FILE`) or convert the image to sRGB first",
             MAX_PROFILE_BYTES >> 20
         ),
     )

@@ -88,7 +88,9 @@ fn iccp(path: &Path) -> Result<Option<Vec<u8>>> {
     let damaged = |why: String| {
         TilerError::decode(
             path,
-            format!("the embedded ICC profile (PNG iCCP chunk) is damaged: {why}; strip it (`exiftool -icc_profile= FILE`) or re-save the image"),
+            format!(
+                "the embedded ICC profile (PNG iCCP chunk) is damaged: {why}; strip it (`exiftool -icc_profile= FILE`) or re-save the image"
+            ),
         )
     };
     let mut file = BufReader::with_capacity(1 << 14, File::open(path).map_err(|e| TilerError::io(path, e))?);
@@ -117,7 +119,9 @@ fn iccp(path: &Path) -> Result<Option<Vec<u8>>> {
                 };
                 match chunk.get(keyword + 1) {
                     Some(0) => {}
-                    Some(method) => return Err(damaged(format!("compression method {method} (only 0, zlib, is defined)"))),
+                    Some(method) => {
+                        return Err(damaged(format!("compression method {method} (only 0, zlib, is defined)")));
+                    }
                     None => return Err(damaged("the chunk ends after the profile name".into())),
                 }
                 let mut profile = Vec::new();

@@ -190,7 +190,8 @@ fn ome_xml_that_does_not_map_is_refused_naming_the_field() {
     let path = dir.path().join("bad.ome.tif");
     let planes = r#"<TiffData IFD="0" PlaneCount="3"/>"#;
     let other = r#"<TiffData IFD="0" PlaneCount="3"><UUID FileName="other.ome.tif">urn:uuid:other</UUID></TiffData>"#;
-    let renamed = r#"<TiffData IFD="0" PlaneCount="3"><UUID FileName="old-name.ome.tif">urn:uuid:self</UUID></TiffData>"#;
+    let renamed =
+        r#"<TiffData IFD="0" PlaneCount="3"><UUID FileName="old-name.ome.tif">urn:uuid:self</UUID></TiffData>"#;
     for (xml, says) in [
         (ome(r#"SizeC="1000000000""#, planes), "Pixels SizeC is 1000000000: at most 4096 channels"),
         (ome(r#"SizeC="3" DimensionOrder="XYQQQ""#, planes), r#"DimensionOrder "XYQQQ""#),
@@ -302,7 +303,8 @@ fn an_unknown_compression_lists_every_one_read() {
     bytes[at + 8..at + 10].copy_from_slice(&52479u16.to_le_bytes());
     std::fs::write(&path, &bytes).unwrap();
     let e = source::open(&path, 1 << 30).err().unwrap().to_string();
-    for read in ["code 52479", "PackBits (32773)", "JPEG (7)", "Aperio JPEG 2000 RGB (33005)", "CCITT Group 4 fax (4)"] {
+    for read in ["code 52479", "PackBits (32773)", "JPEG (7)", "Aperio JPEG 2000 RGB (33005)", "CCITT Group 4 fax (4)"]
+    {
         assert!(e.contains(read), "{read}: {e}");
     }
 }
@@ -335,7 +337,10 @@ fn a_zip_tile_past_its_size_is_refused_unread() {
     drop(tile);
     let out = dir.path().join("out");
     let (output, peak) = run_measured(&["convert", s(&zip_path), "-o", s(&out), "--max-memory", "64M"]);
-    fails_with(&output, &["big.zip:big_files/8/0_0.png", "is 200 MiB, more than a 200x100 rgb 8-bit tile file can be"]);
+    fails_with(
+        &output,
+        &["big.zip:big_files/8/0_0.png", "is 200.0 MiB, more than a 200x100 rgb 8-bit tile file can be"],
+    );
     // The binary alone stays under 64 MiB; the tile's first MiB is what is read of it.
     assert!(peak < 96.0, "peak RSS {peak:.1} MiB");
 }

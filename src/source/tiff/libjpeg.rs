@@ -53,7 +53,9 @@ pub(super) fn decode(stream: &[u8], colour: Colour, extent: Extent, out: &mut [u
         return Err(format!("internal: {} bytes for {} rows of {row_bytes}", out.len(), extent.rows));
     }
     // A frame libjpeg-turbo here does not decode would fail as "damaged" data: say what it is.
-    if let Some(kind) = crate::source::stored::read_header(stream).filter(|h| h.frame != 0).and_then(|h| unsupported_frame(h.frame)) {
+    if let Some(kind) =
+        crate::source::stored::read_header(stream).filter(|h| h.frame != 0).and_then(|h| unsupported_frame(h.frame))
+    {
         return Err(format!(
             "{kind} JPEG, which is not supported (baseline and progressive Huffman-coded JPEG tiles are read); re-save the TIFF, e.g. with `vips tiffsave --compression jpeg`"
         ));
