@@ -11,6 +11,7 @@
 //! delivers a texel's samples together decodes them all each time; the trade keeps memory at
 //! one channel's band, whatever the channel count.
 
+use std::borrow::Cow;
 use std::fs::File;
 use std::io::BufReader;
 use std::panic::AssertUnwindSafe;
@@ -21,8 +22,8 @@ use tiff::decoder::{ChunkType, Decoder};
 use tiff::tags::Tag;
 
 use super::tiff::samples::{self, Stored};
-use super::tiff::slide::{attribute, find_closing, find_element};
-use super::tiff::{check_compression, guarded, open_decoder, open_error};
+use super::tiff::slide::{self, attribute, find_element};
+use super::tiff::{check_compression, description, guarded, open_decoder, open_error};
 use super::{ImageHeader, Pick, RowSource, Streamed};
 use crate::error::{Result, TilerError};
 use crate::limits::human_bytes;
@@ -216,8 +217,17 @@ fn is_tiff(path: &Path) -> Result<bool> {
 /// a TIFF read as it is.
 fn tiff_channels(path: &Path, pick: Pick, max_memory: u64) -> Result<Option<ChannelSet>> {
     let mut decoder = open_decoder(path, max_memory)?;
-    let description = decoder.get_tag_ascii_string(Tag::ImageDescription).unwrap_or_default();
-    let ome = (pick.page.is_none() && description.contains("<OME")).then(|| ome_channels(&description, pick.series));
+    let description = description(path, &mut decoder, max_memory)?;
+    let file = path.file_name().map(|f| f.to_string_lossy()).unwrap_or_default();
+    let ome = match pick.page.is_none() && description.contains("<OME") {
+        true => Some(ome_channels(&description, pick.series, &file).map_err(|e| {
+            TilerError::decode(
+                path,
+                format!("the OME-XML (ImageDescription of page 0) does not map onto the file's pages: {e}; --page N reads one directory as it is"),
+            )
+        })?),
+        false => None,
+    };
     let page = match (&ome, pick.page) {
         (Some(Some(planes)), _) if planes.ifds.len() > 1 => {
             if planes.ifds.len() > MAX_CHANNELS {
@@ -268,83 +278,114 @@ struct OmePlanes {
 
 /// Channel `c` of series `series` (0 if not given) lies in the directory its plane index says:
 /// planes are counted in the Pixels' DimensionOrder, and each TiffData maps a run of planes
-/// (from its FirstC/FirstZ/FirstT, PlaneCount of them) to directories from its IFD on.
-fn ome_channels(xml: &str, series: Option<u32>) -> Option<OmePlanes> {
-    let mut rest = xml;
-    let mut image = None;
-    for _ in 0..=series.unwrap_or(0) {
-        let at = find_element(rest, "Image")?;
-        let body = &rest[at..];
-        let end = find_closing(body, "Image").unwrap_or(body.len());
-        image = Some(&body[..end]);
-        rest = &body[end.max(1)..];
+/// (from its FirstC/FirstZ/FirstT, PlaneCount of them) to directories from its IFD on. A
+/// channel of several samples (`Channel SamplesPerPixel`, an RGB plane) is one plane.
+/// `Ok(None)`: the document has no series `series` (the TIFF reader's pickers say so). An
+/// OME-XML that does not map onto directories of this file is an error naming the field: it is
+/// never read as something else.
+fn ome_channels(xml: &str, series: Option<u32>, file: &str) -> std::result::Result<Option<OmePlanes>, String> {
+    let images = slide::images(xml);
+    if images.is_empty() {
+        return Err("it holds no Image element".into());
     }
-    let image = image?;
-    let tag_at = |text: &str, at: usize| -> String {
-        let tag = &text[at..];
-        tag[..tag.find('>').unwrap_or(tag.len())].to_string()
+    let n = series.unwrap_or(0) as usize;
+    let Some(&image) = images.get(n) else { return Ok(None) };
+    let pixels = find_element(image, "Pixels").ok_or_else(|| format!("Image {n} has no Pixels element"))?;
+    let pixels = slide::start_tag(&image[pixels..]);
+    let size = |name: &str| -> std::result::Result<u64, String> {
+        match attribute(pixels, name) {
+            None => Ok(1),
+            Some(v) => match v.trim().parse::<u64>() {
+                Ok(n) if n > 0 => Ok(n),
+                _ => Err(format!("Pixels {name} \"{v}\" is not a positive whole number")),
+            },
+        }
     };
-    let pixels = tag_at(image, find_element(image, "Pixels")?);
-    let size = |name: &str| attribute(&pixels, name).and_then(|v| v.parse::<u64>().ok()).unwrap_or(1).max(1);
-    let (size_c, size_z, size_t) = (size("SizeC"), size("SizeZ"), size("SizeT"));
-    if size_c as usize > MAX_CHANNELS {
-        return None;
+    let (size_c, size_z, size_t) = (size("SizeC")?, size("SizeZ")?, size("SizeT")?);
+    let order = attribute(pixels, "DimensionOrder").unwrap_or(Cow::Borrowed("XYCZT"));
+    let dims: Vec<char> = order.chars().collect();
+    if dims.len() != 5 || dims[..2] != ['X', 'Y'] || !['C', 'Z', 'T'].iter().all(|d| dims[2..].contains(d)) {
+        return Err(format!("Pixels DimensionOrder \"{order}\" is not XY followed by C, Z and T in some order"));
     }
-    let order = attribute(&pixels, "DimensionOrder").unwrap_or("XYCZT");
-    let dims: Vec<char> = order.chars().skip(2).collect();
-    if dims.len() != 3 || !['C', 'Z', 'T'].iter().all(|d| dims.contains(d)) {
-        return None;
+    let dims = &dims[2..];
+    let mut channels = Vec::new();
+    let mut from = 0;
+    while let Some(at) = find_element(&image[from..], "Channel") {
+        channels.push(slide::start_tag(&image[from + at..]));
+        from += at + 1;
+    }
+    // tifffile writes an RGB plane as SizeC 3 and one Channel of 3 samples.
+    let per_channel = match channels.first().and_then(|c| attribute(c, "SamplesPerPixel")) {
+        None => 1,
+        Some(v) => v.trim().parse::<u64>().ok().filter(|&n| n > 0 && size_c % n == 0).ok_or_else(|| {
+            format!("Channel SamplesPerPixel \"{v}\" does not divide Pixels SizeC {size_c} into planes")
+        })?,
+    };
+    let planes_c = size_c / per_channel;
+    if planes_c > MAX_CHANNELS as u64 {
+        return Err(format!("Pixels SizeC is {size_c}: at most {MAX_CHANNELS} channels are read"));
     }
     let size_of = |d: char| match d {
-        'C' => size_c,
+        'C' => planes_c,
         'Z' => size_z,
         _ => size_t,
     };
+    planes_c
+        .checked_mul(size_z)
+        .and_then(|p| p.checked_mul(size_t))
+        .ok_or_else(|| format!("Pixels SizeC x SizeZ x SizeT ({size_c} x {size_z} x {size_t}) is too large"))?;
     // The plane index of (c, z, t): the first dimension of the order varies fastest.
-    let index = |c: u64, z: u64, t: u64| {
+    let index = |at: [u64; 3]| {
         let mut stride = 1;
-        let mut at = 0;
-        for &d in &dims {
-            at += stride
+        let mut index = 0;
+        for &d in dims {
+            index += stride
                 * match d {
-                    'C' => c,
-                    'Z' => z,
-                    _ => t,
+                    'C' => at[0],
+                    'Z' => at[1],
+                    _ => at[2],
                 };
             stride *= size_of(d);
         }
-        at
+        index
     };
-    let mut runs = Vec::new();
-    let mut from = 0;
-    while let Some(at) = find_element(&image[from..], "TiffData") {
-        let tag = tag_at(image, from + at);
-        let number = |name: &str| attribute(&tag, name).and_then(|v| v.parse::<u64>().ok());
-        let ifd = number("IFD");
-        let first = index(number("FirstC").unwrap_or(0), number("FirstZ").unwrap_or(0), number("FirstT").unwrap_or(0));
+    let runs = slide::tiff_data(xml, image, file)?;
+    for run in &runs {
+        for (k, (name, size)) in [("FirstC", planes_c), ("FirstZ", size_z), ("FirstT", size_t)].into_iter().enumerate()
+        {
+            if run.first[k] >= size {
+                let pixels = ["SizeC", "SizeZ", "SizeT"][k];
+                return Err(format!("TiffData {name} {} is past Pixels {pixels} {size}", run.first[k]));
+            }
+        }
+    }
+    let mut ifds = Vec::new();
+    for c in 0..planes_c {
+        let plane = index([c, 0, 0]);
         // The OME schema's defaults: one plane where an IFD is named, else every plane.
-        let count = number("PlaneCount").unwrap_or(if ifd.is_some() { 1 } else { size_c * size_z * size_t });
-        runs.push((first, count, ifd.unwrap_or(0)));
-        from += at + 1;
+        let count = |run: &slide::TiffData| run.count.unwrap_or(if run.ifd.is_some() { 1 } else { u64::MAX });
+        let run = runs
+            .iter()
+            .find(|run| (index(run.first)..index(run.first).saturating_add(count(run))).contains(&plane))
+            .ok_or_else(|| format!("no TiffData maps channel {c} (plane {plane} in DimensionOrder {order})"))?;
+        if let Some(other) = &run.elsewhere {
+            return Err(format!(
+                "channel {c} is stored in another file ({other}): the files of a multi-file OME-TIFF are not read together"
+            ));
+        }
+        let ifd = run.ifd.unwrap_or(0).checked_add(plane - index(run.first)).and_then(|ifd| u32::try_from(ifd).ok());
+        let past = || format!("channel {c}'s TiffData IFD {} is past any directory", run.ifd.unwrap_or(0));
+        ifds.push(ifd.ok_or_else(past)?);
     }
-    let ifds = (0..size_c)
-        .map(|c| {
-            let plane = index(c, 0, 0);
-            let (first, _, ifd) = runs.iter().find(|(first, count, _)| (*first..first + count).contains(&plane))?;
-            u32::try_from(ifd + (plane - first)).ok()
-        })
-        .collect::<Option<Vec<u32>>>()?;
-    let mut names = Vec::new();
-    let mut from = 0;
-    while let Some(at) = find_element(&image[from..], "Channel") {
-        let tag = tag_at(image, from + at);
-        names.push(attribute(&tag, "Name").map(str::to_string).unwrap_or_else(|| format!("c{}", names.len())));
-        from += at + 1;
-    }
+    let mut names: Vec<String> = channels
+        .iter()
+        .enumerate()
+        .map(|(k, c)| attribute(c, "Name").map_or_else(|| format!("c{k}"), Cow::into_owned))
+        .collect();
     if names.len() != ifds.len() {
         names = (0..ifds.len()).map(|c| format!("c{c}")).collect();
     }
-    Some(OmePlanes { ifds, names })
+    Ok(Some(OmePlanes { ifds, names }))
 }
 
 /// Sample `k` of a TIFF page's texels, whether the samples are stored together (chunky) or
@@ -676,7 +717,7 @@ mod tests {
         let xml = r#"<OME><Image ID="Image:0"><Pixels DimensionOrder="XYZCT" SizeC="3" SizeZ="2" SizeT="1">
             <Channel ID="Channel:0:0" Name="DAPI"/><Channel ID="Channel:0:1" Name="GFP"/><Channel ID="Channel:0:2"/>
             <TiffData IFD="0" PlaneCount="6"/></Pixels></Image></OME>"#;
-        let planes = ome_channels(xml, None).unwrap();
+        let planes = ome_channels(xml, None, "a.ome.tif").unwrap().unwrap();
         assert_eq!(planes.ifds, vec![0, 2, 4]);
         assert_eq!(planes.names, vec!["DAPI", "GFP", "c2"]);
         // Bio-Formats' way: one TiffData per plane, in a second series.
@@ -684,10 +725,50 @@ mod tests {
             <Image ID="Image:1"><Pixels DimensionOrder="XYCZT" SizeC="2" SizeZ="1" SizeT="1">
             <TiffData FirstC="1" IFD="8" PlaneCount="1"/><TiffData FirstC="0" IFD="7" PlaneCount="1"/>
             </Pixels></Image></OME>"#;
-        assert_eq!(ome_channels(xml, Some(1)).unwrap().ifds, vec![7, 8]);
-        // A plane no TiffData names: not a channel set this reader can map.
-        let xml = r#"<OME><Image><Pixels SizeC="2"><TiffData IFD="0" PlaneCount="1"/></Pixels></Image></OME>"#;
-        assert_eq!(ome_channels(xml, None), None);
+        assert_eq!(ome_channels(xml, Some(1), "a").unwrap().unwrap().ifds, vec![7, 8]);
+        assert_eq!(ome_channels(xml, Some(2), "a"), Ok(None), "no such series: the pickers say so");
+        // tifffile's RGB: SizeC 3 as one Channel of 3 samples, one plane.
+        let xml = r#"<OME><Image><Pixels SizeC="3"><Channel Name="RGB" SamplesPerPixel="3"/>
+            <TiffData IFD="0" PlaneCount="1"/></Pixels></Image></OME>"#;
+        assert_eq!(ome_channels(xml, None, "a"), Ok(Some(OmePlanes { ifds: vec![0], names: vec!["RGB".into()] })));
+        // Names are unescaped.
+        let xml = r#"<OME><Image><Pixels SizeC="2"><Channel Name="A&amp;B"/><Channel Name="&#65;"/>
+            <TiffData IFD="0" PlaneCount="2"/></Pixels></Image></OME>"#;
+        assert_eq!(ome_channels(xml, None, "a").unwrap().unwrap().names, vec!["A&B", "A"]);
+    }
+
+    /// An OME-XML that does not map onto this file's pages is refused, naming the field: never
+    /// read as page 0 alone.
+    #[test]
+    fn ome_xml_that_does_not_map_is_refused_naming_the_field() {
+        let pixels =
+            |attrs: &str, inner: &str| format!(r#"<OME><Image><Pixels {attrs}>{inner}</Pixels></Image></OME>"#);
+        let planes = r#"<TiffData IFD="0" PlaneCount="2"/>"#;
+        for (xml, says) in [
+            (pixels(r#"SizeC="1000000000""#, planes), "Pixels SizeC is 1000000000: at most 4096"),
+            (pixels(r#"SizeC="2" DimensionOrder="XYQQQ""#, planes), r#"DimensionOrder "XYQQQ""#),
+            (pixels(r#"SizeC="two""#, planes), r#"Pixels SizeC "two" is not a positive whole number"#),
+            (pixels(r#"SizeC="2""#, r#"<TiffData FirstC="5" IFD="0"/>"#), "TiffData FirstC 5 is past Pixels SizeC 2"),
+            (pixels(r#"SizeC="2""#, r#"<TiffData IFD="0" PlaneCount="1"/>"#), "no TiffData maps channel 1"),
+            (pixels(r#"SizeC="2""#, r#"<TiffData IFD="-1"/>"#), r#"TiffData IFD "-1" is not a number"#),
+            (pixels(r#"SizeC="4""#, r#"<Channel SamplesPerPixel="3"/>"#), "SamplesPerPixel \"3\" does not divide"),
+            (
+                pixels(r#"SizeC="2" SizeZ="99999999999" SizeT="99999999999""#, planes),
+                "SizeC x SizeZ x SizeT (2 x 99999999999 x 99999999999) is too large",
+            ),
+            (
+                pixels(
+                    r#"SizeC="2""#,
+                    r#"<TiffData IFD="0" PlaneCount="2"><UUID FileName="b.ome.tif">urn:uuid:9</UUID></TiffData>"#,
+                ),
+                r#"channel 0 is stored in another file (FileName "b.ome.tif")"#,
+            ),
+            ("<OME><BinaryOnly/></OME>".to_string(), "it holds no Image element"),
+            (r#"<OME><Image ID="Image:0"/></OME>"#.to_string(), "Image 0 has no Pixels element"),
+        ] {
+            let e = ome_channels(&xml, None, "a.ome.tif").unwrap_err();
+            assert!(e.contains(says), "{xml}: {e}");
+        }
     }
 
     #[test]

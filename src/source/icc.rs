@@ -20,6 +20,27 @@ use crate::pixel::{Channels, Depth, PixelLayout};
 /// ImageMagick-with-Ghostscript assume for untagged CMYK.
 pub const DEFAULT_CMYK_PROFILE: &str = "/usr/share/color/icc/ghostscript/default_cmyk.icc";
 
+/// The largest ICC profile read from any image: 16 MiB, just above the most a JPEG can carry
+/// (255 APP2 chunks of 65519 bytes: 16,707,345 bytes); real profiles are a few hundred bytes to
+/// a few MiB. The cap is the same for every `--max-memory`, so whether a profile is honoured
+/// never depends on the budget; a profile held also counts against `--max-memory`
+/// ([`Described`]).
+pub const MAX_PROFILE_BYTES: u64 = 16 << 20;
+
+/// The error for an embedded profile (`whence`: where the file keeps it) of `bytes` bytes
+/// (`None`: more than the cap, where it was cut off while inflating), past
+/// [`MAX_PROFILE_BYTES`].
+pub(crate) fn too_large(path: &Path, bytes: Option<u64>, whence: &str) -> TilerError {
+    let holds = bytes.map_or_else(String::new, |n| format!("{n} bytes, "));
+    TilerError::unsupported(
+        path,
+        format!(
+            "the embedded ICC profile ({whence}) holds {holds}more than the {} MiB a profile may have here; strip it (`exiftool -icc_profile= FILE`) or convert the image to sRGB first",
+            MAX_PROFILE_BYTES >> 20
+        ),
+    )
+}
+
 type RowTransform = Transform<u8, u8, ThreadContext>;
 
 /// The intent vips and browsers use for matrix-shaper photo profiles: relative colorimetric
@@ -27,6 +48,9 @@ type RowTransform = Transform<u8, u8, ThreadContext>;
 const INTENT: Intent = Intent::RelativeColorimetric;
 
 fn lcms_error(path: &Path, what: &str, e: impl std::fmt::Display) -> TilerError {
+    // LittleCMS's "Could not create the object." has a second line guessing at causes.
+    let e = e.to_string();
+    let e = e.lines().next().unwrap_or_default().trim_end_matches('.');
     TilerError::decode(
         path,
         format!(
@@ -96,6 +120,7 @@ pub fn to_srgb(path: &Path, inner: Box<dyn RowSource>, icc: &[u8]) -> Result<Box
             inner,
             note: format!("ICC profile of a {layout} image kept as data, not converted"),
             transform: None,
+            held: icc.len() as u64,
         }));
     }
     let format = format_of(layout);
@@ -115,12 +140,14 @@ pub fn to_srgb(path: &Path, inner: Box<dyn RowSource>, icc: &[u8]) -> Result<Box
             inner,
             note: format!("ICC profile '{name}' is sRGB: left as is"),
             transform: None,
+            held: icc.len() as u64,
         }));
     }
     Ok(Box::new(Described {
         inner,
         note: format!("ICC '{name}' converted to sRGB (LittleCMS)"),
         transform: Some(transform),
+        held: icc.len() as u64,
     }))
 }
 
@@ -168,6 +195,9 @@ pub(crate) struct Described {
     pub inner: Box<dyn RowSource>,
     pub note: String,
     pub transform: Option<RowTransform>,
+    /// The bytes of an ICC profile held for the run (by the source and LittleCMS, or for the
+    /// output to carry), counted against `--max-memory` with the decoder's buffers.
+    pub held: u64,
 }
 
 impl RowSource for Described {
@@ -184,7 +214,7 @@ impl RowSource for Described {
     fn describe(&self) -> String {
         format!("{}; {}", self.inner.describe(), self.note)
     }
-    forward_row_order_to_inner!();
+    forward_row_order_to_inner!(held);
     /// Only rows passed through as they are may be copied as stored.
     fn stored_tiles(&self) -> Option<std::sync::Arc<dyn crate::source::stored::StoredTiles>> {
         self.transform.is_none().then(|| self.inner.stored_tiles()).flatten()

@@ -82,16 +82,27 @@ impl Header {
     }
 }
 
+/// What kind of JPEG a frame marker (SOFn, `0xFFC0 + n`) starts, where libjpeg-turbo here does
+/// not decode it: lossless, hierarchical or arithmetic-coded, its marker named ("lossless
+/// (SOF3)"). `None` for baseline, extended and progressive Huffman-coded frames (SOF0-2).
+pub(crate) fn unsupported_frame(sof: u8) -> Option<String> {
+    let n = sof.wrapping_sub(0xC0);
+    let kind = match sof {
+        0xC0..=0xC2 => return None,
+        0xC3 => "lossless",
+        0xC5..=0xC7 => "hierarchical (differential)",
+        0xC9 | 0xCA => "arithmetic-coded",
+        0xCB => "arithmetic-coded lossless",
+        0xCD..=0xCF => "arithmetic-coded hierarchical",
+        _ => "unknown",
+    };
+    Some(format!("{kind} (SOF{n}, marker 0xFF{sof:02X})"))
+}
+
 pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     let header = read_header(path)?;
     if let Some(sof) = header.sof {
-        let kind = match sof {
-            0xC0..=0xC2 => None,
-            0xC3 => Some("lossless (SOF3)"),
-            0xC5..=0xC7 | 0xCD..=0xCF => Some("hierarchical (differential)"),
-            _ => Some("arithmetic-coded"),
-        };
-        if let Some(kind) = kind {
+        if let Some(kind) = unsupported_frame(sof) {
             return Err(TilerError::unsupported(
                 path,
                 format!(

@@ -12,9 +12,10 @@
 /// The row-order methods of a [`RowSource`] that wraps another in its field `inner` and changes
 /// what its rows hold but not which rows come (ICC conversion, widened or mapped samples, picked
 /// channels): rewinding, skipping and narrowing go straight to the wrapped source, and the
-/// decoder's buffers are the wrapped source's.
+/// decoder's buffers are the wrapped source's (`forward_row_order_to_inner!(field)`: plus the
+/// bytes the wrapper's `u64` field says it holds).
 macro_rules! forward_row_order_to_inner {
-    () => {
+    (@order) => {
         fn rewind(&mut self) -> $crate::error::Result<()> {
             self.inner.rewind()
         }
@@ -26,6 +27,9 @@ macro_rules! forward_row_order_to_inner {
         fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
             self.inner.read_columns(columns)
         }
+    };
+    () => {
+        forward_row_order_to_inner!(@order);
 
         fn buffer_bytes(&self) -> u64 {
             self.inner.buffer_bytes()
@@ -33,6 +37,17 @@ macro_rules! forward_row_order_to_inner {
 
         fn most_buffer_bytes(&self) -> u64 {
             self.inner.most_buffer_bytes()
+        }
+    };
+    ($held:ident) => {
+        forward_row_order_to_inner!(@order);
+
+        fn buffer_bytes(&self) -> u64 {
+            self.inner.buffer_bytes() + self.$held
+        }
+
+        fn most_buffer_bytes(&self) -> u64 {
+            self.inner.most_buffer_bytes() + self.$held
         }
     };
 }
@@ -180,7 +195,7 @@ pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
         source = orient::apply(path, source, orientation, opts.max_memory)?;
     } else if orientation != orient::Orientation::NORMAL {
         let note = format!("EXIF orientation {} not applied (--no-autorotate)", orientation.value());
-        source = Box::new(icc::Described { inner: source, note, transform: None });
+        source = Box::new(icc::Described { inner: source, note, transform: None, held: 0 });
     }
     Ok((source, kept))
 }
@@ -191,9 +206,14 @@ pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
 pub fn with_profile(path: &Path, source: Box<dyn RowSource>, icc: Option<Vec<u8>>, keep: bool) -> Result<Opened> {
     match icc {
         None => Ok((source, None)),
+        // Each reader checks the size before it reads a profile; this holds for every one.
+        Some(icc) if icc.len() as u64 > icc::MAX_PROFILE_BYTES => {
+            Err(icc::too_large(path, Some(icc.len() as u64), "as read"))
+        }
         Some(icc) if keep => {
             let note = format!("ICC profile kept ({} bytes, --keep-icc): pixels as stored", icc.len());
-            Ok((Box::new(icc::Described { inner: source, note, transform: None }), Some(icc)))
+            let held = icc.len() as u64;
+            Ok((Box::new(icc::Described { inner: source, note, transform: None, held }), Some(icc)))
         }
         Some(icc) => Ok((icc::to_srgb(path, source, &icc)?, None)),
     }

@@ -2,9 +2,10 @@
 //! whole (within `--max-memory`).
 
 use std::fs::File;
-use std::io::BufReader;
+use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
+use super::icc::{MAX_PROFILE_BYTES, too_large};
 use super::{Embedded, ImageHeader, RowSource, check_whole_fits, orient};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
@@ -32,6 +33,10 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         png::Limits { bytes: usize::try_from(max_memory).unwrap_or(usize::MAX) },
     );
     decoder.set_transformations(png::Transformations::EXPAND);
+    // The profile is read by `iccp` below, within its own cap: the crate would inflate it
+    // within the whole budget and drop one it cannot inflate without a word.
+    decoder.set_ignore_iccp_chunk(true);
+    let icc = iccp(path)?;
     let mut reader = decoder.read_info().map_err(|e| TilerError::decode(path, format!("not a readable PNG: {e}")))?;
     let (colour, depth) = reader.output_color_type();
     let channels = match colour {
@@ -47,10 +52,10 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     };
     let layout = PixelLayout::new(channels, depth);
     let (width, height) = (reader.info().width, reader.info().height);
-    // iCCP and eXIf as the decoder found them before the image data.
+    // eXIf as the decoder found it before the image data; iCCP as `iccp` read it.
     let embedded = Embedded {
         orientation: reader.info().exif_metadata.as_deref().map(orient::from_exif).unwrap_or_default(),
-        icc: reader.info().icc_profile.as_deref().map(<[u8]>::to_vec),
+        icc,
     };
     let rows = if reader.info().interlaced {
         check_whole_fits(
@@ -70,6 +75,72 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         Rows::Streamed(Box::new(reader))
     };
     Ok(Box::new(PngSource { path: path.to_path_buf(), width, height, layout, next: 0, rows, embedded }))
+}
+
+/// The ICC profile of `path`'s iCCP chunk (PNG 1.2, 11.3.3.3: a keyword of 1 to 79 bytes, a
+/// NUL, compression method 0, a zlib stream), inflated to at most
+/// [`MAX_PROFILE_BYTES`]; `None` without one. Only the chunks' lengths and types are read on
+/// the way (to the first IDAT, after which an iCCP is not allowed); the png crate, which reads
+/// the rest of the file, is told to skip this chunk. A profile that is damaged (no keyword, an
+/// unknown method, not zlib data) or inflates past the cap is an error: its texels are never
+/// taken as sRGB.
+fn iccp(path: &Path) -> Result<Option<Vec<u8>>> {
+    let damaged = |why: String| {
+        TilerError::decode(
+            path,
+            format!(
+                "the embedded ICC profile (PNG iCCP chunk) is damaged: {why}; strip it (`exiftool -icc_profile= FILE`) or re-save the image"
+            ),
+        )
+    };
+    let mut file = BufReader::with_capacity(1 << 14, File::open(path).map_err(|e| TilerError::io(path, e))?);
+    let mut head = [0u8; 8];
+    // Not a PNG, or one cut short: the png crate says what is wrong.
+    if file.read_exact(&mut head).is_err() || head != *b"\x89PNG\r\n\x1a\n" {
+        return Ok(None);
+    }
+    while file.read_exact(&mut head).is_ok() {
+        let length = u32::from_be_bytes([head[0], head[1], head[2], head[3]]) as u64;
+        match &head[4..] {
+            b"IDAT" | b"IEND" => return Ok(None),
+            b"iCCP" => {
+                // A zlib stream of a profile of the cap's size, stored: a few bytes more.
+                if length > MAX_PROFILE_BYTES + 4096 {
+                    return Err(too_large(path, Some(length), "PNG iCCP chunk, compressed"));
+                }
+                let mut chunk = Vec::new();
+                (&mut file).take(length).read_to_end(&mut chunk).map_err(|e| TilerError::io(path, e))?;
+                if chunk.len() as u64 != length {
+                    return Err(damaged(format!("the file ends inside the chunk ({} of {length} bytes)", chunk.len())));
+                }
+                let keyword = chunk.iter().position(|&b| b == 0).filter(|&n| (1..80).contains(&n));
+                let Some(keyword) = keyword else {
+                    return Err(damaged("no profile name of 1 to 79 bytes".into()));
+                };
+                match chunk.get(keyword + 1) {
+                    Some(0) => {}
+                    Some(method) => {
+                        return Err(damaged(format!("compression method {method} (only 0, zlib, is defined)")));
+                    }
+                    None => return Err(damaged("the chunk ends after the profile name".into())),
+                }
+                let mut profile = Vec::new();
+                flate2::read::ZlibDecoder::new(&chunk[keyword + 2..])
+                    .take(MAX_PROFILE_BYTES + 1)
+                    .read_to_end(&mut profile)
+                    .map_err(|e| damaged(format!("not zlib data ({e})")))?;
+                if profile.len() as u64 > MAX_PROFILE_BYTES {
+                    return Err(too_large(path, None, "PNG iCCP chunk, inflated"));
+                }
+                return Ok(Some(profile));
+            }
+            // The chunk's data and CRC.
+            _ => {
+                file.seek(SeekFrom::Current(length as i64 + 4)).map_err(|e| TilerError::io(path, e))?;
+            }
+        }
+    }
+    Ok(None)
 }
 
 impl RowSource for PngSource {

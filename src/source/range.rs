@@ -131,8 +131,8 @@ impl RowSource for Mapped {
             self.inner.describe(),
             self.from.tile_type(),
             8 * self.header.layout.depth.bytes(),
-            self.range.min,
-            self.range.max
+            short(self.range.min),
+            short(self.range.max)
         )
     }
 
@@ -151,9 +151,28 @@ impl RowSource for Mapped {
     }
 }
 
+/// `v` as a summary shows it: as written between 1e-4 and 1e15 (`0.5`, `4095`), else in
+/// exponent form (`1e300`, not 301 digits).
+fn short(v: f64) -> String {
+    match v.abs() {
+        a if a == 0.0 || (1e-4..1e15).contains(&a) => format!("{v}"),
+        _ => format!("{v:e}"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn numbers_in_the_summary_are_short() {
+        assert_eq!(short(-0.5), "-0.5");
+        assert_eq!(short(4095.0), "4095");
+        assert_eq!(short(0.0), "0");
+        assert_eq!(short(-1e300), "-1e300");
+        assert_eq!(short(f64::MAX), "1.7976931348623157e308");
+        assert_eq!(short(1e-7), "1e-7");
+    }
 
     #[test]
     fn ranges_parse_and_refuse_what_is_not_one() {

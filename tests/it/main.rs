@@ -17,6 +17,7 @@ mod docs;
 mod failures;
 mod golden;
 mod hostile;
+mod hostile_sources;
 mod iiif;
 mod keep_icc;
 mod library;

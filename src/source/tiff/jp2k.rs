@@ -23,8 +23,7 @@ use crate::source::{Embedded, ImageHeader, RowSource};
 
 /// Whether the image is JPEG 2000 in Aperio's two forms.
 pub(super) fn is_jp2k(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<bool> {
-    let code: Option<u16> = decoder.find_tag_unsigned(Tag::Compression).map_err(|e| open_error(path, e))?;
-    Ok(matches!(code, Some(33003 | 33005)))
+    Ok(super::reader_of(super::compression_code(path, decoder)?) == Some(super::Reader::Jpeg2000))
 }
 
 pub(super) struct Jp2kTiff {
@@ -170,11 +169,7 @@ impl Jp2kTiff {
         let mut raw = vec![0u8; count as usize];
         self.file.read_exact_at(&mut raw, offset).map_err(|e| format!("cannot read it: {e}"))?;
         let siz = self.check_size(&raw)?;
-        // OpenJPEG reports damage through its result; a panic in the binding must not take the
-        // whole run down either.
-        let image = std::panic::catch_unwind(|| jpeg2k::Image::from_bytes(&raw))
-            .map_err(|_| "the JPEG 2000 decoder failed".to_string())?
-            .map_err(|e| format!("corrupt JPEG 2000 data: {e}"))?;
+        let image = decode_codestream(&raw)?;
         let comps = image.components();
         if comps.len() < 3 {
             return Err(format!("the JPEG 2000 tile has {} components, 3 expected", comps.len()));
@@ -222,6 +217,21 @@ impl Jp2kTiff {
         }
         Ok(())
     }
+}
+
+/// A JPEG 2000 codestream decoded by OpenJPEG, or what failed in words (the binding's "Null
+/// pointer from openjpeg-sys" means OpenJPEG returned no image).
+fn decode_codestream(raw: &[u8]) -> std::result::Result<jpeg2k::Image, String> {
+    // OpenJPEG reports damage through its result; a panic in the binding must not take the
+    // whole run down either.
+    std::panic::catch_unwind(|| jpeg2k::Image::from_bytes(raw))
+        .map_err(|_| "the JPEG 2000 decoder failed".to_string())?
+        .map_err(|e| match e {
+            jpeg2k::error::Error::NullPointerError(_) | jpeg2k::error::Error::CodecError(_) => {
+                "OpenJPEG could not decode it (damaged or unsupported JPEG 2000 data)".to_string()
+            }
+            e => format!("corrupt JPEG 2000 data: {e}"),
+        })
 }
 
 impl Jp2kTiff {
@@ -322,5 +332,24 @@ impl RowSource for Jp2kTiff {
             "{}, jpeg 2000 ({colour}, OpenJPEG), streamed by tile row ({}x{} tiles, decoded in parallel)",
             self.label, self.chunk_w, self.chunk_h
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A codestream OpenJPEG cannot decode is said so, not as a null pointer of the binding.
+    #[test]
+    fn an_undecodable_codestream_says_what_failed() {
+        // SOC, then a SIZ of a 16x16 image of 3 components, then nothing a decoder can use.
+        let mut raw = vec![0xFF, 0x4F, 0xFF, 0x51, 0, 47, 0, 0, 0, 0, 0, 16, 0, 0, 0, 16];
+        raw.extend([0; 16]);
+        raw.extend([0, 0, 0, 16, 0, 0, 0, 16, 0, 0, 0, 0, 0, 0, 0, 0, 0, 3]);
+        raw.extend([7, 1, 1, 7, 1, 1, 7, 1, 1]);
+        raw.extend([0xAB; 64]);
+        let e = decode_codestream(&raw).err().expect("not decodable");
+        assert!(!e.contains("Null pointer"), "{e}");
+        assert!(e.contains("OpenJPEG could not decode it") || e.starts_with("corrupt JPEG 2000 data"), "{e}");
     }
 }

@@ -99,8 +99,7 @@ impl Chunks {
 
 /// Whether the current image is JPEG-compressed (new-style, Compression 7).
 pub(super) fn is_jpeg(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<bool> {
-    let code: Option<u16> = decoder.find_tag_unsigned(Tag::Compression).map_err(|e| open_error(path, e))?;
-    Ok(code == Some(7))
+    Ok(super::reader_of(super::compression_code(path, decoder)?) == Some(super::Reader::Jpeg))
 }
 
 pub(super) fn open(

@@ -41,7 +41,10 @@ pub(super) fn handles(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Re
     let compression = tag(decoder, Tag::Compression)?.unwrap_or(1);
     let bits: Option<Vec<u16>> = decoder.find_tag_unsigned_vec(Tag::BitsPerSample).map_err(|e| open_error(path, e))?;
     let bits = bits.and_then(|b| b.first().copied()).unwrap_or(1);
-    Ok(planar || matches!(photometric, Some(3 | 5)) || matches!(bits, 1 | 2 | 4) || matches!(compression, 2..=4))
+    Ok(planar
+        || matches!(photometric, Some(3 | 5))
+        || matches!(bits, 1 | 2 | 4)
+        || super::reader_of(compression) == Some(super::Reader::Fax))
 }
 
 /// How a row of stored samples becomes texels.
@@ -210,7 +213,8 @@ fn codec(path: &Path, decoder: &mut Decoder<BufReader<File>>, bits: u16, stored:
         other => Err(TilerError::unsupported(
             path,
             format!(
-                "TIFF compression {other} is not supported for planar, palette, CMYK or sub-byte images (none, LZW, Deflate, PackBits, CCITT G3/G4 are); re-save it with `tiffcp -c lzw in.tif out.tif`"
+                "TIFF compression {other} is not supported for planar, palette, CMYK or sub-byte images ({} are); re-save it with `tiffcp -c lzw in.tif out.tif`",
+                super::compressions_read(&[super::Reader::Chunks, super::Reader::Fax])
             ),
         )),
     }

@@ -12,7 +12,7 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 
 use mozjpeg_sys::{J_COLOR_SPACE, jpeg_decompress_struct};
 
-use crate::source::jpeg::{error_manager, panic_message};
+use crate::source::jpeg::{error_manager, panic_message, unsupported_frame};
 
 /// What a TIFF's JPEG tiles hold, by its PhotometricInterpretation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -51,6 +51,14 @@ pub(super) fn decode(stream: &[u8], colour: Colour, extent: Extent, out: &mut [u
     let row_bytes = extent.columns * colour.components();
     if out.len() != row_bytes * extent.rows {
         return Err(format!("internal: {} bytes for {} rows of {row_bytes}", out.len(), extent.rows));
+    }
+    // A frame libjpeg-turbo here does not decode would fail as "damaged" data: say what it is.
+    if let Some(kind) =
+        crate::source::stored::read_header(stream).filter(|h| h.frame != 0).and_then(|h| unsupported_frame(h.frame))
+    {
+        return Err(format!(
+            "{kind} JPEG, which is not supported (baseline and progressive Huffman-coded JPEG tiles are read); re-save the TIFF, e.g. with `vips tiffsave --compression jpeg`"
+        ));
     }
     let mut err = Box::new(error_manager(false));
     // Boxed: libjpeg keeps pointers to the struct in its memory pools while it lives.
@@ -148,4 +156,30 @@ pub(super) fn splice(tables: &[u8], chunk: &[u8], stream: &mut Vec<u8>) -> Resul
 pub(super) fn tables_body(tables: &[u8]) -> Option<&[u8]> {
     let body = tables.strip_prefix(&[0xFF, 0xD8])?;
     Some(body.strip_suffix(&[0xFF, 0xD9]).unwrap_or(body))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Lossless and arithmetic-coded tiles are named as what they are, with their SOF marker,
+    /// not as damaged data.
+    #[test]
+    fn unsupported_frames_are_named_with_their_marker() {
+        let mut stream = Vec::new();
+        let texels = vec![128u8; 16 * 16 * 3];
+        jpeg_encoder::Encoder::new(&mut stream, 90).encode(&texels, 16, 16, jpeg_encoder::ColorType::Rgb).unwrap();
+        let sof = stream.windows(2).position(|w| w == [0xFF, 0xC0]).expect("a baseline frame");
+        let extent = Extent { columns: 16, rows: 16, max_columns: 16, max_rows: 16 };
+        let mut out = vec![0u8; 16 * 16 * 3];
+        assert_eq!(decode(&stream, Colour::YCbCr, extent, &mut out), Ok(()));
+        for (marker, says) in [
+            (0xC9, "arithmetic-coded (SOF9, marker 0xFFC9) JPEG, which is not supported"),
+            (0xC3, "lossless (SOF3, marker 0xFFC3) JPEG, which is not supported"),
+        ] {
+            stream[sof + 1] = marker;
+            let e = decode(&stream, Colour::YCbCr, extent, &mut out).unwrap_err();
+            assert!(e.starts_with(says) && !e.contains("damaged"), "{e}");
+        }
+    }
 }

@@ -159,12 +159,7 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
             .map_err(|e| open_error(path, e))?
             .map(super::orient::Orientation::from_tag)
             .unwrap_or_default(),
-        icc: decoder
-            .find_tag(Tag::IccProfile)
-            .map_err(|e| open_error(path, e))?
-            .map(|v| v.into_u8_vec())
-            .transpose()
-            .map_err(|e| open_error(path, e))?,
+        icc: profile(path, &mut decoder)?,
     };
     if jpeg::is_jpeg(path, &mut decoder)? {
         // One strip cut by restart markers (Hamamatsu NDPI) is read an interval at a time.
@@ -356,7 +351,18 @@ pub(super) fn open_decoder(path: &Path, max_memory: u64) -> Result<Decoder<BufRe
     let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
     // The first directory is read with the crate's default limits (256 MiB of tag values, ample
     // for the strip tables of any image this tool can take); the limits below apply to the rest.
-    let decoder = Decoder::new(BufReader::with_capacity(1 << 16, file)).map_err(|e| open_error(path, e))?;
+    let decoder = Decoder::new(BufReader::with_capacity(1 << 16, file)).map_err(|e| match e {
+        // A seek past 2^63 bytes: the header's offset of the first directory, which the crate
+        // does not name.
+        TiffError::IoError(io) if io.kind() == std::io::ErrorKind::InvalidInput => match first_ifd_offset(path) {
+            Some(offset) => TilerError::decode(
+                path,
+                format!("not a readable TIFF: the header's first directory offset ({offset}) lies past any file"),
+            ),
+            None => open_error(path, TiffError::IoError(io)),
+        },
+        e => open_error(path, e),
+    })?;
     let max = usize::try_from(max_memory).unwrap_or(usize::MAX);
     let mut limits = Limits::default();
     // Bounds every buffer the crate allocates itself (tag value arrays, whole-chunk results).
@@ -368,6 +374,39 @@ pub(super) fn open_decoder(path: &Path, max_memory: u64) -> Result<Decoder<BufRe
     // of a strip or tile row is checked against --max-memory below instead.
     limits.intermediate_buffer_size = usize::MAX;
     Ok(decoder.with_limits(limits))
+}
+
+/// The ICC profile (tag 34675) of `decoder`'s current directory, its size checked against
+/// [`MAX_PROFILE_BYTES`](super::icc::MAX_PROFILE_BYTES) before it is read.
+fn profile(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<Option<Vec<u8>>> {
+    let Some(entry) = decoder.image_ifd().find_entry(Tag::IccProfile) else { return Ok(None) };
+    if entry.count() > super::icc::MAX_PROFILE_BYTES {
+        return Err(super::icc::too_large(path, Some(entry.count()), "TIFF tag 34675"));
+    }
+    let value = decoder.get_tag(Tag::IccProfile).map_err(|e| open_error(path, e))?;
+    let bytes = value.into_u8_vec().map_err(|_| {
+        TilerError::decode(path, "the ICC profile (TIFF tag 34675) is not a run of bytes: a damaged tag")
+    })?;
+    Ok(Some(bytes))
+}
+
+/// The ImageDescription (tag 270) of `decoder`'s current directory, "" without one (or one
+/// that is not ASCII text). Its size is checked before it is read: one larger than
+/// `--max-memory` is an error naming the tag (the `tiff` crate would print a debug line to
+/// stderr and fail without saying which tag).
+pub(super) fn description(path: &Path, decoder: &mut Decoder<BufReader<File>>, max_memory: u64) -> Result<String> {
+    let Some(entry) = decoder.image_ifd().find_entry(Tag::ImageDescription) else { return Ok(String::new()) };
+    if entry.count() > max_memory {
+        return Err(TilerError::unsupported(
+            path,
+            format!(
+                "its ImageDescription (tag 270, an OME-XML document or a vendor's text) holds {} bytes, more than --max-memory ({}); raise --max-memory",
+                entry.count(),
+                crate::limits::human_bytes(max_memory)
+            ),
+        ));
+    }
+    Ok(decoder.get_tag_ascii_string(Tag::ImageDescription).unwrap_or_default())
 }
 
 /// [`DirectStrips`] of an 8-bit TIFF, if its strips hold rows as the texels they are, each of
@@ -426,6 +465,29 @@ fn direct_strips(
 }
 
 /// Whether the file is a BigTIFF (only for the summary line; the crate reads both).
+/// The first directory's offset as the header gives it (bytes 4-7 of a TIFF, 8-15 of a
+/// BigTIFF, in the byte order of bytes 0-1), for an error message; `None` for a header too
+/// short or not a TIFF's.
+fn first_ifd_offset(path: &Path) -> Option<u64> {
+    use std::io::Read;
+    let mut head = [0u8; 16];
+    File::open(path).ok()?.read_exact(&mut head).ok()?;
+    let little = match &head[..2] {
+        b"II" => true,
+        b"MM" => false,
+        _ => return None,
+    };
+    let (at, width) = if is_bigtiff(path).ok()? { (8, 8) } else { (4, 4) };
+    let mut bytes = [0u8; 8];
+    if little {
+        bytes[..width].copy_from_slice(&head[at..at + width]);
+        Some(u64::from_le_bytes(bytes))
+    } else {
+        bytes[8 - width..].copy_from_slice(&head[at..at + width]);
+        Some(u64::from_be_bytes(bytes))
+    }
+}
+
 fn is_bigtiff(path: &Path) -> Result<bool> {
     use std::io::Read;
     let mut head = [0u8; 4];
@@ -456,35 +518,85 @@ pub(super) fn open_error(path: &Path, e: TiffError) -> TilerError {
     }
 }
 
+/// Which reader decodes a TIFF compression.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Reader {
+    /// The `tiff` crate's chunk reader, and ours in `kinds` (planar, palette, CMYK, sub-byte).
+    Chunks,
+    /// libjpeg-turbo (`jpeg.rs`; `ndpi.rs` for one strip cut by restart markers).
+    Jpeg,
+    /// OpenJPEG (`jp2k.rs`): Aperio's two forms.
+    Jpeg2000,
+    /// The fax decoders of `kinds` (`fax.rs`): 1-bit images only.
+    Fax,
+}
+
+/// Every TIFF compression read, by its Compression (tag 259) code, with its name and its
+/// reader. The dispatch in [`open`] and every message listing what is read come from here.
+pub(super) const COMPRESSIONS: [(u16, &str, Reader); 11] = [
+    (1, "uncompressed", Reader::Chunks),
+    (5, "LZW", Reader::Chunks),
+    (8, "Deflate", Reader::Chunks),
+    (32946, "Deflate (old code)", Reader::Chunks),
+    (32773, "PackBits", Reader::Chunks),
+    (7, "JPEG", Reader::Jpeg),
+    (33003, "Aperio JPEG 2000 YCbCr", Reader::Jpeg2000),
+    (33005, "Aperio JPEG 2000 RGB", Reader::Jpeg2000),
+    (2, "CCITT modified Huffman", Reader::Fax),
+    (3, "CCITT Group 3 fax", Reader::Fax),
+    (4, "CCITT Group 4 fax", Reader::Fax),
+];
+
+/// The reader of compression `code`, `None` for one not read.
+pub(super) fn reader_of(code: u16) -> Option<Reader> {
+    COMPRESSIONS.iter().find(|c| c.0 == code).map(|c| c.2)
+}
+
+/// The compression of `decoder`'s current image (1, none, where the tag is absent).
+pub(super) fn compression_code(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<u16> {
+    Ok(decoder.find_tag_unsigned(Tag::Compression).map_err(|e| open_error(path, e))?.unwrap_or(1))
+}
+
+/// "uncompressed (1), LZW (5), ...": the compressions the `readers` read, from [`COMPRESSIONS`].
+pub(super) fn compressions_read(readers: &[Reader]) -> String {
+    let names: Vec<String> =
+        COMPRESSIONS.iter().filter(|c| readers.contains(&c.2)).map(|c| format!("{} ({})", c.1, c.0)).collect();
+    names.join(", ")
+}
+
+/// The compression of an image the chunk reader reads, refused (naming what is read) where it
+/// is not one of its [`Reader::Chunks`] compressions.
 pub(super) fn check_compression(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<CompressionMethod> {
-    let code: u16 = decoder.find_tag_unsigned(Tag::Compression).map_err(|e| open_error(path, e))?.unwrap_or(1);
+    let code = compression_code(path, decoder)?;
     let method = CompressionMethod::from_u16_exhaustive(code);
-    match method {
-        CompressionMethod::None
-        | CompressionMethod::LZW
-        | CompressionMethod::Deflate
-        | CompressionMethod::OldDeflate
-        | CompressionMethod::PackBits => Ok(method),
-        other => {
-            let name = match other {
-                CompressionMethod::Huffman => "CCITT modified Huffman (fax)".to_string(),
-                CompressionMethod::Fax3 => "CCITT Group 3 fax".to_string(),
-                CompressionMethod::Fax4 => "CCITT Group 4 fax".to_string(),
-                CompressionMethod::JPEG => {
-                    return Err(TilerError::unsupported(
-                        path,
-                        "TIFF compression 6 (old-style JPEG, withdrawn in 1995) is not supported (new-style JPEG, compression 7, is); re-save it with libtiff, e.g. `tiffcp -c jpeg in.tif out.tif`",
-                    ));
-                }
-                CompressionMethod::ModernJPEG => "JPEG".to_string(),
+    let named = COMPRESSIONS.iter().find(|c| c.0 == code);
+    match named {
+        Some((_, _, Reader::Chunks)) => Ok(method),
+        // Read by another reader, but not for an image of this kind (a channel set's page of more
+        // than four samples): that reader took the others before this was asked.
+        Some((_, name, _)) => Err(TilerError::unsupported(
+            path,
+            format!(
+                "TIFF compression {name} ({code}) is not supported for this image (its samples are read from {}); re-save it with one of those, e.g. `tiffcp -c lzw in.tif out.tif`",
+                compressions_read(&[Reader::Chunks])
+            ),
+        )),
+        None if code == 6 => Err(TilerError::unsupported(
+            path,
+            "TIFF compression 6 (old-style JPEG, withdrawn in 1995) is not supported (new-style JPEG, compression 7, is); re-save it with libtiff, e.g. `tiffcp -c jpeg in.tif out.tif`",
+        )),
+        None => {
+            let name = match method {
                 CompressionMethod::ZSTD => "Zstandard".to_string(),
                 CompressionMethod::WebP => "WebP".to_string(),
                 _ => format!("code {code}"),
             };
+            let all = [Reader::Chunks, Reader::Jpeg, Reader::Jpeg2000, Reader::Fax];
             Err(TilerError::unsupported(
                 path,
                 format!(
-                    "TIFF compression {name} is not supported (uncompressed, LZW, Deflate and PackBits are); re-save it with one of those, e.g. `tiffcp -c lzw in.tif out.tif`"
+                    "TIFF compression {name} is not supported (these are read: {}; the fax codes for 1-bit images); re-save it with one of those, e.g. `tiffcp -c lzw in.tif out.tif`",
+                    compressions_read(&all)
                 ),
             ))
         }

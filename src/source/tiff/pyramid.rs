@@ -57,7 +57,7 @@ pub(super) fn choose(
     bigtiff: bool,
     max_memory: u64,
 ) -> Result<Chosen> {
-    let pages = survey(path, max_memory)?;
+    let (pages, ended) = survey(path, max_memory)?;
     let vendor = slide::recognise(&pages);
     let index = match (pick.page, pick.series) {
         (Some(_), Some(_)) => return Err(TilerError::Options("--page and --series cannot be given together".into())),
@@ -65,7 +65,12 @@ pub(super) fn choose(
             if page as usize >= pages.len() {
                 return Err(TilerError::unsupported(
                     path,
-                    format!("--page {page}: the TIFF has {} page(s), 0 to {}", pages.len(), pages.len() - 1),
+                    format!(
+                        "--page {page}: the TIFF has {} page(s), 0 to {}{}",
+                        pages.len(),
+                        pages.len() - 1,
+                        ended.as_ref().map_or(String::new(), |why| format!("; {why}"))
+                    ),
                 ));
             }
             page as usize
@@ -75,26 +80,45 @@ pub(super) fn choose(
     if index > 0 {
         decoder.seek_to_image(index).map_err(|e| open_error(path, e))?;
     }
-    Ok(Chosen { index, label: label(&pages, vendor, index, bigtiff) })
+    let mut label = label(&pages, vendor, index, bigtiff);
+    if let Some(why) = ended {
+        label += &format!(" ({why}: later pages not read)");
+    }
+    Ok(Chosen { index, label })
 }
 
-/// The main chain's directories, as far as they can be read.
-fn survey(path: &Path, max_memory: u64) -> Result<Vec<Page>> {
+/// The main chain's directories, as far as they can be read, and why the chain ended early
+/// where it did (a directory the crate cannot read, a cycle of offsets): said in the summary.
+fn survey(path: &Path, max_memory: u64) -> Result<(Vec<Page>, Option<String>)> {
     let mut decoder = open_decoder(path, max_memory)?;
     let mut pages = Vec::new();
     loop {
-        pages.push(page(&mut decoder));
+        let description = super::description(path, &mut decoder, max_memory);
+        // The first page's description says what the file is (OME-XML, a vendor's); a later
+        // one too large to read is only not looked at.
+        let description = if pages.is_empty() { description? } else { description.unwrap_or_default() };
+        pages.push(page(&mut decoder, description));
         // A later directory the crate cannot read ends the survey: it is never chosen.
-        if pages.len() >= MAX_PAGES || !decoder.more_images() || decoder.next_image().is_err() {
-            return Ok(pages);
+        if pages.len() >= MAX_PAGES || !decoder.more_images() {
+            return Ok((pages, None));
+        }
+        if let Err(e) = decoder.next_image() {
+            let e = match e {
+                // A seek past 2^63 bytes.
+                tiff::TiffError::IoError(io) if io.kind() == std::io::ErrorKind::InvalidInput => {
+                    "its next-directory offset lies past any file".to_string()
+                }
+                e => e.to_string(),
+            };
+            let why = format!("the directory chain stops after page {} ({e})", pages.len() - 1);
+            return Ok((pages, Some(why)));
         }
     }
 }
 
-fn page(decoder: &mut Decoder<BufReader<File>>) -> Page {
+fn page(decoder: &mut Decoder<BufReader<File>>, description: String) -> Page {
     let (width, height) = decoder.dimensions().unwrap_or((0, 0));
     let subfile: u32 = decoder.find_tag_unsigned(Tag::NewSubfileType).ok().flatten().unwrap_or(0);
-    let description = decoder.get_tag_ascii_string(Tag::ImageDescription).unwrap_or_default();
     let sub_ifds = decoder.find_tag(Tag::SubIfd).ok().flatten().map_or(0, |v| match v {
         tiff::decoder::ifd::Value::List(items) => items.len(),
         _ => 1,
@@ -124,14 +148,28 @@ fn page(decoder: &mut Decoder<BufReader<File>>) -> Page {
 /// neither a reduced level nor an associated image.
 fn series_page(path: &Path, pages: &[Page], vendor: Vendor, n: u32) -> Result<usize> {
     if vendor == Vendor::Ome {
-        let series = slide::ome_series(&pages[0].description);
+        let file = path.file_name().map(|f| f.to_string_lossy()).unwrap_or_default();
+        let series = slide::ome_series(&pages[0].description, &file)
+            .map_err(|e| TilerError::decode(path, format!("the OME-XML (ImageDescription of page 0): {e}")))?;
         return match series.get(n as usize) {
-            Some(&Some(ifd)) if ifd < pages.len() => Ok(ifd),
+            Some(Some(slide::TiffData { elsewhere: Some(other), .. })) => Err(TilerError::unsupported(
+                path,
+                format!(
+                    "the OME-XML's series {n} is stored in another file ({other}): the files of a multi-file OME-TIFF are not read together; give that file"
+                ),
+            )),
+            Some(Some(slide::TiffData { ifd, .. })) if ifd.unwrap_or(0) < pages.len() as u64 => {
+                Ok(ifd.unwrap_or(0) as usize)
+            }
             Some(_) => Err(TilerError::decode(
                 path,
                 format!(
                     "the OME-XML's series {n} names no directory of the file (TiffData IFD missing or past the last page)"
                 ),
+            )),
+            None if series.is_empty() => Err(TilerError::decode(
+                path,
+                "the OME-XML (ImageDescription of page 0) holds no Image element: not an OME-TIFF this reader can map; --page N reads a directory as it is",
             )),
             None => Err(TilerError::unsupported(
                 path,
@@ -170,9 +208,10 @@ fn label(pages: &[Page], vendor: Vendor, index: usize, bigtiff: bool) -> String 
         None => "full resolution".to_string(),
     };
     let series = match vendor {
-        Vendor::Ome => slide::ome_series(&pages[0].description)
+        Vendor::Ome => slide::ome_series(&pages[0].description, "")
+            .unwrap_or_default()
             .iter()
-            .position(|&ifd| ifd == Some(index))
+            .position(|t| t.as_ref().is_some_and(|t| t.ifd.unwrap_or(0) == index as u64))
             .map_or(String::new(), |s| format!("series {s}, ")),
         _ => String::new(),
     };

@@ -5,6 +5,8 @@
 //! copies. Also which directories are associated images (label, macro,
 //! thumbnail): they are never the image cut, only listed.
 
+use std::borrow::Cow;
+
 use super::pyramid::Page;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -75,24 +77,87 @@ pub(super) fn is_level(vendor: Vendor, pages: &[Page], i: usize) -> bool {
     associated(vendor, pages, i).is_none() && (page.reduced || (vendor == Vendor::Aperio && page.tiled && i > 0))
 }
 
-/// The first directory of each OME-XML `Image` (series), in order: its first TiffData's IFD
-/// attribute (0 where the attribute is absent, as the OME schema says), `None` without TiffData.
-pub(super) fn ome_series(xml: &str) -> Vec<Option<usize>> {
-    let mut series = Vec::new();
+/// One OME-XML `TiffData` element: planes from (FirstC, FirstZ, FirstT) on, `PlaneCount` of
+/// them, stored in directories from `IFD` on.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(in crate::source) struct TiffData {
+    /// FirstC, FirstZ, FirstT (0 where absent).
+    pub first: [u64; 3],
+    pub ifd: Option<u64>,
+    pub count: Option<u64>,
+    /// The file its `UUID` child names when that is not this one (a multi-file OME-TIFF):
+    /// neither this file's name nor the document's own UUID. `None`: this file.
+    pub elsewhere: Option<String>,
+}
+
+/// The TiffData elements of `image` (one `Image` element of the document `xml`), in order;
+/// `file` is this file's name. A number that is not one is an error naming the attribute.
+pub(in crate::source) fn tiff_data(xml: &str, image: &str, file: &str) -> Result<Vec<TiffData>, String> {
+    let own_uuid = find_element(xml, "OME").and_then(|at| attribute(start_tag(&xml[at..]), "UUID"));
+    let mut all = Vec::new();
+    let mut from = 0;
+    while let Some(at) = find_element(&image[from..], "TiffData") {
+        let element = &image[from + at..];
+        let tag = start_tag(element);
+        let number = |name: &str| -> Result<Option<u64>, String> {
+            attribute(tag, name)
+                .map(|v| v.trim().parse::<u64>().map_err(|_| format!("TiffData {name} \"{v}\" is not a number")))
+                .transpose()
+        };
+        let first = [number("FirstC")?.unwrap_or(0), number("FirstZ")?.unwrap_or(0), number("FirstT")?.unwrap_or(0)];
+        let (ifd, count) = (number("IFD")?, number("PlaneCount")?);
+        // `<TiffData .../>` has no UUID child; `<TiffData ...><UUID FileName="f">urn:..</UUID></TiffData>`.
+        let body = match tag.ends_with('/') {
+            true => "",
+            false => &element[..find_closing(element, "TiffData").unwrap_or(element.len())],
+        };
+        let elsewhere = find_element(body, "UUID").and_then(|u| {
+            let uuid_tag = start_tag(&body[u..]);
+            let text = body[u + uuid_tag.len()..].trim_start_matches('>');
+            let text = unescape(text[..text.find('<').unwrap_or(text.len())].trim()).into_owned();
+            let name = attribute(uuid_tag, "FileName");
+            let this = name.as_deref() == Some(file) || own_uuid.as_deref() == Some(text.as_str());
+            (!this).then(|| match name {
+                Some(name) => format!("FileName \"{name}\""),
+                None => format!("UUID {text}"),
+            })
+        });
+        all.push(TiffData { first, ifd, count, elsewhere });
+        from += at + 1;
+    }
+    Ok(all)
+}
+
+/// The start tag that `element` begins with, without its closing `>`.
+pub(in crate::source) fn start_tag(element: &str) -> &str {
+    &element[..element.find('>').unwrap_or(element.len())]
+}
+
+/// Each OME-XML `Image` element (series) of `xml`, in order.
+pub(in crate::source) fn images(xml: &str) -> Vec<&str> {
+    let mut images = Vec::new();
     let mut rest = xml;
     while let Some(at) = find_element(rest, "Image") {
         let body = &rest[at..];
         let end = find_closing(body, "Image").unwrap_or(body.len());
-        let image = &body[..end];
-        let ifd = find_element(image, "TiffData").map(|t| {
-            let tag = &image[t..];
-            let tag = &tag[..tag.find('>').unwrap_or(tag.len())];
-            attribute(tag, "IFD").and_then(|v| v.parse().ok()).unwrap_or(0)
-        });
-        series.push(ifd);
+        images.push(&body[..end]);
         rest = &body[end.max(1)..];
     }
-    series
+    images
+}
+
+/// The first TiffData of each OME-XML `Image` (series), in order (its IFD 0 where the
+/// attribute is absent, as the OME schema says), `None` for an Image without TiffData.
+pub(in crate::source) fn ome_series(xml: &str, file: &str) -> Result<Vec<Option<TiffData>>, String> {
+    images(xml)
+        .into_iter()
+        .enumerate()
+        .map(|(n, image)| {
+            tiff_data(xml, image, file)
+                .map(|all| all.into_iter().next())
+                .map_err(|e| format!("Image {n} (series {n}): {e}"))
+        })
+        .collect()
 }
 
 /// Where the next `<name` or `<prefix:name` start tag begins (not `<ImageRef`, `</Image>`).
@@ -126,7 +191,11 @@ pub(in crate::source) fn find_closing(xml: &str, name: &str) -> Option<usize> {
     None
 }
 
-pub(in crate::source) fn attribute<'a>(tag: &'a str, name: &str) -> Option<&'a str> {
+/// The value of attribute `name` in the start tag `tag`, its references replaced: the five
+/// predefined entities (`&amp;` `&lt;` `&gt;` `&quot;` `&apos;`) and character references
+/// (`&#65;`, `&#x41;`). A malformed reference (an unknown name, no `;`, a number that is no
+/// character) is kept as written, so a value is never lost or shortened.
+pub(in crate::source) fn attribute<'a>(tag: &'a str, name: &str) -> Option<Cow<'a, str>> {
     let mut rest = tag;
     while let Some(at) = rest.find(name) {
         let before = rest[..at].chars().last();
@@ -136,12 +205,57 @@ pub(in crate::source) fn attribute<'a>(tag: &'a str, name: &str) -> Option<&'a s
         {
             let value = value.trim_start();
             let quote = value.chars().next()?;
-            let value = &value[1..];
-            return value.find(quote).map(|end| &value[..end]);
+            let value = &value[quote.len_utf8()..];
+            return value.find(quote).map(|end| unescape(&value[..end]));
         }
         rest = &rest[at + name.len()..];
     }
     None
+}
+
+/// `text` with its XML references replaced (see [`attribute`]).
+pub(in crate::source) fn unescape(text: &str) -> Cow<'_, str> {
+    if !text.contains('&') {
+        return Cow::Borrowed(text);
+    }
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(amp) = rest.find('&') {
+        out.push_str(&rest[..amp]);
+        rest = &rest[amp..];
+        // The longest reference is `&#x10FFFF;` (10 bytes) or `&#1114111;`.
+        let reference = rest[1..].find(';').filter(|&end| end <= 10).and_then(|end| {
+            let name = &rest[1..1 + end];
+            let c = match name {
+                "amp" => Some('&'),
+                "lt" => Some('<'),
+                "gt" => Some('>'),
+                "quot" => Some('"'),
+                "apos" => Some('\''),
+                _ => {
+                    let code = match name.strip_prefix("#x") {
+                        Some(hex) => u32::from_str_radix(hex, 16).ok(),
+                        None => name.strip_prefix('#').and_then(|dec| dec.parse::<u32>().ok()),
+                    };
+                    // XML's Char production: no NUL, no C0 controls but tab and newlines.
+                    code.filter(|&c| c >= 0x20 || matches!(c, 0x9 | 0xA | 0xD)).and_then(char::from_u32)
+                }
+            };
+            c.map(|c| (c, end + 2))
+        });
+        match reference {
+            Some((c, len)) => {
+                out.push(c);
+                rest = &rest[len..];
+            }
+            None => {
+                out.push('&');
+                rest = &rest[1..];
+            }
+        }
+    }
+    out.push_str(rest);
+    Cow::Owned(out)
 }
 
 #[cfg(test)]
@@ -150,13 +264,38 @@ mod tests {
 
     #[test]
     fn ome_series_are_found_by_their_first_tiff_data() {
-        let xml = r#"<?xml version="1.0"?><OME xmlns="http://www.openmicroscopy.org/Schemas/OME/2016-06">
+        let xml = r#"<?xml version="1.0"?><OME xmlns="http://www.openmicroscopy.org/Schemas/OME/2016-06" UUID="urn:uuid:1">
             <Image ID="Image:0" Name="a"><Pixels><TiffData IFD="0" PlaneCount="1"/></Pixels></Image>
             <Image ID="Image:1"><Pixels><TiffData PlaneCount="1" IFD='3'/></Pixels></Image>
             <ome:Image ID="Image:2"><ome:Pixels><ome:TiffData/></ome:Pixels></ome:Image>
-            <Image ID="Image:3"><Pixels/></Image></OME>"#;
-        assert_eq!(ome_series(xml), vec![Some(0), Some(3), Some(0), None]);
-        assert_eq!(ome_series("<OME></OME>"), Vec::<Option<usize>>::new());
+            <Image ID="Image:3"><Pixels/></Image>
+            <Image ID="Image:4"><Pixels><TiffData IFD="1"><UUID FileName="b.ome.tif">urn:uuid:2</UUID></TiffData></Pixels></Image>
+            <Image ID="Image:5"><Pixels><TiffData IFD="2"><UUID FileName="renamed.tif">urn:uuid:1</UUID></TiffData>
+            <TiffData IFD="2"><UUID FileName="a.ome.tif">urn:uuid:3</UUID></TiffData><TiffData><UUID>urn:uuid:4</UUID></TiffData></Pixels></Image></OME>"#;
+        let first = |n: usize| ome_series(xml, "a.ome.tif").unwrap()[n].clone().map(|t| (t.ifd, t.elsewhere));
+        assert_eq!(first(0), Some((Some(0), None)));
+        assert_eq!(first(1), Some((Some(3), None)));
+        assert_eq!(first(2), Some((None, None)));
+        assert_eq!(first(3), None);
+        // Another file's planes, named by FileName; this file's, by its UUID or its name.
+        assert_eq!(first(4), Some((Some(1), Some(r#"FileName "b.ome.tif""#.into()))));
+        let image = images(xml)[5];
+        let all: Vec<_> = tiff_data(xml, image, "a.ome.tif").unwrap().into_iter().map(|t| t.elsewhere).collect();
+        assert_eq!(all, [None, None, Some("UUID urn:uuid:4".into())]);
+        assert_eq!(ome_series("<OME></OME>", "a").unwrap(), Vec::<Option<TiffData>>::new());
+        let bad = r#"<OME><Image><Pixels><TiffData IFD="x1"/></Pixels></Image></OME>"#;
+        assert_eq!(ome_series(bad, "a").unwrap_err(), r#"Image 0 (series 0): TiffData IFD "x1" is not a number"#);
+    }
+
+    #[test]
+    fn attribute_values_are_unescaped() {
+        let tag = r#"<Channel Name="A&amp;B &lt;1&gt; &quot;x&quot; &apos;y&apos;" ID='&#65;&#x42;&#X43;' Bad="&nope; &amp &#0; &#xD800; & ;""#;
+        assert_eq!(attribute(tag, "Name").as_deref(), Some(r#"A&B <1> "x" 'y'"#));
+        // `&#X43;` is no reference (XML's hex prefix is a lower-case x): kept as written.
+        assert_eq!(attribute(tag, "ID").as_deref(), Some("AB&#X43;"));
+        assert_eq!(attribute(tag, "Bad").as_deref(), Some("&nope; &amp &#0; &#xD800; & ;"));
+        assert!(matches!(attribute(r#"<P Name="plain">"#, "Name"), Some(Cow::Borrowed("plain"))));
+        assert_eq!(attribute(r#"<P Name="é&#233;">"#, "Name").as_deref(), Some("éé"));
     }
 
     #[test]

@@ -69,7 +69,8 @@ impl DeepZoom {
         }
         let (cols, rows) = (d.width.div_ceil(d.tile_size), d.height.div_ceil(d.tile_size));
         let first = first_tile(&store, &level_dir, &d.format, cols, rows)?;
-        let (_, _, layout) = probe_stored(&store, &first)?;
+        let side = d.tile_size.saturating_add(d.overlap.saturating_mul(2));
+        let (_, _, layout) = probe_stored(&store, &first, super::any_tile_file_cap(side, side))?;
         Ok(DeepZoom {
             store,
             dzi: dzi.to_string(),

@@ -87,7 +87,9 @@ impl Xyz {
         let ymin = tiles.keys().map(|k| k.1).min().expect("not empty");
         let ymax = tiles.keys().map(|k| k.1).max().expect("not empty");
         let first = tiles.iter().min_by_key(|((x, y), _)| (*y, *x)).map(|(_, p)| p.clone()).expect("not empty");
-        let (tw, th, layout) = probe_stored(&store, &first)?;
+        // The tile size is what the first tile says: its file is read whole only if its header
+        // is not in its first MiB.
+        let (tw, th, layout) = probe_stored(&store, &first, super::store::MAX_TILE_BYTES)?;
         // In u64: tiles at x 0 and 2^32 - 1 span 2^32 columns, which wraps a u32 to zero.
         let (cols, rows) = (xmax as u64 - xmin as u64 + 1, ymax as u64 - ymin as u64 + 1);
         let too_big = || {
@@ -179,7 +181,8 @@ fn number(s: &str) -> Option<u32> {
 
 impl TileGrid for Xyz {
     fn describe(&self) -> String {
-        let (cols, rows) = (self.header.width / self.cell.0, self.header.height / self.cell.1);
+        // The recorded size may end inside the last tile: it is a tile all the same.
+        let (cols, rows) = (self.header.width.div_ceil(self.cell.0), self.header.height.div_ceil(self.cell.1));
         let (x, y) = self.origin;
         format!(
             "zoom {} of the {} tiles in {} ({cols}x{rows} tiles of {}x{} from x {x}, y {y})",
@@ -272,6 +275,22 @@ mod tests {
         assert_eq!(grid.header().layout.to_string(), "rgba 8-bit");
         assert!(grid.describe().contains("zoom 11") && grid.describe().contains("3x2 tiles"), "{}", grid.describe());
         assert!(read_image(tmp.path(), vec![0; 4], true).unwrap() == image);
+    }
+
+    /// The count of tiles described is the grid's, also where the image recorded in
+    /// `tilejson.json` ends inside the last tile.
+    #[test]
+    fn the_description_counts_partly_used_tiles() {
+        let tmp = tempfile::tempdir().unwrap();
+        let (cols, rows) = (3, 2);
+        let image = rgba_image(cols * TS, rows * TS, 5);
+        write_tiles(tmp.path(), 4, (0, 0), &image, cols, rows, &[]);
+        let (width, height) = (2 * TS + 1, TS + 1);
+        let tilejson = format!(r#"{{"maxzoom": 4, "vortex": {{"width": {width}, "height": {height}}}}}"#);
+        std::fs::write(tmp.path().join(crate::viewer::xyz::TILEJSON), tilejson).unwrap();
+        let grid = Xyz::open(tmp.path(), Order::Zyx).unwrap();
+        assert_eq!((grid.header().width, grid.header().height), (width, height));
+        assert!(grid.describe().contains("3x2 tiles"), "{}", grid.describe());
     }
 
     #[test]

@@ -80,7 +80,7 @@ impl Iiif {
         };
         let (names, first) = grid.find_first()?;
         grid.names = names;
-        let (_, _, layout) = probe_stored(&grid.store, &first)?;
+        let (_, _, layout) = probe_stored(&grid.store, &first, super::any_tile_file_cap(cw, ch))?;
         grid.header.layout = layout;
         Ok(grid)
     }

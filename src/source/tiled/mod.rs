@@ -30,10 +30,12 @@ pub use pack_input::PackInput;
 pub use split_output::SplitOutput;
 pub(crate) use store::TileStore;
 
+use crate::decode::probe_tile;
 use crate::error::{Result, TilerError};
+use crate::limits::human_bytes;
 use crate::pixel::PixelLayout;
 use crate::source::stored::{self, Quality, StoredTiles};
-use crate::source::{ImageHeader, RowSource, decode_tile, decode_tile_within};
+use crate::source::{ImageHeader, RowSource, decode_tile_within};
 
 /// Where a cell's texels come from.
 pub enum CellData {
@@ -97,6 +99,13 @@ pub fn check_tiles_found(grid: &dyn TileGrid, allow: bool) -> Result<()> {
 pub(crate) fn tile_file_cap(width: u32, height: u32, layout: PixelLayout) -> u64 {
     let texels = width as u64 * height as u64 * layout.bytes_per_pixel() as u64;
     (2 * texels + (4 << 20)).min(store::MAX_TILE_BYTES)
+}
+
+/// [`tile_file_cap`] of a `width x height` tile of the widest layout (RGBA, 32-bit float): a
+/// tile of a grid whose descriptor gives its size, before its layout is known.
+pub(crate) fn any_tile_file_cap(width: u32, height: u32) -> u64 {
+    use crate::pixel::{Channels, Depth};
+    tile_file_cap(width, height, PixelLayout::new(Channels::Rgba, Depth::F32))
 }
 
 /// A cell's texels, cropped to the cell; `None` for a missing cell.
@@ -398,22 +407,45 @@ pub(crate) fn read_file(path: &Path, cap: u64) -> Result<Option<CellData>> {
     Ok(store::read_capped(path, cap)?.map(|bytes| CellData::File(path.to_path_buf(), bytes)))
 }
 
-/// The header of the tile at `path` (size and layout), from its first bytes.
-pub(crate) fn probe(path: &Path) -> Result<(u32, u32, PixelLayout)> {
-    let bytes = store::read_capped(path, store::MAX_TILE_BYTES)?
-        .ok_or_else(|| TilerError::io(path, std::io::ErrorKind::NotFound.into()))?;
-    let d = decode_tile(path, &bytes)?;
-    Ok((d.width, d.height, d.layout))
+/// Bytes of a tile file read to learn its size and layout: a PNG's IHDR, a JPEG's frame header
+/// (after its APP segments) and WebP's lie in the first KiB or so.
+const PROBE_HEAD: u64 = 1 << 20;
+
+/// The header of the tile at `path` (size and layout), from its first bytes; a file whose
+/// header lies further in (a TIFF with its directory at the end) is read whole, up to `cap`.
+pub(crate) fn probe(path: &Path, cap: u64) -> Result<(u32, u32, PixelLayout)> {
+    let parent = path.parent().unwrap_or(Path::new("/"));
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    probe_stored(&TileStore::dir(parent), &name, cap)
 }
 
-/// The header of tile `rel` of `store` (size and layout), read under the tile size cap.
-pub(crate) fn probe_stored(store: &TileStore, rel: &str) -> Result<(u32, u32, PixelLayout)> {
+/// The header of tile `rel` of `store` (size and layout), read from its first bytes (see
+/// [`probe`]). A tile is never read whole here unless its header needs it: its size is
+/// checked, against the cap of a tile of the size its header gives, before any read of it
+/// ([`TiledSource`] reads each tile under that cap and `--max-memory`).
+pub(crate) fn probe_stored(store: &TileStore, rel: &str, cap: u64) -> Result<(u32, u32, PixelLayout)> {
     let name = store.name(rel);
-    let bytes = store
-        .read(rel, store::MAX_TILE_BYTES)?
-        .ok_or_else(|| TilerError::io(&name, std::io::ErrorKind::NotFound.into()))?;
-    let d = decode_tile(&name, &bytes)?;
-    Ok((d.width, d.height, d.layout))
+    let not_found = || TilerError::io(&name, std::io::ErrorKind::NotFound.into());
+    let (head, size) = store.read_head(rel, PROBE_HEAD)?.ok_or_else(not_found)?;
+    match probe_tile(&name, &head) {
+        Ok((w, h, layout)) => {
+            let most = tile_file_cap(w, h, layout);
+            if size > most {
+                let message = format!(
+                    "is {}, more than a {w}x{h} {layout} tile file can be ({}): not a tile; it is not read",
+                    human_bytes(size),
+                    human_bytes(most)
+                );
+                return Err(TilerError::unsupported(&name, message));
+            }
+            Ok((w, h, layout))
+        }
+        Err(e) if size <= head.len() as u64 => Err(e),
+        Err(_) => {
+            let bytes = store.read(rel, cap)?.ok_or_else(not_found)?;
+            probe_tile(&name, &bytes)
+        }
+    }
 }
 
 /// Reproducible noise bytes for the tests of the tiled inputs.

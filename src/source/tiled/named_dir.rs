@@ -6,7 +6,8 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use super::{CellData, TileGrid, probe, read_file};
+use super::store::MAX_TILE_BYTES;
+use super::{CellData, TileGrid, probe, read_file, tile_file_cap};
 use crate::error::{Result, TilerError};
 use crate::source::ImageHeader;
 use crate::tile_dir::filename::FilenameFormat;
@@ -54,10 +55,10 @@ impl NamedDir {
         let rows = cells.keys().map(|k| k.1 + 1).max().expect("not empty");
         // The first tile in reading order sets the size and layout; edge tiles may be smaller.
         let first = cells.iter().min_by_key(|((x, y), _)| (*y, *x)).map(|(_, p)| p.clone()).expect("not empty");
-        let (tw, th, layout) = probe(&first)?;
+        let (tw, th, layout) = probe(&first, MAX_TILE_BYTES)?;
         let edge = |key: (u32, u32), full: (u32, u32)| -> Result<(u32, u32)> {
             match cells.get(&key) {
-                Some(p) => probe(p).map(|(w, h, _)| (w, h)),
+                Some(p) => probe(p, tile_file_cap(tw, th, layout)).map(|(w, h, _)| (w, h)),
                 None => Ok(full),
             }
         };

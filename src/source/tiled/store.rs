@@ -109,6 +109,33 @@ impl TileStore {
     }
 }
 
+impl TileStore {
+    /// The first `n` bytes of file `rel` and the file's whole size (a zip entry's declared
+    /// uncompressed size), or `None` if there is none: what a tile's header is read from
+    /// without reading the tile.
+    pub fn read_head(&self, rel: &str, n: u64) -> Result<Option<(Vec<u8>, u64)>> {
+        let mut head = Vec::new();
+        match self {
+            TileStore::Dir(root) => {
+                let path = root.join(rel);
+                let Some(file) = open_regular(&path)? else { return Ok(None) };
+                let len = file.metadata().map_err(|e| TilerError::io(&path, e))?.len();
+                file.take(n).read_to_end(&mut head).map_err(|e| TilerError::io(&path, e))?;
+                Ok(Some((head, len)))
+            }
+            TileStore::Zip(z) => {
+                let Some(&index) = z.files.get(rel) else { return Ok(None) };
+                let name = PathBuf::from(format!("{}:{rel}", z.path.display()));
+                let mut archive = z.archive.clone();
+                let entry = archive.by_index(index).map_err(|e| zip_error(&name, e))?;
+                let len = entry.size();
+                entry.take(n).read_to_end(&mut head).map_err(|e| zip_error(&name, e))?;
+                Ok(Some((head, len)))
+            }
+        }
+    }
+}
+
 /// `dir/name`, or `name` at the root: a path inside a store.
 pub fn join(dir: &str, name: &str) -> String {
     if dir.is_empty() { name.to_string() } else { format!("{dir}/{name}") }
