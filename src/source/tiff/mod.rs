@@ -309,6 +309,17 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
     ))
 }
 
+/// Sample `k` of every texel of page `page` as a grey image: a channel of an image of more
+/// samples than a texel holds (`source::channels`), read by [`kinds`], the reader of samples
+/// as they are stored (together or in planes, whatever the photometric calls them).
+pub(super) fn open_sample(path: &Path, page: usize, k: usize, max_memory: u64) -> Result<Box<dyn RowSource>> {
+    let mut decoder = open_decoder(path, max_memory)?;
+    if page > 0 {
+        decoder.seek_to_image(page).map_err(|e| open_error(path, e))?;
+    }
+    kinds::open_sample(path, &mut decoder, k, max_memory)
+}
+
 /// How strips decoded ahead are handed over: in pieces of a few rows where our own decoders
 /// stream them (LZW, Deflate), else whole (the `tiff` crate decodes a strip at once).
 fn ahead_shape(own: Option<&OwnStrips>, height: u32, strip_rows: u64, row_bytes: u64) -> strips_ahead::Shape {
