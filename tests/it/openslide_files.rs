@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use crate::common::cli::{self, s};
 use crate::tiff_corpus::python_stdout;
 use crate::tiff_slides::venv_python;
+use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
 use vortex_tiler::source::{self, Pick};
 
 /// The folder of OpenSlide's test slides, or a skip with a note outside CI.
@@ -43,7 +44,7 @@ for level, (w, h) in enumerate(slide.level_dimensions):
 fn ours(path: &Path, pick: Pick) -> (u32, u32, Vec<u8>) {
     let mut source = source::open_picked(path, 1 << 30, pick).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let layout = source.layout();
-    assert_eq!(layout.to_string(), "8-bit RGB", "{}: {}", path.display(), source.describe());
+    assert_eq!(layout, PixelLayout::new(Channels::Rgb, Depth::U8), "{}: {}", path.display(), source.describe());
     let row = source.width() as usize * 3;
     let mut all = vec![0u8; row * source.height() as usize];
     for chunk in all.chunks_exact_mut(row) {
@@ -58,7 +59,8 @@ fn openslide_test_slides_read_as_openslide_4_reads_them() {
     let Some(py) = venv_python() else { return };
     let dir = tempfile::tempdir().unwrap();
     // (slide, OpenSlide's vendor, the TIFF page of each of its levels)
-    for (name, vendor, pages) in [("boxes.tiff", "generic-tiff", &[0u32, 1, 2, 3][..]), ("small.svs", "aperio", &[0][..])]
+    for (name, vendor, pages) in
+        [("boxes.tiff", "generic-tiff", &[0u32, 1, 2, 3][..]), ("small.svs", "aperio", &[0][..])]
     {
         let slide = fixtures.join(name);
         let out = dir.path().join(name);
@@ -88,8 +90,8 @@ fn dicom_and_damaged_slides_are_refused_naming_the_file() {
     let dir = tempfile::tempdir().unwrap();
     // (file, what the message must say besides the file's name)
     for (name, needles) in [
-        ("boxes_0.dcm", &["not a format"][..]),
-        ("boxes_1.dcm", &["not a format"][..]),
+        ("boxes_0.dcm", &["not an image format"][..]),
+        ("boxes_1.dcm", &["not an image format"][..]),
         ("unreadable.svs", &["tile"][..]),
         ("unopenable.tiff", &["compression", "52479"][..]),
     ] {

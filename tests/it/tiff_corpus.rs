@@ -98,7 +98,12 @@ fn native(mut bytes: Vec<u8>, size: usize) -> Vec<u8> {
 fn first_difference(ours: &[u8], theirs: &[u8], size: usize) -> String {
     let at = ours.chunks_exact(size).zip(theirs.chunks_exact(size)).position(|(a, b)| a != b);
     match at {
-        Some(i) => format!("sample {i} of {}: ours {:?}, tifffile's {:?}", theirs.len() / size, &ours[i * size..][..size], &theirs[i * size..][..size]),
+        Some(i) => format!(
+            "sample {i} of {}: ours {:?}, tifffile's {:?}",
+            theirs.len() / size,
+            &ours[i * size..][..size],
+            &theirs[i * size..][..size]
+        ),
         None => format!("{} bytes where tifffile gives {}", ours.len(), theirs.len()),
     }
 }
@@ -109,7 +114,13 @@ fn check(dir: &Path, entry: &Entry) -> Result<(), String> {
     let max_memory = 1 << 30;
     if entry.kind == "refused" {
         let error = match ChannelSet::open(&path, Pick::default(), max_memory) {
-            Ok(set) => match (0..set.count()).map(|k| set.channel(k).and_then(|mut c| rows(c.as_mut()).map_err(|e| vortex_tiler::error::TilerError::Options(e)))).find_map(Result::err) {
+            Ok(set) => match (0..set.count())
+                .map(|k| {
+                    set.channel(k)
+                        .and_then(|mut c| rows(c.as_mut()).map_err(|e| vortex_tiler::error::TilerError::Options(e)))
+                })
+                .find_map(Result::err)
+            {
                 Some(e) => e.to_string(),
                 None => return Err(format!("read where it must be refused naming {:?}", entry.refuse)),
             },
@@ -144,19 +155,30 @@ fn check(dir: &Path, entry: &Entry) -> Result<(), String> {
         ("channels", Some(set)) => {
             let (count, plane) = (entry.shape[0], entry.shape[1] * entry.shape[2] * size);
             if set.count() != count || set.depth != depth {
-                return Err(format!("{} channels of {:?} where tifffile's are {count} of {dtype}", set.count(), set.depth));
+                return Err(format!(
+                    "{} channels of {:?} where tifffile's are {count} of {dtype}",
+                    set.count(),
+                    set.depth
+                ));
             }
             for k in 0..count {
                 let mut channel = set.channel(k).map_err(|e| e.to_string())?;
                 let ours = rows(channel.as_mut())?;
                 let theirs = &expect[k * plane..][..plane];
                 if ours != theirs {
-                    return Err(format!("channel {k}: {} ({})", first_difference(&ours, theirs, size), channel.describe()));
+                    return Err(format!(
+                        "channel {k}: {} ({})",
+                        first_difference(&ours, theirs, size),
+                        channel.describe()
+                    ));
                 }
             }
         }
         (kind, set) => {
-            return Err(format!("read as {} where {kind} were expected", if set.is_some() { "channels" } else { "texels" }));
+            return Err(format!(
+                "read as {} where {kind} were expected",
+                if set.is_some() { "channels" } else { "texels" }
+            ));
         }
     }
     Ok(())
@@ -245,8 +267,10 @@ fn libvips_five_bands_are_five_channels_as_stored() {
         // `--channels 3,4,0` into a pack or a viewer's layout: three channels as RGB texels.
         let ours = rows(set.interleave(&[3, 4, 0]).unwrap().as_mut()).unwrap();
         let expect = &expect;
-        let theirs: Vec<u8> =
-            (0..plane / 2).flat_map(|i| [3, 4, 0].into_iter().flat_map(move |k| &expect[k * plane + 2 * i..][..2])).copied().collect();
+        let theirs: Vec<u8> = (0..plane / 2)
+            .flat_map(|i| [3, 4, 0].into_iter().flat_map(move |k| &expect[k * plane + 2 * i..][..2]))
+            .copied()
+            .collect();
         assert!(ours == theirs, "{file}: channels 3, 4, 0 as RGB differ from tifffile's");
         // And through the command line into OME-Zarr, read back by zarr.
         let out = d.join(format!("{file}.ome.zarr"));

@@ -48,7 +48,23 @@ pub(super) fn handles(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Re
     let compression = tag(decoder, Tag::Compression)?.unwrap_or(1);
     let bits: Option<Vec<u16>> = decoder.find_tag_unsigned_vec(Tag::BitsPerSample).map_err(|e| open_error(path, e))?;
     let bits = bits.and_then(|b| b.first().copied()).unwrap_or(1);
-    Ok(planar || matches!(photometric, Some(3 | 5)) || matches!(bits, 1 | 2 | 4) || matches!(compression, 2..=4))
+    // RGB with extra samples past its alpha: the crate drops them before undoing the predictor,
+    // at the stride of the samples kept (tests/it/tiff_corpus.rs found it), so every sample is
+    // read here as stored.
+    let samples = tag(decoder, Tag::SamplesPerPixel)?.unwrap_or(1);
+    let extra: Vec<u16> =
+        decoder.find_tag_unsigned_vec(Tag::ExtraSamples).map_err(|e| open_error(path, e))?.unwrap_or_default();
+    let kept = 3 + matches!(extra.first(), Some(1 | 2)) as u16;
+    let rgb_dropping = photometric == Some(2) && samples > kept;
+    // LZW tiles: the crate wants an end code that libtiff and tifffile do not (a tile's rows
+    // complete, libtiff stops); our decoder stops there too.
+    let lzw_tiles = compression == 5 && decoder.get_chunk_type() == ChunkType::Tile;
+    Ok(planar
+        || matches!(photometric, Some(3 | 5))
+        || matches!(bits, 1 | 2 | 4)
+        || matches!(compression, 2..=4)
+        || rgb_dropping
+        || lzw_tiles)
 }
 
 /// How a row of stored samples becomes texels.
@@ -130,7 +146,9 @@ fn form(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<Form> {
     let sample = match bits {
         1 | 2 | 4 if bits_all.iter().all(|&b| b == bits) => {
             if formats.iter().any(|&f| f != 1) {
-                return unsupported(format!("a {bits}-bit image with SampleFormat {formats:?} (not unsigned integers):"));
+                return unsupported(format!(
+                    "a {bits}-bit image with SampleFormat {formats:?} (not unsigned integers):"
+                ));
             }
             None
         }
@@ -278,12 +296,23 @@ pub(super) fn open_sample(
     }
     if f.photometric == 6 {
         // Subsampled chroma is stored in blocks, not texel by texel.
-        return Err(TilerError::unsupported(path, "channels of a YCbCr TIFF (PhotometricInterpretation 6): TIFF is not supported"));
+        return Err(TilerError::unsupported(
+            path,
+            "channels of a YCbCr TIFF (PhotometricInterpretation 6): TIFF is not supported",
+        ));
     }
     let layout = PixelLayout::new(Channels::Grey, sample.file_depth());
     let what = format!("{}-bit sample {k} of {}", f.bits, f.stored);
     let kind = Kind::AsStored { first: k, keep: 1 };
-    let parts = Parts { kind, layout, what, form: f, label: "TIFF channel".into(), embedded: Embedded::default(), associated: false };
+    let parts = Parts {
+        kind,
+        layout,
+        what,
+        form: f,
+        label: "TIFF channel".into(),
+        embedded: Embedded::default(),
+        associated: false,
+    };
     Ok(samples::widen(finish(path, decoder, parts, max_memory)?, sample))
 }
 
