@@ -116,8 +116,7 @@ fn check(dir: &Path, entry: &Entry) -> Result<(), String> {
         let error = match ChannelSet::open(&path, Pick::default(), max_memory) {
             Ok(set) => match (0..set.count())
                 .map(|k| {
-                    set.channel(k)
-                        .and_then(|mut c| rows(c.as_mut()).map_err(|e| vortex_tiler::error::TilerError::Options(e)))
+                    set.channel(k).and_then(|mut c| rows(c.as_mut()).map_err(vortex_tiler::error::TilerError::Options))
                 })
                 .find_map(Result::err)
             {
