@@ -2,7 +2,8 @@
 //! read one channel at a time, each as a grey source.
 //!
 //! A [`ChannelSet`] is one of: a TIFF page of more than four samples per texel (stored
-//! contiguously or in separate planes; up to four planes are texels `tiff::kinds` reads); an OME-TIFF series
+//! contiguously or in separate planes, each channel read by the TIFF reader of samples as
+//! they are stored, `tiff::kinds`, whatever the photometric calls them); an OME-TIFF series
 //! whose channels are grey pages (the OME-XML's planes); a list of grey images of one size
 //! and type (`--channel FILE`, repeated); or any image the pipeline reads, its texels' samples
 //! being the channels. [`ChannelSet::channel`] opens channel `k` as a grey source of its own,
@@ -13,20 +14,15 @@
 
 use std::borrow::Cow;
 use std::fs::File;
-use std::io::BufReader;
-use std::panic::AssertUnwindSafe;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-use tiff::decoder::{ChunkType, Decoder};
 use tiff::tags::Tag;
 
-use super::tiff::samples::{self, Stored};
 use super::tiff::slide::{self, attribute, find_element};
-use super::tiff::{check_compression, description, guarded, open_decoder, open_error};
+use super::tiff::{description, open_decoder, open_error};
 use super::{ImageHeader, Pick, RowSource, Streamed};
 use crate::error::{Result, TilerError};
-use crate::limits::human_bytes;
 use crate::pixel::{Channels, Depth, PixelLayout};
 
 /// Channels an image may have here: OME-TIFF and microscopy files reach a few hundred; the cap
@@ -159,7 +155,7 @@ impl ChannelSet {
                 let inner = super::open_picked(path, self.max_memory, *pick)?;
                 (Box::new(Interleave::pick(inner, layout.depth, k)), path)
             }
-            Kind::Samples { path, page } => (Box::new(TiffPlane::open(path, *page, k, self.max_memory)?), path),
+            Kind::Samples { path, page } => (super::tiff::open_sample(path, *page, k, self.max_memory)?, path),
             Kind::Pages { path, pages } => {
                 let pick = Pick { page: Some(pages[k]), series: None };
                 (super::open_picked(path, self.max_memory, pick)?, path)
@@ -259,13 +255,17 @@ fn tiff_channels(path: &Path, pick: Pick, max_memory: u64) -> Result<Option<Chan
     if samples <= 4 {
         return Ok(None);
     }
-    let plane = TiffPlane::open(path, page, 0, max_memory)?;
+    if samples as usize > MAX_CHANNELS {
+        return Err(TilerError::unsupported(path, format!("{samples} samples per texel: at most {MAX_CHANNELS}")));
+    }
+    let header = super::tiff::open_sample(path, page, 0, max_memory)?.header();
     let names = match &ome {
         Some(Some(planes)) if planes.names.len() == samples as usize => planes.names.clone(),
         _ => (0..samples).map(|k| format!("c{k}")).collect(),
     };
     let kind = Kind::Samples { path: path.to_path_buf(), page };
-    Ok(Some(ChannelSet { width: plane.width, height: plane.height, depth: plane.depth, names, kind, max_memory }))
+    let (width, height, depth) = (header.width, header.height, header.layout.depth);
+    Ok(Some(ChannelSet { width, height, depth, names, kind, max_memory }))
 }
 
 /// An OME-XML series' channels at the first focal plane and time point: the TIFF directory of
@@ -388,211 +388,6 @@ fn ome_channels(xml: &str, series: Option<u32>, file: &str) -> std::result::Resu
     Ok(Some(OmePlanes { ifds, names }))
 }
 
-/// Sample `k` of a TIFF page's texels, whether the samples are stored together (chunky) or
-/// in separate planes, as a grey source: one strip or tile row of the channel held at a time.
-struct TiffPlane {
-    path: PathBuf,
-    decoder: Decoder<BufReader<File>>,
-    width: u32,
-    height: u32,
-    depth: Depth,
-    /// Samples per texel in a chunk: all of them (chunky), or one (planar).
-    chunk_samples: usize,
-    k: usize,
-    /// The index of the channel's first chunk (planar: its plane's).
-    first_chunk: u32,
-    /// Tile width, for a tiled page.
-    tile_width: Option<u32>,
-    /// Rows of a strip or a tile.
-    rows: u32,
-    /// The channel's samples of the rows of the strip or tile row `band_at`.
-    band: Vec<u8>,
-    band_at: Option<u32>,
-    chunk: Vec<u8>,
-    y: u32,
-}
-
-impl TiffPlane {
-    fn open(path: &Path, page: usize, k: usize, max_memory: u64) -> Result<TiffPlane> {
-        let mut decoder = open_decoder(path, max_memory)?;
-        if page > 0 {
-            decoder.seek_to_image(page).map_err(|e| open_error(path, e))?;
-        }
-        check_compression(path, &mut decoder)?;
-        let tag = |decoder: &mut Decoder<_>, tag| -> Result<Option<u64>> {
-            decoder.find_tag_unsigned::<u64>(tag).map_err(|e| open_error(path, e))
-        };
-        let samples = tag(&mut decoder, Tag::SamplesPerPixel)?.unwrap_or(1) as usize;
-        let planar = tag(&mut decoder, Tag::PlanarConfiguration)?.unwrap_or(1) == 2;
-        let formats: Vec<u16> =
-            decoder.find_tag_unsigned_vec(Tag::SampleFormat).map_err(|e| open_error(path, e))?.unwrap_or_default();
-        let bits: Vec<u16> = decoder
-            .find_tag_unsigned_vec(Tag::BitsPerSample)
-            .map_err(|e| open_error(path, e))?
-            .unwrap_or_else(|| vec![1]);
-        // The TIFF reader's reading of the two tags; channels carry the samples as stored.
-        let depth = match samples::stored(&formats, &bits) {
-            Ok(Stored::AsIs(depth)) => depth,
-            Ok(_) => {
-                return Err(TilerError::unsupported(
-                    path,
-                    "channels of half floats or signed 16-bit samples: channels of 8/16/32-bit unsigned or 32-bit float samples are read",
-                ));
-            }
-            Err(what) => {
-                return Err(TilerError::unsupported(
-                    path,
-                    format!("{what} TIFF: channels of 8/16/32-bit unsigned or 32-bit float samples are read"),
-                ));
-            }
-        };
-        if samples > MAX_CHANNELS {
-            return Err(TilerError::unsupported(path, format!("{samples} samples per texel: at most {MAX_CHANNELS}")));
-        }
-        let (width, height) = decoder.dimensions().map_err(|e| open_error(path, e))?;
-        let (tile_width, rows, per_plane, count) = match decoder.get_chunk_type() {
-            ChunkType::Strip => {
-                let rows = decoder.chunk_dimensions().1.clamp(1, height.max(1));
-                let count = decoder.strip_count().map_err(|e| open_error(path, e))?;
-                (None, rows, height.div_ceil(rows), count)
-            }
-            ChunkType::Tile => {
-                let (tw, th) = decoder.chunk_dimensions();
-                if tw == 0 || th == 0 {
-                    return Err(TilerError::decode(path, "a tile of zero size"));
-                }
-                let count = decoder.tile_count().map_err(|e| open_error(path, e))?;
-                (Some(tw), th, width.div_ceil(tw) * height.div_ceil(th), count)
-            }
-        };
-        let planes = if planar { samples as u64 } else { 1 };
-        if (count as u64) < per_plane as u64 * planes {
-            return Err(TilerError::decode(
-                path,
-                format!("corrupt TIFF: {count} strips or tiles where {} planes of {per_plane} need more", planes),
-            ));
-        }
-        let chunk_samples = if planar { 1 } else { samples };
-        let b = depth.bytes() as u64;
-        let band = rows as u64 * width as u64 * b;
-        let chunk = rows as u64 * tile_width.unwrap_or(width) as u64 * chunk_samples as u64 * b;
-        if band + chunk > max_memory {
-            return Err(TilerError::unsupported(
-                path,
-                format!(
-                    "one strip or tile row of a channel and one chunk take {}, more than --max-memory ({}); raise --max-memory or re-save it with smaller strips or tiles",
-                    human_bytes(band + chunk),
-                    human_bytes(max_memory)
-                ),
-            ));
-        }
-        Ok(TiffPlane {
-            path: path.to_path_buf(),
-            decoder,
-            width,
-            height,
-            depth,
-            chunk_samples,
-            k,
-            first_chunk: if planar { k as u32 * per_plane } else { 0 },
-            tile_width,
-            rows,
-            band: vec![0; band as usize],
-            band_at: None,
-            chunk: vec![0; chunk as usize],
-            y: 0,
-        })
-    }
-
-    /// Decodes the strip or tile row `r` and keeps channel `k` of it.
-    fn load(&mut self, r: u32) -> Result<()> {
-        let b = self.depth.bytes();
-        let (width, samples, pick) =
-            (self.width as usize, self.chunk_samples, if self.chunk_samples == 1 { 0 } else { self.k });
-        let rows = self.rows.min(self.height - r * self.rows) as usize;
-        let (across, tw) = match self.tile_width {
-            Some(tw) => (self.width.div_ceil(tw), tw as usize),
-            None => (1, width),
-        };
-        for i in 0..across {
-            let index = self.first_chunk + r * across + i;
-            let left = i as usize * tw;
-            let cw = tw.min(width - left);
-            // The chunk's stored extent: a strip's rows; a tile's, less the padding past the
-            // image's edges (which the crate reports for the first plane's tiles only: a later
-            // plane's edge tiles come whole, so the copy below takes only what lies inside).
-            let (decoder, path) = (&self.decoder, &self.path);
-            let (w, h) = std::panic::catch_unwind(AssertUnwindSafe(|| decoder.chunk_data_dimensions(index)))
-                .map_err(|_| TilerError::decode(path, format!("corrupt TIFF: no strip or tile {index}")))?;
-            let (w, h) = (w as usize, h as usize);
-            if w < cw || h < rows {
-                return Err(TilerError::decode(
-                    path,
-                    format!("corrupt TIFF: strip or tile {index} is {w}x{h}, smaller than the {cw}x{rows} it covers"),
-                ));
-            }
-            let len = w * h * samples * b;
-            if len > self.chunk.len() {
-                return Err(TilerError::decode(path, format!("corrupt TIFF: strip or tile {index} is {w}x{h}")));
-            }
-            let (decoder, chunk) = (&mut self.decoder, &mut self.chunk[..len]);
-            guarded(|| decoder.read_chunk_bytes(index, chunk)).map_err(|message| TilerError::DecodeRow {
-                path: self.path.clone(),
-                row: (r * self.rows) as u64,
-                message: format!("strip or tile {index}: {message}"),
-            })?;
-            for row in 0..rows {
-                let from = &self.chunk[row * w * samples * b..][..cw * samples * b];
-                let to = &mut self.band[(row * width + left) * b..][..cw * b];
-                for (t, f) in to.chunks_exact_mut(b).zip(from.chunks_exact(samples * b)) {
-                    t.copy_from_slice(&f[pick * b..][..b]);
-                }
-            }
-        }
-        self.band_at = Some(r);
-        Ok(())
-    }
-}
-
-impl RowSource for TiffPlane {
-    fn header(&self) -> ImageHeader {
-        ImageHeader { width: self.width, height: self.height, layout: PixelLayout::new(Channels::Grey, self.depth) }
-    }
-
-    fn read_row(&mut self, row: &mut [u8]) -> Result<()> {
-        if self.y >= self.height {
-            return Err(TilerError::DecodeRow {
-                path: self.path.clone(),
-                row: self.y as u64,
-                message: "read past the last row".into(),
-            });
-        }
-        let r = self.y / self.rows;
-        if self.band_at != Some(r) {
-            self.load(r)?;
-        }
-        let bytes = self.width as usize * self.depth.bytes();
-        row.copy_from_slice(&self.band[(self.y % self.rows) as usize * bytes..][..bytes]);
-        self.y += 1;
-        Ok(())
-    }
-
-    fn skip_rows(&mut self, rows: u32) -> Result<()> {
-        self.y = self.y.saturating_add(rows).min(self.height);
-        Ok(())
-    }
-
-    fn rewind(&mut self) -> Result<()> {
-        self.y = 0;
-        Ok(())
-    }
-
-    fn describe(&self) -> String {
-        let stored = if self.chunk_samples == 1 { "separate planes" } else { "samples stored together" };
-        format!("TIFF channel {} ({stored})", self.k)
-    }
-}
-
 /// Samples of several sources side by side in one texel; one source's sample `k` alone.
 struct Interleave {
     sources: Vec<Box<dyn RowSource>>,
@@ -643,6 +438,15 @@ impl RowSource for Interleave {
 
     fn rewind(&mut self) -> Result<()> {
         self.sources.iter_mut().try_for_each(|s| s.rewind())
+    }
+
+    /// The sources' decoders, all held at once (each picked channel is a source of its own).
+    fn buffer_bytes(&self) -> u64 {
+        self.sources.iter().map(|s| s.buffer_bytes()).sum()
+    }
+
+    fn most_buffer_bytes(&self) -> u64 {
+        self.sources.iter().map(|s| s.most_buffer_bytes()).sum()
     }
 
     fn describe(&self) -> String {

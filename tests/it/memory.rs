@@ -182,3 +182,41 @@ fn docs_name_every_memory_member() {
         assert!(doc.contains(&format!("| `{name}` |")), "docs/cli.md's memory table lacks {name}");
     }
 }
+
+/// A 1024x700 TIFF of 5 samples of 16 bits in Deflate strips of 64 rows (640 KiB decoded
+/// each), as tifffile writes it, to OUT.
+const FIVE_SAMPLE_DEFLATE: &str = r#"
+import sys
+import numpy as np, tifffile
+h, w = 700, 1024
+y, x = np.mgrid[0:h, 0:w]
+data = np.stack([(x * (k + 1) * 31 + y * 7 + k * 5000) % 65536 for k in range(5)], -1).astype(np.uint16)
+tifffile.imwrite(sys.argv[1], data, photometric="minisblack", planarconfig="contig", compression="zlib", rowsperstrip=64)
+"#;
+
+/// A TIFF of five samples into OME-Zarr, one pass per channel (issue 41): each channel's
+/// decoder, which holds a strip of every sample and its compressed bytes, counts against
+/// `--max-memory` as the plan's figure does, and what the run held stays under the plan.
+#[test]
+fn channels_count_their_decoder_against_the_budget() {
+    let Some(python) = crate::tiff_slides::venv_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("five.tif");
+    crate::tiff_slides::python(&python, FIVE_SAMPLE_DEFLATE, &[s(&input)]);
+    for budget in ["64M", "16M"] {
+        let out = dir.path().join(format!("out-{budget}.ome.zarr"));
+        let args = ["split", s(&input), "--layout", "ome-zarr", "-o", s(&out), "--max-memory", budget, "--json"];
+        let out = cli::run(&args);
+        assert!(out.status.success(), "{budget}: {}", String::from_utf8_lossy(&out.stderr));
+        let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let m = &doc["memory"];
+        let what = format!("five samples into OME-Zarr under --max-memory {budget}: {m}");
+        let field = |name: &str| m[name].as_u64().unwrap_or_else(|| panic!("{what}: no {name}"));
+        let peaks =
+            vortex_tiler::limits::Peaks { parts: PARTS.map(|(name, _)| field(name)), total: field("peakBytes") };
+        let planned = (!m["plannedBytes"].is_null()).then(|| field("plannedBytes"));
+        check(&MemoryReport { budget: field("maxMemoryBytes"), planned, peaks }, &what);
+        // A strip of 64 rows of 1024 texels of 5 samples: 640 KiB held by the decoder.
+        assert!(field("decoderBytes") >= 64 * 1024 * 5 * 2, "{what}");
+    }
+}

@@ -262,6 +262,10 @@ fn add(mut sum: Summary, pass: Summary) -> Summary {
     // The sink counts every pass's bytes.
     sum.bytes = pass.bytes;
     sum.passes += pass.passes;
+    // The passes run one after another: the run held at most what its largest pass held.
+    if pass.memory.peaks.total > sum.memory.peaks.total {
+        sum.memory = pass.memory;
+    }
     let (s, p) = (&mut sum.stages, pass.stages);
     for (to, from) in [
         (&mut s.read, p.read),

@@ -3,8 +3,8 @@
 //! one plane of a planar-separate image at sub-byte depths: [`super::kinds`] reads those.
 //!
 //! Decoded rows are as stored: samples packed MSB-first at 1, 2 or 4 bits (each row starting
-//! on a byte), 8-bit samples as they are, 16-bit samples in native byte order; the horizontal
-//! predictor is undone. Compressions: none, LZW ([`super::lzw`]), Deflate (flate2), PackBits,
+//! on a byte), 8-bit samples as they are, 16- and 32-bit samples in native byte order; the
+//! horizontal predictor (2) and the floating-point one (3, TIFF Technical Note 3) are undone. Compressions: none, LZW ([`super::lzw`]), Deflate (flate2), PackBits,
 //! CCITT Group 3 (one- and two-dimensional), Group 4 and modified Huffman fax ([`super::fax`]).
 
 use std::fs::File;
@@ -43,18 +43,32 @@ impl Codec {
     }
 }
 
+/// The differencing a chunk's rows were stored with (TIFF tag 317).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Predictor {
+    None,
+    /// 2: each sample less the same sample of the texel to its left, as integers of its size.
+    Horizontal,
+    /// 3: a row's floats split into planes of their bytes (most significant first), each byte
+    /// less the byte one texel to its left (TIFF Technical Note 3; 16- and 32-bit floats).
+    Float,
+}
+
 /// Where every chunk lies and how to turn its bytes into rows.
 pub(super) struct Chunks {
     pub offsets: Vec<u64>,
     pub counts: Vec<u64>,
     pub codec: Codec,
-    pub predictor: bool,
+    pub predictor: Predictor,
     pub big_endian: bool,
-    /// Bits per sample: 1, 2, 4, 8 or 16.
+    /// Bits per sample: 1, 2, 4, 8, 16 or 32.
     pub bits: u16,
     /// FillOrder 2: the bits of each byte are stored least significant first.
     pub reverse_bits: bool,
     pub file_len: u64,
+    /// The compressed bytes of the chunk being decoded, kept for the next (its capacity is
+    /// at most [`compressed_at_most`](Self::compressed_at_most)).
+    pub raw: Vec<u8>,
 }
 
 /// The rows a chunk decodes to: `width` texels (a tile's full width, edge tiles included) of
@@ -73,8 +87,19 @@ impl Shape {
 }
 
 impl Chunks {
+    /// The most compressed bytes [`decode`](Self::decode) holds at once for the chunks
+    /// `indices`, each decoding to `decoded` bytes: the largest byte count among them, none
+    /// over the bound a count is refused beyond; 0 uncompressed (read straight into the rows).
+    pub fn compressed_at_most(&self, indices: impl Iterator<Item = usize>, decoded: u64) -> u64 {
+        if self.codec == Codec::None {
+            return 0;
+        }
+        let bound = compressed_bound(decoded);
+        indices.filter_map(|i| self.counts.get(i)).map(|&c| c.min(bound)).max().unwrap_or(0)
+    }
+
     /// Decodes chunk `index` into `out`, exactly `shape.rows` rows of `shape.row_bytes` bytes.
-    pub fn decode(&self, file: &File, index: usize, shape: Shape, out: &mut [u8]) -> Result<(), String> {
+    pub fn decode(&mut self, file: &File, index: usize, shape: Shape, out: &mut [u8]) -> Result<(), String> {
         let (offset, count) = match (self.offsets.get(index), self.counts.get(index)) {
             (Some(&o), Some(&c)) => (o, c),
             _ => return Err("the TIFF gives it no offset or byte count".into()),
@@ -97,18 +122,21 @@ impl Chunks {
                 out.iter_mut().for_each(|b| *b = b.reverse_bits());
             }
         } else {
-            // No codec here expands less than 1:16 (G4 of noise is the worst), so a byte count
-            // far above that is a corrupt table, refused before allocating for it.
-            let bound = (out.len() as u64).saturating_mul(16).saturating_add(1 << 16);
-            if count > bound {
+            if count > compressed_bound(out.len() as u64) {
                 return Err(format!("it claims {count} compressed bytes for {} decoded ones", out.len()));
             }
-            let mut raw = vec![0u8; count as usize];
-            file.read_exact_at(&mut raw, offset).map_err(|e| format!("cannot read it: {e}"))?;
+            let mut raw = std::mem::take(&mut self.raw);
+            raw.clear();
+            raw.resize(count as usize, 0);
+            let read = file.read_exact_at(&mut raw, offset).map_err(|e| format!("cannot read it: {e}"));
             if self.reverse_bits {
                 raw.iter_mut().for_each(|b| *b = b.reverse_bits());
             }
-            self.decompress(&raw, shape, out).map_err(|e| format!("corrupt or undecodable TIFF data: {e}"))?;
+            let decoded = read.and_then(|()| {
+                self.decompress(&raw, shape, out).map_err(|e| format!("corrupt or undecodable TIFF data: {e}"))
+            });
+            self.raw = raw;
+            decoded?;
         }
         self.undo_predictor(out, row_bytes, shape.samples);
         Ok(())
@@ -130,19 +158,65 @@ impl Chunks {
         }
     }
 
-    /// 16-bit samples into native order, and the horizontal predictor (only allowed at 8 and
-    /// 16 bits) undone, row by row.
+    /// 16- and 32-bit samples into native order, and the predictor (the horizontal one at 8,
+    /// 16 and 32 bits, the floating-point one at 16 and 32) undone, row by row.
     fn undo_predictor(&self, out: &mut [u8], row_bytes: usize, samples: usize) {
+        let horizontal = self.predictor == Predictor::Horizontal;
+        let mut bytes = Vec::new();
         for row in out.chunks_exact_mut(row_bytes) {
-            match self.bits {
-                16 => super::lzw::undo_predictor_16(row, samples, self.big_endian, self.predictor),
-                8 if self.predictor => {
+            match (self.bits, self.predictor) {
+                (16 | 32, Predictor::Float) => undo_float_predictor(row, samples, self.bits as usize / 8, &mut bytes),
+                (16, _) => super::lzw::undo_predictor_16(row, samples, self.big_endian, horizontal),
+                (32, _) => undo_predictor_32(row, samples, self.big_endian, horizontal),
+                (8, Predictor::Horizontal) => {
                     for i in samples..row.len() {
                         row[i] = row[i].wrapping_add(row[i - samples]);
                     }
                 }
                 _ => {}
             }
+        }
+    }
+}
+
+/// The most compressed bytes a chunk of `decoded` bytes may claim: no codec here expands less
+/// than 1:16 (G4 of noise is the worst), so a byte count far above that is a corrupt table,
+/// refused before allocating for it.
+fn compressed_bound(decoded: u64) -> u64 {
+    decoded.saturating_mul(16).saturating_add(1 << 16)
+}
+
+/// A row of 32-bit samples into native order, each texel's added to the one to its left where
+/// they were stored as differences (`predictor`).
+fn undo_predictor_32(row: &mut [u8], samples: usize, big_endian: bool, predictor: bool) {
+    let stride = 4 * samples;
+    for i in (0..row.len() - row.len() % 4).step_by(4) {
+        let b = [row[i], row[i + 1], row[i + 2], row[i + 3]];
+        let mut v = if big_endian { u32::from_be_bytes(b) } else { u32::from_le_bytes(b) };
+        if predictor && i >= stride {
+            let left = &row[i - stride..i - stride + 4];
+            v = v.wrapping_add(u32::from_ne_bytes([left[0], left[1], left[2], left[3]]));
+        }
+        row[i..i + 4].copy_from_slice(&v.to_ne_bytes());
+    }
+}
+
+/// The floating-point predictor undone on a row of `size`-byte floats, `samples` per texel:
+/// each byte plus the one `samples` to its left, then the byte planes (most significant
+/// first, whatever the file's byte order) gathered back into native-order floats. `bytes` is
+/// scratch of one row.
+fn undo_float_predictor(row: &mut [u8], samples: usize, size: usize, bytes: &mut Vec<u8>) {
+    for i in samples..row.len() {
+        row[i] = row[i].wrapping_add(row[i - samples]);
+    }
+    bytes.clear();
+    bytes.extend_from_slice(row);
+    let count = row.len() / size;
+    for (k, float) in row.chunks_exact_mut(size).enumerate() {
+        for (byte, out) in float.iter_mut().enumerate() {
+            // Plane 0 holds the most significant bytes.
+            let plane = if cfg!(target_endian = "big") { byte } else { size - 1 - byte };
+            *out = bytes[plane * count + k];
         }
     }
 }

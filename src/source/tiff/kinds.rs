@@ -1,9 +1,13 @@
 //! The rest of TIFF that scanners, slide vendors and document systems write: planar-separate
 //! images (one plane per sample, PlanarConfiguration 2), 1/2/4-bit grey, palette (indexed
-//! colour), CMYK, and CCITT fax. Chunks are read and decompressed by [`chunks`], one strip or
-//! one row of tiles at a time (of every plane), never a whole plane; each row is then turned
-//! into texels:
+//! colour), CMYK, and CCITT fax; and every sample of a texel as stored, one at a time, for the
+//! channels of an image of more samples than a texel holds ([`open_sample`]). Chunks are read
+//! and decompressed by [`chunks`], one strip or one row of tiles at a time (of every plane
+//! read), never a whole plane; each row is then turned into texels:
 //!
+//! - grey and RGB samples of 8, 16 or 32 bits (unsigned, float, or signed 16-bit) are carried
+//!   as stored, byte for byte ([`samples`] widens half floats and signed ones to `f32`), and
+//!   only the planes of the samples kept are read.
 //! - grey of 1, 2 or 4 bits becomes 8-bit grey scaled to the full range (x 255, 85, 17), as
 //!   libvips loads it; WhiteIsZero is inverted.
 //! - palette indices (1, 2, 4 or 8 bits) become RGB through the ColorMap: 8-bit when the map
@@ -14,6 +18,7 @@
 //!   default CMYK profile, as CMYK JPEG does ([`crate::source::icc::Cmyk`]).
 //!
 //! [`chunks`]: super::chunks
+//! [`samples`]: super::samples
 
 use std::fs::File;
 use std::io::BufReader;
@@ -22,9 +27,11 @@ use std::path::{Path, PathBuf};
 use tiff::decoder::{ChunkType, Decoder};
 use tiff::tags::Tag;
 
-use super::chunks::{Chunks, Codec, Shape};
+use super::chunks::{Chunks, Codec, Predictor, Shape};
+use super::samples::{self, Stored};
 use super::{Chunking, open_error};
 use crate::error::{Result, TilerError};
+use crate::limits::human_bytes;
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::icc::Cmyk;
 use crate::source::{Embedded, ImageHeader, RowSource};
@@ -41,16 +48,32 @@ pub(super) fn handles(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Re
     let compression = tag(decoder, Tag::Compression)?.unwrap_or(1);
     let bits: Option<Vec<u16>> = decoder.find_tag_unsigned_vec(Tag::BitsPerSample).map_err(|e| open_error(path, e))?;
     let bits = bits.and_then(|b| b.first().copied()).unwrap_or(1);
+    // RGB with extra samples past its alpha: the crate drops them before undoing the predictor,
+    // at the stride of the samples kept (tests/it/tiff_corpus.rs found it), so every sample is
+    // read here as stored.
+    let samples = tag(decoder, Tag::SamplesPerPixel)?.unwrap_or(1);
+    let extra: Vec<u16> =
+        decoder.find_tag_unsigned_vec(Tag::ExtraSamples).map_err(|e| open_error(path, e))?.unwrap_or_default();
+    let kept = 3 + matches!(extra.first(), Some(1 | 2)) as u16;
+    let rgb_dropping = photometric == Some(2) && samples > kept;
+    // LZW tiles: the crate wants an end code that libtiff and tifffile do not (a tile's rows
+    // complete, libtiff stops); our decoder stops there too.
+    let lzw_tiles = compression == 5 && decoder.get_chunk_type() == ChunkType::Tile;
     Ok(planar
         || matches!(photometric, Some(3 | 5))
         || matches!(bits, 1 | 2 | 4)
-        || super::reader_of(compression) == Some(super::Reader::Fax))
+        || super::reader_of(compression) == Some(super::Reader::Fax)
+        || rgb_dropping
+        || lzw_tiles)
 }
 
 /// How a row of stored samples becomes texels.
 enum Kind {
-    /// Grey (+alpha) or RGB(A): the first `keep` samples of each texel, scaled up to 8 bits
-    /// from fewer, the grey one inverted for WhiteIsZero.
+    /// Samples `first..first + keep` of each texel as they are stored (8, 16 or 32 bits):
+    /// grey (+alpha) or RGB(A) texels, or one channel.
+    AsStored { first: usize, keep: usize },
+    /// Sub-byte or WhiteIsZero grey (+alpha): the first `keep` samples of each texel, scaled
+    /// up to 8 bits from fewer, the grey one inverted for WhiteIsZero.
     Direct { keep: usize, invert: bool },
     /// Indices into a ColorMap of `3 * n` entries (reds, greens, blues); `shift` is 8 for a
     /// 16-bit map taken to 8 bits, 0 otherwise.
@@ -71,8 +94,12 @@ pub struct KindsSource {
     /// Samples per texel in the file, and per texel within one chunk (1 when planar).
     stored: usize,
     chunk_samples: usize,
-    /// One band (a strip or a row of tiles) per plane: one plane, or `stored` when planar.
+    /// One band (a strip or a row of tiles) per plane read: one plane, or when planar those
+    /// `planes` names.
     bands: Vec<Vec<u8>>,
+    planes: Vec<usize>,
+    /// Strips or tiles in one plane.
+    per_plane: usize,
     band_first: u64,
     band_rows: u64,
     tile: Vec<u8>,
@@ -83,15 +110,26 @@ pub struct KindsSource {
     label: String,
     what: String,
     embedded: Embedded,
+    /// What the buffers above hold at most, the compressed bytes of a chunk included.
+    most_buffer_bytes: u64,
 }
 
-pub(super) fn open(
-    path: &Path,
-    decoder: &mut Decoder<BufReader<File>>,
-    label: String,
-    mut embedded: Embedded,
-    max_memory: u64,
-) -> Result<Box<dyn RowSource>> {
+/// What every kind shares: the samples as stored and how they are coded.
+struct Form {
+    width: u32,
+    /// SamplesPerPixel.
+    stored: usize,
+    planar: bool,
+    photometric: u16,
+    bits: u16,
+    /// What 8-, 16- and 32-bit samples are (`samples::stored`); `None` at fewer bits.
+    sample: Option<Stored>,
+    codec: Codec,
+    predictor: Predictor,
+    extra: Vec<u16>,
+}
+
+fn form(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<Form> {
     let tag_err = |e| open_error(path, e);
     let unsupported = |what: String| Err(TilerError::unsupported(path, format!("{what} TIFF is not supported")));
     let (width, _) = super::dimensions(path, decoder)?;
@@ -104,38 +142,81 @@ pub(super) fn open(
         .ok_or_else(|| TilerError::decode(path, "the TIFF has no PhotometricInterpretation tag"))?;
     let bits_all: Vec<u16> = decoder.find_tag_unsigned_vec(Tag::BitsPerSample).map_err(tag_err)?.unwrap_or(vec![1]);
     let bits = bits_all.first().copied().unwrap_or(1);
-    if bits_all.iter().any(|&b| b != bits) || !matches!(bits, 1 | 2 | 4 | 8 | 16) {
-        return unsupported(format!("a {bits_all:?}-bits-per-sample"));
-    }
     let formats: Vec<u16> = decoder.find_tag_unsigned_vec(Tag::SampleFormat).map_err(tag_err)?.unwrap_or_default();
-    if formats.iter().any(|&f| f != 1) {
-        return unsupported(format!(
-            "a planar, palette, CMYK or sub-byte image with SampleFormat {formats:?} (not unsigned integers):"
-        ));
-    }
+    let sample = match bits {
+        1 | 2 | 4 if bits_all.iter().all(|&b| b == bits) => {
+            if formats.iter().any(|&f| f != 1) {
+                return unsupported(format!(
+                    "a {bits}-bit image with SampleFormat {formats:?} (not unsigned integers):"
+                ));
+            }
+            None
+        }
+        _ => match samples::stored(&formats, &bits_all) {
+            Ok(kind) => Some(kind),
+            Err(what) => return unsupported(what),
+        },
+    };
     let codec = codec(path, decoder, bits, stored)?;
+    let float = matches!(sample, Some(Stored::Half | Stored::AsIs(Depth::F32)));
     let predictor = match u16_tag(decoder, Tag::Predictor)?.unwrap_or(1) {
-        1 => false,
-        2 if bits >= 8 => true,
+        1 => Predictor::None,
+        2 if bits >= 8 => Predictor::Horizontal,
+        3 if float => Predictor::Float,
         p => return unsupported(format!("a {bits}-bit image with predictor {p}:")),
     };
     let extra: Vec<u16> = decoder.find_tag_unsigned_vec(Tag::ExtraSamples).map_err(tag_err)?.unwrap_or_default();
-    let alpha = matches!(extra.first(), Some(1 | 2));
-    let depth = if bits == 16 { Depth::U16 } else { Depth::U8 };
+    Ok(Form { width, stored, planar, photometric, bits, sample, codec, predictor, extra })
+}
 
-    let (kind, layout, what) = match photometric {
-        0 | 1 => {
+pub(super) fn open(
+    path: &Path,
+    decoder: &mut Decoder<BufReader<File>>,
+    label: String,
+    mut embedded: Embedded,
+    max_memory: u64,
+) -> Result<Box<dyn RowSource>> {
+    let tag_err = |e| open_error(path, e);
+    let unsupported = |what: String| Err(TilerError::unsupported(path, format!("{what} TIFF is not supported")));
+    let u16_tag = |decoder: &mut Decoder<BufReader<File>>, t| -> Result<Option<u16>> {
+        decoder.find_tag_unsigned::<u16>(t).map_err(|e| open_error(path, e))
+    };
+    let f = form(path, decoder)?;
+    let (stored, bits, width) = (f.stored, f.bits, f.width);
+    let alpha = matches!(f.extra.first(), Some(1 | 2));
+    // Palette, CMYK, sub-byte and WhiteIsZero samples are unsigned integers of 16 bits or fewer.
+    let narrow = |what: &str| match f.sample {
+        None | Some(Stored::AsIs(Depth::U8 | Depth::U16)) => Ok(()),
+        Some(_) => Err(TilerError::unsupported(
+            path,
+            format!("a {what} of {bits}-bit samples that are not unsigned integers: TIFF is not supported"),
+        )),
+    };
+    let (kind, layout, what) = match (f.photometric, f.sample) {
+        // Samples carried as stored: 8-, 16- and 32-bit grey and RGB, with alpha.
+        (1 | 2, Some(sample)) if f.photometric == 1 || stored >= 3 => {
+            let (grey, colours) = if f.photometric == 1 { (true, 1) } else { (false, 3) };
+            let with_alpha = alpha && stored > colours;
+            let channels = match (grey, with_alpha) {
+                (true, false) => Channels::Grey,
+                (true, true) => Channels::GreyAlpha,
+                (false, false) => Channels::Rgb,
+                (false, true) => Channels::Rgba,
+            };
+            let depth = sample.file_depth();
+            let what = format!("{bits}-bit {}", if grey { "grey" } else { "RGB" });
+            (Kind::AsStored { first: 0, keep: channels.count() }, PixelLayout::new(channels, depth), what)
+        }
+        (0 | 1, _) => {
+            narrow("WhiteIsZero or sub-byte grey")?;
             let channels = if alpha && stored >= 2 { Channels::GreyAlpha } else { Channels::Grey };
-            let invert = photometric == 0;
+            let invert = f.photometric == 0;
             let what = format!("{bits}-bit grey{}", if invert { " (WhiteIsZero)" } else { "" });
+            let depth = if bits == 16 { Depth::U16 } else { Depth::U8 };
             (Kind::Direct { keep: channels.count(), invert }, PixelLayout::new(channels, depth), what)
         }
-        2 if stored >= 3 && bits >= 8 => {
-            let channels = if alpha && stored >= 4 { Channels::Rgba } else { Channels::Rgb };
-            let kind = Kind::Direct { keep: channels.count(), invert: false };
-            (kind, PixelLayout::new(channels, depth), format!("{bits}-bit RGB"))
-        }
-        3 if stored == 1 && bits <= 8 => {
+        (3, _) if stored == 1 && bits <= 8 => {
+            narrow("palette")?;
             let map: Vec<u16> = decoder.find_tag_unsigned_vec(Tag::ColorMap).map_err(tag_err)?.unwrap_or_default();
             let entries = 1usize << bits;
             if map.len() != 3 * entries {
@@ -156,7 +237,8 @@ pub(super) fn open(
             let what = format!("{bits}-bit palette to RGB ({note})");
             (Kind::Palette { map, shift }, PixelLayout::new(Channels::Rgb, depth), what)
         }
-        5 if stored >= 4 && matches!(bits, 8 | 16) => {
+        (5, _) if stored >= 4 && matches!(bits, 8 | 16) => {
+            narrow("CMYK")?;
             let ink_set = u16_tag(decoder, Tag::Unknown(332))?.unwrap_or(1);
             if alpha {
                 return unsupported("a CMYK with alpha".into());
@@ -167,17 +249,71 @@ pub(super) fn open(
             let cmyk = Cmyk::new(path, embedded.icc.as_deref(), false, bits == 16)?;
             // The profile is used up turning CMYK into sRGB.
             embedded.icc = None;
+            let depth = if bits == 16 { Depth::U16 } else { Depth::U8 };
             let what = format!("{bits}-bit CMYK, {}", cmyk.note);
             let row = vec![0u8; width as usize * 4 * depth.bytes()];
             (Kind::Cmyk { cmyk, row }, PixelLayout::new(Channels::Rgb, depth), what)
         }
-        3 => return unsupported(format!("a {bits}-bit palette with {stored} samples per texel")),
-        5 => return unsupported(format!("a {bits}-bit CMYK (8- and 16-bit CMYK are read)")),
-        p => return unsupported(format!("a {bits}-bit photometric-{p} image with {stored} samples per texel:")),
+        (3, _) => return unsupported(format!("a {bits}-bit palette with {stored} samples per texel")),
+        (5, _) => return unsupported(format!("a {bits}-bit CMYK (8- and 16-bit CMYK are read)")),
+        (p, _) => return unsupported(format!("a {bits}-bit photometric-{p} image with {stored} samples per texel:")),
     };
-    let associated = alpha && extra.first() == Some(&1);
-    let parts = Parts { kind, layout, what, codec, predictor, planar, stored, bits, label, embedded, associated };
-    finish(path, decoder, parts, max_memory)
+    let associated = alpha && f.extra.first() == Some(&1);
+    if associated && !layout.depth.is_narrow_int() {
+        return unsupported(format!("a {bits}-bit {} with associated (premultiplied) alpha", layout.depth.tile_type()));
+    }
+    let widen = f.sample.filter(|_| matches!(kind, Kind::AsStored { .. }));
+    let parts = Parts { kind, layout, what, form: f, label, embedded, associated };
+    let source = finish(path, decoder, parts, max_memory)?;
+    Ok(match widen {
+        Some(sample) => samples::widen(source, sample),
+        None => source,
+    })
+}
+
+/// Sample `k` of every texel of the TIFF page in `decoder` as a grey image, whatever the
+/// photometric says the samples are: a channel of an image of more samples than a texel
+/// holds (`source::channels`). Samples of 8, 16 or 32 bits, carried as stored (half floats
+/// and signed 16-bit ones widened to `f32`, as for texels).
+pub(super) fn open_sample(
+    path: &Path,
+    decoder: &mut Decoder<BufReader<File>>,
+    k: usize,
+    max_memory: u64,
+) -> Result<Box<dyn RowSource>> {
+    let f = form(path, decoder)?;
+    let Some(sample) = f.sample else {
+        return Err(TilerError::unsupported(
+            path,
+            format!(
+                "channels of {}-bit samples: channels of 8/16/32-bit unsigned, 16/32-bit float or 16-bit signed samples are read",
+                f.bits
+            ),
+        ));
+    };
+    if k >= f.stored {
+        return Err(TilerError::Options(format!("channel {k}: the TIFF has {} samples per texel", f.stored)));
+    }
+    if f.photometric == 6 {
+        // Subsampled chroma is stored in blocks, not texel by texel.
+        return Err(TilerError::unsupported(
+            path,
+            "channels of a YCbCr TIFF (PhotometricInterpretation 6): TIFF is not supported",
+        ));
+    }
+    let layout = PixelLayout::new(Channels::Grey, sample.file_depth());
+    let what = format!("{}-bit sample {k} of {}", f.bits, f.stored);
+    let kind = Kind::AsStored { first: k, keep: 1 };
+    let parts = Parts {
+        kind,
+        layout,
+        what,
+        form: f,
+        label: "TIFF channel".into(),
+        embedded: Embedded::default(),
+        associated: false,
+    };
+    Ok(samples::widen(finish(path, decoder, parts, max_memory)?, sample))
 }
 
 /// The codec of a file of `bits`-bit, `stored`-sample texels.
@@ -213,8 +349,7 @@ fn codec(path: &Path, decoder: &mut Decoder<BufReader<File>>, bits: u16, stored:
         other => Err(TilerError::unsupported(
             path,
             format!(
-                "TIFF compression {other} is not supported for planar, palette, CMYK or sub-byte images ({} are); re-save it with `tiffcp -c lzw in.tif out.tif`",
-                super::compressions_read(&[super::Reader::Chunks, super::Reader::Fax])
+                "TIFF compression {other} is not supported for planar, palette, CMYK or sub-byte images, nor for channels of more than four samples per texel (none, LZW, Deflate, PackBits, CCITT G3/G4 are); re-save it with `tiffcp -c lzw in.tif out.tif`"
             ),
         )),
     }
@@ -225,11 +360,7 @@ struct Parts {
     kind: Kind,
     layout: PixelLayout,
     what: String,
-    codec: Codec,
-    predictor: bool,
-    planar: bool,
-    stored: usize,
-    bits: u16,
+    form: Form,
     label: String,
     embedded: Embedded,
     associated: bool,
@@ -242,15 +373,16 @@ fn finish(
     max_memory: u64,
 ) -> Result<Box<dyn RowSource>> {
     let tag_err = |e| open_error(path, e);
+    let f = &p.form;
     let (width, height) = decoder.dimensions().map_err(tag_err)?;
     let chunking = match decoder.get_chunk_type() {
         ChunkType::Strip => Chunking::Strips { rows: decoder.chunk_dimensions().1.clamp(1, height) },
         ChunkType::Tile => {
             let (tw, th) = decoder.chunk_dimensions();
-            if tw == 0 || th == 0 || !(tw as u64 * p.bits as u64).is_multiple_of(8) {
+            if tw == 0 || th == 0 || !(tw as u64 * f.bits as u64).is_multiple_of(8) {
                 return Err(TilerError::decode(
                     path,
-                    format!("corrupt TIFF: {tw}x{th} tiles of {}-bit samples", p.bits),
+                    format!("corrupt TIFF: {tw}x{th} tiles of {}-bit samples", f.bits),
                 ));
             }
             Chunking::Tiles { width: tw, height: th, across: width.div_ceil(tw) }
@@ -265,29 +397,52 @@ fn finish(
     let chunks = Chunks {
         offsets: decoder.get_tag_u64_vec(offsets_tag).map_err(tag_err)?,
         counts: decoder.get_tag_u64_vec(counts_tag).map_err(tag_err)?,
-        codec: p.codec,
-        predictor: p.predictor,
+        codec: f.codec,
+        predictor: f.predictor,
         big_endian: decoder.byte_order() == tiff::tags::ByteOrder::BigEndian,
-        bits: p.bits,
+        bits: f.bits,
         reverse_bits: decoder.find_tag_unsigned::<u16>(Tag::FillOrder).map_err(tag_err)? == Some(2),
         file_len,
+        raw: Vec::new(),
     };
-    let chunk_samples = if p.planar { 1 } else { p.stored };
-    let planes = if p.planar { p.stored } else { 1 };
-    let plane_row = Shape { width, rows: 1, samples: chunk_samples }.row_bytes(p.bits) as u64;
+    let chunk_samples = if f.planar { 1 } else { f.stored };
+    // The planes read: of samples carried as stored, only theirs; else every one.
+    let planes: Vec<usize> = match (&p.kind, f.planar) {
+        (_, false) => vec![0],
+        (Kind::AsStored { first, keep }, true) => (*first..first + keep).collect(),
+        (_, true) => (0..f.stored).collect(),
+    };
+    let plane_row = Shape { width, rows: 1, samples: chunk_samples }.row_bytes(f.bits) as u64;
     let band_rows = chunking.rows().min(height) as u64;
-    let tile_bytes = match chunking {
-        Chunking::Strips { .. } => 0,
-        Chunking::Tiles { width: tw, height: th, .. } => {
-            Shape { width: tw, rows: 1, samples: chunk_samples }.row_bytes(p.bits) as u64 * th as u64
+    let (chunk_shape, per_plane) = match chunking {
+        Chunking::Strips { rows } => (Shape { width, rows, samples: chunk_samples }, height.div_ceil(rows) as usize),
+        Chunking::Tiles { width: tw, height: th, across } => {
+            (Shape { width: tw, rows: th, samples: chunk_samples }, across as usize * height.div_ceil(th) as usize)
         }
     };
-    // Held: one band per plane, one tile, the unpacked row.
-    let need = (plane_row * band_rows)
-        .saturating_mul(planes as u64)
+    let tile_bytes = match chunking {
+        Chunking::Strips { .. } => 0,
+        Chunking::Tiles { .. } => chunk_shape.row_bytes(f.bits) as u64 * chunk_shape.rows as u64,
+    };
+    // The unpacked row of sub-byte, WhiteIsZero, palette and CMYK texels, and CMYK's row.
+    let unpacked = match &p.kind {
+        Kind::AsStored { .. } => 0,
+        _ => width as u64 * f.stored as u64 * 2,
+    };
+    let cmyk_row = match &p.kind {
+        Kind::Cmyk { row, .. } => row.len() as u64,
+        _ => 0,
+    };
+    let chunk_bytes = chunk_shape.row_bytes(f.bits) as u64 * chunk_shape.rows as u64;
+    let read = planes.iter().flat_map(|&plane| plane * per_plane..(plane + 1) * per_plane);
+    let compressed = chunks.compressed_at_most(read, chunk_bytes);
+    // Held: one band per plane read, one tile, the compressed bytes of one chunk, the rows.
+    let most = (plane_row * band_rows)
+        .saturating_mul(planes.len() as u64)
         .saturating_add(tile_bytes)
-        .saturating_add(width as u64 * p.stored as u64 * 2);
-    if need > max_memory {
+        .saturating_add(compressed)
+        .saturating_add(unpacked + cmyk_row);
+    if most > max_memory {
         let unit = match chunking {
             Chunking::Strips { rows } => format!("strips of {rows} rows"),
             Chunking::Tiles { width: tw, height: th, .. } => format!("{tw}x{th} tiles"),
@@ -295,14 +450,15 @@ fn finish(
         return Err(TilerError::unsupported(
             path,
             format!(
-                "the {width}x{height} TIFF is stored in {unit}, so one band of them ({} MiB, every plane) would have to be held in memory, more than --max-memory ({} MiB); raise --max-memory or re-save it with smaller strips (e.g. `tiffcp -r 64 in.tif out.tif`)",
-                need.div_ceil(1 << 20),
-                max_memory >> 20
+                "the {width}x{height} TIFF is stored in {unit}, so one band of them ({}, every plane read) would have to be held in memory, more than --max-memory ({}); raise --max-memory or re-save it with smaller strips (e.g. `tiffcp -r 64 in.tif out.tif`)",
+                human_bytes(most),
+                human_bytes(max_memory)
             ),
         ));
     }
     let band_len = usize::try_from(plane_row * band_rows)
         .map_err(|_| TilerError::unsupported(path, "a strip is too large for this machine"))?;
+    let what = format!("{}{}", if f.planar { "planar-separate " } else { "" }, p.what);
     Ok(Box::new(KindsSource {
         path: path.to_path_buf(),
         file,
@@ -312,23 +468,26 @@ fn finish(
         layout: p.layout,
         kind: p.kind,
         chunking,
-        stored: p.stored,
+        stored: f.stored,
         chunk_samples,
-        bands: vec![vec![0u8; band_len]; planes],
+        bands: vec![vec![0u8; band_len]; planes.len()],
+        planes,
+        per_plane,
         band_first: 0,
         band_rows: 0,
         tile: vec![0u8; tile_bytes as usize],
-        samples: vec![0u16; width as usize * p.stored],
+        samples: vec![0u16; (unpacked / 2) as usize],
         associated: p.associated,
         next: 0,
         label: p.label,
-        what: format!("{}{}", if p.planar { "planar-separate " } else { "" }, p.what),
+        what,
         embedded: p.embedded,
+        most_buffer_bytes: most,
     }))
 }
 
 impl KindsSource {
-    /// Decodes, for every plane, the strip or row of tiles holding row `y`.
+    /// Decodes, for every plane read, the strip or row of tiles holding row `y`.
     fn load_band(&mut self, y: u64) -> Result<()> {
         let rows_per = self.chunking.rows() as u64;
         let band = (y / rows_per) as usize;
@@ -341,20 +500,19 @@ impl KindsSource {
             row: y,
             message: format!("{what} (rows {first}..{}): {message}", first + rows as u64),
         };
-        let planes = self.bands.len();
-        for (plane, dest) in self.bands.iter_mut().enumerate() {
-            let of_plane = |what: String| if planes > 1 { format!("{what} of plane {plane}") } else { what };
+        let (planar, per_plane) = (self.chunk_samples == 1 && self.stored > 1, self.per_plane);
+        for (&plane, dest) in self.planes.iter().zip(self.bands.iter_mut()) {
+            let of_plane = |what: String| if planar { format!("{what} of plane {plane}") } else { what };
             let dest = &mut dest[..plane_row * rows as usize];
             match self.chunking {
                 Chunking::Strips { .. } => {
-                    let index = plane * self.height.div_ceil(rows_per as u32) as usize + band;
+                    let index = plane * per_plane + band;
                     let shape = Shape { width: self.width, rows, samples: self.chunk_samples };
                     self.chunks
                         .decode(&self.file, index, shape, dest)
                         .map_err(|m| fail(of_plane(format!("strip {index}")), m))?;
                 }
                 Chunking::Tiles { width: tw, height: th, across } => {
-                    let per_plane = across as usize * self.height.div_ceil(th) as usize;
                     let shape = Shape { width: tw, rows: th, samples: self.chunk_samples };
                     let tile_row = shape.row_bytes(bits);
                     for col in 0..across as usize {
@@ -373,6 +531,30 @@ impl KindsSource {
         }
         (self.band_first, self.band_rows) = (first, rows as u64);
         Ok(())
+    }
+
+    /// Samples `first..first + keep` of each texel of row `y` of the loaded band into `out`,
+    /// byte for byte (samples of 8 bits or more, already in native order).
+    fn copy_as_stored(&self, y: u64, first: usize, keep: usize, out: &mut [u8]) {
+        let b = self.chunks.bits as usize / 8;
+        let plane_row = Shape { width: self.width, rows: 1, samples: self.chunk_samples }.row_bytes(self.chunks.bits);
+        let at = (y - self.band_first) as usize * plane_row;
+        if self.chunk_samples > 1 {
+            // Texels of `stored` samples together: the kept ones are side by side.
+            let texel = self.chunk_samples * b;
+            let row = &self.bands[0][at..at + plane_row];
+            for (o, t) in out.chunks_exact_mut(keep * b).zip(row.chunks_exact(texel)) {
+                o.copy_from_slice(&t[first * b..(first + keep) * b]);
+            }
+        } else {
+            // One sample per texel, or one plane per kept sample.
+            for (c, band) in self.bands.iter().enumerate() {
+                let plane = &band[at..at + plane_row];
+                for (o, s) in out.chunks_exact_mut(keep * b).zip(plane.chunks_exact(b)) {
+                    o[c * b..(c + 1) * b].copy_from_slice(s);
+                }
+            }
+        }
     }
 
     /// Row `y` of the loaded band into `samples`, texel by texel.
@@ -415,6 +597,14 @@ impl RowSource for KindsSource {
         if y < self.band_first || y >= self.band_first + self.band_rows {
             self.load_band(y)?;
         }
+        if let Kind::AsStored { first, keep } = self.kind {
+            self.copy_as_stored(y, first, keep, out);
+            if self.associated {
+                super::unpremultiply(out, self.layout);
+            }
+            self.next += 1;
+            return Ok(());
+        }
         self.unpack_row(y);
         let bits = self.chunks.bits;
         let max = (1u32 << bits) - 1;
@@ -438,6 +628,7 @@ impl RowSource for KindsSource {
                     }
                 }
             }
+            Kind::AsStored { .. } => {}
             Kind::Palette { map, shift } => {
                 let n = map.len() / 3;
                 let sixteen = self.layout.depth == Depth::U16;
@@ -475,6 +666,20 @@ impl RowSource for KindsSource {
     fn skip_rows(&mut self, rows: u32) -> Result<()> {
         self.next += rows as u64;
         Ok(())
+    }
+
+    /// The bands, the tile, the compressed bytes of the last chunk and the unpacked row.
+    fn buffer_bytes(&self) -> u64 {
+        let bands: usize = self.bands.iter().map(Vec::capacity).sum();
+        let cmyk = match &self.kind {
+            Kind::Cmyk { row, .. } => row.capacity(),
+            _ => 0,
+        };
+        (bands + self.tile.capacity() + self.chunks.raw.capacity() + 2 * self.samples.capacity() + cmyk) as u64
+    }
+
+    fn most_buffer_bytes(&self) -> u64 {
+        self.most_buffer_bytes
     }
 
     fn rewind(&mut self) -> Result<()> {
