@@ -26,6 +26,7 @@ mod ndpi;
 mod ome_zarr;
 mod oracle;
 mod pack_cli;
+mod pack_trust;
 mod pmtiles;
 mod remote_pack;
 mod render;
