@@ -74,8 +74,8 @@ pub fn run_verify(a: VerifyArgs) -> Result<()> {
     let started = Instant::now();
     // Opened without holding the index to its checksum: `verify` reports a mismatch with every
     // other problem it finds (every other command refuses such a pack at open).
-    let opened = refuse_directory(&a.input)
-        .and_then(|()| Ok(Pack::open_to_verify(&a.input, vortex_pack::Limits::default())?));
+    let opened =
+        refuse_directory(&a.input).and_then(|()| Ok(Pack::open_to_verify(&a.input, vortex_pack::Limits::default())?));
     let report = match opened {
         Ok(pack) => verify(&pack, VerifyOptions { decode: a.decode }),
         Err(e) if a.json => {

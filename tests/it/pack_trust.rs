@@ -69,7 +69,10 @@ fn verify_still_reports_a_swapped_entry_with_everything_else() {
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(json["tiles"].as_u64().unwrap() > 88, "{json}");
     let problems = json["problems"].as_array().unwrap();
-    assert!(problems.iter().any(|p| p["section"] == "index" && p["message"].as_str().unwrap().contains(INDEX)), "{json}");
+    assert!(
+        problems.iter().any(|p| p["section"] == "index" && p["message"].as_str().unwrap().contains(INDEX)),
+        "{json}"
+    );
 }
 
 #[test]
@@ -99,7 +102,8 @@ fn render_refuses_a_swapped_entry_before_drawing() {
     let dir = tempfile::tempdir().unwrap();
     let pack = damaged_pack(dir.path());
     let frames = dir.path().join("frames");
-    let out = run(&["render", "--pack", s(&pack), "--frames", s(&frames), "--size", "64x48", "--frame-count", "2", "-q"]);
+    let out =
+        run(&["render", "--pack", s(&pack), "--frames", s(&frames), "--size", "64x48", "--frame-count", "2", "-q"]);
     // The pack is opened before the GPU is looked for: this holds with or without an adapter.
     fails_with(&out, &["damaged.vtpk", INDEX]);
     assert!(!frames.exists());
