@@ -173,8 +173,8 @@ pub(super) fn open_layers(
     http_deadline: Option<Duration>,
 ) -> Result<(Vec<Layer>, u32, Vec<Arc<HttpPack>>)> {
     let mut remote = Vec::new();
-    let mut http = HttpOptions::default();
-    http.deadline = http_deadline.unwrap_or(http.deadline);
+    let default = HttpOptions::default();
+    let http = HttpOptions { deadline: http_deadline.unwrap_or(default.deadline), ..default };
     let (sources, mut tile_size) = open_sources(&scene.textures, latency, http, &mut remote)?;
     let mut layers = vec![Layer::colour(sources)];
     for layer in &scene.layers {
