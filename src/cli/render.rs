@@ -15,7 +15,7 @@ use vortex_tiler::limits::Limits;
 use vortex_tiler::output::{self, Product};
 use vortex_vt::sampler::Rgba8Image;
 use vortex_vt_wgpu::harness::{Scene, SceneLayer, SceneRenderer};
-use vortex_vt_wgpu::source::{Delayed, HttpPack, HttpStats};
+use vortex_vt_wgpu::source::{Delayed, HttpOptions, HttpPack, HttpStats};
 use vortex_vt_wgpu::{CacheFormat, Gpu, Layer, LayerKind, Pacing, PageSource, Runtime, SampleFilter};
 
 use super::{report, signals};
@@ -96,6 +96,11 @@ pub(super) struct StreamArgs {
     /// the reads land.
     #[arg(long, value_name = "DURATION", value_parser = parse_duration)]
     pub(super) io_latency: Option<Duration>,
+    /// The most one HTTP request of an http:// or https:// pack may take, from connecting to
+    /// the last byte of its reply, e.g. 30s or 2m: past it the request fails and is retried, so
+    /// a server trickling bytes cannot hold the run (docs/remote.md) [default: 30s].
+    #[arg(long, value_name = "DURATION", value_parser = parse_deadline)]
+    pub(super) http_deadline: Option<Duration>,
     /// Another layer of the textures' stacks, on their page grid: KIND:PACK[,PACK...] with one
     /// pack per texture, KIND colour (sRGB, premultiplied, BC where the GPU samples it) or data
     /// (normals, roughness: filtered as stored, RGBA8). Repeat for more layers (up to 4 in all);
@@ -161,13 +166,19 @@ fn parse_layer(s: &str) -> Result<SceneLayer, String> {
 
 /// The scene's layer stacks as page sources: its `textures` as layer 0 (colour), then its
 /// `layers`, each read `latency` late if given; the largest tile side; and the packs among them
-/// read over HTTP (for their counters).
-pub(super) fn open_layers(scene: &Scene, latency: Option<Duration>) -> Result<(Vec<Layer>, u32, Vec<Arc<HttpPack>>)> {
+/// read over HTTP (for their counters), each request held to `http_deadline` if given.
+pub(super) fn open_layers(
+    scene: &Scene,
+    latency: Option<Duration>,
+    http_deadline: Option<Duration>,
+) -> Result<(Vec<Layer>, u32, Vec<Arc<HttpPack>>)> {
     let mut remote = Vec::new();
-    let (sources, mut tile_size) = open_sources(&scene.textures, latency, &mut remote)?;
+    let default = HttpOptions::default();
+    let http = HttpOptions { deadline: http_deadline.unwrap_or(default.deadline), ..default };
+    let (sources, mut tile_size) = open_sources(&scene.textures, latency, http, &mut remote)?;
     let mut layers = vec![Layer::colour(sources)];
     for layer in &scene.layers {
-        let (sources, side) = open_sources(&layer.textures, latency, &mut remote)?;
+        let (sources, side) = open_sources(&layer.textures, latency, http, &mut remote)?;
         tile_size = tile_size.max(side);
         layers.push(Layer { kind: layer.kind, sources });
     }
@@ -176,10 +187,12 @@ pub(super) fn open_layers(scene: &Scene, latency: Option<Duration>) -> Result<(V
 
 /// The packs at `paths` as page sources (shards refused: they must be merged first), each read
 /// `latency` late if given, and their largest tile side. A path that is an `http://` or
-/// `https://` URL is read from the web server with `Range` requests, and added to `remote`.
+/// `https://` URL is read from the web server with `Range` requests as `http` says, and added
+/// to `remote`; its requests end when a signal asks the run to stop.
 fn open_sources(
     paths: &[PathBuf],
     latency: Option<Duration>,
+    http: HttpOptions,
     remote: &mut Vec<Arc<HttpPack>>,
 ) -> Result<(Vec<Arc<dyn PageSource>>, u32)> {
     let mut tile_size = 0;
@@ -187,7 +200,12 @@ fn open_sources(
         .iter()
         .map(|p| {
             let source: Arc<dyn PageSource> = if let Some(url) = as_url(p) {
-                let pack = Arc::new(HttpPack::open(url).with_context(|| format!("opening {url}"))?);
+                let stop = || signals::requested().is_some();
+                let opened = HttpPack::open_with_stop(url, http, vortex_pack::Limits::default(), stop);
+                if opened.is_err() && signals::requested().is_some() {
+                    return Err(TilerError::Interrupted.into());
+                }
+                let pack = Arc::new(opened.with_context(|| format!("opening {url}"))?);
                 vortex_tiler::scale_out::refuse_shard(p, pack.metadata())?;
                 tile_size = tile_size.max(pack.layout().header().description.tile_size);
                 remote.push(Arc::clone(&pack));
@@ -288,6 +306,24 @@ enum PacingArg {
 
 /// `50ms`, `0.2s`, `1s` or a bare number of milliseconds.
 pub(super) fn parse_duration(s: &str) -> Result<Duration, String> {
+    duration_up_to(s, 60.0, "0 to 60 s such as 50ms or 0.2s")
+}
+
+/// `--http-deadline`: as `parse_duration`, or minutes (`2m`), from 1 ms to an hour.
+fn parse_deadline(s: &str) -> Result<Duration, String> {
+    let t = s.trim();
+    let minutes = t.strip_suffix('m').and_then(|m| m.trim().parse::<f64>().ok());
+    let d = match minutes {
+        Some(m) => duration_up_to(&format!("{}s", m * 60.0), 3600.0, ""),
+        None => duration_up_to(t, 3600.0, ""),
+    };
+    d.ok()
+        .filter(|d| *d >= Duration::from_millis(1))
+        .ok_or_else(|| format!("'{s}' is not a deadline of 1 ms to an hour such as 30s, 500ms or 2m"))
+}
+
+/// `s` as a duration of `0..=max_s` seconds: a number with `ms` or `s` (milliseconds without).
+fn duration_up_to(s: &str, max_s: f64, what: &str) -> Result<Duration, String> {
     let t = s.trim();
     let (number, scale) = if let Some(ms) = t.strip_suffix("ms") {
         (ms, 1e-3)
@@ -297,8 +333,8 @@ pub(super) fn parse_duration(s: &str) -> Result<Duration, String> {
         (t, 1e-3)
     };
     match number.trim().parse::<f64>() {
-        Ok(v) if v.is_finite() && (0.0..=60.0).contains(&(v * scale)) => Ok(Duration::from_secs_f64(v * scale)),
-        _ => Err(format!("'{s}' is not a duration of 0 to 60 s such as 50ms or 0.2s")),
+        Ok(v) if v.is_finite() && (0.0..=max_s).contains(&(v * scale)) => Ok(Duration::from_secs_f64(v * scale)),
+        _ => Err(format!("'{s}' is not a duration of {what}")),
     }
 }
 
@@ -351,7 +387,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let report_file = a.report.as_deref().map(StagedFile::create).transpose()?;
     let frames = a.frames.as_deref().map(StagedFrames::create).transpose()?;
 
-    let (layers, tile_size, remote) = open_layers(&scene, a.stream.io_latency)?;
+    let (layers, tile_size, remote) = open_layers(&scene, a.stream.io_latency, a.stream.http_deadline)?;
     let side = scene.effects.cache_slots_per_side as u32 * tile_size;
     let gpu = Gpu::headless(side.max(scene.size[0]).max(scene.size[1]))?;
     let adapter = gpu.adapter_info();

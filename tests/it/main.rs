@@ -28,6 +28,7 @@ mod ome_zarr;
 mod openslide_files;
 mod oracle;
 mod pack_cli;
+mod pack_trust;
 mod pmtiles;
 mod remote_pack;
 mod render;

@@ -117,6 +117,11 @@ enum Act {
     Garble,
     /// Reply only once `release` says so.
     Hold,
+    /// Reply 206 with the range asked for, one byte of it every 200 ms (until the client hangs
+    /// up): a request that never ends on its own, whose connection is never idle.
+    Trickle,
+    /// Reply 302 to this `Location`.
+    Redirect(&'static str),
 }
 
 /// A server of the test's own over one file: HTTP/1.1, one request per connection, each
@@ -184,6 +189,23 @@ fn answer(mut stream: TcpStream, n: usize, file: &[u8], act: &Decide, release: &
     match act {
         Act::Drop => {}
         Act::Whole => reply("200 OK", String::new(), file),
+        Act::Redirect(to) => reply("302 Found", format!("Location: {to}\r\n"), b""),
+        Act::Trickle => {
+            let head = format!(
+                "HTTP/1.1 206 Partial Content\r\nContent-Length: {}\r\nContent-Range: bytes {start}-{}/{len}\r\nConnection: close\r\n\r\n",
+                end - start,
+                end - 1
+            );
+            if stream.write_all(head.as_bytes()).is_err() {
+                return;
+            }
+            for byte in &file[start as usize..end as usize] {
+                std::thread::sleep(Duration::from_millis(200));
+                if stream.write_all(&[*byte]).is_err() {
+                    return;
+                }
+            }
+        }
         Act::Serve | Act::Hold | Act::Garble => {
             let mut body = file[start as usize..end as usize].to_vec();
             if act == Act::Garble {
@@ -414,8 +436,8 @@ fn damaged_packs_are_refused_over_http_as_the_local_reader_refuses_them() {
     };
     for (name, _) in damaged {
         let (path, url) = (dir.path().join(format!("{name}.vtpk")), format!("{}/{name}.vtpk", server.url()));
-        // Opening checks the index too when it is read whole (the local reader on request).
-        let local = Pack::open(&path).and_then(|p| p.check_index().map(|()| p)).err().unwrap().to_string();
+        // Opening checks the index too when it is read whole (the local reader always).
+        let local = Pack::open(&path).err().unwrap().to_string();
         let remote = HttpPack::open(&url).err().unwrap().to_string();
         assert_eq!(remote.replace(&url, "PACK"), local.replace(s(&path), "PACK"), "{name}");
     }
@@ -438,4 +460,73 @@ fn urls_that_do_not_serve_a_pack_are_named() {
     let port = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
     let refused = format!("http://127.0.0.1:{port}/x.vtpk");
     fails_with(&run(&["render", "--pack", &refused, "-q"]), &["opening http://127.0.0.1", "(6 attempts)"]);
+}
+
+/// A server that answers every request with the whole file is refused when the pack opens,
+/// with a message that says why, not by 6 failed tries of every read after the first.
+#[test]
+fn a_host_that_ignores_range_is_refused_at_open() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = sample_pack(dir.path());
+    let server = Misbehaving::start(&pack, Arc::new(|_, _, _| Act::Whole), Arc::new(|| true));
+    let e = HttpPack::open(&server.url()).err().expect("a pack on a host that ignores Range opens").to_string();
+    assert!(e.contains("this host ignores Range requests") && e.contains("sample.vtpk"), "{e}");
+    assert_eq!(server.requests.load(Ordering::Relaxed), 1, "refused at the first reply, not retried");
+    fails_with(&run(&["render", "--pack", &server.url(), "-q"]), &["sample.vtpk", "this host ignores Range requests"]);
+}
+
+/// A reply that trickles forever ends at the request's deadline, and the error names it.
+#[test]
+fn a_trickling_reply_ends_at_the_deadline() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = sample_pack(dir.path());
+    let server = Misbehaving::start(&pack, Arc::new(|_, _, _| Act::Trickle), Arc::new(|| true));
+    // One attempt: the body (2 KiB at a byte per 200 ms) would take minutes; bytes keep coming,
+    // so only the deadline can end it.
+    let options = HttpOptions { attempts: 1, deadline: Duration::from_millis(500), ..HttpOptions::default() };
+    let e = HttpPack::open_with(&server.url(), options, vortex_pack::Limits::default()).err().unwrap().to_string();
+    assert!(e.contains("no complete reply within the deadline of 0.5 s per request"), "{e}");
+    let out = run(&["render", "--pack", &server.url(), "--http-deadline", "300ms", "-q"]);
+    fails_with(&out, &["sample.vtpk", "deadline of 0.3 s per request", "(6 attempts)"]);
+}
+
+/// SIGTERM while a remote pack opens (its first reply trickling) ends the run as a signal does
+/// (exit 143), not when the reply is done.
+#[test]
+fn a_stop_signal_ends_the_open_of_a_remote_pack() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = sample_pack(dir.path());
+    let server = Misbehaving::start(&pack, Arc::new(|_, _, _| Act::Trickle), Arc::new(|| true));
+    let json = dir.path().join("r.json");
+    let child = std::process::Command::new(crate::common::cli::BIN)
+        .args(["render", "--pack", &server.url(), "--report", s(&json), "-q"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The first request arrives once the handlers are installed (they are before any pack opens).
+    for _ in 0..6000 {
+        if server.requests.load(Ordering::Relaxed) > 0 {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(server.requests.load(Ordering::Relaxed) > 0, "render never asked for the pack");
+    let pid = child.id();
+    assert!(std::process::Command::new("kill").args(["-TERM", &pid.to_string()]).status().unwrap().success());
+    let out = crate::common::cli::wait_or_kill(pid, "render stopped while opening", move || {
+        child.wait_with_output().unwrap()
+    });
+    assert_eq!(out.status.code(), Some(143), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(!json.exists());
+}
+
+/// A redirect to something that is not http(s) is named as such.
+#[test]
+fn a_redirect_out_of_http_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = sample_pack(dir.path());
+    let server = Misbehaving::start(&pack, Arc::new(|_, _, _| Act::Redirect("file:///etc/passwd")), Arc::new(|| true));
+    let e = HttpPack::open(&server.url()).err().unwrap().to_string();
+    assert!(e.contains("redirected to file:///etc/passwd") && e.contains("not an http:// or https:// URL"), "{e}");
 }

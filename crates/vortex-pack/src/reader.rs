@@ -4,8 +4,11 @@
 //! ([`Pack::open_read`]) or bytes the caller holds ([`Pack::from_bytes`]); one function checks
 //! all three the same way before it returns (magic, version, header checksum, the header's
 //! claims against [`Limits`], file length, that every section lies inside the file, the level
-//! table, the metadata checksum) and reads nothing per tile. The index checksum ([`Pack::check_index`]) and tile payloads
-//! ([`Pack::tile_checked`]) are checked on request, or all at once by `verify`.
+//! table, the metadata checksum, and the level table's and index's checksum), so that nothing a
+//! reader trusts (where each tile is, and what kind it is) comes from bytes no checksum has
+//! vouched for. Tile payloads are checked on request ([`Pack::tile_checked`]), or all at once by
+//! `verify`, which alone opens a pack whose index fails its checksum
+//! ([`Pack::open_to_verify`]), to report that with everything else wrong.
 //!
 //! The memory-map contract: the file must not be truncated or rewritten while a `Pack` maps it
 //! (a truncated mapping faults on access). Writers of this crate never rewrite a pack in place:
@@ -35,6 +38,13 @@ impl Bytes {
             Bytes::Memory(b) => (**b).as_ref(),
         }
     }
+}
+
+/// Whether an open holds the index to its checksum (always, but for `verify`).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Trust {
+    Checked,
+    Unchecked,
 }
 
 /// An open pack. `Send + Sync`: lookups take `&self` and touch no shared state.
@@ -118,12 +128,18 @@ impl Pack {
     /// As [`Pack::open`], holding the pack to `limits`.
     pub fn open_with_limits(path: impl AsRef<Path>, limits: Limits) -> Result<Pack> {
         let path = path.as_ref();
-        let file = File::open(path).map_err(|e| io(path, e))?;
-        // SAFETY: a read-only map of a file opened read-only; see the module's contract on
-        // concurrent truncation (a pack rewritten in place by another process).
-        #[expect(unsafe_code)]
-        let map = unsafe { Mmap::map(&file) }.map_err(|e| io(path, e))?;
-        Pack::new(path, Bytes::Map(map), limits)
+        Pack::new(path, map(path)?, limits, Trust::Checked)
+    }
+
+    /// For `verify` alone: maps `path` and checks it as [`Pack::open_with_limits`] does, but for
+    /// the level table's and index's checksum, which [`verify`](crate::verify) then reports
+    /// among every other problem (an entry pointing outside the data section, payloads that
+    /// fail their checksum...) instead of the open failing on it alone. Entries are still
+    /// checked for sense as each is used, but nothing vouches for them: a reader that draws,
+    /// converts or serves tiles opens with [`Pack::open`].
+    pub fn open_to_verify(path: impl AsRef<Path>, limits: Limits) -> Result<Pack> {
+        let path = path.as_ref();
+        Pack::new(path, map(path)?, limits, Trust::Unchecked)
     }
 
     /// Reads the whole file into memory instead of mapping it.
@@ -141,7 +157,7 @@ impl Pack {
             .try_reserve_exact(usize::try_from(len).unwrap_or(usize::MAX))
             .map_err(|e| io(path, std::io::Error::new(std::io::ErrorKind::OutOfMemory, e.to_string())))?;
         file.read_to_end(&mut bytes).map_err(|e| io(path, e))?;
-        Pack::new(path, Bytes::Memory(Box::new(bytes)), limits)
+        Pack::new(path, Bytes::Memory(Box::new(bytes)), limits, Trust::Checked)
     }
 
     /// A pack held in memory (a `Vec<u8>`, `Box<[u8]>`, `Arc<[u8]>`, a static slice...),
@@ -157,16 +173,24 @@ impl Pack {
         bytes: impl AsRef<[u8]> + Send + Sync + 'static,
         limits: Limits,
     ) -> Result<Pack> {
-        Pack::new(&name.into(), Bytes::Memory(Box::new(bytes)), limits)
+        Pack::new(&name.into(), Bytes::Memory(Box::new(bytes)), limits, Trust::Checked)
     }
 
-    fn new(path: &Path, bytes: Bytes, limits: Limits) -> Result<Pack> {
+    /// The one place a local pack is opened: every check of [`PackLayout::read_header`] and
+    /// [`PackLayout::new`], then (unless `verify` asked otherwise) the level table's and index's
+    /// checksum, so that no entry is used that the checksum does not vouch for. An index of
+    /// 350,000 tiles is 8 MiB: a few milliseconds of CRC-32C, read once.
+    fn new(path: &Path, bytes: Bytes, limits: Limits, trust: Trust) -> Result<Pack> {
         let b = bytes.as_slice();
         let h = PackLayout::read_header(path, b, b.len() as u64, limits)?;
         let levels = &b[h.levels_offset as usize..][..h.description.level_count as usize * LEVEL_LEN];
         let meta = &b[h.meta_offset as usize..][..h.meta_len as usize];
         let head = PackLayout::new(path, h, levels, meta, limits)?;
-        Ok(Pack { bytes, head })
+        let pack = Pack { bytes, head };
+        if trust == Trust::Checked {
+            pack.check_index()?;
+        }
+        Ok(pack)
     }
 
     /// The checked header and level table.
@@ -184,9 +208,8 @@ impl Pack {
         &self.head.path
     }
 
-    /// Checks the level table and index against their CRC-32C. Not done by `open`, which reads
-    /// nothing per tile (an index of 350,000 tiles is 8 MiB); `verify` does it, and `tile()`
-    /// checks each entry it returns.
+    /// Checks the level table and index against their CRC-32C: done by every `open` (but
+    /// [`Pack::open_to_verify`]), and by `verify`.
     pub fn check_index(&self) -> Result<()> {
         let h = &self.head.header;
         let b = self.file();
@@ -629,6 +652,16 @@ fn check_levels(h: &Header, levels: &[Level], raw: &[u8]) -> std::result::Result
         return Err((0, format!("the levels hold {next} tiles but the index has {} entries", h.index_count)));
     }
     Ok(())
+}
+
+/// `path` mapped read-only.
+fn map(path: &Path) -> Result<Bytes> {
+    let file = File::open(path).map_err(|e| io(path, e))?;
+    // SAFETY: a read-only map of a file opened read-only; see the module's contract on
+    // concurrent truncation (a pack rewritten in place by another process).
+    #[expect(unsafe_code)]
+    let map = unsafe { Mmap::map(&file) }.map_err(|e| io(path, e))?;
+    Ok(Bytes::Map(map))
 }
 
 fn io(path: &Path, source: std::io::Error) -> PackError {

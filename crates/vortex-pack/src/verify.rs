@@ -1,7 +1,9 @@
 //! Checking a whole pack, byte by byte: what `vortex-tiler verify` runs.
 //!
 //! [`Pack::open`] has already checked the structure (signature, version, header checksum,
-//! section bounds, level table and index checksum, metadata checksum, file length). `verify`
+//! section bounds, level table and index checksum, metadata checksum, file length);
+//! [`Pack::open_to_verify`] all but the index checksum, which `verify` checks itself, so that a
+//! pack whose index is damaged gets a full report rather than one error. `verify`
 //! checks everything else and accounts for every byte of the file: the header, level table,
 //! index and metadata are covered by their checksums, each payload by its entry's CRC-32C, and
 //! every other byte (between sections, between payloads, after the last one) is padding and

@@ -26,6 +26,7 @@ pub(super) struct Options {
     pub scene: Scene,
     pub start: Start,
     pub io_latency: Option<Duration>,
+    pub http_deadline: Option<Duration>,
     pub residency_view: bool,
     /// Where to save the last of how many frames.
     pub screenshot: Option<(PathBuf, u32)>,
@@ -151,7 +152,7 @@ impl State {
         };
         let instance = wgpu::Instance::new(descriptor.with_env());
         let surface = instance.create_surface(Arc::clone(&window)).context("making the window's GPU surface")?;
-        let (layers, tile_size, remote) = open_layers(scene, options.io_latency)?;
+        let (layers, tile_size, remote) = open_layers(scene, options.io_latency, options.http_deadline)?;
         let side = u32::from(scene.effects.cache_slots_per_side) * tile_size;
         let gpu = Gpu::for_surface(instance, &surface, side)?;
 

@@ -90,6 +90,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
         scene,
         start,
         io_latency: a.stream.io_latency,
+        http_deadline: a.stream.http_deadline,
         residency_view: a.residency_view,
         screenshot: a.screenshot.zip(a.frame_count),
     })

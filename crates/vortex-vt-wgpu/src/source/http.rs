@@ -17,16 +17,21 @@
 //! (connection refused, reset or dropped, a timeout, a 5xx, a reply of the wrong range or
 //! length) is retried with exponential backoff; a payload whose bytes fail their CRC is read
 //! again once, with its index block, and then reported as corrupt: a server that keeps sending
-//! wrong bytes is never retried forever, and its bytes are never drawn. A server that ignores
-//! `Range` and sends the whole file (200) is read up to the bytes wanted and the connection
-//! dropped. What it all cost is counted ([`HttpStats`]).
+//! wrong bytes is never retried forever, and its bytes are never drawn. Every request has a
+//! deadline ([`HttpOptions::deadline`]) besides the timeout between bytes, so a server that
+//! trickles a byte now and then cannot hold a read for hours, and a caller's stop
+//! ([`HttpPack::open_with_stop`]) ends the open and every read at the next bytes or retry. A
+//! server that ignores `Range` and answers the first request with the whole file (200) is
+//! refused at open: every read after the first would have to read the file from its start, and
+//! a pack can be gigabytes; a later whole-file reply (a proxy that sometimes ignores `Range`) is
+//! dropped unread and the request retried. What it all cost is counted ([`HttpStats`]).
 
 use std::collections::{BTreeMap, HashMap};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Condvar, Mutex, PoisonError};
-use std::time::Duration;
+use std::sync::{Arc, Condvar, Mutex, PoisonError};
+use std::time::{Duration, Instant};
 
 use vortex_pack::{Limits, PackError, PackLayout, TileId, TileKind};
 
@@ -60,6 +65,11 @@ pub struct HttpOptions {
     /// A connection attempt, or a wait for the next bytes of a reply, that takes longer than
     /// this fails (and is retried): 10 s.
     pub timeout: Duration,
+    /// A request not complete this long after it began (connecting, the reply's head and its
+    /// whole body, redirects included) fails (and is retried): 30 s, in which the largest merged
+    /// request (`max_span`, 4 MiB) arrives at 1.2 Mbit/s. Without it, the `timeout` between
+    /// bytes alone would let a server that sends a byte every few seconds hold a read for hours.
+    pub deadline: Duration,
 }
 
 impl Default for HttpOptions {
@@ -72,6 +82,7 @@ impl Default for HttpOptions {
             max_span: 4 << 20,
             whole_index_up_to: 1 << 20,
             timeout: Duration::from_secs(10),
+            deadline: Duration::from_secs(30),
         }
     }
 }
@@ -89,7 +100,8 @@ pub struct HttpStats {
     pub io_errors: u64,
     /// Payloads whose bytes failed their CRC (each read again once, then reported).
     pub corrupt: u64,
-    /// Replies of the whole file (200) to a `Range` request.
+    /// Replies of the whole file (200) to a `Range` request (refused at open; dropped unread
+    /// and retried after it).
     pub whole_file_replies: u64,
     /// Payloads (and index blocks) that were fetched as part of a merged request with others.
     pub merged_reads: u64,
@@ -146,6 +158,21 @@ impl HttpPack {
     /// Opens the pack at `url`: its header, level table and metadata (and its whole index, when
     /// small) are fetched and checked before this returns.
     pub fn open_with(url: &str, options: HttpOptions, limits: Limits) -> Result<HttpPack, PackError> {
+        HttpPack::open_with_stop(url, options, limits, || false)
+    }
+
+    /// As [`HttpPack::open_with`], and every request (the open's, and each read's after it)
+    /// ends once `stop` answers true: it is asked before each attempt, during the waits between
+    /// attempts and between the reads of a reply's body, so a stop ends a request within the
+    /// between-bytes [`HttpOptions::timeout`] at the latest (a connection or a reply's head
+    /// cannot be interrupted). A stopped open fails, a stopped read fails as unavailable; what
+    /// `render` and `view` pass is "a signal asked the run to stop".
+    pub fn open_with_stop(
+        url: &str,
+        options: HttpOptions,
+        limits: Limits,
+        stop: impl Fn() -> bool + Send + Sync + 'static,
+    ) -> Result<HttpPack, PackError> {
         let location = PathBuf::from(url);
         if !(url.starts_with("http://") || url.starts_with("https://")) {
             let source = std::io::Error::other("not an http:// or https:// URL");
@@ -153,7 +180,8 @@ impl HttpPack {
         }
         let plan = IndexPlan { whole_up_to: options.whole_index_up_to, gap: options.gap };
         // The reads block on this thread, so the future is ready whenever it is polled.
-        let remote = pollster::block_on(RemotePack::open(location, Fetcher::new(url, options), plan, limits))?;
+        let fetcher = Fetcher::new(url, options, Arc::new(stop));
+        let remote = pollster::block_on(RemotePack::open(location, fetcher, plan, limits))?;
         Ok(HttpPack { remote })
     }
 
@@ -238,6 +266,42 @@ impl RangeRead for Fetcher {
     }
 }
 
+/// Redirects one request follows before it fails: 10, as browsers and curl allow about 20 and
+/// ureq 10.
+const MAX_REDIRECTS: u32 = 10;
+
+/// Where a redirect from `base` to `location` (a reply's `Location`) leads: an absolute
+/// `http://` or `https://` URL, a network-path (`//host/path`), an absolute path or one relative
+/// to `base`'s (RFC 3986's common cases; dot segments are left to the server). A `Location` of
+/// any other scheme (`file:`, `ftp:`, `data:`...) is refused, naming it.
+fn redirect_target(base: &str, location: &str) -> Result<String, String> {
+    let location = location.trim();
+    let scheme = location.split_once(':').map(|(s, _)| s).filter(|s| {
+        s.chars().next().is_some_and(|c| c.is_ascii_alphabetic())
+            && s.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '+' | '-' | '.'))
+    });
+    if let Some(scheme) = scheme {
+        return if scheme.eq_ignore_ascii_case("http") || scheme.eq_ignore_ascii_case("https") {
+            Ok(location.to_string())
+        } else {
+            Err(format!("redirected to {location}, which is not an http:// or https:// URL"))
+        };
+    }
+    let (base_scheme, rest) = base.split_once("://").ok_or_else(|| format!("cannot follow a redirect from {base}"))?;
+    if location.starts_with("//") {
+        return Ok(format!("{base_scheme}:{location}"));
+    }
+    let authority_len = rest.find(['/', '?', '#']).unwrap_or(rest.len());
+    let (authority, path) = rest.split_at(authority_len);
+    if location.starts_with('/') {
+        return Ok(format!("{base_scheme}://{authority}{location}"));
+    }
+    let path = &path[..path.find(['?', '#']).unwrap_or(path.len())];
+    let dir = &path[..path.rfind('/').map_or(0, |i| i + 1)];
+    let dir = if dir.is_empty() { "/" } else { dir };
+    Ok(format!("{base_scheme}://{authority}{dir}{location}"))
+}
+
 /// Byte ranges of one URL read by many threads, at most `connections` requests at a time. A read
 /// queues its range; a thread whose range is queued and finds a connection free takes it, with
 /// the queued ranges close to it, as one request, and hands each waiting thread its slice. While
@@ -247,6 +311,8 @@ struct Fetcher {
     url: String,
     agent: ureq::Agent,
     options: HttpOptions,
+    /// Whether the caller wants every request to end now.
+    stop: Arc<dyn Fn() -> bool + Send + Sync>,
     counters: Counters,
     state: Mutex<FetchState>,
     changed: Condvar,
@@ -272,13 +338,17 @@ struct FetchState {
 type Share = (u64, u64, u64);
 
 impl Fetcher {
-    fn new(url: &str, options: HttpOptions) -> Fetcher {
+    fn new(url: &str, options: HttpOptions, stop: Arc<dyn Fn() -> bool + Send + Sync>) -> Fetcher {
         let config = ureq::Agent::config_builder()
             // Statuses are answered here: a 5xx is retried, a 404 is not.
             .http_status_as_error(false)
             .timeout_connect(Some(options.timeout))
             .timeout_recv_response(Some(options.timeout))
             .timeout_per_read(Some(options.timeout))
+            // Each request's deadline (set per request, to what is left of it after redirects),
+            // from its start to the last byte of its body.
+            .timeout_global(Some(options.deadline))
+            .max_redirects(0)
             .max_idle_connections_per_host(options.connections.max(1))
             .user_agent(concat!("vortex-vt-wgpu/", env!("CARGO_PKG_VERSION")))
             .build();
@@ -286,10 +356,16 @@ impl Fetcher {
             url: url.to_string(),
             agent: config.into(),
             options,
+            stop,
             counters: Counters::default(),
             state: Mutex::default(),
             changed: Condvar::new(),
         }
+    }
+
+    /// The error of a request the caller stopped.
+    fn stopped(&self, start: u64, end: u64) -> FetchError {
+        FetchError::Fatal(format!("bytes {start}..{end}: stopped (the run was asked to stop)"))
     }
 
     fn file_len(&self) -> u64 {
@@ -298,7 +374,7 @@ impl Fetcher {
 
     /// The first `n` bytes (fewer if the file is shorter), learning the file's length.
     fn fetch_first(&self, n: u64) -> Result<Vec<u8>, FetchError> {
-        self.with_retries(|| self.request(0, n, true))
+        self.with_retries((0, n), || self.request(0, n, true))
     }
 
     /// Bytes `start..end` of the file, merged with the ranges other threads are waiting for.
@@ -323,7 +399,7 @@ impl Fetcher {
                     add(&self.counters.merged_reads, shares.len() as u64);
                 }
                 let (from, to) = (shares[0].1, shares.iter().map(|s| s.2).max().unwrap_or(end));
-                let result = self.with_retries(|| self.request(from, to, false));
+                let result = self.with_retries((from, to), || self.request(from, to, false));
                 state = lock(&self.state);
                 state.running -= 1;
                 for (t, s, e) in shares {
@@ -364,11 +440,18 @@ impl Fetcher {
     }
 
     /// `attempt`, tried again after each I/O error (waiting `backoff`, doubled each time) up to
-    /// `attempts` times in all.
-    fn with_retries(&self, attempt: impl Fn() -> Result<Vec<u8>, FetchError>) -> Result<Vec<u8>, FetchError> {
+    /// `attempts` times in all, unless the caller stops it.
+    fn with_retries(
+        &self,
+        (start, end): (u64, u64),
+        attempt: impl Fn() -> Result<Vec<u8>, FetchError>,
+    ) -> Result<Vec<u8>, FetchError> {
         let mut wait = self.options.backoff;
         let mut tries = 1;
         loop {
+            if (self.stop)() {
+                return Err(self.stopped(start, end));
+            }
             match attempt() {
                 Err(FetchError::Io(message)) => {
                     add(&self.counters.io_errors, 1);
@@ -376,7 +459,14 @@ impl Fetcher {
                         return Err(FetchError::Io(format!("{message} ({tries} attempts)")));
                     }
                     add(&self.counters.retries, 1);
-                    std::thread::sleep(wait);
+                    // The wait, a tenth of a second at a time, for a stop to end it.
+                    let until = Instant::now() + wait;
+                    while let Some(left) = until.checked_duration_since(Instant::now()).filter(|d| !d.is_zero()) {
+                        if (self.stop)() {
+                            return Err(self.stopped(start, end));
+                        }
+                        std::thread::sleep(left.min(Duration::from_millis(100)));
+                    }
                     wait = wait.saturating_mul(2);
                     tries += 1;
                 }
@@ -391,15 +481,34 @@ impl Fetcher {
         let io = |m: String| FetchError::Io(format!("bytes {start}..{end}: {m}"));
         let fatal = |m: String| FetchError::Fatal(format!("bytes {start}..{end}: {m}"));
         add(&self.counters.requests, 1);
-        let mut get = self.agent.get(&self.url).header("Range", format!("bytes={start}-{}", end - 1));
         let etag = lock(&self.state).etag.clone();
-        if let Some(etag) = &etag {
-            get = get.header("If-Match", etag);
-        }
-        let response = get.call().map_err(|e| match e {
-            ureq::Error::BadUri(_) | ureq::Error::HostNotFound if first => fatal(e.to_string()),
-            e => io(e.to_string()),
-        })?;
+        // Redirects are followed here, not by ureq, so that one to another scheme is named as
+        // such, and the deadline spans them all.
+        let began = Instant::now();
+        let mut url = self.url.clone();
+        let mut redirects = 0;
+        let response = loop {
+            let mut get = self.agent.get(&url).header("Range", format!("bytes={start}-{}", end - 1));
+            if let Some(etag) = &etag {
+                get = get.header("If-Match", etag);
+            }
+            let left = self.options.deadline.saturating_sub(began.elapsed());
+            let response = get.config().timeout_global(Some(left)).build().call().map_err(|e| match e {
+                ureq::Error::BadUri(_) | ureq::Error::HostNotFound if first => fatal(e.to_string()),
+                e => io(self.describe(e)),
+            })?;
+            if !matches!(response.status().as_u16(), 301 | 302 | 303 | 307 | 308) {
+                break response;
+            }
+            let status = response.status().as_u16();
+            let location = response.headers().get("location").and_then(|v| v.to_str().ok());
+            let location = location.ok_or_else(|| fatal(format!("HTTP {status} without a Location")))?;
+            redirects += 1;
+            if redirects > MAX_REDIRECTS {
+                return Err(fatal(format!("more than {MAX_REDIRECTS} redirects (the last to {location})")));
+            }
+            url = redirect_target(&url, location).map_err(fatal)?;
+        };
         let status = response.status().as_u16();
         let header = |name: &str| response.headers().get(name).and_then(|v| v.to_str().ok()).map(str::to_string);
         let known_len = self.file_len();
@@ -412,10 +521,20 @@ impl Fetcher {
                     .ok_or_else(|| io(format!("a 206 reply with Content-Range {range:?}")))?;
                 (from, total)
             }
+            // The whole file, `Range` ignored: refused at open (every later read would have to
+            // read the file from its start); after it, a proxy that sometimes ignores `Range`,
+            // so dropped unread and asked again.
             200 => {
                 add(&self.counters.whole_file_replies, 1);
-                let total = header("content-length").and_then(|v| v.parse().ok());
-                (0, total.ok_or_else(|| io("a 200 reply of unknown length to a Range request".into()))?)
+                let size = header("content-length").map_or(String::new(), |n| format!(" ({n} bytes)"));
+                if first {
+                    return Err(fatal(format!(
+                        "this host ignores Range requests: it answered 200 with the whole file{size}; a pack \
+                         is read in byte ranges, and reading every range from the start of a file that can \
+                         be gigabytes is refused (nginx, Apache, S3 and CDNs honour Range)"
+                    )));
+                }
+                return Err(io(format!("a 200 reply with the whole file{size} to a Range request")));
             }
             416 if first => return Err(fatal("the file is empty (416 Range Not Satisfiable)".into())),
             412 => {
@@ -435,20 +554,30 @@ impl Fetcher {
             return Err(io(format!("the reply holds bytes from {from} of a {total}-byte file")));
         }
         let mut body = response.into_body().into_reader();
-        // A whole-file reply: skip to the bytes wanted (the rest is never read: the connection
-        // is dropped with it).
-        if status == 200 && start > 0 {
-            let skipped =
-                std::io::copy(&mut (&mut body).take(start), &mut std::io::sink()).map_err(|e| io(e.to_string()))?;
-            add(&self.counters.bytes, skipped);
-        }
         let len = end - start;
         let mut bytes = Vec::new();
         bytes.try_reserve_exact(len as usize).map_err(|e| fatal(e.to_string()))?;
-        body.take(len).read_to_end(&mut bytes).map_err(|e| io(e.to_string()))?;
-        add(&self.counters.bytes, bytes.len() as u64);
-        if bytes.len() as u64 != len {
-            return Err(io(format!("the reply ended after {} of {len} bytes", bytes.len())));
+        bytes.resize(len as usize, 0);
+        // Read as it comes, so that a stop is seen between the reads of a slow reply.
+        let mut got = 0;
+        while got < bytes.len() {
+            if (self.stop)() {
+                add(&self.counters.bytes, got as u64);
+                return Err(self.stopped(start, end));
+            }
+            match body.read(&mut bytes[got..]) {
+                Ok(0) => break,
+                Ok(n) => got += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => {
+                    add(&self.counters.bytes, got as u64);
+                    return Err(io(self.describe(e.into())));
+                }
+            }
+        }
+        add(&self.counters.bytes, got as u64);
+        if got as u64 != len {
+            return Err(io(format!("the reply ended after {got} of {len} bytes")));
         }
         if first {
             let mut state = lock(&self.state);
@@ -458,11 +587,48 @@ impl Fetcher {
         }
         Ok(bytes)
     }
+
+    /// What went wrong with a request, the timeouts named by what they bound.
+    fn describe(&self, e: ureq::Error) -> String {
+        let secs = |d: Duration| d.as_secs_f64();
+        match e {
+            ureq::Error::Timeout(ureq::Timeout::Global) => format!(
+                "no complete reply within the deadline of {} s per request (HttpOptions::deadline)",
+                secs(self.options.deadline)
+            ),
+            ureq::Error::Timeout(ureq::Timeout::PerRead) => {
+                format!(
+                    "no bytes for {} s (the timeout between bytes, HttpOptions::timeout)",
+                    secs(self.options.timeout)
+                )
+            }
+            ureq::Error::Timeout(ureq::Timeout::RecvResponse) => {
+                format!("no reply within {} s (HttpOptions::timeout)", secs(self.options.timeout))
+            }
+            ureq::Error::Timeout(ureq::Timeout::Connect) => {
+                format!("no connection within {} s (HttpOptions::timeout)", secs(self.options.timeout))
+            }
+            e => e.to_string(),
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn redirects_resolve_against_the_url_and_other_schemes_are_named() {
+        let base = "http://h:8080/dir/p.vtpk?x=1";
+        assert_eq!(redirect_target(base, "https://cdn/p.vtpk").unwrap(), "https://cdn/p.vtpk");
+        assert_eq!(redirect_target(base, "//cdn/p.vtpk").unwrap(), "http://cdn/p.vtpk");
+        assert_eq!(redirect_target(base, "/other/q.vtpk").unwrap(), "http://h:8080/other/q.vtpk");
+        assert_eq!(redirect_target(base, "q.vtpk").unwrap(), "http://h:8080/dir/q.vtpk");
+        assert_eq!(redirect_target("http://h", "q.vtpk").unwrap(), "http://h/q.vtpk");
+        let e = redirect_target(base, "file:///etc/passwd").unwrap_err();
+        assert_eq!(e, "redirected to file:///etc/passwd, which is not an http:// or https:// URL");
+        assert!(redirect_target(base, "FTP://x/y").is_err());
+    }
 
     #[test]
     fn content_ranges_parse_and_nonsense_does_not() {
@@ -479,7 +645,7 @@ mod tests {
         for (t, &(s, e)) in queued.iter().enumerate() {
             state.queued.insert((s, t as u64), e);
         }
-        (Fetcher::new("http://localhost/x.vtpk", options), state)
+        (Fetcher::new("http://localhost/x.vtpk", options, Arc::new(|| false)), state)
     }
 
     #[test]
