@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 use vortex_pack::{Pack, TileKind, VerifyOptions, verify};
+use vortex_tiler::error::ShowPath;
 use vortex_tiler::output::Product;
 use vortex_tiler::tile_dir::TiledDir;
 use vortex_tiler::{repack, settings};
@@ -78,7 +79,7 @@ pub fn run_verify(a: VerifyArgs) -> Result<()> {
             // The structure is unusable: one problem, in the same shape as a full report's.
             let json = serde_json::json!({"path": a.input, "ok": false, "problems": [{"section": "open", "message": e.to_string()}]});
             say!("{}", serde_json::to_string_pretty(&json)?);
-            anyhow::bail!("{}: cannot be opened as a pack", a.input.display());
+            anyhow::bail!("{}: cannot be opened as a pack", a.input.shown());
         }
         Err(e) => return Err(e),
     };
@@ -89,7 +90,7 @@ pub fn run_verify(a: VerifyArgs) -> Result<()> {
         say!("checked in {:.2} s", started.elapsed().as_secs_f64());
     }
     if !report.is_ok() {
-        anyhow::bail!("{}: {} problem(s) found", a.input.display(), report.problems.len());
+        anyhow::bail!("{}: {} problem(s) found", a.input.shown(), report.problems.len());
     }
     Ok(())
 }
@@ -107,7 +108,7 @@ pub fn run_pack(a: PackArgs) -> Result<()> {
     watch.bar.finish_and_clear();
     let written = written?;
     if !a.quiet {
-        say!("{} -> {} in {:.2} s", report::pack_line(&written), a.output.display(), started.elapsed().as_secs_f64());
+        say!("{} -> {} in {:.2} s", report::pack_line(&written), a.output.shown(), started.elapsed().as_secs_f64());
     }
     Ok(())
 }
@@ -123,7 +124,7 @@ pub fn run_unpack(a: UnpackArgs) -> Result<()> {
     if !a.quiet {
         say!(
             "wrote {count} tile files and info.json to {} in {:.2} s",
-            a.output.display(),
+            a.output.shown(),
             started.elapsed().as_secs_f64()
         );
     }
@@ -135,8 +136,8 @@ fn open_pack(path: &Path) -> Result<Pack> {
     if path.is_dir() {
         bail!(
             "{}: is a directory, not a pack; `vortex-tiler pack {} -o FILE` packs a tile directory",
-            path.display(),
-            path.display()
+            path.shown(),
+            path.shown()
         );
     }
     Ok(Pack::open(path)?)
@@ -191,7 +192,7 @@ pub fn run_info(a: InfoArgs) -> Result<()> {
     }
     say!(
         "{}: Vortex pack {}.{}, {} bytes, content hash {:016x}",
-        a.input.display(),
+        a.input.shown(),
         h.major,
         h.minor,
         h.file_len,

@@ -29,6 +29,7 @@ mod pack_cli;
 mod pmtiles;
 mod remote_pack;
 mod render;
+mod resample_reference;
 mod sample_types;
 mod serve;
 mod serve_hostile;
