@@ -194,7 +194,7 @@ fn check_golden(name: &str, adapter: &str, frames: &[FrameReport]) {
     }
     let golden =
         std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e} (BLESS=1 records it)", path.display()));
-    let (recorded, golden) = golden.split_once('\n').unwrap_or((&golden, ""));
+    let (recorded, golden) = golden.split_once('\n').unwrap_or((golden.as_str(), ""));
     assert!(
         golden == counters,
         "counters on {adapter} differ from {} ({recorded}); BLESS=1 records them if the change is understood:\n{counters}",
