@@ -123,6 +123,15 @@ pub mod viewer;
 /// this library's API uses.
 pub use vortex_pack;
 
+/// The unit tests' rule for an outside part they lack (a colour profile from a Debian
+/// package, `/proc`): outside CI, skip with a note; under `CI=true`, where `.ci/run` installs
+/// every part, fail, saying what was missing. (`tests/it/common` has the same rule.)
+#[cfg(test)]
+pub(crate) fn skip_unless_ci(what: &str, why: &str) {
+    assert!(std::env::var("CI").map_or(true, |v| v != "true"), "CI=true and {why}");
+    eprintln!("note: skipping {what}: {why}");
+}
+
 /// Internals the integration tests check directly (the exact sums, the sRGB tables, the
 /// resamplers, the cutting arithmetic). Not an API: only built with the `testing` feature,
 /// which the crate's own dev-dependency on itself turns on for `cargo test`.

@@ -14,7 +14,9 @@ fn main() -> ExitCode {
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", cli::report::chain(&e));
+            // A name in a message the library or the system wrote may hold a control
+            // character or a terminal escape: it reaches the terminal escaped.
+            eprintln!("error: {}", vortex_tiler::error::escape_controls(&cli::report::chain(&e)));
             match e.downcast_ref::<vortex_tiler::error::TilerError>() {
                 Some(vortex_tiler::error::TilerError::Interrupted) => cli::interrupted_exit_code(),
                 _ => ExitCode::FAILURE,

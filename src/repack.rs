@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use vortex_pack::{Description, Level, NewTile, Pack, PackWriter, Tile, TileId, TileKind, WriteOptions, WriteSummary};
 
 use crate::codec::{Codec, TileEncoder};
-use crate::error::{Result, TilerError};
+use crate::error::{Result, ShowPath, TilerError};
 use crate::output::Claim;
 use crate::pixel::{Depth, PixelLayout, Sample};
 use crate::sink::{DirSink, TileSink, tile_kind};
@@ -235,7 +235,7 @@ pub fn unpack(pack: &Pack, dir: &Claim, progress: &dyn Progress) -> Result<u64> 
             pack.path(),
             format!(
                 "its tiles are {kind} payloads, which are not image files; `vortex-tiler convert {} -o DIR --codec png` writes them as files",
-                pack.path().display()
+                pack.path().shown()
             ),
         )
     };

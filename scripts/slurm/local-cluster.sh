@@ -15,7 +15,10 @@
 # Meant for root on a machine without systemd (a container); daemons are started directly.
 #
 # Environment: VORTEX_SLURM_DIR, VORTEX_SLURM_TIMEOUT (seconds to wait for an idle node, 30),
-# VORTEX_SLURMCTLD_PORT (6817), VORTEX_SLURMD_PORT (6818).
+# VORTEX_SLURMCTLD_PORT (6817), VORTEX_SLURMD_PORT (6818). Without those two, start tries Slurm's
+# own ports 6817/6818, and when a daemon finds its port taken ("Address already in use") it
+# stops what it started and tries another pair (up to PORT_ATTEMPTS); the ports chosen are in
+# the generated slurm.conf, which clients read through SLURM_CONF. Ports given are used as given.
 set -euo pipefail
 
 PROG=local-cluster.sh
@@ -23,6 +26,10 @@ DIR=${VORTEX_SLURM_DIR:-/tmp/vortex-slurm}
 TIMEOUT=${VORTEX_SLURM_TIMEOUT:-30}
 CTLD_PORT=${VORTEX_SLURMCTLD_PORT:-6817}
 D_PORT=${VORTEX_SLURMD_PORT:-6818}
+PORTS_GIVEN=0
+[ -z "${VORTEX_SLURMCTLD_PORT:-}${VORTEX_SLURMD_PORT:-}" ] || PORTS_GIVEN=1
+PORT_ATTEMPTS=6
+TAKEN=75 # what a daemon's start step returns when its port is taken
 CONF=$DIR/etc/slurm.conf
 LOG=$DIR/log
 RUN=$DIR/run
@@ -227,13 +234,19 @@ EOF
 # Keeps the previous run's log as NAME.log.prev, so the tail printed on failure is this run's.
 fresh_log() { [ ! -e "$LOG/$1.log" ] || mv -f "$LOG/$1.log" "$LOG/$1.log.prev"; }
 
-# wait_daemon NAME SECONDS CHECK...: until CHECK succeeds; fails at once when NAME has died.
+# Whether NAME's logs of this start say that its port was taken.
+port_taken() { grep -qs 'Address already in use' "$LOG/$1.start.log" "$LOG/$1.log"; }
+
+# wait_daemon NAME SECONDS CHECK...: until CHECK succeeds; fails at once when NAME has died,
+# returning $TAKEN instead when it died because its port was taken.
 wait_daemon() {
   local name=$1 secs=$2 i
   shift 2
   for ((i = 0; i < secs * 5; i++)); do
     if pid_alive "$RUN/$name.pid" "$name"; then
       "$@" && return 0
+    elif port_taken "$name"; then
+      return "$TAKEN"
     elif [ "$i" -ge 10 ]; then # no live pid 2 s after start: it has exited
       die "$name" "$name exited after starting (see its log)" "$LOG/$name.start.log" "$LOG/$name.log"
     fi
@@ -249,6 +262,7 @@ step_slurmctld() {
   fresh_log slurmctld
   # -c: start with a clean job state; this cluster is for tests, jobs do not survive a restart.
   if ! slurmctld -c >"$LOG/slurmctld.start.log" 2>&1 9>&-; then
+    port_taken slurmctld && return "$TAKEN"
     die slurmctld "slurmctld exited non-zero" "$LOG/slurmctld.start.log" "$LOG/slurmctld.log"
   fi
   wait_daemon slurmctld 20 ctld_pings
@@ -259,9 +273,33 @@ step_slurmd() {
   say "starting slurmd"
   fresh_log slurmd
   if ! slurmd -N "$(node_name)" >"$LOG/slurmd.start.log" 2>&1 9>&-; then
+    port_taken slurmd && return "$TAKEN"
     die slurmd "slurmd exited non-zero" "$LOG/slurmd.start.log" "$LOG/slurmd.log"
   fi
   wait_daemon slurmd 10 true
+}
+
+# A fresh config and both daemons, on other ports while one is taken (see the header). A port is
+# never found free and then released: the daemon binds it or says it could not.
+step_daemons_on_free_ports() {
+  local attempt rc
+  for ((attempt = 1; ; attempt++)); do
+    step_config
+    rc=0
+    step_slurmctld || rc=$?
+    [ "$rc" != 0 ] || step_slurmd || rc=$?
+    [ "$rc" != 0 ] || return 0
+    stop_pidfile slurmd "$RUN/slurmd.pid" >/dev/null
+    stop_pidfile slurmctld "$RUN/slurmctld.pid" >/dev/null
+    if [ "$PORTS_GIVEN" = 1 ] || [ "$attempt" -ge "$PORT_ATTEMPTS" ]; then
+      die ports "port $CTLD_PORT or $D_PORT is taken (after $attempt attempt(s)); set VORTEX_SLURMCTLD_PORT and VORTEX_SLURMD_PORT to free ones" \
+        "$LOG/slurmctld.log" "$LOG/slurmd.log"
+    fi
+    say "port $CTLD_PORT or $D_PORT is taken; trying another pair"
+    # A pair in the range Linux does not hand out on its own (below 32768).
+    CTLD_PORT=$((20000 + (RANDOM % 6000) * 2))
+    D_PORT=$((CTLD_PORT + 1))
+  done
 }
 
 step_wait_idle() {
@@ -301,12 +339,13 @@ cmd_start() {
   step_munged
   # Rewrite the config only when nothing reads it: a running cluster keeps its own.
   if ! ctld_running && ! slurmd_running; then
-    step_config
+    step_daemons_on_free_ports
   elif [ ! -s "$CONF" ]; then
     die config "daemons are running from $DIR but $CONF is missing; run '$0 stop' first"
+  else
+    step_slurmctld || die slurmctld "its port is taken; '$0 stop' and start again" "$LOG/slurmctld.log"
+    step_slurmd || die slurmd "its port is taken; '$0 stop' and start again" "$LOG/slurmd.log"
   fi
-  step_slurmctld
-  step_slurmd
   step_wait_idle
   usage_hint
 }

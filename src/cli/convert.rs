@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 use vortex_tiler::background::Background;
+use vortex_tiler::error::ShowPath;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::pixel::{Depth, PixelLayout};
 use vortex_tiler::source::tiled::{
@@ -90,7 +91,7 @@ pub struct ConvertArgs {
     /// --range does: MIN to 0, MAX to the top code [default: none; without it such an input goes
     /// only to raw/zstd packs, since JPEG and PNG would cut its range]. Samples outside (and NaN)
     /// are clamped and counted in the summary.
-    #[arg(long, value_name = "MIN:MAX")]
+    #[arg(long, value_name = "MIN:MAX", allow_hyphen_values = true)]
     range: Option<source::range::Range>,
 
     #[command(flatten)]
@@ -141,7 +142,7 @@ fn open_grid(a: &ConvertArgs) -> Result<Box<dyn TileGrid>> {
         return Ok(Box::new(NamedDir::open(input, pattern)?));
     }
     if !input.exists() {
-        bail!("{}: no such file or directory", input.display());
+        bail!("{}: no such file or directory", input.shown());
     }
     let order = a.input_layout.order();
     if input.is_file() && is_zip(input) {
@@ -162,8 +163,8 @@ fn open_grid(a: &ConvertArgs) -> Result<Box<dyn TileGrid>> {
         if let Some(kind) = image_kind(input) {
             bail!(
                 "{}: is a {kind} image, not a tiled input; `vortex-tiler split {} -o DIR` (or --pack FILE) cuts an image",
-                input.display(),
-                input.display()
+                input.shown(),
+                input.shown()
             );
         }
         return Ok(Box::new(PackInput::open(input)?));
@@ -176,7 +177,7 @@ fn open_grid(a: &ConvertArgs) -> Result<Box<dyn TileGrid>> {
     }
     bail!(
         "{}: a directory without info.json; for named tiles pass --tiled --filename-format PATTERN, for z/y/x tiles --input-layout google (z/x/y: --input-layout xyz)",
-        input.display()
+        input.shown()
     )
 }
 

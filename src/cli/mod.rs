@@ -237,8 +237,11 @@ impl PackLayout {
 
 pub fn say_line(line: std::fmt::Arguments) {
     use std::io::Write;
+    // A name inside a library's description of the source reaches the terminal escaped.
+    let line = line.to_string();
+    let line = vortex_tiler::error::escape_controls(&line);
     let mut out = std::io::stdout().lock();
-    if let Err(e) = out.write_fmt(line).and_then(|()| out.write_all(b"\n")).and_then(|()| out.flush()) {
+    if let Err(e) = out.write_all(line.as_bytes()).and_then(|()| out.write_all(b"\n")).and_then(|()| out.flush()) {
         if e.kind() == std::io::ErrorKind::BrokenPipe {
             std::process::exit(141);
         }

@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 use vortex_pack::{Pack, TileKind, VerifyOptions, verify};
+use vortex_tiler::error::ShowPath;
 use vortex_tiler::output::Product;
 use vortex_tiler::tile_dir::TiledDir;
 use vortex_tiler::{repack, settings};
@@ -82,7 +83,7 @@ pub fn run_verify(a: VerifyArgs) -> Result<()> {
             // The structure is unusable: one problem, in the same shape as a full report's.
             let json = serde_json::json!({"path": a.input, "ok": false, "problems": [{"section": "open", "message": e.to_string()}]});
             say!("{}", serde_json::to_string_pretty(&json)?);
-            anyhow::bail!("{}: cannot be opened as a pack", a.input.display());
+            anyhow::bail!("{}: cannot be opened as a pack", a.input.shown());
         }
         Err(e) => return Err(e),
     };
@@ -93,7 +94,7 @@ pub fn run_verify(a: VerifyArgs) -> Result<()> {
         say!("checked in {:.2} s", started.elapsed().as_secs_f64());
     }
     if !report.is_ok() {
-        anyhow::bail!("{}: {} problem(s) found", a.input.display(), report.problems.len());
+        anyhow::bail!("{}: {} problem(s) found", a.input.shown(), report.problems.len());
     }
     Ok(())
 }
@@ -111,7 +112,7 @@ pub fn run_pack(a: PackArgs) -> Result<()> {
     watch.bar.finish_and_clear();
     let written = written?;
     if !a.quiet {
-        say!("{} -> {} in {:.2} s", report::pack_line(&written), a.output.display(), started.elapsed().as_secs_f64());
+        say!("{} -> {} in {:.2} s", report::pack_line(&written), a.output.shown(), started.elapsed().as_secs_f64());
     }
     Ok(())
 }
@@ -127,7 +128,7 @@ pub fn run_unpack(a: UnpackArgs) -> Result<()> {
     if !a.quiet {
         say!(
             "wrote {count} tile files and info.json to {} in {:.2} s",
-            a.output.display(),
+            a.output.shown(),
             started.elapsed().as_secs_f64()
         );
     }
@@ -145,8 +146,8 @@ fn refuse_directory(path: &Path) -> Result<()> {
     if path.is_dir() {
         bail!(
             "{}: is a directory, not a pack; `vortex-tiler pack {} -o FILE` packs a tile directory",
-            path.display(),
-            path.display()
+            path.shown(),
+            path.shown()
         );
     }
     Ok(())
@@ -201,7 +202,7 @@ pub fn run_info(a: InfoArgs) -> Result<()> {
     }
     say!(
         "{}: Vortex pack {}.{}, {} bytes, content hash {:016x}",
-        a.input.display(),
+        a.input.shown(),
         h.major,
         h.minor,
         h.file_len,

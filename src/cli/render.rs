@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use vortex_tiler::error::TilerError;
+use vortex_tiler::error::{ShowPath, TilerError};
 use vortex_tiler::limits::Limits;
 use vortex_tiler::output::{self, Product};
 use vortex_vt::sampler::Rgba8Image;
@@ -213,9 +213,9 @@ fn open_sources(
             } else {
                 // A directory maps as "No such device"; say what is wrong instead.
                 if p.is_dir() {
-                    bail!("{} is a directory, not a pack (split an image with --pack to make one)", p.display());
+                    bail!("{} is a directory, not a pack (split an image with --pack to make one)", p.shown());
                 }
-                let pack = vortex_pack::Pack::open(p).with_context(|| format!("opening {}", p.display()))?;
+                let pack = vortex_pack::Pack::open(p).with_context(|| format!("opening {}", p.shown()))?;
                 vortex_tiler::scale_out::refuse_shard(p, pack.metadata())?;
                 tile_size = tile_size.max(pack.description().tile_size);
                 Arc::new(pack)
@@ -476,7 +476,7 @@ fn write_png(path: &Path, image: &Rgba8Image) -> Result<()> {
     let mut writer = encoder.write_header()?;
     writer.write_image_data(image.texels.as_flattened())?;
     writer.finish()?;
-    fs::write(path, &bytes).with_context(|| format!("writing {}", path.display()))
+    fs::write(path, &bytes).with_context(|| format!("writing {}", path.shown()))
 }
 
 /// The report while it is written: its temporary beside the destination, made before the first
@@ -492,7 +492,7 @@ impl StagedFile {
     fn create(dest: &Path) -> Result<StagedFile> {
         let staging = output::partial_path(dest);
         let file = fs::File::create(&staging)
-            .with_context(|| format!("cannot write {}: creating {}", dest.display(), staging.display()))?;
+            .with_context(|| format!("cannot write {}: creating {}", dest.shown(), staging.shown()))?;
         Ok(StagedFile { staging, file, dest: dest.to_path_buf() })
     }
 
@@ -500,7 +500,7 @@ impl StagedFile {
         (&self.file)
             .write_all(bytes)
             .and_then(|()| fs::rename(&self.staging, &self.dest))
-            .with_context(|| format!("writing {}", self.dest.display()))
+            .with_context(|| format!("writing {}", self.dest.shown()))
     }
 }
 
@@ -521,12 +521,12 @@ struct StagedFrames {
 impl StagedFrames {
     fn create(dest: &Path) -> Result<StagedFrames> {
         let staging = output::partial_path(dest);
-        fs::create_dir_all(&staging).with_context(|| format!("creating {}", staging.display()))?;
+        fs::create_dir_all(&staging).with_context(|| format!("creating {}", staging.shown()))?;
         Ok(StagedFrames { staging, dest: dest.to_path_buf() })
     }
 
     fn finish(self) -> Result<()> {
-        output::replace_dir(&self.staging, &self.dest).with_context(|| format!("writing {}", self.dest.display()))
+        output::replace_dir(&self.staging, &self.dest).with_context(|| format!("writing {}", self.dest.shown()))
     }
 }
 

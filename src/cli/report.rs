@@ -4,6 +4,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
+use vortex_tiler::error::ShowPath;
 use vortex_tiler::output::{self, Claim, Product};
 use vortex_tiler::split::Progress;
 
@@ -37,9 +38,9 @@ pub fn claim(dest: &Path, product: Product, inputs: &[&Path], force: bool) -> Re
     let claim = output::claim(dest, product, inputs, force)?;
     signals::remove_on_forced_exit(dest);
     let removed = output::remove_stale(dest)
-        .with_context(|| format!("removing temporaries that earlier runs left beside {}", dest.display()))?;
+        .with_context(|| format!("removing temporaries that earlier runs left beside {}", dest.shown()))?;
     for path in removed {
-        eprintln!("note: removed {}, left by a run that did not finish", path.display());
+        eprintln!("note: removed {}, left by a run that did not finish", path.shown());
     }
     Ok(claim)
 }
@@ -93,7 +94,7 @@ pub fn summary_line(done: &Finished, out: &Path) -> String {
         s.layout.tile_size,
         s.stored,
         mib(s.bytes),
-        out.display(),
+        out.shown(),
         secs,
         mpx / secs,
         done.decoder,

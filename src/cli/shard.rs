@@ -5,6 +5,7 @@ use std::str::FromStr;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use vortex_tiler::error::ShowPath;
 use vortex_tiler::output::Product;
 use vortex_tiler::scale_out::{self, ShardJob};
 
@@ -171,7 +172,7 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
         say!(
             "merged {} shards into {} in {took:.2} s: copied {} of payloads, made {} pages above the cut (LOD {}) from {} of sums",
             m.shards,
-            a.output.display(),
+            a.output.shown(),
             report::mib(m.copied_bytes),
             m.made,
             m.cut,

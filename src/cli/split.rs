@@ -7,6 +7,7 @@ use anyhow::{Context, Result, bail};
 
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
+use vortex_tiler::error::ShowPath;
 use vortex_tiler::layout::Layout;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::output::{Existing, Product};
@@ -61,7 +62,7 @@ pub struct SplitArgs {
     /// without it such sources go only to raw/zstd packs and OME-Zarr, since JPEG and PNG would
     /// cut their range]. Every channel is mapped, alpha included; samples outside (and NaN) are
     /// clamped and counted in the summary, never cut silently.
-    #[arg(long, value_name = "MIN:MAX")]
+    #[arg(long, value_name = "MIN:MAX", allow_hyphen_values = true)]
     range: Option<source::range::Range>,
 
     /// A TIFF holding several images: cut its Nth directory, counted from 0 as tiffinfo and
@@ -379,8 +380,6 @@ pub fn tile(
     started: Instant,
     kept_icc: Option<Vec<u8>>,
 ) -> Result<()> {
-    // The JPEG and PNG tiles of a directory carry the kept profile (a pack's info.json does).
-    let profile = kept_icc.as_deref().map(Profile::new).transpose()?;
     if a.layout == OutputLayout::OmeZarr {
         if kept_icc.is_some() {
             bail!(
@@ -403,7 +402,7 @@ pub fn tile(
         return tile_for_viewer(source, input, names, a, Viewer::Xyz, started, None);
     }
     if let Some(viewer) = a.layout.viewer() {
-        return tile_for_viewer(source, input, names, a, viewer, started, profile);
+        return tile_for_viewer(source, input, names, a, viewer, started, kept_icc.as_deref());
     }
     for (given, flag) in
         [(a.name.is_some(), "--name"), (a.overlap.is_some(), "--overlap"), (a.iiif_id.is_some(), "--iiif-id")]
@@ -417,10 +416,7 @@ pub fn tile(
     let limits = Limits { memory: a.max_memory, ..Limits::default() };
     let shard = match (&a.shard, &a.pack) {
         (None, Some(pack)) if pack.to_string_lossy().contains("{shard}") => {
-            bail!(
-                "'{{shard}}' in --pack {} stands for a shard's index: add --shard I/N or --shard auto",
-                pack.display()
-            )
+            bail!("'{{shard}}' in --pack {} stands for a shard's index: add --shard I/N or --shard auto", pack.shown())
         }
         (None, _) => None,
         (Some(_), None) => bail!("--shard writes a shard pack: give --pack FILE (merge joins them into one pack)"),
@@ -430,7 +426,7 @@ pub fn tile(
             // Every task of an array writes into the same directory: the first makes it.
             if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
                 std::fs::create_dir_all(dir)
-                    .with_context(|| format!("creating {} for the shard packs", dir.display()))?;
+                    .with_context(|| format!("creating {} for the shard packs", dir.shown()))?;
             }
             Some((path, chosen))
         }
@@ -468,11 +464,11 @@ pub fn tile(
     if let (Some(path), false) = (&info_path, a.run.quiet)
         && !changed.is_empty()
     {
-        eprintln!("settings from {}: {}", path.display(), changed.join(", "));
+        eprintln!("settings from {}: {}", path.shown(), changed.join(", "));
     }
     if let Some((path, chosen)) = shard {
         if !a.run.quiet && !a.run.json {
-            eprintln!("shard {} of {} (from {}) into {}", chosen.index, chosen.count, chosen.from, path.display());
+            eprintln!("shard {} of {} (from {}) into {}", chosen.index, chosen.count, chosen.from, path.shown());
         }
         let job = chosen.job(input, info.to_json_pretty(), a.pack_layout.options()?);
         let run = Run::start_counting(source, a, job.pages(&layout)?, started)?;
@@ -488,6 +484,12 @@ pub fn tile(
         }
         return Ok(());
     }
+    // The JPEG and PNG tiles of a directory carry the kept profile; a pack's tiles do not (its
+    // metadata, info.json, holds it once: docs/colour.md).
+    let profile = match a.output {
+        Some(_) => kept_icc.as_deref().map(|icc| Profile::for_tiles(icc, opts.codec)).transpose()?.flatten(),
+        None => None,
+    };
     let mut run = Run::start(source, a, &layout, started)?;
     match (&a.output, &a.pack) {
         (Some(dir), _) => {
@@ -623,7 +625,7 @@ fn tile_for_viewer(
     a: &OutputArgs,
     viewer: Viewer,
     started: Instant,
-    profile: Option<Profile>,
+    kept_icc: Option<&[u8]>,
 ) -> Result<()> {
     let (dest, product) = match (&a.output, &a.pmtiles) {
         (_, Some(file)) => (file, Product::Pmtiles),
@@ -707,6 +709,7 @@ fn tile_for_viewer(
         extension: viewer.extension(opts.codec.extension()),
         iiif: iiif_service.map(|id| iiif::Service { id, codec: opts.codec }),
     };
+    let profile = kept_icc.map(|icc| Profile::for_tiles(icc, opts.codec)).transpose()?.flatten();
     let mut run = Run::start(source, a, &layout, started)?;
     run.profile = profile;
     let sink = DirSink::for_viewer(&claim, tiles)?;

@@ -7,6 +7,7 @@ use std::fs;
 use std::io::Read;
 use std::path::Path;
 
+use crate::error::ShowPath;
 use crate::tile_dir::filename::DEFAULT_FILENAME_STEM;
 use crate::tile_dir::filename::FilenameFormat;
 use crate::tile_dir::info::InfoFile;
@@ -218,7 +219,7 @@ pub fn recognise_dir(path: &Path) -> std::result::Result<(), String> {
         })
         .map_err(|e| format!("unreadable ({e})"))?;
     if !text.contains("\"multiscales\"") {
-        return Err(format!("a Zarr hierarchy whose {} has no multiscales", metadata.display()));
+        return Err(format!("a Zarr hierarchy whose {} has no multiscales", metadata.shown()));
     }
     for entry in entries {
         let name = entry.file_name();

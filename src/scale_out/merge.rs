@@ -27,7 +27,7 @@ use super::manifest::{Manifest, shard_error};
 use super::order::split_order;
 use super::plan::ShardPlan;
 use super::sums::{RootRows, RowReader, SumBound};
-use crate::error::{Result, TilerError};
+use crate::error::{Result, ShowPath, TilerError};
 use crate::layout::Layout;
 use crate::limits::{MAX_ALIGN, MAX_TILE_ALIGN, human_bytes};
 use crate::pixel::PixelLayout;
@@ -218,7 +218,7 @@ fn open_all(paths: &[PathBuf]) -> Result<Vec<Shard>> {
                     "is shard {} of {}, but {} is shard {} of {count}: they are not parts of one split",
                     m.index,
                     m.count,
-                    first.path.display(),
+                    first.path.shown(),
                     m0.index
                 ),
             ));
@@ -235,7 +235,7 @@ fn open_all(paths: &[PathBuf]) -> Result<Vec<Shard>> {
                 format!(
                     "was cut from {}, but {} from {}: every shard must come from the same input",
                     id(m),
-                    first.path.display(),
+                    first.path.shown(),
                     id(m0)
                 ),
             ));
@@ -245,7 +245,7 @@ fn open_all(paths: &[PathBuf]) -> Result<Vec<Shard>> {
                 &s.path,
                 format!(
                     "was made with other options than {}: {}",
-                    first.path.display(),
+                    first.path.shown(),
                     differences(&m.options, &m0.options)
                 ),
             ));
@@ -272,7 +272,7 @@ fn open_all(paths: &[PathBuf]) -> Result<Vec<Shard>> {
         if let Some(other) = &by_index[i as usize] {
             let message = match other.path == s.path {
                 true => "is given twice: give each shard once".to_string(),
-                false => format!("is shard {i} of {count}, and so is {}: give each shard once", other.path.display()),
+                false => format!("is shard {i} of {count}, and so is {}: give each shard once", other.path.shown()),
             };
             return Err(shard_error(&s.path, message));
         }
@@ -303,7 +303,7 @@ fn missing_shards(count: u32, given: &[u32], paths: &[PathBuf]) -> TilerError {
     if total > absent.len() as u64 {
         absent.push(format!("and {} more", total - absent.len() as u64));
     }
-    let files: Vec<String> = paths.iter().take(4).map(|p| p.display().to_string()).collect();
+    let files: Vec<String> = paths.iter().take(4).map(|p| p.shown().to_string()).collect();
     let more = if paths.len() > 4 { format!(" and {} more", paths.len() - 4) } else { String::new() };
     TilerError::Options(format!(
         "shard{} {} of {count} missing from those given ({}{more}); `split --shard I/{count}` makes shard I",

@@ -16,6 +16,7 @@ use super::files::{self, Refused};
 use super::tiles::{Format, Page};
 use crate::codec::{Codec, PngLevel, Subsampling};
 use crate::decode::Decoded;
+use crate::error::ShowPath;
 use crate::layout::Layout;
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::tile_dir::filename::FilenameFormat;
@@ -282,7 +283,7 @@ fn native(mut bytes: Vec<u8>, pixels: PixelLayout) -> Vec<u8> {
 fn read_manifest(dir: &Path, name: &str) -> Result<Vec<u8>, String> {
     let path = dir.join(name);
     files::read_under(dir, &path, MAX_MANIFEST_BYTES).map_err(|e| match e {
-        Refused::Missing => format!("{}: not found", path.display()),
+        Refused::Missing => format!("{}: not found", path.shown()),
         Refused::Refused(message) => message,
     })
 }
@@ -297,7 +298,7 @@ fn open_dir(dir: &Path) -> Result<Source, String> {
     if info_path.is_file() {
         let text = read_manifest(dir, "info.json")?;
         let json: serde_json::Value =
-            serde_json::from_slice(&text).map_err(|e| format!("{}: not JSON: {e}", info_path.display()))?;
+            serde_json::from_slice(&text).map_err(|e| format!("{}: not JSON: {e}", info_path.shown()))?;
         if json.get("@context").is_some() {
             let size = json["width"].as_u64().zip(json["height"].as_u64());
             return Ok(Source::Static(StaticDir {
@@ -320,7 +321,7 @@ fn open_dir(dir: &Path) -> Result<Source, String> {
     if tilejson.is_file() {
         let text = read_manifest(dir, xyz::TILEJSON)?;
         let json: serde_json::Value =
-            serde_json::from_slice(&text).map_err(|e| format!("{}: not JSON: {e}", tilejson.display()))?;
+            serde_json::from_slice(&text).map_err(|e| format!("{}: not JSON: {e}", tilejson.shown()))?;
         let v = &json["vortex"];
         let size = v["width"].as_u64().zip(v["height"].as_u64());
         return Ok(Source::Static(StaticDir {
@@ -331,7 +332,7 @@ fn open_dir(dir: &Path) -> Result<Source, String> {
         }));
     }
     let dzis: Vec<String> = fs::read_dir(dir)
-        .map_err(|e| format!("{}: {e}", dir.display()))?
+        .map_err(|e| format!("{}: {e}", dir.shown()))?
         .filter_map(|e| e.ok()?.file_name().into_string().ok())
         .filter_map(|n| n.strip_suffix(".dzi").map(str::to_string))
         .filter(|stem| dir.join(format!("{stem}_files")).is_dir())

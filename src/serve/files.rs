@@ -6,6 +6,7 @@
 //! FIFO opens at once instead of waiting for a writer) and its type read from the handle, so a
 //! name swapped for a FIFO between a look and the open is still refused.
 
+use crate::error::ShowPath;
 use std::fs::{File, Metadata};
 use std::io::{self, Read};
 use std::path::Path;
@@ -24,12 +25,12 @@ pub enum Refused {
 pub fn open_under(root: &Path, path: &Path) -> Result<(File, Metadata), Refused> {
     let canonical = std::fs::canonicalize(path).map_err(|e| missing_or(path, e))?;
     if !canonical.starts_with(root) {
-        return Err(Refused::Refused(format!("{} leads out of {}", path.display(), root.display())));
+        return Err(Refused::Refused(format!("{} leads out of {}", path.shown(), root.shown())));
     }
     let file = open_nonblocking(&canonical).map_err(|e| missing_or(path, e))?;
-    let meta = file.metadata().map_err(|e| Refused::Refused(format!("{}: {e}", path.display())))?;
+    let meta = file.metadata().map_err(|e| Refused::Refused(format!("{}: {e}", path.shown())))?;
     if !meta.is_file() {
-        return Err(Refused::Refused(format!("{} is not a regular file", path.display())));
+        return Err(Refused::Refused(format!("{} is not a regular file", path.shown())));
     }
     Ok((file, meta))
 }
@@ -38,12 +39,12 @@ pub fn open_under(root: &Path, path: &Path) -> Result<(File, Metadata), Refused>
 /// bounded too, so a file that grows after the check cannot make the read unbounded.
 pub fn read_under(root: &Path, path: &Path, max: u64) -> Result<Vec<u8>, Refused> {
     let (file, meta) = open_under(root, path)?;
-    let too_large = || Refused::Refused(format!("{} is over {max} bytes", path.display()));
+    let too_large = || Refused::Refused(format!("{} is over {max} bytes", path.shown()));
     if meta.len() > max {
         return Err(too_large());
     }
     let mut bytes = Vec::with_capacity(meta.len() as usize);
-    file.take(max + 1).read_to_end(&mut bytes).map_err(|e| Refused::Refused(format!("{}: {e}", path.display())))?;
+    file.take(max + 1).read_to_end(&mut bytes).map_err(|e| Refused::Refused(format!("{}: {e}", path.shown())))?;
     if bytes.len() as u64 > max {
         return Err(too_large());
     }
@@ -53,7 +54,7 @@ pub fn read_under(root: &Path, path: &Path, max: u64) -> Result<Vec<u8>, Refused
 fn missing_or(path: &Path, e: io::Error) -> Refused {
     match e.kind() {
         io::ErrorKind::NotFound | io::ErrorKind::NotADirectory => Refused::Missing,
-        _ => Refused::Refused(format!("{}: {e}", path.display())),
+        _ => Refused::Refused(format!("{}: {e}", path.shown())),
     }
 }
 

@@ -36,6 +36,7 @@ use hyper_util::rt::{TokioIo, TokioTimer};
 use hyper_util::service::TowerToHyperService;
 use tokio::sync::Semaphore;
 
+use crate::error::ShowPath;
 use cache::TileCache;
 pub use catalog::Catalog;
 
@@ -57,13 +58,13 @@ pub(crate) struct AppState {
 #[non_exhaustive]
 pub enum ServeError {
     /// An input that is missing, unreadable or not something this server serves.
-    #[error("{}: {message}", path.display())]
+    #[error("{}: {message}", path.shown())]
     Input { path: PathBuf, message: String },
     /// Two inputs would answer at the same URLs.
-    #[error("{} and {} are both named '{name}' in URLs; rename one (names are file stems)", first.display(), second.display())]
+    #[error("{} and {} are both named '{name}' in URLs; rename one (names are file stems)", first.shown(), second.shown())]
     DuplicateName { name: String, first: PathBuf, second: PathBuf },
     /// `--openseadragon` is not a directory holding `openseadragon.min.js`.
-    #[error("{}: {message}", path.display())]
+    #[error("{}: {message}", path.shown())]
     OpenSeadragon { path: PathBuf, message: String },
     /// The address cannot be listened on (in use, not ours).
     #[error("cannot listen on {addr}: {source}")]

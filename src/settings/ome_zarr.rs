@@ -8,7 +8,7 @@ use std::path::Path;
 
 use super::{CodecChoice, DEFAULT_ZSTD_LEVEL, Requested, resolve};
 use crate::codec::ZSTD_LEVELS;
-use crate::error::{Result, TilerError};
+use crate::error::{Result, ShowPath, TilerError};
 use crate::job::SplitOptions;
 use crate::limits::Limits;
 use crate::output::Product;
@@ -59,7 +59,7 @@ impl OmeZarrPlan {
             (Some(p), Some(ours)) if p.version != ours => {
                 return Err(options(format!(
                     "{} is OME-Zarr {}: its labels are too; leave out --ome-zarr-version {}",
-                    p.image.display(),
+                    p.image.shown(),
                     p.version.name(),
                     ours.name()
                 )));
@@ -70,7 +70,7 @@ impl OmeZarrPlan {
         if parent.is_some() && !asked.filter.is_some_and(Filter::is_label) {
             return Err(options(format!(
                 "{}: a label image's levels need --filter mode or --filter nearest (a mean would invent labels)",
-                dest.display()
+                dest.shown()
             )));
         }
         let shard_chunks = match (version, zarr.shard_chunks) {
@@ -86,7 +86,7 @@ impl OmeZarrPlan {
         if product == Product::Ozx && version != Version::V05 {
             return Err(options(format!(
                 "{}: a zipped OME-Zarr (.ozx, RFC-9) holds OME-Zarr 0.5; leave out --ome-zarr-version 0.4 or write a directory",
-                dest.display()
+                dest.shown()
             )));
         }
         let requested = Requested {
@@ -121,7 +121,7 @@ impl OmeZarrPlan {
             if ours != (p.size.0, p.size.1, p.levels) {
                 return Err(options(format!(
                     "{} is {}x{} in {} levels, but this label image is {}x{} in {} levels (--tile-size {}); a label image matches its image",
-                    p.image.display(),
+                    p.image.shown(),
                     p.size.0,
                     p.size.1,
                     p.levels,

@@ -11,7 +11,7 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::TileSink;
-use crate::error::{Result, TilerError};
+use crate::error::{Result, ShowPath, TilerError};
 use crate::output::{Claim, Product, staging};
 use crate::tile_dir::filename::FilenameFormat;
 use crate::tile_dir::info::Info;
@@ -51,7 +51,7 @@ impl DirSink {
         if claim.product != product {
             return Err(TilerError::Options(format!(
                 "{} was claimed for {}",
-                claim.path.display(),
+                claim.path.shown(),
                 claim.product.noun()
             )));
         }
@@ -61,7 +61,7 @@ impl DirSink {
             fs::remove_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
         }
         fs::create_dir_all(&staging).map_err(|e| {
-            TilerError::write(dest, std::io::Error::new(e.kind(), format!("cannot create {}: {e}", staging.display())))
+            TilerError::write(dest, std::io::Error::new(e.kind(), format!("cannot create {}: {e}", staging.shown())))
         })?;
         Ok(DirSink {
             dest: dest.to_path_buf(),

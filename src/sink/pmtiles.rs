@@ -25,7 +25,7 @@ use flate2::read::GzDecoder;
 use flate2::write::GzEncoder;
 
 use super::TileSink;
-use crate::error::{Result, TilerError};
+use crate::error::{Result, ShowPath, TilerError};
 use crate::layout::Layout;
 use crate::output::staging;
 
@@ -260,7 +260,7 @@ impl PmtilesSink {
         if read_header != header.stored() || read_entries != entries {
             return Err(TilerError::Options(format!(
                 "{}: internal error: the archive's directories read back differ from those written",
-                out.display()
+                out.shown()
             )));
         }
         Ok(PmtilesSummary {

@@ -43,18 +43,32 @@ pub struct Service {
 /// `--iiif-id`'s URL as the `id` of `info.json`: an absolute `http` or `https` URL with a host
 /// and no query or fragment (the id is the base every request is built on, and a viewer
 /// appends `/info.json` and `/region/size/...` to it); a trailing slash is dropped, since the
-/// id names the image, not a directory of it.
+/// id names the image, not a directory of it. IIIF takes the id as a URI (RFC 3986), so every
+/// character must be one a URI may hold as it is: letters, digits, `-._~`, `!$&'()*+,;=`,
+/// `:`, `@`, `/` and `%` starting a two-digit hex escape. Anything else (a space, `"`, `<`,
+/// `>`, `\`, `^`, a backtick, `{|}`, a non-ASCII letter) is refused, naming the character and
+/// its percent-encoding.
 pub fn absolute_id(url: &str) -> Result<String, String> {
-    let why = |what: &str| format!("--iiif-id '{url}' {what}");
+    let why = |what: &str| format!("--iiif-id {url:?} {what}");
     let rest = url
         .strip_prefix("https://")
         .or_else(|| url.strip_prefix("http://"))
         .ok_or_else(|| why("must be an absolute http:// or https:// URL, the address the directory is uploaded to"))?;
-    if url.chars().any(|c| c.is_whitespace() || c.is_control()) {
-        return Err(why("has a space or control character; percent-encode it"));
-    }
     if url.contains(['?', '#']) {
         return Err(why("has a query or fragment; a IIIF id is a plain path that requests are appended to"));
+    }
+    if let Some((at, c)) = url.char_indices().find(|&(at, c)| !uri_char(url, at, c)) {
+        let encoded: String = c.encode_utf8(&mut [0; 4]).bytes().map(|b| format!("%{b:02X}")).collect();
+        let what = match c {
+            '%' => "has a '%' that starts no two-digit hex escape; write a '%' itself as %25".to_string(),
+            c if c.is_whitespace() || c.is_control() => {
+                format!("has a space or control character ({c:?}); percent-encode it ({encoded})")
+            }
+            c => format!(
+                "has {c:?}, which a URI (RFC 3986), and so a IIIF id, may not hold as it is; percent-encode it ({encoded})"
+            ),
+        };
+        return Err(why(&format!("{what} (at byte {at})")));
     }
     let (host, path) = rest.split_once('/').unwrap_or((rest, ""));
     if host.is_empty() || host.starts_with(':') || host.contains('@') {
@@ -69,6 +83,18 @@ pub fn absolute_id(url: &str) -> Result<String, String> {
     }
     let id = format!("{}{host}/{path}", &url[..url.len() - rest.len()]);
     Ok(id)
+}
+
+/// Whether `c`, at byte `at` of `url`, is one a URI holds as it is (RFC 3986 section 2:
+/// unreserved, sub-delims, `:`, `@`, `/`, and `%` followed by two hex digits; `?` and `#` are
+/// refused before this is asked).
+fn uri_char(url: &str, at: usize, c: char) -> bool {
+    match c {
+        'a'..='z' | 'A'..='Z' | '0'..='9' | '-' | '.' | '_' | '~' => true,
+        '!' | '$' | '&' | '\'' | '(' | ')' | '*' | '+' | ',' | ';' | '=' | ':' | '@' | '/' => true,
+        '%' => url.as_bytes().get(at + 1..at + 3).is_some_and(|h| h.iter().all(u8::is_ascii_hexdigit)),
+        _ => false,
+    }
 }
 
 /// The LOD `full/max` is: the finest whose long side is at most [`MAX_WHOLE_SIDE`], else the
@@ -196,6 +222,33 @@ mod tests {
         let one = Viewer::Iiif.page_grid(300, 200, 512, 0).unwrap();
         assert_eq!(tile_path(&one, 0, 0, 0, "png"), "full/300,200/0/default.png");
         assert_eq!(full_max_path(&one, 0, "png").as_deref(), Some("full/max/0/default.png"));
+    }
+
+    /// Only characters a URI holds as they are pass (RFC 3986), so nothing that would need
+    /// escaping in info.json or an HTML attribute reaches them; a valid escape passes as it is.
+    #[test]
+    fn an_id_is_a_uri() {
+        for (id, says) in [
+            ("https://example.org/a\"b", "'\"'"),
+            ("https://example.org/<script>", "'<'"),
+            ("https://example.org/a>b", "'>'"),
+            ("https://example.org/a\\b", "'\\\\'"),
+            ("https://example.org/{x}", "'{'"),
+            ("https://example.org/a|b", "'|'"),
+            ("https://example.org/a^b", "'^'"),
+            ("https://example.org/a`b", "'`'"),
+            ("https://example.org/caf\u{e9}", "%C3%A9"),
+            ("https://example.org/a%zzb", "two-digit hex escape"),
+            ("https://example.org/a%2", "two-digit hex escape"),
+            ("https://example.org/a\tb", "control character"),
+            ("https://example.org/a\u{1b}[31mb", "control character"),
+        ] {
+            let err = absolute_id(id).unwrap_err();
+            assert!(err.contains(says) && err.contains("--iiif-id"), "{id}: {err}");
+        }
+        let fine = "https://user-host.example.org:8443/iiif/a%20b/c;d=e/~f(1)!$&'*+,@";
+        assert_eq!(absolute_id(fine).as_deref(), Ok(fine));
+        assert_eq!(absolute_id("http://example.org/p/").as_deref(), Ok("http://example.org/p"));
     }
 
     #[test]

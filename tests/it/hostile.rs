@@ -166,7 +166,10 @@ fn dead_pid() -> u64 {
 #[test]
 fn temporaries_of_dead_runs_are_removed() {
     if !Path::new("/proc/self").exists() {
-        eprintln!("note: no /proc, so dead runs cannot be told from live ones; skipped");
+        crate::common::skip_unless_ci(
+            "the stale-temporaries test",
+            "no /proc, so dead runs cannot be told from live ones",
+        );
         return;
     }
     let (dir, input) = scratch_with_input();
@@ -342,4 +345,43 @@ fn names_from_an_existing_info_json_that_clash_with_a_flag_name_the_file() {
     );
     ok(&["split", s(&input), "-o", s(&out), "--codec", "png", "--ff", "%1$d/%2$d_%3$d.png", "--quiet"]);
     assert!(out.join("0/0_0.png").is_file());
+}
+
+/// A file name holding a terminal escape, a newline or bytes that are not UTF-8 is shown
+/// escaped and quoted in every message (the error, the summary), so it can neither recolour
+/// nor clear the terminal nor forge a line of output; an ordinary name reads as it is.
+#[test]
+fn names_with_control_characters_are_shown_escaped() {
+    use std::os::unix::ffi::OsStrExt;
+    let dir = tempfile::tempdir().unwrap();
+    let evil = dir.path().join("red\u{1b}[31m\nerror: forged.png");
+    fs::write(&evil, b"not an image").unwrap();
+    let out = run(&["split", s(&evil), "-o", s(&dir.path().join("out"))]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(!err.contains('\u{1b}'), "a raw escape reached the terminal: {err:?}");
+    assert!(err.contains(r#"red\u{1b}[31m\nerror: forged.png""#), "{err:?}");
+    assert_eq!(err.lines().count(), 1, "the name's newline forged a line: {err:?}");
+
+    // A valid image under such a name, into an output named so: the summary is escaped too.
+    let png = dir.path().join("blue\u{1b}[2J.png");
+    fs::copy(fixture("sample.png"), &png).unwrap();
+    let target = dir.path().join("tiles\u{7}");
+    let said = ok(&["split", s(&png), "-o", s(&target)]);
+    assert!(!said.contains('\u{1b}') && !said.contains('\u{7}'), "{said:?}");
+    assert!(said.contains(r#"tiles\u{7}""#), "{said:?}");
+
+    // Bytes that are not UTF-8 show as escapes, not as replacement characters.
+    let latin1 = dir.path().join(std::ffi::OsStr::from_bytes(b"caf\xe9.png"));
+    fs::write(&latin1, b"not an image").unwrap();
+    let out = Command::new(BIN).arg("split").arg(&latin1).arg("-o").arg(dir.path().join("o2")).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains(r"caf\xE9.png"), "{err:?}");
+
+    // An ordinary name is shown as it is, unquoted.
+    let plain = dir.path().join("plain name.png");
+    fs::write(&plain, b"not an image").unwrap();
+    let out = run(&["split", s(&plain), "-o", s(&dir.path().join("o3"))]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(&format!("{}: ", plain.display())) && !err.contains('"'), "{err:?}");
 }

@@ -251,6 +251,9 @@ fn iiif_id_must_be_an_absolute_url() {
         ("https://example.org/", "names no image"),
         ("https://example.org//photo", "empty, '.' or '..'"),
         ("https://example.org/a b", "space"),
+        // Only what a URI may hold (RFC 3986): nothing that info.json or a page would need escaped.
+        ("https://example.org/a\"b", "percent-encode it (%22)"),
+        ("https://example.org/<b>", "percent-encode it (%3C)"),
     ] {
         let r = run(&["split", s(&input), "--layout", "iiif", "-o", s(&out), "--iiif-id", id]);
         fails_with(&r, &["--iiif-id", says]);

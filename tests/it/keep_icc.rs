@@ -135,3 +135,39 @@ fn convert_keeps_or_converts_a_kept_profile() {
     assert_eq!(ours.len(), 6);
     assert!(ours == theirs, "convert's sRGB texels differ from split's");
 }
+
+/// A pack keeps the profile once, in its metadata (`iccProfile`, docs/pack-format.md), for PNG
+/// tiles as for JPEG (its tiles carry no copy of it); `convert PACK -o DIR --keep-icc` writes it
+/// into every PNG tile of the directory it makes, as `split -o` does.
+#[test]
+fn a_pack_keeps_the_profile_in_its_metadata() {
+    if !have_tools() || !Path::new(ADOBE_RGB).is_file() {
+        crate::common::skip_unless_ci(
+            "the kept-profile test",
+            "no colord-data's AdobeRGB1998.icc (apt-get install colord-data)",
+        );
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = pattern_png(dir.path(), 300, 200);
+    let jpg = dir.path().join("adobe.jpg");
+    tool("vips", &["jpegsave", s(&png), s(&jpg), "--profile", ADOBE_RGB]);
+    let profile = std::fs::read(ADOBE_RGB).unwrap();
+    use base64::Engine;
+    let args = ["--tile-size", "128", "--codec", "png", "--keep-icc"];
+    let pack = dir.path().join("kept.vtpk");
+    ok(&[&["split", s(&jpg), "--pack", s(&pack)][..], &args].concat());
+    let opened = vortex_tiler::vortex_pack::Pack::open(&pack).unwrap();
+    let meta: serde_json::Value = serde_json::from_slice(opened.metadata()).unwrap();
+    let kept = base64::engine::general_purpose::STANDARD.decode(meta["iccProfile"].as_str().unwrap()).unwrap();
+    assert_eq!(kept, profile, "the pack's metadata holds the profile");
+    let out = dir.path().join("from-pack");
+    ok(&[&["convert", s(&pack), "-o", s(&out)][..], &args].concat());
+    let pngs = tiles(&out, "png");
+    assert!(pngs.len() >= 6, "{pngs:?}");
+    for tile in &pngs {
+        let header = Command::new("vipsheader").args(["-f", "icc-profile-data", s(tile)]).output().unwrap();
+        let read = base64::engine::general_purpose::STANDARD.decode(String::from_utf8_lossy(&header.stdout).trim());
+        assert_eq!(read.unwrap(), profile, "{}", tile.display());
+    }
+}

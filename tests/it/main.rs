@@ -32,6 +32,7 @@ mod pack_trust;
 mod pmtiles;
 mod remote_pack;
 mod render;
+mod resample_reference;
 mod sample_types;
 mod serve;
 mod serve_hostile;

@@ -75,9 +75,12 @@ struct Layout {
     table: bool,
     /// Where the strip lies (after the directory where `None`); the file is written sparse.
     strip_at: Option<u64>,
+    /// Two restart intervals (numbered in strip order) whose pictures are exchanged: what a
+    /// reader that misplaces intervals would show of a good file, to prove the checks see it.
+    swapped: Option<(u32, u32)>,
 }
 
-const CLASSIC: Layout = Layout { wide: false, table: true, strip_at: None };
+const CLASSIC: Layout = Layout { wide: false, table: true, strip_at: None, swapped: None };
 
 /// An NDPI file of `width` x `height` texels with restart intervals `interval` texels wide.
 fn make_ndpi(path: &Path, width: u32, height: u32, interval: u32, chroma: Chroma, sof: Sof) {
@@ -100,10 +103,17 @@ fn make_ndpi_laid_out(
     let mut starts = Vec::new();
     for row in 0..down {
         for col in 0..across {
+            let n = row * across + col;
+            let shown = match layout.swapped {
+                Some((a, b)) if n == a => b,
+                Some((a, b)) if n == b => a,
+                _ => n,
+            };
+            let (from_row, from_col) = (shown / across, shown % across);
             let mut tile = Vec::with_capacity((interval * mcu_h * 3) as usize);
             for y in 0..mcu_h {
                 for x in 0..interval {
-                    tile.extend_from_slice(&texel(col * interval + x, row * mcu_h + y));
+                    tile.extend_from_slice(&texel(from_col * interval + x, from_row * mcu_h + y));
                 }
             }
             let mut jpeg = Vec::new();
@@ -216,6 +226,49 @@ fn tiff(width: u32, height: u32, strip: &[u8], starts: &[u32], layout: Layout) -
     (out, strip_at)
 }
 
+/// The largest bias, `|mean(ours - picture)|` of one channel over one 16x16 block (one 4:2:0
+/// MCU, aligned; those at the right and bottom edges cut), that JPEG at quality 85 of this
+/// picture may leave. JPEG keeps a block's mean well (its DC is quantised finely) even where
+/// single samples are far off (the noise wraps green round from 255 to 0, which JPEG smooths:
+/// samples off by 44 on average in such a block, with no bias); an interval in the wrong place
+/// shows another part of the ramps, whose means differ by tens of levels. Both figures are
+/// printed by the test. Only blocks whose picture stays within 16..=239 in every channel are
+/// weighed: near 0 and 255 JPEG's ringing is clamped, which biases a block's mean by itself
+/// (24 levels in a block where the noise wraps green round, measured).
+const WORST_BLOCK: f64 = 12.0;
+
+/// The 16x16 block and channel of RGB `a` and `b` (`width` x `height`) with the largest bias,
+/// of the blocks whose test picture stays clear of 0 and 255: (|mean of a - b|, x, y).
+fn worst_block(a: &[u8], b: &[u8], width: u32, height: u32) -> (f64, u32, u32) {
+    assert_eq!((a.len(), b.len()), ((width * height * 3) as usize, (width * height * 3) as usize));
+    let mut worst = (0.0, 0, 0);
+    for by in (0..height).step_by(16) {
+        for bx in (0..width).step_by(16) {
+            let (mut sums, mut n) = ([0i64; 3], 0i64);
+            let clear = |x: u32, y: u32| texel(x, y).iter().all(|v| (16..=239).contains(v));
+            if !(by..(by + 16).min(height)).all(|y| (bx..(bx + 16).min(width)).all(|x| clear(x, y))) {
+                continue;
+            }
+            for y in by..(by + 16).min(height) {
+                for x in bx..(bx + 16).min(width) {
+                    let at = ((y * width + x) * 3) as usize;
+                    for (ch, sum) in sums.iter_mut().enumerate() {
+                        *sum += i64::from(a[at + ch]) - i64::from(b[at + ch]);
+                    }
+                    n += 1;
+                }
+            }
+            for sum in sums {
+                let bias = (sum as f64 / n as f64).abs();
+                if bias > worst.0 {
+                    worst = (bias, bx, by);
+                }
+            }
+        }
+    }
+    worst
+}
+
 /// The top-left `width` x `height` of an image `stride` texels wide.
 fn crop(texels: &[u8], stride: u32, width: u32, height: u32) -> Vec<u8> {
     let row = (stride * 3) as usize;
@@ -265,13 +318,31 @@ fn ndpi_reads_as_openslide_does() {
     // on average (measured); a misplaced interval or row is off by tens.
     let jpeg = Tolerance::mean(6.0, "JPEG at quality 85 of a picture a third noise is off by 3.5 on average");
     let against_picture = |name: &str, ours: &[u8]| {
-        assert_close(name, Picture::new(1020, 500, 3, ours), Picture::new(1020, 500, 3, &picture), jpeg)
+        assert_close(name, Picture::new(1020, 500, 3, ours), Picture::new(1020, 500, 3, &picture), jpeg);
+        // A mean over the whole picture hides one misplaced interval (256 x 16 texels of
+        // 1020 x 500: under 1% of it); the most biased 16x16 block does not. JPEG's loss
+        // stays within WORST_BLOCK on every block, a misplaced interval is far past it.
+        let (worst, x, y) = worst_block(ours, &picture, 1020, 500);
+        eprintln!("{name}: the most biased 16x16 block, at ({x}, {y}), is off by {worst:.2} on average");
+        assert!(worst < WORST_BLOCK, "{name}: the 16x16 block at ({x}, {y}) is off by {worst:.1} on average");
     };
     against_picture("ndpi-ragged", &ours);
     let quarter = slide(dir.path(), "quarter.ndpi", (1020, 500), 256, Chroma::Quarter, Sof::Size);
     let (source, quartered) = our_texels(&quarter, 1 << 30);
     assert!(source.describe().contains("256x16 intervals"), "{}", source.describe());
     against_picture("ndpi-4:2:0", &quartered);
+    // The same 4:2:0 slide with two intervals of MCU row 5 exchanged, as a reader placing
+    // restart intervals wrongly would show it: the whole-picture mean still passes, the worst
+    // block does not.
+    let misplaced = dir.path().join("misplaced.ndpi");
+    let swapped = Layout { swapped: Some((5 * 4, 5 * 4 + 2)), ..CLASSIC };
+    make_ndpi_laid_out(&misplaced, (1020, 500), 256, Chroma::Quarter, Sof::Size, swapped);
+    let (_, wrong) = our_texels(&misplaced, 1 << 30);
+    let (_, mean) = crate::common::compare::differences(&wrong, &picture);
+    assert!(mean < 6.0, "the mean alone ({mean:.2}) would have caught it");
+    let (worst, x, y) = worst_block(&wrong, &picture, 1020, 500);
+    eprintln!("two exchanged intervals: mean {mean:.2}, the worst block, at ({x}, {y}), off by {worst:.2}");
+    assert!(worst > 2.0 * WORST_BLOCK, "a misplaced interval is off by only {worst:.1} at ({x}, {y})");
     // Through the tool: split, then convert of a column range (only those intervals decoded).
     let out = dir.path().join("tiles");
     let summary = cli::ok(&["split", s(&ragged), "-o", s(&out), "--tile-size", "256"]);
@@ -446,7 +517,7 @@ fn an_ndpi_past_4_gib_is_read() {
     // the intervals' edges, where OpenSlide and this reader decode each interval alone.
     make_ndpi_laid_out(&small, (1024, 48), 256, Chroma::Full, Sof::Size, Layout { wide: true, ..CLASSIC });
     let big = dir.path().join("big.ndpi");
-    let layout = Layout { wide: true, table: true, strip_at: Some((5 << 30) + 4096) };
+    let layout = Layout { wide: true, table: true, strip_at: Some((5 << 30) + 4096), swapped: None };
     make_ndpi_laid_out(&big, (1024, 48), 256, Chroma::Full, Sof::Size, layout);
     {
         use std::os::unix::fs::MetadataExt;

@@ -530,3 +530,29 @@ fn a_redirect_out_of_http_is_named() {
     let e = HttpPack::open(&server.url()).err().unwrap().to_string();
     assert!(e.contains("redirected to file:///etc/passwd") && e.contains("not an http:// or https:// URL"), "{e}");
 }
+
+/// The test server never mistakes another server for itself: with its first port taken (by a
+/// listener that accepts and never answers, as a stranger that took the port between our
+/// finding it free and nginx binding it would), nginx fails to bind, and the helper starts it
+/// on the next port and serves from there. (Before, the helper took any connection on the port
+/// as nginx being up, and the tests then talked to the stranger.)
+#[test]
+fn the_test_server_moves_off_a_taken_port() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("hello.txt"), b"hello").unwrap();
+    let Ok(binary) = nginx_binary() else {
+        skip_unless_ci("the nginx port test", "no nginx (apt-get install nginx-light)");
+        return;
+    };
+    let stranger = TcpListener::bind("127.0.0.1:0").unwrap();
+    let taken = stranger.local_addr().unwrap().port();
+    let free = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let server = Nginx::start_on(&binary, dir.path(), &[], [taken, free]);
+    assert_eq!(server.url(), format!("http://127.0.0.1:{free}"));
+    let mut stream = TcpStream::connect(("127.0.0.1", free)).unwrap();
+    use std::io::Read;
+    write!(stream, "GET /hello.txt HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n").unwrap();
+    let mut reply = String::new();
+    stream.read_to_string(&mut reply).unwrap();
+    assert!(reply.starts_with("HTTP/1.1 200") && reply.ends_with("hello"), "{reply}");
+}

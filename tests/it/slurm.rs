@@ -204,3 +204,51 @@ fn submit_split_on_slurm_merges_the_pack_one_machine_makes() {
     assert!(err.contains("task 1 (job") && err.contains("task 1 breaks"), "the failed task's log: {err}");
     assert!(err.contains("1 of 2 split tasks") && !p("broken.vtpk").exists(), "{err}");
 }
+
+/// `local-cluster.sh start` on a machine where Slurm's own port 6817 is taken (here by a
+/// listener of this test; the shared test cluster, if up, takes it too) starts on another pair
+/// of ports, which the generated slurm.conf names, instead of failing with slurmctld's
+/// "Address already in use". A cluster of its own in a scratch directory, started and stopped
+/// here while holding the shared cluster's lock exclusively, so that no other test's cluster
+/// starts or stops meanwhile.
+#[test]
+fn a_cluster_moves_off_a_taken_port() {
+    if !slurm_usable() {
+        return;
+    }
+    let shared = PathBuf::from(std::env::var("VORTEX_SLURM_DIR").unwrap_or_else(|_| "/tmp/vortex-slurm".into()));
+    std::fs::create_dir_all(&shared).unwrap();
+    let mut holder = Command::new("flock")
+        .args(["-x", "-o", s(&shared.join("users.lock")), "sh", "-c", "echo held && exec cat >/dev/null"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("flock (util-linux) runs");
+    let mut line = String::new();
+    BufReader::new(holder.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    assert_eq!(line, "held\n");
+    // Taken by us, or already by someone else: either way slurmctld cannot bind it.
+    let _stranger = std::net::TcpListener::bind("0.0.0.0:6817");
+    let dir = tempfile::tempdir().unwrap();
+    let lc = script("local-cluster.sh");
+    let run = |command: &str| {
+        Command::new(&lc)
+            .arg(command)
+            .env("VORTEX_SLURM_DIR", dir.path())
+            .env_remove("VORTEX_SLURMCTLD_PORT")
+            .env_remove("VORTEX_SLURMD_PORT")
+            .stdin(Stdio::null())
+            .output()
+            .unwrap()
+    };
+    let started = run("start");
+    let conf = std::fs::read_to_string(dir.path().join("etc/slurm.conf")).unwrap_or_default();
+    let stopped = run("stop");
+    drop(holder.stdin.take());
+    let _ = holder.wait();
+    assert!(started.status.success(), "local-cluster.sh start: {}", show(&started));
+    assert!(stopped.status.success(), "local-cluster.sh stop: {}", show(&stopped));
+    assert!(show(&started).contains("is taken; trying another pair"), "{}", show(&started));
+    let port = conf.lines().find_map(|l| l.strip_prefix("SlurmctldPort=")).unwrap_or_default();
+    assert!(!port.is_empty() && port != "6817", "slurm.conf: {conf}");
+}

@@ -131,3 +131,33 @@ fn convert_maps_a_float_pack_as_split_does() {
     let err = String::from_utf8_lossy(&refused.stderr);
     assert!(!refused.status.success() && err.contains("--range MIN:MAX"), "{err}");
 }
+
+/// A negative MIN written as the help writes it, `--range -0.5:1.5` (two arguments, no `=`):
+/// the parser takes it as the flag's value, not as an unknown flag, for split and convert.
+#[test]
+fn a_negative_min_is_taken_without_an_equals_sign() {
+    let dir = tempfile::tempdir().unwrap();
+    let tif = dir.path().join("f.tif");
+    let values: Vec<f32> = (0..32).map(|i| i as f32 / 16.0 - 0.5).collect(); // -0.5 ..= 1.4375
+    let mut encoder = TiffEncoder::new(std::fs::File::create(&tif).unwrap()).unwrap();
+    encoder.write_image::<colortype::Gray32Float>(8, 4, &values).unwrap();
+    let tiles = ["--tile-size", "8", "--border", "0", "--filter", "box"];
+    let out = dir.path().join("split");
+    let said = ok(&[&["split", s(&tif), "-o", s(&out), "--codec", "png", "--range", "-0.5:1.5"][..], &tiles].concat());
+    assert!(said.contains("(--range -0.5:1.5)"), "{said}");
+    let img = finest_png(&out, 8, 4).to_luma8();
+    for (i, v) in values.iter().enumerate() {
+        let want = ((*v as f64 + 0.5) * 255.0 / 2.0).round() as u8;
+        assert_eq!(img.get_pixel(i as u32 % 8, i as u32 / 8).0[0], want, "{v}");
+    }
+    let pack = dir.path().join("f.vtpk");
+    ok(&[&["split", s(&tif), "--pack", s(&pack), "--codec", "raw"][..], &tiles].concat());
+    let converted = dir.path().join("convert");
+    let args = ["convert", s(&pack), "-o", s(&converted), "--codec", "png", "--range", "-0.5:1.5"];
+    ok(&[&args[..], &tiles].concat());
+    assert!(finest_png(&converted, 8, 4).to_luma8() == img, "convert maps as split does");
+    // A flag where the value should be is still refused, naming what was expected.
+    let out = run(&["split", s(&tif), "-o", s(&dir.path().join("r")), "--range", "--json"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("MIN:MAX"), "{err}");
+}

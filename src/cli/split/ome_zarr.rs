@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 
+use vortex_tiler::error::ShowPath;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::output::Product;
 use vortex_tiler::settings::{OmeZarrPlan, OmeZarrRequested, Requested};
@@ -191,7 +192,7 @@ pub fn tile_channels(
     let picks = picks.unwrap_or(&all);
     for (i, &k) in picks.iter().enumerate() {
         if k >= set.count() {
-            bail!("--channels {k}: {} has {} channel(s), 0 to {}", inputs[0].display(), set.count(), set.count() - 1);
+            bail!("--channels {k}: {} has {} channel(s), 0 to {}", inputs[0].shown(), set.count(), set.count() - 1);
         }
         if picks[..i].contains(&k) {
             bail!("--channels names channel {k} twice");
@@ -204,7 +205,7 @@ pub fn tile_channels(
         if ![1, 3].contains(&picks.len()) {
             bail!(
                 "{}: {} channels, and --layout {} (or a pack) holds one (grey) or three (RGB) of them: pick them with --channels 0,1,2, or write every channel with --layout ome-zarr",
-                inputs[0].display(),
+                inputs[0].shown(),
                 picks.len(),
                 clap::ValueEnum::to_possible_value(&a.layout).map(|v| v.get_name().to_string()).unwrap_or_default()
             );
@@ -218,7 +219,7 @@ pub fn tile_channels(
         first.as_ref().map(|s| s.header()).unwrap_or(ImageHeader { width: 0, height: 0, layout: set.layout() });
     let plan = plan(header, &inputs[0], names, a, Some(planes))?;
     if plan.parent.is_some() {
-        bail!("{}: a label image has one channel; pick it with --channels N", plan.dest.display());
+        bail!("{}: a label image has one channel; pick it with --channels N", plan.dest.shown());
     }
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
     let claim = report::claim(&plan.dest, plan.product, &inputs, a.force)?;

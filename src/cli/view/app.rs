@@ -21,6 +21,7 @@ use winit::window::{Window, WindowId};
 use super::Start;
 use super::screenshot;
 use crate::cli::render::{open_layers, refuse_load_errors, remote_stats, warn_of_seams};
+use vortex_tiler::error::ShowPath;
 
 pub(super) struct Options {
     pub scene: Scene,
@@ -271,7 +272,7 @@ impl State {
             Start::Fly(_) => 0,
         };
         let [w, h] = self.images[texture];
-        let name = self.renderer.runtime().loader().sources()[texture].location().display().to_string();
+        let name = self.renderer.runtime().loader().sources()[texture].location().shown().to_string();
         let remote = match remote_stats(&self.remote) {
             _ if self.remote.is_empty() => String::new(),
             s => format!(

@@ -4,6 +4,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result, anyhow, bail};
+use vortex_tiler::error::ShowPath;
 use vortex_tiler::output;
 use vortex_vt_wgpu::Gpu;
 
@@ -56,7 +57,7 @@ pub(super) fn save(gpu: &Gpu, texture: &wgpu::Texture, path: &Path) -> Result<()
     let mut writer = encoder.write_header()?;
     writer.write_image_data(&pixels)?;
     writer.finish()?;
-    output::write_file(path, &bytes).with_context(|| format!("writing {}", path.display()))
+    output::write_file(path, &bytes).with_context(|| format!("writing {}", path.shown()))
 }
 
 /// Refuses to replace a file at `path` that is not a screenshot of ours.
@@ -64,10 +65,7 @@ pub(super) fn refuse_others(path: &Path) -> Result<()> {
     let Ok(existing) = std::fs::read(path) else { return Ok(()) };
     let ours = existing.starts_with(b"\x89PNG") && existing.windows(MARK.1.len()).any(|w| w == MARK.1.as_bytes());
     if !ours {
-        bail!(
-            "{} exists and is not a screenshot of vortex-tiler view; remove it or choose another name",
-            path.display()
-        );
+        bail!("{} exists and is not a screenshot of vortex-tiler view; remove it or choose another name", path.shown());
     }
     Ok(())
 }

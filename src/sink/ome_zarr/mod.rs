@@ -27,7 +27,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 pub use meta::{PixelSize, Plane, Spec, Version};
 
 use super::TileSink;
-use crate::error::{Result, TilerError};
+use crate::error::{Result, ShowPath, TilerError};
 use crate::output::{Claim, Product, staging};
 
 /// Chunks per shard side of OME-Zarr 0.5 when not asked: with 256-texel chunks a shard is
@@ -84,13 +84,13 @@ impl OmeZarrSink {
             Product::OmeZarr => false,
             Product::Ozx => true,
             other => {
-                return Err(TilerError::Options(format!("{} was claimed for {}", claim.path.display(), other.noun())));
+                return Err(TilerError::Options(format!("{} was claimed for {}", claim.path.shown(), other.noun())));
             }
         };
         if zipped && spec.version != Version::V05 {
             return Err(TilerError::Options(format!(
                 "{}: a zipped OME-Zarr (.ozx, RFC-9) holds OME-Zarr 0.5; use --ome-zarr-version 0.5 or write a directory",
-                claim.path.display()
+                claim.path.shown()
             )));
         }
         let dest = claim.path.clone();
@@ -130,7 +130,7 @@ impl OmeZarrSink {
         if open > 0 {
             return Err(TilerError::Options(format!(
                 "internal error: {open} shard(s) of {} never completed",
-                self.dest.display()
+                self.dest.shown()
             )));
         }
         match lock(&self.zip).take() {

@@ -10,7 +10,7 @@ use std::path::Path;
 
 use super::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore};
 use super::{CellData, TileGrid, probe_stored};
-use crate::error::{Result, TilerError};
+use crate::error::{Result, ShowPath, TilerError};
 use crate::source::ImageHeader;
 use crate::viewer::dzi;
 
@@ -61,7 +61,7 @@ impl DeepZoom {
                 store.name(&level_dir),
                 format!(
                     "is missing: {} describes a {}x{} image, whose full-size tiles are level {level}",
-                    dzi_path.display(),
+                    dzi_path.shown(),
                     d.width,
                     d.height
                 ),
@@ -131,7 +131,7 @@ impl TileGrid for DeepZoom {
         format!(
             "level {} of the Deep Zoom pyramid {} ({cols}x{rows} tiles of {}, overlap {}, {})",
             self.level,
-            self.store.name(&self.dzi).display(),
+            self.store.name(&self.dzi).shown(),
             self.tile_size,
             self.overlap,
             self.format

@@ -10,7 +10,7 @@ use std::path::Path;
 
 use super::store::{Entry, Kind, MAX_DESCRIPTOR_BYTES, TileStore, join};
 use super::{CellData, TileGrid, probe_stored};
-use crate::error::{Result, TilerError};
+use crate::error::{Result, ShowPath, TilerError};
 use crate::source::ImageHeader;
 use crate::viewer::xyz::Order;
 
@@ -75,7 +75,7 @@ impl Xyz {
                 if let Some(other) = tiles.insert((x, y), path.clone()) {
                     return Err(TilerError::decode(
                         store.name(&path),
-                        format!("is the same tile (z {zoom}, x {x}, y {y}) as {}", store.name(&other).display()),
+                        format!("is the same tile (z {zoom}, x {x}, y {y}) as {}", store.name(&other).shown()),
                     ));
                 }
             }
@@ -95,7 +95,7 @@ impl Xyz {
         let too_big = || {
             TilerError::Geometry(format!(
                 "{cols}x{rows} tiles of {tw}x{th} at zoom {zoom} of {} make an image too large",
-                store.name(root).display()
+                store.name(root).shown()
             ))
         };
         let mut header = ImageHeader {
@@ -146,7 +146,7 @@ fn highest_zoom(store: &TileStore, root: &str, order: Order) -> Result<(u32, Str
             Some((bz, other)) if *bz == z => {
                 return Err(TilerError::decode(
                     store.name(&path),
-                    format!("is the same zoom level {z} as {}", store.name(other).display()),
+                    format!("is the same zoom level {z} as {}", store.name(other).shown()),
                 ));
             }
             Some((bz, _)) if *bz > z => {}
@@ -188,7 +188,7 @@ impl TileGrid for Xyz {
             "zoom {} of the {} tiles in {} ({cols}x{rows} tiles of {}x{} from x {x}, y {y})",
             self.zoom,
             self.order.pattern(),
-            self.store.name(&self.root).display(),
+            self.store.name(&self.root).shown(),
             self.cell.0,
             self.cell.1
         )

@@ -16,7 +16,7 @@ use serde_json::Value;
 
 use super::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore, join};
 use super::{CellData, TileGrid, probe_stored};
-use crate::error::{Result, TilerError};
+use crate::error::{Result, ShowPath, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::ImageHeader;
 use crate::viewer::iiif::{region_file, whole_file};
@@ -179,7 +179,7 @@ impl TileGrid for Iiif {
         format!(
             "the IIIF Image API {} tiles in {} ({cols}x{rows} tiles of {}x{}, {ext})",
             self.version,
-            self.store.name(&self.root).display(),
+            self.store.name(&self.root).shown(),
             self.cell.0,
             self.cell.1
         )

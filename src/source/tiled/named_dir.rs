@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use super::store::MAX_TILE_BYTES;
 use super::{CellData, TileGrid, probe, read_file, tile_file_cap};
-use crate::error::{Result, TilerError};
+use crate::error::{Result, ShowPath, TilerError};
 use crate::source::ImageHeader;
 use crate::tile_dir::filename::FilenameFormat;
 use crate::tile_dir::info::InfoFile;
@@ -43,7 +43,7 @@ impl NamedDir {
             if let Some(other) = cells.insert((xy[0], xy[1]), path.clone()) {
                 return Err(TilerError::decode(
                     &path,
-                    format!("has the same coordinates (x {}, y {}) as {}", xy[0], xy[1], other.display()),
+                    format!("has the same coordinates (x {}, y {}) as {}", xy[0], xy[1], other.shown()),
                 ));
             }
         }
@@ -105,7 +105,7 @@ impl TileGrid for NamedDir {
             self.cell.0,
             self.cell.1,
             self.names.as_str(),
-            self.dir.display()
+            self.dir.shown()
         )
     }
     fn header(&self) -> ImageHeader {

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use vortex_pack::{Pack, Tile, TileKind};
 
 use super::{CellData, TileGrid};
-use crate::error::{Result, TilerError};
+use crate::error::{Result, ShowPath, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::ImageHeader;
 
@@ -87,7 +87,7 @@ impl TileGrid for PackInput {
     fn describe(&self) -> String {
         format!(
             "LOD 0 of the pack {} ({}-texel payload, border {})",
-            self.pack.path().display(),
+            self.pack.path().shown(),
             self.payload,
             self.border
         )
@@ -341,7 +341,7 @@ mod tests {
             let path = tmp.path().join(format!("bad{i}.vtpk"));
             write_pack(&path, d, levels.clone(), &[((0, 0), tile)]);
             let e = read_image(&path, vec![0], false).unwrap_err().to_string();
-            let name = format!("{}:(lod 0, x 0, y 0): ", path.display());
+            let name = format!("{}:(lod 0, x 0, y 0): ", path.shown());
             assert!(e.starts_with(&name) && e.contains(expected), "{expected}: {e}");
         }
     }

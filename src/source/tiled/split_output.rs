@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use super::{CellData, TileGrid, read_file};
-use crate::error::Result;
+use crate::error::{Result, ShowPath};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::ImageHeader;
 use crate::tile_dir::TiledDir;
@@ -38,12 +38,7 @@ impl SplitOutput {
 
 impl TileGrid for SplitOutput {
     fn describe(&self) -> String {
-        format!(
-            "LOD 0 of the pyramid in {} ({}-texel payload, border {})",
-            self.dir.display(),
-            self.payload,
-            self.border
-        )
+        format!("LOD 0 of the pyramid in {} ({}-texel payload, border {})", self.dir.shown(), self.payload, self.border)
     }
     fn header(&self) -> ImageHeader {
         self.header

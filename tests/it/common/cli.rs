@@ -14,6 +14,49 @@ pub fn run(args: &[&str]) -> Output {
     cmd.output().expect("binary runs")
 }
 
+/// Runs the tool as [`run`] does and measures its peak resident set: the kernel's
+/// `ru_maxrss` of that one child (through `wait4`), in bytes. (`getrusage(RUSAGE_CHILDREN)`
+/// would give the largest of every child this test process ever waited for.)
+#[expect(unsafe_code, reason = "wait4, the kernel's account of one child's peak memory")]
+pub fn run_measuring_rss(args: &[&str]) -> (Output, u64) {
+    use std::io::Read;
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::Stdio;
+    let mut cmd = Command::new(BIN);
+    cmd.args(args).env("NO_COLOR", "1").stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped());
+    let mut child = cmd.spawn().expect("binary runs");
+    let drain = |mut pipe: Box<dyn Read + Send>| {
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            pipe.read_to_end(&mut bytes).map(|_| bytes)
+        })
+    };
+    let stdout = drain(Box::new(child.stdout.take().expect("piped")));
+    let stderr = drain(Box::new(child.stderr.take().expect("piped")));
+    let pid = child.id() as libc::pid_t;
+    let mut status = 0;
+    let usage = loop {
+        // SAFETY: an all-zero `rusage` is a valid value of the plain C struct wait4 fills.
+        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+        // SAFETY: `status` and `usage` are valid and writable; `pid` is our own child, which
+        // nothing else waits for (`child` is never waited on: it is dropped below).
+        let waited = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+        if waited == pid {
+            break usage;
+        }
+        let e = std::io::Error::last_os_error();
+        assert_eq!(e.kind(), std::io::ErrorKind::Interrupted, "wait4: {e}");
+    };
+    drop(child);
+    let output = Output {
+        status: std::process::ExitStatus::from_raw(status),
+        stdout: stdout.join().expect("stdout reader").expect("stdout"),
+        stderr: stderr.join().expect("stderr reader").expect("stderr"),
+    };
+    // Linux counts ru_maxrss in KiB.
+    (output, usage.ru_maxrss as u64 * 1024)
+}
+
 /// A run that must succeed; its standard output.
 pub fn ok(args: &[&str]) -> String {
     let out = run(args);

@@ -26,11 +26,46 @@ pub fn nginx_binary() -> Result<PathBuf, String> {
         .ok_or_else(|| "no nginx (apt-get install nginx-light)".to_string())
 }
 
+/// Tries with a new port when the one found free was taken before nginx bound it.
+const PORT_ATTEMPTS: u32 = 8;
+
+/// The path that answers with this server's own token, so that a readiness check cannot be
+/// answered by another server that took the port.
+const WHOAMI: &str = "/.vortex-whoami";
+
 impl Nginx {
-    /// Serves `root` at `/` and every `(prefix, dir)` of `aliases` at `/prefix/`.
+    /// Serves `root` at `/` and every `(prefix, dir)` of `aliases` at `/prefix/`. A port is
+    /// found free and then released before nginx binds it, so another process may take it in
+    /// between: nginx then exits with "Address already in use" and another port is tried (at
+    /// most [`PORT_ATTEMPTS`]); and the server is taken as started only once the port answers
+    /// [`WHOAMI`] with this instance's token, never because something answers there.
     pub fn start(binary: &Path, root: &Path, aliases: &[(&str, &Path)]) -> Nginx {
+        let free = || TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        Nginx::start_on(binary, root, aliases, std::iter::repeat_with(free))
+    }
+
+    /// [`Nginx::start`] trying `ports` in turn (the first [`PORT_ATTEMPTS`] of them).
+    pub fn start_on(
+        binary: &Path,
+        root: &Path,
+        aliases: &[(&str, &Path)],
+        ports: impl IntoIterator<Item = u16>,
+    ) -> Nginx {
+        let mut last = String::new();
+        for port in ports.into_iter().take(PORT_ATTEMPTS as usize) {
+            match Nginx::try_start(binary, root, aliases, port) {
+                Ok(nginx) => return nginx,
+                Err(log) if log.contains("Address already in use") => last = log,
+                Err(log) => panic!("nginx exited: {log}"),
+            }
+        }
+        panic!("nginx found every port taken ({PORT_ATTEMPTS} tries); the last: {last}");
+    }
+
+    /// nginx on `port`; its error log if it exits before it serves.
+    fn try_start(binary: &Path, root: &Path, aliases: &[(&str, &Path)], port: u16) -> Result<Nginx, String> {
         let dir = tempfile::tempdir().unwrap();
-        let port = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        let token = format!("vortex-nginx {} {}", std::process::id(), dir.path().display());
         let d = dir.path().display();
         let locations: String = aliases
             .iter()
@@ -59,6 +94,7 @@ http {{
     listen 127.0.0.1:{port};
     root {root};
     add_header Cache-Control no-store;
+    location = {WHOAMI} {{ access_log off; default_type text/plain; return 200 "{token}"; }}
 {locations}  }}
 }}
 "#,
@@ -77,15 +113,33 @@ http {{
             .spawn()
             .expect("nginx starts");
         let mut nginx = Nginx { child, port, dir };
+        // A fail-safe against an nginx that neither serves nor exits, not a timing.
         let deadline = Instant::now() + Duration::from_secs(20);
-        while TcpStream::connect(("127.0.0.1", port)).is_err() {
+        while !nginx.answers(&token) {
             if let Ok(Some(status)) = nginx.child.try_wait() {
-                panic!("nginx exited ({status}): {}", nginx.error_log());
+                return Err(format!("nginx exited ({status}) on port {port}: {}", nginx.error_log()));
             }
-            assert!(Instant::now() < deadline, "nginx did not listen on port {port}: {}", nginx.error_log());
+            assert!(Instant::now() < deadline, "nginx did not serve on port {port}: {}", nginx.error_log());
             std::thread::sleep(Duration::from_millis(50));
         }
-        nginx
+        Ok(nginx)
+    }
+
+    /// Whether this server's port answers [`WHOAMI`] with `token`.
+    fn answers(&self, token: &str) -> bool {
+        use std::io::{Read, Write};
+        let Ok(mut stream) = TcpStream::connect(("127.0.0.1", self.port)) else { return false };
+        // Something else holding the port may accept and never answer: give up on it then (the
+        // caller asks again, or finds that nginx exited).
+        if stream.set_read_timeout(Some(Duration::from_secs(2))).is_err() {
+            return false;
+        }
+        let mut reply = Vec::new();
+        let asked = write!(stream, "GET {WHOAMI} HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n");
+        asked.is_ok()
+            && stream.read_to_end(&mut reply).is_ok()
+            && reply.starts_with(b"HTTP/1.1 200")
+            && reply.ends_with(token.as_bytes())
     }
 
     pub fn url(&self) -> String {

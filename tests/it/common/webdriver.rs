@@ -3,7 +3,7 @@
 //! done instead of guessing a time (headless `--screenshot` races with tile loading).
 
 use std::io::{Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpStream;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -20,6 +20,32 @@ pub struct Browser {
     session: String,
 }
 
+/// The port chromedriver says it listens on, read from its standard output (which is then
+/// drained on a thread, so the driver never blocks on a full pipe); what it said instead when
+/// it exits without, or says nothing for two minutes (a fail-safe, not a timing).
+fn listening_port(stdout: std::process::ChildStdout) -> Result<u16, String> {
+    use std::io::BufRead;
+    let (tell, told) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut said = String::new();
+        let mut lines = std::io::BufReader::new(stdout).lines();
+        for line in lines.by_ref().map_while(Result::ok) {
+            let port = line
+                .strip_prefix("ChromeDriver was started successfully on port ")
+                .and_then(|rest| rest.trim_end_matches('.').parse::<u16>().ok());
+            if let Some(port) = port {
+                let _ = tell.send(Ok(port));
+                lines.for_each(drop);
+                return;
+            }
+            said += &line;
+            said.push('\n');
+        }
+        let _ = tell.send(Err(said));
+    });
+    told.recv_timeout(Duration::from_secs(120)).unwrap_or_else(|_| Err("nothing for two minutes".into()))
+}
+
 impl Browser {
     /// Starts `chromedriver` and a headless `chromium` of `width x height` CSS pixels.
     pub fn start(chromedriver: &Path, chromium: &Path, size: (u32, u32)) -> Browser {
@@ -28,19 +54,24 @@ impl Browser {
 
     /// [`Browser::start`] with `flags` (e.g. WebGPU's) in place of `--disable-gpu`.
     pub fn start_with(chromedriver: &Path, chromium: &Path, (width, height): (u32, u32), flags: &[&str]) -> Browser {
-        let port = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
-        let driver = Command::new(chromedriver)
-            .arg(format!("--port={port}"))
-            .stdout(Stdio::null())
+        // Port 0: chromedriver binds a port the kernel picks and says which ("ChromeDriver
+        // was started successfully on port N."), so no port is found free and released first,
+        // for another process to take in between.
+        let mut driver = Command::new(chromedriver)
+            .arg("--port=0")
+            .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
             .expect("chromedriver starts");
+        let port = match listening_port(driver.stdout.take().expect("piped")) {
+            Ok(port) => port,
+            Err(said) => {
+                let _ = driver.kill();
+                let _ = driver.wait();
+                panic!("chromedriver did not start: {said}");
+            }
+        };
         let mut browser = Browser { driver, port, session: String::new() };
-        let deadline = Instant::now() + Duration::from_secs(20);
-        while TcpStream::connect(("127.0.0.1", port)).is_err() {
-            assert!(Instant::now() < deadline, "chromedriver did not listen on port {port}");
-            std::thread::sleep(Duration::from_millis(50));
-        }
         let mut args = vec![
             "--headless=new".to_string(),
             "--no-sandbox".into(),

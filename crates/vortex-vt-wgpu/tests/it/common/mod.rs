@@ -27,6 +27,22 @@ impl log::Log for StderrLogger {
 
 static SETUP: Once = Once::new();
 
+/// Whether this run is CI's (`CI=true`), where every outside part is installed and a test that
+/// lacks one fails rather than skips.
+pub fn under_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true")
+}
+
+/// Outside CI a test that lacks something (a feature of the adapter, a driver) skips with a
+/// note on stderr; under `CI=true` it fails instead, saying what was missing. (The tiler's own
+/// tests have the same rule in `tests/it/common`.)
+pub fn skip_unless_ci(what: &str, why: &str) {
+    assert!(!under_ci(), "CI=true and {why}");
+    // Straight to stderr, past the harness's capture, so the skip shows in a passing run.
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "note: skipping {what} (set CI=true to fail instead): {why}");
+}
+
 /// The device for one test, or `None` (with a note) when there is no adapter outside CI.
 #[expect(unsafe_code, reason = "pinning the Vulkan driver sets environment variables")]
 pub fn gpu() -> Option<Gpu> {
@@ -41,11 +57,8 @@ pub fn gpu() -> Option<Gpu> {
     });
     match Gpu::headless(1024) {
         Ok(gpu) => Some(gpu),
-        Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => panic!("CI=true and no GPU device: {e}"),
         Err(e) => {
-            // Straight to stderr, past the harness's capture, so the skip shows in a passing run.
-            use std::io::Write;
-            let _ = writeln!(std::io::stderr(), "note: skipping a GPU test (set CI=true to fail instead): {e}");
+            skip_unless_ci("a GPU test", &format!("no GPU device: {e}"));
             None
         }
     }
