@@ -348,7 +348,7 @@ mod tests {
         raw.extend([0, 0, 0, 16, 0, 0, 0, 16, 0, 0, 0, 0, 0, 0, 0, 0, 0, 3]);
         raw.extend([7, 1, 1, 7, 1, 1, 7, 1, 1]);
         raw.extend([0xAB; 64]);
-        let e = decode_codestream(&raw).err().expect("not decodable");
+        let e = decode_codestream(&raw).expect_err("not decodable");
         assert!(!e.contains("Null pointer"), "{e}");
         assert!(e.contains("OpenJPEG could not decode it") || e.starts_with("corrupt JPEG 2000 data"), "{e}");
     }
