@@ -344,3 +344,27 @@ fn a_zip_tile_past_its_size_is_refused_unread() {
     // The binary alone stays under 64 MiB; the tile's first MiB is what is read of it.
     assert!(peak < 96.0, "peak RSS {peak:.1} MiB");
 }
+
+/// A damaged strip of a JPEG TIFF is named with its own first row, not the first row of the
+/// group of strips decoded with it (issue 41: strip 5 of 32 rows was reported at row 0).
+#[test]
+fn a_damaged_jpeg_strip_is_named_at_its_own_row() {
+    let Some(python) = crate::tiff_slides::venv_python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bad.tif");
+    let script = r#"
+import sys
+import numpy as np, tifffile
+a = (np.random.RandomState(1).rand(256, 64, 3) * 255).astype("uint8")
+tifffile.imwrite(sys.argv[1], a, photometric="rgb", compression="jpeg", rowsperstrip=32)
+page = tifffile.TiffFile(sys.argv[1]).pages[0]
+o, n = page.dataoffsets[5], page.databytecounts[5]
+b = bytearray(open(sys.argv[1], "rb").read())
+for i in range(o + n // 2, o + n - 2):
+    b[i] = 0xFF if i % 2 == 0 else 0xD9
+open(sys.argv[1], "wb").write(bytes(b))
+"#;
+    crate::tiff_slides::python(&python, script, &[s(&input)]);
+    let out = run(&["split", s(&input), "-o", s(&dir.path().join("out")), "--tile-size", "64"]);
+    fails_with(&out, &["bad.tif", "row 160: JPEG strip 5"]);
+}

@@ -252,7 +252,8 @@ impl JpegTiff {
     }
 
     /// Decodes the band holding image row `y`: its chunks under the columns read, in parallel.
-    fn load_band(&mut self, y: u64) -> std::result::Result<(), String> {
+    /// A chunk that fails is reported with its own first row, not the band's.
+    fn load_band(&mut self, y: u64) -> std::result::Result<(), (u64, String)> {
         let band_h = self.chunk_h as u64 * self.group as u64;
         let first = y / band_h * band_h;
         let first_chunk_row = (first / self.chunk_h as u64) as u32;
@@ -271,7 +272,8 @@ impl JpegTiff {
                 texels.clear();
                 return Ok(());
             }
-            this.decode_chunk(first_chunk_row + r, c, texels)
+            let row = first_chunk_row + r;
+            this.decode_chunk(row, c, texels).map_err(|m| (row as u64 * this.chunk_h as u64, m))
         });
         self.band = band;
         result?;
@@ -333,10 +335,10 @@ impl RowSource for JpegTiff {
         }
         let loaded = self.band_first..self.band_first + self.band_rows;
         if !loaded.contains(&y)
-            && let Err(message) = self.load_band(y)
+            && let Err((row, message)) = self.load_band(y)
         {
             self.failed = true;
-            return Err(TilerError::DecodeRow { path: self.chunks.path.clone(), row: y, message });
+            return Err(TilerError::DecodeRow { path: self.chunks.path.clone(), row, message });
         }
         // The row's part of each chunk under the columns.
         let within = y - self.band_first;
