@@ -15,7 +15,7 @@ use crate::error::{Result, TilerError};
 /// Profile bytes one APP2 segment holds: 65535 less the length field and the 14-byte header.
 const APP2_CHUNK: usize = 65_519;
 
-/// The most profile bytes a JPEG holds: 255 numbered APP2 segments of [`APP2_CHUNK`] bytes.
+/// The most profile bytes a JPEG holds: 255 numbered APP2 segments of `APP2_CHUNK` (65519) bytes.
 pub const MAX_JPEG_PROFILE: usize = 255 * APP2_CHUNK;
 
 /// A profile ready to splice into the tiles of one codec: the JPEG tiles' APP2 segments or the

@@ -24,7 +24,7 @@ pub const DEFAULT_CMYK_PROFILE: &str = "/usr/share/color/icc/ghostscript/default
 /// (255 APP2 chunks of 65519 bytes: 16,707,345 bytes); real profiles are a few hundred bytes to
 /// a few MiB. The cap is the same for every `--max-memory`, so whether a profile is honoured
 /// never depends on the budget; a profile held also counts against `--max-memory`
-/// ([`Described`]).
+/// (`Described`).
 pub const MAX_PROFILE_BYTES: u64 = 16 << 20;
 
 /// The error for an embedded profile (`whence`: where the file keeps it) of `bytes` bytes

@@ -132,7 +132,7 @@ impl Pack {
     }
 
     /// For `verify` alone: maps `path` and checks it as [`Pack::open_with_limits`] does, but for
-    /// the level table's and index's checksum, which [`verify`](crate::verify) then reports
+    /// the level table's and index's checksum, which [`verify`](crate::verify()) then reports
     /// among every other problem (an entry pointing outside the data section, payloads that
     /// fail their checksum...) instead of the open failing on it alone. Entries are still
     /// checked for sense as each is used, but nothing vouches for them: a reader that draws,
