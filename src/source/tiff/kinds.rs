@@ -54,8 +54,10 @@ pub(super) fn handles(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Re
     let samples = tag(decoder, Tag::SamplesPerPixel)?.unwrap_or(1);
     let extra: Vec<u16> =
         decoder.find_tag_unsigned_vec(Tag::ExtraSamples).map_err(|e| open_error(path, e))?.unwrap_or_default();
-    let kept = 3 + matches!(extra.first(), Some(1 | 2)) as u16;
-    let rgb_dropping = photometric == Some(2) && samples > kept;
+    // Four RGB samples with no ExtraSamples tag at all (as the `image` and `tiff` crates write
+    // RGBA) are RGBA, as libtiff takes them; an explicit 0 (unspecified) is not an alpha.
+    let alpha = matches!(extra.first(), Some(1 | 2)) || (extra.is_empty() && samples == 4);
+    let rgb_dropping = photometric == Some(2) && samples > 3 + alpha as u16;
     // LZW tiles: the crate wants an end code that libtiff and tifffile do not (a tile's rows
     // complete, libtiff stops); our decoder stops there too.
     let lzw_tiles = compression == 5 && decoder.get_chunk_type() == ChunkType::Tile;
