@@ -3,51 +3,21 @@
 //! says what it is refused with, or what the summary says, and where memory is the point, the
 //! peak resident memory of the run as the kernel counts it.
 
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 
 use tiff::encoder::{TiffEncoder, colortype};
 use tiff::tags::Tag;
 use vortex_tiler::source::channels::ChannelSet;
 use vortex_tiler::source::{self, OpenOptions, Pick};
 
-use crate::common::cli::{BIN, fails_with, run, s};
+use crate::common::cli::{fails_with, run, s};
 
-/// Runs the binary with `args`; its output and its peak resident memory in MiB (`ru_maxrss` of
-/// this one child, from `wait4`).
-#[expect(unsafe_code, reason = "wait4, the kernel's resource count of one child")]
+/// Runs the binary with `args`; its output and its peak resident memory in MiB (see
+/// [`crate::common::cli::run_measuring_rss`]).
 fn run_measured(args: &[&str]) -> (std::process::Output, f64) {
-    let mut child = Command::new(BIN)
-        .args(args)
-        .env("NO_COLOR", "1")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("binary runs");
-    let (mut out, mut err) = (child.stdout.take().unwrap(), child.stderr.take().unwrap());
-    let stdout = std::thread::spawn(move || {
-        let mut v = Vec::new();
-        out.read_to_end(&mut v).unwrap();
-        v
-    });
-    let stderr = std::thread::spawn(move || {
-        let mut v = Vec::new();
-        err.read_to_end(&mut v).unwrap();
-        v
-    });
-    let pid = child.id() as libc::pid_t;
-    let mut status = 0;
-    // SAFETY: an all-zero `rusage` is a valid value of the plain C struct the call fills.
-    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-    // SAFETY: `pid` is our child, not yet waited for; `status` and `usage` are valid and writable.
-    let waited = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
-    assert_eq!(waited, pid, "wait4");
-    // The child is reaped: `Child` must not wait for it again (its drop does not).
-    std::mem::forget(child);
-    let status = std::os::unix::process::ExitStatusExt::from_raw(status);
-    let output = std::process::Output { status, stdout: stdout.join().unwrap(), stderr: stderr.join().unwrap() };
-    (output, usage.ru_maxrss as f64 / 1024.0)
+    let (out, bytes) = crate::common::cli::run_measuring_rss(args);
+    (out, bytes as f64 / (1 << 20) as f64)
 }
 
 /// A PNG of `w x h` grey texels with `chunk` (type and data) spliced in after IHDR.

@@ -141,6 +141,9 @@ try {
 }
 server.closeAllConnections?.();
 server.close();
-const maxRssKiB = process.resourceUsage().maxRSS;
+// The peak of this process's own memory (VmHWM), not ru_maxrss: Linux carries into ru_maxrss
+// the memory of the test process that forked node before its exec.
+const hwm = /VmHWM:\s+(\d+) kB/.exec(readFileSync("/proc/self/status", "utf8"));
+const maxRssKiB = hwm ? Number(hwm[1]) : process.resourceUsage().maxRSS;
 console.log(JSON.stringify({ name, ...result, served, maxRssKiB, seen }));
 process.exit(0);

@@ -17,44 +17,35 @@ pub fn run(args: &[&str]) -> Output {
 /// Runs the tool as [`run`] does and measures its peak resident set: the kernel's
 /// `ru_maxrss` of that one child (through `wait4`), in bytes. (`getrusage(RUSAGE_CHILDREN)`
 /// would give the largest of every child this test process ever waited for.)
-#[expect(unsafe_code, reason = "wait4, the kernel's account of one child's peak memory")]
 pub fn run_measuring_rss(args: &[&str]) -> (Output, u64) {
-    use std::io::Read;
-    use std::os::unix::process::ExitStatusExt;
-    use std::process::Stdio;
-    let mut cmd = Command::new(BIN);
-    cmd.args(args).env("NO_COLOR", "1").stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped());
-    let mut child = cmd.spawn().expect("binary runs");
-    let drain = |mut pipe: Box<dyn Read + Send>| {
-        std::thread::spawn(move || {
-            let mut bytes = Vec::new();
-            pipe.read_to_end(&mut bytes).map(|_| bytes)
-        })
-    };
-    let stdout = drain(Box::new(child.stdout.take().expect("piped")));
-    let stderr = drain(Box::new(child.stderr.take().expect("piped")));
-    let pid = child.id() as libc::pid_t;
-    let mut status = 0;
-    let usage = loop {
-        // SAFETY: an all-zero `rusage` is a valid value of the plain C struct wait4 fills.
-        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-        // SAFETY: `status` and `usage` are valid and writable; `pid` is our own child, which
-        // nothing else waits for (`child` is never waited on: it is dropped below).
-        let waited = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
-        if waited == pid {
-            break usage;
-        }
-        let e = std::io::Error::last_os_error();
-        assert_eq!(e.kind(), std::io::ErrorKind::Interrupted, "wait4: {e}");
-    };
-    drop(child);
-    let output = Output {
-        status: std::process::ExitStatus::from_raw(status),
-        stdout: stdout.join().expect("stdout reader").expect("stdout"),
-        stderr: stderr.join().expect("stderr reader").expect("stderr"),
-    };
+    // Measured through a small launcher, not as our own child: Linux carries the larger of a
+    // process's peak and the peak of the memory it had before `exec` into `ru_maxrss`, and a
+    // child forked from this test process (hundreds of MiB while the suite runs in parallel)
+    // would report this process's size. The launcher is small when it forks the binary.
+    const LAUNCH: &str = "import os, sys\n\
+        pid = os.fork()\n\
+        if pid == 0:\n    os.execv(sys.argv[2], sys.argv[2:])\n\
+        _, status, usage = os.wait4(pid, 0)\n\
+        open(sys.argv[1], 'w').write(str(usage.ru_maxrss))\n\
+        sys.exit(os.waitstatus_to_exitcode(status) % 256 if os.WIFEXITED(status) else 128 + os.WTERMSIG(status))\n";
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let report = dir.path().join("maxrss");
+    let output = Command::new("python3")
+        .args(["-c", LAUNCH])
+        .arg(&report)
+        .arg(BIN)
+        .args(args)
+        .env("NO_COLOR", "1")
+        .stdin(std::process::Stdio::null())
+        .output()
+        .expect("python3 runs the binary");
+    let kib: u64 = std::fs::read_to_string(&report)
+        .unwrap_or_else(|e| panic!("no peak from the launcher ({e}): {}", String::from_utf8_lossy(&output.stderr)))
+        .trim()
+        .parse()
+        .expect("a number of KiB");
     // Linux counts ru_maxrss in KiB.
-    (output, usage.ru_maxrss as u64 * 1024)
+    (output, kib * 1024)
 }
 
 /// A run that must succeed; its standard output.
