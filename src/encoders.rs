@@ -25,7 +25,7 @@ use crate::limits::in_flight::{GATHER_MOST, LOTS_IN_FLIGHT};
 use crate::limits::{Gauge, Part};
 use crate::pixel::Sample;
 use crate::pyramid::cascade::{Batch, CutTile};
-use crate::sink::TileSink;
+use crate::sink::Target;
 use crate::source::stored::{StoredTiles, crop};
 use crate::stages::{Stage, StageClock};
 use crate::viewer::Crop;
@@ -36,14 +36,20 @@ fn gather_target() -> usize {
 }
 
 /// What the stage counts: tiles encoded, tiles copied from the source (some cropped), tiles
-/// stored (places).
-#[derive(Default)]
+/// stored (places) into each target.
 pub(crate) struct Counts {
     pub encoded: AtomicU64,
     pub copied: AtomicU64,
     /// Of the copied tiles, those cropped at the image's edge.
     pub cropped: AtomicU64,
-    pub tiles: AtomicU64,
+    pub tiles: Vec<AtomicU64>,
+}
+
+impl Counts {
+    pub fn new(targets: usize) -> Counts {
+        let zero = AtomicU64::default;
+        Counts { encoded: zero(), copied: zero(), cropped: zero(), tiles: (0..targets).map(|_| zero()).collect() }
+    }
 }
 
 /// The finest level's pages that are a stored tile of the source, texel for texel: same grid,
@@ -70,11 +76,11 @@ impl Copier {
     /// Page (`x`, `y`) of the finest level, kept as `crop`, as a file made from the stored
     /// tile; `None` where the stored tile cannot be copied, or not cropped to exactly the texels
     /// the run decoded ([`crop::exact`]).
-    fn file(&self, (x, y): (u32, u32), crop: Option<Crop>) -> Result<Option<Stored>> {
+    fn file(&self, (x, y): (u32, u32), crop: Option<Crop>) -> Result<Option<File>> {
         let Some(file) = self.tiles.jpeg(x, y)? else { return Ok(None) };
         let size = crop.map_or((self.side, self.side), |c| (c.width, c.height));
         if size == (self.side, self.side) {
-            return Ok(Some(Stored::Copied(file)));
+            return Ok(Some(File::Copied(file)));
         }
         if !crate::source::stored::read_header(&file).is_some_and(|h| crop::exact(&h, (self.side, self.side), size)) {
             return Ok(None);
@@ -85,7 +91,7 @@ impl Copier {
             y,
             message: format!("cropping the stored JPEG tile: {m}"),
         })?;
-        Ok(Some(Stored::Cropped(cropped)))
+        Ok(Some(File::Cropped(cropped)))
     }
 }
 
@@ -93,7 +99,7 @@ impl Copier {
 pub(crate) fn consume<T: Sample>(
     rx: Receiver<Result<Batch<T>>>,
     encoder: &TileEncoder<T>,
-    sink: &dyn TileSink,
+    targets: &[Target],
     counts: &Counts,
     copier: Option<&Copier>,
     progress: &dyn Progress,
@@ -101,7 +107,7 @@ pub(crate) fn consume<T: Sample>(
 ) -> Result<()> {
     let busy = Busy::default();
     let memory = &clock.memory;
-    let stage = Encoding { encoder, sink, counts, copier, progress, busy: &busy, memory };
+    let stage = Encoding { encoder, targets, counts, copier, progress, busy: &busy, memory };
     // The writer waits for each lot in turn and frees its place once it is stored; a lot is
     // received only into a free place, so the writer's queue never fills.
     let (to_writer, lots) = sync_channel::<Arc<Lot<T>>>(LOTS_IN_FLIGHT);
@@ -115,13 +121,13 @@ pub(crate) fn consume<T: Sample>(
             let free_place = free_place;
             for lot in lots {
                 let results = lot.wait();
-                // Only an ordered sink has anything left to store; every other one stored its
+                // Only ordered sinks have anything left to store; every other one stored its
                 // tiles as they were encoded.
                 clock.time(Stage::Store, || {
                     results.into_iter().zip(&lot.jobs).try_for_each(|(result, job)| match result? {
                         Some(stored) => {
                             memory.add(Part::Encoded, -(stored.bytes() as i64));
-                            stage.store(job.lod, &job.places, &stored)
+                            stage.store(job, &stored, true)
                         }
                         None => Ok(()),
                     })
@@ -149,7 +155,7 @@ pub(crate) fn consume<T: Sample>(
                 if progress.cancelled() {
                     return Err(TilerError::Interrupted);
                 }
-                let lot = Arc::new(Lot::of(gather(first?, &rx)?, sink, copier));
+                let lot = Arc::new(Lot::of(gather(first?, &rx)?, targets, copier));
                 for k in 0..lot.jobs.len() {
                     let lot = Arc::clone(&lot);
                     let stage = &stage;
@@ -213,7 +219,7 @@ fn gather<T>(first: Batch<T>, rx: &Receiver<Result<Batch<T>>>) -> Result<Vec<Bat
 /// What every encoding task needs.
 struct Encoding<'a, T> {
     encoder: &'a TileEncoder<T>,
-    sink: &'a dyn TileSink,
+    targets: &'a [Target<'a>],
     counts: &'a Counts,
     copier: Option<&'a Copier>,
     progress: &'a dyn Progress,
@@ -222,44 +228,53 @@ struct Encoding<'a, T> {
 }
 
 impl<T: Sample> Encoding<'_, T> {
-    /// Encodes one job; stores it too unless the sink is ordered, whose writer stores it.
+    /// Encodes one job and stores it into the sinks that take tiles in any order; what the
+    /// ordered ones (a pack) need is left for the writer, which stores it in the lot's order.
     fn run(&self, job: &Job<T>) -> JobResult {
         let _busy = self.busy.start();
         let texels = job.take_texels()?;
-        let stored = prepare(self.encoder, self.sink, job, &texels, self.copier)?;
+        let stored = prepare(self.encoder, self.targets, job, &texels, self.copier)?;
         // The last job of a tile frees its texels here, not when the writer stores the lot.
         if let Some(texels) = Arc::into_inner(texels) {
             self.memory.add(Part::Tiles, -((texels.capacity() * size_of::<T>()) as i64));
         }
-        match stored {
-            Stored::Encoded(_) => self.counts.encoded.fetch_add(1, Ordering::Relaxed),
-            Stored::Copied(_) => self.counts.copied.fetch_add(1, Ordering::Relaxed),
-            Stored::Cropped(_) => {
+        match stored.file {
+            Some(File::Encoded(_)) => self.counts.encoded.fetch_add(1, Ordering::Relaxed),
+            Some(File::Copied(_)) => self.counts.copied.fetch_add(1, Ordering::Relaxed),
+            Some(File::Cropped(_)) => {
                 self.counts.cropped.fetch_add(1, Ordering::Relaxed);
                 self.counts.copied.fetch_add(1, Ordering::Relaxed)
             }
-            Stored::Constant(_) => 0,
+            None => 0,
         };
-        if self.sink.ordered() {
+        self.store(job, &stored, false)?;
+        if job.places.iter().any(|&(t, _)| self.targets[t].sink.ordered()) {
             self.memory.add(Part::Encoded, stored.bytes() as i64);
             return Ok(Some(stored));
         }
-        self.store(job.lod, &job.places, &stored)?;
         Ok(None)
     }
 
-    /// Writes a prepared tile of `lod` to every place that gets it.
-    fn store(&self, lod: u32, places: &[(u32, u32)], stored: &Stored) -> Result<()> {
-        for &(x, y) in places {
-            match stored {
-                Stored::Encoded(bytes) | Stored::Copied(bytes) | Stored::Cropped(bytes) => {
-                    self.sink.write_tile(lod, x, y, bytes)?
-                }
-                Stored::Constant(texel) => self.sink.write_constant(lod, x, y, texel)?,
+    /// Writes a prepared tile to every place of the ordered sinks (`ordered`) or of the others
+    /// that gets it: as its one colour where the sink takes that, else as the file.
+    fn store(&self, job: &Job<T>, stored: &Stored, ordered: bool) -> Result<()> {
+        let mut count = 0;
+        for &(t, (x, y)) in &job.places {
+            let sink = self.targets[t].sink;
+            if sink.ordered() != ordered {
+                continue;
             }
+            match (&stored.constant, &stored.file) {
+                (Some(texel), _) if sink.takes_constants() => sink.write_constant(job.lod, x, y, texel)?,
+                (_, Some(File::Encoded(bytes) | File::Copied(bytes) | File::Cropped(bytes))) => {
+                    sink.write_tile(job.lod, x, y, bytes)?
+                }
+                (_, None) => return Err(TilerError::Options("a tile was prepared without its file".into())),
+            }
+            self.counts.tiles[t].fetch_add(1, Ordering::Relaxed);
+            count += 1;
         }
-        self.counts.tiles.fetch_add(places.len() as u64, Ordering::Relaxed);
-        self.progress.advance(places.len() as u64);
+        self.progress.advance(count);
         Ok(())
     }
 }
@@ -276,10 +291,10 @@ struct Lot<T> {
 }
 
 impl<T> Lot<T> {
-    fn of(batches: Vec<Batch<T>>, sink: &dyn TileSink, copier: Option<&Copier>) -> Lot<T> {
+    fn of(batches: Vec<Batch<T>>, targets: &[Target], copier: Option<&Copier>) -> Lot<T> {
         let jobs: Vec<Job<T>> = batches
             .into_iter()
-            .flat_map(|batch| batch.tiles.into_iter().flat_map(move |tile| Job::of(sink, copier, batch.lod, tile)))
+            .flat_map(|batch| batch.tiles.into_iter().flat_map(move |tile| Job::of(targets, copier, batch.lod, tile)))
             .collect();
         let finished = Mutex::new(((0..jobs.len()).map(|_| None).collect(), jobs.len()));
         Lot { jobs, finished, done: Condvar::new() }
@@ -305,15 +320,15 @@ impl<T> Lot<T> {
     }
 }
 
-/// One encoding: a cut tile's texels, the part of them the sink keeps, and the places that
-/// get it.
+/// One encoding: a cut tile's texels, the part of them the sinks keep, and the places that
+/// get it (each a target's index and a page).
 struct Job<T> {
     lod: u32,
     crop: Option<Crop>,
-    /// One place whose source tile is copied rather than encoded (pages identical at the cut
-    /// may have different stored bytes, so each place is a job of its own).
+    /// One page whose source tile is copied rather than encoded (pages identical at the cut
+    /// may have different stored bytes, so each page is a job of its own).
     copy: bool,
-    places: Vec<(u32, u32)>,
+    places: Vec<(usize, (u32, u32))>,
     /// Until the encoding takes them: the texels are freed as soon as every encoding of the
     /// tile is done, not kept until the writer has stored the whole lot, so that a row of
     /// tiles less is held at once (issue 28).
@@ -321,23 +336,28 @@ struct Job<T> {
 }
 
 impl<T> Job<T> {
-    /// The encodings a cut tile needs: one, unless the sink crops its places differently
-    /// (identical pages merged at the cut may sit at a viewer tile's edge and in the middle).
-    fn of(sink: &dyn TileSink, copier: Option<&Copier>, lod: u32, cut: CutTile<T>) -> Vec<Job<T>> {
+    /// The encodings a cut tile needs: one for every distinct crop the targets keep of its
+    /// places (identical pages merged at the cut may sit at a viewer tile's edge and in the
+    /// middle; Deep Zoom crops an edge page that a pack keeps whole), and one per copied page.
+    /// Targets past their last level get nothing.
+    fn of(targets: &[Target], copier: Option<&Copier>, lod: u32, cut: CutTile<T>) -> Vec<Job<T>> {
         let texels = Arc::new(cut.texels);
         let mut jobs: Vec<Job<T>> = Vec::new();
-        for place in cut.places {
-            let crop = sink.crop(lod, place.0, place.1);
-            let copy = copier.is_some_and(|c| c.covers(lod, place, crop));
-            match jobs.iter_mut().find(|j| j.crop == crop && !copy && !j.copy) {
-                Some(job) => job.places.push(place),
-                None => jobs.push(Job {
-                    lod,
-                    crop,
-                    copy,
-                    places: vec![place],
-                    texels: Mutex::new(Some(Arc::clone(&texels))),
-                }),
+        for page in cut.places {
+            for (t, target) in targets.iter().enumerate().filter(|(_, target)| lod < target.lods) {
+                let crop = target.sink.crop(lod, page.0, page.1);
+                let copy = copier.is_some_and(|c| c.covers(lod, page, crop));
+                let same = |j: &&mut Job<T>| j.crop == crop && j.copy == copy && (!copy || j.places[0].1 == page);
+                match jobs.iter_mut().find(same) {
+                    Some(job) => job.places.push((t, page)),
+                    None => jobs.push(Job {
+                        lod,
+                        crop,
+                        copy,
+                        places: vec![(t, page)],
+                        texels: Mutex::new(Some(Arc::clone(&texels))),
+                    }),
+                }
             }
         }
         jobs
@@ -350,48 +370,58 @@ impl<T> Job<T> {
     }
 }
 
-/// A tile ready for the sink.
-enum Stored {
+/// A tile ready for the sinks: its one colour for those that store such tiles as their colour,
+/// its file for the others.
+struct Stored {
+    /// Every texel is this one (stored layout, little-endian samples).
+    constant: Option<Vec<u8>>,
+    file: Option<File>,
+}
+
+/// A tile's file.
+enum File {
     Encoded(Vec<u8>),
     /// The source's stored tile, as a file.
     Copied(Vec<u8>),
     /// The source's stored tile cropped losslessly to the part of an edge page the sink keeps.
     Cropped(Vec<u8>),
-    /// Every texel is this one (stored layout, little-endian samples).
-    Constant(Vec<u8>),
 }
 
 impl Stored {
     /// Bytes held until the writer stores it.
     fn bytes(&self) -> usize {
-        match self {
-            Stored::Encoded(b) | Stored::Copied(b) | Stored::Cropped(b) | Stored::Constant(b) => b.capacity(),
-        }
+        let file = match &self.file {
+            Some(File::Encoded(b) | File::Copied(b) | File::Cropped(b)) => b.capacity(),
+            None => 0,
+        };
+        file + self.constant.as_ref().map_or(0, Vec::capacity)
     }
 }
 
-/// Encodes a tile (or the part the sink keeps), unless it has one colour and the sink stores
-/// such tiles as their colour, or it is copied from the source as stored.
+/// Encodes a tile (or the part the sinks keep), unless it has one colour and every sink that
+/// gets it stores such tiles as their colour, or it is copied from the source as stored.
 fn prepare<T: Sample>(
     encoder: &TileEncoder<T>,
-    sink: &dyn TileSink,
+    targets: &[Target],
     job: &Job<T>,
     texels: &[T],
     copier: Option<&Copier>,
 ) -> Result<Stored> {
     let channels = encoder.source_layout().channels.count();
+    let takes_constants = |&(t, _): &(usize, _)| targets[t].sink.takes_constants();
     // A pack entry holds a constant texel of up to 8 bytes (not 3 or 4 samples of 32 bits).
-    if sink.takes_constants()
+    let constant = (job.places.iter().any(takes_constants)
         && encoder.stored_layout().bytes_per_pixel() <= 8
-        && texels.chunks_exact(channels).all(|t| t == &texels[..channels])
-    {
-        return Ok(Stored::Constant(encoder.stored_texel(&texels[..channels])));
+        && texels.chunks_exact(channels).all(|t| t == &texels[..channels]))
+    .then(|| encoder.stored_texel(&texels[..channels]));
+    if constant.is_some() && job.places.iter().all(takes_constants) {
+        return Ok(Stored { constant, file: None });
     }
-    let (lod, (x, y)) = (job.lod, job.places[0]);
+    let (lod, (x, y)) = (job.lod, job.places[0].1);
     if let Some(copier) = copier.filter(|_| job.copy)
         && let Some(file) = copier.file((x, y), job.crop)?
     {
-        return Ok(file);
+        return Ok(Stored { constant, file: Some(file) });
     }
     let mut bytes = Vec::new();
     let encoded = match job.crop {
@@ -402,7 +432,7 @@ fn prepare<T: Sample>(
     // A JPEG or PNG grows its buffer as it writes, up to twice its length: what waits for the
     // writer is only the encoding, as the plan counts it (`Codec::most_encoded_bytes`).
     bytes.shrink_to_fit();
-    Ok(Stored::Encoded(bytes))
+    Ok(Stored { constant, file: Some(File::Encoded(bytes)) })
 }
 
 /// When the pool's encoders were busy: the time all of them waited at once, and the time spent

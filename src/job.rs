@@ -13,7 +13,7 @@ use crate::source::stored::Quality;
 use crate::stages::StageTimes;
 
 /// How to cut and store the pyramid.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct SplitOptions {
     pub tile_size: u32,
     pub border: u32,
@@ -64,6 +64,8 @@ pub struct Summary {
     pub source: PixelLayout,
     pub stored: PixelLayout,
     pub tiles: u64,
+    /// What each target of the run got ([`crate::split::split_to`]); one for a run into one sink.
+    pub per_target: Vec<Written>,
     /// Tiles encoded; the others share an identical neighbour's bytes, were stored as their one
     /// colour or were copied.
     pub encoded: u64,
@@ -84,6 +86,13 @@ pub struct Summary {
     pub stages: StageTimes,
     /// Where the memory went.
     pub memory: MemoryReport,
+}
+
+/// What one sink of a run got: tiles (places) and bytes of tile data.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Written {
+    pub tiles: u64,
+    pub bytes: u64,
 }
 
 /// Where a run's memory went (issue 28), by the stages' own count of their buffers beside the

@@ -25,11 +25,11 @@ use crate::pyramid::reduce::{Acc, Reducer};
 use crate::pyramid::stripes::{Beside, Plan};
 use crate::shard::sums::RootRows;
 use crate::shard::sums::{self, EncodedRoots};
-use crate::sink::TileSink;
+use crate::sink::{Target, TileSink};
 use crate::source::{ImageHeader, RowSource, read_ahead};
 use crate::stages::{Stage, StageClock};
 
-pub use crate::job::{MemoryReport, Progress, SplitOptions, StoredReport, Summary};
+pub use crate::job::{MemoryReport, Progress, SplitOptions, StoredReport, Summary, Written};
 pub use crate::stages::{StageCpu, StageTimes};
 
 /// Whether the finest level's pages are copied from `source`'s stored tiles (the copier) and
@@ -67,17 +67,39 @@ pub fn split(
     opts: &SplitOptions,
     progress: &dyn Progress,
 ) -> Result<Summary> {
+    let lods = opts.layout(source.width(), source.height())?.lod_count;
+    split_to(source, &[Target { sink, lods }], opts, progress)
+}
+
+/// [`split`] into several sinks at once, each taking the levels it has: every page is cut once,
+/// and encoded once for all the sinks that keep the same part of it (those that crop it alike).
+/// `opts` cut the pyramid down to the deepest target's levels.
+pub fn split_to(
+    source: Box<dyn RowSource>,
+    targets: &[Target],
+    opts: &SplitOptions,
+    progress: &dyn Progress,
+) -> Result<Summary> {
     let layout = opts.layout(source.width(), source.height())?;
     let copy = plan_copy(source.as_ref(), opts, &layout);
+    let plan = plan(source.as_ref(), targets, opts, copy.0.is_some())?;
+    let (summary, _) = by_depth(source.header(), targets, opts, layout, copy, Passes::Whole(plan, source), progress)?;
+    Ok(summary)
+}
+
+/// How [`split_to`] reads `source`: in one band, or in stripes (and a coarse pass) where one
+/// band over the whole width does not fit in `opts.max_memory`.
+/// `copies`: whether the finest level's pages are copied from the source's stored tiles.
+pub(crate) fn plan(source: &dyn RowSource, targets: &[Target], opts: &SplitOptions, copies: bool) -> Result<Plan> {
+    let layout = opts.layout(source.width(), source.height())?;
     let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
+    let ordered = targets.iter().any(|t| t.sink.ordered());
     let beside = Beside {
         decoder: source.most_buffer_bytes(),
-        encoded_tile: if sink.ordered() { opts.codec.most_encoded_bytes(layout.tile_size, stored) } else { 0 },
-        copies: copy.0.is_some(),
+        encoded_tile: if ordered { opts.codec.most_encoded_bytes(layout.tile_size, stored) } else { 0 },
+        copies,
     };
-    let plan = Plan::choose(&layout, source.layout().bytes_per_pixel() as u64, opts.filter, opts.max_memory, beside)?;
-    let (summary, _) = by_depth(source.header(), sink, opts, layout, copy, Passes::Whole(plan, source), progress)?;
-    Ok(summary)
+    Plan::choose(&layout, source.layout().bytes_per_pixel() as u64, opts.filter, opts.max_memory, beside)
 }
 
 /// A shard's rectangles of the pyramid (`spans`, top to bottom, each of the LODs up to the
@@ -98,7 +120,8 @@ pub(crate) fn split_shard(
         )));
     }
     let copy = plan_copy(source.as_ref(), opts, &layout);
-    by_depth(source.header(), sink, opts, layout, copy, Passes::Shard(spans, source), progress)
+    let targets = [Target { sink, lods: layout.lod_count }];
+    by_depth(source.header(), &targets, opts, layout, copy, Passes::Shard(spans, source), progress)
 }
 
 /// The levels above a sharded run's cut level, from the exact sums of its roots: what
@@ -111,7 +134,8 @@ pub(crate) fn above_cut(
     progress: &dyn Progress,
 ) -> Result<Summary> {
     let layout = opts.layout(image.width, image.height)?;
-    let (summary, _) = by_depth(image, sink, opts, layout, (None, None), Passes::AboveCut(roots), progress)?;
+    let targets = [Target { sink, lods: layout.lod_count }];
+    let (summary, _) = by_depth(image, &targets, opts, layout, (None, None), Passes::AboveCut(roots), progress)?;
     Ok(summary)
 }
 
@@ -152,7 +176,7 @@ type CopyPlan = (Option<Copier>, Option<StoredReport>);
 
 fn by_depth(
     image: ImageHeader,
-    sink: &dyn TileSink,
+    targets: &[Target],
     opts: &SplitOptions,
     layout: Layout,
     copy: CopyPlan,
@@ -160,10 +184,10 @@ fn by_depth(
     progress: &dyn Progress,
 ) -> Result<(Summary, Vec<EncodedRoots>)> {
     match image.layout.depth {
-        Depth::U8 => run::<u8>(image.layout, sink, opts, layout, copy, passes, progress),
-        Depth::U16 => run::<u16>(image.layout, sink, opts, layout, copy, passes, progress),
-        Depth::U32 => run::<u32>(image.layout, sink, opts, layout, copy, passes, progress),
-        Depth::F32 => run::<f32>(image.layout, sink, opts, layout, copy, passes, progress),
+        Depth::U8 => run::<u8>(image.layout, targets, opts, layout, copy, passes, progress),
+        Depth::U16 => run::<u16>(image.layout, targets, opts, layout, copy, passes, progress),
+        Depth::U32 => run::<u32>(image.layout, targets, opts, layout, copy, passes, progress),
+        Depth::F32 => run::<f32>(image.layout, targets, opts, layout, copy, passes, progress),
         Depth::F16 => Err(TilerError::Options(
             "half-float samples are read as 32-bit floats; a source never hands them on as half".into(),
         )),
@@ -172,7 +196,7 @@ fn by_depth(
 
 fn run<T: Sample>(
     src_layout: PixelLayout,
-    sink: &dyn TileSink,
+    targets: &[Target],
     opts: &SplitOptions,
     layout: Layout,
     (copier, stored_tiles): CopyPlan,
@@ -199,7 +223,7 @@ fn run<T: Sample>(
     let (tx, rx) = sync_channel::<Result<Batch<T>>>(in_flight::QUEUE_BATCHES);
     let clock = StageClock::new();
     let tx = BatchSender::new(tx, Arc::clone(&clock));
-    let counts = encoders::Counts::default();
+    let counts = encoders::Counts::new(targets.len());
     let roots = std::thread::scope(|scope| {
         let producer_clock = Arc::clone(&clock);
         let producer = scope.spawn(move || {
@@ -222,7 +246,7 @@ fn run<T: Sample>(
                 Vec::new()
             })
         });
-        let consumed = encoders::consume(rx, &encoder, sink, &counts, copier.as_ref(), progress, &clock);
+        let consumed = encoders::consume(rx, &encoder, targets, &counts, copier.as_ref(), progress, &clock);
         // Dropping the receiver (on error) makes the producer's next send fail, so it stops.
         let produced = producer.join().map_err(|_| TilerError::panicked("the tiling thread"))?;
         consumed.map(|()| produced)
@@ -231,12 +255,15 @@ fn run<T: Sample>(
         layout,
         source: src_layout,
         stored: encoder.stored_layout(),
-        tiles: counts.tiles.into_inner(),
+        tiles: counts.tiles.iter().map(|t| t.load(std::sync::atomic::Ordering::Relaxed)).sum(),
+        per_target: (counts.tiles.iter().zip(targets))
+            .map(|(t, target)| Written { tiles: t.load(std::sync::atomic::Ordering::Relaxed), bytes: target.sink.bytes_written() })
+            .collect(),
         encoded: counts.encoded.into_inner(),
         copied: counts.copied.into_inner(),
         cropped: counts.cropped.into_inner(),
         stored_tiles,
-        bytes: sink.bytes_written(),
+        bytes: targets.iter().map(|t| t.sink.bytes_written()).sum(),
         stripes,
         passes: pass_count,
         stages: clock.times(),

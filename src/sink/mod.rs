@@ -49,3 +49,12 @@ pub trait TileSink: Sync {
     /// Bytes of tile data written so far.
     fn bytes_written(&self) -> u64;
 }
+
+/// A sink and the levels of the pyramid it takes, LOD 0 up to `lods` (exclusive): one run may
+/// feed several sinks ([`crate::split::split_to`]), a pack stopping at its one-page level where
+/// Deep Zoom goes on down to one texel.
+#[derive(Clone, Copy)]
+pub struct Target<'a> {
+    pub sink: &'a dyn TileSink,
+    pub lods: u32,
+}
