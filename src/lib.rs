@@ -104,6 +104,7 @@ pub(crate) mod job;
 pub mod layout;
 pub mod limits;
 pub mod output;
+pub mod outputs;
 pub mod pixel;
 pub mod pyramid;
 pub mod repack;

@@ -6,12 +6,15 @@ mod cli;
 
 use std::process::ExitCode;
 
-use clap::Parser;
+use clap::{CommandFactory, FromArgMatches};
 
 fn main() -> ExitCode {
     tune_allocator();
-    let args = cli::Args::parse();
-    match cli::run(args) {
+    // The matches as well as the arguments: where each flag stood pairs `split`'s outputs with
+    // their layouts.
+    let matches = cli::Args::command().get_matches();
+    let args = cli::Args::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    match cli::run(args, &matches) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             // A name in a message the library or the system wrote may hold a control

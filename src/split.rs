@@ -67,31 +67,32 @@ pub fn split(
     opts: &SplitOptions,
     progress: &dyn Progress,
 ) -> Result<Summary> {
+    let mut source = source;
     let lods = opts.layout(source.width(), source.height())?.lod_count;
-    split_to(source, &[Target { sink, lods }], opts, progress)
+    split_to(source.as_mut(), &[Target { sink, lods }], opts, progress)
 }
 
 /// [`split`] into several sinks at once, each taking the levels it has: every page is cut once,
 /// and encoded once for all the sinks that keep the same part of it (those that crop it alike).
 /// `opts` cut the pyramid down to the deepest target's levels.
 pub fn split_to(
-    source: Box<dyn RowSource>,
+    source: &mut dyn RowSource,
     targets: &[Target],
     opts: &SplitOptions,
     progress: &dyn Progress,
 ) -> Result<Summary> {
     let layout = opts.layout(source.width(), source.height())?;
-    let copy = plan_copy(source.as_ref(), opts, &layout);
-    let plan = plan(source.as_ref(), targets, opts, copy.0.is_some())?;
+    let copy = plan_copy(source, opts, &layout);
+    let plan = plan(source, targets, opts)?;
     let (summary, _) = by_depth(source.header(), targets, opts, layout, copy, Passes::Whole(plan, source), progress)?;
     Ok(summary)
 }
 
 /// How [`split_to`] reads `source`: in one band, or in stripes (and a coarse pass) where one
 /// band over the whole width does not fit in `opts.max_memory`.
-/// `copies`: whether the finest level's pages are copied from the source's stored tiles.
-pub(crate) fn plan(source: &dyn RowSource, targets: &[Target], opts: &SplitOptions, copies: bool) -> Result<Plan> {
+pub(crate) fn plan(source: &dyn RowSource, targets: &[Target], opts: &SplitOptions) -> Result<Plan> {
     let layout = opts.layout(source.width(), source.height())?;
+    let copies = plan_copy(source, opts, &layout).0.is_some();
     let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
     let ordered = targets.iter().any(|t| t.sink.ordered());
     let beside = Beside {
@@ -164,7 +165,7 @@ pub(crate) fn sum_bytes(opts: &SplitOptions, source: PixelLayout, layout: &Layou
 /// What a run reads, and in which passes.
 enum Passes<'a> {
     /// The whole pyramid from the source: one band, or stripes and a coarse pass.
-    Whole(Plan, Box<dyn RowSource>),
+    Whole(Plan, &'a mut dyn RowSource),
     /// A shard's rectangles of the source, top to bottom, keeping their roots' sums.
     Shard(Vec<Span>, Box<dyn RowSource>),
     /// The levels above the cut, from the roots' sums.
@@ -257,7 +258,10 @@ fn run<T: Sample>(
         stored: encoder.stored_layout(),
         tiles: counts.tiles.iter().map(|t| t.load(std::sync::atomic::Ordering::Relaxed)).sum(),
         per_target: (counts.tiles.iter().zip(targets))
-            .map(|(t, target)| Written { tiles: t.load(std::sync::atomic::Ordering::Relaxed), bytes: target.sink.bytes_written() })
+            .map(|(t, target)| Written {
+                tiles: t.load(std::sync::atomic::Ordering::Relaxed),
+                bytes: target.sink.bytes_written(),
+            })
             .collect(),
         encoded: counts.encoded.into_inner(),
         copied: counts.copied.into_inner(),
@@ -289,7 +293,7 @@ impl<T: Sample> Producer<'_, T> {
     where
         T: Into<A>,
     {
-        let (plan, mut source) = match passes {
+        let (plan, source) = match passes {
             Passes::Whole(plan, source) => (plan, source),
             Passes::Shard(spans, mut source) => return self.shard::<A>(&spans, source.as_mut()),
             Passes::AboveCut(roots) => return self.above_cut::<A>(roots).map(|()| Vec::new()),
@@ -299,11 +303,11 @@ impl<T: Sample> Producer<'_, T> {
                 source.rewind()?;
             }
             let mut cascade = self.cascade::<A>(stripe);
-            self.stripe::<A>(stripe, source.as_mut(), &mut cascade, plan.read_ahead_rows)?;
+            self.stripe::<A>(stripe, &mut *source, &mut cascade, plan.read_ahead_rows)?;
         }
         if let Some(coarse) = &plan.coarse {
             source.rewind()?;
-            self.coarse::<A>(coarse, source.as_mut())?;
+            self.coarse::<A>(coarse, &mut *source)?;
         }
         Ok(Vec::new())
     }

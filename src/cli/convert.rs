@@ -95,7 +95,7 @@ pub struct ConvertArgs {
     range: Option<source::range::Range>,
 
     #[command(flatten)]
-    out: OutputArgs,
+    pub out: OutputArgs,
 }
 
 pub fn run(a: ConvertArgs) -> Result<()> {

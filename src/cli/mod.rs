@@ -255,10 +255,17 @@ pub fn interrupted_exit_code() -> std::process::ExitCode {
     std::process::ExitCode::from(signals::requested().map_or(130, signals::exit_code))
 }
 
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: Args, matches: &clap::ArgMatches) -> Result<()> {
+    let sub = matches.subcommand().map(|(_, m)| m);
     match args.command {
-        Command::Split(a) => split::run(a),
-        Command::Convert(a) => convert::run(a),
+        Command::Split(mut a) => {
+            a.out.place_flags(sub);
+            split::run(a)
+        }
+        Command::Convert(mut a) => {
+            a.out.place_flags(sub);
+            convert::run(a)
+        }
         Command::Pack(a) => pack::run_pack(a),
         Command::Unpack(a) => pack::run_unpack(a),
         Command::Info(a) => pack::run_info(a),

@@ -32,17 +32,24 @@ impl Progress for Watch {
     }
 }
 
-/// Claims `dest` for `product` (see `output::claim`), then removes what dead runs left while
-/// writing it and says so: a run killed outright (power loss, SIGKILL) cannot clean up.
+/// Claims `dest` for `product` (see `output::claim`), then [`prepare`]s it.
 pub fn claim(dest: &Path, product: Product, inputs: &[&Path], force: bool) -> Result<Claim> {
     let claim = output::claim(dest, product, inputs, force)?;
+    prepare(dest)?;
+    Ok(claim)
+}
+
+/// For a claimed destination: removes what dead runs left while writing it and says so (a run
+/// killed outright, by power loss or SIGKILL, cannot clean up), and has a signal remove what
+/// this run leaves.
+pub fn prepare(dest: &Path) -> Result<()> {
     signals::remove_on_forced_exit(dest);
     let removed = output::remove_stale(dest)
         .with_context(|| format!("removing temporaries that earlier runs left beside {}", dest.shown()))?;
     for path in removed {
         eprintln!("note: removed {}, left by a run that did not finish", path.shown());
     }
-    Ok(claim)
+    Ok(())
 }
 
 /// A progress bar on stderr counting `unit` (`tiles`, `frames`), with a rate and an ETA; hidden
@@ -115,6 +122,16 @@ fn stored_clause(copied: u64, cropped: u64, t: &vortex_tiler::split::StoredRepor
 
 /// The summary as one JSON object (`--json`), for scripts: the same numbers as the line.
 pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vortex_pack::WriteSummary>) -> String {
+    summary_value(done, layout, out, pack).to_string()
+}
+
+/// [`summary_json`]'s object.
+pub fn summary_value(
+    done: &Finished,
+    layout: &str,
+    out: &Path,
+    pack: Option<&vortex_pack::WriteSummary>,
+) -> serde_json::Value {
     let s = &done.summary;
     let mut doc = serde_json::json!({
         "output": out.display().to_string(),
@@ -166,7 +183,7 @@ pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vor
             "contentHash": format!("{:016x}", w.content_hash),
         });
     }
-    doc.to_string()
+    doc
 }
 
 /// Where a run's wall time went, in seconds per stage (`split::Summary::stages`), and its CPU
@@ -275,7 +292,7 @@ pub fn mib(bytes: u64) -> String {
 }
 
 /// Peak resident set size, from /proc on Linux.
-fn peak_rss() -> Option<u64> {
+pub fn peak_rss() -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
@@ -293,4 +310,24 @@ pub fn chain(e: &anyhow::Error) -> String {
         }
     }
     out
+}
+
+/// A PMTiles archive's figures, for `--json`.
+pub fn pmtiles_json(w: &vortex_tiler::sink::pmtiles::PmtilesSummary) -> serde_json::Value {
+    serde_json::json!({
+        "tiles": w.tiles,
+        "entries": w.entries,
+        "contents": w.contents,
+        "leafDirectories": w.leaves,
+        "dataBytes": w.data_bytes,
+        "fileBytes": w.file_bytes,
+    })
+}
+
+/// A PMTiles archive's figures, in a line.
+pub fn pmtiles_line(w: &vortex_tiler::sink::pmtiles::PmtilesSummary) -> String {
+    format!(
+        "pmtiles: {} tiles in {} directory entries, {} distinct payloads, {} leaf directories, {} file bytes",
+        w.tiles, w.entries, w.contents, w.leaves, w.file_bytes
+    )
 }

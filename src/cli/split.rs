@@ -8,18 +8,12 @@ use anyhow::{Context, Result, bail};
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
 use vortex_tiler::error::ShowPath;
-use vortex_tiler::layout::Layout;
-use vortex_tiler::limits::Limits;
-use vortex_tiler::output::{Existing, Product};
+use vortex_tiler::outputs::{Budget, Format, Output, Plan, Settings, Wrote};
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::pyramid::Filter;
-use vortex_tiler::settings::{self, CodecChoice, Destination, Plan, Requested};
-use vortex_tiler::sink::icc::{Profile, WithProfile};
-use vortex_tiler::sink::{DirSink, PackSink, PmtilesSink, TileSink};
+use vortex_tiler::settings::{CodecChoice, Requested};
 use vortex_tiler::source::RowSource;
-use vortex_tiler::split::SplitOptions;
-use vortex_tiler::tile_dir::info::InfoFile;
-use vortex_tiler::viewer::{Viewer, ViewerTiles, dzi, iiif};
+use vortex_tiler::viewer::Viewer;
 use vortex_tiler::{scale_out, source, split};
 
 use super::report;
@@ -91,25 +85,24 @@ pub struct SplitArgs {
     channels: Option<Vec<usize>>,
 
     #[command(flatten)]
-    out: OutputArgs,
+    pub out: OutputArgs,
 }
 
 /// What `split` and `convert` write, and how.
 #[derive(clap::Args, Debug)]
 pub struct OutputArgs {
-    /// Output directory (created; replaced only if it holds nothing but a previous output:
-    /// its info.json and the tiles that names).
-    #[arg(
-        short,
-        long,
-        value_name = "DIR",
-        required_unless_present_any = ["pack", "pmtiles"],
-        conflicts_with_all = ["pack", "pmtiles"]
-    )]
-    output: Option<PathBuf>,
+    /// An output: a directory in the --layout that follows it (or, given before any -o, the
+    /// first one's) [default: vortex], or a file or directory whose name says its format:
+    /// FILE.vtpk a pack, FILE.pmtiles PMTiles, DIR.ome.zarr or FILE.ozx OME-Zarr. Repeat it
+    /// (with --pack and --pmtiles) to write several outputs from one read of the input, e.g.
+    /// `-o web --layout dzi -o slide.ome.zarr --pack slide.vtpk`: the outputs that share a
+    /// pyramid and codec share each tile's encoding (docs/outputs.md). A directory is created,
+    /// and replaced only if it holds nothing but a previous output of ours.
+    #[arg(short, long, value_name = "PATH")]
+    output: Vec<PathBuf>,
 
-    /// Write one pack file instead of a directory of tiles (docs/pack-format.md). An existing
-    /// pack is replaced; any other file only with --force.
+    /// Write one pack file (docs/pack-format.md). An existing pack is replaced; any other file
+    /// only with --force.
     #[arg(long, value_name = "FILE")]
     pack: Option<PathBuf>,
 
@@ -119,7 +112,7 @@ pub struct OutputArgs {
     /// 256), zoom 0 the whole image; bounds name the image's place on the web-mercator square,
     /// as the image has no map coordinates. An existing PMTiles archive is replaced; any other
     /// file only with --force.
-    #[arg(long, value_name = "FILE", conflicts_with = "pack")]
+    #[arg(long, value_name = "FILE")]
     pmtiles: Option<PathBuf>,
 
     /// Replace a regular file at --pack or --pmtiles that is not one. Never replaces a directory, a
@@ -135,9 +128,10 @@ pub struct OutputArgs {
     /// it: OpenSeadragon), iiif (IIIF Image API 3.0 level 0: info.json + static tiles), xyz
     /// ({z}/{x}/{y}, Leaflet/OpenLayers/MapLibre) or google ({z}/{y}/{x} as vips writes it).
     /// See docs/viewers.md. ome-zarr: an OME-Zarr image for microscopy tools (napari, Fiji,
-    /// QuPath), -o DIR.ome.zarr or -o FILE.ozx (docs/ome-zarr.md).
-    #[arg(long, value_enum, default_value = "vortex", value_name = "LAYOUT")]
-    layout: OutputLayout,
+    /// QuPath), -o DIR.ome.zarr or -o FILE.ozx (docs/ome-zarr.md). Each --layout belongs to
+    /// the -o before it [default: vortex, or what the output's name says].
+    #[arg(long, value_enum, value_name = "LAYOUT")]
+    layout: Vec<OutputLayout>,
 
     /// --layout dzi: the pyramid's name, NAME.dzi and NAME_files/ [default: the input's file
     /// stem].
@@ -247,6 +241,17 @@ pub struct OutputArgs {
 
     #[command(flatten)]
     run: super::RunFlags,
+
+    /// Where each -o and --layout stood among the arguments, in order (`place_flags`).
+    #[arg(skip)]
+    placed: Vec<Placed>,
+}
+
+/// An `-o` or a `--layout`, in the order given.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Placed {
+    Output(usize),
+    Layout(usize),
 }
 
 /// `--layout`: this tool's tile directory or a viewer's.
@@ -267,13 +272,14 @@ pub enum OutputLayout {
 }
 
 impl OutputLayout {
-    fn viewer(self) -> Option<Viewer> {
+    fn format(self) -> Format {
         match self {
-            OutputLayout::Vortex | OutputLayout::OmeZarr => None,
-            OutputLayout::Dzi => Some(Viewer::Dzi),
-            OutputLayout::Iiif => Some(Viewer::Iiif),
-            OutputLayout::Xyz => Some(Viewer::Xyz),
-            OutputLayout::Google => Some(Viewer::Google),
+            OutputLayout::Vortex => Format::Tiles,
+            OutputLayout::OmeZarr => Format::OmeZarr,
+            OutputLayout::Dzi => Format::Viewer(Viewer::Dzi),
+            OutputLayout::Iiif => Format::Viewer(Viewer::Iiif),
+            OutputLayout::Xyz => Format::Viewer(Viewer::Xyz),
+            OutputLayout::Google => Format::Viewer(Viewer::Google),
         }
     }
 }
@@ -354,9 +360,6 @@ pub fn run(a: SplitArgs) -> Result<()> {
     tile(source, &input, a.filename_format, &a.out, started, kept_icc)
 }
 
-/// Runs the pipeline from `source` into the output `out` names, with the progress bar and
-/// the summary line. `names` is the output filename format flag; `kept_icc` the profile the
-/// texels are in (`--keep-icc`), for info.json.
 impl OutputArgs {
     pub fn background(&self) -> Option<Background> {
         self.background
@@ -370,8 +373,129 @@ impl OutputArgs {
     pub fn tile_type(&self) -> Option<Depth> {
         self.tile_type
     }
+
+    /// Notes where each -o and --layout stood in `matches` (the subcommand's), so that each
+    /// --layout goes with the -o before it.
+    pub fn place_flags(&mut self, matches: Option<&clap::ArgMatches>) {
+        let at = |id: &str| -> Vec<usize> {
+            let given = matches.filter(|m| m.value_source(id) == Some(clap::parser::ValueSource::CommandLine));
+            given.and_then(|m| m.indices_of(id)).map(|i| i.collect()).unwrap_or_default()
+        };
+        let mut placed: Vec<(usize, Placed)> =
+            at("output").into_iter().enumerate().map(|(k, i)| (i, Placed::Output(k))).collect();
+        placed.extend(at("layout").into_iter().enumerate().map(|(k, i)| (i, Placed::Layout(k))));
+        placed.sort_by_key(|&(i, _)| i);
+        self.placed = placed.into_iter().map(|(_, p)| p).collect();
+    }
+
+    /// The outputs the flags name, each -o with the --layout after it (one given before any
+    /// -o belongs to the first), or the format its name says; then --pack and --pmtiles.
+    fn outputs(&self) -> Result<Vec<Output>> {
+        let placed = match self.placed.is_empty() {
+            // Flags not placed (a caller that did not parse a command line): in order.
+            true => {
+                (0..self.output.len()).map(Placed::Output).chain((0..self.layout.len()).map(Placed::Layout)).collect()
+            }
+            false => self.placed.clone(),
+        };
+        let mut layouts: Vec<Option<OutputLayout>> = vec![None; self.output.len()];
+        let mut last = None;
+        for p in placed {
+            match p {
+                Placed::Output(k) => last = Some(k),
+                Placed::Layout(l) => {
+                    let layout = self.layout[l];
+                    let Some(k) = last.or((!self.output.is_empty()).then_some(0)) else {
+                        self.refuse_layout_without_directory(layout)?;
+                        continue;
+                    };
+                    if let Some(before) = layouts[k].replace(layout) {
+                        bail!(
+                            "-o {} has two layouts, {} and {}: give each -o its own --layout after it",
+                            self.output[k].shown(),
+                            name_of(before),
+                            name_of(layout)
+                        );
+                    }
+                }
+            }
+        }
+        let mut outputs: Vec<Output> = (self.output.iter().zip(layouts))
+            .map(|(path, layout)| {
+                let format = match layout {
+                    Some(layout) => layout.format(),
+                    None => Format::of_path(path).unwrap_or(Format::Tiles),
+                };
+                Output::new(format, path)
+            })
+            .collect();
+        outputs.extend(self.pack.iter().map(|p| Output::new(Format::Pack, p)));
+        outputs.extend(self.pmtiles.iter().map(|p| Output::new(Format::Pmtiles, p)));
+        if outputs.is_empty() {
+            bail!(
+                "no output: give -o DIR (with --layout), -o FILE.vtpk, FILE.pmtiles, DIR.ome.zarr or FILE.ozx, --pack FILE or --pmtiles FILE"
+            );
+        }
+        Ok(outputs)
+    }
+
+    /// A --layout with no -o to belong to: vortex and (with --pmtiles) xyz say what --pack and
+    /// --pmtiles write anyway; the others write a directory.
+    fn refuse_layout_without_directory(&self, layout: OutputLayout) -> Result<()> {
+        match (layout, self.pmtiles.is_some()) {
+            (OutputLayout::Vortex, _) | (OutputLayout::Xyz, true) => Ok(()),
+            (OutputLayout::OmeZarr, _) => {
+                bail!(
+                    "--layout ome-zarr writes a directory or a .ozx file (-o DIR.ome.zarr or -o FILE.ozx), not a pack"
+                )
+            }
+            (other, true) => {
+                bail!(
+                    "--pmtiles holds the web-map (xyz) pyramid; --layout {} writes a directory (-o DIR)",
+                    name_of(other)
+                )
+            }
+            (other, false) => bail!(
+                "--layout {} writes a directory (-o DIR); a pack has one layout, which `vortex-tiler serve PACK` serves as Deep Zoom, IIIF and XYZ",
+                name_of(other)
+            ),
+        }
+    }
+
+    /// The settings the outputs share, from the flags; `names`: the filename format flag.
+    fn settings(&self, names: Option<String>, kept_icc: Option<Vec<u8>>) -> Result<Settings> {
+        let o = &self.ome_zarr;
+        Ok(Settings {
+            tiles: Requested {
+                tile_size: self.tile_size,
+                border: self.border,
+                background: self.background,
+                flatten: self.flatten,
+                tile_depth: self.tile_type,
+                filename_format: names,
+                filter: self.filter,
+                reencode: self.reencode,
+                ..self.enc.requested()
+            },
+            overlap: self.overlap,
+            name: self.name.clone(),
+            iiif_id: self.iiif_id.clone(),
+            ome_zarr: ome_zarr::settings(o),
+            pack: self.pack_layout.options()?,
+            keep_icc: kept_icc,
+            force: self.force,
+        })
+    }
 }
 
+/// A layout's name as --layout takes it.
+fn name_of(layout: OutputLayout) -> String {
+    clap::ValueEnum::to_possible_value(&layout).map(|v| v.get_name().to_string()).unwrap_or_default()
+}
+
+/// Runs the pipeline from `source` into the outputs `a` names, with the progress bar and the
+/// summary. `names` is the output filename format flag; `kept_icc` the profile the texels are
+/// in (`--keep-icc`).
 pub fn tile(
     source: Box<dyn RowSource>,
     input: &Path,
@@ -380,139 +504,92 @@ pub fn tile(
     started: Instant,
     kept_icc: Option<Vec<u8>>,
 ) -> Result<()> {
-    if a.layout == OutputLayout::OmeZarr {
-        if kept_icc.is_some() {
-            bail!(
-                "--keep-icc keeps the profile in the JPEG and PNG tiles of a directory and in info.json (a pack's too); OME-Zarr has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
-            );
-        }
-        return ome_zarr::tile(source, input, names, a, started);
+    let outputs = a.outputs()?;
+    let settings = a.settings(names, kept_icc)?;
+    let budget = Budget::new(a.max_memory);
+    if a.shard.is_some() || a.pack.as_ref().is_some_and(|p| p.to_string_lossy().contains("{shard}")) {
+        return shard(source, input, outputs, &settings, a, started);
     }
-    a.ome_zarr.refuse_elsewhere()?;
-    if a.pmtiles.is_some() {
-        if kept_icc.is_some() {
-            bail!(
-                "--keep-icc keeps the profile in the JPEG and PNG tiles of a directory and in info.json (a pack's too); a PMTiles archive has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
-            );
-        }
-        if !matches!(a.layout, OutputLayout::Vortex | OutputLayout::Xyz) {
-            let layout = a.layout.viewer().map_or("ome-zarr", Viewer::name);
-            bail!("--pmtiles holds the web-map (xyz) pyramid; --layout {layout} writes a directory (-o DIR)");
-        }
-        return tile_for_viewer(source, input, names, a, Viewer::Xyz, started, None);
+    let plan = Plan::new(outputs, &settings, &source.header(), &[input], budget)?;
+    for planned in plan.outputs() {
+        report::prepare(&planned.output.path)?;
     }
-    if let Some(viewer) = a.layout.viewer() {
-        return tile_for_viewer(source, input, names, a, viewer, started, kept_icc.as_deref());
-    }
-    for (given, flag) in
-        [(a.name.is_some(), "--name"), (a.overlap.is_some(), "--overlap"), (a.iiif_id.is_some(), "--iiif-id")]
-    {
-        if given {
-            bail!(
-                "{flag} belongs to a viewer layout (--layout dzi, iiif, xyz or google); this tool's tiles have --border"
-            );
+    // Said once everything is checked, just before the work starts.
+    for (path, changed) in plan.outputs().iter().filter_map(|p| p.changed.as_ref()) {
+        if !a.run.quiet {
+            eprintln!("settings from {}: {}", path.shown(), changed.join(", "));
         }
     }
-    let limits = Limits { memory: a.max_memory, ..Limits::default() };
-    let shard = match (&a.shard, &a.pack) {
-        (None, Some(pack)) if pack.to_string_lossy().contains("{shard}") => {
+    let run = Run::start_counting(source, a, plan.total_tiles(), started)?;
+    let (done, wrote) = run.execute_with(|source, watch| {
+        let wrote = plan.write(source, watch)?;
+        let summary = wrote.first().map(|w| w.summary.clone());
+        Ok((summary.ok_or_else(|| vortex_tiler::error::TilerError::Options("a run with no output".into()))?, wrote))
+    })?;
+    match wrote.as_slice() {
+        [one] => report_one(a, &done, one),
+        all => report_all(a, &done, all),
+    }
+    Ok(())
+}
+
+/// `--shard`: one shard of the pack that --pack names (docs/scale-out.md).
+fn shard(
+    source: Box<dyn RowSource>,
+    input: &Path,
+    outputs: Vec<Output>,
+    settings: &Settings,
+    a: &OutputArgs,
+    started: Instant,
+) -> Result<()> {
+    let viewer = outputs.iter().find_map(|o| match o.format {
+        Format::Viewer(v) => Some(v.name()),
+        Format::Pmtiles => Some("xyz"),
+        _ => None,
+    });
+    let pack = match (&a.shard, &a.pack) {
+        (None, pack) => {
+            let pack = pack.as_deref().unwrap_or(Path::new(""));
             bail!("'{{shard}}' in --pack {} stands for a shard's index: add --shard I/N or --shard auto", pack.shown())
         }
-        (None, _) => None,
+        (Some(_), _) if let Some(viewer) = viewer => {
+            bail!("--shard makes shard packs (--pack); cut the pack in shards, merge it, then serve it as {viewer}")
+        }
+        (Some(_), _) if outputs.iter().any(|o| o.format == Format::OmeZarr) => {
+            bail!("--shard makes shard packs (--pack); --layout ome-zarr is written by one run")
+        }
         (Some(_), None) => bail!("--shard writes a shard pack: give --pack FILE (merge joins them into one pack)"),
-        (Some(s), Some(pack)) => {
-            let chosen = s.choose(a.shards, |name| std::env::var(name).ok())?;
-            let path = shard_path(pack, &chosen);
-            // Every task of an array writes into the same directory: the first makes it.
-            if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir)
-                    .with_context(|| format!("creating {} for the shard packs", dir.shown()))?;
-            }
-            Some((path, chosen))
+        (Some(_), Some(_)) if outputs.len() > 1 => {
+            bail!("--shard makes one shard pack (--pack FILE) and no other output")
         }
+        (Some(_), Some(pack)) => pack.clone(),
     };
-    let (dest, product) = match (&a.output, &a.pack, &shard) {
-        (_, _, Some((path, _))) => (path, Product::Pack),
-        (Some(dir), _, _) => (dir, Product::TileDir),
-        (None, Some(file), _) => (file, Product::Pack),
-        (None, None, _) => unreachable!("clap requires --output or --pack"),
-    };
-    let claim = report::claim(dest, product, &[input], a.force)?;
-    // A previous output directory's info.json sets this run's defaults (the original tool's
-    // way of configuring a run); the claim above made sure the directory is ours.
-    let info_path = (product == Product::TileDir && claim.replaces == Some(Existing::Ours))
-        .then(|| dest.join("info.json"))
-        .filter(|p| p.is_file());
-    let existing = info_path.as_deref().map(InfoFile::read).transpose()?;
-    let requested = Requested {
-        tile_size: a.tile_size,
-        border: a.border,
-        background: a.background,
-        flatten: a.flatten,
-        tile_depth: a.tile_type,
-        filename_format: names,
-        filter: a.filter,
-        max_memory: Some(a.max_memory),
-        reencode: a.reencode,
-        ..a.enc.requested()
-    };
-    let existing_ref = info_path.as_deref().zip(existing.as_ref());
-    let destination = if product == Product::Pack { Destination::Pack } else { Destination::TileDir };
-    let plan = Plan::new(&requested, existing_ref, &source.header(), destination, &limits, kept_icc.as_deref())?;
-    let Plan { opts, names, layout, stored, info, changed } = plan;
-    // Said once everything is checked, just before the work starts.
-    if let (Some(path), false) = (&info_path, a.run.quiet)
-        && !changed.is_empty()
-    {
-        eprintln!("settings from {}: {}", path.shown(), changed.join(", "));
+    let chosen = a.shard.as_ref().map(|s| s.choose(a.shards, |name| std::env::var(name).ok())).transpose()?;
+    let Some(chosen) = chosen else { bail!("--shard is required here") };
+    let path = shard_path(&pack, &chosen);
+    // Every task of an array writes into the same directory: the first makes it.
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {} for the shard packs", dir.shown()))?;
     }
-    if let Some((path, chosen)) = shard {
-        if !a.run.quiet && !a.run.json {
-            eprintln!("shard {} of {} (from {}) into {}", chosen.index, chosen.count, chosen.from, path.shown());
-        }
-        let job = chosen.job(input, info.to_json_pretty(), a.pack_layout.options()?);
-        let run = Run::start_counting(source, a, job.pages(&layout)?, started)?;
-        let (done, written) =
-            run.execute_with(|source, watch| scale_out::write_shard(source, &path, &opts, &job, watch))?;
-        if a.run.json {
-            let mut doc: serde_json::Value =
-                serde_json::from_str(&report::summary_json(&done, "shard", &path, Some(&written)))?;
-            doc["shard"] = serde_json::json!({ "index": chosen.index, "count": chosen.count, "from": chosen.from });
-            say!("{doc}");
-        } else {
-            report(a, "shard", &done, &path, Some(&written));
-        }
-        return Ok(());
+    let output = Output::new(Format::Pack, &path);
+    let plan = Plan::new(vec![output], settings, &source.header(), &[input], Budget::new(a.max_memory))?;
+    report::prepare(&path)?;
+    let planned = &plan.outputs()[0];
+    let info = planned.info().map(|i| i.to_json_pretty()).unwrap_or_default();
+    if !a.run.quiet && !a.run.json {
+        eprintln!("shard {} of {} (from {}) into {}", chosen.index, chosen.count, chosen.from, path.shown());
     }
-    // The JPEG and PNG tiles of a directory carry the kept profile; a pack's tiles do not (its
-    // metadata, info.json, holds it once: docs/colour.md).
-    let profile = match a.output {
-        Some(_) => kept_icc.as_deref().map(|icc| Profile::for_tiles(icc, opts.codec)).transpose()?.flatten(),
-        None => None,
-    };
-    let mut run = Run::start(source, a, &layout, started)?;
-    match (&a.output, &a.pack) {
-        (Some(dir), _) => {
-            run.profile = profile;
-            let sink = DirSink::create(&claim, names)?;
-            let summary = run.into_dir(sink, &opts, |sink| sink.finish(&info))?;
-            report(a, "vortex", &summary, dir, None);
-        }
-        (None, Some(file)) => {
-            let sink = PackSink::create(
-                file,
-                &layout,
-                stored,
-                opts.codec,
-                info.to_json_pretty().as_bytes(),
-                a.pack_layout.options()?,
-            )?;
-            // On error the sink is dropped, which deletes the unfinished pack.
-            let summary = run.execute(&sink, &opts)?;
-            let written = sink.finish()?;
-            report(a, "pack", &summary, file, Some(&written));
-        }
-        (None, None) => unreachable!("clap requires --output or --pack"),
+    let job = chosen.job(input, info, a.pack_layout.options()?);
+    let run = Run::start_counting(source, a, job.pages(&planned.layout)?, started)?;
+    let opts = &planned.opts;
+    let (done, written) = run.execute_with(|source, watch| scale_out::write_shard(source, &path, opts, &job, watch))?;
+    if a.run.json {
+        let mut doc: serde_json::Value =
+            serde_json::from_str(&report::summary_json(&done, "shard", &path, Some(&written)))?;
+        doc["shard"] = serde_json::json!({ "index": chosen.index, "count": chosen.count, "from": chosen.from });
+        say!("{doc}");
+    } else {
+        report(a, "shard", &done, &path, Some(&written));
     }
     Ok(())
 }
@@ -521,30 +598,14 @@ pub fn tile(
 struct Run {
     source: Box<dyn RowSource>,
     watch: report::Watch,
-    total: u64,
     started: Instant,
-    /// The kept ICC profile (`--keep-icc`), for the JPEG and PNG tiles of a directory.
-    profile: Option<Profile>,
 }
 
 impl Run {
-    fn start(source: Box<dyn RowSource>, a: &OutputArgs, layout: &Layout, started: Instant) -> Result<Run> {
-        Run::start_counting(source, a, layout.total_tiles(), started)
-    }
-
     /// A run that writes `total` tiles.
     fn start_counting(source: Box<dyn RowSource>, a: &OutputArgs, total: u64, started: Instant) -> Result<Run> {
         a.run.init_pool()?;
-        Ok(Run { source, watch: a.run.watch(total)?, total, started, profile: None })
-    }
-
-    /// Runs the pipeline into `sink`; the summary keeps what the source was.
-    fn execute(mut self, sink: &dyn TileSink, opts: &SplitOptions) -> Result<Finished> {
-        let profile = self.profile.take();
-        let tagged = profile.as_ref().map(|profile| WithProfile { inner: sink, profile });
-        let sink = tagged.as_ref().map_or(sink, |t| t as &dyn TileSink);
-        let (done, ()) = self.execute_with(|source, watch| Ok((split::split(source, sink, opts, watch)?, ())))?;
-        Ok(done)
+        Ok(Run { source, watch: a.run.watch(total)?, started })
     }
 
     /// Runs `work` on the source, its encoders on the worker pool, with the progress bar.
@@ -554,7 +615,7 @@ impl Run {
     ) -> Result<(Finished, R)> {
         let (decoder, width, height) = (self.source.describe(), self.source.width(), self.source.height());
         let after_run = self.source.after_run();
-        let Run { source, watch, started, .. } = self;
+        let Run { source, watch, started } = self;
         let result = work(source, &watch);
         watch.bar.finish_and_clear();
         let (summary, extra) = result?;
@@ -563,31 +624,6 @@ impl Run {
             None => decoder,
         };
         Ok((Finished { summary, decoder, width, height, took: started.elapsed() }, extra))
-    }
-
-    /// Runs the pipeline into a directory sink and `finish`es it when every tile is written,
-    /// else removes what it wrote.
-    fn into_dir(
-        self,
-        sink: DirSink,
-        opts: &SplitOptions,
-        finish: impl FnOnce(DirSink) -> vortex_tiler::error::Result<()>,
-    ) -> Result<Finished> {
-        let total = self.total;
-        match self.execute(&sink, opts) {
-            Ok(done) if done.summary.tiles == total => {
-                finish(sink)?;
-                Ok(done)
-            }
-            Ok(done) => {
-                sink.abandon();
-                bail!("internal error: wrote {} tiles of {total}", done.summary.tiles);
-            }
-            Err(e) => {
-                sink.abandon();
-                Err(e)
-            }
-        }
     }
 }
 
@@ -616,163 +652,75 @@ fn report(a: &OutputArgs, layout: &str, done: &Finished, dest: &Path, pack: Opti
     }
 }
 
-/// `split`/`convert --layout dzi|iiif|xyz|google`: the same pipeline into a directory a viewer
-/// opens as it is.
-fn tile_for_viewer(
-    source: Box<dyn RowSource>,
-    input: &Path,
-    names: Option<String>,
-    a: &OutputArgs,
-    viewer: Viewer,
-    started: Instant,
-    kept_icc: Option<&[u8]>,
-) -> Result<()> {
-    let (dest, product) = match (&a.output, &a.pmtiles) {
-        (_, Some(file)) => (file, Product::Pmtiles),
-        (Some(dir), None) => (dir, Product::Viewer(viewer)),
-        (None, None) => bail!(
-            "--layout {viewer} writes a directory (-o DIR); a pack has one layout, which `vortex-tiler serve PACK` serves as Deep Zoom, IIIF and XYZ"
-        ),
+/// A run of one output: its summary as `split` has always printed it.
+fn report_one(a: &OutputArgs, done: &Finished, wrote: &Wrote) {
+    let Some(pmtiles) = &wrote.pmtiles else {
+        return report(a, wrote.format.name(), done, &wrote.path, wrote.pack.as_ref());
     };
-    if names.is_some() {
-        bail!("--layout {viewer} names its tiles as viewers expect; --filename-format is for --layout vortex");
+    if a.run.json {
+        let mut doc = report::summary_value(done, "pmtiles", &wrote.path, None);
+        doc["pmtiles"] = report::pmtiles_json(pmtiles);
+        say!("{doc}");
+    } else if !a.run.quiet {
+        say!("{}", report::pmtiles_line(pmtiles));
+        say!("{}", report::summary_line(done, &wrote.path));
     }
-    if a.shard.is_some() {
-        bail!("--shard makes shard packs (--pack); cut the pack in shards, merge it, then serve it as {viewer}");
-    }
-    if a.border.is_some() {
-        bail!(match viewer {
-            Viewer::Dzi =>
-                "--layout dzi shares texels between tiles with --overlap (Deep Zoom's), not --border".to_string(),
-            _ => format!("--layout {viewer} tiles have no border or overlap; --border is for --layout vortex"),
-        });
-    }
-    if a.overlap.is_some() && viewer != Viewer::Dzi {
-        bail!("--overlap is Deep Zoom's (--layout dzi); {viewer} tiles do not overlap");
-    }
-    if a.iiif_id.is_some() && viewer != Viewer::Iiif {
-        bail!("--iiif-id names a IIIF image (--layout iiif)");
-    }
-    let iiif_service = a.iiif_id.as_deref().map(iiif::absolute_id).transpose().map_err(anyhow::Error::msg)?;
-    let name = match &a.name {
-        Some(name) => name.clone(),
-        None => input.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
-    };
-    if name.is_empty() || name.contains(['/', '\\']) || name == "." || name == ".." {
-        bail!("--name '{name}' must be a plain file name (it makes NAME.dzi and NAME_files/)");
-    }
-    let limits = Limits { memory: a.max_memory, ..Limits::default() };
-    let claim = report::claim(dest, product, &[input], a.force)?;
-
-    let tile_size = a.tile_size.unwrap_or(viewer.default_tile_size());
-    let overlap = match viewer {
-        Viewer::Dzi => a.overlap.unwrap_or(dzi::DEFAULT_OVERLAP),
-        _ => 0,
-    };
-    let layout = viewer.page_grid(source.width(), source.height(), tile_size, overlap)?;
-    // Web maps pad their square with a colour (vips: white); the other layouts crop at the image.
-    let background = match viewer {
-        Viewer::Xyz | Viewer::Google => Some(a.background.unwrap_or(Background::Colour([255; 4]))),
-        _ => a.background,
-    };
-    let requested = Requested {
-        tile_size: Some(layout.tile_size),
-        border: Some(layout.border),
-        background,
-        flatten: a.flatten,
-        tile_depth: a.tile_type,
-        filter: a.filter,
-        max_memory: Some(a.max_memory),
-        reencode: a.reencode,
-        ..a.enc.requested()
-    };
-    let (mut opts, _) = settings::resolve(&requested, None, source.layout())?;
-    opts.down_to_one_texel = viewer.down_to_one_texel();
-    if !matches!(opts.codec.extension(), "jpg" | "png") {
-        bail!("--layout {viewer} tiles are image files: use --codec jpeg or png, not {}", opts.codec.name());
-    }
-    if iiif_service.is_some() && opts.codec.extension() != "jpg" {
-        bail!(
-            "--iiif-id makes a conformant IIIF level-0 service, whose one required format is JPEG (default.jpg): \
-             use --codec jpeg, or leave --iiif-id out for {} tiles under a relative id",
-            opts.codec.name()
-        );
-    }
-    limits.check_pyramid(&layout, false)?;
-    if product == Product::Pmtiles {
-        return tile_to_pmtiles(source, a, &claim, &layout, &opts, &name, started);
-    }
-    let tiles = ViewerTiles {
-        viewer,
-        layout,
-        name,
-        extension: viewer.extension(opts.codec.extension()),
-        iiif: iiif_service.map(|id| iiif::Service { id, codec: opts.codec }),
-    };
-    let profile = kept_icc.map(|icc| Profile::for_tiles(icc, opts.codec)).transpose()?.flatten();
-    let mut run = Run::start(source, a, &layout, started)?;
-    run.profile = profile;
-    let sink = DirSink::for_viewer(&claim, tiles)?;
-    let done = run.into_dir(sink, &opts, DirSink::finish_viewer)?;
-    report(a, viewer.name(), &done, dest, None);
-    Ok(())
 }
 
-/// `split`/`convert --pmtiles FILE`: the web-map pyramid into one PMTiles archive.
-fn tile_to_pmtiles(
-    source: Box<dyn RowSource>,
-    a: &OutputArgs,
-    claim: &vortex_tiler::output::Claim,
-    layout: &Layout,
-    opts: &SplitOptions,
-    name: &str,
-    started: Instant,
-) -> Result<()> {
-    use vortex_tiler::sink::pmtiles::{self, Bounds, TileType};
-    let need = layout.total_tiles().saturating_mul(pmtiles::ENTRY_MEMORY_BYTES);
-    Limits { memory: a.max_memory, ..Limits::default() }
-        .check_memory(&format!("the PMTiles directory of {} tiles", layout.total_tiles()), need)?;
-    let (tile_type, format) = match opts.codec.extension() {
-        "png" => (TileType::Png, "png"),
-        _ => (TileType::Jpeg, "jpg"),
+/// A run of several outputs: a line for each (its own figures, its pyramid's stages), then
+/// one for the run; with --json, `outputs` and the run's time.
+fn report_all(a: &OutputArgs, done: &Finished, all: &[Wrote]) {
+    let each = |w: &Wrote| Finished {
+        summary: w.summary.clone(),
+        decoder: done.decoder.clone(),
+        width: done.width,
+        height: done.height,
+        took: done.took,
     };
-    let run = Run::start(source, a, layout, started)?;
-    // On error the sink is dropped, which deletes its temporaries.
-    let sink = PmtilesSink::create(&claim.path, layout, tile_type)?;
-    let done = run.execute(&sink, opts)?;
-    if done.summary.tiles != layout.total_tiles() {
-        bail!("internal error: wrote {} tiles of {}", done.summary.tiles, layout.total_tiles());
-    }
-    let metadata = serde_json::json!({
-        "name": name,
-        "format": format,
-        "type": "baselayer",
-        "description": "an image without map coordinates: zoom 0 is the whole image at the top left of the web-mercator square",
-        "vortex": { "layout": "xyz", "width": layout.width, "height": layout.height, "tileSize": layout.tile_size },
-    });
-    let written = sink.finish(&Bounds::of_image(layout), metadata.to_string().as_bytes())?;
-    let file = &claim.path;
+    let pyramids = all.iter().map(|w| w.pyramid + 1).max().unwrap_or(0);
     if a.run.json {
-        let mut doc: serde_json::Value = serde_json::from_str(&report::summary_json(&done, "pmtiles", file, None))?;
-        doc["pmtiles"] = serde_json::json!({
-            "tiles": written.tiles,
-            "entries": written.entries,
-            "contents": written.contents,
-            "leafDirectories": written.leaves,
-            "dataBytes": written.data_bytes,
-            "fileBytes": written.file_bytes,
+        let outputs: Vec<serde_json::Value> = all
+            .iter()
+            .map(|w| {
+                let mut doc = report::summary_value(&each(w), w.format.name(), &w.path, w.pack.as_ref());
+                doc["pyramid"] = w.pyramid.into();
+                if let Some(p) = &w.pmtiles {
+                    doc["pmtiles"] = report::pmtiles_json(p);
+                }
+                doc
+            })
+            .collect();
+        let doc = serde_json::json!({
+            "outputs": outputs,
+            "pyramids": pyramids,
+            "width": done.width,
+            "height": done.height,
+            "source": done.decoder,
+            "seconds": done.took.as_secs_f64(),
+            "peakMemoryBytes": report::peak_rss(),
         });
         say!("{doc}");
     } else if !a.run.quiet {
+        for w in all {
+            if let Some(p) = &w.pmtiles {
+                say!("{}", report::pmtiles_line(p));
+            }
+            if let Some(p) = &w.pack {
+                say!("{}", report::pack_line(p));
+            }
+            say!("{}: {}", w.format, report::summary_line(&each(w), &w.path));
+            if a.run.verbose {
+                say!("{}", report::stages_line(&w.summary.stages, done.width, done.height));
+                say!("{}", report::memory_line(&w.summary.memory));
+            }
+        }
         say!(
-            "pmtiles: {} tiles in {} directory entries, {} distinct payloads, {} leaf directories, {} file bytes",
-            written.tiles,
-            written.entries,
-            written.contents,
-            written.leaves,
-            written.file_bytes
+            "{} outputs from one read of the source in {:.2} s ({} pyramid{}){}",
+            all.len(),
+            done.took.as_secs_f64(),
+            pyramids,
+            if pyramids == 1 { "" } else { "s, cut side by side" },
+            report::peak_rss().map(|b| format!(", peak memory {}", report::mib(b))).unwrap_or_default()
         );
-        say!("{}", report::summary_line(&done, file));
     }
-    Ok(())
 }

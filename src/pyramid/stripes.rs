@@ -40,6 +40,13 @@ pub(crate) struct Plan {
     pub held: u64,
 }
 
+impl Plan {
+    /// Times the source is read: once per stripe, and once more for the coarse levels.
+    pub fn passes(&self) -> usize {
+        self.stripes.len() + self.coarse.is_some() as usize
+    }
+}
+
 /// What a run holds beside its passes' cascades, which the plan counts in every pass.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct Beside {

@@ -61,6 +61,7 @@ mod pnm;
 pub mod range;
 pub(crate) mod read_ahead;
 pub(crate) mod stored;
+pub(crate) mod tee;
 mod tiff;
 pub mod tiled;
 mod whole;

@@ -364,6 +364,7 @@ fn planes(raw: &[u8], channels: usize, sample: usize) -> std::borrow::Cow<'_, [u
 }
 
 /// The OME-Zarr image a label image belongs to, as its labels must match it.
+#[derive(Debug)]
 pub struct LabelParent {
     pub image: PathBuf,
     pub version: Version,

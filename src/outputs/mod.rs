@@ -1,0 +1,166 @@
+//! What a run writes: one or more outputs, each a [`Format`] at a path, planned together from
+//! one source ([`Plan::new`]) and written from one read of it ([`Plan::write`]).
+//!
+//! Planning checks everything a format cannot hold before a byte is written, with the messages
+//! `split` prints, and claims every destination ([`crate::output::claim`]). Writing groups the
+//! outputs that cut the same pyramid with the same codec (a pack and Deep Zoom of the same tile
+//! size, XYZ and PMTiles): each page of a group is cut once and encoded once for every output
+//! that keeps the same part of it. Groups that differ (OME-Zarr's zstd chunks beside JPEG
+//! tiles, another tile size) each make their own pyramid from the same decoded rows
+//! ([`crate::source::tee`]). Every output stays atomic: it is written under a temporary name and
+//! renamed into place when complete; a run that fails leaves none of them.
+//!
+//! ```no_run
+//! # fn main() -> Result<(), vortex_tiler::error::TilerError> {
+//! use std::path::Path;
+//! use vortex_tiler::outputs::{Budget, Format, Output, Plan, Settings};
+//! use vortex_tiler::viewer::Viewer;
+//!
+//! let input = Path::new("slide.tif");
+//! let source = vortex_tiler::source::open(input, Budget::default().bytes())?;
+//! let outputs = vec![
+//!     Output::new(Format::Viewer(Viewer::Dzi), "web"),
+//!     Output::new(Format::Pack, "slide.vtpk"),
+//! ];
+//! let plan = Plan::new(outputs, &Settings::default(), &source.header(), &[input], Budget::default())?;
+//! for wrote in plan.write(source, &())? {
+//!     println!("{}: {} tiles, {} bytes", wrote.path.display(), wrote.tiles, wrote.bytes);
+//! }
+//! # Ok(())
+//! # }
+//! ```
+
+mod plan;
+mod write;
+
+use std::path::{Path, PathBuf};
+
+pub use plan::{Plan, Planned};
+pub use write::Wrote;
+
+use crate::settings::Requested;
+use crate::sink::ome_zarr::{PixelSize, Version};
+use crate::viewer::Viewer;
+
+/// A file layout a run can write.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum Format {
+    /// This tool's tile directory: tiles named by a filename format plus `info.json`.
+    Tiles,
+    /// One pack file (docs/pack-format.md).
+    Pack,
+    /// A directory a viewer opens as it is (Deep Zoom, IIIF level 0, XYZ, Google).
+    Viewer(Viewer),
+    /// One PMTiles v3 archive of the web-map (XYZ) pyramid.
+    Pmtiles,
+    /// An OME-Zarr image: a `.ome.zarr` directory or a zipped `.ozx` file.
+    OmeZarr,
+}
+
+impl Format {
+    /// The format's name in messages and `--json` (`--layout`'s names, `pack`, `pmtiles`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Tiles => "vortex",
+            Format::Pack => "pack",
+            Format::Viewer(viewer) => viewer.name(),
+            Format::Pmtiles => "pmtiles",
+            Format::OmeZarr => "ome-zarr",
+        }
+    }
+
+    /// The format a path's name says, where it says one: `.vtpk` a pack, `.pmtiles` PMTiles,
+    /// `.ome.zarr` and `.ozx` OME-Zarr. A directory's name says none.
+    pub fn of_path(path: &Path) -> Option<Format> {
+        let name = path.file_name()?.to_string_lossy().to_ascii_lowercase();
+        let name = name.trim_end_matches('/');
+        if name.ends_with(".vtpk") {
+            Some(Format::Pack)
+        } else if name.ends_with(".pmtiles") {
+            Some(Format::Pmtiles)
+        } else if name.ends_with(".ome.zarr") || name.ends_with(".ozx") {
+            Some(Format::OmeZarr)
+        } else {
+            None
+        }
+    }
+}
+
+impl std::fmt::Display for Format {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// One output of a run: a format at a path.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Output {
+    pub format: Format,
+    pub path: PathBuf,
+}
+
+impl Output {
+    pub fn new(format: Format, path: impl Into<PathBuf>) -> Output {
+        Output { format, path: path.into() }
+    }
+}
+
+/// How much memory a run may hold at once (`--max-memory`), shared by all its outputs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct Budget(u64);
+
+impl Budget {
+    /// A budget of `bytes`.
+    pub fn new(bytes: u64) -> Budget {
+        Budget(bytes)
+    }
+
+    pub fn bytes(self) -> u64 {
+        self.0
+    }
+}
+
+/// [`crate::limits::DEFAULT_MEMORY`], `split`'s default.
+impl Default for Budget {
+    fn default() -> Budget {
+        Budget(crate::limits::DEFAULT_MEMORY)
+    }
+}
+
+/// What a run's outputs are asked, `split`'s flags: each output reads the settings its format
+/// has and leaves the others to the run's other outputs; a setting no output of the run reads
+/// is refused, naming its flag, as a one-output run refuses it.
+#[derive(Clone, Debug, Default)]
+pub struct Settings {
+    /// Tile size, border, codec and its settings, pyramid filter, background, tile type,
+    /// filename format; `max_memory` is the run's [`Budget`] and is ignored here.
+    pub tiles: Requested,
+    /// Deep Zoom's overlap (`--overlap`).
+    pub overlap: Option<u32>,
+    /// The pyramid's name: Deep Zoom's `NAME.dzi`, TileJSON's and PMTiles' `name`, OME-Zarr's
+    /// `multiscales` name [default: the input's file stem].
+    pub name: Option<String>,
+    /// IIIF: the absolute URL the image is served at (`--iiif-id`).
+    pub iiif_id: Option<String>,
+    /// OME-Zarr's own settings.
+    pub ome_zarr: OmeZarrSettings,
+    /// How a pack's bytes are laid out.
+    pub pack: vortex_pack::WriteOptions,
+    /// The source's ICC profile, where the texels keep its colours (`--keep-icc`): in a tile
+    /// directory's JPEG and PNG tiles and in `info.json`; other formats refuse it.
+    pub keep_icc: Option<Vec<u8>>,
+    /// Replace a foreign regular file at a file output (`--force`).
+    pub force: bool,
+}
+
+/// What only OME-Zarr outputs read (`None`: not given).
+#[derive(Clone, Debug, Default)]
+pub struct OmeZarrSettings {
+    /// 0.4 or 0.5 [default: 0.5, or a label image's image's].
+    pub version: Option<Version>,
+    /// Chunks per shard side (0.5).
+    pub shard_chunks: Option<u32>,
+    /// The physical side of a source pixel.
+    pub pixel_size: Option<PixelSize>,
+}

@@ -1,0 +1,425 @@
+//! [`Plan::new`]: every output of a run checked against the source, the settings and the
+//! budget, and its destination claimed, before the first tile.
+
+use std::path::{Path, PathBuf};
+
+use super::{Budget, Format, OmeZarrSettings, Output, Settings};
+use crate::background::Background;
+use crate::error::{Result, ShowPath, TilerError};
+use crate::job::SplitOptions;
+use crate::layout::Layout;
+use crate::limits::Limits;
+use crate::output::{self, Claim, Existing, Product};
+use crate::pixel::PixelLayout;
+use crate::settings::{self, Destination, OmeZarrPlan, OmeZarrRequested, Requested};
+use crate::sink::icc::Profile;
+use crate::sink::ome_zarr::{LabelParent, Plane, Spec, label_parent};
+use crate::source::ImageHeader;
+use crate::tile_dir::filename::FilenameFormat;
+use crate::tile_dir::info::InfoFile;
+use crate::viewer::{Viewer, ViewerTiles, dzi, iiif};
+
+/// A run's outputs, each checked and claimed.
+#[derive(Debug)]
+pub struct Plan {
+    pub(super) outputs: Vec<Planned>,
+    pub(super) budget: Budget,
+    pub(super) pack: vortex_pack::WriteOptions,
+}
+
+/// One output of a [`Plan`]: how the pipeline cuts and encodes its pyramid, and what its
+/// format writes besides the tiles.
+#[derive(Debug)]
+pub struct Planned {
+    pub output: Output,
+    /// How the pipeline cuts and encodes this output's pyramid.
+    pub opts: SplitOptions,
+    /// The page grid it is cut into.
+    pub layout: Layout,
+    /// Where a previous output's `info.json` set this run's defaults (a tile directory
+    /// replacing one of ours): its path and `name value` of each setting it changed.
+    pub changed: Option<(PathBuf, Vec<String>)>,
+    pub(super) claim: Claim,
+    pub(super) work: Work,
+}
+
+/// What each format needs besides the tiles, to start its sink and to finish it.
+#[derive(Debug)]
+pub(super) enum Work {
+    Tiles { names: FilenameFormat, info: InfoFile, profile: Option<Profile> },
+    Pack { info: InfoFile, stored: PixelLayout },
+    Viewer { tiles: ViewerTiles, profile: Option<Profile> },
+    Pmtiles { name: String },
+    OmeZarr { spec: Box<Spec>, parent: Option<LabelParent> },
+}
+
+impl Plan {
+    /// Plans `outputs` of the source `header` describes (read from `inputs`, which no output
+    /// may overwrite) with `settings`, within `budget`. Fails, before anything is written, on
+    /// the first output that cannot hold what is asked, with the message `split` prints.
+    pub fn new(
+        outputs: Vec<Output>,
+        settings: &Settings,
+        header: &ImageHeader,
+        inputs: &[&Path],
+        budget: Budget,
+    ) -> Result<Plan> {
+        Plan::with_planes(outputs, settings, header, inputs, budget, None)
+    }
+
+    /// [`Plan::new`] for OME-Zarr channels written one pass each (`planes`; `header` is a
+    /// channel's).
+    pub fn with_planes(
+        outputs: Vec<Output>,
+        settings: &Settings,
+        header: &ImageHeader,
+        inputs: &[&Path],
+        budget: Budget,
+        planes: Option<Vec<Plane>>,
+    ) -> Result<Plan> {
+        if outputs.is_empty() {
+            return Err(options("a run needs an output".into()));
+        }
+        check_apart(&outputs)?;
+        refuse_unread(settings, &outputs)?;
+        let formats: Vec<Format> = outputs.iter().map(|o| o.format).collect();
+        let mut planned = Vec::with_capacity(outputs.len());
+        for output in outputs {
+            let own = Own::of(settings, output.format, &formats);
+            let input = inputs.first().copied().unwrap_or(Path::new(""));
+            let at = Context { header, inputs, input, budget, force: settings.force };
+            planned.push(match output.format {
+                Format::Tiles | Format::Pack => tiles(output, &own, &at)?,
+                Format::Viewer(viewer) => for_viewer(output, viewer, &own, &at)?,
+                Format::Pmtiles => for_viewer(output, Viewer::Xyz, &own, &at)?,
+                Format::OmeZarr => ome_zarr(output, &own, &at, planes.clone())?,
+            });
+        }
+        Ok(Plan { outputs: planned, budget, pack: settings.pack })
+    }
+
+    /// The outputs, in the order given.
+    pub fn outputs(&self) -> &[Planned] {
+        &self.outputs
+    }
+
+    /// Tiles the run writes, all outputs together (what a progress bar counts).
+    pub fn total_tiles(&self) -> u64 {
+        self.outputs.iter().map(|p| p.layout.total_tiles()).sum()
+    }
+}
+
+impl Planned {
+    /// The `info.json` a tile directory or a pack holds.
+    pub fn info(&self) -> Option<&InfoFile> {
+        match &self.work {
+            Work::Tiles { info, .. } | Work::Pack { info, .. } => Some(info),
+            _ => None,
+        }
+    }
+}
+
+/// What every output's planning reads besides its settings.
+struct Context<'a> {
+    header: &'a ImageHeader,
+    inputs: &'a [&'a Path],
+    /// The first input, whose file stem names a pyramid by default.
+    input: &'a Path,
+    budget: Budget,
+    force: bool,
+}
+
+impl Context<'_> {
+    fn limits(&self) -> Limits {
+        Limits { memory: self.budget.bytes(), ..Limits::default() }
+    }
+
+    fn claim(&self, path: &Path, product: Product) -> Result<Claim> {
+        Ok(output::claim(path, product, self.inputs, self.force)?)
+    }
+
+    /// `--name`, else the input's file stem.
+    fn name(&self, own: &Own) -> String {
+        match &own.name {
+            Some(name) => name.clone(),
+            None => self.input.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+        }
+    }
+}
+
+/// The settings one output reads: those its format has, or, where no output of the run reads
+/// a setting, every setting given (so that the output refuses it, naming the flag).
+struct Own {
+    tiles: Requested,
+    overlap: Option<u32>,
+    name: Option<String>,
+    iiif_id: Option<String>,
+    ome_zarr: OmeZarrSettings,
+    keep_icc: Option<Vec<u8>>,
+}
+
+/// The settings a format reads beyond those every format does (tile size, background,
+/// flatten, tile type, filter, reencode).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Setting {
+    FilenameFormat,
+    Border,
+    Overlap,
+    Name,
+    IiifId,
+    /// `--codec` and the JPEG, PNG and BC7 settings.
+    ImageCodec,
+    ZstdLevel,
+    KeepIcc,
+}
+
+fn reads(format: Format, setting: Setting) -> bool {
+    use Setting::*;
+    match format {
+        Format::Tiles | Format::Pack => matches!(setting, FilenameFormat | Border | ImageCodec | ZstdLevel | KeepIcc),
+        Format::Viewer(viewer) => match setting {
+            Overlap => viewer == Viewer::Dzi,
+            IiifId => viewer == Viewer::Iiif,
+            Name | ImageCodec | KeepIcc => true,
+            _ => false,
+        },
+        Format::Pmtiles => matches!(setting, Name | ImageCodec),
+        Format::OmeZarr => matches!(setting, Name | ZstdLevel),
+    }
+}
+
+impl Own {
+    fn of(s: &Settings, format: Format, all: &[Format]) -> Own {
+        // Given to this output if it reads it, or if no output does (to be refused).
+        let gets = |setting: Setting| reads(format, setting) || !all.iter().any(|f| reads(*f, setting));
+        let t = &s.tiles;
+        let image_codec = gets(Setting::ImageCodec);
+        let tiles = Requested {
+            filename_format: t.filename_format.clone().filter(|_| gets(Setting::FilenameFormat)),
+            border: t.border.filter(|_| gets(Setting::Border)),
+            codec: t.codec.filter(|_| image_codec || format == Format::OmeZarr),
+            quality: t.quality.filter(|_| image_codec),
+            subsampling: t.subsampling.filter(|_| image_codec),
+            png_level: t.png_level.filter(|_| image_codec),
+            bc7_effort: t.bc7_effort.filter(|_| image_codec),
+            zstd_level: t.zstd_level.filter(|_| gets(Setting::ZstdLevel)),
+            max_memory: None,
+            ..t.clone()
+        };
+        Own {
+            tiles,
+            overlap: s.overlap.filter(|_| gets(Setting::Overlap)),
+            name: s.name.clone().filter(|_| gets(Setting::Name)),
+            iiif_id: s.iiif_id.clone().filter(|_| gets(Setting::IiifId)),
+            ome_zarr: if format == Format::OmeZarr { s.ome_zarr.clone() } else { OmeZarrSettings::default() },
+            keep_icc: s.keep_icc.clone().filter(|_| gets(Setting::KeepIcc)),
+        }
+    }
+}
+
+/// OME-Zarr's own settings with no OME-Zarr output, and `--keep-icc` where no output keeps
+/// the profile, are refused here; the rest by the output that does not read them.
+fn refuse_unread(s: &Settings, outputs: &[Output]) -> Result<()> {
+    if !outputs.iter().any(|o| o.format == Format::OmeZarr) {
+        let z = &s.ome_zarr;
+        for (given, flag) in [
+            (z.version.is_some(), "--ome-zarr-version"),
+            (z.shard_chunks.is_some(), "--shard-chunks"),
+            (z.pixel_size.is_some(), "--pixel-size"),
+        ] {
+            if given {
+                return Err(options(format!("{flag} belongs to --layout ome-zarr")));
+            }
+        }
+    }
+    let keeps = |o: &Output| reads(o.format, Setting::KeepIcc);
+    if s.keep_icc.is_some()
+        && let Some(o) = outputs.iter().find(|o| !keeps(o))
+    {
+        let what = match o.format {
+            Format::Pmtiles => "a PMTiles archive",
+            _ => "OME-Zarr",
+        };
+        return Err(options(format!(
+            "--keep-icc keeps the profile in the JPEG and PNG tiles of a directory and in info.json (a pack's too); {what} has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
+        )));
+    }
+    Ok(())
+}
+
+/// No two outputs at one path, nor one inside another's directory (a directory is renamed
+/// into place whole, which would take the other with it).
+fn check_apart(outputs: &[Output]) -> Result<()> {
+    let absolute = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    for (i, a) in outputs.iter().enumerate() {
+        for b in &outputs[i + 1..] {
+            let (pa, pb) = (absolute(&a.path), absolute(&b.path));
+            if pa.starts_with(&pb) || pb.starts_with(&pa) {
+                return Err(options(format!(
+                    "{} ({}) and {} ({}): the outputs of one run need paths of their own, neither inside the other",
+                    a.path.shown(),
+                    a.format,
+                    b.path.shown(),
+                    b.format
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// This tool's tile directory or a pack.
+fn tiles(output: Output, own: &Own, at: &Context) -> Result<Planned> {
+    for (given, flag) in
+        [(own.name.is_some(), "--name"), (own.overlap.is_some(), "--overlap"), (own.iiif_id.is_some(), "--iiif-id")]
+    {
+        if given {
+            return Err(options(format!(
+                "{flag} belongs to a viewer layout (--layout dzi, iiif, xyz or google); this tool's tiles have --border"
+            )));
+        }
+    }
+    let (product, destination) = match output.format {
+        Format::Pack => (Product::Pack, Destination::Pack),
+        _ => (Product::TileDir, Destination::TileDir),
+    };
+    let claim = at.claim(&output.path, product)?;
+    // A previous output directory's info.json sets this run's defaults (the original tool's
+    // way of configuring a run); the claim made sure the directory is ours.
+    let info_path = (product == Product::TileDir && claim.replaces == Some(Existing::Ours))
+        .then(|| output.path.join("info.json"))
+        .filter(|p| p.is_file());
+    let existing = info_path.as_deref().map(InfoFile::read).transpose()?;
+    let requested = Requested { max_memory: Some(at.budget.bytes()), ..own.tiles.clone() };
+    let existing = info_path.as_deref().zip(existing.as_ref());
+    let icc = own.keep_icc.as_deref();
+    let plan = settings::Plan::new(&requested, existing, at.header, destination, &at.limits(), icc)?;
+    let settings::Plan { opts, names, layout, info, changed, stored } = plan;
+    let changed = info_path.filter(|_| !changed.is_empty()).map(|p| (p, changed));
+    let work = match output.format {
+        Format::Pack => Work::Pack { info, stored },
+        _ => {
+            // The JPEG and PNG tiles of a directory carry the kept profile; a pack's tiles do
+            // not (its metadata, info.json, holds it once: docs/colour.md).
+            let profile = icc.map(|icc| Profile::for_tiles(icc, opts.codec)).transpose()?.flatten();
+            Work::Tiles { names, info, profile }
+        }
+    };
+    Ok(Planned { output, opts, layout, changed, claim, work })
+}
+
+/// A viewer layout's directory, or (as `Viewer::Xyz`) a PMTiles archive.
+fn for_viewer(output: Output, viewer: Viewer, own: &Own, at: &Context) -> Result<Planned> {
+    let t = &own.tiles;
+    if t.filename_format.is_some() {
+        return Err(options(format!(
+            "--layout {viewer} names its tiles as viewers expect; --filename-format is for --layout vortex"
+        )));
+    }
+    if t.border.is_some() {
+        return Err(options(match viewer {
+            Viewer::Dzi => "--layout dzi shares texels between tiles with --overlap (Deep Zoom's), not --border".into(),
+            _ => format!("--layout {viewer} tiles have no border or overlap; --border is for --layout vortex"),
+        }));
+    }
+    if own.overlap.is_some() && viewer != Viewer::Dzi {
+        return Err(options(format!("--overlap is Deep Zoom's (--layout dzi); {viewer} tiles do not overlap")));
+    }
+    if own.iiif_id.is_some() && viewer != Viewer::Iiif {
+        return Err(options("--iiif-id names a IIIF image (--layout iiif)".into()));
+    }
+    let iiif_service = own.iiif_id.as_deref().map(iiif::absolute_id).transpose().map_err(options)?;
+    let name = at.name(own);
+    if name.is_empty() || name.contains(['/', '\\']) || name == "." || name == ".." {
+        return Err(options(format!("--name '{name}' must be a plain file name (it makes NAME.dzi and NAME_files/)")));
+    }
+    let pmtiles = output.format == Format::Pmtiles;
+    let claim = at.claim(&output.path, if pmtiles { Product::Pmtiles } else { Product::Viewer(viewer) })?;
+
+    let tile_size = t.tile_size.unwrap_or(viewer.default_tile_size());
+    let overlap = match viewer {
+        Viewer::Dzi => own.overlap.unwrap_or(dzi::DEFAULT_OVERLAP),
+        _ => 0,
+    };
+    let (width, height) = (at.header.width, at.header.height);
+    let layout = viewer.page_grid(width, height, tile_size, overlap)?;
+    // Web maps pad their square with a colour (vips: white); the other layouts crop at the image.
+    let background = match viewer {
+        Viewer::Xyz | Viewer::Google => Some(t.background.unwrap_or(Background::Colour([255; 4]))),
+        _ => t.background,
+    };
+    let requested = Requested {
+        tile_size: Some(layout.tile_size),
+        border: Some(layout.border),
+        background,
+        max_memory: Some(at.budget.bytes()),
+        filename_format: None,
+        ..t.clone()
+    };
+    let (mut opts, _) = settings::resolve(&requested, None, at.header.layout)?;
+    opts.down_to_one_texel = viewer.down_to_one_texel();
+    if !matches!(opts.codec.extension(), "jpg" | "png") {
+        return Err(options(format!(
+            "--layout {viewer} tiles are image files: use --codec jpeg or png, not {}",
+            opts.codec.name()
+        )));
+    }
+    if iiif_service.is_some() && opts.codec.extension() != "jpg" {
+        return Err(options(format!(
+            "--iiif-id makes a conformant IIIF level-0 service, whose one required format is JPEG (default.jpg): \
+             use --codec jpeg, or leave --iiif-id out for {} tiles under a relative id",
+            opts.codec.name()
+        )));
+    }
+    at.limits().check_pyramid(&layout, false)?;
+    if pmtiles {
+        use crate::sink::pmtiles::ENTRY_MEMORY_BYTES;
+        let need = layout.total_tiles().saturating_mul(ENTRY_MEMORY_BYTES);
+        at.limits().check_memory(&format!("the PMTiles directory of {} tiles", layout.total_tiles()), need)?;
+        return Ok(Planned { output, opts, layout, changed: None, claim, work: Work::Pmtiles { name } });
+    }
+    let tiles = ViewerTiles {
+        viewer,
+        layout,
+        name,
+        extension: viewer.extension(opts.codec.extension()),
+        iiif: iiif_service.map(|id| iiif::Service { id, codec: opts.codec }),
+    };
+    let profile = own.keep_icc.as_deref().map(|icc| Profile::for_tiles(icc, opts.codec)).transpose()?.flatten();
+    Ok(Planned { output, opts, layout, changed: None, claim, work: Work::Viewer { tiles, profile } })
+}
+
+/// An OME-Zarr image (docs/ome-zarr.md); `planes`: channels written one pass each.
+fn ome_zarr(output: Output, own: &Own, at: &Context, planes: Option<Vec<Plane>>) -> Result<Planned> {
+    for (given, flag) in [(own.overlap.is_some(), "--overlap"), (own.iiif_id.is_some(), "--iiif-id")] {
+        if given {
+            return Err(options(format!("{flag} belongs to a viewer layout; OME-Zarr chunks do not overlap")));
+        }
+    }
+    let requested = Requested { max_memory: Some(at.budget.bytes()), ..own.tiles.clone() };
+    let z = &own.ome_zarr;
+    let zarr = OmeZarrRequested {
+        version: z.version,
+        shard_chunks: z.shard_chunks,
+        pixel_size: z.pixel_size,
+        name: at.name(own),
+        planes,
+    };
+    // -o IMAGE/labels/NAME: a label image of IMAGE, in IMAGE's version.
+    let parent = label_parent(&output.path);
+    let OmeZarrPlan { product, spec, opts } =
+        OmeZarrPlan::new(&requested, zarr, &output.path, parent.as_ref(), at.header, &at.limits())?;
+    if parent.is_some() && spec.planes.is_some() {
+        return Err(options(format!(
+            "{}: a label image has one channel; pick it with --channels N",
+            output.path.shown()
+        )));
+    }
+    let claim = at.claim(&output.path, product)?;
+    let layout = spec.layout;
+    Ok(Planned { output, opts, layout, changed: None, claim, work: Work::OmeZarr { spec: Box::new(spec), parent } })
+}
+
+fn options(message: String) -> TilerError {
+    TilerError::Options(message)
+}

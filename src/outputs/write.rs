@@ -1,0 +1,374 @@
+//! [`Plan::write`]: the outputs' sinks, fed from one read of the source, finished together.
+
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use super::plan::{Planned, Work};
+use super::{Budget, Format, Plan};
+use crate::error::{Result, TilerError};
+use crate::job::{Progress, SplitOptions, Summary, Written};
+use crate::sink::icc::{Profile, WithProfile};
+use crate::sink::pmtiles::{Bounds, PmtilesSummary, TileType};
+use crate::sink::{DirSink, OmeZarrSink, PackSink, PmtilesSink, Target, TileSink};
+use crate::source::channels::{ChannelSet, Ranged};
+use crate::source::{RowSource, tee};
+use crate::split;
+
+/// Rows of the source the outputs' pyramids may be apart by, when they read one source
+/// together ([`tee`]): enough that one pyramid's read-ahead chunk does not stop the others.
+const TEE_WINDOW_ROWS: usize = 256;
+
+/// What one output wrote.
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub struct Wrote {
+    pub format: Format,
+    pub path: PathBuf,
+    /// Tiles it holds (a place each) and bytes of tile data.
+    pub tiles: u64,
+    pub bytes: u64,
+    /// The run that cut its pyramid, shared with the outputs cut from the same one: tiles
+    /// encoded and copied, stages, memory.
+    pub summary: Summary,
+    /// Which of the run's pyramids it was cut from, counted from 0 in the order of the
+    /// outputs that first need each.
+    pub pyramid: usize,
+    /// A pack's own figures.
+    pub pack: Option<vortex_pack::WriteSummary>,
+    /// A PMTiles archive's own figures.
+    pub pmtiles: Option<PmtilesSummary>,
+}
+
+/// An output being written: its plan and its sink.
+struct Open {
+    planned: Planned,
+    sink: Sink,
+}
+
+enum Sink {
+    Dir(DirSink),
+    Pack(PackSink),
+    Pmtiles(PmtilesSink),
+    OmeZarr(Box<OmeZarrSink>),
+}
+
+impl Open {
+    /// Starts `planned`'s sink. Each writes under a temporary name and removes it when dropped
+    /// unfinished.
+    fn start(planned: Planned, pack: vortex_pack::WriteOptions) -> Result<Open> {
+        let claim = &planned.claim;
+        let sink = match &planned.work {
+            Work::Tiles { names, .. } => Sink::Dir(DirSink::create(claim, names.clone())?),
+            Work::Viewer { tiles, .. } => Sink::Dir(DirSink::for_viewer(claim, tiles.clone())?),
+            Work::Pack { info, stored } => {
+                let (stored, metadata) = (*stored, info.to_json_pretty());
+                let codec = planned.opts.codec;
+                Sink::Pack(PackSink::create(&claim.path, &planned.layout, stored, codec, metadata.as_bytes(), pack)?)
+            }
+            Work::Pmtiles { .. } => {
+                let tile_type = match planned.opts.codec.extension() {
+                    "png" => TileType::Png,
+                    _ => TileType::Jpeg,
+                };
+                Sink::Pmtiles(PmtilesSink::create(&claim.path, &planned.layout, tile_type)?)
+            }
+            Work::OmeZarr { spec, .. } => Sink::OmeZarr(Box::new(OmeZarrSink::create(claim, (**spec).clone())?)),
+        };
+        Ok(Open { planned, sink })
+    }
+
+    fn tile_sink(&self) -> &dyn TileSink {
+        match &self.sink {
+            Sink::Dir(s) => s,
+            Sink::Pack(s) => s,
+            Sink::Pmtiles(s) => s,
+            Sink::OmeZarr(s) => s.as_ref(),
+        }
+    }
+
+    /// The kept ICC profile its tile files carry.
+    fn profile(&self) -> Option<&Profile> {
+        match &self.planned.work {
+            Work::Tiles { profile, .. } | Work::Viewer { profile, .. } => profile.as_ref(),
+            _ => None,
+        }
+    }
+
+    /// Writes what the format writes last and renames the output into place.
+    fn finish(self, summary: &Summary, at: usize, pyramid: usize) -> Result<Wrote> {
+        let Open { planned, sink } = self;
+        let written = summary.per_target.get(at).copied().unwrap_or_default();
+        let total = planned.layout.total_tiles();
+        if written.tiles != total {
+            return Err(TilerError::Options(format!(
+                "internal error: wrote {} tiles of {total} into {}",
+                written.tiles,
+                planned.output.path.display()
+            )));
+        }
+        let (mut pack, mut pmtiles) = (None, None);
+        match (sink, &planned.work) {
+            (Sink::Dir(dir), Work::Tiles { info, .. }) => dir.finish(info)?,
+            (Sink::Dir(dir), _) => dir.finish_viewer()?,
+            (Sink::Pack(sink), _) => pack = Some(sink.finish()?),
+            (Sink::Pmtiles(sink), Work::Pmtiles { name }) => {
+                let layout = &planned.layout;
+                let metadata = serde_json::json!({
+                    "name": name,
+                    "format": planned.opts.codec.extension(),
+                    "type": "baselayer",
+                    "description": "an image without map coordinates: zoom 0 is the whole image at the top left of the web-mercator square",
+                    "vortex": { "layout": "xyz", "width": layout.width, "height": layout.height, "tileSize": layout.tile_size },
+                });
+                pmtiles = Some(sink.finish(&Bounds::of_image(layout), metadata.to_string().as_bytes())?);
+            }
+            (Sink::OmeZarr(sink), Work::OmeZarr { spec, parent }) => {
+                sink.finish()?;
+                if let (Some(p), Some(label)) = (parent, planned.output.path.file_name()) {
+                    crate::sink::ome_zarr::register_label(
+                        &p.image.join("labels"),
+                        spec.version,
+                        &label.to_string_lossy(),
+                    )?;
+                }
+            }
+            _ => return Err(TilerError::Options("internal error: an output's sink is not its format's".into())),
+        }
+        // The pyramid's summary in this output's terms: its levels, its tiles and bytes.
+        let summary = Summary { layout: planned.layout, tiles: written.tiles, bytes: written.bytes, ..summary.clone() };
+        let Planned { output, .. } = planned;
+        Ok(Wrote {
+            format: output.format,
+            path: output.path,
+            tiles: written.tiles,
+            bytes: written.bytes,
+            summary,
+            pyramid,
+            pack,
+            pmtiles,
+        })
+    }
+}
+
+/// Outputs cut from one pyramid: their indexes, and the options that cut it (down to the
+/// deepest member's levels).
+struct Pyramid {
+    members: Vec<usize>,
+    opts: SplitOptions,
+}
+
+/// The outputs grouped by the pyramid and encoding they share: the same options but for how
+/// deep the levels go.
+fn pyramids(planned: &[&Planned]) -> Vec<Pyramid> {
+    let key = |opts: &SplitOptions| SplitOptions { down_to_one_texel: false, ..opts.clone() };
+    let mut out: Vec<Pyramid> = Vec::new();
+    for (k, p) in planned.iter().enumerate() {
+        match out.iter_mut().find(|g| key(&g.opts) == key(&p.opts)) {
+            Some(g) => {
+                g.members.push(k);
+                g.opts.down_to_one_texel |= p.opts.down_to_one_texel;
+            }
+            None => out.push(Pyramid { members: vec![k], opts: p.opts.clone() }),
+        }
+    }
+    out
+}
+
+impl Plan {
+    /// Writes every output from one read of `source` (the image the plan was made for), and
+    /// says what each wrote, in the order given. `progress` hears of every tile of every output
+    /// and can stop the run. On failure nothing of any output is left (each output that was
+    /// finished before a later one failed to finish stays, complete).
+    pub fn write(self, mut source: Box<dyn RowSource>, progress: &dyn Progress) -> Result<Vec<Wrote>> {
+        let Plan { outputs, budget, pack } = self;
+        let open: Vec<Open> = outputs.into_iter().map(|p| Open::start(p, pack)).collect::<Result<_>>()?;
+        let planned: Vec<&Planned> = open.iter().map(|o| &o.planned).collect();
+        let pyramids = pyramids(&planned);
+        let tagged: Vec<Option<WithProfile>> =
+            open.iter().map(|o| o.profile().map(|profile| WithProfile { inner: o.tile_sink(), profile })).collect();
+        let sink = |k: usize| tagged[k].as_ref().map_or(open[k].tile_sink(), |t| t as &dyn TileSink);
+        let targets: Vec<Vec<Target>> = (pyramids.iter())
+            .map(|g| {
+                g.members.iter().map(|&k| Target { sink: sink(k), lods: open[k].planned.layout.lod_count }).collect()
+            })
+            .collect();
+        let summaries = match pyramids.len() {
+            1 => vec![split::split_to(source.as_mut(), &targets[0], &pyramids[0].opts, progress)?],
+            _ => cut_together(source, &pyramids, &targets, budget, progress)?,
+        };
+        drop(tagged);
+        let mut place = vec![(0, 0); open.len()];
+        for (g, pyramid) in pyramids.iter().enumerate() {
+            for (at, &k) in pyramid.members.iter().enumerate() {
+                place[k] = (g, at);
+            }
+        }
+        open.into_iter().zip(place).map(|(o, (g, at))| o.finish(&summaries[g], at, g)).collect()
+    }
+}
+
+impl Plan {
+    /// Writes the one OME-Zarr output of a plan made with planes ([`Plan::with_planes`]) from
+    /// the channels `picks` of `set`, one pass each, one after another (memory stays one grey
+    /// pipeline's); `first` is channel `picks[0]`, opened already.
+    pub fn write_channels(
+        self,
+        set: &ChannelSet,
+        picks: &[usize],
+        first: Box<dyn RowSource>,
+        progress: &dyn Progress,
+    ) -> Result<Wrote> {
+        let Plan { outputs, pack, .. } = self;
+        let [planned] = <[Planned; 1]>::try_from(outputs)
+            .map_err(|_| TilerError::Options("channels one pass each go to one OME-Zarr output".into()))?;
+        let open = Open::start(planned, pack)?;
+        let Sink::OmeZarr(sink) = &open.sink else {
+            return Err(TilerError::Options("channels one pass each go to an OME-Zarr output".into()));
+        };
+        let (opts, total) = (&open.planned.opts, open.planned.layout.total_tiles());
+        let mut summary: Option<Summary> = None;
+        let mut windows = Vec::with_capacity(picks.len());
+        let mut first = Some(first);
+        for (c, &k) in picks.iter().enumerate() {
+            let source = match first.take() {
+                Some(source) => source,
+                None => set.channel(k)?,
+            };
+            let (mut source, range) = Ranged::new(source);
+            let target = Target { sink: &sink.plane(c as u32), lods: open.planned.layout.lod_count };
+            let done = split::split_to(&mut source, &[target], opts, progress)?;
+            if done.tiles != total {
+                return Err(TilerError::Options(format!(
+                    "internal error: wrote {} tiles of {total} of channel {k}",
+                    done.tiles
+                )));
+            }
+            windows.push(*range.lock().unwrap_or_else(|p| p.into_inner()));
+            summary = Some(match summary {
+                None => done,
+                Some(sum) => add(sum, done),
+            });
+        }
+        let Some(mut summary) = summary else { return Err(TilerError::Options("--channels names no channel".into())) };
+        let mut open = open;
+        if let Sink::OmeZarr(sink) = &mut open.sink {
+            for (c, window) in windows.into_iter().enumerate() {
+                sink.set_window(c, window);
+            }
+        }
+        // One target, every pass's places in it.
+        summary.per_target = vec![Written { tiles: summary.tiles, bytes: summary.bytes }];
+        open.finish(&summary, 0, 0)
+    }
+}
+
+/// Two passes' summaries as one run's: their tiles, reads and stage times added up.
+fn add(mut sum: Summary, pass: Summary) -> Summary {
+    sum.tiles += pass.tiles;
+    sum.encoded += pass.encoded;
+    // The sink counts every pass's bytes.
+    sum.bytes = pass.bytes;
+    sum.passes += pass.passes;
+    // The passes run one after another: the run held at most what its largest pass held.
+    if pass.memory.peaks.total > sum.memory.peaks.total {
+        sum.memory = pass.memory;
+    }
+    let (s, p) = (&mut sum.stages, pass.stages);
+    for (to, from) in [
+        (&mut s.read, p.read),
+        (&mut s.read_wait, p.read_wait),
+        (&mut s.pyramid, p.pyramid),
+        (&mut s.cut, p.cut),
+        (&mut s.producer_blocked, p.producer_blocked),
+        (&mut s.encoders_idle, p.encoders_idle),
+        (&mut s.encode, p.encode),
+        (&mut s.store, p.store),
+    ] {
+        *to += from;
+    }
+    sum
+}
+
+/// Several pyramids from one read of `source` ([`tee`]), each on its own thread with its
+/// share of `budget`, where each then reads the source in one pass; else one after another,
+/// each with the whole budget, the source read again for each (`split` says so in its
+/// passes).
+fn cut_together(
+    mut source: Box<dyn RowSource>,
+    pyramids: &[Pyramid],
+    targets: &[Vec<Target>],
+    budget: Budget,
+    progress: &dyn Progress,
+) -> Result<Vec<Summary>> {
+    let n = pyramids.len() as u64;
+    let window = tee::window_bytes(&source.header(), TEE_WINDOW_ROWS);
+    let share = budget.bytes().saturating_sub(window) / n;
+    let shared: Vec<SplitOptions> =
+        pyramids.iter().map(|g| SplitOptions { max_memory: share, ..g.opts.clone() }).collect();
+    let one_pass = shared
+        .iter()
+        .zip(targets)
+        .all(|(opts, t)| split::plan(source.as_ref(), t, opts).is_ok_and(|p| p.passes() == 1));
+    if !one_pass {
+        let mut summaries = Vec::with_capacity(pyramids.len());
+        for (k, (g, t)) in pyramids.iter().zip(targets).enumerate() {
+            if k > 0 {
+                source.rewind()?;
+            }
+            summaries.push(split::split_to(source.as_mut(), t, &g.opts, progress)?);
+        }
+        return Ok(summaries);
+    }
+    let branches = tee::tee(source, pyramids.len(), TEE_WINDOW_ROWS);
+    let stop = Joint { inner: progress, failed: AtomicBool::new(false), first: Mutex::new(None) };
+    let results: Vec<Result<Summary>> = std::thread::scope(|scope| {
+        let runs: Vec<_> = (branches.into_iter().zip(&shared).zip(targets))
+            .map(|((mut branch, opts), t)| {
+                let stop = &stop;
+                scope.spawn(move || {
+                    let result = split::split_to(branch.as_mut(), t, opts, stop);
+                    result.map_err(|e| stop.fail(e))
+                })
+            })
+            .collect();
+        runs.into_iter().map(|r| r.join().unwrap_or_else(|_| Err(TilerError::panicked("a pyramid's run")))).collect()
+    });
+    // The error that stopped the others, not theirs.
+    match stop.first.into_inner().unwrap_or_else(|poisoned| poisoned.into_inner()) {
+        Some(e) => Err(e),
+        None => results.into_iter().collect(),
+    }
+}
+
+/// The caller's progress, and a stop for every pyramid once one has failed.
+struct Joint<'a> {
+    inner: &'a dyn Progress,
+    failed: AtomicBool,
+    /// The first failure other than being stopped.
+    first: Mutex<Option<TilerError>>,
+}
+
+impl Joint<'_> {
+    /// Stops the other pyramids; keeps `e` if it is the first real failure.
+    fn fail(&self, e: TilerError) -> TilerError {
+        self.failed.store(true, Ordering::SeqCst);
+        let mut first = self.first.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        match (&*first, e) {
+            (None, e) if !matches!(e, TilerError::Interrupted) => {
+                *first = Some(e);
+                TilerError::Interrupted
+            }
+            (_, e) => e,
+        }
+    }
+}
+
+impl Progress for Joint<'_> {
+    fn advance(&self, tiles: u64) {
+        self.inner.advance(tiles);
+    }
+    fn cancelled(&self) -> bool {
+        self.failed.load(Ordering::SeqCst) || self.inner.cancelled()
+    }
+}
