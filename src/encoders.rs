@@ -18,13 +18,16 @@ use std::sync::mpsc::{Receiver, TryRecvError, sync_channel};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::Instant;
 
+use crate::background::Background;
 use crate::codec::TileEncoder;
 use crate::error::{Result, TilerError};
 use crate::job::Progress;
+use crate::layout::Layout;
 use crate::limits::in_flight::{GATHER_MOST, LOTS_IN_FLIGHT};
 use crate::limits::{Gauge, Part};
 use crate::pixel::Sample;
 use crate::pyramid::cascade::{Batch, CutTile};
+use crate::pyramid::cut;
 use crate::sink::Target;
 use crate::source::stored::{StoredTiles, crop};
 use crate::stages::{Stage, StageClock};
@@ -96,10 +99,13 @@ impl Copier {
 }
 
 /// Encodes and writes batches as they arrive, until the producer is done or something fails.
+/// `pages`: the grid the tiles were cut on and the background they were padded with.
+#[expect(clippy::too_many_arguments, reason = "the stage's inputs, each from another part of the run")]
 pub(crate) fn consume<T: Sample>(
     rx: Receiver<Result<Batch<T>>>,
     encoder: &TileEncoder<T>,
     targets: &[Target],
+    pages: (&Layout, Background),
     counts: &Counts,
     copier: Option<&Copier>,
     progress: &dyn Progress,
@@ -107,7 +113,20 @@ pub(crate) fn consume<T: Sample>(
 ) -> Result<()> {
     let busy = Busy::default();
     let memory = &clock.memory;
-    let stage = Encoding { encoder, targets, counts, copier, progress, busy: &busy, memory };
+    let (layout, cut_with) = pages;
+    let channels = encoder.source_layout().channels;
+    // The colour each target pads with where the pages were cut with another (with the edge).
+    let fills = targets
+        .iter()
+        .map(|t| match (t.background == cut_with, t.background.texel::<T>(channels)) {
+            (true, _) => Ok(None),
+            (false, Some(texel)) => Ok(Some(texel)),
+            (false, None) => {
+                Err(TilerError::Options("a sink that repeats the edge was fed pages padded with a colour".into()))
+            }
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let stage = Encoding { encoder, targets, fills: &fills, layout, counts, copier, progress, busy: &busy, memory };
     // The writer waits for each lot in turn and frees its place once it is stored; a lot is
     // received only into a free place, so the writer's queue never fills.
     let (to_writer, lots) = sync_channel::<Arc<Lot<T>>>(LOTS_IN_FLIGHT);
@@ -155,7 +174,7 @@ pub(crate) fn consume<T: Sample>(
                 if progress.cancelled() {
                     return Err(TilerError::Interrupted);
                 }
-                let lot = Arc::new(Lot::of(gather(first?, &rx)?, targets, copier));
+                let lot = Arc::new(Lot::of(gather(first?, &rx)?, &stage));
                 for k in 0..lot.jobs.len() {
                     let lot = Arc::clone(&lot);
                     let stage = &stage;
@@ -220,6 +239,9 @@ fn gather<T>(first: Batch<T>, rx: &Receiver<Result<Batch<T>>>) -> Result<Vec<Bat
 struct Encoding<'a, T> {
     encoder: &'a TileEncoder<T>,
     targets: &'a [Target<'a>],
+    /// Each target's padding colour, where it is not the one the pages were cut with.
+    fills: &'a [Option<Vec<T>>],
+    layout: &'a Layout,
     counts: &'a Counts,
     copier: Option<&'a Copier>,
     progress: &'a dyn Progress,
@@ -233,7 +255,13 @@ impl<T: Sample> Encoding<'_, T> {
     fn run(&self, job: &Job<T>) -> JobResult {
         let _busy = self.busy.start();
         let texels = job.take_texels()?;
-        let stored = prepare(self.encoder, self.targets, job, &texels, self.copier)?;
+        let padded = job.pad.map(|(from, t)| {
+            let mut padded = texels.to_vec();
+            let (side, channels) = (self.layout.tile_size, self.encoder.source_layout().channels.count());
+            cut::fill_padding(&mut padded, side, channels, from, self.fills[t].as_deref().unwrap_or_default());
+            padded
+        });
+        let stored = prepare(self.encoder, self.targets, job, padded.as_deref().unwrap_or(&texels), self.copier)?;
         // The last job of a tile frees its texels here, not when the writer stores the lot.
         if let Some(texels) = Arc::into_inner(texels) {
             self.memory.add(Part::Tiles, -((texels.capacity() * size_of::<T>()) as i64));
@@ -290,11 +318,11 @@ struct Lot<T> {
     done: Condvar,
 }
 
-impl<T> Lot<T> {
-    fn of(batches: Vec<Batch<T>>, targets: &[Target], copier: Option<&Copier>) -> Lot<T> {
+impl<T: Sample> Lot<T> {
+    fn of(batches: Vec<Batch<T>>, stage: &Encoding<T>) -> Lot<T> {
         let jobs: Vec<Job<T>> = batches
             .into_iter()
-            .flat_map(|batch| batch.tiles.into_iter().flat_map(move |tile| Job::of(targets, copier, batch.lod, tile)))
+            .flat_map(|batch| batch.tiles.into_iter().flat_map(move |tile| Job::of(stage, batch.lod, tile)))
             .collect();
         let finished = Mutex::new(((0..jobs.len()).map(|_| None).collect(), jobs.len()));
         Lot { jobs, finished, done: Condvar::new() }
@@ -328,6 +356,9 @@ struct Job<T> {
     /// One page whose source tile is copied rather than encoded (pages identical at the cut
     /// may have different stored bytes, so each page is a job of its own).
     copy: bool,
+    /// Where the page's padding starts (column, row) and the target whose colour fills it, for
+    /// targets that pad with another colour than the pages were cut with.
+    pad: Option<((u32, u32), usize)>,
     places: Vec<(usize, (u32, u32))>,
     /// Until the encoding takes them: the texels are freed as soon as every encoding of the
     /// tile is done, not kept until the writer has stored the whole lot, so that a row of
@@ -335,25 +366,38 @@ struct Job<T> {
     texels: Mutex<Option<Arc<Vec<T>>>>,
 }
 
-impl<T> Job<T> {
+impl<T: Sample> Job<T> {
     /// The encodings a cut tile needs: one for every distinct crop the targets keep of its
     /// places (identical pages merged at the cut may sit at a viewer tile's edge and in the
     /// middle; Deep Zoom crops an edge page that a pack keeps whole), and one per copied page.
-    /// Targets past their last level get nothing.
-    fn of(targets: &[Target], copier: Option<&Copier>, lod: u32, cut: CutTile<T>) -> Vec<Job<T>> {
+    /// Targets past their last level get nothing; a padded page gets a job of its own for
+    /// each padding colour its targets fill it with.
+    fn of(stage: &Encoding<T>, lod: u32, cut: CutTile<T>) -> Vec<Job<T>> {
         let texels = Arc::new(cut.texels);
+        let l = stage.layout;
+        let (extent, virtual_extent) = (l.level_extent(lod), l.virtual_extent(lod));
         let mut jobs: Vec<Job<T>> = Vec::new();
         for page in cut.places {
-            for (t, target) in targets.iter().enumerate().filter(|(_, target)| lod < target.lods) {
+            let from = (
+                cut::padding_from(l, page.0, extent.0, virtual_extent.0),
+                cut::padding_from(l, page.1, extent.1, virtual_extent.1),
+            );
+            for (t, target) in stage.targets.iter().enumerate().filter(|(_, target)| lod < target.lods) {
                 let crop = target.sink.crop(lod, page.0, page.1);
-                let copy = copier.is_some_and(|c| c.covers(lod, page, crop));
-                let same = |j: &&mut Job<T>| j.crop == crop && j.copy == copy && (!copy || j.places[0].1 == page);
+                let copy = stage.copier.is_some_and(|c| c.covers(lod, page, crop));
+                let padded = stage.fills[t].is_some() && from != (l.tile_size, l.tile_size);
+                let pad = padded.then_some((from, t));
+                let fill = |pad: Option<((u32, u32), usize)>| pad.map(|(from, t)| (from, &stage.fills[t]));
+                let same = |j: &&mut Job<T>| {
+                    j.crop == crop && j.copy == copy && (!copy || j.places[0].1 == page) && fill(j.pad) == fill(pad)
+                };
                 match jobs.iter_mut().find(same) {
                     Some(job) => job.places.push((t, page)),
                     None => jobs.push(Job {
                         lod,
                         crop,
                         copy,
+                        pad,
                         places: vec![(t, page)],
                         texels: Mutex::new(Some(Arc::clone(&texels))),
                     }),

@@ -36,11 +36,9 @@
 //! use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 //!
 //! use vortex_tiler::error::{Result, TilerError};
-//! use vortex_tiler::output::{self, Product};
-//! use vortex_tiler::settings::{Destination, Plan, Requested};
-//! use vortex_tiler::sink::PackSink;
-//! use vortex_tiler::split::{self, Progress, Summary};
-//! use vortex_tiler::{limits::Limits, source, vortex_pack::WriteOptions};
+//! use vortex_tiler::outputs::{Budget, Format, Output, Plan, Settings, Wrote};
+//! use vortex_tiler::split::Progress;
+//! use vortex_tiler::{source, viewer::Viewer};
 //!
 //! /// Counts finished tiles; stops the run when `stop` is set.
 //! #[derive(Default)]
@@ -58,20 +56,22 @@
 //!     }
 //! }
 //!
-//! /// Cuts `input` into 256-texel pages with every LOD, into the pack `dest`.
-//! fn tile(input: &Path, dest: &Path, watch: &Watch) -> Result<Summary> {
-//!     output::claim(dest, Product::Pack, &[input], false)?; // replaces only an older pack
-//!     let limits = Limits::default();
-//!     let source = source::open(input, limits.memory)?;
-//!     // Each setting: the flag asked for, else a previous output's info.json (none here), else the default.
-//!     let asked = Requested { tile_size: Some(256), ..Requested::default() };
-//!     let plan = Plan::new(&asked, None, &source.header(), Destination::Pack, &limits, None)?;
-//!     let info = plan.info.to_json_pretty();
-//!     let sink = PackSink::create(dest, &plan.layout, plan.stored, plan.opts.codec, info.as_bytes(), WriteOptions::default())?;
-//!     // On an error the sink is dropped, and its unfinished pack with it.
-//!     let summary = split::split(source, &sink, &plan.opts, watch)?;
-//!     sink.finish()?;
-//!     Ok(summary)
+//! /// Cuts `input` into 256-texel tiles, once, for two outputs: Deep Zoom for OpenSeadragon
+//! /// in `dir/web` and a pack for the GPU in `dir/NAME.vtpk`.
+//! fn tile(input: &Path, dir: &Path, name: &str, watch: &Watch) -> Result<Vec<Wrote>> {
+//!     let budget = Budget::default(); // 1 GiB, everything the run holds at once
+//!     let source = source::open(input, budget.bytes())?;
+//!     let mut settings = Settings::default();
+//!     settings.tiles.tile_size = Some(256);
+//!     settings.tiles.border = Some(0); // the pack's; Deep Zoom has --overlap (here its default, 1)
+//!     let outputs = vec![
+//!         Output::new(Format::Viewer(Viewer::Dzi), dir.join("web")),
+//!         Output::new(Format::Pack, dir.join(format!("{name}.vtpk"))),
+//!     ];
+//!     // Checks every output and claims its path: replaces only an older output of ours.
+//!     let plan = Plan::new(outputs, &settings, &source.header(), &[input], budget)?;
+//!     // A failed or stopped run leaves no output half-written.
+//!     plan.write(source, watch)
 //! }
 //!
 //! # fn main() -> Result<()> {
@@ -79,17 +79,19 @@
 //! # let (input, dir) = (temp.path().join("huge.png"), temp.path());
 //! # image::RgbImage::from_fn(600, 300, |x, y| image::Rgb([x as u8, y as u8, 128])).save(&input).expect("a PNG");
 //! let watch = Watch::default();
-//! let summary = tile(&input, &dir.join("huge.vtpk"), &watch)?;
-//! assert_eq!(watch.tiles.load(Ordering::Relaxed), summary.tiles);
+//! let wrote = tile(&input, dir, "huge", &watch)?;
+//! let total: u64 = wrote.iter().map(|w| w.tiles).sum();
+//! assert_eq!(watch.tiles.load(Ordering::Relaxed), total);
 //!
 //! // Set from anywhere (another thread, a signal handler, a web request's cancellation).
 //! watch.stop.store(true, Ordering::Relaxed);
-//! let stopped = tile(&input, &dir.join("stopped.vtpk"), &watch);
+//! let stopped = tile(&input, dir, "stopped", &watch);
 //! assert!(matches!(stopped, Err(TilerError::Interrupted)));
 //! assert!(!dir.join("stopped.vtpk").exists());
 //! # let pack = vortex_tiler::vortex_pack::Pack::open(&dir.join("huge.vtpk")).expect("the pack");
 //! # assert_eq!(pack.description().width, 600);
-//! # assert_eq!(std::fs::read_dir(dir).expect("the directory").count(), 2, "no temporary left");
+//! # assert!(dir.join("web/huge.dzi").is_file());
+//! # assert_eq!(std::fs::read_dir(dir).expect("the directory").count(), 3, "no temporary left");
 //! # Ok(())
 //! # }
 //! ```

@@ -288,16 +288,10 @@ pub fn unpack(pack: &Pack, dir: &Claim, progress: &dyn Progress) -> Result<u64> 
         }
         Ok(count)
     })();
-    match result {
-        Ok(count) => {
-            sink.finish(&info)?;
-            Ok(count)
-        }
-        Err(e) => {
-            sink.abandon();
-            Err(e)
-        }
-    }
+    // On error the sink is dropped, which removes what it wrote.
+    let count = result?;
+    sink.finish(&info)?;
+    Ok(count)
 }
 
 /// A square grid's side as `tileCount` gives it, or what the grid is when it is not square.

@@ -69,12 +69,14 @@ pub fn split(
 ) -> Result<Summary> {
     let mut source = source;
     let lods = opts.layout(source.width(), source.height())?.lod_count;
-    split_to(source.as_mut(), &[Target { sink, lods }], opts, progress)
+    split_to(source.as_mut(), &[Target { sink, lods, background: opts.background }], opts, progress)
 }
 
 /// [`split`] into several sinks at once, each taking the levels it has: every page is cut once,
-/// and encoded once for all the sinks that keep the same part of it (those that crop it alike).
-/// `opts` cut the pyramid down to the deepest target's levels.
+/// and encoded once for all the sinks that keep the same part of it (those that crop it alike
+/// and pad it alike). `opts` cut the pyramid down to the deepest target's levels, padded with
+/// `opts.background`; a target that pads with another colour gets its padded pages filled
+/// with it (pages cut with the edge repeated can take any colour).
 pub fn split_to(
     source: &mut dyn RowSource,
     targets: &[Target],
@@ -121,7 +123,7 @@ pub(crate) fn split_shard(
         )));
     }
     let copy = plan_copy(source.as_ref(), opts, &layout);
-    let targets = [Target { sink, lods: layout.lod_count }];
+    let targets = [Target { sink, lods: layout.lod_count, background: opts.background }];
     by_depth(source.header(), &targets, opts, layout, copy, Passes::Shard(spans, source), progress)
 }
 
@@ -135,7 +137,7 @@ pub(crate) fn above_cut(
     progress: &dyn Progress,
 ) -> Result<Summary> {
     let layout = opts.layout(image.width, image.height)?;
-    let targets = [Target { sink, lods: layout.lod_count }];
+    let targets = [Target { sink, lods: layout.lod_count, background: opts.background }];
     let (summary, _) = by_depth(image, &targets, opts, layout, (None, None), Passes::AboveCut(roots), progress)?;
     Ok(summary)
 }
@@ -247,7 +249,16 @@ fn run<T: Sample>(
                 Vec::new()
             })
         });
-        let consumed = encoders::consume(rx, &encoder, targets, &counts, copier.as_ref(), progress, &clock);
+        let consumed = encoders::consume(
+            rx,
+            &encoder,
+            targets,
+            (&layout, opts.background),
+            &counts,
+            copier.as_ref(),
+            progress,
+            &clock,
+        );
         // Dropping the receiver (on error) makes the producer's next send fail, so it stops.
         let produced = producer.join().map_err(|_| TilerError::panicked("the tiling thread"))?;
         consumed.map(|()| produced)

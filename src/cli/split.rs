@@ -693,6 +693,7 @@ fn report_all(a: &OutputArgs, done: &Finished, all: &[Wrote]) {
         let doc = serde_json::json!({
             "outputs": outputs,
             "pyramids": pyramids,
+            "sourceReads": all.first().map_or(0, |w| w.reads),
             "width": done.width,
             "height": done.height,
             "source": done.decoder,
@@ -714,12 +715,17 @@ fn report_all(a: &OutputArgs, done: &Finished, all: &[Wrote]) {
                 say!("{}", report::memory_line(&w.summary.memory));
             }
         }
+        let reads = all.first().map_or(0, |w| w.reads);
         say!(
-            "{} outputs from one read of the source in {:.2} s ({} pyramid{}){}",
+            "{} outputs in {:.2} s from {} pyramid{}, the source read {}{}",
             all.len(),
             done.took.as_secs_f64(),
             pyramids,
-            if pyramids == 1 { "" } else { "s, cut side by side" },
+            if pyramids == 1 { "" } else { "s" },
+            match reads {
+                1 => "once".to_string(),
+                n => format!("{n} times (the budget holds the pyramids only one after another)"),
+            },
             report::peak_rss().map(|b| format!(", peak memory {}", report::mib(b))).unwrap_or_default()
         );
     }

@@ -7,28 +7,10 @@
 //! size, XYZ and PMTiles): each page of a group is cut once and encoded once for every output
 //! that keeps the same part of it. Groups that differ (OME-Zarr's zstd chunks beside JPEG
 //! tiles, another tile size) each make their own pyramid from the same decoded rows
-//! ([`crate::source::tee`]). Every output stays atomic: it is written under a temporary name and
+//! (`source::tee`). Every output stays atomic: it is written under a temporary name and
 //! renamed into place when complete; a run that fails leaves none of them.
 //!
-//! ```no_run
-//! # fn main() -> Result<(), vortex_tiler::error::TilerError> {
-//! use std::path::Path;
-//! use vortex_tiler::outputs::{Budget, Format, Output, Plan, Settings};
-//! use vortex_tiler::viewer::Viewer;
-//!
-//! let input = Path::new("slide.tif");
-//! let source = vortex_tiler::source::open(input, Budget::default().bytes())?;
-//! let outputs = vec![
-//!     Output::new(Format::Viewer(Viewer::Dzi), "web"),
-//!     Output::new(Format::Pack, "slide.vtpk"),
-//! ];
-//! let plan = Plan::new(outputs, &Settings::default(), &source.header(), &[input], Budget::default())?;
-//! for wrote in plan.write(source, &())? {
-//!     println!("{}: {} tiles, {} bytes", wrote.path.display(), wrote.tiles, wrote.bytes);
-//! }
-//! # Ok(())
-//! # }
-//! ```
+//! The crate's documentation has an example that writes Deep Zoom and a pack in one run.
 
 mod plan;
 mod write;

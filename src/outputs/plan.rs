@@ -423,3 +423,133 @@ fn ome_zarr(output: Output, own: &Own, at: &Context, planes: Option<Vec<Plane>>)
 fn options(message: String) -> TilerError {
     TilerError::Options(message)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pixel::{Channels, Depth};
+    use crate::settings::CodecChoice;
+
+    fn rgb(width: u32, height: u32) -> ImageHeader {
+        ImageHeader { width, height, layout: PixelLayout::new(Channels::Rgb, Depth::U8) }
+    }
+
+    /// Plans `outputs` (paths under a folder that does not exist: nothing is claimed that is
+    /// there) of a 1000 x 700 RGB image: `Ok` or the message.
+    fn plan(outputs: &[(Format, &str)], settings: Settings) -> std::result::Result<Plan, String> {
+        let root = Path::new("/nonexistent-vortex-plan-test");
+        let outputs = outputs.iter().map(|(f, p)| Output::new(*f, root.join(p))).collect();
+        Plan::new(outputs, &settings, &rgb(1000, 700), &[Path::new("/nonexistent-input/slide.png")], Budget::default())
+            .map_err(|e| e.to_string())
+    }
+
+    fn with(f: impl FnOnce(&mut Settings)) -> Settings {
+        let mut s = Settings::default();
+        f(&mut s);
+        s
+    }
+
+    const DZI: Format = Format::Viewer(Viewer::Dzi);
+    const IIIF: Format = Format::Viewer(Viewer::Iiif);
+    const XYZ: Format = Format::Viewer(Viewer::Xyz);
+
+    /// Every refusal `split` makes of the outputs it is given, as a table: the outputs, the
+    /// settings, and what the message must say.
+    #[test]
+    fn refusals() {
+        type Case = (&'static [(Format, &'static str)], Settings, &'static str);
+        let cases: Vec<Case> = vec![
+            (&[], Settings::default(), "a run needs an output"),
+            (&[(Format::Tiles, "a"), (DZI, "a")], Settings::default(), "paths of their own"),
+            (&[(Format::Tiles, "a"), (Format::Pack, "a/b.vtpk")], Settings::default(), "neither inside the other"),
+            (&[(Format::Tiles, "a")], with(|s| s.name = Some("x".into())), "--name belongs to a viewer layout"),
+            (&[(Format::Pack, "a.vtpk")], with(|s| s.overlap = Some(1)), "--overlap belongs to a viewer layout"),
+            (&[(Format::Tiles, "a")], with(|s| s.iiif_id = Some("https://x.org/a".into())), "--iiif-id belongs"),
+            (
+                &[(Format::Tiles, "a")],
+                with(|s| s.ome_zarr.shard_chunks = Some(4)),
+                "--shard-chunks belongs to --layout ome-zarr",
+            ),
+            (
+                &[(DZI, "a")],
+                with(|s| s.tiles.filename_format = Some("%1$s.png".into())),
+                "--filename-format is for --layout vortex",
+            ),
+            (&[(DZI, "a")], with(|s| s.tiles.border = Some(1)), "--overlap (Deep Zoom's), not --border"),
+            (&[(IIIF, "a")], with(|s| s.tiles.border = Some(1)), "--layout iiif tiles have no border"),
+            (&[(IIIF, "a")], with(|s| s.overlap = Some(1)), "--overlap is Deep Zoom's"),
+            (&[(DZI, "a")], with(|s| s.iiif_id = Some("https://x.org/a".into())), "--iiif-id names a IIIF image"),
+            (&[(IIIF, "a")], with(|s| s.iiif_id = Some("ftp://x".into())), "--iiif-id"),
+            (&[(DZI, "a")], with(|s| s.name = Some("a/b".into())), "must be a plain file name"),
+            (&[(XYZ, "a")], with(|s| s.tiles.codec = Some(CodecChoice::Zstd)), "tiles are image files"),
+            (
+                &[(IIIF, "a")],
+                with(|s| {
+                    s.iiif_id = Some("https://x.org/a".into());
+                    s.tiles.codec = Some(CodecChoice::Png);
+                }),
+                "whose one required format is JPEG",
+            ),
+            (&[(Format::Tiles, "a")], with(|s| s.tiles.codec = Some(CodecChoice::Raw)), "writes packs only"),
+            (
+                &[(Format::Pmtiles, "a.pmtiles")],
+                with(|s| s.keep_icc = Some(vec![0; 200])),
+                "a PMTiles archive has nowhere",
+            ),
+            (&[(Format::OmeZarr, "a.ome.zarr")], with(|s| s.keep_icc = Some(vec![0; 200])), "OME-Zarr has nowhere"),
+            (&[(Format::OmeZarr, "a.ome.zarr")], with(|s| s.overlap = Some(1)), "OME-Zarr chunks do not overlap"),
+            (&[(Format::OmeZarr, "a.ome.zarr")], with(|s| s.tiles.quality = Some(80)), "--quality does not apply"),
+            (&[(Format::OmeZarr, "a.ome.zarr")], with(|s| s.tiles.border = Some(2)), "chunks have no border"),
+            (
+                &[(Format::OmeZarr, "a.ozx")],
+                with(|s| s.ome_zarr.version = Some(crate::sink::ome_zarr::Version::V04)),
+                "holds OME-Zarr 0.5",
+            ),
+        ];
+        for (outputs, settings, want) in cases {
+            match plan(outputs, settings) {
+                Ok(_) => panic!("{outputs:?} planned; expected an error saying {want:?}"),
+                Err(message) => assert!(message.contains(want), "{outputs:?}: {message:?} lacks {want:?}"),
+            }
+        }
+    }
+
+    /// A setting goes to the outputs that read it: Deep Zoom's overlap beside a pack, the
+    /// pack's border beside Deep Zoom, JPEG quality beside OME-Zarr's zstd chunks.
+    #[test]
+    fn each_output_reads_its_own_settings() {
+        let settings = with(|s| {
+            s.overlap = Some(0);
+            s.tiles.border = Some(0);
+            s.tiles.quality = Some(70);
+            s.tiles.tile_size = Some(256);
+        });
+        let p = plan(&[(DZI, "web"), (Format::Pack, "a.vtpk"), (Format::OmeZarr, "a.ome.zarr")], settings).unwrap();
+        let [dzi, pack, zarr] = &p.outputs[..] else { panic!("three outputs") };
+        assert_eq!((dzi.layout.tile_size, dzi.layout.border), (256, 0));
+        assert_eq!((pack.layout.tile_size, pack.layout.border), (256, 0));
+        assert_eq!(
+            dzi.opts,
+            SplitOptions { down_to_one_texel: true, ..pack.opts.clone() },
+            "one pyramid but for its depth"
+        );
+        assert!(matches!(pack.opts.codec, crate::codec::Codec::Jpeg { quality: 70, .. }));
+        assert!(matches!(zarr.opts.codec, crate::codec::Codec::Raw), "OME-Zarr's chunks: {:?}", zarr.opts.codec);
+        assert_eq!(p.total_tiles(), dzi.layout.total_tiles() + pack.layout.total_tiles() + zarr.layout.total_tiles());
+    }
+
+    #[test]
+    fn a_name_says_its_format() {
+        for (name, want) in [
+            ("a.vtpk", Some(Format::Pack)),
+            ("A.PMTILES", Some(Format::Pmtiles)),
+            ("slide.ome.zarr", Some(Format::OmeZarr)),
+            ("slide.ome.zarr/", Some(Format::OmeZarr)),
+            ("slide.ozx", Some(Format::OmeZarr)),
+            ("web", None),
+            ("x.zarr", None),
+        ] {
+            assert_eq!(Format::of_path(Path::new(name)), want, "{name}");
+        }
+    }
+}

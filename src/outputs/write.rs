@@ -6,6 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::plan::{Planned, Work};
 use super::{Budget, Format, Plan};
+use crate::background::Background;
 use crate::error::{Result, TilerError};
 use crate::job::{Progress, SplitOptions, Summary, Written};
 use crate::sink::icc::{Profile, WithProfile};
@@ -34,6 +35,9 @@ pub struct Wrote {
     /// Which of the run's pyramids it was cut from, counted from 0 in the order of the
     /// outputs that first need each.
     pub pyramid: usize,
+    /// Times the run read the source, for all its outputs: once for pyramids cut side by
+    /// side, once per pyramid and stripe where the budget holds them only one after another.
+    pub reads: usize,
     /// A pack's own figures.
     pub pack: Option<vortex_pack::WriteSummary>,
     /// A PMTiles archive's own figures.
@@ -96,10 +100,11 @@ impl Open {
     }
 
     /// Writes what the format writes last and renames the output into place.
-    fn finish(self, summary: &Summary, at: usize, pyramid: usize) -> Result<Wrote> {
+    /// `planes`: the passes that wrote its tiles (an OME-Zarr's channels one pass each).
+    fn finish(self, summary: &Summary, at: usize, pyramid: usize, planes: u64) -> Result<Wrote> {
         let Open { planned, sink } = self;
         let written = summary.per_target.get(at).copied().unwrap_or_default();
-        let total = planned.layout.total_tiles();
+        let total = planned.layout.total_tiles() * planes;
         if written.tiles != total {
             return Err(TilerError::Options(format!(
                 "internal error: wrote {} tiles of {total} into {}",
@@ -145,6 +150,7 @@ impl Open {
             bytes: written.bytes,
             summary,
             pyramid,
+            reads: 0,
             pack,
             pmtiles,
         })
@@ -159,15 +165,24 @@ struct Pyramid {
 }
 
 /// The outputs grouped by the pyramid and encoding they share: the same options but for how
-/// deep the levels go.
+/// deep the levels go and (where alpha is not flattened over it) what pads the pages past the
+/// image. A group whose members pad differently is cut with the edge repeated, which the
+/// encoders fill with each member's colour.
 fn pyramids(planned: &[&Planned]) -> Vec<Pyramid> {
-    let key = |opts: &SplitOptions| SplitOptions { down_to_one_texel: false, ..opts.clone() };
+    let key = |opts: &SplitOptions| SplitOptions {
+        down_to_one_texel: false,
+        background: if opts.flatten { opts.background } else { Background::Edge },
+        ..opts.clone()
+    };
     let mut out: Vec<Pyramid> = Vec::new();
     for (k, p) in planned.iter().enumerate() {
         match out.iter_mut().find(|g| key(&g.opts) == key(&p.opts)) {
             Some(g) => {
                 g.members.push(k);
                 g.opts.down_to_one_texel |= p.opts.down_to_one_texel;
+                if g.opts.background != p.opts.background {
+                    g.opts.background = Background::Edge;
+                }
             }
             None => out.push(Pyramid { members: vec![k], opts: p.opts.clone() }),
         }
@@ -190,11 +205,19 @@ impl Plan {
         let sink = |k: usize| tagged[k].as_ref().map_or(open[k].tile_sink(), |t| t as &dyn TileSink);
         let targets: Vec<Vec<Target>> = (pyramids.iter())
             .map(|g| {
-                g.members.iter().map(|&k| Target { sink: sink(k), lods: open[k].planned.layout.lod_count }).collect()
+                let target = |k: usize| {
+                    let p = &open[k].planned;
+                    Target { sink: sink(k), lods: p.layout.lod_count, background: p.opts.background }
+                };
+                g.members.iter().map(|&k| target(k)).collect()
             })
             .collect();
-        let summaries = match pyramids.len() {
-            1 => vec![split::split_to(source.as_mut(), &targets[0], &pyramids[0].opts, progress)?],
+        let (summaries, reads) = match pyramids.len() {
+            1 => {
+                let summary = split::split_to(source.as_mut(), &targets[0], &pyramids[0].opts, progress)?;
+                let reads = summary.passes;
+                (vec![summary], reads)
+            }
             _ => cut_together(source, &pyramids, &targets, budget, progress)?,
         };
         drop(tagged);
@@ -204,7 +227,8 @@ impl Plan {
                 place[k] = (g, at);
             }
         }
-        open.into_iter().zip(place).map(|(o, (g, at))| o.finish(&summaries[g], at, g)).collect()
+        let finish = |(o, (g, at)): (Open, _)| Ok(Wrote { reads, ..o.finish(&summaries[g], at, g, 1)? });
+        open.into_iter().zip(place).map(finish).collect()
     }
 }
 
@@ -236,7 +260,8 @@ impl Plan {
                 None => set.channel(k)?,
             };
             let (mut source, range) = Ranged::new(source);
-            let target = Target { sink: &sink.plane(c as u32), lods: open.planned.layout.lod_count };
+            let (lods, background) = (open.planned.layout.lod_count, opts.background);
+            let target = Target { sink: &sink.plane(c as u32), lods, background };
             let done = split::split_to(&mut source, &[target], opts, progress)?;
             if done.tiles != total {
                 return Err(TilerError::Options(format!(
@@ -259,7 +284,8 @@ impl Plan {
         }
         // One target, every pass's places in it.
         summary.per_target = vec![Written { tiles: summary.tiles, bytes: summary.bytes }];
-        open.finish(&summary, 0, 0)
+        let reads = summary.passes;
+        Ok(Wrote { reads, ..open.finish(&summary, 0, 0, picks.len() as u64)? })
     }
 }
 
@@ -300,7 +326,7 @@ fn cut_together(
     targets: &[Vec<Target>],
     budget: Budget,
     progress: &dyn Progress,
-) -> Result<Vec<Summary>> {
+) -> Result<(Vec<Summary>, usize)> {
     let n = pyramids.len() as u64;
     let window = tee::window_bytes(&source.header(), TEE_WINDOW_ROWS);
     let share = budget.bytes().saturating_sub(window) / n;
@@ -318,7 +344,8 @@ fn cut_together(
             }
             summaries.push(split::split_to(source.as_mut(), t, &g.opts, progress)?);
         }
-        return Ok(summaries);
+        let reads = summaries.iter().map(|s| s.passes).sum();
+        return Ok((summaries, reads));
     }
     let branches = tee::tee(source, pyramids.len(), TEE_WINDOW_ROWS);
     let stop = Joint { inner: progress, failed: AtomicBool::new(false), first: Mutex::new(None) };
@@ -337,7 +364,7 @@ fn cut_together(
     // The error that stopped the others, not theirs.
     match stop.first.into_inner().unwrap_or_else(|poisoned| poisoned.into_inner()) {
         Some(e) => Err(e),
-        None => results.into_iter().collect(),
+        None => Ok((results.into_iter().collect::<Result<_>>()?, 1)),
     }
 }
 

@@ -65,6 +65,31 @@ pub fn runs(layout: &Layout, t: u32, extent: u32, virtual_len: u64, edge_padding
     out
 }
 
+/// The first texel of page `t` along one direction that [`runs`] fills with the background
+/// when it does not repeat the edge (the page's texels from there on lie past the image), or
+/// the tile size where none does: what a page cut with edge padding needs filled to be the
+/// page cut with a colour.
+pub fn padding_from(layout: &Layout, t: u32, extent: u32, virtual_len: u64) -> u32 {
+    let start = t as i64 * layout.payload() as i64 - layout.border as i64;
+    let last_virtual = virtual_len as i64 - 1;
+    (0..layout.tile_size)
+        .find(|&i| (start + i as i64).clamp(0, last_virtual) >= extent as i64)
+        .unwrap_or(layout.tile_size)
+}
+
+/// Fills the texels of a `side`-texel square tile (`channels` samples each) at or past
+/// `from` (column, row) with `texel`: the tile cut with edge padding made the tile cut with
+/// that colour ([`padding_from`]).
+pub fn fill_padding<T: Copy>(tile: &mut [T], side: u32, channels: usize, from: (u32, u32), texel: &[T]) {
+    let row_len = side as usize * channels;
+    for (y, row) in tile.chunks_exact_mut(row_len).enumerate() {
+        let first = if y as u32 >= from.1 { 0 } else { from.0 as usize };
+        for t in row[first * channels..].chunks_exact_mut(channels) {
+            t.copy_from_slice(texel);
+        }
+    }
+}
+
 /// `runs` for a band whose first column is image column `origin`.
 pub fn shifted(runs: Vec<Run>, origin: u64) -> Vec<Run> {
     let by = origin as u32;
@@ -153,6 +178,28 @@ mod tests {
         let bg = expand(&runs(&l, 1, 20, v, false));
         let want: Vec<Option<u32>> = (10..20).map(Some).chain([None; 6]).collect();
         assert_eq!(bg, want);
+    }
+
+    /// `padding_from` is where `runs` without edge padding first fills, for grids with and
+    /// without a border, at every page of every level.
+    #[test]
+    fn padding_starts_where_the_runs_fill() {
+        for (w, tile, border) in [(20, 16, 2), (24, 16, 2), (1003, 256, 0), (1, 8, 0), (300, 254, 1), (17, 10, 3)] {
+            let l = Layout::new(w, w, tile, border).unwrap();
+            for lod in 0..l.lod_count {
+                let (extent, _) = l.level_extent(lod);
+                let virtual_len = l.virtual_extent(lod).0;
+                for t in 0..l.grid(lod).0 {
+                    let filled = expand(&runs(&l, t, extent, virtual_len, false)).iter().position(Option::is_none);
+                    let want = filled.map_or(tile, |i| i as u32);
+                    assert_eq!(
+                        padding_from(&l, t, extent, virtual_len),
+                        want,
+                        "{w} {tile} {border} lod {lod} page {t}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

@@ -17,13 +17,16 @@ use crate::tile_dir::filename::FilenameFormat;
 use crate::tile_dir::info::Info;
 use crate::viewer::{Crop, Viewer, ViewerTiles};
 
-/// One image file per tile plus a manifest.
+/// One image file per tile plus a manifest. Dropped unfinished (a failed run, a later
+/// output of the same run that failed), it removes what it wrote.
 pub struct DirSink {
     dest: PathBuf,
     staging: PathBuf,
     names: Names,
     made_dirs: Mutex<HashSet<PathBuf>>,
     bytes: AtomicU64,
+    /// Set once the directory is in place: nothing to remove.
+    finished: bool,
 }
 
 /// How tiles are named.
@@ -69,6 +72,7 @@ impl DirSink {
             names,
             made_dirs: Mutex::new(HashSet::new()),
             bytes: AtomicU64::new(0),
+            finished: false,
         })
     }
 
@@ -91,7 +95,6 @@ impl DirSink {
                         files
                     }
                     Err(message) => {
-                        let _ = fs::remove_dir_all(&self.staging);
                         let message = format!("the IIIF whole image: {message}");
                         return Err(TilerError::Decode { path: self.dest.clone(), message });
                     }
@@ -104,22 +107,16 @@ impl DirSink {
         self.complete(manifests)
     }
 
-    fn complete(self, manifests: Vec<(String, Vec<u8>)>) -> Result<()> {
+    fn complete(mut self, manifests: Vec<(String, Vec<u8>)>) -> Result<()> {
         for (name, bytes) in manifests {
             let path = self.staging.join(name);
             // IIIF's whole-image files go into folders of their own (`full/max/0/`).
             let folder = path.parent().map_or(Ok(()), fs::create_dir_all);
-            if let Err(e) = folder.and_then(|()| fs::write(&path, bytes)) {
-                let _ = fs::remove_dir_all(&self.staging);
-                return Err(TilerError::write(&path, e));
-            }
+            folder.and_then(|()| fs::write(&path, bytes)).map_err(|e| TilerError::write(&path, e))?;
         }
-        staging::replace_dir(&self.staging, &self.dest).map_err(|e| TilerError::write(&self.dest, e))
-    }
-
-    /// Removes the staging directory after a failure.
-    pub fn abandon(self) {
-        let _ = fs::remove_dir_all(&self.staging);
+        staging::replace_dir(&self.staging, &self.dest).map_err(|e| TilerError::write(&self.dest, e))?;
+        self.finished = true;
+        Ok(())
     }
 
     pub fn staging_dir(&self) -> &Path {
@@ -170,6 +167,15 @@ impl TileSink for DirSink {
 
     fn bytes_written(&self) -> u64 {
         self.bytes.load(Ordering::Relaxed)
+    }
+}
+
+/// An unfinished directory's staging goes with it.
+impl Drop for DirSink {
+    fn drop(&mut self) {
+        if !self.finished {
+            let _ = fs::remove_dir_all(&self.staging);
+        }
     }
 }
 

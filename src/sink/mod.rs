@@ -57,4 +57,7 @@ pub trait TileSink: Sync {
 pub struct Target<'a> {
     pub sink: &'a dyn TileSink,
     pub lods: u32,
+    /// What its padding holds: pages cut with the edge repeated are filled with its colour
+    /// where they lie past the image.
+    pub background: crate::background::Background,
 }

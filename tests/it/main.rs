@@ -27,6 +27,7 @@ mod ndpi;
 mod ome_zarr;
 mod openslide_files;
 mod oracle;
+mod outputs;
 mod pack_cli;
 mod pack_trust;
 mod pmtiles;

@@ -273,8 +273,10 @@ fn refusals_name_the_flag() {
         &run(&["split", s(&source), "--layout", "ome-zarr", "--ome-zarr-version", "0.4", "-o", s(&ozx)]),
         &["o.ozx", "0.5"],
     );
-    fails_with(&run(&["split", s(&source), "-o", o, "--pixel-size", "1um"]), &["--pixel-size", "ome-zarr"]);
-    assert!(!out.exists() && !ozx.exists());
+    // Without --layout ome-zarr or a name that says it, -o is our tile directory.
+    let plain = dir.path().join("plain");
+    fails_with(&run(&["split", s(&source), "-o", s(&plain), "--pixel-size", "1um"]), &["--pixel-size", "ome-zarr"]);
+    assert!(!out.exists() && !ozx.exists() && !plain.exists());
     // A directory that is not ours is left alone; our previous output is replaced.
     std::fs::create_dir(&out).unwrap();
     std::fs::write(out.join("notes.txt"), "mine").unwrap();
