@@ -45,7 +45,7 @@ serve_with() {
   "$BIN" serve "$PACK" --addr 127.0.0.1:0 "$@" >"$WORK/serve.out" 2>"$WORK/serve.err" &
   PID=$!
   for _ in $(seq 100); do
-    PORT=$(sed -n 's#^serving 1 inputs on http://127.0.0.1:\([0-9]*\)/$#\1#p' "$WORK/serve.out")
+    PORT=$(sed -n 's#^serving 1 input on http://127.0.0.1:\([0-9]*\)/$#\1#p' "$WORK/serve.out")
     [ -n "$PORT" ] && return
     sleep 0.1
   done

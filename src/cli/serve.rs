@@ -72,7 +72,8 @@ pub fn run(args: ServeArgs) -> Result<()> {
                 "warning: listening on {addr}, reachable from other machines; anyone who can reach it can read every input"
             );
         }
-        say!("serving {} inputs on http://{addr}/", server.input_count());
+        let n = server.input_count();
+        say!("serving {n} input{} on http://{addr}/", if n == 1 { "" } else { "s" });
         server.serve(stop_signal(), Duration::from_secs(5)).await?;
         eprintln!("stopped");
         anyhow::Ok(())

@@ -25,30 +25,30 @@ mod ome_zarr;
 pub struct SplitArgs {
     /// Image to cut: PNG, TIFF/BigTIFF, JPEG, PPM/PGM stream in bands; WebP, GIF, BMP, TGA and
     /// QOI are decoded whole within --max-memory.
-    #[arg(value_name = "INPUT", required_unless_present_any = ["input_flag", "channel"])]
+    #[arg(help_heading = "Input", value_name = "INPUT", required_unless_present_any = ["input_flag", "channel"])]
     input: Option<PathBuf>,
 
     /// The input, spelled as the original tool did (--input=in.png).
-    #[arg(long = "input", value_name = "INPUT", conflicts_with = "input")]
+    #[arg(help_heading = "Input", long = "input", value_name = "INPUT", conflicts_with = "input")]
     input_flag: Option<PathBuf>,
 
     /// Tile file names, printf-like with positional arguments 1 = LOD, 2 = x, 3 = y; '/' makes
     /// subdirectories [default: lod%1$02s-x%2$04s-y%3$04s.<ext>].
-    #[arg(long, visible_alias = "ff", value_name = "PATTERN")]
+    #[arg(help_heading = "Outputs", long, visible_alias = "ff", value_name = "PATTERN")]
     filename_format: Option<String>,
 
     /// Keep the stored row order: by default an EXIF orientation (JPEG, TIFF, PNG eXIf) is
     /// applied, so the tiles show the image as viewers and `vips autorot` do (orientations
     /// other than a left-right mirror hold the image, or read it in passes, within
     /// --max-memory).
-    #[arg(long)]
+    #[arg(help_heading = "Input", long)]
     no_autorotate: bool,
 
     /// Keep the texels in the colours of the input's ICC profile, and the profile in every
     /// JPEG and PNG tile file (APP2, iCCP) and in info.json (base64, `iccProfile`; a pack's
     /// tiles rely on it), instead of converting them to sRGB [default: convert: browsers show
     /// untagged tiles as sRGB, and the linear-light LOD filters assume sRGB].
-    #[arg(long)]
+    #[arg(help_heading = "Colour", long)]
     keep_icc: bool,
 
     /// Map 32-bit integer or float samples linearly onto 8 bits (16 with --tile-type
@@ -56,32 +56,32 @@ pub struct SplitArgs {
     /// without it such sources go only to raw/zstd packs and OME-Zarr, since JPEG and PNG would
     /// cut their range]. Every channel is mapped, alpha included; samples outside (and NaN) are
     /// clamped and counted in the summary, never cut silently.
-    #[arg(long, value_name = "MIN:MAX", allow_hyphen_values = true)]
+    #[arg(help_heading = "Colour", long, value_name = "MIN:MAX", allow_hyphen_values = true)]
     range: Option<source::range::Range>,
 
     /// A TIFF holding several images: cut its Nth directory, counted from 0 as tiffinfo and
     /// libvips count them (a reduced level or a slide's label included) [default: the first
     /// full-resolution image; the summary says which page was read and what was skipped].
-    #[arg(long, value_name = "N", conflicts_with = "series")]
+    #[arg(help_heading = "Input", long, value_name = "N", conflicts_with = "series")]
     page: Option<u32>,
 
     /// Cut the Nth series: an OME-TIFF's Nth OME-XML Image, or the Nth full-resolution image
     /// of another multi-page TIFF (reduced levels and label/macro/thumbnail images skipped)
     /// [default: 0].
-    #[arg(long, value_name = "N")]
+    #[arg(help_heading = "Input", long, value_name = "N")]
     series: Option<u32>,
 
     /// One channel's image, a grey image of the others' size and sample type; repeated, in
     /// channel order, in place of INPUT: with --layout ome-zarr, one array of that many
     /// channels (docs/ome-zarr.md).
-    #[arg(long, value_name = "FILE")]
+    #[arg(help_heading = "Input", long, value_name = "FILE")]
     channel: Vec<PathBuf>,
 
     /// Channels to cut, counted from 0, e.g. 0,1,2: any number of them into --layout ome-zarr
     /// (a `c` axis), one (grey) or three (RGB) into the other layouts [default: every channel;
     /// an image of more than four (a TIFF of more samples or separate planes, an OME-TIFF's
     /// planes, --channel files) needs --layout ome-zarr or a pick].
-    #[arg(long, value_name = "LIST", value_delimiter = ',')]
+    #[arg(help_heading = "Input", long, value_name = "LIST", value_delimiter = ',')]
     channels: Option<Vec<usize>>,
 
     #[command(flatten)]
@@ -98,12 +98,12 @@ pub struct OutputArgs {
     /// `-o web --layout dzi -o slide.ome.zarr --pack slide.vtpk`: the outputs that share a
     /// pyramid and codec share each tile's encoding (docs/outputs.md). A directory is created,
     /// and replaced only if it holds nothing but a previous output of ours.
-    #[arg(short, long, value_name = "PATH")]
+    #[arg(help_heading = "Outputs", short, long, value_name = "PATH")]
     output: Vec<PathBuf>,
 
     /// Write one pack file (docs/pack-format.md). An existing pack is replaced; any other file
     /// only with --force.
-    #[arg(long, value_name = "FILE")]
+    #[arg(help_heading = "Outputs", long, value_name = "FILE")]
     pack: Option<PathBuf>,
 
     /// Write one PMTiles v3 archive of the web-map (XYZ) pyramid instead of a directory:
@@ -112,15 +112,15 @@ pub struct OutputArgs {
     /// 256), zoom 0 the whole image; bounds name the image's place on the web-mercator square,
     /// as the image has no map coordinates. An existing PMTiles archive is replaced; any other
     /// file only with --force.
-    #[arg(long, value_name = "FILE")]
+    #[arg(help_heading = "Outputs", long, value_name = "FILE")]
     pmtiles: Option<PathBuf>,
 
     /// Replace a regular file at --pack or --pmtiles that is not one. Never replaces a directory, a
     /// device, a FIFO, a link or the input.
-    #[arg(long)]
+    #[arg(help_heading = "Outputs", long)]
     force: bool,
 
-    #[command(flatten)]
+    #[command(flatten, next_help_heading = "Outputs")]
     pack_layout: super::PackLayout,
 
     /// How the output directory is laid out: vortex (tiles + info.json, this tool's), or one a
@@ -130,17 +130,17 @@ pub struct OutputArgs {
     /// See docs/viewers.md. ome-zarr: an OME-Zarr image for microscopy tools (napari, Fiji,
     /// QuPath), -o DIR.ome.zarr or -o FILE.ozx (docs/ome-zarr.md). Each --layout belongs to
     /// the -o before it [default: vortex, or what the output's name says].
-    #[arg(long, value_enum, value_name = "LAYOUT")]
+    #[arg(help_heading = "Outputs", long, value_enum, value_name = "LAYOUT")]
     layout: Vec<OutputLayout>,
 
     /// --layout dzi: the pyramid's name, NAME.dzi and NAME_files/ [default: the input's file
     /// stem].
-    #[arg(long, value_name = "NAME")]
+    #[arg(help_heading = "Outputs", long, value_name = "NAME")]
     name: Option<String>,
 
     /// --layout dzi: texels each tile shares with each neighbour (Deep Zoom's Overlap; not
     /// --border: an edge tile has no overlap where it has no neighbour) [default: 1].
-    #[arg(long, value_name = "N")]
+    #[arg(help_heading = "Tiles", long, value_name = "N")]
     overlap: Option<u32>,
 
     /// --layout iiif: the absolute http(s) URL the directory will be served at, e.g.
@@ -148,10 +148,10 @@ pub struct OutputArgs {
     /// conformant IIIF level-0 service there: full/max (at most 2048 texels on a side, as
     /// maxWidth/maxHeight say) and the whole-image sizes are written too [default: '.',
     /// relative to the viewer's page, only the files libvips writes; serve rewrites it].
-    #[arg(long, value_name = "URL")]
+    #[arg(help_heading = "Outputs", long, value_name = "URL")]
     iiif_id: Option<String>,
 
-    #[command(flatten)]
+    #[command(flatten, next_help_heading = "Outputs")]
     ome_zarr: ome_zarr::OmeZarrArgs,
 
     /// Side of a stored tile in texels, borders included [default: 128]. LOD 0 has
@@ -159,7 +159,7 @@ pub struct OutputArgs {
     /// each LOD half as many per axis (rounding up), down to the first LOD of one page. In a
     /// viewer layout, the viewer's tile side (Deep Zoom: without overlap) [default: dzi 254,
     /// iiif 512, xyz and google 256]. In --layout ome-zarr, the chunk side [default: 256].
-    #[arg(long, value_name = "N")]
+    #[arg(help_heading = "Tiles", short = 't', long, value_name = "N")]
     tile_size: Option<u32>,
 
     /// Texels copied from neighbouring pages into each tile edge, for filtering on the GPU: 1 is
@@ -168,10 +168,10 @@ pub struct OutputArgs {
     /// its anisotropic filtering); 0 for the nearest filter and for viewers that never filter across
     /// tiles (docs/gpu-sampling.md) [default: 1; 0 where an existing info.json has no border, as
     /// the thesis's files].
-    #[arg(long, value_name = "N")]
+    #[arg(help_heading = "Tiles", long, value_name = "N")]
     border: Option<u32>,
 
-    #[command(flatten)]
+    #[command(flatten, next_help_heading = "Tiles")]
     enc: CodecArgs,
 
     /// Decode and encode every tile, even those the source stores as JPEG tiles on the grid of
@@ -182,17 +182,17 @@ pub struct OutputArgs {
     /// are cropped losslessly from them); the summary says how many were copied, how many of
     /// them cropped, and at what quality they were stored. An explicit --quality or --subsampling
     /// re-encodes them too; docs/sources.md].
-    #[arg(long)]
+    #[arg(help_heading = "Tiles", long)]
     reencode: bool,
 
     /// Fill for the padding in the last page of each row and column, between the image's edge
     /// and the page's: edge (repeat the image's edge), #rrggbb, #rrggbbaa, r,g,b[,a] or a grey
     /// level [default: edge].
-    #[arg(long, value_name = "COLOUR")]
+    #[arg(help_heading = "Tiles", long, value_name = "COLOUR")]
     background: Option<Background>,
 
     /// Composite alpha over --background (black if edge) so that RGBA sources can be stored as JPEG.
-    #[arg(long)]
+    #[arg(help_heading = "Colour", long)]
     flatten: bool,
 
     /// How each LOD is made from the finer ones [default: linear-premultiplied]. box, linear,
@@ -205,14 +205,14 @@ pub struct OutputArgs {
     /// the top-left), so no level holds a value the image does not; lossless codecs only.
     /// --layout ome-zarr defaults to box. 32-bit integer and float images default to box (their
     /// values are not sRGB codes) and take box, nearest and (integers) mode only.
-    #[arg(long, value_parser = super::named::<Filter>())]
+    #[arg(help_heading = "Pyramid and filter", long, value_parser = super::named::<Filter>())]
     filter: Option<Filter>,
 
     /// Sample type of stored tiles: unsignedByte or unsignedShort (png, raw, zstd, zstd-delta),
     /// or for a float source half (raw, zstd: 16-bit floats, what a GPU uploads as R16F, half
     /// the bytes; rounded to nearest even, beyond 65504 infinite) [default: the source's;
     /// 32-bit integer and float sources keep unsignedInt and float].
-    #[arg(long, value_name = "TYPE", value_parser = super::parse_tile_type)]
+    #[arg(help_heading = "Tiles", long, value_name = "TYPE", value_parser = super::parse_tile_type)]
     tile_type: Option<Depth>,
 
     /// Most memory a run may hold at once, checked before allocating: an image decoded whole
@@ -222,7 +222,7 @@ pub struct OutputArgs {
     /// memory.plannedBytes, their most at once); e.g. 512M, 4G. An image too wide for that is
     /// cut in vertical stripes, reading the source once per stripe, for the same tiles; a
     /// budget too small even for those is refused before the run, saying what it needs.
-    #[arg(long, value_name = "SIZE", default_value = "1G", value_parser = super::parse_size)]
+    #[arg(help_heading = "Memory and speed", long, value_name = "SIZE", default_value = "1G", value_parser = super::parse_size)]
     max_memory: u64,
 
     /// Make one shard of a split across machines, into a shard pack (--pack): I/N is shard I
@@ -231,15 +231,15 @@ pub struct OutputArgs {
     /// (JOB_COMPLETION_INDEX, with --shards). '{shard}' in --pack becomes the index.
     /// `vortex-tiler merge` joins the N shard packs into the pack --pack alone makes, byte for
     /// byte. See docs/scale-out.md.
-    #[arg(long, value_name = "I/N|auto")]
+    #[arg(help_heading = "Scale-out", long, value_name = "I/N|auto")]
     shard: Option<super::shard::ShardArg>,
 
     /// With --shard auto: how many shards there are (a Kubernetes Job's completions; a Slurm
     /// array says so itself).
-    #[arg(long, value_name = "N", requires = "shard")]
+    #[arg(help_heading = "Scale-out", long, value_name = "N", requires = "shard")]
     shards: Option<u32>,
 
-    #[command(flatten)]
+    #[command(flatten, next_help_heading = "Memory and speed")]
     run: super::RunFlags,
 
     /// Where each -o and --layout stood among the arguments, in order (`place_flags`).

@@ -449,3 +449,71 @@ fn the_architecture_doc_lists_the_real_layers() {
         assert_eq!(&doc[start..stop], listed, "docs/architecture.md's module layers are stale: rerun with BLESS=1");
     }
 }
+
+/// The entries of docs/architecture.md's source tree: each folder (`"source/tiff/"`) or
+/// top-level line (`""`) with the text that describes its files.
+fn tree_entries(doc: &str) -> BTreeMap<String, String> {
+    let start = doc.find("```text\nsrc/\n").expect("the source tree") + "```text\nsrc/\n".len();
+    let block = &doc[start..start + doc[start..].find("```").expect("the tree's end")];
+    let mut entries: BTreeMap<String, String> = BTreeMap::new();
+    let mut folders: Vec<String> = Vec::new();
+    let mut current = String::new();
+    for line in block.lines() {
+        let indent = line.len() - line.trim_start().len();
+        let first = line.split_whitespace().next().unwrap_or("");
+        if (indent == 2 || indent == 4) && (first.ends_with('/') || first.ends_with(".rs")) {
+            folders.truncate(indent / 2 - 1);
+            current = match first.strip_suffix('/') {
+                Some(folder) => {
+                    folders.push(folder.to_string());
+                    folders.join("/") + "/"
+                }
+                None => folders.iter().map(|f| format!("{f}/")).collect(),
+            };
+        }
+        let text = entries.entry(current.clone()).or_default();
+        text.push_str(line);
+        text.push('\n');
+    }
+    entries
+}
+
+/// Every file of the library and the binary is named in docs/architecture.md's source tree,
+/// under its folder: a new file is placed in the data flow when it is added.
+#[test]
+fn the_architecture_doc_names_every_source_file() {
+    fn walk(dir: &Path, src: &Path, out: &mut Vec<PathBuf>) {
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                walk(&path, src, out);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                out.push(path.strip_prefix(src).unwrap().to_path_buf());
+            }
+        }
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let entries = tree_entries(&std::fs::read_to_string(root.join("docs/architecture.md")).unwrap());
+    let mut files = Vec::new();
+    walk(&root.join("src"), &root.join("src"), &mut files);
+    let named = |text: &str, word: &str| {
+        text.split(|c: char| !(c.is_alphanumeric() || c == '_' || c == '.'))
+            .any(|w| w == word || w == format!("{word}.rs"))
+    };
+    let unnamed: Vec<String> = files
+        .iter()
+        .filter(|file| {
+            let stem = file.file_stem().unwrap().to_string_lossy().into_owned();
+            let folder = file.parent().map(|p| p.to_string_lossy().into_owned()).unwrap_or_default();
+            let key = if folder.is_empty() { String::new() } else { format!("{folder}/") };
+            match entries.get(&key) {
+                // A folder's mod.rs is the folder's own entry.
+                Some(_) if stem == "mod" => false,
+                Some(text) => !named(text, &stem),
+                None => true,
+            }
+        })
+        .map(|f| f.display().to_string())
+        .collect();
+    assert!(unnamed.is_empty(), "docs/architecture.md's source tree does not name {unnamed:?} under its folder");
+}

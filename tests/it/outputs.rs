@@ -245,3 +245,37 @@ fn each_layout_belongs_to_the_output_before_it() {
     );
     assert!(!g.exists() && !at("h.vtpk").exists());
 }
+
+/// `split --help` groups its flags as ripgrep's help does, so that each is found under what it
+/// is for; `-t` is --tile-size.
+#[test]
+fn help_groups_the_flags_by_what_they_are_for() {
+    let help = ok(&["split", "--help"]);
+    let headings: Vec<&str> = help.lines().filter(|l| !l.starts_with(' ') && l.ends_with(':')).collect();
+    for want in ["Input:", "Outputs:", "Tiles:", "Pyramid and filter:", "Colour:", "Memory and speed:", "Scale-out:"] {
+        assert!(headings.contains(&want), "no {want} section in {headings:?}");
+    }
+    // The flags (lines that start with one) under each heading.
+    let mut under: Vec<(&str, &str)> = Vec::new();
+    let mut heading = "";
+    for line in help.lines() {
+        if !line.starts_with(' ') && line.ends_with(':') {
+            heading = line;
+        } else if let Some(flag) = line.trim_start().split([',', ' ']).find(|w| w.starts_with("--")) {
+            under.push((heading, flag));
+        }
+    }
+    for flag in ["--output", "--layout", "--pack", "--pmtiles", "--ome-zarr-version", "--iiif-id"] {
+        assert!(under.contains(&("Outputs:", flag)), "{flag} is not under Outputs: {under:?}");
+    }
+    assert!(
+        under.contains(&("Tiles:", "--quality")) && under.contains(&("Memory and speed:", "--threads")),
+        "{under:?}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let input = odd_png(dir.path(), 100, 80);
+    ok(&["split", s(&input), "-o", s(&dir.path().join("t")), "-t", "64", "-q"]);
+    let info: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("t/info.json")).unwrap()).unwrap();
+    assert_eq!(info["tileSize"], 64);
+}

@@ -24,7 +24,11 @@ impl Server {
         BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
         let addr = line
             .trim()
-            .strip_prefix(&format!("serving {} inputs on http://", inputs.len()))
+            .strip_prefix(&format!(
+                "serving {} input{} on http://",
+                inputs.len(),
+                if inputs.len() == 1 { "" } else { "s" }
+            ))
             .and_then(|rest| rest.strip_suffix('/'))
             .unwrap_or_else(|| panic!("unexpected first line {line:?}"));
         let port = addr.rsplit_once(':').unwrap().1.parse().unwrap();
