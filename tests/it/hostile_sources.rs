@@ -76,8 +76,9 @@ fn a_png_profile_past_the_cap_is_refused_unread_whatever_the_budget() {
     }
 }
 
-/// A damaged iCCP chunk (not zlib data, an unknown method, no name) is an error naming it,
-/// where the png crate dropped it and the texels went out as sRGB; a good one is read.
+/// A damaged iCCP chunk (not zlib data, an unknown method, no name, a CRC that fails) is an
+/// error naming it, where the png crate dropped it and the texels went out as sRGB; a good one
+/// is read.
 #[test]
 fn a_damaged_png_profile_is_an_error_not_srgb() {
     let dir = tempfile::tempdir().unwrap();
@@ -93,11 +94,19 @@ fn a_damaged_png_profile_is_an_error_not_srgb() {
     }
     // sRGB itself, as iCCP: read, found to be sRGB, left alone.
     let srgb = lcms2::Profile::new_srgb().icc().unwrap();
-    png_with_chunk(&png, 8, 8, b"iCCP", &iccp(0, &zlib(&srgb)));
+    let data = iccp(0, &zlib(&srgb));
+    png_with_chunk(&png, 8, 8, b"iCCP", &data);
     let (source, _) = source::open_with(&png, OpenOptions::shown(1 << 30)).unwrap();
     assert!(source.describe().contains("is sRGB: left as is"), "{}", source.describe());
     let keep = OpenOptions { keep_icc: true, ..OpenOptions::shown(1 << 30) };
     assert_eq!(source::open_with(&png, keep).unwrap().1, Some(srgb));
+    // The same chunk with its CRC's last byte changed: damaged, not read as if whole (libvips
+    // warns and keeps it; the png crate drops it).
+    let mut bytes = std::fs::read(&png).unwrap();
+    bytes[33 + 8 + data.len() + 3] ^= 1;
+    std::fs::write(&png, bytes).unwrap();
+    fails_with(&run(&["split", s(&png), "-o", s(&out)]), &["damaged.png", "PNG iCCP chunk) is damaged: its CRC is"]);
+    assert!(!out.exists());
 }
 
 /// A TIFF's ICC tag (34675) over the cap is refused from its count, before it is read, with
