@@ -111,16 +111,11 @@ fn iccp(icc: &[u8]) -> Result<Vec<u8>> {
     Ok(iccp)
 }
 
-/// CRC-32 (ISO-HDLC), as PNG chunks carry it.
+/// CRC-32 (ISO-HDLC), as PNG chunks carry it: flate2's, as the PNG reader checks it.
 fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    for &b in bytes {
-        crc ^= b as u32;
-        for _ in 0..8 {
-            crc = (crc >> 1) ^ (0xEDB8_8320 & (crc & 1).wrapping_neg());
-        }
-    }
-    !crc
+    let mut crc = flate2::Crc::new();
+    crc.update(bytes);
+    crc.sum()
 }
 
 /// A sink whose JPEG and PNG tiles carry `profile`.

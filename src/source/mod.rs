@@ -65,6 +65,7 @@ pub(crate) mod tee;
 mod tiff;
 pub mod tiled;
 mod whole;
+mod xml;
 
 pub(crate) use crate::decode::{decode_tile, decode_tile_within, probe_tile};
 pub use stored::{Quality, StoredTiles};

@@ -34,10 +34,12 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     );
     decoder.set_transformations(png::Transformations::EXPAND);
     // The profile is read by `iccp` below, within its own cap: the crate would inflate it
-    // within the whole budget and drop one it cannot inflate without a word.
+    // within the whole budget, and drop one that is damaged (or fails its CRC) without a word.
     decoder.set_ignore_iccp_chunk(true);
-    let icc = iccp(path)?;
     let mut reader = decoder.read_info().map_err(|e| TilerError::decode(path, format!("not a readable PNG: {e}")))?;
+    // After the crate has read the chunks up to the image data: a file it refuses is named
+    // by the crate, and the walk below meets only chunks the crate has found well formed.
+    let icc = iccp(path)?;
     let (colour, depth) = reader.output_color_type();
     let channels = match colour {
         png::ColorType::Grayscale => Channels::Grey,
@@ -80,10 +82,12 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
 /// The ICC profile of `path`'s iCCP chunk (PNG 1.2, 11.3.3.3: a keyword of 1 to 79 bytes, a
 /// NUL, compression method 0, a zlib stream), inflated to at most
 /// [`MAX_PROFILE_BYTES`]; `None` without one. Only the chunks' lengths and types are read on
-/// the way (to the first IDAT, after which an iCCP is not allowed); the png crate, which reads
-/// the rest of the file, is told to skip this chunk. A profile that is damaged (no keyword, an
-/// unknown method, not zlib data) or inflates past the cap is an error: its texels are never
-/// taken as sRGB.
+/// the way (to the first IDAT, after which an iCCP is not allowed; the first iCCP is the one,
+/// as the png crate takes it); the png crate, which reads the rest of the file, is told to
+/// skip this chunk: it offers no way to learn that a profile was dropped, nor to inflate one
+/// under a cap of its own. A profile that is damaged (its CRC, no keyword, an unknown method,
+/// not zlib data) or inflates past the cap is an error: its texels are never taken as sRGB
+/// (libvips warns and keeps a profile whose CRC fails, and drops one it cannot inflate).
 fn iccp(path: &Path) -> Result<Option<Vec<u8>>> {
     let damaged = |why: String| {
         TilerError::decode(
@@ -108,10 +112,20 @@ fn iccp(path: &Path) -> Result<Option<Vec<u8>>> {
                 if length > MAX_PROFILE_BYTES + 4096 {
                     return Err(too_large(path, Some(length), "PNG iCCP chunk, compressed"));
                 }
+                // The chunk's data, then its CRC (of its type and data).
                 let mut chunk = Vec::new();
-                (&mut file).take(length).read_to_end(&mut chunk).map_err(|e| TilerError::io(path, e))?;
-                if chunk.len() as u64 != length {
-                    return Err(damaged(format!("the file ends inside the chunk ({} of {length} bytes)", chunk.len())));
+                (&mut file).take(length + 4).read_to_end(&mut chunk).map_err(|e| TilerError::io(path, e))?;
+                let Some(at) = chunk.len().checked_sub(4).filter(|&at| at as u64 == length) else {
+                    let read = chunk.len();
+                    return Err(damaged(format!("the file ends inside the chunk ({read} of {} bytes)", length + 4)));
+                };
+                let stored = u32::from_be_bytes([chunk[at], chunk[at + 1], chunk[at + 2], chunk[at + 3]]);
+                chunk.truncate(at);
+                let mut crc = flate2::Crc::new();
+                crc.update(b"iCCP");
+                crc.update(&chunk);
+                if crc.sum() != stored {
+                    return Err(damaged(format!("its CRC is {stored:08x}, its bytes' {:08x}", crc.sum())));
                 }
                 let keyword = chunk.iter().position(|&b| b == 0).filter(|&n| (1..80).contains(&n));
                 let Some(keyword) = keyword else {

@@ -259,6 +259,12 @@ fn icc_profiles_are_converted_to_srgb_as_vips_does() {
             let (source, _) = source::open_with(path, OpenOptions::shown(1 << 30)).unwrap();
             assert!(source.describe().contains("converted to sRGB"), "{}", source.describe());
         }
+        // A PNG as libvips writes one with a profile (`vips copy x.png y.png[profile=..]`: its
+        // iCCP named "icc", before pHYs), not as exiftool retags one.
+        let vips_png = dir.path().join(format!("{name}-vips.png"));
+        tool("vips", &["copy", s(&png), &format!("{}[profile={}]", s(&vips_png), s(&icc))]);
+        let why = "LittleCMS on both sides; 8-bit rounding of the two pipelines";
+        compare_with_vips_icc(&vips_png, false, Tolerance::max_and_mean(2, 0.5, why));
         // 16 bits stay 16 bits.
         let deep = dir.path().join(format!("{name}-16.png"));
         write_png(&deep, 48, 32, PixelLayout::new(Channels::Rgba, Depth::U16));

@@ -6,7 +6,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use tiff::encoder::{TiffEncoder, colortype};
+use tiff::encoder::{TiffEncoder, TiffKind, TiffKindBig, TiffKindStandard, colortype};
 use tiff::tags::Tag;
 use vortex_tiler::source::channels::ChannelSet;
 use vortex_tiler::source::{self, OpenOptions, Pick};
@@ -76,8 +76,9 @@ fn a_png_profile_past_the_cap_is_refused_unread_whatever_the_budget() {
     }
 }
 
-/// A damaged iCCP chunk (not zlib data, an unknown method, no name) is an error naming it,
-/// where the png crate dropped it and the texels went out as sRGB; a good one is read.
+/// A damaged iCCP chunk (not zlib data, an unknown method, no name, a CRC that fails) is an
+/// error naming it, where the png crate dropped it and the texels went out as sRGB; a good one
+/// is read.
 #[test]
 fn a_damaged_png_profile_is_an_error_not_srgb() {
     let dir = tempfile::tempdir().unwrap();
@@ -93,11 +94,19 @@ fn a_damaged_png_profile_is_an_error_not_srgb() {
     }
     // sRGB itself, as iCCP: read, found to be sRGB, left alone.
     let srgb = lcms2::Profile::new_srgb().icc().unwrap();
-    png_with_chunk(&png, 8, 8, b"iCCP", &iccp(0, &zlib(&srgb)));
+    let data = iccp(0, &zlib(&srgb));
+    png_with_chunk(&png, 8, 8, b"iCCP", &data);
     let (source, _) = source::open_with(&png, OpenOptions::shown(1 << 30)).unwrap();
     assert!(source.describe().contains("is sRGB: left as is"), "{}", source.describe());
     let keep = OpenOptions { keep_icc: true, ..OpenOptions::shown(1 << 30) };
     assert_eq!(source::open_with(&png, keep).unwrap().1, Some(srgb));
+    // The same chunk with its CRC's last byte changed: damaged, not read as if whole (libvips
+    // warns and keeps it; the png crate drops it).
+    let mut bytes = std::fs::read(&png).unwrap();
+    bytes[33 + 8 + data.len() + 3] ^= 1;
+    std::fs::write(&png, bytes).unwrap();
+    fails_with(&run(&["split", s(&png), "-o", s(&out)]), &["damaged.png", "PNG iCCP chunk) is damaged: its CRC is"]);
+    assert!(!out.exists());
 }
 
 /// A TIFF's ICC tag (34675) over the cap is refused from its count, before it is read, with
@@ -215,28 +224,36 @@ fn ifd_offsets(bytes: &[u8]) -> Vec<usize> {
     all
 }
 
+/// A TIFF (`K`: classic or BigTIFF) of `pages` 4x4 grey pages at `path`; its bytes.
+fn grey_tiff<K: TiffKind>(path: &Path, pages: usize) -> Vec<u8> {
+    let mut encoder = TiffEncoder::<_, K>::new_generic(std::fs::File::create(path).unwrap()).unwrap();
+    for _ in 0..pages {
+        encoder.new_image::<colortype::Gray8>(4, 4).unwrap().write_data(&[1u8; 16]).unwrap();
+    }
+    drop(encoder);
+    std::fs::read(path).unwrap()
+}
+
 /// A directory chain that loops (page 1 points back at page 0) is said in the summary, where
-/// the file was read as one page without a word.
+/// the file was read as one page without a word; so is a page picked past where it stops.
 #[test]
 fn a_directory_loop_is_said_in_the_summary() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("loop.tif");
-    let mut encoder = TiffEncoder::new(std::fs::File::create(&path).unwrap()).unwrap();
-    for _ in 0..2 {
-        encoder.new_image::<colortype::Gray8>(4, 4).unwrap().write_data(&[1u8; 16]).unwrap();
-    }
-    drop(encoder);
-    let mut bytes = std::fs::read(&path).unwrap();
+    let mut bytes = grey_tiff::<TiffKindStandard>(&path, 2);
     let ifds = ifd_offsets(&bytes);
     assert_eq!(ifds.len(), 2);
     let entries = u16::from_le_bytes([bytes[ifds[1]], bytes[ifds[1] + 1]]) as usize;
     let next = ifds[1] + 2 + 12 * entries;
     bytes[next..next + 4].copy_from_slice(&(ifds[0] as u32).to_le_bytes());
     std::fs::write(&path, &bytes).unwrap();
+    // The tiff crate will not step onto page 1, whose next offset closes the loop, so page 1
+    // is lost with the loop (libtiff and tifffile read both pages and warn).
+    let said = "the directory chain stops after page 0 (format error: file contained a cycle in the list of IFDs)";
     let described = source::open(&path, 1 << 30).unwrap().describe();
-    assert!(described.contains("the directory chain stops after page"), "{described}");
-    let e = source::open_picked(&path, 1 << 30, Pick { page: Some(5), series: None }).err().unwrap().to_string();
-    assert!(e.contains("the directory chain stops after page"), "{e}");
+    assert!(described.contains(&format!("{said}: later pages not read")), "{described}");
+    let e = source::open_picked(&path, 1 << 30, Pick { page: Some(1), series: None }).err().unwrap().to_string();
+    assert!(e.contains("--page 1: the TIFF has 1 page(s), 0 to 0") && e.contains(said), "{e}");
 }
 
 /// A BigTIFF whose first directory lies past 2^63 bytes: the message names the offset, not
@@ -245,10 +262,7 @@ fn a_directory_loop_is_said_in_the_summary() {
 fn a_first_directory_past_any_file_is_named() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("far.tif");
-    let mut encoder = TiffEncoder::new_big(std::fs::File::create(&path).unwrap()).unwrap();
-    encoder.new_image::<colortype::Gray8>(4, 4).unwrap().write_data(&[1u8; 16]).unwrap();
-    drop(encoder);
-    let mut bytes = std::fs::read(&path).unwrap();
+    let mut bytes = grey_tiff::<TiffKindBig>(&path, 1);
     let far = (1u64 << 63) + 8;
     bytes[8..16].copy_from_slice(&far.to_le_bytes());
     std::fs::write(&path, &bytes).unwrap();
@@ -263,10 +277,7 @@ fn a_first_directory_past_any_file_is_named() {
 fn an_unknown_compression_lists_every_one_read() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("odd.tif");
-    let mut encoder = TiffEncoder::new(std::fs::File::create(&path).unwrap()).unwrap();
-    encoder.new_image::<colortype::Gray8>(4, 4).unwrap().write_data(&[1u8; 16]).unwrap();
-    drop(encoder);
-    let mut bytes = std::fs::read(&path).unwrap();
+    let mut bytes = grey_tiff::<TiffKindStandard>(&path, 1);
     // Tag 259, type SHORT, count 1, value 1 (none).
     let entry = [3u8, 1, 3, 0, 1, 0, 0, 0, 1, 0];
     let at = bytes.windows(entry.len()).position(|w| w == entry).expect("a Compression entry");

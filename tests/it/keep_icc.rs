@@ -33,27 +33,42 @@ fn exiftool_profile(file: &Path) -> Vec<u8> {
     out.stdout
 }
 
-/// An Adobe RGB JPEG cut with --keep-icc into JPEG tiles (tile directory) and PNG tiles (Deep
-/// Zoom): every tile carries the profile, byte for byte, as exiftool and libvips read it.
-#[test]
-fn kept_profiles_are_in_every_tile() {
+/// A 300x200 JPEG carrying the Adobe RGB profile as libvips writes it, in a new temporary
+/// directory, and the profile's bytes; `None` (skipped) without libvips or the profile.
+fn adobe_jpeg() -> Option<(tempfile::TempDir, PathBuf, Vec<u8>)> {
     if !have_tools() || !Path::new(ADOBE_RGB).is_file() {
         crate::common::skip_unless_ci(
             "the kept-profile test",
             "no colord-data's AdobeRGB1998.icc (apt-get install colord-data)",
         );
-        return;
+        return None;
     }
-    let Ok(probe) = Command::new("exiftool").arg("-ver").output() else {
-        crate::common::skip_unless_ci("the kept-profile test", "no exiftool (apt-get install libimage-exiftool-perl)");
-        return;
-    };
-    assert!(probe.status.success());
     let dir = tempfile::tempdir().unwrap();
     let png = pattern_png(dir.path(), 300, 200);
     let jpg = dir.path().join("adobe.jpg");
     tool("vips", &["jpegsave", s(&png), s(&jpg), "--profile", ADOBE_RGB]);
     let profile = std::fs::read(ADOBE_RGB).unwrap();
+    Some((dir, jpg, profile))
+}
+
+/// The ICC profile libvips finds in `tile` (`vipsheader` prints it in base64).
+fn vips_profile(tile: &Path) -> Vec<u8> {
+    use base64::Engine;
+    let header = Command::new("vipsheader").args(["-f", "icc-profile-data", s(tile)]).output().unwrap();
+    let said = String::from_utf8_lossy(&header.stdout);
+    base64::engine::general_purpose::STANDARD.decode(said.trim()).unwrap()
+}
+
+/// An Adobe RGB JPEG cut with --keep-icc into JPEG tiles (tile directory) and PNG tiles (Deep
+/// Zoom): every tile carries the profile, byte for byte, as exiftool and libvips read it.
+#[test]
+fn kept_profiles_are_in_every_tile() {
+    let Some((dir, jpg, profile)) = adobe_jpeg() else { return };
+    let Ok(probe) = Command::new("exiftool").arg("-ver").output() else {
+        crate::common::skip_unless_ci("the kept-profile test", "no exiftool (apt-get install libimage-exiftool-perl)");
+        return;
+    };
+    assert!(probe.status.success());
     assert_eq!(exiftool_profile(&jpg), profile, "the input carries the profile");
 
     let out = dir.path().join("jpeg-tiles");
@@ -70,13 +85,9 @@ fn kept_profiles_are_in_every_tile() {
     for tile in &pngs {
         assert_eq!(exiftool_profile(tile), profile, "{}", tile.display());
     }
-    // libvips reads the same profile from both kinds of tile (`vipsheader` prints it in base64).
+    // libvips reads the same profile from both kinds of tile.
     for tile in [&jpegs[0], &pngs[0]] {
-        let header = Command::new("vipsheader").args(["-f", "icc-profile-data", s(tile)]).output().unwrap();
-        use base64::Engine;
-        let said = String::from_utf8_lossy(&header.stdout);
-        let read = base64::engine::general_purpose::STANDARD.decode(said.trim()).unwrap();
-        assert_eq!(read, profile, "{}", tile.display());
+        assert_eq!(vips_profile(tile), profile, "{}", tile.display());
     }
     // Without --keep-icc the texels are converted to sRGB and no tile carries a profile.
     let plain = dir.path().join("plain");
@@ -91,18 +102,7 @@ fn kept_profiles_are_in_every_tile() {
 /// `split` converts the original (tile for tile, byte for byte).
 #[test]
 fn convert_keeps_or_converts_a_kept_profile() {
-    if !have_tools() || !Path::new(ADOBE_RGB).is_file() {
-        crate::common::skip_unless_ci(
-            "the kept-profile test",
-            "no colord-data's AdobeRGB1998.icc (apt-get install colord-data)",
-        );
-        return;
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let png = pattern_png(dir.path(), 300, 200);
-    let jpg = dir.path().join("adobe.jpg");
-    tool("vips", &["jpegsave", s(&png), s(&jpg), "--profile", ADOBE_RGB]);
-    let profile = std::fs::read(ADOBE_RGB).unwrap();
+    let Some((dir, jpg, profile)) = adobe_jpeg() else { return };
     let args = ["--tile-size", "128", "--codec", "png", "--border", "0"];
     let kept = dir.path().join("kept");
     ok(&[&["split", s(&jpg), "-o", s(&kept), "--keep-icc"][..], &args].concat());
@@ -113,10 +113,7 @@ fn convert_keeps_or_converts_a_kept_profile() {
     let info = std::fs::read_to_string(still.join("info.json")).unwrap();
     assert!(info.contains("\"iccProfile\""), "{info}");
     for tile in tiles(&still, "png") {
-        let header = Command::new("vipsheader").args(["-f", "icc-profile-data", s(&tile)]).output().unwrap();
-        use base64::Engine;
-        let read = base64::engine::general_purpose::STANDARD.decode(String::from_utf8_lossy(&header.stdout).trim());
-        assert_eq!(read.unwrap(), profile, "{}", tile.display());
+        assert_eq!(vips_profile(&tile), profile, "{}", tile.display());
     }
 
     let converted = dir.path().join("converted");
@@ -141,18 +138,7 @@ fn convert_keeps_or_converts_a_kept_profile() {
 /// into every PNG tile of the directory it makes, as `split -o` does.
 #[test]
 fn a_pack_keeps_the_profile_in_its_metadata() {
-    if !have_tools() || !Path::new(ADOBE_RGB).is_file() {
-        crate::common::skip_unless_ci(
-            "the kept-profile test",
-            "no colord-data's AdobeRGB1998.icc (apt-get install colord-data)",
-        );
-        return;
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let png = pattern_png(dir.path(), 300, 200);
-    let jpg = dir.path().join("adobe.jpg");
-    tool("vips", &["jpegsave", s(&png), s(&jpg), "--profile", ADOBE_RGB]);
-    let profile = std::fs::read(ADOBE_RGB).unwrap();
+    let Some((dir, jpg, profile)) = adobe_jpeg() else { return };
     use base64::Engine;
     let args = ["--tile-size", "128", "--codec", "png", "--keep-icc"];
     let pack = dir.path().join("kept.vtpk");
@@ -166,8 +152,6 @@ fn a_pack_keeps_the_profile_in_its_metadata() {
     let pngs = tiles(&out, "png");
     assert!(pngs.len() >= 6, "{pngs:?}");
     for tile in &pngs {
-        let header = Command::new("vipsheader").args(["-f", "icc-profile-data", s(tile)]).output().unwrap();
-        let read = base64::engine::general_purpose::STANDARD.decode(String::from_utf8_lossy(&header.stdout).trim());
-        assert_eq!(read.unwrap(), profile, "{}", tile.display());
+        assert_eq!(vips_profile(tile), profile, "{}", tile.display());
     }
 }

@@ -1,7 +1,7 @@
 //! `split --range MIN:MAX`: 32-bit integer and float samples mapped linearly onto 8 or 16 bits
 //! for PNG and JPEG tiles, values outside clamped and counted (docs/sources.md).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::common::cli::{ok, run, s};
 use tiff::encoder::{TiffEncoder, colortype};
@@ -21,12 +21,19 @@ fn finest_png(dir: &Path, width: u32, height: u32) -> image::DynamicImage {
     panic!("no finest PNG tile in {}", dir.display());
 }
 
+/// `values` (32 of them) as an 8x4 grey float TIFF `f.tif` in `dir`.
+fn float_tif(dir: &Path, values: &[f32]) -> PathBuf {
+    let tif = dir.join("f.tif");
+    let mut encoder = TiffEncoder::new(std::fs::File::create(&tif).unwrap()).unwrap();
+    encoder.write_image::<colortype::Gray32Float>(8, 4, values).unwrap();
+    tif
+}
+
 /// A float image into 8-bit PNG through --range 0:1: each value's code is round(v * 255)
 /// (halves away from zero), those outside 0..1 and NaN clamped, and the summary counts them.
 #[test]
 fn floats_map_onto_8_bits_exactly_and_clamped_ones_are_counted() {
     let dir = tempfile::tempdir().unwrap();
-    let tif = dir.path().join("f.tif");
     // (value, expected code, outside the range)
     let cases: [(f32, u8, bool); 8] = [
         (0.0, 0, false),
@@ -39,8 +46,7 @@ fn floats_map_onto_8_bits_exactly_and_clamped_ones_are_counted() {
         (f32::NAN, 0, true),
     ];
     let values: Vec<f32> = (0..4).flat_map(|_| cases.map(|c| c.0)).collect();
-    let mut encoder = TiffEncoder::new(std::fs::File::create(&tif).unwrap()).unwrap();
-    encoder.write_image::<colortype::Gray32Float>(8, 4, &values).unwrap();
+    let tif = float_tif(dir.path(), &values);
     let out = dir.path().join("out");
     let args = ["split", s(&tif), "-o", s(&out), "--codec", "png", "--tile-size", "8", "--border", "0"];
     let said = ok(&[&args[..], &["--range", "0:1", "--filter", "box", "--json"]].concat());
@@ -111,10 +117,8 @@ fn integers_map_onto_16_bits_exactly() {
 #[test]
 fn convert_maps_a_float_pack_as_split_does() {
     let dir = tempfile::tempdir().unwrap();
-    let tif = dir.path().join("f.tif");
     let values: Vec<f32> = (0..32).map(|i| i as f32 / 20.0 - 0.2).collect(); // -0.2 ..= 1.35
-    let mut encoder = TiffEncoder::new(std::fs::File::create(&tif).unwrap()).unwrap();
-    encoder.write_image::<colortype::Gray32Float>(8, 4, &values).unwrap();
+    let tif = float_tif(dir.path(), &values);
     let pack = dir.path().join("f.vtpk");
     let tiles = ["--tile-size", "8", "--border", "0", "--filter", "box"];
     ok(&[&["split", s(&tif), "--pack", s(&pack), "--codec", "raw"][..], &tiles].concat());
@@ -137,10 +141,8 @@ fn convert_maps_a_float_pack_as_split_does() {
 #[test]
 fn a_negative_min_is_taken_without_an_equals_sign() {
     let dir = tempfile::tempdir().unwrap();
-    let tif = dir.path().join("f.tif");
     let values: Vec<f32> = (0..32).map(|i| i as f32 / 16.0 - 0.5).collect(); // -0.5 ..= 1.4375
-    let mut encoder = TiffEncoder::new(std::fs::File::create(&tif).unwrap()).unwrap();
-    encoder.write_image::<colortype::Gray32Float>(8, 4, &values).unwrap();
+    let tif = float_tif(dir.path(), &values);
     let tiles = ["--tile-size", "8", "--border", "0", "--filter", "box"];
     let out = dir.path().join("split");
     let said = ok(&[&["split", s(&tif), "-o", s(&out), "--codec", "png", "--range", "-0.5:1.5"][..], &tiles].concat());

@@ -8,6 +8,7 @@
 use std::borrow::Cow;
 
 use super::pyramid::Page;
+use crate::source::xml::unescape;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Vendor {
@@ -211,51 +212,6 @@ pub(in crate::source) fn attribute<'a>(tag: &'a str, name: &str) -> Option<Cow<'
         rest = &rest[at + name.len()..];
     }
     None
-}
-
-/// `text` with its XML references replaced (see [`attribute`]).
-pub(in crate::source) fn unescape(text: &str) -> Cow<'_, str> {
-    if !text.contains('&') {
-        return Cow::Borrowed(text);
-    }
-    let mut out = String::with_capacity(text.len());
-    let mut rest = text;
-    while let Some(amp) = rest.find('&') {
-        out.push_str(&rest[..amp]);
-        rest = &rest[amp..];
-        // The longest reference is `&#x10FFFF;` (10 bytes) or `&#1114111;`.
-        let reference = rest[1..].find(';').filter(|&end| end <= 10).and_then(|end| {
-            let name = &rest[1..1 + end];
-            let c = match name {
-                "amp" => Some('&'),
-                "lt" => Some('<'),
-                "gt" => Some('>'),
-                "quot" => Some('"'),
-                "apos" => Some('\''),
-                _ => {
-                    let code = match name.strip_prefix("#x") {
-                        Some(hex) => u32::from_str_radix(hex, 16).ok(),
-                        None => name.strip_prefix('#').and_then(|dec| dec.parse::<u32>().ok()),
-                    };
-                    // XML's Char production: no NUL, no C0 controls but tab and newlines.
-                    code.filter(|&c| c >= 0x20 || matches!(c, 0x9 | 0xA | 0xD)).and_then(char::from_u32)
-                }
-            };
-            c.map(|c| (c, end + 2))
-        });
-        match reference {
-            Some((c, len)) => {
-                out.push(c);
-                rest = &rest[len..];
-            }
-            None => {
-                out.push('&');
-                rest = &rest[1..];
-            }
-        }
-    }
-    out.push_str(rest);
-    Cow::Owned(out)
 }
 
 #[cfg(test)]

@@ -12,6 +12,7 @@ use super::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore};
 use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, ShowPath, TilerError};
 use crate::source::ImageHeader;
+use crate::source::xml::unescape;
 use crate::viewer::dzi;
 
 pub struct DeepZoom {
@@ -324,21 +325,13 @@ fn start_tag(text: &str, from: usize) -> std::result::Result<(Element<'_>, usize
         let len = text[at + 1..]
             .find(quote)
             .ok_or_else(|| (at, format!("the value of {attr} in <{name}> has no closing {quote}")))?;
-        let value = unescape(&text[at + 1..at + 1 + len]);
+        let value = unescape(&text[at + 1..at + 1 + len]).into_owned();
         if element.attributes.iter().any(|(n, _)| *n == attr) {
             return Err((at, format!("attribute {attr} appears twice in <{name}>")));
         }
         element.attributes.push((attr, value));
         at += len + 2;
     }
-}
-
-/// The five predefined XML entities.
-fn unescape(value: &str) -> String {
-    if !value.contains('&') {
-        return value.to_string();
-    }
-    value.replace("&lt;", "<").replace("&gt;", ">").replace("&quot;", "\"").replace("&apos;", "'").replace("&amp;", "&")
 }
 
 #[cfg(test)]
@@ -441,7 +434,7 @@ mod tests {
     #[test]
     fn attributes_in_any_order_and_quotes() {
         let text = "\u{feff}<?xml version='1.0'?><!-- made by hand --><dz:Image Overlap = '2' \
-                    Format='jpeg' TileSize=\"254\" xmlns:dz='x'><dz:Size Width='300' Height=\"200\"></dz:Size></dz:Image>";
+                    Format='j&#112;eg' TileSize=\"254\" xmlns:dz='x'><dz:Size Width='300' Height=\"200\"></dz:Size></dz:Image>";
         let d = Descriptor::parse(Path::new("a.dzi"), text).unwrap();
         assert_eq!(d, Descriptor { tile_size: 254, overlap: 2, format: "jpeg".into(), width: 300, height: 200 });
     }
