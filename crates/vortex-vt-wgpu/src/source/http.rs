@@ -266,8 +266,7 @@ impl RangeRead for Fetcher {
     }
 }
 
-/// Redirects one request follows before it fails: 10, as browsers and curl allow about 20 and
-/// ureq 10.
+/// Redirects one request follows before it fails: 10, as ureq (browsers allow 20, curl 50).
 const MAX_REDIRECTS: u32 = 10;
 
 /// Where a redirect from `base` to `location` (a reply's `Location`) leads: an absolute
