@@ -5,13 +5,12 @@
 //! it at open (`convert`, `unpack`, `info`, `serve`, `render`), none may put (4, 0)'s pixels at
 //! (3, 0), and `verify` reports it among its problems.
 
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 
 use vortex_pack::{Pack, TileId};
 
-use crate::common::cli::{BIN, fails_with, fixture, ok, run, s, wait_or_kill};
+use crate::common::cli::{fails_with, fixture, ok, run, s, wait_or_kill};
+use crate::common::server;
 
 /// What every refusal says: the file and the section.
 const INDEX: &str = "level table or index checksum mismatch";
@@ -79,14 +78,7 @@ fn verify_still_reports_a_swapped_entry_with_everything_else() {
 fn serve_refuses_a_swapped_entry_instead_of_serving_the_wrong_page() {
     let dir = tempfile::tempdir().unwrap();
     let pack = damaged_pack(dir.path());
-    let mut child = Command::new(BIN)
-        .args(["serve", s(&pack), "--addr", "127.0.0.1:0"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut first = String::new();
-    BufReader::new(child.stdout.take().unwrap()).read_line(&mut first).unwrap();
+    let (mut child, first) = server::spawn(&[s(&pack), "--addr", "127.0.0.1:0"]);
     if first.starts_with("serving") {
         let _ = child.kill();
         let _ = child.wait();

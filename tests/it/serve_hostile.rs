@@ -6,11 +6,11 @@ use std::fs;
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::Duration;
 
-use crate::common::cli::{BIN, fails_with, fixture, ok, run, s, wait_or_kill};
-use crate::common::server::{Reply, Server};
+use crate::common::cli::{fails_with, fixture, ok, run, s, wait_or_kill};
+use crate::common::server::{self, Reply, Server};
 
 /// Fail-safe for reads that must end: far past any timeout the server is given here.
 const FAIL_SAFE: Duration = Duration::from_secs(60);
@@ -329,14 +329,7 @@ fn start_messages_name_things_once_and_the_real_port() {
 
     let pack = dir.path().join("p.vtpk");
     split_png(&["--pack", s(&pack)]);
-    let mut child = Command::new(BIN)
-        .args(["serve", s(&pack), "--addr", "0.0.0.0:0"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    std::io::BufRead::read_line(&mut std::io::BufReader::new(child.stdout.take().unwrap()), &mut line).unwrap();
+    let (mut child, line) = server::spawn(&[s(&pack), "--addr", "0.0.0.0:0"]);
     let port = line.trim().trim_end_matches('/').rsplit_once(':').unwrap().1.to_string();
     child.kill().unwrap();
     child.wait().unwrap();

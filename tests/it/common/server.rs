@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use super::cli::BIN;
+use super::cli::{BIN, s};
 
 /// A running `vortex-tiler serve`, killed when dropped.
 pub struct Server {
@@ -15,13 +15,26 @@ pub struct Server {
     pub port: u16,
 }
 
+/// `vortex-tiler serve ARGS` started (stdout and stderr piped), and the first line it printed:
+/// `serving N inputs on http://ADDR/` once it listens, or nothing when it refused to start (its
+/// stdout closed; its stderr says why).
+pub fn spawn(args: &[&str]) -> (Child, String) {
+    let mut child = Command::new(BIN)
+        .arg("serve")
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("serve starts");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    (child, line)
+}
+
 impl Server {
     pub fn start(inputs: &[&Path], extra: &[&str]) -> Server {
-        let mut cmd = Command::new(BIN);
-        cmd.arg("serve").args(inputs).args(["--addr", "127.0.0.1:0"]).args(extra);
-        let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("serve starts");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+        let inputs: Vec<&str> = inputs.iter().map(|p| s(p)).collect();
+        let (child, line) = spawn(&[&inputs[..], &["--addr", "127.0.0.1:0"], extra].concat());
         let addr = line
             .trim()
             .strip_prefix(&format!(

@@ -4,15 +4,15 @@
 //!
 //! Writes a pack of 349,525 tiles (a 512 x 512 grid at LOD 0, 10 levels: a 65536² texture in
 //! 128-texel pages) with 1-4 KiB payloads into DIR (default: the system temp dir), then times
-//! `Pack::open`, `tile()` at random addresses, and `verify`, next to plain CRC-32C over the same
-//! bytes. Prints a markdown table.
+//! `Pack::open` (with and without the index's CRC), `tile()` at random addresses, and `verify`,
+//! next to plain CRC-32C over the same bytes. Prints a markdown table.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests and measurement programs may panic on a broken set-up
 
 use std::hint::black_box;
 use std::time::Instant;
 
 use vortex_pack::{
-    Description, Level, NewTile, Pack, PackWriter, TileId, TileKind, VerifyOptions, WriteOptions, verify,
+    Description, Level, Limits, NewTile, Pack, PackWriter, TileId, TileKind, VerifyOptions, WriteOptions, verify,
 };
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -64,7 +64,25 @@ fn main() {
             t.elapsed().as_secs_f64()
         })
         .collect();
+    // The open without the index's CRC (what `verify` opens with, and what `open` was before
+    // it checked the index), and that CRC alone on a pack already mapped.
+    let opens_unchecked: Vec<f64> = (0..200)
+        .map(|_| {
+            let t = Instant::now();
+            black_box(Pack::open_to_verify(&path, Limits::default()).unwrap());
+            t.elapsed().as_secs_f64()
+        })
+        .collect();
     let pack = Pack::open(&path).unwrap();
+    let index_crc_s = median(
+        (0..200)
+            .map(|_| {
+                let t = Instant::now();
+                pack.check_index().unwrap();
+                t.elapsed().as_secs_f64()
+            })
+            .collect(),
+    );
     let lookups = 4_000_000;
     let addresses: Vec<(u32, u32, u32)> = (0..lookups)
         .map(|_| {
@@ -109,6 +127,15 @@ fn main() {
     println!("| file size | {:.2} GB |", gb);
     println!("| write (one pass, with dedup lookups) | {write_s:.2} s |");
     println!("| `Pack::open` (median of 200) | {:.1} µs |", median(opens) * 1e6);
+    println!(
+        "| `Pack::open_to_verify`: `open` without the index CRC (median of 200) | {:.1} µs |",
+        median(opens_unchecked) * 1e6
+    );
+    let index_mib = summary.tiles as f64 * vortex_pack::format::ENTRY_LEN as f64 / (1 << 20) as f64;
+    println!(
+        "| `check_index()` on the mapped pack: CRC-32C of the {index_mib:.1} MiB index (median of 200) | {:.0} µs |",
+        index_crc_s * 1e6
+    );
     println!("| `tile(TileId)` at random addresses (median of 5 x 4M) | {lookup_ns:.1} ns |");
     println!("| `verify` (page cache, median of 3) | {verify_s:.3} s = {:.2} GB/s |", gb / verify_s);
     println!("| CRC-32C over the whole file | {crc_s:.3} s = {:.2} GB/s |", gb / crc_s);

@@ -36,7 +36,7 @@ use std::time::{Duration, Instant};
 use vortex_pack::{Limits, PackError, PackLayout, TileId, TileKind};
 
 use super::pack::decode_stored;
-use super::remote::{IndexPlan, RangeRead, RemotePack, lock, parse_content_range};
+use super::remote::{IndexPlan, RangeRead, RemotePack, ignores_range, lock, parse_content_range};
 use super::{PageSource, ReadError, SourceTile, StoredRead};
 use crate::loader::{LoaderError, RetryPolicy};
 use crate::page_cache::CacheFormat;
@@ -266,8 +266,7 @@ impl RangeRead for Fetcher {
     }
 }
 
-/// Redirects one request follows before it fails: 10, as browsers and curl allow about 20 and
-/// ureq 10.
+/// Redirects one request follows before it fails: 10, as ureq (browsers allow 20, curl 50).
 const MAX_REDIRECTS: u32 = 10;
 
 /// Where a redirect from `base` to `location` (a reply's `Location`) leads: an absolute
@@ -526,14 +525,11 @@ impl Fetcher {
             // so dropped unread and asked again.
             200 => {
                 add(&self.counters.whole_file_replies, 1);
-                let size = header("content-length").map_or(String::new(), |n| format!(" ({n} bytes)"));
+                let size = header("content-length");
                 if first {
-                    return Err(fatal(format!(
-                        "this host ignores Range requests: it answered 200 with the whole file{size}; a pack \
-                         is read in byte ranges, and reading every range from the start of a file that can \
-                         be gigabytes is refused (nginx, Apache, S3 and CDNs honour Range)"
-                    )));
+                    return Err(fatal(ignores_range(size.as_deref())));
                 }
+                let size = size.map_or(String::new(), |n| format!(" ({n} bytes)"));
                 return Err(io(format!("a 200 reply with the whole file{size} to a Range request")));
             }
             416 if first => return Err(fatal("the file is empty (416 Range Not Satisfiable)".into())),

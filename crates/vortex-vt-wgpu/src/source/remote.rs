@@ -261,6 +261,20 @@ impl<R: RangeRead> RemotePack<R> {
     }
 }
 
+/// Why a pack is refused whose host answered the open's first `Range` request with the whole
+/// file (200, `Range` ignored; `size`: its `Content-Length`, if given): every later read would
+/// have to read the file from its start. One rule for the native and the browser reader; a
+/// whole-file reply after the open (a proxy that sometimes ignores `Range`) is dropped unread and
+/// the request tried again.
+pub(crate) fn ignores_range(size: Option<&str>) -> String {
+    let size = size.map_or(String::new(), |n| format!(" ({n} bytes)"));
+    format!(
+        "this host ignores Range requests: it answered 200 with the whole file{size}; a pack is read in byte \
+         ranges, and reading every range from the start of a file that can be gigabytes is refused (nginx, \
+         Apache, S3 and CDNs honour Range)"
+    )
+}
+
 /// `bytes FIRST-LAST/TOTAL` (a `Content-Range` reply header) as (first, last, total).
 pub(crate) fn parse_content_range(v: &str) -> Option<(u64, u64, u64)> {
     let (range, total) = v.trim().strip_prefix("bytes ")?.split_once('/')?;

@@ -5,7 +5,9 @@
 //! with [`PageSource::read_stored`], which answers from what was kept. A failed request (a
 //! network error, a 5xx, a reply of the wrong range) is tried again after 100 ms, doubled each
 //! time, six times in all. The browser keeps its own connections (six per host over HTTP/1.1),
-//! so neighbouring reads are not merged here.
+//! so neighbouring reads are not merged here. A host that ignores `Range` (a 200 with the whole
+//! file) is refused at open with the native reader's message, and a later whole-file reply is
+//! dropped unread and retried, as there.
 //!
 //! A pack on another origin must be served with CORS headers that allow `Range` and expose
 //! `Content-Range`.
@@ -23,7 +25,7 @@ use wasm_bindgen::{JsCast, JsValue};
 use wasm_bindgen_futures::JsFuture;
 
 use super::pack::decode_stored;
-use super::remote::{IndexPlan, RangeRead, RemotePack, lock, parse_content_range};
+use super::remote::{IndexPlan, RangeRead, RemotePack, ignores_range, lock, parse_content_range};
 use super::{LocalFuture, PageSource, ReadError, SourceTile, StoredRead};
 use crate::loader::LoaderError;
 use crate::page_cache::CacheFormat;
@@ -284,7 +286,20 @@ impl FetchRange {
         let response: web_sys::Response = reply.dyn_into().map_err(|e| fatal(js(e)))?;
         let status = response.status();
         match status {
-            200 | 206 => {}
+            206 => {}
+            // The whole file, `Range` ignored: refused at open, dropped unread (its stream
+            // cancelled) and asked again after it, as the native reader does.
+            200 => {
+                if let Some(body) = response.body() {
+                    let _ = body.cancel();
+                }
+                let size = response.headers().get("content-length").ok().flatten();
+                if first {
+                    return Err(fatal(ignores_range(size.as_deref())));
+                }
+                let size = size.map_or(String::new(), |n| format!(" ({n} bytes)"));
+                return Err(retry(format!("a 200 reply with the whole file{size} to a Range request")));
+            }
             416 if first => return Err(fatal("the file is empty (416 Range Not Satisfiable)".into())),
             408 | 429 | 500..=599 => return Err(retry(format!("HTTP {status}"))),
             _ => return Err(fatal(format!("HTTP {status}"))),
@@ -296,19 +311,14 @@ impl FetchRange {
         let body = js_sys::Uint8Array::new(&body).to_vec();
         add(&self.counters.bytes, body.len() as u64);
         // What the reply holds: from which byte, and the file's length.
-        let (from, total) = if status == 206 {
-            let range = range.unwrap_or_default();
-            let (from, _, total) = parse_content_range(&range)
-                .ok_or_else(|| retry(format!("a 206 reply with Content-Range {range:?} (is it exposed by CORS?)")))?;
-            (from, total)
-        } else {
-            (0, body.len() as u64)
-        };
+        let range = range.unwrap_or_default();
+        let (from, _, total) = parse_content_range(&range)
+            .ok_or_else(|| retry(format!("a 206 reply with Content-Range {range:?} (is it exposed by CORS?)")))?;
         let end = if first { end.min(total) } else { end };
         if end > total {
             return Err(retry(format!("the reply holds bytes from {from} of a {total}-byte file")));
         }
-        // A whole-file reply (200) holds the bytes wanted at their offset; a 206 from `from`.
+        // The bytes wanted, in a reply from `from`.
         let skip = start.checked_sub(from).ok_or_else(|| retry(format!("the reply starts at byte {from}")))?;
         let len = (end - start) as usize;
         let bytes = body.get(skip as usize..).and_then(|b| b.get(..len)).ok_or_else(|| {
