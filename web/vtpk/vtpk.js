@@ -329,8 +329,8 @@ class RangeReader {
         if (done) break;
         got += value.length;
         this.stats.bytes += value.length;
+        // The controller's abort (fetchRange's `finally`) ends the stream and the connection.
         if (got > want) {
-          reader.cancel().catch(() => {});
           throw new VtpkError("host", `${asked}: the reply runs past the ${want} bytes asked (${got} bytes so far)`);
         }
         chunks.push(value);
