@@ -354,52 +354,145 @@ fn a_report_that_cannot_be_written_is_refused_before_the_first_frame() {
     }
 }
 
-/// A window that shows more than the image (a 2:1 image whole in a square frame, as the home
-/// views of `view` and the web viewer place it) draws the background beyond the image: the clear
-/// colour, transparent, exactly, where the samples (clamped to the image's edges) would repeat
-/// its first and last rows over 50 rows each (issue 41). Inside, at one texel per pixel with
-/// pixel centres on texel centres, each pixel is its texel.
-#[test]
-fn beyond_the_image_a_window_draws_the_background() {
-    let dir = tempfile::tempdir().unwrap();
-    // No texel is transparent black, so the background cannot pass for the image.
-    let source = image::RgbaImage::from_fn(200, 100, |x, y| {
-        image::Rgba([(x * 5 + y) as u8, (y * 2 + 40) as u8, ((x ^ y) * 3) as u8, 255])
-    });
-    let input = dir.path().join("wide.png");
+/// `source` split into a PNG pack in `dir` with `split`'s options.
+fn png_pack(dir: &Path, source: &image::RgbaImage, split: &[&str]) -> PathBuf {
+    let input = dir.join("source.png");
     source.save(&input).unwrap();
-    let pack = dir.path().join("wide.vtpk");
-    let split = ["split", s(&input), "--pack", s(&pack), "--codec", "png", "--tile-size", "64", "--border", "1", "-q"];
-    let out = run(&split);
+    let pack = dir.join("source.vtpk");
+    let out = run(&[&["split", s(&input), "--pack", s(&pack), "--codec", "png", "-q"], split].concat());
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    pack
+}
+
+/// `render`'s converged frame of a still window (`center`, `width`, as a scene gives them) onto
+/// `pack`; `None` without a GPU.
+fn render_still(pack: &Path, size: (u32, u32), center: [f64; 2], width: f64) -> Option<image::RgbaImage> {
+    let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("scene.json");
-    let json = r#"{"size": [200, 200], "frames": 8,
-        "view": {"window": {"path": [{"frame": 0, "center": [0.5, 0.5], "width": 1}]}},
-        "effects": {"filter": "bilinear", "cache_format": "rgba8"}}"#;
-    std::fs::write(&scene, json).unwrap();
+    let json = serde_json::json!({
+        "size": [size.0, size.1], "frames": 8,
+        "view": { "window": { "path": [{ "frame": 0, "center": center, "width": width }] } },
+        "effects": { "filter": "bilinear", "cache_format": "rgba8" },
+    });
+    std::fs::write(&scene, json.to_string()).unwrap();
     let (frames, report_path) = (dir.path().join("frames"), dir.path().join("report.json"));
     let out =
-        run(&["render", "--pack", s(&pack), "--scene", s(&scene), "--frames", s(&frames), "--report", s(&report_path)]);
+        run(&["render", "--pack", s(pack), "--scene", s(&scene), "--frames", s(&frames), "--report", s(&report_path)]);
     if no_gpu(&out) {
-        return;
+        return None;
     }
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert_eq!(report(&report_path)["frames"][7]["fallback_fraction"], 0.0, "the view did not converge");
     let frame = image::open(frames.join("frame-0007.png")).unwrap().to_rgba8();
-    assert_eq!(frame.dimensions(), (200, 200));
-    let rows = |from: u32, to: u32| frame.as_raw()[(from * 200 * 4) as usize..(to * 200 * 4) as usize].to_vec();
-    let background = vec![0u8; 200 * 50 * 4];
-    let exact = Tolerance::max(0, "the background is the frame's clear colour: nothing is sampled there");
-    for (name, band) in [("render-above-the-image", rows(0, 50)), ("render-below-the-image", rows(150, 200))] {
-        assert_close(name, Picture::new(200, 50, 4, &band), Picture::new(200, 50, 4, &background), exact);
-    }
-    let image = rows(50, 150);
-    let why = "bilinear at texel centres reads one texel, through the cache's sRGB view and into the sRGB \
-               frame: the two conversions round-trip within a code value (measured: exact on lavapipe)";
-    assert_close(
-        "render-the-image",
-        Picture::new(200, 100, 4, &image),
-        Picture::new(200, 100, 4, source.as_raw()),
-        Tolerance::max(1, why),
+    assert_eq!(frame.dimensions(), size);
+    Some(frame)
+}
+
+/// What a window (`center`, `width`, square pixels, as `Window::square_pixels` places it) of
+/// `source` on a `size` frame shows, worked out in f64 here: each pixel whose centre lies on the
+/// image is the texel under it, every other pixel is the background, transparent.
+fn expected_still(source: &image::RgbaImage, size: (u32, u32), center: [f64; 2], width: f64) -> image::RgbaImage {
+    let (iw, ih) = (f64::from(source.width()), f64::from(source.height()));
+    let (fw, fh) = (f64::from(size.0), f64::from(size.1));
+    let extent = [width, width * (iw / ih) / (fw / fh)];
+    let (step, origin) = (
+        [extent[0] * iw / fw, extent[1] * ih / fh],
+        [(center[0] - extent[0] / 2.0) * iw, (center[1] - extent[1] / 2.0) * ih],
     );
+    image::RgbaImage::from_fn(size.0, size.1, |x, y| {
+        let (tx, ty) = (origin[0] + (f64::from(x) + 0.5) * step[0], origin[1] + (f64::from(y) + 0.5) * step[1]);
+        // The windows below keep every pixel centre clear of the image's edges.
+        for (t, side) in [(tx, iw), (ty, ih)] {
+            assert!(
+                (t - t.round()).abs() > 1e-3 || (t.round() != 0.0 && t.round() != side),
+                "pixel {x}, {y} on an edge"
+            );
+        }
+        if (0.0..iw).contains(&tx) && (0.0..ih).contains(&ty) {
+            *source.get_pixel(tx as u32, ty as u32)
+        } else {
+            image::Rgba([0; 4])
+        }
+    })
+}
+
+/// Pixels of `frame` that are not the background where `expected` is, or are where it is not.
+fn background_wrong(frame: &image::RgbaImage, expected: &image::RgbaImage) -> usize {
+    let off = |p: &image::Rgba<u8>| p.0 == [0; 4];
+    frame.pixels().zip(expected.pixels()).filter(|(a, b)| off(a) != off(b)).count()
+}
+
+/// A window that shows more than the image draws the background beyond it: the clear colour,
+/// transparent, exactly, where the samples (clamped to the image's edges) would repeat its edge
+/// texels (issue 41). Margins above and below (a 2:1 image whole in a square frame, as the home
+/// views of `view` and the web viewer place it), left and right (a 1:2 image), and on all four
+/// sides (zoomed out). At one texel per pixel with pixel centres on texel centres, each pixel on
+/// the image is its texel, the first and last rows and columns included.
+#[test]
+fn beyond_the_image_a_window_draws_the_background() {
+    // No texel is transparent black, so the background cannot pass for the image.
+    let pattern = |w, h| {
+        image::RgbaImage::from_fn(w, h, |x, y| {
+            image::Rgba([(x * 5 + y) as u8, (y * 2 + 40) as u8, ((x ^ y) * 3) as u8, 255])
+        })
+    };
+    let windows = [
+        ("render-margins-above-and-below", pattern(200, 100), (200, 200), 1.0),
+        ("render-margins-left-and-right", pattern(100, 200), (200, 200), 2.0),
+        ("render-margins-all-round", pattern(200, 100), (300, 200), 1.5),
+    ];
+    for (name, source, size, width) in windows {
+        let dir = tempfile::tempdir().unwrap();
+        let split = ["--tile-size", "64", "--border", "1"];
+        let pack = png_pack(dir.path(), &source, &split);
+        let Some(frame) = render_still(&pack, size, [0.5, 0.5], width) else { return };
+        let expected = expected_still(&source, size, [0.5, 0.5], width);
+        assert_eq!(background_wrong(&frame, &expected), 0, "{name}: the background is not where it should be");
+        let why = "bilinear at texel centres reads one texel, through the cache's sRGB view and into the sRGB \
+                   frame: the two conversions round-trip within a code value (measured: exact on lavapipe); the \
+                   background is exact";
+        let (w, h) = size;
+        assert_close(
+            name,
+            Picture::new(w, h, 4, frame.as_raw()),
+            Picture::new(w, h, 4, expected.as_raw()),
+            Tolerance::max(1, why),
+        );
+    }
+}
+
+/// An odd-sized image (3001 x 2049: its coarser levels end inside their last texels), with
+/// borders 0 and 4: its first and last rows and columns are drawn, not cut by half a texel, and
+/// the background begins right after them. Zoomed out to 8 texels per pixel (LOD 3), the pixel
+/// centres fall on the centres of the image's first and last texels; at 1:1 on its bottom-right
+/// corner, on every texel's.
+#[test]
+fn the_edge_texels_of_an_odd_sized_image_are_drawn() {
+    // A gradient: every filter and level reproduces it, so any LOD can be checked texel by texel.
+    let source = image::RgbaImage::from_fn(3001, 2049, |x, y| {
+        image::Rgba([(x * 255 / 3000) as u8, (y * 255 / 2048) as u8, 128, 255])
+    });
+    // (frame, centre, width): 8 texels per pixel, texels 0.5 and 3000.5 across, 0.5 and 2048.5
+    // down, at pixel centres; then the corner at one texel per pixel, the image in the frame's
+    // top-left 32 x 32.
+    let windows = [((400, 300), [0.5, 1028.5 / 2049.0], 3200.0 / 3001.0), ((64, 64), [1.0, 1.0], 64.0 / 3001.0)];
+    for border in ["0", "4"] {
+        let dir = tempfile::tempdir().unwrap();
+        let pack = png_pack(dir.path(), &source, &["--tile-size", "128", "--border", border]);
+        for (i, &(size, center, width)) in windows.iter().enumerate() {
+            let name = format!("render-odd-edges-border-{border}-{i}");
+            let Some(frame) = render_still(&pack, size, center, width) else { return };
+            let expected = expected_still(&source, size, center, width);
+            assert_eq!(background_wrong(&frame, &expected), 0, "{name}: the background is not where it should be");
+            let why = "a gradient, which bilinear filtering and the pyramid's levels reproduce to a code value or two \
+                       (the sRGB round trip, and the edge texels of the coarse levels clamped); the background exact";
+            let (w, h) = size;
+            assert_close(
+                &name,
+                Picture::new(w, h, 4, frame.as_raw()),
+                Picture::new(w, h, 4, expected.as_raw()),
+                Tolerance::max(3, why),
+            );
+        }
+    }
 }

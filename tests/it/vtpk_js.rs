@@ -312,8 +312,9 @@ fn hostile(node: &Path, case: &str, pack: Option<&Path>) -> Outcome {
 /// (1 KiB per MiB it inflates to, with its `Content-Encoding` shown and hidden as from another
 /// origin), a `Content-Length` of 1 GiB for 512 bytes, nothing at all, a trickle, a body cut
 /// short, a refused connection, 503 and 404. vtpk.js must stop at the bytes it asked for: each
-/// pouring server offers 256 MiB, and Node's peak memory must stay under 160 MiB (Node itself is
-/// about 60 MiB; the old reader, which read whole bodies, peaked at 863 MB), with the pouring
+/// pouring server offers 256 MiB, and Node's peak memory (VmHWM) must stay under 160 MiB (the
+/// script alone is about 55 MiB, the cases 54 to 66 MiB; the old reader, which read whole
+/// bodies, peaked at 821 to 845 MiB, 3,147 MiB on the 1 GiB Content-Length), with the pouring
 /// stopped well short of the 256 MiB. A silent or trickling server is given up on at the
 /// request deadline (`timeout`, 1 s here). Each failure has the kind that says what to do.
 #[test]

@@ -26,13 +26,23 @@ use crate::common::webdriver::Browser;
 use crate::render::no_gpu;
 
 /// The canvas, in device pixels (headless Chromium's pixel ratio is 1): 16:10, wider than the
-/// 4:3 test image, whose home view (its height fit) spans columns `IMAGE_COLUMNS`.
+/// 4:3 test image, so that its home view has the background beside the image.
 const SIZE: (u32, u32) = (640, 400);
 
-/// The home view shows 1.2 image widths across the canvas (16:10 over 4:3), the image centred:
-/// pixel `x` samples LOD-0 texel `(x + 0.5) * 3.75 - 200`, on the 2000-texel image for `x` in
-/// 53..=586; the nearest pixels off it sample texels -3.1 and 2000.6, clear of the edges.
-const IMAGE_COLUMNS: std::ops::RangeInclusive<u32> = 53..=586;
+/// The home view of an `image`-sized image on the canvas (the viewer's `home`: the whole image,
+/// fit and centred): the share of the image's width across the canvas, and the canvas columns
+/// that show the image, those whose centre samples a LOD-0 texel `origin + (x + 0.5) * step`
+/// inside it (for 2000 x 1500: 1.2 widths, columns 53 to 586).
+fn home_columns(image: (u32, u32)) -> (f64, std::ops::RangeInclusive<u32>) {
+    let (iw, ih) = (f64::from(image.0), f64::from(image.1));
+    let width = (f64::from(SIZE.0) / f64::from(SIZE.1) / (iw / ih)).max(1.0);
+    let (step, origin) = (width * iw / f64::from(SIZE.0), (0.5 - width / 2.0) * iw);
+    let texel = |x: u32| origin + (f64::from(x) + 0.5) * step;
+    // No pixel centre so close to an edge that f32 arithmetic could put it on either side.
+    assert!((0..SIZE.0).all(|x| texel(x).abs() > 0.01 && (texel(x) - iw).abs() > 0.01), "a pixel on an edge");
+    let on: Vec<u32> = (0..SIZE.0).filter(|&x| (0.0..iw).contains(&texel(x))).collect();
+    (width, on[0]..=on[on.len() - 1])
+}
 
 /// Chromium's WebGPU on SwiftShader, headless, with the canvas in screenshots
 /// (/work/shared/tech-notes.md).
@@ -173,12 +183,17 @@ fn the_browser_draws_a_pack_as_render_does_and_falls_back_while_pages_are_in_fli
     let held = state(&browser);
     assert_eq!(held["failure"], "", "{held}");
     let fallback = screenshot(&browser);
+    let image = test_image().dimensions();
+    let (home_width, columns) = home_columns(image);
+    assert_eq!(held["view"]["center"], serde_json::json!([0.5, 0.5]), "not the home view: {held}");
+    let shown = held["view"]["width"].as_f64().unwrap();
+    assert!((shown - home_width).abs() < 1e-9, "not the home view: a width of {shown}, not {home_width}");
     assert!(held["counters"]["in_flight"].as_u64().unwrap() > 0, "nothing in flight while held: {held}");
     assert_eq!(held["counters"]["load_errors"], 0, "{held}");
     // The home view shows the whole 2000 x 1500 image across the canvas's height: every pixel
     // of it is the image, whose darkest value is 40, and none is the stand-in's magenta; every
     // pixel beside it is the background, black.
-    let on_image = |x: u32| IMAGE_COLUMNS.contains(&x);
+    let on_image = |x: u32| columns.contains(&x);
     let holes = fallback.enumerate_pixels().filter(|(x, _, p)| on_image(*x) && p.0.iter().all(|&v| v < 20)).count();
     let stand_ins = fallback.pixels().filter(|p| p.0 == [255, 0, 255]).count();
     let stretched = fallback.enumerate_pixels().filter(|(x, _, p)| !on_image(*x) && p.0 != [0, 0, 0]).count();
@@ -198,7 +213,7 @@ fn the_browser_draws_a_pack_as_render_does_and_falls_back_while_pages_are_in_fli
     assert_eq!(done["counters"]["load_errors"], 0, "{done}");
     let shot = screenshot(&browser);
     // Beside the image, the background exactly: not the image's edge columns stretched.
-    let stretched = shot.enumerate_pixels().filter(|(x, _, p)| !IMAGE_COLUMNS.contains(x) && p.0 != [0, 0, 0]).count();
+    let stretched = shot.enumerate_pixels().filter(|(x, _, p)| !columns.contains(x) && p.0 != [0, 0, 0]).count();
     if stretched > 0 {
         let kept = keep("beside-the-image", &shot);
         panic!("{stretched} pixels beside the image are not the black background (see {kept:?}): {done}");

@@ -4,8 +4,9 @@
  * What the caller can do about an error: `io` try again later (no connection, a reply cut short,
  * the timeout, HTTP 408/429/5xx); `host` fix the server (it ignores Range, hides Content-Range,
  * answers another range, sends more than asked or compresses); `unavailable` the pack is not
- * there (HTTP 404, 403, other 4xx) or changed while being read; `corrupt` the pack's bytes are
- * wrong; `unsupported` a sound pack this module does not show; `usage` the caller's mistake.
+ * there (any status but 200, 206, 408, 429 and 5xx: 404, 403, another 4xx) or changed while
+ * being read; `corrupt` the pack's bytes are wrong; `unsupported` a sound pack this module does
+ * not show (or no canvas to draw tiles in); `usage` the caller's mistake.
  */
 export type VtpkErrorKind = "io" | "host" | "unavailable" | "corrupt" | "unsupported" | "usage";
 
@@ -65,7 +66,8 @@ export interface VtpkOptions {
   /** The most milliseconds one request may take, reply and body together (default 30000; 0:
    * none); a request that takes longer fails with a `VtpkError` of kind `io`. */
   timeout?: number;
-  /** Called with each tile (or index) that fails its checks. */
+  /** Called by `VtpkTileSource` with each tile that fails, whatever the kind; and, by `VtpkPack`
+   * too, when an index read in blocks fails its check (CRC, content hash) once every block is in. */
   onError?: (error: VtpkError) => void;
   /** The OpenSeadragon namespace (default: the global one). */
   OpenSeadragon?: unknown;

@@ -69,12 +69,15 @@ const KIND_NAMES = ["absent", "constant", "raw", "zstd", "png", "jpeg", "bc1", "
  *   `Content-Range` from the page (CORS), answers another range, sends more than was asked (by
  *   `Content-Length` or by the body) or compresses the reply (`Content-Encoding`). Reading again
  *   gives the same; the host's configuration must change.
- * - `unavailable`: the pack cannot be read at this URL and waiting will not change that (HTTP
- *   404, 403 and other 4xx), or it changed on the server while being read.
+ * - `unavailable`: the pack cannot be read at this URL and waiting will not change that (any
+ *   status but 200, 206, 408, 429 and 5xx: 404, 403, another 4xx), or it changed on the server
+ *   while being read.
  * - `corrupt`: the pack's bytes are wrong (a header field, a CRC-32C, the level table, an index
  *   entry, a payload); the message names which. Reading again gives the same bytes.
  * - `unsupported`: a sound pack this reader does not show (another major version, unknown
- *   required features, tiles a browser cannot decode, a payload over the 1 GiB cap).
+ *   required features, 32-bit or float samples, tiles a browser cannot decode, a tile size,
+ *   tile count, metadata or payload over the caps, an offset past 2^53), or no canvas to draw
+ *   tiles in.
  * - `usage`: the caller's mistake (OpenSeadragon not loaded, a tile outside the pack, a bad URL).
  * @typedef {"io" | "host" | "unavailable" | "corrupt" | "unsupported" | "usage"} VtpkErrorKind
  */
@@ -326,8 +329,8 @@ class RangeReader {
         if (done) break;
         got += value.length;
         this.stats.bytes += value.length;
+        // The controller's abort (fetchRange's `finally`) ends the stream and the connection.
         if (got > want) {
-          reader.cancel().catch(() => {});
           throw new VtpkError("host", `${asked}: the reply runs past the ${want} bytes asked (${got} bytes so far)`);
         }
         chunks.push(value);
@@ -382,8 +385,9 @@ class RangeReader {
  *   where Deep Zoom crops them to a few texels; 0 gives it every level
  * @property {number} [timeout] the most milliseconds one request may take, reply and body
  *   together (default 30000; 0: none): one that takes longer is ended, a `VtpkError` of kind `io`
- * @property {(error: VtpkError) => void} [onError] called with each tile that fails, and with
- *   an index read in blocks that fails its check once every block is in
+ * @property {(error: VtpkError) => void} [onError] called by `VtpkTileSource` with each tile
+ *   that fails, whatever the kind; and, by `VtpkPack` too, when an index read in blocks fails
+ *   its check (CRC, content hash) once every block is in
  * @property {any} [OpenSeadragon] the OpenSeadragon namespace (default: the global one)
  */
 
