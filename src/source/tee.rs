@@ -33,8 +33,10 @@ pub(crate) fn tee(source: Box<dyn RowSource>, branches: usize, window: usize) ->
         window,
         row_bytes,
     });
-    // Each branch counts its share of what the tee holds: the decoder's buffers and the window.
-    let held = (decoder + (window * row_bytes) as u64).div_ceil(branches.max(1) as u64);
+    // Each branch's plan counts the decoder's buffers as its own (as a run of its own would:
+    // `Plan::write` checks the plans with the source before the tee); the window is set
+    // aside from the budget the branches share ([`window_bytes`]).
+    let held = decoder;
     (0..branches)
         .map(|index| {
             Box::new(Branch {
