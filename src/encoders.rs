@@ -383,7 +383,8 @@ impl<T: Sample> Job<T> {
                 cut::padding_from(l, page.1, extent.1, virtual_extent.1),
             );
             for (t, target) in stage.targets.iter().enumerate().filter(|(_, target)| lod < target.lods) {
-                let crop = target.sink.crop(lod, page.0, page.1);
+                // A crop that keeps the whole page is no crop: the same encoding as a pack's.
+                let crop = target.sink.crop(lod, page.0, page.1).filter(|c| *c != Crop::whole(l.tile_size));
                 let copy = stage.copier.is_some_and(|c| c.covers(lod, page, crop));
                 let padded = stage.fills[t].is_some() && from != (l.tile_size, l.tile_size);
                 let pad = padded.then_some((from, t));
