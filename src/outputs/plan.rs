@@ -11,7 +11,7 @@ use crate::layout::Layout;
 use crate::limits::Limits;
 use crate::output::{self, Claim, Existing, Product};
 use crate::pixel::PixelLayout;
-use crate::settings::{self, Destination, OmeZarrPlan, OmeZarrRequested, Requested};
+use crate::settings::{self, CodecChoice, Destination, OmeZarrPlan, OmeZarrRequested, Requested};
 use crate::sink::icc::Profile;
 use crate::sink::ome_zarr::{LabelParent, Plane, Spec, label_parent};
 use crate::source::ImageHeader;
@@ -197,7 +197,8 @@ impl Own {
         let tiles = Requested {
             filename_format: t.filename_format.clone().filter(|_| gets(Setting::FilenameFormat)),
             border: t.border.filter(|_| gets(Setting::Border)),
-            codec: t.codec.filter(|_| image_codec || format == Format::OmeZarr),
+            // OME-Zarr takes `--codec zstd` (what it writes) and refuses any other it alone is given.
+            codec: t.codec.filter(|c| image_codec || (format == Format::OmeZarr && *c == CodecChoice::Zstd)),
             quality: t.quality.filter(|_| image_codec),
             subsampling: t.subsampling.filter(|_| image_codec),
             png_level: t.png_level.filter(|_| image_codec),
@@ -428,7 +429,6 @@ fn options(message: String) -> TilerError {
 mod tests {
     use super::*;
     use crate::pixel::{Channels, Depth};
-    use crate::settings::CodecChoice;
 
     fn rgb(width: u32, height: u32) -> ImageHeader {
         ImageHeader { width, height, layout: PixelLayout::new(Channels::Rgb, Depth::U8) }
@@ -523,6 +523,8 @@ mod tests {
             s.tiles.border = Some(0);
             s.tiles.quality = Some(70);
             s.tiles.tile_size = Some(256);
+            // The image outputs' codec: not OME-Zarr's, which would refuse it alone.
+            s.tiles.codec = Some(CodecChoice::Jpeg);
         });
         let p = plan(&[(DZI, "web"), (Format::Pack, "a.vtpk"), (Format::OmeZarr, "a.ome.zarr")], settings).unwrap();
         let [dzi, pack, zarr] = &p.outputs[..] else { panic!("three outputs") };
