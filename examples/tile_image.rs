@@ -13,10 +13,10 @@ use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use vortex_tiler::error::{Result, TilerError};
+use vortex_tiler::formats::pack::PackSink;
 use vortex_tiler::limits::Limits;
 use vortex_tiler::output::{self, Product};
 use vortex_tiler::settings::{Destination, Plan, Requested};
-use vortex_tiler::sink::PackSink;
 use vortex_tiler::split::{self, Progress, Summary};
 use vortex_tiler::{source, vortex_pack::WriteOptions};
 

@@ -21,6 +21,7 @@ use std::time::Instant;
 use crate::background::Background;
 use crate::codec::TileEncoder;
 use crate::error::{Result, TilerError};
+use crate::formats::viewer::Crop;
 use crate::job::Progress;
 use crate::layout::Layout;
 use crate::limits::in_flight::{GATHER_MOST, LOTS_IN_FLIGHT};
@@ -31,7 +32,6 @@ use crate::pyramid::cut;
 use crate::sink::Target;
 use crate::source::stored::{StoredTiles, crop};
 use crate::stages::{Stage, StageClock};
-use crate::viewer::Crop;
 
 /// Tiles a lot is gathered up to: enough to keep every thread of the pool busy twice over.
 fn gather_target() -> usize {

@@ -7,21 +7,22 @@
 //! - [`pyramid`]: the bands, the exact sums and the resampling filters that make every LOD,
 //!   the LOD cascade, and the cutting of tiles with their borders;
 //! - [`codec`]: tile encoders (JPEG, PNG, raw, zstd, BC1/BC7);
-//! - [`sink`]: where encoded tiles go (a tile directory or a pack);
+//! - [`sink`]: where encoded tiles go: the [`sink::TileSink`] every format's sink is;
 //! - [`split`]: the orchestration that runs source -> pyramid -> codec -> sink, with the
 //!   options, progress and summary of a run ([`split::SplitOptions`], [`split::Progress`],
 //!   [`split::Summary`]);
 //! - [`scale_out`]: one split on many machines (a shard's run, the merge).
 //!
-//! Beside the stages: [`tile_dir`] is the tile-directory format (`info.json`, file names) that
-//! the directory sink writes and the tiled sources read; [`repack`] moves tiles between a tile
+//! Beside the stages: [`formats`] holds each file format in a folder of its own: what it names,
+//! its sink and its reader (the tile directory's `info.json` and file names, packs, Deep Zoom,
+//! IIIF and web-map tiles, PMTiles, OME-Zarr); [`outputs`] plans and writes several of them
+//! from one read of a source; [`repack`] moves tiles between a tile
 //! directory and a pack (`pack`, `unpack`). Shared types: [`layout`] (the page grid's
 //! geometry), [`pixel`] (channels and depth), [`background`] (what fills the padding),
 //! [`settings`] (flags and `info.json` into options) and [`error`]. Every command checks
 //! [`limits`] before it allocates and claims its destination through [`output`], the one rule
-//! that keeps it from destroying anything the user owns. [`viewer`] names pages as Deep Zoom,
-//! IIIF and web-map tiles; `serve` (feature `serve`) answers those names over HTTP from packs and
-//! directories.
+//! that keeps it from destroying anything the user owns. `serve` (feature `serve`) answers
+//! the viewer layouts' names ([`formats::viewer`]) over HTTP from packs and directories.
 //!
 //! # Tiling from Rust
 //!
@@ -38,7 +39,8 @@
 //! use vortex_tiler::error::{Result, TilerError};
 //! use vortex_tiler::outputs::{Budget, Format, Output, Plan, Settings, Wrote};
 //! use vortex_tiler::split::Progress;
-//! use vortex_tiler::{source, viewer::Viewer};
+//! use vortex_tiler::formats::viewer::Viewer;
+//! use vortex_tiler::source;
 //!
 //! /// Counts finished tiles; stops the run when `stop` is set.
 //! #[derive(Default)]
@@ -102,6 +104,7 @@ mod decode;
 mod encoders;
 pub mod error;
 mod fnv;
+pub mod formats;
 pub(crate) mod job;
 pub mod layout;
 pub mod limits;
@@ -119,8 +122,6 @@ pub mod sink;
 pub mod source;
 pub mod split;
 pub(crate) mod stages;
-pub mod tile_dir;
-pub mod viewer;
 
 /// The pack format's crate, whose reader ([`vortex_pack::Pack`]) and [`vortex_pack::WriteOptions`]
 /// this library's API uses.

@@ -13,15 +13,16 @@ use vortex_pack::{Description, Level, NewTile, Pack, PackWriter, Tile, TileId, T
 
 use crate::codec::{Codec, TileEncoder};
 use crate::error::{Result, ShowPath, TilerError};
+use crate::formats::pack::tile_kind;
+use crate::formats::tiles::filename::DEFAULT_FILENAME_STEM;
+use crate::formats::tiles::filename::FilenameFormat;
+use crate::formats::tiles::info::InfoFile;
+use crate::formats::tiles::{TiledDir, codec_of, layout_of};
 use crate::output::Claim;
 use crate::pixel::{Depth, PixelLayout, Sample};
-use crate::sink::{DirSink, TileSink, tile_kind};
+use crate::sink::{DirSink, TileSink};
 use crate::source::{decode_tile, probe_tile};
 use crate::split::Progress;
-use crate::tile_dir::filename::DEFAULT_FILENAME_STEM;
-use crate::tile_dir::filename::FilenameFormat;
-use crate::tile_dir::info::InfoFile;
-use crate::tile_dir::{TiledDir, codec_of, layout_of};
 
 /// Every tile of `levels`, coarsest level first, each level in raster order (rows top down).
 /// Raster beats Morton order for rectangular views (`bench/order-locality.py`,

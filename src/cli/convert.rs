@@ -6,12 +6,15 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 use vortex_tiler::background::Background;
 use vortex_tiler::error::ShowPath;
+use vortex_tiler::formats::pack::PackInput;
+use vortex_tiler::formats::tiles::{NamedDir, SplitOutput};
+use vortex_tiler::formats::viewer::dzi::DeepZoom;
+use vortex_tiler::formats::viewer::iiif::Iiif;
+use vortex_tiler::formats::viewer::xyz::{Order, Xyz};
+use vortex_tiler::formats::viewer::{is_iiif_dir, is_zip, open_zip};
 use vortex_tiler::limits::Limits;
 use vortex_tiler::pixel::{Depth, PixelLayout};
-use vortex_tiler::source::tiled::{
-    DeepZoom, Iiif, NamedDir, Order, PackInput, SplitOutput, TileGrid, TiledSource, Xyz, check_tiles_found,
-    is_iiif_dir, is_zip, open_zip,
-};
+use vortex_tiler::source::tiled::{TileGrid, TiledSource, check_tiles_found};
 use vortex_tiler::source::{self, Streamed};
 
 use super::split::{OutputArgs, tile};

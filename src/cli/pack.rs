@@ -6,8 +6,8 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 use vortex_pack::{Pack, TileKind, VerifyOptions, verify};
 use vortex_tiler::error::ShowPath;
+use vortex_tiler::formats::tiles::TiledDir;
 use vortex_tiler::output::Product;
-use vortex_tiler::tile_dir::TiledDir;
 use vortex_tiler::{repack, settings};
 
 use super::PackLayout;

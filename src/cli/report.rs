@@ -313,7 +313,7 @@ pub fn chain(e: &anyhow::Error) -> String {
 }
 
 /// A PMTiles archive's figures, for `--json`.
-pub fn pmtiles_json(w: &vortex_tiler::sink::pmtiles::PmtilesSummary) -> serde_json::Value {
+pub fn pmtiles_json(w: &vortex_tiler::formats::pmtiles::PmtilesSummary) -> serde_json::Value {
     serde_json::json!({
         "tiles": w.tiles,
         "entries": w.entries,
@@ -325,7 +325,7 @@ pub fn pmtiles_json(w: &vortex_tiler::sink::pmtiles::PmtilesSummary) -> serde_js
 }
 
 /// A PMTiles archive's figures, in a line.
-pub fn pmtiles_line(w: &vortex_tiler::sink::pmtiles::PmtilesSummary) -> String {
+pub fn pmtiles_line(w: &vortex_tiler::formats::pmtiles::PmtilesSummary) -> String {
     format!(
         "pmtiles: {} tiles in {} directory entries, {} distinct payloads, {} leaf directories, {} file bytes",
         w.tiles, w.entries, w.contents, w.leaves, w.file_bytes

@@ -8,12 +8,12 @@ use anyhow::{Context, Result, bail};
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
 use vortex_tiler::error::ShowPath;
+use vortex_tiler::formats::viewer::Viewer;
 use vortex_tiler::outputs::{Budget, Format, Output, Plan, Settings, Wrote};
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::pyramid::Filter;
 use vortex_tiler::settings::{CodecChoice, Requested};
 use vortex_tiler::source::RowSource;
-use vortex_tiler::viewer::Viewer;
 use vortex_tiler::{scale_out, source, split};
 
 use super::report;

@@ -8,10 +8,10 @@ use std::io::Read;
 use std::path::Path;
 
 use crate::error::ShowPath;
-use crate::tile_dir::filename::DEFAULT_FILENAME_STEM;
-use crate::tile_dir::filename::FilenameFormat;
-use crate::tile_dir::info::InfoFile;
-use crate::viewer::Viewer;
+use crate::formats::tiles::filename::DEFAULT_FILENAME_STEM;
+use crate::formats::tiles::filename::FilenameFormat;
+use crate::formats::tiles::info::InfoFile;
+use crate::formats::viewer::Viewer;
 
 /// What a command writes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -66,7 +66,7 @@ impl Product {
             Product::TileDir => recognise_tile_dir(path),
             Product::Report => recognise_report(path),
             Product::Frames => recognise_frames(path),
-            Product::Viewer(viewer) => crate::viewer::recognise(viewer, path),
+            Product::Viewer(viewer) => crate::formats::viewer::recognise(viewer, path),
             Product::OmeZarr => recognise_dir(path),
             Product::Ozx => recognise_ozx(path),
             Product::Pmtiles => recognise_pmtiles(path),

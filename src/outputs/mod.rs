@@ -20,9 +20,9 @@ use std::path::{Path, PathBuf};
 pub use plan::{Plan, Planned};
 pub use write::Wrote;
 
+use crate::formats::ome_zarr::{PixelSize, Version};
+use crate::formats::viewer::Viewer;
 use crate::settings::Requested;
-use crate::sink::ome_zarr::{PixelSize, Version};
-use crate::viewer::Viewer;
 
 /// A file layout a run can write.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

@@ -6,18 +6,19 @@ use std::path::{Path, PathBuf};
 use super::{Budget, Format, OmeZarrSettings, Output, Settings};
 use crate::background::Background;
 use crate::error::{Result, ShowPath, TilerError};
+use crate::formats::ome_zarr::{LabelParent, Plane, Spec, label_parent};
+use crate::formats::ome_zarr::{OmeZarrPlan, OmeZarrRequested};
+use crate::formats::tiles::filename::FilenameFormat;
+use crate::formats::tiles::info::InfoFile;
+use crate::formats::viewer::{Viewer, ViewerTiles, dzi, iiif};
 use crate::job::SplitOptions;
 use crate::layout::Layout;
 use crate::limits::Limits;
 use crate::output::{self, Claim, Existing, Product};
 use crate::pixel::PixelLayout;
-use crate::settings::{self, CodecChoice, Destination, OmeZarrPlan, OmeZarrRequested, Requested};
+use crate::settings::{self, CodecChoice, Destination, Requested};
 use crate::sink::icc::Profile;
-use crate::sink::ome_zarr::{LabelParent, Plane, Spec, label_parent};
 use crate::source::ImageHeader;
-use crate::tile_dir::filename::FilenameFormat;
-use crate::tile_dir::info::InfoFile;
-use crate::viewer::{Viewer, ViewerTiles, dzi, iiif};
 
 /// A run's outputs, each checked and claimed.
 #[derive(Debug)]
@@ -374,7 +375,7 @@ fn for_viewer(output: Output, viewer: Viewer, own: &Own, at: &Context) -> Result
     }
     at.limits().check_pyramid(&layout, false)?;
     if pmtiles {
-        use crate::sink::pmtiles::ENTRY_MEMORY_BYTES;
+        use crate::formats::pmtiles::ENTRY_MEMORY_BYTES;
         let need = layout.total_tiles().saturating_mul(ENTRY_MEMORY_BYTES);
         at.limits().check_memory(&format!("the PMTiles directory of {} tiles", layout.total_tiles()), need)?;
         return Ok(Planned { output, opts, layout, changed: None, claim, work: Work::Pmtiles { name } });
@@ -502,7 +503,7 @@ mod tests {
             (&[(Format::OmeZarr, "a.ome.zarr")], with(|s| s.tiles.border = Some(2)), "chunks have no border"),
             (
                 &[(Format::OmeZarr, "a.ozx")],
-                with(|s| s.ome_zarr.version = Some(crate::sink::ome_zarr::Version::V04)),
+                with(|s| s.ome_zarr.version = Some(crate::formats::ome_zarr::Version::V04)),
                 "holds OME-Zarr 0.5",
             ),
         ];

@@ -8,10 +8,13 @@ use super::plan::{Planned, Work};
 use super::{Budget, Format, Plan};
 use crate::background::Background;
 use crate::error::{Result, TilerError};
+use crate::formats::ome_zarr::OmeZarrSink;
+use crate::formats::pack::PackSink;
+use crate::formats::pmtiles::PmtilesSink;
+use crate::formats::pmtiles::{Bounds, PmtilesSummary, TileType};
 use crate::job::{Progress, SplitOptions, Summary, Written};
 use crate::sink::icc::{Profile, WithProfile};
-use crate::sink::pmtiles::{Bounds, PmtilesSummary, TileType};
-use crate::sink::{DirSink, OmeZarrSink, PackSink, PmtilesSink, Target, TileSink};
+use crate::sink::{DirSink, Target, TileSink};
 use crate::source::channels::{ChannelSet, Ranged};
 use crate::source::{RowSource, tee};
 use crate::split;
@@ -131,7 +134,7 @@ impl Open {
             (Sink::OmeZarr(sink), Work::OmeZarr { spec, parent }) => {
                 sink.finish()?;
                 if let (Some(p), Some(label)) = (parent, planned.output.path.file_name()) {
-                    crate::sink::ome_zarr::register_label(
+                    crate::formats::ome_zarr::register_label(
                         &p.image.join("labels"),
                         spec.version,
                         &label.to_string_lossy(),

@@ -28,16 +28,17 @@ use super::order::split_order;
 use super::plan::ShardPlan;
 use super::sums::{RootRows, RowReader, SumBound};
 use crate::error::{Result, ShowPath, TilerError};
+use crate::formats::pack::{pack_description, tile_kind};
+use crate::formats::tiles::info::InfoFile;
 use crate::layout::Layout;
 use crate::limits::{MAX_ALIGN, MAX_TILE_ALIGN, human_bytes};
 use crate::pixel::PixelLayout;
 use crate::pyramid::cascade::Span;
 use crate::pyramid::stripes::{Beside, Plan};
 use crate::settings::{self, Requested};
-use crate::sink::{TileSink, pack_description, tile_kind};
+use crate::sink::TileSink;
 use crate::source::ImageHeader;
 use crate::split::{Progress, SplitOptions};
-use crate::tile_dir::info::InfoFile;
 
 /// What a merge made and read.
 #[derive(Clone, Debug)]

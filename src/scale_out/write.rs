@@ -7,12 +7,12 @@ use vortex_pack::{WriteOptions, WriteSummary};
 use super::manifest::{FORMAT, Manifest, ShardOptions, SourceId, StoredRoots};
 use super::plan::{Region, ShardPlan};
 use crate::error::{Result, TilerError};
+use crate::formats::pack::PackSink;
 use crate::layout::Layout;
 use crate::limits::human_bytes;
 use crate::pixel::PixelLayout;
 use crate::pyramid::cascade::Span;
 use crate::pyramid::stripes::span_bytes;
-use crate::sink::PackSink;
 use crate::source::RowSource;
 use crate::split::{self, Progress, SplitOptions, Summary};
 

@@ -17,12 +17,12 @@ use super::tiles::{Format, Page};
 use crate::codec::{Codec, PngLevel, Subsampling};
 use crate::decode::Decoded;
 use crate::error::ShowPath;
+use crate::formats::tiles::filename::FilenameFormat;
+use crate::formats::tiles::info::InfoFile;
+use crate::formats::tiles::{TiledDir, codec_of};
+use crate::formats::viewer::xyz;
 use crate::layout::Layout;
 use crate::pixel::{Channels, Depth, PixelLayout};
-use crate::tile_dir::filename::FilenameFormat;
-use crate::tile_dir::info::InfoFile;
-use crate::tile_dir::{TiledDir, codec_of};
-use crate::viewer::xyz;
 
 /// JPEG quality of re-encoded tiles when the input does not record its own.
 pub const DEFAULT_QUALITY: u8 = 90;
@@ -158,7 +158,7 @@ fn open_pack(path: &Path) -> Result<Source, String> {
         Some(TileKind::Jpeg) => Codec::Jpeg { quality: DEFAULT_QUALITY, subsampling: Subsampling::S420 },
         _ => Codec::Png { level: PngLevel::Fast },
     });
-    let (pixels, etag) = (crate::tile_dir::layout_of(&d), pack.header().content_hash);
+    let (pixels, etag) = (crate::formats::tiles::layout_of(&d), pack.header().content_hash);
     Ok(Source::Tiled(served(Store::Pack(Arc::new(pack)), layout, pixels, codec, etag)))
 }
 
@@ -248,7 +248,7 @@ fn pack_page(pack: &Arc<Pack>, lod: u32, x: u32, y: u32) -> Result<Option<Page>,
         Err(vortex_pack::PackError::OutOfRange { .. }) => return Ok(None),
         Err(e) => return Err(e.to_string()),
     };
-    let pixels = crate::tile_dir::layout_of(d);
+    let pixels = crate::formats::tiles::layout_of(d);
     let side = d.tile_size;
     let texels = |bytes: Vec<u8>| Decoded { width: side, height: side, layout: pixels, bytes: native(bytes, pixels) };
     Ok(Some(match tile {
@@ -311,7 +311,7 @@ fn open_dir(dir: &Path) -> Result<Source, String> {
         let t = TiledDir::read(dir).map_err(|e| e.to_string())?;
         let d = t.description;
         let layout = Layout::new(d.width as u64, d.height as u64, d.tile_size, d.border).map_err(|e| e.to_string())?;
-        let pixels = crate::tile_dir::layout_of(&d);
+        let pixels = crate::formats::tiles::layout_of(&d);
         // A JPEG pyramid is 8-bit whatever tileType says.
         let pixels = if t.codec.name() == "jpeg" { PixelLayout::new(pixels.channels, Depth::U8) } else { pixels };
         let store = Store::Dir { dir: dir.to_path_buf(), names: t.names };

@@ -24,7 +24,7 @@ use super::range::{self, RangeError};
 use super::reply::{FileBody, Payload, Reply, TILE_CACHE, conditional, etag, not_modified};
 use super::routes::{self, Reject, Route, bad, not_found};
 use super::tile_routes::{dzi_extension, dzi_tile, iiif_extension, iiif_tile, xyz_tile};
-use crate::viewer::{dzi, iiif, xyz};
+use crate::formats::viewer::{dzi, iiif, xyz};
 
 /// `Cache-Control` of manifests and pages.
 const MANIFEST_CACHE: &str = "public, max-age=60";

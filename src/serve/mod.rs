@@ -1,5 +1,5 @@
 //! `vortex-tiler serve`: packs, split directories and viewer-layout directories over HTTP, as
-//! Deep Zoom, IIIF level 0 and XYZ tiles (the names and crops of [`crate::viewer`]), and packs
+//! Deep Zoom, IIIF level 0 and XYZ tiles (the names and crops of [`crate::formats::viewer`]), and packs
 //! as files with `Range` requests. See docs/serve.md for the routes and headers.
 //!
 //! A program embeds it with three types: a [`Catalog`] of inputs, [`ServeOptions`] and the

@@ -1,5 +1,5 @@
 //! Viewer tiles of a pyramid of pages: a Deep Zoom, IIIF or XYZ tile name into the page it
-//! comes from and the crop of it (names and crops from [`crate::viewer`]), then the tile
+//! comes from and the crop of it (names and crops from [`crate::formats::viewer`]), then the tile
 //! itself: the stored bytes when they are it, else the cache, else decoded, cropped and
 //! encoded on a blocking thread.
 
@@ -13,8 +13,9 @@ use super::catalog::{Source, Tiled, stored_image};
 use super::reply::{Reply, TILE_CACHE, etag, internal, not_modified};
 use super::routes::{self, Reject, bad, not_found};
 use super::tiles::{self, Format, Job};
+use crate::formats::viewer::iiif::whole as iiif_whole;
+use crate::formats::viewer::{Crop, Viewer, dzi, iiif};
 use crate::source::decode_tile;
-use crate::viewer::{Crop, Viewer, dzi, iiif, iiif_whole};
 
 pub(super) fn dzi_extension(t: &Tiled) -> &'static str {
     Viewer::Dzi.extension(if t.format == Format::Jpeg { "jpg" } else { "png" })

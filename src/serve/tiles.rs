@@ -16,8 +16,8 @@ use bytes::Bytes;
 
 use crate::codec::{Codec, TileEncoder};
 use crate::decode::{Decoded, decode_tile};
+use crate::formats::viewer::Crop;
 use crate::pixel::{Depth, PixelLayout};
-use crate::viewer::Crop;
 
 /// The image format of the tiles an input is served in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -2,8 +2,6 @@
 //! output directory (the thesis tool's way of configuring a run), which overrides defaults.
 //! Members that contradict each other, the flags or the input are errors naming the member.
 
-mod ome_zarr;
-
 use std::path::Path;
 
 use base64::Engine;
@@ -12,17 +10,15 @@ use crate::background::Background;
 use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling, ZSTD_LEVELS};
 pub use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
 use crate::error::{Result, TilerError};
+pub use crate::formats::tiles::filename::DEFAULT_FILENAME_STEM;
+use crate::formats::tiles::filename::FilenameFormat;
+use crate::formats::tiles::info::{BORDER_WHEN_ABSENT, FORMAT_VERSION, InfoFile};
 use crate::job::SplitOptions;
 use crate::layout::Layout;
 use crate::limits::Limits;
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::pyramid::filter::Filter;
 use crate::source::ImageHeader;
-pub use crate::tile_dir::filename::DEFAULT_FILENAME_STEM;
-use crate::tile_dir::filename::FilenameFormat;
-use crate::tile_dir::info::{BORDER_WHEN_ABSENT, FORMAT_VERSION, InfoFile};
-
-pub use ome_zarr::{OmeZarrPlan, OmeZarrRequested};
 
 pub const DEFAULT_TILE_SIZE: u32 = 128;
 /// Border of `--layout vortex` tiles when neither the flag nor an `info.json` sets one: one

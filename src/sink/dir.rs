@@ -12,10 +12,10 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::TileSink;
 use crate::error::{Result, ShowPath, TilerError};
+use crate::formats::tiles::filename::FilenameFormat;
+use crate::formats::tiles::info::Info;
+use crate::formats::viewer::{Crop, Viewer, ViewerTiles};
 use crate::output::{Claim, Product, staging};
-use crate::tile_dir::filename::FilenameFormat;
-use crate::tile_dir::info::Info;
-use crate::viewer::{Crop, Viewer, ViewerTiles};
 
 /// One image file per tile plus a manifest. Dropped unfinished (a failed run, a later
 /// output of the same run that failed), it removes what it wrote.

@@ -2,26 +2,18 @@
 //! many threads in any order and is finished once, after the last tile, with the pyramid's
 //! description.
 //!
-//! [`DirSink`] (`dir.rs`) writes the tile directory of [`crate::tile_dir`] or a viewer
-//! layout ([`crate::viewer`]); [`PackSink`]
-//! (`pack.rs`) writes one pack file (`crates/vortex-pack`); [`PmtilesSink`] (`pmtiles.rs`) one
-//! PMTiles v3 archive of the web-map pyramid. All write under a temporary name and rename into
-//! place when complete.
+//! Each format's sink lives with its format ([`crate::formats`]); [`DirSink`] (`dir.rs`)
+//! lives here because two formats write through it: the tile directory of
+//! [`crate::formats::tiles`] and the viewer layouts of [`crate::formats::viewer`]. All write
+//! under a temporary name and rename into place when complete.
 
 mod dir;
 pub mod icc;
-pub mod ome_zarr;
-mod pack;
-pub mod pmtiles;
 
 pub use dir::DirSink;
-pub use ome_zarr::OmeZarrSink;
-pub(crate) use pack::pack_description;
-pub use pack::{PackSink, tile_kind};
-pub use pmtiles::PmtilesSink;
 
 use crate::error::{Result, TilerError};
-use crate::viewer::Crop;
+use crate::layout::Crop;
 
 /// Takes the encoded tiles of one run.
 pub trait TileSink: Sync {

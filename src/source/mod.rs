@@ -55,6 +55,7 @@ macro_rules! forward_row_order_to_inner {
 pub mod channels;
 pub mod icc;
 mod jpeg;
+mod libjpeg;
 pub mod orient;
 mod png;
 mod pnm;
@@ -65,7 +66,7 @@ pub(crate) mod tee;
 mod tiff;
 pub mod tiled;
 mod whole;
-mod xml;
+pub(crate) mod xml;
 
 pub(crate) use crate::decode::{decode_tile, decode_tile_within, probe_tile};
 pub use stored::{Quality, StoredTiles};

@@ -8,7 +8,7 @@ use std::borrow::Cow;
 /// `&gt;` `&quot;` `&apos;`) and character references (`&#65;`, `&#x41;`). A malformed
 /// reference (an unknown name, no `;`, a number that is no character) is kept as written, so
 /// a value is never lost or shortened.
-pub(in crate::source) fn unescape(text: &str) -> Cow<'_, str> {
+pub(crate) fn unescape(text: &str) -> Cow<'_, str> {
     if !text.contains('&') {
         return Cow::Borrowed(text);
     }

@@ -7,13 +7,14 @@ use crate::common::cli::{BIN, wait_or_kill};
 use crate::common::{Image, MemSink, layouts, png_options};
 use proptest::prelude::*;
 use vortex_tiler::background::Background;
+use vortex_tiler::formats::tiles::filename::FilenameFormat;
+use vortex_tiler::formats::tiles::info::InfoFile;
+use vortex_tiler::formats::tiles::{NamedDir, SplitOutput};
 use vortex_tiler::output::{self, Product};
 use vortex_tiler::settings::describe;
 use vortex_tiler::sink::DirSink;
-use vortex_tiler::source::tiled::{NamedDir, SplitOutput, TileGrid, TiledSource};
+use vortex_tiler::source::tiled::{TileGrid, TiledSource};
 use vortex_tiler::split::split;
-use vortex_tiler::tile_dir::filename::FilenameFormat;
-use vortex_tiler::tile_dir::info::InfoFile;
 
 /// Every tile's PNG bytes by (lod, x, y).
 type Tiles = std::collections::BTreeMap<(u32, u32, u32), Vec<u8>>;

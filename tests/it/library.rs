@@ -4,8 +4,8 @@
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use vortex_tiler::error::TilerError;
+use vortex_tiler::formats::pack::PackSink;
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
-use vortex_tiler::sink::PackSink;
 use vortex_tiler::split::{Progress, split};
 use vortex_tiler::vortex_pack::WriteOptions;
 

@@ -138,53 +138,75 @@ fn module_path(relative: &Path) -> Vec<String> {
     parts
 }
 
-/// The first segments of the items of a `{ a, b::c, d::{e, f} }` group starting at `tokens[i]`
-/// (the opening brace), with their lines.
-fn group_heads(tokens: &[(Token, usize)], mut i: usize) -> Vec<(String, usize)> {
-    let mut heads = Vec::new();
-    let (mut depth, mut expect_head) = (0, true);
-    while let Some((token, line)) = tokens.get(i) {
-        match token {
-            Token::Open => {
-                depth += 1;
-                expect_head = depth == 1;
+/// The paths a `crate::` or `super::` path starting at `tokens[k]` (the `::` after its
+/// prefix) names, each the prefix `base` followed by its identifiers, a `{ .. }` group giving
+/// one path per item (nested groups too).
+fn paths_after(tokens: &[(Token, usize)], mut k: usize, base: Vec<String>, out: &mut Vec<(Vec<String>, usize)>) {
+    let mut path = base;
+    let mut line = tokens.get(k).map_or(0, |t| t.1);
+    while tokens.get(k).map(|t| &t.0) == Some(&Token::Colons) {
+        match tokens.get(k + 1) {
+            Some((Token::Ident(name), l)) => {
+                path.push(name.clone());
+                line = *l;
+                k += 2;
             }
-            Token::Close => {
-                depth -= 1;
-                if depth == 0 {
-                    break;
+            Some((Token::Open, _)) => {
+                // Each item of the group starts after its comma (or the brace).
+                let mut depth = 0;
+                let mut i = k + 1;
+                let mut item_start = true;
+                while let Some((token, l)) = tokens.get(i) {
+                    match token {
+                        Token::Open => depth += 1,
+                        Token::Close => {
+                            depth -= 1;
+                            if depth == 0 {
+                                break;
+                            }
+                        }
+                        Token::Comma if depth == 1 => item_start = true,
+                        Token::Ident(name) if item_start && depth == 1 => {
+                            item_start = false;
+                            if name != "self" {
+                                let mut item = path.clone();
+                                item.push(name.clone());
+                                // The rest of the item (`::b::{c, d}`) continues from here.
+                                let mut more = Vec::new();
+                                paths_after(tokens, i + 1, item.clone(), &mut more);
+                                if more.is_empty() {
+                                    out.push((item, *l));
+                                } else {
+                                    out.extend(more);
+                                }
+                            }
+                        }
+                        _ if depth == 1 => item_start = false,
+                        _ => {}
+                    }
+                    i += 1;
                 }
+                return;
             }
-            Token::Comma if depth == 1 => expect_head = true,
-            Token::Ident(name) if expect_head && depth == 1 => {
-                heads.push((name.clone(), *line));
-                expect_head = false;
-            }
-            _ => expect_head = false,
+            _ => break,
         }
-        i += 1;
     }
-    heads
+    if !path.is_empty() {
+        out.push((path, line));
+    }
 }
 
-/// Every edge between distinct top-level modules (`top`) in `files` (paths relative to `src/`).
-fn edges(files: &[(PathBuf, String)], top: &BTreeSet<String>) -> Edges {
-    let mut found = Edges::new();
+/// Every path in `files` (relative to `src/`) that leaves its file's module for another
+/// module of the crate, as (the file's module, the path named from the crate root, file:line).
+fn references(files: &[(PathBuf, String)]) -> Vec<(Vec<String>, Vec<String>, String)> {
+    let mut found = Vec::new();
     for (relative, text) in files {
         let file_path = module_path(relative);
-        let Some(from) = file_path.first() else { continue };
         let tokens = tokens(text);
         // Inline `mod name { ... }` blocks deepen the path `super::` climbs from.
         let mut inline: Vec<(usize, usize)> = Vec::new(); // (brace depth it opened at, path length)
         let mut path = file_path.clone();
         let mut depth = 0;
-        let mut record = |to: &str, line: usize| {
-            if to != from && top.contains(to) {
-                found
-                    .entry((from.clone(), to.to_string()))
-                    .or_insert_with(|| format!("src/{}:{line}", relative.display()));
-            }
-        };
         let mut i = 0;
         while i < tokens.len() {
             let ident = |k: usize| match tokens.get(k) {
@@ -217,14 +239,10 @@ fn edges(files: &[(PathBuf, String)], top: &BTreeSet<String>) -> Edges {
                         level = level.saturating_sub(1);
                         k += 2;
                     }
-                    if level == 0 && tokens.get(k).map(|t| &t.0) == Some(&Token::Colons) {
-                        match tokens.get(k + 1) {
-                            Some((Token::Ident(name), line)) => record(name, *line),
-                            Some((Token::Open, _)) => {
-                                group_heads(&tokens, k + 1).iter().for_each(|(n, l)| record(n, *l))
-                            }
-                            _ => {}
-                        }
+                    let mut named = Vec::new();
+                    paths_after(&tokens, k, path[..level].to_vec(), &mut named);
+                    for (to, line) in named {
+                        found.push((path.clone(), to, format!("src/{}:{line}", relative.display())));
                     }
                     i = k;
                     continue;
@@ -235,6 +253,89 @@ fn edges(files: &[(PathBuf, String)], top: &BTreeSet<String>) -> Edges {
         }
     }
     found
+}
+
+/// The modules the files define (`a.rs`, `a/mod.rs`), and among them the namespaces: a
+/// folder whose `mod.rs` declares modules and nothing else (`formats/`), whose modules stand
+/// beside their parent's as if declared there (`formats::tiles` is a module of the root).
+fn modules(files: &[(PathBuf, String)]) -> (BTreeSet<Vec<String>>, BTreeSet<Vec<String>>) {
+    let all: BTreeSet<Vec<String>> = files.iter().map(|(p, _)| module_path(p)).collect();
+    let namespaces = files
+        .iter()
+        .filter(|(p, text)| {
+            p.file_name().is_some_and(|f| f == "mod.rs")
+                && tokens(text).split(|(t, _)| *t == Token::Other).all(|item| {
+                    let words: Vec<&str> = item
+                        .iter()
+                        .filter_map(|(t, _)| match t {
+                            Token::Ident(w) => Some(w.as_str()),
+                            _ => None,
+                        })
+                        .collect();
+                    matches!(words[..], [] | ["mod", _] | ["pub", "mod", _])
+                })
+        })
+        .map(|(p, _)| module_path(p))
+        .collect();
+    (all, namespaces)
+}
+
+/// A module path as the graph's nodes name it: a namespace and the module in it are one name.
+fn nodes_of(path: &[String], namespaces: &BTreeSet<Vec<String>>) -> Vec<String> {
+    let mut nodes: Vec<String> = Vec::new();
+    let mut joined = false;
+    for (i, part) in path.iter().enumerate() {
+        if joined {
+            let last = nodes.last_mut().unwrap();
+            last.push_str("::");
+            last.push_str(part);
+        } else {
+            nodes.push(part.clone());
+        }
+        joined = namespaces.contains(&path[..=i].to_vec());
+    }
+    nodes
+}
+
+/// Every edge between sibling modules, folder by folder: the key `""` holds the root's (the
+/// top-level modules, with the namespaces' modules beside them), `"source"` those between
+/// `source/`'s modules, `"formats/viewer"` those inside that folder, and so on. A path to an item of a parent module (`crate::source::
+/// ImageHeader`) is no edge between siblings.
+fn folder_edges(files: &[(PathBuf, String)]) -> BTreeMap<String, Edges> {
+    let (modules, namespaces) = modules(files);
+    let mut found: BTreeMap<String, Edges> = BTreeMap::new();
+    for (from, to, at) in references(files) {
+        // The longest prefix of the path that is a module: what the path leaves from.
+        let Some(to) = (1..=to.len()).rev().map(|n| &to[..n]).find(|p| modules.contains(*p)) else { continue };
+        let (from, to) = (nodes_of(&from, &namespaces), nodes_of(to, &namespaces));
+        let common = from.iter().zip(&to).take_while(|(a, b)| a == b).count();
+        if let (Some(a), Some(b)) = (from.get(common), to.get(common)) {
+            found
+                .entry(from[..common].join("/").replace("::", "/"))
+                .or_default()
+                .entry((a.clone(), b.clone()))
+                .or_insert(at);
+        }
+    }
+    found
+}
+
+/// The library's top-level modules, as `src/lib.rs` declares them, with the modules of its
+/// namespaces beside them (`formats::tiles`).
+fn top_level(files: &[(PathBuf, String)]) -> BTreeSet<String> {
+    let (modules, namespaces) = modules(files);
+    modules
+        .iter()
+        .filter(|m| !m.is_empty() && !namespaces.contains(*m))
+        .map(|m| nodes_of(m, &namespaces))
+        .filter(|n| n.len() == 1)
+        .map(|n| n[0].clone())
+        .collect()
+}
+
+/// The root's edges: between top-level modules.
+fn edges(files: &[(PathBuf, String)]) -> Edges {
+    folder_edges(files).remove("").unwrap_or_default()
 }
 
 /// The strongly connected components of more than one module (Tarjan's algorithm).
@@ -312,21 +413,6 @@ fn describe(cycles: &[Vec<String>], edges: &Edges) -> String {
     text
 }
 
-/// The library's top-level modules, as `src/lib.rs` declares them.
-fn top_level(lib: &str) -> BTreeSet<String> {
-    let tokens = tokens(lib);
-    let mut names = BTreeSet::new();
-    for (i, (token, _)) in tokens.iter().enumerate() {
-        if let (Token::Ident(word), Some((Token::Ident(name), _))) = (token, tokens.get(i + 1))
-            && word == "mod"
-            && tokens.get(i + 2).map(|t| &t.0) == Some(&Token::Other)
-        {
-            names.insert(name.clone());
-        }
-    }
-    names
-}
-
 /// Every library source file, relative to `src/`, with its text.
 fn library_sources(src: &Path) -> Vec<(PathBuf, String)> {
     fn walk(dir: &Path, src: &Path, out: &mut Vec<(PathBuf, String)>) {
@@ -349,31 +435,104 @@ fn library_sources(src: &Path) -> Vec<(PathBuf, String)> {
     out
 }
 
+/// The cycles of every folder's graph, each with its folder.
+fn all_cycles(folders: &BTreeMap<String, Edges>) -> String {
+    let mut text = String::new();
+    for (folder, edges) in folders {
+        let nodes: BTreeSet<String> = edges.keys().flat_map(|(a, b)| [a.clone(), b.clone()]).collect();
+        let found = cycles(&nodes, edges);
+        if !found.is_empty() {
+            text += &format!("in src/{folder}:\n{}", describe(&found, edges));
+        }
+    }
+    text
+}
+
 #[test]
 fn the_library_modules_form_no_import_cycle() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let files = library_sources(&src);
-    let top = top_level(&std::fs::read_to_string(src.join("lib.rs")).unwrap());
-    assert!(top.len() > 10 && top.contains("split") && top.contains("source"), "the modules of src/lib.rs: {top:?}");
-    let edges = edges(&files, &top);
-    assert!(edges.contains_key(&("split".to_string(), "source".to_string())), "split reads a source: {edges:?}");
-    let found = cycles(&top, &edges);
-    assert!(found.is_empty(), "{}", describe(&found, &edges));
+    let top = top_level(&files);
+    assert!(
+        top.len() > 10 && top.contains("split") && top.contains("formats::tiles"),
+        "the top-level modules: {top:?}"
+    );
+    let folders = folder_edges(&files);
+    let root = &folders[""];
+    assert!(root.contains_key(&("split".to_string(), "source".to_string())), "split reads a source: {root:?}");
+    assert!(folders["source"].contains_key(&("tiff".to_string(), "jpeg".to_string())), "{:?}", folders["source"]);
+    let text = all_cycles(&folders);
+    assert!(text.is_empty(), "{text}");
 }
 
 fn fixture(files: &[(&str, &str)]) -> (BTreeSet<String>, Edges) {
     let files: Vec<(PathBuf, String)> = files.iter().map(|(p, t)| (PathBuf::from(p), t.to_string())).collect();
-    let lib = files.iter().find(|(p, _)| p == Path::new("lib.rs")).map(|(_, t)| t.as_str()).unwrap_or("");
-    let top = top_level(lib);
-    let edges = edges(&files, &top);
-    (top, edges)
+    (top_level(&files), edges(&files))
+}
+
+#[test]
+fn the_check_looks_inside_folders_and_through_namespaces() {
+    let files: Vec<(PathBuf, String)> = [
+        (
+            "lib.rs",
+            "pub mod formats;
+pub mod low;
+",
+        ),
+        // A namespace: its modules are the root's.
+        ("formats/mod.rs", "//! Formats.\npub mod x;\nmod y;\n"),
+        (
+            "formats/x/mod.rs",
+            "mod read;
+mod write;
+use crate::low::L;
+",
+        ),
+        (
+            "formats/x/read.rs",
+            "use super::write::W;
+",
+        ),
+        (
+            "formats/x/write.rs",
+            "use crate::formats::x::read::R;
+use super::X;
+",
+        ),
+        (
+            "formats/y.rs",
+            "use crate::formats::{x::write::W, y::Z};
+",
+        ),
+        (
+            "low.rs",
+            "pub struct L;
+",
+        ),
+    ]
+    .iter()
+    .map(|(p, t)| (PathBuf::from(p), t.to_string()))
+    .collect();
+    assert_eq!(top_level(&files), ["formats::x", "formats::y", "low"].map(String::from).into());
+    let folders = folder_edges(&files);
+    let listed: Vec<(&str, &str, &str)> =
+        folders[""].iter().map(|((f, t), at)| (f.as_str(), t.as_str(), at.as_str())).collect();
+    assert_eq!(
+        listed,
+        [("formats::x", "low", "src/formats/x/mod.rs:3"), ("formats::y", "formats::x", "src/formats/y.rs:1")]
+    );
+    // read and write use each other; `super::X`, an item of their parent, is no edge.
+    let inside: Vec<&(String, String)> = folders["formats/x"].keys().collect();
+    assert_eq!(inside, [&("read".to_string(), "write".to_string()), &("write".to_string(), "read".to_string())]);
+    let text = all_cycles(&folders);
+    assert!(text.contains("in src/formats/x:") && text.contains("read -> write  (src/formats/x/read.rs:1)"), "{text}");
 }
 
 #[test]
 fn the_check_finds_a_cycle_through_groups_and_super() {
     let (top, edges) = fixture(&[
         ("lib.rs", "pub mod a;\nmod b;\n#[cfg(test)]\npub mod c;\n"),
-        ("a/mod.rs", "mod inner;\n"),
+        ("a/mod.rs", "mod inner;\npub struct A;\n"),
         // `super::super` from a/inner.rs is the crate root; the group names b.
         ("a/inner.rs", "// crate::c is in a comment\nfn f() {\n    use super::super::{b::X, self as _};\n}\n"),
         ("b.rs", "const S: &str = \"crate::a\";\nfn g(_: &'static str) {}\nuse crate::{\n    c::Y,\n};\n"),
@@ -421,7 +580,7 @@ fn layers(top: &BTreeSet<String>, edges: &Edges) -> String {
     let mut text = String::new();
     for depth in 0..=layer.values().copied().max().unwrap_or(0) {
         for (m, _) in layer.iter().filter(|(_, l)| **l == depth) {
-            let line = format!("{depth:>2}  {m:<11}{}", uses(m).join(" "));
+            let line = format!("{depth:>2}  {m:<19}{}", uses(m).join(" "));
             text += line.trim_end();
             text.push('\n');
         }
@@ -434,8 +593,8 @@ fn layers(top: &BTreeSet<String>, edges: &Edges) -> String {
 fn the_architecture_doc_lists_the_real_layers() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let src = root.join("src");
-    let top = top_level(&std::fs::read_to_string(src.join("lib.rs")).unwrap());
-    let edges = edges(&library_sources(&src), &top);
+    let files = library_sources(&src);
+    let (top, edges) = (top_level(&files), edges(&files));
     assert!(cycles(&top, &edges).is_empty(), "the_library_modules_form_no_import_cycle says which");
     let listed = layers(&top, &edges);
     let doc_path = root.join("docs/architecture.md");
@@ -461,7 +620,7 @@ fn tree_entries(doc: &str) -> BTreeMap<String, String> {
     for line in block.lines() {
         let indent = line.len() - line.trim_start().len();
         let first = line.split_whitespace().next().unwrap_or("");
-        if (indent == 2 || indent == 4) && (first.ends_with('/') || first.ends_with(".rs")) {
+        if indent >= 2 && indent % 2 == 0 && (first.ends_with('/') || first.ends_with(".rs")) {
             folders.truncate(indent / 2 - 1);
             current = match first.strip_suffix('/') {
                 Some(folder) => {

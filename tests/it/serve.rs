@@ -255,7 +255,8 @@ fn serve_split_and_viewer_directories() {
     assert_eq!((t.status, t.header("content-type")), (200, Some("image/png")));
     let info: serde_json::Value = serde_json::from_slice(&std::fs::read(tiles.join("info.json")).unwrap()).unwrap();
     let names =
-        vortex_tiler::tile_dir::filename::FilenameFormat::parse(info["filenameFormat"].as_str().unwrap(), 3).unwrap();
+        vortex_tiler::formats::tiles::filename::FilenameFormat::parse(info["filenameFormat"].as_str().unwrap(), 3)
+            .unwrap();
     assert!(t.body == std::fs::read(tiles.join(names.format(&[0, 3, 2]))).unwrap());
     assert_eq!(t.image_size(), (64, 64));
     assert_eq!(server.get("/tiles_files/10/11_8.png", &[]).image_size(), (700 - (11 * 60 - 2), 500 - (8 * 60 - 2)));

@@ -26,7 +26,8 @@ fn split_png(out: &[&str]) {
 fn page_file(dir: &Path, lod: u32, x: u32, y: u32) -> PathBuf {
     let info: serde_json::Value = serde_json::from_slice(&fs::read(dir.join("info.json")).unwrap()).unwrap();
     let names =
-        vortex_tiler::tile_dir::filename::FilenameFormat::parse(info["filenameFormat"].as_str().unwrap(), 3).unwrap();
+        vortex_tiler::formats::tiles::filename::FilenameFormat::parse(info["filenameFormat"].as_str().unwrap(), 3)
+            .unwrap();
     dir.join(names.format(&[lod, x, y]))
 }
 

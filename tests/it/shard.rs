@@ -9,14 +9,14 @@ use proptest::prelude::*;
 use vortex_pack::WriteOptions;
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::Codec;
+use vortex_tiler::formats::pack::PackSink;
+use vortex_tiler::formats::tiles::filename::FilenameFormat;
 use vortex_tiler::layout::Layout;
 use vortex_tiler::pyramid::Filter;
 use vortex_tiler::scale_out::{ShardJob, merge, write_shard};
 use vortex_tiler::settings;
-use vortex_tiler::sink::PackSink;
 use vortex_tiler::split::{SplitOptions, split};
 use vortex_tiler::testing::one_band_bytes;
-use vortex_tiler::tile_dir::filename::FilenameFormat;
 
 const EXACT: [Filter; 4] = [Filter::Box, Filter::Linear, Filter::Premultiplied, Filter::LinearPremultiplied];
 

@@ -8,11 +8,11 @@ use std::process::Command;
 
 use proptest::prelude::*;
 use vortex_tiler::background::Background;
+use vortex_tiler::formats::viewer::{Viewer, ViewerTiles, dzi};
 use vortex_tiler::output::{self, Product};
 use vortex_tiler::pyramid::Filter;
 use vortex_tiler::sink::DirSink;
 use vortex_tiler::split::{SplitOptions, split};
-use vortex_tiler::viewer::{Viewer, ViewerTiles, dzi};
 
 use crate::common::cli::{fails_with, fixture, ok, run, s};
 use crate::common::{Image, decode_png_sized, layouts, naive_level_filtered, png_options};

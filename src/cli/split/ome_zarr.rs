@@ -7,8 +7,8 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 
 use vortex_tiler::error::ShowPath;
+use vortex_tiler::formats::ome_zarr::{PixelSize, Plane, Version};
 use vortex_tiler::outputs::{Budget, Format, OmeZarrSettings, Plan};
-use vortex_tiler::sink::ome_zarr::{PixelSize, Plane, Version};
 use vortex_tiler::source::Pick;
 use vortex_tiler::source::channels::ChannelSet;
 

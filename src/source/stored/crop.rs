@@ -17,7 +17,7 @@ use mozjpeg_sys::{
 };
 
 use super::Header;
-use crate::source::jpeg::{error_manager, panic_message};
+use crate::source::libjpeg::{error_manager, panic_message};
 
 /// Whether the top-left `crop` of a stored tile of `full` texels, cropped in the DCT domain,
 /// decodes to exactly the texels decoding the whole tile gives there.

@@ -12,7 +12,8 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 
 use mozjpeg_sys::{J_COLOR_SPACE, jpeg_decompress_struct};
 
-use crate::source::jpeg::{error_manager, panic_message, unsupported_frame};
+use crate::source::jpeg::unsupported_frame;
+use crate::source::libjpeg::{error_manager, panic_message};
 
 /// What a TIFF's JPEG tiles hold, by its PhotometricInterpretation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -15,7 +15,7 @@ use std::path::Path;
 use tiff::decoder::Decoder;
 use tiff::tags::Tag;
 
-use super::slide::{self, Vendor};
+use super::slide::{self, Page, Vendor};
 use super::{open_decoder, open_error};
 use crate::error::{Result, TilerError};
 use crate::source::Pick;
@@ -27,21 +27,6 @@ const MAX_PAGES: usize = 65_536;
 const NDPI_FORMAT_FLAG: u16 = 65420;
 /// The XMP packet, where Ventana BIF files say `iScan`.
 const XMP: u16 = 700;
-
-/// One directory of the main chain.
-#[derive(Clone, Debug)]
-pub(super) struct Page {
-    pub width: u32,
-    pub height: u32,
-    /// NewSubfileType bit 0: a reduced-resolution copy of another page.
-    pub reduced: bool,
-    pub tiled: bool,
-    pub description: String,
-    /// Entries of its SubIFDs tag (the reduced levels of an OME-TIFF or `vips --subifd` pyramid).
-    pub sub_ifds: usize,
-    /// A private tag or XMP packet only one vendor writes (Hamamatsu's 65420, Ventana's iScan).
-    pub hint: Option<Vendor>,
-}
 
 /// The page chosen, and what the summary line says about it.
 pub(super) struct Chosen {

@@ -7,8 +7,22 @@
 
 use std::borrow::Cow;
 
-use super::pyramid::Page;
 use crate::source::xml::unescape;
+
+/// One directory of the main chain.
+#[derive(Clone, Debug)]
+pub(super) struct Page {
+    pub width: u32,
+    pub height: u32,
+    /// NewSubfileType bit 0: a reduced-resolution copy of another page.
+    pub reduced: bool,
+    pub tiled: bool,
+    pub description: String,
+    /// Entries of its SubIFDs tag (the reduced levels of an OME-TIFF or `vips --subifd` pyramid).
+    pub sub_ifds: usize,
+    /// A private tag or XMP packet only one vendor writes (Hamamatsu's 65420, Ventana's iScan).
+    pub hint: Option<Vendor>,
+}
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Vendor {

@@ -5,14 +5,7 @@
 //! Only one row of input tiles is decoded and held at a time (decoded in parallel), so memory
 //! does not grow with the grid's height.
 
-mod archive;
-mod deepzoom;
-mod google;
-mod iiif;
-mod named_dir;
-mod pack_input;
-mod split_output;
-mod store;
+pub(crate) mod store;
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -20,14 +13,6 @@ use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
 
-pub use crate::viewer::xyz::Order;
-pub use archive::{is_iiif_dir, is_zip, open_zip};
-pub use deepzoom::DeepZoom;
-pub use google::Xyz;
-pub use iiif::{Iiif, looks_like_iiif};
-pub use named_dir::NamedDir;
-pub use pack_input::PackInput;
-pub use split_output::SplitOutput;
 pub(crate) use store::TileStore;
 
 use crate::decode::probe_tile;

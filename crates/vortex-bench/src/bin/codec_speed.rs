@@ -17,8 +17,8 @@ use anyhow::{Context, Result, bail};
 use vortex_bench::measure;
 use vortex_pack::{Description, Tile, TileKind};
 use vortex_tiler::codec::{Bc7Effort, Codec, PngLevel, Subsampling, TileEncoder};
+use vortex_tiler::formats::pack::tile_kind;
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
-use vortex_tiler::sink::tile_kind;
 
 fn flag(args: &[String], name: &str, default: u32) -> Result<u32> {
     match args.iter().position(|a| a == name) {

@@ -21,9 +21,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail, ensure};
 use rayon::prelude::*;
+use vortex_tiler::formats::tiles::filename::FilenameFormat;
+use vortex_tiler::formats::tiles::info::InfoFile;
 use vortex_tiler::pixel::{Channels, Depth};
-use vortex_tiler::tile_dir::filename::FilenameFormat;
-use vortex_tiler::tile_dir::info::InfoFile;
 
 const USAGE: &str =
     "usage: psnr SOURCE (--vortex DIR | --dzi DIR_files [--tile-size N] [--overlap N]) [--max-memory BYTES] [-v]";

@@ -5,10 +5,10 @@
 pub use vortex_tiler::background::Background;
 pub use vortex_tiler::codec::{Bc7Effort, Codec, PngLevel, Subsampling};
 pub use vortex_tiler::error::Result as TilerResult;
+pub use vortex_tiler::formats::pack::PackSink;
 pub use vortex_tiler::layout::Layout;
 pub use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
 pub use vortex_tiler::pyramid::Filter;
 pub use vortex_tiler::settings::{self, CodecChoice, Requested};
-pub use vortex_tiler::sink::PackSink;
 pub use vortex_tiler::source::{ImageHeader, RowSource};
 pub use vortex_tiler::split::{self, SplitOptions};

@@ -6,6 +6,11 @@
 
 pub mod filename;
 pub mod info;
+mod named;
+mod read;
+
+pub use named::NamedDir;
+pub use read::SplitOutput;
 
 use std::path::Path;
 

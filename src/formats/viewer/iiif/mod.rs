@@ -14,7 +14,12 @@
 //! resolution, which no client wants in one file, so `max` is bounded by `maxWidth` and
 //! `maxHeight`: it is the finest LOD whose long side is at most [`MAX_WHOLE_SIDE`], and `sizes`
 //! lists it and every coarser LOD. Those whole-image files are made from the LOD's tiles
-//! ([`super::iiif_whole`]).
+//! ([`whole`]).
+
+mod read;
+pub mod whole;
+
+pub use read::{Iiif, looks_like_iiif};
 
 use serde_json::json;
 
@@ -120,7 +125,7 @@ pub fn whole_sizes(layout: &Layout) -> Vec<(u32, u32, u32)> {
 }
 
 /// `full/{size}/0/default.{ext}`: the whole image at `size` (`w,h`, IIIF 2's `w,`, `max` or
-/// `full`), as this writer names it and the IIIF reader (`source::tiled::iiif`) looks for it.
+/// `full`), as this writer names it and the IIIF reader ([`Iiif`]) looks for it.
 pub fn whole_file(size: &str, extension: &str) -> String {
     format!("full/{size}/0/default.{extension}")
 }
@@ -206,7 +211,7 @@ pub fn info_json(layout: &Layout, id: &str, extension: &str, service: bool) -> S
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::viewer::Viewer;
+    use crate::formats::viewer::Viewer;
 
     #[test]
     fn names_match_libvips() {

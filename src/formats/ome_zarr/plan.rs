@@ -6,16 +6,16 @@
 
 use std::path::Path;
 
-use super::{CodecChoice, DEFAULT_ZSTD_LEVEL, Requested, resolve};
 use crate::codec::ZSTD_LEVELS;
 use crate::error::{Result, ShowPath, TilerError};
+use crate::formats::ome_zarr::{
+    DEFAULT_CHUNK, DEFAULT_SHARD_CHUNKS, LabelParent, MAX_SHARD_CHUNKS, PixelSize, Plane, Spec, Version, is_ozx,
+};
 use crate::job::SplitOptions;
 use crate::limits::Limits;
 use crate::output::Product;
 use crate::pyramid::filter::Filter;
-use crate::sink::ome_zarr::{
-    DEFAULT_CHUNK, DEFAULT_SHARD_CHUNKS, LabelParent, MAX_SHARD_CHUNKS, PixelSize, Plane, Spec, Version, is_ozx,
-};
+use crate::settings::{CodecChoice, DEFAULT_ZSTD_LEVEL, Requested, resolve};
 use crate::source::ImageHeader;
 
 /// What only an OME-Zarr run is asked (`None`: not given).
@@ -45,7 +45,7 @@ pub struct OmeZarrPlan {
 impl OmeZarrPlan {
     /// Plans a run of `source` into `dest` from the settings `asked` and the OME-Zarr ones
     /// `zarr`, within `limits`. `parent` is the image `dest` is a label image of
-    /// ([`crate::sink::ome_zarr::label_parent`]), whose version, chunks and size it must match.
+    /// ([`crate::formats::ome_zarr::label_parent`]), whose version, chunks and size it must match.
     pub fn new(
         asked: &Requested,
         zarr: OmeZarrRequested,

@@ -14,12 +14,12 @@ use std::path::Path;
 
 use serde_json::Value;
 
-use super::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore, join};
-use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, ShowPath, TilerError};
+use crate::formats::viewer::iiif::{region_file, whole_file};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::ImageHeader;
-use crate::viewer::iiif::{region_file, whole_file};
+use crate::source::tiled::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore, join};
+use crate::source::tiled::{CellData, TileGrid, any_tile_file_cap, probe_stored};
 
 /// Tile file extensions tried, in this order.
 const EXTENSIONS: [&str; 3] = ["jpg", "png", "webp"];
@@ -80,7 +80,7 @@ impl Iiif {
         };
         let (names, first) = grid.find_first()?;
         grid.names = names;
-        let (_, _, layout) = probe_stored(&grid.store, &first, super::any_tile_file_cap(cw, ch))?;
+        let (_, _, layout) = probe_stored(&grid.store, &first, any_tile_file_cap(cw, ch))?;
         grid.header.layout = layout;
         Ok(grid)
     }

@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 
 use vortex_pack::{Pack, Tile, TileKind};
 
-use super::{CellData, TileGrid};
 use crate::error::{Result, ShowPath, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::ImageHeader;
+use crate::source::tiled::{CellData, TileGrid, info_icc_profile};
 
 pub struct PackInput {
     pack: Pack,
@@ -99,7 +99,7 @@ impl TileGrid for PackInput {
         (self.payload, self.payload)
     }
     fn icc_profile(&self) -> Result<Option<Vec<u8>>> {
-        super::info_icc_profile(self.pack.path(), self.metadata())
+        info_icc_profile(self.pack.path(), self.metadata())
     }
     /// Tiles come out of the pack, whose index bounds them: `_cap` is for files.
     fn read(&self, col: u32, row: u32, _cap: u64) -> Result<Option<CellData>> {
@@ -139,9 +139,9 @@ mod tests {
     use vortex_pack::{Description, Level, NewTile, PackWriter, TileId, WriteOptions};
 
     use super::*;
+    use crate::formats::tiles::square_levels;
     use crate::source::read_all;
     use crate::source::tiled::TiledSource;
-    use crate::tile_dir::square_levels;
 
     const TILE: u32 = 16;
     const BORDER: u32 = 2;

@@ -7,10 +7,10 @@
 //! a pack's pages. Only LODs within [`MAX_WHOLE_SIDE`] are assembled, so the memory is bounded
 //! whatever the image: at most a square of that side (the encoder takes square tiles).
 
-use super::Crop;
-use super::iiif::{MAX_WHOLE_SIDE, crop};
+use super::{MAX_WHOLE_SIDE, crop};
 use crate::codec::{Codec, TileEncoder};
 use crate::decode::Decoded;
+use crate::layout::Crop;
 use crate::layout::Layout;
 use crate::pixel::{Depth, PixelLayout};
 
@@ -85,8 +85,8 @@ mod tests {
     use super::*;
     use crate::codec::PngLevel;
     use crate::decode::decode_tile;
+    use crate::formats::viewer::Viewer;
     use crate::pixel::Channels;
-    use crate::viewer::Viewer;
 
     #[test]
     fn tiles_land_where_the_level_has_them() {

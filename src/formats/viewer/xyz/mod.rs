@@ -7,6 +7,10 @@
 //! the image filled with the background, and a viewer shows its own background where a tile
 //! is missing. A `tilejson.json` (TileJSON 3.0) names the pattern and zoom range.
 
+mod read;
+
+pub use read::Xyz;
+
 use serde_json::json;
 
 use super::Viewer;
@@ -19,7 +23,7 @@ pub const TILEJSON: &str = "tilejson.json";
 
 /// Which coordinate the directories under a zoom level are named by: the one difference
 /// between the two layouts, which the writer ([`tile_path`]) and the reader
-/// (`source::tiled::Xyz`) both take from here.
+/// ([`Xyz`]) both take from here.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Order {
     /// `z/y/x.ext`: a directory per row (Google, vips dzsave --layout google).

@@ -6,9 +6,12 @@
 use std::io::Read;
 use std::path::Path;
 
-use super::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore};
-use super::{DeepZoom, Iiif, Order, TileGrid, Xyz, looks_like_iiif};
+use super::dzi::DeepZoom;
+use super::iiif::{Iiif, looks_like_iiif};
+use super::xyz::{Order, Xyz};
 use crate::error::{Result, TilerError};
+use crate::source::tiled::TileGrid;
+use crate::source::tiled::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore};
 
 /// Whether `path` is a zip archive: named `.zip`, or starting like one.
 pub fn is_zip(path: &Path) -> bool {
@@ -25,7 +28,7 @@ pub fn is_zip(path: &Path) -> bool {
 pub fn is_iiif_dir(dir: &Path) -> bool {
     let mut head = Vec::new();
     // Not a FIFO or a device: opening or reading one would block.
-    let Ok(Some(file)) = super::store::open_regular(&dir.join("info.json")) else { return false };
+    let Ok(Some(file)) = crate::source::tiled::store::open_regular(&dir.join("info.json")) else { return false };
     file.take(MAX_DESCRIPTOR_BYTES).read_to_end(&mut head).is_ok() && looks_like_iiif(&head)
 }
 

@@ -8,11 +8,11 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use super::store::{Entry, Kind, MAX_DESCRIPTOR_BYTES, TileStore, join};
-use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, ShowPath, TilerError};
+use crate::formats::viewer::xyz::Order;
 use crate::source::ImageHeader;
-use crate::viewer::xyz::Order;
+use crate::source::tiled::store::{Entry, Kind, MAX_DESCRIPTOR_BYTES, TileStore, join};
+use crate::source::tiled::{CellData, TileGrid, probe_stored};
 
 pub struct Xyz {
     store: TileStore,
@@ -89,7 +89,7 @@ impl Xyz {
         let first = tiles.iter().min_by_key(|((x, y), _)| (*y, *x)).map(|(_, p)| p.clone()).expect("not empty");
         // The tile size is what the first tile says: its file is read whole only if its header
         // is not in its first MiB.
-        let (tw, th, layout) = probe_stored(&store, &first, super::store::MAX_TILE_BYTES)?;
+        let (tw, th, layout) = probe_stored(&store, &first, crate::source::tiled::store::MAX_TILE_BYTES)?;
         // In u64: tiles at x 0 and 2^32 - 1 span 2^32 columns, which wraps a u32 to zero.
         let (cols, rows) = (xmax as u64 - xmin as u64 + 1, ymax as u64 - ymin as u64 + 1);
         let too_big = || {
@@ -127,7 +127,7 @@ impl Xyz {
 /// The image's size that `tilejson.json` records under `vortex` (written by `split --layout
 /// xyz|google`), if it describes this zoom level as the finest.
 fn recorded_size(store: &TileStore, root: &str, zoom: u32) -> Result<Option<(u32, u32)>> {
-    let path = join(root, crate::viewer::xyz::TILEJSON);
+    let path = join(root, crate::formats::viewer::xyz::TILEJSON);
     let Some(bytes) = store.read(&path, MAX_DESCRIPTOR_BYTES)? else { return Ok(None) };
     let doc: serde_json::Value = serde_json::from_slice(&bytes)
         .map_err(|e| TilerError::decode(store.name(&path), format!("is not JSON: {e}")))?;
@@ -287,7 +287,7 @@ mod tests {
         write_tiles(tmp.path(), 4, (0, 0), &image, cols, rows, &[]);
         let (width, height) = (2 * TS + 1, TS + 1);
         let tilejson = format!(r#"{{"maxzoom": 4, "vortex": {{"width": {width}, "height": {height}}}}}"#);
-        std::fs::write(tmp.path().join(crate::viewer::xyz::TILEJSON), tilejson).unwrap();
+        std::fs::write(tmp.path().join(crate::formats::viewer::xyz::TILEJSON), tilejson).unwrap();
         let grid = Xyz::open(tmp.path(), Order::Zyx).unwrap();
         assert_eq!((grid.header().width, grid.header().height), (width, height));
         assert!(grid.describe().contains("3x2 tiles"), "{}", grid.describe());

@@ -8,12 +8,12 @@
 
 use std::path::Path;
 
-use super::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore};
-use super::{CellData, TileGrid, probe_stored};
 use crate::error::{Result, ShowPath, TilerError};
+use crate::formats::viewer::dzi;
 use crate::source::ImageHeader;
+use crate::source::tiled::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore};
+use crate::source::tiled::{CellData, TileGrid, any_tile_file_cap, probe_stored};
 use crate::source::xml::unescape;
-use crate::viewer::dzi;
 
 pub struct DeepZoom {
     store: TileStore,
@@ -71,7 +71,7 @@ impl DeepZoom {
         let (cols, rows) = (d.width.div_ceil(d.tile_size), d.height.div_ceil(d.tile_size));
         let first = first_tile(&store, &level_dir, &d.format, cols, rows)?;
         let side = d.tile_size.saturating_add(d.overlap.saturating_mul(2));
-        let (_, _, layout) = probe_stored(&store, &first, super::any_tile_file_cap(side, side))?;
+        let (_, _, layout) = probe_stored(&store, &first, any_tile_file_cap(side, side))?;
         Ok(DeepZoom {
             store,
             dzi: dzi.to_string(),

@@ -6,6 +6,10 @@
 //! tile of a row or column stops at the image. Our page of payload P and border B is that
 //! tile before cropping: Deep Zoom level `maxLevel - k` is our LOD k, tile size P, overlap B.
 
+mod read;
+
+pub use read::DeepZoom;
+
 use super::Crop;
 use crate::layout::Layout;
 
@@ -15,7 +19,7 @@ pub const DEFAULT_TILE_SIZE: u32 = 254;
 pub const DEFAULT_OVERLAP: u32 = 1;
 
 /// Deep Zoom's finest level, where the image has its full size: `ceil(log2(max(w, h)))`. The
-/// writer's level names and the reader's finest level (`source::tiled::deepzoom`) both come
+/// writer's level names and the reader's finest level ([`DeepZoom`]) both come
 /// from here; any side a descriptor can state has one, `u32::MAX` included.
 pub fn max_level(width: u32, height: u32) -> u32 {
     u32::BITS - width.max(height).saturating_sub(1).leading_zeros()
@@ -92,7 +96,7 @@ mod tests {
             assert_eq!(max_level(1, side), level, "side {side}");
         }
     }
-    use crate::viewer::Viewer;
+    use crate::formats::viewer::Viewer;
 
     #[test]
     fn levels_go_down_to_one_texel() {

@@ -16,6 +16,7 @@
 //! chunks are compressed already), with the RFC's zip comment.
 
 mod meta;
+mod plan;
 
 use std::collections::{HashMap, HashSet};
 use std::fs;
@@ -25,10 +26,11 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 
 pub use meta::{PixelSize, Plane, Spec, Version};
+pub use plan::{OmeZarrPlan, OmeZarrRequested};
 
-use super::TileSink;
 use crate::error::{Result, ShowPath, TilerError};
 use crate::output::{Claim, Product, staging};
+use crate::sink::TileSink;
 
 /// Chunks per shard side of OME-Zarr 0.5 when not asked: with 256-texel chunks a shard is
 /// 4096 x 4096 texels, so a 100-gigapixel image is about 8000 files (all levels), and a

@@ -13,9 +13,9 @@
 //! - [`xyz`]: square power-of-two zoom levels, `{z}/{x}/{y}` (or `{z}/{y}/{x}` as vips'
 //!   "google"), edge tiles padded with the background.
 
+mod archive;
 pub mod dzi;
 pub mod iiif;
-pub mod iiif_whole;
 mod recognise;
 pub mod xyz;
 
@@ -24,6 +24,7 @@ use std::fmt;
 pub use crate::layout::Crop;
 use crate::layout::Layout;
 
+pub use archive::{is_iiif_dir, is_zip, open_zip};
 pub use recognise::recognise;
 
 /// A file layout a viewer opens directly (`--layout`).
@@ -136,7 +137,7 @@ impl ViewerTiles {
     }
 
     /// The files a IIIF service needs besides its tiles: `full/max` and each size it lists that
-    /// no tile is (see [`iiif_whole`]), made from the tiles `read(path)` gives back. None for
+    /// no tile is (see [`iiif::whole`]), made from the tiles `read(path)` gives back. None for
     /// other layouts, or IIIF without a service.
     pub fn whole_images(
         &self,
@@ -151,7 +152,7 @@ impl ViewerTiles {
                 // The coarsest LOD is one tile, written under this name already.
                 read(&iiif::full_path(w, h, ext))?
             } else {
-                let bytes = iiif_whole::assemble(l, lod, service.codec, |col, row| {
+                let bytes = iiif::whole::assemble(l, lod, service.codec, |col, row| {
                     let path = iiif::tile_path(l, lod, col, row, ext);
                     let decoded = crate::decode::decode_tile(std::path::Path::new(&path), &read(&path)?)
                         .map_err(|e| e.to_string())?;

@@ -1,5 +1,5 @@
 //! A sink that writes one PMTiles v3 archive (`split --pmtiles`): the web-map (XYZ) pyramid of
-//! [`crate::viewer::xyz`] in the single-file format that Leaflet, MapLibre and OpenLayers read
+//! [`crate::formats::viewer::xyz`] in the single-file format that Leaflet, MapLibre and OpenLayers read
 //! from any static host with HTTP range requests (<https://github.com/protomaps/PMTiles>,
 //! `spec/v3/spec.md`).
 //!
@@ -24,10 +24,10 @@ use flate2::Compression;
 use flate2::read::GzDecoder;
 use flate2::write::GzEncoder;
 
-use super::TileSink;
 use crate::error::{Result, ShowPath, TilerError};
 use crate::layout::Layout;
 use crate::output::staging;
+use crate::sink::TileSink;
 
 /// The header's length; the root directory follows it.
 pub(crate) const HEADER_LEN: usize = 127;

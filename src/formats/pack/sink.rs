@@ -9,11 +9,11 @@ use std::sync::Mutex;
 
 use vortex_pack::{Description, NewTile, PackWriter, TileId, TileKind, WriteOptions, WriteSummary};
 
-use super::TileSink;
 use crate::codec::Codec;
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::PixelLayout;
+use crate::sink::TileSink;
 
 pub struct PackSink {
     writer: Mutex<PackWriter>,

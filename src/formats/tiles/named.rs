@@ -6,12 +6,12 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use super::store::MAX_TILE_BYTES;
-use super::{CellData, TileGrid, probe, read_file, tile_file_cap};
 use crate::error::{Result, ShowPath, TilerError};
+use crate::formats::tiles::filename::FilenameFormat;
+use crate::formats::tiles::info::InfoFile;
 use crate::source::ImageHeader;
-use crate::tile_dir::filename::FilenameFormat;
-use crate::tile_dir::info::InfoFile;
+use crate::source::tiled::store::MAX_TILE_BYTES;
+use crate::source::tiled::{CellData, TileGrid, probe, read_file, tile_file_cap};
 
 pub struct NamedDir {
     dir: PathBuf,

@@ -3,12 +3,12 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{CellData, TileGrid, read_file};
 use crate::error::{Result, ShowPath};
+use crate::formats::tiles::TiledDir;
+use crate::formats::tiles::filename::FilenameFormat;
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::ImageHeader;
-use crate::tile_dir::TiledDir;
-use crate::tile_dir::filename::FilenameFormat;
+use crate::source::tiled::{CellData, TileGrid, info_icc_profile, read_file};
 
 pub struct SplitOutput {
     dir: PathBuf,
@@ -49,7 +49,7 @@ impl TileGrid for SplitOutput {
     fn icc_profile(&self) -> Result<Option<Vec<u8>>> {
         let path = self.dir.join("info.json");
         let json = std::fs::read(&path).map_err(|e| crate::error::TilerError::io(&path, e))?;
-        super::info_icc_profile(&path, &json)
+        info_icc_profile(&path, &json)
     }
     fn read(&self, col: u32, row: u32, cap: u64) -> Result<Option<CellData>> {
         read_file(&self.dir.join(self.names.format(&[0, col, row])), cap)
