@@ -4,10 +4,10 @@
 //! Tiles come from the encoders as raw texels (interleaved, little-endian); the sink reorders
 //! them into the arrays' channel-first order and compresses them with zstd, on the encoder
 //! threads. OME-Zarr 0.4 writes one file per chunk. 0.5 gathers `N x N` chunks into a shard
-//! file: chunks are appended to their shard as they come, in any order (the sharding codec
-//! lets a shard's index say where each chunk lies), and the index goes at the shard's end once
-//! its last chunk is in. No chunk is held in memory beyond its own write, only the open
-//! shards' indexes (16 bytes a chunk).
+//! file: chunks are appended to a staging file of their shard as they come, in any order, and
+//! once its last chunk is in the shard is written in row-major chunk order with its index at
+//! the end, so that its bytes do not depend on which encoder thread finished first. No chunk
+//! is held in memory beyond its own write, only the open shards' indexes (16 bytes a chunk).
 //!
 //! Everything is written into a staging directory beside the destination and renamed into
 //! place when complete ([`crate::output::replace_dir`]). A `.ozx` (RFC-9 zipped OME-Zarr) is one
@@ -67,7 +67,10 @@ type ShardKey = (u32, u32, u32, u32);
 
 /// A shard being filled: where its chunks went, and how many are still to come.
 struct Shard {
+    /// Where it goes when complete (in the staging directory).
     path: PathBuf,
+    /// Where its chunks are appended as they come.
+    appended: PathBuf,
     end: u64,
     index: Vec<[u64; 2]>,
     missing: u64,
@@ -227,24 +230,26 @@ impl OmeZarrSink {
         if s.index[slot][0] != EMPTY {
             return Err(TilerError::Encode { lod, x, y, message: "this chunk was written twice".into() });
         }
-        self.make_parent(&s.path)?;
+        self.make_parent(&s.appended)?;
         let mut file = fs::OpenOptions::new()
             .create(true)
             .append(true)
-            .open(&s.path)
-            .map_err(|e| TilerError::write(&s.path, e))?;
-        file.write_all(bytes).map_err(|e| TilerError::write(&s.path, e))?;
+            .open(&s.appended)
+            .map_err(|e| TilerError::write(&s.appended, e))?;
+        file.write_all(bytes).map_err(|e| TilerError::write(&s.appended, e))?;
         s.index[slot] = [s.end, bytes.len() as u64];
         s.end += bytes.len() as u64;
         s.missing -= 1;
         if s.missing > 0 {
             return Ok(());
         }
-        // The index: (offset, length) per chunk, little-endian, then its CRC-32C.
-        let mut index: Vec<u8> = s.index.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
-        index.extend_from_slice(&crc32c::crc32c(&index).to_le_bytes());
-        file.write_all(&index).map_err(|e| TilerError::write(&s.path, e))?;
         drop(file);
+        self.make_parent(&s.path)?;
+        let mut shard = fs::File::create_new(&s.path).map_err(|e| TilerError::write(&s.path, e))?;
+        let appended = fs::File::open(&s.appended).map_err(|e| TilerError::write(&s.appended, e))?;
+        write_in_order(&appended, &s.index, &mut shard).map_err(|e| TilerError::write(&s.path, e))?;
+        drop(shard);
+        fs::remove_file(&s.appended).map_err(|e| TilerError::write(&s.appended, e))?;
         lock(&self.open).remove(&key);
         if self.zipped {
             let name = self.spec.chunk_key(lod, c, x, y);
@@ -264,12 +269,21 @@ impl OmeZarrSink {
         let n = self.spec.shard_chunks;
         let (columns, rows) = self.spec.layout.grid(lod);
         let covered = |first: u32, count: u32| (count.saturating_sub(first)).min(n) as u64;
-        let path = match self.zipped {
-            false => self.staging.join(self.spec.chunk_key(lod, c, sx * n, sy * n)),
-            true => self.staging.join(SHARDS).join(format!("{lod}-{c}-{sx}-{sy}")),
+        let (path, appended) = match self.zipped {
+            false => {
+                let path = self.staging.join(self.spec.chunk_key(lod, c, sx * n, sy * n));
+                let mut appended = path.clone().into_os_string();
+                appended.push(".partial");
+                (path, appended.into())
+            }
+            true => {
+                let name = format!("{lod}-{c}-{sx}-{sy}");
+                (self.staging.join(SHARDS).join(&name), self.staging.join(SHARDS).join(name + ".partial"))
+            }
         };
         Ok(Shard {
             path,
+            appended,
             end: 0,
             index: vec![[EMPTY, EMPTY]; (n * n) as usize],
             missing: covered(sx * n, columns) * covered(sy * n, rows),
@@ -448,9 +462,71 @@ pub fn register_label(labels: &Path, version: Version, name: &str) -> Result<()>
     Ok(())
 }
 
+/// A shard's file: the chunks `index` places in `appended` ((offset, length) per chunk slot,
+/// [`EMPTY`] for none), copied in slot order (row-major), then the index of where they are
+/// now, little-endian, and its CRC-32C.
+fn write_in_order(appended: &fs::File, index: &[[u64; 2]], shard: &mut fs::File) -> std::io::Result<()> {
+    use std::io::{Seek, SeekFrom};
+    let mut from = appended;
+    let mut placed = Vec::with_capacity(index.len() * 16 + 4);
+    let mut end = 0u64;
+    for &[offset, length] in index {
+        if offset == EMPTY {
+            placed.extend_from_slice(&EMPTY.to_le_bytes());
+            placed.extend_from_slice(&EMPTY.to_le_bytes());
+            continue;
+        }
+        from.seek(SeekFrom::Start(offset))?;
+        let copied = std::io::copy(&mut from.take(length), shard)?;
+        if copied != length {
+            return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "a shard's staging file is short"));
+        }
+        placed.extend_from_slice(&end.to_le_bytes());
+        placed.extend_from_slice(&length.to_le_bytes());
+        end += length;
+    }
+    placed.extend_from_slice(&crc32c::crc32c(&placed).to_le_bytes());
+    shard.write_all(&placed)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A shard's bytes are the same whatever order its chunks came in.
+    #[test]
+    fn a_shard_is_written_in_chunk_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let chunks: [&[u8]; 3] = [b"first", b"second chunk", b"3"];
+        // Slots 0, 1 and 3 of a 2 x 2 shard; slot 2 lies outside the array.
+        let slots = [0usize, 1, 3];
+        let shard_of = |order: &[usize], name: &str| {
+            let appended = dir.path().join(format!("{name}.partial"));
+            let mut index = vec![[EMPTY, EMPTY]; 4];
+            let mut bytes = Vec::new();
+            for &i in order {
+                index[slots[i]] = [bytes.len() as u64, chunks[i].len() as u64];
+                bytes.extend_from_slice(chunks[i]);
+            }
+            fs::write(&appended, &bytes).unwrap();
+            let path = dir.path().join(name);
+            let mut shard = fs::File::create_new(&path).unwrap();
+            write_in_order(&fs::File::open(&appended).unwrap(), &index, &mut shard).unwrap();
+            fs::read(path).unwrap()
+        };
+        let a = shard_of(&[2, 0, 1], "a");
+        assert_eq!(a, shard_of(&[0, 1, 2], "b"));
+        assert_eq!(a, shard_of(&[1, 2, 0], "c"));
+        // Its layout, read back independently: the chunks in slot order, then 4 (offset,
+        // length) pairs and the CRC-32C of those 64 bytes.
+        let data = b"firstsecond chunk3";
+        assert_eq!(&a[..data.len()], data);
+        let pairs: Vec<u64> =
+            a[data.len()..data.len() + 64].chunks(8).map(|b| u64::from_le_bytes(b.try_into().unwrap())).collect();
+        assert_eq!(pairs, [0, 5, 5, 12, u64::MAX, u64::MAX, 17, 1]);
+        let crc = u32::from_le_bytes(a[data.len() + 64..].try_into().unwrap());
+        assert_eq!(crc, crc32c::crc32c(&a[data.len()..data.len() + 64]));
+    }
 
     #[test]
     fn texels_become_channel_planes() {
