@@ -102,6 +102,7 @@ mod decode;
 mod encoders;
 pub mod error;
 mod fnv;
+pub mod formats;
 pub(crate) mod job;
 pub mod layout;
 pub mod limits;

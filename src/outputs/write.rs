@@ -8,6 +8,7 @@ use super::plan::{Planned, Work};
 use super::{Budget, Format, Plan};
 use crate::background::Background;
 use crate::error::{Result, TilerError};
+use crate::formats::tiff::{TiffSink, TiffSummary};
 use crate::job::{Progress, SplitOptions, Summary, Written};
 use crate::sink::icc::{Profile, WithProfile};
 use crate::sink::pmtiles::{Bounds, PmtilesSummary, TileType};
@@ -42,6 +43,8 @@ pub struct Wrote {
     pub pack: Option<vortex_pack::WriteSummary>,
     /// A PMTiles archive's own figures.
     pub pmtiles: Option<PmtilesSummary>,
+    /// A TIFF's own figures.
+    pub tiff: Option<TiffSummary>,
 }
 
 /// An output being written: its plan and its sink.
@@ -55,6 +58,7 @@ enum Sink {
     Pack(PackSink),
     Pmtiles(PmtilesSink),
     OmeZarr(Box<OmeZarrSink>),
+    Tiff(TiffSink),
 }
 
 impl Open {
@@ -78,6 +82,7 @@ impl Open {
                 Sink::Pmtiles(PmtilesSink::create(&claim.path, &planned.layout, tile_type)?)
             }
             Work::OmeZarr { spec, .. } => Sink::OmeZarr(Box::new(OmeZarrSink::create(claim, (**spec).clone())?)),
+            Work::Tiff { spec } => Sink::Tiff(TiffSink::create(&claim.path, (**spec).clone())?),
         };
         Ok(Open { planned, sink })
     }
@@ -88,6 +93,7 @@ impl Open {
             Sink::Pack(s) => s,
             Sink::Pmtiles(s) => s,
             Sink::OmeZarr(s) => s.as_ref(),
+            Sink::Tiff(s) => s,
         }
     }
 
@@ -112,7 +118,7 @@ impl Open {
                 planned.output.path.display()
             )));
         }
-        let (mut pack, mut pmtiles) = (None, None);
+        let (mut pack, mut pmtiles, mut tiff) = (None, None, None);
         match (sink, &planned.work) {
             (Sink::Dir(dir), Work::Tiles { info, .. }) => dir.finish(info)?,
             (Sink::Dir(dir), _) => dir.finish_viewer()?,
@@ -138,6 +144,7 @@ impl Open {
                     )?;
                 }
             }
+            (Sink::Tiff(sink), _) => tiff = Some(sink.finish()?),
             _ => return Err(TilerError::Options("internal error: an output's sink is not its format's".into())),
         }
         // The pyramid's summary in this output's terms: its levels, its tiles and bytes.
@@ -153,6 +160,7 @@ impl Open {
             reads: 0,
             pack,
             pmtiles,
+            tiff,
         })
     }
 }
