@@ -18,8 +18,9 @@ import pyvips
 import tifffile
 
 # JPEG at the default quality 85, 4:2:0, on tiff_out.rs's gradient-plus-noise images measures
-# 37-39 dB against the exact levels; a reader that took the YCbCr samples for RGB (or the
-# wrong subsampling) gives under 20 dB. The bound sits between, clear of both.
+# 35 dB against the exact level 0 and more on the smoother levels above (41, 46, 50 dB); a
+# reader that took the YCbCr samples for RGB (or the wrong subsampling) gives under 20 dB. The
+# bound sits between, clear of both.
 JPEG_MIN_PSNR = 30.0
 
 
@@ -81,6 +82,19 @@ def compare(what, got, want, mode, measured):
             fail(f"{what}: {p:.2f} dB from the exact level, under {JPEG_MIN_PSNR}")
 
 
+def libvips_decodes(path, measured):
+    """Whether this libvips' libtiff has the file's codec: pyvips-binary 8.18.7's is built
+    without ZSTD ("ZSTD compression support is not configured"); any other failure fails."""
+    try:
+        pyvips.Image.new_from_file(path, fail=True).avg()
+        return True
+    except pyvips.Error as e:
+        if "ZSTD compression support is not configured" in str(e):
+            measured["libvips"] = "skipped: its libtiff has no zstd"
+            return False
+        fail(f"libvips: {e}")
+
+
 def check_ome(path, src, tile, mode, measured):
     n = levels_of(src, tile)
     with tifffile.TiffFile(path) as t:
@@ -98,7 +112,7 @@ def check_ome(path, src, tile, mode, measured):
                 fail(f"OME-XML lacks {want}")
         for k, level in enumerate(s.levels):
             compare(f"tifffile level {k}", level.asarray(), oracle(src, k), mode, measured)
-    for k in range(n):
+    for k in range(n) if libvips_decodes(path, measured) else ():
         image = pyvips.Image.new_from_file(path, subifd=k - 1)
         compare(f"libvips subifd={k - 1}", image.numpy(), oracle(src, k), mode, measured)
 
@@ -112,7 +126,7 @@ def check_generic(path, src, tile, mode, measured):
             if k > 0 and page.subfiletype != 1:
                 fail(f"page {k}: NewSubfileType {page.subfiletype}, expected 1")
             compare(f"tifffile page {k}", page.asarray(), oracle(src, k), mode, measured)
-    for k in range(n):
+    for k in range(n) if libvips_decodes(path, measured) else ():
         image = pyvips.Image.new_from_file(path, page=k)
         compare(f"libvips page={k}", image.numpy(), oracle(src, k), mode, measured)
     if src.shape[2] != 3 or src.dtype != np.uint8:
