@@ -178,12 +178,10 @@ impl Spec {
         }
         let s = self.stored;
         match self.compression {
-            Compression::Jpeg { .. } => {
-                if s.depth != Depth::U8 || s.channels.has_alpha() {
-                    return Err(TilerError::Options(format!(
-                        "JPEG in TIFF holds 8-bit grey or RGB, not {s}: use --codec deflate or zstd"
-                    )));
-                }
+            Compression::Jpeg { .. } if s.depth != Depth::U8 || s.channels.has_alpha() => {
+                return Err(TilerError::Options(format!(
+                    "JPEG in TIFF holds 8-bit grey or RGB, not {s}: use --codec deflate or zstd"
+                )));
             }
             Compression::Deflate { level } if level > 9 => {
                 return Err(TilerError::Options(format!("Deflate level {level} is outside 0..=9")));
