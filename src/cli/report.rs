@@ -331,3 +331,29 @@ pub fn pmtiles_line(w: &vortex_tiler::formats::pmtiles::PmtilesSummary) -> Strin
         w.tiles, w.entries, w.contents, w.leaves, w.file_bytes
     )
 }
+
+/// A TIFF's figures, for `--json`.
+pub fn tiff_json(w: &vortex_tiler::formats::tiff::TiffSummary) -> serde_json::Value {
+    serde_json::json!({
+        "flavour": w.flavour.name(),
+        "bigtiff": w.bigtiff,
+        "levels": w.levels,
+        "tiles": w.tiles,
+        "compression": w.compression,
+        "tileBytes": w.tile_bytes,
+        "fileBytes": w.file_bytes,
+    })
+}
+
+/// A TIFF's figures, in a line.
+pub fn tiff_line(w: &vortex_tiler::formats::tiff::TiffSummary) -> String {
+    format!(
+        "{}: {} levels, {} {} tiles, {}, {} file bytes",
+        w.flavour.name(),
+        w.levels,
+        w.tiles,
+        w.compression,
+        if w.bigtiff { "BigTIFF" } else { "classic TIFF" },
+        w.file_bytes
+    )
+}

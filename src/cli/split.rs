@@ -8,8 +8,9 @@ use anyhow::{Context, Result, bail};
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
 use vortex_tiler::error::ShowPath;
+use vortex_tiler::formats::tiff::{BigTiff, Flavour};
 use vortex_tiler::formats::viewer::Viewer;
-use vortex_tiler::outputs::{Budget, Format, Output, Plan, Settings, Wrote};
+use vortex_tiler::outputs::{Budget, Format, Output, Plan, Settings, TiffSettings, Wrote};
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::pyramid::Filter;
 use vortex_tiler::settings::{CodecChoice, Requested};
@@ -115,10 +116,15 @@ pub struct OutputArgs {
     #[arg(help_heading = "Outputs", long, value_name = "FILE")]
     pmtiles: Option<PathBuf>,
 
-    /// Replace a regular file at --pack or --pmtiles that is not one. Never replaces a directory, a
-    /// device, a FIFO, a link or the input.
+    /// Replace a regular file at --pack, --pmtiles or a TIFF output that is not one of ours.
+    /// Never replaces a directory, a device, a FIFO, a link or the input.
     #[arg(help_heading = "Outputs", long)]
     force: bool,
+
+    /// TIFF outputs: always BigTIFF [default: BigTIFF only where the file could pass 4 GiB,
+    /// decided before writing].
+    #[arg(help_heading = "Outputs", long)]
+    bigtiff: bool,
 
     #[command(flatten, next_help_heading = "Outputs")]
     pack_layout: super::PackLayout,
@@ -128,8 +134,9 @@ pub struct OutputArgs {
     /// it: OpenSeadragon), iiif (IIIF Image API 3.0 level 0: info.json + static tiles), xyz
     /// ({z}/{x}/{y}, Leaflet/OpenLayers/MapLibre) or google ({z}/{y}/{x} as vips writes it).
     /// See docs/viewers.md. ome-zarr: an OME-Zarr image for microscopy tools (napari, Fiji,
-    /// QuPath), -o DIR.ome.zarr or -o FILE.ozx (docs/ome-zarr.md). Each --layout belongs to
-    /// the -o before it [default: vortex, or what the output's name says].
+    /// QuPath), -o DIR.ome.zarr or -o FILE.ozx (docs/ome-zarr.md). tiff and ome-tiff: one
+    /// pyramidal TIFF file, as -o FILE.tif and -o FILE.ome.tif say (docs/tiff.md). Each
+    /// --layout belongs to the -o before it [default: vortex, or what the output's name says].
     #[arg(help_heading = "Outputs", long, value_enum, value_name = "LAYOUT")]
     layout: Vec<OutputLayout>,
 
@@ -269,6 +276,10 @@ pub enum OutputLayout {
     Google,
     /// OME-Zarr (-o DIR.ome.zarr, or -o FILE.ozx zipped): one array per level, chunks = pages.
     OmeZarr,
+    /// One tiled TIFF file, every level an IFD of its own, as vips tiffsave --tile --pyramid.
+    Tiff,
+    /// One OME-TIFF file: the reduced levels as SubIFDs, OME-XML in the first IFD.
+    OmeTiff,
 }
 
 impl OutputLayout {
@@ -280,6 +291,8 @@ impl OutputLayout {
             OutputLayout::Iiif => Format::Viewer(Viewer::Iiif),
             OutputLayout::Xyz => Format::Viewer(Viewer::Xyz),
             OutputLayout::Google => Format::Viewer(Viewer::Google),
+            OutputLayout::Tiff => Format::Tiff(Flavour::Generic),
+            OutputLayout::OmeTiff => Format::Tiff(Flavour::Ome),
         }
     }
 }
@@ -433,7 +446,7 @@ impl OutputArgs {
         outputs.extend(self.pmtiles.iter().map(|p| Output::new(Format::Pmtiles, p)));
         if outputs.is_empty() {
             bail!(
-                "no output: give -o DIR (with --layout), -o FILE.vtpk, FILE.pmtiles, DIR.ome.zarr or FILE.ozx, --pack FILE or --pmtiles FILE"
+                "no output: give -o DIR (with --layout), -o FILE.vtpk, FILE.pmtiles, DIR.ome.zarr, FILE.ozx, FILE.tif or FILE.ome.tif, --pack FILE or --pmtiles FILE"
             );
         }
         Ok(outputs)
@@ -444,6 +457,9 @@ impl OutputArgs {
     fn refuse_layout_without_directory(&self, layout: OutputLayout) -> Result<()> {
         match (layout, self.pmtiles.is_some()) {
             (OutputLayout::Vortex, _) | (OutputLayout::Xyz, true) => Ok(()),
+            (OutputLayout::Tiff | OutputLayout::OmeTiff, _) => {
+                bail!("--layout {} writes one file (-o FILE.tif), not a pack", name_of(layout))
+            }
             (OutputLayout::OmeZarr, _) => {
                 bail!(
                     "--layout ome-zarr writes a directory or a .ozx file (-o DIR.ome.zarr or -o FILE.ozx), not a pack"
@@ -481,6 +497,7 @@ impl OutputArgs {
             name: self.name.clone(),
             iiif_id: self.iiif_id.clone(),
             ome_zarr: ome_zarr::settings(o),
+            tiff: TiffSettings { bigtiff: if self.bigtiff { BigTiff::Always } else { BigTiff::Auto } },
             pack: self.pack_layout.options()?,
             keep_icc: kept_icc,
             force: self.force,
@@ -654,6 +671,17 @@ fn report(a: &OutputArgs, layout: &str, done: &Finished, dest: &Path, pack: Opti
 
 /// A run of one output: its summary as `split` has always printed it.
 fn report_one(a: &OutputArgs, done: &Finished, wrote: &Wrote) {
+    if let Some(tiff) = &wrote.tiff {
+        if a.run.json {
+            let mut doc = report::summary_value(done, wrote.format.name(), &wrote.path, None);
+            doc["tiff"] = report::tiff_json(tiff);
+            say!("{doc}");
+        } else if !a.run.quiet {
+            say!("{}", report::tiff_line(tiff));
+            say!("{}", report::summary_line(done, &wrote.path));
+        }
+        return;
+    }
     let Some(pmtiles) = &wrote.pmtiles else {
         return report(a, wrote.format.name(), done, &wrote.path, wrote.pack.as_ref());
     };
@@ -687,6 +715,9 @@ fn report_all(a: &OutputArgs, done: &Finished, all: &[Wrote]) {
                 if let Some(p) = &w.pmtiles {
                     doc["pmtiles"] = report::pmtiles_json(p);
                 }
+                if let Some(t) = &w.tiff {
+                    doc["tiff"] = report::tiff_json(t);
+                }
                 doc
             })
             .collect();
@@ -708,6 +739,9 @@ fn report_all(a: &OutputArgs, done: &Finished, all: &[Wrote]) {
             }
             if let Some(p) = &w.pack {
                 say!("{}", report::pack_line(p));
+            }
+            if let Some(t) = &w.tiff {
+                say!("{}", report::tiff_line(t));
             }
             say!("{}: {}", w.format, report::summary_line(&each(w), &w.path));
             if a.run.verbose {

@@ -32,6 +32,8 @@ pub enum Product {
     Ozx,
     /// A PMTiles v3 archive (`split --pmtiles`).
     Pmtiles,
+    /// A pyramidal TIFF or OME-TIFF (`split -o FILE.tif`, `-o FILE.ome.tif`).
+    Tiff,
 }
 
 /// The largest report or `info.json` read to recognise it; ours are far smaller.
@@ -55,6 +57,7 @@ impl Product {
             Product::OmeZarr => "an OME-Zarr image",
             Product::Ozx => "a zipped OME-Zarr image",
             Product::Pmtiles => "a PMTiles archive",
+            Product::Tiff => "a pyramidal TIFF",
         }
     }
 
@@ -70,6 +73,7 @@ impl Product {
             Product::OmeZarr => recognise_dir(path),
             Product::Ozx => recognise_ozx(path),
             Product::Pmtiles => recognise_pmtiles(path),
+            Product::Tiff => recognise_tiff(path),
         }
     }
 }
@@ -94,6 +98,25 @@ fn recognise_pmtiles(path: &Path) -> Result<(), String> {
         [] => Err("an empty file".into()),
         b"PMTiles\x03" => Ok(()),
         _ => Err("a file without a PMTiles v3 signature".into()),
+    }
+}
+
+/// A TIFF that this tool wrote: a TIFF or BigTIFF header and, at byte 16, the signature
+/// `formats::tiff::SIGNATURE` (the writer puts it there; its Software tag points at it).
+/// Anybody else's TIFF, a scan above all, is theirs.
+fn recognise_tiff(path: &Path) -> Result<(), String> {
+    let mut head = Vec::with_capacity(32);
+    fs::File::open(path).and_then(|f| f.take(32).read_to_end(&mut head)).map_err(|e| format!("unreadable ({e})"))?;
+    let tiff = head.starts_with(b"II*\0") || head.starts_with(b"II+\0");
+    if head.is_empty() {
+        return Err("an empty file".into());
+    }
+    if !tiff {
+        return Err("a file that is not a little-endian TIFF".into());
+    }
+    match head.get(16..29) {
+        Some(b"vortex-tiler\0") => Ok(()),
+        _ => Err("a TIFF written by another program".into()),
     }
 }
 

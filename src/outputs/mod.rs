@@ -21,6 +21,7 @@ pub use plan::{Plan, Planned};
 pub use write::Wrote;
 
 use crate::formats::ome_zarr::{PixelSize, Version};
+use crate::formats::tiff::Flavour;
 use crate::formats::viewer::Viewer;
 use crate::settings::Requested;
 
@@ -38,6 +39,8 @@ pub enum Format {
     Pmtiles,
     /// An OME-Zarr image: a `.ome.zarr` directory or a zipped `.ozx` file.
     OmeZarr,
+    /// One pyramidal TIFF file: OME-TIFF or the generic pyramid (docs/tiff.md).
+    Tiff(Flavour),
 }
 
 impl Format {
@@ -49,11 +52,13 @@ impl Format {
             Format::Viewer(viewer) => viewer.name(),
             Format::Pmtiles => "pmtiles",
             Format::OmeZarr => "ome-zarr",
+            Format::Tiff(flavour) => flavour.name(),
         }
     }
 
     /// The format a path's name says, where it says one: `.vtpk` a pack, `.pmtiles` PMTiles,
-    /// `.ome.zarr` and `.ozx` OME-Zarr. A directory's name says none.
+    /// `.ome.zarr` and `.ozx` OME-Zarr, `.ome.tif(f)` OME-TIFF and `.tif(f)` the generic
+    /// TIFF pyramid. A directory's name says none.
     pub fn of_path(path: &Path) -> Option<Format> {
         let name = path.file_name()?.to_string_lossy().to_ascii_lowercase();
         let name = name.trim_end_matches('/');
@@ -64,7 +69,7 @@ impl Format {
         } else if name.ends_with(".ome.zarr") || name.ends_with(".ozx") {
             Some(Format::OmeZarr)
         } else {
-            None
+            Flavour::of_name(name).map(Format::Tiff)
         }
     }
 }
@@ -125,8 +130,10 @@ pub struct Settings {
     pub name: Option<String>,
     /// IIIF: the absolute URL the image is served at (`--iiif-id`).
     pub iiif_id: Option<String>,
-    /// OME-Zarr's own settings.
+    /// OME-Zarr's own settings; its `pixel_size` is a TIFF's too.
     pub ome_zarr: OmeZarrSettings,
+    /// A TIFF's own settings.
+    pub tiff: TiffSettings,
     /// How a pack's bytes are laid out.
     pub pack: vortex_pack::WriteOptions,
     /// The source's ICC profile, where the texels keep its colours (`--keep-icc`): in a tile
@@ -145,4 +152,11 @@ pub struct OmeZarrSettings {
     pub shard_chunks: Option<u32>,
     /// The physical side of a source pixel.
     pub pixel_size: Option<PixelSize>,
+}
+
+/// What only TIFF outputs read.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TiffSettings {
+    /// Classic TIFF where the file stays under 4 GiB, else BigTIFF; or always BigTIFF.
+    pub bigtiff: crate::formats::tiff::BigTiff,
 }

@@ -3,11 +3,12 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{Budget, Format, OmeZarrSettings, Output, Settings};
+use super::{Budget, Format, OmeZarrSettings, Output, Settings, TiffSettings};
 use crate::background::Background;
 use crate::error::{Result, ShowPath, TilerError};
 use crate::formats::ome_zarr::{LabelParent, Plane, Spec, label_parent};
 use crate::formats::ome_zarr::{OmeZarrPlan, OmeZarrRequested};
+use crate::formats::tiff::{self, BigTiff, Compression, Flavour};
 use crate::formats::tiles::filename::FilenameFormat;
 use crate::formats::tiles::info::InfoFile;
 use crate::formats::viewer::{Viewer, ViewerTiles, dzi, iiif};
@@ -15,7 +16,8 @@ use crate::job::SplitOptions;
 use crate::layout::Layout;
 use crate::limits::Limits;
 use crate::output::{self, Claim, Existing, Product};
-use crate::pixel::PixelLayout;
+use crate::pixel::{Depth, PixelLayout};
+use crate::pyramid::filter::Filter;
 use crate::settings::{self, CodecChoice, Destination, Requested};
 use crate::sink::icc::Profile;
 use crate::source::ImageHeader;
@@ -52,6 +54,7 @@ pub(super) enum Work {
     Viewer { tiles: ViewerTiles, profile: Option<Profile> },
     Pmtiles { name: String },
     OmeZarr { spec: Box<Spec>, parent: Option<LabelParent> },
+    Tiff { spec: Box<tiff::Spec> },
 }
 
 impl Plan {
@@ -94,6 +97,7 @@ impl Plan {
                 Format::Viewer(viewer) => for_viewer(output, viewer, &own, &at)?,
                 Format::Pmtiles => for_viewer(output, Viewer::Xyz, &own, &at)?,
                 Format::OmeZarr => ome_zarr(output, &own, &at, planes.clone())?,
+                Format::Tiff(flavour) => tiff_output(output, flavour, &own, &at)?,
             });
         }
         Ok(Plan { outputs: planned, budget, pack: settings.pack })
@@ -156,6 +160,7 @@ struct Own {
     name: Option<String>,
     iiif_id: Option<String>,
     ome_zarr: OmeZarrSettings,
+    tiff: TiffSettings,
     keep_icc: Option<Vec<u8>>,
 }
 
@@ -186,6 +191,7 @@ fn reads(format: Format, setting: Setting) -> bool {
         },
         Format::Pmtiles => matches!(setting, Name | ImageCodec),
         Format::OmeZarr => matches!(setting, Name | ZstdLevel),
+        Format::Tiff(_) => matches!(setting, Name | ImageCodec | ZstdLevel),
     }
 }
 
@@ -213,7 +219,13 @@ impl Own {
             overlap: s.overlap.filter(|_| gets(Setting::Overlap)),
             name: s.name.clone().filter(|_| gets(Setting::Name)),
             iiif_id: s.iiif_id.clone().filter(|_| gets(Setting::IiifId)),
-            ome_zarr: if format == Format::OmeZarr { s.ome_zarr.clone() } else { OmeZarrSettings::default() },
+            ome_zarr: match format {
+                Format::OmeZarr => s.ome_zarr.clone(),
+                // A TIFF records the pixel size (OME's PhysicalSize, the resolution tags).
+                Format::Tiff(_) => OmeZarrSettings { pixel_size: s.ome_zarr.pixel_size, ..OmeZarrSettings::default() },
+                _ => OmeZarrSettings::default(),
+            },
+            tiff: if matches!(format, Format::Tiff(_)) { s.tiff } else { TiffSettings::default() },
             keep_icc: s.keep_icc.clone().filter(|_| gets(Setting::KeepIcc)),
         }
     }
@@ -222,12 +234,16 @@ impl Own {
 /// OME-Zarr's own settings with no OME-Zarr output, and `--keep-icc` where no output keeps
 /// the profile, are refused here; the rest by the output that does not read them.
 fn refuse_unread(s: &Settings, outputs: &[Output]) -> Result<()> {
+    let tiff = outputs.iter().any(|o| matches!(o.format, Format::Tiff(_)));
+    if s.tiff.bigtiff != BigTiff::Auto && !tiff {
+        return Err(options("--bigtiff belongs to a TIFF output (-o FILE.tif or FILE.ome.tif)".into()));
+    }
     if !outputs.iter().any(|o| o.format == Format::OmeZarr) {
         let z = &s.ome_zarr;
         for (given, flag) in [
             (z.version.is_some(), "--ome-zarr-version"),
             (z.shard_chunks.is_some(), "--shard-chunks"),
-            (z.pixel_size.is_some(), "--pixel-size"),
+            (z.pixel_size.is_some() && !tiff, "--pixel-size"),
         ] {
             if given {
                 return Err(options(format!("{flag} belongs to --layout ome-zarr")));
@@ -240,6 +256,7 @@ fn refuse_unread(s: &Settings, outputs: &[Output]) -> Result<()> {
     {
         let what = match o.format {
             Format::Pmtiles => "a PMTiles archive",
+            Format::Tiff(_) => "a TIFF output (its ICC tag is not written yet)",
             _ => "OME-Zarr",
         };
         return Err(options(format!(
@@ -422,6 +439,117 @@ fn ome_zarr(output: Output, own: &Own, at: &Context, planes: Option<Vec<Plane>>)
     Ok(Planned { output, opts, layout, changed: None, claim, work: Work::OmeZarr { spec: Box::new(spec), parent } })
 }
 
+/// A pyramidal TIFF (docs/tiff.md): pages without border, whole at the edges (TIFF pads its
+/// edge tiles), JPEG tiles from the encoders or raw ones that the sink compresses.
+fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Result<Planned> {
+    let t = &own.tiles;
+    let what = flavour.name();
+    for (given, flag) in [
+        (own.overlap.is_some(), "--overlap"),
+        (own.iiif_id.is_some(), "--iiif-id"),
+        (t.filename_format.is_some(), "--filename-format"),
+        (t.png_level.is_some(), "--png-compression"),
+        (t.bc7_effort.is_some(), "--bc7-effort"),
+    ] {
+        if given {
+            return Err(options(format!("{flag} does not apply to a {what} output, one file of tiled levels")));
+        }
+    }
+    if let Some(border) = t.border.filter(|b| *b != 0) {
+        return Err(options(format!("--border {border}: TIFF tiles have no border (each pixel is stored once)")));
+    }
+    let tile_size = t.tile_size.unwrap_or(tiff::DEFAULT_TILE_SIZE);
+    if tile_size == 0 || !tile_size.is_multiple_of(16) {
+        return Err(options(format!(
+            "--tile-size {tile_size}: TIFF tiles are a multiple of 16 pixels a side (e.g. 256 or 512)"
+        )));
+    }
+    let source = at.header.layout;
+    let labels = t.filter.is_some_and(|f| f.is_label());
+    let jpeg_fits = t.tile_depth.unwrap_or(source.depth) == Depth::U8
+        && (!source.channels.has_alpha() || t.flatten)
+        && !labels
+        && source.depth.is_narrow_int();
+    let choice = match t.codec.unwrap_or(CodecChoice::Auto) {
+        CodecChoice::Auto if jpeg_fits => CodecChoice::Jpeg,
+        CodecChoice::Auto => CodecChoice::Deflate,
+        c => c,
+    };
+    let zstd_level = t.zstd_level.unwrap_or(crate::codec::DEFAULT_ZSTD_LEVEL);
+    let (codec, compression) = match choice {
+        CodecChoice::Jpeg => (CodecChoice::Jpeg, None),
+        CodecChoice::Deflate => (CodecChoice::Raw, Some(Compression::Deflate { level: 6 })),
+        CodecChoice::Zstd => (CodecChoice::Raw, Some(Compression::Zstd { level: zstd_level })),
+        CodecChoice::Raw => (CodecChoice::Raw, Some(Compression::None)),
+        other => {
+            return Err(options(format!(
+                "--codec {}: TIFF tiles are jpeg, deflate, zstd or raw (uncompressed)",
+                other.name()
+            )));
+        }
+    };
+    if codec == CodecChoice::Raw {
+        for (given, flag) in [(t.quality.is_some(), "--quality"), (t.subsampling.is_some(), "--subsampling")] {
+            if given {
+                return Err(options(format!("{flag} is JPEG's; this {what} output's tiles are {}", choice.name())));
+            }
+        }
+    }
+    if t.zstd_level.is_some() && choice != CodecChoice::Zstd {
+        return Err(options(format!("--zstd-level is zstd's; this {what} output's tiles are {}", choice.name())));
+    }
+    let requested = Requested {
+        tile_size: Some(tile_size),
+        border: Some(0),
+        codec: Some(codec),
+        // Microscopy measures intensity linearly: OME-TIFF's levels, like OME-Zarr's, are means
+        // of the stored values; the generic pyramid takes the run's default filter.
+        filter: t.filter.or((flavour == Flavour::Ome).then_some(Filter::Box)),
+        max_memory: Some(at.budget.bytes()),
+        filename_format: None,
+        zstd_level: None,
+        ..t.clone()
+    };
+    let (opts, _) = settings::resolve(&requested, None, source)?;
+    let layout = opts.layout(at.header.width, at.header.height)?;
+    let stored = opts.codec.stored_layout(source, opts.flatten, opts.tile_depth)?;
+    let compression = match (compression, opts.codec) {
+        (Some(c), _) => c,
+        (None, crate::codec::Codec::Jpeg { subsampling, .. }) => Compression::Jpeg { subsampling },
+        (None, other) => return Err(options(format!("internal error: TIFF tiles from --codec {}", other.name()))),
+    };
+    at.limits().check_pyramid(&layout, false)?;
+    let pixel_size = own.ome_zarr.pixel_size.map(|p| tiff::Micrometres(micrometres(p)));
+    let spec = tiff::Spec {
+        flavour,
+        width: layout.width,
+        height: layout.height,
+        levels: layout.lod_count,
+        tile_size: layout.tile_size,
+        stored,
+        compression,
+        bigtiff: own.tiff.bigtiff,
+        name: at.name(own).trim_end_matches(".ome").to_string(),
+        pixel_size,
+    };
+    spec.check()?;
+    at.limits().check_memory(&format!("the index of the TIFF's {} tiles", spec.total_tiles()), spec.index_bytes())?;
+    let claim = at.claim(&output.path, Product::Tiff)?;
+    Ok(Planned { output, opts, layout, changed: None, claim, work: Work::Tiff { spec: Box::new(spec) } })
+}
+
+/// A pixel size in micrometres.
+fn micrometres(p: crate::formats::ome_zarr::PixelSize) -> f64 {
+    let per = match p.unit {
+        "nanometer" => 1e-3,
+        "millimeter" => 1e3,
+        "centimeter" => 1e4,
+        "meter" => 1e6,
+        _ => 1.0,
+    };
+    p.value * per
+}
+
 fn options(message: String) -> TilerError {
     TilerError::Options(message)
 }
@@ -453,6 +581,8 @@ mod tests {
     const DZI: Format = Format::Viewer(Viewer::Dzi);
     const IIIF: Format = Format::Viewer(Viewer::Iiif);
     const XYZ: Format = Format::Viewer(Viewer::Xyz);
+    const TIFF: Format = Format::Tiff(Flavour::Generic);
+    const OME_TIFF: Format = Format::Tiff(Flavour::Ome);
 
     /// Every refusal `split` makes of the outputs it is given, as a table: the outputs, the
     /// settings, and what the message must say.
@@ -506,6 +636,23 @@ mod tests {
                 with(|s| s.ome_zarr.version = Some(crate::formats::ome_zarr::Version::V04)),
                 "holds OME-Zarr 0.5",
             ),
+            (&[(TIFF, "a.tif")], with(|s| s.tiles.border = Some(2)), "TIFF tiles have no border"),
+            (&[(OME_TIFF, "a.ome.tif")], with(|s| s.tiles.tile_size = Some(100)), "a multiple of 16"),
+            (&[(TIFF, "a.tif")], with(|s| s.tiles.codec = Some(CodecChoice::Png)), "jpeg, deflate, zstd or raw"),
+            (&[(Format::Pack, "a.vtpk")], with(|s| s.tiles.codec = Some(CodecChoice::Deflate)), "tiles of a TIFF"),
+            (
+                &[(TIFF, "a.tif")],
+                with(|s| {
+                    s.tiles.codec = Some(CodecChoice::Deflate);
+                    s.tiles.quality = Some(80);
+                }),
+                "--quality is JPEG's",
+            ),
+            (&[(TIFF, "a.tif")], with(|s| s.tiles.zstd_level = Some(5)), "--zstd-level is zstd's"),
+            (&[(TIFF, "a.tif")], with(|s| s.overlap = Some(1)), "--overlap does not apply to a tiff output"),
+            (&[(OME_TIFF, "a.ome.tif")], with(|s| s.tiles.filename_format = Some("%1$s.png".into())), "ome-tiff"),
+            (&[(Format::Pack, "a.vtpk")], with(|s| s.tiff.bigtiff = BigTiff::Always), "--bigtiff belongs to a TIFF"),
+            (&[(TIFF, "a.tif")], with(|s| s.keep_icc = Some(vec![0; 200])), "its ICC tag is not written yet"),
         ];
         for (outputs, settings, want) in cases {
             match plan(outputs, settings) {
@@ -541,6 +688,43 @@ mod tests {
         assert_eq!(p.total_tiles(), dzi.layout.total_tiles() + pack.layout.total_tiles() + zarr.layout.total_tiles());
     }
 
+    /// A TIFF beside Deep Zoom of the same tiles shares its pyramid (JPEG by default); the
+    /// codec flags say its compression; 16 bits or alpha are Deflate by default; OME-TIFF's
+    /// levels are box means; `--pixel-size` is a TIFF's too.
+    #[test]
+    fn a_tiff_reads_the_run_s_settings() {
+        let settings = with(|s| {
+            s.overlap = Some(0);
+            s.tiles.tile_size = Some(256);
+            s.ome_zarr.pixel_size = Some("0.5um".parse().unwrap());
+        });
+        let p = plan(&[(TIFF, "a.tif"), (DZI, "web"), (OME_TIFF, "b.ome.tif")], settings).unwrap();
+        let [tiff, dzi, ome] = &p.outputs[..] else { panic!("three outputs") };
+        assert_eq!(dzi.opts, SplitOptions { down_to_one_texel: true, ..tiff.opts.clone() }, "one pyramid");
+        let Work::Tiff { spec } = &tiff.work else { panic!("a TIFF's work") };
+        assert!(matches!(spec.compression, Compression::Jpeg { .. }), "{:?}", spec.compression);
+        assert_eq!((spec.width, spec.height, spec.tile_size, spec.levels), (1000, 700, 256, 3));
+        assert_eq!(spec.pixel_size, Some(tiff::Micrometres(0.5)));
+        assert_eq!(spec.name, "slide");
+        assert_eq!(ome.opts.filter, Filter::Box, "OME-TIFF's levels are means of the stored values");
+
+        let zstd = with(|s| {
+            s.tiles.codec = Some(CodecChoice::Zstd);
+            s.tiles.zstd_level = Some(9);
+        });
+        let p = plan(&[(TIFF, "a.tif")], zstd).unwrap();
+        let Work::Tiff { spec } = &p.outputs[0].work else { panic!() };
+        assert_eq!(spec.compression, Compression::Zstd { level: 9 });
+        assert!(matches!(p.outputs[0].opts.codec, crate::codec::Codec::Raw), "the sink compresses raw tiles");
+
+        let header = ImageHeader { width: 300, height: 200, layout: PixelLayout::new(Channels::Rgba, Depth::U16) };
+        let outputs = vec![Output::new(OME_TIFF, "/nonexistent-vortex-plan-test/c.ome.tiff")];
+        let p = Plan::new(outputs, &Settings::default(), &header, &[], Budget::default()).unwrap();
+        let Work::Tiff { spec } = &p.outputs[0].work else { panic!() };
+        assert_eq!(spec.compression, Compression::Deflate { level: 6 });
+        assert_eq!(spec.stored, PixelLayout::new(Channels::Rgba, Depth::U16));
+    }
+
     #[test]
     fn a_name_says_its_format() {
         for (name, want) in [
@@ -551,6 +735,11 @@ mod tests {
             ("slide.ozx", Some(Format::OmeZarr)),
             ("web", None),
             ("x.zarr", None),
+            ("scan.tif", Some(TIFF)),
+            ("scan.TIFF", Some(TIFF)),
+            ("slide.ome.tif", Some(OME_TIFF)),
+            ("SLIDE.OME.TIFF", Some(OME_TIFF)),
+            ("x.tif.vtpk", Some(Format::Pack)),
         ] {
             assert_eq!(Format::of_path(Path::new(name)), want, "{name}");
         }

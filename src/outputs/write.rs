@@ -12,6 +12,7 @@ use crate::formats::ome_zarr::OmeZarrSink;
 use crate::formats::pack::PackSink;
 use crate::formats::pmtiles::PmtilesSink;
 use crate::formats::pmtiles::{Bounds, PmtilesSummary, TileType};
+use crate::formats::tiff::{TiffSink, TiffSummary};
 use crate::job::{Progress, SplitOptions, Summary, Written};
 use crate::sink::icc::{Profile, WithProfile};
 use crate::sink::{DirSink, Target, TileSink};
@@ -45,6 +46,8 @@ pub struct Wrote {
     pub pack: Option<vortex_pack::WriteSummary>,
     /// A PMTiles archive's own figures.
     pub pmtiles: Option<PmtilesSummary>,
+    /// A TIFF's own figures.
+    pub tiff: Option<TiffSummary>,
 }
 
 /// An output being written: its plan and its sink.
@@ -58,6 +61,7 @@ enum Sink {
     Pack(PackSink),
     Pmtiles(PmtilesSink),
     OmeZarr(Box<OmeZarrSink>),
+    Tiff(TiffSink),
 }
 
 impl Open {
@@ -81,6 +85,7 @@ impl Open {
                 Sink::Pmtiles(PmtilesSink::create(&claim.path, &planned.layout, tile_type)?)
             }
             Work::OmeZarr { spec, .. } => Sink::OmeZarr(Box::new(OmeZarrSink::create(claim, (**spec).clone())?)),
+            Work::Tiff { spec } => Sink::Tiff(TiffSink::create(&claim.path, (**spec).clone())?),
         };
         Ok(Open { planned, sink })
     }
@@ -91,6 +96,7 @@ impl Open {
             Sink::Pack(s) => s,
             Sink::Pmtiles(s) => s,
             Sink::OmeZarr(s) => s.as_ref(),
+            Sink::Tiff(s) => s,
         }
     }
 
@@ -115,7 +121,7 @@ impl Open {
                 planned.output.path.display()
             )));
         }
-        let (mut pack, mut pmtiles) = (None, None);
+        let (mut pack, mut pmtiles, mut tiff) = (None, None, None);
         match (sink, &planned.work) {
             (Sink::Dir(dir), Work::Tiles { info, .. }) => dir.finish(info)?,
             (Sink::Dir(dir), _) => dir.finish_viewer()?,
@@ -141,6 +147,7 @@ impl Open {
                     )?;
                 }
             }
+            (Sink::Tiff(sink), _) => tiff = Some(sink.finish()?),
             _ => return Err(TilerError::Options("internal error: an output's sink is not its format's".into())),
         }
         // The pyramid's summary in this output's terms: its levels, its tiles and bytes.
@@ -156,6 +163,7 @@ impl Open {
             reads: 0,
             pack,
             pmtiles,
+            tiff,
         })
     }
 }

@@ -46,11 +46,13 @@ pub enum CodecChoice {
     Bc1,
     /// Packs only: BC7 blocks, 8-bit RGB or RGBA (tile size a multiple of 4; --bc7-effort).
     Bc7,
+    /// TIFF only: lossless zlib (Adobe Deflate), integer samples horizontally differenced.
+    Deflate,
 }
 
 impl CodecChoice {
     /// Every choice, in the order `--help` lists them.
-    pub const ALL: [CodecChoice; 8] = [
+    pub const ALL: [CodecChoice; 9] = [
         CodecChoice::Auto,
         CodecChoice::Jpeg,
         CodecChoice::Png,
@@ -59,6 +61,7 @@ impl CodecChoice {
         CodecChoice::ZstdDelta,
         CodecChoice::Bc1,
         CodecChoice::Bc7,
+        CodecChoice::Deflate,
     ];
 
     /// The name used on the command line (`--codec`) and in `info.json`.
@@ -72,6 +75,7 @@ impl CodecChoice {
             CodecChoice::ZstdDelta => "zstd-delta",
             CodecChoice::Bc1 => "bc1",
             CodecChoice::Bc7 => "bc7",
+            CodecChoice::Deflate => "deflate",
         }
     }
 
@@ -91,6 +95,7 @@ impl CodecChoice {
             CodecChoice::ZstdDelta => "Packs only: zstd of raw texels whose rows are left-delta filtered first",
             CodecChoice::Bc1 => "Packs only: BC1 blocks, opaque 8-bit RGB (tile size a multiple of 4)",
             CodecChoice::Bc7 => "Packs only: BC7 blocks, 8-bit RGB or RGBA (tile size a multiple of 4; --bc7-effort)",
+            CodecChoice::Deflate => "TIFF only (-o FILE.tif): lossless zlib, integer samples differenced first",
         }
     }
 }
@@ -453,6 +458,11 @@ fn build_codec(
         CodecChoice::Zstd => Codec::Zstd { level: zstd_level, delta: false },
         CodecChoice::ZstdDelta => Codec::Zstd { level: zstd_level, delta: true },
         CodecChoice::Bc1 => Codec::Bc1,
+        CodecChoice::Deflate => {
+            return Err(TilerError::Options(
+                "--codec deflate compresses the tiles of a TIFF (-o FILE.tif or FILE.ome.tif); tile files and packs take png, raw or zstd".into(),
+            ));
+        }
         CodecChoice::Bc7 => Codec::Bc7 {
             effort: req
                 .bc7_effort

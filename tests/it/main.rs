@@ -46,6 +46,7 @@ mod static_web;
 mod stripes;
 mod tiff_corpus;
 mod tiff_kinds;
+mod tiff_out;
 mod tiff_slides;
 mod value_range;
 mod view;

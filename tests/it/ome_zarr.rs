@@ -34,7 +34,7 @@ fn write_png(path: &Path, image: &Image) {
 
 /// A test image at `dir/name.png`: smooth gradients with noise, so that zstd has work and the
 /// levels differ.
-fn input(dir: &Path, name: &str, w: u32, h: u32, layout: PixelLayout) -> PathBuf {
+pub(crate) fn input(dir: &Path, name: &str, w: u32, h: u32, layout: PixelLayout) -> PathBuf {
     let mut image = Image::random(w, h, layout, 7);
     let max = if layout.depth == Depth::U8 { 255u32 } else { 65535 };
     let c = layout.channels.count();

@@ -1,0 +1,276 @@
+//! Pyramidal TIFF out: one file holding every level of the pyramid as tiled images, in the
+//! two layouts the readers of slides and microscopy open (docs/tiff.md).
+//!
+//! * [`Flavour::Generic`], what `vips tiffsave --tile --pyramid` writes: every level a tiled
+//!   IFD of its own in one chain, the reduced ones marked `NewSubfileType` 1 (OpenSlide's
+//!   generic-tiff reader, libvips `page=N`).
+//! * [`Flavour::Ome`], an OME-TIFF: the full resolution in the first IFD with the OME-XML in
+//!   its `ImageDescription`, each reduced level one of its SubIFDs (tag 330), as bioformats,
+//!   QuPath and tifffile read a pyramid.
+//!
+//! The file is written in one pass ([`TiffWriter`]): the header and a signature first, then
+//! each tile's bytes appended as it arrives, in any order, with only its offset and length
+//! kept (16 bytes a tile); at the end the IFDs, their arrays and the OME-XML, and the
+//! header's first-IFD offset patched. Classic TIFF or BigTIFF is decided before the first
+//! byte from an upper bound of the file's size ([`Spec::needs_bigtiff`]), or always with
+//! [`BigTiff::Always`]. [`TiffSink`] is the writer as a pipeline sink: raw tiles compressed
+//! on the encoder threads (`compress.rs`: Deflate or zstd with the horizontal predictor),
+//! JPEG tiles stored as they come, the file written under a temporary name and renamed into
+//! place when complete.
+//!
+//! Not yet (issue 43): a Cloud Optimized GeoTIFF (its IFDs come first and its tile data in a
+//! fixed order: the tile data would be spooled to a temporary and assembled at the end, which
+//! the offset index here already allows), a JPEG source's tiles copied without decoding,
+//! shared `JPEGTables`, the floating-point predictor, and more than four channels as planes.
+
+mod compress;
+mod ifd;
+mod ome;
+mod sink;
+#[cfg(test)]
+mod tests;
+mod writer;
+
+pub use sink::TiffSink;
+pub use writer::{TiffSummary, TiffWriter};
+
+use crate::codec::Subsampling;
+use crate::error::{Result, TilerError};
+use crate::pixel::{Channels, Depth, PixelLayout};
+
+/// Where the writer puts its signature, after the header: the `Software` tag's value, which
+/// names the file as ours so that a later run may replace it (`output::claim`).
+pub const SIGNATURE_AT: u64 = 16;
+/// The signature's text (NUL-terminated in the file, as TIFF's ASCII values are).
+pub const SIGNATURE: &str = "vortex-tiler";
+
+/// The default tile side, libvips' and most scanners'.
+pub const DEFAULT_TILE_SIZE: u32 = 256;
+
+/// Which pyramidal TIFF layout to write.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Flavour {
+    /// Every level a tiled IFD in one chain (`vips tiffsave --tile --pyramid`).
+    Generic,
+    /// OME-TIFF: reduced levels as SubIFDs of the full resolution, OME-XML in its description.
+    Ome,
+}
+
+impl Flavour {
+    /// The flavour's name in messages and `--json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Flavour::Generic => "tiff",
+            Flavour::Ome => "ome-tiff",
+        }
+    }
+
+    /// The flavour a file name says: `.ome.tif` and `.ome.tiff` OME-TIFF, `.tif` and `.tiff`
+    /// the generic pyramid (case-insensitive); other names none.
+    pub fn of_name(name: &str) -> Option<Flavour> {
+        let name = name.to_ascii_lowercase();
+        if name.ends_with(".ome.tif") || name.ends_with(".ome.tiff") {
+            Some(Flavour::Ome)
+        } else if name.ends_with(".tif") || name.ends_with(".tiff") {
+            Some(Flavour::Generic)
+        } else {
+            None
+        }
+    }
+}
+
+/// How each tile's bytes are compressed (the TIFF `Compression` tag).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Compression {
+    /// Uncompressed samples (1).
+    None,
+    /// zlib streams ("Adobe Deflate", 8), integer samples horizontally differenced first.
+    Deflate { level: u32 },
+    /// zstd frames (50000, libtiff's code), integer samples horizontally differenced first.
+    Zstd { level: i32 },
+    /// One whole JPEG stream a tile (7), YCbCr at the encoder's subsampling, or grey.
+    Jpeg { subsampling: Subsampling },
+}
+
+impl Compression {
+    /// The `Compression` tag's value.
+    pub fn code(self) -> u16 {
+        match self {
+            Compression::None => 1,
+            Compression::Deflate { .. } => 8,
+            Compression::Zstd { .. } => 50000,
+            Compression::Jpeg { .. } => 7,
+        }
+    }
+
+    /// Its name in messages and `--json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Compression::None => "none",
+            Compression::Deflate { .. } => "deflate",
+            Compression::Zstd { .. } => "zstd",
+            Compression::Jpeg { .. } => "jpeg",
+        }
+    }
+
+    /// Whether the pipeline hands this compression encoded tiles (JPEG) rather than raw
+    /// samples, which the sink compresses itself.
+    pub fn takes_encoded(self) -> bool {
+        matches!(self, Compression::Jpeg { .. })
+    }
+}
+
+/// Classic TIFF (offsets of 32 bits, files under 4 GiB) or BigTIFF (64 bits).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BigTiff {
+    /// BigTIFF only where the file could pass 4 GiB ([`Spec::needs_bigtiff`]).
+    #[default]
+    Auto,
+    /// Always BigTIFF.
+    Always,
+}
+
+/// The physical side of a level-0 pixel, in micrometres (OME's `PhysicalSizeX`/`Y`, and the
+/// TIFF resolution tags).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Micrometres(pub f64);
+
+/// Everything the file says, fixed before its first byte.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Spec {
+    pub flavour: Flavour,
+    /// The full-resolution image's size; level `k` is `ceil(size / 2^k)`.
+    pub width: u32,
+    pub height: u32,
+    /// Levels, the full resolution included (at least 1).
+    pub levels: u32,
+    /// Tile side in pixels, a multiple of 16 (the TIFF rule); edge tiles are whole tiles.
+    pub tile_size: u32,
+    /// The samples of each pixel as stored.
+    pub stored: PixelLayout,
+    pub compression: Compression,
+    pub bigtiff: BigTiff,
+    /// The image's name (OME's `Image Name`).
+    pub name: String,
+    /// The physical size of a full-resolution pixel, where known.
+    pub pixel_size: Option<Micrometres>,
+}
+
+/// The largest tile side (libtiff and the JPEG codec stop at 65535; a tile this large is
+/// far past any reader's use).
+pub const MAX_TILE_SIZE: u32 = 65536 - 16;
+
+impl Spec {
+    /// Refuses what no TIFF (or no reader of these flavours) holds, before anything is
+    /// written; the messages say what to change.
+    pub fn check(&self) -> Result<()> {
+        let t = self.tile_size;
+        if t == 0 || !t.is_multiple_of(16) || t > MAX_TILE_SIZE {
+            return Err(TilerError::Options(format!(
+                "--tile-size {t}: TIFF tiles are a multiple of 16 pixels a side (e.g. 256 or 512)"
+            )));
+        }
+        if self.width == 0 || self.height == 0 {
+            return Err(TilerError::Geometry(format!("a {}x{} image has no pixels", self.width, self.height)));
+        }
+        if self.levels == 0 || self.levels > 32 {
+            return Err(TilerError::Geometry(format!("a TIFF pyramid of {} levels", self.levels)));
+        }
+        let s = self.stored;
+        match self.compression {
+            Compression::Jpeg { .. } if s.depth != Depth::U8 || s.channels.has_alpha() => {
+                return Err(TilerError::Options(format!(
+                    "JPEG in TIFF holds 8-bit grey or RGB, not {s}: use --codec deflate or zstd"
+                )));
+            }
+            Compression::Deflate { level } if level > 9 => {
+                return Err(TilerError::Options(format!("Deflate level {level} is outside 0..=9")));
+            }
+            _ => {}
+        }
+        if matches!(s.depth, Depth::F16) {
+            return Err(TilerError::Options(
+                "half-float samples: TIFF readers of these pyramids take 8, 16 or 32-bit samples".into(),
+            ));
+        }
+        if self.name.contains('\0') {
+            return Err(TilerError::Options("the image's name holds a NUL character".into()));
+        }
+        Ok(())
+    }
+
+    /// Width and height of level `k`: `ceil(size / 2^k)`.
+    pub fn level_extent(&self, k: u32) -> (u32, u32) {
+        let shrink = |v: u32| (((v as u64) + (1u64 << k) - 1) >> k) as u32;
+        (shrink(self.width), shrink(self.height))
+    }
+
+    /// Tiles across and down level `k`.
+    pub fn level_grid(&self, k: u32) -> (u32, u32) {
+        let (w, h) = self.level_extent(k);
+        (w.div_ceil(self.tile_size), h.div_ceil(self.tile_size))
+    }
+
+    /// Tiles of every level.
+    pub fn total_tiles(&self) -> u64 {
+        (0..self.levels).map(|k| self.level_grid(k)).map(|(c, r)| c as u64 * r as u64).sum()
+    }
+
+    /// Bytes of one tile's samples, uncompressed.
+    pub fn raw_tile_bytes(&self) -> u64 {
+        (self.tile_size as u64).pow(2) * self.stored.bytes_per_pixel() as u64
+    }
+
+    /// The most bytes one stored tile may take: the raw samples for none, the compressors'
+    /// bounds (zstd's `ZSTD_compressBound`; zlib's stored blocks, generously), and for JPEG
+    /// libjpeg-turbo's `tj3JPEGBufSize` as the codec states it.
+    pub fn most_tile_bytes(&self) -> u64 {
+        let raw = self.raw_tile_bytes();
+        match self.compression {
+            Compression::None => raw,
+            Compression::Deflate { .. } => raw + raw / 8 + 1024,
+            Compression::Zstd { .. } => zstd::zstd_safe::compress_bound(raw as usize) as u64,
+            Compression::Jpeg { subsampling } => {
+                crate::codec::Codec::Jpeg { quality: 100, subsampling }.most_encoded_bytes(self.tile_size, self.stored)
+            }
+        }
+    }
+
+    /// Memory the writer's tile index holds: an offset and a length a tile.
+    pub fn index_bytes(&self) -> u64 {
+        self.total_tiles().saturating_mul(16)
+    }
+
+    /// An upper bound of the file's size: header, tiles at their largest, IFDs, their arrays
+    /// and the OME-XML.
+    pub fn most_file_bytes(&self) -> u64 {
+        let tiles = self.total_tiles().saturating_mul(self.most_tile_bytes());
+        let ifds = self.levels as u64 * 4096 + self.total_tiles().saturating_mul(16);
+        let xml = ome::xml(self).len() as u64;
+        tiles.saturating_add(ifds).saturating_add(xml).saturating_add(1024)
+    }
+
+    /// Whether the file is written as BigTIFF: always asked, or its size could pass what
+    /// 32-bit offsets reach.
+    pub fn needs_bigtiff(&self) -> bool {
+        self.bigtiff == BigTiff::Always || self.most_file_bytes() > u32::MAX as u64
+    }
+
+    /// Whether integer samples are horizontally differenced before Deflate or zstd
+    /// (`Predictor` 2); floats are stored as they are (the floating-point predictor, 3, is
+    /// not written yet).
+    pub fn predictor(&self) -> bool {
+        matches!(self.compression, Compression::Deflate { .. } | Compression::Zstd { .. })
+            && matches!(self.stored.depth, Depth::U8 | Depth::U16 | Depth::U32)
+    }
+
+    /// The `Photometric` tag: grey is black-is-zero; RGB tiles in JPEG are YCbCr (what
+    /// the encoder writes), RGB otherwise.
+    pub(crate) fn photometric(&self) -> u16 {
+        match (self.stored.channels, self.compression) {
+            (Channels::Grey | Channels::GreyAlpha, _) => 1,
+            (_, Compression::Jpeg { .. }) => 6,
+            _ => 2,
+        }
+    }
+}

@@ -1,0 +1,273 @@
+//! [`TiffWriter`]: a pyramidal TIFF written front to back in one pass, tiles in any order.
+//!
+//! ```text
+//! 0   header: "II", 42 and the first IFD's offset (classic), or "II", 43, 8, 0 and a
+//!     64-bit offset (BigTIFF); patched at the end
+//! 16  "vortex-tiler\0" (the Software tag's value: the file's signature), padded to 32
+//! 32  tile data, each tile's bytes as they arrived
+//! ..  the IFDs, level 0 first, each with its value area (tile offsets and byte counts,
+//!     the OME-XML), each at a multiple of 8
+//! ```
+
+use std::fs::File;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+use super::ifd::{Ifd, Value, tag};
+use super::{Compression, Flavour, SIGNATURE, SIGNATURE_AT, Spec, ome};
+use crate::error::{Result, ShowPath, TilerError};
+use crate::pixel::Depth;
+
+/// Where tile data starts: after the header and the signature.
+const DATA_AT: u64 = 32;
+
+/// What a finished TIFF holds.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct TiffSummary {
+    pub flavour: Flavour,
+    pub bigtiff: bool,
+    pub levels: u32,
+    pub tiles: u64,
+    /// Bytes of tile data, and of the whole file.
+    pub tile_bytes: u64,
+    pub file_bytes: u64,
+    /// The `Compression` written (`none`, `deflate`, `zstd`, `jpeg`).
+    pub compression: &'static str,
+}
+
+/// A TIFF being written: the file, and where each tile went.
+pub struct TiffWriter {
+    path: PathBuf,
+    file: BufWriter<File>,
+    spec: Spec,
+    big: bool,
+    /// Bytes written so far (the next tile's offset).
+    len: u64,
+    /// Each level's first entry in `tiles`.
+    bases: Vec<usize>,
+    /// Offset and length of every tile, level by level, row by row; offset 0: not yet written.
+    tiles: Vec<(u64, u64)>,
+    tile_bytes: u64,
+}
+
+fn write_err(path: &Path) -> impl Fn(std::io::Error) -> TilerError + '_ {
+    move |e| TilerError::write(path, e)
+}
+
+impl TiffWriter {
+    /// Starts the TIFF `spec` describes in `file` (opened for writing, empty), whose name is
+    /// `path` (for messages). The caller has checked the tile index's memory
+    /// ([`Spec::index_bytes`]) against its budget.
+    pub fn create(path: &Path, file: File, spec: Spec) -> Result<TiffWriter> {
+        spec.check()?;
+        let total = usize::try_from(spec.total_tiles())
+            .map_err(|_| TilerError::Limit(format!("{} tiles: more than this machine indexes", spec.total_tiles())))?;
+        let mut tiles = Vec::new();
+        tiles.try_reserve_exact(total).map_err(|_| {
+            TilerError::Limit(format!("the index of {total} TIFF tiles ({} bytes) does not fit in memory", total * 16))
+        })?;
+        tiles.resize(total, (0, 0));
+        let mut bases = Vec::with_capacity(spec.levels as usize);
+        let mut at = 0usize;
+        for k in 0..spec.levels {
+            bases.push(at);
+            let (c, r) = spec.level_grid(k);
+            at += c as usize * r as usize;
+        }
+        let big = spec.needs_bigtiff();
+        let mut head = Vec::with_capacity(DATA_AT as usize);
+        head.extend(b"II");
+        if big {
+            head.extend(43u16.to_le_bytes());
+            head.extend(8u16.to_le_bytes());
+            head.extend(0u16.to_le_bytes());
+            head.extend(0u64.to_le_bytes());
+        } else {
+            head.extend(42u16.to_le_bytes());
+            head.extend(0u32.to_le_bytes());
+        }
+        head.resize(SIGNATURE_AT as usize, 0);
+        head.extend(SIGNATURE.as_bytes());
+        head.resize(DATA_AT as usize, 0);
+        let mut file = BufWriter::with_capacity(1 << 20, file);
+        file.write_all(&head).map_err(write_err(path))?;
+        Ok(TiffWriter { path: path.to_path_buf(), file, spec, big, len: DATA_AT, bases, tiles, tile_bytes: 0 })
+    }
+
+    /// Whether the file is BigTIFF.
+    pub fn is_bigtiff(&self) -> bool {
+        self.big
+    }
+
+    /// Appends tile `(x, y)` of `level`: `bytes` as the file stores them (compressed).
+    pub fn add_tile(&mut self, level: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+        let err = |message: String| TilerError::Encode { lod: level, x, y, message };
+        if level >= self.spec.levels {
+            return Err(err(format!("the TIFF has {} levels", self.spec.levels)));
+        }
+        let (c, r) = self.spec.level_grid(level);
+        if x >= c || y >= r {
+            return Err(err(format!("level {level} of the TIFF is {c}x{r} tiles")));
+        }
+        if bytes.is_empty() {
+            return Err(err("an empty tile".into()));
+        }
+        let at = self.bases[level as usize] + y as usize * c as usize + x as usize;
+        if self.tiles[at].0 != 0 {
+            return Err(err("internal error: the tile came twice".into()));
+        }
+        let end = self.len + bytes.len() as u64;
+        if !self.big && end > u32::MAX as u64 {
+            return Err(TilerError::Limit(format!(
+                "{}: the tiles passed 4 GiB, more than a classic TIFF's bound said; write BigTIFF",
+                self.path.shown()
+            )));
+        }
+        self.file.write_all(bytes).map_err(write_err(&self.path))?;
+        self.tiles[at] = (self.len, bytes.len() as u64);
+        self.len = end;
+        self.tile_bytes += bytes.len() as u64;
+        Ok(())
+    }
+
+    /// Bytes of tile data written so far.
+    pub fn tile_bytes(&self) -> u64 {
+        self.tile_bytes
+    }
+
+    /// Writes the IFDs after the tiles, points the header at the first, and syncs the file.
+    /// Fails, naming it, if a tile is missing.
+    pub fn finish(mut self) -> Result<TiffSummary> {
+        if let Some(missing) = self.tiles.iter().position(|t| t.0 == 0) {
+            let level = self.bases.iter().rposition(|&b| b <= missing).unwrap_or(0);
+            let (c, _) = self.spec.level_grid(level as u32);
+            let i = missing - self.bases[level];
+            return Err(TilerError::Internal(format!(
+                "{}: tile (level {level}, x {}, y {}) was never written",
+                self.path.shown(),
+                i % c as usize,
+                i / c as usize
+            )));
+        }
+        let levels = self.spec.levels as usize;
+        let mut ifds: Vec<Ifd> = (0..levels).map(|k| self.level_ifd(k as u32)).collect();
+        self.tiles = Vec::new();
+        let sub_ifds = self.spec.flavour == Flavour::Ome && levels > 1;
+        if sub_ifds {
+            ifds[0].set(tag::SUB_IFDS, Value::Ifds(vec![0; levels - 1]));
+        }
+        // Lay the IFDs out, level 0 first, each at a multiple of 8.
+        let mut offsets = Vec::with_capacity(levels);
+        let mut at = self.len.next_multiple_of(8);
+        for ifd in &ifds {
+            offsets.push(at);
+            at = (at + ifd.encoded_len(self.big)).next_multiple_of(8);
+        }
+        if !self.big && at > u32::MAX as u64 {
+            return Err(TilerError::Limit(format!(
+                "{}: the file passed 4 GiB, more than a classic TIFF's bound said; write BigTIFF",
+                self.path.shown()
+            )));
+        }
+        if sub_ifds && let Some(Value::Ifds(v)) = ifds[0].get_mut(tag::SUB_IFDS) {
+            v.copy_from_slice(&offsets[1..]);
+        }
+        for (k, ifd) in ifds.iter().enumerate() {
+            // The generic pyramid chains every level; OME's reduced levels hang off level 0.
+            let next = match self.spec.flavour {
+                Flavour::Generic => offsets.get(k + 1).copied().unwrap_or(0),
+                Flavour::Ome => 0,
+            };
+            let pad = (offsets[k] - self.len) as usize;
+            let bytes = ifd.encode(offsets[k], next, self.big);
+            self.file.write_all(&vec![0; pad]).map_err(write_err(&self.path))?;
+            self.file.write_all(&bytes).map_err(write_err(&self.path))?;
+            self.len = offsets[k] + bytes.len() as u64;
+        }
+        let TiffWriter { path, file, spec, big, len, tile_bytes, .. } = self;
+        let mut file = file.into_inner().map_err(|e| TilerError::write(&path, e.into_error()))?;
+        let first = offsets[0];
+        let patched = if big {
+            file.seek(SeekFrom::Start(8)).and_then(|_| file.write_all(&first.to_le_bytes()))
+        } else {
+            file.seek(SeekFrom::Start(4)).and_then(|_| file.write_all(&(first as u32).to_le_bytes()))
+        };
+        patched.and_then(|()| file.sync_all()).map_err(write_err(&path))?;
+        Ok(TiffSummary {
+            flavour: spec.flavour,
+            bigtiff: big,
+            levels: spec.levels,
+            tiles: spec.total_tiles(),
+            tile_bytes,
+            file_bytes: len,
+            compression: spec.compression.name(),
+        })
+    }
+
+    /// Level `k`'s IFD, its tiles' offsets and byte counts from the index.
+    fn level_ifd(&self, k: u32) -> Ifd {
+        let s = &self.spec;
+        let (w, h) = s.level_extent(k);
+        let spp = s.stored.channels.count();
+        let mut ifd = Ifd::default();
+        ifd.set(tag::NEW_SUBFILE_TYPE, Value::Long(vec![u32::from(k > 0)]));
+        ifd.set(tag::IMAGE_WIDTH, Value::Long(vec![w]));
+        ifd.set(tag::IMAGE_LENGTH, Value::Long(vec![h]));
+        ifd.set(tag::BITS_PER_SAMPLE, Value::Short(vec![s.stored.depth.bytes() as u16 * 8; spp]));
+        ifd.set(tag::COMPRESSION, Value::Short(vec![s.compression.code()]));
+        ifd.set(tag::PHOTOMETRIC, Value::Short(vec![s.photometric()]));
+        if k == 0 && s.flavour == Flavour::Ome {
+            ifd.set(tag::IMAGE_DESCRIPTION, Value::Ascii(ome::xml(s)));
+        }
+        ifd.set(tag::SAMPLES_PER_PIXEL, Value::Short(vec![spp as u16]));
+        if let Some(size) = s.pixel_size {
+            // Pixels a centimetre at this level.
+            let per_cm = rational(10_000.0 / (size.0 * (1u64 << k) as f64));
+            ifd.set(tag::X_RESOLUTION, Value::Rational(vec![per_cm]));
+            ifd.set(tag::Y_RESOLUTION, Value::Rational(vec![per_cm]));
+            ifd.set(tag::RESOLUTION_UNIT, Value::Short(vec![3]));
+        }
+        ifd.set(tag::PLANAR_CONFIGURATION, Value::Short(vec![1]));
+        let count = SIGNATURE.len() as u64 + 1;
+        ifd.set(tag::SOFTWARE, Value::AsciiAt { offset: SIGNATURE_AT, count });
+        if s.predictor() {
+            ifd.set(tag::PREDICTOR, Value::Short(vec![2]));
+        }
+        ifd.set(tag::TILE_WIDTH, Value::Long(vec![s.tile_size]));
+        ifd.set(tag::TILE_LENGTH, Value::Long(vec![s.tile_size]));
+        let (c, r) = s.level_grid(k);
+        let tiles = &self.tiles[self.bases[k as usize]..][..c as usize * r as usize];
+        ifd.set(tag::TILE_OFFSETS, Value::Offsets(tiles.iter().map(|t| t.0).collect()));
+        ifd.set(tag::TILE_BYTE_COUNTS, Value::Offsets(tiles.iter().map(|t| t.1).collect()));
+        if s.stored.channels.has_alpha() {
+            // Unassociated alpha: the samples are not premultiplied.
+            ifd.set(tag::EXTRA_SAMPLES, Value::Short(vec![2]));
+        }
+        let format = if matches!(s.stored.depth, Depth::F32 | Depth::F16) { 3 } else { 1 };
+        ifd.set(tag::SAMPLE_FORMAT, Value::Short(vec![format; spp]));
+        if let Compression::Jpeg { subsampling } = s.compression
+            && s.photometric() == 6
+        {
+            let factor = match subsampling {
+                crate::codec::Subsampling::S420 => 2,
+                crate::codec::Subsampling::S444 => 1,
+            };
+            ifd.set(tag::YCBCR_SUBSAMPLING, Value::Short(vec![factor, factor]));
+            let white = [(0, 1), (255, 1), (128, 1), (255, 1), (128, 1), (255, 1)];
+            ifd.set(tag::REFERENCE_BLACK_WHITE, Value::Rational(white.to_vec()));
+        }
+        ifd
+    }
+}
+
+/// `value` as a TIFF rational, to 6 significant figures or as near as 32 bits allow.
+fn rational(value: f64) -> (u32, u32) {
+    for den in [1_000_000u32, 1000, 1] {
+        let num = (value * den as f64).round();
+        if num >= 1.0 && num <= u32::MAX as f64 {
+            return (num as u32, den);
+        }
+    }
+    if value < 1.0 { (1, u32::MAX) } else { (u32::MAX, 1) }
+}

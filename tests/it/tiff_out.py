@@ -1,0 +1,172 @@
+"""Reads a pyramidal TIFF we wrote with the readers of that world and checks every level
+against a naive pyramid of the source (tests/it/tiff_out.rs runs it with VORTEX_PYVIPS).
+
+    tiff_out.py ome|generic TIFF SOURCE TILE exact|jpeg
+
+ome: tifffile reads one OME series with every level (SubIFDs), libvips every `subifd=`;
+generic: tifffile reads a page a level, libvips every `page=`, OpenSlide 4 opens it as
+generic-tiff with every level and `read_region` gives the source (8-bit RGB sources).
+exact: each level equals the oracle sample for sample; jpeg: within JPEG's error of it.
+Prints one JSON line of what it measured; exits 1 with the reason on a mismatch.
+"""
+
+import json
+import sys
+
+import numpy as np
+import pyvips
+import tifffile
+
+# JPEG at the default quality 85, 4:2:0, on tiff_out.rs's gradient-plus-noise images measures
+# 35 dB against the exact level 0 and more on the smoother levels above (41, 46, 50 dB); a
+# reader that took the YCbCr samples for RGB (or the wrong subsampling) gives under 20 dB. The
+# bound sits between, clear of both.
+JPEG_MIN_PSNR = 30.0
+
+
+def fail(message):
+    print(message, file=sys.stderr)
+    sys.exit(1)
+
+
+def source(path):
+    """The source image as rows x columns x samples."""
+    a = pyvips.Image.new_from_file(path).numpy()
+    return a[:, :, None] if a.ndim == 2 else a
+
+
+def oracle(src, k):
+    """Level k as docs/architecture.md defines it: each texel the mean of the real source
+    samples under its 2^k x 2^k footprint (fewer at the right and bottom edges), rounded half
+    up once: the box filter."""
+    f = 1 << k
+    h, w, c = src.shape
+    rows, cols = -(-h // f), -(-w // f)
+    padded = np.zeros((rows * f, cols * f, c), np.uint64)
+    padded[:h, :w] = src
+    real = np.zeros((rows * f, cols * f), np.uint64)
+    real[:h, :w] = 1
+    sums = padded.reshape(rows, f, cols, f, c).sum(axis=(1, 3))
+    counts = real.reshape(rows, f, cols, f).sum(axis=(1, 3))[:, :, None]
+    return ((2 * sums + counts) // (2 * counts)).astype(src.dtype)
+
+
+def levels_of(src, tile):
+    """Levels down to the first that fits one tile, as the page grid has them."""
+    h, w = src.shape[:2]
+    k = 0
+    while max(-(-w // (1 << k)), -(-h // (1 << k))) > tile:
+        k += 1
+    return k + 1
+
+
+def psnr(a, b, peak):
+    mse = np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2)
+    return float("inf") if mse == 0 else 10 * np.log10(peak * peak / mse)
+
+
+def compare(what, got, want, mode, measured):
+    got = got[:, :, None] if got.ndim == 2 else got
+    if got.shape != want.shape:
+        fail(f"{what}: shape {got.shape}, expected {want.shape}")
+    if mode == "exact":
+        if not np.array_equal(got, want):
+            diff = np.argwhere(got != want)[0]
+            fail(f"{what}: differs first at {tuple(diff)}: {got[tuple(diff)]} != {want[tuple(diff)]}")
+        measured[what] = "exact"
+    else:
+        peak = 255.0 if want.dtype == np.uint8 else 65535.0
+        p = psnr(got, want, peak)
+        measured[what] = round(p, 2)
+        if p < JPEG_MIN_PSNR:
+            fail(f"{what}: {p:.2f} dB from the exact level, under {JPEG_MIN_PSNR}")
+
+
+def libvips_decodes(path, measured):
+    """Whether this libvips' libtiff has the file's codec: pyvips-binary 8.18.7's is built
+    without ZSTD ("ZSTD compression support is not configured"); any other failure fails."""
+    try:
+        pyvips.Image.new_from_file(path, fail=True).avg()
+        return True
+    except pyvips.Error as e:
+        if "ZSTD compression support is not configured" in str(e):
+            measured["libvips"] = "skipped: its libtiff has no zstd"
+            return False
+        fail(f"libvips: {e}")
+
+
+def check_ome(path, src, tile, mode, measured):
+    n = levels_of(src, tile)
+    with tifffile.TiffFile(path) as t:
+        if not t.is_ome:
+            fail("tifffile does not take it for an OME-TIFF")
+        if len(t.series) != 1:
+            fail(f"{len(t.series)} series, expected 1")
+        s = t.series[0]
+        if len(s.levels) != n:
+            fail(f"{len(s.levels)} levels in the series, expected {n}")
+        xml = t.ome_metadata
+        h, w, c = src.shape
+        for want in (f'SizeX="{w}"', f'SizeY="{h}"', f'SizeC="{c}"'):
+            if want not in xml:
+                fail(f"OME-XML lacks {want}")
+        for k, level in enumerate(s.levels):
+            compare(f"tifffile level {k}", level.asarray(), oracle(src, k), mode, measured)
+    for k in range(n) if libvips_decodes(path, measured) else ():
+        image = pyvips.Image.new_from_file(path, subifd=k - 1)
+        compare(f"libvips subifd={k - 1}", image.numpy(), oracle(src, k), mode, measured)
+
+
+def check_generic(path, src, tile, mode, measured):
+    n = levels_of(src, tile)
+    with tifffile.TiffFile(path) as t:
+        if len(t.pages) != n:
+            fail(f"{len(t.pages)} pages, expected {n}")
+        for k, page in enumerate(t.pages):
+            if k > 0 and page.subfiletype != 1:
+                fail(f"page {k}: NewSubfileType {page.subfiletype}, expected 1")
+            compare(f"tifffile page {k}", page.asarray(), oracle(src, k), mode, measured)
+    for k in range(n) if libvips_decodes(path, measured) else ():
+        image = pyvips.Image.new_from_file(path, page=k)
+        compare(f"libvips page={k}", image.numpy(), oracle(src, k), mode, measured)
+    if src.shape[2] != 3 or src.dtype != np.uint8:
+        # OpenSlide gives 8-bit RGBA: it reads 8-bit RGB pyramids as they are.
+        return
+    import openslide
+
+    slide = openslide.OpenSlide(path)
+    vendor = slide.properties.get("openslide.vendor")
+    if vendor != "generic-tiff":
+        fail(f"OpenSlide's vendor: {vendor}")
+    if slide.level_count != n:
+        fail(f"OpenSlide sees {slide.level_count} levels, expected {n}")
+    h, w = src.shape[:2]
+    for k in range(n):
+        want = (-(-w // (1 << k)), -(-h // (1 << k)))
+        if slide.level_dimensions[k] != want:
+            fail(f"OpenSlide level {k}: {slide.level_dimensions[k]}, expected {want}")
+        if abs(slide.level_downsamples[k] - (1 << k)) > 0.01 * (1 << k):
+            fail(f"OpenSlide level {k}: downsample {slide.level_downsamples[k]}")
+    # The whole image at level 0, and level 1 (at a level's own pixels, no resampling).
+    for k in (0, 1) if n > 1 else (0,):
+        want = oracle(src, k)
+        size = (want.shape[1], want.shape[0])
+        region = np.asarray(slide.read_region((0, 0), k, size))
+        if not (region[:, :, 3] == 255).all():
+            fail(f"OpenSlide level {k}: transparent pixels inside the image")
+        compare(f"OpenSlide read_region level {k}", region[:, :, :3], want, mode, measured)
+    slide.close()
+
+
+def main():
+    flavour, path, src_path, tile, mode = sys.argv[1:6]
+    src = source(src_path)
+    measured = {}
+    if flavour == "ome":
+        check_ome(path, src, int(tile), mode, measured)
+    else:
+        check_generic(path, src, int(tile), mode, measured)
+    print(json.dumps(measured))
+
+
+main()

@@ -1,0 +1,176 @@
+//! Pyramidal TIFF out (`-o FILE.tif`, `-o FILE.ome.tif`; docs/tiff.md): the file read back
+//! by our own TIFF reader (always), and by the readers of that world through the Python named
+//! by VORTEX_PYVIPS (tifffile, libvips 8.18, OpenSlide 4: `tiff_out.py`), which are skipped
+//! with a note where they are missing outside CI. Lossless levels must equal a naive box
+//! pyramid of the source exactly; JPEG levels must be within JPEG's error of it.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
+
+use crate::common::cli::{fails_with, ok, run, s};
+use crate::ome_zarr::input;
+
+const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/it/tiff_out.py");
+
+fn rgb8() -> PixelLayout {
+    PixelLayout::new(Channels::Rgb, Depth::U8)
+}
+
+/// The Python with tifffile, pyvips and OpenSlide: VORTEX_PYVIPS, if it imports them; else
+/// a skip with a note, and a failure under CI.
+fn readers() -> Option<PathBuf> {
+    let python = std::env::var_os("VORTEX_PYVIPS").map(PathBuf::from);
+    let works = python.as_ref().is_some_and(|p| {
+        Command::new(p)
+            .args(["-c", "import tifffile, pyvips, openslide, numpy"])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    });
+    if !works {
+        crate::common::skip_unless_ci(
+            "the TIFF readers",
+            "no tifffile/pyvips/openslide: set VORTEX_PYVIPS to a Python with tifffile, pyvips, openslide-python and openslide-bin",
+        );
+        return None;
+    }
+    python
+}
+
+/// Runs `tiff_out.py` on `tiff`; fails with what it said.
+fn check(python: &Path, flavour: &str, tiff: &Path, source: &Path, tile: u32, mode: &str) -> String {
+    let tile = tile.to_string();
+    let args = [SCRIPT, flavour, s(tiff), s(source), &tile, mode];
+    let out = Command::new(python).args(args).output().unwrap();
+    let said = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{flavour} {}: {said}", tiff.display());
+    said
+}
+
+/// Splits `args` into PNG tiles (border 0, box filter) and returns the directory's files,
+/// name and bytes, sorted: what two runs of the same levels must agree on.
+fn png_tiles(source: &Path, dir: &Path, extra: &[&str]) -> Vec<(String, Vec<u8>)> {
+    let mut args = vec!["split", s(source), "-o", s(dir), "--border", "0", "--codec", "png", "--filter", "box", "-q"];
+    args.extend(extra);
+    ok(&args);
+    let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".png"))
+        .map(|e| (e.file_name().to_string_lossy().into_owned(), std::fs::read(e.path()).unwrap()))
+        .collect();
+    files.sort();
+    files
+}
+
+/// A lossless TIFF read back as a source by our own TIFF reader (its full resolution) cuts
+/// the same tiles as the image it was made from: the file's tile index, offsets and predictor
+/// hold together, in both flavours, 8 and 16 bits, alpha, Deflate and none (our reader has no
+/// zstd yet; the readers below check zstd).
+#[test]
+fn our_reader_reads_the_full_resolution_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        ("a.tif", rgb8(), 1000, 700, "deflate"),
+        ("b.ome.tif", PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, "deflate"),
+        ("c.tiff", PixelLayout::new(Channels::Rgba, Depth::U8), 301, 77, "raw"),
+        ("d.ome.tiff", PixelLayout::new(Channels::GreyAlpha, Depth::U16), 257, 129, "deflate"),
+    ];
+    for (k, (name, layout, w, h, codec)) in cases.into_iter().enumerate() {
+        let source = input(dir.path(), &format!("src{k}"), w, h, layout);
+        let tiff = dir.path().join(name);
+        ok(&["split", s(&source), "-o", s(&tiff), "--codec", codec, "--filter", "box", "--tile-size", "128", "-q"]);
+        let want = png_tiles(&source, &dir.path().join(format!("want{k}")), &["--tile-size", "96"]);
+        let got = png_tiles(&tiff, &dir.path().join(format!("got{k}")), &["--tile-size", "96"]);
+        assert!(!want.is_empty());
+        assert!(want == got, "{name}: its tiles differ from the source's");
+    }
+}
+
+/// `-o a.ome.tif` beside Deep Zoom and a pack in one run: every output written, the TIFF in
+/// the summary and in `--json`; a TIFF in a folder that does not exist fails the run and
+/// leaves nothing; a file of someone else's at the path is not replaced.
+#[test]
+fn a_tiff_is_one_output_among_others_and_atomic() {
+    let dir = tempfile::tempdir().unwrap();
+    let source = input(dir.path(), "src", 1000, 700, rgb8());
+    let (tiff, web, pack) = (dir.path().join("a.ome.tif"), dir.path().join("web"), dir.path().join("a.vtpk"));
+    let args = ["split", s(&source), "-o", s(&tiff), "-o", s(&web), "--layout", "dzi", "--pack", s(&pack)];
+    let json = ok(&[&args[..], &["--json", "--overlap", "0", "--border", "0", "--tile-size", "256"]].concat());
+    let doc: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+    let outputs = doc["outputs"].as_array().unwrap();
+    assert_eq!(outputs.len(), 3);
+    assert_eq!(outputs[0]["layout"], "ome-tiff", "{doc}");
+    let t = &outputs[0]["tiff"];
+    assert_eq!(
+        (t["flavour"].as_str(), t["levels"].as_u64(), t["bigtiff"].as_bool()),
+        (Some("ome-tiff"), Some(3), Some(false))
+    );
+    assert_eq!(t["compression"], "jpeg");
+    assert_eq!(t["fileBytes"].as_u64(), Some(std::fs::metadata(&tiff).unwrap().len()));
+    assert!(web.join("src.dzi").is_file() && pack.is_file());
+    // The summary line names it; a second run replaces our own file.
+    let text = ok(&["split", s(&source), "-o", s(&tiff), "--codec", "deflate"]);
+    assert!(text.contains("ome-tiff: 3 levels") && text.contains("deflate") && text.contains("classic TIFF"), "{text}");
+    let big = ok(&["split", s(&source), "-o", s(&tiff), "--bigtiff", "--json"]);
+    assert!(big.contains("\"bigtiff\":true"), "{big}");
+
+    let missing = dir.path().join("nowhere/b.tif");
+    fails_with(&run(&["split", s(&source), "-o", s(&missing), "-o", s(&dir.path().join("web2"))]), &["nowhere"]);
+    assert!(!missing.exists() && !dir.path().join("web2").exists());
+    let names: Vec<String> =
+        std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert!(!names.iter().any(|n| n.contains("partial")), "{names:?}");
+
+    let theirs = dir.path().join("scan.tif");
+    std::fs::write(&theirs, b"II*\0\x08\0\0\0\0\0").unwrap();
+    fails_with(&run(&["split", s(&source), "-o", s(&theirs)]), &["scan.tif", "another program", "--force"]);
+    assert_eq!(std::fs::read(&theirs).unwrap(), b"II*\0\x08\0\0\0\0\0");
+    fails_with(&run(&["split", s(&source), "-o", s(&tiff), "--codec", "png"]), &["jpeg, deflate, zstd or raw"]);
+    fails_with(&run(&["split", s(&source), "-o", s(&tiff), "--tile-size", "100"]), &["multiple of 16"]);
+}
+
+/// tifffile reads the OME-TIFF as one series with every level, libvips every SubIFD; lossless
+/// levels equal the naive pyramid, JPEG ones are within JPEG's error of it.
+#[test]
+fn readers_open_every_level_of_an_ome_tiff() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (rgb8(), 1000, 700, 256, "deflate", "exact"),
+        (PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, 128, "zstd", "exact"),
+        (rgb8(), 1000, 700, 256, "jpeg", "jpeg"),
+        (PixelLayout::new(Channels::Grey, Depth::U8), 700, 301, 128, "jpeg", "jpeg"),
+    ];
+    for (k, (layout, w, h, tile, codec, mode)) in cases.into_iter().enumerate() {
+        let source = input(dir.path(), &format!("src{k}"), w, h, layout);
+        let tiff = dir.path().join(format!("o{k}.ome.tif"));
+        ok(&["split", s(&source), "-o", s(&tiff), "--codec", codec, "--tile-size", &tile.to_string(), "-q"]);
+        let said = check(&python, "ome", &tiff, &source, tile, mode);
+        eprintln!("{}: {said}", tiff.display());
+    }
+}
+
+/// The generic pyramid: tifffile and libvips read a page a level; OpenSlide 4 opens it as
+/// generic-tiff with every level, and `read_region` gives the source.
+#[test]
+fn readers_open_every_level_of_a_generic_pyramid() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (rgb8(), 1000, 700, 256, "deflate", "exact"),
+        (rgb8(), 999, 701, 128, "jpeg", "jpeg"),
+        (PixelLayout::new(Channels::Rgb, Depth::U16), 301, 203, 64, "deflate", "exact"),
+        (PixelLayout::new(Channels::Grey, Depth::U16), 301, 203, 64, "zstd", "exact"),
+        (rgb8(), 450, 333, 256, "raw", "exact"),
+    ];
+    for (k, (layout, w, h, tile, codec, mode)) in cases.into_iter().enumerate() {
+        let source = input(dir.path(), &format!("src{k}"), w, h, layout);
+        let tiff = dir.path().join(format!("g{k}.tif"));
+        let tile_arg = tile.to_string();
+        ok(&["split", s(&source), "-o", s(&tiff), "--codec", codec, "--filter", "box", "--tile-size", &tile_arg, "-q"]);
+        let said = check(&python, "generic", &tiff, &source, tile, mode);
+        eprintln!("{}: {said}", tiff.display());
+    }
+}
