@@ -139,3 +139,23 @@ peer_grid() { [ "$1" = strip-border1 ] && echo "254 1" || echo "256 0"; }
 PEER_DZSAVE='import sys, pyvips
 im = pyvips.Image.new_from_file(sys.argv[1], access="sequential")
 im.dzsave(sys.argv[2], tile_size=int(sys.argv[3]), overlap=int(sys.argv[4]), Q=85)'
+
+# make_slide W H PATH: a slide-like pyramidal TIFF of 256-texel JPEG tiles (Q90, shared tables), as
+# a scanner saves one, unless PATH exists. One lazy pipeline (no full-size intermediates): three
+# Perlin fields, two for the stain's hue and one for where tissue is, over a near-white
+# background, with grain on top. Needs pyvips_setup's $PY.
+make_slide() {
+  [ -s "$3" ] && return
+  log "making $3"
+  "$PY" - "$1" "$2" "$3" <<'PY'
+import sys, pyvips
+w, h, out = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+p1 = pyvips.Image.perlin(w, h, cell_size=512, seed=1)
+p2 = pyvips.Image.perlin(w, h, cell_size=128, seed=2)
+t = (pyvips.Image.perlin(w, h, cell_size=2048, seed=3) * 3 + 0.5).cast("float")
+t = (t > 1).ifthenelse(1, (t < 0).ifthenelse(0, t))
+stain = (p1 * 70 + 180).bandjoin([p2 * 60 + 120, p1 * -40 + 200])
+mix = stain * t + (1 - t) * 242 + pyvips.Image.gaussnoise(w, h, sigma=6, mean=0)
+mix.cast("uchar").copy(interpretation="srgb").tiffsave(out, tile=True, tile_width=256, tile_height=256, pyramid=True, compression="jpeg", Q=90, bigtiff=True)
+PY
+}

@@ -58,23 +58,6 @@ export VIPS_WARNING=0
 cd "$WORK"
 SLIDE=slide-$SIZE.tif
 LZW=slide-$SIZE-lzw.tif
-# make_slide W H PATH: one lazy pipeline (no full-size intermediates): three Perlin fields, two
-# for the stain's hue and one for where tissue is, over a near-white background, with grain on top.
-make_slide() {
-  [ -s "$3" ] && return
-  log "making $3"
-  "$PY" - "$1" "$2" "$3" <<'PY'
-import sys, pyvips
-w, h, out = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
-p1 = pyvips.Image.perlin(w, h, cell_size=512, seed=1)
-p2 = pyvips.Image.perlin(w, h, cell_size=128, seed=2)
-t = (pyvips.Image.perlin(w, h, cell_size=2048, seed=3) * 3 + 0.5).cast("float")
-t = (t > 1).ifthenelse(1, (t < 0).ifthenelse(0, t))
-stain = (p1 * 70 + 180).bandjoin([p2 * 60 + 120, p1 * -40 + 200])
-mix = stain * t + (1 - t) * 242 + pyvips.Image.gaussnoise(w, h, sigma=6, mean=0)
-mix.cast("uchar").copy(interpretation="srgb").tiffsave(out, tile=True, tile_width=256, tile_height=256, pyramid=True, compression="jpeg", Q=90, bigtiff=True)
-PY
-}
 make_slide "$W" "$H" "$SLIDE"
 OS_W=${OPENSLIDE_SIZE%x*}
 OS_H=${OPENSLIDE_SIZE#*x}

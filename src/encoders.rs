@@ -122,7 +122,7 @@ pub(crate) fn consume<T: Sample>(
             (true, _) => Ok(None),
             (false, Some(texel)) => Ok(Some(texel)),
             (false, None) => {
-                Err(TilerError::Options("a sink that repeats the edge was fed pages padded with a colour".into()))
+                Err(TilerError::Internal("a sink that repeats the edge was fed pages padded with a colour".into()))
             }
         })
         .collect::<Result<Vec<_>>>()?;
@@ -297,7 +297,7 @@ impl<T: Sample> Encoding<'_, T> {
                 (_, Some(File::Encoded(bytes) | File::Copied(bytes) | File::Cropped(bytes))) => {
                     sink.write_tile(job.lod, x, y, bytes)?
                 }
-                (_, None) => return Err(TilerError::Options("a tile was prepared without its file".into())),
+                (_, None) => return Err(TilerError::Internal("a tile was prepared without its file".into())),
             }
             self.counts.tiles[t].fetch_add(1, Ordering::Relaxed);
             count += 1;
@@ -343,7 +343,7 @@ impl<T: Sample> Lot<T> {
         while finished.1 > 0 {
             finished = self.done.wait(finished).unwrap_or_else(|poisoned| poisoned.into_inner());
         }
-        let missing = || Err(TilerError::Options("an encoding task stopped without a result".into()));
+        let missing = || Err(TilerError::Internal("an encoding task stopped without a result".into()));
         finished.0.iter_mut().map(|r| r.take().unwrap_or_else(missing)).collect()
     }
 }
@@ -411,7 +411,7 @@ impl<T: Sample> Job<T> {
     /// The texels, for the one run of this job.
     fn take_texels(&self) -> Result<Arc<Vec<T>>> {
         let mut slot = self.texels.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-        slot.take().ok_or_else(|| TilerError::Options("a tile was encoded twice".into()))
+        slot.take().ok_or_else(|| TilerError::Internal("a tile was encoded twice".into()))
     }
 }
 

@@ -116,8 +116,9 @@ pub enum TilerError {
     #[error("interrupted; nothing was left at the destination")]
     Interrupted,
 
-    /// A thread of the run panicked: a bug, not bad input. The run stopped and left nothing at
-    /// the destination.
+    /// A bug, not bad input: a thread of the run panicked, or a check of the run's own work
+    /// failed (a tile written twice, tiles missing from an output). The run stopped and left
+    /// nothing at the destination.
     #[error("internal error: {0}")]
     Internal(String),
 

@@ -115,8 +115,8 @@ impl Open {
         let written = summary.per_target.get(at).copied().unwrap_or_default();
         let total = planned.layout.total_tiles() * planes;
         if written.tiles != total {
-            return Err(TilerError::Options(format!(
-                "internal error: wrote {} tiles of {total} into {}",
+            return Err(TilerError::Internal(format!(
+                "wrote {} tiles of {total} into {}",
                 written.tiles,
                 planned.output.path.display()
             )));
@@ -148,7 +148,7 @@ impl Open {
                 }
             }
             (Sink::Tiff(sink), _) => tiff = Some(sink.finish()?),
-            _ => return Err(TilerError::Options("internal error: an output's sink is not its format's".into())),
+            _ => return Err(TilerError::Internal("an output's sink is not its format's".into())),
         }
         // The pyramid's summary in this output's terms: its levels, its tiles and bytes.
         let summary = Summary { layout: planned.layout, tiles: written.tiles, bytes: written.bytes, ..summary.clone() };
@@ -275,8 +275,8 @@ impl Plan {
             let target = Target { sink: &sink.plane(c as u32), lods, background };
             let done = split::split_to(&mut source, &[target], opts, progress)?;
             if done.tiles != total {
-                return Err(TilerError::Options(format!(
-                    "internal error: wrote {} tiles of {total} of channel {k}",
+                return Err(TilerError::Internal(format!(
+                    "wrote {} tiles of {total} of channel {k}",
                     done.tiles
                 )));
             }

@@ -101,7 +101,7 @@ impl DirSink {
                 }
             }
             Names::Pattern(_) => {
-                return Err(TilerError::Options("a tile directory is finished with its info.json".into()));
+                return Err(TilerError::Internal("a tile directory is finished with its info.json".into()));
             }
         };
         self.complete(manifests)

@@ -26,7 +26,7 @@ pub trait TileSink: Sync {
     /// A tile whose texels all equal `texel` (samples of the stored layout, little-endian);
     /// only called when `takes_constants`.
     fn write_constant(&self, lod: u32, x: u32, y: u32, _texel: &[u8]) -> Result<()> {
-        Err(TilerError::Options(format!("tile (lod {lod}, x {x}, y {y}): this sink stores no one-colour tiles")))
+        Err(TilerError::Internal(format!("tile (lod {lod}, x {x}, y {y}): this sink stores no one-colour tiles")))
     }
     /// Whether tiles must arrive in the same order on every run (a pack's bytes depend on it;
     /// a directory's do not, and takes them from many threads at once).

@@ -117,7 +117,7 @@ impl RowSource for Branch {
             let at = s.next[self.index];
             if let Some(held) = at.checked_sub(s.first).and_then(|k| s.rows.get(k as usize)) {
                 if held.len() != row.len() {
-                    return Err(TilerError::Options("a shared source row was asked with another width".into()));
+                    return Err(TilerError::Internal("a shared source row was asked with another width".into()));
                 }
                 row.copy_from_slice(held);
                 s.next[self.index] += 1;

@@ -34,10 +34,10 @@ fn readme_quick_start_runs() {
     // The README's first command, run from the repository root into a temporary directory.
     let root = env!("CARGO_MANIFEST_DIR");
     let readme = std::fs::read_to_string(format!("{root}/README.md")).unwrap();
-    let line = readme.lines().find(|l| l.starts_with("cargo run --release -- split")).expect("quick-start line");
+    let line = readme.lines().find(|l| l.starts_with("cargo run -- split")).expect("quick-start line");
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let args: Vec<&str> = line.split('#').next().unwrap().split_whitespace().skip(4).collect();
+    let args: Vec<&str> = line.split('#').next().unwrap().split_whitespace().skip(3).collect();
     let args: Vec<&str> = args.into_iter().map(|a| if a == "out/" { out.to_str().unwrap() } else { a }).collect();
     let r = Command::new(env!("CARGO_BIN_EXE_vortex-tiler")).current_dir(root).args(&args).output().unwrap();
     assert!(r.status.success(), "{args:?}: {}", String::from_utf8_lossy(&r.stderr));

@@ -133,8 +133,8 @@ impl OmeZarrSink {
     pub fn finish(self) -> Result<()> {
         let open = lock(&self.open).len();
         if open > 0 {
-            return Err(TilerError::Options(format!(
-                "internal error: {open} shard(s) of {} never completed",
+            return Err(TilerError::Internal(format!(
+                "{open} shard(s) of {} never completed",
                 self.dest.shown()
             )));
         }

@@ -198,7 +198,7 @@ impl PmtilesSink {
     ) -> Result<PmtilesSummary> {
         tiles.sort_unstable_by_key(|t| t.tile_id);
         if let Some(w) = tiles.windows(2).find(|w| w[0].tile_id == w[1].tile_id) {
-            return Err(TilerError::Options(format!("internal error: tile id {} written twice", w[0].tile_id)));
+            return Err(TilerError::Internal(format!("tile id {} written twice", w[0].tile_id)));
         }
         // Data in tile-id order, each distinct payload once, where it first occurs.
         let mut placed: HashMap<u64, u64> = HashMap::new();
@@ -258,8 +258,8 @@ impl PmtilesSink {
         // Read our own archive back: the header and every directory must give the entries.
         let (read_header, read_entries) = read_entries(out)?;
         if read_header != header.stored() || read_entries != entries {
-            return Err(TilerError::Options(format!(
-                "{}: internal error: the archive's directories read back differ from those written",
+            return Err(TilerError::Internal(format!(
+                "{}: the archive's directories read back differ from those written",
                 out.shown()
             )));
         }
