@@ -32,7 +32,7 @@ impl Background {
 
     /// The colour alpha is flattened over: the background colour, or black for `Edge`.
     #[expect(clippy::expect_used, reason = "a colour has a texel in every layout")]
-    pub fn matte<T: Sample>(&self, channels: Channels) -> Vec<T> {
+    pub(crate) fn matte<T: Sample>(&self, channels: Channels) -> Vec<T> {
         let colour = match *self {
             Background::Colour(c) => Background::Colour([c[0], c[1], c[2], 255]),
             Background::Edge => Background::Colour([0, 0, 0, 255]),

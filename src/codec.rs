@@ -14,8 +14,8 @@ use crate::error::TilerError;
 use crate::layout::Crop;
 use crate::pixel::{Channels, Depth, PixelLayout, Sample, u16_to_u8};
 
-pub const DEFAULT_ZSTD_LEVEL: i32 = 3;
-pub const DEFAULT_BC7_EFFORT: Bc7Effort = Bc7Effort::UltraFast;
+pub(crate) const DEFAULT_ZSTD_LEVEL: i32 = 3;
+pub(crate) const DEFAULT_BC7_EFFORT: Bc7Effort = Bc7Effort::UltraFast;
 
 /// JPEG chroma subsampling.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -97,7 +97,7 @@ impl PngLevel {
 pub use vortex_bc::Bc7Effort;
 
 /// zstd levels `--zstd-level` accepts (zstd's negative "fast" levels are left out).
-pub const ZSTD_LEVELS: RangeInclusive<i32> = 1..=22;
+pub(crate) const ZSTD_LEVELS: RangeInclusive<i32> = 1..=22;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Codec {
@@ -131,7 +131,7 @@ impl Codec {
     /// headers), a PNG its filtered rows in stored Deflate blocks with every chunk's framing
     /// (generously: an eighth more and 1 KiB). Both grow their buffer as they write, which
     /// `split`'s encoders shrink to the length once a tile is encoded (`encoders::prepare`).
-    pub fn most_encoded_bytes(&self, side: u32, stored: PixelLayout) -> u64 {
+    pub(crate) fn most_encoded_bytes(&self, side: u32, stored: PixelLayout) -> u64 {
         let side = side as u64;
         let (texels, channels) = (side * side, stored.channels);
         let stored = texels * stored.bytes_per_pixel() as u64;
@@ -182,12 +182,12 @@ impl Codec {
 
     /// Whether a tile of this codec is an image file (JPEG, PNG) that a directory of tiles can
     /// hold; the others are pack payloads only.
-    pub fn writes_files(&self) -> bool {
+    pub(crate) fn writes_files(&self) -> bool {
         matches!(self, Codec::Jpeg { .. } | Codec::Png { .. })
     }
 
     /// Refuses a tile side this codec cannot store: BC blocks are 4x4 texels.
-    pub fn check_tile_size(&self, side: u32) -> Result<(), TilerError> {
+    pub(crate) fn check_tile_size(&self, side: u32) -> Result<(), TilerError> {
         if matches!(self, Codec::Bc1 | Codec::Bc7 { .. }) && !side.is_multiple_of(4) {
             return Err(TilerError::Options(format!(
                 "--codec {} stores 4x4-texel blocks, so --tile-size must be a multiple of 4, not {side}",
@@ -307,7 +307,7 @@ impl<T: Sample> TileEncoder<T> {
         self.stored
     }
 
-    pub fn source_layout(&self) -> PixelLayout {
+    pub(crate) fn source_layout(&self) -> PixelLayout {
         self.source
     }
 
@@ -353,7 +353,7 @@ impl<T: Sample> TileEncoder<T> {
     }
 
     /// One source texel as stored (flattened, depth converted), little-endian samples.
-    pub fn stored_texel(&self, texel: &[T]) -> Vec<u8> {
+    pub(crate) fn stored_texel(&self, texel: &[T]) -> Vec<u8> {
         self.stored_bytes(&self.flattened(texel)).into_owned()
     }
 
@@ -379,7 +379,7 @@ impl<T: Sample> TileEncoder<T> {
 
     /// Encodes the `crop` part of a `side x side` tile as an image file of the crop's size (a
     /// viewer layout's edge tile). Only image codecs (JPEG, PNG) make files of any size.
-    pub fn encode_crop(&self, texels: &[T], crop: Crop, out: &mut Vec<u8>) -> Result<(), String> {
+    pub(crate) fn encode_crop(&self, texels: &[T], crop: Crop, out: &mut Vec<u8>) -> Result<(), String> {
         let (side, channels) = (self.side as usize, self.source.channels.count());
         if crop == Crop::whole(self.side) {
             return self.encode(texels, out);

@@ -139,12 +139,12 @@ impl TilerError {
         TilerError::Decode { path: path.into(), message: message.to_string() }
     }
 
-    pub fn unsupported(path: impl Into<PathBuf>, message: impl ToString) -> Self {
+    pub(crate) fn unsupported(path: impl Into<PathBuf>, message: impl ToString) -> Self {
         TilerError::Unsupported { path: path.into(), message: message.to_string() }
     }
 
     /// A thread that panicked (`what`: which one), or a lock it left poisoned.
-    pub fn panicked(what: &str) -> Self {
+    pub(crate) fn panicked(what: &str) -> Self {
         TilerError::Internal(format!("{what} panicked"))
     }
 

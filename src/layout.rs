@@ -19,7 +19,7 @@ pub const MAX_SIDE: u64 = 1 << 24;
 
 /// LODs of a grid whose longer axis has `pages` pages at LOD 0: one per halving, down to the
 /// first LOD of one page (`info.json` readers check `lodCount` with it too).
-pub fn lods_for(pages: u32) -> u32 {
+pub(crate) fn lods_for(pages: u32) -> u32 {
     pages.next_power_of_two().trailing_zeros() + 1
 }
 
@@ -90,7 +90,7 @@ impl Layout {
 
     /// The thesis's `tileCount` (pages per side of a square power-of-two grid), for the grids
     /// that are one; other grids have no such number.
-    pub fn square_tile_count(&self) -> Option<u32> {
+    pub(crate) fn square_tile_count(&self) -> Option<u32> {
         (self.columns == self.rows && self.columns.is_power_of_two()).then_some(self.columns)
     }
 
@@ -101,7 +101,7 @@ impl Layout {
     }
 
     /// The pack's level table for this grid (docs/pack-format.md), LOD 0 first.
-    pub fn pack_levels(&self) -> Vec<vortex_pack::Level> {
+    pub(crate) fn pack_levels(&self) -> Vec<vortex_pack::Level> {
         (0..self.lod_count)
             .map(|lod| {
                 let ((tiles_w, tiles_h), (width, height)) = (self.grid(lod), self.level_extent(lod));
@@ -116,7 +116,7 @@ impl Layout {
     }
 
     /// Texels of one stored tile.
-    pub fn tile_texels(&self) -> usize {
+    pub(crate) fn tile_texels(&self) -> usize {
         (self.tile_size as usize).pow(2)
     }
 }
@@ -131,7 +131,7 @@ pub struct Crop {
 }
 
 impl Crop {
-    pub fn whole(side: u32) -> Crop {
+    pub(crate) fn whole(side: u32) -> Crop {
         Crop { x: 0, y: 0, width: side, height: side }
     }
 }

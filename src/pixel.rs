@@ -42,7 +42,7 @@ impl Channels {
     }
 
     /// `tileFormat` as written in `info.json`.
-    pub fn tile_format(self) -> &'static str {
+    pub(crate) fn tile_format(self) -> &'static str {
         match self {
             Channels::Grey => "luminance",
             Channels::GreyAlpha => "luminanceAlpha",
@@ -51,7 +51,7 @@ impl Channels {
         }
     }
 
-    pub fn from_tile_format(name: &str) -> Option<Channels> {
+    pub(crate) fn from_tile_format(name: &str) -> Option<Channels> {
         [Channels::Grey, Channels::GreyAlpha, Channels::Rgb, Channels::Rgba]
             .into_iter()
             .find(|c| c.tile_format() == name)
@@ -85,13 +85,13 @@ impl Depth {
     }
 
     /// Whether samples are IEEE floats rather than unsigned integers.
-    pub fn is_float(self) -> bool {
+    pub(crate) fn is_float(self) -> bool {
         matches!(self, Depth::F32 | Depth::F16)
     }
 
     /// Whether this depth is one of the 8/16-bit integer depths that every codec and filter
     /// takes; the others (32-bit, float) go through fewer of them.
-    pub fn is_narrow_int(self) -> bool {
+    pub(crate) fn is_narrow_int(self) -> bool {
         matches!(self, Depth::U8 | Depth::U16)
     }
 
@@ -111,12 +111,12 @@ impl Depth {
     }
 
     /// A pack header's `sample_format` for this depth (docs/pack-format.md).
-    pub fn pack_sample_format(self) -> u8 {
+    pub(crate) fn pack_sample_format(self) -> u8 {
         if self.is_float() { vortex_pack::format::SAMPLE_FLOAT } else { vortex_pack::format::SAMPLE_UNSIGNED }
     }
 
     /// The depth of a pack's `sample_bytes` and `sample_format`, if it is one.
-    pub fn from_pack(sample_bytes: u8, sample_format: u8) -> Option<Depth> {
+    pub(crate) fn from_pack(sample_bytes: u8, sample_format: u8) -> Option<Depth> {
         Depth::ALL.into_iter().find(|d| d.bytes() == sample_bytes as usize && d.pack_sample_format() == sample_format)
     }
 }
@@ -414,7 +414,7 @@ impl<A: Acc> ExactRow<'_, A> {
 
     /// `out[i] = mean i` in f64, rounded to the nearest `f32`: a power-of-two divisor for the
     /// complete footprints is exact, any other one rounds once.
-    pub fn map_float_means(&self, out: &mut [f32]) {
+    pub(crate) fn map_float_means(&self, out: &mut [f32]) {
         debug_assert_eq!(out.len(), self.sums.len());
         let c = self.channels;
         for (i, (o, s)) in out.iter_mut().zip(self.sums).enumerate() {
@@ -426,7 +426,7 @@ impl<A: Acc> ExactRow<'_, A> {
     /// row order; a shift for the leading texels with complete footprints, a division for the
     /// rest. Two plain loops, not one iterator over both, so that each compiles to a tight one
     /// (this is most of a level's cost: issue 18).
-    pub fn map_means<T>(&self, out: &mut [T], f: impl Fn(u64) -> T) {
+    pub(crate) fn map_means<T>(&self, out: &mut [T], f: impl Fn(u64) -> T) {
         debug_assert_eq!(out.len(), self.sums.len());
         let c = self.channels;
         let (head, tail) = self.sums.split_at(self.full_cols * c);

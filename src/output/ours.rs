@@ -45,7 +45,7 @@ impl Product {
     }
 
     /// The product as the messages name it.
-    pub fn noun(self) -> &'static str {
+    pub(crate) fn noun(self) -> &'static str {
         match self {
             Product::Pack => "a pack",
             Product::TileDir => "a tile directory",

@@ -17,7 +17,7 @@ mod write;
 
 use std::path::{Path, PathBuf};
 
-pub use plan::{Plan, Planned};
+pub use plan::Plan;
 pub use write::Wrote;
 
 use crate::formats::ome_zarr::{PixelSize, Version};

@@ -101,9 +101,9 @@ pub struct ServeOptions {
 
 /// The largest `--max-concurrent` and `--max-connections`: far more than one process serves
 /// well, and far under what tokio's semaphores hold.
-pub const MAX_CONNECTIONS: usize = 65_536;
+pub(crate) const MAX_CONNECTIONS: usize = 65_536;
 /// The longest `--idle-timeout`, in seconds.
-pub const MAX_IDLE_TIMEOUT_S: u64 = 3600;
+pub(crate) const MAX_IDLE_TIMEOUT_S: u64 = 3600;
 
 impl ServeOptions {
     /// Refuses counts of 0 (no request would ever be answered) and counts over the caps,

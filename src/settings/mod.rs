@@ -8,7 +8,7 @@ use base64::Engine;
 
 use crate::background::Background;
 use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling, ZSTD_LEVELS};
-pub use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
+pub(crate) use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
 use crate::error::{Result, TilerError};
 pub use crate::formats::tiles::filename::DEFAULT_FILENAME_STEM;
 use crate::formats::tiles::filename::FilenameFormat;
@@ -20,12 +20,12 @@ use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::pyramid::filter::Filter;
 use crate::source::ImageHeader;
 
-pub const DEFAULT_TILE_SIZE: u32 = 128;
+pub(crate) const DEFAULT_TILE_SIZE: u32 = 128;
 /// Border of `--layout vortex` tiles when neither the flag nor an `info.json` sets one: one
 /// texel is what bilinear and trilinear filtering read across a page edge, so the runtime's
 /// default filter shows no seams (border 0 does: docs/gpu-sampling.md).
-pub const DEFAULT_BORDER: u32 = 1;
-pub const DEFAULT_QUALITY: u8 = 85;
+pub(crate) const DEFAULT_BORDER: u32 = 1;
+pub(crate) const DEFAULT_QUALITY: u8 = 85;
 
 /// Which codec: `auto` picks JPEG for 8-bit grey or RGB and PNG for anything with alpha or 16 bits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

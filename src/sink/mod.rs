@@ -8,7 +8,7 @@
 //! under a temporary name and rename into place when complete.
 
 mod dir;
-pub mod icc;
+pub(crate) mod icc;
 
 pub use dir::DirSink;
 
@@ -46,7 +46,7 @@ pub trait TileSink: Sync {
 /// feed several sinks ([`crate::split::split_to`]), a pack stopping at its one-page level where
 /// Deep Zoom goes on down to one texel.
 #[derive(Clone, Copy)]
-pub struct Target<'a> {
+pub(crate) struct Target<'a> {
     pub sink: &'a dyn TileSink,
     pub lods: u32,
     /// What its padding holds: pages cut with the edge repeated are filled with its colour

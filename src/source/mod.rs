@@ -69,7 +69,6 @@ mod whole;
 pub(crate) mod xml;
 
 pub(crate) use crate::decode::{decode_tile, decode_tile_within, probe_tile};
-pub use stored::{Quality, StoredTiles};
 
 use std::fs::File;
 use std::io::Read;
@@ -185,7 +184,7 @@ impl OpenOptions {
 }
 
 /// A source as [`open_with`] presents it, and the ICC profile its texels are in when kept.
-pub type Opened = (Box<dyn RowSource>, Option<Vec<u8>>);
+pub(crate) type Opened = (Box<dyn RowSource>, Option<Vec<u8>>);
 
 /// Opens `path` as viewers show it (or as `opts` says): its orientation applied and its ICC
 /// profile converted to sRGB. Returns the profile when `keep_icc` keeps it, for the output to

@@ -16,7 +16,7 @@ use crate::limits::human_bytes;
 
 /// Passes over the source allowed for one image before a reorientation is refused: each pass
 /// of a JPEG or PNG decodes the whole file again.
-pub const MAX_PASSES: u64 = 8;
+pub(crate) const MAX_PASSES: u64 = 8;
 
 /// The EXIF/TIFF Orientation tag (274): where the stored first row and column belong.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -41,7 +41,7 @@ impl Orientation {
     }
 
     /// Stored columns become rows (orientations 5 to 8).
-    pub fn transposes(self) -> bool {
+    pub(crate) fn transposes(self) -> bool {
         self.0 >= 5
     }
 
@@ -78,7 +78,7 @@ impl Orientation {
 /// The Orientation in an EXIF block: a TIFF structure (byte order, IFD0), as JPEG's APP1
 /// (after "Exif\0\0") and PNG's eXIf chunk hold it. Anything malformed means no orientation:
 /// viewers ignore what they cannot read, and so do we.
-pub fn from_exif(exif: &[u8]) -> Orientation {
+pub(crate) fn from_exif(exif: &[u8]) -> Orientation {
     let exif = exif.strip_prefix(b"Exif\0\0").unwrap_or(exif);
     let big = match exif.get(..4) {
         Some(b"II*\0") => false,

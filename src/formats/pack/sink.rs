@@ -68,7 +68,7 @@ impl PackSink {
     }
 
     /// [`finish`](Self::finish) with other metadata than given at the start.
-    pub fn finish_with_metadata(self, metadata: Vec<u8>) -> Result<WriteSummary> {
+    pub(crate) fn finish_with_metadata(self, metadata: Vec<u8>) -> Result<WriteSummary> {
         let mut writer = self.writer.into_inner().map_err(|_| TilerError::panicked("a tile writer"))?;
         writer.set_metadata(metadata)?;
         Ok(writer.finish()?)

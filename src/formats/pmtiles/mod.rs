@@ -37,14 +37,14 @@ const ROOT_LIMIT: usize = 16384 - HEADER_LEN;
 /// Entries per leaf directory to start from (as go-pmtiles); doubled until the root fits.
 const FIRST_LEAF_SIZE: usize = 4096;
 /// The deepest zoom a PMTiles reader accepts (tile ids must stay below 2^53 in JavaScript).
-pub const MAX_ZOOM: u32 = 26;
+pub(crate) const MAX_ZOOM: u32 = 26;
 /// Memory held per tile until `finish`, a bound for `--max-memory`: its spooled entry (24
 /// bytes), its share of the content map (about 56), and its directory entry at the end (24).
-pub const ENTRY_MEMORY_BYTES: u64 = 104;
+pub(crate) const ENTRY_MEMORY_BYTES: u64 = 104;
 
 /// The spec's tile types.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TileType {
+pub(crate) enum TileType {
     Png = 2,
     Jpeg = 3,
 }
@@ -117,7 +117,7 @@ struct Spool {
 }
 
 /// Writes one PMTiles archive; see the module's description.
-pub struct PmtilesSink {
+pub(crate) struct PmtilesSink {
     dest: PathBuf,
     spool_path: PathBuf,
     out_path: PathBuf,
@@ -329,7 +329,7 @@ impl TileSink for PmtilesSink {
 
 /// The area and view a map reader is told about, in degrees.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Bounds {
+pub(crate) struct Bounds {
     pub min_lon: f64,
     pub min_lat: f64,
     pub max_lon: f64,

@@ -95,11 +95,6 @@ impl TiffWriter {
         Ok(TiffWriter { path: path.to_path_buf(), file, spec, big, len: DATA_AT, bases, tiles, tile_bytes: 0 })
     }
 
-    /// Whether the file is BigTIFF.
-    pub fn is_bigtiff(&self) -> bool {
-        self.big
-    }
-
     /// Appends tile `(x, y)` of `level`: `bytes` as the file stores them (compressed).
     pub fn add_tile(&mut self, level: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
         let err = |message: String| TilerError::Encode { lod: level, x, y, message };
@@ -129,11 +124,6 @@ impl TiffWriter {
         self.len = end;
         self.tile_bytes += bytes.len() as u64;
         Ok(())
-    }
-
-    /// Bytes of tile data written so far.
-    pub fn tile_bytes(&self) -> u64 {
-        self.tile_bytes
     }
 
     /// Writes the IFDs after the tiles, points the header at the first, and syncs the file.

@@ -127,7 +127,7 @@ impl FilenameFormat {
 
     /// The arguments that would give `name`, or `None` if it does not match the pattern (or
     /// gives one argument two values).
-    pub fn match_name(&self, name: &str) -> Option<Vec<u32>> {
+    pub(crate) fn match_name(&self, name: &str) -> Option<Vec<u32>> {
         let mut args: Vec<Option<u32>> = vec![None; self.arg_count()];
         let mut rest = name;
         for p in &self.pieces {

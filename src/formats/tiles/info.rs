@@ -9,11 +9,11 @@ use crate::error::{Result, TilerError};
 use crate::layout::lods_for;
 
 /// The `formatVersion` this tool writes. Files without the member are the thesis's version 0.
-pub const FORMAT_VERSION: u32 = 2;
+pub(crate) const FORMAT_VERSION: u32 = 2;
 
 /// The border of the tiles a file without `border` describes: the thesis's files have no such
 /// member, and their tiles no border.
-pub const BORDER_WHEN_ABSENT: u32 = 0;
+pub(crate) const BORDER_WHEN_ABSENT: u32 = 0;
 
 /// Every member; on reading, all are optional (the thesis's files have only the first six).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -60,7 +60,7 @@ pub struct InfoFile {
 }
 
 /// A complete description, as written after a successful run.
-pub type Info = InfoFile;
+pub(crate) type Info = InfoFile;
 
 impl InfoFile {
     /// Reads and checks an existing `info.json`.

@@ -183,7 +183,7 @@ impl TiledSource {
 
     /// Bytes held while a row of cells is read: the decoded cells of the row and the band
     /// they are copied into, each a cell high and the image wide.
-    pub fn band_bytes(&self) -> u64 {
+    pub(crate) fn band_bytes(&self) -> u64 {
         let (_, ch) = self.grid.cell();
         2 * ch as u64 * self.header.width as u64 * self.header.layout.bytes_per_pixel() as u64
     }

@@ -86,7 +86,8 @@ impl Iiif {
     }
 
     /// The IIIF Image API version (2 or 3).
-    pub fn version(&self) -> u8 {
+    #[cfg(test)]
+    pub(crate) fn version(&self) -> u8 {
         self.version
     }
 
