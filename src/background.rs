@@ -5,6 +5,8 @@ use std::str::FromStr;
 
 use crate::pixel::{Channels, Sample};
 
+/// What fills a page's texels past the image's right and bottom edges (`--background`,
+/// `info.json`'s `background`): `edge`, `#rrggbb` or `#rrggbbaa`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Background {
     /// Repeat the image's edge texels (no visible seam when a runtime filters across the edge).

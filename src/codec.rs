@@ -99,26 +99,37 @@ pub use vortex_bc::Bc7Effort;
 /// zstd levels `--zstd-level` accepts (zstd's negative "fast" levels are left out).
 pub(crate) const ZSTD_LEVELS: RangeInclusive<i32> = 1..=22;
 
+/// How a tile's texels become bytes (`--codec`, `info.json`'s `codec`). JPEG and PNG tiles
+/// are image files, so a tile directory or a viewer layout can hold them; the others only a
+/// pack.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Codec {
+    /// JPEG (libjpeg-turbo): 8-bit grey or RGB, lossy.
     Jpeg {
+        /// 1 to 100 (`--quality`).
         quality: u8,
+        /// Chroma subsampling of RGB tiles; grey tiles have none.
         subsampling: Subsampling,
     },
+    /// PNG: any channels, 8 or 16 bits, lossless.
     Png {
+        /// Compression effort (`--png-compression`): size and time, never the texels.
         level: PngLevel,
     },
     /// Texels as a GPU uploads them (packs only).
     Raw,
     /// Raw texels compressed with zstd, rows left-delta filtered first with `delta` (packs only).
     Zstd {
+        /// The zstd level, 1 to 22 (`--zstd-level`).
         level: i32,
+        /// Whether each row is left-delta filtered first (`--codec zstd-delta`).
         delta: bool,
     },
     /// BC1 blocks, opaque RGB (packs only).
     Bc1,
     /// BC7 blocks, RGB or RGBA (packs only).
     Bc7 {
+        /// The encoder's effort (`--bc7-effort`): time against quality.
         effort: Bc7Effort,
     },
 }
@@ -290,6 +301,10 @@ pub struct TileEncoder<T> {
 }
 
 impl<T: Sample> TileEncoder<T> {
+    /// An encoder of `side`-texel tiles of `source` texels with `codec`: `flatten` composites
+    /// alpha over `matte` (one texel in source samples), `depth` asks for stored samples of
+    /// another depth. Refuses a codec that cannot store the layout, or a `side` it cannot
+    /// take (BC tiles: a multiple of 4), with the message the command line prints.
     pub fn new(
         codec: Codec,
         source: PixelLayout,
@@ -303,6 +318,7 @@ impl<T: Sample> TileEncoder<T> {
         Ok(TileEncoder { codec, source, stored, side, matte })
     }
 
+    /// The texels the tiles hold, after flattening and the stored depth.
     pub fn stored_layout(&self) -> PixelLayout {
         self.stored
     }

@@ -28,18 +28,27 @@ pub(crate) fn lods_for(pages: u32) -> u32 {
 /// `payload = tile_size - 2 * border` are its own and the rest copied from neighbours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Layout {
+    /// Width of the image at LOD 0 in texels, 1 to [`MAX_SIDE`].
     pub width: u32,
+    /// Height of the image at LOD 0 in texels, 1 to [`MAX_SIDE`].
     pub height: u32,
+    /// Side of every stored page in texels, borders included: 8 to 16384.
     pub tile_size: u32,
+    /// Texels each page repeats from its neighbours on every side; the payload
+    /// (`tile_size - 2 * border`) is at least 4.
     pub border: u32,
     /// Pages per row at LOD 0.
     pub columns: u32,
     /// Page rows at LOD 0.
     pub rows: u32,
+    /// LODs in the pyramid, LOD 0 the finest, down to the first LOD of one page.
     pub lod_count: u32,
 }
 
 impl Layout {
+    /// The page grid of a `width` x `height` image in `tile_size`-texel pages with `border`
+    /// texels of border. Refuses ([`TilerError::Geometry`]) an empty image, a side above
+    /// [`MAX_SIDE`], a tile size outside 8..=16384 and a payload under 4 texels.
     pub fn new(width: u64, height: u64, tile_size: u32, border: u32) -> Result<Layout, TilerError> {
         if width == 0 || height == 0 {
             return Err(TilerError::Geometry(format!("the image is {width}x{height}: it has no pixels")));
@@ -124,9 +133,13 @@ impl Layout {
 /// The part of a stored page that a viewer's tile keeps, in the page's texels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Crop {
+    /// Left edge of the kept part, in texels from the page's left (its border included).
     pub x: u32,
+    /// Top edge of the kept part, in texels from the page's top.
     pub y: u32,
+    /// Width of the kept part in texels.
     pub width: u32,
+    /// Height of the kept part in texels.
     pub height: u32,
 }
 

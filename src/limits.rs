@@ -145,7 +145,7 @@ pub(crate) struct Gauge {
     total_peak: AtomicU64,
 }
 
-/// The parts a [`Gauge`] counts, in the pipeline's order.
+/// The parts a `Gauge` counts, in the pipeline's order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Part {
     /// The source decoder's own buffers beyond the rows it fills (a TIFF's row of tiles).
@@ -167,11 +167,14 @@ const PARTS: usize = 6;
 /// Each part's most bytes, and the most all of them held at once.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Peaks {
+    /// The most bytes each [`Part`] held, indexed by `Part as usize`; read with [`Peaks::part`].
     pub parts: [u64; PARTS],
+    /// The most bytes all parts held at one moment (at most the parts' sum).
     pub total: u64,
 }
 
 impl Peaks {
+    /// The most bytes `part` held at once.
     pub fn part(&self, part: Part) -> u64 {
         self.parts[part as usize]
     }

@@ -103,18 +103,31 @@ impl CodecChoice {
 /// What the command line asked for; `None` means "not given".
 #[derive(Clone, Debug, Default)]
 pub struct Requested {
+    /// `--tile-size`: side of a stored tile in texels, borders included.
     pub tile_size: Option<u32>,
+    /// `--border`: texels each tile repeats from its neighbours on every side.
     pub border: Option<u32>,
+    /// `--codec`.
     pub codec: Option<CodecChoice>,
+    /// `--quality`: JPEG quality, 1 to 100.
     pub quality: Option<u8>,
+    /// `--subsampling`: JPEG chroma subsampling.
     pub subsampling: Option<Subsampling>,
+    /// `--png-compression`.
     pub png_level: Option<PngLevel>,
+    /// `--zstd-level`: 1 to 22, for zstd and zstd-delta tiles.
     pub zstd_level: Option<i32>,
+    /// `--bc7-effort`.
     pub bc7_effort: Option<Bc7Effort>,
+    /// `--background`: what fills the padding past the image's edge.
     pub background: Option<Background>,
+    /// `--flatten`: composite alpha over the background, so RGBA can be stored as JPEG.
     pub flatten: bool,
+    /// `--tile-type`: the stored samples' depth, where it may differ from the source's.
     pub tile_depth: Option<Depth>,
+    /// `--filename-format`: the tile files' names (`info.json`'s `filenameFormat`).
     pub filename_format: Option<String>,
+    /// `--filter`: how LODs 1 and up are made.
     pub filter: Option<Filter>,
     /// `--max-memory` (not an `info.json` member).
     pub max_memory: Option<u64>,
@@ -257,7 +270,9 @@ pub fn resolve(
 /// tiles of any codec.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Destination {
+    /// A directory of image files and `info.json` (JPEG or PNG tiles only).
     TileDir,
+    /// One pack file (`.vtpk`), whose tiles may be of any codec.
     Pack,
 }
 
@@ -267,7 +282,9 @@ pub enum Destination {
 /// tool's way of configuring a run), else the default ([`resolve`]).
 #[derive(Clone, Debug)]
 pub struct Plan {
+    /// What the run is asked: tile size, border, codec, filter, background, memory.
     pub opts: SplitOptions,
+    /// The tile files' names (a tile directory's; a pack keeps it in its `info.json`).
     pub names: FilenameFormat,
     /// The page grid the source is cut into.
     pub layout: Layout,

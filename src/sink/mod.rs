@@ -17,6 +17,9 @@ use crate::layout::Crop;
 
 /// Takes the encoded tiles of one run.
 pub trait TileSink: Sync {
+    /// Stores tile `(x, y)` of LOD `lod` (column and row of its level's page grid, from the
+    /// top left), `bytes` as the codec encoded it. Called from the encoding threads, at most
+    /// once per place; in LOD and row order only where [`TileSink::ordered`] says so.
     fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()>;
     /// Whether one-colour tiles should come as their colour (`write_constant`) rather than
     /// encoded.

@@ -31,8 +31,11 @@ pub(crate) const MAX_CHANNELS: usize = 4096;
 
 /// The channels of one image, each to be opened as a grey source.
 pub struct ChannelSet {
+    /// Width of every channel in texels.
     pub width: u32,
+    /// Height of every channel in texels.
     pub height: u32,
+    /// Sample depth of every channel.
     pub depth: Depth,
     /// A name per channel: the OME-XML's `Channel Name`, a file's stem, or the colour's.
     pub names: Vec<String>,
@@ -121,6 +124,7 @@ impl ChannelSet {
         Ok(set)
     }
 
+    /// How many channels: one per entry of `names`.
     pub fn count(&self) -> usize {
         self.names.len()
     }

@@ -5,7 +5,7 @@
 //! RGB(A) and grey(A) stay what they are, 8 or 16 bits per sample; alpha is copied. Grey goes to
 //! a grey profile with sRGB's curve. A profile that maps every probe colour to itself within
 //! one step of the sample scale is sRGB already and is left alone (no CPU spent). CMYK JPEG rows
-//! go through [`Cmyk`] into RGB.
+//! go through `Cmyk` into RGB.
 
 use std::path::Path;
 

@@ -6,7 +6,7 @@
 //! as `--max-memory` allows: one band (the whole image, decoded once) when it fits, otherwise
 //! one pass over the source per band. A pass seeks where the source can (TIFF strips and tiles
 //! skip to the rows it needs, tiled TIFFs decode only the tiles under the columns it needs);
-//! more than [`MAX_PASSES`] passes is refused, naming `--no-autorotate`.
+//! more than `MAX_PASSES` passes is refused, naming `--no-autorotate`.
 
 use std::path::Path;
 
@@ -29,14 +29,16 @@ impl Default for Orientation {
 }
 
 impl Orientation {
-    pub const NORMAL: Orientation = Orientation(1);
+    /// Orientation 1: rows as stored, nothing to undo.
+    pub(crate) const NORMAL: Orientation = Orientation(1);
 
     /// The tag's value; anything outside 1..=8 means nothing, as viewers read it.
     pub fn from_tag(value: u16) -> Orientation {
         if (1..=8).contains(&value) { Orientation(value) } else { Orientation::NORMAL }
     }
 
-    pub fn value(self) -> u16 {
+    /// The EXIF value, 1 to 8.
+    pub(crate) fn value(self) -> u16 {
         self.0
     }
 

@@ -1,4 +1,4 @@
-//! [`OmeZarrSink`]: the pyramid as an OME-Zarr image (`split --layout ome-zarr`), each level
+//! `OmeZarrSink`: the pyramid as an OME-Zarr image (`split --layout ome-zarr`), each level
 //! one array whose chunks are our pages (border 0).
 //!
 //! Tiles come from the encoders as raw texels (interleaved, little-endian); the sink reorders

@@ -15,6 +15,8 @@ use crate::layout::Layout;
 use crate::pixel::PixelLayout;
 use crate::sink::TileSink;
 
+/// A pack being written as a run's sink: tiles appended as they come, the index and header
+/// at [`PackSink::finish`], under a temporary name until then.
 pub struct PackSink {
     writer: Mutex<PackWriter>,
     kind: TileKind,
@@ -34,6 +36,7 @@ pub(crate) fn pack_description(layout: &Layout, stored: PixelLayout) -> Descript
     }
 }
 
+/// The pack's tile kind for tiles of `codec` (a pack records one per tile).
 pub fn tile_kind(codec: Codec) -> TileKind {
     match codec {
         Codec::Jpeg { .. } => TileKind::Jpeg,

@@ -10,7 +10,7 @@
 //! by tile id, writes header, root directory, metadata, leaf directories and then the data by
 //! copying the spooled payloads in tile-id order into `.NAME.partial-PID`, reads its own
 //! directories back, and renames the archive into place. Memory holds the directory entries
-//! only (see [`ENTRY_MEMORY_BYTES`]), never the payloads; the disk holds the payloads twice
+//! only (see `ENTRY_MEMORY_BYTES`), never the payloads; the disk holds the payloads twice
 //! until the spool is removed.
 
 use std::collections::HashMap;
@@ -70,7 +70,9 @@ pub struct PmtilesSummary {
     pub contents: u64,
     /// Leaf directories (0 when the root holds every entry).
     pub leaves: u64,
+    /// Bytes of the tile data section (distinct payloads, each once).
     pub data_bytes: u64,
+    /// Bytes of the whole archive: header, directories, metadata and tile data.
     pub file_bytes: u64,
 }
 

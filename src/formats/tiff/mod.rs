@@ -8,12 +8,12 @@
 //!   its `ImageDescription`, each reduced level one of its SubIFDs (tag 330), as bioformats,
 //!   QuPath and tifffile read a pyramid.
 //!
-//! The file is written in one pass ([`TiffWriter`]): the header and a signature first, then
+//! The file is written in one pass (`TiffWriter`): the header and a signature first, then
 //! each tile's bytes appended as it arrives, in any order, with only its offset and length
 //! kept (16 bytes a tile); at the end the IFDs, their arrays and the OME-XML, and the
 //! header's first-IFD offset patched. Classic TIFF or BigTIFF is decided before the first
-//! byte from an upper bound of the file's size ([`Spec::needs_bigtiff`]), or always with
-//! [`BigTiff::Always`]. [`TiffSink`] is the writer as a pipeline sink: raw tiles compressed
+//! byte from an upper bound of the file's size (`Spec::needs_bigtiff`), or always with
+//! [`BigTiff::Always`]. `TiffSink` is the writer as a pipeline sink: raw tiles compressed
 //! on the encoder threads (`compress.rs`: Deflate or zstd with the horizontal predictor),
 //! JPEG tiles stored as they come, the file written under a temporary name and renamed into
 //! place when complete.
@@ -86,11 +86,20 @@ pub enum Compression {
     /// Uncompressed samples (1).
     None,
     /// zlib streams ("Adobe Deflate", 8), integer samples horizontally differenced first.
-    Deflate { level: u32 },
+    Deflate {
+        /// The zlib level, 0 (stored) to 9 (smallest); a planned output always takes 6.
+        level: u32,
+    },
     /// zstd frames (50000, libtiff's code), integer samples horizontally differenced first.
-    Zstd { level: i32 },
+    Zstd {
+        /// The zstd level, 1 to 22 (`--zstd-level`).
+        level: i32,
+    },
     /// One whole JPEG stream a tile (7), YCbCr at the encoder's subsampling, or grey.
-    Jpeg { subsampling: Subsampling },
+    Jpeg {
+        /// Chroma subsampling of RGB tiles.
+        subsampling: Subsampling,
+    },
 }
 
 impl Compression {
@@ -124,7 +133,7 @@ impl Compression {
 /// Classic TIFF (offsets of 32 bits, files under 4 GiB) or BigTIFF (64 bits).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum BigTiff {
-    /// BigTIFF only where the file could pass 4 GiB ([`Spec::needs_bigtiff`]).
+    /// BigTIFF only where the file could pass 4 GiB (`Spec::needs_bigtiff`).
     #[default]
     Auto,
     /// Always BigTIFF.

@@ -25,12 +25,17 @@ const DATA_AT: u64 = 32;
 #[derive(Clone, Debug, PartialEq, Eq)]
 #[non_exhaustive]
 pub struct TiffSummary {
+    /// Generic pyramidal TIFF or OME-TIFF.
     pub flavour: Flavour,
+    /// Whether the file is BigTIFF (64-bit offsets).
     pub bigtiff: bool,
+    /// Pyramid levels, the full resolution included.
     pub levels: u32,
+    /// Tiles stored, every level.
     pub tiles: u64,
-    /// Bytes of tile data, and of the whole file.
+    /// Bytes of tile data, as stored (compressed).
     pub tile_bytes: u64,
+    /// Bytes of the whole file.
     pub file_bytes: u64,
     /// The `Compression` written (`none`, `deflate`, `zstd`, `jpeg`).
     pub compression: &'static str,

@@ -107,6 +107,7 @@ impl FilenameFormat {
         Ok(FilenameFormat { source: pattern.to_string(), pieces })
     }
 
+    /// The pattern as it was parsed, as `info.json`'s `filenameFormat` writes it.
     pub fn as_str(&self) -> &str {
         &self.source
     }

@@ -41,6 +41,7 @@ pub enum Viewer {
 }
 
 impl Viewer {
+    /// The layout's `--layout` value: `dzi`, `iiif`, `xyz` or `google`.
     pub fn name(self) -> &'static str {
         match self {
             Viewer::Dzi => "dzi",
@@ -103,7 +104,9 @@ pub(crate) struct Placed {
 /// A pyramid in one viewer layout: the page grid it is cut from and its names.
 #[derive(Clone, Debug)]
 pub struct ViewerTiles {
+    /// Which layout names the tiles.
     pub viewer: Viewer,
+    /// The page grid the tiles are cut from (for Deep Zoom, down to one texel).
     pub layout: Layout,
     /// The pyramid's name: Deep Zoom's `NAME.dzi`, the XYZ TileJSON's `name`.
     pub name: String,

@@ -12,9 +12,9 @@
 //! service once uploaded there: level 0 also requires `full/max`, and every size `info.json`
 //! lists in `sizes`, as files. `max` of a gigapixel image would be the whole image at full
 //! resolution, which no client wants in one file, so `max` is bounded by `maxWidth` and
-//! `maxHeight`: it is the finest LOD whose long side is at most [`MAX_WHOLE_SIDE`], and `sizes`
+//! `maxHeight`: it is the finest LOD whose long side is at most `MAX_WHOLE_SIDE` (2048), and `sizes`
 //! lists it and every coarser LOD. Those whole-image files are made from the LOD's tiles
-//! ([`whole`]).
+//! (`whole`).
 
 mod read;
 pub(crate) mod whole;
@@ -42,7 +42,9 @@ pub(crate) const MAX_WHOLE_SIDE: u32 = 2048;
 /// the `sizes`) are encoded with, the tiles' own.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Service {
+    /// The service's absolute URL (`--iiif-id`), what `info.json`'s `id` says.
     pub id: String,
+    /// The codec of the whole-image files.
     pub codec: Codec,
 }
 

@@ -22,7 +22,7 @@ pub(crate) const DEFAULT_TILE_SIZE: u32 = 256;
 pub(crate) const TILEJSON: &str = "tilejson.json";
 
 /// Which coordinate the directories under a zoom level are named by: the one difference
-/// between the two layouts, which the writer ([`tile_path`]) and the reader
+/// between the two layouts, which the writer (`tile_path`) and the reader
 /// ([`Xyz`]) both take from here.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Order {
