@@ -5,6 +5,8 @@ use std::str::FromStr;
 
 use crate::pixel::{Channels, Sample};
 
+/// What fills a page's texels past the image's right and bottom edges (`--background`,
+/// `info.json`'s `background`): `edge`, `#rrggbb` or `#rrggbbaa`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Background {
     /// Repeat the image's edge texels (no visible seam when a runtime filters across the edge).
@@ -32,7 +34,7 @@ impl Background {
 
     /// The colour alpha is flattened over: the background colour, or black for `Edge`.
     #[expect(clippy::expect_used, reason = "a colour has a texel in every layout")]
-    pub fn matte<T: Sample>(&self, channels: Channels) -> Vec<T> {
+    pub(crate) fn matte<T: Sample>(&self, channels: Channels) -> Vec<T> {
         let colour = match *self {
             Background::Colour(c) => Background::Colour([c[0], c[1], c[2], 255]),
             Background::Edge => Background::Colour([0, 0, 0, 255]),

@@ -14,8 +14,8 @@ use crate::error::TilerError;
 use crate::layout::Crop;
 use crate::pixel::{Channels, Depth, PixelLayout, Sample, u16_to_u8};
 
-pub const DEFAULT_ZSTD_LEVEL: i32 = 3;
-pub const DEFAULT_BC7_EFFORT: Bc7Effort = Bc7Effort::UltraFast;
+pub(crate) const DEFAULT_ZSTD_LEVEL: i32 = 3;
+pub(crate) const DEFAULT_BC7_EFFORT: Bc7Effort = Bc7Effort::UltraFast;
 
 /// JPEG chroma subsampling.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -97,28 +97,39 @@ impl PngLevel {
 pub use vortex_bc::Bc7Effort;
 
 /// zstd levels `--zstd-level` accepts (zstd's negative "fast" levels are left out).
-pub const ZSTD_LEVELS: RangeInclusive<i32> = 1..=22;
+pub(crate) const ZSTD_LEVELS: RangeInclusive<i32> = 1..=22;
 
+/// How a tile's texels become bytes (`--codec`, `info.json`'s `codec`). JPEG and PNG tiles
+/// are image files, so a tile directory or a viewer layout can hold them; the others only a
+/// pack.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Codec {
+    /// JPEG (libjpeg-turbo): 8-bit grey or RGB, lossy.
     Jpeg {
+        /// 1 to 100 (`--quality`).
         quality: u8,
+        /// Chroma subsampling of RGB tiles; grey tiles have none.
         subsampling: Subsampling,
     },
+    /// PNG: any channels, 8 or 16 bits, lossless.
     Png {
+        /// Compression effort (`--png-compression`): size and time, never the texels.
         level: PngLevel,
     },
     /// Texels as a GPU uploads them (packs only).
     Raw,
     /// Raw texels compressed with zstd, rows left-delta filtered first with `delta` (packs only).
     Zstd {
+        /// The zstd level, 1 to 22 (`--zstd-level`).
         level: i32,
+        /// Whether each row is left-delta filtered first (`--codec zstd-delta`).
         delta: bool,
     },
     /// BC1 blocks, opaque RGB (packs only).
     Bc1,
     /// BC7 blocks, RGB or RGBA (packs only).
     Bc7 {
+        /// The encoder's effort (`--bc7-effort`): time against quality.
         effort: Bc7Effort,
     },
 }
@@ -131,7 +142,7 @@ impl Codec {
     /// headers), a PNG its filtered rows in stored Deflate blocks with every chunk's framing
     /// (generously: an eighth more and 1 KiB). Both grow their buffer as they write, which
     /// `split`'s encoders shrink to the length once a tile is encoded (`encoders::prepare`).
-    pub fn most_encoded_bytes(&self, side: u32, stored: PixelLayout) -> u64 {
+    pub(crate) fn most_encoded_bytes(&self, side: u32, stored: PixelLayout) -> u64 {
         let side = side as u64;
         let (texels, channels) = (side * side, stored.channels);
         let stored = texels * stored.bytes_per_pixel() as u64;
@@ -182,12 +193,12 @@ impl Codec {
 
     /// Whether a tile of this codec is an image file (JPEG, PNG) that a directory of tiles can
     /// hold; the others are pack payloads only.
-    pub fn writes_files(&self) -> bool {
+    pub(crate) fn writes_files(&self) -> bool {
         matches!(self, Codec::Jpeg { .. } | Codec::Png { .. })
     }
 
     /// Refuses a tile side this codec cannot store: BC blocks are 4x4 texels.
-    pub fn check_tile_size(&self, side: u32) -> Result<(), TilerError> {
+    pub(crate) fn check_tile_size(&self, side: u32) -> Result<(), TilerError> {
         if matches!(self, Codec::Bc1 | Codec::Bc7 { .. }) && !side.is_multiple_of(4) {
             return Err(TilerError::Options(format!(
                 "--codec {} stores 4x4-texel blocks, so --tile-size must be a multiple of 4, not {side}",
@@ -290,6 +301,10 @@ pub struct TileEncoder<T> {
 }
 
 impl<T: Sample> TileEncoder<T> {
+    /// An encoder of `side`-texel tiles of `source` texels with `codec`: `flatten` composites
+    /// alpha over `matte` (one texel in source samples), `depth` asks for stored samples of
+    /// another depth. Refuses a codec that cannot store the layout, or a `side` it cannot
+    /// take (BC tiles: a multiple of 4), with the message the command line prints.
     pub fn new(
         codec: Codec,
         source: PixelLayout,
@@ -303,11 +318,12 @@ impl<T: Sample> TileEncoder<T> {
         Ok(TileEncoder { codec, source, stored, side, matte })
     }
 
+    /// The texels the tiles hold, after flattening and the stored depth.
     pub fn stored_layout(&self) -> PixelLayout {
         self.stored
     }
 
-    pub fn source_layout(&self) -> PixelLayout {
+    pub(crate) fn source_layout(&self) -> PixelLayout {
         self.source
     }
 
@@ -353,7 +369,7 @@ impl<T: Sample> TileEncoder<T> {
     }
 
     /// One source texel as stored (flattened, depth converted), little-endian samples.
-    pub fn stored_texel(&self, texel: &[T]) -> Vec<u8> {
+    pub(crate) fn stored_texel(&self, texel: &[T]) -> Vec<u8> {
         self.stored_bytes(&self.flattened(texel)).into_owned()
     }
 
@@ -379,7 +395,7 @@ impl<T: Sample> TileEncoder<T> {
 
     /// Encodes the `crop` part of a `side x side` tile as an image file of the crop's size (a
     /// viewer layout's edge tile). Only image codecs (JPEG, PNG) make files of any size.
-    pub fn encode_crop(&self, texels: &[T], crop: Crop, out: &mut Vec<u8>) -> Result<(), String> {
+    pub(crate) fn encode_crop(&self, texels: &[T], crop: Crop, out: &mut Vec<u8>) -> Result<(), String> {
         let (side, channels) = (self.side as usize, self.source.channels.count());
         if crop == Crop::whole(self.side) {
             return self.encode(texels, out);

@@ -14,6 +14,7 @@ pub struct Shown<'a>(&'a Path);
 
 /// [`Shown`] for paths: `path.shown()` where `path.display()` would print it raw.
 pub trait ShowPath {
+    /// The path, ready for `{}` in a message: plain, or quoted and escaped.
     fn shown(&self) -> Shown<'_>;
 }
 
@@ -56,6 +57,8 @@ pub fn escape_controls(text: &str) -> std::borrow::Cow<'_, str> {
     std::borrow::Cow::Owned(out)
 }
 
+/// Why a run, a read or a write failed; each variant names where (file, row, tile, field).
+///
 /// New variants may come in any release: match the ones you act on and keep a `_` arm.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -63,38 +66,73 @@ pub enum TilerError {
     /// The file could not be opened or read at all.
     #[error("{}: {source}", path.shown())]
     Io {
+        /// The file that could not be read.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: io::Error,
     },
 
     /// The file is readable but not a valid image of its kind.
     #[error("{}: {message}", path.shown())]
-    Decode { path: PathBuf, message: String },
+    Decode {
+        /// The file (or tile file) that did not decode.
+        path: PathBuf,
+        /// What was wrong with it, as the decoder said.
+        message: String,
+    },
 
     /// Decoding failed part-way through the image.
     #[error("{}: row {row}: {message}", path.shown())]
-    DecodeRow { path: PathBuf, row: u64, message: String },
+    DecodeRow {
+        /// The image being read.
+        path: PathBuf,
+        /// The first row of the full-resolution image (0 at the top) that could not be read.
+        row: u64,
+        /// What the decoder said.
+        message: String,
+    },
 
     /// A valid image this tool cannot handle as asked (format feature, size over a limit).
     #[error("{}: {message}", path.shown())]
-    Unsupported { path: PathBuf, message: String },
+    Unsupported {
+        /// The image.
+        path: PathBuf,
+        /// Which feature or size it is, and what to do instead where there is something.
+        message: String,
+    },
 
-    /// The image size or tile options make no usable virtual texture.
+    /// The image size or tile options make no usable virtual texture (the message says which).
     #[error("{0}")]
     Geometry(String),
 
-    /// Options that contradict each other or the input.
+    /// Options that contradict each other or the input; the message names the flags.
     #[error("{0}")]
     Options(String),
 
     /// A member of an `info.json` is missing, malformed or contradicts the command line.
     #[error("{}: {field}: {message}", path.shown())]
-    Info { path: PathBuf, field: String, message: String },
+    Info {
+        /// The `info.json` read.
+        path: PathBuf,
+        /// The member's name as the file spells it (`tileSize`, `codec`, ...).
+        field: String,
+        /// What is wrong with it.
+        message: String,
+    },
 
     /// Encoding a tile failed.
     #[error("tile (lod {lod}, x {x}, y {y}): {message}")]
-    Encode { lod: u32, x: u32, y: u32, message: String },
+    Encode {
+        /// The tile's level of detail, 0 the full resolution.
+        lod: u32,
+        /// The tile's column in its level's page grid, from 0 at the left.
+        x: u32,
+        /// The tile's row in its level's page grid, from 0 at the top.
+        y: u32,
+        /// What the encoder said.
+        message: String,
+    },
 
     /// Reading or writing a pack failed.
     #[error(transparent)]
@@ -106,7 +144,12 @@ pub enum TilerError {
 
     /// A shard of a sharded split that does not belong with the others, or is damaged.
     #[error("{}: {message}", path.shown())]
-    Shard { path: PathBuf, message: String },
+    Shard {
+        /// The shard's pack.
+        path: PathBuf,
+        /// What does not match or is damaged.
+        message: String,
+    },
 
     /// The destination may not be written (see [`crate::output`]).
     #[error(transparent)]
@@ -125,65 +168,124 @@ pub enum TilerError {
     /// Writing output failed (unwritable directory, full disk, ...).
     #[error("{}: {source}", path.shown())]
     Write {
+        /// The file or directory being written (often its temporary name).
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: io::Error,
     },
 }
 
 impl TilerError {
-    pub fn io(path: impl Into<PathBuf>, source: io::Error) -> Self {
+    /// [`TilerError::Io`]: `path` could not be opened or read.
+    pub(crate) fn io(path: impl Into<PathBuf>, source: io::Error) -> Self {
         TilerError::Io { path: path.into(), source }
     }
 
-    pub fn decode(path: impl Into<PathBuf>, message: impl ToString) -> Self {
+    /// [`TilerError::Decode`]: `path` is not a valid image of its kind.
+    pub(crate) fn decode(path: impl Into<PathBuf>, message: impl ToString) -> Self {
         TilerError::Decode { path: path.into(), message: message.to_string() }
     }
 
-    pub fn unsupported(path: impl Into<PathBuf>, message: impl ToString) -> Self {
+    /// [`TilerError::Unsupported`]: `path` is valid but asks for what this tool does not do.
+    pub(crate) fn unsupported(path: impl Into<PathBuf>, message: impl ToString) -> Self {
         TilerError::Unsupported { path: path.into(), message: message.to_string() }
     }
 
     /// A thread that panicked (`what`: which one), or a lock it left poisoned.
-    pub fn panicked(what: &str) -> Self {
+    pub(crate) fn panicked(what: &str) -> Self {
         TilerError::Internal(format!("{what} panicked"))
     }
 
+    /// [`TilerError::Write`]: writing `path` failed with `source`.
     pub fn write(path: impl Into<PathBuf>, source: io::Error) -> Self {
         TilerError::Write { path: path.into(), source }
     }
 }
 
+/// The library's result: [`TilerError`] unless a function says otherwise.
 pub type Result<T, E = TilerError> = std::result::Result<T, E>;
 
-/// Why a destination was refused.
+/// Why a destination was refused (see [`crate::output::claim`]). `path` is always the
+/// destination as given; each message says what to do instead.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum OutputError {
+    /// The destination is a special file (a device, a FIFO, a socket), which nothing replaces.
     #[error("{}: is {what}; nothing replaces one: choose a regular path", path.shown())]
-    Special { path: PathBuf, what: &'static str },
+    Special {
+        /// The destination.
+        path: PathBuf,
+        /// Which kind of special file, as the message says it ("a FIFO").
+        what: &'static str,
+    },
 
+    /// The destination is a symbolic link: the output is not written through it.
     #[error("{}: is a symbolic link (to {}); give the real path, or remove the link first", path.shown(), target.shown())]
-    Symlink { path: PathBuf, target: PathBuf },
+    Symlink {
+        /// The destination.
+        path: PathBuf,
+        /// Where the link points, as it reads.
+        target: PathBuf,
+    },
 
+    /// A file where the output is a directory, or a directory where it is a file.
     #[error("{}: is {found} where {product} goes; choose another path", path.shown())]
-    WrongType { path: PathBuf, found: &'static str, product: &'static str },
+    WrongType {
+        /// The destination.
+        path: PathBuf,
+        /// What is there ("a file", "a directory").
+        found: &'static str,
+        /// What the run writes, as [`crate::output::Product`] names it.
+        product: &'static str,
+    },
 
+    /// Something this tool did not write is at the destination; it is left alone.
     #[error("{}: {what}, not {product} written by vortex-tiler; {advice}", path.shown())]
-    Foreign { path: PathBuf, what: String, product: &'static str, advice: &'static str },
+    Foreign {
+        /// The destination.
+        path: PathBuf,
+        /// What was found there.
+        what: String,
+        /// What the run writes.
+        product: &'static str,
+        /// What the user can do (another path; `--force` where it applies).
+        advice: &'static str,
+    },
 
+    /// The destination is one of the run's inputs.
     #[error("{}: is the input {}; write the output somewhere else", path.shown(), input.shown())]
-    IsInput { path: PathBuf, input: PathBuf },
+    IsInput {
+        /// The destination.
+        path: PathBuf,
+        /// The input it is.
+        input: PathBuf,
+    },
 
+    /// The destination lies inside an input directory.
     #[error("{}: lies inside the input {}; write the output somewhere else", path.shown(), input.shown())]
-    InsideInput { path: PathBuf, input: PathBuf },
+    InsideInput {
+        /// The destination.
+        path: PathBuf,
+        /// The input directory holding it.
+        input: PathBuf,
+    },
 
+    /// The destination is a directory holding an input, which replacing it would delete.
     #[error("{}: holds the input {}, which replacing it would delete; write the output somewhere else", path.shown(), input.shown())]
-    ContainsInput { path: PathBuf, input: PathBuf },
+    ContainsInput {
+        /// The destination.
+        path: PathBuf,
+        /// The input inside it.
+        input: PathBuf,
+    },
 
+    /// The destination (or its parent) could not be examined.
     #[error("{}: {source}", path.shown())]
     Io {
+        /// The path being examined.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: io::Error,
     },

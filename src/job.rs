@@ -15,9 +15,13 @@ use crate::stages::StageTimes;
 /// How to cut and store the pyramid.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SplitOptions {
+    /// Side of every stored tile in texels, borders included (`--tile-size`).
     pub tile_size: u32,
+    /// Texels each tile repeats from its neighbours on every side (`--border`).
     pub border: u32,
+    /// How tiles are encoded.
     pub codec: Codec,
+    /// What fills the padding past the image's right and bottom edges (`--background`).
     pub background: Background,
     /// Composite alpha over the background (or black) instead of storing it.
     pub flatten: bool,
@@ -32,7 +36,7 @@ pub struct SplitOptions {
     pub down_to_one_texel: bool,
     /// Why the source's stored JPEG tiles are encoded again rather than copied where they
     /// line up with the finest level's pages (`--reencode`, an explicit `--quality` or
-    /// `--subsampling`); `None` copies them ([`crate::source::StoredTiles`]).
+    /// `--subsampling`); `None` copies them (`StoredTiles`).
     pub reencode: Option<&'static str>,
 }
 
@@ -46,6 +50,8 @@ impl SplitOptions {
 
 /// Watches a run: told of finished tiles, asked whether to stop.
 pub trait Progress: Sync {
+    /// `tiles` more tiles are stored, a tile counted once for every sink it went to (called
+    /// from the run's threads); the calls of a finished run add up to [`Summary::tiles`].
     fn advance(&self, _tiles: u64) {}
     /// Checked once per source row and per batch of tiles; a run that sees `true` stops with
     /// [`TilerError::Interrupted`](crate::error::TilerError::Interrupted).
@@ -60,12 +66,16 @@ impl Progress for () {}
 /// What a finished run produced.
 #[derive(Clone, Debug)]
 pub struct Summary {
+    /// The page grid the image was cut into.
     pub layout: Layout,
+    /// The texels the source delivered.
     pub source: PixelLayout,
+    /// The texels the tiles hold (after flattening and the tile depth).
     pub stored: PixelLayout,
+    /// Tiles stored, every LOD, summed over the run's sinks (one sink: each page once).
     pub tiles: u64,
-    /// What each target of the run got ([`crate::split::split_to`]); one for a run into one sink.
-    pub per_target: Vec<Written>,
+    /// What each target of the run got (`split_to`); one for a run into one sink.
+    pub(crate) per_target: Vec<Written>,
     /// Tiles encoded; the others share an identical neighbour's bytes, were stored as their one
     /// colour or were copied.
     pub encoded: u64,
@@ -75,6 +85,7 @@ pub struct Summary {
     pub cropped: u64,
     /// The source's stored tiles, where it has some, and whether they were copied.
     pub stored_tiles: Option<StoredReport>,
+    /// Bytes of tile data the sinks wrote, summed over them (not their files' other bytes).
     pub bytes: u64,
     /// Vertical stripes the fine LODs were cut in (1: one band over the whole width, or one
     /// stripe of the fine LODs and a coarse pass; 0: a shard, whose passes are its rectangles).

@@ -19,7 +19,7 @@ pub const MAX_SIDE: u64 = 1 << 24;
 
 /// LODs of a grid whose longer axis has `pages` pages at LOD 0: one per halving, down to the
 /// first LOD of one page (`info.json` readers check `lodCount` with it too).
-pub fn lods_for(pages: u32) -> u32 {
+pub(crate) fn lods_for(pages: u32) -> u32 {
     pages.next_power_of_two().trailing_zeros() + 1
 }
 
@@ -28,18 +28,27 @@ pub fn lods_for(pages: u32) -> u32 {
 /// `payload = tile_size - 2 * border` are its own and the rest copied from neighbours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Layout {
+    /// Width of the image at LOD 0 in texels, 1 to [`MAX_SIDE`].
     pub width: u32,
+    /// Height of the image at LOD 0 in texels, 1 to [`MAX_SIDE`].
     pub height: u32,
+    /// Side of every stored page in texels, borders included: 8 to 16384.
     pub tile_size: u32,
+    /// Texels each page repeats from its neighbours on every side; the payload
+    /// (`tile_size - 2 * border`) is at least 4.
     pub border: u32,
     /// Pages per row at LOD 0.
     pub columns: u32,
     /// Page rows at LOD 0.
     pub rows: u32,
+    /// LODs in the pyramid, LOD 0 the finest, down to the first LOD of one page.
     pub lod_count: u32,
 }
 
 impl Layout {
+    /// The page grid of a `width` x `height` image in `tile_size`-texel pages with `border`
+    /// texels of border. Refuses ([`TilerError::Geometry`]) an empty image, a side above
+    /// [`MAX_SIDE`], a tile size outside 8..=16384 and a payload under 4 texels.
     pub fn new(width: u64, height: u64, tile_size: u32, border: u32) -> Result<Layout, TilerError> {
         if width == 0 || height == 0 {
             return Err(TilerError::Geometry(format!("the image is {width}x{height}: it has no pixels")));
@@ -90,7 +99,7 @@ impl Layout {
 
     /// The thesis's `tileCount` (pages per side of a square power-of-two grid), for the grids
     /// that are one; other grids have no such number.
-    pub fn square_tile_count(&self) -> Option<u32> {
+    pub(crate) fn square_tile_count(&self) -> Option<u32> {
         (self.columns == self.rows && self.columns.is_power_of_two()).then_some(self.columns)
     }
 
@@ -101,7 +110,7 @@ impl Layout {
     }
 
     /// The pack's level table for this grid (docs/pack-format.md), LOD 0 first.
-    pub fn pack_levels(&self) -> Vec<vortex_pack::Level> {
+    pub(crate) fn pack_levels(&self) -> Vec<vortex_pack::Level> {
         (0..self.lod_count)
             .map(|lod| {
                 let ((tiles_w, tiles_h), (width, height)) = (self.grid(lod), self.level_extent(lod));
@@ -116,7 +125,7 @@ impl Layout {
     }
 
     /// Texels of one stored tile.
-    pub fn tile_texels(&self) -> usize {
+    pub(crate) fn tile_texels(&self) -> usize {
         (self.tile_size as usize).pow(2)
     }
 }
@@ -124,14 +133,18 @@ impl Layout {
 /// The part of a stored page that a viewer's tile keeps, in the page's texels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Crop {
+    /// Left edge of the kept part, in texels from the page's left (its border included).
     pub x: u32,
+    /// Top edge of the kept part, in texels from the page's top.
     pub y: u32,
+    /// Width of the kept part in texels.
     pub width: u32,
+    /// Height of the kept part in texels.
     pub height: u32,
 }
 
 impl Crop {
-    pub fn whole(side: u32) -> Crop {
+    pub(crate) fn whole(side: u32) -> Crop {
         Crop { x: 0, y: 0, width: side, height: side }
     }
 }

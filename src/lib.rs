@@ -98,6 +98,8 @@
 //! # }
 //! ```
 
+#![warn(missing_docs)]
+
 pub mod background;
 pub mod codec;
 mod decode;

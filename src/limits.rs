@@ -54,7 +54,7 @@ impl Default for Limits {
 
 /// The most worker threads accepted: 4 per core, enough to hide I/O waits, not enough to
 /// spend minutes starting threads.
-pub fn max_threads() -> usize {
+pub(crate) fn max_threads() -> usize {
     4 * std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
@@ -71,7 +71,7 @@ impl Limits {
     }
 
     /// Checks a pyramid's tile count and, for a pack, its index.
-    pub fn check_pyramid(&self, layout: &Layout, pack: bool) -> Result<(), TilerError> {
+    pub(crate) fn check_pyramid(&self, layout: &Layout, pack: bool) -> Result<(), TilerError> {
         let tiles = layout.total_tiles();
         if tiles > self.tiles {
             return Err(TilerError::Limit(format!(
@@ -138,14 +138,14 @@ pub fn human_bytes(bytes: u64) -> String {
 /// the most all parts held at once (at most the sum of the parts' peaks, which need not
 /// coincide). Capacities, not lengths: what the allocator was asked for.
 #[derive(Debug, Default)]
-pub struct Gauge {
+pub(crate) struct Gauge {
     now: [AtomicU64; PARTS],
     peak: [AtomicU64; PARTS],
     total: AtomicU64,
     total_peak: AtomicU64,
 }
 
-/// The parts a [`Gauge`] counts, in the pipeline's order.
+/// The parts a `Gauge` counts, in the pipeline's order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Part {
     /// The source decoder's own buffers beyond the rows it fills (a TIFF's row of tiles).
@@ -167,11 +167,14 @@ const PARTS: usize = 6;
 /// Each part's most bytes, and the most all of them held at once.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Peaks {
+    /// The most bytes each [`Part`] held, indexed by `Part as usize`; read with [`Peaks::part`].
     pub parts: [u64; PARTS],
+    /// The most bytes all parts held at one moment (at most the parts' sum).
     pub total: u64,
 }
 
 impl Peaks {
+    /// The most bytes `part` held at once.
     pub fn part(&self, part: Part) -> u64 {
         self.parts[part as usize]
     }

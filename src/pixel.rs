@@ -12,13 +12,18 @@ use std::ops::Add;
 /// Channel arrangement of a texel, in the names `info.json` uses for `tileFormat`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Channels {
+    /// One channel, luminance (`luminance`).
     Grey,
+    /// Luminance then alpha (`luminanceAlpha`).
     GreyAlpha,
+    /// Red, green, blue (`rgb`).
     Rgb,
+    /// Red, green, blue, then alpha (`rgba`); colour is not premultiplied.
     Rgba,
 }
 
 impl Channels {
+    /// Samples per texel: 1 to 4.
     pub fn count(self) -> usize {
         match self {
             Channels::Grey => 1,
@@ -28,6 +33,7 @@ impl Channels {
         }
     }
 
+    /// Whether the last channel is alpha (`GreyAlpha`, `Rgba`).
     pub fn has_alpha(self) -> bool {
         matches!(self, Channels::GreyAlpha | Channels::Rgba)
     }
@@ -42,7 +48,7 @@ impl Channels {
     }
 
     /// `tileFormat` as written in `info.json`.
-    pub fn tile_format(self) -> &'static str {
+    pub(crate) fn tile_format(self) -> &'static str {
         match self {
             Channels::Grey => "luminance",
             Channels::GreyAlpha => "luminanceAlpha",
@@ -51,7 +57,7 @@ impl Channels {
         }
     }
 
-    pub fn from_tile_format(name: &str) -> Option<Channels> {
+    pub(crate) fn from_tile_format(name: &str) -> Option<Channels> {
         [Channels::Grey, Channels::GreyAlpha, Channels::Rgb, Channels::Rgba]
             .into_iter()
             .find(|c| c.tile_format() == name)
@@ -61,7 +67,9 @@ impl Channels {
 /// What one sample is: its size and whether it is an unsigned integer or an IEEE float.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Depth {
+    /// 8-bit unsigned integers, 0 to 255 (`unsignedByte`).
     U8,
+    /// 16-bit unsigned integers, 0 to 65535 (`unsignedShort`).
     U16,
     /// 32-bit unsigned integers (counts, label images with many objects).
     U32,
@@ -76,6 +84,7 @@ impl Depth {
     /// Every depth, in the order `--tile-type` lists them.
     pub const ALL: [Depth; 5] = [Depth::U8, Depth::U16, Depth::U32, Depth::F32, Depth::F16];
 
+    /// Bytes of one sample: 1, 2 or 4.
     pub fn bytes(self) -> usize {
         match self {
             Depth::U8 => 1,
@@ -85,13 +94,13 @@ impl Depth {
     }
 
     /// Whether samples are IEEE floats rather than unsigned integers.
-    pub fn is_float(self) -> bool {
+    pub(crate) fn is_float(self) -> bool {
         matches!(self, Depth::F32 | Depth::F16)
     }
 
     /// Whether this depth is one of the 8/16-bit integer depths that every codec and filter
     /// takes; the others (32-bit, float) go through fewer of them.
-    pub fn is_narrow_int(self) -> bool {
+    pub(crate) fn is_narrow_int(self) -> bool {
         matches!(self, Depth::U8 | Depth::U16)
     }
 
@@ -106,17 +115,19 @@ impl Depth {
         }
     }
 
+    /// The depth `info.json`'s `tileType` (and `--tile-type`) names, as [`Depth::tile_type`]
+    /// writes it; `None` for any other name.
     pub fn from_tile_type(name: &str) -> Option<Depth> {
         Depth::ALL.into_iter().find(|d| d.tile_type() == name)
     }
 
     /// A pack header's `sample_format` for this depth (docs/pack-format.md).
-    pub fn pack_sample_format(self) -> u8 {
+    pub(crate) fn pack_sample_format(self) -> u8 {
         if self.is_float() { vortex_pack::format::SAMPLE_FLOAT } else { vortex_pack::format::SAMPLE_UNSIGNED }
     }
 
     /// The depth of a pack's `sample_bytes` and `sample_format`, if it is one.
-    pub fn from_pack(sample_bytes: u8, sample_format: u8) -> Option<Depth> {
+    pub(crate) fn from_pack(sample_bytes: u8, sample_format: u8) -> Option<Depth> {
         Depth::ALL.into_iter().find(|d| d.bytes() == sample_bytes as usize && d.pack_sample_format() == sample_format)
     }
 }
@@ -124,15 +135,19 @@ impl Depth {
 /// Channels plus depth: everything needed to interpret a row of samples.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct PixelLayout {
+    /// Which channels a texel has, in order.
     pub channels: Channels,
+    /// The size and kind of every sample.
     pub depth: Depth,
 }
 
 impl PixelLayout {
+    /// `channels` of `depth` samples.
     pub fn new(channels: Channels, depth: Depth) -> Self {
         PixelLayout { channels, depth }
     }
 
+    /// Bytes of one texel, all its channels: 1 (8-bit grey) to 16 (32-bit RGBA).
     pub fn bytes_per_pixel(self) -> usize {
         self.channels.count() * self.depth.bytes()
     }
@@ -157,6 +172,7 @@ impl fmt::Display for PixelLayout {
 /// 8/16-bit filters and codecs (sRGB tables, premultiplying, 16-to-8 rounding). The filters and
 /// codecs that use them refuse 32-bit and float samples before a run starts.
 pub trait Sample: Copy + Default + PartialEq + Send + Sync + bytemuck::Pod + 'static {
+    /// The [`Depth`] this type carries (`f32` carries both `F32` and `F16` tiles: `F32`).
     const DEPTH: Depth;
     /// The largest sample of an opaque alpha, as a `u64` (floats: 1.0, read as 1).
     const MAX: u64;
@@ -164,6 +180,8 @@ pub trait Sample: Copy + Default + PartialEq + Send + Sync + bytemuck::Pod + 'st
     type Narrow: Acc + From<Self>;
     /// Exact sums of any pyramid.
     type Wide: Acc + From<Self>;
+    /// The sample as an integer: exact for the integer types; for `f32` Rust's saturating
+    /// `as` (toward zero, NaN to 0), which a float run never reaches.
     fn to_u64(self) -> u64;
     /// Caller guarantees `v <= MAX`.
     fn from_u64(v: u64) -> Self;
@@ -172,6 +190,8 @@ pub trait Sample: Copy + Default + PartialEq + Send + Sync + bytemuck::Pod + 'st
     /// An 8-bit value (a `--background` colour) scaled to the type's full range: times 257
     /// for 16 bits, times 0x01010101 for 32, over 255 for floats (whose range is 0 to 1).
     fn from_u8_scaled(v: u8) -> Self;
+    /// The sample as 16 bits, the value itself (no scaling) for `u8` and `u16`; `u32` keeps
+    /// its low 16 bits and `f32` saturates, which the 8/16-bit paths that call it never see.
     fn to_u16(self) -> u16;
     /// The means of an exact row's sums: each rounded half up to the nearest integer sample
     /// (`box`), or for floats divided in f64 and rounded to the nearest `f32`.
@@ -333,7 +353,9 @@ pub trait Acc:
     fn to_f64(self) -> f64;
     /// Bytes of one sum, as a shard stores it (little-endian).
     const BYTES: usize;
+    /// Writes the sum into `out`, exactly [`Acc::BYTES`] long, little-endian.
     fn to_le(self, out: &mut [u8]);
+    /// The sum [`Acc::to_le`] wrote into `bytes` ([`Acc::BYTES`] long).
     fn from_le(bytes: &[u8]) -> Self;
 }
 
@@ -393,6 +415,7 @@ impl Acc for u128 {
 
 /// An exact output row: sums plus what they must be divided by.
 pub struct ExactRow<'a, A = u64> {
+    /// The row's exact sums, channels interleaved: one per sample of the output row.
     pub sums: &'a [A],
     /// Row of the output level.
     pub y: u64,
@@ -414,7 +437,7 @@ impl<A: Acc> ExactRow<'_, A> {
 
     /// `out[i] = mean i` in f64, rounded to the nearest `f32`: a power-of-two divisor for the
     /// complete footprints is exact, any other one rounds once.
-    pub fn map_float_means(&self, out: &mut [f32]) {
+    pub(crate) fn map_float_means(&self, out: &mut [f32]) {
         debug_assert_eq!(out.len(), self.sums.len());
         let c = self.channels;
         for (i, (o, s)) in out.iter_mut().zip(self.sums).enumerate() {
@@ -426,7 +449,7 @@ impl<A: Acc> ExactRow<'_, A> {
     /// row order; a shift for the leading texels with complete footprints, a division for the
     /// rest. Two plain loops, not one iterator over both, so that each compiles to a tight one
     /// (this is most of a level's cost: issue 18).
-    pub fn map_means<T>(&self, out: &mut [T], f: impl Fn(u64) -> T) {
+    pub(crate) fn map_means<T>(&self, out: &mut [T], f: impl Fn(u64) -> T) {
         debug_assert_eq!(out.len(), self.sums.len());
         let c = self.channels;
         let (head, tail) = self.sums.split_at(self.full_cols * c);

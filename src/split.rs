@@ -29,8 +29,9 @@ use crate::sink::{Target, TileSink};
 use crate::source::{ImageHeader, RowSource, read_ahead};
 use crate::stages::{Stage, StageClock};
 
-pub use crate::job::{MemoryReport, Progress, SplitOptions, StoredReport, Summary, Written};
-pub use crate::stages::{StageCpu, StageTimes};
+pub(crate) use crate::job::Written;
+pub use crate::job::{MemoryReport, Progress, SplitOptions, StoredReport, Summary};
+pub use crate::stages::StageTimes;
 
 /// Whether the finest level's pages are copied from `source`'s stored tiles (the copier) and
 /// what the summary says of them; neither where the source stores none.
@@ -77,7 +78,7 @@ pub fn split(
 /// and pad it alike). `opts` cut the pyramid down to the deepest target's levels, padded with
 /// `opts.background`; a target that pads with another colour gets its padded pages filled
 /// with it (pages cut with the edge repeated can take any colour).
-pub fn split_to(
+pub(crate) fn split_to(
     source: &mut dyn RowSource,
     targets: &[Target],
     opts: &SplitOptions,

@@ -38,13 +38,16 @@ fn io_err(path: &Path) -> impl FnOnce(io::Error) -> OutputError + '_ {
 /// rename into place when complete.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Claim {
+    /// The destination, as given.
     pub path: PathBuf,
+    /// What will be written there.
     pub product: Product,
     /// What the rename will replace: a previous output of ours, or (only with `force`) a
     /// foreign regular file.
     pub replaces: Option<Existing>,
 }
 
+/// What a [`Claim`]'s rename will replace.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Existing {
     /// A previous output of ours (or an empty directory).

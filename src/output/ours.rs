@@ -40,12 +40,14 @@ pub enum Product {
 const MAX_JSON_BYTES: u64 = 64 << 20;
 
 impl Product {
-    pub fn is_dir(self) -> bool {
+    /// Whether the product is a directory (a tile directory, frames, a viewer layout,
+    /// OME-Zarr) rather than one file.
+    pub(crate) fn is_dir(self) -> bool {
         matches!(self, Product::TileDir | Product::Frames | Product::Viewer(_) | Product::OmeZarr)
     }
 
     /// The product as the messages name it.
-    pub fn noun(self) -> &'static str {
+    pub(crate) fn noun(self) -> &'static str {
         match self {
             Product::Pack => "a pack",
             Product::TileDir => "a tile directory",

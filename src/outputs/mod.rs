@@ -17,7 +17,7 @@ mod write;
 
 use std::path::{Path, PathBuf};
 
-pub use plan::{Plan, Planned};
+pub use plan::Plan;
 pub use write::Wrote;
 
 use crate::formats::ome_zarr::{PixelSize, Version};
@@ -83,11 +83,14 @@ impl std::fmt::Display for Format {
 /// One output of a run: a format at a path.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Output {
+    /// What is written.
     pub format: Format,
+    /// Where: a directory for the directory layouts and OME-Zarr, a file for the others.
     pub path: PathBuf,
 }
 
 impl Output {
+    /// `format` at `path`; nothing is checked until [`Plan::new`].
     pub fn new(format: Format, path: impl Into<PathBuf>) -> Output {
         Output { format, path: path.into() }
     }
@@ -103,6 +106,7 @@ impl Budget {
         Budget(bytes)
     }
 
+    /// The budget in bytes.
     pub fn bytes(self) -> u64 {
         self.0
     }

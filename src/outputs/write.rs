@@ -28,10 +28,13 @@ const TEE_WINDOW_ROWS: usize = 256;
 #[derive(Clone, Debug)]
 #[non_exhaustive]
 pub struct Wrote {
+    /// The output's format.
     pub format: Format,
+    /// Where it is, renamed into place.
     pub path: PathBuf,
-    /// Tiles it holds (a place each) and bytes of tile data.
+    /// Tiles it holds, a place each (a tile shared by several places counts for each).
     pub tiles: u64,
+    /// Bytes of tile data it holds (not its index, metadata or manifests).
     pub bytes: u64,
     /// The run that cut its pyramid, shared with the outputs cut from the same one: tiles
     /// encoded and copied, stages, memory.

@@ -117,13 +117,13 @@ impl Filter {
     }
 
     /// Whether this filter picks one texel of each 2x2 block (`pyramid::labels`).
-    pub fn is_label(self) -> bool {
+    pub(crate) fn is_label(self) -> bool {
         matches!(self, Filter::Mode | Filter::Nearest)
     }
 
     /// The filter a run uses on `depth` samples when none is asked for: the default for 8- and
     /// 16-bit images, `box` for 32-bit and float ones (their values are not sRGB codes).
-    pub fn default_for(depth: Depth) -> Filter {
+    pub(crate) fn default_for(depth: Depth) -> Filter {
         if depth.is_narrow_int() { Filter::default() } else { Filter::Box }
     }
 

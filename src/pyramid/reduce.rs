@@ -82,6 +82,7 @@ impl<A: Acc> Reducer<A> {
         self
     }
 
+    /// Texels per output row: the input width over `2^levels`, rounded up.
     #[cfg_attr(not(feature = "testing"), allow(dead_code))] // read by the tests, through `testing`
     pub fn out_width(&self) -> usize {
         self.out_width

@@ -169,6 +169,7 @@ impl<T: Sample> Resampler<T> {
         }
     }
 
+    /// Texels per output row: half the input level's width, rounded up.
     pub fn out_width(&self) -> usize {
         self.in_width.div_ceil(2)
     }

@@ -10,7 +10,7 @@ mod write;
 // The shard format and geometry, as `super::` paths from the two runs name them.
 use crate::shard::{fingerprint, manifest, order, plan, sums};
 
-pub use merge::{Merged, merge};
+pub use merge::merge;
 pub use write::{ShardJob, write_shard};
 
 /// What a pack's metadata says of it if it is a shard (`info`), and the refusal of a shard pack

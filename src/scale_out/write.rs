@@ -18,13 +18,16 @@ use crate::split::{self, Progress, SplitOptions, Summary};
 
 /// Which shard to make, and of what.
 pub struct ShardJob<'a> {
+    /// This shard, counting from 0: less than `count`.
     pub index: u32,
+    /// Shards the split is cut into, 1 or more.
     pub count: u32,
     /// The input as given (fingerprinted, and named in the manifest).
     pub input: &'a Path,
     /// The metadata of the merged pack: what `split --pack` of the same input and options
     /// writes.
     pub info: String,
+    /// The pack's alignments (`--align`, `--tile-align`), those of the merged pack too.
     pub pack: WriteOptions,
 }
 

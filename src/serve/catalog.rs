@@ -29,8 +29,10 @@ pub const DEFAULT_QUALITY: u8 = 90;
 /// The largest manifest read (`info.json`, `tilejson.json`, `.dzi`).
 const MAX_MANIFEST_BYTES: u64 = 1 << 20;
 
+/// The inputs a server answers for, each under its name in URLs: a pack's file stem, a
+/// directory's name.
 pub struct Catalog {
-    pub inputs: Vec<Input>,
+    pub(crate) inputs: Vec<Input>,
 }
 
 pub struct Input {
@@ -85,6 +87,8 @@ pub enum StaticLayout {
 }
 
 impl Catalog {
+    /// Opens every input (a pack, a tile directory, a viewer layout's directory): refuses
+    /// one it cannot serve, and two that would have the same name.
     pub fn open(paths: &[PathBuf]) -> Result<Catalog, ServeError> {
         let mut inputs: Vec<Input> = Vec::new();
         for path in paths {
@@ -99,10 +103,6 @@ impl Catalog {
             inputs.push(input);
         }
         Ok(Catalog { inputs })
-    }
-
-    pub fn get(&self, name: &str) -> Option<&Input> {
-        self.inputs.iter().find(|i| i.name == name)
     }
 }
 

@@ -59,23 +59,43 @@ pub(crate) struct AppState {
 pub enum ServeError {
     /// An input that is missing, unreadable or not something this server serves.
     #[error("{}: {message}", path.shown())]
-    Input { path: PathBuf, message: String },
+    Input {
+        /// The input as given.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
     /// Two inputs would answer at the same URLs.
     #[error("{} and {} are both named '{name}' in URLs; rename one (names are file stems)", first.shown(), second.shown())]
-    DuplicateName { name: String, first: PathBuf, second: PathBuf },
+    DuplicateName {
+        /// The name both would have in URLs (a file stem).
+        name: String,
+        /// The first input of that name.
+        first: PathBuf,
+        /// The second.
+        second: PathBuf,
+    },
     /// `--openseadragon` is not a directory holding `openseadragon.min.js`.
     #[error("{}: {message}", path.shown())]
-    OpenSeadragon { path: PathBuf, message: String },
+    OpenSeadragon {
+        /// The directory given.
+        path: PathBuf,
+        /// What is missing.
+        message: String,
+    },
     /// The address cannot be listened on (in use, not ours).
     #[error("cannot listen on {addr}: {source}")]
     Bind {
+        /// The address asked for.
         addr: SocketAddr,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
     /// An option out of its range.
     #[error("{0}")]
     Options(String),
+    /// An I/O error of the listener: its address not read back after binding, or serving.
     #[error("serving failed: {0}")]
     Io(#[from] std::io::Error),
 }
@@ -83,6 +103,7 @@ pub enum ServeError {
 /// How the server runs.
 #[derive(Clone, Debug)]
 pub struct ServeOptions {
+    /// Address and port to listen on (`--addr`); port 0 takes a free one.
     pub addr: SocketAddr,
     /// Bytes of re-encoded tiles kept in memory (0: none).
     pub cache_bytes: u64,
@@ -101,9 +122,9 @@ pub struct ServeOptions {
 
 /// The largest `--max-concurrent` and `--max-connections`: far more than one process serves
 /// well, and far under what tokio's semaphores hold.
-pub const MAX_CONNECTIONS: usize = 65_536;
+pub(crate) const MAX_CONNECTIONS: usize = 65_536;
 /// The longest `--idle-timeout`, in seconds.
-pub const MAX_IDLE_TIMEOUT_S: u64 = 3600;
+pub(crate) const MAX_IDLE_TIMEOUT_S: u64 = 3600;
 
 impl ServeOptions {
     /// Refuses counts of 0 (no request would ever be answered) and counts over the caps,
@@ -174,6 +195,7 @@ impl Server {
         self.state.local_addr
     }
 
+    /// How many inputs (packs and directories) the server answers for.
     pub fn input_count(&self) -> usize {
         self.state.catalog.inputs.len()
     }

@@ -8,7 +8,7 @@ use base64::Engine;
 
 use crate::background::Background;
 use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling, ZSTD_LEVELS};
-pub use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
+pub(crate) use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
 use crate::error::{Result, TilerError};
 pub use crate::formats::tiles::filename::DEFAULT_FILENAME_STEM;
 use crate::formats::tiles::filename::FilenameFormat;
@@ -20,12 +20,12 @@ use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::pyramid::filter::Filter;
 use crate::source::ImageHeader;
 
-pub const DEFAULT_TILE_SIZE: u32 = 128;
+pub(crate) const DEFAULT_TILE_SIZE: u32 = 128;
 /// Border of `--layout vortex` tiles when neither the flag nor an `info.json` sets one: one
 /// texel is what bilinear and trilinear filtering read across a page edge, so the runtime's
 /// default filter shows no seams (border 0 does: docs/gpu-sampling.md).
-pub const DEFAULT_BORDER: u32 = 1;
-pub const DEFAULT_QUALITY: u8 = 85;
+pub(crate) const DEFAULT_BORDER: u32 = 1;
+pub(crate) const DEFAULT_QUALITY: u8 = 85;
 
 /// Which codec: `auto` picks JPEG for 8-bit grey or RGB and PNG for anything with alpha or 16 bits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -103,18 +103,31 @@ impl CodecChoice {
 /// What the command line asked for; `None` means "not given".
 #[derive(Clone, Debug, Default)]
 pub struct Requested {
+    /// `--tile-size`: side of a stored tile in texels, borders included.
     pub tile_size: Option<u32>,
+    /// `--border`: texels each tile repeats from its neighbours on every side.
     pub border: Option<u32>,
+    /// `--codec`.
     pub codec: Option<CodecChoice>,
+    /// `--quality`: JPEG quality, 1 to 100.
     pub quality: Option<u8>,
+    /// `--subsampling`: JPEG chroma subsampling.
     pub subsampling: Option<Subsampling>,
+    /// `--png-compression`.
     pub png_level: Option<PngLevel>,
+    /// `--zstd-level`: 1 to 22, for zstd and zstd-delta tiles.
     pub zstd_level: Option<i32>,
+    /// `--bc7-effort`.
     pub bc7_effort: Option<Bc7Effort>,
+    /// `--background`: what fills the padding past the image's edge.
     pub background: Option<Background>,
+    /// `--flatten`: composite alpha over the background, so RGBA can be stored as JPEG.
     pub flatten: bool,
+    /// `--tile-type`: the stored samples' depth, where it may differ from the source's.
     pub tile_depth: Option<Depth>,
+    /// `--filename-format`: the tile files' names (`info.json`'s `filenameFormat`).
     pub filename_format: Option<String>,
+    /// `--filter`: how LODs 1 and up are made.
     pub filter: Option<Filter>,
     /// `--max-memory` (not an `info.json` member).
     pub max_memory: Option<u64>,
@@ -257,7 +270,9 @@ pub fn resolve(
 /// tiles of any codec.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Destination {
+    /// A directory of image files and `info.json` (JPEG or PNG tiles only).
     TileDir,
+    /// One pack file (`.vtpk`), whose tiles may be of any codec.
     Pack,
 }
 
@@ -267,7 +282,9 @@ pub enum Destination {
 /// tool's way of configuring a run), else the default ([`resolve`]).
 #[derive(Clone, Debug)]
 pub struct Plan {
+    /// What the run is asked: tile size, border, codec, filter, background, memory.
     pub opts: SplitOptions,
+    /// The tile files' names (a tile directory's; a pack keeps it in its `info.json`).
     pub names: FilenameFormat,
     /// The page grid the source is cut into.
     pub layout: Layout,

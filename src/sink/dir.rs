@@ -6,7 +6,7 @@
 use std::collections::HashSet;
 use std::fs;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -117,10 +117,6 @@ impl DirSink {
         staging::replace_dir(&self.staging, &self.dest).map_err(|e| TilerError::write(&self.dest, e))?;
         self.finished = true;
         Ok(())
-    }
-
-    pub fn staging_dir(&self) -> &Path {
-        &self.staging
     }
 }
 

@@ -16,12 +16,12 @@ use crate::error::{Result, TilerError};
 const APP2_CHUNK: usize = 65_519;
 
 /// The most profile bytes a JPEG holds: 255 numbered APP2 segments of `APP2_CHUNK` (65519) bytes.
-pub const MAX_JPEG_PROFILE: usize = 255 * APP2_CHUNK;
+pub(crate) const MAX_JPEG_PROFILE: usize = 255 * APP2_CHUNK;
 
 /// A profile ready to splice into the tiles of one codec: the JPEG tiles' APP2 segments or the
 /// PNG tiles' iCCP chunk.
 #[derive(Clone, Debug)]
-pub struct Profile {
+pub(crate) struct Profile {
     segments: Segments,
 }
 
@@ -119,7 +119,7 @@ fn crc32(bytes: &[u8]) -> u32 {
 }
 
 /// A sink whose JPEG and PNG tiles carry `profile`.
-pub struct WithProfile<'a> {
+pub(crate) struct WithProfile<'a> {
     pub inner: &'a dyn TileSink,
     pub profile: &'a Profile,
 }

@@ -8,7 +8,7 @@
 //! under a temporary name and rename into place when complete.
 
 mod dir;
-pub mod icc;
+pub(crate) mod icc;
 
 pub use dir::DirSink;
 
@@ -17,6 +17,9 @@ use crate::layout::Crop;
 
 /// Takes the encoded tiles of one run.
 pub trait TileSink: Sync {
+    /// Stores tile `(x, y)` of LOD `lod` (column and row of its level's page grid, from the
+    /// top left), `bytes` as the codec encoded it. Called from the encoding threads, at most
+    /// once per place; in LOD and row order only where [`TileSink::ordered`] says so.
     fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()>;
     /// Whether one-colour tiles should come as their colour (`write_constant`) rather than
     /// encoded.
@@ -46,7 +49,7 @@ pub trait TileSink: Sync {
 /// feed several sinks ([`crate::split::split_to`]), a pack stopping at its one-page level where
 /// Deep Zoom goes on down to one texel.
 #[derive(Clone, Copy)]
-pub struct Target<'a> {
+pub(crate) struct Target<'a> {
     pub sink: &'a dyn TileSink,
     pub lods: u32,
     /// What its padding holds: pages cut with the edge repeated are filled with its colour

@@ -27,12 +27,15 @@ use crate::pixel::{Channels, Depth, PixelLayout};
 
 /// Channels an image may have here: OME-TIFF and microscopy files reach a few hundred; the cap
 /// keeps a corrupt count from becoming a loop of thousands of passes.
-pub const MAX_CHANNELS: usize = 4096;
+pub(crate) const MAX_CHANNELS: usize = 4096;
 
 /// The channels of one image, each to be opened as a grey source.
 pub struct ChannelSet {
+    /// Width of every channel in texels.
     pub width: u32,
+    /// Height of every channel in texels.
     pub height: u32,
+    /// Sample depth of every channel.
     pub depth: Depth,
     /// A name per channel: the OME-XML's `Channel Name`, a file's stem, or the colour's.
     pub names: Vec<String>,
@@ -121,13 +124,9 @@ impl ChannelSet {
         Ok(set)
     }
 
+    /// How many channels: one per entry of `names`.
     pub fn count(&self) -> usize {
         self.names.len()
-    }
-
-    /// Whether the pipeline can read this image as it is (1 to 4 samples per texel).
-    pub fn is_texels(&self) -> bool {
-        matches!(self.kind, Kind::Texels { .. })
     }
 
     /// What the summary line says was read.
@@ -460,10 +459,10 @@ impl RowSource for Interleave {
 }
 
 /// The range of a source's samples, seen as its rows are read (the `omero` windows).
-pub type Range = Arc<Mutex<Option<(f64, f64)>>>;
+pub(crate) type Range = Arc<Mutex<Option<(f64, f64)>>>;
 
 /// A source that notes the smallest and largest sample it delivers into [`Range`].
-pub struct Ranged {
+pub(crate) struct Ranged {
     pub inner: Box<dyn RowSource>,
     pub range: Range,
 }

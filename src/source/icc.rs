@@ -5,7 +5,7 @@
 //! RGB(A) and grey(A) stay what they are, 8 or 16 bits per sample; alpha is copied. Grey goes to
 //! a grey profile with sRGB's curve. A profile that maps every probe colour to itself within
 //! one step of the sample scale is sRGB already and is left alone (no CPU spent). CMYK JPEG rows
-//! go through [`Cmyk`] into RGB.
+//! go through `Cmyk` into RGB.
 
 use std::path::Path;
 
@@ -25,7 +25,7 @@ pub const DEFAULT_CMYK_PROFILE: &str = "/usr/share/color/icc/ghostscript/default
 /// a few MiB. The cap is the same for every `--max-memory`, so whether a profile is honoured
 /// never depends on the budget; a profile held also counts against `--max-memory`
 /// (`Described`).
-pub const MAX_PROFILE_BYTES: u64 = 16 << 20;
+pub(crate) const MAX_PROFILE_BYTES: u64 = 16 << 20;
 
 /// The error for an embedded profile (`whence`: where the file keeps it) of `bytes` bytes
 /// (`None`: more than the cap, where it was cut off while inflating), past
@@ -222,7 +222,7 @@ impl RowSource for Described {
 }
 
 /// CMYK texels (8 bits, Adobe-inverted or not, or 16 bits) to sRGB through a CMYK profile.
-pub struct Cmyk {
+pub(crate) struct Cmyk {
     transform: Transform<u8, u8, ThreadContext>,
     /// Where the profile came from, for the summary line.
     pub note: String,

@@ -69,7 +69,6 @@ mod whole;
 pub(crate) mod xml;
 
 pub(crate) use crate::decode::{decode_tile, decode_tile_within, probe_tile};
-pub use stored::{Quality, StoredTiles};
 
 use std::fs::File;
 use std::io::Read;
@@ -82,20 +81,27 @@ use crate::pixel::PixelLayout;
 /// What a decoder knows before the first row: size and pixel layout.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ImageHeader {
+    /// Width in texels, as the rows are delivered (after any EXIF rotation).
     pub width: u32,
+    /// Height in texels: the number of rows the source delivers.
     pub height: u32,
+    /// Channels and sample depth of every delivered row.
     pub layout: PixelLayout,
 }
 
 /// A decoder positioned at the next row of an image.
 pub trait RowSource: Send {
+    /// Size and pixel layout, known before the first row and the same until the end.
     fn header(&self) -> ImageHeader;
+    /// [`ImageHeader::width`]: texels per row.
     fn width(&self) -> u32 {
         self.header().width
     }
+    /// [`ImageHeader::height`]: rows in all.
     fn height(&self) -> u32 {
         self.header().height
     }
+    /// [`ImageHeader::layout`]: what a row's samples are.
     fn layout(&self) -> PixelLayout {
         self.header().layout
     }
@@ -145,7 +151,7 @@ pub trait RowSource: Send {
         Embedded::default()
     }
     /// The compressed tiles the rows are decoded from, where a run may copy them as they are
-    /// ([`StoredTiles`]); `None` for sources whose rows are not a stored tile's texels (decoded
+    /// (`StoredTiles`); `None` for sources whose rows are not a stored tile's texels (decoded
     /// from strips or whole, or changed on the way: rotated, converted to sRGB).
     fn stored_tiles(&self) -> Option<std::sync::Arc<dyn stored::StoredTiles>> {
         None
@@ -160,6 +166,7 @@ pub trait RowSource: Send {
 /// What a file says about how its stored texels are to be shown.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Embedded {
+    /// The EXIF orientation, or the identity where the file has none.
     pub orientation: orient::Orientation,
     /// The ICC profile, whole (JPEG's APP2 chunks joined).
     pub icc: Option<Vec<u8>>,
@@ -168,6 +175,8 @@ pub struct Embedded {
 /// How [`open_with`] presents an image file.
 #[derive(Clone, Copy, Debug)]
 pub struct OpenOptions {
+    /// Bytes the source may hold (`--max-memory`): a format that cannot be streamed is decoded
+    /// whole only within it, and the read-ahead is sized from it.
     pub max_memory: u64,
     /// Apply the EXIF orientation (`--no-autorotate` turns it off).
     pub autorotate: bool,
@@ -185,7 +194,7 @@ impl OpenOptions {
 }
 
 /// A source as [`open_with`] presents it, and the ICC profile its texels are in when kept.
-pub type Opened = (Box<dyn RowSource>, Option<Vec<u8>>);
+pub(crate) type Opened = (Box<dyn RowSource>, Option<Vec<u8>>);
 
 /// Opens `path` as viewers show it (or as `opts` says): its orientation applied and its ICC
 /// profile converted to sRGB. Returns the profile when `keep_icc` keeps it, for the output to
@@ -329,9 +338,13 @@ fn open_once(path: &Path, max_memory: u64, pick: Pick) -> Result<Box<dyn RowSour
 /// The image formats read row by row, told apart by their first bytes (not the extension).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Streamed {
+    /// PNG (`\x89PNG\r\n\x1a\n`).
     Png,
+    /// TIFF and BigTIFF, either byte order (`II*\0`, `MM\0*`, `II+\0`, `MM\0+`).
     Tiff,
+    /// JPEG (`\xff\xd8\xff`).
     Jpeg,
+    /// Binary PGM or PPM (`P5`, `P6`).
     Pnm,
 }
 
@@ -351,6 +364,7 @@ impl Streamed {
         }
     }
 
+    /// The format's name as messages print it: `PNG`, `TIFF`, `JPEG`, `PNM`.
     pub fn name(self) -> &'static str {
         match self {
             Streamed::Png => "PNG",

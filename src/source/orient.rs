@@ -6,7 +6,7 @@
 //! as `--max-memory` allows: one band (the whole image, decoded once) when it fits, otherwise
 //! one pass over the source per band. A pass seeks where the source can (TIFF strips and tiles
 //! skip to the rows it needs, tiled TIFFs decode only the tiles under the columns it needs);
-//! more than [`MAX_PASSES`] passes is refused, naming `--no-autorotate`.
+//! more than `MAX_PASSES` passes is refused, naming `--no-autorotate`.
 
 use std::path::Path;
 
@@ -16,7 +16,7 @@ use crate::limits::human_bytes;
 
 /// Passes over the source allowed for one image before a reorientation is refused: each pass
 /// of a JPEG or PNG decodes the whole file again.
-pub const MAX_PASSES: u64 = 8;
+pub(crate) const MAX_PASSES: u64 = 8;
 
 /// The EXIF/TIFF Orientation tag (274): where the stored first row and column belong.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -29,19 +29,21 @@ impl Default for Orientation {
 }
 
 impl Orientation {
-    pub const NORMAL: Orientation = Orientation(1);
+    /// Orientation 1: rows as stored, nothing to undo.
+    pub(crate) const NORMAL: Orientation = Orientation(1);
 
     /// The tag's value; anything outside 1..=8 means nothing, as viewers read it.
     pub fn from_tag(value: u16) -> Orientation {
         if (1..=8).contains(&value) { Orientation(value) } else { Orientation::NORMAL }
     }
 
-    pub fn value(self) -> u16 {
+    /// The EXIF value, 1 to 8.
+    pub(crate) fn value(self) -> u16 {
         self.0
     }
 
     /// Stored columns become rows (orientations 5 to 8).
-    pub fn transposes(self) -> bool {
+    pub(crate) fn transposes(self) -> bool {
         self.0 >= 5
     }
 
@@ -78,7 +80,7 @@ impl Orientation {
 /// The Orientation in an EXIF block: a TIFF structure (byte order, IFD0), as JPEG's APP1
 /// (after "Exif\0\0") and PNG's eXIf chunk hold it. Anything malformed means no orientation:
 /// viewers ignore what they cannot read, and so do we.
-pub fn from_exif(exif: &[u8]) -> Orientation {
+pub(crate) fn from_exif(exif: &[u8]) -> Orientation {
     let exif = exif.strip_prefix(b"Exif\0\0").unwrap_or(exif);
     let big = match exif.get(..4) {
         Some(b"II*\0") => false,

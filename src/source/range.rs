@@ -16,7 +16,9 @@ use crate::pixel::{Depth, PixelLayout};
 /// The values mapped to the first and the last code.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Range {
+    /// The value mapped to code 0; lower values clamp to it.
     pub min: f64,
+    /// The value mapped to the largest code (255, or 65535 for 16 bits); higher ones clamp.
     pub max: f64,
 }
 

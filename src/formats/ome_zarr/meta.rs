@@ -18,6 +18,7 @@ pub enum Version {
 }
 
 impl Version {
+    /// The version as the metadata and messages write it: `0.4` or `0.5`.
     pub fn name(self) -> &'static str {
         match self {
             Version::V04 => "0.4",
@@ -29,6 +30,7 @@ impl Version {
 /// The physical side of a source pixel (`--pixel-size 0.25um`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PixelSize {
+    /// The side in `unit`s (positive).
     pub value: f64,
     /// An OME-Zarr space unit (UDUNITS-2 name), e.g. `micrometer`.
     pub unit: &'static str,
@@ -86,6 +88,7 @@ pub struct Spec {
 /// A channel written in a pass of its own.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Plane {
+    /// The channel's name in the OME metadata (`omero.channels`' `label`).
     pub name: String,
     /// The smallest and largest sample, where known before the metadata is written.
     pub window: Option<(f64, f64)>,

@@ -1,4 +1,4 @@
-//! [`OmeZarrSink`]: the pyramid as an OME-Zarr image (`split --layout ome-zarr`), each level
+//! `OmeZarrSink`: the pyramid as an OME-Zarr image (`split --layout ome-zarr`), each level
 //! one array whose chunks are our pages (border 0).
 //!
 //! Tiles come from the encoders as raw texels (interleaved, little-endian); the sink reorders
@@ -25,8 +25,9 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 
-pub use meta::{PixelSize, Plane, Spec, Version};
-pub use plan::{OmeZarrPlan, OmeZarrRequested};
+pub(crate) use meta::Spec;
+pub use meta::{PixelSize, Plane, Version};
+pub(crate) use plan::{OmeZarrPlan, OmeZarrRequested};
 
 use crate::error::{Result, ShowPath, TilerError};
 use crate::output::{Claim, Product, staging};
@@ -35,11 +36,11 @@ use crate::sink::TileSink;
 /// Chunks per shard side of OME-Zarr 0.5 when not asked: with 256-texel chunks a shard is
 /// 4096 x 4096 texels, so a 100-gigapixel image is about 8000 files (all levels), and a
 /// shard's index is 4 KiB.
-pub const DEFAULT_SHARD_CHUNKS: u32 = 16;
+pub(crate) const DEFAULT_SHARD_CHUNKS: u32 = 16;
 /// Chunk side when not asked: the common OME-Zarr chunk, a few hundred KiB raw.
-pub const DEFAULT_CHUNK: u32 = 256;
+pub(crate) const DEFAULT_CHUNK: u32 = 256;
 /// The most chunks per shard side: a shard's index (16 bytes a chunk) stays within 1 MiB.
-pub const MAX_SHARD_CHUNKS: u32 = 256;
+pub(crate) const MAX_SHARD_CHUNKS: u32 = 256;
 
 /// A chunk slot of a shard's index that holds no chunk (the sharding codec's "empty").
 const EMPTY: u64 = u64::MAX;
@@ -47,7 +48,7 @@ const EMPTY: u64 = u64::MAX;
 const ARCHIVE: &str = "archive.ozx";
 const SHARDS: &str = "shards";
 
-pub struct OmeZarrSink {
+pub(crate) struct OmeZarrSink {
     spec: Spec,
     dest: PathBuf,
     staging: PathBuf,
@@ -77,7 +78,7 @@ struct Shard {
 }
 
 /// Whether `path` names a zipped OME-Zarr.
-pub fn is_ozx(path: &Path) -> bool {
+pub(crate) fn is_ozx(path: &Path) -> bool {
     path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ozx"))
 }
 
@@ -311,7 +312,7 @@ impl OmeZarrSink {
 }
 
 /// One channel's pass into an [`OmeZarrSink`] of channels written one pass each.
-pub struct PlaneSink<'a> {
+pub(crate) struct PlaneSink<'a> {
     sink: &'a OmeZarrSink,
     c: u32,
 }
@@ -381,7 +382,7 @@ fn planes(raw: &[u8], channels: usize, sample: usize) -> std::borrow::Cow<'_, [u
 
 /// The OME-Zarr image a label image belongs to, as its labels must match it.
 #[derive(Debug)]
-pub struct LabelParent {
+pub(crate) struct LabelParent {
     pub image: PathBuf,
     pub version: Version,
     /// Its levels, its full size (width, height) and its chunk side, as its metadata says.
@@ -392,7 +393,7 @@ pub struct LabelParent {
 
 /// The image `dest` is a label image of, where `dest` is `IMAGE/labels/NAME` and IMAGE holds
 /// OME-Zarr metadata we can read.
-pub fn label_parent(dest: &Path) -> Option<LabelParent> {
+pub(crate) fn label_parent(dest: &Path) -> Option<LabelParent> {
     let labels = dest.parent().filter(|p| p.file_name().is_some_and(|n| n == "labels"))?;
     let image = labels.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let json =
@@ -420,7 +421,7 @@ pub fn label_parent(dest: &Path) -> Option<LabelParent> {
 
 /// Adds `name` to the `labels` list of the group `labels` (made if absent), each file
 /// replaced whole through a temporary.
-pub fn register_label(labels: &Path, version: Version, name: &str) -> Result<()> {
+pub(crate) fn register_label(labels: &Path, version: Version, name: &str) -> Result<()> {
     let attributes_file = labels.join(match version {
         Version::V04 => ".zattrs",
         Version::V05 => "zarr.json",

@@ -12,6 +12,8 @@ use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::ImageHeader;
 use crate::source::tiled::{CellData, TileGrid, info_icc_profile};
 
+/// A pack's LOD 0 as a grid of tiles, for `convert` to read as an image: each tile decoded
+/// and its border cut off.
 pub struct PackInput {
     pack: Pack,
     header: ImageHeader,

@@ -15,6 +15,8 @@ use crate::layout::Layout;
 use crate::pixel::PixelLayout;
 use crate::sink::TileSink;
 
+/// A pack being written as a run's sink: tiles appended as they come, the index and header
+/// at [`PackSink::finish`], under a temporary name until then.
 pub struct PackSink {
     writer: Mutex<PackWriter>,
     kind: TileKind,
@@ -34,6 +36,7 @@ pub(crate) fn pack_description(layout: &Layout, stored: PixelLayout) -> Descript
     }
 }
 
+/// The pack's tile kind for tiles of `codec` (a pack records one per tile).
 pub fn tile_kind(codec: Codec) -> TileKind {
     match codec {
         Codec::Jpeg { .. } => TileKind::Jpeg,
@@ -68,7 +71,7 @@ impl PackSink {
     }
 
     /// [`finish`](Self::finish) with other metadata than given at the start.
-    pub fn finish_with_metadata(self, metadata: Vec<u8>) -> Result<WriteSummary> {
+    pub(crate) fn finish_with_metadata(self, metadata: Vec<u8>) -> Result<WriteSummary> {
         let mut writer = self.writer.into_inner().map_err(|_| TilerError::panicked("a tile writer"))?;
         writer.set_metadata(metadata)?;
         Ok(writer.finish()?)

@@ -10,7 +10,7 @@
 //! by tile id, writes header, root directory, metadata, leaf directories and then the data by
 //! copying the spooled payloads in tile-id order into `.NAME.partial-PID`, reads its own
 //! directories back, and renames the archive into place. Memory holds the directory entries
-//! only (see [`ENTRY_MEMORY_BYTES`]), never the payloads; the disk holds the payloads twice
+//! only (see `ENTRY_MEMORY_BYTES`), never the payloads; the disk holds the payloads twice
 //! until the spool is removed.
 
 use std::collections::HashMap;
@@ -37,14 +37,14 @@ const ROOT_LIMIT: usize = 16384 - HEADER_LEN;
 /// Entries per leaf directory to start from (as go-pmtiles); doubled until the root fits.
 const FIRST_LEAF_SIZE: usize = 4096;
 /// The deepest zoom a PMTiles reader accepts (tile ids must stay below 2^53 in JavaScript).
-pub const MAX_ZOOM: u32 = 26;
+pub(crate) const MAX_ZOOM: u32 = 26;
 /// Memory held per tile until `finish`, a bound for `--max-memory`: its spooled entry (24
 /// bytes), its share of the content map (about 56), and its directory entry at the end (24).
-pub const ENTRY_MEMORY_BYTES: u64 = 104;
+pub(crate) const ENTRY_MEMORY_BYTES: u64 = 104;
 
 /// The spec's tile types.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TileType {
+pub(crate) enum TileType {
     Png = 2,
     Jpeg = 3,
 }
@@ -70,7 +70,9 @@ pub struct PmtilesSummary {
     pub contents: u64,
     /// Leaf directories (0 when the root holds every entry).
     pub leaves: u64,
+    /// Bytes of the tile data section (distinct payloads, each once).
     pub data_bytes: u64,
+    /// Bytes of the whole archive: header, directories, metadata and tile data.
     pub file_bytes: u64,
 }
 
@@ -117,7 +119,7 @@ struct Spool {
 }
 
 /// Writes one PMTiles archive; see the module's description.
-pub struct PmtilesSink {
+pub(crate) struct PmtilesSink {
     dest: PathBuf,
     spool_path: PathBuf,
     out_path: PathBuf,
@@ -329,7 +331,7 @@ impl TileSink for PmtilesSink {
 
 /// The area and view a map reader is told about, in degrees.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Bounds {
+pub(crate) struct Bounds {
     pub min_lon: f64,
     pub min_lat: f64,
     pub max_lon: f64,

@@ -8,12 +8,12 @@
 //!   its `ImageDescription`, each reduced level one of its SubIFDs (tag 330), as bioformats,
 //!   QuPath and tifffile read a pyramid.
 //!
-//! The file is written in one pass ([`TiffWriter`]): the header and a signature first, then
+//! The file is written in one pass (`TiffWriter`): the header and a signature first, then
 //! each tile's bytes appended as it arrives, in any order, with only its offset and length
 //! kept (16 bytes a tile); at the end the IFDs, their arrays and the OME-XML, and the
 //! header's first-IFD offset patched. Classic TIFF or BigTIFF is decided before the first
-//! byte from an upper bound of the file's size ([`Spec::needs_bigtiff`]), or always with
-//! [`BigTiff::Always`]. [`TiffSink`] is the writer as a pipeline sink: raw tiles compressed
+//! byte from an upper bound of the file's size (`Spec::needs_bigtiff`), or always with
+//! [`BigTiff::Always`]. `TiffSink` is the writer as a pipeline sink: raw tiles compressed
 //! on the encoder threads (`compress.rs`: Deflate or zstd with the horizontal predictor),
 //! JPEG tiles stored as they come, the file written under a temporary name and renamed into
 //! place when complete.
@@ -31,8 +31,9 @@ mod sink;
 mod tests;
 mod writer;
 
-pub use sink::TiffSink;
-pub use writer::{TiffSummary, TiffWriter};
+pub(crate) use sink::TiffSink;
+pub use writer::TiffSummary;
+pub(crate) use writer::TiffWriter;
 
 use crate::codec::Subsampling;
 use crate::error::{Result, TilerError};
@@ -40,12 +41,12 @@ use crate::pixel::{Channels, Depth, PixelLayout};
 
 /// Where the writer puts its signature, after the header: the `Software` tag's value, which
 /// names the file as ours so that a later run may replace it (`output::claim`).
-pub const SIGNATURE_AT: u64 = 16;
+pub(crate) const SIGNATURE_AT: u64 = 16;
 /// The signature's text (NUL-terminated in the file, as TIFF's ASCII values are).
-pub const SIGNATURE: &str = "vortex-tiler";
+pub(crate) const SIGNATURE: &str = "vortex-tiler";
 
 /// The default tile side, libvips' and most scanners'.
-pub const DEFAULT_TILE_SIZE: u32 = 256;
+pub(crate) const DEFAULT_TILE_SIZE: u32 = 256;
 
 /// Which pyramidal TIFF layout to write.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -67,7 +68,7 @@ impl Flavour {
 
     /// The flavour a file name says: `.ome.tif` and `.ome.tiff` OME-TIFF, `.tif` and `.tiff`
     /// the generic pyramid (case-insensitive); other names none.
-    pub fn of_name(name: &str) -> Option<Flavour> {
+    pub(crate) fn of_name(name: &str) -> Option<Flavour> {
         let name = name.to_ascii_lowercase();
         if name.ends_with(".ome.tif") || name.ends_with(".ome.tiff") {
             Some(Flavour::Ome)
@@ -85,11 +86,20 @@ pub enum Compression {
     /// Uncompressed samples (1).
     None,
     /// zlib streams ("Adobe Deflate", 8), integer samples horizontally differenced first.
-    Deflate { level: u32 },
+    Deflate {
+        /// The zlib level, 0 (stored) to 9 (smallest); a planned output always takes 6.
+        level: u32,
+    },
     /// zstd frames (50000, libtiff's code), integer samples horizontally differenced first.
-    Zstd { level: i32 },
+    Zstd {
+        /// The zstd level, 1 to 22 (`--zstd-level`).
+        level: i32,
+    },
     /// One whole JPEG stream a tile (7), YCbCr at the encoder's subsampling, or grey.
-    Jpeg { subsampling: Subsampling },
+    Jpeg {
+        /// Chroma subsampling of RGB tiles.
+        subsampling: Subsampling,
+    },
 }
 
 impl Compression {
@@ -115,7 +125,7 @@ impl Compression {
 
     /// Whether the pipeline hands this compression encoded tiles (JPEG) rather than raw
     /// samples, which the sink compresses itself.
-    pub fn takes_encoded(self) -> bool {
+    pub(crate) fn takes_encoded(self) -> bool {
         matches!(self, Compression::Jpeg { .. })
     }
 }
@@ -123,7 +133,7 @@ impl Compression {
 /// Classic TIFF (offsets of 32 bits, files under 4 GiB) or BigTIFF (64 bits).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum BigTiff {
-    /// BigTIFF only where the file could pass 4 GiB ([`Spec::needs_bigtiff`]).
+    /// BigTIFF only where the file could pass 4 GiB (`Spec::needs_bigtiff`).
     #[default]
     Auto,
     /// Always BigTIFF.
@@ -133,11 +143,11 @@ pub enum BigTiff {
 /// The physical side of a level-0 pixel, in micrometres (OME's `PhysicalSizeX`/`Y`, and the
 /// TIFF resolution tags).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Micrometres(pub f64);
+pub(crate) struct Micrometres(pub f64);
 
 /// Everything the file says, fixed before its first byte.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Spec {
+pub(crate) struct Spec {
     pub flavour: Flavour,
     /// The full-resolution image's size; level `k` is `ceil(size / 2^k)`.
     pub width: u32,
@@ -158,7 +168,7 @@ pub struct Spec {
 
 /// The largest tile side (libtiff and the JPEG codec stop at 65535; a tile this large is
 /// far past any reader's use).
-pub const MAX_TILE_SIZE: u32 = 65536 - 16;
+pub(crate) const MAX_TILE_SIZE: u32 = 65536 - 16;
 
 impl Spec {
     /// Refuses what no TIFF (or no reader of these flavours) holds, before anything is

@@ -48,11 +48,6 @@ impl TiffSink {
         Ok(sink)
     }
 
-    /// What the file says (its layout, compression, levels).
-    pub fn spec(&self) -> &Spec {
-        &self.spec
-    }
-
     /// Writes the IFDs and renames the file into place.
     pub fn finish(mut self) -> Result<TiffSummary> {
         let writer = self.writer.get_mut().map_err(|_| TilerError::panicked("a TIFF writer"))?.take();

@@ -25,12 +25,17 @@ const DATA_AT: u64 = 32;
 #[derive(Clone, Debug, PartialEq, Eq)]
 #[non_exhaustive]
 pub struct TiffSummary {
+    /// Generic pyramidal TIFF or OME-TIFF.
     pub flavour: Flavour,
+    /// Whether the file is BigTIFF (64-bit offsets).
     pub bigtiff: bool,
+    /// Pyramid levels, the full resolution included.
     pub levels: u32,
+    /// Tiles stored, every level.
     pub tiles: u64,
-    /// Bytes of tile data, and of the whole file.
+    /// Bytes of tile data, as stored (compressed).
     pub tile_bytes: u64,
+    /// Bytes of the whole file.
     pub file_bytes: u64,
     /// The `Compression` written (`none`, `deflate`, `zstd`, `jpeg`).
     pub compression: &'static str,
@@ -95,11 +100,6 @@ impl TiffWriter {
         Ok(TiffWriter { path: path.to_path_buf(), file, spec, big, len: DATA_AT, bases, tiles, tile_bytes: 0 })
     }
 
-    /// Whether the file is BigTIFF.
-    pub fn is_bigtiff(&self) -> bool {
-        self.big
-    }
-
     /// Appends tile `(x, y)` of `level`: `bytes` as the file stores them (compressed).
     pub fn add_tile(&mut self, level: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
         let err = |message: String| TilerError::Encode { lod: level, x, y, message };
@@ -129,11 +129,6 @@ impl TiffWriter {
         self.len = end;
         self.tile_bytes += bytes.len() as u64;
         Ok(())
-    }
-
-    /// Bytes of tile data written so far.
-    pub fn tile_bytes(&self) -> u64 {
-        self.tile_bytes
     }
 
     /// Writes the IFDs after the tiles, points the header at the first, and syncs the file.

@@ -107,6 +107,7 @@ impl FilenameFormat {
         Ok(FilenameFormat { source: pattern.to_string(), pieces })
     }
 
+    /// The pattern as it was parsed, as `info.json`'s `filenameFormat` writes it.
     pub fn as_str(&self) -> &str {
         &self.source
     }
@@ -127,7 +128,7 @@ impl FilenameFormat {
 
     /// The arguments that would give `name`, or `None` if it does not match the pattern (or
     /// gives one argument two values).
-    pub fn match_name(&self, name: &str) -> Option<Vec<u32>> {
+    pub(crate) fn match_name(&self, name: &str) -> Option<Vec<u32>> {
         let mut args: Vec<Option<u32>> = vec![None; self.arg_count()];
         let mut rest = name;
         for p in &self.pieces {

@@ -9,18 +9,22 @@ use crate::error::{Result, TilerError};
 use crate::layout::lods_for;
 
 /// The `formatVersion` this tool writes. Files without the member are the thesis's version 0.
-pub const FORMAT_VERSION: u32 = 2;
+pub(crate) const FORMAT_VERSION: u32 = 2;
 
 /// The border of the tiles a file without `border` describes: the thesis's files have no such
 /// member, and their tiles no border.
-pub const BORDER_WHEN_ABSENT: u32 = 0;
+pub(crate) const BORDER_WHEN_ABSENT: u32 = 0;
 
 /// Every member; on reading, all are optional (the thesis's files have only the first six).
+/// Each field is the camel-case member of the same name; `docs/info-json.md` is the
+/// specification, and `None` means the member is absent.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "camelCase", deny_unknown_fields)]
 pub struct InfoFile {
+    /// `formatVersion`: 2 as this tool writes it; absent in the thesis's files (version 0).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub format_version: Option<u32>,
+    /// Side of every stored tile in texels, borders included.
     pub tile_size: Option<u32>,
     /// Pages per side of a square power-of-two grid: written only for such grids (the
     /// thesis's layout), read from the files that have no `tileColumns`.
@@ -32,23 +36,37 @@ pub struct InfoFile {
     /// Page rows at LOD 0 (since format version 2).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tile_rows: Option<u32>,
+    /// Number of LODs, LOD 0 the finest, down to the first of one page.
     pub lod_count: Option<u32>,
+    /// Channels of a texel: `luminance`, `luminanceAlpha`, `rgb` or `rgba`.
     pub tile_format: Option<String>,
+    /// Sample type: `unsignedByte`, `unsignedShort`, and in packs `unsignedInt`, `float`, `half`.
     pub tile_type: Option<String>,
+    /// Tile file names, printf-like: `%1$` the LOD, `%2$` x, `%3$` y.
     pub filename_format: Option<String>,
+    /// Texels each tile repeats from its neighbours on every side (the thesis's files: 0).
     pub border: Option<u32>,
+    /// Width of the real image at LOD 0 in texels.
     pub width: Option<u32>,
+    /// Height of the real image at LOD 0 in texels.
     pub height: Option<u32>,
+    /// What fills the padding: `edge`, `#rrggbb` or `#rrggbbaa`.
     pub background: Option<String>,
+    /// `jpeg` or `png`; in a pack's metadata also `raw`, `zstd`, `zstd-delta`, `bc1`, `bc7`.
     pub codec: Option<String>,
+    /// JPEG only: quality, 1 to 100.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub quality: Option<u8>,
+    /// JPEG only: chroma subsampling, `420` or `444`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub subsampling: Option<String>,
+    /// PNG only: `fast`, `default` or `best`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub png_compression: Option<String>,
+    /// zstd and zstd-delta only: the level, 1 to 22.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub zstd_level: Option<i32>,
+    /// BC7 only: the encoder's effort (`ultra-fast` to `slow`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bc7_effort: Option<String>,
     /// How LODs were made (`--filter`); absent in files written before it existed (`box`).
@@ -60,7 +78,7 @@ pub struct InfoFile {
 }
 
 /// A complete description, as written after a successful run.
-pub type Info = InfoFile;
+pub(crate) type Info = InfoFile;
 
 impl InfoFile {
     /// Reads and checks an existing `info.json`.
@@ -133,6 +151,8 @@ impl InfoFile {
         }
     }
 
+    /// The file's text as this tool writes it: pretty-printed JSON, members in the order
+    /// above, absent ones left out where the specification allows, and a final newline.
     #[expect(clippy::expect_used, reason = "plain data always serialises")]
     pub fn to_json_pretty(&self) -> String {
         let mut s = serde_json::to_string_pretty(self).expect("plain data serialises");

@@ -26,15 +26,21 @@ use info::{FORMAT_VERSION, InfoFile};
 
 /// A tiled directory's `info.json`, completed with defaults for the thesis's version-0 files.
 pub struct TiledDir {
+    /// The file as read, absent members left absent.
     pub info: InfoFile,
+    /// The pyramid as a pack's header describes one: size, tile size, border, levels, texels.
     pub description: Description,
     /// The page grid of every LOD, as a pack's level table states it.
     pub levels: Vec<Level>,
+    /// The tile files' names (`filenameFormat`).
     pub names: FilenameFormat,
+    /// The tiles' codec and its settings, as `info.json` states them.
     pub codec: Codec,
 }
 
 impl TiledDir {
+    /// Reads and checks `dir/info.json`: every member a run needs present or defaulted as
+    /// the thesis's files imply, and consistent with the others.
     pub fn read(dir: &Path) -> Result<TiledDir> {
         let path = dir.join("info.json");
         let mut info = InfoFile::read(&path)?;

@@ -13,6 +13,8 @@ use crate::source::ImageHeader;
 use crate::source::tiled::store::MAX_TILE_BYTES;
 use crate::source::tiled::{CellData, TileGrid, probe, read_file, tile_file_cap};
 
+/// A directory of tiles named by a pattern with a column and a row (`%1$` x, `%2$` y), the
+/// thesis's named tiles, as one image for `convert`; the image's size comes from the tiles.
 pub struct NamedDir {
     dir: PathBuf,
     names: FilenameFormat,
@@ -25,6 +27,7 @@ pub struct NamedDir {
 
 impl NamedDir {
     #[expect(clippy::expect_used, reason = "the files were listed under dir and checked to be non-empty above")]
+    /// Lists the files of `dir` that `pattern` names and probes the tiles' size and layout.
     pub fn open(dir: &Path, pattern: &str) -> Result<NamedDir> {
         let names =
             FilenameFormat::parse(pattern, 2).map_err(|m| TilerError::Options(format!("--filename-format: {m}")))?;

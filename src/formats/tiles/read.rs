@@ -10,6 +10,8 @@ use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::ImageHeader;
 use crate::source::tiled::{CellData, TileGrid, info_icc_profile, read_file};
 
+/// A tile directory this tool wrote (`info.json` and its tiles), read back as its LOD 0
+/// image for `convert`: each tile's border cut off.
 pub struct SplitOutput {
     dir: PathBuf,
     names: FilenameFormat,
@@ -19,6 +21,7 @@ pub struct SplitOutput {
 }
 
 impl SplitOutput {
+    /// Reads `dir/info.json` ([`TiledDir::read`]) and checks what `convert` can read.
     pub fn open(dir: &Path) -> Result<SplitOutput> {
         let t = TiledDir::read(dir)?;
         let d = t.description;

@@ -21,11 +21,11 @@ pub mod xyz;
 
 use std::fmt;
 
-pub use crate::layout::Crop;
+pub(crate) use crate::layout::Crop;
 use crate::layout::Layout;
 
 pub use archive::{is_iiif_dir, is_zip, open_zip};
-pub use recognise::recognise;
+pub(crate) use recognise::recognise;
 
 /// A file layout a viewer opens directly (`--layout`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -41,6 +41,7 @@ pub enum Viewer {
 }
 
 impl Viewer {
+    /// The layout's `--layout` value: `dzi`, `iiif`, `xyz` or `google`.
     pub fn name(self) -> &'static str {
         match self {
             Viewer::Dzi => "dzi",
@@ -51,7 +52,7 @@ impl Viewer {
     }
 
     /// The tile side a viewer of this layout expects by default (vips dzsave's defaults).
-    pub fn default_tile_size(self) -> u32 {
+    pub(crate) fn default_tile_size(self) -> u32 {
         match self {
             Viewer::Dzi => dzi::DEFAULT_TILE_SIZE,
             Viewer::Iiif => iiif::DEFAULT_TILE_SIZE,
@@ -93,7 +94,7 @@ impl fmt::Display for Viewer {
 
 /// One page as a viewer's file: where it goes under the output directory and what it keeps.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Placed {
+pub(crate) struct Placed {
     pub path: String,
     /// A second name for the same bytes (IIIF's `full/max` of a one-tile image).
     pub alias: Option<String>,
@@ -103,7 +104,9 @@ pub struct Placed {
 /// A pyramid in one viewer layout: the page grid it is cut from and its names.
 #[derive(Clone, Debug)]
 pub struct ViewerTiles {
+    /// Which layout names the tiles.
     pub viewer: Viewer,
+    /// The page grid the tiles are cut from (for Deep Zoom, down to one texel).
     pub layout: Layout,
     /// The pyramid's name: Deep Zoom's `NAME.dzi`, the XYZ TileJSON's `name`.
     pub name: String,
@@ -116,7 +119,7 @@ pub struct ViewerTiles {
 
 impl ViewerTiles {
     /// Where page (lod, x, y) goes and which of its texels it keeps.
-    pub fn place(&self, lod: u32, x: u32, y: u32) -> Placed {
+    pub(crate) fn place(&self, lod: u32, x: u32, y: u32) -> Placed {
         let (l, ext) = (&self.layout, self.extension);
         let (path, alias) = match self.viewer {
             Viewer::Dzi => (dzi::tile_path(&self.name, dzi::level_of(l, lod), x, y, ext), None),
@@ -128,7 +131,7 @@ impl ViewerTiles {
 
     /// Which texels of page (lod, x, y) its tile keeps (no file name made: the encoders ask
     /// this of every page).
-    pub fn crop(&self, lod: u32, x: u32, y: u32) -> Crop {
+    pub(crate) fn crop(&self, lod: u32, x: u32, y: u32) -> Crop {
         match self.viewer {
             Viewer::Dzi => dzi::crop(&self.layout, lod, x, y),
             Viewer::Iiif => iiif::crop(&self.layout, lod, x, y),
@@ -139,7 +142,7 @@ impl ViewerTiles {
     /// The files a IIIF service needs besides its tiles: `full/max` and each size it lists that
     /// no tile is (see [`iiif::whole`]), made from the tiles `read(path)` gives back. None for
     /// other layouts, or IIIF without a service.
-    pub fn whole_images(
+    pub(crate) fn whole_images(
         &self,
         read: impl Fn(&str) -> Result<Vec<u8>, String>,
     ) -> Result<Vec<(String, Vec<u8>)>, String> {
@@ -170,7 +173,7 @@ impl ViewerTiles {
     }
 
     /// The manifest files, as (path under the output directory, bytes).
-    pub fn manifests(&self) -> Vec<(String, Vec<u8>)> {
+    pub(crate) fn manifests(&self) -> Vec<(String, Vec<u8>)> {
         let l = &self.layout;
         match self.viewer {
             Viewer::Dzi => vec![(format!("{}.dzi", self.name), dzi::descriptor(l, self.extension).into_bytes())],

@@ -27,7 +27,16 @@ pub enum CellData {
     /// An encoded image file's bytes (PNG, JPEG, ...), and a name for errors.
     File(PathBuf, Vec<u8>),
     /// Samples in the grid's layout, `width x height` of the whole stored tile.
-    Samples { name: PathBuf, width: u32, height: u32, bytes: Vec<u8> },
+    Samples {
+        /// What errors call the tile (its file, or the pack and tile).
+        name: PathBuf,
+        /// Width of the whole stored tile in texels.
+        width: u32,
+        /// Height of the whole stored tile in texels.
+        height: u32,
+        /// The samples, rows top to bottom, channels interleaved, native byte order.
+        bytes: Vec<u8>,
+    },
 }
 
 /// A tiled image. Cell (c, r) covers image texels `[c * cell_w, min((c + 1) * cell_w, width))`
@@ -36,6 +45,7 @@ pub enum CellData {
 pub trait TileGrid: Send + Sync {
     /// One line about the input, for the summary.
     fn describe(&self) -> String;
+    /// The image the grid holds: its size (the cells' union) and texels.
     fn header(&self) -> ImageHeader;
     /// Nominal cell size in image texels.
     fn cell(&self) -> (u32, u32);
@@ -183,7 +193,7 @@ impl TiledSource {
 
     /// Bytes held while a row of cells is read: the decoded cells of the row and the band
     /// they are copied into, each a cell high and the image wide.
-    pub fn band_bytes(&self) -> u64 {
+    pub(crate) fn band_bytes(&self) -> u64 {
         let (_, ch) = self.grid.cell();
         2 * ch as u64 * self.header.width as u64 * self.header.layout.bytes_per_pixel() as u64
     }

@@ -14,9 +14,9 @@ use super::Crop;
 use crate::layout::Layout;
 
 /// vips dzsave's default tile size (254 + 2 x 1 overlap = 256 texels stored).
-pub const DEFAULT_TILE_SIZE: u32 = 254;
+pub(crate) const DEFAULT_TILE_SIZE: u32 = 254;
 /// vips dzsave's default overlap.
-pub const DEFAULT_OVERLAP: u32 = 1;
+pub(crate) const DEFAULT_OVERLAP: u32 = 1;
 
 /// Deep Zoom's finest level, where the image has its full size: `ceil(log2(max(w, h)))`. The
 /// writer's level names and the reader's finest level ([`DeepZoom`]) both come
@@ -26,29 +26,29 @@ pub fn max_level(width: u32, height: u32) -> u32 {
 }
 
 /// The Deep Zoom level of our LOD `lod`.
-pub fn level_of(layout: &Layout, lod: u32) -> u32 {
+pub(crate) fn level_of(layout: &Layout, lod: u32) -> u32 {
     max_level(layout.width, layout.height) - lod
 }
 
 /// `NAME_files/LEVEL`: the directory of a level's tiles, beside `NAME.dzi`.
-pub fn level_dir(name: &str, level: u32) -> String {
+pub(crate) fn level_dir(name: &str, level: u32) -> String {
     format!("{name}_files/{level}")
 }
 
 /// `LEVEL_DIR/COL_ROW.EXT`: a tile in its level's directory.
-pub fn tile_in(level_dir: &str, col: u32, row: u32, extension: &str) -> String {
+pub(crate) fn tile_in(level_dir: &str, col: u32, row: u32, extension: &str) -> String {
     format!("{level_dir}/{col}_{row}.{extension}")
 }
 
 /// `NAME_files/LEVEL/COL_ROW.EXT`.
-pub fn tile_path(name: &str, level: u32, col: u32, row: u32, extension: &str) -> String {
+pub(crate) fn tile_path(name: &str, level: u32, col: u32, row: u32, extension: &str) -> String {
     tile_in(&level_dir(name, level), col, row, extension)
 }
 
 /// The texels of its level that tile `index` of a row (column) holds, `start..end`: its cell
 /// of `cell` texels, plus `overlap` on each side that has a neighbour, stopping at the level's
 /// `extent`. What the writer crops a page to and what the reader expects a tile to hold.
-pub fn tile_span(index: u32, cell: u64, overlap: u64, extent: u32) -> (u64, u64) {
+pub(crate) fn tile_span(index: u32, cell: u64, overlap: u64, extent: u32) -> (u64, u64) {
     let own = index as u64 * cell;
     let start = if index == 0 { own } else { own.saturating_sub(overlap) };
     (start, (own + cell + overlap).min(extent as u64))
@@ -56,7 +56,7 @@ pub fn tile_span(index: u32, cell: u64, overlap: u64, extent: u32) -> (u64, u64)
 
 /// The texels of page (lod, col, row) that its Deep Zoom tile keeps: the left (top) border
 /// only where there is a tile to the left (above), and nothing past the image's edge.
-pub fn crop(layout: &Layout, lod: u32, col: u32, row: u32) -> Crop {
+pub(crate) fn crop(layout: &Layout, lod: u32, col: u32, row: u32) -> Crop {
     let (p, b) = (layout.payload() as u64, layout.border as u64);
     let (level_w, level_h) = layout.level_extent(lod);
     let axis = |index: u32, extent: u32| -> (u32, u32) {
@@ -68,7 +68,7 @@ pub fn crop(layout: &Layout, lod: u32, col: u32, row: u32) -> Crop {
 }
 
 /// The `.dzi` descriptor.
-pub fn descriptor(layout: &Layout, extension: &str) -> String {
+pub(crate) fn descriptor(layout: &Layout, extension: &str) -> String {
     format!(
         concat!(
             "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n",

@@ -15,6 +15,8 @@ use crate::source::tiled::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore};
 use crate::source::tiled::{CellData, TileGrid, any_tile_file_cap, probe_stored};
 use crate::source::xml::unescape;
 
+/// A Deep Zoom pyramid (`NAME.dzi` and `NAME_files/`, in a directory or a zip), its finest
+/// level read as an image for `convert`: the overlap cut off each tile.
 pub struct DeepZoom {
     store: TileStore,
     /// The descriptor, relative to the store.

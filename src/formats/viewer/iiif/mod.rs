@@ -12,14 +12,15 @@
 //! service once uploaded there: level 0 also requires `full/max`, and every size `info.json`
 //! lists in `sizes`, as files. `max` of a gigapixel image would be the whole image at full
 //! resolution, which no client wants in one file, so `max` is bounded by `maxWidth` and
-//! `maxHeight`: it is the finest LOD whose long side is at most [`MAX_WHOLE_SIDE`], and `sizes`
+//! `maxHeight`: it is the finest LOD whose long side is at most `MAX_WHOLE_SIDE` (2048), and `sizes`
 //! lists it and every coarser LOD. Those whole-image files are made from the LOD's tiles
-//! ([`whole`]).
+//! (`whole`).
 
 mod read;
-pub mod whole;
+pub(crate) mod whole;
 
-pub use read::{Iiif, looks_like_iiif};
+pub use read::Iiif;
+pub(crate) use read::looks_like_iiif;
 
 use serde_json::json;
 
@@ -28,20 +29,22 @@ use crate::codec::Codec;
 use crate::layout::Layout;
 
 /// libvips' default tile size for IIIF.
-pub const DEFAULT_TILE_SIZE: u32 = 512;
+pub(crate) const DEFAULT_TILE_SIZE: u32 = 512;
 /// The image's `id` when none is given: relative, resolved by a viewer against the page it
 /// runs in (see docs/viewers.md); `serve` rewrites it to its own URL.
-pub const DEFAULT_ID: &str = ".";
+pub(crate) const DEFAULT_ID: &str = ".";
 
 /// The longest side `full/max` may have: 2048 texels fill a 4K screen's height twice over,
 /// yet take at most 16 MiB to assemble (RGBA, 8-bit) and about a megabyte as a JPEG.
-pub const MAX_WHOLE_SIDE: u32 = 2048;
+pub(crate) const MAX_WHOLE_SIDE: u32 = 2048;
 
 /// A conformant IIIF service: its absolute id, and the codec its whole-image files (`full/max`,
 /// the `sizes`) are encoded with, the tiles' own.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Service {
+    /// The service's absolute URL (`--iiif-id`), what `info.json`'s `id` says.
     pub id: String,
+    /// The codec of the whole-image files.
     pub codec: Codec,
 }
 
@@ -53,7 +56,7 @@ pub struct Service {
 /// `:`, `@`, `/` and `%` starting a two-digit hex escape. Anything else (a space, `"`, `<`,
 /// `>`, `\`, `^`, a backtick, `{|}`, a non-ASCII letter) is refused, naming the character and
 /// its percent-encoding.
-pub fn absolute_id(url: &str) -> Result<String, String> {
+pub(crate) fn absolute_id(url: &str) -> Result<String, String> {
     let why = |what: &str| format!("--iiif-id {url:?} {what}");
     let rest = url
         .strip_prefix("https://")
@@ -104,7 +107,7 @@ fn uri_char(url: &str, at: usize, c: char) -> bool {
 
 /// The LOD `full/max` is: the finest whose long side is at most [`MAX_WHOLE_SIDE`], else the
 /// coarsest (a tile side above the bound).
-pub fn max_lod(layout: &Layout) -> u32 {
+pub(crate) fn max_lod(layout: &Layout) -> u32 {
     let within = |lod: &u32| {
         let (w, h) = layout.level_extent(*lod);
         w.max(h) <= MAX_WHOLE_SIDE
@@ -114,7 +117,7 @@ pub fn max_lod(layout: &Layout) -> u32 {
 
 /// The whole-image sizes a service lists and holds as `full/{w},{h}`: LOD [`max_lod`] and
 /// every coarser one, as (lod, width, height), smallest first.
-pub fn whole_sizes(layout: &Layout) -> Vec<(u32, u32, u32)> {
+pub(crate) fn whole_sizes(layout: &Layout) -> Vec<(u32, u32, u32)> {
     (max_lod(layout)..layout.lod_count)
         .rev()
         .map(|lod| {
@@ -126,29 +129,29 @@ pub fn whole_sizes(layout: &Layout) -> Vec<(u32, u32, u32)> {
 
 /// `full/{size}/0/default.{ext}`: the whole image at `size` (`w,h`, IIIF 2's `w,`, `max` or
 /// `full`), as this writer names it and the IIIF reader ([`Iiif`]) looks for it.
-pub fn whole_file(size: &str, extension: &str) -> String {
+pub(crate) fn whole_file(size: &str, extension: &str) -> String {
     format!("full/{size}/0/default.{extension}")
 }
 
 /// `{x},{y},{w},{h}/{size}/0/default.{ext}`: the region of the image at `size` (IIIF 3's
 /// `w,h`, IIIF 2's `w,`), a tile's file for this writer and the IIIF reader alike.
-pub fn region_file(x: u64, y: u64, w: u64, h: u64, size: &str, extension: &str) -> String {
+pub(crate) fn region_file(x: u64, y: u64, w: u64, h: u64, size: &str, extension: &str) -> String {
     format!("{x},{y},{w},{h}/{size}/0/default.{extension}")
 }
 
 /// The file of the whole image at `width x height`.
-pub fn full_path(width: u32, height: u32, extension: &str) -> String {
+pub(crate) fn full_path(width: u32, height: u32, extension: &str) -> String {
     whole_file(&format!("{width},{height}"), extension)
 }
 
 /// The file of the whole image at the service's `max` size.
-pub fn max_path(extension: &str) -> String {
+pub(crate) fn max_path(extension: &str) -> String {
     whole_file("max", extension)
 }
 
 /// The tile of page (lod, col, row): `{rx},{ry},{rw},{rh}/{w},{h}/0/default.{ext}`, or
 /// `full/{w},{h}/0/default.{ext}` for the coarsest LOD.
-pub fn tile_path(layout: &Layout, lod: u32, col: u32, row: u32, extension: &str) -> String {
+pub(crate) fn tile_path(layout: &Layout, lod: u32, col: u32, row: u32, extension: &str) -> String {
     let Crop { width, height, .. } = crop(layout, lod, col, row);
     if lod + 1 == layout.lod_count {
         return full_path(width, height, extension);
@@ -161,12 +164,12 @@ pub fn tile_path(layout: &Layout, lod: u32, col: u32, row: u32, extension: &str)
 
 /// The second name of the full-resolution tile when the image is a single tile
 /// (`full/max/...`, what OpenSeadragon asks for then).
-pub fn full_max_path(layout: &Layout, lod: u32, extension: &str) -> Option<String> {
+pub(crate) fn full_max_path(layout: &Layout, lod: u32, extension: &str) -> Option<String> {
     (layout.lod_count == 1 && lod == 0).then(|| max_path(extension))
 }
 
 /// The texels a tile keeps: the page, cut at the image's edge (IIIF tiles have no overlap).
-pub fn crop(layout: &Layout, lod: u32, col: u32, row: u32) -> Crop {
+pub(crate) fn crop(layout: &Layout, lod: u32, col: u32, row: u32) -> Crop {
     let p = layout.payload();
     let (level_w, level_h) = layout.level_extent(lod);
     Crop { x: 0, y: 0, width: p.min(level_w - col * p), height: p.min(level_h - row * p) }
@@ -176,7 +179,7 @@ pub fn crop(layout: &Layout, lod: u32, col: u32, row: u32) -> Crop {
 /// id: `--iiif-id`, `serve`) also lists the whole-image `sizes` and bounds `max` by
 /// `maxWidth`/`maxHeight` where it is smaller than the image; without, the file is what
 /// libvips writes.
-pub fn info_json(layout: &Layout, id: &str, extension: &str, service: bool) -> String {
+pub(crate) fn info_json(layout: &Layout, id: &str, extension: &str, service: bool) -> String {
     let scale_factors: Vec<u64> = (0..layout.lod_count).map(|k| 1u64 << k).collect();
     let mut info = json!({
         "@context": "http://iiif.io/api/image/3/context.json",

@@ -39,6 +39,8 @@ enum Names {
     Whole(String),
 }
 
+/// A IIIF Image API 2 or 3 level-0 directory (`info.json` and its tile files, in a
+/// directory or a zip), its full resolution read as an image for `convert`.
 pub struct Iiif {
     store: TileStore,
     /// The directory holding `info.json`, relative to the store (`""` or a folder in a zip).
@@ -86,7 +88,8 @@ impl Iiif {
     }
 
     /// The IIIF Image API version (2 or 3).
-    pub fn version(&self) -> u8 {
+    #[cfg(test)]
+    pub(crate) fn version(&self) -> u8 {
         self.version
     }
 

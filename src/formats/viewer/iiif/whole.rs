@@ -17,7 +17,7 @@ use crate::pixel::{Depth, PixelLayout};
 /// The whole image at `lod`, encoded with `codec`, from its tiles: `tile(col, row)` gives the
 /// decoded page or tile and the part of it that is IIIF's tile of (col, row) (the part
 /// [`crop`] names, moved by a stored border).
-pub fn assemble(
+pub(crate) fn assemble(
     layout: &Layout,
     lod: u32,
     codec: Codec,

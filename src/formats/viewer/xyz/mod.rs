@@ -17,12 +17,12 @@ use super::Viewer;
 use crate::layout::Layout;
 
 /// The tile side web maps use.
-pub const DEFAULT_TILE_SIZE: u32 = 256;
+pub(crate) const DEFAULT_TILE_SIZE: u32 = 256;
 /// The manifest's file name.
-pub const TILEJSON: &str = "tilejson.json";
+pub(crate) const TILEJSON: &str = "tilejson.json";
 
 /// Which coordinate the directories under a zoom level are named by: the one difference
-/// between the two layouts, which the writer ([`tile_path`]) and the reader
+/// between the two layouts, which the writer (`tile_path`) and the reader
 /// ([`Xyz`]) both take from here.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Order {
@@ -42,7 +42,7 @@ impl Order {
     }
 
     /// The pattern, for messages.
-    pub fn pattern(self) -> &'static str {
+    pub(crate) fn pattern(self) -> &'static str {
         match self {
             Order::Zyx => "z/y/x.ext",
             Order::Zxy => "z/x/y.ext",
@@ -51,7 +51,7 @@ impl Order {
 
     /// What the directory under a zoom level and the file in it are named by, for messages:
     /// ("row", "x") or ("column", "y").
-    pub fn names(self) -> (&'static str, &'static str) {
+    pub(crate) fn names(self) -> (&'static str, &'static str) {
         match self {
             Order::Zyx => ("row", "x"),
             Order::Zxy => ("column", "y"),
@@ -59,7 +59,7 @@ impl Order {
     }
 
     /// The tile's (x, y) from the numbers of its directory (`outer`) and its file (`inner`).
-    pub fn xy(self, outer: u32, inner: u32) -> (u32, u32) {
+    pub(crate) fn xy(self, outer: u32, inner: u32) -> (u32, u32) {
         match self {
             Order::Zyx => (inner, outer),
             Order::Zxy => (outer, inner),
@@ -77,13 +77,13 @@ impl Order {
 }
 
 /// `{z}/{x}/{y}.EXT`, or `{z}/{y}/{x}.EXT` for [`Viewer::Google`].
-pub fn tile_path(viewer: Viewer, zoom: u32, x: u32, y: u32, extension: &str) -> String {
+pub(crate) fn tile_path(viewer: Viewer, zoom: u32, x: u32, y: u32, extension: &str) -> String {
     Order::of(viewer).path(&zoom.to_string(), &x.to_string(), &y.to_string(), extension)
 }
 
 /// TileJSON 3.0 for the directory, with the image's size under `vortex` (a map has no notion
 /// of it, a viewer that shows one image does).
-pub fn tilejson(viewer: Viewer, layout: &Layout, name: &str, extension: &str) -> String {
+pub(crate) fn tilejson(viewer: Viewer, layout: &Layout, name: &str, extension: &str) -> String {
     let pattern = Order::of(viewer).path("{z}", "{x}", "{y}", extension);
     let doc = json!({
         "tilejson": "3.0.0",

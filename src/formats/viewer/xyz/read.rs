@@ -14,6 +14,8 @@ use crate::source::ImageHeader;
 use crate::source::tiled::store::{Entry, Kind, MAX_DESCRIPTOR_BYTES, TileStore, join};
 use crate::source::tiled::{CellData, TileGrid, probe_stored};
 
+/// Web-map tiles in `z/x/y` or `z/y/x` directories (in a directory or a zip), the finest
+/// zoom read as an image for `convert`.
 pub struct Xyz {
     store: TileStore,
     /// The directory holding the zoom directories, relative to the store.
