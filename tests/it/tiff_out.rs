@@ -88,6 +88,33 @@ fn our_reader_reads_the_full_resolution_back() {
     }
 }
 
+/// A lossless TIFF's bytes are the same on every run, whatever the thread count: its tiles
+/// are compressed on the encoder threads and stored in the producer's order (the pack's
+/// way). Deflate and zstd with the predictor, and JPEG.
+#[test]
+fn a_tiff_is_the_same_on_every_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (rgb8(), "deflate", "a.tif"),
+        (PixelLayout::new(Channels::Grey, Depth::U16), "zstd", "b.ome.tif"),
+        (rgb8(), "jpeg", "c.tif"),
+    ];
+    for (k, (layout, codec, name)) in cases.into_iter().enumerate() {
+        let source = input(dir.path(), &format!("src{k}"), 1000, 700, layout);
+        let files: Vec<Vec<u8>> = ["1", "3", "3"]
+            .iter()
+            .enumerate()
+            .map(|(run, threads)| {
+                let tiff = dir.path().join(format!("{run}-{name}"));
+                let args = ["split", s(&source), "-o", s(&tiff), "--codec", codec, "--tile-size", "128"];
+                ok(&[&args[..], &["--threads", threads, "-q"]].concat());
+                std::fs::read(&tiff).unwrap()
+            })
+            .collect();
+        assert!(files[0] == files[1] && files[1] == files[2], "{name} ({codec}): the runs' files differ");
+    }
+}
+
 /// `-o a.ome.tif` beside Deep Zoom and a pack in one run: every output written, the TIFF in
 /// the summary and in `--json`; a TIFF in a folder that does not exist fails the run and
 /// leaves nothing; a file of someone else's at the path is not replaced.

@@ -9,21 +9,21 @@
 //!   QuPath and tifffile read a pyramid.
 //!
 //! The file is written in one pass ([`TiffWriter`]): the header and a signature first, then
-//! each tile's bytes appended as it arrives, in any order, with only its offset and length
-//! kept (16 bytes a tile); at the end the IFDs, their arrays and the OME-XML, and the
-//! header's first-IFD offset patched. Classic TIFF or BigTIFF is decided before the first
-//! byte from an upper bound of the file's size ([`Spec::needs_bigtiff`]), or always with
-//! [`BigTiff::Always`]. [`TiffSink`] is the writer as a pipeline sink: raw tiles compressed
-//! on the encoder threads (`compress.rs`: Deflate or zstd with the horizontal predictor),
-//! JPEG tiles stored as they come, the file written under a temporary name and renamed into
-//! place when complete.
+//! each tile's bytes appended as it arrives, with only its offset and length kept (16 bytes a
+//! tile); at the end the IFDs, their arrays and the OME-XML, and the header's first-IFD offset
+//! patched. Classic TIFF or BigTIFF is decided before the first byte from an upper bound of
+//! the file's size ([`Spec::needs_bigtiff`]), or always with [`BigTiff::Always`].
+//! [`TiffSink`] is the writer as a pipeline sink. Tiles come compressed from the encoder
+//! threads ([`Spec::codec`]: JPEG, or Deflate and zstd with the horizontal predictor, which
+//! is the pack's row-delta filter) and in the producer's order (the sink is `ordered`), so the
+//! file's bytes are the same on every run, whatever the thread count; the file is written
+//! under a temporary name and renamed into place when complete.
 //!
 //! Not yet (issue 43): a Cloud Optimized GeoTIFF (its IFDs come first and its tile data in a
 //! fixed order: the tile data would be spooled to a temporary and assembled at the end, which
 //! the offset index here already allows), a JPEG source's tiles copied without decoding,
 //! shared `JPEGTables`, the floating-point predictor, and more than four channels as planes.
 
-mod compress;
 mod ifd;
 mod ome;
 mod sink;
@@ -34,7 +34,7 @@ mod writer;
 pub use sink::TiffSink;
 pub use writer::{TiffSummary, TiffWriter};
 
-use crate::codec::Subsampling;
+use crate::codec::{Codec, Subsampling};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 
@@ -111,12 +111,6 @@ impl Compression {
             Compression::Zstd { .. } => "zstd",
             Compression::Jpeg { .. } => "jpeg",
         }
-    }
-
-    /// Whether the pipeline hands this compression encoded tiles (JPEG) rather than raw
-    /// samples, which the sink compresses itself.
-    pub fn takes_encoded(self) -> bool {
-        matches!(self, Compression::Jpeg { .. })
     }
 }
 
@@ -221,19 +215,16 @@ impl Spec {
         (self.tile_size as u64).pow(2) * self.stored.bytes_per_pixel() as u64
     }
 
-    /// The most bytes one stored tile may take: the raw samples for none, the compressors'
-    /// bounds (zstd's `ZSTD_compressBound`; zlib's stored blocks, generously), and for JPEG
-    /// libjpeg-turbo's `tj3JPEGBufSize` as the codec states it.
+    /// The most bytes one stored tile may take, as the codec states it
+    /// ([`Codec::most_encoded_bytes`]): the raw samples for none, the compressors' bounds
+    /// (zstd's `ZSTD_compressBound`; zlib's stored blocks, generously), and for JPEG
+    /// libjpeg-turbo's `tj3JPEGBufSize` at any quality.
     pub fn most_tile_bytes(&self) -> u64 {
-        let raw = self.raw_tile_bytes();
-        match self.compression {
-            Compression::None => raw,
-            Compression::Deflate { .. } => raw + raw / 8 + 1024,
-            Compression::Zstd { .. } => zstd::zstd_safe::compress_bound(raw as usize) as u64,
-            Compression::Jpeg { subsampling } => {
-                crate::codec::Codec::Jpeg { quality: 100, subsampling }.most_encoded_bytes(self.tile_size, self.stored)
-            }
-        }
+        let codec = match self.compression {
+            Compression::Jpeg { subsampling } => Codec::Jpeg { quality: 100, subsampling },
+            _ => self.codec().unwrap_or(Codec::Raw),
+        };
+        codec.most_encoded_bytes(self.tile_size, self.stored)
     }
 
     /// Memory the writer's tile index holds: an offset and a length a tile.
@@ -262,6 +253,20 @@ impl Spec {
     pub fn predictor(&self) -> bool {
         matches!(self.compression, Compression::Deflate { .. } | Compression::Zstd { .. })
             && matches!(self.stored.depth, Depth::U8 | Depth::U16 | Depth::U32)
+    }
+
+    /// The codec whose tiles the file stores as they come from the encoders: raw samples, or
+    /// Deflate and zstd of them with the horizontal predictor where [`Spec::predictor`] says
+    /// (the filter of the pack's `zstd-delta`, which is TIFF's `Predictor` 2 for integer
+    /// samples). `None` for JPEG, whose quality is the run's setting, not the file's.
+    pub fn codec(&self) -> Option<Codec> {
+        let delta = self.predictor();
+        match self.compression {
+            Compression::None => Some(Codec::Raw),
+            Compression::Deflate { level } => Some(Codec::Deflate { level, delta }),
+            Compression::Zstd { level } => Some(Codec::Zstd { level, delta }),
+            Compression::Jpeg { .. } => None,
+        }
     }
 
     /// The `Photometric` tag: grey is black-is-zero; RGB tiles in JPEG are YCbCr (what
