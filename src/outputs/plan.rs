@@ -749,6 +749,8 @@ mod tests {
             ("scan.TIFF", Some(TIFF)),
             ("slide.ome.tif", Some(OME_TIFF)),
             ("SLIDE.OME.TIFF", Some(OME_TIFF)),
+            ("ortho.cog.tif", Some(Format::Tiff(Flavour::Cog))),
+            ("ORTHO.COG.TIFF", Some(Format::Tiff(Flavour::Cog))),
             ("x.tif.vtpk", Some(Format::Pack)),
         ] {
             assert_eq!(Format::of_path(Path::new(name)), want, "{name}");

@@ -201,3 +201,76 @@ fn readers_open_every_level_of_a_generic_pyramid() {
         eprintln!("{}: {said}", tiff.display());
     }
 }
+
+const COG_SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/it/tiff_cog.py");
+
+/// Debian's Python with GDAL (`python3-gdal`) and `gdalinfo` (`gdal-bin`): both there, or a
+/// skip with a note, and a failure under CI.
+fn gdal() -> bool {
+    let python = Command::new("/usr/bin/python3")
+        .args(["-c", "from osgeo import gdal; from osgeo_utils.samples import validate_cloud_optimized_geotiff"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    let gdalinfo = Command::new("gdalinfo").arg("--version").output().is_ok_and(|o| o.status.success());
+    if !(python && gdalinfo) {
+        crate::common::skip_unless_ci("GDAL", "no gdalinfo or python3-gdal: apt-get install gdal-bin python3-gdal");
+    }
+    python && gdalinfo
+}
+
+/// A COG (`-o FILE.cog.tif`, `--layout cog`) as GDAL sees it: `gdalinfo -json` lists the
+/// full resolution and every reduced level as its overviews; GDAL's COG validator passes,
+/// with its full check of each tile's leader and trailer; each level GDAL reads equals the
+/// naive pyramid (lossless) or is within JPEG's error of it. Classic and BigTIFF, 8 and 16
+/// bits, Deflate with the predictor and JPEG (YCbCr).
+#[test]
+fn gdal_validates_a_cog_and_reads_every_level() {
+    if !gdal() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (rgb8(), 1000, 700, 256u32, "deflate", "exact", false),
+        (PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, 128, "deflate", "exact", true),
+        (rgb8(), 999, 701, 128, "jpeg", "jpeg", false),
+        (PixelLayout::new(Channels::Rgba, Depth::U8), 300, 200, 64, "raw", "exact", false),
+    ];
+    for (k, (layout, w, h, tile, codec, mode, big)) in cases.into_iter().enumerate() {
+        let source = input(dir.path(), &format!("src{k}"), w, h, layout);
+        // The name says COG; so does --layout cog after a plain .tif name.
+        let cog = dir.path().join(if k % 2 == 0 { format!("c{k}.cog.tif") } else { format!("c{k}.tif") });
+        let tile_arg = tile.to_string();
+        let mut args = vec!["split", s(&source), "-o", s(&cog)];
+        if k % 2 == 1 {
+            args.extend(["--layout", "cog"]);
+        }
+        args.extend(["--codec", codec, "--filter", "box", "--tile-size", &tile_arg, "--json"]);
+        if big {
+            args.push("--bigtiff");
+        }
+        let json: serde_json::Value = serde_json::from_str(ok(&args).trim()).unwrap();
+        assert_eq!(json["tiff"]["flavour"], "cog", "{json}");
+
+        let info = Command::new("gdalinfo").args(["-json", s(&cog)]).output().unwrap();
+        assert!(info.status.success(), "gdalinfo: {}", String::from_utf8_lossy(&info.stderr));
+        let info: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+        assert_eq!(info["size"], serde_json::json!([w, h]), "{info}");
+        assert_eq!(info["metadata"]["IMAGE_STRUCTURE"]["LAYOUT"], "COG", "{info}");
+        let overviews = info["bands"][0]["overviews"].as_array().expect("overviews");
+        let sizes: Vec<(u64, u64)> =
+            overviews.iter().map(|o| (o["size"][0].as_u64().unwrap(), o["size"][1].as_u64().unwrap())).collect();
+        // Each level ceil(size / 2^k), down to the first that fits one tile.
+        let (mut want, mut lw, mut lh) = (Vec::new(), u64::from(w), u64::from(h));
+        while lw.max(lh) > u64::from(tile) {
+            (lw, lh) = (lw.div_ceil(2), lh.div_ceil(2));
+            want.push((lw, lh));
+        }
+        assert_eq!(sizes, want, "{}: the overviews gdalinfo lists", cog.display());
+
+        let out = Command::new("/usr/bin/python3").args([COG_SCRIPT, s(&cog), s(&source), &tile_arg, mode]).output();
+        let out = out.unwrap();
+        let said = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        assert!(out.status.success(), "{}: {said}", cog.display());
+        eprintln!("{}: {said}", cog.display());
+    }
+}

@@ -7,6 +7,9 @@
 //! * [`Flavour::Ome`], an OME-TIFF: the full resolution in the first IFD with the OME-XML in
 //!   its `ImageDescription`, each reduced level one of its SubIFDs (tag 330), as bioformats,
 //!   QuPath and tifffile read a pyramid.
+//! * [`Flavour::Cog`], a Cloud Optimized GeoTIFF as GDAL's COG driver lays it out: the
+//!   generic pyramid's IFDs first, behind GDAL's ghost area, then the tile data, the coarsest
+//!   level first (`cog.rs`: the tiles staged beside the file and copied into place at the end).
 //!
 //! The file is written in one pass ([`TiffWriter`]): the header and a signature first, then
 //! each tile's bytes appended as it arrives, with only its offset and length kept (16 bytes a
@@ -19,11 +22,11 @@
 //! file's bytes are the same on every run, whatever the thread count; the file is written
 //! under a temporary name and renamed into place when complete.
 //!
-//! Not yet (issue 43): a Cloud Optimized GeoTIFF (its IFDs come first and its tile data in a
-//! fixed order: the tile data would be spooled to a temporary and assembled at the end, which
-//! the offset index here already allows), a JPEG source's tiles copied without decoding,
-//! shared `JPEGTables`, the floating-point predictor, and more than four channels as planes.
+//! Not yet (issue 43): a GeoTIFF source's georeferencing in a COG, a JPEG source's tiles
+//! copied without decoding, shared `JPEGTables`, the floating-point predictor, and more than
+//! four channels as planes.
 
+mod cog;
 mod ifd;
 mod ome;
 mod sink;
@@ -54,6 +57,9 @@ pub enum Flavour {
     Generic,
     /// OME-TIFF: reduced levels as SubIFDs of the full resolution, OME-XML in its description.
     Ome,
+    /// Cloud Optimized GeoTIFF: the generic pyramid's IFDs first, then the tile data coarse to
+    /// fine, as GDAL's COG driver writes it (its validator passes).
+    Cog,
 }
 
 impl Flavour {
@@ -62,15 +68,19 @@ impl Flavour {
         match self {
             Flavour::Generic => "tiff",
             Flavour::Ome => "ome-tiff",
+            Flavour::Cog => "cog",
         }
     }
 
-    /// The flavour a file name says: `.ome.tif` and `.ome.tiff` OME-TIFF, `.tif` and `.tiff`
-    /// the generic pyramid (case-insensitive); other names none.
+    /// The flavour a file name says: `.ome.tif` and `.ome.tiff` OME-TIFF, `.cog.tif` and
+    /// `.cog.tiff` a COG, `.tif` and `.tiff` the generic pyramid (case-insensitive); other
+    /// names none.
     pub fn of_name(name: &str) -> Option<Flavour> {
         let name = name.to_ascii_lowercase();
         if name.ends_with(".ome.tif") || name.ends_with(".ome.tiff") {
             Some(Flavour::Ome)
+        } else if name.ends_with(".cog.tif") || name.ends_with(".cog.tiff") {
+            Some(Flavour::Cog)
         } else if name.ends_with(".tif") || name.ends_with(".tiff") {
             Some(Flavour::Generic)
         } else {
@@ -187,6 +197,11 @@ impl Spec {
                 "half-float samples: TIFF readers of these pyramids take 8, 16 or 32-bit samples".into(),
             ));
         }
+        if self.flavour == Flavour::Cog && self.most_tile_bytes() > u32::MAX as u64 {
+            return Err(TilerError::Options(format!(
+                "--tile-size {t}: a COG tile's length is a 32-bit leader, and these tiles could pass 4 GiB"
+            )));
+        }
         if self.name.contains('\0') {
             return Err(TilerError::Options("the image's name holds a NUL character".into()));
         }
@@ -232,10 +247,11 @@ impl Spec {
         self.total_tiles().saturating_mul(16)
     }
 
-    /// An upper bound of the file's size: header, tiles at their largest, IFDs, their arrays
-    /// and the OME-XML.
+    /// An upper bound of the file's size: header, tiles at their largest (a COG's with their
+    /// leader and trailer), IFDs, their arrays, the OME-XML and a COG's ghost area.
     pub fn most_file_bytes(&self) -> u64 {
-        let tiles = self.total_tiles().saturating_mul(self.most_tile_bytes());
+        let framing = if self.flavour == Flavour::Cog { cog::FRAMING } else { 0 };
+        let tiles = self.total_tiles().saturating_mul(self.most_tile_bytes() + framing);
         let ifds = self.levels as u64 * 4096 + self.total_tiles().saturating_mul(16);
         let xml = ome::xml(self).len() as u64;
         tiles.saturating_add(ifds).saturating_add(xml).saturating_add(1024)
