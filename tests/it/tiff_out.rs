@@ -274,3 +274,36 @@ fn gdal_validates_a_cog_and_reads_every_level() {
         eprintln!("{}: {said}", cog.display());
     }
 }
+
+/// A JPEG-tiled source whose tiles fit the TIFF's (256 texels, YCbCr 4:2:0: `vips tiffsave`
+/// below Q90) has its interior full-resolution tiles copied as they are stored, as `--json`
+/// says; one whose tiles are RGB JPEGs (vips from Q90 on) has them encoded again, since the
+/// file's tags say YCbCr for every tile of the level (copied, libvips read them as YCbCr: a
+/// mean error of 51). Both read back within JPEG's error of the source.
+#[test]
+fn a_jpeg_tiled_source_s_tiles_are_copied_where_they_fit_the_tiff_s_tags() {
+    if !crate::common::have_program("vips", "--version", "libvips-tools") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = input(dir.path(), "src", 1000, 700, rgb8());
+    // 3 x 2 of the 4 x 3 tiles of level 0 lie inside the image; the edge ones are encoded.
+    for (q, copied) in [("85", 6), ("95", 0)] {
+        let tiled = dir.path().join(format!("s{q}.tif"));
+        let vips = Command::new("vips")
+            .args(["tiffsave", s(&png), s(&tiled), "--tile", "--tile-width", "256", "--tile-height", "256"])
+            .args(["--compression", "jpeg", "--Q", q])
+            .output()
+            .unwrap();
+        assert!(vips.status.success(), "vips: {}", String::from_utf8_lossy(&vips.stderr));
+        let out = dir.path().join(format!("o{q}.tif"));
+        let json = ok(&["split", s(&tiled), "-o", s(&out), "--tile-size", "256", "--json"]);
+        let json: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+        assert_eq!(json["copied"], copied, "Q{q}: {json}");
+        assert_eq!(json["storedTiles"]["copied"], copied, "Q{q}: {json}");
+        if let Some(python) = readers() {
+            let said = check(&python, "generic", &out, &png, 256, "jpeg");
+            eprintln!("Q{q} {}: {said}", out.display());
+        }
+    }
+}

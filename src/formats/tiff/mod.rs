@@ -22,8 +22,9 @@
 //! file's bytes are the same on every run, whatever the thread count; the file is written
 //! under a temporary name and renamed into place when complete.
 //!
-//! Not yet (issue 43): a GeoTIFF source's georeferencing in a COG, a JPEG source's tiles
-//! copied without decoding, shared `JPEGTables`, the floating-point predictor, and more than
+//! A JPEG-tiled source's stored tiles are copied into level 0 where they are what the tags
+//! say ([`TiffSink`]'s `takes_stored_jpeg`). Not yet (issue 43): a GeoTIFF source's
+//! georeferencing in a COG, shared `JPEGTables`, the floating-point predictor, and more than
 //! four channels as planes.
 
 mod cog;
