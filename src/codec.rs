@@ -2,9 +2,11 @@
 //!
 //! The codec also decides the stored texel format: JPEG holds 8-bit grey or RGB only, so 16-bit
 //! tiles are rounded to 8 bits and alpha is either composited away (`--flatten`) or refused.
-//! Raw and zstd store any layout, as PNG does. BC1 stores opaque 8-bit RGB and BC7 8-bit RGB or
-//! RGBA, so grey becomes RGB (grey + alpha RGBA). Raw, zstd and BC payloads have no file format:
-//! they go into packs only (docs/pack-format.md).
+//! Raw, zstd and Deflate store any layout, as PNG does. BC1 stores opaque 8-bit RGB and BC7 8-bit
+//! RGB or RGBA, so grey becomes RGB (grey + alpha RGBA). Raw, zstd and BC payloads have no file
+//! format: they go into packs (docs/pack-format.md) and, raw and zstd, into a TIFF's tiles;
+//! Deflate is a TIFF's only. Compression runs here, on the encoder threads, so that a sink that
+//! stores tiles in order (a pack, a TIFF) only writes them.
 
 use std::borrow::Cow;
 use std::cell::RefCell;
@@ -118,11 +120,21 @@ pub enum Codec {
     },
     /// Texels as a GPU uploads them (packs only).
     Raw,
-    /// Raw texels compressed with zstd, rows left-delta filtered first with `delta` (packs only).
+    /// Raw texels compressed with zstd, rows left-delta filtered first with `delta` (packs, and
+    /// a TIFF's tiles: the filter is TIFF's horizontal predictor for integer samples).
     Zstd {
         /// The zstd level, 1 to 22 (`--zstd-level`).
         level: i32,
         /// Whether each row is left-delta filtered first (`--codec zstd-delta`).
+        delta: bool,
+    },
+    /// Raw texels as one zlib stream, rows left-delta filtered first with `delta` (a TIFF's
+    /// tiles only: "Adobe Deflate", the filter its horizontal predictor).
+    Deflate {
+        /// The zlib level, 0 (stored) to 9.
+        level: u32,
+        /// Whether each row is left-delta filtered first (the horizontal predictor, for
+        /// integer samples).
         delta: bool,
     },
     /// BC1 blocks, opaque RGB (packs only).
@@ -149,6 +161,8 @@ impl Codec {
         match *self {
             Codec::Raw => stored,
             Codec::Zstd { .. } => zstd::zstd_safe::compress_bound(stored as usize) as u64,
+            // zlib's stored blocks cost 5 bytes in 64 KiB; an eighth more is generous.
+            Codec::Deflate { .. } => stored + stored / 8 + 1024,
             Codec::Bc1 => side.div_ceil(4).pow(2) * 8,
             Codec::Bc7 { .. } => side.div_ceil(4).pow(2) * 16,
             Codec::Jpeg { subsampling, .. } => {
@@ -174,6 +188,8 @@ impl Codec {
             Codec::Raw => "raw",
             Codec::Zstd { delta: false, .. } => "zstd",
             Codec::Zstd { delta: true, .. } => "zstd-delta",
+            // `--codec deflate`: a TIFF filters integer samples and says so in its tags.
+            Codec::Deflate { .. } => "deflate",
             Codec::Bc1 => "bc1",
             Codec::Bc7 { .. } => "bc7",
         }
@@ -186,6 +202,7 @@ impl Codec {
             Codec::Png { .. } => "png",
             Codec::Raw => "raw",
             Codec::Zstd { .. } => "zst",
+            Codec::Deflate { .. } => "zz",
             Codec::Bc1 => "bc1",
             Codec::Bc7 { .. } => "bc7",
         }
@@ -221,7 +238,7 @@ impl Codec {
             return self.stored_wide(source, flatten, depth);
         }
         match self {
-            Codec::Png { .. } | Codec::Raw | Codec::Zstd { .. } => {
+            Codec::Png { .. } | Codec::Raw | Codec::Zstd { .. } | Codec::Deflate { .. } => {
                 Ok(PixelLayout::new(channels, depth.unwrap_or(source.depth)))
             }
             Codec::Bc1 | Codec::Bc7 { .. } => {
@@ -267,7 +284,7 @@ impl Codec {
                 "--flatten composites 8- and 16-bit samples; the source is {source}: keep its alpha with --codec raw or zstd"
             )));
         }
-        if !matches!(self, Codec::Raw | Codec::Zstd { .. }) {
+        if !matches!(self, Codec::Raw | Codec::Zstd { .. } | Codec::Deflate { .. }) {
             return Err(TilerError::Options(format!(
                 "the source is {source}, which --codec {name} cannot hold without cutting its range: use --codec raw, zstd or zstd-delta (packs) or --layout ome-zarr to keep it, or map it onto 8 or 16 bits with --range MIN:MAX"
             )));
@@ -388,6 +405,7 @@ impl<T: Sample> TileEncoder<T> {
                 Ok(())
             }
             Codec::Zstd { level, delta } => self.encode_zstd(texels, level, delta, out),
+            Codec::Deflate { level, delta } => self.encode_deflate(texels, level, delta, out),
             Codec::Bc1 => self.encode_bc(texels, None, out),
             Codec::Bc7 { effort } => self.encode_bc(texels, Some(effort), out),
         }
@@ -421,13 +439,30 @@ impl<T: Sample> TileEncoder<T> {
     /// zstd of the raw tile, rows left-delta filtered first with `delta` (the filter of
     /// `zstd-delta` tiles in docs/pack-format.md). One compression context per thread.
     fn encode_zstd(&self, texels: &[T], level: i32, delta: bool, out: &mut Vec<u8>) -> Result<(), String> {
+        *out = zstd_frame(&self.filtered_bytes(texels, delta), level)?;
+        Ok(())
+    }
+
+    /// One zlib stream of the raw tile, rows left-delta filtered first with `delta`.
+    fn encode_deflate(&self, texels: &[T], level: u32, delta: bool, out: &mut Vec<u8>) -> Result<(), String> {
+        use std::io::Write;
+        let raw = self.filtered_bytes(texels, delta);
+        let mut z = flate2::write::ZlibEncoder::new(std::mem::take(out), flate2::Compression::new(level.min(9)));
+        *out = z.write_all(&raw).and_then(|()| z.finish()).map_err(|e| format!("deflate: {e}"))?;
+        Ok(())
+    }
+
+    /// The raw tile's bytes, each row left-delta filtered with `delta`: every sample less the
+    /// same sample of the texel to its left, wrapping at the sample's width
+    /// (`vortex_pack::format::delta_encode_rows`, which is also TIFF's horizontal predictor,
+    /// `Predictor` 2, for integer samples).
+    fn filtered_bytes<'a>(&self, texels: &'a [T], delta: bool) -> Cow<'a, [u8]> {
         let mut raw = self.stored_bytes(texels);
         if delta {
             let (c, sb) = (self.stored.channels.count(), self.stored.depth.bytes());
             vortex_pack::format::delta_encode_rows(raw.to_mut(), self.side as usize, c, sb);
         }
-        *out = zstd_frame(&raw, level)?;
-        Ok(())
+        raw
     }
 
     /// BC1 (`bc7` None) or BC7 blocks of an 8-bit RGB or RGBA tile, by Intel's ISPC texture

@@ -432,6 +432,15 @@ enum File {
     Cropped(Vec<u8>),
 }
 
+impl File {
+    /// The file's bytes.
+    fn bytes(&self) -> &[u8] {
+        match self {
+            File::Encoded(b) | File::Copied(b) | File::Cropped(b) => b,
+        }
+    }
+}
+
 impl Stored {
     /// Bytes held until the writer stores it.
     fn bytes(&self) -> usize {
@@ -465,6 +474,7 @@ fn prepare<T: Sample>(
     let (lod, (x, y)) = (job.lod, job.places[0].1);
     if let Some(copier) = copier.filter(|_| job.copy)
         && let Some(file) = copier.file((x, y), job.crop)?
+        && job.places.iter().all(|&(t, _)| targets[t].sink.takes_stored_jpeg(file.bytes()))
     {
         return Ok(Stored { constant, file: Some(file) });
     }

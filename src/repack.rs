@@ -51,7 +51,7 @@ pub fn pack_dir(
     }
     let metadata = t.info.to_json_pretty();
     let mut writer = PackWriter::create(dest, t.description, t.levels.clone(), metadata.as_bytes(), options)?;
-    let kind = tile_kind(t.codec);
+    let kind = tile_kind(t.codec)?;
     for id in pack_order(&t.levels) {
         if progress.cancelled() {
             return Err(TilerError::Interrupted);
@@ -158,7 +158,7 @@ fn reencode_dir<T: Sample>(
     info.bc7_effort = described.bc7_effort;
     let mut writer =
         PackWriter::create(dest, description, t.levels.clone(), info.to_json_pretty().as_bytes(), options)?;
-    let (from, to) = (tile_kind(t.codec), tile_kind(codec));
+    let (from, to) = (tile_kind(t.codec)?, tile_kind(codec)?);
     let channels = layout.channels.count();
     let ids: Vec<TileId> = pack_order(&t.levels).collect();
     for chunk in ids.chunks(REENCODE_CHUNK) {
@@ -254,7 +254,7 @@ pub fn unpack(pack: &Pack, dir: &Claim, progress: &dyn Progress) -> Result<u64> 
             match pack.tile_checked(id)? {
                 Tile::Absent => continue,
                 Tile::Data(kind @ (TileKind::Png | TileKind::Jpeg), bytes) => {
-                    if let Some(c) = codec.filter(|c| tile_kind(*c) != kind) {
+                    if let Some(c) = codec.filter(|c| tile_kind(*c).ok() != Some(kind)) {
                         return Err(TilerError::Info {
                             path: pack.path().to_path_buf(),
                             field: "metadata: codec".into(),

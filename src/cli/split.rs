@@ -134,8 +134,9 @@ pub struct OutputArgs {
     /// it: OpenSeadragon), iiif (IIIF Image API 3.0 level 0: info.json + static tiles), xyz
     /// ({z}/{x}/{y}, Leaflet/OpenLayers/MapLibre) or google ({z}/{y}/{x} as vips writes it).
     /// See docs/viewers.md. ome-zarr: an OME-Zarr image for microscopy tools (napari, Fiji,
-    /// QuPath), -o DIR.ome.zarr or -o FILE.ozx (docs/ome-zarr.md). tiff and ome-tiff: one
-    /// pyramidal TIFF file, as -o FILE.tif and -o FILE.ome.tif say (docs/tiff.md). Each
+    /// QuPath), -o DIR.ome.zarr or -o FILE.ozx (docs/ome-zarr.md). tiff, ome-tiff and cog: one
+    /// pyramidal TIFF file, as -o FILE.tif, -o FILE.ome.tif and -o FILE.cog.tif say
+    /// (docs/tiff.md). Each
     /// --layout belongs to the -o before it [default: vortex, or what the output's name says].
     #[arg(help_heading = "Outputs", long, value_enum, value_name = "LAYOUT")]
     layout: Vec<OutputLayout>,
@@ -280,6 +281,8 @@ pub enum OutputLayout {
     Tiff,
     /// One OME-TIFF file: the reduced levels as SubIFDs, OME-XML in the first IFD.
     OmeTiff,
+    /// One Cloud Optimized GeoTIFF (GDAL's layout: IFDs first, tile data coarse to fine).
+    Cog,
 }
 
 impl OutputLayout {
@@ -293,6 +296,7 @@ impl OutputLayout {
             OutputLayout::Google => Format::Viewer(Viewer::Google),
             OutputLayout::Tiff => Format::Tiff(Flavour::Generic),
             OutputLayout::OmeTiff => Format::Tiff(Flavour::Ome),
+            OutputLayout::Cog => Format::Tiff(Flavour::Cog),
         }
     }
 }
@@ -457,7 +461,7 @@ impl OutputArgs {
     fn refuse_layout_without_directory(&self, layout: OutputLayout) -> Result<()> {
         match (layout, self.pmtiles.is_some()) {
             (OutputLayout::Vortex, _) | (OutputLayout::Xyz, true) => Ok(()),
-            (OutputLayout::Tiff | OutputLayout::OmeTiff, _) => {
+            (OutputLayout::Tiff | OutputLayout::OmeTiff | OutputLayout::Cog, _) => {
                 bail!("--layout {} writes one file (-o FILE.tif), not a pack", name_of(layout))
             }
             (OutputLayout::OmeZarr, _) => {

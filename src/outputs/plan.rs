@@ -440,7 +440,8 @@ fn ome_zarr(output: Output, own: &Own, at: &Context, planes: Option<Vec<Plane>>)
 }
 
 /// A pyramidal TIFF (docs/tiff.md): pages without border, whole at the edges (TIFF pads its
-/// edge tiles), JPEG tiles from the encoders or raw ones that the sink compresses.
+/// edge tiles), JPEG tiles or the raw, Deflate or zstd ones the file stores, all from the
+/// encoders ([`tiff::Spec::codec`]).
 fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Result<Planned> {
     let t = &own.tiles;
     let what = flavour.name();
@@ -510,7 +511,7 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         zstd_level: None,
         ..t.clone()
     };
-    let (opts, _) = settings::resolve(&requested, None, source)?;
+    let (mut opts, _) = settings::resolve(&requested, None, source)?;
     let layout = opts.layout(at.header.width, at.header.height)?;
     let stored = opts.codec.stored_layout(source, opts.flatten, opts.tile_depth)?;
     let compression = match (compression, opts.codec) {
@@ -533,6 +534,11 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         pixel_size,
     };
     spec.check()?;
+    // The encoders compress the tiles as the file stores them (resolved as raw above, which
+    // keeps the same samples).
+    if let Some(codec) = spec.codec() {
+        opts.codec = codec;
+    }
     at.limits().check_memory(&format!("the index of the TIFF's {} tiles", spec.total_tiles()), spec.index_bytes())?;
     let claim = at.claim(&output.path, Product::Tiff)?;
     Ok(Planned { output, opts, layout, changed: None, claim, work: Work::Tiff { spec: Box::new(spec) } })
@@ -715,7 +721,11 @@ mod tests {
         let p = plan(&[(TIFF, "a.tif")], zstd).unwrap();
         let Work::Tiff { spec } = &p.outputs[0].work else { panic!() };
         assert_eq!(spec.compression, Compression::Zstd { level: 9 });
-        assert!(matches!(p.outputs[0].opts.codec, crate::codec::Codec::Raw), "the sink compresses raw tiles");
+        assert_eq!(
+            p.outputs[0].opts.codec,
+            crate::codec::Codec::Zstd { level: 9, delta: true },
+            "the encoders compress the tiles, with the predictor"
+        );
 
         let header = ImageHeader { width: 300, height: 200, layout: PixelLayout::new(Channels::Rgba, Depth::U16) };
         let outputs = vec![Output::new(OME_TIFF, "/nonexistent-vortex-plan-test/c.ome.tiff")];
@@ -739,6 +749,8 @@ mod tests {
             ("scan.TIFF", Some(TIFF)),
             ("slide.ome.tif", Some(OME_TIFF)),
             ("SLIDE.OME.TIFF", Some(OME_TIFF)),
+            ("ortho.cog.tif", Some(Format::Tiff(Flavour::Cog))),
+            ("ORTHO.COG.TIFF", Some(Format::Tiff(Flavour::Cog))),
             ("x.tif.vtpk", Some(Format::Pack)),
         ] {
             assert_eq!(Format::of_path(Path::new(name)), want, "{name}");

@@ -278,10 +278,7 @@ impl Plan {
             let target = Target { sink: &sink.plane(c as u32), lods, background };
             let done = split::split_to(&mut source, &[target], opts, progress)?;
             if done.tiles != total {
-                return Err(TilerError::Internal(format!(
-                    "wrote {} tiles of {total} of channel {k}",
-                    done.tiles
-                )));
+                return Err(TilerError::Internal(format!("wrote {} tiles of {total} of channel {k}", done.tiles)));
             }
             windows.push(*range.lock().unwrap_or_else(|p| p.into_inner()));
             summary = Some(match summary {

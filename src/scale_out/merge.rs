@@ -94,7 +94,7 @@ pub fn merge(paths: &[PathBuf], dest: &Path, progress: &dyn Progress) -> Result<
     let options = WriteOptions { alignment: o.alignment, payload_alignment: o.payload_alignment };
     let mut writer =
         PackWriter::create(dest, pack_description(&layout, stored), layout.pack_levels(), o.info.as_bytes(), options)?;
-    let kind = tile_kind(opts.codec);
+    let kind = tile_kind(opts.codec)?;
     // A run too wide for one machine's memory has no order of its own: merge writes the one
     // a machine with enough memory would, into a pack, from a source that holds no decoder
     // buffers of its own (rows in memory, PNG, JPEG, uncompressed strips) and stores no tiles

@@ -569,7 +569,7 @@ pub(crate) fn describe_codec(codec: Codec) -> InfoFile {
         Codec::Png { level } => info.png_compression = Some(level.name().into()),
         Codec::Zstd { level, .. } => info.zstd_level = Some(level),
         Codec::Bc7 { effort } => info.bc7_effort = Some(effort.name().into()),
-        Codec::Raw | Codec::Bc1 => {}
+        Codec::Raw | Codec::Bc1 | Codec::Deflate { .. } => {}
     }
     info
 }

@@ -36,6 +36,13 @@ pub trait TileSink: Sync {
     fn ordered(&self) -> bool {
         false
     }
+    /// Whether a source's stored JPEG tile (`jpeg`, a complete file) may be stored as it is:
+    /// a file that describes its own JPEGs (a tile file, a pack) takes any; a TIFF, whose tags
+    /// say the colour space and subsampling of every tile of a level, only one that matches
+    /// them. A tile some sink refuses is encoded for all of them instead.
+    fn takes_stored_jpeg(&self, _jpeg: &[u8]) -> bool {
+        true
+    }
     /// The part of page (lod, x, y) to encode, where the sink's layout keeps less than the
     /// whole page (a viewer layout's edge tiles); `None` keeps it all.
     fn crop(&self, _lod: u32, _x: u32, _y: u32) -> Option<Crop> {

@@ -94,9 +94,10 @@ fn pyramids(json: &serde_json::Value) -> BTreeMap<String, (u64, u64)> {
         .collect()
 }
 
-/// Deep Zoom, a pack and PMTiles of one tile size and no border share one pyramid and each
-/// page's encoding (Deep Zoom's cropped edge pages apart); OME-Zarr (zstd chunks, the box
-/// filter) is cut beside them from the same rows. Each is what its own run writes.
+/// Deep Zoom, a pack, PMTiles and a TIFF of one tile size and no border share one pyramid and
+/// each page's encoding (Deep Zoom's cropped edge pages apart); OME-Zarr (zstd chunks, the box
+/// filter) is cut beside them from the same rows. Each is what its own run writes: the TIFF
+/// too, whose tiles are stored in the producer's order.
 #[test]
 fn shared_and_side_by_side_outputs_are_their_own_runs_files() {
     let dir = tempfile::tempdir().unwrap();
@@ -108,6 +109,7 @@ fn shared_and_side_by_side_outputs_are_their_own_runs_files() {
             &["-o", "{}/web", "--layout", "dzi", "--tile-size", "256", "--overlap", "0"],
             &["--pack", "{}/in.vtpk", "--tile-size", "256", "--border", "0"],
             &["--pmtiles", "{}/in.pmtiles", "--tile-size", "256"],
+            &["-o", "{}/in.tif", "--tile-size", "256"],
             // 0.4: one file per chunk, whose bytes do not depend on the order chunks arrive in.
             &["-o", "{}/in.ome.zarr", "--tile-size", "256", "--ome-zarr-version", "0.4"],
         ],
@@ -125,16 +127,19 @@ fn shared_and_side_by_side_outputs_are_their_own_runs_files() {
             "--pmtiles",
             "{}/in.pmtiles",
             "-o",
+            "{}/in.tif",
+            "-o",
             "{}/in.ome.zarr",
             "--ome-zarr-version",
             "0.4",
             "--tile-size",
             "256",
         ],
-        &["web", "in.vtpk", "in.pmtiles", "in.ome.zarr"],
+        &["web", "in.vtpk", "in.pmtiles", "in.tif", "in.ome.zarr"],
     );
     let p = pyramids(&json);
     assert_eq!(p["dzi"].0, p["pack"].0, "Deep Zoom and the pack share a pyramid: {p:?}");
+    assert_eq!(p["tiff"].0, p["pack"].0, "the TIFF shares it too: {p:?}");
     assert_ne!(p["dzi"].0, p["ome-zarr"].0, "{p:?}");
     assert_eq!(json["pyramids"], p.values().map(|v| v.0).max().unwrap() + 1);
 }

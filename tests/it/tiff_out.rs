@@ -88,6 +88,33 @@ fn our_reader_reads_the_full_resolution_back() {
     }
 }
 
+/// A lossless TIFF's bytes are the same on every run, whatever the thread count: its tiles
+/// are compressed on the encoder threads and stored in the producer's order (the pack's
+/// way). Deflate and zstd with the predictor, and JPEG.
+#[test]
+fn a_tiff_is_the_same_on_every_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (rgb8(), "deflate", "a.tif"),
+        (PixelLayout::new(Channels::Grey, Depth::U16), "zstd", "b.ome.tif"),
+        (rgb8(), "jpeg", "c.tif"),
+    ];
+    for (k, (layout, codec, name)) in cases.into_iter().enumerate() {
+        let source = input(dir.path(), &format!("src{k}"), 1000, 700, layout);
+        let files: Vec<Vec<u8>> = ["1", "3", "3"]
+            .iter()
+            .enumerate()
+            .map(|(run, threads)| {
+                let tiff = dir.path().join(format!("{run}-{name}"));
+                let args = ["split", s(&source), "-o", s(&tiff), "--codec", codec, "--tile-size", "128"];
+                ok(&[&args[..], &["--threads", threads, "-q"]].concat());
+                std::fs::read(&tiff).unwrap()
+            })
+            .collect();
+        assert!(files[0] == files[1] && files[1] == files[2], "{name} ({codec}): the runs' files differ");
+    }
+}
+
 /// `-o a.ome.tif` beside Deep Zoom and a pack in one run: every output written, the TIFF in
 /// the summary and in `--json`; a TIFF in a folder that does not exist fails the run and
 /// leaves nothing; a file of someone else's at the path is not replaced.
@@ -172,5 +199,111 @@ fn readers_open_every_level_of_a_generic_pyramid() {
         ok(&["split", s(&source), "-o", s(&tiff), "--codec", codec, "--filter", "box", "--tile-size", &tile_arg, "-q"]);
         let said = check(&python, "generic", &tiff, &source, tile, mode);
         eprintln!("{}: {said}", tiff.display());
+    }
+}
+
+const COG_SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/it/tiff_cog.py");
+
+/// Debian's Python with GDAL (`python3-gdal`) and `gdalinfo` (`gdal-bin`): both there, or a
+/// skip with a note, and a failure under CI.
+fn gdal() -> bool {
+    let python = Command::new("/usr/bin/python3")
+        .args(["-c", "from osgeo import gdal; from osgeo_utils.samples import validate_cloud_optimized_geotiff"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    let gdalinfo = Command::new("gdalinfo").arg("--version").output().is_ok_and(|o| o.status.success());
+    if !(python && gdalinfo) {
+        crate::common::skip_unless_ci("GDAL", "no gdalinfo or python3-gdal: apt-get install gdal-bin python3-gdal");
+    }
+    python && gdalinfo
+}
+
+/// A COG (`-o FILE.cog.tif`, `--layout cog`) as GDAL sees it: `gdalinfo -json` lists the
+/// full resolution and every reduced level as its overviews; GDAL's COG validator passes,
+/// with its full check of each tile's leader and trailer; each level GDAL reads equals the
+/// naive pyramid (lossless) or is within JPEG's error of it. Classic and BigTIFF, 8 and 16
+/// bits, Deflate with the predictor and JPEG (YCbCr).
+#[test]
+fn gdal_validates_a_cog_and_reads_every_level() {
+    if !gdal() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (rgb8(), 1000, 700, 256u32, "deflate", "exact", false),
+        (PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, 128, "deflate", "exact", true),
+        (rgb8(), 999, 701, 128, "jpeg", "jpeg", false),
+        (PixelLayout::new(Channels::Rgba, Depth::U8), 300, 200, 64, "raw", "exact", false),
+    ];
+    for (k, (layout, w, h, tile, codec, mode, big)) in cases.into_iter().enumerate() {
+        let source = input(dir.path(), &format!("src{k}"), w, h, layout);
+        // The name says COG; so does --layout cog after a plain .tif name.
+        let cog = dir.path().join(if k % 2 == 0 { format!("c{k}.cog.tif") } else { format!("c{k}.tif") });
+        let tile_arg = tile.to_string();
+        let mut args = vec!["split", s(&source), "-o", s(&cog)];
+        if k % 2 == 1 {
+            args.extend(["--layout", "cog"]);
+        }
+        args.extend(["--codec", codec, "--filter", "box", "--tile-size", &tile_arg, "--json"]);
+        if big {
+            args.push("--bigtiff");
+        }
+        let json: serde_json::Value = serde_json::from_str(ok(&args).trim()).unwrap();
+        assert_eq!(json["tiff"]["flavour"], "cog", "{json}");
+
+        let info = Command::new("gdalinfo").args(["-json", s(&cog)]).output().unwrap();
+        assert!(info.status.success(), "gdalinfo: {}", String::from_utf8_lossy(&info.stderr));
+        let info: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+        assert_eq!(info["size"], serde_json::json!([w, h]), "{info}");
+        assert_eq!(info["metadata"]["IMAGE_STRUCTURE"]["LAYOUT"], "COG", "{info}");
+        let overviews = info["bands"][0]["overviews"].as_array().expect("overviews");
+        let sizes: Vec<(u64, u64)> =
+            overviews.iter().map(|o| (o["size"][0].as_u64().unwrap(), o["size"][1].as_u64().unwrap())).collect();
+        // Each level ceil(size / 2^k), down to the first that fits one tile.
+        let (mut want, mut lw, mut lh) = (Vec::new(), u64::from(w), u64::from(h));
+        while lw.max(lh) > u64::from(tile) {
+            (lw, lh) = (lw.div_ceil(2), lh.div_ceil(2));
+            want.push((lw, lh));
+        }
+        assert_eq!(sizes, want, "{}: the overviews gdalinfo lists", cog.display());
+
+        let out = Command::new("/usr/bin/python3").args([COG_SCRIPT, s(&cog), s(&source), &tile_arg, mode]).output();
+        let out = out.unwrap();
+        let said = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        assert!(out.status.success(), "{}: {said}", cog.display());
+        eprintln!("{}: {said}", cog.display());
+    }
+}
+
+/// A JPEG-tiled source whose tiles fit the TIFF's (256 texels, YCbCr 4:2:0: `vips tiffsave`
+/// below Q90) has its interior full-resolution tiles copied as they are stored, as `--json`
+/// says; one whose tiles are RGB JPEGs (vips from Q90 on) has them encoded again, since the
+/// file's tags say YCbCr for every tile of the level (copied, libvips read them as YCbCr: a
+/// mean error of 51). Both read back within JPEG's error of the source.
+#[test]
+fn a_jpeg_tiled_source_s_tiles_are_copied_where_they_fit_the_tiff_s_tags() {
+    if !crate::common::have_program("vips", "--version", "libvips-tools") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = input(dir.path(), "src", 1000, 700, rgb8());
+    // 3 x 2 of the 4 x 3 tiles of level 0 lie inside the image; the edge ones are encoded.
+    for (q, copied) in [("85", 6), ("95", 0)] {
+        let tiled = dir.path().join(format!("s{q}.tif"));
+        let vips = Command::new("vips")
+            .args(["tiffsave", s(&png), s(&tiled), "--tile", "--tile-width", "256", "--tile-height", "256"])
+            .args(["--compression", "jpeg", "--Q", q])
+            .output()
+            .unwrap();
+        assert!(vips.status.success(), "vips: {}", String::from_utf8_lossy(&vips.stderr));
+        let out = dir.path().join(format!("o{q}.tif"));
+        let json = ok(&["split", s(&tiled), "-o", s(&out), "--tile-size", "256", "--json"]);
+        let json: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+        assert_eq!(json["copied"], copied, "Q{q}: {json}");
+        assert_eq!(json["storedTiles"]["copied"], copied, "Q{q}: {json}");
+        if let Some(python) = readers() {
+            let said = check(&python, "generic", &out, &png, 256, "jpeg");
+            eprintln!("Q{q} {}: {said}", out.display());
+        }
     }
 }

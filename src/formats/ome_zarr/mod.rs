@@ -134,10 +134,7 @@ impl OmeZarrSink {
     pub fn finish(self) -> Result<()> {
         let open = lock(&self.open).len();
         if open > 0 {
-            return Err(TilerError::Internal(format!(
-                "{open} shard(s) of {} never completed",
-                self.dest.shown()
-            )));
+            return Err(TilerError::Internal(format!("{open} shard(s) of {} never completed", self.dest.shown())));
         }
         match lock(&self.zip).take() {
             None => {

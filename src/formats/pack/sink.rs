@@ -36,9 +36,9 @@ pub(crate) fn pack_description(layout: &Layout, stored: PixelLayout) -> Descript
     }
 }
 
-/// The pack's tile kind for tiles of `codec` (a pack records one per tile).
-pub fn tile_kind(codec: Codec) -> TileKind {
-    match codec {
+/// The pack's kind of the tiles `codec` makes; Deflate tiles are a TIFF's, which no pack holds.
+pub fn tile_kind(codec: Codec) -> Result<TileKind> {
+    Ok(match codec {
         Codec::Jpeg { .. } => TileKind::Jpeg,
         Codec::Png { .. } => TileKind::Png,
         Codec::Raw => TileKind::Raw,
@@ -46,7 +46,12 @@ pub fn tile_kind(codec: Codec) -> TileKind {
         Codec::Zstd { delta: true, .. } => TileKind::ZstdDelta,
         Codec::Bc1 => TileKind::Bc1,
         Codec::Bc7 { .. } => TileKind::Bc7,
-    }
+        Codec::Deflate { .. } => {
+            return Err(TilerError::Options(
+                "--codec deflate compresses the tiles of a TIFF; a pack takes png, raw, zstd or zstd-delta".into(),
+            ));
+        }
+    })
 }
 
 impl PackSink {
@@ -61,7 +66,7 @@ impl PackSink {
     ) -> Result<PackSink> {
         let d = pack_description(layout, stored);
         let writer = PackWriter::create(dest, d, layout.pack_levels(), metadata, options)?;
-        Ok(PackSink { writer: Mutex::new(writer), kind: tile_kind(codec) })
+        Ok(PackSink { writer: Mutex::new(writer), kind: tile_kind(codec)? })
     }
 
     /// Writes the index and header and renames the pack into place.

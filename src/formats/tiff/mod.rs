@@ -7,23 +7,27 @@
 //! * [`Flavour::Ome`], an OME-TIFF: the full resolution in the first IFD with the OME-XML in
 //!   its `ImageDescription`, each reduced level one of its SubIFDs (tag 330), as bioformats,
 //!   QuPath and tifffile read a pyramid.
+//! * [`Flavour::Cog`], a Cloud Optimized GeoTIFF as GDAL's COG driver lays it out: the
+//!   generic pyramid's IFDs first, behind GDAL's ghost area, then the tile data, the coarsest
+//!   level first (`cog.rs`: the tiles staged beside the file and copied into place at the end).
 //!
 //! The file is written in one pass (`TiffWriter`): the header and a signature first, then
-//! each tile's bytes appended as it arrives, in any order, with only its offset and length
-//! kept (16 bytes a tile); at the end the IFDs, their arrays and the OME-XML, and the
-//! header's first-IFD offset patched. Classic TIFF or BigTIFF is decided before the first
-//! byte from an upper bound of the file's size (`Spec::needs_bigtiff`), or always with
-//! [`BigTiff::Always`]. `TiffSink` is the writer as a pipeline sink: raw tiles compressed
-//! on the encoder threads (`compress.rs`: Deflate or zstd with the horizontal predictor),
-//! JPEG tiles stored as they come, the file written under a temporary name and renamed into
-//! place when complete.
+//! each tile's bytes appended as it arrives, with only its offset and length kept (16 bytes a
+//! tile); at the end the IFDs, their arrays and the OME-XML, and the header's first-IFD offset
+//! patched. Classic TIFF or BigTIFF is decided before the first byte from an upper bound of
+//! the file's size (`Spec::needs_bigtiff`), or always with [`BigTiff::Always`].
+//! `TiffSink` is the writer as a pipeline sink. Tiles come compressed from the encoder
+//! threads (`Spec::codec`: JPEG, or Deflate and zstd with the horizontal predictor, which
+//! is the pack's row-delta filter) and in the producer's order (the sink is `ordered`), so the
+//! file's bytes are the same on every run, whatever the thread count; the file is written
+//! under a temporary name and renamed into place when complete.
 //!
-//! Not yet (issue 43): a Cloud Optimized GeoTIFF (its IFDs come first and its tile data in a
-//! fixed order: the tile data would be spooled to a temporary and assembled at the end, which
-//! the offset index here already allows), a JPEG source's tiles copied without decoding,
-//! shared `JPEGTables`, the floating-point predictor, and more than four channels as planes.
+//! A JPEG-tiled source's stored tiles are copied into level 0 where they are what the tags
+//! say ([`TiffSink`]'s `takes_stored_jpeg`). Not yet (issue 43): a GeoTIFF source's
+//! georeferencing in a COG, shared `JPEGTables`, the floating-point predictor, and more than
+//! four channels as planes.
 
-mod compress;
+mod cog;
 mod ifd;
 mod ome;
 mod sink;
@@ -35,7 +39,7 @@ pub(crate) use sink::TiffSink;
 pub use writer::TiffSummary;
 pub(crate) use writer::TiffWriter;
 
-use crate::codec::Subsampling;
+use crate::codec::{Codec, Subsampling};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 
@@ -55,6 +59,9 @@ pub enum Flavour {
     Generic,
     /// OME-TIFF: reduced levels as SubIFDs of the full resolution, OME-XML in its description.
     Ome,
+    /// Cloud Optimized GeoTIFF: the generic pyramid's IFDs first, then the tile data coarse to
+    /// fine, as GDAL's COG driver writes it (its validator passes).
+    Cog,
 }
 
 impl Flavour {
@@ -63,15 +70,19 @@ impl Flavour {
         match self {
             Flavour::Generic => "tiff",
             Flavour::Ome => "ome-tiff",
+            Flavour::Cog => "cog",
         }
     }
 
-    /// The flavour a file name says: `.ome.tif` and `.ome.tiff` OME-TIFF, `.tif` and `.tiff`
-    /// the generic pyramid (case-insensitive); other names none.
+    /// The flavour a file name says: `.ome.tif` and `.ome.tiff` OME-TIFF, `.cog.tif` and
+    /// `.cog.tiff` a COG, `.tif` and `.tiff` the generic pyramid (case-insensitive); other
+    /// names none.
     pub(crate) fn of_name(name: &str) -> Option<Flavour> {
         let name = name.to_ascii_lowercase();
         if name.ends_with(".ome.tif") || name.ends_with(".ome.tiff") {
             Some(Flavour::Ome)
+        } else if name.ends_with(".cog.tif") || name.ends_with(".cog.tiff") {
+            Some(Flavour::Cog)
         } else if name.ends_with(".tif") || name.ends_with(".tiff") {
             Some(Flavour::Generic)
         } else {
@@ -121,12 +132,6 @@ impl Compression {
             Compression::Zstd { .. } => "zstd",
             Compression::Jpeg { .. } => "jpeg",
         }
-    }
-
-    /// Whether the pipeline hands this compression encoded tiles (JPEG) rather than raw
-    /// samples, which the sink compresses itself.
-    pub(crate) fn takes_encoded(self) -> bool {
-        matches!(self, Compression::Jpeg { .. })
     }
 }
 
@@ -203,6 +208,11 @@ impl Spec {
                 "half-float samples: TIFF readers of these pyramids take 8, 16 or 32-bit samples".into(),
             ));
         }
+        if self.flavour == Flavour::Cog && self.most_tile_bytes() > u32::MAX as u64 {
+            return Err(TilerError::Options(format!(
+                "--tile-size {t}: a COG tile's length is a 32-bit leader, and these tiles could pass 4 GiB"
+            )));
+        }
         if self.name.contains('\0') {
             return Err(TilerError::Options("the image's name holds a NUL character".into()));
         }
@@ -231,19 +241,16 @@ impl Spec {
         (self.tile_size as u64).pow(2) * self.stored.bytes_per_pixel() as u64
     }
 
-    /// The most bytes one stored tile may take: the raw samples for none, the compressors'
-    /// bounds (zstd's `ZSTD_compressBound`; zlib's stored blocks, generously), and for JPEG
-    /// libjpeg-turbo's `tj3JPEGBufSize` as the codec states it.
+    /// The most bytes one stored tile may take, as the codec states it
+    /// ([`Codec::most_encoded_bytes`]): the raw samples for none, the compressors' bounds
+    /// (zstd's `ZSTD_compressBound`; zlib's stored blocks, generously), and for JPEG
+    /// libjpeg-turbo's `tj3JPEGBufSize` at any quality.
     pub fn most_tile_bytes(&self) -> u64 {
-        let raw = self.raw_tile_bytes();
-        match self.compression {
-            Compression::None => raw,
-            Compression::Deflate { .. } => raw + raw / 8 + 1024,
-            Compression::Zstd { .. } => zstd::zstd_safe::compress_bound(raw as usize) as u64,
-            Compression::Jpeg { subsampling } => {
-                crate::codec::Codec::Jpeg { quality: 100, subsampling }.most_encoded_bytes(self.tile_size, self.stored)
-            }
-        }
+        let codec = match self.compression {
+            Compression::Jpeg { subsampling } => Codec::Jpeg { quality: 100, subsampling },
+            _ => self.codec().unwrap_or(Codec::Raw),
+        };
+        codec.most_encoded_bytes(self.tile_size, self.stored)
     }
 
     /// Memory the writer's tile index holds: an offset and a length a tile.
@@ -251,10 +258,11 @@ impl Spec {
         self.total_tiles().saturating_mul(16)
     }
 
-    /// An upper bound of the file's size: header, tiles at their largest, IFDs, their arrays
-    /// and the OME-XML.
+    /// An upper bound of the file's size: header, tiles at their largest (a COG's with their
+    /// leader and trailer), IFDs, their arrays, the OME-XML and a COG's ghost area.
     pub fn most_file_bytes(&self) -> u64 {
-        let tiles = self.total_tiles().saturating_mul(self.most_tile_bytes());
+        let framing = if self.flavour == Flavour::Cog { cog::FRAMING } else { 0 };
+        let tiles = self.total_tiles().saturating_mul(self.most_tile_bytes() + framing);
         let ifds = self.levels as u64 * 4096 + self.total_tiles().saturating_mul(16);
         let xml = ome::xml(self).len() as u64;
         tiles.saturating_add(ifds).saturating_add(xml).saturating_add(1024)
@@ -272,6 +280,20 @@ impl Spec {
     pub fn predictor(&self) -> bool {
         matches!(self.compression, Compression::Deflate { .. } | Compression::Zstd { .. })
             && matches!(self.stored.depth, Depth::U8 | Depth::U16 | Depth::U32)
+    }
+
+    /// The codec whose tiles the file stores as they come from the encoders: raw samples, or
+    /// Deflate and zstd of them with the horizontal predictor where [`Spec::predictor`] says
+    /// (the filter of the pack's `zstd-delta`, which is TIFF's `Predictor` 2 for integer
+    /// samples). `None` for JPEG, whose quality is the run's setting, not the file's.
+    pub fn codec(&self) -> Option<Codec> {
+        let delta = self.predictor();
+        match self.compression {
+            Compression::None => Some(Codec::Raw),
+            Compression::Deflate { level } => Some(Codec::Deflate { level, delta }),
+            Compression::Zstd { level } => Some(Codec::Zstd { level, delta }),
+            Compression::Jpeg { .. } => None,
+        }
     }
 
     /// The `Photometric` tag: grey is black-is-zero; RGB tiles in JPEG are YCbCr (what

@@ -1,18 +1,18 @@
 //! [`TiffSink`]: the pipeline's tiles into a [`TiffWriter`], under a temporary name beside
 //! the destination, renamed into place when complete and removed if the run fails.
 //!
-//! JPEG tiles come encoded and are stored as they are; the others come as raw samples and
-//! are compressed here, on the encoder thread that calls, before the writer's lock. Tiles
-//! are stored in the order they arrive (`ordered` is false, so compression runs on every
-//! encoder thread): the tile data's order in the file varies from run to run, what each
-//! level holds does not.
+//! Every tile comes as the file stores it, compressed on the encoder threads by the codec
+//! [`Spec::codec`] names (or JPEG). The sink is `ordered`: tiles arrive from the encoders'
+//! writer thread in the producer's order, the same on every run, so the file's bytes are
+//! too; the writer appends them as they come and keeps only their offsets and lengths.
 
 use std::fs::{self, File};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use super::{Spec, TiffSummary, TiffWriter, compress};
+use super::{Compression, Spec, TiffSummary, TiffWriter};
+use crate::codec::Subsampling;
 use crate::error::{Result, TilerError};
 use crate::output::staging;
 use crate::sink::TileSink;
@@ -73,20 +73,51 @@ impl Drop for TiffSink {
 }
 
 impl TileSink for TiffSink {
-    fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
-        let compressed;
-        let stored = if self.spec.compression.takes_encoded() {
-            bytes
-        } else {
-            compressed = compress::tile(&self.spec, bytes, (lod, x, y))?;
-            &compressed[..]
-        };
+    fn write_tile(&self, lod: u32, x: u32, y: u32, stored: &[u8]) -> Result<()> {
+        if self.spec.compression == Compression::None && stored.len() as u64 != self.spec.raw_tile_bytes() {
+            let s = &self.spec;
+            let message = format!(
+                "{} bytes where a {}-pixel {} tile has {}",
+                stored.len(),
+                s.tile_size,
+                s.stored,
+                s.raw_tile_bytes()
+            );
+            return Err(TilerError::Encode { lod, x, y, message });
+        }
         let mut writer = self.writer.lock().map_err(|_| TilerError::panicked("a TIFF writer"))?;
         let writer =
             writer.as_mut().ok_or_else(|| TilerError::Internal("a tile after the TIFF was finished".into()))?;
         writer.add_tile(lod, x, y, stored)?;
         self.tile_bytes.fetch_add(stored.len() as u64, Ordering::Relaxed);
         Ok(())
+    }
+
+    /// A stored JPEG tile only where it is what the level's tags say of every tile: a
+    /// baseline 8-bit JPEG of the tile's size, grey for a grey file, else YCbCr (no Adobe
+    /// RGB transform) at the file's `YCbCrSubsampling`. A scanner's 4:4:4 or RGB tiles are
+    /// encoded again instead (the count of copied tiles says so).
+    fn takes_stored_jpeg(&self, jpeg: &[u8]) -> bool {
+        let Compression::Jpeg { subsampling } = self.spec.compression else { return false };
+        let Some(h) = crate::source::stored::read_header(jpeg) else { return false };
+        let side = self.spec.tile_size;
+        let whole = matches!(h.frame, 0xC0 | 0xC1)
+            && h.precision == 8
+            && (u32::from(h.width), u32::from(h.height)) == (side, side);
+        let chroma = match subsampling {
+            Subsampling::S420 => (2, 2),
+            Subsampling::S444 => (1, 1),
+        };
+        let form = match self.spec.photometric() {
+            1 => h.components == 1,
+            _ => h.components == 3 && h.adobe != Some(0) && h.sampling[..] == [chroma, (1, 1), (1, 1)],
+        };
+        whole && form
+    }
+
+    /// Tiles in the producer's order, so that the file is the same on every run.
+    fn ordered(&self) -> bool {
+        true
     }
 
     fn bytes_written(&self) -> u64 {

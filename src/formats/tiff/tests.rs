@@ -280,14 +280,24 @@ fn the_size_bound_picks_bigtiff_before_writing() {
     assert!(large.needs_bigtiff());
 }
 
-/// Deflate and zstd of 16-bit RGB with the predictor: the naive reader inflates each tile and
-/// sums the differences back, and gets the samples given.
+/// Deflate and zstd of 16-bit RGB with the predictor, as the encoders make them from the
+/// codec the spec names: the naive reader inflates each tile and sums the differences back,
+/// and gets the samples given.
 #[test]
 fn compressed_tiles_decode_to_the_samples() {
     let rgb16 = PixelLayout::new(Channels::Rgb, Depth::U16);
     for compression in [Compression::Deflate { level: 6 }, Compression::Zstd { level: 3 }] {
         let s = spec(Flavour::Generic, 20, 18, 2, rgb16, compression);
-        let stored = |l, x, y| compress::tile(&s, &raw_tile(&s, l, x, y), (l, x, y)).unwrap();
+        let codec = s.codec().unwrap();
+        assert!(matches!(codec, Codec::Deflate { delta: true, .. } | Codec::Zstd { delta: true, .. }), "{codec:?}");
+        let encoder = crate::codec::TileEncoder::<u16>::new(codec, rgb16, false, None, 16, vec![]).unwrap();
+        let stored = |l, x, y| {
+            let texels: Vec<u16> =
+                raw_tile(&s, l, x, y).chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect();
+            let mut out = Vec::new();
+            encoder.encode(&texels, &mut out).unwrap();
+            out
+        };
         let file = write(&s, stored);
         let n = open(&file);
         let ifds = chain(&n, n.first());
@@ -372,7 +382,7 @@ fn what_no_tiff_holds_is_refused_before_writing() {
 fn the_sink_leaves_nothing_unless_finished_and_a_later_run_may_replace_its_file() {
     let dir = tempfile::tempdir().unwrap();
     let dest = dir.path().join("a.tif");
-    let s = spec(Flavour::Generic, 20, 20, 2, grey8(), Compression::Deflate { level: 1 });
+    let s = spec(Flavour::Generic, 20, 20, 2, grey8(), Compression::None);
     drop(TiffSink::create(&dest, s.clone()).unwrap());
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "a dropped sink leaves no temporary");
 
@@ -388,7 +398,7 @@ fn the_sink_leaves_nothing_unless_finished_and_a_later_run_may_replace_its_file(
     }
     assert!(sink.write_tile(0, 0, 0, &[1, 2, 3]).is_err(), "raw tiles are whole tiles");
     let summary = sink.finish().unwrap();
-    assert_eq!((summary.levels, summary.tiles, summary.compression), (2, 5, "deflate"));
+    assert_eq!((summary.levels, summary.tiles, summary.compression), (2, 5, "none"));
     let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(names, ["a.tif"]);
     let claim = crate::output::claim(&dest, crate::output::Product::Tiff, &[], false).unwrap();
@@ -397,4 +407,68 @@ fn the_sink_leaves_nothing_unless_finished_and_a_later_run_may_replace_its_file(
     let theirs = dir.path().join("b.tif");
     std::fs::write(&theirs, b"II*\0\x08\0\0\0\0\0").unwrap();
     assert!(crate::output::claim(&theirs, crate::output::Product::Tiff, &[], false).is_err());
+}
+
+/// A COG as GDAL lays it out (`cog.rs`): the ghost area right after the header, the first IFD
+/// right after it at an even offset, every IFD before any tile, the tile data coarsest level
+/// first and row by row, each tile framed by its length and its last 4 bytes repeated.
+#[test]
+fn a_cog_has_gdal_s_ghost_area_its_ifds_first_and_its_data_coarse_to_fine() {
+    for bigtiff in [BigTiff::Auto, BigTiff::Always] {
+        let s = Spec { bigtiff, ..spec(Flavour::Cog, 40, 36, 3, grey8(), Compression::None) };
+        let file = write(&s, |l, x, y| raw_tile(&s, l, x, y));
+        let n = open(&file);
+        assert_eq!(n.big, bigtiff == BigTiff::Always);
+        let head = if n.big { 16 } else { 8 };
+        let line = b"GDAL_STRUCTURAL_METADATA_SIZE=000140 bytes\n";
+        assert_eq!(&file[head..head + line.len()], line);
+        let meta = std::str::from_utf8(&file[head + line.len()..][..140]).unwrap();
+        let want = "LAYOUT=IFDS_BEFORE_DATA\nBLOCK_ORDER=ROW_MAJOR\nBLOCK_LEADER=SIZE_AS_UINT4\n\
+                    BLOCK_TRAILER=LAST_4_BYTES_REPEATED\nKNOWN_INCOMPATIBLE_EDITION=NO\n ";
+        assert_eq!(meta, want);
+        assert_eq!(n.first(), ((head + line.len() + 140) as u64).next_multiple_of(2));
+        let ifds = chain(&n, n.first());
+        check_levels(&file, &s, &ifds, |l, x, y| raw_tile(&s, l, x, y));
+        let last_ifd = ifds.last().unwrap().at;
+        let mut previous = last_ifd;
+        for k in (0..s.levels as usize).rev() {
+            assert!(k == 0 || ifds[k].at > ifds[k - 1].at, "IFDs in level order");
+            for (&o, &c) in ifds[k].all(324).iter().zip(ifds[k].all(325)) {
+                assert!(o > previous, "level {k}: tile at {o}, not after the one before at {previous}");
+                let (o, c) = (o as usize, c as usize);
+                assert_eq!(u32::from_le_bytes(file[o - 4..o].try_into().unwrap()) as usize, c, "leader");
+                assert_eq!(file[o + c..o + c + 4], file[o + c - 4..o + c], "trailer");
+                previous = o as u64;
+            }
+        }
+        let (o, c) = (ifds[0].all(324), ifds[0].all(325));
+        assert_eq!(o.last().unwrap() + c.last().unwrap() + 4, file.len() as u64, "level 0's last tile ends the file");
+    }
+}
+
+/// A COG through the sink: nothing left beside it (the staging file is gone), and a later run
+/// knows it for ours by its first IFD's Software tag (its byte 16 is GDAL's ghost area).
+#[test]
+fn a_cog_leaves_no_staging_file_and_is_recognised_as_ours() {
+    use crate::sink::TileSink;
+    let dir = tempfile::tempdir().unwrap();
+    let dest = dir.path().join("a.cog.tif");
+    let s = spec(Flavour::Cog, 40, 20, 2, grey8(), Compression::None);
+    drop(TiffSink::create(&dest, s.clone()).unwrap());
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "a dropped COG sink leaves nothing");
+    let sink = TiffSink::create(&dest, s.clone()).unwrap();
+    for level in (0..2).rev() {
+        let (c, r) = s.level_grid(level);
+        for y in 0..r {
+            for x in 0..c {
+                sink.write_tile(level, x, y, &raw_tile(&s, level, x, y)).unwrap();
+            }
+        }
+    }
+    let summary = sink.finish().unwrap();
+    assert_eq!(summary.file_bytes, std::fs::metadata(&dest).unwrap().len());
+    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(names, ["a.cog.tif"]);
+    let claim = crate::output::claim(&dest, crate::output::Product::Tiff, &[], false).unwrap();
+    assert_eq!(claim.replaces, Some(crate::output::Existing::Ours));
 }

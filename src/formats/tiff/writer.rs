@@ -1,4 +1,6 @@
 //! [`TiffWriter`]: a pyramidal TIFF written front to back in one pass, tiles in any order.
+//! (A COG is laid out otherwise, IFDs first: its tiles are staged and the file written at
+//! [`TiffWriter::finish`]; see `cog.rs`.)
 //!
 //! ```text
 //! 0   header: "II", 42 and the first IFD's offset (classic), or "II", 43, 8, 0 and a
@@ -13,6 +15,7 @@ use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
+use super::cog::{self, Staging};
 use super::ifd::{Ifd, Value, tag};
 use super::{Compression, Flavour, SIGNATURE, SIGNATURE_AT, Spec, ome};
 use crate::error::{Result, ShowPath, TilerError};
@@ -45,6 +48,9 @@ pub struct TiffSummary {
 pub struct TiffWriter {
     path: PathBuf,
     file: BufWriter<File>,
+    /// A COG's tiles until [`TiffWriter::finish`] writes the file whole; `None` for the other
+    /// flavours, whose tiles go straight into `file`.
+    staging: Option<Staging>,
     spec: Spec,
     big: bool,
     /// Bytes written so far (the next tile's offset).
@@ -52,6 +58,7 @@ pub struct TiffWriter {
     /// Each level's first entry in `tiles`.
     bases: Vec<usize>,
     /// Offset and length of every tile, level by level, row by row; offset 0: not yet written.
+    /// A COG's offsets are in its staging file (each past its leader, so never 0).
     tiles: Vec<(u64, u64)>,
     tile_bytes: u64,
 }
@@ -81,23 +88,19 @@ impl TiffWriter {
             at += c as usize * r as usize;
         }
         let big = spec.needs_bigtiff();
-        let mut head = Vec::with_capacity(DATA_AT as usize);
-        head.extend(b"II");
-        if big {
-            head.extend(43u16.to_le_bytes());
-            head.extend(8u16.to_le_bytes());
-            head.extend(0u16.to_le_bytes());
-            head.extend(0u64.to_le_bytes());
-        } else {
-            head.extend(42u16.to_le_bytes());
-            head.extend(0u32.to_le_bytes());
-        }
-        head.resize(SIGNATURE_AT as usize, 0);
-        head.extend(SIGNATURE.as_bytes());
-        head.resize(DATA_AT as usize, 0);
         let mut file = BufWriter::with_capacity(1 << 20, file);
-        file.write_all(&head).map_err(write_err(path))?;
-        Ok(TiffWriter { path: path.to_path_buf(), file, spec, big, len: DATA_AT, bases, tiles, tile_bytes: 0 })
+        let (staging, len) = if spec.flavour == Flavour::Cog {
+            // The file is written whole at the end; the tiles wait beside it.
+            (Some(Staging::create(path).map_err(write_err(path))?), 0)
+        } else {
+            let mut head = header(big, 0);
+            head.resize(SIGNATURE_AT as usize, 0);
+            head.extend(SIGNATURE.as_bytes());
+            head.resize(DATA_AT as usize, 0);
+            file.write_all(&head).map_err(write_err(path))?;
+            (None, DATA_AT)
+        };
+        Ok(TiffWriter { path: path.to_path_buf(), file, staging, spec, big, len, bases, tiles, tile_bytes: 0 })
     }
 
     /// Appends tile `(x, y)` of `level`: `bytes` as the file stores them (compressed).
@@ -117,22 +120,33 @@ impl TiffWriter {
         if self.tiles[at].0 != 0 {
             return Err(err("internal error: the tile came twice".into()));
         }
-        let end = self.len + bytes.len() as u64;
-        if !self.big && end > u32::MAX as u64 {
-            return Err(TilerError::Limit(format!(
-                "{}: the tiles passed 4 GiB, more than a classic TIFF's bound said; write BigTIFF",
-                self.path.shown()
-            )));
-        }
-        self.file.write_all(bytes).map_err(write_err(&self.path))?;
-        self.tiles[at] = (self.len, bytes.len() as u64);
-        self.len = end;
+        let offset = match &mut self.staging {
+            Some(staging) => {
+                if u32::try_from(bytes.len()).is_err() {
+                    return Err(err(format!("{} bytes: a COG tile's length is a 32-bit leader", bytes.len())));
+                }
+                staging.append(bytes).map_err(write_err(&self.path))?
+            }
+            None => {
+                let end = self.len + bytes.len() as u64;
+                if !self.big && end > u32::MAX as u64 {
+                    return Err(TilerError::Limit(format!(
+                        "{}: the tiles passed 4 GiB, more than a classic TIFF's bound said; write BigTIFF",
+                        self.path.shown()
+                    )));
+                }
+                self.file.write_all(bytes).map_err(write_err(&self.path))?;
+                std::mem::replace(&mut self.len, end)
+            }
+        };
+        self.tiles[at] = (offset, bytes.len() as u64);
         self.tile_bytes += bytes.len() as u64;
         Ok(())
     }
 
-    /// Writes the IFDs after the tiles, points the header at the first, and syncs the file.
-    /// Fails, naming it, if a tile is missing.
+    /// Writes the IFDs after the tiles, points the header at the first, and syncs the file;
+    /// a COG's file is written whole here ([`TiffWriter::finish_cog`]). Fails, naming it, if a
+    /// tile is missing.
     pub fn finish(mut self) -> Result<TiffSummary> {
         if let Some(missing) = self.tiles.iter().position(|t| t.0 == 0) {
             let level = self.bases.iter().rposition(|&b| b <= missing).unwrap_or(0);
@@ -144,6 +158,9 @@ impl TiffWriter {
                 i % c as usize,
                 i / c as usize
             )));
+        }
+        if self.staging.is_some() {
+            return self.finish_cog();
         }
         let levels = self.spec.levels as usize;
         let mut ifds: Vec<Ifd> = (0..levels).map(|k| self.level_ifd(k as u32)).collect();
@@ -171,7 +188,8 @@ impl TiffWriter {
         for (k, ifd) in ifds.iter().enumerate() {
             // The generic pyramid chains every level; OME's reduced levels hang off level 0.
             let next = match self.spec.flavour {
-                Flavour::Generic => offsets.get(k + 1).copied().unwrap_or(0),
+                // (A COG is finished by `finish_cog`, chained likewise.)
+                Flavour::Generic | Flavour::Cog => offsets.get(k + 1).copied().unwrap_or(0),
                 Flavour::Ome => 0,
             };
             let pad = (offsets[k] - self.len) as usize;
@@ -189,15 +207,75 @@ impl TiffWriter {
             file.seek(SeekFrom::Start(4)).and_then(|_| file.write_all(&(first as u32).to_le_bytes()))
         };
         patched.and_then(|()| file.sync_all()).map_err(write_err(&path))?;
-        Ok(TiffSummary {
-            flavour: spec.flavour,
-            bigtiff: big,
-            levels: spec.levels,
-            tiles: spec.total_tiles(),
-            tile_bytes,
-            file_bytes: len,
-            compression: spec.compression.name(),
-        })
+        Ok(summary(&spec, big, tile_bytes, len))
+    }
+
+    /// A COG's file, written whole now that every tile's length is known (`cog.rs`): the
+    /// header, GDAL's ghost area, the IFDs (level 0 first, chained), then the staged tiles
+    /// copied in the file's order, the coarsest level first, each level's row by row, each
+    /// tile framed by its leader and trailer.
+    fn finish_cog(mut self) -> Result<TiffSummary> {
+        let big = self.big;
+        let levels = self.spec.levels as usize;
+        let mut ifds: Vec<Ifd> = (0..levels).map(|k| self.level_ifd(k as u32)).collect();
+        // The IFDs' lengths do not depend on the offsets they hold: lay them out, then the data.
+        let mut at = cog::first_ifd_at(big);
+        let mut offsets = Vec::with_capacity(levels);
+        for ifd in &ifds {
+            offsets.push(at);
+            at += ifd.encoded_len(big);
+        }
+        let data_at = at;
+        for k in (0..levels).rev() {
+            let tiles = self.level_tiles(k as u32);
+            let Some(Value::Offsets(v)) = ifds[k].get_mut(tag::TILE_OFFSETS) else {
+                return Err(TilerError::Internal("a COG level without its tile offsets".into()));
+            };
+            for (offset, &(_, len)) in v.iter_mut().zip(tiles) {
+                *offset = at + 4;
+                at += len + cog::FRAMING;
+            }
+        }
+        if !big && at > u32::MAX as u64 {
+            return Err(TilerError::Limit(format!(
+                "{}: the file passed 4 GiB, more than a classic TIFF's bound said; write BigTIFF",
+                self.path.shown()
+            )));
+        }
+        let path = self.path.clone();
+        let mut head = header(big, offsets[0]);
+        head.extend(cog::ghost_area());
+        head.resize(offsets[0] as usize, 0);
+        self.file.write_all(&head).map_err(write_err(&path))?;
+        for (k, ifd) in ifds.iter().enumerate() {
+            let next = offsets.get(k + 1).copied().unwrap_or(0);
+            self.file.write_all(&ifd.encode(offsets[k], next, big)).map_err(write_err(&path))?;
+        }
+        drop(ifds);
+        let staging = self.staging.take().ok_or_else(|| TilerError::Internal("a COG without its tiles".into()))?;
+        let TiffWriter { file, spec, tile_bytes, tiles, bases, .. } = self;
+        let mut file = file.into_inner().map_err(|e| TilerError::write(&path, e.into_error()))?;
+        // The tiles in the file's order: the coarsest level first, each level's row by row.
+        let ranges = (0..levels).rev().flat_map(|k| {
+            let end = bases.get(k + 1).copied().unwrap_or(tiles.len());
+            tiles[bases[k]..end].iter().copied()
+        });
+        let copied = cog::assemble(staging, &mut file, ranges).map_err(write_err(&path))?;
+        if data_at + copied != at {
+            return Err(TilerError::Internal(format!(
+                "{}: {copied} bytes of tiles copied where {} were laid out",
+                path.shown(),
+                at - data_at
+            )));
+        }
+        file.sync_all().map_err(write_err(&path))?;
+        Ok(summary(&spec, big, tile_bytes, at))
+    }
+
+    /// Level `k`'s tiles in the index, row by row.
+    fn level_tiles(&self, k: u32) -> &[(u64, u64)] {
+        let (c, r) = self.spec.level_grid(k);
+        &self.tiles[self.bases[k as usize]..][..c as usize * r as usize]
     }
 
     /// Level `k`'s IFD, its tiles' offsets and byte counts from the index.
@@ -224,15 +302,21 @@ impl TiffWriter {
             ifd.set(tag::RESOLUTION_UNIT, Value::Short(vec![3]));
         }
         ifd.set(tag::PLANAR_CONFIGURATION, Value::Short(vec![1]));
-        let count = SIGNATURE.len() as u64 + 1;
-        ifd.set(tag::SOFTWARE, Value::AsciiAt { offset: SIGNATURE_AT, count });
+        if s.flavour == Flavour::Cog {
+            // A COG's header is followed by GDAL's ghost area: the signature is the value
+            // itself, which the IFD's value area holds near its start (the tags before it
+            // have small values).
+            ifd.set(tag::SOFTWARE, Value::Ascii(SIGNATURE.into()));
+        } else {
+            let count = SIGNATURE.len() as u64 + 1;
+            ifd.set(tag::SOFTWARE, Value::AsciiAt { offset: SIGNATURE_AT, count });
+        }
         if s.predictor() {
             ifd.set(tag::PREDICTOR, Value::Short(vec![2]));
         }
         ifd.set(tag::TILE_WIDTH, Value::Long(vec![s.tile_size]));
         ifd.set(tag::TILE_LENGTH, Value::Long(vec![s.tile_size]));
-        let (c, r) = s.level_grid(k);
-        let tiles = &self.tiles[self.bases[k as usize]..][..c as usize * r as usize];
+        let tiles = self.level_tiles(k);
         ifd.set(tag::TILE_OFFSETS, Value::Offsets(tiles.iter().map(|t| t.0).collect()));
         ifd.set(tag::TILE_BYTE_COUNTS, Value::Offsets(tiles.iter().map(|t| t.1).collect()));
         if s.stored.channels.has_alpha() {
@@ -253,6 +337,36 @@ impl TiffWriter {
             ifd.set(tag::REFERENCE_BLACK_WHITE, Value::Rational(white.to_vec()));
         }
         ifd
+    }
+}
+
+/// The header: "II", 42 and the first IFD's offset (classic), or "II", 43, 8, 0 and a 64-bit
+/// offset (BigTIFF).
+fn header(big: bool, first_ifd: u64) -> Vec<u8> {
+    let mut head = Vec::with_capacity(16);
+    head.extend(b"II");
+    if big {
+        head.extend(43u16.to_le_bytes());
+        head.extend(8u16.to_le_bytes());
+        head.extend(0u16.to_le_bytes());
+        head.extend(first_ifd.to_le_bytes());
+    } else {
+        head.extend(42u16.to_le_bytes());
+        head.extend((first_ifd as u32).to_le_bytes());
+    }
+    head
+}
+
+/// What a finished file of `spec` holds.
+fn summary(spec: &Spec, big: bool, tile_bytes: u64, file_bytes: u64) -> TiffSummary {
+    TiffSummary {
+        flavour: spec.flavour,
+        bigtiff: big,
+        levels: spec.levels,
+        tiles: spec.total_tiles(),
+        tile_bytes,
+        file_bytes,
+        compression: spec.compression.name(),
     }
 }
 

@@ -107,7 +107,7 @@ fn main() -> Result<()> {
             encoder.encode(tile, &mut out).map_err(anyhow::Error::msg)?;
             times.push(started.elapsed().as_secs_f64() * 1e3);
             bytes += out.len();
-            let back = decode(tile_kind(codec), &out, &description)?;
+            let back = decode(tile_kind(codec)?, &out, &description)?;
             for (a, b) in tile.iter().zip(&back) {
                 squared += (*a as f64 - *b as f64).powi(2);
                 samples += 1.0;

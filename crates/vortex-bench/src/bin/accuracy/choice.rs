@@ -22,6 +22,8 @@ pub enum CodecKey {
     Zstd(bool, i32),
     Bc1,
     Bc7(u8),
+    /// A TIFF's Deflate tiles (not in the sweep).
+    Deflate(bool, u8),
 }
 
 pub const PNG_LEVELS: [PngLevel; 3] = [PngLevel::Fast, PngLevel::Default, PngLevel::Best];
@@ -36,6 +38,7 @@ impl CodecKey {
             Codec::Raw => CodecKey::Raw,
             Codec::Zstd { level, delta } => CodecKey::Zstd(delta, level),
             Codec::Bc1 => CodecKey::Bc1,
+            Codec::Deflate { level, delta } => CodecKey::Deflate(delta, level as u8),
             Codec::Bc7 { effort } => CodecKey::Bc7(BC7_EFFORTS.iter().position(|e| *e == effort).unwrap_or(0) as u8),
         }
     }
@@ -49,6 +52,7 @@ impl CodecKey {
             CodecKey::Raw => Codec::Raw,
             CodecKey::Zstd(delta, level) => Codec::Zstd { level, delta },
             CodecKey::Bc1 => Codec::Bc1,
+            CodecKey::Deflate(delta, level) => Codec::Deflate { level: level as u32, delta },
             CodecKey::Bc7(e) => Codec::Bc7 { effort: BC7_EFFORTS[e as usize] },
         }
     }
@@ -61,6 +65,8 @@ impl CodecKey {
             CodecKey::Zstd(false, l) => format!("zstd {l}"),
             CodecKey::Zstd(true, l) => format!("zstd-delta {l}"),
             CodecKey::Bc1 => "bc1".into(),
+            CodecKey::Deflate(false, l) => format!("deflate {l}"),
+            CodecKey::Deflate(true, l) => format!("deflate-delta {l}"),
             CodecKey::Bc7(e) => format!("bc7 {}", ["ultra-fast", "very-fast", "fast", "basic", "slow"][e as usize]),
         }
     }
@@ -76,6 +82,8 @@ impl CodecKey {
             CodecKey::Zstd(true, _) => 7,
             CodecKey::Bc1 => 8,
             CodecKey::Bc7(_) => 9,
+            // Not in the sweep; plotted beside zstd-delta, its lossless kin, if it ever is.
+            CodecKey::Deflate(..) => 7,
         }
     }
 }
