@@ -23,7 +23,7 @@
 //! under a temporary name and renamed into place when complete.
 //!
 //! A JPEG-tiled source's stored tiles are copied into level 0 where they are what the tags
-//! say ([`TiffSink`]'s `takes_stored_jpeg`). Not yet (issue 43): a GeoTIFF source's
+//! say (`TiffSink`'s `takes_stored_jpeg`). Not yet (issue 43): a GeoTIFF source's
 //! georeferencing in a COG, shared `JPEGTables`, the floating-point predictor, and more than
 //! four channels as planes.
 
