@@ -460,11 +460,6 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         return Err(options(format!("--border {border}: TIFF tiles have no border (each pixel is stored once)")));
     }
     let tile_size = t.tile_size.unwrap_or(tiff::DEFAULT_TILE_SIZE);
-    if tile_size == 0 || !tile_size.is_multiple_of(16) {
-        return Err(options(format!(
-            "--tile-size {tile_size}: TIFF tiles are a multiple of 16 pixels a side (e.g. 256 or 512)"
-        )));
-    }
     let source = at.header.layout;
     let labels = t.filter.is_some_and(|f| f.is_label());
     let jpeg_fits = t.tile_depth.unwrap_or(source.depth) == Depth::U8
@@ -517,16 +512,12 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
     let compression = match (compression, opts.codec) {
         (Some(c), _) => c,
         (None, crate::codec::Codec::Jpeg { subsampling, .. }) => Compression::Jpeg { subsampling },
-        (None, other) => return Err(options(format!("internal error: TIFF tiles from --codec {}", other.name()))),
+        (None, other) => return Err(TilerError::Internal(format!("TIFF tiles from --codec {}", other.name()))),
     };
-    at.limits().check_pyramid(&layout, false)?;
     let pixel_size = own.ome_zarr.pixel_size.map(|p| tiff::Micrometres(micrometres(p)));
     let spec = tiff::Spec {
         flavour,
-        width: layout.width,
-        height: layout.height,
-        levels: layout.lod_count,
-        tile_size: layout.tile_size,
+        layout,
         stored,
         compression,
         bigtiff: own.tiff.bigtiff,
@@ -534,12 +525,13 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         pixel_size,
     };
     spec.check()?;
+    at.limits().check_pyramid(&layout, false)?;
     // The encoders compress the tiles as the file stores them (resolved as raw above, which
     // keeps the same samples).
     if let Some(codec) = spec.codec() {
         opts.codec = codec;
     }
-    at.limits().check_memory(&format!("the index of the TIFF's {} tiles", spec.total_tiles()), spec.index_bytes())?;
+    at.limits().check_memory(&format!("the index of the TIFF's {} tiles", layout.total_tiles()), spec.index_bytes())?;
     let claim = at.claim(&output.path, Product::Tiff)?;
     Ok(Planned { output, opts, layout, changed: None, claim, work: Work::Tiff { spec: Box::new(spec) } })
 }
@@ -709,7 +701,8 @@ mod tests {
         assert_eq!(dzi.opts, SplitOptions { down_to_one_texel: true, ..tiff.opts.clone() }, "one pyramid");
         let Work::Tiff { spec } = &tiff.work else { panic!("a TIFF's work") };
         assert!(matches!(spec.compression, Compression::Jpeg { .. }), "{:?}", spec.compression);
-        assert_eq!((spec.width, spec.height, spec.tile_size, spec.levels), (1000, 700, 256, 3));
+        let l = &spec.layout;
+        assert_eq!((l.width, l.height, l.tile_size, l.lod_count), (1000, 700, 256, 3));
         assert_eq!(spec.pixel_size, Some(tiff::Micrometres(0.5)));
         assert_eq!(spec.name, "slide");
         assert_eq!(ome.opts.filter, Filter::Box, "OME-TIFF's levels are means of the stored values");

@@ -41,6 +41,7 @@ pub(crate) use writer::TiffWriter;
 
 use crate::codec::{Codec, Subsampling};
 use crate::error::{Result, TilerError};
+use crate::layout::Layout;
 use crate::pixel::{Channels, Depth, PixelLayout};
 
 /// Where the writer puts its signature, after the header: the `Software` tag's value, which
@@ -154,13 +155,10 @@ pub(crate) struct Micrometres(pub f64);
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Spec {
     pub flavour: Flavour,
-    /// The full-resolution image's size; level `k` is `ceil(size / 2^k)`.
-    pub width: u32,
-    pub height: u32,
-    /// Levels, the full resolution included (at least 1).
-    pub levels: u32,
-    /// Tile side in pixels, a multiple of 16 (the TIFF rule); edge tiles are whole tiles.
-    pub tile_size: u32,
+    /// The pyramid's page grid, border 0: the full-resolution size, the tile side (a multiple
+    /// of 16, the TIFF rule; edge tiles are whole tiles) and the levels (`lod_count`, the full
+    /// resolution included). Level `k` is `layout.level_extent(k)` in `layout.grid(k)` tiles.
+    pub layout: Layout,
     /// The samples of each pixel as stored.
     pub stored: PixelLayout,
     pub compression: Compression,
@@ -171,25 +169,25 @@ pub(crate) struct Spec {
     pub pixel_size: Option<Micrometres>,
 }
 
-/// The largest tile side (libtiff and the JPEG codec stop at 65535; a tile this large is
-/// far past any reader's use).
-pub(crate) const MAX_TILE_SIZE: u32 = 65536 - 16;
-
 impl Spec {
     /// Refuses what no TIFF (or no reader of these flavours) holds, before anything is
     /// written; the messages say what to change.
     pub fn check(&self) -> Result<()> {
-        let t = self.tile_size;
-        if t == 0 || !t.is_multiple_of(16) || t > MAX_TILE_SIZE {
+        let l = &self.layout;
+        let t = l.tile_size;
+        if t == 0 || !t.is_multiple_of(16) {
             return Err(TilerError::Options(format!(
                 "--tile-size {t}: TIFF tiles are a multiple of 16 pixels a side (e.g. 256 or 512)"
             )));
         }
-        if self.width == 0 || self.height == 0 {
-            return Err(TilerError::Geometry(format!("a {}x{} image has no pixels", self.width, self.height)));
+        if l.border != 0 {
+            return Err(TilerError::Options(format!("--border {}: TIFF tiles have no border", l.border)));
         }
-        if self.levels == 0 || self.levels > 32 {
-            return Err(TilerError::Geometry(format!("a TIFF pyramid of {} levels", self.levels)));
+        if l.width == 0 || l.height == 0 {
+            return Err(TilerError::Geometry(format!("a {}x{} image has no pixels", l.width, l.height)));
+        }
+        if l.lod_count == 0 || l.lod_count > 32 {
+            return Err(TilerError::Geometry(format!("a TIFF pyramid of {} levels", l.lod_count)));
         }
         let s = self.stored;
         match self.compression {
@@ -219,26 +217,9 @@ impl Spec {
         Ok(())
     }
 
-    /// Width and height of level `k`: `ceil(size / 2^k)`.
-    pub fn level_extent(&self, k: u32) -> (u32, u32) {
-        let shrink = |v: u32| (((v as u64) + (1u64 << k) - 1) >> k) as u32;
-        (shrink(self.width), shrink(self.height))
-    }
-
-    /// Tiles across and down level `k`.
-    pub fn level_grid(&self, k: u32) -> (u32, u32) {
-        let (w, h) = self.level_extent(k);
-        (w.div_ceil(self.tile_size), h.div_ceil(self.tile_size))
-    }
-
-    /// Tiles of every level.
-    pub fn total_tiles(&self) -> u64 {
-        (0..self.levels).map(|k| self.level_grid(k)).map(|(c, r)| c as u64 * r as u64).sum()
-    }
-
     /// Bytes of one tile's samples, uncompressed.
     pub fn raw_tile_bytes(&self) -> u64 {
-        (self.tile_size as u64).pow(2) * self.stored.bytes_per_pixel() as u64
+        (self.layout.tile_size as u64).pow(2) * self.stored.bytes_per_pixel() as u64
     }
 
     /// The most bytes one stored tile may take, as the codec states it
@@ -250,20 +231,23 @@ impl Spec {
             Compression::Jpeg { subsampling } => Codec::Jpeg { quality: 100, subsampling },
             _ => self.codec().unwrap_or(Codec::Raw),
         };
-        codec.most_encoded_bytes(self.tile_size, self.stored)
+        codec.most_encoded_bytes(self.layout.tile_size, self.stored)
     }
 
-    /// Memory the writer's tile index holds: an offset and a length a tile.
+    /// Memory the writer's tile index holds at its peak: an offset and a length a tile (16
+    /// bytes) while the tiles come, and at the end the IFDs' offset and byte-count arrays
+    /// beside it (16 more), until the index is dropped.
     pub fn index_bytes(&self) -> u64 {
-        self.total_tiles().saturating_mul(16)
+        self.layout.total_tiles().saturating_mul(32)
     }
 
     /// An upper bound of the file's size: header, tiles at their largest (a COG's with their
     /// leader and trailer), IFDs, their arrays, the OME-XML and a COG's ghost area.
     pub fn most_file_bytes(&self) -> u64 {
         let framing = if self.flavour == Flavour::Cog { cog::FRAMING } else { 0 };
-        let tiles = self.total_tiles().saturating_mul(self.most_tile_bytes() + framing);
-        let ifds = self.levels as u64 * 4096 + self.total_tiles().saturating_mul(16);
+        let total = self.layout.total_tiles();
+        let tiles = total.saturating_mul(self.most_tile_bytes() + framing);
+        let ifds = self.layout.lod_count as u64 * 4096 + total.saturating_mul(16);
         let xml = ome::xml(self).len() as u64;
         tiles.saturating_add(ifds).saturating_add(xml).saturating_add(1024)
     }

@@ -70,8 +70,8 @@ pub(super) fn xml(spec: &Spec) -> String {
         name = escape(&spec.name),
         ty = pixel_type(spec.stored.depth),
         bits = bits,
-        w = spec.width,
-        h = spec.height,
+        w = spec.layout.width,
+        h = spec.layout.height,
         c = samples,
         physical = physical,
     );

@@ -79,7 +79,7 @@ impl TileSink for TiffSink {
             let message = format!(
                 "{} bytes where a {}-pixel {} tile has {}",
                 stored.len(),
-                s.tile_size,
+                s.layout.tile_size,
                 s.stored,
                 s.raw_tile_bytes()
             );
@@ -100,7 +100,7 @@ impl TileSink for TiffSink {
     fn takes_stored_jpeg(&self, jpeg: &[u8]) -> bool {
         let Compression::Jpeg { subsampling } = self.spec.compression else { return false };
         let Some(h) = crate::source::stored::read_header(jpeg) else { return false };
-        let side = self.spec.tile_size;
+        let side = self.spec.layout.tile_size;
         let whole = matches!(h.frame, 0xC0 | 0xC1)
             && h.precision == 8
             && (u32::from(h.width), u32::from(h.height)) == (side, side);

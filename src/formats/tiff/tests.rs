@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 use std::io::Read;
 
 use super::*;
+use crate::layout::Layout;
 use crate::pixel::{Channels, Depth, PixelLayout};
 
 /// One entry as read: its type and its values widened to u64 (ASCII as bytes).
@@ -111,18 +112,31 @@ impl ReadIfd {
 }
 
 fn spec(flavour: Flavour, w: u32, h: u32, levels: u32, stored: PixelLayout, compression: Compression) -> Spec {
+    // Written field by field (not Layout::new) so that the refusals below can be given
+    // sizes Layout itself refuses.
+    let tile_size = 16;
+    let (columns, rows) = (w.div_ceil(tile_size), h.div_ceil(tile_size));
+    let layout = Layout { width: w, height: h, tile_size, border: 0, columns, rows, lod_count: levels };
     Spec {
         flavour,
-        width: w,
-        height: h,
-        levels,
-        tile_size: 16,
+        layout,
         stored,
         compression,
         bigtiff: BigTiff::Auto,
         name: "tiny <&> \"test\"".into(),
         pixel_size: None,
     }
+}
+
+/// Level `k`'s size, worked out here as the TIFF readers expect it: `ceil(size / 2^k)`.
+fn extent(s: &Spec, k: u32) -> (u32, u32) {
+    (s.layout.width.div_ceil(1 << k), s.layout.height.div_ceil(1 << k))
+}
+
+/// Level `k`'s tiles across and down.
+fn grid(s: &Spec, k: u32) -> (u32, u32) {
+    let (w, h) = extent(s, k);
+    (w.div_ceil(s.layout.tile_size), h.div_ceil(s.layout.tile_size))
 }
 
 fn grey8() -> PixelLayout {
@@ -141,8 +155,8 @@ fn write(s: &Spec, tile: impl Fn(u32, u32, u32) -> Vec<u8>) -> Vec<u8> {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("t.tif");
     let mut w = TiffWriter::create(&path, std::fs::File::create(&path).unwrap(), s.clone()).unwrap();
-    for level in (0..s.levels).rev() {
-        let (c, r) = s.level_grid(level);
+    for level in (0..s.layout.lod_count).rev() {
+        let (c, r) = grid(s, level);
         for y in 0..r {
             for x in (0..c).rev() {
                 w.add_tile(level, x, y, &tile(level, x, y)).unwrap();
@@ -158,20 +172,20 @@ fn write(s: &Spec, tile: impl Fn(u32, u32, u32) -> Vec<u8>) -> Vec<u8> {
 /// Checks what every IFD of ours holds: tags ascending, the level's size and tile grid, tile
 /// data inside the file where the tile was put, the signature as Software.
 fn check_levels(file: &[u8], s: &Spec, ifds: &[ReadIfd], tile: impl Fn(u32, u32, u32) -> Vec<u8>) {
-    assert_eq!(ifds.len() as u32, s.levels);
+    assert_eq!(ifds.len() as u32, s.layout.lod_count);
     for (k, ifd) in ifds.iter().enumerate() {
         let k = k as u32;
         let mut sorted = ifd.order.clone();
         sorted.sort_unstable();
         sorted.dedup();
         assert_eq!(ifd.order, sorted, "level {k}: tags ascending, each once");
-        let (w, h) = s.level_extent(k);
+        let (w, h) = extent(s, k);
         assert_eq!((ifd.one(256), ifd.one(257)), (w as u64, h as u64), "level {k}");
         assert_eq!(ifd.one(254), u64::from(k > 0), "NewSubfileType of level {k}");
         assert_eq!((ifd.one(322), ifd.one(323)), (16, 16));
         assert_eq!(ifd.one(277), s.stored.channels.count() as u64);
         assert_eq!(ifd.text(305), SIGNATURE);
-        let (c, r) = s.level_grid(k);
+        let (c, r) = grid(s, k);
         let (offsets, counts) = (ifd.all(324), ifd.all(325));
         assert_eq!(offsets.len(), (c * r) as usize, "level {k}: one offset a tile");
         assert_eq!(counts.len(), offsets.len());
@@ -200,8 +214,12 @@ fn chain(n: &Naive, mut at: u64) -> Vec<ReadIfd> {
 #[test]
 fn a_generic_pyramid_chains_every_level() {
     let s = spec(Flavour::Generic, 40, 20, 3, grey8(), Compression::None);
-    assert_eq!(s.level_grid(0), (3, 2));
-    assert_eq!(s.level_grid(2), (1, 1));
+    // The writer's geometry (the pipeline's Layout) agrees with the readers' rule.
+    for k in 0..3 {
+        assert_eq!((s.layout.level_extent(k), s.layout.grid(k)), (extent(&s, k), grid(&s, k)), "level {k}");
+    }
+    assert_eq!(grid(&s, 0), (3, 2));
+    assert_eq!(grid(&s, 2), (1, 1));
     let file = write(&s, |l, x, y| raw_tile(&s, l, x, y));
     let n = open(&file);
     assert!(!n.big, "a tiny file is classic TIFF");
@@ -274,8 +292,8 @@ fn the_size_bound_picks_bigtiff_before_writing() {
     let small = spec(Flavour::Generic, 1000, 700, 3, grey8(), Compression::Deflate { level: 6 });
     assert!(!small.needs_bigtiff());
     let rgb16 = PixelLayout::new(Channels::Rgb, Depth::U16);
-    let mut large = spec(Flavour::Generic, 40000, 40000, 9, rgb16, Compression::Zstd { level: 3 });
-    large.tile_size = 256;
+    let mut large = spec(Flavour::Generic, 40000, 40000, 1, rgb16, Compression::Zstd { level: 3 });
+    large.layout = Layout::new(40000, 40000, 256, 0).unwrap();
     assert!(large.most_file_bytes() > 40000u64 * 40000 * 6, "at least the raw samples");
     assert!(large.needs_bigtiff());
 }
@@ -366,7 +384,14 @@ fn what_no_tiff_holds_is_refused_before_writing() {
     let rgb = PixelLayout::new(Channels::Rgb, Depth::U8);
     let jpeg = Compression::Jpeg { subsampling: crate::codec::Subsampling::S420 };
     let cases = [
-        (Spec { tile_size: 100, ..spec(Flavour::Generic, 40, 20, 1, rgb, Compression::None) }, "multiple of 16"),
+        (
+            {
+                let mut s = spec(Flavour::Generic, 40, 20, 1, rgb, Compression::None);
+                s.layout.tile_size = 100;
+                s
+            },
+            "multiple of 16",
+        ),
         (spec(Flavour::Generic, 40, 20, 1, PixelLayout::new(Channels::Rgb, Depth::U16), jpeg), "8-bit grey or RGB"),
         (spec(Flavour::Generic, 40, 20, 1, PixelLayout::new(Channels::Rgba, Depth::U8), jpeg), "8-bit grey or RGB"),
         (spec(Flavour::Generic, 0, 20, 1, rgb, Compression::None), "no pixels"),
@@ -389,7 +414,7 @@ fn the_sink_leaves_nothing_unless_finished_and_a_later_run_may_replace_its_file(
     let sink = TiffSink::create(&dest, s.clone()).unwrap();
     use crate::sink::TileSink;
     for level in 0..2 {
-        let (c, r) = s.level_grid(level);
+        let (c, r) = grid(&s, level);
         for y in 0..r {
             for x in 0..c {
                 sink.write_tile(level, x, y, &raw_tile(&s, level, x, y)).unwrap();
@@ -431,7 +456,7 @@ fn a_cog_has_gdal_s_ghost_area_its_ifds_first_and_its_data_coarse_to_fine() {
         check_levels(&file, &s, &ifds, |l, x, y| raw_tile(&s, l, x, y));
         let last_ifd = ifds.last().unwrap().at;
         let mut previous = last_ifd;
-        for k in (0..s.levels as usize).rev() {
+        for k in (0..s.layout.lod_count as usize).rev() {
             assert!(k == 0 || ifds[k].at > ifds[k - 1].at, "IFDs in level order");
             for (&o, &c) in ifds[k].all(324).iter().zip(ifds[k].all(325)) {
                 assert!(o > previous, "level {k}: tile at {o}, not after the one before at {previous}");
@@ -458,7 +483,7 @@ fn a_cog_leaves_no_staging_file_and_is_recognised_as_ours() {
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "a dropped COG sink leaves nothing");
     let sink = TiffSink::create(&dest, s.clone()).unwrap();
     for level in (0..2).rev() {
-        let (c, r) = s.level_grid(level);
+        let (c, r) = grid(&s, level);
         for y in 0..r {
             for x in 0..c {
                 sink.write_tile(level, x, y, &raw_tile(&s, level, x, y)).unwrap();

@@ -73,18 +73,19 @@ impl TiffWriter {
     /// ([`Spec::index_bytes`]) against its budget.
     pub fn create(path: &Path, file: File, spec: Spec) -> Result<TiffWriter> {
         spec.check()?;
-        let total = usize::try_from(spec.total_tiles())
-            .map_err(|_| TilerError::Limit(format!("{} tiles: more than this machine indexes", spec.total_tiles())))?;
+        let all = spec.layout.total_tiles();
+        let total = usize::try_from(all)
+            .map_err(|_| TilerError::Limit(format!("{all} tiles: more than this machine indexes")))?;
         let mut tiles = Vec::new();
         tiles.try_reserve_exact(total).map_err(|_| {
             TilerError::Limit(format!("the index of {total} TIFF tiles ({} bytes) does not fit in memory", total * 16))
         })?;
         tiles.resize(total, (0, 0));
-        let mut bases = Vec::with_capacity(spec.levels as usize);
+        let mut bases = Vec::with_capacity(spec.layout.lod_count as usize);
         let mut at = 0usize;
-        for k in 0..spec.levels {
+        for k in 0..spec.layout.lod_count {
             bases.push(at);
-            let (c, r) = spec.level_grid(k);
+            let (c, r) = spec.layout.grid(k);
             at += c as usize * r as usize;
         }
         let big = spec.needs_bigtiff();
@@ -106,10 +107,10 @@ impl TiffWriter {
     /// Appends tile `(x, y)` of `level`: `bytes` as the file stores them (compressed).
     pub fn add_tile(&mut self, level: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
         let err = |message: String| TilerError::Encode { lod: level, x, y, message };
-        if level >= self.spec.levels {
-            return Err(err(format!("the TIFF has {} levels", self.spec.levels)));
+        if level >= self.spec.layout.lod_count {
+            return Err(err(format!("the TIFF has {} levels", self.spec.layout.lod_count)));
         }
-        let (c, r) = self.spec.level_grid(level);
+        let (c, r) = self.spec.layout.grid(level);
         if x >= c || y >= r {
             return Err(err(format!("level {level} of the TIFF is {c}x{r} tiles")));
         }
@@ -150,7 +151,7 @@ impl TiffWriter {
     pub fn finish(mut self) -> Result<TiffSummary> {
         if let Some(missing) = self.tiles.iter().position(|t| t.0 == 0) {
             let level = self.bases.iter().rposition(|&b| b <= missing).unwrap_or(0);
-            let (c, _) = self.spec.level_grid(level as u32);
+            let (c, _) = self.spec.layout.grid(level as u32);
             let i = missing - self.bases[level];
             return Err(TilerError::Internal(format!(
                 "{}: tile (level {level}, x {}, y {}) was never written",
@@ -162,7 +163,7 @@ impl TiffWriter {
         if self.staging.is_some() {
             return self.finish_cog();
         }
-        let levels = self.spec.levels as usize;
+        let levels = self.spec.layout.lod_count as usize;
         let mut ifds: Vec<Ifd> = (0..levels).map(|k| self.level_ifd(k as u32)).collect();
         self.tiles = Vec::new();
         let sub_ifds = self.spec.flavour == Flavour::Ome && levels > 1;
@@ -216,7 +217,7 @@ impl TiffWriter {
     /// tile framed by its leader and trailer.
     fn finish_cog(mut self) -> Result<TiffSummary> {
         let big = self.big;
-        let levels = self.spec.levels as usize;
+        let levels = self.spec.layout.lod_count as usize;
         let mut ifds: Vec<Ifd> = (0..levels).map(|k| self.level_ifd(k as u32)).collect();
         // The IFDs' lengths do not depend on the offsets they hold: lay them out, then the data.
         let mut at = cog::first_ifd_at(big);
@@ -274,14 +275,14 @@ impl TiffWriter {
 
     /// Level `k`'s tiles in the index, row by row.
     fn level_tiles(&self, k: u32) -> &[(u64, u64)] {
-        let (c, r) = self.spec.level_grid(k);
+        let (c, r) = self.spec.layout.grid(k);
         &self.tiles[self.bases[k as usize]..][..c as usize * r as usize]
     }
 
     /// Level `k`'s IFD, its tiles' offsets and byte counts from the index.
     fn level_ifd(&self, k: u32) -> Ifd {
         let s = &self.spec;
-        let (w, h) = s.level_extent(k);
+        let (w, h) = s.layout.level_extent(k);
         let spp = s.stored.channels.count();
         let mut ifd = Ifd::default();
         ifd.set(tag::NEW_SUBFILE_TYPE, Value::Long(vec![u32::from(k > 0)]));
@@ -314,8 +315,8 @@ impl TiffWriter {
         if s.predictor() {
             ifd.set(tag::PREDICTOR, Value::Short(vec![2]));
         }
-        ifd.set(tag::TILE_WIDTH, Value::Long(vec![s.tile_size]));
-        ifd.set(tag::TILE_LENGTH, Value::Long(vec![s.tile_size]));
+        ifd.set(tag::TILE_WIDTH, Value::Long(vec![s.layout.tile_size]));
+        ifd.set(tag::TILE_LENGTH, Value::Long(vec![s.layout.tile_size]));
         let tiles = self.level_tiles(k);
         ifd.set(tag::TILE_OFFSETS, Value::Offsets(tiles.iter().map(|t| t.0).collect()));
         ifd.set(tag::TILE_BYTE_COUNTS, Value::Offsets(tiles.iter().map(|t| t.1).collect()));
@@ -362,8 +363,8 @@ fn summary(spec: &Spec, big: bool, tile_bytes: u64, file_bytes: u64) -> TiffSumm
     TiffSummary {
         flavour: spec.flavour,
         bigtiff: big,
-        levels: spec.levels,
-        tiles: spec.total_tiles(),
+        levels: spec.layout.lod_count,
+        tiles: spec.layout.total_tiles(),
         tile_bytes,
         file_bytes,
         compression: spec.compression.name(),
