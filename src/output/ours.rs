@@ -103,58 +103,23 @@ fn recognise_pmtiles(path: &Path) -> Result<(), String> {
     }
 }
 
-/// The signature of our TIFFs (`formats::tiff::SIGNATURE`, with its NUL).
-const TIFF_SIGNATURE: &[u8] = b"vortex-tiler\0";
+/// The `Software` tag of the TIFFs this tool writes (`formats::tiff::SIGNATURE`).
+const TIFF_SOFTWARE: &str = "vortex-tiler";
 
-/// The bytes of a TIFF's head read to recognise it: a COG's first IFD and the start of its
-/// value area lie within them.
-const TIFF_HEAD: u64 = 4096;
-
-/// A TIFF that this tool wrote: a TIFF or BigTIFF header and, at byte 16, the signature
-/// `formats::tiff::SIGNATURE` (the writer puts it there; its Software tag points at it); or,
-/// for a COG, whose header GDAL's ghost area follows, a first IFD whose Software tag is the
-/// signature (within the file's first 4 KiB, where the writer puts it). Anybody else's TIFF,
-/// a scan above all, is theirs.
+/// A TIFF that this tool wrote: one whose first directory's `Software` tag is ours, as the
+/// TIFF reader of the sources reads it (a COG's directory follows GDAL's ghost area, the
+/// others' follow the tiles). Anybody else's TIFF, a scan above all, is theirs.
 fn recognise_tiff(path: &Path) -> Result<(), String> {
-    let mut head = Vec::with_capacity(TIFF_HEAD as usize);
-    fs::File::open(path)
-        .and_then(|f| f.take(TIFF_HEAD).read_to_end(&mut head))
-        .map_err(|e| format!("unreadable ({e})"))?;
-    let tiff = head.starts_with(b"II*\0") || head.starts_with(b"II+\0");
-    if head.is_empty() {
-        return Err("an empty file".into());
+    let mut head = Vec::with_capacity(4);
+    fs::File::open(path).and_then(|f| f.take(4).read_to_end(&mut head)).map_err(|e| format!("unreadable ({e})"))?;
+    match &head[..] {
+        [] => Err("an empty file".into()),
+        b"II*\0" | b"II+\0" | b"MM\0*" | b"MM\0+" => match crate::source::tiff::software(path) {
+            Some(software) if software == TIFF_SOFTWARE => Ok(()),
+            _ => Err("a TIFF written by another program".into()),
+        },
+        _ => Err("a file that is not a TIFF".into()),
     }
-    if !tiff {
-        return Err("a file that is not a little-endian TIFF".into());
-    }
-    if head.get(16..29) == Some(TIFF_SIGNATURE) || first_software(&head) == Some(TIFF_SIGNATURE) {
-        return Ok(());
-    }
-    Err("a TIFF written by another program".into())
-}
-
-/// The value of the Software tag (305) of the first IFD of the little-endian TIFF whose first
-/// bytes are `head`, where the IFD and the value lie within them; `None` otherwise.
-fn first_software(head: &[u8]) -> Option<&[u8]> {
-    let big = head.get(2) == Some(&43);
-    let int = |at: u64, n: usize| -> Option<u64> {
-        let at = usize::try_from(at).ok()?;
-        let bytes = head.get(at..at.checked_add(n)?)?;
-        Some(bytes.iter().rev().fold(0u64, |v, &b| (v << 8) | b as u64))
-    };
-    let (first, count_len, entry_len, inline) = if big { (int(8, 8)?, 8, 20, 8) } else { (int(4, 4)?, 2, 12, 4) };
-    let entries = int(first, count_len)?;
-    for i in 0..entries.min(256) {
-        let entry = first + count_len as u64 + i * entry_len;
-        if int(entry, 2)? != 305 || int(entry + 2, 2)? != 2 {
-            continue;
-        }
-        let (count, field) = if big { (int(entry + 4, 8)?, entry + 12) } else { (int(entry + 4, 4)?, entry + 8) };
-        let at = if count <= inline { field } else { int(field, inline as usize)? };
-        let (at, count) = (usize::try_from(at).ok()?, usize::try_from(count).ok()?);
-        return head.get(at..at.checked_add(count)?);
-    }
-    None
 }
 
 fn recognise_report(path: &Path) -> Result<(), String> {

@@ -63,7 +63,7 @@ pub mod range;
 pub(crate) mod read_ahead;
 pub(crate) mod stored;
 pub(crate) mod tee;
-mod tiff;
+pub(crate) mod tiff;
 pub mod tiled;
 mod whole;
 pub(crate) mod xml;

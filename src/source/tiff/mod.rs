@@ -357,6 +357,13 @@ fn own_strips(
     Ok(Some(OwnStrips { offsets, counts, row_bytes, samples, sixteen_bit, big_endian, predictor, deflate }))
 }
 
+/// The first directory's `Software` tag, where `path` is a TIFF that has one: how `split`
+/// recognises a TIFF it wrote before (`output::claim`).
+pub(crate) fn software(path: &Path) -> Option<String> {
+    let mut decoder = open_decoder(path, 64 << 20).ok()?;
+    decoder.get_tag_ascii_string(Tag::Software).ok()
+}
+
 /// A decoder of the TIFF's first image, its buffers bounded by `max_memory`.
 pub(super) fn open_decoder(path: &Path, max_memory: u64) -> Result<Decoder<BufReader<File>>> {
     let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
