@@ -290,21 +290,11 @@ fn refusals_name_the_flag() {
 /// The Python with the readers: VORTEX_PYVIPS, if it imports them; else a skip with a note,
 /// and a failure under CI.
 fn readers() -> Option<PathBuf> {
-    let python = std::env::var_os("VORTEX_PYVIPS").map(PathBuf::from);
-    let works = python.as_ref().is_some_and(|p| {
-        Command::new(p)
-            .args(["-c", "import zarr, ome_zarr, ome_zarr_models, numpy, pyvips"])
-            .output()
-            .is_ok_and(|o| o.status.success())
-    });
-    if !works {
-        crate::common::skip_unless_ci(
-            "the OME-Zarr readers",
-            "no zarr/ome-zarr/ome-zarr-models: set VORTEX_PYVIPS to a Python with zarr 3, ome-zarr, ome-zarr-models",
-        );
-        return None;
-    }
-    python
+    crate::common::python_with(
+        "zarr, ome_zarr, ome_zarr_models, numpy, pyvips",
+        "the OME-Zarr readers",
+        "zarr 3, ome-zarr, ome-zarr-models, numpy and pyvips",
+    )
 }
 
 /// Opens every level with zarr (a zip through its ZipStore) and compares it with the PNG

@@ -21,21 +21,11 @@ fn rgb8() -> PixelLayout {
 /// The Python with tifffile, pyvips and OpenSlide: VORTEX_PYVIPS, if it imports them; else
 /// a skip with a note, and a failure under CI.
 fn readers() -> Option<PathBuf> {
-    let python = std::env::var_os("VORTEX_PYVIPS").map(PathBuf::from);
-    let works = python.as_ref().is_some_and(|p| {
-        Command::new(p)
-            .args(["-c", "import tifffile, pyvips, openslide, numpy"])
-            .output()
-            .is_ok_and(|o| o.status.success())
-    });
-    if !works {
-        crate::common::skip_unless_ci(
-            "the TIFF readers",
-            "no tifffile/pyvips/openslide: set VORTEX_PYVIPS to a Python with tifffile, pyvips, openslide-python and openslide-bin",
-        );
-        return None;
-    }
-    python
+    crate::common::python_with(
+        "tifffile, pyvips, openslide, numpy",
+        "the TIFF readers",
+        "tifffile, pyvips, openslide-python and openslide-bin",
+    )
 }
 
 /// Runs `tiff_out.py` on `tiff`; fails with what it said.

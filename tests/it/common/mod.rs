@@ -27,6 +27,23 @@ pub fn skip_unless_ci(what: &str, why: &str) {
     eprintln!("note: skipping {what}: {why}");
 }
 
+/// The Python named by `VORTEX_PYVIPS` if it imports `modules` (`"zarr, numpy"`); else
+/// [`skip_unless_ci`] naming `what` and the packages that Python needs (`install`).
+pub fn python_with(modules: &str, what: &str, install: &str) -> Option<std::path::PathBuf> {
+    let python = std::env::var_os("VORTEX_PYVIPS").map(std::path::PathBuf::from);
+    let imports = python.as_ref().is_some_and(|p| {
+        std::process::Command::new(p)
+            .args(["-c", &format!("import {modules}")])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    });
+    if !imports {
+        skip_unless_ci(what, &format!("no {modules}: set VORTEX_PYVIPS to a Python with {install}"));
+        return None;
+    }
+    python
+}
+
 /// Whether `program arg` runs; if not, [`skip_unless_ci`] naming the Debian `package` that has it.
 pub fn have_program(program: &str, arg: &str, package: &str) -> bool {
     let found = std::process::Command::new(program).arg(arg).output().is_ok();
