@@ -43,6 +43,20 @@ bench_setup() {
   export VIPS_WARNING=0 # vips 8.14 warns about the TIFF Predictor tag the tiff crate writes
 }
 
+# snapshot_release: copies the release build of vortex-tiler (already built: the slide scripts
+# do not build) into $WORK/bin, so that a concurrent build cannot swap it between runs, and sets
+# VT to the copy and REV to its name in reports. VORTEX=PATH times another build instead
+# (VORTEX_LABEL names it, default its path); CARGO_TARGET_DIR is honoured.
+snapshot_release() {
+  local bin=${VORTEX:-${CARGO_TARGET_DIR:-$ROOT/target}/release/vortex-tiler}
+  [ -x "$bin" ] || { echo "error: build it first: cargo build --release -p vortex-tiler" >&2; exit 1; }
+  mkdir -p "$WORK/bin"
+  cp "$bin" "$WORK/bin/vortex-tiler"
+  VT=$WORK/bin/vortex-tiler
+  REV="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src crates Cargo.toml Cargo.lock || echo +uncommitted)"
+  [ -z "${VORTEX:-}" ] || REV=${VORTEX_LABEL:-$VORTEX}
+}
+
 # measure LOG COMMAND...: runs COMMAND under /usr/bin/time -v, prints "wall_s peak_rss_kib".
 measure() {
   local log=$1

@@ -44,14 +44,7 @@ TOOLS=(${TOOLS:-vortex vortex-reenc vortex-lzw vips pyvips openslide})
 OPENSLIDE_RUNS=${OPENSLIDE_RUNS:-1}
 OPENSLIDE_SIZE=${OPENSLIDE_SIZE:-$((W / 2))x$((H / 2))}
 
-target=${CARGO_TARGET_DIR:-$ROOT/target}
-BIN=${VORTEX:-$target/release/vortex-tiler} # VORTEX=PATH times another build
-[ -x "$BIN" ] || { echo "error: build it first: cargo build --release -p vortex-tiler" >&2; exit 1; }
-mkdir -p "$WORK/bin"
-cp "$BIN" "$WORK/bin/vortex-tiler" # a concurrent build must not swap it between runs
-VT=$WORK/bin/vortex-tiler
-REV="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src crates Cargo.toml Cargo.lock || echo +uncommitted)"
-[ -n "${VORTEX:-}" ] && REV=${VORTEX_LABEL:-$VORTEX}
+snapshot_release # VT, REV
 pyvips_setup
 export VIPS_WARNING=0
 

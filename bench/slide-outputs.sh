@@ -33,13 +33,7 @@ W=${SIZE%x*}
 H=${SIZE#*x}
 splice_check slide-outputs
 
-target=${CARGO_TARGET_DIR:-$ROOT/target}
-BIN=${VORTEX:-$target/release/vortex-tiler}
-[ -x "$BIN" ] || { echo "error: build it first: cargo build --release -p vortex-tiler" >&2; exit 1; }
-mkdir -p "$WORK/bin"
-cp "$BIN" "$WORK/bin/vortex-tiler" # a concurrent build must not swap it between runs
-VT=$WORK/bin/vortex-tiler
-REV="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src crates Cargo.toml Cargo.lock || echo +uncommitted)"
+snapshot_release # VT, REV
 pyvips_setup
 
 cd "$WORK"
