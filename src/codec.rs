@@ -103,7 +103,7 @@ pub(crate) const ZSTD_LEVELS: RangeInclusive<i32> = 1..=22;
 
 /// How a tile's texels become bytes (`--codec`, `info.json`'s `codec`). JPEG and PNG tiles
 /// are image files, so a tile directory or a viewer layout can hold them; the others only a
-/// pack.
+/// pack or a TIFF.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Codec {
     /// JPEG (libjpeg-turbo): 8-bit grey or RGB, lossy.
