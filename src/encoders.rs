@@ -38,20 +38,29 @@ fn gather_target() -> usize {
     (2 * rayon::current_num_threads()).min(GATHER_MOST)
 }
 
-/// What the stage counts: tiles encoded, tiles copied from the source (some cropped), tiles
-/// stored (places) into each target.
+/// What the stage counts: tiles encoded, tiles copied from the source (some cropped), and
+/// what each target got.
+#[derive(Default)]
 pub(crate) struct Counts {
     pub encoded: AtomicU64,
     pub copied: AtomicU64,
     /// Of the copied tiles, those cropped at the image's edge.
     pub cropped: AtomicU64,
-    pub tiles: Vec<AtomicU64>,
+    pub targets: Vec<Placed>,
+}
+
+/// What one target got: tiles stored (places), and of them those copied from the source
+/// (some cropped).
+#[derive(Default)]
+pub(crate) struct Placed {
+    pub tiles: AtomicU64,
+    pub copied: AtomicU64,
+    pub cropped: AtomicU64,
 }
 
 impl Counts {
     pub fn new(targets: usize) -> Counts {
-        let zero = AtomicU64::default;
-        Counts { encoded: zero(), copied: zero(), cropped: zero(), tiles: (0..targets).map(|_| zero()).collect() }
+        Counts { targets: (0..targets).map(|_| Placed::default()).collect(), ..Counts::default() }
     }
 }
 
@@ -66,6 +75,9 @@ pub(crate) struct Copier {
     pub width: u32,
     pub height: u32,
     pub side: u32,
+    /// Whether target t takes the copies (its encoding is the stored tiles'); the others get
+    /// those pages encoded.
+    pub takes: Vec<bool>,
 }
 
 impl Copier {
@@ -99,11 +111,12 @@ impl Copier {
 }
 
 /// Encodes and writes batches as they arrive, until the producer is done or something fails.
+/// `encoders`: one per distinct encoding of the targets, `which[t]` target t's.
 /// `pages`: the grid the tiles were cut on and the background they were padded with.
 #[expect(clippy::too_many_arguments, reason = "the stage's inputs, each from another part of the run")]
 pub(crate) fn consume<T: Sample>(
     rx: Receiver<Result<Batch<T>>>,
-    encoder: &TileEncoder<T>,
+    (encoders, which): (&[TileEncoder<T>], &[usize]),
     targets: &[Target],
     pages: (&Layout, Background),
     counts: &Counts,
@@ -114,7 +127,7 @@ pub(crate) fn consume<T: Sample>(
     let busy = Busy::default();
     let memory = &clock.memory;
     let (layout, cut_with) = pages;
-    let channels = encoder.source_layout().channels;
+    let channels = layout_channels(encoders)?;
     // The colour each target pads with where the pages were cut with another (with the edge).
     let fills = targets
         .iter()
@@ -126,7 +139,8 @@ pub(crate) fn consume<T: Sample>(
             }
         })
         .collect::<Result<Vec<_>>>()?;
-    let stage = Encoding { encoder, targets, fills: &fills, layout, counts, copier, progress, busy: &busy, memory };
+    let stage =
+        Encoding { encoders, which, targets, fills: &fills, layout, counts, copier, progress, busy: &busy, memory };
     // The writer waits for each lot in turn and frees its place once it is stored; a lot is
     // received only into a free place, so the writer's queue never fills.
     let (to_writer, lots) = sync_channel::<Arc<Lot<T>>>(LOTS_IN_FLIGHT);
@@ -237,7 +251,9 @@ fn gather<T>(first: Batch<T>, rx: &Receiver<Result<Batch<T>>>) -> Result<Vec<Bat
 
 /// What every encoding task needs.
 struct Encoding<'a, T> {
-    encoder: &'a TileEncoder<T>,
+    /// One per distinct encoding of the targets; `which[t]` is target t's.
+    encoders: &'a [TileEncoder<T>],
+    which: &'a [usize],
     targets: &'a [Target<'a>],
     /// Each target's padding colour, where it is not the one the pages were cut with.
     fills: &'a [Option<Vec<T>>],
@@ -255,13 +271,14 @@ impl<T: Sample> Encoding<'_, T> {
     fn run(&self, job: &Job<T>) -> JobResult {
         let _busy = self.busy.start();
         let texels = job.take_texels()?;
+        let encoder = &self.encoders[job.encoder];
         let padded = job.pad.map(|(from, t)| {
             let mut padded = texels.to_vec();
-            let (side, channels) = (self.layout.tile_size, self.encoder.source_layout().channels.count());
+            let (side, channels) = (self.layout.tile_size, encoder.source_layout().channels.count());
             cut::fill_padding(&mut padded, side, channels, from, self.fills[t].as_deref().unwrap_or_default());
             padded
         });
-        let stored = prepare(self.encoder, self.targets, job, padded.as_deref().unwrap_or(&texels), self.copier)?;
+        let stored = prepare(encoder, self.targets, job, padded.as_deref().unwrap_or(&texels), self.copier)?;
         // The last job of a tile frees its texels here, not when the writer stores the lot.
         if let Some(texels) = Arc::into_inner(texels) {
             self.memory.add(Part::Tiles, -((texels.capacity() * size_of::<T>()) as i64));
@@ -292,14 +309,21 @@ impl<T: Sample> Encoding<'_, T> {
             if sink.ordered() != ordered {
                 continue;
             }
+            let placed = &self.counts.targets[t];
             match (&stored.constant, &stored.file) {
                 (Some(texel), _) if sink.takes_constants() => sink.write_constant(job.lod, x, y, texel)?,
-                (_, Some(File::Encoded(bytes) | File::Copied(bytes) | File::Cropped(bytes))) => {
-                    sink.write_tile(job.lod, x, y, bytes)?
+                (_, Some(file)) => {
+                    sink.write_tile(job.lod, x, y, file.bytes())?;
+                    if let File::Copied(_) | File::Cropped(_) = file {
+                        placed.copied.fetch_add(1, Ordering::Relaxed);
+                    }
+                    if let File::Cropped(_) = file {
+                        placed.cropped.fetch_add(1, Ordering::Relaxed);
+                    }
                 }
                 (_, None) => return Err(TilerError::Internal("a tile was prepared without its file".into())),
             }
-            self.counts.tiles[t].fetch_add(1, Ordering::Relaxed);
+            placed.tiles.fetch_add(1, Ordering::Relaxed);
             count += 1;
         }
         self.progress.advance(count);
@@ -348,10 +372,12 @@ impl<T: Sample> Lot<T> {
     }
 }
 
-/// One encoding: a cut tile's texels, the part of them the sinks keep, and the places that
-/// get it (each a target's index and a page).
+/// One encoding: a cut tile's texels, the encoder and the part of them the sinks keep, and the
+/// places that get it (each a target's index and a page).
 struct Job<T> {
     lod: u32,
+    /// Which of the run's encoders.
+    encoder: usize,
     crop: Option<Crop>,
     /// One page whose source tile is copied rather than encoded (pages identical at the cut
     /// may have different stored bytes, so each page is a job of its own).
@@ -367,8 +393,8 @@ struct Job<T> {
 }
 
 impl<T: Sample> Job<T> {
-    /// The encodings a cut tile needs: one for every distinct crop the targets keep of its
-    /// places (identical pages merged at the cut may sit at a viewer tile's edge and in the
+    /// The encodings a cut tile needs: one for every distinct encoder and crop the targets
+    /// keep of its places (identical pages merged at the cut may sit at a viewer tile's edge and in the
     /// middle; Deep Zoom crops an edge page that a pack keeps whole), and one per copied page.
     /// Targets past their last level get nothing; a padded page gets a job of its own for
     /// each padding colour its targets fill it with.
@@ -385,17 +411,23 @@ impl<T: Sample> Job<T> {
             for (t, target) in stage.targets.iter().enumerate().filter(|(_, target)| lod < target.lods) {
                 // A crop that keeps the whole page is no crop: the same encoding as a pack's.
                 let crop = target.sink.crop(lod, page.0, page.1).filter(|c| *c != Crop::whole(l.tile_size));
-                let copy = stage.copier.is_some_and(|c| c.covers(lod, page, crop));
+                let encoder = stage.which[t];
+                let copy = stage.copier.is_some_and(|c| c.takes[t] && c.covers(lod, page, crop));
                 let padded = stage.fills[t].is_some() && from != (l.tile_size, l.tile_size);
                 let pad = padded.then_some((from, t));
                 let fill = |pad: Option<((u32, u32), usize)>| pad.map(|(from, t)| (from, &stage.fills[t]));
                 let same = |j: &&mut Job<T>| {
-                    j.crop == crop && j.copy == copy && (!copy || j.places[0].1 == page) && fill(j.pad) == fill(pad)
+                    j.encoder == encoder
+                        && j.crop == crop
+                        && j.copy == copy
+                        && (!copy || j.places[0].1 == page)
+                        && fill(j.pad) == fill(pad)
                 };
                 match jobs.iter_mut().find(same) {
                     Some(job) => job.places.push((t, page)),
                     None => jobs.push(Job {
                         lod,
+                        encoder,
                         crop,
                         copy,
                         pad,
@@ -488,6 +520,14 @@ fn prepare<T: Sample>(
     // writer is only the encoding, as the plan counts it (`Codec::most_encoded_bytes`).
     bytes.shrink_to_fit();
     Ok(Stored { constant, file: Some(File::Encoded(bytes)) })
+}
+
+/// The source's channels, which every encoder of a run shares.
+fn layout_channels<T: Sample>(encoders: &[TileEncoder<T>]) -> Result<crate::pixel::Channels> {
+    match encoders.first() {
+        Some(encoder) => Ok(encoder.source_layout().channels),
+        None => Err(TilerError::Internal("a run without an encoder".into())),
+    }
 }
 
 /// When the pool's encoders were busy: the time all of them waited at once, and the time spent

@@ -46,6 +46,65 @@ impl SplitOptions {
         let layout = Layout::new(width as u64, height as u64, self.tile_size, self.border)?;
         Ok(if self.down_to_one_texel { layout.down_to_one_texel() } else { layout })
     }
+
+    /// How these options turn a cut page into a tile: what outputs that share the pyramid may
+    /// still differ by.
+    pub(crate) fn encoding(&self) -> TileEncoding {
+        TileEncoding {
+            codec: self.codec,
+            flatten: self.flatten,
+            // The colour alpha is composited over; without flattening it is no part of a tile.
+            matte: if self.flatten { self.background } else { Background::Edge },
+            tile_depth: self.tile_depth,
+            reencode: self.reencode,
+        }
+    }
+
+    /// What outputs that share this pyramid have in common: these options without their
+    /// encoding ([`encoding`](Self::encoding)), how deep the levels go and the padding's colour
+    /// (pages cut with the edge repeated take any target's colour).
+    pub(crate) fn pyramid_key(&self) -> SplitOptions {
+        SplitOptions {
+            codec: Codec::Raw,
+            flatten: false,
+            tile_depth: None,
+            reencode: None,
+            down_to_one_texel: false,
+            background: Background::Edge,
+            ..self.clone()
+        }
+    }
+}
+
+/// How one target of a run encodes the pages it gets: several targets of one pyramid may
+/// encode them differently (a Deep Zoom's JPEG tiles beside an OME-Zarr's raw chunks), each
+/// page then encoded once per distinct encoding.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct TileEncoding {
+    pub codec: Codec,
+    pub flatten: bool,
+    /// The colour alpha is composited over where `flatten` ([`Background::Edge`]: black).
+    pub matte: Background,
+    pub tile_depth: Option<Depth>,
+    /// Why the source's stored JPEG tiles are encoded again ([`SplitOptions::reencode`]).
+    pub reencode: Option<&'static str>,
+}
+
+impl TileEncoding {
+    /// The texels its tiles hold, of a `source` pyramid.
+    pub fn stored(&self, source: PixelLayout) -> Result<PixelLayout> {
+        self.codec.stored_layout(source, self.flatten, self.tile_depth)
+    }
+
+    /// Why its tiles cannot be a source's stored JPEG tiles, copied (`None`: they can, where
+    /// the pages line up with them).
+    pub fn declines_stored(&self) -> Option<String> {
+        match (self.reencode, self.codec) {
+            (Some(why), _) => Some(format!("{why} asked")),
+            (None, Codec::Jpeg { .. }) => None,
+            (None, codec) => Some(format!("the tiles are {}", codec.name())),
+        }
+    }
 }
 
 /// Watches a run: told of finished tiles, asked whether to stop.
@@ -99,11 +158,14 @@ pub struct Summary {
     pub memory: MemoryReport,
 }
 
-/// What one sink of a run got: tiles (places) and bytes of tile data.
+/// What one sink of a run got: tiles (places) and bytes of tile data, and of the tiles those
+/// copied from the source's stored tiles (some cropped at the image's edge).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Written {
     pub tiles: u64,
     pub bytes: u64,
+    pub copied: u64,
+    pub cropped: u64,
 }
 
 /// Where a run's memory went (issue 28), by the stages' own count of their buffers beside the

@@ -10,11 +10,13 @@
 //! This file is only that orchestration; the stages live in their modules.
 
 use std::sync::Arc;
+use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::sync_channel;
 
-use crate::codec::{Codec, TileEncoder};
+use crate::codec::TileEncoder;
 use crate::encoders::{self, Copier};
 use crate::error::{Result, TilerError};
+use crate::job::TileEncoding;
 use crate::layout::Layout;
 use crate::limits::{Part, in_flight};
 use crate::pixel::{Depth, PixelLayout, Sample};
@@ -33,15 +35,16 @@ pub(crate) use crate::job::Written;
 pub use crate::job::{MemoryReport, Progress, SplitOptions, StoredReport, Summary};
 pub use crate::stages::StageTimes;
 
-/// Whether the finest level's pages are copied from `source`'s stored tiles (the copier) and
-/// what the summary says of them; neither where the source stores none.
-fn plan_copy(source: &dyn RowSource, opts: &SplitOptions, layout: &Layout) -> (Option<Copier>, Option<StoredReport>) {
+/// Whether the finest level's pages are copied from `source`'s stored tiles (the copier, and
+/// which targets take the copies) and what the summary says of them; neither where the source
+/// stores none. A target whose encoding is not the stored tiles' (another codec, a re-encode
+/// asked) gets its pages encoded beside the others' copies.
+fn plan_copy(source: &dyn RowSource, targets: &[Target], layout: &Layout) -> (Option<Copier>, Option<StoredReport>) {
     let Some(tiles) = source.stored_tiles() else { return (None, None) };
     let (tile_size, side) = (tiles.tile_size(), layout.tile_size);
-    let declined = if let Some(why) = opts.reencode {
-        Some(format!("{why} asked"))
-    } else if !matches!(opts.codec, Codec::Jpeg { .. }) {
-        Some(format!("the tiles are {}", opts.codec.name()))
+    let declined_by: Vec<Option<String>> = targets.iter().map(|t| t.encoding.declines_stored()).collect();
+    let declined = if declined_by.iter().all(Option::is_some) {
+        declined_by.first().cloned().flatten()
     } else if layout.border != 0 {
         Some(format!("the pages have a border (overlap) of {}", layout.border))
     } else if tile_size != (side, side) {
@@ -50,7 +53,13 @@ fn plan_copy(source: &dyn RowSource, opts: &SplitOptions, layout: &Layout) -> (O
         None
     };
     let report = StoredReport { tile_size, quality: tiles.quality(), declined };
-    let copier = report.declined.is_none().then(|| Copier { tiles, width: layout.width, height: layout.height, side });
+    let copier = report.declined.is_none().then(|| Copier {
+        tiles,
+        width: layout.width,
+        height: layout.height,
+        side,
+        takes: declined_by.iter().map(Option::is_none).collect(),
+    });
     (copier, Some(report))
 }
 
@@ -70,7 +79,8 @@ pub fn split(
 ) -> Result<Summary> {
     let mut source = source;
     let lods = opts.layout(source.width(), source.height())?.lod_count;
-    split_to(source.as_mut(), &[Target { sink, lods, background: opts.background }], opts, progress)
+    let target = Target { sink, lods, background: opts.background, encoding: opts.encoding() };
+    split_to(source.as_mut(), &[target], opts, progress)
 }
 
 /// [`split`] into several sinks at once, each taking the levels it has: every page is cut once,
@@ -85,7 +95,7 @@ pub(crate) fn split_to(
     progress: &dyn Progress,
 ) -> Result<Summary> {
     let layout = opts.layout(source.width(), source.height())?;
-    let copy = plan_copy(source, opts, &layout);
+    let copy = plan_copy(source, targets, &layout);
     let plan = plan(source, targets, opts)?;
     let (summary, _) = by_depth(source.header(), targets, opts, layout, copy, Passes::Whole(plan, source), progress)?;
     Ok(summary)
@@ -95,14 +105,18 @@ pub(crate) fn split_to(
 /// band over the whole width does not fit in `opts.max_memory`.
 pub(crate) fn plan(source: &dyn RowSource, targets: &[Target], opts: &SplitOptions) -> Result<Plan> {
     let layout = opts.layout(source.width(), source.height())?;
-    let copies = plan_copy(source, opts, &layout).0.is_some();
-    let stored = opts.codec.stored_layout(source.layout(), opts.flatten, opts.tile_depth)?;
-    let ordered = targets.iter().any(|t| t.sink.ordered());
-    let beside = Beside {
-        decoder: source.most_buffer_bytes(),
-        encoded_tile: if ordered { opts.codec.most_encoded_bytes(layout.tile_size, stored) } else { 0 },
-        copies,
-    };
+    let copies = plan_copy(source, targets, &layout).0.is_some();
+    // An ordered sink's tiles wait for the writer, once per distinct encoding.
+    let mut encodings: Vec<TileEncoding> = Vec::new();
+    let mut encoded_tile = 0;
+    for target in targets {
+        let stored = target.encoding.stored(source.layout())?;
+        if target.sink.ordered() && !encodings.contains(&target.encoding) {
+            encodings.push(target.encoding);
+            encoded_tile += target.encoding.codec.most_encoded_bytes(layout.tile_size, stored);
+        }
+    }
+    let beside = Beside { decoder: source.most_buffer_bytes(), encoded_tile, copies };
     Plan::choose(&layout, source.layout().bytes_per_pixel() as u64, opts.filter, opts.max_memory, beside)
 }
 
@@ -123,8 +137,8 @@ pub(crate) fn split_shard(
             source.layout()
         )));
     }
-    let copy = plan_copy(source.as_ref(), opts, &layout);
-    let targets = [Target { sink, lods: layout.lod_count, background: opts.background }];
+    let targets = [Target { sink, lods: layout.lod_count, background: opts.background, encoding: opts.encoding() }];
+    let copy = plan_copy(source.as_ref(), &targets, &layout);
     by_depth(source.header(), &targets, opts, layout, copy, Passes::Shard(spans, source), progress)
 }
 
@@ -138,7 +152,7 @@ pub(crate) fn above_cut(
     progress: &dyn Progress,
 ) -> Result<Summary> {
     let layout = opts.layout(image.width, image.height)?;
-    let targets = [Target { sink, lods: layout.lod_count, background: opts.background }];
+    let targets = [Target { sink, lods: layout.lod_count, background: opts.background, encoding: opts.encoding() }];
     let (summary, _) = by_depth(image, &targets, opts, layout, (None, None), Passes::AboveCut(roots), progress)?;
     Ok(summary)
 }
@@ -208,9 +222,24 @@ fn run<T: Sample>(
     progress: &dyn Progress,
 ) -> Result<(Summary, Vec<EncodedRoots>)> {
     let channels = src_layout.channels;
-    let matte = opts.background.matte::<T>(channels);
-    let encoder =
-        TileEncoder::<T>::new(opts.codec, src_layout, opts.flatten, opts.tile_depth, layout.tile_size, matte)?;
+    // One encoder per distinct encoding of the targets; `which[t]` is target t's.
+    let mut encodings: Vec<TileEncoding> = Vec::new();
+    let which: Vec<usize> = (targets.iter())
+        .map(|t| match encodings.iter().position(|e| *e == t.encoding) {
+            Some(k) => k,
+            None => {
+                encodings.push(t.encoding);
+                encodings.len() - 1
+            }
+        })
+        .collect();
+    let encoders = (encodings.iter())
+        .map(|e| {
+            let matte = e.matte.matte::<T>(channels);
+            TileEncoder::<T>::new(e.codec, src_layout, e.flatten, e.tile_depth, layout.tile_size, matte)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let Some(first) = encoders.first() else { return Err(TilerError::Internal("a run without a target".into())) };
     let padding = match opts.background.texel::<T>(channels) {
         Some(texel) => Padding::Colour(texel),
         None => Padding::Edge,
@@ -252,7 +281,7 @@ fn run<T: Sample>(
         });
         let consumed = encoders::consume(
             rx,
-            &encoder,
+            (&encoders, &which),
             targets,
             (&layout, opts.background),
             &counts,
@@ -267,12 +296,14 @@ fn run<T: Sample>(
     let summary = Summary {
         layout,
         source: src_layout,
-        stored: encoder.stored_layout(),
-        tiles: counts.tiles.iter().map(|t| t.load(std::sync::atomic::Ordering::Relaxed)).sum(),
-        per_target: (counts.tiles.iter().zip(targets))
+        stored: first.stored_layout(),
+        tiles: counts.targets.iter().map(|t| t.tiles.load(Relaxed)).sum(),
+        per_target: (counts.targets.iter().zip(targets))
             .map(|(t, target)| Written {
-                tiles: t.load(std::sync::atomic::Ordering::Relaxed),
+                tiles: t.tiles.load(Relaxed),
                 bytes: target.sink.bytes_written(),
+                copied: t.copied.load(Relaxed),
+                cropped: t.cropped.load(Relaxed),
             })
             .collect(),
         encoded: counts.encoded.into_inner(),

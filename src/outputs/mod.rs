@@ -3,11 +3,11 @@
 //!
 //! Planning checks everything a format cannot hold before a byte is written, with the messages
 //! `split` prints, and claims every destination ([`crate::output::claim`]). Writing groups the
-//! outputs that cut the same pyramid with the same codec (a pack and Deep Zoom of the same tile
-//! size, XYZ and PMTiles): each page of a group is cut once and encoded once for every output
-//! that keeps the same part of it. Groups that differ (OME-Zarr's zstd chunks beside JPEG
-//! tiles, another tile size) each make their own pyramid from the same decoded rows
-//! (`source::tee`). Every output stays atomic: it is written under a temporary name and
+//! outputs that cut the same pyramid (the same tile size, border and filter: a pack and Deep
+//! Zoom, XYZ and PMTiles, OME-Zarr beside them with `--filter box`): each page of a group is
+//! cut once and encoded once for every codec and crop its outputs keep. Groups that differ
+//! (OME-Zarr's box filter beside the image outputs' default, another tile size) each make
+//! their own pyramid from the same decoded rows (`source::tee`). Every output stays atomic: it is written under a temporary name and
 //! renamed into place when complete; a run that fails leaves none of them.
 //!
 //! The crate's documentation has an example that writes Deep Zoom and a pack in one run.

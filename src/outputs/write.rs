@@ -153,8 +153,17 @@ impl Open {
             (Sink::Tiff(sink), _) => tiff = Some(sink.finish()?),
             _ => return Err(TilerError::Internal("an output's sink is not its format's".into())),
         }
-        // The pyramid's summary in this output's terms: its levels, its tiles and bytes.
-        let summary = Summary { layout: planned.layout, tiles: written.tiles, bytes: written.bytes, ..summary.clone() };
+        // The pyramid's summary in this output's terms: its levels, texels, tiles and bytes.
+        let encoding = planned.opts.encoding();
+        let stored = encoding.stored(summary.source)?;
+        let (tiles, bytes, copied, cropped) = (written.tiles, written.bytes, written.copied, written.cropped);
+        let mut summary = Summary { layout: planned.layout, stored, tiles, bytes, copied, cropped, ..summary.clone() };
+        // Pages copied for the pyramid's other outputs were encoded for this one.
+        if let Some(report) = &mut summary.stored_tiles
+            && report.declined.is_none()
+        {
+            report.declined = encoding.declines_stored();
+        }
         let Planned { output, .. } = planned;
         Ok(Wrote {
             format: output.format,
@@ -172,25 +181,20 @@ impl Open {
 }
 
 /// Outputs cut from one pyramid: their indexes, and the options that cut it (down to the
-/// deepest member's levels).
+/// deepest member's levels). Each member encodes the pages its own way.
 struct Pyramid {
     members: Vec<usize>,
     opts: SplitOptions,
 }
 
-/// The outputs grouped by the pyramid and encoding they share: the same options but for how
-/// deep the levels go and (where alpha is not flattened over it) what pads the pages past the
-/// image. A group whose members pad differently is cut with the edge repeated, which the
-/// encoders fill with each member's colour.
+/// The outputs grouped by the pyramid they share: the same tile size, border, filter and
+/// budget ([`SplitOptions::pyramid_key`]), whatever their encodings, levels and padding. A
+/// group whose members pad differently is cut with the edge repeated, which the encoders fill
+/// with each member's colour.
 fn pyramids(planned: &[&Planned]) -> Vec<Pyramid> {
-    let key = |opts: &SplitOptions| SplitOptions {
-        down_to_one_texel: false,
-        background: if opts.flatten { opts.background } else { Background::Edge },
-        ..opts.clone()
-    };
     let mut out: Vec<Pyramid> = Vec::new();
     for (k, p) in planned.iter().enumerate() {
-        match out.iter_mut().find(|g| key(&g.opts) == key(&p.opts)) {
+        match out.iter_mut().find(|g| g.opts.pyramid_key() == p.opts.pyramid_key()) {
             Some(g) => {
                 g.members.push(k);
                 g.opts.down_to_one_texel |= p.opts.down_to_one_texel;
@@ -221,7 +225,8 @@ impl Plan {
             .map(|g| {
                 let target = |k: usize| {
                     let p = &open[k].planned;
-                    Target { sink: sink(k), lods: p.layout.lod_count, background: p.opts.background }
+                    let (lods, background, encoding) = (p.layout.lod_count, p.opts.background, p.opts.encoding());
+                    Target { sink: sink(k), lods, background, encoding }
                 };
                 g.members.iter().map(|&k| target(k)).collect()
             })
@@ -275,7 +280,7 @@ impl Plan {
             };
             let (mut source, range) = Ranged::new(source);
             let (lods, background) = (open.planned.layout.lod_count, opts.background);
-            let target = Target { sink: &sink.plane(c as u32), lods, background };
+            let target = Target { sink: &sink.plane(c as u32), lods, background, encoding: opts.encoding() };
             let done = split::split_to(&mut source, &[target], opts, progress)?;
             if done.tiles != total {
                 return Err(TilerError::Internal(format!("wrote {} tiles of {total} of channel {k}", done.tiles)));
@@ -294,7 +299,8 @@ impl Plan {
             }
         }
         // One target, every pass's places in it.
-        summary.per_target = vec![Written { tiles: summary.tiles, bytes: summary.bytes }];
+        let (tiles, bytes, copied, cropped) = (summary.tiles, summary.bytes, summary.copied, summary.cropped);
+        summary.per_target = vec![Written { tiles, bytes, copied, cropped }];
         let reads = summary.passes;
         Ok(Wrote { reads, ..open.finish(&summary, 0, 0, picks.len() as u64)? })
     }

@@ -62,4 +62,6 @@ pub(crate) struct Target<'a> {
     /// What its padding holds: pages cut with the edge repeated are filled with its colour
     /// where they lie past the image.
     pub background: crate::background::Background,
+    /// How its tiles are encoded (targets of one pyramid may differ).
+    pub encoding: crate::job::TileEncoding,
 }

@@ -309,6 +309,41 @@ fn other_layouts_copy_and_misfits_say_why() {
     }
 }
 
+/// Outputs of one pyramid that store other codecs: with `--filter box`, a pack (border 0) and
+/// an OME-Zarr share the pyramid of a JPEG-tiled TIFF; the pack gets the stored tiles copied,
+/// the OME-Zarr the same pages decoded, in zstd chunks, and each says what it got.
+#[test]
+fn copies_go_only_to_the_outputs_that_store_jpeg() {
+    if !have_vips() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    let png = pattern_png(dir.path());
+    let tiff = d("slide.tif");
+    let tiled = ["--tile", "--tile-width", "128", "--tile-height", "128", "--compression", "jpeg", "--Q", "90"];
+    tool("vips", &[&["tiffsave", s(&png), s(&tiff)], &tiled[..]].concat());
+    let (pack, zarr) = (d("slide.vtpk"), d("slide.ome.zarr"));
+    let flags = ["--tile-size", "128", "--filter", "box", "--border", "0"];
+    let done = json(&[&["split", s(&tiff), "--pack", s(&pack), "-o", s(&zarr)], &flags[..]].concat());
+    assert_eq!(done["pyramids"], 1, "{done}");
+    let output = |layout: &str| done["outputs"].as_array().unwrap().iter().find(|o| o["layout"] == layout).unwrap();
+    let (p, z) = (output("pack"), output("ome-zarr"));
+    assert_eq!((&p["copied"], &z["copied"]), (&6.into(), &0.into()), "{done}");
+    assert_eq!(z["storedTiles"]["declined"], "the tiles are raw", "{done}");
+    let p = vortex_pack::Pack::open(&pack).unwrap();
+    let vortex_pack::Tile::Data(vortex_pack::TileKind::Jpeg, bytes) =
+        p.tile(vortex_pack::TileId::new(0, 2, 1)).unwrap()
+    else {
+        panic!()
+    };
+    assert_copied(bytes, &stored_stream(&tiff, 6), Some(Marker::AdobeRgb), "pack");
+    // The OME-Zarr alone is the same: its chunks are the decoded pages either way.
+    let alone = d("alone.ome.zarr");
+    cli::ok(&[&["split", s(&tiff), "-o", s(&alone)], &flags[..4]].concat());
+    assert_eq!(files(&zarr), files(&alone));
+}
+
 /// `convert` copies too: the JPEG tiles of a Deep Zoom pyramid without overlap (vips dzsave's)
 /// go into a pack of the same grid as the files they are; with overlap there is nothing to copy.
 #[test]

@@ -144,6 +144,73 @@ fn shared_and_side_by_side_outputs_are_their_own_runs_files() {
     assert_eq!(json["pyramids"], p.values().map(|v| v.0).max().unwrap() + 1);
 }
 
+/// Outputs that differ only in how they encode the pages share one pyramid: with OME-Zarr's
+/// filter (`--filter box`), a 16-bit image's Deep Zoom (8-bit JPEG tiles) and OME-Zarr (16-bit
+/// raw chunks, zstd-compressed) are cut once, each page encoded once for each, and each holds
+/// what its own run writes.
+#[test]
+fn outputs_of_one_filter_share_the_pyramid_whatever_their_encodings() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = Image::random(517, 301, PixelLayout::new(Channels::Rgb, Depth::U16), 7);
+    let input = dir.path().join("in.png");
+    let mut enc = png::Encoder::new(std::fs::File::create(&input).unwrap(), image.width, image.height);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Sixteen);
+    let bytes: Vec<u8> = image.samples.iter().flat_map(|v| (*v as u16).to_be_bytes()).collect();
+    enc.write_header().unwrap().write_image_data(&bytes).unwrap();
+    let json = same_as_separate_runs(
+        &input,
+        dir.path(),
+        &[
+            &[
+                "-o",
+                "{}/web",
+                "--layout",
+                "dzi",
+                "--tile-size",
+                "128",
+                "--overlap",
+                "0",
+                "--filter",
+                "box",
+                "--codec",
+                "jpeg",
+            ],
+            &["-o", "{}/in.ome.zarr", "--tile-size", "128", "--ome-zarr-version", "0.4"],
+        ],
+        &[
+            "-o",
+            "{}/web",
+            "--layout",
+            "dzi",
+            "--overlap",
+            "0",
+            "-o",
+            "{}/in.ome.zarr",
+            "--ome-zarr-version",
+            "0.4",
+            "--tile-size",
+            "128",
+            "--filter",
+            "box",
+            "--codec",
+            "jpeg",
+        ],
+        &["web", "in.ome.zarr"],
+    );
+    let p = pyramids(&json);
+    assert_eq!((json["pyramids"].as_u64(), p["dzi"].0, p["ome-zarr"].0), (Some(1), 0, 0), "{json}");
+    let stored = |layout: &str| {
+        let o = json["outputs"].as_array().unwrap().iter().find(|o| o["layout"] == layout).unwrap();
+        o["stored"].clone()
+    };
+    assert_eq!(
+        (stored("dzi").as_str(), stored("ome-zarr").as_str()),
+        (Some("rgb 8-bit"), Some("rgb 16-bit")),
+        "{json}"
+    );
+}
+
 /// Outputs of other tile sizes and codecs (our directory's 128-texel PNG tiles with a border,
 /// IIIF's 512-texel tiles, Google's 256, OME-Zarr 0.5's zstd chunks in shards of 2 x 2) make
 /// four pyramids from one read. A shard's chunks come from many encoder threads in any order;

@@ -76,9 +76,11 @@ impl PackInput {
 
     /// `bytes` (little-endian samples) as native-endian samples of a whole tile.
     fn samples(&self, name: PathBuf, mut bytes: Vec<u8>) -> CellData {
-        if self.header.layout.depth == Depth::U16 && cfg!(target_endian = "big") {
-            for sample in bytes.chunks_exact_mut(2) {
-                sample.swap(0, 1);
+        // A pack stores samples little-endian; cells hold them in the host's order.
+        let width = self.header.layout.depth.bytes();
+        if width > 1 && cfg!(target_endian = "big") {
+            for sample in bytes.chunks_exact_mut(width) {
+                sample.reverse();
             }
         }
         CellData::Samples { name, width: self.tile_size, height: self.tile_size, bytes }
