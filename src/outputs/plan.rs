@@ -162,6 +162,8 @@ struct Own {
     ome_zarr: OmeZarrSettings,
     tiff: TiffSettings,
     keep_icc: Option<Vec<u8>>,
+    /// The source's georeferencing, for a generic TIFF or a COG.
+    geo: Option<crate::source::GeoTags>,
 }
 
 /// The settings a format reads beyond those every format does (tile size, background,
@@ -227,6 +229,8 @@ impl Own {
             },
             tiff: if matches!(format, Format::Tiff(_)) { s.tiff } else { TiffSettings::default() },
             keep_icc: s.keep_icc.clone().filter(|_| gets(Setting::KeepIcc)),
+            // Not a flag: an output that has nowhere to put it ignores it.
+            geo: s.geo.clone().filter(|_| matches!(format, Format::Tiff(Flavour::Generic | Flavour::Cog))),
         }
     }
 }
@@ -515,6 +519,20 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         (None, other) => return Err(TilerError::Internal(format!("TIFF tiles from --codec {}", other.name()))),
     };
     let pixel_size = own.ome_zarr.pixel_size.map(|p| tiff::Micrometres(micrometres(p)));
+    // Written again as they are, or the run refused: a GIS tool would misplace a file whose
+    // georeferencing is damaged, or drop it, without a word.
+    let geo = match &own.geo {
+        Some(geo) => geo.check().map_err(|why| {
+            TilerError::decode(
+                at.input,
+                format!(
+                    "{why}: the georeferencing cannot be carried into {}; repair it (gdal_edit.py -a_srs and -a_ullr) or write another output",
+                    output.path.shown()
+                ),
+            )
+        })?,
+        None => &[],
+    };
     let spec = tiff::Spec {
         flavour,
         layout,
@@ -523,6 +541,7 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         bigtiff: own.tiff.bigtiff,
         name: at.name(own).trim_end_matches(".ome").to_string(),
         pixel_size,
+        geo: geo.to_vec(),
     };
     spec.check()?;
     at.limits().check_pyramid(&layout, false)?;

@@ -297,3 +297,67 @@ fn a_jpeg_tiled_source_s_tiles_are_copied_where_they_fit_the_tiff_s_tags() {
         }
     }
 }
+
+const GEO_SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/it/tiff_geo.py");
+
+/// Runs `tiff_geo.py` with Debian's Python (GDAL); fails with what it said.
+fn geo(args: &[&str]) -> String {
+    let out = Command::new("/usr/bin/python3").arg(GEO_SCRIPT).args(args).output().unwrap();
+    let said = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "tiff_geo.py {args:?}: {said}");
+    said
+}
+
+/// A GeoTIFF source as GDAL writes it (UTM 33N, no-data 0) keeps its georeferencing in a COG
+/// and in a generic pyramid, written in one run: GDAL reads the same geotransform (the same
+/// doubles), the same coordinate system (WKT), pixel-is-area or pixel-is-point and no-data
+/// from the full resolution; the reduced levels hold only the no-data value, as GDAL's
+/// overviews; the COG validator passes. Pixel is area (ModelPixelScale and ModelTiepoint),
+/// pixel is point, and a rotated grid (ModelTransformation).
+#[test]
+fn a_geotiff_source_keeps_its_georeferencing() {
+    if !gdal() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = input(dir.path(), "src", 1000, 700, rgb8());
+    for kind in ["area", "point", "rotated"] {
+        let source = dir.path().join(format!("{kind}.tif"));
+        geo(&["make", s(&png), s(&source), kind]);
+        let (cog, generic) = (dir.path().join(format!("{kind}.cog.tif")), dir.path().join(format!("{kind}-g.tif")));
+        ok(&["split", s(&source), "-o", s(&cog), "-o", s(&generic), "--codec", "deflate", "--tile-size", "256", "-q"]);
+        for out in [&cog, &generic] {
+            let said = geo(&["check", s(&source), s(out)]);
+            eprintln!("{}: {said}", out.display());
+        }
+    }
+}
+
+/// A GeoTIFF whose GeoKeyDirectory says more keys than it holds: a TIFF output refuses it,
+/// naming the tag and the file, and leaves nothing (carried, GDAL would misplace the image or
+/// drop its coordinate system without a word); a Deep Zoom output, which carries no
+/// georeferencing, ignores it.
+#[test]
+fn a_damaged_geo_key_directory_is_refused_by_a_tiff_output_only() {
+    if !gdal() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = input(dir.path(), "src", 300, 200, rgb8());
+    let source = dir.path().join("geo.tif");
+    geo(&["make", s(&png), s(&source), "area"]);
+    // The directory's header (version 1, revision 1.0, 7 keys) and first key, as GDAL wrote it
+    // (twice: the directory it rewrote when the geotransform was set, and the one before).
+    let mut bytes = std::fs::read(&source).unwrap();
+    let header: Vec<u8> = [1u16, 1, 0, 7, 1024].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let found: Vec<usize> = (0..bytes.len() - header.len()).filter(|&i| bytes[i..].starts_with(&header)).collect();
+    assert!(!found.is_empty(), "no GeoKeyDirectory in {}", source.display());
+    for at in found {
+        bytes[at + 6..at + 8].copy_from_slice(&40u16.to_le_bytes());
+    }
+    std::fs::write(&source, bytes).unwrap();
+    let cog = dir.path().join("a.cog.tif");
+    fails_with(&run(&["split", s(&source), "-o", s(&cog)]), &["geo.tif", "GeoKeyDirectoryTag (34735) says 40 keys"]);
+    assert!(!cog.exists());
+    ok(&["split", s(&source), "-o", s(&dir.path().join("web")), "--layout", "dzi", "-q"]);
+}
