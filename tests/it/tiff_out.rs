@@ -56,8 +56,8 @@ fn png_tiles(source: &Path, dir: &Path, extra: &[&str]) -> Vec<(String, Vec<u8>)
 
 /// A lossless TIFF read back as a source by our own TIFF reader (its full resolution) cuts
 /// the same tiles as the image it was made from: the file's tile index, offsets and predictor
-/// hold together, in both flavours, 8 and 16 bits, alpha, Deflate and none (our reader has no
-/// zstd yet; the readers below check zstd).
+/// hold together, in every flavour, 8 and 16 bits, alpha, Deflate, LZW and none (our reader
+/// has no zstd yet; the readers below check zstd).
 #[test]
 fn our_reader_reads_the_full_resolution_back() {
     let dir = tempfile::tempdir().unwrap();
@@ -66,6 +66,8 @@ fn our_reader_reads_the_full_resolution_back() {
         ("b.ome.tif", PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, "deflate"),
         ("c.tiff", PixelLayout::new(Channels::Rgba, Depth::U8), 301, 77, "raw"),
         ("d.ome.tiff", PixelLayout::new(Channels::GreyAlpha, Depth::U16), 257, 129, "deflate"),
+        ("e.tif", rgb8(), 1000, 700, "lzw"),
+        ("f.cog.tif", PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, "lzw"),
     ];
     for (k, (name, layout, w, h, codec)) in cases.into_iter().enumerate() {
         let source = input(dir.path(), &format!("src{k}"), w, h, layout);
@@ -144,7 +146,10 @@ fn a_tiff_is_one_output_among_others_and_atomic() {
     std::fs::write(&theirs, b"II*\0\x08\0\0\0\0\0").unwrap();
     fails_with(&run(&["split", s(&source), "-o", s(&theirs)]), &["scan.tif", "another program", "--force"]);
     assert_eq!(std::fs::read(&theirs).unwrap(), b"II*\0\x08\0\0\0\0\0");
-    fails_with(&run(&["split", s(&source), "-o", s(&tiff), "--codec", "png"]), &["jpeg, deflate, zstd or raw"]);
+    fails_with(&run(&["split", s(&source), "-o", s(&tiff), "--codec", "png"]), &["jpeg, deflate, lzw, zstd or raw"]);
+    let web = dir.path().join("web3");
+    let lzw = ["split", s(&source), "-o", s(&tiff), "-o", s(&web), "--layout", "dzi", "--codec", "lzw"];
+    fails_with(&run(&lzw), &["web3 (dzi)", "--codec lzw compresses a TIFF output's tiles"]);
     fails_with(&run(&["split", s(&source), "-o", s(&tiff), "--tile-size", "100"]), &["multiple of 16"]);
 }
 
@@ -159,6 +164,7 @@ fn readers_open_every_level_of_an_ome_tiff() {
         (PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, 128, "zstd", "exact"),
         (rgb8(), 1000, 700, 256, "jpeg", "jpeg"),
         (PixelLayout::new(Channels::Grey, Depth::U8), 700, 301, 128, "jpeg", "jpeg"),
+        (rgb8(), 1000, 700, 256, "lzw", "exact"),
     ];
     for (k, (layout, w, h, tile, codec, mode)) in cases.into_iter().enumerate() {
         let source = input(dir.path(), &format!("src{k}"), w, h, layout);
@@ -181,6 +187,7 @@ fn readers_open_every_level_of_a_generic_pyramid() {
         (PixelLayout::new(Channels::Rgb, Depth::U16), 301, 203, 64, "deflate", "exact"),
         (PixelLayout::new(Channels::Grey, Depth::U16), 301, 203, 64, "zstd", "exact"),
         (rgb8(), 450, 333, 256, "raw", "exact"),
+        (PixelLayout::new(Channels::Rgb, Depth::U16), 301, 203, 64, "lzw", "exact"),
     ];
     for (k, (layout, w, h, tile, codec, mode)) in cases.into_iter().enumerate() {
         let source = input(dir.path(), &format!("src{k}"), w, h, layout);
@@ -224,6 +231,7 @@ fn gdal_validates_a_cog_and_reads_every_level() {
         (PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, 128, "deflate", "exact", true),
         (rgb8(), 999, 701, 128, "jpeg", "jpeg", false),
         (PixelLayout::new(Channels::Rgba, Depth::U8), 300, 200, 64, "raw", "exact", false),
+        (PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, 128, "lzw", "exact", false),
     ];
     for (k, (layout, w, h, tile, codec, mode, big)) in cases.into_iter().enumerate() {
         let source = input(dir.path(), &format!("src{k}"), w, h, layout);

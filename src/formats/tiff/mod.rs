@@ -17,7 +17,7 @@
 //! patched. Classic TIFF or BigTIFF is decided before the first byte from an upper bound of
 //! the file's size (`Spec::needs_bigtiff`), or always with [`BigTiff::Always`].
 //! `TiffSink` is the writer as a pipeline sink. Tiles come compressed from the encoder
-//! threads (`Spec::codec`: JPEG, or Deflate and zstd with the horizontal predictor, which
+//! threads (`Spec::codec`: JPEG, or Deflate, LZW and zstd with the horizontal predictor, which
 //! is the pack's row-delta filter) and in the producer's order (the sink is `ordered`), so the
 //! file's bytes are the same on every run, whatever the thread count; the file is written
 //! under a temporary name and renamed into place when complete.
@@ -104,6 +104,8 @@ pub enum Compression {
         /// The zlib level, 0 (stored) to 9 (smallest); a planned output always takes 6.
         level: u32,
     },
+    /// LZW (5), integer samples horizontally differenced first.
+    Lzw,
     /// zstd frames (50000, libtiff's code), integer samples horizontally differenced first.
     Zstd {
         /// The zstd level, 1 to 22 (`--zstd-level`).
@@ -122,6 +124,7 @@ impl Compression {
         match self {
             Compression::None => 1,
             Compression::Deflate { .. } => 8,
+            Compression::Lzw => 5,
             Compression::Zstd { .. } => 50000,
             Compression::Jpeg { .. } => 7,
         }
@@ -132,6 +135,7 @@ impl Compression {
         match self {
             Compression::None => "none",
             Compression::Deflate { .. } => "deflate",
+            Compression::Lzw => "lzw",
             Compression::Zstd { .. } => "zstd",
             Compression::Jpeg { .. } => "jpeg",
         }
@@ -276,7 +280,7 @@ impl Spec {
     /// (`Predictor` 2); floats are stored as they are (the floating-point predictor, 3, is
     /// not written yet).
     pub fn predictor(&self) -> bool {
-        matches!(self.compression, Compression::Deflate { .. } | Compression::Zstd { .. })
+        matches!(self.compression, Compression::Deflate { .. } | Compression::Lzw | Compression::Zstd { .. })
             && matches!(self.stored.depth, Depth::U8 | Depth::U16 | Depth::U32)
     }
 
@@ -289,6 +293,7 @@ impl Spec {
         match self.compression {
             Compression::None => Some(Codec::Raw),
             Compression::Deflate { level } => Some(Codec::Deflate { level, delta }),
+            Compression::Lzw => Some(Codec::Lzw { delta }),
             Compression::Zstd { level } => Some(Codec::Zstd { level, delta }),
             Compression::Jpeg { .. } => None,
         }

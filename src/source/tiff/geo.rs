@@ -80,7 +80,7 @@ impl GeoTags {
 
     /// `tags` checked: damaged where a key's values lie outside the array it points into, or
     /// the directory or the model transform is not what GeoTIFF 1.1 says it is.
-    pub(crate) fn new(tags: Vec<(u16, GeoValue)>) -> GeoTags {
+    fn new(tags: Vec<(u16, GeoValue)>) -> GeoTags {
         let damage = damage(&tags).err();
         GeoTags { tags, damage }
     }
