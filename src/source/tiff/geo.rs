@@ -230,7 +230,8 @@ mod tests {
     /// Each damage names the tag and says what is wrong.
     #[test]
     fn damaged_tags_are_named() {
-        let cases: Vec<(Box<dyn Fn(&mut Vec<(u16, GeoValue)>)>, &str)> = vec![
+        type Change = Box<dyn Fn(&mut Vec<(u16, GeoValue)>)>;
+        let cases: Vec<(Change, &str)> = vec![
             (Box::new(|t| t[2] = keys(5, &[[1024, 0, 1, 1]])), "GeoKeyDirectoryTag (34735) says 5 keys"),
             (Box::new(|t| t[2] = keys(1, &[[1026, 34737, 40, 0]])), "key 1026's 40 values at 0 of GeoAsciiParamsTag"),
             (Box::new(|t| t[2] = keys(1, &[[2057, 34736, 1, 0]])), "GeoDoubleParamsTag (34736), which holds 0"),
