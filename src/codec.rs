@@ -5,7 +5,7 @@
 //! Raw, zstd and Deflate store any layout, as PNG does. BC1 stores opaque 8-bit RGB and BC7 8-bit
 //! RGB or RGBA, so grey becomes RGB (grey + alpha RGBA). Raw, zstd and BC payloads have no file
 //! format: they go into packs (docs/pack-format.md) and, raw and zstd, into a TIFF's tiles;
-//! Deflate is a TIFF's only. Compression runs here, on the encoder threads, so that a sink that
+//! Deflate and LZW are a TIFF's only. Compression runs here, on the encoder threads, so that a sink that
 //! stores tiles in order (a pack, a TIFF) only writes them.
 
 use std::borrow::Cow;
@@ -137,6 +137,14 @@ pub enum Codec {
         /// integer samples).
         delta: bool,
     },
+    /// Raw texels as one TIFF LZW stream (compression 5: codes most significant bit first,
+    /// widened one code early), rows left-delta filtered first with `delta` (a TIFF's tiles
+    /// only, as for Deflate).
+    Lzw {
+        /// Whether each row is left-delta filtered first (the horizontal predictor, for
+        /// integer samples).
+        delta: bool,
+    },
     /// BC1 blocks, opaque RGB (packs only).
     Bc1,
     /// BC7 blocks, RGB or RGBA (packs only).
@@ -163,6 +171,8 @@ impl Codec {
             Codec::Zstd { .. } => zstd::zstd_safe::compress_bound(stored as usize) as u64,
             // zlib's stored blocks cost 5 bytes in 64 KiB; an eighth more is generous.
             Codec::Deflate { .. } => stored + stored / 8 + 1024,
+            // A code (12 bits at most) for every byte, at worst, and the clear codes between.
+            Codec::Lzw { .. } => stored + stored / 2 + 1024,
             Codec::Bc1 => side.div_ceil(4).pow(2) * 8,
             Codec::Bc7 { .. } => side.div_ceil(4).pow(2) * 16,
             Codec::Jpeg { subsampling, .. } => {
@@ -190,6 +200,7 @@ impl Codec {
             Codec::Zstd { delta: true, .. } => "zstd-delta",
             // `--codec deflate`: a TIFF filters integer samples and says so in its tags.
             Codec::Deflate { .. } => "deflate",
+            Codec::Lzw { .. } => "lzw",
             Codec::Bc1 => "bc1",
             Codec::Bc7 { .. } => "bc7",
         }
@@ -203,6 +214,7 @@ impl Codec {
             Codec::Raw => "raw",
             Codec::Zstd { .. } => "zst",
             Codec::Deflate { .. } => "zz",
+            Codec::Lzw { .. } => "lzw",
             Codec::Bc1 => "bc1",
             Codec::Bc7 { .. } => "bc7",
         }
@@ -238,7 +250,7 @@ impl Codec {
             return self.stored_wide(source, flatten, depth);
         }
         match self {
-            Codec::Png { .. } | Codec::Raw | Codec::Zstd { .. } | Codec::Deflate { .. } => {
+            Codec::Png { .. } | Codec::Raw | Codec::Zstd { .. } | Codec::Deflate { .. } | Codec::Lzw { .. } => {
                 Ok(PixelLayout::new(channels, depth.unwrap_or(source.depth)))
             }
             Codec::Bc1 | Codec::Bc7 { .. } => {
@@ -284,7 +296,7 @@ impl Codec {
                 "--flatten composites 8- and 16-bit samples; the source is {source}: keep its alpha with --codec raw or zstd"
             )));
         }
-        if !matches!(self, Codec::Raw | Codec::Zstd { .. } | Codec::Deflate { .. }) {
+        if !matches!(self, Codec::Raw | Codec::Zstd { .. } | Codec::Deflate { .. } | Codec::Lzw { .. }) {
             return Err(TilerError::Options(format!(
                 "the source is {source}, which --codec {name} cannot hold without cutting its range: use --codec raw, zstd or zstd-delta (packs) or --layout ome-zarr to keep it, or map it onto 8 or 16 bits with --range MIN:MAX"
             )));
@@ -406,6 +418,7 @@ impl<T: Sample> TileEncoder<T> {
             }
             Codec::Zstd { level, delta } => self.encode_zstd(texels, level, delta, out),
             Codec::Deflate { level, delta } => self.encode_deflate(texels, level, delta, out),
+            Codec::Lzw { delta } => self.encode_lzw(texels, delta, out),
             Codec::Bc1 => self.encode_bc(texels, None, out),
             Codec::Bc7 { effort } => self.encode_bc(texels, Some(effort), out),
         }
@@ -450,6 +463,15 @@ impl<T: Sample> TileEncoder<T> {
         let mut z = flate2::write::ZlibEncoder::new(std::mem::take(out), flate2::Compression::new(level.min(9)));
         *out = z.write_all(&raw).and_then(|()| z.finish()).map_err(|e| format!("deflate: {e}"))?;
         Ok(())
+    }
+
+    /// One TIFF LZW stream of the raw tile (a clear code first, the end code last: `weezl`,
+    /// the `tiff` crate's coder), rows left-delta filtered first with `delta`.
+    fn encode_lzw(&self, texels: &[T], delta: bool, out: &mut Vec<u8>) -> Result<(), String> {
+        let raw = self.filtered_bytes(texels, delta);
+        let mut encoder = weezl::encode::Encoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8);
+        let result = encoder.into_vec(out).encode_all(&raw);
+        result.status.map(drop).map_err(|e| format!("lzw: {e}"))
     }
 
     /// The raw tile's bytes, each row left-delta filtered with `delta`: every sample less the

@@ -122,7 +122,8 @@ pub fn run(a: ConvertArgs) -> Result<()> {
     if let Some(range) = a.range {
         source = source::range::map(source, range, a.out.tile_type().unwrap_or(Depth::U8))?;
     }
-    let result = tile(source, &a.input, a.output_filename_format.clone(), &a.out, started, kept_icc);
+    let carried = super::split::Carried { icc: kept_icc, geo: None };
+    let result = tile(source, &a.input, a.output_filename_format.clone(), &a.out, started, carried);
     let missing = missing.lock().map(|m| m.clone()).unwrap_or_default();
     if !missing.is_empty() {
         eprintln!(

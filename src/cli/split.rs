@@ -370,11 +370,11 @@ pub fn run(a: SplitArgs) -> Result<()> {
     let input = input.context("an input image is required")?;
     let options =
         source::OpenOptions { max_memory: a.out.max_memory, autorotate: !a.no_autorotate, keep_icc: a.keep_icc, pick };
-    let (mut source, kept_icc) = source::open_with(&input, options)?;
+    let source::Opened { mut source, icc, geo } = source::open_with(&input, options)?;
     if let Some(range) = a.range {
         source = source::range::map(source, range, a.out.tile_type.unwrap_or(Depth::U8))?;
     }
-    tile(source, &input, a.filename_format, &a.out, started, kept_icc)
+    tile(source, &input, a.filename_format, &a.out, started, Carried { icc, geo })
 }
 
 impl OutputArgs {
@@ -483,7 +483,7 @@ impl OutputArgs {
     }
 
     /// The settings the outputs share, from the flags; `names`: the filename format flag.
-    fn settings(&self, names: Option<String>, kept_icc: Option<Vec<u8>>) -> Result<Settings> {
+    fn settings(&self, names: Option<String>, carried: Carried) -> Result<Settings> {
         let o = &self.ome_zarr;
         Ok(Settings {
             tiles: Requested {
@@ -503,7 +503,8 @@ impl OutputArgs {
             ome_zarr: ome_zarr::settings(o),
             tiff: TiffSettings { bigtiff: if self.bigtiff { BigTiff::Always } else { BigTiff::Auto } },
             pack: self.pack_layout.options()?,
-            keep_icc: kept_icc,
+            keep_icc: carried.icc,
+            geo: carried.geo,
             force: self.force,
         })
     }
@@ -517,16 +518,24 @@ fn name_of(layout: OutputLayout) -> String {
 /// Runs the pipeline from `source` into the outputs `a` names, with the progress bar and the
 /// summary. `names` is the output filename format flag; `kept_icc` the profile the texels are
 /// in (`--keep-icc`).
+/// What the source's file says that the outputs may carry: its ICC profile where the run keeps
+/// it (`--keep-icc`), a GeoTIFF's georeferencing.
+#[derive(Default)]
+pub struct Carried {
+    pub icc: Option<Vec<u8>>,
+    pub geo: Option<vortex_tiler::source::GeoTags>,
+}
+
 pub fn tile(
     source: Box<dyn RowSource>,
     input: &Path,
     names: Option<String>,
     a: &OutputArgs,
     started: Instant,
-    kept_icc: Option<Vec<u8>>,
+    carried: Carried,
 ) -> Result<()> {
     let outputs = a.outputs()?;
-    let settings = a.settings(names, kept_icc)?;
+    let settings = a.settings(names, carried)?;
     let budget = Budget::new(a.max_memory);
     if a.shard.is_some() || a.pack.as_ref().is_some_and(|p| p.to_string_lossy().contains("{shard}")) {
         return shard(source, input, outputs, &settings, a, started);

@@ -143,6 +143,9 @@ pub struct Settings {
     /// The source's ICC profile, where the texels keep its colours (`--keep-icc`): in a tile
     /// directory's JPEG and PNG tiles and in `info.json`; other formats refuse it.
     pub keep_icc: Option<Vec<u8>>,
+    /// The source's georeferencing (a GeoTIFF's tags): TIFF outputs write it into their full
+    /// resolution; the others carry none and ignore it.
+    pub geo: Option<crate::source::GeoTags>,
     /// Replace a foreign regular file at a file output (`--force`).
     pub force: bool,
 }

@@ -92,6 +92,16 @@ impl Plan {
             let own = Own::of(settings, output.format, &formats);
             let input = inputs.first().copied().unwrap_or(Path::new(""));
             let at = Context { header, inputs, input, budget, force: settings.force };
+            if let Some(c @ (CodecChoice::Deflate | CodecChoice::Lzw)) = own.tiles.codec
+                && !matches!(output.format, Format::Tiff(_))
+            {
+                return Err(options(format!(
+                    "{} ({}): --codec {} compresses a TIFF output's tiles (-o FILE.tif, FILE.ome.tif or FILE.cog.tif), not this output's; it takes png, raw or zstd: write it in a run of its own",
+                    output.path.shown(),
+                    output.format,
+                    c.name()
+                )));
+            }
             planned.push(match output.format {
                 Format::Tiles | Format::Pack => tiles(output, &own, &at)?,
                 Format::Viewer(viewer) => for_viewer(output, viewer, &own, &at)?,
@@ -162,6 +172,8 @@ struct Own {
     ome_zarr: OmeZarrSettings,
     tiff: TiffSettings,
     keep_icc: Option<Vec<u8>>,
+    /// The source's georeferencing, for a generic TIFF or a COG.
+    geo: Option<crate::source::GeoTags>,
 }
 
 /// The settings a format reads beyond those every format does (tile size, background,
@@ -227,6 +239,8 @@ impl Own {
             },
             tiff: if matches!(format, Format::Tiff(_)) { s.tiff } else { TiffSettings::default() },
             keep_icc: s.keep_icc.clone().filter(|_| gets(Setting::KeepIcc)),
+            // Not a flag: an output that has nowhere to put it ignores it.
+            geo: s.geo.clone().filter(|_| matches!(format, Format::Tiff(Flavour::Generic | Flavour::Cog))),
         }
     }
 }
@@ -475,11 +489,12 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
     let (codec, compression) = match choice {
         CodecChoice::Jpeg => (CodecChoice::Jpeg, None),
         CodecChoice::Deflate => (CodecChoice::Raw, Some(Compression::Deflate { level: 6 })),
+        CodecChoice::Lzw => (CodecChoice::Raw, Some(Compression::Lzw)),
         CodecChoice::Zstd => (CodecChoice::Raw, Some(Compression::Zstd { level: zstd_level })),
         CodecChoice::Raw => (CodecChoice::Raw, Some(Compression::None)),
         other => {
             return Err(options(format!(
-                "--codec {}: TIFF tiles are jpeg, deflate, zstd or raw (uncompressed)",
+                "--codec {}: TIFF tiles are jpeg, deflate, lzw, zstd or raw (uncompressed)",
                 other.name()
             )));
         }
@@ -515,6 +530,20 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         (None, other) => return Err(TilerError::Internal(format!("TIFF tiles from --codec {}", other.name()))),
     };
     let pixel_size = own.ome_zarr.pixel_size.map(|p| tiff::Micrometres(micrometres(p)));
+    // Written again as they are, or the run refused: a GIS tool would misplace a file whose
+    // georeferencing is damaged, or drop it, without a word.
+    let geo = match &own.geo {
+        Some(geo) => geo.check().map_err(|why| {
+            TilerError::decode(
+                at.input,
+                format!(
+                    "{why}: the georeferencing cannot be carried into {}; repair it (gdal_edit.py -a_srs and -a_ullr) or write another output",
+                    output.path.shown()
+                ),
+            )
+        })?,
+        None => &[],
+    };
     let spec = tiff::Spec {
         flavour,
         layout,
@@ -523,6 +552,7 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         bigtiff: own.tiff.bigtiff,
         name: at.name(own).trim_end_matches(".ome").to_string(),
         pixel_size,
+        geo: geo.to_vec(),
     };
     spec.check()?;
     at.limits().check_pyramid(&layout, false)?;
@@ -636,8 +666,17 @@ mod tests {
             ),
             (&[(TIFF, "a.tif")], with(|s| s.tiles.border = Some(2)), "TIFF tiles have no border"),
             (&[(OME_TIFF, "a.ome.tif")], with(|s| s.tiles.tile_size = Some(100)), "a multiple of 16"),
-            (&[(TIFF, "a.tif")], with(|s| s.tiles.codec = Some(CodecChoice::Png)), "jpeg, deflate, zstd or raw"),
-            (&[(Format::Pack, "a.vtpk")], with(|s| s.tiles.codec = Some(CodecChoice::Deflate)), "tiles of a TIFF"),
+            (&[(TIFF, "a.tif")], with(|s| s.tiles.codec = Some(CodecChoice::Png)), "jpeg, deflate, lzw, zstd or raw"),
+            (
+                &[(Format::Pack, "a.vtpk")],
+                with(|s| s.tiles.codec = Some(CodecChoice::Deflate)),
+                "a.vtpk (pack): --codec deflate compresses a TIFF output's tiles",
+            ),
+            (
+                &[(TIFF, "a.tif"), (DZI, "web")],
+                with(|s| s.tiles.codec = Some(CodecChoice::Lzw)),
+                "web (dzi): --codec lzw compresses a TIFF output's tiles",
+            ),
             (
                 &[(TIFF, "a.tif")],
                 with(|s| {

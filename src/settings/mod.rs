@@ -48,11 +48,13 @@ pub enum CodecChoice {
     Bc7,
     /// TIFF only: lossless zlib (Adobe Deflate), integer samples horizontally differenced.
     Deflate,
+    /// TIFF only: lossless LZW (compression 5), integer samples horizontally differenced.
+    Lzw,
 }
 
 impl CodecChoice {
     /// Every choice, in the order `--help` lists them.
-    pub const ALL: [CodecChoice; 9] = [
+    pub const ALL: [CodecChoice; 10] = [
         CodecChoice::Auto,
         CodecChoice::Jpeg,
         CodecChoice::Png,
@@ -62,6 +64,7 @@ impl CodecChoice {
         CodecChoice::Bc1,
         CodecChoice::Bc7,
         CodecChoice::Deflate,
+        CodecChoice::Lzw,
     ];
 
     /// The name used on the command line (`--codec`) and in `info.json`.
@@ -76,6 +79,7 @@ impl CodecChoice {
             CodecChoice::Bc1 => "bc1",
             CodecChoice::Bc7 => "bc7",
             CodecChoice::Deflate => "deflate",
+            CodecChoice::Lzw => "lzw",
         }
     }
 
@@ -96,6 +100,7 @@ impl CodecChoice {
             CodecChoice::Bc1 => "Packs only: BC1 blocks, opaque 8-bit RGB (tile size a multiple of 4)",
             CodecChoice::Bc7 => "Packs only: BC7 blocks, 8-bit RGB or RGBA (tile size a multiple of 4; --bc7-effort)",
             CodecChoice::Deflate => "TIFF only (-o FILE.tif): lossless zlib, integer samples differenced first",
+            CodecChoice::Lzw => "TIFF only (-o FILE.tif): lossless LZW, integer samples differenced first",
         }
     }
 }
@@ -475,10 +480,11 @@ fn build_codec(
         CodecChoice::Zstd => Codec::Zstd { level: zstd_level, delta: false },
         CodecChoice::ZstdDelta => Codec::Zstd { level: zstd_level, delta: true },
         CodecChoice::Bc1 => Codec::Bc1,
-        CodecChoice::Deflate => {
-            return Err(TilerError::Options(
-                "--codec deflate compresses the tiles of a TIFF (-o FILE.tif or FILE.ome.tif); tile files and packs take png, raw or zstd".into(),
-            ));
+        CodecChoice::Deflate | CodecChoice::Lzw => {
+            return Err(TilerError::Options(format!(
+                "--codec {} compresses the tiles of a TIFF (-o FILE.tif or FILE.ome.tif); tile files and packs take png, raw or zstd",
+                choice.name()
+            )));
         }
         CodecChoice::Bc7 => Codec::Bc7 {
             effort: req
@@ -569,7 +575,7 @@ pub(crate) fn describe_codec(codec: Codec) -> InfoFile {
         Codec::Png { level } => info.png_compression = Some(level.name().into()),
         Codec::Zstd { level, .. } => info.zstd_level = Some(level),
         Codec::Bc7 { effort } => info.bc7_effort = Some(effort.name().into()),
-        Codec::Raw | Codec::Bc1 | Codec::Deflate { .. } => {}
+        Codec::Raw | Codec::Bc1 | Codec::Deflate { .. } | Codec::Lzw { .. } => {}
     }
     info
 }

@@ -203,6 +203,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         embedded: Embedded {
             orientation: header.orientation.unwrap_or_default(),
             icc: if cmyk.is_some() { None } else { header.icc() },
+            geo: None,
         },
         cmyk,
     }))

@@ -64,6 +64,7 @@ pub(crate) mod read_ahead;
 pub(crate) mod stored;
 pub(crate) mod tee;
 pub(crate) mod tiff;
+pub use tiff::geo::{GeoTags, GeoValue};
 pub mod tiled;
 mod whole;
 pub(crate) mod xml;
@@ -163,13 +164,15 @@ pub trait RowSource: Send {
     }
 }
 
-/// What a file says about how its stored texels are to be shown.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+/// What a file says about how its stored texels are to be shown, and where.
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Embedded {
     /// The EXIF orientation, or the identity where the file has none.
     pub orientation: orient::Orientation,
     /// The ICC profile, whole (JPEG's APP2 chunks joined).
     pub icc: Option<Vec<u8>>,
+    /// A GeoTIFF's georeferencing, as its tags store it.
+    pub geo: Option<GeoTags>,
 }
 
 /// How [`open_with`] presents an image file.
@@ -193,29 +196,43 @@ impl OpenOptions {
     }
 }
 
-/// A source as [`open_with`] presents it, and the ICC profile its texels are in when kept.
-pub(crate) type Opened = (Box<dyn RowSource>, Option<Vec<u8>>);
+/// A source and the ICC profile its texels are in, when kept ([`with_profile`]).
+pub(crate) type Profiled = (Box<dyn RowSource>, Option<Vec<u8>>);
+
+/// A source as [`open_with`] presents it, and what its file says that an output may carry.
+pub struct Opened {
+    /// The rows, oriented and converted as the options say.
+    pub source: Box<dyn RowSource>,
+    /// The ICC profile the texels are in, when `keep_icc` keeps it.
+    pub icc: Option<Vec<u8>>,
+    /// A GeoTIFF's georeferencing, where the rows are the file's own grid (not turned by an
+    /// orientation): a TIFF output writes it again (docs/tiff.md).
+    pub geo: Option<GeoTags>,
+}
 
 /// Opens `path` as viewers show it (or as `opts` says): its orientation applied and its ICC
 /// profile converted to sRGB. Returns the profile when `keep_icc` keeps it, for the output to
-/// carry.
+/// carry, and the georeferencing where the file has it and the rows keep its grid.
 pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
     let source = open_picked(path, opts.max_memory, opts.pick)?;
-    let Embedded { orientation, icc } = source.embedded();
+    let Embedded { orientation, icc, geo } = source.embedded();
     let (mut source, kept) = with_profile(path, source, icc, opts.keep_icc)?;
+    let turned = opts.autorotate && orientation != orient::Orientation::NORMAL;
     if opts.autorotate {
         source = orient::apply(path, source, orientation, opts.max_memory)?;
     } else if orientation != orient::Orientation::NORMAL {
         let note = format!("EXIF orientation {} not applied (--no-autorotate)", orientation.value());
         source = Box::new(icc::Described { inner: source, note, transform: None, held: 0 });
     }
-    Ok((source, kept))
+    // A turned image's pixels are no longer where the model transform puts them.
+    let geo = geo.filter(|_| !turned);
+    Ok(Opened { source, icc: kept, geo })
 }
 
 /// `source`, whose texels are in the colours of `icc`, converted to sRGB, or kept as they are
 /// with `keep` (`--keep-icc`, which returns the profile for the output to carry); `split` and
 /// `convert` share it.
-pub fn with_profile(path: &Path, source: Box<dyn RowSource>, icc: Option<Vec<u8>>, keep: bool) -> Result<Opened> {
+pub fn with_profile(path: &Path, source: Box<dyn RowSource>, icc: Option<Vec<u8>>, keep: bool) -> Result<Profiled> {
     match icc {
         None => Ok((source, None)),
         // Each reader checks the size before it reads a profile; this holds for every one.

@@ -58,6 +58,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     let embedded = Embedded {
         orientation: reader.info().exif_metadata.as_deref().map(orient::from_exif).unwrap_or_default(),
         icc,
+        geo: None,
     };
     let rows = if reader.info().interlaced {
         check_whole_fits(

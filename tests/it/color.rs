@@ -60,7 +60,7 @@ fn read_all(mut source: Box<dyn RowSource>) -> (u32, u32, PixelLayout, Vec<u16>)
 }
 
 fn shown(path: &Path) -> (u32, u32, PixelLayout, Vec<u16>) {
-    read_all(source::open_with(path, OpenOptions::shown(1 << 30)).unwrap().0)
+    read_all(source::open_with(path, OpenOptions::shown(1 << 30)).unwrap().source)
 }
 
 fn png_of(path: &Path) -> (u32, u32, Vec<u16>) {
@@ -199,7 +199,7 @@ fn jpeg_tiff_and_png_orientations_match_vips_autorot() {
             assert_close(&name, Picture::new(w, h, c, &got), Picture::new(w, h, c, &want), Tolerance::max(1, why));
             // The stored order when asked.
             let options = OpenOptions { autorotate: false, ..OpenOptions::shown(1 << 30) };
-            let (source, _) = source::open_with(&path, options).unwrap();
+            let source = source::open_with(&path, options).unwrap().source;
             assert_eq!((source.width(), source.height()), (60, 40));
             if orientation != 1 {
                 assert!(source.describe().contains("not applied (--no-autorotate)"), "{}", source.describe());
@@ -256,7 +256,7 @@ fn icc_profiles_are_converted_to_srgb_as_vips_does() {
             assert!(source::open(path, 1 << 30).unwrap().embedded().icc.is_some(), "{}", path.display());
             let why = "LittleCMS on both sides; 8-bit rounding of the two pipelines and JPEG decoding";
             compare_with_vips_icc(path, false, Tolerance::max_and_mean(2, 0.5, why));
-            let (source, _) = source::open_with(path, OpenOptions::shown(1 << 30)).unwrap();
+            let source = source::open_with(path, OpenOptions::shown(1 << 30)).unwrap().source;
             assert!(source.describe().contains("converted to sRGB"), "{}", source.describe());
         }
         // A PNG as libvips writes one with a profile (`vips copy x.png y.png[profile=..]`: its
@@ -269,7 +269,7 @@ fn icc_profiles_are_converted_to_srgb_as_vips_does() {
         let deep = dir.path().join(format!("{name}-16.png"));
         write_png(&deep, 48, 32, PixelLayout::new(Channels::Rgba, Depth::U16));
         tag_profile(&deep, &icc);
-        let (source, _) = source::open_with(&deep, OpenOptions::shown(1 << 30)).unwrap();
+        let source = source::open_with(&deep, OpenOptions::shown(1 << 30)).unwrap().source;
         assert_eq!(source.layout(), PixelLayout::new(Channels::Rgba, Depth::U16));
         let why = "LittleCMS on both sides; vips' 16-bit or float Lab rounds to 1/256 of the range (257 + a few)";
         compare_with_vips_icc(&deep, true, Tolerance::max_and_mean(300, 40.0, why));
@@ -279,7 +279,7 @@ fn icc_profiles_are_converted_to_srgb_as_vips_does() {
     write_png(&png, 48, 32, RGB8);
     let plain = read_all(source::open(&png, 1 << 30).unwrap()).3;
     tag_profile(&png, &Path::new(COLORD).join("sRGB.icc"));
-    let (source, _) = source::open_with(&png, OpenOptions::shown(1 << 30)).unwrap();
+    let source = source::open_with(&png, OpenOptions::shown(1 << 30)).unwrap().source;
     assert!(source.describe().contains("is sRGB: left as is"), "{}", source.describe());
     assert_eq!(read_all(source).3, plain);
 }
@@ -299,7 +299,7 @@ fn grey_profiles_are_converted_too() {
     let png = dir.path().join("grey.png");
     write_png(&png, 40, 30, PixelLayout::new(Channels::Grey, Depth::U8));
     tag_profile(&png, &icc);
-    let (source, _) = source::open_with(&png, OpenOptions::shown(1 << 30)).unwrap();
+    let source = source::open_with(&png, OpenOptions::shown(1 << 30)).unwrap().source;
     assert_eq!(source.layout().channels, Channels::Grey);
     let why = "a linear grey profile through LittleCMS on both sides: 8-bit rounding";
     compare_with_vips_icc(&png, false, Tolerance::max_and_mean(2, 0.6, why));
@@ -335,7 +335,7 @@ fn a_damaged_profile_is_a_clear_error_and_keep_icc_takes_it_as_it_is() {
         fails_with(&out, &["damaged-icc.jpg", "ICC profile"]);
         // --keep-icc keeps the pixels and the bytes as they are.
         let keep = OpenOptions { keep_icc: true, ..OpenOptions::shown(1 << 30) };
-        let (source, kept) = source::open_with(&path, keep).unwrap();
+        let source::Opened { source, icc: kept, .. } = source::open_with(&path, keep).unwrap();
         assert_eq!(kept.as_deref(), Some(&body[..]));
         assert_eq!(read_all(source).3, read_all(source::open(&path, 1 << 30).unwrap()).3);
     }
@@ -359,7 +359,7 @@ fn cmyk_jpeg_is_converted_through_its_profile_or_the_default_one() {
     tool("vips", &["icc_export", s(&png), &format!("{}[Q=95]", s(&tagged)), "--output-profile", s(default)]);
     let bytes = std::fs::read(&tagged).unwrap();
     assert!(bytes.windows(7).any(|w| w == b"\xff\xeeA\0\x0eAd" || w.starts_with(b"Adobe")), "no APP14");
-    let (source, _) = source::open_with(&tagged, OpenOptions::shown(1 << 30)).unwrap();
+    let source = source::open_with(&tagged, OpenOptions::shown(1 << 30)).unwrap().source;
     assert!(source.describe().contains("CMYK, Adobe-inverted") && source.describe().contains("embedded ICC"));
     assert_eq!(source.layout(), RGB8);
     // LittleCMS on both sides, through a CLUT profile: rounding of the two pipelines plus
@@ -376,7 +376,7 @@ fn cmyk_jpeg_is_converted_through_its_profile_or_the_default_one() {
         "vips",
         &["icc_transform", s(&bare), s(&theirs), "srgb", "--input-profile", s(default), "--intent", "relative"],
     );
-    let (source, _) = source::open_with(&bare, OpenOptions::shown(1 << 30)).unwrap();
+    let source = source::open_with(&bare, OpenOptions::shown(1 << 30)).unwrap().source;
     assert!(source.describe().contains("no profile embedded"), "{}", source.describe());
     let (w, h, _, ours) = read_all(source);
     let why = "LittleCMS on both sides through the default CMYK profile, and JPEG decoding of four channels";
@@ -441,7 +441,7 @@ fn a_rotated_tiff_larger_than_max_memory_is_read_in_passes() {
         let path = dir.path().join(format!("big-{orientation}.tif"));
         std::fs::copy(&tif, &path).unwrap();
         tag_orientation(&path, orientation);
-        let (source, _) = source::open_with(&path, OpenOptions::shown(max_memory)).unwrap();
+        let source = source::open_with(&path, OpenOptions::shown(max_memory)).unwrap().source;
         assert!(source.describe().contains(passes), "{}", source.describe());
         let theirs = dir.path().join("vips.png");
         tool("vips", &["autorot", s(&path), s(&theirs)]);

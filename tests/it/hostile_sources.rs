@@ -96,10 +96,10 @@ fn a_damaged_png_profile_is_an_error_not_srgb() {
     let srgb = lcms2::Profile::new_srgb().icc().unwrap();
     let data = iccp(0, &zlib(&srgb));
     png_with_chunk(&png, 8, 8, b"iCCP", &data);
-    let (source, _) = source::open_with(&png, OpenOptions::shown(1 << 30)).unwrap();
+    let source = source::open_with(&png, OpenOptions::shown(1 << 30)).unwrap().source;
     assert!(source.describe().contains("is sRGB: left as is"), "{}", source.describe());
     let keep = OpenOptions { keep_icc: true, ..OpenOptions::shown(1 << 30) };
-    assert_eq!(source::open_with(&png, keep).unwrap().1, Some(srgb));
+    assert_eq!(source::open_with(&png, keep).unwrap().icc, Some(srgb));
     // The same chunk with its CRC's last byte changed: damaged, not read as if whole (libvips
     // warns and keeps it; the png crate drops it).
     let mut bytes = std::fs::read(&png).unwrap();

@@ -56,8 +56,8 @@ fn png_tiles(source: &Path, dir: &Path, extra: &[&str]) -> Vec<(String, Vec<u8>)
 
 /// A lossless TIFF read back as a source by our own TIFF reader (its full resolution) cuts
 /// the same tiles as the image it was made from: the file's tile index, offsets and predictor
-/// hold together, in both flavours, 8 and 16 bits, alpha, Deflate and none (our reader has no
-/// zstd yet; the readers below check zstd).
+/// hold together, in every flavour, 8 and 16 bits, alpha, Deflate, LZW and none (our reader
+/// has no zstd yet; the readers below check zstd).
 #[test]
 fn our_reader_reads_the_full_resolution_back() {
     let dir = tempfile::tempdir().unwrap();
@@ -66,6 +66,8 @@ fn our_reader_reads_the_full_resolution_back() {
         ("b.ome.tif", PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, "deflate"),
         ("c.tiff", PixelLayout::new(Channels::Rgba, Depth::U8), 301, 77, "raw"),
         ("d.ome.tiff", PixelLayout::new(Channels::GreyAlpha, Depth::U16), 257, 129, "deflate"),
+        ("e.tif", rgb8(), 1000, 700, "lzw"),
+        ("f.cog.tif", PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, "lzw"),
     ];
     for (k, (name, layout, w, h, codec)) in cases.into_iter().enumerate() {
         let source = input(dir.path(), &format!("src{k}"), w, h, layout);
@@ -144,7 +146,10 @@ fn a_tiff_is_one_output_among_others_and_atomic() {
     std::fs::write(&theirs, b"II*\0\x08\0\0\0\0\0").unwrap();
     fails_with(&run(&["split", s(&source), "-o", s(&theirs)]), &["scan.tif", "another program", "--force"]);
     assert_eq!(std::fs::read(&theirs).unwrap(), b"II*\0\x08\0\0\0\0\0");
-    fails_with(&run(&["split", s(&source), "-o", s(&tiff), "--codec", "png"]), &["jpeg, deflate, zstd or raw"]);
+    fails_with(&run(&["split", s(&source), "-o", s(&tiff), "--codec", "png"]), &["jpeg, deflate, lzw, zstd or raw"]);
+    let web = dir.path().join("web3");
+    let lzw = ["split", s(&source), "-o", s(&tiff), "-o", s(&web), "--layout", "dzi", "--codec", "lzw"];
+    fails_with(&run(&lzw), &["web3 (dzi)", "--codec lzw compresses a TIFF output's tiles"]);
     fails_with(&run(&["split", s(&source), "-o", s(&tiff), "--tile-size", "100"]), &["multiple of 16"]);
 }
 
@@ -159,6 +164,7 @@ fn readers_open_every_level_of_an_ome_tiff() {
         (PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, 128, "zstd", "exact"),
         (rgb8(), 1000, 700, 256, "jpeg", "jpeg"),
         (PixelLayout::new(Channels::Grey, Depth::U8), 700, 301, 128, "jpeg", "jpeg"),
+        (rgb8(), 1000, 700, 256, "lzw", "exact"),
     ];
     for (k, (layout, w, h, tile, codec, mode)) in cases.into_iter().enumerate() {
         let source = input(dir.path(), &format!("src{k}"), w, h, layout);
@@ -181,6 +187,7 @@ fn readers_open_every_level_of_a_generic_pyramid() {
         (PixelLayout::new(Channels::Rgb, Depth::U16), 301, 203, 64, "deflate", "exact"),
         (PixelLayout::new(Channels::Grey, Depth::U16), 301, 203, 64, "zstd", "exact"),
         (rgb8(), 450, 333, 256, "raw", "exact"),
+        (PixelLayout::new(Channels::Rgb, Depth::U16), 301, 203, 64, "lzw", "exact"),
     ];
     for (k, (layout, w, h, tile, codec, mode)) in cases.into_iter().enumerate() {
         let source = input(dir.path(), &format!("src{k}"), w, h, layout);
@@ -224,6 +231,7 @@ fn gdal_validates_a_cog_and_reads_every_level() {
         (PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, 128, "deflate", "exact", true),
         (rgb8(), 999, 701, 128, "jpeg", "jpeg", false),
         (PixelLayout::new(Channels::Rgba, Depth::U8), 300, 200, 64, "raw", "exact", false),
+        (PixelLayout::new(Channels::Grey, Depth::U16), 333, 517, 128, "lzw", "exact", false),
     ];
     for (k, (layout, w, h, tile, codec, mode, big)) in cases.into_iter().enumerate() {
         let source = input(dir.path(), &format!("src{k}"), w, h, layout);
@@ -296,4 +304,68 @@ fn a_jpeg_tiled_source_s_tiles_are_copied_where_they_fit_the_tiff_s_tags() {
             eprintln!("Q{q} {}: {said}", out.display());
         }
     }
+}
+
+const GEO_SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/it/tiff_geo.py");
+
+/// Runs `tiff_geo.py` with Debian's Python (GDAL); fails with what it said.
+fn geo(args: &[&str]) -> String {
+    let out = Command::new("/usr/bin/python3").arg(GEO_SCRIPT).args(args).output().unwrap();
+    let said = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "tiff_geo.py {args:?}: {said}");
+    said
+}
+
+/// A GeoTIFF source as GDAL writes it (UTM 33N, no-data 0) keeps its georeferencing in a COG
+/// and in a generic pyramid, written in one run: GDAL reads the same geotransform (the same
+/// doubles), the same coordinate system (WKT), pixel-is-area or pixel-is-point and no-data
+/// from the full resolution; the reduced levels hold only the no-data value, as GDAL's
+/// overviews; the COG validator passes. Pixel is area (ModelPixelScale and ModelTiepoint),
+/// pixel is point, and a rotated grid (ModelTransformation).
+#[test]
+fn a_geotiff_source_keeps_its_georeferencing() {
+    if !gdal() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = input(dir.path(), "src", 1000, 700, rgb8());
+    for kind in ["area", "point", "rotated"] {
+        let source = dir.path().join(format!("{kind}.tif"));
+        geo(&["make", s(&png), s(&source), kind]);
+        let (cog, generic) = (dir.path().join(format!("{kind}.cog.tif")), dir.path().join(format!("{kind}-g.tif")));
+        ok(&["split", s(&source), "-o", s(&cog), "-o", s(&generic), "--codec", "deflate", "--tile-size", "256", "-q"]);
+        for out in [&cog, &generic] {
+            let said = geo(&["check", s(&source), s(out)]);
+            eprintln!("{}: {said}", out.display());
+        }
+    }
+}
+
+/// A GeoTIFF whose GeoKeyDirectory says more keys than it holds: a TIFF output refuses it,
+/// naming the tag and the file, and leaves nothing (carried, GDAL would misplace the image or
+/// drop its coordinate system without a word); a Deep Zoom output, which carries no
+/// georeferencing, ignores it.
+#[test]
+fn a_damaged_geo_key_directory_is_refused_by_a_tiff_output_only() {
+    if !gdal() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = input(dir.path(), "src", 300, 200, rgb8());
+    let source = dir.path().join("geo.tif");
+    geo(&["make", s(&png), s(&source), "area"]);
+    // The directory's header (version 1, revision 1.0, 7 keys) and first key, as GDAL wrote it
+    // (twice: the directory it rewrote when the geotransform was set, and the one before).
+    let mut bytes = std::fs::read(&source).unwrap();
+    let header: Vec<u8> = [1u16, 1, 0, 7, 1024].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let found: Vec<usize> = (0..bytes.len() - header.len()).filter(|&i| bytes[i..].starts_with(&header)).collect();
+    assert!(!found.is_empty(), "no GeoKeyDirectory in {}", source.display());
+    for at in found {
+        bytes[at + 6..at + 8].copy_from_slice(&40u16.to_le_bytes());
+    }
+    std::fs::write(&source, bytes).unwrap();
+    let cog = dir.path().join("a.cog.tif");
+    fails_with(&run(&["split", s(&source), "-o", s(&cog)]), &["geo.tif", "GeoKeyDirectoryTag (34735) says 40 keys"]);
+    assert!(!cog.exists());
+    ok(&["split", s(&source), "-o", s(&dir.path().join("web")), "--layout", "dzi", "-q"]);
 }

@@ -119,7 +119,7 @@ pub fn tile_channels(
             );
         }
         let source = set.interleave(picks)?;
-        return super::tile(source, &inputs[0], names, a, started, None);
+        return super::tile(source, &inputs[0], names, a, started, super::Carried::default());
     }
     if outputs.len() > 1 {
         bail!(
@@ -131,7 +131,7 @@ pub fn tile_channels(
     let planes = picks.iter().map(|&k| Plane { name: set.names[k].clone(), window: None }).collect();
     let first = set.channel(picks[0])?;
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
-    let settings = a.settings(names, None)?;
+    let settings = a.settings(names, super::Carried::default())?;
     let plan =
         Plan::with_planes(outputs, &settings, &first.header(), &inputs, Budget::new(a.max_memory), Some(planes))?;
     report::prepare(&plan.outputs()[0].output.path)?;

@@ -46,10 +46,11 @@ pub fn tile_kind(codec: Codec) -> Result<TileKind> {
         Codec::Zstd { delta: true, .. } => TileKind::ZstdDelta,
         Codec::Bc1 => TileKind::Bc1,
         Codec::Bc7 { .. } => TileKind::Bc7,
-        Codec::Deflate { .. } => {
-            return Err(TilerError::Options(
-                "--codec deflate compresses the tiles of a TIFF; a pack takes png, raw, zstd or zstd-delta".into(),
-            ));
+        Codec::Deflate { .. } | Codec::Lzw { .. } => {
+            return Err(TilerError::Options(format!(
+                "--codec {} compresses the tiles of a TIFF; a pack takes png, raw, zstd or zstd-delta",
+                codec.name()
+            )));
         }
     })
 }

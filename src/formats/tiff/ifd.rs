@@ -36,6 +36,7 @@ const ASCII: u16 = 2;
 const SHORT: u16 = 3;
 const LONG: u16 = 4;
 const RATIONAL: u16 = 5;
+const DOUBLE: u16 = 12;
 const LONG8: u16 = 16;
 const IFD: u16 = 13;
 const IFD8: u16 = 18;
@@ -48,6 +49,7 @@ pub(super) enum Value {
     Offsets(Vec<u64>),
     Long(Vec<u32>),
     Rational(Vec<(u32, u32)>),
+    Double(Vec<f64>),
     /// Text, written with its terminating NUL.
     Ascii(String),
     /// Offsets of other IFDs (IFD or IFD8).
@@ -72,6 +74,7 @@ impl Value {
             }
             Value::Long(_) => LONG,
             Value::Rational(_) => RATIONAL,
+            Value::Double(_) => DOUBLE,
             Value::Ascii(_) | Value::AsciiAt { .. } => ASCII,
             Value::Ifds(_) => {
                 if big {
@@ -89,6 +92,7 @@ impl Value {
             Value::Offsets(v) | Value::Ifds(v) => v.len() as u64,
             Value::Long(v) => v.len() as u64,
             Value::Rational(v) => v.len() as u64,
+            Value::Double(v) => v.len() as u64,
             Value::Ascii(s) => s.len() as u64 + 1,
             Value::AsciiAt { count, .. } => *count,
         }
@@ -100,6 +104,7 @@ impl Value {
         match self {
             Value::Short(v) => v.iter().for_each(|s| out.extend(s.to_le_bytes())),
             Value::Long(v) => v.iter().for_each(|s| out.extend(s.to_le_bytes())),
+            Value::Double(v) => v.iter().for_each(|s| out.extend(s.to_le_bytes())),
             Value::Offsets(v) | Value::Ifds(v) => {
                 for &o in v {
                     if big {

@@ -17,15 +17,16 @@
 //! patched. Classic TIFF or BigTIFF is decided before the first byte from an upper bound of
 //! the file's size (`Spec::needs_bigtiff`), or always with [`BigTiff::Always`].
 //! `TiffSink` is the writer as a pipeline sink. Tiles come compressed from the encoder
-//! threads (`Spec::codec`: JPEG, or Deflate and zstd with the horizontal predictor, which
+//! threads (`Spec::codec`: JPEG, or Deflate, LZW and zstd with the horizontal predictor, which
 //! is the pack's row-delta filter) and in the producer's order (the sink is `ordered`), so the
 //! file's bytes are the same on every run, whatever the thread count; the file is written
 //! under a temporary name and renamed into place when complete.
 //!
 //! A JPEG-tiled source's stored tiles are copied into level 0 where they are what the tags
-//! say (`TiffSink`'s `takes_stored_jpeg`). Not yet (issue 43): a GeoTIFF source's
-//! georeferencing in a COG, shared `JPEGTables`, the floating-point predictor, and more than
-//! four channels as planes.
+//! say (`TiffSink`'s `takes_stored_jpeg`). A GeoTIFF source's georeferencing tags are written
+//! again into a COG's or a generic pyramid's full resolution (`Spec::geo`). Not yet (issue
+//! 43): shared `JPEGTables`, the floating-point predictor, and more than four channels as
+//! planes.
 
 mod cog;
 mod ifd;
@@ -43,6 +44,7 @@ use crate::codec::{Codec, Subsampling};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::{Channels, Depth, PixelLayout};
+use crate::source::GeoValue;
 
 /// Where the writer puts its signature, after the header: the `Software` tag's value, which
 /// names the file as ours so that a later run may replace it (`output::claim`).
@@ -102,6 +104,8 @@ pub enum Compression {
         /// The zlib level, 0 (stored) to 9 (smallest); a planned output always takes 6.
         level: u32,
     },
+    /// LZW (5), integer samples horizontally differenced first.
+    Lzw,
     /// zstd frames (50000, libtiff's code), integer samples horizontally differenced first.
     Zstd {
         /// The zstd level, 1 to 22 (`--zstd-level`).
@@ -120,6 +124,7 @@ impl Compression {
         match self {
             Compression::None => 1,
             Compression::Deflate { .. } => 8,
+            Compression::Lzw => 5,
             Compression::Zstd { .. } => 50000,
             Compression::Jpeg { .. } => 7,
         }
@@ -130,6 +135,7 @@ impl Compression {
         match self {
             Compression::None => "none",
             Compression::Deflate { .. } => "deflate",
+            Compression::Lzw => "lzw",
             Compression::Zstd { .. } => "zstd",
             Compression::Jpeg { .. } => "jpeg",
         }
@@ -167,6 +173,10 @@ pub(crate) struct Spec {
     pub name: String,
     /// The physical size of a full-resolution pixel, where known.
     pub pixel_size: Option<Micrometres>,
+    /// A GeoTIFF source's georeferencing tags, ascending, written as they are into the full
+    /// resolution's IFD (none in the reduced levels, as GDAL writes its overviews); empty for
+    /// none.
+    pub geo: Vec<(u16, GeoValue)>,
 }
 
 impl Spec {
@@ -242,12 +252,20 @@ impl Spec {
     }
 
     /// An upper bound of the file's size: header, tiles at their largest (a COG's with their
-    /// leader and trailer), IFDs, their arrays, the OME-XML and a COG's ghost area.
+    /// leader and trailer), IFDs, their arrays, the georeferencing, the OME-XML and a COG's
+    /// ghost area.
     pub fn most_file_bytes(&self) -> u64 {
         let framing = if self.flavour == Flavour::Cog { cog::FRAMING } else { 0 };
         let total = self.layout.total_tiles();
         let tiles = total.saturating_mul(self.most_tile_bytes() + framing);
-        let ifds = self.layout.lod_count as u64 * 4096 + total.saturating_mul(16);
+        let geo: u64 = (self.geo.iter())
+            .map(|(_, v)| match v {
+                GeoValue::Shorts(v) => 2 * v.len() as u64,
+                GeoValue::Doubles(v) => 8 * v.len() as u64,
+                GeoValue::Ascii(v) => v.len() as u64 + 1,
+            } + 24)
+            .sum();
+        let ifds = self.layout.lod_count as u64 * 4096 + total.saturating_mul(16) + geo;
         let xml = ome::xml(self).len() as u64;
         tiles.saturating_add(ifds).saturating_add(xml).saturating_add(1024)
     }
@@ -262,7 +280,7 @@ impl Spec {
     /// (`Predictor` 2); floats are stored as they are (the floating-point predictor, 3, is
     /// not written yet).
     pub fn predictor(&self) -> bool {
-        matches!(self.compression, Compression::Deflate { .. } | Compression::Zstd { .. })
+        matches!(self.compression, Compression::Deflate { .. } | Compression::Lzw | Compression::Zstd { .. })
             && matches!(self.stored.depth, Depth::U8 | Depth::U16 | Depth::U32)
     }
 
@@ -275,6 +293,7 @@ impl Spec {
         match self.compression {
             Compression::None => Some(Codec::Raw),
             Compression::Deflate { level } => Some(Codec::Deflate { level, delta }),
+            Compression::Lzw => Some(Codec::Lzw { delta }),
             Compression::Zstd { level } => Some(Codec::Zstd { level, delta }),
             Compression::Jpeg { .. } => None,
         }

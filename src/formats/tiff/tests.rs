@@ -125,6 +125,7 @@ fn spec(flavour: Flavour, w: u32, h: u32, levels: u32, stored: PixelLayout, comp
         bigtiff: BigTiff::Auto,
         name: "tiny <&> \"test\"".into(),
         pixel_size: None,
+        geo: Vec::new(),
     }
 }
 

@@ -20,6 +20,7 @@ use super::ifd::{Ifd, Value, tag};
 use super::{Compression, Flavour, SIGNATURE, SIGNATURE_AT, Spec, ome};
 use crate::error::{Result, ShowPath, TilerError};
 use crate::pixel::Depth;
+use crate::source::GeoValue;
 
 /// Where tile data starts: after the header and the signature.
 const DATA_AT: u64 = 32;
@@ -320,6 +321,19 @@ impl TiffWriter {
         let tiles = self.level_tiles(k);
         ifd.set(tag::TILE_OFFSETS, Value::Offsets(tiles.iter().map(|t| t.0).collect()));
         ifd.set(tag::TILE_BYTE_COUNTS, Value::Offsets(tiles.iter().map(|t| t.1).collect()));
+        // A GeoTIFF source's tags, as they were: level 0 is the source's grid. As GDAL writes
+        // its overviews, the reduced levels repeat only the no-data value (GDAL derives their
+        // transform from their size).
+        for (t, value) in &s.geo {
+            if k == 0 || *t == crate::source::tiff::geo::tag::GDAL_NODATA {
+                let value = match value {
+                    GeoValue::Shorts(v) => Value::Short(v.clone()),
+                    GeoValue::Doubles(v) => Value::Double(v.clone()),
+                    GeoValue::Ascii(v) => Value::Ascii(v.clone()),
+                };
+                ifd.set(*t, value);
+            }
+        }
         if s.stored.channels.has_alpha() {
             // Unassociated alpha: the samples are not premultiplied.
             ifd.set(tag::EXTRA_SAMPLES, Value::Short(vec![2]));

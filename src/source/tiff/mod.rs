@@ -17,6 +17,7 @@
 
 mod chunks;
 mod fax;
+pub mod geo;
 mod jp2k;
 mod jpeg;
 mod kinds;
@@ -160,6 +161,7 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
             .map(super::orient::Orientation::from_tag)
             .unwrap_or_default(),
         icc: profile(path, &mut decoder)?,
+        geo: geo::read(&mut decoder),
     };
     if jpeg::is_jpeg(path, &mut decoder)? {
         // One strip cut by restart markers (Hamamatsu NDPI) is read an interval at a time.
