@@ -740,6 +740,14 @@ mod tests {
     const XYZ: Format = Format::Viewer(Viewer::Xyz);
     const TIFF: Format = Format::Tiff(Flavour::Generic);
     const OME_TIFF: Format = Format::Tiff(Flavour::Ome);
+    const DICOM: Format = Format::Dicom;
+
+    fn with_pixel_size(f: impl FnOnce(&mut Settings)) -> Settings {
+        with(|s| {
+            s.ome_zarr.pixel_size = Some("0.5um".parse().unwrap());
+            f(s);
+        })
+    }
 
     /// Every refusal `split` makes of the outputs it is given, as a table: the outputs, the
     /// settings, and what the message must say.
@@ -810,6 +818,13 @@ mod tests {
             (&[(OME_TIFF, "a.ome.tif")], with(|s| s.tiles.filename_format = Some("%1$s.png".into())), "ome-tiff"),
             (&[(Format::Pack, "a.vtpk")], with(|s| s.tiff.bigtiff = BigTiff::Always), "--bigtiff belongs to a TIFF"),
             (&[(TIFF, "a.tif")], with(|s| s.keep_icc = Some(vec![0; 200])), "its ICC tag is not written yet"),
+            (&[(DICOM, "a")], Settings::default(), "give --pixel-size"),
+            (&[(DICOM, "a")], with_pixel_size(|s| s.tiles.codec = Some(CodecChoice::Zstd)), "JPEG baseline"),
+            (&[(DICOM, "a")], with_pixel_size(|s| s.tiles.border = Some(1)), "DICOM frames have no border"),
+            (&[(DICOM, "a")], with_pixel_size(|s| s.tiles.tile_depth = Some(Depth::U16)), "8-bit samples"),
+            (&[(DICOM, "a")], with_pixel_size(|s| s.keep_icc = Some(vec![0; 200])), "a DICOM series"),
+            (&[(TIFF, "a.tif")], with(|s| s.dicom.uid_root = Some("1.2".into())), "--dicom-uid-root belongs"),
+            (&[(DICOM, "a")], with_pixel_size(|s| s.dicom.uid_root = Some("1.2.".into())), "--dicom-uid-root"),
         ];
         for (outputs, settings, want) in cases {
             match plan(outputs, settings) {
@@ -885,6 +900,25 @@ mod tests {
         let Work::Tiff { spec } = &p.outputs[0].work else { panic!() };
         assert_eq!(spec.compression, Compression::Deflate { level: 6 });
         assert_eq!(spec.stored, PixelLayout::new(Channels::Rgba, Depth::U16));
+    }
+
+    /// A DICOM series beside Deep Zoom of the same tiles shares its pyramid; its frames are
+    /// JPEG at the run's subsampling (YBR_FULL_422 for 4:2:0); the pixel size in mm.
+    #[test]
+    fn a_dicom_series_reads_the_run_s_settings() {
+        let settings = with_pixel_size(|s| {
+            s.overlap = Some(0);
+            s.tiles.tile_size = Some(256);
+        });
+        let p = plan(&[(DICOM, "a"), (DZI, "web")], settings).unwrap();
+        let [dicom, dzi] = &p.outputs[..] else { panic!("two outputs") };
+        assert_eq!(dzi.opts, SplitOptions { down_to_one_texel: true, ..dicom.opts.clone() }, "one pyramid");
+        let Work::Dicom { spec } = &dicom.work else { panic!("a DICOM series' work") };
+        assert_eq!(spec.photometric, dicom::Photometric::YbrFull422);
+        assert_eq!(spec.pixel_mm, 0.0005);
+        assert_eq!((spec.layout.tile_size, spec.layout.lod_count), (256, 3));
+        assert_eq!(spec.name, "slide");
+        assert_eq!(spec.uid_root, dicom::DEFAULT_ROOT);
     }
 
     #[test]

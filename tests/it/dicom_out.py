@@ -135,6 +135,21 @@ def count_copied(directory, tiff, measured):
     copied = [i for i, (a, b) in enumerate(zip(frames, tiles)) if scan(a) is not None and scan(a) == scan(b)]
     measured["copied"] = len(copied)
     measured["copiedFrames"] = copied
+    # The copied frames are the source's own JPEG data: OpenSlide decodes them to the very
+    # texels it reads from the source slide (the region they cover, exactly).
+    import openslide
+
+    columns = -(-ds.TotalPixelMatrixColumns // ds.Columns)
+    if copied:
+        right = max(i % columns for i in copied) + 1
+        bottom = max(i // columns for i in copied) + 1
+        size = (right * ds.Columns, bottom * ds.Rows)
+        ours = openslide.OpenSlide(os.path.join(directory, "level-0.dcm")).read_region((0, 0), 0, size)
+        theirs = openslide.OpenSlide(tiff).read_region((0, 0), 0, size)
+        if not np.array_equal(np.asarray(ours), np.asarray(theirs)):
+            diff = np.abs(np.asarray(ours).astype(int) - np.asarray(theirs).astype(int))
+            fail(f"OpenSlide reads the copied region {size} otherwise from the series than from the source: max {diff.max()}")
+        measured["openslideCopiedRegion"] = f"{size[0]}x{size[1]} equal to the source's"
 
 
 def main():

@@ -279,3 +279,36 @@ fn a_series_beside_deep_zoom() {
     assert!(dcm.join("level-0.dcm").is_file() && web.join("slide.dzi").is_file());
     dciodvfy(&dcm);
 }
+
+/// An Aperio-like SVS as tifffile writes it: 256-texel JPEG tiles in YCbCr 4:2:0, a thumbnail.
+const MAKE_SVS: &str = r#"
+import sys, numpy as np, tifffile
+h, w = 600, 900
+y, x = np.mgrid[0:h, 0:w]
+img = np.stack([x * 255 // w, y * 255 // h, (x // 3 + y // 5) & 255], -1).astype(np.int32)
+img += np.random.default_rng(7).integers(0, 16, img.shape)
+img = np.clip(img, 0, 255).astype(np.uint8)
+head = "Aperio Image Library v12.0.15 \r\n%dx%d" % (w, h)
+with tifffile.TiffWriter(sys.argv[1]) as t:
+    t.write(img, tile=(256, 256), compression="jpeg", compressionargs={"level": 80}, photometric="ycbcr", subsampling=(2, 2), description=head + " [0,0 %dx%d] (256x256) JPEG/YCC Q=80|AppMag = 20|MPP = 0.5" % (w, h), metadata=None)
+    t.write(img[::8, ::8].copy(), compression="jpeg", photometric="rgb", description=head + " -> 112x75", metadata=None)
+"#;
+
+/// An SVS's interior full-resolution tiles are copied byte for byte; OpenSlide reads the
+/// region they cover from the series exactly as from the slide (the same JPEG data, the same
+/// decoder); every level is within JPEG's error of the slide as libvips decodes it.
+#[test]
+fn an_svs_s_tiles_are_copied_and_read_as_the_slide_s() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let svs = dir.path().join("slide.svs");
+    crate::tiff_slides::python(python.as_os_str(), MAKE_SVS, &[s(&svs)]);
+    let out = dir.path().join("series");
+    let json = ok(&["split", s(&svs), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um", "--json"]);
+    let json: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+    // 3 x 2 of the 4 x 3 tiles of level 0 lie inside the image.
+    assert_eq!(json["copied"], 6, "{json}");
+    dciodvfy(&out);
+    let measured = check(&python, &out, &svs, 256, Some(&svs));
+    assert_eq!(measured["copiedFrames"], serde_json::json!([0, 1, 2, 4, 5, 6]), "{measured}");
+}

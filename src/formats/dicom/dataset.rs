@@ -307,7 +307,8 @@ impl<'a> Series<'a> {
                     tags::PIXEL_MEASURES_SEQUENCE,
                     vec![item(|i| {
                         put(i, tags::PIXEL_SPACING, VR::DS, strs(&[&ds(spacing.0), &ds(spacing.1)]));
-                        put(i, tags::SLICE_THICKNESS, VR::DS, "1");
+                        // Unknown: the nominal 1 um of Imaged Volume Depth, in mm.
+                        put(i, tags::SLICE_THICKNESS, VR::DS, "0.001");
                     })],
                 );
                 sequence(
@@ -354,6 +355,48 @@ fn vr_of(vr: Vr) -> VR {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn spec() -> Spec {
+        let mut layout = crate::layout::Layout::new(600, 300, 256, 0).unwrap();
+        layout.lod_count = 2;
+        Spec {
+            layout,
+            stored: crate::pixel::PixelLayout::new(crate::pixel::Channels::Rgb, crate::pixel::Depth::U8),
+            photometric: Photometric::YbrFull422,
+            pixel_mm: 0.0005,
+            name: "slide".into(),
+            uid_root: uid::DEFAULT_ROOT.into(),
+            identity: "test".into(),
+            made: "20260102030405".into(),
+            meta: Default::default(),
+        }
+    }
+
+    /// Where the frames' offsets fit 32 bits the data set has no Extended Offset Table;
+    /// past them it has both its elements, OV, just before where Pixel Data goes; the header
+    /// is the same for the same spec (the sRGB profile's date cleared).
+    #[test]
+    fn the_extended_offset_table_comes_where_offsets_pass_32_bits() {
+        let spec = spec();
+        spec.check().unwrap();
+        let series = Series::new(&spec).unwrap();
+        let near = Offsets { offsets: vec![0, 10, 20], lengths: vec![2, 2, 2] };
+        let far = Offsets { offsets: vec![0, 1 << 31, 1 << 33], lengths: vec![2, 2, 2] };
+        let basic = series.header(0, &near, 6).unwrap();
+        assert_eq!(basic, Series::new(&spec).unwrap().header(0, &near, 6).unwrap(), "the same bytes");
+        assert_eq!(&basic[128..132], b"DICM");
+        let eot = [0xE0, 0x7F, 0x01, 0x00, b'O', b'V'];
+        let find = |bytes: &[u8], what: &[u8]| bytes.windows(what.len()).position(|w| w == what);
+        assert_eq!(find(&basic, &eot), None);
+        let extended = series.header(0, &far, 6).unwrap();
+        let at = find(&extended, &eot).expect("the Extended Offset Table");
+        let lengths = find(&extended, &[0xE0, 0x7F, 0x02, 0x00, b'O', b'V']).expect("its lengths");
+        // OV: 2 reserved bytes, a 32-bit length, then the 64-bit offsets.
+        let value = &extended[at + 12..at + 12 + 24];
+        assert_eq!(value[8..16], (1u64 << 31).to_le_bytes());
+        assert_eq!(lengths, at + 12 + 24, "the lengths follow the offsets");
+        assert_eq!(extended.len(), lengths + 12 + 24, "and end the data set, before Pixel Data");
+    }
 
     #[test]
     fn decimal_strings_fit_sixteen_characters() {
