@@ -357,3 +357,25 @@ pub fn tiff_line(w: &vortex_tiler::formats::tiff::TiffSummary) -> String {
         w.file_bytes
     )
 }
+
+/// A DICOM series' figures, for `--json`.
+pub fn dicom_json(w: &vortex_tiler::formats::dicom::DicomSummary) -> serde_json::Value {
+    serde_json::json!({
+        "instances": w.instances,
+        "frames": w.frames,
+        "photometricInterpretation": w.photometric,
+        "transferSyntax": "1.2.840.10008.1.2.4.50",
+        "seriesInstanceUID": w.series_uid,
+        "extendedOffsetTables": w.extended_offsets,
+        "frameBytes": w.frame_bytes,
+        "fileBytes": w.file_bytes,
+    })
+}
+
+/// A DICOM series' figures, in a line.
+pub fn dicom_line(w: &vortex_tiler::formats::dicom::DicomSummary) -> String {
+    format!(
+        "dicom: {} instances (one a level), {} JPEG baseline frames, {}, series {}, {} file bytes",
+        w.instances, w.frames, w.photometric, w.series_uid, w.file_bytes
+    )
+}

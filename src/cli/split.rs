@@ -8,9 +8,10 @@ use anyhow::{Context, Result, bail};
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
 use vortex_tiler::error::ShowPath;
+use vortex_tiler::formats::dicom::DicomMeta;
 use vortex_tiler::formats::tiff::{BigTiff, Flavour};
 use vortex_tiler::formats::viewer::Viewer;
-use vortex_tiler::outputs::{Budget, Format, Output, Plan, Settings, TiffSettings, Wrote};
+use vortex_tiler::outputs::{Budget, DicomSettings, Format, Output, Plan, Settings, TiffSettings, Wrote};
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::pyramid::Filter;
 use vortex_tiler::settings::{CodecChoice, Requested};
@@ -129,6 +130,18 @@ pub struct OutputArgs {
     #[command(flatten, next_help_heading = "Outputs")]
     pack_layout: super::PackLayout,
 
+    /// --layout dicom: the root the series' UIDs are made under, e.g. your organisation's
+    /// registered root [default: 2.25, UUIDs: no registration needed]. The UIDs are a hash of
+    /// the input and the options, the same on every run (docs/dicom.md).
+    #[arg(help_heading = "Outputs", long, value_name = "ROOT")]
+    dicom_uid_root: Option<String>,
+
+    /// --layout dicom: a JSON object of the patient, study and equipment attributes, by DICOM
+    /// keyword, e.g. {"PatientID": "P1", "AccessionNumber": "A7"} [default: none: the
+    /// patient and study attributes are empty]. docs/dicom.md lists the keywords taken.
+    #[arg(help_heading = "Outputs", long, value_name = "FILE")]
+    dicom_meta: Option<PathBuf>,
+
     /// How the output directory is laid out: vortex (tiles + info.json, this tool's), or one a
     /// viewer opens as it is: dzi (NAME.dzi + NAME_files/, Deep Zoom as vips dzsave writes
     /// it: OpenSeadragon), iiif (IIIF Image API 3.0 level 0: info.json + static tiles), xyz
@@ -136,7 +149,8 @@ pub struct OutputArgs {
     /// See docs/viewers.md. ome-zarr: an OME-Zarr image for microscopy tools (napari, Fiji,
     /// QuPath), -o DIR.ome.zarr or -o FILE.ozx (docs/ome-zarr.md). tiff, ome-tiff and cog: one
     /// pyramidal TIFF file, as -o FILE.tif, -o FILE.ome.tif and -o FILE.cog.tif say
-    /// (docs/tiff.md). Each
+    /// (docs/tiff.md). dicom: a DICOM whole-slide image series, one instance a level, for
+    /// PACS, DICOM viewers and OpenSlide 4 (-o DIR, with --pixel-size; docs/dicom.md). Each
     /// --layout belongs to the -o before it [default: vortex, or what the output's name says].
     #[arg(help_heading = "Outputs", long, value_enum, value_name = "LAYOUT")]
     layout: Vec<OutputLayout>,
@@ -283,6 +297,8 @@ pub enum OutputLayout {
     OmeTiff,
     /// One Cloud Optimized GeoTIFF (GDAL's layout: IFDs first, tile data coarse to fine).
     Cog,
+    /// A DICOM whole-slide image series: one VL Whole Slide Microscopy instance a level.
+    Dicom,
 }
 
 impl OutputLayout {
@@ -297,6 +313,7 @@ impl OutputLayout {
             OutputLayout::Tiff => Format::Tiff(Flavour::Generic),
             OutputLayout::OmeTiff => Format::Tiff(Flavour::Ome),
             OutputLayout::Cog => Format::Tiff(Flavour::Cog),
+            OutputLayout::Dicom => Format::Dicom,
         }
     }
 }
@@ -464,6 +481,7 @@ impl OutputArgs {
             (OutputLayout::Tiff | OutputLayout::OmeTiff | OutputLayout::Cog, _) => {
                 bail!("--layout {} writes one file (-o FILE.tif), not a pack", name_of(layout))
             }
+            (OutputLayout::Dicom, _) => bail!("--layout dicom writes a directory of instances (-o DIR), not a pack"),
             (OutputLayout::OmeZarr, _) => {
                 bail!(
                     "--layout ome-zarr writes a directory or a .ozx file (-o DIR.ome.zarr or -o FILE.ozx), not a pack"
@@ -480,6 +498,19 @@ impl OutputArgs {
                 name_of(other)
             ),
         }
+    }
+
+    /// `--dicom-uid-root` and `--dicom-meta` (the file read and checked).
+    fn dicom(&self) -> Result<DicomSettings> {
+        let meta = match &self.dicom_meta {
+            None => None,
+            Some(path) => {
+                let text = std::fs::read_to_string(path).with_context(|| format!("--dicom-meta {}", path.shown()))?;
+                let meta = DicomMeta::from_json(&text).with_context(|| path.shown().to_string())?;
+                Some(meta)
+            }
+        };
+        Ok(DicomSettings { uid_root: self.dicom_uid_root.clone(), meta })
     }
 
     /// The settings the outputs share, from the flags; `names`: the filename format flag.
@@ -502,6 +533,7 @@ impl OutputArgs {
             iiif_id: self.iiif_id.clone(),
             ome_zarr: ome_zarr::settings(o),
             tiff: TiffSettings { bigtiff: if self.bigtiff { BigTiff::Always } else { BigTiff::Auto } },
+            dicom: self.dicom()?,
             pack: self.pack_layout.options()?,
             keep_icc: carried.icc,
             geo: carried.geo,
@@ -684,6 +716,17 @@ fn report(a: &OutputArgs, layout: &str, done: &Finished, dest: &Path, pack: Opti
 
 /// A run of one output: its summary as `split` has always printed it.
 fn report_one(a: &OutputArgs, done: &Finished, wrote: &Wrote) {
+    if let Some(dicom) = &wrote.dicom {
+        if a.run.json {
+            let mut doc = report::summary_value(done, wrote.format.name(), &wrote.path, None);
+            doc["dicom"] = report::dicom_json(dicom);
+            say!("{doc}");
+        } else if !a.run.quiet {
+            say!("{}", report::dicom_line(dicom));
+            say!("{}", report::summary_line(done, &wrote.path));
+        }
+        return;
+    }
     if let Some(tiff) = &wrote.tiff {
         if a.run.json {
             let mut doc = report::summary_value(done, wrote.format.name(), &wrote.path, None);
@@ -731,6 +774,9 @@ fn report_all(a: &OutputArgs, done: &Finished, all: &[Wrote]) {
                 if let Some(t) = &w.tiff {
                     doc["tiff"] = report::tiff_json(t);
                 }
+                if let Some(d) = &w.dicom {
+                    doc["dicom"] = report::dicom_json(d);
+                }
                 doc
             })
             .collect();
@@ -755,6 +801,9 @@ fn report_all(a: &OutputArgs, done: &Finished, all: &[Wrote]) {
             }
             if let Some(t) = &w.tiff {
                 say!("{}", report::tiff_line(t));
+            }
+            if let Some(d) = &w.dicom {
+                say!("{}", report::dicom_line(d));
             }
             say!("{}: {}", w.format, report::summary_line(&each(w), &w.path));
             if a.run.verbose {

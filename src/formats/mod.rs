@@ -8,11 +8,13 @@
 //!   from a directory or a zip archive.
 //! - [`pmtiles`]: one PMTiles v3 archive.
 //! - [`ome_zarr`]: an OME-Zarr image, 0.4 or 0.5, a directory or a `.ozx`.
+//! - [`dicom`]: a DICOM whole-slide image series, one instance a level.
 //! - [`tiff`]: a pyramidal TIFF in one file: OME-TIFF, or the generic pyramid OpenSlide and
 //!   libvips read.
 //!
 //! A new format is one folder here and one arm of [`crate::outputs::Format`].
 
+pub mod dicom;
 pub mod ome_zarr;
 pub mod pack;
 pub mod pmtiles;

@@ -34,6 +34,8 @@ pub enum Product {
     Pmtiles,
     /// A pyramidal TIFF or OME-TIFF (`split -o FILE.tif`, `-o FILE.ome.tif`).
     Tiff,
+    /// A DICOM whole-slide image series (`split --layout dicom -o DIR`).
+    Dicom,
 }
 
 /// The largest report or `info.json` read to recognise it; ours are far smaller.
@@ -43,7 +45,7 @@ impl Product {
     /// Whether the product is a directory (a tile directory, frames, a viewer layout,
     /// OME-Zarr) rather than one file.
     pub(crate) fn is_dir(self) -> bool {
-        matches!(self, Product::TileDir | Product::Frames | Product::Viewer(_) | Product::OmeZarr)
+        matches!(self, Product::TileDir | Product::Frames | Product::Viewer(_) | Product::OmeZarr | Product::Dicom)
     }
 
     /// The product as the messages name it.
@@ -60,6 +62,7 @@ impl Product {
             Product::Ozx => "a zipped OME-Zarr image",
             Product::Pmtiles => "a PMTiles archive",
             Product::Tiff => "a pyramidal TIFF",
+            Product::Dicom => "a DICOM series",
         }
     }
 
@@ -76,6 +79,7 @@ impl Product {
             Product::Ozx => recognise_ozx(path),
             Product::Pmtiles => recognise_pmtiles(path),
             Product::Tiff => recognise_tiff(path),
+            Product::Dicom => recognise_dicom(path),
         }
     }
 }
@@ -120,6 +124,31 @@ fn recognise_tiff(path: &Path) -> Result<(), String> {
         },
         _ => Err("a file that is not a TIFF".into()),
     }
+}
+
+/// An empty directory, or one holding only the instances a DICOM output names
+/// (`level-N.dcm`), each a DICOM Part-10 file whose File Meta names this program as its
+/// writer (Implementation Version Name `VORTEX_TILER`, within the first 1 KiB).
+fn recognise_dicom(dir: &Path) -> Result<(), String> {
+    for entry in entries(dir)? {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        let numbered = name.strip_prefix("level-").and_then(|n| n.strip_suffix(".dcm"));
+        if !entry.file_type().is_ok_and(|t| t.is_file())
+            || !numbered.is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+        {
+            return Err(format!("holds {name}, which is not one of its instances"));
+        }
+        let mut head = Vec::with_capacity(1024);
+        fs::File::open(entry.path())
+            .and_then(|f| f.take(1024).read_to_end(&mut head))
+            .map_err(|e| format!("unreadable ({e})"))?;
+        let ours = head.get(128..132) == Some(b"DICM") && head.windows(12).any(|w| w == b"VORTEX_TILER");
+        if !ours {
+            return Err(format!("holds {name}, a file this tool did not write"));
+        }
+    }
+    Ok(())
 }
 
 fn recognise_report(path: &Path) -> Result<(), String> {

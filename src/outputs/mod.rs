@@ -41,6 +41,8 @@ pub enum Format {
     OmeZarr,
     /// One pyramidal TIFF file: OME-TIFF or the generic pyramid (docs/tiff.md).
     Tiff(Flavour),
+    /// A DICOM whole-slide image series: a directory of one instance a level (docs/dicom.md).
+    Dicom,
 }
 
 impl Format {
@@ -53,6 +55,7 @@ impl Format {
             Format::Pmtiles => "pmtiles",
             Format::OmeZarr => "ome-zarr",
             Format::Tiff(flavour) => flavour.name(),
+            Format::Dicom => "dicom",
         }
     }
 
@@ -85,7 +88,7 @@ impl std::fmt::Display for Format {
 pub struct Output {
     /// What is written.
     pub format: Format,
-    /// Where: a directory for the directory layouts and OME-Zarr, a file for the others.
+    /// Where: a directory for the directory layouts, OME-Zarr and DICOM, a file for the others.
     pub path: PathBuf,
 }
 
@@ -138,6 +141,8 @@ pub struct Settings {
     pub ome_zarr: OmeZarrSettings,
     /// A TIFF's own settings.
     pub tiff: TiffSettings,
+    /// A DICOM series' own settings.
+    pub dicom: DicomSettings,
     /// How a pack's bytes are laid out.
     pub pack: vortex_pack::WriteOptions,
     /// The source's ICC profile, where the texels keep its colours (`--keep-icc`): in a tile
@@ -159,6 +164,15 @@ pub struct OmeZarrSettings {
     pub shard_chunks: Option<u32>,
     /// The physical side of a source pixel.
     pub pixel_size: Option<PixelSize>,
+}
+
+/// What only DICOM outputs read (docs/dicom.md).
+#[derive(Clone, Debug, Default)]
+pub struct DicomSettings {
+    /// The root the series' UIDs are made under (`--dicom-uid-root`) [default: 2.25, UUIDs].
+    pub uid_root: Option<String>,
+    /// The patient, study and equipment attributes given (`--dicom-meta`).
+    pub meta: Option<crate::formats::dicom::DicomMeta>,
 }
 
 /// What only TIFF outputs read.

@@ -3,9 +3,10 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{Budget, Format, OmeZarrSettings, Output, Settings, TiffSettings};
+use super::{Budget, DicomSettings, Format, OmeZarrSettings, Output, Settings, TiffSettings};
 use crate::background::Background;
 use crate::error::{Result, ShowPath, TilerError};
+use crate::formats::dicom;
 use crate::formats::ome_zarr::{LabelParent, Plane, Spec, label_parent};
 use crate::formats::ome_zarr::{OmeZarrPlan, OmeZarrRequested};
 use crate::formats::tiff::{self, BigTiff, Compression, Flavour};
@@ -55,6 +56,7 @@ pub(super) enum Work {
     Pmtiles { name: String },
     OmeZarr { spec: Box<Spec>, parent: Option<LabelParent> },
     Tiff { spec: Box<tiff::Spec> },
+    Dicom { spec: Box<dicom::Spec> },
 }
 
 impl Plan {
@@ -108,6 +110,7 @@ impl Plan {
                 Format::Pmtiles => for_viewer(output, Viewer::Xyz, &own, &at)?,
                 Format::OmeZarr => ome_zarr(output, &own, &at, planes.clone())?,
                 Format::Tiff(flavour) => tiff_output(output, flavour, &own, &at)?,
+                Format::Dicom => dicom_output(output, &own, &at)?,
             });
         }
         Ok(Plan { outputs: planned, budget, pack: settings.pack })
@@ -171,6 +174,7 @@ struct Own {
     iiif_id: Option<String>,
     ome_zarr: OmeZarrSettings,
     tiff: TiffSettings,
+    dicom: DicomSettings,
     keep_icc: Option<Vec<u8>>,
     /// The source's georeferencing, for a generic TIFF or a COG.
     geo: Option<crate::source::GeoTags>,
@@ -204,6 +208,7 @@ fn reads(format: Format, setting: Setting) -> bool {
         Format::Pmtiles => matches!(setting, Name | ImageCodec),
         Format::OmeZarr => matches!(setting, Name | ZstdLevel),
         Format::Tiff(_) => matches!(setting, Name | ImageCodec | ZstdLevel),
+        Format::Dicom => matches!(setting, Name | ImageCodec),
     }
 }
 
@@ -234,10 +239,13 @@ impl Own {
             ome_zarr: match format {
                 Format::OmeZarr => s.ome_zarr.clone(),
                 // A TIFF records the pixel size (OME's PhysicalSize, the resolution tags).
-                Format::Tiff(_) => OmeZarrSettings { pixel_size: s.ome_zarr.pixel_size, ..OmeZarrSettings::default() },
+                Format::Tiff(_) | Format::Dicom => {
+                    OmeZarrSettings { pixel_size: s.ome_zarr.pixel_size, ..OmeZarrSettings::default() }
+                }
                 _ => OmeZarrSettings::default(),
             },
             tiff: if matches!(format, Format::Tiff(_)) { s.tiff } else { TiffSettings::default() },
+            dicom: if format == Format::Dicom { s.dicom.clone() } else { DicomSettings::default() },
             keep_icc: s.keep_icc.clone().filter(|_| gets(Setting::KeepIcc)),
             // Not a flag: an output that has nowhere to put it ignores it.
             geo: s.geo.clone().filter(|_| matches!(format, Format::Tiff(Flavour::Generic | Flavour::Cog))),
@@ -252,6 +260,14 @@ fn refuse_unread(s: &Settings, outputs: &[Output]) -> Result<()> {
     if s.tiff.bigtiff != BigTiff::Auto && !tiff {
         return Err(options("--bigtiff belongs to a TIFF output (-o FILE.tif or FILE.ome.tif)".into()));
     }
+    let dicom = outputs.iter().any(|o| o.format == Format::Dicom);
+    for (given, flag) in [(s.dicom.uid_root.is_some(), "--dicom-uid-root"), (s.dicom.meta.is_some(), "--dicom-meta")] {
+        if given && !dicom {
+            return Err(options(format!("{flag} belongs to --layout dicom")));
+        }
+    }
+    // A TIFF and a DICOM series record the pixel size too.
+    let tiff = tiff || dicom;
     if !outputs.iter().any(|o| o.format == Format::OmeZarr) {
         let z = &s.ome_zarr;
         for (given, flag) in [
@@ -271,6 +287,7 @@ fn refuse_unread(s: &Settings, outputs: &[Output]) -> Result<()> {
         let what = match o.format {
             Format::Pmtiles => "a PMTiles archive",
             Format::Tiff(_) => "a TIFF output (its ICC tag is not written yet)",
+            Format::Dicom => "a DICOM series (its frames state sRGB)",
             _ => "OME-Zarr",
         };
         return Err(options(format!(
@@ -566,6 +583,148 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
     Ok(Planned { output, opts, layout, changed: None, claim, work: Work::Tiff { spec: Box::new(spec) } })
 }
 
+/// A DICOM whole-slide image series (docs/dicom.md): JPEG baseline frames without border,
+/// whole at the edges, from the encoders or copied from a JPEG-tiled source; the pixel size
+/// is needed (the IOD states the pixel spacing).
+fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
+    let t = &own.tiles;
+    for (given, flag) in [
+        (own.overlap.is_some(), "--overlap"),
+        (own.iiif_id.is_some(), "--iiif-id"),
+        (t.filename_format.is_some(), "--filename-format"),
+        (t.png_level.is_some(), "--png-compression"),
+        (t.bc7_effort.is_some(), "--bc7-effort"),
+        (t.zstd_level.is_some(), "--zstd-level"),
+    ] {
+        if given {
+            return Err(options(format!("{flag} does not apply to --layout dicom, a series of JPEG frames")));
+        }
+    }
+    if let Some(border) = t.border.filter(|b| *b != 0) {
+        return Err(options(format!("--border {border}: DICOM frames have no border (each pixel is stored once)")));
+    }
+    match t.codec.unwrap_or(CodecChoice::Auto) {
+        CodecChoice::Auto | CodecChoice::Jpeg => {}
+        other => {
+            return Err(options(format!(
+                "--codec {}: DICOM frames are JPEG baseline here (lossless frames are not written yet)",
+                other.name()
+            )));
+        }
+    }
+    let source = at.header.layout;
+    if t.tile_depth.unwrap_or(source.depth) != Depth::U8 || t.filter.is_some_and(|f| f.is_label()) {
+        return Err(options(format!(
+            "{}: DICOM frames are JPEG baseline, 8-bit samples; a {source} image needs lossless frames, which are not written yet (--tile-type u8 stores it in 8 bits)",
+            output.path.shown()
+        )));
+    }
+    if source.channels.has_alpha() && !t.flatten {
+        return Err(options(format!(
+            "{}: a {source} image has alpha, which JPEG frames cannot hold: add --flatten (over --background, white by default)",
+            output.path.shown()
+        )));
+    }
+    let Some(pixel_size) = own.ome_zarr.pixel_size else {
+        return Err(options(format!(
+            "{}: a DICOM whole-slide image states its pixel spacing (a type 1 attribute): give --pixel-size, e.g. 0.25um",
+            output.path.shown()
+        )));
+    };
+    let requested = Requested {
+        tile_size: Some(t.tile_size.unwrap_or(dicom::DEFAULT_TILE_SIZE)),
+        border: Some(0),
+        codec: Some(CodecChoice::Jpeg),
+        max_memory: Some(at.budget.bytes()),
+        filename_format: None,
+        zstd_level: None,
+        ..t.clone()
+    };
+    let (opts, _) = settings::resolve(&requested, None, source)?;
+    let layout = opts.layout(at.header.width, at.header.height)?;
+    let stored = opts.codec.stored_layout(source, opts.flatten, opts.tile_depth)?;
+    let crate::codec::Codec::Jpeg { quality, subsampling } = opts.codec else {
+        return Err(TilerError::Internal(format!("DICOM frames from --codec {}", opts.codec.name())));
+    };
+    let photometric = dicom::Photometric::of(stored.channels, subsampling);
+    let uid_root = own.dicom.uid_root.clone().unwrap_or_else(|| dicom::DEFAULT_ROOT.to_string());
+    dicom::check_root(&uid_root)?;
+    let meta = own.dicom.meta.clone().unwrap_or_default();
+    let name = at.name(own);
+    // What the UIDs are a hash of: the input as it is, and what shapes the pixels and the
+    // attributes.
+    let input = crate::shard::fingerprint::fingerprint(at.input).unwrap_or_else(|_| at.input.display().to_string());
+    let given: Vec<String> = meta.iter().map(|(k, v)| format!("{k}={v}")).collect();
+    let identity = format!(
+        "input {input}; {}x{} tile {} levels {}; jpeg q{quality} {}; {stored}; filter {:?}; background {:?}; pixel {}; name {name}; {}",
+        layout.width,
+        layout.height,
+        layout.tile_size,
+        layout.lod_count,
+        photometric.name(),
+        opts.filter,
+        opts.background,
+        micrometres(pixel_size),
+        given.join("; ")
+    );
+    let made = match meta.get("AcquisitionDateTime") {
+        Some(dt) => date_time(dt),
+        None => modified(at.input),
+    };
+    let spec = dicom::Spec {
+        layout,
+        stored,
+        photometric,
+        pixel_mm: dicom::millimetres(micrometres(pixel_size)),
+        name,
+        uid_root,
+        identity,
+        made,
+        meta,
+    };
+    spec.check()?;
+    at.limits().check_pyramid(&layout, false)?;
+    at.limits()
+        .check_memory(&format!("the index of the DICOM series' {} frames", layout.total_tiles()), spec.index_bytes())?;
+    let claim = at.claim(&output.path, Product::Dicom)?;
+    Ok(Planned { output, opts, layout, changed: None, claim, work: Work::Dicom { spec: Box::new(spec) } })
+}
+
+/// A DICOM date-time given (YYYY at least) as the 14 digits YYYYMMDDHHMMSS, the parts not
+/// given the earliest.
+fn date_time(given: &str) -> String {
+    let whole = given.split('.').next().unwrap_or_default();
+    let earliest = "00000101000000";
+    format!("{whole}{}", &earliest[whole.len().min(14)..])
+}
+
+/// The modification time of `path` as YYYYMMDDHHMMSS in UTC; the epoch where it has none.
+fn modified(path: &Path) -> String {
+    let seconds = std::fs::metadata(path)
+        .and_then(|m| m.modified())
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map_or(0, |d| d.as_secs());
+    let (days, rest) = (seconds / 86_400, seconds % 86_400);
+    let (y, m, d) = civil(days as i64);
+    format!("{y:04}{m:02}{d:02}{:02}{:02}{:02}", rest / 3600, rest % 3600 / 60, rest % 60)
+}
+
+/// The proleptic Gregorian date `days` after 1970-01-01 (the days-from-civil inverse of the
+/// era arithmetic: 400-year eras of 146097 days, years starting in March).
+fn civil(days: i64) -> (i64, u32, u32) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    (y, m, d)
+}
+
 /// A pixel size in micrometres.
 fn micrometres(p: crate::formats::ome_zarr::PixelSize) -> f64 {
     let per = match p.unit {
@@ -611,6 +770,14 @@ mod tests {
     const XYZ: Format = Format::Viewer(Viewer::Xyz);
     const TIFF: Format = Format::Tiff(Flavour::Generic);
     const OME_TIFF: Format = Format::Tiff(Flavour::Ome);
+    const DICOM: Format = Format::Dicom;
+
+    fn with_pixel_size(f: impl FnOnce(&mut Settings)) -> Settings {
+        with(|s| {
+            s.ome_zarr.pixel_size = Some("0.5um".parse().unwrap());
+            f(s);
+        })
+    }
 
     /// Every refusal `split` makes of the outputs it is given, as a table: the outputs, the
     /// settings, and what the message must say.
@@ -690,6 +857,13 @@ mod tests {
             (&[(OME_TIFF, "a.ome.tif")], with(|s| s.tiles.filename_format = Some("%1$s.png".into())), "ome-tiff"),
             (&[(Format::Pack, "a.vtpk")], with(|s| s.tiff.bigtiff = BigTiff::Always), "--bigtiff belongs to a TIFF"),
             (&[(TIFF, "a.tif")], with(|s| s.keep_icc = Some(vec![0; 200])), "its ICC tag is not written yet"),
+            (&[(DICOM, "a")], Settings::default(), "give --pixel-size"),
+            (&[(DICOM, "a")], with_pixel_size(|s| s.tiles.codec = Some(CodecChoice::Zstd)), "JPEG baseline"),
+            (&[(DICOM, "a")], with_pixel_size(|s| s.tiles.border = Some(1)), "DICOM frames have no border"),
+            (&[(DICOM, "a")], with_pixel_size(|s| s.tiles.tile_depth = Some(Depth::U16)), "8-bit samples"),
+            (&[(DICOM, "a")], with_pixel_size(|s| s.keep_icc = Some(vec![0; 200])), "a DICOM series"),
+            (&[(TIFF, "a.tif")], with(|s| s.dicom.uid_root = Some("1.2".into())), "--dicom-uid-root belongs"),
+            (&[(DICOM, "a")], with_pixel_size(|s| s.dicom.uid_root = Some("1.2.".into())), "--dicom-uid-root"),
         ];
         for (outputs, settings, want) in cases {
             match plan(outputs, settings) {
@@ -765,6 +939,25 @@ mod tests {
         let Work::Tiff { spec } = &p.outputs[0].work else { panic!() };
         assert_eq!(spec.compression, Compression::Deflate { level: 6 });
         assert_eq!(spec.stored, PixelLayout::new(Channels::Rgba, Depth::U16));
+    }
+
+    /// A DICOM series beside Deep Zoom of the same tiles shares its pyramid; its frames are
+    /// JPEG at the run's subsampling (YBR_FULL_422 for 4:2:0); the pixel size in mm.
+    #[test]
+    fn a_dicom_series_reads_the_run_s_settings() {
+        let settings = with_pixel_size(|s| {
+            s.overlap = Some(0);
+            s.tiles.tile_size = Some(256);
+        });
+        let p = plan(&[(DICOM, "a"), (DZI, "web")], settings).unwrap();
+        let [dicom, dzi] = &p.outputs[..] else { panic!("two outputs") };
+        assert_eq!(dzi.opts, SplitOptions { down_to_one_texel: true, ..dicom.opts.clone() }, "one pyramid");
+        let Work::Dicom { spec } = &dicom.work else { panic!("a DICOM series' work") };
+        assert_eq!(spec.photometric, dicom::Photometric::YbrFull422);
+        assert_eq!(spec.pixel_mm, 0.0005);
+        assert_eq!((spec.layout.tile_size, spec.layout.lod_count), (256, 3));
+        assert_eq!(spec.name, "slide");
+        assert_eq!(spec.uid_root, dicom::DEFAULT_ROOT);
     }
 
     #[test]

@@ -8,6 +8,7 @@ use super::plan::{Planned, Work};
 use super::{Budget, Format, Plan};
 use crate::background::Background;
 use crate::error::{Result, TilerError};
+use crate::formats::dicom::{DicomSink, DicomSummary};
 use crate::formats::ome_zarr::OmeZarrSink;
 use crate::formats::pack::PackSink;
 use crate::formats::pmtiles::PmtilesSink;
@@ -51,6 +52,8 @@ pub struct Wrote {
     pub pmtiles: Option<PmtilesSummary>,
     /// A TIFF's own figures.
     pub tiff: Option<TiffSummary>,
+    /// A DICOM series' own figures.
+    pub dicom: Option<DicomSummary>,
 }
 
 /// An output being written: its plan and its sink.
@@ -65,6 +68,7 @@ enum Sink {
     Pmtiles(PmtilesSink),
     OmeZarr(Box<OmeZarrSink>),
     Tiff(TiffSink),
+    Dicom(DicomSink),
 }
 
 impl Open {
@@ -89,6 +93,7 @@ impl Open {
             }
             Work::OmeZarr { spec, .. } => Sink::OmeZarr(Box::new(OmeZarrSink::create(claim, (**spec).clone())?)),
             Work::Tiff { spec } => Sink::Tiff(TiffSink::create(&claim.path, (**spec).clone())?),
+            Work::Dicom { spec } => Sink::Dicom(DicomSink::create(claim, (**spec).clone())?),
         };
         Ok(Open { planned, sink })
     }
@@ -100,6 +105,7 @@ impl Open {
             Sink::Pmtiles(s) => s,
             Sink::OmeZarr(s) => s.as_ref(),
             Sink::Tiff(s) => s,
+            Sink::Dicom(s) => s,
         }
     }
 
@@ -124,7 +130,7 @@ impl Open {
                 planned.output.path.display()
             )));
         }
-        let (mut pack, mut pmtiles, mut tiff) = (None, None, None);
+        let (mut pack, mut pmtiles, mut tiff, mut dicom) = (None, None, None, None);
         match (sink, &planned.work) {
             (Sink::Dir(dir), Work::Tiles { info, .. }) => dir.finish(info)?,
             (Sink::Dir(dir), _) => dir.finish_viewer()?,
@@ -151,6 +157,7 @@ impl Open {
                 }
             }
             (Sink::Tiff(sink), _) => tiff = Some(sink.finish()?),
+            (Sink::Dicom(sink), _) => dicom = Some(sink.finish()?),
             _ => return Err(TilerError::Internal("an output's sink is not its format's".into())),
         }
         // The pyramid's summary in this output's terms: its levels, texels, tiles and bytes.
@@ -176,6 +183,7 @@ impl Open {
             pack,
             pmtiles,
             tiff,
+            dicom,
         })
     }
 }

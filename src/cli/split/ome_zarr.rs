@@ -31,7 +31,8 @@ pub struct OmeZarrArgs {
 
     /// --layout ome-zarr: the physical side of a source pixel, e.g. 0.25um or 250nm, written
     /// as the levels' scale and the axes' unit [default: none: scales in pixels, no unit].
-    /// A TIFF output records it too (OME's PhysicalSizeX/Y, the resolution tags).
+    /// A TIFF output records it too (OME's PhysicalSizeX/Y, the resolution tags), and a DICOM
+    /// series needs it (its pixel spacing and imaged volume).
     #[arg(long, value_name = "SIZE")]
     pixel_size: Option<PixelSize>,
 }

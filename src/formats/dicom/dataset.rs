@@ -1,0 +1,409 @@
+//! One level's data set: every module the VL Whole Slide Microscopy Image IOD (PS3.3 A.32.8)
+//! requires, built as dicom-rs's in-memory object and written by it (preamble, File Meta,
+//! data set in explicit VR little endian) up to where the Pixel Data element starts, which
+//! `frames` writes.
+//!
+//! What is not known is not invented: the patient and study attributes are empty (type 2)
+//! unless `--dicom-meta` gives them; the equipment's type-1 attributes name this program
+//! where the user names no scanner; the slide's identifiers are its name. docs/dicom.md lists
+//! every attribute.
+
+use dicom_core::value::{C, DataSetSequence};
+use dicom_core::{DataElement, PrimitiveValue, Tag, VR};
+use dicom_dictionary_std::tags;
+use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
+
+use super::frames::Offsets;
+use super::meta::{KEYWORDS, Vr};
+use super::uid::{self, Uids};
+use super::{JPEG_BASELINE, Photometric, SOP_CLASS, Spec};
+use crate::error::{Result, TilerError};
+
+/// The name the files give their writer (the File Meta's Implementation Version Name, and
+/// the default Manufacturer and model).
+const PROGRAM: &str = "vortex-tiler";
+
+/// The Image Type (and frame type) of a level: the full resolution as scanned, the others
+/// derived from it by resampling.
+fn image_type(lod: u32) -> [&'static str; 4] {
+    match lod {
+        0 => ["ORIGINAL", "PRIMARY", "VOLUME", "NONE"],
+        _ => ["DERIVED", "PRIMARY", "VOLUME", "RESAMPLED"],
+    }
+}
+
+/// A decimal string of at most 16 characters (DS), as exact as that allows.
+fn ds(v: f64) -> String {
+    for decimals in (0..=12).rev() {
+        let s = format!("{v:.decimals$}");
+        let s = if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.').to_string() } else { s };
+        if s.len() <= 16 {
+            return s;
+        }
+    }
+    format!("{v:.0}")
+}
+
+type Object = InMemDicomObject;
+
+fn put(o: &mut Object, tag: Tag, vr: VR, value: impl Into<PrimitiveValue>) {
+    o.put(DataElement::new(tag, vr, value.into()));
+}
+
+fn strs(values: &[&str]) -> PrimitiveValue {
+    PrimitiveValue::Strs(values.iter().map(|s| s.to_string()).collect::<C<String>>())
+}
+
+fn empty(o: &mut Object, tag: Tag, vr: VR) {
+    o.put(DataElement::new(tag, vr, PrimitiveValue::Empty));
+}
+
+fn sequence(o: &mut Object, tag: Tag, items: Vec<Object>) {
+    o.put(DataElement::new(tag, VR::SQ, DataSetSequence::from(items)));
+}
+
+fn item(build: impl FnOnce(&mut Object)) -> Object {
+    let mut o = Object::new_empty();
+    build(&mut o);
+    o
+}
+
+/// A coded concept (Code Sequence Macro).
+fn code(value: &str, scheme: &str, meaning: &str) -> Object {
+    item(|o| {
+        put(o, tags::CODE_VALUE, VR::SH, value);
+        put(o, tags::CODING_SCHEME_DESIGNATOR, VR::SH, scheme);
+        put(o, tags::CODE_MEANING, VR::LO, meaning);
+    })
+}
+
+/// The sRGB profile the colour frames' optical path states (the pipeline's texels are sRGB),
+/// with its creation date cleared so that the files are the same on every run.
+fn srgb_profile() -> Result<Vec<u8>> {
+    let mut icc = lcms2::Profile::new_srgb()
+        .icc()
+        .map_err(|e| TilerError::Internal(format!("the sRGB profile could not be made: {e}")))?;
+    if icc.len() >= 100 {
+        // dateTimeNumber (bytes 24..36) and the profile ID (84..100, zero: not computed).
+        icc[24..36].fill(0);
+        icc[84..100].fill(0);
+    }
+    Ok(icc)
+}
+
+/// What the data sets of a series share.
+pub(super) struct Series<'a> {
+    spec: &'a Spec,
+    uids: Uids,
+    icc: Option<Vec<u8>>,
+}
+
+impl<'a> Series<'a> {
+    pub fn new(spec: &'a Spec) -> Result<Series<'a>> {
+        let icc = match spec.photometric {
+            Photometric::Monochrome => None,
+            _ => Some(srgb_profile()?),
+        };
+        Ok(Series { spec, uids: Uids::new(&spec.uid_root, &spec.identity), icc })
+    }
+
+    /// The Series Instance UID.
+    pub fn series_uid(&self) -> String {
+        self.uids.of("series")
+    }
+
+    /// The File Meta and data set of level `lod`, up to the Pixel Data element: the Extended
+    /// Offset Table where `offsets` do not fit the Basic one. `frame_bytes`: the level's
+    /// frames as stored, for the compression ratio.
+    pub fn header(&self, lod: u32, offsets: &Offsets, frame_bytes: u64) -> Result<Vec<u8>> {
+        let object = self.dataset(lod, offsets, frame_bytes);
+        let meta = FileMetaTableBuilder::new()
+            .transfer_syntax(JPEG_BASELINE)
+            .implementation_class_uid(uid::implementation())
+            .implementation_version_name(PROGRAM.to_ascii_uppercase().replace('-', "_"));
+        let file = object.with_meta(meta).map_err(|e| TilerError::Internal(format!("DICOM file meta: {e}")))?;
+        let mut bytes = Vec::new();
+        file.write_all(&mut bytes).map_err(|e| TilerError::Internal(format!("DICOM data set of level {lod}: {e}")))?;
+        Ok(bytes)
+    }
+
+    fn dataset(&self, lod: u32, offsets: &Offsets, frame_bytes: u64) -> Object {
+        let s = self.spec;
+        let l = &s.layout;
+        let meta = &s.meta;
+        let (width, height) = l.level_extent(lod);
+        let (columns, rows) = l.grid(lod);
+        let frames = u64::from(columns) * u64::from(rows);
+        let mut o = Object::new_empty();
+        let given = |keyword: &str| meta.get(keyword).map(str::to_string);
+        let date = &s.made[..8];
+        let time = &s.made[8..];
+
+        // SOP Common.
+        put(&mut o, tags::SPECIFIC_CHARACTER_SET, VR::CS, "ISO_IR 192");
+        put(&mut o, tags::SOP_CLASS_UID, VR::UI, SOP_CLASS);
+        put(&mut o, tags::SOP_INSTANCE_UID, VR::UI, self.uids.of(&format!("instance {lod}")));
+        // Patient, General Study, General Series, General Equipment: what the user gave, else
+        // empty (type 2).
+        for &(keyword, (group, element), vr) in KEYWORDS {
+            let tag = Tag(group, element);
+            let vr = vr_of(vr);
+            match (keyword, given(keyword)) {
+                // Written below, in their modules.
+                ("StudyInstanceUID" | "ContainerIdentifier" | "SpecimenIdentifier" | "AcquisitionDateTime", _) => {}
+                ("Manufacturer" | "ManufacturerModelName", None) => put(&mut o, tag, vr, PROGRAM),
+                ("DeviceSerialNumber", None) => put(&mut o, tag, vr, "0"),
+                ("SoftwareVersions", None) => put(&mut o, tag, vr, env!("CARGO_PKG_VERSION")),
+                ("SeriesDescription", None) => put(&mut o, tag, vr, s.name.as_str()),
+                ("SeriesNumber", None) => put(&mut o, tag, vr, "1"),
+                (_, Some(value)) => put(&mut o, tag, vr, value),
+                (
+                    "PatientName"
+                    | "PatientID"
+                    | "PatientBirthDate"
+                    | "PatientSex"
+                    | "StudyID"
+                    | "StudyDate"
+                    | "StudyTime"
+                    | "AccessionNumber"
+                    | "ReferringPhysicianName",
+                    None,
+                ) => empty(&mut o, tag, vr),
+                (_, None) => {}
+            }
+        }
+        let study = given("StudyInstanceUID").unwrap_or_else(|| self.uids.of("study"));
+        put(&mut o, tags::STUDY_INSTANCE_UID, VR::UI, study);
+        put(&mut o, tags::SERIES_INSTANCE_UID, VR::UI, self.series_uid());
+        put(&mut o, tags::MODALITY, VR::CS, "SM");
+        // Frame of Reference: the slide.
+        put(&mut o, tags::FRAME_OF_REFERENCE_UID, VR::UI, self.uids.of("frame of reference"));
+        put(&mut o, tags::POSITION_REFERENCE_INDICATOR, VR::LO, "SLIDE_CORNER");
+        // General Image, Multi-frame Functional Groups.
+        put(&mut o, tags::INSTANCE_NUMBER, VR::IS, (lod + 1).to_string());
+        put(&mut o, tags::CONTENT_DATE, VR::DA, date);
+        put(&mut o, tags::CONTENT_TIME, VR::TM, time);
+        put(&mut o, tags::ACQUISITION_DATE_TIME, VR::DT, given("AcquisitionDateTime").unwrap_or(s.made.clone()));
+        put(&mut o, tags::NUMBER_OF_FRAMES, VR::IS, frames.to_string());
+        put(&mut o, tags::BURNED_IN_ANNOTATION, VR::CS, "NO");
+        put(&mut o, tags::VOLUMETRIC_PROPERTIES, VR::CS, "VOLUME");
+        // Whole Slide Microscopy Image.
+        put(&mut o, tags::IMAGE_TYPE, VR::CS, strs(&image_type(lod)));
+        let (volume_w, volume_h) = (f64::from(l.width) * s.pixel_mm, f64::from(l.height) * s.pixel_mm);
+        put(&mut o, tags::IMAGED_VOLUME_WIDTH, VR::FL, volume_w as f32);
+        put(&mut o, tags::IMAGED_VOLUME_HEIGHT, VR::FL, volume_h as f32);
+        put(&mut o, tags::IMAGED_VOLUME_DEPTH, VR::FL, 1.0f32);
+        put(&mut o, tags::TOTAL_PIXEL_MATRIX_COLUMNS, VR::UL, width);
+        put(&mut o, tags::TOTAL_PIXEL_MATRIX_ROWS, VR::UL, height);
+        put(&mut o, tags::TOTAL_PIXEL_MATRIX_FOCAL_PLANES, VR::UL, 1u32);
+        sequence(
+            &mut o,
+            tags::TOTAL_PIXEL_MATRIX_ORIGIN_SEQUENCE,
+            vec![item(|i| {
+                put(i, tags::X_OFFSET_IN_SLIDE_COORDINATE_SYSTEM, VR::DS, "0");
+                put(i, tags::Y_OFFSET_IN_SLIDE_COORDINATE_SYSTEM, VR::DS, "0");
+            })],
+        );
+        put(&mut o, tags::IMAGE_ORIENTATION_SLIDE, VR::DS, strs(&["0", "-1", "0", "-1", "0", "0"]));
+        put(&mut o, tags::SPECIMEN_LABEL_IN_IMAGE, VR::CS, "NO");
+        put(&mut o, tags::FOCUS_METHOD, VR::CS, "AUTO");
+        put(&mut o, tags::EXTENDED_DEPTH_OF_FIELD, VR::CS, "NO");
+        put(&mut o, tags::DIMENSION_ORGANIZATION_TYPE, VR::CS, "TILED_FULL");
+        // Image Pixel.
+        let p = s.photometric;
+        put(&mut o, tags::SAMPLES_PER_PIXEL, VR::US, p.samples());
+        put(&mut o, tags::PHOTOMETRIC_INTERPRETATION, VR::CS, p.name());
+        if p.samples() > 1 {
+            put(&mut o, tags::PLANAR_CONFIGURATION, VR::US, 0u16);
+        }
+        let side = l.tile_size as u16;
+        put(&mut o, tags::ROWS, VR::US, side);
+        put(&mut o, tags::COLUMNS, VR::US, side);
+        put(&mut o, tags::BITS_ALLOCATED, VR::US, 8u16);
+        put(&mut o, tags::BITS_STORED, VR::US, 8u16);
+        put(&mut o, tags::HIGH_BIT, VR::US, 7u16);
+        put(&mut o, tags::PIXEL_REPRESENTATION, VR::US, 0u16);
+        if p == Photometric::Monochrome {
+            put(&mut o, tags::PRESENTATION_LUT_SHAPE, VR::CS, "IDENTITY");
+            put(&mut o, tags::RESCALE_INTERCEPT, VR::DS, "0");
+            put(&mut o, tags::RESCALE_SLOPE, VR::DS, "1");
+        }
+        put(&mut o, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "01");
+        let ratio = (frames * s.raw_frame_bytes()) as f64 / frame_bytes.max(1) as f64;
+        put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_RATIO, VR::DS, ds(ratio));
+        put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_METHOD, VR::CS, "ISO_10918_1");
+        // Multi-frame Dimension: the frames' places follow from TILED_FULL.
+        let organisation = self.uids.of("dimension organisation");
+        sequence(
+            &mut o,
+            tags::DIMENSION_ORGANIZATION_SEQUENCE,
+            vec![item(|i| put(i, tags::DIMENSION_ORGANIZATION_UID, VR::UI, organisation.clone()))],
+        );
+        let index = |pointer: Tag| {
+            item(|i| {
+                put(i, tags::DIMENSION_ORGANIZATION_UID, VR::UI, organisation.clone());
+                put(i, tags::DIMENSION_INDEX_POINTER, VR::AT, pointer);
+                let group = tags::PLANE_POSITION_SLIDE_SEQUENCE;
+                put(i, tags::FUNCTIONAL_GROUP_POINTER, VR::AT, group);
+            })
+        };
+        sequence(
+            &mut o,
+            tags::DIMENSION_INDEX_SEQUENCE,
+            vec![
+                index(tags::COLUMN_POSITION_IN_TOTAL_IMAGE_PIXEL_MATRIX),
+                index(tags::ROW_POSITION_IN_TOTAL_IMAGE_PIXEL_MATRIX),
+            ],
+        );
+        // Specimen: the slide, named by the user or by its name.
+        let container = given("ContainerIdentifier").unwrap_or_else(|| s.name.clone());
+        put(&mut o, tags::CONTAINER_IDENTIFIER, VR::LO, container);
+        sequence(&mut o, tags::ISSUER_OF_THE_CONTAINER_IDENTIFIER_SEQUENCE, vec![]);
+        sequence(&mut o, tags::CONTAINER_TYPE_CODE_SEQUENCE, vec![code("433466003", "SCT", "Microscope slide")]);
+        let specimen = given("SpecimenIdentifier").unwrap_or_else(|| s.name.clone());
+        let specimen_uid = self.uids.of("specimen");
+        sequence(
+            &mut o,
+            tags::SPECIMEN_DESCRIPTION_SEQUENCE,
+            vec![item(|i| {
+                put(i, tags::SPECIMEN_IDENTIFIER, VR::LO, specimen);
+                put(i, tags::SPECIMEN_UID, VR::UI, specimen_uid);
+                sequence(i, tags::ISSUER_OF_THE_SPECIMEN_IDENTIFIER_SEQUENCE, vec![]);
+                sequence(i, tags::SPECIMEN_PREPARATION_SEQUENCE, vec![]);
+            })],
+        );
+        // Acquisition Context: none known.
+        sequence(&mut o, tags::ACQUISITION_CONTEXT_SEQUENCE, vec![]);
+        // Optical Path: one, brightfield, full spectrum.
+        put(&mut o, tags::NUMBER_OF_OPTICAL_PATHS, VR::UL, 1u32);
+        let icc = self.icc.clone();
+        sequence(
+            &mut o,
+            tags::OPTICAL_PATH_SEQUENCE,
+            vec![item(|i| {
+                put(i, tags::OPTICAL_PATH_IDENTIFIER, VR::SH, "1");
+                sequence(
+                    i,
+                    tags::ILLUMINATION_TYPE_CODE_SEQUENCE,
+                    vec![code("111744", "DCM", "Brightfield illumination")],
+                );
+                sequence(i, tags::ILLUMINATION_COLOR_CODE_SEQUENCE, vec![code("414298005", "SCT", "Full Spectrum")]);
+                if let Some(icc) = icc {
+                    put(i, tags::ICC_PROFILE, VR::OB, PrimitiveValue::U8(icc.into()));
+                    put(i, tags::COLOR_SPACE, VR::CS, "SRGB");
+                }
+            })],
+        );
+        // Shared Functional Groups: pixel measures, optical path, frame type.
+        let spacing =
+            (f64::from(l.height) * s.pixel_mm / f64::from(height), f64::from(l.width) * s.pixel_mm / f64::from(width));
+        let frame_type = image_type(lod);
+        sequence(
+            &mut o,
+            tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE,
+            vec![item(|g| {
+                sequence(
+                    g,
+                    tags::PIXEL_MEASURES_SEQUENCE,
+                    vec![item(|i| {
+                        put(i, tags::PIXEL_SPACING, VR::DS, strs(&[&ds(spacing.0), &ds(spacing.1)]));
+                        // Unknown: the nominal 1 um of Imaged Volume Depth, in mm.
+                        put(i, tags::SLICE_THICKNESS, VR::DS, "0.001");
+                    })],
+                );
+                sequence(
+                    g,
+                    tags::OPTICAL_PATH_IDENTIFICATION_SEQUENCE,
+                    vec![item(|i| put(i, tags::OPTICAL_PATH_IDENTIFIER, VR::SH, "1"))],
+                );
+                sequence(
+                    g,
+                    tags::WHOLE_SLIDE_MICROSCOPY_IMAGE_FRAME_TYPE_SEQUENCE,
+                    vec![item(|i| put(i, tags::FRAME_TYPE, VR::CS, strs(&frame_type)))],
+                );
+            })],
+        );
+        // Where the frames lie, past the Basic Offset Table's reach.
+        if !offsets.fit_basic() {
+            put(
+                &mut o,
+                tags::EXTENDED_OFFSET_TABLE,
+                VR::OV,
+                PrimitiveValue::U64(offsets.offsets.iter().copied().collect()),
+            );
+            let lengths = offsets.lengths.iter().copied().collect();
+            put(&mut o, tags::EXTENDED_OFFSET_TABLE_LENGTHS, VR::OV, PrimitiveValue::U64(lengths));
+        }
+        o
+    }
+}
+
+fn vr_of(vr: Vr) -> VR {
+    match vr {
+        Vr::Pn => VR::PN,
+        Vr::Lo => VR::LO,
+        Vr::Sh => VR::SH,
+        Vr::Cs => VR::CS,
+        Vr::Da => VR::DA,
+        Vr::Tm => VR::TM,
+        Vr::Dt => VR::DT,
+        Vr::Ui => VR::UI,
+        Vr::Is => VR::IS,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec() -> Spec {
+        let mut layout = crate::layout::Layout::new(600, 300, 256, 0).unwrap();
+        layout.lod_count = 2;
+        Spec {
+            layout,
+            stored: crate::pixel::PixelLayout::new(crate::pixel::Channels::Rgb, crate::pixel::Depth::U8),
+            photometric: Photometric::YbrFull422,
+            pixel_mm: 0.0005,
+            name: "slide".into(),
+            uid_root: uid::DEFAULT_ROOT.into(),
+            identity: "test".into(),
+            made: "20260102030405".into(),
+            meta: Default::default(),
+        }
+    }
+
+    /// Where the frames' offsets fit 32 bits the data set has no Extended Offset Table;
+    /// past them it has both its elements, OV, just before where Pixel Data goes; the header
+    /// is the same for the same spec (the sRGB profile's date cleared).
+    #[test]
+    fn the_extended_offset_table_comes_where_offsets_pass_32_bits() {
+        let spec = spec();
+        spec.check().unwrap();
+        let series = Series::new(&spec).unwrap();
+        let near = Offsets { offsets: vec![0, 10, 20], lengths: vec![2, 2, 2] };
+        let far = Offsets { offsets: vec![0, 1 << 31, 1 << 33], lengths: vec![2, 2, 2] };
+        let basic = series.header(0, &near, 6).unwrap();
+        assert_eq!(basic, Series::new(&spec).unwrap().header(0, &near, 6).unwrap(), "the same bytes");
+        assert_eq!(&basic[128..132], b"DICM");
+        let eot = [0xE0, 0x7F, 0x01, 0x00, b'O', b'V'];
+        let find = |bytes: &[u8], what: &[u8]| bytes.windows(what.len()).position(|w| w == what);
+        assert_eq!(find(&basic, &eot), None);
+        let extended = series.header(0, &far, 6).unwrap();
+        let at = find(&extended, &eot).expect("the Extended Offset Table");
+        let lengths = find(&extended, &[0xE0, 0x7F, 0x02, 0x00, b'O', b'V']).expect("its lengths");
+        // OV: 2 reserved bytes, a 32-bit length, then the 64-bit offsets.
+        let value = &extended[at + 12..at + 12 + 24];
+        assert_eq!(value[8..16], (1u64 << 31).to_le_bytes());
+        assert_eq!(lengths, at + 12 + 24, "the lengths follow the offsets");
+        assert_eq!(extended.len(), lengths + 12 + 24, "and end the data set, before Pixel Data");
+    }
+
+    #[test]
+    fn decimal_strings_fit_sixteen_characters() {
+        assert_eq!(ds(0.00025), "0.00025");
+        assert_eq!(ds(12.5), "12.5");
+        assert_eq!(ds(3.0), "3");
+        assert!(ds(1.0 / 3.0).len() <= 16);
+        assert!(ds(123456.0 / 7.0).len() <= 16);
+    }
+}

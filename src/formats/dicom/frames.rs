@@ -1,0 +1,199 @@
+//! The encapsulated Pixel Data of one instance (PS3.5 A.4), written by our code after the
+//! data set dicom-rs wrote:
+//!
+//! ```text
+//! (7FE0,0010) OB, undefined length      E0 7F 10 00 'O' 'B' 00 00 FF FF FF FF
+//! Basic Offset Table item               FE FF 00 E0 len, then len/4 offsets (u32 LE), or empty
+//! one item a frame, row-major           FE FF 00 E0 len, the JPEG (padded with one 00 to even)
+//! Sequence Delimitation Item            FE FF DD E0 00 00 00 00
+//! ```
+//!
+//! The frames arrive in the producer's order, levels interleaved; each level's are appended
+//! to a staging file of its own as items (header, bytes, pad), with only each item's place
+//! in that file kept. At the end the instance is the data set, then the items copied from the
+//! staging file in row-major order (`std::io::copy`: `copy_file_range` on Linux, and frames
+//! that lie in order there are one copy). Offsets are those of each frame's item from the
+//! first frame's; when the last passes 32 bits the Basic Offset Table is left empty and the
+//! data set carries them in the Extended Offset Table (7FE0,0001/0002) instead.
+
+use std::fs::{self, File};
+use std::io::{self, BufWriter, Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+/// The tag of an item, little-endian.
+const ITEM: [u8; 4] = [0xFE, 0xFF, 0x00, 0xE0];
+/// The Sequence Delimitation Item, with its zero length.
+const DELIMITER: [u8; 8] = [0xFE, 0xFF, 0xDD, 0xE0, 0, 0, 0, 0];
+/// The Pixel Data element's header: OB, undefined length.
+const PIXEL_DATA: [u8; 12] = [0xE0, 0x7F, 0x10, 0x00, b'O', b'B', 0, 0, 0xFF, 0xFF, 0xFF, 0xFF];
+
+/// Where each frame's item lies in the instance's Pixel Data, from the first frame's item.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(super) struct Offsets {
+    /// Each frame's item's offset, row-major.
+    pub offsets: Vec<u64>,
+    /// Each frame's length (its item's value: the JPEG and its pad).
+    pub lengths: Vec<u64>,
+}
+
+impl Offsets {
+    /// Whether the offsets fit the Basic Offset Table's 32 bits.
+    pub fn fit_basic(&self) -> bool {
+        self.offsets.last().is_none_or(|&o| o <= u64::from(u32::MAX))
+    }
+}
+
+/// One level's frames as they came, in a staging file.
+pub(super) struct Staged {
+    path: PathBuf,
+    file: BufWriter<File>,
+    /// Bytes written so far.
+    len: u64,
+    /// Each frame's item in the staging file, row-major: its offset and its whole length
+    /// (header included); length 0 for a frame yet to come.
+    items: Vec<(u64, u32)>,
+}
+
+impl Staged {
+    /// A staging file at `path` for `frames` frames.
+    pub fn create(path: &Path, frames: usize) -> io::Result<Staged> {
+        let file = fs::OpenOptions::new().read(true).write(true).create_new(true).open(path)?;
+        Ok(Staged {
+            path: path.to_path_buf(),
+            file: BufWriter::with_capacity(1 << 20, file),
+            len: 0,
+            items: vec![(0, 0); frames],
+        })
+    }
+
+    /// Appends frame `index` (row-major) as an item. The caller has checked the index.
+    pub fn append(&mut self, index: usize, frame: &[u8]) -> io::Result<()> {
+        let padded = frame.len() + frame.len() % 2;
+        let value = u32::try_from(padded).ok().filter(|&v| v < u32::MAX - 8);
+        let value = value.ok_or_else(|| io::Error::other("a frame of 4 GiB or more"))?;
+        if self.items[index].1 != 0 {
+            return Err(io::Error::other(format!("frame {index} came twice")));
+        }
+        self.file.write_all(&ITEM)?;
+        self.file.write_all(&value.to_le_bytes())?;
+        self.file.write_all(frame)?;
+        if padded > frame.len() {
+            self.file.write_all(&[0])?;
+        }
+        self.items[index] = (self.len, value + 8);
+        self.len += u64::from(value) + 8;
+        Ok(())
+    }
+
+    /// Where each frame will lie; `None` if one has not come.
+    pub fn offsets(&self) -> Option<Offsets> {
+        let mut at = 0u64;
+        let mut offsets = Vec::with_capacity(self.items.len());
+        let mut lengths = Vec::with_capacity(self.items.len());
+        for &(_, whole) in &self.items {
+            if whole == 0 {
+                return None;
+            }
+            offsets.push(at);
+            lengths.push(u64::from(whole) - 8);
+            at += u64::from(whole);
+        }
+        Some(Offsets { offsets, lengths })
+    }
+
+    /// Bytes of the frames (their items' values).
+    pub fn frame_bytes(&self) -> u64 {
+        self.items.iter().map(|&(_, whole)| u64::from(whole).saturating_sub(8)).sum()
+    }
+
+    /// Writes the Pixel Data element into `out` (after the data set): its header, the offset
+    /// table (`basic`: the offsets, else empty), every frame in row-major order, the
+    /// delimiter. Removes the staging file. Returns the bytes written.
+    pub fn write_pixel_data(mut self, out: &mut File, offsets: &Offsets, basic: bool) -> io::Result<u64> {
+        self.file.flush()?;
+        let mut head = Vec::with_capacity(PIXEL_DATA.len() + 8 + 4 * offsets.offsets.len());
+        head.extend_from_slice(&PIXEL_DATA);
+        head.extend_from_slice(&ITEM);
+        if basic {
+            head.extend_from_slice(&(4 * offsets.offsets.len() as u32).to_le_bytes());
+            for &o in &offsets.offsets {
+                // `fit_basic` said each fits.
+                head.extend_from_slice(&(o as u32).to_le_bytes());
+            }
+        } else {
+            head.extend_from_slice(&0u32.to_le_bytes());
+        }
+        out.write_all(&head)?;
+        let mut written = head.len() as u64;
+        let staged = self.file.get_ref();
+        let mut copy = |(from, len): (u64, u64)| -> io::Result<()> {
+            let mut reader = staged;
+            reader.seek(SeekFrom::Start(from))?;
+            let n = io::copy(&mut reader.take(len), out)?;
+            if n != len {
+                return Err(io::Error::new(io::ErrorKind::UnexpectedEof, "the staged frames end early"));
+            }
+            written += n;
+            Ok(())
+        };
+        let mut run: Option<(u64, u64)> = None;
+        for &(at, whole) in &self.items {
+            let whole = u64::from(whole);
+            run = match run {
+                Some((start, n)) if start + n == at => Some((start, n + whole)),
+                Some(done) => {
+                    copy(done)?;
+                    Some((at, whole))
+                }
+                None => Some((at, whole)),
+            };
+        }
+        if let Some(done) = run {
+            copy(done)?;
+        }
+        out.write_all(&DELIMITER)?;
+        written += DELIMITER.len() as u64;
+        let path = std::mem::take(&mut self.path);
+        drop(self);
+        fs::remove_file(&path)?;
+        Ok(written)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Frames that come out of order are written row-major, each an item padded to even,
+    /// behind a Basic Offset Table of their items' offsets.
+    #[test]
+    fn frames_come_out_row_major_behind_their_offsets() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut staged = Staged::create(&dir.path().join("s"), 3).unwrap();
+        assert_eq!(staged.offsets(), None, "frames yet to come");
+        staged.append(2, b"ccc").unwrap();
+        staged.append(0, b"a").unwrap();
+        staged.append(1, b"bbbb").unwrap();
+        assert!(staged.append(1, b"bb").is_err(), "a frame twice");
+        let offsets = staged.offsets().unwrap();
+        assert_eq!(offsets, Offsets { offsets: vec![0, 10, 22], lengths: vec![2, 4, 4] });
+        assert!(offsets.fit_basic());
+        let path = dir.path().join("out");
+        let mut out = File::create(&path).unwrap();
+        let n = staged.write_pixel_data(&mut out, &offsets, true).unwrap();
+        drop(out);
+        let bytes = fs::read(&path).unwrap();
+        assert_eq!(n, bytes.len() as u64);
+        let mut want = PIXEL_DATA.to_vec();
+        want.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0, 12, 0, 0, 0, 0, 0, 0, 0, 10, 0, 0, 0, 22, 0, 0, 0]);
+        want.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0, 2, 0, 0, 0, b'a', 0]);
+        want.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0, 4, 0, 0, 0, b'b', b'b', b'b', b'b']);
+        want.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0, 4, 0, 0, 0, b'c', b'c', b'c', 0]);
+        want.extend_from_slice(&DELIMITER);
+        assert_eq!(bytes, want);
+        assert!(!dir.path().join("s").exists(), "the staging file is removed");
+
+        let far = Offsets { offsets: vec![0, 1 << 32], lengths: vec![1, 1] };
+        assert!(!far.fit_basic(), "past 32 bits: the Extended Offset Table");
+    }
+}

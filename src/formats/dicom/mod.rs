@@ -1,0 +1,190 @@
+//! DICOM whole-slide images out (`--layout dicom -o DIR`, docs/dicom.md): one VL Whole Slide
+//! Microscopy Image instance (a DICOM Part-10 file) per pyramid level, the series a hospital's
+//! archive, viewers and OpenSlide 4 read.
+//!
+//! * [`Spec`]: what every instance says, fixed and checked before the first tile.
+//! * `uid`: the series' UIDs, a hash of the input and the options under a stated root, so that
+//!   a re-run writes the same UIDs and the same bytes.
+//! * `meta`: the patient, study and equipment attributes a user gives (`--dicom-meta`), never
+//!   invented: empty (type 2) where not given.
+//! * `dataset`: each level's data set, written by dicom-rs (`dicom-object`): every module the
+//!   IOD requires, up to the Pixel Data element.
+//! * `frames`: the encapsulated Pixel Data, written by our code after the data set: each
+//!   level's frames are staged in a file as they arrive (memory holds 12 bytes a frame, never
+//!   a frame) and copied into the instance at the end, row by row, behind the offset table.
+//!   dicom-rs would hold every frame of a level in memory to write them itself.
+//! * `sink`: [`DicomSink`], the pipeline's sink: a staging directory renamed into place.
+//!
+//! Frames are JPEG baseline (1.2.840.10008.1.2.4.50), `TILED_FULL`: whole tiles of the
+//! level's grid in row-major order, the right and bottom ones padded. A JPEG-tiled source's
+//! stored tiles that match the level's photometric interpretation are copied byte for byte
+//! (`takes_stored_jpeg`). Not yet: copying a slide's own reduced levels, JPEG 2000 frames,
+//! lossless frames, the associated images (label, overview) and reading a series back.
+
+mod dataset;
+mod frames;
+pub mod meta;
+mod sink;
+mod uid;
+
+pub use meta::DicomMeta;
+pub(crate) use sink::DicomSink;
+pub use uid::{DEFAULT_ROOT, check_root};
+
+use crate::codec::Subsampling;
+use crate::error::{Result, TilerError};
+use crate::layout::Layout;
+use crate::pixel::{Channels, Depth, PixelLayout};
+
+/// The default frame side: the tile of most scanners' slides and of the pyramidal TIFF.
+pub(crate) const DEFAULT_TILE_SIZE: u32 = 256;
+
+/// The VL Whole Slide Microscopy Image Storage SOP Class.
+pub(crate) const SOP_CLASS: &str = "1.2.840.10008.5.1.4.1.1.77.1.6";
+/// JPEG Baseline (Process 1): the transfer syntax of the instances.
+pub(crate) const JPEG_BASELINE: &str = "1.2.840.10008.1.2.4.50";
+
+/// How the frames' pixels are stored, as `PhotometricInterpretation` says.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Photometric {
+    /// Grey, `MONOCHROME2`.
+    Monochrome,
+    /// YCbCr with the chroma halved both ways (JPEG 4:2:0), `YBR_FULL_422` as DICOM names
+    /// every subsampled JPEG baseline frame.
+    YbrFull422,
+    /// YCbCr without subsampling (JPEG 4:4:4), `YBR_FULL`.
+    YbrFull,
+}
+
+impl Photometric {
+    /// The attribute's value.
+    pub fn name(self) -> &'static str {
+        match self {
+            Photometric::Monochrome => "MONOCHROME2",
+            Photometric::YbrFull422 => "YBR_FULL_422",
+            Photometric::YbrFull => "YBR_FULL",
+        }
+    }
+
+    /// The JPEG frames of `channels` at `subsampling`, as the encoders write them.
+    pub(crate) fn of(channels: Channels, subsampling: Subsampling) -> Photometric {
+        match (channels, subsampling) {
+            (Channels::Grey, _) => Photometric::Monochrome,
+            (_, Subsampling::S420) => Photometric::YbrFull422,
+            (_, Subsampling::S444) => Photometric::YbrFull,
+        }
+    }
+
+    /// Samples a pixel.
+    pub fn samples(self) -> u16 {
+        match self {
+            Photometric::Monochrome => 1,
+            _ => 3,
+        }
+    }
+}
+
+/// Everything the instances say, fixed before the first tile.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Spec {
+    /// The pyramid's page grid, border 0: level `k` is `layout.level_extent(k)` in
+    /// `layout.grid(k)` frames of `tile_size` a side.
+    pub layout: Layout,
+    /// The samples as stored: 8-bit grey or RGB.
+    pub stored: PixelLayout,
+    pub photometric: Photometric,
+    /// The side of a full-resolution pixel, in millimetres (DICOM's unit).
+    pub pixel_mm: f64,
+    /// The slide's name: the container and specimen identifiers where `--dicom-meta` gives
+    /// none, and the series description.
+    pub name: String,
+    /// The UID root (`--dicom-uid-root`, else [`DEFAULT_ROOT`]).
+    pub uid_root: String,
+    /// What the UIDs are a hash of: the input's fingerprint and the options.
+    pub identity: String,
+    /// When the image was made, as a DICOM date-time `YYYYMMDDHHMMSS` (UTC): the
+    /// `AcquisitionDateTime` of `--dicom-meta`, else the input's modification time.
+    pub made: String,
+    /// The attributes the user gave.
+    pub meta: DicomMeta,
+}
+
+impl Spec {
+    /// Refuses what these instances cannot hold, before anything is written.
+    pub fn check(&self) -> Result<()> {
+        let l = &self.layout;
+        if l.border != 0 {
+            return Err(TilerError::Options(format!("--border {}: DICOM frames have no border", l.border)));
+        }
+        if l.tile_size == 0 || l.tile_size > u32::from(u16::MAX) {
+            return Err(TilerError::Options(format!(
+                "--tile-size {}: a DICOM frame's Rows and Columns are 16-bit",
+                l.tile_size
+            )));
+        }
+        if l.width == 0 || l.height == 0 {
+            return Err(TilerError::Geometry(format!("a {}x{} image has no pixels", l.width, l.height)));
+        }
+        let s = self.stored;
+        if s.depth != Depth::U8 || !matches!(s.channels, Channels::Grey | Channels::Rgb) {
+            return Err(TilerError::Options(format!(
+                "DICOM frames are JPEG baseline, 8-bit grey or RGB, not {s} (lossless frames are not written yet)"
+            )));
+        }
+        if !(self.pixel_mm.is_finite() && self.pixel_mm > 0.0) {
+            return Err(TilerError::Options(format!("a pixel size of {} mm", self.pixel_mm)));
+        }
+        for lod in 0..l.lod_count {
+            let (c, r) = l.grid(lod);
+            if u64::from(c) * u64::from(r) > i32::MAX as u64 {
+                return Err(TilerError::Options(format!(
+                    "level {lod} has {c} x {r} frames: a DICOM instance's Number of Frames is at most {}",
+                    i32::MAX
+                )));
+            }
+        }
+        uid::check_root(&self.uid_root)?;
+        Ok(())
+    }
+
+    /// Bytes of one frame's samples, uncompressed.
+    pub fn raw_frame_bytes(&self) -> u64 {
+        u64::from(self.layout.tile_size).pow(2) * u64::from(self.photometric.samples())
+    }
+
+    /// Memory the sink's frame index holds: 12 bytes a frame.
+    pub fn index_bytes(&self) -> u64 {
+        self.layout.total_tiles().saturating_mul(12)
+    }
+
+    /// The file name of level `lod`'s instance in the series' directory.
+    pub fn file_name(lod: u32) -> String {
+        format!("level-{lod}.dcm")
+    }
+}
+
+/// A pixel size in micrometres to DICOM's millimetres.
+pub(crate) fn millimetres(micrometres: f64) -> f64 {
+    micrometres / 1000.0
+}
+
+/// What a series written says of itself, for the summary and `--json`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct DicomSummary {
+    /// Instances written, one a level.
+    pub instances: u32,
+    /// Frames stored, every level.
+    pub frames: u64,
+    /// The `PhotometricInterpretation` of the frames.
+    pub photometric: &'static str,
+    /// The Series Instance UID.
+    pub series_uid: String,
+    /// Instances whose frames are located by the Extended Offset Table (past 4 GiB), not the
+    /// Basic Offset Table.
+    pub extended_offsets: u32,
+    /// Bytes of the frames, as stored.
+    pub frame_bytes: u64,
+    /// Bytes of the instances' files, together.
+    pub file_bytes: u64,
+}

@@ -1,0 +1,161 @@
+//! [`DicomSink`]: the pipeline's tiles into a DICOM series, in a staging directory beside the
+//! destination renamed into place when complete (and removed if the run fails).
+//!
+//! Each tile comes as its frame's JPEG, encoded on the encoder threads or copied from the
+//! source, and is appended to its level's staging file at once (`frames::Staged`); the sink
+//! is `ordered`, so the staging files, and the instances made from them, are the same on
+//! every run. `finish` writes each level's instance: the data set (`dataset`), then its
+//! frames copied from the staging file in row-major order.
+
+use std::fs::{self, File};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use super::dataset::Series;
+use super::frames::Staged;
+use super::{DicomSummary, Photometric, Spec};
+use crate::error::{Result, TilerError};
+use crate::output::{Claim, staging};
+use crate::sink::TileSink;
+
+/// A DICOM series as a pipeline sink.
+pub struct DicomSink {
+    dest: PathBuf,
+    staging: PathBuf,
+    spec: Spec,
+    levels: Mutex<Vec<Option<Staged>>>,
+    frame_bytes: AtomicU64,
+    /// Whether the series is in place; `Drop` removes the staging directory otherwise.
+    done: bool,
+}
+
+impl DicomSink {
+    /// Starts the series `spec` describes, to be renamed to the claimed directory.
+    pub fn create(claim: &Claim, spec: Spec) -> Result<DicomSink> {
+        spec.check()?;
+        let dest = claim.path.clone();
+        let staging = staging::partial_path(&dest);
+        if staging.exists() {
+            fs::remove_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
+        }
+        fs::create_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
+        let mut sink = DicomSink {
+            dest,
+            staging,
+            spec,
+            levels: Mutex::new(Vec::new()),
+            frame_bytes: AtomicU64::new(0),
+            done: false,
+        };
+        // On failure `sink` is dropped, which removes the staging directory.
+        let mut levels = Vec::with_capacity(sink.spec.layout.lod_count as usize);
+        for lod in 0..sink.spec.layout.lod_count {
+            let (c, r) = sink.spec.layout.grid(lod);
+            let path = sink.staging.join(format!(".level-{lod}.frames"));
+            let staged = Staged::create(&path, c as usize * r as usize).map_err(|e| TilerError::write(&path, e))?;
+            levels.push(Some(staged));
+        }
+        sink.levels = Mutex::new(levels);
+        Ok(sink)
+    }
+
+    /// Writes every level's instance and renames the series into place.
+    pub fn finish(mut self) -> Result<DicomSummary> {
+        let levels = std::mem::take(self.levels.get_mut().map_err(|_| TilerError::panicked("a DICOM sink"))?);
+        let series = Series::new(&self.spec)?;
+        let mut summary = DicomSummary {
+            instances: 0,
+            frames: 0,
+            photometric: self.spec.photometric.name(),
+            series_uid: series.series_uid(),
+            extended_offsets: 0,
+            frame_bytes: 0,
+            file_bytes: 0,
+        };
+        for (lod, staged) in levels.into_iter().enumerate() {
+            let lod = lod as u32;
+            let staged = staged.ok_or_else(|| TilerError::Internal("a DICOM sink finished twice".into()))?;
+            let offsets = staged.offsets().ok_or_else(|| {
+                TilerError::Internal(format!("level {lod} of the DICOM series lacks frames at the end"))
+            })?;
+            let basic = offsets.fit_basic();
+            let frame_bytes = staged.frame_bytes();
+            let header = series.header(lod, &offsets, frame_bytes)?;
+            let path = self.staging.join(Spec::file_name(lod));
+            let write = |file: &mut File| -> std::io::Result<u64> {
+                use std::io::Write;
+                file.write_all(&header)?;
+                let n = staged.write_pixel_data(file, &offsets, basic)?;
+                file.sync_all()?;
+                Ok(header.len() as u64 + n)
+            };
+            let mut file = File::create(&path).map_err(|e| TilerError::write(&path, e))?;
+            summary.file_bytes += write(&mut file).map_err(|e| TilerError::write(&path, e))?;
+            summary.instances += 1;
+            summary.frames += offsets.offsets.len() as u64;
+            summary.frame_bytes += frame_bytes;
+            summary.extended_offsets += u32::from(!basic);
+        }
+        staging::replace_dir(&self.staging, &self.dest).map_err(|e| TilerError::write(&self.dest, e))?;
+        self.done = true;
+        Ok(summary)
+    }
+
+    fn path(&self) -> &Path {
+        &self.dest
+    }
+}
+
+impl Drop for DicomSink {
+    /// An unfinished series leaves nothing behind.
+    fn drop(&mut self) {
+        if !self.done {
+            let _ = fs::remove_dir_all(&self.staging);
+        }
+    }
+}
+
+impl TileSink for DicomSink {
+    fn write_tile(&self, lod: u32, x: u32, y: u32, stored: &[u8]) -> Result<()> {
+        let (columns, rows) = self.spec.layout.grid(lod);
+        if x >= columns || y >= rows {
+            let message = format!("outside level {lod}'s {columns} x {rows} frames");
+            return Err(TilerError::Encode { lod, x, y, message });
+        }
+        let mut levels = self.levels.lock().map_err(|_| TilerError::panicked("a DICOM sink"))?;
+        let staged = levels.get_mut(lod as usize).and_then(Option::as_mut);
+        let staged = staged.ok_or_else(|| TilerError::Internal(format!("a frame of level {lod} after the end")))?;
+        let index = y as usize * columns as usize + x as usize;
+        staged.append(index, stored).map_err(|e| TilerError::write(self.path(), e))?;
+        self.frame_bytes.fetch_add(stored.len() as u64, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// A stored JPEG tile only where it is what the instance says of every frame: baseline,
+    /// 8-bit, of the frame's size, grey for MONOCHROME2, else YCbCr (no Adobe RGB transform)
+    /// at the subsampling the photometric interpretation names.
+    fn takes_stored_jpeg(&self, jpeg: &[u8]) -> bool {
+        let Some(h) = crate::source::stored::read_header(jpeg) else { return false };
+        let side = self.spec.layout.tile_size;
+        // Process 1 (SOF0) is what the transfer syntax names; extended sequential is not.
+        let whole = h.frame == 0xC0 && h.precision == 8 && (u32::from(h.width), u32::from(h.height)) == (side, side);
+        let form = match self.spec.photometric {
+            Photometric::Monochrome => h.components == 1,
+            p => {
+                let chroma = if p == Photometric::YbrFull422 { (2, 2) } else { (1, 1) };
+                h.components == 3 && h.adobe != Some(0) && h.sampling[..] == [chroma, (1, 1), (1, 1)]
+            }
+        };
+        whole && form
+    }
+
+    /// Frames in the producer's order, so that the series is the same on every run.
+    fn ordered(&self) -> bool {
+        true
+    }
+
+    fn bytes_written(&self) -> u64 {
+        self.frame_bytes.load(Ordering::Relaxed)
+    }
+}

@@ -1,0 +1,173 @@
+"""Reads a DICOM whole-slide image series we wrote with the readers of that world and checks
+every level against a naive pyramid of the source (tests/it/dicom_out.rs runs it with
+VORTEX_PYVIPS).
+
+    dicom_out.py DIR SOURCE TILE [COPIED_FROM]
+
+pydicom reads every instance (the IOD's key attributes checked), highdicom parses each as a VL
+Whole Slide Microscopy Image, wsidicom opens the directory as one slide and every level read
+back is within JPEG's error of the oracle (tiff_oracle.py: the box pyramid of SOURCE, decoded by
+libvips), OpenSlide 4 opens the directory as a DICOM slide and `read_region` of every level is
+within the same error. With COPIED_FROM (a JPEG-tiled TIFF): the frames whose entropy-coded
+data equals that TIFF's stored tile are counted, and printed as "copied".
+Prints one JSON line of what it measured; exits 1 with the reason on a mismatch.
+"""
+
+import glob
+import json
+import os
+import sys
+
+import numpy as np
+import pydicom
+import pyvips
+
+from tiff_oracle import compare, fail, levels_of, oracle
+
+WSI = "1.2.840.10008.5.1.4.1.1.77.1.6"
+JPEG_BASELINE = "1.2.840.10008.1.2.4.50"
+
+
+def source(path):
+    a = pyvips.Image.new_from_file(path).numpy()
+    return a[:, :, None] if a.ndim == 2 else a
+
+
+def rgb_or_grey(a, channels):
+    a = np.asarray(a)
+    a = a[:, :, None] if a.ndim == 2 else a
+    return a[:, :, :channels]
+
+
+def check_instances(directory, src, tile, measured):
+    n = levels_of(src, tile)
+    paths = sorted(glob.glob(os.path.join(directory, "*.dcm")))
+    if len(paths) != n:
+        fail(f"{len(paths)} instances, expected {n} (one a level)")
+    h, w = src.shape[:2]
+    series = set()
+    for k in range(n):
+        p = os.path.join(directory, f"level-{k}.dcm")
+        ds = pydicom.dcmread(p)
+        series.add(ds.SeriesInstanceUID)
+        want = {
+            "SOPClassUID": WSI,
+            "TransferSyntaxUID": JPEG_BASELINE,
+            "DimensionOrganizationType": "TILED_FULL",
+            "TotalPixelMatrixColumns": -(-w // (1 << k)),
+            "TotalPixelMatrixRows": -(-h // (1 << k)),
+            "Rows": tile,
+            "Columns": tile,
+            "NumberOfFrames": -(-(-(-w // (1 << k))) // tile) * -(-(-(-h // (1 << k))) // tile),
+            "ImageType": ["ORIGINAL", "PRIMARY", "VOLUME", "NONE"] if k == 0 else ["DERIVED", "PRIMARY", "VOLUME", "RESAMPLED"],
+        }
+        for key, value in want.items():
+            got = ds.file_meta.TransferSyntaxUID if key == "TransferSyntaxUID" else ds.get(key)
+            got = list(got) if key == "ImageType" else got
+            if got != value:
+                fail(f"level {k}: {key} {got!r}, expected {value!r}")
+        frames = list(pydicom.encaps.generate_frames(ds.PixelData, number_of_frames=ds.NumberOfFrames))
+        if len(frames) != ds.NumberOfFrames or not all(f.startswith(b"\xff\xd8") for f in frames):
+            fail(f"level {k}: {len(frames)} frames, not {ds.NumberOfFrames} JPEG streams")
+        import highdicom
+
+        image = highdicom.imread(p)
+        if image.SOPClassUID != WSI:
+            fail(f"highdicom: level {k} is {image.SOPClassUID}")
+    if len(series) != 1:
+        fail(f"{len(series)} series")
+    measured["instances"] = n
+    return n
+
+
+def check_wsidicom(directory, src, n, mode, measured):
+    from wsidicom import WsiDicom
+
+    c = src.shape[2]
+    with WsiDicom.open(directory) as slide:
+        if len(slide.levels) != n:
+            fail(f"wsidicom: {len(slide.levels)} levels, expected {n}")
+        for k, level in enumerate(slide.levels):
+            got = rgb_or_grey(slide.read_region((0, 0), k, level.size.to_tuple()), c)
+            compare(f"wsidicom level {k}", got, oracle(src, k), mode, measured)
+
+
+def check_openslide(directory, src, n, mode, measured):
+    import openslide
+
+    if tuple(int(v) for v in openslide.__library_version__.split(".")[:1]) < (4,):
+        fail(f"OpenSlide {openslide.__library_version__}: DICOM needs 4")
+    slide = openslide.OpenSlide(os.path.join(directory, "level-0.dcm"))
+    if slide.properties.get("openslide.vendor") != "dicom":
+        fail(f"OpenSlide: vendor {slide.properties.get('openslide.vendor')}")
+    if slide.level_count != n:
+        fail(f"OpenSlide: {slide.level_count} levels, expected {n}")
+    c = src.shape[2]
+    for k in range(n):
+        region = np.asarray(slide.read_region((0, 0), k, slide.level_dimensions[k]))
+        if not (region[:, :, 3] == 255).all():
+            fail(f"OpenSlide: level {k} has transparent texels")
+        got = region[:, :, :3] if c == 3 else region[:, :, :1]
+        compare(f"openslide level {k}", got, oracle(src, k), mode, measured)
+
+
+def scan(jpeg):
+    """The entropy-coded data and what follows: from the first SOS marker to EOI."""
+    at = jpeg.find(b"\xff\xda")
+    end = jpeg.rfind(b"\xff\xd9")
+    return jpeg[at : end + 2] if at >= 0 and end > at else None
+
+
+def count_copied(directory, tiff, measured):
+    """Frames of level 0 whose compressed scan equals the source's stored tile's."""
+    import tifffile
+
+    ds = pydicom.dcmread(os.path.join(directory, "level-0.dcm"))
+    frames = list(pydicom.encaps.generate_frames(ds.PixelData, number_of_frames=ds.NumberOfFrames))
+    with tifffile.TiffFile(tiff) as t, open(tiff, "rb") as f:
+        page = t.pages[0]
+        tiles = []
+        for offset, count in zip(page.dataoffsets, page.databytecounts):
+            f.seek(offset)
+            tiles.append(f.read(count))
+        if len(tiles) != len(frames):
+            fail(f"{len(frames)} frames at level 0, the source has {len(tiles)} tiles")
+    copied = [i for i, (a, b) in enumerate(zip(frames, tiles)) if scan(a) is not None and scan(a) == scan(b)]
+    measured["copied"] = len(copied)
+    measured["copiedFrames"] = copied
+    # The copied frames are the source's own JPEG data: OpenSlide decodes them to the very
+    # texels it reads from the source slide (the region they cover, exactly).
+    import openslide
+
+    columns = -(-ds.TotalPixelMatrixColumns // ds.Columns)
+    if copied:
+        right = max(i % columns for i in copied) + 1
+        bottom = max(i // columns for i in copied) + 1
+        size = (right * ds.Columns, bottom * ds.Rows)
+        ours = openslide.OpenSlide(os.path.join(directory, "level-0.dcm")).read_region((0, 0), 0, size)
+        theirs = openslide.OpenSlide(tiff).read_region((0, 0), 0, size)
+        if not np.array_equal(np.asarray(ours), np.asarray(theirs)):
+            diff = np.abs(np.asarray(ours).astype(int) - np.asarray(theirs).astype(int))
+            fail(f"OpenSlide reads the copied region {size} otherwise from the series than from the source: max {diff.max()}")
+        measured["openslideCopiedRegion"] = f"{size[0]}x{size[1]} equal to the source's"
+
+
+def main():
+    directory, source_path, tile = sys.argv[1], sys.argv[2], int(sys.argv[3])
+    copied_from = sys.argv[4] if len(sys.argv) > 4 else None
+    src = source(source_path)
+    measured = {}
+    n = check_instances(directory, src, tile, measured)
+    check_wsidicom(directory, src, n, "jpeg", measured)
+    if src.shape[2] == 3:
+        check_openslide(directory, src, n, "jpeg", measured)
+    else:
+        # libdicom asks every image for Planar Configuration, which the Image Pixel module
+        # forbids where Samples per Pixel is 1: OpenSlide 4 opens RGB DICOM slides only.
+        measured["openslide"] = "skipped: it reads RGB DICOM slides only"
+    if copied_from:
+        count_copied(directory, copied_from, measured)
+    print(json.dumps(measured))
+
+
+main()

@@ -1,0 +1,314 @@
+//! DICOM whole-slide images out (`--layout dicom -o DIR`; docs/dicom.md): every instance
+//! checked by dciodvfy (Debian's dicom3tools), and the series read back by pydicom, highdicom,
+//! wsidicom and OpenSlide 4 through the Python named by VORTEX_PYVIPS (`dicom_out.py`), each
+//! skipped with a note where missing outside CI and a failure under CI. Every level read back
+//! must be within JPEG's error of a naive box pyramid of the source (tiff_oracle.py: 30 dB,
+//! between the 35 dB JPEG Q85 measures on these images and the under 20 dB of a reader that
+//! takes YCbCr for RGB).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
+
+use crate::common::cli::{fails_with, ok, run, s};
+use crate::ome_zarr::input;
+
+const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/it/dicom_out.py");
+
+fn rgb8() -> PixelLayout {
+    PixelLayout::new(Channels::Rgb, Depth::U8)
+}
+
+/// The Python with pydicom, highdicom, wsidicom and OpenSlide 4, or a skip with a note (a
+/// failure under CI).
+fn readers() -> Option<PathBuf> {
+    crate::common::python_with(
+        "pydicom, highdicom, wsidicom, openslide, pyvips, tifffile, numpy",
+        "the DICOM readers",
+        "pydicom, highdicom, wsidicom, openslide-python and openslide-bin",
+    )
+}
+
+/// Runs `dicom_out.py` on the series in `dir`; fails with what it said; returns its JSON.
+fn check(python: &Path, dir: &Path, source: &Path, tile: u32, copied_from: Option<&Path>) -> serde_json::Value {
+    let tile = tile.to_string();
+    let mut args = vec![SCRIPT, s(dir), s(source), &tile];
+    args.extend(copied_from.map(s));
+    let out = Command::new(python).args(&args).output().unwrap();
+    let said = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{}: {said}", dir.display());
+    eprintln!("{}: {said}", dir.display());
+    let line = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(line.trim().lines().last().unwrap_or("{}")).unwrap()
+}
+
+/// The warnings dciodvfy is allowed to give, each with why it stands (docs/dicom.md); an
+/// error is never allowed.
+const ACCEPTED_WARNINGS: &[(&str, &str)] = &[(
+    "Missing attribute or value that would be needed to build DICOMDIR",
+    "Patient ID, Study Date, Study Time and Study ID are type 2, left empty unless --dicom-meta \
+     gives them (never invented); only a DICOMDIR, which we do not write, would need them",
+)];
+
+/// dciodvfy on every instance of `dir`: no error; every warning one of [`ACCEPTED_WARNINGS`].
+/// Skipped with a note where dicom3tools is missing outside CI.
+fn dciodvfy(dir: &Path) {
+    if !crate::common::have_program("dciodvfy", "-help", "dicom3tools") {
+        return;
+    }
+    let mut instances: Vec<PathBuf> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
+    instances.sort();
+    assert!(!instances.is_empty());
+    for dcm in instances {
+        let out = Command::new("dciodvfy").arg(&dcm).output().unwrap();
+        let said = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        let errors: Vec<&str> = said.lines().filter(|l| l.starts_with("Error")).collect();
+        assert!(errors.is_empty(), "dciodvfy {}: {}", dcm.display(), said);
+        for warning in said.lines().filter(|l| l.starts_with("Warning")) {
+            let known = ACCEPTED_WARNINGS.iter().any(|(w, _)| warning.contains(w));
+            assert!(known, "dciodvfy {}: an unexplained warning: {warning}\n{said}", dcm.display());
+        }
+    }
+}
+
+fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut out: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .map(|e| (e.file_name().to_string_lossy().into_owned(), std::fs::read(e.path()).unwrap()))
+        .collect();
+    out.sort();
+    out
+}
+
+/// An RGB image encoded (no JPEG-tiled source): one valid instance a level, read back by
+/// every reader within JPEG's error of the exact pyramid; the same bytes on a second run
+/// (the UIDs are a hash of the input and options); other UIDs with another root.
+#[test]
+fn a_series_is_valid_read_back_by_every_reader_and_the_same_on_every_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = input(dir.path(), "slide", 1000, 700, rgb8());
+    let out = dir.path().join("series");
+    let json = ok(&["split", s(&png), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um", "--json"]);
+    let json: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+    assert_eq!(json["dicom"]["instances"], 3, "{json}");
+    assert_eq!(json["dicom"]["photometricInterpretation"], "YBR_FULL_422", "{json}");
+    let names: Vec<String> = files(&out).into_iter().map(|(n, _)| n).collect();
+    assert_eq!(names, ["level-0.dcm", "level-1.dcm", "level-2.dcm"]);
+    dciodvfy(&out);
+    if let Some(python) = readers() {
+        check(&python, &out, &png, 256, None);
+    }
+
+    let again = dir.path().join("again");
+    ok(&["split", s(&png), "--layout", "dicom", "-o", s(&again), "--pixel-size", "0.5um", "-q"]);
+    assert!(files(&out) == files(&again), "a second run wrote other bytes");
+    // A re-run replaces the series it wrote.
+    ok(&["split", s(&png), "--layout", "dicom", "-o", s(&again), "--pixel-size", "0.5um", "-q"]);
+
+    let rooted = dir.path().join("rooted");
+    let root = "1.2.826.0.1.3680043.10.999";
+    let json = ok(&[
+        "split",
+        s(&png),
+        "--layout",
+        "dicom",
+        "-o",
+        s(&rooted),
+        "--pixel-size",
+        "0.5um",
+        "--dicom-uid-root",
+        root,
+        "--json",
+    ]);
+    let json: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+    let series = json["dicom"]["seriesInstanceUID"].as_str().unwrap().to_string();
+    assert!(series.starts_with(&format!("{root}.")) && series.len() <= 64, "{series}");
+}
+
+/// A grey image, and the user's attributes (`--dicom-meta`): MONOCHROME2 frames, valid; the
+/// attributes given are in every instance, never invented where not.
+#[test]
+fn grey_frames_and_the_users_attributes() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = input(dir.path(), "grey", 600, 300, PixelLayout::new(Channels::Grey, Depth::U8));
+    let meta = dir.path().join("meta.json");
+    std::fs::write(&meta, r#"{"PatientName": "Doe^Jane", "PatientID": "P-17", "AccessionNumber": "A42"}"#).unwrap();
+    let out = dir.path().join("series");
+    let json = ok(&[
+        "split",
+        s(&png),
+        "--layout",
+        "dicom",
+        "-o",
+        s(&out),
+        "--pixel-size",
+        "250nm",
+        "--dicom-meta",
+        s(&meta),
+        "--json",
+    ]);
+    assert!(json.contains("MONOCHROME2"), "{json}");
+    dciodvfy(&out);
+    let level0 = std::fs::read(out.join("level-0.dcm")).unwrap();
+    for given in ["Doe^Jane", "P-17", "A42"] {
+        assert!(level0.windows(given.len()).any(|w| w == given.as_bytes()), "{given} missing");
+    }
+    if let Some(python) = readers() {
+        check(&python, &out, &png, 256, None);
+    }
+}
+
+/// A JPEG-tiled source whose tiles fit the frames (256 texels, YCbCr 4:2:0: `vips tiffsave`
+/// below Q90) has its interior full-resolution tiles copied byte for byte (their entropy-coded
+/// data equal to the source's stored tiles), as `--json` says; the edge tiles, which lie past
+/// the image, and the reduced levels are encoded. Read back within JPEG's error of the source
+/// as libvips decodes it.
+#[test]
+fn a_jpeg_tiled_source_s_tiles_are_copied_byte_for_byte() {
+    if !crate::common::have_program("vips", "--version", "libvips-tools") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = input(dir.path(), "src", 1000, 700, rgb8());
+    let tiled = dir.path().join("s85.tif");
+    let vips = Command::new("vips")
+        .args(["tiffsave", s(&png), s(&tiled), "--tile", "--tile-width", "256", "--tile-height", "256"])
+        .args(["--compression", "jpeg", "--Q", "85"])
+        .output()
+        .unwrap();
+    assert!(vips.status.success(), "vips: {}", String::from_utf8_lossy(&vips.stderr));
+    let out = dir.path().join("series");
+    let json = ok(&["split", s(&tiled), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um", "--json"]);
+    let json: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+    // 3 x 2 of the 4 x 3 tiles of level 0 lie inside the image.
+    assert_eq!(json["copied"], 6, "{json}");
+    dciodvfy(&out);
+    if let Some(python) = readers() {
+        let measured = check(&python, &out, &tiled, 256, Some(&tiled));
+        assert_eq!(measured["copied"], 6, "{measured}");
+        assert_eq!(measured["copiedFrames"], serde_json::json!([0, 1, 2, 4, 5, 6]), "{measured}");
+    }
+}
+
+/// What a DICOM series cannot hold is refused before anything is written, naming what to
+/// change; a failing run leaves no partial series.
+#[test]
+fn refusals_and_no_partial_series() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = input(dir.path(), "in", 300, 200, rgb8());
+    let deep = input(dir.path(), "deep", 300, 200, PixelLayout::new(Channels::Rgb, Depth::U16));
+    let alpha = input(dir.path(), "alpha", 300, 200, PixelLayout::new(Channels::Rgba, Depth::U8));
+    let out = dir.path().join("series");
+    let o = s(&out);
+    let a_file = dir.path().join("a-file");
+    std::fs::write(&a_file, b"not a directory").unwrap();
+    let bad_meta = dir.path().join("bad.json");
+    std::fs::write(&bad_meta, r#"{"PatientAge": "040Y"}"#).unwrap();
+    for (args, want) in [
+        (vec!["split", s(&png), "--layout", "dicom", "-o", o], &["--pixel-size"][..]),
+        (vec!["split", s(&deep), "--layout", "dicom", "-o", o, "--pixel-size", "1um"], &["8-bit", "lossless"][..]),
+        (vec!["split", s(&alpha), "--layout", "dicom", "-o", o, "--pixel-size", "1um"], &["--flatten"][..]),
+        (
+            vec!["split", s(&png), "--layout", "dicom", "-o", o, "--pixel-size", "1um", "--codec", "png"],
+            &["JPEG baseline"][..],
+        ),
+        (
+            vec!["split", s(&png), "--layout", "dicom", "-o", s(&a_file), "--pixel-size", "1um"],
+            &["a-file", "a file"][..],
+        ),
+        (
+            vec!["split", s(&png), "--layout", "dicom", "-o", o, "--pixel-size", "1um", "--dicom-meta", s(&bad_meta)],
+            &["bad.json", "unknown keyword \"PatientAge\""][..],
+        ),
+        (
+            vec!["split", s(&png), "--layout", "dicom", "-o", o, "--pixel-size", "1um", "--dicom-uid-root", "1.02"],
+            &["leading zero"][..],
+        ),
+        (
+            vec!["split", s(&png), "-o", o, "--dicom-uid-root", "1.2"],
+            &["--dicom-uid-root belongs to --layout dicom"][..],
+        ),
+        (
+            vec!["split", s(&png), "--layout", "dicom", "-o", o, "--pixel-size", "1um", "--overlap", "1"],
+            &["--overlap"][..],
+        ),
+    ] {
+        fails_with(&run(&args), want);
+        assert!(!out.exists(), "{args:?} left {}", out.display());
+    }
+    assert_eq!(std::fs::read(&a_file).unwrap(), b"not a directory");
+    // A truncated source fails mid-run: nothing is left, the staging directory neither.
+    let bytes = std::fs::read(&png).unwrap();
+    let cut = dir.path().join("cut.png");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let result = run(&["split", s(&cut), "--layout", "dicom", "-o", o, "--pixel-size", "1um"]);
+    assert!(!result.status.success());
+    let left: Vec<String> =
+        std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert!(left.iter().all(|n| !n.contains("series")), "left behind: {left:?}");
+}
+
+/// A DICOM series is one output among others of one run: Deep Zoom beside it shares the
+/// pyramid's encoding.
+#[test]
+fn a_series_beside_deep_zoom() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = input(dir.path(), "slide", 700, 500, rgb8());
+    let (dcm, web) = (dir.path().join("dcm"), dir.path().join("web"));
+    let said = ok(&[
+        "split",
+        s(&png),
+        "--layout",
+        "dicom",
+        "-o",
+        s(&dcm),
+        "-o",
+        s(&web),
+        "--layout",
+        "dzi",
+        "--overlap",
+        "0",
+        "--tile-size",
+        "256",
+        "--pixel-size",
+        "0.5um",
+    ]);
+    assert!(said.contains("2 outputs") && said.contains("1 pyramid"), "{said}");
+    assert!(dcm.join("level-0.dcm").is_file() && web.join("slide.dzi").is_file());
+    dciodvfy(&dcm);
+}
+
+/// An Aperio-like SVS as tifffile writes it: 256-texel JPEG tiles in YCbCr 4:2:0, a thumbnail.
+const MAKE_SVS: &str = r#"
+import sys, numpy as np, tifffile
+h, w = 600, 900
+y, x = np.mgrid[0:h, 0:w]
+img = np.stack([x * 255 // w, y * 255 // h, (x // 3 + y // 5) & 255], -1).astype(np.int32)
+img += np.random.default_rng(7).integers(0, 16, img.shape)
+img = np.clip(img, 0, 255).astype(np.uint8)
+head = "Aperio Image Library v12.0.15 \r\n%dx%d" % (w, h)
+with tifffile.TiffWriter(sys.argv[1]) as t:
+    t.write(img, tile=(256, 256), compression="jpeg", compressionargs={"level": 80}, photometric="ycbcr", subsampling=(2, 2), description=head + " [0,0 %dx%d] (256x256) JPEG/YCC Q=80|AppMag = 20|MPP = 0.5" % (w, h), metadata=None)
+    t.write(img[::8, ::8].copy(), compression="jpeg", photometric="rgb", description=head + " -> 112x75", metadata=None)
+"#;
+
+/// An SVS's interior full-resolution tiles are copied byte for byte; OpenSlide reads the
+/// region they cover from the series exactly as from the slide (the same JPEG data, the same
+/// decoder); every level is within JPEG's error of the slide as libvips decodes it.
+#[test]
+fn an_svs_s_tiles_are_copied_and_read_as_the_slide_s() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let svs = dir.path().join("slide.svs");
+    crate::tiff_slides::python(python.as_os_str(), MAKE_SVS, &[s(&svs)]);
+    let out = dir.path().join("series");
+    let json = ok(&["split", s(&svs), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um", "--json"]);
+    let json: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+    // 3 x 2 of the 4 x 3 tiles of level 0 lie inside the image.
+    assert_eq!(json["copied"], 6, "{json}");
+    dciodvfy(&out);
+    let measured = check(&python, &out, &svs, 256, Some(&svs));
+    assert_eq!(measured["copiedFrames"], serde_json::json!([0, 1, 2, 4, 5, 6]), "{measured}");
+}
