@@ -6,6 +6,7 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 use vortex_tiler::error::ShowPath;
 use vortex_tiler::output::{self, Claim, Product};
+use vortex_tiler::outputs::Figures;
 use vortex_tiler::split::Progress;
 
 use super::signals;
@@ -121,17 +122,13 @@ fn stored_clause(copied: u64, cropped: u64, t: &vortex_tiler::split::StoredRepor
 }
 
 /// The summary as one JSON object (`--json`), for scripts: the same numbers as the line.
-pub fn summary_json(done: &Finished, layout: &str, out: &Path, pack: Option<&vortex_pack::WriteSummary>) -> String {
-    summary_value(done, layout, out, pack).to_string()
+pub fn summary_json(done: &Finished, layout: &str, out: &Path, figures: &Figures) -> String {
+    summary_value(done, layout, out, figures).to_string()
 }
 
-/// [`summary_json`]'s object.
-pub fn summary_value(
-    done: &Finished,
-    layout: &str,
-    out: &Path,
-    pack: Option<&vortex_pack::WriteSummary>,
-) -> serde_json::Value {
+/// [`summary_json`]'s object; the format's own figures under its name (`pack`, `pmtiles`,
+/// `tiff`, `dicom`).
+pub fn summary_value(done: &Finished, layout: &str, out: &Path, figures: &Figures) -> serde_json::Value {
     let s = &done.summary;
     let mut doc = serde_json::json!({
         "output": out.display().to_string(),
@@ -172,16 +169,26 @@ pub fn summary_value(
             "declined": t.declined,
         });
     }
-    if let Some(w) = pack {
-        doc["pack"] = serde_json::json!({
-            "storedPayloads": w.stored_payloads,
-            "deduplicated": w.deduplicated,
-            "constant": w.constant,
-            "absent": w.absent,
-            "payloadBytes": w.payload_bytes,
-            "fileBytes": w.file_bytes,
-            "contentHash": format!("{:016x}", w.content_hash),
-        });
+    let own = match figures {
+        Figures::Pack(w) => Some((
+            "pack",
+            serde_json::json!({
+                "storedPayloads": w.stored_payloads,
+                "deduplicated": w.deduplicated,
+                "constant": w.constant,
+                "absent": w.absent,
+                "payloadBytes": w.payload_bytes,
+                "fileBytes": w.file_bytes,
+                "contentHash": format!("{:016x}", w.content_hash),
+            }),
+        )),
+        Figures::Pmtiles(w) => Some(("pmtiles", pmtiles_json(w))),
+        Figures::Tiff(w) => Some(("tiff", tiff_json(w))),
+        Figures::Dicom(w) => Some(("dicom", dicom_json(w))),
+        _ => None,
+    };
+    if let Some((key, value)) = own {
+        doc[key] = value;
     }
     doc
 }
@@ -273,6 +280,17 @@ pub fn memory_line(m: &vortex_tiler::split::MemoryReport) -> String {
 }
 
 /// What a pack writer stored: deduplication and one-colour tiles.
+/// The line of a format's own figures, said before the output's summary line.
+pub fn figures_line(figures: &Figures) -> Option<String> {
+    match figures {
+        Figures::Pack(w) => Some(pack_line(w)),
+        Figures::Pmtiles(w) => Some(pmtiles_line(w)),
+        Figures::Tiff(w) => Some(tiff_line(w)),
+        Figures::Dicom(w) => Some(dicom_line(w)),
+        _ => None,
+    }
+}
+
 pub fn pack_line(w: &vortex_pack::WriteSummary) -> String {
     format!(
         "pack: {} tiles, {} payloads stored ({} duplicates shared, {} one-colour, {} absent), {} in {} file bytes, content hash {:016x}",
@@ -313,7 +331,7 @@ pub fn chain(e: &anyhow::Error) -> String {
 }
 
 /// A PMTiles archive's figures, for `--json`.
-pub fn pmtiles_json(w: &vortex_tiler::formats::pmtiles::PmtilesSummary) -> serde_json::Value {
+fn pmtiles_json(w: &vortex_tiler::formats::pmtiles::PmtilesSummary) -> serde_json::Value {
     serde_json::json!({
         "tiles": w.tiles,
         "entries": w.entries,
@@ -325,7 +343,7 @@ pub fn pmtiles_json(w: &vortex_tiler::formats::pmtiles::PmtilesSummary) -> serde
 }
 
 /// A PMTiles archive's figures, in a line.
-pub fn pmtiles_line(w: &vortex_tiler::formats::pmtiles::PmtilesSummary) -> String {
+fn pmtiles_line(w: &vortex_tiler::formats::pmtiles::PmtilesSummary) -> String {
     format!(
         "pmtiles: {} tiles in {} directory entries, {} distinct payloads, {} leaf directories, {} file bytes",
         w.tiles, w.entries, w.contents, w.leaves, w.file_bytes
@@ -333,7 +351,7 @@ pub fn pmtiles_line(w: &vortex_tiler::formats::pmtiles::PmtilesSummary) -> Strin
 }
 
 /// A TIFF's figures, for `--json`.
-pub fn tiff_json(w: &vortex_tiler::formats::tiff::TiffSummary) -> serde_json::Value {
+fn tiff_json(w: &vortex_tiler::formats::tiff::TiffSummary) -> serde_json::Value {
     serde_json::json!({
         "flavour": w.flavour.name(),
         "bigtiff": w.bigtiff,
@@ -346,7 +364,7 @@ pub fn tiff_json(w: &vortex_tiler::formats::tiff::TiffSummary) -> serde_json::Va
 }
 
 /// A TIFF's figures, in a line.
-pub fn tiff_line(w: &vortex_tiler::formats::tiff::TiffSummary) -> String {
+fn tiff_line(w: &vortex_tiler::formats::tiff::TiffSummary) -> String {
     format!(
         "{}: {} levels, {} {} tiles, {}, {} file bytes",
         w.flavour.name(),
@@ -359,7 +377,7 @@ pub fn tiff_line(w: &vortex_tiler::formats::tiff::TiffSummary) -> String {
 }
 
 /// A DICOM series' figures, for `--json`.
-pub fn dicom_json(w: &vortex_tiler::formats::dicom::DicomSummary) -> serde_json::Value {
+fn dicom_json(w: &vortex_tiler::formats::dicom::DicomSummary) -> serde_json::Value {
     serde_json::json!({
         "instances": w.instances,
         "frames": w.frames,
@@ -373,7 +391,7 @@ pub fn dicom_json(w: &vortex_tiler::formats::dicom::DicomSummary) -> serde_json:
 }
 
 /// A DICOM series' figures, in a line.
-pub fn dicom_line(w: &vortex_tiler::formats::dicom::DicomSummary) -> String {
+fn dicom_line(w: &vortex_tiler::formats::dicom::DicomSummary) -> String {
     format!(
         "dicom: {} instances (one a level), {} JPEG baseline frames, {}, series {}, {} file bytes",
         w.instances, w.frames, w.photometric, w.series_uid, w.file_bytes

@@ -11,7 +11,7 @@ use vortex_tiler::error::ShowPath;
 use vortex_tiler::formats::dicom::DicomMeta;
 use vortex_tiler::formats::tiff::{BigTiff, Flavour};
 use vortex_tiler::formats::viewer::Viewer;
-use vortex_tiler::outputs::{Budget, DicomSettings, Format, Output, Plan, Settings, TiffSettings, Wrote};
+use vortex_tiler::outputs::{Budget, DicomSettings, Figures, Format, Output, Plan, Settings, TiffSettings, Wrote};
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::pyramid::Filter;
 use vortex_tiler::settings::{CodecChoice, Requested};
@@ -646,12 +646,12 @@ fn shard(
     let opts = &planned.opts;
     let (done, written) = run.execute_with(|source, watch| scale_out::write_shard(source, &path, opts, &job, watch))?;
     if a.run.json {
-        let mut doc: serde_json::Value =
-            serde_json::from_str(&report::summary_json(&done, "shard", &path, Some(&written)))?;
+        let figures = Figures::Pack(written);
+        let mut doc: serde_json::Value = serde_json::from_str(&report::summary_json(&done, "shard", &path, &figures))?;
         doc["shard"] = serde_json::json!({ "index": chosen.index, "count": chosen.count, "from": chosen.from });
         say!("{doc}");
     } else {
-        report(a, "shard", &done, &path, Some(&written));
+        report(a, "shard", &done, &path, &Figures::Pack(written));
     }
     Ok(())
 }
@@ -698,13 +698,14 @@ pub struct Finished {
     pub took: std::time::Duration,
 }
 
-/// The summary line (and a pack's line), or with --json one JSON object; nothing with --quiet.
-fn report(a: &OutputArgs, layout: &str, done: &Finished, dest: &Path, pack: Option<&vortex_pack::WriteSummary>) {
+/// The summary line (after the format's own line), or with --json one JSON object; nothing
+/// with --quiet.
+fn report(a: &OutputArgs, layout: &str, done: &Finished, dest: &Path, figures: &Figures) {
     if a.run.json {
-        say!("{}", report::summary_json(done, layout, dest, pack));
+        say!("{}", report::summary_json(done, layout, dest, figures));
     } else if !a.run.quiet {
-        if let Some(written) = pack {
-            say!("{}", report::pack_line(written));
+        if let Some(line) = report::figures_line(figures) {
+            say!("{line}");
         }
         say!("{}", report::summary_line(done, dest));
         if a.run.verbose {
@@ -716,39 +717,7 @@ fn report(a: &OutputArgs, layout: &str, done: &Finished, dest: &Path, pack: Opti
 
 /// A run of one output: its summary as `split` has always printed it.
 fn report_one(a: &OutputArgs, done: &Finished, wrote: &Wrote) {
-    if let Some(dicom) = &wrote.dicom {
-        if a.run.json {
-            let mut doc = report::summary_value(done, wrote.format.name(), &wrote.path, None);
-            doc["dicom"] = report::dicom_json(dicom);
-            say!("{doc}");
-        } else if !a.run.quiet {
-            say!("{}", report::dicom_line(dicom));
-            say!("{}", report::summary_line(done, &wrote.path));
-        }
-        return;
-    }
-    if let Some(tiff) = &wrote.tiff {
-        if a.run.json {
-            let mut doc = report::summary_value(done, wrote.format.name(), &wrote.path, None);
-            doc["tiff"] = report::tiff_json(tiff);
-            say!("{doc}");
-        } else if !a.run.quiet {
-            say!("{}", report::tiff_line(tiff));
-            say!("{}", report::summary_line(done, &wrote.path));
-        }
-        return;
-    }
-    let Some(pmtiles) = &wrote.pmtiles else {
-        return report(a, wrote.format.name(), done, &wrote.path, wrote.pack.as_ref());
-    };
-    if a.run.json {
-        let mut doc = report::summary_value(done, "pmtiles", &wrote.path, None);
-        doc["pmtiles"] = report::pmtiles_json(pmtiles);
-        say!("{doc}");
-    } else if !a.run.quiet {
-        say!("{}", report::pmtiles_line(pmtiles));
-        say!("{}", report::summary_line(done, &wrote.path));
-    }
+    report(a, wrote.format.name(), done, &wrote.path, &wrote.figures);
 }
 
 /// A run of several outputs: a line for each (its own figures, its pyramid's stages), then
@@ -766,17 +735,8 @@ fn report_all(a: &OutputArgs, done: &Finished, all: &[Wrote]) {
         let outputs: Vec<serde_json::Value> = all
             .iter()
             .map(|w| {
-                let mut doc = report::summary_value(&each(w), w.format.name(), &w.path, w.pack.as_ref());
+                let mut doc = report::summary_value(&each(w), w.format.name(), &w.path, &w.figures);
                 doc["pyramid"] = w.pyramid.into();
-                if let Some(p) = &w.pmtiles {
-                    doc["pmtiles"] = report::pmtiles_json(p);
-                }
-                if let Some(t) = &w.tiff {
-                    doc["tiff"] = report::tiff_json(t);
-                }
-                if let Some(d) = &w.dicom {
-                    doc["dicom"] = report::dicom_json(d);
-                }
                 doc
             })
             .collect();
@@ -793,17 +753,8 @@ fn report_all(a: &OutputArgs, done: &Finished, all: &[Wrote]) {
         say!("{doc}");
     } else if !a.run.quiet {
         for w in all {
-            if let Some(p) = &w.pmtiles {
-                say!("{}", report::pmtiles_line(p));
-            }
-            if let Some(p) = &w.pack {
-                say!("{}", report::pack_line(p));
-            }
-            if let Some(t) = &w.tiff {
-                say!("{}", report::tiff_line(t));
-            }
-            if let Some(d) = &w.dicom {
-                say!("{}", report::dicom_line(d));
+            if let Some(line) = report::figures_line(&w.figures) {
+                say!("{line}");
             }
             say!("{}: {}", w.format, report::summary_line(&each(w), &w.path));
             if a.run.verbose {

@@ -18,7 +18,7 @@ mod write;
 use std::path::{Path, PathBuf};
 
 pub use plan::Plan;
-pub use write::Wrote;
+pub use write::{Figures, Wrote};
 
 use crate::formats::ome_zarr::{PixelSize, Version};
 use crate::formats::tiff::Flavour;

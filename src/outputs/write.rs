@@ -46,14 +46,24 @@ pub struct Wrote {
     /// Times the run read the source, for all its outputs: once for pyramids cut side by
     /// side, once per pyramid and stripe where the budget holds them only one after another.
     pub reads: usize,
-    /// A pack's own figures.
-    pub pack: Option<vortex_pack::WriteSummary>,
-    /// A PMTiles archive's own figures.
-    pub pmtiles: Option<PmtilesSummary>,
-    /// A TIFF's own figures.
-    pub tiff: Option<TiffSummary>,
-    /// A DICOM series' own figures.
-    pub dicom: Option<DicomSummary>,
+    /// Its format's own figures, where the format has any.
+    pub figures: Figures,
+}
+
+/// A format's own figures of what it wrote, beside the tiles and bytes every output counts.
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub enum Figures {
+    /// A tile directory, a viewer layout or an OME-Zarr: its tiles and bytes say it all.
+    None,
+    /// A pack's payloads, deduplication and content hash.
+    Pack(vortex_pack::WriteSummary),
+    /// A PMTiles archive's tiles, directories and bytes.
+    Pmtiles(PmtilesSummary),
+    /// A TIFF's levels, BigTIFF or not, and bytes.
+    Tiff(TiffSummary),
+    /// A DICOM series' instances and frames.
+    Dicom(DicomSummary),
 }
 
 /// An output being written: its plan and its sink.
@@ -130,11 +140,10 @@ impl Open {
                 planned.output.path.display()
             )));
         }
-        let (mut pack, mut pmtiles, mut tiff, mut dicom) = (None, None, None, None);
-        match (sink, &planned.work) {
-            (Sink::Dir(dir), Work::Tiles { info, .. }) => dir.finish(info)?,
-            (Sink::Dir(dir), _) => dir.finish_viewer()?,
-            (Sink::Pack(sink), _) => pack = Some(sink.finish()?),
+        let figures = match (sink, &planned.work) {
+            (Sink::Dir(dir), Work::Tiles { info, .. }) => dir.finish(info).map(|()| Figures::None)?,
+            (Sink::Dir(dir), _) => dir.finish_viewer().map(|()| Figures::None)?,
+            (Sink::Pack(sink), _) => Figures::Pack(sink.finish()?),
             (Sink::Pmtiles(sink), Work::Pmtiles { name }) => {
                 let layout = &planned.layout;
                 let metadata = serde_json::json!({
@@ -144,7 +153,7 @@ impl Open {
                     "description": "an image without map coordinates: zoom 0 is the whole image at the top left of the web-mercator square",
                     "vortex": { "layout": "xyz", "width": layout.width, "height": layout.height, "tileSize": layout.tile_size },
                 });
-                pmtiles = Some(sink.finish(&Bounds::of_image(layout), metadata.to_string().as_bytes())?);
+                Figures::Pmtiles(sink.finish(&Bounds::of_image(layout), metadata.to_string().as_bytes())?)
             }
             (Sink::OmeZarr(sink), Work::OmeZarr { spec, parent }) => {
                 sink.finish()?;
@@ -155,11 +164,12 @@ impl Open {
                         &label.to_string_lossy(),
                     )?;
                 }
+                Figures::None
             }
-            (Sink::Tiff(sink), _) => tiff = Some(sink.finish()?),
-            (Sink::Dicom(sink), _) => dicom = Some(sink.finish()?),
+            (Sink::Tiff(sink), _) => Figures::Tiff(sink.finish()?),
+            (Sink::Dicom(sink), _) => Figures::Dicom(sink.finish()?),
             _ => return Err(TilerError::Internal("an output's sink is not its format's".into())),
-        }
+        };
         // The pyramid's summary in this output's terms: its levels, texels, tiles and bytes.
         let encoding = planned.opts.encoding();
         let stored = encoding.stored(summary.source)?;
@@ -180,10 +190,7 @@ impl Open {
             summary,
             pyramid,
             reads: 0,
-            pack,
-            pmtiles,
-            tiff,
-            dicom,
+            figures,
         })
     }
 }

@@ -148,6 +148,6 @@ pub fn tile_channels(
         height: set.height,
         took: started.elapsed(),
     };
-    super::report(a, "ome-zarr", &done, &wrote.path, None);
+    super::report(a, "ome-zarr", &done, &wrote.path, &wrote.figures);
     Ok(())
 }
