@@ -156,7 +156,7 @@ fn outputs_of_one_filter_share_the_pyramid_whatever_their_encodings() {
     let mut enc = png::Encoder::new(std::fs::File::create(&input).unwrap(), image.width, image.height);
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Sixteen);
-    let bytes: Vec<u8> = image.samples.iter().flat_map(|v| (*v as u16).to_be_bytes()).collect();
+    let bytes: Vec<u8> = image.samples.iter().flat_map(|v| v.to_be_bytes()).collect();
     enc.write_header().unwrap().write_image_data(&bytes).unwrap();
     let json = same_as_separate_runs(
         &input,

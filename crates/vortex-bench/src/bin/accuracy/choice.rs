@@ -24,6 +24,8 @@ pub enum CodecKey {
     Bc7(u8),
     /// A TIFF's Deflate tiles (not in the sweep).
     Deflate(bool, u8),
+    /// A TIFF's LZW tiles (not in the sweep).
+    Lzw(bool),
 }
 
 pub const PNG_LEVELS: [PngLevel; 3] = [PngLevel::Fast, PngLevel::Default, PngLevel::Best];
@@ -39,6 +41,7 @@ impl CodecKey {
             Codec::Zstd { level, delta } => CodecKey::Zstd(delta, level),
             Codec::Bc1 => CodecKey::Bc1,
             Codec::Deflate { level, delta } => CodecKey::Deflate(delta, level as u8),
+            Codec::Lzw { delta } => CodecKey::Lzw(delta),
             Codec::Bc7 { effort } => CodecKey::Bc7(BC7_EFFORTS.iter().position(|e| *e == effort).unwrap_or(0) as u8),
         }
     }
@@ -53,6 +56,7 @@ impl CodecKey {
             CodecKey::Zstd(delta, level) => Codec::Zstd { level, delta },
             CodecKey::Bc1 => Codec::Bc1,
             CodecKey::Deflate(delta, level) => Codec::Deflate { level: level as u32, delta },
+            CodecKey::Lzw(delta) => Codec::Lzw { delta },
             CodecKey::Bc7(e) => Codec::Bc7 { effort: BC7_EFFORTS[e as usize] },
         }
     }
@@ -67,6 +71,8 @@ impl CodecKey {
             CodecKey::Bc1 => "bc1".into(),
             CodecKey::Deflate(false, l) => format!("deflate {l}"),
             CodecKey::Deflate(true, l) => format!("deflate-delta {l}"),
+            CodecKey::Lzw(false) => "lzw".into(),
+            CodecKey::Lzw(true) => "lzw-delta".into(),
             CodecKey::Bc7(e) => format!("bc7 {}", ["ultra-fast", "very-fast", "fast", "basic", "slow"][e as usize]),
         }
     }
@@ -82,8 +88,8 @@ impl CodecKey {
             CodecKey::Zstd(true, _) => 7,
             CodecKey::Bc1 => 8,
             CodecKey::Bc7(_) => 9,
-            // Not in the sweep; plotted beside zstd-delta, its lossless kin, if it ever is.
-            CodecKey::Deflate(..) => 7,
+            // Not in the sweep; plotted beside zstd-delta, their lossless kin, if they ever are.
+            CodecKey::Deflate(..) | CodecKey::Lzw(_) => 7,
         }
     }
 }
