@@ -2,7 +2,7 @@
 //! Microscopy Image instance (a DICOM Part-10 file) per pyramid level, the series a hospital's
 //! archive, viewers and OpenSlide 4 read.
 //!
-//! * [`Spec`]: what every instance says, fixed and checked before the first tile.
+//! * `Spec`: what every instance says, fixed and checked before the first tile.
 //! * `uid`: the series' UIDs, a hash of the input and the options under a stated root, so that
 //!   a re-run writes the same UIDs and the same bytes.
 //! * `meta`: the patient, study and equipment attributes a user gives (`--dicom-meta`), never
@@ -13,7 +13,7 @@
 //!   level's frames are staged in a file as they arrive (memory holds 12 bytes a frame, never
 //!   a frame) and copied into the instance at the end, row by row, behind the offset table.
 //!   dicom-rs would hold every frame of a level in memory to write them itself.
-//! * `sink`: [`DicomSink`], the pipeline's sink: a staging directory renamed into place.
+//! * `sink`: `DicomSink`, the pipeline's sink: a staging directory renamed into place.
 //!
 //! Frames are JPEG baseline (1.2.840.10008.1.2.4.50), `TILED_FULL`: whole tiles of the
 //! level's grid in row-major order, the right and bottom ones padded. A JPEG-tiled source's
