@@ -28,6 +28,14 @@ pub fn partial_path(dest: &Path) -> PathBuf {
     parent_of(dest).join(format!(".{}.partial-{}", name_of(dest), std::process::id()))
 }
 
+/// An empty staging directory at `staging`: what a run of this process left there removed.
+pub fn fresh_dir(staging: &Path) -> io::Result<()> {
+    if staging.exists() {
+        fs::remove_dir_all(staging)?;
+    }
+    fs::create_dir_all(staging)
+}
+
 /// Writes `bytes` to a temporary name beside `path`, then renames it into place; on any
 /// failure the temporary is removed. The caller has claimed `path` (see [`super::claim`]).
 pub fn write_file(path: &Path, bytes: &[u8]) -> io::Result<()> {

@@ -470,19 +470,26 @@ fn ome_zarr(output: Output, own: &Own, at: &Context, planes: Option<Vec<Plane>>)
     Ok(Planned { output, opts, layout, changed: None, claim, work: Work::OmeZarr { spec: Box::new(spec), parent } })
 }
 
+/// The tile directories' and viewers' flags, and whether each was given: a TIFF or a DICOM
+/// series, which holds its tiles in files of its own, refuses them.
+fn file_and_viewer_flags(own: &Own) -> [(bool, &'static str); 5] {
+    let t = &own.tiles;
+    [
+        (own.overlap.is_some(), "--overlap"),
+        (own.iiif_id.is_some(), "--iiif-id"),
+        (t.filename_format.is_some(), "--filename-format"),
+        (t.png_level.is_some(), "--png-compression"),
+        (t.bc7_effort.is_some(), "--bc7-effort"),
+    ]
+}
+
 /// A pyramidal TIFF (docs/tiff.md): pages without border, whole at the edges (TIFF pads its
 /// edge tiles), JPEG tiles or the raw, Deflate or zstd ones the file stores, all from the
 /// encoders ([`tiff::Spec::codec`]).
 fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Result<Planned> {
     let t = &own.tiles;
     let what = flavour.name();
-    for (given, flag) in [
-        (own.overlap.is_some(), "--overlap"),
-        (own.iiif_id.is_some(), "--iiif-id"),
-        (t.filename_format.is_some(), "--filename-format"),
-        (t.png_level.is_some(), "--png-compression"),
-        (t.bc7_effort.is_some(), "--bc7-effort"),
-    ] {
+    for (given, flag) in file_and_viewer_flags(own) {
         if given {
             return Err(options(format!("{flag} does not apply to a {what} output, one file of tiled levels")));
         }
@@ -588,14 +595,7 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
 /// is needed (the IOD states the pixel spacing).
 fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
     let t = &own.tiles;
-    for (given, flag) in [
-        (own.overlap.is_some(), "--overlap"),
-        (own.iiif_id.is_some(), "--iiif-id"),
-        (t.filename_format.is_some(), "--filename-format"),
-        (t.png_level.is_some(), "--png-compression"),
-        (t.bc7_effort.is_some(), "--bc7-effort"),
-        (t.zstd_level.is_some(), "--zstd-level"),
-    ] {
+    for (given, flag) in file_and_viewer_flags(own).into_iter().chain([(t.zstd_level.is_some(), "--zstd-level")]) {
         if given {
             return Err(options(format!("{flag} does not apply to --layout dicom, a series of JPEG frames")));
         }

@@ -36,10 +36,7 @@ impl DicomSink {
         spec.check()?;
         let dest = claim.path.clone();
         let staging = staging::partial_path(&dest);
-        if staging.exists() {
-            fs::remove_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
-        }
-        fs::create_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
+        staging::fresh_dir(&staging).map_err(|e| TilerError::write(&staging, e))?;
         let mut sink = DicomSink {
             dest,
             staging,

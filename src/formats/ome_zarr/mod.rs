@@ -101,10 +101,7 @@ impl OmeZarrSink {
         }
         let dest = claim.path.clone();
         let staging = staging::partial_path(&dest);
-        if staging.exists() {
-            fs::remove_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
-        }
-        fs::create_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
+        staging::fresh_dir(&staging).map_err(|e| TilerError::write(&staging, e))?;
         let mut sink = OmeZarrSink {
             spec,
             dest,
