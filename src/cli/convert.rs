@@ -122,7 +122,7 @@ pub fn run(a: ConvertArgs) -> Result<()> {
     if let Some(range) = a.range {
         source = source::range::map(source, range, a.out.tile_type().unwrap_or(Depth::U8))?;
     }
-    let carried = super::split::Carried { icc: kept_icc, geo: None };
+    let carried = super::split::Carried { icc: kept_icc, ..Default::default() };
     let result = tile(source, &a.input, a.output_filename_format.clone(), &a.out, started, carried);
     let missing = missing.lock().map(|m| m.clone()).unwrap_or_default();
     if !missing.is_empty() {

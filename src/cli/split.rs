@@ -387,11 +387,11 @@ pub fn run(a: SplitArgs) -> Result<()> {
     let input = input.context("an input image is required")?;
     let options =
         source::OpenOptions { max_memory: a.out.max_memory, autorotate: !a.no_autorotate, keep_icc: a.keep_icc, pick };
-    let source::Opened { mut source, icc, geo } = source::open_with(&input, options)?;
+    let source::Opened { mut source, icc, geo, pitch } = source::open_with(&input, options)?;
     if let Some(range) = a.range {
         source = source::range::map(source, range, a.out.tile_type.unwrap_or(Depth::U8))?;
     }
-    tile(source, &input, a.filename_format, &a.out, started, Carried { icc, geo })
+    tile(source, &input, a.filename_format, &a.out, started, Carried { icc, geo, pitch })
 }
 
 impl OutputArgs {
@@ -537,6 +537,7 @@ impl OutputArgs {
             pack: self.pack_layout.options()?,
             keep_icc: carried.icc,
             geo: carried.geo,
+            pitch: carried.pitch,
             force: self.force,
         })
     }
@@ -556,6 +557,7 @@ fn name_of(layout: OutputLayout) -> String {
 pub struct Carried {
     pub icc: Option<Vec<u8>>,
     pub geo: Option<vortex_tiler::source::GeoTags>,
+    pub pitch: Option<vortex_tiler::source::PixelPitch>,
 }
 
 pub fn tile(

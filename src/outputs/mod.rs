@@ -151,6 +151,9 @@ pub struct Settings {
     /// The source's georeferencing (a GeoTIFF's tags): TIFF outputs write it into their full
     /// resolution; the others carry none and ignore it.
     pub geo: Option<crate::source::GeoTags>,
+    /// The physical size of a source pixel where its file states it: an OME-Zarr, a TIFF or a
+    /// DICOM series records it when `ome_zarr.pixel_size` is not given.
+    pub pitch: Option<crate::source::PixelPitch>,
     /// Replace a foreign regular file at a file output (`--force`).
     pub force: bool,
 }

@@ -7,6 +7,7 @@ use super::{Budget, DicomSettings, Format, OmeZarrSettings, Output, Settings, Ti
 use crate::background::Background;
 use crate::error::{Result, ShowPath, TilerError};
 use crate::formats::dicom;
+use crate::formats::ome_zarr::PixelSize;
 use crate::formats::ome_zarr::{LabelParent, Plane, Spec, label_parent};
 use crate::formats::ome_zarr::{OmeZarrPlan, OmeZarrRequested};
 use crate::formats::tiff::{self, BigTiff, Compression, Flavour};
@@ -237,10 +238,10 @@ impl Own {
             name: s.name.clone().filter(|_| gets(Setting::Name)),
             iiif_id: s.iiif_id.clone().filter(|_| gets(Setting::IiifId)),
             ome_zarr: match format {
-                Format::OmeZarr => s.ome_zarr.clone(),
+                Format::OmeZarr => OmeZarrSettings { pixel_size: pixel_size(s), ..s.ome_zarr.clone() },
                 // A TIFF records the pixel size (OME's PhysicalSize, the resolution tags).
                 Format::Tiff(_) | Format::Dicom => {
-                    OmeZarrSettings { pixel_size: s.ome_zarr.pixel_size, ..OmeZarrSettings::default() }
+                    OmeZarrSettings { pixel_size: pixel_size(s), ..OmeZarrSettings::default() }
                 }
                 _ => OmeZarrSettings::default(),
             },
@@ -251,6 +252,14 @@ impl Own {
             geo: s.geo.clone().filter(|_| matches!(format, Format::Tiff(Flavour::Generic | Flavour::Cog))),
         }
     }
+}
+
+/// `--pixel-size`, or else the source's square pixel as its file states it.
+fn pixel_size(s: &Settings) -> Option<PixelSize> {
+    s.ome_zarr.pixel_size.or_else(|| {
+        let side = s.pitch.as_ref()?.square()?;
+        Some(PixelSize { value: side, unit: "micrometer" })
+    })
 }
 
 /// OME-Zarr's own settings with no OME-Zarr output, and `--keep-icc` where no output keeps
@@ -627,7 +636,7 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
     }
     let Some(pixel_size) = own.ome_zarr.pixel_size else {
         return Err(options(format!(
-            "{}: a DICOM whole-slide image states its pixel spacing (a type 1 attribute): give --pixel-size, e.g. 0.25um",
+            "{}: a DICOM whole-slide image states its pixel spacing (a type 1 attribute), and the input states no square pixel size (an Aperio MPP, OME-XML's PhysicalSizeX/Y, resolution tags in centimetres): give --pixel-size, e.g. 0.25um",
             output.path.shown()
         )));
     };

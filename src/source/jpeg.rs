@@ -204,6 +204,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
             orientation: header.orientation.unwrap_or_default(),
             icc: if cmyk.is_some() { None } else { header.icc() },
             geo: None,
+            pitch: None,
         },
         cmyk,
     }))

@@ -173,6 +173,29 @@ pub struct Embedded {
     pub icc: Option<Vec<u8>>,
     /// A GeoTIFF's georeferencing, as its tags store it.
     pub geo: Option<GeoTags>,
+    /// The physical size of a stored pixel, where the file states it.
+    pub pitch: Option<PixelPitch>,
+}
+
+/// The physical size of one pixel, where a file states it (a slide's MPP, OME-XML's
+/// `PhysicalSizeX`/`Y`, resolution tags in pixels per centimetre): what an OME-TIFF, an
+/// OME-Zarr or a DICOM series records when `--pixel-size` is not given.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelPitch {
+    /// Micrometres across one pixel.
+    pub x_um: f64,
+    /// Micrometres down one pixel.
+    pub y_um: f64,
+    /// Where the file says it, for the summary ("the Aperio description's MPP").
+    pub from: &'static str,
+}
+
+impl PixelPitch {
+    /// The side of a square pixel, or `None` where the sides differ by more than rounding
+    /// (a part in 10^4: resolution tags are rationals, MPP values a few digits).
+    pub fn square(&self) -> Option<f64> {
+        ((self.x_um - self.y_um).abs() <= 1e-4 * self.x_um.max(self.y_um)).then_some(self.x_um)
+    }
 }
 
 /// How [`open_with`] presents an image file.
@@ -208,6 +231,9 @@ pub struct Opened {
     /// A GeoTIFF's georeferencing, where the rows are the file's own grid (not turned by an
     /// orientation): a TIFF output writes it again (docs/tiff.md).
     pub geo: Option<GeoTags>,
+    /// The physical size of a pixel of the rows, where the file states it (its sides swapped
+    /// where an orientation turns the image).
+    pub pitch: Option<PixelPitch>,
 }
 
 /// Opens `path` as viewers show it (or as `opts` says): its orientation applied and its ICC
@@ -215,7 +241,7 @@ pub struct Opened {
 /// carry, and the georeferencing where the file has it and the rows keep its grid.
 pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
     let source = open_picked(path, opts.max_memory, opts.pick)?;
-    let Embedded { orientation, icc, geo } = source.embedded();
+    let Embedded { orientation, icc, geo, pitch } = source.embedded();
     let (mut source, kept) = with_profile(path, source, icc, opts.keep_icc)?;
     let turned = opts.autorotate && orientation != orient::Orientation::NORMAL;
     if opts.autorotate {
@@ -226,7 +252,11 @@ pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
     }
     // A turned image's pixels are no longer where the model transform puts them.
     let geo = geo.filter(|_| !turned);
-    Ok(Opened { source, icc: kept, geo })
+    let pitch = match pitch {
+        Some(p) if opts.autorotate && orientation.transposes() => Some(PixelPitch { x_um: p.y_um, y_um: p.x_um, ..p }),
+        other => other,
+    };
+    Ok(Opened { source, icc: kept, geo, pitch })
 }
 
 /// `source`, whose texels are in the colours of `icc`, converted to sRGB, or kept as they are

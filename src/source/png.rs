@@ -59,6 +59,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         orientation: reader.info().exif_metadata.as_deref().map(orient::from_exif).unwrap_or_default(),
         icc,
         geo: None,
+        pitch: None,
     };
     let rows = if reader.info().interlaced {
         check_whole_fits(

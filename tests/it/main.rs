@@ -31,6 +31,7 @@ mod oracle;
 mod outputs;
 mod pack_cli;
 mod pack_trust;
+mod pixel_size;
 mod pmtiles;
 mod remote_pack;
 mod render;

@@ -344,7 +344,7 @@ pub(crate) fn python(python: &std::ffi::OsStr, script: &str, args: &[&str]) {
 /// An Aperio-like SVS as tifffile writes it: a 240-texel JPEG-tiled full resolution, a
 /// thumbnail in strips, a tiled reduced level, an LZW label and a JPEG macro; the texels of
 /// the image it was made from go to OUT.rgb.
-const MAKE_SVS: &str = r#"
+pub(crate) const MAKE_SVS: &str = r#"
 import sys, numpy as np, tifffile
 out = sys.argv[1]
 h, w = 500, 720

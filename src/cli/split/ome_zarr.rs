@@ -30,7 +30,8 @@ pub struct OmeZarrArgs {
     shard_chunks: Option<u32>,
 
     /// --layout ome-zarr: the physical side of a source pixel, e.g. 0.25um or 250nm, written
-    /// as the levels' scale and the axes' unit [default: none: scales in pixels, no unit].
+    /// as the levels' scale and the axes' unit [default: the input's own where its file
+    /// states it (a slide's MPP, OME-XML, resolution tags in cm), else none: scales in pixels].
     /// A TIFF output records it too (OME's PhysicalSizeX/Y, the resolution tags), and a DICOM
     /// series needs it (its pixel spacing and imaged volume).
     #[arg(long, value_name = "SIZE")]

@@ -25,6 +25,7 @@ mod libjpeg;
 mod lzw;
 mod ndpi;
 mod ndpi_dir;
+mod pitch;
 mod pyramid;
 // Its reading of SampleFormat and BitsPerSample serves the channel source too.
 pub(super) mod samples;
@@ -162,6 +163,7 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
             .unwrap_or_default(),
         icc: profile(path, &mut decoder)?,
         geo: geo::read(&mut decoder),
+        pitch: chosen.pitch,
     };
     if jpeg::is_jpeg(path, &mut decoder)? {
         // One strip cut by restart markers (Hamamatsu NDPI) is read an interval at a time.

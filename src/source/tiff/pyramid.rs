@@ -32,6 +32,8 @@ const XMP: u16 = 700;
 pub(super) struct Chosen {
     pub index: usize,
     pub label: String,
+    /// The physical size of its pixels, where the file states it.
+    pub pitch: Option<crate::source::PixelPitch>,
 }
 
 /// Surveys the file, picks a page and positions `decoder` on it.
@@ -69,7 +71,8 @@ pub(super) fn choose(
     if let Some(why) = ended {
         label += &format!(" ({why}: later pages not read)");
     }
-    Ok(Chosen { index, label })
+    let pitch = super::pitch::of_page(vendor, &pages, index, decoder);
+    Ok(Chosen { index, label, pitch })
 }
 
 /// The main chain's directories, as far as they can be read, and why the chain ended early
