@@ -120,30 +120,26 @@ pub enum Codec {
     },
     /// Texels as a GPU uploads them (packs only).
     Raw,
-    /// Raw texels compressed with zstd, rows left-delta filtered first with `delta` (packs, and
-    /// a TIFF's tiles: the filter is TIFF's horizontal predictor for integer samples).
+    /// Raw texels compressed with zstd, rows filtered first (packs, and a TIFF's tiles).
     Zstd {
         /// The zstd level, 1 to 22 (`--zstd-level`).
         level: i32,
-        /// Whether each row is left-delta filtered first (`--codec zstd-delta`).
-        delta: bool,
+        /// How each row is filtered first (`--codec zstd-delta`: [`RowFilter::Delta`]).
+        filter: RowFilter,
     },
-    /// Raw texels as one zlib stream, rows left-delta filtered first with `delta` (a TIFF's
-    /// tiles only: "Adobe Deflate", the filter its horizontal predictor).
+    /// Raw texels as one zlib stream, rows filtered first (a TIFF's tiles only: "Adobe
+    /// Deflate", the filter its predictor).
     Deflate {
         /// The zlib level, 0 (stored) to 9.
         level: u32,
-        /// Whether each row is left-delta filtered first (the horizontal predictor, for
-        /// integer samples).
-        delta: bool,
+        /// How each row is filtered first.
+        filter: RowFilter,
     },
     /// Raw texels as one TIFF LZW stream (compression 5: codes most significant bit first,
-    /// widened one code early), rows left-delta filtered first with `delta` (a TIFF's tiles
-    /// only, as for Deflate).
+    /// widened one code early), rows filtered first (a TIFF's tiles only, as for Deflate).
     Lzw {
-        /// Whether each row is left-delta filtered first (the horizontal predictor, for
-        /// integer samples).
-        delta: bool,
+        /// How each row is filtered first.
+        filter: RowFilter,
     },
     /// BC1 blocks, opaque RGB (packs only).
     Bc1,
@@ -196,8 +192,8 @@ impl Codec {
             Codec::Jpeg { .. } => "jpeg",
             Codec::Png { .. } => "png",
             Codec::Raw => "raw",
-            Codec::Zstd { delta: false, .. } => "zstd",
-            Codec::Zstd { delta: true, .. } => "zstd-delta",
+            Codec::Zstd { filter: RowFilter::Delta, .. } => "zstd-delta",
+            Codec::Zstd { .. } => "zstd",
             // `--codec deflate`: a TIFF filters integer samples and says so in its tags.
             Codec::Deflate { .. } => "deflate",
             Codec::Lzw { .. } => "lzw",
@@ -319,6 +315,29 @@ impl Codec {
     }
 }
 
+/// How the rows of a tile's raw bytes are filtered before a lossless codec compresses them
+/// (TIFF's `Predictor`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum RowFilter {
+    /// The bytes as they are (`Predictor` 1).
+    None,
+    /// Each sample less the same sample of the texel to its left, wrapping at the sample's
+    /// width: the pack's `zstd-delta` (docs/pack-format.md) and TIFF's horizontal predictor
+    /// (`Predictor` 2) for integer samples.
+    Delta,
+    /// TIFF's floating-point predictor (`Predictor` 3, Adobe's Photoshop TIFF technical note
+    /// 3), for float samples: each row's sample bytes regrouped into planes, the most
+    /// significant bytes first, then each byte less the byte one texel's samples before it.
+    FloatingPoint,
+}
+
+impl RowFilter {
+    /// [`RowFilter::Delta`] where `on`, else none.
+    pub fn delta(on: bool) -> RowFilter {
+        if on { RowFilter::Delta } else { RowFilter::None }
+    }
+}
+
 /// Encodes tiles of one layout with one codec; shared by all worker threads.
 pub struct TileEncoder<T> {
     codec: Codec,
@@ -416,9 +435,9 @@ impl<T: Sample> TileEncoder<T> {
                 out.extend_from_slice(&self.stored_bytes(texels));
                 Ok(())
             }
-            Codec::Zstd { level, delta } => self.encode_zstd(texels, level, delta, out),
-            Codec::Deflate { level, delta } => self.encode_deflate(texels, level, delta, out),
-            Codec::Lzw { delta } => self.encode_lzw(texels, delta, out),
+            Codec::Zstd { level, filter } => self.encode_zstd(texels, level, filter, out),
+            Codec::Deflate { level, filter } => self.encode_deflate(texels, level, filter, out),
+            Codec::Lzw { filter } => self.encode_lzw(texels, filter, out),
             Codec::Bc1 => self.encode_bc(texels, None, out),
             Codec::Bc7 { effort } => self.encode_bc(texels, Some(effort), out),
         }
@@ -449,40 +468,41 @@ impl<T: Sample> TileEncoder<T> {
         }
     }
 
-    /// zstd of the raw tile, rows left-delta filtered first with `delta` (the filter of
-    /// `zstd-delta` tiles in docs/pack-format.md). One compression context per thread.
-    fn encode_zstd(&self, texels: &[T], level: i32, delta: bool, out: &mut Vec<u8>) -> Result<(), String> {
-        *out = zstd_frame(&self.filtered_bytes(texels, delta), level)?;
+    /// zstd of the raw tile, rows filtered first (`zstd-delta`: the filter of those tiles
+    /// in docs/pack-format.md). One compression context per thread.
+    fn encode_zstd(&self, texels: &[T], level: i32, filter: RowFilter, out: &mut Vec<u8>) -> Result<(), String> {
+        *out = zstd_frame(&self.filtered_bytes(texels, filter), level)?;
         Ok(())
     }
 
-    /// One zlib stream of the raw tile, rows left-delta filtered first with `delta`.
-    fn encode_deflate(&self, texels: &[T], level: u32, delta: bool, out: &mut Vec<u8>) -> Result<(), String> {
+    /// One zlib stream of the raw tile, rows filtered first.
+    fn encode_deflate(&self, texels: &[T], level: u32, filter: RowFilter, out: &mut Vec<u8>) -> Result<(), String> {
         use std::io::Write;
-        let raw = self.filtered_bytes(texels, delta);
+        let raw = self.filtered_bytes(texels, filter);
         let mut z = flate2::write::ZlibEncoder::new(std::mem::take(out), flate2::Compression::new(level.min(9)));
         *out = z.write_all(&raw).and_then(|()| z.finish()).map_err(|e| format!("deflate: {e}"))?;
         Ok(())
     }
 
     /// One TIFF LZW stream of the raw tile (a clear code first, the end code last: `weezl`,
-    /// the `tiff` crate's coder), rows left-delta filtered first with `delta`.
-    fn encode_lzw(&self, texels: &[T], delta: bool, out: &mut Vec<u8>) -> Result<(), String> {
-        let raw = self.filtered_bytes(texels, delta);
+    /// the `tiff` crate's coder), rows filtered first.
+    fn encode_lzw(&self, texels: &[T], filter: RowFilter, out: &mut Vec<u8>) -> Result<(), String> {
+        let raw = self.filtered_bytes(texels, filter);
         let mut encoder = weezl::encode::Encoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8);
         let result = encoder.into_vec(out).encode_all(&raw);
         result.status.map(drop).map_err(|e| format!("lzw: {e}"))
     }
 
-    /// The raw tile's bytes, each row left-delta filtered with `delta`: every sample less the
-    /// same sample of the texel to its left, wrapping at the sample's width
-    /// (`vortex_pack::format::delta_encode_rows`, which is also TIFF's horizontal predictor,
-    /// `Predictor` 2, for integer samples).
-    fn filtered_bytes<'a>(&self, texels: &'a [T], delta: bool) -> Cow<'a, [u8]> {
+    /// The raw tile's bytes (little-endian samples), each row filtered as `filter` says:
+    /// [`RowFilter::Delta`] by `vortex_pack::format::delta_encode_rows`,
+    /// [`RowFilter::FloatingPoint`] by [`float_predict_rows`].
+    fn filtered_bytes<'a>(&self, texels: &'a [T], filter: RowFilter) -> Cow<'a, [u8]> {
         let mut raw = self.stored_bytes(texels);
-        if delta {
-            let (c, sb) = (self.stored.channels.count(), self.stored.depth.bytes());
-            vortex_pack::format::delta_encode_rows(raw.to_mut(), self.side as usize, c, sb);
+        let (c, sb) = (self.stored.channels.count(), self.stored.depth.bytes());
+        match filter {
+            RowFilter::None => {}
+            RowFilter::Delta => vortex_pack::format::delta_encode_rows(raw.to_mut(), self.side as usize, c, sb),
+            RowFilter::FloatingPoint => float_predict_rows(raw.to_mut(), self.side as usize, c, sb),
         }
         raw
     }
@@ -624,6 +644,31 @@ fn flatten<T: Sample>(texels: &[T], channels: usize, matte: &[T]) -> Vec<T> {
     out
 }
 
+/// TIFF's floating-point predictor (`Predictor` 3) on rows of `width` texels of `channels`
+/// little-endian samples of `sample_bytes` bytes: each row's bytes regrouped into planes, every
+/// sample's most significant byte first and its least significant last, then each byte less
+/// the byte `channels` places before it (one texel back within a plane; the difference runs on
+/// across the planes' boundaries, as the technical note defines it).
+pub(crate) fn float_predict_rows(bytes: &mut [u8], width: usize, channels: usize, sample_bytes: usize) {
+    let samples = width * channels;
+    let row_bytes = samples * sample_bytes;
+    if row_bytes == 0 {
+        return;
+    }
+    let mut planes = vec![0u8; row_bytes];
+    for row in bytes.chunks_exact_mut(row_bytes) {
+        for (i, sample) in row.chunks_exact(sample_bytes).enumerate() {
+            for (b, byte) in sample.iter().enumerate() {
+                planes[(sample_bytes - 1 - b) * samples + i] = *byte;
+            }
+        }
+        for i in (channels..row_bytes).rev() {
+            planes[i] = planes[i].wrapping_sub(planes[i - channels]);
+        }
+        row.copy_from_slice(&planes);
+    }
+}
+
 /// One zstd frame of `bytes` (tiles, OME-Zarr chunks); one compression context per thread, kept
 /// for the next call at the same level.
 pub(crate) fn zstd_frame(bytes: &[u8], level: i32) -> Result<Vec<u8>, String> {
@@ -643,6 +688,19 @@ pub(crate) fn zstd_frame(bytes: &[u8], level: i32) -> Result<Vec<u8>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Worked by hand from the technical note: 1.0 and 2.0 (00 00 80 3F, 00 00 00 40) regroup
+    /// into the planes 3F 40 | 80 00 | 00 00 | 00 00, then each byte less the one before.
+    #[test]
+    fn the_floating_point_predictor_regroups_then_differences() {
+        let mut row: Vec<u8> = [1.0f32, 2.0].iter().flat_map(|v| v.to_le_bytes()).collect();
+        float_predict_rows(&mut row, 2, 1, 4);
+        assert_eq!(row, [0x3F, 0x01, 0x40, 0x80, 0, 0, 0, 0]);
+        // Two channels: each byte less the one two places back; rows are independent.
+        let mut rows: Vec<u8> = [1.0f32, 2.0, 1.0, 2.0].iter().flat_map(|v| v.to_le_bytes()).collect();
+        float_predict_rows(&mut rows, 1, 2, 4);
+        assert_eq!(rows, [0x3F, 0x40, 0x41, 0xC0, 0x80, 0, 0, 0, 0x3F, 0x40, 0x41, 0xC0, 0x80, 0, 0, 0]);
+    }
 
     #[test]
     fn flatten_composites_over_matte() {

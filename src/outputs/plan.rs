@@ -208,7 +208,7 @@ fn reads(format: Format, setting: Setting) -> bool {
         },
         Format::Pmtiles => matches!(setting, Name | ImageCodec),
         Format::OmeZarr => matches!(setting, Name | ZstdLevel),
-        Format::Tiff(_) => matches!(setting, Name | ImageCodec | ZstdLevel),
+        Format::Tiff(_) => matches!(setting, Name | ImageCodec | ZstdLevel | KeepIcc),
         Format::Dicom => matches!(setting, Name | ImageCodec),
     }
 }
@@ -295,12 +295,11 @@ fn refuse_unread(s: &Settings, outputs: &[Output]) -> Result<()> {
     {
         let what = match o.format {
             Format::Pmtiles => "a PMTiles archive",
-            Format::Tiff(_) => "a TIFF output (its ICC tag is not written yet)",
             Format::Dicom => "a DICOM series (its frames state sRGB)",
             _ => "OME-Zarr",
         };
         return Err(options(format!(
-            "--keep-icc keeps the profile in the JPEG and PNG tiles of a directory and in info.json (a pack's too); {what} has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
+            "--keep-icc keeps the profile in the JPEG and PNG tiles of a directory and in info.json (a pack's too), and in a TIFF's ICC tag; {what} has nowhere to keep it: leave --keep-icc out to convert the texels to sRGB"
         )));
     }
     Ok(())
@@ -586,6 +585,7 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         name: at.name(own).trim_end_matches(".ome").to_string(),
         pixel_size,
         geo: geo.to_vec(),
+        icc: own.keep_icc.clone(),
     };
     spec.check()?;
     at.limits().check_pyramid(&layout, false)?;
@@ -865,7 +865,6 @@ mod tests {
             (&[(TIFF, "a.tif")], with(|s| s.overlap = Some(1)), "--overlap does not apply to a tiff output"),
             (&[(OME_TIFF, "a.ome.tif")], with(|s| s.tiles.filename_format = Some("%1$s.png".into())), "ome-tiff"),
             (&[(Format::Pack, "a.vtpk")], with(|s| s.tiff.bigtiff = BigTiff::Always), "--bigtiff belongs to a TIFF"),
-            (&[(TIFF, "a.tif")], with(|s| s.keep_icc = Some(vec![0; 200])), "its ICC tag is not written yet"),
             (&[(DICOM, "a")], Settings::default(), "give --pixel-size"),
             (&[(DICOM, "a")], with_pixel_size(|s| s.tiles.codec = Some(CodecChoice::Zstd)), "JPEG baseline"),
             (&[(DICOM, "a")], with_pixel_size(|s| s.tiles.border = Some(1)), "DICOM frames have no border"),
@@ -917,6 +916,7 @@ mod tests {
             s.overlap = Some(0);
             s.tiles.tile_size = Some(256);
             s.ome_zarr.pixel_size = Some("0.5um".parse().unwrap());
+            s.keep_icc = Some(vec![7; 300]);
         });
         let p = plan(&[(TIFF, "a.tif"), (DZI, "web"), (OME_TIFF, "b.ome.tif")], settings).unwrap();
         let [tiff, dzi, ome] = &p.outputs[..] else { panic!("three outputs") };
@@ -926,6 +926,7 @@ mod tests {
         let l = &spec.layout;
         assert_eq!((l.width, l.height, l.tile_size, l.lod_count), (1000, 700, 256, 3));
         assert_eq!(spec.pixel_size, Some(tiff::Micrometres(0.5)));
+        assert_eq!(spec.icc, Some(vec![7; 300]), "--keep-icc: the profile the samples are in");
         assert_eq!(spec.name, "slide");
         assert_eq!(ome.opts.filter, Filter::Box, "OME-TIFF's levels are means of the stored values");
 
@@ -938,7 +939,7 @@ mod tests {
         assert_eq!(spec.compression, Compression::Zstd { level: 9 });
         assert_eq!(
             p.outputs[0].opts.codec,
-            crate::codec::Codec::Zstd { level: 9, delta: true },
+            crate::codec::Codec::Zstd { level: 9, filter: crate::codec::RowFilter::Delta },
             "the encoders compress the tiles, with the predictor"
         );
 

@@ -7,7 +7,7 @@ use std::path::Path;
 use base64::Engine;
 
 use crate::background::Background;
-use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling, ZSTD_LEVELS};
+use crate::codec::{Bc7Effort, Codec, PngLevel, RowFilter, Subsampling, ZSTD_LEVELS};
 pub(crate) use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
 use crate::error::{Result, TilerError};
 pub use crate::formats::tiles::filename::DEFAULT_FILENAME_STEM;
@@ -477,8 +477,8 @@ fn build_codec(
                 .unwrap_or(PngLevel::Fast),
         },
         CodecChoice::Raw => Codec::Raw,
-        CodecChoice::Zstd => Codec::Zstd { level: zstd_level, delta: false },
-        CodecChoice::ZstdDelta => Codec::Zstd { level: zstd_level, delta: true },
+        CodecChoice::Zstd => Codec::Zstd { level: zstd_level, filter: RowFilter::None },
+        CodecChoice::ZstdDelta => Codec::Zstd { level: zstd_level, filter: RowFilter::Delta },
         CodecChoice::Bc1 => Codec::Bc1,
         CodecChoice::Deflate | CodecChoice::Lzw => {
             return Err(TilerError::Options(format!(

@@ -155,3 +155,19 @@ fn a_pack_keeps_the_profile_in_its_metadata() {
         assert_eq!(vips_profile(tile), profile, "{}", tile.display());
     }
 }
+
+/// A TIFF output keeps the profile in every level's ICC tag (34675): libvips reads it from
+/// the first page and from a reduced one (`[page=1]`), and exiftool from the file; without
+/// --keep-icc the file carries none.
+#[test]
+fn a_tiff_keeps_the_profile_in_every_level() {
+    let Some((dir, jpg, profile)) = adobe_jpeg() else { return };
+    let tiff = dir.path().join("kept.tif");
+    ok(&["split", s(&jpg), "-o", s(&tiff), "--keep-icc", "--tile-size", "64", "--codec", "deflate"]);
+    assert_eq!(vips_profile(&tiff), profile, "level 0");
+    let page1 = format!("{}[page=1]", s(&tiff));
+    assert_eq!(vips_profile(Path::new(&page1)), profile, "level 1");
+    let plain = dir.path().join("plain.tif");
+    ok(&["split", s(&jpg), "-o", s(&plain), "--tile-size", "64", "--codec", "deflate"]);
+    assert!(vips_profile(&plain).is_empty(), "no profile without --keep-icc");
+}

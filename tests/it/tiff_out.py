@@ -3,7 +3,8 @@ against a naive pyramid of the source (tests/it/tiff_out.rs runs it with VORTEX_
 
     tiff_out.py ome|generic TIFF SOURCE TILE exact|jpeg
 
-ome: tifffile reads one OME series with every level (SubIFDs), libvips every `subifd=`;
+ome: tifffile reads one OME series with every level (SubIFDs), libvips every `subifd=`, and
+the OME-XML validates against the OME schema (ome-types);
 generic: tifffile reads a page a level, libvips every `page=`, OpenSlide 4 opens it as
 generic-tiff with every level and `read_region` gives the source (8-bit RGB sources).
 exact: each level equals the oracle sample for sample; jpeg: within JPEG's error of it.
@@ -14,6 +15,7 @@ import json
 import sys
 
 import numpy as np
+import ome_types
 import pyvips
 import tifffile
 
@@ -39,6 +41,16 @@ def libvips_decodes(path, measured):
         fail(f"libvips: {e}")
 
 
+def check_predictor(what, page, src):
+    """Float samples, compressed, take the floating-point predictor (3); integers the
+    horizontal one (2)."""
+    if page.compression == 1 or page.compression == 7:
+        return
+    want = 3 if src.dtype.kind == "f" else 2
+    if int(page.predictor) != want:
+        fail(f"{what}: Predictor {int(page.predictor)}, expected {want}")
+
+
 def check_ome(path, src, tile, mode, measured):
     n = levels_of(src, tile)
     with tifffile.TiffFile(path) as t:
@@ -50,11 +62,18 @@ def check_ome(path, src, tile, mode, measured):
         if len(s.levels) != n:
             fail(f"{len(s.levels)} levels in the series, expected {n}")
         xml = t.ome_metadata
+        # ome-types checks the document against the OME 2016-06 schema (its bundled XSD,
+        # through lxml) and parses it.
+        try:
+            pixels = ome_types.from_xml(xml, validate=True).images[0].pixels
+        except Exception as e:
+            fail(f"the OME-XML does not validate against the OME schema: {e}")
         h, w, c = src.shape
-        for want in (f'SizeX="{w}"', f'SizeY="{h}"', f'SizeC="{c}"'):
-            if want not in xml:
-                fail(f"OME-XML lacks {want}")
+        if (pixels.size_x, pixels.size_y, pixels.size_c) != (w, h, c):
+            fail(f"OME-XML says {pixels.size_x}x{pixels.size_y}x{pixels.size_c}, expected {w}x{h}x{c}")
+        measured["ome-types"] = "valid"
         for k, level in enumerate(s.levels):
+            check_predictor(f"level {k}", level.keyframe, src)
             compare(f"tifffile level {k}", level.asarray(), oracle(src, k), mode, measured)
     for k in range(n) if libvips_decodes(path, measured) else ():
         image = pyvips.Image.new_from_file(path, subifd=k - 1)
@@ -69,6 +88,7 @@ def check_generic(path, src, tile, mode, measured):
         for k, page in enumerate(t.pages):
             if k > 0 and page.subfiletype != 1:
                 fail(f"page {k}: NewSubfileType {page.subfiletype}, expected 1")
+            check_predictor(f"page {k}", page, src)
             compare(f"tifffile page {k}", page.asarray(), oracle(src, k), mode, measured)
     for k in range(n) if libvips_decodes(path, measured) else ():
         image = pyvips.Image.new_from_file(path, page=k)

@@ -22,9 +22,9 @@ fn rgb8() -> PixelLayout {
 /// a skip with a note, and a failure under CI.
 fn readers() -> Option<PathBuf> {
     crate::common::python_with(
-        "tifffile, pyvips, openslide, numpy",
+        "tifffile, pyvips, openslide, numpy, ome_types",
         "the TIFF readers",
-        "tifffile, pyvips, openslide-python and openslide-bin",
+        "tifffile, pyvips, openslide-python, openslide-bin and ome-types[lxml]",
     )
 }
 
@@ -171,6 +171,37 @@ fn readers_open_every_level_of_an_ome_tiff() {
         let tiff = dir.path().join(format!("o{k}.ome.tif"));
         ok(&["split", s(&source), "-o", s(&tiff), "--codec", codec, "--tile-size", &tile.to_string(), "-q"]);
         let said = check(&python, "ome", &tiff, &source, tile, mode);
+        eprintln!("{}: {said}", tiff.display());
+    }
+}
+
+/// Float samples (a float32 TIFF made by tifffile, negative and fractional values) keep
+/// their bits: Deflate and LZW with the floating-point predictor (3), which tifffile and
+/// libvips undo; every level equals the float box oracle (means in float64, rounded once to
+/// float32, as our pyramid makes them) exactly.
+#[test]
+fn float_samples_take_the_floating_point_predictor() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let make = r#"
+import sys, numpy as np, tifffile
+h, w = 203, 301
+y, x = np.mgrid[0:h, 0:w]
+grey = (x * 0.37 - y * 1.25 + np.random.default_rng(3).normal(0, 4, (h, w))).astype(np.float32)
+rgb = np.stack([grey, grey * -2.5 + 1e3, (x ^ y) / 7.0], -1).astype(np.float32)
+tifffile.imwrite(sys.argv[1], grey)
+tifffile.imwrite(sys.argv[2], rgb, photometric="rgb")
+"#;
+    let (grey, rgb) = (dir.path().join("grey.tif"), dir.path().join("rgb.tif"));
+    crate::tiff_slides::python(python.as_os_str(), make, &[s(&grey), s(&rgb)]);
+    for (source, flavour, out, codec) in [
+        (&grey, "ome", "g.ome.tif", "deflate"),
+        (&rgb, "generic", "r.tif", "lzw"),
+        (&rgb, "ome", "r.ome.tif", "deflate"),
+    ] {
+        let tiff = dir.path().join(out);
+        ok(&["split", s(source), "-o", s(&tiff), "--codec", codec, "--filter", "box", "--tile-size", "64", "-q"]);
+        let said = check(&python, flavour, &tiff, source, 64, "exact");
         eprintln!("{}: {said}", tiff.display());
     }
 }
@@ -368,4 +399,43 @@ fn a_damaged_geo_key_directory_is_refused_by_a_tiff_output_only() {
     fails_with(&run(&["split", s(&source), "-o", s(&cog)]), &["geo.tif", "GeoKeyDirectoryTag (34735) says 40 keys"]);
     assert!(!cog.exists());
     ok(&["split", s(&source), "-o", s(&dir.path().join("web")), "--layout", "dzi", "-q"]);
+}
+
+/// A run killed (SIGKILL) part way through a TIFF leaves nothing at the path: the file is
+/// written under a temporary name (`.NAME.partial-PID`, a COG's tiles staged beside it) and
+/// renamed when complete. The same command run again writes the file and removes what the
+/// dead run left.
+#[test]
+fn a_killed_run_leaves_no_tiff_and_the_next_run_cleans_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("big.ppm");
+    let mut bytes = b"P6\n2000 2000\n255\n".to_vec();
+    bytes.extend((0..3 * 2000 * 2000u32).map(|i| (i % 251) as u8));
+    std::fs::write(&input, bytes).unwrap();
+    for name in ["x.tif", "x.cog.tif"] {
+        let tiff = dir.path().join(name);
+        let args = ["split", s(&input), "-o", s(&tiff), "--codec", "deflate", "--tile-size", "16", "-q"];
+        let mut child = Command::new(crate::common::cli::BIN).args(args).spawn().unwrap();
+        // The child's only sign of progress is its temporary file growing: polled a bounded
+        // number of times, and the child killed wherever it has got to (nothing below depends
+        // on how far).
+        let partial = dir.path().join(format!(".{name}.partial-{}", child.id()));
+        for _ in 0..4000 {
+            if std::fs::metadata(&partial).is_ok_and(|m| m.len() >= 100_000) || child.try_wait().unwrap().is_some() {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        assert!(Command::new("kill").args(["-KILL", &child.id().to_string()]).status().unwrap().success());
+        assert!(!child.wait().unwrap().success(), "{name}: killed");
+        assert!(!tiff.exists(), "{name}: nothing at the destination");
+        ok(&args);
+        let left: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|f| f.starts_with('.'))
+            .collect();
+        assert!(left.is_empty(), "{name}: the dead run's temporaries remain: {left:?}");
+        assert!(tiff.is_file());
+    }
 }

@@ -9,7 +9,7 @@ use std::sync::Mutex;
 
 use vortex_pack::{Description, NewTile, PackWriter, TileId, TileKind, WriteOptions, WriteSummary};
 
-use crate::codec::Codec;
+use crate::codec::{Codec, RowFilter};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::PixelLayout;
@@ -36,17 +36,18 @@ pub(crate) fn pack_description(layout: &Layout, stored: PixelLayout) -> Descript
     }
 }
 
-/// The pack's kind of the tiles `codec` makes; Deflate tiles are a TIFF's, which no pack holds.
+/// The pack's kind of the tiles `codec` makes; Deflate and LZW tiles and the floating-point
+/// predictor are a TIFF's, which no pack holds.
 pub fn tile_kind(codec: Codec) -> Result<TileKind> {
     Ok(match codec {
         Codec::Jpeg { .. } => TileKind::Jpeg,
         Codec::Png { .. } => TileKind::Png,
         Codec::Raw => TileKind::Raw,
-        Codec::Zstd { delta: false, .. } => TileKind::Zstd,
-        Codec::Zstd { delta: true, .. } => TileKind::ZstdDelta,
+        Codec::Zstd { filter: RowFilter::None, .. } => TileKind::Zstd,
+        Codec::Zstd { filter: RowFilter::Delta, .. } => TileKind::ZstdDelta,
         Codec::Bc1 => TileKind::Bc1,
         Codec::Bc7 { .. } => TileKind::Bc7,
-        Codec::Deflate { .. } | Codec::Lzw { .. } => {
+        Codec::Deflate { .. } | Codec::Lzw { .. } | Codec::Zstd { filter: RowFilter::FloatingPoint, .. } => {
             return Err(TilerError::Options(format!(
                 "--codec {} compresses the tiles of a TIFF; a pack takes png, raw, zstd or zstd-delta",
                 codec.name()

@@ -29,6 +29,7 @@ pub(super) mod tag {
     pub const SAMPLE_FORMAT: u16 = 339;
     pub const YCBCR_SUBSAMPLING: u16 = 530;
     pub const REFERENCE_BLACK_WHITE: u16 = 532;
+    pub const ICC_PROFILE: u16 = 34675;
 }
 
 /// TIFF field types.
@@ -36,6 +37,7 @@ const ASCII: u16 = 2;
 const SHORT: u16 = 3;
 const LONG: u16 = 4;
 const RATIONAL: u16 = 5;
+const UNDEFINED: u16 = 7;
 const DOUBLE: u16 = 12;
 const LONG8: u16 = 16;
 const IFD: u16 = 13;
@@ -52,6 +54,8 @@ pub(super) enum Value {
     Double(Vec<f64>),
     /// Text, written with its terminating NUL.
     Ascii(String),
+    /// Bytes of no TIFF type (an ICC profile).
+    Undefined(Vec<u8>),
     /// Offsets of other IFDs (IFD or IFD8).
     Ifds(Vec<u64>),
     /// ASCII bytes already in the file at `offset`, `count` of them with the NUL.
@@ -75,6 +79,7 @@ impl Value {
             Value::Long(_) => LONG,
             Value::Rational(_) => RATIONAL,
             Value::Double(_) => DOUBLE,
+            Value::Undefined(_) => UNDEFINED,
             Value::Ascii(_) | Value::AsciiAt { .. } => ASCII,
             Value::Ifds(_) => {
                 if big {
@@ -93,6 +98,7 @@ impl Value {
             Value::Long(v) => v.len() as u64,
             Value::Rational(v) => v.len() as u64,
             Value::Double(v) => v.len() as u64,
+            Value::Undefined(v) => v.len() as u64,
             Value::Ascii(s) => s.len() as u64 + 1,
             Value::AsciiAt { count, .. } => *count,
         }
@@ -123,6 +129,7 @@ impl Value {
                 out.extend(s.as_bytes());
                 out.push(0);
             }
+            Value::Undefined(v) => out.extend(v),
             Value::AsciiAt { .. } => {}
         }
         out

@@ -18,15 +18,14 @@
 //! the file's size (`Spec::needs_bigtiff`), or always with [`BigTiff::Always`].
 //! `TiffSink` is the writer as a pipeline sink. Tiles come compressed from the encoder
 //! threads (`Spec::codec`: JPEG, or Deflate, LZW and zstd with the horizontal predictor, which
-//! is the pack's row-delta filter) and in the producer's order (the sink is `ordered`), so the
+//! is the pack's row-delta filter, for integer samples and the floating-point one for floats) and in the producer's order (the sink is `ordered`), so the
 //! file's bytes are the same on every run, whatever the thread count; the file is written
 //! under a temporary name and renamed into place when complete.
 //!
 //! A JPEG-tiled source's stored tiles are copied into level 0 where they are what the tags
 //! say (`TiffSink`'s `takes_stored_jpeg`). A GeoTIFF source's georeferencing tags are written
 //! again into a COG's or a generic pyramid's full resolution (`Spec::geo`). Not yet (issue
-//! 43): shared `JPEGTables`, the floating-point predictor, and more than four channels as
-//! planes.
+//! 43): shared `JPEGTables` and more than four channels as planes.
 
 mod cog;
 mod ifd;
@@ -40,7 +39,7 @@ pub(crate) use sink::TiffSink;
 pub use writer::TiffSummary;
 pub(crate) use writer::TiffWriter;
 
-use crate::codec::{Codec, Subsampling};
+use crate::codec::{Codec, RowFilter, Subsampling};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::{Channels, Depth, PixelLayout};
@@ -177,6 +176,9 @@ pub(crate) struct Spec {
     /// resolution's IFD (none in the reduced levels, as GDAL writes its overviews); empty for
     /// none.
     pub geo: Vec<(u16, GeoValue)>,
+    /// The ICC profile the samples are in (`--keep-icc`), in every level's IFD; `None`: sRGB,
+    /// which TIFF readers assume.
+    pub icc: Option<Vec<u8>>,
 }
 
 impl Spec {
@@ -252,8 +254,8 @@ impl Spec {
     }
 
     /// An upper bound of the file's size: header, tiles at their largest (a COG's with their
-    /// leader and trailer), IFDs, their arrays, the georeferencing, the OME-XML and a COG's
-    /// ghost area.
+    /// leader and trailer), IFDs, their arrays, the georeferencing, the ICC profiles, the
+    /// OME-XML and a COG's ghost area.
     pub fn most_file_bytes(&self) -> u64 {
         let framing = if self.flavour == Flavour::Cog { cog::FRAMING } else { 0 };
         let total = self.layout.total_tiles();
@@ -265,7 +267,8 @@ impl Spec {
                 GeoValue::Ascii(v) => v.len() as u64 + 1,
             } + 24)
             .sum();
-        let ifds = self.layout.lod_count as u64 * 4096 + total.saturating_mul(16) + geo;
+        let icc = self.icc.as_ref().map_or(0, |p| p.len() as u64 + 2);
+        let ifds = self.layout.lod_count as u64 * (4096 + icc) + total.saturating_mul(16) + geo;
         let xml = ome::xml(self).len() as u64;
         tiles.saturating_add(ifds).saturating_add(xml).saturating_add(1024)
     }
@@ -276,25 +279,28 @@ impl Spec {
         self.bigtiff == BigTiff::Always || self.most_file_bytes() > u32::MAX as u64
     }
 
-    /// Whether integer samples are horizontally differenced before Deflate or zstd
-    /// (`Predictor` 2); floats are stored as they are (the floating-point predictor, 3, is
-    /// not written yet).
-    pub fn predictor(&self) -> bool {
-        matches!(self.compression, Compression::Deflate { .. } | Compression::Lzw | Compression::Zstd { .. })
-            && matches!(self.stored.depth, Depth::U8 | Depth::U16 | Depth::U32)
+    /// How rows are filtered before Deflate, LZW or zstd: integer samples horizontally
+    /// differenced (`Predictor` 2), float ones by the floating-point predictor (3).
+    pub fn predictor(&self) -> RowFilter {
+        if !matches!(self.compression, Compression::Deflate { .. } | Compression::Lzw | Compression::Zstd { .. }) {
+            return RowFilter::None;
+        }
+        match self.stored.depth {
+            Depth::U8 | Depth::U16 | Depth::U32 => RowFilter::Delta,
+            Depth::F16 | Depth::F32 => RowFilter::FloatingPoint,
+        }
     }
 
     /// The codec whose tiles the file stores as they come from the encoders: raw samples, or
-    /// Deflate and zstd of them with the horizontal predictor where [`Spec::predictor`] says
-    /// (the filter of the pack's `zstd-delta`, which is TIFF's `Predictor` 2 for integer
-    /// samples). `None` for JPEG, whose quality is the run's setting, not the file's.
+    /// Deflate, LZW and zstd of them filtered as [`Spec::predictor`] says. `None` for JPEG,
+    /// whose quality is the run's setting, not the file's.
     pub fn codec(&self) -> Option<Codec> {
-        let delta = self.predictor();
+        let filter = self.predictor();
         match self.compression {
             Compression::None => Some(Codec::Raw),
-            Compression::Deflate { level } => Some(Codec::Deflate { level, delta }),
-            Compression::Lzw => Some(Codec::Lzw { delta }),
-            Compression::Zstd { level } => Some(Codec::Zstd { level, delta }),
+            Compression::Deflate { level } => Some(Codec::Deflate { level, filter }),
+            Compression::Lzw => Some(Codec::Lzw { filter }),
+            Compression::Zstd { level } => Some(Codec::Zstd { level, filter }),
             Compression::Jpeg { .. } => None,
         }
     }

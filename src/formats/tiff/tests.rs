@@ -126,6 +126,7 @@ fn spec(flavour: Flavour, w: u32, h: u32, levels: u32, stored: PixelLayout, comp
         name: "tiny <&> \"test\"".into(),
         pixel_size: None,
         geo: Vec::new(),
+        icc: None,
     }
 }
 
@@ -308,7 +309,13 @@ fn compressed_tiles_decode_to_the_samples() {
     for compression in [Compression::Deflate { level: 6 }, Compression::Zstd { level: 3 }] {
         let s = spec(Flavour::Generic, 20, 18, 2, rgb16, compression);
         let codec = s.codec().unwrap();
-        assert!(matches!(codec, Codec::Deflate { delta: true, .. } | Codec::Zstd { delta: true, .. }), "{codec:?}");
+        assert!(
+            matches!(
+                codec,
+                Codec::Deflate { filter: RowFilter::Delta, .. } | Codec::Zstd { filter: RowFilter::Delta, .. }
+            ),
+            "{codec:?}"
+        );
         let encoder = crate::codec::TileEncoder::<u16>::new(codec, rgb16, false, None, 16, vec![]).unwrap();
         let stored = |l, x, y| {
             let texels: Vec<u16> =
@@ -340,6 +347,43 @@ fn compressed_tiles_decode_to_the_samples() {
             }
         }
         assert_eq!(out, raw_tile(&s, 1, 0, 0), "{compression:?}");
+    }
+}
+
+/// Float samples take the floating-point predictor (3) before Deflate and LZW: the `tiff`
+/// crate, a reader of its own that undoes predictor 3, gives back every sample bit for bit,
+/// negative, fractional and subnormal ones included, across the tiles' joins.
+#[test]
+fn float_tiles_take_the_floating_point_predictor() {
+    let rgbf = PixelLayout::new(Channels::Rgb, Depth::F32);
+    let value = |x: u32, y: u32, c: u32| match (x + y + c) % 5 {
+        0 => -(x as f32) * 0.37 - y as f32,
+        1 => f32::from_bits(0x0000_0401 + x),
+        2 => 1.0e30 / (1 + y) as f32,
+        _ => (x * 1000 + y * 10 + c) as f32 / 7.0,
+    };
+    for compression in [Compression::Deflate { level: 6 }, Compression::Lzw] {
+        let s = spec(Flavour::Generic, 20, 18, 1, rgbf, compression);
+        let codec = s.codec().unwrap();
+        let encoder = crate::codec::TileEncoder::<f32>::new(codec, rgbf, false, None, 16, vec![]).unwrap();
+        let file = write(&s, |_, tx, ty| {
+            let texels: Vec<f32> =
+                (0..16 * 16 * 3).map(|i| value(tx * 16 + (i / 3) % 16, ty * 16 + i / 48, i % 3)).collect();
+            let mut out = Vec::new();
+            encoder.encode(&texels, &mut out).unwrap();
+            out
+        });
+        let n = open(&file);
+        assert_eq!(chain(&n, n.first())[0].one(317), 3, "{compression:?}: floating-point predictor");
+        let mut decoder = tiff::decoder::Decoder::new(std::io::Cursor::new(&file)).unwrap();
+        let tiff::decoder::DecodingResult::F32(samples) = decoder.read_image().unwrap() else {
+            panic!("{compression:?}: not read as float samples");
+        };
+        assert_eq!(samples.len(), 20 * 18 * 3);
+        for (i, got) in samples.iter().enumerate() {
+            let (x, y, c) = ((i / 3) as u32 % 20, (i / 3) as u32 / 20, i as u32 % 3);
+            assert_eq!(got.to_bits(), value(x, y, c).to_bits(), "{compression:?}: ({x}, {y}) sample {c}");
+        }
     }
 }
 

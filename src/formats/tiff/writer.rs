@@ -18,6 +18,7 @@ use std::path::{Path, PathBuf};
 use super::cog::{self, Staging};
 use super::ifd::{Ifd, Value, tag};
 use super::{Compression, Flavour, SIGNATURE, SIGNATURE_AT, Spec, ome};
+use crate::codec::RowFilter;
 use crate::error::{Result, ShowPath, TilerError};
 use crate::pixel::Depth;
 use crate::source::GeoValue;
@@ -313,8 +314,10 @@ impl TiffWriter {
             let count = SIGNATURE.len() as u64 + 1;
             ifd.set(tag::SOFTWARE, Value::AsciiAt { offset: SIGNATURE_AT, count });
         }
-        if s.predictor() {
-            ifd.set(tag::PREDICTOR, Value::Short(vec![2]));
+        match s.predictor() {
+            RowFilter::None => {}
+            RowFilter::Delta => ifd.set(tag::PREDICTOR, Value::Short(vec![2])),
+            RowFilter::FloatingPoint => ifd.set(tag::PREDICTOR, Value::Short(vec![3])),
         }
         ifd.set(tag::TILE_WIDTH, Value::Long(vec![s.layout.tile_size]));
         ifd.set(tag::TILE_LENGTH, Value::Long(vec![s.layout.tile_size]));
@@ -333,6 +336,9 @@ impl TiffWriter {
                 };
                 ifd.set(*t, value);
             }
+        }
+        if let Some(icc) = &s.icc {
+            ifd.set(tag::ICC_PROFILE, Value::Undefined(icc.clone()));
         }
         if s.stored.channels.has_alpha() {
             // Unassociated alpha: the samples are not premultiplied.

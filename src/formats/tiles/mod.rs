@@ -16,7 +16,7 @@ use std::path::Path;
 
 use vortex_pack::{Description, Level};
 
-use crate::codec::{Bc7Effort, Codec, PngLevel, Subsampling};
+use crate::codec::{Bc7Effort, Codec, PngLevel, RowFilter, Subsampling};
 use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
 use crate::error::{Result, TilerError};
 use crate::layout::{Layout, lods_for};
@@ -156,8 +156,8 @@ pub(crate) fn codec_of(info: &InfoFile, extension: Option<String>) -> Option<Cod
         // Never a file extension: these tiles are not files.
         _ if info.codec.is_none() => None,
         "raw" => Some(Codec::Raw),
-        "zstd" => Some(Codec::Zstd { level: zstd_level, delta: false }),
-        "zstd-delta" => Some(Codec::Zstd { level: zstd_level, delta: true }),
+        "zstd" => Some(Codec::Zstd { level: zstd_level, filter: RowFilter::None }),
+        "zstd-delta" => Some(Codec::Zstd { level: zstd_level, filter: RowFilter::Delta }),
         "bc1" => Some(Codec::Bc1),
         "bc7" => Some(Codec::Bc7 { effort: effort.unwrap_or(DEFAULT_BC7_EFFORT) }),
         _ => None,

@@ -16,7 +16,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use vortex_bench::measure;
 use vortex_pack::{Description, Tile, TileKind};
-use vortex_tiler::codec::{Bc7Effort, Codec, PngLevel, Subsampling, TileEncoder};
+use vortex_tiler::codec::{Bc7Effort, Codec, PngLevel, RowFilter, Subsampling, TileEncoder};
 use vortex_tiler::formats::pack::tile_kind;
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
 
@@ -83,7 +83,7 @@ fn main() -> Result<()> {
     codecs.push(("raw".into(), Codec::Raw));
     for delta in [false, true] {
         for level in [1, 3, 9, 19] {
-            let codec = Codec::Zstd { level, delta };
+            let codec = Codec::Zstd { level, filter: RowFilter::delta(delta) };
             codecs.push((format!("{} {level}", codec.name()), codec));
         }
     }

@@ -1,7 +1,7 @@
 //! What is measured: a [`Choice`] is one way to build the pyramid (a LOD filter and a tile
 //! codec), with its label in tables and plots and its plot family.
 
-use crate::tiler::{Bc7Effort, Codec, Filter, PngLevel, Subsampling};
+use crate::tiler::{Bc7Effort, Codec, Filter, PngLevel, RowFilter, Subsampling};
 
 /// Every LOD filter, in the order of the tables.
 pub const FILTERS: [Filter; 6] = Filter::ALL;
@@ -38,10 +38,11 @@ impl CodecKey {
             Codec::Jpeg { quality, subsampling } => CodecKey::Jpeg(quality, subsampling == Subsampling::S444),
             Codec::Png { level } => CodecKey::Png(PNG_LEVELS.iter().position(|l| *l == level).unwrap_or(0) as u8),
             Codec::Raw => CodecKey::Raw,
-            Codec::Zstd { level, delta } => CodecKey::Zstd(delta, level),
+            // The sweep filters by rows' deltas only (no float samples, so no floating-point predictor).
+            Codec::Zstd { level, filter } => CodecKey::Zstd(filter != RowFilter::None, level),
             Codec::Bc1 => CodecKey::Bc1,
-            Codec::Deflate { level, delta } => CodecKey::Deflate(delta, level as u8),
-            Codec::Lzw { delta } => CodecKey::Lzw(delta),
+            Codec::Deflate { level, filter } => CodecKey::Deflate(filter != RowFilter::None, level as u8),
+            Codec::Lzw { filter } => CodecKey::Lzw(filter != RowFilter::None),
             Codec::Bc7 { effort } => CodecKey::Bc7(BC7_EFFORTS.iter().position(|e| *e == effort).unwrap_or(0) as u8),
         }
     }
@@ -53,10 +54,10 @@ impl CodecKey {
             }
             CodecKey::Png(l) => Codec::Png { level: PNG_LEVELS[l as usize] },
             CodecKey::Raw => Codec::Raw,
-            CodecKey::Zstd(delta, level) => Codec::Zstd { level, delta },
+            CodecKey::Zstd(delta, level) => Codec::Zstd { level, filter: RowFilter::delta(delta) },
             CodecKey::Bc1 => Codec::Bc1,
-            CodecKey::Deflate(delta, level) => Codec::Deflate { level: level as u32, delta },
-            CodecKey::Lzw(delta) => Codec::Lzw { delta },
+            CodecKey::Deflate(delta, level) => Codec::Deflate { level: level as u32, filter: RowFilter::delta(delta) },
+            CodecKey::Lzw(delta) => Codec::Lzw { filter: RowFilter::delta(delta) },
             CodecKey::Bc7(e) => Codec::Bc7 { effort: BC7_EFFORTS[e as usize] },
         }
     }

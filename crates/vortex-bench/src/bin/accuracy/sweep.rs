@@ -8,7 +8,7 @@ use crate::choice::PNG_LEVELS;
 use crate::images::Img;
 use crate::measure::Measured;
 use crate::tiler::{
-    Bc7Effort, Channels, Codec, CodecChoice, Depth, Filter, PixelLayout, PngLevel, Requested, SplitOptions,
+    Bc7Effort, Channels, Codec, CodecChoice, Depth, Filter, PixelLayout, PngLevel, Requested, RowFilter, SplitOptions,
     Subsampling, settings,
 };
 
@@ -50,7 +50,7 @@ pub fn codec_sweep() -> Vec<Codec> {
     v.push(Codec::Raw);
     for delta in [false, true] {
         for level in [1, 3, 9, 19] {
-            v.push(Codec::Zstd { level, delta });
+            v.push(Codec::Zstd { level, filter: RowFilter::delta(delta) });
         }
     }
     v.push(Codec::Bc1);

@@ -9,7 +9,7 @@ use crate::choice::CodecKey;
 use crate::measure::Measured;
 use crate::pareto::{Axis, pareto};
 use crate::sweep::{Defaults, codec_sweep, is_default};
-use crate::tiler::{Bc7Effort, Codec, Filter, PngLevel};
+use crate::tiler::{Bc7Effort, Codec, Filter, PngLevel, RowFilter};
 
 /// `accuracy:defaults`.
 pub fn defaults(res: &Results, d: &Defaults) -> String {
@@ -114,14 +114,15 @@ pub fn defaults(res: &Results, d: &Defaults) -> String {
         f1(al.ratio((f, png_default), (f, PNG_FAST))),
         f1(100.0 * (1.0 - op.bytes_ratio((f, png_default), (f, PNG_FAST)))),
         f1(op.ratio((f, png_default), (f, PNG_FAST))),
-        f1(al.bytes(f, Codec::Zstd { level: d.zstd_level, delta: true }) / 1024.0),
+        f1(al.bytes(f, Codec::Zstd { level: d.zstd_level, filter: RowFilter::Delta }) / 1024.0),
         f1(al.bytes(f, PNG_FAST) / 1024.0),
-        f2(al.ratio((f, Codec::Zstd { level: d.zstd_level, delta: true }), (f, PNG_FAST))),
+        f2(al.ratio((f, Codec::Zstd { level: d.zstd_level, filter: RowFilter::Delta }), (f, PNG_FAST))),
     );
-    let zd = |level| (f, Codec::Zstd { level, delta: true });
+    let zd = |level| (f, Codec::Zstd { level, filter: RowFilter::Delta });
     let level = d.zstd_level;
     let delta_wins = [1, 3, 9, 19].iter().all(|l| {
-        op.bytes(f, Codec::Zstd { level: *l, delta: true }) < op.bytes(f, Codec::Zstd { level: *l, delta: false })
+        op.bytes(f, Codec::Zstd { level: *l, filter: RowFilter::Delta })
+            < op.bytes(f, Codec::Zstd { level: *l, filter: RowFilter::None })
     });
     out!(
         s,
