@@ -187,8 +187,9 @@ fn open_grid(a: &ConvertArgs) -> Result<Box<dyn TileGrid>> {
 
 /// The image format `path` starts like, if any: `convert` takes tiles, `split` images.
 fn image_kind(path: &Path) -> Option<&'static str> {
-    let mut magic = Vec::with_capacity(8);
-    std::io::Read::read_to_end(&mut std::io::Read::take(std::fs::File::open(path).ok()?, 8), &mut magic).ok()?;
+    let mut magic = Vec::with_capacity(Streamed::SNIFF_BYTES);
+    let file = std::fs::File::open(path).ok()?;
+    std::io::Read::read_to_end(&mut std::io::Read::take(file, Streamed::SNIFF_BYTES as u64), &mut magic).ok()?;
     Streamed::sniff(&magic).map(Streamed::name)
 }
 
