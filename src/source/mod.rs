@@ -358,6 +358,20 @@ fn open_once(path: &Path, max_memory: u64, pick: Pick) -> Result<Box<dyn RowSour
     }
 }
 
+/// Whether `path` is a DICOM file or a directory holding one: a whole-slide series, which
+/// [`open_with`] reads (`convert` takes it as `split` does).
+pub fn is_dicom_input(path: &Path) -> bool {
+    match path.is_dir() {
+        true => dicom::holds_dicom(path),
+        false => {
+            let mut head = Vec::with_capacity(Streamed::SNIFF_BYTES);
+            File::open(path)
+                .and_then(|f| f.take(Streamed::SNIFF_BYTES as u64).read_to_end(&mut head))
+                .is_ok_and(|_| dicom::is_dicom(&head))
+        }
+    }
+}
+
 /// The image formats read row by row, told apart by their first bytes (not the extension).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Streamed {

@@ -85,6 +85,11 @@ impl Chunks {
         }
         let mut compressed = vec![0u8; count as usize];
         self.file.read_exact_at(&mut compressed, offset).map_err(|e| format!("{name}: cannot be read: {e}"))?;
+        // A JPEG ends at its EOI: a byte after it pads the chunk to an even length (as DICOM
+        // pads every fragment) and is no part of the stream.
+        if compressed.ends_with(&[0xFF, 0xD9, 0x00]) {
+            compressed.pop();
+        }
         if self.tables.is_empty() {
             return match compressed.starts_with(&[0xFF, 0xD8]) {
                 true => Ok(compressed),
