@@ -345,7 +345,12 @@ fn open_once(path: &Path, max_memory: u64, pick: Pick) -> Result<Box<dyn RowSour
         let name = format.map_or("this", Streamed::name);
         return Err(TilerError::unsupported(
             path,
-            format!("--page and --series choose among a TIFF's images; a {name} file holds one"),
+            match format {
+                Some(Streamed::Dicom) => {
+                    "--page and --series choose among a TIFF's images; of a DICOM series the full-resolution instance is read".to_string()
+                }
+                _ => format!("--page and --series choose among a TIFF's images; a {name} file holds one"),
+            },
         ));
     }
     match format {

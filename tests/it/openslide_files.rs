@@ -90,10 +90,7 @@ fn damaged_slides_are_refused_naming_the_file() {
     let Some(fixtures) = fixtures() else { return };
     let dir = tempfile::tempdir().unwrap();
     // (file, what the message must say besides the file's name)
-    for (name, needles) in [
-        ("unreadable.svs", &["tile"][..]),
-        ("unopenable.tiff", &["compression", "52479"][..]),
-    ] {
+    for (name, needles) in [("unreadable.svs", &["tile"][..]), ("unopenable.tiff", &["compression", "52479"][..])] {
         let pack = dir.path().join(format!("{name}.vtpk"));
         let out = cli::run(&["split", s(&fixtures.join(name)), "--pack", s(&pack), "-q"]);
         let mut all = vec![name];

@@ -167,7 +167,7 @@ fn locate_pixel_data(path: &Path) -> Result<(String, Option<PixelData>, u64)> {
         DataSetReader::new_with_ts(&mut reader, ts).map_err(|e| bad(format!("its data set cannot be read: {e}")))?;
     let mut depth = 0usize;
     let mut pixel_data = None;
-    while let Some(token) = tokens.next() {
+    for token in tokens.by_ref() {
         let token = token.map_err(|e| bad(format!("its data set cannot be read: {e}")))?;
         let at = position.get();
         let left = file_len.saturating_sub(at);
