@@ -143,3 +143,49 @@ pub(crate) fn native(path: &Path, at: u64, len: u64, frames: u64, frame_bytes: u
 fn show(tag: [u8; 4]) -> String {
     format!("({:02X}{:02X},{:02X}{:02X})", tag[1], tag[0], tag[3], tag[2])
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Encapsulated items: the offset table `bot`, then one fragment of each length, then the
+    /// delimiter (unless `end` is false).
+    fn items(bot: &[u32], fragments: &[u32], end: bool) -> Vec<u8> {
+        let mut out = ITEM.to_vec();
+        out.extend((bot.len() as u32 * 4).to_le_bytes());
+        out.extend(bot.iter().flat_map(|o| o.to_le_bytes()));
+        for &len in fragments {
+            out.extend(ITEM);
+            out.extend(len.to_le_bytes());
+            out.extend(vec![0xAB; len as usize]);
+        }
+        if end {
+            out.extend(SEQUENCE_END);
+            out.extend([0; 4]);
+        }
+        out
+    }
+
+    fn walk(bytes: &[u8], frames: u64) -> Result<Frames> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("f.dcm");
+        std::fs::write(&path, bytes).unwrap();
+        encapsulated(&path, 0, bytes.len() as u64, frames, Tables { extended: None })
+    }
+
+    #[test]
+    fn items_are_walked_and_the_offset_table_checked() {
+        let frames = walk(&items(&[0, 12], &[4, 6], true), 2).unwrap();
+        assert_eq!(frames, Frames { offsets: vec![24, 36], counts: vec![4, 6] });
+        let said = |r: Result<Frames>| r.unwrap_err().to_string();
+        assert!(said(walk(&items(&[0, 10], &[4, 6], true), 2)).contains("frame 1 at byte 10"));
+        assert!(said(walk(&items(&[0], &[4, 6], true), 2)).contains("need 0 or 8"));
+        assert!(said(walk(&items(&[], &[4, 6, 2], true), 2)).contains("more fragments than its 2 frames"));
+        assert!(said(walk(&items(&[], &[4], true), 2)).contains("1 fragments for 2 frames"));
+        let mut cut = items(&[], &[4, 6], false);
+        cut.truncate(cut.len() - 3);
+        assert!(said(walk(&cut, 2)).contains("frame 1: its 6 bytes"));
+        // A frame count the file cannot hold is refused before anything is allocated.
+        assert!(said(walk(&items(&[], &[4], true), u32::MAX as u64)).contains("cannot fit"));
+    }
+}
