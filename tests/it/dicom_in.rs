@@ -1,7 +1,7 @@
 //! DICOM whole-slide images in (docs/dicom.md, "Reading DICOM"): a series we wrote read back
 //! (its frames decoded as the source's tiles were, and copied again where they fit), series
-//! written by another writer (dicom-rs here, uncompressed `TILED_FULL` and `TILED_SPARSE`, read
-//! exactly), OpenSlide's DICOM test pair read as OpenSlide 4 reads it, and damaged series
+//! written by other writers (dicom-rs: uncompressed `TILED_FULL` and `TILED_SPARSE`; pydicom:
+//! lossless JPEG 2000; read exactly), OpenSlide's DICOM test pair read as OpenSlide 4 reads it, and damaged series
 //! refused naming the file and the frame or attribute.
 
 use std::path::{Path, PathBuf};
@@ -343,4 +343,60 @@ fn damaged_series_are_refused_naming_the_file_and_the_frame() {
         fails_with(&run(&["split", s(file), "--pack", s(&out), "-q"]), want);
         assert!(!out.exists(), "{}: a pack was left behind", file.display());
     }
+}
+
+/// A JPEG 2000 series another writer made: pydicom's data set around lossless J2K codestreams
+/// (imagecodecs' OpenJPEG, reversible colour transform: `YBR_RCT`), 32x32 frames over a 70x50
+/// matrix, a Basic Offset Table: read exactly as the array it was made from (lossless).
+const J2K_SERIES: &str = r#"
+import sys, numpy, imagecodecs, pydicom
+from pydicom.dataset import Dataset, FileMetaDataset
+from pydicom.encaps import encapsulate
+from pydicom.uid import generate_uid
+w, h, t = 70, 50, 32
+rng = numpy.random.default_rng(7)
+image = rng.integers(0, 256, (h, w, 3), dtype=numpy.uint8)
+frames = []
+for r in range(0, h, t):
+    for c in range(0, w, t):
+        tile = numpy.zeros((t, t, 3), numpy.uint8)
+        part = image[r:r + t, c:c + t]
+        tile[:part.shape[0], :part.shape[1]] = part
+        frames.append(imagecodecs.jpeg2k_encode(tile, level=0, codecformat="j2k", reversible=True, mct=True))
+meta = FileMetaDataset()
+meta.MediaStorageSOPClassUID = "1.2.840.10008.5.1.4.1.1.77.1.6"
+meta.MediaStorageSOPInstanceUID = generate_uid()
+meta.TransferSyntaxUID = "1.2.840.10008.1.2.4.90"
+ds = Dataset()
+ds.file_meta = meta
+ds.SOPClassUID, ds.SOPInstanceUID = meta.MediaStorageSOPClassUID, meta.MediaStorageSOPInstanceUID
+ds.SeriesInstanceUID = generate_uid()
+ds.ImageType = ["ORIGINAL", "PRIMARY", "VOLUME", "NONE"]
+ds.SamplesPerPixel, ds.PhotometricInterpretation, ds.PlanarConfiguration = 3, "YBR_RCT", 0
+ds.Rows = ds.Columns = t
+ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 8, 8, 7, 0
+ds.TotalPixelMatrixColumns, ds.TotalPixelMatrixRows = w, h
+ds.NumberOfFrames = len(frames)
+ds.DimensionOrganizationType = "TILED_FULL"
+ds.PixelData = encapsulate(frames, has_bot=True)
+ds["PixelData"].VR = "OB"
+ds.save_as(sys.argv[1], enforce_file_format=True)
+open(sys.argv[2], "wb").write(image.tobytes())
+"#;
+
+#[test]
+fn a_jpeg_2000_series_of_another_writer_reads_exactly() {
+    let Some(py) =
+        crate::common::python_with("pydicom, imagecodecs, numpy", "a JPEG 2000 DICOM", "pydicom, imagecodecs")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (dcm, raw) = (dir.path().join("j2k.dcm"), dir.path().join("image.rgb"));
+    let out = Command::new(&py).arg("-c").arg(J2K_SERIES).args([s(&dcm), s(&raw)]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (w, h, texels, said) = read_all(&dcm);
+    assert_eq!((w, h), (70, 50), "{said}");
+    assert!(said.contains("jpeg 2000"), "{said}");
+    assert!(texels == std::fs::read(&raw).unwrap(), "the J2K frames read otherwise than the array ({said})");
 }
