@@ -400,3 +400,20 @@ fn a_jpeg_2000_series_of_another_writer_reads_exactly() {
     assert!(said.contains("jpeg 2000"), "{said}");
     assert!(texels == std::fs::read(&raw).unwrap(), "the J2K frames read otherwise than the array ({said})");
 }
+
+/// MONOCHROME2 JPEG frames (a grey image we encode) read back grey, within JPEG's error (the
+/// 30 dB of the colour round trip above).
+#[test]
+fn grey_frames_read_back_grey() {
+    let dir = tempfile::tempdir().unwrap();
+    let grey = PixelLayout::new(Channels::Grey, Depth::U8);
+    let png = input(dir.path(), "grey", 500, 300, grey);
+    let series = dir.path().join("series");
+    ok(&["split", s(&png), "--layout", "dicom", "-o", s(&series), "--pixel-size", "1um", "-q"]);
+    let source = source::open(&series, 1 << 30).unwrap();
+    assert_eq!(source.layout(), grey, "{}", source.describe());
+    let (_, _, texels, said) = read_all(&series);
+    let (_, _, original, _) = read_all(&png);
+    let psnr = psnr(&texels, &original);
+    assert!(psnr >= 30.0, "{psnr:.1} dB from the image ({said})");
+}
