@@ -77,27 +77,29 @@ fn starts_like_dicom(path: &Path) -> bool {
 /// Opens the series `path` is an instance of (or, a directory, holds) as its full-resolution
 /// image.
 pub(crate) fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
+    let mut skipped = 0;
     let (series, given) = if path.is_dir() {
         (dicom_files(path)?.iter().map(|p| Instance::read(p)).collect::<Result<Vec<_>>>()?, None)
     } else {
         let given = Instance::read(path)?;
         let uid = given.text(tags::SERIES_INSTANCE_UID);
         let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-        let mut series = vec![];
+        let mut series = vec![given];
         for other in dicom_files(dir)? {
             if same_file(&other, path) {
                 continue;
             }
-            // Only the instances of the same series matter; another file that cannot be read
-            // is not one of them.
-            if let Ok(instance) = Instance::read(&other)
-                && uid.is_some()
-                && instance.text(tags::SERIES_INSTANCE_UID) == uid
-            {
-                series.push(instance);
+            // Only the instances of the same series matter; a file beside it that cannot be
+            // read is skipped (it may be of another series), and the summary says so.
+            match Instance::read(&other) {
+                Ok(instance) if uid.is_some() && instance.text(tags::SERIES_INSTANCE_UID) == uid => {
+                    series.push(instance)
+                }
+                Ok(_) => {}
+                Err(_) => skipped += 1,
             }
         }
-        series.insert(0, given);
+        series.sort_by(|a, b| a.path.cmp(&b.path));
         (series, Some(path))
     };
     let slides: Vec<Instance> =
@@ -140,6 +142,9 @@ pub(crate) fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     let mut label = format!("DICOM WSI {name} (the full-resolution level of {}", volumes.len());
     if alike > 1 {
         label += &format!("; {} instances of this size: the first by name read", alike);
+    }
+    if skipped > 0 {
+        label += &format!("; {skipped} unreadable DICOM files beside it skipped");
     }
     label.push(')');
     build(chosen, label, max_memory)
