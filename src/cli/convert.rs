@@ -103,6 +103,16 @@ pub struct ConvertArgs {
 
 pub fn run(a: ConvertArgs) -> Result<()> {
     let started = Instant::now();
+    if !a.tiled && a.filename_format.is_none() && source::is_dicom_input(&a.input) {
+        // A DICOM whole-slide series is tiled, and read as `split` reads it (source::dicom).
+        let options = source::OpenOptions { keep_icc: a.keep_icc, ..source::OpenOptions::shown(a.out.max_memory()) };
+        let source::Opened { mut source, icc, .. } = source::open_with(&a.input, options)?;
+        if let Some(range) = a.range {
+            source = source::range::map(source, range, a.out.tile_type().unwrap_or(Depth::U8))?;
+        }
+        let carried = super::split::Carried { icc, geo: None };
+        return tile(source, &a.input, a.output_filename_format.clone(), &a.out, started, carried);
+    }
     let grid = open_grid(&a)?;
     check_tiles_found(grid.as_ref(), a.allow_missing_tiles)?;
     let header = grid.header();
@@ -187,8 +197,9 @@ fn open_grid(a: &ConvertArgs) -> Result<Box<dyn TileGrid>> {
 
 /// The image format `path` starts like, if any: `convert` takes tiles, `split` images.
 fn image_kind(path: &Path) -> Option<&'static str> {
-    let mut magic = Vec::with_capacity(8);
-    std::io::Read::read_to_end(&mut std::io::Read::take(std::fs::File::open(path).ok()?, 8), &mut magic).ok()?;
+    let mut magic = Vec::with_capacity(Streamed::SNIFF_BYTES);
+    let file = std::fs::File::open(path).ok()?;
+    std::io::Read::read_to_end(&mut std::io::Read::take(file, Streamed::SNIFF_BYTES as u64), &mut magic).ok()?;
     Streamed::sniff(&magic).map(Streamed::name)
 }
 

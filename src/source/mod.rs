@@ -53,6 +53,7 @@ macro_rules! forward_row_order_to_inner {
 }
 
 pub mod channels;
+pub(crate) mod dicom;
 pub mod icc;
 mod jpeg;
 mod libjpeg;
@@ -350,6 +351,9 @@ fn open_once(path: &Path, max_memory: u64, pick: Pick) -> Result<Box<dyn RowSour
     // Checked before opening: opening a FIFO blocks until a writer comes.
     let meta = std::fs::metadata(path).map_err(|e| TilerError::io(path, e))?;
     if meta.is_dir() {
+        if pick == Pick::default() && dicom::holds_dicom(path) {
+            return dicom::open(path, max_memory);
+        }
         return Err(TilerError::decode(path, "is a directory, not an image"));
     }
     if !meta.is_file() {
@@ -358,7 +362,8 @@ fn open_once(path: &Path, max_memory: u64, pick: Pick) -> Result<Box<dyn RowSour
             "is not a regular file (a FIFO, socket or device): an image is opened more than once (its first bytes, then its rows), so save it to a file first",
         ));
     }
-    let mut magic = [0u8; 8];
+    // A DICOM file's signature follows its 128-byte preamble; the others start the file.
+    let mut magic = [0u8; dicom::MAGIC_AT + 4];
     let mut file = File::open(path).map_err(|e| TilerError::io(path, e))?;
     let n = read_up_to(&mut file, &mut magic).map_err(|e| TilerError::io(path, e))?;
     let magic = &magic[..n];
@@ -370,7 +375,12 @@ fn open_once(path: &Path, max_memory: u64, pick: Pick) -> Result<Box<dyn RowSour
         let name = format.map_or("this", Streamed::name);
         return Err(TilerError::unsupported(
             path,
-            format!("--page and --series choose among a TIFF's images; a {name} file holds one"),
+            match format {
+                Some(Streamed::Dicom) => {
+                    "--page and --series choose among a TIFF's images; of a DICOM series the full-resolution instance is read".to_string()
+                }
+                _ => format!("--page and --series choose among a TIFF's images; a {name} file holds one"),
+            },
         ));
     }
     match format {
@@ -378,7 +388,22 @@ fn open_once(path: &Path, max_memory: u64, pick: Pick) -> Result<Box<dyn RowSour
         Some(Streamed::Tiff) => tiff::open(path, max_memory, pick),
         Some(Streamed::Jpeg) => jpeg::open(path, max_memory),
         Some(Streamed::Pnm) => pnm::open(path),
+        Some(Streamed::Dicom) => dicom::open(path, max_memory),
         None => whole::open(path, max_memory),
+    }
+}
+
+/// Whether `path` is a DICOM file or a directory holding one: a whole-slide series, which
+/// [`open_with`] reads (`convert` takes it as `split` does).
+pub fn is_dicom_input(path: &Path) -> bool {
+    match path.is_dir() {
+        true => dicom::holds_dicom(path),
+        false => {
+            let mut head = Vec::with_capacity(Streamed::SNIFF_BYTES);
+            File::open(path)
+                .and_then(|f| f.take(Streamed::SNIFF_BYTES as u64).read_to_end(&mut head))
+                .is_ok_and(|_| dicom::is_dicom(&head))
+        }
     }
 }
 
@@ -393,12 +418,20 @@ pub enum Streamed {
     Jpeg,
     /// Binary PGM or PPM (`P5`, `P6`).
     Pnm,
+    /// A DICOM Part-10 file (`DICM` after a 128-byte preamble): a whole-slide image's series.
+    Dicom,
 }
 
 impl Streamed {
-    /// The format whose signature `magic` (a file's first 8 bytes, or fewer) starts with.
+    /// The bytes [`sniff`](Self::sniff) looks at: a DICOM file's signature is at 128.
+    pub const SNIFF_BYTES: usize = dicom::MAGIC_AT + 4;
+
+    /// The format whose signature `magic` (a file's first [`SNIFF_BYTES`](Self::SNIFF_BYTES)
+    /// bytes, or fewer) starts with.
     pub fn sniff(magic: &[u8]) -> Option<Streamed> {
-        if magic.starts_with(b"\x89PNG\r\n\x1a\n") {
+        if dicom::is_dicom(magic) {
+            Some(Streamed::Dicom)
+        } else if magic.starts_with(b"\x89PNG\r\n\x1a\n") {
             Some(Streamed::Png)
         } else if [b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"].iter().any(|m| magic.starts_with(*m)) {
             Some(Streamed::Tiff)
@@ -411,13 +444,14 @@ impl Streamed {
         }
     }
 
-    /// The format's name as messages print it: `PNG`, `TIFF`, `JPEG`, `PNM`.
+    /// The format's name as messages print it: `PNG`, `TIFF`, `JPEG`, `PNM`, `DICOM`.
     pub fn name(self) -> &'static str {
         match self {
             Streamed::Png => "PNG",
             Streamed::Tiff => "TIFF",
             Streamed::Jpeg => "JPEG",
             Streamed::Pnm => "PNM",
+            Streamed::Dicom => "DICOM",
         }
     }
 }

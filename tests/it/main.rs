@@ -13,6 +13,7 @@ mod color;
 mod common;
 mod convert;
 mod copy_tiles;
+mod dicom_in;
 mod dicom_out;
 mod docs;
 mod failures;

@@ -76,11 +76,44 @@ pub(super) fn open(
     if chunk_w == 0 || chunk_h == 0 {
         return Err(TilerError::decode(path, format!("the TIFF declares {chunk_w}x{chunk_h} tiles")));
     }
-    let across = width.div_ceil(chunk_w);
     let (offsets_tag, counts_tag) =
         if tiled { (Tag::TileOffsets, Tag::TileByteCounts) } else { (Tag::StripOffsets, Tag::StripByteCounts) };
     let offsets = decoder.get_tag_u64_vec(offsets_tag).map_err(tag_err)?;
     let counts = decoder.get_tag_u64_vec(counts_tag).map_err(tag_err)?;
+    let grid = Grid { size: (width, height), chunk: (chunk_w, chunk_h), offsets, counts };
+    assemble(path, grid, ycbcr, label, embedded, max_memory)
+}
+
+/// Where a grid of JPEG 2000 codestreams lies in a file: a TIFF's tiles or strips, or a
+/// DICOM instance's JPEG 2000 frames (`source::dicom`).
+pub(crate) struct Grid {
+    /// The image's texels across and down.
+    pub size: (u32, u32),
+    /// One chunk's texels across and down.
+    pub chunk: (u32, u32),
+    /// Each chunk's bytes in the file, row-major.
+    pub offsets: Vec<u64>,
+    pub counts: Vec<u64>,
+}
+
+/// The row source of `grid`'s codestreams in `path`; `ycbcr`: their three components are Y,
+/// Cb, Cr without the codestream's own colour transform (turned into RGB here), not R, G, B.
+pub(crate) fn assemble(
+    path: &Path,
+    grid: Grid,
+    ycbcr: bool,
+    label: String,
+    embedded: Embedded,
+    max_memory: u64,
+) -> Result<Box<dyn RowSource>> {
+    let Grid { size: (width, height), chunk: (chunk_w, chunk_h), offsets, counts } = grid;
+    if width == 0 || height == 0 || chunk_w == 0 || chunk_h == 0 {
+        return Err(TilerError::decode(
+            path,
+            format!("a {width}x{height} image of {chunk_w}x{chunk_h} JPEG 2000 tiles"),
+        ));
+    }
+    let across = width.div_ceil(chunk_w);
     // A row of tiles of RGB texels, and per worker a compressed tile (at most twice its
     // texels, checked per tile) and OpenJPEG's i32 per sample.
     let tile = chunk_w as u64 * chunk_h as u64 * 3;
@@ -93,7 +126,7 @@ pub(super) fn open(
         return Err(TilerError::unsupported(
             path,
             format!(
-                "the JPEG 2000 TIFF is stored in {chunk_w}x{chunk_h} tiles: a row of them and the tiles being decoded ({} MiB) would have to be held in memory, more than --max-memory ({} MiB); raise --max-memory",
+                "the JPEG 2000 image is stored in {chunk_w}x{chunk_h} tiles: a row of them and the tiles being decoded ({} MiB) would have to be held in memory, more than --max-memory ({} MiB); raise --max-memory",
                 need.div_ceil(1 << 20),
                 max_memory >> 20
             ),
@@ -155,11 +188,11 @@ impl Jp2kTiff {
     fn decode_tile(&self, index: usize, w: u32, h: u32, texels: &mut Vec<u8>) -> std::result::Result<(), String> {
         let (offset, count) = match (self.offsets.get(index), self.counts.get(index)) {
             (Some(&o), Some(&c)) if c > 0 => (o, c),
-            _ => return Err("the TIFF gives it no data (offset or byte count missing or 0)".into()),
+            _ => return Err("the file gives it no data (offset or byte count missing or 0)".into()),
         };
         if offset.checked_add(count).is_none_or(|end| end > self.file_len) {
             return Err(format!(
-                "its {count} bytes at offset {offset} run past the end of the file: a truncated TIFF?"
+                "its {count} bytes at offset {offset} run past the end of the file: a truncated file?"
             ));
         }
         let bound = self.chunk_w as u64 * self.chunk_h as u64 * 6 + (1 << 16);

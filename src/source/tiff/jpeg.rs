@@ -79,12 +79,17 @@ impl Chunks {
         }
         if offset.checked_add(count).is_none_or(|end| end > self.file_len) {
             return Err(format!(
-                "{name} lies past the end of the file ({count} bytes at {offset}, the file has {}): a truncated TIFF?",
+                "{name} lies past the end of the file ({count} bytes at {offset}, the file has {}): a truncated file?",
                 self.file_len
             ));
         }
         let mut compressed = vec![0u8; count as usize];
         self.file.read_exact_at(&mut compressed, offset).map_err(|e| format!("{name}: cannot be read: {e}"))?;
+        // A JPEG ends at its EOI: a byte after it pads the chunk to an even length (as DICOM
+        // pads every fragment) and is no part of the stream.
+        if compressed.ends_with(&[0xFF, 0xD9, 0x00]) {
+            compressed.pop();
+        }
         if self.tables.is_empty() {
             return match compressed.starts_with(&[0xFF, 0xD8]) {
                 true => Ok(compressed),
@@ -127,22 +132,10 @@ pub(super) fn open(
         // RowsPerStrip is often 2^32-1 ("one strip"): clamp it to the image.
         (width, rows.clamp(1, height))
     };
-    let across = width.div_ceil(chunk_w);
-    let down = height.div_ceil(chunk_h);
     let (offset_tag, count_tag) =
         if tiled { (Tag::TileOffsets, Tag::TileByteCounts) } else { (Tag::StripOffsets, Tag::StripByteCounts) };
     let offsets = decoder.get_tag_u64_vec(offset_tag).map_err(tag_err)?;
     let counts = decoder.get_tag_u64_vec(count_tag).map_err(tag_err)?;
-    let chunks = across as u64 * down as u64;
-    if (offsets.len() as u64) < chunks || (counts.len() as u64) < chunks {
-        let message = format!(
-            "corrupt TIFF: {} offsets and {} byte counts for {chunks} {}",
-            offsets.len(),
-            counts.len(),
-            if tiled { "tiles" } else { "strips" }
-        );
-        return Err(TilerError::decode(path, message));
-    }
     let tables = match decoder.find_tag(Tag::JPEGTables).map_err(tag_err)? {
         None => Vec::new(),
         Some(_) => {
@@ -154,6 +147,54 @@ pub(super) fn open(
         }
     };
 
+    let grid = Grid { size: (width, height), chunk: (chunk_w, chunk_h), tiled, offsets, counts, tables };
+    assemble(path, grid, colour, label, embedded, max_memory)
+}
+
+/// Where a grid of JPEG chunks lies in a file, whatever the container: a TIFF's tags or a
+/// DICOM instance's encapsulated frames.
+pub(crate) struct Grid {
+    /// The image's texels across and down.
+    pub size: (u32, u32),
+    /// One chunk's texels across and down (a strip is as wide as the image).
+    pub chunk: (u32, u32),
+    /// Tiles (copied where they fit), not strips.
+    pub tiled: bool,
+    /// Each chunk's bytes in the file, row-major; a count of 0 is a missing chunk.
+    pub offsets: Vec<u64>,
+    pub counts: Vec<u64>,
+    /// Shared table segments spliced into every chunk (no SOI/EOI), or empty.
+    pub tables: Vec<u8>,
+}
+
+/// The row source of `grid`'s JPEG chunks in `path`, their samples `colour`, checked against
+/// `max_memory` before anything is allocated: a TIFF's JPEG tiles or strips, and a DICOM
+/// instance's JPEG baseline frames (`source::dicom`).
+pub(crate) fn assemble(
+    path: &Path,
+    grid: Grid,
+    colour: Colour,
+    label: String,
+    embedded: crate::source::Embedded,
+    max_memory: u64,
+) -> Result<Box<dyn RowSource>> {
+    let Grid { size: (width, height), chunk: (chunk_w, chunk_h), tiled, offsets, counts, tables } = grid;
+    if width == 0 || height == 0 || chunk_w == 0 || chunk_h == 0 {
+        let what = format!("a {width}x{height} image of {chunk_w}x{chunk_h} JPEG chunks");
+        return Err(TilerError::decode(path, format!("{what}: nothing to read")));
+    }
+    let across = width.div_ceil(chunk_w);
+    let down = height.div_ceil(chunk_h);
+    let chunks = across as u64 * down as u64;
+    if (offsets.len() as u64) < chunks || (counts.len() as u64) < chunks {
+        let message = format!(
+            "corrupt file: {} offsets and {} byte counts for {chunks} {}",
+            offsets.len(),
+            counts.len(),
+            if tiled { "tiles" } else { "strips" }
+        );
+        return Err(TilerError::decode(path, message));
+    }
     // One band of decoded texels: a row of tiles, or a group of strips.
     let row_bytes = width as u64 * colour.components() as u64;
     let band_bytes = |group: u64| row_bytes.saturating_mul(chunk_h as u64).saturating_mul(group);

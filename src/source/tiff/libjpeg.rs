@@ -17,7 +17,7 @@ use crate::source::libjpeg::{error_manager, panic_message};
 
 /// What a TIFF's JPEG tiles hold, by its PhotometricInterpretation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Colour {
+pub(crate) enum Colour {
     /// One component (BlackIsZero).
     Grey,
     /// Luma and chroma (YCbCr), converted to RGB as they are decoded (libtiff's JPEGCOLORMODE_RGB).
@@ -27,7 +27,7 @@ pub(super) enum Colour {
 }
 
 impl Colour {
-    pub(super) fn components(self) -> usize {
+    pub(crate) fn components(self) -> usize {
         match self {
             Colour::Grey => 1,
             Colour::YCbCr | Colour::Rgb => 3,

@@ -18,10 +18,11 @@
 mod chunks;
 mod fax;
 pub mod geo;
-mod jp2k;
-mod jpeg;
+// Their tile grids serve DICOM's frames too (`source::dicom`).
+pub(super) mod jp2k;
+pub(super) mod jpeg;
 mod kinds;
-mod libjpeg;
+pub(super) mod libjpeg;
 mod lzw;
 mod ndpi;
 mod ndpi_dir;
