@@ -1,7 +1,7 @@
 //! The physical size of a pixel, taken from the input where its file states it (an Aperio
 //! slide's MPP, OME-XML's PhysicalSizeX/Y, TIFF resolution tags in pixels per centimetre) and
 //! recorded by the outputs that hold one: an OME-TIFF's OME-XML, an OME-Zarr's scale and a
-//! DICOM series' Pixel Spacing, each read back by its own world's reader (tifffile, zarr,
+//! DICOM series' Pixel Spacing (read again when a DICOM series is the input), each read back by its own world's reader (tifffile, zarr,
 //! pydicom through the Python named by VORTEX_PYVIPS). `--pixel-size` overrides the file's.
 
 use std::path::Path;
@@ -56,17 +56,25 @@ fn a_slide_s_mpp_is_recorded_by_every_output_that_holds_one() {
     let dir = tempfile::tempdir().unwrap();
     let svs = dir.path().join("slide.svs");
     crate::tiff_slides::python(python.as_os_str(), crate::tiff_slides::MAKE_SVS, &[s(&svs)]);
-    let (ome, zarr, dicom) = (dir.path().join("a.ome.tif"), dir.path().join("a.ome.zarr"), dir.path().join("d"));
+    let (ome, zarr, series) = (dir.path().join("a.ome.tif"), dir.path().join("a.ome.zarr"), dir.path().join("d"));
     ok(&["split", s(&svs), "-o", s(&ome), "-o", s(&zarr), "-q"]);
-    ok(&["split", s(&svs), "--layout", "dicom", "-o", s(&dicom), "-q"]);
-    let said =
-        read_back(&python, &[format!("ome={}", s(&ome)), format!("zarr={}", s(&zarr)), format!("dicom={}", s(&dicom))]);
+    ok(&["split", s(&svs), "--layout", "dicom", "-o", s(&series), "-q"]);
+    let said = read_back(
+        &python,
+        &[format!("ome={}", s(&ome)), format!("zarr={}", s(&zarr)), format!("dicom={}", s(&series))],
+    );
     let ome = &said["ome"];
     assert!(close(&ome[0], 0.5) && close(&ome[1], 0.5) && ome[2] == "µm", "{said}");
     let zarr = &said["zarr"];
     assert!(close(&zarr[0][0], 0.5) && close(&zarr[0][1], 0.5) && close(&zarr[1][1], 1.0), "{said}");
     let dicom = &said["dicom"];
     assert!(close(&dicom[0][0], 0.5) && close(&dicom[0][1], 0.5) && close(&dicom[1][1], 1.0), "{said}");
+
+    // Read back from the DICOM series, its Pixel Spacing is the input's pixel size again.
+    let again = dir.path().join("again.ome.zarr");
+    ok(&["split", s(&series), "-o", s(&again), "-q"]);
+    let said = read_back(&python, &[format!("zarr={}", s(&again))]);
+    assert!(close(&said["zarr"][0][0], 0.5) && close(&said["zarr"][0][1], 0.5), "from DICOM: {said}");
 
     let given = dir.path().join("given.ome.zarr");
     ok(&["split", s(&svs), "-o", s(&given), "--pixel-size", "0.25um", "-q"]);

@@ -247,9 +247,11 @@ fn build(instance: &Instance, mut label: String, max_memory: u64) -> Result<Box<
         }
     };
     let grid = place_frames(instance, &stored, (across, down), (tile_w, tile_h), frames, &mut label)?;
-    if let Some(um) = pixel_spacing_um(instance) {
-        label += &format!(", {um:.4} µm/texel");
+    let pitch = pixel_pitch(instance);
+    if let Some(p) = pitch {
+        label += &format!(", {:.4} µm/texel", p.x_um);
     }
+    let embedded = crate::source::Embedded { pitch, ..Default::default() };
     let size = (width, height);
     let tile = (tile_w, tile_h);
     match ts {
@@ -263,7 +265,7 @@ fn build(instance: &Instance, mut label: String, max_memory: u64) -> Result<Box<
                 counts: grid.counts,
                 tables: vec![],
             };
-            jpeg::assemble(path, grid, colour, label, Default::default(), max_memory)
+            jpeg::assemble(path, grid, colour, label, embedded, max_memory)
         }
         JPEG_2000_LOSSLESS | JPEG_2000 => {
             let ycbcr = match photometric.as_str() {
@@ -279,7 +281,7 @@ fn build(instance: &Instance, mut label: String, max_memory: u64) -> Result<Box<
                 }
             };
             let grid = jp2k::Grid { size, chunk: tile, offsets: grid.offsets, counts: grid.counts };
-            jp2k::assemble(path, grid, ycbcr, label, Default::default(), max_memory)
+            jp2k::assemble(path, grid, ycbcr, label, embedded, max_memory)
         }
         _ => {
             let grey = match (photometric.as_str(), samples) {
@@ -294,7 +296,7 @@ fn build(instance: &Instance, mut label: String, max_memory: u64) -> Result<Box<
                     ));
                 }
             };
-            native::open(path, size, tile, grid.offsets, grey, label)
+            native::open(path, size, tile, grid.offsets, grey, label, embedded)
         }
     }
 }
@@ -434,13 +436,16 @@ fn place_frames(
     Ok(grid)
 }
 
-/// The pixel spacing the Shared Functional Groups' Pixel Measures give, in micrometres across.
-fn pixel_spacing_um(instance: &Instance) -> Option<f64> {
+/// The pixel spacing the Shared Functional Groups' Pixel Measures give, in micrometres: Pixel
+/// Spacing is (row spacing, column spacing) in millimetres, the height of a pixel then its width.
+fn pixel_pitch(instance: &Instance) -> Option<crate::source::PixelPitch> {
     let shared = instance.object.get(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE)?.items()?.first()?;
     let measures = shared.get(tags::PIXEL_MEASURES_SEQUENCE)?.items()?.first()?;
     let spacing = measures.get(tags::PIXEL_SPACING)?.to_multi_float64().ok()?;
-    // (row spacing, column spacing) in millimetres.
-    spacing.get(1).or(spacing.first()).map(|mm| mm * 1000.0).filter(|um| um.is_finite() && *um > 0.0)
+    let um = |mm: Option<&f64>| mm.map(|mm| mm * 1000.0).filter(|um| um.is_finite() && *um > 0.0);
+    let y_um = um(spacing.first())?;
+    let x_um = um(spacing.get(1)).unwrap_or(y_um);
+    Some(crate::source::PixelPitch { x_um, y_um, from: "the DICOM Pixel Spacing" })
 }
 
 /// How libjpeg is to read the frames' samples: as the first frame's markers say (JFIF or

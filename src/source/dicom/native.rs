@@ -23,6 +23,7 @@ pub(super) struct NativeFrames {
     next: u64,
     columns: Option<Range<u32>>,
     label: String,
+    embedded: crate::source::Embedded,
 }
 
 /// The row source of the frames at `offsets` (one per cell of the `tile` grid over `size`).
@@ -33,6 +34,7 @@ pub(super) fn open(
     offsets: Vec<u64>,
     grey: bool,
     label: String,
+    embedded: crate::source::Embedded,
 ) -> Result<Box<dyn RowSource>> {
     let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
     Ok(Box::new(NativeFrames {
@@ -46,10 +48,15 @@ pub(super) fn open(
         next: 0,
         columns: None,
         label,
+        embedded,
     }))
 }
 
 impl RowSource for NativeFrames {
+    fn embedded(&self) -> crate::source::Embedded {
+        self.embedded.clone()
+    }
+
     fn header(&self) -> ImageHeader {
         let channels = if self.pixel == 1 { Channels::Grey } else { Channels::Rgb };
         ImageHeader { width: self.size.0, height: self.size.1, layout: PixelLayout::new(channels, Depth::U8) }
