@@ -58,7 +58,8 @@ fn a_slide_s_mpp_is_recorded_by_every_output_that_holds_one() {
     crate::tiff_slides::python(python.as_os_str(), crate::tiff_slides::MAKE_SVS, &[s(&svs)]);
     let (ome, zarr, series) = (dir.path().join("a.ome.tif"), dir.path().join("a.ome.zarr"), dir.path().join("d"));
     ok(&["split", s(&svs), "-o", s(&ome), "-o", s(&zarr), "-q"]);
-    ok(&["split", s(&svs), "--layout", "dicom", "-o", s(&series), "-q"]);
+    let said = ok(&["split", s(&svs), "--layout", "dicom", "-o", s(&series)]);
+    assert!(said.contains("0.5000 µm/texel (the Aperio description's MPP)"), "the summary says where: {said}");
     let said = read_back(
         &python,
         &[format!("ome={}", s(&ome)), format!("zarr={}", s(&zarr)), format!("dicom={}", s(&series))],

@@ -72,6 +72,12 @@ pub(super) fn choose(
         label += &format!(" ({why}: later pages not read)");
     }
     let pitch = super::pitch::of_page(vendor, &pages, index, decoder);
+    if let Some(p) = &pitch {
+        label += &match p.square() {
+            Some(side) => format!(", {side:.4} µm/texel ({})", p.from),
+            None => format!(", {:.4} x {:.4} µm/texel ({})", p.x_um, p.y_um, p.from),
+        };
+    }
     Ok(Chosen { index, label, pitch })
 }
 
