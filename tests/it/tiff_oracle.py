@@ -26,22 +26,18 @@ def oracle(src, k):
     f = 1 << k
     h, w, c = src.shape
     rows, cols = -(-h // f), -(-w // f)
-    if src.dtype.kind == "f":
-        # Float samples: the mean in float64 (as docs/sources.md's exact pyramid sums them),
-        # rounded to the sample type once.
-        padded = np.zeros((rows * f, cols * f, c), np.float64)
-        padded[:h, :w] = src
-        real = np.zeros((rows * f, cols * f), np.float64)
-        real[:h, :w] = 1
-        sums = padded.reshape(rows, f, cols, f, c).sum(axis=(1, 3))
-        counts = real.reshape(rows, f, cols, f).sum(axis=(1, 3))[:, :, None]
-        return (sums / counts).astype(src.dtype)
-    padded = np.zeros((rows * f, cols * f, c), np.uint64)
+    # Float samples are summed in float64 (as docs/sources.md's exact pyramid sums them) and
+    # their mean rounded to the sample type once; integers exactly, rounded half up.
+    floats = src.dtype.kind == "f"
+    acc = np.float64 if floats else np.uint64
+    padded = np.zeros((rows * f, cols * f, c), acc)
     padded[:h, :w] = src
-    real = np.zeros((rows * f, cols * f), np.uint64)
+    real = np.zeros((rows * f, cols * f), acc)
     real[:h, :w] = 1
     sums = padded.reshape(rows, f, cols, f, c).sum(axis=(1, 3))
     counts = real.reshape(rows, f, cols, f).sum(axis=(1, 3))[:, :, None]
+    if floats:
+        return (sums / counts).astype(src.dtype)
     return ((2 * sums + counts) // (2 * counts)).astype(src.dtype)
 
 
