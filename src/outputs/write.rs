@@ -246,13 +246,17 @@ struct Copying {
     photometric: Photometric,
 }
 
+/// What [`choose_levels`] decided, an entry an output: the series that copy, and why the
+/// others asked to copy do not.
+struct Chosen {
+    copying: Vec<Option<Copying>>,
+    declined: Vec<Option<String>>,
+}
+
 /// Decides, for each DICOM output asked for the slide's own levels, whether they are copied
 /// (its spec then describes them) or why not (it is then cut from our pyramid). The source's
 /// levels are read once, and only where some output asks.
-fn choose_levels(
-    outputs: &mut [Planned],
-    source: &dyn RowSource,
-) -> Result<(Vec<Option<Copying>>, Vec<Option<String>>)> {
+fn choose_levels(outputs: &mut [Planned], source: &dyn RowSource) -> Result<Chosen> {
     let mut copying: Vec<Option<Copying>> = outputs.iter().map(|_| None).collect();
     let mut declined = vec![None; outputs.len()];
     let mut stored: Option<Option<StoredLevels>> = None;
@@ -278,7 +282,7 @@ fn choose_levels(
             }
         }
     }
-    Ok((copying, declined))
+    Ok(Chosen { copying, declined })
 }
 
 /// Outputs cut from one pyramid: their indexes, and the options that cut it (down to the
@@ -324,7 +328,7 @@ impl Plan {
             })
             .collect();
         // A DICOM series of the slide's own levels copies them, cut from no pyramid.
-        let (copying, mut declined) = choose_levels(&mut outputs, source.as_ref())?;
+        let Chosen { copying, mut declined } = choose_levels(&mut outputs, source.as_ref())?;
         let open: Vec<Open> = outputs.into_iter().map(|p| Open::start(p, pack)).collect::<Result<_>>()?;
         let cut: Vec<usize> = (0..open.len()).filter(|&k| copying[k].is_none()).collect();
         let mut copied = vec![0u64; open.len()];
