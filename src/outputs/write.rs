@@ -261,7 +261,13 @@ fn choose_levels(outputs: &mut [Planned], source: &dyn RowSource) -> Result<Chos
     let mut declined = vec![None; outputs.len()];
     let mut stored: Option<Option<StoredLevels>> = None;
     for (k, planned) in outputs.iter_mut().enumerate() {
+        // Re-encoding asked (`--reencode`, `--quality`, `--subsampling`) is never copying.
+        let reencode = planned.opts.encoding().declines_stored();
         let Work::Dicom { spec, levels: Levels::Stored } = &mut planned.work else { continue };
+        if let Some(why) = reencode {
+            declined[k] = Some(format!("the frames are encoded: {why}"));
+            continue;
+        }
         if stored.is_none() {
             stored = Some(source.stored_levels()?);
         }
