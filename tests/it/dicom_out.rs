@@ -449,7 +449,19 @@ fn levels_not_copyable_fall_back_to_our_pyramid_saying_why() {
     let levelled = dir.path().join("levelled.svs");
     crate::tiff_slides::python(python.as_os_str(), MAKE_LEVELLED_SVS, &[s(&levelled)]);
     let out = dir.path().join("q70");
-    let json = json_of(&ok(&["split", s(&levelled), "--layout", "dicom", "-o", s(&out), "--pixel-size", "1um", "--quality", "70", "--json"]));
+    let json = json_of(&ok(&[
+        "split",
+        s(&levelled),
+        "--layout",
+        "dicom",
+        "-o",
+        s(&out),
+        "--pixel-size",
+        "1um",
+        "--quality",
+        "70",
+        "--json",
+    ]));
     assert_eq!(json["dicom"]["levels"], "pow2", "{json}");
     assert!(json["dicom"]["levelsDeclined"].as_str().unwrap().contains("--quality"), "{json}");
     fails_with(
