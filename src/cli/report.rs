@@ -387,13 +387,21 @@ fn dicom_json(w: &vortex_tiler::formats::dicom::DicomSummary) -> serde_json::Val
         "extendedOffsetTables": w.extended_offsets,
         "frameBytes": w.frame_bytes,
         "fileBytes": w.file_bytes,
+        "levelsAsked": w.levels.name(),
+        "levels": if w.levels_copied { "stored" } else { "pow2" },
+        "levelsDeclined": w.levels_declined,
     })
 }
 
 /// A DICOM series' figures, in a line.
 fn dicom_line(w: &vortex_tiler::formats::dicom::DicomSummary) -> String {
+    let levels = match (w.levels_copied, &w.levels_declined) {
+        (true, _) => "the slide's own levels, every frame copied as stored".to_string(),
+        (false, None) => "our power-of-two pyramid".to_string(),
+        (false, Some(why)) => format!("our power-of-two pyramid (the slide's own levels not copied: {why})"),
+    };
     format!(
-        "dicom: {} instances (one a level), {} JPEG baseline frames, {}, series {}, {} file bytes",
+        "dicom: {} instances (one a level: {levels}), {} JPEG baseline frames, {}, series {}, {} file bytes",
         w.instances, w.frames, w.photometric, w.series_uid, w.file_bytes
     )
 }

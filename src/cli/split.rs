@@ -8,7 +8,7 @@ use anyhow::{Context, Result, bail};
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
 use vortex_tiler::error::ShowPath;
-use vortex_tiler::formats::dicom::DicomMeta;
+use vortex_tiler::formats::dicom::{DicomMeta, Levels as DicomLevels};
 use vortex_tiler::formats::tiff::{BigTiff, Flavour};
 use vortex_tiler::formats::viewer::Viewer;
 use vortex_tiler::outputs::{Budget, DicomSettings, Figures, Format, Output, Plan, Settings, TiffSettings, Wrote};
@@ -141,6 +141,14 @@ pub struct OutputArgs {
     /// patient and study attributes are empty]. docs/dicom.md lists the keywords taken.
     #[arg(help_heading = "Outputs", long, value_name = "FILE")]
     dicom_meta: Option<PathBuf>,
+
+    /// --layout dicom: which levels the series holds: stored (the slide's own levels, every
+    /// JPEG tile copied as a frame, nothing decoded, where the source is a pyramid of JPEG
+    /// tiles DICOM can hold; else our pyramid, the summary saying why) or pow2 (our exact
+    /// power-of-two pyramid, full-resolution tiles still copied where they fit)
+    /// [default: stored]. See docs/dicom.md.
+    #[arg(help_heading = "Outputs", long, value_name = "LEVELS")]
+    levels: Option<LevelsArg>,
 
     /// How the output directory is laid out: vortex (tiles + info.json, this tool's), or one a
     /// viewer opens as it is: dzi (NAME.dzi + NAME_files/, Deep Zoom as vips dzsave writes
@@ -277,6 +285,13 @@ enum Placed {
 }
 
 /// `--layout`: this tool's tile directory or a viewer's.
+/// `--levels`' values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum LevelsArg {
+    Stored,
+    Pow2,
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum OutputLayout {
     /// Tiles named by --filename-format plus info.json (docs/info-json.md).
@@ -510,7 +525,11 @@ impl OutputArgs {
                 Some(meta)
             }
         };
-        Ok(DicomSettings { uid_root: self.dicom_uid_root.clone(), meta })
+        let levels = self.levels.map(|l| match l {
+            LevelsArg::Stored => DicomLevels::Stored,
+            LevelsArg::Pow2 => DicomLevels::Pow2,
+        });
+        Ok(DicomSettings { uid_root: self.dicom_uid_root.clone(), meta, levels })
     }
 
     /// The settings the outputs share, from the flags; `names`: the filename format flag.
@@ -732,7 +751,7 @@ fn report_all(a: &OutputArgs, done: &Finished, all: &[Wrote]) {
         height: done.height,
         took: done.took,
     };
-    let pyramids = all.iter().map(|w| w.pyramid + 1).max().unwrap_or(0);
+    let pyramids = all.iter().filter_map(|w| w.pyramid).map(|p| p + 1).max().unwrap_or(0);
     if a.run.json {
         let outputs: Vec<serde_json::Value> = all
             .iter()
@@ -772,6 +791,7 @@ fn report_all(a: &OutputArgs, done: &Finished, all: &[Wrote]) {
             pyramids,
             if pyramids == 1 { "" } else { "s" },
             match reads {
+                0 => "for no pyramid (every level copied as stored)".to_string(),
                 1 => "once".to_string(),
                 n => format!("{n} times (the budget holds the pyramids only one after another)"),
             },

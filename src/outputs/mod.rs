@@ -176,6 +176,8 @@ pub struct DicomSettings {
     pub uid_root: Option<String>,
     /// The patient, study and equipment attributes given (`--dicom-meta`).
     pub meta: Option<crate::formats::dicom::DicomMeta>,
+    /// Which levels the series holds (`--levels`) [default: the slide's own, as stored].
+    pub levels: Option<crate::formats::dicom::Levels>,
 }
 
 /// What only TIFF outputs read.

@@ -51,13 +51,35 @@ pub struct Planned {
 /// What each format needs besides the tiles, to start its sink and to finish it.
 #[derive(Debug)]
 pub(super) enum Work {
-    Tiles { names: FilenameFormat, info: InfoFile, profile: Option<Profile> },
-    Pack { info: InfoFile, stored: PixelLayout },
-    Viewer { tiles: ViewerTiles, profile: Option<Profile> },
-    Pmtiles { name: String },
-    OmeZarr { spec: Box<Spec>, parent: Option<LabelParent> },
-    Tiff { spec: Box<tiff::Spec> },
-    Dicom { spec: Box<dicom::Spec> },
+    Tiles {
+        names: FilenameFormat,
+        info: InfoFile,
+        profile: Option<Profile>,
+    },
+    Pack {
+        info: InfoFile,
+        stored: PixelLayout,
+    },
+    Viewer {
+        tiles: ViewerTiles,
+        profile: Option<Profile>,
+    },
+    Pmtiles {
+        name: String,
+    },
+    OmeZarr {
+        spec: Box<Spec>,
+        parent: Option<LabelParent>,
+    },
+    Tiff {
+        spec: Box<tiff::Spec>,
+    },
+    /// `levels`: whether the slide's own levels are to be copied, decided when the source's
+    /// levels are read ([`Plan::write`]).
+    Dicom {
+        spec: Box<dicom::Spec>,
+        levels: dicom::Levels,
+    },
 }
 
 impl Plan {
@@ -270,7 +292,12 @@ fn refuse_unread(s: &Settings, outputs: &[Output]) -> Result<()> {
         return Err(options("--bigtiff belongs to a TIFF output (-o FILE.tif or FILE.ome.tif)".into()));
     }
     let dicom = outputs.iter().any(|o| o.format == Format::Dicom);
-    for (given, flag) in [(s.dicom.uid_root.is_some(), "--dicom-uid-root"), (s.dicom.meta.is_some(), "--dicom-meta")] {
+    let given = [
+        (s.dicom.uid_root.is_some(), "--dicom-uid-root"),
+        (s.dicom.meta.is_some(), "--dicom-meta"),
+        (s.dicom.levels.is_some(), "--levels"),
+    ];
+    for (given, flag) in given {
         if given && !dicom {
             return Err(options(format!("{flag} belongs to --layout dicom")));
         }
@@ -682,6 +709,7 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
     };
     let spec = dicom::Spec {
         layout,
+        copied: Vec::new(),
         stored,
         photometric,
         pixel_mm: dicom::millimetres(micrometres(pixel_size)),
@@ -696,7 +724,14 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
     at.limits()
         .check_memory(&format!("the index of the DICOM series' {} frames", layout.total_tiles()), spec.index_bytes())?;
     let claim = at.claim(&output.path, Product::Dicom)?;
-    Ok(Planned { output, opts, layout, changed: None, claim, work: Work::Dicom { spec: Box::new(spec) } })
+    Ok(Planned {
+        output,
+        opts,
+        layout,
+        changed: None,
+        claim,
+        work: Work::Dicom { spec: Box::new(spec), levels: own.dicom.levels.unwrap_or_default() },
+    })
 }
 
 /// A DICOM date-time given (YYYY at least) as the 14 digits YYYYMMDDHHMMSS, the parts not
@@ -962,7 +997,7 @@ mod tests {
         let p = plan(&[(DICOM, "a"), (DZI, "web")], settings).unwrap();
         let [dicom, dzi] = &p.outputs[..] else { panic!("two outputs") };
         assert_eq!(dzi.opts, SplitOptions { down_to_one_texel: true, ..dicom.opts.clone() }, "one pyramid");
-        let Work::Dicom { spec } = &dicom.work else { panic!("a DICOM series' work") };
+        let Work::Dicom { spec, .. } = &dicom.work else { panic!("a DICOM series' work") };
         assert_eq!(spec.photometric, dicom::Photometric::YbrFull422);
         assert_eq!(spec.pixel_mm, 0.0005);
         assert_eq!((spec.layout.tile_size, spec.layout.lod_count), (256, 3));

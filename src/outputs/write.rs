@@ -8,7 +8,7 @@ use super::plan::{Planned, Work};
 use super::{Budget, Format, Plan};
 use crate::background::Background;
 use crate::error::{Result, TilerError};
-use crate::formats::dicom::{DicomSink, DicomSummary};
+use crate::formats::dicom::{self, DicomSink, DicomSummary, Levels, Photometric};
 use crate::formats::ome_zarr::OmeZarrSink;
 use crate::formats::pack::PackSink;
 use crate::formats::pmtiles::PmtilesSink;
@@ -18,6 +18,7 @@ use crate::job::{Progress, SplitOptions, Summary, Written};
 use crate::sink::icc::{Profile, WithProfile};
 use crate::sink::{DirSink, Target, TileSink};
 use crate::source::channels::{ChannelSet, Ranged};
+use crate::source::stored::StoredLevels;
 use crate::source::{RowSource, tee};
 use crate::split;
 
@@ -41,8 +42,9 @@ pub struct Wrote {
     /// encoded and copied, stages, memory.
     pub summary: Summary,
     /// Which of the run's pyramids it was cut from, counted from 0 in the order of the
-    /// outputs that first need each.
-    pub pyramid: usize,
+    /// outputs that first need each; `None` for a DICOM series of the slide's own levels,
+    /// copied as stored (cut from none).
+    pub pyramid: Option<usize>,
     /// Times the run read the source, for all its outputs: once for pyramids cut side by
     /// side, once per pyramid and stripe where the budget holds them only one after another.
     pub reads: usize,
@@ -103,7 +105,7 @@ impl Open {
             }
             Work::OmeZarr { spec, .. } => Sink::OmeZarr(Box::new(OmeZarrSink::create(claim, (**spec).clone())?)),
             Work::Tiff { spec } => Sink::Tiff(TiffSink::create(&claim.path, (**spec).clone())?),
-            Work::Dicom { spec } => Sink::Dicom(DicomSink::create(claim, (**spec).clone())?),
+            Work::Dicom { spec, .. } => Sink::Dicom(DicomSink::create(claim, (**spec).clone())?),
         };
         Ok(Open { planned, sink })
     }
@@ -188,11 +190,105 @@ impl Open {
             tiles: written.tiles,
             bytes: written.bytes,
             summary,
-            pyramid,
+            pyramid: Some(pyramid),
             reads: 0,
             figures,
         })
     }
+
+    /// [`finish`](Self::finish) for a DICOM series of the slide's own levels: `frames` copied
+    /// from the source of `source` texels, no pyramid cut.
+    fn finish_copied(self, frames: u64, source: crate::pixel::PixelLayout, budget: Budget) -> Result<Wrote> {
+        let Open { planned, sink } = self;
+        let (Sink::Dicom(sink), Work::Dicom { spec, .. }) = (sink, &planned.work) else {
+            return Err(TilerError::Internal("levels copied into an output that is no DICOM series".into()));
+        };
+        let bytes = sink.bytes_written();
+        let mut figures = sink.finish()?;
+        figures.levels = crate::formats::dicom::Levels::Stored;
+        // The summary's grid: level 0's frames, as many levels as the series has.
+        let level = spec.level(0);
+        let mut layout = crate::layout::Layout::new(u64::from(level.width), u64::from(level.height), level.frame.0, 0)?;
+        layout.lod_count = spec.level_count();
+        let summary = Summary {
+            layout,
+            source,
+            stored: spec.stored,
+            tiles: frames,
+            per_target: vec![Written { tiles: frames, bytes, copied: frames, cropped: 0 }],
+            encoded: 0,
+            copied: frames,
+            cropped: 0,
+            stored_tiles: None,
+            bytes,
+            stripes: 0,
+            passes: 0,
+            stages: Default::default(),
+            memory: crate::job::MemoryReport { budget: budget.bytes(), ..Default::default() },
+        };
+        let Planned { output, .. } = planned;
+        Ok(Wrote {
+            format: output.format,
+            path: output.path,
+            tiles: frames,
+            bytes,
+            summary,
+            pyramid: None,
+            reads: 0,
+            figures: Figures::Dicom(figures),
+        })
+    }
+}
+
+/// A DICOM series that copies the slide's own levels: the levels and the frames' form.
+struct Copying {
+    levels: StoredLevels,
+    photometric: Photometric,
+}
+
+/// What [`choose_levels`] decided, an entry an output: the series that copy, and why the
+/// others asked to copy do not.
+struct Chosen {
+    copying: Vec<Option<Copying>>,
+    declined: Vec<Option<String>>,
+}
+
+/// Decides, for each DICOM output asked for the slide's own levels, whether they are copied
+/// (its spec then describes them) or why not (it is then cut from our pyramid). The source's
+/// levels are read once, and only where some output asks.
+fn choose_levels(outputs: &mut [Planned], source: &dyn RowSource) -> Result<Chosen> {
+    let mut copying: Vec<Option<Copying>> = outputs.iter().map(|_| None).collect();
+    let mut declined = vec![None; outputs.len()];
+    let mut stored: Option<Option<StoredLevels>> = None;
+    for (k, planned) in outputs.iter_mut().enumerate() {
+        // Re-encoding asked (`--reencode`, `--quality`, `--subsampling`) is never copying.
+        let reencode = planned.opts.encoding().declines_stored();
+        let Work::Dicom { spec, levels: Levels::Stored } = &mut planned.work else { continue };
+        if let Some(why) = reencode {
+            declined[k] = Some(format!("the frames are encoded: {why}"));
+            continue;
+        }
+        if stored.is_none() {
+            stored = Some(source.stored_levels()?);
+        }
+        let Some(Some(levels)) = &stored else {
+            declined[k] = Some("the source is no slide of JPEG-tiled levels".into());
+            continue;
+        };
+        match dicom::copyable(levels)? {
+            Err(why) => declined[k] = Some(why),
+            Ok((copied, photometric)) => {
+                let shapes: Vec<String> =
+                    copied.iter().map(|l| format!("{}x{}/{}x{}", l.width, l.height, l.frame.0, l.frame.1)).collect();
+                spec.identity = format!("{}; levels stored {} {}", spec.identity, shapes.join(" "), photometric.name());
+                spec.copied = copied;
+                spec.photometric = photometric;
+                spec.check()?;
+                copying[k] = Some(Copying { levels: levels.clone(), photometric });
+            }
+        }
+    }
+    Ok(Chosen { copying, declined })
 }
 
 /// Outputs cut from one pyramid: their indexes, and the options that cut it (down to the
@@ -229,9 +325,25 @@ impl Plan {
     /// and can stop the run. On failure nothing of any output is left (each output that was
     /// finished before a later one failed to finish stays, complete).
     pub fn write(self, mut source: Box<dyn RowSource>, progress: &dyn Progress) -> Result<Vec<Wrote>> {
-        let Plan { outputs, budget, pack } = self;
+        let Plan { mut outputs, budget, pack } = self;
+        let source_layout = source.layout();
+        let asked: Vec<Levels> = (outputs.iter())
+            .map(|p| match &p.work {
+                Work::Dicom { levels, .. } => *levels,
+                _ => Levels::Pow2,
+            })
+            .collect();
+        // A DICOM series of the slide's own levels copies them, cut from no pyramid.
+        let Chosen { copying, mut declined } = choose_levels(&mut outputs, source.as_ref())?;
         let open: Vec<Open> = outputs.into_iter().map(|p| Open::start(p, pack)).collect::<Result<_>>()?;
-        let planned: Vec<&Planned> = open.iter().map(|o| &o.planned).collect();
+        let cut: Vec<usize> = (0..open.len()).filter(|&k| copying[k].is_none()).collect();
+        let mut copied = vec![0u64; open.len()];
+        for (k, c) in copying.iter().enumerate() {
+            if let (Some(c), Sink::Dicom(sink)) = (c, &open[k].sink) {
+                copied[k] = dicom::copy_levels(sink, &c.levels, c.photometric, progress)?;
+            }
+        }
+        let planned: Vec<&Planned> = cut.iter().map(|&k| &open[k].planned).collect();
         let pyramids = pyramids(&planned);
         let tagged: Vec<Option<WithProfile>> =
             open.iter().map(|o| o.profile().map(|profile| WithProfile { inner: o.tile_sink(), profile })).collect();
@@ -243,10 +355,11 @@ impl Plan {
                     let (lods, background, encoding) = (p.layout.lod_count, p.opts.background, p.opts.encoding());
                     Target { sink: sink(k), lods, background, encoding }
                 };
-                g.members.iter().map(|&k| target(k)).collect()
+                g.members.iter().map(|&m| target(cut[m])).collect()
             })
             .collect();
         let (summaries, reads) = match pyramids.len() {
+            0 => (Vec::new(), 0),
             1 => {
                 let summary = split::split_to(source.as_mut(), &targets[0], &pyramids[0].opts, progress)?;
                 let reads = summary.passes;
@@ -255,14 +368,27 @@ impl Plan {
             _ => cut_together(source, &pyramids, &targets, budget, progress)?,
         };
         drop(tagged);
-        let mut place = vec![(0, 0); open.len()];
+        let mut place = vec![None; open.len()];
         for (g, pyramid) in pyramids.iter().enumerate() {
-            for (at, &k) in pyramid.members.iter().enumerate() {
-                place[k] = (g, at);
+            for (at, &m) in pyramid.members.iter().enumerate() {
+                place[cut[m]] = Some((g, at));
             }
         }
-        let finish = |(o, (g, at)): (Open, _)| Ok(Wrote { reads, ..o.finish(&summaries[g], at, g, 1)? });
-        open.into_iter().zip(place).map(finish).collect()
+        let mut wrote = Vec::with_capacity(open.len());
+        for (k, o) in open.into_iter().enumerate() {
+            let mut w = match place[k] {
+                Some((g, at)) => o.finish(&summaries[g], at, g, 1)?,
+                None => o.finish_copied(copied[k], source_layout, budget)?,
+            };
+            if let Figures::Dicom(f) = &mut w.figures
+                && w.pyramid.is_some()
+            {
+                f.levels = asked[k];
+                f.levels_declined = declined[k].take();
+            }
+            wrote.push(Wrote { reads, ..w });
+        }
+        Ok(wrote)
     }
 }
 

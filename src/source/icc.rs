@@ -219,6 +219,12 @@ impl RowSource for Described {
     fn stored_tiles(&self) -> Option<std::sync::Arc<dyn crate::source::stored::StoredTiles>> {
         self.transform.is_none().then(|| self.inner.stored_tiles()).flatten()
     }
+    fn stored_levels(&self) -> Result<Option<crate::source::stored::StoredLevels>> {
+        match self.transform {
+            None => self.inner.stored_levels(),
+            Some(_) => Ok(None),
+        }
+    }
 }
 
 /// CMYK texels (8 bits, Adobe-inverted or not, or 16 bits) to sRGB through a CMYK profile.

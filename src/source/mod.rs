@@ -158,6 +158,13 @@ pub trait RowSource: Send {
     fn stored_tiles(&self) -> Option<std::sync::Arc<dyn stored::StoredTiles>> {
         None
     }
+    /// Every level of the slide the rows are the full resolution of, as stored, where all
+    /// are grids of JPEG tiles an output may copy (`StoredLevels`); `None` for sources that
+    /// are no such pyramid. Read when asked (the reduced levels' directories): an error names
+    /// the file and the level.
+    fn stored_levels(&self) -> Result<Option<stored::StoredLevels>> {
+        Ok(None)
+    }
     /// What the source has to add to the summary once its rows are read (the samples
     /// `--range` clamped), asked after the run.
     fn after_run(&self) -> Option<Box<dyn Fn() -> String + Send>> {
@@ -325,6 +332,9 @@ impl RowSource for Reopening {
     }
     fn stored_tiles(&self) -> Option<std::sync::Arc<dyn stored::StoredTiles>> {
         self.inner.stored_tiles()
+    }
+    fn stored_levels(&self) -> Result<Option<stored::StoredLevels>> {
+        self.inner.stored_levels()
     }
     fn rewind(&mut self) -> Result<()> {
         let again = open_once(&self.path, self.max_memory, self.pick)?;

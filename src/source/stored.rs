@@ -15,6 +15,9 @@
 
 pub mod crop;
 
+use std::path::PathBuf;
+use std::sync::Arc;
+
 /// What a run may copy: a grid of tiles stored as JPEG.
 pub trait StoredTiles: Send + Sync {
     /// Texels of a stored tile across and down.
@@ -25,6 +28,41 @@ pub trait StoredTiles: Send + Sync {
     /// copied as it is (a stream that is not a whole tile, or that a browser cannot decode):
     /// that tile is encoded instead. An error names the file and the tile.
     fn jpeg(&self, col: u32, row: u32) -> crate::error::Result<Option<Vec<u8>>>;
+}
+
+/// A slide's levels as it stores them: the full resolution and its reduced copies, largest
+/// first, each a grid of JPEG tiles, for an output that keeps every level as it is (a DICOM
+/// series, `--levels stored`: docs/dicom.md).
+#[derive(Clone)]
+pub struct StoredLevels {
+    /// The file they are in, for messages.
+    pub path: PathBuf,
+    pub levels: Vec<StoredLevel>,
+    /// Why the levels stop where they do, where a later reduced level is no grid of JPEG
+    /// tiles (in strips, another compression): then they cannot all be copied.
+    pub unlike: Option<String>,
+}
+
+/// One level of [`StoredLevels`].
+#[derive(Clone)]
+pub struct StoredLevel {
+    pub width: u32,
+    pub height: u32,
+    /// The file's directory that holds it, counted from 0 (`--page`'s count).
+    pub page: usize,
+    /// Its tiles, every one of them (the right and bottom ones padded as stored).
+    pub tiles: Arc<dyn StoredTiles>,
+}
+
+/// An error of level `k` (in page `page`) of [`StoredLevels`], naming the level.
+pub(crate) fn in_level(e: crate::error::TilerError, k: usize, page: usize) -> crate::error::TilerError {
+    use crate::error::TilerError;
+    let name = |message: String| format!("level {k} (page {page}): {message}");
+    match e {
+        TilerError::Decode { path, message } => TilerError::Decode { path, message: name(message) },
+        TilerError::Unsupported { path, message } => TilerError::Unsupported { path, message: name(message) },
+        other => other,
+    }
 }
 
 /// A JPEG quality estimated from a luminance quantisation table.

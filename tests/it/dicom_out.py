@@ -3,6 +3,8 @@ every level against a naive pyramid of the source (tests/it/dicom_out.rs runs it
 VORTEX_PYVIPS).
 
     dicom_out.py DIR SOURCE TILE [COPIED_FROM]
+    dicom_out.py levels DIR SLIDE
+
 
 pydicom reads every instance (the IOD's key attributes checked), highdicom parses each as a VL
 Whole Slide Microscopy Image, wsidicom opens the directory as one slide and every level read
@@ -10,6 +12,13 @@ back is within JPEG's error of the oracle (tiff_oracle.py: the box pyramid of SO
 libvips), OpenSlide 4 opens the directory as a DICOM slide and `read_region` of every level is
 within the same error. With COPIED_FROM (a JPEG-tiled TIFF): the frames whose entropy-coded
 data equals that TIFF's stored tile are counted, and printed as "copied".
+With `levels` (a series of the slide's own levels, `--levels stored`): one instance a level of
+SLIDE (a JPEG-tiled TIFF or SVS, its levels as OpenSlide lists them), pydicom reads each (its
+Total Pixel Matrix the level's size, its frames the level's tiles), highdicom parses each,
+wsidicom's encoded tiles are the source level's stored tiles made complete (the same
+entropy-coded data, SOS to EOI, and the same SOF, DQT and DHT segments as the tile with the
+file's JPEGTables), and OpenSlide 4 reads every level of the series exactly as it reads the
+same level of SLIDE.
 Prints one JSON line of what it measured; exits 1 with the reason on a mismatch.
 """
 
@@ -152,7 +161,99 @@ def count_copied(directory, tiff, measured):
         measured["openslideCopiedRegion"] = f"{size[0]}x{size[1]} equal to the source's"
 
 
+def segments(jpeg):
+    """The marker segments before the first SOS, (marker, body), in order."""
+    out, at = [], 2
+    while at + 4 <= len(jpeg) and jpeg[at] == 0xFF:
+        marker = jpeg[at + 1]
+        if marker in (0xDA, 0xD9):
+            break
+        n = int.from_bytes(jpeg[at + 2 : at + 4], "big")
+        out.append((marker, jpeg[at + 4 : at + 2 + n]))
+        at += 2 + n
+    return out
+
+
+def tables(jpeg):
+    """Its SOF, DQT and DHT segments: what it decodes by (APP markers aside)."""
+    return [s for s in segments(jpeg) if s[0] in (0xC0, 0xC1, 0xC2, 0xC4, 0xDB)]
+
+
+def check_levels(directory, slide_path):
+    import highdicom
+    import openslide
+    import tifffile
+    from wsidicom import WsiDicom
+
+    measured = {}
+    theirs = openslide.OpenSlide(slide_path)
+    n = theirs.level_count
+    paths = sorted(glob.glob(os.path.join(directory, "*.dcm")))
+    if len(paths) != n:
+        fail(f"{len(paths)} instances, the slide has {n} levels")
+    # The slide's levels as tifffile finds them: the tiled pages of the main chain, largest
+    # first, that OpenSlide lists (their sizes).
+    sizes = list(theirs.level_dimensions)
+    with tifffile.TiffFile(slide_path) as t, open(slide_path, "rb") as f, WsiDicom.open(directory) as wsi:
+        pages = []
+        for page in t.pages:
+            if page.is_tiled and (page.imagewidth, page.imagelength) in sizes[len(pages) :][:1]:
+                pages.append(page)
+        if len(pages) != n:
+            fail(f"tifffile finds {len(pages)} of the slide's {n} levels")
+        frames_checked = 0
+        for k, page in enumerate(pages):
+            p = os.path.join(directory, f"level-{k}.dcm")
+            ds = pydicom.dcmread(p)
+            want = {
+                "SOPClassUID": WSI,
+                "DimensionOrganizationType": "TILED_FULL",
+                "TotalPixelMatrixColumns": page.imagewidth,
+                "TotalPixelMatrixRows": page.imagelength,
+                "Rows": page.tilelength,
+                "Columns": page.tilewidth,
+                "NumberOfFrames": len(page.dataoffsets),
+            }
+            for key, value in want.items():
+                if ds.get(key) != value:
+                    fail(f"level {k}: {key} {ds.get(key)!r}, expected {value!r}")
+            if ds.file_meta.TransferSyntaxUID != JPEG_BASELINE:
+                fail(f"level {k}: transfer syntax {ds.file_meta.TransferSyntaxUID}")
+            spacing = [float(v) for v in ds.SharedFunctionalGroupsSequence[0].PixelMeasuresSequence[0].PixelSpacing]
+            want_spacing = [0.0005 * pages[0].imagelength / page.imagelength, 0.0005 * pages[0].imagewidth / page.imagewidth]
+            if any(abs(a - b) > 1e-9 for a, b in zip(spacing, want_spacing)):
+                fail(f"level {k}: Pixel Spacing {spacing}, expected {want_spacing}")
+            if highdicom.imread(p).SOPClassUID != WSI:
+                fail(f"highdicom: level {k}")
+            # wsidicom numbers a level by its scale's power of two (a downsample of 4 is its 2).
+            level = wsi.levels[k].level
+            across = -(-page.imagewidth // page.tilewidth)
+            shared = page.jpegtables or b""
+            for i, (offset, count) in enumerate(zip(page.dataoffsets, page.databytecounts)):
+                f.seek(offset)
+                stored = f.read(count)
+                frame = wsi.read_encoded_tile(level, (i % across, i // across), crop_to_image_boundary=False)
+                if scan(frame) != scan(stored):
+                    fail(f"level {k} tile {i}: the frame's entropy-coded data is not the stored tile's")
+                if tables(frame) != tables(shared) + tables(stored):
+                    fail(f"level {k} tile {i}: the frame's tables are not the stored tile's and JPEGTables'")
+                frames_checked += 1
+            # OpenSlide reads the series' level as the slide's, texel for texel.
+            ours = openslide.OpenSlide(os.path.join(directory, "level-0.dcm"))
+            a = np.asarray(ours.read_region((0, 0), k, ours.level_dimensions[k]))
+            b = np.asarray(theirs.read_region((0, 0), k, theirs.level_dimensions[k]))
+            if a.shape != b.shape or not np.array_equal(a, b):
+                fail(f"OpenSlide reads level {k} of the series otherwise than the slide's")
+    measured["instances"] = n
+    measured["framesEqual"] = frames_checked
+    measured["openslideLevelsEqual"] = n
+    print(json.dumps(measured))
+
+
 def main():
+    if sys.argv[1] == "levels":
+        check_levels(sys.argv[2], sys.argv[3])
+        return
     directory, source_path, tile = sys.argv[1], sys.argv[2], int(sys.argv[3])
     copied_from = sys.argv[4] if len(sys.argv) > 4 else None
     src = source(source_path)

@@ -312,3 +312,186 @@ fn an_svs_s_tiles_are_copied_and_read_as_the_slide_s() {
     let measured = check(&python, &out, &svs, 256, Some(&svs));
     assert_eq!(measured["copiedFrames"], serde_json::json!([0, 1, 2, 4, 5, 6]), "{measured}");
 }
+
+/// An Aperio-like SVS with reduced levels (downsamples 4 and about 16), as tifffile writes
+/// it: 256-texel JPEG tiles in YCbCr 4:2:0, a thumbnail in strips between the levels. With
+/// `zlib` as the second argument its first reduced level is Deflate-compressed instead.
+const MAKE_LEVELLED_SVS: &str = r#"
+import sys, numpy as np, tifffile
+h, w = 1500, 2300
+y, x = np.mgrid[0:h, 0:w]
+img = np.stack([x * 255 // w, y * 255 // h, (x // 3 + y // 5) & 255], -1).astype(np.int32)
+img += np.random.default_rng(7).integers(0, 16, img.shape)
+img = np.clip(img, 0, 255).astype(np.uint8)
+head = "Aperio Image Library v12.0.15 \r\n%dx%d" % (w, h)
+kw = dict(compression="jpeg", compressionargs={"level": 80}, photometric="ycbcr", subsampling=(2, 2), metadata=None)
+reduced = dict(kw, compression="zlib", compressionargs={}, photometric="rgb", subsampling=None) if sys.argv[2:] == ["zlib"] else kw
+with tifffile.TiffWriter(sys.argv[1]) as t:
+    t.write(img, tile=(256, 256), description=head + " [0,0 %dx%d] (256x256) JPEG/YCC Q=80|AppMag = 20|MPP = 0.5" % (w, h), **kw)
+    t.write(img[::8, ::8].copy(), compression="jpeg", photometric="rgb", description=head + " -> thumbnail", metadata=None)
+    t.write(img[::4, ::4].copy(), tile=(256, 256), description=head + " -> 575x375", **reduced)
+    t.write(img[::16, ::16].copy(), tile=(256, 256), description=head + " -> 144x94", **kw)
+"#;
+
+fn json_of(said: &str) -> serde_json::Value {
+    serde_json::from_str(said.trim()).unwrap()
+}
+
+/// A slide that is a pyramid of JPEG tiles (an Aperio-like SVS, a `vips tiffsave --pyramid`
+/// JPEG TIFF) has every level written as an instance, every stored tile copied as a frame
+/// (edge tiles too: TILED_FULL frames may reach past the image), nothing encoded: valid for
+/// dciodvfy, the frames the source's stored tiles made complete (wsidicom), and every level
+/// read by OpenSlide exactly as it reads the slide's. `--levels pow2` gives our pyramid.
+#[test]
+fn a_slide_s_own_levels_are_copied_as_stored() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let svs = dir.path().join("slide.svs");
+    crate::tiff_slides::python(python.as_os_str(), MAKE_LEVELLED_SVS, &[s(&svs)]);
+    let mut slides = vec![(svs.clone(), 61)];
+    if crate::common::have_program("vips", "--version", "libvips-tools") {
+        let png = input(dir.path(), "src", 2300, 1500, rgb8());
+        let tif = dir.path().join("vips-pyramid.tif");
+        let vips = Command::new("vips")
+            .args(["tiffsave", s(&png), s(&tif), "--tile", "--pyramid", "--compression", "jpeg", "--Q", "85"])
+            .args(["--tile-width", "256", "--tile-height", "256"])
+            .output()
+            .unwrap();
+        assert!(vips.status.success(), "vips: {}", String::from_utf8_lossy(&vips.stderr));
+        // 9 x 6, 5 x 3, 3 x 2, 2 x 1 and 1 tiles.
+        slides.push((tif, 78));
+    }
+    for (slide, frames) in slides {
+        let out = dir.path().join(format!("{}-series", slide.file_stem().unwrap().to_string_lossy()));
+        let json = ok(&["split", s(&slide), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um", "--json"]);
+        let json = json_of(&json);
+        assert_eq!(json["dicom"]["levels"], "stored", "{json}");
+        assert_eq!(json["dicom"]["levelsDeclined"], serde_json::Value::Null, "{json}");
+        assert_eq!(json["dicom"]["frames"], frames, "{json}");
+        assert_eq!((json["copied"].clone(), json["encoded"].clone()), (frames.into(), 0.into()), "{json}");
+        assert_eq!(json["dicom"]["photometricInterpretation"], "YBR_FULL_422", "{json}");
+        dciodvfy(&out);
+        let script = Command::new(&python).args([SCRIPT, "levels", s(&out), s(&slide)]).output().unwrap();
+        let said = format!("{}{}", String::from_utf8_lossy(&script.stdout), String::from_utf8_lossy(&script.stderr));
+        assert!(script.status.success(), "{}: {said}", out.display());
+        assert!(said.contains(&format!("\"framesEqual\": {frames}")), "{said}");
+    }
+    // Our exact pyramid instead: 2300 x 1500 in 256-texel frames, down to one frame.
+    let pow2 = dir.path().join("pow2");
+    let json = ok(&[
+        "split",
+        s(&svs),
+        "--layout",
+        "dicom",
+        "-o",
+        s(&pow2),
+        "--pixel-size",
+        "0.5um",
+        "--levels",
+        "pow2",
+        "--json",
+    ]);
+    let json = json_of(&json);
+    assert_eq!(json["dicom"]["levels"], "pow2", "{json}");
+    assert_eq!(json["dicom"]["levelsAsked"], "pow2", "{json}");
+    assert_eq!(json["dicom"]["instances"], 5, "{json}");
+    // 8 x 5 of the 9 x 6 tiles of level 0 lie inside the image.
+    assert_eq!(json["copied"], 40, "{json}");
+    dciodvfy(&pow2);
+}
+
+/// DICOM of the slide's own levels beside Deep Zoom in one run: Deep Zoom's pyramid is cut,
+/// the series copies the levels.
+#[test]
+fn copied_levels_beside_deep_zoom() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let svs = dir.path().join("slide.svs");
+    crate::tiff_slides::python(python.as_os_str(), MAKE_LEVELLED_SVS, &[s(&svs)]);
+    let (dcm, web) = (dir.path().join("dcm"), dir.path().join("web"));
+    let args = ["split", s(&svs), "--layout", "dicom", "-o", s(&dcm), "-o", s(&web), "--layout", "dzi"];
+    let json = json_of(&ok(&[&args[..], &["--pixel-size", "0.5um", "--json"]].concat()));
+    let outputs = json["outputs"].as_array().unwrap();
+    assert_eq!(json["pyramids"], 1, "{json}");
+    assert_eq!(outputs[0]["dicom"]["levels"], "stored", "{json}");
+    assert_eq!(outputs[0]["pyramid"], serde_json::Value::Null, "{json}");
+    assert_eq!(outputs[1]["pyramid"], 0, "{json}");
+    assert!(web.join("slide.dzi").is_file());
+    assert_eq!(std::fs::read_dir(&dcm).unwrap().count(), 3);
+    dciodvfy(&dcm);
+}
+
+/// Levels DICOM cannot hold as stored (here a Deflate-compressed reduced level) make our
+/// pyramid, the summary saying why; a source that is no pyramid of JPEG tiles too. The
+/// output is then what `--levels pow2` writes, byte for byte.
+#[test]
+fn levels_not_copyable_fall_back_to_our_pyramid_saying_why() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let svs = dir.path().join("deflate-level.svs");
+    crate::tiff_slides::python(python.as_os_str(), MAKE_LEVELLED_SVS, &[s(&svs), "zlib"]);
+    let png = input(dir.path(), "flat", 600, 400, rgb8());
+    for (source, why) in [(&svs, "level 1 (page 2) is not JPEG-compressed"), (&png, "no slide of JPEG-tiled levels")] {
+        let out = dir.path().join("series");
+        let json =
+            json_of(&ok(&["split", s(source), "--layout", "dicom", "-o", s(&out), "--pixel-size", "1um", "--json"]));
+        assert_eq!(json["dicom"]["levels"], "pow2", "{json}");
+        assert!(json["dicom"]["levelsDeclined"].as_str().unwrap().contains(why), "{json}");
+        let said = ok(&["split", s(source), "--layout", "dicom", "-o", s(&out), "--pixel-size", "1um"]);
+        assert!(said.contains(why), "{said}");
+        let pow2 = dir.path().join("pow2");
+        ok(&["split", s(source), "--layout", "dicom", "-o", s(&pow2), "--pixel-size", "1um", "--levels", "pow2", "-q"]);
+        assert!(files(&out) == files(&pow2), "the fallback is not --levels pow2's series");
+        std::fs::remove_dir_all(&out).unwrap();
+        std::fs::remove_dir_all(&pow2).unwrap();
+    }
+    // Encoded frames asked: our pyramid, saying so.
+    let levelled = dir.path().join("levelled.svs");
+    crate::tiff_slides::python(python.as_os_str(), MAKE_LEVELLED_SVS, &[s(&levelled)]);
+    let out = dir.path().join("q70");
+    let json = json_of(&ok(&[
+        "split",
+        s(&levelled),
+        "--layout",
+        "dicom",
+        "-o",
+        s(&out),
+        "--pixel-size",
+        "1um",
+        "--quality",
+        "70",
+        "--json",
+    ]));
+    assert_eq!(json["dicom"]["levels"], "pow2", "{json}");
+    assert!(json["dicom"]["levelsDeclined"].as_str().unwrap().contains("--quality"), "{json}");
+    fails_with(
+        &run(&["split", s(&png), "-o", s(&dir.path().join("web")), "--levels", "pow2"]),
+        &["--levels belongs to --layout dicom"],
+    );
+}
+
+/// A reduced level whose tiles lie past the end of the file (a truncated slide) fails the
+/// run with an error naming the file, the level and the tile, and leaves no series.
+#[test]
+fn a_truncated_level_fails_naming_it_and_leaves_no_series() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let svs = dir.path().join("cut.svs");
+    crate::tiff_slides::python(python.as_os_str(), MAKE_LEVELLED_SVS, &[s(&svs)]);
+    // The last tile of level 1 (page 2) moved past the end of the file.
+    let damage = r#"
+import sys, tifffile
+with tifffile.TiffFile(sys.argv[1], mode="r+b") as t:
+    tag = t.pages[2].tags["TileOffsets"]
+    offsets = list(tag.value)
+    offsets[-1] = 1 << 30
+    tag.overwrite(offsets)
+"#;
+    crate::tiff_slides::python(python.as_os_str(), damage, &[s(&svs)]);
+    let out = dir.path().join("series");
+    let result = run(&["split", s(&svs), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um"]);
+    fails_with(&result, &["cut.svs", "level 1 (page 2)", "column 2, row 1", "past the end of the file"]);
+    let left: Vec<String> =
+        std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert!(left.iter().all(|n| !n.contains("series")), "left behind: {left:?}");
+}

@@ -129,10 +129,12 @@ impl<'a> Series<'a> {
 
     fn dataset(&self, lod: u32, offsets: &Offsets, frame_bytes: u64) -> Object {
         let s = self.spec;
-        let l = &s.layout;
+        // Level 0's image: the pixel spacing of the others follows from its size and theirs.
+        let l = s.level(0);
+        let level = s.level(lod);
         let meta = &s.meta;
-        let (width, height) = l.level_extent(lod);
-        let (columns, rows) = l.grid(lod);
+        let (width, height) = (level.width, level.height);
+        let (columns, rows) = level.grid();
         let frames = u64::from(columns) * u64::from(rows);
         let mut o = Object::new_empty();
         let given = |keyword: &str| meta.get(keyword).map(str::to_string);
@@ -216,9 +218,9 @@ impl<'a> Series<'a> {
         if p.samples() > 1 {
             put(&mut o, tags::PLANAR_CONFIGURATION, VR::US, 0u16);
         }
-        let side = l.tile_size as u16;
-        put(&mut o, tags::ROWS, VR::US, side);
-        put(&mut o, tags::COLUMNS, VR::US, side);
+        // `Spec::check` keeps the frame's sides within 16 bits.
+        put(&mut o, tags::ROWS, VR::US, level.frame.1 as u16);
+        put(&mut o, tags::COLUMNS, VR::US, level.frame.0 as u16);
         put(&mut o, tags::BITS_ALLOCATED, VR::US, 8u16);
         put(&mut o, tags::BITS_STORED, VR::US, 8u16);
         put(&mut o, tags::HIGH_BIT, VR::US, 7u16);
@@ -229,7 +231,7 @@ impl<'a> Series<'a> {
             put(&mut o, tags::RESCALE_SLOPE, VR::DS, "1");
         }
         put(&mut o, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "01");
-        let ratio = (frames * s.raw_frame_bytes()) as f64 / frame_bytes.max(1) as f64;
+        let ratio = (frames * s.raw_frame_bytes(lod)) as f64 / frame_bytes.max(1) as f64;
         put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_RATIO, VR::DS, ds(ratio));
         put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_METHOD, VR::CS, "ISO_10918_1");
         // Multi-frame Dimension: the frames' places follow from TILED_FULL.
@@ -361,6 +363,7 @@ mod tests {
         layout.lod_count = 2;
         Spec {
             layout,
+            copied: Vec::new(),
             stored: crate::pixel::PixelLayout::new(crate::pixel::Channels::Rgb, crate::pixel::Depth::U8),
             photometric: Photometric::YbrFull422,
             pixel_mm: 0.0005,

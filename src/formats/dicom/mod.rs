@@ -15,17 +15,23 @@
 //!   dicom-rs would hold every frame of a level in memory to write them itself.
 //! * `sink`: `DicomSink`, the pipeline's sink: a staging directory renamed into place.
 //!
+//! * `copy`: a slide's own levels as the instances (`--levels stored`): every stored JPEG
+//!   tile of every level copied as a frame, nothing decoded, where all are what DICOM holds.
+//!
 //! Frames are JPEG baseline (1.2.840.10008.1.2.4.50), `TILED_FULL`: whole tiles of the
 //! level's grid in row-major order, the right and bottom ones padded. A JPEG-tiled source's
 //! stored tiles that match the level's photometric interpretation are copied byte for byte
-//! (`takes_stored_jpeg`). Not yet: copying a slide's own reduced levels, JPEG 2000 frames,
-//! lossless frames, the associated images (label, overview) and reading a series back.
+//! (`takes_stored_jpeg`); a slide's own levels are copied whole (`copy`). Not yet: JPEG 2000
+//! frames, lossless frames, the associated images (label, overview).
 
+mod copy;
 mod dataset;
 mod frames;
 pub mod meta;
 mod sink;
 mod uid;
+
+pub(crate) use copy::{copy_levels, copyable};
 
 pub use meta::DicomMeta;
 pub(crate) use sink::DicomSink;
@@ -54,6 +60,9 @@ pub enum Photometric {
     YbrFull422,
     /// YCbCr without subsampling (JPEG 4:4:4), `YBR_FULL`.
     YbrFull,
+    /// R, G, B as they are (a JPEG whose Adobe marker says no transform), `RGB`: only as a
+    /// slide stores it.
+    Rgb,
 }
 
 impl Photometric {
@@ -63,6 +72,7 @@ impl Photometric {
             Photometric::Monochrome => "MONOCHROME2",
             Photometric::YbrFull422 => "YBR_FULL_422",
             Photometric::YbrFull => "YBR_FULL",
+            Photometric::Rgb => "RGB",
         }
     }
 
@@ -84,12 +94,57 @@ impl Photometric {
     }
 }
 
+/// Which levels a series holds (`--levels`, docs/dicom.md).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Levels {
+    /// The slide's own levels, every stored JPEG tile copied as a frame, where the source is
+    /// a pyramid of JPEG tiles DICOM can hold; else our pyramid, saying why.
+    #[default]
+    Stored,
+    /// Our exact power-of-two pyramid (the full resolution's stored tiles still copied where
+    /// they fit the frames).
+    Pow2,
+}
+
+impl Levels {
+    /// `--levels`' name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Levels::Stored => "stored",
+            Levels::Pow2 => "pow2",
+        }
+    }
+}
+
+/// One instance's image: its Total Pixel Matrix and its frames' size, columns by rows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Level {
+    pub width: u32,
+    pub height: u32,
+    pub frame: (u32, u32),
+}
+
+impl Level {
+    /// Frames across and down (`TILED_FULL`: the right and bottom ones reach past the image).
+    pub fn grid(&self) -> (u32, u32) {
+        (self.width.div_ceil(self.frame.0), self.height.div_ceil(self.frame.1))
+    }
+
+    pub fn frames(&self) -> u64 {
+        let (c, r) = self.grid();
+        u64::from(c) * u64::from(r)
+    }
+}
+
 /// Everything the instances say, fixed before the first tile.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Spec {
     /// The pyramid's page grid, border 0: level `k` is `layout.level_extent(k)` in
     /// `layout.grid(k)` frames of `tile_size` a side.
     pub layout: Layout,
+    /// The slide's own levels, copied as stored (`copy`), largest first; empty: the levels
+    /// of `layout`.
+    pub copied: Vec<Level>,
     /// The samples as stored: 8-bit grey or RGB.
     pub stored: PixelLayout,
     pub photometric: Photometric,
@@ -134,9 +189,16 @@ impl Spec {
         if !(self.pixel_mm.is_finite() && self.pixel_mm > 0.0) {
             return Err(TilerError::Options(format!("a pixel size of {} mm", self.pixel_mm)));
         }
-        for lod in 0..l.lod_count {
-            let (c, r) = l.grid(lod);
-            if u64::from(c) * u64::from(r) > i32::MAX as u64 {
+        for lod in 0..self.level_count() {
+            let level = self.level(lod);
+            let (c, r) = level.grid();
+            if level.frame.0 == 0 || level.frame.1 == 0 || level.frame.0.max(level.frame.1) > u32::from(u16::MAX) {
+                return Err(TilerError::Options(format!(
+                    "level {lod}'s {}x{} frames: a DICOM frame's Rows and Columns are 16-bit",
+                    level.frame.0, level.frame.1
+                )));
+            }
+            if level.frames() > i32::MAX as u64 {
                 return Err(TilerError::Options(format!(
                     "level {lod} has {c} x {r} frames: a DICOM instance's Number of Frames is at most {}",
                     i32::MAX
@@ -147,14 +209,35 @@ impl Spec {
         Ok(())
     }
 
-    /// Bytes of one frame's samples, uncompressed.
-    pub fn raw_frame_bytes(&self) -> u64 {
-        u64::from(self.layout.tile_size).pow(2) * u64::from(self.photometric.samples())
+    /// Instances in the series, one a level.
+    pub fn level_count(&self) -> u32 {
+        match self.copied.len() {
+            0 => self.layout.lod_count,
+            n => n as u32,
+        }
+    }
+
+    /// Level `lod`'s image and frames.
+    pub fn level(&self, lod: u32) -> Level {
+        match self.copied.get(lod as usize) {
+            Some(level) => *level,
+            None => {
+                let (width, height) = self.layout.level_extent(lod);
+                Level { width, height, frame: (self.layout.tile_size, self.layout.tile_size) }
+            }
+        }
+    }
+
+    /// Bytes of one frame's samples of level `lod`, uncompressed.
+    pub fn raw_frame_bytes(&self, lod: u32) -> u64 {
+        let (w, h) = self.level(lod).frame;
+        u64::from(w) * u64::from(h) * u64::from(self.photometric.samples())
     }
 
     /// Memory the sink's frame index holds: 12 bytes a frame.
     pub fn index_bytes(&self) -> u64 {
-        self.layout.total_tiles().saturating_mul(12)
+        let frames: u64 = (0..self.level_count()).map(|lod| self.level(lod).frames()).sum();
+        frames.saturating_mul(12)
     }
 
     /// The file name of level `lod`'s instance in the series' directory.
@@ -187,4 +270,11 @@ pub struct DicomSummary {
     pub frame_bytes: u64,
     /// Bytes of the instances' files, together.
     pub file_bytes: u64,
+    /// The levels asked for (`--levels`).
+    pub levels: Levels,
+    /// Whether the instances are the slide's own levels, every frame copied as stored.
+    pub levels_copied: bool,
+    /// Why the slide's own levels were not copied where they were asked for (the source is
+    /// no pyramid of JPEG tiles, or one DICOM cannot hold as it is).
+    pub levels_declined: Option<String>,
 }

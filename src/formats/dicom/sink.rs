@@ -46,9 +46,9 @@ impl DicomSink {
             done: false,
         };
         // On failure `sink` is dropped, which removes the staging directory.
-        let mut levels = Vec::with_capacity(sink.spec.layout.lod_count as usize);
-        for lod in 0..sink.spec.layout.lod_count {
-            let (c, r) = sink.spec.layout.grid(lod);
+        let mut levels = Vec::with_capacity(sink.spec.level_count() as usize);
+        for lod in 0..sink.spec.level_count() {
+            let (c, r) = sink.spec.level(lod).grid();
             let path = sink.staging.join(format!(".level-{lod}.frames"));
             let staged = Staged::create(&path, c as usize * r as usize).map_err(|e| TilerError::write(&path, e))?;
             levels.push(Some(staged));
@@ -69,6 +69,9 @@ impl DicomSink {
             extended_offsets: 0,
             frame_bytes: 0,
             file_bytes: 0,
+            levels: super::Levels::Pow2,
+            levels_copied: !self.spec.copied.is_empty(),
+            levels_declined: None,
         };
         for (lod, staged) in levels.into_iter().enumerate() {
             let lod = lod as u32;
@@ -115,7 +118,10 @@ impl Drop for DicomSink {
 
 impl TileSink for DicomSink {
     fn write_tile(&self, lod: u32, x: u32, y: u32, stored: &[u8]) -> Result<()> {
-        let (columns, rows) = self.spec.layout.grid(lod);
+        if lod >= self.spec.level_count() {
+            return Err(TilerError::Internal(format!("a frame of level {lod}, past the series' levels")));
+        }
+        let (columns, rows) = self.spec.level(lod).grid();
         if x >= columns || y >= rows {
             let message = format!("outside level {lod}'s {columns} x {rows} frames");
             return Err(TilerError::Encode { lod, x, y, message });
@@ -139,6 +145,7 @@ impl TileSink for DicomSink {
         let whole = h.frame == 0xC0 && h.precision == 8 && (u32::from(h.width), u32::from(h.height)) == (side, side);
         let form = match self.spec.photometric {
             Photometric::Monochrome => h.components == 1,
+            Photometric::Rgb => h.components == 3 && h.adobe == Some(0) && h.sampling[..] == [(1, 1); 3],
             p => {
                 let chroma = if p == Photometric::YbrFull422 { (2, 2) } else { (1, 1) };
                 h.components == 3 && h.adobe != Some(0) && h.sampling[..] == [chroma, (1, 1), (1, 1)]

@@ -265,7 +265,7 @@ fn build(instance: &Instance, mut label: String, max_memory: u64) -> Result<Box<
                 counts: grid.counts,
                 tables: vec![],
             };
-            jpeg::assemble(path, grid, colour, label, embedded, max_memory)
+            jpeg::assemble(path, grid, colour, label, embedded, jpeg::Pages::alone(max_memory))
         }
         JPEG_2000_LOSSLESS | JPEG_2000 => {
             let ycbcr = match photometric.as_str() {

@@ -25,7 +25,7 @@ use super::libjpeg::{self, Colour, Extent};
 use super::open_error;
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
-use crate::source::stored::{self, Quality, Samples, StoredTiles};
+use crate::source::stored::{self, Quality, Samples, StoredLevel, StoredLevels, StoredTiles};
 use crate::source::{ImageHeader, RowSource};
 
 /// Chunk rows decoded together when the TIFF is in strips: enough strips to keep every core
@@ -56,6 +56,24 @@ pub(super) struct JpegTiff {
     label: String,
     /// The orientation and ICC profile of the image's directory.
     embedded: crate::source::Embedded,
+    /// Its page in the file, and its reduced levels'.
+    pages: Pages,
+}
+
+/// The page read and the pages of its reduced levels (`pyramid::Chosen`), read as stored
+/// levels when a run asks for them ([`RowSource::stored_levels`]), and the memory the reader
+/// may hold.
+pub(crate) struct Pages {
+    pub index: usize,
+    pub levels: Vec<usize>,
+    pub max_memory: u64,
+}
+
+impl Pages {
+    /// One image with no levels of its own to copy (a DICOM instance).
+    pub(crate) fn alone(max_memory: u64) -> Pages {
+        Pages { index: 0, levels: Vec::new(), max_memory }
+    }
 }
 
 /// Where the compressed chunks are, shared with the [`StoredTiles`] a run copies them through.
@@ -112,9 +130,8 @@ pub(super) fn open(
     decoder: &mut Decoder<BufReader<File>>,
     label: String,
     embedded: crate::source::Embedded,
-    max_memory: u64,
+    pages: Pages,
 ) -> Result<Box<dyn RowSource>> {
-    let tag_err = |e| open_error(path, e);
     let (width, height) = super::dimensions(path, decoder)?;
     let colour = colour(path, decoder)?;
     let tiled = decoder.get_chunk_type() == ChunkType::Tile;
@@ -132,23 +149,10 @@ pub(super) fn open(
         // RowsPerStrip is often 2^32-1 ("one strip"): clamp it to the image.
         (width, rows.clamp(1, height))
     };
-    let (offset_tag, count_tag) =
-        if tiled { (Tag::TileOffsets, Tag::TileByteCounts) } else { (Tag::StripOffsets, Tag::StripByteCounts) };
-    let offsets = decoder.get_tag_u64_vec(offset_tag).map_err(tag_err)?;
-    let counts = decoder.get_tag_u64_vec(count_tag).map_err(tag_err)?;
-    let tables = match decoder.find_tag(Tag::JPEGTables).map_err(tag_err)? {
-        None => Vec::new(),
-        Some(_) => {
-            let raw = decoder.get_tag_u8_vec(Tag::JPEGTables).map_err(tag_err)?;
-            let body = libjpeg::tables_body(&raw).ok_or_else(|| {
-                TilerError::decode(path, "corrupt TIFF: JPEGTables does not start with a JPEG SOI marker")
-            })?;
-            body.to_vec()
-        }
-    };
-
+    let chunks = width.div_ceil(chunk_w) as u64 * height.div_ceil(chunk_h) as u64;
+    let (offsets, counts, tables) = chunk_tags(path, decoder, tiled, chunks)?;
     let grid = Grid { size: (width, height), chunk: (chunk_w, chunk_h), tiled, offsets, counts, tables };
-    assemble(path, grid, colour, label, embedded, max_memory)
+    assemble(path, grid, colour, label, embedded, pages)
 }
 
 /// Where a grid of JPEG chunks lies in a file, whatever the container: a TIFF's tags or a
@@ -176,8 +180,9 @@ pub(crate) fn assemble(
     colour: Colour,
     label: String,
     embedded: crate::source::Embedded,
-    max_memory: u64,
+    pages: Pages,
 ) -> Result<Box<dyn RowSource>> {
+    let max_memory = pages.max_memory;
     let Grid { size: (width, height), chunk: (chunk_w, chunk_h), tiled, offsets, counts, tables } = grid;
     if width == 0 || height == 0 || chunk_w == 0 || chunk_h == 0 {
         let what = format!("a {width}x{height} image of {chunk_w}x{chunk_h} JPEG chunks");
@@ -247,7 +252,43 @@ pub(crate) fn assemble(
         failed: false,
         label,
         embedded,
+        pages,
     }))
+}
+
+/// The chunks' offsets and byte counts (`chunks` of them at least) and the JPEGTables marker
+/// segments (no SOI/EOI; empty where each chunk is complete) of the current directory.
+fn chunk_tags(
+    path: &Path,
+    decoder: &mut Decoder<BufReader<File>>,
+    tiled: bool,
+    chunks: u64,
+) -> Result<(Vec<u64>, Vec<u64>, Vec<u8>)> {
+    let tag_err = |e| open_error(path, e);
+    let (offset_tag, count_tag) =
+        if tiled { (Tag::TileOffsets, Tag::TileByteCounts) } else { (Tag::StripOffsets, Tag::StripByteCounts) };
+    let offsets = decoder.get_tag_u64_vec(offset_tag).map_err(tag_err)?;
+    let counts = decoder.get_tag_u64_vec(count_tag).map_err(tag_err)?;
+    if (offsets.len() as u64) < chunks || (counts.len() as u64) < chunks {
+        let message = format!(
+            "corrupt TIFF: {} offsets and {} byte counts for {chunks} {}",
+            offsets.len(),
+            counts.len(),
+            if tiled { "tiles" } else { "strips" }
+        );
+        return Err(TilerError::decode(path, message));
+    }
+    let tables = match decoder.find_tag(Tag::JPEGTables).map_err(tag_err)? {
+        None => Vec::new(),
+        Some(_) => {
+            let raw = decoder.get_tag_u8_vec(Tag::JPEGTables).map_err(tag_err)?;
+            let body = libjpeg::tables_body(&raw).ok_or_else(|| {
+                TilerError::decode(path, "corrupt TIFF: JPEGTables does not start with a JPEG SOI marker")
+            })?;
+            body.to_vec()
+        }
+    };
+    Ok((offsets, counts, tables))
 }
 
 /// The colour the JPEG chunks hold, from PhotometricInterpretation and SamplesPerPixel.
@@ -408,27 +449,31 @@ impl RowSource for JpegTiff {
 
     /// The tiles, to copy where the output's pages line up with them (strips never do).
     fn stored_tiles(&self) -> Option<Arc<dyn StoredTiles>> {
-        let samples = match self.colour {
-            Colour::Grey => Samples::Grey,
-            Colour::YCbCr => Samples::YCbCr,
-            Colour::Rgb => Samples::Rgb,
-        };
-        // The tables are in JPEGTables, or in each tile: the first tile's say the quality.
-        let quality = match self.chunks.tables.is_empty() {
-            false => stored::read_header(&[&[0xFF, 0xD8], &self.chunks.tables[..]].concat()),
-            true => self.chunks.stream(0, "tile 0").ok().and_then(|s| stored::read_header(&s)),
-        }
-        .and_then(|h| h.luma_table)
-        .map(|t| stored::estimate_quality(&t));
-        let tiles = JpegTiles {
-            chunks: Arc::clone(&self.chunks),
-            samples,
-            size: (self.chunk_w, self.chunk_h),
-            across: self.across,
-            down: self.height.div_ceil(self.chunk_h),
-            quality,
-        };
+        let tiles = JpegTiles::new(&self.chunks, self.colour, (self.chunk_w, self.chunk_h), (self.width, self.height));
         self.tiled.then(|| Arc::new(tiles) as Arc<dyn StoredTiles>)
+    }
+
+    /// This page and its reduced levels, where it has some, each as its JPEG tiles.
+    fn stored_levels(&self) -> Result<Option<StoredLevels>> {
+        let Some(full) = self.stored_tiles().filter(|_| !self.pages.levels.is_empty()) else { return Ok(None) };
+        let path = &self.chunks.path;
+        let (width, height, page) = (self.width, self.height, self.pages.index);
+        let mut stored = StoredLevels {
+            path: path.clone(),
+            levels: vec![StoredLevel { width, height, page, tiles: full }],
+            unlike: None,
+        };
+        for (k, &page) in self.pages.levels.iter().enumerate() {
+            let k = k + 1;
+            match level(path, page, self.pages.max_memory).map_err(|e| stored::in_level(e, k, page))? {
+                Ok(level) => stored.levels.push(level),
+                Err(why) => {
+                    stored.unlike = Some(format!("level {k} (page {page}) {why}"));
+                    break;
+                }
+            }
+        }
+        Ok(Some(stored))
     }
 
     fn describe(&self) -> String {
@@ -447,6 +492,32 @@ impl RowSource for JpegTiff {
     }
 }
 
+/// Page `page` of `path`, a reduced level, as its JPEG tiles; `Err(why)` where it is not
+/// JPEG tiles (strips, another compression).
+fn level(path: &Path, page: usize, max_memory: u64) -> Result<std::result::Result<StoredLevel, String>> {
+    let mut decoder = super::open_decoder(path, max_memory)?;
+    decoder.seek_to_image(page).map_err(|e| open_error(path, e))?;
+    if !is_jpeg(path, &mut decoder)? {
+        return Ok(Err("is not JPEG-compressed".into()));
+    }
+    if decoder.get_chunk_type() != ChunkType::Tile {
+        return Ok(Err("is stored in strips, not tiles".into()));
+    }
+    let (width, height) = super::dimensions(path, &mut decoder)?;
+    let colour = colour(path, &mut decoder)?;
+    let (tw, th) = decoder.chunk_dimensions();
+    if tw == 0 || th == 0 || tw % 8 != 0 || th % 8 != 0 {
+        return Err(TilerError::decode(path, format!("the JPEG TIFF declares {tw}x{th} tiles (not multiples of 8)")));
+    }
+    let tiles = u64::from(width.div_ceil(tw)) * u64::from(height.div_ceil(th));
+    let (offsets, counts, tables) = chunk_tags(path, &mut decoder, true, tiles)?;
+    let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
+    let chunks = Arc::new(Chunks { path: path.to_path_buf(), file, file_len, offsets, counts, tables });
+    let tiles = Arc::new(JpegTiles::new(&chunks, colour, (tw, th), (width, height)));
+    Ok(Ok(StoredLevel { width, height, page, tiles }))
+}
+
 /// How a tile is named in errors.
 fn tile_name(col: u32, row: u32, index: usize) -> String {
     format!("JPEG tile at column {col}, row {row} (tile {index})")
@@ -460,6 +531,32 @@ struct JpegTiles {
     across: u32,
     down: u32,
     quality: Option<Quality>,
+}
+
+impl JpegTiles {
+    /// The `size` tiles of a `width x height` image in `chunks`, holding `colour`.
+    fn new(chunks: &Arc<Chunks>, colour: Colour, size: (u32, u32), (width, height): (u32, u32)) -> JpegTiles {
+        let samples = match colour {
+            Colour::Grey => Samples::Grey,
+            Colour::YCbCr => Samples::YCbCr,
+            Colour::Rgb => Samples::Rgb,
+        };
+        // The tables are in JPEGTables, or in each tile: the first tile's say the quality.
+        let quality = match chunks.tables.is_empty() {
+            false => stored::read_header(&[&[0xFF, 0xD8], &chunks.tables[..]].concat()),
+            true => chunks.stream(0, "tile 0").ok().and_then(|s| stored::read_header(&s)),
+        }
+        .and_then(|h| h.luma_table)
+        .map(|t| stored::estimate_quality(&t));
+        JpegTiles {
+            chunks: Arc::clone(chunks),
+            samples,
+            size,
+            across: width.div_ceil(size.0),
+            down: height.div_ceil(size.1),
+            quality,
+        }
+    }
 }
 
 impl StoredTiles for JpegTiles {

@@ -171,7 +171,8 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
         if let Some(source) = ndpi::open(path, &mut decoder, &chosen.label, &embedded, max_memory, chosen.index)? {
             return Ok(source);
         }
-        return jpeg::open(path, &mut decoder, chosen.label, embedded, max_memory);
+        let pages = jpeg::Pages { index: chosen.index, levels: chosen.levels, max_memory };
+        return jpeg::open(path, &mut decoder, chosen.label, embedded, pages);
     }
     if jp2k::is_jp2k(path, &mut decoder)? {
         return jp2k::open(path, &mut decoder, chosen.label, embedded, max_memory);

@@ -34,6 +34,9 @@ pub(super) struct Chosen {
     pub label: String,
     /// The physical size of its pixels, where the file states it.
     pub pitch: Option<crate::source::PixelPitch>,
+    /// The pages of the main chain that are the chosen page's reduced levels (tiled, smaller,
+    /// in the file's order), for an output that copies every level; SubIFDs are not listed.
+    pub levels: Vec<usize>,
 }
 
 /// Surveys the file, picks a page and positions `decoder` on it.
@@ -78,7 +81,8 @@ pub(super) fn choose(
             None => format!(", {:.4} x {:.4} µm/texel ({})", p.x_um, p.y_um, p.from),
         };
     }
-    Ok(Chosen { index, label, pitch })
+    let levels = reduced_levels(&pages, vendor, index);
+    Ok(Chosen { index, label, pitch, levels })
 }
 
 /// The main chain's directories, as far as they can be read, and why the chain ended early
@@ -136,6 +140,31 @@ fn page(decoder: &mut Decoder<BufReader<File>>, description: String) -> Page {
         sub_ifds,
         hint,
     }
+}
+
+/// The reduced levels of page `index` in the main chain: the tiled levels after it, each
+/// smaller than the one before, up to the next full-resolution page (another series).
+fn reduced_levels(pages: &[Page], vendor: Vendor, index: usize) -> Vec<usize> {
+    let chosen = &pages[index];
+    if vendor == Vendor::Ome || !chosen.tiled || slide::associated(vendor, pages, index).is_some() {
+        return Vec::new();
+    }
+    let mut levels = Vec::new();
+    let mut last = (chosen.width, chosen.height);
+    for i in index + 1..pages.len() {
+        if slide::associated(vendor, pages, i).is_some() {
+            continue;
+        }
+        if !slide::is_level(vendor, pages, i) {
+            break;
+        }
+        let p = &pages[i];
+        if p.tiled && p.width <= last.0 && p.height <= last.1 && (p.width, p.height) != last {
+            levels.push(i);
+            last = (p.width, p.height);
+        }
+    }
+    levels
 }
 
 /// The first page of series `n`: OME-XML's Nth `Image`, or else the Nth page that is
