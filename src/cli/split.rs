@@ -284,7 +284,6 @@ enum Placed {
     Layout(usize),
 }
 
-/// `--layout`: this tool's tile directory or a viewer's.
 /// `--levels`' values.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum LevelsArg {
@@ -292,6 +291,7 @@ enum LevelsArg {
     Pow2,
 }
 
+/// `--layout`: this tool's tile directory or a viewer's.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum OutputLayout {
     /// Tiles named by --filename-format plus info.json (docs/info-json.md).

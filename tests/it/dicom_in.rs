@@ -60,14 +60,7 @@ fn a_jpeg_tiled_tiff_through_dicom_keeps_its_tiles() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let png = input(dir.path(), "src", 1024, 768, rgb8());
-    let tiled = dir.path().join("s85.tif");
-    let vips = Command::new("vips")
-        .args(["tiffsave", s(&png), s(&tiled), "--tile", "--tile-width", "256", "--tile-height", "256"])
-        .args(["--compression", "jpeg", "--Q", "85"])
-        .output()
-        .unwrap();
-    assert!(vips.status.success(), "vips: {}", String::from_utf8_lossy(&vips.stderr));
+    let tiled = crate::dicom_out::vips_jpeg_tiff(dir.path(), 1024, 768);
     let series = dir.path().join("series");
     let json = ok(&["split", s(&tiled), "--layout", "dicom", "-o", s(&series), "--pixel-size", "0.5um", "--json"]);
     let json: serde_json::Value = serde_json::from_str(json.trim()).unwrap();

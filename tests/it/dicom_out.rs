@@ -160,6 +160,20 @@ fn grey_frames_and_the_users_attributes() {
     }
 }
 
+/// A `W x H` gradient-with-noise image saved by `vips tiffsave` as a JPEG TIFF of 256-texel tiles
+/// at Q85 (YCbCr 4:2:0, as libvips writes below Q90): `DIR/s85.tif`.
+pub(crate) fn vips_jpeg_tiff(dir: &Path, w: u32, h: u32) -> PathBuf {
+    let png = input(dir, "src", w, h, rgb8());
+    let tiled = dir.join("s85.tif");
+    let vips = Command::new("vips")
+        .args(["tiffsave", s(&png), s(&tiled), "--tile", "--tile-width", "256", "--tile-height", "256"])
+        .args(["--compression", "jpeg", "--Q", "85"])
+        .output()
+        .unwrap();
+    assert!(vips.status.success(), "vips: {}", String::from_utf8_lossy(&vips.stderr));
+    tiled
+}
+
 /// A JPEG-tiled source whose tiles fit the frames (256 texels, YCbCr 4:2:0: `vips tiffsave`
 /// below Q90) has its interior full-resolution tiles copied byte for byte (their entropy-coded
 /// data equal to the source's stored tiles), as `--json` says; the edge tiles, which lie past
@@ -171,14 +185,7 @@ fn a_jpeg_tiled_source_s_tiles_are_copied_byte_for_byte() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let png = input(dir.path(), "src", 1000, 700, rgb8());
-    let tiled = dir.path().join("s85.tif");
-    let vips = Command::new("vips")
-        .args(["tiffsave", s(&png), s(&tiled), "--tile", "--tile-width", "256", "--tile-height", "256"])
-        .args(["--compression", "jpeg", "--Q", "85"])
-        .output()
-        .unwrap();
-    assert!(vips.status.success(), "vips: {}", String::from_utf8_lossy(&vips.stderr));
+    let tiled = vips_jpeg_tiff(dir.path(), 1000, 700);
     let out = dir.path().join("series");
     let json = ok(&["split", s(&tiled), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um", "--json"]);
     let json: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
