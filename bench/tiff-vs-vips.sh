@@ -6,9 +6,11 @@
 # alternately RUNS times (default 5), each under /usr/bin/time -v (wall, user+system CPU, peak
 # RSS), all with 256-texel JPEG Q85 tiles:
 #   strip     the 16384 x 16384 RGB strip BigTIFF of bench/lib.sh into
-#     generic     vortex-tiler split src16k.tif -o OUT.tif --quality 85 -q
-#                 (every level a page of its own; the default filter)
-#     ome         vortex-tiler split src16k.tif -o OUT.ome.tif --quality 85 -q
+#     generic     vortex-tiler split src16k.tif -o OUT.tif --json
+#                 (every level a page of its own; the default filter; the default quality,
+#                 85: an explicit --quality asks for re-encoding, so a slide's tiles would
+#                 not be copied)
+#     ome         vortex-tiler split src16k.tif -o OUT.ome.tif --json
 #                 (reduced levels as SubIFDs; the box filter, OME-TIFF's default)
 #     vips        pyvips: tiffsave(tile=True, pyramid=True, compression="jpeg", Q=85,
 #                 tile_width=256, tile_height=256, bigtiff=True), sequential access
@@ -54,8 +56,8 @@ run_tool() {
   src=$([ "$part" = strip ] && echo src16k.tif || echo "$SLIDE")
   rm -rf "$OUT" && mkdir -p "$OUT"
   case $tool in
-    generic) result=$(measure "$WORK/$tool.log" "$VT" split "$src" -o "$OUT/x.tif" --quality 85 --json) ;;
-    ome) result=$(measure "$WORK/$tool.log" "$VT" split "$src" -o "$OUT/x.ome.tif" --quality 85 --json) ;;
+    generic) result=$(measure "$WORK/$tool.log" "$VT" split "$src" -o "$OUT/x.tif" --json) ;;
+    ome) result=$(measure "$WORK/$tool.log" "$VT" split "$src" -o "$OUT/x.ome.tif" --json) ;;
     vips) result=$(measure "$WORK/$tool.log" "$PY" -c "$TIFFSAVE" "$src" "$OUT/x.tif" 0) ;;
     vips-subifd) result=$(measure "$WORK/$tool.log" "$PY" -c "$TIFFSAVE" "$src" "$OUT/x.tif" 1) ;;
   esac
