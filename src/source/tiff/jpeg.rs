@@ -136,21 +136,13 @@ pub(super) fn open(
     let colour = colour(path, decoder)?;
     let tiled = decoder.get_chunk_type() == ChunkType::Tile;
     let (chunk_w, chunk_h) = if tiled {
-        let (tw, th) = decoder.chunk_dimensions();
-        if tw == 0 || th == 0 || tw % 8 != 0 || th % 8 != 0 {
-            return Err(TilerError::decode(
-                path,
-                format!("the JPEG TIFF declares {tw}x{th} tiles (not multiples of 8)"),
-            ));
-        }
-        (tw, th)
+        tile_size(path, decoder)?
     } else {
         let (_, rows) = decoder.chunk_dimensions();
         // RowsPerStrip is often 2^32-1 ("one strip"): clamp it to the image.
         (width, rows.clamp(1, height))
     };
-    let chunks = width.div_ceil(chunk_w) as u64 * height.div_ceil(chunk_h) as u64;
-    let (offsets, counts, tables) = chunk_tags(path, decoder, tiled, chunks)?;
+    let (offsets, counts, tables) = chunk_tags(path, decoder, tiled)?;
     let grid = Grid { size: (width, height), chunk: (chunk_w, chunk_h), tiled, offsets, counts, tables };
     assemble(path, grid, colour, label, embedded, pages)
 }
@@ -191,15 +183,7 @@ pub(crate) fn assemble(
     let across = width.div_ceil(chunk_w);
     let down = height.div_ceil(chunk_h);
     let chunks = across as u64 * down as u64;
-    if (offsets.len() as u64) < chunks || (counts.len() as u64) < chunks {
-        let message = format!(
-            "corrupt file: {} offsets and {} byte counts for {chunks} {}",
-            offsets.len(),
-            counts.len(),
-            if tiled { "tiles" } else { "strips" }
-        );
-        return Err(TilerError::decode(path, message));
-    }
+    enough_chunks(path, &offsets, &counts, chunks, tiled)?;
     // One band of decoded texels: a row of tiles, or a group of strips.
     let row_bytes = width as u64 * colour.components() as u64;
     let band_bytes = |group: u64| row_bytes.saturating_mul(chunk_h as u64).saturating_mul(group);
@@ -256,28 +240,41 @@ pub(crate) fn assemble(
     }))
 }
 
-/// The chunks' offsets and byte counts (`chunks` of them at least) and the JPEGTables marker
-/// segments (no SOI/EOI; empty where each chunk is complete) of the current directory.
-fn chunk_tags(
-    path: &Path,
-    decoder: &mut Decoder<BufReader<File>>,
-    tiled: bool,
-    chunks: u64,
-) -> Result<(Vec<u64>, Vec<u64>, Vec<u8>)> {
-    let tag_err = |e| open_error(path, e);
-    let (offset_tag, count_tag) =
-        if tiled { (Tag::TileOffsets, Tag::TileByteCounts) } else { (Tag::StripOffsets, Tag::StripByteCounts) };
-    let offsets = decoder.get_tag_u64_vec(offset_tag).map_err(tag_err)?;
-    let counts = decoder.get_tag_u64_vec(count_tag).map_err(tag_err)?;
+/// The current directory's tile size, which JPEG tiles need in multiples of 8.
+fn tile_size(path: &Path, decoder: &Decoder<BufReader<File>>) -> Result<(u32, u32)> {
+    let (tw, th) = decoder.chunk_dimensions();
+    if tw == 0 || th == 0 || tw % 8 != 0 || th % 8 != 0 {
+        return Err(TilerError::decode(path, format!("the JPEG TIFF declares {tw}x{th} tiles (not multiples of 8)")));
+    }
+    Ok((tw, th))
+}
+
+/// Refuses fewer offsets or byte counts than the grid's `chunks`.
+fn enough_chunks(path: &Path, offsets: &[u64], counts: &[u64], chunks: u64, tiled: bool) -> Result<()> {
     if (offsets.len() as u64) < chunks || (counts.len() as u64) < chunks {
         let message = format!(
-            "corrupt TIFF: {} offsets and {} byte counts for {chunks} {}",
+            "corrupt file: {} offsets and {} byte counts for {chunks} {}",
             offsets.len(),
             counts.len(),
             if tiled { "tiles" } else { "strips" }
         );
         return Err(TilerError::decode(path, message));
     }
+    Ok(())
+}
+
+/// The chunks' offsets and byte counts and the JPEGTables marker segments (no SOI/EOI; empty
+/// where each chunk is complete) of the current directory.
+fn chunk_tags(
+    path: &Path,
+    decoder: &mut Decoder<BufReader<File>>,
+    tiled: bool,
+) -> Result<(Vec<u64>, Vec<u64>, Vec<u8>)> {
+    let tag_err = |e| open_error(path, e);
+    let (offset_tag, count_tag) =
+        if tiled { (Tag::TileOffsets, Tag::TileByteCounts) } else { (Tag::StripOffsets, Tag::StripByteCounts) };
+    let offsets = decoder.get_tag_u64_vec(offset_tag).map_err(tag_err)?;
+    let counts = decoder.get_tag_u64_vec(count_tag).map_err(tag_err)?;
     let tables = match decoder.find_tag(Tag::JPEGTables).map_err(tag_err)? {
         None => Vec::new(),
         Some(_) => {
@@ -505,12 +502,10 @@ fn level(path: &Path, page: usize, max_memory: u64) -> Result<std::result::Resul
     }
     let (width, height) = super::dimensions(path, &mut decoder)?;
     let colour = colour(path, &mut decoder)?;
-    let (tw, th) = decoder.chunk_dimensions();
-    if tw == 0 || th == 0 || tw % 8 != 0 || th % 8 != 0 {
-        return Err(TilerError::decode(path, format!("the JPEG TIFF declares {tw}x{th} tiles (not multiples of 8)")));
-    }
+    let (tw, th) = tile_size(path, &decoder)?;
+    let (offsets, counts, tables) = chunk_tags(path, &mut decoder, true)?;
     let tiles = u64::from(width.div_ceil(tw)) * u64::from(height.div_ceil(th));
-    let (offsets, counts, tables) = chunk_tags(path, &mut decoder, true, tiles)?;
+    enough_chunks(path, &offsets, &counts, tiles, true)?;
     let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
     let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
     let chunks = Arc::new(Chunks { path: path.to_path_buf(), file, file_len, offsets, counts, tables });
