@@ -19,24 +19,28 @@ use crate::pixel::{Channels, Depth, PixelLayout, Sample, u16_to_u8};
 pub(crate) const DEFAULT_ZSTD_LEVEL: i32 = 3;
 pub(crate) const DEFAULT_BC7_EFFORT: Bc7Effort = Bc7Effort::UltraFast;
 
-/// JPEG chroma subsampling.
+/// How a JPEG codes colour: YCbCr with its chroma subsampled or not, or RGB as it is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Subsampling {
     /// 4:2:0: chroma at half resolution both ways (smaller files, what libjpeg does below q90).
     S420,
     /// 4:4:4: full-resolution chroma.
     S444,
+    /// RGB without the YCbCr transform, every component at full resolution (an Adobe marker
+    /// says so): what Aperio scanners and libvips at Q90 and above store; the largest files.
+    Rgb,
 }
 
 impl Subsampling {
     /// Every value, in the order `--help` lists them.
-    pub const ALL: [Subsampling; 2] = [Subsampling::S420, Subsampling::S444];
+    pub const ALL: [Subsampling; 3] = [Subsampling::S420, Subsampling::S444, Subsampling::Rgb];
 
     /// The name used on the command line (`--subsampling`) and in `info.json`.
     pub fn name(self) -> &'static str {
         match self {
             Subsampling::S420 => "420",
             Subsampling::S444 => "444",
+            Subsampling::Rgb => "rgb",
         }
     }
 
@@ -52,6 +56,15 @@ impl Subsampling {
                 "4:2:0: chroma at half resolution both ways (smaller files, what libjpeg does below q90)"
             }
             Subsampling::S444 => "4:4:4: full-resolution chroma",
+            Subsampling::Rgb => "RGB as it is, no YCbCr (what Aperio scanners and libvips at Q90+ store; largest)",
+        }
+    }
+
+    /// Luma samples per chroma sample, across and down (RGB: every component in full).
+    pub(crate) fn factor(self) -> u8 {
+        match self {
+            Subsampling::S420 => 2,
+            Subsampling::S444 | Subsampling::Rgb => 1,
         }
     }
 }
@@ -175,7 +188,7 @@ impl Codec {
                 let per_texel = match (channels, subsampling) {
                     (Channels::Grey, _) => 2,
                     (_, Subsampling::S420) => 3,
-                    (_, Subsampling::S444) => 6,
+                    (_, Subsampling::S444 | Subsampling::Rgb) => 6,
                 };
                 side.next_multiple_of(16).pow(2) * per_texel + 2048
             }
@@ -554,11 +567,13 @@ impl<T: Sample> TileEncoder<T> {
             c.set_size(width as usize, height as usize);
             c.set_quality(quality as f32);
             if colour == mozjpeg::ColorSpace::JCS_RGB {
-                let px = match subsampling {
-                    Subsampling::S420 => (2, 2),
-                    Subsampling::S444 => (1, 1),
-                };
-                c.set_chroma_sampling_pixel_sizes(px, px);
+                if subsampling == Subsampling::Rgb {
+                    // Kept as RGB, each component at full resolution, with an Adobe marker.
+                    c.set_color_space(mozjpeg::ColorSpace::JCS_RGB);
+                } else {
+                    let px = subsampling.factor();
+                    c.set_chroma_sampling_pixel_sizes((px, px), (px, px));
+                }
             }
             let mut started = c.start_compress(buf)?;
             started.write_scanlines(&samples)?;
@@ -707,6 +722,26 @@ mod tests {
         let px = [255u8, 0, 0, 255, 255, 0, 0, 0, 255, 0, 0, 128];
         let out = flatten(&px, 4, &[0, 0, 255]);
         assert_eq!(out, vec![255, 0, 0, 0, 0, 255, 128, 0, 127]);
+    }
+
+    /// Each coding is what the stream's frame and Adobe marker say, as a TIFF's or DICOM's
+    /// tags must declare it; grey has none.
+    #[test]
+    fn a_jpeg_is_coded_as_its_subsampling_says() {
+        let rgb = PixelLayout::new(Channels::Rgb, Depth::U8);
+        let texels: Vec<u8> = (0..16 * 16 * 3).map(|i| (i * 7 % 251) as u8).collect();
+        for subsampling in Subsampling::ALL {
+            let encoder = TileEncoder::new(Codec::Jpeg { quality: 90, subsampling }, rgb, false, None, 16, Vec::new());
+            let mut out = Vec::new();
+            encoder.unwrap().encode(&texels, &mut out).unwrap();
+            let header = crate::source::stored::read_header(&out).unwrap();
+            assert_eq!(header.subsampling(), Some(subsampling), "{header:?}");
+        }
+        let grey = PixelLayout::new(Channels::Grey, Depth::U8);
+        let codec = Codec::Jpeg { quality: 90, subsampling: Subsampling::Rgb };
+        let mut out = Vec::new();
+        TileEncoder::new(codec, grey, false, None, 16, Vec::new()).unwrap().encode(&texels[..256], &mut out).unwrap();
+        assert_eq!(crate::source::stored::read_header(&out).unwrap().subsampling(), None);
     }
 
     #[test]

@@ -345,7 +345,8 @@ pub struct CodecArgs {
     #[arg(long, value_name = "Q")]
     pub quality: Option<u8>,
 
-    /// JPEG chroma subsampling [default: 420].
+    /// How JPEG tiles code colour [default: 420; a TIFF or DICOM output of a JPEG-tiled source:
+    /// the source tiles' coding, so that they are copied].
     #[arg(long, value_parser = super::named::<Subsampling>())]
     pub subsampling: Option<Subsampling>,
 
@@ -532,8 +533,9 @@ impl OutputArgs {
         Ok(DicomSettings { uid_root: self.dicom_uid_root.clone(), meta, levels })
     }
 
-    /// The settings the outputs share, from the flags; `names`: the filename format flag.
-    fn settings(&self, names: Option<String>, carried: Carried) -> Result<Settings> {
+    /// The settings the outputs share, from the flags; `names`: the filename format flag;
+    /// `stored`: how the source's stored JPEG tiles code colour.
+    fn settings(&self, names: Option<String>, carried: Carried, stored: Option<Subsampling>) -> Result<Settings> {
         let o = &self.ome_zarr;
         Ok(Settings {
             tiles: Requested {
@@ -557,6 +559,7 @@ impl OutputArgs {
             keep_icc: carried.icc,
             geo: carried.geo,
             pitch: carried.pitch,
+            stored_subsampling: stored,
             force: self.force,
         })
     }
@@ -567,9 +570,6 @@ fn name_of(layout: OutputLayout) -> String {
     clap::ValueEnum::to_possible_value(&layout).map(|v| v.get_name().to_string()).unwrap_or_default()
 }
 
-/// Runs the pipeline from `source` into the outputs `a` names, with the progress bar and the
-/// summary. `names` is the output filename format flag; `kept_icc` the profile the texels are
-/// in (`--keep-icc`).
 /// What the source's file says that the outputs may carry: its ICC profile where the run keeps
 /// it (`--keep-icc`), a GeoTIFF's georeferencing.
 #[derive(Default)]
@@ -579,6 +579,8 @@ pub struct Carried {
     pub pitch: Option<vortex_tiler::source::PixelPitch>,
 }
 
+/// Runs the pipeline from `source` into the outputs `a` names, with the progress bar and the
+/// summary. `names` is the output filename format flag; `carried` what the source's file says.
 pub fn tile(
     source: Box<dyn RowSource>,
     input: &Path,
@@ -588,7 +590,7 @@ pub fn tile(
     carried: Carried,
 ) -> Result<()> {
     let outputs = a.outputs()?;
-    let settings = a.settings(names, carried)?;
+    let settings = a.settings(names, carried, source.stored_tiles().and_then(|t| t.subsampling()))?;
     let budget = Budget::new(a.max_memory);
     if a.shard.is_some() || a.pack.as_ref().is_some_and(|p| p.to_string_lossy().contains("{shard}")) {
         return shard(source, input, outputs, &settings, a, started);

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use super::{Budget, DicomSettings, Format, OmeZarrSettings, Output, Settings, TiffSettings};
 use crate::background::Background;
+use crate::codec::{Codec, Subsampling};
 use crate::error::{Result, ShowPath, TilerError};
 use crate::formats::dicom;
 use crate::formats::ome_zarr::PixelSize;
@@ -116,7 +117,8 @@ impl Plan {
         for output in outputs {
             let own = Own::of(settings, output.format, &formats);
             let input = inputs.first().copied().unwrap_or(Path::new(""));
-            let at = Context { header, inputs, input, budget, force: settings.force };
+            let at =
+                Context { header, inputs, input, budget, force: settings.force, stored: settings.stored_subsampling };
             if let Some(c @ (CodecChoice::Deflate | CodecChoice::Lzw)) = own.tiles.codec
                 && !matches!(output.format, Format::Tiff(_))
             {
@@ -168,9 +170,21 @@ struct Context<'a> {
     input: &'a Path,
     budget: Budget,
     force: bool,
+    /// How the source's stored JPEG tiles code colour ([`Settings::stored_subsampling`]).
+    stored: Option<Subsampling>,
 }
 
 impl Context<'_> {
+    /// `opts` with JPEG tiles coded as the source's stored ones where `--subsampling` is not
+    /// given: a TIFF or DICOM output declares one coding for all its tiles, so that only then
+    /// can the stored tiles be copied into it.
+    fn coded_as_stored(&self, mut opts: SplitOptions, given: Option<Subsampling>) -> SplitOptions {
+        if let (None, Some(stored), Codec::Jpeg { subsampling, .. }) = (given, self.stored, &mut opts.codec) {
+            *subsampling = stored;
+        }
+        opts
+    }
+
     fn limits(&self) -> Limits {
         Limits { memory: self.budget.bytes(), ..Limits::default() }
     }
@@ -580,7 +594,8 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         zstd_level: None,
         ..t.clone()
     };
-    let (mut opts, _) = settings::resolve(&requested, None, source)?;
+    let (opts, _) = settings::resolve(&requested, None, source)?;
+    let mut opts = at.coded_as_stored(opts, t.subsampling);
     let layout = opts.layout(at.header.width, at.header.height)?;
     let stored = opts.codec.stored_layout(source, opts.flatten, opts.tile_depth)?;
     let compression = match (compression, opts.codec) {
@@ -677,9 +692,10 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
         ..t.clone()
     };
     let (opts, _) = settings::resolve(&requested, None, source)?;
+    let opts = at.coded_as_stored(opts, t.subsampling);
     let layout = opts.layout(at.header.width, at.header.height)?;
     let stored = opts.codec.stored_layout(source, opts.flatten, opts.tile_depth)?;
-    let crate::codec::Codec::Jpeg { quality, subsampling } = opts.codec else {
+    let Codec::Jpeg { quality, subsampling } = opts.codec else {
         return Err(TilerError::Internal(format!("DICOM frames from --codec {}", opts.codec.name())));
     };
     let photometric = dicom::Photometric::of(stored.channels, subsampling);

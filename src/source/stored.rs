@@ -28,6 +28,12 @@ pub trait StoredTiles: Send + Sync {
     /// copied as it is (a stream that is not a whole tile, or that a browser cannot decode):
     /// that tile is encoded instead. An error names the file and the tile.
     fn jpeg(&self, col: u32, row: u32) -> crate::error::Result<Option<Vec<u8>>>;
+    /// How the tiles code colour, as the first one does (`None`: grey, unreadable or coded
+    /// otherwise): a TIFF or DICOM output, which declares one coding for every tile, takes it
+    /// where `--subsampling` is not given, so that the tiles can be copied.
+    fn subsampling(&self) -> Option<crate::codec::Subsampling> {
+        self.jpeg(0, 0).ok().flatten().and_then(|file| read_header(&file)).and_then(|h| h.subsampling())
+    }
 }
 
 /// A slide's levels as it stores them: the full resolution and its reduced copies, largest
@@ -129,6 +135,24 @@ pub struct Header {
     pub jfif: bool,
     /// An Adobe APP14 marker's transform (0: RGB or CMYK as is, 1: YCbCr, 2: YCCK).
     pub adobe: Option<u8>,
+}
+
+impl Header {
+    /// How a three-component stream codes colour: RGB where an Adobe marker says it is not
+    /// transformed (every component at full resolution), else YCbCr at 4:2:0 or 4:4:4; `None`
+    /// for grey, CMYK or another sampling (4:2:2, 4:1:1).
+    pub fn subsampling(&self) -> Option<crate::codec::Subsampling> {
+        use crate::codec::Subsampling;
+        if self.components != 3 {
+            return None;
+        }
+        let full = self.sampling[..] == [(1, 1); 3];
+        match self.adobe {
+            Some(0) => full.then_some(Subsampling::Rgb),
+            _ if full => Some(Subsampling::S444),
+            _ => (self.sampling[..] == [(2, 2), (1, 1), (1, 1)]).then_some(Subsampling::S420),
+        }
+    }
 }
 
 /// Reads the segments of `stream` (SOI, then marker segments) up to its first SOS, or its end

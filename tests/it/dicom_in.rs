@@ -60,7 +60,7 @@ fn a_jpeg_tiled_tiff_through_dicom_keeps_its_tiles() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let tiled = crate::dicom_out::vips_jpeg_tiff(dir.path(), 1024, 768);
+    let tiled = crate::dicom_out::vips_jpeg_tiff(dir.path(), 1024, 768, 85);
     let series = dir.path().join("series");
     let json = ok(&["split", s(&tiled), "--layout", "dicom", "-o", s(&series), "--pixel-size", "0.5um", "--json"]);
     let json: serde_json::Value = serde_json::from_str(json.trim()).unwrap();

@@ -144,6 +144,7 @@ def count_copied(directory, tiff, measured):
     copied = [i for i, (a, b) in enumerate(zip(frames, tiles)) if scan(a) is not None and scan(a) == scan(b)]
     measured["copied"] = len(copied)
     measured["copiedFrames"] = copied
+    measured["photometric"] = ds.PhotometricInterpretation
     # The copied frames are the source's own JPEG data: OpenSlide decodes them to the very
     # texels it reads from the source slide (the region they cover, exactly).
     import openslide

@@ -162,40 +162,44 @@ fn grey_frames_and_the_users_attributes() {
 
 /// A `W x H` gradient-with-noise image saved by `vips tiffsave` as a JPEG TIFF of 256-texel tiles
 /// at Q85 (YCbCr 4:2:0, as libvips writes below Q90): `DIR/s85.tif`.
-pub(crate) fn vips_jpeg_tiff(dir: &Path, w: u32, h: u32) -> PathBuf {
+pub(crate) fn vips_jpeg_tiff(dir: &Path, w: u32, h: u32, quality: u8) -> PathBuf {
     let png = input(dir, "src", w, h, rgb8());
-    let tiled = dir.join("s85.tif");
+    let tiled = dir.join(format!("s{quality}.tif"));
     let vips = Command::new("vips")
         .args(["tiffsave", s(&png), s(&tiled), "--tile", "--tile-width", "256", "--tile-height", "256"])
-        .args(["--compression", "jpeg", "--Q", "85"])
+        .args(["--compression", "jpeg", "--Q", &quality.to_string()])
         .output()
         .unwrap();
     assert!(vips.status.success(), "vips: {}", String::from_utf8_lossy(&vips.stderr));
     tiled
 }
 
-/// A JPEG-tiled source whose tiles fit the frames (256 texels, YCbCr 4:2:0: `vips tiffsave`
-/// below Q90) has its interior full-resolution tiles copied byte for byte (their entropy-coded
-/// data equal to the source's stored tiles), as `--json` says; the edge tiles, which lie past
-/// the image, and the reduced levels are encoded. Read back within JPEG's error of the source
-/// as libvips decodes it.
+/// A JPEG-tiled source whose tiles fit the frames (256 texels) has its interior
+/// full-resolution tiles copied byte for byte (their entropy-coded data equal to the source's
+/// stored tiles), as `--json` says, whether they are YCbCr 4:2:0 (`vips tiffsave` below Q90:
+/// YBR_FULL_422) or RGB (from Q90 on, as Aperio scanners store them: the series says RGB);
+/// the edge tiles, which lie past the image, and the reduced levels are encoded alike. Read
+/// back within JPEG's error of the source as libvips decodes it.
 #[test]
 fn a_jpeg_tiled_source_s_tiles_are_copied_byte_for_byte() {
     if !crate::common::have_program("vips", "--version", "libvips-tools") {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let tiled = vips_jpeg_tiff(dir.path(), 1000, 700);
-    let out = dir.path().join("series");
-    let json = ok(&["split", s(&tiled), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um", "--json"]);
-    let json: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
-    // 3 x 2 of the 4 x 3 tiles of level 0 lie inside the image.
-    assert_eq!(json["copied"], 6, "{json}");
-    dciodvfy(&out);
-    if let Some(python) = readers() {
-        let measured = check(&python, &out, &tiled, 256, Some(&tiled));
-        assert_eq!(measured["copied"], 6, "{measured}");
-        assert_eq!(measured["copiedFrames"], serde_json::json!([0, 1, 2, 4, 5, 6]), "{measured}");
+    for (quality, photometric) in [(85, "YBR_FULL_422"), (95, "RGB")] {
+        let tiled = vips_jpeg_tiff(dir.path(), 1000, 700, quality);
+        let out = dir.path().join(format!("series{quality}"));
+        let json = ok(&["split", s(&tiled), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um", "--json"]);
+        let json: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+        // 3 x 2 of the 4 x 3 tiles of level 0 lie inside the image.
+        assert_eq!(json["copied"], 6, "Q{quality}: {json}");
+        dciodvfy(&out);
+        if let Some(python) = readers() {
+            let measured = check(&python, &out, &tiled, 256, Some(&tiled));
+            assert_eq!(measured["copied"], 6, "Q{quality}: {measured}");
+            assert_eq!(measured["copiedFrames"], serde_json::json!([0, 1, 2, 4, 5, 6]), "Q{quality}: {measured}");
+            assert_eq!(measured["photometric"], photometric, "Q{quality}: {measured}");
+        }
     }
 }
 

@@ -304,11 +304,12 @@ fn gdal_validates_a_cog_and_reads_every_level() {
     }
 }
 
-/// A JPEG-tiled source whose tiles fit the TIFF's (256 texels, YCbCr 4:2:0: `vips tiffsave`
-/// below Q90) has its interior full-resolution tiles copied as they are stored, as `--json`
-/// says; one whose tiles are RGB JPEGs (vips from Q90 on) has them encoded again, since the
-/// file's tags say YCbCr for every tile of the level (copied, libvips read them as YCbCr: a
-/// mean error of 51). Both read back within JPEG's error of the source.
+/// A JPEG-tiled source whose tiles fit the TIFF's (256 texels) has its interior
+/// full-resolution tiles copied as they are stored, as `--json` says, and the file declares
+/// the tiles' own coding for every level: YCbCr 4:2:0 from `vips tiffsave` below Q90, RGB
+/// from Q90 on (as Aperio scanners store them; declared YCbCr, libvips read such tiles with a
+/// mean error of 51). An explicit `--subsampling` re-encodes them. Every case reads back
+/// within JPEG's error of the source.
 #[test]
 fn a_jpeg_tiled_source_s_tiles_are_copied_where_they_fit_the_tiff_s_tags() {
     if !crate::common::have_program("vips", "--version", "libvips-tools") {
@@ -316,8 +317,20 @@ fn a_jpeg_tiled_source_s_tiles_are_copied_where_they_fit_the_tiff_s_tags() {
     }
     let dir = tempfile::tempdir().unwrap();
     let png = input(dir.path(), "src", 1000, 700, rgb8());
+    let photometric = |tiff: &Path| {
+        let mut decoder = tiff::decoder::Decoder::new(std::fs::File::open(tiff).unwrap()).unwrap();
+        let mut found = vec![decoder.get_tag_u32(tiff::tags::Tag::PhotometricInterpretation).unwrap()];
+        while decoder.more_images() {
+            decoder.next_image().unwrap();
+            found.push(decoder.get_tag_u32(tiff::tags::Tag::PhotometricInterpretation).unwrap());
+        }
+        found
+    };
     // 3 x 2 of the 4 x 3 tiles of level 0 lie inside the image; the edge ones are encoded.
-    for (q, copied) in [("85", 6), ("95", 0)] {
+    let (ycbcr, rgb) = (6, 2);
+    for (q, extra, copied, declared) in
+        [("85", None, 6, ycbcr), ("95", None, 6, rgb), ("95", Some("420"), 0, ycbcr), ("85", Some("rgb"), 0, rgb)]
+    {
         let tiled = dir.path().join(format!("s{q}.tif"));
         let vips = Command::new("vips")
             .args(["tiffsave", s(&png), s(&tiled), "--tile", "--tile-width", "256", "--tile-height", "256"])
@@ -325,14 +338,18 @@ fn a_jpeg_tiled_source_s_tiles_are_copied_where_they_fit_the_tiff_s_tags() {
             .output()
             .unwrap();
         assert!(vips.status.success(), "vips: {}", String::from_utf8_lossy(&vips.stderr));
-        let out = dir.path().join(format!("o{q}.tif"));
-        let json = ok(&["split", s(&tiled), "-o", s(&out), "--tile-size", "256", "--json"]);
+        let out = dir.path().join(format!("o{q}-{}.tif", extra.unwrap_or("as-stored")));
+        let mut args = vec!["split", s(&tiled), "-o", s(&out), "--tile-size", "256", "--json"];
+        args.extend(extra.map(|e| ["--subsampling", e]).iter().flatten());
+        let json = ok(&args);
         let json: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
-        assert_eq!(json["copied"], copied, "Q{q}: {json}");
-        assert_eq!(json["storedTiles"]["copied"], copied, "Q{q}: {json}");
+        let case = format!("Q{q} --subsampling {extra:?}");
+        assert_eq!(json["copied"], copied, "{case}: {json}");
+        assert_eq!(json["storedTiles"]["copied"], copied, "{case}: {json}");
+        assert_eq!(photometric(&out), [declared; 3], "{case}: each level's Photometric");
         if let Some(python) = readers() {
             let said = check(&python, "generic", &out, &png, 256, "jpeg");
-            eprintln!("Q{q} {}: {said}", out.display());
+            eprintln!("{case} {}: {said}", out.display());
         }
     }
 }

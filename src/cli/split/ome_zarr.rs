@@ -133,7 +133,7 @@ pub fn tile_channels(
     let planes = picks.iter().map(|&k| Plane { name: set.names[k].clone(), window: None }).collect();
     let first = set.channel(picks[0])?;
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
-    let settings = a.settings(names, super::Carried::default())?;
+    let settings = a.settings(names, super::Carried::default(), None)?;
     let plan =
         Plan::with_planes(outputs, &settings, &first.header(), &inputs, Budget::new(a.max_memory), Some(planes))?;
     report::prepare(&plan.outputs()[0].output.path)?;

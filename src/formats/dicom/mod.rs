@@ -60,8 +60,8 @@ pub enum Photometric {
     YbrFull422,
     /// YCbCr without subsampling (JPEG 4:4:4), `YBR_FULL`.
     YbrFull,
-    /// R, G, B as they are (a JPEG whose Adobe marker says no transform), `RGB`: only as a
-    /// slide stores it.
+    /// R, G, B as they are (a JPEG whose Adobe marker says no transform), `RGB`: as Aperio
+    /// slides store them, or `--subsampling rgb`.
     Rgb,
 }
 
@@ -82,6 +82,7 @@ impl Photometric {
             (Channels::Grey, _) => Photometric::Monochrome,
             (_, Subsampling::S420) => Photometric::YbrFull422,
             (_, Subsampling::S444) => Photometric::YbrFull,
+            (_, Subsampling::Rgb) => Photometric::Rgb,
         }
     }
 

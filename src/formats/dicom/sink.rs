@@ -15,6 +15,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use super::dataset::Series;
 use super::frames::Staged;
 use super::{DicomSummary, Photometric, Spec};
+use crate::codec::Subsampling;
 use crate::error::{Result, TilerError};
 use crate::output::{Claim, staging};
 use crate::sink::TileSink;
@@ -136,8 +137,8 @@ impl TileSink for DicomSink {
     }
 
     /// A stored JPEG tile only where it is what the instance says of every frame: baseline,
-    /// 8-bit, of the frame's size, grey for MONOCHROME2, else YCbCr (no Adobe RGB transform)
-    /// at the subsampling the photometric interpretation names.
+    /// 8-bit, of the frame's size, grey for MONOCHROME2, else coded as the photometric
+    /// interpretation names (RGB, or YCbCr at its subsampling).
     fn takes_stored_jpeg(&self, jpeg: &[u8]) -> bool {
         let Some(h) = crate::source::stored::read_header(jpeg) else { return false };
         let side = self.spec.layout.tile_size;
@@ -145,11 +146,9 @@ impl TileSink for DicomSink {
         let whole = h.frame == 0xC0 && h.precision == 8 && (u32::from(h.width), u32::from(h.height)) == (side, side);
         let form = match self.spec.photometric {
             Photometric::Monochrome => h.components == 1,
-            Photometric::Rgb => h.components == 3 && h.adobe == Some(0) && h.sampling[..] == [(1, 1); 3],
-            p => {
-                let chroma = if p == Photometric::YbrFull422 { (2, 2) } else { (1, 1) };
-                h.components == 3 && h.adobe != Some(0) && h.sampling[..] == [chroma, (1, 1), (1, 1)]
-            }
+            Photometric::Rgb => h.subsampling() == Some(Subsampling::Rgb),
+            Photometric::YbrFull422 => h.subsampling() == Some(Subsampling::S420),
+            Photometric::YbrFull => h.subsampling() == Some(Subsampling::S444),
         };
         whole && form
     }

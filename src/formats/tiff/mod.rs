@@ -306,11 +306,11 @@ impl Spec {
     }
 
     /// The `Photometric` tag: grey is black-is-zero; RGB tiles in JPEG are YCbCr (what
-    /// the encoder writes), RGB otherwise.
+    /// the encoder writes) unless coded as RGB, RGB otherwise.
     pub(crate) fn photometric(&self) -> u16 {
         match (self.stored.channels, self.compression) {
             (Channels::Grey | Channels::GreyAlpha, _) => 1,
-            (_, Compression::Jpeg { .. }) => 6,
+            (_, Compression::Jpeg { subsampling }) if subsampling != Subsampling::Rgb => 6,
             _ => 2,
         }
     }

@@ -12,7 +12,6 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::{Compression, Spec, TiffSummary, TiffWriter};
-use crate::codec::Subsampling;
 use crate::error::{Result, TilerError};
 use crate::output::staging;
 use crate::sink::TileSink;
@@ -94,9 +93,8 @@ impl TileSink for TiffSink {
     }
 
     /// A stored JPEG tile only where it is what the level's tags say of every tile: a
-    /// baseline 8-bit JPEG of the tile's size, grey for a grey file, else YCbCr (no Adobe
-    /// RGB transform) at the file's `YCbCrSubsampling`. A scanner's 4:4:4 or RGB tiles are
-    /// encoded again instead (the count of copied tiles says so).
+    /// baseline 8-bit JPEG of the tile's size, grey for a grey file, else coded as the file's
+    /// `Photometric` and `YCbCrSubsampling` say (a TIFF of the source's RGB tiles is RGB).
     fn takes_stored_jpeg(&self, jpeg: &[u8]) -> bool {
         let Compression::Jpeg { subsampling } = self.spec.compression else { return false };
         let Some(h) = crate::source::stored::read_header(jpeg) else { return false };
@@ -104,13 +102,9 @@ impl TileSink for TiffSink {
         let whole = matches!(h.frame, 0xC0 | 0xC1)
             && h.precision == 8
             && (u32::from(h.width), u32::from(h.height)) == (side, side);
-        let chroma = match subsampling {
-            Subsampling::S420 => (2, 2),
-            Subsampling::S444 => (1, 1),
-        };
         let form = match self.spec.photometric() {
             1 => h.components == 1,
-            _ => h.components == 3 && h.adobe != Some(0) && h.sampling[..] == [chroma, (1, 1), (1, 1)],
+            _ => h.subsampling() == Some(subsampling),
         };
         whole && form
     }

@@ -388,8 +388,9 @@ fn float_tiles_take_the_floating_point_predictor() {
 }
 
 #[test]
-fn jpeg_rgb_is_ycbcr_at_the_encoder_s_subsampling() {
-    for (subsampling, factor) in [(crate::codec::Subsampling::S420, 2), (crate::codec::Subsampling::S444, 1)] {
+fn jpeg_rgb_is_ycbcr_at_the_encoder_s_subsampling_or_rgb() {
+    use crate::codec::Subsampling;
+    for subsampling in Subsampling::ALL {
         let s = spec(
             Flavour::Generic,
             16,
@@ -401,10 +402,16 @@ fn jpeg_rgb_is_ycbcr_at_the_encoder_s_subsampling() {
         let file = write(&s, |_, _, _| b"\xff\xd8 not really a JPEG \xff\xd9".to_vec());
         let n = open(&file);
         let ifd = n.ifd(n.first());
+        assert!(!ifd.tags.contains_key(&317), "no predictor before JPEG");
+        if subsampling == Subsampling::Rgb {
+            assert_eq!((ifd.one(259), ifd.one(262)), (7, 2));
+            assert!(!ifd.tags.contains_key(&530) && !ifd.tags.contains_key(&532), "no YCbCr tags for RGB");
+            continue;
+        }
+        let factor = u64::from(subsampling.factor());
         assert_eq!((ifd.one(259), ifd.one(262)), (7, 6));
         assert_eq!(ifd.all(530), [factor, factor]);
         assert_eq!(ifd.all(532).len(), 6);
-        assert!(!ifd.tags.contains_key(&317), "no predictor before JPEG");
     }
 }
 

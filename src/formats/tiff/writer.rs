@@ -349,10 +349,7 @@ impl TiffWriter {
         if let Compression::Jpeg { subsampling } = s.compression
             && s.photometric() == 6
         {
-            let factor = match subsampling {
-                crate::codec::Subsampling::S420 => 2,
-                crate::codec::Subsampling::S444 => 1,
-            };
+            let factor = u16::from(subsampling.factor());
             ifd.set(tag::YCBCR_SUBSAMPLING, Value::Short(vec![factor, factor]));
             let white = [(0, 1), (255, 1), (128, 1), (255, 1), (128, 1), (255, 1)];
             ifd.set(tag::REFERENCE_BLACK_WHITE, Value::Rational(white.to_vec()));

@@ -142,7 +142,7 @@ pub(crate) fn layout_of(d: &Description) -> PixelLayout {
 /// The codec `info.json` names, or else the one the tile files' extension implies.
 pub(crate) fn codec_of(info: &InfoFile, extension: Option<String>) -> Option<Codec> {
     let name = info.codec.clone().or(extension).unwrap_or_default();
-    let subsampling = if info.subsampling.as_deref() == Some("444") { Subsampling::S444 } else { Subsampling::S420 };
+    let subsampling = info.subsampling.as_deref().and_then(Subsampling::from_name).unwrap_or(Subsampling::S420);
     let level = match info.png_compression.as_deref() {
         Some("default") => PngLevel::Default,
         Some("best") => PngLevel::Best,
