@@ -724,26 +724,6 @@ mod tests {
         assert_eq!(out, vec![255, 0, 0, 0, 0, 255, 128, 0, 127]);
     }
 
-    /// Each coding is what the stream's frame and Adobe marker say, as a TIFF's or DICOM's
-    /// tags must declare it; grey has none.
-    #[test]
-    fn a_jpeg_is_coded_as_its_subsampling_says() {
-        let rgb = PixelLayout::new(Channels::Rgb, Depth::U8);
-        let texels: Vec<u8> = (0..16 * 16 * 3).map(|i| (i * 7 % 251) as u8).collect();
-        for subsampling in Subsampling::ALL {
-            let encoder = TileEncoder::new(Codec::Jpeg { quality: 90, subsampling }, rgb, false, None, 16, Vec::new());
-            let mut out = Vec::new();
-            encoder.unwrap().encode(&texels, &mut out).unwrap();
-            let header = crate::source::stored::read_header(&out).unwrap();
-            assert_eq!(header.subsampling(), Some(subsampling), "{header:?}");
-        }
-        let grey = PixelLayout::new(Channels::Grey, Depth::U8);
-        let codec = Codec::Jpeg { quality: 90, subsampling: Subsampling::Rgb };
-        let mut out = Vec::new();
-        TileEncoder::new(codec, grey, false, None, 16, Vec::new()).unwrap().encode(&texels[..256], &mut out).unwrap();
-        assert_eq!(crate::source::stored::read_header(&out).unwrap().subsampling(), None);
-    }
-
     #[test]
     fn jpeg_refuses_alpha_unless_flattened() {
         let codec = Codec::Jpeg { quality: 85, subsampling: Subsampling::S420 };

@@ -149,6 +149,51 @@ impl Crop {
     }
 }
 
+/// One level of a pyramid that keeps a slide's own levels (any downsample between them): its
+/// image and its tiles' size, across by down. The right and bottom tiles reach past the image,
+/// whole, as a TIFF stores them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Level {
+    pub width: u32,
+    pub height: u32,
+    pub tile: (u32, u32),
+}
+
+impl Level {
+    /// Tiles across and down.
+    pub fn grid(&self) -> (u32, u32) {
+        (self.width.div_ceil(self.tile.0), self.height.div_ceil(self.tile.1))
+    }
+
+    /// Tiles in all.
+    pub fn tiles(&self) -> u64 {
+        let (c, r) = self.grid();
+        u64::from(c) * u64::from(r)
+    }
+}
+
+/// Which levels a pyramidal file holds (`--levels`: a TIFF's or a DICOM series').
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Levels {
+    /// The slide's own levels, every stored JPEG tile copied as it is, where the source is a
+    /// pyramid of JPEG tiles the output can hold; else our pyramid, saying why.
+    #[default]
+    Stored,
+    /// Our exact power-of-two pyramid (the full resolution's stored tiles still copied where
+    /// they fit).
+    Pow2,
+}
+
+impl Levels {
+    /// `--levels`' name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Levels::Stored => "stored",
+            Levels::Pow2 => "pow2",
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -82,7 +82,8 @@ pub fn summary_line(done: &Finished, out: &Path) -> String {
     let mpx = done.width as f64 * done.height as f64 / 1e6;
     let peak = peak_rss().map(|b| format!(", peak memory {}", mib(b))).unwrap_or_default();
     let stripes = match (s.stripes, s.passes) {
-        (_, 1) => String::new(),
+        // One read; or none, where the slide's own levels were copied.
+        (_, 0 | 1) => String::new(),
         (0, n) => format!(", in {n} rectangles of the source"),
         (_, n) => format!(
             ", in {} vertical stripe{} and a coarse pass (the source read {n} times)",
@@ -360,20 +361,33 @@ fn tiff_json(w: &vortex_tiler::formats::tiff::TiffSummary) -> serde_json::Value 
         "compression": w.compression,
         "tileBytes": w.tile_bytes,
         "fileBytes": w.file_bytes,
+        "levelsCopied": w.levels_copied,
+        "levelsDeclined": w.levels_declined,
     })
 }
 
 /// A TIFF's figures, in a line.
 fn tiff_line(w: &vortex_tiler::formats::tiff::TiffSummary) -> String {
     format!(
-        "{}: {} levels, {} {} tiles, {}, {} file bytes",
+        "{}: {} levels ({}), {} {} tiles, {}, {} file bytes",
         w.flavour.name(),
         w.levels,
+        levels_clause(w.levels_copied, &w.levels_declined, "tile"),
         w.tiles,
         w.compression,
         if w.bigtiff { "BigTIFF" } else { "classic TIFF" },
         w.file_bytes
     )
+}
+
+/// Whose levels an output holds: the slide's own, each `unit` copied, or our pyramid, and why
+/// not the slide's where it would have copied them.
+fn levels_clause(copied: bool, declined: &Option<String>, unit: &str) -> String {
+    match (copied, declined) {
+        (true, _) => format!("the slide's own, every {unit} copied as stored"),
+        (false, None) => "our power-of-two pyramid".to_string(),
+        (false, Some(why)) => format!("our power-of-two pyramid; the slide's own levels not copied: {why}"),
+    }
 }
 
 /// A DICOM series' figures, for `--json`.
@@ -395,13 +409,13 @@ fn dicom_json(w: &vortex_tiler::formats::dicom::DicomSummary) -> serde_json::Val
 
 /// A DICOM series' figures, in a line.
 fn dicom_line(w: &vortex_tiler::formats::dicom::DicomSummary) -> String {
-    let levels = match (w.levels_copied, &w.levels_declined) {
-        (true, _) => "the slide's own levels, every frame copied as stored".to_string(),
-        (false, None) => "our power-of-two pyramid".to_string(),
-        (false, Some(why)) => format!("our power-of-two pyramid (the slide's own levels not copied: {why})"),
-    };
     format!(
-        "dicom: {} instances (one a level: {levels}), {} JPEG baseline frames, {}, series {}, {} file bytes",
-        w.instances, w.frames, w.photometric, w.series_uid, w.file_bytes
+        "dicom: {} instances (one a level: {}), {} JPEG baseline frames, {}, series {}, {} file bytes",
+        w.instances,
+        levels_clause(w.levels_copied, &w.levels_declined, "frame"),
+        w.frames,
+        w.photometric,
+        w.series_uid,
+        w.file_bytes
     )
 }

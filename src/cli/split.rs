@@ -8,9 +8,10 @@ use anyhow::{Context, Result, bail};
 use vortex_tiler::background::Background;
 use vortex_tiler::codec::{Bc7Effort, PngLevel, Subsampling};
 use vortex_tiler::error::ShowPath;
-use vortex_tiler::formats::dicom::{DicomMeta, Levels as DicomLevels};
+use vortex_tiler::formats::dicom::DicomMeta;
 use vortex_tiler::formats::tiff::{BigTiff, Flavour};
 use vortex_tiler::formats::viewer::Viewer;
+use vortex_tiler::layout::Levels;
 use vortex_tiler::outputs::{Budget, DicomSettings, Figures, Format, Output, Plan, Settings, TiffSettings, Wrote};
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::pyramid::Filter;
@@ -142,11 +143,11 @@ pub struct OutputArgs {
     #[arg(help_heading = "Outputs", long, value_name = "FILE")]
     dicom_meta: Option<PathBuf>,
 
-    /// --layout dicom: which levels the series holds: stored (the slide's own levels, every
-    /// JPEG tile copied as a frame, nothing decoded, where the source is a pyramid of JPEG
-    /// tiles DICOM can hold; else our pyramid, the summary saying why) or pow2 (our exact
+    /// A TIFF or DICOM output: which levels it holds: stored (the slide's own levels, every
+    /// JPEG tile copied as it is, nothing decoded, where the source is a pyramid of JPEG tiles
+    /// the output can hold; else our pyramid, the summary saying why) or pow2 (our exact
     /// power-of-two pyramid, full-resolution tiles still copied where they fit)
-    /// [default: stored]. See docs/dicom.md.
+    /// [default: stored]. See docs/tiff.md and docs/dicom.md.
     #[arg(help_heading = "Outputs", long, value_name = "LEVELS")]
     levels: Option<LevelsArg>,
 
@@ -526,11 +527,7 @@ impl OutputArgs {
                 Some(meta)
             }
         };
-        let levels = self.levels.map(|l| match l {
-            LevelsArg::Stored => DicomLevels::Stored,
-            LevelsArg::Pow2 => DicomLevels::Pow2,
-        });
-        Ok(DicomSettings { uid_root: self.dicom_uid_root.clone(), meta, levels })
+        Ok(DicomSettings { uid_root: self.dicom_uid_root.clone(), meta })
     }
 
     /// The settings the outputs share, from the flags; `names`: the filename format flag;
@@ -555,6 +552,10 @@ impl OutputArgs {
             ome_zarr: ome_zarr::settings(o),
             tiff: TiffSettings { bigtiff: if self.bigtiff { BigTiff::Always } else { BigTiff::Auto } },
             dicom: self.dicom()?,
+            levels: self.levels.map(|l| match l {
+                LevelsArg::Stored => Levels::Stored,
+                LevelsArg::Pow2 => Levels::Pow2,
+            }),
             pack: self.pack_layout.options()?,
             keep_icc: carried.icc,
             geo: carried.geo,

@@ -12,9 +12,12 @@
 //! - [`tiff`]: a pyramidal TIFF in one file: OME-TIFF, or the generic pyramid OpenSlide and
 //!   libvips read.
 //!
+//! - `levels`: a slide's own levels copied into a TIFF or a DICOM series.
+//!
 //! A new format is one folder here and one arm of [`crate::outputs::Format`].
 
 pub mod dicom;
+pub mod levels;
 pub mod ome_zarr;
 pub mod pack;
 pub mod pmtiles;

@@ -143,6 +143,9 @@ pub struct Settings {
     pub tiff: TiffSettings,
     /// A DICOM series' own settings.
     pub dicom: DicomSettings,
+    /// Which levels a TIFF or a DICOM series holds (`--levels`) [default: the slide's own, as
+    /// stored, where it has some].
+    pub levels: Option<crate::layout::Levels>,
     /// How a pack's bytes are laid out.
     pub pack: vortex_pack::WriteOptions,
     /// The source's ICC profile, where the texels keep its colours (`--keep-icc`): in a tile
@@ -182,8 +185,6 @@ pub struct DicomSettings {
     pub uid_root: Option<String>,
     /// The patient, study and equipment attributes given (`--dicom-meta`).
     pub meta: Option<crate::formats::dicom::DicomMeta>,
-    /// Which levels the series holds (`--levels`) [default: the slide's own, as stored].
-    pub levels: Option<crate::formats::dicom::Levels>,
 }
 
 /// What only TIFF outputs read.

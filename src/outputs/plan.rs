@@ -16,7 +16,7 @@ use crate::formats::tiles::filename::FilenameFormat;
 use crate::formats::tiles::info::InfoFile;
 use crate::formats::viewer::{Viewer, ViewerTiles, dzi, iiif};
 use crate::job::SplitOptions;
-use crate::layout::Layout;
+use crate::layout::{Layout, Levels};
 use crate::limits::Limits;
 use crate::output::{self, Claim, Existing, Product};
 use crate::pixel::{Depth, PixelLayout};
@@ -72,14 +72,15 @@ pub(super) enum Work {
         spec: Box<Spec>,
         parent: Option<LabelParent>,
     },
+    /// `levels` (`None`: not asked, the default): whether the slide's own levels are to be
+    /// copied, decided when the source's levels are read ([`Plan::write`]).
     Tiff {
         spec: Box<tiff::Spec>,
+        levels: Option<Levels>,
     },
-    /// `levels`: whether the slide's own levels are to be copied, decided when the source's
-    /// levels are read ([`Plan::write`]).
     Dicom {
         spec: Box<dicom::Spec>,
-        levels: dicom::Levels,
+        levels: Option<Levels>,
     },
 }
 
@@ -153,6 +154,15 @@ impl Plan {
 }
 
 impl Planned {
+    /// Which levels a TIFF or DICOM output holds (`--levels`, stored by default); our
+    /// pyramid's for the other formats.
+    pub(super) fn work_levels(&self) -> Levels {
+        match &self.work {
+            Work::Tiff { levels, .. } | Work::Dicom { levels, .. } => levels.unwrap_or_default(),
+            _ => Levels::Pow2,
+        }
+    }
+
     /// The `info.json` a tile directory or a pack holds.
     pub fn info(&self) -> Option<&InfoFile> {
         match &self.work {
@@ -213,6 +223,7 @@ struct Own {
     tiff: TiffSettings,
     dicom: DicomSettings,
     keep_icc: Option<Vec<u8>>,
+    levels: Option<Levels>,
     /// The source's georeferencing, for a generic TIFF or a COG.
     geo: Option<crate::source::GeoTags>,
 }
@@ -284,6 +295,7 @@ impl Own {
             tiff: if matches!(format, Format::Tiff(_)) { s.tiff } else { TiffSettings::default() },
             dicom: if format == Format::Dicom { s.dicom.clone() } else { DicomSettings::default() },
             keep_icc: s.keep_icc.clone().filter(|_| gets(Setting::KeepIcc)),
+            levels: s.levels.filter(|_| matches!(format, Format::Tiff(_) | Format::Dicom)),
             // Not a flag: an output that has nowhere to put it ignores it.
             geo: s.geo.clone().filter(|_| matches!(format, Format::Tiff(Flavour::Generic | Flavour::Cog))),
         }
@@ -306,15 +318,16 @@ fn refuse_unread(s: &Settings, outputs: &[Output]) -> Result<()> {
         return Err(options("--bigtiff belongs to a TIFF output (-o FILE.tif or FILE.ome.tif)".into()));
     }
     let dicom = outputs.iter().any(|o| o.format == Format::Dicom);
-    let given = [
-        (s.dicom.uid_root.is_some(), "--dicom-uid-root"),
-        (s.dicom.meta.is_some(), "--dicom-meta"),
-        (s.dicom.levels.is_some(), "--levels"),
-    ];
+    let given = [(s.dicom.uid_root.is_some(), "--dicom-uid-root"), (s.dicom.meta.is_some(), "--dicom-meta")];
     for (given, flag) in given {
         if given && !dicom {
             return Err(options(format!("{flag} belongs to --layout dicom")));
         }
+    }
+    if s.levels.is_some() && !tiff && !dicom {
+        return Err(options(
+            "--levels belongs to a TIFF output (-o FILE.tif, FILE.ome.tif or FILE.cog.tif) or --layout dicom".into(),
+        ));
     }
     // A TIFF and a DICOM series record the pixel size too.
     let tiff = tiff || dicom;
@@ -628,6 +641,7 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         pixel_size,
         geo: geo.to_vec(),
         icc: own.keep_icc.clone(),
+        copied: Vec::new(),
     };
     spec.check()?;
     at.limits().check_pyramid(&layout, false)?;
@@ -638,7 +652,14 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
     }
     at.limits().check_memory(&format!("the index of the TIFF's {} tiles", layout.total_tiles()), spec.index_bytes())?;
     let claim = at.claim(&output.path, Product::Tiff)?;
-    Ok(Planned { output, opts, layout, changed: None, claim, work: Work::Tiff { spec: Box::new(spec) } })
+    Ok(Planned {
+        output,
+        opts,
+        layout,
+        changed: None,
+        claim,
+        work: Work::Tiff { spec: Box::new(spec), levels: own.levels },
+    })
 }
 
 /// A DICOM whole-slide image series (docs/dicom.md): JPEG baseline frames without border,
@@ -746,7 +767,7 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
         layout,
         changed: None,
         claim,
-        work: Work::Dicom { spec: Box::new(spec), levels: own.dicom.levels.unwrap_or_default() },
+        work: Work::Dicom { spec: Box::new(spec), levels: own.levels },
     })
 }
 
@@ -972,7 +993,7 @@ mod tests {
         let p = plan(&[(TIFF, "a.tif"), (DZI, "web"), (OME_TIFF, "b.ome.tif")], settings).unwrap();
         let [tiff, dzi, ome] = &p.outputs[..] else { panic!("three outputs") };
         assert_eq!(dzi.opts, SplitOptions { down_to_one_texel: true, ..tiff.opts.clone() }, "one pyramid");
-        let Work::Tiff { spec } = &tiff.work else { panic!("a TIFF's work") };
+        let Work::Tiff { spec, .. } = &tiff.work else { panic!("a TIFF's work") };
         assert!(matches!(spec.compression, Compression::Jpeg { .. }), "{:?}", spec.compression);
         let l = &spec.layout;
         assert_eq!((l.width, l.height, l.tile_size, l.lod_count), (1000, 700, 256, 3));
@@ -986,7 +1007,7 @@ mod tests {
             s.tiles.zstd_level = Some(9);
         });
         let p = plan(&[(TIFF, "a.tif")], zstd).unwrap();
-        let Work::Tiff { spec } = &p.outputs[0].work else { panic!() };
+        let Work::Tiff { spec, .. } = &p.outputs[0].work else { panic!() };
         assert_eq!(spec.compression, Compression::Zstd { level: 9 });
         assert_eq!(
             p.outputs[0].opts.codec,
@@ -997,7 +1018,7 @@ mod tests {
         let header = ImageHeader { width: 300, height: 200, layout: PixelLayout::new(Channels::Rgba, Depth::U16) };
         let outputs = vec![Output::new(OME_TIFF, "/nonexistent-vortex-plan-test/c.ome.tiff")];
         let p = Plan::new(outputs, &Settings::default(), &header, &[], Budget::default()).unwrap();
-        let Work::Tiff { spec } = &p.outputs[0].work else { panic!() };
+        let Work::Tiff { spec, .. } = &p.outputs[0].work else { panic!() };
         assert_eq!(spec.compression, Compression::Deflate { level: 6 });
         assert_eq!(spec.stored, PixelLayout::new(Channels::Rgba, Depth::U16));
     }

@@ -8,13 +8,14 @@ use super::plan::{Planned, Work};
 use super::{Budget, Format, Plan};
 use crate::background::Background;
 use crate::error::{Result, TilerError};
-use crate::formats::dicom::{self, DicomSink, DicomSummary, Levels, Photometric};
+use crate::formats::dicom::{self, DicomSink, DicomSummary, Photometric};
 use crate::formats::ome_zarr::OmeZarrSink;
 use crate::formats::pack::PackSink;
 use crate::formats::pmtiles::PmtilesSink;
 use crate::formats::pmtiles::{Bounds, PmtilesSummary, TileType};
-use crate::formats::tiff::{TiffSink, TiffSummary};
+use crate::formats::tiff::{self, TiffSink, TiffSummary};
 use crate::job::{Progress, SplitOptions, Summary, Written};
+use crate::layout::Levels;
 use crate::sink::icc::{Profile, WithProfile};
 use crate::sink::{DirSink, Target, TileSink};
 use crate::source::channels::{ChannelSet, Ranged};
@@ -79,7 +80,7 @@ enum Sink {
     Pack(PackSink),
     Pmtiles(PmtilesSink),
     OmeZarr(Box<OmeZarrSink>),
-    Tiff(TiffSink),
+    Tiff(Box<TiffSink>),
     Dicom(DicomSink),
 }
 
@@ -104,7 +105,7 @@ impl Open {
                 Sink::Pmtiles(PmtilesSink::create(&claim.path, &planned.layout, tile_type)?)
             }
             Work::OmeZarr { spec, .. } => Sink::OmeZarr(Box::new(OmeZarrSink::create(claim, (**spec).clone())?)),
-            Work::Tiff { spec } => Sink::Tiff(TiffSink::create(&claim.path, (**spec).clone())?),
+            Work::Tiff { spec, .. } => Sink::Tiff(Box::new(TiffSink::create(&claim.path, (**spec).clone())?)),
             Work::Dicom { spec, .. } => Sink::Dicom(DicomSink::create(claim, (**spec).clone())?),
         };
         Ok(Open { planned, sink })
@@ -116,7 +117,7 @@ impl Open {
             Sink::Pack(s) => s,
             Sink::Pmtiles(s) => s,
             Sink::OmeZarr(s) => s.as_ref(),
-            Sink::Tiff(s) => s,
+            Sink::Tiff(s) => s.as_ref(),
             Sink::Dicom(s) => s,
         }
     }
@@ -196,28 +197,35 @@ impl Open {
         })
     }
 
-    /// [`finish`](Self::finish) for a DICOM series of the slide's own levels: `frames` copied
-    /// from the source of `source` texels, no pyramid cut.
-    fn finish_copied(self, frames: u64, source: crate::pixel::PixelLayout, budget: Budget) -> Result<Wrote> {
+    /// [`finish`](Self::finish) for a TIFF or DICOM series of the slide's own levels:
+    /// `tiles` copied from the source of `source` texels, no pyramid cut.
+    fn finish_copied(self, tiles: u64, source: crate::pixel::PixelLayout, budget: Budget) -> Result<Wrote> {
+        let bytes = self.tile_sink().bytes_written();
         let Open { planned, sink } = self;
-        let (Sink::Dicom(sink), Work::Dicom { spec, .. }) = (sink, &planned.work) else {
-            return Err(TilerError::Internal("levels copied into an output that is no DICOM series".into()));
+        // The summary's grid: level 0's tiles, as many levels as the output has.
+        let (level, levels, stored, figures) = match (sink, &planned.work) {
+            (Sink::Tiff(sink), Work::Tiff { spec, .. }) => {
+                (spec.level(0), spec.level_count(), spec.stored, Figures::Tiff(sink.finish()?))
+            }
+            (Sink::Dicom(sink), Work::Dicom { spec, .. }) => {
+                let mut figures = sink.finish()?;
+                figures.levels = Levels::Stored;
+                let level = spec.level(0);
+                let level = crate::layout::Level { width: level.width, height: level.height, tile: level.frame };
+                (level, spec.level_count(), spec.stored, Figures::Dicom(figures))
+            }
+            _ => return Err(TilerError::Internal("levels copied into an output that holds none".into())),
         };
-        let bytes = sink.bytes_written();
-        let mut figures = sink.finish()?;
-        figures.levels = crate::formats::dicom::Levels::Stored;
-        // The summary's grid: level 0's frames, as many levels as the series has.
-        let level = spec.level(0);
-        let mut layout = crate::layout::Layout::new(u64::from(level.width), u64::from(level.height), level.frame.0, 0)?;
-        layout.lod_count = spec.level_count();
+        let mut layout = crate::layout::Layout::new(u64::from(level.width), u64::from(level.height), level.tile.0, 0)?;
+        layout.lod_count = levels;
         let summary = Summary {
             layout,
             source,
-            stored: spec.stored,
-            tiles: frames,
-            per_target: vec![Written { tiles: frames, bytes, copied: frames, cropped: 0 }],
+            stored,
+            tiles,
+            per_target: vec![Written { tiles, bytes, copied: tiles, cropped: 0 }],
             encoded: 0,
-            copied: frames,
+            copied: tiles,
             cropped: 0,
             stored_tiles: None,
             bytes,
@@ -227,35 +235,33 @@ impl Open {
             memory: crate::job::MemoryReport { budget: budget.bytes(), ..Default::default() },
         };
         let Planned { output, .. } = planned;
-        Ok(Wrote {
-            format: output.format,
-            path: output.path,
-            tiles: frames,
-            bytes,
-            summary,
-            pyramid: None,
-            reads: 0,
-            figures: Figures::Dicom(figures),
-        })
+        Ok(Wrote { format: output.format, path: output.path, tiles, bytes, summary, pyramid: None, reads: 0, figures })
     }
 }
 
-/// A DICOM series that copies the slide's own levels: the levels and the frames' form.
+/// An output that copies the slide's own levels: the levels, and the form every tile must
+/// have, which the output declares.
 struct Copying {
     levels: StoredLevels,
-    photometric: Photometric,
+    form: Form,
 }
 
-/// What [`choose_levels`] decided, an entry an output: the series that copy, and why the
-/// others asked to copy do not.
+enum Form {
+    Dicom(Photometric),
+    Tiff(tiff::Coding),
+}
+
+/// What [`choose_levels`] decided, an entry an output: those that copy, and why the others
+/// that would copy do not.
 struct Chosen {
     copying: Vec<Option<Copying>>,
     declined: Vec<Option<String>>,
 }
 
-/// Decides, for each DICOM output asked for the slide's own levels, whether they are copied
-/// (its spec then describes them) or why not (it is then cut from our pyramid). The source's
-/// levels are read once, and only where some output asks.
+/// Decides, for each TIFF and DICOM output of the slide's own levels (`--levels stored`, the
+/// default), whether they are copied (its spec then describes them) or why not (it is then
+/// cut from our pyramid; said where the levels were asked for, or where the slide has
+/// some). The source's levels are read once, and only where some output would copy them.
 fn choose_levels(outputs: &mut [Planned], source: &dyn RowSource) -> Result<Chosen> {
     let mut copying: Vec<Option<Copying>> = outputs.iter().map(|_| None).collect();
     let mut declined = vec![None; outputs.len()];
@@ -263,29 +269,58 @@ fn choose_levels(outputs: &mut [Planned], source: &dyn RowSource) -> Result<Chos
     for (k, planned) in outputs.iter_mut().enumerate() {
         // Re-encoding asked (`--reencode`, `--quality`, `--subsampling`) is never copying.
         let reencode = planned.opts.encoding().declines_stored();
-        let Work::Dicom { spec, levels: Levels::Stored } = &mut planned.work else { continue };
-        if let Some(why) = reencode {
-            declined[k] = Some(format!("the frames are encoded: {why}"));
+        let (Work::Tiff { levels: asked, .. } | Work::Dicom { levels: asked, .. }) = &planned.work else { continue };
+        let asked = asked.is_some();
+        if planned.work_levels() != Levels::Stored {
             continue;
         }
         if stored.is_none() {
             stored = Some(source.stored_levels()?);
         }
-        let Some(Some(levels)) = &stored else {
-            declined[k] = Some("the source is no slide of JPEG-tiled levels".into());
-            continue;
-        };
-        match dicom::copyable(levels)? {
-            Err(why) => declined[k] = Some(why),
-            Ok((copied, photometric)) => {
-                let shapes: Vec<String> =
-                    copied.iter().map(|l| format!("{}x{}/{}x{}", l.width, l.height, l.frame.0, l.frame.1)).collect();
-                spec.identity = format!("{}; levels stored {} {}", spec.identity, shapes.join(" "), photometric.name());
-                spec.copied = copied;
-                spec.photometric = photometric;
-                spec.check()?;
-                copying[k] = Some(Copying { levels: levels.clone(), photometric });
+        let levels = match &stored {
+            // A slide whose later levels are not JPEG tiles says why below.
+            Some(Some(levels)) if levels.levels.len() > 1 || levels.unlike.is_some() => levels,
+            Some(Some(_)) => {
+                declined[k] = asked.then(|| "the slide has no reduced levels".into());
+                continue;
             }
+            _ => {
+                declined[k] = asked.then(|| "the source is no slide of JPEG-tiled levels".into());
+                continue;
+            }
+        };
+        if let Some(why) = reencode {
+            declined[k] = Some(format!("the tiles are encoded: {why}"));
+            continue;
+        }
+        let form = match &mut planned.work {
+            Work::Dicom { spec, .. } => match dicom::copyable(levels)? {
+                Err(why) => Err(why),
+                Ok((copied, photometric)) => {
+                    let shapes: Vec<String> = (copied.iter())
+                        .map(|l| format!("{}x{}/{}x{}", l.width, l.height, l.frame.0, l.frame.1))
+                        .collect();
+                    spec.identity =
+                        format!("{}; levels stored {} {}", spec.identity, shapes.join(" "), photometric.name());
+                    spec.copied = copied;
+                    spec.photometric = photometric;
+                    spec.check()?;
+                    Ok(Form::Dicom(photometric))
+                }
+            },
+            Work::Tiff { spec, .. } => match tiff::copyable(levels, spec.stored.channels)? {
+                Err(why) => Err(why),
+                Ok((copied, coding)) => {
+                    (spec.copied, spec.compression) = (copied, tiff::compression(coding));
+                    spec.check()?;
+                    Ok(Form::Tiff(coding))
+                }
+            },
+            _ => continue,
+        };
+        match form {
+            Ok(form) => copying[k] = Some(Copying { levels: levels.clone(), form }),
+            Err(why) => declined[k] = Some(why),
         }
     }
     Ok(Chosen { copying, declined })
@@ -327,21 +362,30 @@ impl Plan {
     pub fn write(self, mut source: Box<dyn RowSource>, progress: &dyn Progress) -> Result<Vec<Wrote>> {
         let Plan { mut outputs, budget, pack } = self;
         let source_layout = source.layout();
-        let asked: Vec<Levels> = (outputs.iter())
-            .map(|p| match &p.work {
-                Work::Dicom { levels, .. } => *levels,
-                _ => Levels::Pow2,
-            })
-            .collect();
-        // A DICOM series of the slide's own levels copies them, cut from no pyramid.
+        let asked: Vec<Levels> = outputs.iter().map(Planned::work_levels).collect();
+        // A TIFF or DICOM series of the slide's own levels copies them, cut from no pyramid.
         let Chosen { copying, mut declined } = choose_levels(&mut outputs, source.as_ref())?;
         let open: Vec<Open> = outputs.into_iter().map(|p| Open::start(p, pack)).collect::<Result<_>>()?;
         let cut: Vec<usize> = (0..open.len()).filter(|&k| copying[k].is_none()).collect();
         let mut copied = vec![0u64; open.len()];
         for (k, c) in copying.iter().enumerate() {
-            if let (Some(c), Sink::Dicom(sink)) = (c, &open[k].sink) {
-                copied[k] = dicom::copy_levels(sink, &c.levels, c.photometric, progress)?;
-            }
+            let Some(c) = c else { continue };
+            copied[k] = match (&c.form, &open[k].sink) {
+                (Form::Dicom(photometric), Sink::Dicom(sink)) => {
+                    dicom::copy_levels(sink, &c.levels, *photometric, progress)?
+                }
+                (Form::Tiff(coding), Sink::Tiff(sink)) => {
+                    let fits = |h: &crate::source::stored::Header| tiff::fits(h, *coding);
+                    crate::formats::levels::copy(
+                        sink.as_ref(),
+                        &c.levels,
+                        &tiff::coding_name(*coding),
+                        &fits,
+                        progress,
+                    )?
+                }
+                _ => return Err(TilerError::Internal("levels copied into an output of another form".into())),
+            };
         }
         let planned: Vec<&Planned> = cut.iter().map(|&k| &open[k].planned).collect();
         let pyramids = pyramids(&planned);
@@ -380,11 +424,13 @@ impl Plan {
                 Some((g, at)) => o.finish(&summaries[g], at, g, 1)?,
                 None => o.finish_copied(copied[k], source_layout, budget)?,
             };
-            if let Figures::Dicom(f) = &mut w.figures
-                && w.pyramid.is_some()
-            {
-                f.levels = asked[k];
-                f.levels_declined = declined[k].take();
+            match &mut w.figures {
+                Figures::Dicom(f) if w.pyramid.is_some() => {
+                    f.levels = asked[k];
+                    f.levels_declined = declined[k].take();
+                }
+                Figures::Tiff(f) => f.levels_declined = declined[k].take(),
+                _ => {}
             }
             wrote.push(Wrote { reads, ..w });
         }

@@ -268,6 +268,28 @@ const ADOBE_RGB: [u8; 16] = [0xFF, 0xEE, 0, 14, b'A', b'd', b'o', b'b', b'e', 0,
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::codec::{Codec, Subsampling, TileEncoder};
+    use crate::pixel::{Channels, Depth, PixelLayout};
+
+    /// Each coding is what the stream's frame and Adobe marker say, as a TIFF's or DICOM's
+    /// tags must declare it; grey has none.
+    #[test]
+    fn a_jpeg_is_coded_as_its_subsampling_says() {
+        let rgb = PixelLayout::new(Channels::Rgb, Depth::U8);
+        let texels: Vec<u8> = (0..16 * 16 * 3).map(|i| (i * 7 % 251) as u8).collect();
+        for subsampling in Subsampling::ALL {
+            let encoder = TileEncoder::new(Codec::Jpeg { quality: 90, subsampling }, rgb, false, None, 16, Vec::new());
+            let mut out = Vec::new();
+            encoder.unwrap().encode(&texels, &mut out).unwrap();
+            let header = read_header(&out).unwrap();
+            assert_eq!(header.subsampling(), Some(subsampling), "{header:?}");
+        }
+        let grey = PixelLayout::new(Channels::Grey, Depth::U8);
+        let codec = Codec::Jpeg { quality: 90, subsampling: Subsampling::Rgb };
+        let mut out = Vec::new();
+        TileEncoder::new(codec, grey, false, None, 16, Vec::new()).unwrap().encode(&texels[..256], &mut out).unwrap();
+        assert_eq!(read_header(&out).unwrap().subsampling(), None);
+    }
 
     /// libjpeg's table for `q`, as jpeg_set_quality makes it.
     fn ijg(q: u32) -> [u16; 64] {

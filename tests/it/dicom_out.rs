@@ -327,7 +327,7 @@ fn an_svs_s_tiles_are_copied_and_read_as_the_slide_s() {
 /// An Aperio-like SVS with reduced levels (downsamples 4 and about 16), as tifffile writes
 /// it: 256-texel JPEG tiles in YCbCr 4:2:0, a thumbnail in strips between the levels. With
 /// `zlib` as the second argument its first reduced level is Deflate-compressed instead.
-const MAKE_LEVELLED_SVS: &str = r#"
+pub(crate) const MAKE_LEVELLED_SVS: &str = r#"
 import sys, numpy as np, tifffile
 h, w = 1500, 2300
 y, x = np.mgrid[0:h, 0:w]
@@ -442,13 +442,17 @@ fn levels_not_copyable_fall_back_to_our_pyramid_saying_why() {
     let svs = dir.path().join("deflate-level.svs");
     crate::tiff_slides::python(python.as_os_str(), MAKE_LEVELLED_SVS, &[s(&svs), "zlib"]);
     let png = input(dir.path(), "flat", 600, 400, rgb8());
-    for (source, why) in [(&svs, "level 1 (page 2) is not JPEG-compressed"), (&png, "no slide of JPEG-tiled levels")] {
+    // A source without levels says why only where they were asked for.
+    let asked: &[&str] = &["--levels", "stored"];
+    for (source, why, extra) in
+        [(&svs, "level 1 (page 2) is not JPEG-compressed", &[][..]), (&png, "no slide of JPEG-tiled levels", asked)]
+    {
         let out = dir.path().join("series");
-        let json =
-            json_of(&ok(&["split", s(source), "--layout", "dicom", "-o", s(&out), "--pixel-size", "1um", "--json"]));
+        let args = ["split", s(source), "--layout", "dicom", "-o", s(&out), "--pixel-size", "1um"];
+        let json = json_of(&ok(&[&args[..], extra, &["--json"]].concat()));
         assert_eq!(json["dicom"]["levels"], "pow2", "{json}");
         assert!(json["dicom"]["levelsDeclined"].as_str().unwrap().contains(why), "{json}");
-        let said = ok(&["split", s(source), "--layout", "dicom", "-o", s(&out), "--pixel-size", "1um"]);
+        let said = ok(&[&args[..], extra].concat());
         assert!(said.contains(why), "{said}");
         let pow2 = dir.path().join("pow2");
         ok(&["split", s(source), "--layout", "dicom", "-o", s(&pow2), "--pixel-size", "1um", "--levels", "pow2", "-q"]);
@@ -477,7 +481,7 @@ fn levels_not_copyable_fall_back_to_our_pyramid_saying_why() {
     assert!(json["dicom"]["levelsDeclined"].as_str().unwrap().contains("--quality"), "{json}");
     fails_with(
         &run(&["split", s(&png), "-o", s(&dir.path().join("web")), "--levels", "pow2"]),
-        &["--levels belongs to --layout dicom"],
+        &["--levels belongs to a TIFF output", "or --layout dicom"],
     );
 }
 

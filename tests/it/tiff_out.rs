@@ -354,6 +354,78 @@ fn a_jpeg_tiled_source_s_tiles_are_copied_where_they_fit_the_tiff_s_tags() {
     }
 }
 
+/// Reads TIFF OUT (flavour FLAVOUR) against the slide SLIDE's own tiled levels: tifffile
+/// reads one series of as many levels, each equal to the slide's level (the same JPEG
+/// streams, decoded by the same decoder); an OME-TIFF's XML validates; OpenSlide 4 opens a
+/// generic pyramid with the slide's downsamples.
+const SAME_LEVELS: &str = r#"
+import sys, numpy as np, tifffile, openslide, ome_types
+out, slide, flavour = sys.argv[1:4]
+with tifffile.TiffFile(slide) as s, tifffile.TiffFile(out) as t:
+    want = [p for p in s.pages if p.is_tiled]
+    levels = t.series[0].levels
+    if len(levels) != len(want):
+        sys.exit(f"{len(levels)} levels, the slide has {len(want)}")
+    for k, (level, page) in enumerate(zip(levels, want)):
+        a, b = level.asarray(), page.asarray()
+        if a.shape != b.shape or not np.array_equal(a, b):
+            sys.exit(f"level {k}: {a.shape} differs from the slide's {b.shape}")
+    if flavour == "ome":
+        ome_types.from_xml(t.ome_metadata, validate=True)
+if flavour == "generic":
+    ours, theirs = openslide.OpenSlide(out), openslide.OpenSlide(slide)
+    if ours.level_dimensions != theirs.level_dimensions:
+        sys.exit(f"OpenSlide: {ours.level_dimensions}, the slide {theirs.level_dimensions}")
+    for k, size in enumerate(ours.level_dimensions):
+        if not np.array_equal(np.asarray(ours.read_region((0, 0), k, size)), np.asarray(theirs.read_region((0, 0), k, size))):
+            sys.exit(f"OpenSlide: level {k} differs from the slide's")
+"#;
+
+/// A slide that is a pyramid of JPEG tiles (an Aperio-like SVS, downsamples 4 and about 16)
+/// is written with its own levels, every stored tile copied, nothing encoded, in every
+/// flavour (a TIFF pyramid may step down by any factor): each level read back equal to the
+/// slide's, and a COG valid for GDAL. `--levels pow2` gives our pyramid, and a source with
+/// no levels says nothing of them unless `--levels stored` was asked.
+#[test]
+fn a_slide_s_own_levels_are_copied_as_stored() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let svs = dir.path().join("slide.svs");
+    crate::tiff_slides::python(python.as_os_str(), crate::dicom_out::MAKE_LEVELLED_SVS, &[s(&svs)]);
+    // 9 x 6, 3 x 2 and 1 tiles.
+    for (name, flavour) in [("g.tif", "generic"), ("o.ome.tif", "ome"), ("c.cog.tif", "cog")] {
+        let out = dir.path().join(name);
+        let json: serde_json::Value =
+            serde_json::from_str(ok(&["split", s(&svs), "-o", s(&out), "--json"]).trim()).unwrap();
+        assert_eq!(json["tiff"]["levelsCopied"], true, "{flavour}: {json}");
+        assert_eq!((json["copied"].clone(), json["encoded"].clone()), (61.into(), 0.into()), "{flavour}: {json}");
+        assert_eq!(json["tiff"]["levels"], 3, "{flavour}: {json}");
+        let check = Command::new(&python).args(["-c", SAME_LEVELS, s(&out), s(&svs), flavour]).output().unwrap();
+        assert!(check.status.success(), "{flavour}: {}", String::from_utf8_lossy(&check.stderr));
+        if flavour == "cog" && gdal() {
+            let script = "import sys; from osgeo_utils.samples import validate_cloud_optimized_geotiff as v; e, w, _ = v.validate(sys.argv[1], full_check=True); sys.exit('; '.join(e) or None)";
+            let valid = Command::new("/usr/bin/python3").args(["-c", script, s(&out)]).output().unwrap();
+            assert!(valid.status.success(), "COG: {}", String::from_utf8_lossy(&valid.stderr));
+        }
+    }
+    let pow2 = dir.path().join("pow2.tif");
+    let json: serde_json::Value =
+        serde_json::from_str(ok(&["split", s(&svs), "-o", s(&pow2), "--levels", "pow2", "--json"]).trim()).unwrap();
+    assert_eq!((json["tiff"]["levelsCopied"].clone(), json["tiff"]["levels"].clone()), (false.into(), 5.into()));
+    assert_eq!(json["tiff"]["levelsDeclined"], serde_json::Value::Null, "{json}");
+    // A PNG has no levels: said only where asked.
+    let png = input(dir.path(), "flat", 300, 200, rgb8());
+    let flat = dir.path().join("flat.tif");
+    for (extra, said) in
+        [(None, serde_json::Value::Null), (Some("stored"), "the source is no slide of JPEG-tiled levels".into())]
+    {
+        let mut args = vec!["split", s(&png), "-o", s(&flat), "--json", "--force"];
+        args.extend(extra.iter().flat_map(|e| ["--levels", e]));
+        let json: serde_json::Value = serde_json::from_str(ok(&args).trim()).unwrap();
+        assert_eq!(json["tiff"]["levelsDeclined"], said, "--levels {extra:?}: {json}");
+    }
+}
+
 const GEO_SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/it/tiff_geo.py");
 
 /// Runs `tiff_geo.py` with Debian's Python (GDAL); fails with what it said.

@@ -95,27 +95,7 @@ impl Photometric {
     }
 }
 
-/// Which levels a series holds (`--levels`, docs/dicom.md).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum Levels {
-    /// The slide's own levels, every stored JPEG tile copied as a frame, where the source is
-    /// a pyramid of JPEG tiles DICOM can hold; else our pyramid, saying why.
-    #[default]
-    Stored,
-    /// Our exact power-of-two pyramid (the full resolution's stored tiles still copied where
-    /// they fit the frames).
-    Pow2,
-}
-
-impl Levels {
-    /// `--levels`' name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Levels::Stored => "stored",
-            Levels::Pow2 => "pow2",
-        }
-    }
-}
+pub use crate::layout::Levels;
 
 /// One instance's image: its Total Pixel Matrix and its frames' size, columns by rows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

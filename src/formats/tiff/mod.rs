@@ -28,6 +28,7 @@
 //! 43): shared `JPEGTables` and more than four channels as planes.
 
 mod cog;
+mod copy;
 mod ifd;
 mod ome;
 mod sink;
@@ -35,13 +36,14 @@ mod sink;
 mod tests;
 mod writer;
 
+pub(crate) use copy::{Coding, coding_name, compression, copyable, fits};
 pub(crate) use sink::TiffSink;
 pub use writer::TiffSummary;
 pub(crate) use writer::TiffWriter;
 
 use crate::codec::{Codec, RowFilter, Subsampling};
 use crate::error::{Result, TilerError};
-use crate::layout::Layout;
+use crate::layout::{Layout, Level};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::GeoValue;
 
@@ -179,9 +181,41 @@ pub(crate) struct Spec {
     /// The ICC profile the samples are in (`--keep-icc`), in every level's IFD; `None`: sRGB,
     /// which TIFF readers assume.
     pub icc: Option<Vec<u8>>,
+    /// The slide's own levels where they are copied as stored (`--levels stored`): each its
+    /// size and tiles, any downsample between them; empty: `layout`'s levels.
+    pub copied: Vec<Level>,
 }
 
 impl Spec {
+    /// Levels, the full resolution included.
+    pub fn level_count(&self) -> u32 {
+        match self.copied.len() {
+            0 => self.layout.lod_count,
+            n => n as u32,
+        }
+    }
+
+    /// Level `k`'s image and tiles.
+    pub fn level(&self, k: u32) -> Level {
+        match self.copied.get(k as usize) {
+            Some(level) => *level,
+            None => {
+                let (width, height) = self.layout.level_extent(k);
+                Level { width, height, tile: (self.layout.tile_size, self.layout.tile_size) }
+            }
+        }
+    }
+
+    /// Tiles, every level.
+    pub fn total_tiles(&self) -> u64 {
+        (0..self.level_count()).map(|k| self.level(k).tiles()).sum()
+    }
+
+    /// The longest side of any level's tiles.
+    fn tile_side(&self) -> u32 {
+        (0..self.level_count()).map(|k| self.level(k).tile).map(|(w, h)| w.max(h)).max().unwrap_or(0)
+    }
+
     /// Refuses what no TIFF (or no reader of these flavours) holds, before anything is
     /// written; the messages say what to change.
     pub fn check(&self) -> Result<()> {
@@ -192,14 +226,24 @@ impl Spec {
                 "--tile-size {t}: TIFF tiles are a multiple of 16 pixels a side (e.g. 256 or 512)"
             )));
         }
+        if let Some((k, c)) = self.copied.iter().enumerate().find(|(_, c)| {
+            let (w, h) = c.tile;
+            w == 0 || h == 0 || !w.is_multiple_of(16) || !h.is_multiple_of(16) || c.width == 0 || c.height == 0
+        }) {
+            return Err(TilerError::Options(format!(
+                "level {k} of the slide is {}x{} in {}x{} tiles: a TIFF's tiles are a multiple of 16 pixels a side",
+                c.width, c.height, c.tile.0, c.tile.1
+            )));
+        }
         if l.border != 0 {
             return Err(TilerError::Options(format!("--border {}: TIFF tiles have no border", l.border)));
         }
         if l.width == 0 || l.height == 0 {
             return Err(TilerError::Geometry(format!("a {}x{} image has no pixels", l.width, l.height)));
         }
-        if l.lod_count == 0 || l.lod_count > 32 {
-            return Err(TilerError::Geometry(format!("a TIFF pyramid of {} levels", l.lod_count)));
+        let levels = self.level_count();
+        if levels == 0 || levels > 32 {
+            return Err(TilerError::Geometry(format!("a TIFF pyramid of {levels} levels")));
         }
         let s = self.stored;
         match self.compression {
@@ -229,7 +273,7 @@ impl Spec {
         Ok(())
     }
 
-    /// Bytes of one tile's samples, uncompressed.
+    /// Bytes of one tile's samples, uncompressed (our pyramid's tiles are all one size).
     pub fn raw_tile_bytes(&self) -> u64 {
         (self.layout.tile_size as u64).pow(2) * self.stored.bytes_per_pixel() as u64
     }
@@ -243,14 +287,14 @@ impl Spec {
             Compression::Jpeg { subsampling } => Codec::Jpeg { quality: 100, subsampling },
             _ => self.codec().unwrap_or(Codec::Raw),
         };
-        codec.most_encoded_bytes(self.layout.tile_size, self.stored)
+        codec.most_encoded_bytes(self.tile_side(), self.stored)
     }
 
     /// Memory the writer's tile index holds at its peak: an offset and a length a tile (16
     /// bytes) while the tiles come, and at the end the IFDs' offset and byte-count arrays
     /// beside it (16 more), until the index is dropped.
     pub fn index_bytes(&self) -> u64 {
-        self.layout.total_tiles().saturating_mul(32)
+        self.total_tiles().saturating_mul(32)
     }
 
     /// An upper bound of the file's size: header, tiles at their largest (a COG's with their
@@ -258,7 +302,7 @@ impl Spec {
     /// OME-XML and a COG's ghost area.
     pub fn most_file_bytes(&self) -> u64 {
         let framing = if self.flavour == Flavour::Cog { cog::FRAMING } else { 0 };
-        let total = self.layout.total_tiles();
+        let total = self.total_tiles();
         let tiles = total.saturating_mul(self.most_tile_bytes() + framing);
         let geo: u64 = (self.geo.iter())
             .map(|(_, v)| match v {
@@ -268,7 +312,7 @@ impl Spec {
             } + 24)
             .sum();
         let icc = self.icc.as_ref().map_or(0, |p| p.len() as u64 + 2);
-        let ifds = self.layout.lod_count as u64 * (4096 + icc) + total.saturating_mul(16) + geo;
+        let ifds = u64::from(self.level_count()) * (4096 + icc) + total.saturating_mul(16) + geo;
         let xml = ome::xml(self).len() as u64;
         tiles.saturating_add(ifds).saturating_add(xml).saturating_add(1024)
     }

@@ -127,6 +127,7 @@ fn spec(flavour: Flavour, w: u32, h: u32, levels: u32, stored: PixelLayout, comp
         pixel_size: None,
         geo: Vec::new(),
         icc: None,
+        copied: Vec::new(),
     }
 }
 

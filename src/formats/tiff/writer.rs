@@ -44,6 +44,11 @@ pub struct TiffSummary {
     pub file_bytes: u64,
     /// The `Compression` written (`none`, `deflate`, `zstd`, `jpeg`).
     pub compression: &'static str,
+    /// Whether the levels are the slide's own, every tile copied as stored (`--levels
+    /// stored`), not our power-of-two pyramid.
+    pub levels_copied: bool,
+    /// Why the slide's own levels were not copied, where the file would have copied them.
+    pub levels_declined: Option<String>,
 }
 
 /// A TIFF being written: the file, and where each tile went.
@@ -75,7 +80,7 @@ impl TiffWriter {
     /// ([`Spec::index_bytes`]) against its budget.
     pub fn create(path: &Path, file: File, spec: Spec) -> Result<TiffWriter> {
         spec.check()?;
-        let all = spec.layout.total_tiles();
+        let all = spec.total_tiles();
         let total = usize::try_from(all)
             .map_err(|_| TilerError::Limit(format!("{all} tiles: more than this machine indexes")))?;
         let mut tiles = Vec::new();
@@ -83,12 +88,11 @@ impl TiffWriter {
             TilerError::Limit(format!("the index of {total} TIFF tiles ({} bytes) does not fit in memory", total * 16))
         })?;
         tiles.resize(total, (0, 0));
-        let mut bases = Vec::with_capacity(spec.layout.lod_count as usize);
+        let mut bases = Vec::with_capacity(spec.level_count() as usize);
         let mut at = 0usize;
-        for k in 0..spec.layout.lod_count {
+        for k in 0..spec.level_count() {
             bases.push(at);
-            let (c, r) = spec.layout.grid(k);
-            at += c as usize * r as usize;
+            at += spec.level(k).tiles() as usize;
         }
         let big = spec.needs_bigtiff();
         let mut file = BufWriter::with_capacity(1 << 20, file);
@@ -109,10 +113,10 @@ impl TiffWriter {
     /// Appends tile `(x, y)` of `level`: `bytes` as the file stores them (compressed).
     pub fn add_tile(&mut self, level: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
         let err = |message: String| TilerError::Encode { lod: level, x, y, message };
-        if level >= self.spec.layout.lod_count {
-            return Err(err(format!("the TIFF has {} levels", self.spec.layout.lod_count)));
+        if level >= self.spec.level_count() {
+            return Err(err(format!("the TIFF has {} levels", self.spec.level_count())));
         }
-        let (c, r) = self.spec.layout.grid(level);
+        let (c, r) = self.spec.level(level).grid();
         if x >= c || y >= r {
             return Err(err(format!("level {level} of the TIFF is {c}x{r} tiles")));
         }
@@ -153,7 +157,7 @@ impl TiffWriter {
     pub fn finish(mut self) -> Result<TiffSummary> {
         if let Some(missing) = self.tiles.iter().position(|t| t.0 == 0) {
             let level = self.bases.iter().rposition(|&b| b <= missing).unwrap_or(0);
-            let (c, _) = self.spec.layout.grid(level as u32);
+            let (c, _) = self.spec.level(level as u32).grid();
             let i = missing - self.bases[level];
             return Err(TilerError::Internal(format!(
                 "{}: tile (level {level}, x {}, y {}) was never written",
@@ -165,7 +169,7 @@ impl TiffWriter {
         if self.staging.is_some() {
             return self.finish_cog();
         }
-        let levels = self.spec.layout.lod_count as usize;
+        let levels = self.spec.level_count() as usize;
         let mut ifds: Vec<Ifd> = (0..levels).map(|k| self.level_ifd(k as u32)).collect();
         self.tiles = Vec::new();
         let sub_ifds = self.spec.flavour == Flavour::Ome && levels > 1;
@@ -219,7 +223,7 @@ impl TiffWriter {
     /// tile framed by its leader and trailer.
     fn finish_cog(mut self) -> Result<TiffSummary> {
         let big = self.big;
-        let levels = self.spec.layout.lod_count as usize;
+        let levels = self.spec.level_count() as usize;
         let mut ifds: Vec<Ifd> = (0..levels).map(|k| self.level_ifd(k as u32)).collect();
         // The IFDs' lengths do not depend on the offsets they hold: lay them out, then the data.
         let mut at = cog::first_ifd_at(big);
@@ -277,14 +281,15 @@ impl TiffWriter {
 
     /// Level `k`'s tiles in the index, row by row.
     fn level_tiles(&self, k: u32) -> &[(u64, u64)] {
-        let (c, r) = self.spec.layout.grid(k);
+        let (c, r) = self.spec.level(k).grid();
         &self.tiles[self.bases[k as usize]..][..c as usize * r as usize]
     }
 
     /// Level `k`'s IFD, its tiles' offsets and byte counts from the index.
     fn level_ifd(&self, k: u32) -> Ifd {
         let s = &self.spec;
-        let (w, h) = s.layout.level_extent(k);
+        let level = s.level(k);
+        let (w, h) = (level.width, level.height);
         let spp = s.stored.channels.count();
         let mut ifd = Ifd::default();
         ifd.set(tag::NEW_SUBFILE_TYPE, Value::Long(vec![u32::from(k > 0)]));
@@ -298,8 +303,13 @@ impl TiffWriter {
         }
         ifd.set(tag::SAMPLES_PER_PIXEL, Value::Short(vec![spp as u16]));
         if let Some(size) = s.pixel_size {
-            // Pixels a centimetre at this level.
-            let per_cm = rational(10_000.0 / (size.0 * (1u64 << k) as f64));
+            // Pixels a centimetre at this level: 2^k times fewer in our pyramid; a copied
+            // level's pixels as much larger as it is narrower than the full resolution.
+            let scale = match s.copied.is_empty() {
+                true => (1u64 << k) as f64,
+                false => f64::from(s.level(0).width) / f64::from(w),
+            };
+            let per_cm = rational(10_000.0 / (size.0 * scale));
             ifd.set(tag::X_RESOLUTION, Value::Rational(vec![per_cm]));
             ifd.set(tag::Y_RESOLUTION, Value::Rational(vec![per_cm]));
             ifd.set(tag::RESOLUTION_UNIT, Value::Short(vec![3]));
@@ -319,8 +329,8 @@ impl TiffWriter {
             RowFilter::Delta => ifd.set(tag::PREDICTOR, Value::Short(vec![2])),
             RowFilter::FloatingPoint => ifd.set(tag::PREDICTOR, Value::Short(vec![3])),
         }
-        ifd.set(tag::TILE_WIDTH, Value::Long(vec![s.layout.tile_size]));
-        ifd.set(tag::TILE_LENGTH, Value::Long(vec![s.layout.tile_size]));
+        ifd.set(tag::TILE_WIDTH, Value::Long(vec![level.tile.0]));
+        ifd.set(tag::TILE_LENGTH, Value::Long(vec![level.tile.1]));
         let tiles = self.level_tiles(k);
         ifd.set(tag::TILE_OFFSETS, Value::Offsets(tiles.iter().map(|t| t.0).collect()));
         ifd.set(tag::TILE_BYTE_COUNTS, Value::Offsets(tiles.iter().map(|t| t.1).collect()));
@@ -380,11 +390,13 @@ fn summary(spec: &Spec, big: bool, tile_bytes: u64, file_bytes: u64) -> TiffSumm
     TiffSummary {
         flavour: spec.flavour,
         bigtiff: big,
-        levels: spec.layout.lod_count,
-        tiles: spec.layout.total_tiles(),
+        levels: spec.level_count(),
+        tiles: spec.total_tiles(),
         tile_bytes,
         file_bytes,
         compression: spec.compression.name(),
+        levels_copied: !spec.copied.is_empty(),
+        levels_declined: None,
     }
 }
 
