@@ -184,6 +184,9 @@ pub struct DicomSettings {
     pub meta: Option<crate::formats::dicom::DicomMeta>,
     /// Which levels the series holds (`--levels`) [default: the slide's own, as stored].
     pub levels: Option<crate::formats::dicom::Levels>,
+    /// Leave the source's associated images out (`--no-associated`) [default: each carried
+    /// as its own instance].
+    pub no_associated: bool,
 }
 
 /// What only TIFF outputs read.
