@@ -99,6 +99,9 @@ impl Associated {
         let name = |message: String| format!("the {} ({}): {message}", self.kind.name(), self.origin());
         let named = |e: TilerError| match e {
             TilerError::Decode { path, message } => TilerError::Decode { path, message: name(message) },
+            TilerError::DecodeRow { path, row, message } => {
+                TilerError::Decode { path, message: name(format!("row {row}: {message}")) }
+            }
             TilerError::Unsupported { path, message } => TilerError::Unsupported { path, message: name(message) },
             other => other,
         };

@@ -578,4 +578,28 @@ fn a_slide_s_associated_images_are_instances_of_the_series() {
         &run(&["split", s(&svs), "--layout", "dzi", "-o", s(&web), "--no-associated"]),
         &["--no-associated belongs to --layout dicom"],
     );
+
+    // A damaged associated image (the macro's JPEG strip zeroed) fails the run naming the
+    // file and the image, and leaves no series; --no-associated converts the slide.
+    let damaged = dir.path().join("damaged.svs");
+    let mut bytes = std::fs::read(&svs).unwrap();
+    let macro_strip = r#"
+import sys, tifffile
+with tifffile.TiffFile(sys.argv[1]) as t:
+    p = t.pages[4]
+    print(p.dataoffsets[0], p.databytecounts[0])
+"#;
+    let out_py = Command::new(&python).args(["-c", macro_strip, s(&svs)]).output().unwrap();
+    let said = String::from_utf8_lossy(&out_py.stdout).into_owned();
+    let [at, len]: [usize; 2] =
+        said.split_whitespace().map(|v| v.parse().unwrap()).collect::<Vec<_>>().try_into().unwrap();
+    bytes[at..at + len].fill(0);
+    std::fs::write(&damaged, &bytes).unwrap();
+    let series = dir.path().join("damaged-series");
+    fails_with(
+        &run(&["split", s(&damaged), "--layout", "dicom", "-o", s(&series)]),
+        &["damaged.svs", "the overview (page 4)", "--no-associated"],
+    );
+    assert!(!series.exists());
+    ok(&["split", s(&damaged), "--layout", "dicom", "-o", s(&series), "--no-associated", "-q"]);
 }
