@@ -556,37 +556,8 @@ impl<T: Sample> TileEncoder<T> {
         out: &mut Vec<u8>,
     ) -> Result<(), String> {
         let samples = to_u8(texels);
-        let colour = match self.stored.channels {
-            Channels::Grey => mozjpeg::ColorSpace::JCS_GRAYSCALE,
-            _ => mozjpeg::ColorSpace::JCS_RGB,
-        };
-        let buf = std::mem::take(out);
-        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> std::io::Result<Vec<u8>> {
-            let mut c = mozjpeg::Compress::new(colour);
-            c.set_fastest_defaults();
-            c.set_size(width as usize, height as usize);
-            c.set_quality(quality as f32);
-            if colour == mozjpeg::ColorSpace::JCS_RGB {
-                if subsampling == Subsampling::Rgb {
-                    // Kept as RGB, each component at full resolution, with an Adobe marker.
-                    c.set_color_space(mozjpeg::ColorSpace::JCS_RGB);
-                } else {
-                    let px = subsampling.factor();
-                    c.set_chroma_sampling_pixel_sizes((px, px), (px, px));
-                }
-            }
-            let mut started = c.start_compress(buf)?;
-            started.write_scanlines(&samples)?;
-            started.finish()
-        }));
-        match result {
-            Ok(Ok(bytes)) => {
-                *out = bytes;
-                Ok(())
-            }
-            Ok(Err(e)) => Err(e.to_string()),
-            Err(_) => Err("libjpeg failed".into()),
-        }
+        *out = encode_jpeg(&samples, (width, height), self.stored.channels, quality, subsampling, std::mem::take(out))?;
+        Ok(())
     }
 
     fn encode_png(
@@ -664,6 +635,46 @@ fn flatten<T: Sample>(texels: &[T], channels: usize, matte: &[T]) -> Vec<T> {
 /// sample's most significant byte first and its least significant last, then each byte less
 /// the byte `channels` places before it (one texel back within a plane; the difference runs on
 /// across the planes' boundaries, as the technical note defines it).
+/// One JPEG baseline stream of `width x height` 8-bit `samples` (grey, else RGB, interleaved),
+/// at `quality`, coded as `subsampling` says (RGB with an Adobe marker, or YCbCr), written
+/// into `buf`'s allocation.
+pub(crate) fn encode_jpeg(
+    samples: &[u8],
+    (width, height): (u32, u32),
+    channels: Channels,
+    quality: u8,
+    subsampling: Subsampling,
+    buf: Vec<u8>,
+) -> Result<Vec<u8>, String> {
+    let colour = match channels {
+        Channels::Grey => mozjpeg::ColorSpace::JCS_GRAYSCALE,
+        _ => mozjpeg::ColorSpace::JCS_RGB,
+    };
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> std::io::Result<Vec<u8>> {
+        let mut c = mozjpeg::Compress::new(colour);
+        c.set_fastest_defaults();
+        c.set_size(width as usize, height as usize);
+        c.set_quality(quality as f32);
+        if colour == mozjpeg::ColorSpace::JCS_RGB {
+            if subsampling == Subsampling::Rgb {
+                // Kept as RGB, each component at full resolution, with an Adobe marker.
+                c.set_color_space(mozjpeg::ColorSpace::JCS_RGB);
+            } else {
+                let px = subsampling.factor();
+                c.set_chroma_sampling_pixel_sizes((px, px), (px, px));
+            }
+        }
+        let mut started = c.start_compress(buf)?;
+        started.write_scanlines(samples)?;
+        started.finish()
+    }));
+    match result {
+        Ok(Ok(bytes)) => Ok(bytes),
+        Ok(Err(e)) => Err(e.to_string()),
+        Err(_) => Err("libjpeg failed".into()),
+    }
+}
+
 pub(crate) fn float_predict_rows(bytes: &mut [u8], width: usize, channels: usize, sample_bytes: usize) {
     let samples = width * channels;
     let row_bytes = samples * sample_bytes;

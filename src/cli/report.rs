@@ -404,13 +404,30 @@ fn dicom_json(w: &vortex_tiler::formats::dicom::DicomSummary) -> serde_json::Val
         "levelsAsked": w.levels.name(),
         "levels": if w.levels_copied { "stored" } else { "pow2" },
         "levelsDeclined": w.levels_declined,
+        "associated": w.associated.iter().map(|a| serde_json::json!({
+            "kind": a.kind,
+            "width": a.width,
+            "height": a.height,
+            "from": a.origin,
+            "file": a.file,
+            "photometricInterpretation": a.photometric,
+            "frameBytes": a.frame_bytes,
+        })).collect::<Vec<_>>(),
+        "associatedLeftOut": w.associated_left_out,
     })
 }
 
 /// A DICOM series' figures, in a line.
 fn dicom_line(w: &vortex_tiler::formats::dicom::DicomSummary) -> String {
+    let carried: Vec<String> =
+        w.associated.iter().map(|a| format!("{} {}x{} ({})", a.kind, a.width, a.height, a.origin)).collect();
+    let associated = match (carried.is_empty(), w.associated_left_out) {
+        (true, 0) => String::new(),
+        (false, _) => format!("; associated images, each its own instance: {}", carried.join(", ")),
+        (true, n) => format!("; {n} associated image(s) left out (--no-associated)"),
+    };
     format!(
-        "dicom: {} instances (one a level: {}), {} JPEG baseline frames, {}, series {}, {} file bytes",
+        "dicom: {} instances (one a level: {}), {} JPEG baseline frames, {}, series {}, {} file bytes{associated}",
         w.instances,
         levels_clause(w.levels_copied, &w.levels_declined, "frame"),
         w.frames,

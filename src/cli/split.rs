@@ -151,6 +151,12 @@ pub struct OutputArgs {
     #[arg(help_heading = "Outputs", long, value_name = "LEVELS")]
     levels: Option<LevelsArg>,
 
+    /// --layout dicom: leave the slide's associated images (label, overview, thumbnail) out
+    /// of the series [default: each carried as its own instance]. A label often shows the
+    /// patient's name or number.
+    #[arg(help_heading = "Outputs", long)]
+    no_associated: bool,
+
     /// How the output directory is laid out: vortex (tiles + info.json, this tool's), or one a
     /// viewer opens as it is: dzi (NAME.dzi + NAME_files/, Deep Zoom as vips dzsave writes
     /// it: OpenSeadragon), iiif (IIIF Image API 3.0 level 0: info.json + static tiles), xyz
@@ -527,7 +533,7 @@ impl OutputArgs {
                 Some(meta)
             }
         };
-        Ok(DicomSettings { uid_root: self.dicom_uid_root.clone(), meta })
+        Ok(DicomSettings { uid_root: self.dicom_uid_root.clone(), meta, no_associated: self.no_associated })
     }
 
     /// The settings the outputs share, from the flags; `names`: the filename format flag;

@@ -17,7 +17,7 @@
 //! complete; temporaries that a dead process left behind are found and removed by the next run
 //! for the same destination ([`remove_stale`]).
 
-mod ours;
+pub(crate) mod ours;
 pub(crate) mod staging;
 
 use std::fs;

@@ -126,17 +126,28 @@ fn recognise_tiff(path: &Path) -> Result<(), String> {
     }
 }
 
+/// Whether `name` is one a DICOM series' instance files may have (`formats::dicom`'s
+/// `Spec::file_name` and `Spec::associated_file_name`, whose unit test holds them to this):
+/// `level-N.dcm`, and `KIND.dcm` or `KIND-N.dcm` for an associated image.
+pub(crate) fn is_dicom_instance_name(name: &str) -> bool {
+    let digits = |n: &str| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit());
+    let Some(stem) = name.strip_suffix(".dcm") else { return false };
+    if let Some(n) = stem.strip_prefix("level-") {
+        return digits(n);
+    }
+    let kind = stem.split_once('-').map_or(stem, |(kind, n)| if digits(n) { kind } else { "" });
+    ["label", "overview", "thumbnail"].contains(&kind)
+}
+
 /// An empty directory, or one holding only the instances a DICOM output names
-/// (`level-N.dcm`), each a DICOM Part-10 file whose File Meta names this program as its
-/// writer (Implementation Version Name `VORTEX_TILER`, within the first 1 KiB).
+/// (`level-N.dcm`, `label.dcm`, `overview-2.dcm`, ...: [`is_dicom_instance_name`]), each a
+/// DICOM Part-10 file whose File Meta names this program as its writer (Implementation
+/// Version Name `VORTEX_TILER`, within the first 1 KiB).
 fn recognise_dicom(dir: &Path) -> Result<(), String> {
     for entry in entries(dir)? {
         let name = entry.file_name();
         let name = name.to_string_lossy();
-        let numbered = name.strip_prefix("level-").and_then(|n| n.strip_suffix(".dcm"));
-        if !entry.file_type().is_ok_and(|t| t.is_file())
-            || !numbered.is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
-        {
+        if !entry.file_type().is_ok_and(|t| t.is_file()) || !is_dicom_instance_name(&name) {
             return Err(format!("holds {name}, which is not one of its instances"));
         }
         let mut head = Vec::with_capacity(1024);
@@ -295,5 +306,19 @@ pub fn recognise_ozx(path: &Path) -> std::result::Result<(), String> {
         Ok(())
     } else {
         Err("a file that is not a zipped OME-Zarr".into())
+    }
+}
+
+#[cfg(test)]
+mod dicom_names {
+    use super::is_dicom_instance_name;
+
+    /// Names a series never gives an instance are not taken for one.
+    #[test]
+    fn other_names_are_not_instances() {
+        for name in ["level-.dcm", "level-x.dcm", "label.txt", "macro.dcm", "label-.dcm", "label-a.dcm", "x.dcm"] {
+            assert!(!is_dicom_instance_name(name), "{name}");
+        }
+        assert!(is_dicom_instance_name("overview-3.dcm"));
     }
 }

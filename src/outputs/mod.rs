@@ -185,6 +185,9 @@ pub struct DicomSettings {
     pub uid_root: Option<String>,
     /// The patient, study and equipment attributes given (`--dicom-meta`).
     pub meta: Option<crate::formats::dicom::DicomMeta>,
+    /// Leave the source's associated images out (`--no-associated`) [default: each carried
+    /// as its own instance].
+    pub no_associated: bool,
 }
 
 /// What only TIFF outputs read.

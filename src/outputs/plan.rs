@@ -318,7 +318,11 @@ fn refuse_unread(s: &Settings, outputs: &[Output]) -> Result<()> {
         return Err(options("--bigtiff belongs to a TIFF output (-o FILE.tif or FILE.ome.tif)".into()));
     }
     let dicom = outputs.iter().any(|o| o.format == Format::Dicom);
-    let given = [(s.dicom.uid_root.is_some(), "--dicom-uid-root"), (s.dicom.meta.is_some(), "--dicom-meta")];
+    let given = [
+        (s.dicom.uid_root.is_some(), "--dicom-uid-root"),
+        (s.dicom.meta.is_some(), "--dicom-meta"),
+        (s.dicom.no_associated, "--no-associated"),
+    ];
     for (given, flag) in given {
         if given && !dicom {
             return Err(options(format!("{flag} belongs to --layout dicom")));
@@ -740,6 +744,15 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
         micrometres(pixel_size),
         given.join("; ")
     );
+    // The associated images (label, overview, thumbnail), each its own instance, unless left
+    // out; their kinds and sizes are part of the identity.
+    let found = crate::source::associated::of_file(at.input, at.budget.bytes())?;
+    let associated_left_out = if own.dicom.no_associated { found.len() } else { 0 };
+    let associated = if own.dicom.no_associated { Vec::new() } else { found };
+    let mut identity = identity;
+    for a in &associated {
+        identity += &format!("; {} {}x{} {}", a.kind.name(), a.width, a.height, a.origin());
+    }
     let made = match meta.get("AcquisitionDateTime") {
         Some(dt) => date_time(dt),
         None => modified(at.input),
@@ -755,6 +768,10 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
         identity,
         made,
         meta,
+        associated,
+        quality,
+        associated_bytes: at.budget.bytes(),
+        associated_left_out,
     };
     spec.check()?;
     at.limits().check_pyramid(&layout, false)?;

@@ -52,6 +52,7 @@ macro_rules! forward_row_order_to_inner {
     };
 }
 
+pub mod associated;
 pub mod channels;
 pub(crate) mod dicom;
 pub mod icc;

@@ -4,6 +4,7 @@ VORTEX_PYVIPS).
 
     dicom_out.py DIR SOURCE TILE [COPIED_FROM]
     dicom_out.py levels DIR SLIDE
+    dicom_out.py associated DIR SLIDE
 
 
 pydicom reads every instance (the IOD's key attributes checked), highdicom parses each as a VL
@@ -19,6 +20,12 @@ wsidicom's encoded tiles are the source level's stored tiles made complete (the 
 entropy-coded data, SOS to EOI, and the same SOF, DQT and DHT segments as the tile with the
 file's JPEGTables), and OpenSlide 4 reads every level of the series exactly as it reads the
 same level of SLIDE.
+With `associated` (a series made from a slide with associated images): pydicom reads each of
+the series' LABEL, OVERVIEW and THUMBNAIL instances (one JPEG frame, the whole image, in the
+levels' series), highdicom parses the thumbnail (it cannot open a TILED_FULL image without
+Pixel Spacing, which a label and an overview leave out), wsidicom reads the label and the overview, and OpenSlide
+4 lists them as `label`, `macro` and `thumbnail`; each within JPEG's error of SLIDE's page as
+tifffile decodes it.
 Prints one JSON line of what it measured; exits 1 with the reason on a mismatch.
 """
 
@@ -50,7 +57,7 @@ def rgb_or_grey(a, channels):
 
 def check_instances(directory, src, tile, measured):
     n = levels_of(src, tile)
-    paths = sorted(glob.glob(os.path.join(directory, "*.dcm")))
+    paths = sorted(glob.glob(os.path.join(directory, "level-*.dcm")))
     if len(paths) != n:
         fail(f"{len(paths)} instances, expected {n} (one a level)")
     h, w = src.shape[:2]
@@ -189,7 +196,7 @@ def check_levels(directory, slide_path):
     measured = {}
     theirs = openslide.OpenSlide(slide_path)
     n = theirs.level_count
-    paths = sorted(glob.glob(os.path.join(directory, "*.dcm")))
+    paths = sorted(glob.glob(os.path.join(directory, "level-*.dcm")))
     if len(paths) != n:
         fail(f"{len(paths)} instances, the slide has {n} levels")
     # The slide's levels as tifffile finds them: the tiled pages of the main chain, largest
@@ -251,9 +258,82 @@ def check_levels(directory, slide_path):
     print(json.dumps(measured))
 
 
+def associated_pages(slide_path):
+    """The slide's associated images as tifffile decodes them, by kind, as the Aperio
+    descriptions name them (the second page, in strips, is the thumbnail)."""
+    import tifffile
+
+    out = {}
+    with tifffile.TiffFile(slide_path) as t:
+        for i, page in enumerate(t.pages):
+            words = (page.description or "").lower().replace("\n", " ").split()
+            kind = next((k for k in ("label", "macro", "thumbnail") if k in words), None)
+            if kind is None and i == 1 and not page.is_tiled:
+                kind = "thumbnail"
+            if kind:
+                out[kind] = page.asarray()
+    return out
+
+
+def check_associated(directory, slide_path):
+    import highdicom
+    import openslide
+    from wsidicom import WsiDicom
+
+    measured = {}
+    want = associated_pages(slide_path)
+    types = {"label": "LABEL", "macro": "OVERVIEW", "thumbnail": "THUMBNAIL"}
+    names = {"label": "label.dcm", "macro": "overview.dcm", "thumbnail": "thumbnail.dcm"}
+    series = pydicom.dcmread(os.path.join(directory, "level-0.dcm")).SeriesInstanceUID
+    for kind, pixels in want.items():
+        p = os.path.join(directory, names[kind])
+        ds = pydicom.dcmread(p)
+        h, w = pixels.shape[:2]
+        expect = {
+            "SOPClassUID": WSI,
+            "SeriesInstanceUID": series,
+            "NumberOfFrames": 1,
+            "Rows": h,
+            "Columns": w,
+            "TotalPixelMatrixRows": h,
+            "TotalPixelMatrixColumns": w,
+        }
+        for key, value in expect.items():
+            if ds.get(key) != value:
+                fail(f"{kind}: {key} {ds.get(key)!r}, expected {value!r}")
+        if list(ds.ImageType)[2] != types[kind]:
+            fail(f"{kind}: Image Type {list(ds.ImageType)}")
+        if ds.file_meta.TransferSyntaxUID != JPEG_BASELINE:
+            fail(f"{kind}: transfer syntax {ds.file_meta.TransferSyntaxUID}")
+        # highdicom reads a TILED_FULL image's Pixel Spacing, which a label's and an
+        # overview's photograph has not (type 1C: the IOD asks it of VOLUME and THUMBNAIL
+        # images only; dciodvfy checks it).
+        if kind == "thumbnail" and highdicom.imread(p).SOPClassUID != WSI:
+            fail(f"highdicom: {kind}")
+        compare(f"pydicom {kind}", rgb_or_grey(ds.pixel_array, 3), rgb_or_grey(pixels, 3), "jpeg", measured)
+    with WsiDicom.open(directory) as slide:
+        if "label" in want:
+            compare("wsidicom label", rgb_or_grey(slide.read_label(), 3), rgb_or_grey(want["label"], 3), "jpeg", measured)
+        if "macro" in want:
+            got = rgb_or_grey(slide.read_overview(), 3)
+            compare("wsidicom overview", got, rgb_or_grey(want["macro"], 3), "jpeg", measured)
+    ours = openslide.OpenSlide(os.path.join(directory, "level-0.dcm"))
+    listed = sorted(ours.associated_images.keys())
+    if listed != sorted(want):
+        fail(f"OpenSlide lists {listed}, the slide has {sorted(want)}")
+    for kind, pixels in want.items():
+        got = np.asarray(ours.associated_images[kind].convert("RGB"))
+        compare(f"openslide {kind}", got, rgb_or_grey(pixels, 3), "jpeg", measured)
+    measured["associated"] = sorted(want)
+    print(json.dumps(measured))
+
+
 def main():
     if sys.argv[1] == "levels":
         check_levels(sys.argv[2], sys.argv[3])
+        return
+    if sys.argv[1] == "associated":
+        check_associated(sys.argv[2], sys.argv[3])
         return
     directory, source_path, tile = sys.argv[1], sys.argv[2], int(sys.argv[3])
     copied_from = sys.argv[4] if len(sys.argv) > 4 else None

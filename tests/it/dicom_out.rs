@@ -428,7 +428,8 @@ fn copied_levels_beside_deep_zoom() {
     assert_eq!(outputs[0]["pyramid"], serde_json::Value::Null, "{json}");
     assert_eq!(outputs[1]["pyramid"], 0, "{json}");
     assert!(web.join("slide.dzi").is_file());
-    assert_eq!(std::fs::read_dir(&dcm).unwrap().count(), 3);
+    // The three levels and the slide's thumbnail.
+    assert_eq!(std::fs::read_dir(&dcm).unwrap().count(), 4);
     dciodvfy(&dcm);
 }
 
@@ -509,4 +510,100 @@ with tifffile.TiffFile(sys.argv[1], mode="r+b") as t:
     let left: Vec<String> =
         std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     assert!(left.iter().all(|n| !n.contains("series")), "left behind: {left:?}");
+}
+
+/// An Aperio-like SVS with a reduced level and every associated image, in Aperio's order:
+/// the full resolution, the thumbnail (JPEG strips), a reduced level, the label (LZW strips)
+/// and the macro (JPEG strips).
+const MAKE_SVS_WITH_LABEL: &str = r#"
+import sys, numpy as np, tifffile
+def picture(h, w, seed):
+    y, x = np.mgrid[0:h, 0:w]
+    img = np.stack([x * 255 // w, y * 255 // h, (x // 3 + y // 5) & 255], -1).astype(np.int32)
+    img += np.random.default_rng(seed).integers(0, 16, img.shape)
+    return np.clip(img, 0, 255).astype(np.uint8)
+h, w = 1000, 1500
+img = picture(h, w, 7)
+head = "Aperio Image Library v12.0.15 \r\n%dx%d" % (w, h)
+kw = dict(compression="jpeg", compressionargs={"level": 80}, photometric="ycbcr", subsampling=(2, 2), metadata=None)
+label = picture(230, 190, 8)
+label[40:60, 20:170] = 0
+macro = picture(300, 820, 9)
+with tifffile.TiffWriter(sys.argv[1]) as t:
+    t.write(img, tile=(256, 256), description=head + " [0,0 %dx%d] (256x256) JPEG/YCC Q=80|AppMag = 20|MPP = 0.5" % (w, h), **kw)
+    t.write(img[::8, ::8].copy(), compression="jpeg", photometric="rgb", description=head + " -> thumbnail", metadata=None)
+    t.write(img[::4, ::4].copy(), tile=(256, 256), description=head + " -> 375x250", **kw)
+    t.write(label, compression="lzw", photometric="rgb", rowsperstrip=16, description="Aperio Image Library v12.0.15\r\nlabel 190x230", metadata=None)
+    t.write(macro, compression="jpeg", photometric="rgb", rowsperstrip=32, description="Aperio Image Library v12.0.15\r\nmacro 820x300", metadata=None)
+"#;
+
+/// A slide's label, overview (macro) and thumbnail are carried into the series as their own
+/// instances (LABEL, OVERVIEW, THUMBNAIL, in the levels' series), valid for dciodvfy, read by
+/// pydicom, highdicom, wsidicom and OpenSlide 4 (its `label`, `macro`, `thumbnail`) within
+/// JPEG's error of the slide's pages (they are decoded and encoded again: 30 dB, as every
+/// encoded frame); `--json` lists them; `--no-associated` leaves them out, saying how many.
+#[test]
+fn a_slide_s_associated_images_are_instances_of_the_series() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let svs = dir.path().join("slide.svs");
+    crate::tiff_slides::python(python.as_os_str(), MAKE_SVS_WITH_LABEL, &[s(&svs)]);
+    let out = dir.path().join("series");
+    let json = json_of(&ok(&["split", s(&svs), "--layout", "dicom", "-o", s(&out), "--json"]));
+    let dicom = &json["dicom"];
+    assert_eq!(dicom["levels"], "stored", "{json}");
+    assert_eq!(dicom["instances"], 2, "{json}");
+    let kinds: Vec<&str> =
+        dicom["associated"].as_array().unwrap().iter().map(|a| a["kind"].as_str().unwrap()).collect();
+    assert_eq!(kinds, ["thumbnail", "label", "overview"], "{json}");
+    assert_eq!(dicom["associated"][1]["width"], 190, "{json}");
+    assert_eq!(dicom["associated"][1]["from"], "page 3", "{json}");
+    assert_eq!(dicom["associatedLeftOut"], 0, "{json}");
+    let names: Vec<String> = files(&out).into_iter().map(|(n, _)| n).collect();
+    assert_eq!(names, ["label.dcm", "level-0.dcm", "level-1.dcm", "overview.dcm", "thumbnail.dcm"]);
+    dciodvfy(&out);
+    let script = Command::new(&python).args([SCRIPT, "associated", s(&out), s(&svs)]).output().unwrap();
+    let said = format!("{}{}", String::from_utf8_lossy(&script.stdout), String::from_utf8_lossy(&script.stderr));
+    assert!(script.status.success(), "{}: {said}", out.display());
+    eprintln!("{said}");
+
+    let bare = dir.path().join("bare");
+    let said = ok(&["split", s(&svs), "--layout", "dicom", "-o", s(&bare), "--no-associated", "--json"]);
+    let json = json_of(&said);
+    assert_eq!(json["dicom"]["associated"], serde_json::json!([]), "{json}");
+    assert_eq!(json["dicom"]["associatedLeftOut"], 3, "{json}");
+    let names: Vec<String> = files(&bare).into_iter().map(|(n, _)| n).collect();
+    assert_eq!(names, ["level-0.dcm", "level-1.dcm"]);
+    let said = run(&["split", s(&svs), "--layout", "dicom", "-o", s(&bare)]);
+    let line = format!("{}{}", String::from_utf8_lossy(&said.stdout), String::from_utf8_lossy(&said.stderr));
+    assert!(line.contains("label 190x230 (page 3)"), "{line}");
+    let web = dir.path().join("web");
+    fails_with(
+        &run(&["split", s(&svs), "--layout", "dzi", "-o", s(&web), "--no-associated"]),
+        &["--no-associated belongs to --layout dicom"],
+    );
+
+    // A damaged associated image (the macro's JPEG strip zeroed) fails the run naming the
+    // file and the image, and leaves no series; --no-associated converts the slide.
+    let damaged = dir.path().join("damaged.svs");
+    let mut bytes = std::fs::read(&svs).unwrap();
+    let macro_strip = r#"
+import sys, tifffile
+with tifffile.TiffFile(sys.argv[1]) as t:
+    p = t.pages[4]
+    print(p.dataoffsets[0], p.databytecounts[0])
+"#;
+    let out_py = Command::new(&python).args(["-c", macro_strip, s(&svs)]).output().unwrap();
+    let said = String::from_utf8_lossy(&out_py.stdout).into_owned();
+    let [at, len]: [usize; 2] =
+        said.split_whitespace().map(|v| v.parse().unwrap()).collect::<Vec<_>>().try_into().unwrap();
+    bytes[at..at + len].fill(0);
+    std::fs::write(&damaged, &bytes).unwrap();
+    let series = dir.path().join("damaged-series");
+    fails_with(
+        &run(&["split", s(&damaged), "--layout", "dicom", "-o", s(&series)]),
+        &["damaged.svs", "the overview (page 4)", "--no-associated"],
+    );
+    assert!(!series.exists());
+    ok(&["split", s(&damaged), "--layout", "dicom", "-o", s(&series), "--no-associated", "-q"]);
 }

@@ -16,20 +16,89 @@ use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
 use super::frames::Offsets;
 use super::meta::{KEYWORDS, Vr};
 use super::uid::{self, Uids};
-use super::{JPEG_BASELINE, Photometric, SOP_CLASS, Spec};
+use super::{JPEG_BASELINE, Level, Photometric, SOP_CLASS, Spec};
 use crate::error::{Result, TilerError};
+use crate::source::associated::Kind;
 
 /// The name the files give their writer (the File Meta's Implementation Version Name, and
 /// the default Manufacturer and model).
 const PROGRAM: &str = "vortex-tiler";
 
-/// The Image Type (and frame type) of a level: the full resolution as scanned, the others
-/// derived from it by resampling.
-fn image_type(lod: u32) -> [&'static str; 4] {
-    match lod {
-        0 => ["ORIGINAL", "PRIMARY", "VOLUME", "NONE"],
-        _ => ["DERIVED", "PRIMARY", "VOLUME", "RESAMPLED"],
+/// What one instance of the series is: a level of the pyramid or an associated image.
+pub(super) struct Part {
+    /// Instance Number.
+    pub number: u32,
+    /// What its SOP Instance UID is a hash of.
+    pub role: String,
+    /// Image Type (and the frames' Frame Type).
+    pub image_type: [&'static str; 4],
+    /// Its Total Pixel Matrix and frames.
+    pub level: Level,
+    pub photometric: Photometric,
+    /// Pixel Spacing (rows, columns) in mm, where known: the levels' and the thumbnail's
+    /// (each covers the scanned image), not a label's or an overview's (photographs).
+    pub spacing: Option<(f64, f64)>,
+    /// Whether the slide's label shows in the image (a label; an overview, which photographs
+    /// the whole glass slide).
+    pub label_in_image: bool,
+}
+
+impl Part {
+    /// Level `lod` of `spec`: the full resolution as scanned, the others derived from it by
+    /// resampling.
+    pub fn level(spec: &Spec, lod: u32) -> Part {
+        let image_type = match lod {
+            0 => ["ORIGINAL", "PRIMARY", "VOLUME", "NONE"],
+            _ => ["DERIVED", "PRIMARY", "VOLUME", "RESAMPLED"],
+        };
+        let level = spec.level(lod);
+        Part {
+            number: lod + 1,
+            role: format!("instance {lod}"),
+            image_type,
+            level,
+            photometric: spec.photometric,
+            spacing: Some(spacing(spec, level)),
+            label_in_image: false,
+        }
     }
+
+    /// Associated image `k` of `spec`, of `photometric` frames: one frame, the whole image
+    /// (PS3.3 C.8.12.4.1.1: LABEL and OVERVIEW as photographed, THUMBNAIL resampled).
+    pub fn associated(spec: &Spec, k: usize, photometric: Photometric) -> Option<Part> {
+        let image = spec.associated.get(k)?;
+        let level = Level { width: image.width, height: image.height, frame: (image.width, image.height) };
+        let (image_type, label_in_image) = match image.kind {
+            Kind::Label => (["ORIGINAL", "PRIMARY", "LABEL", "NONE"], true),
+            Kind::Overview => (["ORIGINAL", "PRIMARY", "OVERVIEW", "NONE"], true),
+            Kind::Thumbnail => (["DERIVED", "PRIMARY", "THUMBNAIL", "RESAMPLED"], false),
+        };
+        Some(Part {
+            number: spec.level_count() + 1 + k as u32,
+            role: format!("associated {k} {}", image.kind.name()),
+            image_type,
+            level,
+            photometric,
+            spacing: (image.kind == Kind::Thumbnail).then(|| spacing(spec, level)),
+            label_in_image,
+        })
+    }
+
+    /// Whether the image is of the scanned area (a level, the thumbnail), which the Imaged
+    /// Volume attributes describe.
+    fn of_the_volume(&self) -> bool {
+        matches!(self.image_type[2], "VOLUME" | "THUMBNAIL")
+    }
+}
+
+/// The pixel spacing (rows, columns) of an image of `level`'s size covering what level 0
+/// covers: level 0's times level 0's size over the image's, per axis.
+fn spacing(spec: &Spec, level: Level) -> (f64, f64) {
+    let l = spec.level(0);
+    (
+        f64::from(l.height) * spec.pixel_mm / f64::from(level.height),
+        f64::from(l.width) * spec.pixel_mm / f64::from(level.width),
+    )
 }
 
 /// A decimal string of at most 16 characters (DS), as exact as that allows.
@@ -100,9 +169,10 @@ pub(super) struct Series<'a> {
 
 impl<'a> Series<'a> {
     pub fn new(spec: &'a Spec) -> Result<Series<'a>> {
-        let icc = match spec.photometric {
-            Photometric::Monochrome => None,
-            _ => Some(srgb_profile()?),
+        // Colour instances state the sRGB profile (a grey series' associated images may be).
+        let icc = match spec.photometric == Photometric::Monochrome && spec.associated.is_empty() {
+            true => None,
+            false => Some(srgb_profile()?),
         };
         Ok(Series { spec, uids: Uids::new(&spec.uid_root, &spec.identity), icc })
     }
@@ -112,26 +182,28 @@ impl<'a> Series<'a> {
         self.uids.of("series")
     }
 
-    /// The File Meta and data set of level `lod`, up to the Pixel Data element: the Extended
-    /// Offset Table where `offsets` do not fit the Basic one. `frame_bytes`: the level's
+    /// The File Meta and data set of instance `part`, up to the Pixel Data element: the
+    /// Extended Offset Table where `offsets` do not fit the Basic one. `frame_bytes`: its
     /// frames as stored, for the compression ratio.
-    pub fn header(&self, lod: u32, offsets: &Offsets, frame_bytes: u64) -> Result<Vec<u8>> {
-        let object = self.dataset(lod, offsets, frame_bytes);
+    pub fn header(&self, part: &Part, offsets: &Offsets, frame_bytes: u64) -> Result<Vec<u8>> {
+        let lod = part.number;
+        let object = self.dataset(part, offsets, frame_bytes);
         let meta = FileMetaTableBuilder::new()
             .transfer_syntax(JPEG_BASELINE)
             .implementation_class_uid(uid::implementation())
             .implementation_version_name(PROGRAM.to_ascii_uppercase().replace('-', "_"));
         let file = object.with_meta(meta).map_err(|e| TilerError::Internal(format!("DICOM file meta: {e}")))?;
         let mut bytes = Vec::new();
-        file.write_all(&mut bytes).map_err(|e| TilerError::Internal(format!("DICOM data set of level {lod}: {e}")))?;
+        file.write_all(&mut bytes)
+            .map_err(|e| TilerError::Internal(format!("DICOM data set of instance {lod}: {e}")))?;
         Ok(bytes)
     }
 
-    fn dataset(&self, lod: u32, offsets: &Offsets, frame_bytes: u64) -> Object {
+    fn dataset(&self, part: &Part, offsets: &Offsets, frame_bytes: u64) -> Object {
         let s = self.spec;
-        // Level 0's image: the pixel spacing of the others follows from its size and theirs.
+        // Level 0's image: the imaged volume.
         let l = s.level(0);
-        let level = s.level(lod);
+        let level = part.level;
         let meta = &s.meta;
         let (width, height) = (level.width, level.height);
         let (columns, rows) = level.grid();
@@ -144,7 +216,7 @@ impl<'a> Series<'a> {
         // SOP Common.
         put(&mut o, tags::SPECIFIC_CHARACTER_SET, VR::CS, "ISO_IR 192");
         put(&mut o, tags::SOP_CLASS_UID, VR::UI, SOP_CLASS);
-        put(&mut o, tags::SOP_INSTANCE_UID, VR::UI, self.uids.of(&format!("instance {lod}")));
+        put(&mut o, tags::SOP_INSTANCE_UID, VR::UI, self.uids.of(&part.role));
         // Patient, General Study, General Series, General Equipment: what the user gave, else
         // empty (type 2).
         for &(keyword, (group, element), vr) in KEYWORDS {
@@ -182,19 +254,23 @@ impl<'a> Series<'a> {
         put(&mut o, tags::FRAME_OF_REFERENCE_UID, VR::UI, self.uids.of("frame of reference"));
         put(&mut o, tags::POSITION_REFERENCE_INDICATOR, VR::LO, "SLIDE_CORNER");
         // General Image, Multi-frame Functional Groups.
-        put(&mut o, tags::INSTANCE_NUMBER, VR::IS, (lod + 1).to_string());
+        put(&mut o, tags::INSTANCE_NUMBER, VR::IS, part.number.to_string());
         put(&mut o, tags::CONTENT_DATE, VR::DA, date);
         put(&mut o, tags::CONTENT_TIME, VR::TM, time);
         put(&mut o, tags::ACQUISITION_DATE_TIME, VR::DT, given("AcquisitionDateTime").unwrap_or(s.made.clone()));
         put(&mut o, tags::NUMBER_OF_FRAMES, VR::IS, frames.to_string());
-        put(&mut o, tags::BURNED_IN_ANNOTATION, VR::CS, "NO");
+        // A label is text; an overview photographs it: either may name the patient.
+        put(&mut o, tags::BURNED_IN_ANNOTATION, VR::CS, if part.label_in_image { "YES" } else { "NO" });
         put(&mut o, tags::VOLUMETRIC_PROPERTIES, VR::CS, "VOLUME");
         // Whole Slide Microscopy Image.
-        put(&mut o, tags::IMAGE_TYPE, VR::CS, strs(&image_type(lod)));
-        let (volume_w, volume_h) = (f64::from(l.width) * s.pixel_mm, f64::from(l.height) * s.pixel_mm);
-        put(&mut o, tags::IMAGED_VOLUME_WIDTH, VR::FL, volume_w as f32);
-        put(&mut o, tags::IMAGED_VOLUME_HEIGHT, VR::FL, volume_h as f32);
-        put(&mut o, tags::IMAGED_VOLUME_DEPTH, VR::FL, 1.0f32);
+        put(&mut o, tags::IMAGE_TYPE, VR::CS, strs(&part.image_type));
+        // Type 1C: required of the images of the scanned area, not of photographs.
+        if part.of_the_volume() {
+            let (volume_w, volume_h) = (f64::from(l.width) * s.pixel_mm, f64::from(l.height) * s.pixel_mm);
+            put(&mut o, tags::IMAGED_VOLUME_WIDTH, VR::FL, volume_w as f32);
+            put(&mut o, tags::IMAGED_VOLUME_HEIGHT, VR::FL, volume_h as f32);
+            put(&mut o, tags::IMAGED_VOLUME_DEPTH, VR::FL, 1.0f32);
+        }
         put(&mut o, tags::TOTAL_PIXEL_MATRIX_COLUMNS, VR::UL, width);
         put(&mut o, tags::TOTAL_PIXEL_MATRIX_ROWS, VR::UL, height);
         put(&mut o, tags::TOTAL_PIXEL_MATRIX_FOCAL_PLANES, VR::UL, 1u32);
@@ -207,12 +283,17 @@ impl<'a> Series<'a> {
             })],
         );
         put(&mut o, tags::IMAGE_ORIENTATION_SLIDE, VR::DS, strs(&["0", "-1", "0", "-1", "0", "0"]));
-        put(&mut o, tags::SPECIMEN_LABEL_IN_IMAGE, VR::CS, "NO");
+        // Slide Label (a label's): what it reads is not known here (type 2, empty).
+        if part.image_type[2] == "LABEL" {
+            empty(&mut o, tags::LABEL_TEXT, VR::UT);
+            empty(&mut o, tags::BARCODE_VALUE, VR::LT);
+        }
+        put(&mut o, tags::SPECIMEN_LABEL_IN_IMAGE, VR::CS, if part.label_in_image { "YES" } else { "NO" });
         put(&mut o, tags::FOCUS_METHOD, VR::CS, "AUTO");
         put(&mut o, tags::EXTENDED_DEPTH_OF_FIELD, VR::CS, "NO");
         put(&mut o, tags::DIMENSION_ORGANIZATION_TYPE, VR::CS, "TILED_FULL");
         // Image Pixel.
-        let p = s.photometric;
+        let p = part.photometric;
         put(&mut o, tags::SAMPLES_PER_PIXEL, VR::US, p.samples());
         put(&mut o, tags::PHOTOMETRIC_INTERPRETATION, VR::CS, p.name());
         if p.samples() > 1 {
@@ -231,7 +312,8 @@ impl<'a> Series<'a> {
             put(&mut o, tags::RESCALE_SLOPE, VR::DS, "1");
         }
         put(&mut o, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "01");
-        let ratio = (frames * s.raw_frame_bytes(lod)) as f64 / frame_bytes.max(1) as f64;
+        let raw = u64::from(level.frame.0) * u64::from(level.frame.1) * u64::from(p.samples());
+        let ratio = (frames * raw) as f64 / frame_bytes.max(1) as f64;
         put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_RATIO, VR::DS, ds(ratio));
         put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_METHOD, VR::CS, "ISO_10918_1");
         // Multi-frame Dimension: the frames' places follow from TILED_FULL.
@@ -278,7 +360,7 @@ impl<'a> Series<'a> {
         sequence(&mut o, tags::ACQUISITION_CONTEXT_SEQUENCE, vec![]);
         // Optical Path: one, brightfield, full spectrum.
         put(&mut o, tags::NUMBER_OF_OPTICAL_PATHS, VR::UL, 1u32);
-        let icc = self.icc.clone();
+        let icc = self.icc.clone().filter(|_| p != Photometric::Monochrome);
         sequence(
             &mut o,
             tags::OPTICAL_PATH_SEQUENCE,
@@ -297,9 +379,7 @@ impl<'a> Series<'a> {
             })],
         );
         // Shared Functional Groups: pixel measures, optical path, frame type.
-        let spacing =
-            (f64::from(l.height) * s.pixel_mm / f64::from(height), f64::from(l.width) * s.pixel_mm / f64::from(width));
-        let frame_type = image_type(lod);
+        let frame_type = part.image_type;
         sequence(
             &mut o,
             tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE,
@@ -308,7 +388,9 @@ impl<'a> Series<'a> {
                     g,
                     tags::PIXEL_MEASURES_SEQUENCE,
                     vec![item(|i| {
-                        put(i, tags::PIXEL_SPACING, VR::DS, strs(&[&ds(spacing.0), &ds(spacing.1)]));
+                        if let Some(spacing) = part.spacing {
+                            put(i, tags::PIXEL_SPACING, VR::DS, strs(&[&ds(spacing.0), &ds(spacing.1)]));
+                        }
                         // Unknown: the nominal 1 um of Imaged Volume Depth, in mm.
                         put(i, tags::SLICE_THICKNESS, VR::DS, "0.001");
                     })],
@@ -372,6 +454,10 @@ mod tests {
             identity: "test".into(),
             made: "20260102030405".into(),
             meta: Default::default(),
+            associated: Vec::new(),
+            quality: 85,
+            associated_bytes: 1 << 20,
+            associated_left_out: 0,
         }
     }
 
@@ -385,13 +471,14 @@ mod tests {
         let series = Series::new(&spec).unwrap();
         let near = Offsets { offsets: vec![0, 10, 20], lengths: vec![2, 2, 2] };
         let far = Offsets { offsets: vec![0, 1 << 31, 1 << 33], lengths: vec![2, 2, 2] };
-        let basic = series.header(0, &near, 6).unwrap();
-        assert_eq!(basic, Series::new(&spec).unwrap().header(0, &near, 6).unwrap(), "the same bytes");
+        let part = Part::level(&spec, 0);
+        let basic = series.header(&part, &near, 6).unwrap();
+        assert_eq!(basic, Series::new(&spec).unwrap().header(&part, &near, 6).unwrap(), "the same bytes");
         assert_eq!(&basic[128..132], b"DICM");
         let eot = [0xE0, 0x7F, 0x01, 0x00, b'O', b'V'];
         let find = |bytes: &[u8], what: &[u8]| bytes.windows(what.len()).position(|w| w == what);
         assert_eq!(find(&basic, &eot), None);
-        let extended = series.header(0, &far, 6).unwrap();
+        let extended = series.header(&part, &far, 6).unwrap();
         let at = find(&extended, &eot).expect("the Extended Offset Table");
         let lengths = find(&extended, &[0xE0, 0x7F, 0x02, 0x00, b'O', b'V']).expect("its lengths");
         // OV: 2 reserved bytes, a 32-bit length, then the 64-bit offsets.

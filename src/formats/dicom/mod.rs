@@ -18,11 +18,15 @@
 //! * `copy`: a slide's own levels as the instances (`--levels stored`): every stored JPEG
 //!   tile of every level copied as a frame, nothing decoded, where all are what DICOM holds.
 //!
+//! After the levels, each of the source's associated images (label, overview, thumbnail:
+//! `source::associated`) is an instance of one frame, encoded at `finish`, unless
+//! `--no-associated` leaves them out.
+//!
 //! Frames are JPEG baseline (1.2.840.10008.1.2.4.50), `TILED_FULL`: whole tiles of the
 //! level's grid in row-major order, the right and bottom ones padded. A JPEG-tiled source's
 //! stored tiles that match the level's photometric interpretation are copied byte for byte
 //! (`takes_stored_jpeg`); a slide's own levels are copied whole (`copy`). Not yet: JPEG 2000
-//! frames, lossless frames, the associated images (label, overview).
+//! frames, lossless frames.
 
 mod copy;
 mod dataset;
@@ -143,6 +147,16 @@ pub(crate) struct Spec {
     pub made: String,
     /// The attributes the user gave.
     pub meta: DicomMeta,
+    /// The source's associated images, each its own instance after the levels (one frame,
+    /// the whole image, decoded and encoded as JPEG at `quality`); empty with
+    /// `--no-associated`.
+    pub associated: Vec<crate::source::associated::Associated>,
+    /// The JPEG quality of the associated images' frames.
+    pub quality: u8,
+    /// The most bytes one associated image may take decoded (`--max-memory`).
+    pub associated_bytes: u64,
+    /// The associated images the source has that `--no-associated` left out.
+    pub associated_left_out: usize,
 }
 
 impl Spec {
@@ -186,8 +200,29 @@ impl Spec {
                 )));
             }
         }
+        for image in &self.associated {
+            if image.width == 0 || image.height == 0 || image.width.max(image.height) > u32::from(u16::MAX) {
+                return Err(TilerError::Options(format!(
+                    "the {} ({}, {}x{}) is one frame, whose Rows and Columns are 16-bit: --no-associated leaves the associated images out",
+                    image.kind.name(),
+                    image.origin(),
+                    image.width,
+                    image.height
+                )));
+            }
+        }
         uid::check_root(&self.uid_root)?;
         Ok(())
+    }
+
+    /// The file name of associated image `k`'s instance: `label.dcm`, `overview.dcm`,
+    /// `thumbnail.dcm`, numbered from the second of a kind on (`label-2.dcm`).
+    pub fn associated_file_name(&self, k: usize) -> String {
+        let kind = self.associated[k].kind;
+        match self.associated[..k].iter().filter(|a| a.kind == kind).count() {
+            0 => format!("{}.dcm", kind.name()),
+            n => format!("{}-{}.dcm", kind.name(), n + 1),
+        }
     }
 
     /// Instances in the series, one a level.
@@ -207,12 +242,6 @@ impl Spec {
                 Level { width, height, frame: (self.layout.tile_size, self.layout.tile_size) }
             }
         }
-    }
-
-    /// Bytes of one frame's samples of level `lod`, uncompressed.
-    pub fn raw_frame_bytes(&self, lod: u32) -> u64 {
-        let (w, h) = self.level(lod).frame;
-        u64::from(w) * u64::from(h) * u64::from(self.photometric.samples())
     }
 
     /// Memory the sink's frame index holds: 12 bytes a frame.
@@ -258,4 +287,45 @@ pub struct DicomSummary {
     /// Why the slide's own levels were not copied where they were asked for (the source is
     /// no pyramid of JPEG tiles, or one DICOM cannot hold as it is).
     pub levels_declined: Option<String>,
+    /// The associated images carried, each its own instance (not counted in `instances`
+    /// and `frames`).
+    pub associated: Vec<AssociatedSummary>,
+    /// The associated images the source has that `--no-associated` left out.
+    pub associated_left_out: usize,
+}
+
+/// One associated image carried into a series.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct AssociatedSummary {
+    /// `label`, `overview` or `thumbnail`.
+    pub kind: &'static str,
+    /// Texels across, as stored (its one frame's Columns).
+    pub width: u32,
+    /// Texels down (its one frame's Rows).
+    pub height: u32,
+    /// Where the source stores it (`page 3`).
+    pub origin: String,
+    /// Its instance's file name in the series' directory.
+    pub file: String,
+    /// The `PhotometricInterpretation` of its frame.
+    pub photometric: &'static str,
+    /// Bytes of its one JPEG frame.
+    pub frame_bytes: u64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every name a series gives its instances is one a later run recognises as its own
+    /// (`output::ours`).
+    #[test]
+    fn instance_names_are_recognised() {
+        let mut names: Vec<String> = (0..12).map(Spec::file_name).collect();
+        names.extend(["label.dcm", "overview.dcm", "thumbnail.dcm", "label-2.dcm"].map(String::from));
+        for name in names {
+            assert!(crate::output::ours::is_dicom_instance_name(&name), "{name}");
+        }
+    }
 }

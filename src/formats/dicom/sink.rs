@@ -12,13 +12,22 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use super::dataset::Series;
+use super::dataset::{Part, Series};
 use super::frames::Staged;
-use super::{DicomSummary, Photometric, Spec};
+use super::{AssociatedSummary, DicomSummary, Photometric, Spec};
 use crate::codec::Subsampling;
 use crate::error::{Result, TilerError};
 use crate::output::{Claim, staging};
 use crate::sink::TileSink;
+
+/// What one instance's file holds.
+struct Written {
+    frames: u64,
+    frame_bytes: u64,
+    file_bytes: u64,
+    /// Whether its frames are located by the Basic Offset Table.
+    basic: bool,
+}
 
 /// A DICOM series as a pipeline sink.
 pub struct DicomSink {
@@ -58,7 +67,8 @@ impl DicomSink {
         Ok(sink)
     }
 
-    /// Writes every level's instance and renames the series into place.
+    /// Writes every level's instance, then each associated image's, and renames the series
+    /// into place.
     pub fn finish(mut self) -> Result<DicomSummary> {
         let levels = std::mem::take(self.levels.get_mut().map_err(|_| TilerError::panicked("a DICOM sink"))?);
         let series = Series::new(&self.spec)?;
@@ -73,34 +83,95 @@ impl DicomSink {
             levels: super::Levels::Pow2,
             levels_copied: !self.spec.copied.is_empty(),
             levels_declined: None,
+            associated: Vec::new(),
+            associated_left_out: self.spec.associated_left_out,
         };
         for (lod, staged) in levels.into_iter().enumerate() {
             let lod = lod as u32;
             let staged = staged.ok_or_else(|| TilerError::Internal("a DICOM sink finished twice".into()))?;
-            let offsets = staged.offsets().ok_or_else(|| {
-                TilerError::Internal(format!("level {lod} of the DICOM series lacks frames at the end"))
-            })?;
-            let basic = offsets.fit_basic();
-            let frame_bytes = staged.frame_bytes();
-            let header = series.header(lod, &offsets, frame_bytes)?;
-            let path = self.staging.join(Spec::file_name(lod));
-            let write = |file: &mut File| -> std::io::Result<u64> {
-                use std::io::Write;
-                file.write_all(&header)?;
-                let n = staged.write_pixel_data(file, &offsets, basic)?;
-                file.sync_all()?;
-                Ok(header.len() as u64 + n)
-            };
-            let mut file = File::create(&path).map_err(|e| TilerError::write(&path, e))?;
-            summary.file_bytes += write(&mut file).map_err(|e| TilerError::write(&path, e))?;
+            let written = self.write_instance(&series, &Part::level(&self.spec, lod), staged, &Spec::file_name(lod))?;
+            summary.file_bytes += written.file_bytes;
             summary.instances += 1;
-            summary.frames += offsets.offsets.len() as u64;
-            summary.frame_bytes += frame_bytes;
-            summary.extended_offsets += u32::from(!basic);
+            summary.frames += written.frames;
+            summary.frame_bytes += written.frame_bytes;
+            summary.extended_offsets += u32::from(!written.basic);
+        }
+        for k in 0..self.spec.associated.len() {
+            summary.associated.push(self.write_associated(&series, k)?);
         }
         staging::replace_dir(&self.staging, &self.dest).map_err(|e| TilerError::write(&self.dest, e))?;
         self.done = true;
         Ok(summary)
+    }
+
+    /// Writes the instance `part` of `staged` frames into the staging directory as `name`.
+    fn write_instance(&self, series: &Series, part: &Part, staged: Staged, name: &str) -> Result<Written> {
+        let number = part.number;
+        let offsets = staged.offsets().ok_or_else(|| {
+            TilerError::Internal(format!("instance {number} of the DICOM series lacks frames at the end"))
+        })?;
+        let basic = offsets.fit_basic();
+        let frame_bytes = staged.frame_bytes();
+        let header = series.header(part, &offsets, frame_bytes)?;
+        let path = self.staging.join(name);
+        let frames = offsets.offsets.len() as u64;
+        let write = |file: &mut File| -> std::io::Result<u64> {
+            use std::io::Write;
+            file.write_all(&header)?;
+            let n = staged.write_pixel_data(file, &offsets, basic)?;
+            file.sync_all()?;
+            Ok(header.len() as u64 + n)
+        };
+        let mut file = File::create(&path).map_err(|e| TilerError::write(&path, e))?;
+        let file_bytes = write(&mut file).map_err(|e| TilerError::write(&path, e))?;
+        Ok(Written { frames, frame_bytes, file_bytes, basic })
+    }
+
+    /// Decodes associated image `k` of the source, encodes it as one JPEG frame (YCbCr 4:2:0,
+    /// or grey, at the series' quality) and writes its instance.
+    fn write_associated(&self, series: &Series, k: usize) -> Result<AssociatedSummary> {
+        let image = &self.spec.associated[k];
+        let pixels = image.decode(self.spec.associated_bytes).map_err(|e| match e {
+            TilerError::Decode { path, message } => TilerError::Decode {
+                path,
+                message: format!("{message} (--no-associated leaves the associated images out)"),
+            },
+            other => other,
+        })?;
+        let photometric = Photometric::of(pixels.channels, Subsampling::S420);
+        let size = (pixels.width, pixels.height);
+        let jpeg = crate::codec::encode_jpeg(
+            &pixels.samples,
+            size,
+            pixels.channels,
+            self.spec.quality,
+            Subsampling::S420,
+            Vec::new(),
+        )
+        .map_err(|message| {
+            TilerError::Internal(format!(
+                "the {} ({}) could not be encoded: {message}",
+                image.kind.name(),
+                image.origin()
+            ))
+        })?;
+        drop(pixels);
+        let name = self.spec.associated_file_name(k);
+        let path = self.staging.join(format!(".{name}.frames"));
+        let mut staged = Staged::create(&path, 1).map_err(|e| TilerError::write(&path, e))?;
+        staged.append(0, &jpeg).map_err(|e| TilerError::write(&path, e))?;
+        let part = Part::associated(&self.spec, k, photometric)
+            .ok_or_else(|| TilerError::Internal(format!("no associated image {k}")))?;
+        let written = self.write_instance(series, &part, staged, &name)?;
+        Ok(AssociatedSummary {
+            kind: image.kind.name(),
+            width: image.width,
+            height: image.height,
+            origin: image.origin(),
+            file: name,
+            photometric: photometric.name(),
+            frame_bytes: written.frame_bytes,
+        })
     }
 
     fn path(&self) -> &Path {

@@ -310,6 +310,12 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
     ))
 }
 
+/// The associated images of the TIFF at `path` (for `source::associated`): each one's kind
+/// (`label`, `macro`, `thumbnail`), directory, width and height.
+pub(crate) fn associated_pages(path: &Path, max_memory: u64) -> Result<Vec<(&'static str, usize, u32, u32)>> {
+    pyramid::associated_pages(path, max_memory)
+}
+
 /// Sample `k` of every texel of page `page` as a grey image: a channel of an image of more
 /// samples than a texel holds (`source::channels`), read by [`kinds`], the reader of samples
 /// as they are stored (together or in planes, whatever the photometric calls them).

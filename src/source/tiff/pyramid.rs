@@ -142,6 +142,17 @@ fn page(decoder: &mut Decoder<BufReader<File>>, description: String) -> Page {
     }
 }
 
+/// The associated images of the file (a slide's label, macro and thumbnail directories, as
+/// [`slide::associated`] recognises them): each one's kind (`label`, `macro`, `thumbnail`),
+/// directory, width and height, in the file's order.
+pub(super) fn associated_pages(path: &Path, max_memory: u64) -> Result<Vec<(&'static str, usize, u32, u32)>> {
+    let (pages, _) = survey(path, max_memory)?;
+    let vendor = slide::recognise(&pages);
+    Ok((0..pages.len())
+        .filter_map(|i| Some((slide::associated(vendor, &pages, i)?, i, pages[i].width, pages[i].height)))
+        .collect())
+}
+
 /// The reduced levels of page `index` in the main chain: the tiled levels after it, each
 /// smaller than the one before, up to the next full-resolution page (another series).
 fn reduced_levels(pages: &[Page], vendor: Vendor, index: usize) -> Vec<usize> {
