@@ -1,5 +1,6 @@
 //! Where a `split` run's time goes, stage by stage: what reading the source takes (on its
-//! own thread), what the producer thread spends waiting for rows and building the pyramid, how
+//! own thread), what decoding its tiles on the pool takes (a JPEG TIFF's bands decoded ahead),
+//! what the producer thread spends waiting for rows and building the pyramid, how
 //! long it waits for the encoders (they are the
 //! bottleneck) and how long the encoders wait for it (it is), and the encoders' and the sink's
 //! share. Measured on every run (a few clock reads per chunk of source rows, per batch of tiles
@@ -29,6 +30,9 @@ const STAGES: usize = Stage::Store as usize + 1;
 pub(crate) enum Stage {
     /// Reading and decoding source rows, on the source's own thread (`source::read_ahead`).
     Read,
+    /// Decoding the source's tiles or strips in tasks on the pool, beside the reading thread
+    /// (a JPEG TIFF's next band): the tasks' time over the pool's threads, as for encoding.
+    Decode,
     /// The producer waiting for source rows.
     ReadWait,
     /// The producer's whole run, waits included.
@@ -95,6 +99,7 @@ impl StageClock {
         let cpu = Split::of(&self.cpu);
         StageTimes {
             read: wall.read,
+            decode: get(&self.wall, Stage::Decode),
             read_wait: wall.read_wait,
             pyramid: wall.pyramid,
             cut: wall.cut,
@@ -104,12 +109,68 @@ impl StageClock {
             store: get(&self.wall, Stage::Store),
             cpu: thread_cpu().map(|_| StageCpu {
                 read: cpu.read,
+                decode: get(&self.cpu, Stage::Decode),
                 pyramid: cpu.pyramid,
                 cut: cpu.cut,
                 encode: get(&self.cpu, Stage::Encode),
                 store: get(&self.cpu, Stage::Store),
             }),
         }
+    }
+}
+
+/// Time spent in tasks on the pool, summed over the tasks: wall and CPU clock, each read on the
+/// thread that runs the task. A source that decodes in such tasks keeps one
+/// (`RowSource::decoding`); `source::read_ahead` adds what it counted in a pass to
+/// [`Stage::Decode`].
+#[derive(Debug, Default)]
+pub(crate) struct TaskClock {
+    wall: AtomicU64,
+    cpu: AtomicU64,
+}
+
+impl TaskClock {
+    /// Runs `f`, adding its wall time and this thread's CPU time in it.
+    pub(crate) fn time<R>(&self, f: impl FnOnce() -> R) -> R {
+        let started = Instant::now();
+        let cpu = thread_cpu();
+        let result = f();
+        let cpu = cpu.zip(thread_cpu()).map(|(from, to)| to.saturating_sub(from));
+        add(&self.cpu, cpu.unwrap_or_default());
+        add(&self.wall, started.elapsed());
+        result
+    }
+
+    /// The time counted so far.
+    pub(crate) fn total(&self) -> Decoding {
+        let get = |clock: &AtomicU64| Duration::from_nanos(clock.load(Ordering::Relaxed));
+        Decoding { wall: get(&self.wall), cpu: get(&self.cpu) }
+    }
+}
+
+/// Time a source has spent decoding in tasks on the pool since it was opened, summed over the
+/// tasks (`RowSource::decoding`): the `decode` stage of a run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Decoding {
+    /// The tasks' wall time, added up.
+    pub wall: Duration,
+    /// Their CPU time (user and system), added up; zero where the platform has no per-thread
+    /// CPU clock.
+    pub cpu: Duration,
+}
+
+impl Decoding {
+    /// What was spent after `earlier`, an earlier reading of the same source's clock.
+    pub fn since(self, earlier: Decoding) -> Decoding {
+        Decoding { wall: self.wall.saturating_sub(earlier.wall), cpu: self.cpu.saturating_sub(earlier.cpu) }
+    }
+}
+
+/// Two sources' decoding together (channels read from several).
+impl std::ops::Add for Decoding {
+    type Output = Decoding;
+    fn add(self, other: Decoding) -> Decoding {
+        Decoding { wall: self.wall + other.wall, cpu: self.cpu + other.cpu }
     }
 }
 
@@ -182,6 +243,9 @@ pub(crate) fn thread_cpu() -> Option<Duration> {
 pub struct StageTimes {
     /// Reading and decoding the source (on its own thread).
     pub read: Duration,
+    /// Decoding the source's tiles in tasks on the pool (a JPEG TIFF's bands decoded ahead of
+    /// the reading thread), per pool thread: the tasks' time divided by the pool's threads.
+    pub decode: Duration,
     /// The producer waiting for source rows.
     pub read_wait: Duration,
     /// Building the pyramid, and cutting tiles where `cut` is zero (the producer's time not
@@ -203,15 +267,17 @@ pub struct StageTimes {
 
 /// CPU time (user and system) per stage of a finished run, read from the CPU clock of the
 /// thread that runs each stage around the same calls as its wall time: the reading thread's
-/// reading, the producer's sums (and cutting where `cut` is zero), the cutting thread's cutting,
-/// every encoding task's (summed over the pool's threads, not divided by them as the wall time
-/// is) and the writer's storing. Not counted: threads a source decodes on besides its reading
-/// thread (a compressed TIFF's strip workers, a tiled JPEG TIFF's tiles decoded on the pool),
-/// the encoders' caller and the process's start and end; the process's CPU time is the
-/// stages' and these.
+/// reading, the decoding tasks' and the encoding tasks' (summed over the pool's threads, not
+/// divided by them as the wall time is), the producer's sums (and cutting where `cut` is
+/// zero), the cutting thread's cutting and the writer's storing. Not counted: threads a source
+/// decodes on besides its reading thread and the pool (a Deflate or LZW TIFF's strip workers),
+/// tiles a source other than a JPEG TIFF decodes on the pool (JPEG 2000, NDPI, `convert`'s
+/// inputs), the encoders' caller and the process's start and end; the process's CPU time is
+/// the stages' and these.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StageCpu {
     pub read: Duration,
+    pub decode: Duration,
     pub pyramid: Duration,
     pub cut: Duration,
     pub encode: Duration,
@@ -221,7 +287,7 @@ pub struct StageCpu {
 impl StageCpu {
     /// The stages' CPU time together.
     pub fn total(&self) -> Duration {
-        self.read + self.pyramid + self.cut + self.encode + self.store
+        self.read + self.decode + self.pyramid + self.cut + self.encode + self.store
     }
 }
 

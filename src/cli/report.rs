@@ -200,6 +200,7 @@ fn stages_json(t: &vortex_tiler::split::StageTimes) -> serde_json::Value {
     let cpu = t.cpu.map(|c| {
         serde_json::json!({
             "readSeconds": c.read.as_secs_f64(),
+            "decodeSeconds": c.decode.as_secs_f64(),
             "pyramidSeconds": c.pyramid.as_secs_f64(),
             "cutSeconds": c.cut.as_secs_f64(),
             "encodeSeconds": c.encode.as_secs_f64(),
@@ -208,6 +209,7 @@ fn stages_json(t: &vortex_tiler::split::StageTimes) -> serde_json::Value {
     });
     serde_json::json!({
         "readSeconds": t.read.as_secs_f64(),
+        "decodeSeconds": t.decode.as_secs_f64(),
         "readWaitSeconds": t.read_wait.as_secs_f64(),
         "pyramidSeconds": t.pyramid.as_secs_f64(),
         "cutSeconds": t.cut.as_secs_f64(),
@@ -224,8 +226,9 @@ fn stages_json(t: &vortex_tiler::split::StageTimes) -> serde_json::Value {
 pub fn stages_line(t: &vortex_tiler::split::StageTimes, width: u32, height: u32) -> String {
     let mpx = (width as f64 * height as f64 / 1e6).max(1e-9);
     let wall = format!(
-        "wall s: read {:.2}, pyramid {:.2}, cut {:.2}, encode {:.2} per encoder, store {:.2}",
+        "wall s: read {:.2}, decode {:.2} per pool thread, pyramid {:.2}, cut {:.2}, encode {:.2} per encoder, store {:.2}",
         t.read.as_secs_f64(),
+        t.decode.as_secs_f64(),
         t.pyramid.as_secs_f64(),
         t.cut.as_secs_f64(),
         t.encode.as_secs_f64(),
@@ -234,8 +237,9 @@ pub fn stages_line(t: &vortex_tiler::split::StageTimes, width: u32, height: u32)
     let Some(c) = t.cpu else { return format!("stages (no per-thread CPU clock here): {wall}") };
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3 / mpx;
     format!(
-        "stages, CPU ms per source Mpx: read {:.1}, pyramid {:.1}, cut {:.1}, encode {:.1}, store {:.1} (together {:.1}); {wall}",
+        "stages, CPU ms per source Mpx: read {:.1}, decode {:.1}, pyramid {:.1}, cut {:.1}, encode {:.1}, store {:.1} (together {:.1}); {wall}",
         ms(c.read),
+        ms(c.decode),
         ms(c.pyramid),
         ms(c.cut),
         ms(c.encode),

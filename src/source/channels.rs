@@ -448,6 +448,10 @@ impl RowSource for Interleave {
         self.sources.iter().map(|s| s.most_buffer_bytes()).sum()
     }
 
+    fn decoding(&self) -> super::Decoding {
+        self.sources.iter().map(|s| s.decoding()).fold(super::Decoding::default(), |a, b| a + b)
+    }
+
     fn describe(&self) -> String {
         let inner = self.sources[0].describe();
         match (self.sources.len(), self.pick) {

@@ -12,7 +12,7 @@
 /// The row-order methods of a [`RowSource`] that wraps another in its field `inner` and changes
 /// what its rows hold but not which rows come (ICC conversion, widened or mapped samples, picked
 /// channels): rewinding, skipping and narrowing go straight to the wrapped source, and the
-/// decoder's buffers are the wrapped source's (`forward_row_order_to_inner!(field)`: plus the
+/// decoder's buffers and decoding time are the wrapped source's (`forward_row_order_to_inner!(field)`: plus the
 /// bytes the wrapper's `u64` field says it holds).
 macro_rules! forward_row_order_to_inner {
     (@order) => {
@@ -38,6 +38,10 @@ macro_rules! forward_row_order_to_inner {
         fn most_buffer_bytes(&self) -> u64 {
             self.inner.most_buffer_bytes()
         }
+
+        fn decoding(&self) -> $crate::source::Decoding {
+            self.inner.decoding()
+        }
     };
     ($held:ident) => {
         forward_row_order_to_inner!(@order);
@@ -48,6 +52,10 @@ macro_rules! forward_row_order_to_inner {
 
         fn most_buffer_bytes(&self) -> u64 {
             self.inner.most_buffer_bytes() + self.$held
+        }
+
+        fn decoding(&self) -> $crate::source::Decoding {
+            self.inner.decoding()
         }
     };
 }
@@ -72,6 +80,7 @@ mod whole;
 pub(crate) mod xml;
 
 pub(crate) use crate::decode::{decode_tile, decode_tile_within, probe_tile};
+pub use crate::stages::Decoding;
 
 use std::fs::File;
 use std::io::Read;
@@ -124,6 +133,13 @@ pub trait RowSource: Send {
     /// what it holds once open: sources whose buffers are all allocated at open say no more.
     fn most_buffer_bytes(&self) -> u64 {
         self.buffer_bytes()
+    }
+    /// The time the source has spent decoding in tasks on the rayon pool since it was opened
+    /// (a JPEG TIFF's next band, decoded while this one's rows are read), summed over the
+    /// tasks: what `split --json` reports as the `decode` stage. Zero where all the decoding is
+    /// done inside [`read_row`](Self::read_row), on the reading thread, and counted there.
+    fn decoding(&self) -> Decoding {
+        Decoding::default()
     }
     /// Starts again from the first row: an image too wide for one band is read once per
     /// vertical stripe. Sources that cannot say so.
@@ -321,6 +337,11 @@ impl RowSource for Reopening {
     }
     fn most_buffer_bytes(&self) -> u64 {
         self.inner.most_buffer_bytes()
+    }
+    /// The file opened last's: a stripe's pass (`source::read_ahead`) counts what its reading
+    /// added, and a rewind comes between passes.
+    fn decoding(&self) -> Decoding {
+        self.inner.decoding()
     }
     fn read_columns(&mut self, columns: std::ops::Range<u32>) -> bool {
         self.inner.read_columns(columns)

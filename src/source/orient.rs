@@ -288,6 +288,10 @@ impl RowSource for Oriented {
         )
     }
 
+    fn decoding(&self) -> crate::source::Decoding {
+        self.inner.decoding()
+    }
+
     fn rewind(&mut self) -> Result<()> {
         self.next = 0;
         if self.orientation.value() == 2 {

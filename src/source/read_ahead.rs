@@ -6,13 +6,14 @@
 //! source is left at the same position. With chunks of 0 rows it reads on the caller's thread
 //! (runs short of memory: striped ones). `chunks` hands the chunks themselves over, for a
 //! caller that passes them on to another thread; a `Chunk` goes back to the reader when it is
-//! dropped, wherever that is.
+//! dropped, wherever that is. What the source decoded in tasks on the pool meanwhile (a JPEG
+//! TIFF's next band) goes to the `decode` stage.
 
 use std::sync::mpsc::{Sender, channel, sync_channel};
 
 use crate::error::{Result, TilerError};
 use crate::limits::Part;
-use crate::source::RowSource;
+use crate::source::{Decoding, RowSource};
 use crate::stages::{Stage, StageClock};
 
 use crate::limits::read_ahead::CHUNKS_AHEAD;
@@ -42,7 +43,8 @@ impl<T> Drop for Chunk<T> {
 /// of `chunk_rows` (0: on this thread, one row at a time), and calls `each` with every row, in
 /// order, on this one. Stops at the first error of either side (the
 /// reader then stops after at most the chunk it is reading). The reader's time goes to
-/// [`Stage::Read`], the caller's waits for rows to [`Stage::ReadWait`].
+/// [`Stage::Read`], the caller's waits for rows to [`Stage::ReadWait`], the source's decoding
+/// on the pool to [`Stage::Decode`].
 pub(crate) fn rows<T: bytemuck::Pod + Send>(
     source: &mut dyn RowSource,
     count: u64,
@@ -55,12 +57,14 @@ pub(crate) fn rows<T: bytemuck::Pod + Send>(
         let mut row = vec![T::zeroed(); row_len];
         let row_bytes = (row_len * size_of::<T>()) as i64;
         clock.memory.add(Part::ReadAhead, row_bytes);
+        let decoded = source.decoding();
         let result = (0..count).try_for_each(|_| {
             // Read on this thread: the caller waits for every row.
             clock.time_all(&[Stage::Read, Stage::ReadWait], || source.read_row(bytemuck::cast_slice_mut(&mut row)))?;
             clock.memory.set(Part::Decoder, source.buffer_bytes());
             each(&row)
         });
+        count_decoding(clock, source, decoded);
         clock.memory.add(Part::ReadAhead, -row_bytes);
         return result;
     }
@@ -86,6 +90,7 @@ pub(crate) fn chunks<T: bytemuck::Pod + Send>(
         // comes back to be read into again).
         let reader = std::thread::Builder::new().name("vortex-read".into()).spawn_scoped(scope, move || {
             let (mut left, mut allocated) = (count, 0);
+            let decoded = source.decoding();
             while left > 0 {
                 let n = left.min(per_chunk);
                 // A chunk the caller has finished with, or a new one.
@@ -106,6 +111,7 @@ pub(crate) fn chunks<T: bytemuck::Pod + Send>(
                 }
                 left -= n;
             }
+            count_decoding(clock, source, decoded);
             allocated
         });
         let reader =
@@ -123,6 +129,16 @@ pub(crate) fn chunks<T: bytemuck::Pod + Send>(
         clock.memory.add(Part::ReadAhead, -allocated);
         used
     })
+}
+
+/// Adds what `source` decoded on the pool since `before` to [`Stage::Decode`]: the tasks' CPU
+/// time, and their wall time over the pool's threads (as the encoders' is).
+fn count_decoding(clock: &StageClock, source: &dyn RowSource, before: Decoding) {
+    let decoded = source.decoding().since(before);
+    if decoded != Decoding::default() {
+        clock.add(Stage::Decode, decoded.wall / rayon::current_num_threads().max(1) as u32);
+        clock.add_cpu(Stage::Decode, decoded.cpu);
+    }
 }
 
 #[cfg(test)]

@@ -379,3 +379,47 @@ fn convert_copies_jpeg_cells() {
     assert_eq!(done["copied"], 0, "{done}");
     assert!(done.get("storedTiles").is_none(), "{done}");
 }
+
+/// The next row of tiles decoded on the pool while this one's rows are read (issue 45) changes
+/// no byte: a JPEG-tiled TIFF of 8 tile rows (RGB and YCbCr 4:2:0; the finest level copied,
+/// the others made from the decoded tiles) makes the same pack with one pool thread and with three, and the same tile
+/// directory as a run under a budget that leaves no room for a second row of tiles (and so cuts
+/// it in stripes: a pack's order would differ, its tiles not).
+#[test]
+fn decoding_ahead_changes_no_byte() {
+    if !have_vips() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = pattern_png_sized(dir.path(), 1000, 900);
+    let tiled = ["--tile", "--tile-width", "128", "--tile-height", "128", "--compression", "jpeg"];
+    for (name, quality) in [("rgb", "90"), ("ycbcr", "75")] {
+        let tiff = dir.path().join(format!("{name}.tif"));
+        tool("vips", &[&["tiffsave", s(&png), s(&tiff)], &tiled[..], &["--Q", quality]].concat());
+        let mut outputs = Vec::new();
+        // 2 MiB: a row of tiles is 375 KiB, two more than a quarter of it.
+        let runs = [
+            ("--pack", "--threads", "1"),
+            ("--pack", "--threads", "3"),
+            ("-o", "--threads", "2"),
+            ("-o", "--max-memory", "2M"),
+        ];
+        for (run, (to, flag, value)) in runs.into_iter().enumerate() {
+            let out = dir.path().join(format!("{name}-{run}"));
+            let args = ["split", s(&tiff), to, s(&out), "--tile-size", "128", "--border", "0", flag, value];
+            let doc = json(&args);
+            let what = format!("{name} with {to} {flag} {value}: {doc}");
+            let ahead = doc["source"].as_str().unwrap().contains("decoded ahead");
+            assert_eq!(ahead, flag == "--threads", "{what}");
+            assert!(doc["copied"].as_u64().unwrap() > 0 && doc["encoded"].as_u64().unwrap() > 0, "{what}");
+            // The tiles are decoded on the pool, ahead or not: the `decode` stage.
+            assert!(doc["stages"]["decodeSeconds"].as_f64().unwrap() > 0.0, "{what}");
+            outputs.push(match to {
+                "--pack" => BTreeMap::from([(String::new(), std::fs::read(&out).unwrap())]),
+                _ => files(&out),
+            });
+        }
+        assert!(outputs[0] == outputs[1], "{name}: the packs differ");
+        assert!(outputs[2] == outputs[3], "{name}: the tile directories differ");
+    }
+}

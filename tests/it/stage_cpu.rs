@@ -2,7 +2,8 @@
 //! CPU milliseconds per source megapixel, read from the CPU clock of the thread that runs each
 //! stage. No durations are compared with expectations: only what must hold however loaded the
 //! machine is (a thread spends no more CPU than the time that passes; the stages' CPU is part
-//! of the process's; encoding tiles takes some).
+//! of the process's; encoding tiles takes some, and so does decoding a JPEG TIFF's tiles on the
+//! pool).
 
 use std::path::Path;
 
@@ -11,7 +12,8 @@ use crate::common::cli::{self, s};
 use tiff::encoder::{TiffEncoder, colortype};
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
 
-const CPU_STAGES: [&str; 5] = ["readSeconds", "pyramidSeconds", "cutSeconds", "encodeSeconds", "storeSeconds"];
+const CPU_STAGES: [&str; 6] =
+    ["readSeconds", "decodeSeconds", "pyramidSeconds", "cutSeconds", "encodeSeconds", "storeSeconds"];
 
 /// A `width x height` random RGB TIFF in strips of 16 rows.
 fn strip_tiff(path: &Path, width: u32, height: u32) {
@@ -43,13 +45,21 @@ fn json_says_what_cpu_each_stage_spent_within_the_process() {
     // and under a budget that stripes the run, reading on the pyramid's thread, into a directory.
     let pack = dir.path().join("out.vtpk");
     let tree = dir.path().join("tree");
-    let runs: [(&str, Vec<&str>); 2] = [
-        ("pack, read ahead", vec!["--pack", s(&pack)]),
-        ("directory, striped", vec!["-o", s(&tree), "--max-memory", "2M"]),
+    let mut runs: Vec<(&str, &Path, Vec<&str>)> = vec![
+        ("pack, read ahead", &source, vec!["--pack", s(&pack)]),
+        ("directory, striped", &source, vec!["-o", s(&tree), "--max-memory", "2M"]),
     ];
-    for (what, output) in runs {
+    // A JPEG-tiled TIFF, its tiles decoded on the pool beside the reading thread.
+    let jpeg = dir.path().join("jpeg.tif");
+    if crate::common::have_program("tiffcp", "-h", "libtiff-tools") {
+        let args = ["-c", "jpeg", "-t", "-w", "128", "-l", "128", s(&source), s(&jpeg)];
+        let out = std::process::Command::new("tiffcp").args(args).output().unwrap();
+        assert!(out.status.success(), "tiffcp: {}", String::from_utf8_lossy(&out.stderr));
+        runs.push(("JPEG tiles, pack", &jpeg, vec!["--pack", s(&pack)]));
+    }
+    for (what, input, output) in runs {
         let before = children_cpu_seconds();
-        let mut args = vec!["split", s(&source), "--tile-size", "128", "--force", "--json"];
+        let mut args = vec!["split", s(input), "--tile-size", "128", "--force", "--json"];
         args.extend(output);
         let out = cli::ok(&args);
         // This run's CPU time, and that of any other test's child reaped meanwhile: a bound.
@@ -69,6 +79,11 @@ fn json_says_what_cpu_each_stage_spent_within_the_process() {
         let total: f64 = CPU_STAGES.iter().map(|name| seconds(name)).sum();
         assert!(total <= process, "{what}: the stages' {total} s of CPU over the process's {process} s: {stages}");
         assert!(seconds("encodeSeconds") > 0.0, "{what}: tiles were encoded: {stages}");
+        assert_eq!(
+            seconds("decodeSeconds") > 0.0,
+            what.starts_with("JPEG"),
+            "{what}: tiles decoded on the pool: {stages}"
+        );
         assert!(doc["encoded"].as_u64().unwrap() > 0, "{doc}");
         // Reading and storing each run on one thread, timed around the same calls as their wall
         // time: no more CPU than wall.
@@ -89,9 +104,18 @@ fn verbose_says_the_cpu_per_source_megapixel_of_each_stage() {
     strip_tiff(&source, 600, 500);
     let out = cli::ok(&["split", s(&source), "-o", s(&dir.path().join("out")), "--tile-size", "128", "-v"]);
     let line = out.lines().find(|l| l.starts_with("stages")).unwrap_or_else(|| panic!("no stages line: {out}"));
-    let per_stage = ["read ", "pyramid ", "cut ", "encode ", "store "];
+    let per_stage = ["read ", "decode ", "pyramid ", "cut ", "encode ", "store "];
     assert!(per_stage.iter().all(|stage| line.contains(stage)), "{line}");
     if cfg!(target_os = "linux") {
         assert!(line.contains("CPU ms per source Mpx") && line.contains("wall s:"), "{line}");
+    }
+}
+
+#[test]
+fn docs_name_every_stage_member() {
+    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/cli.md")).unwrap();
+    let wall_only = ["readWaitSeconds", "producerBlockedSeconds", "encodersIdleSeconds", "cpu"];
+    for name in CPU_STAGES.into_iter().chain(wall_only) {
+        assert!(doc.contains(&format!("| `{name}` |")), "docs/cli.md's stages table lacks {name}");
     }
 }

@@ -5,10 +5,12 @@
 //!
 //! Read one row of tiles (or a group of strips) at a time, the chunks of a band decoded in
 //! parallel on the rayon pool by libjpeg-turbo ([`libjpeg`]), each straight from the file with a
-//! positioned read. Only the chunks under the columns asked for are decoded. Memory: one band
-//! of decoded texels plus a compressed chunk per worker, checked against `--max-memory` before
-//! anything is allocated. A damaged or missing chunk is an error naming the file and the
-//! chunk's column and row.
+//! positioned read. Only the chunks under the columns asked for are decoded. While the rows of
+//! one band are read, the next is decoded on the pool ([`band_ahead`]), where two bands take
+//! at most a quarter of `--max-memory`; that decoding is the run's `decode` stage
+//! ([`RowSource::decoding`]). Memory: one band of decoded texels (two, decoding ahead) plus a
+//! compressed chunk per worker, checked against `--max-memory` before anything is allocated.
+//! A damaged or missing chunk is an error naming the file and the chunk's column and row.
 
 use std::fs::File;
 use std::io::BufReader;
@@ -21,18 +23,22 @@ use rayon::prelude::*;
 use tiff::decoder::{ChunkType, Decoder};
 use tiff::tags::Tag;
 
+use super::band_ahead::{self, BandAhead};
 use super::libjpeg::{self, Colour, Extent};
 use super::open_error;
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::stored::{self, Quality, Samples, StoredLevel, StoredLevels, StoredTiles};
-use crate::source::{ImageHeader, RowSource};
+use crate::source::{Decoding, ImageHeader, RowSource};
+use crate::stages::TaskClock;
 
 /// Chunk rows decoded together when the TIFF is in strips: enough strips to keep every core
 /// busy (libtiff writes JPEG strips of 8 or 16 rows), within an eighth of `--max-memory`.
 const STRIPS_PER_CORE: usize = 4;
 
-pub(super) struct JpegTiff {
+/// Where an image's JPEG chunks are and how they are laid out: what decoding a band needs,
+/// shared with the task that decodes the next band ahead.
+struct Source {
     chunks: Arc<Chunks>,
     width: u32,
     height: u32,
@@ -44,11 +50,20 @@ pub(super) struct JpegTiff {
     tiled: bool,
     /// Chunk rows held in one band.
     group: u32,
+    /// The tasks' decoding time.
+    clock: TaskClock,
+}
+
+pub(super) struct JpegTiff {
+    source: Arc<Source>,
     /// The decoded chunks of the band, `[chunk row in band * across + column]`, each its
     /// texels inside the image only; those outside the columns read are left empty.
     band: Vec<Vec<u8>>,
     band_first: u64,
     band_rows: u64,
+    /// The next band, decoding on the pool; `None` where two bands would take more than a
+    /// quarter of `--max-memory`.
+    ahead: Option<BandAhead>,
     columns: Option<Range<u32>>,
     next: u64,
     failed: bool,
@@ -202,6 +217,9 @@ pub(crate) fn assemble(
     let workers = std::thread::available_parallelism().map_or(1, |n| n.get()) as u64;
     let per_worker = largest.saturating_mul(2).saturating_add(row_bytes); // read, spliced, a scanline
     let need = band_bytes(group).saturating_add(workers.saturating_mul(per_worker));
+    // The next band decoded ahead where both fit a quarter of the budget: the pyramid's own
+    // bands take about as much as the source's, and the rest is theirs and the tiles'.
+    let ahead = need.saturating_add(band_bytes(group)) <= max_memory / 4;
     if need > max_memory {
         let what = if tiled {
             format!("a row of {chunk_w}x{chunk_h} JPEG tiles")
@@ -217,20 +235,25 @@ pub(crate) fn assemble(
             ),
         ));
     }
-    let chunks = Chunks { path: path.to_path_buf(), file, file_len, offsets, counts, tables };
+    let chunks = Arc::new(Chunks { path: path.to_path_buf(), file, file_len, offsets, counts, tables });
+    let clock = TaskClock::default();
     Ok(Box::new(JpegTiff {
-        chunks: Arc::new(chunks),
-        width,
-        height,
-        colour,
-        chunk_w,
-        chunk_h,
-        across,
-        tiled,
-        group: group as u32,
+        source: Arc::new(Source {
+            chunks,
+            width,
+            height,
+            colour,
+            chunk_w,
+            chunk_h,
+            across,
+            tiled,
+            group: group as u32,
+            clock,
+        }),
         band: Vec::new(),
         band_first: 0,
         band_rows: 0,
+        ahead: ahead.then(BandAhead::default),
         columns: None,
         next: 0,
         failed: false,
@@ -324,79 +347,151 @@ fn colour(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<Colour>
     Ok(colour)
 }
 
-impl JpegTiff {
+impl Source {
     fn layout(&self) -> PixelLayout {
         let channels = if self.colour == Colour::Grey { Channels::Grey } else { Channels::Rgb };
         PixelLayout::new(channels, Depth::U8)
     }
 
-    /// Decodes the band holding image row `y`: its chunks under the columns read, in parallel.
-    /// A chunk that fails is reported with its own first row, not the band's.
-    fn load_band(&mut self, y: u64) -> std::result::Result<(), (u64, String)> {
-        let band_h = self.chunk_h as u64 * self.group as u64;
-        let first = y / band_h * band_h;
-        let first_chunk_row = (first / self.chunk_h as u64) as u32;
+    /// The chunk at `col`, `row` (in chunks): its texels inside the image.
+    fn extent(&self, row: u32, col: u32) -> Extent {
+        let x0 = col * self.chunk_w;
+        let y0 = row as u64 * self.chunk_h as u64;
+        Extent {
+            columns: self.chunk_w.min(self.width - x0) as usize,
+            rows: (self.chunk_h as u64).min(self.height as u64 - y0) as usize,
+            max_columns: self.chunk_w as usize,
+            max_rows: self.chunk_h as usize,
+        }
+    }
+
+    /// Sizes `band`'s buffers for the band `key`: each chunk under its columns exactly to its
+    /// texels inside the image (never more, whatever band the buffer held before), the others
+    /// emptied. Their capacity in bytes.
+    fn size_band(&self, key: &band_ahead::Key, band: &mut Vec<Vec<u8>>) -> u64 {
+        let first = key.first_row;
         let chunk_rows = (self.height as u64 - first).div_ceil(self.chunk_h as u64).min(self.group as u64) as u32;
-        let cols = match &self.columns {
-            Some(c) => c.start / self.chunk_w..c.end.div_ceil(self.chunk_w),
-            None => 0..self.across,
-        };
-        let across = self.across;
-        self.band.resize_with((chunk_rows * across) as usize, Vec::new);
-        let mut band = std::mem::take(&mut self.band);
-        let this = &*self;
-        let result = band.par_iter_mut().enumerate().try_for_each(|(i, texels)| {
-            let (r, c) = (i as u32 / across, i as u32 % across);
-            if !cols.contains(&c) {
+        band.resize_with((chunk_rows * self.across) as usize, Vec::new);
+        for (i, texels) in band.iter_mut().enumerate() {
+            let (r, c) = (i as u32 / self.across, i as u32 % self.across);
+            let len = match key.columns.contains(&c) {
+                true => {
+                    let extent = self.extent(key.first_chunk_row + r, c);
+                    extent.columns * extent.rows * self.colour.components()
+                }
+                false => 0,
+            };
+            if texels.len() != len {
                 texels.clear();
+                texels.reserve_exact(len);
+                texels.resize(len, 0);
+            }
+        }
+        band.iter().map(|texels| texels.capacity() as u64).sum()
+    }
+
+    /// Decodes the chunks of the band `key` under its columns into `band` (sized by
+    /// [`size_band`](Self::size_band)), in parallel on the pool. A chunk that fails is
+    /// reported with its own first row, not the band's.
+    fn decode_band(&self, key: &band_ahead::Key, band: &mut [Vec<u8>]) -> std::result::Result<(), (u64, String)> {
+        band.par_iter_mut().enumerate().try_for_each(|(i, texels)| {
+            let (r, c) = (i as u32 / self.across, i as u32 % self.across);
+            if !key.columns.contains(&c) {
                 return Ok(());
             }
-            let row = first_chunk_row + r;
-            this.decode_chunk(row, c, texels).map_err(|m| (row as u64 * this.chunk_h as u64, m))
-        });
-        self.band = band;
-        result?;
-        self.band_first = first;
-        self.band_rows = band_h.min(self.height as u64 - first);
-        Ok(())
+            let row = key.first_chunk_row + r;
+            let decoded = self.clock.time(|| self.decode_chunk(row, c, texels));
+            decoded.map_err(|m| (row as u64 * self.chunk_h as u64, m))
+        })
     }
 
     /// The texels of the chunk at `col`, `row` (in chunks) inside the image, into `texels`.
-    fn decode_chunk(&self, row: u32, col: u32, texels: &mut Vec<u8>) -> std::result::Result<(), String> {
+    fn decode_chunk(&self, row: u32, col: u32, texels: &mut [u8]) -> std::result::Result<(), String> {
         let index = row as usize * self.across as usize + col as usize;
         let name = match self.tiled {
             true => tile_name(col, row, index),
             false => format!("JPEG strip {row}"),
         };
         let stream = self.chunks.stream(index, &name)?;
-        let x0 = col * self.chunk_w;
-        let y0 = row as u64 * self.chunk_h as u64;
-        let extent = Extent {
-            columns: self.chunk_w.min(self.width - x0) as usize,
-            rows: (self.chunk_h as u64).min(self.height as u64 - y0) as usize,
-            max_columns: self.chunk_w as usize,
-            max_rows: self.chunk_h as usize,
+        libjpeg::decode(&stream, self.colour, self.extent(row, col), texels).map_err(|m| format!("{name}: {m}"))
+    }
+}
+
+impl JpegTiff {
+    /// The band whose first image row is `first`, under the columns read.
+    fn key(&self, first: u64) -> band_ahead::Key {
+        let s = &self.source;
+        let columns = match &self.columns {
+            Some(c) => c.start / s.chunk_w..c.end.div_ceil(s.chunk_w),
+            None => 0..s.across,
         };
-        texels.resize(extent.columns * extent.rows * self.colour.components(), 0);
-        libjpeg::decode(&stream, self.colour, extent, texels).map_err(|m| format!("{name}: {m}"))
+        band_ahead::Key { first_chunk_row: (first / s.chunk_h as u64) as u32, first_row: first, columns }
+    }
+
+    /// Makes the band holding image row `y` the one read: the band decoded ahead if it is
+    /// that one, else decoded now (in parallel, this thread waiting). Then starts the next
+    /// band's decoding on the pool, where it decodes ahead.
+    fn load_band(&mut self, y: u64) -> std::result::Result<(), (u64, String)> {
+        let source = Arc::clone(&self.source);
+        let band_h = source.chunk_h as u64 * source.group as u64;
+        let first = y / band_h * band_h;
+        let key = self.key(first);
+        let taken = match &mut self.ahead {
+            Some(ahead) => ahead.take(&key),
+            None => Err(Vec::new()),
+        };
+        // The buffers of the band read until now are reused, for this band or the next.
+        let done = std::mem::take(&mut self.band);
+        let (band, result, spare) = match taken {
+            Ok((band, result)) => (band, result, done),
+            Err(spare) => {
+                let mut band = done;
+                source.size_band(&key, &mut band);
+                let result = source.decode_band(&key, &mut band);
+                (band, result, spare)
+            }
+        };
+        self.band = band;
+        result?;
+        self.band_first = first;
+        self.band_rows = band_h.min(source.height as u64 - first);
+        let next = first + band_h;
+        if next < source.height as u64 && BandAhead::possible() {
+            let next = self.key(next);
+            if let Some(ahead) = &mut self.ahead {
+                let mut buffers = spare;
+                let bytes = source.size_band(&next, &mut buffers);
+                ahead.start(next.clone(), buffers, bytes, move |band| source.decode_band(&next, band));
+            }
+        }
+        Ok(())
     }
 }
 
 impl RowSource for JpegTiff {
     fn header(&self) -> ImageHeader {
-        ImageHeader { width: self.width, height: self.height, layout: self.layout() }
+        let s = &self.source;
+        ImageHeader { width: s.width, height: s.height, layout: s.layout() }
     }
 
-    /// The band's decoded chunks. (The compressed chunk each worker reads is freed as soon as
-    /// it is decoded, and not counted.)
+    /// The band's decoded chunks, and the next band's decoding ahead. (The compressed chunk
+    /// each worker reads is freed as soon as it is decoded, and not counted.)
     fn buffer_bytes(&self) -> u64 {
-        self.band.iter().map(|chunk| chunk.capacity() as u64).sum()
+        let band: u64 = self.band.iter().map(|chunk| chunk.capacity() as u64).sum();
+        band + self.ahead.as_ref().map_or(0, BandAhead::bytes)
     }
 
-    /// A band of whole chunks: each is resized to its texels inside the image, never more.
+    /// A band of whole chunks, two where the next is decoded ahead: each is sized to its
+    /// texels inside the image, never more.
     fn most_buffer_bytes(&self) -> u64 {
-        let chunk = self.chunk_w as u64 * self.chunk_h as u64 * self.colour.components() as u64;
-        (self.group as u64 * self.across as u64).saturating_mul(chunk)
+        let s = &self.source;
+        let chunk = s.chunk_w as u64 * s.chunk_h as u64 * s.colour.components() as u64;
+        let bands = 1 + self.ahead.is_some() as u64;
+        (bands * s.group as u64 * s.across as u64).saturating_mul(chunk)
+    }
+
+    fn decoding(&self) -> Decoding {
+        self.source.clock.total()
     }
 
     fn embedded(&self) -> crate::source::Embedded {
@@ -405,10 +500,11 @@ impl RowSource for JpegTiff {
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
         let y = self.next;
-        let fail = |message: String| TilerError::DecodeRow { path: self.chunks.path.clone(), row: y, message };
-        let columns = self.columns.clone().unwrap_or(0..self.width);
-        let pixel = self.colour.components();
-        super::check_row(y, self.height, &columns, pixel, out.len()).map_err(fail)?;
+        let s = Arc::clone(&self.source);
+        let fail = |message: String| TilerError::DecodeRow { path: s.chunks.path.clone(), row: y, message };
+        let columns = self.columns.clone().unwrap_or(0..s.width);
+        let pixel = s.colour.components();
+        super::check_row(y, s.height, &columns, pixel, out.len()).map_err(fail)?;
         if self.failed {
             return Err(fail("an earlier JPEG tile or strip failed to decode".into()));
         }
@@ -417,13 +513,13 @@ impl RowSource for JpegTiff {
             && let Err((row, message)) = self.load_band(y)
         {
             self.failed = true;
-            return Err(TilerError::DecodeRow { path: self.chunks.path.clone(), row, message });
+            return Err(TilerError::DecodeRow { path: s.chunks.path.clone(), row, message });
         }
         // The row's part of each chunk under the columns.
         let within = y - self.band_first;
-        let (chunk_row, chunk_y) = ((within / self.chunk_h as u64) as usize, (within % self.chunk_h as u64) as usize);
-        let chunks = &self.band[chunk_row * self.across as usize..];
-        copy_row(chunks, self.chunk_w, self.width, pixel, chunk_y, columns, out);
+        let (chunk_row, chunk_y) = ((within / s.chunk_h as u64) as usize, (within % s.chunk_h as u64) as usize);
+        let chunks = &self.band[chunk_row * s.across as usize..];
+        copy_row(chunks, s.chunk_w, s.width, pixel, chunk_y, columns, out);
         self.next += 1;
         Ok(())
     }
@@ -436,7 +532,7 @@ impl RowSource for JpegTiff {
 
     /// Only the chunks under the columns are decoded (tiles; a strip is always whole).
     fn read_columns(&mut self, columns: Range<u32>) -> bool {
-        let columns = (columns != (0..self.width)).then_some(columns);
+        let columns = (columns != (0..self.source.width)).then_some(columns);
         if columns != self.columns {
             // The loaded band may lack the chunks under the new columns.
             (self.columns, self.band_rows) = (columns, 0);
@@ -446,15 +542,16 @@ impl RowSource for JpegTiff {
 
     /// The tiles, to copy where the output's pages line up with them (strips never do).
     fn stored_tiles(&self) -> Option<Arc<dyn StoredTiles>> {
-        let tiles = JpegTiles::new(&self.chunks, self.colour, (self.chunk_w, self.chunk_h), (self.width, self.height));
-        self.tiled.then(|| Arc::new(tiles) as Arc<dyn StoredTiles>)
+        let s = &self.source;
+        let tiles = JpegTiles::new(&s.chunks, s.colour, (s.chunk_w, s.chunk_h), (s.width, s.height));
+        s.tiled.then(|| Arc::new(tiles) as Arc<dyn StoredTiles>)
     }
 
     /// This page and its reduced levels, where it has some, each as its JPEG tiles.
     fn stored_levels(&self) -> Result<Option<StoredLevels>> {
         let Some(full) = self.stored_tiles().filter(|_| !self.pages.levels.is_empty()) else { return Ok(None) };
-        let path = &self.chunks.path;
-        let (width, height, page) = (self.width, self.height, self.pages.index);
+        let path = &self.source.chunks.path;
+        let (width, height, page) = (self.source.width, self.source.height, self.pages.index);
         let mut stored = StoredLevels {
             path: path.clone(),
             levels: vec![StoredLevel { width, height, page, tiles: full }],
@@ -474,16 +571,18 @@ impl RowSource for JpegTiff {
     }
 
     fn describe(&self) -> String {
-        let colour = match self.colour {
+        let s = &self.source;
+        let colour = match s.colour {
             Colour::Grey => "grey",
             Colour::YCbCr => "YCbCr",
             Colour::Rgb => "RGB",
         };
-        let tables = if self.chunks.tables.is_empty() { "" } else { ", shared tables" };
-        let chunks = if self.tiled {
-            format!("streamed by tile row ({}x{} tiles, decoded in parallel)", self.chunk_w, self.chunk_h)
+        let tables = if s.chunks.tables.is_empty() { "" } else { ", shared tables" };
+        let ahead = if self.ahead.is_some() { ", the next decoded ahead" } else { "" };
+        let chunks = if s.tiled {
+            format!("streamed by tile row ({}x{} tiles, decoded in parallel{ahead})", s.chunk_w, s.chunk_h)
         } else {
-            format!("streamed by strip ({} rows, {} strips decoded at once)", self.chunk_h, self.group)
+            format!("streamed by strip ({} rows, {} strips decoded at once{ahead})", s.chunk_h, s.group)
         };
         format!("{}, jpeg ({colour}{tables}, libjpeg-turbo), {chunks}", self.label)
     }

@@ -15,6 +15,7 @@
 //! unspecified, or any after the alpha) are dropped, and associated (premultiplied) alpha is
 //! turned into straight alpha ([`unpremultiply`] says how it rounds).
 
+mod band_ahead;
 mod chunks;
 mod fax;
 pub mod geo;
