@@ -210,9 +210,7 @@ impl Open {
             (Sink::Dicom(sink), Work::Dicom { spec, .. }) => {
                 let mut figures = sink.finish()?;
                 figures.levels = Levels::Stored;
-                let level = spec.level(0);
-                let level = crate::layout::Level { width: level.width, height: level.height, tile: level.frame };
-                (level, spec.level_count(), spec.stored, Figures::Dicom(figures))
+                (spec.level(0), spec.level_count(), spec.stored, Figures::Dicom(figures))
             }
             _ => return Err(TilerError::Internal("levels copied into an output that holds none".into())),
         };
@@ -298,7 +296,7 @@ fn choose_levels(outputs: &mut [Planned], source: &dyn RowSource) -> Result<Chos
                 Err(why) => Err(why),
                 Ok((copied, photometric)) => {
                     let shapes: Vec<String> = (copied.iter())
-                        .map(|l| format!("{}x{}/{}x{}", l.width, l.height, l.frame.0, l.frame.1))
+                        .map(|l| format!("{}x{}/{}x{}", l.width, l.height, l.tile.0, l.tile.1))
                         .collect();
                     spec.identity =
                         format!("{}; levels stored {} {}", spec.identity, shapes.join(" "), photometric.name());

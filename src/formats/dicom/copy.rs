@@ -13,7 +13,6 @@
 use super::{DicomSink, Level, Photometric};
 use crate::error::{Result, TilerError};
 use crate::job::Progress;
-use crate::sink::TileSink;
 use crate::source::stored::{self, Header, StoredLevels};
 
 /// What the instances hold where they copy `levels`: each level's image and frames, and the
@@ -50,7 +49,7 @@ pub(crate) fn copyable(levels: &StoredLevels) -> Result<std::result::Result<(Vec
             }
             _ => photometric = Some(this),
         }
-        out.push(Level { width: level.width, height: level.height, frame });
+        out.push(Level { width: level.width, height: level.height, tile: frame });
     }
     let photometric = photometric.ok_or_else(|| TilerError::Internal("a slide of no levels".into()))?;
     Ok(Ok((out, photometric)))
@@ -86,34 +85,8 @@ pub(crate) fn copy_levels(
     photometric: Photometric,
     progress: &dyn Progress,
 ) -> Result<u64> {
-    let mut copied = 0;
-    for (k, level) in levels.levels.iter().enumerate() {
-        let (w, h) = level.tiles.tile_size();
-        let (across, down) = (level.width.div_ceil(w), level.height.div_ceil(h));
-        for row in 0..down {
-            if progress.cancelled() {
-                return Err(TilerError::Interrupted);
-            }
-            for col in 0..across {
-                let file = level.tiles.jpeg(col, row).map_err(|e| stored::in_level(e, k, level.page))?;
-                let fits = file.as_deref().and_then(stored::read_header).is_some_and(|h| form(&h) == Ok(photometric));
-                let Some(file) = file.filter(|_| fits) else {
-                    return Err(TilerError::decode(
-                        &levels.path,
-                        format!(
-                            "level {k} (page {}): the tile at column {col}, row {row} is not a {w}x{h} {} JPEG as the level's first is, so the level cannot be copied as stored; --levels pow2 makes the series from the decoded pixels",
-                            level.page,
-                            photometric.name()
-                        ),
-                    ));
-                };
-                sink.write_tile(k as u32, col, row, &file)?;
-                copied += 1;
-            }
-            progress.advance(u64::from(across));
-        }
-    }
-    Ok(copied)
+    let fits = |h: &Header| form(h) == Ok(photometric);
+    crate::formats::levels::copy(sink, levels, photometric.name(), &fits, progress)
 }
 
 #[cfg(test)]

@@ -67,7 +67,7 @@ impl Part {
     /// (PS3.3 C.8.12.4.1.1: LABEL and OVERVIEW as photographed, THUMBNAIL resampled).
     pub fn associated(spec: &Spec, k: usize, photometric: Photometric) -> Option<Part> {
         let image = spec.associated.get(k)?;
-        let level = Level { width: image.width, height: image.height, frame: (image.width, image.height) };
+        let level = Level { width: image.width, height: image.height, tile: (image.width, image.height) };
         let (image_type, label_in_image) = match image.kind {
             Kind::Label => (["ORIGINAL", "PRIMARY", "LABEL", "NONE"], true),
             Kind::Overview => (["ORIGINAL", "PRIMARY", "OVERVIEW", "NONE"], true),
@@ -300,8 +300,8 @@ impl<'a> Series<'a> {
             put(&mut o, tags::PLANAR_CONFIGURATION, VR::US, 0u16);
         }
         // `Spec::check` keeps the frame's sides within 16 bits.
-        put(&mut o, tags::ROWS, VR::US, level.frame.1 as u16);
-        put(&mut o, tags::COLUMNS, VR::US, level.frame.0 as u16);
+        put(&mut o, tags::ROWS, VR::US, level.tile.1 as u16);
+        put(&mut o, tags::COLUMNS, VR::US, level.tile.0 as u16);
         put(&mut o, tags::BITS_ALLOCATED, VR::US, 8u16);
         put(&mut o, tags::BITS_STORED, VR::US, 8u16);
         put(&mut o, tags::HIGH_BIT, VR::US, 7u16);
@@ -312,7 +312,7 @@ impl<'a> Series<'a> {
             put(&mut o, tags::RESCALE_SLOPE, VR::DS, "1");
         }
         put(&mut o, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "01");
-        let raw = u64::from(level.frame.0) * u64::from(level.frame.1) * u64::from(p.samples());
+        let raw = u64::from(level.tile.0) * u64::from(level.tile.1) * u64::from(p.samples());
         let ratio = (frames * raw) as f64 / frame_bytes.max(1) as f64;
         put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_RATIO, VR::DS, ds(ratio));
         put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_METHOD, VR::CS, "ISO_10918_1");

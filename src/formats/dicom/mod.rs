@@ -101,25 +101,9 @@ impl Photometric {
 
 pub use crate::layout::Levels;
 
-/// One instance's image: its Total Pixel Matrix and its frames' size, columns by rows.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct Level {
-    pub width: u32,
-    pub height: u32,
-    pub frame: (u32, u32),
-}
-
-impl Level {
-    /// Frames across and down (`TILED_FULL`: the right and bottom ones reach past the image).
-    pub fn grid(&self) -> (u32, u32) {
-        (self.width.div_ceil(self.frame.0), self.height.div_ceil(self.frame.1))
-    }
-
-    pub fn frames(&self) -> u64 {
-        let (c, r) = self.grid();
-        u64::from(c) * u64::from(r)
-    }
-}
+/// One instance's image: its Total Pixel Matrix and its frames' size (`tile`), columns by
+/// rows; `TILED_FULL`: the right and bottom frames reach past the image.
+pub(crate) use crate::layout::Level;
 
 /// Everything the instances say, fixed before the first tile.
 #[derive(Clone, Debug, PartialEq)]
@@ -187,13 +171,13 @@ impl Spec {
         for lod in 0..self.level_count() {
             let level = self.level(lod);
             let (c, r) = level.grid();
-            if level.frame.0 == 0 || level.frame.1 == 0 || level.frame.0.max(level.frame.1) > u32::from(u16::MAX) {
+            if level.tile.0 == 0 || level.tile.1 == 0 || level.tile.0.max(level.tile.1) > u32::from(u16::MAX) {
                 return Err(TilerError::Options(format!(
                     "level {lod}'s {}x{} frames: a DICOM frame's Rows and Columns are 16-bit",
-                    level.frame.0, level.frame.1
+                    level.tile.0, level.tile.1
                 )));
             }
-            if level.frames() > i32::MAX as u64 {
+            if level.tiles() > i32::MAX as u64 {
                 return Err(TilerError::Options(format!(
                     "level {lod} has {c} x {r} frames: a DICOM instance's Number of Frames is at most {}",
                     i32::MAX
@@ -239,14 +223,14 @@ impl Spec {
             Some(level) => *level,
             None => {
                 let (width, height) = self.layout.level_extent(lod);
-                Level { width, height, frame: (self.layout.tile_size, self.layout.tile_size) }
+                Level { width, height, tile: (self.layout.tile_size, self.layout.tile_size) }
             }
         }
     }
 
     /// Memory the sink's frame index holds: 12 bytes a frame.
     pub fn index_bytes(&self) -> u64 {
-        let frames: u64 = (0..self.level_count()).map(|lod| self.level(lod).frames()).sum();
+        let frames: u64 = (0..self.level_count()).map(|lod| self.level(lod).tiles()).sum();
         frames.saturating_mul(12)
     }
 
