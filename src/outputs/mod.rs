@@ -157,11 +157,9 @@ pub struct Settings {
     /// The physical size of a source pixel where its file states it: an OME-Zarr, a TIFF or a
     /// DICOM series records it when `ome_zarr.pixel_size` is not given.
     pub pitch: Option<crate::source::PixelPitch>,
-    /// How the source's stored JPEG tiles code colour ([`StoredTiles::subsampling`]): a TIFF
-    /// or DICOM output's JPEG tiles are coded so where `--subsampling` is not given, so that
-    /// the stored tiles can be copied into it.
-    ///
-    /// [`StoredTiles::subsampling`]: crate::source::stored::StoredTiles::subsampling
+    /// How the source's stored JPEG tiles code colour (its first tile's, as
+    /// `StoredTiles::subsampling` reads it): a TIFF or DICOM output's JPEG tiles are coded so
+    /// where `--subsampling` is not given, so that the stored tiles can be copied into it.
     pub stored_subsampling: Option<crate::codec::Subsampling>,
     /// Replace a foreign regular file at a file output (`--force`).
     pub force: bool,
