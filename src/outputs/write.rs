@@ -43,8 +43,8 @@ pub struct Wrote {
     /// encoded and copied, stages, memory.
     pub summary: Summary,
     /// Which of the run's pyramids it was cut from, counted from 0 in the order of the
-    /// outputs that first need each; `None` for a DICOM series of the slide's own levels,
-    /// copied as stored (cut from none).
+    /// outputs that first need each; `None` for a TIFF or DICOM series of the slide's own
+    /// levels, copied as stored (cut from none).
     pub pyramid: Option<usize>,
     /// Times the run read the source, for all its outputs: once for pyramids cut side by
     /// side, once per pyramid and stripe where the budget holds them only one after another.
@@ -244,6 +244,7 @@ struct Copying {
     form: Form,
 }
 
+/// The form of a copied tile: a DICOM frame's photometric interpretation, a TIFF tile's coding.
 enum Form {
     Dicom(Photometric),
     Tiff(tiff::Coding),
