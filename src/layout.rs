@@ -160,6 +160,26 @@ pub(crate) struct Level {
 }
 
 impl Level {
+    /// Levels of a file that holds `copied` (a slide's own, any downsample) where there are
+    /// any, else `layout`'s power-of-two levels.
+    pub fn count(copied: &[Level], layout: &Layout) -> u32 {
+        match copied.len() {
+            0 => layout.lod_count,
+            n => n as u32,
+        }
+    }
+
+    /// Level `k` of such a file: `copied[k]`, else `layout`'s level `k` in its square tiles.
+    pub fn of(copied: &[Level], layout: &Layout, k: u32) -> Level {
+        match copied.get(k as usize) {
+            Some(level) => *level,
+            None => {
+                let (width, height) = layout.level_extent(k);
+                Level { width, height, tile: (layout.tile_size, layout.tile_size) }
+            }
+        }
+    }
+
     /// Tiles across and down.
     pub fn grid(&self) -> (u32, u32) {
         (self.width.div_ceil(self.tile.0), self.height.div_ceil(self.tile.1))

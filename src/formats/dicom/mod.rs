@@ -211,21 +211,12 @@ impl Spec {
 
     /// Instances in the series, one a level.
     pub fn level_count(&self) -> u32 {
-        match self.copied.len() {
-            0 => self.layout.lod_count,
-            n => n as u32,
-        }
+        Level::count(&self.copied, &self.layout)
     }
 
     /// Level `lod`'s image and frames.
     pub fn level(&self, lod: u32) -> Level {
-        match self.copied.get(lod as usize) {
-            Some(level) => *level,
-            None => {
-                let (width, height) = self.layout.level_extent(lod);
-                Level { width, height, tile: (self.layout.tile_size, self.layout.tile_size) }
-            }
-        }
+        Level::of(&self.copied, &self.layout, lod)
     }
 
     /// Memory the sink's frame index holds: 12 bytes a frame.

@@ -189,21 +189,12 @@ pub(crate) struct Spec {
 impl Spec {
     /// Levels, the full resolution included.
     pub fn level_count(&self) -> u32 {
-        match self.copied.len() {
-            0 => self.layout.lod_count,
-            n => n as u32,
-        }
+        Level::count(&self.copied, &self.layout)
     }
 
     /// Level `k`'s image and tiles.
     pub fn level(&self, k: u32) -> Level {
-        match self.copied.get(k as usize) {
-            Some(level) => *level,
-            None => {
-                let (width, height) = self.layout.level_extent(k);
-                Level { width, height, tile: (self.layout.tile_size, self.layout.tile_size) }
-            }
-        }
+        Level::of(&self.copied, &self.layout, k)
     }
 
     /// Tiles, every level.
