@@ -381,10 +381,11 @@ if flavour == "generic":
             sys.exit(f"OpenSlide: level {k} differs from the slide's")
 "#;
 
-/// A slide that is a pyramid of JPEG tiles (an Aperio-like SVS, downsamples 4 and about 16)
-/// is written with its own levels, every stored tile copied, nothing encoded, in every
-/// flavour (a TIFF pyramid may step down by any factor): each level read back equal to the
-/// slide's, and a COG valid for GDAL. `--levels pow2` gives our pyramid, and a source with
+/// A slide that is a pyramid of JPEG tiles (an Aperio-like SVS as tifffile writes it, YCbCr
+/// with downsamples 4 and about 16; a `vips tiffsave --pyramid` file at Q90, RGB-coded) is
+/// written with its own levels, every stored tile copied, nothing encoded, in every flavour
+/// (a TIFF pyramid may step down by any factor): each level read back equal to the slide's,
+/// and a COG valid for GDAL. `--levels pow2` gives our pyramid, and a source with
 /// no levels says nothing of them unless `--levels stored` was asked.
 #[test]
 fn a_slide_s_own_levels_are_copied_as_stored() {
@@ -393,19 +394,34 @@ fn a_slide_s_own_levels_are_copied_as_stored() {
     let svs = dir.path().join("slide.svs");
     crate::tiff_slides::python(python.as_os_str(), crate::dicom_out::MAKE_LEVELLED_SVS, &[s(&svs)]);
     // 9 x 6, 3 x 2 and 1 tiles.
-    for (name, flavour) in [("g.tif", "generic"), ("o.ome.tif", "ome"), ("c.cog.tif", "cog")] {
-        let out = dir.path().join(name);
+    let mut slides = vec![(svs.clone(), 61)];
+    if crate::common::have_program("vips", "--version", "libvips-tools") {
+        let png = input(dir.path(), "src", 1000, 700, rgb8());
+        let tif = dir.path().join("vips-pyramid.tif");
+        let vips = Command::new("vips")
+            .args(["tiffsave", s(&png), s(&tif), "--tile", "--pyramid", "--compression", "jpeg", "--Q", "90"])
+            .args(["--tile-width", "256", "--tile-height", "256"])
+            .output()
+            .unwrap();
+        assert!(vips.status.success(), "vips: {}", String::from_utf8_lossy(&vips.stderr));
+        // 4 x 3, 2 x 2 and 1 tiles.
+        slides.push((tif, 17));
+    }
+    let flavours = [("g.tif", "generic"), ("o.ome.tif", "ome"), ("c.cog.tif", "cog")];
+    for ((slide, tiles), (name, flavour)) in slides.iter().flat_map(|s| flavours.iter().map(move |f| (s, f))) {
+        let out = dir.path().join(format!("{}-{name}", slide.file_stem().unwrap().to_string_lossy()));
         let json: serde_json::Value =
-            serde_json::from_str(ok(&["split", s(&svs), "-o", s(&out), "--json"]).trim()).unwrap();
-        assert_eq!(json["tiff"]["levelsCopied"], true, "{flavour}: {json}");
-        assert_eq!((json["copied"].clone(), json["encoded"].clone()), (61.into(), 0.into()), "{flavour}: {json}");
-        assert_eq!(json["tiff"]["levels"], 3, "{flavour}: {json}");
-        let check = Command::new(&python).args(["-c", SAME_LEVELS, s(&out), s(&svs), flavour]).output().unwrap();
-        assert!(check.status.success(), "{flavour}: {}", String::from_utf8_lossy(&check.stderr));
-        if flavour == "cog" && gdal() {
+            serde_json::from_str(ok(&["split", s(slide), "-o", s(&out), "--json"]).trim()).unwrap();
+        let case = format!("{} {flavour}", slide.display());
+        assert_eq!(json["tiff"]["levelsCopied"], true, "{case}: {json}");
+        assert_eq!((json["copied"].clone(), json["encoded"].clone()), ((*tiles).into(), 0.into()), "{case}: {json}");
+        assert_eq!(json["tiff"]["levels"], 3, "{case}: {json}");
+        let check = Command::new(&python).args(["-c", SAME_LEVELS, s(&out), s(slide), flavour]).output().unwrap();
+        assert!(check.status.success(), "{case}: {}", String::from_utf8_lossy(&check.stderr));
+        if *flavour == "cog" && gdal() {
             let script = "import sys; from osgeo_utils.samples import validate_cloud_optimized_geotiff as v; e, w, _ = v.validate(sys.argv[1], full_check=True); sys.exit('; '.join(e) or None)";
             let valid = Command::new("/usr/bin/python3").args(["-c", script, s(&out)]).output().unwrap();
-            assert!(valid.status.success(), "COG: {}", String::from_utf8_lossy(&valid.stderr));
+            assert!(valid.status.success(), "{case}: {}", String::from_utf8_lossy(&valid.stderr));
         }
     }
     let pow2 = dir.path().join("pow2.tif");
