@@ -92,21 +92,16 @@ impl TileSink for TiffSink {
         Ok(())
     }
 
-    /// A stored JPEG tile only where it is what the level's tags say of every tile: a
-    /// baseline 8-bit JPEG of the tile's size, grey for a grey file, else coded as the file's
-    /// `Photometric` and `YCbCrSubsampling` say (a TIFF of the source's RGB tiles is RGB).
+    /// A stored JPEG tile only where it is what the level's tags say of every tile: of the
+    /// tile's size, and of the form a copied level's tiles have (`copy::fits`: 8-bit
+    /// sequential, grey for a grey file, else coded as `Photometric` and `YCbCrSubsampling`
+    /// say; a TIFF of the source's RGB tiles is RGB).
     fn takes_stored_jpeg(&self, jpeg: &[u8]) -> bool {
         let Compression::Jpeg { subsampling } = self.spec.compression else { return false };
         let Some(h) = crate::source::stored::read_header(jpeg) else { return false };
         let side = self.spec.layout.tile_size;
-        let whole = matches!(h.frame, 0xC0 | 0xC1)
-            && h.precision == 8
-            && (u32::from(h.width), u32::from(h.height)) == (side, side);
-        let form = match self.spec.photometric() {
-            1 => h.components == 1,
-            _ => h.subsampling() == Some(subsampling),
-        };
-        whole && form
+        let coding = (self.spec.photometric() != 1).then_some(subsampling);
+        (u32::from(h.width), u32::from(h.height)) == (side, side) && super::fits(&h, coding)
     }
 
     /// Tiles in the producer's order, so that the file is the same on every run.
