@@ -630,11 +630,6 @@ fn flatten<T: Sample>(texels: &[T], channels: usize, matte: &[T]) -> Vec<T> {
     out
 }
 
-/// TIFF's floating-point predictor (`Predictor` 3) on rows of `width` texels of `channels`
-/// little-endian samples of `sample_bytes` bytes: each row's bytes regrouped into planes, every
-/// sample's most significant byte first and its least significant last, then each byte less
-/// the byte `channels` places before it (one texel back within a plane; the difference runs on
-/// across the planes' boundaries, as the technical note defines it).
 /// One JPEG baseline stream of `width x height` 8-bit `samples` (grey, else RGB, interleaved),
 /// at `quality`, coded as `subsampling` says (RGB with an Adobe marker, or YCbCr), written
 /// into `buf`'s allocation.
@@ -675,6 +670,11 @@ pub(crate) fn encode_jpeg(
     }
 }
 
+/// TIFF's floating-point predictor (`Predictor` 3) on rows of `width` texels of `channels`
+/// little-endian samples of `sample_bytes` bytes: each row's bytes regrouped into planes, every
+/// sample's most significant byte first and its least significant last, then each byte less
+/// the byte `channels` places before it (one texel back within a plane; the difference runs on
+/// across the planes' boundaries, as the technical note defines it).
 pub(crate) fn float_predict_rows(bytes: &mut [u8], width: usize, channels: usize, sample_bytes: usize) {
     let samples = width * channels;
     let row_bytes = samples * sample_bytes;

@@ -5,6 +5,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 use vortex_tiler::error::ShowPath;
+use vortex_tiler::formats::tiff::Flavour;
 use vortex_tiler::output::{self, Claim, Product};
 use vortex_tiler::outputs::Figures;
 use vortex_tiler::split::Progress;
@@ -367,13 +368,33 @@ fn tiff_json(w: &vortex_tiler::formats::tiff::TiffSummary) -> serde_json::Value 
         "fileBytes": w.file_bytes,
         "levelsCopied": w.levels_copied,
         "levelsDeclined": w.levels_declined,
+        "associated": w.associated.iter().map(|a| serde_json::json!({
+            "kind": a.kind,
+            "width": a.width,
+            "height": a.height,
+            "from": a.origin,
+            "page": a.page,
+            "bytes": a.bytes,
+        })).collect::<Vec<_>>(),
+        "associatedLeftOut": w.associated_left_out,
     })
 }
 
 /// A TIFF's figures, in a line.
 fn tiff_line(w: &vortex_tiler::formats::tiff::TiffSummary) -> String {
+    let carried: Vec<String> = w
+        .associated
+        .iter()
+        .map(|a| format!("{} {}x{} ({}, page {})", a.kind, a.width, a.height, a.origin, a.page))
+        .collect();
+    let associated = match (carried.is_empty(), w.associated_left_out) {
+        (true, 0) => String::new(),
+        (false, _) => format!("; associated images after the levels: {}", carried.join(", ")),
+        (true, n) if w.flavour == Flavour::Generic => format!("; {n} associated image(s) left out (--no-associated)"),
+        (true, n) => format!("; {n} associated image(s) left out: a generic TIFF (-o NAME.tif) carries them"),
+    };
     format!(
-        "{}: {} levels ({}), {} {} tiles, {}, {} file bytes",
+        "{}: {} levels ({}), {} {} tiles, {}, {} file bytes{associated}",
         w.flavour.name(),
         w.levels,
         levels_clause(w.levels_copied, &w.levels_declined, "tile"),

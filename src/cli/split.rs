@@ -151,9 +151,9 @@ pub struct OutputArgs {
     #[arg(help_heading = "Outputs", long, value_name = "LEVELS")]
     levels: Option<LevelsArg>,
 
-    /// --layout dicom: leave the slide's associated images (label, overview, thumbnail) out
-    /// of the series [default: each carried as its own instance]. A label often shows the
-    /// patient's name or number.
+    /// A generic TIFF (-o FILE.tif) or --layout dicom: leave the slide's associated images
+    /// (label, macro, thumbnail) out [default: each carried, an IFD or an instance of its
+    /// own]. A label often shows the patient's name or number.
     #[arg(help_heading = "Outputs", long)]
     no_associated: bool,
 
@@ -533,7 +533,7 @@ impl OutputArgs {
                 Some(meta)
             }
         };
-        Ok(DicomSettings { uid_root: self.dicom_uid_root.clone(), meta, no_associated: self.no_associated })
+        Ok(DicomSettings { uid_root: self.dicom_uid_root.clone(), meta })
     }
 
     /// The settings the outputs share, from the flags; `names`: the filename format flag;
@@ -558,6 +558,7 @@ impl OutputArgs {
             ome_zarr: ome_zarr::settings(o),
             tiff: TiffSettings { bigtiff: if self.bigtiff { BigTiff::Always } else { BigTiff::Auto } },
             dicom: self.dicom()?,
+            no_associated: self.no_associated,
             levels: self.levels.map(|l| match l {
                 LevelsArg::Stored => Levels::Stored,
                 LevelsArg::Pow2 => Levels::Pow2,

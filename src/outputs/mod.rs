@@ -146,6 +146,10 @@ pub struct Settings {
     /// Which levels a TIFF or a DICOM series holds (`--levels`) [default: the slide's own, as
     /// stored, where it has some].
     pub levels: Option<crate::layout::Levels>,
+    /// Leave the source's associated images (label, macro, thumbnail) out of a generic TIFF
+    /// and a DICOM series (`--no-associated`) [default: carried, each an IFD or an instance
+    /// of its own].
+    pub no_associated: bool,
     /// How a pack's bytes are laid out.
     pub pack: vortex_pack::WriteOptions,
     /// The source's ICC profile, where the texels keep its colours (`--keep-icc`): in a tile
@@ -183,9 +187,6 @@ pub struct DicomSettings {
     pub uid_root: Option<String>,
     /// The patient, study and equipment attributes given (`--dicom-meta`).
     pub meta: Option<crate::formats::dicom::DicomMeta>,
-    /// Leave the source's associated images out (`--no-associated`) [default: each carried
-    /// as its own instance].
-    pub no_associated: bool,
 }
 
 /// What only TIFF outputs read.

@@ -24,6 +24,7 @@ use crate::pyramid::filter::Filter;
 use crate::settings::{self, CodecChoice, Destination, Requested};
 use crate::sink::icc::Profile;
 use crate::source::ImageHeader;
+use crate::source::associated::Associated;
 
 /// A run's outputs, each checked and claimed.
 #[derive(Debug)]
@@ -185,6 +186,13 @@ struct Context<'a> {
 }
 
 impl Context<'_> {
+    /// The source's associated images an output carries, none where `left_out`
+    /// (`--no-associated`); and how many it leaves out.
+    fn associated(&self, left_out: bool) -> Result<(Vec<Associated>, usize)> {
+        let found = crate::source::associated::of_file(self.input, self.budget.bytes())?;
+        Ok(if left_out { (Vec::new(), found.len()) } else { (found, 0) })
+    }
+
     /// `opts` with JPEG tiles coded as the source's stored ones where `--subsampling` is not
     /// given: a TIFF or DICOM output declares one coding for all its tiles, so that only then
     /// can the stored tiles be copied into it.
@@ -224,6 +232,7 @@ struct Own {
     dicom: DicomSettings,
     keep_icc: Option<Vec<u8>>,
     levels: Option<Levels>,
+    no_associated: bool,
     /// The source's georeferencing, for a generic TIFF or a COG.
     geo: Option<crate::source::GeoTags>,
 }
@@ -296,6 +305,7 @@ impl Own {
             dicom: if format == Format::Dicom { s.dicom.clone() } else { DicomSettings::default() },
             keep_icc: s.keep_icc.clone().filter(|_| gets(Setting::KeepIcc)),
             levels: s.levels.filter(|_| matches!(format, Format::Tiff(_) | Format::Dicom)),
+            no_associated: s.no_associated,
             // Not a flag: an output that has nowhere to put it ignores it.
             geo: s.geo.clone().filter(|_| matches!(format, Format::Tiff(Flavour::Generic | Flavour::Cog))),
         }
@@ -318,15 +328,17 @@ fn refuse_unread(s: &Settings, outputs: &[Output]) -> Result<()> {
         return Err(options("--bigtiff belongs to a TIFF output (-o FILE.tif or FILE.ome.tif)".into()));
     }
     let dicom = outputs.iter().any(|o| o.format == Format::Dicom);
-    let given = [
-        (s.dicom.uid_root.is_some(), "--dicom-uid-root"),
-        (s.dicom.meta.is_some(), "--dicom-meta"),
-        (s.dicom.no_associated, "--no-associated"),
-    ];
+    let given = [(s.dicom.uid_root.is_some(), "--dicom-uid-root"), (s.dicom.meta.is_some(), "--dicom-meta")];
     for (given, flag) in given {
         if given && !dicom {
             return Err(options(format!("{flag} belongs to --layout dicom")));
         }
+    }
+    let generic = outputs.iter().any(|o| o.format == Format::Tiff(Flavour::Generic));
+    if s.no_associated && !generic && !dicom {
+        return Err(options(
+            "--no-associated belongs to a generic TIFF (-o FILE.tif) or --layout dicom, the outputs that carry a slide's associated images".into(),
+        ));
     }
     if s.levels.is_some() && !tiff && !dicom {
         return Err(options(
@@ -621,6 +633,17 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         (None, other) => return Err(TilerError::Internal(format!("TIFF tiles from --codec {}", other.name()))),
     };
     let pixel_size = own.ome_zarr.pixel_size.map(|p| tiff::Micrometres(micrometres(p)));
+    // A slide's label, macro and thumbnail follow a generic pyramid's levels; the other
+    // flavours leave them out (an OME-TIFF would describe them in its XML, a COG's readers
+    // take every IFD for an overview).
+    let (associated, mut associated_left_out) = at.associated(own.no_associated)?;
+    let associated = match flavour {
+        Flavour::Generic => associated,
+        _ => {
+            associated_left_out += associated.len();
+            Vec::new()
+        }
+    };
     // Written again as they are, or the run refused: a GIS tool would misplace a file whose
     // georeferencing is damaged, or drop it, without a word.
     let geo = match &own.geo {
@@ -646,6 +669,9 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         geo: geo.to_vec(),
         icc: own.keep_icc.clone(),
         copied: Vec::new(),
+        associated,
+        associated_bytes: at.budget.bytes(),
+        associated_left_out,
     };
     spec.check()?;
     at.limits().check_pyramid(&layout, false)?;
@@ -746,9 +772,7 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
     );
     // The associated images (label, overview, thumbnail), each its own instance, unless left
     // out; their kinds and sizes are part of the identity.
-    let found = crate::source::associated::of_file(at.input, at.budget.bytes())?;
-    let associated_left_out = if own.dicom.no_associated { found.len() } else { 0 };
-    let associated = if own.dicom.no_associated { Vec::new() } else { found };
+    let (associated, associated_left_out) = at.associated(own.no_associated)?;
     let mut identity = identity;
     for a in &associated {
         identity += &format!("; {} {}x{} {}", a.kind.name(), a.width, a.height, a.origin());

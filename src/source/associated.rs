@@ -93,10 +93,13 @@ impl Associated {
     /// Its texels as 8-bit grey or RGB, decoded by the reader of its file. The decoded size is
     /// checked against `max_bytes` before anything is allocated; an image of other samples
     /// (16-bit, alpha, more channels) or one that cannot be decoded is an error naming the
-    /// file and the image.
+    /// file and the image, and how to leave the images out.
     pub fn decode(&self, max_bytes: u64) -> Result<Pixels> {
         let Stored::TiffPage { path, page } = &self.from;
-        let name = |message: String| format!("the {} ({}): {message}", self.kind.name(), self.origin());
+        let name = |message: String| {
+            let (kind, origin) = (self.kind.name(), self.origin());
+            format!("the {kind} ({origin}): {message} (--no-associated leaves the associated images out)")
+        };
         let named = |e: TilerError| match e {
             TilerError::Decode { path, message } => TilerError::Decode { path, message: name(message) },
             TilerError::DecodeRow { path, row, message } => {

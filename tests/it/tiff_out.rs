@@ -442,6 +442,97 @@ fn a_slide_s_own_levels_are_copied_as_stored() {
     }
 }
 
+/// The associated images of an SVS (the file's pages by kind, as its descriptions name them)
+/// against an output's (`generic`: named by their descriptions alone), compared by tifffile
+/// sample for sample: the strips are lossless and both sides decode the slide's LZW and JPEG
+/// pages with libjpeg-turbo's default IDCT, so any difference is ours. libvips reads each by
+/// its `page=`, and OpenSlide still opens only the levels (the strips are not tiled).
+const SAME_ASSOCIATED: &str = r#"
+import sys, json, numpy as np, tifffile, pyvips, openslide
+out, slide = sys.argv[1], sys.argv[2]
+def associated(path, aperio):
+    got = {}
+    with tifffile.TiffFile(path) as t:
+        for i, p in enumerate(t.pages):
+            words = (p.description or "").lower().replace("\r", " ").split()
+            kind = next((k for k in ("label", "macro", "thumbnail") if k in words), None)
+            if kind is None and aperio and i == 1 and not p.is_tiled:
+                kind = "thumbnail"
+            if kind:
+                got[kind] = (i, p.asarray(), int(p.compression), int(p.predictor), p.is_tiled)
+    return got
+want, have = associated(slide, True), associated(out, False)
+assert sorted(want) == sorted(have), (sorted(want), sorted(have))
+pages = {}
+for kind, (_, a, _, _, _) in want.items():
+    page, b, compression, predictor, tiled = have[kind]
+    assert (compression, predictor, tiled) == (8, 2, False), (kind, compression, predictor, tiled)
+    assert a.shape == b.shape, (kind, a.shape, b.shape)
+    assert np.array_equal(a, b), (kind, int(np.abs(a.astype(int) - b).max()))
+    v = pyvips.Image.new_from_file(out, page=page)
+    pixels = np.ndarray(buffer=v.write_to_memory(), dtype=np.uint8, shape=[v.height, v.width, v.bands])
+    assert np.array_equal(pixels, b), kind
+    pages[kind] = page
+s = openslide.OpenSlide(out)
+assert s.level_count == 2, s.level_count
+print(json.dumps(pages))
+"#;
+
+/// A slide's label, macro and thumbnail follow a generic pyramid's levels, one lossless strip
+/// each (`SAME_ASSOCIATED`); `--json` and the summary list them; our own reader finds them
+/// again (a DICOM series made from the TIFF carries all three). `--no-associated` and the
+/// flavours that hold none leave them out, saying how many and why.
+#[test]
+fn a_slide_s_associated_images_follow_a_generic_pyramid() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let svs = dir.path().join("slide.svs");
+    crate::tiff_slides::python(python.as_os_str(), crate::dicom_out::MAKE_SVS_WITH_LABEL, &[s(&svs)]);
+    let tif = dir.path().join("slide.tif");
+    let json = json_of(&ok(&["split", s(&svs), "-o", s(&tif), "--json"]));
+    let t = &json["tiff"];
+    let listed: Vec<(&str, u64)> = (t["associated"].as_array().unwrap().iter())
+        .map(|a| (a["kind"].as_str().unwrap(), a["page"].as_u64().unwrap()))
+        .collect();
+    assert_eq!(listed, [("thumbnail", 2), ("label", 3), ("overview", 4)], "{json}");
+    assert_eq!(
+        (t["associated"][1]["width"].clone(), t["associated"][1]["from"].clone()),
+        (190.into(), "page 3".into())
+    );
+    assert_eq!(t["associatedLeftOut"], 0, "{json}");
+    let check = Command::new(&python).args(["-c", SAME_ASSOCIATED, s(&tif), s(&svs)]).output().unwrap();
+    let said = String::from_utf8_lossy(&check.stdout);
+    assert!(check.status.success(), "{said}{}", String::from_utf8_lossy(&check.stderr));
+    assert_eq!(said.trim(), r#"{"thumbnail": 2, "label": 3, "macro": 4}"#);
+
+    // Our reader takes them for what they are: not levels, and carried on.
+    let series = dir.path().join("series");
+    let json = json_of(&ok(&["split", s(&tif), "--layout", "dicom", "-o", s(&series), "--json"]));
+    let kinds: Vec<&str> =
+        json["dicom"]["associated"].as_array().unwrap().iter().map(|a| a["kind"].as_str().unwrap()).collect();
+    assert_eq!((kinds, json["dicom"]["instances"].clone()), (vec!["thumbnail", "label", "overview"], 2.into()));
+
+    let bare = dir.path().join("bare.tif");
+    let json = json_of(&ok(&["split", s(&svs), "-o", s(&bare), "--no-associated", "--json"]));
+    assert_eq!(
+        (json["tiff"]["associated"].clone(), json["tiff"]["associatedLeftOut"].clone()),
+        (serde_json::json!([]), 3.into())
+    );
+    let ome = dir.path().join("slide.ome.tif");
+    let said = run(&["split", s(&svs), "-o", s(&ome)]);
+    let line = format!("{}{}", String::from_utf8_lossy(&said.stdout), String::from_utf8_lossy(&said.stderr));
+    assert!(said.status.success() && line.contains("3 associated image(s) left out: a generic TIFF"), "{line}");
+    let cog = dir.path().join("slide.cog.tif");
+    fails_with(
+        &run(&["split", s(&svs), "-o", s(&cog), "--no-associated"]),
+        &["--no-associated belongs to a generic TIFF"],
+    );
+}
+
+fn json_of(said: &str) -> serde_json::Value {
+    serde_json::from_str(said.trim()).unwrap_or_else(|e| panic!("{e}: {said}"))
+}
+
 const GEO_SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/it/tiff_geo.py");
 
 /// Runs `tiff_geo.py` with Debian's Python (GDAL); fails with what it said.

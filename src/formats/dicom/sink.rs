@@ -131,13 +131,7 @@ impl DicomSink {
     /// or grey, at the series' quality) and writes its instance.
     fn write_associated(&self, series: &Series, k: usize) -> Result<AssociatedSummary> {
         let image = &self.spec.associated[k];
-        let pixels = image.decode(self.spec.associated_bytes).map_err(|e| match e {
-            TilerError::Decode { path, message } => TilerError::Decode {
-                path,
-                message: format!("{message} (--no-associated leaves the associated images out)"),
-            },
-            other => other,
-        })?;
+        let pixels = image.decode(self.spec.associated_bytes)?;
         let photometric = Photometric::of(pixels.channels, Subsampling::S420);
         let size = (pixels.width, pixels.height);
         let jpeg = crate::codec::encode_jpeg(

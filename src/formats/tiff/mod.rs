@@ -24,9 +24,12 @@
 //!
 //! A JPEG-tiled source's stored tiles are copied into level 0 where they are what the tags
 //! say (`TiffSink`'s `takes_stored_jpeg`). A GeoTIFF source's georeferencing tags are written
-//! again into a COG's or a generic pyramid's full resolution (`Spec::geo`). Not yet (issue
-//! 43): shared `JPEGTables` and more than four channels as planes.
+//! again into a COG's or a generic pyramid's full resolution (`Spec::geo`). A slide's
+//! associated images (label, macro, thumbnail) follow a generic pyramid's levels, each one
+//! strip of its own (`associated.rs`). Not yet (issue 43): shared `JPEGTables` and more than
+//! four channels as planes.
 
+mod associated;
 mod cog;
 mod copy;
 mod ifd;
@@ -36,6 +39,7 @@ mod sink;
 mod tests;
 mod writer;
 
+pub use associated::AssociatedSummary;
 pub(crate) use copy::{Coding, coding_name, compression, copyable, fits};
 pub(crate) use sink::TiffSink;
 pub use writer::TiffSummary;
@@ -46,6 +50,7 @@ use crate::error::{Result, TilerError};
 use crate::layout::{Layout, Level};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::GeoValue;
+use crate::source::associated::Associated;
 
 /// Where the writer puts its signature, after the header: the `Software` tag's value, which
 /// names the file as ours so that a later run may replace it (`output::claim`).
@@ -184,6 +189,14 @@ pub(crate) struct Spec {
     /// The slide's own levels where they are copied as stored (`--levels stored`): each its
     /// size and tiles, any downsample between them; empty: `layout`'s levels.
     pub copied: Vec<Level>,
+    /// The source's associated images (label, macro, thumbnail), each written after the
+    /// levels as an IFD of its own (the generic flavour only; empty for the others).
+    pub associated: Vec<Associated>,
+    /// The most bytes one associated image may take decoded (`--max-memory`).
+    pub associated_bytes: u64,
+    /// The associated images the source has that the file leaves out (`--no-associated`,
+    /// or a flavour that holds none).
+    pub associated_left_out: usize,
 }
 
 impl Spec {
@@ -261,6 +274,18 @@ impl Spec {
         if self.name.contains('\0') {
             return Err(TilerError::Options("the image's name holds a NUL character".into()));
         }
+        if !self.associated.is_empty() && self.flavour != Flavour::Generic {
+            return Err(TilerError::Internal(format!("associated images in a {} file", self.flavour.name())));
+        }
+        if let Some(image) = self.associated.iter().find(|a| a.width == 0 || a.height == 0) {
+            return Err(TilerError::Options(format!(
+                "the {} ({}) is {}x{}: it has no pixels; --no-associated leaves the associated images out",
+                image.kind.name(),
+                image.origin(),
+                image.width,
+                image.height
+            )));
+        }
         Ok(())
     }
 
@@ -305,7 +330,10 @@ impl Spec {
         let icc = self.icc.as_ref().map_or(0, |p| p.len() as u64 + 2);
         let ifds = u64::from(self.level_count()) * (4096 + icc) + total.saturating_mul(16) + geo;
         let xml = ome::xml(self).len() as u64;
-        tiles.saturating_add(ifds).saturating_add(xml).saturating_add(1024)
+        let associated: u64 = (self.associated.iter())
+            .map(|a| associated::most_bytes(a.width, a.height).saturating_add(4096))
+            .fold(0, u64::saturating_add);
+        tiles.saturating_add(ifds).saturating_add(xml).saturating_add(associated).saturating_add(1024)
     }
 
     /// Whether the file is written as BigTIFF: always asked, or its size could pass what

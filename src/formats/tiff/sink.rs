@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use super::{Compression, Spec, TiffSummary, TiffWriter};
+use super::{AssociatedSummary, Compression, Spec, TiffSummary, TiffWriter};
 use crate::error::{Result, TilerError};
 use crate::output::staging;
 use crate::sink::TileSink;
@@ -47,11 +47,29 @@ impl TiffSink {
         Ok(sink)
     }
 
-    /// Writes the IFDs and renames the file into place.
+    /// Writes the source's associated images (decoded now, one at a time), the IFDs, and
+    /// renames the file into place.
     pub fn finish(mut self) -> Result<TiffSummary> {
         let writer = self.writer.get_mut().map_err(|_| TilerError::panicked("a TIFF writer"))?.take();
-        let writer = writer.ok_or_else(|| TilerError::Internal("a TIFF sink finished twice".into()))?;
-        let summary = writer.finish()?;
+        let mut writer = writer.ok_or_else(|| TilerError::Internal("a TIFF sink finished twice".into()))?;
+        let mut associated = Vec::with_capacity(self.spec.associated.len());
+        for (k, image) in self.spec.associated.iter().enumerate() {
+            // Half the budget for the samples, the rest for their compressed strip.
+            let pixels = image.decode(self.spec.associated_bytes / 2)?;
+            let (width, height) = (pixels.width, pixels.height);
+            let bytes = writer.add_associated(image.kind, pixels)?;
+            let page = self.spec.level_count() as usize + k;
+            associated.push(AssociatedSummary {
+                kind: image.kind.name(),
+                width,
+                height,
+                origin: image.origin(),
+                page,
+                bytes,
+            });
+        }
+        let mut summary = writer.finish()?;
+        summary.associated = associated;
         fs::rename(&self.tmp, &self.dest).map_err(|e| TilerError::write(&self.dest, e))?;
         self.done = true;
         if let Some(dir) = self.dest.parent().filter(|d| !d.as_os_str().is_empty()) {

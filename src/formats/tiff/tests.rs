@@ -128,6 +128,9 @@ fn spec(flavour: Flavour, w: u32, h: u32, levels: u32, stored: PixelLayout, comp
         geo: Vec::new(),
         icc: None,
         copied: Vec::new(),
+        associated: Vec::new(),
+        associated_bytes: 0,
+        associated_left_out: 0,
     }
 }
 

@@ -7,14 +7,16 @@
 //!     64-bit offset (BigTIFF); patched at the end
 //! 16  "vortex-tiler\0" (the Software tag's value: the file's signature), padded to 32
 //! 32  tile data, each tile's bytes as they arrived
-//! ..  the IFDs, level 0 first, each with its value area (tile offsets and byte counts,
-//!     the OME-XML), each at a multiple of 8
+//! ..  a generic pyramid's associated images, one strip each (`associated.rs`)
+//! ..  the IFDs, level 0 first, then the associated images', each with its value area (tile
+//!     offsets and byte counts, the OME-XML), each at a multiple of 8
 //! ```
 
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
+use super::associated::{self, AssociatedSummary, Placed};
 use super::cog::{self, Staging};
 use super::ifd::{Ifd, Value, tag};
 use super::{Compression, Flavour, SIGNATURE, SIGNATURE_AT, Spec, ome};
@@ -22,6 +24,7 @@ use crate::codec::RowFilter;
 use crate::error::{Result, ShowPath, TilerError};
 use crate::pixel::Depth;
 use crate::source::GeoValue;
+use crate::source::associated::{Kind, Pixels};
 
 /// Where tile data starts: after the header and the signature.
 const DATA_AT: u64 = 32;
@@ -49,6 +52,11 @@ pub struct TiffSummary {
     pub levels_copied: bool,
     /// Why the slide's own levels were not copied, where the file would have copied them.
     pub levels_declined: Option<String>,
+    /// The source's associated images the file holds after its levels.
+    pub associated: Vec<AssociatedSummary>,
+    /// The source's associated images it leaves out (`--no-associated`, or a flavour other
+    /// than the generic one).
+    pub associated_left_out: usize,
 }
 
 /// A TIFF being written: the file, and where each tile went.
@@ -68,6 +76,8 @@ pub struct TiffWriter {
     /// A COG's offsets are in its staging file (each past its leader, so never 0).
     tiles: Vec<(u64, u64)>,
     tile_bytes: u64,
+    /// The associated images written after the tiles (a generic pyramid's).
+    associated: Vec<Placed>,
 }
 
 fn write_err(path: &Path) -> impl Fn(std::io::Error) -> TilerError + '_ {
@@ -107,7 +117,8 @@ impl TiffWriter {
             file.write_all(&head).map_err(write_err(path))?;
             (None, DATA_AT)
         };
-        Ok(TiffWriter { path: path.to_path_buf(), file, staging, spec, big, len, bases, tiles, tile_bytes: 0 })
+        let path = path.to_path_buf();
+        Ok(TiffWriter { path, file, staging, spec, big, len, bases, tiles, tile_bytes: 0, associated: Vec::new() })
     }
 
     /// Appends tile `(x, y)` of `level`: `bytes` as the file stores them (compressed).
@@ -151,6 +162,29 @@ impl TiffWriter {
         Ok(())
     }
 
+    /// Appends an associated image of the source (a generic pyramid's: after its tiles, before
+    /// the IFDs), its rows differenced and deflated in place; its strip's length.
+    pub fn add_associated(&mut self, kind: Kind, mut pixels: Pixels) -> Result<u64> {
+        if self.spec.flavour != Flavour::Generic {
+            return Err(TilerError::Internal(format!("an associated image in a {} file", self.spec.flavour.name())));
+        }
+        let strip = associated::strip(&mut pixels).map_err(write_err(&self.path))?;
+        let end = self.len + strip.len() as u64;
+        if !self.big && end > u32::MAX as u64 {
+            return Err(TilerError::Limit(format!(
+                "{}: the {} passed 4 GiB, more than a classic TIFF's bound said; write BigTIFF",
+                self.path.shown(),
+                kind.name()
+            )));
+        }
+        self.file.write_all(&strip).map_err(write_err(&self.path))?;
+        let (width, height, channels) = (pixels.width, pixels.height, pixels.channels);
+        let len = strip.len() as u64;
+        self.associated.push(Placed { kind, width, height, channels, offset: self.len, len });
+        self.len = end;
+        Ok(len)
+    }
+
     /// Writes the IFDs after the tiles, points the header at the first, and syncs the file;
     /// a COG's file is written whole here ([`TiffWriter::finish_cog`]). Fails, naming it, if a
     /// tile is missing.
@@ -171,6 +205,7 @@ impl TiffWriter {
         }
         let levels = self.spec.level_count() as usize;
         let mut ifds: Vec<Ifd> = (0..levels).map(|k| self.level_ifd(k as u32)).collect();
+        ifds.extend(self.associated.iter().map(|image| associated::ifd(image, self.signature())));
         self.tiles = Vec::new();
         let sub_ifds = self.spec.flavour == Flavour::Ome && levels > 1;
         if sub_ifds {
@@ -190,10 +225,11 @@ impl TiffWriter {
             )));
         }
         if sub_ifds && let Some(Value::Ifds(v)) = ifds[0].get_mut(tag::SUB_IFDS) {
-            v.copy_from_slice(&offsets[1..]);
+            v.copy_from_slice(&offsets[1..levels]);
         }
         for (k, ifd) in ifds.iter().enumerate() {
-            // The generic pyramid chains every level; OME's reduced levels hang off level 0.
+            // The generic pyramid chains every level, then its associated images; OME's
+            // reduced levels hang off level 0.
             let next = match self.spec.flavour {
                 // (A COG is finished by `finish_cog`, chained likewise.)
                 Flavour::Generic | Flavour::Cog => offsets.get(k + 1).copied().unwrap_or(0),
@@ -285,6 +321,16 @@ impl TiffWriter {
         &self.tiles[self.bases[k as usize]..][..c as usize * r as usize]
     }
 
+    /// The `Software` tag's value, the signature: in a COG, whose header is followed by GDAL's
+    /// ghost area, the text itself, which the IFD's value area holds near its start (the tags
+    /// before it have small values); elsewhere the copy after the header.
+    fn signature(&self) -> Value {
+        match self.spec.flavour {
+            Flavour::Cog => Value::Ascii(SIGNATURE.into()),
+            _ => Value::AsciiAt { offset: SIGNATURE_AT, count: SIGNATURE.len() as u64 + 1 },
+        }
+    }
+
     /// Level `k`'s IFD, its tiles' offsets and byte counts from the index.
     fn level_ifd(&self, k: u32) -> Ifd {
         let s = &self.spec;
@@ -315,15 +361,7 @@ impl TiffWriter {
             ifd.set(tag::RESOLUTION_UNIT, Value::Short(vec![3]));
         }
         ifd.set(tag::PLANAR_CONFIGURATION, Value::Short(vec![1]));
-        if s.flavour == Flavour::Cog {
-            // A COG's header is followed by GDAL's ghost area: the signature is the value
-            // itself, which the IFD's value area holds near its start (the tags before it
-            // have small values).
-            ifd.set(tag::SOFTWARE, Value::Ascii(SIGNATURE.into()));
-        } else {
-            let count = SIGNATURE.len() as u64 + 1;
-            ifd.set(tag::SOFTWARE, Value::AsciiAt { offset: SIGNATURE_AT, count });
-        }
+        ifd.set(tag::SOFTWARE, self.signature());
         match s.predictor() {
             RowFilter::None => {}
             RowFilter::Delta => ifd.set(tag::PREDICTOR, Value::Short(vec![2])),
@@ -397,6 +435,8 @@ fn summary(spec: &Spec, big: bool, tile_bytes: u64, file_bytes: u64) -> TiffSumm
         compression: spec.compression.name(),
         levels_copied: !spec.copied.is_empty(),
         levels_declined: None,
+        associated: Vec::new(),
+        associated_left_out: spec.associated_left_out,
     }
 }
 
