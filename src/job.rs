@@ -112,6 +112,9 @@ pub trait Progress: Sync {
     /// `tiles` more tiles are stored, a tile counted once for every sink it went to (called
     /// from the run's threads); the calls of a finished run add up to [`Summary::tiles`].
     fn advance(&self, _tiles: u64) {}
+    /// The run's tiles in all, where writing finds them other than planned: an output that
+    /// holds a slide's own levels copies their tiles, not the pyramid the plan counted.
+    fn total(&self, _tiles: u64) {}
     /// Checked once per source row and per batch of tiles; a run that sees `true` stops with
     /// [`TilerError::Interrupted`](crate::error::TilerError::Interrupted).
     fn cancelled(&self) -> bool {

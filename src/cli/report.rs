@@ -29,6 +29,9 @@ impl Progress for Watch {
     fn advance(&self, tiles: u64) {
         self.bar.inc(tiles);
     }
+    fn total(&self, tiles: u64) {
+        self.bar.set_length(tiles);
+    }
     fn cancelled(&self) -> bool {
         signals::requested().is_some()
     }

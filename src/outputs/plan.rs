@@ -155,6 +155,16 @@ impl Plan {
 }
 
 impl Planned {
+    /// The tiles it holds: a TIFF's or DICOM series' own levels' where it copies a slide's,
+    /// else its pyramid's.
+    pub(super) fn tiles(&self) -> u64 {
+        match &self.work {
+            Work::Tiff { spec, .. } => spec.total_tiles(),
+            Work::Dicom { spec, .. } => (0..spec.level_count()).map(|k| spec.level(k).tiles()).sum(),
+            _ => self.layout.total_tiles(),
+        }
+    }
+
     /// Which levels a TIFF or DICOM output holds (`--levels`, stored by default); our
     /// pyramid's for the other formats.
     pub(super) fn work_levels(&self) -> Levels {

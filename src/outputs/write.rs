@@ -364,6 +364,9 @@ impl Plan {
         let asked: Vec<Levels> = outputs.iter().map(Planned::work_levels).collect();
         // A TIFF or DICOM series of the slide's own levels copies them, cut from no pyramid.
         let Chosen { copying, mut declined } = choose_levels(&mut outputs, source.as_ref())?;
+        if copying.iter().any(Option::is_some) {
+            progress.total(outputs.iter().map(Planned::tiles).sum());
+        }
         let open: Vec<Open> = outputs.into_iter().map(|p| Open::start(p, pack)).collect::<Result<_>>()?;
         let cut: Vec<usize> = (0..open.len()).filter(|&k| copying[k].is_none()).collect();
         let mut copied = vec![0u64; open.len()];

@@ -72,3 +72,55 @@ fn a_run_stopped_part_way_leaves_no_pack() {
     let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert!(left.is_empty(), "left behind: {left:?}");
 }
+
+/// What a run tells its `Progress`: the tiles in all where writing finds them other than the
+/// plan counted, and each tile as it is stored.
+#[derive(Default)]
+struct Counted {
+    total: AtomicU64,
+    tiles: AtomicU64,
+}
+
+impl Progress for Counted {
+    fn advance(&self, tiles: u64) {
+        self.tiles.fetch_add(tiles, Ordering::SeqCst);
+    }
+    fn total(&self, tiles: u64) {
+        self.total.store(tiles, Ordering::SeqCst);
+    }
+}
+
+/// A TIFF of a slide's own levels copies their tiles, not the pyramid the plan counted: the
+/// run says how many it will store (here the slide's 512-texel tiles, where the plan counted
+/// 256-texel ones) and stores that many, so a progress bar ends full.
+#[test]
+fn a_run_of_copied_levels_tells_its_progress_their_tiles() {
+    use vortex_tiler::formats::tiff::Flavour;
+    use vortex_tiler::layout::Levels;
+    use vortex_tiler::outputs::{Budget, Format, Output, Plan, Settings};
+
+    let dir = tempfile::tempdir().unwrap();
+    let input = crate::ome_zarr::input(dir.path(), "image", 1500, 1100, PixelLayout::new(Channels::Rgb, Depth::U8));
+    // The slide: our own JPEG pyramid of 512-texel tiles.
+    let slide = dir.path().join("slide.tif");
+    let budget = Budget::default();
+    let mut settings = Settings::default();
+    settings.tiles.tile_size = Some(512);
+    settings.levels = Some(Levels::Pow2);
+    let source = vortex_tiler::source::open(&input, budget.bytes()).unwrap();
+    let outputs = vec![Output::new(Format::Tiff(Flavour::Generic), &slide)];
+    Plan::new(outputs, &settings, &source.header(), &[input.as_path()], budget).unwrap().write(source, &()).unwrap();
+
+    let source = vortex_tiler::source::open(&slide, budget.bytes()).unwrap();
+    let copy = dir.path().join("copy.tif");
+    let outputs = vec![Output::new(Format::Tiff(Flavour::Generic), &copy)];
+    let plan = Plan::new(outputs, &Settings::default(), &source.header(), &[slide.as_path()], budget).unwrap();
+    let planned = plan.total_tiles();
+    let counted = Counted::default();
+    let wrote = plan.write(source, &counted).unwrap();
+    let copied = wrote[0].tiles;
+    assert_eq!(wrote[0].summary.copied, copied, "every tile of the slide's levels copied");
+    assert_eq!(counted.total.load(Ordering::SeqCst), copied, "planned {planned}");
+    assert_eq!(counted.tiles.load(Ordering::SeqCst), copied);
+    assert!(planned > copied, "the plan counted {planned} tiles of 256, the slide has {copied} of 512");
+}
