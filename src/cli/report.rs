@@ -361,6 +361,7 @@ fn tiff_json(w: &vortex_tiler::formats::tiff::TiffSummary) -> serde_json::Value 
         "flavour": w.flavour.name(),
         "bigtiff": w.bigtiff,
         "levels": w.levels,
+        "planes": w.planes,
         "tiles": w.tiles,
         "compression": w.compression,
         "tileBytes": w.tile_bytes,
@@ -372,8 +373,12 @@ fn tiff_json(w: &vortex_tiler::formats::tiff::TiffSummary) -> serde_json::Value 
 
 /// A TIFF's figures, in a line.
 fn tiff_line(w: &vortex_tiler::formats::tiff::TiffSummary) -> String {
+    let planes = match w.planes {
+        1 => String::new(),
+        n => format!(" in each of {n} planes (a channel each)"),
+    };
     format!(
-        "{}: {} levels ({}), {} {} tiles, {}, {} file bytes",
+        "{}: {} levels{planes} ({}), {} {} tiles, {}, {} file bytes",
         w.flavour.name(),
         w.levels,
         levels_clause(w.levels_copied, &w.levels_declined, "tile"),
