@@ -54,7 +54,7 @@ fn png_tiles(dir: &Path, args: &[&str]) -> Vec<(String, Vec<u8>)> {
 /// `--channel` files into an OME-TIFF of planes, read back by our own reader as a channel set
 /// (the OME-XML's `TiffData` mapping IFD `c` to channel `c`): each plane cuts the same tiles as
 /// its file, 8 and 16 bits, all channels or picked ones in the order picked; `--json` says
-/// the planes and counts every plane's tiles.
+/// the planes and counts every plane's tiles; the file is the same on every run.
 #[test]
 fn channel_files_become_planes_our_reader_reads_back() {
     let dir = tempfile::tempdir().unwrap();
@@ -80,6 +80,17 @@ fn channel_files_become_planes_our_reader_reads_back() {
         let per_plane: u64 =
             (0..doc["lodCount"].as_u64().unwrap()).map(|k| 150u64.div_ceil(64 << k) * 97u64.div_ceil(64 << k)).sum();
         assert_eq!(doc["tiles"].as_u64().unwrap(), per_plane * order.len() as u64, "{doc}");
+        // The same bytes on every run, whatever the thread count: each plane's tiles reach the
+        // writer in the producer's order.
+        for threads in ["1", "3"] {
+            let again = sub.join(format!("again{threads}.ome.tif"));
+            let args: Vec<&str> = (args.iter().map(|a| if *a == s(&tiff) { s(&again) } else { a }))
+                .filter(|a| *a != "--json")
+                .chain(["--threads", threads, "-q"])
+                .collect();
+            ok(&args);
+            assert!(std::fs::read(&again).unwrap() == std::fs::read(&tiff).unwrap(), "{threads} threads: another file");
+        }
         for (c, &k) in order.iter().enumerate() {
             let c = c.to_string();
             let got = png_tiles(&sub.join(format!("got{c}")), &[s(&tiff), "--channels", &c]);
