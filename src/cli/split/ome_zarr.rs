@@ -116,10 +116,13 @@ pub fn tile_channels(
             let first = &outputs[0];
             match first.format {
                 Format::Tiff(flavour) => bail!(
-                    "{}: {} channels, and a {} ({}) holds one (grey) or three (RGB) of them a pixel: pick them with --channels 0,1,2, or write every channel as a plane of an OME-TIFF (-o FILE.ome.tif) or with --layout ome-zarr",
+                    "{}: {} channels, and {} ({}) holds one (grey) or three (RGB) of them a pixel: pick them with --channels 0,1,2, or write every channel as a plane of an OME-TIFF (-o FILE.ome.tif) or with --layout ome-zarr",
                     inputs[0].shown(),
                     picks.len(),
-                    flavour.name(),
+                    match flavour {
+                        Flavour::Cog => "a COG",
+                        _ => "a generic pyramidal TIFF",
+                    },
                     first.path.shown(),
                 ),
                 format => bail!(
