@@ -365,6 +365,7 @@ fn tiff_json(w: &vortex_tiler::formats::tiff::TiffSummary) -> serde_json::Value 
         "flavour": w.flavour.name(),
         "bigtiff": w.bigtiff,
         "levels": w.levels,
+        "planes": w.planes,
         "tiles": w.tiles,
         "compression": w.compression,
         "tileBytes": w.tile_bytes,
@@ -396,8 +397,12 @@ fn tiff_line(w: &vortex_tiler::formats::tiff::TiffSummary) -> String {
         (true, n) if w.flavour == Flavour::Generic => format!("; {n} associated image(s) left out (--no-associated)"),
         (true, n) => format!("; {n} associated image(s) left out: a generic TIFF (-o NAME.tif) carries them"),
     };
+    let planes = match w.planes {
+        1 => String::new(),
+        n => format!(" in each of {n} planes (a channel each)"),
+    };
     format!(
-        "{}: {} levels ({}), {} {} tiles, {}, {} file bytes{associated}",
+        "{}: {} levels{planes} ({}), {} {} tiles, {}, {} file bytes{associated}",
         w.flavour.name(),
         w.levels,
         levels_clause(w.levels_copied, &w.levels_declined, "tile"),

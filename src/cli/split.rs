@@ -76,14 +76,15 @@ pub struct SplitArgs {
 
     /// One channel's image, a grey image of the others' size and sample type; repeated, in
     /// channel order, in place of INPUT: with --layout ome-zarr, one array of that many
-    /// channels (docs/ome-zarr.md).
+    /// channels (docs/ome-zarr.md); into -o FILE.ome.tif, a grey plane each (docs/tiff.md).
     #[arg(help_heading = "Input", long, value_name = "FILE")]
     channel: Vec<PathBuf>,
 
     /// Channels to cut, counted from 0, e.g. 0,1,2: any number of them into --layout ome-zarr
-    /// (a `c` axis), one (grey) or three (RGB) into the other layouts [default: every channel;
-    /// an image of more than four (a TIFF of more samples or separate planes, an OME-TIFF's
-    /// planes, --channel files) needs --layout ome-zarr or a pick].
+    /// (a `c` axis) or an OME-TIFF (-o FILE.ome.tif: a grey plane each), one (grey) or three
+    /// (RGB) into the other layouts [default: every channel; an image of more than four (a
+    /// TIFF of more samples or separate planes, an OME-TIFF's planes, --channel files) needs
+    /// --layout ome-zarr, an OME-TIFF or a pick].
     #[arg(help_heading = "Input", long, value_name = "LIST", value_delimiter = ',')]
     channels: Option<Vec<usize>>,
 

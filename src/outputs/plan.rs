@@ -99,8 +99,8 @@ impl Plan {
         Plan::with_planes(outputs, settings, header, inputs, budget, None)
     }
 
-    /// [`Plan::new`] for OME-Zarr channels written one pass each (`planes`; `header` is a
-    /// channel's).
+    /// [`Plan::new`] for channels written one pass each (`planes`; `header` is a channel's),
+    /// into an OME-Zarr or an OME-TIFF ([`Plan::write_channels`]).
     pub fn with_planes(
         outputs: Vec<Output>,
         settings: &Settings,
@@ -136,7 +136,7 @@ impl Plan {
                 Format::Viewer(viewer) => for_viewer(output, viewer, &own, &at)?,
                 Format::Pmtiles => for_viewer(output, Viewer::Xyz, &own, &at)?,
                 Format::OmeZarr => ome_zarr(output, &own, &at, planes.clone())?,
-                Format::Tiff(flavour) => tiff_output(output, flavour, &own, &at)?,
+                Format::Tiff(flavour) => tiff_output(output, flavour, &own, &at, planes.as_deref())?,
                 Format::Dicom => dicom_output(output, &own, &at)?,
             });
         }
@@ -573,10 +573,24 @@ fn file_and_viewer_flags(own: &Own) -> [(bool, &'static str); 5] {
 
 /// A pyramidal TIFF (docs/tiff.md): pages without border, whole at the edges (TIFF pads its
 /// edge tiles), JPEG tiles or the raw, Deflate or zstd ones the file stores, all from the
-/// encoders ([`tiff::Spec::codec`]).
-fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Result<Planned> {
+/// encoders ([`tiff::Spec::codec`]); `planes`: channels written one pass each, each a grey
+/// plane of an OME-TIFF.
+fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context, planes: Option<&[Plane]>) -> Result<Planned> {
     let t = &own.tiles;
     let what = flavour.name();
+    if let Some(planes) = planes
+        && flavour != Flavour::Ome
+    {
+        return Err(options(format!(
+            "{}: {} channels one pass each go into an OME-TIFF's planes (-o FILE.ome.tif); a {what} holds one to four samples a pixel: pick one or three with --channels",
+            output.path.shown(),
+            planes.len()
+        )));
+    }
+    let planar = planes.is_some();
+    let channels: Vec<tiff::OmeChannel> = (planes.unwrap_or_default().iter())
+        .map(|p| tiff::OmeChannel { name: Some(p.name.clone()), colour: p.colour })
+        .collect();
     for (given, flag) in file_and_viewer_flags(own) {
         if given {
             return Err(options(format!("{flag} does not apply to a {what} output, one file of tiled levels")));
@@ -682,6 +696,8 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
         associated,
         associated_bytes: at.budget.bytes(),
         associated_left_out,
+        channels,
+        planar,
     };
     spec.check()?;
     at.limits().check_pyramid(&layout, false)?;
@@ -690,7 +706,7 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context) -> Res
     if let Some(codec) = spec.codec() {
         opts.codec = codec;
     }
-    at.limits().check_memory(&format!("the index of the TIFF's {} tiles", layout.total_tiles()), spec.index_bytes())?;
+    at.limits().check_memory(&format!("the index of the TIFF's {} tiles", spec.total_tiles()), spec.index_bytes())?;
     let claim = at.claim(&output.path, Product::Tiff)?;
     Ok(Planned {
         output,

@@ -441,9 +441,10 @@ impl Plan {
 }
 
 impl Plan {
-    /// Writes the one OME-Zarr output of a plan made with planes ([`Plan::with_planes`]) from
-    /// the channels `picks` of `set`, one pass each, one after another (memory stays one grey
-    /// pipeline's); `first` is channel `picks[0]`, opened already.
+    /// Writes the one output of a plan made with planes ([`Plan::with_planes`]: an OME-Zarr,
+    /// or an OME-TIFF of a grey plane a channel) from the channels `picks` of `set`, one pass
+    /// each, one after another (memory stays one grey pipeline's); `first` is channel
+    /// `picks[0]`, opened already.
     pub fn write_channels(
         self,
         set: &ChannelSet,
@@ -452,12 +453,10 @@ impl Plan {
         progress: &dyn Progress,
     ) -> Result<Wrote> {
         let Plan { outputs, pack, .. } = self;
-        let [planned] = <[Planned; 1]>::try_from(outputs)
-            .map_err(|_| TilerError::Options("channels one pass each go to one OME-Zarr output".into()))?;
+        let [planned] = <[Planned; 1]>::try_from(outputs).map_err(|_| {
+            TilerError::Options("channels one pass each go to one output (an OME-Zarr or an OME-TIFF)".into())
+        })?;
         let open = Open::start(planned, pack)?;
-        let Sink::OmeZarr(sink) = &open.sink else {
-            return Err(TilerError::Options("channels one pass each go to an OME-Zarr output".into()));
-        };
         let (opts, total) = (&open.planned.opts, open.planned.layout.total_tiles());
         let mut summary: Option<Summary> = None;
         let mut windows = Vec::with_capacity(picks.len());
@@ -469,7 +468,23 @@ impl Plan {
             };
             let (mut source, range) = Ranged::new(source);
             let (lods, background) = (open.planned.layout.lod_count, opts.background);
-            let target = Target { sink: &sink.plane(c as u32), lods, background, encoding: opts.encoding() };
+            let (zarr, tiff);
+            let sink: &dyn TileSink = match &open.sink {
+                Sink::OmeZarr(sink) => {
+                    zarr = sink.plane(c as u32);
+                    &zarr
+                }
+                Sink::Tiff(sink) => {
+                    tiff = sink.plane(c as u32);
+                    &tiff
+                }
+                _ => {
+                    return Err(TilerError::Options(
+                        "channels one pass each go to an OME-Zarr or an OME-TIFF output".into(),
+                    ));
+                }
+            };
+            let target = Target { sink, lods, background, encoding: opts.encoding() };
             let done = split::split_to(&mut source, &[target], opts, progress)?;
             if done.tiles != total {
                 return Err(TilerError::Internal(format!("wrote {} tiles of {total} of channel {k}", done.tiles)));

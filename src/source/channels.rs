@@ -39,6 +39,9 @@ pub struct ChannelSet {
     pub depth: Depth,
     /// A name per channel: the OME-XML's `Channel Name`, a file's stem, or the colour's.
     pub names: Vec<String>,
+    /// A colour per channel where the source gives one (the OME-XML's `Channel Color`: RGBA,
+    /// red in the high byte); as many as `names`.
+    pub colours: Vec<Option<u32>>,
     kind: Kind,
     max_memory: u64,
 }
@@ -68,9 +71,10 @@ impl ChannelSet {
             Channels::Grey => vec!["grey".to_string()],
             Channels::GreyAlpha => vec!["grey".to_string(), "alpha".to_string()],
         };
-        let names = names.into_iter().take(layout.channels.count()).collect();
+        let names: Vec<String> = names.into_iter().take(layout.channels.count()).collect();
+        let colours = vec![None; names.len()];
         let kind = Kind::Texels { path: path.to_path_buf(), pick, layout };
-        Ok(ChannelSet { width, height, depth: layout.depth, names, kind, max_memory })
+        Ok(ChannelSet { width, height, depth: layout.depth, names, colours, kind, max_memory })
     }
 
     /// The channels of `path` if the pipeline cannot read them as texels: a TIFF page of
@@ -105,6 +109,7 @@ impl ChannelSet {
             height: header.height,
             depth: header.layout.depth,
             names,
+            colours: vec![None; paths.len()],
             kind: Kind::Files(paths.to_vec()),
             max_memory,
         };
@@ -234,9 +239,9 @@ fn tiff_channels(path: &Path, pick: Pick, max_memory: u64) -> Result<Option<Chan
             let first = Pick { page: Some(planes.ifds[0]), series: None };
             let header = super::open_picked(path, max_memory, first)?.header();
             let kind = Kind::Pages { path: path.to_path_buf(), pages: planes.ifds.clone() };
-            let names = planes.names.clone();
+            let (names, colours) = (planes.names.clone(), planes.colours.clone());
             let (width, height, depth) = (header.width, header.height, header.layout.depth);
-            return Ok(Some(ChannelSet { width, height, depth, names, kind, max_memory }));
+            return Ok(Some(ChannelSet { width, height, depth, names, colours, kind, max_memory }));
         }
         (Some(Some(planes)), _) => planes.ifds[0] as usize,
         (_, Some(page)) => page as usize,
@@ -258,13 +263,13 @@ fn tiff_channels(path: &Path, pick: Pick, max_memory: u64) -> Result<Option<Chan
         return Err(TilerError::unsupported(path, format!("{samples} samples per texel: at most {MAX_CHANNELS}")));
     }
     let header = super::tiff::open_sample(path, page, 0, max_memory)?.header();
-    let names = match &ome {
-        Some(Some(planes)) if planes.names.len() == samples as usize => planes.names.clone(),
-        _ => (0..samples).map(|k| format!("c{k}")).collect(),
+    let (names, colours) = match &ome {
+        Some(Some(planes)) if planes.names.len() == samples as usize => (planes.names.clone(), planes.colours.clone()),
+        _ => ((0..samples).map(|k| format!("c{k}")).collect(), vec![None; samples as usize]),
     };
     let kind = Kind::Samples { path: path.to_path_buf(), page };
     let (width, height, depth) = (header.width, header.height, header.layout.depth);
-    Ok(Some(ChannelSet { width, height, depth, names, kind, max_memory }))
+    Ok(Some(ChannelSet { width, height, depth, names, colours, kind, max_memory }))
 }
 
 /// An OME-XML series' channels at the first focal plane and time point: the TIFF directory of
@@ -273,6 +278,8 @@ fn tiff_channels(path: &Path, pick: Pick, max_memory: u64) -> Result<Option<Chan
 struct OmePlanes {
     ifds: Vec<u32>,
     names: Vec<String>,
+    /// Each channel's `Color`, where it has a readable one.
+    colours: Vec<Option<u32>>,
 }
 
 /// Channel `c` of series `series` (0 if not given) lies in the directory its plane index says:
@@ -381,10 +388,24 @@ fn ome_channels(xml: &str, series: Option<u32>, file: &str) -> std::result::Resu
         .enumerate()
         .map(|(k, c)| attribute(c, "Name").map_or_else(|| format!("c{k}"), Cow::into_owned))
         .collect();
+    let mut colours: Vec<Option<u32>> =
+        channels.iter().map(|c| attribute(c, "Color").and_then(|v| colour(&v))).collect();
     if names.len() != ifds.len() {
         names = (0..ifds.len()).map(|c| format!("c{c}")).collect();
+        colours = vec![None; ifds.len()];
     }
-    Ok(Some(OmePlanes { ifds, names }))
+    Ok(Some(OmePlanes { ifds, names, colours }))
+}
+
+/// An OME `Color`: RGBA as a signed 32-bit integer (the schema's type), or as the unsigned
+/// one some writers put; anything else is no colour (it is only a display hint).
+fn colour(value: &str) -> Option<u32> {
+    let v: i64 = value.trim().parse().ok()?;
+    match v {
+        -0x8000_0000..0 => Some(v as i32 as u32),
+        0..=0xFFFF_FFFF => Some(v as u32),
+        _ => None,
+    }
 }
 
 /// Samples of several sources side by side in one texel; one source's sample `k` alone.
@@ -537,11 +558,17 @@ mod tests {
         // tifffile's RGB: SizeC 3 as one Channel of 3 samples, one plane.
         let xml = r#"<OME><Image><Pixels SizeC="3"><Channel Name="RGB" SamplesPerPixel="3"/>
             <TiffData IFD="0" PlaneCount="1"/></Pixels></Image></OME>"#;
-        assert_eq!(ome_channels(xml, None, "a"), Ok(Some(OmePlanes { ifds: vec![0], names: vec!["RGB".into()] })));
+        let rgb = OmePlanes { ifds: vec![0], names: vec!["RGB".into()], colours: vec![None] };
+        assert_eq!(ome_channels(xml, None, "a"), Ok(Some(rgb)));
         // Names are unescaped.
         let xml = r#"<OME><Image><Pixels SizeC="2"><Channel Name="A&amp;B"/><Channel Name="&#65;"/>
             <TiffData IFD="0" PlaneCount="2"/></Pixels></Image></OME>"#;
         assert_eq!(ome_channels(xml, None, "a").unwrap().unwrap().names, vec!["A&B", "A"]);
+        // Colours: the schema's signed RGBA, an unsigned one, and none where unreadable.
+        let xml = r#"<OME><Image><Pixels SizeC="4"><Channel Color="-16776961"/><Channel Color="16711935"/>
+            <Channel Color="4278190335"/><Channel Color="blue"/><TiffData IFD="0" PlaneCount="4"/></Pixels></Image></OME>"#;
+        let colours = ome_channels(xml, None, "a").unwrap().unwrap().colours;
+        assert_eq!(colours, vec![Some(0xFF00_00FF), Some(0x00FF_00FF), Some(0xFF00_00FF), None]);
     }
 
     /// An OME-XML that does not map onto this file's pages is refused, naming the field: never

@@ -50,6 +50,7 @@ mod stripes;
 mod tiff_corpus;
 mod tiff_kinds;
 mod tiff_out;
+mod tiff_planes;
 mod tiff_slides;
 mod value_range;
 mod view;

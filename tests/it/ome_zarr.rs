@@ -14,7 +14,7 @@ use crate::common::Image;
 use crate::common::cli::{fails_with, ok, run, s};
 
 /// Writes `image` as a PNG (16-bit samples big-endian, as PNG stores them).
-fn write_png(path: &Path, image: &Image) {
+pub(crate) fn write_png(path: &Path, image: &Image) {
     let mut enc = png::Encoder::new(std::fs::File::create(path).unwrap(), image.width, image.height);
     enc.set_color(match image.layout.channels {
         Channels::Grey => png::ColorType::Grayscale,

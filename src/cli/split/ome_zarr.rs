@@ -8,6 +8,7 @@ use anyhow::{Result, bail};
 
 use vortex_tiler::error::ShowPath;
 use vortex_tiler::formats::ome_zarr::{PixelSize, Plane, Version};
+use vortex_tiler::formats::tiff::Flavour;
 use vortex_tiler::outputs::{Budget, Format, OmeZarrSettings, Plan};
 use vortex_tiler::source::Pick;
 use vortex_tiler::source::channels::ChannelSet;
@@ -83,8 +84,9 @@ pub fn channel_set(
     Ok(set.map(|set| (set, vec![input.to_path_buf()])))
 }
 
-/// Cuts the channels `picks` (all by default) of `set`: into OME-Zarr, one pass per channel
-/// (docs/ome-zarr.md); into another output, as one grey or RGB image.
+/// Cuts the channels `picks` (all by default) of `set`: into OME-Zarr or an OME-TIFF, one pass
+/// per channel (docs/ome-zarr.md, docs/tiff.md: a grey plane each); into another output, as
+/// one grey or RGB image.
 pub fn tile_channels(
     set: ChannelSet,
     picks: Option<&[usize]>,
@@ -107,30 +109,51 @@ pub fn tile_channels(
         bail!("--channels names no channel");
     }
     let outputs = a.outputs()?;
-    let zarr = outputs.iter().any(|o| o.format == Format::OmeZarr);
-    if !zarr {
+    // OME-Zarr and OME-TIFF hold any number of channels, each a pyramid of its own.
+    let planar = |f: Format| matches!(f, Format::OmeZarr | Format::Tiff(Flavour::Ome));
+    if !outputs.iter().any(|o| planar(o.format)) {
         if ![1, 3].contains(&picks.len()) {
-            bail!(
-                "{}: {} channels, and --layout {} (or a pack) holds one (grey) or three (RGB) of them: pick them with --channels 0,1,2, or write every channel with --layout ome-zarr",
-                inputs[0].shown(),
-                picks.len(),
-                match outputs[0].format {
-                    Format::Pack | Format::Pmtiles => "vortex",
-                    format => format.name(),
-                }
-            );
+            let first = &outputs[0];
+            match first.format {
+                Format::Tiff(flavour) => bail!(
+                    "{}: {} channels, and {} ({}) holds one (grey) or three (RGB) of them a pixel: pick them with --channels 0,1,2, or write every channel as a plane of an OME-TIFF (-o FILE.ome.tif) or with --layout ome-zarr",
+                    inputs[0].shown(),
+                    picks.len(),
+                    match flavour {
+                        Flavour::Cog => "a COG",
+                        _ => "a generic pyramidal TIFF",
+                    },
+                    first.path.shown(),
+                ),
+                format => bail!(
+                    "{}: {} channels, and --layout {} (or a pack) holds one (grey) or three (RGB) of them: pick them with --channels 0,1,2, or write every channel with --layout ome-zarr",
+                    inputs[0].shown(),
+                    picks.len(),
+                    match format {
+                        Format::Pack | Format::Pmtiles => "vortex",
+                        format => format.name(),
+                    }
+                ),
+            }
         }
         let source = set.interleave(picks)?;
         return super::tile(source, &inputs[0], names, a, started, super::Carried::default());
     }
     if outputs.len() > 1 {
+        let into = outputs.iter().find(|o| planar(o.format)).map_or(Format::OmeZarr, |o| o.format);
         bail!(
-            "{}: its {} channels go into OME-Zarr one pass each, which writes no other output in the same run: write the others in a run of their own",
+            "{}: its {} channels go into {} one pass each, which writes no other output in the same run (each pass is one channel's pyramid, which no other output holds alone): write the others in a run of their own",
             inputs[0].shown(),
-            picks.len()
+            picks.len(),
+            match into {
+                Format::OmeZarr => "OME-Zarr",
+                _ => "an OME-TIFF's planes",
+            }
         );
     }
-    let planes = picks.iter().map(|&k| Plane { name: set.names[k].clone(), window: None }).collect();
+    let planes = (picks.iter())
+        .map(|&k| Plane { name: set.names[k].clone(), window: None, colour: set.colours.get(k).copied().flatten() })
+        .collect();
     let first = set.channel(picks[0])?;
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
     let settings = a.settings(names, super::Carried::default(), None)?;
@@ -149,6 +172,6 @@ pub fn tile_channels(
         height: set.height,
         took: started.elapsed(),
     };
-    super::report(a, "ome-zarr", &done, &wrote.path, &wrote.figures);
+    super::report(a, wrote.format.name(), &done, &wrote.path, &wrote.figures);
     Ok(())
 }

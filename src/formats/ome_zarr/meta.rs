@@ -92,6 +92,9 @@ pub struct Plane {
     pub name: String,
     /// The smallest and largest sample, where known before the metadata is written.
     pub window: Option<(f64, f64)>,
+    /// The channel's colour where the source gives it (an OME-TIFF's `Channel Color`): RGBA,
+    /// red in the high byte. `None`: the viewers' default for its place ([`PLANE_COLOURS`]).
+    pub colour: Option<u32>,
 }
 
 /// Colours of the channels written one pass each, in turn: the ones microscopy viewers give
@@ -200,7 +203,10 @@ impl Spec {
                     let (start, end) = (number(start), number(end));
                     json!({
                         "label": plane.name,
-                        "color": PLANE_COLOURS[c % PLANE_COLOURS.len()],
+                        "color": match plane.colour {
+                            Some(rgba) => format!("{:06X}", rgba >> 8),
+                            None => PLANE_COLOURS[c % PLANE_COLOURS.len()].to_string(),
+                        },
                         "active": true,
                         "coefficient": 1,
                         "family": "linear",

@@ -26,8 +26,10 @@
 //! say (`TiffSink`'s `takes_stored_jpeg`). A GeoTIFF source's georeferencing tags are written
 //! again into a COG's or a generic pyramid's full resolution (`Spec::geo`). A slide's
 //! associated images (label, macro, thumbnail) follow a generic pyramid's levels, each one
-//! strip of its own (`associated.rs`). Not yet (issue 43): shared `JPEGTables` and more than
-//! four channels as planes.
+//! strip of its own (`associated.rs`). An OME-TIFF holds channels as grey planes
+//! (`Spec::planar`), one pass of the pipeline each: plane `c`'s tiles come after plane
+//! `c - 1`'s, and its IFDs are the `c`th main IFD with its SubIFDs. Not yet (issue 43):
+//! shared `JPEGTables`.
 
 mod associated;
 mod cog;
@@ -158,6 +160,15 @@ pub enum BigTiff {
     Always,
 }
 
+/// An OME channel's name and colour, where the source says them (OME's `Channel` `Name` and
+/// `Color`); nothing is invented for what it does not say.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub(crate) struct OmeChannel {
+    pub name: Option<String>,
+    /// RGBA, red in the high byte (OME's `Color`, written as the signed 32-bit integer it is).
+    pub colour: Option<u32>,
+}
+
 /// The physical side of a level-0 pixel, in micrometres (OME's `PhysicalSizeX`/`Y`, and the
 /// TIFF resolution tags).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -197,6 +208,13 @@ pub(crate) struct Spec {
     /// The associated images the source has that the file leaves out (`--no-associated`,
     /// or a flavour that holds none).
     pub associated_left_out: usize,
+    /// An OME-TIFF's channels as OME names them. With `planar`, one grey plane each: plane `c`
+    /// is a main IFD of its own (the `c`th of the chain, its reduced levels its SubIFDs), as
+    /// bioformats and raw2ometiff write more channels than a pixel holds. Without, at most one
+    /// entry: the one channel of `stored`'s interleaved samples; empty: nothing said of it.
+    pub channels: Vec<OmeChannel>,
+    /// Whether each of `channels` is a grey plane of its own (OME-TIFF only).
+    pub planar: bool,
 }
 
 impl Spec {
@@ -210,9 +228,22 @@ impl Spec {
         Level::of(&self.copied, &self.layout, k)
     }
 
-    /// Tiles, every level.
-    pub fn total_tiles(&self) -> u64 {
+    /// Planes: a grey one per channel where `planar`, else the one of interleaved samples.
+    pub fn planes(&self) -> u32 {
+        match self.planar {
+            true => self.channels.len() as u32,
+            false => 1,
+        }
+    }
+
+    /// Tiles of one plane, every level.
+    pub fn plane_tiles(&self) -> u64 {
         (0..self.level_count()).map(|k| self.level(k).tiles()).sum()
+    }
+
+    /// Tiles, every level of every plane.
+    pub fn total_tiles(&self) -> u64 {
+        self.plane_tiles().saturating_mul(u64::from(self.planes()))
     }
 
     /// The longest side of any level's tiles.
@@ -269,6 +300,35 @@ impl Spec {
         if self.flavour == Flavour::Cog && self.most_tile_bytes() > u32::MAX as u64 {
             return Err(TilerError::Options(format!(
                 "--tile-size {t}: a COG tile's length is a 32-bit leader, and these tiles could pass 4 GiB"
+            )));
+        }
+        if self.planar {
+            let planes = self.channels.len();
+            if self.flavour != Flavour::Ome {
+                return Err(TilerError::Options(format!(
+                    "{planes} channels as planes: only an OME-TIFF (-o FILE.ome.tif) holds them; a {} holds one to four samples a pixel: pick them with --channels",
+                    self.flavour.name()
+                )));
+            }
+            if planes == 0 || planes > crate::source::channels::MAX_CHANNELS {
+                return Err(TilerError::Options(format!(
+                    "an OME-TIFF of {planes} planes: 1 to {} are written",
+                    crate::source::channels::MAX_CHANNELS
+                )));
+            }
+            if self.stored.channels != Channels::Grey || !self.copied.is_empty() {
+                return Err(TilerError::Internal(format!(
+                    "an OME-TIFF's planes are grey pyramids of ours, not {} samples or copied levels",
+                    self.stored
+                )));
+            }
+        } else if self.channels.len() > 1 {
+            return Err(TilerError::Internal("interleaved samples are one OME channel".into()));
+        }
+        if let Some(c) = self.channels.iter().find(|c| c.name.as_ref().is_some_and(|n| n.contains('\0'))) {
+            return Err(TilerError::Options(format!(
+                "the channel name {:?} holds a NUL character",
+                c.name.as_deref().unwrap_or_default()
             )));
         }
         if self.name.contains('\0') {
@@ -328,7 +388,8 @@ impl Spec {
             } + 24)
             .sum();
         let icc = self.icc.as_ref().map_or(0, |p| p.len() as u64 + 2);
-        let ifds = u64::from(self.level_count()) * (4096 + icc) + total.saturating_mul(16) + geo;
+        let ifds =
+            u64::from(self.level_count()) * u64::from(self.planes()) * (4096 + icc) + total.saturating_mul(16) + geo;
         let xml = ome::xml(self).len() as u64;
         let associated: u64 = (self.associated.iter())
             .map(|a| associated::most_bytes(a.width, a.height).saturating_add(4096))

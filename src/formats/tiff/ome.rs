@@ -1,11 +1,11 @@
 //! The OME-XML an OME-TIFF carries in its first IFD's `ImageDescription` (OME schema
 //! 2016-06): one image, its size, channels and pixel type, the physical pixel size where
-//! known, and one `TiffData` naming the first IFD (its reduced levels are that IFD's SubIFDs,
-//! which the schema does not describe and readers find by the tag).
+//! known, and `TiffData` naming the main IFD of each plane (its reduced levels are that IFD's
+//! SubIFDs, which the schema does not describe and readers find by the tag).
 
 use std::fmt::Write;
 
-use super::Spec;
+use super::{OmeChannel, Spec};
 use crate::pixel::Depth;
 
 const NAMESPACE: &str = "http://www.openmicroscopy.org/Schemas/OME/2016-06";
@@ -38,8 +38,11 @@ fn escape(text: &str) -> String {
     out
 }
 
-/// The OME-XML of `spec`'s image: samples interleaved in one IFD a plane, so one channel of
-/// as many samples as a pixel has (OME's RGB convention), `SizeC` counting the samples.
+/// The OME-XML of `spec`'s image. Samples interleaved in one IFD a plane: one channel of as
+/// many samples as a pixel has (OME's RGB convention), `SizeC` counting the samples, named
+/// where the source names it. Planes (`Spec::planar`): a channel each, of one sample, each
+/// with its name and, where the source gives it, its colour, and a `TiffData` mapping main IFD
+/// `c` (the `c`th of the chain; SubIFDs are not counted) to channel `c`.
 pub(super) fn xml(spec: &Spec) -> String {
     let samples = spec.stored.channels.count();
     let bits = spec.stored.depth.bytes() * 8;
@@ -51,6 +54,10 @@ pub(super) fn xml(spec: &Spec) -> String {
             size.0
         );
     }
+    let (size_c, interleaved) = match spec.planar {
+        true => (spec.channels.len(), "false"),
+        false => (samples, "true"),
+    };
     let mut out = String::new();
     let _ = write!(
         out,
@@ -60,20 +67,49 @@ pub(super) fn xml(spec: &Spec) -> String {
             r#"xsi:schemaLocation="{ns} {ns}/ome.xsd" Creator="vortex-tiler {version}">"#,
             r#"<Image ID="Image:0" Name="{name}">"#,
             r#"<Pixels ID="Pixels:0" DimensionOrder="XYCZT" Type="{ty}" SignificantBits="{bits}" "#,
-            r#"Interleaved="true" BigEndian="false" SizeX="{w}" SizeY="{h}" SizeC="{c}" SizeZ="1" SizeT="1"{physical}>"#,
-            r#"<Channel ID="Channel:0:0" SamplesPerPixel="{c}"><LightPath/></Channel>"#,
-            r#"<TiffData IFD="0" PlaneCount="1"/>"#,
-            r#"</Pixels></Image></OME>"#
+            r#"Interleaved="{interleaved}" BigEndian="false" SizeX="{w}" SizeY="{h}" SizeC="{c}" SizeZ="1" SizeT="1"{physical}>"#,
         ),
         ns = NAMESPACE,
         version = env!("CARGO_PKG_VERSION"),
         name = escape(&spec.name),
         ty = pixel_type(spec.stored.depth),
         bits = bits,
+        interleaved = interleaved,
         w = spec.layout.width,
         h = spec.layout.height,
-        c = samples,
+        c = size_c,
         physical = physical,
     );
+    match spec.planar {
+        false => {
+            let channel = spec.channels.first().cloned().unwrap_or_default();
+            let _ = write!(out, r#"<Channel ID="Channel:0:0"{}"#, attributes(&channel));
+            let _ = write!(out, r#" SamplesPerPixel="{samples}"><LightPath/></Channel>"#);
+            out.push_str(r#"<TiffData IFD="0" PlaneCount="1"/>"#);
+        }
+        true => {
+            for (c, channel) in spec.channels.iter().enumerate() {
+                let _ = write!(out, r#"<Channel ID="Channel:0:{c}"{}"#, attributes(channel));
+                out.push_str(r#" SamplesPerPixel="1"><LightPath/></Channel>"#);
+            }
+            for c in 0..spec.channels.len() {
+                let _ = write!(out, r#"<TiffData IFD="{c}" FirstC="{c}" FirstZ="0" FirstT="0" PlaneCount="1"/>"#);
+            }
+        }
+    }
+    out.push_str("</Pixels></Image></OME>");
+    out
+}
+
+/// A channel's `Name` and `Color` attributes, each where known. `Color` is RGBA as the signed
+/// 32-bit integer the schema types it.
+fn attributes(channel: &OmeChannel) -> String {
+    let mut out = String::new();
+    if let Some(name) = &channel.name {
+        let _ = write!(out, r#" Name="{}""#, escape(name));
+    }
+    if let Some(colour) = channel.colour {
+        let _ = write!(out, r#" Color="{}""#, colour as i32);
+    }
     out
 }

@@ -89,8 +89,15 @@ impl Drop for TiffSink {
     }
 }
 
-impl TileSink for TiffSink {
-    fn write_tile(&self, lod: u32, x: u32, y: u32, stored: &[u8]) -> Result<()> {
+impl TiffSink {
+    /// The sink of plane `c`'s pass, for an OME-TIFF of channels written one pass each
+    /// (`Spec::planar`).
+    pub fn plane(&self, c: u32) -> PlaneSink<'_> {
+        PlaneSink { sink: self, c }
+    }
+
+    /// Stores tile `(x, y)` of level `lod` of plane `c`.
+    fn write_plane(&self, c: u32, lod: u32, x: u32, y: u32, stored: &[u8]) -> Result<()> {
         if self.spec.compression == Compression::None && stored.len() as u64 != self.spec.raw_tile_bytes() {
             let s = &self.spec;
             let message = format!(
@@ -105,9 +112,41 @@ impl TileSink for TiffSink {
         let mut writer = self.writer.lock().map_err(|_| TilerError::panicked("a TIFF writer"))?;
         let writer =
             writer.as_mut().ok_or_else(|| TilerError::Internal("a tile after the TIFF was finished".into()))?;
-        writer.add_tile(lod, x, y, stored)?;
+        writer.add_plane_tile(c, lod, x, y, stored)?;
         self.tile_bytes.fetch_add(stored.len() as u64, Ordering::Relaxed);
         Ok(())
+    }
+}
+
+/// One channel's pass into a [`TiffSink`] of planes: its tiles are the plane's.
+pub(crate) struct PlaneSink<'a> {
+    sink: &'a TiffSink,
+    c: u32,
+}
+
+impl TileSink for PlaneSink<'_> {
+    fn write_tile(&self, lod: u32, x: u32, y: u32, stored: &[u8]) -> Result<()> {
+        self.sink.write_plane(self.c, lod, x, y, stored)
+    }
+
+    /// A stored JPEG tile as the file's own sink takes it (a plane is grey, as a grey file).
+    fn takes_stored_jpeg(&self, jpeg: &[u8]) -> bool {
+        self.sink.takes_stored_jpeg(jpeg)
+    }
+
+    /// Tiles in the producer's order, so that the file is the same on every run.
+    fn ordered(&self) -> bool {
+        true
+    }
+
+    fn bytes_written(&self) -> u64 {
+        self.sink.bytes_written()
+    }
+}
+
+impl TileSink for TiffSink {
+    fn write_tile(&self, lod: u32, x: u32, y: u32, stored: &[u8]) -> Result<()> {
+        self.write_plane(0, lod, x, y, stored)
     }
 
     /// A stored JPEG tile only where it is what the level's tags say of every tile: of the

@@ -131,6 +131,8 @@ fn spec(flavour: Flavour, w: u32, h: u32, levels: u32, stored: PixelLayout, comp
         associated: Vec::new(),
         associated_bytes: 0,
         associated_left_out: 0,
+        channels: Vec::new(),
+        planar: false,
     }
 }
 
@@ -165,7 +167,7 @@ fn write(s: &Spec, tile: impl Fn(u32, u32, u32) -> Vec<u8>) -> Vec<u8> {
         let (c, r) = grid(s, level);
         for y in 0..r {
             for x in (0..c).rev() {
-                w.add_tile(level, x, y, &tile(level, x, y)).unwrap();
+                w.add_plane_tile(0, level, x, y, &tile(level, x, y)).unwrap();
             }
         }
     }
@@ -426,11 +428,11 @@ fn a_missing_or_repeated_or_stray_tile_is_an_error() {
     let path = dir.path().join("t.tif");
     let mut w = TiffWriter::create(&path, std::fs::File::create(&path).unwrap(), s.clone()).unwrap();
     let t = raw_tile(&s, 0, 0, 0);
-    w.add_tile(0, 0, 0, &t).unwrap();
-    assert!(w.add_tile(0, 0, 0, &t).unwrap_err().to_string().contains("twice"));
-    assert!(w.add_tile(0, 3, 0, &t).unwrap_err().to_string().contains("3x2 tiles"));
-    assert!(w.add_tile(2, 0, 0, &t).unwrap_err().to_string().contains("2 levels"));
-    assert!(w.add_tile(0, 1, 0, &[]).unwrap_err().to_string().contains("empty"));
+    w.add_plane_tile(0, 0, 0, 0, &t).unwrap();
+    assert!(w.add_plane_tile(0, 0, 0, 0, &t).unwrap_err().to_string().contains("twice"));
+    assert!(w.add_plane_tile(0, 0, 3, 0, &t).unwrap_err().to_string().contains("3x2 tiles"));
+    assert!(w.add_plane_tile(0, 2, 0, 0, &t).unwrap_err().to_string().contains("2 levels"));
+    assert!(w.add_plane_tile(0, 0, 1, 0, &[]).unwrap_err().to_string().contains("empty"));
     let e = w.finish().unwrap_err().to_string();
     assert!(e.contains("tile (level 0, x 1, y 0) was never written"), "{e}");
 }
@@ -552,4 +554,111 @@ fn a_cog_leaves_no_staging_file_and_is_recognised_as_ours() {
     assert_eq!(names, ["a.cog.tif"]);
     let claim = crate::output::claim(&dest, crate::output::Product::Tiff, &[], false).unwrap();
     assert_eq!(claim.replaces, Some(crate::output::Existing::Ours));
+}
+
+/// `s` with `names` as grey planes, colours where given.
+fn planar(mut s: Spec, channels: &[(&str, Option<u32>)]) -> Spec {
+    s.channels = (channels.iter()).map(|(n, c)| OmeChannel { name: Some(n.to_string()), colour: *c }).collect();
+    s.planar = true;
+    s
+}
+
+/// A plane's tile: `raw_tile`'s, told apart by its plane.
+fn plane_tile(s: &Spec, p: u32, level: u32, x: u32, y: u32) -> Vec<u8> {
+    raw_tile(s, level, x, y).into_iter().map(|b| b.wrapping_add(p as u8 * 101)).collect()
+}
+
+/// An OME-TIFF of planes, as bioformats and raw2ometiff write more channels than a pixel
+/// holds: plane `c` is the `c`th main IFD, its reduced levels its SubIFDs; the OME-XML (first
+/// IFD only) says one channel of one sample a plane, with its name and colour, and a
+/// `TiffData` mapping IFD `c` to channel `c`. Tiles come plane after plane, as the passes run.
+#[test]
+fn an_ome_tiff_of_planes_chains_a_main_ifd_a_channel() {
+    for big in [BigTiff::Auto, BigTiff::Always] {
+        let grey16 = PixelLayout::new(Channels::Grey, Depth::U16);
+        let base = Spec { bigtiff: big, ..spec(Flavour::Ome, 40, 20, 3, grey16, Compression::None) };
+        let s = planar(base, &[("DAPI", Some(0x0000_FFFF)), ("G&FP", None), ("c2", Some(0xFF00_00FF))]);
+        assert_eq!((s.planes(), s.total_tiles()), (3, 3 * s.plane_tiles()));
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.ome.tif");
+        let mut w = TiffWriter::create(&path, std::fs::File::create(&path).unwrap(), s.clone()).unwrap();
+        for p in 0..3 {
+            for level in 0..3 {
+                let (c, r) = grid(&s, level);
+                for y in 0..r {
+                    for x in 0..c {
+                        w.add_plane_tile(p, level, x, y, &plane_tile(&s, p, level, x, y)).unwrap();
+                    }
+                }
+            }
+        }
+        let e = w.add_plane_tile(3, 0, 0, 0, &[1]).unwrap_err().to_string();
+        assert!(e.contains("plane 3: the TIFF has 3 plane(s)"), "{e}");
+        let summary = w.finish().unwrap();
+        assert_eq!((summary.planes, summary.tiles), (3, s.total_tiles()));
+        let file = std::fs::read(&path).unwrap();
+        let n = open(&file);
+        assert_eq!(n.big, big == BigTiff::Always);
+        let main = chain(&n, n.first());
+        assert_eq!(main.len(), 3, "one main IFD a plane");
+        for (p, ifd) in main.iter().enumerate() {
+            let mut levels = vec![n.ifd(ifd.at)];
+            levels.extend(ifd.all(330).iter().map(|&at| n.ifd(at)));
+            check_levels(&file, &s, &levels, |l, x, y| plane_tile(&s, p as u32, l, x, y));
+            assert!(levels.iter().all(|l| l.one(277) == 1 && l.all(258) == [16] && l.one(262) == 1));
+            assert_eq!(ifd.tags.contains_key(&270), p == 0, "OME-XML in the first IFD only");
+        }
+        let xml = main[0].text(270);
+        for want in [
+            r#"SizeC="3""#,
+            r#"Type="uint16""#,
+            r#"Interleaved="false""#,
+            r#"<Channel ID="Channel:0:0" Name="DAPI" Color="65535" SamplesPerPixel="1">"#,
+            r#"<Channel ID="Channel:0:1" Name="G&amp;FP" SamplesPerPixel="1">"#,
+            r#"<Channel ID="Channel:0:2" Name="c2" Color="-16776961" SamplesPerPixel="1">"#,
+            r#"<TiffData IFD="0" FirstC="0" FirstZ="0" FirstT="0" PlaneCount="1"/>"#,
+            r#"<TiffData IFD="2" FirstC="2" FirstZ="0" FirstT="0" PlaneCount="1"/></Pixels>"#,
+        ] {
+            assert!(xml.contains(want), "{want} in {xml}");
+        }
+    }
+}
+
+/// A plane never written is named with its plane; planes only in an OME-TIFF, of grey
+/// samples; an interleaved image is one OME channel, named where the source names it.
+#[test]
+fn planes_are_checked_and_one_interleaved_channel_is_named_only_where_known() {
+    let s = planar(spec(Flavour::Ome, 40, 20, 2, grey8(), Compression::None), &[("a", None), ("b", None)]);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.ome.tif");
+    let mut w = TiffWriter::create(&path, std::fs::File::create(&path).unwrap(), s.clone()).unwrap();
+    for level in 0..2 {
+        let (c, r) = grid(&s, level);
+        for (x, y) in (0..r).flat_map(|y| (0..c).map(move |x| (x, y))) {
+            w.add_plane_tile(0, level, x, y, &raw_tile(&s, level, x, y)).unwrap();
+        }
+    }
+    let e = w.finish().unwrap_err().to_string();
+    assert!(e.contains("tile (plane 1, level 0, x 0, y 0) was never written"), "{e}");
+    let rgb = PixelLayout::new(Channels::Rgb, Depth::U8);
+    for (s, want) in [
+        (planar(spec(Flavour::Generic, 40, 20, 1, grey8(), Compression::None), &[("a", None)]), "only an OME-TIFF"),
+        (planar(spec(Flavour::Cog, 40, 20, 1, grey8(), Compression::None), &[("a", None)]), "--channels"),
+        (planar(spec(Flavour::Ome, 40, 20, 1, rgb, Compression::None), &[("a", None)]), "grey pyramids"),
+        (planar(spec(Flavour::Ome, 40, 20, 1, grey8(), Compression::None), &[("a\0", None)]), "NUL"),
+        (planar(spec(Flavour::Ome, 40, 20, 1, grey8(), Compression::None), &[]), "0 planes"),
+    ] {
+        let e = s.check().unwrap_err().to_string();
+        assert!(e.contains(want), "{e:?} lacks {want:?}");
+    }
+    // Interleaved RGB: one channel of three samples; unnamed as before, or named.
+    let mut s = spec(Flavour::Ome, 40, 20, 1, rgb, Compression::None);
+    let unnamed = ome::xml(&s);
+    assert!(unnamed.contains(r#"<Channel ID="Channel:0:0" SamplesPerPixel="3"><LightPath/></Channel>"#), "{unnamed}");
+    assert!(!unnamed.contains("Color="));
+    s.channels = vec![OmeChannel { name: Some("H&E".into()), colour: None }];
+    let named = ome::xml(&s);
+    assert!(named.contains(r#"<Channel ID="Channel:0:0" Name="H&amp;E" SamplesPerPixel="3">"#), "{named}");
+    s.channels.push(OmeChannel::default());
+    assert!(s.check().unwrap_err().to_string().contains("one OME channel"));
 }

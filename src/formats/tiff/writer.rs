@@ -9,8 +9,14 @@
 //! 32  tile data, each tile's bytes as they arrived
 //! ..  a generic pyramid's associated images, one strip each (`associated.rs`)
 //! ..  the IFDs, level 0 first, then the associated images', each with its value area (tile
-//!     offsets and byte counts, the OME-XML), each at a multiple of 8
+//!     offsets and byte counts, the OME-XML), each at a multiple of 8; an OME-TIFF of
+//!     planes: plane 0's levels, then plane 1's, and so on, each plane's level 0 a main IFD
+//!     (chained) and its reduced levels its SubIFDs
 //! ```
+//!
+//! An OME-TIFF's planes come one after another (a pass of the pipeline each): their tiles
+//! are appended as they come, plane after plane, and only the index grows with the planes
+//! (16 bytes a tile, as for levels).
 
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
@@ -39,7 +45,10 @@ pub struct TiffSummary {
     pub bigtiff: bool,
     /// Pyramid levels, the full resolution included.
     pub levels: u32,
-    /// Tiles stored, every level.
+    /// Planes, each a pyramid of `levels`: an OME-TIFF's channels one grey plane each, else 1
+    /// (the pixels' samples interleaved).
+    pub planes: u32,
+    /// Tiles stored, every level of every plane.
     pub tiles: u64,
     /// Bytes of tile data, as stored (compressed).
     pub tile_bytes: u64,
@@ -70,9 +79,11 @@ pub struct TiffWriter {
     big: bool,
     /// Bytes written so far (the next tile's offset).
     len: u64,
-    /// Each level's first entry in `tiles`.
+    /// Each level's first entry in `tiles`, plane by plane (plane `p`'s level `k` at
+    /// `p * levels + k`).
     bases: Vec<usize>,
-    /// Offset and length of every tile, level by level, row by row; offset 0: not yet written.
+    /// Offset and length of every tile, plane by plane, level by level, row by row; offset 0:
+    /// not yet written.
     /// A COG's offsets are in its staging file (each past its leader, so never 0).
     tiles: Vec<(u64, u64)>,
     tile_bytes: u64,
@@ -98,11 +109,13 @@ impl TiffWriter {
             TilerError::Limit(format!("the index of {total} TIFF tiles ({} bytes) does not fit in memory", total * 16))
         })?;
         tiles.resize(total, (0, 0));
-        let mut bases = Vec::with_capacity(spec.level_count() as usize);
+        let mut bases = Vec::with_capacity((spec.level_count() * spec.planes()) as usize);
         let mut at = 0usize;
-        for k in 0..spec.level_count() {
-            bases.push(at);
-            at += spec.level(k).tiles() as usize;
+        for _ in 0..spec.planes() {
+            for k in 0..spec.level_count() {
+                bases.push(at);
+                at += spec.level(k).tiles() as usize;
+            }
         }
         let big = spec.needs_bigtiff();
         let mut file = BufWriter::with_capacity(1 << 20, file);
@@ -121,9 +134,13 @@ impl TiffWriter {
         Ok(TiffWriter { path, file, staging, spec, big, len, bases, tiles, tile_bytes: 0, associated: Vec::new() })
     }
 
-    /// Appends tile `(x, y)` of `level`: `bytes` as the file stores them (compressed).
-    pub fn add_tile(&mut self, level: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+    /// Appends tile `(x, y)` of `level` of plane `plane` (0, or an OME-TIFF's channel
+    /// `plane`): `bytes` as the file stores them (compressed).
+    pub fn add_plane_tile(&mut self, plane: u32, level: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
         let err = |message: String| TilerError::Encode { lod: level, x, y, message };
+        if plane >= self.spec.planes() {
+            return Err(err(format!("plane {plane}: the TIFF has {} plane(s)", self.spec.planes())));
+        }
         if level >= self.spec.level_count() {
             return Err(err(format!("the TIFF has {} levels", self.spec.level_count())));
         }
@@ -134,7 +151,7 @@ impl TiffWriter {
         if bytes.is_empty() {
             return Err(err("an empty tile".into()));
         }
-        let at = self.bases[level as usize] + y as usize * c as usize + x as usize;
+        let at = self.base(plane, level) + y as usize * c as usize + x as usize;
         if self.tiles[at].0 != 0 {
             return Err(err("internal error: the tile came twice".into()));
         }
@@ -190,11 +207,14 @@ impl TiffWriter {
     /// tile is missing.
     pub fn finish(mut self) -> Result<TiffSummary> {
         if let Some(missing) = self.tiles.iter().position(|t| t.0 == 0) {
-            let level = self.bases.iter().rposition(|&b| b <= missing).unwrap_or(0);
+            let at = self.bases.iter().rposition(|&b| b <= missing).unwrap_or(0);
+            let levels = self.spec.level_count() as usize;
+            let (plane, level) = (at / levels, at % levels);
             let (c, _) = self.spec.level(level as u32).grid();
-            let i = missing - self.bases[level];
+            let i = missing - self.bases[at];
+            let plane = if self.spec.planar { format!("plane {plane}, ") } else { String::new() };
             return Err(TilerError::Internal(format!(
-                "{}: tile (level {level}, x {}, y {}) was never written",
+                "{}: tile ({plane}level {level}, x {}, y {}) was never written",
                 self.path.shown(),
                 i % c as usize,
                 i / c as usize
@@ -204,15 +224,22 @@ impl TiffWriter {
             return self.finish_cog();
         }
         let levels = self.spec.level_count() as usize;
-        let mut ifds: Vec<Ifd> = (0..levels).map(|k| self.level_ifd(k as u32)).collect();
+        let planes = self.spec.planes();
+        // Plane by plane, level 0 first: plane `p`'s level `k` is IFD `p * levels + k`.
+        let mut ifds: Vec<Ifd> = (0..planes)
+            .flat_map(|p| (0..levels).map(move |k| (p, k as u32)))
+            .map(|(p, k)| self.level_ifd(p, k))
+            .collect();
         ifds.extend(self.associated.iter().map(|image| associated::ifd(image, self.signature())));
         self.tiles = Vec::new();
         let sub_ifds = self.spec.flavour == Flavour::Ome && levels > 1;
         if sub_ifds {
-            ifds[0].set(tag::SUB_IFDS, Value::Ifds(vec![0; levels - 1]));
+            for main in ifds.iter_mut().step_by(levels) {
+                main.set(tag::SUB_IFDS, Value::Ifds(vec![0; levels - 1]));
+            }
         }
         // Lay the IFDs out, level 0 first, each at a multiple of 8.
-        let mut offsets = Vec::with_capacity(levels);
+        let mut offsets = Vec::with_capacity(ifds.len());
         let mut at = self.len.next_multiple_of(8);
         for ifd in &ifds {
             offsets.push(at);
@@ -224,15 +251,21 @@ impl TiffWriter {
                 self.path.shown()
             )));
         }
-        if sub_ifds && let Some(Value::Ifds(v)) = ifds[0].get_mut(tag::SUB_IFDS) {
-            v.copy_from_slice(&offsets[1..levels]);
+        if sub_ifds {
+            for (p, main) in ifds.iter_mut().step_by(levels).enumerate() {
+                if let Some(Value::Ifds(v)) = main.get_mut(tag::SUB_IFDS) {
+                    v.copy_from_slice(&offsets[p * levels + 1..][..levels - 1]);
+                }
+            }
         }
         for (k, ifd) in ifds.iter().enumerate() {
             // The generic pyramid chains every level, then its associated images; OME's
-            // reduced levels hang off level 0.
+            // reduced levels hang off their plane's level 0, and the planes' level 0s are
+            // chained.
             let next = match self.spec.flavour {
                 // (A COG is finished by `finish_cog`, chained likewise.)
                 Flavour::Generic | Flavour::Cog => offsets.get(k + 1).copied().unwrap_or(0),
+                Flavour::Ome if k % levels == 0 => offsets.get(k + levels).copied().unwrap_or(0),
                 Flavour::Ome => 0,
             };
             let pad = (offsets[k] - self.len) as usize;
@@ -260,7 +293,7 @@ impl TiffWriter {
     fn finish_cog(mut self) -> Result<TiffSummary> {
         let big = self.big;
         let levels = self.spec.level_count() as usize;
-        let mut ifds: Vec<Ifd> = (0..levels).map(|k| self.level_ifd(k as u32)).collect();
+        let mut ifds: Vec<Ifd> = (0..levels).map(|k| self.level_ifd(0, k as u32)).collect();
         // The IFDs' lengths do not depend on the offsets they hold: lay them out, then the data.
         let mut at = cog::first_ifd_at(big);
         let mut offsets = Vec::with_capacity(levels);
@@ -270,7 +303,7 @@ impl TiffWriter {
         }
         let data_at = at;
         for k in (0..levels).rev() {
-            let tiles = self.level_tiles(k as u32);
+            let tiles = self.level_tiles(0, k as u32);
             let Some(Value::Offsets(v)) = ifds[k].get_mut(tag::TILE_OFFSETS) else {
                 return Err(TilerError::Internal("a COG level without its tile offsets".into()));
             };
@@ -315,10 +348,9 @@ impl TiffWriter {
         Ok(summary(&spec, big, tile_bytes, at))
     }
 
-    /// Level `k`'s tiles in the index, row by row.
-    fn level_tiles(&self, k: u32) -> &[(u64, u64)] {
-        let (c, r) = self.spec.level(k).grid();
-        &self.tiles[self.bases[k as usize]..][..c as usize * r as usize]
+    /// Where plane `p`'s level `k` starts in the index.
+    fn base(&self, p: u32, k: u32) -> usize {
+        self.bases[(p * self.spec.level_count() + k) as usize]
     }
 
     /// The `Software` tag's value, the signature: in a COG, whose header is followed by GDAL's
@@ -331,8 +363,14 @@ impl TiffWriter {
         }
     }
 
-    /// Level `k`'s IFD, its tiles' offsets and byte counts from the index.
-    fn level_ifd(&self, k: u32) -> Ifd {
+    /// Plane `p`'s level `k`'s tiles in the index, row by row.
+    fn level_tiles(&self, p: u32, k: u32) -> &[(u64, u64)] {
+        let (c, r) = self.spec.level(k).grid();
+        &self.tiles[self.base(p, k)..][..c as usize * r as usize]
+    }
+
+    /// Plane `p`'s level `k`'s IFD, its tiles' offsets and byte counts from the index.
+    fn level_ifd(&self, p: u32, k: u32) -> Ifd {
         let s = &self.spec;
         let level = s.level(k);
         let (w, h) = (level.width, level.height);
@@ -344,7 +382,7 @@ impl TiffWriter {
         ifd.set(tag::BITS_PER_SAMPLE, Value::Short(vec![s.stored.depth.bytes() as u16 * 8; spp]));
         ifd.set(tag::COMPRESSION, Value::Short(vec![s.compression.code()]));
         ifd.set(tag::PHOTOMETRIC, Value::Short(vec![s.photometric()]));
-        if k == 0 && s.flavour == Flavour::Ome {
+        if (p, k) == (0, 0) && s.flavour == Flavour::Ome {
             ifd.set(tag::IMAGE_DESCRIPTION, Value::Ascii(ome::xml(s)));
         }
         ifd.set(tag::SAMPLES_PER_PIXEL, Value::Short(vec![spp as u16]));
@@ -369,7 +407,7 @@ impl TiffWriter {
         }
         ifd.set(tag::TILE_WIDTH, Value::Long(vec![level.tile.0]));
         ifd.set(tag::TILE_LENGTH, Value::Long(vec![level.tile.1]));
-        let tiles = self.level_tiles(k);
+        let tiles = self.level_tiles(p, k);
         ifd.set(tag::TILE_OFFSETS, Value::Offsets(tiles.iter().map(|t| t.0).collect()));
         ifd.set(tag::TILE_BYTE_COUNTS, Value::Offsets(tiles.iter().map(|t| t.1).collect()));
         // A GeoTIFF source's tags, as they were: level 0 is the source's grid. As GDAL writes
@@ -429,6 +467,7 @@ fn summary(spec: &Spec, big: bool, tile_bytes: u64, file_bytes: u64) -> TiffSumm
         flavour: spec.flavour,
         bigtiff: big,
         levels: spec.level_count(),
+        planes: spec.planes(),
         tiles: spec.total_tiles(),
         tile_bytes,
         file_bytes,

@@ -1,0 +1,229 @@
+//! An OME-TIFF of more channels than a pixel holds (`-o FILE.ome.tif` of a TIFF of more than
+//! four samples, an OME-TIFF's grey planes, `--channel` files, `--channels` picks;
+//! docs/tiff.md): a grey plane a channel, each the `c`th main IFD with its reduced levels as
+//! SubIFDs, cut one pass each as OME-Zarr's channels are. Read back by our own reader (always)
+//! and by tifffile and ome-types (the OME schema) from the Python named by VORTEX_PYVIPS,
+//! skipped with a note where it is missing outside CI.
+//!
+//! The comparisons are exact: both sides are the same grey pipeline's levels (box filter, the
+//! same tile size) stored losslessly (Deflate with the predictor in the TIFF, PNG tiles or
+//! zstd chunks on the other side), so every sample must be the same number.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
+
+use crate::common::Image;
+use crate::common::cli::{fails_with, ok, run, s};
+use crate::ome_zarr::write_png;
+
+/// `n` grey images of `layout` at `dir/chK.png`, each its own content, so that a swapped or
+/// repeated channel shows.
+fn channel_files(dir: &Path, n: u32, layout: PixelLayout) -> Vec<PathBuf> {
+    (0..n)
+        .map(|k| {
+            let mut image = Image::random(150, 97, layout, 31 + u64::from(k));
+            for (i, v) in image.samples.iter_mut().enumerate() {
+                *v = v.wrapping_add((i as u16 % 150).wrapping_mul(k as u16 + 1));
+                if layout.depth == Depth::U8 {
+                    *v &= 0xFF;
+                }
+            }
+            let path = dir.join(format!("ch{k}.png"));
+            write_png(&path, &image);
+            path
+        })
+        .collect()
+}
+
+/// The PNG tiles of `args` (border 0, box filter, 32-texel tiles), name and bytes, sorted.
+fn png_tiles(dir: &Path, args: &[&str]) -> Vec<(String, Vec<u8>)> {
+    let base = ["split", "-o", s(dir), "--border", "0", "--codec", "png", "--filter", "box", "--tile-size", "32", "-q"];
+    ok(&[&base[..], args].concat());
+    let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".png"))
+        .map(|e| (e.file_name().to_string_lossy().into_owned(), std::fs::read(e.path()).unwrap()))
+        .collect();
+    files.sort();
+    files
+}
+
+/// `--channel` files into an OME-TIFF of planes, read back by our own reader as a channel set
+/// (the OME-XML's `TiffData` mapping IFD `c` to channel `c`): each plane cuts the same tiles as
+/// its file, 8 and 16 bits, all channels or picked ones in the order picked; `--json` says
+/// the planes and counts every plane's tiles; the file is the same on every run.
+#[test]
+fn channel_files_become_planes_our_reader_reads_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (depth, n, picks) in [(Depth::U16, 5u32, None), (Depth::U8, 4, Some("3,1"))] {
+        let sub = d.join(format!("{depth:?}"));
+        std::fs::create_dir(&sub).unwrap();
+        let files = channel_files(&sub, n, PixelLayout::new(Channels::Grey, depth));
+        let tiff = sub.join("cells.ome.tif");
+        let mut args = vec!["split", "-o", s(&tiff), "--codec", "deflate", "--tile-size", "64", "--json"];
+        args.extend(files.iter().flat_map(|f| ["--channel", s(f)]));
+        if let Some(picks) = picks {
+            args.extend(["--channels", picks]);
+        }
+        let doc: serde_json::Value = serde_json::from_str(ok(&args).trim()).unwrap();
+        let order: Vec<usize> = match picks {
+            Some(p) => p.split(',').map(|k| k.parse().unwrap()).collect(),
+            None => (0..n as usize).collect(),
+        };
+        assert_eq!(doc["layout"], "ome-tiff", "{doc}");
+        assert_eq!(doc["tiff"]["planes"], order.len(), "{doc}");
+        assert_eq!(doc["tiff"]["tiles"], doc["tiles"], "{doc}");
+        let per_plane: u64 =
+            (0..doc["lodCount"].as_u64().unwrap()).map(|k| 150u64.div_ceil(64 << k) * 97u64.div_ceil(64 << k)).sum();
+        assert_eq!(doc["tiles"].as_u64().unwrap(), per_plane * order.len() as u64, "{doc}");
+        // The same bytes on every run, whatever the thread count: each plane's tiles reach the
+        // writer in the producer's order.
+        for threads in ["1", "3"] {
+            let again = sub.join(format!("again{threads}.ome.tif"));
+            let args: Vec<&str> = (args.iter().map(|a| if *a == s(&tiff) { s(&again) } else { a }))
+                .filter(|a| *a != "--json")
+                .chain(["--threads", threads, "-q"])
+                .collect();
+            ok(&args);
+            assert!(std::fs::read(&again).unwrap() == std::fs::read(&tiff).unwrap(), "{threads} threads: another file");
+        }
+        for (c, &k) in order.iter().enumerate() {
+            let c = c.to_string();
+            let got = png_tiles(&sub.join(format!("got{c}")), &[s(&tiff), "--channels", &c]);
+            let want = png_tiles(&sub.join(format!("want{c}")), &[s(&files[k])]);
+            assert!(!want.is_empty());
+            assert!(got == want, "{depth:?}: plane {c} is not channel {k}'s pyramid");
+        }
+    }
+}
+
+/// A TIFF of more than four samples into a generic pyramid or a COG is refused, naming the
+/// OME flavour and `--channels`; an OME-TIFF of planes writes no other output in its run (each
+/// pass is one channel's pyramid); nothing is left behind.
+#[test]
+fn planes_only_in_an_ome_tiff_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let files = channel_files(d, 5, PixelLayout::new(Channels::Grey, Depth::U8));
+    let channels: Vec<&str> = files.iter().flat_map(|f| ["--channel", s(f)]).collect();
+    let split = |extra: &[&str]| run(&[&["split"][..], &channels, extra].concat());
+    for name in ["x.tif", "x.cog.tif"] {
+        let out = d.join(name);
+        fails_with(&split(&["-o", s(&out)]), &["5 channels", name, "--channels 0,1,2", "-o FILE.ome.tif"]);
+        assert!(!out.exists());
+    }
+    let (tiff, zarr, web) = (d.join("x.ome.tif"), d.join("x.ome.zarr"), d.join("web"));
+    let both = split(&["-o", s(&tiff), "-o", s(&zarr), "--layout", "ome-zarr"]);
+    fails_with(&both, &["5 channels", "one pass each", "run of their own"]);
+    let beside = split(&["-o", s(&tiff), "-o", s(&web), "--layout", "dzi"]);
+    fails_with(&beside, &["an OME-TIFF's planes one pass each", "run of their own"]);
+    assert!(!tiff.exists() && !zarr.exists() && !web.exists());
+    let leftovers: Vec<_> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| !n.ends_with(".png"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    // One or three picked are still a grey or RGB generic pyramid.
+    ok(&[&["split"][..], &channels, &["-o", s(&d.join("rgb.tif")), "--channels", "0,1,2", "-q"]].concat());
+}
+
+/// Writes the inputs: a TIFF of 6 uint16 samples a pixel (stored together), an OME-TIFF of 5
+/// uint8 grey planes with names and colours, a TIFF of 5 float32 samples in separate planes.
+const INPUTS: &str = r#"
+import sys
+import numpy as np, tifffile
+out = sys.argv[1]
+h, w = 301, 410
+rng = np.random.default_rng(5)
+y, x = np.mgrid[0:h, 0:w]
+def channels(c):
+    return np.stack([((x * (k + 1) * 37 + y * 11 * (k + 2)) % 60000 + rng.integers(0, 50, (h, w))) for k in range(c)])
+tifffile.imwrite(f"{out}/six.tif", np.moveaxis(channels(6).astype(np.uint16), 0, -1), photometric="minisblack", planarconfig="contig", rowsperstrip=16)
+names = ["DAPI", "GFP", "RFP", "Cy5", "BF"]
+colours = [-16776961, 16711935, 65535, -65281, -1]
+tifffile.imwrite(f"{out}/named.ome.tif", (channels(5) % 256).astype(np.uint8), metadata={"axes": "CYX", "Channel": {"Name": names, "Color": colours}})
+tifffile.imwrite(f"{out}/float.tif", channels(5).astype(np.float32) / 7.0 - 1000.0, photometric="minisblack", planarconfig="separate", rowsperstrip=16)
+"#;
+
+/// tifffile reads the OME-TIFF as one series (C, Y, X) with every level, each equal to the
+/// OME-Zarr of the same channels, of the same sample type; ome-types validates the OME-XML
+/// against the schema; the channels' names are the ones given and their colours those the
+/// source gave (none written where it gave none), as the OME-Zarr's `omero` says too.
+const COMPARE: &str = r#"
+import re, sys
+import numpy as np, tifffile, zarr, ome_types
+tif, zarr_path, dtype, names, colours = sys.argv[1:6]
+names = names.split(",")
+colours = [None if c == "-" else int(c) for c in colours.split(",")]
+with tifffile.TiffFile(tif) as t:
+    assert t.is_ome and len(t.series) == 1, (t.is_ome, len(t.series))
+    series = t.series[0]
+    assert series.axes == "CYX", series.axes
+    xml = t.ome_metadata
+    levels = [level.asarray() for level in series.levels]
+pixels = ome_types.from_xml(xml, validate=True).images[0].pixels
+assert [c.name for c in pixels.channels] == names, [c.name for c in pixels.channels]
+assert [c.samples_per_pixel for c in pixels.channels] == [1] * len(names)
+assert [(d.ifd, d.first_c, d.plane_count) for d in pixels.tiff_data_blocks] == [(c, c, 1) for c in range(len(names))]
+for c, want in enumerate(colours):
+    tag = re.search(f'<Channel ID="Channel:0:{c}"[^>]*>', xml).group(0)
+    got = pixels.channels[c].color.as_int32() if "Color=" in tag else None
+    assert got == want, (c, tag, want)
+root = zarr.open_group(zarr_path, mode="r")
+attrs = root.attrs.asdict()
+ome = attrs.get("ome", attrs)
+omero = ome["omero"]["channels"]
+assert [c["label"] for c in omero] == names, omero
+for c, want in enumerate(colours):
+    if want is not None:
+        assert omero[c]["color"] == f"{want & 0xFFFFFFFF:08X}"[:6], (c, omero[c]["color"])
+datasets = ome["multiscales"][0]["datasets"]
+assert len(datasets) == len(levels) > 1, (len(datasets), len(levels))
+for d, a in zip(datasets, levels):
+    b = root[d["path"]][...]
+    assert a.dtype == np.dtype(dtype) and a.dtype == b.dtype, (a.dtype, b.dtype)
+    assert a.shape == b.shape and np.array_equal(a, b), f"level {d['path']}: {a.shape} {b.shape}"
+print(f"{len(levels)} levels x {len(names)} channels identical, {levels[0].dtype}")
+"#;
+
+fn python_ok(python: &Path, args: &[&str]) -> String {
+    let out = Command::new(python).args(args).output().unwrap();
+    let said = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{args:?}: {said}");
+    said
+}
+
+#[test]
+fn tifffile_reads_every_plane_s_levels_as_the_ome_zarr_holds_them() {
+    let Some(python) = crate::common::python_with(
+        "tifffile, zarr, numpy, ome_types",
+        "the OME-TIFF of planes against OME-Zarr",
+        "tifffile, zarr and ome-types[lxml]",
+    ) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    python_ok(&python, &["-c", INPUTS, s(d)]);
+    let six = "c0,c1,c2,c3,c4,c5";
+    let named_colours = "-16776961,16711935,65535,-65281,-1";
+    for (input, dtype, names, colours) in [
+        ("six.tif", "uint16", six, "-,-,-,-,-,-"),
+        ("named.ome.tif", "uint8", "DAPI,GFP,RFP,Cy5,BF", named_colours),
+        ("float.tif", "float32", "c0,c1,c2,c3,c4", "-,-,-,-,-"),
+    ] {
+        let source = d.join(input);
+        let tiff = d.join(format!("{input}.out.ome.tif"));
+        let zarr = d.join(format!("{input}.ome.zarr"));
+        ok(&["split", s(&source), "-o", s(&tiff), "--codec", "deflate", "--tile-size", "128", "-q"]);
+        ok(&["split", s(&source), "--layout", "ome-zarr", "-o", s(&zarr), "--tile-size", "128", "-q"]);
+        let said = python_ok(&python, &["-c", COMPARE, s(&tiff), s(&zarr), dtype, names, colours]);
+        let count = names.split(',').count();
+        assert!(said.contains(&format!("3 levels x {count} channels identical, {dtype}")), "{input}: {said}");
+    }
+}
