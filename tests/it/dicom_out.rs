@@ -696,7 +696,7 @@ fn native_refusals() {
     let o = s(&out);
     let native = ["--layout", "dicom", "-o", o, "--pixel-size", "1um", "--codec", "raw"];
     for (input, extra, want) in [
-        (&tiff, &[][..], &["float.tif", "8- or 16-bit unsigned", "--range"][..]),
+        (&tiff, &[][..], &["series", "32-bit float", "8- or 16-bit unsigned", "--range"][..]),
         (&alpha, &[][..], &["alpha", "--flatten"][..]),
         (&png, &["--quality", "90"][..], &["--quality is JPEG's"][..]),
     ] {
