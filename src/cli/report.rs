@@ -429,7 +429,8 @@ fn dicom_json(w: &vortex_tiler::formats::dicom::DicomSummary) -> serde_json::Val
         "instances": w.instances,
         "frames": w.frames,
         "photometricInterpretation": w.photometric,
-        "transferSyntax": "1.2.840.10008.1.2.4.50",
+        "transferSyntax": w.transfer_syntax,
+        "frameCoding": w.frame_coding,
         "seriesInstanceUID": w.series_uid,
         "extendedOffsetTables": w.extended_offsets,
         "frameBytes": w.frame_bytes,
@@ -460,10 +461,11 @@ fn dicom_line(w: &vortex_tiler::formats::dicom::DicomSummary) -> String {
         (true, n) => format!("; {n} associated image(s) left out (--no-associated)"),
     };
     format!(
-        "dicom: {} instances (one a level: {}), {} JPEG baseline frames, {}, series {}, {} file bytes{associated}",
+        "dicom: {} instances (one a level: {}), {} {} frames, {}, series {}, {} file bytes{associated}",
         w.instances,
         levels_clause(w.levels_copied, &w.levels_declined, "frame"),
         w.frames,
+        w.frame_coding,
         w.photometric,
         w.series_uid,
         w.file_bytes

@@ -122,7 +122,7 @@ impl Plan {
             let at =
                 Context { header, inputs, input, budget, force: settings.force, stored: settings.stored_subsampling };
             if let Some(c @ (CodecChoice::Deflate | CodecChoice::Lzw)) = own.tiles.codec
-                && !matches!(output.format, Format::Tiff(_))
+                && !matches!(output.format, Format::Tiff(_) | Format::Dicom)
             {
                 return Err(options(format!(
                     "{} ({}): --codec {} compresses a TIFF output's tiles (-o FILE.tif, FILE.ome.tif or FILE.cog.tif), not this output's; it takes png, raw or zstd: write it in a run of its own",
@@ -718,39 +718,62 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context, planes
     })
 }
 
-/// A DICOM whole-slide image series (docs/dicom.md): JPEG baseline frames without border,
-/// whole at the edges, from the encoders or copied from a JPEG-tiled source; the pixel size
-/// is needed (the IOD states the pixel spacing).
+/// A DICOM whole-slide image series (docs/dicom.md): frames without border, whole at the
+/// edges; JPEG baseline from the encoders or copied from a JPEG-tiled source, or native
+/// (`--codec raw`, lossless, 8 or 16 bits); the pixel size is needed (the IOD states the
+/// pixel spacing).
 fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
     let t = &own.tiles;
     for (given, flag) in file_and_viewer_flags(own).into_iter().chain([(t.zstd_level.is_some(), "--zstd-level")]) {
         if given {
-            return Err(options(format!("{flag} does not apply to --layout dicom, a series of JPEG frames")));
+            return Err(options(format!("{flag} does not apply to --layout dicom, a series of DICOM frames")));
         }
     }
     if let Some(border) = t.border.filter(|b| *b != 0) {
         return Err(options(format!("--border {border}: DICOM frames have no border (each pixel is stored once)")));
     }
-    match t.codec.unwrap_or(CodecChoice::Auto) {
-        CodecChoice::Auto | CodecChoice::Jpeg => {}
+    let transfer = match t.codec.unwrap_or(CodecChoice::Auto) {
+        CodecChoice::Auto | CodecChoice::Jpeg => dicom::Transfer::JpegBaseline,
+        CodecChoice::Raw => dicom::Transfer::Native,
         other => {
             return Err(options(format!(
-                "--codec {}: DICOM frames are JPEG baseline here (lossless frames are not written yet)",
-                other.name()
+                "--codec {}: DICOM frames are JPEG baseline (jpeg, the default) or native, uncompressed (raw){}",
+                other.name(),
+                if other == CodecChoice::Deflate {
+                    "; the Deflated transfer syntax is not written (docs/dicom.md)"
+                } else {
+                    ""
+                }
             )));
         }
-    }
+    };
     let source = at.header.layout;
-    if t.tile_depth.unwrap_or(source.depth) != Depth::U8 || t.filter.is_some_and(|f| f.is_label()) {
+    let native = transfer == dicom::Transfer::Native;
+    let depth = t.tile_depth.unwrap_or(source.depth);
+    if native {
+        if !matches!(depth, Depth::U8 | Depth::U16) {
+            return Err(options(format!(
+                "{}: a {source} image: DICOM whole-slide frames hold 8- or 16-bit unsigned samples, no {} (map it onto them with --range MIN:MAX, or write OME-Zarr or OME-TIFF to keep it)",
+                output.path.shown(),
+                depth.tile_type()
+            )));
+        }
+        for (given, flag) in [(t.quality.is_some(), "--quality"), (t.subsampling.is_some(), "--subsampling")] {
+            if given {
+                return Err(options(format!("{flag} is JPEG's; --codec raw writes native DICOM frames")));
+            }
+        }
+    } else if depth != Depth::U8 || t.filter.is_some_and(|f| f.is_label()) {
         return Err(options(format!(
-            "{}: DICOM frames are JPEG baseline, 8-bit samples; a {source} image needs lossless frames, which are not written yet (--tile-type u8 stores it in 8 bits)",
+            "{}: DICOM frames are JPEG baseline by default, 8-bit samples; a {source} image needs lossless frames: --codec raw writes them (native, 8 or 16 bits), or --tile-type u8 stores it in 8 bits",
             output.path.shown()
         )));
     }
     if source.channels.has_alpha() && !t.flatten {
         return Err(options(format!(
-            "{}: a {source} image has alpha, which JPEG frames cannot hold: add --flatten (over --background, white by default)",
-            output.path.shown()
+            "{}: a {source} image has alpha, which {} frames cannot hold: add --flatten (over --background, white by default)",
+            output.path.shown(),
+            if native { "DICOM whole-slide" } else { "JPEG" }
         )));
     }
     let Some(pixel_size) = own.ome_zarr.pixel_size else {
@@ -762,7 +785,7 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
     let requested = Requested {
         tile_size: Some(t.tile_size.unwrap_or(dicom::DEFAULT_TILE_SIZE)),
         border: Some(0),
-        codec: Some(CodecChoice::Jpeg),
+        codec: Some(if native { CodecChoice::Raw } else { CodecChoice::Jpeg }),
         max_memory: Some(at.budget.bytes()),
         filename_format: None,
         zstd_level: None,
@@ -772,10 +795,15 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
     let opts = at.coded_as_stored(opts, t.subsampling);
     let layout = opts.layout(at.header.width, at.header.height)?;
     let stored = opts.codec.stored_layout(source, opts.flatten, opts.tile_depth)?;
-    let Codec::Jpeg { quality, subsampling } = opts.codec else {
-        return Err(TilerError::Internal(format!("DICOM frames from --codec {}", opts.codec.name())));
+    let (quality, photometric, coding) = match opts.codec {
+        Codec::Jpeg { quality, subsampling } => {
+            let photometric = dicom::Photometric::of(stored.channels, subsampling);
+            (quality, photometric, format!("jpeg q{quality} {}", photometric.name()))
+        }
+        // The associated images' frames are native too; the quality is not used.
+        Codec::Raw => (settings::DEFAULT_QUALITY, dicom::Photometric::native(stored.channels), "native".to_string()),
+        other => return Err(TilerError::Internal(format!("DICOM frames from --codec {}", other.name()))),
     };
-    let photometric = dicom::Photometric::of(stored.channels, subsampling);
     let uid_root = own.dicom.uid_root.clone().unwrap_or_else(|| dicom::DEFAULT_ROOT.to_string());
     dicom::check_root(&uid_root)?;
     let meta = own.dicom.meta.clone().unwrap_or_default();
@@ -785,12 +813,11 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
     let input = crate::shard::fingerprint::fingerprint(at.input).unwrap_or_else(|_| at.input.display().to_string());
     let given: Vec<String> = meta.iter().map(|(k, v)| format!("{k}={v}")).collect();
     let identity = format!(
-        "input {input}; {}x{} tile {} levels {}; jpeg q{quality} {}; {stored}; filter {:?}; background {:?}; pixel {}; name {name}; {}",
+        "input {input}; {}x{} tile {} levels {}; {coding}; {stored}; filter {:?}; background {:?}; pixel {}; name {name}; {}",
         layout.width,
         layout.height,
         layout.tile_size,
         layout.lod_count,
-        photometric.name(),
         opts.filter,
         opts.background,
         micrometres(pixel_size),
@@ -812,6 +839,7 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
         copied: Vec::new(),
         stored,
         photometric,
+        transfer,
         pixel_mm: dicom::millimetres(micrometres(pixel_size)),
         name,
         uid_root,
@@ -1008,6 +1036,27 @@ mod tests {
             (&[(DICOM, "a")], with_pixel_size(|s| s.tiles.codec = Some(CodecChoice::Zstd)), "JPEG baseline"),
             (&[(DICOM, "a")], with_pixel_size(|s| s.tiles.border = Some(1)), "DICOM frames have no border"),
             (&[(DICOM, "a")], with_pixel_size(|s| s.tiles.tile_depth = Some(Depth::U16)), "8-bit samples"),
+            (
+                &[(DICOM, "a")],
+                with_pixel_size(|s| {
+                    s.tiles.codec = Some(CodecChoice::Raw);
+                    s.tiles.tile_depth = Some(Depth::F32);
+                }),
+                "8- or 16-bit unsigned",
+            ),
+            (
+                &[(DICOM, "a")],
+                with_pixel_size(|s| {
+                    s.tiles.codec = Some(CodecChoice::Raw);
+                    s.tiles.subsampling = Some(Subsampling::S444);
+                }),
+                "--subsampling is JPEG's",
+            ),
+            (
+                &[(DICOM, "a")],
+                with_pixel_size(|s| s.tiles.codec = Some(CodecChoice::Deflate)),
+                "Deflated transfer syntax is not written",
+            ),
             (&[(DICOM, "a")], with_pixel_size(|s| s.keep_icc = Some(vec![0; 200])), "a DICOM series"),
             (&[(TIFF, "a.tif")], with(|s| s.dicom.uid_root = Some("1.2".into())), "--dicom-uid-root belongs"),
             (&[(DICOM, "a")], with_pixel_size(|s| s.dicom.uid_root = Some("1.2.".into())), "--dicom-uid-root"),
@@ -1107,6 +1156,20 @@ mod tests {
         assert_eq!((spec.layout.tile_size, spec.layout.lod_count), (256, 3));
         assert_eq!(spec.name, "slide");
         assert_eq!(spec.uid_root, dicom::DEFAULT_ROOT);
+        assert_eq!(spec.transfer, dicom::Transfer::JpegBaseline);
+
+        // `--codec raw`: native frames of the samples as they are, 16-bit kept; the encoders
+        // write raw tiles; the UIDs differ from the JPEG series'.
+        let header = ImageHeader { width: 300, height: 200, layout: PixelLayout::new(Channels::Grey, Depth::U16) };
+        let settings = with_pixel_size(|s| s.tiles.codec = Some(CodecChoice::Raw));
+        let outputs = vec![Output::new(DICOM, "/nonexistent-vortex-plan-test/n")];
+        let p = Plan::new(outputs, &settings, &header, &[], Budget::default()).unwrap();
+        let Work::Dicom { spec: native, .. } = &p.outputs[0].work else { panic!("a DICOM series' work") };
+        assert_eq!(native.transfer, dicom::Transfer::Native);
+        assert_eq!(native.photometric, dicom::Photometric::Monochrome);
+        assert_eq!(native.stored, PixelLayout::new(Channels::Grey, Depth::U16));
+        assert_eq!(p.outputs[0].opts.codec, crate::codec::Codec::Raw);
+        assert!(native.identity.contains("; native;"), "{}", native.identity);
     }
 
     #[test]

@@ -288,6 +288,12 @@ fn choose_levels(outputs: &mut [Planned], source: &dyn RowSource) -> Result<Chos
                 continue;
             }
         };
+        if let Work::Dicom { spec, .. } = &planned.work
+            && spec.transfer == dicom::Transfer::Native
+        {
+            declined[k] = Some("native frames asked (--codec raw), which no stored JPEG tile is".into());
+            continue;
+        }
         if let Some(why) = reencode {
             declined[k] = Some(format!("the tiles are encoded: {why}"));
             continue;

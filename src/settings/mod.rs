@@ -36,7 +36,8 @@ pub enum CodecChoice {
     Jpeg,
     /// Lossless, any layout (--png-compression).
     Png,
-    /// Packs only: texels as a GPU uploads them, any layout.
+    /// Uncompressed texels, any layout: a pack's (as a GPU uploads them), a TIFF's tiles, a
+    /// DICOM series' native frames.
     Raw,
     /// Packs only: raw texels compressed with zstd (--zstd-level).
     Zstd,
@@ -94,7 +95,9 @@ impl CodecChoice {
             CodecChoice::Auto => "JPEG for 8-bit grey or RGB, PNG with alpha or 16 bits",
             CodecChoice::Jpeg => "Lossy, 8-bit grey or RGB (--quality, --subsampling)",
             CodecChoice::Png => "Lossless, any layout (--png-compression)",
-            CodecChoice::Raw => "Packs only: texels as a GPU uploads them, any layout",
+            CodecChoice::Raw => {
+                "Uncompressed texels, any layout: packs (as a GPU uploads them), TIFF tiles, DICOM native frames"
+            }
             CodecChoice::Zstd => "Packs only: raw texels compressed with zstd (--zstd-level)",
             CodecChoice::ZstdDelta => "Packs only: zstd of raw texels whose rows are left-delta filtered first",
             CodecChoice::Bc1 => "Packs only: BC1 blocks, opaque 8-bit RGB (tile size a multiple of 4)",

@@ -4,7 +4,8 @@ VORTEX_PYVIPS).
 
     dicom_out.py DIR SOURCE TILE [COPIED_FROM]
     dicom_out.py levels DIR SLIDE
-    dicom_out.py associated DIR SLIDE
+    dicom_out.py associated DIR SLIDE [native]
+    dicom_out.py native DIR SOURCE TILE
 
 
 pydicom reads every instance (the IOD's key attributes checked), highdicom parses each as a VL
@@ -25,7 +26,18 @@ the series' LABEL, OVERVIEW and THUMBNAIL instances (one JPEG frame, the whole i
 levels' series), highdicom parses the thumbnail (it cannot open a TILED_FULL image without
 Pixel Spacing, which a label and an overview leave out), wsidicom reads the label and the overview, and OpenSlide
 4 lists them as `label`, `macro` and `thumbnail`; each within JPEG's error of SLIDE's page as
-tifffile decodes it.
+tifffile decodes it. With `native` too (a series of native frames): each instance's transfer
+syntax is explicit VR little endian, and what every reader reads is the page as tifffile
+decodes it, exactly for the LZW label, within two JPEG decoders' rounding for the JPEG pages
+(`native_close`).
+With `native` (a series of native frames, `--codec raw --filter box`): pydicom reads every
+instance (transfer syntax explicit VR little endian, the Image Pixel attributes of 8- or 16-bit
+samples, Lossy Image Compression 00) and every frame equals the oracle's tile exactly, the edge
+frames padded with the level's edge texels repeated (`--background edge`, the default);
+highdicom parses each; wsidicom reads every level equal to the oracle; OpenSlide 4 reads every
+level of an 8-bit RGB series equal to the oracle (it reads no grey or 16-bit DICOM slide).
+Exact, because the frames are the pyramid's samples as they are, and the box pyramid is exact
+(tiff_oracle.py).
 Prints one JSON line of what it measured; exits 1 with the reason on a mismatch.
 """
 
@@ -42,6 +54,7 @@ from tiff_oracle import compare, fail, levels_of, oracle
 
 WSI = "1.2.840.10008.5.1.4.1.1.77.1.6"
 JPEG_BASELINE = "1.2.840.10008.1.2.4.50"
+EXPLICIT_VR_LE = "1.2.840.10008.1.2.1"
 
 
 def source(path):
@@ -275,7 +288,21 @@ def associated_pages(slide_path):
     return out
 
 
-def check_associated(directory, slide_path):
+def native_close(what, got, want, lossless, measured):
+    """A native frame against the page as tifffile decodes it: exact where the page is
+    lossless (LZW), else at most 2 apart: the same JPEG decoded by our libjpeg-turbo and by
+    tifffile's imagecodecs may round the inverse DCT and the chroma upsampling otherwise
+    (measured equal here; the measure is printed)."""
+    got = got[:, :, None] if got.ndim == 2 else got
+    if got.shape != want.shape:
+        fail(f"{what}: shape {got.shape}, expected {want.shape}")
+    diff = int(np.abs(got.astype(int) - want.astype(int)).max())
+    measured[f"{what} max difference"] = diff
+    if diff > (0 if lossless else 2):
+        fail(f"{what}: {diff} from the page's samples")
+
+
+def check_associated(directory, slide_path, native=False):
     import highdicom
     import openslide
     from wsidicom import WsiDicom
@@ -285,6 +312,14 @@ def check_associated(directory, slide_path):
     types = {"label": "LABEL", "macro": "OVERVIEW", "thumbnail": "THUMBNAIL"}
     names = {"label": "label.dcm", "macro": "overview.dcm", "thumbnail": "thumbnail.dcm"}
     series = pydicom.dcmread(os.path.join(directory, "level-0.dcm")).SeriesInstanceUID
+
+    def close(what, kind, got, pixels):
+        if native:
+            # MAKE_SVS_WITH_LABEL's label is LZW; its thumbnail and macro JPEG.
+            native_close(what, got, rgb_or_grey(pixels, 3), kind == "label", measured)
+        else:
+            compare(what, got, rgb_or_grey(pixels, 3), "jpeg", measured)
+
     for kind, pixels in want.items():
         p = os.path.join(directory, names[kind])
         ds = pydicom.dcmread(p)
@@ -303,37 +338,119 @@ def check_associated(directory, slide_path):
                 fail(f"{kind}: {key} {ds.get(key)!r}, expected {value!r}")
         if list(ds.ImageType)[2] != types[kind]:
             fail(f"{kind}: Image Type {list(ds.ImageType)}")
-        if ds.file_meta.TransferSyntaxUID != JPEG_BASELINE:
+        syntax = EXPLICIT_VR_LE if native else JPEG_BASELINE
+        if ds.file_meta.TransferSyntaxUID != syntax:
             fail(f"{kind}: transfer syntax {ds.file_meta.TransferSyntaxUID}")
         # highdicom reads a TILED_FULL image's Pixel Spacing, which a label's and an
         # overview's photograph has not (type 1C: the IOD asks it of VOLUME and THUMBNAIL
         # images only; dciodvfy checks it).
         if kind == "thumbnail" and highdicom.imread(p).SOPClassUID != WSI:
             fail(f"highdicom: {kind}")
-        compare(f"pydicom {kind}", rgb_or_grey(ds.pixel_array, 3), rgb_or_grey(pixels, 3), "jpeg", measured)
+        close(f"pydicom {kind}", kind, rgb_or_grey(ds.pixel_array, 3), pixels)
     with WsiDicom.open(directory) as slide:
         if "label" in want:
-            compare("wsidicom label", rgb_or_grey(slide.read_label(), 3), rgb_or_grey(want["label"], 3), "jpeg", measured)
+            close("wsidicom label", "label", rgb_or_grey(slide.read_label(), 3), want["label"])
         if "macro" in want:
-            got = rgb_or_grey(slide.read_overview(), 3)
-            compare("wsidicom overview", got, rgb_or_grey(want["macro"], 3), "jpeg", measured)
+            close("wsidicom overview", "macro", rgb_or_grey(slide.read_overview(), 3), want["macro"])
     ours = openslide.OpenSlide(os.path.join(directory, "level-0.dcm"))
     listed = sorted(ours.associated_images.keys())
     if listed != sorted(want):
         fail(f"OpenSlide lists {listed}, the slide has {sorted(want)}")
     for kind, pixels in want.items():
         got = np.asarray(ours.associated_images[kind].convert("RGB"))
-        compare(f"openslide {kind}", got, rgb_or_grey(pixels, 3), "jpeg", measured)
+        close(f"openslide {kind}", kind, got, pixels)
     measured["associated"] = sorted(want)
     print(json.dumps(measured))
 
 
+def frames_of(level, tile):
+    """The TILED_FULL frames of a level, row-major: whole tiles, the right and bottom ones
+    padded with the edge texels repeated."""
+    h, w, c = level.shape
+    rows, cols = -(-h // tile), -(-w // tile)
+    padded = np.pad(level, ((0, rows * tile - h), (0, cols * tile - w), (0, 0)), mode="edge")
+    return padded.reshape(rows, tile, cols, tile, c).swapaxes(1, 2).reshape(rows * cols, tile, tile, c)
+
+
+def check_native(directory, source_path, tile):
+    import highdicom
+    from wsidicom import WsiDicom
+
+    src = source(source_path)
+    c = src.shape[2]
+    bits = 16 if src.dtype == np.uint16 else 8
+    measured = {}
+    n = levels_of(src, tile)
+    paths = sorted(glob.glob(os.path.join(directory, "level-*.dcm")))
+    if len(paths) != n:
+        fail(f"{len(paths)} instances, expected {n} (one a level)")
+    for k in range(n):
+        p = os.path.join(directory, f"level-{k}.dcm")
+        ds = pydicom.dcmread(p)
+        want = {
+            "SOPClassUID": WSI,
+            "DimensionOrganizationType": "TILED_FULL",
+            "Rows": tile,
+            "Columns": tile,
+            "SamplesPerPixel": c,
+            "PhotometricInterpretation": "RGB" if c == 3 else "MONOCHROME2",
+            "PlanarConfiguration": 0 if c == 3 else None,
+            "BitsAllocated": bits,
+            "BitsStored": bits,
+            "HighBit": bits - 1,
+            "PixelRepresentation": 0,
+            "LossyImageCompression": "00",
+            "LossyImageCompressionRatio": None,
+            "LossyImageCompressionMethod": None,
+        }
+        for key, value in want.items():
+            if ds.get(key) != value:
+                fail(f"level {k}: {key} {ds.get(key)!r}, expected {value!r}")
+        if ds.file_meta.TransferSyntaxUID != EXPLICIT_VR_LE:
+            fail(f"level {k}: transfer syntax {ds.file_meta.TransferSyntaxUID}")
+        vr = ds["PixelData"].VR
+        if vr != ("OW" if bits == 16 else "OB"):
+            fail(f"level {k}: Pixel Data {vr}")
+        level = oracle(src, k)
+        frames = np.asarray(ds.pixel_array).reshape(-1, tile, tile, c)
+        expected = frames_of(level, tile)
+        if frames.dtype != src.dtype or frames.shape != expected.shape:
+            fail(f"level {k}: frames {frames.dtype} {frames.shape}, expected {src.dtype} {expected.shape}")
+        for i, (got, want_frame) in enumerate(zip(frames, expected)):
+            compare(f"pydicom level {k} frame {i}", got, want_frame, "exact", {})
+        measured[f"pydicom level {k}"] = f"{len(frames)} frames exact"
+        if highdicom.imread(p).SOPClassUID != WSI:
+            fail(f"highdicom: level {k}")
+    if bits == 16 and c == 3:
+        # wsidicom decodes 16-bit samples of grey images only (its native decoder's rule).
+        measured["wsidicom"] = "not checked: it reads no 16-bit RGB"
+    else:
+        with WsiDicom.open(directory) as slide:
+            if len(slide.levels) != n:
+                fail(f"wsidicom: {len(slide.levels)} levels, expected {n}")
+            for k, level in enumerate(slide.levels):
+                got = rgb_or_grey(slide.read_region((0, 0), k, level.size.to_tuple()), c)
+                # 16-bit grey comes as a PIL "I" image (int32) holding the samples as they are.
+                if got.dtype != src.dtype and got.min() >= 0 and got.max() <= np.iinfo(src.dtype).max:
+                    got = got.astype(src.dtype)
+                compare(f"wsidicom level {k}", got, oracle(src, k), "exact", measured)
+    if c == 3 and bits == 8:
+        check_openslide(directory, src, n, "exact", measured)
+    else:
+        measured["openslide"] = "not checked: it reads 8-bit RGB DICOM slides only"
+    measured["instances"] = n
+    print(json.dumps(measured))
+
+
 def main():
+    if sys.argv[1] == "native":
+        check_native(sys.argv[2], sys.argv[3], int(sys.argv[4]))
+        return
     if sys.argv[1] == "levels":
         check_levels(sys.argv[2], sys.argv[3])
         return
     if sys.argv[1] == "associated":
-        check_associated(sys.argv[2], sys.argv[3])
+        check_associated(sys.argv[2], sys.argv[3], sys.argv[4:] == ["native"])
         return
     directory, source_path, tile = sys.argv[1], sys.argv[2], int(sys.argv[3])
     copied_from = sys.argv[4] if len(sys.argv) > 4 else None

@@ -607,3 +607,105 @@ with tifffile.TiffFile(sys.argv[1]) as t:
     assert!(!series.exists());
     ok(&["split", s(&damaged), "--layout", "dicom", "-o", s(&series), "--no-associated", "-q"]);
 }
+
+/// Native frames (`--codec raw`, explicit VR little endian): 8-bit RGB, 16-bit grey and
+/// 16-bit RGB, each valid for dciodvfy; pydicom reads every frame equal to the naive box
+/// pyramid's tile (tiff_oracle.py; the edge frames padded with the edge repeated), exactly:
+/// the frames are the pyramid's samples as they are, and the box pyramid is exact; wsidicom
+/// reads every level equal to it (grey and 8-bit: it reads no 16-bit RGB), OpenSlide 4 the
+/// 8-bit RGB series' (it reads no grey or 16-bit DICOM slide). Our own DICOM reader reads
+/// the 8-bit series back to the same tiles as the image it was made from.
+#[test]
+fn native_frames_are_the_pyramid_s_samples_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let grey16 = PixelLayout::new(Channels::Grey, Depth::U16);
+    let rgb16 = PixelLayout::new(Channels::Rgb, Depth::U16);
+    // Sizes whose levels halve exactly where wsidicom checks the scale (1024 x 640 by 96,
+    // edges padded); 1000 x 700 and 301 x 203 round at every level.
+    for (name, layout, w, h, tile, bits) in
+        [("rgb8", rgb8(), 1000, 700, 256, 8), ("grey16", grey16, 1024, 640, 96, 16), ("rgb16", rgb16, 301, 203, 64, 16)]
+    {
+        let png = input(dir.path(), name, w, h, layout);
+        let out = dir.path().join(format!("{name}-series"));
+        let tile_arg = tile.to_string();
+        let args = ["split", s(&png), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um"];
+        let json =
+            json_of(&ok(
+                &[&args[..], &["--codec", "raw", "--filter", "box", "--tile-size", &tile_arg, "--json"]].concat()
+            ));
+        let dicom = &json["dicom"];
+        assert_eq!(dicom["transferSyntax"], "1.2.840.10008.1.2.1", "{json}");
+        assert_eq!(dicom["frameCoding"], format!("native {bits}-bit"), "{json}");
+        let photometric = if layout.channels == Channels::Grey { "MONOCHROME2" } else { "RGB" };
+        assert_eq!(dicom["photometricInterpretation"], photometric, "{json}");
+        assert_eq!(dicom["extendedOffsetTables"], 0, "{json}");
+        assert_eq!(json["copied"], 0, "{json}");
+        dciodvfy(&out);
+        if let Some(python) = readers() {
+            let script = Command::new(&python).args([SCRIPT, "native", s(&out), s(&png), &tile_arg]).output().unwrap();
+            let said =
+                format!("{}{}", String::from_utf8_lossy(&script.stdout), String::from_utf8_lossy(&script.stderr));
+            assert!(script.status.success(), "{}: {said}", out.display());
+            eprintln!("{name}: {said}");
+        }
+        if bits == 8 {
+            // Our reader takes the series' level 0: the same pyramid as from the image.
+            let from_png = crate::tiff_out::png_tiles(&png, &dir.path().join("from-png"), &[]);
+            let from_dicom = crate::tiff_out::png_tiles(&out, &dir.path().join("from-dicom"), &[]);
+            assert!(!from_png.is_empty() && from_png == from_dicom, "the series reads back otherwise");
+        }
+    }
+}
+
+/// A JPEG-tiled slide with `--codec raw`: nothing is copied (a JPEG tile is no native
+/// frame), the summary says why the slide's own levels were not; the associated images are
+/// native too, valid, their samples those decoded from the slide.
+#[test]
+fn native_frames_of_a_jpeg_slide_copy_nothing_and_say_why() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let svs = dir.path().join("slide.svs");
+    crate::tiff_slides::python(python.as_os_str(), MAKE_SVS_WITH_LABEL, &[s(&svs)]);
+    let out = dir.path().join("series");
+    let json = json_of(&ok(&["split", s(&svs), "--layout", "dicom", "-o", s(&out), "--codec", "raw", "--json"]));
+    let dicom = &json["dicom"];
+    assert_eq!(dicom["levels"], "pow2", "{json}");
+    assert!(dicom["levelsDeclined"].as_str().unwrap().contains("raw"), "{json}");
+    assert_eq!((json["copied"].clone(), dicom["transferSyntax"].clone()), (0.into(), "1.2.840.10008.1.2.1".into()));
+    assert_eq!(dicom["associated"].as_array().unwrap().len(), 3, "{json}");
+    dciodvfy(&out);
+    let script = Command::new(&python).args([SCRIPT, "associated", s(&out), s(&svs), "native"]).output().unwrap();
+    let said = format!("{}{}", String::from_utf8_lossy(&script.stdout), String::from_utf8_lossy(&script.stderr));
+    assert!(script.status.success(), "{}: {said}", out.display());
+    eprintln!("{said}");
+}
+
+/// What native frames cannot hold is refused before anything is written, naming the flag to
+/// change: float samples (DICOM whole-slide images have none), alpha without `--flatten`,
+/// JPEG's own flags, another codec.
+#[test]
+fn native_refusals() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = input(dir.path(), "in", 300, 200, rgb8());
+    let alpha = input(dir.path(), "alpha", 300, 200, PixelLayout::new(Channels::Rgba, Depth::U8));
+    let tiff = dir.path().join("float.tif");
+    let floats: Vec<f32> = (0..64 * 48).map(|i| i as f32 / 100.0).collect();
+    let mut tif = tiff::encoder::TiffEncoder::new(std::fs::File::create(&tiff).unwrap()).unwrap();
+    tif.write_image::<tiff::encoder::colortype::Gray32Float>(64, 48, &floats).unwrap();
+    let out = dir.path().join("series");
+    let o = s(&out);
+    let native = ["--layout", "dicom", "-o", o, "--pixel-size", "1um", "--codec", "raw"];
+    for (input, extra, want) in [
+        (&tiff, &[][..], &["series", "32-bit float", "8- or 16-bit unsigned", "--range"][..]),
+        (&alpha, &[][..], &["alpha", "--flatten"][..]),
+        (&png, &["--quality", "90"][..], &["--quality is JPEG's"][..]),
+    ] {
+        fails_with(&run(&[&["split", s(input)][..], &native, extra].concat()), want);
+        assert!(!out.exists());
+    }
+    let args = ["split", s(&png), "--layout", "dicom", "-o", o, "--pixel-size", "1um", "--codec", "deflate"];
+    fails_with(&run(&args), &["jpeg", "raw", "Deflated transfer syntax is not written"]);
+    // With --flatten, alpha is composited away: RGB frames.
+    ok(&[&["split", s(&alpha)][..], &native, &["--flatten", "-q"]].concat());
+    dciodvfy(&out);
+}

@@ -40,7 +40,7 @@ fn check(python: &Path, flavour: &str, tiff: &Path, source: &Path, tile: u32, mo
 
 /// Splits `args` into PNG tiles (border 0, box filter) and returns the directory's files,
 /// name and bytes, sorted: what two runs of the same levels must agree on.
-fn png_tiles(source: &Path, dir: &Path, extra: &[&str]) -> Vec<(String, Vec<u8>)> {
+pub(crate) fn png_tiles(source: &Path, dir: &Path, extra: &[&str]) -> Vec<(String, Vec<u8>)> {
     let mut args = vec!["split", s(source), "-o", s(dir), "--border", "0", "--codec", "png", "--filter", "box", "-q"];
     args.extend(extra);
     ok(&args);

@@ -16,7 +16,7 @@ use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
 use super::frames::Offsets;
 use super::meta::{KEYWORDS, Vr};
 use super::uid::{self, Uids};
-use super::{JPEG_BASELINE, Level, Photometric, SOP_CLASS, Spec};
+use super::{Level, Photometric, SOP_CLASS, Spec, Transfer};
 use crate::error::{Result, TilerError};
 use crate::source::associated::Kind;
 
@@ -35,6 +35,8 @@ pub(super) struct Part {
     /// Its Total Pixel Matrix and frames.
     pub level: Level,
     pub photometric: Photometric,
+    /// Bits a sample: 8, or 16 (a level's native frames of 16-bit samples).
+    pub bits: u16,
     /// Pixel Spacing (rows, columns) in mm, where known: the levels' and the thumbnail's
     /// (each covers the scanned image), not a label's or an overview's (photographs).
     pub spacing: Option<(f64, f64)>,
@@ -58,13 +60,15 @@ impl Part {
             image_type,
             level,
             photometric: spec.photometric,
+            bits: if spec.stored.depth == crate::pixel::Depth::U16 { 16 } else { 8 },
             spacing: Some(spacing(spec, level)),
             label_in_image: false,
         }
     }
 
-    /// Associated image `k` of `spec`, of `photometric` frames: one frame, the whole image
-    /// (PS3.3 C.8.12.4.1.1: LABEL and OVERVIEW as photographed, THUMBNAIL resampled).
+    /// Associated image `k` of `spec`, of `photometric` frames of 8-bit samples: one frame,
+    /// the whole image (PS3.3 C.8.12.4.1.1: LABEL and OVERVIEW as photographed, THUMBNAIL
+    /// resampled).
     pub fn associated(spec: &Spec, k: usize, photometric: Photometric) -> Option<Part> {
         let image = spec.associated.get(k)?;
         let level = Level { width: image.width, height: image.height, tile: (image.width, image.height) };
@@ -79,6 +83,7 @@ impl Part {
             image_type,
             level,
             photometric,
+            bits: 8,
             spacing: (image.kind == Kind::Thumbnail).then(|| spacing(spec, level)),
             label_in_image,
         })
@@ -189,7 +194,7 @@ impl<'a> Series<'a> {
         let lod = part.number;
         let object = self.dataset(part, offsets, frame_bytes);
         let meta = FileMetaTableBuilder::new()
-            .transfer_syntax(JPEG_BASELINE)
+            .transfer_syntax(self.spec.transfer.uid())
             .implementation_class_uid(uid::implementation())
             .implementation_version_name(PROGRAM.to_ascii_uppercase().replace('-', "_"));
         let file = object.with_meta(meta).map_err(|e| TilerError::Internal(format!("DICOM file meta: {e}")))?;
@@ -302,20 +307,27 @@ impl<'a> Series<'a> {
         // `Spec::check` keeps the frame's sides within 16 bits.
         put(&mut o, tags::ROWS, VR::US, level.tile.1 as u16);
         put(&mut o, tags::COLUMNS, VR::US, level.tile.0 as u16);
-        put(&mut o, tags::BITS_ALLOCATED, VR::US, 8u16);
-        put(&mut o, tags::BITS_STORED, VR::US, 8u16);
-        put(&mut o, tags::HIGH_BIT, VR::US, 7u16);
+        put(&mut o, tags::BITS_ALLOCATED, VR::US, part.bits);
+        put(&mut o, tags::BITS_STORED, VR::US, part.bits);
+        put(&mut o, tags::HIGH_BIT, VR::US, part.bits - 1);
         put(&mut o, tags::PIXEL_REPRESENTATION, VR::US, 0u16);
         if p == Photometric::Monochrome {
             put(&mut o, tags::PRESENTATION_LUT_SHAPE, VR::CS, "IDENTITY");
             put(&mut o, tags::RESCALE_INTERCEPT, VR::DS, "0");
             put(&mut o, tags::RESCALE_SLOPE, VR::DS, "1");
         }
-        put(&mut o, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "01");
-        let raw = u64::from(level.tile.0) * u64::from(level.tile.1) * u64::from(p.samples());
-        let ratio = (frames * raw) as f64 / frame_bytes.max(1) as f64;
-        put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_RATIO, VR::DS, ds(ratio));
-        put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_METHOD, VR::CS, "ISO_10918_1");
+        match s.transfer {
+            Transfer::JpegBaseline => {
+                put(&mut o, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "01");
+                let raw = u64::from(level.tile.0) * u64::from(level.tile.1) * u64::from(p.samples());
+                let ratio = (frames * raw) as f64 / frame_bytes.max(1) as f64;
+                put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_RATIO, VR::DS, ds(ratio));
+                put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_METHOD, VR::CS, "ISO_10918_1");
+            }
+            // The frames as the pyramid made them (the ratio and method are type 1C, of lossy
+            // images only).
+            Transfer::Native => put(&mut o, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "00"),
+        }
         // Multi-frame Dimension: the frames' places follow from TILED_FULL.
         let organisation = self.uids.of("dimension organisation");
         sequence(
@@ -448,6 +460,7 @@ mod tests {
             copied: Vec::new(),
             stored: crate::pixel::PixelLayout::new(crate::pixel::Channels::Rgb, crate::pixel::Depth::U8),
             photometric: Photometric::YbrFull422,
+            transfer: Transfer::JpegBaseline,
             pixel_mm: 0.0005,
             name: "slide".into(),
             uid_root: uid::DEFAULT_ROOT.into(),

@@ -15,6 +15,20 @@
 //! that lie in order there are one copy). Offsets are those of each frame's item from the
 //! first frame's; when the last passes 32 bits the Basic Offset Table is left empty and the
 //! data set carries them in the Extended Offset Table (7FE0,0001/0002) instead.
+//!
+//! Native frames (`Native`, PS3.5 8.1.1 and A.2) have no items and no offset table: every
+//! frame is the same length, one after another, so frame `i` lies at `i` frame lengths from
+//! the start of the value, and the element's length is known before the first frame comes:
+//!
+//! ```text
+//! (7FE0,0010) OB or OW, its length   E0 7F 10 00 'O' 'B' 00 00 len (u32 LE, even)
+//! frame 0, frame 1, ... row-major    the samples, interleaved, little-endian
+//! a 00 pad where len would be odd
+//! ```
+//!
+//! The instance is written in place: the data set and this header first, the file's length
+//! set, and each frame written at its place as it comes (no copy at the end; the disk holds
+//! the frames once).
 
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Read, Seek, SeekFrom, Write};
@@ -37,6 +51,11 @@ pub(super) struct Offsets {
 }
 
 impl Offsets {
+    /// No frames to locate: a native instance's (its frames lie one after another).
+    pub fn none() -> Offsets {
+        Offsets { offsets: Vec::new(), lengths: Vec::new() }
+    }
+
     /// Whether the offsets fit the Basic Offset Table's 32 bits.
     pub fn fit_basic(&self) -> bool {
         self.offsets.last().is_none_or(|&o| o <= u64::from(u32::MAX))
@@ -160,6 +179,88 @@ impl Staged {
     }
 }
 
+/// One native instance being written in place: its data set and Pixel Data header written,
+/// each frame written at its place as it comes.
+pub(super) struct Native {
+    file: File,
+    /// Where frame 0 starts in the file.
+    start: u64,
+    /// Bytes of each frame.
+    frame_len: u64,
+    /// Which frames came, row-major.
+    came: Vec<bool>,
+    /// Frames yet to come.
+    left: usize,
+    /// The file's length once complete.
+    len: u64,
+}
+
+impl Native {
+    /// Starts the instance at `path`: `header` (File Meta and data set up to Pixel Data),
+    /// then the Pixel Data element of `frames` frames of `frame_len` bytes, OW where the
+    /// samples are 16-bit (`wide`), else OB. Refuses a value past the 32-bit length.
+    pub fn create(path: &Path, header: &[u8], frames: usize, frame_len: u64, wide: bool) -> io::Result<Native> {
+        let value =
+            (frames as u64).checked_mul(frame_len).ok_or_else(|| io::Error::other("a Pixel Data past 64 bits"))?;
+        let padded = value + value % 2;
+        let length = u32::try_from(padded)
+            .ok()
+            .filter(|&l| l != u32::MAX)
+            .ok_or_else(|| io::Error::other(format!("{padded} bytes of Pixel Data, past a 32-bit length")))?;
+        let mut file = fs::OpenOptions::new().read(true).write(true).create_new(true).open(path)?;
+        file.write_all(header)?;
+        let vr = if wide { b"OW" } else { b"OB" };
+        let mut element = PIXEL_DATA[..4].to_vec();
+        element.extend_from_slice(vr);
+        element.extend_from_slice(&[0, 0]);
+        element.extend_from_slice(&length.to_le_bytes());
+        file.write_all(&element)?;
+        let start = (header.len() + element.len()) as u64;
+        let len = start + padded;
+        // The frames' place, zeros (and the pad) until they come.
+        file.set_len(len)?;
+        Ok(Native { file, start, frame_len, came: vec![false; frames], left: frames, len })
+    }
+
+    /// Writes frame `index` (row-major) at its place. The caller has checked the index.
+    pub fn put(&mut self, index: usize, frame: &[u8]) -> io::Result<()> {
+        if frame.len() as u64 != self.frame_len {
+            return Err(io::Error::other(format!(
+                "frame {index} is {} bytes, not the {} of a native frame",
+                frame.len(),
+                self.frame_len
+            )));
+        }
+        if std::mem::replace(&mut self.came[index], true) {
+            return Err(io::Error::other(format!("frame {index} came twice")));
+        }
+        self.file.seek(SeekFrom::Start(self.start + index as u64 * self.frame_len))?;
+        self.file.write_all(frame)?;
+        self.left -= 1;
+        Ok(())
+    }
+
+    /// Frames the instance holds.
+    pub fn frames(&self) -> u64 {
+        self.came.len() as u64
+    }
+
+    /// Bytes of the frames.
+    pub fn frame_bytes(&self) -> u64 {
+        self.came.len() as u64 * self.frame_len
+    }
+
+    /// Ends the instance: every frame must have come. Returns the file's length.
+    pub fn finish(self) -> io::Result<u64> {
+        if self.left != 0 {
+            let first = self.came.iter().position(|c| !c).unwrap_or_default();
+            return Err(io::Error::other(format!("{} frames never came, frame {first} the first", self.left)));
+        }
+        self.file.sync_all()?;
+        Ok(self.len)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -195,5 +296,40 @@ mod tests {
 
         let far = Offsets { offsets: vec![0, 1 << 32], lengths: vec![1, 1] };
         assert!(!far.fit_basic(), "past 32 bits: the Extended Offset Table");
+    }
+
+    /// Native frames that come out of order lie row-major after the element's header, OB for
+    /// 8-bit samples, its length the frames' padded to even; a frame of another length, or
+    /// twice, is refused; an instance lacking a frame does not finish.
+    #[test]
+    fn native_frames_lie_row_major_in_place() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("n.dcm");
+        let mut native = Native::create(&path, b"HEAD", 3, 3, false).unwrap();
+        native.put(2, b"ccc").unwrap();
+        native.put(0, b"aaa").unwrap();
+        assert!(native.put(1, b"bb").is_err(), "a short frame");
+        assert!(native.put(0, b"aaa").is_err(), "a frame twice");
+        native.put(1, b"bbb").unwrap();
+        assert_eq!(native.frame_bytes(), 9);
+        let n = native.finish().unwrap();
+        let bytes = fs::read(&path).unwrap();
+        assert_eq!(n, bytes.len() as u64);
+        let mut want = b"HEAD".to_vec();
+        want.extend_from_slice(&[0xE0, 0x7F, 0x10, 0x00, b'O', b'B', 0, 0, 10, 0, 0, 0]);
+        want.extend_from_slice(b"aaabbbccc\0");
+        assert_eq!(bytes, want);
+
+        // 16-bit samples: OW, even already.
+        let wide = dir.path().join("w.dcm");
+        let mut native = Native::create(&wide, b"", 1, 4, true).unwrap();
+        native.put(0, &[1, 0, 2, 0]).unwrap();
+        native.finish().unwrap();
+        assert_eq!(fs::read(&wide).unwrap(), [0xE0, 0x7F, 0x10, 0x00, b'O', b'W', 0, 0, 4, 0, 0, 0, 1, 0, 2, 0]);
+
+        let short = Native::create(&dir.path().join("s.dcm"), b"", 2, 2, false).unwrap();
+        assert!(short.finish().unwrap_err().to_string().contains("frame 0 the first"));
+        let past = Native::create(&dir.path().join("p.dcm"), b"", 1 << 20, 1 << 12, false);
+        assert!(past.is_err(), "4 GiB of frames");
     }
 }

@@ -22,11 +22,14 @@
 //! `source::associated`) is an instance of one frame, encoded at `finish`, unless
 //! `--no-associated` leaves them out.
 //!
-//! Frames are JPEG baseline (1.2.840.10008.1.2.4.50), `TILED_FULL`: whole tiles of the
-//! level's grid in row-major order, the right and bottom ones padded. A JPEG-tiled source's
-//! stored tiles that match the level's photometric interpretation are copied byte for byte
-//! (`takes_stored_jpeg`); a slide's own levels are copied whole (`copy`). Not yet: JPEG 2000
-//! frames, lossless frames.
+//! Frames are `TILED_FULL`: whole tiles of the level's grid in row-major order, the right and
+//! bottom ones padded. They are JPEG baseline (1.2.840.10008.1.2.4.50) by default: a
+//! JPEG-tiled source's stored tiles that match the level's photometric interpretation are
+//! copied byte for byte (`takes_stored_jpeg`); a slide's own levels are copied whole (`copy`).
+//! With `--codec raw` they are native ([`Transfer::Native`], explicit VR little endian,
+//! 1.2.840.10008.1.2.1): 8- or 16-bit grey or RGB samples as the pyramid made them, lossless,
+//! each frame written in place in its instance (`frames::Native`). Not yet: JPEG 2000 frames,
+//! the Deflated transfer syntax (docs/dicom.md says why).
 
 mod copy;
 mod dataset;
@@ -51,8 +54,43 @@ pub(crate) const DEFAULT_TILE_SIZE: u32 = 256;
 
 /// The VL Whole Slide Microscopy Image Storage SOP Class.
 pub(crate) const SOP_CLASS: &str = "1.2.840.10008.5.1.4.1.1.77.1.6";
-/// JPEG Baseline (Process 1): the transfer syntax of the instances.
+/// JPEG Baseline (Process 1): the transfer syntax of JPEG frames.
 pub(crate) const JPEG_BASELINE: &str = "1.2.840.10008.1.2.4.50";
+/// Explicit VR Little Endian: the transfer syntax of native (uncompressed) frames.
+pub(crate) const EXPLICIT_VR_LITTLE_ENDIAN: &str = "1.2.840.10008.1.2.1";
+
+/// The most bytes a native instance's Pixel Data may hold: its element's 32-bit length, even,
+/// short of `FFFFFFFF` (undefined length, which only encapsulated data may have).
+pub(crate) const NATIVE_MOST_BYTES: u64 = u32::MAX as u64 - 1;
+
+/// How the frames of every instance of a series are stored: its transfer syntax.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Transfer {
+    /// JPEG baseline, one JPEG a frame, encapsulated (8-bit, lossy): the default.
+    JpegBaseline,
+    /// Native (`--codec raw`): the samples as they are, 8 or 16 bits, interleaved, little
+    /// endian, every frame of an instance one after another in its Pixel Data (lossless).
+    Native,
+}
+
+impl Transfer {
+    /// The Transfer Syntax UID.
+    pub fn uid(self) -> &'static str {
+        match self {
+            Transfer::JpegBaseline => JPEG_BASELINE,
+            Transfer::Native => EXPLICIT_VR_LITTLE_ENDIAN,
+        }
+    }
+
+    /// What the frames are, for the summary: `JPEG baseline`, `native 8-bit`, `native 16-bit`.
+    pub fn describe(self, depth: Depth) -> &'static str {
+        match (self, depth) {
+            (Transfer::JpegBaseline, _) => "JPEG baseline",
+            (Transfer::Native, Depth::U16) => "native 16-bit",
+            (Transfer::Native, _) => "native 8-bit",
+        }
+    }
+}
 
 /// How the frames' pixels are stored, as `PhotometricInterpretation` says.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -90,6 +128,14 @@ impl Photometric {
         }
     }
 
+    /// Native frames of `channels`: the samples as they are, grey or RGB (interleaved).
+    pub(crate) fn native(channels: Channels) -> Photometric {
+        match channels {
+            Channels::Grey => Photometric::Monochrome,
+            _ => Photometric::Rgb,
+        }
+    }
+
     /// Samples a pixel.
     pub fn samples(self) -> u16 {
         match self {
@@ -114,9 +160,11 @@ pub(crate) struct Spec {
     /// The slide's own levels, copied as stored (`copy`), largest first; empty: the levels
     /// of `layout`.
     pub copied: Vec<Level>,
-    /// The samples as stored: 8-bit grey or RGB.
+    /// The samples as stored: 8-bit grey or RGB, or 16-bit for native frames.
     pub stored: PixelLayout,
     pub photometric: Photometric,
+    /// How every instance's frames are stored, the associated images' too.
+    pub transfer: Transfer,
     /// The side of a full-resolution pixel, in millimetres (DICOM's unit).
     pub pixel_mm: f64,
     /// The slide's name: the container and specimen identifiers where `--dicom-meta` gives
@@ -132,10 +180,10 @@ pub(crate) struct Spec {
     /// The attributes the user gave.
     pub meta: DicomMeta,
     /// The source's associated images, each its own instance after the levels (one frame,
-    /// the whole image, decoded and encoded as JPEG at `quality`); empty with
-    /// `--no-associated`.
+    /// the whole image, decoded and encoded as JPEG at `quality`, or native 8-bit); empty
+    /// with `--no-associated`.
     pub associated: Vec<crate::source::associated::Associated>,
-    /// The JPEG quality of the associated images' frames.
+    /// The JPEG quality of the associated images' frames (not used by native ones).
     pub quality: u8,
     /// The most bytes one associated image may take decoded (`--max-memory`).
     pub associated_bytes: u64,
@@ -160,10 +208,25 @@ impl Spec {
             return Err(TilerError::Geometry(format!("a {}x{} image has no pixels", l.width, l.height)));
         }
         let s = self.stored;
-        if s.depth != Depth::U8 || !matches!(s.channels, Channels::Grey | Channels::Rgb) {
-            return Err(TilerError::Options(format!(
-                "DICOM frames are JPEG baseline, 8-bit grey or RGB, not {s} (lossless frames are not written yet)"
-            )));
+        let grey_or_rgb = matches!(s.channels, Channels::Grey | Channels::Rgb);
+        match self.transfer {
+            Transfer::JpegBaseline if s.depth != Depth::U8 || !grey_or_rgb => {
+                return Err(TilerError::Options(format!(
+                    "JPEG baseline DICOM frames are 8-bit grey or RGB, not {s}: --codec raw writes native frames of 8 or 16 bits"
+                )));
+            }
+            Transfer::Native if !matches!(s.depth, Depth::U8 | Depth::U16) || !grey_or_rgb => {
+                return Err(TilerError::Options(format!(
+                    "native DICOM frames are 8- or 16-bit unsigned grey or RGB, not {s}"
+                )));
+            }
+            Transfer::Native if !self.copied.is_empty() => {
+                return Err(TilerError::Internal("a slide's JPEG levels copied into native frames".into()));
+            }
+            _ => {}
+        }
+        if self.transfer == Transfer::Native && self.photometric != Photometric::native(s.channels) {
+            return Err(TilerError::Internal(format!("native {s} frames stated as {}", self.photometric.name())));
         }
         if !(self.pixel_mm.is_finite() && self.pixel_mm > 0.0) {
             return Err(TilerError::Options(format!("a pixel size of {} mm", self.pixel_mm)));
@@ -183,11 +246,34 @@ impl Spec {
                     i32::MAX
                 )));
             }
+            let bytes = self.pixel_data_bytes(level, s);
+            if self.transfer == Transfer::Native && bytes > NATIVE_MOST_BYTES {
+                return Err(TilerError::Options(format!(
+                    "level {lod} ({}x{} texels, {c} x {r} frames of {}x{} {s}) would hold {bytes} bytes ({:.1} GiB) of native Pixel Data, past the 4 GiB a DICOM element's 32-bit length reaches (native frames have no offset table to go further): write JPEG frames (leave out --codec raw){}, or a smaller image",
+                    level.width,
+                    level.height,
+                    level.tile.0,
+                    level.tile.1,
+                    bytes as f64 / f64::from(1u32 << 30),
+                    if s.depth == Depth::U16 { ", 8-bit samples (--tile-type u8)" } else { "" }
+                )));
+            }
         }
         for image in &self.associated {
             if image.width == 0 || image.height == 0 || image.width.max(image.height) > u32::from(u16::MAX) {
                 return Err(TilerError::Options(format!(
                     "the {} ({}, {}x{}) is one frame, whose Rows and Columns are 16-bit: --no-associated leaves the associated images out",
+                    image.kind.name(),
+                    image.origin(),
+                    image.width,
+                    image.height
+                )));
+            }
+            // Decoded as 8-bit RGB at most: three bytes a texel.
+            let bytes = u64::from(image.width) * u64::from(image.height) * 3;
+            if self.transfer == Transfer::Native && bytes > NATIVE_MOST_BYTES {
+                return Err(TilerError::Options(format!(
+                    "the {} ({}, {}x{}) would be {bytes} bytes of native Pixel Data, past the 4 GiB a DICOM element's 32-bit length reaches: --no-associated leaves the associated images out",
                     image.kind.name(),
                     image.origin(),
                     image.width,
@@ -219,6 +305,13 @@ impl Spec {
         Level::of(&self.copied, &self.layout, lod)
     }
 
+    /// Bytes of `level`'s frames of `stored` samples, uncompressed: what a native
+    /// instance's Pixel Data holds (before its pad to an even length).
+    pub fn pixel_data_bytes(&self, level: Level, stored: PixelLayout) -> u64 {
+        let frame = u64::from(level.tile.0) * u64::from(level.tile.1) * stored.bytes_per_pixel() as u64;
+        level.tiles().saturating_mul(frame)
+    }
+
     /// Memory the sink's frame index holds: 12 bytes a frame.
     pub fn index_bytes(&self) -> u64 {
         let frames: u64 = (0..self.level_count()).map(|lod| self.level(lod).tiles()).sum();
@@ -246,6 +339,10 @@ pub struct DicomSummary {
     pub frames: u64,
     /// The `PhotometricInterpretation` of the frames.
     pub photometric: &'static str,
+    /// The instances' Transfer Syntax UID.
+    pub transfer_syntax: &'static str,
+    /// What the frames are: `JPEG baseline`, `native 8-bit` or `native 16-bit`.
+    pub frame_coding: &'static str,
     /// The Series Instance UID.
     pub series_uid: String,
     /// Instances whose frames are located by the Extended Offset Table (past 4 GiB), not the
@@ -285,13 +382,78 @@ pub struct AssociatedSummary {
     pub file: String,
     /// The `PhotometricInterpretation` of its frame.
     pub photometric: &'static str,
-    /// Bytes of its one JPEG frame.
+    /// Bytes of its one frame (JPEG, or native samples).
     pub frame_bytes: u64,
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn native(width: u64, height: u64, stored: PixelLayout) -> Spec {
+        let mut layout = crate::layout::Layout::new(width, height, 256, 0).unwrap();
+        layout.lod_count = 1;
+        Spec {
+            layout,
+            copied: Vec::new(),
+            stored,
+            photometric: Photometric::native(stored.channels),
+            transfer: Transfer::Native,
+            pixel_mm: 0.0005,
+            name: "slide".into(),
+            uid_root: DEFAULT_ROOT.into(),
+            identity: "test".into(),
+            made: "20260102030405".into(),
+            meta: Default::default(),
+            associated: Vec::new(),
+            quality: 85,
+            associated_bytes: 1 << 20,
+            associated_left_out: 0,
+        }
+    }
+
+    /// A native level's Pixel Data must fit its element's 32-bit length (no offset table
+    /// goes past it): 256 x 255 frames of 256 x 256 grey bytes do (4278190080 bytes), 256 x
+    /// 256 (2^32) do not, and the refusal names the level, its size and what to change;
+    /// 16-bit samples take twice the bytes. JPEG frames are not bounded so.
+    #[test]
+    fn a_native_level_past_32_bits_is_refused_naming_it() {
+        let grey = PixelLayout::new(Channels::Grey, Depth::U8);
+        native(65536, 65280, grey).check().unwrap();
+        let message = native(65536, 65536, grey).check().unwrap_err().to_string();
+        for want in ["level 0", "65536x65536", "4294967296 bytes", "4 GiB", "--codec raw"] {
+            assert!(message.contains(want), "{want}: {message}");
+        }
+        let wide = PixelLayout::new(Channels::Grey, Depth::U16);
+        let message = native(65536, 32768, wide).check().unwrap_err().to_string();
+        assert!(message.contains("--tile-type u8"), "{message}");
+        native(65536, 32512, wide).check().unwrap();
+        let rgb16 = PixelLayout::new(Channels::Rgb, Depth::U16);
+        // 6 bytes a texel: 104 x 104 frames fit, 105 x 105 do not.
+        native(26624, 26624, rgb16).check().unwrap();
+        assert!(native(26625, 26625, rgb16).check().is_err(), "6 bytes a texel");
+        let jpeg = Spec { transfer: Transfer::JpegBaseline, ..native(65536, 65536, grey) };
+        jpeg.check().unwrap();
+    }
+
+    /// Native frames hold 8- or 16-bit unsigned grey or RGB, stated as MONOCHROME2 or RGB;
+    /// JPEG frames 8-bit only.
+    #[test]
+    fn native_frames_are_8_or_16_bit_grey_or_rgb() {
+        let ok = |c, d| native(600, 300, PixelLayout::new(c, d)).check();
+        ok(Channels::Rgb, Depth::U16).unwrap();
+        ok(Channels::Grey, Depth::U8).unwrap();
+        assert!(ok(Channels::Grey, Depth::F32).is_err());
+        assert!(ok(Channels::Rgba, Depth::U8).is_err());
+        let ybr = Spec {
+            photometric: Photometric::YbrFull422,
+            ..native(600, 300, PixelLayout::new(Channels::Rgb, Depth::U8))
+        };
+        assert!(ybr.check().is_err(), "native frames are RGB as stored");
+        let wide = PixelLayout::new(Channels::Grey, Depth::U16);
+        let jpeg = Spec { transfer: Transfer::JpegBaseline, ..native(600, 300, wide) };
+        assert!(jpeg.check().unwrap_err().to_string().contains("--codec raw"));
+    }
 
     /// Every name a series gives its instances is one a later run recognises as its own
     /// (`output::ours`).

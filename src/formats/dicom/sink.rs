@@ -6,6 +6,11 @@
 //! is `ordered`, so the staging files, and the instances made from them, are the same on
 //! every run. `finish` writes each level's instance: the data set (`dataset`), then its
 //! frames copied from the staging file in row-major order.
+//!
+//! Native frames (`--codec raw`) come as the tile's samples (`Codec::Raw`: interleaved,
+//! little-endian) and are written at once at their place in their level's instance, whose
+//! data set is written when the sink is made (`frames::Native`); `finish` checks that every
+//! frame came.
 
 use std::fs::{self, File};
 use std::path::{Path, PathBuf};
@@ -13,8 +18,8 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::dataset::{Part, Series};
-use super::frames::Staged;
-use super::{AssociatedSummary, DicomSummary, Photometric, Spec};
+use super::frames::{Native, Offsets, Staged};
+use super::{AssociatedSummary, DicomSummary, Photometric, Spec, Transfer};
 use crate::codec::Subsampling;
 use crate::error::{Result, TilerError};
 use crate::output::{Claim, staging};
@@ -29,12 +34,20 @@ struct Written {
     basic: bool,
 }
 
+/// One level's frames as they come.
+enum Frames {
+    /// JPEG frames, staged as items until the instance is written.
+    Encapsulated(Staged),
+    /// Native frames, written in place in the instance.
+    Native(Native),
+}
+
 /// A DICOM series as a pipeline sink.
 pub struct DicomSink {
     dest: PathBuf,
     staging: PathBuf,
     spec: Spec,
-    levels: Mutex<Vec<Option<Staged>>>,
+    levels: Mutex<Vec<Option<Frames>>>,
     frame_bytes: AtomicU64,
     /// Whether the series is in place; `Drop` removes the staging directory otherwise.
     done: bool,
@@ -57,14 +70,34 @@ impl DicomSink {
         };
         // On failure `sink` is dropped, which removes the staging directory.
         let mut levels = Vec::with_capacity(sink.spec.level_count() as usize);
+        let series = Series::new(&sink.spec)?;
         for lod in 0..sink.spec.level_count() {
-            let (c, r) = sink.spec.level(lod).grid();
-            let path = sink.staging.join(format!(".level-{lod}.frames"));
-            let staged = Staged::create(&path, c as usize * r as usize).map_err(|e| TilerError::write(&path, e))?;
-            levels.push(Some(staged));
+            let frames = sink.spec.level(lod).tiles() as usize;
+            let level = match sink.spec.transfer {
+                Transfer::JpegBaseline => {
+                    let path = sink.staging.join(format!(".level-{lod}.frames"));
+                    Frames::Encapsulated(Staged::create(&path, frames).map_err(|e| TilerError::write(&path, e))?)
+                }
+                Transfer::Native => {
+                    let part = Part::level(&sink.spec, lod);
+                    let path = sink.staging.join(Spec::file_name(lod));
+                    Frames::Native(sink.start_native(&series, &part, &path)?)
+                }
+            };
+            levels.push(Some(level));
         }
+        drop(series);
         sink.levels = Mutex::new(levels);
         Ok(sink)
+    }
+
+    /// Writes the data set of native instance `part` at `path`, ready for its frames.
+    fn start_native(&self, series: &Series, part: &Part, path: &Path) -> Result<Native> {
+        let header = series.header(part, &Offsets::none(), 0)?;
+        let samples = u64::from(part.photometric.samples()) * u64::from(part.bits / 8);
+        let frame_len = u64::from(part.level.tile.0) * u64::from(part.level.tile.1) * samples;
+        let frames = part.level.tiles() as usize;
+        Native::create(path, &header, frames, frame_len, part.bits > 8).map_err(|e| TilerError::write(path, e))
     }
 
     /// Writes every level's instance, then each associated image's, and renames the series
@@ -76,6 +109,8 @@ impl DicomSink {
             instances: 0,
             frames: 0,
             photometric: self.spec.photometric.name(),
+            transfer_syntax: self.spec.transfer.uid(),
+            frame_coding: self.spec.transfer.describe(self.spec.stored.depth),
             series_uid: series.series_uid(),
             extended_offsets: 0,
             frame_bytes: 0,
@@ -86,10 +121,16 @@ impl DicomSink {
             associated: Vec::new(),
             associated_left_out: self.spec.associated_left_out,
         };
-        for (lod, staged) in levels.into_iter().enumerate() {
+        for (lod, frames) in levels.into_iter().enumerate() {
             let lod = lod as u32;
-            let staged = staged.ok_or_else(|| TilerError::Internal("a DICOM sink finished twice".into()))?;
-            let written = self.write_instance(&series, &Part::level(&self.spec, lod), staged, &Spec::file_name(lod))?;
+            let frames = frames.ok_or_else(|| TilerError::Internal("a DICOM sink finished twice".into()))?;
+            let name = Spec::file_name(lod);
+            let written = match frames {
+                Frames::Encapsulated(staged) => {
+                    self.write_instance(&series, &Part::level(&self.spec, lod), staged, &name)?
+                }
+                Frames::Native(native) => self.finish_native(native, &name)?,
+            };
             summary.file_bytes += written.file_bytes;
             summary.instances += 1;
             summary.frames += written.frames;
@@ -127,11 +168,43 @@ impl DicomSink {
         Ok(Written { frames, frame_bytes, file_bytes, basic })
     }
 
+    /// Ends native instance `name`, naming what is missing.
+    fn finish_native(&self, native: Native, name: &str) -> Result<Written> {
+        let path = self.staging.join(name);
+        let (frames, frame_bytes) = (native.frames(), native.frame_bytes());
+        let file_bytes = native.finish().map_err(|e| match e.kind() {
+            std::io::ErrorKind::Other => TilerError::Internal(format!("{name} of the DICOM series: {e}")),
+            _ => TilerError::write(&path, e),
+        })?;
+        Ok(Written { frames, frame_bytes, file_bytes, basic: true })
+    }
+
     /// Decodes associated image `k` of the source, encodes it as one JPEG frame (YCbCr 4:2:0,
-    /// or grey, at the series' quality) and writes its instance.
+    /// or grey, at the series' quality), or one native frame of its 8-bit samples, and
+    /// writes its instance.
     fn write_associated(&self, series: &Series, k: usize) -> Result<AssociatedSummary> {
         let image = &self.spec.associated[k];
         let pixels = image.decode(self.spec.associated_bytes)?;
+        let name = self.spec.associated_file_name(k);
+        if self.spec.transfer == Transfer::Native {
+            let photometric = Photometric::native(pixels.channels);
+            let part = Part::associated(&self.spec, k, photometric)
+                .ok_or_else(|| TilerError::Internal(format!("no associated image {k}")))?;
+            let path = self.staging.join(&name);
+            let mut native = self.start_native(series, &part, &path)?;
+            native.put(0, &pixels.samples).map_err(|e| TilerError::write(&path, e))?;
+            drop(pixels);
+            let written = self.finish_native(native, &name)?;
+            return Ok(AssociatedSummary {
+                kind: image.kind.name(),
+                width: image.width,
+                height: image.height,
+                origin: image.origin(),
+                file: name,
+                photometric: photometric.name(),
+                frame_bytes: written.frame_bytes,
+            });
+        }
         let photometric = Photometric::of(pixels.channels, Subsampling::S420);
         let size = (pixels.width, pixels.height);
         let jpeg = crate::codec::encode_jpeg(
@@ -150,7 +223,6 @@ impl DicomSink {
             ))
         })?;
         drop(pixels);
-        let name = self.spec.associated_file_name(k);
         let path = self.staging.join(format!(".{name}.frames"));
         let mut staged = Staged::create(&path, 1).map_err(|e| TilerError::write(&path, e))?;
         staged.append(0, &jpeg).map_err(|e| TilerError::write(&path, e))?;
@@ -193,18 +265,26 @@ impl TileSink for DicomSink {
             return Err(TilerError::Encode { lod, x, y, message });
         }
         let mut levels = self.levels.lock().map_err(|_| TilerError::panicked("a DICOM sink"))?;
-        let staged = levels.get_mut(lod as usize).and_then(Option::as_mut);
-        let staged = staged.ok_or_else(|| TilerError::Internal(format!("a frame of level {lod} after the end")))?;
+        let frames = levels.get_mut(lod as usize).and_then(Option::as_mut);
+        let frames = frames.ok_or_else(|| TilerError::Internal(format!("a frame of level {lod} after the end")))?;
         let index = y as usize * columns as usize + x as usize;
-        staged.append(index, stored).map_err(|e| TilerError::write(self.path(), e))?;
+        let put = match frames {
+            Frames::Encapsulated(staged) => staged.append(index, stored),
+            Frames::Native(native) => native.put(index, stored),
+        };
+        put.map_err(|e| TilerError::write(self.path(), e))?;
         self.frame_bytes.fetch_add(stored.len() as u64, Ordering::Relaxed);
         Ok(())
     }
 
-    /// A stored JPEG tile only where it is what the instance says of every frame: baseline,
-    /// 8-bit, of the frame's size, grey for MONOCHROME2, else coded as the photometric
-    /// interpretation names (RGB, or YCbCr at its subsampling).
+    /// A stored JPEG tile only where it is what the instance says of every frame: JPEG
+    /// frames (never native ones), baseline, 8-bit, of the frame's size, grey for
+    /// MONOCHROME2, else coded as the photometric interpretation names (RGB, or YCbCr at its
+    /// subsampling).
     fn takes_stored_jpeg(&self, jpeg: &[u8]) -> bool {
+        if self.spec.transfer != Transfer::JpegBaseline {
+            return false;
+        }
         let Some(h) = crate::source::stored::read_header(jpeg) else { return false };
         let side = self.spec.layout.tile_size;
         // Process 1 (SOF0) is what the transfer syntax names; extended sequential is not.
