@@ -93,7 +93,7 @@ pub struct Plane {
     /// The smallest and largest sample, where known before the metadata is written.
     pub window: Option<(f64, f64)>,
     /// The channel's colour where the source gives it (an OME-TIFF's `Channel Color`): RGBA,
-    /// red in the high byte. `None`: the viewers' default for its place ([`PLANE_COLOURS`]).
+    /// red in the high byte. `None`: the viewers' default for its place (`PLANE_COLOURS`).
     pub colour: Option<u32>,
 }
 
