@@ -341,11 +341,18 @@ def check_associated(directory, slide_path, native=False):
         syntax = EXPLICIT_VR_LE if native else JPEG_BASELINE
         if ds.file_meta.TransferSyntaxUID != syntax:
             fail(f"{kind}: transfer syntax {ds.file_meta.TransferSyntaxUID}")
-        # highdicom reads a TILED_FULL image's Pixel Spacing, which a label's and an
-        # overview's photograph has not (type 1C: the IOD asks it of VOLUME and THUMBNAIL
-        # images only; dciodvfy checks it).
-        if kind == "thumbnail" and highdicom.imread(p).SOPClassUID != WSI:
+        # A label's and an overview's photograph has no Pixel Spacing (type 1C: the IOD asks
+        # it of VOLUME and THUMBNAIL images only), from which a reader of a TILED_FULL image
+        # places its frames (highdicom does): their one frame is placed per frame,
+        # TILED_SPARSE. highdicom reads every instance and assembles its pixels.
+        organisation = "TILED_FULL" if kind == "thumbnail" else "TILED_SPARSE"
+        if ds.DimensionOrganizationType != organisation:
+            fail(f"{kind}: {ds.DimensionOrganizationType}, expected {organisation}")
+        image = highdicom.imread(p)
+        if image.SOPClassUID != WSI:
             fail(f"highdicom: {kind}")
+        matrix = image.get_total_pixel_matrix(dtype=np.uint8, apply_icc_profile=False)
+        close(f"highdicom {kind}", kind, rgb_or_grey(matrix, 3), pixels)
         close(f"pydicom {kind}", kind, rgb_or_grey(ds.pixel_array, 3), pixels)
     with WsiDicom.open(directory) as slide:
         if "label" in want:

@@ -89,6 +89,12 @@ impl Part {
         })
     }
 
+    /// Whether its frame's place is stated per frame (TILED_SPARSE) rather than following from
+    /// a Pixel Spacing it has not (a label, an overview: photographs of no stated scale).
+    fn placed_per_frame(&self) -> bool {
+        self.spacing.is_none()
+    }
+
     /// Whether the image is of the scanned area (a level, the thumbnail), which the Imaged
     /// Volume attributes describe.
     fn of_the_volume(&self) -> bool {
@@ -296,7 +302,11 @@ impl<'a> Series<'a> {
         put(&mut o, tags::SPECIMEN_LABEL_IN_IMAGE, VR::CS, if part.label_in_image { "YES" } else { "NO" });
         put(&mut o, tags::FOCUS_METHOD, VR::CS, "AUTO");
         put(&mut o, tags::EXTENDED_DEPTH_OF_FIELD, VR::CS, "NO");
-        put(&mut o, tags::DIMENSION_ORGANIZATION_TYPE, VR::CS, "TILED_FULL");
+        // A frame's place in TILED_FULL follows from its index and the Pixel Spacing (readers
+        // such as highdicom derive every frame's slide position so); an image without one (a
+        // label, an overview) states its single frame's place instead, TILED_SPARSE.
+        let organisation_type = if part.placed_per_frame() { "TILED_SPARSE" } else { "TILED_FULL" };
+        put(&mut o, tags::DIMENSION_ORGANIZATION_TYPE, VR::CS, organisation_type);
         // Image Pixel.
         let p = part.photometric;
         put(&mut o, tags::SAMPLES_PER_PIXEL, VR::US, p.samples());
@@ -419,6 +429,36 @@ impl<'a> Series<'a> {
                 );
             })],
         );
+        // Per frame (TILED_SPARSE, one frame): its dimension index values (column, row, as the
+        // Dimension Index Sequence lists them) and its place, the whole image's: the Total
+        // Pixel Matrix's first texel, at the origin the Total Pixel Matrix Origin states, in
+        // the one focal plane (Z 0).
+        if part.placed_per_frame() {
+            sequence(
+                &mut o,
+                tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE,
+                vec![item(|g| {
+                    sequence(
+                        g,
+                        tags::FRAME_CONTENT_SEQUENCE,
+                        vec![item(|i| {
+                            put(i, tags::DIMENSION_INDEX_VALUES, VR::UL, PrimitiveValue::U32([1, 1].into()))
+                        })],
+                    );
+                    sequence(
+                        g,
+                        tags::PLANE_POSITION_SLIDE_SEQUENCE,
+                        vec![item(|i| {
+                            put(i, tags::COLUMN_POSITION_IN_TOTAL_IMAGE_PIXEL_MATRIX, VR::SL, 1i32);
+                            put(i, tags::ROW_POSITION_IN_TOTAL_IMAGE_PIXEL_MATRIX, VR::SL, 1i32);
+                            put(i, tags::X_OFFSET_IN_SLIDE_COORDINATE_SYSTEM, VR::DS, "0");
+                            put(i, tags::Y_OFFSET_IN_SLIDE_COORDINATE_SYSTEM, VR::DS, "0");
+                            put(i, tags::Z_OFFSET_IN_SLIDE_COORDINATE_SYSTEM, VR::DS, "0");
+                        })],
+                    );
+                })],
+            );
+        }
         // Where the frames lie, past the Basic Offset Table's reach.
         if !offsets.fit_basic() {
             put(
