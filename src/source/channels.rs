@@ -21,7 +21,7 @@ use tiff::tags::Tag;
 
 use super::tiff::slide::{self, attribute, find_element};
 use super::tiff::{description, open_decoder, open_error};
-use super::{ImageHeader, Pick, RowSource, Streamed};
+use super::{ImageHeader, Pick, PixelPitch, RowSource, Streamed};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 
@@ -42,6 +42,10 @@ pub struct ChannelSet {
     /// A colour per channel where the source gives one (the OME-XML's `Channel Color`: RGBA,
     /// red in the high byte); as many as `names`.
     pub colours: Vec<Option<u32>>,
+    /// The physical size of a pixel, where the file states it, as the source's reader gives
+    /// it for the same image read as it is (`Embedded::pitch`); `--channel` files' only where
+    /// every file states the same.
+    pub pitch: Option<PixelPitch>,
     kind: Kind,
     max_memory: u64,
 }
@@ -74,7 +78,8 @@ impl ChannelSet {
         let names: Vec<String> = names.into_iter().take(layout.channels.count()).collect();
         let colours = vec![None; names.len()];
         let kind = Kind::Texels { path: path.to_path_buf(), pick, layout };
-        Ok(ChannelSet { width, height, depth: layout.depth, names, colours, kind, max_memory })
+        let pitch = source.embedded().pitch;
+        Ok(ChannelSet { width, height, depth: layout.depth, names, colours, pitch, kind, max_memory })
     }
 
     /// The channels of `path` if the pipeline cannot read them as texels: a TIFF page of
@@ -104,16 +109,20 @@ impl ChannelSet {
                 p.file_stem().map(|s| s.to_string_lossy().trim_end_matches(".ome").to_string()).unwrap_or_default()
             })
             .collect();
-        let set = ChannelSet {
+        let mut set = ChannelSet {
             width: header.width,
             height: header.height,
             depth: header.layout.depth,
             names,
             colours: vec![None; paths.len()],
+            pitch: None,
             kind: Kind::Files(paths.to_vec()),
             max_memory,
         };
-        // Every file is opened now, so that a wrong one fails before any output is made.
+        // Every file is opened now, so that a wrong one fails before any output is made. The
+        // pixel size is the files' where they all state one and agree (files of one size from
+        // one instrument), else none: a size some channels contradict is no measurement.
+        let mut pitches = Vec::with_capacity(paths.len());
         for (k, path) in paths.iter().enumerate() {
             if let Some(many) = ChannelSet::beyond_texels(path, Pick::default(), max_memory)? {
                 return Err(TilerError::unsupported(
@@ -124,8 +133,12 @@ impl ChannelSet {
                     ),
                 ));
             }
-            set.channel(k)?;
+            pitches.push(set.channel(k)?.embedded().pitch);
         }
+        set.pitch = match pitches.split_first() {
+            Some((Some(first), rest)) if rest.iter().all(|p| p.is_some_and(|p| same_pitch(&p, first))) => Some(*first),
+            _ => None,
+        };
         Ok(set)
     }
 
@@ -142,7 +155,12 @@ impl ChannelSet {
             Kind::Pages { .. } => "grey pages of an OME-TIFF",
             Kind::Files(_) => "grey images",
         };
-        format!("{} channels ({what}), one pass each", self.count())
+        let pitch = match self.pitch.as_ref().map(|p| (p, p.square())) {
+            Some((p, Some(side))) => format!(", {side:.4} µm/texel ({})", p.from),
+            Some((p, None)) => format!(", {:.4} x {:.4} µm/texel ({})", p.x_um, p.y_um, p.from),
+            None => String::new(),
+        };
+        format!("{} channels ({what}), one pass each{pitch}", self.count())
     }
 
     /// Channel `k` as a grey source of this set's size and sample type.
@@ -201,6 +219,13 @@ impl ChannelSet {
     }
 }
 
+/// Two files' pixel sizes agree to rounding (a part in 10^4, as [`PixelPitch::square`] takes
+/// it): where each was stated need not matter.
+fn same_pitch(a: &PixelPitch, b: &PixelPitch) -> bool {
+    let close = |u: f64, v: f64| (u - v).abs() <= 1e-4 * u.max(v);
+    close(a.x_um, b.x_um) && close(a.y_um, b.y_um)
+}
+
 fn is_tiff(path: &Path) -> Result<bool> {
     // Anything but a file (a FIFO would block here) is left to the decoders, which say why not.
     if !std::fs::metadata(path).is_ok_and(|m| m.is_file()) {
@@ -237,11 +262,13 @@ fn tiff_channels(path: &Path, pick: Pick, max_memory: u64) -> Result<Option<Chan
                 ));
             }
             let first = Pick { page: Some(planes.ifds[0]), series: None };
-            let header = super::open_picked(path, max_memory, first)?.header();
+            // The series' first plane is the page the OME-XML's PhysicalSizeX/Y is found for.
+            let source = super::open_picked(path, max_memory, first)?;
+            let (header, pitch) = (source.header(), source.embedded().pitch);
             let kind = Kind::Pages { path: path.to_path_buf(), pages: planes.ifds.clone() };
             let (names, colours) = (planes.names.clone(), planes.colours.clone());
             let (width, height, depth) = (header.width, header.height, header.layout.depth);
-            return Ok(Some(ChannelSet { width, height, depth, names, colours, kind, max_memory }));
+            return Ok(Some(ChannelSet { width, height, depth, names, colours, pitch, kind, max_memory }));
         }
         (Some(Some(planes)), _) => planes.ifds[0] as usize,
         (_, Some(page)) => page as usize,
@@ -267,9 +294,10 @@ fn tiff_channels(path: &Path, pick: Pick, max_memory: u64) -> Result<Option<Chan
         Some(Some(planes)) if planes.names.len() == samples as usize => (planes.names.clone(), planes.colours.clone()),
         _ => ((0..samples).map(|k| format!("c{k}")).collect(), vec![None; samples as usize]),
     };
+    let pitch = super::tiff::page_pitch(path, page, max_memory)?;
     let kind = Kind::Samples { path: path.to_path_buf(), page };
     let (width, height, depth) = (header.width, header.height, header.layout.depth);
-    Ok(Some(ChannelSet { width, height, depth, names, colours, kind, max_memory }))
+    Ok(Some(ChannelSet { width, height, depth, names, colours, pitch, kind, max_memory }))
 }
 
 /// An OME-XML series' channels at the first focal plane and time point: the TIFF directory of

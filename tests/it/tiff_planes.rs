@@ -227,3 +227,92 @@ fn tifffile_reads_every_plane_s_levels_as_the_ome_zarr_holds_them() {
         assert!(said.contains(&format!("3 levels x {count} channels identical, {dtype}")), "{input}: {said}");
     }
 }
+
+/// Writes the inputs of [`the_source_pixel_size_is_carried`]: an OME-TIFF of 5 grey planes at
+/// 0.325 µm (OME-XML), a TIFF of 6 samples at 0.5 µm (resolution tags in pixels per
+/// centimetre), and grey TIFFs for `--channel`: two at 0.4 µm, one at 0.8 µm.
+const SIZED: &str = r#"
+import sys
+import numpy as np, tifffile
+out = sys.argv[1]
+h, w = 97, 150
+rng = np.random.default_rng(7)
+def channels(c):
+    return rng.integers(0, 256, (c, h, w)).astype(np.uint8)
+tifffile.imwrite(f"{out}/planes.ome.tif", channels(5), metadata={"axes": "CYX", "PhysicalSizeX": 0.325, "PhysicalSizeXUnit": "µm", "PhysicalSizeY": 0.325, "PhysicalSizeYUnit": "µm"})
+tifffile.imwrite(f"{out}/six.tif", np.moveaxis(channels(6), 0, -1), photometric="minisblack", planarconfig="contig", resolution=(1e4 / 0.5, 1e4 / 0.5), resolutionunit="CENTIMETER")
+for k, um in enumerate([0.4, 0.4, 0.8]):
+    tifffile.imwrite(f"{out}/ch{k}.tif", channels(1)[0], photometric="minisblack", resolution=(1e4 / um, 1e4 / um), resolutionunit="CENTIMETER")
+"#;
+
+/// The pixel size an output records at level 0, as `x,y` (`-` for none): an OME-TIFF's
+/// PhysicalSizeX/Y in micrometres (ome-types, the schema), an OME-Zarr's level-0 scale where its
+/// axes have a unit.
+const SIZE_OF: &str = r#"
+import sys
+import tifffile, zarr, ome_types
+path = sys.argv[1]
+if path.endswith(".ome.tif"):
+    with tifffile.TiffFile(path) as t:
+        pixels = ome_types.from_xml(t.ome_metadata, validate=True).images[0].pixels
+    x, y = pixels.physical_size_x, pixels.physical_size_y
+    if x is not None:
+        assert pixels.physical_size_x_unit.value == "µm", pixels.physical_size_x_unit
+else:
+    attrs = zarr.open_group(path, mode="r").attrs.asdict()
+    ms = attrs.get("ome", attrs)["multiscales"][0]
+    scale = ms["datasets"][0]["coordinateTransformations"][0]["scale"]
+    units = [a.get("unit") for a in ms["axes"][-2:]]
+    x, y = (scale[-1], scale[-2]) if units == ["micrometer"] * 2 else (None, None)
+print("-" if x is None else f"{x:.6g},{y:.6g}")
+"#;
+
+/// A run of many channels records the source's pixel size as a run of the image read as it is
+/// does: an OME-TIFF's PhysicalSizeX/Y and a TIFF's resolution tags become the OME-TIFF's
+/// PhysicalSizeX/Y and the OME-Zarr's level-0 scale; `--pixel-size` overrides it; `--channel`
+/// files give theirs where all agree, none where they differ or state none.
+#[test]
+fn the_source_pixel_size_is_carried() {
+    let Some(python) = crate::common::python_with(
+        "tifffile, zarr, numpy, ome_types",
+        "the pixel size a run of many channels carries",
+        "tifffile, zarr and ome-types[lxml]",
+    ) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    python_ok(&python, &["-c", SIZED, s(d)]);
+    let (planes, six) = (d.join("planes.ome.tif"), d.join("six.tif"));
+    let chs: Vec<PathBuf> = (0..3).map(|k| d.join(format!("ch{k}.tif"))).collect();
+    let pngs = channel_files(d, 2, PixelLayout::new(Channels::Grey, Depth::U8));
+    let files = |paths: &[&PathBuf]| -> Vec<String> {
+        paths.iter().flat_map(|p| ["--channel".to_string(), s(p).to_string()]).collect()
+    };
+    let cases: Vec<(&str, Vec<String>, &str)> = vec![
+        ("planes", vec![s(&planes).into()], "0.325,0.325"),
+        ("planes-picked", vec![s(&planes).into(), "--channels".into(), "4,0".into()], "0.325,0.325"),
+        ("planes-given", vec![s(&planes).into(), "--pixel-size".into(), "0.5um".into()], "0.5,0.5"),
+        ("six", vec![s(&six).into()], "0.5,0.5"),
+        ("agree", files(&[&chs[0], &chs[1]]), "0.4,0.4"),
+        ("differ", files(&[&chs[0], &chs[1], &chs[2]]), "-"),
+        ("none", files(&[&pngs[0], &pngs[1]]), "-"),
+    ];
+    let outs = d.join("out");
+    std::fs::create_dir(&outs).unwrap();
+    for (name, args, want) in cases {
+        for out in [outs.join(format!("{name}.ome.tif")), outs.join(format!("{name}.ome.zarr"))] {
+            let mut all: Vec<&str> = vec!["split", "-o", s(&out), "--tile-size", "64", "-q"];
+            if out.extension().is_some_and(|e| e == "zarr") {
+                all.extend(["--layout", "ome-zarr"]);
+            }
+            all.extend(args.iter().map(String::as_str));
+            ok(&all);
+            let got = python_ok(&python, &["-c", SIZE_OF, s(&out)]);
+            assert_eq!(got.trim(), want, "{name}: {}", out.display());
+        }
+    }
+    // The summary says the size and where it was found.
+    let said = ok(&["split", s(&planes), "-o", s(&outs.join("said.ome.tif")), "--tile-size", "64"]);
+    assert!(said.contains("0.3250 µm/texel (the OME-XML's PhysicalSizeX/Y)"), "{said}");
+}

@@ -137,7 +137,8 @@ pub fn tile_channels(
             }
         }
         let source = set.interleave(picks)?;
-        return super::tile(source, &inputs[0], names, a, started, super::Carried::default());
+        let carried = super::Carried { pitch: set.pitch, ..super::Carried::default() };
+        return super::tile(source, &inputs[0], names, a, started, carried);
     }
     if outputs.len() > 1 {
         let into = outputs.iter().find(|o| planar(o.format)).map_or(Format::OmeZarr, |o| o.format);
@@ -156,7 +157,9 @@ pub fn tile_channels(
         .collect();
     let first = set.channel(picks[0])?;
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
-    let settings = a.settings(names, super::Carried::default(), None)?;
+    // The source's pixel size, as a run of the image read as it is carries it; no ICC profile
+    // or georeferencing: each plane is a grey channel, not the texels they describe.
+    let settings = a.settings(names, super::Carried { pitch: set.pitch, ..super::Carried::default() }, None)?;
     let plan =
         Plan::with_planes(outputs, &settings, &first.header(), &inputs, Budget::new(a.max_memory), Some(planes))?;
     report::prepare(&plan.outputs()[0].output.path)?;

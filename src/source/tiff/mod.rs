@@ -317,6 +317,16 @@ pub(crate) fn associated_pages(path: &Path, max_memory: u64) -> Result<Vec<(&'st
     pyramid::associated_pages(path, max_memory)
 }
 
+/// The physical size of a pixel of page `page`, as [`open`] finds it for that page (its
+/// `Embedded::pitch`): for a page of more samples than a texel holds, which [`open_sample`]
+/// reads a channel at a time.
+pub(super) fn page_pitch(path: &Path, page: usize, max_memory: u64) -> Result<Option<crate::source::PixelPitch>> {
+    let page = u32::try_from(page).map_err(|_| TilerError::Options(format!("page {page}: past any TIFF's pages")))?;
+    let mut decoder = open_decoder(path, max_memory)?;
+    let pick = crate::source::Pick { page: Some(page), series: None };
+    Ok(pyramid::choose(path, &mut decoder, pick, is_bigtiff(path)?, max_memory)?.pitch)
+}
+
 /// Sample `k` of every texel of page `page` as a grey image: a channel of an image of more
 /// samples than a texel holds (`source::channels`), read by [`kinds`], the reader of samples
 /// as they are stored (together or in planes, whatever the photometric calls them).
