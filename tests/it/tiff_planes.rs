@@ -17,6 +17,7 @@ use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
 use crate::common::Image;
 use crate::common::cli::{fails_with, ok, run, s};
 use crate::ome_zarr::write_png;
+use crate::tiff_out::png_tiles;
 
 /// `n` grey images of `layout` at `dir/chK.png`, each its own content, so that a swapped or
 /// repeated channel shows.
@@ -35,20 +36,6 @@ fn channel_files(dir: &Path, n: u32, layout: PixelLayout) -> Vec<PathBuf> {
             path
         })
         .collect()
-}
-
-/// The PNG tiles of `args` (border 0, box filter, 32-texel tiles), name and bytes, sorted.
-fn png_tiles(dir: &Path, args: &[&str]) -> Vec<(String, Vec<u8>)> {
-    let base = ["split", "-o", s(dir), "--border", "0", "--codec", "png", "--filter", "box", "--tile-size", "32", "-q"];
-    ok(&[&base[..], args].concat());
-    let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap())
-        .filter(|e| e.file_name().to_string_lossy().ends_with(".png"))
-        .map(|e| (e.file_name().to_string_lossy().into_owned(), std::fs::read(e.path()).unwrap()))
-        .collect();
-    files.sort();
-    files
 }
 
 /// `--channel` files into an OME-TIFF of planes, read back by our own reader as a channel set
@@ -93,8 +80,8 @@ fn channel_files_become_planes_our_reader_reads_back() {
         }
         for (c, &k) in order.iter().enumerate() {
             let c = c.to_string();
-            let got = png_tiles(&sub.join(format!("got{c}")), &[s(&tiff), "--channels", &c]);
-            let want = png_tiles(&sub.join(format!("want{c}")), &[s(&files[k])]);
+            let got = png_tiles(&tiff, &sub.join(format!("got{c}")), &["--tile-size", "32", "--channels", &c]);
+            let want = png_tiles(&files[k], &sub.join(format!("want{c}")), &["--tile-size", "32"]);
             assert!(!want.is_empty());
             assert!(got == want, "{depth:?}: plane {c} is not channel {k}'s pyramid");
         }

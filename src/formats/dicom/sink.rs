@@ -186,6 +186,15 @@ impl DicomSink {
         let image = &self.spec.associated[k];
         let pixels = image.decode(self.spec.associated_bytes)?;
         let name = self.spec.associated_file_name(k);
+        let summary = |file, photometric: Photometric, frame_bytes| AssociatedSummary {
+            kind: image.kind.name(),
+            width: image.width,
+            height: image.height,
+            origin: image.origin(),
+            file,
+            photometric: photometric.name(),
+            frame_bytes,
+        };
         if self.spec.transfer == Transfer::Native {
             let photometric = Photometric::native(pixels.channels);
             let part = Part::associated(&self.spec, k, photometric)
@@ -195,15 +204,7 @@ impl DicomSink {
             native.put(0, &pixels.samples).map_err(|e| TilerError::write(&path, e))?;
             drop(pixels);
             let written = self.finish_native(native, &name)?;
-            return Ok(AssociatedSummary {
-                kind: image.kind.name(),
-                width: image.width,
-                height: image.height,
-                origin: image.origin(),
-                file: name,
-                photometric: photometric.name(),
-                frame_bytes: written.frame_bytes,
-            });
+            return Ok(summary(name, photometric, written.frame_bytes));
         }
         let photometric = Photometric::of(pixels.channels, Subsampling::S420);
         let size = (pixels.width, pixels.height);
@@ -229,15 +230,7 @@ impl DicomSink {
         let part = Part::associated(&self.spec, k, photometric)
             .ok_or_else(|| TilerError::Internal(format!("no associated image {k}")))?;
         let written = self.write_instance(series, &part, staged, &name)?;
-        Ok(AssociatedSummary {
-            kind: image.kind.name(),
-            width: image.width,
-            height: image.height,
-            origin: image.origin(),
-            file: name,
-            photometric: photometric.name(),
-            frame_bytes: written.frame_bytes,
-        })
+        Ok(summary(name, photometric, written.frame_bytes))
     }
 
     fn path(&self) -> &Path {
