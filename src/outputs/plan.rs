@@ -116,11 +116,19 @@ impl Plan {
         refuse_unread(settings, &outputs)?;
         let formats: Vec<Format> = outputs.iter().map(|o| o.format).collect();
         let mut planned = Vec::with_capacity(outputs.len());
+        let input = inputs.first().copied().unwrap_or(Path::new(""));
+        let found = std::cell::OnceCell::new();
+        let at = Context {
+            header,
+            inputs,
+            input,
+            budget,
+            force: settings.force,
+            stored: settings.stored_subsampling,
+            associated: &found,
+        };
         for output in outputs {
             let own = Own::of(settings, output.format, &formats);
-            let input = inputs.first().copied().unwrap_or(Path::new(""));
-            let at =
-                Context { header, inputs, input, budget, force: settings.force, stored: settings.stored_subsampling };
             if let Some(c @ (CodecChoice::Deflate | CodecChoice::Lzw)) = own.tiles.codec
                 && !matches!(output.format, Format::Tiff(_) | Format::Dicom)
             {
@@ -193,13 +201,18 @@ struct Context<'a> {
     force: bool,
     /// How the source's stored JPEG tiles code colour ([`Settings::stored_subsampling`]).
     stored: Option<Subsampling>,
+    /// The source's associated images, found once for the outputs that carry them.
+    associated: &'a std::cell::OnceCell<Vec<Associated>>,
 }
 
 impl Context<'_> {
     /// The source's associated images an output carries, none where `left_out`
     /// (`--no-associated`); and how many it leaves out.
     fn associated(&self, left_out: bool) -> Result<(Vec<Associated>, usize)> {
-        let found = crate::source::associated::of_file(self.input, self.budget.bytes())?;
+        if self.associated.get().is_none() {
+            let _ = self.associated.set(crate::source::associated::of_file(self.input, self.budget.bytes())?);
+        }
+        let found = self.associated.get().cloned().unwrap_or_default();
         Ok(if left_out { (Vec::new(), found.len()) } else { (found, 0) })
     }
 

@@ -136,7 +136,7 @@ impl ChannelSet {
             pitches.push(set.channel(k)?.embedded().pitch);
         }
         set.pitch = match pitches.split_first() {
-            Some((Some(first), rest)) if rest.iter().all(|p| p.is_some_and(|p| same_pitch(&p, first))) => Some(*first),
+            Some((Some(first), rest)) if rest.iter().all(|p| p.is_some_and(|p| p.same_as(first))) => Some(*first),
             _ => None,
         };
         Ok(set)
@@ -217,13 +217,6 @@ impl ChannelSet {
         let sources = picks.iter().map(|&k| self.channel(k)).collect::<Result<Vec<_>>>()?;
         Ok(Box::new(Interleave::new(sources, PixelLayout::new(channels, self.depth))))
     }
-}
-
-/// Two files' pixel sizes agree to rounding (a part in 10^4, as [`PixelPitch::square`] takes
-/// it): where each was stated need not matter.
-fn same_pitch(a: &PixelPitch, b: &PixelPitch) -> bool {
-    let close = |u: f64, v: f64| (u - v).abs() <= 1e-4 * u.max(v);
-    close(a.x_um, b.x_um) && close(a.y_um, b.y_um)
 }
 
 fn is_tiff(path: &Path) -> Result<bool> {

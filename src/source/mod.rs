@@ -219,8 +219,19 @@ impl PixelPitch {
     /// The side of a square pixel, or `None` where the sides differ by more than rounding
     /// (a part in 10^4: resolution tags are rationals, MPP values a few digits).
     pub fn square(&self) -> Option<f64> {
-        ((self.x_um - self.y_um).abs() <= 1e-4 * self.x_um.max(self.y_um)).then_some(self.x_um)
+        agree(self.x_um, self.y_um).then_some(self.x_um)
     }
+
+    /// Whether `other` is the same size to rounding (as [`PixelPitch::square`] takes it),
+    /// wherever each was stated.
+    pub fn same_as(&self, other: &PixelPitch) -> bool {
+        agree(self.x_um, other.x_um) && agree(self.y_um, other.y_um)
+    }
+}
+
+/// Two lengths equal to a part in 10^4.
+fn agree(u: f64, v: f64) -> bool {
+    (u - v).abs() <= 1e-4 * u.max(v)
 }
 
 /// How [`open_with`] presents an image file.

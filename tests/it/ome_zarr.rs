@@ -721,8 +721,8 @@ fn many_channels_are_refused_where_a_texel_holds_four() {
     };
     let out = dir.path().join("out");
     let o = s(&out);
-    fails_with(&split(&["-o", o]), &["5 channels", "--layout vortex", "--channels 0,1,2", "--layout ome-zarr"]);
-    fails_with(&split(&["-o", o, "--layout", "dzi"]), &["--layout dzi", "--channels 0,1,2"]);
+    fails_with(&split(&["-o", o]), &["5 channels", "a vortex output", "--channels 0,1,2", "--layout ome-zarr"]);
+    fails_with(&split(&["-o", o, "--layout", "dzi"]), &["a dzi output", "--channels 0,1,2"]);
     fails_with(&split(&["-o", o, "--layout", "dzi", "--channels", "0,1"]), &["2 channels", "--channels 0,1,2"]);
     fails_with(&split(&["--pack", o]), &["5 channels", "a pack", "--channels 0,1,2"]);
     assert!(!out.exists());

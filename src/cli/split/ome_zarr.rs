@@ -114,27 +114,13 @@ pub fn tile_channels(
     if !outputs.iter().any(|o| planar(o.format)) {
         if ![1, 3].contains(&picks.len()) {
             let first = &outputs[0];
-            match first.format {
-                Format::Tiff(flavour) => bail!(
-                    "{}: {} channels, and {} ({}) holds one (grey) or three (RGB) of them a pixel: pick them with --channels 0,1,2, or write every channel as a plane of an OME-TIFF (-o FILE.ome.tif) or with --layout ome-zarr",
-                    inputs[0].shown(),
-                    picks.len(),
-                    match flavour {
-                        Flavour::Cog => "a COG",
-                        _ => "a generic pyramidal TIFF",
-                    },
-                    first.path.shown(),
-                ),
-                format => bail!(
-                    "{}: {} channels, and --layout {} (or a pack) holds one (grey) or three (RGB) of them: pick them with --channels 0,1,2, or write every channel with --layout ome-zarr",
-                    inputs[0].shown(),
-                    picks.len(),
-                    match format {
-                        Format::Pack | Format::Pmtiles => "vortex",
-                        format => format.name(),
-                    }
-                ),
-            }
+            bail!(
+                "{}: {} channels, and a {} output ({}) holds one (grey) or three (RGB) of them a pixel: pick them with --channels 0,1,2, or write every channel with --layout ome-zarr or as a plane of an OME-TIFF (-o FILE.ome.tif)",
+                inputs[0].shown(),
+                picks.len(),
+                first.format,
+                first.path.shown(),
+            );
         }
         let source = set.interleave(picks)?;
         let carried = super::Carried { pitch: set.pitch, ..super::Carried::default() };

@@ -493,25 +493,7 @@ mod tests {
     use super::*;
 
     fn spec() -> Spec {
-        let mut layout = crate::layout::Layout::new(600, 300, 256, 0).unwrap();
-        layout.lod_count = 2;
-        Spec {
-            layout,
-            copied: Vec::new(),
-            stored: crate::pixel::PixelLayout::new(crate::pixel::Channels::Rgb, crate::pixel::Depth::U8),
-            photometric: Photometric::YbrFull422,
-            transfer: Transfer::JpegBaseline,
-            pixel_mm: 0.0005,
-            name: "slide".into(),
-            uid_root: uid::DEFAULT_ROOT.into(),
-            identity: "test".into(),
-            made: "20260102030405".into(),
-            meta: Default::default(),
-            associated: Vec::new(),
-            quality: 85,
-            associated_bytes: 1 << 20,
-            associated_left_out: 0,
-        }
+        super::super::test_spec(600, 300, 2)
     }
 
     /// Where the frames' offsets fit 32 bits the data set has no Extended Offset Table;

@@ -205,7 +205,7 @@ impl Native {
         let padded = value + value % 2;
         let length = u32::try_from(padded)
             .ok()
-            .filter(|&l| l != u32::MAX)
+            .filter(|&l| u64::from(l) <= super::NATIVE_MOST_BYTES)
             .ok_or_else(|| io::Error::other(format!("{padded} bytes of Pixel Data, past a 32-bit length")))?;
         let mut file = fs::OpenOptions::new().read(true).write(true).create_new(true).open(path)?;
         file.write_all(header)?;

@@ -386,30 +386,42 @@ pub struct AssociatedSummary {
     pub frame_bytes: u64,
 }
 
+/// A JPEG series of `lods` levels of a `width x height` 8-bit RGB image in 256-texel frames,
+/// YCbCr 4:2:0, with fixed names, UIDs and date: what the unit tests vary.
+#[cfg(test)]
+pub(super) fn test_spec(width: u64, height: u64, lods: u32) -> Spec {
+    let mut layout = crate::layout::Layout::new(width, height, 256, 0).expect("a layout");
+    layout.lod_count = lods;
+    Spec {
+        layout,
+        copied: Vec::new(),
+        stored: PixelLayout::new(Channels::Rgb, Depth::U8),
+        photometric: Photometric::YbrFull422,
+        transfer: Transfer::JpegBaseline,
+        pixel_mm: 0.0005,
+        name: "slide".into(),
+        uid_root: DEFAULT_ROOT.into(),
+        identity: "test".into(),
+        made: "20260102030405".into(),
+        meta: Default::default(),
+        associated: Vec::new(),
+        quality: 85,
+        associated_bytes: 1 << 20,
+        associated_left_out: 0,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    /// A series of one level of 256-texel frames of native `stored` samples.
     fn native(width: u64, height: u64, stored: PixelLayout) -> Spec {
-        let mut layout = crate::layout::Layout::new(width, height, 256, 0).unwrap();
-        layout.lod_count = 1;
-        Spec {
-            layout,
-            copied: Vec::new(),
-            stored,
-            photometric: Photometric::native(stored.channels),
-            transfer: Transfer::Native,
-            pixel_mm: 0.0005,
-            name: "slide".into(),
-            uid_root: DEFAULT_ROOT.into(),
-            identity: "test".into(),
-            made: "20260102030405".into(),
-            meta: Default::default(),
-            associated: Vec::new(),
-            quality: 85,
-            associated_bytes: 1 << 20,
-            associated_left_out: 0,
-        }
+        let mut spec = test_spec(width, height, 1);
+        spec.stored = stored;
+        spec.photometric = Photometric::native(stored.channels);
+        spec.transfer = Transfer::Native;
+        spec
     }
 
     /// A native level's Pixel Data must fit its element's 32-bit length (no offset table
