@@ -662,3 +662,48 @@ fn planes_are_checked_and_one_interleaved_channel_is_named_only_where_known() {
     s.channels.push(OmeChannel::default());
     assert!(s.check().unwrap_err().to_string().contains("one OME channel"));
 }
+
+/// A generic pyramid's associated images follow its levels in the chain, one deflated strip
+/// each, grey or RGB, of odd sizes: the `tiff` crate (a decoder of its own, not ours) reads
+/// each page's samples back exactly, with its one-word description and `NewSubfileType` 1.
+#[test]
+fn associated_images_follow_the_levels_and_decode_to_their_samples() {
+    use crate::source::associated::{Kind, Pixels};
+    let s = spec(Flavour::Generic, 20, 18, 2, grey8(), Compression::Deflate { level: 6 });
+    let samples = |w: u32, h: u32, c: usize| -> Vec<u8> {
+        (0..w as usize * h as usize * c).map(|i| (i * 37 % 251) as u8).collect()
+    };
+    let images = [
+        (Kind::Label, Pixels { width: 37, height: 23, channels: Channels::Grey, samples: samples(37, 23, 1) }),
+        (Kind::Overview, Pixels { width: 50, height: 11, channels: Channels::Rgb, samples: samples(50, 11, 3) }),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.tif");
+    let mut w = TiffWriter::create(&path, std::fs::File::create(&path).unwrap(), s.clone()).unwrap();
+    for level in 0..2 {
+        let (c, r) = grid(&s, level);
+        for (x, y) in (0..r).flat_map(|y| (0..c).map(move |x| (x, y))) {
+            let tile = raw_tile(&s, level, x, y);
+            let encoder = crate::codec::TileEncoder::<u8>::new(s.codec().unwrap(), grey8(), false, None, 16, vec![]);
+            let mut out = Vec::new();
+            encoder.unwrap().encode(&tile, &mut out).unwrap();
+            w.add_plane_tile(0, level, x, y, &out).unwrap();
+        }
+    }
+    for (kind, pixels) in images.iter().cloned() {
+        w.add_associated(kind, pixels).unwrap();
+    }
+    w.finish().unwrap();
+
+    let mut decoder = tiff::decoder::Decoder::new(std::fs::File::open(&path).unwrap()).unwrap();
+    for (page, (kind, pixels)) in images.iter().enumerate().map(|(k, i)| (k + 2, i)) {
+        decoder.seek_to_image(page).unwrap();
+        assert_eq!(decoder.dimensions().unwrap(), (pixels.width, pixels.height), "page {page}");
+        let description = decoder.get_tag_ascii_string(tiff::tags::Tag::ImageDescription).unwrap();
+        assert_eq!(description, associated::word(*kind));
+        assert_eq!(decoder.get_tag_u32(tiff::tags::Tag::NewSubfileType).unwrap(), 1);
+        let tiff::decoder::DecodingResult::U8(got) = decoder.read_image().unwrap() else { panic!("8-bit samples") };
+        assert_eq!(got, pixels.samples, "page {page}: the {kind:?}'s samples");
+    }
+    assert!(!decoder.more_images(), "nothing after the associated images");
+}
