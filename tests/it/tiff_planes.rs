@@ -185,15 +185,15 @@ fn python_ok(python: &Path, args: &[&str]) -> String {
     said
 }
 
+/// The Python with tifffile, zarr and ome-types for `what`: VORTEX_PYVIPS, else a skip with
+/// a note (a failure under CI).
+fn readers(what: &str) -> Option<PathBuf> {
+    crate::common::python_with("tifffile, zarr, numpy, ome_types", what, "tifffile, zarr and ome-types[lxml]")
+}
+
 #[test]
 fn tifffile_reads_every_plane_s_levels_as_the_ome_zarr_holds_them() {
-    let Some(python) = crate::common::python_with(
-        "tifffile, zarr, numpy, ome_types",
-        "the OME-TIFF of planes against OME-Zarr",
-        "tifffile, zarr and ome-types[lxml]",
-    ) else {
-        return;
-    };
+    let Some(python) = readers("the OME-TIFF of planes against OME-Zarr") else { return };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     python_ok(&python, &["-c", INPUTS, s(d)]);
@@ -260,13 +260,7 @@ print("-" if x is None else f"{x:.6g},{y:.6g}")
 /// files give theirs where all agree, none where they differ or state none.
 #[test]
 fn the_source_pixel_size_is_carried() {
-    let Some(python) = crate::common::python_with(
-        "tifffile, zarr, numpy, ome_types",
-        "the pixel size a run of many channels carries",
-        "tifffile, zarr and ome-types[lxml]",
-    ) else {
-        return;
-    };
+    let Some(python) = readers("the pixel size a run of many channels carries") else { return };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     python_ok(&python, &["-c", SIZED, s(d)]);
