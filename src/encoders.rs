@@ -312,11 +312,10 @@ impl<T: Sample> Encoding<'_, T> {
             let placed = &self.counts.targets[t];
             match (&stored.constant, &stored.file) {
                 (Some(texel), _) if sink.takes_constants() => sink.write_constant(job.lod, x, y, texel)?,
+                (_, Some(File::Encoded(bytes))) => sink.write_tile(job.lod, x, y, bytes)?,
                 (_, Some(file)) => {
-                    sink.write_tile(job.lod, x, y, file.bytes())?;
-                    if let File::Copied(_) | File::Cropped(_) = file {
-                        placed.copied.fetch_add(1, Ordering::Relaxed);
-                    }
+                    sink.write_stored(job.lod, x, y, file.bytes())?;
+                    placed.copied.fetch_add(1, Ordering::Relaxed);
                     if let File::Cropped(_) = file {
                         placed.cropped.fetch_add(1, Ordering::Relaxed);
                     }

@@ -106,11 +106,11 @@ pub fn run(a: ConvertArgs) -> Result<()> {
     if !a.tiled && a.filename_format.is_none() && source::is_dicom_input(&a.input) {
         // A DICOM whole-slide series is tiled, and read as `split` reads it (source::dicom).
         let options = source::OpenOptions { keep_icc: a.keep_icc, ..source::OpenOptions::shown(a.out.max_memory()) };
-        let source::Opened { mut source, icc, pitch, .. } = source::open_with(&a.input, options)?;
+        let source::Opened { mut source, icc, pitch, lossy, .. } = source::open_with(&a.input, options)?;
         if let Some(range) = a.range {
             source = source::range::map(source, range, a.out.tile_type().unwrap_or(Depth::U8))?;
         }
-        let carried = super::split::Carried { icc, geo: None, pitch };
+        let carried = super::split::Carried { icc, geo: None, pitch, lossy };
         return tile(source, &a.input, a.output_filename_format.clone(), &a.out, started, carried);
     }
     let grid = open_grid(&a)?;

@@ -411,11 +411,11 @@ pub fn run(a: SplitArgs) -> Result<()> {
     let input = input.context("an input image is required")?;
     let options =
         source::OpenOptions { max_memory: a.out.max_memory, autorotate: !a.no_autorotate, keep_icc: a.keep_icc, pick };
-    let source::Opened { mut source, icc, geo, pitch } = source::open_with(&input, options)?;
+    let source::Opened { mut source, icc, geo, pitch, lossy } = source::open_with(&input, options)?;
     if let Some(range) = a.range {
         source = source::range::map(source, range, a.out.tile_type.unwrap_or(Depth::U8))?;
     }
-    tile(source, &input, a.filename_format, &a.out, started, Carried { icc, geo, pitch })
+    tile(source, &input, a.filename_format, &a.out, started, Carried { icc, geo, pitch, lossy })
 }
 
 impl OutputArgs {
@@ -568,6 +568,7 @@ impl OutputArgs {
             keep_icc: carried.icc,
             geo: carried.geo,
             pitch: carried.pitch,
+            lossy: carried.lossy,
             stored_subsampling: stored,
             force: self.force,
         })
@@ -580,12 +581,13 @@ fn name_of(layout: OutputLayout) -> String {
 }
 
 /// What the source's file says that the outputs may carry: its ICC profile where the run keeps
-/// it (`--keep-icc`), a GeoTIFF's georeferencing.
+/// it (`--keep-icc`), a GeoTIFF's georeferencing, its pixel size, its lossy compressions.
 #[derive(Default)]
 pub struct Carried {
     pub icc: Option<Vec<u8>>,
     pub geo: Option<vortex_tiler::source::GeoTags>,
     pub pitch: Option<vortex_tiler::source::PixelPitch>,
+    pub lossy: Vec<vortex_tiler::source::LossyStep>,
 }
 
 /// Runs the pipeline from `source` into the outputs `a` names, with the progress bar and the

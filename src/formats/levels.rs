@@ -37,7 +37,7 @@ pub(crate) fn copy(
                         ),
                     ));
                 };
-                sink.write_tile(k as u32, col, row, &file)?;
+                sink.write_stored(k as u32, col, row, &file)?;
                 copied += 1;
             }
             progress.advance(u64::from(across));

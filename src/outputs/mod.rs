@@ -161,6 +161,9 @@ pub struct Settings {
     /// The physical size of a source pixel where its file states it: an OME-Zarr, a TIFF or a
     /// DICOM series records it when `ome_zarr.pixel_size` is not given.
     pub pitch: Option<crate::source::PixelPitch>,
+    /// The lossy compressions the source's texels went through (`Embedded::lossy`): a DICOM
+    /// series lists them before its own JPEG coding.
+    pub lossy: Vec<crate::source::LossyStep>,
     /// How the source's stored JPEG tiles code colour (its first tile's, as
     /// `StoredTiles::subsampling` reads it): a TIFF or DICOM output's JPEG tiles are coded so
     /// where `--subsampling` is not given, so that the stored tiles can be copied into it.

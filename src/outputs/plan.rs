@@ -125,6 +125,7 @@ impl Plan {
             budget,
             force: settings.force,
             stored: settings.stored_subsampling,
+            lossy: &settings.lossy,
             associated: &found,
         };
         for output in outputs {
@@ -201,6 +202,8 @@ struct Context<'a> {
     force: bool,
     /// How the source's stored JPEG tiles code colour ([`Settings::stored_subsampling`]).
     stored: Option<Subsampling>,
+    /// The lossy compressions the source's texels went through ([`Settings::lossy`]).
+    lossy: &'a [crate::source::LossyStep],
     /// The source's associated images, found once for the outputs that carry them.
     associated: &'a std::cell::OnceCell<Vec<Associated>>,
 }
@@ -863,6 +866,7 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
         quality,
         associated_bytes: at.budget.bytes(),
         associated_left_out,
+        source_lossy: at.lossy.to_vec(),
     };
     spec.check()?;
     at.limits().check_pyramid(&layout, false)?;

@@ -131,6 +131,12 @@ impl TileSink for WithProfile<'_> {
             None => self.inner.write_tile(lod, x, y, bytes),
         }
     }
+    fn write_stored(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+        match self.profile.embed(bytes) {
+            Some(tagged) => self.inner.write_stored(lod, x, y, &tagged),
+            None => self.inner.write_stored(lod, x, y, bytes),
+        }
+    }
     fn takes_constants(&self) -> bool {
         self.inner.takes_constants()
     }

@@ -21,6 +21,12 @@ pub trait TileSink: Sync {
     /// top left), `bytes` as the codec encoded it. Called from the encoding threads, at most
     /// once per place; in LOD and row order only where [`TileSink::ordered`] says so.
     fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()>;
+    /// Stores tile `(x, y)` of LOD `lod` as [`TileSink::write_tile`] does, `bytes` being the
+    /// source's stored JPEG tile, copied (or cropped losslessly), not coded by this run: a
+    /// sink that states how its tiles were coded (a DICOM series' lossy history) counts them.
+    fn write_stored(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+        self.write_tile(lod, x, y, bytes)
+    }
     /// Whether one-colour tiles should come as their colour (`write_constant`) rather than
     /// encoded.
     fn takes_constants(&self) -> bool {

@@ -70,7 +70,7 @@ enum Stored {
 }
 
 /// An associated image decoded: 8-bit grey or RGB samples, row after row, interleaved.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Pixels {
     /// Texels across.
     pub width: u32,
@@ -80,6 +80,9 @@ pub struct Pixels {
     pub channels: Channels,
     /// `width x height x channels` bytes.
     pub samples: Vec<u8>,
+    /// The lossy compressions its texels went through, as its reader says
+    /// ([`Embedded::lossy`](super::Embedded::lossy)).
+    pub lossy: Vec<super::LossyStep>,
 }
 
 impl Associated {
@@ -139,7 +142,8 @@ impl Associated {
                 source.read_row(chunk).map_err(named)?;
             }
         }
-        Ok(Pixels { width: header.width, height: header.height, channels, samples })
+        let lossy = source.embedded().lossy;
+        Ok(Pixels { width: header.width, height: header.height, channels, samples, lossy })
     }
 }
 

@@ -24,7 +24,7 @@ use mozjpeg::{ColorSpace, Decompress};
 
 use super::icc::Cmyk;
 use super::libjpeg::{HIT_EOF, error_manager, panic_message};
-use super::{Embedded, ImageHeader, RowSource, orient};
+use super::{Embedded, ImageHeader, LossyStep, RowSource, orient};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 
@@ -126,6 +126,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
     let strict_eof = multi_scan || header.first_scan_components.is_none();
 
     let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
     HIT_EOF.with(|eof| eof.set(false));
     let started = catch_unwind(AssertUnwindSafe(|| -> Result<_> {
         let decompress = Decompress::builder()
@@ -205,6 +206,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
             icc: if cmyk.is_some() { None } else { header.icc() },
             geo: None,
             pitch: None,
+            lossy: LossyStep::of(LossyStep::JPEG, (width as u32, height as u32), header.components as usize, file_len),
         },
         cmyk,
     }))

@@ -200,6 +200,39 @@ pub struct Embedded {
     pub geo: Option<GeoTags>,
     /// The physical size of a stored pixel, where the file states it.
     pub pitch: Option<PixelPitch>,
+    /// The lossy compressions the stored texels went through, oldest first: a JPEG's or a
+    /// JPEG-tiled slide's, or what a DICOM instance states. Empty where the file says none
+    /// (its texels may still have been lossy once, before it was written).
+    pub lossy: Vec<LossyStep>,
+}
+
+/// One lossy compression of an image's texels, as DICOM's Lossy Image Compression Method
+/// and Ratio record it: an output that states the image's history (a DICOM series) lists
+/// the source's steps before its own.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LossyStep {
+    /// The method, as DICOM's defined terms name it: `ISO_10918_1` (JPEG), `ISO_15444_1`
+    /// (JPEG 2000), or what a DICOM source states.
+    pub method: String,
+    /// Bytes of the texels uncompressed over bytes compressed (a DICOM source's as stated).
+    pub ratio: f64,
+}
+
+impl LossyStep {
+    /// JPEG's method (ISO/IEC 10918-1).
+    pub const JPEG: &'static str = "ISO_10918_1";
+    /// JPEG 2000's method (ISO/IEC 15444-1).
+    pub const JPEG_2000: &'static str = "ISO_15444_1";
+
+    /// `method` compressing `width x height` texels of `samples` 8-bit samples into
+    /// `compressed` bytes; no step where nothing was compressed.
+    pub(crate) fn of(method: &str, (width, height): (u32, u32), samples: usize, compressed: u64) -> Vec<LossyStep> {
+        let raw = u64::from(width) * u64::from(height) * samples as u64;
+        match compressed {
+            0 => Vec::new(),
+            _ => vec![LossyStep { method: method.to_string(), ratio: raw as f64 / compressed as f64 }],
+        }
+    }
 }
 
 /// The physical size of one pixel, where a file states it (a slide's MPP, OME-XML's
@@ -270,6 +303,8 @@ pub struct Opened {
     /// The physical size of a pixel of the rows, where the file states it (its sides swapped
     /// where an orientation turns the image).
     pub pitch: Option<PixelPitch>,
+    /// The lossy compressions the file's texels went through ([`Embedded::lossy`]).
+    pub lossy: Vec<LossyStep>,
 }
 
 /// Opens `path` as viewers show it (or as `opts` says): its orientation applied and its ICC
@@ -277,7 +312,7 @@ pub struct Opened {
 /// carry, and the georeferencing where the file has it and the rows keep its grid.
 pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
     let source = open_picked(path, opts.max_memory, opts.pick)?;
-    let Embedded { orientation, icc, geo, pitch } = source.embedded();
+    let Embedded { orientation, icc, geo, pitch, lossy } = source.embedded();
     let (mut source, kept) = with_profile(path, source, icc, opts.keep_icc)?;
     let turned = opts.autorotate && orientation != orient::Orientation::NORMAL;
     if opts.autorotate {
@@ -292,7 +327,7 @@ pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
         Some(p) if opts.autorotate && orientation.transposes() => Some(PixelPitch { x_um: p.y_um, y_um: p.x_um, ..p }),
         other => other,
     };
-    Ok(Opened { source, icc: kept, geo, pitch })
+    Ok(Opened { source, icc: kept, geo, pitch, lossy })
 }
 
 /// `source`, whose texels are in the colours of `icc`, converted to sRGB, or kept as they are

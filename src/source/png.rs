@@ -60,6 +60,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         icc,
         geo: None,
         pitch: None,
+        lossy: Vec::new(),
     };
     let rows = if reader.info().interlaced {
         check_whole_fits(

@@ -6,6 +6,7 @@ VORTEX_PYVIPS).
     dicom_out.py levels DIR SLIDE
     dicom_out.py associated DIR SLIDE [native]
     dicom_out.py native DIR SOURCE TILE
+    dicom_out.py lossy DIR [SLIDE]
 
 
 pydicom reads every instance (the IOD's key attributes checked), highdicom parses each as a VL
@@ -38,6 +39,9 @@ highdicom parses each; wsidicom reads every level equal to the oracle; OpenSlide
 level of an 8-bit RGB series equal to the oracle (it reads no grey or 16-bit DICOM slide).
 Exact, because the frames are the pyramid's samples as they are, and the box pyramid is exact
 (tiff_oracle.py).
+With `lossy`: each instance's Lossy Image Compression, methods and ratios as pydicom reads
+them and, given SLIDE (a JPEG-tiled TIFF), its first page's texel bytes over its tiles' bytes
+as tifffile lists them (`sourceRatio`).
 Prints one JSON line of what it measured; exits 1 with the reason on a mismatch.
 """
 
@@ -449,7 +453,30 @@ def check_native(directory, source_path, tile):
     print(json.dumps(measured))
 
 
+def lossy(directory, slide_path=None):
+    """Each instance's lossy history as pydicom reads it; SLIDE's first page's ratio."""
+    listed = lambda v: [] if v is None else [str(x) for x in (v if isinstance(v, pydicom.multival.MultiValue) else [v])]
+    said = {}
+    for name in sorted(os.listdir(directory)):
+        ds = pydicom.dcmread(os.path.join(directory, name), stop_before_pixels=True)
+        said[name] = {
+            "flag": ds.LossyImageCompression,
+            "methods": listed(ds.get("LossyImageCompressionMethod")),
+            "ratios": [float(r) for r in listed(ds.get("LossyImageCompressionRatio"))],
+        }
+    if slide_path:
+        import tifffile
+
+        with tifffile.TiffFile(slide_path) as tif:
+            page = tif.pages[0]
+            said["sourceRatio"] = page.imagewidth * page.imagelength * page.samplesperpixel / sum(page.databytecounts)
+    print(json.dumps(said))
+
+
 def main():
+    if sys.argv[1] == "lossy":
+        lossy(*sys.argv[2:4])
+        return
     if sys.argv[1] == "native":
         check_native(sys.argv[2], sys.argv[3], int(sys.argv[4]))
         return

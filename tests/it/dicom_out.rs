@@ -709,3 +709,66 @@ fn native_refusals() {
     ok(&[&["split", s(&alpha)][..], &native, &["--flatten", "-q"]].concat());
     dciodvfy(&out);
 }
+
+/// Every instance states the pixels' lossy history (PS3.3 C.7.6.1.1.5), read by pydicom:
+/// the source's JPEG coding (its texels' bytes over its tiles' bytes, as tifffile lists
+/// them), then the series' own JPEG coding where it coded frames; a PNG's native frames
+/// were never lossy (`00`). A copied level adds no step; a level made by the pyramid does.
+#[test]
+fn each_instance_states_the_lossy_history_of_its_pixels() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let history = |series: &Path, slide: Option<&Path>| {
+        let mut args = vec![SCRIPT, "lossy", s(series)];
+        args.extend(slide.map(s));
+        let out = Command::new(&python).args(&args).output().unwrap();
+        let said = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        assert!(out.status.success(), "{}: {said}", series.display());
+        json_of(&String::from_utf8_lossy(&out.stdout))
+    };
+    let methods = |said: &serde_json::Value, file: &str| -> Vec<String> {
+        said[file]["methods"].as_array().unwrap().iter().map(|m| m.as_str().unwrap().to_string()).collect()
+    };
+    let jpeg = || "ISO_10918_1".to_string();
+    // A PNG: native frames never lossy, JPEG frames one step, ours.
+    let png = input(dir.path(), "src", 600, 400, rgb8());
+    for (codec, flag, steps) in [("raw", "00", 0), ("jpeg", "01", 1)] {
+        let out = dir.path().join(format!("png-{codec}"));
+        ok(&["split", s(&png), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um", "--codec", codec]);
+        let said = history(&out, None);
+        for file in ["level-0.dcm", "level-1.dcm"] {
+            assert_eq!(said[file]["flag"], flag, "{codec}: {said}");
+            assert_eq!(methods(&said, file), vec![jpeg(); steps], "{codec}: {said}");
+        }
+    }
+    // A JPEG-tiled slide: its coding is every instance's first step.
+    let svs = dir.path().join("slide.svs");
+    crate::tiff_slides::python(python.as_os_str(), MAKE_LEVELLED_SVS, &[s(&svs)]);
+    let runs: [(&str, &[&str], [usize; 2]); 3] = [
+        // Its own levels, every frame copied: the slide's step alone.
+        ("stored", &[], [1, 1]),
+        // Level 0's inner tiles copied, its edge frames and the other levels coded here.
+        ("pow2", &["--levels", "pow2"], [2, 2]),
+        // Native frames: the slide's step, no more.
+        ("raw", &["--codec", "raw"], [1, 1]),
+    ];
+    for (name, extra, steps) in runs {
+        let out = dir.path().join(format!("svs-{name}"));
+        let args = ["split", s(&svs), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um"];
+        ok(&[&args[..], extra].concat());
+        let said = history(&out, Some(&svs));
+        let source = said["sourceRatio"].as_f64().unwrap();
+        for (file, steps) in ["level-0.dcm", "level-1.dcm"].into_iter().zip(steps) {
+            assert_eq!(said[file]["flag"], "01", "{name}: {said}");
+            assert_eq!(methods(&said, file), vec![jpeg(); steps], "{name}: {said}");
+            let ratios = said[file]["ratios"].as_array().unwrap();
+            assert_eq!(ratios.len(), steps, "{name}: {said}");
+            // The slide's step is its level 0's ratio, in DS's 16 characters.
+            let first = ratios[0].as_f64().unwrap();
+            assert!((first - source).abs() <= source * 1e-9, "{name}: {first} is not the slide's {source}: {said}");
+        }
+        if name == "pow2" {
+            dciodvfy(&out);
+        }
+    }
+}

@@ -18,6 +18,7 @@ use super::meta::{KEYWORDS, Vr};
 use super::uid::{self, Uids};
 use super::{Level, Photometric, SOP_CLASS, Spec, Transfer};
 use crate::error::{Result, TilerError};
+use crate::source::LossyStep;
 use crate::source::associated::Kind;
 
 /// The name the files give their writer (the File Meta's Implementation Version Name, and
@@ -43,6 +44,11 @@ pub(super) struct Part {
     /// Whether the slide's label shows in the image (a label; an overview, which photographs
     /// the whole glass slide).
     pub label_in_image: bool,
+    /// The lossy compressions its pixels went through before this series: the source's.
+    pub lossy_before: Vec<LossyStep>,
+    /// Whether this series coded its frames (JPEG frames: a lossy step of its own), rather
+    /// than copying every one of them as stored.
+    pub coded_here: bool,
 }
 
 impl Part {
@@ -63,13 +69,16 @@ impl Part {
             bits: if spec.stored.depth == crate::pixel::Depth::U16 { 16 } else { 8 },
             spacing: Some(spacing(spec, level)),
             label_in_image: false,
+            lossy_before: spec.source_lossy.clone(),
+            coded_here: true,
         }
     }
 
     /// Associated image `k` of `spec`, of `photometric` frames of 8-bit samples: one frame,
     /// the whole image (PS3.3 C.8.12.4.1.1: LABEL and OVERVIEW as photographed, THUMBNAIL
     /// resampled).
-    pub fn associated(spec: &Spec, k: usize, photometric: Photometric) -> Option<Part> {
+    /// `lossy_before`: what its page's reader says of it.
+    pub fn associated(spec: &Spec, k: usize, photometric: Photometric, lossy_before: Vec<LossyStep>) -> Option<Part> {
         let image = spec.associated.get(k)?;
         let level = Level { width: image.width, height: image.height, tile: (image.width, image.height) };
         let (image_type, label_in_image) = match image.kind {
@@ -86,6 +95,8 @@ impl Part {
             bits: 8,
             spacing: (image.kind == Kind::Thumbnail).then(|| spacing(spec, level)),
             label_in_image,
+            lossy_before,
+            coded_here: true,
         })
     }
 
@@ -326,17 +337,24 @@ impl<'a> Series<'a> {
             put(&mut o, tags::RESCALE_INTERCEPT, VR::DS, "0");
             put(&mut o, tags::RESCALE_SLOPE, VR::DS, "1");
         }
-        match s.transfer {
-            Transfer::JpegBaseline => {
-                put(&mut o, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "01");
-                let raw = u64::from(level.tile.0) * u64::from(level.tile.1) * u64::from(p.samples());
-                let ratio = (frames * raw) as f64 / frame_bytes.max(1) as f64;
-                put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_RATIO, VR::DS, ds(ratio));
-                put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_METHOD, VR::CS, "ISO_10918_1");
-            }
-            // The frames as the pyramid made them (the ratio and method are type 1C, of lossy
-            // images only).
-            Transfer::Native => put(&mut o, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "00"),
+        // The pixels' lossy history (PS3.3 C.7.6.1.1.5): the source's steps, then this
+        // series' JPEG coding where it coded the frames; "00" (and no ratio or method, type
+        // 1C) only where none was ever lossy, as far as the source says.
+        let mut steps = part.lossy_before.clone();
+        if s.transfer == Transfer::JpegBaseline && part.coded_here {
+            let raw = u64::from(level.tile.0) * u64::from(level.tile.1) * u64::from(p.samples());
+            let ratio = (frames * raw) as f64 / frame_bytes.max(1) as f64;
+            steps.push(LossyStep { method: LossyStep::JPEG.to_string(), ratio });
+        }
+        if steps.is_empty() {
+            put(&mut o, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "00");
+        } else {
+            put(&mut o, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "01");
+            let ratios: Vec<String> = steps.iter().map(|step| ds(step.ratio)).collect();
+            let ratios: Vec<&str> = ratios.iter().map(String::as_str).collect();
+            let methods: Vec<&str> = steps.iter().map(|step| step.method.as_str()).collect();
+            put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_RATIO, VR::DS, strs(&ratios));
+            put(&mut o, tags::LOSSY_IMAGE_COMPRESSION_METHOD, VR::CS, strs(&methods));
         }
         // Multi-frame Dimension: the frames' places follow from TILED_FULL.
         let organisation = self.uids.of("dimension organisation");
@@ -521,6 +539,41 @@ mod tests {
         assert_eq!(value[8..16], (1u64 << 31).to_le_bytes());
         assert_eq!(lengths, at + 12 + 24, "the lengths follow the offsets");
         assert_eq!(extended.len(), lengths + 12 + 24, "and end the data set, before Pixel Data");
+    }
+
+    /// Lossy Image Compression and its ratios and methods: the source's steps in order, then
+    /// the series' JPEG coding where it coded the frames (the ratio of the frames' texels to
+    /// their bytes); `00` and neither list where no step was lossy.
+    #[test]
+    fn the_lossy_history_is_the_source_s_steps_then_the_series_own() {
+        let text = |o: &Object, tag| o.element(tag).ok().map(|e| e.to_str().unwrap().to_string());
+        // Level 0: 3 x 2 frames of 256 x 256 RGB texels in an eighth of their bytes.
+        let offsets = Offsets { offsets: (0..6).collect(), lengths: vec![1; 6] };
+        let frame_bytes = 6 * 256 * 256 * 3 / 8;
+        let j2k = LossyStep { method: LossyStep::JPEG_2000.to_string(), ratio: 20.0 };
+        let cases = [
+            (Transfer::JpegBaseline, vec![], true, Some(("8", "ISO_10918_1"))),
+            (Transfer::JpegBaseline, vec![j2k.clone()], false, Some(("20", "ISO_15444_1"))),
+            (Transfer::JpegBaseline, vec![j2k.clone()], true, Some(("20\\8", "ISO_15444_1\\ISO_10918_1"))),
+            (Transfer::Native, vec![j2k], true, Some(("20", "ISO_15444_1"))),
+            (Transfer::Native, vec![], true, None),
+        ];
+        for (transfer, before, coded_here, want) in cases {
+            let spec = Spec { transfer, ..spec() };
+            let series = Series::new(&spec).unwrap();
+            let part = Part { lossy_before: before.clone(), coded_here, ..Part::level(&spec, 0) };
+            let o = series.dataset(&part, &offsets, frame_bytes);
+            let said = (
+                text(&o, tags::LOSSY_IMAGE_COMPRESSION),
+                text(&o, tags::LOSSY_IMAGE_COMPRESSION_RATIO),
+                text(&o, tags::LOSSY_IMAGE_COMPRESSION_METHOD),
+            );
+            let want = match want {
+                Some((ratios, methods)) => (Some("01".into()), Some(ratios.into()), Some(methods.into())),
+                None => (Some("00".into()), None, None),
+            };
+            assert_eq!(said, want, "{transfer:?}, {before:?} before, coded here: {coded_here}");
+        }
     }
 
     #[test]

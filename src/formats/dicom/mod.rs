@@ -189,6 +189,10 @@ pub(crate) struct Spec {
     pub associated_bytes: u64,
     /// The associated images the source has that `--no-associated` left out.
     pub associated_left_out: usize,
+    /// The lossy compressions the source's texels went through, oldest first: every level's
+    /// instance states them (Lossy Image Compression Method and Ratio) before the series' own
+    /// JPEG coding, which an instance of copied frames did not add.
+    pub source_lossy: Vec<crate::source::LossyStep>,
 }
 
 impl Spec {
@@ -408,6 +412,7 @@ pub(super) fn test_spec(width: u64, height: u64, lods: u32) -> Spec {
         quality: 85,
         associated_bytes: 1 << 20,
         associated_left_out: 0,
+        source_lossy: Vec::new(),
     }
 }
 

@@ -48,6 +48,8 @@ pub struct DicomSink {
     staging: PathBuf,
     spec: Spec,
     levels: Mutex<Vec<Option<Frames>>>,
+    /// Per level, the frames copied as the source stored them (`write_stored`).
+    stored: Vec<AtomicU64>,
     frame_bytes: AtomicU64,
     /// Whether the series is in place; `Drop` removes the staging directory otherwise.
     done: bool,
@@ -59,12 +61,14 @@ impl DicomSink {
         spec.check()?;
         let dest = claim.path.clone();
         let staging = staging::partial_path(&dest);
+        let levels_count = spec.level_count();
         staging::fresh_dir(&staging).map_err(|e| TilerError::write(&staging, e))?;
         let mut sink = DicomSink {
             dest,
             staging,
             spec,
             levels: Mutex::new(Vec::new()),
+            stored: (0..levels_count).map(|_| AtomicU64::new(0)).collect(),
             frame_bytes: AtomicU64::new(0),
             done: false,
         };
@@ -127,7 +131,10 @@ impl DicomSink {
             let name = Spec::file_name(lod);
             let written = match frames {
                 Frames::Encapsulated(staged) => {
-                    self.write_instance(&series, &Part::level(&self.spec, lod), staged, &name)?
+                    let mut part = Part::level(&self.spec, lod);
+                    let copied = self.stored[lod as usize].load(Ordering::Relaxed);
+                    part.coded_here = copied < self.spec.level(lod).tiles();
+                    self.write_instance(&series, &part, staged, &name)?
                 }
                 Frames::Native(native) => self.finish_native(native, &name)?,
             };
@@ -184,7 +191,8 @@ impl DicomSink {
     /// writes its instance.
     fn write_associated(&self, series: &Series, k: usize) -> Result<AssociatedSummary> {
         let image = &self.spec.associated[k];
-        let pixels = image.decode(self.spec.associated_bytes)?;
+        let mut pixels = image.decode(self.spec.associated_bytes)?;
+        let lossy = std::mem::take(&mut pixels.lossy);
         let name = self.spec.associated_file_name(k);
         let summary = |file, photometric: Photometric, frame_bytes| AssociatedSummary {
             kind: image.kind.name(),
@@ -197,7 +205,7 @@ impl DicomSink {
         };
         if self.spec.transfer == Transfer::Native {
             let photometric = Photometric::native(pixels.channels);
-            let part = Part::associated(&self.spec, k, photometric)
+            let part = Part::associated(&self.spec, k, photometric, lossy)
                 .ok_or_else(|| TilerError::Internal(format!("no associated image {k}")))?;
             let path = self.staging.join(&name);
             let mut native = self.start_native(series, &part, &path)?;
@@ -227,7 +235,7 @@ impl DicomSink {
         let path = self.staging.join(format!(".{name}.frames"));
         let mut staged = Staged::create(&path, 1).map_err(|e| TilerError::write(&path, e))?;
         staged.append(0, &jpeg).map_err(|e| TilerError::write(&path, e))?;
-        let part = Part::associated(&self.spec, k, photometric)
+        let part = Part::associated(&self.spec, k, photometric, lossy)
             .ok_or_else(|| TilerError::Internal(format!("no associated image {k}")))?;
         let written = self.write_instance(series, &part, staged, &name)?;
         Ok(summary(name, photometric, written.frame_bytes))
@@ -267,6 +275,16 @@ impl TileSink for DicomSink {
         };
         put.map_err(|e| TilerError::write(self.path(), e))?;
         self.frame_bytes.fetch_add(stored.len() as u64, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// A stored JPEG tile copied as a frame, counted: an instance of only such frames adds
+    /// no lossy step of its own to the source's.
+    fn write_stored(&self, lod: u32, x: u32, y: u32, jpeg: &[u8]) -> Result<()> {
+        self.write_tile(lod, x, y, jpeg)?;
+        if let Some(count) = self.stored.get(lod as usize) {
+            count.fetch_add(1, Ordering::Relaxed);
+        }
         Ok(())
     }
 

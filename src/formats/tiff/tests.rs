@@ -674,8 +674,14 @@ fn associated_images_follow_the_levels_and_decode_to_their_samples() {
         (0..w as usize * h as usize * c).map(|i| (i * 37 % 251) as u8).collect()
     };
     let images = [
-        (Kind::Label, Pixels { width: 37, height: 23, channels: Channels::Grey, samples: samples(37, 23, 1) }),
-        (Kind::Overview, Pixels { width: 50, height: 11, channels: Channels::Rgb, samples: samples(50, 11, 3) }),
+        (
+            Kind::Label,
+            Pixels { width: 37, height: 23, channels: Channels::Grey, samples: samples(37, 23, 1), lossy: Vec::new() },
+        ),
+        (
+            Kind::Overview,
+            Pixels { width: 50, height: 11, channels: Channels::Rgb, samples: samples(50, 11, 3), lossy: Vec::new() },
+        ),
     ];
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("t.tif");

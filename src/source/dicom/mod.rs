@@ -251,7 +251,7 @@ fn build(instance: &Instance, mut label: String, max_memory: u64) -> Result<Box<
     if let Some(p) = pitch {
         label += &format!(", {:.4} µm/texel", p.x_um);
     }
-    let embedded = crate::source::Embedded { pitch, ..Default::default() };
+    let embedded = crate::source::Embedded { pitch, lossy: stated_lossy(instance), ..Default::default() };
     let size = (width, height);
     let tile = (tile_w, tile_h);
     match ts {
@@ -446,6 +446,27 @@ fn pixel_pitch(instance: &Instance) -> Option<crate::source::PixelPitch> {
     let y_um = um(spacing.first())?;
     let x_um = um(spacing.get(1)).unwrap_or(y_um);
     Some(crate::source::PixelPitch { x_um, y_um, from: "the DICOM Pixel Spacing" })
+}
+
+/// The lossy compressions the instance states its pixels went through (Lossy Image
+/// Compression `01`, with each step's method and ratio, in order); none where it states none
+/// or gives no ratio (the readers of its frames then say what their own coding was).
+fn stated_lossy(instance: &Instance) -> Vec<crate::source::LossyStep> {
+    if instance.text(tags::LOSSY_IMAGE_COMPRESSION).as_deref() != Some("01") {
+        return Vec::new();
+    }
+    let methods = instance.texts(tags::LOSSY_IMAGE_COMPRESSION_METHOD);
+    let ratios = instance.texts(tags::LOSSY_IMAGE_COMPRESSION_RATIO);
+    ratios
+        .iter()
+        .enumerate()
+        .map_while(|(i, ratio)| {
+            let ratio = ratio.parse::<f64>().ok().filter(|r| r.is_finite() && *r > 0.0)?;
+            // A method for each ratio; one method for all where only one is given.
+            let method = methods.get(i).or(methods.last()).filter(|m| !m.is_empty())?;
+            Some(crate::source::LossyStep { method: method.clone(), ratio })
+        })
+        .collect()
 }
 
 /// How libjpeg is to read the frames' samples: as the first frame's markers say (JFIF or

@@ -19,7 +19,7 @@ use tiff::tags::Tag;
 use super::open_error;
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
-use crate::source::{Embedded, ImageHeader, RowSource};
+use crate::source::{Embedded, ImageHeader, LossyStep, RowSource};
 
 /// Whether the image is JPEG 2000 in Aperio's two forms.
 pub(super) fn is_jp2k(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<bool> {
@@ -103,7 +103,7 @@ pub(crate) fn assemble(
     grid: Grid,
     ycbcr: bool,
     label: String,
-    embedded: Embedded,
+    mut embedded: Embedded,
     max_memory: u64,
 ) -> Result<Box<dyn RowSource>> {
     let Grid { size: (width, height), chunk: (chunk_w, chunk_h), offsets, counts } = grid;
@@ -134,6 +134,13 @@ pub(crate) fn assemble(
     }
     let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
     let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
+    // The first tile's coding style says whether the wavelet was the irreversible one (a
+    // lossy step; a file that states its history, a DICOM instance, keeps its own).
+    if embedded.lossy.is_empty() && irreversible(&main_header(&file, file_len, &offsets, &counts)) {
+        let tiles = (across as usize).saturating_mul(height.div_ceil(chunk_h) as usize);
+        let compressed = counts.iter().take(tiles).fold(0u64, |sum, &c| sum.saturating_add(c));
+        embedded.lossy = LossyStep::of(LossyStep::JPEG_2000, (width, height), 3, compressed);
+    }
     Ok(Box::new(Jp2kTiff {
         path: path.to_path_buf(),
         file,
@@ -153,6 +160,39 @@ pub(crate) fn assemble(
         label,
         embedded,
     }))
+}
+
+/// The first bytes (4 KiB at most) of the first tile's codestream; empty where there are
+/// none to read (a damaged tile is reported when it is decoded).
+fn main_header(file: &File, file_len: u64, offsets: &[u64], counts: &[u64]) -> Vec<u8> {
+    let (Some(&offset), Some(&count)) = (offsets.first(), counts.first()) else { return Vec::new() };
+    let mut head = vec![0u8; count.min(4096).min(file_len.saturating_sub(offset)) as usize];
+    match file.read_exact_at(&mut head, offset) {
+        Ok(()) => head,
+        Err(_) => Vec::new(),
+    }
+}
+
+/// Whether a codestream's main header says it was coded with the irreversible (9-7) wavelet
+/// (its COD segment: ISO/IEC 15444-1 A.6.1, the transformation is SPcod's fifth byte); false
+/// where it is the reversible (5-3) one or no COD is found.
+fn irreversible(head: &[u8]) -> bool {
+    if !head.starts_with(&[0xFF, 0x4F]) {
+        return false;
+    }
+    let mut at = 2;
+    while at + 4 <= head.len() && head[at] == 0xFF {
+        let (marker, length) = (head[at + 1], u16::from_be_bytes([head[at + 2], head[at + 3]]));
+        match marker {
+            // COD: Lcod, Scod, SGcod (4 bytes), then SPcod's levels, code-block sizes, style,
+            // transformation (0: irreversible 9-7, 1: reversible 5-3).
+            0x52 => return head.get(at + 13) == Some(&0),
+            // SOT: the main header ended without a COD.
+            0x90 => return false,
+            _ => at += 2 + usize::from(length),
+        }
+    }
+    false
 }
 
 impl Jp2kTiff {
@@ -371,6 +411,25 @@ impl RowSource for Jp2kTiff {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The COD segment's transformation byte, after a SIZ segment skipped by its length: 0 is
+    /// the irreversible wavelet; 1, no COD, or no SOC is not.
+    #[test]
+    fn the_coding_style_says_whether_the_wavelet_was_irreversible() {
+        let header = |transformation: u8| {
+            let mut raw = vec![0xFF, 0x4F, 0xFF, 0x51, 0, 6, 1, 2, 3, 4];
+            // COD: Lcod 12, Scod, progression, 1 layer, MCT, 5 levels, 64x64 blocks, style.
+            raw.extend([0xFF, 0x52, 0, 12, 0, 0, 0, 1, 1, 5, 4, 4, 0, transformation]);
+            raw.extend([0xFF, 0x90, 0, 10]);
+            raw
+        };
+        assert!(irreversible(&header(0)));
+        assert!(!irreversible(&header(1)));
+        assert!(!irreversible(&header(0)[2..]), "no SOC");
+        let sot_first = [0xFF, 0x4F, 0xFF, 0x90, 0, 10, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0xFF, 0x52];
+        assert!(!irreversible(&sot_first), "the main header ends at the first SOT");
+        assert!(!irreversible(&header(0)[..20]), "cut before the transformation");
+    }
 
     /// A codestream OpenJPEG cannot decode is said so, not as a null pointer of the binding.
     #[test]

@@ -29,7 +29,7 @@ use super::open_error;
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::stored::{self, Quality, Samples, StoredLevel, StoredLevels, StoredTiles};
-use crate::source::{Decoding, ImageHeader, RowSource};
+use crate::source::{Decoding, ImageHeader, LossyStep, RowSource};
 use crate::stages::TaskClock;
 
 /// Chunk rows decoded together when the TIFF is in strips: enough strips to keep every core
@@ -186,7 +186,7 @@ pub(crate) fn assemble(
     grid: Grid,
     colour: Colour,
     label: String,
-    embedded: crate::source::Embedded,
+    mut embedded: crate::source::Embedded,
     pages: Pages,
 ) -> Result<Box<dyn RowSource>> {
     let max_memory = pages.max_memory;
@@ -199,6 +199,13 @@ pub(crate) fn assemble(
     let down = height.div_ceil(chunk_h);
     let chunks = across as u64 * down as u64;
     enough_chunks(path, &offsets, &counts, chunks, tiled)?;
+    // The chunks' JPEG coding is a lossy step (a file that states its history, a DICOM
+    // instance, keeps its own).
+    if embedded.lossy.is_empty() {
+        let compressed = counts.iter().take(chunks as usize).fold(0u64, |sum, &c| sum.saturating_add(c));
+        let samples = colour.components();
+        embedded.lossy = LossyStep::of(LossyStep::JPEG, (width, height), samples, compressed);
+    }
     // One band of decoded texels: a row of tiles, or a group of strips.
     let row_bytes = width as u64 * colour.components() as u64;
     let band_bytes = |group: u64| row_bytes.saturating_mul(chunk_h as u64).saturating_mul(group);

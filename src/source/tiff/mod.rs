@@ -166,6 +166,8 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
         icc: profile(path, &mut decoder)?,
         geo: geo::read(&mut decoder),
         pitch: chosen.pitch,
+        // The JPEG and JPEG 2000 readers say what their coding lost.
+        lossy: Vec::new(),
     };
     if jpeg::is_jpeg(path, &mut decoder)? {
         // One strip cut by restart markers (Hamamatsu NDPI) is read an interval at a time.

@@ -165,6 +165,7 @@ pub(super) fn open(
     }
     // Each interval is decoded as a JPEG of its own: one interval wide, one MCU row high.
     let mut header = header;
+    let colour_components = header.colour.components();
     let size_at = header.sof_at + 5;
     header.bytes[size_at..size_at + 2].copy_from_slice(&(header.mcu_h as u16).to_be_bytes());
     header.bytes[size_at + 2..size_at + 4].copy_from_slice(&(interval_w as u16).to_be_bytes());
@@ -240,7 +241,15 @@ pub(super) fn open(
         failed: false,
         label: label.to_string(),
         located,
-        embedded: embedded.clone(),
+        embedded: crate::source::Embedded {
+            lossy: crate::source::LossyStep::of(
+                crate::source::LossyStep::JPEG,
+                (width, height),
+                colour_components,
+                count,
+            ),
+            ..embedded.clone()
+        },
     })))
 }
 
