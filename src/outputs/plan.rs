@@ -211,12 +211,26 @@ struct Context<'a> {
 impl Context<'_> {
     /// The source's associated images an output carries, none where `left_out`
     /// (`--no-associated`); and how many it leaves out.
+    /// Each carried one is checked now ([`Associated::check`]): one that cannot be decoded
+    /// as the output needs stops the run before its pyramid is cut.
     fn associated(&self, left_out: bool) -> Result<(Vec<Associated>, usize)> {
         if self.associated.get().is_none() {
             let _ = self.associated.set(crate::source::associated::of_file(self.input, self.budget.bytes())?);
         }
         let found = self.associated.get().cloned().unwrap_or_default();
-        Ok(if left_out { (Vec::new(), found.len()) } else { (found, 0) })
+        if left_out {
+            return Ok((Vec::new(), found.len()));
+        }
+        for image in &found {
+            image.check(self.associated_bytes())?;
+        }
+        Ok((found, 0))
+    }
+
+    /// The most bytes one associated image may take decoded: half the budget, the rest for
+    /// its encoded strip or frame.
+    fn associated_bytes(&self) -> u64 {
+        self.budget.bytes() / 2
     }
 
     /// `opts` with JPEG tiles coded as the source's stored ones where `--subsampling` is not
@@ -710,7 +724,7 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context, planes
         icc: own.keep_icc.clone(),
         copied: Vec::new(),
         associated,
-        associated_bytes: at.budget.bytes(),
+        associated_bytes: at.associated_bytes(),
         associated_left_out,
         channels,
         planar,
@@ -864,7 +878,7 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
         meta,
         associated,
         quality,
-        associated_bytes: at.budget.bytes(),
+        associated_bytes: at.associated_bytes(),
         associated_left_out,
         source_lossy: at.lossy.to_vec(),
     };

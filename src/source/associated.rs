@@ -93,36 +93,67 @@ impl Associated {
         }
     }
 
+    /// Whether it can be decoded as [`decode`](Self::decode) decodes it, known before any
+    /// texel is: its reader opens, its texels are 8-bit grey or RGB of the listed size, and
+    /// they fit `max_bytes`. A run checks this when it plans, so that an image it cannot
+    /// carry stops it before the pyramid is cut, not after; the error is `decode`'s.
+    pub fn check(&self, max_bytes: u64) -> Result<()> {
+        self.open(max_bytes).map(drop)
+    }
+
     /// Its texels as 8-bit grey or RGB, decoded by the reader of its file. The decoded size is
     /// checked against `max_bytes` before anything is allocated; an image of other samples
     /// (16-bit, alpha, more channels) or one that cannot be decoded is an error naming the
     /// file and the image, and how to leave the images out.
     pub fn decode(&self, max_bytes: u64) -> Result<Pixels> {
-        let Stored::TiffPage { path, page } = &self.from;
-        let name = |message: String| {
-            let (kind, origin) = (self.kind.name(), self.origin());
-            format!("the {kind} ({origin}): {message} (--no-associated leaves the associated images out)")
-        };
-        let named = |e: TilerError| match e {
-            TilerError::Decode { path, message } => TilerError::Decode { path, message: name(message) },
-            TilerError::DecodeRow { path, row, message } => {
-                TilerError::Decode { path, message: name(format!("row {row}: {message}")) }
+        let (mut source, bytes) = self.open(max_bytes)?;
+        let header = source.header();
+        let channels = header.layout.channels;
+        let row = header.width as usize * channels.count();
+        let mut samples = vec![0u8; bytes];
+        if row > 0 {
+            for chunk in samples.chunks_exact_mut(row) {
+                source.read_row(chunk).map_err(|e| self.named(e))?;
             }
-            TilerError::Unsupported { path, message } => TilerError::Unsupported { path, message: name(message) },
+        }
+        let lossy = source.embedded().lossy;
+        Ok(Pixels { width: header.width, height: header.height, channels, samples, lossy })
+    }
+
+    /// `message` about this image, naming it and how to leave the images out.
+    fn name(&self, message: String) -> String {
+        let (kind, origin) = (self.kind.name(), self.origin());
+        format!("the {kind} ({origin}): {message} (--no-associated leaves the associated images out)")
+    }
+
+    /// A reader's error about this image, named as [`name`](Self::name) names it.
+    fn named(&self, e: TilerError) -> TilerError {
+        match e {
+            TilerError::Decode { path, message } => TilerError::Decode { path, message: self.name(message) },
+            TilerError::DecodeRow { path, row, message } => {
+                TilerError::Decode { path, message: self.name(format!("row {row}: {message}")) }
+            }
+            TilerError::Unsupported { path, message } => TilerError::Unsupported { path, message: self.name(message) },
             other => other,
-        };
+        }
+    }
+
+    /// Its reader, at the first row, and the bytes of its texels decoded, checked as
+    /// [`check`](Self::check) says.
+    fn open(&self, max_bytes: u64) -> Result<(Box<dyn super::RowSource>, usize)> {
+        let Stored::TiffPage { path, page } = &self.from;
         let pick = super::Pick { page: Some(*page as u32), series: None };
-        let mut source = super::tiff::open(path, max_bytes, pick).map_err(named)?;
+        let source = super::tiff::open(path, max_bytes, pick).map_err(|e| self.named(e))?;
         let header = source.header();
         let channels = header.layout.channels;
         if header.layout.depth != Depth::U8 || !matches!(channels, Channels::Grey | Channels::Rgb) {
             let message = format!("{} texels, not 8-bit grey or RGB", header.layout);
-            return Err(TilerError::unsupported(path, name(message)));
+            return Err(TilerError::unsupported(path, self.name(message)));
         }
         if (header.width, header.height) != (self.width, self.height) {
             let message =
                 format!("{}x{} as read, {}x{} as listed", header.width, header.height, self.width, self.height);
-            return Err(TilerError::decode(path, name(message)));
+            return Err(TilerError::decode(path, self.name(message)));
         }
         let row = header.width as usize * channels.count();
         let bytes = (row as u64).checked_mul(u64::from(header.height)).filter(|&b| b <= max_bytes);
@@ -134,16 +165,9 @@ impl Associated {
                 header.layout,
                 max_bytes >> 20
             );
-            return Err(TilerError::unsupported(path, name(message)));
+            return Err(TilerError::unsupported(path, self.name(message)));
         };
-        let mut samples = vec![0u8; bytes];
-        if row > 0 {
-            for chunk in samples.chunks_exact_mut(row) {
-                source.read_row(chunk).map_err(named)?;
-            }
-        }
-        let lossy = source.embedded().lossy;
-        Ok(Pixels { width: header.width, height: header.height, channels, samples, lossy })
+        Ok((source, bytes))
     }
 }
 

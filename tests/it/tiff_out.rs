@@ -529,6 +529,38 @@ fn a_slide_s_associated_images_follow_a_generic_pyramid() {
     );
 }
 
+/// An associated image no output can carry (a 16-bit label) stops the run when it is
+/// planned, naming the image and the way out, before any level is cut: nothing is left at
+/// the TIFF's or the series' path; `--no-associated` makes both.
+#[test]
+fn an_associated_image_that_cannot_be_carried_is_refused_before_the_levels() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let svs = dir.path().join("slide.svs");
+    let sixteen_bit_label = crate::dicom_out::MAKE_SVS_WITH_LABEL
+        .replace("t.write(label, compression=", "t.write(label.astype(np.uint16) * 257, compression=");
+    crate::tiff_slides::python(python.as_os_str(), &sixteen_bit_label, &[s(&svs)]);
+    let (tif, series) = (dir.path().join("slide.tif"), dir.path().join("series"));
+    let why = ["slide.svs", "the label (page 3): rgb 16-bit texels, not 8-bit grey or RGB", "--no-associated"];
+    // The library's plan refuses it, before the source's first row is read.
+    {
+        use vortex_tiler::formats::tiff::Flavour;
+        use vortex_tiler::outputs::{Budget, Format, Output, Plan, Settings};
+        let source = vortex_tiler::source::open(&svs, Budget::default().bytes()).unwrap();
+        let outputs = vec![Output::new(Format::Tiff(Flavour::Generic), &tif)];
+        let planned = Plan::new(outputs, &Settings::default(), &source.header(), &[svs.as_path()], Budget::default());
+        let Err(refused) = planned else { panic!("a plan of a TIFF carrying a 16-bit label") };
+        let refused = refused.to_string();
+        assert!(why.iter().all(|w| refused.contains(w)), "{refused}");
+    }
+    fails_with(&run(&["split", s(&svs), "-o", s(&tif)]), &why);
+    fails_with(&run(&["split", s(&svs), "--layout", "dicom", "-o", s(&series)]), &why);
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left, [std::ffi::OsString::from("slide.svs")], "nothing but the slide");
+    ok(&["split", s(&svs), "-o", s(&tif), "--no-associated", "-q"]);
+    ok(&["split", s(&svs), "--layout", "dicom", "-o", s(&series), "--no-associated", "-q"]);
+}
+
 fn json_of(said: &str) -> serde_json::Value {
     serde_json::from_str(said.trim()).unwrap_or_else(|e| panic!("{e}: {said}"))
 }

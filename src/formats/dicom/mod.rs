@@ -185,7 +185,7 @@ pub(crate) struct Spec {
     pub associated: Vec<crate::source::associated::Associated>,
     /// The JPEG quality of the associated images' frames (not used by native ones).
     pub quality: u8,
-    /// The most bytes one associated image may take decoded (`--max-memory`).
+    /// The most bytes one associated image may take decoded (half of `--max-memory`).
     pub associated_bytes: u64,
     /// The associated images the source has that `--no-associated` left out.
     pub associated_left_out: usize,

@@ -203,7 +203,7 @@ pub(crate) struct Spec {
     /// The source's associated images (label, macro, thumbnail), each written after the
     /// levels as an IFD of its own (the generic flavour only; empty for the others).
     pub associated: Vec<Associated>,
-    /// The most bytes one associated image may take decoded (`--max-memory`).
+    /// The most bytes one associated image may take decoded (half of `--max-memory`).
     pub associated_bytes: u64,
     /// The associated images the source has that the file leaves out (`--no-associated`,
     /// or a flavour that holds none).

@@ -54,8 +54,7 @@ impl TiffSink {
         let mut writer = writer.ok_or_else(|| TilerError::Internal("a TIFF sink finished twice".into()))?;
         let mut associated = Vec::with_capacity(self.spec.associated.len());
         for (k, image) in self.spec.associated.iter().enumerate() {
-            // Half the budget for the samples, the rest for their compressed strip.
-            let pixels = image.decode(self.spec.associated_bytes / 2)?;
+            let pixels = image.decode(self.spec.associated_bytes)?;
             let (width, height) = (pixels.width, pixels.height);
             let bytes = writer.add_associated(image.kind, pixels)?;
             let page = self.spec.level_count() as usize + k;
