@@ -394,8 +394,10 @@ fn tiff_line(w: &vortex_tiler::formats::tiff::TiffSummary) -> String {
     let associated = match (carried.is_empty(), w.associated_left_out) {
         (true, 0) => String::new(),
         (false, _) => format!("; associated images after the levels: {}", carried.join(", ")),
-        (true, n) if w.flavour == Flavour::Generic => format!("; {n} associated image(s) left out (--no-associated)"),
-        (true, n) => format!("; {n} associated image(s) left out: a generic TIFF (-o NAME.tif) carries them"),
+        (true, n) if w.flavour == Flavour::Cog => {
+            format!("; {n} associated image(s) left out: a generic TIFF or an OME-TIFF carries them")
+        }
+        (true, n) => format!("; {n} associated image(s) left out (--no-associated)"),
     };
     let planes = match w.planes {
         1 => String::new(),

@@ -152,9 +152,10 @@ pub struct OutputArgs {
     #[arg(help_heading = "Outputs", long, value_name = "LEVELS")]
     levels: Option<LevelsArg>,
 
-    /// A generic TIFF (-o FILE.tif) or --layout dicom: leave the slide's associated images
-    /// (label, macro, thumbnail) out [default: each carried, an IFD or an instance of its
-    /// own]. A label often shows the patient's name or number.
+    /// A generic TIFF (-o FILE.tif), an OME-TIFF (-o FILE.ome.tif) or --layout dicom: leave
+    /// the slide's associated images (label, macro, thumbnail) out [default: each carried, an
+    /// IFD, an OME image or an instance of its own]. A label often shows the patient's name or
+    /// number.
     #[arg(help_heading = "Outputs", long)]
     no_associated: bool,
 

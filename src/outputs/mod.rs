@@ -146,9 +146,9 @@ pub struct Settings {
     /// Which levels a TIFF or a DICOM series holds (`--levels`) [default: the slide's own, as
     /// stored, where it has some].
     pub levels: Option<crate::layout::Levels>,
-    /// Leave the source's associated images (label, macro, thumbnail) out of a generic TIFF
-    /// and a DICOM series (`--no-associated`) [default: carried, each an IFD or an instance
-    /// of its own].
+    /// Leave the source's associated images (label, macro, thumbnail) out of a generic TIFF,
+    /// an OME-TIFF and a DICOM series (`--no-associated`) [default: carried, each an IFD, an
+    /// OME image or an instance of its own].
     pub no_associated: bool,
     /// How a pack's bytes are laid out.
     pub pack: vortex_pack::WriteOptions,

@@ -374,10 +374,10 @@ fn refuse_unread(s: &Settings, outputs: &[Output]) -> Result<()> {
             return Err(options(format!("{flag} belongs to --layout dicom")));
         }
     }
-    let generic = outputs.iter().any(|o| o.format == Format::Tiff(Flavour::Generic));
-    if s.no_associated && !generic && !dicom {
+    let carrying = outputs.iter().any(|o| matches!(o.format, Format::Tiff(Flavour::Generic | Flavour::Ome)));
+    if s.no_associated && !carrying && !dicom {
         return Err(options(
-            "--no-associated belongs to a generic TIFF (-o FILE.tif) or --layout dicom, the outputs that carry a slide's associated images".into(),
+            "--no-associated belongs to a generic TIFF (-o FILE.tif), an OME-TIFF (-o FILE.ome.tif) or --layout dicom, the outputs that carry a slide's associated images".into(),
         ));
     }
     if s.levels.is_some() && !tiff && !dicom {
@@ -687,17 +687,10 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context, planes
         (None, other) => return Err(TilerError::Internal(format!("TIFF tiles from --codec {}", other.name()))),
     };
     let pixel_size = own.ome_zarr.pixel_size.map(|p| tiff::Micrometres(micrometres(p)));
-    // A slide's label, macro and thumbnail follow a generic pyramid's levels; the other
-    // flavours leave them out (an OME-TIFF would describe them in its XML, a COG's readers
-    // take every IFD for an overview).
-    let (associated, mut associated_left_out) = at.associated(own.no_associated)?;
-    let associated = match flavour {
-        Flavour::Generic => associated,
-        _ => {
-            associated_left_out += associated.len();
-            Vec::new()
-        }
-    };
+    // A slide's label, macro and thumbnail follow a generic pyramid's levels, and an
+    // OME-TIFF's as images of their own; a COG leaves them out (its readers take every IFD
+    // for an overview).
+    let (associated, associated_left_out) = at.associated(own.no_associated || flavour == Flavour::Cog)?;
     // Written again as they are, or the run refused: a GIS tool would misplace a file whose
     // georeferencing is damaged, or drop it, without a word.
     let geo = match &own.geo {

@@ -473,15 +473,18 @@ for kind, (_, a, _, _, _) in want.items():
     pixels = np.ndarray(buffer=v.write_to_memory(), dtype=np.uint8, shape=[v.height, v.width, v.bands])
     assert np.array_equal(pixels, b), kind
     pages[kind] = page
+# OpenSlide's generic TIFF reader takes the tiled main IFDs for levels (an OME-TIFF's
+# reduced levels are SubIFDs, which it does not follow), never the strips.
 s = openslide.OpenSlide(out)
-assert s.level_count == 2, s.level_count
+assert s.level_count == int(sys.argv[3]), s.level_count
 print(json.dumps(pages))
 "#;
 
 /// A slide's label, macro and thumbnail follow a generic pyramid's levels, one lossless strip
 /// each (`SAME_ASSOCIATED`); `--json` and the summary list them; our own reader finds them
-/// again (a DICOM series made from the TIFF carries all three). `--no-associated` and the
-/// flavours that hold none leave them out, saying how many and why.
+/// again (a DICOM series made from the TIFF carries all three). An OME-TIFF carries them
+/// too, each an OME image tifffile lists as a series. `--no-associated` and a COG leave them
+/// out, saying how many and why.
 #[test]
 fn a_slide_s_associated_images_follow_a_generic_pyramid() {
     let Some(python) = readers() else { return };
@@ -500,7 +503,7 @@ fn a_slide_s_associated_images_follow_a_generic_pyramid() {
         (190.into(), "page 3".into())
     );
     assert_eq!(t["associatedLeftOut"], 0, "{json}");
-    let check = Command::new(&python).args(["-c", SAME_ASSOCIATED, s(&tif), s(&svs)]).output().unwrap();
+    let check = Command::new(&python).args(["-c", SAME_ASSOCIATED, s(&tif), s(&svs), "2"]).output().unwrap();
     let said = String::from_utf8_lossy(&check.stdout);
     assert!(check.status.success(), "{said}{}", String::from_utf8_lossy(&check.stderr));
     assert_eq!(said.trim(), r#"{"thumbnail": 2, "label": 3, "macro": 4}"#);
@@ -518,16 +521,44 @@ fn a_slide_s_associated_images_follow_a_generic_pyramid() {
         (json["tiff"]["associated"].clone(), json["tiff"]["associatedLeftOut"].clone()),
         (serde_json::json!([]), 3.into())
     );
+    // An OME-TIFF: the same IFDs after its pyramid's, each an OME image of its own, which
+    // tifffile lists as series beside the pyramid (the OME-XML valid for ome-types).
     let ome = dir.path().join("slide.ome.tif");
-    let said = run(&["split", s(&svs), "-o", s(&ome)]);
-    let line = format!("{}{}", String::from_utf8_lossy(&said.stdout), String::from_utf8_lossy(&said.stderr));
-    assert!(said.status.success() && line.contains("3 associated image(s) left out: a generic TIFF"), "{line}");
+    let json = json_of(&ok(&["split", s(&svs), "-o", s(&ome), "--json"]));
+    assert_eq!(json["tiff"]["associated"].as_array().map(Vec::len), Some(3), "{json}");
+    let check = Command::new(&python).args(["-c", SAME_ASSOCIATED, s(&ome), s(&svs), "1"]).output().unwrap();
+    let said = String::from_utf8_lossy(&check.stdout);
+    assert!(check.status.success(), "{said}{}", String::from_utf8_lossy(&check.stderr));
+    assert_eq!(said.trim(), r#"{"thumbnail": 1, "label": 2, "macro": 3}"#, "main IFDs after level 0's");
+    let series = Command::new(&python).args(["-c", OME_SERIES, s(&ome)]).output().unwrap();
+    let said = String::from_utf8_lossy(&series.stdout);
+    assert!(series.status.success(), "{said}{}", String::from_utf8_lossy(&series.stderr));
+    assert_eq!(
+        said.trim(),
+        r#"[["slide", [1000, 1500, 3], 2], ["thumbnail", [125, 188, 3], 1], ["label", [230, 190, 3], 1], ["macro", [300, 820, 3], 1]]"#
+    );
     let cog = dir.path().join("slide.cog.tif");
+    let said = run(&["split", s(&svs), "-o", s(&cog)]);
+    let line = format!("{}{}", String::from_utf8_lossy(&said.stdout), String::from_utf8_lossy(&said.stderr));
+    assert!(
+        said.status.success() && line.contains("3 associated image(s) left out: a generic TIFF or an OME-TIFF"),
+        "{line}"
+    );
     fails_with(
-        &run(&["split", s(&svs), "-o", s(&cog), "--no-associated"]),
-        &["--no-associated belongs to a generic TIFF"],
+        &run(&["split", s(&svs), "-o", s(&dir.path().join("b.cog.tif")), "--no-associated"]),
+        &["--no-associated belongs to a generic TIFF (-o FILE.tif), an OME-TIFF"],
     );
 }
+
+/// An OME-TIFF's series as tifffile lists them from its OME-XML (validated by ome-types):
+/// each one's name, shape and levels.
+const OME_SERIES: &str = r#"
+import sys, json, tifffile, ome_types
+with tifffile.TiffFile(sys.argv[1]) as t:
+    assert t.is_ome
+    ome_types.from_xml(t.ome_metadata, validate=True)
+    print(json.dumps([[s.name, list(s.shape), len(s.levels)] for s in t.series]))
+"#;
 
 /// An associated image no output can carry (a 16-bit label) stops the run when it is
 /// planned, naming the image and the way out, before any level is cut: nothing is left at

@@ -334,7 +334,7 @@ impl Spec {
         if self.name.contains('\0') {
             return Err(TilerError::Options("the image's name holds a NUL character".into()));
         }
-        if !self.associated.is_empty() && self.flavour != Flavour::Generic {
+        if !self.associated.is_empty() && self.flavour == Flavour::Cog {
             return Err(TilerError::Internal(format!("associated images in a {} file", self.flavour.name())));
         }
         if let Some(image) = self.associated.iter().find(|a| a.width == 0 || a.height == 0) {
@@ -390,7 +390,8 @@ impl Spec {
         let icc = self.icc.as_ref().map_or(0, |p| p.len() as u64 + 2);
         let ifds =
             u64::from(self.level_count()) * u64::from(self.planes()) * (4096 + icc) + total.saturating_mul(16) + geo;
-        let xml = ome::xml(self).len() as u64;
+        let xml = ome::xml(self, &[]).len() as u64;
+        // Each associated image's strip, and its IFD and OME-XML `Image` in 4 KiB.
         let associated: u64 = (self.associated.iter())
             .map(|a| associated::most_bytes(a.width, a.height).saturating_add(4096))
             .fold(0, u64::saturating_add);

@@ -5,6 +5,7 @@
 
 use std::fmt::Write;
 
+use super::associated::Placed;
 use super::{OmeChannel, Spec};
 use crate::pixel::Depth;
 
@@ -43,7 +44,12 @@ fn escape(text: &str) -> String {
 /// where the source names it. Planes (`Spec::planar`): a channel each, of one sample, each
 /// with its name and, where the source gives it, its colour, and a `TiffData` mapping main IFD
 /// `c` (the `c`th of the chain; SubIFDs are not counted) to channel `c`.
-pub(super) fn xml(spec: &Spec) -> String {
+///
+/// Each of the source's associated images (`associated`, placed after the planes) is an
+/// `Image` of its own, named as Aperio names it (`label`, `macro`, `thumbnail`): 8-bit grey
+/// or RGB interleaved, its one IFD the main IFD after the planes' (QuPath and Bio-Formats
+/// list them beside the pyramid).
+pub(super) fn xml(spec: &Spec, associated: &[Placed]) -> String {
     let samples = spec.stored.channels.count();
     let bits = spec.stored.depth.bytes() * 8;
     let mut physical = String::new();
@@ -97,7 +103,28 @@ pub(super) fn xml(spec: &Spec) -> String {
             }
         }
     }
-    out.push_str("</Pixels></Image></OME>");
+    out.push_str("</Pixels></Image>");
+    let planes = spec.planes();
+    for (j, image) in associated.iter().enumerate() {
+        let (i, spp) = (j + 1, image.channels.count());
+        let _ = write!(
+            out,
+            concat!(
+                r#"<Image ID="Image:{i}" Name="{name}">"#,
+                r#"<Pixels ID="Pixels:{i}" DimensionOrder="XYCZT" Type="uint8" SignificantBits="8" "#,
+                r#"Interleaved="true" BigEndian="false" SizeX="{w}" SizeY="{h}" SizeC="{spp}" SizeZ="1" SizeT="1">"#,
+                r#"<Channel ID="Channel:{i}:0" SamplesPerPixel="{spp}"><LightPath/></Channel>"#,
+                r#"<TiffData IFD="{ifd}" PlaneCount="1"/></Pixels></Image>"#,
+            ),
+            i = i,
+            name = super::associated::word(image.kind),
+            w = image.width,
+            h = image.height,
+            spp = spp,
+            ifd = planes as usize + j,
+        );
+    }
+    out.push_str("</OME>");
     out
 }
 

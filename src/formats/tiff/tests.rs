@@ -653,11 +653,11 @@ fn planes_are_checked_and_one_interleaved_channel_is_named_only_where_known() {
     }
     // Interleaved RGB: one channel of three samples; unnamed as before, or named.
     let mut s = spec(Flavour::Ome, 40, 20, 1, rgb, Compression::None);
-    let unnamed = ome::xml(&s);
+    let unnamed = ome::xml(&s, &[]);
     assert!(unnamed.contains(r#"<Channel ID="Channel:0:0" SamplesPerPixel="3"><LightPath/></Channel>"#), "{unnamed}");
     assert!(!unnamed.contains("Color="));
     s.channels = vec![OmeChannel { name: Some("H&E".into()), colour: None }];
-    let named = ome::xml(&s);
+    let named = ome::xml(&s, &[]);
     assert!(named.contains(r#"<Channel ID="Channel:0:0" Name="H&amp;E" SamplesPerPixel="3">"#), "{named}");
     s.channels.push(OmeChannel::default());
     assert!(s.check().unwrap_err().to_string().contains("one OME channel"));

@@ -182,7 +182,7 @@ impl TiffWriter {
     /// Appends an associated image of the source (a generic pyramid's: after its tiles, before
     /// the IFDs), its rows differenced and deflated in place; its strip's length.
     pub fn add_associated(&mut self, kind: Kind, mut pixels: Pixels) -> Result<u64> {
-        if self.spec.flavour != Flavour::Generic {
+        if self.spec.flavour == Flavour::Cog {
             return Err(TilerError::Internal(format!("an associated image in a {} file", self.spec.flavour.name())));
         }
         let strip = associated::strip(&mut pixels).map_err(write_err(&self.path))?;
@@ -230,11 +230,12 @@ impl TiffWriter {
             .flat_map(|p| (0..levels).map(move |k| (p, k as u32)))
             .map(|(p, k)| self.level_ifd(p, k))
             .collect();
+        let planes = planes as usize;
         ifds.extend(self.associated.iter().map(|image| associated::ifd(image, self.signature())));
         self.tiles = Vec::new();
         let sub_ifds = self.spec.flavour == Flavour::Ome && levels > 1;
         if sub_ifds {
-            for main in ifds.iter_mut().step_by(levels) {
+            for main in ifds.iter_mut().take(planes * levels).step_by(levels) {
                 main.set(tag::SUB_IFDS, Value::Ifds(vec![0; levels - 1]));
             }
         }
@@ -252,7 +253,7 @@ impl TiffWriter {
             )));
         }
         if sub_ifds {
-            for (p, main) in ifds.iter_mut().step_by(levels).enumerate() {
+            for (p, main) in ifds.iter_mut().take(planes * levels).step_by(levels).enumerate() {
                 if let Some(Value::Ifds(v)) = main.get_mut(tag::SUB_IFDS) {
                     v.copy_from_slice(&offsets[p * levels + 1..][..levels - 1]);
                 }
@@ -261,10 +262,11 @@ impl TiffWriter {
         for (k, ifd) in ifds.iter().enumerate() {
             // The generic pyramid chains every level, then its associated images; OME's
             // reduced levels hang off their plane's level 0, and the planes' level 0s are
-            // chained.
+            // chained, then the associated images.
             let next = match self.spec.flavour {
                 // (A COG is finished by `finish_cog`, chained likewise.)
                 Flavour::Generic | Flavour::Cog => offsets.get(k + 1).copied().unwrap_or(0),
+                Flavour::Ome if k >= planes * levels => offsets.get(k + 1).copied().unwrap_or(0),
                 Flavour::Ome if k % levels == 0 => offsets.get(k + levels).copied().unwrap_or(0),
                 Flavour::Ome => 0,
             };
@@ -383,7 +385,7 @@ impl TiffWriter {
         ifd.set(tag::COMPRESSION, Value::Short(vec![s.compression.code()]));
         ifd.set(tag::PHOTOMETRIC, Value::Short(vec![s.photometric()]));
         if (p, k) == (0, 0) && s.flavour == Flavour::Ome {
-            ifd.set(tag::IMAGE_DESCRIPTION, Value::Ascii(ome::xml(s)));
+            ifd.set(tag::IMAGE_DESCRIPTION, Value::Ascii(ome::xml(s, &self.associated)));
         }
         ifd.set(tag::SAMPLES_PER_PIXEL, Value::Short(vec![spp as u16]));
         if let Some(size) = s.pixel_size {
