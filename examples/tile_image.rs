@@ -46,7 +46,7 @@ fn tile(input: &Path, dest: &Path, watch: &Watch) -> Result<Summary> {
     // Refuses to replace anything but an older pack (`force` false), as the command line does.
     output::claim(dest, Product::Pack, &[input], false)?;
     let limits = Limits::default();
-    let source = source::open(input, limits.memory)?;
+    let source = source::open(input, vortex_tiler::limits::Budget::new(limits.memory))?;
     // Each setting: what was asked for, else a previous output's info.json (none here), else the default.
     let asked = Requested { tile_size: Some(256), ..Requested::default() };
     let plan = Plan::new(&asked, None, &source.header(), Destination::Pack, &limits, None)?;

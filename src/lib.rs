@@ -62,7 +62,7 @@
 //! /// in `dir/web` and a pack for the GPU in `dir/NAME.vtpk`.
 //! fn tile(input: &Path, dir: &Path, name: &str, watch: &Watch) -> Result<Vec<Wrote>> {
 //!     let budget = Budget::default(); // 1 GiB, everything the run holds at once
-//!     let source = source::open(input, budget.bytes())?;
+//!     let source = source::open(input, budget)?;
 //!     let mut settings = Settings::default();
 //!     settings.tiles.tile_size = Some(256);
 //!     settings.tiles.border = Some(0); // the pack's; Deep Zoom has --overlap (here its default, 1)

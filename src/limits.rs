@@ -30,6 +30,30 @@ pub struct Limits {
 /// `--max-memory`'s default.
 pub const DEFAULT_MEMORY: u64 = 1 << 30;
 
+/// How much memory a run may hold at once (`--max-memory`): what a source's reader may hold
+/// ([`crate::source::open`]) and what a run's outputs share ([`crate::outputs::Plan`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct Budget(u64);
+
+impl Budget {
+    /// A budget of `bytes`.
+    pub fn new(bytes: u64) -> Budget {
+        Budget(bytes)
+    }
+
+    /// The budget in bytes.
+    pub fn bytes(self) -> u64 {
+        self.0
+    }
+}
+
+/// [`DEFAULT_MEMORY`], `split`'s default.
+impl Default for Budget {
+    fn default() -> Budget {
+        Budget(DEFAULT_MEMORY)
+    }
+}
+
 /// The largest `--tile-align` (a pack's payload alignment) that `split`, `pack` and `convert`
 /// accept and that `merge` accepts from a shard: 1 MiB. Each payload is padded to it, so a
 /// larger one makes a file mostly of padding (2 GiB made 44 tiles a 71 GB file), and no

@@ -18,6 +18,7 @@ use vortex_tiler::source::tiled::{TileGrid, TiledSource, check_tiles_found};
 use vortex_tiler::source::{self, Streamed};
 
 use super::split::{OutputArgs, tile};
+use vortex_tiler::limits::Budget;
 
 /// How the input's tiles are laid out on disk.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -105,7 +106,8 @@ pub fn run(a: ConvertArgs) -> Result<()> {
     let started = Instant::now();
     if !a.tiled && a.filename_format.is_none() && source::is_dicom_input(&a.input) {
         // A DICOM whole-slide series is tiled, and read as `split` reads it (source::dicom).
-        let options = source::OpenOptions { keep_icc: a.keep_icc, ..source::OpenOptions::shown(a.out.max_memory()) };
+        let options =
+            source::OpenOptions { keep_icc: a.keep_icc, ..source::OpenOptions::shown(Budget::new(a.out.max_memory())) };
         let source::Opened { mut source, icc, pitch, lossy, .. } = source::open_with(&a.input, options)?;
         if let Some(range) = a.range {
             source = source::range::map(source, range, a.out.tile_type().unwrap_or(Depth::U8))?;
@@ -119,7 +121,7 @@ pub fn run(a: ConvertArgs) -> Result<()> {
     let grid_cell = grid.cell();
     let icc = grid.icc_profile()?;
     let source = TiledSource::new(grid, fill_texel(a.out.background(), header.layout), a.strict)
-        .with_max_memory(a.out.max_memory());
+        .with_budget(Budget::new(a.out.max_memory()));
     Limits { memory: a.out.max_memory(), ..Limits::default() }.check_memory(
         &format!(
             "reading a row of {}x{} input tiles of the {}x{} image (and one tile at a time)",

@@ -410,8 +410,12 @@ pub fn run(a: SplitArgs) -> Result<()> {
         return ome_zarr::tile_channels(set, a.channels.as_deref(), &inputs, a.filename_format, &a.out, started);
     }
     let input = input.context("an input image is required")?;
-    let options =
-        source::OpenOptions { max_memory: a.out.max_memory, autorotate: !a.no_autorotate, keep_icc: a.keep_icc, pick };
+    let options = source::OpenOptions {
+        budget: Budget::new(a.out.max_memory),
+        autorotate: !a.no_autorotate,
+        keep_icc: a.keep_icc,
+        pick,
+    };
     let source::Opened { mut source, icc, geo, pitch, lossy } = source::open_with(&input, options)?;
     if let Some(range) = a.range {
         source = source::range::map(source, range, a.out.tile_type.unwrap_or(Depth::U8))?;

@@ -99,28 +99,7 @@ impl Output {
     }
 }
 
-/// How much memory a run may hold at once (`--max-memory`), shared by all its outputs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub struct Budget(u64);
-
-impl Budget {
-    /// A budget of `bytes`.
-    pub fn new(bytes: u64) -> Budget {
-        Budget(bytes)
-    }
-
-    /// The budget in bytes.
-    pub fn bytes(self) -> u64 {
-        self.0
-    }
-}
-
-/// [`crate::limits::DEFAULT_MEMORY`], `split`'s default.
-impl Default for Budget {
-    fn default() -> Budget {
-        Budget(crate::limits::DEFAULT_MEMORY)
-    }
-}
+pub use crate::limits::Budget;
 
 /// What a run's outputs are asked, `split`'s flags: each output reads the settings its format
 /// has and leaves the others to the run's other outputs; a setting no output of the run reads

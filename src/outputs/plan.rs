@@ -215,7 +215,7 @@ impl Context<'_> {
     /// as the output needs stops the run before its pyramid is cut.
     fn associated(&self, left_out: bool) -> Result<(Vec<Associated>, usize)> {
         if self.associated.get().is_none() {
-            let _ = self.associated.set(crate::source::associated::of_file(self.input, self.budget.bytes())?);
+            let _ = self.associated.set(crate::source::associated::of_file(self.input, self.budget)?);
         }
         let found = self.associated.get().cloned().unwrap_or_default();
         if left_out {

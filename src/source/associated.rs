@@ -174,7 +174,8 @@ impl Associated {
 /// The associated images of the file at `path`, in the file's order: a TIFF's associated
 /// directories (none for any other file, or a directory). An error where the TIFF's
 /// directories cannot be read.
-pub fn of_file(path: &Path, max_memory: u64) -> Result<Vec<Associated>> {
+pub fn of_file(path: &Path, budget: crate::limits::Budget) -> Result<Vec<Associated>> {
+    let max_memory = budget.bytes();
     let mut magic = Vec::with_capacity(4);
     let is_tiff = path.is_file()
         && std::fs::File::open(path)
@@ -211,7 +212,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let png = dir.path().join("a.png");
         std::fs::write(&png, b"\x89PNG\r\n\x1a\n").unwrap();
-        assert_eq!(of_file(&png, 1 << 20).unwrap(), Vec::new());
-        assert_eq!(of_file(dir.path(), 1 << 20).unwrap(), Vec::new());
+        assert_eq!(of_file(&png, crate::limits::Budget::new(1 << 20)).unwrap(), Vec::new());
+        assert_eq!(of_file(dir.path(), crate::limits::Budget::new(1 << 20)).unwrap(), Vec::new());
     }
 }

@@ -23,6 +23,7 @@ use super::tiff::slide::{self, attribute, find_element};
 use super::tiff::{description, open_decoder, open_error};
 use super::{ImageHeader, Pick, PixelPitch, RowSource, Streamed};
 use crate::error::{Result, TilerError};
+use crate::limits::Budget;
 use crate::pixel::{Channels, Depth, PixelLayout};
 
 /// Channels an image may have here: OME-TIFF and microscopy files reach a few hundred; the cap
@@ -64,11 +65,12 @@ enum Kind {
 
 impl ChannelSet {
     /// The channels of `path` (`pick` choosing a TIFF's page or series).
-    pub fn open(path: &Path, pick: Pick, max_memory: u64) -> Result<ChannelSet> {
-        if let Some(set) = ChannelSet::beyond_texels(path, pick, max_memory)? {
+    pub fn open(path: &Path, pick: Pick, budget: Budget) -> Result<ChannelSet> {
+        let max_memory = budget.bytes();
+        if let Some(set) = ChannelSet::beyond_texels(path, pick, budget)? {
             return Ok(set);
         }
-        let source = super::open_picked(path, max_memory, pick)?;
+        let source = super::open_picked(path, budget, pick)?;
         let ImageHeader { width, height, layout } = source.header();
         let names = match layout.channels {
             Channels::Rgb | Channels::Rgba => ["red", "green", "blue", "alpha"].map(String::from).to_vec(),
@@ -84,7 +86,8 @@ impl ChannelSet {
 
     /// The channels of `path` if the pipeline cannot read them as texels: a TIFF page of
     /// more than four samples (together or in planes), an OME-TIFF series of several grey pages.
-    pub fn beyond_texels(path: &Path, pick: Pick, max_memory: u64) -> Result<Option<ChannelSet>> {
+    pub fn beyond_texels(path: &Path, pick: Pick, budget: Budget) -> Result<Option<ChannelSet>> {
+        let max_memory = budget.bytes();
         match is_tiff(path)? {
             true => tiff_channels(path, pick, max_memory),
             false => Ok(None),
@@ -97,12 +100,13 @@ impl ChannelSet {
     }
 
     /// One channel per file, each a grey image of the first one's size and sample type.
-    pub fn files(paths: &[PathBuf], max_memory: u64) -> Result<ChannelSet> {
+    pub fn files(paths: &[PathBuf], budget: Budget) -> Result<ChannelSet> {
+        let max_memory = budget.bytes();
         if paths.len() > MAX_CHANNELS {
             return Err(TilerError::Options(format!("{} --channel files: at most {MAX_CHANNELS}", paths.len())));
         }
         let first = paths.first().ok_or_else(|| TilerError::Options("--channel names no file".into()))?;
-        let header = super::open(first, max_memory)?.header();
+        let header = super::open(first, budget)?.header();
         let names = paths
             .iter()
             .map(|p| {
@@ -124,7 +128,7 @@ impl ChannelSet {
         // one instrument), else none: a size some channels contradict is no measurement.
         let mut pitches = Vec::with_capacity(paths.len());
         for (k, path) in paths.iter().enumerate() {
-            if let Some(many) = ChannelSet::beyond_texels(path, Pick::default(), max_memory)? {
+            if let Some(many) = ChannelSet::beyond_texels(path, Pick::default(), budget)? {
                 return Err(TilerError::unsupported(
                     path,
                     format!(
@@ -174,15 +178,15 @@ impl ChannelSet {
         }
         let (source, path): (Box<dyn RowSource>, &Path) = match &self.kind {
             Kind::Texels { path, pick, layout } => {
-                let inner = super::open_picked(path, self.max_memory, *pick)?;
+                let inner = super::open_picked(path, Budget::new(self.max_memory), *pick)?;
                 (Box::new(Interleave::pick(inner, layout.depth, k)), path)
             }
             Kind::Samples { path, page } => (super::tiff::open_sample(path, *page, k, self.max_memory)?, path),
             Kind::Pages { path, pages } => {
                 let pick = Pick { page: Some(pages[k]), series: None };
-                (super::open_picked(path, self.max_memory, pick)?, path)
+                (super::open_picked(path, Budget::new(self.max_memory), pick)?, path)
             }
-            Kind::Files(paths) => (super::open(&paths[k], self.max_memory)?, &paths[k]),
+            Kind::Files(paths) => (super::open(&paths[k], Budget::new(self.max_memory))?, &paths[k]),
         };
         let want = ImageHeader {
             width: self.width,
@@ -256,7 +260,7 @@ fn tiff_channels(path: &Path, pick: Pick, max_memory: u64) -> Result<Option<Chan
             }
             let first = Pick { page: Some(planes.ifds[0]), series: None };
             // The series' first plane is the page the OME-XML's PhysicalSizeX/Y is found for.
-            let source = super::open_picked(path, max_memory, first)?;
+            let source = super::open_picked(path, Budget::new(max_memory), first)?;
             let (header, pitch) = (source.header(), source.embedded().pitch);
             let kind = Kind::Pages { path: path.to_path_buf(), pages: planes.ifds.clone() };
             let (names, colours) = (planes.names.clone(), planes.colours.clone());

@@ -461,7 +461,7 @@ mod tests {
             let path = dir.path().join(format!("{name}.jpg"));
             write_jpeg(&path, &pattern(w, h, samples), w, h, colour, &options);
             // Through the format dispatch, as the pipeline opens it.
-            let mut source = crate::source::open(&path, 1 << 30).unwrap();
+            let mut source = crate::source::open(&path, crate::limits::Budget::new(1 << 30)).unwrap();
             let channels = if samples == 1 { Channels::Grey } else { Channels::Rgb };
             assert_eq!(source.layout(), PixelLayout::new(channels, Depth::U8));
             assert_eq!((source.width(), source.height()), (w, h));

@@ -87,7 +87,7 @@ use std::io::Read;
 use std::path::Path;
 
 use crate::error::{Result, TilerError};
-use crate::limits::human_bytes;
+use crate::limits::{Budget, human_bytes};
 use crate::pixel::PixelLayout;
 
 /// What a decoder knows before the first row: size and pixel layout.
@@ -270,9 +270,9 @@ fn agree(u: f64, v: f64) -> bool {
 /// How [`open_with`] presents an image file.
 #[derive(Clone, Copy, Debug)]
 pub struct OpenOptions {
-    /// Bytes the source may hold (`--max-memory`): a format that cannot be streamed is decoded
+    /// What the source may hold (`--max-memory`): a format that cannot be streamed is decoded
     /// whole only within it, and the read-ahead is sized from it.
-    pub max_memory: u64,
+    pub budget: Budget,
     /// Apply the EXIF orientation (`--no-autorotate` turns it off).
     pub autorotate: bool,
     /// Keep the pixels as stored instead of converting an ICC profile to sRGB (`--keep-icc`).
@@ -283,8 +283,8 @@ pub struct OpenOptions {
 
 impl OpenOptions {
     /// Orientation applied and colours converted to sRGB, as viewers show the image.
-    pub fn shown(max_memory: u64) -> OpenOptions {
-        OpenOptions { max_memory, autorotate: true, keep_icc: false, pick: Pick::default() }
+    pub fn shown(budget: Budget) -> OpenOptions {
+        OpenOptions { budget, autorotate: true, keep_icc: false, pick: Pick::default() }
     }
 }
 
@@ -311,12 +311,12 @@ pub struct Opened {
 /// profile converted to sRGB. Returns the profile when `keep_icc` keeps it, for the output to
 /// carry, and the georeferencing where the file has it and the rows keep its grid.
 pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
-    let source = open_picked(path, opts.max_memory, opts.pick)?;
+    let source = open_picked(path, opts.budget, opts.pick)?;
     let Embedded { orientation, icc, geo, pitch, lossy } = source.embedded();
     let (mut source, kept) = with_profile(path, source, icc, opts.keep_icc)?;
     let turned = opts.autorotate && orientation != orient::Orientation::NORMAL;
     if opts.autorotate {
-        source = orient::apply(path, source, orientation, opts.max_memory)?;
+        source = orient::apply(path, source, orientation, opts.budget.bytes())?;
     } else if orientation != orient::Orientation::NORMAL {
         let note = format!("EXIF orientation {} not applied (--no-autorotate)", orientation.value());
         source = Box::new(icc::Described { inner: source, note, transform: None, held: 0 });
@@ -414,13 +414,16 @@ impl RowSource for Reopening {
     }
 }
 
-/// Opens `path`, choosing the decoder from the file's first bytes (not its extension).
-pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
-    open_picked(path, max_memory, Pick::default())
+/// Opens `path`, choosing the decoder from the file's first bytes (not its extension); its
+/// reader holds no more than `budget` (a file that cannot be streamed is decoded whole only
+/// within it, and read-ahead is sized from it).
+pub fn open(path: &Path, budget: Budget) -> Result<Box<dyn RowSource>> {
+    open_picked(path, budget, Pick::default())
 }
 
 /// [`open`], reading the page or series `pick` names of a file holding several.
-pub fn open_picked(path: &Path, max_memory: u64, pick: Pick) -> Result<Box<dyn RowSource>> {
+pub fn open_picked(path: &Path, budget: Budget, pick: Pick) -> Result<Box<dyn RowSource>> {
+    let max_memory = budget.bytes();
     let inner = open_once(path, max_memory, pick)?;
     Ok(Box::new(Reopening { path: path.to_path_buf(), max_memory, pick, inner }))
 }

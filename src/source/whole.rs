@@ -121,14 +121,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("opaque.gif");
         let rgba = gif(&path, false);
-        let mut source = crate::source::open(&path, 1 << 20).unwrap();
+        let mut source = crate::source::open(&path, crate::limits::Budget::new(1 << 20)).unwrap();
         assert_eq!(source.layout(), PixelLayout::new(Channels::Rgb, Depth::U8));
         let rgb: Vec<u8> = rgba.chunks_exact(4).flat_map(|t| [t[0], t[1], t[2]]).collect();
         assert_eq!(read_all(source.as_mut()).unwrap(), rgb);
 
         let path = dir.path().join("transparent.gif");
         gif(&path, true);
-        let mut source = crate::source::open(&path, 1 << 20).unwrap();
+        let mut source = crate::source::open(&path, crate::limits::Budget::new(1 << 20)).unwrap();
         assert_eq!(source.layout(), PixelLayout::new(Channels::Rgba, Depth::U8));
         let got = read_all(source.as_mut()).unwrap();
         assert_eq!(got[3], 0);

@@ -14,6 +14,7 @@ use crate::common::Image;
 use crate::common::cli::{fails_with, ok, run, s};
 use crate::common::compare::{Picture, Tolerance, assert_close};
 use crate::common::decode_png_sized;
+use vortex_tiler::limits::Budget;
 
 const COLORD: &str = "/usr/share/color/icc/colord";
 
@@ -60,7 +61,7 @@ fn read_all(mut source: Box<dyn RowSource>) -> (u32, u32, PixelLayout, Vec<u16>)
 }
 
 fn shown(path: &Path) -> (u32, u32, PixelLayout, Vec<u16>) {
-    read_all(source::open_with(path, OpenOptions::shown(1 << 30)).unwrap().source)
+    read_all(source::open_with(path, OpenOptions::shown(Budget::new(1 << 30))).unwrap().source)
 }
 
 fn png_of(path: &Path) -> (u32, u32, Vec<u16>) {
@@ -198,7 +199,7 @@ fn jpeg_tiff_and_png_orientations_match_vips_autorot() {
             let (name, c) = (format!("autorot-{ext}-{orientation}"), got.len() / (w * h) as usize);
             assert_close(&name, Picture::new(w, h, c, &got), Picture::new(w, h, c, &want), Tolerance::max(1, why));
             // The stored order when asked.
-            let options = OpenOptions { autorotate: false, ..OpenOptions::shown(1 << 30) };
+            let options = OpenOptions { autorotate: false, ..OpenOptions::shown(Budget::new(1 << 30)) };
             let source = source::open_with(&path, options).unwrap().source;
             assert_eq!((source.width(), source.height()), (60, 40));
             if orientation != 1 {
@@ -253,10 +254,10 @@ fn icc_profiles_are_converted_to_srgb_as_vips_does() {
         tool("vips", &[&["tiffsave", s(&png), s(&jpeg_tif)][..], &tiled].concat());
         for path in [&png, &jpg, &tif, &jpeg_tif] {
             tag_profile(path, &icc);
-            assert!(source::open(path, 1 << 30).unwrap().embedded().icc.is_some(), "{}", path.display());
+            assert!(source::open(path, Budget::new(1 << 30)).unwrap().embedded().icc.is_some(), "{}", path.display());
             let why = "LittleCMS on both sides; 8-bit rounding of the two pipelines and JPEG decoding";
             compare_with_vips_icc(path, false, Tolerance::max_and_mean(2, 0.5, why));
-            let source = source::open_with(path, OpenOptions::shown(1 << 30)).unwrap().source;
+            let source = source::open_with(path, OpenOptions::shown(Budget::new(1 << 30))).unwrap().source;
             assert!(source.describe().contains("converted to sRGB"), "{}", source.describe());
         }
         // A PNG as libvips writes one with a profile (`vips copy x.png y.png[profile=..]`: its
@@ -269,7 +270,7 @@ fn icc_profiles_are_converted_to_srgb_as_vips_does() {
         let deep = dir.path().join(format!("{name}-16.png"));
         write_png(&deep, 48, 32, PixelLayout::new(Channels::Rgba, Depth::U16));
         tag_profile(&deep, &icc);
-        let source = source::open_with(&deep, OpenOptions::shown(1 << 30)).unwrap().source;
+        let source = source::open_with(&deep, OpenOptions::shown(Budget::new(1 << 30))).unwrap().source;
         assert_eq!(source.layout(), PixelLayout::new(Channels::Rgba, Depth::U16));
         let why = "LittleCMS on both sides; vips' 16-bit or float Lab rounds to 1/256 of the range (257 + a few)";
         compare_with_vips_icc(&deep, true, Tolerance::max_and_mean(300, 40.0, why));
@@ -277,9 +278,9 @@ fn icc_profiles_are_converted_to_srgb_as_vips_does() {
     // sRGB itself is left alone.
     let png = dir.path().join("srgb.png");
     write_png(&png, 48, 32, RGB8);
-    let plain = read_all(source::open(&png, 1 << 30).unwrap()).3;
+    let plain = read_all(source::open(&png, Budget::new(1 << 30)).unwrap()).3;
     tag_profile(&png, &Path::new(COLORD).join("sRGB.icc"));
-    let source = source::open_with(&png, OpenOptions::shown(1 << 30)).unwrap().source;
+    let source = source::open_with(&png, OpenOptions::shown(Budget::new(1 << 30))).unwrap().source;
     assert!(source.describe().contains("is sRGB: left as is"), "{}", source.describe());
     assert_eq!(read_all(source).3, plain);
 }
@@ -299,7 +300,7 @@ fn grey_profiles_are_converted_too() {
     let png = dir.path().join("grey.png");
     write_png(&png, 40, 30, PixelLayout::new(Channels::Grey, Depth::U8));
     tag_profile(&png, &icc);
-    let source = source::open_with(&png, OpenOptions::shown(1 << 30)).unwrap().source;
+    let source = source::open_with(&png, OpenOptions::shown(Budget::new(1 << 30))).unwrap().source;
     assert_eq!(source.layout().channels, Channels::Grey);
     let why = "a linear grey profile through LittleCMS on both sides: 8-bit rounding";
     compare_with_vips_icc(&png, false, Tolerance::max_and_mean(2, 0.6, why));
@@ -329,15 +330,15 @@ fn a_damaged_profile_is_a_clear_error_and_keep_icc_takes_it_as_it_is() {
     let srgb = lcms2::Profile::new_srgb().icc().unwrap();
     for body in [b"this is not an ICC profile".to_vec(), srgb[..srgb.len() / 2].to_vec()] {
         let path = jpeg_with_icc(dir.path(), &body);
-        let err = source::open_with(&path, OpenOptions::shown(1 << 30)).err().unwrap().to_string();
+        let err = source::open_with(&path, OpenOptions::shown(Budget::new(1 << 30))).err().unwrap().to_string();
         assert!(err.contains("damaged-icc.jpg") && err.contains("ICC profile") && err.contains("--keep-icc"), "{err}");
         let out = run(&["split", s(&path), "-o", s(&dir.path().join("out"))]);
         fails_with(&out, &["damaged-icc.jpg", "ICC profile"]);
         // --keep-icc keeps the pixels and the bytes as they are.
-        let keep = OpenOptions { keep_icc: true, ..OpenOptions::shown(1 << 30) };
+        let keep = OpenOptions { keep_icc: true, ..OpenOptions::shown(Budget::new(1 << 30)) };
         let source::Opened { source, icc: kept, .. } = source::open_with(&path, keep).unwrap();
         assert_eq!(kept.as_deref(), Some(&body[..]));
-        assert_eq!(read_all(source).3, read_all(source::open(&path, 1 << 30).unwrap()).3);
+        assert_eq!(read_all(source).3, read_all(source::open(&path, Budget::new(1 << 30)).unwrap()).3);
     }
 }
 
@@ -359,7 +360,7 @@ fn cmyk_jpeg_is_converted_through_its_profile_or_the_default_one() {
     tool("vips", &["icc_export", s(&png), &format!("{}[Q=95]", s(&tagged)), "--output-profile", s(default)]);
     let bytes = std::fs::read(&tagged).unwrap();
     assert!(bytes.windows(7).any(|w| w == b"\xff\xeeA\0\x0eAd" || w.starts_with(b"Adobe")), "no APP14");
-    let source = source::open_with(&tagged, OpenOptions::shown(1 << 30)).unwrap().source;
+    let source = source::open_with(&tagged, OpenOptions::shown(Budget::new(1 << 30))).unwrap().source;
     assert!(source.describe().contains("CMYK, Adobe-inverted") && source.describe().contains("embedded ICC"));
     assert_eq!(source.layout(), RGB8);
     // LittleCMS on both sides, through a CLUT profile: rounding of the two pipelines plus
@@ -370,13 +371,13 @@ fn cmyk_jpeg_is_converted_through_its_profile_or_the_default_one() {
     // Without a profile: the default one, as vips is told to use it.
     let bare = dir.path().join("bare.jpg");
     tool("vips", &["copy", s(&tagged), &format!("{}[Q=95,strip]", s(&bare))]);
-    assert!(source::open(&bare, 1 << 30).unwrap().embedded().icc.is_none());
+    assert!(source::open(&bare, Budget::new(1 << 30)).unwrap().embedded().icc.is_none());
     let theirs = dir.path().join("bare.vips.png");
     tool(
         "vips",
         &["icc_transform", s(&bare), s(&theirs), "srgb", "--input-profile", s(default), "--intent", "relative"],
     );
-    let source = source::open_with(&bare, OpenOptions::shown(1 << 30)).unwrap().source;
+    let source = source::open_with(&bare, OpenOptions::shown(Budget::new(1 << 30))).unwrap().source;
     assert!(source.describe().contains("no profile embedded"), "{}", source.describe());
     let (w, h, _, ours) = read_all(source);
     let why = "LittleCMS on both sides through the default CMYK profile, and JPEG decoding of four channels";
@@ -441,7 +442,7 @@ fn a_rotated_tiff_larger_than_max_memory_is_read_in_passes() {
         let path = dir.path().join(format!("big-{orientation}.tif"));
         std::fs::copy(&tif, &path).unwrap();
         tag_orientation(&path, orientation);
-        let source = source::open_with(&path, OpenOptions::shown(max_memory)).unwrap().source;
+        let source = source::open_with(&path, OpenOptions::shown(Budget::new(max_memory))).unwrap().source;
         assert!(source.describe().contains(passes), "{}", source.describe());
         let theirs = dir.path().join("vips.png");
         tool("vips", &["autorot", s(&path), s(&theirs)]);

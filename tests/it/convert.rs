@@ -10,6 +10,7 @@ use vortex_tiler::background::Background;
 use vortex_tiler::formats::tiles::filename::FilenameFormat;
 use vortex_tiler::formats::tiles::info::InfoFile;
 use vortex_tiler::formats::tiles::{NamedDir, SplitOutput};
+use vortex_tiler::limits::Budget;
 use vortex_tiler::output::{self, Product};
 use vortex_tiler::settings::describe;
 use vortex_tiler::sink::DirSink;
@@ -86,7 +87,7 @@ fn named_tiles_that_do_not_divide_the_new_size() {
     let original = dir.path().join("orig.png");
     img.save(&original).unwrap();
     let got = converted(Box::new(NamedDir::open(&tiles, "x%02s-y%02s.png").unwrap()), 128, 4);
-    let want = split_to_memory(vortex_tiler::source::open(&original, 1 << 30).unwrap(), 128, 4);
+    let want = split_to_memory(vortex_tiler::source::open(&original, Budget::new(1 << 30)).unwrap(), 128, 4);
     assert!(got == want);
 }
 
@@ -247,7 +248,8 @@ fn an_info_json_beside_named_tiles_gives_the_image_size() {
     let cropped = image::imageops::crop_imm(&img, 0, 0, 100, 90).to_image();
     cropped.save(dir.path().join("c.png")).unwrap();
     let got = converted(Box::new(NamedDir::open(&tiles, "x%s-y%s.png").unwrap()), 32, 1);
-    let want = split_to_memory(vortex_tiler::source::open(&dir.path().join("c.png"), 1 << 30).unwrap(), 32, 1);
+    let want =
+        split_to_memory(vortex_tiler::source::open(&dir.path().join("c.png"), Budget::new(1 << 30)).unwrap(), 32, 1);
     assert!(got == want);
 }
 

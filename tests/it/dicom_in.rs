@@ -16,6 +16,7 @@ use vortex_tiler::source;
 
 use crate::common::cli::{fails_with, ok, run, s};
 use crate::ome_zarr::input;
+use vortex_tiler::limits::Budget;
 
 fn rgb8() -> PixelLayout {
     PixelLayout::new(Channels::Rgb, Depth::U8)
@@ -23,7 +24,7 @@ fn rgb8() -> PixelLayout {
 
 /// Every texel of `path` as our source reads it (no profile applied), its size and summary.
 fn read_all(path: &Path) -> (u32, u32, Vec<u8>, String) {
-    let mut source = source::open(path, 1 << 30).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut source = source::open(path, Budget::new(1 << 30)).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let row = source.width() as usize * source.layout().bytes_per_pixel();
     let mut all = vec![0u8; row * source.height() as usize];
     for chunk in all.chunks_exact_mut(row) {
@@ -403,7 +404,7 @@ fn grey_frames_read_back_grey() {
     let png = input(dir.path(), "grey", 500, 300, grey);
     let series = dir.path().join("series");
     ok(&["split", s(&png), "--layout", "dicom", "-o", s(&series), "--pixel-size", "1um", "-q"]);
-    let source = source::open(&series, 1 << 30).unwrap();
+    let source = source::open(&series, Budget::new(1 << 30)).unwrap();
     assert_eq!(source.layout(), grey, "{}", source.describe());
     let (_, _, texels, said) = read_all(&series);
     let (_, _, original, _) = read_all(&png);

@@ -12,7 +12,7 @@ use vortex_tiler::split::split;
 
 fn golden(fixture: &str, tile: u32, border: u32, background: Background) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
-    let src = source::open(&root.join(fixture), 1 << 30).unwrap();
+    let src = source::open(&root.join(fixture), vortex_tiler::limits::Budget::new(1 << 30)).unwrap();
     let sink = MemSink::default();
     let summary = split(src, &sink, &png_options(tile, border, background), &()).unwrap();
     let mut text =

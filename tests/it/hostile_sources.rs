@@ -12,6 +12,7 @@ use vortex_tiler::source::channels::ChannelSet;
 use vortex_tiler::source::{self, OpenOptions, Pick};
 
 use crate::common::cli::{fails_with, run, s};
+use vortex_tiler::limits::Budget;
 
 /// Runs the binary with `args`; its output and its peak resident memory in MiB (see
 /// [`crate::common::cli::run_measuring_rss`]).
@@ -96,9 +97,9 @@ fn a_damaged_png_profile_is_an_error_not_srgb() {
     let srgb = lcms2::Profile::new_srgb().icc().unwrap();
     let data = iccp(0, &zlib(&srgb));
     png_with_chunk(&png, 8, 8, b"iCCP", &data);
-    let source = source::open_with(&png, OpenOptions::shown(1 << 30)).unwrap().source;
+    let source = source::open_with(&png, OpenOptions::shown(Budget::new(1 << 30))).unwrap().source;
     assert!(source.describe().contains("is sRGB: left as is"), "{}", source.describe());
-    let keep = OpenOptions { keep_icc: true, ..OpenOptions::shown(1 << 30) };
+    let keep = OpenOptions { keep_icc: true, ..OpenOptions::shown(Budget::new(1 << 30)) };
     assert_eq!(source::open_with(&png, keep).unwrap().icc, Some(srgb));
     // The same chunk with its CRC's last byte changed: damaged, not read as if whole (libvips
     // warns and keeps it; the png crate drops it).
@@ -121,7 +122,7 @@ fn a_tiff_profile_past_the_cap_is_refused_from_its_count() {
     image.encoder().write_tag(Tag::IccProfile, &vec![7u8; (16 << 20) + 1][..]).unwrap();
     image.write_data(&[9u8; 48]).unwrap();
     for budget in [8u64 << 20, 1 << 30] {
-        let e = source::open_with(&tif, OpenOptions::shown(budget)).err().expect("refused").to_string();
+        let e = source::open_with(&tif, OpenOptions::shown(Budget::new(budget))).err().expect("refused").to_string();
         assert!(
             e.contains("icc.tif") && e.contains("(TIFF tag 34675) holds 16777217 bytes, more than the 16 MiB"),
             "{budget}: {e}"
@@ -155,7 +156,7 @@ fn ome_channel_names_are_unescaped() {
     let channels = r#"<Channel ID="Channel:0:0" Name="A&amp;B"/><Channel ID="Channel:0:1" Name="&#65;&lt;&#x42;&gt;"/><Channel ID="Channel:0:2" Name="&bogus; &amp"/>"#;
     let xml = ome(r#"DimensionOrder="XYCZT" SizeC="3""#, &format!(r#"{channels}<TiffData IFD="0" PlaneCount="3"/>"#));
     ome_tiff(&path, &xml, 3);
-    let set = ChannelSet::open(&path, Pick::default(), 1 << 30).unwrap();
+    let set = ChannelSet::open(&path, Pick::default(), Budget::new(1 << 30)).unwrap();
     // A malformed reference is kept as written.
     assert_eq!(set.names, ["A&B", "A<B>", "&bogus; &amp"]);
 }
@@ -179,7 +180,7 @@ fn ome_xml_that_does_not_map_is_refused_naming_the_field() {
         ("<OME><Image ID=\"Image:0\"></OME>".into(), "Image 0 has no Pixels element"),
     ] {
         ome_tiff(&path, &xml, 3);
-        let e = ChannelSet::open(&path, Pick::default(), 1 << 30).err().expect("refused").to_string();
+        let e = ChannelSet::open(&path, Pick::default(), Budget::new(1 << 30)).err().expect("refused").to_string();
         assert!(e.contains("bad.ome.tif") && e.contains("OME-XML") && e.contains(says), "{xml}: {e}");
     }
     // Through the command line too: no OME-Zarr of page 0.
@@ -189,11 +190,11 @@ fn ome_xml_that_does_not_map_is_refused_naming_the_field() {
     assert!(!out.exists());
     // The main reader: series 0 is in another file.
     ome_tiff(&path, &ome(r#"SizeC="3""#, other), 3);
-    let e = source::open(&path, 1 << 30).err().expect("refused").to_string();
+    let e = source::open(&path, Budget::new(1 << 30)).err().expect("refused").to_string();
     assert!(e.contains("series 0 is stored in another file (FileName \"other.ome.tif\")"), "{e}");
     // A renamed file whose TiffData names its own UUID is this file.
     ome_tiff(&path, &ome(r#"SizeC="3""#, renamed), 3);
-    assert_eq!(ChannelSet::open(&path, Pick::default(), 1 << 30).unwrap().count(), 3);
+    assert_eq!(ChannelSet::open(&path, Pick::default(), Budget::new(1 << 30)).unwrap().count(), 3);
 }
 
 /// An ImageDescription larger than `--max-memory` is an error naming the tag, and nothing but
@@ -250,9 +251,12 @@ fn a_directory_loop_is_said_in_the_summary() {
     // The tiff crate will not step onto page 1, whose next offset closes the loop, so page 1
     // is lost with the loop (libtiff and tifffile read both pages and warn).
     let said = "the directory chain stops after page 0 (format error: file contained a cycle in the list of IFDs)";
-    let described = source::open(&path, 1 << 30).unwrap().describe();
+    let described = source::open(&path, Budget::new(1 << 30)).unwrap().describe();
     assert!(described.contains(&format!("{said}: later pages not read")), "{described}");
-    let e = source::open_picked(&path, 1 << 30, Pick { page: Some(1), series: None }).err().unwrap().to_string();
+    let e = source::open_picked(&path, Budget::new(1 << 30), Pick { page: Some(1), series: None })
+        .err()
+        .unwrap()
+        .to_string();
     assert!(e.contains("--page 1: the TIFF has 1 page(s), 0 to 0") && e.contains(said), "{e}");
 }
 
@@ -266,7 +270,7 @@ fn a_first_directory_past_any_file_is_named() {
     let far = (1u64 << 63) + 8;
     bytes[8..16].copy_from_slice(&far.to_le_bytes());
     std::fs::write(&path, &bytes).unwrap();
-    let e = source::open(&path, 1 << 30).err().unwrap().to_string();
+    let e = source::open(&path, Budget::new(1 << 30)).err().unwrap().to_string();
     assert!(e.contains(&format!("first directory offset ({far}) lies past any file")), "{e}");
     assert!(!e.contains("os error"), "{e}");
 }
@@ -283,7 +287,7 @@ fn an_unknown_compression_lists_every_one_read() {
     let at = bytes.windows(entry.len()).position(|w| w == entry).expect("a Compression entry");
     bytes[at + 8..at + 10].copy_from_slice(&52479u16.to_le_bytes());
     std::fs::write(&path, &bytes).unwrap();
-    let e = source::open(&path, 1 << 30).err().unwrap().to_string();
+    let e = source::open(&path, Budget::new(1 << 30)).err().unwrap().to_string();
     for read in ["code 52479", "PackBits (32773)", "JPEG (7)", "Aperio JPEG 2000 RGB (33005)", "CCITT Group 4 fax (4)"]
     {
         assert!(e.contains(read), "{read}: {e}");

@@ -107,11 +107,11 @@ fn a_run_of_copied_levels_tells_its_progress_their_tiles() {
     let mut settings = Settings::default();
     settings.tiles.tile_size = Some(512);
     settings.levels = Some(Levels::Pow2);
-    let source = vortex_tiler::source::open(&input, budget.bytes()).unwrap();
+    let source = vortex_tiler::source::open(&input, budget).unwrap();
     let outputs = vec![Output::new(Format::Tiff(Flavour::Generic), &slide)];
     Plan::new(outputs, &settings, &source.header(), &[input.as_path()], budget).unwrap().write(source, &()).unwrap();
 
-    let source = vortex_tiler::source::open(&slide, budget.bytes()).unwrap();
+    let source = vortex_tiler::source::open(&slide, budget).unwrap();
     let copy = dir.path().join("copy.tif");
     let outputs = vec![Output::new(Format::Tiff(Flavour::Generic), &copy)];
     let plan = Plan::new(outputs, &Settings::default(), &source.header(), &[slide.as_path()], budget).unwrap();

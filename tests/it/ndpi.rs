@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 use crate::common::cli::{self, s};
 use crate::common::compare::{Picture, Tolerance, assert_close};
 use crate::tiff_slides::{openslide_region, our_texels};
+use vortex_tiler::limits::Budget;
 use vortex_tiler::source;
 
 /// Chroma subsampling of a test slide: its MCU's width and height.
@@ -349,7 +350,7 @@ fn ndpi_reads_as_openslide_does() {
     assert!(summary.contains("Hamamatsu NDPI"), "{summary}");
     let dzi = dir.path().join("slide.dzi");
     cli::ok(&["split", s(&ragged), "-o", s(&dzi), "--layout", "dzi", "--tile-size", "256", "--overlap", "0"]);
-    let mut columns = source::open(&ragged, 1 << 30).unwrap();
+    let mut columns = source::open(&ragged, Budget::new(1 << 30)).unwrap();
     assert!(columns.read_columns(300..700));
     columns.skip_rows(100).unwrap();
     let mut row = vec![0u8; 400 * 3];
@@ -382,7 +383,7 @@ fn an_ndpi_larger_than_max_memory_streams() {
     let (_, roomy) = our_texels(&big, 1 << 30);
     let (_, tight) = our_texels(&big, 24 << 20);
     assert!(roomy == tight);
-    let err = source::open(&big, 4 << 20).err().expect("refused").to_string();
+    let err = source::open(&big, Budget::new(4 << 20)).err().expect("refused").to_string();
     for needle in ["big.ndpi", "--max-memory", "one MCU row"] {
         assert!(err.contains(needle), "{needle:?} missing from: {err}");
     }
@@ -407,7 +408,7 @@ fn damaged_ndpi(layout: Layout) {
     let read = |name: &str, data: &[u8]| -> String {
         let path = dir.path().join(name);
         std::fs::write(&path, data).unwrap();
-        let result = source::open(&path, 1 << 30).and_then(|mut source| {
+        let result = source::open(&path, Budget::new(1 << 30)).and_then(|mut source| {
             let mut row = vec![0u8; source.width() as usize * 3];
             (0..source.height()).try_for_each(|_| source.read_row(&mut row))
         });
@@ -445,7 +446,7 @@ fn damaged_ndpi(layout: Layout) {
         let mut mutated = bytes.clone();
         mutated[at] ^= (state >> 24) as u8 | 1;
         std::fs::write(&path, &mutated).unwrap();
-        let result = source::open(&path, 64 << 20).and_then(|mut source| {
+        let result = source::open(&path, Budget::new(64 << 20)).and_then(|mut source| {
             let mut row = vec![0u8; source.width() as usize * source.layout().bytes_per_pixel()];
             (0..source.height()).try_for_each(|_| source.read_row(&mut row))
         });
@@ -494,7 +495,7 @@ fn the_offset_table_locates_intervals_and_is_checked() {
     late[entry..entry + 4].copy_from_slice(&(start + 3).to_le_bytes());
     let path = dir.path().join("late.ndpi");
     std::fs::write(&path, &late).unwrap();
-    let err = source::open(&path, 1 << 30)
+    let err = source::open(&path, Budget::new(1 << 30))
         .and_then(|mut source| {
             let mut row = vec![0u8; 1024 * 3];
             (0..48).try_for_each(|_| source.read_row(&mut row))
@@ -554,7 +555,7 @@ fn an_ndpi_past_4_gib_is_read() {
     file.seek(SeekFrom::Start(6 << 30)).unwrap();
     file.write_all(&directory).unwrap();
     drop(file);
-    let err = source::open(&far, 1 << 30).err().expect("a directory past 4 GiB is refused").to_string();
+    let err = source::open(&far, Budget::new(1 << 30)).err().expect("a directory past 4 GiB is refused").to_string();
     for needle in ["far.ndpi", "NDPI directory 0 lies at byte 6442450944, past 4 GiB"] {
         assert!(err.contains(needle), "{needle:?} missing from: {err}");
     }

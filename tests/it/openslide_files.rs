@@ -43,7 +43,8 @@ for level, (w, h) in enumerate(slide.level_dimensions):
 
 /// Our texels of `pick` of `path`, as stored (no profile applied), and their size.
 fn ours(path: &Path, pick: Pick) -> (u32, u32, Vec<u8>) {
-    let mut source = source::open_picked(path, 1 << 30, pick).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut source = source::open_picked(path, vortex_tiler::limits::Budget::new(1 << 30), pick)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let layout = source.layout();
     assert_eq!(layout, PixelLayout::new(Channels::Rgb, Depth::U8), "{}: {}", path.display(), source.describe());
     let row = source.width() as usize * 3;

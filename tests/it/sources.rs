@@ -6,6 +6,7 @@ use crate::common;
 use crate::common::compare::{Picture, Tolerance, assert_close};
 use crate::common::{MemSink, png_options};
 use vortex_tiler::background::Background;
+use vortex_tiler::limits::Budget;
 use vortex_tiler::source;
 use vortex_tiler::split::split;
 
@@ -14,7 +15,7 @@ fn fixture(name: &str) -> PathBuf {
 }
 
 fn tiles(path: &Path, max_memory: u64) -> Vec<((u32, u32, u32), Vec<u8>)> {
-    let src = source::open(path, max_memory).unwrap();
+    let src = source::open(path, Budget::new(max_memory)).unwrap();
     let sink = MemSink::default();
     split(src, &sink, &png_options(16, 1, Background::Edge), &()).unwrap();
     sink.tiles.into_inner().unwrap().into_iter().collect()
@@ -31,7 +32,7 @@ fn interlaced_png_matches_the_same_pixels_streamed() {
 
 #[test]
 fn interlaced_png_over_max_memory_is_refused_with_advice() {
-    let err = source::open(&fixture("interlaced-61x47.png"), 1000).err().expect("refused").to_string();
+    let err = source::open(&fixture("interlaced-61x47.png"), Budget::new(1000)).err().expect("refused").to_string();
     for needle in ["interlaced-61x47.png", "Adam7", "8.4 KiB", "--max-memory", "non-interlaced"] {
         assert!(err.contains(needle), "{needle:?} missing from: {err}");
     }
@@ -70,7 +71,7 @@ fn jpeg_input_streams() {
     let img = image::RgbImage::from_fn(200, 120, |x, y| image::Rgb([(x + y) as u8, (x * 2) as u8, (y * 2) as u8]));
     let jpg = dir.path().join("in.jpg");
     img.save(&jpg).unwrap();
-    let src = source::open(&jpg, 1 << 20).unwrap();
+    let src = source::open(&jpg, Budget::new(1 << 20)).unwrap();
     assert!(src.describe().contains("jpeg"), "{}", src.describe());
     let reference = dir.path().join("ref.png");
     image::open(&jpg).unwrap().to_rgb8().save(&reference).unwrap();

@@ -100,7 +100,7 @@ fn a_ppm_is_read_a_stripe_at_a_time() {
     let opts = SplitOptions { filter: Filter::LinearPremultiplied, ..png_options(16, 2, Background::Edge) };
     let tiles = |max_memory: u64| {
         let sink = MemSink::default();
-        let source = vortex_tiler::source::open(&path, 1 << 30).unwrap();
+        let source = vortex_tiler::source::open(&path, vortex_tiler::limits::Budget::new(1 << 30)).unwrap();
         let summary = split(source, &sink, &SplitOptions { max_memory, ..opts.clone() }, &()).unwrap();
         (summary.passes, sink.tiles.into_inner().unwrap())
     };

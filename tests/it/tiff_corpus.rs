@@ -27,6 +27,7 @@ use std::path::Path;
 
 use crate::common::cli::s;
 use crate::tiff_slides::{python, venv_python};
+use vortex_tiler::limits::Budget;
 use vortex_tiler::pixel::Depth;
 use vortex_tiler::source::channels::ChannelSet;
 use vortex_tiler::source::{self, Pick, RowSource};
@@ -113,7 +114,7 @@ fn check(dir: &Path, entry: &Entry) -> Result<(), String> {
     let path = dir.join(format!("{}.tif", entry.name));
     let max_memory = 1 << 30;
     if entry.kind == "refused" {
-        let error = match ChannelSet::open(&path, Pick::default(), max_memory) {
+        let error = match ChannelSet::open(&path, Pick::default(), Budget::new(max_memory)) {
             Ok(set) => match (0..set.count())
                 .map(|k| {
                     set.channel(k).and_then(|mut c| rows(c.as_mut()).map_err(vortex_tiler::error::TilerError::Options))
@@ -137,10 +138,11 @@ fn check(dir: &Path, entry: &Entry) -> Result<(), String> {
     let depth = depth_of(dtype);
     let size = depth.bytes();
     let expect = native(std::fs::read(dir.join(format!("{}.expect", entry.name))).unwrap(), size);
-    let channels = ChannelSet::beyond_texels(&path, Pick::default(), max_memory).map_err(|e| e.to_string())?;
+    let channels =
+        ChannelSet::beyond_texels(&path, Pick::default(), Budget::new(max_memory)).map_err(|e| e.to_string())?;
     match (entry.kind.as_str(), channels) {
         ("texels", None) => {
-            let mut source = source::open(&path, max_memory).map_err(|e| e.to_string())?;
+            let mut source = source::open(&path, Budget::new(max_memory)).map_err(|e| e.to_string())?;
             let layout = source.layout();
             let samples = entry.shape[2];
             if layout.depth != depth || layout.channels.count() != samples {
@@ -257,7 +259,7 @@ fn libvips_five_bands_are_five_channels_as_stored() {
     let plane = expect.len() / 5;
     for file in ["vips.tif", "tifffile.tif"] {
         let path = d.join(file);
-        let set = ChannelSet::open(&path, Pick::default(), 1 << 30).unwrap();
+        let set = ChannelSet::open(&path, Pick::default(), Budget::new(1 << 30)).unwrap();
         assert_eq!((set.count(), set.depth), (5, Depth::U16), "{file}");
         for k in 0..5 {
             let ours = rows(set.channel(k).unwrap().as_mut()).unwrap();

@@ -11,6 +11,7 @@ use crate::common::compare::{Picture, Tolerance, assert_close};
 use crate::tiff_slides::{
     have_tools, openslide_texels, our_texels, pattern_png, python, tool, venv_python, vips_texels,
 };
+use vortex_tiler::limits::Budget;
 use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
 use vortex_tiler::source;
 
@@ -148,7 +149,7 @@ fn bilevel_fax_and_sub_byte_grey_decode_as_libvips_does() {
     let data = 8..bytes.len() / 2;
     bytes[data].fill(0);
     std::fs::write(&zeroed, &bytes).unwrap();
-    let mut source = source::open(&zeroed, 1 << 30).unwrap();
+    let mut source = source::open(&zeroed, Budget::new(1 << 30)).unwrap();
     let mut row = vec![0u8; 333];
     let err = (0..201).find_map(|_| source.read_row(&mut row).err()).expect("zeroed fax data fails").to_string();
     for needle in ["zeroed-2d.tif", "strip 0 (rows 0..9)", "fax row 0"] {
@@ -159,7 +160,7 @@ fn bilevel_fax_and_sub_byte_grey_decode_as_libvips_does() {
         let mh = d("mh-one.tif");
         let script = "import sys, tifffile\nwith tifffile.TiffFile(sys.argv[1]) as t:\n    p = t.pages[0]\n    o, n = p.dataoffsets[0], p.databytecounts[0]\nf = open(sys.argv[1], 'r+b'); f.seek(o); f.write(bytes(n))";
         python(&py, script, &[s(&mh)]);
-        let mut source = source::open(&mh, 1 << 30).unwrap();
+        let mut source = source::open(&mh, Budget::new(1 << 30)).unwrap();
         let err = source.read_row(&mut row).expect_err("zeroed fax data fails").to_string();
         for needle in ["mh-one.tif", "strip 0", "a bad run length in fax row 0"] {
             assert!(err.contains(needle), "{needle:?} missing from: {err}");
@@ -265,7 +266,7 @@ fn cmyk_tiff_is_converted_through_its_profile_or_the_default_one() {
     let bare = d("bare.tif");
     tool("vips", &["copy", s(&tagged), &format!("{}[strip]", s(&bare))]);
     for (path, embedded) in [(&tagged, true), (&planar, true), (&bare, false)] {
-        let source = source::open_with(path, source::OpenOptions::shown(1 << 30)).unwrap().source;
+        let source = source::open_with(path, source::OpenOptions::shown(Budget::new(1 << 30))).unwrap().source;
         let described = source.describe();
         let whence = if embedded { "embedded ICC" } else { "no profile embedded" };
         assert!(described.contains("CMYK") && described.contains(whence), "{described}");
@@ -312,7 +313,7 @@ fn damaged_kinds_name_the_strip_and_large_ones_stream() {
     std::fs::copy(&planar, &moved).unwrap();
     let script = "import sys, tifffile\nwith tifffile.TiffFile(sys.argv[1], mode='r+b') as t:\n    tag = t.pages[0].tags['StripOffsets']\n    v = list(tag.value)\n    v[24 + 2] = 1 << 30\n    tag.overwrite(v)";
     python(&py, script, &[s(&moved)]);
-    let mut source = source::open(&moved, 1 << 30).unwrap();
+    let mut source = source::open(&moved, Budget::new(1 << 30)).unwrap();
     let mut row = vec![0u8; 512 * 3];
     for _ in 0..32 {
         source.read_row(&mut row).unwrap();
@@ -330,7 +331,7 @@ fn damaged_kinds_name_the_strip_and_large_ones_stream() {
     let g4 = tiffcp(&one, &d("g4.tif"), &["-c", "g4", "-r", "64"]);
     let script = "import sys, tifffile\nwith tifffile.TiffFile(sys.argv[1]) as t:\n    p = t.pages[0]\n    o, n = p.dataoffsets[2], p.databytecounts[2]\nf = open(sys.argv[1], 'r+b'); f.seek(o); f.write(bytes(n))";
     python(&py, script, &[s(&g4)]);
-    let mut source = source::open(&g4, 1 << 30).unwrap();
+    let mut source = source::open(&g4, Budget::new(1 << 30)).unwrap();
     let mut row = vec![0u8; 512];
     let err = (0..384).find_map(|_| source.read_row(&mut row).err()).expect("zeroed fax data fails").to_string();
     for needle in ["g4.tif", "row 128", "strip 2 (rows 128..192)", "fax"] {
@@ -341,7 +342,7 @@ fn damaged_kinds_name_the_strip_and_large_ones_stream() {
     let lzw = tiffcp(&rgb, &d("planar-lzw.tif"), &["-p", "separate", "-c", "lzw", "-r", "16"]);
     let (_, ours) = our_texels(&lzw, 64 << 10);
     assert!(ours == vips_texels(&lzw), "streamed planar texels differ from libvips's");
-    let err = source::open(&lzw, 16 << 10).err().expect("over --max-memory").to_string();
+    let err = source::open(&lzw, Budget::new(16 << 10)).err().expect("over --max-memory").to_string();
     assert!(err.contains("--max-memory") && err.contains("planar-lzw.tif"), "{err}");
     // And through `split`, end to end.
     let out = d("out");
@@ -415,7 +416,7 @@ fn aperio_jpeg_2000_decodes_as_openslide_does() {
     let slide = d("slide-rgb.svs");
     let script = "import sys, tifffile\nwith tifffile.TiffFile(sys.argv[1]) as t:\n    p = t.pages[0]\n    o, n = p.dataoffsets[7], p.databytecounts[7]\nf = open(sys.argv[1], 'r+b'); f.seek(o); f.write(bytes(n))";
     python(&py, script, &[s(&slide)]);
-    let mut source = source::open(&slide, 1 << 30).unwrap();
+    let mut source = source::open(&slide, Budget::new(1 << 30)).unwrap();
     let mut row = vec![0u8; 600 * 3];
     let err = (0..1500).find_map(|_| source.read_row(&mut row).err()).expect("a zeroed tile fails").to_string();
     for needle in ["slide-rgb.svs", "row 128", "tile 7 (tile row 1, column 2; rows 128..256)", "JPEG 2000"] {

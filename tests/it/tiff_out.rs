@@ -577,7 +577,7 @@ fn an_associated_image_that_cannot_be_carried_is_refused_before_the_levels() {
     {
         use vortex_tiler::formats::tiff::Flavour;
         use vortex_tiler::outputs::{Budget, Format, Output, Plan, Settings};
-        let source = vortex_tiler::source::open(&svs, Budget::default().bytes()).unwrap();
+        let source = vortex_tiler::source::open(&svs, Budget::default()).unwrap();
         let outputs = vec![Output::new(Format::Tiff(Flavour::Generic), &tif)];
         let planned = Plan::new(outputs, &Settings::default(), &source.header(), &[svs.as_path()], Budget::default());
         let Err(refused) = planned else { panic!("a plan of a TIFF carrying a 16-bit label") };

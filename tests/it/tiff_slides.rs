@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use crate::common::cli::{self, s};
+use vortex_tiler::limits::Budget;
 use vortex_tiler::source::{self, RowSource};
 
 /// Whether `vips` and `tiffcp` can run; outside CI a missing one skips the test with a note.
@@ -48,7 +49,7 @@ pub(crate) fn vips_texels(path: &Path) -> Vec<u8> {
 }
 
 pub(crate) fn our_texels(path: &Path, max_memory: u64) -> (Box<dyn RowSource>, Vec<u8>) {
-    let mut source = source::open(path, max_memory).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut source = source::open(path, Budget::new(max_memory)).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let row = source.width() as usize * source.layout().bytes_per_pixel();
     let mut all = vec![0u8; row * source.height() as usize];
     for chunk in all.chunks_exact_mut(row) {
@@ -201,7 +202,7 @@ fn damaged_jpeg_tiles_are_errors_naming_the_tile() {
     let fails = |bytes: &[u8], name: &str, needles: &[&str]| {
         let path = dir.path().join(name);
         std::fs::write(&path, bytes).unwrap();
-        let mut source = source::open(&path, 1 << 30).unwrap();
+        let mut source = source::open(&path, Budget::new(1 << 30)).unwrap();
         let mut row = vec![0u8; 300 * 3];
         let err = (0..200).find_map(|_| source.read_row(&mut row).err()).expect("an error");
         let text = err.to_string();
@@ -258,7 +259,7 @@ fn a_jpeg_tiff_larger_than_max_memory_streams() {
     let (_, roomy) = our_texels(&tif, 1 << 30);
     let (_, tight) = our_texels(&tif, 4 << 20);
     assert!(roomy == tight);
-    let err = source::open(&tif, 1 << 20).err().expect("refused").to_string();
+    let err = source::open(&tif, Budget::new(1 << 20)).err().expect("refused").to_string();
     for needle in ["big.tif", "--max-memory", "256x256 JPEG tiles"] {
         assert!(err.contains(needle), "{needle:?} missing from: {err}");
     }
@@ -286,7 +287,7 @@ fn old_style_jpeg_is_refused() {
     let at = bytes.windows(entry.len()).position(|w| w == entry).expect("a Compression entry");
     bytes[at + 8] = 6;
     std::fs::write(&path, &bytes).unwrap();
-    let err = source::open(&path, 1 << 30).err().expect("refused").to_string();
+    let err = source::open(&path, Budget::new(1 << 30)).err().expect("refused").to_string();
     for needle in ["ojpeg.tif", "old-style JPEG", "compression 7", "tiffcp -c jpeg"] {
         assert!(err.contains(needle), "{needle:?} missing from: {err}");
     }
@@ -310,7 +311,7 @@ fn columns_and_skipped_rows_match_whole_rows() {
         tool("vips", &[&["tiffsave", s(&png), s(&tif), "--compression", "jpeg"][..], extra].concat());
         let (_, whole) = our_texels(&tif, 1 << 30);
         for (columns, skip) in [(70..200u32, 0u32), (0..64, 65), (300..333, 130), (1..2, 209)] {
-            let mut source = source::open(&tif, 1 << 30).unwrap();
+            let mut source = source::open(&tif, Budget::new(1 << 30)).unwrap();
             assert!(source.read_columns(columns.clone()), "{name}");
             source.skip_rows(skip).unwrap();
             let mut row = vec![0u8; columns.len() * 3];
@@ -416,13 +417,15 @@ fn aperio_svs_reads_level_0_as_openslide_does() {
         assert!(differ == 0, "{differ} samples differ from OpenSlide's level 0");
     }
     // The label by its page, exactly as stored (LZW).
-    let label = source::open_picked(&svs, 1 << 30, source::Pick { page: Some(3), series: None }).unwrap();
+    let label = source::open_picked(&svs, Budget::new(1 << 30), source::Pick { page: Some(3), series: None }).unwrap();
     assert_eq!((label.width(), label.height()), (80, 100));
     assert!(label.describe().contains("page 3 of 5: label; skipped thumbnail"), "{}", label.describe());
-    let err = source::open_picked(&svs, 1 << 30, source::Pick { page: Some(5), series: None }).err().unwrap();
+    let err =
+        source::open_picked(&svs, Budget::new(1 << 30), source::Pick { page: Some(5), series: None }).err().unwrap();
     assert!(err.to_string().contains("--page 5: the TIFF has 5 page(s)"), "{err}");
     // Series: the full-resolution images only (here one).
-    let err = source::open_picked(&svs, 1 << 30, source::Pick { page: None, series: Some(1) }).err().unwrap();
+    let err =
+        source::open_picked(&svs, Budget::new(1 << 30), source::Pick { page: None, series: Some(1) }).err().unwrap();
     assert!(err.to_string().contains("1 full-resolution image(s)"), "{err}");
     // The tool says so too.
     let out = dir.path().join("out");
@@ -464,7 +467,7 @@ fn ome_tiff_series_read_as_tifffile_does() {
         (1, (260, 200), "tiff (OME-TIFF, series 1, page 1 of 2: full resolution)"),
     ] {
         let pick = source::Pick { page: None, series: Some(series) };
-        let mut source = source::open_picked(&ome, 1 << 30, pick).unwrap();
+        let mut source = source::open_picked(&ome, Budget::new(1 << 30), pick).unwrap();
         assert_eq!((source.width(), source.height()), size);
         assert!(source.describe().starts_with(says), "{}", source.describe());
         let mut ours = vec![0u8; size.0 as usize * size.1 as usize * 3];
@@ -476,8 +479,9 @@ fn ome_tiff_series_read_as_tifffile_does() {
         assert!(ours.len() == theirs.len() && differ == 0, "series {series}: {differ} samples differ from tifffile");
     }
     // The default is series 0; a series past the last is refused, naming the count.
-    assert!(source::open(&ome, 1 << 30).unwrap().describe().contains("series 0"));
-    let err = source::open_picked(&ome, 1 << 30, source::Pick { page: None, series: Some(2) }).err().unwrap();
+    assert!(source::open(&ome, Budget::new(1 << 30)).unwrap().describe().contains("series 0"));
+    let err =
+        source::open_picked(&ome, Budget::new(1 << 30), source::Pick { page: None, series: Some(2) }).err().unwrap();
     assert!(err.to_string().contains("--series 2: the OME-TIFF has 2 series"), "{err}");
     let out = dir.path().join("out");
     let stdout = cli::ok(&["split", s(&ome), "-o", s(&out), "--series", "1", "--tile-size", "256"]);
@@ -506,7 +510,7 @@ fn damaged_jpeg_tiffs_never_panic() {
     let path = dir.path().join("mutated.tif");
     let read = |data: &[u8]| {
         std::fs::write(&path, data).unwrap();
-        let result = source::open(&path, 64 << 20).and_then(|mut source| {
+        let result = source::open(&path, Budget::new(64 << 20)).and_then(|mut source| {
             let mut row = vec![0u8; source.width() as usize * source.layout().bytes_per_pixel()];
             (0..source.height()).try_for_each(|_| source.read_row(&mut row))
         });

@@ -74,12 +74,12 @@ pub fn channel_set(
         if input.is_some() {
             bail!("--channel names every channel's image; leave out the INPUT");
         }
-        return Ok(Some((ChannelSet::files(files, a.max_memory)?, files.to_vec())));
+        return Ok(Some((ChannelSet::files(files, Budget::new(a.max_memory))?, files.to_vec())));
     }
     let Some(input) = input else { bail!("an input image is required (or --channel FILE per channel)") };
     let set = match picks {
-        true => Some(ChannelSet::open(input, pick, a.max_memory)?),
-        false => ChannelSet::beyond_texels(input, pick, a.max_memory)?,
+        true => Some(ChannelSet::open(input, pick, Budget::new(a.max_memory))?),
+        false => ChannelSet::beyond_texels(input, pick, Budget::new(a.max_memory))?,
     };
     Ok(set.map(|set| (set, vec![input.to_path_buf()])))
 }

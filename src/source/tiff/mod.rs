@@ -1299,7 +1299,7 @@ mod tests {
             &rgb16,
         );
         // Through the format dispatch, as the pipeline opens it.
-        let source = crate::source::open(&path, 1 << 30).unwrap();
+        let source = crate::source::open(&path, crate::limits::Budget::new(1 << 30)).unwrap();
         assert!(source.describe().starts_with("bigtiff, deflate"), "{}", source.describe());
         drop(source);
         assert_matches_image_crate(&path, PixelLayout::new(Channels::Rgb, Depth::U16));

@@ -149,11 +149,11 @@ impl TiledSource {
         }
     }
 
-    /// Holds the run within `max_memory`: the band, and as many tiles read and decoded at once
+    /// Holds the run within `budget`: the band, and as many tiles read and decoded at once
     /// as the rest holds (at least one; [`memory_needed`](Self::memory_needed) says whether
     /// one fits).
-    pub fn with_max_memory(mut self, max_memory: u64) -> TiledSource {
-        self.in_flight = max_memory.saturating_sub(self.band_bytes());
+    pub fn with_budget(mut self, budget: crate::limits::Budget) -> TiledSource {
+        self.in_flight = budget.bytes().saturating_sub(self.band_bytes());
         self
     }
 

@@ -103,7 +103,7 @@ fn run() -> Result<()> {
         _ => bail!("give exactly one of --vortex and --dzi\n{USAGE}"),
     };
 
-    let mut src = vortex_tiler::source::open(&source, max_memory)?;
+    let mut src = vortex_tiler::source::open(&source, vortex_tiler::limits::Budget::new(max_memory))?;
     let layout = src.layout();
     ensure!(layout.depth == Depth::U8, "{}: only 8-bit sources are supported, not {layout}", source.display());
     let (width, height) = (src.width(), src.height());
