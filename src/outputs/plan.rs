@@ -117,7 +117,7 @@ impl Plan {
         let formats: Vec<Format> = outputs.iter().map(|o| o.format).collect();
         let mut planned = Vec::with_capacity(outputs.len());
         let input = inputs.first().copied().unwrap_or(Path::new(""));
-        let found = std::cell::OnceCell::new();
+        let (found, checked) = (std::cell::OnceCell::new(), std::cell::OnceCell::new());
         let at = Context {
             header,
             inputs,
@@ -127,6 +127,7 @@ impl Plan {
             stored: settings.stored_subsampling,
             lossy: &settings.lossy,
             associated: &found,
+            associated_checked: &checked,
         };
         for output in outputs {
             let own = Own::of(settings, output.format, &formats);
@@ -206,13 +207,15 @@ struct Context<'a> {
     lossy: &'a [crate::source::LossyStep],
     /// The source's associated images, found once for the outputs that carry them.
     associated: &'a std::cell::OnceCell<Vec<Associated>>,
+    /// Set once they are checked, by the first output that carries them.
+    associated_checked: &'a std::cell::OnceCell<()>,
 }
 
 impl Context<'_> {
     /// The source's associated images an output carries, none where `left_out`
-    /// (`--no-associated`); and how many it leaves out.
-    /// Each carried one is checked now ([`Associated::check`]): one that cannot be decoded
-    /// as the output needs stops the run before its pyramid is cut.
+    /// (`--no-associated`); and how many it leaves out. Each carried one is checked once a
+    /// plan ([`Associated::check`]): one that cannot be decoded as the outputs need stops the
+    /// run before its pyramid is cut.
     fn associated(&self, left_out: bool) -> Result<(Vec<Associated>, usize)> {
         if self.associated.get().is_none() {
             let _ = self.associated.set(crate::source::associated::of_file(self.input, self.budget)?);
@@ -221,8 +224,11 @@ impl Context<'_> {
         if left_out {
             return Ok((Vec::new(), found.len()));
         }
-        for image in &found {
-            image.check(self.associated_bytes())?;
+        if self.associated_checked.get().is_none() {
+            for image in &found {
+                image.check(self.associated_bytes())?;
+            }
+            let _ = self.associated_checked.set(());
         }
         Ok((found, 0))
     }

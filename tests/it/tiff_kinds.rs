@@ -372,17 +372,23 @@ ycc = np.stack([0.299 * f[..., 0] + 0.587 * f[..., 1] + 0.114 * f[..., 2],
                 128 - 0.168736 * f[..., 0] - 0.331264 * f[..., 1] + 0.5 * f[..., 2],
                 128 + 0.5 * f[..., 0] - 0.418688 * f[..., 1] - 0.081312 * f[..., 2]], -1)
 ycc = np.clip(np.round(ycc), 0, 255).astype(np.uint8)
-def tiles(a):
+def tiles(a, lossless=True):
     for ty in range(0, h, t):
         for tx in range(0, w, t):
             tile = np.zeros((t, t, 3), np.uint8)
             part = a[ty:ty + t, tx:tx + t]
             tile[:part.shape[0], :part.shape[1]] = part
-            yield imagecodecs.jpeg2k_encode(tile, level=0, codecformat="J2K", mct=False)
-for name, a, code in (("rgb", img, 33005), ("ycbcr", ycc, 33003)):
+            if lossless:
+                yield imagecodecs.jpeg2k_encode(tile, level=0, codecformat="J2K", mct=False)
+            else:
+                yield imagecodecs.jpeg2k_encode(tile, level=40, codecformat="J2K", mct=False, reversible=False)
+for name, a, code, lossless in (("rgb", img, 33005, True), ("ycbcr", ycc, 33003, True), ("lossy", img, 33005, False)):
     desc = "Aperio Image Library v12.0.15 \r\n%dx%d [0,0 %dx%d] (%dx%d) J2K/KDU Q=70|AppMag = 20|MPP = 0.5" % (w, h, w, h, t, t)
-    tifffile.imwrite("%s-%s.svs" % (sys.argv[1], name), tiles(a), shape=(h, w, 3), dtype="uint8", tile=(t, t),
+    tifffile.imwrite("%s-%s.svs" % (sys.argv[1], name), tiles(a, lossless), shape=(h, w, 3), dtype="uint8", tile=(t, t),
                      compression=code, photometric="rgb", description=desc, metadata=None)
+    if not lossless:
+        with tifffile.TiffFile("%s-%s.svs" % (sys.argv[1], name)) as f:
+            print(h * w * 3 / sum(f.pages[0].databytecounts))
 "#;
 
 /// Aperio JPEG 2000 (33005 RGB, 33003 YCbCr): OpenSlide's level 0, streamed within a
@@ -392,7 +398,22 @@ fn aperio_jpeg_2000_decodes_as_openslide_does() {
     let Some(py) = venv_python() else { return };
     let dir = tempfile::tempdir().unwrap();
     let d = |name: &str| dir.path().join(name);
-    python(&py, MAKE_J2K_SVS, &[s(&d("slide"))]);
+    let said = python(&py, MAKE_J2K_SVS, &[s(&d("slide"))]);
+    // What the slide's coding lost, as its tiles' COD segments say: nothing for OpenJPEG's
+    // reversible wavelet; the irreversible one a JPEG 2000 step, its texels' bytes over its
+    // tiles' bytes as tifffile lists them.
+    for (name, lossy) in [("slide-rgb.svs", false), ("slide-ycbcr.svs", false), ("slide-lossy.svs", true)] {
+        let steps = source::open(&d(name), Budget::new(1 << 30)).unwrap().embedded().lossy;
+        match lossy {
+            false => assert_eq!(steps, [], "{name}"),
+            true => {
+                let ratio: f64 = said.trim().parse().unwrap();
+                assert_eq!(steps.len(), 1, "{name}: {steps:?}");
+                assert_eq!(steps[0].method, "ISO_15444_1", "{name}");
+                assert!((steps[0].ratio - ratio).abs() <= ratio * 1e-9, "{name}: {steps:?}, tifffile's {ratio}");
+            }
+        }
+    }
     // 600 x 1500 RGB is 2.6 MiB; a row of 128-texel tiles and the tiles being decoded fit in 2.
     // RGB: lossless tiles decoded by OpenJPEG on both sides, exactly. YCbCr: OpenSlide's own
     // YCbCr tables round the green term once where libjpeg's fixed point (used here) rounds

@@ -337,9 +337,11 @@ pub(crate) fn venv_python() -> Option<std::ffi::OsString> {
     python
 }
 
-pub(crate) fn python(python: &std::ffi::OsStr, script: &str, args: &[&str]) {
+/// Runs `script` with `args`; its standard output, or a failure saying what it printed.
+pub(crate) fn python(python: &std::ffi::OsStr, script: &str, args: &[&str]) -> String {
     let out = Command::new(python).arg("-c").arg(script).args(args).output().unwrap();
     assert!(out.status.success(), "{script}: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 /// An Aperio-like SVS as tifffile writes it: a 240-texel JPEG-tiled full resolution, a
