@@ -92,7 +92,7 @@ impl Copier {
     /// tile; `None` where the stored tile cannot be copied, or not cropped to exactly the texels
     /// the run decoded ([`crop::exact`]).
     fn file(&self, (x, y): (u32, u32), crop: Option<Crop>) -> Result<Option<File>> {
-        let Some(file) = self.tiles.jpeg(x, y)? else { return Ok(None) };
+        let Some(file) = self.tiles.tile(x, y)? else { return Ok(None) };
         let size = crop.map_or((self.side, self.side), |c| (c.width, c.height));
         if size == (self.side, self.side) {
             return Ok(Some(File::Copied(file)));

@@ -4,18 +4,18 @@
 use crate::error::{Result, TilerError};
 use crate::job::Progress;
 use crate::sink::TileSink;
-use crate::source::stored::{self, Header, StoredLevels};
+use crate::source::stored::{self, StoredLevels};
 
 /// Copies every tile of every level of `levels` into `sink` as that level's tile, row by row
 /// (`--levels stored`: a TIFF's or a DICOM series' levels as the slide stores them); says how
-/// many. Each tile must be what `fits` takes (the form of its level's first tile, which the
-/// output declares for all, `form` naming it), else the run fails naming the file, the level
-/// and the tile.
+/// many. Each tile must be what `fits` takes of its stored bytes and its level's tile size
+/// (the form of its level's first tile, which the output declares for all, `form` naming it), else the run fails
+/// naming the file, the level and the tile.
 pub(crate) fn copy(
     sink: &dyn TileSink,
     levels: &StoredLevels,
     form: &str,
-    fits: &dyn Fn(&Header) -> bool,
+    fits: &dyn Fn(&[u8], (u32, u32)) -> bool,
     progress: &dyn Progress,
 ) -> Result<u64> {
     let mut copied = 0;
@@ -27,12 +27,12 @@ pub(crate) fn copy(
                 return Err(TilerError::Interrupted);
             }
             for col in 0..across {
-                let file = level.tiles.jpeg(col, row).map_err(|e| stored::in_level(e, k, level.page))?;
-                let Some(file) = file.filter(|f| stored::read_header(f).is_some_and(|h| fits(&h))) else {
+                let file = level.tiles.tile(col, row).map_err(|e| stored::in_level(e, k, level.page))?;
+                let Some(file) = file.filter(|f| fits(f, (w, h))) else {
                     return Err(TilerError::decode(
                         &levels.path,
                         format!(
-                            "level {k} (page {}): the tile at column {col}, row {row} is not a {w}x{h} {form} JPEG as the level's first is, so the level cannot be copied as stored; --levels pow2 makes the output from the decoded pixels",
+                            "level {k} (page {}): the tile at column {col}, row {row} is not a {w}x{h} {form} tile as the level's first is, so the level cannot be copied as stored; --levels pow2 makes the output from the decoded pixels",
                             level.page
                         ),
                     ));

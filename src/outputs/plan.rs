@@ -821,7 +821,11 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
         ..t.clone()
     };
     let (opts, _) = settings::resolve(&requested, None, source)?;
-    let opts = at.coded_as_stored(opts, t.subsampling);
+    let mut opts = at.coded_as_stored(opts, t.subsampling);
+    // A source's 4:4:4 JPEG tiles are not taken: no whole-slide image states YBR_FULL frames.
+    if let (None, Codec::Jpeg { subsampling: s @ Subsampling::S444, .. }) = (t.subsampling, &mut opts.codec) {
+        *s = Subsampling::S420;
+    }
     let layout = opts.layout(at.header.width, at.header.height)?;
     let stored = opts.codec.stored_layout(source, opts.flatten, opts.tile_depth)?;
     let (quality, photometric, coding) = match opts.codec {

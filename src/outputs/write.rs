@@ -8,7 +8,7 @@ use super::plan::{Planned, Work};
 use super::{Budget, Format, Plan};
 use crate::background::Background;
 use crate::error::{Result, TilerError};
-use crate::formats::dicom::{self, DicomSink, DicomSummary, Photometric};
+use crate::formats::dicom::{self, DicomSink, DicomSummary};
 use crate::formats::ome_zarr::OmeZarrSink;
 use crate::formats::pack::PackSink;
 use crate::formats::pmtiles::PmtilesSink;
@@ -19,7 +19,7 @@ use crate::layout::Levels;
 use crate::sink::icc::{Profile, WithProfile};
 use crate::sink::{DirSink, Target, TileSink};
 use crate::source::channels::{ChannelSet, Ranged};
-use crate::source::stored::StoredLevels;
+use crate::source::stored::{StoredLevels, read_header};
 use crate::source::{RowSource, tee};
 use crate::split;
 
@@ -246,7 +246,7 @@ struct Copying {
 
 /// The form of a copied tile: a DICOM frame's photometric interpretation, a TIFF tile's coding.
 enum Form {
-    Dicom(Photometric),
+    Dicom(dicom::Form),
     Tiff(tiff::Coding),
 }
 
@@ -291,7 +291,7 @@ fn choose_levels(outputs: &mut [Planned], source: &dyn RowSource) -> Result<Chos
         if let Work::Dicom { spec, .. } = &planned.work
             && spec.transfer == dicom::Transfer::Native
         {
-            declined[k] = Some("native frames asked (--codec raw), which no stored JPEG tile is".into());
+            declined[k] = Some("native frames asked (--codec raw), which no stored JPEG or JPEG 2000 tile is".into());
             continue;
         }
         if let Some(why) = reencode {
@@ -301,16 +301,15 @@ fn choose_levels(outputs: &mut [Planned], source: &dyn RowSource) -> Result<Chos
         let form = match &mut planned.work {
             Work::Dicom { spec, .. } => match dicom::copyable(levels)? {
                 Err(why) => Err(why),
-                Ok((copied, photometric)) => {
+                Ok((copied, form)) => {
                     let shapes: Vec<String> = (copied.iter())
                         .map(|l| format!("{}x{}/{}x{}", l.width, l.height, l.tile.0, l.tile.1))
                         .collect();
-                    spec.identity =
-                        format!("{}; levels stored {} {}", spec.identity, shapes.join(" "), photometric.name());
-                    spec.copied = copied;
-                    spec.photometric = photometric;
+                    let photometric = form.photometric.name();
+                    spec.identity = format!("{}; levels stored {} {photometric}", spec.identity, shapes.join(" "));
+                    (spec.copied, spec.photometric, spec.transfer) = (copied, form.photometric, form.transfer);
                     spec.check()?;
-                    Ok(Form::Dicom(photometric))
+                    Ok(Form::Dicom(form))
                 }
             },
             Work::Tiff { spec, .. } => match tiff::copyable(levels, spec.stored.channels)? {
@@ -379,15 +378,13 @@ impl Plan {
         for (k, c) in copying.iter().enumerate() {
             let Some(c) = c else { continue };
             copied[k] = match (&c.form, &open[k].sink) {
-                (Form::Dicom(photometric), Sink::Dicom(sink)) => {
-                    dicom::copy_levels(sink, &c.levels, *photometric, progress)?
-                }
+                (Form::Dicom(form), Sink::Dicom(sink)) => dicom::copy_levels(sink, &c.levels, *form, progress)?,
                 (Form::Tiff(coding), Sink::Tiff(sink)) => {
-                    let fits = |h: &crate::source::stored::Header| tiff::fits(h, *coding);
+                    let fits = |file: &[u8], _| read_header(file).is_some_and(|h| tiff::fits(&h, *coding));
                     crate::formats::levels::copy(
                         sink.as_ref(),
                         &c.levels,
-                        &tiff::coding_name(*coding),
+                        &format!("{} JPEG", tiff::coding_name(*coding)),
                         &fits,
                         progress,
                     )?

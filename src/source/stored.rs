@@ -13,39 +13,58 @@
 //! from the page cache: they were read moments before to be decoded) rather than carry them
 //! through the read-ahead, the pyramid and its stripes and rewinds beside the decoded rows.
 
+pub mod codestream;
 pub mod crop;
 
 use std::path::PathBuf;
 use std::sync::Arc;
 
-/// What a run may copy: a grid of tiles stored as JPEG.
+/// How a grid's tiles are coded as stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Coding {
+    /// JPEG files: what a viewer's tile is, and what every output that copies tiles takes.
+    Jpeg,
+    /// JPEG 2000 codestreams, as Aperio stores its SVS tiles: a DICOM series' levels copy them
+    /// (`--levels stored`). `ycbcr`: their three components are Y, Cb, Cr without the
+    /// codestream's own colour transform (Compression 33003), else R, G, B or that transform's.
+    Jpeg2000 { ycbcr: bool },
+}
+
+/// What a run may copy: a grid of tiles stored as JPEG (every grid a source offers for its
+/// full resolution alone, `RowSource::stored_tiles`) or, among a slide's levels, JPEG 2000.
 pub trait StoredTiles: Send + Sync {
     /// Texels of a stored tile across and down.
     fn tile_size(&self) -> (u32, u32);
     /// The quality the tiles were stored at, from their quantisation tables.
     fn quality(&self) -> Option<Quality>;
-    /// Tile (`col`, `row`) of the grid as a complete JPEG file, or `None` where it cannot be
-    /// copied as it is (a stream that is not a whole tile, or that a browser cannot decode):
-    /// that tile is encoded instead. An error names the file and the tile.
-    fn jpeg(&self, col: u32, row: u32) -> crate::error::Result<Option<Vec<u8>>>;
+    /// How the tiles are coded.
+    fn coding(&self) -> Coding {
+        Coding::Jpeg
+    }
+    /// Tile (`col`, `row`) of the grid as stored: a complete JPEG file, or a JPEG 2000
+    /// codestream as [`coding`](Self::coding) says; `None` where it cannot be copied as it is
+    /// (a stream that is not a whole tile, or that a browser cannot decode): that tile is
+    /// encoded instead. An error names the file and the tile.
+    fn tile(&self, col: u32, row: u32) -> crate::error::Result<Option<Vec<u8>>>;
     /// How the tiles code colour, as the first one does (`None`: grey, unreadable or coded
     /// otherwise): a TIFF or DICOM output, which declares one coding for every tile, takes it
     /// where `--subsampling` is not given, so that the tiles can be copied.
     fn subsampling(&self) -> Option<crate::codec::Subsampling> {
-        self.jpeg(0, 0).ok().flatten().and_then(|file| read_header(&file)).and_then(|h| h.subsampling())
+        self.tile(0, 0).ok().flatten().and_then(|file| read_header(&file)).and_then(|h| h.subsampling())
     }
 }
 
 /// A slide's levels as it stores them: the full resolution and its reduced copies, largest
-/// first, each a grid of JPEG tiles, for an output that keeps every level as it is (a DICOM
+/// first, each a grid of JPEG (or JPEG 2000) tiles, for an output that keeps every level as it is (a DICOM
 /// series, `--levels stored`: docs/dicom.md).
 #[derive(Clone)]
 pub struct StoredLevels {
     /// The file they are in, for messages.
     pub path: PathBuf,
     pub levels: Vec<StoredLevel>,
-    /// Why the levels stop where they do, where a later reduced level is no grid of JPEG
-    /// tiles (in strips, another compression): then they cannot all be copied.
+    /// Why the levels stop where they do, where a later reduced level is no grid of tiles
+    /// coded as the first level's are (in strips, another compression): then they cannot all
+    /// be copied.
     pub unlike: Option<String>,
 }
 

@@ -7,6 +7,7 @@ VORTEX_PYVIPS).
     dicom_out.py associated DIR SLIDE [native]
     dicom_out.py native DIR SOURCE TILE
     dicom_out.py lossy DIR [SLIDE]
+    dicom_out.py j2k DIR SLIDE PHOTOMETRIC TRANSFER
 
 
 pydicom reads every instance (the IOD's key attributes checked), highdicom parses each as a VL
@@ -42,6 +43,12 @@ Exact, because the frames are the pyramid's samples as they are, and the box pyr
 With `lossy`: each instance's Lossy Image Compression, methods and ratios as pydicom reads
 them and, given SLIDE (a JPEG-tiled TIFF), its first page's texel bytes over its tiles' bytes
 as tifffile lists them (`sourceRatio`).
+With `j2k` (a series of an Aperio JPEG 2000 slide's own levels): one instance a level, of
+TRANSFER syntax and PHOTOMETRIC interpretation, every frame pydicom reads the stored
+codestream of the slide's tile byte for byte (tifffile's offsets and byte counts), highdicom
+parses each, wsidicom hands out the same bytes as each level's encoded tiles, the slide's
+thumbnail an instance of one JPEG baseline frame; and where PHOTOMETRIC is one OpenSlide 4 reads
+(RGB, YBR_RCT, YBR_ICT), it reads every level of the series exactly as it reads the slide's.
 Prints one JSON line of what it measured; exits 1 with the reason on a mismatch.
 """
 
@@ -473,7 +480,69 @@ def lossy(directory, slide_path=None):
     print(json.dumps(said))
 
 
+def check_jpeg_2000(directory, slide_path, photometric, transfer):
+    import highdicom
+    import openslide
+    import tifffile
+    from pydicom.encaps import generate_frames
+    from wsidicom import WsiDicom
+
+    theirs = openslide.OpenSlide(slide_path)
+    n = theirs.level_count
+    paths = sorted(glob.glob(os.path.join(directory, "level-*.dcm")))
+    if len(paths) != n:
+        fail(f"{len(paths)} instances, the slide has {n} levels")
+    frames_equal = 0
+    with tifffile.TiffFile(slide_path) as t, open(slide_path, "rb") as f, WsiDicom.open(directory) as wsi:
+        pages = [page for page in t.pages if page.is_tiled]
+        if len(pages) != n:
+            fail(f"tifffile finds {len(pages)} tiled pages, OpenSlide {n} levels")
+        for k, page in enumerate(pages):
+            p = os.path.join(directory, f"level-{k}.dcm")
+            ds = pydicom.dcmread(p)
+            if ds.file_meta.TransferSyntaxUID != transfer or ds.PhotometricInterpretation != photometric:
+                fail(f"level {k}: {ds.file_meta.TransferSyntaxUID} {ds.PhotometricInterpretation}")
+            if (ds.Columns, ds.Rows, ds.NumberOfFrames) != (page.tilewidth, page.tilelength, len(page.dataoffsets)):
+                fail(f"level {k}: {ds.Columns}x{ds.Rows} frames, {ds.NumberOfFrames} of them")
+            if highdicom.imread(p).SOPClassUID != WSI:
+                fail(f"highdicom: level {k}")
+            stored = []
+            for offset, count in zip(page.dataoffsets, page.databytecounts):
+                f.seek(offset)
+                stored.append(f.read(count))
+            frames = list(generate_frames(ds.PixelData, number_of_frames=ds.NumberOfFrames))
+            # An item holds an even number of bytes: an odd codestream ends padded with one 0.
+            for i, (frame, tile) in enumerate(zip(frames, stored)):
+                if frame != tile and frame != tile + b"\0":
+                    fail(f"level {k} frame {i}: not the slide's stored codestream")
+            across = -(-page.imagewidth // page.tilewidth)
+            level = wsi.levels[k].level
+            for i, tile in enumerate(stored):
+                got = wsi.read_encoded_tile(level, (i % across, i // across), crop_to_image_boundary=False)
+                if got.rstrip(b"\0") != tile.rstrip(b"\0"):
+                    fail(f"wsidicom: level {k} tile {i} is not the stored codestream")
+            frames_equal += len(stored)
+    thumbnail = pydicom.dcmread(os.path.join(directory, "thumbnail.dcm"))
+    if thumbnail.file_meta.TransferSyntaxUID != JPEG_BASELINE or thumbnail.NumberOfFrames != 1:
+        fail(f"thumbnail: {thumbnail.file_meta.TransferSyntaxUID}, {thumbnail.NumberOfFrames} frames")
+    measured = {"instances": n, "framesEqual": frames_equal}
+    if photometric in ("RGB", "YBR_RCT", "YBR_ICT"):
+        ours = openslide.OpenSlide(paths[0])
+        for k in range(n):
+            a = np.asarray(ours.read_region((0, 0), k, ours.level_dimensions[k]))
+            b = np.asarray(theirs.read_region((0, 0), k, theirs.level_dimensions[k]))
+            if a.shape != b.shape or not np.array_equal(a, b):
+                fail(f"OpenSlide reads level {k} of the series otherwise than the slide's")
+        measured["openslideLevelsEqual"] = n
+    else:
+        measured["openslide"] = f"skipped: it reads no {photometric} JPEG 2000"
+    print(json.dumps(measured))
+
+
 def main():
+    if sys.argv[1] == "j2k":
+        check_jpeg_2000(*sys.argv[2:6])
+        return
     if sys.argv[1] == "lossy":
         lossy(*sys.argv[2:4])
         return

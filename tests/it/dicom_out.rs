@@ -245,6 +245,10 @@ fn refusals_and_no_partial_series() {
             vec!["split", s(&png), "--layout", "dicom", "-o", o, "--pixel-size", "1um", "--overlap", "1"],
             &["--overlap"][..],
         ),
+        (
+            vec!["split", s(&png), "--layout", "dicom", "-o", o, "--pixel-size", "1um", "--subsampling", "444"],
+            &["--subsampling 444", "YBR_FULL", "may not state"][..],
+        ),
     ] {
         fails_with(&run(&args), want);
         assert!(!out.exists(), "{args:?} left {}", out.display());
@@ -409,6 +413,113 @@ fn a_slide_s_own_levels_are_copied_as_stored() {
     // 8 x 5 of the 9 x 6 tiles of level 0 lie inside the image.
     assert_eq!(json["copied"], 40, "{json}");
     dciodvfy(&pow2);
+}
+
+/// An Aperio SVS of JPEG 2000 tiles as tifffile writes it with imagecodecs' OpenJPEG: three
+/// levels of 128-texel tiles (1024 x 704, 256 x 176, 64 x 44: 48, 4 and 1 tiles; downsamples
+/// of 4 and 16 as wsidicom needs them, within 1% of a power of two) and a JPEG
+/// thumbnail between the first two, as Aperio orders them. The second argument picks the
+/// coding: `rct` (33005, the reversible wavelet through the codestream's colour transform),
+/// `ict` (33005, irreversible, through the transform), `rgb` (33005, reversible, no transform)
+/// or `ycbcr` (33003: Y, Cb, Cr components, reversible, no transform: `YBR_FULL`, which no
+/// whole-slide image may state).
+const MAKE_J2K_LEVELLED_SVS: &str = r#"
+import sys, numpy as np, tifffile, imagecodecs
+kind = sys.argv[2]
+h, w, t = 704, 1024, 128
+y, x = np.mgrid[0:h, 0:w]
+img = np.stack([x * 255 // w, y * 255 // h, (x // 3 + y // 5) & 255], -1).astype(np.int32)
+img += np.random.default_rng(7).integers(0, 16, img.shape)
+img = np.clip(img, 0, 255).astype(np.uint8)
+def ycc(a):
+    f = a.astype(np.float64)
+    c = np.stack([0.299 * f[..., 0] + 0.587 * f[..., 1] + 0.114 * f[..., 2],
+                  128 - 0.168736 * f[..., 0] - 0.331264 * f[..., 1] + 0.5 * f[..., 2],
+                  128 + 0.5 * f[..., 0] - 0.418688 * f[..., 1] - 0.081312 * f[..., 2]], -1)
+    return np.clip(np.round(c), 0, 255).astype(np.uint8)
+code = 33003 if kind == "ycbcr" else 33005
+def tiles(a):
+    a = ycc(a) if kind == "ycbcr" else a
+    for ty in range(0, a.shape[0], t):
+        for tx in range(0, a.shape[1], t):
+            tile = np.zeros((t, t, 3), np.uint8)
+            part = a[ty:ty + t, tx:tx + t]
+            tile[:part.shape[0], :part.shape[1]] = part
+            if kind == "ict":
+                yield imagecodecs.jpeg2k_encode(tile, level=40, codecformat="J2K", mct=True, reversible=False)
+            else:
+                yield imagecodecs.jpeg2k_encode(tile, level=0, codecformat="J2K", mct=kind == "rct", reversible=True)
+head = "Aperio Image Library v12.0.15 \r\n%dx%d" % (w, h)
+with tifffile.TiffWriter(sys.argv[1]) as tw:
+    def level(a, description):
+        tw.write(tiles(a), shape=a.shape, dtype="uint8", tile=(t, t), compression=code, photometric="rgb", description=description, metadata=None)
+    level(img, head + " [0,0 %dx%d] (%dx%d) J2K/KDU Q=70|AppMag = 20|MPP = 0.5" % (w, h, t, t))
+    tw.write(img[::8, ::8].copy(), compression="jpeg", photometric="rgb", description=head + " -> thumbnail", metadata=None)
+    level(img[::4, ::4].copy(), head + " -> 256x176")
+    level(img[::16, ::16].copy(), head + " -> 64x44")
+"#;
+
+/// An Aperio JPEG 2000 slide's levels are copied as JPEG 2000 frames, nothing decoded: each
+/// codestream byte for byte (pydicom's frames, wsidicom's encoded tiles), the transfer syntax
+/// lossless only (.90) for reversible codestreams, .91 for irreversible ones, the photometric
+/// interpretation what the codestream and the TIFF say (PS3.5 8.2.4), valid for dciodvfy and
+/// read by OpenSlide 4 exactly as it reads the slide; the thumbnail stays a JPEG baseline
+/// instance. The irreversible slide's instances state its JPEG 2000 step and no coding of
+/// their own. Aperio's YCbCr (33003) tiles would be `YBR_FULL` frames, which the IOD forbids:
+/// that slide makes our JPEG pyramid, saying why, as `--levels pow2` does.
+#[test]
+fn an_aperio_jpeg_2000_slide_s_levels_are_copied_as_jpeg_2000_frames() {
+    let Some(python) = readers() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let (lossless, lossy) = ("1.2.840.10008.1.2.4.90", "1.2.840.10008.1.2.4.91");
+    for (kind, photometric, transfer) in
+        [("rct", "YBR_RCT", lossless), ("ict", "YBR_ICT", lossy), ("rgb", "RGB", lossless)]
+    {
+        let svs = dir.path().join(format!("{kind}.svs"));
+        crate::tiff_slides::python(python.as_os_str(), MAKE_J2K_LEVELLED_SVS, &[s(&svs), kind]);
+        let out = dir.path().join(format!("{kind}-series"));
+        let json = ok(&["split", s(&svs), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um", "--json"]);
+        let json = json_of(&json);
+        let d = &json["dicom"];
+        assert_eq!(
+            (d["levels"].clone(), d["levelsDeclined"].clone()),
+            ("stored".into(), serde_json::Value::Null),
+            "{json}"
+        );
+        assert_eq!((json["copied"].clone(), json["encoded"].clone()), (53.into(), 0.into()), "{kind}: {json}");
+        assert_eq!(
+            (d["photometricInterpretation"].as_str(), d["transferSyntax"].as_str()),
+            (Some(photometric), Some(transfer))
+        );
+        dciodvfy(&out);
+        let script =
+            Command::new(&python).args([SCRIPT, "j2k", s(&out), s(&svs), photometric, transfer]).output().unwrap();
+        let said = format!("{}{}", String::from_utf8_lossy(&script.stdout), String::from_utf8_lossy(&script.stderr));
+        assert!(script.status.success(), "{kind}: {said}");
+        assert!(said.contains("\"framesEqual\": 53") && said.contains("\"openslideLevelsEqual\": 3"), "{said}");
+        // Each level's lossy history: the slide's JPEG 2000 step where it was irreversible,
+        // nothing of the series' own.
+        let history = Command::new(&python).args([SCRIPT, "lossy", s(&out)]).output().unwrap();
+        let history = json_of(&String::from_utf8_lossy(&history.stdout));
+        let want: &[&str] = if kind == "ict" { &["ISO_15444_1"] } else { &[] };
+        for level in ["level-0.dcm", "level-1.dcm", "level-2.dcm"] {
+            assert_eq!(history[level]["methods"], serde_json::json!(want), "{kind} {level}: {history}");
+        }
+    }
+    // Our JPEG pyramid instead: asked for, or where the tiles are YCbCr; every frame encoded.
+    let ycbcr = dir.path().join("ycbcr.svs");
+    crate::tiff_slides::python(python.as_os_str(), MAKE_J2K_LEVELLED_SVS, &[s(&ycbcr), "ycbcr"]);
+    for (slide, extra, declined) in [("rct.svs", &["--levels", "pow2"][..], false), ("ycbcr.svs", &[][..], true)] {
+        let (slide, out) = (dir.path().join(slide), dir.path().join(format!("{slide}-pow2")));
+        let args = ["split", s(&slide), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um"];
+        let json = json_of(&ok(&[&args[..], extra, &["--json"]].concat()));
+        let d = &json["dicom"];
+        assert_eq!((d["transferSyntax"].as_str(), json["copied"].as_u64()), (Some("1.2.840.10008.1.2.4.50"), Some(0)));
+        assert_eq!(d["photometricInterpretation"], "YBR_FULL_422", "{json}");
+        let why = d["levelsDeclined"].as_str().unwrap_or_default();
+        assert_eq!(why.contains("Compression 33003: YBR_FULL, which"), declined, "{json}");
+        dciodvfy(&out);
+    }
 }
 
 /// DICOM of the slide's own levels beside Deep Zoom in one run: Deep Zoom's pyramid is cut,

@@ -36,6 +36,9 @@ pub(super) struct Part {
     /// Its Total Pixel Matrix and frames.
     pub level: Level,
     pub photometric: Photometric,
+    /// How its frames are stored: the series' for a level; JPEG baseline for an associated
+    /// image unless the series is native.
+    pub transfer: Transfer,
     /// Bits a sample: 8, or 16 (a level's native frames of 16-bit samples).
     pub bits: u16,
     /// Pixel Spacing (rows, columns) in mm, where known: the levels' and the thumbnail's
@@ -66,6 +69,7 @@ impl Part {
             image_type,
             level,
             photometric: spec.photometric,
+            transfer: spec.transfer,
             bits: if spec.stored.depth == crate::pixel::Depth::U16 { 16 } else { 8 },
             spacing: Some(spacing(spec, level)),
             label_in_image: false,
@@ -92,6 +96,10 @@ impl Part {
             image_type,
             level,
             photometric,
+            transfer: match spec.transfer {
+                Transfer::Native => Transfer::Native,
+                _ => Transfer::JpegBaseline,
+            },
             bits: 8,
             spacing: (image.kind == Kind::Thumbnail).then(|| spacing(spec, level)),
             label_in_image,
@@ -211,7 +219,7 @@ impl<'a> Series<'a> {
         let lod = part.number;
         let object = self.dataset(part, offsets, frame_bytes);
         let meta = FileMetaTableBuilder::new()
-            .transfer_syntax(self.spec.transfer.uid())
+            .transfer_syntax(part.transfer.uid())
             .implementation_class_uid(uid::implementation())
             .implementation_version_name(PROGRAM.to_ascii_uppercase().replace('-', "_"));
         let file = object.with_meta(meta).map_err(|e| TilerError::Internal(format!("DICOM file meta: {e}")))?;
@@ -341,7 +349,7 @@ impl<'a> Series<'a> {
         // series' JPEG coding where it coded the frames; "00" (and no ratio or method, type
         // 1C) only where none was ever lossy, as far as the source says.
         let mut steps = part.lossy_before.clone();
-        if s.transfer == Transfer::JpegBaseline && part.coded_here {
+        if part.transfer == Transfer::JpegBaseline && part.coded_here {
             let raw = u64::from(level.tile.0) * u64::from(level.tile.1) * u64::from(p.samples());
             let ratio = (frames * raw) as f64 / frame_bytes.max(1) as f64;
             steps.push(LossyStep { method: LossyStep::JPEG.to_string(), ratio });
@@ -542,7 +550,7 @@ mod tests {
     }
 
     /// Lossy Image Compression and its ratios and methods: the source's steps in order, then
-    /// the series' JPEG coding where it coded the frames (the ratio of the frames' texels to
+    /// the series' JPEG baseline coding where it coded the frames (the ratio of the frames' texels to
     /// their bytes); `00` and neither list where no step was lossy.
     #[test]
     fn the_lossy_history_is_the_source_s_steps_then_the_series_own() {
@@ -555,6 +563,8 @@ mod tests {
             (Transfer::JpegBaseline, vec![], true, Some(("8", "ISO_10918_1"))),
             (Transfer::JpegBaseline, vec![j2k.clone()], false, Some(("20", "ISO_15444_1"))),
             (Transfer::JpegBaseline, vec![j2k.clone()], true, Some(("20\\8", "ISO_15444_1\\ISO_10918_1"))),
+            // Copied JPEG 2000 frames are the source's coding, never the series' own.
+            (Transfer::Jpeg2000, vec![j2k.clone()], true, Some(("20", "ISO_15444_1"))),
             (Transfer::Native, vec![j2k], true, Some(("20", "ISO_15444_1"))),
             (Transfer::Native, vec![], true, None),
         ];

@@ -16,7 +16,8 @@
 //! * `sink`: `DicomSink`, the pipeline's sink: a staging directory renamed into place.
 //!
 //! * `copy`: a slide's own levels as the instances (`--levels stored`): every stored JPEG
-//!   tile of every level copied as a frame, nothing decoded, where all are what DICOM holds.
+//!   or JPEG 2000 tile of every level copied as a frame, nothing decoded, where all are what
+//!   DICOM holds.
 //!
 //! After the levels, each of the source's associated images (label, overview, thumbnail:
 //! `source::associated`) is an instance of one frame, encoded at `finish`, unless
@@ -25,11 +26,13 @@
 //! Frames are `TILED_FULL`: whole tiles of the level's grid in row-major order, the right and
 //! bottom ones padded. They are JPEG baseline (1.2.840.10008.1.2.4.50) by default: a
 //! JPEG-tiled source's stored tiles that match the level's photometric interpretation are
-//! copied byte for byte (`takes_stored_jpeg`); a slide's own levels are copied whole (`copy`).
+//! copied byte for byte (`takes_stored_jpeg`); a slide's own levels are copied whole (`copy`),
+//! an Aperio slide's JPEG 2000 tiles as JPEG 2000 frames (1.2.840.10008.1.2.4.90 where every
+//! level's codestreams are reversible, else .91; its associated images stay JPEG baseline).
 //! With `--codec raw` they are native ([`Transfer::Native`], explicit VR little endian,
 //! 1.2.840.10008.1.2.1): 8- or 16-bit grey or RGB samples as the pyramid made them, lossless,
-//! each frame written in place in its instance (`frames::Native`). Not yet: JPEG 2000 frames,
-//! the Deflated transfer syntax (docs/dicom.md says why).
+//! each frame written in place in its instance (`frames::Native`). Not written: JPEG 2000
+//! frames of our own coding, the Deflated transfer syntax (docs/dicom.md says why).
 
 mod copy;
 mod dataset;
@@ -38,7 +41,7 @@ pub mod meta;
 mod sink;
 mod uid;
 
-pub(crate) use copy::{copy_levels, copyable};
+pub(crate) use copy::{Form, copy_levels, copyable};
 
 pub use meta::DicomMeta;
 pub(crate) use sink::DicomSink;
@@ -56,6 +59,10 @@ pub(crate) const DEFAULT_TILE_SIZE: u32 = 256;
 pub(crate) const SOP_CLASS: &str = "1.2.840.10008.5.1.4.1.1.77.1.6";
 /// JPEG Baseline (Process 1): the transfer syntax of JPEG frames.
 pub(crate) const JPEG_BASELINE: &str = "1.2.840.10008.1.2.4.50";
+/// JPEG 2000 Image Compression (Lossless Only): copied frames of the reversible wavelet.
+pub(crate) const JPEG_2000_LOSSLESS: &str = "1.2.840.10008.1.2.4.90";
+/// JPEG 2000 Image Compression: copied frames, lossy or not.
+pub(crate) const JPEG_2000: &str = "1.2.840.10008.1.2.4.91";
 /// Explicit VR Little Endian: the transfer syntax of native (uncompressed) frames.
 pub(crate) const EXPLICIT_VR_LITTLE_ENDIAN: &str = "1.2.840.10008.1.2.1";
 
@@ -71,6 +78,12 @@ pub enum Transfer {
     /// Native (`--codec raw`): the samples as they are, 8 or 16 bits, interleaved, little
     /// endian, every frame of an instance one after another in its Pixel Data (lossless).
     Native,
+    /// JPEG 2000 of the reversible wavelet only, encapsulated: a slide's lossless JPEG 2000
+    /// tiles copied (never coded here).
+    Jpeg2000Lossless,
+    /// JPEG 2000, encapsulated: a slide's JPEG 2000 tiles copied, some of the irreversible
+    /// wavelet.
+    Jpeg2000,
 }
 
 impl Transfer {
@@ -79,13 +92,23 @@ impl Transfer {
         match self {
             Transfer::JpegBaseline => JPEG_BASELINE,
             Transfer::Native => EXPLICIT_VR_LITTLE_ENDIAN,
+            Transfer::Jpeg2000Lossless => JPEG_2000_LOSSLESS,
+            Transfer::Jpeg2000 => JPEG_2000,
         }
     }
 
-    /// What the frames are, for the summary: `JPEG baseline`, `native 8-bit`, `native 16-bit`.
+    /// Whether its frames are encapsulated (one item a frame), not native.
+    pub fn encapsulated(self) -> bool {
+        self != Transfer::Native
+    }
+
+    /// What the frames are, for the summary: `JPEG baseline`, `JPEG 2000 lossless`, `JPEG
+    /// 2000`, `native 8-bit`, `native 16-bit`.
     pub fn describe(self, depth: Depth) -> &'static str {
         match (self, depth) {
             (Transfer::JpegBaseline, _) => "JPEG baseline",
+            (Transfer::Jpeg2000Lossless, _) => "JPEG 2000 lossless",
+            (Transfer::Jpeg2000, _) => "JPEG 2000",
             (Transfer::Native, Depth::U16) => "native 16-bit",
             (Transfer::Native, _) => "native 8-bit",
         }
@@ -100,11 +123,16 @@ pub enum Photometric {
     /// YCbCr with the chroma halved both ways (JPEG 4:2:0), `YBR_FULL_422` as DICOM names
     /// every subsampled JPEG baseline frame.
     YbrFull422,
-    /// YCbCr without subsampling (JPEG 4:4:4), `YBR_FULL`.
+    /// YCbCr without subsampling (JPEG 4:4:4), `YBR_FULL`: which a whole-slide image may not
+    /// state (`Spec::check` refuses it; PS3.3 C.8.12.4.1.5).
     YbrFull,
     /// R, G, B as they are (a JPEG whose Adobe marker says no transform), `RGB`: as Aperio
-    /// slides store them, or `--subsampling rgb`.
+    /// slides store them, or `--subsampling rgb`; JPEG 2000 without its colour transform.
     Rgb,
+    /// JPEG 2000 through its reversible colour transform (RCT), `YBR_RCT`.
+    YbrRct,
+    /// JPEG 2000 through its irreversible colour transform (ICT), `YBR_ICT`.
+    YbrIct,
 }
 
 impl Photometric {
@@ -115,6 +143,8 @@ impl Photometric {
             Photometric::YbrFull422 => "YBR_FULL_422",
             Photometric::YbrFull => "YBR_FULL",
             Photometric::Rgb => "RGB",
+            Photometric::YbrRct => "YBR_RCT",
+            Photometric::YbrIct => "YBR_ICT",
         }
     }
 
@@ -227,7 +257,15 @@ impl Spec {
             Transfer::Native if !self.copied.is_empty() => {
                 return Err(TilerError::Internal("a slide's JPEG levels copied into native frames".into()));
             }
+            Transfer::Jpeg2000Lossless | Transfer::Jpeg2000 if self.copied.is_empty() || s.depth != Depth::U8 => {
+                return Err(TilerError::Internal("JPEG 2000 frames that are no slide's copied levels".into()));
+            }
             _ => {}
+        }
+        if self.photometric == Photometric::YbrFull {
+            return Err(TilerError::Options(
+                "--subsampling 444: YCbCr JPEG frames at 4:4:4 are YBR_FULL, which a VL Whole Slide Microscopy Image may not state (its Photometric Interpretation is MONOCHROME2, RGB, YBR_FULL_422, YBR_ICT or YBR_RCT): use 420 (the default) or rgb".into(),
+            ));
         }
         if self.transfer == Transfer::Native && self.photometric != Photometric::native(s.channels) {
             return Err(TilerError::Internal(format!("native {s} frames stated as {}", self.photometric.name())));

@@ -77,12 +77,12 @@ impl DicomSink {
         let series = Series::new(&sink.spec)?;
         for lod in 0..sink.spec.level_count() {
             let frames = sink.spec.level(lod).tiles() as usize;
-            let level = match sink.spec.transfer {
-                Transfer::JpegBaseline => {
+            let level = match sink.spec.transfer.encapsulated() {
+                true => {
                     let path = sink.staging.join(format!(".level-{lod}.frames"));
                     Frames::Encapsulated(Staged::create(&path, frames).map_err(|e| TilerError::write(&path, e))?)
                 }
-                Transfer::Native => {
+                false => {
                     let part = Part::level(&sink.spec, lod);
                     let path = sink.staging.join(Spec::file_name(lod));
                     Frames::Native(sink.start_native(&series, &part, &path)?)
@@ -186,9 +186,9 @@ impl DicomSink {
         Ok(Written { frames, frame_bytes, file_bytes, basic: true })
     }
 
-    /// Decodes associated image `k` of the source, encodes it as one JPEG frame (YCbCr 4:2:0,
-    /// or grey, at the series' quality), or one native frame of its 8-bit samples, and
-    /// writes its instance.
+    /// Decodes associated image `k` of the source, encodes it as one JPEG baseline frame
+    /// (YCbCr 4:2:0, or grey, at the series' quality: also in a series of copied JPEG 2000
+    /// levels), or one native frame of its 8-bit samples, and writes its instance.
     fn write_associated(&self, series: &Series, k: usize) -> Result<AssociatedSummary> {
         let image = &self.spec.associated[k];
         let mut pixels = image.decode(self.spec.associated_bytes)?;
@@ -305,6 +305,7 @@ impl TileSink for DicomSink {
             Photometric::Rgb => h.subsampling() == Some(Subsampling::Rgb),
             Photometric::YbrFull422 => h.subsampling() == Some(Subsampling::S420),
             Photometric::YbrFull => h.subsampling() == Some(Subsampling::S444),
+            Photometric::YbrRct | Photometric::YbrIct => false,
         };
         whole && form
     }

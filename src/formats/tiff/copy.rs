@@ -56,8 +56,11 @@ pub(crate) fn copyable(
     let mut coding: Option<Coding> = None;
     for (k, level) in levels.levels.iter().enumerate() {
         let name = format!("level {k} (page {})", level.page);
+        if level.tiles.coding() != stored::Coding::Jpeg {
+            return Ok(Err(format!("{name}'s tiles are JPEG 2000: a TIFF copies JPEG tiles only")));
+        }
         let tile = level.tiles.tile_size();
-        let first = level.tiles.jpeg(0, 0).map_err(|e| stored::in_level(e, k, level.page))?;
+        let first = level.tiles.tile(0, 0).map_err(|e| stored::in_level(e, k, level.page))?;
         let Some(h) = first.as_deref().and_then(stored::read_header) else {
             return Ok(Err(format!("{name}'s first tile is no whole {}x{} JPEG", tile.0, tile.1)));
         };

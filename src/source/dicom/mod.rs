@@ -31,8 +31,8 @@ use self::instance::{Instance, PixelData, show_tag};
 use super::RowSource;
 use super::stored;
 use super::tiff::jp2k;
-use super::tiff::jpeg;
 use super::tiff::libjpeg::Colour;
+use super::tiff::{Pages, jpeg};
 use crate::error::{Result, TilerError};
 
 pub(crate) use self::instance::{MAGIC_AT, is_dicom};
@@ -265,7 +265,7 @@ fn build(instance: &Instance, mut label: String, max_memory: u64) -> Result<Box<
                 counts: grid.counts,
                 tables: vec![],
             };
-            jpeg::assemble(path, grid, colour, label, embedded, jpeg::Pages::alone(max_memory))
+            jpeg::assemble(path, grid, colour, label, embedded, Pages::alone(max_memory))
         }
         JPEG_2000_LOSSLESS | JPEG_2000 => {
             let ycbcr = match photometric.as_str() {
@@ -281,7 +281,7 @@ fn build(instance: &Instance, mut label: String, max_memory: u64) -> Result<Box<
                 }
             };
             let grid = jp2k::Grid { size, chunk: tile, offsets: grid.offsets, counts: grid.counts };
-            jp2k::assemble(path, grid, ycbcr, label, embedded, max_memory)
+            jp2k::assemble(path, grid, ycbcr, label, embedded, Pages::alone(max_memory))
         }
         _ => {
             let grey = match (photometric.as_str(), samples) {

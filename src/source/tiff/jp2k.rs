@@ -11,14 +11,17 @@ use std::fs::File;
 use std::io::BufReader;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use rayon::prelude::*;
 use tiff::decoder::{ChunkType, Decoder};
 use tiff::tags::Tag;
 
-use super::open_error;
+use super::{Pages, open_error};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
+use crate::source::stored::codestream::Codestream;
+use crate::source::stored::{self, Coding, Quality, StoredLevel, StoredLevels, StoredTiles};
 use crate::source::{Embedded, ImageHeader, LossyStep, RowSource};
 
 /// Whether the image is JPEG 2000 in Aperio's two forms.
@@ -28,8 +31,6 @@ pub(super) fn is_jp2k(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Re
 
 pub(super) struct Jp2kTiff {
     path: PathBuf,
-    file: File,
-    file_len: u64,
     width: u32,
     height: u32,
     /// The components are Y, Cb, Cr (33003), not R, G, B (33005).
@@ -37,8 +38,7 @@ pub(super) struct Jp2kTiff {
     chunk_w: u32,
     chunk_h: u32,
     across: u32,
-    offsets: Vec<u64>,
-    counts: Vec<u64>,
+    chunks: Arc<Codestreams>,
     /// The decoded tiles of the current row, RGB texels inside the image only.
     band: Vec<Vec<u8>>,
     band_first: u64,
@@ -46,6 +46,51 @@ pub(super) struct Jp2kTiff {
     next: u64,
     label: String,
     embedded: Embedded,
+    /// The page read and its reduced levels, for an output that copies them.
+    pages: Pages,
+}
+
+/// Where a grid's codestreams lie in a file, and the reading of one: the reader decodes them,
+/// an output that copies them takes them as they are ([`Jp2kTiles`]).
+struct Codestreams {
+    path: PathBuf,
+    file: File,
+    file_len: u64,
+    /// Each chunk's bytes in the file, row-major.
+    offsets: Vec<u64>,
+    counts: Vec<u64>,
+    /// The most bytes a chunk may claim: twice its texels' and 64 KiB of headers.
+    bound: u64,
+    /// Its texels across and down, for messages.
+    chunk: (u32, u32),
+}
+
+impl Codestreams {
+    fn new(path: &Path, offsets: Vec<u64>, counts: Vec<u64>, (w, h): (u32, u32)) -> Result<Codestreams> {
+        let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
+        let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
+        let bound = u64::from(w) * u64::from(h) * 6 + (1 << 16);
+        Ok(Codestreams { path: path.to_path_buf(), file, file_len, offsets, counts, bound, chunk: (w, h) })
+    }
+
+    /// Chunk `index`'s codestream as stored, or what is wrong with where the file puts it.
+    fn read(&self, index: usize) -> std::result::Result<Vec<u8>, String> {
+        let (offset, count) = match (self.offsets.get(index), self.counts.get(index)) {
+            (Some(&o), Some(&c)) if c > 0 => (o, c),
+            _ => return Err("the file gives it no data (offset or byte count missing or 0)".into()),
+        };
+        if offset.checked_add(count).is_none_or(|end| end > self.file_len) {
+            return Err(format!(
+                "its {count} bytes at offset {offset} run past the end of the file: a truncated file?"
+            ));
+        }
+        if count > self.bound {
+            return Err(format!("it claims {count} compressed bytes for a {}x{} tile", self.chunk.0, self.chunk.1));
+        }
+        let mut raw = vec![0u8; count as usize];
+        self.file.read_exact_at(&mut raw, offset).map_err(|e| format!("cannot read it: {e}"))?;
+        Ok(raw)
+    }
 }
 
 pub(super) fn open(
@@ -53,7 +98,7 @@ pub(super) fn open(
     decoder: &mut Decoder<BufReader<File>>,
     label: String,
     embedded: Embedded,
-    max_memory: u64,
+    pages: Pages,
 ) -> Result<Box<dyn RowSource>> {
     let tag_err = |e| open_error(path, e);
     let (width, height) = super::dimensions(path, decoder)?;
@@ -81,7 +126,9 @@ pub(super) fn open(
     let offsets = decoder.get_tag_u64_vec(offsets_tag).map_err(tag_err)?;
     let counts = decoder.get_tag_u64_vec(counts_tag).map_err(tag_err)?;
     let grid = Grid { size: (width, height), chunk: (chunk_w, chunk_h), offsets, counts };
-    assemble(path, grid, ycbcr, label, embedded, max_memory)
+    // Strips are never copied as a level's tiles.
+    let pages = if tiled { pages } else { Pages { levels: Vec::new(), ..pages } };
+    assemble(path, grid, ycbcr, label, embedded, pages)
 }
 
 /// Where a grid of JPEG 2000 codestreams lies in a file: a TIFF's tiles or strips, or a
@@ -98,14 +145,16 @@ pub(crate) struct Grid {
 
 /// The row source of `grid`'s codestreams in `path`; `ycbcr`: their three components are Y,
 /// Cb, Cr without the codestream's own colour transform (turned into RGB here), not R, G, B.
+/// `pages`: the page read, its reduced levels, and `--max-memory`.
 pub(crate) fn assemble(
     path: &Path,
     grid: Grid,
     ycbcr: bool,
     label: String,
     mut embedded: Embedded,
-    max_memory: u64,
+    pages: Pages,
 ) -> Result<Box<dyn RowSource>> {
+    let max_memory = pages.max_memory;
     let Grid { size: (width, height), chunk: (chunk_w, chunk_h), offsets, counts } = grid;
     if width == 0 || height == 0 || chunk_w == 0 || chunk_h == 0 {
         return Err(TilerError::decode(
@@ -132,67 +181,48 @@ pub(crate) fn assemble(
             ),
         ));
     }
-    let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
-    let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
+    let chunks = Codestreams::new(path, offsets, counts, (chunk_w, chunk_h))?;
     // The first tile's coding style says whether the wavelet was the irreversible one (a
     // lossy step; a file that states its history, a DICOM instance, keeps its own).
-    if embedded.lossy.is_empty() && irreversible(&main_header(&file, file_len, &offsets, &counts)) {
+    if embedded.lossy.is_empty() && irreversible(&main_header(&chunks)) {
         let tiles = (across as usize).saturating_mul(height.div_ceil(chunk_h) as usize);
-        let compressed = counts.iter().take(tiles).fold(0u64, |sum, &c| sum.saturating_add(c));
+        let compressed = chunks.counts.iter().take(tiles).fold(0u64, |sum, &c| sum.saturating_add(c));
         embedded.lossy = LossyStep::of(LossyStep::JPEG_2000, (width, height), 3, compressed);
     }
     Ok(Box::new(Jp2kTiff {
         path: path.to_path_buf(),
-        file,
-        file_len,
         width,
         height,
         ycbcr,
         chunk_w,
         chunk_h,
         across,
-        offsets,
-        counts,
+        chunks: Arc::new(chunks),
         band: vec![Vec::new(); across as usize],
         band_first: 0,
         band_rows: 0,
         next: 0,
         label,
         embedded,
+        pages,
     }))
 }
 
 /// The first bytes (4 KiB at most) of the first tile's codestream; empty where there are
 /// none to read (a damaged tile is reported when it is decoded).
-fn main_header(file: &File, file_len: u64, offsets: &[u64], counts: &[u64]) -> Vec<u8> {
-    let (Some(&offset), Some(&count)) = (offsets.first(), counts.first()) else { return Vec::new() };
-    let mut head = vec![0u8; count.min(4096).min(file_len.saturating_sub(offset)) as usize];
-    match file.read_exact_at(&mut head, offset) {
+fn main_header(chunks: &Codestreams) -> Vec<u8> {
+    let (Some(&offset), Some(&count)) = (chunks.offsets.first(), chunks.counts.first()) else { return Vec::new() };
+    let mut head = vec![0u8; count.min(4096).min(chunks.file_len.saturating_sub(offset)) as usize];
+    match chunks.file.read_exact_at(&mut head, offset) {
         Ok(()) => head,
         Err(_) => Vec::new(),
     }
 }
 
-/// Whether a codestream's main header says it was coded with the irreversible (9-7) wavelet
-/// (its COD segment: ISO/IEC 15444-1 A.6.1, the transformation is SPcod's fifth byte); false
-/// where it is the reversible (5-3) one or no COD is found.
+/// Whether a codestream's main header says it was coded with the irreversible (9-7) wavelet;
+/// false where it is the reversible (5-3) one or the header is unreadable.
 fn irreversible(head: &[u8]) -> bool {
-    if !head.starts_with(&[0xFF, 0x4F]) {
-        return false;
-    }
-    let mut at = 2;
-    while at + 4 <= head.len() && head[at] == 0xFF {
-        let (marker, length) = (head[at + 1], u16::from_be_bytes([head[at + 2], head[at + 3]]));
-        match marker {
-            // COD: Lcod, Scod, SGcod (4 bytes), then SPcod's levels, code-block sizes, style,
-            // transformation (0: irreversible 9-7, 1: reversible 5-3).
-            0x52 => return head.get(at + 13) == Some(&0),
-            // SOT: the main header ended without a COD.
-            0x90 => return false,
-            _ => at += 2 + usize::from(length),
-        }
-    }
-    false
+    Codestream::read(head).ok().and_then(|c| c.coding).is_some_and(|c| !c.reversible)
 }
 
 impl Jp2kTiff {
@@ -226,22 +256,9 @@ impl Jp2kTiff {
 
     /// Tile `index` into `texels`: its `w` x `h` texels inside the image, as RGB.
     fn decode_tile(&self, index: usize, w: u32, h: u32, texels: &mut Vec<u8>) -> std::result::Result<(), String> {
-        let (offset, count) = match (self.offsets.get(index), self.counts.get(index)) {
-            (Some(&o), Some(&c)) if c > 0 => (o, c),
-            _ => return Err("the file gives it no data (offset or byte count missing or 0)".into()),
-        };
-        if offset.checked_add(count).is_none_or(|end| end > self.file_len) {
-            return Err(format!(
-                "its {count} bytes at offset {offset} run past the end of the file: a truncated file?"
-            ));
-        }
-        let bound = self.chunk_w as u64 * self.chunk_h as u64 * 6 + (1 << 16);
-        if count > bound {
-            return Err(format!("it claims {count} compressed bytes for a {}x{} tile", self.chunk_w, self.chunk_h));
-        }
-        let mut raw = vec![0u8; count as usize];
-        self.file.read_exact_at(&mut raw, offset).map_err(|e| format!("cannot read it: {e}"))?;
+        let raw = self.chunks.read(index)?;
         let siz = self.check_size(&raw)?;
+        let origin = (u64::from(siz.origin.0), u64::from(siz.origin.1));
         let image = decode_codestream(&raw)?;
         let comps = image.components();
         if comps.len() < 3 {
@@ -253,14 +270,14 @@ impl Jp2kTiff {
         // first texel takes the first sample).
         let mut planes = Vec::with_capacity(3);
         for (i, c) in comps[..3].iter().enumerate() {
-            let (dx, dy) = siz.factors[i];
+            let (dx, dy) = siz.components.get(i).map_or((1, 1), |c| (u64::from(c.dx), u64::from(c.dy)));
             let first = |origin: u64, d: u64| origin.div_ceil(d);
-            let (fx, fy) = (first(siz.origin.0, dx), first(siz.origin.1, dy));
+            let (fx, fy) = (first(origin.0, dx), first(origin.1, dy));
             // The component's sample under the tile's last texel must be there.
             let covers = |origin: u64, n: u32, d: u64, f: u64, have: u32| {
                 ((origin + n as u64 - 1) / d).saturating_sub(f) < have as u64
             };
-            let shaped = covers(siz.origin.0, w, dx, fx, c.width()) && covers(siz.origin.1, h, dy, fy, c.height());
+            let shaped = covers(origin.0, w, dx, fx, c.width()) && covers(origin.1, h, dy, fy, c.height());
             if !shaped || c.precision() != 8 || c.is_signed() || c.data().len() < (c.width() * c.height()) as usize {
                 return Err(format!(
                     "JPEG 2000 component {i} is {}x{} of {}{} bits, subsampled {dx}x{dy}; unsigned 8-bit covering {w}x{h} texels expected",
@@ -271,12 +288,12 @@ impl Jp2kTiff {
                 ));
             }
             let columns: Vec<usize> =
-                (0..w as u64).map(|x| ((siz.origin.0 + x) / dx).saturating_sub(fx) as usize).collect();
+                (0..w as u64).map(|x| ((origin.0 + x) / dx).saturating_sub(fx) as usize).collect();
             planes.push((c.data(), c.width() as usize, dy, fy, columns));
         }
         let sample = |plane: usize, r: u32, x: usize| {
             let (data, stride, dy, fy, columns) = &planes[plane];
-            let row = ((siz.origin.1 + r as u64) / dy).saturating_sub(*fy) as usize;
+            let row = ((origin.1 + r as u64) / dy).saturating_sub(*fy) as usize;
             data[row * stride + columns[x]].clamp(0, 255)
         };
         texels.clear();
@@ -309,46 +326,18 @@ fn decode_codestream(raw: &[u8]) -> std::result::Result<jpeg2k::Image, String> {
 
 impl Jp2kTiff {
     /// Refuses a codestream whose SIZ marker declares more texels or components than a tile
-    /// holds, before OpenJPEG allocates for them; returns the image's origin and its first three
-    /// components' subsampling.
-    fn check_size(&self, raw: &[u8]) -> std::result::Result<Siz, String> {
-        let be32 = |at: usize| raw.get(at..at + 4).map(|b| u32::from_be_bytes([b[0], b[1], b[2], b[3]]));
-        if raw.get(..4) != Some(&[0xFF, 0x4F, 0xFF, 0x51]) {
-            return Err("not a JPEG 2000 codestream (no SOC and SIZ markers at its start)".into());
-        }
-        let size = (be32(8), be32(12), be32(16), be32(20));
-        let (Some(x), Some(y), Some(x0), Some(y0)) = size else {
-            return Err("the JPEG 2000 SIZ marker is cut short".into());
-        };
-        let components = raw.get(40..42).map_or(0, |b| u16::from_be_bytes([b[0], b[1]]));
-        let (w, h) = (x.saturating_sub(x0), y.saturating_sub(y0));
-        if w > self.chunk_w || h > self.chunk_h || !(1..=4).contains(&components) {
-            let (tw, th) = (self.chunk_w, self.chunk_h);
+    /// holds, before OpenJPEG allocates for them; returns what its main header says.
+    fn check_size(&self, raw: &[u8]) -> std::result::Result<Codestream, String> {
+        let c = Codestream::read(raw)?;
+        let components = c.components.len();
+        if c.width > self.chunk_w || c.height > self.chunk_h || !(1..=4).contains(&components) {
+            let (w, h, tw, th) = (c.width, c.height, self.chunk_w, self.chunk_h);
             return Err(format!(
                 "the codestream declares {w}x{h} texels of {components} components in a {tw}x{th} tile"
             ));
         }
-        // Each component's Ssiz, XRsiz and YRsiz follow; a factor of 0 is not JPEG 2000.
-        let mut factors = [(1, 1); 3];
-        for (i, factor) in factors.iter_mut().enumerate().take(components as usize) {
-            let Some(&[_, dx, dy]) = raw.get(42 + 3 * i..45 + 3 * i) else {
-                return Err("the JPEG 2000 SIZ marker is cut short".into());
-            };
-            if dx == 0 || dy == 0 {
-                return Err(format!("JPEG 2000 component {i} is subsampled {dx}x{dy}"));
-            }
-            *factor = (dx as u64, dy as u64);
-        }
-        Ok(Siz { origin: (x0 as u64, y0 as u64), factors })
+        Ok(c)
     }
-}
-
-/// What a tile's SIZ marker says about where its components' samples lie.
-struct Siz {
-    /// The image area's origin on the reference grid (XOsiz, YOsiz).
-    origin: (u64, u64),
-    /// The first three components' subsampling (XRsiz, YRsiz).
-    factors: [(u64, u64); 3],
 }
 
 /// JFIF YCbCr to RGB in libjpeg's fixed point (16 fractional bits, each term rounded), the
@@ -361,6 +350,75 @@ fn ycbcr_to_rgb(y: i32, cb: i32, cr: i32) -> [u8; 3] {
     let g = y + ((-fix(0.34414) * cb - fix(0.71414) * cr + HALF) >> 16);
     let b = y + ((fix(1.772) * cb + HALF) >> 16);
     [r.clamp(0, 255) as u8, g.clamp(0, 255) as u8, b.clamp(0, 255) as u8]
+}
+
+/// Page `page` of `path`, a reduced level, as its JPEG 2000 tiles; `Err(why)` where it is not
+/// tiles of the same coding as the page read (`ycbcr`).
+fn level(path: &Path, page: usize, ycbcr: bool, max_memory: u64) -> Result<std::result::Result<StoredLevel, String>> {
+    let mut decoder = super::open_decoder(path, max_memory)?;
+    decoder.seek_to_image(page).map_err(|e| open_error(path, e))?;
+    match decoder.find_tag_unsigned::<u16>(Tag::Compression).map_err(|e| open_error(path, e))? {
+        Some(33003) if ycbcr => {}
+        Some(33005) if !ycbcr => {}
+        _ => return Ok(Err(format!("is not JPEG 2000 of {} components", if ycbcr { "YCbCr" } else { "RGB" }))),
+    }
+    if decoder.get_chunk_type() != ChunkType::Tile {
+        return Ok(Err("is stored in strips, not tiles".into()));
+    }
+    let (width, height) = super::dimensions(path, &mut decoder)?;
+    let (tw, th) = decoder.chunk_dimensions();
+    if tw == 0 || th == 0 {
+        return Err(TilerError::decode(path, format!("page {page} declares {tw}x{th} tiles")));
+    }
+    let offsets = decoder.get_tag_u64_vec(Tag::TileOffsets).map_err(|e| open_error(path, e))?;
+    let counts = decoder.get_tag_u64_vec(Tag::TileByteCounts).map_err(|e| open_error(path, e))?;
+    let (across, down) = (width.div_ceil(tw), height.div_ceil(th));
+    let tiles = u64::from(across) * u64::from(down);
+    if (offsets.len() as u64) < tiles || (counts.len() as u64) < tiles {
+        return Err(TilerError::decode(
+            path,
+            format!(
+                "page {page} lists {} tile offsets and {} byte counts for {tiles} tiles",
+                offsets.len(),
+                counts.len()
+            ),
+        ));
+    }
+    let chunks = Arc::new(Codestreams::new(path, offsets, counts, (tw, th))?);
+    Ok(Ok(StoredLevel { width, height, page, tiles: Arc::new(Jp2kTiles { chunks, ycbcr, across, down }) }))
+}
+
+/// The JPEG 2000 tiles of a tiled TIFF page, handed out as stored.
+struct Jp2kTiles {
+    chunks: Arc<Codestreams>,
+    ycbcr: bool,
+    across: u32,
+    down: u32,
+}
+
+impl StoredTiles for Jp2kTiles {
+    fn tile_size(&self) -> (u32, u32) {
+        self.chunks.chunk
+    }
+
+    fn quality(&self) -> Option<Quality> {
+        None
+    }
+
+    fn coding(&self) -> Coding {
+        Coding::Jpeg2000 { ycbcr: self.ycbcr }
+    }
+
+    fn tile(&self, col: u32, row: u32) -> Result<Option<Vec<u8>>> {
+        let index = row as usize * self.across as usize + col as usize;
+        let name = format!("JPEG 2000 tile at column {col}, row {row} (tile {index})");
+        if col >= self.across || row >= self.down {
+            let message = format!("{name}: outside the {}x{} tiles", self.across, self.down);
+            return Err(TilerError::decode(&self.chunks.path, message));
+        }
+        let raw = self.chunks.read(index).map_err(|m| TilerError::decode(&self.chunks.path, format!("{name}: {m}")))?;
+        Ok(Some(raw))
+    }
 }
 
 impl RowSource for Jp2kTiff {
@@ -399,6 +457,38 @@ impl RowSource for Jp2kTiff {
         Ok(())
     }
 
+    /// This page and its reduced levels, where it has some, each as its JPEG 2000 tiles, for a
+    /// DICOM series to copy (strips, or a level coded otherwise, end them: `unlike`).
+    fn stored_levels(&self) -> Result<Option<StoredLevels>> {
+        if self.pages.levels.is_empty() {
+            return Ok(None);
+        }
+        let path = &self.path;
+        let full = Jp2kTiles {
+            chunks: Arc::clone(&self.chunks),
+            ycbcr: self.ycbcr,
+            across: self.across,
+            down: self.height.div_ceil(self.chunk_h),
+        };
+        let (width, height, page) = (self.width, self.height, self.pages.index);
+        let mut stored = StoredLevels {
+            path: path.clone(),
+            levels: vec![StoredLevel { width, height, page, tiles: Arc::new(full) }],
+            unlike: None,
+        };
+        for (k, &page) in self.pages.levels.iter().enumerate() {
+            let k = k + 1;
+            match level(path, page, self.ycbcr, self.pages.max_memory).map_err(|e| stored::in_level(e, k, page))? {
+                Ok(level) => stored.levels.push(level),
+                Err(why) => {
+                    stored.unlike = Some(format!("level {k} (page {page}) {why}"));
+                    break;
+                }
+            }
+        }
+        Ok(Some(stored))
+    }
+
     fn describe(&self) -> String {
         let colour = if self.ycbcr { "YCbCr" } else { "RGB" };
         format!(
@@ -411,25 +501,6 @@ impl RowSource for Jp2kTiff {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// The COD segment's transformation byte, after a SIZ segment skipped by its length: 0 is
-    /// the irreversible wavelet; 1, no COD, or no SOC is not.
-    #[test]
-    fn the_coding_style_says_whether_the_wavelet_was_irreversible() {
-        let header = |transformation: u8| {
-            let mut raw = vec![0xFF, 0x4F, 0xFF, 0x51, 0, 6, 1, 2, 3, 4];
-            // COD: Lcod 12, Scod, progression, 1 layer, MCT, 5 levels, 64x64 blocks, style.
-            raw.extend([0xFF, 0x52, 0, 12, 0, 0, 0, 1, 1, 5, 4, 4, 0, transformation]);
-            raw.extend([0xFF, 0x90, 0, 10]);
-            raw
-        };
-        assert!(irreversible(&header(0)));
-        assert!(!irreversible(&header(1)));
-        assert!(!irreversible(&header(0)[2..]), "no SOC");
-        let sot_first = [0xFF, 0x4F, 0xFF, 0x90, 0, 10, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0xFF, 0x52];
-        assert!(!irreversible(&sot_first), "the main header ends at the first SOT");
-        assert!(!irreversible(&header(0)[..20]), "cut before the transformation");
-    }
 
     /// A codestream OpenJPEG cannot decode is said so, not as a null pointer of the binding.
     #[test]

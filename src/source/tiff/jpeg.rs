@@ -25,7 +25,7 @@ use tiff::tags::Tag;
 
 use super::band_ahead::{self, BandAhead};
 use super::libjpeg::{self, Colour, Extent};
-use super::open_error;
+use super::{Pages, open_error};
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::stored::{self, Quality, Samples, StoredLevel, StoredLevels, StoredTiles};
@@ -73,22 +73,6 @@ pub(super) struct JpegTiff {
     embedded: crate::source::Embedded,
     /// Its page in the file, and its reduced levels'.
     pages: Pages,
-}
-
-/// The page read and the pages of its reduced levels (`pyramid::Chosen`), read as stored
-/// levels when a run asks for them ([`RowSource::stored_levels`]), and the memory the reader
-/// may hold.
-pub(crate) struct Pages {
-    pub index: usize,
-    pub levels: Vec<usize>,
-    pub max_memory: u64,
-}
-
-impl Pages {
-    /// One image with no levels of its own to copy (a DICOM instance).
-    pub(crate) fn alone(max_memory: u64) -> Pages {
-        Pages { index: 0, levels: Vec::new(), max_memory }
-    }
 }
 
 /// Where the compressed chunks are, shared with the [`StoredTiles`] a run copies them through.
@@ -669,7 +653,7 @@ impl StoredTiles for JpegTiles {
         self.quality
     }
 
-    fn jpeg(&self, col: u32, row: u32) -> Result<Option<Vec<u8>>> {
+    fn tile(&self, col: u32, row: u32) -> Result<Option<Vec<u8>>> {
         let index = row as usize * self.across as usize + col as usize;
         let name = tile_name(col, row, index);
         if col >= self.across || row >= self.down {

@@ -152,6 +152,22 @@ impl Chunking {
     }
 }
 
+/// The page read and the pages of its reduced levels (`pyramid::Chosen`), read as stored
+/// levels when a run asks for them (`RowSource::stored_levels`), and the memory the reader may
+/// hold.
+pub(crate) struct Pages {
+    pub index: usize,
+    pub levels: Vec<usize>,
+    pub max_memory: u64,
+}
+
+impl Pages {
+    /// One image with no levels of its own to copy (a DICOM instance).
+    pub(crate) fn alone(max_memory: u64) -> Pages {
+        Pages { index: 0, levels: Vec::new(), max_memory }
+    }
+}
+
 pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<Box<dyn RowSource>> {
     let bigtiff = is_bigtiff(path)?;
     ndpi_dir::check_reachable(path)?;
@@ -174,11 +190,12 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
         if let Some(source) = ndpi::open(path, &mut decoder, &chosen.label, &embedded, max_memory, chosen.index)? {
             return Ok(source);
         }
-        let pages = jpeg::Pages { index: chosen.index, levels: chosen.levels, max_memory };
+        let pages = Pages { index: chosen.index, levels: chosen.levels, max_memory };
         return jpeg::open(path, &mut decoder, chosen.label, embedded, pages);
     }
     if jp2k::is_jp2k(path, &mut decoder)? {
-        return jp2k::open(path, &mut decoder, chosen.label, embedded, max_memory);
+        let pages = Pages { index: chosen.index, levels: chosen.levels, max_memory };
+        return jp2k::open(path, &mut decoder, chosen.label, embedded, pages);
     }
     if kinds::handles(path, &mut decoder)? {
         return kinds::open(path, &mut decoder, chosen.label, embedded, max_memory);

@@ -383,7 +383,7 @@ impl StoredTiles for JpegCells {
     /// The cell's file where it is a JPEG file of exactly the cell, as decoders read it
     /// (8-bit, Huffman-coded, as many components as the image); a missing cell, a PNG, an
     /// overlapping one or any other is encoded.
-    fn jpeg(&self, col: u32, row: u32) -> Result<Option<Vec<u8>>> {
+    fn tile(&self, col: u32, row: u32) -> Result<Option<Vec<u8>>> {
         if self.grid.crop(col, row) != (0, 0) {
             return Ok(None);
         }
