@@ -6,6 +6,9 @@ use crate::job::Progress;
 use crate::sink::TileSink;
 use crate::source::stored::{self, StoredLevels};
 
+/// Whether a stored tile (its bytes, its level's tile size) is of the form the output declares.
+pub(crate) type Fits<'a> = &'a dyn Fn(&[u8], (u32, u32)) -> bool;
+
 /// Copies every tile of every level of `levels` into `sink` as that level's tile, row by row
 /// (`--levels stored`: a TIFF's or a DICOM series' levels as the slide stores them); says how
 /// many. Each tile must be what `fits` takes of its stored bytes and its level's tile size
@@ -15,7 +18,7 @@ pub(crate) fn copy(
     sink: &dyn TileSink,
     levels: &StoredLevels,
     form: &str,
-    fits: &dyn Fn(&[u8], (u32, u32)) -> bool,
+    fits: Fits,
     progress: &dyn Progress,
 ) -> Result<u64> {
     let mut copied = 0;
