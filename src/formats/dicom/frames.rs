@@ -16,6 +16,13 @@
 //! first frame's; when the last passes 32 bits the Basic Offset Table is left empty and the
 //! data set carries them in the Extended Offset Table (7FE0,0001/0002) instead.
 //!
+//! A slide's copied levels (`InOrder`) send their frames in row-major order: each such
+//! instance is written in place instead, the data set and the Pixel Data header first, the
+//! Basic Offset Table reserved (zeros) and filled in at the end, every item appended as it
+//! comes, so that the disk holds the frames once. Where the offsets pass 32 bits, the instance
+//! is written again at the end with the Extended Offset Table, its items copied from the first
+//! file as staged ones are.
+//!
 //! Native frames (`Native`, PS3.5 8.1.1 and A.2) have no items and no offset table: every
 //! frame is the same length, one after another, so frame `i` lies at `i` frame lengths from
 //! the start of the value, and the element's length is known before the first frame comes:
@@ -130,29 +137,13 @@ impl Staged {
     /// delimiter. Removes the staging file. Returns the bytes written.
     pub fn write_pixel_data(mut self, out: &mut File, offsets: &Offsets, basic: bool) -> io::Result<u64> {
         self.file.flush()?;
-        let mut head = Vec::with_capacity(PIXEL_DATA.len() + 8 + 4 * offsets.offsets.len());
-        head.extend_from_slice(&PIXEL_DATA);
-        head.extend_from_slice(&ITEM);
-        if basic {
-            head.extend_from_slice(&(4 * offsets.offsets.len() as u32).to_le_bytes());
-            for &o in &offsets.offsets {
-                // `fit_basic` said each fits.
-                head.extend_from_slice(&(o as u32).to_le_bytes());
-            }
-        } else {
-            head.extend_from_slice(&0u32.to_le_bytes());
-        }
+        let head = pixel_data_head(basic.then_some(&offsets.offsets[..]));
         out.write_all(&head)?;
         let mut written = head.len() as u64;
         let staged = self.file.get_ref();
         let mut copy = |(from, len): (u64, u64)| -> io::Result<()> {
-            let mut reader = staged;
-            reader.seek(SeekFrom::Start(from))?;
-            let n = io::copy(&mut reader.take(len), out)?;
-            if n != len {
-                return Err(io::Error::new(io::ErrorKind::UnexpectedEof, "the staged frames end early"));
-            }
-            written += n;
+            copy_range(staged, from, len, out)?;
+            written += len;
             Ok(())
         };
         let mut run: Option<(u64, u64)> = None;
@@ -176,6 +167,127 @@ impl Staged {
         drop(self);
         fs::remove_file(&path)?;
         Ok(written)
+    }
+}
+
+/// Copies `len` bytes at `from` in `source` to the end of `out`.
+fn copy_range(source: &File, from: u64, len: u64, out: &mut File) -> io::Result<()> {
+    let mut reader = source;
+    reader.seek(SeekFrom::Start(from))?;
+    let n = io::copy(&mut reader.take(len), out)?;
+    if n != len {
+        return Err(io::Error::new(io::ErrorKind::UnexpectedEof, "the staged frames end early"));
+    }
+    Ok(())
+}
+
+/// The Pixel Data element's header and its Basic Offset Table item: `offsets`, or empty.
+fn pixel_data_head(offsets: Option<&[u64]>) -> Vec<u8> {
+    let offsets = offsets.unwrap_or_default();
+    let mut head = Vec::with_capacity(PIXEL_DATA.len() + 8 + 4 * offsets.len());
+    head.extend_from_slice(&PIXEL_DATA);
+    head.extend_from_slice(&ITEM);
+    head.extend_from_slice(&(4 * offsets.len() as u32).to_le_bytes());
+    for &o in offsets {
+        // The caller checked that each fits (`Offsets::fit_basic`).
+        head.extend_from_slice(&(o as u32).to_le_bytes());
+    }
+    head
+}
+
+/// One instance of encapsulated frames that come in row-major order, written in place: its
+/// data set and Pixel Data header first, the Basic Offset Table reserved, each frame's item
+/// appended as it comes.
+pub(super) struct InOrder {
+    path: PathBuf,
+    file: BufWriter<File>,
+    /// Where the Basic Offset Table's values lie in the file.
+    table: u64,
+    /// Where the first frame's item starts in the file.
+    first: u64,
+    /// The frames that came: each item's offset from the first's, and its value's length.
+    offsets: Offsets,
+    frames: usize,
+    /// Bytes of the items so far.
+    len: u64,
+}
+
+impl InOrder {
+    /// Starts the instance at `path`: `header` (File Meta and data set up to Pixel Data, of
+    /// no Extended Offset Table), then the Pixel Data element's header and a Basic Offset
+    /// Table of `frames` offsets, zeros until `finish`.
+    pub fn create(path: &Path, header: &[u8], frames: usize) -> io::Result<InOrder> {
+        if frames.checked_mul(4).is_none_or(|n| n > u32::MAX as usize - 8) {
+            return Err(io::Error::other(format!("{frames} frames: more than a Basic Offset Table lists")));
+        }
+        let file = fs::OpenOptions::new().read(true).write(true).create_new(true).open(path)?;
+        let mut file = BufWriter::with_capacity(1 << 20, file);
+        file.write_all(header)?;
+        let zeros = vec![0u64; frames];
+        let head = pixel_data_head(Some(&zeros));
+        file.write_all(&head)?;
+        let (table, first) = ((header.len() + PIXEL_DATA.len() + 8) as u64, (header.len() + head.len()) as u64);
+        let offsets = Offsets { offsets: Vec::with_capacity(frames), lengths: Vec::with_capacity(frames) };
+        Ok(InOrder { path: path.to_path_buf(), file, table, first, offsets, frames, len: 0 })
+    }
+
+    /// Appends frame `index` as an item: the next in row-major order, or an error.
+    pub fn append(&mut self, index: usize, frame: &[u8]) -> io::Result<()> {
+        let next = self.offsets.offsets.len();
+        if index != next || next >= self.frames {
+            return Err(io::Error::other(format!("frame {index} came where frame {next} was due")));
+        }
+        let padded = frame.len() + frame.len() % 2;
+        let value = u32::try_from(padded).ok().filter(|&v| v < u32::MAX - 8);
+        let value = value.ok_or_else(|| io::Error::other("a frame of 4 GiB or more"))?;
+        self.file.write_all(&ITEM)?;
+        self.file.write_all(&value.to_le_bytes())?;
+        self.file.write_all(frame)?;
+        if padded > frame.len() {
+            self.file.write_all(&[0])?;
+        }
+        self.offsets.offsets.push(self.len);
+        self.offsets.lengths.push(u64::from(value));
+        self.len += u64::from(value) + 8;
+        Ok(())
+    }
+
+    /// Where each frame lies; `None` if one has not come.
+    pub fn offsets(&self) -> Option<&Offsets> {
+        (self.offsets.offsets.len() == self.frames).then_some(&self.offsets)
+    }
+
+    /// Bytes of the frames (their items' values).
+    pub fn frame_bytes(&self) -> u64 {
+        self.offsets.lengths.iter().sum()
+    }
+
+    /// Ends the instance, every frame come: the delimiter, then the offsets into the table
+    /// where they fit 32 bits; else (`extended`: the data set with the Extended Offset Table)
+    /// the instance is written again, the items copied behind an empty table. Returns the
+    /// file's length.
+    pub fn finish(self, extended: Option<&[u8]>) -> io::Result<u64> {
+        let InOrder { path, file, table, first, offsets, len, .. } = self;
+        let mut file = file.into_inner().map_err(|e| e.into_error())?;
+        file.write_all(&DELIMITER)?;
+        let Some(header) = extended else {
+            let values: Vec<u8> = offsets.offsets.iter().flat_map(|&o| (o as u32).to_le_bytes()).collect();
+            file.seek(SeekFrom::Start(table))?;
+            file.write_all(&values)?;
+            file.sync_all()?;
+            return Ok(first + len + DELIMITER.len() as u64);
+        };
+        let again = path.with_extension("extended");
+        let mut out = fs::OpenOptions::new().write(true).create_new(true).open(&again)?;
+        let head = pixel_data_head(None);
+        out.write_all(header)?;
+        out.write_all(&head)?;
+        copy_range(&file, first, len, &mut out)?;
+        out.write_all(&DELIMITER)?;
+        out.sync_all()?;
+        drop(file);
+        fs::rename(&again, &path)?;
+        Ok((header.len() + head.len() + DELIMITER.len()) as u64 + len)
     }
 }
 
@@ -296,6 +408,54 @@ mod tests {
 
         let far = Offsets { offsets: vec![0, 1 << 32], lengths: vec![1, 1] };
         assert!(!far.fit_basic(), "past 32 bits: the Extended Offset Table");
+    }
+
+    /// Frames written in place as they come in order make the instance staged frames make,
+    /// byte for byte; one out of order is refused; past 32 bits the instance is written again
+    /// with the header given and an empty Basic Offset Table.
+    #[test]
+    fn frames_in_order_are_written_in_place_as_staged_ones_are() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: [&[u8]; 3] = [b"a", b"bbbb", b"ccc"];
+        let mut staged = Staged::create(&dir.path().join("s"), 3).unwrap();
+        let in_place = dir.path().join("in-place.dcm");
+        let mut in_order = InOrder::create(&in_place, b"HEAD", 3).unwrap();
+        assert!(in_order.append(1, b"bbbb").is_err(), "frame 1 before frame 0");
+        for (i, frame) in frames.iter().enumerate() {
+            staged.append(i, frame).unwrap();
+            assert!(in_order.offsets().is_none(), "frames yet to come");
+            in_order.append(i, frame).unwrap();
+        }
+        assert!(in_order.append(3, b"d").is_err(), "a fourth frame of three");
+        let offsets = staged.offsets().unwrap();
+        assert_eq!(in_order.offsets(), Some(&offsets));
+        assert_eq!(in_order.frame_bytes(), staged.frame_bytes());
+        let n = in_order.finish(None).unwrap();
+        let want_path = dir.path().join("staged.dcm");
+        let mut want = File::create(&want_path).unwrap();
+        want.write_all(b"HEAD").unwrap();
+        staged.write_pixel_data(&mut want, &offsets, true).unwrap();
+        drop(want);
+        let (got, want) = (fs::read(&in_place).unwrap(), fs::read(&want_path).unwrap());
+        assert_eq!(got, want);
+        assert_eq!(n, got.len() as u64);
+
+        // Past 32 bits (here: the caller says so by giving the Extended Offset Table's header).
+        let far = dir.path().join("far.dcm");
+        let mut in_order = InOrder::create(&far, b"HEAD", 2).unwrap();
+        in_order.append(0, b"x").unwrap();
+        in_order.append(1, b"yy").unwrap();
+        let n = in_order.finish(Some(b"HEAD+EOT")).unwrap();
+        let mut want = b"HEAD+EOT".to_vec();
+        want.extend_from_slice(&PIXEL_DATA);
+        want.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0, 0, 0, 0, 0]);
+        want.extend_from_slice(&[
+            0xFE, 0xFF, 0x00, 0xE0, 2, 0, 0, 0, b'x', 0, 0xFE, 0xFF, 0x00, 0xE0, 2, 0, 0, 0, b'y', b'y',
+        ]);
+        want.extend_from_slice(&DELIMITER);
+        assert_eq!(fs::read(&far).unwrap(), want);
+        assert_eq!(n, want.len() as u64);
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 3, "no second file left");
     }
 
     /// Native frames that come out of order lie row-major after the element's header, OB for

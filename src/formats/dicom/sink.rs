@@ -5,7 +5,9 @@
 //! source, and is appended to its level's staging file at once (`frames::Staged`); the sink
 //! is `ordered`, so the staging files, and the instances made from them, are the same on
 //! every run. `finish` writes each level's instance: the data set (`dataset`), then its
-//! frames copied from the staging file in row-major order.
+//! frames copied from the staging file in row-major order. A slide's copied levels
+//! (`Spec::copied`) come in row-major order: their instances are written in place as the
+//! frames come (`frames::InOrder`), the same bytes without the second copy.
 //!
 //! Native frames (`--codec raw`) come as the tile's samples (`Codec::Raw`: interleaved,
 //! little-endian) and are written at once at their place in their level's instance, whose
@@ -18,7 +20,7 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::dataset::{Part, Series};
-use super::frames::{Native, Offsets, Staged};
+use super::frames::{InOrder, Native, Offsets, Staged};
 use super::{AssociatedSummary, DicomSummary, Photometric, Spec, Transfer};
 use crate::codec::Subsampling;
 use crate::error::{Result, TilerError};
@@ -38,6 +40,8 @@ struct Written {
 enum Frames {
     /// JPEG frames, staged as items until the instance is written.
     Encapsulated(Staged),
+    /// A copied level's frames, in row-major order, written in place as items.
+    InOrder(InOrder),
     /// Native frames, written in place in the instance.
     Native(Native),
 }
@@ -77,7 +81,14 @@ impl DicomSink {
         let series = Series::new(&sink.spec)?;
         for lod in 0..sink.spec.level_count() {
             let frames = sink.spec.level(lod).tiles() as usize;
+            let copied = !sink.spec.copied.is_empty();
             let level = match sink.spec.transfer.encapsulated() {
+                true if copied => {
+                    let part = Part { coded_here: false, ..Part::level(&sink.spec, lod) };
+                    let header = series.header(&part, &Offsets::none(), 0)?;
+                    let path = sink.staging.join(Spec::file_name(lod));
+                    Frames::InOrder(InOrder::create(&path, &header, frames).map_err(|e| TilerError::write(&path, e))?)
+                }
                 true => {
                     let path = sink.staging.join(format!(".level-{lod}.frames"));
                     Frames::Encapsulated(Staged::create(&path, frames).map_err(|e| TilerError::write(&path, e))?)
@@ -137,6 +148,7 @@ impl DicomSink {
                     self.write_instance(&series, &part, staged, &name)?
                 }
                 Frames::Native(native) => self.finish_native(native, &name)?,
+                Frames::InOrder(in_order) => self.finish_in_order(&series, lod, in_order, &name)?,
             };
             summary.file_bytes += written.file_bytes;
             summary.instances += 1;
@@ -172,6 +184,26 @@ impl DicomSink {
         };
         let mut file = File::create(&path).map_err(|e| TilerError::write(&path, e))?;
         let file_bytes = write(&mut file).map_err(|e| TilerError::write(&path, e))?;
+        Ok(Written { frames, frame_bytes, file_bytes, basic })
+    }
+
+    /// Ends copied level `lod`'s instance `name`, written in place: every frame copied as
+    /// stored (its data set says no coding of the series' own), the Extended Offset Table
+    /// where the offsets pass 32 bits.
+    fn finish_in_order(&self, series: &Series, lod: u32, in_order: InOrder, name: &str) -> Result<Written> {
+        let copied = self.stored[lod as usize].load(Ordering::Relaxed);
+        let missing = || TilerError::Internal(format!("{name} of the DICOM series lacks copied frames at the end"));
+        let offsets = in_order.offsets().filter(|_| copied == self.spec.level(lod).tiles()).ok_or_else(missing)?;
+        let (frames, basic, frame_bytes) = (offsets.offsets.len() as u64, offsets.fit_basic(), in_order.frame_bytes());
+        let extended = match basic {
+            true => None,
+            false => {
+                let part = Part { coded_here: false, ..Part::level(&self.spec, lod) };
+                Some(series.header(&part, offsets, frame_bytes)?)
+            }
+        };
+        let path = self.staging.join(name);
+        let file_bytes = in_order.finish(extended.as_deref()).map_err(|e| TilerError::write(&path, e))?;
         Ok(Written { frames, frame_bytes, file_bytes, basic })
     }
 
@@ -271,6 +303,7 @@ impl TileSink for DicomSink {
         let index = y as usize * columns as usize + x as usize;
         let put = match frames {
             Frames::Encapsulated(staged) => staged.append(index, stored),
+            Frames::InOrder(in_order) => in_order.append(index, stored),
             Frames::Native(native) => native.put(index, stored),
         };
         put.map_err(|e| TilerError::write(self.path(), e))?;
