@@ -174,14 +174,18 @@ impl Header {
     }
 }
 
-/// Reads the segments of `stream` (SOI, then marker segments) up to its first SOS, or its end
-/// (a JPEGTables stream has no scan). `None` for data that is not such a stream.
-pub fn read_header(stream: &[u8]) -> Option<Header> {
-    let mut at = 2;
+/// A JPEG marker segment: its marker, and its bytes' range in the stream.
+type Segment = (u8, std::ops::Range<usize>);
+
+/// The marker segments of `stream` (SOI, then segments) before its first SOS or EOI, each
+/// its marker and its bytes' range in `stream` (the marker and length included), and where
+/// the scan (or the end) starts. `None` for data that is not such a stream. The one walker of
+/// a JPEG's header: [`read_header`] reads it, [`split_tables`] cuts the tables out of it.
+fn segments(stream: &[u8]) -> Option<(Vec<Segment>, usize)> {
     if !stream.starts_with(&[0xFF, 0xD8]) {
         return None;
     }
-    let mut header = Header::default();
+    let (mut out, mut at) = (Vec::new(), 2);
     while at + 4 <= stream.len() {
         if stream[at] != 0xFF {
             return None;
@@ -195,7 +199,19 @@ pub fn read_header(stream: &[u8]) -> Option<Header> {
             break;
         }
         let len = u16::from_be_bytes([stream[at + 2], stream[at + 3]]) as usize;
-        let body = stream.get(at + 4..(at + 2).checked_add(len)?)?;
+        let end = (at + 2).checked_add(len).filter(|&end| end <= stream.len() && len >= 2)?;
+        out.push((marker, at..end));
+        at = end;
+    }
+    Some((out, at.min(stream.len())))
+}
+
+/// Reads the segments of `stream` (SOI, then marker segments) up to its first SOS, or its end
+/// (a JPEGTables stream has no scan). `None` for data that is not such a stream.
+pub fn read_header(stream: &[u8]) -> Option<Header> {
+    let mut header = Header::default();
+    for (marker, range) in segments(stream)?.0 {
+        let body = &stream[range.start + 4..range.end];
         match marker {
             0xC0..=0xCF if !matches!(marker, 0xC4 | 0xC8 | 0xCC) => {
                 let [precision, h0, h1, w0, w1, components, ..] = *body else { return None };
@@ -213,9 +229,23 @@ pub fn read_header(stream: &[u8]) -> Option<Header> {
             0xEE if body.starts_with(b"Adobe") && body.len() >= 12 => header.adobe = Some(body[11]),
             _ => {}
         }
-        at += 2 + len;
     }
     Some(header)
+}
+
+/// `stream` cut in two: its quantisation and Huffman tables (its DQT and DHT segments, as they
+/// are, in order) and the stream without them (an abbreviated stream, which a TIFF's shared
+/// `JPEGTables` completes). `None` for data that is no JPEG stream.
+pub fn split_tables(stream: &[u8]) -> Option<(Vec<u8>, Vec<u8>)> {
+    let (segments, scan) = segments(stream)?;
+    let (mut tables, mut rest) = (Vec::new(), Vec::with_capacity(stream.len()));
+    rest.extend_from_slice(&stream[..2]);
+    for (marker, range) in segments {
+        let to = if matches!(marker, 0xDB | 0xC4) { &mut tables } else { &mut rest };
+        to.extend_from_slice(&stream[range]);
+    }
+    rest.extend_from_slice(&stream[scan..]);
+    Some((tables, rest))
 }
 
 /// The tables of one DQT segment; table 0 is kept.
@@ -289,6 +319,28 @@ mod tests {
     use super::*;
     use crate::codec::{Codec, Subsampling, TileEncoder};
     use crate::pixel::{Channels, Depth, PixelLayout};
+
+    /// A JPEG cut into its tables and the rest: the tables are its DQT and DHT segments, the
+    /// rest holds none and no scan byte is lost; the tables spliced back after SOI decode to
+    /// the same texels as the whole stream.
+    #[test]
+    fn a_jpeg_s_tables_are_cut_out_and_put_back() {
+        let texels: Vec<u8> = (0..32 * 16 * 3).map(|i| (i * 7 % 251) as u8).collect();
+        let jpeg =
+            crate::codec::encode_jpeg(&texels, (32, 16), Channels::Rgb, 80, Subsampling::S420, Vec::new()).unwrap();
+        let (tables, rest) = split_tables(&jpeg).unwrap();
+        let markers = |stream: &[u8]| -> Vec<u8> { segments(stream).unwrap().0.iter().map(|s| s.0).collect() };
+        let in_tables: Vec<u8> = markers(&[&[0xFF, 0xD8], &tables[..]].concat());
+        assert!(in_tables.contains(&0xDB) && in_tables.contains(&0xC4), "{in_tables:x?}");
+        assert!(in_tables.iter().all(|m| matches!(m, 0xDB | 0xC4)), "{in_tables:x?}");
+        assert!(!markers(&rest).iter().any(|m| matches!(m, 0xDB | 0xC4)));
+        assert_eq!(tables.len() + rest.len(), jpeg.len());
+        assert_eq!(read_header(&rest).unwrap().luma_table, None, "no DQT left");
+        let whole = [&rest[..2], &tables[..], &rest[2..]].concat();
+        let decode = |bytes: &[u8]| image::load_from_memory(bytes).unwrap().to_rgb8().into_raw();
+        assert_eq!(decode(&whole), decode(&jpeg));
+        assert_eq!(split_tables(b"not a jpeg"), None);
+    }
 
     /// Each coding is what the stream's frame and Adobe marker say, as a TIFF's or DICOM's
     /// tags must declare it; grey has none.

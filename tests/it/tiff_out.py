@@ -7,7 +7,8 @@ ome: tifffile reads one OME series with every level (SubIFDs), libvips every `su
 the OME-XML validates against the OME schema (ome-types);
 generic: tifffile reads a page a level, libvips every `page=`, OpenSlide 4 opens it as
 generic-tiff with every level and `read_region` gives the source (8-bit RGB sources).
-exact: each level equals the oracle sample for sample; jpeg: within JPEG's error of it.
+exact: each level equals the oracle sample for sample; jpeg: within JPEG's error of it, and
+every level's JPEG tiles share its JPEGTables (no tile holds a DQT or DHT segment).
 Prints one JSON line of what it measured; exits 1 with the reason on a mismatch.
 """
 
@@ -51,6 +52,23 @@ def check_predictor(what, page, src):
         fail(f"{what}: Predictor {int(page.predictor)}, expected {want}")
 
 
+def check_shared_tables(what, page, measured):
+    """A JPEG level's tables are its JPEGTables (quantisation and Huffman tables), and its
+    tiles are abbreviated streams without them, as libvips and scanners write them."""
+    if page.compression != 7:
+        return
+    tables = page.jpegtables or b""
+    if not (tables.startswith(b"\xff\xd8") and b"\xff\xdb" in tables and b"\xff\xc4" in tables):
+        fail(f"{what}: JPEGTables {tables[:16]!r}..., expected SOI, DQT and DHT")
+    fh = page.parent.filehandle
+    for i, (offset, count) in enumerate(zip(page.dataoffsets, page.databytecounts)):
+        fh.seek(offset)
+        head = fh.read(min(count, 2048)).split(b"\xff\xda")[0]
+        if b"\xff\xdb" in head or b"\xff\xc4" in head:
+            fail(f"{what}: tile {i} holds its own tables")
+    measured["sharedTables"] = measured.get("sharedTables", 0) + 1
+
+
 def check_ome(path, src, tile, mode, measured):
     n = levels_of(src, tile)
     with tifffile.TiffFile(path) as t:
@@ -74,6 +92,7 @@ def check_ome(path, src, tile, mode, measured):
         measured["ome-types"] = "valid"
         for k, level in enumerate(s.levels):
             check_predictor(f"level {k}", level.keyframe, src)
+            check_shared_tables(f"level {k}", level.keyframe, measured)
             compare(f"tifffile level {k}", level.asarray(), oracle(src, k), mode, measured)
     for k in range(n) if libvips_decodes(path, measured) else ():
         image = pyvips.Image.new_from_file(path, subifd=k - 1)
@@ -89,6 +108,7 @@ def check_generic(path, src, tile, mode, measured):
             if k > 0 and page.subfiletype != 1:
                 fail(f"page {k}: NewSubfileType {page.subfiletype}, expected 1")
             check_predictor(f"page {k}", page, src)
+            check_shared_tables(f"page {k}", page, measured)
             compare(f"tifffile page {k}", page.asarray(), oracle(src, k), mode, measured)
     for k in range(n) if libvips_decodes(path, measured) else ():
         image = pyvips.Image.new_from_file(path, page=k)

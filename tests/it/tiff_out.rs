@@ -154,7 +154,8 @@ fn a_tiff_is_one_output_among_others_and_atomic() {
 }
 
 /// tifffile reads the OME-TIFF as one series with every level, libvips every SubIFD; lossless
-/// levels equal the naive pyramid, JPEG ones are within JPEG's error of it.
+/// levels equal the naive pyramid, JPEG ones are within JPEG's error of it, their tiles
+/// abbreviated behind the level's shared JPEGTables.
 #[test]
 fn readers_open_every_level_of_an_ome_tiff() {
     let Some(python) = readers() else { return };
@@ -172,6 +173,8 @@ fn readers_open_every_level_of_an_ome_tiff() {
         ok(&["split", s(&source), "-o", s(&tiff), "--codec", codec, "--tile-size", &tile.to_string(), "-q"]);
         let said = check(&python, "ome", &tiff, &source, tile, mode);
         eprintln!("{}: {said}", tiff.display());
+        // JPEG levels share their tables (JPEGTables), every tile abbreviated.
+        assert_eq!(said.contains("\"sharedTables\""), codec == "jpeg", "{said}");
     }
 }
 
@@ -227,6 +230,7 @@ fn readers_open_every_level_of_a_generic_pyramid() {
         ok(&["split", s(&source), "-o", s(&tiff), "--codec", codec, "--filter", "box", "--tile-size", &tile_arg, "-q"]);
         let said = check(&python, "generic", &tiff, &source, tile, mode);
         eprintln!("{}: {said}", tiff.display());
+        assert_eq!(said.contains("\"sharedTables\""), codec == "jpeg", "{said}");
     }
 }
 

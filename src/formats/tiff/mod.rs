@@ -28,8 +28,9 @@
 //! associated images (label, macro, thumbnail) follow a generic pyramid's levels, each one
 //! strip of its own (`associated.rs`). An OME-TIFF holds channels as grey planes
 //! (`Spec::planar`), one pass of the pipeline each: plane `c`'s tiles come after plane
-//! `c - 1`'s, and its IFDs are the `c`th main IFD with its SubIFDs. Not yet (issue 43):
-//! shared `JPEGTables`.
+//! `c - 1`'s, and its IFDs are the `c`th main IFD with its SubIFDs. JPEG tiles share their
+//! tables: each IFD's `JPEGTables` are its first tile's, and every tile with the same tables
+//! is stored without them (`TiffWriter::abbreviate`), as libvips and scanners write them.
 
 mod associated;
 mod cog;

@@ -87,6 +87,10 @@ pub struct TiffWriter {
     /// A COG's offsets are in its staging file (each past its leader, so never 0).
     tiles: Vec<(u64, u64)>,
     tile_bytes: u64,
+    /// JPEG tiles: each IFD's shared tables (its `JPEGTables`), those of its first tile; a
+    /// later tile with the same tables is stored without them (abbreviated), one with others
+    /// whole. Indexed as `bases`.
+    tables: Vec<Option<Vec<u8>>>,
     /// The associated images written after the tiles (a generic pyramid's).
     associated: Vec<Placed>,
 }
@@ -131,11 +135,25 @@ impl TiffWriter {
             (None, DATA_AT)
         };
         let path = path.to_path_buf();
-        Ok(TiffWriter { path, file, staging, spec, big, len, bases, tiles, tile_bytes: 0, associated: Vec::new() })
+        let tables = vec![None; bases.len()];
+        Ok(TiffWriter {
+            path,
+            file,
+            staging,
+            spec,
+            big,
+            len,
+            bases,
+            tiles,
+            tile_bytes: 0,
+            tables,
+            associated: Vec::new(),
+        })
     }
 
     /// Appends tile `(x, y)` of `level` of plane `plane` (0, or an OME-TIFF's channel
-    /// `plane`): `bytes` as the file stores them (compressed).
+    /// `plane`): `bytes` as the file stores them (compressed; a JPEG whose tables are its
+    /// level's shared ones is stored without them).
     pub fn add_plane_tile(&mut self, plane: u32, level: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
         let err = |message: String| TilerError::Encode { lod: level, x, y, message };
         if plane >= self.spec.planes() {
@@ -155,6 +173,11 @@ impl TiffWriter {
         if self.tiles[at].0 != 0 {
             return Err(err("internal error: the tile came twice".into()));
         }
+        let abbreviated = match self.spec.compression {
+            Compression::Jpeg { .. } => self.abbreviate((plane * self.spec.level_count() + level) as usize, bytes),
+            _ => None,
+        };
+        let bytes = abbreviated.as_deref().unwrap_or(bytes);
         let offset = match &mut self.staging {
             Some(staging) => {
                 if u32::try_from(bytes.len()).is_err() {
@@ -351,6 +374,14 @@ impl TiffWriter {
     }
 
     /// Where plane `p`'s level `k` starts in the index.
+    /// JPEG `tile` of IFD `ifd` without its tables where they are the IFD's shared ones (the
+    /// first tile's become them); `None`: stored whole (no tables, or others).
+    fn abbreviate(&mut self, ifd: usize, tile: &[u8]) -> Option<Vec<u8>> {
+        let (tables, rest) = crate::source::stored::split_tables(tile).filter(|(t, _)| !t.is_empty())?;
+        let shared = self.tables[ifd].get_or_insert_with(|| tables.clone());
+        (*shared == tables).then_some(rest)
+    }
+
     fn base(&self, p: u32, k: u32) -> usize {
         self.bases[(p * self.spec.level_count() + k) as usize]
     }
@@ -406,6 +437,9 @@ impl TiffWriter {
             RowFilter::None => {}
             RowFilter::Delta => ifd.set(tag::PREDICTOR, Value::Short(vec![2])),
             RowFilter::FloatingPoint => ifd.set(tag::PREDICTOR, Value::Short(vec![3])),
+        }
+        if let Some(tables) = &self.tables[(p * s.level_count() + k) as usize] {
+            ifd.set(tag::JPEG_TABLES, Value::Undefined([&[0xFF, 0xD8], &tables[..], &[0xFF, 0xD9]].concat()));
         }
         ifd.set(tag::TILE_WIDTH, Value::Long(vec![level.tile.0]));
         ifd.set(tag::TILE_LENGTH, Value::Long(vec![level.tile.1]));
