@@ -108,11 +108,11 @@ pub fn run(a: ConvertArgs) -> Result<()> {
         // A DICOM whole-slide series is tiled, and read as `split` reads it (source::dicom).
         let options =
             source::OpenOptions { keep_icc: a.keep_icc, ..source::OpenOptions::shown(Budget::new(a.out.max_memory())) };
-        let source::Opened { mut source, icc, pitch, lossy, .. } = source::open_with(&a.input, options)?;
+        let source::Opened { mut source, icc, pitch, lossy, channel, .. } = source::open_with(&a.input, options)?;
         if let Some(range) = a.range {
             source = source::range::map(source, range, a.out.tile_type().unwrap_or(Depth::U8))?;
         }
-        let carried = super::split::Carried { icc, geo: None, pitch, lossy };
+        let carried = super::split::Carried { icc, geo: None, pitch, lossy, channel };
         return tile(source, &a.input, a.output_filename_format.clone(), &a.out, started, carried);
     }
     let grid = open_grid(&a)?;

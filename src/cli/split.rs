@@ -416,11 +416,11 @@ pub fn run(a: SplitArgs) -> Result<()> {
         keep_icc: a.keep_icc,
         pick,
     };
-    let source::Opened { mut source, icc, geo, pitch, lossy } = source::open_with(&input, options)?;
+    let source::Opened { mut source, icc, geo, pitch, lossy, channel } = source::open_with(&input, options)?;
     if let Some(range) = a.range {
         source = source::range::map(source, range, a.out.tile_type.unwrap_or(Depth::U8))?;
     }
-    tile(source, &input, a.filename_format, &a.out, started, Carried { icc, geo, pitch, lossy })
+    tile(source, &input, a.filename_format, &a.out, started, Carried { icc, geo, pitch, lossy, channel })
 }
 
 impl OutputArgs {
@@ -574,6 +574,7 @@ impl OutputArgs {
             geo: carried.geo,
             pitch: carried.pitch,
             lossy: carried.lossy,
+            channel: carried.channel,
             stored_subsampling: stored,
             force: self.force,
         })
@@ -586,13 +587,15 @@ fn name_of(layout: OutputLayout) -> String {
 }
 
 /// What the source's file says that the outputs may carry: its ICC profile where the run keeps
-/// it (`--keep-icc`), a GeoTIFF's georeferencing, its pixel size, its lossy compressions.
+/// it (`--keep-icc`), a GeoTIFF's georeferencing, its pixel size, its lossy compressions, the
+/// name of its one channel.
 #[derive(Default)]
 pub struct Carried {
     pub icc: Option<Vec<u8>>,
     pub geo: Option<vortex_tiler::source::GeoTags>,
     pub pitch: Option<vortex_tiler::source::PixelPitch>,
     pub lossy: Vec<vortex_tiler::source::LossyStep>,
+    pub channel: Option<vortex_tiler::source::ChannelLabel>,
 }
 
 /// Runs the pipeline from `source` into the outputs `a` names, with the progress bar and the

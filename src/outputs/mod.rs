@@ -143,6 +143,9 @@ pub struct Settings {
     /// The lossy compressions the source's texels went through (`Embedded::lossy`): a DICOM
     /// series lists them before its own JPEG coding.
     pub lossy: Vec<crate::source::LossyStep>,
+    /// The one channel the source's file names (`Embedded::channel`): an OME-TIFF of one
+    /// plane names its channel so.
+    pub channel: Option<crate::source::ChannelLabel>,
     /// How the source's stored JPEG tiles code colour (its first tile's, as
     /// `StoredTiles::subsampling` reads it): a TIFF or DICOM output's JPEG tiles are coded so
     /// where `--subsampling` is not given, so that the stored tiles can be copied into it.

@@ -281,6 +281,8 @@ struct Own {
     no_associated: bool,
     /// The source's georeferencing, for a generic TIFF or a COG.
     geo: Option<crate::source::GeoTags>,
+    /// The one channel the source names, for an OME-TIFF.
+    channel: Option<crate::source::ChannelLabel>,
 }
 
 /// The settings a format reads beyond those every format does (tile size, background,
@@ -354,6 +356,7 @@ impl Own {
             no_associated: s.no_associated,
             // Not a flag: an output that has nowhere to put it ignores it.
             geo: s.geo.clone().filter(|_| matches!(format, Format::Tiff(Flavour::Generic | Flavour::Cog))),
+            channel: s.channel.clone().filter(|_| format == Format::Tiff(Flavour::Ome)),
         }
     }
 }
@@ -624,9 +627,13 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context, planes
         )));
     }
     let planar = planes.is_some();
-    let channels: Vec<tiff::OmeChannel> = (planes.unwrap_or_default().iter())
-        .map(|p| tiff::OmeChannel { name: Some(p.name.clone()), colour: p.colour })
-        .collect();
+    let channels: Vec<tiff::OmeChannel> = match planes {
+        Some(planes) => {
+            planes.iter().map(|p| tiff::OmeChannel { name: Some(p.name.clone()), colour: p.colour }).collect()
+        }
+        // An image's one channel, as its file names it (a one-channel OME-TIFF).
+        None => (own.channel.iter()).map(|c| tiff::OmeChannel { name: c.name.clone(), colour: c.colour }).collect(),
+    };
     for (given, flag) in file_and_viewer_flags(own) {
         if given {
             return Err(options(format!("{flag} does not apply to a {what} output, one file of tiled levels")));

@@ -414,23 +414,12 @@ fn ome_channels(xml: &str, series: Option<u32>, file: &str) -> std::result::Resu
         .map(|(k, c)| attribute(c, "Name").map_or_else(|| format!("c{k}"), Cow::into_owned))
         .collect();
     let mut colours: Vec<Option<u32>> =
-        channels.iter().map(|c| attribute(c, "Color").and_then(|v| colour(&v))).collect();
+        channels.iter().map(|c| attribute(c, "Color").and_then(|v| slide::colour(&v))).collect();
     if names.len() != ifds.len() {
         names = (0..ifds.len()).map(|c| format!("c{c}")).collect();
         colours = vec![None; ifds.len()];
     }
     Ok(Some(OmePlanes { ifds, names, colours }))
-}
-
-/// An OME `Color`: RGBA as a signed 32-bit integer (the schema's type), or as the unsigned
-/// one some writers put; anything else is no colour (it is only a display hint).
-fn colour(value: &str) -> Option<u32> {
-    let v: i64 = value.trim().parse().ok()?;
-    match v {
-        -0x8000_0000..0 => Some(v as i32 as u32),
-        0..=0xFFFF_FFFF => Some(v as u32),
-        _ => None,
-    }
 }
 
 /// Samples of several sources side by side in one texel; one source's sample `k` alone.

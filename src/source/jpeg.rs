@@ -207,6 +207,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
             geo: None,
             pitch: None,
             lossy: LossyStep::of(LossyStep::JPEG, (width as u32, height as u32), header.components as usize, file_len),
+            channel: None,
         },
         cmyk,
     }))

@@ -204,6 +204,18 @@ pub struct Embedded {
     /// JPEG-tiled slide's, or what a DICOM instance states. Empty where the file says none
     /// (its texels may still have been lossy once, before it was written).
     pub lossy: Vec<LossyStep>,
+    /// The one channel the file names for the image (an OME-TIFF series of one `Channel`).
+    pub channel: Option<ChannelLabel>,
+}
+
+/// What a file says of the one channel of its image, as OME-XML's `Channel` does: an
+/// OME-TIFF output names its one channel so again.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ChannelLabel {
+    /// Its `Name`.
+    pub name: Option<String>,
+    /// Its `Color`, RGBA.
+    pub colour: Option<u32>,
 }
 
 /// One lossy compression of an image's texels, as DICOM's Lossy Image Compression Method
@@ -305,6 +317,8 @@ pub struct Opened {
     pub pitch: Option<PixelPitch>,
     /// The lossy compressions the file's texels went through ([`Embedded::lossy`]).
     pub lossy: Vec<LossyStep>,
+    /// The one channel the file names ([`Embedded::channel`]).
+    pub channel: Option<ChannelLabel>,
 }
 
 /// Opens `path` as viewers show it (or as `opts` says): its orientation applied and its ICC
@@ -312,7 +326,7 @@ pub struct Opened {
 /// carry, and the georeferencing where the file has it and the rows keep its grid.
 pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
     let source = open_picked(path, opts.budget, opts.pick)?;
-    let Embedded { orientation, icc, geo, pitch, lossy } = source.embedded();
+    let Embedded { orientation, icc, geo, pitch, lossy, channel } = source.embedded();
     let (mut source, kept) = with_profile(path, source, icc, opts.keep_icc)?;
     let turned = opts.autorotate && orientation != orient::Orientation::NORMAL;
     if opts.autorotate {
@@ -327,7 +341,7 @@ pub fn open_with(path: &Path, opts: OpenOptions) -> Result<Opened> {
         Some(p) if opts.autorotate && orientation.transposes() => Some(PixelPitch { x_um: p.y_um, y_um: p.x_um, ..p }),
         other => other,
     };
-    Ok(Opened { source, icc: kept, geo, pitch, lossy })
+    Ok(Opened { source, icc: kept, geo, pitch, lossy, channel })
 }
 
 /// `source`, whose texels are in the colours of `icc`, converted to sRGB, or kept as they are

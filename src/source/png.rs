@@ -61,6 +61,7 @@ pub fn open(path: &Path, max_memory: u64) -> Result<Box<dyn RowSource>> {
         geo: None,
         pitch: None,
         lossy: Vec::new(),
+        channel: None,
     };
     let rows = if reader.info().interlaced {
         check_whole_fits(

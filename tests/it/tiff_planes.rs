@@ -297,3 +297,43 @@ fn the_source_pixel_size_is_carried() {
     let said = ok(&["split", s(&planes), "-o", s(&outs.join("said.ome.tif")), "--tile-size", "64"]);
     assert!(said.contains("0.3250 µm/texel (the OME-XML's PhysicalSizeX/Y)"), "{said}");
 }
+
+/// A one-channel OME-TIFF (tifffile, `Channel Name="DAPI"` with a `Color`, 16-bit) and its
+/// channel named in OME-XML; the one channel the second names, read back by ome-types.
+const ONE_CHANNEL: &str = r#"
+import sys
+import numpy as np, tifffile
+img = np.random.default_rng(5).integers(0, 4096, (97, 150)).astype(np.uint16)
+tifffile.imwrite(sys.argv[1], img, metadata={"axes": "YX", "Channel": {"Name": "DAPI", "Color": -16776961}})
+tifffile.imwrite(sys.argv[2], img, metadata={"axes": "YX"})
+"#;
+
+/// The OME-XML's channels (it validates), and the first one's `Name` and `Color` attributes
+/// as written (ome-types gives a `Color` not written the schema's default).
+const CHANNEL_OF: &str = r#"
+import re, sys
+import tifffile, ome_types
+with tifffile.TiffFile(sys.argv[1]) as t:
+    xml = t.ome_metadata
+channels = ome_types.from_xml(xml, validate=True).images[0].pixels.channels
+tag = re.search(r"<Channel\b[^>]*>", xml).group(0)
+said = lambda name: (re.search(name + r'="([^"]*)"', tag) or [None, None])[1]
+print(len(channels), said("Name"), said("Color"))
+"#;
+
+/// The one channel of an OME-TIFF source keeps its name and colour in an OME-TIFF output (read
+/// as texels, it is not a run of planes); a source that names none gives a channel without
+/// either, as before.
+#[test]
+fn a_one_channel_ome_tiff_keeps_its_channel_s_name() {
+    let Some(python) = readers("the channel name of a one-channel OME-TIFF") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let (named, plain) = (dir.path().join("dapi.ome.tif"), dir.path().join("plain.ome.tif"));
+    python_ok(&python, &["-c", ONE_CHANNEL, s(&named), s(&plain)]);
+    for (source, want) in [(&named, "1 DAPI -16776961"), (&plain, "1 None None")] {
+        let out = dir.path().join(format!("out-{}", source.file_name().unwrap().to_string_lossy()));
+        ok(&["split", s(source), "-o", s(&out), "--tile-size", "64", "-q"]);
+        let got = python_ok(&python, &["-c", CHANNEL_OF, s(&out)]);
+        assert_eq!(got.trim(), want, "{}", source.display());
+    }
+}

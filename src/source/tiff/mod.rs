@@ -184,6 +184,7 @@ pub fn open(path: &Path, max_memory: u64, pick: crate::source::Pick) -> Result<B
         pitch: chosen.pitch,
         // The JPEG and JPEG 2000 readers say what their coding lost.
         lossy: Vec::new(),
+        channel: chosen.channel.clone(),
     };
     if jpeg::is_jpeg(path, &mut decoder)? {
         // One strip cut by restart markers (Hamamatsu NDPI) is read an interval at a time.

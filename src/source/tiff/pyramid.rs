@@ -37,6 +37,8 @@ pub(super) struct Chosen {
     /// The pages of the main chain that are the chosen page's reduced levels (tiled, smaller,
     /// in the file's order), for an output that copies every level; SubIFDs are not listed.
     pub levels: Vec<usize>,
+    /// The one channel an OME-XML series (`--series`, or the first; not a `--page`) names.
+    pub channel: Option<crate::source::ChannelLabel>,
 }
 
 /// Surveys the file, picks a page and positions `decoder` on it.
@@ -82,7 +84,12 @@ pub(super) fn choose(
         };
     }
     let levels = reduced_levels(&pages, vendor, index);
-    Ok(Chosen { index, label, pitch, levels })
+    let series = pick.series.filter(|_| pick.page.is_none()).unwrap_or(0);
+    let channel = match (vendor, pick.page) {
+        (Vendor::Ome, None) => slide::ome_channel_label(&pages[0].description, series),
+        _ => None,
+    };
+    Ok(Chosen { index, label, pitch, levels, channel })
 }
 
 /// The main chain's directories, as far as they can be read, and why the chain ended early

@@ -206,6 +206,31 @@ pub(in crate::source) fn find_closing(xml: &str, name: &str) -> Option<usize> {
     None
 }
 
+/// The one `Channel` of OME-XML series `series`, its `Name` and `Color` as given; `None` where
+/// the series has none, several, or one that says neither.
+pub(in crate::source) fn ome_channel_label(xml: &str, series: u32) -> Option<crate::source::ChannelLabel> {
+    let image = *images(xml).get(series as usize)?;
+    let first = find_element(image, "Channel")?;
+    if find_element(&image[first + 1..], "Channel").is_some() {
+        return None;
+    }
+    let tag = start_tag(&image[first..]);
+    let name = attribute(tag, "Name").map(Cow::into_owned);
+    let colour = attribute(tag, "Color").and_then(|v| colour(&v));
+    (name.is_some() || colour.is_some()).then_some(crate::source::ChannelLabel { name, colour })
+}
+
+/// An OME `Color`: RGBA as a signed 32-bit integer (the schema's type), or as the unsigned
+/// one some writers put; anything else is no colour (it is only a display hint).
+pub(in crate::source) fn colour(value: &str) -> Option<u32> {
+    let v: i64 = value.trim().parse().ok()?;
+    match v {
+        -0x8000_0000..0 => Some(v as i32 as u32),
+        0..=0xFFFF_FFFF => Some(v as u32),
+        _ => None,
+    }
+}
+
 /// The value of attribute `name` in the start tag `tag`, its references replaced: the five
 /// predefined entities (`&amp;` `&lt;` `&gt;` `&quot;` `&apos;`) and character references
 /// (`&#65;`, `&#x41;`). A malformed reference (an unknown name, no `;`, a number that is no
