@@ -473,10 +473,10 @@ impl<T: Sample> Producer<'_, T> {
                     Ok(())
                 })
             });
-            let cutter = cutter.map_err(|e| TilerError::Options(format!("cannot start the cutting thread: {e}")))?;
+            let cutter = cutter.map_err(|e| TilerError::Internal(format!("cannot start the cutting thread: {e}")))?;
             let hand_on = move |chunk, derived| {
                 let sent = clock.time(Stage::Handoff, || to_cutter.send((chunk, derived)));
-                sent.map_err(|_| TilerError::Options("the cutting thread stopped".into()))
+                sent.map_err(|_| TilerError::Internal("the cutting thread stopped".into()))
             };
             let summed =
                 read_ahead::chunks(source, count, row_len, chunk_rows, clock, |chunk: read_ahead::Chunk<T>| {

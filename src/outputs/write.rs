@@ -457,7 +457,7 @@ impl Plan {
     ) -> Result<Wrote> {
         let Plan { outputs, pack, .. } = self;
         let [planned] = <[Planned; 1]>::try_from(outputs).map_err(|_| {
-            TilerError::Options("channels one pass each go to one output (an OME-Zarr or an OME-TIFF)".into())
+            TilerError::Internal("channels one pass each go to one output (an OME-Zarr or an OME-TIFF)".into())
         })?;
         let open = Open::start(planned, pack)?;
         let (opts, total) = (&open.planned.opts, open.planned.layout.total_tiles());
@@ -482,7 +482,7 @@ impl Plan {
                     &tiff
                 }
                 _ => {
-                    return Err(TilerError::Options(
+                    return Err(TilerError::Internal(
                         "channels one pass each go to an OME-Zarr or an OME-TIFF output".into(),
                     ));
                 }

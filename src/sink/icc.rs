@@ -100,7 +100,7 @@ fn iccp(icc: &[u8]) -> Result<Vec<u8>> {
     let mut body = b"iCCP".to_vec();
     body.extend_from_slice(b"ICC profile\0\0"); // name, separator, compression method 0
     let mut zlib = flate2::write::ZlibEncoder::new(body, flate2::Compression::default());
-    let failed = |e: std::io::Error| TilerError::Options(format!("compressing the ICC profile for PNG tiles: {e}"));
+    let failed = |e: std::io::Error| TilerError::Internal(format!("compressing the ICC profile for PNG tiles: {e}"));
     let body = zlib.write_all(icc).and_then(|()| zlib.finish()).map_err(failed)?;
     let length = u32::try_from(body.len() - 4).ok().filter(|&l| l <= i32::MAX as u32).ok_or_else(|| {
         TilerError::Options(format!("an ICC profile of {} bytes is too large for a PNG chunk", icc.len()))

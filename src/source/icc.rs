@@ -79,7 +79,7 @@ fn target(layout: PixelLayout) -> Result<Profile<ThreadContext>> {
     if is_colour(layout) {
         return Ok(Profile::new_srgb_context(ThreadContext::new()));
     }
-    let failed = |e: lcms2::Error| TilerError::Options(format!("LittleCMS could not make an sRGB grey profile: {e}"));
+    let failed = |e: lcms2::Error| TilerError::Internal(format!("LittleCMS could not make an sRGB grey profile: {e}"));
     // sRGB's own curve (IEC 61966-2-1) as an ICC parametric curve of type 4.
     let curve =
         ToneCurve::new_parametric(4, &[2.4, 1.0 / 1.055, 0.055 / 1.055, 1.0 / 12.92, 0.04045]).map_err(failed)?;

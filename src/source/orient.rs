@@ -256,7 +256,7 @@ impl RowSource for Oriented {
     fn read_row(&mut self, row: &mut [u8]) -> Result<()> {
         let y = self.next;
         if y >= self.header.height {
-            return Err(TilerError::Options(format!("{}: read past the last row", self.describe())));
+            return Err(TilerError::Internal(format!("{}: read past the last row", self.describe())));
         }
         if self.orientation.value() == 2 {
             self.fresh = false;

@@ -115,7 +115,7 @@ pub(crate) fn chunks<T: bytemuck::Pod + Send>(
             allocated
         });
         let reader =
-            reader.map_err(|e| TilerError::Options(format!("cannot start the source's reading thread: {e}")))?;
+            reader.map_err(|e| TilerError::Internal(format!("cannot start the source's reading thread: {e}")))?;
         let mut used = Ok(());
         while let Ok(chunk) = clock.time(Stage::ReadWait, || full_rx.recv()) {
             used = chunk.and_then(|rows| each(Chunk { rows, back: empty_tx.clone() }));

@@ -251,7 +251,7 @@ impl OmeZarrSink {
             let mut shard_file = fs::File::open(&s.path).map_err(|e| TilerError::write(&s.path, e))?;
             let archive = self.staging.join(ARCHIVE);
             let mut zip = lock(&self.zip);
-            let zip = zip.as_mut().ok_or_else(|| TilerError::Options("the .ozx was finished early".into()))?;
+            let zip = zip.as_mut().ok_or_else(|| TilerError::Internal("the .ozx was finished early".into()))?;
             add_entry(zip, &archive, &name, &mut shard_file)?;
             fs::remove_file(&s.path).map_err(|e| TilerError::write(&s.path, e))?;
         }

@@ -135,7 +135,7 @@ fn write_err(path: &Path) -> impl Fn(std::io::Error) -> TilerError + '_ {
 }
 
 fn poisoned() -> TilerError {
-    TilerError::Options("a tile writer panicked".into())
+    TilerError::panicked("a tile writer")
 }
 
 impl PmtilesSink {
@@ -476,7 +476,7 @@ impl Header {
 
 fn gzip(bytes: &[u8]) -> Result<Vec<u8>> {
     let mut e = GzEncoder::new(Vec::new(), Compression::default());
-    e.write_all(bytes).and_then(|()| e.finish()).map_err(|e| TilerError::Options(format!("gzip: {e}")))
+    e.write_all(bytes).and_then(|()| e.finish()).map_err(|e| TilerError::Internal(format!("gzip: {e}")))
 }
 
 fn push_varint(out: &mut Vec<u8>, mut v: u64) {
