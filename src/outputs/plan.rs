@@ -330,6 +330,8 @@ impl Own {
             subsampling: t.subsampling.filter(|_| image_codec),
             png_level: t.png_level.filter(|_| image_codec),
             bc7_effort: t.bc7_effort.filter(|_| image_codec),
+            lossless: t.lossless && image_codec,
+            jxl_effort: t.jxl_effort.filter(|_| image_codec),
             zstd_level: t.zstd_level.filter(|_| gets(Setting::ZstdLevel)),
             max_memory: None,
             ..t.clone()
@@ -532,10 +534,22 @@ fn for_viewer(output: Output, viewer: Viewer, own: &Own, at: &Context) -> Result
     };
     let (mut opts, _) = settings::resolve(&requested, None, at.header.layout)?;
     opts.down_to_one_texel = viewer.down_to_one_texel();
-    if !matches!(opts.codec.extension(), "jpg" | "png") {
+    if !matches!(opts.codec.extension(), "jpg" | "png" | "jxl") {
         return Err(options(format!(
-            "--layout {viewer} tiles are image files: use --codec jpeg or png, not {}",
+            "--layout {viewer} tiles are image files: use --codec jpeg, png or jxl, not {}",
             opts.codec.name()
+        )));
+    }
+    // Deep Zoom names its tiles' format in the descriptor (Format="jxl"); the others have no
+    // place to declare JPEG XL yet (IIIF's extraFormats, PMTiles' tile type: docs/jxl.md).
+    if matches!(opts.codec, Codec::Jxl { .. }) && viewer != Viewer::Dzi {
+        let what = if pmtiles {
+            "a PMTiles archive (its tile types have no JPEG XL)".to_string()
+        } else {
+            format!("--layout {viewer}")
+        };
+        return Err(options(format!(
+            "--codec jxl: {what} cannot declare JPEG XL tiles yet; write them into a tile directory (-o DIR) or --layout dzi, or use --codec jpeg or png here"
         )));
     }
     if iiif_service.is_some() && opts.codec.extension() != "jpg" {

@@ -77,6 +77,15 @@ impl Effort {
         }
     }
 
+    /// `effort` brought into 1..=9 (for constants; [`Effort::new`] refuses what is outside).
+    pub const fn clamped(effort: u8) -> Effort {
+        match effort {
+            0 => Effort(1),
+            1..=9 => Effort(effort),
+            _ => Effort(9),
+        }
+    }
+
     /// The number, 1 to 9.
     pub fn get(self) -> u8 {
         self.0
@@ -127,7 +136,14 @@ pub fn encode(image: &Image, quality: Quality, effort: Effort) -> Result<Vec<u8>
     // `check`), which libjxl copies before returning; `format` is only read.
     let added = unsafe { ffi::JxlEncoderAddImageFrame(settings, &format, data, bytes) };
     enc.check(added, "JxlEncoderAddImageFrame")?;
-    enc.finish(bytes / 4 + 4096, bytes.saturating_mul(2).saturating_add(1 << 20))
+    enc.finish(bytes / 4 + 4096, most_encoded_bytes(bytes))
+}
+
+/// The most bytes [`encode`] writes for an image of `raw` bytes of samples: larger output is
+/// an [`Error::Encoder`] (lossless files of noise come close to the samples' size; lossy ones
+/// at the smallest distance up to some 1.5 times it).
+pub fn most_encoded_bytes(raw: usize) -> usize {
+    raw.saturating_mul(2).saturating_add(64 << 10)
 }
 
 /// `jpeg`, a JPEG file, recompressed losslessly into JPEG XL (its DCT coefficients coded
@@ -146,7 +162,7 @@ pub fn recompress_jpeg(jpeg: &[u8], effort: Effort) -> Result<Vec<u8>, Error> {
     if added != ffi::JXL_ENC_SUCCESS {
         return Err(Error::JpegRecompression { step: "JxlEncoderAddJPEGFrame", reason: enc.reason() });
     }
-    enc.finish(jpeg.len() + 4096, jpeg.len().saturating_mul(2).saturating_add(1 << 20)).map_err(|e| match e {
+    enc.finish(jpeg.len() + 4096, most_encoded_bytes(jpeg.len())).map_err(|e| match e {
         Error::Encoder { step, reason } => Error::JpegRecompression { step, reason },
         other => other,
     })

@@ -6,7 +6,7 @@ mod encode;
 mod ffi;
 
 pub use decode::{Decoded, Header, Samples, decode, probe};
-pub use encode::{Effort, Image, Pixels, Quality, distance_for_quality, encode, recompress_jpeg};
+pub use encode::{Effort, Image, Pixels, Quality, distance_for_quality, encode, most_encoded_bytes, recompress_jpeg};
 
 /// Whether `bytes` start as a JPEG XL file does: a bare codestream (`FF 0A`) or the ISO BMFF
 /// container's signature box.
