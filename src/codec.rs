@@ -21,10 +21,21 @@ pub(crate) const DEFAULT_BC7_EFFORT: Bc7Effort = Bc7Effort::UltraFast;
 /// `--codec jxl`'s default quality: 90, Butteraugli distance 1.0 (libjxl's own default,
 /// "visually lossless"; [`vortex_jxl::distance_for_quality`]).
 pub(crate) const DEFAULT_JXL_QUALITY: u8 = 90;
-/// `--jxl-effort`'s default: on 256-texel tiles, lossy effort 5 gives files as small as 7 in
-/// less time, and lossless 5 sits between 3 (a third larger) and 7 (twice as slow); see
-/// docs/jxl.md.
+/// `--jxl-effort`'s default for lossy tiles (and copied JPEG tiles' recompression): on
+/// 256-texel tiles effort 5 made files 4% smaller than 3 and as small as 7 (docs/jxl.md).
 pub(crate) const DEFAULT_JXL_EFFORT: JxlEffort = JxlEffort::clamped(5);
+/// `--jxl-effort`'s default for lossless tiles: effort 5 took 5 times 3's time for 2% less.
+pub(crate) const DEFAULT_JXL_LOSSLESS_EFFORT: JxlEffort = JxlEffort::clamped(3);
+
+impl Codec {
+    /// `--codec jxl` at `quality` (`None`: lossless) with the default effort for it.
+    pub(crate) fn jxl_default_effort(quality: Option<u8>) -> JxlEffort {
+        match quality {
+            Some(_) => DEFAULT_JXL_EFFORT,
+            None => DEFAULT_JXL_LOSSLESS_EFFORT,
+        }
+    }
+}
 
 /// Why a pack refuses JPEG XL tiles, for now: the pack format has no tile kind for them.
 pub(crate) const JXL_NOT_IN_PACKS: &str = "--codec jxl: packs do not hold JPEG XL tiles yet (the pack format has no tile kind for them); write them into a tile directory (-o DIR) or --layout dzi, or the pack with --codec jpeg or png";

@@ -8,7 +8,7 @@ use base64::Engine;
 
 use crate::background::Background;
 use crate::codec::{Bc7Effort, Codec, JxlEffort, PngLevel, RowFilter, Subsampling, ZSTD_LEVELS};
-pub(crate) use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_JXL_EFFORT, DEFAULT_JXL_QUALITY, DEFAULT_ZSTD_LEVEL};
+pub(crate) use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_JXL_QUALITY, DEFAULT_ZSTD_LEVEL};
 use crate::error::{Result, TilerError};
 pub use crate::formats::tiles::filename::DEFAULT_FILENAME_STEM;
 use crate::formats::tiles::filename::FilenameFormat;
@@ -515,14 +515,12 @@ fn build_codec(
             // `--lossless` on the command line wins over a lossy info.json, `--quality` over
             // a lossless one.
             let lossless = req.lossless || (req.quality.is_none() && info.lossless == Some(true));
+            let quality = (!lossless).then(|| req.quality.or(info.quality).unwrap_or(DEFAULT_JXL_QUALITY));
             let effort = match req.jxl_effort.or(info.jxl_effort) {
                 Some(e) => JxlEffort::new(e).map_err(|e| TilerError::Options(format!("{e} (--jxl-effort)")))?,
-                None => DEFAULT_JXL_EFFORT,
+                None => Codec::jxl_default_effort(quality),
             };
-            Codec::Jxl {
-                quality: (!lossless).then(|| req.quality.or(info.quality).unwrap_or(DEFAULT_JXL_QUALITY)),
-                effort,
-            }
+            Codec::Jxl { quality, effort }
         }
         CodecChoice::Bc7 => Codec::Bc7 {
             effort: req
@@ -801,6 +799,47 @@ mod tests {
             let info = serde_json::to_value(&plan.info).expect("info.json as JSON");
             assert_eq!(info[member], want, "{rule}");
         }
+    }
+
+    /// The same rules for JPEG XL tiles, in a tile directory (packs do not hold them yet).
+    #[test]
+    fn jxl_settings_come_from_flags_then_info_json_then_defaults() {
+        let none = Requested::default;
+        let jxl = || Requested { codec: Some(CodecChoice::Jxl), ..none() };
+        let cases: Vec<(&str, Requested, Option<Value>, &str, Value)> = vec![
+            ("jxl: quality 90 by default", jxl(), None, "quality", json!(90)),
+            ("jxl: lossy effort 5 by default", jxl(), None, "jxlEffort", json!(5)),
+            ("jxl: lossless effort 3 by default", Requested { lossless: true, ..jxl() }, None, "jxlEffort", json!(3)),
+            (
+                "jxl: lossless from info.json",
+                jxl(),
+                Some(json!({"codec": "jxl", "lossless": true})),
+                "lossless",
+                json!(true),
+            ),
+            (
+                "jxl: --quality over a lossless info.json",
+                Requested { quality: Some(70), ..jxl() },
+                Some(json!({"codec": "jxl", "lossless": true})),
+                "quality",
+                json!(70),
+            ),
+            (
+                "jxl: codec from the file names",
+                none(),
+                Some(json!({"filenameFormat": "%1$d/%2$d_%3$d.jxl"})),
+                "codec",
+                json!("jxl"),
+            ),
+        ];
+        for (rule, flags, previous, member, want) in cases {
+            let plan = plan(&flags, previous, header(Channels::Rgb, Depth::U8), Destination::TileDir)
+                .unwrap_or_else(|e| panic!("{rule}: {e}"));
+            let info = serde_json::to_value(&plan.info).expect("info.json as JSON");
+            assert_eq!(info[member], want, "{rule}");
+        }
+        let pack = plan(&jxl(), None, header(Channels::Rgb, Depth::U8), Destination::Pack);
+        assert!(pack.is_err_and(|e| e.to_string().contains("packs do not hold JPEG XL")));
     }
 
     #[test]

@@ -17,7 +17,7 @@ use std::path::Path;
 use vortex_pack::{Description, Level};
 
 use crate::codec::{Bc7Effort, Codec, JxlEffort, PngLevel, RowFilter, Subsampling};
-use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_JXL_EFFORT, DEFAULT_JXL_QUALITY, DEFAULT_ZSTD_LEVEL};
+use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_JXL_QUALITY, DEFAULT_ZSTD_LEVEL};
 use crate::error::{Result, TilerError};
 use crate::layout::{Layout, lods_for};
 use crate::pixel::{Channels, Depth, PixelLayout};
@@ -153,10 +153,11 @@ pub(crate) fn codec_of(info: &InfoFile, extension: Option<String>) -> Option<Cod
     match name.as_str() {
         "jpeg" | "jpg" => Some(Codec::Jpeg { quality: info.quality.unwrap_or(85), subsampling }),
         "png" => Some(Codec::Png { level }),
-        "jxl" => Some(Codec::Jxl {
-            quality: (info.lossless != Some(true)).then(|| info.quality.unwrap_or(DEFAULT_JXL_QUALITY)),
-            effort: info.jxl_effort.and_then(|e| JxlEffort::new(e).ok()).unwrap_or(DEFAULT_JXL_EFFORT),
-        }),
+        "jxl" => {
+            let quality = (info.lossless != Some(true)).then(|| info.quality.unwrap_or(DEFAULT_JXL_QUALITY));
+            let effort = info.jxl_effort.and_then(|e| JxlEffort::new(e).ok());
+            Some(Codec::Jxl { quality, effort: effort.unwrap_or(Codec::jxl_default_effort(quality)) })
+        }
         // Never a file extension: these tiles are not files.
         _ if info.codec.is_none() => None,
         "raw" => Some(Codec::Raw),
