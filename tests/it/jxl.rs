@@ -252,3 +252,27 @@ fn what_cannot_hold_jxl_and_flags_that_do_not_fit_are_clear_errors() {
     // Nothing was left behind by the refused runs.
     assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0);
 }
+
+#[test]
+fn a_corrupt_or_truncated_jxl_tile_is_an_error_naming_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("jxl");
+    split(&fixture("sample.png"), &dir, &["--tile-size", "64", "--codec", "jxl", "--lossless", "--jxl-effort", "1"]);
+    let tile = dir.join("lod00-x0001-y0002.jxl");
+    let whole = std::fs::read(&tile).unwrap();
+    let mut garbage = whole.clone();
+    for b in garbage.iter_mut().skip(16) {
+        *b = b.wrapping_mul(31).wrapping_add(7);
+    }
+    for (what, bytes) in [("truncated", whole[..whole.len() / 3].to_vec()), ("corrupt", garbage)] {
+        std::fs::write(&tile, &bytes).unwrap();
+        let out = cli::run(&["convert", s(&dir), "-o", s(&tmp.path().join(format!("out-{what}"))), "--codec", "png"]);
+        // Debian's libjxl 0.7 prints its own trace of the failure (`./lib/jxl/decode.cc:...`)
+        // to standard error first; our message is the line that starts with `error: `.
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{what}: {err}");
+        assert!(!err.contains("panicked"), "{what}: {err}");
+        let line = err.lines().find(|l| l.starts_with("error: ")).unwrap_or_else(|| panic!("{what}: {err}"));
+        assert!(line.contains("lod00-x0001-y0002.jxl") && line.contains("JPEG XL"), "{what}: {line}");
+    }
+}
