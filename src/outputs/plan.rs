@@ -540,17 +540,13 @@ fn for_viewer(output: Output, viewer: Viewer, own: &Own, at: &Context) -> Result
             opts.codec.name()
         )));
     }
-    // Deep Zoom names its tiles' format in the descriptor (Format="jxl"); the others have no
-    // place to declare JPEG XL yet (IIIF's extraFormats, PMTiles' tile type: docs/jxl.md).
-    if matches!(opts.codec, Codec::Jxl { .. }) && viewer != Viewer::Dzi {
-        let what = if pmtiles {
-            "a PMTiles archive (its tile types have no JPEG XL)".to_string()
-        } else {
-            format!("--layout {viewer}")
-        };
-        return Err(options(format!(
-            "--codec jxl: {what} cannot declare JPEG XL tiles yet; write them into a tile directory (-o DIR) or --layout dzi, or use --codec jpeg or png here"
-        )));
+    // Deep Zoom names its tiles' format in the descriptor (Format="jxl"), IIIF in
+    // preferredFormats and extraFormats, TileJSON in its URL template; PMTiles' tile type has
+    // no value for JPEG XL (docs/jxl.md).
+    if matches!(opts.codec, Codec::Jxl { .. }) && pmtiles {
+        return Err(options(
+            "--codec jxl: a PMTiles archive cannot declare JPEG XL tiles (its tile type has no value for them); write them into a tile directory (-o DIR) or --layout dzi, iiif or xyz, or use --codec jpeg or png here".into(),
+        ));
     }
     if iiif_service.is_some() && opts.codec.extension() != "jpg" {
         return Err(options(format!(

@@ -109,7 +109,7 @@ impl CodecChoice {
             CodecChoice::Deflate => "TIFF only (-o FILE.tif): lossless zlib, integer samples differenced first",
             CodecChoice::Lzw => "TIFF only (-o FILE.tif): lossless LZW, integer samples differenced first",
             CodecChoice::Jxl => {
-                "JPEG XL, any layout: lossy at --quality (90 = distance 1.0), or --lossless; --jxl-effort. Tile directories and Deep Zoom; copied JPEG tiles are recompressed losslessly"
+                "JPEG XL, any layout: lossy at --quality (90 = distance 1.0), or --lossless; --jxl-effort. Tile directories, Deep Zoom, IIIF, XYZ; copied JPEG tiles are recompressed losslessly"
             }
         }
     }
