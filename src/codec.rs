@@ -2,7 +2,7 @@
 //!
 //! The codec also decides the stored texel format: JPEG holds 8-bit grey or RGB only, so 16-bit
 //! tiles are rounded to 8 bits and alpha is either composited away (`--flatten`) or refused.
-//! Raw, zstd and Deflate store any layout, as PNG does. BC1 stores opaque 8-bit RGB and BC7 8-bit
+//! Raw, zstd and Deflate store any layout, as PNG and JPEG XL do. BC1 stores opaque 8-bit RGB and BC7 8-bit
 //! RGB or RGBA, so grey becomes RGB (grey + alpha RGBA). Raw, zstd and BC payloads have no file
 //! format: they go into packs (docs/pack-format.md) and, raw and zstd, into a TIFF's tiles;
 //! Deflate and LZW are a TIFF's only. Compression runs here, on the encoder threads, so that a sink that
@@ -18,6 +18,30 @@ use crate::pixel::{Channels, Depth, PixelLayout, Sample, u16_to_u8};
 
 pub(crate) const DEFAULT_ZSTD_LEVEL: i32 = 3;
 pub(crate) const DEFAULT_BC7_EFFORT: Bc7Effort = Bc7Effort::UltraFast;
+/// `--codec jxl`'s default quality: 90, Butteraugli distance 1.0 (libjxl's own default,
+/// "visually lossless"; [`vortex_jxl::distance_for_quality`]).
+pub(crate) const DEFAULT_JXL_QUALITY: u8 = 90;
+/// `--jxl-effort`'s default for lossy tiles (and copied JPEG tiles' recompression): on
+/// 256-texel tiles effort 5 made files 4% smaller than 3 and as small as 7 (docs/jxl.md).
+pub(crate) const DEFAULT_JXL_EFFORT: JxlEffort = JxlEffort::clamped(5);
+/// `--jxl-effort`'s default for lossless tiles: effort 5 took 5 times 3's time for 2% less.
+pub(crate) const DEFAULT_JXL_LOSSLESS_EFFORT: JxlEffort = JxlEffort::clamped(3);
+
+impl Codec {
+    /// `--codec jxl` at `quality` (`None`: lossless) with the default effort for it.
+    pub(crate) fn jxl_default_effort(quality: Option<u8>) -> JxlEffort {
+        match quality {
+            Some(_) => DEFAULT_JXL_EFFORT,
+            None => DEFAULT_JXL_LOSSLESS_EFFORT,
+        }
+    }
+}
+
+/// Why a pack refuses JPEG XL tiles, for now: the pack format has no tile kind for them.
+pub(crate) const JXL_NOT_IN_PACKS: &str = "--codec jxl: packs do not hold JPEG XL tiles yet (the pack format has no tile kind for them); write them into a tile directory (-o DIR) or a viewer layout (--layout dzi, iiif or xyz), or the pack with --codec jpeg or png";
+
+/// JPEG XL encoder effort, 1 (fastest) to 9 (smallest): vortex-jxl's, over libjxl.
+pub use vortex_jxl::Effort as JxlEffort;
 
 /// How a JPEG codes colour: YCbCr with its chroma subsampled or not, or RGB as it is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -161,6 +185,14 @@ pub enum Codec {
         /// The encoder's effort (`--bc7-effort`): time against quality.
         effort: Bc7Effort,
     },
+    /// JPEG XL (libjxl, through vortex-jxl): any channels, 8 or 16 bits, lossy or lossless.
+    Jxl {
+        /// `Some(q)`: lossy at the Butteraugli distance quality q (1 to 100, `--quality`) maps
+        /// to ([`vortex_jxl::distance_for_quality`]); `None`: lossless (`--lossless`).
+        quality: Option<u8>,
+        /// Encoder effort (`--jxl-effort`): time against size, never the texels.
+        effort: JxlEffort,
+    },
 }
 
 impl Codec {
@@ -196,6 +228,7 @@ impl Codec {
                 let filtered = stored + side;
                 filtered + filtered / 8 + 1024
             }
+            Codec::Jxl { .. } => vortex_jxl::most_encoded_bytes(stored as usize) as u64,
         }
     }
 
@@ -212,6 +245,7 @@ impl Codec {
             Codec::Lzw { .. } => "lzw",
             Codec::Bc1 => "bc1",
             Codec::Bc7 { .. } => "bc7",
+            Codec::Jxl { .. } => "jxl",
         }
     }
 
@@ -226,13 +260,19 @@ impl Codec {
             Codec::Lzw { .. } => "lzw",
             Codec::Bc1 => "bc1",
             Codec::Bc7 { .. } => "bc7",
+            Codec::Jxl { .. } => "jxl",
         }
     }
 
-    /// Whether a tile of this codec is an image file (JPEG, PNG) that a directory of tiles can
-    /// hold; the others are pack payloads only.
+    /// Whether a tile of this codec is an image file (JPEG, PNG, JPEG XL) that a directory of
+    /// tiles can hold; the others are pack payloads only.
     pub(crate) fn writes_files(&self) -> bool {
-        matches!(self, Codec::Jpeg { .. } | Codec::Png { .. })
+        matches!(self, Codec::Jpeg { .. } | Codec::Png { .. } | Codec::Jxl { .. })
+    }
+
+    /// Whether tiles of this codec lose texels: JPEG, lossy JPEG XL, BC1 and BC7.
+    pub(crate) fn is_lossy(&self) -> bool {
+        matches!(self, Codec::Jpeg { .. } | Codec::Bc1 | Codec::Bc7 { .. } | Codec::Jxl { quality: Some(_), .. })
     }
 
     /// Refuses a tile side this codec cannot store: BC blocks are 4x4 texels.
@@ -259,9 +299,12 @@ impl Codec {
             return self.stored_wide(source, flatten, depth);
         }
         match self {
-            Codec::Png { .. } | Codec::Raw | Codec::Zstd { .. } | Codec::Deflate { .. } | Codec::Lzw { .. } => {
-                Ok(PixelLayout::new(channels, depth.unwrap_or(source.depth)))
-            }
+            Codec::Png { .. }
+            | Codec::Jxl { .. }
+            | Codec::Raw
+            | Codec::Zstd { .. }
+            | Codec::Deflate { .. }
+            | Codec::Lzw { .. } => Ok(PixelLayout::new(channels, depth.unwrap_or(source.depth))),
             Codec::Bc1 | Codec::Bc7 { .. } => {
                 let name = self.name();
                 if depth == Some(Depth::U16) {
@@ -388,6 +431,11 @@ impl<T: Sample> TileEncoder<T> {
         self.source
     }
 
+    /// The codec it encodes with.
+    pub(crate) fn codec(&self) -> Codec {
+        self.codec
+    }
+
     /// Texels in the stored channels: alpha composited away if the stored layout has none, grey
     /// repeated into RGB if it is RGB (BC1, BC7).
     fn flattened<'a>(&self, texels: &'a [T]) -> Cow<'a, [T]> {
@@ -453,6 +501,7 @@ impl<T: Sample> TileEncoder<T> {
             Codec::Lzw { filter } => self.encode_lzw(texels, filter, out),
             Codec::Bc1 => self.encode_bc(texels, None, out),
             Codec::Bc7 { effort } => self.encode_bc(texels, Some(effort), out),
+            Codec::Jxl { quality, effort } => self.encode_jxl(texels, (self.side, self.side), quality, effort, out),
         }
     }
 
@@ -477,7 +526,8 @@ impl<T: Sample> TileEncoder<T> {
         match self.codec {
             Codec::Jpeg { quality, subsampling } => self.encode_jpeg(&part, size, quality, subsampling, out),
             Codec::Png { level } => self.encode_png(&part, size, level, out),
-            other => Err(format!("{} tiles are square; only jpeg and png tiles can be cropped", other.name())),
+            Codec::Jxl { quality, effort } => self.encode_jxl(&part, size, quality, effort, out),
+            other => Err(format!("{} tiles are square; only jpeg, png and jxl tiles can be cropped", other.name())),
         }
     }
 
@@ -557,6 +607,40 @@ impl<T: Sample> TileEncoder<T> {
     ) -> Result<(), String> {
         let samples = to_u8(texels);
         *out = encode_jpeg(&samples, (width, height), self.stored.channels, quality, subsampling, std::mem::take(out))?;
+        Ok(())
+    }
+
+    /// One JPEG XL file of the stored samples (8 or 16 bits, the source's sRGB colour): lossy
+    /// at the distance `quality` maps to, or lossless where it is `None`.
+    fn encode_jxl(
+        &self,
+        texels: &[T],
+        (width, height): (u32, u32),
+        quality: Option<u8>,
+        effort: JxlEffort,
+        out: &mut Vec<u8>,
+    ) -> Result<(), String> {
+        let quality = match quality {
+            Some(q) => vortex_jxl::Quality::Distance(vortex_jxl::distance_for_quality(q)),
+            None => vortex_jxl::Quality::Lossless,
+        };
+        let channels = self.stored.channels.count() as u32;
+        let wide: Vec<u16>;
+        let narrow: Cow<[u8]>;
+        let pixels = match self.stored.depth {
+            Depth::U8 => {
+                narrow = to_u8(texels);
+                vortex_jxl::Pixels::U8(&narrow)
+            }
+            Depth::U16 => {
+                let widen = if T::DEPTH == Depth::U8 { 257 } else { 1 };
+                wide = texels.iter().map(|s| s.to_u16() * widen).collect();
+                vortex_jxl::Pixels::U16(&wide)
+            }
+            other => return Err(format!("JPEG XL tiles hold 8 or 16-bit samples, not {}", other.tile_type())),
+        };
+        let image = vortex_jxl::Image { width, height, channels, pixels };
+        *out = vortex_jxl::encode(&image, quality, effort).map_err(|e| e.to_string())?;
         Ok(())
     }
 

@@ -42,6 +42,9 @@ pub fn decode_tile(path: &Path, bytes: &[u8]) -> Result<Decoded> {
 /// [`decode_tile`] of a tile at most `max` (width, height) texels: a larger one is refused
 /// from its header, before its texels are allocated.
 pub fn decode_tile_within(path: &Path, bytes: &[u8], max: (u32, u32)) -> Result<Decoded> {
+    if vortex_jxl::is_jxl(bytes) {
+        return decode_jxl(path, bytes, max);
+    }
     let reader =
         ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format().map_err(|e| TilerError::io(path, e))?;
     let decoder = reader.into_decoder().map_err(|e| image_error(path, e))?;
@@ -59,6 +62,10 @@ pub fn decode_tile_within(path: &Path, bytes: &[u8], max: (u32, u32)) -> Result<
 /// A tile file's size and pixel layout from its header alone, without decoding it.
 pub fn probe_tile(path: &Path, bytes: &[u8]) -> Result<(u32, u32, PixelLayout)> {
     use image::ImageDecoder;
+    if vortex_jxl::is_jxl(bytes) {
+        let header = vortex_jxl::probe(bytes).map_err(|e| jxl_error(path, e))?;
+        return Ok((header.width, header.height, jxl_layout(path, header)?));
+    }
     let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| TilerError::io(path, e))?;
@@ -84,6 +91,39 @@ pub(crate) fn layout_of(colour: image::ColorType) -> Option<PixelLayout> {
         _ => return None,
     };
     Some(PixelLayout::new(channels, depth))
+}
+
+/// A JPEG XL tile through libjxl's decoder (vortex-jxl): 8-bit samples up to 8 bits coded,
+/// 16-bit ones above.
+fn decode_jxl(path: &Path, bytes: &[u8], max: (u32, u32)) -> Result<Decoded> {
+    let decoded = vortex_jxl::decode(bytes, max).map_err(|e| jxl_error(path, e))?;
+    let header = decoded.header;
+    let layout = jxl_layout(path, header)?;
+    let bytes = match decoded.samples {
+        vortex_jxl::Samples::U8(s) => s,
+        vortex_jxl::Samples::U16(s) => bytemuck::cast_slice(&s).to_vec(),
+    };
+    Ok(Decoded { width: header.width, height: header.height, layout, bytes })
+}
+
+fn jxl_layout(path: &Path, header: vortex_jxl::Header) -> Result<PixelLayout> {
+    let channels = match header.channels {
+        1 => Channels::Grey,
+        2 => Channels::GreyAlpha,
+        3 => Channels::Rgb,
+        4 => Channels::Rgba,
+        n => return Err(TilerError::unsupported(path, format!("a JPEG XL image of {n} channels"))),
+    };
+    let depth = if header.bits_per_sample <= 8 { Depth::U8 } else { Depth::U16 };
+    Ok(PixelLayout::new(channels, depth))
+}
+
+fn jxl_error(path: &Path, e: vortex_jxl::Error) -> TilerError {
+    match e {
+        vortex_jxl::Error::TooLarge { .. } => TilerError::decode(path, e),
+        vortex_jxl::Error::OutOfMemory(_) => TilerError::unsupported(path, format!("{e}; raise --max-memory")),
+        other => TilerError::decode(path, format!("corrupt or truncated JPEG XL tile: {other}")),
+    }
 }
 
 pub(crate) fn image_error(path: &Path, e: image::ImageError) -> TilerError {

@@ -10,7 +10,9 @@
 //! lots are encoding or waiting for the writer at once.
 //!
 //! Where the source's stored JPEG tiles line up with the finest level's pages, a [`Copier`]
-//! hands those pages' files over instead of encoding them ([`crate::source::stored`]).
+//! hands those pages' files over instead of encoding them ([`crate::source::stored`]); for
+//! JPEG XL tiles each is recompressed losslessly ([`File::Recompressed`]: `djxl` gives the
+//! stored JPEG back byte for byte).
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -19,9 +21,10 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::time::Instant;
 
 use crate::background::Background;
+use crate::codec::Codec;
 use crate::codec::TileEncoder;
 use crate::error::{Result, TilerError};
-use crate::job::Progress;
+use crate::job::{Progress, Recompressed};
 use crate::layout::Crop;
 use crate::layout::Layout;
 use crate::limits::in_flight::{GATHER_MOST, LOTS_IN_FLIGHT};
@@ -46,7 +49,35 @@ pub(crate) struct Counts {
     pub copied: AtomicU64,
     /// Of the copied tiles, those cropped at the image's edge.
     pub cropped: AtomicU64,
+    /// Of the copied tiles, those recompressed into JPEG XL.
+    pub recompressed: Recompressing,
     pub targets: Vec<Placed>,
+}
+
+/// [`Recompressed`] as it is counted, from the pool's threads.
+#[derive(Default)]
+pub(crate) struct Recompressing {
+    tiles: AtomicU64,
+    jpeg_bytes: AtomicU64,
+    jxl_bytes: AtomicU64,
+    refused: AtomicU64,
+}
+
+impl Recompressing {
+    fn add(&self, jpeg: usize, jxl: usize) {
+        self.tiles.fetch_add(1, Ordering::Relaxed);
+        self.jpeg_bytes.fetch_add(jpeg as u64, Ordering::Relaxed);
+        self.jxl_bytes.fetch_add(jxl as u64, Ordering::Relaxed);
+    }
+
+    pub fn total(&self) -> Recompressed {
+        Recompressed {
+            tiles: self.tiles.load(Ordering::Relaxed),
+            jpeg_bytes: self.jpeg_bytes.load(Ordering::Relaxed),
+            jxl_bytes: self.jxl_bytes.load(Ordering::Relaxed),
+            refused: self.refused.load(Ordering::Relaxed),
+        }
+    }
 }
 
 /// What one target got: tiles stored (places), and of them those copied from the source
@@ -56,6 +87,7 @@ pub(crate) struct Placed {
     pub tiles: AtomicU64,
     pub copied: AtomicU64,
     pub cropped: AtomicU64,
+    pub recompressed: Recompressing,
 }
 
 impl Counts {
@@ -278,7 +310,8 @@ impl<T: Sample> Encoding<'_, T> {
             cut::fill_padding(&mut padded, side, channels, from, self.fills[t].as_deref().unwrap_or_default());
             padded
         });
-        let stored = prepare(encoder, self.targets, job, padded.as_deref().unwrap_or(&texels), self.copier)?;
+        let stored =
+            prepare(encoder, self.targets, job, padded.as_deref().unwrap_or(&texels), self.copier, self.counts)?;
         // The last job of a tile frees its texels here, not when the writer stores the lot.
         if let Some(texels) = Arc::into_inner(texels) {
             self.memory.add(Part::Tiles, -((texels.capacity() * size_of::<T>()) as i64));
@@ -288,6 +321,11 @@ impl<T: Sample> Encoding<'_, T> {
             Some(File::Copied(_)) => self.counts.copied.fetch_add(1, Ordering::Relaxed),
             Some(File::Cropped(_)) => {
                 self.counts.cropped.fetch_add(1, Ordering::Relaxed);
+                self.counts.copied.fetch_add(1, Ordering::Relaxed)
+            }
+            Some(File::Recompressed { ref jxl, jpeg, cropped }) => {
+                self.counts.recompressed.add(jpeg, jxl.len());
+                self.counts.cropped.fetch_add(u64::from(cropped), Ordering::Relaxed);
                 self.counts.copied.fetch_add(1, Ordering::Relaxed)
             }
             None => 0,
@@ -313,6 +351,13 @@ impl<T: Sample> Encoding<'_, T> {
             match (&stored.constant, &stored.file) {
                 (Some(texel), _) if sink.takes_constants() => sink.write_constant(job.lod, x, y, texel)?,
                 (_, Some(File::Encoded(bytes))) => sink.write_tile(job.lod, x, y, bytes)?,
+                // A JPEG XL file is written as any encoded tile: only a JPEG is a stored tile.
+                (_, Some(File::Recompressed { jxl, jpeg, cropped })) => {
+                    sink.write_tile(job.lod, x, y, jxl)?;
+                    placed.copied.fetch_add(1, Ordering::Relaxed);
+                    placed.cropped.fetch_add(u64::from(*cropped), Ordering::Relaxed);
+                    placed.recompressed.add(*jpeg, jxl.len());
+                }
                 (_, Some(file)) => {
                     sink.write_stored(job.lod, x, y, file.bytes())?;
                     placed.copied.fetch_add(1, Ordering::Relaxed);
@@ -461,13 +506,37 @@ enum File {
     Copied(Vec<u8>),
     /// The source's stored tile cropped losslessly to the part of an edge page the sink keeps.
     Cropped(Vec<u8>),
+    /// The stored tile (`cropped` or not) recompressed losslessly into JPEG XL: `jxl`, from a
+    /// JPEG of `jpeg` bytes, which `djxl` rebuilds byte for byte.
+    Recompressed {
+        jxl: Vec<u8>,
+        jpeg: usize,
+        cropped: bool,
+    },
 }
 
 impl File {
     /// The file's bytes.
     fn bytes(&self) -> &[u8] {
         match self {
-            File::Encoded(b) | File::Copied(b) | File::Cropped(b) => b,
+            File::Encoded(b) | File::Copied(b) | File::Cropped(b) | File::Recompressed { jxl: b, .. } => b,
+        }
+    }
+
+    /// The copy as `codec`'s tiles hold it: a JPEG as it is for JPEG tiles, recompressed for
+    /// JPEG XL ones; `None` where libjxl cannot rebuild this JPEG exactly (counted in
+    /// `refused`), so that the page is encoded from its texels instead.
+    fn for_codec(self, codec: Codec, refused: &AtomicU64) -> Result<Option<File>> {
+        let Codec::Jxl { effort, .. } = codec else { return Ok(Some(self)) };
+        let cropped = matches!(self, File::Cropped(_));
+        let jpeg = self.bytes();
+        match vortex_jxl::recompress_jpeg(jpeg, effort) {
+            Ok(jxl) => Ok(Some(File::Recompressed { jxl, jpeg: jpeg.len(), cropped })),
+            Err(vortex_jxl::Error::JpegRecompression { .. }) => {
+                refused.fetch_add(1, Ordering::Relaxed);
+                Ok(None)
+            }
+            Err(e) => Err(TilerError::Internal(format!("recompressing a stored JPEG tile: {e}"))),
         }
     }
 }
@@ -476,7 +545,9 @@ impl Stored {
     /// Bytes held until the writer stores it.
     fn bytes(&self) -> usize {
         let file = match &self.file {
-            Some(File::Encoded(b) | File::Copied(b) | File::Cropped(b)) => b.capacity(),
+            Some(File::Encoded(b) | File::Copied(b) | File::Cropped(b) | File::Recompressed { jxl: b, .. }) => {
+                b.capacity()
+            }
             None => 0,
         };
         file + self.constant.as_ref().map_or(0, Vec::capacity)
@@ -491,6 +562,7 @@ fn prepare<T: Sample>(
     job: &Job<T>,
     texels: &[T],
     copier: Option<&Copier>,
+    counts: &Counts,
 ) -> Result<Stored> {
     let channels = encoder.source_layout().channels.count();
     let takes_constants = |&(t, _): &(usize, _)| targets[t].sink.takes_constants();
@@ -506,6 +578,7 @@ fn prepare<T: Sample>(
     if let Some(copier) = copier.filter(|_| job.copy)
         && let Some(file) = copier.file((x, y), job.crop)?
         && job.places.iter().all(|&(t, _)| targets[t].sink.takes_stored_jpeg(file.bytes()))
+        && let Some(file) = file.for_codec(encoder.codec(), &counts.recompressed.refused)?
     {
         return Ok(Stored { constant, file: Some(file) });
     }

@@ -101,7 +101,8 @@ impl TileEncoding {
     pub fn declines_stored(&self) -> Option<String> {
         match (self.reencode, self.codec) {
             (Some(why), _) => Some(format!("{why} asked")),
-            (None, Codec::Jpeg { .. }) => None,
+            // JPEG XL takes them recompressed losslessly (`encoders::File::Recompressed`).
+            (None, Codec::Jpeg { .. } | Codec::Jxl { .. }) => None,
             (None, codec) => Some(format!("the tiles are {}", codec.name())),
         }
     }
@@ -145,6 +146,8 @@ pub struct Summary {
     pub copied: u64,
     /// Of the copied tiles, those cropped losslessly to an edge page's part inside the image.
     pub cropped: u64,
+    /// Of the copied tiles, those recompressed losslessly into JPEG XL (`--codec jxl`).
+    pub recompressed: Recompressed,
     /// The source's stored tiles, where it has some, and whether they were copied.
     pub stored_tiles: Option<StoredReport>,
     /// Bytes of tile data the sinks wrote, summed over them (not their files' other bytes).
@@ -169,6 +172,29 @@ pub struct Written {
     pub bytes: u64,
     pub copied: u64,
     pub cropped: u64,
+    pub recompressed: Recompressed,
+}
+
+/// The source's stored JPEG tiles that `--codec jxl` recompressed losslessly into JPEG XL
+/// (libjxl's JPEG reconstruction: `djxl` gives each JPEG back byte for byte).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Recompressed {
+    /// Tiles recompressed.
+    pub tiles: u64,
+    /// Their bytes as the stored JPEG files (cropped ones as cropped).
+    pub jpeg_bytes: u64,
+    /// Their bytes as JPEG XL files.
+    pub jxl_bytes: u64,
+    /// Stored tiles libjxl could not recompress exactly (an unusual JPEG), encoded from their
+    /// texels instead.
+    pub refused: u64,
+}
+
+impl Recompressed {
+    /// Bytes the recompression saved (negative where the JPEG XL files are larger).
+    pub fn saved(&self) -> i64 {
+        self.jpeg_bytes as i64 - self.jxl_bytes as i64
+    }
 }
 
 /// Where a run's memory went (issue 28), by the stages' own count of their buffers beside the

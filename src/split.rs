@@ -32,7 +32,7 @@ use crate::source::{ImageHeader, RowSource, read_ahead};
 use crate::stages::{Stage, StageClock};
 
 pub(crate) use crate::job::Written;
-pub use crate::job::{MemoryReport, Progress, SplitOptions, StoredReport, Summary};
+pub use crate::job::{MemoryReport, Progress, Recompressed, SplitOptions, StoredReport, Summary};
 pub use crate::stages::StageTimes;
 
 /// Whether the finest level's pages are copied from `source`'s stored tiles (the copier, and
@@ -304,11 +304,13 @@ fn run<T: Sample>(
                 bytes: target.sink.bytes_written(),
                 copied: t.copied.load(Relaxed),
                 cropped: t.cropped.load(Relaxed),
+                recompressed: t.recompressed.total(),
             })
             .collect(),
         encoded: counts.encoded.into_inner(),
         copied: counts.copied.into_inner(),
         cropped: counts.cropped.into_inner(),
+        recompressed: counts.recompressed.total(),
         stored_tiles,
         bytes: targets.iter().map(|t| t.sink.bytes_written()).sum(),
         stripes,

@@ -8,7 +8,7 @@ use vortex_tiler::error::ShowPath;
 use vortex_tiler::formats::tiff::Flavour;
 use vortex_tiler::output::{self, Claim, Product};
 use vortex_tiler::outputs::Figures;
-use vortex_tiler::split::Progress;
+use vortex_tiler::split::{Progress, Summary};
 
 use super::signals;
 use super::split::Finished;
@@ -95,7 +95,7 @@ pub fn summary_line(done: &Finished, out: &Path) -> String {
             if s.stripes == 1 { "" } else { "s" }
         ),
     };
-    let stored = s.stored_tiles.as_ref().map(|t| stored_clause(s.copied, s.cropped, t)).unwrap_or_default();
+    let stored = s.stored_tiles.as_ref().map(|t| stored_clause(s, t)).unwrap_or_default();
     format!(
         "wrote {} tiles ({} encoded, {} LODs from {} x {} pages, {}x{} {}) totalling {} to {} in {:.2} s: {:.1} source Mpx/s [{}]{stripes}{peak}{stored}",
         s.tiles,
@@ -115,13 +115,30 @@ pub fn summary_line(done: &Finished, out: &Path) -> String {
 }
 
 /// What became of the source's stored JPEG tiles, for the summary line.
-fn stored_clause(copied: u64, cropped: u64, t: &vortex_tiler::split::StoredReport) -> String {
+fn stored_clause(s: &Summary, t: &vortex_tiler::split::StoredReport) -> String {
+    let (copied, cropped, r) = (s.copied, s.cropped, &s.recompressed);
     let quality = t.quality.map(|q| format!(" ({q} by their quantisation tables)")).unwrap_or_default();
     let tiles = format!("the source's {}x{} JPEG tiles{quality}", t.tile_size.0, t.tile_size.1);
-    match &t.declined {
-        None => {
-            format!("; {copied} tiles copied as stored, {cropped} of them cropped losslessly at the edge, from {tiles}")
+    let recompressed = match (r.tiles, r.refused) {
+        (0, 0) => String::new(),
+        (n, refused) => {
+            let percent = 100.0 * r.saved() as f64 / r.jpeg_bytes.max(1) as f64;
+            let refused = match refused {
+                0 => String::new(),
+                k => format!("; {k} libjxl could not rebuild exactly were encoded from their texels"),
+            };
+            format!(
+                "; {n} of them recompressed losslessly into JPEG XL, {} of JPEG in {} (saved {} bytes, {percent:.1}%){refused}",
+                mib(r.jpeg_bytes),
+                mib(r.jxl_bytes),
+                r.saved()
+            )
         }
+    };
+    match &t.declined {
+        None => format!(
+            "; {copied} tiles copied as stored, {cropped} of them cropped losslessly at the edge, from {tiles}{recompressed}"
+        ),
         Some(why) => format!("; {tiles} re-encoded, not copied: {why}"),
     }
 }
@@ -172,6 +189,13 @@ pub fn summary_value(done: &Finished, layout: &str, out: &Path, figures: &Figure
             "copied": s.copied,
             "cropped": s.cropped,
             "declined": t.declined,
+            "recompressed": {
+                "tiles": s.recompressed.tiles,
+                "jpegBytes": s.recompressed.jpeg_bytes,
+                "jxlBytes": s.recompressed.jxl_bytes,
+                "savedBytes": s.recompressed.saved(),
+                "refused": s.recompressed.refused,
+            },
         });
     }
     let own = match figures {

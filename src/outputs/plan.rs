@@ -332,6 +332,8 @@ impl Own {
             subsampling: t.subsampling.filter(|_| image_codec),
             png_level: t.png_level.filter(|_| image_codec),
             bc7_effort: t.bc7_effort.filter(|_| image_codec),
+            lossless: t.lossless && image_codec,
+            jxl_effort: t.jxl_effort.filter(|_| image_codec),
             zstd_level: t.zstd_level.filter(|_| gets(Setting::ZstdLevel)),
             max_memory: None,
             ..t.clone()
@@ -535,11 +537,19 @@ fn for_viewer(output: Output, viewer: Viewer, own: &Own, at: &Context) -> Result
     };
     let (mut opts, _) = settings::resolve(&requested, None, at.header.layout)?;
     opts.down_to_one_texel = viewer.down_to_one_texel();
-    if !matches!(opts.codec.extension(), "jpg" | "png") {
+    if !matches!(opts.codec.extension(), "jpg" | "png" | "jxl") {
         return Err(options(format!(
-            "--layout {viewer} tiles are image files: use --codec jpeg or png, not {}",
+            "--layout {viewer} tiles are image files: use --codec jpeg, png or jxl, not {}",
             opts.codec.name()
         )));
+    }
+    // Deep Zoom names its tiles' format in the descriptor (Format="jxl"), IIIF in
+    // preferredFormats and extraFormats, TileJSON in its URL template; PMTiles' tile type has
+    // no value for JPEG XL (docs/jxl.md).
+    if matches!(opts.codec, Codec::Jxl { .. }) && pmtiles {
+        return Err(options(
+            "--codec jxl: a PMTiles archive cannot declare JPEG XL tiles (its tile type has no value for them); write them into a tile directory (-o DIR) or --layout dzi, iiif or xyz, or use --codec jpeg or png here".into(),
+        ));
     }
     if iiif_service.is_some() && opts.codec.extension() != "jpg" {
         return Err(options(format!(

@@ -177,7 +177,9 @@ impl Open {
         let encoding = planned.opts.encoding();
         let stored = encoding.stored(summary.source)?;
         let (tiles, bytes, copied, cropped) = (written.tiles, written.bytes, written.copied, written.cropped);
-        let mut summary = Summary { layout: planned.layout, stored, tiles, bytes, copied, cropped, ..summary.clone() };
+        let recompressed = written.recompressed;
+        let mut summary =
+            Summary { layout: planned.layout, stored, tiles, bytes, copied, cropped, recompressed, ..summary.clone() };
         // Pages copied for the pyramid's other outputs were encoded for this one.
         if let Some(report) = &mut summary.stored_tiles
             && report.declined.is_none()
@@ -221,10 +223,11 @@ impl Open {
             source,
             stored,
             tiles,
-            per_target: vec![Written { tiles, bytes, copied: tiles, cropped: 0 }],
+            per_target: vec![Written { tiles, bytes, copied: tiles, cropped: 0, recompressed: Default::default() }],
             encoded: 0,
             copied: tiles,
             cropped: 0,
+            recompressed: Default::default(),
             stored_tiles: None,
             bytes,
             stripes: 0,
@@ -507,7 +510,7 @@ impl Plan {
         }
         // One target, every pass's places in it.
         let (tiles, bytes, copied, cropped) = (summary.tiles, summary.bytes, summary.copied, summary.cropped);
-        summary.per_target = vec![Written { tiles, bytes, copied, cropped }];
+        summary.per_target = vec![Written { tiles, bytes, copied, cropped, recompressed: summary.recompressed }];
         let reads = summary.passes;
         Ok(Wrote { reads, ..open.finish(&summary, 0, 0, picks.len() as u64)? })
     }

@@ -7,8 +7,8 @@ use std::path::Path;
 use base64::Engine;
 
 use crate::background::Background;
-use crate::codec::{Bc7Effort, Codec, PngLevel, RowFilter, Subsampling, ZSTD_LEVELS};
-pub(crate) use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
+use crate::codec::{Bc7Effort, Codec, JxlEffort, PngLevel, RowFilter, Subsampling, ZSTD_LEVELS};
+pub(crate) use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_JXL_QUALITY, DEFAULT_ZSTD_LEVEL};
 use crate::error::{Result, TilerError};
 pub use crate::formats::tiles::filename::DEFAULT_FILENAME_STEM;
 use crate::formats::tiles::filename::FilenameFormat;
@@ -51,14 +51,17 @@ pub enum CodecChoice {
     Deflate,
     /// TIFF only: lossless LZW (compression 5), integer samples horizontally differenced.
     Lzw,
+    /// JPEG XL, any layout: lossy (--quality, mapped to a distance) or --lossless; --jxl-effort.
+    Jxl,
 }
 
 impl CodecChoice {
     /// Every choice, in the order `--help` lists them.
-    pub const ALL: [CodecChoice; 10] = [
+    pub const ALL: [CodecChoice; 11] = [
         CodecChoice::Auto,
         CodecChoice::Jpeg,
         CodecChoice::Png,
+        CodecChoice::Jxl,
         CodecChoice::Raw,
         CodecChoice::Zstd,
         CodecChoice::ZstdDelta,
@@ -81,6 +84,7 @@ impl CodecChoice {
             CodecChoice::Bc7 => "bc7",
             CodecChoice::Deflate => "deflate",
             CodecChoice::Lzw => "lzw",
+            CodecChoice::Jxl => "jxl",
         }
     }
 
@@ -104,6 +108,9 @@ impl CodecChoice {
             CodecChoice::Bc7 => "Packs only: BC7 blocks, 8-bit RGB or RGBA (tile size a multiple of 4; --bc7-effort)",
             CodecChoice::Deflate => "TIFF only (-o FILE.tif): lossless zlib, integer samples differenced first",
             CodecChoice::Lzw => "TIFF only (-o FILE.tif): lossless LZW, integer samples differenced first",
+            CodecChoice::Jxl => {
+                "JPEG XL, any layout: lossy at --quality (90 = distance 1.0), or --lossless; --jxl-effort. Tile directories, Deep Zoom, IIIF, XYZ; copied JPEG tiles are recompressed losslessly"
+            }
         }
     }
 }
@@ -127,6 +134,10 @@ pub struct Requested {
     pub zstd_level: Option<i32>,
     /// `--bc7-effort`.
     pub bc7_effort: Option<Bc7Effort>,
+    /// `--lossless`: JPEG XL tiles that keep every sample.
+    pub lossless: bool,
+    /// `--jxl-effort`: 1 to 9.
+    pub jxl_effort: Option<u8>,
     /// `--background`: what fills the padding past the image's edge.
     pub background: Option<Background>,
     /// `--flatten`: composite alpha over the background, so RGBA can be stored as JPEG.
@@ -169,6 +180,7 @@ pub fn resolve(
     let ext_codec = match ext.as_deref() {
         Some("jpg" | "jpeg") => Some(CodecChoice::Jpeg),
         Some("png") => Some(CodecChoice::Png),
+        Some("jxl") => Some(CodecChoice::Jxl),
         _ => None,
     };
     let mut choice = req.codec.or(info_codec).or(ext_codec).unwrap_or(CodecChoice::Auto);
@@ -204,9 +216,9 @@ pub fn resolve(
         choice = if lossless { CodecChoice::Png } else { CodecChoice::Jpeg };
     }
     let codec = build_codec(choice, req, info, &field_err)?;
-    if let (Some(filter), true) = (labels, matches!(codec, Codec::Jpeg { .. } | Codec::Bc1 | Codec::Bc7 { .. })) {
+    if let (Some(filter), true) = (labels, codec.is_lossy()) {
         return Err(TilerError::Options(format!(
-            "--filter {filter} keeps label values exact, which --codec {} would blur; use png, raw, zstd or zstd-delta",
+            "--filter {filter} keeps label values exact, which --codec {} would blur; use png, raw, zstd, zstd-delta or jxl --lossless",
             codec.name()
         )));
     }
@@ -324,6 +336,11 @@ impl Plan {
                 opts.codec.name()
             )));
         }
+        if destination == Destination::Pack
+            && let Codec::Jxl { .. } = opts.codec
+        {
+            return Err(TilerError::Options(crate::codec::JXL_NOT_IN_PACKS.into()));
+        }
         let layout = opts.layout(source.width, source.height)?;
         if let Some((path, info)) = existing {
             check_grid(path, info, asked, &layout)?;
@@ -372,7 +389,11 @@ fn refuse_lossy_defaults(
         ));
     }
     let lossless_source = (has_alpha && !req.flatten) || source.depth != Depth::U8;
-    let lossy = matches!(info_codec, Some(CodecChoice::Jpeg | CodecChoice::Bc1 | CodecChoice::Bc7));
+    let lossy = match info_codec {
+        Some(CodecChoice::Jpeg | CodecChoice::Bc1 | CodecChoice::Bc7) => true,
+        Some(CodecChoice::Jxl) => info.lossless != Some(true),
+        _ => false,
+    };
     if lossless_source && lossy && req.codec.is_none() {
         return Err(field_err(
             "codec",
@@ -452,7 +473,7 @@ fn info_codec(info: &InfoFile, field_err: &dyn Fn(&str, String) -> TilerError) -
     match info.codec.as_deref() {
         None | Some("auto") => Ok(None),
         Some(name) => CodecChoice::from_name(name).map(Some).ok_or_else(|| {
-            field_err("codec", format!("'{name}' is not a codec (jpeg, png, raw, zstd, zstd-delta, bc1, bc7)"))
+            field_err("codec", format!("'{name}' is not a codec (jpeg, png, jxl, raw, zstd, zstd-delta, bc1, bc7)"))
         }),
     }
 }
@@ -465,6 +486,7 @@ fn build_codec(
     field_err: &dyn Fn(&str, String) -> TilerError,
 ) -> Result<Codec> {
     let zstd_level = req.zstd_level.or(info.zstd_level).unwrap_or(DEFAULT_ZSTD_LEVEL);
+    refuse_jxl_flags(choice, req)?;
     let codec = match choice {
         CodecChoice::Jpeg => Codec::Jpeg {
             quality: req.quality.or(info.quality).unwrap_or(DEFAULT_QUALITY),
@@ -489,6 +511,17 @@ fn build_codec(
                 choice.name()
             )));
         }
+        CodecChoice::Jxl => {
+            // `--lossless` on the command line wins over a lossy info.json, `--quality` over
+            // a lossless one.
+            let lossless = req.lossless || (req.quality.is_none() && info.lossless == Some(true));
+            let quality = (!lossless).then(|| req.quality.or(info.quality).unwrap_or(DEFAULT_JXL_QUALITY));
+            let effort = match req.jxl_effort.or(info.jxl_effort) {
+                Some(e) => JxlEffort::new(e).map_err(|e| TilerError::Options(format!("{e} (--jxl-effort)")))?,
+                None => Codec::jxl_default_effort(quality),
+            };
+            Codec::Jxl { quality, effort }
+        }
         CodecChoice::Bc7 => Codec::Bc7 {
             effort: req
                 .bc7_effort
@@ -497,8 +530,8 @@ fn build_codec(
         },
     };
     match codec {
-        Codec::Jpeg { quality, .. } if !(1..=100).contains(&quality) => {
-            Err(TilerError::Options(format!("JPEG quality {quality} (--quality) is outside 1..=100")))
+        Codec::Jpeg { quality, .. } | Codec::Jxl { quality: Some(quality), .. } if !(1..=100).contains(&quality) => {
+            Err(TilerError::Options(format!("quality {quality} (--quality) is outside 1..=100")))
         }
         Codec::Zstd { level, .. } if !ZSTD_LEVELS.contains(&level) => Err(TilerError::Options(format!(
             "zstd level {level} (--zstd-level) is outside {}..={}",
@@ -507,6 +540,39 @@ fn build_codec(
         ))),
         codec => Ok(codec),
     }
+}
+
+/// JPEG XL's flags with another codec, and `--lossless` with `--quality`, are refused: each
+/// would be ignored without a word.
+fn refuse_jxl_flags(choice: CodecChoice, req: &Requested) -> Result<()> {
+    if choice != CodecChoice::Jxl {
+        let flag = match (req.lossless, req.jxl_effort) {
+            (true, _) => "--lossless",
+            (false, Some(_)) => "--jxl-effort",
+            (false, None) => return Ok(()),
+        };
+        let already = match choice {
+            CodecChoice::Png | CodecChoice::Raw | CodecChoice::Zstd | CodecChoice::ZstdDelta => {
+                format!(" (--codec {} is lossless already)", choice.name())
+            }
+            _ => String::new(),
+        };
+        return Err(TilerError::Options(format!(
+            "{flag} is JPEG XL's: add --codec jxl, or leave {flag} out for --codec {}{already}",
+            choice.name()
+        )));
+    }
+    if req.lossless && req.quality.is_some() {
+        return Err(TilerError::Options(
+            "--lossless keeps every sample, so --quality has nothing to set: give one or the other".into(),
+        ));
+    }
+    if req.subsampling.is_some() {
+        return Err(TilerError::Options(
+            "--subsampling is JPEG's; JPEG XL tiles code colour at full resolution".into(),
+        ));
+    }
+    Ok(())
 }
 
 /// The codec to re-encode tiles of `source` layout with, for `pack`: the flags in `req` over
@@ -559,6 +625,8 @@ pub fn describe(l: &Layout, stored: PixelLayout, opts: &SplitOptions, names: &Fi
         background: Some(opts.background.to_string()),
         codec: codec.codec,
         quality: codec.quality,
+        lossless: codec.lossless,
+        jxl_effort: codec.jxl_effort,
         subsampling: codec.subsampling,
         png_compression: codec.png_compression,
         zstd_level: codec.zstd_level,
@@ -578,6 +646,11 @@ pub(crate) fn describe_codec(codec: Codec) -> InfoFile {
         Codec::Png { level } => info.png_compression = Some(level.name().into()),
         Codec::Zstd { level, .. } => info.zstd_level = Some(level),
         Codec::Bc7 { effort } => info.bc7_effort = Some(effort.name().into()),
+        Codec::Jxl { quality, effort } => {
+            info.quality = quality;
+            info.lossless = quality.is_none().then_some(true);
+            info.jxl_effort = Some(effort.get());
+        }
         Codec::Raw | Codec::Bc1 | Codec::Deflate { .. } | Codec::Lzw { .. } => {}
     }
     info
@@ -726,6 +799,47 @@ mod tests {
             let info = serde_json::to_value(&plan.info).expect("info.json as JSON");
             assert_eq!(info[member], want, "{rule}");
         }
+    }
+
+    /// The same rules for JPEG XL tiles, in a tile directory (packs do not hold them yet).
+    #[test]
+    fn jxl_settings_come_from_flags_then_info_json_then_defaults() {
+        let none = Requested::default;
+        let jxl = || Requested { codec: Some(CodecChoice::Jxl), ..none() };
+        let cases: Vec<(&str, Requested, Option<Value>, &str, Value)> = vec![
+            ("jxl: quality 90 by default", jxl(), None, "quality", json!(90)),
+            ("jxl: lossy effort 5 by default", jxl(), None, "jxlEffort", json!(5)),
+            ("jxl: lossless effort 3 by default", Requested { lossless: true, ..jxl() }, None, "jxlEffort", json!(3)),
+            (
+                "jxl: lossless from info.json",
+                jxl(),
+                Some(json!({"codec": "jxl", "lossless": true})),
+                "lossless",
+                json!(true),
+            ),
+            (
+                "jxl: --quality over a lossless info.json",
+                Requested { quality: Some(70), ..jxl() },
+                Some(json!({"codec": "jxl", "lossless": true})),
+                "quality",
+                json!(70),
+            ),
+            (
+                "jxl: codec from the file names",
+                none(),
+                Some(json!({"filenameFormat": "%1$d/%2$d_%3$d.jxl"})),
+                "codec",
+                json!("jxl"),
+            ),
+        ];
+        for (rule, flags, previous, member, want) in cases {
+            let plan = plan(&flags, previous, header(Channels::Rgb, Depth::U8), Destination::TileDir)
+                .unwrap_or_else(|e| panic!("{rule}: {e}"));
+            let info = serde_json::to_value(&plan.info).expect("info.json as JSON");
+            assert_eq!(info[member], want, "{rule}");
+        }
+        let pack = plan(&jxl(), None, header(Channels::Rgb, Depth::U8), Destination::Pack);
+        assert!(pack.is_err_and(|e| e.to_string().contains("packs do not hold JPEG XL")));
     }
 
     #[test]

@@ -43,6 +43,13 @@ impl Profile {
         let segments = match codec {
             Codec::Jpeg { .. } => Segments::App2(app2(icc)?),
             Codec::Png { .. } => Segments::Iccp(iccp(icc)?),
+            // A JPEG XL file states its colour itself (sRGB, as encoded here): tiles that carry
+            // another profile's texels would be shown wrong.
+            Codec::Jxl { .. } => {
+                return Err(TilerError::Options(
+                    "--keep-icc: JPEG XL tiles do not carry an ICC profile yet; leave --keep-icc out to convert the texels to sRGB, or use --codec jpeg or png".into(),
+                ));
+            }
             _ => return Ok(None),
         };
         Ok(Some(Profile { segments }))
@@ -210,5 +217,8 @@ mod tests {
         assert_eq!(png.embed(&[0xFF, 0xD8, 0xFF, 0xD9]), None, "a PNG profile goes into PNG tiles only");
         assert!(Profile::for_tiles(&icc, Codec::Raw).unwrap().is_none());
         assert!(Profile::for_tiles(&[], PNG).is_err());
+        let jxl = Codec::Jxl { quality: None, effort: crate::codec::JxlEffort::clamped(3) };
+        let err = Profile::for_tiles(&icc, jxl).unwrap_err().to_string();
+        assert!(err.contains("JPEG XL tiles do not carry an ICC profile"), "{err}");
     }
 }

@@ -21,6 +21,7 @@ mod golden;
 mod hostile;
 mod hostile_sources;
 mod iiif;
+mod jxl;
 mod keep_icc;
 mod library;
 mod memory;

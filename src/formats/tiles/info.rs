@@ -52,11 +52,17 @@ pub struct InfoFile {
     pub height: Option<u32>,
     /// What fills the padding: `edge`, `#rrggbb` or `#rrggbbaa`.
     pub background: Option<String>,
-    /// `jpeg` or `png`; in a pack's metadata also `raw`, `zstd`, `zstd-delta`, `bc1`, `bc7`.
+    /// `jpeg`, `png` or `jxl`; in a pack's metadata also `raw`, `zstd`, `zstd-delta`, `bc1`, `bc7`.
     pub codec: Option<String>,
-    /// JPEG only: quality, 1 to 100.
+    /// JPEG and lossy JPEG XL: quality, 1 to 100 (JPEG XL's maps to a distance).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub quality: Option<u8>,
+    /// JPEG XL only: `true` for lossless tiles.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lossless: Option<bool>,
+    /// JPEG XL only: the encoder's effort, 1 to 9.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub jxl_effort: Option<u8>,
     /// JPEG only: chroma subsampling, `420` or `444`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub subsampling: Option<String>,

@@ -16,8 +16,8 @@ use std::path::Path;
 
 use vortex_pack::{Description, Level};
 
-use crate::codec::{Bc7Effort, Codec, PngLevel, RowFilter, Subsampling};
-use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_ZSTD_LEVEL};
+use crate::codec::{Bc7Effort, Codec, JxlEffort, PngLevel, RowFilter, Subsampling};
+use crate::codec::{DEFAULT_BC7_EFFORT, DEFAULT_JXL_QUALITY, DEFAULT_ZSTD_LEVEL};
 use crate::error::{Result, TilerError};
 use crate::layout::{Layout, lods_for};
 use crate::pixel::{Channels, Depth, PixelLayout};
@@ -71,7 +71,7 @@ impl TiledDir {
         let codec = codec_of(&info, names.extension()).filter(Codec::writes_files).ok_or_else(|| TilerError::Info {
             path: path.clone(),
             field: "codec".into(),
-            message: "neither codec nor the file extension says jpeg or png".into(),
+            message: "neither codec nor the file extension says jpeg, png or jxl".into(),
         })?;
         let channels = Channels::from_tile_format(info.tile_format.as_deref().unwrap_or("rgb")).ok_or_else(|| {
             TilerError::Info { path: path.clone(), field: "tileFormat".into(), message: "not supported".into() }
@@ -153,6 +153,11 @@ pub(crate) fn codec_of(info: &InfoFile, extension: Option<String>) -> Option<Cod
     match name.as_str() {
         "jpeg" | "jpg" => Some(Codec::Jpeg { quality: info.quality.unwrap_or(85), subsampling }),
         "png" => Some(Codec::Png { level }),
+        "jxl" => {
+            let quality = (info.lossless != Some(true)).then(|| info.quality.unwrap_or(DEFAULT_JXL_QUALITY));
+            let effort = info.jxl_effort.and_then(|e| JxlEffort::new(e).ok());
+            Some(Codec::Jxl { quality, effort: effort.unwrap_or(Codec::jxl_default_effort(quality)) })
+        }
         // Never a file extension: these tiles are not files.
         _ if info.codec.is_none() => None,
         "raw" => Some(Codec::Raw),

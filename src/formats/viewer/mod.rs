@@ -76,10 +76,12 @@ impl Viewer {
         self == Viewer::Dzi
     }
 
-    /// The extension of a tile file: `jpeg` as vips writes Deep Zoom tiles, `jpg` elsewhere.
+    /// The extension of a tile file: `jpeg` as vips writes Deep Zoom tiles, `jpg` elsewhere;
+    /// `png` and `jxl` as they are.
     pub fn extension(self, codec_extension: &str) -> &'static str {
         match (self, codec_extension) {
             (_, "png") => "png",
+            (_, "jxl") => "jxl",
             (Viewer::Dzi, _) => "jpeg",
             _ => "jpg",
         }

@@ -92,7 +92,7 @@ fn is_iiif_tile(f: &str) -> bool {
 /// The stem of a tile image's file name.
 fn image(name: &str) -> Option<&str> {
     let (stem, ext) = name.rsplit_once('.')?;
-    ["jpg", "jpeg", "png"].contains(&ext).then_some(stem)
+    ["jpg", "jpeg", "png", "jxl"].contains(&ext).then_some(stem)
 }
 
 /// How many decimal numbers `text` is, separated by `sep`; `None` if anything else is in it.

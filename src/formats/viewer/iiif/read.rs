@@ -22,7 +22,7 @@ use crate::source::tiled::store::{Kind, MAX_DESCRIPTOR_BYTES, TileStore, join};
 use crate::source::tiled::{CellData, TileGrid, any_tile_file_cap, probe_stored};
 
 /// Tile file extensions tried, in this order.
-const EXTENSIONS: [&str; 3] = ["jpg", "png", "webp"];
+const EXTENSIONS: [&str; 4] = ["jpg", "png", "webp", "jxl"];
 
 /// Whether `bytes` (an `info.json`) is a IIIF Image API description: it names the API's
 /// context. Malformed ones count too, so that the IIIF reader reports what is wrong with them.
