@@ -1,7 +1,7 @@
 //! What is measured: a [`Choice`] is one way to build the pyramid (a LOD filter and a tile
 //! codec), with its label in tables and plots and its plot family.
 
-use crate::tiler::{Bc7Effort, Codec, Filter, PngLevel, RowFilter, Subsampling};
+use crate::tiler::{Bc7Effort, Codec, Filter, JxlEffort, PngLevel, RowFilter, Subsampling};
 
 /// Every LOD filter, in the order of the tables.
 pub const FILTERS: [Filter; 6] = Filter::ALL;
@@ -26,6 +26,8 @@ pub enum CodecKey {
     Deflate(bool, u8),
     /// A TIFF's LZW tiles (not in the sweep).
     Lzw(bool),
+    /// JPEG XL at a quality (`None`: lossless) and an effort (not in the sweep yet).
+    Jxl(Option<u8>, u8),
 }
 
 pub const PNG_LEVELS: [PngLevel; 3] = [PngLevel::Fast, PngLevel::Default, PngLevel::Best];
@@ -44,6 +46,7 @@ impl CodecKey {
             Codec::Deflate { level, filter } => CodecKey::Deflate(filter != RowFilter::None, level as u8),
             Codec::Lzw { filter } => CodecKey::Lzw(filter != RowFilter::None),
             Codec::Bc7 { effort } => CodecKey::Bc7(BC7_EFFORTS.iter().position(|e| *e == effort).unwrap_or(0) as u8),
+            Codec::Jxl { quality, effort } => CodecKey::Jxl(quality, effort.get()),
         }
     }
 
@@ -59,6 +62,7 @@ impl CodecKey {
             CodecKey::Deflate(delta, level) => Codec::Deflate { level: level as u32, filter: RowFilter::delta(delta) },
             CodecKey::Lzw(delta) => Codec::Lzw { filter: RowFilter::delta(delta) },
             CodecKey::Bc7(e) => Codec::Bc7 { effort: BC7_EFFORTS[e as usize] },
+            CodecKey::Jxl(quality, effort) => Codec::Jxl { quality, effort: JxlEffort::clamped(effort) },
         }
     }
 
@@ -75,6 +79,8 @@ impl CodecKey {
             CodecKey::Lzw(false) => "lzw".into(),
             CodecKey::Lzw(true) => "lzw-delta".into(),
             CodecKey::Bc7(e) => format!("bc7 {}", ["ultra-fast", "very-fast", "fast", "basic", "slow"][e as usize]),
+            CodecKey::Jxl(Some(q), e) => format!("jxl q{q} e{e}"),
+            CodecKey::Jxl(None, e) => format!("jxl lossless e{e}"),
         }
     }
 
@@ -91,6 +97,9 @@ impl CodecKey {
             CodecKey::Bc7(_) => 9,
             // Not in the sweep; plotted beside zstd-delta, their lossless kin, if they ever are.
             CodecKey::Deflate(..) | CodecKey::Lzw(_) => 7,
+            // Not in the sweep yet; lossy beside JPEG, lossless beside zstd-delta.
+            CodecKey::Jxl(Some(_), _) => 2,
+            CodecKey::Jxl(None, _) => 7,
         }
     }
 }

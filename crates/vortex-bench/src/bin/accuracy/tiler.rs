@@ -3,7 +3,7 @@
 //! it judges (`settings::resolve`). When the tiler's modules move, only these paths change.
 
 pub use vortex_tiler::background::Background;
-pub use vortex_tiler::codec::{Bc7Effort, Codec, PngLevel, RowFilter, Subsampling};
+pub use vortex_tiler::codec::{Bc7Effort, Codec, JxlEffort, PngLevel, RowFilter, Subsampling};
 pub use vortex_tiler::error::Result as TilerResult;
 pub use vortex_tiler::formats::pack::PackSink;
 pub use vortex_tiler::layout::Layout;
