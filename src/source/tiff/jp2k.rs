@@ -373,17 +373,7 @@ fn level(path: &Path, page: usize, ycbcr: bool, max_memory: u64) -> Result<std::
     let offsets = decoder.get_tag_u64_vec(Tag::TileOffsets).map_err(|e| open_error(path, e))?;
     let counts = decoder.get_tag_u64_vec(Tag::TileByteCounts).map_err(|e| open_error(path, e))?;
     let (across, down) = (width.div_ceil(tw), height.div_ceil(th));
-    let tiles = u64::from(across) * u64::from(down);
-    if (offsets.len() as u64) < tiles || (counts.len() as u64) < tiles {
-        return Err(TilerError::decode(
-            path,
-            format!(
-                "page {page} lists {} tile offsets and {} byte counts for {tiles} tiles",
-                offsets.len(),
-                counts.len()
-            ),
-        ));
-    }
+    super::enough_chunks(path, &offsets, &counts, u64::from(across) * u64::from(down), true)?;
     let chunks = Arc::new(Codestreams::new(path, offsets, counts, (tw, th))?);
     Ok(Ok(StoredLevel { width, height, page, tiles: Arc::new(Jp2kTiles { chunks, ycbcr, across, down }) }))
 }

@@ -182,7 +182,7 @@ pub(crate) fn assemble(
     let across = width.div_ceil(chunk_w);
     let down = height.div_ceil(chunk_h);
     let chunks = across as u64 * down as u64;
-    enough_chunks(path, &offsets, &counts, chunks, tiled)?;
+    super::enough_chunks(path, &offsets, &counts, chunks, tiled)?;
     // The chunks' JPEG coding is a lossy step (a file that states its history, a DICOM
     // instance, keeps its own).
     if embedded.lossy.is_empty() {
@@ -261,20 +261,6 @@ fn tile_size(path: &Path, decoder: &Decoder<BufReader<File>>) -> Result<(u32, u3
         return Err(TilerError::decode(path, format!("the JPEG TIFF declares {tw}x{th} tiles (not multiples of 8)")));
     }
     Ok((tw, th))
-}
-
-/// Refuses fewer offsets or byte counts than the grid's `chunks`.
-fn enough_chunks(path: &Path, offsets: &[u64], counts: &[u64], chunks: u64, tiled: bool) -> Result<()> {
-    if (offsets.len() as u64) < chunks || (counts.len() as u64) < chunks {
-        let message = format!(
-            "corrupt file: {} offsets and {} byte counts for {chunks} {}",
-            offsets.len(),
-            counts.len(),
-            if tiled { "tiles" } else { "strips" }
-        );
-        return Err(TilerError::decode(path, message));
-    }
-    Ok(())
 }
 
 /// The chunks' offsets and byte counts and the JPEGTables marker segments (no SOI/EOI; empty
@@ -595,7 +581,7 @@ fn level(path: &Path, page: usize, max_memory: u64) -> Result<std::result::Resul
     let (tw, th) = tile_size(path, &decoder)?;
     let (offsets, counts, tables) = chunk_tags(path, &mut decoder, true)?;
     let tiles = u64::from(width.div_ceil(tw)) * u64::from(height.div_ceil(th));
-    enough_chunks(path, &offsets, &counts, tiles, true)?;
+    super::enough_chunks(path, &offsets, &counts, tiles, true)?;
     let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
     let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
     let chunks = Arc::new(Chunks { path: path.to_path_buf(), file, file_len, offsets, counts, tables });

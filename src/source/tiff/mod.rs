@@ -152,6 +152,20 @@ impl Chunking {
     }
 }
 
+/// Refuses fewer offsets or byte counts than the grid's `chunks`.
+pub(super) fn enough_chunks(path: &Path, offsets: &[u64], counts: &[u64], chunks: u64, tiled: bool) -> Result<()> {
+    if (offsets.len() as u64) < chunks || (counts.len() as u64) < chunks {
+        let message = format!(
+            "corrupt file: {} offsets and {} byte counts for {chunks} {}",
+            offsets.len(),
+            counts.len(),
+            if tiled { "tiles" } else { "strips" }
+        );
+        return Err(TilerError::decode(path, message));
+    }
+    Ok(())
+}
+
 /// The page read and the pages of its reduced levels (`pyramid::Chosen`), read as stored
 /// levels when a run asks for them (`RowSource::stored_levels`), and the memory the reader may
 /// hold.
