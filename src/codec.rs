@@ -37,9 +37,6 @@ impl Codec {
     }
 }
 
-/// Why a pack refuses JPEG XL tiles, for now: the pack format has no tile kind for them.
-pub(crate) const JXL_NOT_IN_PACKS: &str = "--codec jxl: packs do not hold JPEG XL tiles yet (the pack format has no tile kind for them); write them into a tile directory (-o DIR) or a viewer layout (--layout dzi, iiif or xyz), or the pack with --codec jpeg or png";
-
 /// JPEG XL encoder effort, 1 (fastest) to 9 (smallest): vortex-jxl's, over libjxl.
 pub use vortex_jxl::Effort as JxlEffort;
 

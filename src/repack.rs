@@ -64,7 +64,7 @@ pub fn pack_dir(
 }
 
 /// The file of tile `id` and its bytes, checked against `info.json` before they are stored:
-/// a regular file no larger than a tile can be, a complete `kind` (PNG or JPEG) file whose
+/// a regular file no larger than a tile can be, a complete `kind` (PNG, JPEG or JPEG XL) file whose
 /// header says the directory's tile size and pixel layout.
 fn read_tile(dir: &Path, t: &TiledDir, id: TileId, kind: TileKind) -> Result<(std::path::PathBuf, Vec<u8>)> {
     use std::io::Read;
@@ -89,6 +89,8 @@ fn read_tile(dir: &Path, t: &TiledDir, id: TileId, kind: TileKind) -> Result<(st
     file.take(most + 1).read_to_end(&mut bytes).map_err(|e| TilerError::io(&path, e))?;
     let (looks_right, complete) = match kind {
         TileKind::Jpeg => (bytes.starts_with(&[0xff, 0xd8, 0xff]), bytes.ends_with(&[0xff, 0xd9])),
+        // A JPEG XL codestream has no end marker: it is complete if it decodes.
+        TileKind::Jxl => (vortex_jxl::is_jxl(&bytes), vortex_jxl::decode(&bytes, (side, side)).is_ok()),
         _ => (bytes.starts_with(b"\x89PNG\r\n\x1a\n"), bytes.ends_with(&PNG_END)),
     };
     if !looks_right {
@@ -253,7 +255,7 @@ pub fn unpack(pack: &Pack, dir: &Claim, progress: &dyn Progress) -> Result<u64> 
             }
             match pack.tile_checked(id)? {
                 Tile::Absent => continue,
-                Tile::Data(kind @ (TileKind::Png | TileKind::Jpeg), bytes) => {
+                Tile::Data(kind @ (TileKind::Png | TileKind::Jpeg | TileKind::Jxl), bytes) => {
                     if let Some(c) = codec.filter(|c| tile_kind(*c).ok() != Some(kind)) {
                         return Err(TilerError::Info {
                             path: pack.path().to_path_buf(),

@@ -156,17 +156,23 @@ fn open_pack(path: &Path) -> Result<Source, String> {
     });
     let codec = info.as_ref().and_then(|i| codec_of(i, None)).unwrap_or(match first_kind {
         Some(TileKind::Jpeg) => Codec::Jpeg { quality: DEFAULT_QUALITY, subsampling: Subsampling::S420 },
+        Some(TileKind::Jxl) => Codec::Jxl { quality: None, effort: SERVED_JXL_EFFORT },
         _ => Codec::Png { level: PngLevel::Fast },
     });
     let (pixels, etag) = (crate::formats::tiles::layout_of(&d), pack.header().content_hash);
     Ok(Source::Tiled(served(Store::Pack(Arc::new(pack)), layout, pixels, codec, etag)))
 }
 
-/// The tiles of a pyramid whose pages are `codec`: JPEG stays JPEG (at its quality), anything
-/// else is served as PNG.
+/// `--jxl-effort` of a JPEG XL tile made while a browser waits (a cropped or halved page):
+/// libjxl's fastest.
+const SERVED_JXL_EFFORT: crate::codec::JxlEffort = crate::codec::JxlEffort::clamped(1);
+
+/// The tiles of a pyramid whose pages are `codec`: JPEG stays JPEG (at its quality), JPEG XL
+/// stays JPEG XL (at its quality or lossless), anything else is served as PNG.
 fn served(store: Store, layout: Layout, pixels: PixelLayout, codec: Codec, etag: u64) -> Tiled {
     let (format, codec) = match codec {
         Codec::Jpeg { quality, subsampling } => (Format::Jpeg, Codec::Jpeg { quality, subsampling }),
+        Codec::Jxl { quality, .. } => (Format::Jxl, Codec::Jxl { quality, effort: SERVED_JXL_EFFORT }),
         _ => (Format::Png, Codec::Png { level: PngLevel::Fast }),
     };
     Tiled { store, layout, pixels, format, codec, etag }
@@ -208,18 +214,19 @@ impl Tiled {
     }
 }
 
-/// A JPEG or PNG payload of `pack`, its checksum checked, as bytes that borrow its memory map
+/// A JPEG, PNG or JPEG XL payload of `pack`, its checksum checked, as bytes that borrow its memory map
 /// (no copy); `None` for any other tile, and for a damaged one (which the decoding path then
 /// reports).
 pub fn stored_image(pack: &Arc<Pack>, lod: u32, x: u32, y: u32) -> Option<(Format, Bytes)> {
     image_of(pack, &pack.tile_checked(vortex_pack::TileId::new(lod, x, y)).ok()?)
 }
 
-/// A JPEG or PNG tile of `pack` as bytes that borrow its memory map.
+/// A JPEG, PNG or JPEG XL tile of `pack` as bytes that borrow its memory map.
 fn image_of(pack: &Arc<Pack>, tile: &Tile) -> Option<(Format, Bytes)> {
     let (format, bytes) = match tile {
         Tile::Data(TileKind::Jpeg, b) => (Format::Jpeg, b),
         Tile::Data(TileKind::Png, b) => (Format::Png, b),
+        Tile::Data(TileKind::Jxl, b) => (Format::Jxl, b),
         _ => return None,
     };
     let start = (bytes.as_ptr() as usize).checked_sub(pack.file().as_ptr() as usize)?;
@@ -257,7 +264,7 @@ fn pack_page(pack: &Arc<Pack>, lod: u32, x: u32, y: u32) -> Result<Option<Page>,
             let n = side as usize * side as usize;
             Page::Texels(texels(value.iter().copied().cycle().take(n * value.len()).collect()))
         }
-        Tile::Data(TileKind::Jpeg, _) | Tile::Data(TileKind::Png, _) => {
+        Tile::Data(TileKind::Jpeg | TileKind::Png | TileKind::Jxl, _) => {
             let (format, bytes) = image_of(pack, &tile).ok_or("the payload lies outside the pack's file")?;
             Page::Image(format, bytes)
         }

@@ -58,7 +58,7 @@ pub fn index(catalog: &Catalog) -> String {
                 let l = &t.layout;
                 let mut links = format!(
                     "<a href=\"/{n}.dzi\">DZI</a> <a href=\"/{n}/iiif/info.json\">IIIF</a> <a href=\"/{n}/xyz/0/0/0.{}\">XYZ</a>",
-                    if t.format == super::tiles::Format::Jpeg { "jpg" } else { "png" }
+                    t.format.extension(crate::formats::viewer::Viewer::Xyz)
                 );
                 if t.pack().is_some() {
                     links.push_str(&format!(" <a href=\"/{n}.vtpk\">pack</a>"));

@@ -12,17 +12,17 @@ use super::AppState;
 use super::catalog::{Source, Tiled, stored_image};
 use super::reply::{Reply, TILE_CACHE, etag, internal, not_modified};
 use super::routes::{self, Reject, bad, not_found};
-use super::tiles::{self, Format, Job};
+use super::tiles::{self, Job};
 use crate::formats::viewer::iiif::whole as iiif_whole;
 use crate::formats::viewer::{Crop, Viewer, dzi, iiif};
 use crate::source::decode_tile;
 
 pub(super) fn dzi_extension(t: &Tiled) -> &'static str {
-    Viewer::Dzi.extension(if t.format == Format::Jpeg { "jpg" } else { "png" })
+    t.format.extension(Viewer::Dzi)
 }
 
 pub(super) fn iiif_extension(t: &Tiled) -> &'static str {
-    Viewer::Iiif.extension(if t.format == Format::Jpeg { "jpg" } else { "png" })
+    t.format.extension(Viewer::Iiif)
 }
 
 pub(super) async fn dzi_tile(
@@ -159,7 +159,7 @@ pub(super) async fn xyz_tile(
 ) -> Result<Reply, Reject> {
     let tile = routes::xyz_tile(rest)?;
     let l = &t.layout;
-    let ext = Viewer::Xyz.extension(if t.format == Format::Jpeg { "jpg" } else { "png" });
+    let ext = t.format.extension(Viewer::Xyz);
     if tile.extension != ext {
         return Err(not_found(format!("the XYZ tiles of this input are .{ext}")));
     }

@@ -1,11 +1,12 @@
 //! A stored page into a viewer's tile: the stored bytes when they already are that tile, else
 //! the page decoded, cropped (and, below the pack's last LOD, halved) and encoded again.
 //!
-//! A JPEG or PNG page whose crop is the whole page and whose format is the one served is sent
-//! as stored. Everything else is decoded to its own texel layout (PNG and JPEG files by the
-//! `image` crate as `convert` reads tile files; raw, zstd and BC payloads by `vortex_pack`),
-//! cropped and encoded by the tiler's own [`TileEncoder::encode_crop`]: JPEG for JPEG inputs
-//! (at the input's quality), PNG (fast) for everything else, 16-bit samples kept.
+//! A JPEG, PNG or JPEG XL page whose crop is the whole page and whose format is the one served
+//! is sent as stored. Everything else is decoded to its own texel layout (image files as
+//! `convert` reads tile files; raw, zstd and BC payloads by `vortex_pack`), cropped and encoded
+//! by the tiler's own [`TileEncoder::encode_crop`]: JPEG for JPEG inputs (at the input's
+//! quality), JPEG XL for JPEG XL inputs (at the input's quality or lossless, effort 1: a tile
+//! made while a browser waits), PNG (fast) for everything else, 16-bit samples kept.
 //!
 //! Deep Zoom's levels go on below one page down to 1 x 1 texel; those few tiny levels are made
 //! here by halving the last stored LOD's image with a 2 x 2 box (the mean of the real texels
@@ -24,6 +25,7 @@ use crate::pixel::{Depth, PixelLayout};
 pub enum Format {
     Jpeg,
     Png,
+    Jxl,
 }
 
 impl Format {
@@ -31,7 +33,17 @@ impl Format {
         match self {
             Format::Jpeg => "image/jpeg",
             Format::Png => "image/png",
+            Format::Jxl => "image/jxl",
         }
+    }
+
+    /// The file extension `viewer` names these tiles with.
+    pub fn extension(self, viewer: crate::formats::viewer::Viewer) -> &'static str {
+        viewer.extension(match self {
+            Format::Jpeg => "jpg",
+            Format::Png => "png",
+            Format::Jxl => "jxl",
+        })
     }
 }
 
@@ -76,7 +88,7 @@ pub fn render(page: Page, job: &Job) -> Result<Bytes, String> {
         return Err(format!("the page is {}x{}, not {side}x{side}", decoded.width, decoded.height, side = job.side));
     }
     if !decoded.layout.depth.is_narrow_int() {
-        return Err(format!("{} pages have no image tile to serve (JPEG and PNG hold 8 or 16 bits)", decoded.layout));
+        return Err(format!("{} pages have no image tile to serve (image tiles hold 8 or 16 bits)", decoded.layout));
     }
     let (decoded, crop) = if job.halvings > 0 { halved_page(&decoded, job)? } else { (decoded, job.crop) };
     let mut out = Vec::new();

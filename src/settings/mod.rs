@@ -109,7 +109,7 @@ impl CodecChoice {
             CodecChoice::Deflate => "TIFF only (-o FILE.tif): lossless zlib, integer samples differenced first",
             CodecChoice::Lzw => "TIFF only (-o FILE.tif): lossless LZW, integer samples differenced first",
             CodecChoice::Jxl => {
-                "JPEG XL, any layout: lossy at --quality (90 = distance 1.0), or --lossless; --jxl-effort. Tile directories, Deep Zoom, IIIF, XYZ; copied JPEG tiles are recompressed losslessly"
+                "JPEG XL, any layout: lossy at --quality (90 = distance 1.0), or --lossless; --jxl-effort. Tile directories, packs, Deep Zoom, IIIF, XYZ; copied JPEG tiles are recompressed losslessly"
             }
         }
     }
@@ -335,11 +335,6 @@ impl Plan {
                 "--codec {} writes packs only (its tiles are not image files): write --pack FILE instead of --output, or use --codec png for lossless tile files",
                 opts.codec.name()
             )));
-        }
-        if destination == Destination::Pack
-            && let Codec::Jxl { .. } = opts.codec
-        {
-            return Err(TilerError::Options(crate::codec::JXL_NOT_IN_PACKS.into()));
         }
         let layout = opts.layout(source.width, source.height)?;
         if let Some((path, info)) = existing {
@@ -838,8 +833,8 @@ mod tests {
             let info = serde_json::to_value(&plan.info).expect("info.json as JSON");
             assert_eq!(info[member], want, "{rule}");
         }
-        let pack = plan(&jxl(), None, header(Channels::Rgb, Depth::U8), Destination::Pack);
-        assert!(pack.is_err_and(|e| e.to_string().contains("packs do not hold JPEG XL")));
+        let pack = plan(&jxl(), None, header(Channels::Rgb, Depth::U8), Destination::Pack).unwrap();
+        assert_eq!(serde_json::to_value(&pack.info).unwrap()["codec"], json!("jxl"));
     }
 
     #[test]

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use crate::common::cli::{self, fixture, s};
+use crate::common::server::Server;
 
 fn have_djxl() -> bool {
     crate::common::have_program("djxl", "--version", "libjxl-tools")
@@ -203,6 +204,113 @@ fn recompressed_stored_jpeg_tiles_give_back_the_stored_jpeg_byte_for_byte() {
     assert!(line.contains("recompressed losslessly into JPEG XL") && line.contains("saved"), "{line}");
 }
 
+/// Every tile of `pack` as RGBA8 (`vortex_pack`'s decoders: jxl-oxide for JPEG XL tiles),
+/// with its id, absent tiles left out.
+fn pack_tiles(pack: &Path) -> Vec<(vortex_pack::TileId, Vec<u8>)> {
+    let pack = vortex_pack::Pack::open(pack).unwrap();
+    let mut out = Vec::new();
+    for (lod, level) in pack.levels().iter().enumerate() {
+        for y in 0..level.tiles_h {
+            for x in 0..level.tiles_w {
+                let id = vortex_pack::TileId::new(lod as u32, x, y);
+                if let Some(rgba) = pack.decode_rgba8(id).unwrap() {
+                    out.push((id, rgba));
+                }
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn a_jxl_pack_holds_lossless_tiles_and_recompressed_stored_jpegs() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Lossless: the pack's JPEG XL tiles decode (by jxl-oxide, the runtimes' decoder) to the
+    // PNG pack's texels, and libjxl (`convert`) reads them back as the PNG pack's pyramid.
+    for input in ["sample.png", "rgba8-130x67.png", "grey-alpha16-97x61.png"] {
+        let (jxl, png) = (tmp.path().join(format!("{input}.jxl.vtpk")), tmp.path().join(format!("{input}.png.vtpk")));
+        let tiles = ["--tile-size", "64", "--border", "2"];
+        cli::ok(
+            &[
+                &["split", s(&fixture(input)), "--pack", s(&jxl)][..],
+                &tiles,
+                &["--codec", "jxl", "--lossless", "--jxl-effort", "1"],
+            ]
+            .concat(),
+        );
+        cli::ok(&[&["split", s(&fixture(input)), "--pack", s(&png)][..], &tiles, &["--codec", "png"]].concat());
+        let p = vortex_pack::Pack::open(&jxl).unwrap();
+        assert_eq!(p.header().required_features & vortex_pack::format::REQUIRED_JXL, vortex_pack::format::REQUIRED_JXL);
+        let (ours, theirs) = (pack_tiles(&jxl), pack_tiles(&png));
+        assert!(ours.len() > 2 && ours.len() == theirs.len(), "{input}");
+        for ((id, a), (_, b)) in ours.iter().zip(&theirs) {
+            assert!(a == b, "{input} {id:?}: the JPEG XL tile differs from the PNG tile");
+        }
+        let verified = cli::ok(&["verify", s(&jxl), "--decode"]);
+        assert!(verified.contains("jxl"), "{verified}");
+        // `unpack` writes the tiles out as .jxl files and `pack` stores them again, as they were.
+        let (files_dir, again) =
+            (tmp.path().join(format!("{input}-files")), tmp.path().join(format!("{input}-again.vtpk")));
+        cli::ok(&["unpack", s(&jxl), "-o", s(&files_dir)]);
+        assert!(!files(&files_dir, "jxl").is_empty());
+        cli::ok(&["pack", s(&files_dir), "-o", s(&again)]);
+        let a = vortex_pack::Pack::open(&jxl).unwrap();
+        let b = vortex_pack::Pack::open(&again).unwrap();
+        assert!(
+            a.ids().all(|id| a.tile(id).unwrap() == b.tile(id).unwrap()),
+            "{input}: pack -> unpack -> pack changed a tile"
+        );
+        let (a, b) = (tmp.path().join(format!("{input}-a")), tmp.path().join(format!("{input}-b")));
+        cli::ok(&["convert", s(&jxl), "-o", s(&a), "--codec", "png"]);
+        cli::ok(&["convert", s(&png), "-o", s(&b), "--codec", "png"]);
+        for name in files(&b, "png") {
+            let (x, y) = (image::open(a.join(&name)).unwrap(), image::open(b.join(&name)).unwrap());
+            assert!(x.as_bytes() == y.as_bytes(), "{input} {name:?}: converted back through libjxl, it differs");
+        }
+    }
+
+    // A JPEG-tiled TIFF's stored tiles: the JPEG pack copies them, the JPEG XL pack holds each
+    // recompressed, from which djxl gives the same JPEG back.
+    if !have_djxl() || !crate::common::have_program("vips", "--version", "libvips-tools") {
+        return;
+    }
+    let slide = tmp.path().join("slide.tif");
+    let out = Command::new("vips")
+        .args(["tiffsave", s(&fixture("sample.png")), s(&slide), "--tile", "--tile-width", "128"])
+        .args(["--tile-height", "128", "--compression", "jpeg", "--Q", "85"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (jpeg, jxl) = (tmp.path().join("slide.jpeg.vtpk"), tmp.path().join("slide.jxl.vtpk"));
+    let grid = ["--border", "0", "--tile-size", "128", "--json"];
+    cli::ok(&[&["split", s(&slide), "--pack", s(&jpeg)][..], &grid].concat());
+    let report: serde_json::Value = serde_json::from_str(&cli::ok(
+        &[&["split", s(&slide), "--pack", s(&jxl)][..], &grid, &["--codec", "jxl"]].concat(),
+    ))
+    .unwrap();
+    let recompressed = &report["storedTiles"]["recompressed"];
+    assert!(recompressed["tiles"].as_u64().unwrap() > 0, "{report}");
+    let (jpeg, jxl) = (vortex_pack::Pack::open(&jpeg).unwrap(), vortex_pack::Pack::open(&jxl).unwrap());
+    let mut rebuilt = 0;
+    for (x, y) in (0..jxl.levels()[0].tiles_w).flat_map(|x| (0..jxl.levels()[0].tiles_h).map(move |y| (x, y))) {
+        let id = vortex_pack::TileId::new(0, x, y);
+        let vortex_pack::Tile::Data(vortex_pack::TileKind::Jxl, bytes) = jxl.tile(id).unwrap() else {
+            panic!("{id:?}")
+        };
+        if !bytes.windows(4).any(|w| w == b"jbrd") {
+            continue;
+        }
+        let (tile, back) = (tmp.path().join("tile.jxl"), tmp.path().join("tile.jpg"));
+        std::fs::write(&tile, bytes).unwrap();
+        let _ = std::fs::remove_file(&back);
+        djxl(&tile, &back).unwrap();
+        let vortex_pack::Tile::Data(vortex_pack::TileKind::Jpeg, original) = jpeg.tile(id).unwrap() else { panic!() };
+        assert!(std::fs::read(&back).unwrap() == original, "{id:?}: djxl's JPEG is not the stored one");
+        rebuilt += 1;
+    }
+    assert_eq!(Some(rebuilt), recompressed["tiles"].as_u64(), "{report}");
+}
+
 #[test]
 fn what_cannot_hold_jxl_and_flags_that_do_not_fit_are_clear_errors() {
     let tmp = tempfile::tempdir().unwrap();
@@ -260,10 +368,6 @@ fn what_cannot_hold_jxl_and_flags_that_do_not_fit_are_clear_errors() {
             vec!["PMTiles archive cannot declare JPEG XL", "--layout dzi, iiif or xyz"],
         ),
         (
-            vec!["--pack".into(), s(&out("h.vtpk")).into(), "--codec".into(), "jxl".into()],
-            vec!["packs do not hold JPEG XL tiles yet"],
-        ),
-        (
             vec!["-o".into(), s(&out("i.tif")).into(), "--codec".into(), "jxl".into()],
             vec!["--codec jxl", "TIFF tiles are"],
         ),
@@ -298,4 +402,52 @@ fn a_corrupt_or_truncated_jxl_tile_is_an_error_naming_it() {
         let line = err.lines().find(|l| l.starts_with("error: ")).unwrap_or_else(|| panic!("{what}: {err}"));
         assert!(line.contains("lod00-x0001-y0002.jxl") && line.contains("JPEG XL"), "{what}: {line}");
     }
+}
+
+#[test]
+fn serve_hands_out_a_jxl_pack_s_tiles_as_jpeg_xl() {
+    let tmp = tempfile::tempdir().unwrap();
+    // sample.png (700 x 500) in 64-texel pages with a border of 1: Deep Zoom tiles of 62, the
+    // edge ones cropped, the levels below the last LOD halved (tests/it/serve.rs has the grid).
+    let (jxl, png) = (tmp.path().join("world.vtpk"), tmp.path().join("png").join("world.vtpk"));
+    std::fs::create_dir(tmp.path().join("png")).unwrap();
+    let grid = ["--tile-size", "64", "--border", "1", "-q"];
+    cli::ok(
+        &[
+            &["split", s(&fixture("sample.png")), "--pack", s(&jxl)][..],
+            &grid,
+            &["--codec", "jxl", "--lossless", "--jxl-effort", "1"],
+        ]
+        .concat(),
+    );
+    cli::ok(&[&["split", s(&fixture("sample.png")), "--pack", s(&png)][..], &grid, &["--codec", "png"]].concat());
+    let (server, png_server) = (Server::start(&[&jxl], &[]), Server::start(&[&png], &[]));
+
+    let dzi = server.get("/world.dzi", &[]).text();
+    assert!(dzi.contains(r#"Format="jxl" Overlap="1" TileSize="62""#), "{dzi}");
+    // An interior page is sent as stored.
+    let pack = vortex_pack::Pack::open(&jxl).unwrap();
+    let vortex_pack::Tile::Data(vortex_pack::TileKind::Jxl, stored) =
+        pack.tile(vortex_pack::TileId::new(0, 3, 2)).unwrap()
+    else {
+        panic!("a JPEG XL page")
+    };
+    let tile = server.get("/world_files/10/3_2.jxl", &[]);
+    assert_eq!((tile.status, tile.header("content-type")), (200, Some("image/jxl")));
+    assert!(tile.body == stored, "the interior tile is not the stored payload");
+    // Cropped edge tiles and halved levels are encoded again, losslessly as the pack was: the
+    // texels of the PNG pack's served tiles.
+    for (path, size) in [("10/11_8", (19, 5)), ("10/0_0", (63, 63)), ("5/0_0", (22, 16)), ("0/0_0", (1, 1))] {
+        let reply = server.get(&format!("/world_files/{path}.jxl"), &[]);
+        assert_eq!((reply.status, reply.header("content-type")), (200, Some("image/jxl")), "{path}");
+        let ours = vortex_jxl::decode(&reply.body, (64, 64)).unwrap();
+        assert_eq!((ours.header.width, ours.header.height), size, "{path}");
+        let expected = image::load_from_memory(&png_server.get(&format!("/world_files/{path}.png"), &[]).body).unwrap();
+        let vortex_jxl::Samples::U8(texels) = ours.samples else { panic!("8-bit") };
+        assert!(texels == expected.as_bytes(), "{path}: the served JPEG XL tile differs from the PNG one");
+    }
+    // IIIF and XYZ name their tiles .jxl; the other extensions are not there.
+    assert_eq!(server.get("/world/iiif/full/44,32/0/default.jxl", &[]).status, 200);
+    assert_eq!(server.get("/world/xyz/0/0/0.jxl", &[]).status, 200);
+    assert_eq!(server.get("/world_files/10/3_2.jpeg", &[]).status, 404);
 }

@@ -98,7 +98,7 @@ impl Tile<'_> {
                 }
                 Ok(out)
             }
-            TileKind::Png | TileKind::Jpeg => {
+            TileKind::Png | TileKind::Jpeg | TileKind::Jxl => {
                 Err(fail(format!("{} payloads are image files, not texels (see decode_rgba8)", kind.name())))
             }
             TileKind::Absent | TileKind::Constant => Err(fail(format!("{} tiles have no payload", kind.name()))),
@@ -149,6 +149,7 @@ impl PayloadDecoder {
             }
             TileKind::Png => decode_png(bytes, d.tile_size, max_bytes)?,
             TileKind::Jpeg => decode_jpeg(bytes, d.tile_size, max_bytes)?,
+            TileKind::Jxl => decode_jxl(bytes, d, max_bytes)?,
             TileKind::Bc1 | TileKind::Bc7 => decode_blocks(kind, bytes, d, max_bytes)?,
             TileKind::Absent | TileKind::Constant => return Err(format!("{} tiles have no payload", kind.name())),
         };
@@ -353,6 +354,46 @@ fn decode_jpeg(bytes: &[u8], side: u32, max_bytes: u64) -> Result<Vec<u8>, Strin
     let mut buf = alloc(size as u64)?;
     decoder.decode_into(&mut buf).map_err(|e| format!("jpeg: {e:?}"))?;
     texels_to_rgba8(&buf, channels, 1, Endian::Little)
+}
+
+/// A JPEG XL tile (`jxl-oxide`): its size read from its header and checked before anything
+/// is rendered, the renderer's allocations held under `max_bytes`; 16-bit samples become 8-bit
+/// as raw ones do, `(v + 128) / 257`.
+fn decode_jxl(bytes: &[u8], d: &Description, max_bytes: u64) -> Result<Vec<u8>, String> {
+    use jxl_oxide::{AllocTracker, JxlImage};
+    let limit = usize::try_from(max_bytes).unwrap_or(usize::MAX);
+    let image = JxlImage::builder()
+        .alloc_tracker(AllocTracker::with_limit(limit))
+        .read(bytes)
+        .map_err(|e| format!("jxl: {e}"))?;
+    let side = d.tile_size;
+    let (w, h) = (image.width(), image.height());
+    if (w, h) != (side, side) {
+        return Err(format!("jxl image is {w}x{h}, the tile is {side}x{side}"));
+    }
+    if image.num_loaded_keyframes() != 1 {
+        return Err(format!("jxl image has {} frames, a tile one", image.num_loaded_keyframes()));
+    }
+    let render = image.render_frame(0).map_err(|e| format!("jxl: {e}"))?;
+    let mut stream = render.stream();
+    let channels = stream.channels();
+    if !(1..=4).contains(&channels) {
+        return Err(format!("jxl image has {channels} channels (CMYK or extra channels), not grey or RGB"));
+    }
+    let samples = side as u64 * side as u64 * channels as u64;
+    if samples * d.sample_bytes.max(1) as u64 > max_bytes {
+        return Err(format!("jxl image exceeds the decoding limit of {max_bytes} bytes"));
+    }
+    let (texels, sample_bytes) = if d.sample_bytes == 2 {
+        let mut buf = vec![0u16; samples as usize];
+        stream.write_to_buffer(&mut buf);
+        (buf.iter().flat_map(|v| v.to_le_bytes()).collect(), 2)
+    } else {
+        let mut buf = alloc(samples)?;
+        stream.write_to_buffer(&mut buf);
+        (buf, 1)
+    };
+    texels_to_rgba8(&texels, channels as u8, sample_bytes, Endian::Little)
 }
 
 #[cfg(test)]

@@ -24,8 +24,11 @@ pub const REQUIRED_ZSTD_DELTA: u64 = 1 << 0;
 /// 1): a 1.1 reader without this bit would take float bits for integers. A writer sets it
 /// exactly for such packs, so that every other pack's bytes are as 1.1 made them.
 pub const REQUIRED_WIDE_SAMPLES: u64 = 1 << 1;
+/// Required-feature bit 2: the pack holds JPEG XL tiles (kind 9), which an older reader does
+/// not know. A writer sets it exactly when it stores such a tile.
+pub const REQUIRED_JXL: u64 = 1 << 2;
 /// Required-feature bits this reader understands.
-pub const KNOWN_REQUIRED_FEATURES: u64 = REQUIRED_ZSTD_DELTA | REQUIRED_WIDE_SAMPLES;
+pub const KNOWN_REQUIRED_FEATURES: u64 = REQUIRED_ZSTD_DELTA | REQUIRED_WIDE_SAMPLES | REQUIRED_JXL;
 /// [`Description::sample_format`] of unsigned integer samples.
 pub const SAMPLE_UNSIGNED: u8 = 0;
 /// [`Description::sample_format`] of IEEE 754 float samples (binary16 or binary32).
@@ -54,13 +57,16 @@ pub enum TileKind {
     /// `Raw` with every row left-delta filtered ([`delta_encode_rows`]), then compressed with
     /// zstd. Since 1.1; a pack holding one sets [`REQUIRED_ZSTD_DELTA`].
     ZstdDelta = 8,
+    /// A JPEG XL file of the tile (a bare codestream or the container; 8 or 16-bit samples,
+    /// grey or RGB, with or without alpha). A pack holding one sets [`REQUIRED_JXL`].
+    Jxl = 9,
 }
 
 impl TileKind {
     /// Every kind, in the order of their bytes (`ALL[k as usize] == k`).
-    pub const ALL: [TileKind; 9] = {
+    pub const ALL: [TileKind; 10] = {
         use TileKind::*;
-        [Absent, Constant, Raw, Zstd, Png, Jpeg, Bc1, Bc7, ZstdDelta]
+        [Absent, Constant, Raw, Zstd, Png, Jpeg, Bc1, Bc7, ZstdDelta, Jxl]
     };
 
     /// The kind of byte `v` of an index entry; `None` for a byte no kind has.
@@ -80,6 +86,7 @@ impl TileKind {
             TileKind::Bc1 => "bc1",
             TileKind::Bc7 => "bc7",
             TileKind::ZstdDelta => "zstd-delta",
+            TileKind::Jxl => "jxl",
         }
     }
 
@@ -92,6 +99,7 @@ impl TileKind {
     pub fn required_feature(self) -> u64 {
         match self {
             TileKind::ZstdDelta => REQUIRED_ZSTD_DELTA,
+            TileKind::Jxl => REQUIRED_JXL,
             _ => 0,
         }
     }

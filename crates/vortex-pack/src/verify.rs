@@ -57,7 +57,7 @@ pub struct Report {
     /// Index entries (every tile address of every level).
     pub tiles: u64,
     /// Tiles of each kind, indexed by the kind's byte (`TileKind as usize`).
-    pub kinds: [u64; 9],
+    pub kinds: [u64; TileKind::ALL.len()],
     /// Entries of no known kind.
     pub unknown_kinds: u64,
     /// Distinct payloads in the data section (inside it and not empty), and their bytes.
@@ -74,7 +74,7 @@ pub struct Report {
     pub problems: Vec<Problem>,
 }
 
-const KINDS: [TileKind; 9] = TileKind::ALL;
+const KINDS: [TileKind; TileKind::ALL.len()] = TileKind::ALL;
 
 impl Report {
     /// No problem found.
@@ -541,7 +541,7 @@ impl Verifier<'_> {
     fn decode(&mut self, decoder: &mut PayloadDecoder, group: &[Payload], bytes: &[u8], crc: u32) {
         let d = self.pack.header().description;
         let max_bytes = self.pack.limits().max_decoded_bytes;
-        let mut done = [false; 9];
+        let mut done = [false; TileKind::ALL.len()];
         for q in group.iter().filter(|q| q.crc == crc) {
             // Entries of unknown kinds were reported by `entries()` and carry no payload.
             let Some(kind) = self.kind_of(q.position) else { continue };

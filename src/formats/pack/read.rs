@@ -117,7 +117,7 @@ impl TileGrid for PackInput {
                 }
                 self.samples(name(), bytes)
             }
-            Tile::Data(TileKind::Png | TileKind::Jpeg, bytes) => CellData::File(name(), bytes.to_vec()),
+            Tile::Data(TileKind::Png | TileKind::Jpeg | TileKind::Jxl, bytes) => CellData::File(name(), bytes.to_vec()),
             Tile::Data(kind, bytes) => {
                 let limit = vortex_pack::DEFAULT_MAX_DECODED_BYTES;
                 let raw = Tile::Data(kind, bytes)

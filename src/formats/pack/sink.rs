@@ -47,7 +47,7 @@ pub fn tile_kind(codec: Codec) -> Result<TileKind> {
         Codec::Zstd { filter: RowFilter::Delta, .. } => TileKind::ZstdDelta,
         Codec::Bc1 => TileKind::Bc1,
         Codec::Bc7 { .. } => TileKind::Bc7,
-        Codec::Jxl { .. } => return Err(TilerError::Options(crate::codec::JXL_NOT_IN_PACKS.into())),
+        Codec::Jxl { .. } => TileKind::Jxl,
         Codec::Deflate { .. } | Codec::Lzw { .. } | Codec::Zstd { filter: RowFilter::FloatingPoint, .. } => {
             return Err(TilerError::Options(format!(
                 "--codec {} compresses the tiles of a TIFF; a pack takes png, raw, zstd or zstd-delta",

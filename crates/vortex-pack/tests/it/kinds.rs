@@ -1,5 +1,5 @@
-//! The kinds format 1.1 adds or specifies: zstd-delta (with its required-feature bit), BC1 and
-//! BC7 blocks. Blocks here are written by hand, bit by bit, from the Direct3D definitions, so
+//! The kinds format 1.1 adds or specifies: zstd-delta and JPEG XL (each with its
+//! required-feature bit), BC1 and BC7 blocks. Blocks here are written by hand, bit by bit, from the Direct3D definitions, so
 //! that the decoder is checked against the format rather than against an encoder.
 
 use vortex_pack::format::{self, delta_decode_rows, delta_encode_rows};
@@ -119,12 +119,83 @@ fn zstd_delta_tiles_read_back_exactly_and_need_their_feature_bit() {
     write(&path, d, |x, y| (TileKind::Zstd, zstd::bulk::compress(&noise(192, x + y), 1).unwrap()));
     let mut b = std::fs::read(&path).unwrap();
     assert_eq!(b[at::REQUIRED], 0);
-    // (Bit 1 marks 32-bit and float samples: bit 2 is the first one not defined.)
-    b[at::REQUIRED] = 4;
+    // (Bit 1 marks 32-bit and float samples, bit 2 JPEG XL tiles: bit 3 is the first one not
+    // defined.)
+    b[at::REQUIRED] = 8;
     reseal(&mut b);
     std::fs::write(&path, &b).unwrap();
     let e = Pack::open(&path).err().unwrap().to_string();
-    assert!(e.contains("required features 0x4 unknown"), "{e}");
+    assert!(e.contains("required features 0x8 unknown"), "{e}");
+}
+
+#[test]
+fn jxl_tiles_decode_as_libjxl_coded_them_and_need_their_feature_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    // Lossless tiles of every layout, 8 and 16 bits: libjxl encodes, jxl-oxide decodes, and the
+    // RGBA8 tile is exactly the texels' (16 bits as raw ones, (v + 128) / 257).
+    for (channels, sample_bytes) in [(1u8, 1u8), (2, 1), (3, 1), (4, 1), (3, 2), (2, 2)] {
+        let d = common::description(channels, sample_bytes);
+        let side = d.tile_size;
+        let raw = |x: u32, y: u32| noise(d.raw_tile_len().unwrap() as usize, x * 5 + y + 16 * channels as u32);
+        let encode = |texels: &[u8]| {
+            let words: Vec<u16> = texels.chunks_exact(2).map(|p| u16::from_le_bytes([p[0], p[1]])).collect();
+            let pixels =
+                if sample_bytes == 1 { vortex_jxl::Pixels::U8(texels) } else { vortex_jxl::Pixels::U16(&words) };
+            let image = vortex_jxl::Image { width: side, height: side, channels: channels as u32, pixels };
+            vortex_jxl::encode(&image, vortex_jxl::Quality::Lossless, vortex_jxl::Effort::new(1).unwrap()).unwrap()
+        };
+        let path = dir.path().join(format!("jxl{channels}{sample_bytes}.vtpk"));
+        write(&path, d, |x, y| (TileKind::Jxl, encode(&raw(x, y))));
+        let pack = Pack::open(&path).unwrap();
+        assert_eq!(pack.header().required_features, format::REQUIRED_JXL);
+        let report = verify(&pack, DECODE);
+        assert!(report.is_ok() && report.count(TileKind::Jxl) == 16, "{report}");
+        assert!(report.to_json().contains("\"jxl\":16"), "{}", report.to_json());
+        let expected = Tile::Data(TileKind::Raw, &raw(3, 2)).decode_rgba8(&d, LIMIT).unwrap().unwrap();
+        let rgba = pack.decode_rgba8(TileId { lod: 0, x: 3, y: 2 }).unwrap().unwrap();
+        assert!(rgba == expected, "{channels} channel(s) of {sample_bytes} byte(s)");
+        // A JPEG XL payload is an image file, like PNG's: no texels of the pack's own format.
+        let Tile::Data(_, bytes) = pack.tile(TileId::new(0, 3, 2)).unwrap() else { panic!() };
+        assert!(Tile::Data(TileKind::Jxl, bytes).decode_texels(&d, LIMIT).is_err());
+
+        // Without the bit, a reader refuses the tile.
+        let mut b = std::fs::read(&path).unwrap();
+        b[at::REQUIRED] = 0;
+        reseal(&mut b);
+        let bad = dir.path().join(format!("jxl-nobit{channels}{sample_bytes}.vtpk"));
+        std::fs::write(&bad, &b).unwrap();
+        let e = Pack::open(&bad).unwrap().tile(TileId::new(0, 0, 0)).unwrap_err().to_string();
+        assert!(e.contains("jxl") && e.contains("required-feature bit 0x4"), "{e}");
+    }
+
+    // A lossy tile decodes within what its distance allows, and a tile of another size, a
+    // recompressed JPEG of the right size, and garbage are told apart.
+    let d = common::description(3, 1);
+    let side = d.tile_size;
+    let smooth: Vec<u8> = (0..side * side * 3).map(|i| ((i / 3 % side) * 255 / side) as u8).collect();
+    let image = vortex_jxl::Image { width: side, height: side, channels: 3, pixels: vortex_jxl::Pixels::U8(&smooth) };
+    let lossy =
+        vortex_jxl::encode(&image, vortex_jxl::Quality::Distance(1.0), vortex_jxl::Effort::new(3).unwrap()).unwrap();
+    let rgba = Tile::Data(TileKind::Jxl, &lossy).decode_rgba8(&d, LIMIT).unwrap().unwrap();
+    let worst = rgba
+        .chunks_exact(4)
+        .zip(smooth.chunks_exact(3))
+        .flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c])))
+        .max();
+    // Distance 1.0 on a smooth ramp: a few levels at most (libjxl's own decoder differs by as
+    // much); a wrong colour space or channel order would be off by tens.
+    assert!(worst.unwrap() <= 6, "worst error {worst:?}");
+    let mut wide = vec![0u8; (side as usize * 2) * (side as usize * 2) * 3];
+    wide[0] = 1;
+    let image =
+        vortex_jxl::Image { width: side * 2, height: side * 2, channels: 3, pixels: vortex_jxl::Pixels::U8(&wide) };
+    let big = vortex_jxl::encode(&image, vortex_jxl::Quality::Lossless, vortex_jxl::Effort::new(1).unwrap()).unwrap();
+    let e = Tile::Data(TileKind::Jxl, &big).decode_rgba8(&d, LIMIT).unwrap_err().to_string();
+    assert!(e.contains(&format!("jxl image is {0}x{0}, the tile is {1}x{1}", side * 2, side)), "{e}");
+    for garbage in [&b"\xff\x0a"[..], b"not a jxl", &lossy[..lossy.len() / 2]] {
+        let e = Tile::Data(TileKind::Jxl, garbage).decode_rgba8(&d, LIMIT).unwrap_err().to_string();
+        assert!(e.contains("jxl"), "{e}");
+    }
 }
 
 /// Appends `value`'s low `bits` bits to a little-endian bit stream (as BC7 reads it).
