@@ -113,6 +113,9 @@ pub fn view(input: &Input, tile_source: &str, local_openseadragon: bool) -> Stri
             "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{name}</title>\n",
             "<style>html,body{{margin:0;height:100%;background:#222}}#viewer{{width:100%;height:100%}}</style>\n",
             "<script src=\"{script}\"></script>\n</head><body>\n<div id=\"viewer\"></div>\n<script>\n",
+            // OpenSeadragon 6 opens the image formats it lists, JPEG XL not among them; the
+            // browser decodes it where it can.
+            "OpenSeadragon.setImageFormatsSupported({{ jxl: true }});\n",
             "window.viewer = OpenSeadragon({{\n  id: \"viewer\",\n  prefixUrl: \"{images}\",\n",
             "  tileSources: {source},\n  crossOriginPolicy: \"Anonymous\",\n  showNavigator: true\n}});\n",
             "</script>\n</body></html>\n"

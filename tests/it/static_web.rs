@@ -29,6 +29,8 @@ import { VtpkTileSource } from "/web/vtpk/vtpk.js";
 const q = new URLSearchParams(location.search);
 const [x, y, w, h] = q.get("region").split(",").map(Number);
 window.loaded = []; window.failed = [];
+// OpenSeadragon 6 opens only the image formats it lists: JPEG XL is added, as docs/jxl.md says.
+OpenSeadragon.setImageFormatsSupported({ jxl: true });
 try {
   // ?dzi=URL shows a Deep Zoom directory instead, for the measurement against it.
   const source = q.get("dzi") || await VtpkTileSource.open(q.get("pack"), { wholeIndexUpTo: Number(q.get("whole")) });
@@ -152,6 +154,48 @@ fn vtpk_source_shows_packs_from_a_static_host() {
     let pack_reads: Vec<_> = requests.iter().filter(|r| r.2.contains(".vtpk HTTP/")).collect();
     assert!(!pack_reads.is_empty());
     assert!(pack_reads.iter().all(|r| r.0 == 206 && r.3.starts_with("bytes=")), "{pack_reads:?}");
+}
+
+/// JPEG XL (issue 46), from the same static host: a pack of JXL tiles through `vtpk.js` (which
+/// hands them to the browser's own decoder) and a `--layout dzi` directory of `.jxl` tiles that
+/// OpenSeadragon opens itself, each at the three regions and the same picture threshold as the
+/// JPEG ones; nginx served every `.jxl` tile.
+#[test]
+fn openseadragon_shows_jpeg_xl_packs_and_deep_zoom_from_a_static_host() {
+    let Some(site) = Site::start("the static-host JPEG XL browser test") else { return };
+    let source = test_image();
+    let input = site.dir.path().join("photo.png");
+    source.save(&input).unwrap();
+    // Quality 90 is JPEG XL's "visually lossless" distance 1.0, as Q95 is for the JPEG tests.
+    let jxl = ["--codec", "jxl", "--quality", "90", "--jxl-effort", "3"];
+    pack(&site, &input, "jxl.vtpk", &[&["--tile-size", "256", "--border", "4"][..], &jxl].concat());
+    let dzi = site.dir.path().join("dzi-jxl");
+    ok(&[&["split", s(&input), "--layout", "dzi", "-o", s(&dzi), "-q"][..], &jxl].concat());
+    let dzi_url = format!("{}/dzi-jxl/photo.dzi", site.nginx.url());
+    let mut failures = Vec::new();
+    for (what, query) in
+        [("jxl.vtpk", "pack=jxl.vtpk&whole=262144".to_string()), ("jxl Deep Zoom", format!("dzi={dzi_url}"))]
+    {
+        for region in REGIONS {
+            let (shot, state) = site.show_query(&query, region);
+            assert_eq!(state["openError"], Value::Null, "{what}: {state}");
+            assert_eq!(state["errors"], serde_json::json!([]), "{what}: {state}");
+            assert_eq!(state["failed"], serde_json::json!([]), "{what}: tiles failed to load: {state}");
+            let verdict = judge(&source, region, &shot);
+            eprintln!("{what}, region {region:?}: {}", verdict.as_ref().unwrap_or_else(|e| e));
+            if let Err(why) = verdict {
+                shot.save(site.dir.path().join(format!("failed-{}-{}.png", what.replace(' ', "-"), region.0))).unwrap();
+                failures.push(format!("{what}, region {region:?}: {why}"));
+            }
+        }
+    }
+    if !failures.is_empty() {
+        let kept = site.dir.keep();
+        panic!("{} (screenshots in {})", failures.join("; "), kept.display());
+    }
+    let requests = site.nginx.requests();
+    let tiles: Vec<_> = requests.iter().filter(|r| r.2.contains("/dzi-jxl/photo_files/")).collect();
+    assert!(tiles.len() > 3 && tiles.iter().all(|r| r.0 == 200 && r.2.contains(".jxl ")), "{tiles:?}");
 }
 
 /// A tile whose payload was changed after writing is reported by the JS source (with its

@@ -123,7 +123,7 @@ fn case(name: &'static str, bytes: Vec<u8>, kind: &'static str, expected: &'stat
 /// as a static host would: each damaged or forged pack is refused with the error kind and a
 /// message naming what is wrong. The forged ones (checksums made valid again) are what `verify`
 /// refuses beyond the checksums: a content hash that is not the index's, a payload off its
-/// alignment, a raw tile of the wrong length, a kind-8 entry without its feature bit. An index
+/// alignment, a raw tile of the wrong length, a kind-8 or kind-9 entry without its feature bit. An index
 /// read in blocks that fails its CRC once whole fails every later read, as in the Rust reader of
 /// remote packs, not only the `onError` callback.
 #[test]
@@ -158,7 +158,9 @@ fn vtpk_js_refuses_what_verify_refuses() {
         case("short", bytes[..100].to_vec(), "corrupt", "shorter than a pack header"),
         case("header bit", good.flipped(50), "corrupt", "header's CRC-32C does not match"),
         case("major 2", good.header(8, &2u16.to_le_bytes()), "unsupported", "major version 2"),
-        case("unknown feature", good.header(16, &4u64.to_le_bytes()), "unsupported", "required features"),
+        case("unknown feature", good.header(16, &8u64.to_le_bytes()), "unsupported", "required features"),
+        // Node decodes no images: a JPEG XL pack is refused as in a browser without JPEG XL.
+        case("jxl where none decodes", good.header(16, &4u64.to_le_bytes()), "unsupported", "does not decode"),
         case("32-bit samples", good.header(69, &[4]), "corrupt", "without required-feature bit 0x2"),
         case("wide samples", good.header(16, &2u64.to_le_bytes()), "unsupported", "8- and 16-bit"),
         case("huge tile", good.header(56, &65536u32.to_le_bytes()), "unsupported", "tile_size 65536"),
@@ -178,6 +180,7 @@ fn vtpk_js_refuses_what_verify_refuses() {
         ),
         case("raw tile length", raw.entry(0, 8, &(raw_first.len - 8).to_le_bytes()), "corrupt", "a raw tile of"),
         case("zstd-delta without its bit", good.entry(0, 16, &[8]), "corrupt", "without required-feature bit 0x1"),
+        case("jxl without its bit", good.entry(0, 16, &[9]), "corrupt", "without required-feature bit 0x4"),
         Case {
             read: Read::Blocks,
             // Entry 70's offset, far from tile (0, 0, 0)'s block; no checksum fixed.

@@ -36,7 +36,7 @@ export interface VtpkLevel {
 }
 
 export interface VtpkEntry {
-  /** 0 absent, 1 constant, 2 raw, 4 png, 5 jpeg. */
+  /** 0 absent, 1 constant, 2 raw, 4 png, 5 jpeg, 9 jxl. */
   kind: number;
   offset: number;
   len: number;

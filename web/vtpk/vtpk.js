@@ -26,9 +26,12 @@
  * overall deadline (`timeout`). Every failure is a {@link VtpkError} whose `kind` says what the
  * caller can do about it.
  *
- * JPEG and PNG tiles are decoded by the browser; raw tiles (8 or 16 bits) are converted here,
- * which is cheap. zstd, zstd-delta, BC1 and BC7 tiles would need a decoder shipped with the
- * page, so such packs are refused at `open` with a message saying how to write one that works.
+ * JPEG and PNG tiles are decoded by the browser, and JPEG XL tiles where the browser decodes
+ * JPEG XL (Chrome 155, Firefox 158, Safari 17 on; `open` asks it once, with a 1x1 image, and
+ * refuses a JPEG XL pack in a browser that does not); raw tiles (8 or 16 bits) are converted
+ * here, which is cheap. zstd, zstd-delta, BC1 and BC7 tiles would need a decoder shipped with
+ * the page, so such packs are refused at `open` with a message saying how to write one that
+ * works.
  * @module vtpk
  */
 
@@ -56,8 +59,32 @@ const MAX_DECODED_BYTES = 2 ** 30;
 const TIMEOUT = 30000;
 
 /** Tile kinds (docs/pack-format.md, "Index"). */
-const KIND = { absent: 0, constant: 1, raw: 2, zstd: 3, png: 4, jpeg: 5, bc1: 6, bc7: 7, zstdDelta: 8 };
-const KIND_NAMES = ["absent", "constant", "raw", "zstd", "png", "jpeg", "bc1", "bc7", "zstd-delta"];
+const KIND = { absent: 0, constant: 1, raw: 2, zstd: 3, png: 4, jpeg: 5, bc1: 6, bc7: 7, zstdDelta: 8, jxl: 9 };
+const KIND_NAMES = ["absent", "constant", "raw", "zstd", "png", "jpeg", "bc1", "bc7", "zstd-delta", "jxl"];
+/** The image type a browser decodes each image kind's payload as. */
+const IMAGE_TYPES = { [KIND.png]: "image/png", [KIND.jpeg]: "image/jpeg", [KIND.jxl]: "image/jxl" };
+
+/** A 1x1 lossless JPEG XL image (`cjxl -d 0 -e 1` of one red texel). */
+const JXL_PROBE = new Uint8Array([
+  0xff, 0x0a, 0x00, 0x10, 0x10, 0x50, 0x5c, 0x08, 0x08, 0x02, 0x01, 0x00, 0x3c, 0x00, 0x4b,
+  0x12, 0xa5, 0x42, 0x85, 0x24, 0xd6, 0xc8, 0xed, 0x1b, 0x0f, 0x00, 0xdf, 0xaf, 0x03,
+]);
+/** @type {Promise<boolean> | null} */
+let jxlDecodes = null;
+
+/** Whether this browser decodes JPEG XL: the probe image decoded, once a page. @returns {Promise<boolean>} */
+function browserDecodesJxl() {
+  if (typeof createImageBitmap !== "function") return Promise.resolve(false);
+  jxlDecodes ??= createImageBitmap(new Blob([JXL_PROBE], { type: "image/jxl" })).then(
+    (bitmap) => {
+      const ok = bitmap.width === 1 && bitmap.height === 1;
+      bitmap.close();
+      return ok;
+    },
+    () => false,
+  );
+  return jxlDecodes;
+}
 
 /**
  * What went wrong, which says what the caller can do about it:
@@ -359,7 +386,7 @@ class RangeReader {
 
 /**
  * @typedef {object} VtpkEntry
- * @property {number} kind 0 absent, 1 constant, 2 raw, 4 png, 5 jpeg (others are refused)
+ * @property {number} kind 0 absent, 1 constant, 2 raw, 4 png, 5 jpeg, 9 jxl (others are refused)
  * @property {number} offset payload offset (0 without payload)
  * @property {number} len payload length
  * @property {number} crc CRC-32C of the payload
@@ -404,6 +431,13 @@ export class VtpkPack {
     const first = await reader.read(0, FIRST_READ);
     const pack = new VtpkPack(url, reader, first, options);
     await pack.readIndexAndMetadata(first);
+    if (pack.holdsJxl && !(await browserDecodesJxl())) {
+      throw new VtpkError(
+        "unsupported",
+        `${url}: its tiles are JPEG XL, which this browser does not decode (Chrome 155, Firefox 158 and Safari 17 do); ` +
+          "write the pack with --codec jpeg or --codec png to show it here",
+      );
+    }
     return pack;
   }
 
@@ -442,7 +476,7 @@ export class VtpkPack {
     if (first[71] || first.subarray(144, 188).some((b) => b)) corrupt("reserved header bytes are not zero");
     if (u16(8) !== 1) fail("unsupported", `format major version ${u16(8)}, this reader reads 1`);
     const required = view.getBigUint64(16, true);
-    if (required & ~3n) {
+    if (required & ~7n) {
       fail("unsupported", `required features ${hex(Number(required & 0xffffffffn))} include some this reader does not know`);
     }
     if (u32(12) !== HEADER_LEN) corrupt(`header_len ${u32(12)}, not ${HEADER_LEN}`);
@@ -497,6 +531,8 @@ export class VtpkPack {
     // What this reader allocates, held to the cap the Rust reader of remote packs holds it to.
     if (this.metaLen > MAX_DECODED_BYTES) fail("unsupported", `meta_len ${this.metaLen}, over the cap of ${MAX_DECODED_BYTES} bytes`);
     if (required & 1n) this.refuse("zstd-delta");
+    /** Required-feature bit 2: the pack holds JPEG XL tiles, which `open` asks the browser about. */
+    this.holdsJxl = (required & 4n) !== 0n;
     // Payloads are padded to their alignment: neighbours in a row are that far apart at most.
     if (options.gap === undefined) reader.gap = Math.max(reader.gap, this.payloadAlignment);
     /** @type {VtpkLevel[]} */
@@ -652,6 +688,7 @@ export class VtpkPack {
     if (entry.kind >= KIND_NAMES.length) damaged(`unknown tile kind ${entry.kind}`);
     // A pack with zstd-delta tiles sets required-feature bit 0, which `open` refused.
     if (entry.kind === KIND.zstdDelta) damaged("a zstd-delta tile in a pack without required-feature bit 0x1");
+    if (entry.kind === KIND.jxl && !this.holdsJxl) damaged("a jxl tile in a pack without required-feature bit 0x4");
     if (entry.kind === KIND.constant || entry.kind === KIND.absent) {
       // No payload: length and CRC zero, and nothing past the texel's samples (all of it for
       // absent). Until the index CRC is checked, this is what catches a damaged entry.
@@ -665,7 +702,7 @@ export class VtpkPack {
       damaged(`its payload (${entry.len} bytes at ${entry.offset}) is not inside the data section`);
     }
     if (entry.offset % this.payloadAlignment) damaged(`its payload at ${entry.offset} is not aligned to ${this.payloadAlignment} bytes`);
-    if (![KIND.raw, KIND.png, KIND.jpeg].includes(entry.kind)) this.refuse(KIND_NAMES[entry.kind]);
+    if (entry.kind !== KIND.raw && !IMAGE_TYPES[entry.kind]) this.refuse(KIND_NAMES[entry.kind]);
     const raw = this.tileSize * this.tileSize * this.channels * this.sampleBytes;
     if (entry.kind === KIND.raw && entry.len !== raw) damaged(`a raw tile of ${entry.len} bytes, not ${raw}`);
     if (entry.len > MAX_DECODED_BYTES) {
@@ -777,10 +814,9 @@ export class VtpkPack {
       ctx.putImageData(image, 0, 0);
       return { canvas, absent: false };
     }
-    const type = entry.kind === KIND.png ? "image/png" : "image/jpeg";
     let bitmap;
     try {
-      bitmap = await createImageBitmap(new Blob([bytes], { type }), { colorSpaceConversion: "none" });
+      bitmap = await createImageBitmap(new Blob([bytes], { type: IMAGE_TYPES[entry.kind] }), { colorSpaceConversion: "none" });
     } catch (e) {
       throw new VtpkError("corrupt", `${where}: the browser cannot decode its ${KIND_NAMES[entry.kind]} payload: ${said(e)}`, e);
     }
