@@ -667,13 +667,14 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context, planes
     let zstd_level = t.zstd_level.unwrap_or(crate::codec::DEFAULT_ZSTD_LEVEL);
     let (codec, compression) = match choice {
         CodecChoice::Jpeg => (CodecChoice::Jpeg, None),
+        CodecChoice::Jxl => (CodecChoice::Jxl, None),
         CodecChoice::Deflate => (CodecChoice::Raw, Some(Compression::Deflate { level: 6 })),
         CodecChoice::Lzw => (CodecChoice::Raw, Some(Compression::Lzw)),
         CodecChoice::Zstd => (CodecChoice::Raw, Some(Compression::Zstd { level: zstd_level })),
         CodecChoice::Raw => (CodecChoice::Raw, Some(Compression::None)),
         other => {
             return Err(options(format!(
-                "--codec {}: TIFF tiles are jpeg, deflate, lzw, zstd or raw (uncompressed)",
+                "--codec {}: TIFF tiles are jpeg, jxl, deflate, lzw, zstd or raw (uncompressed)",
                 other.name()
             )));
         }
@@ -707,6 +708,7 @@ fn tiff_output(output: Output, flavour: Flavour, own: &Own, at: &Context, planes
     let compression = match (compression, opts.codec) {
         (Some(c), _) => c,
         (None, crate::codec::Codec::Jpeg { subsampling, .. }) => Compression::Jpeg { subsampling },
+        (None, crate::codec::Codec::Jxl { .. }) => Compression::Jxl,
         (None, other) => return Err(TilerError::Internal(format!("TIFF tiles from --codec {}", other.name()))),
     };
     let pixel_size = own.ome_zarr.pixel_size.map(|p| tiff::Micrometres(micrometres(p)));
@@ -1060,7 +1062,7 @@ mod tests {
             ),
             (&[(TIFF, "a.tif")], with(|s| s.tiles.border = Some(2)), "TIFF tiles have no border"),
             (&[(OME_TIFF, "a.ome.tif")], with(|s| s.tiles.tile_size = Some(100)), "a multiple of 16"),
-            (&[(TIFF, "a.tif")], with(|s| s.tiles.codec = Some(CodecChoice::Png)), "jpeg, deflate, lzw, zstd or raw"),
+            (&[(TIFF, "a.tif")], with(|s| s.tiles.codec = Some(CodecChoice::Png)), "jpeg, jxl, deflate, lzw, zstd or raw"),
             (
                 &[(Format::Pack, "a.vtpk")],
                 with(|s| s.tiles.codec = Some(CodecChoice::Deflate)),

@@ -301,6 +301,14 @@ fn choose_levels(outputs: &mut [Planned], source: &dyn RowSource) -> Result<Chos
             declined[k] = Some(format!("the tiles are encoded: {why}"));
             continue;
         }
+        if let Work::Tiff { spec, .. } = &planned.work
+            && spec.compression == tiff::Compression::Jxl
+        {
+            // Its stored JPEG tiles are recompressed losslessly where the pages line up with
+            // them; the slide's reduced levels are not: ours are.
+            declined[k] = Some("JPEG XL tiles asked (--codec jxl), which no stored JPEG level is".into());
+            continue;
+        }
         let form = match &mut planned.work {
             Work::Dicom { spec, .. } => match dicom::copyable(levels)? {
                 Err(why) => Err(why),

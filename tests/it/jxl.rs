@@ -367,10 +367,6 @@ fn what_cannot_hold_jxl_and_flags_that_do_not_fit_are_clear_errors() {
             vec!["--pmtiles".into(), s(&out("g.pmtiles")).into(), "--codec".into(), "jxl".into()],
             vec!["PMTiles archive cannot declare JPEG XL", "--layout dzi, iiif or xyz"],
         ),
-        (
-            vec!["-o".into(), s(&out("i.tif")).into(), "--codec".into(), "jxl".into()],
-            vec!["--codec jxl", "TIFF tiles are"],
-        ),
     ];
     for (args, needles) in cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -450,4 +446,112 @@ fn serve_hands_out_a_jxl_pack_s_tiles_as_jpeg_xl() {
     assert_eq!(server.get("/world/iiif/full/44,32/0/default.jxl", &[]).status, 200);
     assert_eq!(server.get("/world/xyz/0/0/0.jxl", &[]).status, 200);
     assert_eq!(server.get("/world_files/10/3_2.jpeg", &[]).status, 404);
+}
+
+/// tifffile (with imagecodecs' libjxl) reads every level of the TIFF named and prints, per
+/// level, its compression and its samples' digest; with `tiles`, it also writes level 0's raw
+/// tiles to `DIR/x_y.jxl`.
+const TIFF_PAGES: &str = r#"
+import hashlib, json, sys, tifffile
+path, tiles = sys.argv[1], sys.argv[2] if len(sys.argv) > 2 else None
+with tifffile.TiffFile(path) as t:
+    # An OME-TIFF's levels are SubIFDs of its first page: the series' levels find both kinds.
+    levels = t.series[0].levels if len(t.series[0].levels) > 1 else t.pages
+    for level in levels:
+        a = level.asarray()
+        print(json.dumps({"compression": int(level.keyframe.compression), "shape": list(a.shape),
+                          "dtype": str(a.dtype), "sha": hashlib.sha256(a.tobytes()).hexdigest()}))
+    if tiles:
+        page = t.pages[0]
+        across = -(-page.imagewidth // page.tilewidth)
+        for i, (at, n) in enumerate(zip(page.dataoffsets, page.databytecounts)):
+            t.filehandle.seek(at)
+            with open(f"{tiles}/{i % across}_{i // across}.jxl", "wb") as f:
+                f.write(t.filehandle.read(n))
+"#;
+
+/// What [`TIFF_PAGES`] says of `tiff`, a JSON object a page.
+fn tiff_pages(python: &Path, tiff: &Path, tiles: Option<&Path>) -> Vec<serde_json::Value> {
+    let mut args = vec!["-c", TIFF_PAGES, s(tiff)];
+    args.extend(tiles.map(s));
+    let out = Command::new(python).args(&args).output().unwrap();
+    assert!(out.status.success(), "{}: {}", tiff.display(), String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+}
+
+#[test]
+fn a_jxl_tiff_is_what_tifffile_reads_and_holds_the_stored_jpegs_recompressed() {
+    let Some(python) =
+        crate::common::python_with("tifffile, imagecodecs", "the JPEG XL TIFF test", "tifffile and imagecodecs")
+    else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    // Lossless JPEG XL levels (compression 50002, as tifffile and libvips write it) hold the
+    // samples of the Deflate file of the same pyramid, page for page: RGB, RGBA, 16-bit grey
+    // with alpha; generic and OME-TIFF.
+    for (input, ext) in [("sample.png", "tif"), ("rgba8-130x67.png", "tif"), ("grey-alpha16-97x61.png", "ome.tif")] {
+        let (jxl, deflate) =
+            (tmp.path().join(format!("{input}.jxl.{ext}")), tmp.path().join(format!("{input}.deflate.{ext}")));
+        let grid = ["--tile-size", "64", "-q"];
+        cli::ok(
+            &[
+                &["split", s(&fixture(input)), "-o", s(&jxl)][..],
+                &grid,
+                &["--codec", "jxl", "--lossless", "--jxl-effort", "1"],
+            ]
+            .concat(),
+        );
+        cli::ok(&[&["split", s(&fixture(input)), "-o", s(&deflate)][..], &grid, &["--codec", "deflate"]].concat());
+        let (ours, theirs) = (tiff_pages(&python, &jxl, None), tiff_pages(&python, &deflate, None));
+        assert!(ours.len() > 1 && ours.len() == theirs.len(), "{input}: {ours:?}");
+        for (a, b) in ours.iter().zip(&theirs) {
+            assert_eq!(a["compression"], 50002, "{input}");
+            assert_eq!(
+                (&a["shape"], &a["dtype"], &a["sha"]),
+                (&b["shape"], &b["dtype"], &b["sha"]),
+                "{input}: a level differs"
+            );
+        }
+    }
+
+    // A JPEG-tiled TIFF's stored tiles: each tile of the JPEG XL file's full resolution that
+    // carries libjxl's reconstruction data gives back, through djxl, the JPEG the JPEG pack
+    // copies; the slide's reduced levels are not copied (they are JPEG), the summary says why.
+    if !have_djxl() || !crate::common::have_program("vips", "--version", "libvips-tools") {
+        return;
+    }
+    let slide = tmp.path().join("slide.tif");
+    let out = Command::new("vips")
+        .args(["tiffsave", s(&fixture("sample.png")), s(&slide), "--tile", "--tile-width", "128"])
+        .args(["--tile-height", "128", "--compression", "jpeg", "--Q", "85", "--pyramid"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (tiff, pack) = (tmp.path().join("slide.jxl.tif"), tmp.path().join("slide.jpeg.vtpk"));
+    let said = cli::ok(&["split", s(&slide), "-o", s(&tiff), "--tile-size", "128", "--codec", "jxl"]);
+    assert!(said.contains("JPEG XL tiles asked") && said.contains("recompressed losslessly"), "{said}");
+    cli::ok(&["split", s(&slide), "--pack", s(&pack), "--tile-size", "128", "--border", "0", "-q"]);
+    let tiles = tmp.path().join("tiles");
+    std::fs::create_dir(&tiles).unwrap();
+    assert!(tiff_pages(&python, &tiff, Some(&tiles)).iter().all(|p| p["compression"] == 50002));
+    let pack = vortex_pack::Pack::open(&pack).unwrap();
+    let mut rebuilt = 0;
+    for name in files(&tiles, "jxl") {
+        let tile = tiles.join(&name);
+        if !std::fs::read(&tile).unwrap().windows(4).any(|w| w == b"jbrd") {
+            continue;
+        }
+        let (x, y) = name.to_str().unwrap().trim_end_matches(".jxl").split_once('_').unwrap();
+        let id = vortex_pack::TileId::new(0, x.parse().unwrap(), y.parse().unwrap());
+        let vortex_pack::Tile::Data(vortex_pack::TileKind::Jpeg, original) = pack.tile(id).unwrap() else {
+            panic!("{id:?}")
+        };
+        let back = tmp.path().join("back.jpg");
+        let _ = std::fs::remove_file(&back);
+        djxl(&tile, &back).unwrap();
+        assert!(std::fs::read(&back).unwrap() == original, "{id:?}: djxl's JPEG is not the stored one");
+        rebuilt += 1;
+    }
+    assert!(rebuilt >= 6, "{rebuilt} tiles rebuilt: {said}");
 }

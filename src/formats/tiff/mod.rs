@@ -125,6 +125,9 @@ pub enum Compression {
         /// Chroma subsampling of RGB tiles.
         subsampling: Subsampling,
     },
+    /// One JPEG XL file a tile (50002, as libvips and tifffile write it): grey or RGB, alpha
+    /// as an extra sample, 8 or 16 bits; lossy at the run's quality, or lossless.
+    Jxl,
 }
 
 impl Compression {
@@ -136,6 +139,7 @@ impl Compression {
             Compression::Lzw => 5,
             Compression::Zstd { .. } => 50000,
             Compression::Jpeg { .. } => 7,
+            Compression::Jxl => 50002,
         }
     }
 
@@ -147,6 +151,7 @@ impl Compression {
             Compression::Lzw => "lzw",
             Compression::Zstd { .. } => "zstd",
             Compression::Jpeg { .. } => "jpeg",
+            Compression::Jxl => "jxl",
         }
     }
 }
@@ -288,6 +293,11 @@ impl Spec {
                     "JPEG in TIFF holds 8-bit grey or RGB, not {s}: use --codec deflate or zstd"
                 )));
             }
+            Compression::Jxl if !s.depth.is_narrow_int() => {
+                return Err(TilerError::Options(format!(
+                    "JPEG XL in TIFF holds 8 or 16-bit samples, not {s}: use --codec deflate or zstd"
+                )));
+            }
             Compression::Deflate { level } if level > 9 => {
                 return Err(TilerError::Options(format!("Deflate level {level} is outside 0..=9")));
             }
@@ -362,6 +372,7 @@ impl Spec {
     pub fn most_tile_bytes(&self) -> u64 {
         let codec = match self.compression {
             Compression::Jpeg { subsampling } => Codec::Jpeg { quality: 100, subsampling },
+            Compression::Jxl => Codec::Jxl { quality: None, effort: crate::codec::JxlEffort::clamped(1) },
             _ => self.codec().unwrap_or(Codec::Raw),
         };
         codec.most_encoded_bytes(self.tile_side(), self.stored)
@@ -418,8 +429,8 @@ impl Spec {
     }
 
     /// The codec whose tiles the file stores as they come from the encoders: raw samples, or
-    /// Deflate, LZW and zstd of them filtered as [`Spec::predictor`] says. `None` for JPEG,
-    /// whose quality is the run's setting, not the file's.
+    /// Deflate, LZW and zstd of them filtered as [`Spec::predictor`] says. `None` for JPEG and
+    /// JPEG XL, whose quality is the run's setting, not the file's.
     pub fn codec(&self) -> Option<Codec> {
         let filter = self.predictor();
         match self.compression {
@@ -427,7 +438,7 @@ impl Spec {
             Compression::Deflate { level } => Some(Codec::Deflate { level, filter }),
             Compression::Lzw => Some(Codec::Lzw { filter }),
             Compression::Zstd { level } => Some(Codec::Zstd { level, filter }),
-            Compression::Jpeg { .. } => None,
+            Compression::Jpeg { .. } | Compression::Jxl => None,
         }
     }
 

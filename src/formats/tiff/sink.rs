@@ -152,12 +152,18 @@ impl TileSink for TiffSink {
     /// tile's size, and of the form a copied level's tiles have (`copy::fits`: 8-bit
     /// sequential, grey for a grey file, else coded as `Photometric` and `YCbCrSubsampling`
     /// say; a TIFF of the source's RGB tiles is RGB).
+    /// In a JPEG XL file, a stored tile of its size and of its grey or colour is taken, to be
+    /// recompressed losslessly (it decodes to what `Photometric` says whatever its coding).
     fn takes_stored_jpeg(&self, jpeg: &[u8]) -> bool {
-        let Compression::Jpeg { subsampling } = self.spec.compression else { return false };
         let Some(h) = crate::source::stored::read_header(jpeg) else { return false };
         let side = self.spec.layout.tile_size;
-        let coding = (self.spec.photometric() != 1).then_some(subsampling);
-        (u32::from(h.width), u32::from(h.height)) == (side, side) && super::fits(&h, coding)
+        let grey = self.spec.photometric() == 1;
+        let sized = (u32::from(h.width), u32::from(h.height)) == (side, side);
+        match self.spec.compression {
+            Compression::Jpeg { subsampling } => sized && super::fits(&h, (!grey).then_some(subsampling)),
+            Compression::Jxl => sized && h.components == if grey { 1 } else { 3 },
+            _ => false,
+        }
     }
 
     /// Tiles in the producer's order, so that the file is the same on every run.
