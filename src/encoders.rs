@@ -524,13 +524,16 @@ impl File {
     }
 
     /// The copy as `codec`'s tiles hold it: a JPEG as it is for JPEG tiles, recompressed for
-    /// JPEG XL ones; `None` where libjxl cannot rebuild this JPEG exactly (counted in
+    /// JPEG XL ones (less any quantisation table no component uses); `None` where libjxl cannot rebuild this JPEG exactly (counted in
     /// `refused`), so that the page is encoded from its texels instead.
     fn for_codec(self, codec: Codec, refused: &AtomicU64) -> Result<Option<File>> {
         let Codec::Jxl { effort, .. } = codec else { return Ok(Some(self)) };
         let cropped = matches!(self, File::Cropped(_));
         let jpeg = self.bytes();
-        match vortex_jxl::recompress_jpeg(jpeg, effort) {
+        // A table no component uses (an RGB slide's chroma table) is not kept: libjxl would
+        // refuse the JPEG, and it decodes the same without it.
+        let used = crate::source::stored::without_unused_tables(jpeg).unwrap_or(std::borrow::Cow::Borrowed(jpeg));
+        match vortex_jxl::recompress_jpeg(&used, effort) {
             Ok(jxl) => Ok(Some(File::Recompressed { jxl, jpeg: jpeg.len(), cropped })),
             Err(vortex_jxl::Error::JpegRecompression { .. }) => {
                 refused.fetch_add(1, Ordering::Relaxed);

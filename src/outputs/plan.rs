@@ -1062,7 +1062,11 @@ mod tests {
             ),
             (&[(TIFF, "a.tif")], with(|s| s.tiles.border = Some(2)), "TIFF tiles have no border"),
             (&[(OME_TIFF, "a.ome.tif")], with(|s| s.tiles.tile_size = Some(100)), "a multiple of 16"),
-            (&[(TIFF, "a.tif")], with(|s| s.tiles.codec = Some(CodecChoice::Png)), "jpeg, jxl, deflate, lzw, zstd or raw"),
+            (
+                &[(TIFF, "a.tif")],
+                with(|s| s.tiles.codec = Some(CodecChoice::Png)),
+                "jpeg, jxl, deflate, lzw, zstd or raw",
+            ),
             (
                 &[(Format::Pack, "a.vtpk")],
                 with(|s| s.tiles.codec = Some(CodecChoice::Deflate)),

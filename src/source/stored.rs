@@ -213,7 +213,7 @@ pub fn read_header(stream: &[u8]) -> Option<Header> {
     for (marker, range) in segments(stream)?.0 {
         let body = &stream[range.start + 4..range.end];
         match marker {
-            0xC0..=0xCF if !matches!(marker, 0xC4 | 0xC8 | 0xCC) => {
+            _ if is_frame(marker) => {
                 let [precision, h0, h1, w0, w1, components, ..] = *body else { return None };
                 header.frame = marker;
                 header.precision = precision;
@@ -246,6 +246,51 @@ pub fn split_tables(stream: &[u8]) -> Option<(Vec<u8>, Vec<u8>)> {
     }
     rest.extend_from_slice(&stream[scan..]);
     Some((tables, rest))
+}
+
+/// `stream` without the quantisation tables that no component of its frame uses, a DQT
+/// segment left with none dropped: the same pixels, the same entropy-coded data. An RGB tile
+/// completed by a TIFF's shared `JPEGTables` (as Aperio and libvips write them) carries the
+/// chroma table its components never use, which libjxl 0.7 will not recompress ("Non-trivial
+/// unused quant table"). Borrowed where every table is used; `None` for data that is no JPEG
+/// stream or has no frame header.
+pub fn without_unused_tables(stream: &[u8]) -> Option<std::borrow::Cow<'_, [u8]>> {
+    use std::borrow::Cow;
+    let (segments, scan) = segments(stream)?;
+    let body = |range: &std::ops::Range<usize>| &stream[range.start + 4..range.end];
+    let frame = segments.iter().find(|(marker, _)| is_frame(*marker)).map(|(_, range)| body(range))?;
+    let components = *frame.get(5)? as usize;
+    // Three bytes a component: its id, its sampling factors, its table.
+    let used: Vec<u8> = frame.get(6..6 + 3 * components)?.chunks_exact(3).map(|c| c[2]).collect();
+    let mut out = Vec::with_capacity(stream.len());
+    out.extend_from_slice(&stream[..2]);
+    for (marker, range) in &segments {
+        if *marker != 0xDB {
+            out.extend_from_slice(&stream[range.clone()]);
+            continue;
+        }
+        let (mut tables, mut kept) = (body(range), Vec::new());
+        while let [pq_tq, ..] = *tables {
+            let size = 1 + if pq_tq >> 4 == 1 { 128 } else { 64 };
+            let table = tables.get(..size)?;
+            if used.contains(&(pq_tq & 0x0F)) {
+                kept.extend_from_slice(table);
+            }
+            tables = &tables[size..];
+        }
+        if !kept.is_empty() {
+            out.extend_from_slice(&[0xFF, 0xDB]);
+            out.extend_from_slice(&u16::try_from(kept.len() + 2).ok()?.to_be_bytes());
+            out.extend_from_slice(&kept);
+        }
+    }
+    out.extend_from_slice(&stream[scan..]);
+    Some(if out.len() == stream.len() { Cow::Borrowed(stream) } else { Cow::Owned(out) })
+}
+
+/// Whether `marker` starts a frame (SOF0 to SOF15; C4, C8 and CC are other segments).
+fn is_frame(marker: u8) -> bool {
+    (0xC0..=0xCF).contains(&marker) && !matches!(marker, 0xC4 | 0xC8 | 0xCC)
 }
 
 /// The tables of one DQT segment; table 0 is kept.
@@ -340,6 +385,32 @@ mod tests {
         let decode = |bytes: &[u8]| image::load_from_memory(bytes).unwrap().to_rgb8().into_raw();
         assert_eq!(decode(&whole), decode(&jpeg));
         assert_eq!(split_tables(b"not a jpeg"), None);
+    }
+
+    /// A table no component uses goes, alone in its DQT segment or beside a used one; the
+    /// rest of the stream stays byte for byte, and a stream of used tables is not copied.
+    #[test]
+    fn unused_quantisation_tables_are_dropped_and_nothing_else() {
+        let texels: Vec<u8> = (0..16 * 16 * 3).map(|i| (i * 5 % 251) as u8).collect();
+        // RGB: all three components quantised by table 0.
+        let rgb =
+            crate::codec::encode_jpeg(&texels, (16, 16), Channels::Rgb, 85, Subsampling::Rgb, Vec::new()).unwrap();
+        let dqt = segments(&rgb).unwrap().0.into_iter().find(|s| s.0 == 0xDB).unwrap().1;
+        assert_eq!(rgb[dqt.start + 4], 0, "table 0 alone");
+        let unused = [&[1u8][..], &[9u8; 64]].concat();
+        let alone = [&rgb[..2], &[0xFF, 0xDB, 0, 67], &unused[..], &rgb[2..]].concat();
+        let body = [&rgb[dqt.start + 4..dqt.end], &unused[..]].concat();
+        let len = (body.len() as u16 + 2).to_be_bytes();
+        let beside = [&rgb[..dqt.start], &[0xFF, 0xDB, len[0], len[1]], &body[..], &rgb[dqt.end..]].concat();
+        for stream in [&alone, &beside] {
+            assert!(without_unused_tables(stream).unwrap()[..] == rgb[..]);
+        }
+        assert!(matches!(without_unused_tables(&rgb), Some(std::borrow::Cow::Borrowed(_))));
+        // 4:2:0 YCbCr uses both of its tables.
+        let ycc =
+            crate::codec::encode_jpeg(&texels, (16, 16), Channels::Rgb, 85, Subsampling::S420, Vec::new()).unwrap();
+        assert!(matches!(without_unused_tables(&ycc), Some(std::borrow::Cow::Borrowed(_))));
+        assert_eq!(without_unused_tables(b"not a jpeg"), None);
     }
 
     /// Each coding is what the stream's frame and Adobe marker say, as a TIFF's or DICOM's

@@ -146,7 +146,10 @@ fn a_tiff_is_one_output_among_others_and_atomic() {
     std::fs::write(&theirs, b"II*\0\x08\0\0\0\0\0").unwrap();
     fails_with(&run(&["split", s(&source), "-o", s(&theirs)]), &["scan.tif", "another program", "--force"]);
     assert_eq!(std::fs::read(&theirs).unwrap(), b"II*\0\x08\0\0\0\0\0");
-    fails_with(&run(&["split", s(&source), "-o", s(&tiff), "--codec", "png"]), &["jpeg, jxl, deflate, lzw, zstd or raw"]);
+    fails_with(
+        &run(&["split", s(&source), "-o", s(&tiff), "--codec", "png"]),
+        &["jpeg, jxl, deflate, lzw, zstd or raw"],
+    );
     let web = dir.path().join("web3");
     let lzw = ["split", s(&source), "-o", s(&tiff), "-o", s(&web), "--layout", "dzi", "--codec", "lzw"];
     fails_with(&run(&lzw), &["web3 (dzi)", "--codec lzw compresses a TIFF output's tiles"]);
