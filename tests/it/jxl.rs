@@ -204,6 +204,15 @@ fn recompressed_stored_jpeg_tiles_give_back_the_stored_jpeg_byte_for_byte() {
     assert!(line.contains("recompressed losslessly into JPEG XL") && line.contains("saved"), "{line}");
 }
 
+/// The fixture `input` split twice with `grid` (`flag`: `-o` or `--pack`): into `jxl` as
+/// lossless JPEG XL (effort 1) and into `other` with `--codec codec`, the same pyramid.
+fn lossless_and(input: &str, flag: &str, (jxl, other): (&Path, &Path), grid: &[&str], codec: &str) {
+    let run =
+        |out: &Path, how: &[&str]| cli::ok(&[&["split", s(&fixture(input)), flag, s(out)][..], grid, how].concat());
+    run(jxl, &["--codec", "jxl", "--lossless", "--jxl-effort", "1"]);
+    run(other, &["--codec", codec]);
+}
+
 /// Every tile of `pack` as RGBA8 (`vortex_pack`'s decoders: jxl-oxide for JPEG XL tiles),
 /// with its id, absent tiles left out.
 fn pack_tiles(pack: &Path) -> Vec<(vortex_pack::TileId, Vec<u8>)> {
@@ -230,15 +239,7 @@ fn a_jxl_pack_holds_lossless_tiles_and_recompressed_stored_jpegs() {
     for input in ["sample.png", "rgba8-130x67.png", "grey-alpha16-97x61.png"] {
         let (jxl, png) = (tmp.path().join(format!("{input}.jxl.vtpk")), tmp.path().join(format!("{input}.png.vtpk")));
         let tiles = ["--tile-size", "64", "--border", "2"];
-        cli::ok(
-            &[
-                &["split", s(&fixture(input)), "--pack", s(&jxl)][..],
-                &tiles,
-                &["--codec", "jxl", "--lossless", "--jxl-effort", "1"],
-            ]
-            .concat(),
-        );
-        cli::ok(&[&["split", s(&fixture(input)), "--pack", s(&png)][..], &tiles, &["--codec", "png"]].concat());
+        lossless_and(input, "--pack", (&jxl, &png), &tiles, "png");
         let p = vortex_pack::Pack::open(&jxl).unwrap();
         assert_eq!(p.header().required_features & vortex_pack::format::REQUIRED_JXL, vortex_pack::format::REQUIRED_JXL);
         let (ours, theirs) = (pack_tiles(&jxl), pack_tiles(&png));
@@ -408,15 +409,7 @@ fn serve_hands_out_a_jxl_pack_s_tiles_as_jpeg_xl() {
     let (jxl, png) = (tmp.path().join("world.vtpk"), tmp.path().join("png").join("world.vtpk"));
     std::fs::create_dir(tmp.path().join("png")).unwrap();
     let grid = ["--tile-size", "64", "--border", "1", "-q"];
-    cli::ok(
-        &[
-            &["split", s(&fixture("sample.png")), "--pack", s(&jxl)][..],
-            &grid,
-            &["--codec", "jxl", "--lossless", "--jxl-effort", "1"],
-        ]
-        .concat(),
-    );
-    cli::ok(&[&["split", s(&fixture("sample.png")), "--pack", s(&png)][..], &grid, &["--codec", "png"]].concat());
+    lossless_and("sample.png", "--pack", (&jxl, &png), &grid, "png");
     let (server, png_server) = (Server::start(&[&jxl], &[]), Server::start(&[&png], &[]));
 
     let dzi = server.get("/world.dzi", &[]).text();
@@ -494,15 +487,7 @@ fn a_jxl_tiff_is_what_tifffile_reads_and_holds_the_stored_jpegs_recompressed() {
         let (jxl, deflate) =
             (tmp.path().join(format!("{input}.jxl.{ext}")), tmp.path().join(format!("{input}.deflate.{ext}")));
         let grid = ["--tile-size", "64", "-q"];
-        cli::ok(
-            &[
-                &["split", s(&fixture(input)), "-o", s(&jxl)][..],
-                &grid,
-                &["--codec", "jxl", "--lossless", "--jxl-effort", "1"],
-            ]
-            .concat(),
-        );
-        cli::ok(&[&["split", s(&fixture(input)), "-o", s(&deflate)][..], &grid, &["--codec", "deflate"]].concat());
+        lossless_and(input, "-o", (&jxl, &deflate), &grid, "deflate");
         let (ours, theirs) = (tiff_pages(&python, &jxl, None), tiff_pages(&python, &deflate, None));
         assert!(ours.len() > 1 && ours.len() == theirs.len(), "{input}: {ours:?}");
         for (a, b) in ours.iter().zip(&theirs) {

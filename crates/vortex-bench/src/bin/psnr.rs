@@ -12,6 +12,8 @@
 //! `<col>_<row>.<ext>`; tile size and overlap come from the `OUT.dzi` next to it, or from
 //! `--tile-size` / `--overlap`. Tiles in the padding beyond the image are not compared.
 //!
+//! JPEG XL tiles are decoded by libjxl (`vortex-jxl`), the others by the `image` crate.
+//!
 //! Prints only the PSNR in dB over all colour samples (8-bit, peak 255), or `inf` for an
 //! identical image; `-v` adds the sample count and mean squared error on stderr. Sources must be
 //! 8-bit grey or RGB; alpha channels are ignored.
@@ -120,7 +122,7 @@ fn run() -> Result<()> {
             .into_par_iter()
             .map(|col| {
                 let path = grid.tile_path(col, tile_row);
-                let img = image::open(&path).with_context(|| format!("decoding {}", path.display()))?;
+                let img = open_tile(&path).with_context(|| format!("decoding {}", path.display()))?;
                 let (w, h) = (img.width(), img.height());
                 // The last texel of this page that lies in the image must be inside the tile.
                 let need_w = grid.lead(col) + (width - col * page).min(page);
@@ -214,4 +216,22 @@ fn dzi_grid(files: PathBuf, tile_size: Option<u32>, overlap: Option<u32>) -> Res
 fn dzi_descriptor(files: &Path) -> Option<String> {
     let name = files.file_name()?.to_str()?.strip_suffix("_files")?;
     std::fs::read_to_string(files.with_file_name(format!("{name}.dzi"))).ok()
+}
+
+/// A tile file decoded: JPEG XL by libjxl, anything else by the `image` crate.
+fn open_tile(path: &Path) -> Result<image::DynamicImage> {
+    let bytes = std::fs::read(path)?;
+    if !vortex_jxl::is_jxl(&bytes) {
+        return Ok(image::load_from_memory(&bytes)?);
+    }
+    let decoded = vortex_jxl::decode(&bytes, (1 << 16, 1 << 16))?;
+    let (w, h, channels) = (decoded.header.width, decoded.header.height, decoded.header.channels);
+    let vortex_jxl::Samples::U8(px) = decoded.samples else { bail!("16-bit JPEG XL tiles are not compared") };
+    match channels {
+        1 => image::GrayImage::from_raw(w, h, px).map(image::DynamicImage::ImageLuma8),
+        2 => image::GrayAlphaImage::from_raw(w, h, px).map(image::DynamicImage::ImageLumaA8),
+        3 => image::RgbImage::from_raw(w, h, px).map(image::DynamicImage::ImageRgb8),
+        _ => image::RgbaImage::from_raw(w, h, px).map(image::DynamicImage::ImageRgba8),
+    }
+    .context("a JPEG XL tile of the wrong length")
 }
