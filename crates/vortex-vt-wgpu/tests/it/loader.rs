@@ -34,6 +34,8 @@ enum Spec {
     Zstd(u32),
     Png(u32),
     Jpeg(u32),
+    /// Lossless JPEG XL, encoded by libjxl (decoded by `vortex_pack` with jxl-oxide).
+    Jxl(u32),
     /// A payload of this kind that does not decode (its CRC is right).
     Garbage(TileKind),
 }
@@ -74,6 +76,13 @@ fn jpeg(tile_size: u32, seed: u32) -> Vec<u8> {
     out
 }
 
+fn jxl(tile_size: u32, seed: u32) -> Vec<u8> {
+    let texels = rgb(tile_size, seed);
+    let pixels = vortex_jxl::Pixels::U8(&texels);
+    let image = vortex_jxl::Image { width: tile_size, height: tile_size, channels: 3, pixels };
+    vortex_jxl::encode(&image, vortex_jxl::Quality::Lossless, vortex_jxl::Effort::new(1).unwrap()).unwrap()
+}
+
 /// Writes a pack of `description` with the pyramid's levels, each tile as `spec` says.
 fn write_pack(path: &Path, d: Description, spec: impl Fn(TileId) -> Spec) -> Arc<Pack> {
     let levels = pyramid_levels(&d, 1 << (d.level_count - 1));
@@ -99,6 +108,7 @@ fn write_pack_with_levels(path: &Path, d: Description, levels: Vec<Level>, spec:
                     Spec::Zstd(seed) => (TileKind::Zstd, zstd::bulk::compress(&rgb(d.tile_size, seed), 3).unwrap()),
                     Spec::Png(seed) => (TileKind::Png, png(d.tile_size, seed)),
                     Spec::Jpeg(seed) => (TileKind::Jpeg, jpeg(d.tile_size, seed)),
+                    Spec::Jxl(seed) => (TileKind::Jxl, jxl(d.tile_size, seed)),
                     Spec::Garbage(kind) => (kind, b"this is not an image of any kind".to_vec()),
                 };
                 w.add(id, NewTile::Data(kind, &bytes)).unwrap();
@@ -117,11 +127,12 @@ fn seed(id: TileId) -> u32 {
 /// Every kind of tile, at every LOD: JPEG, PNG, raw, constant, zstd in turn.
 fn mixed(id: TileId) -> Spec {
     let s = seed(id);
-    match (id.lod + id.x + 2 * id.y) % 5 {
+    match (id.lod + id.x + 2 * id.y) % 6 {
         0 => Spec::Jpeg(s),
         1 => Spec::Png(s),
         2 => Spec::Raw(s),
         3 => Spec::Constant([s as u8, (s * 3) as u8, 200]),
+        4 => Spec::Jxl(s),
         _ => Spec::Zstd(s),
     }
 }
@@ -238,8 +249,9 @@ fn texels_equal_decode_rgba8_for_every_tile_kind() {
         };
         *kinds.entry(kind).or_insert(0) += 1;
     }
-    for kind in [TileKind::Jpeg, TileKind::Png, TileKind::Raw, TileKind::Zstd, TileKind::Constant] {
-        assert!(kinds.get(&kind).copied().unwrap_or(0) >= 3, "{kind:?}: {kinds:?}");
+    for kind in [TileKind::Jpeg, TileKind::Png, TileKind::Raw, TileKind::Zstd, TileKind::Jxl, TileKind::Constant] {
+        // 21 pages over six kinds: each at least twice.
+        assert!(kinds.get(&kind).copied().unwrap_or(0) >= 2, "{kind:?}: {kinds:?}");
     }
     let c = loader.counters();
     assert_eq!((c.pages, c.tiles_decoded, c.absent_filled, c.errors), (21, 21, 0, 0));
