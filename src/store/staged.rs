@@ -1,0 +1,83 @@
+//! [`Staged`]: an output written as one object (a pack, PMTiles, a zipped OME-Zarr, a TIFF) at
+//! an `s3://` URL. Not streamed yet: the pack and PMTiles writers write their header last and
+//! seek back to it, and the TIFF writer patches its directories' offsets, so the file is
+//! written by the format's own sink into a local temporary (under `TMPDIR`), exactly as for a
+//! local destination, then sent as a multipart upload of parts read back from it. The object
+//! appears only when the upload completes; a failure aborts the upload and the temporary is
+//! removed either way. Local disk must therefore hold the whole file for now.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use super::{ObjectUrl, StoreError};
+use crate::error::Result;
+use crate::output::{Product, staging};
+
+/// The smallest part S3 takes (but for the last).
+const MIN_PART: u64 = 8 << 20;
+/// The most parts of one multipart upload S3 takes.
+const MAX_PARTS: u64 = 10_000;
+
+/// Staging directories this process made, numbered from 0, so that a later run can find
+/// those of a dead one ([`staging::remove_stale`]).
+static MADE: AtomicUsize = AtomicUsize::new(0);
+
+/// Whether `product` is one file, written to a bucket as one object.
+pub(crate) fn single_object(product: Product) -> bool {
+    matches!(product, Product::Pack | Product::Pmtiles | Product::Ozx | Product::Tiff)
+}
+
+/// A one-object output's local temporary, sent to its URL by [`Staged::upload`].
+pub(crate) struct Staged {
+    url: ObjectUrl,
+    /// The staging directory (removed when dropped) and the file in it the sink writes.
+    dir: PathBuf,
+    local: PathBuf,
+}
+
+impl Staged {
+    /// A fresh staging directory for `url`'s file under the system's temporary directory;
+    /// those that dead runs left there are removed first.
+    pub(crate) fn create(url: &ObjectUrl) -> Result<Staged> {
+        let n = MADE.fetch_add(1, Ordering::Relaxed);
+        let base = std::env::temp_dir().join(format!("vortex-s3-{n}"));
+        let fail = |path: &Path, source| StoreError::Staging { url: url.to_string(), path: path.to_path_buf(), source };
+        staging::remove_stale(&base).map_err(|e| fail(&base, e))?;
+        let dir = staging::partial_path(&base);
+        staging::fresh_dir(&dir).map_err(|e| fail(&dir, e))?;
+        let name = url.key().rsplit('/').next().unwrap_or("output");
+        Ok(Staged { url: url.clone(), local: dir.join(name), dir })
+    }
+
+    /// Where the format's sink writes the file (its destination, as if local).
+    pub(crate) fn local(&self) -> &Path {
+        &self.local
+    }
+
+    /// Sends the finished file as a multipart upload with at most `in_flight` bytes of parts
+    /// in flight (one part at least), then removes the temporary. Returns the bytes sent.
+    #[cfg(feature = "s3")]
+    pub(crate) fn upload(self, in_flight: u64) -> Result<u64> {
+        let fail = |source| StoreError::Staging { url: self.url.to_string(), path: self.local.clone(), source };
+        let size = std::fs::metadata(&self.local).map_err(fail)?.len();
+        let part = MIN_PART.max(size.div_ceil(MAX_PARTS));
+        let part_bytes = usize::try_from(part).map_err(|_| {
+            let e = std::io::Error::other(format!("{size} bytes need parts of {part} bytes, more than memory holds"));
+            fail(e)
+        })?;
+        let parts = usize::try_from((in_flight / part).max(1)).unwrap_or(1);
+        let bucket = super::bucket::Bucket::open(&self.url)?;
+        Ok(bucket.upload_file(&self.url, &self.local, part_bytes, parts)?)
+    }
+
+    #[cfg(not(feature = "s3"))]
+    pub(crate) fn upload(self, _: u64) -> Result<u64> {
+        Err(StoreError::NotBuilt { url: self.url.to_string() }.into())
+    }
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
