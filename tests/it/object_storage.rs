@@ -97,6 +97,32 @@ fn deep_zoom_a_tile_directory_a_pack_and_pmtiles_in_a_bucket_equal_the_local_run
 }
 
 #[test]
+fn a_zipped_ome_zarr_and_a_tiff_in_a_bucket_equal_the_local_files() {
+    let Some(moto) = Moto::start("the s3:// .ozx and TIFF test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let work = tempfile::tempdir().unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("sample.png");
+    for (name, extra) in [("s.ozx", ["--layout", "ome-zarr"]), ("s.tif", ["--tile-size", "128"])] {
+        let local = work.path().join(name);
+        let url = format!("s3://tiles/files/{name}");
+        for dest in [s(&local), url.as_str()] {
+            let mut args = vec!["split", s(&input), "-o", dest, "-q"];
+            args.extend(extra);
+            let out = moto.run(&args, tmp.path());
+            assert!(out.status.success(), "{dest}: {}", stderr(&out));
+        }
+        let got = tempfile::tempdir().unwrap();
+        let key = format!("files/{name}");
+        assert_eq!(moto.boto(&["get", "tiles", &key, s(got.path())]), [key.clone()]);
+        let bucket = std::fs::read(got.path().join(name)).unwrap();
+        assert!(bucket == std::fs::read(&local).unwrap(), "{key} differs from the local file");
+    }
+    assert!(moto.boto(&["uploads", "tiles"]).is_empty(), "a multipart upload was left open");
+    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "TMPDIR keeps staged files");
+}
+
+#[test]
 fn a_prefix_or_object_that_is_not_ours_is_refused_and_ours_is_replaced() {
     let Some(moto) = Moto::start("the s3:// claim test") else { return };
     moto.boto(&["mb", "tiles"]);
