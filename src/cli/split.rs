@@ -106,7 +106,8 @@ pub struct OutputArgs {
     /// s3://BUCKET/PREFIX writes a directory layout (vortex, dzi, iiif, xyz, google) to
     /// S3-compatible storage, one object a file, uploaded as the tiles are made; s3://BUCKET/KEY
     /// with a file's name (.vtpk, .pmtiles, .ozx, .tif) writes that file as one object (staged
-    /// under TMPDIR, then a multipart upload). Credentials, region and endpoint come from the
+    /// under TMPDIR, then a multipart upload); s3://BUCKET/PREFIX.ome.zarr is staged under
+    /// TMPDIR too, then uploaded file by file. Credentials, region and endpoint come from the
     /// AWS environment: AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY, AWS_REGION, AWS_ENDPOINT_URL
     /// (MinIO, R2, a local server; with AWS_ALLOW_HTTP=true for plain http). A failed run
     /// deletes what it uploaded; a prefix holding anything but a previous output of ours is

@@ -108,7 +108,10 @@ impl Open {
     fn start(planned: Planned, pack: vortex_pack::WriteOptions, in_flight: u64) -> Result<Open> {
         // One object at an s3:// URL: the sink writes a local temporary, uploaded when finished.
         let staged = match ObjectUrl::of_path(&planned.claim.path) {
-            Some(url) if !crate::store::directory_product(planned.claim.product) => Some(Staged::create(&url?)?),
+            Some(url) if !crate::store::directory_product(planned.claim.product) => {
+                let claim = &planned.claim;
+                Some(Staged::create(&url?, claim.product, claim.replaces.is_some())?)
+            }
             _ => None,
         };
         let local;

@@ -20,7 +20,8 @@
 //!
 //! Files written as one object (a pack, PMTiles, `.ozx`, a TIFF) are staged to a local
 //! temporary and sent as a multipart upload once complete, which the server makes visible
-//! only when the upload completes; a failure aborts the upload (`staged.rs`).
+//! only when the upload completes; a failure aborts the upload (`staged.rs`). An OME-Zarr
+//! directory is staged too, then uploaded file by file with the directory layouts' rules.
 
 pub(crate) mod local;
 pub(crate) mod staged;
@@ -76,7 +77,7 @@ fn open_prefix(url: &ObjectUrl, _: &Claim, _: u64) -> Result<Box<dyn Files>> {
 /// for a bucket): a prefix that is empty or holds a previous output of ours; an object that is
 /// absent, one of ours, or (with `force`) anything else.
 pub(crate) fn claim(url: &ObjectUrl, product: Product, force: bool) -> Result<Claim> {
-    if !directory_product(product) && !staged::single_object(product) {
+    if !directory_product(product) && !staged::single_object(product) && !staged::staged_dir(product) {
         return Err(StoreError::Unsupported { url: url.to_string(), product: product.noun() }.into());
     }
     claim_in_bucket(url, product, force)
@@ -90,7 +91,7 @@ pub(crate) fn directory_product(product: Product) -> bool {
 #[cfg(feature = "s3")]
 fn claim_in_bucket(url: &ObjectUrl, product: Product, force: bool) -> Result<Claim> {
     let bucket = bucket::Bucket::open(url)?;
-    let replaces = match directory_product(product) {
+    let replaces = match directory_product(product) || staged::staged_dir(product) {
         true => bucket.claim_prefix(url, product.noun())?,
         false => bucket.claim_object(url, product, force)?,
     };
