@@ -19,8 +19,10 @@ use crate::error::Result;
 use crate::output::{Product, staging};
 
 /// The smallest part S3 takes (but for the last).
+#[cfg(feature = "s3")]
 const MIN_PART: u64 = 8 << 20;
 /// The most parts of one multipart upload S3 takes.
+#[cfg(feature = "s3")]
 const MAX_PARTS: u64 = 10_000;
 
 /// Staging directories this process made, numbered from 0, so that a later run can find
@@ -39,13 +41,17 @@ pub(crate) fn staged_dir(product: Product) -> bool {
 }
 
 /// The names of Zarr's metadata files, uploaded after every chunk and shard.
+#[cfg(feature = "s3")]
 const ZARR_METADATA: [&str; 5] = ["zarr.json", ".zattrs", ".zarray", ".zgroup", ".zmetadata"];
 
 /// A one-object output's local temporary, sent to its URL by [`Staged::upload`].
 pub(crate) struct Staged {
     url: ObjectUrl,
+    // Without the `s3` feature no claim of an s3:// URL succeeds, so none is ever uploaded.
+    #[cfg_attr(not(feature = "s3"), allow(dead_code))]
     product: Product,
     /// Whether the claim found a previous output of ours at the prefix (a directory's).
+    #[cfg_attr(not(feature = "s3"), allow(dead_code))]
     replaces: bool,
     /// The staging directory (removed when dropped) and the file in it the sink writes.
     dir: PathBuf,
