@@ -155,6 +155,10 @@ pub enum TilerError {
     #[error(transparent)]
     Output(#[from] OutputError),
 
+    /// An object-storage destination (`s3://`) could not be used or written.
+    #[error(transparent)]
+    Store(#[from] StoreError),
+
     /// The caller asked the run to stop (Ctrl-C).
     #[error("interrupted; nothing was left at the destination")]
     Interrupted,
@@ -288,5 +292,78 @@ pub enum OutputError {
         /// The operating system's error.
         #[source]
         source: io::Error,
+    },
+}
+
+/// Why an object-storage destination could not be used or written.
+///
+/// New variants may come in any release: match the ones you act on and keep a `_` arm.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum StoreError {
+    /// The URL is not one this tool can write to.
+    #[error("{url}: {why}")]
+    Url {
+        /// The URL as given (escaped).
+        url: String,
+        /// What is wrong with it.
+        why: String,
+    },
+    /// This build has no object-storage client (the `s3` feature is off).
+    #[error("{url}: this build cannot write to object storage (build vortex-tiler with the `s3` feature)")]
+    NotBuilt {
+        /// The URL given.
+        url: String,
+    },
+    /// The format is not written to object storage yet.
+    #[error("{url}: {product} cannot be written to object storage yet; write it to a local path and upload it")]
+    Unsupported {
+        /// The URL given.
+        url: String,
+        /// The product, as messages name it.
+        product: &'static str,
+    },
+    /// The client could not be set up from the environment (`AWS_*` variables).
+    #[error("{url}: cannot set up the S3 client from the AWS_* environment: {message}")]
+    Client {
+        /// The URL given.
+        url: String,
+        /// The client's reason.
+        message: String,
+    },
+    /// A request failed after its retries: the object, what was asked, the server's reply.
+    #[error("s3://{bucket}/{key}: {op} failed: {message}")]
+    Request {
+        /// The bucket.
+        bucket: String,
+        /// The object's key (or the prefix listed).
+        key: String,
+        /// What was asked: `PUT`, `GET`, `LIST`, `DELETE`, a multipart upload's step.
+        op: &'static str,
+        /// The client's error, the server's reply within it.
+        message: String,
+    },
+    /// The prefix or object holds something that is not a previous output of ours.
+    #[error("{url}: holds {what}, not {product} written by vortex-tiler; {advice}")]
+    Foreign {
+        /// The URL given.
+        url: String,
+        /// What is there (an object's key, an object without our signature).
+        what: String,
+        /// What would have been written.
+        product: &'static str,
+        /// How to proceed.
+        advice: &'static str,
+    },
+    /// A local file staged for a single-object upload could not be read or written.
+    #[error("{url}: staging {}: {source}", path.shown())]
+    Staging {
+        /// The URL the file goes to.
+        url: String,
+        /// The local temporary.
+        path: std::path::PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
     },
 }

@@ -124,6 +124,7 @@ pub mod sink;
 pub mod source;
 pub mod split;
 pub(crate) mod stages;
+pub mod store;
 
 /// The pack format's crate, whose reader ([`vortex_pack::Pack`]) and [`vortex_pack::WriteOptions`]
 /// this library's API uses.

@@ -102,11 +102,21 @@ pub struct OutputArgs {
     /// `-o web --layout dzi -o slide.ome.zarr --pack slide.vtpk`: the outputs that share a
     /// pyramid and codec share each tile's encoding (docs/outputs.md). A directory is created,
     /// and replaced only if it holds nothing but a previous output of ours.
+    ///
+    /// s3://BUCKET/PREFIX writes a directory layout (vortex, dzi, iiif, xyz, google) to
+    /// S3-compatible storage, one object a file, uploaded as the tiles are made; s3://BUCKET/KEY
+    /// with a file's name (.vtpk, .pmtiles, .ozx, .tif) writes that file as one object (staged
+    /// under TMPDIR, then a multipart upload); s3://BUCKET/PREFIX.ome.zarr is staged under
+    /// TMPDIR too, then uploaded file by file. Credentials, region and endpoint come from the
+    /// AWS environment: AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY, AWS_REGION, AWS_ENDPOINT_URL
+    /// (MinIO, R2, a local server; with AWS_ALLOW_HTTP=true for plain http). A failed run
+    /// deletes what it uploaded; a prefix holding anything but a previous output of ours is
+    /// refused (docs/object-storage.md).
     #[arg(help_heading = "Outputs", short, long, value_name = "PATH")]
     output: Vec<PathBuf>,
 
     /// Write one pack file (docs/pack-format.md). An existing pack is replaced; any other file
-    /// only with --force.
+    /// only with --force. An s3://BUCKET/KEY.vtpk URL writes it as one object (see -o).
     #[arg(help_heading = "Outputs", long, value_name = "FILE")]
     pack: Option<PathBuf>,
 
@@ -634,7 +644,10 @@ pub fn tile(
     }
     let plan = Plan::new(outputs, &settings, &source.header(), &[input], budget)?;
     for planned in plan.outputs() {
-        report::prepare(&planned.output.path)?;
+        // An s3:// output leaves nothing beside it on local disk to clean up.
+        if vortex_tiler::store::ObjectUrl::of_path(&planned.output.path).is_none() {
+            report::prepare(&planned.output.path)?;
+        }
     }
     // Said once everything is checked, just before the work starts.
     for (path, changed) in plan.outputs().iter().filter_map(|p| p.changed.as_ref()) {
@@ -681,6 +694,9 @@ fn shard(
             bail!("--shard makes shard packs (--pack); --layout ome-zarr is written by one run")
         }
         (Some(_), None) => bail!("--shard writes a shard pack: give --pack FILE (merge joins them into one pack)"),
+        (Some(_), Some(pack)) if vortex_tiler::store::ObjectUrl::of_path(pack).is_some() => {
+            bail!("--shard writes shard packs to local files for now, not to {}", pack.shown())
+        }
         (Some(_), Some(_)) if outputs.len() > 1 => {
             bail!("--shard makes one shard pack (--pack FILE) and no other output")
         }

@@ -254,6 +254,9 @@ impl Context<'_> {
     }
 
     fn claim(&self, path: &Path, product: Product) -> Result<Claim> {
+        if let Some(url) = crate::store::ObjectUrl::of_path(path) {
+            return crate::store::claim(&url?, product, self.force);
+        }
         Ok(output::claim(path, product, self.inputs, self.force)?)
     }
 

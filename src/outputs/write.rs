@@ -16,12 +16,15 @@ use crate::formats::pmtiles::{Bounds, PmtilesSummary, TileType};
 use crate::formats::tiff::{self, TiffSink, TiffSummary};
 use crate::job::{Progress, SplitOptions, Summary, Written};
 use crate::layout::Levels;
+use crate::output::Claim;
 use crate::sink::icc::{Profile, WithProfile};
 use crate::sink::{DirSink, Target, TileSink};
 use crate::source::channels::{ChannelSet, Ranged};
 use crate::source::stored::{StoredLevels, read_header};
 use crate::source::{RowSource, tee};
 use crate::split;
+use crate::store::ObjectUrl;
+use crate::store::staged::Staged;
 
 /// Rows of the source the outputs' pyramids may be apart by, when they read one source
 /// together ([`tee`]): enough that one pyramid's read-ahead chunk does not stop the others.
@@ -69,10 +72,25 @@ pub enum Figures {
     Dicom(DicomSummary),
 }
 
-/// An output being written: its plan and its sink.
+/// An output being written: its plan and its sink; for one object at an `s3://` URL, the
+/// local file its sink writes, uploaded once finished.
 struct Open {
     planned: Planned,
     sink: Sink,
+    staged: Option<Staged>,
+    /// Bytes of uploads in flight at most, for an `s3://` destination.
+    in_flight: u64,
+}
+
+/// The share of `--max-memory` that uploads to object storage take: an eighth, at most
+/// 64 MiB, split among the run's `s3://` outputs; the pyramid gets the rest.
+fn upload_reserve(budget: Budget, outputs: &[Planned]) -> (Budget, u64) {
+    let uploading = outputs.iter().filter(|p| ObjectUrl::of_path(&p.output.path).is_some()).count() as u64;
+    if uploading == 0 {
+        return (budget, 0);
+    }
+    let reserve = (budget.bytes() / 8).min(64 << 20);
+    (Budget::new(budget.bytes() - reserve), (reserve / uploading).max(1))
 }
 
 enum Sink {
@@ -87,11 +105,26 @@ enum Sink {
 impl Open {
     /// Starts `planned`'s sink. Each writes under a temporary name and removes it when dropped
     /// unfinished.
-    fn start(planned: Planned, pack: vortex_pack::WriteOptions) -> Result<Open> {
-        let claim = &planned.claim;
+    fn start(planned: Planned, pack: vortex_pack::WriteOptions, in_flight: u64) -> Result<Open> {
+        // One object at an s3:// URL: the sink writes a local temporary, uploaded when finished.
+        let staged = match ObjectUrl::of_path(&planned.claim.path) {
+            Some(url) if !crate::store::directory_product(planned.claim.product) => {
+                let claim = &planned.claim;
+                Some(Staged::create(&url?, claim.product, claim.replaces.is_some())?)
+            }
+            _ => None,
+        };
+        let local;
+        let claim = match &staged {
+            Some(staged) => {
+                local = Claim { path: staged.local().to_path_buf(), product: planned.claim.product, replaces: None };
+                &local
+            }
+            None => &planned.claim,
+        };
         let sink = match &planned.work {
-            Work::Tiles { names, .. } => Sink::Dir(DirSink::create(claim, names.clone())?),
-            Work::Viewer { tiles, .. } => Sink::Dir(DirSink::for_viewer(claim, tiles.clone())?),
+            Work::Tiles { names, .. } => Sink::Dir(DirSink::create_uploading(claim, names.clone(), in_flight)?),
+            Work::Viewer { tiles, .. } => Sink::Dir(DirSink::for_viewer_uploading(claim, tiles.clone(), in_flight)?),
             Work::Pack { info, stored } => {
                 let (stored, metadata) = (*stored, info.to_json_pretty());
                 let codec = planned.opts.codec;
@@ -108,7 +141,15 @@ impl Open {
             Work::Tiff { spec, .. } => Sink::Tiff(Box::new(TiffSink::create(&claim.path, (**spec).clone())?)),
             Work::Dicom { spec, .. } => Sink::Dicom(DicomSink::create(claim, (**spec).clone())?),
         };
-        Ok(Open { planned, sink })
+        Ok(Open { planned, sink, staged, in_flight })
+    }
+
+    /// Sends a one-object output's finished local file to its `s3://` URL.
+    fn upload(staged: Option<Staged>, in_flight: u64) -> Result<()> {
+        match staged {
+            Some(staged) => staged.upload(in_flight).map(drop),
+            None => Ok(()),
+        }
     }
 
     fn tile_sink(&self) -> &dyn TileSink {
@@ -133,7 +174,7 @@ impl Open {
     /// Writes what the format writes last and renames the output into place.
     /// `planes`: the passes that wrote its tiles (an OME-Zarr's channels one pass each).
     fn finish(self, summary: &Summary, at: usize, pyramid: usize, planes: u64) -> Result<Wrote> {
-        let Open { planned, sink } = self;
+        let Open { planned, sink, staged, in_flight } = self;
         let written = summary.per_target.get(at).copied().unwrap_or_default();
         let total = planned.layout.total_tiles() * planes;
         if written.tiles != total {
@@ -173,6 +214,7 @@ impl Open {
             (Sink::Dicom(sink), _) => Figures::Dicom(sink.finish()?),
             _ => return Err(TilerError::Internal("an output's sink is not its format's".into())),
         };
+        Open::upload(staged, in_flight)?;
         // The pyramid's summary in this output's terms: its levels, texels, tiles and bytes.
         let encoding = planned.opts.encoding();
         let stored = encoding.stored(summary.source)?;
@@ -203,7 +245,7 @@ impl Open {
     /// `tiles` copied from the source of `source` texels, no pyramid cut.
     fn finish_copied(self, tiles: u64, source: crate::pixel::PixelLayout, budget: Budget) -> Result<Wrote> {
         let bytes = self.tile_sink().bytes_written();
-        let Open { planned, sink } = self;
+        let Open { planned, sink, staged, in_flight } = self;
         // The summary's grid: level 0's tiles, as many levels as the output has.
         let (level, levels, stored, figures) = match (sink, &planned.work) {
             (Sink::Tiff(sink), Work::Tiff { spec, .. }) => {
@@ -216,6 +258,7 @@ impl Open {
             }
             _ => return Err(TilerError::Internal("levels copied into an output that holds none".into())),
         };
+        Open::upload(staged, in_flight)?;
         let mut layout = crate::layout::Layout::new(u64::from(level.width), u64::from(level.height), level.tile.0, 0)?;
         layout.lod_count = levels;
         let summary = Summary {
@@ -383,7 +426,8 @@ impl Plan {
         if copying.iter().any(Option::is_some) {
             progress.total(outputs.iter().map(Planned::tiles).sum());
         }
-        let open: Vec<Open> = outputs.into_iter().map(|p| Open::start(p, pack)).collect::<Result<_>>()?;
+        let (budget, in_flight) = upload_reserve(budget, &outputs);
+        let open: Vec<Open> = outputs.into_iter().map(|p| Open::start(p, pack, in_flight)).collect::<Result<_>>()?;
         let cut: Vec<usize> = (0..open.len()).filter(|&k| copying[k].is_none()).collect();
         let mut copied = vec![0u64; open.len()];
         for (k, c) in copying.iter().enumerate() {
@@ -470,7 +514,7 @@ impl Plan {
         let [planned] = <[Planned; 1]>::try_from(outputs).map_err(|_| {
             TilerError::Internal("channels one pass each go to one output (an OME-Zarr or an OME-TIFF)".into())
         })?;
-        let open = Open::start(planned, pack)?;
+        let open = Open::start(planned, pack, crate::store::UPLOAD_BYTES)?;
         let (opts, total) = (&open.planned.opts, open.planned.layout.total_tiles());
         let mut summary: Option<Summary> = None;
         let mut windows = Vec::with_capacity(picks.len());

@@ -1,13 +1,11 @@
 //! [`DirSink`]: one file per tile plus a manifest (our `info.json`, or a viewer layout's
-//! `.dzi`, IIIF `info.json` or TileJSON), written into a staging directory beside the
-//! destination and renamed into place only when everything is written, so an interrupted run
-//! never leaves a directory that looks like a finished pyramid.
+//! `.dzi`, IIIF `info.json` or TileJSON), the manifest last. The files go through
+//! [`crate::store::Files`]: into a staging directory beside a local destination, renamed into
+//! place only when everything is written, so an interrupted run never leaves a directory that
+//! looks like a finished pyramid; or as objects under an `s3://` prefix, removed if the run
+//! fails (docs/object-storage.md).
 
-use std::collections::HashSet;
-use std::fs;
-use std::io::Write;
 use std::path::PathBuf;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::TileSink;
@@ -15,18 +13,16 @@ use crate::error::{Result, ShowPath, TilerError};
 use crate::formats::tiles::filename::FilenameFormat;
 use crate::formats::tiles::info::Info;
 use crate::formats::viewer::{Crop, Viewer, ViewerTiles};
-use crate::output::{Claim, Product, staging};
+use crate::output::{Claim, Product};
+use crate::store::{Files, UPLOAD_BYTES, files_for};
 
 /// One image file per tile plus a manifest. Dropped unfinished (a failed run, a later
 /// output of the same run that failed), it removes what it wrote.
 pub struct DirSink {
     dest: PathBuf,
-    staging: PathBuf,
+    files: Box<dyn Files>,
     names: Names,
-    made_dirs: Mutex<HashSet<PathBuf>>,
     bytes: AtomicU64,
-    /// Set once the directory is in place: nothing to remove.
-    finished: bool,
 }
 
 /// How tiles are named.
@@ -40,17 +36,28 @@ enum Names {
 impl DirSink {
     /// Prepares to write a tile directory into the destination `claim` checked (see
     /// [`crate::output::claim`]): absent, empty, or a previous output of ours, which `finish`
-    /// replaces.
+    /// replaces. An `s3://` destination ([`crate::store`]) has up to 32 MiB of uploads in flight.
     pub fn create(claim: &Claim, names: FilenameFormat) -> Result<DirSink> {
-        Self::start(claim, Product::TileDir, Names::Pattern(names))
+        Self::start(claim, Product::TileDir, Names::Pattern(names), UPLOAD_BYTES)
     }
 
     /// Prepares to write `tiles`' viewer layout into the destination `claim` checked.
     pub fn for_viewer(claim: &Claim, tiles: ViewerTiles) -> Result<DirSink> {
-        Self::start(claim, Product::Viewer(tiles.viewer), Names::Viewer(tiles))
+        Self::start(claim, Product::Viewer(tiles.viewer), Names::Viewer(tiles), UPLOAD_BYTES)
     }
 
-    fn start(claim: &Claim, product: Product, names: Names) -> Result<DirSink> {
+    /// [`create`](Self::create) with at most `in_flight` bytes of uploads at once to an
+    /// `s3://` prefix.
+    pub(crate) fn create_uploading(claim: &Claim, names: FilenameFormat, in_flight: u64) -> Result<DirSink> {
+        Self::start(claim, Product::TileDir, Names::Pattern(names), in_flight)
+    }
+
+    /// [`for_viewer`](Self::for_viewer) with at most `in_flight` bytes of uploads at once.
+    pub(crate) fn for_viewer_uploading(claim: &Claim, tiles: ViewerTiles, in_flight: u64) -> Result<DirSink> {
+        Self::start(claim, Product::Viewer(tiles.viewer), Names::Viewer(tiles), in_flight)
+    }
+
+    fn start(claim: &Claim, product: Product, names: Names, in_flight: u64) -> Result<DirSink> {
         if claim.product != product {
             return Err(TilerError::Options(format!(
                 "{} was claimed for {}",
@@ -58,22 +65,8 @@ impl DirSink {
                 claim.product.noun()
             )));
         }
-        let dest = claim.path.as_path();
-        let staging = staging::partial_path(dest);
-        if staging.exists() {
-            fs::remove_dir_all(&staging).map_err(|e| TilerError::write(&staging, e))?;
-        }
-        fs::create_dir_all(&staging).map_err(|e| {
-            TilerError::write(dest, std::io::Error::new(e.kind(), format!("cannot create {}: {e}", staging.shown())))
-        })?;
-        Ok(DirSink {
-            dest: dest.to_path_buf(),
-            staging,
-            names,
-            made_dirs: Mutex::new(HashSet::new()),
-            bytes: AtomicU64::new(0),
-            finished: false,
-        })
+        let files = files_for(claim, in_flight)?;
+        Ok(DirSink { dest: claim.path.clone(), files, names, bytes: AtomicU64::new(0) })
     }
 
     /// Writes `info.json` last, then moves the staging directory into place. A previous output
@@ -88,7 +81,7 @@ impl DirSink {
         let manifests = match &self.names {
             Names::Viewer(tiles) => {
                 // A IIIF service's whole-image files, made from the tiles just written.
-                let read = |name: &str| fs::read(self.staging.join(name)).map_err(|e| format!("{name}: {e}"));
+                let read = |name: &str| self.files.read(name).map_err(|e| format!("{name}: {e}"));
                 match tiles.whole_images(read) {
                     Ok(mut files) => {
                         files.extend(tiles.manifests());
@@ -108,15 +101,7 @@ impl DirSink {
     }
 
     fn complete(mut self, manifests: Vec<(String, Vec<u8>)>) -> Result<()> {
-        for (name, bytes) in manifests {
-            let path = self.staging.join(name);
-            // IIIF's whole-image files go into folders of their own (`full/max/0/`).
-            let folder = path.parent().map_or(Ok(()), fs::create_dir_all);
-            folder.and_then(|()| fs::write(&path, bytes)).map_err(|e| TilerError::write(&path, e))?;
-        }
-        staging::replace_dir(&self.staging, &self.dest).map_err(|e| TilerError::write(&self.dest, e))?;
-        self.finished = true;
-        Ok(())
+        self.files.publish(manifests)
     }
 }
 
@@ -166,34 +151,13 @@ impl TileSink for DirSink {
     }
 }
 
-/// An unfinished directory's staging goes with it.
-impl Drop for DirSink {
-    fn drop(&mut self) {
-        if !self.finished {
-            let _ = fs::remove_dir_all(&self.staging);
-        }
-    }
-}
-
 impl DirSink {
-    /// Writes one tile file at `name` under the staging directory, never over another: `false`
-    /// if the name is taken.
+    /// Writes one tile file at `name`, never over another: `false` if the name is taken.
     fn write_file(&self, name: &str, bytes: &[u8]) -> Result<bool> {
-        let path = self.staging.join(name);
-        if let Some(dir) = path.parent().filter(|d| *d != self.staging) {
-            let mut made = self.made_dirs.lock().unwrap_or_else(|p| p.into_inner());
-            if !made.contains(dir) {
-                fs::create_dir_all(dir).map_err(|e| TilerError::write(dir, e))?;
-                made.insert(dir.to_path_buf());
-            }
+        let written = self.files.put_new(name, bytes)?;
+        if written {
+            self.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
         }
-        let mut file = match fs::File::create_new(&path) {
-            Ok(file) => file,
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => return Ok(false),
-            Err(e) => return Err(TilerError::write(&path, e)),
-        };
-        file.write_all(bytes).map_err(|e| TilerError::write(&path, e))?;
-        self.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
-        Ok(true)
+        Ok(written)
     }
 }

@@ -5,7 +5,8 @@
 //! Each format's sink lives with its format ([`crate::formats`]); [`DirSink`] (`dir.rs`)
 //! lives here because two formats write through it: the tile directory of
 //! [`crate::formats::tiles`] and the viewer layouts of [`crate::formats::viewer`]. All write
-//! under a temporary name and rename into place when complete.
+//! under a temporary name and rename into place when complete; at an `s3://` URL, see
+//! [`crate::store`].
 
 mod dir;
 pub(crate) mod icc;

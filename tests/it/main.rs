@@ -27,6 +27,7 @@ mod library;
 mod memory;
 mod module_graph;
 mod ndpi;
+mod object_storage;
 mod ome_zarr;
 mod openslide_files;
 mod oracle;

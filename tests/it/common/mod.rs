@@ -5,6 +5,7 @@ pub mod cli;
 pub mod compare;
 pub mod nginx;
 pub mod picture;
+pub mod s3;
 pub mod server;
 pub mod webdriver;
 

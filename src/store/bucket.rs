@@ -1,0 +1,455 @@
+//! An S3-compatible bucket through Apache Arrow's `object_store` (feature `s3`): the client and
+//! its runtime ([`Bucket`]), the claim of a prefix or an object, a directory output's files as
+//! objects uploaded in parallel ([`Uploads`]), and a staged file's multipart upload.
+//!
+//! Credentials, region and endpoint come from the standard AWS environment
+//! (`AWS_ACCESS_KEY_ID`, `AWS_SECRET_ACCESS_KEY`, `AWS_SESSION_TOKEN`, `AWS_REGION`,
+//! `AWS_ENDPOINT_URL` for MinIO, R2 or a local server, `AWS_ALLOW_HTTP=true` for one without
+//! TLS). Each request is retried with exponential backoff on 5xx replies, throttling, timeouts
+//! and dropped connections, up to [`MAX_RETRIES`] times within [`RETRY_WINDOW`].
+//!
+//! Uploads run on a small tokio runtime of the output's own, so the encoder threads that call
+//! [`Files::put_new`] only wait when the bytes in flight would pass the output's share of
+//! `--max-memory`; the first failure is kept and returned by the next call (and by `publish`).
+
+use std::collections::HashSet;
+use std::hash::Hasher;
+use std::path::Path;
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::time::Duration;
+
+use futures::stream::{FuturesUnordered, StreamExt, TryStreamExt};
+use object_store::aws::{AmazonS3, AmazonS3Builder};
+use object_store::path::Path as Key;
+use object_store::{BackoffConfig, ObjectStore, ObjectStoreExt, PutPayload, RetryConfig};
+
+use super::{Files, ObjectUrl, StoreError};
+use crate::error::Result;
+use crate::output::{Existing, Product};
+
+/// The marker object a directory output keeps under its prefix (see [`crate::store`]).
+pub(crate) const MARKER: &str = ".vortex-tiler";
+/// Retries of one request after its first try.
+const MAX_RETRIES: usize = 5;
+/// No retry starts later than this after a request's first try.
+const RETRY_WINDOW: Duration = Duration::from_secs(60);
+/// Requests in flight at most per output, whatever their size (many small tiles).
+const MAX_REQUESTS: usize = 64;
+/// The largest marker object read back: ours are under 200 bytes.
+const MAX_MARKER_BYTES: u64 = 4096;
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// A bucket's client and the runtime its requests run on.
+pub(crate) struct Bucket {
+    store: Arc<AmazonS3>,
+    runtime: tokio::runtime::Runtime,
+    name: String,
+}
+
+impl Bucket {
+    /// The client of `url`'s bucket, configured from the AWS environment. Sends nothing.
+    pub(crate) fn open(url: &ObjectUrl) -> Result<Bucket, StoreError> {
+        let client = |message: String| StoreError::Client { url: url.to_string(), message };
+        let mut backoff = BackoffConfig::default();
+        (backoff.init_backoff, backoff.max_backoff, backoff.base) =
+            (Duration::from_millis(100), Duration::from_secs(8), 2.0);
+        let mut retry = RetryConfig::default();
+        (retry.backoff, retry.max_retries, retry.retry_timeout) = (backoff, MAX_RETRIES, RETRY_WINDOW);
+        let store = AmazonS3Builder::from_env()
+            .with_bucket_name(url.bucket())
+            .with_retry(retry)
+            .build()
+            .map_err(|e| client(e.to_string()))?;
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .thread_name("vortex-s3")
+            .enable_all()
+            .build()
+            .map_err(|e| client(format!("cannot start its runtime: {e}")))?;
+        Ok(Bucket { store: Arc::new(store), runtime, name: url.bucket().to_string() })
+    }
+
+    /// `key` as the client takes it, refused (not re-encoded) where it could not be stored as
+    /// spelt.
+    fn key(&self, key: &str) -> Result<Key, StoreError> {
+        Key::parse(key).map_err(|e| StoreError::Url {
+            url: format!("s3://{}/{}", self.name, key.escape_debug()),
+            why: format!("not an object key this tool writes: {e}"),
+        })
+    }
+
+    fn failed(&self, key: &str, op: &'static str, e: impl ToString) -> StoreError {
+        StoreError::Request { bucket: self.name.clone(), key: key.to_string(), op, message: e.to_string() }
+    }
+
+    /// Stores `bytes` at `key`, waiting for the reply.
+    fn put(&self, key: &str, bytes: Vec<u8>) -> Result<(), StoreError> {
+        let location = self.key(key)?;
+        let put = self.store.put(&location, PutPayload::from(bytes));
+        self.runtime.block_on(put).map(drop).map_err(|e| self.failed(key, "PUT", reply(&e)))
+    }
+
+    /// The object at `key`, `None` where there is none, refused past `max` bytes.
+    fn get(&self, key: &str, max: u64) -> Result<Option<Vec<u8>>, StoreError> {
+        let location = self.key(key)?;
+        self.runtime.block_on(async {
+            let got = match self.store.get(&location).await {
+                Ok(got) => got,
+                Err(object_store::Error::NotFound { .. }) => return Ok(None),
+                Err(e) => return Err(self.failed(key, "GET", reply(&e))),
+            };
+            if got.meta.size > max {
+                return Err(self.failed(key, "GET", format!("{} bytes, more than the {max} expected", got.meta.size)));
+            }
+            got.bytes().await.map(|b| Some(b.to_vec())).map_err(|e| self.failed(key, "GET", reply(&e)))
+        })
+    }
+
+    /// The first object under `prefix` (a key's segments; empty: the whole bucket), if any.
+    fn first_under(&self, prefix: &str) -> Result<Option<String>, StoreError> {
+        let location = if prefix.is_empty() { None } else { Some(self.key(prefix)?) };
+        let mut listed = self.store.list(location.as_ref());
+        match self.runtime.block_on(listed.next()) {
+            None => Ok(None),
+            Some(Ok(meta)) => Ok(Some(meta.location.to_string())),
+            Some(Err(e)) => Err(self.failed(prefix, "LIST", reply(&e))),
+        }
+    }
+
+    /// Deletes every object under `url`'s prefix, the marker last (so that a deletion cut
+    /// short still leaves the prefix recognisably ours).
+    pub(crate) fn delete_prefix(&self, url: &ObjectUrl) -> Result<(), StoreError> {
+        let marker_key = url.child(MARKER);
+        let marker = self.key(&marker_key)?;
+        let prefix = if url.key().is_empty() { None } else { Some(self.key(url.key())?) };
+        self.runtime.block_on(async {
+            let keep = marker.clone();
+            let listed = self.store.list(prefix.as_ref()).map_ok(|m| m.location);
+            let listed = listed.try_filter(move |l| futures::future::ready(*l != keep)).boxed();
+            let mut deleted = self.store.delete_stream(listed);
+            while let Some(result) = deleted.next().await {
+                result.map_err(|e| self.failed(url.key(), "DELETE", reply(&e)))?;
+            }
+            match self.store.delete(&marker).await {
+                Ok(()) | Err(object_store::Error::NotFound { .. }) => Ok(()),
+                Err(e) => Err(self.failed(&marker_key, "DELETE", reply(&e))),
+            }
+        })
+    }
+
+    /// What the claim of a directory output at the prefix `url` finds: nothing, a previous
+    /// output of ours (its marker names `noun`), or a refusal naming a foreign key.
+    pub(crate) fn claim_prefix(&self, url: &ObjectUrl, noun: &'static str) -> Result<Option<Existing>, StoreError> {
+        let foreign = |what: String| StoreError::Foreign {
+            url: url.to_string(),
+            what,
+            product: noun,
+            advice: "choose a new or empty prefix",
+        };
+        let marker_key = url.child(MARKER);
+        match self.get(&marker_key, MAX_MARKER_BYTES)? {
+            Some(bytes) => match marker_product(&bytes) {
+                Some(product) if product == noun => Ok(Some(Existing::Ours)),
+                Some(product) => Err(foreign(format!("{product} (its {MARKER} says so)"))),
+                None => Err(foreign(format!("an object {marker_key} that is not our marker"))),
+            },
+            None => match self.first_under(url.key())? {
+                Some(key) => Err(foreign(format!("the object {key}"))),
+                None => Ok(None),
+            },
+        }
+    }
+
+    /// What the claim of a one-object output at `url` finds: nothing, a previous output of
+    /// ours (a pack's or PMTiles' signature), or something replaced only with `force`.
+    pub(crate) fn claim_object(
+        &self,
+        url: &ObjectUrl,
+        product: Product,
+        force: bool,
+    ) -> Result<Option<Existing>, StoreError> {
+        if url.key().is_empty() {
+            let why = "a file output needs an object key: s3://BUCKET/KEY".into();
+            return Err(StoreError::Url { url: url.to_string(), why });
+        }
+        let location = self.key(url.key())?;
+        let head = self.runtime.block_on(self.store.head(&location));
+        let size = match head {
+            Ok(meta) => meta.size,
+            Err(object_store::Error::NotFound { .. }) => {
+                return match self.first_under(url.key())? {
+                    Some(key) => Err(StoreError::Foreign {
+                        url: url.to_string(),
+                        what: format!("objects under it as a prefix ({key})"),
+                        product: product.noun(),
+                        advice: "choose another key",
+                    }),
+                    None => Ok(None),
+                };
+            }
+            Err(e) => return Err(self.failed(url.key(), "HEAD", reply(&e))),
+        };
+        let range = self.store.get_range(&location, 0..size.min(8));
+        let head = self.runtime.block_on(range).map_err(|e| self.failed(url.key(), "GET", reply(&e)))?;
+        let ours = match product {
+            Product::Pack => head[..] == vortex_pack::format::MAGIC[..],
+            Product::Pmtiles => &head[..] == b"PMTiles\x03",
+            _ => false,
+        };
+        match (ours, force) {
+            (true, _) => Ok(Some(Existing::Ours)),
+            (false, true) => Ok(Some(Existing::ForcedFile)),
+            (false, false) => Err(StoreError::Foreign {
+                url: url.to_string(),
+                what: format!("an object of {size} bytes"),
+                product: product.noun(),
+                advice: "pass --force to replace it, or choose another key",
+            }),
+        }
+    }
+
+    /// Sends the local file `local` to `url` as a multipart upload of `part_bytes`-byte parts,
+    /// `parts` of them in flight at most; on any failure the upload is aborted, so that
+    /// nothing is left, visible or not. Returns the bytes sent.
+    pub(crate) fn upload_file(
+        &self,
+        url: &ObjectUrl,
+        local: &Path,
+        part_bytes: usize,
+        parts: usize,
+    ) -> Result<u64, StoreError> {
+        use std::io::Read;
+        let key = url.key();
+        let location = self.key(key)?;
+        let staging = |source| StoreError::Staging { url: url.to_string(), path: local.to_path_buf(), source };
+        let mut file = std::fs::File::open(local).map_err(staging)?;
+        self.runtime.block_on(async {
+            let mut upload = self
+                .store
+                .put_multipart(&location)
+                .await
+                .map_err(|e| self.failed(key, "CreateMultipartUpload", reply(&e)))?;
+            let sent = async {
+                let mut pending: FuturesUnordered<object_store::UploadPart> = FuturesUnordered::new();
+                let mut sent = 0u64;
+                loop {
+                    let mut part = Vec::with_capacity(part_bytes);
+                    (&mut file).take(part_bytes as u64).read_to_end(&mut part).map_err(staging)?;
+                    if part.is_empty() {
+                        break;
+                    }
+                    while pending.len() >= parts.max(1) {
+                        if let Some(done) = pending.next().await {
+                            done.map_err(|e| self.failed(key, "UploadPart", reply(&e)))?;
+                        }
+                    }
+                    sent += part.len() as u64;
+                    pending.push(upload.put_part(PutPayload::from(part)));
+                }
+                while let Some(done) = pending.next().await {
+                    done.map_err(|e| self.failed(key, "UploadPart", reply(&e)))?;
+                }
+                upload.complete().await.map_err(|e| self.failed(key, "CompleteMultipartUpload", reply(&e)))?;
+                Ok::<u64, StoreError>(sent)
+            }
+            .await;
+            if sent.is_err() {
+                // What was sent is discarded by the server; a failure here leaves an incomplete
+                // upload that a bucket's lifecycle rule removes (docs/object-storage.md).
+                let _ = upload.abort().await;
+            }
+            sent
+        })
+    }
+}
+
+/// A client error as a message: its own text, then each cause it does not already quote (the
+/// server's reply, or why no connection was made).
+fn reply(e: &object_store::Error) -> String {
+    let mut text = e.to_string();
+    let mut cause = std::error::Error::source(e);
+    while let Some(c) = cause {
+        let more = c.to_string();
+        if !text.contains(&more) {
+            text = format!("{text}: {more}");
+        }
+        cause = c.source();
+    }
+    text
+}
+
+/// The marker's JSON: which product the prefix holds and whether it is complete.
+fn marker_json(noun: &str, state: &str) -> Vec<u8> {
+    let json = serde_json::json!({ "writer": "vortex-tiler", "product": noun, "state": state });
+    json.to_string().into_bytes()
+}
+
+/// The product a marker names, if it is ours.
+fn marker_product(bytes: &[u8]) -> Option<String> {
+    let json: serde_json::Value = serde_json::from_slice(bytes).ok()?;
+    (json.get("writer")?.as_str()? == "vortex-tiler").then_some(())?;
+    Some(json.get("product")?.as_str()?.to_string())
+}
+
+/// What is in flight: bytes, requests, and the first failure.
+#[derive(Default)]
+struct InFlight {
+    bytes: u64,
+    requests: usize,
+    failed: Option<(String, String)>,
+}
+
+/// [`InFlight`] and the condition its waiters wait on.
+#[derive(Default)]
+struct Flight {
+    state: Mutex<InFlight>,
+    changed: Condvar,
+}
+
+impl Flight {
+    /// A request of `bytes` ended, with `failure` (its key and the error) if it failed.
+    fn ended(&self, bytes: u64, failure: Option<(String, String)>) {
+        let mut s = lock(&self.state);
+        s.bytes -= bytes;
+        s.requests -= 1;
+        if s.failed.is_none() {
+            s.failed = failure;
+        }
+        self.changed.notify_all();
+    }
+}
+
+/// A directory output's files as objects under a prefix (see [`crate::store`]). Dropped
+/// unpublished, it deletes every object under the prefix.
+pub(crate) struct Uploads {
+    bucket: Bucket,
+    url: ObjectUrl,
+    noun: &'static str,
+    /// Hashes of the names written: two files of one name are refused as on a disk.
+    names: Mutex<HashSet<u64>>,
+    flight: Arc<Flight>,
+    /// Bytes of uploads in flight at most (a larger file goes alone).
+    cap: u64,
+    published: bool,
+}
+
+impl Uploads {
+    /// Starts a directory output (`noun`) at the prefix `url`, claimed; a previous output of
+    /// ours there (`replaces`) is deleted first. At most `in_flight` bytes go at once.
+    pub(crate) fn start(url: &ObjectUrl, noun: &'static str, replaces: bool, in_flight: u64) -> Result<Uploads> {
+        let uploads = Uploads {
+            bucket: Bucket::open(url)?,
+            url: url.clone(),
+            noun,
+            names: Mutex::new(HashSet::new()),
+            flight: Arc::default(),
+            cap: in_flight.max(1),
+            published: false,
+        };
+        if replaces {
+            uploads.bucket.delete_prefix(url)?;
+        }
+        uploads.bucket.put(&url.child(MARKER), marker_json(noun, "writing"))?;
+        Ok(uploads)
+    }
+
+    /// Waits until nothing is in flight; the first failure, if any.
+    fn settle(&self) -> Result<(), StoreError> {
+        let mut s = lock(&self.flight.state);
+        while s.requests > 0 {
+            s = self.flight.changed.wait(s).unwrap_or_else(|p| p.into_inner());
+        }
+        match &s.failed {
+            None => Ok(()),
+            Some((key, message)) => Err(self.bucket.failed(key, "PUT", message)),
+        }
+    }
+}
+
+impl Files for Uploads {
+    fn put_new(&self, name: &str, bytes: &[u8]) -> Result<bool> {
+        let key = self.url.child(name);
+        let location = self.bucket.key(&key)?;
+        let mut hash = crate::fnv::Fnv::default();
+        hash.write(name.as_bytes());
+        if !lock(&self.names).insert(hash.finish()) {
+            return Ok(false);
+        }
+        let len = bytes.len() as u64;
+        {
+            let mut s = lock(&self.flight.state);
+            while s.failed.is_none() && s.requests > 0 && (s.requests >= MAX_REQUESTS || s.bytes + len > self.cap) {
+                s = self.flight.changed.wait(s).unwrap_or_else(|p| p.into_inner());
+            }
+            if let Some((key, message)) = &s.failed {
+                return Err(self.bucket.failed(key, "PUT", message).into());
+            }
+            s.bytes += len;
+            s.requests += 1;
+        }
+        let (store, flight) = (Arc::clone(&self.bucket.store), Arc::clone(&self.flight));
+        let payload = PutPayload::from(bytes.to_vec());
+        self.bucket.runtime.spawn(async move {
+            let result = store.put(&location, payload).await;
+            flight.ended(len, result.err().map(|e| (key, reply(&e))));
+        });
+        Ok(true)
+    }
+
+    fn read(&self, name: &str) -> Result<Vec<u8>> {
+        self.settle()?;
+        let key = self.url.child(name);
+        match self.bucket.get(&key, u64::MAX)? {
+            Some(bytes) => Ok(bytes),
+            None => Err(self.bucket.failed(&key, "GET", "no such object, though this run wrote it").into()),
+        }
+    }
+
+    fn publish(&mut self, manifests: Vec<(String, Vec<u8>)>) -> Result<()> {
+        self.settle()?;
+        for (name, bytes) in manifests {
+            self.bucket.put(&self.url.child(&name), bytes)?;
+        }
+        self.bucket.put(&self.url.child(MARKER), marker_json(self.noun, "complete"))?;
+        self.published = true;
+        Ok(())
+    }
+}
+
+/// An unpublished output's objects are deleted: a failed run leaves nothing under the prefix.
+impl Drop for Uploads {
+    fn drop(&mut self) {
+        if self.published {
+            return;
+        }
+        let _ = self.settle();
+        if let Err(e) = self.bucket.delete_prefix(&self.url) {
+            // Nothing to return the error to: the run has failed already, with its own error.
+            eprintln!("warning: removing the unfinished output at {}: {e}", self.url);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_marker_names_its_product_and_only_ours_counts() {
+        let marker = marker_json("a Deep Zoom pyramid", "writing");
+        assert_eq!(marker_product(&marker).as_deref(), Some("a Deep Zoom pyramid"));
+        assert_eq!(marker_product(br#"{"writer":"someone","product":"a Deep Zoom pyramid"}"#), None);
+        assert_eq!(marker_product(b"not json"), None);
+    }
+
+    #[test]
+    fn a_reply_carries_its_causes_once() {
+        let cause = std::io::Error::new(std::io::ErrorKind::ConnectionRefused, "Connection refused");
+        let e = object_store::Error::Generic { store: "S3", source: Box::new(cause) };
+        let text = reply(&e);
+        assert_eq!(text.matches("Connection refused").count(), 1, "{text}");
+    }
+}

@@ -1,0 +1,155 @@
+//! [`Staged`]: an output written as one object (a pack, PMTiles, a zipped OME-Zarr, a TIFF) at
+//! an `s3://` URL, or an OME-Zarr directory written locally before its files are uploaded. Not streamed yet: the pack and PMTiles writers write their header last and
+//! seek back to it, and the TIFF writer patches its directories' offsets, so the file is
+//! written by the format's own sink into a local temporary (under `TMPDIR`), exactly as for a
+//! local destination, then sent as a multipart upload of parts read back from it. The object
+//! appears only when the upload completes; a failure aborts the upload and the temporary is
+//! removed either way. Local disk must therefore hold the whole file for now.
+//!
+//! An OME-Zarr directory is staged the same way (its sink reorders each 0.5 shard's chunks
+//! through a local file, and writes its metadata at the end), then sent file by file through
+//! [`super::bucket::Uploads`], which follows a directory layout's rules: the marker first, the
+//! metadata last, everything deleted on failure. Not streamed yet either.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use super::{ObjectUrl, StoreError};
+use crate::error::Result;
+use crate::output::{Product, staging};
+
+/// The smallest part S3 takes (but for the last).
+#[cfg(feature = "s3")]
+const MIN_PART: u64 = 8 << 20;
+/// The most parts of one multipart upload S3 takes.
+#[cfg(feature = "s3")]
+const MAX_PARTS: u64 = 10_000;
+
+/// Staging directories this process made, numbered from 0, so that a later run can find
+/// those of a dead one ([`staging::remove_stale`]).
+static MADE: AtomicUsize = AtomicUsize::new(0);
+
+/// Whether `product` is one file, written to a bucket as one object.
+pub(crate) fn single_object(product: Product) -> bool {
+    matches!(product, Product::Pack | Product::Pmtiles | Product::Ozx | Product::Tiff)
+}
+
+/// Whether `product` is a directory written locally, then uploaded file by file (an
+/// OME-Zarr directory, whose sink reorders each shard's chunks in a local file).
+pub(crate) fn staged_dir(product: Product) -> bool {
+    product == Product::OmeZarr
+}
+
+/// The names of Zarr's metadata files, uploaded after every chunk and shard.
+#[cfg(feature = "s3")]
+const ZARR_METADATA: [&str; 5] = ["zarr.json", ".zattrs", ".zarray", ".zgroup", ".zmetadata"];
+
+/// A one-object output's local temporary, sent to its URL by [`Staged::upload`].
+pub(crate) struct Staged {
+    url: ObjectUrl,
+    // Without the `s3` feature no claim of an s3:// URL succeeds, so none is ever uploaded.
+    #[cfg_attr(not(feature = "s3"), allow(dead_code))]
+    product: Product,
+    /// Whether the claim found a previous output of ours at the prefix (a directory's).
+    #[cfg_attr(not(feature = "s3"), allow(dead_code))]
+    replaces: bool,
+    /// The staging directory (removed when dropped) and the file in it the sink writes.
+    dir: PathBuf,
+    local: PathBuf,
+}
+
+impl Staged {
+    /// A fresh staging directory for `url`'s file under the system's temporary directory;
+    /// those that dead runs left there are removed first.
+    pub(crate) fn create(url: &ObjectUrl, product: Product, replaces: bool) -> Result<Staged> {
+        let n = MADE.fetch_add(1, Ordering::Relaxed);
+        let base = std::env::temp_dir().join(format!("vortex-s3-{n}"));
+        let fail = |path: &Path, source| StoreError::Staging { url: url.to_string(), path: path.to_path_buf(), source };
+        staging::remove_stale(&base).map_err(|e| fail(&base, e))?;
+        let dir = staging::partial_path(&base);
+        staging::fresh_dir(&dir).map_err(|e| fail(&dir, e))?;
+        let name = url.key().rsplit('/').next().filter(|n| !n.is_empty()).unwrap_or("output");
+        Ok(Staged { url: url.clone(), product, replaces, local: dir.join(name), dir })
+    }
+
+    /// Where the format's sink writes the file (its destination, as if local).
+    pub(crate) fn local(&self) -> &Path {
+        &self.local
+    }
+
+    /// Sends the finished file as a multipart upload with at most `in_flight` bytes of parts
+    /// in flight (one part at least), then removes the temporary. Returns the bytes sent.
+    #[cfg(feature = "s3")]
+    pub(crate) fn upload(self, in_flight: u64) -> Result<u64> {
+        if staged_dir(self.product) {
+            return self.upload_dir(in_flight);
+        }
+        let fail = |source| StoreError::Staging { url: self.url.to_string(), path: self.local.clone(), source };
+        let size = std::fs::metadata(&self.local).map_err(fail)?.len();
+        let part = MIN_PART.max(size.div_ceil(MAX_PARTS));
+        let part_bytes = usize::try_from(part).map_err(|_| {
+            let e = std::io::Error::other(format!("{size} bytes need parts of {part} bytes, more than memory holds"));
+            fail(e)
+        })?;
+        let parts = usize::try_from((in_flight / part).max(1)).unwrap_or(1);
+        let bucket = super::bucket::Bucket::open(&self.url)?;
+        Ok(bucket.upload_file(&self.url, &self.local, part_bytes, parts)?)
+    }
+
+    /// A finished directory sent file by file under the URL's prefix, in parallel, with the
+    /// rules of a directory layout (`crate::store`): the marker first, Zarr's metadata after
+    /// every chunk and shard, everything deleted on failure.
+    #[cfg(feature = "s3")]
+    fn upload_dir(&self, in_flight: u64) -> Result<u64> {
+        use super::Files;
+        let fail =
+            |path: &Path, source| StoreError::Staging { url: self.url.to_string(), path: path.to_path_buf(), source };
+        let mut files = Vec::new();
+        walk(&self.local, &self.local, &mut files).map_err(|e| fail(&self.local, e))?;
+        files.sort();
+        let is_metadata = |rel: &str| ZARR_METADATA.contains(&rel.rsplit('/').next().unwrap_or(rel));
+        let (metadata, data): (Vec<_>, Vec<_>) = files.into_iter().partition(|(rel, _)| is_metadata(rel));
+        let mut uploads = super::bucket::Uploads::start(&self.url, self.product.noun(), self.replaces, in_flight)?;
+        let mut sent = 0u64;
+        for (rel, path) in data {
+            let bytes = std::fs::read(&path).map_err(|e| fail(&path, e))?;
+            sent += bytes.len() as u64;
+            if !uploads.put_new(&rel, &bytes)? {
+                return Err(crate::error::TilerError::Internal(format!("{}: {rel} was uploaded twice", self.url)));
+            }
+        }
+        let manifests = (metadata.into_iter())
+            .map(|(rel, path)| std::fs::read(&path).map(|bytes| (rel, bytes)).map_err(|e| fail(&path, e)))
+            .collect::<Result<Vec<_>, _>>()?;
+        uploads.publish(manifests)?;
+        Ok(sent)
+    }
+
+    #[cfg(not(feature = "s3"))]
+    pub(crate) fn upload(self, _: u64) -> Result<u64> {
+        Err(StoreError::NotBuilt { url: self.url.to_string() }.into())
+    }
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// Every regular file under `dir`, as its path relative to `base` ('/'-separated) and itself.
+#[cfg(feature = "s3")]
+fn walk(dir: &Path, base: &Path, out: &mut Vec<(String, PathBuf)>) -> std::io::Result<()> {
+    for entry in std::fs::read_dir(dir)? {
+        let entry = entry?;
+        let path = entry.path();
+        if entry.file_type()?.is_dir() {
+            walk(&path, base, out)?;
+        } else {
+            let rel = path.strip_prefix(base).map_err(std::io::Error::other)?;
+            let rel = rel.iter().map(|c| c.to_string_lossy()).collect::<Vec<_>>().join("/");
+            out.push((rel, path));
+        }
+    }
+    Ok(())
+}

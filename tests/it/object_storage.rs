@@ -1,0 +1,264 @@
+//! Outputs at `s3://` URLs against a real S3 server (moto, `common::s3`): what lands in the
+//! bucket is byte for byte what a local run writes; a prefix that is not ours is refused; a
+//! failed run (a missing bucket, a broken input, the server gone) says which object failed
+//! and why, exits non-zero, and leaves no object and no open multipart upload.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use crate::common::cli::{fixture, s, wait_or_kill};
+use crate::common::s3::Moto;
+
+/// Every regular file under `dir`, by its path relative to `dir` ('/'-separated).
+fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    fn walk(dir: &Path, base: &Path, out: &mut BTreeMap<String, Vec<u8>>) {
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                walk(&path, base, out);
+            } else {
+                let rel = path.strip_prefix(base).unwrap().to_string_lossy().replace('\\', "/");
+                out.insert(rel, std::fs::read(&path).unwrap());
+            }
+        }
+    }
+    let mut out = BTreeMap::new();
+    walk(dir, dir, &mut out);
+    out
+}
+
+/// Asserts that two sets of files are equal, naming the first difference.
+fn assert_same_files(bucket: &BTreeMap<String, Vec<u8>>, local: &BTreeMap<String, Vec<u8>>, what: &str) {
+    let names = |m: &BTreeMap<String, Vec<u8>>| m.keys().cloned().collect::<Vec<_>>();
+    assert_eq!(names(bucket), names(local), "{what}: the bucket's objects are not the local run's files");
+    for (name, bytes) in local {
+        assert!(
+            bucket[name] == *bytes,
+            "{what}: {name} differs ({} bytes in the bucket, {} local)",
+            bucket[name].len(),
+            bytes.len()
+        );
+    }
+}
+
+/// A zip's entries by name, and its comment as the entry "".
+fn zip_entries(bytes: &[u8]) -> BTreeMap<String, Vec<u8>> {
+    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes)).unwrap();
+    let mut out = BTreeMap::from([(String::new(), zip.comment().to_vec())]);
+    for i in 0..zip.len() {
+        let mut entry = zip.by_index(i).unwrap();
+        let mut body = Vec::new();
+        std::io::Read::read_to_end(&mut entry, &mut body).unwrap();
+        out.insert(entry.name().unwrap().into_owned(), body);
+    }
+    out
+}
+
+/// The objects under `prefix/`, downloaded.
+fn download(moto: &Moto, bucket: &str, prefix: &str) -> BTreeMap<String, Vec<u8>> {
+    let dir = tempfile::tempdir().unwrap();
+    moto.boto(&["get", bucket, &format!("{prefix}/"), s(dir.path())]);
+    files(dir.path())
+}
+
+fn stderr(out: &std::process::Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn deep_zoom_a_tile_directory_a_pack_and_pmtiles_in_a_bucket_equal_the_local_run() {
+    let Some(moto) = Moto::start("the s3:// output test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let work = tempfile::tempdir().unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let local = work.path().join("local");
+    let input = fixture("sample.png");
+    let common = ["--tile-size", "128", "-q"];
+    let mut args = vec!["split", s(&input)];
+    let (dz, vt, pack, pm) = (local.join("dz"), local.join("vt"), local.join("p.vtpk"), local.join("m.pmtiles"));
+    args.extend(["-o", s(&dz), "--layout", "dzi", "-o", s(&vt), "--pack", s(&pack), "--pmtiles", s(&pm)]);
+    args.extend(common);
+    let out = moto.run(&args, tmp.path());
+    assert!(out.status.success(), "local run: {}", stderr(&out));
+
+    let mut args = vec!["split", s(&input)];
+    args.extend(["-o", "s3://tiles/run/dz", "--layout", "dzi", "-o", "s3://tiles/run/vt"]);
+    args.extend(["--pack", "s3://tiles/run/p.vtpk", "--pmtiles", "s3://tiles/run/m.pmtiles"]);
+    args.extend(common);
+    let out = moto.run(&args, tmp.path());
+    assert!(out.status.success(), "s3 run: {}", stderr(&out));
+
+    for (prefix, dir) in [("run/dz", &dz), ("run/vt", &vt)] {
+        let mut bucket = download(&moto, "tiles", prefix);
+        let marker = bucket.remove(".vortex-tiler").unwrap_or_else(|| panic!("{prefix}: no marker"));
+        let marker = String::from_utf8(marker).unwrap();
+        assert!(marker.contains("\"state\":\"complete\""), "{prefix}: {marker}");
+        assert_same_files(&bucket, &files(dir), prefix);
+    }
+    let got = tempfile::tempdir().unwrap();
+    for (key, path) in [("run/p.vtpk", &pack), ("run/m.pmtiles", &pm)] {
+        let keys = moto.boto(&["get", "tiles", key, s(got.path())]);
+        assert_eq!(keys, [key.to_string()]);
+        let name = key.rsplit('/').next().unwrap();
+        let bucket = std::fs::read(got.path().join(name)).unwrap();
+        assert!(bucket == std::fs::read(path).unwrap(), "{key} differs from the local file");
+    }
+    assert!(moto.boto(&["uploads", "tiles"]).is_empty(), "a multipart upload was left open");
+    // The one-object outputs' local temporaries are gone.
+    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "TMPDIR keeps staged files");
+}
+
+#[test]
+fn ome_zarr_zipped_or_not_and_a_tiff_in_a_bucket_equal_the_local_files() {
+    let Some(moto) = Moto::start("the s3:// .ozx and TIFF test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let work = tempfile::tempdir().unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("sample.png");
+    for (name, extra) in [("s.ozx", ["--layout", "ome-zarr"]), ("s.tif", ["--tile-size", "128"])] {
+        let local = work.path().join(name);
+        let url = format!("s3://tiles/files/{name}");
+        for dest in [s(&local), url.as_str()] {
+            let mut args = vec!["split", s(&input), "-o", dest, "-q"];
+            args.extend(extra);
+            let out = moto.run(&args, tmp.path());
+            assert!(out.status.success(), "{dest}: {}", stderr(&out));
+        }
+        let got = tempfile::tempdir().unwrap();
+        let key = format!("files/{name}");
+        assert_eq!(moto.boto(&["get", "tiles", &key, s(got.path())]), std::slice::from_ref(&key));
+        let (bucket, local) = (std::fs::read(got.path().join(name)).unwrap(), std::fs::read(&local).unwrap());
+        if name.ends_with(".ozx") {
+            // A .ozx's shards go into the zip as they complete, in an order the threads
+            // decide, locally too: the same entries and comment, byte for byte.
+            assert_same_files(&zip_entries(&bucket), &zip_entries(&local), &key);
+        } else {
+            assert!(bucket == local, "{key} differs from the local file");
+        }
+    }
+    // An OME-Zarr directory (0.5, sharded): staged, then uploaded file by file.
+    let local = work.path().join("s.ome.zarr");
+    for dest in [s(&local), "s3://tiles/files/s.ome.zarr"] {
+        let out = moto.run(&["split", s(&input), "-o", dest, "--tile-size", "128", "-q"], tmp.path());
+        assert!(out.status.success(), "{dest}: {}", stderr(&out));
+    }
+    let mut bucket = download(&moto, "tiles", "files/s.ome.zarr");
+    assert!(bucket.remove(".vortex-tiler").is_some(), "no marker");
+    assert_same_files(&bucket, &files(&local), "s.ome.zarr");
+    assert!(moto.boto(&["uploads", "tiles"]).is_empty(), "a multipart upload was left open");
+    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "TMPDIR keeps staged files");
+}
+
+#[test]
+fn a_prefix_or_object_that_is_not_ours_is_refused_and_ours_is_replaced() {
+    let Some(moto) = Moto::start("the s3:// claim test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("sample.png");
+    let dzi = |url: &str| moto.run(&["split", s(&input), "-o", url, "--layout", "dzi", "-q"], tmp.path());
+    // A previous output of ours is replaced, twice over.
+    for _ in 0..2 {
+        let out = dzi("s3://tiles/ours");
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    assert!(download(&moto, "tiles", "ours").contains_key("sample.dzi"));
+    // Somebody's object under the prefix: refused, named, kept.
+    moto.boto(&["put", "tiles", "theirs/notes.txt", "my notes"]);
+    let out = dzi("s3://tiles/theirs");
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("s3://tiles/theirs") && err.contains("theirs/notes.txt") && err.contains("not a Deep Zoom"),
+        "{err}"
+    );
+    assert_eq!(download(&moto, "tiles", "theirs").keys().collect::<Vec<_>>(), ["notes.txt"]);
+    // Somebody's object where a pack goes: only with --force.
+    moto.boto(&["put", "tiles", "theirs.vtpk", "not a pack"]);
+    let out = moto.run(&["split", s(&input), "--pack", "s3://tiles/theirs.vtpk", "-q"], tmp.path());
+    let err = stderr(&out);
+    assert!(out.status.code() == Some(1) && err.contains("--force") && err.contains("s3://tiles/theirs.vtpk"), "{err}");
+    let out = moto.run(&["split", s(&input), "--pack", "s3://tiles/theirs.vtpk", "-q", "--force"], tmp.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    // A URL that is no bucket's.
+    let out = dzi("s3://Bad_Bucket/x");
+    let err = stderr(&out);
+    assert!(out.status.code() == Some(1) && err.contains("Bad_Bucket") && err.contains("lower-case"), "{err}");
+}
+
+#[test]
+fn a_failed_run_names_the_object_and_leaves_nothing() {
+    let Some(moto) = Moto::start("the s3:// failure test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let input = fixture("sample.png");
+    // A bucket that does not exist: the server's reply, for a directory and for a pack.
+    let out = moto.run(&["split", s(&input), "-o", "s3://no-such-bucket/x", "--layout", "dzi", "-q"], tmp.path());
+    let err = stderr(&out);
+    assert!(
+        out.status.code() == Some(1) && err.contains("s3://no-such-bucket/x") && err.contains("NoSuchBucket"),
+        "{err}"
+    );
+    let out = moto.run(&["split", s(&input), "--pack", "s3://no-such-bucket/p.vtpk", "-q"], tmp.path());
+    let err = stderr(&out);
+    assert!(
+        out.status.code() == Some(1) && err.contains("s3://no-such-bucket/p.vtpk") && err.contains("NoSuchBucket"),
+        "{err}"
+    );
+    // An input that breaks after its first rows: the tiles already uploaded are deleted.
+    let bytes = std::fs::read(&input).unwrap();
+    let broken = tmp.path().join("broken.png");
+    std::fs::write(&broken, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let out = moto
+        .run(&["split", s(&broken), "-o", "s3://tiles/cut", "--layout", "dzi", "--tile-size", "64", "-q"], tmp.path());
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let out = moto.run(&["split", s(&broken), "--pack", "s3://tiles/cut.vtpk", "-q"], tmp.path());
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    std::fs::remove_file(&broken).unwrap();
+    let left = download(&moto, "tiles", "");
+    assert!(left.is_empty(), "objects left: {:?}", left.keys().collect::<Vec<_>>());
+    assert!(moto.boto(&["uploads", "tiles"]).is_empty(), "a multipart upload was left open");
+    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "TMPDIR keeps staged files");
+}
+
+#[test]
+fn the_server_stopped_mid_upload_is_a_clear_error() {
+    let Some(mut moto) = Moto::start("the s3:// server-stopped test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let tmp = tempfile::tempdir().unwrap();
+    // Enough 32-texel tiles (some 12000) that the run is still uploading when the server
+    // stops: noise, as a PPM (written fast, read fast).
+    let (w, h) = (3000usize, 3000usize);
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut ppm = format!("P6 {w} {h} 255\n").into_bytes();
+    ppm.extend((0..w * h * 3).map(|_| {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state as u8
+    }));
+    let input = tmp.path().join("noise.ppm");
+    std::fs::write(&input, ppm).unwrap();
+    let work = tempfile::tempdir().unwrap();
+    let args = ["split", s(&input), "-o", "s3://tiles/big", "--layout", "dzi", "--tile-size", "32", "-q"];
+    let mut child = moto.command(&args, work.path()).stderr(std::process::Stdio::piped()).spawn().unwrap();
+    // Once tiles are arriving (the marker and more), the server goes.
+    let started = Instant::now();
+    loop {
+        let count: usize = moto.boto(&["count", "tiles", "big/"])[0].parse().unwrap();
+        if count > 3 {
+            break;
+        }
+        assert!(child.try_wait().unwrap().is_none(), "the run ended before the server was stopped");
+        assert!(started.elapsed() < Duration::from_secs(60), "no tiles reached the server");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    moto.stop();
+    let pid = child.id();
+    let out = wait_or_kill(pid, "split to a stopped server", move || child.wait_with_output().unwrap());
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "the run did not fail (did it end before the server stopped?): {err}");
+    assert!(err.contains("error: s3://tiles/big/") && err.contains("failed"), "{err}");
+    assert!(err.contains("Connection refused"), "the reply (no connection) is not named: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
