@@ -48,6 +48,23 @@ fn djxl_image(jxl: &Path, scratch: &Path) -> image::DynamicImage {
     image::open(&png).unwrap()
 }
 
+/// sample.png as libvips writes a JPEG-tiled TIFF (128-texel tiles, Q85, shared tables, and
+/// `extra` flags) in `dir`; `None` (after a note, or a failure under CI) without djxl or vips.
+fn vips_jpeg_tiff(dir: &Path, extra: &[&str]) -> Option<PathBuf> {
+    if !have_djxl() || !crate::common::have_program("vips", "--version", "libvips-tools") {
+        return None;
+    }
+    let slide = dir.join("slide.tif");
+    let out = Command::new("vips")
+        .args(["tiffsave", s(&fixture("sample.png")), s(&slide), "--tile", "--tile-width", "128"])
+        .args(["--tile-height", "128", "--compression", "jpeg", "--Q", "85"])
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    Some(slide)
+}
+
 /// A split of `input` with `args`, into `out`.
 fn split(input: &Path, out: &Path, args: &[&str]) -> String {
     let mut all = vec!["split", s(input), "-o", s(out)];
@@ -152,17 +169,8 @@ fn convert_reads_a_jxl_directory_back_texel_for_texel() {
 
 #[test]
 fn recompressed_stored_jpeg_tiles_give_back_the_stored_jpeg_byte_for_byte() {
-    if !have_djxl() || !crate::common::have_program("vips", "--version", "libvips-tools") {
-        return;
-    }
     let tmp = tempfile::tempdir().unwrap();
-    let slide = tmp.path().join("slide.tif");
-    let out = Command::new("vips")
-        .args(["tiffsave", s(&fixture("sample.png")), s(&slide), "--tile", "--tile-width", "128"])
-        .args(["--tile-height", "128", "--compression", "jpeg", "--Q", "85"])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let Some(slide) = vips_jpeg_tiff(tmp.path(), &[]) else { return };
     let (jpeg, jxl) = (tmp.path().join("jpeg"), tmp.path().join("jxl"));
     let grid = ["--layout", "dzi", "--overlap", "0", "--tile-size", "128", "--json"];
     // The JPEG run copies the stored tiles byte for byte (tests/it/copy_tiles.rs checks that).
@@ -272,16 +280,7 @@ fn a_jxl_pack_holds_lossless_tiles_and_recompressed_stored_jpegs() {
 
     // A JPEG-tiled TIFF's stored tiles: the JPEG pack copies them, the JPEG XL pack holds each
     // recompressed, from which djxl gives the same JPEG back.
-    if !have_djxl() || !crate::common::have_program("vips", "--version", "libvips-tools") {
-        return;
-    }
-    let slide = tmp.path().join("slide.tif");
-    let out = Command::new("vips")
-        .args(["tiffsave", s(&fixture("sample.png")), s(&slide), "--tile", "--tile-width", "128"])
-        .args(["--tile-height", "128", "--compression", "jpeg", "--Q", "85"])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let Some(slide) = vips_jpeg_tiff(tmp.path(), &[]) else { return };
     let (jpeg, jxl) = (tmp.path().join("slide.jpeg.vtpk"), tmp.path().join("slide.jxl.vtpk"));
     let grid = ["--border", "0", "--tile-size", "128", "--json"];
     cli::ok(&[&["split", s(&slide), "--pack", s(&jpeg)][..], &grid].concat());
@@ -503,16 +502,7 @@ fn a_jxl_tiff_is_what_tifffile_reads_and_holds_the_stored_jpegs_recompressed() {
     // A JPEG-tiled TIFF's stored tiles: each tile of the JPEG XL file's full resolution that
     // carries libjxl's reconstruction data gives back, through djxl, the JPEG the JPEG pack
     // copies; the slide's reduced levels are not copied (they are JPEG), the summary says why.
-    if !have_djxl() || !crate::common::have_program("vips", "--version", "libvips-tools") {
-        return;
-    }
-    let slide = tmp.path().join("slide.tif");
-    let out = Command::new("vips")
-        .args(["tiffsave", s(&fixture("sample.png")), s(&slide), "--tile", "--tile-width", "128"])
-        .args(["--tile-height", "128", "--compression", "jpeg", "--Q", "85", "--pyramid"])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let Some(slide) = vips_jpeg_tiff(tmp.path(), &["--pyramid"]) else { return };
     let (tiff, pack) = (tmp.path().join("slide.jxl.tif"), tmp.path().join("slide.jpeg.vtpk"));
     let said = cli::ok(&["split", s(&slide), "-o", s(&tiff), "--tile-size", "128", "--codec", "jxl"]);
     assert!(said.contains("JPEG XL tiles asked") && said.contains("recompressed losslessly"), "{said}");

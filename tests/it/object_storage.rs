@@ -5,7 +5,7 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use crate::common::cli::{fixture, s, wait_or_kill};
 use crate::common::s3::Moto;
@@ -242,15 +242,14 @@ fn the_server_stopped_mid_upload_is_a_clear_error() {
     let work = tempfile::tempdir().unwrap();
     let args = ["split", s(&input), "-o", "s3://tiles/big", "--layout", "dzi", "--tile-size", "32", "-q"];
     let mut child = moto.command(&args, work.path()).stderr(std::process::Stdio::piped()).spawn().unwrap();
-    // Once tiles are arriving (the marker and more), the server goes.
-    let started = Instant::now();
+    // Once tiles are arriving (the marker and more), the server goes; a run that ends first is
+    // named (one that never uploads is ended by CI's test timeout).
     loop {
         let count: usize = moto.boto(&["count", "tiles", "big/"])[0].parse().unwrap();
         if count > 3 {
             break;
         }
         assert!(child.try_wait().unwrap().is_none(), "the run ended before the server was stopped");
-        assert!(started.elapsed() < Duration::from_secs(60), "no tiles reached the server");
         std::thread::sleep(Duration::from_millis(50));
     }
     moto.stop();
