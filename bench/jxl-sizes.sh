@@ -12,7 +12,8 @@
 # Usage, from the repository root:  bench/jxl-sizes.sh
 #   QUALITIES (JXL --quality values, default "90 85 80 75"), EFFORTS (default "1 3 5 7", at
 #   quality 85), SIZE (the slide, default 46000x32914), VORTEX_PYVIPS (a Python with pyvips,
-#   to make the slide; without it the slide rows are left out). Run it on a quiet machine.
+#   to make the slide; else bench/lib.sh installs one, and without one the slide rows are left
+#   out), PARTS (default "image slide": which tables to measure). Run it on a quiet machine.
 set -euo pipefail
 source bench/lib.sh
 bench_setup
@@ -21,7 +22,8 @@ QUALITIES=${QUALITIES:-90 85 80 75}
 EFFORTS=${EFFORTS:-1 3 5 7}
 SRC=$WORK/src16k.tif
 OUT=$WORK/jxl-sizes
-rm -rf "$OUT" && mkdir -p "$OUT"
+PARTS=${PARTS:-image slide}
+mkdir -p "$OUT"
 
 # row LABEL ARGS...: one Deep Zoom run of $SRC; prints a table row.
 row() {
@@ -42,7 +44,7 @@ row() {
   rm -rf "$dir"
 }
 
-{
+[[ " $PARTS " == *" image "* ]] && {
   echo "| tiles | bytes | PSNR (dB) | wall (s) | CPU (s) | peak (MiB) |"
   echo "|---|---:|---:|---:|---:|---:|"
   log "JPEG Q85"
@@ -58,8 +60,10 @@ row() {
   done
 } | tee "$OUT/image.md"
 
-if [ -z "${VORTEX_PYVIPS:-}" ]; then
-  log "no VORTEX_PYVIPS: the slide rows are left out"
+[[ " $PARTS " == *" slide "* ]] || exit 0
+pyvips_setup # PY: a Python with pyvips, to make the slide
+if [ -z "$PY" ]; then
+  log "no pyvips: the slide rows are left out"
   exit 0
 fi
 SIZE=${SIZE:-46000x32914}

@@ -122,8 +122,8 @@ pub struct OutputArgs {
 
     /// Write one PMTiles v3 archive of the web-map (XYZ) pyramid instead of a directory:
     /// one file any static web host serves to Leaflet, MapLibre or OpenLayers with the
-    /// `pmtiles` JavaScript package (docs/web.md). JPEG or PNG tiles of --tile-size (default
-    /// 256), zoom 0 the whole image; bounds name the image's place on the web-mercator square,
+    /// `pmtiles` JavaScript package (docs/web.md). JPEG, PNG or JPEG XL (tile type 0, which
+    /// browsers that decode JPEG XL show) tiles of --tile-size (default 256), zoom 0 the whole image; bounds name the image's place on the web-mercator square,
     /// as the image has no map coordinates. An existing PMTiles archive is replaced; any other
     /// file only with --force.
     #[arg(help_heading = "Outputs", long, value_name = "FILE")]

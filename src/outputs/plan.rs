@@ -546,14 +546,6 @@ fn for_viewer(output: Output, viewer: Viewer, own: &Own, at: &Context) -> Result
             opts.codec.name()
         )));
     }
-    // Deep Zoom names its tiles' format in the descriptor (Format="jxl"), IIIF in
-    // preferredFormats and extraFormats, TileJSON in its URL template; PMTiles' tile type has
-    // no value for JPEG XL (docs/jxl.md).
-    if matches!(opts.codec, Codec::Jxl { .. }) && pmtiles {
-        return Err(options(
-            "--codec jxl: a PMTiles archive cannot declare JPEG XL tiles (its tile type has no value for them); write them into a tile directory (-o DIR) or --layout dzi, iiif or xyz, or use --codec jpeg or png here".into(),
-        ));
-    }
     if iiif_service.is_some() && opts.codec.extension() != "jpg" {
         return Err(options(format!(
             "--iiif-id makes a conformant IIIF level-0 service, whose one required format is JPEG (default.jpg): \

@@ -133,6 +133,7 @@ impl Open {
             Work::Pmtiles { .. } => {
                 let tile_type = match planned.opts.codec.extension() {
                     "png" => TileType::Png,
+                    "jxl" => TileType::Unknown,
                     _ => TileType::Jpeg,
                 };
                 Sink::Pmtiles(PmtilesSink::create(&claim.path, &planned.layout, tile_type)?)

@@ -363,10 +363,6 @@ fn what_cannot_hold_jxl_and_flags_that_do_not_fit_are_clear_errors() {
             ],
             vec!["--iiif-id", "required format is JPEG"],
         ),
-        (
-            vec!["--pmtiles".into(), s(&out("g.pmtiles")).into(), "--codec".into(), "jxl".into()],
-            vec!["PMTiles archive cannot declare JPEG XL", "--layout dzi, iiif or xyz"],
-        ),
     ];
     for (args, needles) in cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();

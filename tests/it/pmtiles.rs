@@ -86,7 +86,7 @@ fn split_both(dir: &Path, input: &Path, name: &str, args: &[&str]) -> Value {
     summary
 }
 
-/// JPEG and PNG archives read back by the reference reader: every tile equals our XYZ tile,
+/// JPEG, PNG and JPEG XL archives read back by the reference reader: every tile equals our XYZ tile,
 /// the header says what the archive holds and where the image lies, the metadata names the
 /// image's size, and identical tiles share one payload.
 #[test]
@@ -99,9 +99,13 @@ fn the_reference_reader_reads_every_tile_back() {
         split_both(dir.path(), &input, "jpeg", &["--tile-size", "128"]);
         return;
     };
-    for (name, ext, args) in
-        [("jpeg", "jpg", &["--tile-size", "128"][..]), ("png", "png", &["--tile-size", "64", "--codec", "png"][..])]
-    {
+    // JPEG XL has no tile type of its own: 0, "Unknown/Other", with the metadata's format.
+    let cases = [
+        ("jpeg", "jpg", 128u32, 3, &["--tile-size", "128"][..]),
+        ("png", "png", 64, 2, &["--tile-size", "64", "--codec", "png"][..]),
+        ("jxl", "jxl", 64, 0, &["--tile-size", "64", "--codec", "jxl"][..]),
+    ];
+    for (name, ext, tile, tile_type, args) in cases {
         let summary = split_both(dir.path(), &input, name, args);
         let read = check_with_reader(
             &python,
@@ -111,12 +115,11 @@ fn the_reference_reader_reads_every_tile_back() {
             1,
         );
         let h = &read["header"];
-        let tile: u32 = if name == "jpeg" { 128 } else { 64 };
         // Zoom z holds the image in 2^z tiles per side at most: 1000 px needs 8 of 128, 16 of 64.
-        let max_zoom = if name == "jpeg" { 3 } else { 4 };
+        let max_zoom = if tile == 128 { 3 } else { 4 };
         assert_eq!((h["version"].as_u64(), h["clustered"].as_bool()), (Some(3), Some(true)), "{h}");
         assert_eq!((h["min_zoom"].as_u64(), h["max_zoom"].as_u64()), (Some(0), Some(max_zoom)), "{h}");
-        assert_eq!(h["tile_type"].as_u64(), Some(if name == "jpeg" { 3 } else { 2 }), "{h}");
+        assert_eq!(h["tile_type"].as_u64(), Some(tile_type), "{h}");
         assert_eq!(h["internal_compression"].as_u64(), Some(2), "{h}");
         assert_eq!(h["addressed_tiles_count"].as_u64(), read["tiles"].as_u64(), "{h}");
         // The flat block makes identical tiles: fewer payloads than tiles.
@@ -234,9 +237,10 @@ window.errors = [];
 } catch (e) { window.openError = String(e && e.message || e); } })();
 </script></body></html>"#;
 
-/// nginx (a plain static host with `Range`) serves an archive, and Leaflet with the npm
-/// `pmtiles` package shows it in Chromium at the three regions of `browser.rs`; each
-/// screenshot is judged against the source region (PSNR, and better than the region shifted).
+/// nginx (a plain static host with `Range`) serves an archive of JPEG tiles and one of JPEG XL
+/// tiles, and Leaflet with the npm `pmtiles` package shows each in Chromium at the three
+/// regions of `browser.rs`; each screenshot is judged against the source region (PSNR, and
+/// better than the region shifted), the same threshold for both codecs.
 #[test]
 fn leaflet_shows_an_archive_from_a_static_host() {
     use crate::browser::REGIONS;
@@ -259,7 +263,13 @@ fn leaflet_shows_an_archive_from_a_static_host() {
     let source = test_image();
     let input = dir.path().join("photo.png");
     source.save(&input).unwrap();
-    ok(&["split", s(&input), "--pmtiles", s(&dir.path().join("photo.pmtiles")), "-q", "--quality", "95"]);
+    // JPEG, and JPEG XL in an archive of tile type 0 ("Unknown/Other"): the package hands its
+    // tiles to an <img> untyped and Chromium recognises JPEG XL by its signature.
+    let archives = [("photo.pmtiles", "jpeg"), ("photo-jxl.pmtiles", "jxl")];
+    for (name, codec) in archives {
+        let archive = dir.path().join(name);
+        ok(&["split", s(&input), "--pmtiles", s(&archive), "-q", "--codec", codec, "--quality", "95"]);
+    }
     let server = Nginx::start(
         &nginx,
         dir.path(),
@@ -267,19 +277,19 @@ fn leaflet_shows_an_archive_from_a_static_host() {
     );
     let browser = Browser::start(&parts.chromedriver, &parts.chromium, VIEW);
     let mut failures = Vec::new();
-    for region in REGIONS {
+    for ((name, codec), region) in archives.into_iter().flat_map(|a| REGIONS.map(|r| (a, r))) {
         let (x, y, w, h) = region;
-        let url = format!("{}/map.html?archive=photo.pmtiles&region={x},{y},{w},{h}", server.url());
+        let url = format!("{}/map.html?archive={name}&region={x},{y},{w},{h}", server.url());
         browser.open_and_wait(&url, "window.openError || window.done", std::time::Duration::from_secs(60));
         let state = browser.execute("return { openError: window.openError || null, errors: window.errors };");
-        assert_eq!(state["openError"], Value::Null, "{state}");
-        assert_eq!(state["errors"], serde_json::json!([]), "{state}");
+        assert_eq!(state["openError"], Value::Null, "{codec}: {state}");
+        assert_eq!(state["errors"], serde_json::json!([]), "{codec}: {state}");
         let shot = image::load_from_memory(&browser.screenshot("#v")).unwrap().to_rgb8();
         let verdict = judge(&source, region, &shot);
-        eprintln!("leaflet, region {region:?}: {}", verdict.as_ref().unwrap_or_else(|e| e));
+        eprintln!("leaflet, {codec}, region {region:?}: {}", verdict.as_ref().unwrap_or_else(|e| e));
         if let Err(why) = verdict {
-            shot.save(dir.path().join(format!("failed-{x}.png"))).unwrap();
-            failures.push(format!("region {region:?}: {why}"));
+            shot.save(dir.path().join(format!("failed-{codec}-{x}.png"))).unwrap();
+            failures.push(format!("{codec}, region {region:?}: {why}"));
         }
     }
     if !failures.is_empty() {

@@ -1,7 +1,8 @@
 //! A sink that writes one PMTiles v3 archive (`split --pmtiles`): the web-map (XYZ) pyramid of
 //! [`crate::formats::viewer::xyz`] in the single-file format that Leaflet, MapLibre and OpenLayers read
 //! from any static host with HTTP range requests (<https://github.com/protomaps/PMTiles>,
-//! `spec/v3/spec.md`).
+//! `spec/v3/spec.md`). JPEG XL tiles have no tile type of their own: the header says 0
+//! ("Unknown/Other") and the metadata's `format` says `jxl`.
 //!
 //! The spec wants the root directory within the first 16 KiB and, for a "clustered" archive,
 //! tile data in tile-id (Hilbert) order, while our tiles arrive in the pipeline's order. So
@@ -45,6 +46,9 @@ pub(crate) const ENTRY_MEMORY_BYTES: u64 = 104;
 /// The spec's tile types.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum TileType {
+    /// "Unknown/Other": JPEG XL tiles, for which v3 has no value; the metadata's `format`
+    /// says `jxl` (docs/jxl.md).
+    Unknown = 0,
     Png = 2,
     Jpeg = 3,
 }
@@ -413,7 +417,7 @@ impl Header {
         }
         h[96] = 1; // clustered: data in tile-id order
         h[97] = GZIP; // directories and metadata
-        h[98] = NO_COMPRESSION; // JPEG and PNG tiles are compressed already
+        h[98] = NO_COMPRESSION; // JPEG, PNG and JPEG XL tiles are compressed already
         h[99] = self.tile_type as u8;
         h[100] = 0; // min zoom
         h[101] = self.max_zoom;
@@ -447,6 +451,7 @@ impl Header {
             tile_entries: n(9),
             tile_contents: n(10),
             tile_type: match h[99] {
+                0 => TileType::Unknown,
                 2 => TileType::Png,
                 3 => TileType::Jpeg,
                 _ => return None,
