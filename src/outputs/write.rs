@@ -500,24 +500,26 @@ impl Plan {
 }
 
 impl Plan {
-    /// Writes the one output of a plan made with planes ([`Plan::with_planes`]: an OME-Zarr,
-    /// or an OME-TIFF of a grey plane a channel) from the channels `picks` of `set`, one pass
-    /// each, one after another (memory stays one grey pipeline's); `first` is channel
-    /// `picks[0]`, opened already.
+    /// Writes the outputs of a plan made with planes ([`Plan::with_planes`]: OME-Zarr images
+    /// and OME-TIFFs of a grey plane a channel) from the channels `picks` of `set`, one pass
+    /// each, one after another (memory stays one grey pipeline's, or one for each distinct
+    /// pyramid the outputs need, cut from one read of the channel); `first` is channel
+    /// `picks[0]`, opened already. Says what each output wrote, in the order given.
     pub fn write_channels(
         self,
         set: &ChannelSet,
         picks: &[usize],
         first: Box<dyn RowSource>,
         progress: &dyn Progress,
-    ) -> Result<Wrote> {
-        let Plan { outputs, pack, .. } = self;
-        let [planned] = <[Planned; 1]>::try_from(outputs).map_err(|_| {
-            TilerError::Internal("channels one pass each go to one output (an OME-Zarr or an OME-TIFF)".into())
-        })?;
-        let open = Open::start(planned, pack, crate::store::UPLOAD_BYTES)?;
-        let (opts, total) = (&open.planned.opts, open.planned.layout.total_tiles());
-        let mut summary: Option<Summary> = None;
+    ) -> Result<Vec<Wrote>> {
+        let Plan { outputs, budget, pack } = self;
+        if outputs.iter().any(|p| !matches!(p.work, Work::OmeZarr { .. } | Work::Tiff { .. })) {
+            return Err(TilerError::Internal("channels one pass each go to OME-Zarr and OME-TIFF outputs".into()));
+        }
+        let open: Vec<Open> =
+            outputs.into_iter().map(|p| Open::start(p, pack, crate::store::UPLOAD_BYTES)).collect::<Result<_>>()?;
+        let pyramids = pyramids(&open.iter().map(|o| &o.planned).collect::<Vec<_>>());
+        let mut summaries: Vec<Option<Summary>> = vec![None; pyramids.len()];
         let mut windows = Vec::with_capacity(picks.len());
         let mut first = Some(first);
         for (c, &k) in picks.iter().enumerate() {
@@ -526,52 +528,70 @@ impl Plan {
                 None => set.channel(k)?,
             };
             let (mut source, range) = Ranged::new(source);
-            let (lods, background) = (open.planned.layout.lod_count, opts.background);
-            let (zarr, tiff);
-            let sink: &dyn TileSink = match &open.sink {
-                Sink::OmeZarr(sink) => {
-                    zarr = sink.plane(c as u32);
-                    &zarr
-                }
-                Sink::Tiff(sink) => {
-                    tiff = sink.plane(c as u32);
-                    &tiff
-                }
-                _ => {
-                    return Err(TilerError::Internal(
-                        "channels one pass each go to an OME-Zarr or an OME-TIFF output".into(),
-                    ));
-                }
+            let planes: Vec<Box<dyn TileSink + '_>> = (open.iter())
+                .map(|o| match &o.sink {
+                    Sink::OmeZarr(sink) => Ok(Box::new(sink.plane(c as u32)) as Box<dyn TileSink>),
+                    Sink::Tiff(sink) => Ok(Box::new(sink.plane(c as u32)) as Box<dyn TileSink>),
+                    _ => Err(TilerError::Internal("a planar output's sink is not its format's".into())),
+                })
+                .collect::<Result<_>>()?;
+            let targets: Vec<Vec<Target>> = (pyramids.iter())
+                .map(|g| {
+                    let target = |m: usize| {
+                        let p = &open[m].planned;
+                        let (lods, background) = (p.layout.lod_count, p.opts.background);
+                        Target { sink: planes[m].as_ref(), lods, background, encoding: p.opts.encoding() }
+                    };
+                    g.members.iter().map(|&m| target(m)).collect()
+                })
+                .collect();
+            let passes = match pyramids.len() {
+                1 => vec![split::split_to(&mut source, &targets[0], &pyramids[0].opts, progress)?],
+                _ => cut_together(Box::new(source), &pyramids, &targets, budget, progress)?.0,
             };
-            let target = Target { sink, lods, background, encoding: opts.encoding() };
-            let done = split::split_to(&mut source, &[target], opts, progress)?;
-            if done.tiles != total {
-                return Err(TilerError::Internal(format!("wrote {} tiles of {total} of channel {k}", done.tiles)));
-            }
+            drop(targets);
+            drop(planes);
             windows.push(*range.lock().unwrap_or_else(|p| p.into_inner()));
-            summary = Some(match summary {
-                None => done,
-                Some(sum) => add(sum, done),
-            });
-        }
-        let Some(mut summary) = summary else { return Err(TilerError::Options("--channels names no channel".into())) };
-        let mut open = open;
-        if let Sink::OmeZarr(sink) = &mut open.sink {
-            for (c, window) in windows.into_iter().enumerate() {
-                sink.set_window(c, window);
+            for (sum, pass) in summaries.iter_mut().zip(passes) {
+                *sum = Some(match sum.take() {
+                    None => pass,
+                    Some(sum) => add(sum, pass),
+                });
             }
         }
-        // One target, every pass's places in it.
-        let (tiles, bytes, copied, cropped) = (summary.tiles, summary.bytes, summary.copied, summary.cropped);
-        summary.per_target = vec![Written { tiles, bytes, copied, cropped, recompressed: summary.recompressed }];
-        let reads = summary.passes;
-        Ok(Wrote { reads, ..open.finish(&summary, 0, 0, picks.len() as u64)? })
+        let summaries: Vec<Summary> = summaries
+            .into_iter()
+            .collect::<Option<_>>()
+            .ok_or_else(|| TilerError::Options("--channels names no channel".into()))?;
+        let mut place = vec![(0, 0); open.len()];
+        for (g, pyramid) in pyramids.iter().enumerate() {
+            for (at, &m) in pyramid.members.iter().enumerate() {
+                place[m] = (g, at);
+            }
+        }
+        let mut wrote = Vec::with_capacity(open.len());
+        for (m, mut o) in open.into_iter().enumerate() {
+            if let Sink::OmeZarr(sink) = &mut o.sink {
+                for (c, window) in windows.iter().enumerate() {
+                    sink.set_window(c, *window);
+                }
+            }
+            let (g, at) = place[m];
+            let reads = summaries[g].passes;
+            wrote.push(Wrote { reads, ..o.finish(&summaries[g], at, g, picks.len() as u64)? });
+        }
+        Ok(wrote)
     }
 }
 
 /// Two passes' summaries as one run's: their tiles, reads and stage times added up.
 fn add(mut sum: Summary, pass: Summary) -> Summary {
     sum.tiles += pass.tiles;
+    // Each target's tiles added up; its sink counts every pass's bytes.
+    for (to, from) in sum.per_target.iter_mut().zip(&pass.per_target) {
+        (to.tiles, to.copied, to.cropped) = (to.tiles + from.tiles, to.copied + from.copied, to.cropped + from.cropped);
+        to.bytes = from.bytes;
+    }
     sum.encoded += pass.encoded;
     // The sink counts every pass's bytes.
     sum.bytes = pass.bytes;

@@ -12,7 +12,7 @@ use crate::common::Image;
 use crate::common::cli::{fails_with, ok, run, s};
 
 /// Every file under `path` (or the file itself), by its path relative to it, with its bytes.
-fn files(path: &Path) -> BTreeMap<String, Vec<u8>> {
+pub(crate) fn files(path: &Path) -> BTreeMap<String, Vec<u8>> {
     fn walk(root: &Path, at: &Path, out: &mut BTreeMap<String, Vec<u8>>) {
         if at.is_file() {
             let name = at.strip_prefix(root).unwrap().to_string_lossy().into_owned();

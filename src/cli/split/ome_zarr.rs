@@ -126,16 +126,13 @@ pub fn tile_channels(
         let carried = super::Carried { pitch: set.pitch, ..super::Carried::default() };
         return super::tile(source, &inputs[0], names, a, started, carried);
     }
-    if outputs.len() > 1 {
-        let into = outputs.iter().find(|o| planar(o.format)).map_or(Format::OmeZarr, |o| o.format);
+    if let Some(other) = outputs.iter().find(|o| !planar(o.format)) {
         bail!(
-            "{}: its {} channels go into {} one pass each, which writes no other output in the same run (each pass is one channel's pyramid, which no other output holds alone): write the others in a run of their own",
+            "{}: its {} channels go into OME-Zarr and OME-TIFF planes one pass each, and {} ({}) holds no plane: write it in a run of its own",
             inputs[0].shown(),
             picks.len(),
-            match into {
-                Format::OmeZarr => "OME-Zarr",
-                _ => "an OME-TIFF's planes",
-            }
+            other.format,
+            other.path.shown(),
         );
     }
     let planes = (picks.iter())
@@ -148,19 +145,25 @@ pub fn tile_channels(
     let settings = a.settings(names, super::Carried { pitch: set.pitch, ..super::Carried::default() }, None)?;
     let plan =
         Plan::with_planes(outputs, &settings, &first.header(), &inputs, Budget::new(a.max_memory), Some(planes))?;
-    report::prepare(&plan.outputs()[0].output.path)?;
+    for planned in plan.outputs() {
+        report::prepare(&planned.output.path)?;
+    }
     a.run.init_pool()?;
     let watch = a.run.watch(plan.total_tiles() * picks.len() as u64)?;
     let wrote = plan.write_channels(&set, picks, first, &watch);
     watch.bar.finish_and_clear();
     let wrote = wrote?;
+    let Some(first) = wrote.first() else { bail!("a run with no output") };
     let done = Finished {
-        summary: wrote.summary.clone(),
+        summary: first.summary.clone(),
         decoder: set.describe(),
         width: set.width,
         height: set.height,
         took: started.elapsed(),
     };
-    super::report(a, wrote.format.name(), &done, &wrote.path, &wrote.figures);
+    match wrote.as_slice() {
+        [one] => super::report_one(a, &done, one),
+        all => super::report_all(a, &done, all),
+    }
     Ok(())
 }
