@@ -323,8 +323,9 @@ pub enum StoreError {
         /// The product, as messages name it.
         product: &'static str,
     },
-    /// The client could not be set up from the environment (`AWS_*` variables).
-    #[error("{url}: cannot set up the S3 client from the AWS_* environment: {message}")]
+    /// The client could not be set up from the environment (`AWS_*` variables) and the
+    /// shared files' profile.
+    #[error("{url}: cannot set up the S3 client from the AWS environment and profile: {message}")]
     Client {
         /// The URL given.
         url: String,

@@ -5,7 +5,7 @@
 //! Credentials, region and endpoint come from the standard AWS environment
 //! (`AWS_ACCESS_KEY_ID`, `AWS_SECRET_ACCESS_KEY`, `AWS_SESSION_TOKEN`, `AWS_REGION`,
 //! `AWS_ENDPOINT_URL` for MinIO, R2 or a local server, `AWS_ALLOW_HTTP=true` for one without
-//! TLS). Each request is retried with exponential backoff on 5xx replies, throttling, timeouts
+//! TLS), and what it leaves out from the shared files' profile (`profile.rs`). Each request is retried with exponential backoff on 5xx replies, throttling, timeouts
 //! and dropped connections, up to [`MAX_RETRIES`] times within [`RETRY_WINDOW`].
 //!
 //! Uploads run on a small tokio runtime of the output's own, so the encoder threads that call
@@ -58,11 +58,25 @@ impl Bucket {
             (Duration::from_millis(100), Duration::from_secs(8), 2.0);
         let mut retry = RetryConfig::default();
         (retry.backoff, retry.max_retries, retry.retry_timeout) = (backoff, MAX_RETRIES, RETRY_WINDOW);
-        let store = AmazonS3Builder::from_env()
-            .with_bucket_name(url.bucket())
-            .with_retry(retry)
-            .build()
-            .map_err(|e| client(e.to_string()))?;
+        let mut builder = AmazonS3Builder::from_env().with_bucket_name(url.bucket()).with_retry(retry);
+        // The shared files' profile fills in what the environment does not say.
+        let env = |name: &str| std::env::var(name).ok().filter(|v| !v.is_empty());
+        if let Some(p) = super::profile::load(&env).map_err(client)? {
+            if let (None, Some(id), Some(secret)) = (env("AWS_ACCESS_KEY_ID"), p.access_key_id, p.secret_access_key) {
+                builder = builder.with_access_key_id(id).with_secret_access_key(secret);
+                if let Some(token) = p.session_token {
+                    builder = builder.with_token(token);
+                }
+            }
+            if let (None, None, Some(region)) = (env("AWS_REGION"), env("AWS_DEFAULT_REGION"), p.region) {
+                builder = builder.with_region(region);
+            }
+            if let (None, None, Some(endpoint)) = (env("AWS_ENDPOINT_URL"), env("AWS_ENDPOINT"), p.endpoint_url) {
+                // An http:// endpoint the user wrote into the profile is allowed, as the SDKs do.
+                builder = builder.with_allow_http(endpoint.starts_with("http://")).with_endpoint(endpoint);
+            }
+        }
+        let store = builder.build().map_err(|e| client(e.to_string()))?;
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .thread_name("vortex-s3")

@@ -29,6 +29,8 @@ mod url;
 
 #[cfg(feature = "s3")]
 pub(crate) mod bucket;
+#[cfg(feature = "s3")]
+mod profile;
 
 pub use crate::error::StoreError;
 pub use url::ObjectUrl;

@@ -186,6 +186,48 @@ fn a_prefix_or_object_that_is_not_ours_is_refused_and_ours_is_replaced() {
     assert!(out.status.code() == Some(1) && err.contains("Bad_Bucket") && err.contains("lower-case"), "{err}");
 }
 
+/// The shared files' profile stands in for the environment, as in the AWS CLI: with no
+/// `AWS_*` variable but `AWS_PROFILE`, the keys come from `~/.aws/credentials`, the region and
+/// an http:// endpoint (this server) from `~/.aws/config`, and the pack lands in the bucket as
+/// a local run writes it. A profile that assumes a role is refused, naming it; nothing lands.
+#[test]
+fn an_aws_profile_s_keys_region_and_endpoint_are_used() {
+    let Some(moto) = Moto::start("the AWS profile test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let (home, tmp, work) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let endpoint = moto.env().into_iter().find(|(k, _)| *k == "AWS_ENDPOINT_URL").unwrap().1;
+    let aws = home.path().join(".aws");
+    std::fs::create_dir(&aws).unwrap();
+    let config = format!(
+        "[profile lab]\nregion = us-east-1\nendpoint_url = {endpoint}\n\n[profile admin]\nrole_arn = arn:aws:iam::1:role/x\nsource_profile = lab\n"
+    );
+    std::fs::write(aws.join("config"), config).unwrap();
+    std::fs::write(aws.join("credentials"), "[lab]\naws_access_key_id = test\naws_secret_access_key = test\n").unwrap();
+    let input = fixture("sample.png");
+    let local = work.path().join("p.vtpk");
+    let out = moto.run(&["split", s(&input), "--pack", s(&local), "--tile-size", "128", "-q"], tmp.path());
+    assert!(out.status.success(), "local run: {}", stderr(&out));
+    let with_profile = |profile: &str, url: &str| {
+        let mut cmd = std::process::Command::new(crate::common::cli::BIN);
+        cmd.args(["split", s(&input), "--pack", url, "--tile-size", "128", "-q"]);
+        cmd.env("HOME", home.path()).env("TMPDIR", tmp.path()).env("AWS_PROFILE", profile).env("NO_COLOR", "1");
+        let others = ["AWS_DEFAULT_REGION", "AWS_ENDPOINT", "AWS_SESSION_TOKEN", "AWS_CONFIG_FILE"];
+        for name in moto.env().into_iter().map(|(k, _)| k).chain(others).chain(["AWS_SHARED_CREDENTIALS_FILE"]) {
+            cmd.env_remove(name);
+        }
+        cmd.output().unwrap()
+    };
+    let out = with_profile("lab", "s3://tiles/p.vtpk");
+    assert!(out.status.success(), "profile run: {}", stderr(&out));
+    let got = tempfile::tempdir().unwrap();
+    assert_eq!(moto.boto(&["get", "tiles", "p.vtpk", s(got.path())]), ["p.vtpk"]);
+    assert!(std::fs::read(got.path().join("p.vtpk")).unwrap() == std::fs::read(&local).unwrap());
+    let out = with_profile("admin", "s3://tiles/q.vtpk");
+    let err = stderr(&out);
+    assert!(out.status.code() == Some(1) && err.contains("'admin'") && err.contains("role_arn"), "{err}");
+    assert_eq!(moto.boto(&["count", "tiles", "q"]), ["0"]);
+}
+
 #[test]
 fn a_failed_run_names_the_object_and_leaves_nothing() {
     let Some(moto) = Moto::start("the s3:// failure test") else { return };
