@@ -8,6 +8,7 @@ VORTEX_PYVIPS).
     dicom_out.py native DIR SOURCE TILE
     dicom_out.py lossy DIR [SLIDE]
     dicom_out.py j2k DIR SLIDE PHOTOMETRIC TRANSFER
+    dicom_out.py jxl DIR SOURCE TILE MODE [JPEG_DIR]
 
 
 pydicom reads every instance (the IOD's key attributes checked), highdicom parses each as a VL
@@ -49,6 +50,16 @@ codestream of the slide's tile byte for byte (tifffile's offsets and byte counts
 parses each, wsidicom hands out the same bytes as each level's encoded tiles, the slide's
 thumbnail an instance of one JPEG baseline frame; and where PHOTOMETRIC is one OpenSlide 4 reads
 (RGB, YBR_RCT, YBR_ICT), it reads every level of the series exactly as it reads the slide's.
+With `jxl` (a series of JPEG XL frames, `--codec jxl`): pydicom reads every instance (the
+Image Pixel attributes of 8-bit grey or RGB samples, interleaved; every frame a JPEG XL
+codestream or container), highdicom parses each, and wsidicom (through imagecodecs' libjxl)
+reads every level equal to the oracle (MODE `exact`: lossless frames of a box pyramid) or
+within JPEG's error of it (MODE `jpeg`: lossy frames); each instance's transfer syntax,
+photometric interpretation and lossy history are printed. With JPEG_DIR (a JPEG baseline
+series of the same JPEG-tiled source, its level-0 frames the stored tiles made complete):
+every frame that is a recompressed JPEG (it carries libjxl's reconstruction box, `jbrd`) is
+decoded to JPEG by `djxl`, which must give JPEG_DIR's frame of the same level and index byte
+for byte (counted per level in `rebuilt`; level 0's indexes in `rebuiltFrames`).
 Prints one JSON line of what it measured; exits 1 with the reason on a mismatch.
 """
 
@@ -539,7 +550,95 @@ def check_jpeg_2000(directory, slide_path, photometric, transfer):
     print(json.dumps(measured))
 
 
+JXL_CODESTREAM = b"\xff\x0a"
+JXL_CONTAINER = b"\x00\x00\x00\x0cJXL \r\n\x87\n"
+
+
+def check_jxl(directory, source_path, tile, mode, jpeg_dir=None):
+    import subprocess
+    import tempfile
+
+    import highdicom
+    from pydicom.encaps import generate_frames
+    from wsidicom import WsiDicom
+
+    listed = lambda v: [] if v is None else [str(x) for x in (v if isinstance(v, pydicom.multival.MultiValue) else [v])]
+    src = source(source_path)
+    c = src.shape[2]
+    n = levels_of(src, tile)
+    paths = sorted(glob.glob(os.path.join(directory, "level-*.dcm")))
+    if len(paths) != n:
+        fail(f"{len(paths)} instances, expected {n} (one a level)")
+    measured = {"transferSyntaxes": [], "photometric": [], "lossy": [], "methods": []}
+    for k in range(n):
+        p = os.path.join(directory, f"level-{k}.dcm")
+        ds = pydicom.dcmread(p)
+        want = {
+            "SOPClassUID": WSI,
+            "DimensionOrganizationType": "TILED_FULL",
+            "Rows": tile,
+            "Columns": tile,
+            "SamplesPerPixel": c,
+            "PlanarConfiguration": 0 if c == 3 else None,
+            "BitsAllocated": 8,
+            "BitsStored": 8,
+            "HighBit": 7,
+            "PixelRepresentation": 0,
+        }
+        for key, value in want.items():
+            if ds.get(key) != value:
+                fail(f"level {k}: {key} {ds.get(key)!r}, expected {value!r}")
+        measured["transferSyntaxes"].append(str(ds.file_meta.TransferSyntaxUID))
+        measured["photometric"].append(ds.PhotometricInterpretation)
+        measured["lossy"].append(ds.LossyImageCompression)
+        measured["methods"].append(listed(ds.get("LossyImageCompressionMethod")))
+        frames = list(generate_frames(ds.PixelData, number_of_frames=ds.NumberOfFrames))
+        if len(frames) != ds.NumberOfFrames or not all(f.startswith((JXL_CODESTREAM, JXL_CONTAINER)) for f in frames):
+            fail(f"level {k}: {len(frames)} frames, not {ds.NumberOfFrames} JPEG XL codestreams or containers")
+        if highdicom.imread(p).SOPClassUID != WSI:
+            fail(f"highdicom: level {k}")
+    with WsiDicom.open(directory) as slide:
+        if len(slide.levels) != n:
+            fail(f"wsidicom: {len(slide.levels)} levels, expected {n}")
+        for k, level in enumerate(slide.levels):
+            got = rgb_or_grey(slide.read_region((0, 0), k, level.size.to_tuple()), c)
+            compare(f"wsidicom level {k}", got, oracle(src, k), mode, measured)
+    if jpeg_dir:
+        measured["rebuilt"] = []
+        with tempfile.TemporaryDirectory() as scratch:
+            for k in range(n):
+                ours = pydicom.dcmread(os.path.join(directory, f"level-{k}.dcm"))
+                jpegs = pydicom.dcmread(os.path.join(jpeg_dir, f"level-{k}.dcm"))
+                frames = list(generate_frames(ours.PixelData, number_of_frames=ours.NumberOfFrames))
+                stored = list(generate_frames(jpegs.PixelData, number_of_frames=jpegs.NumberOfFrames))
+                if len(frames) != len(stored):
+                    fail(f"level {k}: {len(frames)} frames, the JPEG series {len(stored)}")
+                rebuilt = []
+                for i, (frame, jpeg) in enumerate(zip(frames, stored)):
+                    if b"jbrd" not in frame:
+                        continue
+                    jxl, back = os.path.join(scratch, "frame.jxl"), os.path.join(scratch, "frame.jpg")
+                    with open(jxl, "wb") as f:
+                        f.write(frame)
+                    run = subprocess.run(["djxl", jxl, back], capture_output=True)
+                    if run.returncode != 0:
+                        fail(f"djxl: level {k} frame {i}: {run.stderr.decode(errors='replace')}")
+                    with open(back, "rb") as f:
+                        again = f.read()
+                    # An item holds an even number of bytes: a JPEG of odd length ends padded with one 0.
+                    if again != jpeg and again + b"\0" != jpeg:
+                        fail(f"level {k} frame {i}: djxl's JPEG is not the JPEG series' frame (the stored tile)")
+                    rebuilt.append(i)
+                if k == 0:
+                    measured["rebuiltFrames"] = rebuilt
+                measured["rebuilt"].append(len(rebuilt))
+    print(json.dumps(measured))
+
+
 def main():
+    if sys.argv[1] == "jxl":
+        check_jxl(sys.argv[2], sys.argv[3], int(sys.argv[4]), sys.argv[5], *sys.argv[6:7])
+        return
     if sys.argv[1] == "j2k":
         check_jpeg_2000(*sys.argv[2:6])
         return
