@@ -320,6 +320,38 @@ fn a_slide_s_own_levels_are_recompressed_into_jpeg_xl_jpeg_recompression_instanc
     }
 }
 
+/// Our reader refuses a damaged JPEG XL frame naming the file and the frame: one whose
+/// signature is gone (no JPEG XL codestream), one whose header is damaged.
+#[test]
+fn a_damaged_jpeg_xl_frame_is_an_error_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = input(dir.path(), "rgb", 600, 300, PixelLayout::new(Channels::Rgb, Depth::U8));
+    let out = dir.path().join("series");
+    let args = ["split", s(&png), "--layout", "dicom", "-o", s(&out), "--pixel-size", "0.5um"];
+    ok(&[&args[..], &["--codec", "jxl", "--lossless", "--jxl-effort", "1", "-q"]].concat());
+    let level = out.join("level-0.dcm");
+    let bytes = std::fs::read(&level).unwrap();
+    // The Pixel Data element (7FE0,0010, OB, undefined length), then the Basic Offset
+    // Table's item, then frame 0's item: its bytes 8 on.
+    let pixel_data = (0..bytes.len() - 4).find(|&i| bytes[i..i + 4] == [0xE0, 0x7F, 0x10, 0x00]).unwrap();
+    let table = pixel_data + 12;
+    assert_eq!(bytes[table..table + 4], [0xFE, 0xFF, 0x00, 0xE0]);
+    let length = u32::from_le_bytes(bytes[table + 4..table + 8].try_into().unwrap()) as usize;
+    let frame = table + 8 + length + 8;
+    assert_eq!(bytes[frame..frame + 2], [0xFF, 0x0A], "frame 0 is a bare codestream");
+    for (name, at, damage, want) in
+        [("unsigned", frame, &[0u8, 0][..], "no JPEG XL codestream"), ("header", frame + 2, &[0xFF; 8][..], "JPEG XL")]
+    {
+        let mut damaged = bytes.clone();
+        damaged[at..at + damage.len()].copy_from_slice(damage);
+        let series = dir.path().join(name);
+        std::fs::create_dir(&series).unwrap();
+        std::fs::write(series.join("level-0.dcm"), &damaged).unwrap();
+        let back = dir.path().join(format!("{name}-back"));
+        fails_with(&run(&["split", s(&series), "-o", s(&back), "--codec", "png"]), &["level-0.dcm", "frame 0", want]);
+    }
+}
+
 /// What JPEG XL frames cannot hold is refused before anything is written, naming what to
 /// change: alpha without `--flatten`, JPEG's subsampling, a 32-bit float image.
 #[test]
