@@ -156,7 +156,8 @@ fn lossless_frames_are_the_pyramid_s_samples_exactly() {
 /// frames (they decode to RGB: the XYB transform is the codestream's own), each stating its
 /// lossy step as `ISO_18181_1`; wsidicom reads every level within JPEG's error of the box
 /// pyramid (30 dB, as the JPEG series: JPEG XL at distance 1.0 measures 36.8 dB on
-/// photographs, docs/jxl.md; a reader taking its RGB for YCbCr falls under 20), and so does
+/// photographs, docs/jxl.md, and 35.1 dB on this image's level 0; a reader taking its RGB for
+/// YCbCr falls under 20), and so does
 /// our reader, whose full-resolution tiles are within JPEG XL's error of the image's.
 #[test]
 fn lossy_frames_are_within_jpeg_s_error_and_say_so() {
