@@ -51,7 +51,7 @@ parses each, wsidicom hands out the same bytes as each level's encoded tiles, th
 thumbnail an instance of one JPEG baseline frame; and where PHOTOMETRIC is one OpenSlide 4 reads
 (RGB, YBR_RCT, YBR_ICT), it reads every level of the series exactly as it reads the slide's.
 With `jxl` (a series of JPEG XL frames, `--codec jxl`): pydicom reads every instance (the
-Image Pixel attributes of 8-bit grey or RGB samples, interleaved; every frame a JPEG XL
+Image Pixel attributes of 8- or 16-bit grey or RGB samples, interleaved; every frame a JPEG XL
 codestream or container), highdicom parses each, and wsidicom (through imagecodecs' libjxl)
 reads every level (a JPEG XL JPEG Recompression one, which wsidicom 0.36 does not open, is
 decoded frame by frame by imagecodecs' libjxl, wsidicom's own decoder) equal to the oracle (MODE `exact`: lossless frames of a box pyramid) or
@@ -567,6 +567,7 @@ def check_jxl(directory, source_path, tile, mode, jpeg_dir=None):
     listed = lambda v: [] if v is None else [str(x) for x in (v if isinstance(v, pydicom.multival.MultiValue) else [v])]
     src = source(source_path)
     c = src.shape[2]
+    bits = 16 if src.dtype == np.uint16 else 8
     n = levels_of(src, tile)
     paths = sorted(glob.glob(os.path.join(directory, "level-*.dcm")))
     if len(paths) != n:
@@ -582,9 +583,9 @@ def check_jxl(directory, source_path, tile, mode, jpeg_dir=None):
             "Columns": tile,
             "SamplesPerPixel": c,
             "PlanarConfiguration": 0 if c == 3 else None,
-            "BitsAllocated": 8,
-            "BitsStored": 8,
-            "HighBit": 7,
+            "BitsAllocated": bits,
+            "BitsStored": bits,
+            "HighBit": bits - 1,
             "PixelRepresentation": 0,
         }
         for key, value in want.items():
@@ -610,6 +611,9 @@ def check_jxl(directory, source_path, tile, mode, jpeg_dir=None):
                 fail(f"wsidicom: {len(slide.levels)} levels, expected {len(others)}")
             for i, (k, level) in enumerate(zip(others, slide.levels)):
                 got = rgb_or_grey(slide.read_region((0, 0), i, level.size.to_tuple()), c)
+                # 16-bit grey comes as a PIL "I" image (int32) holding the samples as they are.
+                if got.dtype != src.dtype and got.min() >= 0 and got.max() <= np.iinfo(src.dtype).max:
+                    got = got.astype(src.dtype)
                 compare(f"wsidicom level {k}", got, oracle(src, k), mode, measured)
     for k in recompression:
         import imagecodecs
