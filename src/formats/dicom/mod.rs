@@ -445,9 +445,11 @@ pub struct DicomSummary {
     pub frames: u64,
     /// The `PhotometricInterpretation` of the frames.
     pub photometric: &'static str,
-    /// The instances' Transfer Syntax UID.
+    /// The series' Transfer Syntax UID (each level's instance's is in `level_frames`: in a
+    /// JPEG XL series one of only recompressed JPEGs is JPEG XL JPEG Recompression).
     pub transfer_syntax: &'static str,
-    /// What the frames are: `JPEG baseline`, `native 8-bit` or `native 16-bit`.
+    /// What the frames are: `Transfer::describe` of the series' transfer syntax (`JPEG baseline`,
+    /// `JPEG XL`, `native 8-bit`, ...).
     pub frame_coding: &'static str,
     /// The Series Instance UID.
     pub series_uid: String,
