@@ -351,9 +351,9 @@ impl<T: Sample> Encoding<'_, T> {
             match (&stored.constant, &stored.file) {
                 (Some(texel), _) if sink.takes_constants() => sink.write_constant(job.lod, x, y, texel)?,
                 (_, Some(File::Encoded(bytes))) => sink.write_tile(job.lod, x, y, bytes)?,
-                // A JPEG XL file is written as any encoded tile: only a JPEG is a stored tile.
+                // A JPEG XL file is no stored JPEG tile: the sink is told it is a recompressed one.
                 (_, Some(File::Recompressed { jxl, jpeg, cropped })) => {
-                    sink.write_tile(job.lod, x, y, jxl)?;
+                    sink.write_recompressed(job.lod, x, y, jxl)?;
                     placed.copied.fetch_add(1, Ordering::Relaxed);
                     placed.cropped.fetch_add(u64::from(*cropped), Ordering::Relaxed);
                     placed.recompressed.add(*jpeg, jxl.len());

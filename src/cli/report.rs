@@ -474,6 +474,11 @@ fn dicom_json(w: &vortex_tiler::formats::dicom::DicomSummary) -> serde_json::Val
             "frameBytes": a.frame_bytes,
         })).collect::<Vec<_>>(),
         "associatedLeftOut": w.associated_left_out,
+        "levelFrames": w.level_frames.iter().map(|l| serde_json::json!({
+            "transferSyntax": l.transfer_syntax,
+            "photometricInterpretation": l.photometric,
+            "storedFrames": l.stored,
+        })).collect::<Vec<_>>(),
     })
 }
 
@@ -486,8 +491,19 @@ fn dicom_line(w: &vortex_tiler::formats::dicom::DicomSummary) -> String {
         (false, _) => format!("; associated images, each its own instance: {}", carried.join(", ")),
         (true, n) => format!("; {n} associated image(s) left out (--no-associated)"),
     };
+    // Where an instance's transfer syntax is not the series' (a JPEG XL instance of only
+    // recompressed JPEG tiles), each level's.
+    let per_level = match w.level_frames.iter().all(|l| l.transfer_syntax == w.transfer_syntax) {
+        true => String::new(),
+        false => {
+            let each: Vec<String> = (w.level_frames.iter().enumerate())
+                .map(|(k, l)| format!("level {k} {} {}", l.transfer_syntax, l.photometric))
+                .collect();
+            format!(" ({})", each.join(", "))
+        }
+    };
     format!(
-        "dicom: {} instances (one a level: {}), {} {} frames, {}, series {}, {} file bytes{associated}",
+        "dicom: {} instances (one a level: {}), {} {} frames, {}{per_level}, series {}, {} file bytes{associated}",
         w.instances,
         levels_clause(w.levels_copied, &w.levels_declined, "frame"),
         w.frames,

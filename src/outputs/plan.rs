@@ -778,9 +778,11 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
     let transfer = match t.codec.unwrap_or(CodecChoice::Auto) {
         CodecChoice::Auto | CodecChoice::Jpeg => dicom::Transfer::JpegBaseline,
         CodecChoice::Raw => dicom::Transfer::Native,
+        CodecChoice::Jxl if t.lossless => dicom::Transfer::JpegXlLossless,
+        CodecChoice::Jxl => dicom::Transfer::JpegXl,
         other => {
             return Err(options(format!(
-                "--codec {}: DICOM frames are JPEG baseline (jpeg, the default) or native, uncompressed (raw){}",
+                "--codec {}: DICOM frames are JPEG baseline (jpeg, the default), JPEG XL (jxl) or native, uncompressed (raw){}",
                 other.name(),
                 if other == CodecChoice::Deflate {
                     "; the Deflated transfer syntax is not written (docs/dicom.md)"
@@ -792,8 +794,9 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
     };
     let source = at.header.layout;
     let native = transfer == dicom::Transfer::Native;
+    let jxl = transfer.jpeg_xl();
     let depth = t.tile_depth.unwrap_or(source.depth);
-    if native {
+    if native || jxl {
         if !matches!(depth, Depth::U8 | Depth::U16) {
             return Err(options(format!(
                 "{}: a {source} image: DICOM whole-slide frames hold 8- or 16-bit unsigned samples, no {} (map it onto them with --range MIN:MAX, or write OME-Zarr or OME-TIFF to keep it)",
@@ -801,9 +804,11 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
                 depth.tile_type()
             )));
         }
-        for (given, flag) in [(t.quality.is_some(), "--quality"), (t.subsampling.is_some(), "--subsampling")] {
-            if given {
-                return Err(options(format!("{flag} is JPEG's; --codec raw writes native DICOM frames")));
+        if native {
+            for (given, flag) in [(t.quality.is_some(), "--quality"), (t.subsampling.is_some(), "--subsampling")] {
+                if given {
+                    return Err(options(format!("{flag} is JPEG's; --codec raw writes native DICOM frames")));
+                }
             }
         }
     } else if depth != Depth::U8 || t.filter.is_some_and(|f| f.is_label()) {
@@ -816,7 +821,7 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
         return Err(options(format!(
             "{}: a {source} image has alpha, which {} frames cannot hold: add --flatten (over --background, white by default)",
             output.path.shown(),
-            if native { "DICOM whole-slide" } else { "JPEG" }
+            if native || jxl { "DICOM whole-slide" } else { "JPEG" }
         )));
     }
     let Some(pixel_size) = own.ome_zarr.pixel_size else {
@@ -828,7 +833,11 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
     let requested = Requested {
         tile_size: Some(t.tile_size.unwrap_or(dicom::DEFAULT_TILE_SIZE)),
         border: Some(0),
-        codec: Some(if native { CodecChoice::Raw } else { CodecChoice::Jpeg }),
+        codec: Some(match transfer {
+            dicom::Transfer::Native => CodecChoice::Raw,
+            _ if jxl => CodecChoice::Jxl,
+            _ => CodecChoice::Jpeg,
+        }),
         max_memory: Some(at.budget.bytes()),
         filename_format: None,
         zstd_level: None,
@@ -849,6 +858,15 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
         }
         // The associated images' frames are native too; the quality is not used.
         Codec::Raw => (settings::DEFAULT_QUALITY, dicom::Photometric::native(stored.channels), "native".to_string()),
+        // JPEG XL frames decode to the samples as they are, grey or RGB (the XYB transform
+        // of lossy frames is the codestream's own); the associated images' are JPEG baseline.
+        Codec::Jxl { quality, effort } => {
+            let coding = match quality {
+                Some(q) => format!("jxl q{q} effort {}", effort.get()),
+                None => format!("jxl lossless effort {}", effort.get()),
+            };
+            (settings::DEFAULT_QUALITY, dicom::Photometric::native(stored.channels), coding)
+        }
         other => return Err(TilerError::Internal(format!("DICOM frames from --codec {}", other.name()))),
     };
     let uid_root = own.dicom.uid_root.clone().unwrap_or_else(|| dicom::DEFAULT_ROOT.to_string());
@@ -895,6 +913,10 @@ fn dicom_output(output: Output, own: &Own, at: &Context) -> Result<Planned> {
         meta,
         associated,
         quality,
+        jxl_effort: match opts.codec {
+            Codec::Jxl { effort, .. } => Some(effort),
+            _ => None,
+        },
         associated_bytes: at.associated_bytes(),
         associated_left_out,
         source_lossy: at.lossy.to_vec(),

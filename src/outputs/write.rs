@@ -248,17 +248,26 @@ impl Open {
         let bytes = self.tile_sink().bytes_written();
         let Open { planned, sink, staged, in_flight } = self;
         // The summary's grid: level 0's tiles, as many levels as the output has.
+        let mut recompressed = crate::job::Recompressed::default();
         let (level, levels, stored, figures) = match (sink, &planned.work) {
             (Sink::Tiff(sink), Work::Tiff { spec, .. }) => {
                 (spec.level(0), spec.level_count(), spec.stored, Figures::Tiff(sink.finish()?))
             }
             (Sink::Dicom(sink), Work::Dicom { spec, .. }) => {
+                recompressed = sink.recompressed();
                 let mut figures = sink.finish()?;
                 figures.levels = Levels::Stored;
                 (spec.level(0), spec.level_count(), spec.stored, Figures::Dicom(figures))
             }
             _ => return Err(TilerError::Internal("levels copied into an output that holds none".into())),
         };
+        // A JPEG XL series' copied JPEG tiles, recompressed: told as the other outputs tell
+        // theirs (`storedTiles.recompressed`).
+        let stored_tiles = (recompressed.tiles > 0).then_some(crate::job::StoredReport {
+            tile_size: level.tile,
+            quality: None,
+            declined: None,
+        });
         Open::upload(staged, in_flight)?;
         let mut layout = crate::layout::Layout::new(u64::from(level.width), u64::from(level.height), level.tile.0, 0)?;
         layout.lod_count = levels;
@@ -267,12 +276,12 @@ impl Open {
             source,
             stored,
             tiles,
-            per_target: vec![Written { tiles, bytes, copied: tiles, cropped: 0, recompressed: Default::default() }],
+            per_target: vec![Written { tiles, bytes, copied: tiles, cropped: 0, recompressed }],
             encoded: 0,
             copied: tiles,
             cropped: 0,
-            recompressed: Default::default(),
-            stored_tiles: None,
+            recompressed,
+            stored_tiles,
             bytes,
             stripes: 0,
             passes: 0,
@@ -356,13 +365,27 @@ fn choose_levels(outputs: &mut [Planned], source: &dyn RowSource) -> Result<Chos
         let form = match &mut planned.work {
             Work::Dicom { spec, .. } => match dicom::copyable(levels)? {
                 Err(why) => Err(why),
+                // JPEG XL frames: every stored JPEG tile recompressed losslessly (`copy_levels`).
+                Ok((_, form)) if spec.transfer.jpeg_xl() && form.transfer != dicom::Transfer::JpegBaseline => {
+                    Err("JPEG XL frames asked (--codec jxl), and the slide's JPEG 2000 tiles are no JPEG to recompress"
+                        .into())
+                }
                 Ok((copied, form)) => {
                     let shapes: Vec<String> = (copied.iter())
                         .map(|l| format!("{}x{}/{}x{}", l.width, l.height, l.tile.0, l.tile.1))
                         .collect();
                     let photometric = form.photometric.name();
-                    spec.identity = format!("{}; levels stored {} {photometric}", spec.identity, shapes.join(" "));
-                    (spec.copied, spec.photometric, spec.transfer) = (copied, form.photometric, form.transfer);
+                    let transfer = match spec.transfer.jpeg_xl() {
+                        true => dicom::Transfer::JpegXlRecompression,
+                        false => form.transfer,
+                    };
+                    spec.identity = format!(
+                        "{}; levels stored {} {photometric} {}",
+                        spec.identity,
+                        shapes.join(" "),
+                        transfer.uid()
+                    );
+                    (spec.copied, spec.photometric, spec.transfer) = (copied, form.photometric, transfer);
                     spec.check()?;
                     Ok(Form::Dicom(form))
                 }

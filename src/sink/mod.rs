@@ -28,6 +28,12 @@ pub trait TileSink: Sync {
     fn write_stored(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
         self.write_tile(lod, x, y, bytes)
     }
+    /// Stores tile `(x, y)` of LOD `lod` as [`TileSink::write_tile`] does, `jxl` being the
+    /// source's stored JPEG tile recompressed losslessly into JPEG XL (`--codec jxl`): a sink
+    /// that states how its tiles were coded (a DICOM series' transfer syntax) counts them.
+    fn write_recompressed(&self, lod: u32, x: u32, y: u32, jxl: &[u8]) -> Result<()> {
+        self.write_tile(lod, x, y, jxl)
+    }
     /// Whether one-colour tiles should come as their colour (`write_constant`) rather than
     /// encoded.
     fn takes_constants(&self) -> bool {

@@ -224,7 +224,7 @@ pub struct ChannelLabel {
 #[derive(Clone, Debug, PartialEq)]
 pub struct LossyStep {
     /// The method, as DICOM's defined terms name it: `ISO_10918_1` (JPEG), `ISO_15444_1`
-    /// (JPEG 2000), or what a DICOM source states.
+    /// (JPEG 2000), `ISO_18181_1` (JPEG XL), or what a DICOM source states.
     pub method: String,
     /// Bytes of the texels uncompressed over bytes compressed (a DICOM source's as stated).
     pub ratio: f64,
@@ -235,6 +235,9 @@ impl LossyStep {
     pub const JPEG: &'static str = "ISO_10918_1";
     /// JPEG 2000's method (ISO/IEC 15444-1).
     pub const JPEG_2000: &'static str = "ISO_15444_1";
+    /// JPEG XL's method (ISO/IEC 18181-1; PS3.3 C.7.6.1.1.5.1's defined term since
+    /// Supplement 232).
+    pub const JPEG_XL: &'static str = "ISO_18181_1";
 
     /// `method` compressing `width x height` texels of `samples` 8-bit samples into
     /// `compressed` bytes; no step where nothing was compressed.

@@ -8,6 +8,7 @@ VORTEX_PYVIPS).
     dicom_out.py native DIR SOURCE TILE
     dicom_out.py lossy DIR [SLIDE]
     dicom_out.py j2k DIR SLIDE PHOTOMETRIC TRANSFER
+    dicom_out.py jxl DIR SOURCE TILE MODE [JPEG_DIR]
 
 
 pydicom reads every instance (the IOD's key attributes checked), highdicom parses each as a VL
@@ -49,6 +50,17 @@ codestream of the slide's tile byte for byte (tifffile's offsets and byte counts
 parses each, wsidicom hands out the same bytes as each level's encoded tiles, the slide's
 thumbnail an instance of one JPEG baseline frame; and where PHOTOMETRIC is one OpenSlide 4 reads
 (RGB, YBR_RCT, YBR_ICT), it reads every level of the series exactly as it reads the slide's.
+With `jxl` (a series of JPEG XL frames, `--codec jxl`): pydicom reads every instance (the
+Image Pixel attributes of 8- or 16-bit grey or RGB samples, interleaved; every frame a JPEG XL
+codestream or container), highdicom parses each, and wsidicom (through imagecodecs' libjxl)
+reads every level (a JPEG XL JPEG Recompression one, which wsidicom 0.36 does not open, is
+decoded frame by frame by imagecodecs' libjxl, wsidicom's own decoder) equal to the oracle (MODE `exact`: lossless frames of a box pyramid) or
+within JPEG's error of it (MODE `jpeg`: lossy frames); each instance's transfer syntax,
+photometric interpretation and lossy history are printed. With JPEG_DIR (a JPEG baseline
+series of the same JPEG-tiled source, its level-0 frames the stored tiles made complete):
+every frame that is a recompressed JPEG (it carries libjxl's reconstruction box, `jbrd`) is
+decoded to JPEG by `djxl`, which must give JPEG_DIR's frame of the same level and index byte
+for byte (counted per level in `rebuilt`; level 0's indexes in `rebuiltFrames`).
 Prints one JSON line of what it measured; exits 1 with the reason on a mismatch.
 """
 
@@ -539,7 +551,125 @@ def check_jpeg_2000(directory, slide_path, photometric, transfer):
     print(json.dumps(measured))
 
 
+JXL_CODESTREAM = b"\xff\x0a"
+JXL_CONTAINER = b"\x00\x00\x00\x0cJXL \r\n\x87\n"
+JXL_RECOMPRESSION = "1.2.840.10008.1.2.4.111"
+
+
+def check_jxl(directory, source_path, tile, mode, jpeg_dir=None):
+    import subprocess
+    import tempfile
+
+    import highdicom
+    from pydicom.encaps import generate_frames
+    from wsidicom import WsiDicom
+
+    listed = lambda v: [] if v is None else [str(x) for x in (v if isinstance(v, pydicom.multival.MultiValue) else [v])]
+    src = source(source_path)
+    c = src.shape[2]
+    bits = 16 if src.dtype == np.uint16 else 8
+    n = levels_of(src, tile)
+    paths = sorted(glob.glob(os.path.join(directory, "level-*.dcm")))
+    if len(paths) != n:
+        fail(f"{len(paths)} instances, expected {n} (one a level)")
+    measured = {"transferSyntaxes": [], "photometric": [], "lossy": [], "methods": []}
+    for k in range(n):
+        p = os.path.join(directory, f"level-{k}.dcm")
+        ds = pydicom.dcmread(p)
+        want = {
+            "SOPClassUID": WSI,
+            "DimensionOrganizationType": "TILED_FULL",
+            "Rows": tile,
+            "Columns": tile,
+            "SamplesPerPixel": c,
+            "PlanarConfiguration": 0 if c == 3 else None,
+            "BitsAllocated": bits,
+            "BitsStored": bits,
+            "HighBit": bits - 1,
+            "PixelRepresentation": 0,
+        }
+        for key, value in want.items():
+            if ds.get(key) != value:
+                fail(f"level {k}: {key} {ds.get(key)!r}, expected {value!r}")
+        measured["transferSyntaxes"].append(str(ds.file_meta.TransferSyntaxUID))
+        measured["photometric"].append(ds.PhotometricInterpretation)
+        measured["lossy"].append(ds.LossyImageCompression)
+        measured["methods"].append(listed(ds.get("LossyImageCompressionMethod")))
+        frames = list(generate_frames(ds.PixelData, number_of_frames=ds.NumberOfFrames))
+        if len(frames) != ds.NumberOfFrames or not all(f.startswith((JXL_CODESTREAM, JXL_CONTAINER)) for f in frames):
+            fail(f"level {k}: {len(frames)} frames, not {ds.NumberOfFrames} JPEG XL codestreams or containers")
+        if highdicom.imread(p).SOPClassUID != WSI:
+            fail(f"highdicom: level {k}")
+    # wsidicom 0.36 opens an instance only where it has an encoder for its transfer syntax
+    # too (codec.Codec.is_supported), which it has for .110 and .112, not .111: those levels
+    # are decoded here by imagecodecs' libjxl, wsidicom's decoder, frame by frame.
+    recompression = [k for k, ts in enumerate(measured["transferSyntaxes"]) if ts == JXL_RECOMPRESSION]
+    others = [k for k in range(n) if k not in recompression]
+    if others:
+        with WsiDicom.open(directory) as slide:
+            if len(slide.levels) != len(others):
+                fail(f"wsidicom: {len(slide.levels)} levels, expected {len(others)}")
+            for i, (k, level) in enumerate(zip(others, slide.levels)):
+                got = rgb_or_grey(slide.read_region((0, 0), i, level.size.to_tuple()), c)
+                # 16-bit grey comes as a PIL "I" image (int32) holding the samples as they are.
+                if got.dtype != src.dtype and got.min() >= 0 and got.max() <= np.iinfo(src.dtype).max:
+                    got = got.astype(src.dtype)
+                compare(f"wsidicom level {k}", got, oracle(src, k), mode, measured)
+    for k in recompression:
+        import imagecodecs
+
+        ds = pydicom.dcmread(os.path.join(directory, f"level-{k}.dcm"))
+        frames = list(generate_frames(ds.PixelData, number_of_frames=ds.NumberOfFrames))
+        cols = -(-ds.TotalPixelMatrixColumns // ds.Columns)
+        rows = -(-ds.TotalPixelMatrixRows // ds.Rows)
+        whole = np.zeros((rows * ds.Rows, cols * ds.Columns, c), np.uint8)
+        for i, frame in enumerate(frames[: rows * cols]):
+            tile = rgb_or_grey(imagecodecs.jpegxl_decode(frame), c)
+            r, q = divmod(i, cols)
+            whole[r * ds.Rows : (r + 1) * ds.Rows, q * ds.Columns : (q + 1) * ds.Columns] = tile
+        got = whole[: ds.TotalPixelMatrixRows, : ds.TotalPixelMatrixColumns]
+        want = oracle(src, k)
+        # A slide's own level made by libvips halves rounding down (287 x 187 where the box
+        # pyramid has 288 x 188): compared where both have texels.
+        if all(0 <= w - g <= 1 for g, w in zip(got.shape[:2], want.shape[:2])):
+            want = want[: got.shape[0], : got.shape[1]]
+        compare(f"imagecodecs level {k}", got, want, mode, measured)
+    if jpeg_dir:
+        measured["rebuilt"] = []
+        with tempfile.TemporaryDirectory() as scratch:
+            for k in range(n):
+                ours = pydicom.dcmread(os.path.join(directory, f"level-{k}.dcm"))
+                jpegs = pydicom.dcmread(os.path.join(jpeg_dir, f"level-{k}.dcm"))
+                frames = list(generate_frames(ours.PixelData, number_of_frames=ours.NumberOfFrames))
+                stored = list(generate_frames(jpegs.PixelData, number_of_frames=jpegs.NumberOfFrames))
+                if len(frames) != len(stored):
+                    fail(f"level {k}: {len(frames)} frames, the JPEG series {len(stored)}")
+                rebuilt = []
+                for i, (frame, jpeg) in enumerate(zip(frames, stored)):
+                    if b"jbrd" not in frame:
+                        continue
+                    jxl, back = os.path.join(scratch, "frame.jxl"), os.path.join(scratch, "frame.jpg")
+                    with open(jxl, "wb") as f:
+                        f.write(frame)
+                    run = subprocess.run(["djxl", jxl, back], capture_output=True)
+                    if run.returncode != 0:
+                        fail(f"djxl: level {k} frame {i}: {run.stderr.decode(errors='replace')}")
+                    with open(back, "rb") as f:
+                        again = f.read()
+                    # An item holds an even number of bytes: a JPEG of odd length ends padded with one 0.
+                    if again != jpeg and again + b"\0" != jpeg:
+                        fail(f"level {k} frame {i}: djxl's JPEG is not the JPEG series' frame (the stored tile)")
+                    rebuilt.append(i)
+                if k == 0:
+                    measured["rebuiltFrames"] = rebuilt
+                measured["rebuilt"].append(len(rebuilt))
+    print(json.dumps(measured))
+
+
 def main():
+    if sys.argv[1] == "jxl":
+        check_jxl(sys.argv[2], sys.argv[3], int(sys.argv[4]), sys.argv[5], *sys.argv[6:7])
+        return
     if sys.argv[1] == "j2k":
         check_jpeg_2000(*sys.argv[2:6])
         return

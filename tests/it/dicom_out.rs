@@ -14,7 +14,7 @@ use vortex_tiler::pixel::{Channels, Depth, PixelLayout};
 use crate::common::cli::{fails_with, ok, run, s};
 use crate::ome_zarr::input;
 
-const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/it/dicom_out.py");
+pub(crate) const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/it/dicom_out.py");
 
 fn rgb8() -> PixelLayout {
     PixelLayout::new(Channels::Rgb, Depth::U8)
@@ -22,7 +22,7 @@ fn rgb8() -> PixelLayout {
 
 /// The Python with pydicom, highdicom, wsidicom and OpenSlide 4, or a skip with a note (a
 /// failure under CI).
-fn readers() -> Option<PathBuf> {
+pub(crate) fn readers() -> Option<PathBuf> {
     crate::common::python_with(
         "pydicom, highdicom, wsidicom, openslide, pyvips, tifffile, numpy",
         "the DICOM readers",
@@ -45,7 +45,7 @@ fn check(python: &Path, dir: &Path, source: &Path, tile: u32, copied_from: Optio
 
 /// The warnings dciodvfy is allowed to give, each with why it stands (docs/dicom.md); an
 /// error is never allowed.
-const ACCEPTED_WARNINGS: &[(&str, &str)] = &[(
+pub(crate) const ACCEPTED_WARNINGS: &[(&str, &str)] = &[(
     "Missing attribute or value that would be needed to build DICOMDIR",
     "Patient ID, Study Date, Study Time and Study ID are type 2, left empty unless --dicom-meta \
      gives them (never invented); only a DICOMDIR, which we do not write, would need them",
@@ -348,7 +348,7 @@ with tifffile.TiffWriter(sys.argv[1]) as t:
     t.write(img[::16, ::16].copy(), tile=(256, 256), description=head + " -> 144x94", **kw)
 "#;
 
-fn json_of(said: &str) -> serde_json::Value {
+pub(crate) fn json_of(said: &str) -> serde_json::Value {
     serde_json::from_str(said.trim()).unwrap()
 }
 

@@ -14,6 +14,7 @@ mod common;
 mod convert;
 mod copy_tiles;
 mod dicom_in;
+mod dicom_jxl;
 mod dicom_out;
 mod docs;
 mod failures;

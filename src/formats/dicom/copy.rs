@@ -10,7 +10,9 @@
 //! interpretation its headers say, the same for every level; where one is not, the series is
 //! our pyramid and the summary says why. [`copy_levels`] then copies every tile, each checked
 //! against its level's first (a tile of another form, a truncated or unreadable one, is an
-//! error naming the file, the level and the tile).
+//! error naming the file, the level and the tile). In a JPEG XL series every JPEG tile is
+//! recompressed losslessly on its way ([`Recompress`]): every instance JPEG XL JPEG
+//! Recompression.
 
 use super::{DicomSink, Level, Photometric, Transfer};
 use crate::error::{Result, TilerError};
@@ -96,7 +98,7 @@ fn frame_form(coding: Coding, tile: &[u8], size: (u32, u32)) -> std::result::Res
 /// three with an Adobe marker saying no transform, unsubsampled, RGB; else YCbCr,
 /// `YBR_FULL_422` with the chroma halved across (4:2:2) or both ways (4:2:0). (Unsubsampled
 /// YCbCr would be `YBR_FULL`, which a whole-slide image may not state: PS3.3 C.8.12.4.1.5.)
-fn form(h: &Header) -> std::result::Result<Photometric, String> {
+pub(super) fn form(h: &Header) -> std::result::Result<Photometric, String> {
     if h.frame != 0xC0 || h.precision != 8 {
         return Err(format!("{}-bit JPEG of SOF{}, not baseline (SOF0) 8-bit", h.precision, h.frame & 0x0F));
     }
@@ -166,7 +168,48 @@ pub(crate) fn copy_levels(sink: &DicomSink, levels: &StoredLevels, form: Form, p
         Coding::Jpeg => format!("{} JPEG", form.photometric.name()),
         Coding::Jpeg2000 { .. } => format!("{} JPEG 2000", form.photometric.name()),
     };
-    crate::formats::levels::copy(sink, levels, &name, &fits, progress)
+    match sink.recompressing() {
+        Some(effort) => {
+            let recompress = Recompress { sink, path: &levels.path, effort };
+            crate::formats::levels::copy(&recompress, levels, &name, &fits, progress)
+        }
+        None => crate::formats::levels::copy(sink, levels, &name, &fits, progress),
+    }
+}
+
+/// A series of a slide's JPEG levels in JPEG XL frames (JPEG XL JPEG Recompression): each
+/// stored tile copied is recompressed losslessly on its way into the sink (less any
+/// quantisation table no component uses, as for every recompression: docs/jxl.md). A tile
+/// libjxl cannot rebuild exactly fails the run naming it: no texels of it were decoded to
+/// encode instead.
+struct Recompress<'a> {
+    sink: &'a DicomSink,
+    path: &'a std::path::Path,
+    effort: crate::codec::JxlEffort,
+}
+
+impl crate::sink::TileSink for Recompress<'_> {
+    fn write_tile(&self, lod: u32, x: u32, y: u32, _bytes: &[u8]) -> Result<()> {
+        Err(TilerError::Internal(format!("level {lod}'s tile ({x}, {y}) came encoded into a series of copied levels")))
+    }
+
+    fn write_stored(&self, lod: u32, x: u32, y: u32, jpeg: &[u8]) -> Result<()> {
+        let used = stored::without_unused_tables(jpeg).unwrap_or(std::borrow::Cow::Borrowed(jpeg));
+        match vortex_jxl::recompress_jpeg(&used, self.effort) {
+            Ok(jxl) => self.sink.write_recompressed_copy(lod, (x, y), jpeg.len(), &jxl),
+            Err(e @ vortex_jxl::Error::JpegRecompression { .. }) => Err(TilerError::unsupported(
+                self.path,
+                format!(
+                    "level {lod}, the tile at column {x}, row {y}: libjxl cannot recompress this JPEG losslessly ({e}), and a slide's own levels are copied, not decoded: --levels pow2 encodes such tiles from their texels"
+                ),
+            )),
+            Err(e) => Err(TilerError::Internal(format!("recompressing level {lod}'s tile ({x}, {y}): {e}"))),
+        }
+    }
+
+    fn bytes_written(&self) -> u64 {
+        self.sink.bytes_written()
+    }
 }
 
 #[cfg(test)]

@@ -49,8 +49,9 @@ pub(super) struct Part {
     pub label_in_image: bool,
     /// The lossy compressions its pixels went through before this series: the source's.
     pub lossy_before: Vec<LossyStep>,
-    /// Whether this series coded its frames (JPEG frames: a lossy step of its own), rather
-    /// than copying every one of them as stored.
+    /// Whether this series coded frames itself with a loss (JPEG, lossy JPEG XL: a lossy
+    /// step of its own), rather than copying (or recompressing losslessly) every one of them
+    /// as stored, or coding them losslessly.
     pub coded_here: bool,
 }
 
@@ -349,10 +350,16 @@ impl<'a> Series<'a> {
         // series' JPEG coding where it coded the frames; "00" (and no ratio or method, type
         // 1C) only where none was ever lossy, as far as the source says.
         let mut steps = part.lossy_before.clone();
-        if part.transfer == Transfer::JpegBaseline && part.coded_here {
-            let raw = u64::from(level.tile.0) * u64::from(level.tile.1) * u64::from(p.samples());
+        let method = match part.transfer {
+            Transfer::JpegBaseline => Some(LossyStep::JPEG),
+            Transfer::JpegXl => Some(LossyStep::JPEG_XL),
+            _ => None,
+        };
+        if let Some(method) = method.filter(|_| part.coded_here) {
+            let sample_bytes = u64::from(part.bits.div_ceil(8));
+            let raw = u64::from(level.tile.0) * u64::from(level.tile.1) * u64::from(p.samples()) * sample_bytes;
             let ratio = (frames * raw) as f64 / frame_bytes.max(1) as f64;
-            steps.push(LossyStep { method: LossyStep::JPEG.to_string(), ratio });
+            steps.push(LossyStep { method: method.to_string(), ratio });
         }
         if steps.is_empty() {
             put(&mut o, tags::LOSSY_IMAGE_COMPRESSION, VR::CS, "00");
@@ -565,13 +572,20 @@ mod tests {
             (Transfer::JpegBaseline, vec![j2k.clone()], true, Some(("20\\8", "ISO_15444_1\\ISO_10918_1"))),
             // Copied JPEG 2000 frames are the source's coding, never the series' own.
             (Transfer::Jpeg2000, vec![j2k.clone()], true, Some(("20", "ISO_15444_1"))),
-            (Transfer::Native, vec![j2k], true, Some(("20", "ISO_15444_1"))),
+            (Transfer::Native, vec![j2k.clone()], true, Some(("20", "ISO_15444_1"))),
             (Transfer::Native, vec![], true, None),
+            // Lossy JPEG XL frames coded here are a step of ISO/IEC 18181-1; lossless ones,
+            // and JPEGs recompressed losslessly, none.
+            (Transfer::JpegXl, vec![], true, Some(("8", "ISO_18181_1"))),
+            (Transfer::JpegXl, vec![j2k.clone()], true, Some(("20\\8", "ISO_15444_1\\ISO_18181_1"))),
+            (Transfer::JpegXl, vec![], false, None),
+            (Transfer::JpegXlLossless, vec![], true, None),
+            (Transfer::JpegXlRecompression, vec![j2k], false, Some(("20", "ISO_15444_1"))),
         ];
         for (transfer, before, coded_here, want) in cases {
             let spec = Spec { transfer, ..spec() };
             let series = Series::new(&spec).unwrap();
-            let part = Part { lossy_before: before.clone(), coded_here, ..Part::level(&spec, 0) };
+            let part = Part { lossy_before: before.clone(), coded_here, transfer, ..Part::level(&spec, 0) };
             let o = series.dataset(&part, &offsets, frame_bytes);
             let said = (
                 text(&o, tags::LOSSY_IMAGE_COMPRESSION),

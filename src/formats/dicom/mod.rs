@@ -31,8 +31,16 @@
 //! level's codestreams are reversible, else .91; its associated images stay JPEG baseline).
 //! With `--codec raw` they are native ([`Transfer::Native`], explicit VR little endian,
 //! 1.2.840.10008.1.2.1): 8- or 16-bit grey or RGB samples as the pyramid made them, lossless,
-//! each frame written in place in its instance (`frames::Native`). Not written: JPEG 2000
-//! frames of our own coding, the Deflated transfer syntax (docs/dicom.md says why).
+//! each frame written in place in its instance (`frames::Native`). With `--codec jxl` they
+//! are JPEG XL (Supplement 232; the encoders' JPEG XL tiles, staged as JPEG frames are):
+//! [`Transfer::JpegXlLossless`] (1.2.840.10008.1.2.4.110) with `--lossless`, else
+//! [`Transfer::JpegXl`] (.112), `RGB` or `MONOCHROME2` as they decode; a JPEG-tiled source's
+//! stored tiles that fill level-0 frames come recompressed losslessly, and an instance of
+//! only such frames is [`Transfer::JpegXlRecompression`] (.111), stating the JPEGs'
+//! photometric interpretation (`sink::instance_coding` decides per instance; the associated
+//! images stay JPEG baseline); a slide's own JPEG levels (`copy`) are recompressed tile by
+//! tile, every instance .111. Not written: JPEG 2000 frames of our own coding, the Deflated
+//! transfer syntax (docs/dicom.md says why).
 
 mod copy;
 mod dataset;
@@ -65,6 +73,13 @@ pub(crate) const JPEG_2000_LOSSLESS: &str = "1.2.840.10008.1.2.4.90";
 pub(crate) const JPEG_2000: &str = "1.2.840.10008.1.2.4.91";
 /// Explicit VR Little Endian: the transfer syntax of native (uncompressed) frames.
 pub(crate) const EXPLICIT_VR_LITTLE_ENDIAN: &str = "1.2.840.10008.1.2.1";
+/// JPEG XL Lossless (PS3.5 A.4.12, Supplement 232): `--codec jxl --lossless` frames.
+pub(crate) const JPEG_XL_LOSSLESS: &str = "1.2.840.10008.1.2.4.110";
+/// JPEG XL JPEG Recompression: every frame a JPEG recompressed losslessly, from which the
+/// JPEG comes back byte for byte.
+pub(crate) const JPEG_XL_RECOMPRESSION: &str = "1.2.840.10008.1.2.4.111";
+/// JPEG XL: any JPEG XL codestream, lossy or not.
+pub(crate) const JPEG_XL: &str = "1.2.840.10008.1.2.4.112";
 
 /// The most bytes a native instance's Pixel Data may hold: its element's 32-bit length, even,
 /// short of `FFFFFFFF` (undefined length, which only encapsulated data may have).
@@ -84,6 +99,16 @@ pub enum Transfer {
     /// JPEG 2000, encapsulated: a slide's JPEG 2000 tiles copied, some of the irreversible
     /// wavelet.
     Jpeg2000,
+    /// JPEG XL Lossless (`--codec jxl --lossless`), encapsulated: the pyramid's samples kept,
+    /// 8 or 16 bits.
+    JpegXlLossless,
+    /// JPEG XL JPEG Recompression: an instance whose every frame is a source's stored JPEG
+    /// tile recompressed losslessly (never a series' own choice: the sink finds it per
+    /// instance).
+    JpegXlRecompression,
+    /// JPEG XL (`--codec jxl`, lossy), encapsulated; also an instance that mixes
+    /// recompressed JPEG tiles (valid JPEG XL codestreams) with frames coded here.
+    JpegXl,
 }
 
 impl Transfer {
@@ -94,7 +119,15 @@ impl Transfer {
             Transfer::Native => EXPLICIT_VR_LITTLE_ENDIAN,
             Transfer::Jpeg2000Lossless => JPEG_2000_LOSSLESS,
             Transfer::Jpeg2000 => JPEG_2000,
+            Transfer::JpegXlLossless => JPEG_XL_LOSSLESS,
+            Transfer::JpegXlRecompression => JPEG_XL_RECOMPRESSION,
+            Transfer::JpegXl => JPEG_XL,
         }
+    }
+
+    /// Whether its frames are JPEG XL codestreams.
+    pub fn jpeg_xl(self) -> bool {
+        matches!(self, Transfer::JpegXlLossless | Transfer::JpegXlRecompression | Transfer::JpegXl)
     }
 
     /// Whether its frames are encapsulated (one item a frame), not native.
@@ -103,12 +136,16 @@ impl Transfer {
     }
 
     /// What the frames are, for the summary: `JPEG baseline`, `JPEG 2000 lossless`, `JPEG
-    /// 2000`, `native 8-bit`, `native 16-bit`.
+    /// 2000`, `JPEG XL lossless`, `JPEG XL recompressed JPEG`, `JPEG XL`, `native 8-bit`,
+    /// `native 16-bit`.
     pub fn describe(self, depth: Depth) -> &'static str {
         match (self, depth) {
             (Transfer::JpegBaseline, _) => "JPEG baseline",
             (Transfer::Jpeg2000Lossless, _) => "JPEG 2000 lossless",
             (Transfer::Jpeg2000, _) => "JPEG 2000",
+            (Transfer::JpegXlLossless, _) => "JPEG XL lossless",
+            (Transfer::JpegXlRecompression, _) => "JPEG XL recompressed JPEG",
+            (Transfer::JpegXl, _) => "JPEG XL",
             (Transfer::Native, Depth::U16) => "native 16-bit",
             (Transfer::Native, _) => "native 8-bit",
         }
@@ -158,7 +195,8 @@ impl Photometric {
         }
     }
 
-    /// Native frames of `channels`: the samples as they are, grey or RGB (interleaved).
+    /// Native frames of `channels`: the samples as they are, grey or RGB (interleaved); also
+    /// what JPEG XL frames coded here state (what they decode to).
     pub(crate) fn native(channels: Channels) -> Photometric {
         match channels {
             Channels::Grey => Photometric::Monochrome,
@@ -215,6 +253,9 @@ pub(crate) struct Spec {
     pub associated: Vec<crate::source::associated::Associated>,
     /// The JPEG quality of the associated images' frames (not used by native ones).
     pub quality: u8,
+    /// `--jxl-effort` of a JPEG XL series: what a slide's copied JPEG levels are recompressed
+    /// at (`copy`); `None` for other frames.
+    pub jxl_effort: Option<crate::codec::JxlEffort>,
     /// The most bytes one associated image may take decoded (half of `--max-memory`).
     pub associated_bytes: u64,
     /// The associated images the source has that `--no-associated` left out.
@@ -260,6 +301,23 @@ impl Spec {
             Transfer::Jpeg2000Lossless | Transfer::Jpeg2000 if self.copied.is_empty() || s.depth != Depth::U8 => {
                 return Err(TilerError::Internal("JPEG 2000 frames that are no slide's copied levels".into()));
             }
+            Transfer::JpegXlLossless | Transfer::JpegXl
+                if !matches!(s.depth, Depth::U8 | Depth::U16) || !grey_or_rgb =>
+            {
+                return Err(TilerError::Options(format!(
+                    "JPEG XL DICOM frames are 8- or 16-bit unsigned grey or RGB, not {s}"
+                )));
+            }
+            Transfer::JpegXlLossless | Transfer::JpegXl if !self.copied.is_empty() => {
+                return Err(TilerError::Internal("a slide's JPEG levels copied into JPEG XL frames".into()));
+            }
+            // Found per instance by the sink where every frame is a recompressed JPEG, or a
+            // whole series of a slide's JPEG levels, every tile recompressed (`copy`).
+            Transfer::JpegXlRecompression if self.copied.is_empty() || s.depth != Depth::U8 => {
+                return Err(TilerError::Internal(
+                    "a series stated JPEG XL JPEG Recompression that copies no slide's JPEG levels".into(),
+                ));
+            }
             _ => {}
         }
         if self.photometric == Photometric::YbrFull {
@@ -267,8 +325,14 @@ impl Spec {
                 "--subsampling 444: YCbCr JPEG frames at 4:4:4 are YBR_FULL, which a VL Whole Slide Microscopy Image may not state (its Photometric Interpretation is MONOCHROME2, RGB, YBR_FULL_422, YBR_ICT or YBR_RCT): use 420 (the default) or rgb".into(),
             ));
         }
-        if self.transfer == Transfer::Native && self.photometric != Photometric::native(s.channels) {
-            return Err(TilerError::Internal(format!("native {s} frames stated as {}", self.photometric.name())));
+        if matches!(self.transfer, Transfer::Native | Transfer::JpegXlLossless | Transfer::JpegXl)
+            && self.photometric != Photometric::native(s.channels)
+        {
+            return Err(TilerError::Internal(format!(
+                "{} {s} frames stated as {}",
+                self.transfer.describe(s.depth),
+                self.photometric.name()
+            )));
         }
         if !(self.pixel_mm.is_finite() && self.pixel_mm > 0.0) {
             return Err(TilerError::Options(format!("a pixel size of {} mm", self.pixel_mm)));
@@ -381,9 +445,11 @@ pub struct DicomSummary {
     pub frames: u64,
     /// The `PhotometricInterpretation` of the frames.
     pub photometric: &'static str,
-    /// The instances' Transfer Syntax UID.
+    /// The series' Transfer Syntax UID (each level's instance's is in `level_frames`: in a
+    /// JPEG XL series one of only recompressed JPEGs is JPEG XL JPEG Recompression).
     pub transfer_syntax: &'static str,
-    /// What the frames are: `JPEG baseline`, `native 8-bit` or `native 16-bit`.
+    /// What the frames are: `Transfer::describe` of the series' transfer syntax (`JPEG baseline`,
+    /// `JPEG XL`, `native 8-bit`, ...).
     pub frame_coding: &'static str,
     /// The Series Instance UID.
     pub series_uid: String,
@@ -406,6 +472,22 @@ pub struct DicomSummary {
     pub associated: Vec<AssociatedSummary>,
     /// The associated images the source has that `--no-associated` left out.
     pub associated_left_out: usize,
+    /// Each level's instance, largest first: how its frames are stored. Its transfer syntax
+    /// is the series' but in a JPEG XL series, where an instance of only recompressed JPEG
+    /// tiles is JPEG XL JPEG Recompression.
+    pub level_frames: Vec<LevelFrames>,
+}
+
+/// How one level's instance stores its frames.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct LevelFrames {
+    /// Its Transfer Syntax UID.
+    pub transfer_syntax: &'static str,
+    /// Its `PhotometricInterpretation`.
+    pub photometric: &'static str,
+    /// Its frames that are a source's stored tiles, copied or recompressed losslessly.
+    pub stored: u64,
 }
 
 /// One associated image carried into a series.
@@ -448,6 +530,7 @@ pub(super) fn test_spec(width: u64, height: u64, lods: u32) -> Spec {
         meta: Default::default(),
         associated: Vec::new(),
         quality: 85,
+        jxl_effort: None,
         associated_bytes: 1 << 20,
         associated_left_out: 0,
         source_lossy: Vec::new(),
@@ -508,6 +591,25 @@ mod tests {
         let wide = PixelLayout::new(Channels::Grey, Depth::U16);
         let jpeg = Spec { transfer: Transfer::JpegBaseline, ..native(600, 300, wide) };
         assert!(jpeg.check().unwrap_err().to_string().contains("--codec raw"));
+    }
+
+    /// JPEG XL frames hold 8- or 16-bit grey or RGB, stated as MONOCHROME2 or RGB (what they
+    /// decode to); JPEG XL JPEG Recompression is an instance's, never a whole series' choice.
+    #[test]
+    fn jpeg_xl_frames_are_8_or_16_bit_grey_or_rgb_as_decoded() {
+        let jxl = |transfer, c, d| {
+            let stored = PixelLayout::new(c, d);
+            Spec { transfer, photometric: Photometric::native(c), ..native(600, 300, stored) }
+        };
+        jxl(Transfer::JpegXl, Channels::Rgb, Depth::U8).check().unwrap();
+        jxl(Transfer::JpegXlLossless, Channels::Grey, Depth::U16).check().unwrap();
+        assert!(jxl(Transfer::JpegXl, Channels::Rgba, Depth::U8).check().is_err());
+        assert!(jxl(Transfer::JpegXlLossless, Channels::Grey, Depth::F32).check().is_err());
+        let ybr = Spec { photometric: Photometric::YbrFull422, ..jxl(Transfer::JpegXl, Channels::Rgb, Depth::U8) };
+        assert!(ybr.check().is_err(), "JPEG XL frames decode to RGB");
+        assert!(jxl(Transfer::JpegXlRecompression, Channels::Rgb, Depth::U8).check().is_err(), "no copied levels");
+        assert_eq!(Transfer::JpegXlRecompression.uid(), "1.2.840.10008.1.2.4.111");
+        assert!(Transfer::JpegXl.jpeg_xl() && Transfer::JpegXl.encapsulated() && !Transfer::Jpeg2000.jpeg_xl());
     }
 
     /// Every name a series gives its instances is one a later run recognises as its own

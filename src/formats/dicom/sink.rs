@@ -9,6 +9,13 @@
 //! (`Spec::copied`) come in row-major order: their instances are written in place as the
 //! frames come (`frames::InOrder`), the same bytes without the second copy.
 //!
+//! JPEG XL frames (`--codec jxl`) are staged as JPEG frames are; a source's stored JPEG tile
+//! that lines up with a level-0 frame comes recompressed losslessly (`write_recompressed`),
+//! and `finish` states each instance's transfer syntax from what its frames are
+//! ([`instance_coding`]): JPEG XL JPEG Recompression where every frame is such a JPEG (with
+//! the JPEGs' photometric interpretation, which a transcoding back to JPEG baseline keeps),
+//! else the series' JPEG XL or JPEG XL Lossless, JPEG XL where the two are mixed.
+//!
 //! Native frames (`--codec raw`) come as the tile's samples (`Codec::Raw`: interleaved,
 //! little-endian) and are written at once at their place in their level's instance, whose
 //! data set is written when the sink is made (`frames::Native`); `finish` checks that every
@@ -16,12 +23,12 @@
 
 use std::fs::{self, File};
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Mutex, OnceLock};
 
 use super::dataset::{Part, Series};
 use super::frames::{InOrder, Native, Offsets, Staged};
-use super::{AssociatedSummary, DicomSummary, Photometric, Spec, Transfer};
+use super::{AssociatedSummary, DicomSummary, LevelFrames, Photometric, Spec, Transfer};
 use crate::codec::Subsampling;
 use crate::error::{Result, TilerError};
 use crate::output::{Claim, staging};
@@ -52,8 +59,15 @@ pub struct DicomSink {
     staging: PathBuf,
     spec: Spec,
     levels: Mutex<Vec<Option<Frames>>>,
-    /// Per level, the frames copied as the source stored them (`write_stored`).
+    /// Per level, the frames copied as the source stored them (`write_stored`), or
+    /// recompressed losslessly into JPEG XL (`write_recompressed`).
     stored: Vec<AtomicU64>,
+    /// In a JPEG XL series, the photometric interpretation the stored JPEG tiles taken for
+    /// recompression are as JPEG frames (the first one taken says; the others must match).
+    recompressed_form: OnceLock<Photometric>,
+    /// A slide's copied JPEG levels recompressed into JPEG XL (`copy`): tiles, JPEG bytes,
+    /// JPEG XL bytes.
+    recompressed: [AtomicU64; 3],
     frame_bytes: AtomicU64,
     /// Whether the series is in place; `Drop` removes the staging directory otherwise.
     done: bool,
@@ -73,6 +87,8 @@ impl DicomSink {
             spec,
             levels: Mutex::new(Vec::new()),
             stored: (0..levels_count).map(|_| AtomicU64::new(0)).collect(),
+            recompressed_form: OnceLock::new(),
+            recompressed: [AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)],
             frame_bytes: AtomicU64::new(0),
             done: false,
         };
@@ -115,6 +131,37 @@ impl DicomSink {
         Native::create(path, &header, frames, frame_len, part.bits > 8).map_err(|e| TilerError::write(path, e))
     }
 
+    /// The effort a slide's copied JPEG levels are recompressed into JPEG XL at, where the
+    /// series is of such levels (JPEG XL JPEG Recompression); `None` where they are copied as
+    /// they are.
+    pub(crate) fn recompressing(&self) -> Option<crate::codec::JxlEffort> {
+        (self.spec.transfer == Transfer::JpegXlRecompression)
+            .then(|| self.spec.jxl_effort.unwrap_or(crate::codec::DEFAULT_JXL_EFFORT))
+    }
+
+    /// Stores a copied level's stored tile recompressed into JPEG XL (`jxl`, from a JPEG of
+    /// `jpeg` bytes) as frame (`x`, `y`) of level `lod`, counted.
+    pub(crate) fn write_recompressed_copy(&self, lod: u32, (x, y): (u32, u32), jpeg: usize, jxl: &[u8]) -> Result<()> {
+        self.write_recompressed(lod, x, y, jxl)?;
+        let [tiles, jpeg_bytes, jxl_bytes] = &self.recompressed;
+        tiles.fetch_add(1, Ordering::Relaxed);
+        jpeg_bytes.fetch_add(jpeg as u64, Ordering::Relaxed);
+        jxl_bytes.fetch_add(jxl.len() as u64, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// A slide's copied JPEG levels recompressed so far (none refused: a tile libjxl cannot
+    /// rebuild fails the run, since no texels of it were decoded).
+    pub(crate) fn recompressed(&self) -> crate::job::Recompressed {
+        let [tiles, jpeg_bytes, jxl_bytes] = &self.recompressed;
+        crate::job::Recompressed {
+            tiles: tiles.load(Ordering::Relaxed),
+            jpeg_bytes: jpeg_bytes.load(Ordering::Relaxed),
+            jxl_bytes: jxl_bytes.load(Ordering::Relaxed),
+            refused: 0,
+        }
+    }
+
     /// Writes every level's instance, then each associated image's, and renames the series
     /// into place.
     pub fn finish(mut self) -> Result<DicomSummary> {
@@ -135,21 +182,30 @@ impl DicomSink {
             levels_declined: None,
             associated: Vec::new(),
             associated_left_out: self.spec.associated_left_out,
+            level_frames: Vec::new(),
         };
         for (lod, frames) in levels.into_iter().enumerate() {
             let lod = lod as u32;
             let frames = frames.ok_or_else(|| TilerError::Internal("a DICOM sink finished twice".into()))?;
             let name = Spec::file_name(lod);
+            let copied = self.stored[lod as usize].load(Ordering::Relaxed);
+            let mut part = Part::level(&self.spec, lod);
             let written = match frames {
                 Frames::Encapsulated(staged) => {
-                    let mut part = Part::level(&self.spec, lod);
-                    let copied = self.stored[lod as usize].load(Ordering::Relaxed);
-                    part.coded_here = copied < self.spec.level(lod).tiles();
+                    let form = self.recompressed_form.get().copied();
+                    let total = self.spec.level(lod).tiles();
+                    (part.transfer, part.photometric, part.coded_here) =
+                        instance_coding(&self.spec, copied, total, form);
                     self.write_instance(&series, &part, staged, &name)?
                 }
                 Frames::Native(native) => self.finish_native(native, &name)?,
                 Frames::InOrder(in_order) => self.finish_in_order(&series, lod, in_order, &name)?,
             };
+            summary.level_frames.push(LevelFrames {
+                transfer_syntax: part.transfer.uid(),
+                photometric: part.photometric.name(),
+                stored: copied,
+            });
             summary.file_bytes += written.file_bytes;
             summary.instances += 1;
             summary.frames += written.frames;
@@ -278,6 +334,33 @@ impl DicomSink {
     }
 }
 
+/// The transfer syntax, photometric interpretation and whether the series' own coding lost
+/// anything, of a level's instance in the series `spec` of whose `frames` frames `stored` are
+/// the source's stored JPEG tiles (copied, or in a JPEG XL series recompressed, `form` their
+/// photometric interpretation as JPEG frames). JPEG baseline: the series' own JPEG coding is
+/// a lossy step where a frame was coded here. JPEG XL: an instance of only recompressed JPEGs
+/// is JPEG XL JPEG Recompression, stating the JPEGs' photometric interpretation (PS3.5 8.2.15:
+/// that which the JPEG baseline instance rebuilt from it states); one that mixes them with
+/// frames coded here is JPEG XL (a recompressed JPEG is a JPEG XL codestream, but not a
+/// lossless coding of the pyramid's samples, so not JPEG XL Lossless), decoded as RGB or
+/// grey; the series' own coding loses where it is lossy (`--quality`) and coded a frame.
+pub(super) fn instance_coding(
+    spec: &Spec,
+    stored: u64,
+    frames: u64,
+    form: Option<Photometric>,
+) -> (Transfer, Photometric, bool) {
+    let coded_here = stored < frames;
+    match spec.transfer {
+        Transfer::JpegXl | Transfer::JpegXlLossless => match form {
+            Some(form) if !coded_here => (Transfer::JpegXlRecompression, form, false),
+            _ if stored > 0 => (Transfer::JpegXl, spec.photometric, coded_here && spec.transfer == Transfer::JpegXl),
+            _ => (spec.transfer, spec.photometric, coded_here && spec.transfer == Transfer::JpegXl),
+        },
+        transfer => (transfer, spec.photometric, coded_here),
+    }
+}
+
 impl Drop for DicomSink {
     /// An unfinished series leaves nothing behind.
     fn drop(&mut self) {
@@ -321,18 +404,35 @@ impl TileSink for DicomSink {
         Ok(())
     }
 
+    /// A stored JPEG tile recompressed losslessly into JPEG XL: stored as any frame,
+    /// counted with the copied ones (it adds no lossy step either).
+    fn write_recompressed(&self, lod: u32, x: u32, y: u32, jxl: &[u8]) -> Result<()> {
+        self.write_stored(lod, x, y, jxl)
+    }
+
     /// A stored JPEG tile only where it is what the instance says of every frame: JPEG
     /// frames (never native ones), baseline, 8-bit, of the frame's size, grey for
     /// MONOCHROME2, else coded as the photometric interpretation names (RGB, or YCbCr at its
-    /// subsampling).
+    /// subsampling). In a JPEG XL series (to be recompressed), one a whole-slide image may
+    /// state as a JPEG frame (not YCbCr 4:4:4), of the series' samples, and of the form of
+    /// the first one taken, which an instance of only such frames states.
     fn takes_stored_jpeg(&self, jpeg: &[u8]) -> bool {
-        if self.spec.transfer != Transfer::JpegBaseline {
-            return false;
-        }
         let Some(h) = crate::source::stored::read_header(jpeg) else { return false };
         let side = self.spec.layout.tile_size;
         // Process 1 (SOF0) is what the transfer syntax names; extended sequential is not.
         let whole = h.frame == 0xC0 && h.precision == 8 && (u32::from(h.width), u32::from(h.height)) == (side, side);
+        if matches!(self.spec.transfer, Transfer::JpegXl | Transfer::JpegXlLossless) {
+            let Ok(form) = super::copy::form(&h) else { return false };
+            let grey = self.spec.photometric == Photometric::Monochrome;
+            let samples = self.spec.stored.depth == crate::pixel::Depth::U8;
+            return whole
+                && samples
+                && grey == (form == Photometric::Monochrome)
+                && *self.recompressed_form.get_or_init(|| form) == form;
+        }
+        if self.spec.transfer != Transfer::JpegBaseline {
+            return false;
+        }
         let form = match self.spec.photometric {
             Photometric::Monochrome => h.components == 1,
             Photometric::Rgb => h.subsampling() == Some(Subsampling::Rgb),
@@ -350,5 +450,32 @@ impl TileSink for DicomSink {
 
     fn bytes_written(&self) -> u64 {
         self.frame_bytes.load(Ordering::Relaxed)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each level's instance states what its frames are: in a JPEG XL series, JPEG XL JPEG
+    /// Recompression (with the JPEGs' photometric interpretation) only where every frame is a
+    /// recompressed stored JPEG; mixed with frames coded here, JPEG XL, whose own lossy step
+    /// counts only where the series is lossy. A JPEG series is JPEG baseline whatever was
+    /// copied, its own step where a frame was coded here.
+    #[test]
+    fn an_instance_of_only_recompressed_jpegs_is_jpeg_xl_jpeg_recompression() {
+        let rgb = |transfer| Spec { transfer, photometric: Photometric::Rgb, ..super::super::test_spec(1000, 700, 1) };
+        let form = Some(Photometric::YbrFull422);
+        let (lossy, lossless) = (rgb(Transfer::JpegXl), rgb(Transfer::JpegXlLossless));
+        let recompression = (Transfer::JpegXlRecompression, Photometric::YbrFull422, false);
+        assert_eq!(instance_coding(&lossy, 12, 12, form), recompression);
+        assert_eq!(instance_coding(&lossless, 12, 12, form), recompression);
+        assert_eq!(instance_coding(&lossy, 6, 12, form), (Transfer::JpegXl, Photometric::Rgb, true));
+        assert_eq!(instance_coding(&lossless, 6, 12, form), (Transfer::JpegXl, Photometric::Rgb, false));
+        assert_eq!(instance_coding(&lossy, 0, 12, None), (Transfer::JpegXl, Photometric::Rgb, true));
+        assert_eq!(instance_coding(&lossless, 0, 12, None), (Transfer::JpegXlLossless, Photometric::Rgb, false));
+        let jpeg = super::super::test_spec(1000, 700, 1);
+        assert_eq!(instance_coding(&jpeg, 12, 12, None), (Transfer::JpegBaseline, Photometric::YbrFull422, false));
+        assert_eq!(instance_coding(&jpeg, 6, 12, None), (Transfer::JpegBaseline, Photometric::YbrFull422, true));
     }
 }

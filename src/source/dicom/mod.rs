@@ -7,18 +7,21 @@
 //! * [`frames`]: where each frame lies: the encapsulated items walked, the offset tables checked
 //!   against them; or the native Pixel Data cut.
 //! * [`native`]: uncompressed frames read straight from the file.
+//! * [`jxl`]: JPEG XL frames, decoded a row of frames at a time.
 //!
 //! The series is the instances of the given file's directory that share its Series Instance
 //! UID; of those whose Image Type says `VOLUME`, the one of the largest Total Pixel Matrix is
 //! read. Its frames go to the readers that already read the same bytes in a TIFF: JPEG baseline
 //! frames are complete JPEG streams, a JPEG-tiled TIFF's tiles without shared tables
 //! (`tiff::jpeg`: decoded by libjpeg-turbo, and copied as stored where the output's tiles line
-//! up with them); JPEG 2000 frames are codestreams, Aperio's tiles (`tiff::jp2k`: OpenJPEG).
+//! up with them); JPEG 2000 frames are codestreams, Aperio's tiles (`tiff::jp2k`: OpenJPEG);
+//! JPEG XL frames ([`jxl`]) are decoded by libjxl, as a JPEG XL tile directory's tiles are.
 //! The first focal plane and the first optical path are read, and the summary says when there
 //! are more. The optical path's ICC profile is not applied (as OpenSlide's `read_region`).
 
 mod frames;
 mod instance;
+mod jxl;
 mod native;
 
 use std::path::{Path, PathBuf};
@@ -42,6 +45,9 @@ const WSI_SOP_CLASS: &str = "1.2.840.10008.5.1.4.1.1.77.1.6";
 const JPEG_BASELINE: &str = "1.2.840.10008.1.2.4.50";
 const JPEG_2000_LOSSLESS: &str = "1.2.840.10008.1.2.4.90";
 const JPEG_2000: &str = "1.2.840.10008.1.2.4.91";
+const JPEG_XL_LOSSLESS: &str = "1.2.840.10008.1.2.4.110";
+const JPEG_XL_RECOMPRESSION: &str = "1.2.840.10008.1.2.4.111";
+const JPEG_XL: &str = "1.2.840.10008.1.2.4.112";
 const EXPLICIT_LITTLE: &str = "1.2.840.10008.1.2.1";
 const IMPLICIT_LITTLE: &str = "1.2.840.10008.1.2";
 
@@ -180,7 +186,10 @@ fn build(instance: &Instance, mut label: String, max_memory: u64) -> Result<Box<
             "the instance is part of a concatenation (Concatenation UID (0020,9161)): frames split over several instances are not read",
         ));
     }
-    if bits != 8 || !matches!(samples, 1 | 3) {
+    let ts = instance.transfer_syntax.as_str();
+    let jpeg_xl = matches!(ts, JPEG_XL_LOSSLESS | JPEG_XL_RECOMPRESSION | JPEG_XL);
+    // JPEG XL frames may be 16-bit (`jxl::layout_of` checks them).
+    if (bits != 8 && !jpeg_xl) || !matches!(samples, 1 | 3) {
         return Err(TilerError::unsupported(
             path,
             format!(
@@ -204,9 +213,11 @@ fn build(instance: &Instance, mut label: String, max_memory: u64) -> Result<Box<
     let Some(pixel_data) = instance.pixel_data else {
         return Err(TilerError::decode(path, "the instance has no Pixel Data (7FE0,0010)"));
     };
-    let ts = instance.transfer_syntax.as_str();
     let stored = match (ts, pixel_data) {
-        (JPEG_BASELINE | JPEG_2000_LOSSLESS | JPEG_2000, PixelData::Encapsulated { items_at }) => {
+        (
+            JPEG_BASELINE | JPEG_2000_LOSSLESS | JPEG_2000 | JPEG_XL_LOSSLESS | JPEG_XL_RECOMPRESSION | JPEG_XL,
+            PixelData::Encapsulated { items_at },
+        ) => {
             let offsets = offset_table(instance, tags::EXTENDED_OFFSET_TABLE)?;
             let lengths = offset_table(instance, Tag(0x7FE0, 0x0002))?;
             let extended = match (&offsets, &lengths) {
@@ -231,7 +242,17 @@ fn build(instance: &Instance, mut label: String, max_memory: u64) -> Result<Box<
             let frame_bytes = tile_w as u64 * tile_h as u64 * samples;
             frames::native(path, at, len, frames, frame_bytes)?
         }
-        (JPEG_BASELINE | JPEG_2000_LOSSLESS | JPEG_2000 | EXPLICIT_LITTLE | IMPLICIT_LITTLE, _) => {
+        (
+            JPEG_BASELINE
+            | JPEG_2000_LOSSLESS
+            | JPEG_2000
+            | JPEG_XL_LOSSLESS
+            | JPEG_XL_RECOMPRESSION
+            | JPEG_XL
+            | EXPLICIT_LITTLE
+            | IMPLICIT_LITTLE,
+            _,
+        ) => {
             return Err(TilerError::decode(
                 path,
                 format!("transfer syntax {ts} does not match how its Pixel Data (7FE0,0010) is stored"),
@@ -241,7 +262,7 @@ fn build(instance: &Instance, mut label: String, max_memory: u64) -> Result<Box<
             return Err(TilerError::unsupported(
                 path,
                 format!(
-                    "transfer syntax {ts} is not read (JPEG baseline 1.2.840.10008.1.2.4.50, JPEG 2000 .4.90 and .4.91, uncompressed 1.2.840.10008.1.2.1 are)"
+                    "transfer syntax {ts} is not read (JPEG baseline 1.2.840.10008.1.2.4.50, JPEG 2000 .4.90 and .4.91, JPEG XL .4.110, .4.111 and .4.112, uncompressed 1.2.840.10008.1.2.1 are)"
                 ),
             ));
         }
@@ -282,6 +303,12 @@ fn build(instance: &Instance, mut label: String, max_memory: u64) -> Result<Box<
             };
             let grid = jp2k::Grid { size, chunk: tile, offsets: grid.offsets, counts: grid.counts };
             jp2k::assemble(path, grid, ycbcr, label, embedded, Pages::alone(max_memory))
+        }
+        JPEG_XL_LOSSLESS | JPEG_XL_RECOMPRESSION | JPEG_XL => {
+            let layout =
+                jxl::layout_of(&photometric, samples, bits).map_err(|why| TilerError::unsupported(path, why))?;
+            let frames = (grid.offsets, grid.counts);
+            jxl::open(path, size, tile, frames, layout, label, embedded, max_memory)
         }
         _ => {
             let grey = match (photometric.as_str(), samples) {

@@ -1,0 +1,287 @@
+//! JPEG XL frames (transfer syntaxes 1.2.840.10008.1.2.4.110 JPEG XL Lossless, .111 JPEG XL
+//! JPEG Recompression and .112 JPEG XL): each frame one JPEG XL codestream or container,
+//! decoded by libjxl through vortex-jxl (the decoder `convert` reads JPEG XL tile directories
+//! with, `decode::decode_tile`), one row of frames at a time, the frames of a row in parallel
+//! on the rayon pool, each read straight from the file. A frame's header is checked before its
+//! texels are allocated: it must be the instance's Columns x Rows, of its samples (grey or RGB,
+//! no alpha; 8 or 16 bits as Bits Allocated says). A damaged or truncated frame is an error
+//! naming the file and the frame's index, column and row. A recompressed JPEG decodes to
+//! RGB (or grey) as libjxl decodes it: the Photometric Interpretation the instance states for
+//! the JPEG it rebuilds (`YBR_FULL_422`) is not applied again.
+
+use std::fs::File;
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+
+use crate::error::{Result, TilerError};
+use crate::pixel::{Channels, Depth, PixelLayout};
+use crate::source::{Embedded, ImageHeader, RowSource};
+
+/// The frames of one instance and where its rows are.
+pub(super) struct JxlFrames {
+    path: PathBuf,
+    file: File,
+    file_len: u64,
+    size: (u32, u32),
+    tile: (u32, u32),
+    across: u32,
+    /// Each grid cell's frame in the file, row-major.
+    offsets: Vec<u64>,
+    counts: Vec<u64>,
+    layout: PixelLayout,
+    /// The decoded frames of the current row of frames, the texels inside the image only.
+    band: Vec<Vec<u8>>,
+    band_first: u64,
+    band_rows: u64,
+    next: u64,
+    label: String,
+    embedded: Embedded,
+}
+
+/// The row source of the JPEG XL frames at `offsets` and `counts` (one per cell of the `tile`
+/// grid over `size`) of `layout` samples; refused where a row of decoded frames and the
+/// frames being decoded would not fit `max_memory`.
+#[expect(clippy::too_many_arguments, reason = "the instance's attributes, each checked by the caller")]
+pub(super) fn open(
+    path: &Path,
+    size: (u32, u32),
+    tile: (u32, u32),
+    (offsets, counts): (Vec<u64>, Vec<u64>),
+    layout: PixelLayout,
+    label: String,
+    embedded: Embedded,
+    max_memory: u64,
+) -> Result<Box<dyn RowSource>> {
+    let across = size.0.div_ceil(tile.0);
+    let frame = u64::from(tile.0) * u64::from(tile.1) * layout.bytes_per_pixel() as u64;
+    // A row of frames, and per worker a compressed frame (at most twice its texels, checked
+    // per frame) and the decoded one before it is cropped.
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let workers = cores.min(across as usize) as u64;
+    let need = (frame * u64::from(across)).saturating_add(frame.saturating_mul(3).saturating_mul(workers));
+    if need > max_memory {
+        return Err(TilerError::unsupported(
+            path,
+            format!(
+                "its JPEG XL frames are {}x{}: a row of them and the frames being decoded ({} MiB) would have to be held in memory, more than --max-memory ({} MiB); raise --max-memory",
+                tile.0,
+                tile.1,
+                need.div_ceil(1 << 20),
+                max_memory >> 20
+            ),
+        ));
+    }
+    let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
+    Ok(Box::new(JxlFrames {
+        path: path.to_path_buf(),
+        file,
+        file_len,
+        size,
+        tile,
+        across,
+        offsets,
+        counts,
+        layout,
+        band: vec![Vec::new(); across as usize],
+        band_first: 0,
+        band_rows: 0,
+        next: 0,
+        label,
+        embedded,
+    }))
+}
+
+impl JxlFrames {
+    /// Frame `index`'s bytes as stored, or what is wrong with where the file puts them.
+    fn read(&self, index: usize) -> std::result::Result<Vec<u8>, String> {
+        let (offset, count) = match (self.offsets.get(index), self.counts.get(index)) {
+            (Some(&o), Some(&c)) if c > 0 => (o, c),
+            _ => return Err("the instance gives it no data".into()),
+        };
+        if offset.checked_add(count).is_none_or(|end| end > self.file_len) {
+            return Err(format!(
+                "its {count} bytes at offset {offset} run past the end of the file: a truncated file?"
+            ));
+        }
+        let bound =
+            u64::from(self.tile.0) * u64::from(self.tile.1) * self.layout.bytes_per_pixel() as u64 * 2 + (1 << 16);
+        if count > bound {
+            return Err(format!("it claims {count} compressed bytes for a {}x{} frame", self.tile.0, self.tile.1));
+        }
+        let mut raw = vec![0u8; count as usize];
+        self.file.read_exact_at(&mut raw, offset).map_err(|e| format!("cannot read it: {e}"))?;
+        Ok(raw)
+    }
+
+    /// Frame `index` into `texels`: its `w` x `h` texels inside the image, as the layout's
+    /// samples (native byte order).
+    fn decode_frame(&self, index: usize, w: u32, h: u32, texels: &mut Vec<u8>) -> std::result::Result<(), String> {
+        let raw = self.read(index)?;
+        if !vortex_jxl::is_jxl(&raw) {
+            return Err("it is no JPEG XL codestream or container".into());
+        }
+        let decoded =
+            vortex_jxl::decode(&raw, self.tile).map_err(|e| format!("corrupt or truncated JPEG XL data: {e}"))?;
+        let header = decoded.header;
+        let channels = self.layout.channels.count() as u32;
+        let wide = header.bits_per_sample > 8;
+        if (header.width, header.height) != self.tile
+            || header.channels != channels
+            || wide != (self.layout.depth == Depth::U16)
+        {
+            return Err(format!(
+                "the JPEG XL image is {}x{} of {} channels of {} bits; the instance's frames are {}x{} {}",
+                header.width,
+                header.height,
+                header.channels,
+                header.bits_per_sample,
+                self.tile.0,
+                self.tile.1,
+                self.layout
+            ));
+        }
+        let bytes: Vec<u8> = match decoded.samples {
+            vortex_jxl::Samples::U8(s) => s,
+            vortex_jxl::Samples::U16(s) => bytemuck::cast_slice(&s).to_vec(),
+        };
+        let pixel = self.layout.bytes_per_pixel();
+        let (stride, row) = (self.tile.0 as usize * pixel, w as usize * pixel);
+        texels.clear();
+        texels.reserve(row * h as usize);
+        for r in 0..h as usize {
+            texels.extend_from_slice(&bytes[r * stride..r * stride + row]);
+        }
+        Ok(())
+    }
+
+    /// Decodes the row of frames holding row `y`, the frames in parallel.
+    fn load_band(&mut self, y: u64) -> Result<()> {
+        let (tw, th) = self.tile;
+        let row = (y / u64::from(th)) as u32;
+        let first = u64::from(row) * u64::from(th);
+        let rows = u64::from(th).min(u64::from(self.size.1) - first) as u32;
+        let mut band = std::mem::take(&mut self.band);
+        let this = &*self;
+        let result = band.par_iter_mut().enumerate().try_for_each(|(col, texels)| {
+            let index = row as usize * this.across as usize + col;
+            let w = tw.min(this.size.0 - col as u32 * tw);
+            this.decode_frame(index, w, rows, texels).map_err(|m| (col, index, m))
+        });
+        self.band = band;
+        if let Err((col, index, message)) = result {
+            self.band_rows = 0;
+            return Err(TilerError::DecodeRow {
+                path: self.path.clone(),
+                row: y,
+                message: format!("frame {index} (column {col}, row {row} of frames): {message}"),
+            });
+        }
+        (self.band_first, self.band_rows) = (first, u64::from(rows));
+        Ok(())
+    }
+}
+
+impl RowSource for JxlFrames {
+    fn header(&self) -> ImageHeader {
+        ImageHeader { width: self.size.0, height: self.size.1, layout: self.layout }
+    }
+
+    fn embedded(&self) -> Embedded {
+        self.embedded.clone()
+    }
+
+    fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
+        let y = self.next;
+        let pixel = self.layout.bytes_per_pixel();
+        let fail = |message: String| TilerError::DecodeRow { path: self.path.clone(), row: y, message };
+        if y >= u64::from(self.size.1) {
+            return Err(fail(format!("past the image's {} rows", self.size.1)));
+        }
+        if out.len() != self.size.0 as usize * pixel {
+            return Err(fail(format!("internal: a row of {} bytes for {} texels", out.len(), self.size.0)));
+        }
+        if y < self.band_first || y >= self.band_first + self.band_rows {
+            self.load_band(y)?;
+        }
+        let r = (y - self.band_first) as usize;
+        let tw = self.tile.0 as usize;
+        for (col, texels) in self.band.iter().enumerate() {
+            let x0 = col * tw;
+            let w = tw.min(self.size.0 as usize - x0);
+            out[x0 * pixel..(x0 + w) * pixel].copy_from_slice(&texels[r * w * pixel..(r + 1) * w * pixel]);
+        }
+        self.next += 1;
+        Ok(())
+    }
+
+    fn buffer_bytes(&self) -> u64 {
+        self.band.iter().map(|t| t.capacity() as u64).sum()
+    }
+
+    fn most_buffer_bytes(&self) -> u64 {
+        u64::from(self.tile.0) * u64::from(self.tile.1) * self.layout.bytes_per_pixel() as u64 * u64::from(self.across)
+    }
+
+    fn skip_rows(&mut self, rows: u32) -> Result<()> {
+        self.next += u64::from(rows);
+        Ok(())
+    }
+
+    fn rewind(&mut self) -> Result<()> {
+        self.next = 0;
+        Ok(())
+    }
+
+    fn describe(&self) -> String {
+        let colour = match self.layout.channels {
+            Channels::Grey => "grey",
+            _ => "RGB",
+        };
+        format!(
+            "{}, JPEG XL frames ({colour}, libjxl), streamed by row of frames ({}x{} frames, decoded in parallel)",
+            self.label, self.tile.0, self.tile.1
+        )
+    }
+}
+
+/// The samples JPEG XL frames of `samples` samples of `bits` bits decode to, as an instance
+/// states them: grey (`MONOCHROME2`) or RGB (`RGB`, or the `YBR_FULL_422`/`RGB` a JPEG XL JPEG
+/// Recompression instance states for the JPEGs it rebuilds), 8 or 16 bits; `Err(why)` for
+/// anything else.
+pub(super) fn layout_of(photometric: &str, samples: u64, bits: u64) -> std::result::Result<PixelLayout, String> {
+    let depth = match bits {
+        8 => Depth::U8,
+        16 => Depth::U16,
+        _ => return Err(format!("JPEG XL frames of {bits} bits (Bits Allocated) are not read (8 and 16 are)")),
+    };
+    let channels = match (photometric, samples) {
+        ("MONOCHROME2", 1) => Channels::Grey,
+        ("RGB" | "YBR_FULL_422" | "YBR_FULL", 3) => Channels::Rgb,
+        (other, n) => {
+            return Err(format!(
+                "JPEG XL frames of Photometric Interpretation {other} with {n} samples are not read (MONOCHROME2, RGB, YBR_FULL_422 are)"
+            ));
+        }
+    };
+    Ok(PixelLayout::new(channels, depth))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What an instance states picks the samples; what no JPEG XL frame of ours can be is
+    /// named.
+    #[test]
+    fn the_samples_are_what_the_instance_states() {
+        assert_eq!(layout_of("RGB", 3, 8), Ok(PixelLayout::new(Channels::Rgb, Depth::U8)));
+        assert_eq!(layout_of("YBR_FULL_422", 3, 8), Ok(PixelLayout::new(Channels::Rgb, Depth::U8)));
+        assert_eq!(layout_of("MONOCHROME2", 1, 16), Ok(PixelLayout::new(Channels::Grey, Depth::U16)));
+        assert!(layout_of("MONOCHROME1", 1, 8).unwrap_err().contains("MONOCHROME1"));
+        assert!(layout_of("RGB", 1, 8).is_err());
+        assert!(layout_of("RGB", 3, 12).unwrap_err().contains("12 bits"));
+    }
+}
