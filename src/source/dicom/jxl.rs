@@ -9,27 +9,23 @@
 //! RGB (or grey) as libjxl decodes it: the Photometric Interpretation the instance states for
 //! the JPEG it rebuilds (`YBR_FULL_422`) is not applied again.
 
-use std::fs::File;
-use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
+use crate::source::tiff::jp2k::Codestreams;
 use crate::source::{Embedded, ImageHeader, RowSource};
 
 /// The frames of one instance and where its rows are.
 pub(super) struct JxlFrames {
     path: PathBuf,
-    file: File,
-    file_len: u64,
+    /// Each grid cell's frame in the file, row-major.
+    frames: Codestreams,
     size: (u32, u32),
     tile: (u32, u32),
     across: u32,
-    /// Each grid cell's frame in the file, row-major.
-    offsets: Vec<u64>,
-    counts: Vec<u64>,
     layout: PixelLayout,
     /// The decoded frames of the current row of frames, the texels inside the image only.
     band: Vec<Vec<u8>>,
@@ -73,17 +69,13 @@ pub(super) fn open(
             ),
         ));
     }
-    let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
-    let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
+    let frames = Codestreams::new(path, (offsets, counts), tile, layout.bytes_per_pixel() as u64, "frame")?;
     Ok(Box::new(JxlFrames {
         path: path.to_path_buf(),
-        file,
-        file_len,
+        frames,
         size,
         tile,
         across,
-        offsets,
-        counts,
         layout,
         band: vec![Vec::new(); across as usize],
         band_first: 0,
@@ -95,31 +87,10 @@ pub(super) fn open(
 }
 
 impl JxlFrames {
-    /// Frame `index`'s bytes as stored, or what is wrong with where the file puts them.
-    fn read(&self, index: usize) -> std::result::Result<Vec<u8>, String> {
-        let (offset, count) = match (self.offsets.get(index), self.counts.get(index)) {
-            (Some(&o), Some(&c)) if c > 0 => (o, c),
-            _ => return Err("the instance gives it no data".into()),
-        };
-        if offset.checked_add(count).is_none_or(|end| end > self.file_len) {
-            return Err(format!(
-                "its {count} bytes at offset {offset} run past the end of the file: a truncated file?"
-            ));
-        }
-        let bound =
-            u64::from(self.tile.0) * u64::from(self.tile.1) * self.layout.bytes_per_pixel() as u64 * 2 + (1 << 16);
-        if count > bound {
-            return Err(format!("it claims {count} compressed bytes for a {}x{} frame", self.tile.0, self.tile.1));
-        }
-        let mut raw = vec![0u8; count as usize];
-        self.file.read_exact_at(&mut raw, offset).map_err(|e| format!("cannot read it: {e}"))?;
-        Ok(raw)
-    }
-
     /// Frame `index` into `texels`: its `w` x `h` texels inside the image, as the layout's
     /// samples (native byte order).
     fn decode_frame(&self, index: usize, w: u32, h: u32, texels: &mut Vec<u8>) -> std::result::Result<(), String> {
-        let raw = self.read(index)?;
+        let raw = self.frames.read(index)?;
         if !vortex_jxl::is_jxl(&raw) {
             return Err("it is no JPEG XL codestream or container".into());
         }

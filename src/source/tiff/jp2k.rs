@@ -52,7 +52,7 @@ pub(super) struct Jp2kTiff {
 
 /// Where a grid's codestreams lie in a file, and the reading of one: the reader decodes them,
 /// an output that copies them takes them as they are ([`Jp2kTiles`]).
-struct Codestreams {
+pub(in crate::source) struct Codestreams {
     path: PathBuf,
     file: File,
     file_len: u64,
@@ -61,20 +61,29 @@ struct Codestreams {
     counts: Vec<u64>,
     /// The most bytes a chunk may claim: twice its texels' and 64 KiB of headers.
     bound: u64,
-    /// Its texels across and down, for messages.
+    /// Its texels across and down, and what it is (`tile`, `frame`), for messages.
     chunk: (u32, u32),
+    what: &'static str,
 }
 
 impl Codestreams {
-    fn new(path: &Path, offsets: Vec<u64>, counts: Vec<u64>, (w, h): (u32, u32)) -> Result<Codestreams> {
+    /// The chunks of `path` at `offsets` and `counts`, each `w x h` texels of `texel_bytes`
+    /// bytes once decoded; `what` names one in messages.
+    pub(in crate::source) fn new(
+        path: &Path,
+        (offsets, counts): (Vec<u64>, Vec<u64>),
+        (w, h): (u32, u32),
+        texel_bytes: u64,
+        what: &'static str,
+    ) -> Result<Codestreams> {
         let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
         let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
-        let bound = u64::from(w) * u64::from(h) * 6 + (1 << 16);
-        Ok(Codestreams { path: path.to_path_buf(), file, file_len, offsets, counts, bound, chunk: (w, h) })
+        let bound = (u64::from(w) * u64::from(h) * texel_bytes).saturating_mul(2) + (1 << 16);
+        Ok(Codestreams { path: path.to_path_buf(), file, file_len, offsets, counts, bound, chunk: (w, h), what })
     }
 
-    /// Chunk `index`'s codestream as stored, or what is wrong with where the file puts it.
-    fn read(&self, index: usize) -> std::result::Result<Vec<u8>, String> {
+    /// Chunk `index`'s bytes as stored, or what is wrong with where the file puts them.
+    pub(in crate::source) fn read(&self, index: usize) -> std::result::Result<Vec<u8>, String> {
         let (offset, count) = match (self.offsets.get(index), self.counts.get(index)) {
             (Some(&o), Some(&c)) if c > 0 => (o, c),
             _ => return Err("the file gives it no data (offset or byte count missing or 0)".into()),
@@ -85,7 +94,10 @@ impl Codestreams {
             ));
         }
         if count > self.bound {
-            return Err(format!("it claims {count} compressed bytes for a {}x{} tile", self.chunk.0, self.chunk.1));
+            return Err(format!(
+                "it claims {count} compressed bytes for a {}x{} {}",
+                self.chunk.0, self.chunk.1, self.what
+            ));
         }
         let mut raw = vec![0u8; count as usize];
         self.file.read_exact_at(&mut raw, offset).map_err(|e| format!("cannot read it: {e}"))?;
@@ -181,7 +193,7 @@ pub(crate) fn assemble(
             ),
         ));
     }
-    let chunks = Codestreams::new(path, offsets, counts, (chunk_w, chunk_h))?;
+    let chunks = Codestreams::new(path, (offsets, counts), (chunk_w, chunk_h), 3, "tile")?;
     // The first tile's coding style says whether the wavelet was the irreversible one (a
     // lossy step; a file that states its history, a DICOM instance, keeps its own).
     if embedded.lossy.is_empty() && irreversible(&main_header(&chunks)) {
@@ -374,7 +386,7 @@ fn level(path: &Path, page: usize, ycbcr: bool, max_memory: u64) -> Result<std::
     let counts = decoder.get_tag_u64_vec(Tag::TileByteCounts).map_err(|e| open_error(path, e))?;
     let (across, down) = (width.div_ceil(tw), height.div_ceil(th));
     super::enough_chunks(path, &offsets, &counts, u64::from(across) * u64::from(down), true)?;
-    let chunks = Arc::new(Codestreams::new(path, offsets, counts, (tw, th))?);
+    let chunks = Arc::new(Codestreams::new(path, (offsets, counts), (tw, th), 3, "tile")?);
     Ok(Ok(StoredLevel { width, height, page, tiles: Arc::new(Jp2kTiles { chunks, ycbcr, across, down }) }))
 }
 
