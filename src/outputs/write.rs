@@ -525,9 +525,9 @@ impl Plan {
 impl Plan {
     /// Writes the outputs of a plan made with planes ([`Plan::with_planes`]: OME-Zarr images
     /// and OME-TIFFs of a grey plane a channel) from the channels `picks` of `set`, one pass
-    /// each, one after another (memory stays one grey pipeline's, or one for each distinct
-    /// pyramid the outputs need, cut from one read of the channel); `first` is channel
-    /// `picks[0]`, opened already. Says what each output wrote, in the order given.
+    /// each, one after another, each pass's one pyramid feeding every output (memory stays
+    /// one grey pipeline's); `first` is channel `picks[0]`, opened already. Says what each
+    /// output wrote, in the order given.
     pub fn write_channels(
         self,
         set: &ChannelSet,
@@ -535,14 +535,17 @@ impl Plan {
         first: Box<dyn RowSource>,
         progress: &dyn Progress,
     ) -> Result<Vec<Wrote>> {
-        let Plan { outputs, budget, pack } = self;
+        let Plan { outputs, pack, .. } = self;
         if outputs.iter().any(|p| !matches!(p.work, Work::OmeZarr { .. } | Work::Tiff { .. })) {
             return Err(TilerError::Internal("channels one pass each go to OME-Zarr and OME-TIFF outputs".into()));
         }
         let open: Vec<Open> =
             outputs.into_iter().map(|p| Open::start(p, pack, crate::store::UPLOAD_BYTES)).collect::<Result<_>>()?;
-        let pyramids = pyramids(&open.iter().map(|o| &o.planned).collect::<Vec<_>>());
-        let mut summaries: Vec<Option<Summary>> = vec![None; pyramids.len()];
+        // Both formats take the run's tile size and the box filter unless one is given for
+        // all: their pyramids are one.
+        let [pyramid] = <[Pyramid; 1]>::try_from(pyramids(&open.iter().map(|o| &o.planned).collect::<Vec<_>>()))
+            .map_err(|_| TilerError::Internal("the planar outputs need pyramids of their own".into()))?;
+        let mut summary: Option<Summary> = None;
         let mut windows = Vec::with_capacity(picks.len());
         let mut first = Some(first);
         for (c, &k) in picks.iter().enumerate() {
@@ -558,50 +561,29 @@ impl Plan {
                     _ => Err(TilerError::Internal("a planar output's sink is not its format's".into())),
                 })
                 .collect::<Result<_>>()?;
-            let targets: Vec<Vec<Target>> = (pyramids.iter())
-                .map(|g| {
-                    let target = |m: usize| {
-                        let p = &open[m].planned;
-                        let (lods, background) = (p.layout.lod_count, p.opts.background);
-                        Target { sink: planes[m].as_ref(), lods, background, encoding: p.opts.encoding() }
-                    };
-                    g.members.iter().map(|&m| target(m)).collect()
+            let targets: Vec<Target> = (open.iter().zip(&planes))
+                .map(|(o, plane)| {
+                    let p = &o.planned;
+                    let (lods, background) = (p.layout.lod_count, p.opts.background);
+                    Target { sink: plane.as_ref(), lods, background, encoding: p.opts.encoding() }
                 })
                 .collect();
-            let passes = match pyramids.len() {
-                1 => vec![split::split_to(&mut source, &targets[0], &pyramids[0].opts, progress)?],
-                _ => cut_together(Box::new(source), &pyramids, &targets, budget, progress)?.0,
-            };
-            drop(targets);
-            drop(planes);
+            let pass = split::split_to(&mut source, &targets, &pyramid.opts, progress)?;
             windows.push(*range.lock().unwrap_or_else(|p| p.into_inner()));
-            for (sum, pass) in summaries.iter_mut().zip(passes) {
-                *sum = Some(match sum.take() {
-                    None => pass,
-                    Some(sum) => add(sum, pass),
-                });
-            }
+            summary = Some(match summary {
+                None => pass,
+                Some(sum) => add(sum, pass),
+            });
         }
-        let summaries: Vec<Summary> = summaries
-            .into_iter()
-            .collect::<Option<_>>()
-            .ok_or_else(|| TilerError::Options("--channels names no channel".into()))?;
-        let mut place = vec![(0, 0); open.len()];
-        for (g, pyramid) in pyramids.iter().enumerate() {
-            for (at, &m) in pyramid.members.iter().enumerate() {
-                place[m] = (g, at);
-            }
-        }
+        let Some(summary) = summary else { return Err(TilerError::Options("--channels names no channel".into())) };
         let mut wrote = Vec::with_capacity(open.len());
-        for (m, mut o) in open.into_iter().enumerate() {
+        for (at, mut o) in open.into_iter().enumerate() {
             if let Sink::OmeZarr(sink) = &mut o.sink {
                 for (c, window) in windows.iter().enumerate() {
                     sink.set_window(c, *window);
                 }
             }
-            let (g, at) = place[m];
-            let reads = summaries[g].passes;
-            wrote.push(Wrote { reads, ..o.finish(&summaries[g], at, g, picks.len() as u64)? });
+            wrote.push(Wrote { reads: summary.passes, ..o.finish(&summary, at, 0, picks.len() as u64)? });
         }
         Ok(wrote)
     }
