@@ -74,6 +74,7 @@ pub(crate) mod read_ahead;
 pub(crate) mod stored;
 pub(crate) mod tee;
 pub(crate) mod tiff;
+mod tile_rows;
 pub use tiff::geo::{GeoTags, GeoValue};
 pub mod tiled;
 mod whole;

@@ -11,11 +11,10 @@
 
 use std::path::{Path, PathBuf};
 
-use rayon::prelude::*;
-
 use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::tiff::jp2k::Codestreams;
+use crate::source::tile_rows::TileRows;
 use crate::source::{Embedded, ImageHeader, RowSource};
 
 /// The frames of one instance and where its rows are.
@@ -25,13 +24,9 @@ pub(super) struct JxlFrames {
     frames: Codestreams,
     size: (u32, u32),
     tile: (u32, u32),
-    across: u32,
     layout: PixelLayout,
-    /// The decoded frames of the current row of frames, the texels inside the image only.
-    band: Vec<Vec<u8>>,
-    band_first: u64,
-    band_rows: u64,
-    next: u64,
+    /// The decoded row of frames and where the reader is.
+    rows: TileRows,
     label: String,
     embedded: Embedded,
 }
@@ -75,12 +70,8 @@ pub(super) fn open(
         frames,
         size,
         tile,
-        across,
         layout,
-        band: vec![Vec::new(); across as usize],
-        band_first: 0,
-        band_rows: 0,
-        next: 0,
+        rows: TileRows::new(size, tile, layout.bytes_per_pixel(), "frame"),
         label,
         embedded,
     }))
@@ -127,32 +118,6 @@ impl JxlFrames {
         }
         Ok(())
     }
-
-    /// Decodes the row of frames holding row `y`, the frames in parallel.
-    fn load_band(&mut self, y: u64) -> Result<()> {
-        let (tw, th) = self.tile;
-        let row = (y / u64::from(th)) as u32;
-        let first = u64::from(row) * u64::from(th);
-        let rows = u64::from(th).min(u64::from(self.size.1) - first) as u32;
-        let mut band = std::mem::take(&mut self.band);
-        let this = &*self;
-        let result = band.par_iter_mut().enumerate().try_for_each(|(col, texels)| {
-            let index = row as usize * this.across as usize + col;
-            let w = tw.min(this.size.0 - col as u32 * tw);
-            this.decode_frame(index, w, rows, texels).map_err(|m| (col, index, m))
-        });
-        self.band = band;
-        if let Err((col, index, message)) = result {
-            self.band_rows = 0;
-            return Err(TilerError::DecodeRow {
-                path: self.path.clone(),
-                row: y,
-                message: format!("frame {index} (column {col}, row {row} of frames): {message}"),
-            });
-        }
-        (self.band_first, self.band_rows) = (first, u64::from(rows));
-        Ok(())
-    }
 }
 
 impl RowSource for JxlFrames {
@@ -165,44 +130,27 @@ impl RowSource for JxlFrames {
     }
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
-        let y = self.next;
-        let pixel = self.layout.bytes_per_pixel();
-        let fail = |message: String| TilerError::DecodeRow { path: self.path.clone(), row: y, message };
-        if y >= u64::from(self.size.1) {
-            return Err(fail(format!("past the image's {} rows", self.size.1)));
-        }
-        if out.len() != self.size.0 as usize * pixel {
-            return Err(fail(format!("internal: a row of {} bytes for {} texels", out.len(), self.size.0)));
-        }
-        if y < self.band_first || y >= self.band_first + self.band_rows {
-            self.load_band(y)?;
-        }
-        let r = (y - self.band_first) as usize;
-        let tw = self.tile.0 as usize;
-        for (col, texels) in self.band.iter().enumerate() {
-            let x0 = col * tw;
-            let w = tw.min(self.size.0 as usize - x0);
-            out[x0 * pixel..(x0 + w) * pixel].copy_from_slice(&texels[r * w * pixel..(r + 1) * w * pixel]);
-        }
-        self.next += 1;
-        Ok(())
+        let mut rows = std::mem::take(&mut self.rows);
+        let read = rows.read_row(&self.path, out, |index, w, h, texels| self.decode_frame(index, w, h, texels));
+        self.rows = rows;
+        read
     }
 
     fn buffer_bytes(&self) -> u64 {
-        self.band.iter().map(|t| t.capacity() as u64).sum()
+        self.rows.buffer_bytes()
     }
 
     fn most_buffer_bytes(&self) -> u64 {
-        u64::from(self.tile.0) * u64::from(self.tile.1) * self.layout.bytes_per_pixel() as u64 * u64::from(self.across)
+        self.rows.most_buffer_bytes()
     }
 
     fn skip_rows(&mut self, rows: u32) -> Result<()> {
-        self.next += u64::from(rows);
+        self.rows.skip(rows);
         Ok(())
     }
 
     fn rewind(&mut self) -> Result<()> {
-        self.next = 0;
+        self.rows.rewind();
         Ok(())
     }
 

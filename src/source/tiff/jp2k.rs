@@ -13,7 +13,6 @@ use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use rayon::prelude::*;
 use tiff::decoder::{ChunkType, Decoder};
 use tiff::tags::Tag;
 
@@ -22,6 +21,7 @@ use crate::error::{Result, TilerError};
 use crate::pixel::{Channels, Depth, PixelLayout};
 use crate::source::stored::codestream::Codestream;
 use crate::source::stored::{self, Coding, Quality, StoredLevel, StoredLevels, StoredTiles};
+use crate::source::tile_rows::TileRows;
 use crate::source::{Embedded, ImageHeader, LossyStep, RowSource};
 
 /// Whether the image is JPEG 2000 in Aperio's two forms.
@@ -39,11 +39,8 @@ pub(super) struct Jp2kTiff {
     chunk_h: u32,
     across: u32,
     chunks: Arc<Codestreams>,
-    /// The decoded tiles of the current row, RGB texels inside the image only.
-    band: Vec<Vec<u8>>,
-    band_first: u64,
-    band_rows: u64,
-    next: u64,
+    /// The decoded row of tiles (RGB) and where the reader is.
+    rows: TileRows,
     label: String,
     embedded: Embedded,
     /// The page read and its reduced levels, for an output that copies them.
@@ -210,10 +207,7 @@ pub(crate) fn assemble(
         chunk_h,
         across,
         chunks: Arc::new(chunks),
-        band: vec![Vec::new(); across as usize],
-        band_first: 0,
-        band_rows: 0,
-        next: 0,
+        rows: TileRows::new((width, height), (chunk_w, chunk_h), 3, "tile"),
         label,
         embedded,
         pages,
@@ -238,34 +232,6 @@ fn irreversible(head: &[u8]) -> bool {
 }
 
 impl Jp2kTiff {
-    /// Decodes the row of tiles holding row `y`, the tiles in parallel.
-    fn load_band(&mut self, y: u64) -> Result<()> {
-        let row = (y / self.chunk_h as u64) as u32;
-        let first = row as u64 * self.chunk_h as u64;
-        let rows = (self.chunk_h as u64).min(self.height as u64 - first) as u32;
-        let mut band = std::mem::take(&mut self.band);
-        let this = &*self;
-        let result = band.par_iter_mut().enumerate().try_for_each(|(col, texels)| {
-            let index = (row * this.across) as usize + col;
-            let data_w = this.chunk_w.min(this.width - col as u32 * this.chunk_w);
-            this.decode_tile(index, data_w, rows, texels).map_err(|m| (col, index, m))
-        });
-        self.band = band;
-        if let Err((col, index, message)) = result {
-            self.band_rows = 0;
-            return Err(TilerError::DecodeRow {
-                path: self.path.clone(),
-                row: y,
-                message: format!(
-                    "tile {index} (tile row {row}, column {col}; rows {first}..{}): {message}",
-                    first + rows as u64
-                ),
-            });
-        }
-        (self.band_first, self.band_rows) = (first, rows as u64);
-        Ok(())
-    }
-
     /// Tile `index` into `texels`: its `w` x `h` texels inside the image, as RGB.
     fn decode_tile(&self, index: usize, w: u32, h: u32, texels: &mut Vec<u8>) -> std::result::Result<(), String> {
         let raw = self.chunks.read(index)?;
@@ -433,29 +399,27 @@ impl RowSource for Jp2kTiff {
     }
 
     fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
-        let y = self.next;
-        let fail = |message: String| TilerError::DecodeRow { path: self.path.clone(), row: y, message };
-        super::check_row(y, self.height, &(0..self.width), 3, out.len()).map_err(fail)?;
-        if y < self.band_first || y >= self.band_first + self.band_rows {
-            self.load_band(y)?;
-        }
-        let r = (y - self.band_first) as usize;
-        for (col, texels) in self.band.iter().enumerate() {
-            let x0 = col * self.chunk_w as usize;
-            let w = (self.chunk_w as usize).min(self.width as usize - x0);
-            out[x0 * 3..(x0 + w) * 3].copy_from_slice(&texels[r * w * 3..(r + 1) * w * 3]);
-        }
-        self.next += 1;
-        Ok(())
+        let mut rows = std::mem::take(&mut self.rows);
+        let read = rows.read_row(&self.path, out, |index, w, h, texels| self.decode_tile(index, w, h, texels));
+        self.rows = rows;
+        read
+    }
+
+    fn buffer_bytes(&self) -> u64 {
+        self.rows.buffer_bytes()
+    }
+
+    fn most_buffer_bytes(&self) -> u64 {
+        self.rows.most_buffer_bytes()
     }
 
     fn skip_rows(&mut self, rows: u32) -> Result<()> {
-        self.next += rows as u64;
+        self.rows.skip(rows);
         Ok(())
     }
 
     fn rewind(&mut self) -> Result<()> {
-        self.next = 0;
+        self.rows.rewind();
         Ok(())
     }
 
