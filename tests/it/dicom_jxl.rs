@@ -277,14 +277,7 @@ fn a_slide_s_own_levels_are_recompressed_into_jpeg_xl_jpeg_recompression_instanc
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let png = input(dir.path(), "src", 2300, 1500, PixelLayout::new(Channels::Rgb, Depth::U8));
-    let tif = dir.path().join("vips-pyramid.tif");
-    let vips = Command::new("vips")
-        .args(["tiffsave", s(&png), s(&tif), "--tile", "--pyramid", "--compression", "jpeg", "--Q", "85"])
-        .args(["--tile-width", "256", "--tile-height", "256"])
-        .output()
-        .unwrap();
-    assert!(vips.status.success(), "vips: {}", String::from_utf8_lossy(&vips.stderr));
+    let tif = crate::dicom_out::vips_pyramid(dir.path());
     let jpeg = dir.path().join("jpeg");
     ok(&["split", s(&tif), "--layout", "dicom", "-o", s(&jpeg), "--pixel-size", "0.5um", "-q"]);
     let out = dir.path().join("jxl");

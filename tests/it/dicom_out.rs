@@ -365,14 +365,7 @@ fn a_slide_s_own_levels_are_copied_as_stored() {
     crate::tiff_slides::python(python.as_os_str(), MAKE_LEVELLED_SVS, &[s(&svs)]);
     let mut slides = vec![(svs.clone(), 61)];
     if crate::common::have_program("vips", "--version", "libvips-tools") {
-        let png = input(dir.path(), "src", 2300, 1500, rgb8());
-        let tif = dir.path().join("vips-pyramid.tif");
-        let vips = Command::new("vips")
-            .args(["tiffsave", s(&png), s(&tif), "--tile", "--pyramid", "--compression", "jpeg", "--Q", "85"])
-            .args(["--tile-width", "256", "--tile-height", "256"])
-            .output()
-            .unwrap();
-        assert!(vips.status.success(), "vips: {}", String::from_utf8_lossy(&vips.stderr));
+        let tif = vips_pyramid(dir.path());
         // 9 x 6, 5 x 3, 3 x 2, 2 x 1 and 1 tiles.
         slides.push((tif, 78));
     }
@@ -882,4 +875,18 @@ fn each_instance_states_the_lossy_history_of_its_pixels() {
             dciodvfy(&out);
         }
     }
+}
+
+/// A 2300 x 1500 RGB image as `vips tiffsave --tile --pyramid` writes it (JPEG Q85, 256-texel
+/// tiles, its own reduced levels), at `dir/vips-pyramid.tif`: a slide of another writer.
+pub(crate) fn vips_pyramid(dir: &Path) -> PathBuf {
+    let png = input(dir, "src", 2300, 1500, rgb8());
+    let tif = dir.join("vips-pyramid.tif");
+    let vips = Command::new("vips")
+        .args(["tiffsave", s(&png), s(&tif), "--tile", "--pyramid", "--compression", "jpeg", "--Q", "85"])
+        .args(["--tile-width", "256", "--tile-height", "256"])
+        .output()
+        .unwrap();
+    assert!(vips.status.success(), "vips: {}", String::from_utf8_lossy(&vips.stderr));
+    tif
 }
