@@ -480,7 +480,7 @@ impl<T: Sample> TileEncoder<T> {
     }
 
     /// Encodes a `side x side` tile given in the source layout.
-    pub fn encode(&self, texels: &[T], out: &mut Vec<u8>) -> Result<(), String> {
+    pub fn encode(&self, texels: &[T], out: &mut Vec<u8>) -> Result<(), EncodeError> {
         out.clear();
         let texels = self.flattened(texels);
         let texels = &texels[..];
@@ -504,13 +504,13 @@ impl<T: Sample> TileEncoder<T> {
 
     /// Encodes the `crop` part of a `side x side` tile as an image file of the crop's size (a
     /// viewer layout's edge tile). Only image codecs (JPEG, PNG) make files of any size.
-    pub(crate) fn encode_crop(&self, texels: &[T], crop: Crop, out: &mut Vec<u8>) -> Result<(), String> {
+    pub(crate) fn encode_crop(&self, texels: &[T], crop: Crop, out: &mut Vec<u8>) -> Result<(), EncodeError> {
         let (side, channels) = (self.side as usize, self.source.channels.count());
         if crop == Crop::whole(self.side) {
             return self.encode(texels, out);
         }
         if crop.x + crop.width > self.side || crop.y + crop.height > self.side || crop.width == 0 || crop.height == 0 {
-            return Err(format!("crop {crop:?} is not inside a {side}-texel tile"));
+            return Err(EncodeError::CropOutside { crop, side: self.side });
         }
         let (x, w) = (crop.x as usize * channels, crop.width as usize * channels);
         let mut part = Vec::with_capacity(w * crop.height as usize);
@@ -524,33 +524,39 @@ impl<T: Sample> TileEncoder<T> {
             Codec::Jpeg { quality, subsampling } => self.encode_jpeg(&part, size, quality, subsampling, out),
             Codec::Png { level } => self.encode_png(&part, size, level, out),
             Codec::Jxl { quality, effort } => self.encode_jxl(&part, size, quality, effort, out),
-            other => Err(format!("{} tiles are square; only jpeg, png and jxl tiles can be cropped", other.name())),
+            other => Err(EncodeError::NotCroppable { codec: other.name() }),
         }
     }
 
     /// zstd of the raw tile, rows filtered first (`zstd-delta`: the filter of those tiles
     /// in docs/pack-format.md). One compression context per thread.
-    fn encode_zstd(&self, texels: &[T], level: i32, filter: RowFilter, out: &mut Vec<u8>) -> Result<(), String> {
-        *out = zstd_frame(&self.filtered_bytes(texels, filter), level)?;
+    fn encode_zstd(&self, texels: &[T], level: i32, filter: RowFilter, out: &mut Vec<u8>) -> Result<(), EncodeError> {
+        *out = zstd_frame(&self.filtered_bytes(texels, filter), level).map_err(|m| failed("zstd", m))?;
         Ok(())
     }
 
     /// One zlib stream of the raw tile, rows filtered first.
-    fn encode_deflate(&self, texels: &[T], level: u32, filter: RowFilter, out: &mut Vec<u8>) -> Result<(), String> {
+    fn encode_deflate(
+        &self,
+        texels: &[T],
+        level: u32,
+        filter: RowFilter,
+        out: &mut Vec<u8>,
+    ) -> Result<(), EncodeError> {
         use std::io::Write;
         let raw = self.filtered_bytes(texels, filter);
         let mut z = flate2::write::ZlibEncoder::new(std::mem::take(out), flate2::Compression::new(level.min(9)));
-        *out = z.write_all(&raw).and_then(|()| z.finish()).map_err(|e| format!("deflate: {e}"))?;
+        *out = z.write_all(&raw).and_then(|()| z.finish()).map_err(|e| failed("deflate", e))?;
         Ok(())
     }
 
     /// One TIFF LZW stream of the raw tile (a clear code first, the end code last: `weezl`,
     /// the `tiff` crate's coder), rows filtered first.
-    fn encode_lzw(&self, texels: &[T], filter: RowFilter, out: &mut Vec<u8>) -> Result<(), String> {
+    fn encode_lzw(&self, texels: &[T], filter: RowFilter, out: &mut Vec<u8>) -> Result<(), EncodeError> {
         let raw = self.filtered_bytes(texels, filter);
         let mut encoder = weezl::encode::Encoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8);
         let result = encoder.into_vec(out).encode_all(&raw);
-        result.status.map(drop).map_err(|e| format!("lzw: {e}"))
+        result.status.map(drop).map_err(|e| failed("lzw", e))
     }
 
     /// The raw tile's bytes (little-endian samples), each row filtered as `filter` says:
@@ -569,7 +575,7 @@ impl<T: Sample> TileEncoder<T> {
 
     /// BC1 (`bc7` None) or BC7 blocks of an 8-bit RGB or RGBA tile, by Intel's ISPC texture
     /// compressor; the blocks come in rows, top down, as a GPU upload takes them.
-    fn encode_bc(&self, texels: &[T], bc7: Option<Bc7Effort>, out: &mut Vec<u8>) -> Result<(), String> {
+    fn encode_bc(&self, texels: &[T], bc7: Option<Bc7Effort>, out: &mut Vec<u8>) -> Result<(), EncodeError> {
         let samples = to_u8(texels);
         let rgba: Cow<[u8]> = match self.stored.channels {
             // Colour under alpha 0 is never seen, but the encoder fits it like any other texel
@@ -589,7 +595,7 @@ impl<T: Sample> TileEncoder<T> {
             None => vortex_bc::encode_bc1(&rgba, side, side, out),
             Some(effort) => vortex_bc::encode_bc7(&rgba, side, side, effort, self.stored.channels.has_alpha(), out),
         }
-        .map_err(|e| e.to_string())
+        .map_err(|e| failed(if bc7.is_some() { "bc7" } else { "bc1" }, e))
     }
 
     /// libjpeg-turbo's encoder (MozJPEG in its libjpeg-turbo-compatible "fastest" profile: no
@@ -601,9 +607,11 @@ impl<T: Sample> TileEncoder<T> {
         quality: u8,
         subsampling: Subsampling,
         out: &mut Vec<u8>,
-    ) -> Result<(), String> {
+    ) -> Result<(), EncodeError> {
         let samples = to_u8(texels);
-        *out = encode_jpeg(&samples, (width, height), self.stored.channels, quality, subsampling, std::mem::take(out))?;
+        let buf = std::mem::take(out);
+        *out = encode_jpeg(&samples, (width, height), self.stored.channels, quality, subsampling, buf)
+            .map_err(|m| failed("jpeg", m))?;
         Ok(())
     }
 
@@ -616,7 +624,7 @@ impl<T: Sample> TileEncoder<T> {
         quality: Option<u8>,
         effort: JxlEffort,
         out: &mut Vec<u8>,
-    ) -> Result<(), String> {
+    ) -> Result<(), EncodeError> {
         let quality = match quality {
             Some(q) => vortex_jxl::Quality::Distance(vortex_jxl::distance_for_quality(q)),
             None => vortex_jxl::Quality::Lossless,
@@ -634,10 +642,10 @@ impl<T: Sample> TileEncoder<T> {
                 wide = texels.iter().map(|s| s.to_u16() * widen).collect();
                 vortex_jxl::Pixels::U16(&wide)
             }
-            other => return Err(format!("JPEG XL tiles hold 8 or 16-bit samples, not {}", other.tile_type())),
+            other => return Err(EncodeError::Samples { codec: "jxl", samples: other.tile_type() }),
         };
         let image = vortex_jxl::Image { width, height, channels, pixels };
-        *out = vortex_jxl::encode(&image, quality, effort).map_err(|e| e.to_string())?;
+        *out = vortex_jxl::encode(&image, quality, effort).map_err(|e| failed("jxl", e))?;
         Ok(())
     }
 
@@ -647,7 +655,7 @@ impl<T: Sample> TileEncoder<T> {
         (width, height): (u32, u32),
         level: PngLevel,
         out: &mut Vec<u8>,
-    ) -> Result<(), String> {
+    ) -> Result<(), EncodeError> {
         let mut enc = png::Encoder::new(&mut *out, width, height);
         enc.set_color(match self.stored.channels {
             Channels::Grey => png::ColorType::Grayscale,
@@ -670,12 +678,56 @@ impl<T: Sample> TileEncoder<T> {
                 let widen = if T::DEPTH == Depth::U8 { 257 } else { 1 };
                 Cow::Owned(texels.iter().flat_map(|s| (s.to_u16() * widen).to_be_bytes()).collect())
             }
-            other => return Err(format!("PNG holds 8 or 16-bit samples, not {}", other.tile_type())),
+            other => return Err(EncodeError::Samples { codec: "png", samples: other.tile_type() }),
         };
-        let mut writer = enc.write_header().map_err(|e| e.to_string())?;
-        writer.write_image_data(&data).map_err(|e| e.to_string())?;
-        writer.finish().map_err(|e| e.to_string())
+        let mut writer = enc.write_header().map_err(|e| failed("png", e))?;
+        writer.write_image_data(&data).map_err(|e| failed("png", e))?;
+        writer.finish().map_err(|e| failed("png", e))
     }
+}
+
+/// Why a tile could not be encoded ([`TileEncoder::encode`]).
+///
+/// New variants may come in any release: match the ones you act on and keep a `_` arm.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum EncodeError {
+    /// The codec stores no samples of this type.
+    #[error("{codec} tiles hold 8 or 16-bit samples, not {samples}")]
+    Samples {
+        /// The codec, by its `--codec` name.
+        codec: &'static str,
+        /// The samples' `tileType` (`unsignedInt`, `float`, ...).
+        samples: &'static str,
+    },
+    /// The part of the tile asked for is not inside it.
+    #[error("crop {crop:?} is not inside a {side}-texel tile")]
+    CropOutside {
+        /// The part asked for.
+        crop: Crop,
+        /// The tile's side in texels.
+        side: u32,
+    },
+    /// The codec's tiles are all the tile size: only image files (JPEG, PNG, JPEG XL) are cut
+    /// to an edge tile's size.
+    #[error("{codec} tiles are square; only jpeg, png and jxl tiles can be cropped")]
+    NotCroppable {
+        /// The codec, by its `--codec` name.
+        codec: &'static str,
+    },
+    /// The codec's library failed.
+    #[error("{codec}: {message}")]
+    Failed {
+        /// The codec, by its `--codec` name.
+        codec: &'static str,
+        /// The library's message.
+        message: String,
+    },
+}
+
+/// `codec`'s library failed with `e`.
+fn failed(codec: &'static str, e: impl std::fmt::Display) -> EncodeError {
+    EncodeError::Failed { codec, message: e.to_string() }
 }
 
 /// Samples as 8-bit, rounding 16-bit ones to the nearest 8-bit value. (32-bit and float

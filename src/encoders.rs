@@ -590,7 +590,7 @@ fn prepare<T: Sample>(
         None => encoder.encode(texels, &mut bytes),
         Some(crop) => encoder.encode_crop(texels, crop, &mut bytes),
     };
-    encoded.map_err(|message| TilerError::Encode { lod, x, y, message })?;
+    encoded.map_err(|e| TilerError::Encode { lod, x, y, message: e.to_string() })?;
     // A JPEG or PNG grows its buffer as it writes, up to twice its length: what waits for the
     // writer is only the encoding, as the plan counts it (`Codec::most_encoded_bytes`).
     bytes.shrink_to_fit();

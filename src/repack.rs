@@ -187,11 +187,11 @@ fn reencode_dir<T: Sample>(
                     return Ok((id, path, Stored::Constant(encoder.stored_texel(first))));
                 }
                 let mut out = Vec::new();
-                encoder.encode(&texels, &mut out).map_err(|message| TilerError::Encode {
+                encoder.encode(&texels, &mut out).map_err(|e| TilerError::Encode {
                     lod: id.lod,
                     x: id.x,
                     y: id.y,
-                    message,
+                    message: e.to_string(),
                 })?;
                 Ok((id, path, Stored::Data(out)))
             })
@@ -230,7 +230,7 @@ pub fn unpack(pack: &Pack, dir: &Claim, progress: &dyn Progress) -> Result<u64> 
         Some(f) => f.clone(),
         None => format!("{DEFAULT_FILENAME_STEM}.{}", codec_of(&info, None).map_or("png", |c| c.extension())),
     };
-    let names = FilenameFormat::parse(&names, 3).map_err(TilerError::Options)?;
+    let names = FilenameFormat::parse(&names, 3).map_err(|e| TilerError::Options(format!("filename format: {e}")))?;
     let codec = codec_of(&info, names.extension());
     let layout = layout_of(&d);
     let no_files = |kind: &str| {
@@ -355,7 +355,7 @@ fn encode_constant<T: Sample>(codec: Codec, layout: PixelLayout, side: u32, texe
     let texels: Vec<T> = samples.iter().copied().cycle().take(samples.len() * (side as usize).pow(2)).collect();
     let encoder = TileEncoder::<T>::new(codec, layout, false, None, side, Vec::new())?;
     let mut out = Vec::new();
-    encoder.encode(&texels, &mut out).map_err(|message| TilerError::Encode { lod: 0, x: 0, y: 0, message })?;
+    encoder.encode(&texels, &mut out).map_err(|e| TilerError::Encode { lod: 0, x: 0, y: 0, message: e.to_string() })?;
     Ok(out)
 }
 

@@ -93,10 +93,12 @@ pub fn render(page: Page, job: &Job) -> Result<Bytes, String> {
     let (decoded, crop) = if job.halvings > 0 { halved_page(&decoded, job)? } else { (decoded, job.crop) };
     let mut out = Vec::new();
     match decoded.layout.depth {
-        Depth::U8 => encoder::<u8>(job, decoded.layout)?.encode_crop(&decoded.bytes, crop, &mut out)?,
+        Depth::U8 => encoder::<u8>(job, decoded.layout)?
+            .encode_crop(&decoded.bytes, crop, &mut out)
+            .map_err(|e| e.to_string())?,
         _ => {
             let samples: Vec<u16> = bytemuck::pod_collect_to_vec(&decoded.bytes);
-            encoder::<u16>(job, decoded.layout)?.encode_crop(&samples, crop, &mut out)?
+            encoder::<u16>(job, decoded.layout)?.encode_crop(&samples, crop, &mut out).map_err(|e| e.to_string())?
         }
     }
     Ok(Bytes::from(out))

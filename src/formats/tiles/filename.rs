@@ -19,6 +19,82 @@ const MAX_WIDTH: usize = 32;
 /// The thesis's default names, with the codec's extension.
 pub const DEFAULT_FILENAME_STEM: &str = "lod%1$02s-x%2$04s-y%3$04s";
 
+/// Why a file-name pattern was refused: the pattern and what is wrong with it.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("'{pattern}': {why}")]
+pub struct PatternError {
+    /// The pattern as given.
+    pub pattern: String,
+    /// What is wrong with it.
+    pub why: Refused,
+}
+
+/// What is wrong with a file-name pattern ([`PatternError`]); each message names the pattern
+/// or its conversion.
+///
+/// New variants may come in any release: match the ones you act on and keep a `_` arm.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Refused {
+    /// A `%` starts no conversion this syntax has.
+    #[error("bad conversion at byte {at} (expected e.g. %1$04s or %d)")]
+    Conversion {
+        /// Where the `%` is, in bytes from the pattern's start.
+        at: usize,
+    },
+    /// The `N` of `%N$` is no number.
+    #[error("bad argument number in '{conversion}'")]
+    ArgumentNumber {
+        /// The conversion, as written.
+        conversion: String,
+    },
+    /// The `N` of `%N$` names no argument.
+    #[error("'{conversion}' refers to argument {n}, but there are {count}")]
+    NoSuchArgument {
+        /// The conversion, as written.
+        conversion: String,
+        /// The argument it names.
+        n: usize,
+        /// How many there are.
+        count: usize,
+    },
+    /// More conversions without `N$` than there are arguments.
+    #[error("has more than {count} conversions")]
+    TooManyConversions {
+        /// How many arguments there are.
+        count: usize,
+    },
+    /// A second `$` in a conversion.
+    #[error("bad conversion '{conversion}'")]
+    Flags {
+        /// The conversion, as written.
+        conversion: String,
+    },
+    /// The width is no number.
+    #[error("bad width in '{conversion}'")]
+    Width {
+        /// The conversion, as written.
+        conversion: String,
+    },
+    /// A width past what a file name part holds.
+    #[error("width {width} in '{conversion}' is more than {}: a file name part holds at most 255 bytes", MAX_WIDTH)]
+    TooWide {
+        /// The conversion, as written.
+        conversion: String,
+        /// Its width.
+        width: usize,
+    },
+    /// An argument no conversion uses: two tiles would get one name.
+    #[error("never uses argument {n}: tiles would share file names")]
+    Unused {
+        /// The argument, counted from 1.
+        n: usize,
+    },
+    /// An absolute path, or one with `..`.
+    #[error("must stay inside the output directory")]
+    Outside,
+}
+
 /// A parsed pattern.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FilenameFormat {
@@ -29,7 +105,8 @@ pub struct FilenameFormat {
 impl FilenameFormat {
     /// Parses `pattern` whose conversions may refer to `arg_count` arguments; every argument
     /// must be used so that no two tiles share a name.
-    pub fn parse(pattern: &str, arg_count: usize) -> Result<FilenameFormat, String> {
+    pub fn parse(pattern: &str, arg_count: usize) -> Result<FilenameFormat, PatternError> {
+        let refused = |why: Refused| PatternError { pattern: pattern.to_string(), why };
         let mut pieces = Vec::new();
         let mut literal = String::new();
         let mut next_arg = 0;
@@ -45,9 +122,7 @@ impl FilenameFormat {
                     Some((_, '%')) if spec.is_empty() => break '%',
                     Some((_, c @ ('s' | 'd' | 'i' | 'u'))) => break c,
                     Some((_, c)) if c.is_ascii_digit() || c == '$' => spec.push(c),
-                    _ => {
-                        return Err(format!("bad conversion at byte {at} of '{pattern}' (expected e.g. %1$04s or %d)"));
-                    }
+                    _ => return Err(refused(Refused::Conversion { at })),
                 }
             };
             if conversion == '%' {
@@ -56,37 +131,34 @@ impl FilenameFormat {
             }
             let (index, flags) = match spec.split_once('$') {
                 Some((n, rest)) => {
-                    let n: usize = n
-                        .parse()
-                        .map_err(|_| format!("bad argument number in '%{spec}{conversion}' of '{pattern}'"))?;
+                    let conversion = format!("%{spec}{conversion}");
+                    let Ok(n) = n.parse::<usize>() else {
+                        return Err(refused(Refused::ArgumentNumber { conversion }));
+                    };
                     if n == 0 || n > arg_count {
-                        return Err(format!(
-                            "'%{spec}{conversion}' in '{pattern}' refers to argument {n}, but there are {arg_count}"
-                        ));
+                        return Err(refused(Refused::NoSuchArgument { conversion, n, count: arg_count }));
                     }
                     (n - 1, rest)
                 }
                 None => {
                     next_arg += 1;
                     if next_arg > arg_count {
-                        return Err(format!("'{pattern}' has more than {arg_count} conversions"));
+                        return Err(refused(Refused::TooManyConversions { count: arg_count }));
                     }
                     (next_arg - 1, spec.as_str())
                 }
             };
+            let whole = || format!("%{spec}{conversion}");
             if flags.contains('$') {
-                return Err(format!("bad conversion '%{spec}{conversion}' in '{pattern}'"));
+                return Err(refused(Refused::Flags { conversion: whole() }));
             }
             let zero = flags.starts_with('0');
-            let width: usize = if flags.is_empty() {
-                0
-            } else {
-                flags.parse().map_err(|_| format!("bad width in '%{spec}{conversion}'"))?
+            let width: usize = match flags.is_empty() {
+                true => 0,
+                false => flags.parse().map_err(|_| refused(Refused::Width { conversion: whole() }))?,
             };
             if width > MAX_WIDTH {
-                return Err(format!(
-                    "width {width} in '%{spec}{conversion}' is more than {MAX_WIDTH}: a file name part holds at most 255 bytes"
-                ));
+                return Err(refused(Refused::TooWide { conversion: whole(), width }));
             }
             if !literal.is_empty() {
                 pieces.push(Piece::Literal(std::mem::take(&mut literal)));
@@ -98,11 +170,11 @@ impl FilenameFormat {
         }
         for i in 0..arg_count {
             if !pieces.iter().any(|p| matches!(p, Piece::Arg { index, .. } if *index == i)) {
-                return Err(format!("'{pattern}' never uses argument {}: tiles would share file names", i + 1));
+                return Err(refused(Refused::Unused { n: i + 1 }));
             }
         }
         if pattern.starts_with('/') || pattern.split('/').any(|part| part == "..") {
-            return Err(format!("'{pattern}' must stay inside the output directory"));
+            return Err(refused(Refused::Outside));
         }
         Ok(FilenameFormat { source: pattern.to_string(), pieces })
     }
@@ -205,14 +277,24 @@ mod tests {
     }
 
     #[test]
-    fn refuses_bad_patterns() {
-        for bad in
-            ["x%02s.png", "%4$s%2$s%3$s", "%q", "%1$s-%2$s-%3$s-%s%s%s%s", "../%s%s%s", "/abs/%s%s%s", "%1$2$s%s%s"]
-        {
-            assert!(FilenameFormat::parse(bad, 3).is_err(), "{bad} was accepted");
-        }
-        for wide in ["%1$65536d-%2$d-%3$d.png", "%1$33d-%2$d-%3$d"] {
-            assert!(FilenameFormat::parse(wide, 3).unwrap_err().contains("width"), "{wide}");
+    fn refuses_bad_patterns_saying_why() {
+        let conversion = |c: &str| c.to_string();
+        for (bad, why) in [
+            ("x%02s.png", Refused::Unused { n: 2 }),
+            ("%4$s%2$s%3$s", Refused::NoSuchArgument { conversion: conversion("%4$s"), n: 4, count: 3 }),
+            ("%q", Refused::Conversion { at: 0 }),
+            ("%1$s-%2$s-%3$s-%s%s%s%s", Refused::TooManyConversions { count: 3 }),
+            ("../%s%s%s", Refused::Outside),
+            ("/abs/%s%s%s", Refused::Outside),
+            ("%1$2$s%s%s", Refused::Flags { conversion: conversion("%1$2$s") }),
+            ("%$s%s%s", Refused::ArgumentNumber { conversion: conversion("%$s") }),
+            ("%1$99999999999999999999d%s%s", Refused::Width { conversion: conversion("%1$99999999999999999999d") }),
+            ("%1$65536d-%2$d-%3$d.png", Refused::TooWide { conversion: conversion("%1$65536d"), width: 65536 }),
+            ("%1$33d-%2$d-%3$d", Refused::TooWide { conversion: conversion("%1$33d"), width: 33 }),
+        ] {
+            let e = FilenameFormat::parse(bad, 3).unwrap_err();
+            assert_eq!(e, PatternError { pattern: bad.into(), why }, "{bad}");
+            assert!(e.to_string().starts_with(&format!("'{bad}': ")), "{e}");
         }
     }
 }

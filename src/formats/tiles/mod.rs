@@ -63,10 +63,10 @@ impl TiledDir {
             }
         };
         let names = info.filename_format.clone().ok_or_else(|| missing("filenameFormat"))?;
-        let names = FilenameFormat::parse(&names, 3).map_err(|m| TilerError::Info {
+        let names = FilenameFormat::parse(&names, 3).map_err(|e| TilerError::Info {
             path: path.clone(),
             field: "filenameFormat".into(),
-            message: m,
+            message: e.to_string(),
         })?;
         let codec = codec_of(&info, names.extension()).filter(Codec::writes_files).ok_or_else(|| TilerError::Info {
             path: path.clone(),

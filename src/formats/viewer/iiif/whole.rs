@@ -65,10 +65,12 @@ pub(crate) fn assemble(
     let whole = Crop { x: 0, y: 0, width, height };
     let mut out = Vec::new();
     match pixels.depth {
-        Depth::U8 => encoder::<u8>(codec, pixels, side)?.encode_crop(&bytes, whole, &mut out)?,
+        Depth::U8 => {
+            encoder::<u8>(codec, pixels, side)?.encode_crop(&bytes, whole, &mut out).map_err(|e| e.to_string())?
+        }
         Depth::U16 => {
             let samples: Vec<u16> = bytemuck::pod_collect_to_vec(&bytes);
-            encoder::<u16>(codec, pixels, side)?.encode_crop(&samples, whole, &mut out)?
+            encoder::<u16>(codec, pixels, side)?.encode_crop(&samples, whole, &mut out).map_err(|e| e.to_string())?
         }
         // Split refuses JPEG and PNG tiles for 32-bit and float images before any is written.
         other => return Err(format!("{other:?} samples have no JPEG or PNG tiles")),
