@@ -14,6 +14,7 @@
 //! JPEG XL tiles each is recompressed losslessly ([`File::Recompressed`]: `djxl` gives the
 //! stored JPEG back byte for byte).
 
+use std::borrow::Cow;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, TryRecvError, sync_channel};
@@ -31,7 +32,7 @@ use crate::limits::in_flight::{GATHER_MOST, LOTS_IN_FLIGHT};
 use crate::limits::{Gauge, Part};
 use crate::pixel::Sample;
 use crate::pyramid::cascade::{Batch, CutTile};
-use crate::pyramid::cut;
+use crate::pyramid::cut::{self, Padding};
 use crate::sink::Target;
 use crate::source::stored::{StoredTiles, crop};
 use crate::stages::{Stage, StageClock};
@@ -120,6 +121,46 @@ impl Copier {
         lod == 0 && (c.x, c.y) == (0, 0) && inside(x, c.width, self.width) && inside(y, c.height, self.height)
     }
 
+    /// Page (`x`, `y`) of the finest level (no border: the copies' grid) cut from its stored
+    /// tile, decoded whole, and padded past the image as the cascade pads (`padding`): where a
+    /// run that has no texels of that level (`--fast-shrink`) must encode a page it cannot copy,
+    /// the page the cascade would have cut.
+    fn page<T: Sample>(&self, (x, y): (u32, u32), layout: &Layout, padding: &Padding<T>) -> Result<Vec<T>> {
+        let Some(decoded) = self.tiles.decode(x, y, 1)? else {
+            return Err(TilerError::Internal("a stored tile to copy cannot be decoded".into()));
+        };
+        let side = self.side;
+        let (w, h) = (side.min(self.width - x * side) as usize, side.min(self.height - y * side) as usize);
+        let channels = decoded.len() / (w * h).max(1);
+        if decoded.len() != w * h * channels {
+            return Err(TilerError::Internal(format!("{} bytes decoded for a {w}x{h} tile", decoded.len())));
+        }
+        let texels: Vec<T> = decoded.into_iter().map(T::from_u8_scaled).collect();
+        let (extent, virtual_extent) = (layout.level_extent(0), layout.virtual_extent(0));
+        let (edge, fill) = match padding {
+            Padding::Edge => (true, &[][..]),
+            Padding::Colour(texel) => (false, &texel[..]),
+        };
+        let x_runs = cut::shifted(cut::runs(layout, x, extent.0, virtual_extent.0, edge), u64::from(x * side));
+        let y_runs = cut::shifted(cut::runs(layout, y, extent.1, virtual_extent.1, edge), u64::from(y * side));
+        let row = |r: u32| Some(&texels[r as usize * w * channels..(r as usize + 1) * w * channels]);
+        let mut page = Vec::with_capacity(side as usize * side as usize * channels);
+        for run in y_runs {
+            match run {
+                cut::Run::Copy { start, len } => {
+                    (start..start + len).for_each(|r| cut::push_row(&mut page, &x_runs, row(r), channels, fill))
+                }
+                cut::Run::Repeat { at, len } => {
+                    (0..len).for_each(|_| cut::push_row(&mut page, &x_runs, row(at), channels, fill))
+                }
+                cut::Run::Fill { len } => {
+                    (0..len).for_each(|_| cut::push_row(&mut page, &x_runs, None, channels, fill))
+                }
+            }
+        }
+        Ok(page)
+    }
+
     /// Page (`x`, `y`) of the finest level, kept as `crop`, as a file made from the stored
     /// tile; `None` where the stored tile cannot be copied, or not cropped to exactly the texels
     /// the run decoded ([`crop::exact`]).
@@ -171,8 +212,23 @@ pub(crate) fn consume<T: Sample>(
             }
         })
         .collect::<Result<Vec<_>>>()?;
-    let stage =
-        Encoding { encoders, which, targets, fills: &fills, layout, counts, copier, progress, busy: &busy, memory };
+    let padding = match cut_with.texel::<T>(channels) {
+        Some(texel) => Padding::Colour(texel),
+        None => Padding::Edge,
+    };
+    let stage = Encoding {
+        encoders,
+        which,
+        targets,
+        fills: &fills,
+        padding,
+        layout,
+        counts,
+        copier,
+        progress,
+        busy: &busy,
+        memory,
+    };
     // The writer waits for each lot in turn and frees its place once it is stored; a lot is
     // received only into a free place, so the writer's queue never fills.
     let (to_writer, lots) = sync_channel::<Arc<Lot<T>>>(LOTS_IN_FLIGHT);
@@ -289,6 +345,8 @@ struct Encoding<'a, T> {
     targets: &'a [Target<'a>],
     /// Each target's padding colour, where it is not the one the pages were cut with.
     fills: &'a [Option<Vec<T>>],
+    /// What the pages were padded with past the image, for pages cut here from a stored tile.
+    padding: Padding<T>,
     layout: &'a Layout,
     counts: &'a Counts,
     copier: Option<&'a Copier>,
@@ -304,14 +362,22 @@ impl<T: Sample> Encoding<'_, T> {
         let _busy = self.busy.start();
         let texels = job.take_texels()?;
         let encoder = &self.encoders[job.encoder];
-        let padded = job.pad.map(|(from, t)| {
-            let mut padded = texels.to_vec();
-            let (side, channels) = (self.layout.tile_size, encoder.source_layout().channels.count());
-            cut::fill_padding(&mut padded, side, channels, from, self.fills[t].as_deref().unwrap_or_default());
-            padded
-        });
-        let stored =
-            prepare(encoder, self.targets, job, padded.as_deref().unwrap_or(&texels), self.copier, self.counts)?;
+        // The page as this job's targets pad it: cut from the stored tile first where the
+        // cascade did not cut it.
+        let page = || -> Result<Cow<'_, [T]>> {
+            let mut page = match (job.stored, self.copier) {
+                (false, _) => Cow::Borrowed(&texels[..]),
+                (true, Some(copier)) => Cow::Owned(copier.page(job.places[0].1, self.layout, &self.padding)?),
+                (true, None) => return Err(TilerError::Internal("a stored page without the stored tiles".into())),
+            };
+            if let Some((from, t)) = job.pad {
+                let (side, channels) = (self.layout.tile_size, encoder.source_layout().channels.count());
+                let fill = self.fills[t].as_deref().unwrap_or_default();
+                cut::fill_padding(page.to_mut(), side, channels, from, fill);
+            }
+            Ok(page)
+        };
+        let stored = prepare(encoder, self.targets, job, page, self.copier, self.counts)?;
         // The last job of a tile frees its texels here, not when the writer stores the lot.
         if let Some(texels) = Arc::into_inner(texels) {
             self.memory.add(Part::Tiles, -((texels.capacity() * size_of::<T>()) as i64));
@@ -390,7 +456,10 @@ impl<T: Sample> Lot<T> {
     fn of(batches: Vec<Batch<T>>, stage: &Encoding<T>) -> Lot<T> {
         let jobs: Vec<Job<T>> = batches
             .into_iter()
-            .flat_map(|batch| batch.tiles.into_iter().flat_map(move |tile| Job::of(stage, batch.lod, tile)))
+            .flat_map(|batch| {
+                let (lod, stored) = (batch.lod, batch.stored);
+                batch.tiles.into_iter().flat_map(move |tile| Job::of(stage, lod, stored, tile))
+            })
             .collect();
         let finished = Mutex::new(((0..jobs.len()).map(|_| None).collect(), jobs.len()));
         Lot { jobs, finished, done: Condvar::new() }
@@ -426,6 +495,8 @@ struct Job<T> {
     /// One page whose source tile is copied rather than encoded (pages identical at the cut
     /// may have different stored bytes, so each page is a job of its own).
     copy: bool,
+    /// A page of a stored batch ([`Batch::stored`]): no texels until it must be encoded.
+    stored: bool,
     /// Where the page's padding starts (column, row) and the target whose colour fills it, for
     /// targets that pad with another colour than the pages were cut with.
     pad: Option<((u32, u32), usize)>,
@@ -442,7 +513,7 @@ impl<T: Sample> Job<T> {
     /// middle; Deep Zoom crops an edge page that a pack keeps whole), and one per copied page.
     /// Targets past their last level get nothing; a padded page gets a job of its own for
     /// each padding colour its targets fill it with.
-    fn of(stage: &Encoding<T>, lod: u32, cut: CutTile<T>) -> Vec<Job<T>> {
+    fn of(stage: &Encoding<T>, lod: u32, stored: bool, cut: CutTile<T>) -> Vec<Job<T>> {
         let texels = Arc::new(cut.texels);
         let l = stage.layout;
         let (extent, virtual_extent) = (l.level_extent(lod), l.virtual_extent(lod));
@@ -464,7 +535,7 @@ impl<T: Sample> Job<T> {
                     j.encoder == encoder
                         && j.crop == crop
                         && j.copy == copy
-                        && (!copy || j.places[0].1 == page)
+                        && (!(copy || stored) || j.places[0].1 == page)
                         && fill(j.pad) == fill(pad)
                 };
                 match jobs.iter_mut().find(same) {
@@ -474,6 +545,7 @@ impl<T: Sample> Job<T> {
                         encoder,
                         crop,
                         copy,
+                        stored,
                         pad,
                         places: vec![(t, page)],
                         texels: Mutex::new(Some(Arc::clone(&texels))),
@@ -559,21 +631,29 @@ impl Stored {
 
 /// Encodes a tile (or the part the sinks keep), unless it has one colour and every sink that
 /// gets it stores such tiles as their colour, or it is copied from the source as stored.
-fn prepare<T: Sample>(
+///
+/// `page` gives the texels (cut from the stored tile, for a stored job, only when asked): a
+/// stored page is copied without being decoded, so is never found to be of one colour.
+fn prepare<'a, T: Sample>(
     encoder: &TileEncoder<T>,
     targets: &[Target],
     job: &Job<T>,
-    texels: &[T],
+    page: impl Fn() -> Result<Cow<'a, [T]>>,
     copier: Option<&Copier>,
     counts: &Counts,
 ) -> Result<Stored> {
     let channels = encoder.source_layout().channels.count();
     let takes_constants = |&(t, _): &(usize, _)| targets[t].sink.takes_constants();
     // A pack entry holds a constant texel of up to 8 bytes (not 3 or 4 samples of 32 bits).
-    let constant = (job.places.iter().any(takes_constants)
-        && encoder.stored_layout().bytes_per_pixel() <= 8
-        && texels.chunks_exact(channels).all(|t| t == &texels[..channels]))
-    .then(|| encoder.stored_texel(&texels[..channels]));
+    let looked_at =
+        match !job.stored && job.places.iter().any(takes_constants) && encoder.stored_layout().bytes_per_pixel() <= 8 {
+            true => Some(page()?),
+            false => None,
+        };
+    let constant = looked_at
+        .as_ref()
+        .filter(|texels| texels.chunks_exact(channels).all(|t| t == &texels[..channels]))
+        .map(|texels| encoder.stored_texel(&texels[..channels]));
     if constant.is_some() && job.places.iter().all(takes_constants) {
         return Ok(Stored { constant, file: None });
     }
@@ -585,10 +665,14 @@ fn prepare<T: Sample>(
     {
         return Ok(Stored { constant, file: Some(file) });
     }
+    let texels = match looked_at {
+        Some(texels) => texels,
+        None => page()?,
+    };
     let mut bytes = Vec::new();
     let encoded = match job.crop {
-        None => encoder.encode(texels, &mut bytes),
-        Some(crop) => encoder.encode_crop(texels, crop, &mut bytes),
+        None => encoder.encode(&texels, &mut bytes),
+        Some(crop) => encoder.encode_crop(&texels, crop, &mut bytes),
     };
     encoded.map_err(|e| TilerError::Encode { lod, x, y, message: e.to_string() })?;
     // A JPEG or PNG grows its buffer as it writes, up to twice its length: what waits for the

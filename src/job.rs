@@ -38,6 +38,10 @@ pub struct SplitOptions {
     /// line up with the finest level's pages (`--reencode`, an explicit `--quality` or
     /// `--subsampling`); `None` copies them (`StoredTiles`).
     pub reencode: Option<&'static str>,
+    /// Make the first reduced level from the source's stored JPEG tiles decoded at half size
+    /// in the DCT domain (`--fast-shrink`), where the finest level copies them: faster, not
+    /// exact (docs/accuracy.md). Off: every level from the exact sums of the decoded texels.
+    pub fast_shrink: bool,
 }
 
 impl SplitOptions {

@@ -20,7 +20,7 @@ use crate::job::TileEncoding;
 use crate::layout::Layout;
 use crate::limits::{Part, in_flight};
 use crate::pixel::{Depth, PixelLayout, Sample};
-use crate::pyramid::cascade::{Batch, BatchSender, Cascade, Derived, Span};
+use crate::pyramid::cascade::{Batch, BatchSender, Cascade, CutTile, Derived, Span};
 use crate::pyramid::cut::Padding;
 use crate::pyramid::filter::{ExactFilter, sums_need_u128};
 use crate::pyramid::reduce::{Acc, Reducer};
@@ -96,9 +96,46 @@ pub(crate) fn split_to(
 ) -> Result<Summary> {
     let layout = opts.layout(source.width(), source.height())?;
     let copy = plan_copy(source, targets, &layout);
-    let plan = plan(source, targets, opts)?;
-    let (summary, _) = by_depth(source.header(), targets, opts, layout, copy, Passes::Whole(plan, source), progress)?;
+    let header = source.header();
+    let passes = match opts.fast_shrink && layout.lod_count > 1 {
+        true => {
+            let halved = halved(source, targets, &copy)?;
+            let half = opts.layout(halved.width(), halved.height())?;
+            Passes::Halved(plan(halved.as_ref(), targets, opts)?, half, halved)
+        }
+        false => Passes::Whole(plan(source, targets, opts)?, source),
+    };
+    let (summary, _) = by_depth(header, targets, opts, layout, copy, passes, progress)?;
     Ok(summary)
+}
+
+/// `--fast-shrink`'s source: `source` at half size, decoded from its stored JPEG tiles, where
+/// every target copies those tiles into its finest level (which then needs no texel); else
+/// why not.
+fn halved(source: &dyn RowSource, targets: &[Target], (copier, report): &CopyPlan) -> Result<Box<dyn RowSource>> {
+    let refuse = |why: String| Err(TilerError::Options(format!("--fast-shrink: {why}")));
+    let Some(copier) = copier else {
+        return match report.as_ref().and_then(|r| r.declined.as_ref()) {
+            Some(why) => refuse(format!(
+                "the first reduced level is made from the stored JPEG tiles that the finest level copies, and this run does not copy them: {why}"
+            )),
+            None => refuse(format!(
+                "the source stores no JPEG tiles its rows are decoded from ({}); it takes JPEG-tiled TIFFs, slides and DICOM JPEG series",
+                source.describe()
+            )),
+        };
+    };
+    if let Some(t) = copier.takes.iter().position(|takes| !takes) {
+        let why = targets[t].encoding.declines_stored().unwrap_or_default();
+        return refuse(format!(
+            "every output must copy the stored JPEG tiles into its finest level, and output {} encodes them ({why})",
+            t + 1
+        ));
+    }
+    match source.halved() {
+        Some(halved) => Ok(halved),
+        None => refuse(format!("the stored tiles of {} cannot be decoded at half size", source.describe())),
+    }
 }
 
 /// How [`split_to`] reads `source`: in one band, or in stripes (and a coarse pass) where one
@@ -187,6 +224,10 @@ enum Passes<'a> {
     Shard(Vec<Span>, Box<dyn RowSource>),
     /// The levels above the cut, from the roots' sums.
     AboveCut(RootRows<'a>),
+    /// `--fast-shrink`: the finest level's pages copied from the source's stored tiles, then
+    /// the rest of the pyramid from the source at half size (whose levels are the `Layout`'s),
+    /// as the `Whole` pass reads it.
+    Halved(Plan, Layout, Box<dyn RowSource>),
 }
 
 /// Which of the finest level's pages are copied from the source, and what the summary says.
@@ -246,7 +287,7 @@ fn run<T: Sample>(
     };
 
     let (stripes, pass_count, planned) = match &passes {
-        Passes::Whole(plan, _) => {
+        Passes::Whole(plan, _) | Passes::Halved(plan, ..) => {
             (plan.stripes.len(), plan.stripes.len() + plan.coarse.is_some() as usize, Some(plan.held))
         }
         Passes::Shard(spans, _) => (0, spans.len(), None),
@@ -257,21 +298,31 @@ fn run<T: Sample>(
     let clock = StageClock::new();
     let tx = BatchSender::new(tx, Arc::clone(&clock));
     let counts = encoders::Counts::new(targets.len());
+    // A halved pass's cascade starts at the run's first reduced level.
+    let (cascade_layout, lods_above) = match &passes {
+        Passes::Halved(_, half, _) => (*half, 1),
+        _ => (layout, 0),
+    };
     let roots = std::thread::scope(|scope| {
         let producer_clock = Arc::clone(&clock);
         let producer = scope.spawn(move || {
             let producer = Producer {
-                layout,
+                layout: cascade_layout,
                 pixels: src_layout,
                 opts,
                 padding,
-                out: tx.clone(),
+                out: tx.above(lods_above),
                 progress,
                 clock: producer_clock,
             };
-            let result = producer.clock.time(Stage::Producer, || match sum_bytes(opts, src_layout, &layout) {
-                16 => producer.run::<T::Wide>(passes),
-                _ => producer.run::<T::Narrow>(passes),
+            let result = producer.clock.time(Stage::Producer, || {
+                if lods_above > 0 {
+                    send_stored_pages(&tx, &layout, &producer)?;
+                }
+                match sum_bytes(opts, src_layout, &cascade_layout) {
+                    16 => producer.run::<T::Wide>(passes),
+                    _ => producer.run::<T::Narrow>(passes),
+                }
             });
             // An error goes to the consumer, which stops and returns it.
             result.unwrap_or_else(|e| {
@@ -321,6 +372,19 @@ fn run<T: Sample>(
     Ok((summary, roots))
 }
 
+/// Every page of `layout`'s finest level, one batch per row, as pages to copy from the source's
+/// stored tiles (`--fast-shrink`: no texel of that level is decoded, and a batch holds none).
+fn send_stored_pages<T: Sample>(out: &BatchSender<T>, layout: &Layout, producer: &Producer<T>) -> Result<()> {
+    let (columns, rows) = layout.grid(0);
+    for y in 0..rows {
+        producer.check_cancelled()?;
+        let tiles = (0..columns).map(|x| CutTile { texels: Vec::new(), places: vec![(x, y)] }).collect();
+        let sent = out.send(Ok(Batch { lod: 0, tiles, stored: true }));
+        sent.map_err(|_| TilerError::Internal("the encoders stopped".into()))?;
+    }
+    Ok(())
+}
+
 /// The producer: reads the source row by row into each pass's cascade, which sends the cut
 /// tiles on.
 struct Producer<'a, T> {
@@ -338,8 +402,13 @@ impl<T: Sample> Producer<'_, T> {
     where
         T: Into<A>,
     {
+        let mut halved;
         let (plan, source) = match passes {
             Passes::Whole(plan, source) => (plan, source),
+            Passes::Halved(plan, _, source) => {
+                halved = source;
+                (plan, halved.as_mut())
+            }
             Passes::Shard(spans, mut source) => return self.shard::<A>(&spans, source.as_mut()),
             Passes::AboveCut(roots) => return self.above_cut::<A>(roots).map(|()| Vec::new()),
         };

@@ -257,6 +257,16 @@ pub struct OutputArgs {
     #[arg(help_heading = "Pyramid and filter", long, value_parser = super::named::<Filter>())]
     filter: Option<Filter>,
 
+    /// Make LOD 1 from the source's stored JPEG tiles decoded at half size (libjpeg's scaled
+    /// inverse DCT, as libvips shrinks a JPEG on load) instead of from the exact means of their
+    /// decoded texels; the levels above it follow from LOD 1 with --filter. Faster, not exact:
+    /// docs/accuracy.md measures both. Every output must copy the stored tiles into LOD 0 (a
+    /// JPEG-tiled TIFF, slide or DICOM JPEG series cut at its tile size with no border or
+    /// overlap), which stays the stored tiles, untouched; a page of one colour is then copied
+    /// rather than stored as its colour.
+    #[arg(help_heading = "Pyramid and filter", long)]
+    fast_shrink: bool,
+
     /// Sample type of stored tiles: unsignedByte or unsignedShort (png, raw, zstd, zstd-delta),
     /// or for a float source half (raw, zstd: 16-bit floats, what a GPU uploads as R16F, half
     /// the bytes; rounded to nearest even, beyond 65504 infinite) [default: the source's;
@@ -584,6 +594,7 @@ impl OutputArgs {
                 filename_format: names,
                 filter: self.filter,
                 reencode: self.reencode,
+                fast_shrink: self.fast_shrink,
                 ..self.enc.requested()
             },
             overlap: self.overlap,

@@ -641,7 +641,8 @@ fn cut_together(
         .iter()
         .zip(targets)
         .all(|(opts, t)| split::plan(source.as_ref(), t, opts).is_ok_and(|p| p.passes() == 1));
-    if !one_pass {
+    // --fast-shrink reads the source at half size, which one read cannot share.
+    if !one_pass || pyramids.iter().any(|g| g.opts.fast_shrink) {
         let mut summaries = Vec::with_capacity(pyramids.len());
         for (k, (g, t)) in pyramids.iter().zip(targets).enumerate() {
             if k > 0 {

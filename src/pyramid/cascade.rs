@@ -35,21 +35,30 @@ use crate::stages::{Stage, StageClock};
 pub(crate) struct BatchSender<T> {
     tx: SyncSender<Result<Batch<T>>>,
     clock: Arc<StageClock>,
+    /// Levels added to every batch's: 1 where the cascade starts at the run's first reduced
+    /// level (`--fast-shrink`: the finest level is copied, not cut).
+    lods_above: u32,
 }
 
 impl<T> Clone for BatchSender<T> {
     fn clone(&self) -> Self {
-        BatchSender { tx: self.tx.clone(), clock: Arc::clone(&self.clock) }
+        BatchSender { tx: self.tx.clone(), clock: Arc::clone(&self.clock), lods_above: self.lods_above }
     }
 }
 
 impl<T> BatchSender<T> {
     pub(crate) fn new(tx: SyncSender<Result<Batch<T>>>, clock: Arc<StageClock>) -> BatchSender<T> {
-        BatchSender { tx, clock }
+        BatchSender { tx, clock, lods_above: 0 }
+    }
+
+    /// This sender for a cascade whose level 0 is the run's level `lods_above`.
+    pub(crate) fn above(&self, lods_above: u32) -> BatchSender<T> {
+        BatchSender { lods_above, ..self.clone() }
     }
 
     /// Sends `batch`, waiting while the channel is full; fails once the encoders have stopped.
     pub(crate) fn send(&self, batch: Result<Batch<T>>) -> std::result::Result<(), SendError<Result<Batch<T>>>> {
+        let batch = batch.map(|b| Batch { lod: b.lod + self.lods_above, ..b });
         self.clock.time(Stage::ProducerBlocked, || self.tx.send(batch))
     }
 }
@@ -58,6 +67,9 @@ impl<T> BatchSender<T> {
 pub(crate) struct Batch<T> {
     pub lod: u32,
     pub tiles: Vec<CutTile<T>>,
+    /// The pages are the source's stored tiles, copied (`--fast-shrink`'s finest level): their
+    /// texels are empty, decoded from the stored tile only where a page cannot be copied.
+    pub stored: bool,
 }
 
 /// Texels of a tile and every (x, y) that holds them: neighbours with identical texels (most
@@ -296,7 +308,8 @@ impl<T: Sample> Cuts<T> {
             memory.add(Part::Bands, -bytes);
             memory.add(Part::Tiles, bytes);
             moved.set(moved.get() + bytes);
-            out.send(Ok(Batch { lod, tiles })).map_err(|_| TilerError::Options("the encoder stopped".into()))
+            out.send(Ok(Batch { lod, tiles, stored: false }))
+                .map_err(|_| TilerError::Options("the encoder stopped".into()))
         };
         let held = band.held_bytes();
         let pushed = band.push(row, padding, |row| {

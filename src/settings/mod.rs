@@ -152,6 +152,8 @@ pub struct Requested {
     pub max_memory: Option<u64>,
     /// `--reencode`: encode the source's stored JPEG tiles again rather than copy them.
     pub reencode: bool,
+    /// `--fast-shrink`: the first reduced level from the stored JPEG tiles decoded at half size.
+    pub fast_shrink: bool,
 }
 
 /// Combines flags, an existing `info.json` (at `info_path`) and the source into settings.
@@ -269,6 +271,7 @@ pub fn resolve(
             (_, _, Some(_)) => Some("--subsampling"),
             _ => None,
         },
+        fast_shrink: req.fast_shrink,
     };
     opts.filter.check(source).map_err(TilerError::Options)?;
     let stored = codec.stored_layout(source, flatten, tile_depth)?;

@@ -219,6 +219,9 @@ impl RowSource for Described {
     fn stored_tiles(&self) -> Option<std::sync::Arc<dyn crate::source::stored::StoredTiles>> {
         self.transform.is_none().then(|| self.inner.stored_tiles()).flatten()
     }
+    fn halved(&self) -> Option<Box<dyn RowSource>> {
+        self.transform.is_none().then(|| self.inner.halved()).flatten()
+    }
     fn stored_levels(&self) -> Result<Option<crate::source::stored::StoredLevels>> {
         match self.transform {
             None => self.inner.stored_levels(),

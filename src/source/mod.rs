@@ -63,6 +63,7 @@ macro_rules! forward_row_order_to_inner {
 pub mod associated;
 pub mod channels;
 pub(crate) mod dicom;
+pub(crate) mod halved;
 pub mod icc;
 mod jpeg;
 mod libjpeg;
@@ -174,6 +175,13 @@ pub trait RowSource: Send {
     /// (`StoredTiles`); `None` for sources whose rows are not a stored tile's texels (decoded
     /// from strips or whole, or changed on the way: rotated, converted to sRGB).
     fn stored_tiles(&self) -> Option<std::sync::Arc<dyn stored::StoredTiles>> {
+        None
+    }
+    /// These rows at half their size, each stored JPEG tile decoded from its DCT coefficients at
+    /// 1/2 scale (`--fast-shrink`: [`halved`]), for a run that copies those tiles into its
+    /// finest level; `None` for sources that cannot (the default), whose rows are not their
+    /// stored tiles' texels as libjpeg decodes them.
+    fn halved(&self) -> Option<Box<dyn RowSource>> {
         None
     }
     /// Every level of the slide the rows are the full resolution of, as stored, where all
@@ -418,6 +426,9 @@ impl RowSource for Reopening {
     }
     fn stored_tiles(&self) -> Option<std::sync::Arc<dyn stored::StoredTiles>> {
         self.inner.stored_tiles()
+    }
+    fn halved(&self) -> Option<Box<dyn RowSource>> {
+        self.inner.halved()
     }
     fn stored_levels(&self) -> Result<Option<stored::StoredLevels>> {
         self.inner.stored_levels()

@@ -46,6 +46,13 @@ pub trait StoredTiles: Send + Sync {
     /// (a stream that is not a whole tile, or that a browser cannot decode): that tile is
     /// encoded instead. An error names the file and the tile.
     fn tile(&self, col: u32, row: u32) -> crate::error::Result<Option<Vec<u8>>>;
+    /// Tile (`col`, `row`)'s texels inside the image, as the source's rows hold them (8-bit
+    /// grey or RGB), decoded at 1/`denominator` of its size (1 or 2: `--fast-shrink`'s half
+    /// size, from the DCT coefficients): `ceil(w / d)` x `ceil(h / d)` texels, rows packed.
+    /// `None` for grids that cannot (the default). An error names the file and the tile.
+    fn decode(&self, _col: u32, _row: u32, _denominator: u32) -> crate::error::Result<Option<Vec<u8>>> {
+        Ok(None)
+    }
     /// How the tiles code colour, as the first one does (`None`: grey, unreadable or coded
     /// otherwise): a TIFF or DICOM output, which declares one coding for every tile, takes it
     /// where `--subsampling` is not given, so that the tiles can be copied.

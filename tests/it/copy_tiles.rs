@@ -16,11 +16,11 @@ use std::process::Command;
 use crate::common::cli::{self, s};
 
 /// Whether `vips` runs; outside CI a missing one skips the test with a note.
-fn have_vips() -> bool {
+pub(crate) fn have_vips() -> bool {
     crate::common::have_program("vips", "--version", "libvips-tools")
 }
 
-fn tool(name: &str, args: &[&str]) {
+pub(crate) fn tool(name: &str, args: &[&str]) {
     let out = Command::new(name).args(args).output().unwrap();
     assert!(out.status.success(), "{name} {args:?}: {}", String::from_utf8_lossy(&out.stderr));
 }
@@ -32,7 +32,7 @@ fn pattern_png(dir: &Path) -> PathBuf {
 }
 
 /// The pattern at `w x h`.
-fn pattern_png_sized(dir: &Path, w: u32, h: u32) -> PathBuf {
+pub(crate) fn pattern_png_sized(dir: &Path, w: u32, h: u32) -> PathBuf {
     let mut state = 0x2545_F491u32;
     let img = image::RgbImage::from_fn(w, h, |x, y| {
         state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
@@ -118,7 +118,7 @@ fn vips_texels(path: &Path, crop: Option<(u32, u32, u32, u32)>, scratch: &Path) 
 }
 
 /// Every file under `dir`, by its path below it.
-fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+pub(crate) fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     let mut all = BTreeMap::new();
     let mut stack = vec![dir.to_path_buf()];
     while let Some(d) = stack.pop() {

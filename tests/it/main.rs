@@ -18,6 +18,7 @@ mod dicom_jxl;
 mod dicom_out;
 mod docs;
 mod failures;
+mod fast_shrink;
 mod golden;
 mod hostile;
 mod hostile_sources;

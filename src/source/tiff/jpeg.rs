@@ -332,14 +332,7 @@ impl Source {
 
     /// The chunk at `col`, `row` (in chunks): its texels inside the image.
     fn extent(&self, row: u32, col: u32) -> Extent {
-        let x0 = col * self.chunk_w;
-        let y0 = row as u64 * self.chunk_h as u64;
-        Extent {
-            columns: self.chunk_w.min(self.width - x0) as usize,
-            rows: (self.chunk_h as u64).min(self.height as u64 - y0) as usize,
-            max_columns: self.chunk_w as usize,
-            max_rows: self.chunk_h as usize,
-        }
+        chunk_extent((self.chunk_w, self.chunk_h), (self.width, self.height), col, row)
     }
 
     /// Sizes `band`'s buffers for the band `key`: each chunk under its columns exactly to its
@@ -524,6 +517,13 @@ impl RowSource for JpegTiff {
         s.tiled.then(|| Arc::new(tiles) as Arc<dyn StoredTiles>)
     }
 
+    /// The tiles decoded at half size: what their texels are, as `read_row` decodes them.
+    fn halved(&self) -> Option<Box<dyn RowSource>> {
+        let tiles = self.stored_tiles()?;
+        let path = &self.source.chunks.path;
+        Some(Box::new(crate::source::halved::Halved::new(path, tiles, self.header(), self.embedded())))
+    }
+
     /// This page and its reduced levels, where it has some, each as its JPEG tiles.
     fn stored_levels(&self) -> Result<Option<StoredLevels>> {
         let Some(full) = self.stored_tiles().filter(|_| !self.pages.levels.is_empty()) else { return Ok(None) };
@@ -597,8 +597,11 @@ fn tile_name(col: u32, row: u32, index: usize) -> String {
 /// The JPEG tiles of a tiled TIFF, handed out as files.
 struct JpegTiles {
     chunks: Arc<Chunks>,
+    colour: Colour,
     samples: Samples,
     size: (u32, u32),
+    /// The image's texels across and down.
+    image: (u32, u32),
     across: u32,
     down: u32,
     quality: Option<Quality>,
@@ -621,12 +624,28 @@ impl JpegTiles {
         .map(|t| stored::estimate_quality(&t));
         JpegTiles {
             chunks: Arc::clone(chunks),
+            colour,
             samples,
             size,
+            image: (width, height),
             across: width.div_ceil(size.0),
             down: height.div_ceil(size.1),
             quality,
         }
+    }
+
+    /// Tile (`col`, `row`)'s complete JPEG stream, and its name for messages.
+    fn stream(&self, col: u32, row: u32) -> Result<(Vec<u8>, String)> {
+        let index = row as usize * self.across as usize + col as usize;
+        let name = tile_name(col, row, index);
+        if col >= self.across || row >= self.down {
+            return Err(TilerError::decode(
+                &self.chunks.path,
+                format!("{name}: outside the {}x{} tiles", self.across, self.down),
+            ));
+        }
+        let stream = self.chunks.stream(index, &name).map_err(|m| TilerError::decode(&self.chunks.path, m))?;
+        Ok((stream, name))
     }
 }
 
@@ -640,16 +659,30 @@ impl StoredTiles for JpegTiles {
     }
 
     fn tile(&self, col: u32, row: u32) -> Result<Option<Vec<u8>>> {
-        let index = row as usize * self.across as usize + col as usize;
-        let name = tile_name(col, row, index);
-        if col >= self.across || row >= self.down {
-            return Err(TilerError::decode(
-                &self.chunks.path,
-                format!("{name}: outside the {}x{} tiles", self.across, self.down),
-            ));
-        }
-        let stream = self.chunks.stream(index, &name).map_err(|m| TilerError::decode(&self.chunks.path, m))?;
+        let (stream, _) = self.stream(col, row)?;
         Ok(stored::as_file(&stream, self.samples, self.size))
+    }
+
+    fn decode(&self, col: u32, row: u32, denominator: u32) -> Result<Option<Vec<u8>>> {
+        let (stream, name) = self.stream(col, row)?;
+        let extent = chunk_extent(self.size, self.image, col, row);
+        let d = denominator as usize;
+        let mut texels = vec![0; extent.columns.div_ceil(d) * extent.rows.div_ceil(d) * self.colour.components()];
+        libjpeg::decode_scaled(&stream, self.colour, extent, denominator, &mut texels)
+            .map_err(|m| TilerError::decode(&self.chunks.path, format!("{name}: {m}")))?;
+        Ok(Some(texels))
+    }
+}
+
+/// The chunk at `col`, `row` of a grid of `chunk`-texel chunks over an `image`: its texels
+/// inside the image.
+fn chunk_extent(chunk: (u32, u32), image: (u32, u32), col: u32, row: u32) -> Extent {
+    let (x0, y0) = (col * chunk.0, row as u64 * chunk.1 as u64);
+    Extent {
+        columns: chunk.0.min(image.0 - x0) as usize,
+        rows: (chunk.1 as u64).min(image.1 as u64 - y0) as usize,
+        max_columns: chunk.0 as usize,
+        max_rows: chunk.1 as usize,
     }
 }
 

@@ -49,9 +49,28 @@ pub(super) struct Extent {
 /// Decodes the first `extent.rows` rows of `stream`, the first `extent.columns` texels of each,
 /// into `out` (rows packed, `components` bytes per texel).
 pub(super) fn decode(stream: &[u8], colour: Colour, extent: Extent, out: &mut [u8]) -> Result<(), String> {
-    let row_bytes = extent.columns * colour.components();
-    if out.len() != row_bytes * extent.rows {
-        return Err(format!("internal: {} bytes for {} rows of {row_bytes}", out.len(), extent.rows));
+    decode_scaled(stream, colour, extent, 1, out)
+}
+
+/// [`decode`] at 1/`denominator` of the size (1, 2, 4 or 8): libjpeg-turbo's scaled inverse
+/// DCT makes each 8x8 block 4x4, 2x2 or 1x1 texels straight from its coefficients, which is
+/// how libvips shrinks a JPEG on load. `out` holds `ceil(columns / d)` texels of each of the
+/// first `ceil(rows / d)` rows.
+pub(super) fn decode_scaled(
+    stream: &[u8],
+    colour: Colour,
+    extent: Extent,
+    denominator: u32,
+    out: &mut [u8],
+) -> Result<(), String> {
+    if ![1, 2, 4, 8].contains(&denominator) {
+        return Err(format!("internal: a JPEG is decoded at 1/1, 1/2, 1/4 or 1/8, not 1/{denominator}"));
+    }
+    let d = denominator as usize;
+    let row_bytes = extent.columns.div_ceil(d) * colour.components();
+    let rows = extent.rows.div_ceil(d);
+    if out.len() != row_bytes * rows {
+        return Err(format!("internal: {} bytes for {rows} rows of {row_bytes}", out.len()));
     }
     // A frame libjpeg-turbo here does not decode would fail as "damaged" data: say what it is.
     if let Some(kind) =
@@ -65,7 +84,7 @@ pub(super) fn decode(stream: &[u8], colour: Colour, extent: Extent, out: &mut [u
     // Boxed: libjpeg keeps pointers to the struct in its memory pools while it lives.
     let mut cinfo: Box<jpeg_decompress_struct> = Box::new(zeroed_cinfo());
     cinfo.common.err = &mut *err;
-    let result = catch_unwind(AssertUnwindSafe(|| run(&mut cinfo, stream, colour, extent, out)));
+    let result = catch_unwind(AssertUnwindSafe(|| run(&mut cinfo, stream, colour, (extent, denominator), out)));
     destroy(&mut cinfo);
     match result {
         Ok(result) => result,
@@ -93,7 +112,7 @@ fn run(
     cinfo: &mut jpeg_decompress_struct,
     stream: &[u8],
     colour: Colour,
-    extent: Extent,
+    (extent, denominator): (Extent, u32),
     out: &mut [u8],
 ) -> Result<(), String> {
     // SAFETY: `cinfo` was zeroed, its `err` points at a live error manager whose
@@ -121,14 +140,20 @@ fn run(
         Colour::YCbCr => (J_COLOR_SPACE::JCS_YCbCr, J_COLOR_SPACE::JCS_RGB),
         Colour::Rgb => (J_COLOR_SPACE::JCS_RGB, J_COLOR_SPACE::JCS_RGB),
     };
+    (cinfo.scale_num, cinfo.scale_denom) = (1, denominator);
     // SAFETY: as above; the header has been read.
     unsafe { mozjpeg_sys::jpeg_start_decompress(cinfo) };
-    let row_bytes = extent.columns * n;
-    let mut scanline = vec![0u8; w * n];
+    // libjpeg rounds a scaled size up, as `ceil(w / d)`.
+    let (out_w, d) = (cinfo.output_width as usize, denominator as usize);
+    if out_w != w.div_ceil(d) || cinfo.output_components as usize != n {
+        return Err(format!("internal: libjpeg decodes {w} columns at 1/{d} into {out_w} of {} samples", n));
+    }
+    let row_bytes = extent.columns.div_ceil(d) * n;
+    let mut scanline = vec![0u8; out_w * n];
     for row in out.chunks_exact_mut(row_bytes) {
         let mut at = scanline.as_mut_ptr();
         // SAFETY: `at` points at one writable row of `output_width` x `output_components`
-        // bytes (w x n: no scaling, and the output has as many components as the input).
+        // bytes (checked above: the output has as many components as the input).
         let got = unsafe { mozjpeg_sys::jpeg_read_scanlines(cinfo, &mut at, 1) };
         if got != 1 {
             return Err(format!("libjpeg stopped at row {}", cinfo.output_scanline));

@@ -148,6 +148,7 @@ pub fn png_options(tile_size: u32, border: u32, background: Background) -> Split
         max_memory: 1 << 30,
         down_to_one_texel: false,
         reencode: None,
+        fast_shrink: false,
     }
 }
 

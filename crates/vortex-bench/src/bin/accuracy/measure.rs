@@ -114,6 +114,7 @@ pub fn split_once(img: &Img, layout: &Layout, choice: Choice, dest: &Path) -> Re
         max_memory: vortex_tiler::limits::DEFAULT_MEMORY,
         down_to_one_texel: false,
         reencode: None,
+        fast_shrink: false,
     };
     let stored = codec.stored_layout(img.layout(), false, None)?;
     let started = Instant::now();
