@@ -223,4 +223,6 @@ pub struct StoredReport {
     pub quality: Option<Quality>,
     /// Why none was copied (`None`: those wholly inside the image and on the pages' grid were).
     pub declined: Option<String>,
+    /// The first reduced level was made from them decoded at half size (`--fast-shrink`).
+    pub halved: bool,
 }

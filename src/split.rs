@@ -52,7 +52,7 @@ fn plan_copy(source: &dyn RowSource, targets: &[Target], layout: &Layout) -> (Op
     } else {
         None
     };
-    let report = StoredReport { tile_size, quality: tiles.quality(), declined };
+    let report = StoredReport { tile_size, quality: tiles.quality(), declined, halved: false };
     let copier = report.declined.is_none().then(|| Copier {
         tiles,
         width: layout.width,
@@ -95,11 +95,14 @@ pub(crate) fn split_to(
     progress: &dyn Progress,
 ) -> Result<Summary> {
     let layout = opts.layout(source.width(), source.height())?;
-    let copy = plan_copy(source, targets, &layout);
+    let mut copy = plan_copy(source, targets, &layout);
     let header = source.header();
     let passes = match opts.fast_shrink && layout.lod_count > 1 {
         true => {
             let halved = halved(source, targets, &copy)?;
+            if let Some(report) = &mut copy.1 {
+                report.halved = true;
+            }
             let half = opts.layout(halved.width(), halved.height())?;
             Passes::Halved(plan(halved.as_ref(), targets, opts)?, half, halved)
         }

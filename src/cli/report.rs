@@ -135,9 +135,10 @@ fn stored_clause(s: &Summary, t: &vortex_tiler::split::StoredReport) -> String {
             )
         }
     };
+    let halved = if t.halved { ", LOD 1 from them decoded at half size (--fast-shrink)" } else { "" };
     match &t.declined {
         None => format!(
-            "; {copied} tiles copied as stored, {cropped} of them cropped losslessly at the edge, from {tiles}{recompressed}"
+            "; {copied} tiles copied as stored, {cropped} of them cropped losslessly at the edge, from {tiles}{recompressed}{halved}"
         ),
         Some(why) => format!("; {tiles} re-encoded, not copied: {why}"),
     }
@@ -189,6 +190,7 @@ pub fn summary_value(done: &Finished, layout: &str, out: &Path, figures: &Figure
             "copied": s.copied,
             "cropped": s.cropped,
             "declined": t.declined,
+            "halved": t.halved,
             "recompressed": {
                 "tiles": s.recompressed.tiles,
                 "jpegBytes": s.recompressed.jpeg_bytes,

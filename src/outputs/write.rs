@@ -267,6 +267,7 @@ impl Open {
             tile_size: level.tile,
             quality: None,
             declined: None,
+            halved: false,
         });
         Open::upload(staged, in_flight)?;
         let mut layout = crate::layout::Layout::new(u64::from(level.width), u64::from(level.height), level.tile.0, 0)?;

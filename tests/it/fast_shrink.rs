@@ -67,6 +67,10 @@ fn the_first_reduced_level_is_the_stored_tiles_at_half_size() {
     assert_eq!(level(&fast_files, 0), level(&exact_files, 0), "LOD 0 is the stored tiles in both runs");
     assert_eq!(level(&fast_files, 0).len(), 48);
     assert_eq!(fast["copied"], 48, "{fast}");
+    assert_eq!(
+        (fast["storedTiles"]["halved"].as_bool(), exact["storedTiles"]["halved"].as_bool()),
+        (Some(true), Some(false))
+    );
     assert_eq!(fast["tiles"], exact["tiles"]);
 
     let scratch = dir.path().join("tile.jpg");
