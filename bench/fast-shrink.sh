@@ -51,7 +51,7 @@ for lod, level in enumerate(levels):
         cols = 1 + max(int(os.path.basename(n).split("_")[0]) for n in names)
         rows = 1 + max(int(os.path.basename(n).split("_")[1].split(".")[0]) for n in names)
         ext = os.path.splitext(names[0])[1]
-        tiles = [pyvips.Image.new_from_file(os.path.join(root, str(level), f"{c}_{r}{ext}"), access="sequential")
+        tiles = [pyvips.Image.new_from_file(os.path.join(root, str(level), f"{c}_{r}{ext}"))
                  for r in range(rows) for c in range(cols)]
         return pyvips.Image.arrayjoin(tiles, across=cols).extract_band(0, n=3).cast("float")
     x, y = image(a), image(b)
@@ -132,4 +132,4 @@ PY
   echo
   echo "Medians of $RUNS runs, alternating."
 } | tee "$OUT/report.md"
-splice fast-shrink "$OUT/report.md"
+splice fast-shrink "$OUT/report.md" ""
