@@ -19,8 +19,8 @@
 #   VORTEX_PYVIPS (a Python with pyvips; else bench/lib.sh installs one), DOC (default
 #   docs/accuracy.md: the tables go between its fast-shrink markers). Run it on a quiet machine.
 set -euo pipefail
+DOC=${DOC:-$PWD/docs/accuracy.md}
 source bench/lib.sh
-DOC=${DOC:-$ROOT/docs/accuracy.md}
 bench_setup
 pyvips_setup
 [ -n "$PY" ] || { echo "error: no Python with pyvips to make the slide and compare the levels" >&2; exit 1; }
