@@ -13,7 +13,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use crate::error::{Result, TilerError};
+use crate::error::TilerError;
 use crate::source::stored::StoredTiles;
 use crate::source::tile_rows::TileRows;
 use crate::source::{Decoding, Embedded, ImageHeader, RowSource};
@@ -45,7 +45,7 @@ impl Halved {
     }
 
     /// Tile `index`'s `w x h` texels at half size into `texels`.
-    fn decode(&self, index: usize, (w, h): (u32, u32), texels: &mut Vec<u8>) -> std::result::Result<(), String> {
+    fn decode(&self, index: usize, w: u32, h: u32, texels: &mut Vec<u8>) -> std::result::Result<(), String> {
         let (col, row) = (index as u32 % self.across, index as u32 / self.across);
         let message = |e: TilerError| match e {
             TilerError::Decode { message, .. } => message,
@@ -64,28 +64,15 @@ impl Halved {
 }
 
 impl RowSource for Halved {
+    rows_of_tile_rows!(decode);
+
     fn header(&self) -> ImageHeader {
         self.header
     }
 
-    fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
-        let mut rows = std::mem::take(&mut self.rows);
-        let read = rows.read_row(&self.path, out, |index, w, h, texels| self.decode(index, (w, h), texels));
-        self.rows = rows;
-        read
-    }
-
     fn describe(&self) -> String {
         let (tw, th) = self.tiles.tile_size();
-        format!("{}x{} JPEG tiles decoded at half size (--fast-shrink: DCT-scaled, a row of tiles in parallel)", tw, th)
-    }
-
-    fn buffer_bytes(&self) -> u64 {
-        self.rows.buffer_bytes()
-    }
-
-    fn most_buffer_bytes(&self) -> u64 {
-        self.rows.most_buffer_bytes()
+        format!("{tw}x{th} JPEG tiles decoded at half size (--fast-shrink: DCT-scaled, a row of tiles in parallel)")
     }
 
     fn decoding(&self) -> Decoding {
@@ -94,15 +81,5 @@ impl RowSource for Halved {
 
     fn embedded(&self) -> Embedded {
         self.embedded.clone()
-    }
-
-    fn skip_rows(&mut self, rows: u32) -> Result<()> {
-        self.rows.skip(rows);
-        Ok(())
-    }
-
-    fn rewind(&mut self) -> Result<()> {
-        self.rows.rewind();
-        Ok(())
     }
 }

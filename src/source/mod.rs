@@ -60,6 +60,40 @@ macro_rules! forward_row_order_to_inner {
     };
 }
 
+/// The row methods of a [`RowSource`] whose rows come from a grid of whole-decoded tiles
+/// (`tile_rows::TileRows`) in its field `rows`, the file named by its field `path`:
+/// `rows_of_tile_rows!(decode)` reads each row through `self.decode(index, w, h, texels)`,
+/// which decodes tile `index` (row-major) into `texels`, its `w x h` texels inside the image.
+macro_rules! rows_of_tile_rows {
+    ($decode:ident) => {
+        fn read_row(&mut self, out: &mut [u8]) -> $crate::error::Result<()> {
+            // Taken out while it reads, so that the decoding may borrow `self`.
+            let mut rows = std::mem::take(&mut self.rows);
+            let read = rows.read_row(&self.path, out, |index, w, h, texels| self.$decode(index, w, h, texels));
+            self.rows = rows;
+            read
+        }
+
+        fn buffer_bytes(&self) -> u64 {
+            self.rows.buffer_bytes()
+        }
+
+        fn most_buffer_bytes(&self) -> u64 {
+            self.rows.most_buffer_bytes()
+        }
+
+        fn skip_rows(&mut self, rows: u32) -> $crate::error::Result<()> {
+            self.rows.skip(rows);
+            Ok(())
+        }
+
+        fn rewind(&mut self) -> $crate::error::Result<()> {
+            self.rows.rewind();
+            Ok(())
+        }
+    };
+}
+
 pub mod associated;
 pub mod channels;
 pub(crate) mod dicom;

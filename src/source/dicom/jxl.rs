@@ -121,37 +121,14 @@ impl JxlFrames {
 }
 
 impl RowSource for JxlFrames {
+    rows_of_tile_rows!(decode_frame);
+
     fn header(&self) -> ImageHeader {
         ImageHeader { width: self.size.0, height: self.size.1, layout: self.layout }
     }
 
     fn embedded(&self) -> Embedded {
         self.embedded.clone()
-    }
-
-    fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
-        let mut rows = std::mem::take(&mut self.rows);
-        let read = rows.read_row(&self.path, out, |index, w, h, texels| self.decode_frame(index, w, h, texels));
-        self.rows = rows;
-        read
-    }
-
-    fn buffer_bytes(&self) -> u64 {
-        self.rows.buffer_bytes()
-    }
-
-    fn most_buffer_bytes(&self) -> u64 {
-        self.rows.most_buffer_bytes()
-    }
-
-    fn skip_rows(&mut self, rows: u32) -> Result<()> {
-        self.rows.skip(rows);
-        Ok(())
-    }
-
-    fn rewind(&mut self) -> Result<()> {
-        self.rows.rewind();
-        Ok(())
     }
 
     fn describe(&self) -> String {

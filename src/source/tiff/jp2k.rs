@@ -390,37 +390,14 @@ impl StoredTiles for Jp2kTiles {
 }
 
 impl RowSource for Jp2kTiff {
+    rows_of_tile_rows!(decode_tile);
+
     fn header(&self) -> ImageHeader {
         ImageHeader { width: self.width, height: self.height, layout: PixelLayout::new(Channels::Rgb, Depth::U8) }
     }
 
     fn embedded(&self) -> Embedded {
         self.embedded.clone()
-    }
-
-    fn read_row(&mut self, out: &mut [u8]) -> Result<()> {
-        let mut rows = std::mem::take(&mut self.rows);
-        let read = rows.read_row(&self.path, out, |index, w, h, texels| self.decode_tile(index, w, h, texels));
-        self.rows = rows;
-        read
-    }
-
-    fn buffer_bytes(&self) -> u64 {
-        self.rows.buffer_bytes()
-    }
-
-    fn most_buffer_bytes(&self) -> u64 {
-        self.rows.most_buffer_bytes()
-    }
-
-    fn skip_rows(&mut self, rows: u32) -> Result<()> {
-        self.rows.skip(rows);
-        Ok(())
-    }
-
-    fn rewind(&mut self) -> Result<()> {
-        self.rows.rewind();
-        Ok(())
     }
 
     /// This page and its reduced levels, where it has some, each as its JPEG 2000 tiles, for a
