@@ -633,7 +633,7 @@ impl Stored {
 /// gets it stores such tiles as their colour, or it is copied from the source as stored.
 ///
 /// `page` gives the texels (cut from the stored tile, for a stored job, only when asked): a
-/// stored page is copied without being decoded, so is never found to be of one colour.
+/// stored page to copy is copied without being decoded, so is never found to be of one colour.
 fn prepare<'a, T: Sample>(
     encoder: &TileEncoder<T>,
     targets: &[Target],
@@ -645,11 +645,11 @@ fn prepare<'a, T: Sample>(
     let channels = encoder.source_layout().channels.count();
     let takes_constants = |&(t, _): &(usize, _)| targets[t].sink.takes_constants();
     // A pack entry holds a constant texel of up to 8 bytes (not 3 or 4 samples of 32 bits).
-    let looked_at =
-        match !job.stored && job.places.iter().any(takes_constants) && encoder.stored_layout().bytes_per_pixel() <= 8 {
-            true => Some(page()?),
-            false => None,
-        };
+    // A stored page to copy is not decoded to find out.
+    let may_be_constant = !(job.stored && job.copy)
+        && job.places.iter().any(takes_constants)
+        && encoder.stored_layout().bytes_per_pixel() <= 8;
+    let looked_at = if may_be_constant { Some(page()?) } else { None };
     let constant = looked_at
         .as_ref()
         .filter(|texels| texels.chunks_exact(channels).all(|t| t == &texels[..channels]))
