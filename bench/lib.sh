@@ -144,6 +144,7 @@ split_variant_args() {
   case $1 in
     strip-box) echo "--border 0 --filter box" ;;
     strip-border1) echo "--border 1" ;;
+    jtiff-fast) echo "--border 0 --fast-shrink" ;;
     *) echo "--border 0" ;;
   esac
 }

@@ -20,6 +20,9 @@
 # only the JPEG codec, the one the peer writes too (issue 28's goals); CODECS adds the others.
 # *held* is what the stages held at most by their own count (`split --json`'s
 # `memory.peakBytes`), beside the peak RSS.
+# `jtiff` is the image as a JPEG-tiled BigTIFF (256² tiles, Q90: RGB, as libvips writes from
+# Q90 on), whose tiles the pack copies into its finest level (issue 45); `jtiff-fast` cuts it with
+# `--fast-shrink` (docs/accuracy.md).
 # Two more rows cut the strip BigTIFF as issue 28's goals name them: `strip-box` with
 # `--filter box` (libvips' own 2x2 mean), `strip-border1` with the default border of 1 (the peer
 # then writes 254-texel tiles with an overlap of 1: the same 256-texel files).
@@ -41,7 +44,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source bench/lib.sh
 RUNS=${RUNS:-5}
-SOURCES=${SOURCES:-strip strip-box strip-border1 tiled deflate lzw png jpeg ppm tiles}
+SOURCES=${SOURCES:-strip strip-box strip-border1 tiled jtiff jtiff-fast deflate lzw png jpeg ppm tiles}
 CODECS=${CODECS:-jpeg}
 bench_setup
 SRC=$WORK/src16k.tif
@@ -56,6 +59,10 @@ source_file() {
   case $1 in
     strip | strip-box | strip-border1) echo "$SRC"; return ;;
     tiled) f=$M/tiled.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --tile --tile-width 256 --tile-height 256 --bigtiff ;;
+    jtiff | jtiff-fast)
+      f=$M/jtiff.tif
+      [ -s "$f" ] || vips tiffsave "$SRC" "$f" --tile --tile-width 256 --tile-height 256 --compression jpeg --Q 90 --bigtiff
+      ;;
     deflate) f=$M/deflate.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --compression deflate --bigtiff ;;
     lzw) f=$M/lzw.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --compression lzw --bigtiff ;;
     png) f=$M/src.png; [ -s "$f" ] || vips pngsave "$SRC" "$f" --compression 1 ;;
@@ -146,7 +153,7 @@ def cells():
 mpx = 16384 * 16384 / 1e6
 print(f"{datetime.date.today()}, {os.cpu_count()} cores, vortex-tiler {rev}"
       + (f", peer {peer_version} (pyvips-binary, direct mode: `Q=85`) writing a .zip of 256-texel JPEG tiles" if peer_version else "")
-      + "; `split --pack --tile-size 256 --border 0`, default filter (`strip-box`: `--filter box`; `strip-border1`: `--border 1`,"
+      + "; `split --pack --tile-size 256 --border 0`, default filter (`strip-box`: `--filter box`; `jtiff-fast`: `--fast-shrink`; `strip-border1`: `--border 1`,"
       + " the peer's tiles 254 texels with an overlap of 1); the median of the runs per cell.")
 print()
 print("| source | codec | wall | CPU | CPU / wall | CPU ms / Mpx | Mpx/s | peak RSS | held | read | waits for rows | pyramid | cut | waits for encoders | encoders wait | encode | store | bound by | vs peer |")
@@ -206,7 +213,8 @@ by*: the encoders (or storing, where it took longer than encoding) where the cut
 them longer than they for it, else the busiest of reading, the pyramid and cutting. *Held*: what
 the stages held at most by their own count (\`split --json\`'s \`memory.peakBytes\`, docs/cli.md);
 the rest of the peak RSS is code, stacks, tables and the allocator's. The
-\`tiles\` source is 4096 JPEG tiles, read by \`convert\`.
+\`tiles\` source is 4096 JPEG tiles, read by \`convert\`; \`jtiff\` a JPEG-tiled BigTIFF whose
+tiles the pack copies (\`jtiff-fast\`: with \`--fast-shrink\`).
 *vs peer*: libvips' wall time over ours, JPEG only. In the CPU table, *read*, *decode* (a JPEG
 TIFF's tiles decoded on the pool), *sums*, *cut*, *encode* and *store* are each stage's CPU time
 by its thread's CPU clock (\`split --json\`'s
