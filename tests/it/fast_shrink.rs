@@ -191,3 +191,28 @@ fn runs_that_cannot_copy_the_finest_level_are_refused() {
         assert!(!out.exists(), "{args:?} left an output");
     }
 }
+
+/// A pack (the ordered sink, which stores the finest pages first here): its finest level, unpacked,
+/// is the exact run's; every other level is there.
+#[test]
+fn a_pack_holds_the_stored_tiles_and_every_level() {
+    if !have_vips() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let tiff = jpeg_tiff(dir.path(), (1000, 700));
+    let mut unpacked = Vec::new();
+    for (name, extra) in [("exact", &[][..]), ("fast", &["--fast-shrink"][..])] {
+        let pack = dir.path().join(format!("{name}.vtpk"));
+        let args =
+            [&["split", s(&tiff), "--pack", s(&pack), "--tile-size", "128", "--border", "0", "-q"], extra].concat();
+        cli::ok(&args);
+        let out = dir.path().join(format!("{name}-unpacked"));
+        cli::ok(&["unpack", s(&pack), "-o", s(&out), "-q"]);
+        unpacked.push(files(&out));
+    }
+    let names = |all: &std::collections::BTreeMap<String, Vec<u8>>| all.keys().cloned().collect::<Vec<_>>();
+    assert_eq!(names(&unpacked[1]), names(&unpacked[0]), "the same tiles");
+    assert_eq!(level(&unpacked[1], 0), level(&unpacked[0], 0), "LOD 0 is the exact run's");
+    assert_eq!(level(&unpacked[1], 0).len(), 48);
+}
