@@ -212,7 +212,7 @@ pub trait RowSource: Send {
         None
     }
     /// These rows at half their size, each stored JPEG tile decoded from its DCT coefficients at
-    /// 1/2 scale (`--fast-shrink`: [`halved`]), for a run that copies those tiles into its
+    /// 1/2 scale (`--fast-shrink`, `source/halved.rs`), for a run that copies those tiles into its
     /// finest level; `None` for sources that cannot (the default), whose rows are not their
     /// stored tiles' texels as libjpeg decodes them.
     fn halved(&self) -> Option<Box<dyn RowSource>> {
