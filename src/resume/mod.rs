@@ -455,7 +455,7 @@ mod tests {
             Record::file(id(0, 3, 4), b"tile"),
             Record::Entry {
                 id: id(2, 0, 1),
-                entry: Entry { offset_or_value: 0x1234_5678_9a, len: 77, crc: 5, kind: 3 },
+                entry: Entry { offset_or_value: 0x0012_3456_789a, len: 77, crc: 5, kind: 3 },
             },
             Record::Entry { id: id(1, 1, 1), entry: Entry { offset_or_value: 0xffee, len: 0, crc: 0, kind: 1 } },
         ];
