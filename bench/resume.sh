@@ -3,20 +3,27 @@
 #
 #   1. The journal's cost on a run that is not interrupted: `split SRC --pack` (and `-o DIR
 #      --layout dzi`) with and without --resume, RUNS rounds alternating, medians of the wall and
-#      of the user + system CPU time (/usr/bin/time). Goal of the issue: under 2%.
+#      of the user + system CPU time (/usr/bin/time), and the cost as the median over rounds of
+#      each round's (--resume - plain) / plain (a round's two runs are seconds apart, so other
+#      load on the machine moves them alike). Goal of the issue: under 2%.
 #   2. A run SIGKILLed once its journal records half the tiles, then the same command with
 #      --resume: the resumed run's tiles encoded and kept (from --json), its CPU time, and the
 #      work done twice: (killed run's CPU + resumed run's CPU - an uninterrupted run's CPU) /
 #      the uninterrupted run's CPU. The resumed output is compared with the uninterrupted
 #      run's (`cmp`, `diff -r`): the script stops if they differ.
 #
+#   3. With CALLGRIND=1, the journal's cost where other load on the machine cannot move it:
+#      the instructions (valgrind's callgrind, user space only; one encoder thread) of a
+#      4096 x 4096 crop of the source cut with and without --resume, pack and Deep Zoom. The
+#      kernel's part, one write(2) of a line per tile, is under a microsecond a tile.
+#
 # Source: a SIDE x SIDE RGB 8-bit uncompressed TIFF made by libvips (smooth bands plus noise,
 # so that JPEG tiles are of a usual size), read once before the runs (page cache). Tiles: 256
 # texels, no border, JPEG quality 85.
 #
 # Usage, from the repository root, after `cargo build --release` (any feature set with `cli`):
-#     bench/resume.sh                 # SIDE=8192 RUNS=5, about 2 minutes on 2 cores
-#     SIDE=16384 RUNS=3 bench/resume.sh
+#     bench/resume.sh                 # SIDE=8192 RUNS=5, under a minute on 2 cores
+#     SIDE=16384 RUNS=5 bench/resume.sh   # about 3 minutes
 # VORTEX=PATH times another build. Works in bench/work/ (git-ignored): every process in
 # resume-runs.tsv, the summary on standard output.
 set -euo pipefail
@@ -48,11 +55,11 @@ RAW=$WORK/resume-runs.tsv # kind case round wall_s cpu_s encoded kept tiles
 OUT=$WORK/out-resume
 rm -rf "$OUT"
 mkdir -p "$OUT"
-TILES=(--tile-size 256 --border 0 --codec jpeg)
+TILES=(--tile-size 256 --codec jpeg)
 
 # dest KIND NAME: the output's path; flags KIND PATH: the output's flags.
 dest() { if [ "$1" = pack ]; then echo "$OUT/$2.vtpk"; else echo "$OUT/$2"; fi; }
-flags() { if [ "$1" = pack ]; then echo "--pack $2"; else echo "-o $2 --layout dzi"; fi; }
+flags() { if [ "$1" = pack ]; then echo "--pack $2 --border 0"; else echo "-o $2 --layout dzi --overlap 0"; fi; }
 jnum() { grep -o "\"$1\":[0-9.eE+-]*" "$2" | head -1 | cut -d: -f2; }
 cpu_of() { awk '/User time/ { u = $NF } /System time/ { s = $NF } END { printf "%.3f", u + s }' "$1"; }
 wall_of() {
@@ -105,6 +112,23 @@ for kind in pack dzi; do
   if [ "$kind" = pack ]; then cmp "$path" "$(dest pack plain)"; else diff -r "$path" "$(dest dzi plain)" >/dev/null; fi
 done
 
+if [ "${CALLGRIND:-0}" = 1 ]; then
+  [ -s resume-src4096.tif ] || vips crop "$SRC" resume-src4096.tif 0 0 4096 4096
+  # instructions FLAGS...: callgrind's count of the run's user-space instructions.
+  instructions() {
+    valgrind --tool=callgrind --callgrind-out-file="$WORK/callgrind.out" "$VT" split resume-src4096.tif "$@" \
+      --tile-size 256 --codec jpeg -q --threads 1 2>&1 | sed -n 's/.*Collected : //p'
+  }
+  for kind in pack dzi; do
+    rm -rf "$OUT"/cg-*  "$OUT"/.cg-*
+    # shellcheck disable=SC2046
+    plain=$(instructions $(flags "$kind" "$(dest "$kind" cg-plain)"))
+    # shellcheck disable=SC2046
+    journal=$(instructions $(flags "$kind" "$(dest "$kind" cg-journal)") --resume)
+    printf '%s\tcallgrind\t1\t%s\t%s\n' "$kind" "$plain" "$journal" >>"$RAW"
+  done
+fi
+
 median_of() { awk -F'\t' -v k="$1" -v c="$2" -v f="$3" '$1 == k && $2 == c { print $f }' "$RAW" | sort -g |
   awk '{ v[NR] = $1 } END { if (NR % 2) print v[(NR + 1) / 2]; else print (v[NR / 2] + v[NR / 2 + 1]) / 2 }'; }
 one() { awk -F'\t' -v k="$1" -v c="$2" -v f="$3" '$1 == k && $2 == c { print $f; exit }' "$RAW"; }
@@ -112,12 +136,27 @@ one() { awk -F'\t' -v k="$1" -v c="$2" -v f="$3" '$1 == k && $2 == c { print $f;
 echo
 echo "vortex-tiler $REV, $(date -u '+%Y-%m-%d %H:%M UTC'), $SIDE x $SIDE RGB, 256-texel JPEG tiles, $RUNS rounds (medians); $(nproc) cores, load $(cut -d' ' -f1 /proc/loadavg)"
 echo
-echo "| output | wall s plain | wall s --resume | wall cost | CPU s plain | CPU s --resume | CPU cost |"
+# paired KIND COLUMN: the median over rounds of (--resume - plain) / plain, in %.
+paired() {
+  awk -F'\t' -v k="$1" -v c="$2" '$1 == k && $2 == "plain" { p[$3] = $c } $1 == k && $2 == "journal" { j[$3] = $c }
+    END { for (r in p) if (r in j) printf "%.2f\n", 100 * (j[r] - p[r]) / p[r] }' "$RAW" | sort -g |
+    awk '{ v[NR] = $1 } END { if (NR % 2) print v[(NR + 1) / 2]; else print (v[NR / 2] + v[NR / 2 + 1]) / 2 }'
+}
+echo "| output | wall s plain | wall s --resume | wall cost (median of rounds) | CPU s plain | CPU s --resume | CPU cost (median of rounds) |"
 echo "|---|---:|---:|---:|---:|---:|---:|"
 for kind in pack dzi; do
   wp=$(median_of "$kind" plain 4) wj=$(median_of "$kind" journal 4) cp=$(median_of "$kind" plain 5) cj=$(median_of "$kind" journal 5)
-  echo "| $kind | $wp | $wj | $(calc '%+.1f%%' "100 * ($wj - $wp) / $wp") | $cp | $cj | $(calc '%+.1f%%' "100 * ($cj - $cp) / $cp") |"
+  echo "| $kind | $wp | $wj | $(paired "$kind" 4)% | $cp | $cj | $(paired "$kind" 5)% |"
 done
+if [ "${CALLGRIND:-0}" = 1 ]; then
+  echo
+  echo "| output (4096 x 4096, one thread) | instructions plain | instructions --resume | cost |"
+  echo "|---|---:|---:|---:|"
+  for kind in pack dzi; do
+    p=$(one "$kind" callgrind 4) j=$(one "$kind" callgrind 5)
+    echo "| $kind | $p | $j | $(calc '%+.2f%%' "100 * ($j - $p) / $p") |"
+  done
+fi
 echo
 echo "| output | tiles | journaled at the kill | resumed: kept | resumed: encoded | encoded uninterrupted | killed CPU s | resumed CPU s | done twice (CPU) |"
 echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|"
