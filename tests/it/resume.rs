@@ -93,6 +93,11 @@ fn recorded(journal: &Path) -> Vec<String> {
 /// Starts `args` (with `--resume`), SIGKILLs it once its journal records half of `total`
 /// tiles, and returns the journal, then holding what the run finished.
 fn kill_half_way(args: &[String], dest: &Path, total: u64) -> PathBuf {
+    stop_half_way(args, dest, total, "-KILL").0
+}
+
+/// [`kill_half_way`] with `signal`; also the run's exit status and standard error.
+fn stop_half_way(args: &[String], dest: &Path, total: u64, signal: &str) -> (PathBuf, Option<i32>, String) {
     let mut child = Command::new(BIN)
         .args(args)
         .arg("--resume")
@@ -114,13 +119,14 @@ fn kill_half_way(args: &[String], dest: &Path, total: u64) -> PathBuf {
     kill("-STOP");
     let running = child.try_wait().unwrap().is_none();
     assert!(running && !dest.exists(), "the run finished before it was stopped half-way");
-    kill("-KILL");
-    let out = wait_or_kill(pid, "a run SIGKILLed", || child.wait_with_output().unwrap());
+    kill(signal);
+    kill("-CONT");
+    let out = wait_or_kill(pid, "a run stopped half-way", || child.wait_with_output().unwrap());
     assert!(!out.status.success());
-    let journal = journal().expect("the killed run's journal stays");
+    let journal = journal().expect("the stopped run's journal stays");
     let n = recorded(&journal).len() as u64;
     assert!(n >= total / 2 && n < total, "{n} of {total} tiles journaled");
-    journal
+    (journal, out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
 /// Every file under `dir`, by its path relative to it, with its bytes.
@@ -194,6 +200,28 @@ fn a_killed_pack_is_resumed_byte_for_byte() {
 #[test]
 fn a_killed_deep_zoom_is_resumed_byte_for_byte() {
     killed_and_resumed(&DZI);
+}
+
+/// SIGTERM (what Slurm sends at a time limit, before SIGKILL) stops a resumable run cleanly,
+/// and it keeps what it staged and its journal, and says so; `--resume` goes on from them.
+#[test]
+fn a_run_stopped_by_sigterm_keeps_its_tiles_for_resume() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.ppm");
+    image(&input);
+    std::fs::create_dir(dir.path().join("ref")).unwrap();
+    let reference = dir.path().join("ref").join(PACK.name);
+    run_ok(&[command(&input, &PACK, &reference, &[]), vec!["-q".into()]].concat());
+    let dest = dir.path().join(PACK.name);
+    let args = command(&input, &PACK, &dest, &[]);
+    let (journal, code, stderr) = stop_half_way(&args, &dest, PACK.tiles, "-TERM");
+    assert_eq!(code, Some(143), "{stderr}");
+    assert!(stderr.contains("run the same command with --resume") && !stderr.contains("panicked"), "{stderr}");
+    assert_eq!(beside(&dest, "tmp-").len(), 1, "the staged pack stays");
+    let at_stop = recorded(&journal).len() as u64;
+    let (json, _) = run_ok(&[args, vec!["--resume".into(), "--json".into()]].concat());
+    same_output(&dest, &reference);
+    assert_eq!(number(&json, "kept"), at_stop, "{json}");
 }
 
 /// A staged tile damaged after the kill is found by its checksum and made again: for a pack,
