@@ -47,6 +47,9 @@ fn gather_target() -> usize {
 #[derive(Default)]
 pub(crate) struct Counts {
     pub encoded: AtomicU64,
+    /// Tiles (places) that every sink they go to held already, kept from an interrupted run
+    /// (`--resume`): not encoded again.
+    pub kept: AtomicU64,
     pub copied: AtomicU64,
     /// Of the copied tiles, those cropped at the image's edge.
     pub cropped: AtomicU64,
@@ -377,13 +380,20 @@ impl<T: Sample> Encoding<'_, T> {
             }
             Ok(page)
         };
-        let stored = prepare(encoder, self.targets, job, page, self.copier, self.counts)?;
+        // A tile every place of which a resumed run kept is neither encoded nor stored again.
+        let kept = job.places.iter().all(|&(t, (x, y))| self.targets[t].sink.kept(job.lod, x, y));
+        let stored = match kept {
+            true => Stored { constant: None, file: Some(File::Kept) },
+            false => prepare(encoder, self.targets, job, page, self.copier, self.counts)?,
+        };
         // The last job of a tile frees its texels here, not when the writer stores the lot.
         if let Some(texels) = Arc::into_inner(texels) {
             self.memory.add(Part::Tiles, -((texels.capacity() * size_of::<T>()) as i64));
         }
         match stored.file {
             Some(File::Encoded(_)) => self.counts.encoded.fetch_add(1, Ordering::Relaxed),
+            // Every place of it kept (several, where identical pages were merged at the cut).
+            Some(File::Kept) => self.counts.kept.fetch_add(job.places.len() as u64, Ordering::Relaxed),
             Some(File::Copied(_)) => self.counts.copied.fetch_add(1, Ordering::Relaxed),
             Some(File::Cropped(_)) => {
                 self.counts.cropped.fetch_add(1, Ordering::Relaxed);
@@ -415,6 +425,8 @@ impl<T: Sample> Encoding<'_, T> {
             }
             let placed = &self.counts.targets[t];
             match (&stored.constant, &stored.file) {
+                // In the sink already.
+                (_, Some(File::Kept)) => {}
                 (Some(texel), _) if sink.takes_constants() => sink.write_constant(job.lod, x, y, texel)?,
                 (_, Some(File::Encoded(bytes))) => sink.write_tile(job.lod, x, y, bytes)?,
                 // A JPEG XL file is no stored JPEG tile: the sink is told it is a recompressed one.
@@ -585,6 +597,8 @@ enum File {
         jpeg: usize,
         cropped: bool,
     },
+    /// None: the tile is in every sink of it already, kept from an interrupted run.
+    Kept,
 }
 
 impl File {
@@ -592,6 +606,7 @@ impl File {
     fn bytes(&self) -> &[u8] {
         match self {
             File::Encoded(b) | File::Copied(b) | File::Cropped(b) | File::Recompressed { jxl: b, .. } => b,
+            File::Kept => &[],
         }
     }
 
@@ -623,7 +638,7 @@ impl Stored {
             Some(File::Encoded(b) | File::Copied(b) | File::Cropped(b) | File::Recompressed { jxl: b, .. }) => {
                 b.capacity()
             }
-            None => 0,
+            Some(File::Kept) | None => 0,
         };
         file + self.constant.as_ref().map_or(0, Vec::capacity)
     }

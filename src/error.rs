@@ -159,6 +159,10 @@ pub enum TilerError {
     #[error(transparent)]
     Store(#[from] StoreError),
 
+    /// A run could not be resumed (`--resume`, see [`crate::resume`]).
+    #[error(transparent)]
+    Resume(#[from] ResumeError),
+
     /// The caller asked the run to stop (Ctrl-C).
     #[error("interrupted; nothing was left at the destination")]
     Interrupted,
@@ -366,5 +370,60 @@ pub enum StoreError {
         /// The operating system's error.
         #[source]
         source: std::io::Error,
+    },
+}
+
+/// Why a run could not be resumed (`split --resume`, [`crate::resume`]). Each message names
+/// the file or the output and says what to do instead.
+///
+/// New variants may come in any release: match the ones you act on and keep a `_` arm.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ResumeError {
+    /// The journal found beside the output records another run: another input, other
+    /// options, another version.
+    #[error(
+        "{}: the interrupted run it records is not this one: {}; run the command it records, or leave out --resume to start afresh (its staged tiles are then removed)",
+        journal.shown(),
+        differences.join("; ")
+    )]
+    Mismatch {
+        /// The journal.
+        journal: PathBuf,
+        /// What differs, a phrase each (`tile size 128, not 256`).
+        differences: Vec<String>,
+    },
+    /// A run that is still going journals the same output.
+    #[error("{}: another run (process {pid}) is writing it with --resume; wait for it to end, or stop it first", output.shown())]
+    Busy {
+        /// The output.
+        output: PathBuf,
+        /// The other run's process.
+        pid: u32,
+    },
+    /// The journal cannot be read as one.
+    #[error("{}: not a journal this vortex-tiler can read ({why}); leave out --resume to start afresh", journal.shown())]
+    Unreadable {
+        /// The journal.
+        journal: PathBuf,
+        /// What is wrong with it.
+        why: String,
+    },
+    /// The run cannot be resumed: its output's format, or their number.
+    #[error("{}: --resume {why}", output.shown())]
+    Unsupported {
+        /// The output.
+        output: PathBuf,
+        /// What cannot be resumed, and what can.
+        why: String,
+    },
+    /// The journal or the staged output could not be read or written.
+    #[error("{}: {source}", path.shown())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: io::Error,
     },
 }

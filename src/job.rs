@@ -146,6 +146,9 @@ pub struct Summary {
     /// Tiles encoded; the others share an identical neighbour's bytes, were stored as their one
     /// colour or were copied.
     pub encoded: u64,
+    /// Tiles kept from the interrupted run this one resumed (`--resume`, [`crate::resume`]):
+    /// in the output already, checked against its journal, neither encoded nor written again.
+    pub kept: u64,
     /// Tiles of the finest level copied from the source's stored JPEG tiles.
     pub copied: u64,
     /// Of the copied tiles, those cropped losslessly to an edge page's part inside the image.

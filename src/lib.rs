@@ -115,6 +115,7 @@ pub mod outputs;
 pub mod pixel;
 pub mod pyramid;
 pub mod repack;
+pub mod resume;
 pub mod scale_out;
 #[cfg(feature = "serve")]
 pub mod serve;

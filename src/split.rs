@@ -362,6 +362,7 @@ fn run<T: Sample>(
             })
             .collect(),
         encoded: counts.encoded.into_inner(),
+        kept: counts.kept.into_inner(),
         copied: counts.copied.into_inner(),
         cropped: counts.cropped.into_inner(),
         recompressed: counts.recompressed.total(),

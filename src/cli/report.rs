@@ -49,10 +49,22 @@ pub fn claim(dest: &Path, product: Product, inputs: &[&Path], force: bool) -> Re
 /// this run leaves.
 pub fn prepare(dest: &Path) -> Result<()> {
     signals::remove_on_forced_exit(dest);
+    remove_stale(dest)
+}
+
+/// [`prepare`] for a resumable run (`--resume`): what it stages stays when it is stopped, even
+/// by a second signal, for the next `--resume` to go on from.
+pub fn prepare_resumable(dest: &Path) -> Result<()> {
+    remove_stale(dest)
+}
+
+fn remove_stale(dest: &Path) -> Result<()> {
     let removed = output::remove_stale(dest)
         .with_context(|| format!("removing temporaries that earlier runs left beside {}", dest.shown()))?;
     for path in removed {
-        eprintln!("note: removed {}, left by a run that did not finish", path.shown());
+        let journal = path.file_name().is_some_and(|n| n.to_string_lossy().contains(".resume-"));
+        let hint = if journal { " (a journal: --resume would have gone on from that run's tiles)" } else { "" };
+        eprintln!("note: removed {}, left by a run that did not finish{hint}", path.shown());
     }
     Ok(())
 }
@@ -96,8 +108,12 @@ pub fn summary_line(done: &Finished, out: &Path) -> String {
         ),
     };
     let stored = s.stored_tiles.as_ref().map(|t| stored_clause(s, t)).unwrap_or_default();
+    let kept = match s.kept {
+        0 => String::new(),
+        k => format!(", {k} kept from the interrupted run"),
+    };
     format!(
-        "wrote {} tiles ({} encoded, {} LODs from {} x {} pages, {}x{} {}) totalling {} to {} in {:.2} s: {:.1} source Mpx/s [{}]{stripes}{peak}{stored}",
+        "wrote {} tiles ({} encoded{kept}, {} LODs from {} x {} pages, {}x{} {}) totalling {} to {} in {:.2} s: {:.1} source Mpx/s [{}]{stripes}{peak}{stored}",
         s.tiles,
         s.encoded,
         s.layout.lod_count,
@@ -161,6 +177,7 @@ pub fn summary_value(done: &Finished, layout: &str, out: &Path, figures: &Figure
         "source": done.decoder,
         "tiles": s.tiles,
         "encoded": s.encoded,
+        "kept": s.kept,
         "copied": s.copied,
         "cropped": s.cropped,
         "bytes": s.bytes,

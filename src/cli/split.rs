@@ -129,6 +129,17 @@ pub struct OutputArgs {
     #[arg(help_heading = "Outputs", long, value_name = "FILE")]
     pmtiles: Option<PathBuf>,
 
+    /// Make the run resumable, and resume an interrupted one: the run journals each tile it
+    /// finishes (a line with its place and a CRC-32C) in `.NAME.resume-PID` beside the output;
+    /// after a kill (SIGKILL, a Slurm time limit, Ctrl-C) the same command with --resume
+    /// checks the staged tiles against that journal, keeps those that are whole, and encodes
+    /// only the others, for an output byte for byte that of an uninterrupted run. With
+    /// nothing to resume it starts afresh (journaled), so a job script can always pass it. A
+    /// journal of another input or other options is refused, naming what differs. One output,
+    /// on local disk: a pack, a tile directory or Deep Zoom (docs/resume.md).
+    #[arg(help_heading = "Outputs", long)]
+    resume: bool,
+
     /// Replace a regular file at --pack, --pmtiles or a TIFF output that is not one of ours.
     /// Never replaces a directory, a device, a FIFO, a link or the input.
     #[arg(help_heading = "Outputs", long)]
@@ -445,6 +456,9 @@ pub fn run(a: SplitArgs) -> Result<()> {
     if let Some((set, inputs)) =
         ome_zarr::channel_set(input.as_deref(), &a.channel, a.channels.is_some(), pick, &a.out)?
     {
+        if a.out.resume {
+            bail!("--resume resumes a run into a pack, a tile directory or Deep Zoom; not one of several channels");
+        }
         return ome_zarr::tile_channels(set, a.channels.as_deref(), &inputs, a.filename_format, &a.out, started);
     }
     let input = input.context("an input image is required")?;
@@ -651,13 +665,35 @@ pub fn tile(
     let settings = a.settings(names, carried, source.stored_tiles().and_then(|t| t.subsampling()))?;
     let budget = Budget::new(a.max_memory);
     if a.shard.is_some() || a.pack.as_ref().is_some_and(|p| p.to_string_lossy().contains("{shard}")) {
+        if a.resume {
+            bail!("--resume resumes a whole run; a shard is made again whole: run its index again (docs/scale-out.md)");
+        }
         return shard(source, input, outputs, &settings, a, started);
     }
-    let plan = Plan::new(outputs, &settings, &source.header(), &[input], budget)?;
+    let mut plan = Plan::new(outputs, &settings, &source.header(), &[input], budget)?;
+    // Taken over before the clean-up of dead runs' temporaries, which would remove them.
+    let resumed = match a.resume {
+        true => Some(plan.resumable(input)?),
+        false => None,
+    };
     for planned in plan.outputs() {
         // An s3:// output leaves nothing beside it on local disk to clean up.
         if vortex_tiler::store::ObjectUrl::of_path(&planned.output.path).is_none() {
-            report::prepare(&planned.output.path)?;
+            if resumed.is_some() {
+                report::prepare_resumable(&planned.output.path)?;
+            } else {
+                report::prepare(&planned.output.path)?;
+            }
+        }
+    }
+    if let Some(r) = resumed.as_ref().filter(|_| !a.run.quiet) {
+        match &r.from {
+            Some(from) => eprintln!(
+                "resuming the interrupted run of {}: {} tiles recorded, checked against its staged output",
+                from.shown(),
+                r.recorded
+            ),
+            None => eprintln!("nothing to resume: starting afresh, journaled in {}", r.journal.shown()),
         }
     }
     // Said once everything is checked, just before the work starts.
@@ -667,11 +703,18 @@ pub fn tile(
         }
     }
     let run = Run::start_counting(source, a, plan.total_tiles(), started)?;
-    let (done, wrote) = run.execute_with(|source, watch| {
+    let result = run.execute_with(|source, watch| {
         let wrote = plan.write(source, watch)?;
         let summary = wrote.first().map(|w| w.summary.clone());
         Ok((summary.ok_or_else(|| vortex_tiler::error::TilerError::Options("a run with no output".into()))?, wrote))
-    })?;
+    });
+    if let (Err(_), Some(r)) = (&result, &resumed) {
+        eprintln!(
+            "note: the tiles finished so far stay beside the output, journaled in {}: run the same command with --resume to go on from them",
+            r.journal.shown()
+        );
+    }
+    let (done, wrote) = result?;
     match wrote.as_slice() {
         [one] => report_one(a, &done, one),
         all => report_all(a, &done, all),

@@ -4,8 +4,9 @@
 //! the pack writer's own name), in the destination's directory so that the final rename never
 //! crosses a file system. A run that is killed outright (SIGKILL, power loss) cannot clean up;
 //! the next run for the same destination finds temporaries whose PID is no longer alive and
-//! removes them. A temporary of a live process, possibly another run writing the same
-//! destination, is left alone.
+//! removes them (with a resumable run's journal, `.NAME.resume-PID`: a run without `--resume`
+//! starts afresh, docs/resume.md). A temporary of a live process, possibly another run
+//! writing the same destination, is left alone.
 
 use std::fs;
 use std::io;
@@ -108,11 +109,11 @@ pub fn remove_stale(dest: &Path) -> io::Result<Vec<PathBuf>> {
     Ok(removed)
 }
 
-/// The PID in `partial-PID` or `partial-PID.old` (a pack writer's `tmp-PID` is
-/// [`vortex_pack::temporary_pid`]'s to read).
+/// The PID in `partial-PID` or `partial-PID.old`, or a resumable run's journal's `resume-PID`
+/// or `resume-PID.new` (its next version, renamed over it: docs/resume.md; a pack writer's `tmp-PID` is [`vortex_pack::temporary_pid`]'s to read).
 fn partial_pid(suffix: &str) -> Option<u32> {
-    let digits = suffix.strip_prefix("partial-")?;
-    let digits = digits.strip_suffix(".old").unwrap_or(digits);
+    let digits = suffix.strip_prefix("partial-").or_else(|| suffix.strip_prefix("resume-"))?;
+    let digits = digits.strip_suffix(".old").or_else(|| digits.strip_suffix(".new")).unwrap_or(digits);
     if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
         return None;
     }
@@ -121,7 +122,7 @@ fn partial_pid(suffix: &str) -> Option<u32> {
 
 /// Whether process `pid` exists: `None` where this system cannot tell (no `/proc`), so that
 /// nothing is removed there.
-fn process_alive(pid: u32) -> Option<bool> {
+pub(crate) fn process_alive(pid: u32) -> Option<bool> {
     let proc = Path::new("/proc");
     if !proc.join("self").exists() {
         return None;
@@ -144,6 +145,8 @@ mod tests {
     fn names_carry_the_pid() {
         assert_eq!(partial_pid("partial-123"), Some(123));
         assert_eq!(partial_pid("partial-123.old"), Some(123));
+        assert_eq!(partial_pid("resume-77"), Some(77), "a resumable run's journal");
+        assert_eq!(partial_pid("resume-77.new"), Some(77));
         assert_eq!(partial_pid("tmp-9"), None, "the pack writer's");
         assert_eq!(partial_pid("partial-"), None);
         assert_eq!(partial_pid("partial-12x"), None);

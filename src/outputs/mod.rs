@@ -13,11 +13,13 @@
 //! The crate's documentation has an example that writes Deep Zoom and a pack in one run.
 
 mod plan;
+mod resume;
 mod write;
 
 use std::path::{Path, PathBuf};
 
 pub use plan::Plan;
+pub use resume::Resumed;
 pub use write::{Figures, Wrote};
 
 use crate::formats::ome_zarr::{PixelSize, Version};

@@ -32,6 +32,8 @@ pub struct Plan {
     pub(super) outputs: Vec<Planned>,
     pub(super) budget: Budget,
     pub(super) pack: vortex_pack::WriteOptions,
+    /// A resumable run's journal and what it took over ([`Plan::resumable`]).
+    pub(super) resume: Option<super::resume::Resuming>,
 }
 
 /// One output of a [`Plan`]: how the pipeline cuts and encodes its pyramid, and what its
@@ -150,7 +152,7 @@ impl Plan {
                 Format::Dicom => dicom_output(output, &own, &at)?,
             });
         }
-        Ok(Plan { outputs: planned, budget, pack: settings.pack })
+        Ok(Plan { outputs: planned, budget, pack: settings.pack, resume: None })
     }
 
     /// The outputs, in the order given.

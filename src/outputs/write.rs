@@ -104,8 +104,16 @@ enum Sink {
 
 impl Open {
     /// Starts `planned`'s sink. Each writes under a temporary name and removes it when dropped
-    /// unfinished.
-    fn start(planned: Planned, pack: vortex_pack::WriteOptions, in_flight: u64) -> Result<Open> {
+    /// unfinished. `resume`: the journal of a resumable run ([`Plan::resumable`]), for its one output.
+    fn start(
+        planned: Planned,
+        pack: vortex_pack::WriteOptions,
+        in_flight: u64,
+        resume: Option<super::resume::Resuming>,
+    ) -> Result<Open> {
+        if let Some(resume) = resume {
+            return Open::resuming(planned, pack, resume);
+        }
         // One object at an s3:// URL: the sink writes a local temporary, uploaded when finished.
         let staged = match ObjectUrl::of_path(&planned.claim.path) {
             Some(url) if !crate::store::directory_product(planned.claim.product) => {
@@ -143,6 +151,36 @@ impl Open {
             Work::Dicom { spec, .. } => Sink::Dicom(DicomSink::create(claim, (**spec).clone())?),
         };
         Ok(Open { planned, sink, staged, in_flight })
+    }
+
+    /// [`start`](Self::start) for a resumable run: its sink journals every tile and keeps
+    /// what the interrupted run it takes over left whole.
+    fn resuming(planned: Planned, pack: vortex_pack::WriteOptions, resume: super::resume::Resuming) -> Result<Open> {
+        let super::resume::Resuming { journal, previous } = resume;
+        let claim = &planned.claim;
+        let sink = match &planned.work {
+            Work::Tiles { names, .. } => Sink::Dir(DirSink::create_resuming(claim, names.clone(), journal, previous)?),
+            Work::Viewer { tiles, .. } => {
+                Sink::Dir(DirSink::for_viewer_resuming(claim, tiles.clone(), journal, previous)?)
+            }
+            Work::Pack { info, stored } => {
+                let (stored, metadata) = (*stored, info.to_json_pretty());
+                let (layout, codec) = (&planned.layout, planned.opts.codec);
+                let sink = PackSink::create_resuming(
+                    &claim.path,
+                    layout,
+                    stored,
+                    codec,
+                    metadata.as_bytes(),
+                    pack,
+                    journal,
+                    previous,
+                )?;
+                Sink::Pack(sink)
+            }
+            _ => return Err(TilerError::Internal("a resumable output of a format that is not resumed".into())),
+        };
+        Ok(Open { planned, sink, staged: None, in_flight: 0 })
     }
 
     /// Sends a one-object output's finished local file to its `s3://` URL.
@@ -279,6 +317,7 @@ impl Open {
             tiles,
             per_target: vec![Written { tiles, bytes, copied: tiles, cropped: 0, recompressed }],
             encoded: 0,
+            kept: 0,
             copied: tiles,
             cropped: 0,
             recompressed,
@@ -443,7 +482,7 @@ impl Plan {
     /// and can stop the run. On failure nothing of any output is left (each output that was
     /// finished before a later one failed to finish stays, complete).
     pub fn write(self, mut source: Box<dyn RowSource>, progress: &dyn Progress) -> Result<Vec<Wrote>> {
-        let Plan { mut outputs, budget, pack } = self;
+        let Plan { mut outputs, budget, pack, mut resume } = self;
         let source_layout = source.layout();
         let asked: Vec<Levels> = outputs.iter().map(Planned::work_levels).collect();
         // A TIFF or DICOM series of the slide's own levels copies them, cut from no pyramid.
@@ -452,7 +491,8 @@ impl Plan {
             progress.total(outputs.iter().map(Planned::tiles).sum());
         }
         let (budget, in_flight) = upload_reserve(budget, &outputs);
-        let open: Vec<Open> = outputs.into_iter().map(|p| Open::start(p, pack, in_flight)).collect::<Result<_>>()?;
+        let open: Vec<Open> =
+            outputs.into_iter().map(|p| Open::start(p, pack, in_flight, resume.take())).collect::<Result<_>>()?;
         let cut: Vec<usize> = (0..open.len()).filter(|&k| copying[k].is_none()).collect();
         let mut copied = vec![0u64; open.len()];
         for (k, c) in copying.iter().enumerate() {
@@ -540,8 +580,10 @@ impl Plan {
         if outputs.iter().any(|p| !matches!(p.work, Work::OmeZarr { .. } | Work::Tiff { .. })) {
             return Err(TilerError::Internal("channels one pass each go to OME-Zarr and OME-TIFF outputs".into()));
         }
-        let open: Vec<Open> =
-            outputs.into_iter().map(|p| Open::start(p, pack, crate::store::UPLOAD_BYTES)).collect::<Result<_>>()?;
+        let open: Vec<Open> = outputs
+            .into_iter()
+            .map(|p| Open::start(p, pack, crate::store::UPLOAD_BYTES, None))
+            .collect::<Result<_>>()?;
         // Both formats take the run's tile size and the box filter unless one is given for
         // all: their pyramids are one.
         let [pyramid] = <[Pyramid; 1]>::try_from(pyramids(&open.iter().map(|o| &o.planned).collect::<Vec<_>>()))
@@ -599,6 +641,7 @@ fn add(mut sum: Summary, pass: Summary) -> Summary {
         to.bytes = from.bytes;
     }
     sum.encoded += pass.encoded;
+    sum.kept += pass.kept;
     // The sink counts every pass's bytes.
     sum.bytes = pass.bytes;
     sum.passes += pass.passes;

@@ -5,8 +5,11 @@
 //! looks like a finished pyramid; or as objects under an `s3://` prefix, removed if the run
 //! fails (docs/object-storage.md).
 
+use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
+
+use vortex_pack::TileId;
 
 use super::TileSink;
 use crate::error::{Result, ShowPath, TilerError};
@@ -14,15 +17,21 @@ use crate::formats::tiles::filename::FilenameFormat;
 use crate::formats::tiles::info::Info;
 use crate::formats::viewer::{Crop, Viewer, ViewerTiles};
 use crate::output::{Claim, Product};
-use crate::store::{Files, UPLOAD_BYTES, files_for};
+use crate::resume::{self, Interrupted, Journal, Record};
+use crate::store::local::StagingDir;
+use crate::store::{Files, ObjectUrl, UPLOAD_BYTES, files_for};
 
 /// One image file per tile plus a manifest. Dropped unfinished (a failed run, a later
-/// output of the same run that failed), it removes what it wrote.
+/// output of the same run that failed), it removes what it wrote, unless it is a resumable
+/// run's (`--resume`), whose staged tiles stay for the next `--resume`.
 pub struct DirSink {
     dest: PathBuf,
     files: Box<dyn Files>,
     names: Names,
     bytes: AtomicU64,
+    /// A resumable run's journal and the tiles kept from the run it resumes, with their
+    /// files' lengths.
+    resume: Option<(Journal, HashMap<TileId, u64>)>,
 }
 
 /// How tiles are named.
@@ -66,7 +75,64 @@ impl DirSink {
             )));
         }
         let files = files_for(claim, in_flight)?;
-        Ok(DirSink { dest: claim.path.clone(), files, names, bytes: AtomicU64::new(0) })
+        Ok(DirSink { dest: claim.path.clone(), files, names, bytes: AtomicU64::new(0), resume: None })
+    }
+
+    /// [`create`](Self::create) for a resumable run (`--resume`): every tile written is
+    /// recorded in `journal`, an interrupted run's staged tiles (`previous`, taken over by
+    /// [`Journal::start`]) are checked against its journal and those whole are kept, and the
+    /// staging stays when the sink is dropped unfinished. A local destination only.
+    pub(crate) fn create_resuming(
+        claim: &Claim,
+        names: FilenameFormat,
+        journal: Journal,
+        previous: Option<Interrupted>,
+    ) -> Result<DirSink> {
+        Self::resuming(claim, Product::TileDir, Names::Pattern(names), journal, previous)
+    }
+
+    /// [`for_viewer`](Self::for_viewer) for a resumable run, as [`create_resuming`](Self::create_resuming).
+    pub(crate) fn for_viewer_resuming(
+        claim: &Claim,
+        tiles: ViewerTiles,
+        journal: Journal,
+        previous: Option<Interrupted>,
+    ) -> Result<DirSink> {
+        Self::resuming(claim, Product::Viewer(tiles.viewer), Names::Viewer(tiles), journal, previous)
+    }
+
+    fn resuming(
+        claim: &Claim,
+        product: Product,
+        names: Names,
+        journal: Journal,
+        previous: Option<Interrupted>,
+    ) -> Result<DirSink> {
+        if claim.product != product || ObjectUrl::of_path(&claim.path).is_some() {
+            return Err(TilerError::Internal(format!(
+                "{} cannot be resumed as {}",
+                claim.path.shown(),
+                product.noun()
+            )));
+        }
+        let mut kept = HashMap::new();
+        if let Some(previous) = previous {
+            // What is not recorded (written as the run was killed) or not whole goes.
+            let names_of = |id: TileId| names.of(id);
+            let whole = resume::check_files(&previous.staging, &previous.records, &names_of);
+            let keep: HashSet<String> = whole.iter().flat_map(|r| names_of(r.id())).collect();
+            resume::prune(&previous.staging, &keep)?;
+            journal.keep(&whole)?;
+            for r in &whole {
+                if let Record::File { id, len, .. } = r {
+                    kept.insert(*id, *len);
+                }
+            }
+        }
+        let files = Box::new(StagingDir::resumable(&claim.path)?);
+        // Every kept tile is part of the output: its bytes count as written.
+        let bytes = AtomicU64::new(kept.iter().map(|(id, len)| len * names.of(*id).len() as u64).sum());
+        Ok(DirSink { dest: claim.path.clone(), files, names, bytes, resume: Some((journal, kept)) })
     }
 
     /// Writes `info.json` last, then moves the staging directory into place. A previous output
@@ -101,12 +167,59 @@ impl DirSink {
     }
 
     fn complete(mut self, manifests: Vec<(String, Vec<u8>)>) -> Result<()> {
-        self.files.publish(manifests)
+        self.files.publish(manifests)?;
+        match self.resume.take() {
+            Some((journal, _)) => journal.finish(),
+            None => Ok(()),
+        }
     }
 }
 
 impl TileSink for DirSink {
     fn write_tile(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
+        let id = TileId { lod, x, y };
+        if let Some((journal, kept)) = &self.resume {
+            if kept.contains_key(&id) {
+                return Ok(());
+            }
+            self.write_names(lod, x, y, bytes)?;
+            return journal.record(Record::file(id, bytes));
+        }
+        self.write_names(lod, x, y, bytes)
+    }
+
+    fn kept(&self, lod: u32, x: u32, y: u32) -> bool {
+        self.resume.as_ref().is_some_and(|(_, kept)| kept.contains_key(&TileId { lod, x, y }))
+    }
+
+    fn crop(&self, lod: u32, x: u32, y: u32) -> Option<Crop> {
+        match &self.names {
+            Names::Pattern(_) => None,
+            Names::Viewer(tiles) => Some(tiles.crop(lod, x, y)),
+        }
+    }
+
+    fn bytes_written(&self) -> u64 {
+        self.bytes.load(Ordering::Relaxed)
+    }
+}
+
+impl Names {
+    /// The files that hold tile `id`.
+    fn of(&self, id: TileId) -> Vec<String> {
+        match self {
+            Names::Pattern(names) => vec![names.format(&[id.lod, id.x, id.y])],
+            Names::Viewer(tiles) => {
+                let placed = tiles.place(id.lod, id.x, id.y);
+                std::iter::once(placed.path).chain(placed.alias).collect()
+            }
+        }
+    }
+}
+
+impl DirSink {
+    /// Writes tile `(lod, x, y)`'s file, under each name its layout gives it.
+    fn write_names(&self, lod: u32, x: u32, y: u32, bytes: &[u8]) -> Result<()> {
         let taken = |name: &str, why: String| {
             TilerError::Options(format!("tile (lod {lod}, x {x}, y {y}) would overwrite {name}: {why}"))
         };
@@ -139,19 +252,6 @@ impl TileSink for DirSink {
         }
     }
 
-    fn crop(&self, lod: u32, x: u32, y: u32) -> Option<Crop> {
-        match &self.names {
-            Names::Pattern(_) => None,
-            Names::Viewer(tiles) => Some(tiles.crop(lod, x, y)),
-        }
-    }
-
-    fn bytes_written(&self) -> u64 {
-        self.bytes.load(Ordering::Relaxed)
-    }
-}
-
-impl DirSink {
     /// Writes one tile file at `name`, never over another: `false` if the name is taken.
     fn write_file(&self, name: &str, bytes: &[u8]) -> Result<bool> {
         let written = self.files.put_new(name, bytes)?;

@@ -156,6 +156,9 @@ impl TileSink for WithProfile<'_> {
     fn crop(&self, lod: u32, x: u32, y: u32) -> Option<Crop> {
         self.inner.crop(lod, x, y)
     }
+    fn kept(&self, lod: u32, x: u32, y: u32) -> bool {
+        self.inner.kept(lod, x, y)
+    }
     fn bytes_written(&self) -> u64 {
         self.inner.bytes_written()
     }

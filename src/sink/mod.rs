@@ -61,6 +61,12 @@ pub trait TileSink: Sync {
     fn crop(&self, _lod: u32, _x: u32, _y: u32) -> Option<Crop> {
         None
     }
+    /// Whether tile `(x, y)` of LOD `lod` is in the output already, kept from an interrupted
+    /// run that this one resumes (`--resume`, [`crate::resume`]): the run need not encode it,
+    /// and the sink ignores it if it comes. `false` for every tile of a run that resumes nothing.
+    fn kept(&self, _lod: u32, _x: u32, _y: u32) -> bool {
+        false
+    }
     /// Bytes of tile data written so far.
     fn bytes_written(&self) -> u64;
 }

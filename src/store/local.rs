@@ -20,6 +20,8 @@ pub(crate) struct StagingDir {
     made_dirs: Mutex<HashSet<PathBuf>>,
     /// Set once the directory is in place: nothing to remove.
     published: bool,
+    /// A resumable run's staging: left when dropped unpublished, for a later `--resume`.
+    keep: bool,
 }
 
 impl StagingDir {
@@ -32,7 +34,25 @@ impl StagingDir {
         fs::create_dir_all(&staging).map_err(|e| {
             TilerError::write(dest, std::io::Error::new(e.kind(), format!("cannot create {}: {e}", staging.shown())))
         })?;
-        Ok(StagingDir { dest: dest.to_path_buf(), staging, made_dirs: Mutex::new(HashSet::new()), published: false })
+        Ok(StagingDir {
+            dest: dest.to_path_buf(),
+            staging,
+            made_dirs: Mutex::new(HashSet::new()),
+            published: false,
+            keep: false,
+        })
+    }
+
+    /// The staging directory of a resumable run (`--resume`, [`crate::resume`]): what is
+    /// there already (an interrupted run's tiles, taken over) stays, and so does the directory
+    /// when dropped unpublished.
+    pub(crate) fn resumable(dest: &Path) -> Result<StagingDir> {
+        let staging = staging::partial_path(dest);
+        fs::create_dir_all(&staging).map_err(|e| {
+            TilerError::write(dest, std::io::Error::new(e.kind(), format!("cannot create {}: {e}", staging.shown())))
+        })?;
+        let made_dirs = Mutex::new(HashSet::new());
+        Ok(StagingDir { dest: dest.to_path_buf(), staging, made_dirs, published: false, keep: true })
     }
 }
 
@@ -76,7 +96,7 @@ impl Files for StagingDir {
 /// An unpublished directory's staging goes with it.
 impl Drop for StagingDir {
     fn drop(&mut self) {
-        if !self.published {
+        if !self.published && !self.keep {
             let _ = fs::remove_dir_all(&self.staging);
         }
     }

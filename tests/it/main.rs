@@ -41,6 +41,7 @@ mod pmtiles;
 mod remote_pack;
 mod render;
 mod resample_reference;
+mod resume;
 mod sample_types;
 mod serve;
 mod serve_hostile;

@@ -69,7 +69,8 @@ pub struct WriteSummary {
 
 /// Writes a pack in one pass: tiles in any order ([`PackWriter::add`]), then
 /// [`PackWriter::finish`], which writes the index and header and renames the file into place.
-/// Dropped unfinished, it removes its temporary file: a pack is whole or absent.
+/// Dropped unfinished, it removes its temporary file (unless asked to keep it for a later
+/// [`PackWriter::resume`]): a pack is whole or absent.
 pub struct PackWriter {
     dest: PathBuf,
     tmp: PathBuf,
@@ -88,6 +89,8 @@ pub struct PackWriter {
     required_features: u64,
     summary: WriteSummary,
     writeback: Writeback,
+    /// Leave the temporary file when dropped unfinished ([`PackWriter::keep_on_drop`]).
+    keep: bool,
 }
 
 impl PackWriter {
@@ -99,11 +102,32 @@ impl PackWriter {
     pub fn create(
         dest: impl AsRef<Path>,
         description: Description,
+        levels: Vec<Level>,
+        metadata: &[u8],
+        options: WriteOptions,
+    ) -> Result<PackWriter> {
+        let mut w = Self::plan(dest.as_ref(), description, levels, metadata, options)?;
+        let file = OpenOptions::new().write(true).read(true).create(true).truncate(true).open(&w.tmp).map_err(|e| {
+            io(&w.dest, std::io::Error::new(e.kind(), format!("cannot create {}: {e}", w.tmp.display())))
+        })?;
+        w.file = Some(file);
+        // Placeholders up to the data section: zeros, so that an unfinished file has no signature.
+        let data_offset = w.data_offset;
+        w.file_mut().set_len(data_offset).map_err(|e| io(&w.tmp, e))?;
+        w.file_mut().seek(SeekFrom::Start(data_offset)).map_err(|e| io(&w.tmp, e))?;
+        Ok(w)
+    }
+
+    /// What [`create`](Self::create) and [`resume`](Self::resume) check and allocate: a writer
+    /// with no file open yet.
+    fn plan(
+        dest: &Path,
+        description: Description,
         mut levels: Vec<Level>,
         metadata: &[u8],
         options: WriteOptions,
     ) -> Result<PackWriter> {
-        let dest = dest.as_ref().to_path_buf();
+        let dest = dest.to_path_buf();
         let usage = PackError::Usage;
         if levels.len() != description.level_count as usize {
             return Err(usage(format!("{} levels given, description says {}", levels.len(), description.level_count)));
@@ -169,19 +193,14 @@ impl PackWriter {
         written.try_reserve_exact(count_usize).map_err(out_of_memory)?;
         written.resize(count_usize, false);
         let tmp = temporary_path(&dest);
-        let file =
-            OpenOptions::new().write(true).read(true).create(true).truncate(true).open(&tmp).map_err(|e| {
-                io(&dest, std::io::Error::new(e.kind(), format!("cannot create {}: {e}", tmp.display())))
-            })?;
-
         let levels_offset = HEADER_LEN as u64;
         let index_offset = levels_offset + levels.len() as u64 * LEVEL_LEN as u64;
         let meta_offset = index_offset + count * ENTRY_LEN as u64;
         let data_offset = (meta_offset + meta_len as u64).next_multiple_of(options.alignment as u64);
-        let mut w = PackWriter {
+        Ok(PackWriter {
             dest,
             tmp,
-            file: Some(file),
+            file: None,
             description,
             levels,
             metadata: metadata.to_vec(),
@@ -194,11 +213,108 @@ impl PackWriter {
             required_features: description.required_features(),
             summary: WriteSummary::default(),
             writeback: Writeback::default(),
-        };
-        // Placeholders up to the data section: zeros, so that an unfinished file has no signature.
-        w.file_mut().set_len(data_offset).map_err(|e| io(&w.tmp, e))?;
-        w.file_mut().seek(SeekFrom::Start(data_offset)).map_err(|e| io(&w.tmp, e))?;
-        Ok(w)
+            keep: false,
+        })
+    }
+
+    /// Goes on with the temporary file `from` that a writer of the same pack left unfinished
+    /// (a run killed outright, or one that kept its file: [`keep_on_drop`](Self::keep_on_drop)),
+    /// with `kept`: the tiles that writer added, in the order it added them, with the entries
+    /// it gave them ([`entry`](Self::entry)). The arguments before `from` must be those the
+    /// first writer was created with. The file is renamed to this process's
+    /// [`temporary_path`]; each payload is read back and checked against its entry's length
+    /// and CRC-32C, in order, and the first that fails (or lies outside the file, or breaks the
+    /// order in which a writer appends) ends what is kept: the file is cut there, so that the
+    /// tiles added next are appended exactly where the first writer would have appended them.
+    /// Returns the writer and how many of `kept` it holds (a prefix).
+    pub fn resume(
+        dest: impl AsRef<Path>,
+        description: Description,
+        levels: Vec<Level>,
+        metadata: &[u8],
+        options: WriteOptions,
+        from: &Path,
+        kept: &[(TileId, Entry)],
+    ) -> Result<(PackWriter, usize)> {
+        let mut w = Self::plan(dest.as_ref(), description, levels, metadata, options)?;
+        if from != w.tmp {
+            fs::rename(from, &w.tmp).map_err(|e| {
+                io(&w.dest, std::io::Error::new(e.kind(), format!("cannot take over {}: {e}", from.display())))
+            })?;
+        }
+        let file = OpenOptions::new().write(true).read(true).open(&w.tmp).map_err(|e| io(&w.tmp, e))?;
+        let len = file.metadata().map_err(|e| io(&w.tmp, e))?.len();
+        w.file = Some(file);
+        let mut held = 0;
+        let mut buf = Vec::new();
+        for (id, entry) in kept {
+            if !w.take_kept(*id, entry, len, &mut buf)? {
+                break;
+            }
+            held += 1;
+        }
+        // What lies past the last payload kept goes: the next is appended where it would have been.
+        let end = w.end.max(w.data_offset);
+        w.file_mut().set_len(end).map_err(|e| io(&w.tmp, e))?;
+        w.file_mut().seek(SeekFrom::Start(end)).map_err(|e| io(&w.tmp, e))?;
+        Ok((w, held))
+    }
+
+    /// Takes one tile a previous writer added, as [`resume`](Self::resume) describes: `false`
+    /// (nothing taken) where it cannot be kept.
+    fn take_kept(&mut self, id: TileId, entry: &Entry, len: u64, buf: &mut Vec<u8>) -> Result<bool> {
+        let Ok(position) = self.position(id) else { return Ok(false) };
+        if self.written[position] {
+            return Ok(false);
+        }
+        let Some(kind) = TileKind::from_u8(entry.kind) else { return Ok(false) };
+        if kind == TileKind::Constant {
+            self.summary.constant += 1;
+        } else if kind == TileKind::Absent {
+            self.summary.absent += 1;
+        } else {
+            let (offset, n) = (entry.offset_or_value, entry.len as u64);
+            let Some(stop) = offset.checked_add(n) else { return Ok(false) };
+            if n == 0 || offset < self.data_offset || stop > len || self.description.refuses(kind).is_some() {
+                return Ok(false);
+            }
+            let known = self.stored.get(&(entry.crc, entry.len)).is_some_and(|o| o.contains(&offset));
+            if known {
+                self.summary.deduplicated += 1;
+            } else {
+                // A new payload lies where a writer appends the next: at the end, aligned.
+                if offset != self.end.next_multiple_of(self.options.payload_alignment as u64) {
+                    return Ok(false);
+                }
+                buf.resize(entry.len as usize, 0);
+                self.file_ref().read_exact_at(buf, offset).map_err(|e| io(&self.tmp, e))?;
+                if crc32c::crc32c(buf) != entry.crc {
+                    return Ok(false);
+                }
+                self.end = stop;
+                self.stored.entry((entry.crc, entry.len)).or_default().push(offset);
+                self.summary.stored_payloads += 1;
+                self.summary.payload_bytes += n;
+            }
+            self.required_features |= kind.required_feature();
+        }
+        self.written[position] = true;
+        self.entries[position] = *entry;
+        self.summary.tiles += 1;
+        Ok(true)
+    }
+
+    /// The entry tile `id` was given when added (`None`: not added yet), for a caller that
+    /// records what was written so that [`resume`](Self::resume) can go on after a crash.
+    pub fn entry(&self, id: TileId) -> Option<Entry> {
+        let position = self.position(id).ok()?;
+        self.written[position].then(|| self.entries[position])
+    }
+
+    /// Has an unfinished writer leave its temporary file when dropped, for a later
+    /// [`resume`](Self::resume), instead of removing it.
+    pub fn keep_on_drop(&mut self) {
+        self.keep = true;
     }
 
     /// The file being written: `Some` from `create` until `finish` or `drop` takes it.
@@ -436,7 +552,7 @@ impl PackWriter {
 
 impl Drop for PackWriter {
     fn drop(&mut self) {
-        if self.file.take().is_some() {
+        if self.file.take().is_some() && !self.keep {
             let _ = fs::remove_file(&self.tmp);
         }
     }

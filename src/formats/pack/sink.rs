@@ -4,6 +4,7 @@
 //! as it comes (one pass, no intermediate files) and keeps only the index in memory.
 //! One-colour tiles are stored as their colour, with no payload.
 
+use std::collections::HashSet;
 use std::path::Path;
 use std::sync::Mutex;
 
@@ -13,6 +14,7 @@ use crate::codec::{Codec, RowFilter};
 use crate::error::{Result, TilerError};
 use crate::layout::Layout;
 use crate::pixel::PixelLayout;
+use crate::resume::{Interrupted, Journal, Record};
 use crate::sink::TileSink;
 
 /// A pack being written as a run's sink: tiles appended as they come, the index and header
@@ -20,6 +22,8 @@ use crate::sink::TileSink;
 pub struct PackSink {
     writer: Mutex<PackWriter>,
     kind: TileKind,
+    /// A resumable run's journal and the tiles kept from the run it resumes.
+    resume: Option<(Journal, HashSet<TileId>)>,
 }
 
 /// The pack's description of a tiler layout and stored texel format.
@@ -69,13 +73,58 @@ impl PackSink {
     ) -> Result<PackSink> {
         let d = pack_description(layout, stored);
         let writer = PackWriter::create(dest, d, layout.pack_levels(), metadata, options)?;
-        Ok(PackSink { writer: Mutex::new(writer), kind: tile_kind(codec)? })
+        Ok(PackSink { writer: Mutex::new(writer), kind: tile_kind(codec)?, resume: None })
+    }
+
+    /// [`create`](Self::create) for a resumable run (`--resume`): every tile added is recorded
+    /// in `journal`; the tiles an interrupted run's journal records (`previous`, its staged
+    /// file taken over by [`Journal::start`]) are kept, in the order it added them, up to the
+    /// first whose payload is not the one recorded, and its file cut there
+    /// ([`PackWriter::resume`]), so that the tiles added next land where an uninterrupted run
+    /// puts them; the file stays when the sink is dropped unfinished.
+    #[expect(clippy::too_many_arguments, reason = "create's, and the journal's")]
+    pub(crate) fn create_resuming(
+        dest: &Path,
+        layout: &Layout,
+        stored: PixelLayout,
+        codec: Codec,
+        metadata: &[u8],
+        options: WriteOptions,
+        journal: Journal,
+        previous: Option<Interrupted>,
+    ) -> Result<PackSink> {
+        let d = pack_description(layout, stored);
+        let kind = tile_kind(codec)?;
+        let (mut writer, kept) = match previous {
+            None => (PackWriter::create(dest, d, layout.pack_levels(), metadata, options)?, HashSet::new()),
+            Some(previous) => {
+                let entries: Vec<(TileId, vortex_pack::Entry)> = (previous.records.iter())
+                    .map_while(|r| match r {
+                        Record::Entry { id, entry } => Some((*id, *entry)),
+                        Record::File { .. } => None,
+                    })
+                    .collect();
+                let levels = layout.pack_levels();
+                let (writer, held) =
+                    PackWriter::resume(dest, d, levels, metadata, options, &previous.staging, &entries)?;
+                let records: Vec<Record> =
+                    entries[..held].iter().map(|&(id, entry)| Record::Entry { id, entry }).collect();
+                journal.keep(&records)?;
+                (writer, entries[..held].iter().map(|(id, _)| *id).collect())
+            }
+        };
+        writer.keep_on_drop();
+        Ok(PackSink { writer: Mutex::new(writer), kind, resume: Some((journal, kept)) })
     }
 
     /// Writes the index and header and renames the pack into place.
     pub fn finish(self) -> Result<WriteSummary> {
         let writer = self.writer.into_inner().map_err(|_| TilerError::panicked("a tile writer"))?;
-        Ok(writer.finish()?)
+        let summary = writer.finish()?;
+        if let Some((journal, _)) = self.resume {
+            journal.finish()?;
+        }
+        Ok(summary)
     }
 
     /// [`finish`](Self::finish) with other metadata than given at the start.
@@ -86,8 +135,16 @@ impl PackSink {
     }
 
     fn add(&self, lod: u32, x: u32, y: u32, tile: NewTile) -> Result<()> {
+        let id = TileId { lod, x, y };
         let mut w = self.writer.lock().map_err(|_| TilerError::panicked("a tile writer"))?;
-        Ok(w.add(TileId { lod, x, y }, tile)?)
+        let Some((journal, kept)) = &self.resume else { return Ok(w.add(id, tile)?) };
+        if kept.contains(&id) {
+            return Ok(());
+        }
+        w.add(id, tile)?;
+        // Recorded under the writer's lock: the journal's order is the order of the adds.
+        let entry = w.entry(id).ok_or_else(|| TilerError::Internal(format!("tile {id:?} added, not entered")))?;
+        journal.record(Record::Entry { id, entry })
     }
 }
 
@@ -106,6 +163,10 @@ impl TileSink for PackSink {
 
     fn ordered(&self) -> bool {
         true
+    }
+
+    fn kept(&self, lod: u32, x: u32, y: u32) -> bool {
+        self.resume.as_ref().is_some_and(|(_, kept)| kept.contains(&TileId { lod, x, y }))
     }
 
     /// Payload bytes stored: identical tiles count once.

@@ -493,3 +493,73 @@ fn shorter_metadata_set_at_the_end_gives_back_its_room() {
         PackWriter::create(dir.path().join("x.vtpk"), d, levels.clone(), b"{}", WriteOptions::default()).unwrap();
     assert!(matches!(w.set_metadata(b"{\"longer\":1}".to_vec()), Err(PackError::Usage(_))));
 }
+
+/// A writer killed half-way (its file kept, as after SIGKILL) is resumed from the entries it
+/// gave: the pack is the one an uninterrupted writer makes, byte for byte; a damaged payload
+/// ends what is kept, and what follows it is written again.
+#[test]
+fn a_resumed_writer_makes_the_same_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = common::description(3, 1);
+    let levels = vortex_pack::fuzzing::pyramid_levels(&d, 4);
+    let options = WriteOptions { alignment: 4096, payload_alignment: 16 };
+    // Every tile of the pyramid, some repeated (shared payloads) and some constant.
+    let tiles: Vec<(TileId, Option<Vec<u8>>)> = levels
+        .iter()
+        .enumerate()
+        .flat_map(|(lod, l)| {
+            (0..l.tiles_h).flat_map(move |y| (0..l.tiles_w).map(move |x| TileId { lod: lod as u32, x, y }))
+        })
+        .enumerate()
+        .map(|(k, id)| (id, (k % 5 != 4).then(|| common::raw_tile(&d, (k % 7) as u32))))
+        .collect();
+    let add = |w: &mut PackWriter, (id, tile): &(TileId, Option<Vec<u8>>)| match tile {
+        Some(bytes) => w.add(*id, NewTile::Data(TileKind::Raw, bytes)).unwrap(),
+        None => w.add(*id, NewTile::Constant(&[9, 8, 7])).unwrap(),
+    };
+    let whole = dir.path().join("whole.vtpk");
+    let mut w = PackWriter::create(&whole, d, levels.clone(), b"{}", options).unwrap();
+    tiles.iter().for_each(|t| add(&mut w, t));
+    w.finish().unwrap();
+    let expected = std::fs::read(&whole).unwrap();
+
+    for damage in [false, true] {
+        let path = dir.path().join("resumed.vtpk");
+        let mut w = PackWriter::create(&path, d, levels.clone(), b"{}", options).unwrap();
+        let half = tiles.len() / 2;
+        let mut journal = Vec::new();
+        for t in &tiles[..half] {
+            add(&mut w, t);
+            journal.push((t.0, w.entry(t.0).unwrap()));
+        }
+        // One more payload written but not journaled, as a kill between the two leaves it.
+        add(&mut w, &tiles[half]);
+        w.keep_on_drop();
+        drop(w);
+        // A killed run's name: another PID's.
+        let left = dir.path().join(".resumed.vtpk.tmp-4000000000");
+        std::fs::rename(vortex_pack::temporary_path(&path), &left).unwrap();
+        let mut first_damaged = half;
+        if damage {
+            // The 4th payload stored, one byte changed: the tiles from the first that stored it on go.
+            let mut seen = std::collections::HashSet::new();
+            let (k, e) = (journal.iter().enumerate())
+                .filter(|(_, (_, e))| e.len > 0 && seen.insert(e.offset_or_value))
+                .map(|(k, (_, e))| (k, *e))
+                .nth(3)
+                .unwrap();
+            let mut bytes = std::fs::read(&left).unwrap();
+            bytes[e.offset_or_value as usize] ^= 1;
+            std::fs::write(&left, bytes).unwrap();
+            first_damaged = k;
+        }
+        let (mut w, held) = PackWriter::resume(&path, d, levels.clone(), b"{}", options, &left, &journal).unwrap();
+        assert_eq!(held, first_damaged, "damaged: {damage}");
+        assert!(!left.exists());
+        for t in &tiles[held..] {
+            add(&mut w, t);
+        }
+        w.finish().unwrap();
+        assert!(std::fs::read(&path).unwrap() == expected, "damaged: {damage}");
+    }
+}
