@@ -56,6 +56,17 @@ fn command(input: &Path, kind: &Kind, dest: &Path, extra: &[&str]) -> Vec<String
     args
 }
 
+/// The uninterrupted run of `kind` on `input`, into `ref/` under the same name, and the command
+/// that writes the same output into `dir`: (the reference, the destination, the command).
+fn reference_and_command(dir: &Path, input: &Path, kind: &Kind) -> (PathBuf, PathBuf, Vec<String>) {
+    std::fs::create_dir_all(dir.join("ref")).unwrap();
+    let reference = dir.join("ref").join(kind.name);
+    run_ok(&[command(input, kind, &reference, &[]), vec!["-q".into()]].concat());
+    let dest = dir.join(kind.name);
+    let args = command(input, kind, &dest, &[]);
+    (reference, dest, args)
+}
+
 fn run_ok(args: &[String]) -> (String, String) {
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let out = run(&args);
@@ -209,11 +220,7 @@ fn a_run_stopped_by_sigterm_keeps_its_tiles_for_resume() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("in.ppm");
     image(&input);
-    std::fs::create_dir(dir.path().join("ref")).unwrap();
-    let reference = dir.path().join("ref").join(PACK.name);
-    run_ok(&[command(&input, &PACK, &reference, &[]), vec!["-q".into()]].concat());
-    let dest = dir.path().join(PACK.name);
-    let args = command(&input, &PACK, &dest, &[]);
+    let (reference, dest, args) = reference_and_command(dir.path(), &input, &PACK);
     let (journal, code, stderr) = stop_half_way(&args, &dest, PACK.tiles, "-TERM");
     assert_eq!(code, Some(143), "{stderr}");
     assert!(stderr.contains("run the same command with --resume") && !stderr.contains("panicked"), "{stderr}");
@@ -232,12 +239,8 @@ fn a_damaged_staged_tile_is_made_again() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("in.ppm");
     image(&input);
-    std::fs::create_dir(dir.path().join("ref")).unwrap();
     for kind in [&PACK, &DZI] {
-        let reference = dir.path().join("ref").join(kind.name);
-        run_ok(&[command(&input, kind, &reference, &[]), vec!["-q".into()]].concat());
-        let dest = dir.path().join(kind.name);
-        let args = command(&input, kind, &dest, &[]);
+        let (reference, dest, args) = reference_and_command(dir.path(), &input, kind);
         let journal = kill_half_way(&args, &dest, kind.tiles);
         let records = recorded(&journal);
         let staged = beside(&dest, if kind.name.ends_with(".vtpk") { "tmp-" } else { "partial-" });
@@ -279,11 +282,7 @@ fn another_runs_journal_is_refused_and_nothing_to_resume_starts_afresh() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("in.ppm");
     image(&input);
-    std::fs::create_dir(dir.path().join("ref")).unwrap();
-    let reference = dir.path().join("ref").join(PACK.name);
-    run_ok(&[command(&input, &PACK, &reference, &[]), vec!["-q".into()]].concat());
-    let dest = dir.path().join(PACK.name);
-    let args = command(&input, &PACK, &dest, &[]);
+    let (reference, dest, args) = reference_and_command(dir.path(), &input, &PACK);
     let journal = kill_half_way(&args, &dest, PACK.tiles);
     let before = std::fs::read(&journal).unwrap();
 
