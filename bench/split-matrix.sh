@@ -78,9 +78,11 @@ source_file() {
   echo "$f"
 }
 
+# codec_args CODEC SOURCE: the flags of CODEC. JPEG's Q85 is the default: asked for explicitly,
+# it would re-encode the stored tiles of the JPEG-tiled sources, which their rows copy.
 codec_args() {
   case $1 in
-    jpeg) echo "--codec jpeg --quality 85" ;;
+    jpeg) [[ $2 == jtiff* ]] && echo "--codec jpeg" || echo "--codec jpeg --quality 85" ;;
     png) echo "--codec png --png-compression fast" ;;
     bc7) echo "--codec bc7 --bc7-effort ultra-fast" ;;
     *) echo "--codec $1" ;;
@@ -121,7 +123,7 @@ for name in $SOURCES_RUN; do
     for codec in $CODECS; do
       # shellcheck disable=SC2046 # codec_args and split_variant_args are word-split on purpose
       run "$name $codec" "$WORK/bin/vortex-tiler" "$command" "$file" --pack "$OUT/out.vtpk" --force --tile-size 256 \
-        $(split_variant_args "$name") $(codec_args "$codec") --json
+        $(split_variant_args "$name") $(codec_args "$codec" "$name") --json
       rm -f "$OUT/out.vtpk"
     done
     if [ -n "$PY" ] && [ "$name" != tiles ]; then
