@@ -130,16 +130,17 @@ pub(crate) fn process_alive(pid: u32) -> Option<bool> {
     Some(proc.join(pid.to_string()).exists())
 }
 
+/// A PID that no process has: beyond the kernel's maximum (for tests of dead runs' files).
+#[cfg(test)]
+pub(crate) fn dead_pid() -> u32 {
+    let max: u32 =
+        fs::read_to_string("/proc/sys/kernel/pid_max").ok().and_then(|s| s.trim().parse().ok()).unwrap_or(4194304);
+    max + 1
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A PID that no process has: beyond the kernel's maximum.
-    fn dead_pid() -> u32 {
-        let max: u32 =
-            fs::read_to_string("/proc/sys/kernel/pid_max").ok().and_then(|s| s.trim().parse().ok()).unwrap_or(4194304);
-        max + 1
-    }
 
     #[test]
     fn names_carry_the_pid() {

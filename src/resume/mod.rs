@@ -442,13 +442,6 @@ mod tests {
         TileId { lod, x, y }
     }
 
-    /// A PID no process has: beyond the kernel's maximum.
-    fn dead_pid() -> u32 {
-        let max: u32 =
-            fs::read_to_string("/proc/sys/kernel/pid_max").ok().and_then(|s| s.trim().parse().ok()).unwrap_or(4194304);
-        max + 1
-    }
-
     #[test]
     fn records_read_back_as_written() {
         let records = [
@@ -495,7 +488,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let dest = dir.path().join("out");
         let me = Identity::new().with("tile size", 256);
-        let dead = dead_pid();
+        let dead = staging::dead_pid();
         // Nothing to resume: a fresh journal, header only.
         let (journal, found) = Journal::start(&dest, Staging::Directory, &me).unwrap();
         assert!(found.is_none());
@@ -544,7 +537,7 @@ mod tests {
         let e = Journal::start(&dest, Staging::Pack, &Identity::new()).unwrap_err().to_string();
         assert!(e.contains("process 1"), "{e}");
         fs::remove_file(journal_path(&dest, 1)).unwrap();
-        fs::write(journal_path(&dest, dead_pid()), "not a journal\n").unwrap();
+        fs::write(journal_path(&dest, staging::dead_pid()), "not a journal\n").unwrap();
         let e = Journal::start(&dest, Staging::Pack, &Identity::new()).unwrap_err().to_string();
         assert!(e.contains(".out.vtpk.resume-") && e.contains("not a journal"), "{e}");
     }
