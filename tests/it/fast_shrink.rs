@@ -13,10 +13,15 @@ use crate::common::compare::{Picture, Tolerance, assert_close};
 use crate::copy_tiles::{files, have_vips, pattern_png_sized, tool};
 
 /// A libvips JPEG TIFF of the pattern at `w x h`, in 128-texel tiles at Q85 (YCbCr 4:2:0).
-fn jpeg_tiff(dir: &Path, (w, h): (u32, u32)) -> std::path::PathBuf {
+fn jpeg_tiff(dir: &Path, size: (u32, u32)) -> std::path::PathBuf {
+    jpeg_tiff_at(dir, size, "85")
+}
+
+/// [`jpeg_tiff`] at `quality`: YCbCr 4:2:0 below 90, RGB (an Adobe marker in the copies) from 90.
+fn jpeg_tiff_at(dir: &Path, (w, h): (u32, u32), quality: &str) -> std::path::PathBuf {
     let png = pattern_png_sized(dir, w, h);
-    let tiff = dir.join(format!("slide-{w}x{h}.tif"));
-    let tiled = ["--tile", "--tile-width", "128", "--tile-height", "128", "--compression", "jpeg", "--Q", "85"];
+    let tiff = dir.join(format!("slide-{w}x{h}-q{quality}.tif"));
+    let tiled = ["--tile", "--tile-width", "128", "--tile-height", "128", "--compression", "jpeg", "--Q", quality];
     tool("vips", &[&["tiffsave", s(&png), s(&tiff)], &tiled[..]].concat());
     tiff
 }
@@ -54,12 +59,23 @@ fn decode(jpeg: &[u8]) -> Vec<u8> {
 /// decodes them, encoded as `cjpeg` encodes them.
 #[test]
 fn the_first_reduced_level_is_the_stored_tiles_at_half_size() {
+    halves_as_djpeg_does("85");
+}
+
+/// The same for RGB tiles, as libvips stores them from Q90 on (no chroma subsampling, an Adobe
+/// marker in the copied files).
+#[test]
+fn rgb_tiles_are_halved_as_djpeg_halves_them() {
+    halves_as_djpeg_does("95");
+}
+
+fn halves_as_djpeg_does(quality: &str) {
     let libjpeg = ["djpeg", "cjpeg"].iter().all(|p| crate::common::have_program(p, "-version", "libjpeg-turbo-progs"));
     if !have_vips() || !libjpeg {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let tiff = jpeg_tiff(dir.path(), (1024, 768));
+    let tiff = jpeg_tiff_at(dir.path(), (1024, 768), quality);
     let (exact_dir, fast_dir) = (dir.path().join("exact"), dir.path().join("fast"));
     let exact = split(&tiff, &exact_dir, &[]);
     let fast = split(&tiff, &fast_dir, &["--fast-shrink"]);
@@ -95,7 +111,7 @@ fn the_first_reduced_level_is_the_stored_tiles_at_half_size() {
         let want = decode(&out.stdout);
         let got = decode(&fast_files[&format!("lod01-x{x:04}-y{y:04}.jpg")]);
         assert_close(
-            &format!("fast-shrink-lod1-{x}-{y}"),
+            &format!("fast-shrink-q{quality}-lod1-{x}-{y}"),
             Picture::new(128, 128, 3, &got),
             Picture::new(128, 128, 3, &want),
             Tolerance::max(
@@ -110,7 +126,7 @@ fn the_first_reduced_level_is_the_stored_tiles_at_half_size() {
         // (docs/accuracy.md measures it).
         let exact_page = decode(&exact_files[&format!("lod01-x{x:04}-y{y:04}.jpg")]);
         assert_close(
-            &format!("fast-shrink-vs-exact-lod1-{x}-{y}"),
+            &format!("fast-shrink-q{quality}-vs-exact-lod1-{x}-{y}"),
             Picture::new(128, 128, 3, &got),
             Picture::new(128, 128, 3, &exact_page),
             Tolerance::mean(
