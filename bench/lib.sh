@@ -137,6 +137,18 @@ sys.exit(0 if version >= (8, 15) and "Q" in pyvips.Introspect.get("dzsave").opti
 PY
 }
 
+# jpeg_tiled_source: the 16384² image saved by Debian's vips as a JPEG-tiled BigTIFF (256² RGB
+# tiles, Q90: RGB, as libvips writes from Q90 on), made the first time; prints its path.
+jpeg_tiled_source() {
+  local f=$WORK/matrix/jtiff.tif
+  if [ ! -s "$f" ]; then
+    mkdir -p "$WORK/matrix"
+    vips tiffsave "$WORK/src16k.tif" "$f.part.tif" --tile --tile-width 256 --tile-height 256 --compression jpeg --Q 90 --bigtiff
+    mv "$f.part.tif" "$f"
+  fi
+  echo "$f"
+}
+
 # split_variant_args NAME: how bench/split-matrix.sh's row NAME cuts its source: the variants of
 # the strip BigTIFF that issue 28's goals name (`strip-box`: libvips' own 2x2 mean;
 # `strip-border1`: our default border), every other row with no border.

@@ -59,10 +59,7 @@ source_file() {
   case $1 in
     strip | strip-box | strip-border1) echo "$SRC"; return ;;
     tiled) f=$M/tiled.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --tile --tile-width 256 --tile-height 256 --bigtiff ;;
-    jtiff | jtiff-fast)
-      f=$M/jtiff.tif
-      [ -s "$f" ] || vips tiffsave "$SRC" "$f" --tile --tile-width 256 --tile-height 256 --compression jpeg --Q 90 --bigtiff
-      ;;
+    jtiff | jtiff-fast) f=$(jpeg_tiled_source) ;;
     deflate) f=$M/deflate.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --compression deflate --bigtiff ;;
     lzw) f=$M/lzw.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --compression lzw --bigtiff ;;
     png) f=$M/src.png; [ -s "$f" ] || vips pngsave "$SRC" "$f" --compression 1 ;;
