@@ -33,23 +33,17 @@ RAW=$C/runs.tsv # fs what run wall_s sys_s files printed
 mkdir -p "$C"
 : >"$RAW"
 LOOPS=
-if [ "$(id -u)" = 0 ] && command -v mkfs.ext4 >/dev/null && command -v mount >/dev/null; then
+if can_mount; then
   LOOPS="journal nojournal"
 else
   echo "note: not root or no mkfs.ext4: the loop-mounted ext4 rows are left out" >&2
 fi
-trap 'for fs in $LOOPS; do umount "$C/mnt-$fs" 2>/dev/null || true; done; rm -f "$C"/*.img' EXIT
+trap 'for fs in $LOOPS; do drop_ext4 "$C/mnt-$fs"; done' EXIT
 
 # fresh_fs FS: a new, empty ext4 at $C/mnt-FS (FS: journal or nojournal); prints its path.
 fresh_fs() {
-  local img=$C/$1.img mnt=$C/mnt-$1
-  umount "$mnt" 2>/dev/null || true
-  rm -f "$img"
-  truncate -s 3G "$img"
-  mkfs.ext4 -q -F $([ "$1" = nojournal ] && echo "-O ^has_journal") "$img"
-  mkdir -p "$mnt"
-  mount -o loop "$img" "$mnt"
-  echo "$mnt"
+  new_ext4 "$C/mnt-$1" "$1"
+  echo "$C/mnt-$1"
 }
 
 # timed FS WHAT RUN OUT COMMAND...: one run under /usr/bin/time, appended to $RAW with the number

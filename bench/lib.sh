@@ -149,6 +149,22 @@ jpeg_tiled_source() {
   echo "$f"
 }
 
+# new_ext4 MOUNT [nojournal]: a new, empty ext4 (with a journal unless asked) on a 3 GB image,
+# mounted at MOUNT through a loop device, replacing what was mounted there; root only. A run
+# writing thousands of files measures its file system's recent deletions too (on a journal-less
+# ext4 new inodes skip those freed in the last minutes: docs/benchmarks.md, "Creating files"),
+# so directory outputs are timed on a new one. drop_ext4 MOUNT unmounts it and removes its image.
+new_ext4() {
+  drop_ext4 "$1"
+  truncate -s 3G "$1.img"
+  mkfs.ext4 -q -F $([ "${2:-}" = nojournal ] && echo "-O ^has_journal") "$1.img"
+  mkdir -p "$1"
+  mount -o loop "$1.img" "$1"
+}
+drop_ext4() { umount "$1" 2>/dev/null || true; rm -f "$1.img"; }
+# can_mount: whether new_ext4 can work here (root, mkfs.ext4).
+can_mount() { [ "$(id -u)" = 0 ] && command -v mkfs.ext4 >/dev/null; }
+
 # split_variant_args NAME: how bench/split-matrix.sh's row NAME cuts its source: the variants of
 # the strip BigTIFF that issue 28's goals name (`strip-box`: libvips' own 2x2 mean;
 # `strip-border1`: our default border), every other row with no border.
@@ -157,12 +173,13 @@ split_variant_args() {
     strip-box) echo "--border 0 --filter box" ;;
     strip-border1) echo "--border 1" ;;
     jtiff-fast) echo "--border 0 --fast-shrink" ;;
+    *-dzi) echo "--overlap 0" ;;
     *) echo "--border 0" ;;
   esac
 }
 # peer_grid NAME: the peer's tile size and overlap giving the same 256-texel files as that row.
 peer_grid() { [ "$1" = strip-border1 ] && echo "254 1" || echo "256 0"; }
-# The peer's call: dzsave SOURCE into OUT (a .zip) at TILE_SIZE and OVERLAP, JPEG Q85 in direct mode.
+# The peer's call: dzsave SOURCE into OUT (a .zip, else a Deep Zoom directory) at TILE_SIZE and OVERLAP, JPEG Q85 in direct mode.
 PEER_DZSAVE='import sys, pyvips
 im = pyvips.Image.new_from_file(sys.argv[1], access="sequential")
 im.dzsave(sys.argv[2], tile_size=int(sys.argv[3]), overlap=int(sys.argv[4]), Q=85)'

@@ -22,7 +22,11 @@
 # `memory.peakBytes`), beside the peak RSS.
 # `jtiff` is the image as a JPEG-tiled BigTIFF (256² tiles, Q90: RGB, as libvips writes from
 # Q90 on), whose tiles the pack copies into its finest level (issue 45); `jtiff-fast` cuts it with
-# `--fast-shrink` (docs/accuracy.md).
+# `--fast-shrink` (docs/accuracy.md). `slide` is bench/lib.sh's 16384² slide (make_slide), its
+# tiles copied too. `jtiff-dzi` and `slide-dzi` write Deep Zoom directories (256-texel tiles, no
+# overlap) instead of a pack, and the peer dzsave's directory instead of a .zip: each run on a
+# new ext4 mounted through a loop device where root can (bench/lib.sh's new_ext4), since on this
+# machine's disk creating files measures recent deletions too (bench/create-files.sh).
 # Two more rows cut the strip BigTIFF as issue 28's goals name them: `strip-box` with
 # `--filter box` (libvips' own 2x2 mean), `strip-border1` with the default border of 1 (the peer
 # then writes 254-texel tiles with an overlap of 1: the same 256-texel files).
@@ -44,7 +48,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source bench/lib.sh
 RUNS=${RUNS:-5}
-SOURCES=${SOURCES:-strip strip-box strip-border1 tiled jtiff jtiff-fast deflate lzw png jpeg ppm tiles}
+SOURCES=${SOURCES:-strip strip-box strip-border1 tiled jtiff jtiff-fast jtiff-dzi slide slide-dzi deflate lzw png jpeg ppm tiles}
 CODECS=${CODECS:-jpeg}
 bench_setup
 SRC=$WORK/src16k.tif
@@ -59,7 +63,12 @@ source_file() {
   case $1 in
     strip | strip-box | strip-border1) echo "$SRC"; return ;;
     tiled) f=$M/tiled.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --tile --tile-width 256 --tile-height 256 --bigtiff ;;
-    jtiff | jtiff-fast) f=$(jpeg_tiled_source) ;;
+    jtiff | jtiff-fast | jtiff-dzi) f=$(jpeg_tiled_source) ;;
+    slide | slide-dzi)
+      [ -n "$PY" ] || { echo "error: the slide rows need pyvips to make the slide (bench/lib.sh's make_slide)" >&2; exit 1; }
+      f=$WORK/slide-16384x16384.tif
+      make_slide 16384 16384 "$f"
+      ;;
     deflate) f=$M/deflate.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --compression deflate --bigtiff ;;
     lzw) f=$M/lzw.tif; [ -s "$f" ] || vips tiffsave "$SRC" "$f" --compression lzw --bigtiff ;;
     png) f=$M/src.png; [ -s "$f" ] || vips pngsave "$SRC" "$f" --compression 1 ;;
@@ -76,14 +85,36 @@ source_file() {
 }
 
 # codec_args CODEC SOURCE: the flags of CODEC. JPEG's Q85 is the default: asked for explicitly,
-# it would re-encode the stored tiles of the JPEG-tiled sources, which their rows copy.
+# it would re-encode the stored tiles of the JPEG-tiled sources and the slide, which their rows copy.
 codec_args() {
   case $1 in
-    jpeg) [[ $2 == jtiff* ]] && echo "--codec jpeg" || echo "--codec jpeg --quality 85" ;;
+    jpeg) [[ $2 == jtiff* || $2 == slide* ]] && echo "--codec jpeg" || echo "--codec jpeg --quality 85" ;;
     png) echo "--codec png --png-compression fast" ;;
     bc7) echo "--codec bc7 --bc7-effort ultra-fast" ;;
     *) echo "--codec $1" ;;
   esac
+}
+
+# Deep Zoom rows (`*-dzi`) write 5,470 files a run: on a new file system each run where one can be
+# mounted (bench/lib.sh's new_ext4), else into directories kept until the end (never where
+# files were just deleted).
+DIRS=
+! can_mount || DIRS=$M/mnt
+# output_args NAME ours|peer: where that run writes (ours: the flags; the peer: its destination),
+# the file system made first for a Deep Zoom row.
+output_args() {
+  if [[ $1 == *-dzi ]]; then
+    local dest=$OUT/dzi-$2-$RANDOM
+    [ -z "$DIRS" ] || { new_ext4 "$DIRS" >&2; dest=$DIRS/dzi; }
+    [ "$2" = ours ] && echo "--layout dzi -o $dest/out" || echo "$dest/peer"
+  else
+    [ "$2" = ours ] && echo "--pack $OUT/out.vtpk --force" || echo "$OUT/peer.zip"
+  fi
+}
+# discard_output NAME ours|peer: the run's output removed (a Deep Zoom directory stays to the end
+# where no file system can be mounted).
+discard_output() {
+  if [[ $1 == *-dzi ]]; then [ -z "$DIRS" ] || drop_ext4 "$DIRS"; else rm -f "$OUT/out.vtpk" "$OUT/peer.zip"; fi
 }
 
 RAW=$M/runs.tsv
@@ -118,19 +149,20 @@ for name in $SOURCES_RUN; do
   [ "$name" = tiles ] && command=convert
   for round in $(seq "$RUNS"); do
     for codec in $CODECS; do
-      # shellcheck disable=SC2046 # codec_args and split_variant_args are word-split on purpose
-      run "$name $codec" "$WORK/bin/vortex-tiler" "$command" "$file" --pack "$OUT/out.vtpk" --force --tile-size 256 \
+      # shellcheck disable=SC2046 # output_args, codec_args and split_variant_args are word-split on purpose
+      run "$name $codec" "$WORK/bin/vortex-tiler" "$command" "$file" $(output_args "$name" ours) --tile-size 256 \
         $(split_variant_args "$name") $(codec_args "$codec" "$name") --json
-      rm -f "$OUT/out.vtpk"
+      discard_output "$name" ours
     done
     if [ -n "$PY" ] && [ "$name" != tiles ]; then
-      rm -rf "$OUT/peer.zip"
       # shellcheck disable=SC2046 # peer_grid is word-split on purpose
-      run "$name peer" "$PY" -c "$PEER_DZSAVE" "$file" "$OUT/peer.zip" $(peer_grid "$name")
-      rm -f "$OUT/peer.zip"
+      run "$name peer" "$PY" -c "$PEER_DZSAVE" "$file" "$(output_args "$name" peer)" $(peer_grid "$name")
+      discard_output "$name" peer
     fi
   done
 done
+[ -z "$DIRS" ] || drop_ext4 "$DIRS"
+rm -rf "$OUT"/dzi-*
 
 REPORT=$M/report.md
 python3 - "$RAW" "$PYVIPS_VERSION" "$REV" "$SOURCES" "$CODECS" >"$REPORT" <<'PY'
@@ -153,7 +185,8 @@ mpx = 16384 * 16384 / 1e6
 print(f"{datetime.date.today()}, {os.cpu_count()} cores, vortex-tiler {rev}"
       + (f", peer {peer_version} (pyvips-binary, direct mode: `Q=85`) writing a .zip of 256-texel JPEG tiles" if peer_version else "")
       + "; `split --pack --tile-size 256 --border 0`, default filter (`strip-box`: `--filter box`; `jtiff-fast`: `--fast-shrink`; `strip-border1`: `--border 1`,"
-      + " the peer's tiles 254 texels with an overlap of 1); the median of the runs per cell.")
+      + " the peer's tiles 254 texels with an overlap of 1; `-dzi`: `--layout dzi --overlap 0` and the peer's dzsave to a directory, each run on a new ext4)"
+      + "; the median of the runs per cell.")
 print()
 print("| source | codec | wall | CPU | CPU / wall | CPU ms / Mpx | Mpx/s | peak RSS | held | read | waits for rows | pyramid | cut | waits for encoders | encoders wait | encode | store | bound by | vs peer |")
 print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|")
@@ -174,7 +207,7 @@ for s, peer, ours in cells():
               f"| {st['readSeconds']:.2f} | {st.get('readWaitSeconds', 0):.2f} | {st['pyramidSeconds']:.2f} | {st.get('cutSeconds', 0):.2f} | {st['producerBlockedSeconds']:.2f} "
               f"| {st['encodersIdleSeconds']:.2f} | {st['encodeSeconds']:.2f} | {st['storeSeconds']:.2f} | {bound} | {vs} |")
     if peer:
-        print(f"| {s} | peer: libvips .zip (JPEG) | {peer[0]:.2f} s | {peer[1]:.2f} s | {peer[1] / peer[0]:.2f} | {peer[1] / mpx * 1e3:.1f} | {mpx / peer[0]:.0f} "
+        print(f"| {s} | peer: libvips {'Deep Zoom' if s.endswith('-dzi') else '.zip'} (JPEG) | {peer[0]:.2f} s | {peer[1]:.2f} s | {peer[1] / peer[0]:.2f} | {peer[1] / mpx * 1e3:.1f} | {mpx / peer[0]:.0f} "
               f"| {peer[2] / 1024:.0f} MiB | | | | | | | | | | | |")
 print()
 print("CPU milliseconds per source megapixel, by stage (`split --json`'s `stages.cpu`, the same median runs); *other* is the rest of the process's CPU.")
@@ -213,7 +246,11 @@ them longer than they for it, else the busiest of reading, the pyramid and cutti
 the stages held at most by their own count (\`split --json\`'s \`memory.peakBytes\`, docs/cli.md);
 the rest of the peak RSS is code, stacks, tables and the allocator's. The
 \`tiles\` source is 4096 JPEG tiles, read by \`convert\`; \`jtiff\` a JPEG-tiled BigTIFF whose
-tiles the pack copies (\`jtiff-fast\`: with \`--fast-shrink\`).
+tiles the pack copies (\`jtiff-fast\`: with \`--fast-shrink\`); \`slide\` a slide-like pyramidal
+TIFF of the same size (bench/lib.sh's make_slide: 256-texel JPEG tiles at Q90), its tiles copied
+too. The \`-dzi\` rows write Deep Zoom directories instead of a pack (the peer: dzsave into a
+directory), each run on a new file system: on this machine's disk a run creating files just
+after others were deleted measures that deletion too (\`bench/create-files.sh\`).
 *vs peer*: libvips' wall time over ours, JPEG only. In the CPU table, *read*, *decode* (a JPEG
 TIFF's tiles decoded on the pool), *sums*, *cut*, *encode* and *store* are each stage's CPU time
 by its thread's CPU clock (\`split --json\`'s
