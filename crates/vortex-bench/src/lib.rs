@@ -4,7 +4,8 @@
 //! [`run_info`] says when and where the run happened and writes the result atomically, and
 //! [`measure`] holds the arithmetic of their tables (medians, PSNR). The tools the benchmark
 //! scripts run are binaries here too: `gen_image` (synthetic test images of any size), `psnr`
-//! (a pyramid's finest level against its source) and `codec_speed` (each tile codec's cost).
+//! (a pyramid's finest level against its source), `codec_speed` (each tile codec's cost) and
+//! `create_files` (what creating a tile file costs the file system).
 //!
 //! ```sh
 //! cargo run --release -p vortex-bench --bin accuracy        # docs/accuracy.md + its two SVGs
@@ -12,6 +13,7 @@
 //! cargo run --release -p vortex-bench --bin gen_image -- 2048 2048 img.png
 //! cargo run --release -p vortex-bench --bin psnr -- img.png --vortex OUT_DIR
 //! cargo run --release -p vortex-bench --bin codec_speed -- img.png
+//! cargo run --release -p vortex-bench --bin create_files -- /tmp/new-dir --threads 2
 //! ```
 #![allow(clippy::unwrap_used, clippy::expect_used)] // measurement programs may panic on a broken set-up
 
