@@ -306,6 +306,11 @@ fn run<T: Sample>(
         Passes::Halved(_, half, _) => (*half, 1),
         _ => (layout, 0),
     };
+    // Where every target copies the finest level's pages from the source's stored tiles, and a
+    // page that cannot be copied can be cut from its decoded stored tile, the cascade sends
+    // those pages without texels, as a halved pass does: the level's texels still make the
+    // sums, but none is cut or held for the encoders (issue 45).
+    let stored_finest = (copier.as_ref()).is_some_and(|c| c.tiles.decodes() && c.takes.iter().all(|&takes| takes));
     let roots = std::thread::scope(|scope| {
         let producer_clock = Arc::clone(&clock);
         let producer = scope.spawn(move || {
@@ -315,6 +320,7 @@ fn run<T: Sample>(
                 opts,
                 padding,
                 out: tx.above(lods_above),
+                stored_finest: stored_finest && lods_above == 0,
                 progress,
                 clock: producer_clock,
             };
@@ -397,6 +403,8 @@ struct Producer<'a, T> {
     opts: &'a SplitOptions,
     padding: Padding<T>,
     out: BatchSender<T>,
+    /// Whether LOD 0's pages go to the encoders as the source's stored tiles, without texels.
+    stored_finest: bool,
     progress: &'a dyn Progress,
     clock: Arc<StageClock>,
 }
@@ -469,7 +477,12 @@ impl<T: Sample> Producer<'_, T> {
     where
         T: Into<A>,
     {
-        Cascade::new(self.layout, span, self.pixels, self.opts.filter, self.padding.clone(), self.out.clone())
+        let cascade =
+            Cascade::new(self.layout, span, self.pixels, self.opts.filter, self.padding.clone(), self.out.clone());
+        match self.stored_finest && span.lods.start == 0 {
+            true => cascade.with_stored_first(),
+            false => cascade,
+        }
     }
 
     /// LOD 0 onwards for the columns and rows of `span`, from the source's next row on: the

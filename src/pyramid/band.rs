@@ -32,6 +32,9 @@ pub struct Band<T> {
     end_tile_row: u32,
     /// Image row index of the next row to arrive.
     next_row: u64,
+    /// Whether the tiles get their texels: not where the level's pages are the source's stored
+    /// tiles, handed on without texels when their rows are in ([`Band::drop_texels`]).
+    texels: bool,
 }
 
 /// A row of tiles being filled.
@@ -76,7 +79,14 @@ impl<T: Copy> Band<T> {
             next_row: first_row,
             next_tile_row: tile_rows.start,
             end_tile_row: tile_rows.end,
+            texels: true,
         }
+    }
+
+    /// From now on, the band hands on its rows of tiles when their rows are in, as it would,
+    /// but with no texels in them.
+    pub fn drop_texels(&mut self) {
+        self.texels = false;
     }
 
     pub fn lod(&self) -> u32 {
@@ -117,7 +127,7 @@ impl<T: Copy> Band<T> {
                     Some(_) => break,
                     None => None,
                 };
-                for (tile, (_, runs)) in open.tiles.iter_mut().zip(&self.x_runs) {
+                for (tile, (_, runs)) in open.tiles.iter_mut().zip(&self.x_runs).filter(|_| self.texels) {
                     cut::push_row(tile, runs, texels, self.channels, fill);
                 }
                 open.written += 1;
@@ -129,6 +139,7 @@ impl<T: Copy> Band<T> {
             done(TileRow { index: open.index, tiles })?;
         }
         if complete > 0
+            && self.texels
             && let Some(front) = self.open.front_mut()
         {
             let texels = self.layout.tile_texels() * self.channels;
@@ -145,7 +156,7 @@ impl<T: Copy> Band<T> {
     /// the encoders' queue is full (12 MiB more at a 16384-texel width, issue 28).
     fn begin(&self, index: u32) -> OpenRow<T> {
         let sources = cut::expand(&cut::runs(&self.layout, index, self.height, self.virtual_height, self.edge_padding));
-        let texels = if self.open.is_empty() { self.layout.tile_texels() * self.channels } else { 0 };
+        let texels = if self.open.is_empty() && self.texels { self.layout.tile_texels() * self.channels } else { 0 };
         let tiles = self.x_runs.iter().map(|_| Vec::with_capacity(texels)).collect();
         OpenRow { index, sources, written: 0, tiles }
     }

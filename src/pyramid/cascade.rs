@@ -268,6 +268,9 @@ pub(crate) struct Cuts<T> {
     padding: Padding<T>,
     /// Per level, the band that fills its tiles as its rows arrive.
     levels: Vec<Band<T>>,
+    /// Whether the first level's pages are the source's stored tiles, sent without texels
+    /// ([`Cascade::with_stored_first`]).
+    stored_first: bool,
     out: BatchSender<T>,
 }
 
@@ -293,7 +296,8 @@ impl<T: Sample> Cuts<T> {
 
     /// Row `row` into level `level`'s band; sends every row of tiles it completes.
     fn push(&mut self, level: usize, row: &[T]) -> Result<()> {
-        let Cuts { layout, channels, padding, levels, out } = self;
+        let Cuts { layout, channels, padding, levels, stored_first, out } = self;
+        let stored = *stored_first && level == 0;
         let band = &mut levels[level];
         let lod = band.lod();
         let per_batch = batch_tiles(layout, *channels * size_of::<T>());
@@ -308,8 +312,7 @@ impl<T: Sample> Cuts<T> {
             memory.add(Part::Bands, -bytes);
             memory.add(Part::Tiles, bytes);
             moved.set(moved.get() + bytes);
-            out.send(Ok(Batch { lod, tiles, stored: false }))
-                .map_err(|_| TilerError::Options("the encoder stopped".into()))
+            out.send(Ok(Batch { lod, tiles, stored })).map_err(|_| TilerError::Options("the encoder stopped".into()))
         };
         let held = band.held_bytes();
         let pushed = band.push(row, padding, |row| {
@@ -319,9 +322,9 @@ impl<T: Sample> Cuts<T> {
                     send(std::mem::take(&mut tiles))?;
                 }
                 // Neighbours in a batch with the same texels (most often one colour) share one
-                // encoding.
+                // encoding; stored pages have none yet, and are each a page of their own.
                 match tiles.last_mut() {
-                    Some(prev) if prev.texels == texels => prev.places.push((tx, row.index)),
+                    Some(prev) if !stored && prev.texels == texels => prev.places.push((tx, row.index)),
                     _ => tiles.push(CutTile { texels, places: vec![(tx, row.index)] }),
                 }
             }
@@ -520,9 +523,18 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
         let next_row = span.window_rows(&layout, span.lods.start).start;
         Cascade {
             sums: Sums { channels, levels: sum_levels, exact, prepared, next_row },
-            cuts: Cuts { layout, channels, padding, levels: cut_levels, out },
+            cuts: Cuts { layout, channels, padding, levels: cut_levels, stored_first: false, out },
             derived: Derived::default(),
         }
+    }
+
+    /// This cascade with its first level's pages sent as the source's stored tiles: no texel of
+    /// that level is cut or held, and its rows of pages go on when their rows are in, as they
+    /// would cut ([`Batch::stored`]).
+    pub fn with_stored_first(mut self) -> Self {
+        self.cuts.levels.iter_mut().take(1).for_each(Band::drop_texels);
+        self.cuts.stored_first = true;
+        self
     }
 
     /// Keeps the exact sums of the pages of the span's last LOD, its payload texels only (a
@@ -595,6 +607,17 @@ mod tests {
     /// A 61 x 45 RGBA image (odd sizes, partial footprints) in 8-texel tiles with a border of 1:
     /// 5 LODs, tile rows of several cut after the same source row.
     fn pass(filter: Filter, run: impl FnOnce(&mut Cascade<u8, u64>, &[Vec<u8>])) -> Sent {
+        pass_sending(filter, false, run).into_iter().map(|(lod, _, tiles)| (lod, tiles)).collect()
+    }
+
+    /// [`pass`], its first level sent as stored pages where `stored_first`; each batch says
+    /// whether it is.
+    #[expect(clippy::type_complexity, reason = "a test's record of what was sent")]
+    fn pass_sending(
+        filter: Filter,
+        stored_first: bool,
+        run: impl FnOnce(&mut Cascade<u8, u64>, &[Vec<u8>]),
+    ) -> Vec<(u32, bool, Vec<(Vec<(u32, u32)>, Vec<u8>)>)> {
         let (w, h) = (61u32, 45u32);
         let layout = Layout::new(w as u64, h as u64, 8, 1).unwrap();
         let pixels = PixelLayout::new(Channels::Rgba, Depth::U8);
@@ -603,14 +626,45 @@ mod tests {
         let (tx, rx) = sync_channel(1000); // more than the batches of this image
         let out = BatchSender::new(tx, StageClock::new());
         let mut cascade = Cascade::new(layout, &Span::whole(&layout), pixels, filter, Padding::Edge, out);
+        if stored_first {
+            cascade = cascade.with_stored_first();
+        }
         run(&mut cascade, &rows);
         drop(cascade);
         rx.into_iter()
             .map(|b| {
                 let b = b.unwrap();
-                (b.lod, b.tiles.into_iter().map(|t| (t.places, t.texels)).collect())
+                (b.lod, b.stored, b.tiles.into_iter().map(|t| (t.places, t.texels)).collect())
             })
             .collect()
+    }
+
+    /// With its first level's pages stored, a cascade sends the same batches in the same order
+    /// (which is what makes a pack's bytes): the first level's without texels, a page each
+    /// (they are not merged: their texels are not known), the others as they were.
+    #[test]
+    fn stored_first_pages_go_where_their_cut_pages_went() {
+        let run = |cascade: &mut Cascade<u8, u64>, rows: &[Vec<u8>]| {
+            for row in rows {
+                cascade.push_source_row(row).unwrap();
+            }
+            cascade.finish().unwrap();
+        };
+        let cut = pass_sending(Filter::Box, false, run);
+        let stored = pass_sending(Filter::Box, true, run);
+        assert_eq!(cut.len(), stored.len(), "one batch for each");
+        for ((lod, was_stored, tiles), (stored_lod, is_stored, stored_tiles)) in cut.iter().zip(&stored) {
+            assert_eq!((lod, *was_stored, *is_stored), (stored_lod, false, *lod == 0));
+            match lod {
+                0 => {
+                    let places: Vec<_> = tiles.iter().flat_map(|(places, _)| places.clone()).collect();
+                    let pages: Vec<_> = stored_tiles.iter().map(|(places, _)| places.clone()).collect();
+                    assert_eq!(pages, places.iter().map(|&p| vec![p]).collect::<Vec<_>>());
+                    assert!(stored_tiles.iter().all(|(_, texels)| texels.is_empty()));
+                }
+                _ => assert!(tiles == stored_tiles, "LOD {lod} as it was"),
+            }
+        }
     }
 
     #[test]

@@ -53,6 +53,10 @@ pub trait StoredTiles: Send + Sync {
     fn decode(&self, _col: u32, _row: u32, _denominator: u32) -> crate::error::Result<Option<Vec<u8>>> {
         Ok(None)
     }
+    /// Whether [`decode`](Self::decode) decodes this grid's tiles.
+    fn decodes(&self) -> bool {
+        false
+    }
     /// How the tiles code colour, as the first one does (`None`: grey, unreadable or coded
     /// otherwise): a TIFF or DICOM output, which declares one coding for every tile, takes it
     /// where `--subsampling` is not given, so that the tiles can be copied.

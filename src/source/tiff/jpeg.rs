@@ -663,6 +663,10 @@ impl StoredTiles for JpegTiles {
         Ok(stored::as_file(&stream, self.samples, self.size))
     }
 
+    fn decodes(&self) -> bool {
+        true
+    }
+
     fn decode(&self, col: u32, row: u32, denominator: u32) -> Result<Option<Vec<u8>>> {
         let (stream, name) = self.stream(col, row)?;
         let extent = chunk_extent(self.size, self.image, col, row);
