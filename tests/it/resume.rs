@@ -1,12 +1,14 @@
 //! `split --resume` (docs/resume.md): a real run SIGKILLed half-way, then the same command
 //! with `--resume`, gives the bytes of an uninterrupted run and encodes only what was left; a
 //! damaged staged tile is made again; a journal of another run is refused, naming what
-//! differs; with nothing to resume the run starts afresh.
+//! differs; with nothing to resume the run starts afresh. The same for outputs at `s3://`,
+//! against moto's S3 server (`common::s3`).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 use crate::common::cli::{BIN, fails_with, run, s, wait_or_kill};
+use crate::common::s3::Moto;
 
 /// A 2048 x 1536 PPM: noise (each tile's own bytes), with a flat block (one-colour tiles, and
 /// tiles a pack stores once).
@@ -42,6 +44,12 @@ const PACK: Kind = Kind { flags: &["--border", "0", "--pack"], name: "out.vtpk",
 /// 2048 x 1536: 192 + 48 + 12 + 4 + 1 + 1 x 7).
 const DZI: Kind =
     Kind { flags: &["--overlap", "0", "--layout", "dzi", "-o"], name: "out", tiles: 192 + 48 + 12 + 4 + 1 + 7 };
+
+/// IIIF, XYZ and Google: the same grid, no levels below one page (16 x 16 pages of the
+/// web-mercator square for XYZ and Google, and as many IIIF tiles).
+const IIIF: Kind = Kind { flags: &["--layout", "iiif", "-o"], name: "out", tiles: 257 };
+const XYZ: Kind = Kind { flags: &["--layout", "xyz", "-o"], name: "out", tiles: 257 };
+const GOOGLE: Kind = Kind { flags: &["--layout", "google", "-o"], name: "out", tiles: 257 };
 
 /// The command of a run into `dest`: slow enough per tile (PNG at its best compression, one
 /// encoder thread) that the test can stop it half-way.
@@ -109,8 +117,29 @@ fn kill_half_way(args: &[String], dest: &Path, total: u64) -> PathBuf {
 
 /// [`kill_half_way`] with `signal`; also the run's exit status and standard error.
 fn stop_half_way(args: &[String], dest: &Path, total: u64, signal: &str) -> (PathBuf, Option<i32>, String) {
-    let mut child = Command::new(BIN)
-        .args(args)
+    let journal = || beside(dest, "resume-").into_iter().next();
+    let mut command = Command::new(BIN);
+    command.args(args);
+    let (code, stderr) =
+        stop_when(command, &|| until(&|| journal().is_some_and(|j| recorded(&j).len() as u64 >= total / 2)), signal);
+    let journal = journal().expect("the stopped run's journal stays");
+    let n = recorded(&journal).len() as u64;
+    assert!(n >= total / 2 && n < total, "{n} of {total} tiles journaled");
+    (journal, code, stderr)
+}
+
+/// Waits until `reached` (with a fail-safe deadline, not a timing).
+fn until(reached: &dyn Fn() -> bool) {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    while !reached() && std::time::Instant::now() < deadline {
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+}
+
+/// Starts `command` with `--resume`, stops it with `signal` once `half_way` returns, and
+/// returns its exit status and standard error.
+fn stop_when(mut command: Command, half_way: &dyn Fn(), signal: &str) -> (Option<i32>, String) {
+    let mut child = command
         .arg("--resume")
         .arg("-q")
         .env("NO_COLOR", "1")
@@ -119,25 +148,17 @@ fn stop_half_way(args: &[String], dest: &Path, total: u64, signal: &str) -> (Pat
         .spawn()
         .unwrap();
     let pid = child.id();
-    let journal = || beside(dest, "resume-").into_iter().next();
-    // Until half the tiles are journaled (a fail-safe deadline, not a timing).
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
-    while journal().is_none_or(|j| (recorded(&j).len() as u64) < total / 2) && std::time::Instant::now() < deadline {
-        std::thread::sleep(std::time::Duration::from_millis(2));
-    }
+    half_way();
     let kill =
         |signal: &str| assert!(Command::new("kill").args([signal, &pid.to_string()]).status().unwrap().success());
     kill("-STOP");
     let running = child.try_wait().unwrap().is_none();
-    assert!(running && !dest.exists(), "the run finished before it was stopped half-way");
+    assert!(running, "the run finished before it was stopped half-way");
     kill(signal);
     kill("-CONT");
     let out = wait_or_kill(pid, "a run stopped half-way", || child.wait_with_output().unwrap());
     assert!(!out.status.success());
-    let journal = journal().expect("the stopped run's journal stays");
-    let n = recorded(&journal).len() as u64;
-    assert!(n >= total / 2 && n < total, "{n} of {total} tiles journaled");
-    (journal, out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+    (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
 /// Every file under `dir`, by its path relative to it, with its bytes.
@@ -211,6 +232,21 @@ fn a_killed_pack_is_resumed_byte_for_byte() {
 #[test]
 fn a_killed_deep_zoom_is_resumed_byte_for_byte() {
     killed_and_resumed(&DZI);
+}
+
+#[test]
+fn a_killed_iiif_output_is_resumed_byte_for_byte() {
+    killed_and_resumed(&IIIF);
+}
+
+#[test]
+fn a_killed_xyz_output_is_resumed_byte_for_byte() {
+    killed_and_resumed(&XYZ);
+}
+
+#[test]
+fn a_killed_google_output_is_resumed_byte_for_byte() {
+    killed_and_resumed(&GOOGLE);
 }
 
 /// SIGTERM (what Slurm sends at a time limit, before SIGKILL) stops a resumable run cleanly,
@@ -328,7 +364,7 @@ fn resume_refuses_what_it_cannot_resume() {
     let d = |n: &str| dir.path().join(n);
     for (args, needles) in [
         (vec!["--pmtiles", s(&d("a.pmtiles"))], vec!["a.pmtiles", "cannot resume a pmtiles output"]),
-        (vec!["-o", s(&d("iiif")), "--layout", "iiif"], vec!["cannot resume a iiif output", "--layout dzi"]),
+        (vec!["-o", s(&d("z")), "--layout", "ome-zarr"], vec!["cannot resume a ome-zarr output", "--layout dzi, iiif"]),
         (vec!["-o", s(&d("a")), "--pack", s(&d("b.vtpk"))], vec!["one output; this one writes 2"]),
         (vec!["--pack", s(&d("s.vtpk")), "--shard", "0/2"], vec!["a shard is made again whole"]),
     ] {
@@ -342,4 +378,120 @@ fn resume_refuses_what_it_cannot_resume() {
     let help =
         String::from_utf8_lossy(&run(&["split", "--help"]).stdout).split_whitespace().collect::<Vec<_>>().join(" ");
     assert!(help.contains("--resume") && help.contains("docs/resume.md") && help.contains("starts afresh"), "{help}");
+}
+
+/// The arguments as `&str`s.
+fn strs(args: &[String]) -> Vec<&str> {
+    args.iter().map(String::as_str).collect()
+}
+
+/// Every object under `prefix/` of `bucket`, downloaded: its name under the prefix and bytes.
+fn download(moto: &Moto, bucket: &str, prefix: &str) -> Vec<(String, Vec<u8>)> {
+    let dir = tempfile::tempdir().unwrap();
+    moto.boto(&["get", bucket, &format!("{prefix}/"), s(dir.path())]);
+    files(dir.path())
+}
+
+/// Deep Zoom at an `s3://` prefix, SIGKILLed once half its tiles are in the bucket, then the
+/// same command with `--resume` (on what the bucket holds: nothing is kept on local disk): the
+/// objects are the uninterrupted local run's files byte for byte, every tile uploaded before
+/// the kill is kept, the marker no longer names the run; a run of other options is refused
+/// before anything is written or deleted.
+#[test]
+fn a_killed_deep_zoom_in_a_bucket_is_resumed_byte_for_byte() {
+    let Some(moto) = Moto::start("the s3:// Deep Zoom --resume test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let (dir, tmp) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let input = dir.path().join("in.ppm");
+    image(&input);
+    std::fs::create_dir(dir.path().join("ref")).unwrap();
+    let reference = dir.path().join("ref").join(DZI.name);
+    let (json, _) = run_ok(&[command(&input, &DZI, &reference, &[]), vec!["--json".into()]].concat());
+    let (whole_encoded, whole_bytes) = (number(&json, "encoded"), number(&json, "bytes"));
+
+    let args = command(&input, &DZI, Path::new("s3://tiles/run/out"), &[]);
+    // Half the tiles and the marker.
+    let half_way = || until(&|| moto.quick_count("tiles", "run/out/") as u64 > DZI.tiles / 2);
+    stop_when(moto.command(&strs(&args), tmp.path()), &half_way, "-KILL");
+    let listed = moto.boto(&["keys", "tiles", "run/out/"]);
+    let at_kill = listed.iter().filter(|k| !k.ends_with("/.vortex-tiler")).count() as u64;
+    assert!((DZI.tiles / 2..DZI.tiles).contains(&at_kill), "{at_kill} of {} tiles uploaded", DZI.tiles);
+
+    // Other options: refused, naming what differs, and nothing in the bucket changes.
+    let mut other = args.clone();
+    let at = other.iter().position(|a| a == "128").unwrap();
+    other[at] = "64".into();
+    other.push("--resume".into());
+    let out = moto.run(&strs(&other), tmp.path());
+    fails_with(&out, &["s3://tiles/run/out/.vortex-tiler", "tile size 64, not 128", "leave out --resume"]);
+    assert_eq!(moto.boto(&["keys", "tiles", "run/out/"]), listed, "a refusal changes nothing");
+
+    let out = moto.run(&strs(&[args, vec!["--resume".into(), "--json".into()]].concat()), tmp.path());
+    let (json, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success() && stderr.contains("resuming the interrupted run"), "{stderr}");
+    let (kept, encoded, uploaded) = (number(&json, "kept"), number(&json, "encoded"), number(&json, "uploadedBytes"));
+    assert_eq!(number(&json, "tiles"), DZI.tiles);
+    // Every tile uploaded before the kill is whole (a PUT is): kept, neither encoded nor sent again.
+    assert_eq!(kept, at_kill, "{json}");
+    assert!(encoded <= DZI.tiles - kept && encoded * 100 <= whole_encoded * 60, "{json}");
+    assert!(uploaded * 100 <= whole_bytes * 60, "uploaded {uploaded} of {whole_bytes} bytes");
+
+    let mut bucket = download(&moto, "tiles", "run/out");
+    let at = bucket.iter().position(|(name, _)| name == ".vortex-tiler").expect("the marker");
+    let marker = String::from_utf8(bucket.remove(at).1).unwrap();
+    assert!(marker.contains("\"state\":\"complete\"") && !marker.contains("\"run\""), "{marker}");
+    let local = files(&reference);
+    assert_eq!(bucket.len(), local.len(), "the bucket holds other objects than the local run's files");
+    for ((name, bytes), (local_name, local_bytes)) in bucket.iter().zip(&local) {
+        assert_eq!(name, local_name);
+        assert!(bytes == local_bytes, "{name} differs");
+    }
+    // Nothing else anywhere in the bucket, nothing in TMPDIR.
+    assert_eq!(moto.boto(&["keys", "tiles", ""]).len(), local.len() + 1);
+    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "TMPDIR keeps files");
+}
+
+/// A pack at `s3://`, staged on this machine: SIGKILLed once its journal (beside the staged
+/// pack, under TMPDIR) records half the tiles, then resumed: the object is the uninterrupted
+/// local run's pack byte for byte, the journaled tiles are kept, and nothing stays in TMPDIR,
+/// the bucket or its multipart uploads.
+#[test]
+fn a_killed_pack_in_a_bucket_is_resumed_byte_for_byte() {
+    let Some(moto) = Moto::start("the s3:// pack --resume test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let (dir, tmp) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let input = dir.path().join("in.ppm");
+    image(&input);
+    std::fs::create_dir(dir.path().join("ref")).unwrap();
+    let reference = dir.path().join("ref").join(PACK.name);
+    let (json, _) = run_ok(&[command(&input, &PACK, &reference, &[]), vec!["--json".into()]].concat());
+    let whole_encoded = number(&json, "encoded");
+
+    let args = command(&input, &PACK, Path::new("s3://tiles/run/out.vtpk"), &[]);
+    let journal = || {
+        let staged = std::fs::read_dir(tmp.path()).ok()?.map(|e| e.unwrap().path());
+        let mut staged = staged.filter(|p| p.file_name().unwrap().to_string_lossy().starts_with("vortex-s3-resume-"));
+        beside(&staged.next()?.join(PACK.name), "resume-").into_iter().next()
+    };
+    let half_way = || until(&|| journal().is_some_and(|j| recorded(&j).len() as u64 >= PACK.tiles / 2));
+    stop_when(moto.command(&strs(&args), tmp.path()), &half_way, "-KILL");
+    let at_kill = recorded(&journal().expect("the killed run's journal stays")).len() as u64;
+    assert!((PACK.tiles / 2..PACK.tiles).contains(&at_kill), "{at_kill} of {} tiles journaled", PACK.tiles);
+    assert!(moto.boto(&["keys", "tiles", ""]).is_empty(), "a killed run's pack is visible");
+
+    let out = moto.run(&strs(&[args, vec!["--resume".into(), "--json".into()]].concat()), tmp.path());
+    let (json, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success() && stderr.contains("resuming the interrupted run"), "{stderr}");
+    let (kept, encoded) = (number(&json, "kept"), number(&json, "encoded"));
+    assert_eq!(kept, at_kill, "{json}");
+    assert!(encoded <= PACK.tiles - kept && encoded * 100 <= whole_encoded * 60, "{json}");
+    let pack = std::fs::read(&reference).unwrap();
+    assert_eq!(number(&json, "uploadedBytes"), pack.len() as u64, "{json}");
+
+    let got = tempfile::tempdir().unwrap();
+    assert_eq!(moto.boto(&["get", "tiles", "run/out.vtpk", s(got.path())]), ["run/out.vtpk"]);
+    assert!(std::fs::read(got.path().join(PACK.name)).unwrap() == pack, "the object differs from the local pack");
+    assert_eq!(moto.boto(&["keys", "tiles", ""]), ["run/out.vtpk"]);
+    assert!(moto.boto(&["uploads", "tiles"]).is_empty(), "a multipart upload was left open");
+    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "TMPDIR keeps files");
 }
