@@ -36,20 +36,31 @@ struct Kind {
     flags: &'static [&'static str],
     name: &'static str,
     tiles: u64,
+    /// Whether a resumed run keeps exactly the tiles journaled. Identical pages (the flat
+    /// block's) merged into one job at the cut are kept only where every one of their places
+    /// was journaled: a run killed among them encodes that job again, once, and keeps fewer
+    /// tiles than journaled (up to the flat block's 16). With this image and kill point that
+    /// happens to IIIF, XYZ and Google (measured: 126 kept of 128 journaled), not to the others.
+    keeps_all: bool,
 }
 
 /// A pack: 16 x 12 pages, then 8 x 6, 4 x 3, 2 x 2, 1.
-const PACK: Kind = Kind { flags: &["--border", "0", "--pack"], name: "out.vtpk", tiles: 192 + 48 + 12 + 4 + 1 };
+const PACK: Kind =
+    Kind { flags: &["--border", "0", "--pack"], name: "out.vtpk", tiles: 192 + 48 + 12 + 4 + 1, keeps_all: true };
 /// Deep Zoom: the same grid down to one page, then on down to one texel (levels 0 to 11 of
 /// 2048 x 1536: 192 + 48 + 12 + 4 + 1 + 1 x 7).
-const DZI: Kind =
-    Kind { flags: &["--overlap", "0", "--layout", "dzi", "-o"], name: "out", tiles: 192 + 48 + 12 + 4 + 1 + 7 };
+const DZI: Kind = Kind {
+    flags: &["--overlap", "0", "--layout", "dzi", "-o"],
+    name: "out",
+    tiles: 192 + 48 + 12 + 4 + 1 + 7,
+    keeps_all: true,
+};
 
 /// IIIF, XYZ and Google: the same grid, no levels below one page (16 x 16 pages of the
 /// web-mercator square for XYZ and Google, and as many IIIF tiles).
-const IIIF: Kind = Kind { flags: &["--layout", "iiif", "-o"], name: "out", tiles: 257 };
-const XYZ: Kind = Kind { flags: &["--layout", "xyz", "-o"], name: "out", tiles: 257 };
-const GOOGLE: Kind = Kind { flags: &["--layout", "google", "-o"], name: "out", tiles: 257 };
+const IIIF: Kind = Kind { flags: &["--layout", "iiif", "-o"], name: "out", tiles: 257, keeps_all: false };
+const XYZ: Kind = Kind { flags: &["--layout", "xyz", "-o"], name: "out", tiles: 257, keeps_all: false };
+const GOOGLE: Kind = Kind { flags: &["--layout", "google", "-o"], name: "out", tiles: 257, keeps_all: false };
 
 /// The command of a run into `dest`: slow enough per tile (PNG at its best compression, one
 /// encoder thread) that the test can stop it half-way.
@@ -121,7 +132,7 @@ fn stop_half_way(args: &[String], dest: &Path, total: u64, signal: &str) -> (Pat
     let mut command = Command::new(BIN);
     command.args(args);
     let (code, stderr) =
-        stop_when(command, &|| until(&|| journal().is_some_and(|j| recorded(&j).len() as u64 >= total / 2)), signal);
+        stop_when(command, &|_| until(&|| journal().is_some_and(|j| recorded(&j).len() as u64 >= total / 2)), signal);
     let journal = journal().expect("the stopped run's journal stays");
     let n = recorded(&journal).len() as u64;
     assert!(n >= total / 2 && n < total, "{n} of {total} tiles journaled");
@@ -136,9 +147,14 @@ fn until(reached: &dyn Fn() -> bool) {
     }
 }
 
-/// Starts `command` with `--resume`, stops it with `signal` once `half_way` returns, and
-/// returns its exit status and standard error.
-fn stop_when(mut command: Command, half_way: &dyn Fn(), signal: &str) -> (Option<i32>, String) {
+/// Sends `signal` (`-STOP`) to process `pid`.
+fn send(pid: u32, signal: &str) {
+    assert!(Command::new("kill").args([signal, &pid.to_string()]).status().unwrap().success());
+}
+
+/// Starts `command` with `--resume`, stops it with `signal` once `half_way` (given its process
+/// id) returns, and returns its exit status and standard error.
+fn stop_when(mut command: Command, half_way: &dyn Fn(u32), signal: &str) -> (Option<i32>, String) {
     let mut child = command
         .arg("--resume")
         .arg("-q")
@@ -148,14 +164,12 @@ fn stop_when(mut command: Command, half_way: &dyn Fn(), signal: &str) -> (Option
         .spawn()
         .unwrap();
     let pid = child.id();
-    half_way();
-    let kill =
-        |signal: &str| assert!(Command::new("kill").args([signal, &pid.to_string()]).status().unwrap().success());
-    kill("-STOP");
+    half_way(pid);
+    send(pid, "-STOP");
     let running = child.try_wait().unwrap().is_none();
     assert!(running, "the run finished before it was stopped half-way");
-    kill(signal);
-    kill("-CONT");
+    send(pid, signal);
+    send(pid, "-CONT");
     let out = wait_or_kill(pid, "a run stopped half-way", || child.wait_with_output().unwrap());
     assert!(!out.status.success());
     (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
@@ -214,8 +228,12 @@ fn killed_and_resumed(kind: &Kind) {
     same_output(&dest, &reference);
     let (kept, encoded) = (number(&json, "kept"), number(&json, "encoded"));
     assert_eq!(number(&json, "tiles"), kind.tiles);
-    // Every tile journaled before the kill is whole: kept, not encoded again.
-    assert_eq!(kept, at_kill, "{json}");
+    // Every tile journaled before the kill is whole: kept, not encoded again (but where it
+    // shares a job with one that was not journaled: see `Kind::keeps_all`).
+    match kind.keeps_all {
+        true => assert_eq!(kept, at_kill, "{json}"),
+        false => assert!(kept <= at_kill && kept + 16 >= at_kill, "kept {kept} of {at_kill} journaled: {json}"),
+    }
     // What the resumed run encoded: at most what was left (the one-colour tiles need none),
     // and so (half the tiles were left, none of them one-colour) little more than half of
     // what an uninterrupted run encodes.
@@ -393,7 +411,8 @@ fn download(moto: &Moto, bucket: &str, prefix: &str) -> Vec<(String, Vec<u8>)> {
 }
 
 /// Deep Zoom at an `s3://` prefix, SIGKILLed once half its tiles are in the bucket, then the
-/// same command with `--resume` (on what the bucket holds: nothing is kept on local disk): the
+/// same command with `--resume` as on another machine (on what the bucket holds: the input
+/// copied elsewhere, another TMPDIR): the
 /// objects are the uninterrupted local run's files byte for byte, every tile uploaded before
 /// the kill is kept, the marker no longer names the run; a run of other options is refused
 /// before anything is written or deleted.
@@ -411,7 +430,18 @@ fn a_killed_deep_zoom_in_a_bucket_is_resumed_byte_for_byte() {
 
     let args = command(&input, &DZI, Path::new("s3://tiles/run/out"), &[]);
     // Half the tiles and the marker.
-    let half_way = || until(&|| moto.quick_count("tiles", "run/out/") as u64 > DZI.tiles / 2);
+    // Counted with the run stopped, so that it cannot go on while the server answers (its
+    // uploads in flight still land, at most 64 of them).
+    let half_way = |pid| {
+        until(&|| {
+            send(pid, "-STOP");
+            let half = moto.quick_count("tiles", "run/out/") as u64 > DZI.tiles / 2;
+            if !half {
+                send(pid, "-CONT");
+            }
+            half
+        })
+    };
     stop_when(moto.command(&strs(&args), tmp.path()), &half_way, "-KILL");
     let listed = moto.boto(&["keys", "tiles", "run/out/"]);
     let at_kill = listed.iter().filter(|k| !k.ends_with("/.vortex-tiler")).count() as u64;
@@ -426,7 +456,13 @@ fn a_killed_deep_zoom_in_a_bucket_is_resumed_byte_for_byte() {
     fails_with(&out, &["s3://tiles/run/out/.vortex-tiler", "tile size 64, not 128", "leave out --resume"]);
     assert_eq!(moto.boto(&["keys", "tiles", "run/out/"]), listed, "a refusal changes nothing");
 
-    let out = moto.run(&strs(&[args, vec!["--resume".into(), "--json".into()]].concat()), tmp.path());
+    // As on another machine: the input elsewhere (the same file), another TMPDIR.
+    let elsewhere = dir.path().join("elsewhere");
+    std::fs::create_dir(&elsewhere).unwrap();
+    std::fs::copy(&input, elsewhere.join("in.ppm")).unwrap();
+    let args = command(&elsewhere.join("in.ppm"), &DZI, Path::new("s3://tiles/run/out"), &["--resume", "--json"]);
+    let other_tmp = tempfile::tempdir().unwrap();
+    let out = moto.run(&strs(&args), other_tmp.path());
     let (json, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     assert!(out.status.success() && stderr.contains("resuming the interrupted run"), "{stderr}");
     let (kept, encoded, uploaded) = (number(&json, "kept"), number(&json, "encoded"), number(&json, "uploadedBytes"));
@@ -446,9 +482,11 @@ fn a_killed_deep_zoom_in_a_bucket_is_resumed_byte_for_byte() {
         assert_eq!(name, local_name);
         assert!(bytes == local_bytes, "{name} differs");
     }
-    // Nothing else anywhere in the bucket, nothing in TMPDIR.
+    // Nothing else anywhere in the bucket, nothing in either TMPDIR.
     assert_eq!(moto.boto(&["keys", "tiles", ""]).len(), local.len() + 1);
-    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "TMPDIR keeps files");
+    for tmp in [tmp.path(), other_tmp.path()] {
+        assert_eq!(std::fs::read_dir(tmp).unwrap().count(), 0, "TMPDIR keeps files");
+    }
 }
 
 /// A pack at `s3://`, staged on this machine: SIGKILLed once its journal (beside the staged
@@ -473,7 +511,7 @@ fn a_killed_pack_in_a_bucket_is_resumed_byte_for_byte() {
         let mut staged = staged.filter(|p| p.file_name().unwrap().to_string_lossy().starts_with("vortex-s3-resume-"));
         beside(&staged.next()?.join(PACK.name), "resume-").into_iter().next()
     };
-    let half_way = || until(&|| journal().is_some_and(|j| recorded(&j).len() as u64 >= PACK.tiles / 2));
+    let half_way = |_| until(&|| journal().is_some_and(|j| recorded(&j).len() as u64 >= PACK.tiles / 2));
     stop_when(moto.command(&strs(&args), tmp.path()), &half_way, "-KILL");
     let at_kill = recorded(&journal().expect("the killed run's journal stays")).len() as u64;
     assert!((PACK.tiles / 2..PACK.tiles).contains(&at_kill), "{at_kill} of {} tiles journaled", PACK.tiles);
