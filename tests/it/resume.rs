@@ -533,3 +533,41 @@ fn a_killed_pack_in_a_bucket_is_resumed_byte_for_byte() {
     assert!(moto.boto(&["uploads", "tiles"]).is_empty(), "a multipart upload was left open");
     assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "TMPDIR keeps files");
 }
+
+/// SIGTERM (Slurm's first signal at a time limit) stops a `--resume` run at an `s3://` prefix
+/// cleanly, and what it uploaded stays under the prefix (the marker still says `writing`), and
+/// it says so; `--resume` then keeps those tiles. Without `--resume` the same prefix is cleared
+/// and made afresh.
+#[test]
+fn a_deep_zoom_in_a_bucket_stopped_by_sigterm_keeps_its_tiles_for_resume() {
+    let Some(moto) = Moto::start("the s3:// SIGTERM --resume test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let (dir, tmp) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let input = dir.path().join("in.ppm");
+    image(&input);
+    let args = command(&input, &DZI, Path::new("s3://tiles/run/out"), &[]);
+    let half_way = |pid| {
+        until(&|| {
+            send(pid, "-STOP");
+            let half = moto.quick_count("tiles", "run/out/") as u64 > DZI.tiles / 2;
+            if !half {
+                send(pid, "-CONT");
+            }
+            half
+        })
+    };
+    let (code, stderr) = stop_when(moto.command(&strs(&args), tmp.path()), &half_way, "-TERM");
+    assert_eq!(code, Some(143), "{stderr}");
+    assert!(stderr.contains("stay under the prefix") && !stderr.contains("panicked"), "{stderr}");
+    let listed = moto.boto(&["keys", "tiles", "run/out/"]);
+    let tiles = listed.iter().filter(|k| !k.ends_with("/.vortex-tiler")).count() as u64;
+    assert!(tiles > DZI.tiles / 2, "{tiles} tiles stayed");
+
+    let out = moto.run(&strs(&[args.clone(), vec!["--resume".into(), "--json".into()]].concat()), tmp.path());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(number(&String::from_utf8_lossy(&out.stdout), "kept"), tiles);
+    // Without --resume: afresh.
+    let out = moto.run(&strs(&[args, vec!["--json".into()]].concat()), tmp.path());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(number(&String::from_utf8_lossy(&out.stdout), "kept"), 0);
+}
