@@ -135,8 +135,11 @@ pub struct OutputArgs {
     /// checks the staged tiles against that journal, keeps those that are whole, and encodes
     /// only the others, for an output byte for byte that of an uninterrupted run. With
     /// nothing to resume it starts afresh (journaled), so a job script can always pass it. A
-    /// journal of another input or other options is refused, naming what differs. One output,
-    /// on local disk: a pack, a tile directory or Deep Zoom (docs/resume.md).
+    /// journal of another input or other options is refused, naming what differs. One output:
+    /// a pack, a tile directory or a viewer layout. At an s3:// prefix the bucket is the record
+    /// (its marker names the run, the tiles listed there are kept), so any machine can resume
+    /// it; a pack at s3:// is staged and journaled under TMPDIR, resumed on that machine
+    /// (docs/resume.md).
     #[arg(help_heading = "Outputs", long)]
     resume: bool,
 
@@ -457,7 +460,9 @@ pub fn run(a: SplitArgs) -> Result<()> {
         ome_zarr::channel_set(input.as_deref(), &a.channel, a.channels.is_some(), pick, &a.out)?
     {
         if a.out.resume {
-            bail!("--resume resumes a run into a pack, a tile directory or Deep Zoom; not one of several channels");
+            bail!(
+                "--resume resumes a run into a pack, a tile directory or a viewer layout; not one of several channels"
+            );
         }
         return ome_zarr::tile_channels(set, a.channels.as_deref(), &inputs, a.filename_format, &a.out, started);
     }
@@ -688,6 +693,11 @@ pub fn tile(
     }
     if let Some(r) = resumed.as_ref().filter(|_| !a.run.quiet) {
         match &r.from {
+            Some(from) if vortex_tiler::store::ObjectUrl::of_path(from).is_some() => eprintln!(
+                "resuming the interrupted run that {} names: {} objects under its prefix, each tile kept whose objects are all there",
+                from.shown(),
+                r.recorded
+            ),
             Some(from) => eprintln!(
                 "resuming the interrupted run of {}: {} tiles recorded, checked against its staged output",
                 from.shown(),
@@ -709,10 +719,17 @@ pub fn tile(
         Ok((summary.ok_or_else(|| vortex_tiler::error::TilerError::Options("a run with no output".into()))?, wrote))
     });
     if let (Err(_), Some(r)) = (&result, &resumed) {
-        eprintln!(
-            "note: the tiles finished so far stay beside the output, journaled in {}: run the same command with --resume to go on from them",
-            r.journal.shown()
-        );
+        if vortex_tiler::store::ObjectUrl::of_path(&r.journal).is_some() {
+            eprintln!(
+                "note: the tiles uploaded so far stay under the prefix, whose {} names this run: run the same command with --resume to go on from them",
+                r.journal.shown()
+            );
+        } else {
+            eprintln!(
+                "note: the tiles finished so far stay beside the output, journaled in {}: run the same command with --resume to go on from them",
+                r.journal.shown()
+            );
+        }
     }
     let (done, wrote) = result?;
     match wrote.as_slice() {
@@ -781,7 +798,7 @@ fn shard(
         doc["shard"] = serde_json::json!({ "index": chosen.index, "count": chosen.count, "from": chosen.from });
         say!("{doc}");
     } else {
-        report(a, "shard", &done, &path, &Figures::Pack(written));
+        report(a, "shard", &done, &path, &Figures::Pack(written), None);
     }
     Ok(())
 }
@@ -830,9 +847,13 @@ pub struct Finished {
 
 /// The summary line (after the format's own line), or with --json one JSON object; nothing
 /// with --quiet.
-fn report(a: &OutputArgs, layout: &str, done: &Finished, dest: &Path, figures: &Figures) {
+fn report(a: &OutputArgs, layout: &str, done: &Finished, dest: &Path, figures: &Figures, uploaded: Option<u64>) {
     if a.run.json {
-        say!("{}", report::summary_json(done, layout, dest, figures));
+        let mut doc = report::summary_value(done, layout, dest, figures);
+        if let Some(sent) = uploaded {
+            doc["uploadedBytes"] = sent.into();
+        }
+        say!("{doc}");
     } else if !a.run.quiet {
         if let Some(line) = report::figures_line(figures) {
             say!("{line}");
@@ -847,7 +868,7 @@ fn report(a: &OutputArgs, layout: &str, done: &Finished, dest: &Path, figures: &
 
 /// A run of one output: its summary as `split` has always printed it.
 fn report_one(a: &OutputArgs, done: &Finished, wrote: &Wrote) {
-    report(a, wrote.format.name(), done, &wrote.path, &wrote.figures);
+    report(a, wrote.format.name(), done, &wrote.path, &wrote.figures, wrote.uploaded);
 }
 
 /// A run of several outputs: a line for each (its own figures, its pyramid's stages), then
@@ -867,6 +888,9 @@ fn report_all(a: &OutputArgs, done: &Finished, all: &[Wrote]) {
             .map(|w| {
                 let mut doc = report::summary_value(&each(w), w.format.name(), &w.path, &w.figures);
                 doc["pyramid"] = w.pyramid.into();
+                if let Some(sent) = w.uploaded {
+                    doc["uploadedBytes"] = sent.into();
+                }
                 doc
             })
             .collect();

@@ -18,7 +18,7 @@ use crate::job::{Progress, SplitOptions, Summary, Written};
 use crate::layout::Levels;
 use crate::output::Claim;
 use crate::sink::icc::{Profile, WithProfile};
-use crate::sink::{DirSink, Target, TileSink};
+use crate::sink::{DirSink, ResumeFrom, Target, TileSink};
 use crate::source::channels::{ChannelSet, Ranged};
 use crate::source::stored::{StoredLevels, read_header};
 use crate::source::{RowSource, tee};
@@ -54,6 +54,10 @@ pub struct Wrote {
     pub reads: usize,
     /// Its format's own figures, where the format has any.
     pub figures: Figures,
+    /// Bytes this run sent to an `s3://` output: a directory's tile objects (not those kept
+    /// from an interrupted run, `--resume`), a one-object output's file; `None` for a local
+    /// output.
+    pub uploaded: Option<u64>,
 }
 
 /// A format's own figures of what it wrote, beside the tiles and bytes every output counts.
@@ -112,7 +116,7 @@ impl Open {
         resume: Option<super::resume::Resuming>,
     ) -> Result<Open> {
         if let Some(resume) = resume {
-            return Open::resuming(planned, pack, resume);
+            return Open::resuming(planned, pack, in_flight, resume);
         }
         // One object at an s3:// URL: the sink writes a local temporary, uploaded when finished.
         let staged = match ObjectUrl::of_path(&planned.claim.path) {
@@ -153,21 +157,36 @@ impl Open {
         Ok(Open { planned, sink, staged, in_flight })
     }
 
-    /// [`start`](Self::start) for a resumable run: its sink journals every tile and keeps
+    /// [`start`](Self::start) for a resumable run: its sink records every tile and keeps
     /// what the interrupted run it takes over left whole.
-    fn resuming(planned: Planned, pack: vortex_pack::WriteOptions, resume: super::resume::Resuming) -> Result<Open> {
-        let super::resume::Resuming { journal, previous } = resume;
+    fn resuming(
+        planned: Planned,
+        pack: vortex_pack::WriteOptions,
+        in_flight: u64,
+        resume: super::resume::Resuming,
+    ) -> Result<Open> {
+        use super::resume::Resuming;
         let claim = &planned.claim;
-        let sink = match &planned.work {
-            Work::Tiles { names, .. } => Sink::Dir(DirSink::create_resuming(claim, names.clone(), journal, previous)?),
-            Work::Viewer { tiles, .. } => {
-                Sink::Dir(DirSink::for_viewer_resuming(claim, tiles.clone(), journal, previous)?)
+        let (from, local) = match resume {
+            Resuming::Journaled { journal, previous, local } => (ResumeFrom::Journal(journal, previous), local),
+            Resuming::Prefix { run, listed } => {
+                (ResumeFrom::Bucket { run, listed, layout: planned.layout, in_flight }, None)
             }
-            Work::Pack { info, stored } => {
+        };
+        // A pack at s3:// is staged on this machine, at a place of its own, then uploaded.
+        let staged = match (&local, ObjectUrl::of_path(&claim.path)) {
+            (Some(local), Some(url)) => Some(Staged::resumable(&url?, claim.product, local.clone())?),
+            _ => None,
+        };
+        let sink = match (&planned.work, from) {
+            (Work::Tiles { names, .. }, from) => Sink::Dir(DirSink::create_resuming(claim, names.clone(), from)?),
+            (Work::Viewer { tiles, .. }, from) => Sink::Dir(DirSink::for_viewer_resuming(claim, tiles.clone(), from)?),
+            (Work::Pack { info, stored }, ResumeFrom::Journal(journal, previous)) => {
                 let (stored, metadata) = (*stored, info.to_json_pretty());
                 let (layout, codec) = (&planned.layout, planned.opts.codec);
+                let dest = local.as_deref().unwrap_or(&claim.path);
                 let sink = PackSink::create_resuming(
-                    &claim.path,
+                    dest,
                     layout,
                     stored,
                     codec,
@@ -180,15 +199,12 @@ impl Open {
             }
             _ => return Err(TilerError::Internal("a resumable output of a format that is not resumed".into())),
         };
-        Ok(Open { planned, sink, staged: None, in_flight: 0 })
+        Ok(Open { planned, sink, staged, in_flight })
     }
 
-    /// Sends a one-object output's finished local file to its `s3://` URL.
-    fn upload(staged: Option<Staged>, in_flight: u64) -> Result<()> {
-        match staged {
-            Some(staged) => staged.upload(in_flight).map(drop),
-            None => Ok(()),
-        }
+    /// Sends a one-object output's finished local file to its `s3://` URL; the bytes sent.
+    fn upload(staged: Option<Staged>, in_flight: u64) -> Result<Option<u64>> {
+        staged.map(|staged| staged.upload(in_flight)).transpose()
     }
 
     fn tile_sink(&self) -> &dyn TileSink {
@@ -223,6 +239,11 @@ impl Open {
                 planned.output.path.display()
             )));
         }
+        let in_bucket = ObjectUrl::of_path(&planned.output.path).is_some();
+        let mut uploaded = match &sink {
+            Sink::Dir(dir) if in_bucket => Some(dir.bytes_sent()),
+            _ => None,
+        };
         let figures = match (sink, &planned.work) {
             (Sink::Dir(dir), Work::Tiles { info, .. }) => dir.finish(info).map(|()| Figures::None)?,
             (Sink::Dir(dir), _) => dir.finish_viewer().map(|()| Figures::None)?,
@@ -253,7 +274,9 @@ impl Open {
             (Sink::Dicom(sink), _) => Figures::Dicom(sink.finish()?),
             _ => return Err(TilerError::Internal("an output's sink is not its format's".into())),
         };
-        Open::upload(staged, in_flight)?;
+        if let Some(sent) = Open::upload(staged, in_flight)? {
+            uploaded = Some(sent);
+        }
         // The pyramid's summary in this output's terms: its levels, texels, tiles and bytes.
         let encoding = planned.opts.encoding();
         let stored = encoding.stored(summary.source)?;
@@ -277,6 +300,7 @@ impl Open {
             pyramid: Some(pyramid),
             reads: 0,
             figures,
+            uploaded,
         })
     }
 
@@ -307,7 +331,7 @@ impl Open {
             declined: None,
             halved: false,
         });
-        Open::upload(staged, in_flight)?;
+        let uploaded = Open::upload(staged, in_flight)?;
         let mut layout = crate::layout::Layout::new(u64::from(level.width), u64::from(level.height), level.tile.0, 0)?;
         layout.lod_count = levels;
         let summary = Summary {
@@ -329,7 +353,8 @@ impl Open {
             memory: crate::job::MemoryReport { budget: budget.bytes(), ..Default::default() },
         };
         let Planned { output, .. } = planned;
-        Ok(Wrote { format: output.format, path: output.path, tiles, bytes, summary, pyramid: None, reads: 0, figures })
+        let (format, path) = (output.format, output.path);
+        Ok(Wrote { format, path, tiles, bytes, summary, pyramid: None, reads: 0, figures, uploaded })
     }
 }
 

@@ -107,11 +107,11 @@ impl Identity {
         out
     }
 
-    fn to_json(&self) -> serde_json::Value {
+    pub(crate) fn to_json(&self) -> serde_json::Value {
         serde_json::Value::Array(self.0.iter().map(|(k, v)| serde_json::json!([k, v])).collect())
     }
 
-    fn from_json(value: &serde_json::Value) -> Option<Identity> {
+    pub(crate) fn from_json(value: &serde_json::Value) -> Option<Identity> {
         let pairs = value.as_array()?.iter().map(|pair| match pair.as_array()?.as_slice() {
             [k, v] => Some((k.as_str()?.to_string(), v.as_str()?.to_string())),
             _ => None,

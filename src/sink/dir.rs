@@ -16,8 +16,9 @@ use crate::error::{Result, ShowPath, TilerError};
 use crate::formats::tiles::filename::FilenameFormat;
 use crate::formats::tiles::info::Info;
 use crate::formats::viewer::{Crop, Viewer, ViewerTiles};
+use crate::layout::Layout;
 use crate::output::{Claim, Product};
-use crate::resume::{self, Interrupted, Journal, Record};
+use crate::resume::{self, Identity, Interrupted, Journal, Record};
 use crate::store::local::StagingDir;
 use crate::store::{Files, ObjectUrl, UPLOAD_BYTES, files_for};
 
@@ -29,9 +30,20 @@ pub struct DirSink {
     files: Box<dyn Files>,
     names: Names,
     bytes: AtomicU64,
-    /// A resumable run's journal and the tiles kept from the run it resumes, with their
-    /// files' lengths.
-    resume: Option<(Journal, HashMap<TileId, u64>)>,
+    /// A resumable run's journal (none at an `s3://` prefix, where the bucket is the record)
+    /// and the tiles kept from the run it resumes, with their files' lengths.
+    resume: Option<(Option<Journal>, HashMap<TileId, u64>)>,
+}
+
+/// Where a resumable directory run (`--resume`) records its tiles, and what it finds of an
+/// interrupted run of it.
+pub(crate) enum ResumeFrom {
+    /// A local destination: the journal, and the interrupted run it took over, if any.
+    Journal(Journal, Option<Interrupted>),
+    /// An `s3://` prefix: the bucket is the record. The run's identity (the prefix's marker
+    /// names it while the run writes), the objects an interrupted run of it left under the
+    /// prefix (`None`: nothing to resume), and the output's grid.
+    Bucket { run: Identity, listed: Option<HashMap<String, u64>>, layout: Layout, in_flight: u64 },
 }
 
 /// How tiles are named.
@@ -79,36 +91,23 @@ impl DirSink {
     }
 
     /// [`create`](Self::create) for a resumable run (`--resume`): every tile written is
-    /// recorded in `journal`, an interrupted run's staged tiles (`previous`, taken over by
-    /// [`Journal::start`]) are checked against its journal and those whole are kept, and the
-    /// staging stays when the sink is dropped unfinished. A local destination only.
-    pub(crate) fn create_resuming(
-        claim: &Claim,
-        names: FilenameFormat,
-        journal: Journal,
-        previous: Option<Interrupted>,
-    ) -> Result<DirSink> {
-        Self::resuming(claim, Product::TileDir, Names::Pattern(names), journal, previous)
+    /// recorded, and the tiles an interrupted run left whole are kept. At a local destination
+    /// the journal records them, and the interrupted run's staged tiles (taken over by
+    /// [`Journal::start`]) are checked against its journal; at an `s3://` prefix the bucket is
+    /// the record: a tile is kept where an object of its size is listed under each of its names
+    /// (a PUT is whole or absent). What the run wrote stays when the sink is dropped unfinished.
+    pub(crate) fn create_resuming(claim: &Claim, names: FilenameFormat, from: ResumeFrom) -> Result<DirSink> {
+        Self::resuming(claim, Product::TileDir, Names::Pattern(names), from)
     }
 
     /// [`for_viewer`](Self::for_viewer) for a resumable run, as [`create_resuming`](Self::create_resuming).
-    pub(crate) fn for_viewer_resuming(
-        claim: &Claim,
-        tiles: ViewerTiles,
-        journal: Journal,
-        previous: Option<Interrupted>,
-    ) -> Result<DirSink> {
-        Self::resuming(claim, Product::Viewer(tiles.viewer), Names::Viewer(tiles), journal, previous)
+    pub(crate) fn for_viewer_resuming(claim: &Claim, tiles: ViewerTiles, from: ResumeFrom) -> Result<DirSink> {
+        Self::resuming(claim, Product::Viewer(tiles.viewer), Names::Viewer(tiles), from)
     }
 
-    fn resuming(
-        claim: &Claim,
-        product: Product,
-        names: Names,
-        journal: Journal,
-        previous: Option<Interrupted>,
-    ) -> Result<DirSink> {
-        if claim.product != product || ObjectUrl::of_path(&claim.path).is_some() {
+    fn resuming(claim: &Claim, product: Product, names: Names, from: ResumeFrom) -> Result<DirSink> {
+        let in_bucket = ObjectUrl::of_path(&claim.path).is_some();
+        if claim.product != product || in_bucket != matches!(from, ResumeFrom::Bucket { .. }) {
             return Err(TilerError::Internal(format!(
                 "{} cannot be resumed as {}",
                 claim.path.shown(),
@@ -116,23 +115,47 @@ impl DirSink {
             )));
         }
         let mut kept = HashMap::new();
-        if let Some(previous) = previous {
-            // What is not recorded (written as the run was killed) or not whole goes.
-            let names_of = |id: TileId| names.of(id);
-            let whole = resume::check_files(&previous.staging, &previous.records, &names_of);
-            let keep: HashSet<String> = whole.iter().flat_map(|r| names_of(r.id())).collect();
-            resume::prune(&previous.staging, &keep)?;
-            journal.keep(&whole)?;
-            for r in &whole {
-                if let Record::File { id, len, .. } = r {
-                    kept.insert(*id, *len);
+        let (files, journal): (Box<dyn Files>, _) = match from {
+            ResumeFrom::Journal(journal, previous) => {
+                if let Some(previous) = previous {
+                    // What is not recorded (written as the run was killed) or not whole goes.
+                    let names_of = |id: TileId| names.of(id);
+                    let whole = resume::check_files(&previous.staging, &previous.records, &names_of);
+                    let keep: HashSet<String> = whole.iter().flat_map(|r| names_of(r.id())).collect();
+                    resume::prune(&previous.staging, &keep)?;
+                    journal.keep(&whole)?;
+                    for r in &whole {
+                        if let Record::File { id, len, .. } = r {
+                            kept.insert(*id, *len);
+                        }
+                    }
                 }
+                (Box::new(StagingDir::resumable(&claim.path)?), Some(journal))
             }
-        }
-        let files = Box::new(StagingDir::resumable(&claim.path)?);
+            ResumeFrom::Bucket { run, listed, layout, in_flight } => {
+                let mut stale = Vec::new();
+                if let Some(listed) = &listed {
+                    kept = names.whole(&layout, listed);
+                    // Objects that are no kept tile's (a manifest, a tile missing a name) go.
+                    let keep: HashSet<String> = kept.keys().flat_map(|id| names.of(*id)).collect();
+                    stale = listed.keys().filter(|n| !keep.contains(*n)).cloned().collect();
+                }
+                (crate::store::resuming_prefix(claim, in_flight, run, listed.is_none(), &stale)?, None)
+            }
+        };
         // Every kept tile is part of the output: its bytes count as written.
         let bytes = AtomicU64::new(kept.iter().map(|(id, len)| len * names.of(*id).len() as u64).sum());
         Ok(DirSink { dest: claim.path.clone(), files, names, bytes, resume: Some((journal, kept)) })
+    }
+
+    /// Bytes of the tile files this run wrote: those kept from an interrupted run
+    /// (`--resume`) are not counted.
+    pub(crate) fn bytes_sent(&self) -> u64 {
+        let kept = self
+            .resume
+            .as_ref()
+            .map_or(0, |(_, kept)| kept.iter().map(|(id, len)| len * self.names.of(*id).len() as u64).sum());
+        self.bytes_written() - kept
     }
 
     /// Writes `info.json` last, then moves the staging directory into place. A previous output
@@ -169,8 +192,8 @@ impl DirSink {
     fn complete(mut self, manifests: Vec<(String, Vec<u8>)>) -> Result<()> {
         self.files.publish(manifests)?;
         match self.resume.take() {
-            Some((journal, _)) => journal.finish(),
-            None => Ok(()),
+            Some((Some(journal), _)) => journal.finish(),
+            _ => Ok(()),
         }
     }
 }
@@ -183,7 +206,7 @@ impl TileSink for DirSink {
                 return Ok(());
             }
             self.write_names(lod, x, y, bytes)?;
-            return journal.record(Record::file(id, bytes));
+            return journal.as_ref().map_or(Ok(()), |j| j.record(Record::file(id, bytes)));
         }
         self.write_names(lod, x, y, bytes)
     }
@@ -205,6 +228,25 @@ impl TileSink for DirSink {
 }
 
 impl Names {
+    /// The tiles of `layout` whose every file is among `listed` (names and sizes), all of one
+    /// size: their ids and that size.
+    fn whole(&self, layout: &Layout, listed: &HashMap<String, u64>) -> HashMap<TileId, u64> {
+        let mut whole = HashMap::new();
+        for lod in 0..layout.lod_count {
+            let (columns, rows) = layout.grid(lod);
+            for (x, y) in (0..rows).flat_map(|y| (0..columns).map(move |x| (x, y))) {
+                let id = TileId { lod, x, y };
+                let sizes: Option<Vec<u64>> = self.of(id).iter().map(|n| listed.get(n).copied()).collect();
+                if let Some([first, rest @ ..]) = sizes.as_deref()
+                    && rest.iter().all(|s| s == first)
+                {
+                    whole.insert(id, *first);
+                }
+            }
+        }
+        whole
+    }
+
     /// The files that hold tile `id`.
     fn of(&self, id: TileId) -> Vec<String> {
         match self {
@@ -259,5 +301,28 @@ impl DirSink {
             self.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
         }
         Ok(written)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A tile is whole where its objects are listed; a listing's other names are no tile's.
+    #[test]
+    fn tiles_whole_in_a_listing_are_those_all_of_whose_objects_are_listed() {
+        // 3 x 2 pages, then 2 x 1, then 1.
+        let layout = Layout::new(300, 200, 128, 0).unwrap();
+        assert_eq!(layout.lod_count, 3);
+        let names = Names::Pattern(FilenameFormat::parse("%d/%d_%d.png", 3).unwrap());
+        let listed: HashMap<String, u64> =
+            [("0/0_0.png", 10), ("0/2_1.png", 7), ("2/0_0.png", 3), ("info.json", 99), ("0/9_9.png", 1)]
+                .into_iter()
+                .map(|(n, s)| (n.to_string(), s))
+                .collect();
+        let whole = names.whole(&layout, &listed);
+        let id = |lod, x, y| TileId { lod, x, y };
+        let expected: HashMap<TileId, u64> = [(id(0, 0, 0), 10), (id(0, 2, 1), 7), (id(2, 0, 0), 3)].into();
+        assert_eq!(whole, expected);
     }
 }

@@ -12,6 +12,7 @@ mod dir;
 pub(crate) mod icc;
 
 pub use dir::DirSink;
+pub(crate) use dir::ResumeFrom;
 
 use crate::error::{Result, TilerError};
 use crate::layout::Crop;

@@ -12,7 +12,7 @@
 //! [`Files::put_new`] only wait when the bytes in flight would pass the output's share of
 //! `--max-memory`; the first failure is kept and returned by the next call (and by `publish`).
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::hash::Hasher;
 use std::path::Path;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
@@ -26,6 +26,7 @@ use object_store::{BackoffConfig, ObjectStore, ObjectStoreExt, PutPayload, Retry
 use super::{Files, ObjectUrl, StoreError};
 use crate::error::Result;
 use crate::output::{Existing, Product};
+use crate::resume::Identity;
 
 /// The marker object a directory output keeps under its prefix (see [`crate::store`]).
 pub(crate) const MARKER: &str = ".vortex-tiler";
@@ -131,6 +132,43 @@ impl Bucket {
             Some(Ok(meta)) => Ok(Some(meta.location.to_string())),
             Some(Err(e)) => Err(self.failed(prefix, "LIST", reply(&e))),
         }
+    }
+
+    /// The identity of the resumable run whose marker is at the prefix `url`, if a run
+    /// given `--resume` was writing it (and did not finish).
+    pub(crate) fn resumable_run(&self, url: &ObjectUrl) -> Result<Option<Identity>, StoreError> {
+        Ok(self.get(&url.child(MARKER), MAX_MARKER_BYTES)?.as_deref().and_then(marker_run))
+    }
+
+    /// Every object under the prefix `url` but the marker: its name below the prefix and its
+    /// size.
+    pub(crate) fn list_sizes(&self, url: &ObjectUrl) -> Result<HashMap<String, u64>, StoreError> {
+        let prefix = if url.key().is_empty() { None } else { Some(self.key(url.key())?) };
+        let skip = url.child("").len();
+        self.runtime.block_on(async {
+            let mut listed = self.store.list(prefix.as_ref());
+            let mut out = HashMap::new();
+            while let Some(meta) = listed.next().await {
+                let meta = meta.map_err(|e| self.failed(url.key(), "LIST", reply(&e)))?;
+                let name = meta.location.as_ref().get(skip..).unwrap_or_default().to_string();
+                if name != MARKER {
+                    out.insert(name, meta.size);
+                }
+            }
+            Ok(out)
+        })
+    }
+
+    /// Deletes the objects `names` under the prefix `url`.
+    pub(crate) fn delete_names(&self, url: &ObjectUrl, names: &[String]) -> Result<(), StoreError> {
+        let keys = names.iter().map(|n| self.key(&url.child(n))).collect::<Result<Vec<_>, _>>()?;
+        self.runtime.block_on(async {
+            let mut deleted = self.store.delete_stream(futures::stream::iter(keys.into_iter().map(Ok)).boxed());
+            while let Some(result) = deleted.next().await {
+                result.map_err(|e| self.failed(url.key(), "DELETE", reply(&e)))?;
+            }
+            Ok(())
+        })
     }
 
     /// Deletes every object under `url`'s prefix, the marker last (so that a deletion cut
@@ -295,10 +333,21 @@ fn reply(e: &object_store::Error) -> String {
     text
 }
 
-/// The marker's JSON: which product the prefix holds and whether it is complete.
-fn marker_json(noun: &str, state: &str) -> Vec<u8> {
-    let json = serde_json::json!({ "writer": "vortex-tiler", "product": noun, "state": state });
+/// The marker's JSON: which product the prefix holds and whether it is complete; while a
+/// resumable run (`--resume`) writes it, that run's identity too.
+fn marker_json(noun: &str, state: &str, run: Option<&Identity>) -> Vec<u8> {
+    let mut json = serde_json::json!({ "writer": "vortex-tiler", "product": noun, "state": state });
+    if let Some(run) = run {
+        json["run"] = run.to_json();
+    }
     json.to_string().into_bytes()
+}
+
+/// The identity of the resumable run a marker says is writing the prefix, if it says so.
+fn marker_run(bytes: &[u8]) -> Option<Identity> {
+    let json: serde_json::Value = serde_json::from_slice(bytes).ok()?;
+    (json.get("state")?.as_str()? == "writing").then_some(())?;
+    Identity::from_json(json.get("run")?)
 }
 
 /// The product a marker names, if it is ours.
@@ -348,12 +397,39 @@ pub(crate) struct Uploads {
     /// Bytes of uploads in flight at most (a larger file goes alone).
     cap: u64,
     published: bool,
+    /// A resumable run's identity (`--resume`): its marker names it while the run writes, and
+    /// what it uploaded stays when it is dropped unpublished, for the next `--resume`.
+    run: Option<Identity>,
 }
 
 impl Uploads {
     /// Starts a directory output (`noun`) at the prefix `url`, claimed; a previous output of
     /// ours there (`replaces`) is deleted first. At most `in_flight` bytes go at once.
     pub(crate) fn start(url: &ObjectUrl, noun: &'static str, replaces: bool, in_flight: u64) -> Result<Uploads> {
+        Uploads::open(url, noun, replaces, in_flight, None)
+    }
+
+    /// [`start`](Self::start) for a resumable run of `run` (`--resume`): the marker names the
+    /// run until it is published, and the objects stay when it is dropped unpublished. `clear`:
+    /// what the prefix holds is deleted first (a previous output of ours, or a run that cannot
+    /// be resumed); otherwise it is the interrupted run's, kept.
+    pub(crate) fn resuming(
+        url: &ObjectUrl,
+        noun: &'static str,
+        clear: bool,
+        in_flight: u64,
+        run: Identity,
+    ) -> Result<Uploads> {
+        Uploads::open(url, noun, clear, in_flight, Some(run))
+    }
+
+    fn open(
+        url: &ObjectUrl,
+        noun: &'static str,
+        replaces: bool,
+        in_flight: u64,
+        run: Option<Identity>,
+    ) -> Result<Uploads> {
         let uploads = Uploads {
             bucket: Bucket::open(url)?,
             url: url.clone(),
@@ -362,12 +438,18 @@ impl Uploads {
             flight: Arc::default(),
             cap: in_flight.max(1),
             published: false,
+            run,
         };
         if replaces {
             uploads.bucket.delete_prefix(url)?;
         }
-        uploads.bucket.put(&url.child(MARKER), marker_json(noun, "writing"))?;
+        uploads.bucket.put(&url.child(MARKER), marker_json(noun, "writing", uploads.run.as_ref()))?;
         Ok(uploads)
+    }
+
+    /// Deletes the objects `names` ('/'-separated, under the prefix).
+    pub(crate) fn delete(&self, names: &[String]) -> Result<(), StoreError> {
+        self.bucket.delete_names(&self.url, names)
     }
 
     /// Waits until nothing is in flight; the first failure, if any.
@@ -427,7 +509,7 @@ impl Files for Uploads {
         for (name, bytes) in manifests {
             self.bucket.put(&self.url.child(&name), bytes)?;
         }
-        self.bucket.put(&self.url.child(MARKER), marker_json(self.noun, "complete"))?;
+        self.bucket.put(&self.url.child(MARKER), marker_json(self.noun, "complete", None))?;
         self.published = true;
         Ok(())
     }
@@ -440,6 +522,9 @@ impl Drop for Uploads {
             return;
         }
         let _ = self.settle();
+        if self.run.is_some() {
+            return;
+        }
         if let Err(e) = self.bucket.delete_prefix(&self.url) {
             // Nothing to return the error to: the run has failed already, with its own error.
             eprintln!("warning: removing the unfinished output at {}: {e}", self.url);
@@ -453,8 +538,14 @@ mod tests {
 
     #[test]
     fn the_marker_names_its_product_and_only_ours_counts() {
-        let marker = marker_json("a Deep Zoom pyramid", "writing");
+        let marker = marker_json("a Deep Zoom pyramid", "writing", None);
         assert_eq!(marker_product(&marker).as_deref(), Some("a Deep Zoom pyramid"));
+        assert_eq!(marker_run(&marker), None);
+        let run = Identity::new().with("tile size", 256);
+        let marker = marker_json("a Deep Zoom pyramid", "writing", Some(&run));
+        assert_eq!(marker_product(&marker).as_deref(), Some("a Deep Zoom pyramid"));
+        assert_eq!(marker_run(&marker), Some(run.clone()));
+        assert_eq!(marker_run(&marker_json("a Deep Zoom pyramid", "complete", Some(&run))), None);
         assert_eq!(marker_product(br#"{"writer":"someone","product":"a Deep Zoom pyramid"}"#), None);
         assert_eq!(marker_product(b"not json"), None);
     }

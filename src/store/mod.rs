@@ -35,8 +35,12 @@ mod profile;
 pub use crate::error::StoreError;
 pub use url::ObjectUrl;
 
+use std::collections::HashMap;
+use std::path::PathBuf;
+
 use crate::error::Result;
 use crate::output::{Claim, Product};
+use crate::resume::Identity;
 
 /// Bytes of uploads in flight per output when the caller does not say: each request's body
 /// is held until the server has it.
@@ -73,6 +77,58 @@ fn open_prefix(url: &ObjectUrl, claim: &Claim, in_flight: u64) -> Result<Box<dyn
 #[cfg(not(feature = "s3"))]
 fn open_prefix(url: &ObjectUrl, _: &Claim, _: u64) -> Result<Box<dyn Files>> {
     Err(StoreError::NotBuilt { url: url.to_string() }.into())
+}
+
+/// What a resumable run (`--resume`, docs/resume.md) of identity `run` finds at the prefix
+/// `url` of a directory output: its marker's URL (where the run is recorded), and, where the
+/// marker names an interrupted resumable run of this identity, every object it left there (its
+/// name under the prefix and its size). A marker naming another run is refused, naming what
+/// differs, before anything is written or deleted.
+#[cfg(feature = "s3")]
+pub(crate) fn resumable_prefix(url: &ObjectUrl, run: &Identity) -> Result<(PathBuf, Option<HashMap<String, u64>>)> {
+    let bucket = bucket::Bucket::open(url)?;
+    let marker = PathBuf::from(format!("s3://{}/{}", url.bucket(), url.child(bucket::MARKER)));
+    let Some(then) = bucket.resumable_run(url)? else { return Ok((marker, None)) };
+    let differences = run.differences(&then);
+    if !differences.is_empty() {
+        return Err(crate::error::ResumeError::Mismatch { journal: marker, differences }.into());
+    }
+    let listed = bucket.list_sizes(url)?;
+    Ok((marker, Some(listed)))
+}
+
+#[cfg(not(feature = "s3"))]
+pub(crate) fn resumable_prefix(url: &ObjectUrl, _: &Identity) -> Result<(PathBuf, Option<HashMap<String, u64>>)> {
+    Err(StoreError::NotBuilt { url: url.to_string() }.into())
+}
+
+/// [`Files`] of a resumable run of identity `run` at the `s3://` prefix `claim` names: with
+/// `clear`, what the prefix holds is deleted first (nothing there is resumed); otherwise the
+/// interrupted run's objects stay but `stale` (names under the prefix: a manifest, a tile not
+/// whole), which go. The objects stay when the files are dropped unpublished.
+#[cfg(feature = "s3")]
+pub(crate) fn resuming_prefix(
+    claim: &Claim,
+    in_flight: u64,
+    run: Identity,
+    clear: bool,
+    stale: &[String],
+) -> Result<Box<dyn Files>> {
+    let url = match ObjectUrl::of_path(&claim.path) {
+        Some(url) => url?,
+        None => return Err(crate::error::TilerError::Internal("a local output resumed as a bucket's".into())),
+    };
+    let clear = clear && claim.replaces.is_some();
+    let uploads = bucket::Uploads::resuming(&url, claim.product.noun(), clear, in_flight, run)?;
+    if !clear && !stale.is_empty() {
+        uploads.delete(stale)?;
+    }
+    Ok(Box::new(uploads))
+}
+
+#[cfg(not(feature = "s3"))]
+pub(crate) fn resuming_prefix(claim: &Claim, _: u64, _: Identity, _: bool, _: &[String]) -> Result<Box<dyn Files>> {
+    Err(StoreError::NotBuilt { url: claim.path.display().to_string() }.into())
 }
 
 /// Checks that the object URL `url` may receive `product` (the rule of [`crate::output::claim`]

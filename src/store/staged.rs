@@ -56,6 +56,24 @@ pub(crate) struct Staged {
     /// The staging directory (removed when dropped) and the file in it the sink writes.
     dir: PathBuf,
     local: PathBuf,
+    /// A resumable run's (`--resume`): the directory stays until the file is uploaded.
+    keep: bool,
+}
+
+/// Where a resumable run (`--resume`, docs/resume.md) of this machine stages the file of
+/// `url`: in a directory of its own under the system's temporary directory, named after the
+/// URL and the endpoint, the same for every run of that command, so that the next `--resume`
+/// finds the journal and the staged pack beside this path, as beside a local output.
+pub(crate) fn resumable_path(url: &ObjectUrl) -> PathBuf {
+    use std::hash::Hasher;
+    let mut hash = crate::fnv::Fnv::default();
+    hash.write(url.to_string().as_bytes());
+    for name in ["AWS_ENDPOINT_URL", "AWS_ENDPOINT"] {
+        hash.write(std::env::var(name).unwrap_or_default().as_bytes());
+        hash.write(&[0]);
+    }
+    let name = url.key().rsplit('/').next().filter(|n| !n.is_empty()).unwrap_or("output");
+    std::env::temp_dir().join(format!("vortex-s3-resume-{:016x}", hash.finish())).join(name)
 }
 
 impl Staged {
@@ -69,7 +87,17 @@ impl Staged {
         let dir = staging::partial_path(&base);
         staging::fresh_dir(&dir).map_err(|e| fail(&dir, e))?;
         let name = url.key().rsplit('/').next().filter(|n| !n.is_empty()).unwrap_or("output");
-        Ok(Staged { url: url.clone(), product, replaces, local: dir.join(name), dir })
+        Ok(Staged { url: url.clone(), product, replaces, local: dir.join(name), dir, keep: false })
+    }
+
+    /// The file of a resumable run, `local` ([`resumable_path`]): its directory is made if
+    /// need be, and stays (with the journal and staged file a run that did not finish left in
+    /// it) until the file is uploaded.
+    pub(crate) fn resumable(url: &ObjectUrl, product: Product, local: PathBuf) -> Result<Staged> {
+        let dir = local.parent().map(Path::to_path_buf).unwrap_or_default();
+        let fail = |source| StoreError::Staging { url: url.to_string(), path: dir.clone(), source };
+        std::fs::create_dir_all(&dir).map_err(fail)?;
+        Ok(Staged { url: url.clone(), product, replaces: false, dir, local, keep: true })
     }
 
     /// Where the format's sink writes the file (its destination, as if local).
@@ -80,7 +108,14 @@ impl Staged {
     /// Sends the finished file as a multipart upload with at most `in_flight` bytes of parts
     /// in flight (one part at least), then removes the temporary. Returns the bytes sent.
     #[cfg(feature = "s3")]
-    pub(crate) fn upload(self, in_flight: u64) -> Result<u64> {
+    pub(crate) fn upload(mut self, in_flight: u64) -> Result<u64> {
+        let sent = self.send(in_flight)?;
+        self.keep = false;
+        Ok(sent)
+    }
+
+    #[cfg(feature = "s3")]
+    fn send(&self, in_flight: u64) -> Result<u64> {
         if staged_dir(self.product) {
             return self.upload_dir(in_flight);
         }
@@ -133,6 +168,9 @@ impl Staged {
 
 impl Drop for Staged {
     fn drop(&mut self) {
+        if self.keep {
+            return;
+        }
         let _ = std::fs::remove_dir_all(&self.dir);
     }
 }

@@ -10,7 +10,8 @@ use std::time::Duration;
 
 /// What the boto3 helper does: `mb BUCKET`, `put BUCKET KEY TEXT`, `get BUCKET PREFIX DIR`
 /// (every object under PREFIX into DIR, printing each key), `count BUCKET PREFIX` (objects
-/// under PREFIX, up to 10), `uploads BUCKET` (open multipart uploads, one key a line).
+/// under PREFIX, up to 10), `keys BUCKET PREFIX` (every key under PREFIX, a line each), `uploads
+/// BUCKET` (open multipart uploads, one key a line).
 const BOTO: &str = r#"
 import os, sys, boto3
 s3 = boto3.client("s3")
@@ -30,6 +31,10 @@ elif cmd == "get":
             print(o["Key"])
 elif cmd == "count":
     print(s3.list_objects_v2(Bucket=bucket, Prefix=sys.argv[3], MaxKeys=10).get("KeyCount", 0))
+elif cmd == "keys":
+    for page in s3.get_paginator("list_objects_v2").paginate(Bucket=bucket, Prefix=sys.argv[3]):
+        for o in page.get("Contents", []):
+            print(o["Key"])
 elif cmd == "uploads":
     for u in s3.list_multipart_uploads(Bucket=bucket).get("Uploads", []):
         print(u["Key"])
@@ -91,6 +96,19 @@ impl Moto {
             Command::new(self.bin.join("python")).arg("-c").arg(BOTO).args(args).envs(self.env()).output().unwrap();
         assert!(out.status.success(), "boto3 {args:?}: {}", String::from_utf8_lossy(&out.stderr));
         String::from_utf8_lossy(&out.stdout).lines().map(str::to_string).collect()
+    }
+
+    /// Objects under `prefix` (up to 1,000), asked without starting Python: an unsigned
+    /// ListObjectsV2 (moto takes it), a few milliseconds, for a test to watch a run's progress.
+    pub fn quick_count(&self, bucket: &str, prefix: &str) -> usize {
+        use std::io::{Read, Write};
+        let mut stream = TcpStream::connect(("127.0.0.1", self.port)).unwrap();
+        let prefix = prefix.replace('/', "%2F");
+        write!(stream, "GET /{bucket}?list-type=2&prefix={prefix} HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n").unwrap();
+        let mut reply = String::new();
+        stream.read_to_string(&mut reply).unwrap();
+        assert!(reply.starts_with("HTTP/1.") && reply.contains(" 200 "), "{reply}");
+        reply.matches("<Key>").count()
     }
 
     /// The tool run with this server's environment (and `tmpdir` as its `TMPDIR`).
