@@ -152,6 +152,20 @@ fn send(pid: u32, signal: &str) {
     assert!(Command::new("kill").args([signal, &pid.to_string()]).status().unwrap().success());
 }
 
+/// Waits until more than half the Deep Zoom tiles (and the marker) are in `moto`'s
+/// `tiles/run/out/`, counted with the run `pid` stopped, so that it cannot go on while the
+/// server answers (its uploads in flight still land, at most 64 of them); it stays stopped.
+fn half_in_bucket(moto: &Moto, pid: u32) {
+    until(&|| {
+        send(pid, "-STOP");
+        let half = moto.quick_count("tiles", "run/out/") as u64 > DZI.tiles / 2;
+        if !half {
+            send(pid, "-CONT");
+        }
+        half
+    })
+}
+
 /// Starts `command` with `--resume`, stops it with `signal` once `half_way` (given its process
 /// id) returns, and returns its exit status and standard error.
 fn stop_when(mut command: Command, half_way: &dyn Fn(u32), signal: &str) -> (Option<i32>, String) {
@@ -429,20 +443,7 @@ fn a_killed_deep_zoom_in_a_bucket_is_resumed_byte_for_byte() {
     let (whole_encoded, whole_bytes) = (number(&json, "encoded"), number(&json, "bytes"));
 
     let args = command(&input, &DZI, Path::new("s3://tiles/run/out"), &[]);
-    // Half the tiles and the marker.
-    // Counted with the run stopped, so that it cannot go on while the server answers (its
-    // uploads in flight still land, at most 64 of them).
-    let half_way = |pid| {
-        until(&|| {
-            send(pid, "-STOP");
-            let half = moto.quick_count("tiles", "run/out/") as u64 > DZI.tiles / 2;
-            if !half {
-                send(pid, "-CONT");
-            }
-            half
-        })
-    };
-    stop_when(moto.command(&strs(&args), tmp.path()), &half_way, "-KILL");
+    stop_when(moto.command(&strs(&args), tmp.path()), &|pid| half_in_bucket(&moto, pid), "-KILL");
     let listed = moto.boto(&["keys", "tiles", "run/out/"]);
     let at_kill = listed.iter().filter(|k| !k.ends_with("/.vortex-tiler")).count() as u64;
     assert!((DZI.tiles / 2..DZI.tiles).contains(&at_kill), "{at_kill} of {} tiles uploaded", DZI.tiles);
@@ -546,17 +547,7 @@ fn a_deep_zoom_in_a_bucket_stopped_by_sigterm_keeps_its_tiles_for_resume() {
     let input = dir.path().join("in.ppm");
     image(&input);
     let args = command(&input, &DZI, Path::new("s3://tiles/run/out"), &[]);
-    let half_way = |pid| {
-        until(&|| {
-            send(pid, "-STOP");
-            let half = moto.quick_count("tiles", "run/out/") as u64 > DZI.tiles / 2;
-            if !half {
-                send(pid, "-CONT");
-            }
-            half
-        })
-    };
-    let (code, stderr) = stop_when(moto.command(&strs(&args), tmp.path()), &half_way, "-TERM");
+    let (code, stderr) = stop_when(moto.command(&strs(&args), tmp.path()), &|pid| half_in_bucket(&moto, pid), "-TERM");
     assert_eq!(code, Some(143), "{stderr}");
     assert!(stderr.contains("stay under the prefix") && !stderr.contains("panicked"), "{stderr}");
     let listed = moto.boto(&["keys", "tiles", "run/out/"]);
