@@ -20,10 +20,7 @@ fn main() -> ExitCode {
             // A name in a message the library or the system wrote may hold a control
             // character or a terminal escape: it reaches the terminal escaped.
             eprintln!("error: {}", vortex_tiler::error::escape_controls(&cli::report::chain(&e)));
-            match e.downcast_ref::<vortex_tiler::error::TilerError>() {
-                Some(vortex_tiler::error::TilerError::Interrupted) => cli::interrupted_exit_code(),
-                _ => ExitCode::FAILURE,
-            }
+            cli::exit_code(&e)
         }
     }
 }

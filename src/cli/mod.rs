@@ -250,9 +250,24 @@ pub fn say_line(line: std::fmt::Arguments) {
     }
 }
 
-/// The exit status of a run that a signal stopped: 128 + its number (130 for Ctrl-C).
-pub fn interrupted_exit_code() -> std::process::ExitCode {
-    std::process::ExitCode::from(signals::requested().map_or(130, signals::exit_code))
+/// A `--resume` run stopped by a signal: unlike other stopped runs, it leaves what it finished
+/// (staged beside its output, or under its `s3://` prefix) for the next `--resume`.
+#[derive(Debug, thiserror::Error)]
+#[error("interrupted; what was finished stays for --resume")]
+pub struct InterruptedForResume;
+
+/// The exit status of a failed run: 128 + the number of the signal that stopped it (130 for
+/// Ctrl-C), else 1.
+pub fn exit_code(e: &anyhow::Error) -> std::process::ExitCode {
+    let interrupted = e.is::<InterruptedForResume>()
+        || matches!(
+            e.downcast_ref::<vortex_tiler::error::TilerError>(),
+            Some(vortex_tiler::error::TilerError::Interrupted)
+        );
+    match interrupted {
+        true => std::process::ExitCode::from(signals::requested().map_or(130, signals::exit_code)),
+        false => std::process::ExitCode::FAILURE,
+    }
 }
 
 pub fn run(args: Args, matches: &clap::ArgMatches) -> Result<()> {

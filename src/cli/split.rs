@@ -731,7 +731,10 @@ pub fn tile(
             );
         }
     }
-    let (done, wrote) = result?;
+    let (done, wrote) = result.map_err(|e| match (e.downcast_ref::<vortex_tiler::error::TilerError>(), &resumed) {
+        (Some(vortex_tiler::error::TilerError::Interrupted), Some(_)) => super::InterruptedForResume.into(),
+        _ => e,
+    })?;
     match wrote.as_slice() {
         [one] => report_one(a, &done, one),
         all => report_all(a, &done, all),

@@ -292,6 +292,7 @@ fn a_run_stopped_by_sigterm_keeps_its_tiles_for_resume() {
     let (journal, code, stderr) = stop_half_way(&args, &dest, PACK.tiles, "-TERM");
     assert_eq!(code, Some(143), "{stderr}");
     assert!(stderr.contains("run the same command with --resume") && !stderr.contains("panicked"), "{stderr}");
+    assert!(stderr.contains("error: interrupted; what was finished stays for --resume"), "{stderr}");
     assert_eq!(beside(&dest, "tmp-").len(), 1, "the staged pack stays");
     let at_stop = recorded(&journal).len() as u64;
     let (json, _) = run_ok(&[args, vec!["--resume".into(), "--json".into()]].concat());
@@ -550,6 +551,7 @@ fn a_deep_zoom_in_a_bucket_stopped_by_sigterm_keeps_its_tiles_for_resume() {
     let (code, stderr) = stop_when(moto.command(&strs(&args), tmp.path()), &|pid| half_in_bucket(&moto, pid), "-TERM");
     assert_eq!(code, Some(143), "{stderr}");
     assert!(stderr.contains("stay under the prefix") && !stderr.contains("panicked"), "{stderr}");
+    assert!(stderr.contains("error: interrupted; what was finished stays for --resume"), "{stderr}");
     let listed = moto.boto(&["keys", "tiles", "run/out/"]);
     let tiles = listed.iter().filter(|k| !k.ends_with("/.vortex-tiler")).count() as u64;
     assert!(tiles > DZI.tiles / 2, "{tiles} tiles stayed");
