@@ -127,8 +127,10 @@ impl<T: Copy> Band<T> {
                     Some(_) => break,
                     None => None,
                 };
-                for (tile, (_, runs)) in open.tiles.iter_mut().zip(&self.x_runs).filter(|_| self.texels) {
-                    cut::push_row(tile, runs, texels, self.channels, fill);
+                if self.texels {
+                    for (tile, (_, runs)) in open.tiles.iter_mut().zip(&self.x_runs) {
+                        cut::push_row(tile, runs, texels, self.channels, fill);
+                    }
                 }
                 open.written += 1;
             }
