@@ -309,8 +309,10 @@ fn run<T: Sample>(
     // Where every target copies the finest level's pages from the source's stored tiles, and a
     // page that cannot be copied can be cut from its decoded stored tile, the cascade sends
     // those pages without texels, as a halved pass does: the level's texels still make the
-    // sums, but none is cut or held for the encoders (issue 45).
-    let stored_finest = (copier.as_ref()).is_some_and(|c| c.tiles.decodes() && c.takes.iter().all(|&takes| takes));
+    // sums, but none is cut or held for the encoders (issue 45). Not for a sink that stores a
+    // page of one colour as that colour (a pack): only the texels say which pages are.
+    let stored_finest = (copier.as_ref()).is_some_and(|c| c.tiles.decodes() && c.takes.iter().all(|&takes| takes))
+        && targets.iter().all(|t| !t.sink.takes_constants());
     let roots = std::thread::scope(|scope| {
         let producer_clock = Arc::clone(&clock);
         let producer = scope.spawn(move || {

@@ -232,3 +232,33 @@ fn a_pack_holds_the_stored_tiles_and_every_level() {
     assert_eq!(level(&unpacked[1], 0), level(&unpacked[0], 0), "LOD 0 is the exact run's");
     assert_eq!(level(&unpacked[1], 0).len(), 48);
 }
+
+/// A copied page of one colour is a pack's constant, as in a run that encodes every page (the
+/// oracle: it finds constants in the texels it cut): a run whose finest level needs no texel
+/// must still look at them where a sink stores such pages as their colour.
+#[test]
+fn a_copied_page_of_one_colour_is_still_a_packs_constant() {
+    if !have_vips() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = pattern_png_sized(dir.path(), 640, 384);
+    let (black, flat, both) = (dir.path().join("black.v"), dir.path().join("flat.v"), dir.path().join("both.v"));
+    tool("vips", &["black", s(&black), "256", "256", "--bands", "3"]);
+    tool("vips", &["linear", s(&black), s(&flat), "1", "240", "--uchar"]);
+    tool("vips", &["insert", s(&png), s(&flat), s(&both), "128", "128"]);
+    let tiff = dir.path().join("flat.tif");
+    let tiled = ["--tile", "--tile-width", "128", "--tile-height", "128", "--compression", "jpeg", "--Q", "90"];
+    tool("vips", &[&["tiffsave", s(&both), s(&tiff)], &tiled[..]].concat());
+    let pack = |name: &str, extra: &[&str]| -> serde_json::Value {
+        let out = dir.path().join(name);
+        let args =
+            [&["split", s(&tiff), "--pack", s(&out), "--tile-size", "128", "--border", "0", "--json"], extra].concat();
+        serde_json::from_str(&cli::ok(&args)).unwrap()
+    };
+    let copied = pack("copied.vtpk", &[]);
+    let encoded = pack("encoded.vtpk", &["--quality", "90"]);
+    assert!(copied["copied"].as_u64() > Some(0), "{copied}");
+    assert!(encoded["pack"]["constant"].as_u64() >= Some(4), "the flat 256² block's 4 pages: {encoded}");
+    assert_eq!(copied["pack"]["constant"], encoded["pack"]["constant"], "{copied}\n{encoded}");
+}
