@@ -384,7 +384,10 @@ impl<T: Sample> Encoding<'_, T> {
         let kept = job.places.iter().all(|&(t, (x, y))| self.targets[t].sink.kept(job.lod, x, y));
         let stored = match kept {
             true => Stored { constant: None, file: Some(File::Kept) },
-            false => prepare(encoder, self.targets, job, page, self.copier, self.counts)?,
+            false => {
+                let colour = (job.stored && !texels.is_empty()).then_some(&texels[..]);
+                prepare(encoder, self.targets, job, page, colour, self.copier, self.counts)?
+            }
         };
         // The last job of a tile frees its texels here, not when the writer stores the lot.
         if let Some(texels) = Arc::into_inner(texels) {
@@ -648,27 +651,29 @@ impl Stored {
 /// gets it stores such tiles as their colour, or it is copied from the source as stored.
 ///
 /// `page` gives the texels (cut from the stored tile, for a stored job, only when asked): a
-/// stored page to copy is copied without being decoded, so is never found to be of one colour.
+/// stored page to copy is copied without being decoded; `colour` is its one colour, where the
+/// band found every texel of it to be one (`Band::drop_texels`).
 fn prepare<'a, T: Sample>(
     encoder: &TileEncoder<T>,
     targets: &[Target],
     job: &Job<T>,
     page: impl Fn() -> Result<Cow<'a, [T]>>,
+    colour: Option<&[T]>,
     copier: Option<&Copier>,
     counts: &Counts,
 ) -> Result<Stored> {
     let channels = encoder.source_layout().channels.count();
     let takes_constants = |&(t, _): &(usize, _)| targets[t].sink.takes_constants();
     // A pack entry holds a constant texel of up to 8 bytes (not 3 or 4 samples of 32 bits).
-    // A stored page to copy is not decoded to find out.
-    let may_be_constant = !(job.stored && job.copy)
-        && job.places.iter().any(takes_constants)
-        && encoder.stored_layout().bytes_per_pixel() <= 8;
-    let looked_at = if may_be_constant { Some(page()?) } else { None };
-    let constant = looked_at
-        .as_ref()
-        .filter(|texels| texels.chunks_exact(channels).all(|t| t == &texels[..channels]))
-        .map(|texels| encoder.stored_texel(&texels[..channels]));
+    let may_be_constant = job.places.iter().any(takes_constants) && encoder.stored_layout().bytes_per_pixel() <= 8;
+    // A stored page to copy is not decoded to find out: the band said whether it is one colour.
+    let copied_as_stored = job.stored && job.copy;
+    let looked_at = if may_be_constant && !copied_as_stored { Some(page()?) } else { None };
+    let one_colour = match &looked_at {
+        Some(texels) => texels.chunks_exact(channels).all(|t| t == &texels[..channels]).then(|| &texels[..channels]),
+        None => colour.filter(|_| may_be_constant && copied_as_stored),
+    };
+    let constant = one_colour.map(|texel| encoder.stored_texel(texel));
     if constant.is_some() && job.places.iter().all(takes_constants) {
         return Ok(Stored { constant, file: None });
     }

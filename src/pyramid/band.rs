@@ -33,7 +33,8 @@ pub struct Band<T> {
     /// Image row index of the next row to arrive.
     next_row: u64,
     /// Whether the tiles get their texels: not where the level's pages are the source's stored
-    /// tiles, handed on without texels when their rows are in ([`Band::drop_texels`]).
+    /// tiles, handed on with their one colour at most when their rows are in
+    /// ([`Band::drop_texels`]).
     texels: bool,
 }
 
@@ -44,17 +45,21 @@ struct OpenRow<T> {
     sources: Vec<Option<u32>>,
     /// Rows of the tiles written so far.
     written: usize,
-    /// One per entry of `x_runs`.
+    /// One per entry of `x_runs`: its texels; without texels, the one colour of every texel
+    /// so far (empty before the first, and once two differ).
     tiles: Vec<Vec<T>>,
+    /// Without texels: per tile, whether two of its texels differ.
+    varied: Vec<bool>,
 }
 
-/// A complete row of tiles: its index, and each tile's column and texels, left to right.
+/// A complete row of tiles: its index, and each tile's column and texels, left to right (without
+/// texels, [`Band::drop_texels`]: the tile's one colour, or nothing where it has more than one).
 pub struct TileRow<T> {
     pub index: u32,
     pub tiles: Vec<(u32, Vec<T>)>,
 }
 
-impl<T: Copy> Band<T> {
+impl<T: Copy + PartialEq> Band<T> {
     /// The band of level `lod` that cuts the page columns of `x_runs` (whose
     /// runs index the rows it is given) in the rows of tiles `tile_rows`, given the level's
     /// rows from image row `first_row` on (a span's window may start above its first tile's).
@@ -84,7 +89,9 @@ impl<T: Copy> Band<T> {
     }
 
     /// From now on, the band hands on its rows of tiles when their rows are in, as it would,
-    /// but with no texels in them.
+    /// but with no texels in them: only a tile all of whose texels are one colour holds it (one
+    /// texel), which is all a pack needs of a page it copies (whether to store it as a colour).
+    /// Each tile's texels are compared as they arrive, until two differ.
     pub fn drop_texels(&mut self) {
         self.texels = false;
     }
@@ -131,6 +138,14 @@ impl<T: Copy> Band<T> {
                     for (tile, (_, runs)) in open.tiles.iter_mut().zip(&self.x_runs) {
                         cut::push_row(tile, runs, texels, self.channels, fill);
                     }
+                } else {
+                    let tiles = open.tiles.iter_mut().zip(&mut open.varied).zip(&self.x_runs);
+                    for ((colour, varied), (_, runs)) in tiles.filter(|((_, varied), _)| !**varied) {
+                        if !cut::narrow_colour(colour, runs, texels, self.channels, fill) {
+                            *varied = true;
+                            *colour = Vec::new();
+                        }
+                    }
                 }
                 open.written += 1;
             }
@@ -160,7 +175,7 @@ impl<T: Copy> Band<T> {
         let sources = cut::expand(&cut::runs(&self.layout, index, self.height, self.virtual_height, self.edge_padding));
         let texels = if self.open.is_empty() && self.texels { self.layout.tile_texels() * self.channels } else { 0 };
         let tiles = self.x_runs.iter().map(|_| Vec::with_capacity(texels)).collect();
-        OpenRow { index, sources, written: 0, tiles }
+        OpenRow { index, sources, written: 0, tiles, varied: vec![false; self.x_runs.len()] }
     }
 }
 

@@ -537,6 +537,12 @@ impl<T: Sample + Into<A>, A: Acc> Cascade<T, A> {
         self
     }
 
+    /// Whether the first level's pages are sent as the source's stored tiles
+    /// ([`with_stored_first`](Self::with_stored_first)).
+    pub fn first_level_stored(&self) -> bool {
+        self.cuts.stored_first
+    }
+
     /// Keeps the exact sums of the pages of the span's last LOD, its payload texels only (a
     /// shard's subtree roots), for [`take_root_sums`](Self::take_root_sums).
     #[expect(clippy::expect_used, reason = "a cascade has at least one level")]
@@ -621,8 +627,12 @@ mod tests {
         let (w, h) = (61u32, 45u32);
         let layout = Layout::new(w as u64, h as u64, 8, 1).unwrap();
         let pixels = PixelLayout::new(Channels::Rgba, Depth::U8);
-        let rows: Vec<Vec<u8>> =
-            (0..h).map(|y| (0..w * 4).map(|i| ((i * 37 + y * 101) % 256) as u8).collect()).collect();
+        // Varied texels, but for a block of one colour that fills a few pages.
+        let texel = |i: u32, y: u32| match (i / 4, y) {
+            (0..30, 0..20) => [10, 20, 30, 40][i as usize % 4],
+            _ => ((i * 37 + y * 101) % 256) as u8,
+        };
+        let rows: Vec<Vec<u8>> = (0..h).map(|y| (0..w * 4).map(|i| texel(i, y)).collect()).collect();
         let (tx, rx) = sync_channel(1000); // more than the batches of this image
         let out = BatchSender::new(tx, StageClock::new());
         let mut cascade = Cascade::new(layout, &Span::whole(&layout), pixels, filter, Padding::Edge, out);
@@ -640,8 +650,9 @@ mod tests {
     }
 
     /// With its first level's pages stored, a cascade sends the same batches in the same order
-    /// (which is what makes a pack's bytes): the first level's without texels, a page each
-    /// (they are not merged: their texels are not known), the others as they were.
+    /// (which is what makes a pack's bytes): the first level's a page each (they are not
+    /// merged: their texels are not known), each without texels but for its one colour where
+    /// it has one, the others as they were.
     #[test]
     fn stored_first_pages_go_where_their_cut_pages_went() {
         let run = |cascade: &mut Cascade<u8, u64>, rows: &[Vec<u8>]| {
@@ -653,6 +664,7 @@ mod tests {
         let cut = pass_sending(Filter::Box, false, run);
         let stored = pass_sending(Filter::Box, true, run);
         assert_eq!(cut.len(), stored.len(), "one batch for each");
+        let mut one_colour = 0;
         for ((lod, was_stored, tiles), (stored_lod, is_stored, stored_tiles)) in cut.iter().zip(&stored) {
             assert_eq!((lod, *was_stored, *is_stored), (stored_lod, false, *lod == 0));
             match lod {
@@ -660,11 +672,20 @@ mod tests {
                     let places: Vec<_> = tiles.iter().flat_map(|(places, _)| places.clone()).collect();
                     let pages: Vec<_> = stored_tiles.iter().map(|(places, _)| places.clone()).collect();
                     assert_eq!(pages, places.iter().map(|&p| vec![p]).collect::<Vec<_>>());
-                    assert!(stored_tiles.iter().all(|(_, texels)| texels.is_empty()));
+                    let cut_texels = |page| &tiles.iter().find(|(places, _)| places.contains(page)).unwrap().1;
+                    for (page, texels) in stored_tiles.iter().map(|(places, texels)| (&places[0], texels)) {
+                        let cut = cut_texels(page);
+                        match cut.chunks_exact(4).all(|t| t == &cut[..4]) {
+                            true => assert_eq!(texels, &cut[..4], "page {page:?}'s colour"),
+                            false => assert!(texels.is_empty(), "page {page:?} has no one colour"),
+                        }
+                        one_colour += usize::from(!texels.is_empty());
+                    }
                 }
                 _ => assert!(tiles == stored_tiles, "LOD {lod} as it was"),
             }
         }
+        assert_eq!(one_colour, 4 * 3, "the pages the block of one colour fills");
     }
 
     #[test]

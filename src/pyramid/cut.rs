@@ -118,6 +118,36 @@ pub fn push_row<T: Copy>(out: &mut Vec<T>, x_runs: &[Run], row: Option<&[T]>, ch
     }
 }
 
+/// Whether every texel of one row of a tile, picked as [`push_row`] picks them, is `colour`
+/// (one texel; where it is empty, it becomes the row's first texel). Stops at the first texel
+/// that differs.
+pub fn narrow_colour<T: Copy + PartialEq>(
+    colour: &mut Vec<T>,
+    x_runs: &[Run],
+    row: Option<&[T]>,
+    channels: usize,
+    fill: &[T],
+) -> bool {
+    for run in x_runs {
+        let texels = match (*run, row) {
+            (Run::Copy { start, len }, Some(r)) => &r[start as usize * channels..(start + len) as usize * channels],
+            (Run::Repeat { at, len }, Some(r)) if len > 0 => &r[at as usize * channels..(at as usize + 1) * channels],
+            (Run::Copy { len, .. } | Run::Repeat { len, .. } | Run::Fill { len }, _) if len > 0 => fill,
+            _ => &[],
+        };
+        if texels.is_empty() {
+            continue;
+        }
+        if colour.is_empty() {
+            colour.extend_from_slice(&texels[..channels]);
+        }
+        if !texels.chunks_exact(channels).all(|t| t == &colour[..]) {
+            return false;
+        }
+    }
+    true
+}
+
 /// Each texel of `runs` in turn: the real texel it holds, or `None` for the background.
 pub fn expand(runs: &[Run]) -> Vec<Option<u32>> {
     let mut out = Vec::new();
