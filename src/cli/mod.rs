@@ -154,6 +154,7 @@ enum Command {
     ///   for i in 0 1 2 3; do vortex-tiler split huge.tif --pack part-$i.vtpk --shard $i/4; done
     ///   vortex-tiler merge part-*.vtpk -o huge.vtpk
     ///   sbatch --array=0-15 ...; vortex-tiler merge parts/*.vtpk -o huge.vtpk   # scripts/slurm/
+    ///   vortex-tiler merge s3://tiles/huge.parts/ -o s3://tiles/huge.vtpk   # every object below
     #[command(verbatim_doc_comment)]
     Merge(shard::MergeArgs),
 }

@@ -7,7 +7,8 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use vortex_tiler::error::ShowPath;
 use vortex_tiler::output::Product;
-use vortex_tiler::scale_out::{self, ShardJob};
+use vortex_tiler::scale_out::{self, PackUpload, ShardFiles, ShardJob};
+use vortex_tiler::store::ObjectUrl;
 
 use super::report;
 
@@ -121,12 +122,16 @@ impl Chosen {
 #[derive(clap::Args, Debug)]
 pub struct MergeArgs {
     /// The shard packs of one split, written by `split --shard I/N --pack FILE`: all N of
-    /// them, in any order.
+    /// them, in any order. An s3://BUCKET/KEY.vtpk URL reads that object, and
+    /// s3://BUCKET/PREFIX/ (with the trailing /) every object directly below the prefix; each
+    /// is downloaded whole under TMPDIR before the merge (docs/scale-out.md).
     #[arg(value_name = "SHARD", required = true)]
     shards: Vec<PathBuf>,
 
     /// The pack to write: the pack `split --pack` of the same input and options makes, byte
-    /// for byte. An existing pack is replaced; any other file only with --force.
+    /// for byte. An existing pack is replaced; any other file only with --force. An
+    /// s3://BUCKET/KEY.vtpk URL writes it as one object (staged under TMPDIR, then a
+    /// multipart upload; docs/object-storage.md).
     #[arg(short, long, value_name = "PACK")]
     output: PathBuf,
 
@@ -140,21 +145,36 @@ pub struct MergeArgs {
 
 pub fn run_merge(a: MergeArgs) -> Result<()> {
     let started = Instant::now();
-    let inputs: Vec<&Path> = a.shards.iter().map(PathBuf::as_path).collect();
-    report::claim(&a.output, Product::Pack, &inputs, a.force)?;
+    let names = ShardFiles::list(&a.shards)?;
+    // The output is claimed before any shard is downloaded.
+    let upload = match ObjectUrl::of_path(&a.output) {
+        Some(_) => Some(PackUpload::claim(&a.output, &names, a.force)?),
+        None => {
+            let inputs: Vec<&Path> = names.iter().map(PathBuf::as_path).collect();
+            report::claim(&a.output, Product::Pack, &inputs, a.force)?;
+            None
+        }
+    };
+    let downloads = names.iter().filter(|n| ObjectUrl::of_path(n).is_some()).count();
+    if downloads > 0 && !a.run.quiet && !a.run.json {
+        let packs = if downloads == 1 { "pack" } else { "packs" };
+        eprintln!("downloading {downloads} shard {packs} under {}", std::env::temp_dir().shown());
+    }
+    let shards = ShardFiles::fetch(names)?;
     a.run.init_pool()?;
     // Every shard's level table is the merged pack's: the first one's gives the bar's length.
-    let total = vortex_pack::Pack::open(&a.shards[0])
-        .map(|p| p.levels().iter().map(|l| l.tiles_w as u64 * l.tiles_h as u64).sum())
-        .unwrap_or(0);
+    let total = (shards.files().first().and_then(|first| vortex_pack::Pack::open(first).ok()))
+        .map_or(0, |p| p.levels().iter().map(|l| l.tiles_w as u64 * l.tiles_h as u64).sum());
     let watch = a.run.watch(total)?;
-    let merged = scale_out::merge(&a.shards, &a.output, &watch);
+    let dest = upload.as_ref().map_or(a.output.as_path(), PackUpload::local);
+    let merged = scale_out::merge_files(&shards, dest, &watch);
     watch.bar.finish_and_clear();
     let merged = merged?;
+    let uploaded = upload.map(PackUpload::upload).transpose()?;
     let took = started.elapsed().as_secs_f64();
     let m = &merged;
     if a.run.json {
-        let doc = serde_json::json!({
+        let mut doc = serde_json::json!({
             "output": a.output.display().to_string(),
             "shards": m.shards,
             "cutLevel": m.cut,
@@ -166,6 +186,9 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
             "contentHash": format!("{:016x}", m.pack.content_hash),
             "seconds": took,
         });
+        if let Some(sent) = uploaded {
+            doc["uploadedBytes"] = sent.into();
+        }
         say!("{doc}");
     } else if !a.run.quiet {
         say!("{}", report::pack_line(&m.pack));

@@ -301,9 +301,10 @@ pub struct OutputArgs {
     /// Make one shard of a split across machines, into a shard pack (--pack): I/N is shard I
     /// of N, counting from 0; auto reads the index from a Slurm job array
     /// (SLURM_ARRAY_TASK_ID, SLURM_ARRAY_TASK_COUNT) or a Kubernetes Indexed Job
-    /// (JOB_COMPLETION_INDEX, with --shards). '{shard}' in --pack becomes the index.
-    /// `vortex-tiler merge` joins the N shard packs into the pack --pack alone makes, byte for
-    /// byte. See docs/scale-out.md.
+    /// (JOB_COMPLETION_INDEX, with --shards). '{shard}' in --pack becomes the index; --pack
+    /// may be an s3://BUCKET/KEY.vtpk URL (staged under TMPDIR, then uploaded), so that the
+    /// machines share no file system for the shards. `vortex-tiler merge` joins the N shard
+    /// packs into the pack --pack alone makes, byte for byte. See docs/scale-out.md.
     #[arg(help_heading = "Scale-out", long, value_name = "I/N|auto")]
     shard: Option<super::shard::ShardArg>,
 
@@ -768,9 +769,6 @@ fn shard(
             bail!("--shard makes shard packs (--pack); --layout ome-zarr is written by one run")
         }
         (Some(_), None) => bail!("--shard writes a shard pack: give --pack FILE (merge joins them into one pack)"),
-        (Some(_), Some(pack)) if vortex_tiler::store::ObjectUrl::of_path(pack).is_some() => {
-            bail!("--shard writes shard packs to local files for now, not to {}", pack.shown())
-        }
         (Some(_), Some(_)) if outputs.len() > 1 => {
             bail!("--shard makes one shard pack (--pack FILE) and no other output")
         }
@@ -779,13 +777,23 @@ fn shard(
     let chosen = a.shard.as_ref().map(|s| s.choose(a.shards, |name| std::env::var(name).ok())).transpose()?;
     let Some(chosen) = chosen else { bail!("--shard is required here") };
     let path = shard_path(&pack, &chosen);
+    let in_bucket = vortex_tiler::store::ObjectUrl::of_path(&path).is_some();
     // Every task of an array writes into the same directory: the first makes it.
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+    if let Some(dir) = path.parent().filter(|d| !in_bucket && !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {} for the shard packs", dir.shown()))?;
     }
     let output = Output::new(Format::Pack, &path);
     let plan = Plan::new(vec![output], settings, &source.header(), &[input], Budget::new(a.max_memory))?;
-    report::prepare(&path)?;
+    // At s3:// (claimed by the plan) the shard pack is written to a local temporary, then
+    // uploaded once finished, when the pyramid's memory is free again.
+    let upload = match in_bucket {
+        true => Some(scale_out::PackUpload::claimed(&path, a.max_memory)?),
+        false => {
+            report::prepare(&path)?;
+            None
+        }
+    };
+    let dest = upload.as_ref().map_or(path.as_path(), |u| u.local());
     let planned = &plan.outputs()[0];
     let info = planned.info().map(|i| i.to_json_pretty()).unwrap_or_default();
     if !a.run.quiet && !a.run.json {
@@ -794,14 +802,18 @@ fn shard(
     let job = chosen.job(input, info, a.pack_layout.options()?);
     let run = Run::start_counting(source, a, job.pages(&planned.layout)?, started)?;
     let opts = &planned.opts;
-    let (done, written) = run.execute_with(|source, watch| scale_out::write_shard(source, &path, opts, &job, watch))?;
+    let (done, written) = run.execute_with(|source, watch| scale_out::write_shard(source, dest, opts, &job, watch))?;
+    let uploaded = upload.map(scale_out::PackUpload::upload).transpose()?;
     if a.run.json {
         let figures = Figures::Pack(written);
         let mut doc: serde_json::Value = serde_json::from_str(&report::summary_json(&done, "shard", &path, &figures))?;
         doc["shard"] = serde_json::json!({ "index": chosen.index, "count": chosen.count, "from": chosen.from });
+        if let Some(sent) = uploaded {
+            doc["uploadedBytes"] = sent.into();
+        }
         say!("{doc}");
     } else {
-        report(a, "shard", &done, &path, &Figures::Pack(written), None);
+        report(a, "shard", &done, &path, &Figures::Pack(written), uploaded);
     }
     Ok(())
 }

@@ -24,6 +24,7 @@ use std::sync::Mutex;
 use vortex_pack::{NewTile, Pack, PackWriter, Tile, TileId, WriteOptions, WriteSummary};
 
 use super::manifest::{Manifest, shard_error};
+use super::objects::ShardFiles;
 use super::order::split_order;
 use super::plan::ShardPlan;
 use super::sums::{RootRows, RowReader, SumBound};
@@ -43,14 +44,17 @@ use crate::split::{Progress, SplitOptions};
 /// What a merge made and read.
 #[derive(Clone, Debug)]
 pub struct Merged {
+    /// The merged pack's own summary: tiles, bytes, content hash.
     pub pack: WriteSummary,
+    /// Shards merged.
     pub shards: u32,
     /// The cut level: LODs above it were made by the merge.
     pub cut: u32,
     /// Pages made above the cut.
     pub made: u64,
-    /// Payload bytes copied from the shards, and compressed sums read.
+    /// Payload bytes copied from the shards.
     pub copied_bytes: u64,
+    /// Compressed sums read from the shards' manifests.
     pub sums_bytes: u64,
 }
 
@@ -64,7 +68,13 @@ struct Shard {
 /// Merges the shard packs at `paths` (any order) into a pack at `dest`. Runs the encoders of
 /// the levels above the cut on the current rayon pool.
 pub fn merge(paths: &[PathBuf], dest: &Path, progress: &dyn Progress) -> Result<Merged> {
-    let shards = open_all(paths)?;
+    merge_files(&ShardFiles::local(paths), dest, progress)
+}
+
+/// [`merge`] of `shards`, each read from its local file and named in errors as it was given
+/// (an `s3://` URL for one downloaded).
+pub fn merge_files(shards: &ShardFiles, dest: &Path, progress: &dyn Progress) -> Result<Merged> {
+    let shards = open_all(shards.names(), shards.files())?;
     let first = &shards[0];
     let pixels = first.manifest.source.pixels(&first.path)?;
     let (opts, layout, stored) = read_options(first, pixels)?;
@@ -194,17 +204,21 @@ fn missing(path: &Path, id: TileId) -> TilerError {
     shard_error(path, format!("page (lod {}, x {}, y {}) is missing", id.lod, id.x, id.y))
 }
 
-/// Opens every shard, checks that they belong together, and returns them by index.
-fn open_all(paths: &[PathBuf]) -> Result<Vec<Shard>> {
+/// Opens every shard (named `paths`, read from `files`), checks that they belong together,
+/// and returns them by index.
+fn open_all(paths: &[PathBuf], files: &[PathBuf]) -> Result<Vec<Shard>> {
     if paths.is_empty() {
         return Err(TilerError::Options("no shards given: merge SHARD... -o PACK".into()));
     }
     let mut shards = Vec::with_capacity(paths.len());
-    for path in paths {
+    for (path, file) in paths.iter().zip(files) {
         // `open` checks the header's, the metadata's and the index's checksums: a damaged entry
         // can still read as a valid one (a page's kind turned to constant has no payload CRC to
         // fail), so none is used that the index's checksum does not vouch for.
-        let pack = Pack::open(path)?;
+        let pack = match path == file {
+            true => Pack::open(path)?,
+            false => Pack::open_named(file, path)?,
+        };
         let manifest = Manifest::parse(path, pack.metadata())?;
         shards.push(Shard { path: path.clone(), pack, manifest });
     }

@@ -5,12 +5,14 @@
 //! depend on it, so `split` and the sources can use them.
 
 mod merge;
+mod objects;
 mod write;
 
 // The shard format and geometry, as `super::` paths from the two runs name them.
 use crate::shard::{fingerprint, manifest, order, plan, sums};
 
-pub use merge::merge;
+pub use merge::{Merged, merge, merge_files};
+pub use objects::{PackUpload, ShardFiles};
 pub use write::{ShardJob, write_shard};
 
 /// What a pack's metadata says of it if it is a shard (`info`), and the refusal of a shard pack

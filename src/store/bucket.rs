@@ -28,6 +28,8 @@ use crate::error::Result;
 use crate::output::{Existing, Product};
 use crate::resume::Identity;
 
+mod read;
+
 /// The marker object a directory output keeps under its prefix (see [`crate::store`]).
 pub(crate) const MARKER: &str = ".vortex-tiler";
 /// Retries of one request after its first try.

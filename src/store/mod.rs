@@ -23,6 +23,7 @@
 //! only when the upload completes; a failure aborts the upload (`staged.rs`). An OME-Zarr
 //! directory is staged too, then uploaded file by file with the directory layouts' rules.
 
+pub(crate) mod fetched;
 pub(crate) mod local;
 pub(crate) mod staged;
 mod url;

@@ -303,3 +303,132 @@ fn the_server_stopped_mid_upload_is_a_clear_error() {
     assert!(err.contains("Connection refused"), "the reply (no connection) is not named: {err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+/// A noise image of `w` x `h` as a PPM at `path`, different for each `seed`.
+fn noise_ppm(path: &Path, w: usize, h: usize, seed: u64) {
+    let mut state = 0x9E37_79B9_7F4A_7C15u64 ^ seed.wrapping_mul(0xD1B5_4A32_D192_ED03);
+    let mut ppm = format!("P6 {w} {h} 255\n").into_bytes();
+    ppm.extend((0..w * h * 3).map(|i| {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        // Smooth enough to compress, noisy enough that no two pages are alike.
+        ((i / 3 % w) as u64 / 4 + (state & 15)) as u8
+    }));
+    std::fs::write(path, ppm).unwrap();
+}
+
+/// The object at `key`, downloaded.
+fn object(moto: &Moto, bucket: &str, key: &str) -> Vec<u8> {
+    let got = tempfile::tempdir().unwrap();
+    assert_eq!(moto.boto(&["get", bucket, key, s(got.path())]), [key.to_string()], "no object {key}");
+    std::fs::read(got.path().join(key.rsplit('/').next().unwrap())).unwrap()
+}
+
+/// The tiling options of the scale-out tests: 32-texel pages over a 300 x 200 image, so that
+/// three shards are cut below a level that `merge` makes.
+const SHARDED: [&str; 5] = ["--tile-size", "32", "--border", "2", "-q"];
+
+/// `split --shard I/N` writes its shard pack to `s3://` (`{shard}` in the URL as in a path),
+/// the same bytes as to a local file; `merge` reads them from the bucket, listed under a
+/// prefix or named one by one, and writes the one-machine pack, byte for byte, into the
+/// bucket or to a local file.
+#[test]
+fn shards_in_a_bucket_merge_to_the_one_machine_pack_in_the_bucket_or_locally() {
+    let Some(moto) = Moto::start("the s3:// scale-out test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let (work, tmp) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let input = work.path().join("scan.ppm");
+    noise_ppm(&input, 300, 200, 1);
+    let run = |args: &[&str]| {
+        let out = moto.run(&[args, &SHARDED[..]].concat(), tmp.path());
+        assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+    };
+    let one = work.path().join("one.vtpk");
+    run(&["split", s(&input), "--pack", s(&one)]);
+    for i in 0..3 {
+        run(&["split", s(&input), "--pack", "s3://tiles/parts/shard-{shard}.vtpk", "--shard", &format!("{i}/3")]);
+    }
+    let local_shard = work.path().join("shard-1.vtpk");
+    run(&["split", s(&input), "--pack", s(&local_shard), "--shard", "1/3"]);
+    assert!(
+        object(&moto, "tiles", "parts/shard-1.vtpk") == std::fs::read(&local_shard).unwrap(),
+        "the shard pack in the bucket differs from the local one"
+    );
+    let one = std::fs::read(&one).unwrap();
+
+    // A prefix's objects, into the bucket.
+    let out = moto.run(&["merge", "s3://tiles/parts/", "-o", "s3://tiles/merged.vtpk", "--json"], tmp.path());
+    assert!(out.status.success(), "merge to s3: {}", stderr(&out));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(report["shards"], 3, "{report}");
+    assert_eq!(report["uploadedBytes"].as_u64(), Some(one.len() as u64), "{report}");
+    assert!(object(&moto, "tiles", "merged.vtpk") == one, "the merged pack in the bucket is not the one-machine pack");
+
+    // The objects named, in any order, and a local shard beside them, into a local file.
+    let merged = work.path().join("merged.vtpk");
+    let args = ["merge", "s3://tiles/parts/shard-2.vtpk", s(&local_shard), "s3://tiles/parts/shard-0.vtpk"];
+    let out = moto.run(&[&args[..], &["-o", s(&merged), "-q"]].concat(), tmp.path());
+    assert!(out.status.success(), "merge to a local file: {}", stderr(&out));
+    assert!(std::fs::read(&merged).unwrap() == one, "the local merge is not the one-machine pack");
+
+    assert!(moto.boto(&["uploads", "tiles"]).is_empty(), "a multipart upload was left open");
+    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "TMPDIR keeps staged or downloaded files");
+}
+
+/// A shard that is not in the bucket, one cut from another input, a prefix missing a shard
+/// and a server that is down: each refused with the object named, exit status 1, and no
+/// merged pack in the bucket, on disk or half-uploaded.
+#[test]
+fn a_missing_or_foreign_shard_in_a_bucket_is_named_and_nothing_is_written() {
+    let Some(mut moto) = Moto::start("the s3:// scale-out failure test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let (work, tmp) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let (scan, other) = (work.path().join("scan.ppm"), work.path().join("other.ppm"));
+    noise_ppm(&scan, 300, 200, 1);
+    noise_ppm(&other, 300, 200, 2);
+    let split = |input: &Path, url: &str, shard: &str| {
+        let args = ["split", s(input), "--pack", url, "--shard", shard];
+        let out = moto.run(&[&args[..], &SHARDED[..]].concat(), tmp.path());
+        assert!(out.status.success(), "{url}: {}", stderr(&out));
+    };
+    split(&scan, "s3://tiles/a/shard-{shard}.vtpk", "0/2");
+    split(&scan, "s3://tiles/a/shard-{shard}.vtpk", "1/2");
+    split(&other, "s3://tiles/b/shard-{shard}.vtpk", "1/2");
+    split(&scan, "s3://tiles/c/shard-{shard}.vtpk", "0/2");
+    let local = work.path().join("m.vtpk");
+    let merge_fails = |shards: &[&str], words: &[&str]| {
+        for dest in ["s3://tiles/m.vtpk", s(&local)] {
+            let out = moto.run(&[&["merge", "-o", dest][..], shards].concat(), tmp.path());
+            let err = stderr(&out);
+            assert_eq!(out.status.code(), Some(1), "{shards:?} into {dest}: {err}");
+            assert!(words.iter().all(|w| err.contains(w)), "{shards:?} into {dest}: {err}");
+            assert!(!err.contains("panicked") && !err.contains("vortex-s3-get"), "{err}");
+        }
+    };
+    merge_fails(
+        &["s3://tiles/a/shard-0.vtpk", "s3://tiles/a/shard-3.vtpk"],
+        &["s3://tiles/a/shard-3.vtpk", "no such object"],
+    );
+    merge_fails(
+        &["s3://tiles/a/shard-0.vtpk", "s3://tiles/b/shard-1.vtpk"],
+        &["s3://tiles/b/shard-1.vtpk", "same input", "s3://tiles/a/shard-0.vtpk"],
+    );
+    merge_fails(&["s3://tiles/c/"], &["shard 1 of 2 missing", "s3://tiles/c/shard-0.vtpk"]);
+    // An object that is no pack: named by its URL, not by the local copy it was read from.
+    moto.boto(&["put", "tiles", "d/notes.txt", "my notes"]);
+    merge_fails(&["s3://tiles/a/shard-0.vtpk", "s3://tiles/d/"], &["s3://tiles/d/notes.txt"]);
+    merge_fails(&["s3://tiles/nothing/"], &["s3://tiles/nothing/", "no object"]);
+    assert_eq!(moto.boto(&["count", "tiles", "m.vtpk"]), ["0"]);
+    assert!(moto.boto(&["uploads", "tiles"]).is_empty(), "a multipart upload was left open");
+
+    // The server down: the listing fails, naming the prefix and the reason.
+    moto.stop();
+    let out = moto.run(&["merge", "s3://tiles/a/", "-o", s(&local), "-q"], tmp.path());
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("s3://tiles/a") && err.contains("Connection refused"), "{err}");
+    assert!(!local.exists(), "a merged pack was written");
+    assert_eq!(std::fs::read_dir(work.path()).unwrap().count(), 2, "the work directory holds more than the inputs");
+    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "TMPDIR keeps staged or downloaded files");
+}

@@ -131,6 +131,21 @@ impl Pack {
         Pack::new(path, map(path)?, limits, Trust::Checked)
     }
 
+    /// As [`Pack::open`], for a local copy of a pack kept elsewhere: maps `path` but names the
+    /// pack `name` (the URL it was downloaded from) in errors and [`Pack::path`], where `path`
+    /// (a temporary) would mean nothing to the user. An error opening the file names both.
+    pub fn open_named(path: impl AsRef<Path>, name: impl Into<PathBuf>) -> Result<Pack> {
+        let (path, name) = (path.as_ref(), name.into());
+        let bytes = map(path).map_err(|e| match e {
+            PackError::Io { source, .. } => {
+                let why = format!("its local copy {}: {source}", path.display());
+                io(&name, std::io::Error::new(source.kind(), why))
+            }
+            other => other,
+        })?;
+        Pack::new(&name, bytes, Limits::default(), Trust::Checked)
+    }
+
     /// For `verify` alone: maps `path` and checks it as [`Pack::open_with_limits`] does, but for
     /// the level table's and index's checksum, which [`verify`](crate::verify()) then reports
     /// among every other problem (an entry pointing outside the data section, payloads that
