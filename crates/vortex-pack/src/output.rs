@@ -50,6 +50,30 @@ pub trait PackOutput {
     fn complete(&mut self, len: u64, head: &[u8]) -> std::io::Result<()>;
 }
 
+/// A boxed output: writers of outputs chosen at run time as one type
+/// ([`PackWriter::boxed`](crate::PackWriter::boxed)).
+impl<O: PackOutput + ?Sized> PackOutput for Box<O> {
+    fn name(&self) -> &Path {
+        (**self).name()
+    }
+
+    fn append(&mut self, offset: u64, bytes: &[u8]) -> std::io::Result<()> {
+        (**self).append(offset, bytes)
+    }
+
+    fn holds(&mut self, offset: u64, bytes: &[u8]) -> std::io::Result<bool> {
+        (**self).holds(offset, bytes)
+    }
+
+    fn move_down(&mut self, from: u64, to: u64, len: u64) -> std::io::Result<bool> {
+        (**self).move_down(from, to, len)
+    }
+
+    fn complete(&mut self, len: u64, head: &[u8]) -> std::io::Result<()> {
+        (**self).complete(len, head)
+    }
+}
+
 /// A pack written to a local file under a temporary name beside its destination
 /// ([`temporary_path`](crate::temporary_path)), renamed into place when complete: the output of
 /// [`PackWriter::create`](crate::PackWriter::create) and

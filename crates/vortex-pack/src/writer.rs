@@ -156,6 +156,42 @@ impl<O: PackOutput> PackWriter<O> {
     ) -> Result<PackWriter<O>> {
         Ok(plan(out.name(), description, levels, metadata, options)?.into_writer(out))
     }
+
+    /// This writer with its output boxed, so that writers of different outputs are one type.
+    pub fn boxed(self) -> PackWriter<Box<dyn PackOutput + Send>>
+    where
+        O: Send + 'static,
+    {
+        let PackWriter {
+            out,
+            description,
+            levels,
+            metadata,
+            options,
+            entries,
+            written,
+            stored,
+            data_offset,
+            end,
+            required_features,
+            summary,
+        } = self;
+        let out: Box<dyn PackOutput + Send> = Box::new(out);
+        PackWriter {
+            out,
+            description,
+            levels,
+            metadata,
+            options,
+            entries,
+            written,
+            stored,
+            data_offset,
+            end,
+            required_features,
+            summary,
+        }
+    }
 }
 
 /// What [`PackWriter::create`], [`PackWriter::resume`] and [`PackWriter::with_output`] check
