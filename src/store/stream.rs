@@ -362,7 +362,7 @@ mod tests {
     /// flight; the store, to read back.
     fn stream(key: &str, part: u64) -> (Stream, Arc<InMemory>) {
         let memory = Arc::new(InMemory::new());
-        let url = ObjectUrl::parse(&format!("s3://b/{key}")).unwrap();
+        let url = ObjectUrl::parse(&format!("s3://tiles/{key}")).unwrap();
         let bucket = Bucket::with_store(Arc::clone(&memory) as Arc<dyn Store>, &url).unwrap();
         (Stream::with_bucket(bucket, &url, part, 2 * part).unwrap(), memory)
     }
@@ -424,7 +424,7 @@ mod tests {
         // The duplicate still in memory is shared, as locally; the one sent away is stored again.
         assert_eq!((on_disk.deduplicated, streamed.deduplicated), (2, 1));
         assert_eq!(streamed.file_bytes, on_disk.file_bytes + 64 * 64 * 4);
-        let pack = vortex_pack::Pack::from_bytes("s3://b/p.vtpk", bytes).unwrap();
+        let pack = vortex_pack::Pack::from_bytes("s3://tiles/p.vtpk", bytes).unwrap();
         assert!(vortex_pack::verify(&pack, Default::default()).is_ok());
         let local = vortex_pack::Pack::open(&local).unwrap();
         for (x, y) in (0..4).flat_map(|y| (0..4).map(move |x| (x, y))) {
