@@ -358,7 +358,7 @@ mod tests {
     use object_store::memory::InMemory;
     use vortex_pack::{Description, Level, NewTile, PackWriter, TileId, TileKind, WriteOptions};
 
-    /// A stream to `s3://b/KEY` in a store held in memory, in parts of `part` bytes, two in
+    /// A stream to `s3://tiles/KEY` in a store held in memory, in parts of `part` bytes, two in
     /// flight; the store, to read back.
     fn stream(key: &str, part: u64) -> (Stream, Arc<InMemory>) {
         let memory = Arc::new(InMemory::new());
