@@ -118,11 +118,14 @@ impl Open {
         if let Some(resume) = resume {
             return Open::resuming(planned, pack, in_flight, resume);
         }
-        // One object at an s3:// URL: the sink writes a local temporary, uploaded when finished.
-        let staged = match ObjectUrl::of_path(&planned.claim.path) {
-            Some(url) if !crate::store::directory_product(planned.claim.product) => {
+        // One object at an s3:// URL: a pack is streamed as it is made; the other sinks write a
+        // local temporary, uploaded when finished.
+        let url = ObjectUrl::of_path(&planned.claim.path).transpose()?;
+        let streamed = matches!(planned.work, Work::Pack { .. }) && url.is_some();
+        let staged = match url.clone() {
+            Some(url) if !streamed && !crate::store::directory_product(planned.claim.product) => {
                 let claim = &planned.claim;
-                Some(Staged::create(&url?, claim.product, claim.replaces.is_some())?)
+                Some(Staged::create(&url, claim.product, claim.replaces.is_some())?)
             }
             _ => None,
         };
@@ -139,8 +142,15 @@ impl Open {
             Work::Viewer { tiles, .. } => Sink::Dir(DirSink::for_viewer_uploading(claim, tiles.clone(), in_flight)?),
             Work::Pack { info, stored } => {
                 let (stored, metadata) = (*stored, info.to_json_pretty());
-                let codec = planned.opts.codec;
-                Sink::Pack(PackSink::create(&claim.path, &planned.layout, stored, codec, metadata.as_bytes(), pack)?)
+                let (layout, codec, metadata) = (&planned.layout, planned.opts.codec, metadata.as_bytes());
+                Sink::Pack(match url.as_ref().filter(|_| streamed) {
+                    Some(url) => {
+                        let bound = crate::formats::pack::size_bound(layout, stored, metadata.len());
+                        let out = crate::store::stream_pack(url, bound, in_flight)?;
+                        PackSink::create_to(out, layout, stored, codec, metadata, pack)?
+                    }
+                    None => PackSink::create(&claim.path, layout, stored, codec, metadata, pack)?,
+                })
             }
             Work::Pmtiles { .. } => {
                 let tile_type = match planned.opts.codec.extension() {
@@ -229,7 +239,7 @@ impl Open {
     /// Writes what the format writes last and renames the output into place.
     /// `planes`: the passes that wrote its tiles (an OME-Zarr's channels one pass each).
     fn finish(self, summary: &Summary, at: usize, pyramid: usize, planes: u64) -> Result<Wrote> {
-        let Open { planned, sink, staged, in_flight } = self;
+        let Open { planned, sink, mut staged, in_flight } = self;
         let written = summary.per_target.get(at).copied().unwrap_or_default();
         let total = planned.layout.total_tiles() * planes;
         if written.tiles != total {
@@ -247,8 +257,14 @@ impl Open {
         let figures = match (sink, &planned.work) {
             (Sink::Dir(dir), Work::Tiles { info, .. }) => dir.finish(info).map(|()| Figures::None)?,
             (Sink::Dir(dir), _) => dir.finish_viewer().map(|()| Figures::None)?,
-            (Sink::Pack(sink), _) => Figures::Pack(sink.finish()?),
-            (Sink::Pmtiles(sink), Work::Pmtiles { name }) => {
+            (Sink::Pack(sink), _) => {
+                let written = sink.finish()?;
+                if in_bucket && staged.is_none() {
+                    uploaded = Some(written.file_bytes);
+                }
+                Figures::Pack(written)
+            }
+            (Sink::Pmtiles(mut sink), Work::Pmtiles { name }) => {
                 let layout = &planned.layout;
                 let metadata = serde_json::json!({
                     "name": name,
@@ -257,7 +273,20 @@ impl Open {
                     "description": "an image without map coordinates: zoom 0 is the whole image at the top left of the web-mercator square",
                     "vortex": { "layout": "xyz", "width": layout.width, "height": layout.height, "tileSize": layout.tile_size },
                 });
-                Figures::Pmtiles(sink.finish(&Bounds::of_image(layout), metadata.to_string().as_bytes())?)
+                let (bounds, metadata) = (Bounds::of_image(layout), metadata.to_string());
+                Figures::Pmtiles(match staged.take() {
+                    // At s3://, assembled from the spool straight into the upload.
+                    Some(staged) => {
+                        let bound = sink.archive_bound(metadata.len());
+                        let finish = |w: &mut dyn std::io::Write, name: &std::path::Path| {
+                            sink.finish_into(&bounds, metadata.as_bytes(), w, name)
+                        };
+                        let (written, sent) = staged.upload_written(bound, in_flight, finish)?;
+                        uploaded = Some(sent);
+                        written
+                    }
+                    None => sink.finish(&bounds, metadata.as_bytes())?,
+                })
             }
             (Sink::OmeZarr(sink), Work::OmeZarr { spec, parent }) => {
                 sink.finish()?;

@@ -1,6 +1,6 @@
 //! An S3-compatible bucket through Apache Arrow's `object_store` (feature `s3`): the client and
 //! its runtime ([`Bucket`]), the claim of a prefix or an object, a directory output's files as
-//! objects uploaded in parallel ([`Uploads`]), and a staged file's multipart upload.
+//! objects uploaded in parallel ([`Uploads`]); `stream.rs` sends one object as it is made.
 //!
 //! Credentials, region and endpoint come from the standard AWS environment
 //! (`AWS_ACCESS_KEY_ID`, `AWS_SECRET_ACCESS_KEY`, `AWS_SESSION_TOKEN`, `AWS_REGION`,
@@ -14,12 +14,12 @@
 
 use std::collections::{HashMap, HashSet};
 use std::hash::Hasher;
-use std::path::Path;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::Duration;
 
-use futures::stream::{FuturesUnordered, StreamExt, TryStreamExt};
-use object_store::aws::{AmazonS3, AmazonS3Builder};
+use futures::stream::{StreamExt, TryStreamExt};
+use object_store::aws::AmazonS3Builder;
+use object_store::multipart::MultipartStore;
 use object_store::path::Path as Key;
 use object_store::{BackoffConfig, ObjectStore, ObjectStoreExt, PutPayload, RetryConfig};
 
@@ -45,10 +45,16 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
+/// What a bucket's client does: objects, and multipart uploads part by part (`AmazonS3`;
+/// `object_store`'s `InMemory` in unit tests).
+pub(crate) trait Store: ObjectStore + MultipartStore {}
+
+impl<T: ObjectStore + MultipartStore> Store for T {}
+
 /// A bucket's client and the runtime its requests run on.
 pub(crate) struct Bucket {
-    store: Arc<AmazonS3>,
-    runtime: tokio::runtime::Runtime,
+    pub(super) store: Arc<dyn Store>,
+    pub(super) runtime: tokio::runtime::Runtime,
     name: String,
 }
 
@@ -80,25 +86,33 @@ impl Bucket {
             }
         }
         let store = builder.build().map_err(|e| client(e.to_string()))?;
+        Bucket::with_store(Arc::new(store), url)
+    }
+
+    /// The bucket of `url` through the client `store`, on a runtime of its own.
+    pub(crate) fn with_store(store: Arc<dyn Store>, url: &ObjectUrl) -> Result<Bucket, StoreError> {
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .thread_name("vortex-s3")
             .enable_all()
             .build()
-            .map_err(|e| client(format!("cannot start its runtime: {e}")))?;
-        Ok(Bucket { store: Arc::new(store), runtime, name: url.bucket().to_string() })
+            .map_err(|e| StoreError::Client {
+                url: url.to_string(),
+                message: format!("cannot start its runtime: {e}"),
+            })?;
+        Ok(Bucket { store, runtime, name: url.bucket().to_string() })
     }
 
     /// `key` as the client takes it, refused (not re-encoded) where it could not be stored as
     /// spelt.
-    fn key(&self, key: &str) -> Result<Key, StoreError> {
+    pub(super) fn key(&self, key: &str) -> Result<Key, StoreError> {
         Key::parse(key).map_err(|e| StoreError::Url {
             url: format!("s3://{}/{}", self.name, key.escape_debug()),
             why: format!("not an object key this tool writes: {e}"),
         })
     }
 
-    fn failed(&self, key: &str, op: &'static str, e: impl ToString) -> StoreError {
+    pub(super) fn failed(&self, key: &str, op: &'static str, e: impl ToString) -> StoreError {
         StoreError::Request { bucket: self.name.clone(), key: key.to_string(), op, message: e.to_string() }
     }
 
@@ -264,65 +278,11 @@ impl Bucket {
             }),
         }
     }
-
-    /// Sends the local file `local` to `url` as a multipart upload of `part_bytes`-byte parts,
-    /// `parts` of them in flight at most; on any failure the upload is aborted, so that
-    /// nothing is left, visible or not. Returns the bytes sent.
-    pub(crate) fn upload_file(
-        &self,
-        url: &ObjectUrl,
-        local: &Path,
-        part_bytes: usize,
-        parts: usize,
-    ) -> Result<u64, StoreError> {
-        use std::io::Read;
-        let key = url.key();
-        let location = self.key(key)?;
-        let staging = |source| StoreError::Staging { url: url.to_string(), path: local.to_path_buf(), source };
-        let mut file = std::fs::File::open(local).map_err(staging)?;
-        self.runtime.block_on(async {
-            let mut upload = self
-                .store
-                .put_multipart(&location)
-                .await
-                .map_err(|e| self.failed(key, "CreateMultipartUpload", reply(&e)))?;
-            let sent = async {
-                let mut pending: FuturesUnordered<object_store::UploadPart> = FuturesUnordered::new();
-                let mut sent = 0u64;
-                loop {
-                    let mut part = Vec::with_capacity(part_bytes);
-                    (&mut file).take(part_bytes as u64).read_to_end(&mut part).map_err(staging)?;
-                    if part.is_empty() {
-                        break;
-                    }
-                    while pending.len() >= parts.max(1) {
-                        if let Some(done) = pending.next().await {
-                            done.map_err(|e| self.failed(key, "UploadPart", reply(&e)))?;
-                        }
-                    }
-                    sent += part.len() as u64;
-                    pending.push(upload.put_part(PutPayload::from(part)));
-                }
-                while let Some(done) = pending.next().await {
-                    done.map_err(|e| self.failed(key, "UploadPart", reply(&e)))?;
-                }
-                upload.complete().await.map_err(|e| self.failed(key, "CompleteMultipartUpload", reply(&e)))?;
-                Ok::<u64, StoreError>(sent)
-            }
-            .await;
-            if sent.is_err() {
-                // What was sent is discarded by the server; a failure here leaves an incomplete
-                // upload that a bucket's lifecycle rule removes (docs/object-storage.md).
-                let _ = upload.abort().await;
-            }
-            sent
-        })
-    }
 }
 
 /// A client error as a message: its own text, then each cause it does not already quote (the
 /// server's reply, or why no connection was made).
-fn reply(e: &object_store::Error) -> String {
+pub(crate) fn reply(e: &object_store::Error) -> String {
     let mut text = e.to_string();
     let mut cause = std::error::Error::source(e);
     while let Some(c) = cause {

@@ -18,10 +18,11 @@
 //!   without a rename, keeping it until the new one is complete would need a second prefix
 //!   and a server-side copy of every tile.
 //!
-//! Files written as one object (a pack, PMTiles, `.ozx`, a TIFF) are staged to a local
-//! temporary and sent as a multipart upload once complete, which the server makes visible
-//! only when the upload completes; a failure aborts the upload (`staged.rs`). An OME-Zarr
-//! directory is staged too, then uploaded file by file with the directory layouts' rules.
+//! A pack is sent as one multipart upload while it is made (`stream.rs`), which the server
+//! makes visible only when the upload completes; a failure aborts the upload. The other files
+//! written as one object (PMTiles, `.ozx`, a TIFF) are staged to a local temporary and sent the
+//! same way once complete (`staged.rs`). An OME-Zarr directory and a DICOM series are staged
+//! too, then uploaded file by file with the directory layouts' rules.
 
 pub(crate) mod fetched;
 pub(crate) mod local;
@@ -32,6 +33,8 @@ mod url;
 pub(crate) mod bucket;
 #[cfg(feature = "s3")]
 mod profile;
+#[cfg(feature = "s3")]
+pub(crate) mod stream;
 
 pub use crate::error::StoreError;
 pub use url::ObjectUrl;
@@ -130,6 +133,22 @@ pub(crate) fn resuming_prefix(
 #[cfg(not(feature = "s3"))]
 pub(crate) fn resuming_prefix(claim: &Claim, _: u64, _: Identity, _: bool, _: &[String]) -> Result<Box<dyn Files>> {
     Err(StoreError::NotBuilt { url: claim.path.display().to_string() }.into())
+}
+
+/// The output of a pack streamed to `url` as it is made ([`stream::Stream`]), in parts sized
+/// for an object of at most `bound` bytes, at most `in_flight` bytes of them in flight.
+#[cfg(feature = "s3")]
+pub(crate) fn stream_pack(
+    url: &ObjectUrl,
+    bound: u64,
+    in_flight: u64,
+) -> Result<Box<dyn vortex_pack::PackOutput + Send>> {
+    Ok(Box::new(stream::Stream::open(url, stream::part_size(bound), in_flight)?))
+}
+
+#[cfg(not(feature = "s3"))]
+pub(crate) fn stream_pack(url: &ObjectUrl, _: u64, _: u64) -> Result<Box<dyn vortex_pack::PackOutput + Send>> {
+    Err(StoreError::NotBuilt { url: url.to_string() }.into())
 }
 
 /// Checks that the object URL `url` may receive `product` (the rule of [`crate::output::claim`]

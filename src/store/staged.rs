@@ -1,13 +1,16 @@
-//! [`Staged`]: an output written as one object (a pack, PMTiles, a zipped OME-Zarr, a TIFF) at
-//! an `s3://` URL, or an OME-Zarr directory written locally before its files are uploaded. Not streamed yet: the pack and PMTiles writers write their header last and
-//! seek back to it, and the TIFF writer patches its directories' offsets, so the file is
-//! written by the format's own sink into a local temporary (under `TMPDIR`), exactly as for a
-//! local destination, then sent as a multipart upload of parts read back from it. The object
-//! appears only when the upload completes; a failure aborts the upload and the temporary is
-//! removed either way. Local disk must therefore hold the whole file for now.
+//! [`Staged`]: an output written as one object (PMTiles, a zipped OME-Zarr, a TIFF, a pack with
+//! `--resume`) at an `s3://` URL, or a directory (OME-Zarr, DICOM) written locally before its
+//! files are uploaded. The PMTiles writer lays out its directories once the data's order is
+//! known, and the TIFF writer patches its directories' offsets, so the file is written by the
+//! format's own sink into a local temporary (under `TMPDIR`), exactly as for a local
+//! destination, then read back into a [`super::stream::Stream`] (a pack without `--resume` is
+//! streamed as it is made, with no temporary). The object appears only when the upload
+//! completes; a failure aborts the upload and the temporary is removed either way. Local disk
+//! must therefore hold the whole file.
 //!
-//! An OME-Zarr directory is staged the same way (its sink reorders each 0.5 shard's chunks
-//! through a local file, and writes its metadata at the end), then sent file by file through
+//! A directory is staged the same way (the OME-Zarr sink reorders each 0.5 shard's chunks
+//! through a local file and writes its metadata at the end; the DICOM sink writes each
+//! instance's offset tables after its frames), then sent file by file through
 //! [`super::bucket::Uploads`], which follows a directory layout's rules: the marker first, the
 //! metadata last, everything deleted on failure. Not streamed yet either.
 
@@ -18,13 +21,6 @@ use super::{ObjectUrl, StoreError};
 use crate::error::Result;
 use crate::output::{Product, staging};
 
-/// The smallest part S3 takes (but for the last).
-#[cfg(feature = "s3")]
-const MIN_PART: u64 = 8 << 20;
-/// The most parts of one multipart upload S3 takes.
-#[cfg(feature = "s3")]
-const MAX_PARTS: u64 = 10_000;
-
 /// Staging directories this process made, numbered from 0, so that a later run can find
 /// those of a dead one ([`staging::remove_stale`]).
 static MADE: AtomicUsize = AtomicUsize::new(0);
@@ -34,10 +30,11 @@ pub(crate) fn single_object(product: Product) -> bool {
     matches!(product, Product::Pack | Product::Pmtiles | Product::Ozx | Product::Tiff)
 }
 
-/// Whether `product` is a directory written locally, then uploaded file by file (an
-/// OME-Zarr directory, whose sink reorders each shard's chunks in a local file).
+/// Whether `product` is a directory written locally, then uploaded file by file: an OME-Zarr
+/// directory, whose sink reorders each shard's chunks in a local file, and a DICOM series,
+/// whose instances' offset tables are written after their frames.
 pub(crate) fn staged_dir(product: Product) -> bool {
-    product == Product::OmeZarr
+    matches!(product, Product::OmeZarr | Product::Dicom)
 }
 
 /// The names of Zarr's metadata files, uploaded after every chunk and shard.
@@ -119,16 +116,22 @@ impl Staged {
         if staged_dir(self.product) {
             return self.upload_dir(in_flight);
         }
+        use std::io::Read;
         let fail = |source| StoreError::Staging { url: self.url.to_string(), path: self.local.clone(), source };
-        let size = std::fs::metadata(&self.local).map_err(fail)?.len();
-        let part = MIN_PART.max(size.div_ceil(MAX_PARTS));
-        let part_bytes = usize::try_from(part).map_err(|_| {
-            let e = std::io::Error::other(format!("{size} bytes need parts of {part} bytes, more than memory holds"));
-            fail(e)
-        })?;
-        let parts = usize::try_from((in_flight / part).max(1)).unwrap_or(1);
-        let bucket = super::bucket::Bucket::open(&self.url)?;
-        Ok(bucket.upload_file(&self.url, &self.local, part_bytes, parts)?)
+        let mut file = std::fs::File::open(&self.local).map_err(fail)?;
+        let size = file.metadata().map_err(fail)?.len();
+        let mut stream = super::stream::Stream::open(&self.url, super::stream::part_size(size), in_flight)?;
+        let mut chunk = vec![0u8; 1 << 20];
+        let mut at = 0u64;
+        loop {
+            let n = file.read(&mut chunk).map_err(fail)?;
+            if n == 0 {
+                break;
+            }
+            stream.append(at, &chunk[..n])?;
+            at += n as u64;
+        }
+        Ok(stream.complete(at, &[])?)
     }
 
     /// A finished directory sent file by file under the URL's prefix, in parallel, with the
@@ -162,6 +165,34 @@ impl Staged {
 
     #[cfg(not(feature = "s3"))]
     pub(crate) fn upload(self, _: u64) -> Result<u64> {
+        Err(StoreError::NotBuilt { url: self.url.to_string() }.into())
+    }
+
+    /// Sends what `write` writes front to back (a file assembled from what is staged, such as
+    /// a PMTiles archive from its spool) straight into the upload, as it is written, in parts
+    /// sized for at most `bound` bytes, at most `in_flight` bytes in flight; `write` gets the
+    /// URL to name in errors. Then removes the staging directory. Returns what `write`
+    /// returned and the bytes sent.
+    #[cfg(feature = "s3")]
+    pub(crate) fn upload_written<T>(
+        self,
+        bound: u64,
+        in_flight: u64,
+        write: impl FnOnce(&mut dyn std::io::Write, &Path) -> Result<T>,
+    ) -> Result<(T, u64)> {
+        let mut stream = super::stream::Stream::open(&self.url, super::stream::part_size(bound), in_flight)?;
+        let made = write(&mut stream, &self.url.to_path())?;
+        let sent = stream.complete(stream.end(), &[])?;
+        Ok((made, sent))
+    }
+
+    #[cfg(not(feature = "s3"))]
+    pub(crate) fn upload_written<T>(
+        self,
+        _: u64,
+        _: u64,
+        _: impl FnOnce(&mut dyn std::io::Write, &Path) -> Result<T>,
+    ) -> Result<(T, u64)> {
         Err(StoreError::NotBuilt { url: self.url.to_string() }.into())
     }
 }

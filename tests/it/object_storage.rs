@@ -269,20 +269,12 @@ fn the_server_stopped_mid_upload_is_a_clear_error() {
     moto.boto(&["mb", "tiles"]);
     let tmp = tempfile::tempdir().unwrap();
     // Enough 32-texel tiles (some 12000) that the run is still uploading when the server
-    // stops: noise, as a PPM (written fast, read fast).
-    let (w, h) = (3000usize, 3000usize);
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut ppm = format!("P6 {w} {h} 255\n").into_bytes();
-    ppm.extend((0..w * h * 3).map(|_| {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state as u8
-    }));
+    // stops; a streamed pack of the same tiles beside them.
     let input = tmp.path().join("noise.ppm");
-    std::fs::write(&input, ppm).unwrap();
+    noise_ppm(&input, 3000, 3000, 0);
     let work = tempfile::tempdir().unwrap();
     let args = ["split", s(&input), "-o", "s3://tiles/big", "--layout", "dzi", "--tile-size", "32", "-q"];
+    let args = [&args[..], &["--pack", "s3://tiles/big.vtpk"]].concat();
     let mut child = moto.command(&args, work.path()).stderr(std::process::Stdio::piped()).spawn().unwrap();
     // Once tiles are arriving (the marker and more), the server goes; a run that ends first is
     // named (one that never uploads is ended by CI's test timeout).
@@ -299,12 +291,13 @@ fn the_server_stopped_mid_upload_is_a_clear_error() {
     let out = wait_or_kill(pid, "split to a stopped server", move || child.wait_with_output().unwrap());
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "the run did not fail (did it end before the server stopped?): {err}");
-    assert!(err.contains("error: s3://tiles/big/") && err.contains("failed"), "{err}");
+    assert!(err.contains("error: s3://tiles/big") && err.contains("failed"), "{err}");
     assert!(err.contains("Connection refused"), "the reply (no connection) is not named: {err}");
     assert!(!err.contains("panicked"), "{err}");
 }
 
-/// A noise image of `w` x `h` as a PPM at `path`, different for each `seed`.
+/// A noise image of `w` x `h` as a PPM at `path` (written fast, read fast, no two tiles alike),
+/// different for each `seed`.
 fn noise_ppm(path: &Path, w: usize, h: usize, seed: u64) {
     let mut state = 0x9E37_79B9_7F4A_7C15u64 ^ seed.wrapping_mul(0xD1B5_4A32_D192_ED03);
     let mut ppm = format!("P6 {w} {h} 255\n").into_bytes();
@@ -431,4 +424,69 @@ fn a_missing_or_foreign_shard_in_a_bucket_is_named_and_nothing_is_written() {
     assert!(!local.exists(), "a merged pack was written");
     assert_eq!(std::fs::read_dir(work.path()).unwrap().count(), 2, "the work directory holds more than the inputs");
     assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "TMPDIR keeps staged or downloaded files");
+}
+
+/// A pack of several parts (noise in raw tiles: some 27 MiB, parts of 8) is streamed to the
+/// bucket as it is made, with nothing staged (the run's TMPDIR is a file, where no directory can
+/// be made), and lands byte for byte as a local run writes it. The same run cut short by a
+/// broken input, after parts were sent, leaves no object and no open multipart upload.
+#[test]
+fn a_pack_of_several_parts_is_streamed_and_a_failure_leaves_nothing() {
+    let Some(moto) = Moto::start("the streamed pack test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let work = tempfile::tempdir().unwrap();
+    let input = work.path().join("noise.ppm");
+    noise_ppm(&input, 2400, 2400, 0);
+    let local = work.path().join("p.vtpk");
+    let pack = |input: &Path, dest: &str, tmpdir: &Path| {
+        let args = ["split", s(input), "--pack", dest, "--codec", "raw", "-q"];
+        moto.run(&args, tmpdir)
+    };
+    let out = pack(&input, s(&local), work.path());
+    assert!(out.status.success(), "local run: {}", stderr(&out));
+    let size = std::fs::metadata(&local).unwrap().len();
+    assert!(size > 2 * (8 << 20), "{size} bytes: not several parts");
+    let not_a_dir = work.path().join("not-a-dir");
+    std::fs::write(&not_a_dir, "TMPDIR is a file: nothing can be staged").unwrap();
+    let out = pack(&input, "s3://tiles/p.vtpk", &not_a_dir);
+    assert!(out.status.success(), "s3 run: {}", stderr(&out));
+    let got = tempfile::tempdir().unwrap();
+    assert_eq!(moto.boto(&["get", "tiles", "p.vtpk", s(got.path())]), ["p.vtpk"]);
+    assert!(std::fs::read(got.path().join("p.vtpk")).unwrap() == std::fs::read(&local).unwrap(), "the packs differ");
+
+    // Broken after some 18 MiB of rows: parts are sent, then the run fails.
+    let broken = work.path().join("broken.ppm");
+    noise_ppm(&broken, 3000, 3000, 0);
+    let bytes = std::fs::read(&broken).unwrap();
+    std::fs::write(&broken, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let out = pack(&broken, "s3://tiles/cut.vtpk", work.path());
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(moto.boto(&["count", "tiles", "cut"]), ["0"], "the cut pack is visible");
+    assert!(moto.boto(&["uploads", "tiles"]).is_empty(), "a multipart upload was left open");
+}
+
+/// A DICOM series (`--layout dicom`) at `s3://`: staged, then uploaded instance by instance
+/// under the prefix, each object byte for byte the local run's file, the marker complete.
+#[test]
+fn a_dicom_series_in_a_bucket_equals_the_local_directory() {
+    let Some(moto) = Moto::start("the s3:// DICOM test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let (work, tmp) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let input = fixture("sample.png");
+    let local = work.path().join("series");
+    for dest in [s(&local), "s3://tiles/dicom/series"] {
+        let args = ["split", s(&input), "--layout", "dicom", "-o", dest, "--pixel-size", "0.5um", "-q"];
+        let out = moto.run(&args, tmp.path());
+        assert!(out.status.success(), "{dest}: {}", stderr(&out));
+    }
+    let mut bucket = download(&moto, "tiles", "dicom/series");
+    let marker = String::from_utf8(bucket.remove(".vortex-tiler").expect("no marker")).unwrap();
+    assert!(marker.contains("\"state\":\"complete\"") && marker.contains("DICOM"), "{marker}");
+    let local = files(&local);
+    assert!(local.len() >= 2, "{:?}: not a series of instances", local.keys().collect::<Vec<_>>());
+    assert_same_files(&bucket, &local, "dicom/series");
+    assert!(moto.boto(&["uploads", "tiles"]).is_empty(), "a multipart upload was left open");
+    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "TMPDIR keeps staged files");
 }

@@ -22,6 +22,8 @@ pub mod format;
 #[doc(hidden)]
 pub mod fuzzing;
 mod limits;
+#[cfg(feature = "write")]
+mod output;
 mod reader;
 pub mod verify;
 #[cfg(feature = "write")]
@@ -32,6 +34,8 @@ mod writer;
 pub use error::{PackError, Result};
 pub use format::{Description, Entry, Header, Level, TileKind};
 pub use limits::{DEFAULT_MAX_DECODED_BYTES, Limits};
+#[cfg(feature = "write")]
+pub use output::{PackFile, PackOutput};
 pub use reader::{Pack, PackLayout, Place, Tile, TileId};
 pub use verify::{Problem, Report, VerifyOptions, verify};
 #[cfg(feature = "write")]

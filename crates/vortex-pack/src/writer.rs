@@ -2,23 +2,23 @@
 //! (24 bytes per tile for the index, 16 per distinct payload for deduplication), never to the
 //! data.
 //!
-//! The file is written under a temporary name beside the destination: zeroed header, level
-//! table, index and metadata placeholders, then payloads as they come. `finish` writes the
-//! tables, syncs, writes the header last (its signature is the "complete" mark: an unfinished
-//! file starts with zeros), syncs again and renames the file into place. Dropping an
-//! unfinished writer deletes the temporary file.
+//! The bytes go to a [`PackOutput`]: payloads appended as they come, past the room kept for
+//! the head (header, level table, index, metadata), which `finish` hands over last. A local
+//! file ([`PackFile`]) is written under a temporary name beside the destination: zeroed
+//! placeholders, then payloads; `finish` writes the tables, syncs, writes the header last (its
+//! signature is the "complete" mark: an unfinished file starts with zeros), syncs again and
+//! renames the file into place. Dropping an unfinished writer deletes the temporary file.
 
 use std::collections::HashMap;
-use std::fs::{self, File, OpenOptions};
-use std::io::{Seek, SeekFrom, Write};
+use std::fs;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 use crate::error::{PackError, Result};
 use crate::format::{self, Description, ENTRY_LEN, Entry, FNV_OFFSET, HEADER_LEN, Header, LEVEL_LEN, Level, TileKind};
 use crate::limits::Limits;
+use crate::output::{PackFile, PackOutput};
 use crate::reader::TileId;
-use crate::writeback::Writeback;
 
 /// A tile handed to the writer.
 #[derive(Clone, Copy, Debug)]
@@ -68,13 +68,12 @@ pub struct WriteSummary {
 }
 
 /// Writes a pack in one pass: tiles in any order ([`PackWriter::add`]), then
-/// [`PackWriter::finish`], which writes the index and header and renames the file into place.
-/// Dropped unfinished, it removes its temporary file (unless asked to keep it for a later
-/// [`PackWriter::resume`]): a pack is whole or absent.
-pub struct PackWriter {
-    dest: PathBuf,
-    tmp: PathBuf,
-    file: Option<File>,
+/// [`PackWriter::finish`], which writes the index and header and completes the output (a
+/// local file is renamed into place). Dropped unfinished, its output leaves no pack (a local
+/// file's temporary is removed unless kept for a later [`PackWriter::resume`]): a pack is
+/// whole or absent.
+pub struct PackWriter<O: PackOutput = PackFile> {
+    out: O,
     description: Description,
     levels: Vec<Level>,
     metadata: Vec<u8>,
@@ -88,12 +87,41 @@ pub struct PackWriter {
     /// Required-feature bits of the kinds stored so far.
     required_features: u64,
     summary: WriteSummary,
-    writeback: Writeback,
-    /// Leave the temporary file when dropped unfinished ([`PackWriter::keep_on_drop`]).
-    keep: bool,
 }
 
-impl PackWriter {
+/// A writer's layout before its output exists: what [`PackWriter::plan`] checks and allocates.
+struct Plan {
+    description: Description,
+    levels: Vec<Level>,
+    metadata: Vec<u8>,
+    options: WriteOptions,
+    entries: Vec<Entry>,
+    written: Vec<bool>,
+    data_offset: u64,
+}
+
+impl Plan {
+    /// The writer of this plan into `out`.
+    fn into_writer<O: PackOutput>(self, out: O) -> PackWriter<O> {
+        let Plan { description, levels, metadata, options, entries, written, data_offset } = self;
+        PackWriter {
+            out,
+            description,
+            levels,
+            metadata,
+            options,
+            entries,
+            written,
+            stored: HashMap::new(),
+            data_offset,
+            end: data_offset,
+            required_features: description.required_features(),
+            summary: WriteSummary::default(),
+        }
+    }
+}
+
+impl PackWriter<PackFile> {
     /// Starts `dest` (written as [`temporary_path`] beside it until `finish`). `levels` are the
     /// level table's rows, LOD 0 first; the writer places their entries one after another in
     /// the index (each level's `first_entry`, whatever it said). A pack that readers with the
@@ -106,117 +134,145 @@ impl PackWriter {
         metadata: &[u8],
         options: WriteOptions,
     ) -> Result<PackWriter> {
-        let mut w = Self::plan(dest.as_ref(), description, levels, metadata, options)?;
-        let file = OpenOptions::new().write(true).read(true).create(true).truncate(true).open(&w.tmp).map_err(|e| {
-            io(&w.dest, std::io::Error::new(e.kind(), format!("cannot create {}: {e}", w.tmp.display())))
-        })?;
-        w.file = Some(file);
+        let dest = dest.as_ref();
+        let plan = plan(dest, description, levels, metadata, options)?;
+        let mut out = PackFile::create(dest, temporary_path(dest)).map_err(|e| io(dest, e))?;
         // Placeholders up to the data section: zeros, so that an unfinished file has no signature.
-        let data_offset = w.data_offset;
-        w.file_mut().set_len(data_offset).map_err(|e| io(&w.tmp, e))?;
-        w.file_mut().seek(SeekFrom::Start(data_offset)).map_err(|e| io(&w.tmp, e))?;
-        Ok(w)
+        out.truncate(plan.data_offset).map_err(|e| io(out.name(), e))?;
+        Ok(plan.into_writer(out))
     }
+}
 
-    /// What [`create`](Self::create) and [`resume`](Self::resume) check and allocate: a writer
-    /// with no file open yet.
-    fn plan(
-        dest: &Path,
+impl<O: PackOutput> PackWriter<O> {
+    /// Starts a pack written to `out` (which must be empty), with the arguments of
+    /// [`PackWriter::create`]: a destination of the caller's own, such as an upload sent as
+    /// it is made. Errors name [`PackOutput::name`].
+    pub fn with_output(
+        out: O,
         description: Description,
-        mut levels: Vec<Level>,
+        levels: Vec<Level>,
         metadata: &[u8],
         options: WriteOptions,
-    ) -> Result<PackWriter> {
-        let dest = dest.to_path_buf();
-        let usage = PackError::Usage;
-        if levels.len() != description.level_count as usize {
-            return Err(usage(format!("{} levels given, description says {}", levels.len(), description.level_count)));
-        }
-        for a in [options.alignment, options.payload_alignment] {
-            if !a.is_power_of_two() || a < 8 {
-                return Err(usage(format!("alignment {a} is not a power of two >= 8")));
-            }
-        }
-        // What the reader refuses, refused here (a texel over 8 bytes would not fit an entry).
-        let d = &description;
-        if !d.texel_ok() {
-            return Err(usage(format!("{} is not a texel format", d.texel_name())));
-        }
-        if d.tile_size == 0 || d.border.checked_mul(2).is_none_or(|b| b >= d.tile_size) || d.width == 0 || d.height == 0
-        {
-            return Err(usage(format!(
-                "image {}x{}, tile {} border {} is not a valid texture",
-                d.width, d.height, d.tile_size, d.border
-            )));
-        }
-        if d.level_count == 0 || d.level_count > 32 {
-            return Err(usage(format!("{} levels (1 to 32)", d.level_count)));
-        }
-        let meta_len = u32::try_from(metadata.len()).map_err(|_| usage("metadata over 4 GiB".into()))?;
-        let mut count = 0u64;
-        for l in &mut levels {
-            if l.tiles_w == 0 || l.tiles_h == 0 {
-                return Err(usage(format!("a level of {}x{} tiles: every level holds tiles", l.tiles_w, l.tiles_h)));
-            }
-            l.first_entry = count;
-            count =
-                count.checked_add(l.tiles_w as u64 * l.tiles_h as u64).ok_or_else(|| usage("too many tiles".into()))?;
-        }
-        let caps = Limits::default();
-        let over = |field: &str, offset: usize, value: u64, limit: u64, cap| PackError::LimitExceeded {
-            path: dest.clone(),
-            field: field.into(),
-            offset: offset as u64,
-            value,
-            limit,
-            cap,
-        };
-        if d.tile_size > caps.max_tile_size {
-            let (value, limit) = (d.tile_size.into(), caps.max_tile_size.into());
-            return Err(over("tile_size", format::at::TILE_SIZE, value, limit, "max_tile_size"));
-        }
-        if count > caps.max_tiles {
-            return Err(over("index_count", format::at::INDEX_COUNT, count, caps.max_tiles, "max_tiles"));
-        }
-        let count_usize = usize::try_from(count)
-            .ok()
-            .filter(|n| n.checked_mul(ENTRY_LEN).is_some())
-            .ok_or_else(|| usage("too many tiles".into()))?;
-        let out_of_memory = |e: std::collections::TryReserveError| {
-            let message = format!("cannot allocate the index of {count} tiles: {e}");
-            io(&dest, std::io::Error::new(std::io::ErrorKind::OutOfMemory, message))
-        };
-        let mut entries = Vec::new();
-        entries.try_reserve_exact(count_usize).map_err(out_of_memory)?;
-        entries.resize(count_usize, Entry::ABSENT);
-        let mut written = Vec::new();
-        written.try_reserve_exact(count_usize).map_err(out_of_memory)?;
-        written.resize(count_usize, false);
-        let tmp = temporary_path(&dest);
-        let levels_offset = HEADER_LEN as u64;
-        let index_offset = levels_offset + levels.len() as u64 * LEVEL_LEN as u64;
-        let meta_offset = index_offset + count * ENTRY_LEN as u64;
-        let data_offset = (meta_offset + meta_len as u64).next_multiple_of(options.alignment as u64);
-        Ok(PackWriter {
-            dest,
-            tmp,
-            file: None,
+    ) -> Result<PackWriter<O>> {
+        Ok(plan(out.name(), description, levels, metadata, options)?.into_writer(out))
+    }
+
+    /// This writer with its output boxed, so that writers of different outputs are one type.
+    pub fn boxed(self) -> PackWriter<Box<dyn PackOutput + Send>>
+    where
+        O: Send + 'static,
+    {
+        let PackWriter {
+            out,
             description,
             levels,
-            metadata: metadata.to_vec(),
+            metadata,
             options,
             entries,
             written,
-            stored: HashMap::new(),
+            stored,
             data_offset,
-            end: data_offset,
-            required_features: description.required_features(),
-            summary: WriteSummary::default(),
-            writeback: Writeback::default(),
-            keep: false,
-        })
+            end,
+            required_features,
+            summary,
+        } = self;
+        let out: Box<dyn PackOutput + Send> = Box::new(out);
+        PackWriter {
+            out,
+            description,
+            levels,
+            metadata,
+            options,
+            entries,
+            written,
+            stored,
+            data_offset,
+            end,
+            required_features,
+            summary,
+        }
     }
+}
 
+/// What [`PackWriter::create`], [`PackWriter::resume`] and [`PackWriter::with_output`] check
+/// and allocate: the layout of a pack named `dest` (in errors), its index all absent.
+fn plan(
+    dest: &Path,
+    description: Description,
+    mut levels: Vec<Level>,
+    metadata: &[u8],
+    options: WriteOptions,
+) -> Result<Plan> {
+    let usage = PackError::Usage;
+    if levels.len() != description.level_count as usize {
+        return Err(usage(format!("{} levels given, description says {}", levels.len(), description.level_count)));
+    }
+    for a in [options.alignment, options.payload_alignment] {
+        if !a.is_power_of_two() || a < 8 {
+            return Err(usage(format!("alignment {a} is not a power of two >= 8")));
+        }
+    }
+    // What the reader refuses, refused here (a texel over 8 bytes would not fit an entry).
+    let d = &description;
+    if !d.texel_ok() {
+        return Err(usage(format!("{} is not a texel format", d.texel_name())));
+    }
+    if d.tile_size == 0 || d.border.checked_mul(2).is_none_or(|b| b >= d.tile_size) || d.width == 0 || d.height == 0 {
+        return Err(usage(format!(
+            "image {}x{}, tile {} border {} is not a valid texture",
+            d.width, d.height, d.tile_size, d.border
+        )));
+    }
+    if d.level_count == 0 || d.level_count > 32 {
+        return Err(usage(format!("{} levels (1 to 32)", d.level_count)));
+    }
+    let meta_len = u32::try_from(metadata.len()).map_err(|_| usage("metadata over 4 GiB".into()))?;
+    let mut count = 0u64;
+    for l in &mut levels {
+        if l.tiles_w == 0 || l.tiles_h == 0 {
+            return Err(usage(format!("a level of {}x{} tiles: every level holds tiles", l.tiles_w, l.tiles_h)));
+        }
+        l.first_entry = count;
+        count = count.checked_add(l.tiles_w as u64 * l.tiles_h as u64).ok_or_else(|| usage("too many tiles".into()))?;
+    }
+    let caps = Limits::default();
+    let over = |field: &str, offset: usize, value: u64, limit: u64, cap| PackError::LimitExceeded {
+        path: dest.to_path_buf(),
+        field: field.into(),
+        offset: offset as u64,
+        value,
+        limit,
+        cap,
+    };
+    if d.tile_size > caps.max_tile_size {
+        let (value, limit) = (d.tile_size.into(), caps.max_tile_size.into());
+        return Err(over("tile_size", format::at::TILE_SIZE, value, limit, "max_tile_size"));
+    }
+    if count > caps.max_tiles {
+        return Err(over("index_count", format::at::INDEX_COUNT, count, caps.max_tiles, "max_tiles"));
+    }
+    let count_usize = usize::try_from(count)
+        .ok()
+        .filter(|n| n.checked_mul(ENTRY_LEN).is_some())
+        .ok_or_else(|| usage("too many tiles".into()))?;
+    let out_of_memory = |e: std::collections::TryReserveError| {
+        let message = format!("cannot allocate the index of {count} tiles: {e}");
+        io(dest, std::io::Error::new(std::io::ErrorKind::OutOfMemory, message))
+    };
+    let mut entries = Vec::new();
+    entries.try_reserve_exact(count_usize).map_err(out_of_memory)?;
+    entries.resize(count_usize, Entry::ABSENT);
+    let mut written = Vec::new();
+    written.try_reserve_exact(count_usize).map_err(out_of_memory)?;
+    written.resize(count_usize, false);
+    let levels_offset = HEADER_LEN as u64;
+    let index_offset = levels_offset + levels.len() as u64 * LEVEL_LEN as u64;
+    let meta_offset = index_offset + count * ENTRY_LEN as u64;
+    let data_offset = (meta_offset + meta_len as u64).next_multiple_of(options.alignment as u64);
+    Ok(Plan { description, levels, metadata: metadata.to_vec(), options, entries, written, data_offset })
+}
+
+impl PackWriter<PackFile> {
     /// Goes on with the temporary file `from` that a writer of the same pack left unfinished
     /// (a run killed outright, or one that kept its file: [`keep_on_drop`](Self::keep_on_drop)),
     /// with `kept`: the tiles that writer added, in the order it added them, with the entries
@@ -236,15 +292,17 @@ impl PackWriter {
         from: &Path,
         kept: &[(TileId, Entry)],
     ) -> Result<(PackWriter, usize)> {
-        let mut w = Self::plan(dest.as_ref(), description, levels, metadata, options)?;
-        if from != w.tmp {
-            fs::rename(from, &w.tmp).map_err(|e| {
-                io(&w.dest, std::io::Error::new(e.kind(), format!("cannot take over {}: {e}", from.display())))
+        let dest = dest.as_ref();
+        let plan = plan(dest, description, levels, metadata, options)?;
+        let tmp = temporary_path(dest);
+        if from != tmp {
+            fs::rename(from, &tmp).map_err(|e| {
+                io(dest, std::io::Error::new(e.kind(), format!("cannot take over {}: {e}", from.display())))
             })?;
         }
-        let file = OpenOptions::new().write(true).read(true).open(&w.tmp).map_err(|e| io(&w.tmp, e))?;
-        let len = file.metadata().map_err(|e| io(&w.tmp, e))?.len();
-        w.file = Some(file);
+        let out = PackFile::reopen(dest, tmp.clone()).map_err(|e| io(&tmp, e))?;
+        let len = out.file().metadata().map_err(|e| io(&tmp, e))?.len();
+        let mut w = plan.into_writer(out);
         let mut held = 0;
         let mut buf = Vec::new();
         for (id, entry) in kept {
@@ -255,8 +313,7 @@ impl PackWriter {
         }
         // What lies past the last payload kept goes: the next is appended where it would have been.
         let end = w.end.max(w.data_offset);
-        w.file_mut().set_len(end).map_err(|e| io(&w.tmp, e))?;
-        w.file_mut().seek(SeekFrom::Start(end)).map_err(|e| io(&w.tmp, e))?;
+        w.out.truncate(end).map_err(|e| io(&tmp, e))?;
         Ok((w, held))
     }
 
@@ -287,7 +344,7 @@ impl PackWriter {
                     return Ok(false);
                 }
                 buf.resize(entry.len as usize, 0);
-                self.file_ref().read_exact_at(buf, offset).map_err(|e| io(&self.tmp, e))?;
+                self.out.file().read_exact_at(buf, offset).map_err(|e| io(self.out.name(), e))?;
                 if crc32c::crc32c(buf) != entry.crc {
                     return Ok(false);
                 }
@@ -304,28 +361,19 @@ impl PackWriter {
         Ok(true)
     }
 
+    /// Has an unfinished writer leave its temporary file when dropped, for a later
+    /// [`resume`](Self::resume), instead of removing it.
+    pub fn keep_on_drop(&mut self) {
+        self.out.keep_on_drop();
+    }
+}
+
+impl<O: PackOutput> PackWriter<O> {
     /// The entry tile `id` was given when added (`None`: not added yet), for a caller that
     /// records what was written so that [`resume`](Self::resume) can go on after a crash.
     pub fn entry(&self, id: TileId) -> Option<Entry> {
         let position = self.position(id).ok()?;
         self.written[position].then(|| self.entries[position])
-    }
-
-    /// Has an unfinished writer leave its temporary file when dropped, for a later
-    /// [`resume`](Self::resume), instead of removing it.
-    pub fn keep_on_drop(&mut self) {
-        self.keep = true;
-    }
-
-    /// The file being written: `Some` from `create` until `finish` or `drop` takes it.
-    #[expect(clippy::expect_used, reason = "only finish and drop take the file, and both consume the writer")]
-    fn file_mut(&mut self) -> &mut File {
-        self.file.as_mut().expect("open until finish")
-    }
-
-    #[expect(clippy::expect_used, reason = "only finish and drop take the file, and both consume the writer")]
-    fn file_ref(&self) -> &File {
-        self.file.as_ref().expect("open until finish")
     }
 
     /// Adds the tile at `id`; each tile at most once. Identical payloads are stored once.
@@ -397,13 +445,11 @@ impl PackWriter {
     }
 
     /// An offset already holding exactly `bytes` (compared byte for byte, never by hash alone).
-    fn find_stored(&self, crc: u32, bytes: &[u8]) -> Result<Option<u64>> {
+    /// An output that can no longer tell (its bytes sent away) gets the payload again.
+    fn find_stored(&mut self, crc: u32, bytes: &[u8]) -> Result<Option<u64>> {
         let Some(offsets) = self.stored.get(&(crc, bytes.len() as u32)) else { return Ok(None) };
-        let file = self.file_ref();
-        let mut buf = vec![0u8; bytes.len()];
         for &offset in offsets {
-            file.read_exact_at(&mut buf, offset).map_err(|e| io(&self.tmp, e))?;
-            if buf == bytes {
+            if self.out.holds(offset, bytes).map_err(|e| io(self.out.name(), e))? {
                 return Ok(Some(offset));
             }
         }
@@ -412,18 +458,8 @@ impl PackWriter {
 
     fn append(&mut self, crc: u32, bytes: &[u8]) -> Result<u64> {
         let offset = self.end.next_multiple_of(self.options.payload_alignment as u64);
-        let pad = (offset - self.end) as usize;
-        let tmp = self.tmp.clone();
-        let file = self.file_mut();
-        file.write_all(&[0u8; 65536][..pad.min(65536)]).map_err(|e| io(&tmp, e))?;
-        if pad > 65536 {
-            file.seek(SeekFrom::Start(offset)).map_err(|e| io(&tmp, e))?;
-        }
-        file.write_all(bytes).map_err(|e| io(&tmp, e))?;
+        self.out.append(offset, bytes).map_err(|e| io(self.out.name(), e))?;
         self.end = offset + bytes.len() as u64;
-        if let Some(file) = &self.file {
-            self.writeback.written(file, self.end);
-        }
         self.stored.entry((crc, bytes.len() as u32)).or_default().push(offset);
         self.summary.stored_payloads += 1;
         self.summary.payload_bytes += bytes.len() as u64;
@@ -451,30 +487,20 @@ impl PackWriter {
         self.summary.payload_bytes
     }
 
-    /// Writes the tables and the header, syncs and renames the file into place. Tiles never
-    /// added are absent.
+    /// Hands the head (header, tables, padding) to the output and completes it: a local file
+    /// gets its tables, a sync, its header and another sync, and is renamed into place. Tiles
+    /// never added are absent.
     pub fn finish(mut self) -> Result<WriteSummary> {
-        let tmp = self.tmp.clone();
-        // The file stays in `self.file` until renamed, so that an error on the way leaves `Drop`
-        // to delete it.
-        let io_err = |e| io(&tmp, e);
         let meta_end = HEADER_LEN as u64
             + (self.levels.len() * LEVEL_LEN) as u64
             + (self.entries.len() * ENTRY_LEN) as u64
             + self.metadata.len() as u64;
-        self.reclaim_room(meta_end).map_err(io_err)?;
-        let file = self.file_ref();
-        // Pad the file end so that the data section ends the file exactly (the padding of a
-        // zero-payload pack is the data section itself).
-        file.set_len(self.end).map_err(io_err)?;
+        self.reclaim_room(meta_end).map_err(|e| io(self.out.name(), e))?;
         let levels: Vec<u8> = self.levels.iter().flat_map(|l| l.encode()).collect();
         let index: Vec<u8> = self.entries.iter().flat_map(|e| e.encode()).collect();
         let levels_offset = HEADER_LEN as u64;
         let index_offset = levels_offset + levels.len() as u64;
         let meta_offset = index_offset + index.len() as u64;
-        file.write_all_at(&levels, levels_offset).map_err(io_err)?;
-        file.write_all_at(&index, index_offset).map_err(io_err)?;
-        file.write_all_at(&self.metadata, meta_offset).map_err(io_err)?;
         let content_hash = format::fnv1a(format::fnv1a(FNV_OFFSET, &self.metadata), &index);
         let header = Header {
             major: format::MAJOR,
@@ -496,32 +522,27 @@ impl PackWriter {
             data_offset: self.data_offset,
             data_len: self.end - self.data_offset,
         };
-        file.sync_data().map_err(io_err)?;
-        file.write_all_at(&header.encode(), 0).map_err(io_err)?;
-        file.sync_all().map_err(io_err)?;
-        drop(self.file.take());
-        if let Err(e) = fs::rename(&self.tmp, &self.dest) {
-            let _ = fs::remove_file(&self.tmp);
-            return Err(io(&self.dest, e));
-        }
-        if let Some(dir) = self.dest.parent().filter(|d| !d.as_os_str().is_empty()) {
-            // Make the rename itself durable; not all file systems allow syncing a directory.
-            let _ = File::open(dir).and_then(|d| d.sync_all());
-        }
+        // The head: everything before the data section, the padding after the metadata zeros.
+        let mut head = header.encode().to_vec();
+        head.extend_from_slice(&levels);
+        drop(levels);
+        head.extend_from_slice(&index);
+        drop(index);
+        head.extend_from_slice(&self.metadata);
+        head.resize(self.data_offset as usize, 0);
+        self.out.complete(self.end, &head).map_err(|e| io(self.out.name(), e))?;
         self.summary.file_bytes = self.end;
         self.summary.content_hash = content_hash;
         self.summary.absent += self.written.iter().filter(|w| !**w).count() as u64;
         self.summary.tiles = self.entries.len() as u64;
         Ok(self.summary)
     }
-}
 
-impl PackWriter {
     /// Moves the data section down over the room that shorter metadata left unused
     /// ([`set_metadata`](Self::set_metadata)), in whole units of both alignments so that every
-    /// offset stays aligned, when that room is more than an eighth of the data: the copy costs
-    /// at most eight times the bytes it saves. Less stays as zero padding (most file systems
-    /// store it as a hole).
+    /// offset stays aligned, when that room is more than an eighth of the data (the copy costs
+    /// at most eight times the bytes it saves) and the output can move what it holds. Less, or
+    /// an output that cannot, leaves zero padding (most file systems store it as a hole).
     fn reclaim_room(&mut self, meta_end: u64) -> std::io::Result<()> {
         let unit = self.options.alignment.max(self.options.payload_alignment) as u64;
         let wanted = meta_end.next_multiple_of(self.options.alignment as u64);
@@ -529,15 +550,9 @@ impl PackWriter {
         if shift == 0 || shift * 8 < self.end - self.data_offset {
             return Ok(());
         }
-        let file = self.file_ref();
-        // Front to back: every chunk lands below where it was read.
-        let mut chunk = vec![0u8; (1 << 20).min((self.end - self.data_offset) as usize)];
-        let mut at = self.data_offset;
-        while at < self.end {
-            let n = chunk.len().min((self.end - at) as usize);
-            file.read_exact_at(&mut chunk[..n], at)?;
-            file.write_all_at(&chunk[..n], at - shift)?;
-            at += n as u64;
+        let len = self.end - self.data_offset;
+        if !self.out.move_down(self.data_offset, self.data_offset - shift, len)? {
+            return Ok(());
         }
         for e in &mut self.entries {
             if TileKind::from_u8(e.kind).is_some_and(TileKind::has_payload) {
@@ -547,14 +562,6 @@ impl PackWriter {
         self.data_offset -= shift;
         self.end -= shift;
         Ok(())
-    }
-}
-
-impl Drop for PackWriter {
-    fn drop(&mut self) {
-        if self.file.take().is_some() && !self.keep {
-            let _ = fs::remove_file(&self.tmp);
-        }
     }
 }
 

@@ -6,5 +6,5 @@ mod read;
 mod sink;
 
 pub use read::PackInput;
-pub(crate) use sink::pack_description;
 pub use sink::{PackSink, tile_kind};
+pub(crate) use sink::{pack_description, size_bound};

@@ -2,13 +2,14 @@
 //!
 //! Tiles arrive from the encoder threads in any order; the pack writer appends each payload
 //! as it comes (one pass, no intermediate files) and keeps only the index in memory.
-//! One-colour tiles are stored as their colour, with no payload.
+//! One-colour tiles are stored as their colour, with no payload. The pack goes to a local file
+//! or to any [`PackOutput`] (a pack at `s3://` is streamed: `crate::store::stream`).
 
 use std::collections::HashSet;
 use std::path::Path;
 use std::sync::Mutex;
 
-use vortex_pack::{Description, NewTile, PackWriter, TileId, TileKind, WriteOptions, WriteSummary};
+use vortex_pack::{Description, NewTile, PackOutput, PackWriter, TileId, TileKind, WriteOptions, WriteSummary};
 
 use crate::codec::{Codec, RowFilter};
 use crate::error::{Result, TilerError};
@@ -17,10 +18,13 @@ use crate::pixel::PixelLayout;
 use crate::resume::{Interrupted, Journal, Record};
 use crate::sink::TileSink;
 
+/// The writer of a pack to a local file or to another output.
+type Writer = PackWriter<Box<dyn PackOutput + Send>>;
+
 /// A pack being written as a run's sink: tiles appended as they come, the index and header
-/// at [`PackSink::finish`], under a temporary name until then.
+/// at [`PackSink::finish`], under a temporary name (or not visible) until then.
 pub struct PackSink {
-    writer: Mutex<PackWriter>,
+    writer: Mutex<Writer>,
     kind: TileKind,
     /// A resumable run's journal and the tiles kept from the run it resumes.
     resume: Option<(Journal, HashSet<TileId>)>,
@@ -38,6 +42,20 @@ pub(crate) fn pack_description(layout: &Layout, stored: PixelLayout) -> Descript
         sample_bytes: stored.depth.bytes() as u8,
         sample_format: stored.depth.pack_sample_format(),
     }
+}
+
+/// A bound on the bytes of a pack of `layout`'s tiles of `stored` texels with `metadata_len`
+/// bytes of metadata, for an output that must plan its size (a streamed upload's part size):
+/// every tile a payload of twice its raw size (an encoder that expands noise expands it by far
+/// less), the index and metadata, and room for the alignments.
+pub(crate) fn size_bound(layout: &Layout, stored: PixelLayout, metadata_len: usize) -> u64 {
+    let d = pack_description(layout, stored);
+    let tiles = layout.total_tiles();
+    let raw = d.raw_tile_len().unwrap_or(u64::MAX);
+    let payloads = tiles.saturating_mul(raw.saturating_mul(2).saturating_add(8));
+    payloads
+        .saturating_add(tiles.saturating_mul(vortex_pack::format::ENTRY_LEN as u64))
+        .saturating_add(metadata_len as u64 + (1 << 20))
 }
 
 /// The pack's kind of the tiles `codec` makes; Deflate and LZW tiles and the floating-point
@@ -73,6 +91,21 @@ impl PackSink {
     ) -> Result<PackSink> {
         let d = pack_description(layout, stored);
         let writer = PackWriter::create(dest, d, layout.pack_levels(), metadata, options)?;
+        Ok(PackSink { writer: Mutex::new(writer.boxed()), kind: tile_kind(codec)?, resume: None })
+    }
+
+    /// [`create`](Self::create) writing to `out`, which must be empty (an upload streamed as
+    /// the pack is made).
+    pub(crate) fn create_to(
+        out: Box<dyn PackOutput + Send>,
+        layout: &Layout,
+        stored: PixelLayout,
+        codec: Codec,
+        metadata: &[u8],
+        options: WriteOptions,
+    ) -> Result<PackSink> {
+        let d = pack_description(layout, stored);
+        let writer = PackWriter::with_output(out, d, layout.pack_levels(), metadata, options)?;
         Ok(PackSink { writer: Mutex::new(writer), kind: tile_kind(codec)?, resume: None })
     }
 
@@ -114,7 +147,7 @@ impl PackSink {
             }
         };
         writer.keep_on_drop();
-        Ok(PackSink { writer: Mutex::new(writer), kind, resume: Some((journal, kept)) })
+        Ok(PackSink { writer: Mutex::new(writer.boxed()), kind, resume: Some((journal, kept)) })
     }
 
     /// Writes the index and header and renames the pack into place.

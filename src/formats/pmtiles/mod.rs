@@ -8,11 +8,12 @@
 //! tile data in tile-id (Hilbert) order, while our tiles arrive in the pipeline's order. So
 //! each encoded tile is appended, as it comes, to a spool file beside the destination
 //! (`.NAME.tmp-PID`); identical tiles are spooled once. `finish` sorts the directory entries
-//! by tile id, writes header, root directory, metadata, leaf directories and then the data by
-//! copying the spooled payloads in tile-id order into `.NAME.partial-PID`, reads its own
-//! directories back, and renames the archive into place. Memory holds the directory entries
-//! only (see `ENTRY_MEMORY_BYTES`), never the payloads; the disk holds the payloads twice
-//! until the spool is removed.
+//! by tile id, reads its own directories back from the bytes it made of them, writes header,
+//! root directory, metadata, leaf directories and then the data by copying the spooled
+//! payloads in tile-id order into `.NAME.partial-PID`, and renames the archive into place.
+//! Memory holds the directory entries only (see `ENTRY_MEMORY_BYTES`), never the payloads; the
+//! disk holds the payloads twice until the spool is removed. At `s3://`, `finish_into` sends
+//! the archive straight into the upload instead, so the disk holds the payloads once.
 
 use std::collections::HashMap;
 use std::fs::{self, File};
@@ -180,11 +181,13 @@ impl PmtilesSink {
     /// Writes the archive with `bounds` and `metadata` (JSON), checks its directories and
     /// renames it into place.
     pub fn finish(mut self, bounds: &Bounds, metadata: &[u8]) -> Result<PmtilesSummary> {
-        let spool = self.spool.get_mut().map_err(|_| poisoned())?;
-        let tiles = std::mem::take(&mut spool.tiles);
-        spool.by_content = HashMap::new();
-        let spooled = spool.file.try_clone().map_err(write_err(&self.spool_path))?;
-        let summary = self.write_archive(&spooled, tiles, bounds, metadata)?;
+        let out = self.out_path.clone();
+        let file = File::create(&out).map_err(write_err(&out))?;
+        let mut w = BufWriter::with_capacity(1 << 20, file);
+        let summary = self.finish_into(bounds, metadata, &mut w, &out)?;
+        let file = w.into_inner().map_err(|e| TilerError::write(&out, e.into_error()))?;
+        file.sync_all().map_err(write_err(&out))?;
+        drop(file);
         fs::rename(&self.out_path, &self.dest).map_err(write_err(&self.dest))?;
         let _ = fs::remove_file(&self.spool_path);
         self.done = true;
@@ -195,12 +198,39 @@ impl PmtilesSink {
         Ok(summary)
     }
 
+    /// A bound on the bytes of the archive, with `metadata_len` bytes of metadata: the payloads
+    /// spooled, at most 40 bytes of directory a tile (a varint entry is at most 4 x 10 bytes
+    /// before gzip, which shrinks such runs), and room for the header.
+    pub(crate) fn archive_bound(&self, metadata_len: usize) -> u64 {
+        let (spooled, tiles) = self.spool.lock().map_or((0, 0), |s| (s.len, s.tiles.len() as u64));
+        spooled.saturating_add(tiles.saturating_mul(40)).saturating_add(metadata_len as u64 + (1 << 20))
+    }
+
+    /// Writes the archive with `bounds` and `metadata` (JSON), its directories checked, front
+    /// to back into `w` (`name` in errors): the local temporary of [`finish`](Self::finish), or
+    /// an upload. The spool is removed when the sink is dropped.
+    pub(crate) fn finish_into(
+        &mut self,
+        bounds: &Bounds,
+        metadata: &[u8],
+        w: &mut dyn Write,
+        name: &Path,
+    ) -> Result<PmtilesSummary> {
+        let spool = self.spool.get_mut().map_err(|_| poisoned())?;
+        let tiles = std::mem::take(&mut spool.tiles);
+        spool.by_content = HashMap::new();
+        let spooled = spool.file.try_clone().map_err(write_err(&self.spool_path))?;
+        self.write_archive(&spooled, tiles, bounds, metadata, w, name)
+    }
+
     fn write_archive(
         &self,
         spooled: &File,
         mut tiles: Vec<Spooled>,
         bounds: &Bounds,
         metadata: &[u8],
+        w: &mut dyn Write,
+        out: &Path,
     ) -> Result<PmtilesSummary> {
         tiles.sort_unstable_by_key(|t| t.tile_id);
         if let Some(w) = tiles.windows(2).find(|w| w[0].tile_id == w[1].tile_id) {
@@ -245,30 +275,28 @@ impl PmtilesSink {
             max_zoom: (self.lod_count - 1) as u8,
             bounds: *bounds,
         };
-        let out = &self.out_path;
-        let file = File::create(out).map_err(write_err(out))?;
-        let mut w = BufWriter::with_capacity(1 << 20, file);
-        for part in [&header.encode()[..], &root, &metadata, &leaves] {
-            w.write_all(part).map_err(write_err(out))?;
+        let mut head = header.encode().to_vec();
+        for part in [&root, &metadata, &leaves] {
+            head.extend_from_slice(part);
         }
-        let mut buf = Vec::new();
-        for (offset, length) in &copies {
-            buf.resize(*length as usize, 0);
-            spooled.read_exact_at(&mut buf, *offset).map_err(write_err(&self.spool_path))?;
-            w.write_all(&buf).map_err(write_err(out))?;
-        }
-        let file = w.into_inner().map_err(|e| TilerError::write(out, e.into_error()))?;
-        file.sync_all().map_err(write_err(out))?;
-        drop(file);
-
-        // Read our own archive back: the header and every directory must give the entries.
-        let (read_header, read_entries) = read_entries(out)?;
+        // Read our own directories back, from the bytes written: the header and every
+        // directory must give the entries.
+        let (read_header, read_entries) = read_entries(out, &head)?;
         if read_header != header.stored() || read_entries != entries {
             return Err(TilerError::Internal(format!(
                 "{}: the archive's directories read back differ from those written",
                 out.shown()
             )));
         }
+        w.write_all(&head).map_err(write_err(out))?;
+        drop(head);
+        let mut buf = Vec::new();
+        for (offset, length) in &copies {
+            buf.resize(*length as usize, 0);
+            spooled.read_exact_at(&mut buf, *offset).map_err(write_err(&self.spool_path))?;
+            w.write_all(&buf).map_err(write_err(out))?;
+        }
+        w.flush().map_err(write_err(out))?;
         Ok(PmtilesSummary {
             tiles: header.addressed_tiles,
             entries: header.tile_entries,
@@ -590,25 +618,22 @@ fn directories(entries: &[Entry]) -> Result<(Vec<u8>, Vec<u8>, u64)> {
     }
 }
 
-/// An archive this module wrote, read back: its header and every tile entry (leaves
-/// followed), in tile-id order. Sizes are checked against the file before anything is read.
-fn read_entries(path: &Path) -> Result<(Header, Vec<Entry>)> {
+/// The head of an archive this module wrote (`path`'s bytes before the tile data), read back:
+/// its header and every tile entry (leaves followed), in tile-id order. Sizes are checked
+/// against the head before anything is read.
+fn read_entries(path: &Path, head: &[u8]) -> Result<(Header, Vec<Entry>)> {
     let bad = |what: &str| TilerError::decode(path, format!("not a PMTiles archive as written: {what}"));
-    let file = File::open(path).map_err(|e| TilerError::io(path, e))?;
-    let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
-    let mut h = [0u8; HEADER_LEN];
-    file.read_exact_at(&mut h, 0).map_err(|e| TilerError::io(path, e))?;
-    let header = Header::decode(&h).ok_or_else(|| bad("header"))?;
+    let h: &[u8; HEADER_LEN] = head.get(..HEADER_LEN).and_then(|h| h.try_into().ok()).ok_or_else(|| bad("header"))?;
+    let header = Header::decode(h).ok_or_else(|| bad("header"))?;
     let section = |offset: u64, length: u64| -> Result<Vec<Entry>> {
-        if offset.checked_add(length).is_none_or(|end| end > file_len) {
-            return Err(bad("a directory past the end of the file"));
-        }
-        let mut bytes = vec![0u8; length as usize];
-        file.read_exact_at(&mut bytes, offset).map_err(|e| TilerError::io(path, e))?;
+        let range = usize::try_from(offset).ok().zip(usize::try_from(length).ok());
+        let Some(bytes) = range.and_then(|(o, n)| head.get(o..o.checked_add(n)?)) else {
+            return Err(bad("a directory past the end of the directories"));
+        };
         let mut plain = Vec::new();
         // A directory entry is at least 4 bytes before compression and gzip expands by at
         // most ~1032x: bound what is inflated by what any honest directory can be.
-        GzDecoder::new(&bytes[..])
+        GzDecoder::new(bytes)
             .take(length.saturating_mul(1032) + 64)
             .read_to_end(&mut plain)
             .map_err(|_| bad("a directory that does not inflate"))?;
