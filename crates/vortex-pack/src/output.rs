@@ -31,8 +31,9 @@ pub trait PackOutput {
     fn append(&mut self, offset: u64, bytes: &[u8]) -> std::io::Result<()>;
 
     /// Whether the bytes stored at `offset` (a payload appended earlier) are known to equal
-    /// `bytes`: `false` when they differ, and when the output can no longer tell (its bytes
-    /// sent away); the writer then stores `bytes` again. Never `true` by hash alone.
+    /// `bytes`: `false` when they differ, and when the output can no longer tell; the writer
+    /// then stores `bytes` again. A local file compares them byte for byte; an output that
+    /// sent them away may compare a cryptographic digest of them (never a checksum alone).
     fn holds(&mut self, offset: u64, bytes: &[u8]) -> std::io::Result<bool>;
 
     /// Moves the `len` bytes at `from` down to `to` (`to < from`), if this output can: `false`
