@@ -360,6 +360,15 @@ pub enum StoreError {
         /// How to proceed.
         advice: &'static str,
     },
+    /// Another run is writing the prefix: its marker changed while this run watched it, or it
+    /// was written between this run's look and its own write (docs/object-storage.md).
+    #[error("{url}: {why}; wait for that run to end, or choose another prefix")]
+    Busy {
+        /// The prefix.
+        url: String,
+        /// What showed the other run.
+        why: String,
+    },
     /// A local file staged for a single-object upload could not be read or written.
     #[error("{url}: staging {}: {source}", path.shown())]
     Staging {

@@ -17,9 +17,15 @@
 //!   last. A previous output of ours at the prefix is deleted before the new one starts:
 //!   without a rename, keeping it until the new one is complete would need a second prefix
 //!   and a server-side copy of every tile.
+//! * A run holds the prefix by its marker: it rewrites it every 30 s while it writes (a
+//!   heartbeat), each write conditional on the version it wrote last. A run that finds a
+//!   marker saying `writing` watches it for four beats and is refused if it changes (another
+//!   run is alive); it takes the prefix with one conditional write of the marker, so that of
+//!   two runs starting together one is refused, before anything is deleted.
 //!
-//! A pack is sent as one multipart upload while it is made (`stream.rs`), which the server
-//! makes visible only when the upload completes; a failure aborts the upload. The other files
+//! A pack (a shard's and `merge`'s too) is sent as one multipart upload while it is made
+//! (`stream.rs`), which the server makes visible only when the upload completes; a failure
+//! aborts the upload. The other files
 //! written as one object (PMTiles, `.ozx`, a TIFF) are staged to a local temporary and sent the
 //! same way once complete (`staged.rs`). An OME-Zarr directory and a DICOM series are staged
 //! too, then uploaded file by file with the directory layouts' rules.

@@ -296,6 +296,63 @@ fn the_server_stopped_mid_upload_is_a_clear_error() {
     assert!(!err.contains("panicked"), "{err}");
 }
 
+/// Two runs at one prefix (a job submitted twice): the second, started while the first is
+/// writing, watches the first's marker beat (every second here, `Moto::env`) and stops before
+/// it writes or deletes anything; the first finishes whole. A run killed outright is taken
+/// over once its marker has stood still for four of its beats, and the result is the local
+/// run's.
+#[test]
+fn a_second_run_on_a_prefix_being_written_is_refused_and_a_killed_ones_taken_over() {
+    let Some(moto) = Moto::start("the s3:// two-runs test") else { return };
+    moto.boto(&["mb", "tiles"]);
+    let (work, tmp) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    // Some 3000 tiles of 64 texels: several seconds of PUTs to moto, so that the first run
+    // is still writing when the second has looked (a run that ends first is named).
+    let input = work.path().join("noise.ppm");
+    noise_ppm(&input, 3072, 3072, 5);
+    let local = work.path().join("local");
+    let args = |dest: &str| -> Vec<String> {
+        ["split", s(&input), "-o", dest, "--layout", "dzi", "--tile-size", "64", "-q"].map(String::from).to_vec()
+    };
+    fn refs(a: &[String]) -> Vec<&str> {
+        a.iter().map(String::as_str).collect()
+    }
+    let out = moto.run(&refs(&args(s(&local))), tmp.path());
+    assert!(out.status.success(), "local run: {}", stderr(&out));
+    let local = files(&local);
+    let writing = |child: &mut std::process::Child, prefix: &str| loop {
+        assert!(child.try_wait().unwrap().is_none(), "the first run ended before it was watched");
+        if moto.quick_count("tiles", prefix) > 20 {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+
+    let mut first = moto.command(&refs(&args("s3://tiles/busy")), tmp.path()).spawn().unwrap();
+    writing(&mut first, "busy/");
+    let second = moto.run(&refs(&args("s3://tiles/busy")), tmp.path());
+    let err = stderr(&second);
+    assert_eq!(second.status.code(), Some(1), "{err}");
+    assert!(err.contains("error: s3://tiles/busy: another run is writing it"), "{err}");
+    assert!(first.wait().unwrap().success(), "the first run failed beside the refused one");
+    let mut bucket = download(&moto, "tiles", "busy");
+    let marker = String::from_utf8(bucket.remove(".vortex-tiler").expect("no marker")).unwrap();
+    assert!(marker.contains("\"state\":\"complete\""), "{marker}");
+    assert_same_files(&bucket, &local, "busy");
+
+    let mut killed = moto.command(&refs(&args("s3://tiles/killed")), tmp.path()).spawn().unwrap();
+    writing(&mut killed, "killed/");
+    killed.kill().unwrap();
+    killed.wait().unwrap();
+    let out = moto.run(&refs(&args("s3://tiles/killed")), tmp.path());
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("watching its marker for 4 s"), "{err}");
+    let mut bucket = download(&moto, "tiles", "killed");
+    bucket.remove(".vortex-tiler").expect("no marker");
+    assert_same_files(&bucket, &local, "killed");
+}
+
 /// A noise image of `w` x `h` as a PPM at `path` (written fast, read fast, no two tiles alike),
 /// different for each `seed`.
 fn noise_ppm(path: &Path, w: usize, h: usize, seed: u64) {

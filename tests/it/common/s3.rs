@@ -79,9 +79,11 @@ impl Moto {
         Some(moto)
     }
 
-    /// The AWS environment a client of this server needs.
+    /// The AWS environment a client of this server needs, and a heartbeat of 1 s for the
+    /// runs that write a prefix (so that a killed run's prefix is taken over after 4 s).
     pub fn env(&self) -> Vec<(&'static str, String)> {
         vec![
+            ("VORTEX_S3_HEARTBEAT_SECS", "1".into()),
             ("AWS_ENDPOINT_URL", format!("http://127.0.0.1:{}", self.port)),
             ("AWS_ACCESS_KEY_ID", "test".into()),
             ("AWS_SECRET_ACCESS_KEY", "test".into()),
