@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use vortex_tiler::error::ShowPath;
 use vortex_tiler::output::Product;
-use vortex_tiler::scale_out::{self, PackUpload, ShardFiles, ShardJob};
+use vortex_tiler::scale_out::{self, ShardFiles, ShardJob};
 use vortex_tiler::store::ObjectUrl;
 
 use super::report;
@@ -130,8 +130,8 @@ pub struct MergeArgs {
 
     /// The pack to write: the pack `split --pack` of the same input and options makes, byte
     /// for byte. An existing pack is replaced; any other file only with --force. An
-    /// s3://BUCKET/KEY.vtpk URL writes it as one object (staged under TMPDIR, then a
-    /// multipart upload; docs/object-storage.md).
+    /// s3://BUCKET/KEY.vtpk URL writes it as one object, streamed as it is made (one multipart
+    /// upload, visible once complete; docs/object-storage.md).
     #[arg(short, long, value_name = "PACK")]
     output: PathBuf,
 
@@ -147,14 +147,14 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
     let started = Instant::now();
     let names = ShardFiles::list(&a.shards)?;
     // The output is claimed before any shard is downloaded.
-    let upload = match ObjectUrl::of_path(&a.output) {
-        Some(_) => Some(PackUpload::claim(&a.output, &names, a.force)?),
-        None => {
+    let in_bucket = ObjectUrl::of_path(&a.output).is_some();
+    match in_bucket {
+        true => scale_out::claim_pack(&a.output, &names, a.force)?,
+        false => {
             let inputs: Vec<&Path> = names.iter().map(PathBuf::as_path).collect();
             report::claim(&a.output, Product::Pack, &inputs, a.force)?;
-            None
         }
-    };
+    }
     let downloads = names.iter().filter(|n| ObjectUrl::of_path(n).is_some()).count();
     if downloads > 0 && !a.run.quiet && !a.run.json {
         let packs = if downloads == 1 { "pack" } else { "packs" };
@@ -166,11 +166,10 @@ pub fn run_merge(a: MergeArgs) -> Result<()> {
     let total = (shards.files().first().and_then(|first| vortex_pack::Pack::open(first).ok()))
         .map_or(0, |p| p.levels().iter().map(|l| l.tiles_w as u64 * l.tiles_h as u64).sum());
     let watch = a.run.watch(total)?;
-    let dest = upload.as_ref().map_or(a.output.as_path(), PackUpload::local);
-    let merged = scale_out::merge_files(&shards, dest, &watch);
+    let merged = scale_out::merge_files(&shards, &a.output, &watch);
     watch.bar.finish_and_clear();
     let merged = merged?;
-    let uploaded = upload.map(PackUpload::upload).transpose()?;
+    let uploaded = in_bucket.then_some(merged.pack.file_bytes);
     let took = started.elapsed().as_secs_f64();
     let m = &merged;
     if a.run.json {

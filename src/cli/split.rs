@@ -105,8 +105,9 @@ pub struct OutputArgs {
     ///
     /// s3://BUCKET/PREFIX writes a directory layout (vortex, dzi, iiif, xyz, google) to
     /// S3-compatible storage, one object a file, uploaded as the tiles are made; s3://BUCKET/KEY
-    /// with a file's name (.vtpk, .pmtiles, .ozx, .tif) writes that file as one object (staged
-    /// under TMPDIR, then a multipart upload); s3://BUCKET/PREFIX.ome.zarr is staged under
+    /// with a file's name (.vtpk, .pmtiles, .ozx, .tif) writes that file as one object (a pack
+    /// streamed as it is made, the others staged under TMPDIR, then sent as one multipart
+    /// upload); s3://BUCKET/PREFIX.ome.zarr is staged under
     /// TMPDIR too, then uploaded file by file. Credentials, region and endpoint come from the
     /// AWS environment: AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY, AWS_REGION, AWS_ENDPOINT_URL
     /// (MinIO, R2, a local server; with AWS_ALLOW_HTTP=true for plain http). A failed run
@@ -302,8 +303,8 @@ pub struct OutputArgs {
     /// of N, counting from 0; auto reads the index from a Slurm job array
     /// (SLURM_ARRAY_TASK_ID, SLURM_ARRAY_TASK_COUNT) or a Kubernetes Indexed Job
     /// (JOB_COMPLETION_INDEX, with --shards). '{shard}' in --pack becomes the index; --pack
-    /// may be an s3://BUCKET/KEY.vtpk URL (staged under TMPDIR, then uploaded), so that the
-    /// machines share no file system for the shards. `vortex-tiler merge` joins the N shard
+    /// may be an s3://BUCKET/KEY.vtpk URL (streamed as it is made), so that the machines
+    /// share no file system for the shards. `vortex-tiler merge` joins the N shard
     /// packs into the pack --pack alone makes, byte for byte. See docs/scale-out.md.
     #[arg(help_heading = "Scale-out", long, value_name = "I/N|auto")]
     shard: Option<super::shard::ShardArg>,
@@ -784,16 +785,10 @@ fn shard(
     }
     let output = Output::new(Format::Pack, &path);
     let plan = Plan::new(vec![output], settings, &source.header(), &[input], Budget::new(a.max_memory))?;
-    // At s3:// (claimed by the plan) the shard pack is written to a local temporary, then
-    // uploaded once finished, when the pyramid's memory is free again.
-    let upload = match in_bucket {
-        true => Some(scale_out::PackUpload::claimed(&path, a.max_memory)?),
-        false => {
-            report::prepare(&path)?;
-            None
-        }
-    };
-    let dest = upload.as_ref().map_or(path.as_path(), |u| u.local());
+    // At s3:// (claimed by the plan) the shard pack is streamed as it is made.
+    if !in_bucket {
+        report::prepare(&path)?;
+    }
     let planned = &plan.outputs()[0];
     let info = planned.info().map(|i| i.to_json_pretty()).unwrap_or_default();
     if !a.run.quiet && !a.run.json {
@@ -802,8 +797,8 @@ fn shard(
     let job = chosen.job(input, info, a.pack_layout.options()?);
     let run = Run::start_counting(source, a, job.pages(&planned.layout)?, started)?;
     let opts = &planned.opts;
-    let (done, written) = run.execute_with(|source, watch| scale_out::write_shard(source, dest, opts, &job, watch))?;
-    let uploaded = upload.map(scale_out::PackUpload::upload).transpose()?;
+    let (done, written) = run.execute_with(|source, watch| scale_out::write_shard(source, &path, opts, &job, watch))?;
+    let uploaded = in_bucket.then_some(written.file_bytes);
     if a.run.json {
         let figures = Figures::Pack(written);
         let mut doc: serde_json::Value = serde_json::from_str(&report::summary_json(&done, "shard", &path, &figures))?;

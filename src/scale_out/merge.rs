@@ -29,7 +29,7 @@ use super::order::split_order;
 use super::plan::ShardPlan;
 use super::sums::{RootRows, RowReader, SumBound};
 use crate::error::{Result, ShowPath, TilerError};
-use crate::formats::pack::{pack_description, tile_kind};
+use crate::formats::pack::{pack_description, size_bound, tile_kind};
 use crate::formats::tiles::info::InfoFile;
 use crate::layout::Layout;
 use crate::limits::{MAX_ALIGN, MAX_TILE_ALIGN, human_bytes};
@@ -72,7 +72,8 @@ pub fn merge(paths: &[PathBuf], dest: &Path, progress: &dyn Progress) -> Result<
 }
 
 /// [`merge`] of `shards`, each read from its local file and named in errors as it was given
-/// (an `s3://` URL for one downloaded).
+/// (an `s3://` URL for one downloaded), into `dest`: a local file, or an `s3://` URL already
+/// claimed ([`super::claim_pack`]), streamed as it is made.
 pub fn merge_files(shards: &ShardFiles, dest: &Path, progress: &dyn Progress) -> Result<Merged> {
     let shards = open_all(shards.names(), shards.files())?;
     let first = &shards[0];
@@ -102,8 +103,14 @@ pub fn merge_files(shards: &ShardFiles, dest: &Path, progress: &dyn Progress) ->
     // Every page, in the one-machine order.
     let o = &first.manifest.options;
     let options = WriteOptions { alignment: o.alignment, payload_alignment: o.payload_alignment };
-    let mut writer =
-        PackWriter::create(dest, pack_description(&layout, stored), layout.pack_levels(), o.info.as_bytes(), options)?;
+    let (description, levels, info) = (pack_description(&layout, stored), layout.pack_levels(), o.info.as_bytes());
+    let mut writer = match crate::store::ObjectUrl::of_path(dest) {
+        Some(_) => {
+            let out = super::objects::pack_output(dest, size_bound(&layout, stored, info.len()))?;
+            PackWriter::with_output(out, description, levels, info, options)?
+        }
+        None => PackWriter::create(dest, description, levels, info, options)?.boxed(),
+    };
     let kind = tile_kind(opts.codec)?;
     // A run too wide for one machine's memory has no order of its own: merge writes the one
     // a machine with enough memory would, into a pack, from a source that holds no decoder

@@ -12,7 +12,7 @@ mod write;
 use crate::shard::{fingerprint, manifest, order, plan, sums};
 
 pub use merge::{Merged, merge, merge_files};
-pub use objects::{PackUpload, ShardFiles};
+pub use objects::{ShardFiles, claim_pack};
 pub use write::{ShardJob, write_shard};
 
 /// What a pack's metadata says of it if it is a shard (`info`), and the refusal of a shard pack

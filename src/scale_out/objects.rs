@@ -1,7 +1,7 @@
 //! A scale-out's packs at `s3://` (docs/scale-out.md): the shard packs `merge` reads, named or
-//! listed under a prefix and downloaded whole to a local temporary ([`ShardFiles`]), and a pack
-//! (a shard, or the merged pack) written by its writer to a local temporary and uploaded as
-//! one object ([`PackUpload`]), with the staging and multipart upload of `split --pack`.
+//! listed under a prefix and downloaded whole to a local temporary ([`ShardFiles`]), and the
+//! claim of a pack bound for a bucket ([`claim_pack`]); a pack there (a shard, or the merged
+//! pack) is streamed as it is made ([`pack_output`]), as `split --pack` streams one.
 //!
 //! The shards are downloaded, not read in ranges: the pack reader maps a file and hands out
 //! borrowed payloads, and the merge reads one page at a time in the one-machine order, which
@@ -11,9 +11,9 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{Result, TilerError};
 use crate::output::{OutputError, Product};
+use crate::store::ObjectUrl;
 use crate::store::fetched::{Fetched, list_below};
-use crate::store::staged::Staged;
-use crate::store::{ObjectUrl, UPLOAD_BYTES};
+use vortex_pack::PackOutput;
 
 /// The shard packs a merge reads: each by the name it was given (a local path, or an `s3://`
 /// URL, which errors and reports show) and the local file that holds it.
@@ -88,52 +88,34 @@ impl ShardFiles {
     }
 }
 
-/// A pack bound for an `s3://` URL: written by its writer to a local temporary
-/// ([`local`](Self::local)), then sent as one multipart upload ([`upload`](Self::upload)),
-/// which the server makes visible only once complete. Dropped without being uploaded, it
-/// removes the temporary and nothing appears in the bucket.
-pub struct PackUpload {
-    staged: Staged,
-    in_flight: u64,
+/// Claims `dest`, an `s3://` URL, for a pack as `split --pack` does (an object that is not a
+/// pack is replaced only with `force`), refusing it where it is one of `inputs`.
+pub fn claim_pack(dest: &Path, inputs: &[PathBuf], force: bool) -> Result<()> {
+    let url = bucket_url(dest)?;
+    for input in inputs {
+        if ObjectUrl::of_path(input).and_then(|u| u.ok()).is_some_and(|u| u == url) {
+            return Err(OutputError::IsInput { path: dest.to_path_buf(), input: input.clone() }.into());
+        }
+    }
+    crate::store::claim(&url, Product::Pack, force).map(drop)
 }
 
-impl PackUpload {
-    /// Claims `dest`, an `s3://` URL, for a pack as `split --pack` does (an object that is not
-    /// a pack is replaced only with `force`), refusing it where it is one of `inputs`. The
-    /// upload holds at most 32 MiB of parts in memory (one part at least).
-    pub fn claim(dest: &Path, inputs: &[PathBuf], force: bool) -> Result<PackUpload> {
-        let url = match ObjectUrl::of_path(dest) {
-            Some(url) => url?,
-            None => return Err(TilerError::Internal(format!("{} is not an s3:// URL", dest.display()))),
-        };
-        for input in inputs {
-            if ObjectUrl::of_path(input).and_then(|u| u.ok()).is_some_and(|u| u == url) {
-                return Err(OutputError::IsInput { path: dest.to_path_buf(), input: input.clone() }.into());
-            }
-        }
-        crate::store::claim(&url, Product::Pack, force)?;
-        PackUpload::claimed(dest, UPLOAD_BYTES)
-    }
+/// The output of a pack at `dest`, an `s3://` URL already claimed: one multipart upload
+/// streamed as the pack is made, in parts sized for `bound` bytes at most, [`IN_FLIGHT`] bytes
+/// of them in flight. Nothing is visible until the pack is complete.
+pub(crate) fn pack_output(dest: &Path, bound: u64) -> Result<Box<dyn PackOutput + Send>> {
+    crate::store::stream_pack(&bucket_url(dest)?, bound, IN_FLIGHT)
+}
 
-    /// [`claim`](Self::claim) for a URL already claimed (by [`crate::outputs::Plan::new`]),
-    /// with at most `in_flight` bytes of parts in memory (32 MiB at most, one part at least).
-    pub fn claimed(dest: &Path, in_flight: u64) -> Result<PackUpload> {
-        let url = match ObjectUrl::of_path(dest) {
-            Some(url) => url?,
-            None => return Err(TilerError::Internal(format!("{} is not an s3:// URL", dest.display()))),
-        };
-        let in_flight = in_flight.clamp(1, UPLOAD_BYTES);
-        Ok(PackUpload { staged: Staged::create(&url, Product::Pack, false)?, in_flight })
-    }
+/// Bytes of a scale-out pack's parts in flight: two parts of 8 MiB, which with the first part
+/// (held to the end) and the one filling make 32 MiB besides `--max-memory` (a shard's budget
+/// is its pyramid's, the same on every machine so that the merge can follow it).
+const IN_FLIGHT: u64 = 16 << 20;
 
-    /// Where the pack's writer writes it, as if it were the destination.
-    pub fn local(&self) -> &Path {
-        self.staged.local()
-    }
-
-    /// Sends the finished pack, then removes the temporary. Returns the bytes sent.
-    pub fn upload(self) -> Result<u64> {
-        self.staged.upload(self.in_flight)
+fn bucket_url(dest: &Path) -> Result<ObjectUrl> {
+    match ObjectUrl::of_path(dest) {
+        Some(url) => Ok(url?),
+        None => Err(TilerError::Internal(format!("{} is not an s3:// URL", dest.display()))),
     }
 }
 
@@ -149,7 +131,7 @@ mod tests {
         assert_eq!((files.names(), files.files()), (&given[..], &given[..]));
         // Refused before anything is asked of the server.
         let url = PathBuf::from("s3://tiles/parts/a.vtpk");
-        let Err(e) = PackUpload::claim(&url, &[given[0].clone(), url.clone()], false) else { panic!("claimed") };
+        let Err(e) = claim_pack(&url, &[given[0].clone(), url.clone()], false) else { panic!("claimed") };
         assert!(e.to_string().contains("is the input"), "{e}");
     }
 }

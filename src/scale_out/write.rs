@@ -7,7 +7,7 @@ use vortex_pack::{WriteOptions, WriteSummary};
 use super::manifest::{FORMAT, Manifest, ShardOptions, SourceId, StoredRoots};
 use super::plan::{Region, ShardPlan};
 use crate::error::{Result, TilerError};
-use crate::formats::pack::PackSink;
+use crate::formats::pack::{PackSink, size_bound};
 use crate::layout::Layout;
 use crate::limits::human_bytes;
 use crate::pixel::PixelLayout;
@@ -43,7 +43,8 @@ impl ShardJob<'_> {
     }
 }
 
-/// Cuts shard `job.index` of `source` into a shard pack at `dest`.
+/// Cuts shard `job.index` of `source` into a shard pack at `dest`: a local file, or an
+/// `s3://` URL already claimed, streamed as it is made.
 pub fn write_shard(
     source: Box<dyn RowSource>,
     dest: &Path,
@@ -101,7 +102,14 @@ pub fn write_shard(
             job.index
         ))
     })?;
-    let sink = PackSink::create(dest, &layout, stored, opts.codec, &vec![b' '; room], job.pack)?;
+    let room = vec![b' '; room];
+    let sink = match crate::store::ObjectUrl::of_path(dest) {
+        Some(_) => {
+            let out = super::objects::pack_output(dest, size_bound(&layout, stored, room.len()))?;
+            PackSink::create_to(out, &layout, stored, opts.codec, &room, job.pack)?
+        }
+        None => PackSink::create(dest, &layout, stored, opts.codec, &room, job.pack)?,
+    };
     let (summary, roots) = split::split_shard(source, &sink, opts, spans, progress)?;
     manifest.roots = roots.iter().map(|r| StoredRoots::new(r.columns.clone(), r.rows.clone(), &r.bytes)).collect();
     let written = sink.finish_with_metadata(manifest.to_json())?;

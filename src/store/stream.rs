@@ -257,6 +257,21 @@ impl Stream {
         Ok(())
     }
 
+    /// Moves the data down from `from` to `to` where all of it is still held in the first part
+    /// (nothing sent yet): the first part then starts at `to`. `false` (nothing moved) where
+    /// some was sent, or where `from` is not where the data starts.
+    fn move_down(&mut self, from: u64, to: u64) -> bool {
+        let held_whole = self.upload.is_none() && self.filling.is_empty();
+        if !held_whole || self.first_start != Some(from) || to >= from {
+            return false;
+        }
+        let shift = from - to;
+        self.first_start = Some(to);
+        self.end -= shift;
+        self.payloads = std::mem::take(&mut self.payloads).into_iter().map(|(at, d)| (at - shift, d)).collect();
+        true
+    }
+
     /// The end of what was appended: the length of a file written front to back.
     pub(crate) fn end(&self) -> u64 {
         self.end
@@ -341,6 +356,12 @@ impl vortex_pack::PackOutput for Stream {
         })
     }
 
+    /// Only while everything appended is still held (a pack smaller than a part): a shard
+    /// pack's unused metadata room is then given back as in a local file.
+    fn move_down(&mut self, from: u64, to: u64, len: u64) -> std::io::Result<bool> {
+        Ok(from + len == self.end && Stream::move_down(self, from, to))
+    }
+
     fn complete(&mut self, len: u64, head: &[u8]) -> std::io::Result<()> {
         Stream::complete(self, len, head).map(drop).map_err(io)
     }
@@ -379,7 +400,7 @@ mod tests {
     use crate::store::bucket::Store;
     use object_store::ObjectStoreExt;
     use object_store::memory::InMemory;
-    use vortex_pack::{Description, Level, NewTile, PackWriter, TileId, TileKind, WriteOptions};
+    use vortex_pack::{Description, Level, NewTile, Pack, PackWriter, TileId, TileKind, WriteOptions};
 
     /// A stream to `s3://tiles/KEY` in a store held in memory, in parts of `part` bytes, two in
     /// flight; the store, to read back.
@@ -400,8 +421,12 @@ mod tests {
     }
 
     /// A pack of 64-texel raw RGBA tiles, every one different but two alike near each other
-    /// and two alike far apart, written by `writer`.
-    fn pack<O: vortex_pack::PackOutput>(mut writer: PackWriter<O>) -> vortex_pack::WriteSummary {
+    /// and two alike far apart, written by `writer` (with `metadata` in place of the room
+    /// given at its start, if any).
+    fn pack<O: vortex_pack::PackOutput>(
+        mut writer: PackWriter<O>,
+        metadata: Option<&[u8]>,
+    ) -> vortex_pack::WriteSummary {
         for y in 0..4u32 {
             for x in 0..4u32 {
                 let seed = match (x, y) {
@@ -414,6 +439,9 @@ mod tests {
             }
         }
         writer.add(TileId { lod: 2, x: 0, y: 0 }, NewTile::Constant(&[1, 2, 3, 4])).unwrap();
+        if let Some(m) = metadata {
+            writer.set_metadata(m.to_vec()).unwrap();
+        }
         writer.finish().unwrap()
     }
 
@@ -437,10 +465,10 @@ mod tests {
         let local = dir.path().join("p.vtpk");
         let (d, levels) = description();
         let options = WriteOptions::default();
-        let on_disk = pack(PackWriter::create(&local, d, levels.clone(), b"{}", options).unwrap());
+        let on_disk = pack(PackWriter::create(&local, d, levels.clone(), b"{}", options).unwrap(), None);
         // Parts of 20000 bytes: some of a tile each, the first held to the end.
         let (out, memory) = stream("p.vtpk", 20_000);
-        let streamed = pack(PackWriter::with_output(out, d, levels, b"{}", options).unwrap());
+        let streamed = pack(PackWriter::with_output(out, d, levels, b"{}", options).unwrap(), None);
         let bytes = object(&memory, "p.vtpk").expect("the pack was not stored");
         assert!(bytes.len() > 10 * 20_000, "{} bytes: not many parts", bytes.len());
         // The duplicate still in memory is shared, and the one sent away too (by its digest).
@@ -448,6 +476,36 @@ mod tests {
         assert!(bytes == std::fs::read(&local).unwrap(), "the streamed pack is not the local one");
         let pack = vortex_pack::Pack::from_bytes("s3://tiles/p.vtpk", bytes).unwrap();
         assert!(vortex_pack::verify(&pack, Default::default()).is_ok());
+    }
+
+    /// A shard pack's metadata room, mostly unused at the end (more than an eighth of the
+    /// data), is given back where the whole pack is still held, as a local file gives it back:
+    /// the same bytes. Once parts are sent it stays as zeros: other bytes, the same tiles.
+    #[test]
+    fn unused_metadata_room_is_given_back_while_the_pack_is_held() {
+        let dir = tempfile::tempdir().unwrap();
+        let local = dir.path().join("p.vtpk");
+        let (d, levels) = description();
+        let (options, room, used) = (WriteOptions::default(), vec![b' '; 100_000], Some(&b"{}"[..]));
+        pack(PackWriter::create(&local, d, levels.clone(), &room, options).unwrap(), used);
+        let local = std::fs::read(&local).unwrap();
+        let (out, memory) = stream("held.vtpk", 1 << 20);
+        pack(PackWriter::with_output(out, d, levels.clone(), &room, options).unwrap(), used);
+        assert!(object(&memory, "held.vtpk").unwrap() == local, "the held pack differs from the local one");
+        let (out, memory) = stream("sent.vtpk", 20_000);
+        pack(PackWriter::with_output(out, d, levels, &room, options).unwrap(), used);
+        let sent = object(&memory, "sent.vtpk").unwrap();
+        assert!(
+            sent.len() > local.len() + 90_000,
+            "{} bytes, {} locally: the room was not kept",
+            sent.len(),
+            local.len()
+        );
+        let (sent, local) = (Pack::from_bytes("sent", sent).unwrap(), Pack::from_bytes("local", local).unwrap());
+        for (x, y) in (0..4).flat_map(|y| (0..4).map(move |x| (x, y))) {
+            let id = vortex_pack::TileId::new(0, x, y);
+            assert_eq!(sent.tile(id).unwrap(), local.tile(id).unwrap(), "tile ({x}, {y})");
+        }
     }
 
     #[test]
